@@ -1,0 +1,38 @@
+"""The ``skyfix`` command: one subcommand per module, each adding itself with ``register``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from localizer.calibration import ConfigError
+
+from .session import SessionError
+
+SUBCOMMANDS = (
+    "groundstation.process",
+)
+
+
+class UsageError(ValueError):
+    """A wrong option or input file named on the command line (exit code 2)."""
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="skyfix", description="UUV position from UAV imagery")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name in SUBCOMMANDS:
+        importlib.import_module(name).register(sub)
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except (SessionError, ConfigError, UsageError) as e:
+        print(f"skyfix {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,48 @@
+"""pymavlink set up for MAVLink 2, and MAVLink messages fed into the localizer's telemetry.
+
+The one place where MAVLink units become the localizer's: ATTITUDE radians (FRD
+body in NED) as they are; GLOBAL_POSITION_INT degE7 → degrees and mm → metres;
+GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z) and flags as they are;
+MOUNT_ORIENTATION degrees. All samples keep the autopilot's ``time_boot_ms``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's import to parse MAVLink 2
+
+from pymavlink import mavutil as _mavutil  # noqa: E402
+
+from localizer.telemetry import Telemetry  # noqa: E402
+
+#: Message types the localizer uses.
+USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")
+
+
+def mavutil():
+    """pymavlink's ``mavutil`` module, imported with MAVLink 2 enabled."""
+    return _mavutil
+
+
+def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
+    """Feed one decoded pymavlink message into ``tel``; True if it was used.
+
+    Samples with values outside their physical range, non-finite values or times
+    out of order are refused by the telemetry store (and counted there).
+    """
+    kind = msg.get_type()
+    if kind not in USED:
+        return False
+    boot_ms = msg.time_boot_ms
+    tel.clock.add_receive(boot_ms, receive_unix_s)
+    if kind == "ATTITUDE":
+        return tel.add_attitude(boot_ms, msg.roll, msg.pitch, msg.yaw)
+    if kind == "GLOBAL_POSITION_INT":
+        return tel.add_position(boot_ms, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0, msg.relative_alt / 1000.0)
+    if kind == "SYSTEM_TIME":
+        tel.clock.add_system_time(boot_ms, msg.time_unix_usec)
+        return True
+    if kind == "GIMBAL_DEVICE_ATTITUDE_STATUS":
+        return tel.add_gimbal(boot_ms, msg.q, msg.flags)
+    return tel.add_mount(boot_ms, msg.roll, msg.pitch, msg.yaw)

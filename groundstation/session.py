@@ -1,0 +1,206 @@
+"""Reading a session directory (format version 1) into calibration, telemetry and tables.
+
+Every problem is a :class:`SessionError` whose one-line message names the file,
+the line or key, and the offending value. Recoverable oddities (undecodable
+MAVLink frames, messages from other systems, a truncated last line of a log that
+was being written when power went) are kept as warnings on the session.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from localizer.calibration import Calibration, ConfigError, calibration_from_dict
+from localizer.telemetry import Telemetry
+
+from .mavlink_io import ingest, mavutil
+
+SUPPORTED_VERSION = 1
+_NEEDED_FOR_SOURCE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+
+
+class SessionError(ValueError):
+    """A session that cannot be processed; the message is one line."""
+
+
+@dataclass
+class Session:
+    path: Path
+    calibration: Calibration
+    telemetry: Telemetry
+    track: dict[str, np.ndarray] | None = None  # t, u, v (NaN where the UUV was not seen)
+    frames: dict[str, np.ndarray] | None = None  # frame, t
+    video_path: Path | None = None
+    truth: dict[str, np.ndarray] | None = None  # t, lat, lon, depth_m
+    warnings: list[str] = field(default_factory=list)
+    uav_sysid: int | None = None
+
+
+def _number(text: str, where: str, col: str, allow_empty: bool) -> float:
+    text = text.strip()
+    if text == "" and allow_empty:
+        return math.nan
+    try:
+        value = float(text)
+    except ValueError:
+        raise SessionError(f"{where}: {col} = {text!r}: not a number") from None
+    if not math.isfinite(value) and not allow_empty:
+        raise SessionError(f"{where}: {col} = {text!r}: must be finite")
+    return value
+
+
+def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """A CSV with at least ``columns`` in its header, as float arrays; checks times increase."""
+    try:
+        f = open(path, newline="")
+    except OSError as e:
+        raise SessionError(f"{path}: cannot read: {e.strerror}") from None
+    with f:
+        reader = csv.DictReader(f)
+        missing = [c for c in columns if c not in (reader.fieldnames or [])]
+        if missing:
+            raise SessionError(f"{path}: header {reader.fieldnames!r} lacks {', '.join(missing)}")
+        cols: dict[str, list[float]] = {c: [] for c in columns}
+        for row in reader:
+            where = f"{path}:{reader.line_num}"
+            for c in columns:
+                if row[c] is None:
+                    raise SessionError(f"{where}: row too short, no {c}")
+                cols[c].append(_number(row[c], where, c, c in allow_empty))
+    out = {c: np.array(v, dtype=float) for c, v in cols.items()}
+    t = out.get("t")
+    if t is not None and len(t) > 1 and not np.all(np.diff(t) > 0):
+        i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise SessionError(f"{path}: t = {t[i + 1]!r} on data row {i + 2} does not increase")
+    return out
+
+
+def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise SessionError(f"{path}: cannot read: {e.strerror}") from None
+    lines = text.split("\n")
+    count = 0
+    for i, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        truncated_tail = i == len(lines) and not text.endswith("\n")
+        try:
+            rec = json.loads(line)
+            t, depth = rec["t"], rec["depth_m"]
+            if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (t, depth)):
+                raise TypeError
+        except (ValueError, KeyError, TypeError):
+            if truncated_tail:
+                warnings.append(f"{path}:{i}: truncated last line ignored: {line[:60]!r}")
+                continue
+            raise SessionError(f"{path}:{i}: expected {{\"t\": number, \"depth_m\": number}}, got {line[:80]!r}") from None
+        if not (math.isfinite(t) and math.isfinite(depth)):
+            raise SessionError(f"{path}:{i}: non-finite value in {line[:80]!r}")
+        if not -5.0 <= depth <= 11000.0:
+            raise SessionError(f"{path}:{i}: depth_m = {depth!r} out of range [-5, 11000]")
+        if not tel.add_depth(float(t), float(depth)):
+            raise SessionError(f"{path}:{i}: t = {t!r} does not increase")
+        count += 1
+    if count == 0:
+        raise SessionError(f"{path}: no depth samples")
+    return count
+
+
+def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> int:
+    """Ingest the UAV's messages; returns the UAV's system id (that of the first ATTITUDE)."""
+    if not path.is_file():
+        raise SessionError(f"{path}: missing (the UAV's telemetry is required)")
+    conn = mavutil().mavlink_connection(str(path), dialect="ardupilotmega", robust_parsing=True)
+    msgs = []
+    bad = 0
+    try:
+        while True:
+            try:
+                m = conn.recv_msg()
+            except Exception as e:  # pymavlink raises bare errors on some corrupt records
+                bad += 1
+                warnings.append(f"{path}: undecodable record skipped: {e}")
+                continue
+            if m is None:
+                break
+            if m.get_type() == "BAD_DATA":
+                bad += 1
+                continue
+            msgs.append(m)
+    finally:
+        conn.close()
+    if bad:
+        warnings.append(f"{path}: {bad} undecodable MAVLink frames skipped")
+    sysid = next((m.get_srcSystem() for m in msgs if m.get_type() == "ATTITUDE"), None)
+    if sysid is None:
+        raise SessionError(f"{path}: no ATTITUDE message (is this the UAV's telemetry?)")
+    others = 0
+    counts: dict[str, int] = {}
+    for m in msgs:
+        if m.get_srcSystem() != sysid:
+            others += 1
+            continue
+        if ingest(tel, m, m._timestamp):
+            counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
+    if others:
+        warnings.append(f"{path}: {others} messages from systems other than the UAV (sysid {sysid}) ignored")
+    needed = ["ATTITUDE", "GLOBAL_POSITION_INT"]
+    if source in _NEEDED_FOR_SOURCE:
+        needed.append(_NEEDED_FOR_SOURCE[source])
+    for kind in needed:
+        if not counts.get(kind):
+            raise SessionError(f"{path}: no usable {kind} message (mount.attitude_source = {source!r})")
+    for name, series in (("ATTITUDE", tel.attitude), ("GLOBAL_POSITION_INT", tel.position)):
+        if series.rejected:
+            warnings.append(f"{path}: {series.rejected} {name} samples out of order or non-finite, skipped")
+    return sysid
+
+
+def load_session(path) -> Session:
+    """Read and validate a session directory."""
+    path = Path(path)
+    if not path.is_dir():
+        raise SessionError(f"{path}: not a session directory")
+    toml_path = path / "session.toml"
+    try:
+        meta = tomllib.loads(toml_path.read_text())
+    except FileNotFoundError:
+        raise SessionError(f"{toml_path}: missing") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise SessionError(f"{toml_path}: malformed TOML: {e}") from None
+    version = meta.get("version")
+    if version != SUPPORTED_VERSION:
+        raise SessionError(f"{toml_path}: version = {version!r}: this skyfix reads version {SUPPORTED_VERSION}")
+    try:
+        cal = calibration_from_dict(meta, source=str(toml_path))
+    except ConfigError as e:
+        raise SessionError(str(e)) from None
+
+    warnings: list[str] = []
+    tel = Telemetry(cal.timing)
+    sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings)
+    if not (path / "depth.jsonl").is_file():
+        raise SessionError(f"{path / 'depth.jsonl'}: missing (the UUV's depth is required)")
+    _read_depth(path / "depth.jsonl", tel, warnings)
+
+    session = Session(path=path, calibration=cal, telemetry=tel, warnings=warnings, uav_sysid=sysid)
+    if (path / "track.csv").is_file():
+        session.track = read_table(path / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    if (path / "truth.csv").is_file():
+        session.truth = read_table(path / "truth.csv", ("t", "lat", "lon", "depth_m"))
+    videos = sorted(p for p in path.glob("video.*") if p.is_file())
+    if videos:
+        session.video_path = videos[0]
+        if not (path / "video_frames.csv").is_file():
+            raise SessionError(f"{path / 'video_frames.csv'}: missing (required with {videos[0].name})")
+        session.frames = read_table(path / "video_frames.csv", ("frame", "t"))
+    return session

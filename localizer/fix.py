@@ -1,0 +1,113 @@
+"""The fix: one typed result per frame, from tracker to every sink.
+
+:func:`locate` turns tracked pixels and aligned camera poses into fixes. Status
+words: ``ok``; ``no_track``/``lost`` (tracker); ``bad_pixel`` (outside the image
+or outside the lens model); ``no_clock``; ``no_<input>``/``stale_<input>`` for
+attitude, position, gimbal, depth; ``below_surface``; ``no_water`` (the ray never
+reaches the water).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .calibration import Calibration
+from .geodesy import ned_to_geodetic
+from .pose import CameraPose
+from .ray import pixel_to_offset
+from .uncertainty import accuracy
+
+
+@dataclass
+class Fix:
+    """One frame's result. Positions WGS84 degrees; altitudes metres AMSL; NaN when no fix."""
+
+    t_unix: float
+    status: str
+    u: float = float("nan")  # distorted pixel of the UUV
+    v: float = float("nan")
+    lat: float = float("nan")
+    lon: float = float("nan")
+    alt_amsl_m: float = float("nan")
+    depth_m: float = float("nan")
+    h_acc_m: float = float("nan")
+    v_acc_m: float = float("nan")
+    north_m: float = float("nan")  # UUV relative to the UAV's reported position
+    east_m: float = float("nan")
+    frame: int = -1
+    confidence: float = float("nan")  # tracker's, 0..1
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class Fixes:
+    """Fixes for N frames as arrays (the batched form of :class:`Fix`)."""
+
+    t_unix: np.ndarray
+    status: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    alt_amsl_m: np.ndarray
+    depth_m: np.ndarray
+    h_acc_m: np.ndarray
+    v_acc_m: np.ndarray
+    north_m: np.ndarray
+    east_m: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t_unix)
+
+    def __getitem__(self, i: int) -> Fix:
+        return Fix(**{k: (v[i] if k == "status" else float(v[i])) for k, v in vars(self).items()})
+
+
+def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) -> Fixes:
+    """Fixes for pixels (u, v) seen at the poses' times; ``refraction=False`` is the paper's straight ray.
+
+    Pixels that are NaN mean the tracker had nothing (status ``no_track``) unless
+    the pose already failed.
+    """
+    u = np.atleast_1d(np.asarray(u, dtype=float))
+    v = np.atleast_1d(np.asarray(v, dtype=float))
+    status = pose.status.copy()
+    ok = status == "ok"
+    status[ok & ~(np.isfinite(u) & np.isfinite(v))] = "no_track"
+    status[(status == "ok") & ~cal.camera.contains(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))] = "bad_pixel"
+    n_water = cal.water.refractive_index if refraction else None
+
+    nan = np.full(len(u), np.nan)
+    lat, lon, alt, north, east, h_acc, v_acc = (nan.copy() for _ in range(7))
+    idx = np.flatnonzero(status == "ok")
+    if len(idx):
+        R = pose.R_ned_from_cv[idx]
+        h = pose.height_m[idx]
+        d = pose.depth_m[idx]
+        off, reaches = pixel_to_offset(cal.camera, R, u[idx], v[idx], h, d, n_water)
+        bad_lens = ~np.all(np.isfinite(off), axis=-1) & reaches
+        status[idx[~reaches]] = "no_water"
+        status[idx[bad_lens]] = "bad_pixel"
+        good = reaches & ~bad_lens
+        idx, off, R, h, d = idx[good], off[good], R[good], h[good], d[good]
+        cam = pose.cam_offset_ned_m[idx]
+        north[idx] = cam[:, 0] + off[:, 0]
+        east[idx] = cam[:, 1] + off[:, 1]
+        down = pose.uav_height_m[idx] + d
+        lat[idx], lon[idx], _ = ned_to_geodetic(
+            north[idx], east[idx], down, pose.lat_deg[idx], pose.lon_deg[idx], pose.alt_amsl_m[idx]
+        )
+        alt[idx] = pose.alt_amsl_m[idx] - down
+        h_acc[idx], v_acc[idx] = accuracy(cal.camera, R, u[idx], v[idx], h, d, n_water, cal.sigmas)
+    return Fixes(
+        t_unix=pose.t_unix, status=status, u=u, v=v, lat=lat, lon=lon, alt_amsl_m=alt,
+        depth_m=pose.depth_m.copy(), h_acc_m=h_acc, v_acc_m=v_acc, north_m=north, east_m=east,
+    )

@@ -1,0 +1,59 @@
+"""The telemetry a fix needs, buffered on the clocks it arrives with.
+
+UAV messages are stored on the autopilot's boot clock (seconds), which is
+precise and monotonic; a frame's UNIX time is mapped onto it at query time via
+:class:`~localizer.timeline.VehicleClock`. Depth comes with UNIX times. Angles
+in radians, positions in degrees and metres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .calibration import Timing
+from .timeline import Series, VehicleClock
+
+
+class Telemetry:
+    """Buffers for ATTITUDE, GLOBAL_POSITION_INT, the gimbal message and depth.
+
+    ``keep_s`` bounds the history kept (live service); None keeps all (offline).
+    """
+
+    def __init__(self, timing: Timing | None = None, keep_s: float | None = None):
+        timing = timing or Timing()
+        self.clock = VehicleClock()
+        # roll, pitch, yaw of the UAV body (FRD in NED), boot seconds
+        self.attitude = Series("aaa", timing.attitude_gap_s, timing.attitude_hold_s, keep_s)
+        # lat_deg, lon_deg, alt_amsl_m, relative_alt_m, boot seconds
+        self.position = Series("llll", timing.position_gap_s, timing.position_hold_s, keep_s)
+        # GIMBAL_DEVICE_ATTITUDE_STATUS: q (w, x, y, z), flags, boot seconds
+        self.gimbal = Series("qqqqs", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
+        # MOUNT_ORIENTATION: roll, pitch, yaw relative to the vehicle, boot seconds
+        self.mount = Series("aaa", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
+        # UUV depth below the surface (m, positive down), UNIX seconds
+        self.depth = Series("l", timing.depth_gap_s, timing.depth_hold_s, keep_s)
+
+    def add_attitude(self, time_boot_ms, roll, pitch, yaw) -> bool:
+        if not all(abs(a) <= 2 * np.pi for a in (roll, pitch, yaw)):
+            return False
+        return self.attitude.append(time_boot_ms / 1000.0, (roll, pitch, yaw))
+
+    def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m) -> bool:
+        if not (-90 <= lat_deg <= 90 and -180 <= lon_deg <= 180) or (lat_deg == 0 and lon_deg == 0):
+            return False
+        return self.position.append(time_boot_ms / 1000.0, (lat_deg, lon_deg, alt_amsl_m, relative_alt_m))
+
+    def add_gimbal(self, time_boot_ms, q_wxyz, flags) -> bool:
+        q = np.asarray(q_wxyz, dtype=float)
+        if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 0.1:
+            return False
+        return self.gimbal.append(time_boot_ms / 1000.0, (*q, flags))
+
+    def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg) -> bool:
+        return self.mount.append(time_boot_ms / 1000.0, np.radians((roll_deg, pitch_deg, yaw_deg)))
+
+    def add_depth(self, t_unix, depth_m) -> bool:
+        if not -5.0 <= depth_m <= 11000.0:
+            return False
+        return self.depth.append(t_unix, (depth_m,))
