@@ -143,8 +143,3 @@ def R_ned_from_fixed_mount(R_ned_from_body, fixed_rpy_deg):
 def R_ned_from_cv(R_ned_from_gimbal):
     """OpenCV camera frame in NED, from the gimbal's FRD attitude."""
     return np.asarray(R_ned_from_gimbal) @ R_GIMBAL_FROM_CV
-
-
-def wrap_pi(angle):
-    """Wrap radians to [-π, π)."""
-    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi

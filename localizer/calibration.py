@@ -15,6 +15,12 @@ from dataclasses import dataclass, field, fields
 from .camera import Camera
 
 ATTITUDE_SOURCES = ("gimbal_device", "mount_orientation", "fixed")
+_KNOWN_KEYS = {
+    "camera": {"width", "height", "fx", "fy", "cx", "cy", "distortion"},
+    "mount": {"attitude_source", "fixed_rpy_deg", "camera_offset_m"},
+    "water": {"takeoff_height_above_surface_m", "surface_amsl_m", "refractive_index"},
+    "tracker": {"init_bbox", "init_t"},
+}
 
 
 class ConfigError(ValueError):
@@ -80,6 +86,7 @@ class Calibration:
     init_t: float | None = None
     sigmas: Sigmas = field(default_factory=Sigmas)
     timing: Timing = field(default_factory=Timing)
+    warnings: tuple[str, ...] = ()  # keys this version does not know (other tools may add keys)
 
 
 def _number(source, key, value, *, positive=False, nonneg=False, lo=None, hi=None):
@@ -189,4 +196,10 @@ def calibration_from_dict(data: dict, source: str = "session.toml") -> Calibrati
         Timing, source, "timing", _table(source, data, "timing", required=False),
         lambda s, k, v: _number(s, k, v, positive=True),
     )
-    return Calibration(camera, mount, water, init_bbox, init_t, sigmas, timing)
+    warnings = tuple(
+        f"{source}: {name}.{key} is not a key skyfix knows; ignored (a typo?)"
+        for name, known in _KNOWN_KEYS.items()
+        for key in _table(source, data, name, required=False)
+        if key not in known
+    )
+    return Calibration(camera, mount, water, init_bbox, init_t, sigmas, timing, warnings)

@@ -68,7 +68,7 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
     elif src == "mount_orientation":
         m, sm = tel.mount.sample(boot)
         _mark(status, sm, "gimbal")
-        R_gimbal = att.euler_to_R(m[:, 0], m[:, 1], m[:, 2] + a[:, 2])
+        R_gimbal = att.R_ned_from_mount_orientation(*np.degrees(m.T), a[:, 2])
     else:
         R_gimbal = att.R_ned_from_fixed_mount(R_body, cal.mount.fixed_rpy_deg)
 
@@ -81,7 +81,7 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
     return CameraPose(
         t_unix=t,
         status=status,
-        R_ned_from_cv=R_gimbal @ att.R_GIMBAL_FROM_CV,
+        R_ned_from_cv=att.R_ned_from_cv(R_gimbal),
         lat_deg=p[:, 0],
         lon_deg=p[:, 1],
         alt_amsl_m=p[:, 2],

@@ -22,8 +22,3 @@ def height_above_surface_m(
     if surface_amsl_m is not None:
         return np.asarray(alt_amsl_m, dtype=float) - surface_amsl_m
     return np.asarray(relative_alt_m, dtype=float) + takeoff_height_above_surface_m
-
-
-def surface_amsl(alt_amsl_m, height_above_surface):
-    """Altitude of the water surface above mean sea level (m), given the UAV's altitude and height above it."""
-    return np.asarray(alt_amsl_m, dtype=float) - np.asarray(height_above_surface, dtype=float)

@@ -14,6 +14,12 @@ from .calibration import Timing
 from .timeline import Series, VehicleClock
 
 
+def _refuse(series: Series) -> bool:
+    """Count a sample refused for its value (NaN fails every range check too)."""
+    series.rejected += 1
+    return False
+
+
 class Telemetry:
     """Buffers for ATTITUDE, GLOBAL_POSITION_INT, the gimbal message and depth.
 
@@ -22,7 +28,7 @@ class Telemetry:
 
     def __init__(self, timing: Timing | None = None, keep_s: float | None = None):
         timing = timing or Timing()
-        self.clock = VehicleClock()
+        self.clock = VehicleClock(on_reboot=self._drop_boot_clock_samples)
         # roll, pitch, yaw of the UAV body (FRD in NED), boot seconds
         self.attitude = Series("aaa", timing.attitude_gap_s, timing.attitude_hold_s, keep_s)
         # lat_deg, lon_deg, alt_amsl_m, relative_alt_m, boot seconds
@@ -34,20 +40,25 @@ class Telemetry:
         # UUV depth below the surface (m, positive down), UNIX seconds
         self.depth = Series("l", timing.depth_gap_s, timing.depth_hold_s, keep_s)
 
+    def _drop_boot_clock_samples(self) -> None:
+        """The autopilot rebooted: samples on its old boot clock would be matched to wrong frames."""
+        for series in (self.attitude, self.position, self.gimbal, self.mount):
+            series.clear()
+
     def add_attitude(self, time_boot_ms, roll, pitch, yaw) -> bool:
         if not all(abs(a) <= 2 * np.pi for a in (roll, pitch, yaw)):
-            return False
+            return _refuse(self.attitude)
         return self.attitude.append(time_boot_ms / 1000.0, (roll, pitch, yaw))
 
     def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m) -> bool:
         if not (-90 <= lat_deg <= 90 and -180 <= lon_deg <= 180) or (lat_deg == 0 and lon_deg == 0):
-            return False
+            return _refuse(self.position)
         return self.position.append(time_boot_ms / 1000.0, (lat_deg, lon_deg, alt_amsl_m, relative_alt_m))
 
     def add_gimbal(self, time_boot_ms, q_wxyz, flags) -> bool:
         q = np.asarray(q_wxyz, dtype=float)
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 0.1:
-            return False
+            return _refuse(self.gimbal)
         return self.gimbal.append(time_boot_ms / 1000.0, (*q, flags))
 
     def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg) -> bool:
@@ -55,5 +66,5 @@ class Telemetry:
 
     def add_depth(self, t_unix, depth_m) -> bool:
         if not -5.0 <= depth_m <= 11000.0:
-            return False
+            return _refuse(self.depth)
         return self.depth.append(t_unix, (depth_m,))

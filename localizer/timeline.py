@@ -38,7 +38,7 @@ class Series:
         self._t = np.empty(64)
         self._v = np.empty((64, len(kinds)))
         self._n = 0
-        self.rejected = 0  # out-of-order or non-finite samples refused
+        self.rejected = 0  # samples refused: out of order, non-finite or out of range
         self._angle = np.array([k == "a" for k in kinds])
         self._step = np.array([k == "s" for k in kinds])
         self._quat = np.array([k == "q" for k in kinds])
@@ -153,15 +153,17 @@ class VehicleClock:
     the offset is the median of the last ``window`` pairs, so one bad pair cannot
     move it. Fallback when no SYSTEM_TIME carries a UNIX time: the smallest
     ``receive time − boot time`` seen, i.e. the offset plus the link's least
-    delay. A reboot (boot time going back by more than ``reboot_s``) resets it.
+    delay. A reboot (boot time going back by more than ``reboot_s``) resets it and
+    calls ``on_reboot()``, so samples stamped with the old boot clock can be dropped.
     """
 
-    def __init__(self, window: int = 31, reboot_s: float = 5.0):
+    def __init__(self, window: int = 31, reboot_s: float = 5.0, on_reboot=None):
         self._system = deque(maxlen=window)
         self._recv_min: float | None = None
         self._last_boot_s: float | None = None
         self._reboot_s = reboot_s
         self.reboots = 0
+        self._on_reboot = on_reboot
 
     def _check_reboot(self, boot_s: float) -> None:
         last = self._last_boot_s
@@ -169,6 +171,8 @@ class VehicleClock:
             self._system.clear()
             self._recv_min = None
             self.reboots += 1
+            if self._on_reboot is not None:
+                self._on_reboot()
             last = None
         self._last_boot_s = boot_s if last is None else max(boot_s, last)
 

@@ -14,8 +14,8 @@ import numpy as np
 
 from .attitude import rotation_about
 from .calibration import Sigmas
-from .camera import Camera
-from .ray import pixel_to_offset
+from .camera import Camera, pixel_to_ray
+from .refraction import offset_from_ray
 
 _AXES = np.eye(3)  # north, east, down
 
@@ -25,24 +25,26 @@ def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, si
     u = np.asarray(u, dtype=float)
     v = np.asarray(v, dtype=float)
     R = np.asarray(R_ned_from_cv, dtype=float)
-    h = np.asarray(height_m, dtype=float)
-    d = np.asarray(depth_m, dtype=float)
-    base, _ = pixel_to_offset(camera, R, u, v, h, d, n_water)
+    h = np.broadcast_to(np.asarray(height_m, dtype=float), u.shape)
+    d = np.broadcast_to(np.asarray(depth_m, dtype=float), u.shape)
     px, ang, dl = 0.5, 1e-4, 1e-3
-    tilt = np.radians(sigmas.tilt_deg)
-    yaw = np.radians(sigmas.yaw_deg)
-    perturbed = [
-        (pixel_to_offset(camera, R, u + px, v, h, d, n_water)[0], px, sigmas.pixel_px),
-        (pixel_to_offset(camera, R, u, v + px, h, d, n_water)[0], px, sigmas.pixel_px),
-        (pixel_to_offset(camera, rotation_about(_AXES[0], ang) @ R, u, v, h, d, n_water)[0], ang, tilt),
-        (pixel_to_offset(camera, rotation_about(_AXES[1], ang) @ R, u, v, h, d, n_water)[0], ang, tilt),
-        (pixel_to_offset(camera, rotation_about(_AXES[2], ang) @ R, u, v, h, d, n_water)[0], ang, yaw),
-        (pixel_to_offset(camera, R, u, v, h + dl, d, n_water)[0], dl, sigmas.height_m),
-        (pixel_to_offset(camera, R, u, v, h, d + dl, n_water)[0], dl, sigmas.depth_m),
+    # the undistorted rays of the pixel and of its two pixel-perturbed neighbours, in one call
+    rays = pixel_to_ray(camera, np.stack([u, u + px, u]), np.stack([v, v, v + px]))
+    dirs = np.einsum("...ij,k...j->k...i", R, rays)
+    base = dirs[0]
+    rotated = [np.einsum("ij,...j->...i", rotation_about(axis, ang), base) for axis in _AXES]
+    all_dirs = np.stack([base, dirs[1], dirs[2], *rotated, base, base])
+    all_h = np.stack([h] * 6 + [h + dl, h])
+    all_d = np.stack([d] * 7 + [d + dl])
+    off, _ = offset_from_ray(all_dirs, all_h, all_d, n_water)
+    steps_sigmas = [
+        (px, sigmas.pixel_px), (px, sigmas.pixel_px),
+        (ang, np.radians(sigmas.tilt_deg)), (ang, np.radians(sigmas.tilt_deg)), (ang, np.radians(sigmas.yaw_deg)),
+        (dl, sigmas.height_m), (dl, sigmas.depth_m),
     ]
     cov = np.zeros(u.shape + (2, 2))
-    for off, step, sigma in perturbed:
-        j = (off - base) / step * sigma  # column of J·diag(σ)
+    for k, (step, sigma) in enumerate(steps_sigmas, start=1):
+        j = (off[k] - off[0]) / step * sigma  # column of J·diag(σ)
         cov += j[..., :, None] * j[..., None, :]
     var_h = cov[..., 0, 0] + cov[..., 1, 1] + sigmas.uav_horizontal_m**2
     h_acc = np.sqrt(var_h)

@@ -1,0 +1,300 @@
+"""The default tracker: normalized cross-correlation in the window the telemetry predicts.
+
+The UUV's grey-level appearance is kept as a *canonical* template (upright, at
+the size it had at init). Each frame it is rotated to the UUV's current heading
+in the image and scaled to the predicted apparent size, then matched
+(``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``) inside a window centred on the
+prediction and as large as its uncertainty; the peak is refined to sub-pixel
+precision by a parabola fit, and the heading by trying ±``turn_step_deg``. The
+matched patch, turned back upright, is blended slowly into the canonical
+template when the match is confident, so the template follows lighting and depth
+without sliding off the vehicle. Images are block-averaged by an integer factor
+so the template keeps about ``work_px`` pixels across whatever the UUV's size:
+the cost per frame is nearly independent of resolution.
+
+Loss: a peak below ``ok_score`` (or far below the recent level), or outside the
+predicted window, means the UUV is not where it should be: status ``lost``, no
+position. While lost, the window grows with the prediction's uncertainty (the
+whole frame without a prediction), every heading is tried, and the track resumes
+only after ``reacquire_frames`` consecutive matches above ``reacquire_score``
+that agree with each other and with the camera motion predicted between them, so
+a hidden UUV is not replaced by a look-alike patch of seafloor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from . import Prediction, TrackResult
+from .opencv import check_box
+
+
+@dataclass(frozen=True)
+class TemplateParams:
+    work_px: int = 28  # the template's side after block averaging (pixels)
+    ok_score: float = 0.5  # NCC below this: the UUV is not there
+    level_drop: float = 0.25  # ... or this far below the recent level of confident matches
+    update_score: float = 0.7  # NCC above this: blend the match into the template
+    learn_rate: float = 0.05  # fraction of the template replaced per confident frame
+    recentre_px: float = 0.2  # undo the learnt template's drift from its first appearance beyond this
+    turn_step_deg: float = 6.0  # heading change tried each frame (each way)
+    search_sigmas: float = 3.0  # window half-size in prediction sigmas
+    min_radius_px: float = 6.0  # smallest window half-size (full-resolution pixels)
+    default_radius_px: float = 40.0  # window half-size without a prediction while tracking
+    reacquire_score: float = 0.7
+    reacquire_below_level: float = 0.15  # re-acquisition also needs a score within this of the level
+    reacquire_frames: int = 3
+    reacquire_tolerance: float = 0.3  # agreement between consecutive matches, in template sides
+    reacquire_headings: int = 16  # headings tried while lost
+    coarse_side: int = 96  # windows wider than this (working pixels) are searched at half resolution first
+
+
+def _parabola(a: float, b: float, c: float) -> float:
+    """Offset of the extremum of a parabola through (-1, a), (0, b), (1, c), clipped to ±0.5."""
+    den = a - 2.0 * b + c
+    return 0.0 if den >= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+
+def _peak(scores: np.ndarray) -> tuple[float, float, float]:
+    """(score, x, y) of the best match with sub-pixel offsets."""
+    _, best, _, (j, i) = cv2.minMaxLoc(scores)
+    h, w = scores.shape
+    dx = _parabola(scores[i, j - 1], scores[i, j], scores[i, j + 1]) if 0 < j < w - 1 else 0.0
+    dy = _parabola(scores[i - 1, j], scores[i, j], scores[i + 1, j]) if 0 < i < h - 1 else 0.0
+    return float(best), j + dx, i + dy
+
+
+def _similarity(angle_deg: float, scale: float) -> np.ndarray:
+    a = math.radians(angle_deg)
+    return scale * np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+
+
+def _warp(src: np.ndarray, centre, A: np.ndarray, side: int) -> np.ndarray:
+    """side × side image whose pixel d (from its centre) samples ``src`` at ``centre + A·d``."""
+    c = (side - 1) / 2.0
+    b = np.asarray(centre, dtype=float) - A @ np.array([c, c])
+    M = np.hstack([A, b[:, None]]).astype(np.float64)
+    return cv2.warpAffine(src, M, (side, side), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REPLICATE)
+
+
+class TemplateTracker:
+    """Rotating, scaling NCC template steered by the telemetry's :class:`Prediction` (optional)."""
+
+    def __init__(self, params: TemplateParams | None = None):
+        self.p = params or TemplateParams()
+        self._ready = False
+
+    # -- images at working resolution ------------------------------------------------------
+    def _blocks(self, frame_bgr, bx0: int, by0: int, bw: int, bh: int) -> np.ndarray:
+        """Grey blocks [bx0, bx0 + bw) × [by0, by0 + bh) of k×k pixels (clipped to the frame): float32."""
+        k = self.k
+        roi = frame_bgr[by0 * k : (by0 + bh) * k, bx0 * k : (bx0 + bw) * k]
+        gray = cv2.cvtColor(roi, cv2.COLOR_BGR2GRAY) if roi.ndim == 3 else roi
+        if k > 1:
+            gray = cv2.resize(gray, (gray.shape[1] // k, gray.shape[0] // k), interpolation=cv2.INTER_AREA)
+        return gray.astype(np.float32)
+
+    def _to_work(self, u: float, v: float) -> tuple[float, float]:
+        k = self.k
+        return (u - (k - 1) / 2.0) / k, (v - (k - 1) / 2.0) / k
+
+    def _to_full(self, qx: float, qy: float) -> tuple[float, float]:
+        k = self.k
+        return qx * k + (k - 1) / 2.0, qy * k + (k - 1) / 2.0
+
+    def _upright(self, frame_bgr, u: float, v: float) -> np.ndarray | None:
+        """The canonical-frame patch (side D) of the UUV centred at full-res (u, v), or None off the frame."""
+        qx, qy = self._to_work(u, v)
+        half = int(math.ceil(self.D * self._scale * 0.75)) + 2
+        bx0, by0 = int(qx) - half, int(qy) - half
+        region = self._blocks(frame_bgr, max(bx0, 0), max(by0, 0), 2 * half + 1 + min(bx0, 0), 2 * half + 1 + min(by0, 0))
+        if region.shape[0] < 4 or region.shape[1] < 4:
+            return None
+        centre = (qx - max(bx0, 0), qy - max(by0, 0))
+        return _warp(region, centre, _similarity(self._angle, self._scale), self.D)
+
+    def _template(self, angle_deg: float, shrink: int = 1) -> np.ndarray:
+        """The template (side S / shrink) at a heading, at the current scale."""
+        side = max(5, -(-self.S // shrink)) | 1
+        c = (self.D - 1) / 2.0
+        A = _similarity(-angle_deg, shrink / self._scale)
+        return _warp(self._canon, (c, c), A, side)
+
+    # -- setup -----------------------------------------------------------------------------
+    def init(self, frame_bgr, box, prediction: Prediction | None = None, point=None) -> None:
+        x, y, w, h = check_box(frame_bgr, box)
+        self.k = max(1, round(max(w, h) / self.p.work_px))
+        self.S = int(math.ceil(max(w, h) / self.k)) | 1  # matching template side (odd)
+        self.D = int(math.ceil(self.S * math.sqrt(2.0))) + 2 | 1  # canonical side: holds every rotation
+        self._angle, self._scale = 0.0, 1.0
+        self._ref_px_per_m = prediction.px_per_m if prediction is not None else float("nan")
+        self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
+        self._canon = self._upright(frame_bgr, self.u, self.v)
+        lo = (self.D - self.S) // 2
+        self._anchor = self._canon[lo : lo + self.S, lo : lo + self.S].copy()  # the first appearance
+        self._velocity = (0.0, 0.0)
+        self._level = 1.0
+        self._tracking = True
+        self._hits: list[tuple[float, float, float, float]] = []  # u, v, predicted u, v
+        self._ready = True
+
+    def _rescale(self, prediction: Prediction | None) -> None:
+        if prediction is not None and self._ref_px_per_m > 0 and prediction.px_per_m > 0:
+            self._scale = prediction.px_per_m / self._ref_px_per_m
+
+    # -- matching ----------------------------------------------------------------------------
+    def _region(self, frame_bgr, cu: float, cv_: float, radius_px: float, side: int):
+        """Working-resolution window where a template of ``side`` may sit within ``radius_px`` of (cu, cv_)."""
+        H, W = frame_bgr.shape[:2]
+        qx, qy = self._to_work(cu, cv_)
+        r = max(1, int(math.ceil(radius_px / self.k)))
+        half = (side - 1) // 2
+        bx0, by0 = max(int(round(qx)) - half - r, 0), max(int(round(qy)) - half - r, 0)
+        bx1 = min(int(round(qx)) + half + r + 1, W // self.k)
+        by1 = min(int(round(qy)) + half + r + 1, H // self.k)
+        if bx1 - bx0 < side + 1 or by1 - by0 < side + 1:
+            return None, 0, 0
+        return self._blocks(frame_bgr, bx0, by0, bx1 - bx0, by1 - by0), bx0, by0
+
+    def _match_in(self, region, bx0: int, by0: int, template: np.ndarray):
+        """(score, u, v) of the template's best match in a working-resolution region."""
+        best, j, i = _peak(cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED))
+        half = (template.shape[0] - 1) / 2.0
+        u, v = self._to_full(bx0 + j + half, by0 + i + half)
+        return best, u, v
+
+    def _refine(self, frame_bgr, u: float, v: float):
+        """Best heading among the current ±turn_step near (u, v): (score, u, v), updating the heading."""
+        step = self.p.turn_step_deg
+        region, bx0, by0 = self._region(frame_bgr, u, v, 2.0 * self.k, self.S)
+        if region is None:
+            return -1.0, math.nan, math.nan
+        found = [self._match_in(region, bx0, by0, self._template(self._angle + da)) for da in (-step, 0.0, step)]
+        scores = [f[0] for f in found]
+        best = int(np.argmax(scores))
+        if best == 1:
+            self._angle += step * _parabola(*scores)
+        else:
+            self._angle += step * (best - 1)
+        return found[best]
+
+    def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles):
+        """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_); coarse first if wide."""
+        region, bx0, by0 = self._region(frame_bgr, cu, cv_, radius_px, self.S)
+        if region is None:
+            return -1.0, math.nan, math.nan, self._angle
+        coarse = max(region.shape) > self.p.coarse_side
+        if coarse:
+            region = cv2.resize(region, (region.shape[1] // 2, region.shape[0] // 2), interpolation=cv2.INTER_AREA)
+        best = (-1.0, math.nan, math.nan, self._angle)
+        for a in angles:
+            t = self._template(a, shrink=2 if coarse else 1)
+            s, j, i = _peak(cv2.matchTemplate(region, t, cv2.TM_CCOEFF_NORMED))
+            if s > best[0]:
+                half = (t.shape[0] - 1) / 2.0
+                f = 2.0 if coarse else 1.0
+                u, v = self._to_full(bx0 + (j + half) * f + (f - 1) / 2, by0 + (i + half) * f + (f - 1) / 2)
+                best = (s, u, v, a)
+        return best
+
+    def _learn(self, frame_bgr, u: float, v: float) -> None:
+        """Blend the upright patch into the template, then hold the template on its first appearance.
+
+        Each blend may be off by a fraction of a pixel; summed, that would slide the
+        template off the vehicle. The learnt template's offset from the init
+        template is measured and undone whenever it exceeds ``recentre_px``.
+        """
+        patch = self._upright(frame_bgr, u, v)
+        if patch is None:
+            return
+        cv2.accumulateWeighted(patch, self._canon, self.p.learn_rate)
+        m = 3
+        lo = (self.D - self.S) // 2 - m
+        window = self._canon[lo : lo + self.S + 2 * m, lo : lo + self.S + 2 * m]
+        _, dx, dy = _peak(cv2.matchTemplate(window, self._anchor, cv2.TM_CCOEFF_NORMED))
+        dx, dy = dx - m, dy - m
+        if math.hypot(dx, dy) > self.p.recentre_px:
+            M = np.array([[1.0, 0.0, -dx], [0.0, 1.0, -dy]])
+            self._canon = cv2.warpAffine(self._canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR,
+                                         borderMode=cv2.BORDER_REPLICATE)
+
+    # -- per frame ---------------------------------------------------------------------------
+    def update(self, frame_bgr, prediction: Prediction | None = None) -> TrackResult:
+        if not self._ready:
+            return TrackResult("not_initialized")
+        self._rescale(prediction)
+        return self._follow(frame_bgr, prediction) if self._tracking else self._reacquire(frame_bgr, prediction)
+
+    def _radius(self, prediction: Prediction | None, fallback: float) -> float:
+        if prediction is None or not math.isfinite(prediction.sigma_px):
+            return fallback
+        return max(self.p.min_radius_px, self.p.search_sigmas * prediction.sigma_px)
+
+    def _result(self, u: float, v: float, score: float) -> TrackResult:
+        side = int(round(self.S * self.k * self._scale))
+        box = (int(round(u - (side - 1) / 2.0)), int(round(v - (side - 1) / 2.0)), side, side)
+        return TrackResult("ok", u, v, box, max(0.0, score))
+
+    def _lose(self, score: float) -> TrackResult:
+        self._tracking = False
+        self._hits = []
+        return TrackResult("lost", confidence=max(0.0, score))
+
+    def _follow(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
+        if prediction is not None:
+            cu, cv_ = prediction.u, prediction.v
+        else:
+            cu, cv_ = self.u + self._velocity[0], self.v + self._velocity[1]
+        radius = self._radius(prediction, self.p.default_radius_px)
+        score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,))
+        if score >= self.p.ok_score:
+            score, u, v = self._refine(frame_bgr, u, v)
+        floor = max(self.p.ok_score, self._level - self.p.level_drop)
+        if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k):
+            return self._lose(score)
+        self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
+        self.u, self.v = u, v
+        self._level += 0.1 * (score - self._level)
+        if score >= self.p.update_score:
+            self._learn(frame_bgr, u, v)
+        return self._result(u, v, score)
+
+    def _reacquire(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
+        H, W = frame_bgr.shape[:2]
+        if prediction is not None and math.isfinite(prediction.sigma_px):
+            cu, cv_, radius = prediction.u, prediction.v, self._radius(prediction, float(max(W, H)))
+        else:
+            cu, cv_, radius = W / 2.0, H / 2.0, float(max(W, H))
+        n = self.p.reacquire_headings
+        angles = [self._angle + 360.0 * m / n for m in range(n)]
+        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles)
+        if score >= self.p.reacquire_score:
+            saved = self._angle
+            self._angle = angle
+            score, u, v = self._refine(frame_bgr, u, v)
+            if not score >= self.p.reacquire_score:
+                self._angle = saved
+        need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
+        if not score >= need:
+            self._hits = []
+            return TrackResult("lost", confidence=max(0.0, score))
+        pu, pv = (prediction.u, prediction.v) if prediction is not None else (0.0, 0.0)
+        tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
+        if self._hits:
+            lu, lv, lpu, lpv = self._hits[-1]
+            # consecutive matches must move as the prediction moved (camera motion), within tol
+            if math.hypot((u - lu) - (pu - lpu), (v - lv) - (pv - lpv)) > tol:
+                self._hits = []
+        self._hits.append((u, v, pu, pv))
+        if len(self._hits) < self.p.reacquire_frames:
+            return TrackResult("lost", confidence=score)
+        self._tracking = True
+        self._hits = []
+        self._velocity = (0.0, 0.0)
+        self.u, self.v = u, v
+        return self._result(u, v, score)

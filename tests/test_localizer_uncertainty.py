@@ -1,0 +1,114 @@
+"""The fix's 1-sigma accuracy against Monte-Carlo: perturb each input by its sigma, measure."""
+
+import dataclasses
+import itertools
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from localizer.calibration import Sigmas
+from localizer.camera import Camera
+from localizer.ray import pixel_to_offset
+from localizer.uncertainty import accuracy
+
+CAM = Camera(1920, 1080, 1664.0, 1664.0, 959.5, 539.5, (-0.12, 0.08, 0.0004, -0.0002, -0.01))
+N_WATER = 1.34
+R_NADIR = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # cv x→E, y→S, z→D
+
+
+def camera_R(tilt_from_nadir_deg, heading_deg):
+    """Nadir camera tilted towards ``heading_deg`` by ``tilt_from_nadir_deg``."""
+    tilt = cv2.Rodrigues(np.array([0.0, math.radians(tilt_from_nadir_deg), 0.0]))[0]  # Down → North
+    turn = cv2.Rodrigues(np.array([0.0, 0.0, math.radians(heading_deg)]))[0]
+    return turn @ tilt @ R_NADIR
+
+
+def monte_carlo_drms(R, u, v, h, d, sigmas, n=3000, seed=1):
+    """DRMS of fixes from inputs drawn with the sigmas (pixel, tilt, heading, height, depth)."""
+    rng = np.random.default_rng(seed)
+    tilt, yaw = math.radians(sigmas.tilt_deg), math.radians(sigmas.yaw_deg)
+    rvec = rng.normal(0.0, 1.0, (n, 3)) * [tilt, tilt, yaw]  # about North, East, Down
+    Rs = np.stack([cv2.Rodrigues(r)[0] @ R for r in rvec])
+    uu = u + rng.normal(0.0, sigmas.pixel_px, n)
+    vv = v + rng.normal(0.0, sigmas.pixel_px, n)
+    hh = h + rng.normal(0.0, sigmas.height_m, n)
+    dd = d + rng.normal(0.0, sigmas.depth_m, n)
+    true, _ = pixel_to_offset(CAM, R, u, v, h, d, N_WATER)
+    off, reaches = pixel_to_offset(CAM, Rs, uu, vv, hh, dd, N_WATER)
+    assert np.all(reaches)
+    err = off - true
+    return math.sqrt(np.mean(np.sum(err**2, axis=-1))), math.sqrt(np.sum(np.mean(err, axis=0) ** 2))
+
+
+SCENES = {
+    "nadir, centre": (camera_R(0, 0), CAM.cx, CAM.cy, 30.0, 2.0),
+    "nadir, corner": (camera_R(0, 0), 40.0, 1040.0, 60.0, 1.0),
+    "35° oblique": (camera_R(35, 70), 1500.0, 300.0, 25.0, 3.0),
+    "45° oblique, far corner": (camera_R(45, -150), 1800.0, 100.0, 15.0, 4.0),
+}
+ONLY = {  # each input alone, at a size that makes it dominate
+    "pixel_px": 8.0,
+    "tilt_deg": 1.0,
+    "yaw_deg": 3.0,
+    "height_m": 1.0,
+    "depth_m": 0.3,
+}
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_h_acc_matches_monte_carlo(scene):
+    R, u, v, h, d = SCENES[scene]
+    sig = Sigmas()
+    h_acc, _ = accuracy(CAM, R, u, v, h, d, N_WATER, sig)
+    drms, bias = monte_carlo_drms(R, u, v, h, d, sig)
+    assert float(h_acc) == pytest.approx(drms, rel=0.15)
+    assert bias < 0.2 * drms  # the linearization is fair: the spread is centred on the fix
+
+
+@pytest.mark.parametrize("name", sorted(ONLY))
+def test_each_input_enters_with_its_own_sigma(name):
+    R, u, v, h, d = SCENES["35° oblique"]
+    zero = dict.fromkeys(ONLY, 0.0)
+    sig = dataclasses.replace(Sigmas(), **{**zero, name: ONLY[name]})
+    h_acc, _ = accuracy(CAM, R, u, v, h, d, N_WATER, sig)
+    drms, _ = monte_carlo_drms(R, u, v, h, d, sig, seed=2)
+    assert drms > 0.01
+    assert float(h_acc) == pytest.approx(drms, rel=0.15)
+
+
+def test_h_acc_grows_off_nadir_and_with_height():
+    sig = Sigmas()
+    tilts = [0, 10, 20, 30, 40, 50]
+    by_tilt = [
+        float(accuracy(CAM, camera_R(t, 30), CAM.cx, CAM.cy, 30.0, 2.0, N_WATER, sig)[0])
+        for t in tilts
+    ]
+    assert all(b > a for a, b in itertools.pairwise(by_tilt)), by_tilt
+    heights = [5.0, 10.0, 20.0, 40.0, 80.0]
+    by_h = [
+        float(accuracy(CAM, camera_R(20, 0), 300.0, 700.0, h, 2.0, N_WATER, sig)[0])
+        for h in heights
+    ]
+    assert all(b > a for a, b in itertools.pairwise(by_h)), by_h
+
+
+def test_uav_position_accuracy_adds_in_quadrature_and_vertical():
+    R, u, v, h, d = SCENES["35° oblique"]
+    base, _ = accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(depth_m=0.1))
+    more, v_acc = accuracy(
+        CAM, R, u, v, h, d, N_WATER, Sigmas(uav_horizontal_m=1.5, depth_m=0.1, surface_amsl_m=0.2)
+    )
+    assert float(more) == pytest.approx(math.sqrt(float(base) ** 2 + 1.5**2))
+    assert float(v_acc) == pytest.approx(math.sqrt(0.1**2 + 0.2**2))
+
+
+def test_batched_accuracy():
+    R, u, v, h, d = SCENES["35° oblique"]
+    Rs = np.stack([R, camera_R(0, 0)])
+    h_acc, v_acc = accuracy(
+        CAM, Rs, [u, CAM.cx], [v, CAM.cy], [h, 30.0], [d, 2.0], N_WATER, Sigmas()
+    )
+    assert h_acc.shape == v_acc.shape == (2,)
+    assert h_acc[0] == pytest.approx(float(accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas())[0]))

@@ -1,0 +1,170 @@
+"""`skyfix process --use-track` on real session files: good output, and every bad-input case.
+
+Each bad case starts from a copy of a bundled scenario, breaks one thing, and
+checks: exit code 2, one line on stderr naming the file and the offending value,
+and no positions.csv left behind.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from groundstation.cli import main
+from groundstation.positions import read_positions_csv
+from localizer.geodesy import horizontal_error_m
+
+BUNDLED = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled"
+
+
+def _bundled(name: str) -> Path:
+    path = BUNDLED / name
+    if not (path / "session.toml").is_file():
+        pytest.fail(f"bundled fixture {path} missing: regenerate with sim_fixtures/bundle.py")
+    return path
+
+
+@pytest.fixture
+def session(tmp_path) -> Path:
+    dst = tmp_path / "session"
+    shutil.copytree(_bundled("oblique_2m"), dst, ignore=shutil.ignore_patterns("video.*", "video_frames.csv"))
+    return dst
+
+
+def _run(capsys, *argv) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _edit(path: Path, pattern: str, repl: str) -> None:
+    text = path.read_text()
+    new, n = re.subn(pattern, repl, text, flags=re.MULTILINE)
+    assert n == 1, f"pattern {pattern!r} not found once in {path}"
+    path.write_text(new)
+
+
+def test_positions_match_truth_and_spec_columns(session, tmp_path, capsys):
+    out = tmp_path / "out"
+    code, stdout, _ = _run(capsys, "process", str(session), "--out", str(out), "--use-track")
+    assert code == 0
+    header = (out / "positions.csv").read_text().splitlines()[0].split(",")
+    assert header[:6] == ["t", "lat", "lon", "depth_m", "h_acc_m", "status"]
+    pos = read_positions_csv(out / "positions.csv")
+    track = np.loadtxt(session / "track.csv", delimiter=",", skiprows=1, ndmin=2)
+    assert len(pos["t"]) == len(track)
+    ok = pos["status"] == "ok"
+    assert ok.mean() > 0.9
+    assert np.all(np.isnan(pos["lat"][~ok]))
+    truth = np.genfromtxt(session / "truth.csv", delimiter=",", names=True)
+    lat = np.interp(pos["t"][ok], truth["t"], truth["lat"])
+    lon = np.interp(pos["t"][ok], truth["t"], truth["lon"])
+    err = horizontal_error_m(pos["lat"][ok], pos["lon"][ok], lat, lon)
+    assert err.mean() < 0.005, f"geometry-only MAE {err.mean():.4f} m"
+
+
+def test_straight_ray_is_worse_off_nadir(session, tmp_path, capsys):
+    """The paper's method (--no-refraction) misses an oblique 2 m deep target by decimetres."""
+    for flag, name in (([], "bent"), (["--no-refraction"], "straight")):
+        assert _run(capsys, "process", str(session), "--out", str(tmp_path / name), "--use-track", *flag)[0] == 0
+    bent = read_positions_csv(tmp_path / "bent" / "positions.csv")
+    straight = read_positions_csv(tmp_path / "straight" / "positions.csv")
+    ok = (bent["status"] == "ok") & (straight["status"] == "ok")
+    shift = horizontal_error_m(bent["lat"][ok], bent["lon"][ok], straight["lat"][ok], straight["lon"][ok])
+    assert np.median(shift) > 0.15
+
+
+def test_real_console_script(session, tmp_path):
+    """The installed entry point, as a user runs it."""
+    exe = Path(sys.executable).with_name("skyfix")
+    res = subprocess.run([str(exe), "process", str(session), "--out", str(tmp_path / "o"), "--use-track"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert "positions.csv" in res.stdout
+
+
+BAD_CASES = {
+    "not a directory": (lambda s: shutil.rmtree(s), "not a session directory"),
+    "no session.toml": (lambda s: (s / "session.toml").unlink(), "session.toml: missing"),
+    "malformed TOML": (lambda s: _edit(s / "session.toml", r"^version = 1$", "version = = 1"), "malformed TOML"),
+    "wrong version": (lambda s: _edit(s / "session.toml", r"^version = 1$", "version = 7"), "version = 7"),
+    "NaN focal length": (lambda s: _edit(s / "session.toml", r"^fx = .*$", "fx = nan"), "camera.fx = nan"),
+    "negative refractive index": (
+        lambda s: _edit(s / "session.toml", r"^refractive_index = .*$", "refractive_index = -1.34"),
+        "water.refractive_index = -1.34",
+    ),
+    "unknown attitude source": (
+        lambda s: _edit(s / "session.toml", r'^attitude_source = .*$', 'attitude_source = "compass"'),
+        "mount.attitude_source = 'compass'",
+    ),
+    "no uav.tlog": (lambda s: (s / "uav.tlog").unlink(), "uav.tlog: missing"),
+    "garbage uav.tlog": (
+        lambda s: (s / "uav.tlog").write_bytes(np.random.default_rng(1).bytes(20000)), "no ATTITUDE message"
+    ),
+    "no depth.jsonl": (lambda s: (s / "depth.jsonl").unlink(), "depth.jsonl: missing"),
+    "garbage depth line": (
+        lambda s: _insert_line(s / "depth.jsonl", 3, "{not json"), "depth.jsonl:4: expected"
+    ),
+    "NaN depth": (lambda s: _insert_line(s / "depth.jsonl", 3, '{"t": 1.0, "depth_m": NaN}'), "non-finite"),
+    "depth out of range": (
+        lambda s: _replace_depth(s / "depth.jsonl", 2, 99999.0), "depth_m = 99999.0 out of range"
+    ),
+    "non-numeric pixel": (lambda s: _replace_track_cell(s / "track.csv", 2, "abc"), "u = 'abc': not a number"),
+    "ray never reaches the water": (lambda s: _camera_looks_up(s / "session.toml"), "no_water"),
+}
+
+
+def _camera_looks_up(path: Path) -> None:
+    """A rigid camera pitched 45° above the horizon: no ray can reach the water."""
+    text = re.sub(r"^fixed_rpy_deg = .*\n", "", path.read_text(), flags=re.MULTILINE)
+    path.write_text(text)
+    _edit(path, r"^attitude_source = .*$", 'attitude_source = "fixed"\nfixed_rpy_deg = [0.0, 45.0, 0.0]')
+
+
+def _insert_line(path: Path, index: int, line: str) -> None:
+    lines = path.read_text().splitlines()
+    lines.insert(index, line)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _replace_depth(path: Path, index: int, depth: float) -> None:
+    lines = path.read_text().splitlines()
+    lines[index] = re.sub(r'"depth_m":\s*[-0-9.eE]+', f'"depth_m": {depth}', lines[index])
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _replace_track_cell(path: Path, row: int, value: str) -> None:
+    lines = path.read_text().splitlines()
+    cells = lines[row].split(",")
+    cells[1] = value
+    lines[row] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CASES))
+def test_bad_session_is_one_clear_line_and_no_output(case, session, tmp_path, capsys):
+    breaker, expected = BAD_CASES[case]
+    breaker(session)
+    out = tmp_path / "out"
+    code, _, err = _run(capsys, "process", str(session), "--out", str(out), "--use-track")
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert expected in lines[0]
+    assert not (out / "positions.csv").exists()
+    assert not out.exists() or not list(out.glob("*.partial"))
+
+
+def test_truncated_last_depth_line_is_a_warning(session, tmp_path, capsys):
+    """A log cut mid-write (power loss) loses one sample, not the session."""
+    with open(session / "depth.jsonl", "a") as f:
+        f.write('{"t": 17')
+    code, _, err = _run(capsys, "process", str(session), "--out", str(tmp_path / "o"), "--use-track")
+    assert code == 0
+    assert "truncated last line" in err
