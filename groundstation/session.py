@@ -185,7 +185,7 @@ def load_session(path) -> Session:
     except ConfigError as e:
         raise SessionError(str(e)) from None
 
-    warnings: list[str] = []
+    warnings: list[str] = list(cal.warnings)
     tel = Telemetry(cal.timing)
     sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings)
     if not (path / "depth.jsonl").is_file():
