@@ -12,6 +12,8 @@ from .session import SessionError
 
 SUBCOMMANDS = (
     "groundstation.process",
+    "groundstation.evaluate",
+    "sim_fixtures.cli",
 )
 
 

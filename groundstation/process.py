@@ -22,7 +22,7 @@ from .session import Session, SessionError, load_session
 _GEOMETRY_FAILURES = ("no_water", "below_surface", "bad_pixel")
 
 
-def pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False):
+def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False):
     """``(t, u, v, track_status)`` per frame: from track.csv or from tracking the video."""
     if use_track:
         if session.track is None:
@@ -38,11 +38,9 @@ def pixels(session: Session, use_track: bool, tracker: str = "default", progress
     return tracked.t, tracked.u, tracked.v, tracked.status
 
 
-def process_session(
-    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False
-) -> Fixes:
-    """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
-    t, u, v, track_status = pixels(session, use_track, tracker, progress)
+def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
+    """Fixes for ``pixels = (t, u, v, track_status)`` (see :func:`frame_pixels`)."""
+    t, u, v, track_status = pixels
     pose = camera_pose(session.calibration, session.telemetry, t)
     fixes = locate(session.calibration, pose, u, v, refraction=refraction)
     lost = (track_status != "ok") & (pose.status == "ok")
@@ -56,6 +54,13 @@ def process_session(
                 f"is {fixes.status[i]} (camera height {pose.height_m[i]:.2f} m): check [mount] and [water]"
             )
     return fixes
+
+
+def process_session(
+    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False
+) -> Fixes:
+    """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
+    return locate_frames(session, frame_pixels(session, use_track, tracker, progress), refraction)
 
 
 def summary(fixes: Fixes) -> str:

@@ -1,0 +1,227 @@
+"""Write a complete session (format v1) for a scenario: video, telemetry, depth, truth, track.
+
+Ground truth is the UUV's reference point, the centre of its top face (what the
+camera sees and the tracker follows), in WGS84 with its depth below the surface;
+``depth.jsonl`` reports the depth of that same point. ``track.csv`` holds the
+exact distorted pixel of the truth point, projected with the localizer's forward
+model (:func:`localizer.ray.offset_to_pixel`), one row per frame; where the UUV is
+hidden by an occlusion window or outside the image, ``u`` and ``v`` are empty. The video is rendered
+independently by ray casting (:mod:`sim_fixtures.render`) and encoded by the
+``ffmpeg`` CLI (libx264, yuv420p, raw BGR frames through a pipe).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from localizer.attitude import R_GIMBAL_FROM_CV
+from localizer.calibration import ConfigError
+from localizer.camera import Camera
+from localizer.geodesy import ned_to_geodetic
+from localizer.ray import offset_to_pixel
+
+from .motion import Motion
+from .render import Renderer, View
+from .scenario import Scenario
+from .tlog import Clock, write_tlog
+
+MARK = "# synthetic session made by skyfix sim"  # first line of session.toml
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The true geometry at each frame (arrays over frames)."""
+
+    t_unix: np.ndarray
+    tau_s: np.ndarray
+    R_ned_from_cv: np.ndarray  # (N, 3, 3)
+    camera_ned: np.ndarray  # (N, 3)
+    uuv_ned: np.ndarray  # (N, 3) top-face centre
+    uuv_heading: np.ndarray
+    visible: np.ndarray  # not occluded
+    u: np.ndarray  # exact distorted pixel of the reference point
+    v: np.ndarray
+
+    def view(self, i: int) -> View:
+        return View(self.R_ned_from_cv[i], self.camera_ned[i], self.uuv_ned[i], float(self.uuv_heading[i]),
+                    bool(self.visible[i]), float(self.tau_s[i]))
+
+
+def camera_of(sc: Scenario) -> Camera:
+    """The scenario's camera: fx = fy from the horizontal field of view, principal point at the centre."""
+    c = sc.camera
+    f = (c.width / 2) / np.tan(np.radians(c.hfov_deg) / 2)
+    return Camera(c.width, c.height, f, f, (c.width - 1) / 2, (c.height - 1) / 2, tuple(c.distortion))
+
+
+def frame_truth(sc: Scenario, motion: Motion, camera: Camera) -> Truth:
+    """True state at every frame's exposure time, and the truth point's exact pixel."""
+    n = round(sc.duration_s * sc.fps)
+    clock = Clock.of(sc)
+    tau = np.arange(n) / sc.fps
+    t_unix = (clock.start_us + np.round(tau * 1e6)) / 1e6
+    R = motion.R_ned_from_gimbal(tau) @ R_GIMBAL_FROM_CV
+    cam = motion.camera_ned(tau)
+    uuv = motion.uuv_ned(tau)
+    visible = np.ones(n, bool)
+    for a, b in sc.occlusions:
+        visible &= ~((tau >= a) & (tau < b))
+    u, v = offset_to_pixel(camera, R, uuv[:, :2] - cam[:, :2], -cam[:, 2], uuv[:, 2], sc.site.refractive_index)
+    return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v)
+
+
+def _write_csv(path: Path, header, rows) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        w.writerows(rows)
+
+
+def _session_toml(sc: Scenario, camera: Camera, init_bbox, init_t: float) -> str:
+    s, m = sc.site, sc.mount
+
+    def vec(x):
+        return "[" + ", ".join(repr(float(a)) for a in x) + "]"
+
+    water = (f"takeoff_height_above_surface_m = {s.takeoff_height_above_surface_m!r}" if s.water_reference == "takeoff"
+             else f"surface_amsl_m = {s.surface_amsl_m!r}")
+    return f"""{MARK} from scenario "{sc.name}" (seed {sc.seed})
+version = 1
+
+[camera]
+width = {camera.width}
+height = {camera.height}
+fx = {float(camera.fx)!r}
+fy = {float(camera.fy)!r}
+cx = {float(camera.cx)!r}
+cy = {float(camera.cy)!r}
+distortion = {vec(camera.distortion)}
+
+[mount]
+attitude_source = "{m.attitude_source}"
+fixed_rpy_deg = {vec(m.fixed_rpy_deg)}
+camera_offset_m = {vec(m.camera_offset_m)}
+
+[water]
+{water}
+refractive_index = {s.refractive_index!r}
+
+[tracker]
+init_bbox = [{", ".join(str(int(x)) for x in init_bbox)}]
+init_t = {init_t!r}
+""" + _uncertainty_toml(sc)
+
+
+def _uncertainty_toml(sc: Scenario) -> str:
+    """An ``[uncertainty]`` table stating the scenario's telemetry noise, when it has any."""
+    t = sc.telemetry
+    if not (t.attitude_noise_deg or t.height_noise_m or t.depth_noise_m):
+        return ""
+    return f"""
+[uncertainty]  # the simulated telemetry noise (1-sigma per sample)
+tilt_deg = {t.attitude_noise_deg!r}
+yaw_deg = {t.attitude_noise_deg!r}
+height_m = {t.height_noise_m!r}
+depth_m = {t.depth_noise_m!r}
+"""
+
+
+class Encoder:
+    """``ffmpeg`` reading raw BGR frames on stdin, writing H.264 (libx264, yuv420p) MP4."""
+
+    def __init__(self, path: Path, width: int, height: int, fps: float, crf: int):
+        if shutil.which("ffmpeg") is None:
+            raise RuntimeError("ffmpeg not found on PATH; install it (apt install ffmpeg) to render video")
+        cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24", "-s", f"{width}x{height}",
+               "-r", f"{fps:g}", "-i", "-", "-an", "-c:v", "libx264", "-preset", "veryfast", "-crf", str(crf),
+               "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(path)]
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE)
+
+    def write(self, frame_bgr: np.ndarray) -> None:
+        self.proc.stdin.write(frame_bgr.tobytes())
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        if self.proc.wait() != 0:
+            raise RuntimeError(f"ffmpeg exited with status {self.proc.returncode}")
+
+
+@dataclass(frozen=True)
+class Report:
+    session: Path
+    frames: int
+    render_s: float  # rendering + encoding time
+    total_s: float
+    messages: dict
+
+
+def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None) -> Report:
+    """Write the session for ``sc`` into ``out_dir``.
+
+    The directory is created; a session generated earlier is overwritten, any other
+    session (a real recording) is refused with :class:`ConfigError`.
+    """
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    existing = out / "session.toml"
+    if existing.is_file() and not existing.read_text(errors="replace").startswith(MARK):
+        raise ConfigError(str(out), "--out", str(out), "holds a session not made by skyfix sim; refusing to overwrite it")
+    out.mkdir(parents=True, exist_ok=True)
+    camera = camera_of(sc)
+    motion = Motion(sc)
+    truth = frame_truth(sc, motion, camera)
+    clock = Clock.of(sc)
+    rng = np.random.default_rng([sc.seed, 404])
+
+    messages = write_tlog(out / "uav.tlog", sc, motion, clock, rng)
+    tel = sc.telemetry
+    tau_d = np.arange(-tel.lead_s, sc.duration_s + 1.0, 1.0 / tel.depth_hz)
+    tau_d = tau_d + rng.uniform(0.0, 0.2 / tel.depth_hz, len(tau_d))
+    depth = motion.uuv_depth_m(tau_d) + rng.normal(0.0, 1.0, len(tau_d)) * tel.depth_noise_m
+    with open(out / "depth.jsonl", "w") as f:
+        f.writelines(json.dumps({"t": round(sc.start_unix + tau, 6), "depth_m": round(float(d), 5)}) + "\n"
+                     for tau, d in zip(tau_d, depth))
+
+    s = sc.site
+    lat, lon, _ = ned_to_geodetic(truth.uuv_ned[:, 0], truth.uuv_ned[:, 1], truth.uuv_ned[:, 2],
+                                  s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    _write_csv(out / "truth.csv", ("t", "lat", "lon", "depth_m"),
+               ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}")
+                for t, a, b, d in zip(truth.t_unix, lat, lon, truth.uuv_ned[:, 2])))
+    seen = truth.visible & camera.contains(np.nan_to_num(truth.u, nan=-1e9), np.nan_to_num(truth.v, nan=-1e9))
+    _write_csv(out / "track.csv", ("t", "u", "v"),
+               ((f"{t:.6f}", f"{u:.4f}" if ok else "", f"{v:.4f}" if ok else "")
+                for t, u, v, ok in zip(truth.t_unix, truth.u, truth.v, seen)))
+    _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(truth.t_unix)))
+
+    t1 = time.perf_counter()
+    renderer = Renderer(sc, camera)
+    encoder = Encoder(out / "video.mp4", camera.width, camera.height, sc.fps, sc.render.crf)
+    init = None
+    try:
+        for i in range(len(truth.t_unix)):
+            img, box = renderer.render(truth.view(i))
+            if init is None and box is not None:
+                init = (box, float(truth.t_unix[i]))
+            encoder.write(img)
+    finally:
+        encoder.close()
+    render_s = time.perf_counter() - t1
+    if init is None:
+        raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
+    pad = 3
+    x, y, w, h = init[0]
+    x0, y0 = max(0, x - pad), max(0, y - pad)
+    box = (x0, y0, min(camera.width, x + w + pad) - x0, min(camera.height, y + h + pad) - y0)
+    (out / "session.toml").write_text(_session_toml(sc, camera, box, init[1]))
+    if scenario_text is not None:
+        (out / "scenario.toml").write_text(scenario_text)
+    return Report(out, len(truth.t_unix), render_s, time.perf_counter() - t0, messages)

@@ -1,0 +1,218 @@
+"""A synthetic scenario: what the generator is asked to simulate, read from a small TOML file.
+
+Every table and key is optional except ``name``; unknown keys and wrong types are
+refused with a one-line :class:`~localizer.calibration.ConfigError` naming the
+file, key and value. Units are in the key names (``_m``, ``_deg``, ``_s``, ``_hz``).
+World frame: local North-East-Down with its origin on the water surface at
+``[site] lat_deg, lon_deg``; the water surface is the plane ``down = 0``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+from localizer.calibration import ConfigError
+
+
+@dataclass(frozen=True)
+class Site:
+    lat_deg: float = 63.4400  # origin of the world frame, on the water surface
+    lon_deg: float = 10.4000
+    surface_amsl_m: float = 0.40  # the water surface's altitude above mean sea level
+    water_reference: str = "takeoff"  # session.toml [water] key written: "takeoff" or "amsl"
+    takeoff_height_above_surface_m: float = 1.80  # the take-off point above the water
+    refractive_index: float = 1.34
+    floor_depth_m: float = 4.0  # flat seafloor below the surface
+    attenuation_bgr_per_m: tuple = (0.05, 0.08, 0.22)  # light attenuation coefficients (1/m)
+    water_bgr: tuple = (120.0, 105.0, 50.0)  # colour of deep water (0-255)
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    width: int = 640
+    height: int = 360
+    hfov_deg: float = 62.0  # horizontal field of view of the undistorted pinhole (fx = fy)
+    distortion: tuple = (-0.12, 0.08, 0.0004, -0.0002, -0.01)  # k1, k2, p1, p2, k3
+
+
+@dataclass(frozen=True)
+class MountSpec:
+    attitude_source: str = "gimbal_device"  # "gimbal_device", "mount_orientation" or "fixed"
+    gimbal_frame: str = "earth"  # gimbal_device yaw reported "earth" (flags 64) or "vehicle" (flags 32)
+    pitch_deg: float = -90.0  # gimbal attitude held relative to the horizon / North
+    yaw_deg: float = 0.0  # gimbal heading held (degrees from North)
+    jitter_deg: float = 0.05  # amplitude of the gimbal's residual wobble (0.4 and 0.7 Hz)
+    fixed_rpy_deg: tuple = (0.0, -90.0, 0.0)  # "fixed": camera in the body FRD frame
+    camera_offset_m: tuple = (0.10, 0.0, 0.20)  # camera in body FRD relative to the reported position
+
+
+@dataclass(frozen=True)
+class UavSpec:
+    height_m: float = 10.0  # mean height of the reported position above the water
+    height_swing_m: float = 0.3  # amplitude of slow height changes
+    standoff: str = "auto"  # "auto": placed so the optical axis meets the UUV's path centre; "given"
+    north_m: float = 0.0  # mean position when standoff = "given"
+    east_m: float = 0.0
+    drift_m: float = 0.4  # amplitude of the hover's horizontal drift
+    yaw_deg: float = 20.0  # mean heading
+    yaw_swing_deg: float = 10.0  # amplitude of the heading's sinusoidal changes
+    yaw_period_s: float = 12.0
+    tilt_deg: float = 4.0  # wind tilt: the airframe leans into the wind by this much
+    wind_from_deg: float = 250.0
+    gust_deg: float = 0.8  # amplitude of the tilt's oscillation
+
+
+@dataclass(frozen=True)
+class UuvSpec:
+    north_m: float = 0.0  # centre of the figure-eight path
+    east_m: float = 0.0
+    path_n_m: float = 0.8  # half extent of the path along North and East
+    path_e_m: float = 0.6
+    period_s: float = 24.0  # one loop of the figure eight
+    depth_m: float = 1.0  # mean depth of the top face (the reference point)
+    depth_swing_m: float = 0.25
+    depth_period_s: float = 15.0
+    size_m: tuple = (0.46, 0.34, 0.25)  # length, width, height (BlueROV2)
+
+
+@dataclass(frozen=True)
+class LinkSpec:
+    delay_s: float = 0.045  # telemetry link delay (sample to ground-station receipt)
+    jitter_s: float = 0.012  # mean of the exponential extra delay; the link stays in order
+    boot_s_at_start: float = 412.0  # autopilot uptime when the scenario starts
+
+
+@dataclass(frozen=True)
+class TelemetrySpec:
+    attitude_hz: float = 50.0
+    position_hz: float = 10.0
+    gimbal_hz: float = 20.0
+    depth_hz: float = 8.0
+    lead_s: float = 2.0  # telemetry starts this long before the first frame
+    attitude_noise_deg: float = 0.0  # 1-sigma white noise on reported roll, pitch, yaw
+    height_noise_m: float = 0.0  # 1-sigma noise on reported altitudes
+    depth_noise_m: float = 0.0  # 1-sigma noise on reported UUV depth
+
+
+@dataclass(frozen=True)
+class RenderSpec:
+    exposure: float = 1.4  # sunlight just below the surface, relative to the albedo
+    caustics: float = 0.5  # strength of the moving caustic pattern (0 = none)
+    glint: float = 0.0  # strength of sun glint (0 = none)
+    sun_azimuth_deg: float = 140.0
+    sun_elevation_deg: float = 55.0
+    noise_sigma: float = 2.0  # sensor noise, grey levels
+    crf: int = 23  # x264 quality (lower is better)
+    supersample: int = 2  # rays per pixel side on the UUV (anti-aliasing)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str = ""
+    seed: int = 1
+    duration_s: float = 8.0
+    fps: float = 30.0
+    start_unix: float = 1763800000.0
+    occlusions: tuple = ()  # ((start_s, end_s), ...) relative to the first frame: the UUV is hidden
+    site: Site = field(default_factory=Site)
+    camera: CameraSpec = field(default_factory=CameraSpec)
+    mount: MountSpec = field(default_factory=MountSpec)
+    uav: UavSpec = field(default_factory=UavSpec)
+    uuv: UuvSpec = field(default_factory=UuvSpec)
+    link: LinkSpec = field(default_factory=LinkSpec)
+    telemetry: TelemetrySpec = field(default_factory=TelemetrySpec)
+    render: RenderSpec = field(default_factory=RenderSpec)
+
+
+_TABLES = {"site": Site, "camera": CameraSpec, "mount": MountSpec, "uav": UavSpec, "uuv": UuvSpec,
+           "link": LinkSpec, "telemetry": TelemetrySpec, "render": RenderSpec}
+_CHOICES = {"site.water_reference": ("takeoff", "amsl"),
+            "mount.attitude_source": ("gimbal_device", "mount_orientation", "fixed"),
+            "mount.gimbal_frame": ("earth", "vehicle"), "uav.standoff": ("auto", "given")}
+
+
+def _checked(source: str, key: str, value, default):
+    """``value`` converted to the type of ``default``, or ConfigError."""
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    elif isinstance(default, str):
+        ok = isinstance(value, str) and (key not in _CHOICES or value in _CHOICES[key])
+    else:  # a tuple of numbers of fixed length
+        ok = (isinstance(value, list) and len(value) == len(default)
+              and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value))
+        value = tuple(float(x) for x in value) if ok else value
+    if not ok:
+        want = f"one of {', '.join(_CHOICES[key])}" if key in _CHOICES else f"a value like {default!r}"
+        raise ConfigError(source, key, value, f"expected {want}")
+    return value
+
+
+def _build(cls, source: str, prefix: str, table: dict, skip=()):
+    known = {f.name: f for f in fields(cls)}
+    if not isinstance(table, dict):
+        raise ConfigError(source, prefix or "(top level)", table, "expected a table")
+    kwargs = {}
+    for key, value in table.items():
+        if key in skip:
+            continue
+        full = f"{prefix}.{key}" if prefix else key
+        if key not in known:
+            raise ConfigError(source, full, value, f"unknown key (known: {', '.join(sorted(known))})")
+        default = cls.__dataclass_fields__[key].default
+        kwargs[key] = _checked(source, full, value, default)
+    return kwargs
+
+
+def _occlusions(source: str, value) -> tuple:
+    if not isinstance(value, list) or not all(
+        isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) for x in w) and w[0] < w[1]
+        for w in value
+    ):
+        raise ConfigError(source, "occlusions", value, "expected a list of [start_s, end_s] pairs, start < end")
+    return tuple((float(a), float(b)) for a, b in value)
+
+
+def scenario_from_dict(data: dict, source: str = "scenario.toml") -> Scenario:
+    """Validate parsed TOML and build a :class:`Scenario`."""
+    if not isinstance(data.get("name"), str) or not data["name"]:
+        raise ConfigError(source, "name", data.get("name"), "expected a non-empty string")
+    top = _build(Scenario, source, "", data, skip=("name", "occlusions", *_TABLES))
+    tables = {k: cls(**_build(cls, source, k, data.get(k, {}))) for k, cls in _TABLES.items()}
+    occl = _occlusions(source, data["occlusions"]) if "occlusions" in data else ()
+    sc = Scenario(name=data["name"], occlusions=occl, **top, **tables)
+    for key, value in (("duration_s", sc.duration_s), ("fps", sc.fps)):
+        if not value > 0:
+            raise ConfigError(source, key, value, "must be > 0")
+    shallowest = sc.uuv.depth_m - abs(sc.uuv.depth_swing_m)
+    deepest = sc.uuv.depth_m + abs(sc.uuv.depth_swing_m) + sc.uuv.size_m[2]
+    if not (shallowest > 0 and deepest < sc.site.floor_depth_m):
+        raise ConfigError(source, "uuv.depth_m", sc.uuv.depth_m,
+                          "the UUV must stay between the surface and the seafloor (site.floor_depth_m)")
+    return sc
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario TOML file."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as e:
+        raise ConfigError(str(path), "(file)", str(path), f"cannot read: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(str(path), "(syntax)", str(path), str(e)) from None
+    return scenario_from_dict(data, str(path))
+
+
+def with_overrides(sc: Scenario, **tables) -> Scenario:
+    """A copy of ``sc`` with some fields of its tables replaced, e.g. ``camera={"width": 1280}``."""
+    changes = {k: replace(getattr(sc, k), **v) for k, v in tables.items() if k in _TABLES}
+    top = {k: v for k, v in tables.items() if k not in _TABLES}
+    return replace(sc, **changes, **top)
