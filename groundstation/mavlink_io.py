@@ -12,9 +12,9 @@ import os
 
 os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's import to parse MAVLink 2
 
-from pymavlink import mavutil as _mavutil  # noqa: E402
+from pymavlink import mavutil as _mavutil
 
-from localizer.telemetry import Telemetry  # noqa: E402
+from localizer.telemetry import Telemetry
 
 #: Message types the localizer uses.
 USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")

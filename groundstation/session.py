@@ -59,21 +59,20 @@ def _number(text: str, where: str, col: str, allow_empty: bool) -> float:
 def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
     """A CSV with at least ``columns`` in its header, as float arrays; checks times increase."""
     try:
-        f = open(path, newline="")
-    except OSError as e:
-        raise SessionError(f"{path}: cannot read: {e.strerror}") from None
-    with f:
-        reader = csv.DictReader(f)
-        missing = [c for c in columns if c not in (reader.fieldnames or [])]
-        if missing:
-            raise SessionError(f"{path}: header {reader.fieldnames!r} lacks {', '.join(missing)}")
-        cols: dict[str, list[float]] = {c: [] for c in columns}
-        for row in reader:
-            where = f"{path}:{reader.line_num}"
-            for c in columns:
-                if row[c] is None:
-                    raise SessionError(f"{where}: row too short, no {c}")
-                cols[c].append(_number(row[c], where, c, c in allow_empty))
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            missing = [c for c in columns if c not in (reader.fieldnames or [])]
+            if missing:
+                raise SessionError(f"{path}: header {reader.fieldnames!r} lacks {', '.join(missing)}")
+            cols: dict[str, list[float]] = {c: [] for c in columns}
+            for row in reader:
+                where = f"{path}:{reader.line_num}"
+                for c in columns:
+                    if row[c] is None:
+                        raise SessionError(f"{where}: row too short, no {c}")
+                    cols[c].append(_number(row[c], where, c, c in allow_empty))
+    except (OSError, UnicodeDecodeError) as e:
+        raise SessionError(f"{path}: cannot read: {e}") from None
     out = {c: np.array(v, dtype=float) for c, v in cols.items()}
     t = out.get("t")
     if t is not None and len(t) > 1 and not np.all(np.diff(t) > 0):
@@ -126,7 +125,7 @@ def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> 
         while True:
             try:
                 m = conn.recv_msg()
-            except Exception as e:  # pymavlink raises bare errors on some corrupt records
+            except Exception as e:  # noqa: BLE001 - pymavlink raises assorted errors on corrupt records
                 bad += 1
                 warnings.append(f"{path}: undecodable record skipped: {e}")
                 continue

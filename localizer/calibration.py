@@ -185,7 +185,7 @@ def calibration_from_dict(data: dict, source: str = "session.toml") -> Calibrati
         x, y, w, h = _vector(source, "tracker.init_bbox", box, 4)
         if w < 2 or h < 2 or x < 0 or y < 0 or x + w > width or y + h > height:
             raise ConfigError(source, "tracker.init_bbox", box, f"box must lie inside the {width}x{height} image")
-        init_bbox = (int(round(x)), int(round(y)), int(round(w)), int(round(h)))
+        init_bbox = (round(x), round(y), round(w), round(h))
     init_t = _number(source, "tracker.init_t", tr["init_t"]) if "init_t" in tr else None
 
     sigmas = _dataclass_from(
