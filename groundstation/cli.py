@@ -14,6 +14,8 @@ SUBCOMMANDS = (
     "groundstation.process",
     "groundstation.evaluate",
     "sim_fixtures.cli",
+    "groundstation.service",
+    "groundstation.replay",
 )
 
 

@@ -37,7 +37,7 @@ class Prediction:
 class TrackResult:
     """One frame's tracking result."""
 
-    status: str  # "ok" or why not: "lost", "searching", "not_initialized"
+    status: str  # "ok" or why not: "lost", "not_initialized"
     u: float = float("nan")  # the UUV's centre, distorted pixels
     v: float = float("nan")
     box: tuple[int, int, int, int] | None = None  # x, y, w, h

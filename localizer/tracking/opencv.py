@@ -19,7 +19,7 @@ MIL_SEED = 1
 def check_box(frame: np.ndarray, box) -> tuple[int, int, int, int]:
     """The box as ints, or ValueError naming it if it does not lie inside the frame."""
     h, w = frame.shape[:2]
-    x, y, bw, bh = (int(round(c)) for c in box)
+    x, y, bw, bh = (round(c) for c in box)
     if bw < 2 or bh < 2 or x < 0 or y < 0 or x + bw > w or y + bh > h:
         raise ValueError(f"init box {tuple(box)!r} does not lie inside the {w}x{h} frame")
     return x, y, bw, bh

@@ -20,6 +20,7 @@ import math
 import numpy as np
 
 from ..calibration import Calibration
+from ..fix import locate
 from ..geodesy import geodetic_to_ned
 from ..pose import CameraPose
 from ..ray import offset_to_pixel, pixel_to_offset
@@ -27,6 +28,8 @@ from . import Prediction
 
 VEHICLE_FOOTPRINT_M = (0.46, 0.34)  # BlueROV2-sized: length, beam (metres)
 VEHICLE_HEIGHT_M = 0.25  # from the top face down to the bottom
+UUV_SPEED_MPS = 1.0  # how fast the UUV may move unseen: the prediction's 1-sigma grows by this per second
+BASE_SIGMA_M = 0.08  # the prediction's 1-sigma from the telemetry itself (attitude, timing)
 _STEP_M = 0.05  # finite-difference step for the image scale
 
 
@@ -94,3 +97,20 @@ def predict(cal: Calibration, pose: CameraPose, lat_deg, lon_deg, sigma_m) -> li
     u, v, k = project_uuv(cal, pose, lat_deg, lon_deg)
     sigma = np.broadcast_to(np.asarray(sigma_m, dtype=float), u.shape)
     return [prediction_at(u[i], v[i], k[i], sigma[i]) for i in range(len(u))]
+
+
+def init_target(cal: Calibration, pose: CameraPose, box) -> tuple[tuple[float, float], Prediction | None]:
+    """For a tracker's init box (x, y, w, h) in the pose's (single) frame: the pixel to track and a prediction.
+
+    The pixel is the top face's centre (:func:`top_face_pixel`); the prediction
+    (None without a usable pose) gives the tracker the UUV's apparent size there,
+    to which later predictions are compared when the range or depth changes.
+    """
+    x, y, w, h = box
+    u, v = top_face_pixel(cal, pose, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
+    point = (float(u[0]), float(v[0]))
+    fix = locate(cal, pose, u[:1], v[:1])
+    if fix.status[0] != "ok":
+        return point, None
+    pu, pv, k = project_uuv(cal, pose, fix.lat[0], fix.lon[0])
+    return point, prediction_at(pu[0], pv[0], k[0], BASE_SIGMA_M, (point[0] - pu[0], point[1] - pv[0]))

@@ -5,20 +5,25 @@ the size it had at init). Each frame it is rotated to the UUV's current heading
 in the image and scaled to the predicted apparent size, then matched
 (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``) inside a window centred on the
 prediction and as large as its uncertainty; the peak is refined to sub-pixel
-precision by a parabola fit, and the heading by trying ±``turn_step_deg``. The
+precision by a parabola fit, and every ``adapt_every`` frames (at once when the
+score sags) the heading is followed by trying ±``turn_step_deg`` steps. The
 matched patch, turned back upright, is blended slowly into the canonical
-template when the match is confident, so the template follows lighting and depth
-without sliding off the vehicle. Images are block-averaged by an integer factor
-so the template keeps about ``work_px`` pixels across whatever the UUV's size:
-the cost per frame is nearly independent of resolution.
+template when the match is confident, and the template is held on its first
+appearance, so it follows lighting and depth without sliding off the vehicle.
+Images are block-averaged by an integer factor so the template keeps about
+``work_px`` pixels across whatever the UUV's size: the cost per frame is nearly
+independent of resolution. The reported pixel is the init ``point`` (default:
+the box centre), carried along as the vehicle moves and turns.
 
-Loss: a peak below ``ok_score`` (or far below the recent level), or outside the
-predicted window, means the UUV is not where it should be: status ``lost``, no
-position. While lost, the window grows with the prediction's uncertainty (the
-whole frame without a prediction), every heading is tried, and the track resumes
-only after ``reacquire_frames`` consecutive matches above ``reacquire_score``
-that agree with each other and with the camera motion predicted between them, so
-a hidden UUV is not replaced by a look-alike patch of seafloor.
+Loss: a peak below ``ok_score`` (or ``level_drop`` below the recent level), or
+outside the predicted window, means the UUV is not where it should be: status
+``lost``, no position. While lost, a candidate is searched every ``search_every``
+frames in a window that grows with the prediction's uncertainty (the whole frame
+without a prediction), at ``reacquire_headings`` headings refined by turn steps;
+a candidate is then followed frame by frame, and the track resumes only after
+``reacquire_frames`` consecutive matches above ``reacquire_score`` (and near the
+recent level) that move as the camera motion predicts, so a hidden UUV is not
+replaced by a look-alike patch of seafloor.
 """
 
 from __future__ import annotations
@@ -35,13 +40,16 @@ from .opencv import check_box
 
 @dataclass(frozen=True)
 class TemplateParams:
-    work_px: int = 28  # the template's side after block averaging (pixels)
+    work_px: int = 24  # the template's side after block averaging (pixels)
     ok_score: float = 0.5  # NCC below this: the UUV is not there
     level_drop: float = 0.25  # ... or this far below the recent level of confident matches
     update_score: float = 0.7  # NCC above this: blend the match into the template
-    learn_rate: float = 0.05  # fraction of the template replaced per confident frame
+    adapt_every: int = 2  # try other headings and learn the appearance every this many frames
+    learn_rate: float = 0.08  # fraction of the template replaced per learning step
     recentre_px: float = 0.2  # undo the learnt template's drift from its first appearance beyond this
-    turn_step_deg: float = 6.0  # heading change tried each frame (each way)
+    turn_step_deg: float = 6.0  # heading change tried each time (each way)
+    max_turn_steps: int = 4  # ... and up to this many steps while the match improves
+    turn_drop: float = 0.05  # try other headings at once when the score falls this far below the level
     search_sigmas: float = 3.0  # window half-size in prediction sigmas
     min_radius_px: float = 6.0  # smallest window half-size (full-resolution pixels)
     default_radius_px: float = 40.0  # window half-size without a prediction while tracking
@@ -49,14 +57,16 @@ class TemplateParams:
     reacquire_below_level: float = 0.15  # re-acquisition also needs a score within this of the level
     reacquire_frames: int = 3
     reacquire_tolerance: float = 0.3  # agreement between consecutive matches, in template sides
-    reacquire_headings: int = 16  # headings tried while lost
+    reacquire_headings: int = 8  # headings tried while lost (then refined by turn steps)
+    search_every: int = 2  # while lost with no candidate, search every this many frames
+    scale_step: float = 0.01  # re-scale the template when the predicted size changes by more than this
     coarse_side: int = 96  # windows wider than this (working pixels) are searched at half resolution first
 
 
 def _parabola(a: float, b: float, c: float) -> float:
     """Offset of the extremum of a parabola through (-1, a), (0, b), (1, c), clipped to ±0.5."""
     den = a - 2.0 * b + c
-    return 0.0 if den >= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+    return 0.0 if den >= 0 else min(0.5, max(-0.5, 0.5 * (a - c) / den))
 
 
 def _peak(scores: np.ndarray) -> tuple[float, float, float]:
@@ -65,7 +75,7 @@ def _peak(scores: np.ndarray) -> tuple[float, float, float]:
     h, w = scores.shape
     dx = _parabola(scores[i, j - 1], scores[i, j], scores[i, j + 1]) if 0 < j < w - 1 else 0.0
     dy = _parabola(scores[i - 1, j], scores[i, j], scores[i + 1, j]) if 0 < i < h - 1 else 0.0
-    return float(best), j + dx, i + dy
+    return float(best), float(j + dx), float(i + dy)
 
 
 def _similarity(angle_deg: float, scale: float) -> np.ndarray:
@@ -110,7 +120,7 @@ class TemplateTracker:
     def _upright(self, frame_bgr, u: float, v: float) -> np.ndarray | None:
         """The canonical-frame patch (side D) of the UUV centred at full-res (u, v), or None off the frame."""
         qx, qy = self._to_work(u, v)
-        half = int(math.ceil(self.D * self._scale * 0.75)) + 2
+        half = math.ceil(self.D * self._scale * 0.75) + 2
         bx0, by0 = int(qx) - half, int(qy) - half
         region = self._blocks(frame_bgr, max(bx0, 0), max(by0, 0), 2 * half + 1 + min(bx0, 0), 2 * half + 1 + min(by0, 0))
         if region.shape[0] < 4 or region.shape[1] < 4:
@@ -119,44 +129,55 @@ class TemplateTracker:
         return _warp(region, centre, _similarity(self._angle, self._scale), self.D)
 
     def _template(self, angle_deg: float, shrink: int = 1) -> np.ndarray:
-        """The template (side S / shrink) at a heading, at the current scale."""
-        side = max(5, -(-self.S // shrink)) | 1
-        c = (self.D - 1) / 2.0
-        A = _similarity(-angle_deg, shrink / self._scale)
-        return _warp(self._canon, (c, c), A, side)
+        """The template (side S / shrink) at a heading, at the current scale (cached until the next change)."""
+        key = (angle_deg, self._scale, shrink)
+        if key not in self._cache:
+            side = max(5, -(-self.S // shrink)) | 1
+            c = (self.D - 1) / 2.0
+            A = _similarity(-angle_deg, shrink / self._scale)
+            if len(self._cache) > 64:
+                self._cache.clear()
+            self._cache[key] = _warp(self._canon, (c, c), A, side)
+        return self._cache[key]
 
     # -- setup -----------------------------------------------------------------------------
     def init(self, frame_bgr, box, prediction: Prediction | None = None, point=None) -> None:
         x, y, w, h = check_box(frame_bgr, box)
         self.k = max(1, round(max(w, h) / self.p.work_px))
-        self.S = int(math.ceil(max(w, h) / self.k)) | 1  # matching template side (odd)
-        self.D = int(math.ceil(self.S * math.sqrt(2.0))) + 2 | 1  # canonical side: holds every rotation
+        self.S = math.ceil(max(w, h) / self.k) | 1  # matching template side (odd)
+        self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
         self._angle, self._scale = 0.0, 1.0
         self._ref_px_per_m = prediction.px_per_m if prediction is not None else float("nan")
         self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
+        self._cache: dict = {}
         self._canon = self._upright(frame_bgr, self.u, self.v)
         lo = (self.D - self.S) // 2
         self._anchor = self._canon[lo : lo + self.S, lo : lo + self.S].copy()  # the first appearance
         self._velocity = (0.0, 0.0)
         self._level = 1.0
+        self._frames = 0
+        self._lost_frames = 0
         self._tracking = True
         self._hits: list[tuple[float, float, float, float]] = []  # u, v, predicted u, v
         self._ready = True
 
     def _rescale(self, prediction: Prediction | None) -> None:
+        """Follow the predicted apparent size relative to that at init (in steps of ``scale_step``)."""
         if prediction is not None and self._ref_px_per_m > 0 and prediction.px_per_m > 0:
-            self._scale = prediction.px_per_m / self._ref_px_per_m
+            scale = prediction.px_per_m / self._ref_px_per_m
+            if abs(scale / self._scale - 1.0) > self.p.scale_step:
+                self._scale = scale
 
     # -- matching ----------------------------------------------------------------------------
     def _region(self, frame_bgr, cu: float, cv_: float, radius_px: float, side: int):
         """Working-resolution window where a template of ``side`` may sit within ``radius_px`` of (cu, cv_)."""
         H, W = frame_bgr.shape[:2]
         qx, qy = self._to_work(cu, cv_)
-        r = max(1, int(math.ceil(radius_px / self.k)))
+        r = max(1, math.ceil(radius_px / self.k))
         half = (side - 1) // 2
-        bx0, by0 = max(int(round(qx)) - half - r, 0), max(int(round(qy)) - half - r, 0)
-        bx1 = min(int(round(qx)) + half + r + 1, W // self.k)
-        by1 = min(int(round(qy)) + half + r + 1, H // self.k)
+        bx0, by0 = max(round(qx) - half - r, 0), max(round(qy) - half - r, 0)
+        bx1 = min(round(qx) + half + r + 1, W // self.k)
+        by1 = min(round(qy) + half + r + 1, H // self.k)
         if bx1 - bx0 < side + 1 or by1 - by0 < side + 1:
             return None, 0, 0
         return self._blocks(frame_bgr, bx0, by0, bx1 - bx0, by1 - by0), bx0, by0
@@ -168,20 +189,33 @@ class TemplateTracker:
         u, v = self._to_full(bx0 + j + half, by0 + i + half)
         return best, u, v
 
-    def _refine(self, frame_bgr, u: float, v: float):
-        """Best heading among the current ±turn_step near (u, v): (score, u, v), updating the heading."""
+    def _refine(self, frame_bgr, found0):
+        """Best heading near the match ``found0`` = (score, u, v) at the current heading: (score, u, v).
+
+        Tries the heading ±``turn_step_deg``, and keeps turning (up to
+        ``max_turn_steps`` steps) while the score still improves; updates the heading.
+        """
         step = self.p.turn_step_deg
-        region, bx0, by0 = self._region(frame_bgr, u, v, 2.0 * self.k, self.S)
+        region, bx0, by0 = self._region(frame_bgr, found0[1], found0[2], 3.0 * self.k, self.S)
         if region is None:
-            return -1.0, math.nan, math.nan
-        found = [self._match_in(region, bx0, by0, self._template(self._angle + da)) for da in (-step, 0.0, step)]
-        scores = [f[0] for f in found]
-        best = int(np.argmax(scores))
-        if best == 1:
-            self._angle += step * _parabola(*scores)
-        else:
-            self._angle += step * (best - 1)
-        return found[best]
+            return found0
+
+        def at(angle):
+            return self._match_in(region, bx0, by0, self._template(angle))
+
+        left, right = at(self._angle - step), at(self._angle + step)
+        if found0[0] >= left[0] and found0[0] >= right[0]:
+            self._angle += step * _parabola(left[0], found0[0], right[0])
+            return found0
+        direction, best = (-1.0, left) if left[0] > right[0] else (1.0, right)
+        angle = self._angle + direction * step
+        for _ in range(self.p.max_turn_steps - 1):
+            further = at(angle + direction * step)
+            if further[0] <= best[0]:
+                break
+            angle, best = angle + direction * step, further
+        self._angle = angle
+        return best
 
     def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles):
         """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_); coarse first if wide."""
@@ -213,6 +247,7 @@ class TemplateTracker:
         if patch is None:
             return
         cv2.accumulateWeighted(patch, self._canon, self.p.learn_rate)
+        self._cache.clear()
         m = 3
         lo = (self.D - self.S) // 2 - m
         window = self._canon[lo : lo + self.S + 2 * m, lo : lo + self.S + 2 * m]
@@ -236,13 +271,14 @@ class TemplateTracker:
         return max(self.p.min_radius_px, self.p.search_sigmas * prediction.sigma_px)
 
     def _result(self, u: float, v: float, score: float) -> TrackResult:
-        side = int(round(self.S * self.k * self._scale))
-        box = (int(round(u - (side - 1) / 2.0)), int(round(v - (side - 1) / 2.0)), side, side)
+        side = round(self.S * self.k * self._scale)
+        box = (round(u - (side - 1) / 2.0), round(v - (side - 1) / 2.0), side, side)
         return TrackResult("ok", u, v, box, max(0.0, score))
 
     def _lose(self, score: float) -> TrackResult:
         self._tracking = False
         self._hits = []
+        self._lost_frames = -1  # search on the next frame, then every search_every frames
         return TrackResult("lost", confidence=max(0.0, score))
 
     def _follow(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
@@ -252,44 +288,39 @@ class TemplateTracker:
             cu, cv_ = self.u + self._velocity[0], self.v + self._velocity[1]
         radius = self._radius(prediction, self.p.default_radius_px)
         score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,))
-        if score >= self.p.ok_score:
-            score, u, v = self._refine(frame_bgr, u, v)
+        self._frames += 1
+        slow_step = self._frames % self.p.adapt_every == 0
+        if score >= self.p.ok_score and (slow_step or score < self._level - self.p.turn_drop):
+            score, u, v = self._refine(frame_bgr, (score, u, v))
         floor = max(self.p.ok_score, self._level - self.p.level_drop)
         if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k):
             return self._lose(score)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v = u, v
         self._level += 0.1 * (score - self._level)
-        if score >= self.p.update_score:
+        if score >= self.p.update_score and slow_step:
             self._learn(frame_bgr, u, v)
         return self._result(u, v, score)
 
     def _reacquire(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
-        H, W = frame_bgr.shape[:2]
-        if prediction is not None and math.isfinite(prediction.sigma_px):
-            cu, cv_, radius = prediction.u, prediction.v, self._radius(prediction, float(max(W, H)))
+        """While lost: find a candidate anywhere the UUV may be, then follow it until it has proved itself."""
+        pu, pv = (prediction.u, prediction.v) if prediction is not None else (0.0, 0.0)
+        tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
+        if self._hits:
+            # the candidate must move as the prediction moved (camera motion), within tol
+            lu, lv, lpu, lpv = self._hits[-1]
+            score, u, v, _ = self._search(frame_bgr, lu + pu - lpu, lv + pv - lpv, tol, (self._angle,))
+            if score >= self.p.ok_score:
+                score, u, v = self._refine(frame_bgr, (score, u, v))
         else:
-            cu, cv_, radius = W / 2.0, H / 2.0, float(max(W, H))
-        n = self.p.reacquire_headings
-        angles = [self._angle + 360.0 * m / n for m in range(n)]
-        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles)
-        if score >= self.p.reacquire_score:
-            saved = self._angle
-            self._angle = angle
-            score, u, v = self._refine(frame_bgr, u, v)
-            if not score >= self.p.reacquire_score:
-                self._angle = saved
+            self._lost_frames += 1
+            if self._lost_frames % self.p.search_every:
+                return TrackResult("lost")
+            score, u, v = self._candidate(frame_bgr, prediction)
         need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
         if not score >= need:
             self._hits = []
             return TrackResult("lost", confidence=max(0.0, score))
-        pu, pv = (prediction.u, prediction.v) if prediction is not None else (0.0, 0.0)
-        tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
-        if self._hits:
-            lu, lv, lpu, lpv = self._hits[-1]
-            # consecutive matches must move as the prediction moved (camera motion), within tol
-            if math.hypot((u - lu) - (pu - lpu), (v - lv) - (pv - lpv)) > tol:
-                self._hits = []
         self._hits.append((u, v, pu, pv))
         if len(self._hits) < self.p.reacquire_frames:
             return TrackResult("lost", confidence=score)
@@ -298,3 +329,23 @@ class TemplateTracker:
         self._velocity = (0.0, 0.0)
         self.u, self.v = u, v
         return self._result(u, v, score)
+
+    def _candidate(self, frame_bgr, prediction: Prediction | None):
+        """Best match over every heading in the prediction's window (the whole frame without one): (score, u, v)."""
+        H, W = frame_bgr.shape[:2]
+        if prediction is not None and math.isfinite(prediction.sigma_px):
+            cu, cv_, radius = prediction.u, prediction.v, self._radius(prediction, float(max(W, H)))
+        else:
+            cu, cv_, radius = W / 2.0, H / 2.0, float(max(W, H))
+        n = self.p.reacquire_headings
+        angles = [self._angle + 360.0 * m / n for m in range(n)]
+        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles)
+        if score < self.p.ok_score:  # not even a candidate (headings are coarse here: refined below)
+            return score, u, v
+        saved, self._angle = self._angle, angle
+        region, bx0, by0 = self._region(frame_bgr, u, v, 2.0 * self.k, self.S)
+        if region is not None:  # the (possibly coarse) match, again at full working resolution
+            score, u, v = self._refine(frame_bgr, self._match_in(region, bx0, by0, self._template(angle)))
+        if score < self.p.reacquire_score:
+            self._angle = saved
+        return score, u, v

@@ -1,0 +1,145 @@
+"""The per-frame pipeline of the live service: tracker → time alignment → geometry → sinks.
+
+Frames wait in a short queue; when the pipeline falls behind, the oldest waiting
+frame is dropped (and counted), so a fix is never computed for a frame that is
+already old. The tracker runs in a worker thread (OpenCV releases the GIL); the
+telemetry is only read on the event loop, where it is written. The first frame
+initialises the tracker with the calibration's ``[tracker] init_bbox`` (its
+``init_t`` is for recorded sessions and is not used live). After a good fix, each
+frame's tracker gets a prediction the way the offline tracking makes it
+(:mod:`groundstation.track_video`): that fix's position projected into the new
+frame, shifted by the residual between the fix's pixel and the projection at its
+own frame, with an uncertainty growing at ``UUV_SPEED_MPS`` since the fix.
+Frames the video reader marks ``buffered`` (their exposure time is unknown) are
+tracked but get the status ``buffered`` and no position.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections import Counter, deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from localizer.calibration import Calibration
+from localizer.fix import Fix, locate
+from localizer.pose import camera_pose
+from localizer.telemetry import Telemetry
+from localizer.tracking import TrackResult, make_tracker
+from localizer.tracking.predict import prediction_at, project_uuv
+
+from .sources.video_live import LiveFrame
+from .track_video import BASE_SIGMA_M, UUV_SPEED_MPS
+
+log = logging.getLogger("skyfix.pipeline")
+
+
+@dataclass(frozen=True)
+class FrameInfo:
+    """Timing of one processed frame (UNIX seconds): when it arrived and when its fix was ready."""
+
+    index: int
+    t_recv: float
+    t_fix: float
+
+
+def box_centre(box) -> tuple[float, float]:
+    """Centre of an (x, y, w, h) box in pixel-centre coordinates (box [x, x+w) spans centres x … x+w−1)."""
+    x, y, w, h = box
+    return x + (w - 1) / 2.0, y + (h - 1) / 2.0
+
+
+class Pipeline:
+    """Worker turning frames into :class:`~localizer.fix.Fix` es for every sink (``on_fix(fix, info)``)."""
+
+    def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2):
+        self.cal = cal
+        self.tel = tel
+        self.tracker_name = tracker
+        make_tracker(tracker, cal)  # fail early on a wrong name
+        self.sinks = list(sinks)
+        self.queue_len = queue_len
+        self._queue: deque[LiveFrame] = deque()
+        self._ready = asyncio.Event()
+        self._tracker = None
+        self._last_ok: Fix | None = None
+        self.processed = 0
+        self.dropped = 0
+        self.statuses: Counter[str] = Counter()
+        self.last_status: str | None = None
+
+    def submit(self, frame: LiveFrame) -> None:
+        """Queue a frame (on the event loop); drops the oldest waiting frame when the queue is full.
+
+        The very first frame is never dropped: ``init_bbox`` belongs to it.
+        """
+        if len(self._queue) >= self.queue_len:
+            first_waiting = self._tracker is None and self.processed == 0 and self._queue[0].index == 0
+            del self._queue[1 if first_waiting else 0]
+            self.dropped += 1
+        self._queue.append(frame)
+        self._ready.set()
+
+    async def run(self) -> None:
+        while True:
+            if not self._queue:
+                self._ready.clear()
+                await self._ready.wait()
+                continue
+            frame = self._queue.popleft()
+            fix = await self.process(frame)
+            info = FrameInfo(frame.index, frame.t_recv, time.time())
+            self.processed += 1
+            self.statuses[fix.status] += 1
+            if fix.status != self.last_status:
+                log.info("frame %d: status %s", frame.index, fix.status)
+            self.last_status = fix.status
+            for sink in self.sinks:
+                sink.on_fix(fix, info)
+
+    async def process(self, frame: LiveFrame) -> Fix:
+        """The fix of one frame (status says why when there is none; ``buffered`` frames are only tracked)."""
+        result = await self._track(frame)
+        if not result.ok or frame.buffered:
+            fix = Fix(frame.t_unix, result.status if not result.ok else "buffered")
+        else:
+            fix = locate(self.cal, camera_pose(self.cal, self.tel, frame.t_unix), result.u, result.v)[0]
+        fix.frame = frame.index
+        fix.confidence = result.confidence
+        if fix.ok:
+            self._last_ok = fix
+        return fix
+
+    async def _track(self, frame: LiveFrame) -> TrackResult:
+        if self._tracker is None:
+            box = self.cal.init_bbox
+            if box is None:
+                return TrackResult("no_init_bbox")
+            tracker = make_tracker(self.tracker_name, self.cal)
+            try:
+                await asyncio.to_thread(tracker.init, frame.image, box)
+            except ValueError as e:
+                log.warning("tracker init on frame %d: %s", frame.index, e)
+                return TrackResult("bad_init_bbox")
+            self._tracker = tracker
+            return TrackResult("ok", *box_centre(box), box)
+        return await asyncio.to_thread(self._tracker.update, frame.image, self._predict(frame.t_unix))
+
+    def _predict(self, t_unix: float):
+        last = self._last_ok
+        if last is None:
+            return None
+        pose = camera_pose(self.cal, self.tel, [t_unix, last.t_unix])
+        u, v, px_per_m = project_uuv(self.cal, pose, last.lat, last.lon)
+        shift = (last.u - u[1], last.v - v[1])
+        if not (math.isfinite(shift[0]) and math.isfinite(shift[1])):
+            shift = (0.0, 0.0)
+        sigma_m = BASE_SIGMA_M + UUV_SPEED_MPS * abs(t_unix - last.t_unix)
+        return prediction_at(u[0], v[0], px_per_m[0], sigma_m, shift)
+
+    def status(self) -> dict:
+        return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),
+                "last_status": self.last_status, "statuses": dict(self.statuses)}

@@ -1,0 +1,276 @@
+"""``skyfix replay SESSION``: re-stream a recorded session live, with its original pacing.
+
+Everything is shifted in time by one offset ``shift_s`` (now + a short lead − the
+session's first time), printed first as a JSON line, so that the replayed world
+agrees with itself:
+
+- ``uav.tlog``: each MAVLink frame is sent over UDP (``--mavlink-out``, default
+  ``udpout:127.0.0.1:14550``) at its record time + shift; SYSTEM_TIME's
+  ``time_unix_usec`` is shifted by the same amount (re-packed with the original
+  system, component and sequence), every other frame goes out byte for byte.
+- ``depth.jsonl``: each sample is published over Zenoh on ``--depth-key`` as
+  ``{"t": t + shift, "depth_m": ...}`` at t + shift.
+- The video: the ``ffmpeg`` command streams it as MPEG-TS to ``--video-out``
+  (default ``udp://127.0.0.1:5600``) with ``-re`` (real time, by the file's
+  timestamps). ffmpeg is started ahead and waits on a pipe; the file is fed to
+  it at ``video_frames.csv`` t₀ + shift, so frame 0 leaves then (ffmpeg's own
+  start-up, 0.1–0.5 s on a busy machine, would otherwise shift every frame) and
+  frame i at about t_i + shift when the file's timestamps follow
+  ``video_frames.csv`` (true for recordings and generated sessions). An MP4
+  whose index is at its end cannot be piped and is opened by path (start-up
+  delay included). H.264, HEVC and MPEG-2 are copied; other codecs are
+  re-encoded (H.264, zero latency).
+- A UUV-side endpoint (``--uuv-listen``, default ``udpin:127.0.0.1:14660``)
+  writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
+  stdout), with its receive time: what the UUV's autopilot would get.
+
+Replay ends after the session (plus ``--tail-s``) or ``--duration-s``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+from .mavlink_io import mavutil
+from .session import SessionError, read_table
+from .zenoh_session import open_session, put_json
+
+log = logging.getLogger("skyfix.replay")
+
+COPY_CODECS = ("h264", "hevc", "mpeg2video")
+FFMPEG_WARMUP_S = 0.5  # ffmpeg is started this long before the video's first frame is due
+
+
+def read_tlog(path: Path) -> list[tuple[float, object]]:
+    """``(record time UNIX s, message)`` of every decodable frame of a tlog, in file order."""
+    if not path.is_file():
+        raise SessionError(f"{path}: missing")
+    conn = mavutil().mavlink_connection(str(path), robust_parsing=True)
+    out = []
+    try:
+        while (m := conn.recv_msg()) is not None:
+            if m.get_type() != "BAD_DATA":
+                out.append((m._timestamp, m))
+    finally:
+        conn.close()
+    if not out:
+        raise SessionError(f"{path}: no MAVLink frames")
+    return out
+
+
+def read_depth(path: Path) -> list[tuple[float, float]]:
+    """``(t, depth_m)`` of every well-formed line of depth.jsonl (a truncated last line is skipped)."""
+    out = []
+    for i, line in enumerate(path.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+            out.append((float(rec["t"]), float(rec["depth_m"])))
+        except (ValueError, KeyError, TypeError):
+            log.warning("%s:%d: skipped: %r", path, i, line[:80])
+    return out
+
+
+def frame_bytes(msg, shift_s: float) -> bytes:
+    """The frame to send: the original bytes, or SYSTEM_TIME re-packed with its UNIX time shifted."""
+    if msg.get_type() != "SYSTEM_TIME" or msg.time_unix_usec == 0:
+        return msg.get_msgbuf()
+    mav = mavutil().mavlink.MAVLink(None, srcSystem=msg.get_srcSystem(), srcComponent=msg.get_srcComponent())
+    mav.seq = msg.get_seq()
+    msg.time_unix_usec = int(msg.time_unix_usec + round(shift_s * 1e6))
+    return msg.pack(mav)
+
+
+def video_codec(path: Path) -> str:
+    out = subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-show_entries", "stream=codec_name",
+                          "-of", "default=nw=1:nk=1", str(path)], capture_output=True, text=True, check=False)
+    return out.stdout.strip()
+
+
+def pipeable(video: Path) -> bool:
+    """False for an MP4/MOV whose index (``moov``) comes after its data: ffmpeg cannot read it from a pipe."""
+    if video.suffix.lower() not in (".mp4", ".mov", ".m4v"):
+        return True
+    with open(video, "rb") as f:
+        while len(head := f.read(8)) == 8:
+            size, kind = int.from_bytes(head[:4], "big"), head[4:]
+            if kind in (b"moov", b"mdat"):
+                return kind == b"moov"
+            if size < 8:
+                return False
+            f.seek(size - 8, 1)
+    return False
+
+
+def ffmpeg_command(video: Path, url: str, from_pipe: bool) -> list[str]:
+    """``ffmpeg -re`` streaming ``video`` (or the same bytes on stdin) as MPEG-TS to a UDP URL."""
+    codec = ["-c:v", "copy"] if video_codec(video) in COPY_CODECS else [
+        "-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency", "-pix_fmt", "yuv420p"]
+    sep = "&" if "?" in url else "?"
+    return ["ffmpeg", "-loglevel", "error", "-re", "-i", "pipe:0" if from_pipe else str(video), "-an", *codec, "-muxdelay", "0", "-muxpreload", "0", "-f", "mpegts",
+            f"{url}{sep}pkt_size=1316"]
+
+
+def _sleep_until(t_unix: float, stop: threading.Event) -> bool:
+    """Wait for a UNIX time; False if stopped first."""
+    delay = t_unix - time.time()
+    return not stop.wait(delay) if delay > 0 else not stop.is_set()
+
+
+class Replay:
+    """The replay's threads and processes; :meth:`run` blocks until the session has been sent."""
+
+    def __init__(self, args: argparse.Namespace):
+        self.args = args
+        self.dir = Path(args.session)
+        if not (self.dir / "session.toml").is_file():
+            raise SessionError(f"{self.dir}: not a session directory (no session.toml)")
+        self.tlog = read_tlog(self.dir / "uav.tlog")
+        self.depth = read_depth(self.dir / "depth.jsonl") if (self.dir / "depth.jsonl").is_file() else []
+        videos = sorted(p for p in self.dir.glob("video.*") if p.is_file())
+        self.video = videos[0] if videos and not args.no_video else None
+        self.frames = read_table(self.dir / "video_frames.csv", ("frame", "t")) if self.video else None
+        starts = [self.tlog[0][0]] + [self.depth[0][0]] * bool(self.depth)
+        ends = [self.tlog[-1][0]] + [self.depth[-1][0]] * bool(self.depth)
+        if self.frames is not None:
+            starts.append(float(self.frames["t"][0]))
+            ends.append(float(self.frames["t"][-1]))
+        self.t_start, self.t_end = min(starts), max(ends)
+        self.stop = threading.Event()
+        self.counts = {"mavlink": 0, "depth": 0, "gps_input": 0}
+
+    def _send_tlog(self, shift: float) -> None:
+        conn = mavutil().mavlink_connection(self.args.mavlink_out, input=False)
+        try:
+            for t, msg in self.tlog:
+                if not _sleep_until(t + shift, self.stop):
+                    return
+                conn.write(frame_bytes(msg, shift))
+                self.counts["mavlink"] += 1
+        finally:
+            conn.close()
+
+    def _send_depth(self, shift: float, session) -> None:
+        for t, depth in self.depth:
+            if not _sleep_until(t + shift, self.stop):
+                return
+            put_json(self.args.depth_key, {"t": t + shift, "depth_m": depth}, session)
+            self.counts["depth"] += 1
+
+    def _listen_uuv(self, out) -> None:
+        conn = mavutil().mavlink_connection(self.args.uuv_listen, source_system=1, source_component=1)
+        try:
+            while not self.stop.is_set():
+                msg = conn.recv_match(type="GPS_INPUT", blocking=True, timeout=0.2)
+                if msg is None:
+                    continue
+                rec = {"event": "gps_input", "t_recv": time.time(), "sysid": msg.get_srcSystem(),
+                       "compid": msg.get_srcComponent(), **msg.to_dict()}
+                rec.pop("mavpackettype", None)
+                out.write(json.dumps(rec) + "\n")
+                out.flush()
+                self.counts["gps_input"] += 1
+        finally:
+            conn.close()
+
+    def _stream_video(self, t0_unix: float) -> subprocess.Popen | None:
+        """Start ffmpeg so that the video's first frame leaves at ``t0_unix``."""
+        from_pipe = pipeable(self.video)
+        if not from_pipe:
+            log.warning("%s: index at the end of the file; streamed by path, frames late by ffmpeg's start-up",
+                        self.video)
+        if not _sleep_until(t0_unix - (FFMPEG_WARMUP_S if from_pipe else 0.0), self.stop):
+            return None
+        cmd = ffmpeg_command(self.video, self.args.video_out, from_pipe)
+        if not from_pipe:
+            return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        proc = subprocess.Popen(cmd, stdin=subprocess.PIPE)
+
+        def feed():
+            if not _sleep_until(t0_unix, self.stop):
+                return
+            try:
+                with open(self.video, "rb") as f:
+                    while (chunk := f.read(1 << 16)) and not self.stop.is_set():
+                        proc.stdin.write(chunk)
+                proc.stdin.close()
+            except (BrokenPipeError, ValueError):  # ffmpeg ended or was stopped
+                pass
+
+        threading.Thread(target=feed, name="video-feed", daemon=True).start()
+        return proc
+
+    def run(self) -> int:
+        args = self.args
+        shift = time.time() + args.lead_s - self.t_start
+        out = open(args.uuv_log, "a") if args.uuv_log else sys.stdout  # noqa: SIM115 - closed in finally
+        print(json.dumps({"event": "start", "session": str(self.dir), "shift_s": shift,
+                          "t_start": self.t_start + shift, "t_end": self.t_end + shift}), flush=True)
+        session = open_session(args.zenoh_connect or (), args.zenoh_listen or ())
+        ffmpeg = None
+        threads = [threading.Thread(target=self._send_tlog, args=(shift,), name="tlog", daemon=True),
+                   threading.Thread(target=self._send_depth, args=(shift, session), name="depth", daemon=True)]
+        if args.uuv_listen:
+            threads.append(threading.Thread(target=self._listen_uuv, args=(out,), name="uuv", daemon=True))
+        try:
+            for th in threads:
+                th.start()
+            if self.video is not None:
+                ffmpeg = self._stream_video(float(self.frames["t"][0]) + shift)
+            t_stop = self.t_end + shift + args.tail_s
+            if args.duration_s is not None:
+                t_stop = min(t_stop, time.time() + args.duration_s)
+            _sleep_until(t_stop, self.stop)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop.set()
+            if ffmpeg is not None:
+                ffmpeg.terminate()
+                ffmpeg.wait(5.0)
+            for th in threads:
+                th.join(2.0)
+            session.close()
+            print(json.dumps({"event": "end", **self.counts}), flush=True)
+            if out is not sys.stdout:
+                out.close()
+        return 0
+
+
+def replay(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    return Replay(args).run()
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("replay", help="re-stream a recorded session live (MAVLink, Zenoh depth, video)",
+                              description=__doc__.split("\n\n")[0])
+    p.add_argument("session", help="session directory (format v1)")
+    p.add_argument("--mavlink-out", default="udpout:127.0.0.1:14550", help="where the UAV's MAVLink goes")
+    p.add_argument("--video-out", default="udp://127.0.0.1:5600", help="where the MPEG-TS video goes")
+    p.add_argument("--no-video", action="store_true", help="do not stream the video")
+    p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
+    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
+    p.add_argument("--depth-key", default="uuv/depth", help="Zenoh key the depth is published on")
+    p.add_argument("--uuv-listen", default="udpin:127.0.0.1:14660",
+                   help="UUV-side endpoint logging GPS_INPUT ('' for none)")
+    p.add_argument("--uuv-log", help="file the GPS_INPUT JSON lines are appended to (default stdout)")
+    p.add_argument("--lead-s", type=float, default=1.0, help="delay before the session's first message")
+    p.add_argument("--tail-s", type=float, default=1.0, help="keep listening this long after the session ends")
+    p.add_argument("--duration-s", type=float, help="stop after this many seconds")
+    p.set_defaults(func=replay)
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(prog="skyfix")
+    register(parser.add_subparsers(dest="command", required=True))
+    a = parser.parse_args()
+    sys.exit(a.func(a))

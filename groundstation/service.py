@@ -1,0 +1,169 @@
+"""``skyfix run``: the live service. One asyncio task per link, all in one TaskGroup.
+
+Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth over
+Zenoh (:mod:`.sources.depth_zenoh`), the UAV's video (:mod:`.sources.video_live`),
+the per-frame :mod:`.pipeline`, GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
+the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`) and, with ``--record``, the
+recorder (:mod:`.sinks.recorder`). Blocking I/O lives in threads owned by the
+workers; all telemetry is written and read on the event loop. SIGINT/SIGTERM (or
+``--duration-s``) cancel every worker; a worker that fails cancels the others and
+the service exits with its error. The Zenoh session is closed in ``finally``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import signal
+import sys
+import time
+
+import numpy as np
+import zenoh
+
+from localizer.telemetry import Telemetry
+
+from . import config
+from .pipeline import Pipeline
+from .sinks.gps_input import GpsInputSink, MavlinkLink, ZenohMavlinkIn
+from .sinks.recorder import Recorder
+from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
+from .sources.depth_zenoh import BLUEOS_KEY, DepthZenoh
+from .sources.uav_mavlink import UavMavlink
+from .sources.video_live import VideoLive
+from .zenoh_session import open_session
+
+log = logging.getLogger("skyfix.run")
+
+TELEMETRY_KEEP_S = 60.0
+
+
+def latency_summary(latencies_s) -> dict:
+    """Percentiles (ms) of frame arrival → GPS_INPUT sent; None when nothing was measured."""
+    a = np.asarray(latencies_s, dtype=float) * 1000.0
+    if len(a) == 0:
+        return {"n": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
+    return {"n": len(a), "p50_ms": round(float(np.percentile(a, 50)), 3),
+            "p99_ms": round(float(np.percentile(a, 99)), 3), "max_ms": round(float(a.max()), 3)}
+
+
+async def _stopper(stop: asyncio.Event, duration_s: float | None) -> None:
+    try:
+        await asyncio.wait_for(stop.wait(), timeout=duration_s)
+    except TimeoutError:
+        pass
+
+
+async def serve(cfg: config.RunConfig) -> dict:
+    """Run the service until stopped; returns the final status."""
+    loop = asyncio.get_running_loop()
+    cal = config.load_calibration(cfg.calibration)
+    tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S)
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    session = open_session(cfg.zenoh_connect, cfg.zenoh_listen, multicast=cfg.zenoh_multicast,
+                           config_file=cfg.zenoh_config)
+    closers = []
+    try:
+        size = (cal.camera.width, cal.camera.height)
+        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None) if cfg.record else None
+        fix_sink = ZenohFixSink(session, cfg.fix_key)
+        closers.append(fix_sink.close)
+        sinks = [fix_sink]
+        gps = None
+        if cfg.gps_input:
+            link = (ZenohMavlinkIn(session, cfg.gps_input.removeprefix("zenoh:")) if cfg.gps_input.startswith("zenoh:")
+                    else MavlinkLink(cfg.gps_input))
+            gps = GpsInputSink(link, cfg.gps_input_hz, cfg.fix_max_age_ms / 1000.0)
+            sinks.append(gps)
+        if recorder:
+            sinks.append(recorder)
+        pipeline = Pipeline(cal, tel, cfg.tracker, sinks)
+
+        if cfg.mavlink_backend == "mavsdk":
+            from .sources.uav_mavsdk import UavMavsdk
+
+            uav = UavMavsdk(cfg.mavlink, tel)
+        else:
+            uav = UavMavlink(cfg.mavlink, tel)
+        depth_key = BLUEOS_KEY if cfg.depth_source == "blueos" and cfg.depth_key == "uuv/depth" else cfg.depth_key
+        depth = DepthZenoh(session, depth_key, tel, cfg.depth_source)
+        video = None
+        if cfg.video:
+            submit = pipeline.submit
+            if recorder:
+                def submit(frame, _submit=pipeline.submit):
+                    recorder.on_frame(frame)
+                    _submit(frame)
+            video = VideoLive(cfg.video, cfg.video_latency_ms / 1000.0, submit,
+                              expected_size=size)
+        if recorder:
+            uav.listeners.append(recorder.on_mavlink)
+            depth.listeners.append(recorder.on_depth)
+
+        def status(now: float) -> dict:
+            out = {"uav": uav.status(now), "depth": depth.status(now), "pipeline": pipeline.status(),
+                   "fixes_published": fix_sink.published}
+            if video:
+                out["video"] = video.status(now)
+            if gps:
+                out["gps_input"] = gps.status(now)
+                out["latency"] = latency_summary(list(gps.latencies_s)[-1000:])
+            if recorder:
+                out["record"] = recorder.status()
+            return out
+
+        workers = [uav, depth, pipeline, ZenohStatus(session, cfg.status_key, cfg.alive_key, status)]
+        workers += [w for w in (video, gps, recorder) if w is not None]
+        log.info("skyfix run: UAV %s, video %s, depth %s, fixes on %s, GPS_INPUT %s", cfg.mavlink, cfg.video,
+                 depth_key, cfg.fix_key, cfg.gps_input)
+        async with asyncio.TaskGroup() as tg:
+            tasks = [tg.create_task(w.run(), name=type(w).__name__) for w in workers]
+            await _stopper(stop, cfg.duration_s)
+            for task in tasks:
+                task.cancel()
+        final = status(time.time())
+        if gps:
+            final["latency"] = latency_summary(gps.latencies_s)
+            final["latencies_ms"] = [round(x * 1000.0, 3) for x in gps.latencies_s]
+        return final
+    finally:
+        for close in closers:
+            close()
+        session.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    """``skyfix run``: exit code 0 after a clean stop."""
+    cfg = config.run_config(args)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    final = None
+    try:
+        final = asyncio.run(serve(cfg))
+    except* (OSError, zenoh.ZError) as eg:  # a link that cannot be opened: one line each, no traceback
+        for e in eg.exceptions:
+            print(f"skyfix run: error: {e}", file=sys.stderr)
+    if final is None:
+        return 1
+    if cfg.stats:
+        with open(cfg.stats, "w") as f:
+            json.dump(final, f, indent=1)
+    log.info("stopped: %s", json.dumps({k: v for k, v in final.items() if k != "latencies_ms"}))
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("run", help="the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out",
+                              description=__doc__.split("\n\n")[0])
+    config.add_arguments(p)
+    p.set_defaults(func=run)
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(prog="skyfix")
+    register(parser.add_subparsers(dest="command", required=True))
+    a = parser.parse_args()
+    sys.exit(a.func(a))

@@ -1,0 +1,221 @@
+"""MAVLink ``GPS_INPUT`` to the UUV's autopilot, filled the way ArduSub's AP_GPS_MAV reads it.
+
+When: every new fix is sent as soon as it is ready, and whenever ``1 / hz`` has
+passed without a message, the latest state is sent again; so the autopilot sees
+at least ``hz`` messages per second (ArduPilot calls a MAVLink GPS unhealthy
+below ~5 Hz or after two gaps over 245 ms) and at most the video's frame rate
+(EKF3 fuses GPS at most every 70 ms and skips the rest).
+
+What (:func:`gps_input_fields`):
+
+- The newest fix with status ``ok``, while it is at most ``max_age_s`` old: ``fix_type``
+  3; ``lat``/``lon`` degE7; ``alt`` the UUV's altitude AMSL (m);
+  ``horiz_accuracy``/``vert_accuracy`` the fix's ``h_acc_m``/``v_acc_m``;
+  ``hdop`` = ``h_acc_m / UERE_M`` and ``vdop`` = ``v_acc_m / UERE_M`` with a
+  nominal 1 m user range error, so EKF3's alignment gate hdop ≤ 2.5 means
+  h_acc ≤ 2.5 m; ``satellites_visible`` the constant :data:`SATELLITES` (EKF3
+  wants ≥ 6 to align; there are no satellites, the number only passes that
+  gate); ``time_week``/``time_week_ms`` the frame's exposure time as GPS time
+  (UTC + 18 leap seconds), used by ArduPilot's jitter correction; velocities
+  are not estimated and flagged ignored.
+- Once the newest ok fix is older than ``max_age_s`` (track lost, telemetry
+  stale, video stopped; ``--fix-max-age-ms``, default 500 ms):
+  ``fix_type`` 1 (NO_FIX), lat/lon/alt 0, every ``ignore_flags`` bit set, 0
+  satellites, hdop/vdop 99.99. Why 1 and not 0: AP_GPS copies ``fix_type`` into
+  the GPS status, and 0 is NO_GPS ("no GPS connected") while 1 is NO_FIX ("GPS
+  connected, no position"): the link is fine and only the position is missing,
+  so the pilot's "GPS: no fix" is the true message and a lost UUV track is not
+  confused with a broken cable. Either way the EKF (which needs a 3D fix) stops
+  using GPS position; a stale fix is never sent as valid.
+
+Identity: system :data:`GPS_SYSID`, component 220 (``MAV_COMP_ID_GPS``) on its
+own pymavlink link (not MAVSDK, which sends to every link and reports success on
+failure). With ``zenoh:KEY`` the message is injected through BlueOS's
+mavlink-server instead (JSON on ``mavlink/in``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import threading
+import time
+from collections import deque
+
+import zenoh
+
+from localizer.fix import Fix
+
+from ..mavlink_io import mavutil
+from ..zenoh_session import put_json
+
+log = logging.getLogger("skyfix.gps_input")
+
+GPS_SYSID = 245  # the same system as skyfix's ground-station heartbeat on the UAV link
+GPS_COMPID = 220  # MAV_COMP_ID_GPS
+SATELLITES = 10
+UERE_M = 1.0
+GPS_EPOCH_UNIX = 315964800  # 1980-01-06T00:00:00Z
+LEAP_S = 18  # GPS − UTC since 2017
+WEEK_S = 604800
+IGNORE_ALT, IGNORE_HDOP, IGNORE_VDOP = 1, 2, 4
+IGNORE_VEL_HORIZ, IGNORE_VEL_VERT, IGNORE_SPEED_ACC = 8, 16, 32
+IGNORE_HORIZ_ACC, IGNORE_VERT_ACC = 64, 128
+IGNORE_VELOCITY = IGNORE_VEL_HORIZ | IGNORE_VEL_VERT | IGNORE_SPEED_ACC
+IGNORE_ALL = 255
+FIX_NONE, FIX_3D = 1, 3
+DOP_MAX = 99.99
+
+
+def gps_time(t_unix: float) -> tuple[int, int]:
+    """``(week, ms of week)`` of a UNIX time, in GPS time (UTC + 18 leap seconds)."""
+    ms = round((t_unix - GPS_EPOCH_UNIX + LEAP_S) * 1000.0)
+    week, ms_of_week = divmod(ms, WEEK_S * 1000)
+    return week, ms_of_week
+
+
+def _dop(acc_m: float) -> float:
+    return min(max(acc_m / UERE_M, 0.01), DOP_MAX)
+
+
+def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> dict:
+    """GPS_INPUT fields for the newest fix at send time (a no-fix message unless it is ok and fresh)."""
+    valid = (fix is not None and fix.ok and abs(t_send_unix - fix.t_unix) <= max_age_s
+             and math.isfinite(fix.lat) and math.isfinite(fix.lon) and math.isfinite(fix.alt_amsl_m))
+    if not valid:
+        week, week_ms = gps_time(t_send_unix)
+        return {"time_usec": int(t_send_unix * 1e6), "gps_id": 0, "ignore_flags": IGNORE_ALL,
+                "time_week_ms": week_ms, "time_week": week, "fix_type": FIX_NONE, "lat": 0, "lon": 0, "alt": 0.0,
+                "hdop": DOP_MAX, "vdop": DOP_MAX, "vn": 0.0, "ve": 0.0, "vd": 0.0, "speed_accuracy": 0.0,
+                "horiz_accuracy": 0.0, "vert_accuracy": 0.0, "satellites_visible": 0, "yaw": 0}
+    week, week_ms = gps_time(fix.t_unix)
+    ignore = IGNORE_VELOCITY
+    h_acc, v_acc = fix.h_acc_m, fix.v_acc_m
+    if not math.isfinite(h_acc):
+        ignore |= IGNORE_HORIZ_ACC | IGNORE_HDOP
+        h_acc = 0.0
+    if not math.isfinite(v_acc):
+        ignore |= IGNORE_VERT_ACC | IGNORE_VDOP
+        v_acc = 0.0
+    return {"time_usec": int(fix.t_unix * 1e6), "gps_id": 0, "ignore_flags": ignore, "time_week_ms": week_ms,
+            "time_week": week, "fix_type": FIX_3D, "lat": round(fix.lat * 1e7), "lon": round(fix.lon * 1e7),
+            "alt": float(fix.alt_amsl_m), "hdop": _dop(h_acc), "vdop": _dop(v_acc), "vn": 0.0, "ve": 0.0, "vd": 0.0,
+            "speed_accuracy": 0.0, "horiz_accuracy": float(h_acc), "vert_accuracy": float(v_acc),
+            "satellites_visible": SATELLITES, "yaw": 0}
+
+
+class MavlinkLink:
+    """GPS_INPUT over a dedicated pymavlink connection; a reader thread drains what the autopilot sends
+    (needed for ``udpin:`` to learn its address) and notes when it was last heard."""
+
+    def __init__(self, url: str):
+        self.url = url
+        self.last_heard: float | None = None
+        self._conn = None
+        self._stop = threading.Event()
+        self._reader: threading.Thread | None = None
+
+    def open(self) -> None:
+        self._conn = mavutil().mavlink_connection(self.url, source_system=GPS_SYSID, source_component=GPS_COMPID,
+                                                  autoreconnect=True)
+        self._reader = threading.Thread(target=self._drain, name="gps-input-link", daemon=True)
+        self._reader.start()
+
+    def _drain(self) -> None:
+        while not self._stop.is_set():
+            try:
+                msg = self._conn.recv_match(blocking=True, timeout=0.5)
+            except Exception as e:  # noqa: BLE001 - pymavlink raises bare errors on corrupt input
+                log.debug("GPS_INPUT link: unreadable input from the autopilot: %s", e)
+                continue
+            if msg is not None and msg.get_type() != "BAD_DATA":
+                self.last_heard = time.time()
+
+    def send(self, fields: dict) -> None:
+        self._conn.mav.send(self._conn.mav.gps_input_encode(**fields))
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._reader is not None:
+            self._reader.join(2.0)
+        if self._conn is not None:
+            self._conn.close()
+
+
+class ZenohMavlinkIn:
+    """GPS_INPUT injected through BlueOS's mavlink-server: its JSON shape on ``key`` (``mavlink/in``)."""
+
+    def __init__(self, session: zenoh.Session, key: str):
+        self.session = session
+        self.url = f"zenoh:{key}"
+        self.key = key
+        self.last_heard = None
+        self._seq = 0
+
+    def open(self) -> None:
+        pass
+
+    def send(self, fields: dict) -> None:
+        message = {"type": "GPS_INPUT", **fields, "ignore_flags": {"bits": fields["ignore_flags"]}}
+        header = {"system_id": GPS_SYSID, "component_id": GPS_COMPID, "sequence": self._seq}
+        self._seq = (self._seq + 1) % 256
+        put_json(self.key, {"header": header, "message": message}, self.session)
+
+    def close(self) -> None:
+        pass
+
+
+class GpsInputSink:
+    """Worker sending GPS_INPUT through ``link`` (:class:`MavlinkLink` or :class:`ZenohMavlinkIn`)."""
+
+    def __init__(self, link, hz: float, max_age_s: float):
+        self.link = link
+        self.period_s = 1.0 / hz
+        self.max_age_s = max_age_s
+        self.sent = 0
+        self.sent_valid = 0
+        self.latencies_s: deque[float] = deque(maxlen=100_000)  # frame arrival → GPS_INPUT sent, new fixes
+        self._fix: Fix | None = None
+        self._info = None
+        self._new = asyncio.Event()
+        self._last_ok: Fix | None = None
+
+    def on_fix(self, fix: Fix, info) -> None:
+        if fix.ok:
+            self._last_ok = fix
+        self._fix, self._info = fix, info
+        self._new.set()
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        await asyncio.to_thread(self.link.open)
+        try:
+            next_due = loop.time()
+            while True:
+                try:
+                    await asyncio.wait_for(self._new.wait(), timeout=max(0.0, next_due - loop.time()))
+                except TimeoutError:
+                    pass
+                fresh = self._new.is_set()
+                self._new.clear()
+                self._send(fresh)
+                next_due = loop.time() + self.period_s
+        finally:
+            await asyncio.to_thread(self.link.close)
+
+    def _send(self, fresh: bool) -> None:
+        now = time.time()
+        fields = gps_input_fields(self._last_ok, now, self.max_age_s)
+        self.link.send(fields)
+        t_sent = time.time()
+        self.sent += 1
+        if fields["fix_type"] == FIX_3D:
+            self.sent_valid += 1
+            if fresh and self._fix is self._last_ok:
+                self.latencies_s.append(t_sent - self._info.t_recv)
+
+    def status(self, now: float) -> dict:
+        heard = self.link.last_heard
+        return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
+                "autopilot_age_s": None if heard is None else round(now - heard, 3)}

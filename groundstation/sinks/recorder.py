@@ -1,0 +1,172 @@
+"""``--record DIR``: the live run written as a session directory (format v1) as it goes.
+
+``session.toml`` (version 1 and the calibration's tables) is written first;
+``uav.tlog`` gets every good MAVLink frame from the UAV with its receive time,
+``depth.jsonl`` every accepted depth sample, ``positions.csv`` every fix, and
+``video.ts`` + ``video_frames.csv`` the received frames (raw frames piped into an
+``ffmpeg`` process encoding H.264 into MPEG-TS, with wall-clock timestamps so a
+replay keeps the real pacing). Every file is append-only and flushed at least
+once a second; MPEG-TS stays readable when cut off, so a crash loses at most the
+last second and never corrupts what is already written. When the encoder falls
+behind, frames are left out of the recording (counted), and ``video_frames.csv``
+lists only the frames that were encoded.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import csv
+import json
+import logging
+import queue
+import struct
+import subprocess
+import threading
+import tomllib
+from pathlib import Path
+
+from localizer.fix import Fix
+
+from ..positions import COLUMNS, format_row
+
+log = logging.getLogger("skyfix.record")
+
+CALIBRATION_TABLES = ("camera", "mount", "water", "tracker", "uncertainty", "timing")
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ValueError(f"cannot write {value!r} to session.toml")
+
+
+def session_toml(calibration: dict) -> str:
+    """session.toml text: ``version = 1`` and the calibration's tables (scalars and lists)."""
+    lines = ["version = 1"]
+    for name in CALIBRATION_TABLES:
+        if name in calibration:
+            lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in calibration[name].items()]
+    return "\n".join(lines) + "\n"
+
+
+class VideoWriter:
+    """Raw BGR frames → ``ffmpeg`` → H.264 in MPEG-TS, in a thread; ``frames.csv`` rows for each encoded frame."""
+
+    def __init__(self, path: Path, frames_csv: Path, size: tuple[int, int], queue_len: int = 30):
+        self.path = path
+        self.size = size
+        self.written = 0
+        self.dropped = 0
+        self._queue: queue.Queue = queue.Queue(maxsize=queue_len)
+        self._frames = open(frames_csv, "w", newline="")  # noqa: SIM115 - closed in close()
+        self._csv = csv.writer(self._frames)
+        self._csv.writerow(("frame", "t"))
+        w, h = size
+        self._proc = subprocess.Popen(
+            ["ffmpeg", "-loglevel", "error", "-use_wallclock_as_timestamps", "1", "-f", "rawvideo",
+             "-pix_fmt", "bgr24", "-s", f"{w}x{h}", "-i", "-", "-fps_mode", "passthrough", "-c:v", "libx264",
+             "-preset", "ultrafast", "-tune", "zerolatency", "-pix_fmt", "yuv420p", "-f", "mpegts", str(path)],
+            stdin=subprocess.PIPE,
+        )
+        self._thread = threading.Thread(target=self._write, name="record-video", daemon=True)
+        self._thread.start()
+
+    def put(self, t_unix: float, image) -> None:
+        try:
+            self._queue.put_nowait((t_unix, image))
+        except queue.Full:
+            self.dropped += 1
+
+    def _write(self) -> None:
+        while (item := self._queue.get()) is not None:
+            t, image = item
+            try:
+                self._proc.stdin.write(image.tobytes())
+            except (BrokenPipeError, ValueError):
+                log.warning("record: ffmpeg stopped; no more video recorded")
+                return
+            self._csv.writerow((self.written, f"{t:.6f}"))
+            self.written += 1
+
+    def flush(self) -> None:
+        self._frames.flush()
+
+    def close(self) -> None:
+        self._queue.put(None)
+        self._thread.join(10.0)
+        self._frames.close()
+        try:
+            self._proc.stdin.close()
+        except BrokenPipeError:
+            pass
+        self._proc.wait(10.0)
+
+
+class Recorder:
+    """Worker and sink writing the session; see the module docstring."""
+
+    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None):
+        self.dir = Path(directory)
+        if self.dir.exists() and any(self.dir.iterdir()):
+            raise FileExistsError(f"--record {directory}: exists and is not empty (a recording is never overwritten)")
+        self.dir.mkdir(parents=True, exist_ok=True)
+        calibration = tomllib.loads(Path(cal_source).read_text())
+        (self.dir / "session.toml").write_text(session_toml(calibration))
+        # append-only files, open for the whole run and closed when the worker ends
+        self._tlog = open(self.dir / "uav.tlog", "ab")  # noqa: SIM115
+        self._depth = open(self.dir / "depth.jsonl", "a")  # noqa: SIM115
+        self._positions = open(self.dir / "positions.csv", "a", newline="")  # noqa: SIM115
+        self._pos_csv = csv.writer(self._positions)
+        self._pos_csv.writerow(COLUMNS)
+        # started now, not at the first frame: spawning ffmpeg takes tens of ms the event loop cannot spare
+        self._video = VideoWriter(self.dir / "video.ts", self.dir / "video_frames.csv", video_size) if video_size else None
+        self.mavlink_frames = 0
+        self.depth_samples = 0
+        self.fixes = 0
+
+    def on_mavlink(self, msg, t_recv: float) -> None:
+        self._tlog.write(struct.pack(">Q", int(t_recv * 1e6)) + msg.get_msgbuf())
+        self.mavlink_frames += 1
+
+    def on_depth(self, t_unix: float, depth_m: float) -> None:
+        self._depth.write(json.dumps({"t": t_unix, "depth_m": depth_m}) + "\n")
+        self.depth_samples += 1
+
+    def on_frame(self, frame) -> None:
+        """A received frame (of the ``video_size`` given at the start)."""
+        self._video.put(frame.t_unix, frame.image)
+
+    def on_fix(self, fix: Fix, info) -> None:
+        self._pos_csv.writerow(format_row(fix))
+        self.fixes += 1
+
+    def flush(self) -> None:
+        for f in (self._tlog, self._depth, self._positions):
+            f.flush()
+        if self._video:
+            self._video.flush()
+
+    async def run(self) -> None:
+        try:
+            while True:
+                await asyncio.sleep(1.0)
+                self.flush()
+        finally:
+            self.flush()
+            if self._video:
+                await asyncio.to_thread(self._video.close)
+            for f in (self._tlog, self._depth, self._positions):
+                f.close()
+
+    def status(self) -> dict:
+        out = {"dir": str(self.dir), "mavlink_frames": self.mavlink_frames, "depth_samples": self.depth_samples,
+               "fixes": self.fixes}
+        if self._video:
+            out.update(video_frames=self._video.written, video_dropped=self._video.dropped)
+        return out

@@ -1,0 +1,111 @@
+"""The UUV's depth over Zenoh, in one of two payload shapes.
+
+``skyfix``: JSON ``{"t": <UNIX s>, "depth_m": <m, positive down>}`` on the depth
+key (extra keys ignored), the same shape as a session's ``depth.jsonl``.
+
+``blueos``: BlueOS mavlink-server's JSON on ``mavlink/{sys}/{comp}/VFR_HUD``
+(``{"header": {...}, "message": {"type": "VFR_HUD", "alt": -1.23, ...}}``);
+ArduSub's depth is ``-alt``. VFR_HUD carries no time, so the sample's time is
+its receive time.
+
+Zenoh's callback thread only copies the payload and hands it to the event loop.
+A payload that does not parse is logged in one line with the offending value
+and counted; the service keeps running.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import time
+from collections.abc import Callable
+
+import zenoh
+
+from localizer.telemetry import Telemetry
+
+log = logging.getLogger("skyfix.depth")
+
+BLUEOS_KEY = "mavlink/*/*/VFR_HUD"
+
+
+class BadDepth(ValueError):
+    """A depth payload that cannot be used."""
+
+
+def _number(obj: dict, key: str):
+    value = obj.get(key) if isinstance(obj, dict) else None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise BadDepth(f"{key} missing or not a finite number")
+    return float(value)
+
+
+def parse_depth(payload: bytes, shape: str, t_recv_unix: float) -> tuple[float, float]:
+    """``(t_unix, depth_m)`` of one payload; raises :class:`BadDepth`."""
+    try:
+        obj = json.loads(payload)
+    except (ValueError, UnicodeDecodeError):
+        raise BadDepth("not JSON") from None
+    if shape == "blueos":
+        msg = obj.get("message") if isinstance(obj, dict) else None
+        if isinstance(msg, dict) and msg.get("type", "VFR_HUD") != "VFR_HUD":
+            raise BadDepth(f"message type {msg.get('type')!r} is not VFR_HUD")
+        return t_recv_unix, -_number(msg, "alt")
+    return _number(obj, "t"), _number(obj, "depth_m")
+
+
+class DepthZenoh:
+    """Worker subscribing to the UUV's depth; ``listeners`` get ``(t_unix, depth_m)`` of accepted samples."""
+
+    def __init__(self, session: zenoh.Session, key: str, tel: Telemetry, shape: str = "skyfix",
+                 listeners: list[Callable] | None = None):
+        self.session = session
+        self.key = key
+        self.tel = tel
+        self.shape = shape
+        self.listeners = listeners or []
+        self.received = 0
+        self.bad = 0
+        self.refused = 0
+        self.last_recv: float | None = None
+        self.last_depth_m: float | None = None
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+
+        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh's thread: copy and hand over only
+            data = sample.payload.to_bytes()
+            key = str(sample.key_expr)
+            try:
+                loop.call_soon_threadsafe(self._on_payload, key, data, time.time())
+            except RuntimeError:  # loop closed: shutting down
+                pass
+
+        sub = self.session.declare_subscriber(self.key, on_sample)
+        try:
+            await asyncio.Event().wait()
+        finally:
+            sub.undeclare()
+
+    def _on_payload(self, key: str, data: bytes, t_recv: float) -> None:
+        self.received += 1
+        try:
+            t, depth = parse_depth(data, self.shape, t_recv)
+        except BadDepth as e:
+            self.bad += 1
+            log.warning("depth on %s: %s: %r", key, e, data[:120])
+            return
+        if not self.tel.add_depth(t, depth):
+            self.refused += 1
+            log.warning("depth on %s refused (out of range or time not increasing): t=%r depth_m=%r", key, t, depth)
+            return
+        self.last_recv, self.last_depth_m = t_recv, depth
+        for listener in self.listeners:
+            listener(t, depth)
+
+    def status(self, now: float) -> dict:
+        age = None if self.last_recv is None else round(now - self.last_recv, 3)
+        return {"key": self.key, "shape": self.shape, "received": self.received, "bad": self.bad,
+                "refused": self.refused, "age_s": age, "depth_m": self.last_depth_m}

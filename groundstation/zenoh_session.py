@@ -1,0 +1,45 @@
+"""Opening the Zenoh session the live service and replay share.
+
+Peer mode by default, multicast scouting off unless asked (a field laptop should
+not discover every Zenoh node on the boat's network by surprise), explicit
+``connect``/``listen`` endpoints such as ``tcp/192.168.2.2:7447``. A JSON5 config
+file (see ``deploy/zenoh/``) may set everything else; the endpoints and flags
+given here are applied on top of it.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+
+import zenoh
+
+
+def make_config(connect: Sequence[str] = (), listen: Sequence[str] = (), *, multicast: bool = False,
+                mode: str | None = None, config_file: str | None = None) -> zenoh.Config:
+    """A :class:`zenoh.Config`: ``config_file`` (JSON5) if given, then mode, scouting and endpoints."""
+    conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
+    if mode is not None or config_file is None:
+        conf.insert_json5("mode", json.dumps(mode or "peer"))
+    if not multicast:
+        conf.insert_json5("scouting/multicast/enabled", "false")
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    return conf
+
+
+def open_session(connect: Sequence[str] = (), listen: Sequence[str] = (), *, multicast: bool = False,
+                 mode: str | None = None, config_file: str | None = None) -> zenoh.Session:
+    """An open Zenoh session; the caller must ``close()`` it (in ``finally``), or the process hangs at exit."""
+    return zenoh.open(make_config(connect, listen, multicast=multicast, mode=mode, config_file=config_file))
+
+
+def put_json(target, obj: dict, session: zenoh.Session) -> None:
+    """Publish ``obj`` as JSON (encoding application/json, timestamped) on a publisher or key."""
+    payload = json.dumps(obj, allow_nan=False)
+    if isinstance(target, str):
+        session.put(target, payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp())
+    else:
+        target.put(payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp())

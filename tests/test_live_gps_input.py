@@ -1,0 +1,130 @@
+"""GPS_INPUT as ArduSub's AP_GPS_MAV reads it: fields, GPS time, and the sender over a real pymavlink link."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from datetime import UTC, datetime, timedelta
+
+import pytest
+from live_helpers import free_port
+
+from groundstation.mavlink_io import mavutil
+from groundstation.sinks.gps_input import (
+    IGNORE_ALL,
+    GpsInputSink,
+    MavlinkLink,
+    gps_input_fields,
+    gps_time,
+)
+from localizer.fix import Fix
+
+
+@pytest.mark.parametrize("t_unix", [1763800000.0, 1763800000.2504, 1_700_000_000.999, 1483228800.0])
+def test_gps_time_matches_calendar(t_unix):
+    gps_epoch = datetime(1980, 1, 6, tzinfo=UTC)
+    elapsed = datetime.fromtimestamp(t_unix, UTC) + timedelta(seconds=18) - gps_epoch  # 18 leap s since 2017
+    week, ms = gps_time(t_unix)
+    assert week == elapsed.days // 7
+    assert ms == pytest.approx(((elapsed.days % 7) * 86400 + elapsed.seconds) * 1000 + elapsed.microseconds / 1000,
+                               abs=1)
+
+
+def _fix(t, **kw):
+    base = {"t_unix": t, "status": "ok", "u": 100.0, "v": 200.0, "lat": 63.44, "lon": 10.4, "alt_amsl_m": -0.7,
+            "depth_m": 1.1, "h_acc_m": 0.3, "v_acc_m": 0.5}
+    return Fix(**{**base, **kw})
+
+
+def test_fresh_fix_fields():
+    t = 1763800000.0
+    f = gps_input_fields(_fix(t), t + 0.05, max_age_s=0.5)
+    assert f["fix_type"] == 3
+    assert (f["lat"], f["lon"]) == (634400000, 104000000)
+    assert f["alt"] == pytest.approx(-0.7)
+    assert f["horiz_accuracy"] == pytest.approx(0.3) and f["vert_accuracy"] == pytest.approx(0.5)
+    assert f["hdop"] == pytest.approx(0.3) and f["vdop"] == pytest.approx(0.5)
+    assert f["satellites_visible"] >= 6
+    assert f["ignore_flags"] == 8 | 16 | 32  # velocities and speed accuracy only
+    assert (f["time_week"], f["time_week_ms"]) == gps_time(t)
+
+
+@pytest.mark.parametrize("fix,dt", [(None, 0.0), ("stale", 0.8), ("lost", 0.0), ("nan", 0.0)])
+def test_no_fix_is_explicit(fix, dt):
+    t = 1763800000.0
+    f = {None: None, "stale": _fix(t), "lost": _fix(t, status="lost"), "nan": _fix(t, lat=float("nan"))}[fix]
+    out = gps_input_fields(f, t + dt, max_age_s=0.5)
+    assert out["fix_type"] == 1 and out["ignore_flags"] == IGNORE_ALL
+    assert out["lat"] == 0 and out["lon"] == 0 and out["satellites_visible"] == 0
+
+
+def test_sender_over_pymavlink_rate_fix_and_expiry():
+    port = free_port()
+    uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
+    got = []
+
+    async def scenario():
+        sink = GpsInputSink(MavlinkLink(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
+        task = asyncio.create_task(sink.run())
+        await asyncio.sleep(1.0)  # no fix yet: no-fix messages at 10 Hz
+        t_fix = time.time()
+        sink.on_fix(_fix(t_fix), info=type("I", (), {"t_recv": t_fix})())
+        await asyncio.sleep(1.2)  # valid until 0.5 s old, then no-fix again
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        return t_fix
+
+    try:
+        t_fix = asyncio.run(scenario())
+        while (m := uuv.recv_match(type="GPS_INPUT", blocking=True, timeout=0.3)) is not None:
+            got.append((m.get_srcSystem(), m.get_srcComponent(), m.fix_type, m.time_usec / 1e6))
+    finally:
+        uuv.close()
+    assert {(s, c) for s, c, _, _ in got} == {(245, 220)}
+    types = [ft for _, _, ft, _ in got]
+    before = types[: types.index(3)]
+    assert len(before) >= 9 and set(before) == {1}
+    valid = [t for _, _, ft, t in got if ft == 3]
+    assert 4 <= len(valid) <= 7  # 0.5 s of validity at 10 Hz (+ the immediate send)
+    assert all(t == pytest.approx(t_fix, abs=1e-6) for t in valid)
+    assert types[-1] == 1
+    assert 19 <= len(got) <= 26  # 2.2 s at 10 Hz plus the fix sent at once
+
+
+def test_injection_through_blueos_mavlink_in():
+    import json
+    import socket
+
+    from groundstation.sinks.gps_input import ZenohMavlinkIn
+    from groundstation.zenoh_session import open_session
+
+    ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    skyfix_side, blueos_side = open_session(listen=[ep]), open_session(connect=[ep])
+    got = []
+    sub = blueos_side.declare_subscriber("mavlink/in", lambda s: got.append((str(s.encoding), s.payload.to_string())))
+
+    async def scenario():
+        await asyncio.sleep(0.3)
+        sink = GpsInputSink(ZenohMavlinkIn(skyfix_side, "mavlink/in"), hz=10.0, max_age_s=0.5)
+        task = asyncio.create_task(sink.run())
+        await asyncio.sleep(0.25)
+        t = time.time()
+        sink.on_fix(_fix(t), info=type("I", (), {"t_recv": t})())
+        await asyncio.sleep(0.2)
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+    try:
+        asyncio.run(scenario())
+    finally:
+        sub.undeclare()
+        blueos_side.close()
+        skyfix_side.close()
+    msgs = [json.loads(p) for enc, p in got]
+    assert all(enc == "application/json" for enc, _ in got) and len(msgs) >= 4
+    assert {(m["header"]["system_id"], m["header"]["component_id"]) for m in msgs} == {(245, 220)}
+    assert [m["header"]["sequence"] for m in msgs] == list(range(len(msgs)))
+    assert msgs[0]["message"]["type"] == "GPS_INPUT" and msgs[0]["message"]["fix_type"] == 1
+    assert msgs[0]["message"]["ignore_flags"] == {"bits": IGNORE_ALL}
+    valid = [m["message"] for m in msgs if m["message"]["fix_type"] == 3]
+    assert valid and valid[0]["lat"] == 634400000 and valid[0]["ignore_flags"] == {"bits": 56}

@@ -1,0 +1,58 @@
+"""The live pipeline's queue and the fix JSON sent on Zenoh."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from groundstation.config import load_calibration
+from groundstation.pipeline import Pipeline, box_centre
+from groundstation.sinks.zenoh_fix import fix_to_json
+from groundstation.sources.video_live import LiveFrame
+from localizer.fix import Fix
+from localizer.telemetry import Telemetry
+
+CAL = """
+[camera]
+width = 64
+height = 48
+fx = 50.0
+fy = 50.0
+cx = 31.5
+cy = 23.5
+[mount]
+attitude_source = "fixed"
+[water]
+takeoff_height_above_surface_m = 2.0
+[tracker]
+init_bbox = [10, 10, 8, 6]
+"""
+
+
+def _frame(i):
+    return LiveFrame(i, 100.0 + i / 30, 100.0 + i / 30, np.zeros((48, 64, 3), np.uint8))
+
+
+def test_queue_drops_oldest_but_keeps_the_init_frame(tmp_path):
+    (tmp_path / "cal.toml").write_text(CAL)
+    p = Pipeline(load_calibration(str(tmp_path / "cal.toml")), Telemetry(), "default", [], queue_len=3)
+    for i in range(6):
+        p.submit(_frame(i))
+    assert [f.index for f in p._queue] == [0, 4, 5] and p.dropped == 3
+    p._tracker = object()  # once initialised, the oldest waiting frame goes first
+    p.submit(_frame(6))
+    assert [f.index for f in p._queue] == [4, 5, 6] and p.dropped == 4
+
+
+def test_box_centre_is_in_pixel_centre_coordinates():
+    assert box_centre((10, 20, 4, 6)) == (11.5, 22.5)
+
+
+def test_fix_json_has_no_nan_and_no_position_without_fix():
+    ok = fix_to_json(Fix(t_unix=1.5, status="ok", lat=63.4, lon=10.4, h_acc_m=0.2, u=3.0, v=4.0, frame=7))
+    assert ok["lat"] == 63.4 and ok["frame"] == 7 and ok["confidence"] is None
+    lost = fix_to_json(Fix(t_unix=1.5, status="lost", lat=63.4, lon=10.4))
+    assert lost["lat"] is None and lost["lon"] is None and lost["status"] == "lost"
+    json.dumps(ok, allow_nan=False)
+    json.dumps(lost, allow_nan=False)

@@ -1,0 +1,145 @@
+"""Live sources over real loopback links: depth over Zenoh, the UAV's MAVLink over UDP, video over UDP MPEG-TS."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import socket
+import subprocess
+import time
+
+import pytest
+from live_helpers import free_port
+
+from groundstation.mavlink_io import mavutil
+from groundstation.sources.depth_zenoh import DepthZenoh, parse_depth
+from groundstation.sources.uav_mavlink import GCS_SYSID, UavMavlink
+from groundstation.sources.video_live import VideoLive
+from groundstation.zenoh_session import open_session
+from localizer.telemetry import Telemetry
+
+
+async def _run_for(worker, seconds, during=None):
+    task = asyncio.create_task(worker.run())
+    await asyncio.sleep(0.3)
+    if during is not None:
+        await during()
+    await asyncio.sleep(seconds)
+    task.cancel()
+    await asyncio.gather(task, return_exceptions=True)
+
+
+def test_depth_over_zenoh_both_shapes_and_garbage(caplog):
+    ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    service = open_session(listen=[ep])
+    publisher = open_session(connect=[ep])
+    tel_own, tel_blueos = Telemetry(), Telemetry()
+    own = DepthZenoh(service, "uuv/depth", tel_own)
+    blueos = DepthZenoh(service, "mavlink/*/*/VFR_HUD", tel_blueos, shape="blueos")
+    t0 = time.time()
+
+    async def publish():
+        await asyncio.sleep(0.5)  # let the subscriptions propagate
+        for i in range(3):
+            publisher.put("uuv/depth", json.dumps({"t": t0 + i * 0.1, "depth_m": 1.0 + i, "extra": "x"}))
+        publisher.put("uuv/depth", b"\xff\x00garbage")
+        publisher.put("uuv/depth", json.dumps({"t": t0 + 1, "depth_m": "deep"}))
+        publisher.put("uuv/depth", json.dumps({"t": t0 + 2, "depth_m": 99999.0}))  # out of range
+        hud = {"header": {"system_id": 1, "component_id": 1, "sequence": 5, "message_id": 74},
+               "message": {"type": "VFR_HUD", "alt": -1.25, "airspeed": 0.0}}
+        publisher.put("mavlink/1/1/VFR_HUD", json.dumps(hud))
+        publisher.put("mavlink/1/1/VFR_HUD", json.dumps({"message": {"type": "VFR_HUD"}}))
+
+    async def both():
+        await asyncio.gather(_run_for(own, 0.5, publish), _run_for(blueos, 0.8))
+
+    caplog.set_level(logging.WARNING)
+    try:
+        asyncio.run(both())
+    finally:
+        publisher.close()
+        service.close()
+    assert list(tel_own.depth.values[:, 0]) == [1.0, 2.0, 3.0]
+    assert own.bad == 2 and own.refused == 1
+    assert list(tel_blueos.depth.values[:, 0]) == [1.25] and blueos.bad == 1
+    assert any("'deep'" in r.message or "deep" in r.message for r in caplog.records)
+    assert any("garbage" in r.message for r in caplog.records)
+
+
+def test_parse_depth_rejects_non_numbers():
+    with pytest.raises(ValueError, match="depth_m"):
+        parse_depth(b'{"t": 1.0, "depth_m": NaN}', "skyfix", 0.0)
+    with pytest.raises(ValueError, match="not VFR_HUD"):
+        parse_depth(b'{"message": {"type": "ATTITUDE", "alt": 1}}', "blueos", 0.0)
+
+
+def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
+    port = free_port()
+    tel = Telemetry()
+    uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel)
+    mav = mavutil()
+    sender = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+    other = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=7, source_component=1)
+    now = time.time()
+
+    async def send():
+        sender.mav.heartbeat_send(mav.mavlink.MAV_TYPE_QUADROTOR, mav.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4)
+        await asyncio.sleep(0.1)
+        for i in range(10):
+            boot_ms = 100_000 + i * 20
+            sender.mav.system_time_send(int((now + i * 0.02) * 1e6), boot_ms)
+            sender.mav.attitude_send(boot_ms, 0.01, -0.02, 0.5 + i * 0.01, 0, 0, 0)
+            sender.mav.global_position_int_send(boot_ms, 634400000, 104000000, 12000, 10000, 0, 0, 0, 0)
+            other.mav.attitude_send(boot_ms, 1.0, 1.0, 1.0, 0, 0, 0)
+            if i == 5:
+                sender.write(b"\xfd\x09\x00\x00\x00\x01\x01\x1e\x00\x00" + b"\x00" * 11)  # corrupt: bad CRC
+            await asyncio.sleep(0.02)
+
+    try:
+        asyncio.run(_run_for(uav, 1.3, send))
+        hb = sender.recv_match(type="HEARTBEAT", blocking=True, timeout=2.0)
+    finally:
+        sender.close()
+        other.close()
+    assert uav.uav_sysid == 1
+    assert len(tel.attitude) == 10 and len(tel.position) == 10
+    assert tel.attitude.values[:, 0].max() == pytest.approx(0.01)  # system 7's attitude was not mixed in
+    assert uav.health.other_systems == 10 and uav.health.bad_data >= 1
+    assert tel.clock.source == "system_time"
+    assert set(uav.status(time.time())["age_s"]) >= {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME"}
+    assert hb is not None and hb.type == mav.mavlink.MAV_TYPE_GCS and hb.get_srcSystem() == GCS_SYSID
+
+
+def _stream(port: int, seconds: float) -> subprocess.Popen:
+    return subprocess.Popen(
+        ["ffmpeg", "-loglevel", "error", "-re", "-f", "lavfi", "-i", "testsrc=size=320x240:rate=30",
+         "-t", str(seconds), "-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency", "-g", "15",
+         "-f", "mpegts", f"udp://127.0.0.1:{port}?pkt_size=1316"])
+
+
+def test_video_reconnects_when_the_stream_resumes():
+    port = free_port()
+    frames = []
+    video = VideoLive(f"udp://127.0.0.1:{port}", 0.1, frames.append, read_timeout_ms=1500, retry_s=0.1)
+    ended = []
+
+    async def two_streams():
+        task = asyncio.create_task(video.run())
+        await asyncio.sleep(0.5)
+        for _ in range(2):
+            p = _stream(port, 1.5)
+            await asyncio.to_thread(p.wait)
+            ended.append(time.time())
+            await asyncio.sleep(2.5)  # silence: read timeout, then reconnect attempts
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+    asyncio.run(two_streams())
+    first = [f for f in frames if f.t_recv <= ended[0] + 0.5]
+    second = [f for f in frames if f.t_recv > ended[0] + 1.5]  # after the first stream timed out
+    assert video.connects >= 2
+    assert len(first) >= 25 and len(second) >= 25  # 45 frames sent each time; a GOP may be lost at a start
+    assert [f.index for f in frames] == list(range(len(frames)))
+    assert all(abs(f.t_recv - f.t_unix - 0.1) < 1e-6 for f in frames)
+    assert frames[0].image.shape == (240, 320, 3)

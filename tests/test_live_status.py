@@ -1,0 +1,49 @@
+"""Health outputs over real Zenoh: the 1 Hz status JSON and the liveliness token."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import time
+
+from live_helpers import free_port
+
+from groundstation.sinks.zenoh_fix import ZenohStatus
+from groundstation.zenoh_session import open_session
+
+
+def test_status_and_liveliness():
+    ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    service, watcher = open_session(listen=[ep]), open_session(connect=[ep])
+    got = []
+    sub = watcher.declare_subscriber("skyfix/status", lambda s: got.append(
+        (str(s.encoding), s.timestamp is not None, json.loads(s.payload.to_string()))))
+    calls = []
+
+    def status(now):
+        calls.append(now)
+        return {"uav": {"age_s": {"ATTITUDE": 0.02}}, "n": len(calls)}
+
+    alive = {}
+
+    async def scenario():
+        await asyncio.sleep(0.3)
+        task = asyncio.create_task(ZenohStatus(service, "skyfix/status", "skyfix/alive", status, 0.2).run())
+        await asyncio.sleep(0.7)
+        alive["during"] = [str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=2.0)]
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        await asyncio.sleep(0.3)
+        alive["after"] = [str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=1.0)]
+
+    try:
+        asyncio.run(scenario())
+    finally:
+        sub.undeclare()
+        watcher.close()
+        service.close()
+    assert alive["during"] == ["skyfix/alive"] and alive["after"] == []
+    assert len(got) >= 3
+    assert all(enc == "application/json" and stamped for enc, stamped, _ in got)
+    assert got[-1][2]["uav"]["age_s"]["ATTITUDE"] == 0.02 and abs(got[-1][2]["t"] - time.time()) < 2.0

@@ -1,0 +1,115 @@
+"""Reading video with groundstation.video: real files made by the ffmpeg CLI, damaged on purpose."""
+
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from groundstation.video import VideoError, open_video
+
+pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
+
+FPS = 25
+N = 50
+SIZE = (160, 120)
+
+
+def _encode(path, frames=N, size=SIZE, gop=10, extra=()):
+    """A clip whose frame i shows a bright bar at column 2·i (so each frame is recognisable)."""
+    w, h = size
+    raw = np.full((frames, h, w, 3), 40, np.uint8)
+    for i in range(frames):
+        raw[i, :, 2 * i : 2 * i + 6] = 230
+    cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24", "-s", f"{w}x{h}", "-r", str(FPS),
+           "-i", "-", "-c:v", "libx264", "-g", str(gop), "-pix_fmt", "yuv420p", *extra, str(path)]
+    subprocess.run(cmd, input=raw.tobytes(), check=True)
+    return path
+
+
+def _bar_column(image) -> int:
+    return int(np.argmax(image[:, :, 2].mean(axis=0) > 135))
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    return _encode(tmp_path_factory.mktemp("video") / "clip.mp4", extra=("-movflags", "+faststart"))
+
+
+def test_reads_every_frame_in_order(clip):
+    with open_video(clip, expected_size=SIZE, threads=2) as video:
+        assert video.size == SIZE and video.fps == pytest.approx(FPS)
+        frames = list(video)
+    assert [f.index for f in frames] == list(range(N))
+    assert [_bar_column(f.image) for f in frames] == [2 * i for i in range(N)]
+    assert frames[0].image.shape == (SIZE[1], SIZE[0], 3)
+
+
+def test_prefetch_yields_the_same_frames(clip):
+    with open_video(clip) as video:
+        indices = [(f.index, _bar_column(f.image)) for f in video.prefetch(depth=3)]
+    assert indices == [(i, 2 * i) for i in range(N)]
+
+
+def test_missing_empty_and_non_video_files_are_named(tmp_path):
+    with pytest.raises(VideoError, match=r"nothere\.mp4: missing"):
+        open_video(tmp_path / "nothere.mp4")
+    (tmp_path / "empty.mp4").write_bytes(b"")
+    with pytest.raises(VideoError, match=r"empty\.mp4: empty file"):
+        open_video(tmp_path / "empty.mp4")
+    (tmp_path / "text.mp4").write_text("this is not a video\n" * 100)
+    with pytest.raises(VideoError, match=r"text\.mp4: FFmpeg cannot open it"):
+        open_video(tmp_path / "text.mp4")
+
+
+def test_size_different_from_the_calibration_is_an_error(clip):
+    with pytest.raises(VideoError, match=r"160x120 pixels differs from the calibration's camera 1920x1080"):
+        open_video(clip, expected_size=(1920, 1080))
+
+
+def test_truncated_file_ends_early_without_error(clip, tmp_path):
+    data = clip.read_bytes()
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(data[: len(data) * 6 // 10])
+    with open_video(cut) as video:
+        frames = list(video)
+    assert 5 < len(frames) < N
+    # every frame that came out is the right one for its index
+    assert all(_bar_column(f.image) == 2 * f.index for f in frames)
+
+
+def test_truncated_file_without_index_cannot_be_opened(tmp_path):
+    clip = _encode(tmp_path / "plain.mp4")  # moov atom at the end
+    cut = tmp_path / "cut.mp4"
+    data = clip.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(VideoError, match="cut.mp4: FFmpeg cannot open it"):
+        open_video(cut)
+
+
+def test_corrupt_frames_leave_gaps_not_shifts(tmp_path):
+    clip = _encode(tmp_path / "ts.ts", gop=5)  # MPEG-TS: damage stays local
+    data = bytearray(clip.read_bytes())
+    mid = len(data) // 2
+    for i in range(mid, mid + 4000):
+        data[i] = (data[i] * 7 + 13) & 0xFF
+    bad = tmp_path / "bad.ts"
+    bad.write_bytes(bytes(data))
+    with open_video(bad) as video:
+        frames = list(video)
+    indices = [f.index for f in frames]
+    assert len(frames) < N
+    assert indices == sorted(set(indices))
+    # frames that decoded carry the index of their own content (up to concealment blur)
+    good = [f for f in frames if abs(_bar_column(f.image) - 2 * f.index) <= 2]
+    assert len(good) >= 0.8 * len(frames)
+    assert frames[-1].index >= N - 5
+
+
+def test_closing_while_prefetching_stops_the_reader_first(clip):
+    video = open_video(clip)
+    frames = video.prefetch(depth=2)
+    assert next(frames).index == 0
+    video.close()  # the reader thread is still decoding: it must stop before the decoder goes
+    rest = list(frames)  # what was already decoded, then the end (no hang, no crash)
+    assert len(rest) <= 3
