@@ -91,6 +91,35 @@ def test_sender_over_pymavlink_rate_fix_and_expiry():
     assert 19 <= len(got) <= 26  # 2.2 s at 10 Hz plus the fix sent at once
 
 
+def test_tracker_loss_ends_the_fix_at_once():
+    """A lost track must not keep the last position alive for max_age_s."""
+    port = free_port()
+    uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
+
+    async def scenario():
+        sink = GpsInputSink(MavlinkLink(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=5.0)
+        task = asyncio.create_task(sink.run())
+        await asyncio.sleep(0.3)
+        t = time.time()
+        sink.on_fix(_fix(t), info=type("I", (), {"t_recv": t})())
+        await asyncio.sleep(0.05)
+        sink.on_fix(_fix(t + 0.03, status="lost"), info=type("I", (), {"t_recv": t + 0.03})())
+        await asyncio.sleep(0.3)
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+    try:
+        asyncio.run(scenario())
+        types = []
+        while (m := uuv.recv_match(type="GPS_INPUT", blocking=True, timeout=0.3)) is not None:
+            types.append(m.fix_type)
+    finally:
+        uuv.close()
+    first_valid = types.index(3)
+    assert types[first_valid:].count(3) == 1  # only the fix itself; after the loss, no-fix only
+    assert len(types) - first_valid >= 4  # the no-fix messages kept coming at 10 Hz
+
+
 def test_injection_through_blueos_mavlink_in():
     import json
     import socket

@@ -18,8 +18,9 @@ What (:func:`gps_input_fields`):
   gate); ``time_week``/``time_week_ms`` the frame's exposure time as GPS time
   (UTC + 18 leap seconds), used by ArduPilot's jitter correction; velocities
   are not estimated and flagged ignored.
-- Once the newest ok fix is older than ``max_age_s`` (track lost, telemetry
-  stale, video stopped; ``--fix-max-age-ms``, default 500 ms):
+- Once the newest ok fix is older than ``max_age_s`` (telemetry stale, video
+  stopped; ``--fix-max-age-ms``, default 500 ms), or at once when the tracker
+  reports the UUV lost (:data:`LOSS_STATUSES`):
   ``fix_type`` 1 (NO_FIX), lat/lon/alt 0, every ``ignore_flags`` bit set, 0
   satellites, hdop/vdop 99.99. Why 1 and not 0: AP_GPS copies ``fix_type`` into
   the GPS status, and 0 is NO_GPS ("no GPS connected") while 1 is NO_FIX ("GPS
@@ -66,6 +67,8 @@ IGNORE_VELOCITY = IGNORE_VEL_HORIZ | IGNORE_VEL_VERT | IGNORE_SPEED_ACC
 IGNORE_ALL = 255
 FIX_NONE, FIX_3D = 1, 3
 DOP_MAX = 99.99
+#: Frame statuses meaning the UUV is no longer where the last fix put it: the last fix is dropped at once.
+LOSS_STATUSES = ("lost", "no_track")
 
 
 def gps_time(t_unix: float) -> tuple[int, int]:
@@ -184,6 +187,8 @@ class GpsInputSink:
     def on_fix(self, fix: Fix, info) -> None:
         if fix.ok:
             self._last_ok = fix
+        elif fix.status in LOSS_STATUSES:
+            self._last_ok = None
         self._fix, self._info = fix, info
         self._new.set()
 
