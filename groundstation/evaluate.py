@@ -23,9 +23,10 @@ import numpy as np
 from localizer.calibration import ConfigError
 from localizer.fix import Fixes
 from localizer.geodesy import geodetic_to_ned, horizontal_error_m
+from localizer.tracking import TRACKERS
 
 from .positions import write_positions_csv
-from .process import frame_pixels, locate_frames
+from .process import frame_pixels, locate_frames, print_warnings
 from .session import Session, SessionError, load_session
 
 METHODS = (("refraction", True), ("straight", False))
@@ -158,7 +159,10 @@ def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str 
     from_track = use_track or session.video_path is None
     if not use_track and from_track:
         print(f"{name}: no video: pixels from track.csv", file=sys.stderr)
-    pixels = frame_pixels(session, from_track, tracker, progress)
+    try:
+        pixels = frame_pixels(session, from_track, tracker, progress)
+    finally:
+        print_warnings(session)
     frames = len(session.frames["t"]) if session.frames is not None else None
     sess_dir = out_dir / name
     runs, results = {}, []
@@ -205,6 +209,6 @@ def register(subparsers) -> None:
     p.add_argument("--out", default="out/evaluate", help="output directory (default: out/evaluate)")
     p.add_argument("--use-track", action="store_true",
                    help="take pixels from track.csv (geometry only) instead of tracking the video")
-    p.add_argument("--tracker", default="default", help="tracker backend for video tracking")
+    p.add_argument("--tracker", default="default", choices=TRACKERS, help="tracker backend for video tracking")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)

@@ -9,7 +9,10 @@ initialises the tracker with the calibration's ``[tracker] init_bbox`` (its
 frame's tracker gets a prediction the way the offline tracking makes it
 (:mod:`groundstation.track_video`): that fix's position projected into the new
 frame, shifted by the residual between the fix's pixel and the projection at its
-own frame, with an uncertainty growing at ``UUV_SPEED_MPS`` since the fix.
+own frame, with an uncertainty growing with the time since the fix
+(:func:`localizer.tracking.predict.follow`). The tracker reports the centre of
+the UUV's top face, the point its depth refers to
+(:func:`localizer.tracking.predict.init_target`).
 Frames the video reader marks ``buffered`` (their exposure time is unknown) are
 tracked but get the status ``buffered`` and no position.
 """
@@ -18,7 +21,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import time
 from collections import Counter, deque
 from collections.abc import Sequence
@@ -29,10 +31,9 @@ from localizer.fix import Fix, locate
 from localizer.pose import camera_pose
 from localizer.telemetry import Telemetry
 from localizer.tracking import TrackResult, make_tracker
-from localizer.tracking.predict import prediction_at, project_uuv
+from localizer.tracking.predict import follow, init_target, project_uuv
 
 from .sources.video_live import LiveFrame
-from .track_video import BASE_SIGMA_M, UUV_SPEED_MPS
 
 log = logging.getLogger("skyfix.pipeline")
 
@@ -44,12 +45,6 @@ class FrameInfo:
     index: int
     t_recv: float
     t_fix: float
-
-
-def box_centre(box) -> tuple[float, float]:
-    """Centre of an (x, y, w, h) box in pixel-centre coordinates (box [x, x+w) spans centres x … x+w−1)."""
-    x, y, w, h = box
-    return x + (w - 1) / 2.0, y + (h - 1) / 2.0
 
 
 class Pipeline:
@@ -119,13 +114,14 @@ class Pipeline:
             if box is None:
                 return TrackResult("no_init_bbox")
             tracker = make_tracker(self.tracker_name, self.cal)
+            point, prediction = init_target(self.cal, camera_pose(self.cal, self.tel, frame.t_unix), box)
             try:
-                await asyncio.to_thread(tracker.init, frame.image, box)
+                await asyncio.to_thread(tracker.init, frame.image, box, prediction, point)
             except ValueError as e:
                 log.warning("tracker init on frame %d: %s", frame.index, e)
                 return TrackResult("bad_init_bbox")
             self._tracker = tracker
-            return TrackResult("ok", *box_centre(box), box)
+            return TrackResult("ok", point[0], point[1], box)
         return await asyncio.to_thread(self._tracker.update, frame.image, self._predict(frame.t_unix))
 
     def _predict(self, t_unix: float):
@@ -134,11 +130,7 @@ class Pipeline:
             return None
         pose = camera_pose(self.cal, self.tel, [t_unix, last.t_unix])
         u, v, px_per_m = project_uuv(self.cal, pose, last.lat, last.lon)
-        shift = (last.u - u[1], last.v - v[1])
-        if not (math.isfinite(shift[0]) and math.isfinite(shift[1])):
-            shift = (0.0, 0.0)
-        sigma_m = BASE_SIGMA_M + UUV_SPEED_MPS * abs(t_unix - last.t_unix)
-        return prediction_at(u[0], v[0], px_per_m[0], sigma_m, shift)
+        return follow((u[0], v[0], px_per_m[0]), (u[1], v[1]), (last.u, last.v), t_unix - last.t_unix)
 
     def status(self) -> dict:
         return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),

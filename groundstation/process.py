@@ -14,6 +14,7 @@ import numpy as np
 
 from localizer.fix import Fixes, locate
 from localizer.pose import camera_pose
+from localizer.tracking import TRACKERS
 
 from .positions import write_positions_csv
 from .session import Session, SessionError, load_session
@@ -35,6 +36,7 @@ def frame_pixels(session: Session, use_track: bool, tracker: str = "default", pr
     from .track_video import track_session
 
     tracked = track_session(session, tracker_name=tracker, progress=progress)
+    session.warnings.extend(tracked.warnings)
     return tracked.t, tracked.u, tracked.v, tracked.status
 
 
@@ -69,14 +71,21 @@ def summary(fixes: Fixes) -> str:
     return f"{len(fixes)} frames: {parts}"
 
 
-def run(args) -> int:
-    session = load_session(args.session)
+def print_warnings(session: Session) -> None:
+    """The session's warnings (reading, tracking), one line each on stderr."""
     for w in session.warnings:
         print(f"warning: {w}", file=sys.stderr)
-    fixes = process_session(
-        session, use_track=args.use_track, refraction=not args.no_refraction,
-        tracker=args.tracker, progress=not args.quiet,
-    )
+
+
+def run(args) -> int:
+    session = load_session(args.session)
+    try:
+        fixes = process_session(
+            session, use_track=args.use_track, refraction=not args.no_refraction,
+            tracker=args.tracker, progress=not args.quiet,
+        )
+    finally:
+        print_warnings(session)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_positions_csv(out / "positions.csv", fixes)
@@ -90,6 +99,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, help="output directory for positions.csv")
     p.add_argument("--use-track", action="store_true", help="take the UUV pixels from track.csv (no tracker)")
     p.add_argument("--no-refraction", action="store_true", help="the paper's straight ray (no Snell refraction)")
-    p.add_argument("--tracker", default="default", help="tracker backend (see `skyfix process --help`)")
+    p.add_argument("--tracker", default="default", choices=TRACKERS,
+                   help="tracker backend; default: telemetry-guided template matching; mil: the paper's")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)

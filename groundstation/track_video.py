@@ -29,13 +29,7 @@ import numpy as np
 from localizer.fix import locate
 from localizer.pose import CameraPose, camera_pose
 from localizer.tracking import TrackResult, make_tracker
-from localizer.tracking.predict import (
-    BASE_SIGMA_M,
-    UUV_SPEED_MPS,
-    init_target,
-    prediction_at,
-    project_uuv,
-)
+from localizer.tracking.predict import follow, init_target, project_uuv
 
 from .session import Session, SessionError
 from .video import VideoError, open_video
@@ -138,11 +132,7 @@ class _Predictor:
         if self.last_ok is None or self.anchor is None:
             return None
         j, u, v = self.last_ok
-        shift = (u - self.proj[j, 0], v - self.proj[j, 1])
-        if not (math.isfinite(shift[0]) and math.isfinite(shift[1])):
-            shift = (0.0, 0.0)
-        dt = abs(self.pose.t_unix[row] - self.pose.t_unix[j])
-        return prediction_at(*self.proj[row], BASE_SIGMA_M + UUV_SPEED_MPS * dt, shift)
+        return follow(self.proj[row], self.proj[j], (u, v), self.pose.t_unix[row] - self.pose.t_unix[j])
 
 
 def track_session(session: Session, tracker_name: str = "default", progress: bool = False) -> TrackedVideo:

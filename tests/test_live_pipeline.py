@@ -7,7 +7,7 @@ import json
 import numpy as np
 
 from groundstation.config import load_calibration
-from groundstation.pipeline import Pipeline, box_centre
+from groundstation.pipeline import Pipeline
 from groundstation.sinks.zenoh_fix import fix_to_json
 from groundstation.sources.video_live import LiveFrame
 from localizer.fix import Fix
@@ -43,10 +43,6 @@ def test_queue_drops_oldest_but_keeps_the_init_frame(tmp_path):
     p._tracker = object()  # once initialised, the oldest waiting frame goes first
     p.submit(_frame(6))
     assert [f.index for f in p._queue] == [4, 5, 6] and p.dropped == 4
-
-
-def test_box_centre_is_in_pixel_centre_coordinates():
-    assert box_centre((10, 20, 4, 6)) == (11.5, 22.5)
 
 
 def test_fix_json_has_no_nan_and_no_position_without_fix():

@@ -77,8 +77,12 @@ def test_cli_process_with_tracker_writes_positions(session_dir, tmp_path, capsys
     assert skyfix(["process", str(session_dir), "--out", str(tmp_path), "--tracker", "default", "--quiet"]) == 0
     lines = (tmp_path / "positions.csv").read_text().splitlines()
     assert len(lines) == 1 + 90
-    assert skyfix(["process", str(session_dir), "--out", str(tmp_path), "--tracker", "nope"]) == 2
-    assert "tracker = 'nope': unknown" in capsys.readouterr().err
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        skyfix(["process", str(session_dir), "--out", str(tmp_path), "--tracker", "nope"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'nope'" in err and "mil" in err
 
 
 def test_truncated_video_gives_no_video_status_for_the_missing_frames(session_dir, tmp_path):

@@ -92,6 +92,22 @@ def prediction_at(u: float, v: float, px_per_m: float, sigma_m: float, shift_px=
     )
 
 
+def follow(projected_now, projected_then, pixel_then, dt_s: float) -> Prediction | None:
+    """Prediction for a frame: the last tracked pixel moved by what the camera did since.
+
+    ``projected_now`` ``(u, v, px_per_m)`` and ``projected_then`` ``(u, v, ...)``: the
+    UUV's last located position projected (:func:`project_uuv`) into this frame and
+    into the frame it was tracked in; ``pixel_then``: the pixel tracked there. The
+    residual between that pixel and its projection is carried over, and the
+    uncertainty grows at :data:`UUV_SPEED_MPS` over the ``dt_s`` seconds since.
+    """
+    shift = (pixel_then[0] - projected_then[0], pixel_then[1] - projected_then[1])
+    if not (math.isfinite(shift[0]) and math.isfinite(shift[1])):
+        shift = (0.0, 0.0)
+    u, v, px_per_m = projected_now[:3]
+    return prediction_at(u, v, px_per_m, BASE_SIGMA_M + UUV_SPEED_MPS * abs(dt_s), shift)
+
+
 def predict(cal: Calibration, pose: CameraPose, lat_deg, lon_deg, sigma_m) -> list[Prediction | None]:
     """One :class:`Prediction` per frame of ``pose`` for a UUV last at (lat, lon); None where it cannot project."""
     u, v, k = project_uuv(cal, pose, lat_deg, lon_deg)
