@@ -122,10 +122,10 @@ def live(session_dir: Path, work: Path) -> dict:
     ep = f"tcp/127.0.0.1:{zport}"
     stats = work / "stats.json"
     py = sys.executable
-    run = [py, "-m", "groundstation.service", "run", "--calibration", str(session_dir / "session.toml"),
+    run = [py, "-m", "groundstation.cli", "run", "--calibration", str(session_dir / "session.toml"),
            "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", "180",
            "--zenoh-listen", ep, "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(stats)]
-    replay = [py, "-m", "groundstation.replay", "replay", str(session_dir), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
+    replay = [py, "-m", "groundstation.cli", "replay", str(session_dir), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
               "--video-out", f"udp://127.0.0.1:{video}", "--zenoh-connect", ep, "--uuv-listen",
               f"udpin:127.0.0.1:{uuv}", "--uuv-log", str(work / "uuv.jsonl"), "--lead-s", "2"]
     samples = []  # (time, cpu_s, rss_mb)

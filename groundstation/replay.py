@@ -268,9 +268,3 @@ def register(subparsers) -> None:
     p.add_argument("--duration-s", type=float, help="stop after this many seconds")
     p.set_defaults(func=replay)
 
-
-if __name__ == "__main__":
-    parser = argparse.ArgumentParser(prog="skyfix")
-    register(parser.add_subparsers(dest="command", required=True))
-    a = parser.parse_args()
-    sys.exit(a.func(a))

@@ -161,9 +161,3 @@ def register(subparsers) -> None:
     config.add_arguments(p)
     p.set_defaults(func=run)
 
-
-if __name__ == "__main__":
-    parser = argparse.ArgumentParser(prog="skyfix")
-    register(parser.add_subparsers(dest="command", required=True))
-    a = parser.parse_args()
-    sys.exit(a.func(a))

@@ -2,5 +2,5 @@
 
 ``skyfix sim SCENARIO.toml --out DIR`` (:mod:`sim_fixtures.cli`) writes a session
 in format v1; ``python -m sim_fixtures.bundle`` regenerates ``bundled/``;
-``python -m sim_fixtures.bench`` measures the generator's speed.
+``bench/sim.py`` measures the generator's speed.
 """

@@ -22,13 +22,8 @@ def free_port(kind: int = socket.SOCK_DGRAM) -> int:
 
 
 def skyfix(*args: str) -> list[str]:
-    """The command line of ``skyfix <args>`` (through the CLI once it registers the live subcommands)."""
-    from groundstation import cli
-
-    module = {"run": "groundstation.service", "replay": "groundstation.replay"}[args[0]]
-    if module in cli.SUBCOMMANDS:
-        return [sys.executable, "-m", "groundstation.cli", *args]
-    return [sys.executable, "-m", module, *args]
+    """The command line of ``skyfix <args>``, as the installed console script runs it."""
+    return [sys.executable, "-m", "groundstation.cli", *args]
 
 
 def start(cmd: list[str], log: Path) -> subprocess.Popen:

@@ -1,10 +1,10 @@
-"""Generator speed: ``python -m sim_fixtures.bench [SCENARIO.toml] [--out FILE]``.
+"""Generator speed: ``python bench/sim.py [SCENARIO.toml] [--out FILE]``.
 
 Generates the scenario (default ``scenarios/bench_720p.toml``, 10 s of 720p30)
 into a temporary directory and, as the baseline measured in the same run on the
 same machine, encodes the same number of frames of one still image with the same
 FFmpeg settings. Prints both and appends them to ``FILE`` (default
-``out/bench_sim.txt``).
+``bench/results/sim.txt``).
 """
 
 from __future__ import annotations
@@ -17,15 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .bundle import SCENARIOS
-from .generate import Encoder, generate
-from .scenario import load_scenario
+from sim_fixtures.bundle import SCENARIOS
+from sim_fixtures.generate import Encoder, generate
+from sim_fixtures.scenario import load_scenario
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sim_fixtures.bench")
+    p = argparse.ArgumentParser(prog="bench/sim.py")
     p.add_argument("scenario", nargs="?", default=str(SCENARIOS / "bench_720p.toml"))
-    p.add_argument("--out", default="out/bench_sim.txt")
+    p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "sim.txt"))
     args = p.parse_args(argv)
     sc = load_scenario(args.scenario)
     with tempfile.TemporaryDirectory() as tmp:
