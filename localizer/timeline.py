@@ -54,10 +54,6 @@ class Series:
     def values(self) -> np.ndarray:
         return self._v[: self._n]
 
-    @property
-    def last_t(self) -> float | None:
-        return float(self._t[self._n - 1]) if self._n else None
-
     def append(self, t: float, values) -> bool:
         """Add one sample; returns False (and counts it) if it is out of order or not finite."""
         values = np.asarray(values, dtype=float)

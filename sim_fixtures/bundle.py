@@ -19,11 +19,6 @@ BUNDLED_DIR = HERE / "bundled"
 BUNDLED = ("nadir_hover", "oblique_2m", "vehicle_yaw", "mount_orientation", "fixed_camera", "occlusion")
 
 
-def bundled_sessions() -> list[Path]:
-    """Paths of the bundled sessions, in :data:`BUNDLED` order."""
-    return [BUNDLED_DIR / name for name in BUNDLED]
-
-
 def main(argv=None) -> int:
     names = (argv if argv is not None else sys.argv[1:]) or BUNDLED
     for name in names:

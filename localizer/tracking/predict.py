@@ -108,13 +108,6 @@ def follow(projected_now, projected_then, pixel_then, dt_s: float) -> Prediction
     return prediction_at(u, v, px_per_m, BASE_SIGMA_M + UUV_SPEED_MPS * abs(dt_s), shift)
 
 
-def predict(cal: Calibration, pose: CameraPose, lat_deg, lon_deg, sigma_m) -> list[Prediction | None]:
-    """One :class:`Prediction` per frame of ``pose`` for a UUV last at (lat, lon); None where it cannot project."""
-    u, v, k = project_uuv(cal, pose, lat_deg, lon_deg)
-    sigma = np.broadcast_to(np.asarray(sigma_m, dtype=float), u.shape)
-    return [prediction_at(u[i], v[i], k[i], sigma[i]) for i in range(len(u))]
-
-
 def init_target(cal: Calibration, pose: CameraPose, box) -> tuple[tuple[float, float], Prediction | None]:
     """For a tracker's init box (x, y, w, h) in the pose's (single) frame: the pixel to track and a prediction.
 
