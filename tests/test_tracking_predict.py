@@ -12,7 +12,9 @@ from localizer.ray import offset_to_pixel
 from localizer.tracking.predict import (
     VEHICLE_FOOTPRINT_M,
     VEHICLE_HEIGHT_M,
-    predict,
+    UUV_SPEED_MPS,
+    follow,
+    prediction_at,
     project_uuv,
     top_face_pixel,
 )
@@ -44,8 +46,8 @@ def test_apparent_size_at_nadir_follows_the_apparent_depth(make_cal, make_teleme
     h, d, n_water = 20.0, 2.0, 1.34
     cal, pose = _pose(make_cal, make_telemetry, [T0 + 1.0], height_m=h, depth_m=d)
     below = locate(cal, pose, [959.5], [539.5])
-    preds = predict(cal, pose, below.lat[0], below.lon[0], sigma_m=0.1)
-    p = preds[0]
+    u, v, px_per_m = project_uuv(cal, pose, below.lat[0], below.lon[0])
+    p = prediction_at(u[0], v[0], px_per_m[0], sigma_m=0.1)
     # paraxial: a submerged object at depth d looks like one at d / n; the camera's own height is h
     k = cal.camera.fx / (pose.height_m[0] + d / n_water)
     assert p.px_per_m == pytest.approx(k, rel=5e-3)
@@ -58,7 +60,8 @@ def test_apparent_size_at_nadir_follows_the_apparent_depth(make_cal, make_teleme
 def test_no_prediction_without_a_pose(make_cal, make_telemetry):
     cal, pose = _pose(make_cal, make_telemetry, [T0 + 1.0, T0 + 60.0])
     assert pose.status[1] != "ok"
-    preds = predict(cal, pose, 47.5, 8.5, sigma_m=0.1)
+    u, v, px_per_m = project_uuv(cal, pose, 47.5, 8.5)
+    preds = [prediction_at(u[i], v[i], px_per_m[i], sigma_m=0.1) for i in range(2)]
     assert preds[0] is not None and preds[1] is None
 
 
@@ -81,3 +84,15 @@ def test_top_face_pixel_undoes_the_visible_side(make_cal, make_telemetry, headin
     u, v = top_face_pixel(cal, pose, [box_u], [box_v])
     assert naive > 3.0  # the visible side matters at this angle
     assert math.hypot(u[0] - u_true, v[0] - v_true) < 0.15 * naive
+
+
+def test_follow_carries_the_last_residual_and_widens_with_time():
+    """The last pixel moved by the camera's motion: projection now + (pixel then - projection then)."""
+    p1 = follow((500.0, 300.0, 40.0), (480.0, 310.0, 40.0), (483.0, 308.5), dt_s=0.1)
+    p2 = follow((500.0, 300.0, 40.0), (480.0, 310.0, 40.0), (483.0, 308.5), dt_s=1.1)
+    assert (p1.u, p1.v) == pytest.approx((503.0, 298.5))
+    assert p2.sigma_px - p1.sigma_px == pytest.approx(UUV_SPEED_MPS * 1.0 * 40.0)
+    # an unusable residual (no earlier projection) predicts the plain projection
+    p3 = follow((500.0, 300.0, 40.0), (float("nan"), float("nan")), (483.0, 308.5), dt_s=0.1)
+    assert (p3.u, p3.v) == pytest.approx((500.0, 300.0))
+    assert follow((float("nan"), 300.0, 40.0), (480.0, 310.0), (483.0, 308.5), dt_s=0.1) is None
