@@ -10,9 +10,9 @@ from localizer.geodesy import ned_to_geodetic
 from localizer.pose import camera_pose
 from localizer.ray import offset_to_pixel
 from localizer.tracking.predict import (
+    UUV_SPEED_MPS,
     VEHICLE_FOOTPRINT_M,
     VEHICLE_HEIGHT_M,
-    UUV_SPEED_MPS,
     follow,
     prediction_at,
     project_uuv,
