@@ -46,6 +46,8 @@ def test_depth_over_zenoh_both_shapes_and_garbage(caplog):
         publisher.put("uuv/depth", b"\xff\x00garbage")
         publisher.put("uuv/depth", json.dumps({"t": t0 + 1, "depth_m": "deep"}))
         publisher.put("uuv/depth", json.dumps({"t": t0 + 2, "depth_m": 99999.0}))  # out of range
+        publisher.put("uuv/depth", json.dumps({"t": t0 + 3600, "depth_m": 1.5}))  # a clock an hour ahead
+        publisher.put("uuv/depth", json.dumps({"t": t0 + 0.3, "depth_m": 4.0}))  # must still be taken
         hud = {"header": {"system_id": 1, "component_id": 1, "sequence": 5, "message_id": 74},
                "message": {"type": "VFR_HUD", "alt": -1.25, "airspeed": 0.0}}
         publisher.put("mavlink/1/1/VFR_HUD", json.dumps(hud))
@@ -60,11 +62,12 @@ def test_depth_over_zenoh_both_shapes_and_garbage(caplog):
     finally:
         publisher.close()
         service.close()
-    assert list(tel_own.depth.values[:, 0]) == [1.0, 2.0, 3.0]
-    assert own.bad == 2 and own.refused == 1
+    assert list(tel_own.depth.values[:, 0]) == [1.0, 2.0, 3.0, 4.0]
+    assert own.bad == 2 and own.refused == 2
     assert list(tel_blueos.depth.values[:, 0]) == [1.25] and blueos.bad == 1
     assert any("'deep'" in r.message or "deep" in r.message for r in caplog.records)
     assert any("garbage" in r.message for r in caplog.records)
+    assert any("ahead of the receive time" in r.message for r in caplog.records)
 
 
 def test_parse_depth_rejects_non_numbers():

@@ -29,6 +29,9 @@ from localizer.telemetry import Telemetry
 log = logging.getLogger("skyfix.depth")
 
 BLUEOS_KEY = "mavlink/*/*/VFR_HUD"
+#: A sample stamped further ahead of its receive time than this is refused: accepting it would
+#: make every later (correct) sample look out of order and freeze the depth.
+MAX_FUTURE_S = 2.0
 
 
 class BadDepth(ValueError):
@@ -96,6 +99,10 @@ class DepthZenoh:
         except BadDepth as e:
             self.bad += 1
             log.warning("depth on %s: %s: %r", key, e, data[:120])
+            return
+        if t > t_recv + MAX_FUTURE_S:
+            self.refused += 1
+            log.warning("depth on %s refused: t=%r is %.1f s ahead of the receive time", key, t, t - t_recv)
             return
         if not self.tel.add_depth(t, depth):
             self.refused += 1
