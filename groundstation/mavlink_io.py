@@ -26,8 +26,12 @@ def mavutil():
 
 
 def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
-    """Feed one decoded pymavlink message into ``tel``; True if it was used.
+    """Feed one decoded pymavlink message of the UAV's system into ``tel``; True if it was used.
 
+    The component that sends ATTITUDE first is the autopilot: its clock is the
+    buffers' clock, and its copies alone of ATTITUDE, GLOBAL_POSITION_INT and
+    SYSTEM_TIME are used. A gimbal message from another component (a MAVLink
+    gimbal with its own ``time_boot_ms``) is moved onto the autopilot's clock.
     Samples with values outside their physical range, non-finite values or times
     out of order are refused by the telemetry store (and counted there).
     """
@@ -35,7 +39,17 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     if kind not in USED:
         return False
     boot_ms = msg.time_boot_ms
-    tel.clock.add_receive(boot_ms, receive_unix_s)
+    component = msg.get_srcComponent()
+    if tel.autopilot_component is None and kind == "ATTITUDE":
+        tel.autopilot_component = component
+    if component == tel.autopilot_component or tel.autopilot_component is None:
+        tel.clock.add_receive(boot_ms, receive_unix_s)
+    elif kind in ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION"):
+        boot_ms = tel.to_autopilot_boot_ms(component, boot_ms, receive_unix_s)
+        if boot_ms is None:
+            return False
+    else:
+        return False  # another component's ATTITUDE, position or time: not the autopilot's clock
     if kind == "ATTITUDE":
         return tel.add_attitude(boot_ms, msg.roll, msg.pitch, msg.yaw)
     if kind == "GLOBAL_POSITION_INT":

@@ -39,6 +39,22 @@ class Telemetry:
         self.mount = Series("aaa", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
         # UUV depth below the surface (m, positive down), UNIX seconds
         self.depth = Series("l", timing.depth_gap_s, timing.depth_hold_s, keep_s)
+        # the MAVLink component whose time_boot_ms the UAV buffers are on, and other components' clocks
+        self.autopilot_component: int | None = None
+        self._other_clocks: dict[int, VehicleClock] = {}
+
+    def to_autopilot_boot_ms(self, component: int, time_boot_ms, receive_unix_s: float) -> float | None:
+        """Another component's ``time_boot_ms`` on the autopilot's boot clock (a MAVLink gimbal keeps its own).
+
+        Each clock's least ``receive − boot`` offset includes the same least link
+        delay, which cancels in their difference. None until the autopilot's is known.
+        """
+        clock = self._other_clocks.setdefault(component, VehicleClock())
+        clock.add_receive(time_boot_ms, receive_unix_s)
+        own = self.clock.receive_offset_s
+        if own is None:
+            return None
+        return time_boot_ms + (clock.receive_offset_s - own) * 1000.0
 
     def _drop_boot_clock_samples(self) -> None:
         """The autopilot rebooted: samples on its old boot clock would be matched to wrong frames."""

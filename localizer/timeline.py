@@ -197,6 +197,11 @@ class VehicleClock:
         return None
 
     @property
+    def receive_offset_s(self) -> float | None:
+        """The smallest ``receive time − boot time`` seen (seconds), whatever SYSTEM_TIME says."""
+        return self._recv_min
+
+    @property
     def offset_s(self) -> float | None:
         """UNIX time minus boot time (seconds), or None if unknown."""
         if self._system:

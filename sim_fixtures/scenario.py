@@ -74,6 +74,9 @@ class UuvSpec:
     depth_m: float = 1.0  # mean depth of the top face (the reference point)
     depth_swing_m: float = 0.25
     depth_period_s: float = 15.0
+    # ((t_s, depth_m), ...) keyframes, times from the first frame and increasing: when given, the depth
+    # follows them (cosine-eased in between, held outside) instead of depth_m ± depth_swing_m; a dive
+    depth_profile: tuple = ()
     size_m: tuple = (0.46, 0.34, 0.25)  # length, width, height (BlueROV2)
 
 
@@ -171,13 +174,29 @@ def _build(cls, source: str, prefix: str, table: dict, skip=()):
     return kwargs
 
 
-def _occlusions(source: str, value) -> tuple:
+def _pairs(value) -> tuple | None:
+    """A TOML list of number pairs as a tuple of float pairs, or None if it is not one."""
     if not isinstance(value, list) or not all(
-        isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) for x in w) and w[0] < w[1]
+        isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
         for w in value
     ):
-        raise ConfigError(source, "occlusions", value, "expected a list of [start_s, end_s] pairs, start < end")
+        return None
     return tuple((float(a), float(b)) for a, b in value)
+
+
+def _occlusions(source: str, value) -> tuple:
+    pairs = _pairs(value)
+    if pairs is None or not all(a < b for a, b in pairs):
+        raise ConfigError(source, "occlusions", value, "expected a list of [start_s, end_s] pairs, start < end")
+    return pairs
+
+
+def _depth_profile(source: str, value) -> tuple:
+    pairs = _pairs(value)
+    if not pairs or not all(t0 < t1 for (t0, _), (t1, _) in zip(pairs, pairs[1:])):
+        raise ConfigError(source, "uuv.depth_profile", value,
+                          "expected a non-empty list of [t_s, depth_m] pairs with increasing t_s")
+    return pairs
 
 
 def scenario_from_dict(data: dict, source: str = "scenario.toml") -> Scenario:
@@ -185,16 +204,22 @@ def scenario_from_dict(data: dict, source: str = "scenario.toml") -> Scenario:
     if not isinstance(data.get("name"), str) or not data["name"]:
         raise ConfigError(source, "name", data.get("name"), "expected a non-empty string")
     top = _build(Scenario, source, "", data, skip=("name", "occlusions", *_TABLES))
-    tables = {k: cls(**_build(cls, source, k, data.get(k, {}))) for k, cls in _TABLES.items()}
+    uuv = data.get("uuv", {})
+    skip = {"uuv": ("depth_profile",)}
+    tables = {k: cls(**_build(cls, source, k, data.get(k, {}), skip.get(k, ()))) for k, cls in _TABLES.items()}
+    if isinstance(uuv, dict) and "depth_profile" in uuv:
+        tables["uuv"] = replace(tables["uuv"], depth_profile=_depth_profile(source, uuv["depth_profile"]))
     occl = _occlusions(source, data["occlusions"]) if "occlusions" in data else ()
     sc = Scenario(name=data["name"], occlusions=occl, **top, **tables)
     for key, value in (("duration_s", sc.duration_s), ("fps", sc.fps)):
         if not value > 0:
             raise ConfigError(source, key, value, "must be > 0")
-    shallowest = sc.uuv.depth_m - abs(sc.uuv.depth_swing_m)
-    deepest = sc.uuv.depth_m + abs(sc.uuv.depth_swing_m) + sc.uuv.size_m[2]
-    if not (shallowest > 0 and deepest < sc.site.floor_depth_m):
-        raise ConfigError(source, "uuv.depth_m", sc.uuv.depth_m,
+    v = sc.uuv
+    key, value, depths = (("uuv.depth_profile", [list(k) for k in v.depth_profile], [d for _, d in v.depth_profile])
+                          if v.depth_profile else ("uuv.depth_m", v.depth_m, [v.depth_m - abs(v.depth_swing_m),
+                                                                               v.depth_m + abs(v.depth_swing_m)]))
+    if not (min(depths) > 0 and max(depths) + v.size_m[2] < sc.site.floor_depth_m):
+        raise ConfigError(source, key, value,
                           "the UUV must stay between the surface and the seafloor (site.floor_depth_m)")
     return sc
 

@@ -50,6 +50,7 @@ class DirectMessage:
     def __init__(self, m):
         self._type = m.message_name
         self._sysid = m.system_id
+        self._compid = m.component_id
         self.__dict__.update(json.loads(m.fields_json))
 
     def get_type(self) -> str:
@@ -57,6 +58,9 @@ class DirectMessage:
 
     def get_srcSystem(self) -> int:
         return self._sysid
+
+    def get_srcComponent(self) -> int:
+        return self._compid
 
 
 class UavMavsdk:

@@ -1,0 +1,96 @@
+"""MAVLink messages from several components of the UAV, as pymavlink decodes them off the wire.
+
+A MAVLink gimbal (component 154) stamps GIMBAL_DEVICE_ATTITUDE_STATUS with its
+own ``time_boot_ms``; the samples must land on the autopilot's clock, not be
+dropped as "no gimbal" nor make the clock believe the autopilot rebooted.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from groundstation.mavlink_io import ingest, mavutil
+from localizer.attitude import euler_to_quat
+from localizer.calibration import calibration_from_dict
+from localizer.pose import camera_pose
+from localizer.telemetry import Telemetry
+
+T0 = 1_763_800_000.0
+AUTOPILOT_BOOT0_MS = 250_000  # the autopilot has been up for 250 s at T0
+GIMBAL_BOOT0_MS = 7_300  # the gimbal booted later: its clock is 242.7 s behind
+PITCH_RATE_DEG_S = 10.0  # the gimbal tilts steadily, so a time error shows as a pitch error
+
+
+def _decode(msg, component: int):
+    sender = mavutil().mavlink.MAVLink(None, srcSystem=1, srcComponent=component)
+    buf = msg.pack(sender)
+    parsed = mavutil().mavlink.MAVLink(None).parse_buffer(buf)
+    assert parsed and parsed[0].get_srcComponent() == component
+    return parsed[0]
+
+
+def _pitch_deg(t):
+    return -80.0 + PITCH_RATE_DEG_S * (t - T0)
+
+
+def _feed(tel: Telemetry, rng, gimbal_component: int, gimbal_boot0_ms: int, extra=()):
+    mav = mavutil().mavlink
+    messages = []  # (receive time, decoded message)
+    for k in range(150):  # 3 s at 50 Hz
+        t = T0 + k * 0.02
+        ap_ms = AUTOPILOT_BOOT0_MS + round((t - T0) * 1000)
+        g_ms = gimbal_boot0_ms + round((t - T0) * 1000)
+        delay = 0.04 + rng.exponential(0.01)
+        messages.append((t + delay, _decode(mav.MAVLink_attitude_message(ap_ms, 0.0, 0.0, 0.3, 0, 0, 0), 1)))
+        q = euler_to_quat(0.0, math.radians(_pitch_deg(t)), 0.3)
+        gimbal = mav.MAVLink_gimbal_device_attitude_status_message(0, 0, g_ms, 64, [float(x) for x in q], 0, 0, 0, 0)
+        messages.append((t + delay + 0.001, _decode(gimbal, gimbal_component)))
+        if k % 5 == 0:
+            pos = mav.MAVLink_global_position_int_message(ap_ms, 434000000, 163000000, 30000, 20000, 0, 0, 0, 0)
+            messages.append((t + delay + 0.002, _decode(pos, 1)))
+        if k % 50 == 0:
+            st = mav.MAVLink_system_time_message(int(t * 1e6), ap_ms)
+            messages.append((t + delay + 0.003, _decode(st, 1)))
+    messages.extend(extra)
+    for t_recv, msg in sorted(messages, key=lambda m: m[0]):
+        ingest(tel, msg, t_recv)
+    for k in range(7):
+        tel.add_depth(T0 + 0.5 * k, 1.0)
+
+
+def _cal():
+    return calibration_from_dict({
+        "camera": {"width": 640, "height": 360, "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 179.5},
+        "mount": {"attitude_source": "gimbal_device"},
+        "water": {"takeoff_height_above_surface_m": 2.0},
+    })
+
+
+@pytest.mark.parametrize(
+    ("gimbal_component", "gimbal_boot0_ms"),
+    [(1, AUTOPILOT_BOOT0_MS), (154, GIMBAL_BOOT0_MS)],  # the autopilot's own mount driver; a MAVLink gimbal
+)
+def test_gimbal_samples_land_on_the_autopilot_clock(gimbal_component, gimbal_boot0_ms):
+    tel = Telemetry()
+    _feed(tel, np.random.default_rng(3), gimbal_component, gimbal_boot0_ms)
+    assert tel.clock.reboots == 0
+    times = T0 + np.array([0.5, 1.2, 2.5])
+    pose = camera_pose(_cal(), tel, times)
+    assert list(pose.status) == ["ok"] * 3
+    axis_down = pose.R_ned_from_cv[:, 2, 2]  # the optical axis's down component = -sin(pitch)
+    pitch = np.degrees(-np.arcsin(axis_down))
+    # a time error of dt shows as PITCH_RATE_DEG_S·dt; 0.05° is 5 ms
+    assert pitch == pytest.approx(_pitch_deg(times), abs=0.05)
+
+
+def test_other_components_attitude_is_not_the_autopilots():
+    """An ATTITUDE from another component (e.g. a companion's estimate) must not enter the buffers."""
+    tel = Telemetry()
+    mav = mavutil().mavlink
+    stray = _decode(mav.MAVLink_attitude_message(AUTOPILOT_BOOT0_MS + 1510, 0.5, 0.5, 2.0, 0, 0, 0), 191)
+    _feed(tel, np.random.default_rng(4), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.55, stray)])
+    assert tel.autopilot_component == 1
+    assert not np.any(np.isclose(tel.attitude.values[:, 2], 2.0))
