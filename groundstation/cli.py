@@ -8,6 +8,7 @@ import sys
 
 from localizer.calibration import ConfigError
 
+from .mavlink_io import LinkError
 from .session import SessionError
 
 SUBCOMMANDS = (
@@ -19,10 +20,6 @@ SUBCOMMANDS = (
 )
 
 
-class UsageError(ValueError):
-    """A wrong option or input file named on the command line (exit code 2)."""
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="skyfix", description="UUV position from UAV imagery")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -31,7 +28,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (SessionError, ConfigError, UsageError) as e:
+    except (SessionError, ConfigError, LinkError) as e:
         print(f"skyfix {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -134,13 +134,13 @@ def run_config(args: argparse.Namespace) -> RunConfig:
             values[f.name] = tuple(given) if isinstance(given, list) else given
     cfg = RunConfig(**values)
     if cfg.calibration is None:
-        raise ConfigError("skyfix run", "--calibration", None, "required (flag or config file)")
+        raise ConfigError("options", "--calibration", None, "required (flag or config file)")
     if cfg.tracker not in TRACKERS:
-        raise ConfigError("skyfix run", "--tracker", cfg.tracker, f"expected one of {', '.join(TRACKERS)}")
+        raise ConfigError("options", "--tracker", cfg.tracker, f"expected one of {', '.join(TRACKERS)}")
     if cfg.record and cfg.mavlink_backend == "mavsdk":
-        raise ConfigError("skyfix run", "--record", cfg.record, "recording needs --mavlink-backend pymavlink")
+        raise ConfigError("options", "--record", cfg.record, "recording needs --mavlink-backend pymavlink")
     if not cfg.gps_input_hz >= 5.0:
-        raise ConfigError("skyfix run", "--gps-input-hz", cfg.gps_input_hz, "ArduPilot needs ≥ 5 Hz")
+        raise ConfigError("options", "--gps-input-hz", cfg.gps_input_hz, "ArduPilot needs ≥ 5 Hz")
     return cfg
 
 

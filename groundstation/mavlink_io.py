@@ -25,6 +25,18 @@ def mavutil():
     return _mavutil
 
 
+class LinkError(OSError):
+    """A MAVLink link that cannot be opened; the message is one line naming the connection string."""
+
+
+def connect(url: str, **kwargs):
+    """``mavutil.mavlink_connection(url, **kwargs)``, with any failure as one :class:`LinkError` line."""
+    try:
+        return _mavutil.mavlink_connection(url, **kwargs)
+    except Exception as e:  # noqa: BLE001 - pymavlink fails with ValueError, OSError, serial errors, ...
+        raise LinkError(f"MAVLink {url!r}: cannot open: {e}") from None
+
+
 def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     """Feed one decoded pymavlink message of the UAV's system into ``tel``; True if it was used.
 

@@ -38,7 +38,7 @@ import threading
 import time
 from pathlib import Path
 
-from .mavlink_io import mavutil
+from .mavlink_io import connect, mavutil
 from .session import SessionError, read_table
 from .zenoh_session import open_session, put_json
 
@@ -147,16 +147,12 @@ class Replay:
         self.stop = threading.Event()
         self.counts = {"mavlink": 0, "depth": 0, "gps_input": 0}
 
-    def _send_tlog(self, shift: float) -> None:
-        conn = mavutil().mavlink_connection(self.args.mavlink_out, input=False)
-        try:
-            for t, msg in self.tlog:
-                if not _sleep_until(t + shift, self.stop):
-                    return
-                conn.write(frame_bytes(msg, shift))
-                self.counts["mavlink"] += 1
-        finally:
-            conn.close()
+    def _send_tlog(self, conn, shift: float) -> None:
+        for t, msg in self.tlog:
+            if not _sleep_until(t + shift, self.stop):
+                return
+            conn.write(frame_bytes(msg, shift))
+            self.counts["mavlink"] += 1
 
     def _send_depth(self, shift: float, session) -> None:
         for t, depth in self.depth:
@@ -165,21 +161,17 @@ class Replay:
             put_json(self.args.depth_key, {"t": t + shift, "depth_m": depth}, session)
             self.counts["depth"] += 1
 
-    def _listen_uuv(self, out) -> None:
-        conn = mavutil().mavlink_connection(self.args.uuv_listen, source_system=1, source_component=1)
-        try:
-            while not self.stop.is_set():
-                msg = conn.recv_match(type="GPS_INPUT", blocking=True, timeout=0.2)
-                if msg is None:
-                    continue
-                rec = {"event": "gps_input", "t_recv": time.time(), "sysid": msg.get_srcSystem(),
-                       "compid": msg.get_srcComponent(), **msg.to_dict()}
-                rec.pop("mavpackettype", None)
-                out.write(json.dumps(rec) + "\n")
-                out.flush()
-                self.counts["gps_input"] += 1
-        finally:
-            conn.close()
+    def _listen_uuv(self, conn, out) -> None:
+        while not self.stop.is_set():
+            msg = conn.recv_match(type="GPS_INPUT", blocking=True, timeout=0.2)
+            if msg is None:
+                continue
+            rec = {"event": "gps_input", "t_recv": time.time(), "sysid": msg.get_srcSystem(),
+                   "compid": msg.get_srcComponent(), **msg.to_dict()}
+            rec.pop("mavpackettype", None)
+            out.write(json.dumps(rec) + "\n")
+            out.flush()
+            self.counts["gps_input"] += 1
 
     def _stream_video(self, t0_unix: float) -> subprocess.Popen | None:
         """Start ffmpeg so that the video's first frame leaves at ``t0_unix``."""
@@ -214,12 +206,15 @@ class Replay:
         out = open(args.uuv_log, "a") if args.uuv_log else sys.stdout  # noqa: SIM115 - closed in finally
         print(json.dumps({"event": "start", "session": str(self.dir), "shift_s": shift,
                           "t_start": self.t_start + shift, "t_end": self.t_end + shift}), flush=True)
+        links = [connect(args.mavlink_out, input=False)]
+        if args.uuv_listen:
+            links.append(connect(args.uuv_listen, source_system=1, source_component=1))
         session = open_session(args.zenoh_connect or (), args.zenoh_listen or ())
         ffmpeg = None
-        threads = [threading.Thread(target=self._send_tlog, args=(shift,), name="tlog", daemon=True),
+        threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True),
                    threading.Thread(target=self._send_depth, args=(shift, session), name="depth", daemon=True)]
         if args.uuv_listen:
-            threads.append(threading.Thread(target=self._listen_uuv, args=(out,), name="uuv", daemon=True))
+            threads.append(threading.Thread(target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True))
         try:
             for th in threads:
                 th.start()
@@ -238,6 +233,8 @@ class Replay:
                 ffmpeg.wait(5.0)
             for th in threads:
                 th.join(2.0)
+            for link in links:
+                link.close()
             session.close()
             print(json.dumps({"event": "end", **self.counts}), flush=True)
             if out is not sys.stdout:

@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
         for e in eg.exceptions:
             print(f"skyfix run: error: {e}", file=sys.stderr)
     if final is None:
-        return 1
+        return 2
     if cfg.stats:
         with open(cfg.stats, "w") as f:
             json.dump(final, f, indent=1)

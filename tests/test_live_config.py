@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import pytest
 
@@ -42,3 +43,17 @@ def test_required_and_range_checks():
         config.run_config(_parse([]))
     with pytest.raises(ConfigError, match="5 Hz"):
         config.run_config(_parse(["--calibration", "x.toml", "--gps-input-hz", "4"]))
+
+
+@pytest.mark.parametrize("option", ["--mavlink", "--gps-input"])
+def test_a_link_that_cannot_open_is_one_line_and_exit_2(tmp_path, option, capsys):
+    """A mistyped connection string stops the service with one line naming it, not a traceback."""
+    from groundstation.cli import main
+
+    bundled = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"
+    argv = ["run", "--calibration", str(bundled), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "3",
+            option, "udpin:127.0.0.1:notaport"]
+    assert main(argv) == 2
+    err_lines = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
+    assert len(err_lines) == 1
+    assert err_lines[0].startswith("skyfix run: error: MAVLink 'udpin:127.0.0.1:notaport': cannot open:")

@@ -48,7 +48,7 @@ import zenoh
 
 from localizer.fix import Fix
 
-from ..mavlink_io import mavutil
+from ..mavlink_io import connect
 from ..zenoh_session import put_json
 
 log = logging.getLogger("skyfix.gps_input")
@@ -120,7 +120,7 @@ class MavlinkLink:
         self._reader: threading.Thread | None = None
 
     def open(self) -> None:
-        self._conn = mavutil().mavlink_connection(self.url, source_system=GPS_SYSID, source_component=GPS_COMPID,
+        self._conn = connect(self.url, source_system=GPS_SYSID, source_component=GPS_COMPID,
                                                   autoreconnect=True)
         self._reader = threading.Thread(target=self._drain, name="gps-input-link", daemon=True)
         self._reader.start()

@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 from localizer.telemetry import Telemetry
 
-from ..mavlink_io import USED, ingest, mavutil
+from ..mavlink_io import USED, connect, ingest, mavutil
 
 log = logging.getLogger("skyfix.uav")
 
@@ -61,7 +61,7 @@ class UavMavlink:
         loop = asyncio.get_running_loop()
         mav = mavutil()
         conn = await asyncio.to_thread(
-            mav.mavlink_connection, self.url, source_system=GCS_SYSID, source_component=GCS_COMPID,
+            connect, self.url, source_system=GCS_SYSID, source_component=GCS_COMPID,
             autoreconnect=True,
         )
         reader = threading.Thread(target=self._read, args=(conn, loop), name="uav-mavlink", daemon=True)
