@@ -84,3 +84,26 @@ finally:
     sub.undeclare()
     session.close()
 """
+
+
+def replay_shift(log: Path, timeout_s: float = 15.0) -> float:
+    """The time shift ``skyfix replay`` printed first (UNIX s − session s), read from its log."""
+    def first_json() -> dict | None:
+        for line in log.read_text().splitlines() if log.exists() else ():
+            if line.startswith("{"):
+                return json.loads(line)
+        return None
+
+    wait_for(lambda: first_json() is not None, timeout_s, f"the replay's start line in {log}")
+    return first_json()["shift_s"]
+
+
+def truth_errors_m(session: Path, t_session, lat, lon):
+    """Horizontal distance (m) of each position to ``truth.csv`` interpolated at its session time (s)."""
+    import numpy as np
+
+    from localizer.geodesy import horizontal_error_m
+
+    truth = np.genfromtxt(session / "truth.csv", delimiter=",", names=True)
+    return horizontal_error_m(np.asarray(lat), np.asarray(lon), np.interp(t_session, truth["t"], truth["lat"]),
+                              np.interp(t_session, truth["t"], truth["lon"]))

@@ -51,6 +51,8 @@ def parse_depth(payload: bytes, shape: str, t_recv_unix: float) -> tuple[float, 
         obj = json.loads(payload)
     except (ValueError, UnicodeDecodeError):
         raise BadDepth("not JSON") from None
+    except RecursionError:  # e.g. b"[[[[..." deeper than the interpreter's recursion limit
+        raise BadDepth("JSON nested too deeply") from None
     if shape == "blueos":
         msg = obj.get("message") if isinstance(obj, dict) else None
         if isinstance(msg, dict) and msg.get("type", "VFR_HUD") != "VFR_HUD":

@@ -16,6 +16,7 @@ import asyncio
 import logging
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 
 from localizer.telemetry import Telemetry
@@ -55,6 +56,7 @@ class UavMavlink:
         self.listeners = listeners or []
         self.health = LinkHealth()
         self.uav_sysid: int | None = None
+        self._refused_by_kind: Counter[str] = Counter()
         self._stop = threading.Event()
 
     async def run(self) -> None:
@@ -123,6 +125,11 @@ class UavMavlink:
             used = False
         if kind in USED and not used:
             self.health.refused += 1
+            self._refused_by_kind[kind] += 1
+            n = self._refused_by_kind[kind]
+            if n == 1 or n % 100 == 0:
+                log.warning("UAV MAVLink: %s #%d refused (not finite, out of range, out of order or not the "
+                            "autopilot's): %s", kind, n, msg)
         for listener in self.listeners:
             listener(msg, t_recv)
 

@@ -35,6 +35,7 @@ log = logging.getLogger("skyfix.video")
 UDP_CAPTURE_OPTIONS = "analyzeduration;1000000|probesize;5000000"
 MAX_QUICK_FAILURES = 30  # undecodable frames in a row before reconnecting
 MIN_OPEN_TIMEOUT_MS = 10_000  # an open interrupted while probing leaves a capture that decodes nothing
+STALL_FRAMES = 4  # a frame decoded this many frame intervals after the previous one may have waited in the decoder
 
 
 @dataclass
@@ -42,9 +43,11 @@ class LiveFrame:
     """A received frame: running index, exposure and receive times (UNIX s), BGR image.
 
     ``buffered``: the frame may have waited in a buffer (the first frame of a
-    connection, or one decoded less than half a frame interval after the previous
-    one), so its receive time is not when it arrived and its exposure time is
-    unknown; such frames only keep the tracker going.
+    connection, one decoded less than half a frame interval after the previous
+    one, or one decoded more than :data:`STALL_FRAMES` intervals after it: the
+    decoder holds frames back and releases them when the stream stalls or stops),
+    so its receive time is not when it arrived and its exposure time is unknown;
+    such frames only keep the tracker going.
     """
 
     index: int
@@ -120,8 +123,10 @@ class VideoLive:
                         self._error(f"{self.url}: stream stopped after frame {self.frames - 1}; reconnecting")
                         break
                     quick_failures = 0
-                    # the first frame of a connection may have waited through FFmpeg's probing
-                    buffered = t_prev is None or t_recv - t_prev < 0.5 / fps
+                    # the first frame of a connection may have waited through FFmpeg's probing, and the
+                    # first after a stall in the decoder (H.264 with B-frames holds frames back)
+                    gap_s = None if t_prev is None else t_recv - t_prev
+                    buffered = gap_s is None or gap_s < 0.5 / fps or gap_s > STALL_FRAMES / fps
                     t_prev = t_recv
                     self.buffered += buffered
                     live = LiveFrame(self.frames, t_recv - self.latency_s, t_recv, frame.image, buffered)
