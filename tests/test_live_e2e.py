@@ -7,7 +7,6 @@ and explicit no-fix messages otherwise; the run's recording loads as a session."
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import socket
@@ -15,26 +14,26 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from live_helpers import ROOT, SUBSCRIBER, free_port, read_jsonl, skyfix, start, stop, wait_for
+from live_helpers import (
+    ROOT,
+    SUBSCRIBER,
+    free_port,
+    read_jsonl,
+    replay_shift,
+    skyfix,
+    start,
+    stop,
+    truth_errors_m,
+    wait_for,
+)
 
 from groundstation.session import load_session
-from localizer.geodesy import horizontal_error_m
 
 # SKYFIX_LIVE_SESSION may name another session (with truth.csv) to rehearse
 SESSION = Path(os.environ.get("SKYFIX_LIVE_SESSION", ROOT / "sim_fixtures" / "bundled" / "nadir_hover"))
 # Send → frame-decoded delay of this replay chain (ffmpeg -re copying the session's H.264, which has
 # B-frames, into MPEG-TS over UDP; OpenCV decoding), measured on this machine at 45–65 ms.
 VIDEO_LATENCY_MS = 55
-
-
-def _truth(session) -> dict[str, np.ndarray]:
-    with open(session / "truth.csv") as f:
-        rows = list(csv.DictReader(f))
-    return {k: np.array([float(r[k]) for r in rows]) for k in ("t", "lat", "lon")}
-
-
-def _errors_m(truth, t, lat, lon):
-    return horizontal_error_m(lat, lon, np.interp(t, truth["t"], truth["lat"]), np.interp(t, truth["t"], truth["lon"]))
 
 
 def test_replay_run_subscriber_uuv(tmp_path):
@@ -71,9 +70,7 @@ def test_replay_run_subscriber_uuv(tmp_path):
     assert procs[0].returncode == 0, run_log[-3000:]
     assert replay.returncode == 0, (tmp_path / "replay.log").read_text()[-3000:]
 
-    replay_lines = [json.loads(x) for x in (tmp_path / "replay.log").read_text().splitlines() if x.startswith("{")]
-    shift = replay_lines[0]["shift_s"]
-    truth = _truth(SESSION)
+    shift = replay_shift(tmp_path / "replay.log")
     n_frames = len((SESSION / "video_frames.csv").read_text().splitlines()) - 1
 
     # Fixes over Zenoh, seen by an independent process
@@ -84,7 +81,7 @@ def test_replay_run_subscriber_uuv(tmp_path):
     fix = [json.loads(s["payload"]) for s in fixes]
     ok = [f for f in fix if f["status"] == "ok"]
     assert len(ok) >= 0.8 * n_frames, {f["status"] for f in fix}
-    err = _errors_m(truth, np.array([f["t"] for f in ok]) - shift, np.array([f["lat"] for f in ok]),
+    err = truth_errors_m(SESSION, np.array([f["t"] for f in ok]) - shift, np.array([f["lat"] for f in ok]),
                     np.array([f["lon"] for f in ok]))
     print(f"Zenoh: {len(fix)} fixes, {len(ok)} ok, MAE {err.mean():.4f} m, max {err.max():.4f} m")
     assert err.mean() <= 0.1, f"Zenoh fixes: MAE {err.mean():.3f} m, max {err.max():.3f} m"
@@ -102,7 +99,7 @@ def test_replay_run_subscriber_uuv(tmp_path):
     valid = [g for g in gps if g["fix_type"] == 3]
     assert len(valid) >= 0.5 * len(gps)
     assert all(g["satellites_visible"] >= 6 and g["time_week"] > 2000 for g in valid)
-    err = _errors_m(truth, np.array([g["time_usec"] / 1e6 for g in valid]) - shift,
+    err = truth_errors_m(SESSION, np.array([g["time_usec"] / 1e6 for g in valid]) - shift,
                     np.array([g["lat"] / 1e7 for g in valid]), np.array([g["lon"] / 1e7 for g in valid]))
     print(f"GPS_INPUT: {len(gps)} messages, {rate_hz:.1f} Hz, largest gap {np.diff(t_recv).max() * 1000:.0f} ms, "
           f"{len(valid)} valid, MAE {err.mean():.4f} m, max {err.max():.4f} m")
