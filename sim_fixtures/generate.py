@@ -4,8 +4,10 @@ Ground truth is the UUV's reference point, the centre of its top face (what the
 camera sees and the tracker follows), in WGS84 with its depth below the surface;
 ``depth.jsonl`` reports the depth of that same point. ``track.csv`` holds the
 exact distorted pixel of the truth point, projected with the localizer's forward
-model (:func:`localizer.ray.offset_to_pixel`), one row per frame; where the UUV is
-hidden by an occlusion window or outside the image, ``u`` and ``v`` are empty. The video is rendered
+model (:func:`localizer.ray.offset_to_pixel`), one row per frame; where the UUV cannot
+be seen, ``u`` and ``v`` are empty: hidden by an occlusion window, outside the image,
+or too deep in turbid water, its contrast below the sensor noise (see
+:meth:`~sim_fixtures.render.Renderer.render`); ``truth.csv`` has every frame. The video is rendered
 independently by ray casting (:mod:`sim_fixtures.render`) and encoded by the
 ``ffmpeg`` CLI (libx264, yuv420p, raw BGR frames through a pipe).
 """
@@ -196,25 +198,27 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     _write_csv(out / "truth.csv", ("t", "lat", "lon", "depth_m"),
                ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}")
                 for t, a, b, d in zip(truth.t_unix, lat, lon, truth.uuv_ned[:, 2])))
-    seen = truth.visible & camera.contains(np.nan_to_num(truth.u, nan=-1e9), np.nan_to_num(truth.v, nan=-1e9))
-    _write_csv(out / "track.csv", ("t", "u", "v"),
-               ((f"{t:.6f}", f"{u:.4f}" if ok else "", f"{v:.4f}" if ok else "")
-                for t, u, v, ok in zip(truth.t_unix, truth.u, truth.v, seen)))
     _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(truth.t_unix)))
 
     t1 = time.perf_counter()
     renderer = Renderer(sc, camera)
     encoder = Encoder(out / "video.mp4", camera.width, camera.height, sc.fps, sc.render.crf)
     init = None
+    in_view = np.zeros(len(truth.t_unix), bool)  # the UUV can be seen in the frame (see Renderer.render)
     try:
         for i in range(len(truth.t_unix)):
             img, box = renderer.render(truth.view(i))
+            in_view[i] = box is not None
             if init is None and box is not None:
                 init = (box, float(truth.t_unix[i]))
             encoder.write(img)
     finally:
         encoder.close()
     render_s = time.perf_counter() - t1
+    seen = in_view & camera.contains(np.nan_to_num(truth.u, nan=-1e9), np.nan_to_num(truth.v, nan=-1e9))
+    _write_csv(out / "track.csv", ("t", "u", "v"),
+               ((f"{t:.6f}", f"{u:.4f}" if ok else "", f"{v:.4f}" if ok else "")
+                for t, u, v, ok in zip(truth.t_unix, truth.u, truth.v, seen)))
     if init is None:
         raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
     pad = 3

@@ -23,6 +23,18 @@ def _wave(tau, amplitude, freq_hz, phase):
     return amplitude * np.sin(TAU * freq_hz * np.asarray(tau, dtype=float) + phase)
 
 
+def _eased(tau, keyframes):
+    """Values through ``keyframes`` ((tau, value), ...) at ``tau``: cosine-eased between consecutive ones
+    (the rate is zero at each keyframe, so the motion stays smooth), held before the first and after the last."""
+    k = np.asarray(keyframes, dtype=float)
+    tau = np.asarray(tau, dtype=float)
+    if len(k) == 1:
+        return np.full(tau.shape, k[0, 1])
+    i = np.clip(np.searchsorted(k[:, 0], tau, side="right") - 1, 0, len(k) - 2)
+    s = np.clip((tau - k[i, 0]) / (k[i + 1, 0] - k[i, 0]), 0.0, 1.0)
+    return k[i, 1] + (k[i + 1, 1] - k[i, 1]) * (1.0 - np.cos(np.pi * s)) / 2.0
+
+
 class Motion:
     """Trajectories of one scenario; deterministic for its seed."""
 
@@ -90,8 +102,13 @@ class Motion:
         return np.arctan2(d[..., 1], d[..., 0])
 
     def uuv_depth_m(self, tau_s):
-        """Depth of the UUV's reference point (centre of its top face) below the surface."""
+        """Depth of the UUV's reference point (centre of its top face) below the surface.
+
+        ``depth_m`` ± a slow swing, or the ``depth_profile`` keyframes when given (see :func:`_eased`).
+        """
         v = self.sc.uuv
+        if v.depth_profile:
+            return _eased(tau_s, v.depth_profile)
         return v.depth_m + _wave(tau_s, v.depth_swing_m, 1.0 / v.depth_period_s, self._ph[12])
 
     def uuv_ned(self, tau_s):

@@ -26,6 +26,8 @@ from .scenario import Scenario
 FLOOR_M_PER_PX = 0.015
 SKY_BGR = np.array([235.0, 215.0, 200.0], np.float32)
 GLINT_HAZE = 0.1  # the smooth part of the sun's glint; the rest comes in sparkles from surface ripples
+MIN_CONTRAST = 1.0  # grey levels: the UUV counts as visible only if it changes its box at least this much (RMS)
+GREY_BGR = np.array([0.114, 0.587, 0.299])  # luma weights (as cv2.COLOR_BGR2GRAY)
 
 
 @dataclass(frozen=True)
@@ -224,7 +226,13 @@ class Renderer:
         return np.sqrt(layers[0] * layers[1])
 
     def _uuv(self, view: View, img, near):
-        """Blend the UUV into ``img`` (H, W, 3) in a window around it; returns its bounding box or None."""
+        """Blend the UUV into ``img`` (H, W, 3) in a window around it; returns its bounding box, or None
+        where it cannot be seen: no pixel mostly covered, or its contrast below the sensor noise.
+
+        Contrast: the RMS change (grey levels) the vehicle makes to the pixels of its box, before
+        noise. Deep in turbid water it fades into the water's colour and drops below the noise's
+        ``noise_sigma`` (at least ``MIN_CONTRAST``): the UUV is then drawn but counts as not visible.
+        """
         rows, cols = np.nonzero(near)
         if len(rows) == 0:
             return None
@@ -249,15 +257,20 @@ class Renderer:
         cover = hit.reshape(shape).mean(axis=2)[..., None]
         mean_hit = colour.reshape(shape + (3,)).sum(axis=2) / np.maximum(cover * ss * ss, 1)
         win = img[v0:v1, u0:u1]
+        change = (mean_hit - win) * cover
         win[:] = win * (1 - cover) + mean_hit * cover
         ys, xs = np.nonzero(cover[..., 0] > 0.25)
         if len(ys) == 0:
             return None
         x, y = u0 + xs.min(), v0 + ys.min()
-        return int(x), int(y), int(u0 + xs.max() - x + 1), int(v0 + ys.max() - y + 1)
+        w, h = u0 + xs.max() - x + 1, v0 + ys.max() - y + 1
+        grey = change[y - v0 : y - v0 + h, x - u0 : x - u0 + w] @ GREY_BGR
+        if np.sqrt(np.mean(grey**2)) < max(self.sc.render.noise_sigma, MIN_CONTRAST):
+            return None
+        return int(x), int(y), int(w), int(h)
 
     def render(self, view: View):
-        """One frame: ``(image (H, W, 3) uint8 BGR, UUV bounding box (x, y, w, h) or None)``."""
+        """One frame: ``(image (H, W, 3) uint8 BGR, UUV bounding box (x, y, w, h) or None where it cannot be seen)``."""
         fields, near = self._coarse(view)
         fmap = np.ascontiguousarray(fields["map"])
         albedo = cv2.remap(self.floor, fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)

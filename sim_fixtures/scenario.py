@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import tomllib
 from dataclasses import dataclass, field, fields, replace
+from itertools import pairwise
 from pathlib import Path
 
 from localizer.calibration import ConfigError
@@ -193,7 +194,7 @@ def _occlusions(source: str, value) -> tuple:
 
 def _depth_profile(source: str, value) -> tuple:
     pairs = _pairs(value)
-    if not pairs or not all(t0 < t1 for (t0, _), (t1, _) in zip(pairs, pairs[1:])):
+    if not pairs or not all(t0 < t1 for (t0, _), (t1, _) in pairwise(pairs)):
         raise ConfigError(source, "uuv.depth_profile", value,
                           "expected a non-empty list of [t_s, depth_m] pairs with increasing t_s")
     return pairs
@@ -204,20 +205,20 @@ def scenario_from_dict(data: dict, source: str = "scenario.toml") -> Scenario:
     if not isinstance(data.get("name"), str) or not data["name"]:
         raise ConfigError(source, "name", data.get("name"), "expected a non-empty string")
     top = _build(Scenario, source, "", data, skip=("name", "occlusions", *_TABLES))
-    uuv = data.get("uuv", {})
-    skip = {"uuv": ("depth_profile",)}
+    skip = {"uuv": ("depth_profile",)}  # a list of pairs, checked below
     tables = {k: cls(**_build(cls, source, k, data.get(k, {}), skip.get(k, ()))) for k, cls in _TABLES.items()}
-    if isinstance(uuv, dict) and "depth_profile" in uuv:
-        tables["uuv"] = replace(tables["uuv"], depth_profile=_depth_profile(source, uuv["depth_profile"]))
+    if "depth_profile" in data.get("uuv", {}):
+        tables["uuv"] = replace(tables["uuv"], depth_profile=_depth_profile(source, data["uuv"]["depth_profile"]))
     occl = _occlusions(source, data["occlusions"]) if "occlusions" in data else ()
     sc = Scenario(name=data["name"], occlusions=occl, **top, **tables)
     for key, value in (("duration_s", sc.duration_s), ("fps", sc.fps)):
         if not value > 0:
             raise ConfigError(source, key, value, "must be > 0")
     v = sc.uuv
-    key, value, depths = (("uuv.depth_profile", [list(k) for k in v.depth_profile], [d for _, d in v.depth_profile])
-                          if v.depth_profile else ("uuv.depth_m", v.depth_m, [v.depth_m - abs(v.depth_swing_m),
-                                                                               v.depth_m + abs(v.depth_swing_m)]))
+    if v.depth_profile:
+        key, value, depths = "uuv.depth_profile", [list(k) for k in v.depth_profile], [d for _, d in v.depth_profile]
+    else:
+        key, value, depths = "uuv.depth_m", v.depth_m, (v.depth_m - abs(v.depth_swing_m), v.depth_m + abs(v.depth_swing_m))
     if not (min(depths) > 0 and max(depths) + v.size_m[2] < sc.site.floor_depth_m):
         raise ConfigError(source, key, value,
                           "the UUV must stay between the surface and the seafloor (site.floor_depth_m)")

@@ -10,19 +10,24 @@ score sags) the heading is followed by trying ±``turn_step_deg`` steps. The
 matched patch, turned back upright, is blended slowly into the canonical
 template when the match is confident, and the template is held on its first
 appearance, so it follows lighting and depth without sliding off the vehicle.
+Patches with less than ``learn_contrast`` of the first appearance's grey-level
+spread are not learnt: a UUV fading into turbid water as it dives would
+otherwise teach the template the water's noise.
 Images are block-averaged by an integer factor so the template keeps about
 ``work_px`` pixels across whatever the UUV's size: the cost per frame is nearly
 independent of resolution. The reported pixel is the init ``point`` (default:
 the box centre), carried along as the vehicle moves and turns.
 
 Loss: a peak below ``ok_score`` (or ``level_drop`` below the recent level), or
-outside the predicted window, means the UUV is not where it should be: status
-``lost``, no position. While lost, a candidate is searched every ``search_every``
+outside the predicted window, or a matched patch with less than ``min_contrast``
+of the first appearance's grey-level spread (the UUV has dived out of sight: NCC
+alone would match the water's noise), means the UUV is not where it should be:
+status ``lost``, no position. While lost, a candidate is searched every ``search_every``
 frames in a window that grows with the prediction's uncertainty (the whole frame
 without a prediction), at ``reacquire_headings`` headings refined by turn steps;
 a candidate is then followed frame by frame, and the track resumes only after
 ``reacquire_frames`` consecutive matches above ``reacquire_score`` (and near the
-recent level) that move as the camera motion predicts, so a hidden UUV is not
+recent level, with ``min_contrast``) that move as the camera motion predicts, so a hidden UUV is not
 replaced by a look-alike patch of seafloor.
 """
 
@@ -46,6 +51,8 @@ class TemplateParams:
     update_score: float = 0.7  # NCC above this: blend the match into the template
     adapt_every: int = 2  # try other headings and learn the appearance every this many frames
     learn_rate: float = 0.08  # fraction of the template replaced per learning step
+    learn_contrast: float = 0.2  # learn only from patches with at least this share of the first appearance's contrast
+    min_contrast: float = 0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
     recentre_px: float = 0.2  # undo the learnt template's drift from its first appearance beyond this
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
@@ -128,6 +135,17 @@ class TemplateTracker:
         centre = (qx - max(bx0, 0), qy - max(by0, 0))
         return _warp(region, centre, _similarity(self._angle, self._scale), self.D)
 
+    def _spread(self, frame_bgr, u: float, v: float) -> float:
+        """Standard deviation (grey levels) of the working-resolution square the template covers at full-res (u, v)."""
+        qx, qy = self._to_work(u, v)
+        half = max(1, round(self.S * self._scale) // 2)
+        square = self._blocks(frame_bgr, max(round(qx) - half, 0), max(round(qy) - half, 0), 2 * half + 1, 2 * half + 1)
+        return float(cv2.meanStdDev(square)[1][0, 0]) if square.size else 0.0
+
+    def _contrast(self, frame_bgr, u: float, v: float) -> float:
+        """The grey-level spread at (u, v) relative to the first appearance's (see :meth:`_spread`)."""
+        return self._spread(frame_bgr, u, v) / max(self._anchor_spread, 1e-6)
+
     def _template(self, angle_deg: float, shrink: int = 1) -> np.ndarray:
         """The template (side S / shrink) at a heading, at the current scale (cached until the next change)."""
         key = (angle_deg, self._scale, shrink)
@@ -153,6 +171,7 @@ class TemplateTracker:
         self._canon = self._upright(frame_bgr, self.u, self.v)
         lo = (self.D - self.S) // 2
         self._anchor = self._canon[lo : lo + self.S, lo : lo + self.S].copy()  # the first appearance
+        self._anchor_spread = self._spread(frame_bgr, self.u, self.v)
         self._velocity = (0.0, 0.0)
         self._level = 1.0
         self._frames = 0
@@ -244,8 +263,8 @@ class TemplateTracker:
         template is measured and undone whenever it exceeds ``recentre_px``.
         """
         patch = self._upright(frame_bgr, u, v)
-        if patch is None:
-            return
+        if patch is None or self._contrast(frame_bgr, u, v) < self.p.learn_contrast:
+            return  # fading (deep, turbid water): keep the vehicle's structure rather than learn the noise
         cv2.accumulateWeighted(patch, self._canon, self.p.learn_rate)
         self._cache.clear()
         m = 3
@@ -270,6 +289,10 @@ class TemplateTracker:
             return fallback
         return max(self.p.min_radius_px, self.p.search_sigmas * prediction.sigma_px)
 
+    def _visible(self, frame_bgr, u: float, v: float) -> bool:
+        """Whether the patch at (u, v) stands out of the water: at least ``min_contrast`` (see :meth:`_contrast`)."""
+        return self._contrast(frame_bgr, u, v) >= self.p.min_contrast
+
     def _result(self, u: float, v: float, score: float) -> TrackResult:
         side = round(self.S * self.k * self._scale)
         box = (round(u - (side - 1) / 2.0), round(v - (side - 1) / 2.0), side, side)
@@ -293,7 +316,7 @@ class TemplateTracker:
         if score >= self.p.ok_score and (slow_step or score < self._level - self.p.turn_drop):
             score, u, v = self._refine(frame_bgr, (score, u, v))
         floor = max(self.p.ok_score, self._level - self.p.level_drop)
-        if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k):
+        if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k and self._visible(frame_bgr, u, v)):
             return self._lose(score)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v = u, v
@@ -318,7 +341,7 @@ class TemplateTracker:
                 return TrackResult("lost")
             score, u, v = self._candidate(frame_bgr, prediction)
         need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
-        if not score >= need:
+        if not (score >= need and self._visible(frame_bgr, u, v)):
             self._hits = []
             return TrackResult("lost", confidence=max(0.0, score))
         self._hits.append((u, v, pu, pv))
