@@ -70,6 +70,20 @@ def test_depth_over_zenoh_both_shapes_and_garbage(caplog):
     assert any("ahead of the receive time" in r.message for r in caplog.records)
 
 
+def test_a_flood_of_one_problem_stays_a_trickle_in_the_log(caplog):
+    """Each distinct problem is named; 1000 copies of one give a handful of lines, not 1000."""
+    tel = Telemetry()
+    depth = DepthZenoh(None, "uuv/depth", tel)
+    caplog.set_level(logging.WARNING)
+    for _ in range(1000):
+        depth._on_payload("uuv/depth", b"garbage", time.time())
+    depth._on_payload("uuv/depth", json.dumps({"t": time.time(), "depth_m": "deep"}).encode(), time.time())
+    lines = [r.message for r in caplog.records]
+    assert depth.bad == 1001
+    assert sum("not JSON" in m for m in lines) == 5 + 1000 // 100
+    assert any("'deep'" in m or "deep" in m for m in lines)
+
+
 def test_parse_depth_rejects_non_numbers():
     with pytest.raises(ValueError, match="depth_m"):
         parse_depth(b'{"t": 1.0, "depth_m": NaN}', "skyfix", 0.0)

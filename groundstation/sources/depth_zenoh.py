@@ -26,6 +26,8 @@ import zenoh
 
 from localizer.telemetry import Telemetry
 
+from ..logs import Throttle
+
 log = logging.getLogger("skyfix.depth")
 
 BLUEOS_KEY = "mavlink/*/*/VFR_HUD"
@@ -74,6 +76,7 @@ class DepthZenoh:
         self.received = 0
         self.bad = 0
         self.refused = 0
+        self._throttle = Throttle()
         self.last_recv: float | None = None
         self.last_depth_m: float | None = None
 
@@ -100,15 +103,19 @@ class DepthZenoh:
             t, depth = parse_depth(data, self.shape, t_recv)
         except BadDepth as e:
             self.bad += 1
-            log.warning("depth on %s: %s: %r", key, e, data[:120])
+            if self._throttle(str(e)):
+                log.warning("depth on %s: %s: %r", key, e, data[:120])
             return
         if t > t_recv + MAX_FUTURE_S:
             self.refused += 1
-            log.warning("depth on %s refused: t=%r is %.1f s ahead of the receive time", key, t, t - t_recv)
+            if self._throttle("future"):
+                log.warning("depth on %s refused: t=%r is %.1f s ahead of the receive time", key, t, t - t_recv)
             return
         if not self.tel.add_depth(t, depth):
             self.refused += 1
-            log.warning("depth on %s refused (out of range or time not increasing): t=%r depth_m=%r", key, t, depth)
+            if self._throttle("refused"):
+                log.warning("depth on %s refused (out of range or time not increasing): t=%r depth_m=%r",
+                            key, t, depth)
             return
         self.last_recv, self.last_depth_m = t_recv, depth
         for listener in self.listeners:

@@ -16,11 +16,11 @@ import asyncio
 import logging
 import threading
 import time
-from collections import Counter
 from collections.abc import Callable
 
 from localizer.telemetry import Telemetry
 
+from ..logs import Throttle
 from ..mavlink_io import USED, connect, ingest, mavutil
 
 log = logging.getLogger("skyfix.uav")
@@ -56,7 +56,7 @@ class UavMavlink:
         self.listeners = listeners or []
         self.health = LinkHealth()
         self.uav_sysid: int | None = None
-        self._refused_by_kind: Counter[str] = Counter()
+        self._throttle = Throttle()
         self._stop = threading.Event()
 
     async def run(self) -> None:
@@ -93,10 +93,12 @@ class UavMavlink:
             except RuntimeError:  # loop closed: shutting down
                 return
 
-    def _bad(self, why: str) -> None:
+    def _bad(self, reason: str, data: bytes) -> None:
         self.health.bad_data += 1
-        if self.health.bad_data == 1 or self.health.bad_data % 100 == 0:
-            log.warning("UAV MAVLink: malformed frame #%d on %s: %s", self.health.bad_data, self.url, why)
+        if self._throttle(reason):
+            shown = data[:16].hex() + ("…" if len(data) > 16 else "")
+            log.warning("UAV MAVLink: malformed frame #%d on %s: %s (bytes %s)", self.health.bad_data, self.url,
+                        reason, shown)
 
     def _is_uav(self, msg) -> bool:
         sysid = msg.get_srcSystem()
@@ -111,7 +113,7 @@ class UavMavlink:
     def _on_message(self, msg, t_recv: float) -> None:
         kind = msg.get_type()
         if kind == "BAD_DATA":
-            self._bad(getattr(msg, "reason", "bad data"))
+            self._bad(getattr(msg, "reason", "bad data"), bytes(getattr(msg, "data", b"")))
             return
         if not self._is_uav(msg):
             self.health.other_systems += 1
@@ -125,9 +127,8 @@ class UavMavlink:
             used = False
         if kind in USED and not used:
             self.health.refused += 1
-            self._refused_by_kind[kind] += 1
-            n = self._refused_by_kind[kind]
-            if n == 1 or n % 100 == 0:
+            n = self._throttle(kind)
+            if n:
                 log.warning("UAV MAVLink: %s #%d refused (not finite, out of range, out of order or not the "
                             "autopilot's): %s", kind, n, msg)
         for listener in self.listeners:
