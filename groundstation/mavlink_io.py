@@ -45,7 +45,8 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     SYSTEM_TIME are used. A gimbal message from another component (a MAVLink
     gimbal with its own ``time_boot_ms``) is moved onto the autopilot's clock.
     Samples with values outside their physical range, non-finite values or times
-    out of order are refused by the telemetry store (and counted there).
+    out of order are refused by the telemetry store (and counted there), and only
+    samples that pass reach the clock, so a garbage frame cannot fake a reboot.
     """
     kind = msg.get_type()
     if kind not in USED:
@@ -54,21 +55,23 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     component = msg.get_srcComponent()
     if tel.autopilot_component is None and kind == "ATTITUDE":
         tel.autopilot_component = component
-    if component == tel.autopilot_component or tel.autopilot_component is None:
-        tel.clock.add_receive(boot_ms, receive_unix_s)
-    elif kind in ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION"):
+    own_clock = tel.autopilot_component in (None, component)
+    if not own_clock:
+        if kind not in ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION"):
+            return False  # another component's ATTITUDE, position or time: not the autopilot's clock
         boot_ms = tel.to_autopilot_boot_ms(component, boot_ms, receive_unix_s)
         if boot_ms is None:
             return False
-    else:
-        return False  # another component's ATTITUDE, position or time: not the autopilot's clock
+    recv = receive_unix_s if own_clock else None
     if kind == "ATTITUDE":
-        return tel.add_attitude(boot_ms, msg.roll, msg.pitch, msg.yaw)
+        return tel.add_attitude(boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s=recv)
     if kind == "GLOBAL_POSITION_INT":
-        return tel.add_position(boot_ms, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0, msg.relative_alt / 1000.0)
+        return tel.add_position(boot_ms, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0, msg.relative_alt / 1000.0,
+                                receive_unix_s=recv)
     if kind == "SYSTEM_TIME":
+        tel.clock.add_receive(boot_ms, receive_unix_s)
         tel.clock.add_system_time(boot_ms, msg.time_unix_usec)
         return True
     if kind == "GIMBAL_DEVICE_ATTITUDE_STATUS":
-        return tel.add_gimbal(boot_ms, msg.q, msg.flags)
-    return tel.add_mount(boot_ms, msg.roll, msg.pitch, msg.yaw)
+        return tel.add_gimbal(boot_ms, msg.q, msg.flags, receive_unix_s=recv)
+    return tel.add_mount(boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s=recv)

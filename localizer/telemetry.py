@@ -61,23 +61,40 @@ class Telemetry:
         for series in (self.attitude, self.position, self.gimbal, self.mount):
             series.clear()
 
-    def add_attitude(self, time_boot_ms, roll, pitch, yaw) -> bool:
+    def _on_clock(self, time_boot_ms, receive_unix_s: float | None) -> None:
+        """Tell the clock about a sample that passed its checks (so garbage cannot fake a reboot)."""
+        if receive_unix_s is not None:
+            self.clock.add_receive(time_boot_ms, receive_unix_s)
+
+    def add_attitude(self, time_boot_ms, roll, pitch, yaw, receive_unix_s: float | None = None) -> bool:
+        """ATTITUDE (radians); ``receive_unix_s`` also feeds the clock once the values pass."""
         if not all(abs(a) <= 2 * np.pi for a in (roll, pitch, yaw)):
             return _refuse(self.attitude)
+        self._on_clock(time_boot_ms, receive_unix_s)
         return self.attitude.append(time_boot_ms / 1000.0, (roll, pitch, yaw))
 
-    def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m) -> bool:
-        if not (-90 <= lat_deg <= 90 and -180 <= lon_deg <= 180) or (lat_deg == 0 and lon_deg == 0):
+    def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m,
+                     receive_unix_s: float | None = None) -> bool:
+        """GLOBAL_POSITION_INT in degrees and metres; lat/lon 0/0 (no GNSS) is refused."""
+        if (not (-90 <= lat_deg <= 90 and -180 <= lon_deg <= 180) or (lat_deg == 0 and lon_deg == 0)
+                or not np.all(np.isfinite((alt_amsl_m, relative_alt_m)))):
             return _refuse(self.position)
+        self._on_clock(time_boot_ms, receive_unix_s)
         return self.position.append(time_boot_ms / 1000.0, (lat_deg, lon_deg, alt_amsl_m, relative_alt_m))
 
-    def add_gimbal(self, time_boot_ms, q_wxyz, flags) -> bool:
+    def add_gimbal(self, time_boot_ms, q_wxyz, flags, receive_unix_s: float | None = None) -> bool:
+        """GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z), which must be near unit length."""
         q = np.asarray(q_wxyz, dtype=float)
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 0.1:
             return _refuse(self.gimbal)
+        self._on_clock(time_boot_ms, receive_unix_s)
         return self.gimbal.append(time_boot_ms / 1000.0, (*q, flags))
 
-    def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg) -> bool:
+    def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg, receive_unix_s: float | None = None) -> bool:
+        """MOUNT_ORIENTATION (degrees; yaw relative to the vehicle)."""
+        if not all(abs(a) <= 360.0 for a in (roll_deg, pitch_deg, yaw_deg)):
+            return _refuse(self.mount)
+        self._on_clock(time_boot_ms, receive_unix_s)
         return self.mount.append(time_boot_ms / 1000.0, np.radians((roll_deg, pitch_deg, yaw_deg)))
 
     def add_depth(self, t_unix, depth_m) -> bool:

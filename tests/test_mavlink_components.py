@@ -94,3 +94,17 @@ def test_other_components_attitude_is_not_the_autopilots():
     _feed(tel, np.random.default_rng(4), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.55, stray)])
     assert tel.autopilot_component == 1
     assert not np.any(np.isclose(tel.attitude.values[:, 2], 2.0))
+
+
+def test_a_garbage_frame_cannot_fake_a_reboot_but_a_real_reboot_is_seen():
+    """time_boot_ms 0 with a NaN roll is refused before it reaches the clock; a valid one is a reboot."""
+    mav = mavutil().mavlink
+    tel = Telemetry()
+    garbage = _decode(mav.MAVLink_attitude_message(0, float("nan"), 0.0, 0.3, 0, 0, 0), 1)
+    _feed(tel, np.random.default_rng(5), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.0, garbage)])
+    assert tel.clock.reboots == 0 and tel.attitude.rejected >= 1
+    assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]
+
+    rebooted = _decode(mav.MAVLink_attitude_message(1200, 0.0, 0.0, 0.3, 0, 0, 0), 1)
+    assert ingest(tel, rebooted, T0 + 3.5)
+    assert tel.clock.reboots == 1 and len(tel.attitude) == 1  # the old boot clock's samples are gone
