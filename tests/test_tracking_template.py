@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from localizer.tracking import TRACKERS, Prediction, make_tracker
-from localizer.tracking.template import TemplateTracker
+from localizer.tracking.template import TemplateParams, TemplateTracker
 
 W, H = 320, 240
 LENGTH, BEAM = 34, 24  # target size (pixels)
@@ -117,6 +117,26 @@ def test_template_reports_loss_while_hidden_and_reacquires(with_prediction):
     assert all(status[i] == "ok" for i in range(back[0], len(status)))
     err = [math.hypot(results[i].u - truth[i + 1][0], results[i].v - truth[i + 1][1]) for i in back]
     assert np.mean(err) < 1.0 and max(err) < 3.0
+
+
+@pytest.mark.parametrize("with_prediction", [True, False])
+def test_template_searches_less_often_the_longer_it_is_lost_and_still_reacquires(with_prediction):
+    p = TemplateParams()
+    a = 20  # hidden from frame a to frame b - 1
+    b = a + p.long_loss_frames + 8 * p.search_every_long + 3
+    frames, truth, _ = make_clip(n=b + 20, hidden=[(a, b)])
+    preds = _predictions(truth) if with_prediction else None
+    results = _run(TemplateTracker(p), frames, truth, preds)  # results[i] is frame i + 1
+    assert not any(r.ok for r in results[a - 1 : b - 1])
+    # a search while lost reports its best score; frames without one report none
+    searched = [i + 1 for i in range(a, b - 1) if np.isfinite(results[i].confidence)]
+    lost_for = np.array(searched) - a  # frames since the loss (declared at frame a)
+    gaps = np.diff(lost_for)
+    assert np.all(gaps[lost_for[1:] <= p.long_loss_frames] == p.search_every)
+    assert np.all(gaps[lost_for[:-1] >= p.long_loss_frames] == p.search_every_long)
+    back = next(i + 1 for i in range(b - 1, len(results)) if results[i].ok)
+    assert back - b <= p.search_every_long + p.reacquire_frames - 2, "re-acquired by the first search after it is back"
+    assert all(r.ok for r in results[back - 1 :])
 
 
 def test_template_follows_the_predicted_apparent_size():

@@ -23,8 +23,10 @@ outside the predicted window, or a matched patch with less than ``min_contrast``
 of the first appearance's grey-level spread (the UUV has dived out of sight: NCC
 alone would match the water's noise), means the UUV is not where it should be:
 status ``lost``, no position. While lost, a candidate is searched every ``search_every``
-frames in a window that grows with the prediction's uncertainty (the whole frame
-without a prediction), at ``reacquire_headings`` headings refined by turn steps;
+frames (every ``search_every_long`` once lost ``long_loss_frames``) in a window that
+grows with the prediction's uncertainty (the whole frame without a prediction), at
+``reacquire_headings`` headings refined by turn steps (a wide window is searched
+block-averaged first, and its best places again at working resolution);
 a candidate is then followed frame by frame, and the track resumes only after
 ``reacquire_frames`` consecutive matches above ``reacquire_score`` (and near the
 recent level, with ``min_contrast``) that move as the camera motion predicts, so a hidden UUV is not
@@ -65,9 +67,13 @@ class TemplateParams:
     reacquire_frames: int = 3
     reacquire_tolerance: float = 0.3  # agreement between consecutive matches, in template sides
     reacquire_headings: int = 8  # headings tried while lost (then refined by turn steps)
-    search_every: int = 2  # while lost with no candidate, search every this many frames
+    search_every: int = 2  # while lost with no candidate, search every this many frames...
+    long_loss_frames: int = 60  # ... and once lost this many frames (2 s at 30 fps), ...
+    search_every_long: int = 6  # ... every this many
     scale_step: float = 0.01  # re-scale the template when the predicted size changes by more than this
-    coarse_side: int = 96  # windows wider than this (working pixels) are searched at half resolution first
+    coarse_side: int = 96  # windows wider than this (working pixels) are searched block-averaged first
+    coarse_px: int = 8  # ... with the template about this many blocks across
+    coarse_keep: int = 3  # ... and this many of the best places found there matched again at full resolution
 
 
 def _parabola(a: float, b: float, c: float) -> float:
@@ -85,16 +91,12 @@ def _peak(scores: np.ndarray) -> tuple[float, float, float]:
     return float(best), float(j + dx), float(i + dy)
 
 
-def _similarity(angle_deg: float, scale: float) -> np.ndarray:
+def _warp(src: np.ndarray, centre, angle_deg: float, scale: float, side: int) -> np.ndarray:
+    """side × side image whose pixel d (from its centre) samples ``src`` at ``centre + scale · R(angle) · d``."""
     a = math.radians(angle_deg)
-    return scale * np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-
-
-def _warp(src: np.ndarray, centre, A: np.ndarray, side: int) -> np.ndarray:
-    """side × side image whose pixel d (from its centre) samples ``src`` at ``centre + A·d``."""
+    ca, sa = scale * math.cos(a), scale * math.sin(a)
     c = (side - 1) / 2.0
-    b = np.asarray(centre, dtype=float) - A @ np.array([c, c])
-    M = np.hstack([A, b[:, None]]).astype(np.float64)
+    M = np.array([[ca, -sa, centre[0] - (ca - sa) * c], [sa, ca, centre[1] - (sa + ca) * c]])
     return cv2.warpAffine(src, M, (side, side), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                           borderMode=cv2.BORDER_REPLICATE)
 
@@ -105,16 +107,32 @@ class TemplateTracker:
     def __init__(self, params: TemplateParams | None = None):
         self.p = params or TemplateParams()
         self._ready = False
+        self._grey = None  # (bx0, by0, blocks): the largest area of the current frame converted (see _blocks)
 
     # -- images at working resolution ------------------------------------------------------
     def _blocks(self, frame_bgr, bx0: int, by0: int, bw: int, bh: int) -> np.ndarray:
-        """Grey blocks [bx0, bx0 + bw) × [by0, by0 + bh) of k×k pixels (clipped to the frame): float32."""
+        """Grey blocks [bx0, bx0 + bw) × [by0, by0 + bh) of k×k pixels (clipped to the frame): float32, read-only.
+
+        Within one :meth:`update`, blocks inside the largest area converted so far
+        are a view of it: a frame is converted once, not once per look.
+        """
         k = self.k
-        roi = frame_bgr[by0 * k : (by0 + bh) * k, bx0 * k : (bx0 + bw) * k]
+        bx1, by1 = min(bx0 + bw, frame_bgr.shape[1] // k), min(by0 + bh, frame_bgr.shape[0] // k)
+        if bx1 <= bx0 or by1 <= by0:
+            return np.zeros((0, 0), np.float32)
+        if self._grey is not None:
+            gx0, gy0, grey = self._grey
+            if gx0 <= bx0 and gy0 <= by0 and bx1 <= gx0 + grey.shape[1] and by1 <= gy0 + grey.shape[0]:
+                return grey[by0 - gy0 : by1 - gy0, bx0 - gx0 : bx1 - gx0]
+        roi = frame_bgr[by0 * k : by1 * k, bx0 * k : bx1 * k]
         gray = cv2.cvtColor(roi, cv2.COLOR_BGR2GRAY) if roi.ndim == 3 else roi
         if k > 1:
-            gray = cv2.resize(gray, (gray.shape[1] // k, gray.shape[0] // k), interpolation=cv2.INTER_AREA)
-        return gray.astype(np.float32)
+            gray = cv2.resize(gray, (bx1 - bx0, by1 - by0), interpolation=cv2.INTER_AREA)
+        blocks = gray.astype(np.float32)
+        blocks.flags.writeable = False
+        if self._grey is None or blocks.size > self._grey[2].size:
+            self._grey = (bx0, by0, blocks)
+        return blocks
 
     def _to_work(self, u: float, v: float) -> tuple[float, float]:
         k = self.k
@@ -133,7 +151,7 @@ class TemplateTracker:
         if region.shape[0] < 4 or region.shape[1] < 4:
             return None
         centre = (qx - max(bx0, 0), qy - max(by0, 0))
-        return _warp(region, centre, _similarity(self._angle, self._scale), self.D)
+        return _warp(region, centre, self._angle, self._scale, self.D)
 
     def _spread(self, frame_bgr, u: float, v: float) -> float:
         """Standard deviation (grey levels) of the working-resolution square the template covers at full-res (u, v)."""
@@ -147,15 +165,21 @@ class TemplateTracker:
         return self._spread(frame_bgr, u, v) / max(self._anchor_spread, 1e-6)
 
     def _template(self, angle_deg: float, shrink: int = 1) -> np.ndarray:
-        """The template (side S / shrink) at a heading, at the current scale (cached until the next change)."""
+        """The template at a heading and the current scale, block-averaged by ``shrink`` (cached until the next change).
+
+        Its side is S, or the odd number of ``shrink`` × ``shrink`` blocks covering S
+        (at least 5); its centre pixel is centred on the vehicle's.
+        """
         key = (angle_deg, self._scale, shrink)
         if key not in self._cache:
-            side = max(5, -(-self.S // shrink)) | 1
+            side = max(5, -(-self.S // shrink)) | 1 if shrink > 1 else self.S
             c = (self.D - 1) / 2.0
-            A = _similarity(-angle_deg, shrink / self._scale)
+            t = _warp(self._canon, (c, c), -angle_deg, 1.0 / self._scale, side * shrink)
+            if shrink > 1:
+                t = cv2.resize(t, (side, side), interpolation=cv2.INTER_AREA)
             if len(self._cache) > 64:
                 self._cache.clear()
-            self._cache[key] = _warp(self._canon, (c, c), A, side)
+            self._cache[key] = t
         return self._cache[key]
 
     # -- setup -----------------------------------------------------------------------------
@@ -164,6 +188,7 @@ class TemplateTracker:
         self.k = max(1, round(max(w, h) / self.p.work_px))
         self.S = math.ceil(max(w, h) / self.k) | 1  # matching template side (odd)
         self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
+        self._grey = None
         self._angle, self._scale = 0.0, 1.0
         self._ref_px_per_m = prediction.px_per_m if prediction is not None else float("nan")
         self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
@@ -201,6 +226,11 @@ class TemplateTracker:
             return None, 0, 0
         return self._blocks(frame_bgr, bx0, by0, bx1 - bx0, by1 - by0), bx0, by0
 
+    def _prepare(self, frame_bgr, cu: float, cv_: float, radius_px: float) -> None:
+        """Convert at once what a search within ``radius_px`` of (cu, cv_) reads, and what the
+        refinement and the contrast check around its match read (see :meth:`_blocks`)."""
+        self._region(frame_bgr, cu, cv_, radius_px + 4 * self.k, self.S)
+
     def _match_in(self, region, bx0: int, by0: int, template: np.ndarray):
         """(score, u, v) of the template's best match in a working-resolution region."""
         best, j, i = _peak(cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED))
@@ -237,22 +267,41 @@ class TemplateTracker:
         return best
 
     def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles):
-        """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_); coarse first if wide."""
+        """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_).
+
+        A window wider than ``coarse_side`` is first searched block-averaged (the
+        template about ``coarse_px`` across); the ``coarse_keep`` best places
+        found there are matched again at working resolution, and the best of those counts.
+        """
         region, bx0, by0 = self._region(frame_bgr, cu, cv_, radius_px, self.S)
         if region is None:
             return -1.0, math.nan, math.nan, self._angle
-        coarse = max(region.shape) > self.p.coarse_side
-        if coarse:
-            region = cv2.resize(region, (region.shape[1] // 2, region.shape[0] // 2), interpolation=cv2.INTER_AREA)
-        best = (-1.0, math.nan, math.nan, self._angle)
+        if max(region.shape) <= self.p.coarse_side:
+            return max((*self._match_in(region, bx0, by0, self._template(a)), a) for a in angles)
+        f = max(2, self.S // self.p.coarse_px)
+        h, w = region.shape[0] // f, region.shape[1] // f
+        small = cv2.resize(region[: h * f, : w * f], (w, h), interpolation=cv2.INTER_AREA)
+        places = []  # (coarse score, working-resolution x, y of the template's centre, heading)
         for a in angles:
-            t = self._template(a, shrink=2 if coarse else 1)
-            s, j, i = _peak(cv2.matchTemplate(region, t, cv2.TM_CCOEFF_NORMED))
-            if s > best[0]:
+            t = self._template(a, shrink=f)
+            if t.shape[0] < min(h, w):
+                s, j, i = _peak(cv2.matchTemplate(small, t, cv2.TM_CCOEFF_NORMED))
                 half = (t.shape[0] - 1) / 2.0
-                f = 2.0 if coarse else 1.0
-                u, v = self._to_full(bx0 + (j + half) * f + (f - 1) / 2, by0 + (i + half) * f + (f - 1) / 2)
-                best = (s, u, v, a)
+                places.append((s, (j + half) * f + (f - 1) / 2.0, (i + half) * f + (f - 1) / 2.0, a))
+        best = (-1.0, math.nan, math.nan, self._angle)
+        kept: list[tuple[float, float]] = []
+        for _, x, y, a in sorted(places, reverse=True):
+            if len(kept) == self.p.coarse_keep:
+                break
+            if any(math.hypot(x - kx, y - ky) < self.S / 2.0 for kx, ky in kept):
+                continue  # the same place at another heading
+            kept.append((x, y))
+            r = (self.S - 1) // 2 + f + 1  # the template may sit within f + 1 of the coarse place
+            x0, y0 = max(round(x) - r, 0), max(round(y) - r, 0)
+            window = region[y0 : round(y) + r + 1, x0 : round(x) + r + 1]
+            if min(window.shape) > self.S:
+                found = (*self._match_in(window, bx0 + x0, by0 + y0, self._template(a)), a)
+                best = max(best, found)
         return best
 
     def _learn(self, frame_bgr, u: float, v: float) -> None:
@@ -282,6 +331,7 @@ class TemplateTracker:
         if not self._ready:
             return TrackResult("not_initialized")
         self._rescale(prediction)
+        self._grey = None  # a new frame
         return self._follow(frame_bgr, prediction) if self._tracking else self._reacquire(frame_bgr, prediction)
 
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
@@ -310,6 +360,7 @@ class TemplateTracker:
         else:
             cu, cv_ = self.u + self._velocity[0], self.v + self._velocity[1]
         radius = self._radius(prediction, self.p.default_radius_px)
+        self._prepare(frame_bgr, cu, cv_, radius)
         score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,))
         self._frames += 1
         slow_step = self._frames % self.p.adapt_every == 0
@@ -332,12 +383,14 @@ class TemplateTracker:
         if self._hits:
             # the candidate must move as the prediction moved (camera motion), within tol
             lu, lv, lpu, lpv = self._hits[-1]
+            self._prepare(frame_bgr, lu + pu - lpu, lv + pv - lpv, tol)
             score, u, v, _ = self._search(frame_bgr, lu + pu - lpu, lv + pv - lpv, tol, (self._angle,))
             if score >= self.p.ok_score:
                 score, u, v = self._refine(frame_bgr, (score, u, v))
         else:
             self._lost_frames += 1
-            if self._lost_frames % self.p.search_every:
+            long_loss = self._lost_frames >= self.p.long_loss_frames
+            if self._lost_frames % (self.p.search_every_long if long_loss else self.p.search_every):
                 return TrackResult("lost")
             score, u, v = self._candidate(frame_bgr, prediction)
         need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
@@ -366,9 +419,7 @@ class TemplateTracker:
         if score < self.p.ok_score:  # not even a candidate (headings are coarse here: refined below)
             return score, u, v
         saved, self._angle = self._angle, angle
-        region, bx0, by0 = self._region(frame_bgr, u, v, 2.0 * self.k, self.S)
-        if region is not None:  # the (possibly coarse) match, again at full working resolution
-            score, u, v = self._refine(frame_bgr, self._match_in(region, bx0, by0, self._template(angle)))
+        score, u, v = self._refine(frame_bgr, (score, u, v))
         if score < self.p.reacquire_score:
             self._angle = saved
         return score, u, v
