@@ -25,6 +25,8 @@ class RunConfig:
     mavlink_backend: str = "pymavlink"
     video: str | None = None  # anything FFmpeg opens
     video_latency_ms: float = 0.0  # exposure → receive delay subtracted from each frame's receive time
+    no_request_rates: bool = False  # leave the autopilot's telemetry rates alone
+    telemetry_wait_ms: float = 300.0  # how long a frame may wait for attitude telemetry after it
     zenoh_connect: tuple[str, ...] = ()
     zenoh_listen: tuple[str, ...] = ()
     zenoh_config: str | None = None  # a Zenoh JSON5 config file; endpoints above are added to it
@@ -51,6 +53,8 @@ _HELP = {
     "mavlink_backend": "library reading the UAV's MAVLink",
     "video": "the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., a file",
     "video_latency_ms": "delay from exposure to frame receipt, subtracted from receive times",
+    "no_request_rates": "do not ask the autopilot for the telemetry rates skyfix needs (a shared link)",
+    "telemetry_wait_ms": "longest wait of a frame for the attitude sample after it (slow radios need ~300)",
     "zenoh_connect": "Zenoh endpoint to connect to, e.g. tcp/192.168.2.2:7447 (repeatable)",
     "zenoh_listen": "Zenoh endpoint to listen on (repeatable)",
     "zenoh_config": "Zenoh JSON5 config file (deploy/zenoh/*.json5)",
@@ -141,6 +145,8 @@ def run_config(args: argparse.Namespace) -> RunConfig:
         raise ConfigError("options", "--record", cfg.record, "recording needs --mavlink-backend pymavlink")
     if not cfg.gps_input_hz >= 5.0:
         raise ConfigError("options", "--gps-input-hz", cfg.gps_input_hz, "ArduPilot needs ≥ 5 Hz")
+    if not 0.0 <= cfg.telemetry_wait_ms <= 2000.0:
+        raise ConfigError("options", "--telemetry-wait-ms", cfg.telemetry_wait_ms, "expected 0 … 2000")
     return cfg
 
 

@@ -1,9 +1,11 @@
 """pymavlink set up for MAVLink 2, and MAVLink messages fed into the localizer's telemetry.
 
-The one place where MAVLink units become the localizer's: ATTITUDE radians (FRD
-body in NED) as they are; GLOBAL_POSITION_INT degE7 → degrees and mm → metres;
-GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z) and flags as they are;
-MOUNT_ORIENTATION degrees. All samples keep the autopilot's ``time_boot_ms``.
+The one place where MAVLink units become the localizer's: ATTITUDE radians and
+rad/s (FRD body in NED) as they are; GLOBAL_POSITION_INT degE7 → degrees, mm →
+metres, cm/s → m/s; GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z) and
+flags as they are; MOUNT_ORIENTATION degrees; GPS_RAW_INT mm → metres; TIMESYNC
+ns. Samples keep the autopilot's ``time_boot_ms``; the telemetry maps it onto
+the station clock with the receive times.
 """
 
 from __future__ import annotations
@@ -17,7 +19,11 @@ from pymavlink import mavutil as _mavutil
 from localizer.telemetry import Telemetry
 
 #: Message types the localizer uses.
-USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")
+USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION",
+        "GPS_RAW_INT", "TIMESYNC", "PARAM_VALUE")
+GIMBAL_MESSAGES = ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")
+MAV_AUTOPILOT_INVALID = 8
+NOT_AUTOPILOTS = (6, 18, 26, 30)  # MAV_TYPE GCS, ONBOARD_CONTROLLER, GIMBAL, CAMERA
 
 
 def mavutil():
@@ -40,38 +46,52 @@ def connect(url: str, **kwargs):
 def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     """Feed one decoded pymavlink message of the UAV's system into ``tel``; True if it was used.
 
-    The component that sends ATTITUDE first is the autopilot: its clock is the
-    buffers' clock, and its copies alone of ATTITUDE, GLOBAL_POSITION_INT and
-    SYSTEM_TIME are used. A gimbal message from another component (a MAVLink
-    gimbal with its own ``time_boot_ms``) is moved onto the autopilot's clock.
-    Samples with values outside their physical range, non-finite values or times
-    out of order are refused by the telemetry store (and counted there), and only
-    samples that pass reach the clock, so a garbage frame cannot fake a reboot.
+    The autopilot is the component whose HEARTBEAT names an autopilot, or that sends
+    ATTITUDE first: its clock is the buffers' clock, and its copies alone of
+    ATTITUDE, GLOBAL_POSITION_INT, SYSTEM_TIME, GPS_RAW_INT, TIMESYNC and
+    PARAM_VALUE are used (before it is known, nothing else is). A gimbal message
+    from another component (a MAVLink gimbal with its own ``time_boot_ms``) is
+    aligned by its own clock. Samples with values outside their physical range,
+    non-finite values or times out of order are refused by the telemetry store
+    (the reason in ``tel.refusal``, None for a message that was merely not used),
+    and only samples that pass reach the clocks.
     """
     kind = msg.get_type()
+    component = msg.get_srcComponent()
+    tel.refusal = None
+    if tel.autopilot_component is None and (
+        kind == "ATTITUDE"
+        or kind == "HEARTBEAT" and msg.autopilot != MAV_AUTOPILOT_INVALID and msg.type not in NOT_AUTOPILOTS
+    ):
+        tel.autopilot_component = component
     if kind not in USED:
         return False
-    boot_ms = msg.time_boot_ms
-    component = msg.get_srcComponent()
-    if tel.autopilot_component is None and kind == "ATTITUDE":
-        tel.autopilot_component = component
-    own_clock = tel.autopilot_component in (None, component)
-    if not own_clock:
-        if kind not in ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION"):
-            return False  # another component's ATTITUDE, position or time: not the autopilot's clock
-        boot_ms = tel.to_autopilot_boot_ms(component, boot_ms, receive_unix_s)
-        if boot_ms is None:
-            return False
-    recv = receive_unix_s if own_clock else None
+    if tel.autopilot_component is None:
+        return False  # not refused: which component is the autopilot is not known yet
+    own = component == tel.autopilot_component
+    if kind in GIMBAL_MESSAGES:
+        other = None if own else component
+        if kind == "MOUNT_ORIENTATION":
+            return tel.add_mount(msg.time_boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s, other)
+        return tel.add_gimbal(msg.time_boot_ms, msg.q, msg.flags, receive_unix_s, other)
+    if not own:
+        tel.refusal = f"from component {component}, not the autopilot ({tel.autopilot_component})"
+        return False
     if kind == "ATTITUDE":
-        return tel.add_attitude(boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s=recv)
+        return tel.add_attitude(msg.time_boot_ms, msg.roll, msg.pitch, msg.yaw,
+                                (msg.rollspeed, msg.pitchspeed, msg.yawspeed), receive_unix_s)
     if kind == "GLOBAL_POSITION_INT":
-        return tel.add_position(boot_ms, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0, msg.relative_alt / 1000.0,
-                                receive_unix_s=recv)
+        return tel.add_position(msg.time_boot_ms, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0,
+                                msg.relative_alt / 1000.0, (msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0),
+                                receive_unix_s)
     if kind == "SYSTEM_TIME":
-        tel.clock.add_receive(boot_ms, receive_unix_s)
-        tel.clock.add_system_time(boot_ms, msg.time_unix_usec)
-        return True
-    if kind == "GIMBAL_DEVICE_ATTITUDE_STATUS":
-        return tel.add_gimbal(boot_ms, msg.q, msg.flags, receive_unix_s=recv)
-    return tel.add_mount(boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s=recv)
+        return tel.add_system_time(msg.time_boot_ms, msg.time_unix_usec, receive_unix_s)
+    if kind == "TIMESYNC":  # the autopilot's own requests (tc1 = 0) need nothing from us
+        return msg.tc1 == 0 or tel.add_timesync(msg.tc1, msg.ts1, receive_unix_s)
+    if kind == "GPS_RAW_INT":
+        alt_ellipsoid_mm = getattr(msg, "alt_ellipsoid", 0) or 0  # MAVLink 2 extensions: 0 when not sent
+        geoid = (alt_ellipsoid_mm - msg.alt) / 1000.0 if alt_ellipsoid_mm else float("nan")
+        return tel.add_gps_raw((getattr(msg, "h_acc", 0) or 0) / 1000.0, geoid, receive_unix_s)
+    name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
+    tel.add_param(name.rstrip("\x00"), float(msg.param_value))
+    return True

@@ -1,6 +1,6 @@
 """The per-frame pipeline of the live service: tracker → time alignment → geometry → sinks.
 
-Frames wait in a short queue; when the pipeline falls behind, the oldest waiting
+Frames wait in a short queue; when the tracker falls behind, the oldest waiting
 frame is dropped (and counted), so a fix is never computed for a frame that is
 already old. The tracker runs in a worker thread (OpenCV releases the GIL); the
 telemetry is only read on the event loop, where it is written. The first frame
@@ -13,6 +13,13 @@ own frame, with an uncertainty growing with the time since the fix
 (:func:`localizer.tracking.predict.follow`). The tracker reports the centre of
 the UUV's top face, the point its depth refers to
 (:func:`localizer.tracking.predict.init_target`).
+
+A tracked frame then waits, in order, until the camera's attitude telemetry
+(ATTITUDE, and the gimbal message) has a sample after its time, so that it is
+interpolated as offline rather than extrapolated; at most ``telemetry_wait_s``
+after the frame arrived (a slow radio: ATTITUDE at 4 Hz needs about 0.3 s), then
+it is located with what there is (extrapolated within ``[timing]`` limits, with
+the accuracy grown to match, or a ``stale_…`` status). Tracking goes on meanwhile.
 Frames the video reader marks ``buffered`` (their exposure time is unknown) are
 tracked but get the status ``buffered`` and no position.
 """
@@ -50,15 +57,24 @@ class FrameInfo:
 class Pipeline:
     """Worker turning frames into :class:`~localizer.fix.Fix` es for every sink (``on_fix(fix, info)``)."""
 
-    def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2):
+    def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
+                 telemetry_wait_s: float = 0.3):
         self.cal = cal
         self.tel = tel
         self.tracker_name = tracker
         make_tracker(tracker, cal)  # fail early on a wrong name
         self.sinks = list(sinks)
         self.queue_len = queue_len
+        self.telemetry_wait_s = telemetry_wait_s
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
+        self._tracked: deque[tuple[LiveFrame, TrackResult]] = deque()  # waiting for their telemetry
+        self._tracked_ready = asyncio.Event()
+        self._telemetry = asyncio.Event()
+        self._angle_series = [tel.attitude] + (
+            [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
+            else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
+        self.waited_s = 0.0  # total time frames waited for telemetry
         self._tracker = None
         self._last_ok: Fix | None = None
         self.processed = 0
@@ -78,26 +94,69 @@ class Pipeline:
         self._queue.append(frame)
         self._ready.set()
 
+    def telemetry_arrived(self, *_) -> None:
+        """Called (on the loop) whenever UAV telemetry arrives: waiting frames look again."""
+        self._telemetry.set()
+
     async def run(self) -> None:
+        async with asyncio.TaskGroup() as tg:
+            tg.create_task(self._track_frames())
+            tg.create_task(self._locate_frames())
+
+    async def _track_frames(self) -> None:
         while True:
             if not self._queue:
                 self._ready.clear()
                 await self._ready.wait()
                 continue
             frame = self._queue.popleft()
-            fix = await self.process(frame)
-            info = FrameInfo(frame.index, frame.t_recv, time.time())
-            self.processed += 1
-            self.statuses[fix.status] += 1
-            if fix.status != self.last_status:
-                log.info("frame %d: status %s", frame.index, fix.status)
-            self.last_status = fix.status
-            for sink in self.sinks:
-                sink.on_fix(fix, info)
+            self._tracked.append((frame, await self._track(frame)))
+            self._tracked_ready.set()
+
+    def _needs_telemetry(self, frame: LiveFrame, result: TrackResult) -> bool:
+        """Whether a tracked frame would be located before its attitude telemetry brackets it."""
+        if not result.ok or frame.buffered:
+            return False
+        t = float(self.tel.uav_time(frame.t_unix))
+        return any(s.last_t is None or s.last_t < t for s in self._angle_series)
+
+    async def _locate_frames(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            if not self._tracked:
+                self._tracked_ready.clear()
+                await self._tracked_ready.wait()
+                continue
+            frame, result = self._tracked[0]
+            left = frame.t_recv + self.telemetry_wait_s - time.time()
+            if left > 0 and self._needs_telemetry(frame, result):
+                self._telemetry.clear()
+                t0 = loop.time()
+                try:
+                    await asyncio.wait_for(self._telemetry.wait(), timeout=left)
+                except TimeoutError:
+                    pass
+                self.waited_s += loop.time() - t0
+                continue
+            self._tracked.popleft()
+            self._emit(frame, self._locate(frame, result))
+
+    def _emit(self, frame: LiveFrame, fix: Fix) -> None:
+        info = FrameInfo(frame.index, frame.t_recv, time.time())
+        self.processed += 1
+        self.statuses[fix.status] += 1
+        if fix.status != self.last_status:
+            log.info("frame %d: status %s", frame.index, fix.status)
+        self.last_status = fix.status
+        for sink in self.sinks:
+            sink.on_fix(fix, info)
 
     async def process(self, frame: LiveFrame) -> Fix:
-        """The fix of one frame (status says why when there is none; ``buffered`` frames are only tracked)."""
-        result = await self._track(frame)
+        """The fix of one frame with the telemetry there is now (status says why when there is none)."""
+        return self._locate(frame, await self._track(frame))
+
+    def _locate(self, frame: LiveFrame, result: TrackResult) -> Fix:
+        """A tracked frame's fix; ``buffered`` frames are only tracked."""
         if not result.ok or frame.buffered:
             fix = Fix(frame.t_unix, result.status if not result.ok else "buffered")
         else:
@@ -134,4 +193,5 @@ class Pipeline:
 
     def status(self) -> dict:
         return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),
+                "waiting_for_telemetry": len(self._tracked), "waited_s": round(self.waited_s, 3),
                 "last_status": self.last_status, "statuses": dict(self.statuses)}

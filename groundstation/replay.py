@@ -5,11 +5,15 @@ session's first time), printed first as a JSON line, so that the replayed world
 agrees with itself:
 
 - ``uav.tlog``: each MAVLink frame is sent over UDP (``--mavlink-out``, default
-  ``udpout:127.0.0.1:14550``) at its record time + shift; SYSTEM_TIME's
-  ``time_unix_usec`` is shifted by the same amount (re-packed with the original
-  system, component and sequence), every other frame goes out byte for byte.
+  ``udpout:127.0.0.1:14550``) at its record time + shift. The UNIX times in it are
+  shifted by the same amount (re-packed with the original system, component and
+  sequence): SYSTEM_TIME's ``time_unix_usec``, GPS_RAW_INT's ``time_usec``, and
+  the ``ts1`` of TIMESYNC replies (the recording station's clock), so a live
+  run measures the recorded link delay and clock offsets again. Every other
+  frame goes out byte for byte.
 - ``depth.jsonl``: each sample is published over Zenoh on ``--depth-key`` as
-  ``{"t": t + shift, "depth_m": ...}`` at t + shift.
+  ``{"t": t + shift, "depth_m": ...}`` at its recorded arrival ``t_recv`` + shift
+  (``t`` + shift when it has none), so a UUV clock that was off stays off.
 - The video: the ``ffmpeg`` command streams it as MPEG-TS to ``--video-out``
   (default ``udp://127.0.0.1:5600``) with ``-re`` (real time, by the file's
   timestamps). ffmpeg is started ahead and waits on a pipe; the file is fed to
@@ -65,27 +69,38 @@ def read_tlog(path: Path) -> list[tuple[float, object]]:
     return out
 
 
-def read_depth(path: Path) -> list[tuple[float, float]]:
-    """``(t, depth_m)`` of every well-formed line of depth.jsonl (a truncated last line is skipped)."""
+def read_depth(path: Path) -> list[tuple[float, float, float]]:
+    """``(t_send, t, depth_m)`` of every well-formed line of depth.jsonl (a truncated last line is skipped);
+    ``t_send`` is the recorded arrival ``t_recv``, or ``t`` without one."""
     out = []
     for i, line in enumerate(path.read_text().splitlines(), start=1):
         if not line.strip():
             continue
         try:
             rec = json.loads(line)
-            out.append((float(rec["t"]), float(rec["depth_m"])))
-        except (ValueError, KeyError, TypeError):
+            t = float(rec["t"])
+            out.append((float(rec.get("t_recv", t)), t, float(rec["depth_m"])))
+        except (ValueError, KeyError, TypeError, AttributeError):
             log.warning("%s:%d: skipped: %r", path, i, line[:80])
+    out.sort(key=lambda r: r[0])
     return out
 
 
+#: UNIX-time fields re-stamped by the replay: message → (field, units per second)
+UNIX_FIELDS = {"SYSTEM_TIME": ("time_unix_usec", 1e6), "GPS_RAW_INT": ("time_usec", 1e6), "TIMESYNC": ("ts1", 1e9)}
+_UNIX_MIN_S = 1e9  # a smaller value is a boot time or "unknown" (0), not a UNIX time: left alone
+
+
 def frame_bytes(msg, shift_s: float) -> bytes:
-    """The frame to send: the original bytes, or SYSTEM_TIME re-packed with its UNIX time shifted."""
-    if msg.get_type() != "SYSTEM_TIME" or msg.time_unix_usec == 0:
+    """The frame to send: the original bytes, or re-packed with its UNIX time shifted (:data:`UNIX_FIELDS`)."""
+    field = UNIX_FIELDS.get(msg.get_type())
+    if field is None or getattr(msg, field[0]) < _UNIX_MIN_S * field[1] or (
+            msg.get_type() == "TIMESYNC" and msg.tc1 == 0):
         return msg.get_msgbuf()
+    name, per_s = field
     mav = mavutil().mavlink.MAVLink(None, srcSystem=msg.get_srcSystem(), srcComponent=msg.get_srcComponent())
     mav.seq = msg.get_seq()
-    msg.time_unix_usec = int(msg.time_unix_usec + round(shift_s * 1e6))
+    setattr(msg, name, int(getattr(msg, name) + round(shift_s * per_s)))
     return msg.pack(mav)
 
 
@@ -139,7 +154,7 @@ class Replay:
         self.video = videos[0] if videos and not args.no_video else None
         self.frames = read_table(self.dir / "video_frames.csv", ("frame", "t")) if self.video else None
         starts = [self.tlog[0][0]] + [self.depth[0][0]] * bool(self.depth)
-        ends = [self.tlog[-1][0]] + [self.depth[-1][0]] * bool(self.depth)
+        ends = [self.tlog[-1][0]] + [self.depth[-1][0]] * bool(self.depth)  # in arrival order
         if self.frames is not None:
             starts.append(float(self.frames["t"][0]))
             ends.append(float(self.frames["t"][-1]))
@@ -155,8 +170,8 @@ class Replay:
             self.counts["mavlink"] += 1
 
     def _send_depth(self, shift: float, session) -> None:
-        for t, depth in self.depth:
-            if not _sleep_until(t + shift, self.stop):
+        for t_send, t, depth in self.depth:
+            if not _sleep_until(t_send + shift, self.stop):
                 return
             put_json(self.args.depth_key, {"t": t + shift, "depth_m": depth}, session)
             self.counts["depth"] += 1

@@ -31,6 +31,7 @@ from .sinks.gps_input import GpsInputSink, MavlinkLink, ZenohMavlinkIn
 from .sinks.recorder import Recorder
 from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from .sources.depth_zenoh import BLUEOS_KEY, DepthZenoh
+from .sources.rates import needed_rates
 from .sources.uav_mavlink import UavMavlink
 from .sources.video_live import VideoLive
 from .zenoh_session import open_session
@@ -69,7 +70,8 @@ async def serve(cfg: config.RunConfig) -> dict:
     closers = []
     try:
         size = (cal.camera.width, cal.camera.height)
-        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None) if cfg.record else None
+        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
+                            depth_latency_s=cal.timing.depth_latency_s) if cfg.record else None
         fix_sink = ZenohFixSink(session, cfg.fix_key)
         closers.append(fix_sink.close)
         sinks = [fix_sink]
@@ -81,14 +83,16 @@ async def serve(cfg: config.RunConfig) -> dict:
             sinks.append(gps)
         if recorder:
             sinks.append(recorder)
-        pipeline = Pipeline(cal, tel, cfg.tracker, sinks)
+        pipeline = Pipeline(cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0)
 
         if cfg.mavlink_backend == "mavsdk":
             from .sources.uav_mavsdk import UavMavsdk
 
             uav = UavMavsdk(cfg.mavlink, tel)
         else:
-            uav = UavMavlink(cfg.mavlink, tel)
+            uav = UavMavlink(cfg.mavlink, tel, needed_rates(cal.mount.attitude_source),
+                             request_rates=not cfg.no_request_rates)
+        uav.listeners.append(pipeline.telemetry_arrived)
         depth_key = BLUEOS_KEY if cfg.depth_source == "blueos" and cfg.depth_key == "uuv/depth" else cfg.depth_key
         depth = DepthZenoh(session, depth_key, tel, cfg.depth_source)
         video = None

@@ -82,33 +82,41 @@ def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...
 
 
 def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
+    """Feed depth.jsonl into ``tel``: ``t`` (the UUV's stamp) and, when recorded, ``t_recv`` (its arrival)."""
     try:
         text = path.read_text()
     except OSError as e:
         raise SessionError(f"{path}: cannot read: {e.strerror}") from None
     lines = text.split("\n")
-    count = 0
+    count = refused = 0
+    last_t = -math.inf
     for i, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         truncated_tail = i == len(lines) and not text.endswith("\n")
         try:
             rec = json.loads(line)
-            t, depth = rec["t"], rec["depth_m"]
-            if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (t, depth)):
+            t, depth, t_recv = rec["t"], rec["depth_m"], rec.get("t_recv")
+            if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (t, depth, t_recv or 0.0)):
                 raise TypeError
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, AttributeError):
             if truncated_tail:
                 warnings.append(f"{path}:{i}: truncated last line ignored: {line[:60]!r}")
                 continue
             raise SessionError(f"{path}:{i}: expected {{\"t\": number, \"depth_m\": number}}, got {line[:80]!r}") from None
-        if not (math.isfinite(t) and math.isfinite(depth)):
+        if not (math.isfinite(t) and math.isfinite(depth) and math.isfinite(t_recv or 0.0)):
             raise SessionError(f"{path}:{i}: non-finite value in {line[:80]!r}")
         if not -5.0 <= depth <= 11000.0:
             raise SessionError(f"{path}:{i}: depth_m = {depth!r} out of range [-5, 11000]")
-        if not tel.add_depth(float(t), float(depth)):
+        if t <= last_t:
             raise SessionError(f"{path}:{i}: t = {t!r} does not increase")
-        count += 1
+        last_t = t
+        if tel.add_depth(float(t), float(depth), None if t_recv is None else float(t_recv)):
+            count += 1
+        else:
+            refused += 1
+    if refused:
+        warnings.append(f"{path}: {refused} depth samples out of order once aligned to the station clock, skipped")
     if count == 0:
         raise SessionError(f"{path}: no depth samples")
     return count
@@ -164,6 +172,19 @@ def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> 
     return sysid
 
 
+def clock_summary(tel: Telemetry) -> str:
+    """One line on how the session's clocks were aligned."""
+    parts = [f"UAV link delay {tel.uav_latency_s * 1000:.0f} ms ({tel.latency_source})"]
+    gnss = tel.station_minus_gnss_s
+    parts.append("no GNSS time (SYSTEM_TIME)" if gnss is None else f"station − GNSS {gnss:+.3f} s")
+    if tel.uav_clock.segments:
+        parts.append(f"{tel.uav_clock.segments} autopilot reboot(s)")
+    uuv = tel.uuv_clock_minus_station_s
+    if uuv is not None:
+        parts.append(f"UUV clock − station {uuv:+.3f} s, depth aligned by {tel.depth_aligned_by}")
+    return "clocks: " + ", ".join(parts)
+
+
 def load_session(path) -> Session:
     """Read and validate a session directory."""
     path = Path(path)
@@ -190,6 +211,8 @@ def load_session(path) -> Session:
     if not (path / "depth.jsonl").is_file():
         raise SessionError(f"{path / 'depth.jsonl'}: missing (the UUV's depth is required)")
     _read_depth(path / "depth.jsonl", tel, warnings)
+    warnings.extend(f"{path}: {notice}" for notice in tel.notices)
+    tel.notices.clear()
 
     session = Session(path=path, calibration=cal, telemetry=tel, warnings=warnings, uav_sysid=sysid)
     if (path / "track.csv").is_file():

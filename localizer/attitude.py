@@ -41,15 +41,6 @@ def euler_to_R(roll, pitch, yaw):
     return R
 
 
-def R_to_euler(R):
-    """Z-Y-X Euler angles ``(roll, pitch, yaw)`` in radians of ``R_ned_from_frd``."""
-    R = np.asarray(R, dtype=float)
-    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
-    pitch = -np.arcsin(np.clip(R[..., 2, 0], -1.0, 1.0))
-    yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
-    return roll, pitch, yaw
-
-
 def quat_to_R(q):
     """Rotation matrix of a quaternion ``(w, x, y, z)`` (normalized here), MAVLink's order."""
     q = np.asarray(q, dtype=float)
@@ -96,6 +87,17 @@ def rotation_about(axis, angle):
     return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
+def rotvec(R):
+    """Rotation vector (axis × angle, radians) of rotation matrices (..., 3, 3); angles below π."""
+    R = np.asarray(R, dtype=float)
+    cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(angle > 1e-12, angle / (2.0 * np.sin(angle)), 0.5)
+    return axis * scale[..., None]
+
+
 def gimbal_yaw_in_earth_frame(flags):
     """Whether a GIMBAL_DEVICE_ATTITUDE_STATUS quaternion has its yaw relative to North.
 
@@ -110,28 +112,62 @@ def gimbal_yaw_in_earth_frame(flags):
     return earth | (~vehicle & lock)
 
 
-def R_ned_from_gimbal_device(q, flags, vehicle_yaw):
-    """Gimbal FRD attitude from GIMBAL_DEVICE_ATTITUDE_STATUS.
+def R_yaw(yaw):
+    """Rotation about Down by ``yaw`` (radians): the vehicle frame (x forward, level) in NED."""
+    yaw = np.asarray(yaw, dtype=float)
+    c, s = np.cos(yaw), np.sin(yaw)
+    R = np.zeros(yaw.shape + (3, 3))
+    R[..., 0, 0], R[..., 0, 1] = c, -s
+    R[..., 1, 0], R[..., 1, 1] = s, c
+    R[..., 2, 2] = 1.0
+    return R
 
-    ``q`` (w, x, y, z): roll and pitch relative to the horizon; yaw relative to North
-    or to the vehicle heading as ``flags`` say (:func:`gimbal_yaw_in_earth_frame`).
-    ``vehicle_yaw`` (radians from North) is the UAV's yaw at the same instant.
+
+def euler_rates(roll, pitch, p, q, r):
+    """Z-Y-X Euler angle rates ``(roll', pitch', yaw')`` (rad/s) of body rates ``p, q, r`` (FRD, rad/s).
+
+    ATTITUDE's ``rollspeed``, ``pitchspeed``, ``yawspeed`` are the body rates (the
+    gyros), not the Euler angles' derivatives; they differ once the vehicle leans.
+    """
+    sr, cr = np.sin(roll), np.cos(roll)
+    cp, tp = np.cos(pitch), np.tan(pitch)
+    return p + (q * sr + r * cr) * tp, q * cr - r * sr, (q * sr + r * cr) / cp
+
+
+def R_ned_from_gimbal_device(q, flags, vehicle_yaw, R_ned_from_body=None):
+    """Gimbal FRD attitude from GIMBAL_DEVICE_ATTITUDE_STATUS, composed as rotations (no Euler angles).
+
+    ``q`` (w, x, y, z) has roll and pitch relative to the horizon and its yaw
+    relative to North or to the vehicle's heading as ``flags`` say
+    (:func:`gimbal_yaw_in_earth_frame`): in the vehicle frame, ``R = R_yaw(vehicle_yaw) · R(q)``
+    (MAVLink's ``q_earth = q_delta_yaw · q_vehicle``), which holds at pitch −90° too,
+    where Euler angles lose the yaw. ``vehicle_yaw`` (radians from North) is the UAV's
+    yaw at the same instant.
+
+    ``R_ned_from_body`` given: the quaternion is relative to the airframe (an
+    ArduPilot servo mount reports its servo demands, roll and pitch relative to
+    the body, under horizon-relative flags), so ``R = R_ned_from_body · R(q)``.
     """
     R = quat_to_R(q)
-    roll, pitch, yaw_rel = R_to_euler(R)
-    R_vehicle = euler_to_R(roll, pitch, yaw_rel + np.asarray(vehicle_yaw, dtype=float))
+    if R_ned_from_body is not None:
+        return np.asarray(R_ned_from_body) @ R
     earth = np.asarray(gimbal_yaw_in_earth_frame(flags))[..., None, None]
-    return np.where(earth, R, R_vehicle)
+    return np.where(earth, R, R_yaw(vehicle_yaw) @ R)
 
 
-def R_ned_from_mount_orientation(roll_deg, pitch_deg, yaw_rel_deg, vehicle_yaw):
+def R_ned_from_mount_orientation(roll_deg, pitch_deg, yaw_rel_deg, vehicle_yaw, R_ned_from_body=None):
     """Gimbal FRD attitude from ArduPilot's MOUNT_ORIENTATION.
 
     Roll and pitch are relative to the horizon, ``yaw_rel_deg`` to the vehicle's
-    heading; it is composed with ``vehicle_yaw`` (radians) from ATTITUDE at the same
-    instant rather than taken from ``yaw_absolute``, which older firmware leaves at 0.
+    heading: ``R = R_yaw(vehicle_yaw) · R(roll, pitch, yaw_rel)`` with ``vehicle_yaw``
+    (radians) from ATTITUDE at the same instant (``yaw_absolute`` is 0 in older
+    firmware). With ``R_ned_from_body`` (a servo mount) the angles are relative to
+    the airframe: ``R = R_ned_from_body · R(roll, pitch, yaw_rel)``.
     """
-    return euler_to_R(np.radians(roll_deg), np.radians(pitch_deg), np.radians(yaw_rel_deg) + vehicle_yaw)
+    R = euler_to_R(np.radians(roll_deg), np.radians(pitch_deg), np.radians(yaw_rel_deg))
+    if R_ned_from_body is not None:
+        return np.asarray(R_ned_from_body) @ R
+    return R_yaw(vehicle_yaw) @ R
 
 
 def R_ned_from_fixed_mount(R_ned_from_body, fixed_rpy_deg):

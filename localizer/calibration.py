@@ -15,9 +15,10 @@ from dataclasses import dataclass, field, fields
 from .camera import Camera
 
 ATTITUDE_SOURCES = ("gimbal_device", "mount_orientation", "fixed")
+ROLL_PITCH_REFERENCES = ("auto", "horizon", "body")
 _KNOWN_KEYS = {
     "camera": {"width", "height", "fx", "fy", "cx", "cy", "distortion"},
-    "mount": {"attitude_source", "fixed_rpy_deg", "camera_offset_m"},
+    "mount": {"attitude_source", "fixed_rpy_deg", "camera_offset_m", "gimbal_roll_pitch"},
     "water": {"takeoff_height_above_surface_m", "surface_amsl_m", "refractive_index"},
     "tracker": {"init_bbox", "init_t"},
 }
@@ -36,6 +37,10 @@ class Mount:
     attitude_source: str = "gimbal_device"
     fixed_rpy_deg: tuple[float, float, float] = (0.0, -90.0, 0.0)
     camera_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # body FRD, metres
+    # what the gimbal message's roll and pitch are relative to: "horizon" (the MAVLink rule),
+    # "body" (ArduPilot's servo mount, MNT1_TYPE 1, reports its servo demands), or "auto":
+    # "body" when the autopilot says MNT1_TYPE = 1, else "horizon"
+    gimbal_roll_pitch: str = "auto"
 
 
 @dataclass(frozen=True)
@@ -54,20 +59,33 @@ class Sigmas:
     stabilised gimbal and a barometric altitude reference.
     """
 
-    pixel_px: float = 2.0  # tracker error in the image
-    tilt_deg: float = 0.5  # camera roll/pitch (gimbal + AHRS)
-    yaw_deg: float = 1.5  # camera heading (compass)
-    height_m: float = 0.3  # camera height above the water
-    depth_m: float = 0.05  # UUV pressure depth
-    uav_horizontal_m: float = 0.0  # the UAV position's own horizontal accuracy (DRMS); 0 for a fix relative to the UAV, ~1.5 for plain GNSS
+    pixel_px: float = 2.0  # tracker error in the image: a template tracker on a vehicle 30-100 px long
+    tilt_deg: float = 0.5  # camera roll/pitch: a consumer gimbal's IMU with the autopilot's AHRS
+    yaw_deg: float = 1.5  # camera heading: a calibrated compass away from magnetic interference
+    height_m: float = 0.3  # camera height above the water: barometric altitude over a few minutes
+    depth_m: float = 0.05  # UUV depth: a pressure sensor (Bar30) with the surface pressure zeroed
+    # the UAV position's own horizontal accuracy (m): None takes GPS_RAW_INT's h_acc, the
+    # receiver's own estimate, or UAV_HORIZONTAL_FALLBACK_M (plain GNSS) when it sends none
+    uav_horizontal_m: float | None = None
+    time_s: float = 0.02  # frames vs telemetry time alignment (video latency and link delay not measured better)
     surface_amsl_m: float = 0.5  # the water surface's altitude reference, for the vertical accuracy
+
+
+#: The UAV's horizontal accuracy (m, 1-sigma) assumed when neither the calibration nor GPS_RAW_INT gives it.
+UAV_HORIZONTAL_FALLBACK_M = 1.5
 
 
 @dataclass(frozen=True)
 class Timing:
-    """Staleness limits (seconds). Beyond them a frame gets "no fix", never an extrapolated guess."""
+    """Time alignment and staleness limits (seconds).
 
-    attitude_gap_s: float = 0.25
+    ``*_gap_s``: the longest interval between two samples that is interpolated;
+    ``*_hold_s``: how long after the newest sample it is extrapolated (ATTITUDE with
+    its rates, positions with their velocities) or held (the rest), with the fix's
+    accuracy grown by the estimated error. Beyond them a frame gets "no fix".
+    """
+
+    attitude_gap_s: float = 0.6  # cubic with the body rates: still sub-0.1 deg at 4 Hz on a wobbling airframe
     attitude_hold_s: float = 0.15
     position_gap_s: float = 1.0
     position_hold_s: float = 0.5
@@ -75,6 +93,11 @@ class Timing:
     gimbal_hold_s: float = 0.3
     depth_gap_s: float = 2.0
     depth_hold_s: float = 1.0
+    # the UAV link's one-way delay; None: measured with MAVLink TIMESYNC, 0 until it is
+    mavlink_latency_s: float | None = None
+    depth_latency_s: float = 0.05  # the UUV's depth, measurement to arrival, used when its clock disagrees
+    depth_clock_tolerance_s: float = 0.1  # a UUV clock this close to the station's is trusted as it is
+    clock_window_s: float = 30.0  # sliding window of the least-delay clock alignment
 
 
 @dataclass(frozen=True)
@@ -155,10 +178,15 @@ def calibration_from_dict(data: dict, source: str = "session.toml") -> Calibrati
     att = mt.get("attitude_source", "gimbal_device")
     if att not in ATTITUDE_SOURCES:
         raise ConfigError(source, "mount.attitude_source", att, f"expected one of {', '.join(ATTITUDE_SOURCES)}")
+    roll_pitch = mt.get("gimbal_roll_pitch", "auto")
+    if roll_pitch not in ROLL_PITCH_REFERENCES:
+        raise ConfigError(source, "mount.gimbal_roll_pitch", roll_pitch,
+                          f"expected one of {', '.join(ROLL_PITCH_REFERENCES)}")
     mount = Mount(
         attitude_source=att,
         fixed_rpy_deg=_vector(source, "mount.fixed_rpy_deg", mt.get("fixed_rpy_deg", [0.0, -90.0, 0.0]), 3),
         camera_offset_m=_vector(source, "mount.camera_offset_m", mt.get("camera_offset_m", [0.0, 0.0, 0.0]), 3),
+        gimbal_roll_pitch=roll_pitch,
     )
 
     wt = _table(source, data, "water")
@@ -194,7 +222,7 @@ def calibration_from_dict(data: dict, source: str = "session.toml") -> Calibrati
     )
     timing = _dataclass_from(
         Timing, source, "timing", _table(source, data, "timing", required=False),
-        lambda s, k, v: _number(s, k, v, positive=True),
+        lambda s, k, v: _number(s, k, v, nonneg=True) if "latency" in k else _number(s, k, v, positive=True),
     )
     warnings = tuple(
         f"{source}: {name}.{key} is not a key skyfix knows; ignored (a typo?)"

@@ -2,9 +2,9 @@
 
 :func:`locate` turns tracked pixels and aligned camera poses into fixes. Status
 words: ``ok``; ``no_track``/``lost`` (tracker); ``bad_pixel`` (outside the image
-or outside the lens model); ``no_clock``; ``no_<input>``/``stale_<input>`` for
-attitude, position, gimbal, depth; ``below_surface``; ``no_water`` (the ray never
-reaches the water).
+or outside the lens model); ``no_<input>``/``stale_<input>`` for attitude,
+position, gimbal, depth; ``below_surface``; ``no_water`` (the ray never reaches
+the water); ``bad_time``.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from .uncertainty import accuracy
 class Fix:
     """One frame's result. Positions WGS84 degrees; altitudes metres AMSL; NaN when no fix."""
 
-    t_unix: float
+    t_unix: float  # the frame's exposure, station clock
     status: str
     u: float = float("nan")  # distorted pixel of the UUV
     v: float = float("nan")
@@ -36,6 +36,10 @@ class Fix:
     v_acc_m: float = float("nan")
     north_m: float = float("nan")  # UUV relative to the UAV's reported position
     east_m: float = float("nan")
+    sigma_n_m: float = float("nan")  # 1-sigma north and east, and their covariance (m²)
+    sigma_e_m: float = float("nan")
+    cov_ne_m2: float = float("nan")
+    t_gnss: float = float("nan")  # the exposure as GNSS (UNIX) time; NaN without SYSTEM_TIME
     frame: int = -1
     confidence: float = float("nan")  # tracker's, 0..1
 
@@ -63,6 +67,10 @@ class Fixes:
     v_acc_m: np.ndarray
     north_m: np.ndarray
     east_m: np.ndarray
+    sigma_n_m: np.ndarray
+    sigma_e_m: np.ndarray
+    cov_ne_m2: np.ndarray
+    t_gnss: np.ndarray
 
     def __len__(self) -> int:
         return len(self.t_unix)
@@ -86,7 +94,7 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
     n_water = cal.water.refractive_index if refraction else None
 
     nan = np.full(len(u), np.nan)
-    lat, lon, alt, north, east, h_acc, v_acc = (nan.copy() for _ in range(7))
+    lat, lon, alt, north, east, h_acc, v_acc, sig_n, sig_e, cov_ne = (nan.copy() for _ in range(10))
     idx = np.flatnonzero(status == "ok")
     if len(idx):
         R = pose.R_ned_from_cv[idx]
@@ -106,8 +114,15 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
             north[idx], east[idx], down, pose.lat_deg[idx], pose.lon_deg[idx], pose.alt_amsl_m[idx]
         )
         alt[idx] = pose.alt_amsl_m[idx] - down
-        h_acc[idx], v_acc[idx] = accuracy(cal.camera, R, u[idx], v[idx], h, d, n_water, cal.sigmas)
+        h_acc[idx], v_acc[idx], cov = accuracy(
+            cal.camera, R, u[idx], v[idx], h, d, n_water, cal.sigmas,
+            sigma_tilt_rad=pose.sigma_tilt_rad[idx], sigma_yaw_rad=pose.sigma_yaw_rad[idx],
+            sigma_uav_m=pose.sigma_uav_m[idx], omega_ned=pose.omega_ned[idx],
+            velocity_ned_mps=pose.velocity_ned_mps[idx],
+        )
+        sig_n[idx], sig_e[idx], cov_ne[idx] = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1]), cov[:, 0, 1]
     return Fixes(
         t_unix=pose.t_unix, status=status, u=u, v=v, lat=lat, lon=lon, alt_amsl_m=alt,
         depth_m=pose.depth_m.copy(), h_acc_m=h_acc, v_acc_m=v_acc, north_m=north, east_m=east,
+        sigma_n_m=sig_n, sigma_e_m=sig_e, cov_ne_m2=cov_ne, t_gnss=pose.t_gnss.copy(),
     )

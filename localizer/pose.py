@@ -1,8 +1,12 @@
-"""Everything about the camera at a frame's time: attitude, position, height, and the UUV's depth.
+"""Everything about the camera at a frame's time: attitude, position, height, the UUV's depth, and
+how sure each is.
 
-:func:`camera_pose` aligns the telemetry to frame times and composes the camera
-attitude from the source the calibration names. A frame whose inputs are
-missing or stale gets a status word and NaNs, never an extrapolated value.
+:func:`camera_pose` aligns the telemetry to frames' station times (see
+:mod:`localizer.telemetry`) and composes the camera attitude from the source the
+calibration names, as rotations. A frame whose inputs are missing or too old gets
+a status word and NaNs; one just past the newest sample gets an extrapolated
+value with its estimated error in ``sigma_*``. The camera's angular and linear
+velocity come along, so a time-alignment error can be turned into metres.
 """
 
 from __future__ import annotations
@@ -12,17 +16,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import attitude as att
-from .calibration import Calibration
+from .calibration import UAV_HORIZONTAL_FALLBACK_M, Calibration
 from .surface import height_above_surface_m
-from .telemetry import Telemetry
+from .telemetry import DEG_PER_M, Telemetry
 from .timeline import BEFORE_FIRST, OK
+
+#: Time step (s) over which the camera's angular velocity is measured.
+RATE_STEP_S = 0.02
+SERVO_MOUNT = 1  # ArduPilot MNT1_TYPE: servo gimbal stabilised by the autopilot
 
 
 @dataclass
 class CameraPose:
     """Camera state for N frames (arrays of length N)."""
 
-    t_unix: np.ndarray
+    t_unix: np.ndarray  # station clock
     status: np.ndarray  # "ok" or why there is no pose (object array of str)
     R_ned_from_cv: np.ndarray  # (N, 3, 3)
     lat_deg: np.ndarray  # the UAV's reported position
@@ -32,6 +40,13 @@ class CameraPose:
     uav_height_m: np.ndarray  # reported position above the water
     height_m: np.ndarray  # camera above the water
     depth_m: np.ndarray  # UUV below the water
+    sigma_tilt_rad: np.ndarray  # extra 1-sigma of the camera's tilt from extrapolation or hold
+    sigma_yaw_rad: np.ndarray  # ... and of its heading
+    sigma_uav_m: np.ndarray  # the UAV position's horizontal 1-sigma (GNSS receiver, or configured)
+    omega_ned: np.ndarray  # (N, 3) the camera's angular velocity in NED, rad/s
+    velocity_ned_mps: np.ndarray  # (N, 3) the UAV's velocity in NED, m/s
+    t_gnss: np.ndarray  # the frame's time as GNSS (UNIX) time; NaN without SYSTEM_TIME
+    geoid_separation_m: np.ndarray  # ellipsoid minus mean sea level at the UAV (GPS_RAW_INT); NaN if unknown
 
 
 def _mark(status, series_status, name):
@@ -41,36 +56,67 @@ def _mark(status, series_status, name):
     status[fresh & (series_status != BEFORE_FIRST) & (series_status != OK)] = f"stale_{name}"
 
 
+def servo_mount(cal: Calibration, tel: Telemetry) -> bool:
+    """Whether the gimbal message's roll and pitch are relative to the airframe (see ``[mount] gimbal_roll_pitch``)."""
+    ref = cal.mount.gimbal_roll_pitch
+    return ref == "body" or (ref == "auto" and tel.mount_type == SERVO_MOUNT)
+
+
+def _rotations(cal: Calibration, tel: Telemetry, tq, status=None):
+    """``(R_ned_from_gimbal, R_ned_from_body, sigma_tilt, sigma_yaw)`` at UAV-scale times ``tq``.
+
+    ``status`` given: failing inputs are marked in it.
+    """
+    a, sa, ea = tel.attitude.sample(tq)
+    if status is not None:
+        _mark(status, sa, "attitude")
+    R_body = att.euler_to_R(a[:, 0], a[:, 1], a[:, 2])
+    sig_tilt, sig_yaw = np.hypot(ea[:, 0], ea[:, 1]), ea[:, 2].copy()
+    src = cal.mount.attitude_source
+    if src == "fixed":
+        return att.R_ned_from_fixed_mount(R_body, cal.mount.fixed_rpy_deg), R_body, sig_tilt, sig_yaw
+    body = R_body if servo_mount(cal, tel) else None
+    if src == "gimbal_device":
+        g, sg, eg = tel.gimbal.sample(tq)
+        R_gimbal = att.R_ned_from_gimbal_device(g[:, :4], np.nan_to_num(g[:, 4]), a[:, 2], body)
+        g_tilt = g_yaw = eg[:, 0]
+    else:
+        g, sg, eg = tel.mount.sample(tq)
+        R_gimbal = att.R_ned_from_mount_orientation(*np.degrees(g.T), a[:, 2], body)
+        g_tilt, g_yaw = np.hypot(eg[:, 0], eg[:, 1]), eg[:, 2]
+    if status is not None:
+        _mark(status, sg, "gimbal")
+    return R_gimbal, R_body, np.hypot(sig_tilt, g_tilt), np.hypot(sig_yaw, g_yaw)
+
+
 def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
+    """The camera at station time(s) ``t_unix`` (see the module doc)."""
     t = np.atleast_1d(np.asarray(t_unix, dtype=float))
     n = len(t)
     status = np.full(n, "ok", dtype=object)
     status[~np.isfinite(t)] = "bad_time"
-    try:
-        boot = tel.clock.to_boot_s(t)
-    except LookupError:
-        boot = np.full(n, np.nan)
-        status[status == "ok"] = "no_clock"
+    tq = tel.uav_time(t)
 
-    a, sa = tel.attitude.sample(boot)
-    _mark(status, sa, "attitude")
-    p, sp = tel.position.sample(boot)
+    R_gimbal, R_body, sig_tilt, sig_yaw = _rotations(cal, tel, tq, status)
+    p, sp, ep = tel.position.sample(tq)
     _mark(status, sp, "position")
-    dep, sd = tel.depth.sample(t)
+    dep, sd, _ = tel.depth.sample(t)
     _mark(status, sd, "depth")
 
-    R_body = att.euler_to_R(a[:, 0], a[:, 1], a[:, 2])
-    src = cal.mount.attitude_source
-    if src == "gimbal_device":
-        g, sg = tel.gimbal.sample(boot)
-        _mark(status, sg, "gimbal")
-        R_gimbal = att.R_ned_from_gimbal_device(g[:, :4], np.nan_to_num(g[:, 4]), a[:, 2])
-    elif src == "mount_orientation":
-        m, sm = tel.mount.sample(boot)
-        _mark(status, sm, "gimbal")
-        R_gimbal = att.R_ned_from_mount_orientation(*np.degrees(m.T), a[:, 2])
+    R_cv = att.R_ned_from_cv(R_gimbal)
+    R_before = att.R_ned_from_cv(_rotations(cal, tel, tq - RATE_STEP_S)[0])
+    omega = np.nan_to_num(att.rotvec(R_cv @ np.swapaxes(R_before, -1, -2)) / RATE_STEP_S)
+    cos_lat = np.cos(np.radians(p[:, 0]))
+    velocity = np.nan_to_num(np.stack([p[:, 4] / DEG_PER_M, p[:, 5] * cos_lat / DEG_PER_M, -p[:, 6]], axis=-1))
+
+    gnss, _, _ = tel.gnss.sample(tq)
+    if cal.sigmas.uav_horizontal_m is not None:
+        sigma_uav = np.full(n, cal.sigmas.uav_horizontal_m)
     else:
-        R_gimbal = att.R_ned_from_fixed_mount(R_body, cal.mount.fixed_rpy_deg)
+        sigma_uav = np.where(np.isfinite(gnss[:, 0]), gnss[:, 0], UAV_HORIZONTAL_FALLBACK_M)
+    drift_m = np.hypot(ep[:, 0], ep[:, 1] * cos_lat) / DEG_PER_M  # extrapolated or held position
+    sigma_uav = np.hypot(sigma_uav, np.nan_to_num(drift_m))
+    offset_gnss = tel.station_minus_gnss_s
 
     offset_ned = np.einsum("nij,j->ni", R_body, np.asarray(cal.mount.camera_offset_m))
     uav_h = height_above_surface_m(
@@ -81,7 +127,7 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
     return CameraPose(
         t_unix=t,
         status=status,
-        R_ned_from_cv=att.R_ned_from_cv(R_gimbal),
+        R_ned_from_cv=R_cv,
         lat_deg=p[:, 0],
         lon_deg=p[:, 1],
         alt_amsl_m=p[:, 2],
@@ -89,4 +135,11 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
         uav_height_m=uav_h,
         height_m=cam_h,
         depth_m=dep[:, 0],
+        sigma_tilt_rad=sig_tilt,
+        sigma_yaw_rad=sig_yaw,
+        sigma_uav_m=sigma_uav,
+        omega_ned=omega,
+        velocity_ned_mps=velocity,
+        t_gnss=t - offset_gnss if offset_gnss is not None else np.full(n, np.nan),
+        geoid_separation_m=gnss[:, 1],
     )

@@ -1,103 +1,263 @@
-"""The telemetry a fix needs, buffered on the clocks it arrives with.
+"""The telemetry a fix needs, aligned to the station clock.
 
-UAV messages are stored on the autopilot's boot clock (seconds), which is
-precise and monotonic; a frame's UNIX time is mapped onto it at query time via
-:class:`~localizer.timeline.VehicleClock`. Depth comes with UNIX times. Angles
-in radians, positions in degrees and metres.
+One time base: the station's clock (frames, depth arrivals and MAVLink receive
+times are stamped with it). The UAV's samples carry its autopilot's
+``time_boot_ms``; each is stored at ``boot + offset``, the offset being the least
+``receive − boot`` over a sliding window (:class:`~localizer.clock.ClockMap`), i.e.
+when the fastest delivery would have brought it. A frame at station time ``t`` is
+looked up at ``t + uav_latency_s``, the link's one-way delay: configured
+(``[timing] mavlink_latency_s``), else measured with MAVLink TIMESYNC, else 0.
+A reboot of the autopilot (its boot clock going back) starts a new clock segment;
+samples from before it keep their times and stay usable. A MAVLink gimbal with
+its own boot clock gets its own :class:`~localizer.clock.ClockMap` onto the same scale.
+
+SYSTEM_TIME does not align anything: it measures the station clock's offset from
+GNSS time (:attr:`Telemetry.station_minus_gnss_s`), which gives GPS_INPUT its
+week time. The UUV's depth is stored at station time: by the UUV's own stamp when
+its clock agrees with the station's (within ``depth_clock_tolerance_s``), else
+mapped by its arrival times minus ``depth_latency_s``.
+
+Angles in radians, positions in degrees and metres, rates per second.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from .attitude import euler_rates
 from .calibration import Timing
-from .timeline import Series, VehicleClock
+from .clock import ClockMap, Median, RoundTrip
+from .timeline import Series
 
-
-def _refuse(series: Series) -> bool:
-    """Count a sample refused for its value (NaN fails every range check too)."""
-    series.rejected += 1
-    return False
+#: Station-clock disagreements (seconds) worth telling the operator about.
+CLOCK_NOTICE_S = 0.1
+DEG_PER_M = math.degrees(1.0 / 6_378_137.0)  # latitude degrees per metre north (sphere; for rates only)
+_NOTICE_AFTER = 3  # samples before a clock offset is reported
 
 
 class Telemetry:
-    """Buffers for ATTITUDE, GLOBAL_POSITION_INT, the gimbal message and depth.
+    """Buffers for ATTITUDE, GLOBAL_POSITION_INT, the gimbal message, GPS_RAW_INT and depth.
 
     ``keep_s`` bounds the history kept (live service); None keeps all (offline).
+    Every ``add_*`` returns False when it refuses a sample, with the reason in
+    :attr:`refusal`; only samples that pass reach the clocks, so a garbage frame
+    cannot fake a reboot. :attr:`notices` collects one-line news for the log
+    (reboots, clocks that disagree): the caller takes them out.
     """
 
     def __init__(self, timing: Timing | None = None, keep_s: float | None = None):
-        timing = timing or Timing()
-        self.clock = VehicleClock(on_reboot=self._drop_boot_clock_samples)
-        # roll, pitch, yaw of the UAV body (FRD in NED), boot seconds
-        self.attitude = Series("aaa", timing.attitude_gap_s, timing.attitude_hold_s, keep_s)
-        # lat_deg, lon_deg, alt_amsl_m, relative_alt_m, boot seconds
-        self.position = Series("llll", timing.position_gap_s, timing.position_hold_s, keep_s)
-        # GIMBAL_DEVICE_ATTITUDE_STATUS: q (w, x, y, z), flags, boot seconds
+        self.timing = timing = timing or Timing()
+        w = timing.clock_window_s
+        self.uav_clock = ClockMap(w)  # the autopilot's time_boot_ms (the component that sends ATTITUDE)
+        self._component_clocks: dict[int, ClockMap] = {}  # other components' boot clocks (a MAVLink gimbal)
+        self.timesync = RoundTrip(w)
+        self._measured_latency_s: float | None = None
+        self._gnss = Median()  # arrival-scale minus GNSS time, per SYSTEM_TIME
+        self.uuv_clock = ClockMap(w)  # the UUV's own depth stamps
+        self.depth_aligned_by: str | None = None  # "uuv_clock" or "arrival"
+        # roll, pitch, yaw of the UAV body (FRD in NED) and their rates
+        self.attitude = Series("HHHddd", timing.attitude_gap_s, timing.attitude_hold_s, keep_s)
+        # lat_deg, lon_deg, alt_amsl_m, relative_alt_m and their rates
+        self.position = Series("hhhhdddd", timing.position_gap_s, timing.position_hold_s, keep_s)
+        # GIMBAL_DEVICE_ATTITUDE_STATUS: q (w, x, y, z), flags
         self.gimbal = Series("qqqqs", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
-        # MOUNT_ORIENTATION: roll, pitch, yaw relative to the vehicle, boot seconds
+        # MOUNT_ORIENTATION: roll, pitch, yaw relative to the vehicle
         self.mount = Series("aaa", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
-        # UUV depth below the surface (m, positive down), UNIX seconds
+        # GPS_RAW_INT: the receiver's horizontal accuracy (m) and geoid separation (m), receive times
+        self.gnss = Series("ss", math.inf, 10.0, keep_s)
+        # UUV depth below the surface (m, positive down), station seconds
         self.depth = Series("l", timing.depth_gap_s, timing.depth_hold_s, keep_s)
-        # the MAVLink component whose time_boot_ms the UAV buffers are on, and other components' clocks
         self.autopilot_component: int | None = None
-        self._other_clocks: dict[int, VehicleClock] = {}
+        self.mount_type: int | None = None  # the autopilot's MNT1_TYPE parameter, once seen
+        self.refusal: str | None = None
+        self._boot_s = math.nan  # the boot time of the sample being added
+        self._last_boot: dict[int, float] = {}  # per series: the boot time of its newest sample
+        self.notices: list[str] = []
+        self._noticed: dict[str, float] = {}
 
-    def to_autopilot_boot_ms(self, component: int, time_boot_ms, receive_unix_s: float) -> float | None:
-        """Another component's ``time_boot_ms`` on the autopilot's boot clock (a MAVLink gimbal keeps its own).
+    # -- clocks --------------------------------------------------------------------------------
+    @property
+    def uav_latency_s(self) -> float:
+        """The UAV link's one-way delay (s) subtracted from the least-delay alignment."""
+        if self.timing.mavlink_latency_s is not None:
+            return self.timing.mavlink_latency_s
+        return self._measured_latency_s or 0.0
 
-        Each clock's least ``receive − boot`` offset includes the same least link
-        delay, which cancels in their difference. None until the autopilot's is known.
-        """
-        clock = self._other_clocks.setdefault(component, VehicleClock())
-        clock.add_receive(time_boot_ms, receive_unix_s)
-        own = self.clock.receive_offset_s
-        if own is None:
-            return None
-        return time_boot_ms + (clock.receive_offset_s - own) * 1000.0
+    @property
+    def latency_source(self) -> str:
+        if self.timing.mavlink_latency_s is not None:
+            return "configured"
+        return "timesync" if self._measured_latency_s is not None else "assumed 0 (no TIMESYNC reply)"
 
-    def _drop_boot_clock_samples(self) -> None:
-        """The autopilot rebooted: samples on its old boot clock would be matched to wrong frames."""
-        for series in (self.attitude, self.position, self.gimbal, self.mount):
-            series.clear()
+    @property
+    def measured_latency_s(self) -> float | None:
+        """The link delay TIMESYNC measured (s), whether or not it is used."""
+        return self._measured_latency_s
 
-    def _on_clock(self, time_boot_ms, receive_unix_s: float | None) -> None:
-        """Tell the clock about a sample that passed its checks (so garbage cannot fake a reboot)."""
-        if receive_unix_s is not None:
-            self.clock.add_receive(time_boot_ms, receive_unix_s)
+    def uav_time(self, t_station):
+        """Station time(s) as the UAV buffers' time scale (see the module doc)."""
+        return np.asarray(t_station, dtype=float) + self.uav_latency_s
 
-    def add_attitude(self, time_boot_ms, roll, pitch, yaw, receive_unix_s: float | None = None) -> bool:
-        """ATTITUDE (radians); ``receive_unix_s`` also feeds the clock once the values pass."""
+    @property
+    def station_minus_gnss_s(self) -> float | None:
+        """The station clock minus GNSS time (s), from SYSTEM_TIME; None without it."""
+        x = self._gnss.value
+        return None if x is None else x - self.uav_latency_s
+
+    @property
+    def uuv_clock_minus_station_s(self) -> float | None:
+        """The UUV's clock minus the station's (s), from its depth stamps and arrivals; None without them."""
+        off = self.uuv_clock.offset_s
+        return None if off is None else -(off - self.timing.depth_latency_s)
+
+    def _notice_once(self, key: str, value: float, text: str) -> None:
+        """Add ``text`` to the notices unless ``key`` was reported within CLOCK_NOTICE_S of ``value``."""
+        last = self._noticed.get(key)
+        if last is None or abs(value - last) > CLOCK_NOTICE_S:
+            self._noticed[key] = value
+            self.notices.append(text)
+
+    def _uav_t(self, time_boot_ms, receive_s: float, component: int | None) -> float:
+        """A sample's time on the UAV buffers' scale; feeds the clock of its component."""
+        boot_s = float(time_boot_ms) / 1000.0
+        self._boot_s = boot_s
+        own = component is None or component == self.autopilot_component
+        clock = self.uav_clock if own else self._component_clocks.setdefault(component, ClockMap(self.timing.clock_window_s))
+        if clock.add(boot_s, receive_s):
+            before, after = clock.last_restart
+            who = "autopilot" if own else f"component {component}"
+            self.notices.append(f"{who} rebooted (time_boot_ms went back from {before:.1f} s to {after:.1f} s): "
+                                "a new clock segment; the telemetry before it is kept")
+            if own:
+                self.timesync.clear()
+                self._gnss.clear()
+        return boot_s + clock.offset_s
+
+    def _refuse(self, series: Series, why: str) -> bool:
+        series.rejected += 1
+        self.refusal = why
+        return False
+
+    def _append(self, series: Series, t: float, values) -> bool:
+        if series.append(t, values):
+            return True
+        self.refusal = "not finite, or not after the previous sample"
+        return False
+
+    def _append_uav(self, series: Series, t: float, values) -> bool:
+        """Append a UAV sample. One that follows the previous on its own clock but not on the station's
+        (the least-delay offset just improved by more than the sample interval: the first
+        samples of a link) is dropped without complaint: it carries nothing wrong."""
+        last_boot = self._last_boot.get(id(series))
+        if series.last_t is not None and t <= series.last_t and last_boot is not None and self._boot_s > last_boot:
+            self._last_boot[id(series)] = self._boot_s
+            return True
+        if not self._append(series, t, values):
+            return False
+        self._last_boot[id(series)] = self._boot_s
+        return True
+
+    # -- MAVLink ---------------------------------------------------------------------------------
+    def add_attitude(self, time_boot_ms, roll, pitch, yaw, rates, receive_s: float) -> bool:
+        """ATTITUDE (radians) with its body rates ``(p, q, r)`` (rad/s, FRD; None or NaN: unknown)."""
         if not all(abs(a) <= 2 * np.pi for a in (roll, pitch, yaw)):
-            return _refuse(self.attitude)
-        self._on_clock(time_boot_ms, receive_unix_s)
-        return self.attitude.append(time_boot_ms / 1000.0, (roll, pitch, yaw))
+            return self._refuse(self.attitude, "angles not finite or beyond ±2π (degrees sent as radians?)")
+        p, q, r = (math.nan,) * 3 if rates is None else rates
+        if not all(abs(x) < 100.0 for x in (p, q, r)):  # NaN and absurd rates alike: interpolate linearly
+            p = q = r = math.nan
+        t = self._uav_t(time_boot_ms, receive_s, None)
+        return self._append_uav(self.attitude, t, (roll, pitch, yaw, *euler_rates(roll, pitch, p, q, r)))
 
-    def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m,
-                     receive_unix_s: float | None = None) -> bool:
-        """GLOBAL_POSITION_INT in degrees and metres; lat/lon 0/0 (no GNSS) is refused."""
-        if (not (-90 <= lat_deg <= 90 and -180 <= lon_deg <= 180) or (lat_deg == 0 and lon_deg == 0)
-                or not np.all(np.isfinite((alt_amsl_m, relative_alt_m)))):
-            return _refuse(self.position)
-        self._on_clock(time_boot_ms, receive_unix_s)
-        return self.position.append(time_boot_ms / 1000.0, (lat_deg, lon_deg, alt_amsl_m, relative_alt_m))
+    def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m, velocity_ned_mps,
+                     receive_s: float) -> bool:
+        """GLOBAL_POSITION_INT in degrees, metres and m/s (velocity None: unknown)."""
+        if lat_deg == 0 and lon_deg == 0:
+            return self._refuse(self.position, "lat/lon 0/0: the UAV has no GPS fix yet")
+        if not (-90 <= lat_deg <= 90 and -180 <= lon_deg <= 180):
+            return self._refuse(self.position, "lat/lon out of range (degE7 not converted?)")
+        if not np.all(np.isfinite((alt_amsl_m, relative_alt_m))):
+            return self._refuse(self.position, "altitude not finite")
+        vn, ve, vd = (math.nan,) * 3 if velocity_ned_mps is None else velocity_ned_mps
+        rates = (vn * DEG_PER_M, ve * DEG_PER_M / math.cos(math.radians(lat_deg)), -vd, -vd)
+        t = self._uav_t(time_boot_ms, receive_s, None)
+        return self._append_uav(self.position, t, (lat_deg, lon_deg, alt_amsl_m, relative_alt_m, *rates))
 
-    def add_gimbal(self, time_boot_ms, q_wxyz, flags, receive_unix_s: float | None = None) -> bool:
+    def add_gimbal(self, time_boot_ms, q_wxyz, flags, receive_s: float, component: int | None = None) -> bool:
         """GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z), which must be near unit length."""
         q = np.asarray(q_wxyz, dtype=float)
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 0.1:
-            return _refuse(self.gimbal)
-        self._on_clock(time_boot_ms, receive_unix_s)
-        return self.gimbal.append(time_boot_ms / 1000.0, (*q, flags))
+            return self._refuse(self.gimbal, "quaternion not finite or not of unit length")
+        t = self._uav_t(time_boot_ms, receive_s, component)
+        return self._append_uav(self.gimbal, t, (*q, flags))
 
-    def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg, receive_unix_s: float | None = None) -> bool:
+    def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg, receive_s: float,
+                  component: int | None = None) -> bool:
         """MOUNT_ORIENTATION (degrees; yaw relative to the vehicle)."""
         if not all(abs(a) <= 360.0 for a in (roll_deg, pitch_deg, yaw_deg)):
-            return _refuse(self.mount)
-        self._on_clock(time_boot_ms, receive_unix_s)
-        return self.mount.append(time_boot_ms / 1000.0, np.radians((roll_deg, pitch_deg, yaw_deg)))
+            return self._refuse(self.mount, "angles not finite or beyond ±360°")
+        t = self._uav_t(time_boot_ms, receive_s, component)
+        return self._append_uav(self.mount, t, np.radians((roll_deg, pitch_deg, yaw_deg)))
 
-    def add_depth(self, t_unix, depth_m) -> bool:
-        if not -5.0 <= depth_m <= 11000.0:
-            return _refuse(self.depth)
-        return self.depth.append(t_unix, (depth_m,))
+    def add_system_time(self, time_boot_ms, time_unix_usec: int, receive_s: float) -> bool:
+        """SYSTEM_TIME: feeds the autopilot's clock; a GNSS time (nonzero) measures the station's offset."""
+        t = self._uav_t(time_boot_ms, receive_s, None)
+        if time_unix_usec <= 0:
+            return True  # the autopilot has no UNIX time yet
+        self._gnss.add(t - time_unix_usec / 1e6)
+        off = self.station_minus_gnss_s
+        if off is not None and abs(off) > CLOCK_NOTICE_S:
+            way = "behind" if off < 0 else "ahead of"
+            self._notice_once("gnss", off, f"the station clock is {abs(off):.2f} s {way} GNSS time (SYSTEM_TIME): "
+                              "telemetry is aligned by receive times, GPS_INPUT carries GNSS time")
+        return True
+
+    def add_timesync(self, tc1_ns: int, ts1_ns: int, receive_s: float) -> bool:
+        """A TIMESYNC reply to our request: ``ts1`` our send time (station ns), ``tc1`` the autopilot's receipt (boot ns)."""
+        if tc1_ns <= 0 or not self.timesync.add(tc1_ns / 1e9, ts1_ns / 1e9, receive_s):
+            self.refusal = "not a reply to a request of this station"
+            return False
+        off = self.uav_clock.offset_s
+        if off is not None:
+            self._measured_latency_s = max(0.0, off - self.timesync.offset_s)
+        return True
+
+    def add_gps_raw(self, h_acc_m: float, geoid_separation_m: float, receive_s: float) -> bool:
+        """GPS_RAW_INT's horizontal accuracy and geoid separation (m; NaN where the receiver gives none)."""
+        h_acc = h_acc_m if math.isfinite(h_acc_m) and h_acc_m > 0 else math.nan
+        return self._append(self.gnss, receive_s, (h_acc, geoid_separation_m))
+
+    def add_param(self, name: str, value: float) -> None:
+        """A PARAM_VALUE of the autopilot; MNT1_TYPE tells what its gimbal reports."""
+        if name == "MNT1_TYPE" and math.isfinite(value):
+            self.mount_type = int(round(value))
+
+    # -- depth -----------------------------------------------------------------------------------
+    def add_depth(self, t_source: float | None, depth_m: float, receive_s: float | None = None) -> bool:
+        """The UUV's depth (m, positive down), stamped ``t_source`` by the UUV and received at ``receive_s``.
+
+        Without ``receive_s`` (sessions that did not record arrivals) the UUV's stamp
+        is taken as station time; without ``t_source`` (BlueOS VFR_HUD, which carries
+        none) the arrival minus ``depth_latency_s`` is.
+        """
+        if not (isinstance(depth_m, (int, float)) and -5.0 <= depth_m <= 11000.0):
+            return self._refuse(self.depth, "depth_m not finite or outside [-5, 11000]")
+        latency = self.timing.depth_latency_s
+        if receive_s is None:
+            t = t_source
+        elif t_source is None:
+            t, self.depth_aligned_by = receive_s - latency, "arrival"
+        else:
+            if not math.isfinite(t_source):
+                return self._refuse(self.depth, "time not finite")
+            self.uuv_clock.add(t_source, receive_s)
+            station_minus_uuv = self.uuv_clock.offset_s - latency
+            if abs(station_minus_uuv) <= self.timing.depth_clock_tolerance_s:
+                t, self.depth_aligned_by = t_source, "uuv_clock"
+            else:
+                t, self.depth_aligned_by = t_source + station_minus_uuv, "arrival"
+                if self.uuv_clock.segments or len(self.depth) >= _NOTICE_AFTER:
+                    self._notice_once("uuv", -station_minus_uuv, f"the UUV's clock is {-station_minus_uuv:+.2f} s "
+                                      "off the station's: its depth is aligned by arrival times")
+        return self._append(self.depth, t, (depth_m,))

@@ -1,17 +1,31 @@
-"""Telemetry buffers sampled at a frame's time, and the vehicle clock mapped to UNIX time.
+"""Telemetry buffers sampled at a frame's time: interpolation rules, extrapolation, staleness.
 
 A :class:`Series` holds samples in increasing time and interpolates them with a
-rule per column: ``l`` linear, ``a`` an angle in radians (interpolated along the
-short way, so yaw crosses ±180° correctly), ``q`` four consecutive columns of a
-quaternion (w, x, y, z; spherical linear interpolation), ``s`` a step (the
-earlier sample's value, for flags). Staleness is explicit: a time further than
-``max_gap_s`` from both neighbours' gap, or more than ``max_hold_s`` after the
-last sample, or before the first, gets a status instead of a value.
+rule per column:
+
+- ``l`` linear; ``a`` an angle in radians (interpolated along the short way, so
+  yaw crosses ±180° correctly); ``s`` a step (the earlier sample's value, for flags);
+- ``q`` four consecutive columns of a quaternion (w, x, y, z; spherical linear
+  interpolation);
+- ``h`` (a value) and ``H`` (an angle) with their rates of change in ``d`` columns
+  (the i-th ``d`` is the rate of the i-th ``h``/``H``, per second): cubic Hermite
+  interpolation, exact for motions that are cubic between samples, so a slow
+  telemetry radio (ATTITUDE at 4 Hz) still gives the attitude between samples. A
+  sample whose rate is NaN is interpolated linearly. Step columns may hold NaN
+  (a value the source does not report).
+
+Staleness is explicit: a time between two samples further apart than
+``max_gap_s``, more than ``max_hold_s`` after the newest sample, or before the
+first, gets a status instead of a value. Within ``max_hold_s`` after the newest
+sample, ``h``/``H`` columns are extrapolated with their rate and other columns
+are held; :meth:`Series.sample` also returns each column's estimated error of that
+extrapolation or hold (half the last change of rate times the time squared, or the
+last rate of change times the time), so the fix's accuracy can grow with it.
 """
 
 from __future__ import annotations
 
-from collections import deque
+from typing import NamedTuple
 
 import numpy as np
 
@@ -21,8 +35,18 @@ GAP = 2  # the bracketing samples are too far apart
 STALE = 3  # the newest sample is too old
 
 
+class Sampled(NamedTuple):
+    values: np.ndarray  # (..., ncols); NaN where status is not OK
+    status: np.ndarray  # (...) int8
+    error: np.ndarray  # (..., ncols) 1-sigma estimate of the extrapolation/hold error; 0 when interpolated
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
 class Series:
-    """Append-only time series with interpolation; times in seconds of any one clock.
+    """Append-only time series with interpolation; times in seconds of one clock.
 
     ``keep_s`` bounds memory for live use: samples older than ``keep_s`` before the
     newest are dropped as the buffer grows. ``None`` keeps everything (offline).
@@ -31,6 +55,11 @@ class Series:
     def __init__(self, kinds: str, max_gap_s: float, max_hold_s: float, keep_s: float | None = None):
         if "q" in kinds and kinds.count("q") != 4:
             raise ValueError("a quaternion takes exactly four 'q' columns")
+        k = np.array(list(kinds))
+        self._herm = np.flatnonzero((k == "h") | (k == "H"))
+        self._rate = np.flatnonzero(k == "d")
+        if len(self._herm) != len(self._rate):
+            raise ValueError("every 'h'/'H' column needs one 'd' rate column")
         self.kinds = kinds
         self.max_gap_s = max_gap_s
         self.max_hold_s = max_hold_s
@@ -39,9 +68,11 @@ class Series:
         self._v = np.empty((64, len(kinds)))
         self._n = 0
         self.rejected = 0  # samples refused: out of order, non-finite or out of range
-        self._angle = np.array([k == "a" for k in kinds])
-        self._step = np.array([k == "s" for k in kinds])
-        self._quat = np.array([k == "q" for k in kinds])
+        self._angle = (k == "a") | (k == "H")
+        self._linear = (k == "l") | (k == "h") | (k == "d")
+        self._quat = k == "q"
+        self._may_be_nan = (k == "d") | (k == "s")  # unknown rates; steps that are not reported
+        self._exact = (k == "d") | (k == "s")  # no error estimate: rates themselves, flags
 
     def __len__(self) -> int:
         return self._n
@@ -54,10 +85,18 @@ class Series:
     def values(self) -> np.ndarray:
         return self._v[: self._n]
 
+    @property
+    def last_t(self) -> float | None:
+        return float(self._t[self._n - 1]) if self._n else None
+
     def append(self, t: float, values) -> bool:
-        """Add one sample; returns False (and counts it) if it is out of order or not finite."""
+        """Add one sample; returns False (and counts it) if it is out of order or not finite.
+
+        Rate (``d``) columns may be NaN: that sample is then interpolated linearly.
+        """
         values = np.asarray(values, dtype=float)
-        if not np.isfinite(t) or values.shape != (len(self.kinds),) or not np.all(np.isfinite(values)):
+        if (not np.isfinite(t) or values.shape != (len(self.kinds),)
+                or not np.all(np.isfinite(values) | self._may_be_nan)):
             self.rejected += 1
             return False
         if self._n and t <= self._t[self._n - 1]:
@@ -85,17 +124,16 @@ class Series:
         self._t = np.concatenate([self._t, np.empty(len(self._t))])
         self._v = np.concatenate([self._v, np.empty_like(self._v)])
 
-    def sample(self, t):
-        """Values at time(s) ``t``: ``(values (..., ncols), status (...))``; statuses above.
-
-        Rows whose status is not OK hold NaN.
-        """
+    def sample(self, t) -> Sampled:
+        """Values at time(s) ``t`` with their statuses (above) and extrapolation errors."""
         t = np.asarray(t, dtype=float)
-        out = np.full(t.shape + (len(self.kinds),), np.nan)
+        ncol = len(self.kinds)
+        out = np.full(t.shape + (ncol,), np.nan)
+        err = np.zeros(t.shape + (ncol,))
         status = np.full(t.shape, BEFORE_FIRST, dtype=np.int8)
         n = self._n
         if n == 0:
-            return out, status
+            return Sampled(out, status, err)
         ts, vs = self._t[:n], self._v[:n]
         i = np.searchsorted(ts, t, side="right")  # ts[i-1] <= t < ts[i]
         after_last = i >= n
@@ -104,25 +142,66 @@ class Series:
         inner = (i > 0) & ~after_last
         i0 = np.clip(i - 1, 0, n - 1)
         i1 = np.clip(i, 0, n - 1)
-        gap = ts[i1] - ts[i0]
-        status = np.where(inner & (gap > self.max_gap_s), GAP, status).astype(np.int8)
+        status = np.where(inner & (ts[i1] - ts[i0] > self.max_gap_s), GAP, status).astype(np.int8)
         ok = status == OK
-        if not np.any(ok):
-            return out, status
-        t0, t1 = ts[i0][ok], ts[i1][ok]
-        v0, v1 = vs[i0][ok], vs[i1][ok]
+        if np.any(ok & inner):
+            sel = ok & inner
+            out[sel] = self._interpolate(t[sel], ts[i0][sel], ts[i1][sel], vs[i0][sel], vs[i1][sel])
+        if np.any(ok & after_last):
+            sel = ok & after_last
+            out[sel], err[sel] = self._extrapolate(t[sel] - ts[-1])
+        return Sampled(out, status, err)
+
+    def _interpolate(self, t, t0, t1, v0, v1):
+        h = t1 - t0
         with np.errstate(invalid="ignore", divide="ignore"):
-            w = np.where(t1 > t0, (t[ok] - t0) / (t1 - t0), 0.0)
-        w = np.clip(w, 0.0, 1.0)[:, None]
+            w = np.clip(np.where(h > 0, (t - t0) / h, 0.0), 0.0, 1.0)
         diff = v1 - v0
-        diff[:, self._angle] = (diff[:, self._angle] + np.pi) % (2 * np.pi) - np.pi
-        res = v0 + w * diff
-        res[:, self._angle] = (res[:, self._angle] + np.pi) % (2 * np.pi) - np.pi
-        res[:, self._step] = v0[:, self._step]
+        diff[:, self._angle] = _wrap(diff[:, self._angle])
+        res = v0.copy()
+        res[:, self._linear | self._angle] += w[:, None] * diff[:, self._linear | self._angle]
         if self._quat.any():
-            res[:, self._quat] = slerp(v0[:, self._quat], v1[:, self._quat], w[:, 0])
-        out[ok] = res
-        return out, status
+            res[:, self._quat] = slerp(v0[:, self._quat], v1[:, self._quat], w)
+        if len(self._herm):
+            d0, d1 = v0[:, self._rate], v1[:, self._rate]
+            w2 = w[:, None]
+            hh = h[:, None]
+            h10 = w2 * (1 - w2) ** 2  # Hermite basis in the form v0 + w·Δ + corrections
+            h11 = w2 * w2 * (w2 - 1)
+            # cubic Hermite = linear interpolation + the rates' departure from the chord
+            herm = (h10 * (hh * d0 - diff[:, self._herm]) + h11 * (hh * d1 - diff[:, self._herm]))
+            herm = np.where(np.isfinite(herm), herm, 0.0)  # a NaN rate: linear
+            res[:, self._herm] += herm
+        res[:, self._angle] = _wrap(res[:, self._angle])
+        return res
+
+    def _extrapolate(self, dt):
+        """Values ``dt`` seconds after the newest sample and the error estimates (see the module doc)."""
+        n = self._n
+        last = self._v[n - 1]
+        res = np.tile(last, (len(dt), 1))
+        err = np.zeros_like(res)
+        if n >= 2:
+            prev, span = self._v[n - 2], self._t[n - 1] - self._t[n - 2]
+            change = last - prev
+            change[self._angle] = _wrap(change[self._angle])
+            err[:] = np.abs(change) / span * dt[:, None]  # held: drifts at the last rate of change
+            if self._quat.any():
+                dot = abs(float(np.dot(last[self._quat], prev[self._quat])))
+                turn = 2.0 * np.arccos(min(1.0, dot / (np.linalg.norm(last[self._quat]) * np.linalg.norm(prev[self._quat]))))
+                err[:, self._quat] = turn / span * dt[:, None]
+        if len(self._herm):
+            rate = last[self._rate]
+            has_rate = np.isfinite(rate)
+            res[:, self._herm] += np.where(has_rate, rate * dt[:, None], 0.0)
+            if n >= 2:
+                accel = np.abs(last[self._rate] - self._v[n - 2][self._rate]) / (self._t[n - 1] - self._t[n - 2])
+                extra = 0.5 * accel * dt[:, None] ** 2
+                err[:, self._herm] = np.where(has_rate & np.isfinite(extra), extra, err[:, self._herm])
+        err = np.where(np.isfinite(err), err, 0.0)
+        err[:, self._exact] = 0.0
+        res[:, self._angle] = _wrap(res[:, self._angle])
+        return res, err
 
 
 def slerp(q0, q1, w):
@@ -140,77 +219,3 @@ def slerp(q0, q1, w):
         b = np.where(small, w, np.sin(w * theta) / sin_t)
     q = a[..., None] * q0 + b[..., None] * q1
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-class VehicleClock:
-    """Maps the autopilot's ``time_boot_ms`` to UNIX time.
-
-    Preferred: SYSTEM_TIME pairs (``time_unix_usec`` from the autopilot's GNSS);
-    the offset is the median of the last ``window`` pairs, so one bad pair cannot
-    move it. Fallback when no SYSTEM_TIME carries a UNIX time: the smallest
-    ``receive time − boot time`` seen, i.e. the offset plus the link's least
-    delay. A reboot (boot time going back by more than ``reboot_s``) resets it and
-    calls ``on_reboot()``, so samples stamped with the old boot clock can be dropped.
-    """
-
-    def __init__(self, window: int = 31, reboot_s: float = 5.0, on_reboot=None):
-        self._system = deque(maxlen=window)
-        self._recv_min: float | None = None
-        self._last_boot_s: float | None = None
-        self._reboot_s = reboot_s
-        self.reboots = 0
-        self._on_reboot = on_reboot
-
-    def _check_reboot(self, boot_s: float) -> None:
-        last = self._last_boot_s
-        if last is not None and boot_s < last - self._reboot_s:
-            self._system.clear()
-            self._recv_min = None
-            self.reboots += 1
-            if self._on_reboot is not None:
-                self._on_reboot()
-            last = None
-        self._last_boot_s = boot_s if last is None else max(boot_s, last)
-
-    def add_system_time(self, time_boot_ms: int, time_unix_usec: int) -> None:
-        """A SYSTEM_TIME message; ``time_unix_usec == 0`` (autopilot without UNIX time) is ignored."""
-        boot_s = time_boot_ms / 1000.0
-        self._check_reboot(boot_s)
-        if time_unix_usec > 0:
-            self._system.append(time_unix_usec / 1e6 - boot_s)
-
-    def add_receive(self, time_boot_ms: int, receive_unix_s: float) -> None:
-        """Any timestamped message with the ground station's receive time (UNIX seconds)."""
-        boot_s = time_boot_ms / 1000.0
-        self._check_reboot(boot_s)
-        off = receive_unix_s - boot_s
-        if self._recv_min is None or off < self._recv_min:
-            self._recv_min = off
-
-    @property
-    def source(self) -> str | None:
-        """``"system_time"``, ``"receive"``, or None before any usable message."""
-        if self._system:
-            return "system_time"
-        if self._recv_min is not None:
-            return "receive"
-        return None
-
-    @property
-    def receive_offset_s(self) -> float | None:
-        """The smallest ``receive time − boot time`` seen (seconds), whatever SYSTEM_TIME says."""
-        return self._recv_min
-
-    @property
-    def offset_s(self) -> float | None:
-        """UNIX time minus boot time (seconds), or None if unknown."""
-        if self._system:
-            return float(np.median(self._system))
-        return self._recv_min
-
-    def to_boot_s(self, t_unix):
-        """Boot-clock seconds of UNIX time(s); raises LookupError when no offset is known."""
-        off = self.offset_s
-        if off is None:
-            raise LookupError("no clock reference yet (no SYSTEM_TIME or timestamped message)")
-        return np.asarray(t_unix, dtype=float) - off

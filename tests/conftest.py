@@ -71,7 +71,9 @@ def _telemetry(
     """A Telemetry with constant values sampled at ``rate_hz`` from T0_UNIX for ``duration_s``.
 
     ``height_m`` is the UAV's reported position above the water; relative_alt and
-    alt are derived from it for the water reference in use.
+    alt are derived from it for the water reference in use. Every sample arrives
+    the instant it is taken, so the autopilot's boot clock maps exactly onto the
+    station clock (BOOT0_MS at T0_UNIX).
     """
     tel = Telemetry()
     if surface_amsl_m is not None:
@@ -82,14 +84,14 @@ def _telemetry(
     n = int(duration_s * rate_hz) + 1
     for i in range(n):
         boot_ms = BOOT0_MS + round(i * 1000 / rate_hz)
-        t = T0_UNIX + (boot_ms - BOOT0_MS) / 1000
+        t = T0_UNIX + (boot_ms - BOOT0_MS) / 1000  # received the instant it was sampled
         if system_time:
-            tel.clock.add_system_time(boot_ms, round(t * 1e6))
-        tel.add_attitude(boot_ms, r, p, y)
-        tel.add_position(boot_ms, lat, lon, alt_amsl_m, rel_alt)
-        tel.add_gimbal(boot_ms, q, gimbal_flags)
+            tel.add_system_time(boot_ms, round(t * 1e6), t)
+        tel.add_attitude(boot_ms, r, p, y, (0.0, 0.0, 0.0), t)
+        tel.add_position(boot_ms, lat, lon, alt_amsl_m, rel_alt, (0.0, 0.0, 0.0), t)
+        tel.add_gimbal(boot_ms, q, gimbal_flags, t)
         if mount_rpy_deg is not None:
-            tel.add_mount(boot_ms, *mount_rpy_deg)
+            tel.add_mount(boot_ms, *mount_rpy_deg, t)
         tel.add_depth(t, depth_m)
     return tel
 

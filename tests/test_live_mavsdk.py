@@ -10,6 +10,7 @@ import pytest
 from live_helpers import free_port
 
 from groundstation.mavlink_io import mavutil
+from groundstation.sources.rates import needed_rates
 from groundstation.sources.uav_mavlink import UavMavlink
 from groundstation.sources.uav_mavsdk import UavMavsdk, mavsdk_url
 from localizer.telemetry import Telemetry
@@ -19,7 +20,8 @@ def test_backends_agree_on_one_stream():
     mav = mavutil()
     ports = free_port(), free_port()
     tels = Telemetry(), Telemetry()
-    backends = UavMavlink(f"udpin:127.0.0.1:{ports[0]}", tels[0]), UavMavsdk(f"udpin:127.0.0.1:{ports[1]}", tels[1])
+    backends = (UavMavlink(f"udpin:127.0.0.1:{ports[0]}", tels[0], needed_rates("gimbal_device")),
+                UavMavsdk(f"udpin:127.0.0.1:{ports[1]}", tels[1]))
     senders = [mav.mavlink_connection(f"udpout:127.0.0.1:{p}", source_system=1, source_component=1) for p in ports]
     rng = np.random.default_rng(5)
 
@@ -57,9 +59,11 @@ def test_backends_agree_on_one_stream():
     for name in ("attitude", "position", "gimbal"):
         a, b = getattr(tels[0], name), getattr(tels[1], name)
         assert len(a) == len(b) == 25, name
-        np.testing.assert_array_equal(a.times, b.times)
         np.testing.assert_allclose(a.values, b.values, rtol=1e-6, atol=1e-7)  # MAVSDK's JSON prints floats
-    assert tels[0].clock.offset_s == pytest.approx(tels[1].clock.offset_s, abs=1e-6)
+        # each backend aligns by its own receive times (MAVSDK hands messages over later, more so on a
+        # loaded machine): the same boot-clock spacing, shifted by the difference of least delays
+        np.testing.assert_allclose(np.diff(a.times), np.diff(b.times), atol=0.05)
+        assert abs(np.median(a.times - b.times)) < 0.5, name
 
 
 def test_connection_strings():

@@ -14,6 +14,7 @@ from live_helpers import free_port
 
 from groundstation.mavlink_io import mavutil
 from groundstation.sources.depth_zenoh import DepthZenoh, parse_depth
+from groundstation.sources.rates import needed_rates
 from groundstation.sources.uav_mavlink import GCS_SYSID, UavMavlink
 from groundstation.sources.video_live import VideoLive
 from groundstation.zenoh_session import open_session
@@ -31,43 +32,55 @@ async def _run_for(worker, seconds, during=None):
 
 
 def test_depth_over_zenoh_both_shapes_and_garbage(caplog):
+    """Depth stamped by a UUV clock an hour ahead is aligned by its arrival (and says so); one that agrees
+    with the station is taken as stamped; BlueOS's VFR_HUD has no time and is taken at its arrival."""
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     service = open_session(listen=[ep])
     publisher = open_session(connect=[ep])
-    tel_own, tel_blueos = Telemetry(), Telemetry()
+    tel_own, tel_sync, tel_blueos = Telemetry(), Telemetry(), Telemetry()
     own = DepthZenoh(service, "uuv/depth", tel_own)
+    synced = DepthZenoh(service, "uuv/depth_synced", tel_sync)
     blueos = DepthZenoh(service, "mavlink/*/*/VFR_HUD", tel_blueos, shape="blueos")
-    t0 = time.time()
+    stamps = []
 
     async def publish():
         await asyncio.sleep(0.5)  # let the subscriptions propagate
         for i in range(3):
-            publisher.put("uuv/depth", json.dumps({"t": t0 + i * 0.1, "depth_m": 1.0 + i, "extra": "x"}))
+            publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.0 + i, "extra": "x"}))
+            stamps.append(time.time())
+            publisher.put("uuv/depth_synced", json.dumps({"t": stamps[-1], "depth_m": 0.5}))
+            await asyncio.sleep(0.05)
         publisher.put("uuv/depth", b"\xff\x00garbage")
-        publisher.put("uuv/depth", json.dumps({"t": t0 + 1, "depth_m": "deep"}))
-        publisher.put("uuv/depth", json.dumps({"t": t0 + 2, "depth_m": 99999.0}))  # out of range
-        publisher.put("uuv/depth", json.dumps({"t": t0 + 3600, "depth_m": 1.5}))  # a clock an hour ahead
-        publisher.put("uuv/depth", json.dumps({"t": t0 + 0.3, "depth_m": 4.0}))  # must still be taken
+        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": "deep"}))
+        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0}))  # out of range
+        await asyncio.sleep(0.05)
+        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0}))
         hud = {"header": {"system_id": 1, "component_id": 1, "sequence": 5, "message_id": 74},
                "message": {"type": "VFR_HUD", "alt": -1.25, "airspeed": 0.0}}
         publisher.put("mavlink/1/1/VFR_HUD", json.dumps(hud))
         publisher.put("mavlink/1/1/VFR_HUD", json.dumps({"message": {"type": "VFR_HUD"}}))
 
-    async def both():
-        await asyncio.gather(_run_for(own, 0.5, publish), _run_for(blueos, 0.8))
+    async def all_three():
+        await asyncio.gather(_run_for(own, 0.8, publish), _run_for(synced, 1.3), _run_for(blueos, 1.3))
 
     caplog.set_level(logging.WARNING)
+    t_start = time.time()
     try:
-        asyncio.run(both())
+        asyncio.run(all_three())
     finally:
         publisher.close()
         service.close()
     assert list(tel_own.depth.values[:, 0]) == [1.0, 2.0, 3.0, 4.0]
-    assert own.bad == 2 and own.refused == 2
+    assert own.bad == 2 and own.refused == 1
+    assert tel_own.depth_aligned_by == "arrival"
+    assert tel_own.uuv_clock_minus_station_s == pytest.approx(3600.0, abs=0.2)
+    assert t_start < tel_own.depth.times[0] < time.time()  # on the station clock, not an hour ahead
+    assert any("UUV's clock is +3600" in r.message for r in caplog.records)
+    assert tel_sync.depth_aligned_by == "uuv_clock" and list(tel_sync.depth.times) == stamps
     assert list(tel_blueos.depth.values[:, 0]) == [1.25] and blueos.bad == 1
-    assert any("'deep'" in r.message or "deep" in r.message for r in caplog.records)
+    assert t_start < tel_blueos.depth.times[0] < time.time()
+    assert any("deep" in r.message for r in caplog.records)
     assert any("garbage" in r.message for r in caplog.records)
-    assert any("ahead of the receive time" in r.message for r in caplog.records)
 
 
 def test_a_flood_of_one_problem_stays_a_trickle_in_the_log(caplog):
@@ -86,26 +99,25 @@ def test_a_flood_of_one_problem_stays_a_trickle_in_the_log(caplog):
 
 def test_parse_depth_rejects_non_numbers():
     with pytest.raises(ValueError, match="depth_m"):
-        parse_depth(b'{"t": 1.0, "depth_m": NaN}', "skyfix", 0.0)
+        parse_depth(b'{"t": 1.0, "depth_m": NaN}', "skyfix")
     with pytest.raises(ValueError, match="not VFR_HUD"):
-        parse_depth(b'{"message": {"type": "ATTITUDE", "alt": 1}}', "blueos", 0.0)
+        parse_depth(b'{"message": {"type": "ATTITUDE", "alt": 1}}', "blueos")
 
 
 def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
     port = free_port()
     tel = Telemetry()
-    uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel)
+    uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel, needed_rates("fixed"))
     mav = mavutil()
     sender = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
     other = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=7, source_component=1)
-    now = time.time()
 
     async def send():
         sender.mav.heartbeat_send(mav.mavlink.MAV_TYPE_QUADROTOR, mav.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4)
         await asyncio.sleep(0.1)
         for i in range(10):
             boot_ms = 100_000 + i * 20
-            sender.mav.system_time_send(int((now + i * 0.02) * 1e6), boot_ms)
+            sender.mav.system_time_send(int(time.time() * 1e6), boot_ms)
             sender.mav.attitude_send(boot_ms, 0.01, -0.02, 0.5 + i * 0.01, 0, 0, 0)
             sender.mav.global_position_int_send(boot_ms, 634400000, 104000000, 12000, 10000, 0, 0, 0, 0)
             other.mav.attitude_send(boot_ms, 1.0, 1.0, 1.0, 0, 0, 0)
@@ -123,8 +135,9 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
     assert len(tel.attitude) == 10 and len(tel.position) == 10
     assert tel.attitude.values[:, 0].max() == pytest.approx(0.01)  # system 7's attitude was not mixed in
     assert uav.health.other_systems == 10 and uav.health.bad_data >= 1
-    assert tel.clock.source == "system_time"
-    assert set(uav.status(time.time())["age_s"]) >= {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME"}
+    status = uav.status(time.time())
+    assert abs(status["clocks"]["station_minus_gnss_s"]) < 0.1  # SYSTEM_TIME was stamped when sent
+    assert set(status["age_s"]) >= {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME"}
     assert hb is not None and hb.type == mav.mavlink.MAV_TYPE_GCS and hb.get_srcSystem() == GCS_SYSID
 
 

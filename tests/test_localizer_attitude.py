@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pyproj import Geod
 
-from localizer.attitude import R_to_euler, euler_to_quat, euler_to_R, quat_to_R
+from localizer.attitude import euler_rates, euler_to_quat, euler_to_R, quat_to_R, rotvec
 from localizer.fix import locate
 from localizer.pose import camera_pose
 
@@ -47,9 +47,6 @@ def test_quaternion_and_euler_agree(roll, pitch, yaw):
     R = euler_to_R(roll, pitch, yaw)
     assert np.allclose(quat_to_R(euler_to_quat(roll, pitch, yaw)), R, atol=1e-12)
     assert np.allclose(np.linalg.norm(euler_to_quat(roll, pitch, yaw)), 1.0)
-    r2, p2, y2 = R_to_euler(R)
-    assert np.allclose(euler_to_R(r2, p2, y2), R, atol=1e-9)
-    assert abs(p2 - pitch) < 1e-9
 
 
 def test_hand_built_quaternion_matches_euler(quat_ypr):
@@ -190,3 +187,106 @@ def test_lever_arm_follows_roll_and_pitch(make_cal, make_telemetry):
     c, s = math.cos(math.radians(10)), math.sin(math.radians(10))
     # nose up: forward tips up, down tips forward
     assert np.allclose(pose.cam_offset_ned_m[0], [c + 0.25 * s, 0.0, -s + 0.25 * c], atol=1e-12)
+
+
+# ---- straight down, as rotations: no Euler round trip ----
+
+
+def _f32(q):
+    """A quaternion as MAVLink carries it (float32)."""
+    return np.asarray(q, dtype=np.float32).astype(float)
+
+
+def rot(axis, deg_):
+    return rodrigues(np.eye(3)[axis], math.radians(deg_))
+
+
+Z, Y, X = 2, 1, 0
+
+
+@pytest.mark.parametrize("rel_yaw_deg, vehicle_yaw_deg", [(52.3, 20.0), (-130.0, 175.0), (0.0, -90.0)])
+def test_commanded_nadir_vehicle_frame_gimbal(make_cal, make_telemetry, rel_yaw_deg, vehicle_yaw_deg):
+    """Pitch exactly −90° with yaw relative to the vehicle (flags 44, as ArduCopter sends it), float32 on the
+    wire: the image is turned by vehicle yaw + relative yaw; built here as Rz(ψ_v)·Rz(ψ_rel)·Ry(−90°)."""
+    q = _f32(euler_to_quat(0.0, math.radians(-90.0), math.radians(rel_yaw_deg)))
+    tel = make_telemetry(uav_rpy_deg=(4.0, -3.0, vehicle_yaw_deg), gimbal_flags=44)
+    tel.gimbal.clear()
+    for i in range(61):
+        tel.add_gimbal(250_000 + 50 * i, q, 44, T0_UNIX + 0.05 * i)
+    pose = pose_of(make_cal(), tel)
+    R_expected = rot(Z, vehicle_yaw_deg) @ rot(Z, rel_yaw_deg) @ rot(Y, -90.0)
+    assert np.allclose(pose.R_ned_from_cv[0][:, 2], [0.0, 0.0, 1.0], atol=1e-7)  # straight down
+    h = math.radians(vehicle_yaw_deg + rel_yaw_deg)
+    assert np.allclose(image_right(pose), [-math.sin(h), math.cos(h), 0.0], atol=1e-6)
+    assert np.allclose(pose.R_ned_from_cv[0], R_expected @ np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0.0]]), atol=1e-6)
+
+
+def test_facts_quaternion_keeps_its_yaw(make_cal, make_telemetry):
+    """The quaternion ArduCopter SITL sent pointing down (facts.md, "yaw 52.3°" from the vehicle's). A pure
+    Rz(ψ)·Ry(−90°) is (c·a, s·a, −c·a, s·a) with c, s = cos, sin ψ/2 and a = √½: ψ = 2·atan2(x, w) = 52.67°."""
+    q = _f32([0.63373, 0.31367, -0.63373, 0.31367])
+    rel_yaw = math.degrees(2 * math.atan2(q[1], q[0]))
+    assert rel_yaw == pytest.approx(52.3, abs=0.5)
+    tel = make_telemetry(uav_rpy_deg=(0.0, 0.0, 30.0), gimbal_flags=44)
+    tel.gimbal.clear()
+    for i in range(61):
+        tel.add_gimbal(250_000 + 50 * i, q, 44, T0_UNIX + 0.05 * i)
+    pose = pose_of(make_cal(), tel)
+    assert np.allclose(optical_axis(pose), [0.0, 0.0, 1.0], atol=1e-4)
+    right = image_right(pose)
+    assert math.degrees(math.atan2(-right[0], right[1])) == pytest.approx(30.0 + rel_yaw, abs=1e-3)
+
+
+def test_earth_frame_nadir_ignores_vehicle_yaw(make_cal, make_telemetry):
+    q = _f32(euler_to_quat(0.0, math.radians(-90.0), math.radians(-40.0)))
+    for vehicle_yaw in (0.0, 77.0):
+        tel = make_telemetry(uav_rpy_deg=(0.0, 0.0, vehicle_yaw), gimbal_flags=64)
+        tel.gimbal.clear()
+        for i in range(61):
+            tel.add_gimbal(250_000 + 50 * i, q, 64, T0_UNIX + 0.05 * i)
+        right = image_right(pose_of(make_cal(), tel))
+        assert math.degrees(math.atan2(-right[0], right[1])) == pytest.approx(-40.0, abs=1e-4)
+
+
+@pytest.mark.parametrize("roll_pitch, param", [("body", None), ("auto", 1.0)])
+def test_servo_mount_roll_pitch_are_relative_to_the_leaning_body(make_cal, make_telemetry, roll_pitch, param):
+    """ArduPilot's servo mount (MNT1_TYPE 1) reports servo demands: target − lean, flagged as horizon-relative.
+    The vehicle leans 15° right and 10° nose down; the camera is truly at pitch −60° from the horizon, yaw 0
+    relative to the vehicle heading 30°. Built here as R_body · R(servo angles)."""
+    lean_r, lean_p, yaw_v = 15.0, -10.0, 30.0
+    servo = (0.0 - lean_r, -60.0 - lean_p, 0.0)  # roll, pitch, yaw demands
+    q = _f32(euler_to_quat(*(math.radians(a) for a in servo)))
+    tel = make_telemetry(uav_rpy_deg=(lean_r, lean_p, yaw_v), gimbal_flags=44)
+    tel.gimbal.clear()
+    for i in range(61):
+        tel.add_gimbal(250_000 + 50 * i, q, 44, T0_UNIX + 0.05 * i)
+    if param is not None:
+        tel.add_param("MNT1_TYPE", param)
+    cal = make_cal(mount={"attitude_source": "gimbal_device", "gimbal_roll_pitch": roll_pitch})
+    pose = pose_of(cal, tel)
+    R_body = rot(Z, yaw_v) @ rot(Y, lean_p) @ rot(X, lean_r)
+    R_cam = R_body @ rot(Z, servo[2]) @ rot(Y, servo[1]) @ rot(X, servo[0])
+    assert np.allclose(optical_axis(pose), R_cam[:, 0], atol=1e-6)
+    # read as horizon-relative (the flags' word), the same message would point elsewhere
+    horizon = pose_of(make_cal(mount={"attitude_source": "gimbal_device", "gimbal_roll_pitch": "horizon"}), tel)
+    miss = math.degrees(math.acos(np.clip(optical_axis(horizon) @ optical_axis(pose), -1, 1)))
+    assert miss > 10.0
+
+
+def test_euler_rates_from_body_rates():
+    """Body rates p, q, r of a leaning vehicle: the Euler angles of R·exp(ω dt) change at the returned rates."""
+    roll, pitch, yaw = 0.3, -0.2, 1.0
+    w = np.array([0.4, -0.7, 0.25])  # body FRD rad/s
+    dt = 1e-6
+    R1 = euler_to_R(roll, pitch, yaw) @ cv2.Rodrigues(w * dt)[0]
+    r1 = math.atan2(R1[2, 1], R1[2, 2])
+    p1 = -math.asin(R1[2, 0])
+    y1 = math.atan2(R1[1, 0], R1[0, 0])
+    expected = ((r1 - roll) / dt, (p1 - pitch) / dt, (y1 - yaw) / dt)
+    assert np.allclose(euler_rates(roll, pitch, *w), expected, atol=1e-5)
+
+
+def test_rotvec_matches_cv2():
+    rng = np.random.default_rng(7)
+    for r in rng.normal(0, 1.0, (20, 3)):
+        assert np.allclose(rotvec(cv2.Rodrigues(r)[0]), r, atol=1e-9)

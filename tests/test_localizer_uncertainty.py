@@ -1,4 +1,7 @@
-"""The fix's 1-sigma accuracy against Monte-Carlo: perturb each input by its sigma, measure."""
+"""The fix's 1-sigma accuracy against Monte-Carlo: perturb each input by its sigma, measure.
+
+Also the terms beyond the calibration's sigmas: the UAV's own position error, extrapolated
+attitude, and a time-alignment error that moves a rotating, travelling camera."""
 
 import dataclasses
 import itertools
@@ -61,7 +64,7 @@ ONLY = {  # each input alone, at a size that makes it dominate
 def test_h_acc_matches_monte_carlo(scene):
     R, u, v, h, d = SCENES[scene]
     sig = Sigmas()
-    h_acc, _ = accuracy(CAM, R, u, v, h, d, N_WATER, sig)
+    h_acc = accuracy(CAM, R, u, v, h, d, N_WATER, sig)[0]
     drms, bias = monte_carlo_drms(R, u, v, h, d, sig)
     assert float(h_acc) == pytest.approx(drms, rel=0.15)
     assert bias < 0.2 * drms  # the linearization is fair: the spread is centred on the fix
@@ -72,7 +75,7 @@ def test_each_input_enters_with_its_own_sigma(name):
     R, u, v, h, d = SCENES["35° oblique"]
     zero = dict.fromkeys(ONLY, 0.0)
     sig = dataclasses.replace(Sigmas(), **{**zero, name: ONLY[name]})
-    h_acc, _ = accuracy(CAM, R, u, v, h, d, N_WATER, sig)
+    h_acc = accuracy(CAM, R, u, v, h, d, N_WATER, sig)[0]
     drms, _ = monte_carlo_drms(R, u, v, h, d, sig, seed=2)
     assert drms > 0.01
     assert float(h_acc) == pytest.approx(drms, rel=0.15)
@@ -96,19 +99,49 @@ def test_h_acc_grows_off_nadir_and_with_height():
 
 def test_uav_position_accuracy_adds_in_quadrature_and_vertical():
     R, u, v, h, d = SCENES["35° oblique"]
-    base, _ = accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(depth_m=0.1))
-    more, v_acc = accuracy(
-        CAM, R, u, v, h, d, N_WATER, Sigmas(uav_horizontal_m=1.5, depth_m=0.1, surface_amsl_m=0.2)
+    base = accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(depth_m=0.1))[0]
+    more, v_acc, cov = accuracy(
+        CAM, R, u, v, h, d, N_WATER, Sigmas(depth_m=0.1, surface_amsl_m=0.2), sigma_uav_m=1.5
     )
     assert float(more) == pytest.approx(math.sqrt(float(base) ** 2 + 1.5**2))
     assert float(v_acc) == pytest.approx(math.sqrt(0.1**2 + 0.2**2))
+    assert float(more) == pytest.approx(math.sqrt(cov[0, 0] + cov[1, 1]))
+
+
+def test_extrapolated_attitude_adds_to_tilt_and_heading():
+    """Extra tilt and heading sigmas from extrapolation act like larger calibration sigmas."""
+    R, u, v, h, d = SCENES["35° oblique"]
+    extra_tilt, extra_yaw = math.radians(0.4), math.radians(0.9)
+    with_extra = accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(), sigma_tilt_rad=extra_tilt,
+                          sigma_yaw_rad=extra_yaw)[0]
+    wider = Sigmas(tilt_deg=math.hypot(0.5, 0.4), yaw_deg=math.hypot(1.5, 0.9))
+    assert float(with_extra) == pytest.approx(float(accuracy(CAM, R, u, v, h, d, N_WATER, wider)[0]))
+
+
+def test_time_alignment_error_against_monte_carlo():
+    """A camera turning at ω and travelling at v, matched to telemetry δt ~ N(0, σ_t) off: the fix moves by
+    the rotation ω·δt of the ray, v_h·δt, and the height change −v_d·δt. Checked by drawing δt."""
+    R, u, v, h, d = SCENES["35° oblique"]
+    omega = np.array([0.05, -0.12, 0.3])  # rad/s in NED
+    vel = np.array([1.5, -0.8, 0.6])  # m/s
+    quiet = Sigmas(pixel_px=0.0, tilt_deg=0.0, yaw_deg=0.0, height_m=0.0, depth_m=0.0, time_s=0.05)
+    h_acc, _, cov = accuracy(CAM, R, u, v, h, d, N_WATER, quiet, omega_ned=omega, velocity_ned_mps=vel)
+    rng = np.random.default_rng(5)
+    dt = rng.normal(0.0, quiet.time_s, 4000)
+    Rs = np.stack([cv2.Rodrigues(omega * x)[0] @ R for x in dt])
+    true, _ = pixel_to_offset(CAM, R, u, v, h, d, N_WATER)
+    off, _ = pixel_to_offset(CAM, Rs, np.full(len(dt), u), np.full(len(dt), v), h - vel[2] * dt, d, N_WATER)
+    err = off + vel[:2] * dt[:, None] - true
+    assert float(h_acc) == pytest.approx(math.sqrt(np.mean(np.sum(err**2, axis=-1))), rel=0.05)
+    assert cov[0, 1] == pytest.approx(np.mean(err[:, 0] * err[:, 1]), rel=0.15, abs=1e-5)
 
 
 def test_batched_accuracy():
     R, u, v, h, d = SCENES["35° oblique"]
     Rs = np.stack([R, camera_R(0, 0)])
-    h_acc, v_acc = accuracy(
+    h_acc, v_acc, cov = accuracy(
         CAM, Rs, [u, CAM.cx], [v, CAM.cy], [h, 30.0], [d, 2.0], N_WATER, Sigmas()
     )
+    assert cov.shape == (2, 2, 2)
     assert h_acc.shape == v_acc.shape == (2,)
     assert h_acc[0] == pytest.approx(float(accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas())[0]))

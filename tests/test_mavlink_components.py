@@ -1,8 +1,9 @@
 """MAVLink messages from several components of the UAV, as pymavlink decodes them off the wire.
 
 A MAVLink gimbal (component 154) stamps GIMBAL_DEVICE_ATTITUDE_STATUS with its
-own ``time_boot_ms``; the samples must land on the autopilot's clock, not be
-dropped as "no gimbal" nor make the clock believe the autopilot rebooted.
+own ``time_boot_ms``; the samples must be aligned by its own clock, not be
+dropped as "no gimbal" nor make the autopilot's clock believe it rebooted. The
+link delay comes from TIMESYNC replies, as ArduPilot answers them.
 """
 
 from __future__ import annotations
@@ -54,6 +55,9 @@ def _feed(tel: Telemetry, rng, gimbal_component: int, gimbal_boot0_ms: int, extr
         if k % 50 == 0:
             st = mav.MAVLink_system_time_message(int(t * 1e6), ap_ms)
             messages.append((t + delay + 0.003, _decode(st, 1)))
+            # our TIMESYNC request left at t, reached the autopilot 40 ms later and came back 40 ms after that
+            sync = mav.MAVLink_timesync_message(round((ap_ms / 1000 + 0.04) * 1e9), round(t * 1e9))
+            messages.append((t + 0.08, _decode(sync, 1)))
     messages.extend(extra)
     for t_recv, msg in sorted(messages, key=lambda m: m[0]):
         ingest(tel, msg, t_recv)
@@ -76,7 +80,9 @@ def _cal():
 def test_gimbal_samples_land_on_the_autopilot_clock(gimbal_component, gimbal_boot0_ms):
     tel = Telemetry()
     _feed(tel, np.random.default_rng(3), gimbal_component, gimbal_boot0_ms)
-    assert tel.clock.reboots == 0
+    assert tel.uav_clock.segments == 0
+    # the least delay of 150 samples is 40 ms plus the smallest of their exponential jitters
+    assert tel.latency_source == "timesync" and tel.uav_latency_s == pytest.approx(0.04, abs=5e-4)
     times = T0 + np.array([0.5, 1.2, 2.5])
     pose = camera_pose(_cal(), tel, times)
     assert list(pose.status) == ["ok"] * 3
@@ -97,14 +103,18 @@ def test_other_components_attitude_is_not_the_autopilots():
 
 
 def test_a_garbage_frame_cannot_fake_a_reboot_but_a_real_reboot_is_seen():
-    """time_boot_ms 0 with a NaN roll is refused before it reaches the clock; a valid one is a reboot."""
+    """time_boot_ms 0 with a NaN roll is refused before it reaches the clock; a valid one is a reboot,
+    after which the earlier samples still serve the earlier frames."""
     mav = mavutil().mavlink
     tel = Telemetry()
     garbage = _decode(mav.MAVLink_attitude_message(0, float("nan"), 0.0, 0.3, 0, 0, 0), 1)
     _feed(tel, np.random.default_rng(5), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.0, garbage)])
-    assert tel.clock.reboots == 0 and tel.attitude.rejected >= 1
+    assert tel.uav_clock.segments == 0 and tel.attitude.rejected >= 1
     assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]
 
+    n = len(tel.attitude)
     rebooted = _decode(mav.MAVLink_attitude_message(1200, 0.0, 0.0, 0.3, 0, 0, 0), 1)
     assert ingest(tel, rebooted, T0 + 3.5)
-    assert tel.clock.reboots == 1 and len(tel.attitude) == 1  # the old boot clock's samples are gone
+    assert tel.uav_clock.segments == 1 and len(tel.attitude) == n + 1
+    assert any("rebooted" in notice for notice in tel.notices)
+    assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]

@@ -92,7 +92,8 @@ def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> d
                 "time_week_ms": week_ms, "time_week": week, "fix_type": FIX_NONE, "lat": 0, "lon": 0, "alt": 0.0,
                 "hdop": DOP_MAX, "vdop": DOP_MAX, "vn": 0.0, "ve": 0.0, "vd": 0.0, "speed_accuracy": 0.0,
                 "horiz_accuracy": 0.0, "vert_accuracy": 0.0, "satellites_visible": 0, "yaw": 0}
-    week, week_ms = gps_time(fix.t_unix)
+    t_exposure = fix.t_gnss if math.isfinite(fix.t_gnss) else fix.t_unix
+    week, week_ms = gps_time(t_exposure)
     ignore = IGNORE_VELOCITY
     h_acc, v_acc = fix.h_acc_m, fix.v_acc_m
     if not math.isfinite(h_acc):
@@ -101,7 +102,7 @@ def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> d
     if not math.isfinite(v_acc):
         ignore |= IGNORE_VERT_ACC | IGNORE_VDOP
         v_acc = 0.0
-    return {"time_usec": int(fix.t_unix * 1e6), "gps_id": 0, "ignore_flags": ignore, "time_week_ms": week_ms,
+    return {"time_usec": int(t_exposure * 1e6), "gps_id": 0, "ignore_flags": ignore, "time_week_ms": week_ms,
             "time_week": week, "fix_type": FIX_3D, "lat": round(fix.lat * 1e7), "lon": round(fix.lon * 1e7),
             "alt": float(fix.alt_amsl_m), "hdop": _dop(h_acc), "vdop": _dop(v_acc), "vn": 0.0, "ve": 0.0, "vd": 0.0,
             "speed_accuracy": 0.0, "horiz_accuracy": float(h_acc), "vert_accuracy": float(v_acc),

@@ -2,7 +2,9 @@
 
 ``session.toml`` (version 1 and the calibration's tables) is written first;
 ``uav.tlog`` gets every good MAVLink frame from the UAV with its receive time,
-``depth.jsonl`` every accepted depth sample, ``positions.csv`` every fix, and
+``depth.jsonl`` every accepted depth sample (``t`` the UUV's own stamp, or the
+arrival minus the depth latency when the source has none, and ``t_recv`` its
+arrival on the station clock), ``positions.csv`` every fix, and
 ``video.ts`` + ``video_frames.csv`` the received frames (raw frames piped into an
 ``ffmpeg`` process encoding H.264 into MPEG-TS, with wall-clock timestamps so a
 replay keeps the real pacing). Every file is append-only and flushed at least
@@ -111,7 +113,8 @@ class VideoWriter:
 class Recorder:
     """Worker and sink writing the session; see the module docstring."""
 
-    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None):
+    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None,
+                 depth_latency_s: float = 0.0):
         self.dir = Path(directory)
         if self.dir.exists() and any(self.dir.iterdir()):
             raise FileExistsError(f"--record {directory}: exists and is not empty (a recording is never overwritten)")
@@ -126,6 +129,7 @@ class Recorder:
         self._pos_csv.writerow(COLUMNS)
         # started now, not at the first frame: spawning ffmpeg takes tens of ms the event loop cannot spare
         self._video = VideoWriter(self.dir / "video.ts", self.dir / "video_frames.csv", video_size) if video_size else None
+        self.depth_latency_s = depth_latency_s
         self.mavlink_frames = 0
         self.depth_samples = 0
         self.fixes = 0
@@ -134,8 +138,9 @@ class Recorder:
         self._tlog.write(struct.pack(">Q", int(t_recv * 1e6)) + msg.get_msgbuf())
         self.mavlink_frames += 1
 
-    def on_depth(self, t_unix: float, depth_m: float) -> None:
-        self._depth.write(json.dumps({"t": t_unix, "depth_m": depth_m}) + "\n")
+    def on_depth(self, t_uuv: float | None, depth_m: float, t_recv: float) -> None:
+        t = t_recv - self.depth_latency_s if t_uuv is None else t_uuv
+        self._depth.write(json.dumps({"t": t, "depth_m": depth_m, "t_recv": t_recv}) + "\n")
         self.depth_samples += 1
 
     def on_frame(self, frame) -> None:

@@ -1,12 +1,14 @@
 """The UUV's depth over Zenoh, in one of two payload shapes.
 
 ``skyfix``: JSON ``{"t": <UNIX s>, "depth_m": <m, positive down>}`` on the depth
-key (extra keys ignored), the same shape as a session's ``depth.jsonl``.
+key (extra keys ignored), the same shape as a session's ``depth.jsonl``. ``t`` is
+the UUV's own clock (a vehicle computer without network may be minutes off): the
+telemetry aligns it by the arrival times (:meth:`localizer.telemetry.Telemetry.add_depth`).
 
 ``blueos``: BlueOS mavlink-server's JSON on ``mavlink/{sys}/{comp}/VFR_HUD``
 (``{"header": {...}, "message": {"type": "VFR_HUD", "alt": -1.23, ...}}``);
 ArduSub's depth is ``-alt``. VFR_HUD carries no time, so the sample's time is
-its receive time.
+its arrival minus ``[timing] depth_latency_s``.
 
 Zenoh's callback thread only copies the payload and hands it to the event loop.
 A payload that does not parse is logged in one line with the offending value
@@ -31,9 +33,6 @@ from ..logs import Throttle
 log = logging.getLogger("skyfix.depth")
 
 BLUEOS_KEY = "mavlink/*/*/VFR_HUD"
-#: A sample stamped further ahead of its receive time than this is refused: accepting it would
-#: make every later (correct) sample look out of order and freeze the depth.
-MAX_FUTURE_S = 2.0
 
 
 class BadDepth(ValueError):
@@ -47,8 +46,8 @@ def _number(obj: dict, key: str):
     return float(value)
 
 
-def parse_depth(payload: bytes, shape: str, t_recv_unix: float) -> tuple[float, float]:
-    """``(t_unix, depth_m)`` of one payload; raises :class:`BadDepth`."""
+def parse_depth(payload: bytes, shape: str) -> tuple[float | None, float]:
+    """``(t_unix of the UUV's clock or None, depth_m)`` of one payload; raises :class:`BadDepth`."""
     try:
         obj = json.loads(payload)
     except (ValueError, UnicodeDecodeError):
@@ -59,7 +58,7 @@ def parse_depth(payload: bytes, shape: str, t_recv_unix: float) -> tuple[float, 
         msg = obj.get("message") if isinstance(obj, dict) else None
         if isinstance(msg, dict) and msg.get("type", "VFR_HUD") != "VFR_HUD":
             raise BadDepth(f"message type {msg.get('type')!r} is not VFR_HUD")
-        return t_recv_unix, -_number(msg, "alt")
+        return None, -_number(msg, "alt")
     return _number(obj, "t"), _number(obj, "depth_m")
 
 
@@ -100,26 +99,22 @@ class DepthZenoh:
     def _on_payload(self, key: str, data: bytes, t_recv: float) -> None:
         self.received += 1
         try:
-            t, depth = parse_depth(data, self.shape, t_recv)
+            t, depth = parse_depth(data, self.shape)
         except BadDepth as e:
             self.bad += 1
             if self._throttle(str(e)):
                 log.warning("depth on %s: %s: %r", key, e, data[:120])
             return
-        if t > t_recv + MAX_FUTURE_S:
+        if not self.tel.add_depth(t, depth, t_recv):
             self.refused += 1
-            if self._throttle("future"):
-                log.warning("depth on %s refused: t=%r is %.1f s ahead of the receive time", key, t, t - t_recv)
+            if self._throttle(f"refused: {self.tel.refusal}"):
+                log.warning("depth on %s refused (%s): t=%r depth_m=%r", key, self.tel.refusal, t, depth)
             return
-        if not self.tel.add_depth(t, depth):
-            self.refused += 1
-            if self._throttle("refused"):
-                log.warning("depth on %s refused (out of range or time not increasing): t=%r depth_m=%r",
-                            key, t, depth)
-            return
+        while self.tel.notices:
+            log.warning("depth: %s", self.tel.notices.pop(0))
         self.last_recv, self.last_depth_m = t_recv, depth
         for listener in self.listeners:
-            listener(t, depth)
+            listener(t, depth, t_recv)
 
     def status(self, now: float) -> dict:
         age = None if self.last_recv is None else round(now - self.last_recv, 3)

@@ -1,13 +1,19 @@
 """The UAV's telemetry over pymavlink, live.
 
 A reader thread blocks in ``recv_match`` and hands every message, with its
-receive time (UNIX seconds), to the event loop, where it is fed into the
-:class:`~localizer.telemetry.Telemetry` (only the loop touches the telemetry).
-The service heartbeats as a ground station (``MAV_TYPE_GCS``) at 1 Hz as
-system ``GCS_SYSID`` / component ``GCS_COMPID`` (not 255, so it does not clash
-with QGroundControl on the same link). Only the UAV's messages are used: the
-system id of the first autopilot heartbeat or used message; others are counted.
-Malformed frames (pymavlink's BAD_DATA) are counted and logged, never fatal.
+receive time (station clock, UNIX seconds), to the event loop, where it is fed
+into the :class:`~localizer.telemetry.Telemetry` (only the loop touches the
+telemetry). As a ground station (``MAV_TYPE_GCS``, system ``GCS_SYSID`` /
+component ``GCS_COMPID``, not 255, so it does not clash with QGroundControl on the
+same link) the worker, once per second, heartbeats and sends a TIMESYNC request
+(the autopilot's replies measure the link's delay); once the autopilot is known
+it asks for its ``MNT1_TYPE`` parameter (what the gimbal message's roll and
+pitch are relative to) and for the telemetry rates skyfix needs
+(:mod:`.rates`; ``--no-request-rates`` leaves them alone). Only the UAV's
+messages are used: the system id of the first autopilot heartbeat or used
+message; others are counted. Malformed frames (pymavlink's BAD_DATA) and refused
+samples are counted and logged with their reason, never fatal; so are the
+telemetry's notices (reboots, clocks that disagree).
 """
 
 from __future__ import annotations
@@ -22,46 +28,77 @@ from localizer.telemetry import Telemetry
 
 from ..logs import Throttle
 from ..mavlink_io import USED, connect, ingest, mavutil
+from .rates import RateMeter, RateRequests, send_interval, send_stream
 
 log = logging.getLogger("skyfix.uav")
 
 GCS_SYSID = 245
 GCS_COMPID = 190  # MAV_COMP_ID_MISSIONPLANNER: a ground station
+PARAM_RETRY_S = 5.0
+PARAM_TRIES = 3
 
 
 class LinkHealth:
-    """Receive time of the newest message of each type and error counters."""
+    """Receive time of the newest message of each type, rates and error counters."""
 
     def __init__(self):
         self.last_seen: dict[str, float] = {}
+        self.meter = RateMeter()
         self.received = 0
         self.bad_data = 0
         self.other_systems = 0
         self.refused = 0
+
+    def seen(self, kind: str, t: float) -> None:
+        self.received += 1
+        self.last_seen[kind] = t
+        self.meter.add(kind, t)
 
     def ages_s(self, now: float) -> dict[str, float]:
         return {k: round(now - t, 3) for k, t in sorted(self.last_seen.items())}
 
     def as_dict(self, now: float) -> dict:
         return {"received": self.received, "bad_data": self.bad_data, "other_systems": self.other_systems,
-                "refused": self.refused, "age_s": self.ages_s(now)}
+                "refused": self.refused, "age_s": self.ages_s(now), "rates_hz": self.meter.rates(now)}
+
+
+def clock_status(tel: Telemetry) -> dict:
+    """How the telemetry's clocks are aligned, for the status."""
+    gnss = tel.station_minus_gnss_s
+    uuv = tel.uuv_clock_minus_station_s
+    measured = tel.measured_latency_s
+    return {
+        "station_minus_gnss_s": None if gnss is None else round(gnss, 3),
+        "uav_link_latency_ms": round(tel.uav_latency_s * 1000.0, 1),
+        "uav_link_latency_source": tel.latency_source,
+        "uav_link_latency_measured_ms": None if measured is None else round(measured * 1000.0, 1),
+        "uav_reboots": tel.uav_clock.segments,
+        "uuv_clock_minus_station_s": None if uuv is None else round(uuv, 3),
+        "depth_aligned_by": tel.depth_aligned_by,
+    }
 
 
 class UavMavlink:
     """Worker owning the UAV's MAVLink link; ``listeners`` get ``(msg, t_recv_unix)`` for every good message."""
 
-    def __init__(self, url: str, tel: Telemetry, listeners: list[Callable] | None = None):
+    def __init__(self, url: str, tel: Telemetry, needed_hz: dict[str, float], request_rates: bool = True,
+                 listeners: list[Callable] | None = None):
         self.url = url
         self.tel = tel
         self.listeners = listeners or []
         self.health = LinkHealth()
+        self.requests = RateRequests(needed_hz, enabled=request_rates)
         self.uav_sysid: int | None = None
+        self.autopilot: tuple[int, int] | None = None  # (system, component) to send requests to
+        self._params_asked = 0
+        self._params_last = 0.0
         self._throttle = Throttle()
         self._stop = threading.Event()
+        self._low_warned: set[str] = set()
+        self._denied: list[str] = []  # rate requests the autopilot refused, to ask again the older way
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
-        mav = mavutil()
         conn = await asyncio.to_thread(
             connect, self.url, source_system=GCS_SYSID, source_component=GCS_COMPID,
             autoreconnect=True,
@@ -69,21 +106,68 @@ class UavMavlink:
         reader = threading.Thread(target=self._read, args=(conn, loop), name="uav-mavlink", daemon=True)
         reader.start()
         try:
+            next_beat = 0.0
             while True:
-                conn.mav.heartbeat_send(mav.mavlink.MAV_TYPE_GCS, mav.mavlink.MAV_AUTOPILOT_INVALID, 0, 0,
-                                        mav.mavlink.MAV_STATE_ACTIVE)
-                await asyncio.sleep(1.0)
+                now = time.time()
+                if now >= next_beat:
+                    self._beat(conn, now)
+                    next_beat = now + 1.0
+                self._ask(conn, now)
+                await asyncio.sleep(0.25)
         finally:
             self._stop.set()
             await asyncio.to_thread(reader.join, 2.0)
             conn.close()
+
+    def _beat(self, conn, now: float) -> None:
+        """Once a second: heartbeat as a ground station and a TIMESYNC request (ts1: our clock in ns)."""
+        mav = mavutil().mavlink
+        conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE)
+        conn.mav.timesync_send(0, time.time_ns())
+        for kind, hz in self.requests.needed.items():
+            rate = self.health.meter.rate_hz(kind, now)
+            if self.autopilot and now - (self.requests._since or now) > 15.0 and rate < hz / 2:
+                if kind not in self._low_warned:
+                    self._low_warned.add(kind)
+                    log.warning("UAV MAVLink: %s arrives at %.1f Hz (%g Hz needed; request: %s)", kind, rate, hz,
+                                self.requests.state.get(kind, "none sent"))
+            elif rate >= hz / 2:
+                self._low_warned.discard(kind)
+
+    def _ask(self, conn, now: float) -> None:
+        """Parameter and rate requests to the autopilot, once it is known."""
+        if self.autopilot is None:
+            return
+        if (self.tel.mount_type is None and self._params_asked < PARAM_TRIES
+                and now - self._params_last >= PARAM_RETRY_S):
+            conn.mav.param_request_read_send(*self.autopilot, b"MNT1_TYPE", -1)
+            self._params_asked += 1
+            self._params_last = now
+        for kind, msg_id, hz in self.requests.due(self.health.meter, now):
+            log.info("UAV MAVLink: %s at %.1f Hz; asking for %g Hz (SET_MESSAGE_INTERVAL)", kind,
+                     self.health.meter.rate_hz(kind, now), hz)
+            send_interval(conn, self.autopilot, msg_id, hz)
+        for kind in self.requests.unanswered(now):
+            self._fall_back(conn, kind, "no answer")
+        while self._denied:
+            self._fall_back(conn, self._denied.pop(0), "denied")
+
+    def _fall_back(self, conn, kind: str, why: str) -> None:
+        hz = self.requests.needed[kind]
+        log.info("UAV MAVLink: SET_MESSAGE_INTERVAL for %s: %s; asking with REQUEST_DATA_STREAM", kind, why)
+        send_stream(conn, self.autopilot, kind, hz)
+        self.requests.state[kind] = f"{self.requests.state[kind]}; stream requested at {hz:g} Hz"
 
     def _read(self, conn, loop: asyncio.AbstractEventLoop) -> None:
         while not self._stop.is_set():
             try:
                 msg = conn.recv_match(blocking=True, timeout=0.5)
             except Exception as e:  # noqa: BLE001 - pymavlink raises bare errors on some corrupt input
-                loop.call_soon_threadsafe(self._bad, repr(e))
+                try:
+                    loop.call_soon_threadsafe(self._bad, repr(e), b"")
+                except RuntimeError:  # loop closed: shutting down
+                    return
+                self._stop.wait(0.2)  # an unplugged serial radio raises at once, every time
                 continue
             if msg is None:
                 continue
@@ -118,21 +202,29 @@ class UavMavlink:
         if not self._is_uav(msg):
             self.health.other_systems += 1
             return
-        self.health.received += 1
-        self.health.last_seen[kind] = t_recv
+        self.health.seen(kind, t_recv)
         try:
             used = ingest(self.tel, msg, t_recv)
         except (AttributeError, TypeError, ValueError) as e:
-            log.warning("UAV MAVLink: %s refused: %s: %s", kind, e, msg)
+            self.tel.refusal = f"{type(e).__name__}: {e}"
             used = False
-        if kind in USED and not used:
+        if self.autopilot is None and self.tel.autopilot_component is not None:
+            self.autopilot = (msg.get_srcSystem(), self.tel.autopilot_component)
+            self.requests.start(t_recv)
+        if kind == "COMMAND_ACK" and self.autopilot is not None:
+            denied = self.requests.on_ack(msg.command, msg.result)
+            if denied is not None:
+                self._denied.append(denied)
+        if kind in USED and not used and self.tel.refusal:
             self.health.refused += 1
-            n = self._throttle(kind)
+            n = self._throttle(f"{kind}: {self.tel.refusal}")
             if n:
-                log.warning("UAV MAVLink: %s #%d refused (not finite, out of range, out of order or not the "
-                            "autopilot's): %s", kind, n, msg)
+                log.warning("UAV MAVLink: %s #%d refused: %s: %s", kind, n, self.tel.refusal, msg)
+        while self.tel.notices:
+            log.warning("UAV MAVLink: %s", self.tel.notices.pop(0))
         for listener in self.listeners:
             listener(msg, t_recv)
 
     def status(self, now: float) -> dict:
-        return {"url": self.url, "sysid": self.uav_sysid, "clock": self.tel.clock.source, **self.health.as_dict(now)}
+        return {"url": self.url, "sysid": self.uav_sysid, "clocks": clock_status(self.tel),
+                "rate_requests": dict(self.requests.state), **self.health.as_dict(now)}

@@ -5,7 +5,10 @@ read raw through MAVSDK's MavlinkDirect plugin, so that their ``time_boot_ms``
 reaches the telemetry unchanged (MAVSDK's Telemetry plugin drops it for
 positions) and both backends yield the same samples; each message is fed through
 :func:`groundstation.mavlink_io.ingest`. MAVSDK heartbeats as a ground station by
-itself. Messages flow once MAVSDK has seen the UAV's autopilot heartbeat.
+itself. Messages flow once MAVSDK has seen the UAV's autopilot heartbeat. This
+backend only listens: it sends no TIMESYNC and no rate or parameter requests
+(the pymavlink backend does), so set ``[timing] mavlink_latency_s`` and
+``[mount] gimbal_roll_pitch`` with it.
 
 Connection strings: MAVSDK's own (``udpin://0.0.0.0:14550``,
 ``serial:///dev/ttyUSB0:57600``) or pymavlink's ``udpin:``, ``udpout:``,
@@ -24,7 +27,7 @@ from collections.abc import Callable
 from localizer.telemetry import Telemetry
 
 from ..mavlink_io import USED, ingest
-from .uav_mavlink import LinkHealth
+from .uav_mavlink import LinkHealth, clock_status
 
 log = logging.getLogger("skyfix.uav")
 
@@ -99,18 +102,17 @@ class UavMavsdk:
             self.health.other_systems += 1
             return
         kind = msg.get_type()
-        self.health.received += 1
-        self.health.last_seen[kind] = t_recv
+        self.health.seen(kind, t_recv)
         try:
             used = ingest(self.tel, msg, t_recv)
         except (AttributeError, TypeError, ValueError) as e:
             log.warning("UAV MAVLink (MAVSDK): %s refused: %s", kind, e)
             used = False
-        if not used:
+        if not used and self.tel.refusal:
             self.health.refused += 1
         for listener in self.listeners:
             listener(msg, t_recv)
 
     def status(self, now: float) -> dict:
-        return {"url": self.url, "backend": "mavsdk", "sysid": self.uav_sysid, "clock": self.tel.clock.source,
+        return {"url": self.url, "backend": "mavsdk", "sysid": self.uav_sysid, "clocks": clock_status(self.tel),
                 **self.health.as_dict(now)}

@@ -1,0 +1,127 @@
+"""The telemetry rates skyfix needs from the UAV, what arrives, and what to ask the autopilot for.
+
+Needed (per second): ATTITUDE 25 (the camera's attitude between frames; slower is
+interpolated with its body rates, at a cost), GLOBAL_POSITION_INT 10, the gimbal
+message 20, SYSTEM_TIME 1, GPS_RAW_INT 2 (the UAV's own accuracy). As a ground
+station skyfix asks for the ones that arrive slower with
+``MAV_CMD_SET_MESSAGE_INTERVAL``; a refusal or no answer falls back to the older
+``REQUEST_DATA_STREAM`` for the stream that carries the message (ArduPilot's
+stream tables). A message already faster than needed is left alone. Every
+request and answer is kept for the status.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+NEEDED_HZ = {"ATTITUDE": 25.0, "GLOBAL_POSITION_INT": 10.0, "SYSTEM_TIME": 1.0, "GPS_RAW_INT": 2.0}
+GIMBAL_HZ = 20.0
+GIMBAL_MESSAGE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+MESSAGE_ID = {"ATTITUDE": 30, "GLOBAL_POSITION_INT": 33, "SYSTEM_TIME": 2, "GPS_RAW_INT": 24,
+              "GIMBAL_DEVICE_ATTITUDE_STATUS": 285, "MOUNT_ORIENTATION": 265}
+# MAV_DATA_STREAM carrying each message on ArduPilot: EXTRA1, POSITION, EXTRA3, EXTENDED_STATUS
+STREAM = {"ATTITUDE": 10, "GLOBAL_POSITION_INT": 6, "SYSTEM_TIME": 12, "GPS_RAW_INT": 2,
+          "GIMBAL_DEVICE_ATTITUDE_STATUS": 12, "MOUNT_ORIENTATION": 12}
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_RESULT_ACCEPTED = 0
+SETTLE_S = 3.0  # measure this long after the autopilot appears before asking
+RETRY_S = 10.0  # ask again this often while a message stays slow
+ACK_TIMEOUT_S = 2.0
+WINDOW_S = 5.0  # rates are measured over this window
+SLOW = 0.9  # a message below this share of its needed rate counts as slow
+
+
+def needed_rates(attitude_source: str) -> dict[str, float]:
+    """The rates (Hz) needed for a calibration's camera attitude source."""
+    out = dict(NEEDED_HZ)
+    if attitude_source in GIMBAL_MESSAGE:
+        out[GIMBAL_MESSAGE[attitude_source]] = GIMBAL_HZ
+    return out
+
+
+class RateMeter:
+    """Receive rate of each message type over the last :data:`WINDOW_S` seconds."""
+
+    def __init__(self):
+        self._times: dict[str, deque[float]] = {}
+
+    def add(self, kind: str, t: float) -> None:
+        q = self._times.setdefault(kind, deque())
+        q.append(t)
+        while q[0] < t - WINDOW_S:
+            q.popleft()
+
+    def rate_hz(self, kind: str, now: float) -> float:
+        q = self._times.get(kind)
+        if not q or now - q[-1] > WINDOW_S:
+            return 0.0
+        first = max(q[0], now - WINDOW_S)
+        n = sum(1 for t in q if t >= first)
+        return (n - 1) / (now - first) if n > 1 and now > first else 0.0
+
+    def rates(self, now: float) -> dict[str, float]:
+        return {k: round(self.rate_hz(k, now), 1) for k in sorted(self._times)}
+
+
+@dataclass
+class RateRequests:
+    """Which rate requests to send now, and the autopilot's answers (``state`` per message)."""
+
+    needed: dict[str, float]
+    enabled: bool = True
+    state: dict[str, str] = field(default_factory=dict)
+    _since: float | None = None
+    _asked: dict[str, float] = field(default_factory=dict)
+    _pending: deque = field(default_factory=deque)  # (kind, sent at) awaiting COMMAND_ACK, in order
+
+    def start(self, now: float) -> None:
+        """The autopilot has appeared: requests may follow after :data:`SETTLE_S`."""
+        if self._since is None:
+            self._since = now
+
+    def due(self, meter: RateMeter, now: float) -> list[tuple[str, int, float]]:
+        """Requests to send now: ``(kind, message id, Hz)`` for SET_MESSAGE_INTERVAL."""
+        if not self.enabled or self._since is None or now - self._since < SETTLE_S:
+            return []
+        out = []
+        for kind, hz in self.needed.items():
+            measured = meter.rate_hz(kind, now)
+            if measured >= SLOW * hz:
+                if kind in self._asked:
+                    self.state[kind] = f"{self.state.get(kind, 'requested')}, now {measured:.1f} Hz"
+                    del self._asked[kind]
+                continue
+            if now - self._asked.get(kind, -1e9) >= RETRY_S:
+                self._asked[kind] = now
+                self._pending.append((kind, now))
+                self.state[kind] = f"requested {hz:g} Hz (was {measured:.1f} Hz)"
+                out.append((kind, MESSAGE_ID[kind], hz))
+        return out
+
+    def on_ack(self, command: int, result: int) -> str | None:
+        """A COMMAND_ACK; returns the message kind it answered when it was for a rate request."""
+        if command != MAV_CMD_SET_MESSAGE_INTERVAL or not self._pending:
+            return None
+        kind, _ = self._pending.popleft()
+        self.state[kind] = "accepted" if result == MAV_RESULT_ACCEPTED else f"denied (MAV_RESULT {result})"
+        return kind if result != MAV_RESULT_ACCEPTED else None
+
+    def unanswered(self, now: float) -> list[str]:
+        """Requests with no COMMAND_ACK within :data:`ACK_TIMEOUT_S` (dropped from the pending list)."""
+        out = []
+        while self._pending and now - self._pending[0][1] > ACK_TIMEOUT_S:
+            kind, _ = self._pending.popleft()
+            self.state[kind] = "no answer"
+            out.append(kind)
+        return out
+
+
+def send_interval(conn, target: tuple[int, int], msg_id: int, hz: float) -> None:
+    """``MAV_CMD_SET_MESSAGE_INTERVAL`` for one message."""
+    conn.mav.command_long_send(*target, MAV_CMD_SET_MESSAGE_INTERVAL, 0, float(msg_id), 1e6 / hz, 0, 0, 0, 0, 0)
+
+
+def send_stream(conn, target: tuple[int, int], kind: str, hz: float) -> None:
+    """The older ``REQUEST_DATA_STREAM`` for the stream that carries ``kind``."""
+    conn.mav.request_data_stream_send(*target, STREAM[kind], max(1, round(hz)), 1)

@@ -1,0 +1,152 @@
+"""Other clocks mapped onto the station's clock (the ground station's ``time.time()``).
+
+skyfix has one time base: the station clock. Frames are stamped with it, and
+every other source is mapped onto it by what arrives when:
+
+- :class:`ClockMap` follows a source clock (an autopilot's ``time_boot_ms``, a
+  UUV's own UNIX clock) by the least ``arrival − source time`` over a sliding
+  window: the source clock's offset plus the link's smallest delay. The window
+  follows drift; a source time going backwards starts a new segment (a reboot).
+- :class:`RoundTrip` measures a link's delay from MAVLink TIMESYNC exchanges
+  (ours out, the autopilot's reply back): with the delay split evenly both ways,
+  the best exchange gives the autopilot clock's offset without the delay, and the
+  difference to :class:`ClockMap`'s offset is the one-way delay.
+- :class:`Median` keeps the median of recent values (GNSS time offsets from
+  SYSTEM_TIME), so one bad pair cannot move it.
+
+All times in seconds; ``arrival_s`` is station time.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+
+class _WindowMin:
+    """Minimum of values added over the last ``window_s`` of arrival time (monotonic deque)."""
+
+    def __init__(self, window_s: float):
+        self.window_s = window_s
+        self._q: deque[tuple[float, float, object]] = deque()  # (arrival, value, payload), values increasing
+
+    def clear(self) -> None:
+        self._q.clear()
+
+    def add(self, arrival_s: float, value: float, payload=None) -> None:
+        q = self._q
+        while q and q[-1][1] >= value:
+            q.pop()
+        q.append((arrival_s, value, payload))
+        while q[0][0] < arrival_s - self.window_s:
+            q.popleft()
+
+    @property
+    def best(self) -> tuple[float, float, object] | None:
+        """``(arrival, value, payload)`` of the minimum, or None when empty."""
+        return self._q[0] if self._q else None
+
+
+class ClockMap:
+    """A source clock on the station clock: ``station ≈ source + offset_s − latency``.
+
+    ``offset_s`` is the least ``arrival − source`` over the last ``window_s`` seconds
+    of arrivals, so it includes the link's smallest delay (subtract it where it is
+    known: :class:`RoundTrip`, or a configured latency). A source time more than
+    ``reboot_s`` earlier than the latest one, or a station clock that stepped back,
+    empties the window and counts a new segment: samples already mapped keep their
+    station times, later ones are mapped from the new segment alone.
+    """
+
+    def __init__(self, window_s: float = 30.0, reboot_s: float = 1.0):
+        self.reboot_s = reboot_s
+        self._min = _WindowMin(window_s)
+        self._last_source: float | None = None
+        self._last_arrival: float | None = None
+        self.segments = 0  # restarts seen (reboots of the source, steps of the station clock)
+        self.last_restart: tuple[float, float] | None = None  # (source time before, source time after)
+
+    def add(self, source_s: float, arrival_s: float) -> bool:
+        """One sample's source and arrival times; True when it started a new segment."""
+        restarted = False
+        last = self._last_source
+        if last is not None and (source_s < last - self.reboot_s or arrival_s < self._last_arrival - self.reboot_s):
+            self._min.clear()
+            self.segments += 1
+            self.last_restart = (last, source_s)
+            restarted = True
+            last = None
+        self._last_source = source_s if last is None else max(source_s, last)
+        self._last_arrival = arrival_s if self._last_arrival is None or restarted else max(arrival_s, self._last_arrival)
+        self._min.add(arrival_s, arrival_s - source_s)
+        return restarted
+
+    @property
+    def offset_s(self) -> float | None:
+        """Least ``arrival − source`` in the window (seconds), or None before any sample."""
+        best = self._min.best
+        return None if best is None else best[1]
+
+    def to_arrival(self, source_s):
+        """Source time(s) on the station clock as the fastest delivery would see them (offset added)."""
+        off = self.offset_s
+        if off is None:
+            raise LookupError("no sample from this source yet")
+        return np.asarray(source_s, dtype=float) + off
+
+
+class RoundTrip:
+    """A remote clock's offset from request/reply exchanges (MAVLink TIMESYNC), delay split evenly.
+
+    ``add(remote_s, sent_s, arrival_s)``: our request left at ``sent_s`` (station),
+    the remote stamped its receipt ``remote_s`` (its clock) and the reply arrived at
+    ``arrival_s``. The exchange with the shortest round trip in the window gives
+    ``offset_s = (sent + arrival) / 2 − remote``: station minus remote time, with an
+    error of at most half the round trip's asymmetry.
+    """
+
+    MAX_ROUND_TRIP_S = 2.0
+
+    def __init__(self, window_s: float = 30.0):
+        self._min = _WindowMin(window_s)
+        self.exchanges = 0
+
+    def clear(self) -> None:
+        self._min.clear()
+
+    def add(self, remote_s: float, sent_s: float, arrival_s: float) -> bool:
+        """One exchange; False (ignored) when its round trip is negative or implausibly long."""
+        rtt = arrival_s - sent_s
+        if not 0.0 <= rtt <= self.MAX_ROUND_TRIP_S:
+            return False
+        self._min.add(arrival_s, rtt, (sent_s + arrival_s) / 2.0 - remote_s)
+        self.exchanges += 1
+        return True
+
+    @property
+    def offset_s(self) -> float | None:
+        best = self._min.best
+        return None if best is None else best[2]
+
+    @property
+    def round_trip_s(self) -> float | None:
+        best = self._min.best
+        return None if best is None else best[1]
+
+
+class Median:
+    """Median of the last ``n`` values added."""
+
+    def __init__(self, n: int = 31):
+        self._v: deque[float] = deque(maxlen=n)
+
+    def add(self, value: float) -> None:
+        self._v.append(value)
+
+    def clear(self) -> None:
+        self._v.clear()
+
+    @property
+    def value(self) -> float | None:
+        return float(np.median(self._v)) if self._v else None

@@ -1,0 +1,73 @@
+"""Clocks onto the station clock: least-delay alignment, drift, reboots, TIMESYNC round trips."""
+
+import numpy as np
+import pytest
+
+from localizer.clock import ClockMap, Median, RoundTrip
+
+
+def test_least_delay_offset_and_its_window():
+    """arrival − source: the offset plus each sample's delay; the map keeps the least within its window."""
+    c = ClockMap(window_s=10.0)
+    with pytest.raises(LookupError):
+        c.to_arrival(1.0)
+    off = 1_700_000_000.0
+    delays = [0.080, 0.030, 0.120, 0.021, 0.045]
+    for i, d in enumerate(delays):
+        c.add(100.0 + i, off + 100.0 + i + d)
+    assert c.offset_s == pytest.approx(off + 0.021, abs=1e-9)
+    assert float(c.to_arrival(102.5)) == pytest.approx(off + 102.521, abs=1e-9)
+    for i in range(20):  # 20 s later the 21 ms sample has left the window: the least delay now is 40 ms
+        c.add(110.0 + i, off + 110.0 + i + 0.040 + 0.01 * (i % 3))
+    assert c.offset_s == pytest.approx(off + 0.040, abs=1e-9)
+    assert c.segments == 0
+
+
+def test_window_follows_a_drifting_clock():
+    """A source clock running 200 ppm slow, received with 30–60 ms delays: the map stays within the
+    drift over one window plus nothing else."""
+    rng = np.random.default_rng(3)
+    c = ClockMap(window_s=5.0)
+    errs = []
+    for k in range(2000):
+        t = 1000.0 + 0.1 * k  # true time = station time
+        source = t * (1 - 200e-6)
+        c.add(source, t + 0.03 + rng.exponential(0.01))
+        if k > 100:
+            errs.append(float(c.to_arrival(source)) - 0.03 - t)
+    assert max(abs(e) for e in errs) < 200e-6 * 5.0 + 0.002
+
+
+def test_reboot_and_station_clock_step_start_new_segments():
+    c = ClockMap(reboot_s=1.0)
+    for i in range(10):
+        assert not c.add(600.0 + 0.1 * i, 2000.0 + 0.1 * i + 0.02)
+    assert c.offset_s == pytest.approx(1400.02)
+    assert not c.add(600.95, 2001.02)  # 0.05 s back (reordered): not a reboot
+    assert c.add(2.0, 2003.0 + 0.02)  # boot clock back by 599 s: rebooted
+    assert c.segments == 1 and c.last_restart == (pytest.approx(600.95), 2.0)
+    assert c.offset_s == pytest.approx(2001.02)
+    assert c.add(3.0, 1990.0)  # the station clock stepped back 13 s (NTP)
+    assert c.segments == 2 and c.offset_s == pytest.approx(1987.0)
+
+
+def test_round_trip_takes_the_fastest_exchange_and_splits_it_evenly():
+    rt = RoundTrip(window_s=30.0)
+    remote_minus_station = -1_700_000_000.0 + 412.0  # a boot clock
+    for i, (up, down) in enumerate([(0.05, 0.07), (0.02, 0.02), (0.09, 0.01), (0.03, 0.04)]):
+        sent = 1_700_000_100.0 + i
+        remote = sent + up + remote_minus_station
+        assert rt.add(remote, sent, sent + up + down)
+    assert rt.round_trip_s == pytest.approx(0.04)
+    assert rt.offset_s == pytest.approx(-remote_minus_station, abs=1e-9)
+    assert not rt.add(5.0, 100.0, 99.0)  # came back before it left
+    assert not rt.add(5.0, 100.0, 103.0)  # 3 s round trip: not an answer to this request
+    assert rt.exchanges == 4
+
+
+def test_median_resists_outliers():
+    m = Median(n=11)
+    assert m.value is None
+    for i in range(11):
+        m.add(50.0 if i in (3, 7) else 2.5)
+    assert m.value == 2.5
