@@ -11,10 +11,11 @@ from .scenario import load_scenario
 def run(args) -> int:
     path = Path(args.scenario)
     sc = load_scenario(path)
-    report = generate(sc, args.out, scenario_text=path.read_text())
+    report = generate(sc, args.out, scenario_text=path.read_text(), video=not args.no_video)
     counts = ", ".join(f"{k} {n}" for k, n in sorted(report.messages.items()))
-    print(f"{sc.name}: {report.frames} frames {sc.camera.width}x{sc.camera.height} rendered and encoded in "
-          f"{report.render_s:.1f} s ({report.total_s:.1f} s in all); tlog: {counts} -> {report.session}")
+    made = (f"rendered and encoded in {report.render_s:.1f} s" if not args.no_video else "without video")
+    print(f"{sc.name}: {report.frames} frames {sc.camera.width}x{sc.camera.height} {made} "
+          f"({report.total_s:.1f} s in all); tlog: {counts} -> {report.session}")
     return 0
 
 
@@ -22,4 +23,6 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("sim", help="generate a synthetic session (video, telemetry, truth) from a scenario")
     p.add_argument("scenario", help="scenario TOML file (see sim_fixtures/scenarios/)")
     p.add_argument("--out", required=True, help="session directory to write")
+    p.add_argument("--no-video", action="store_true",
+                   help="no video.mp4 (fast): telemetry, depth, truth and track.csv for geometry-only tests")
     p.set_defaults(func=run)

@@ -3,13 +3,22 @@
 Ground truth is the UUV's reference point, the centre of its top face (what the
 camera sees and the tracker follows), in WGS84 with its depth below the surface;
 ``depth.jsonl`` reports the depth of that same point. ``track.csv`` holds the
-exact distorted pixel of the truth point, projected with the localizer's forward
-model (:func:`localizer.ray.offset_to_pixel`), one row per frame; where the UUV cannot
+exact distorted pixel of the truth point, one row per frame: where the light from
+it crosses the surface (Fermat's principle), projected by OpenCV
+(:mod:`sim_fixtures.geometry`, independent of the localizer); where the UUV cannot
 be seen, ``u`` and ``v`` are empty: hidden by an occlusion window, outside the image,
 or too deep in turbid water, its contrast below the sensor noise (see
 :meth:`~sim_fixtures.render.Renderer.render`); ``truth.csv`` has every frame. The video is rendered
-independently by ray casting (:mod:`sim_fixtures.render`) and encoded by the
-``ffmpeg`` CLI (libx264, yuv420p, raw BGR frames through a pipe).
+by ray casting (:mod:`sim_fixtures.render`) and encoded by the ``ffmpeg`` CLI
+(libx264, yuv420p, raw BGR frames through a pipe).
+
+Times: the frames' exposure times in ``video_frames.csv``, ``track.csv`` and
+``truth.csv`` are on the ground station's clock (true time + ``[clock]
+station_offset_s``), as a recording laptop stamps them. ``depth.jsonl`` has one line
+per depth measurement, ``{"t": <the UUV's clock when it measured>, "depth_m": <m, positive
+down>, "t_recv": <the station's clock when the ground station received it>}``; the UUV's
+clock is true time + ``uuv_offset_s``; the depth link takes ``link.depth_delay_s`` plus an
+exponential jitter of mean ``link.depth_jitter_s``, arrivals in order.
 """
 
 from __future__ import annotations
@@ -24,16 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from localizer.attitude import R_GIMBAL_FROM_CV
 from localizer.calibration import ConfigError
-from localizer.camera import Camera
-from localizer.geodesy import ned_to_geodetic
-from localizer.ray import offset_to_pixel
 
+from .geometry import R_GIMBAL_FROM_CV, SimCamera, ned_to_geodetic, project, surface_crossing
 from .motion import Motion
 from .render import Renderer, View
 from .scenario import Scenario
-from .tlog import Clock, write_tlog
+from .tlog import Clock, exponential, stream, write_tlog
 
 MARK = "# synthetic session made by skyfix sim"  # first line of session.toml
 
@@ -42,8 +48,8 @@ MARK = "# synthetic session made by skyfix sim"  # first line of session.toml
 class Truth:
     """The true geometry at each frame (arrays over frames)."""
 
-    t_unix: np.ndarray
-    tau_s: np.ndarray
+    t_unix: np.ndarray  # exposure time on the ground station's clock (video_frames.csv, track.csv, truth.csv)
+    tau_s: np.ndarray  # seconds since the first frame; true time is start_unix + tau_s
     R_ned_from_cv: np.ndarray  # (N, 3, 3)
     camera_ned: np.ndarray  # (N, 3)
     uuv_ned: np.ndarray  # (N, 3) top-face centre
@@ -57,27 +63,51 @@ class Truth:
                     bool(self.visible[i]), float(self.tau_s[i]))
 
 
-def camera_of(sc: Scenario) -> Camera:
+def camera_of(sc: Scenario) -> SimCamera:
     """The scenario's camera: fx = fy from the horizontal field of view, principal point at the centre."""
     c = sc.camera
     f = (c.width / 2) / np.tan(np.radians(c.hfov_deg) / 2)
-    return Camera(c.width, c.height, f, f, (c.width - 1) / 2, (c.height - 1) / 2, tuple(c.distortion))
+    return SimCamera(c.width, c.height, f, f, (c.width - 1) / 2, (c.height - 1) / 2, tuple(c.distortion))
 
 
-def frame_truth(sc: Scenario, motion: Motion, camera: Camera) -> Truth:
+def reference_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, point_ned, n_water: float):
+    """Distorted pixel (u, v) of a submerged point: its light's surface crossing, projected by OpenCV.
+
+    ``R_ned_from_cv`` (N, 3, 3), ``camera_ned`` and ``point_ned`` (N, 3), one pose per point.
+    """
+    crossing = surface_crossing(camera_ned, point_ned, n_water)
+    uv = np.array([project(camera, R, c, x) for R, c, x in zip(R_ned_from_cv, camera_ned, crossing)])
+    return uv[:, 0], uv[:, 1]
+
+
+def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
     """True state at every frame's exposure time, and the truth point's exact pixel."""
     n = round(sc.duration_s * sc.fps)
     clock = Clock.of(sc)
     tau = np.arange(n) / sc.fps
-    t_unix = (clock.start_us + np.round(tau * 1e6)) / 1e6
+    t_unix = clock.station_us(clock.true_us(tau)) / 1e6
     R = motion.R_ned_from_gimbal(tau) @ R_GIMBAL_FROM_CV
     cam = motion.camera_ned(tau)
     uuv = motion.uuv_ned(tau)
     visible = np.ones(n, bool)
     for a, b in sc.occlusions:
         visible &= ~((tau >= a) & (tau < b))
-    u, v = offset_to_pixel(camera, R, uuv[:, :2] - cam[:, :2], -cam[:, 2], uuv[:, 2], sc.site.refractive_index)
+    u, v = reference_pixel(camera, R, cam, uuv, sc.site.refractive_index)
     return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v)
+
+
+def depth_records(sc: Scenario, motion: Motion, clock: Clock) -> list[dict]:
+    """The lines of ``depth.jsonl``: the UUV's measurements with its clock's time and the station's arrival time."""
+    tel = sc.telemetry
+    rng = stream(sc, "depth")
+    tau = np.arange(-tel.lead_s, sc.duration_s + 1.0, 1.0 / tel.depth_hz)
+    tau = tau + rng.uniform(0.0, 0.2 / tel.depth_hz, len(tau))
+    depth = motion.uuv_depth_m(tau) + rng.normal(0.0, 1.0, len(tau)) * tel.depth_noise_m
+    measured = clock.true_us(tau)
+    delay = sc.link.depth_delay_s + exponential(stream(sc, "depth_link"), sc.link.depth_jitter_s, len(tau))
+    arrived = np.maximum.accumulate(measured + np.round(delay * 1e6).astype(np.int64))
+    return [{"t": round((m + clock.uuv_offset_us) / 1e6, 6), "depth_m": round(float(d), 5),
+             "t_recv": round(clock.station_us(a) / 1e6, 6)} for m, d, a in zip(measured, depth, arrived)]
 
 
 def _write_csv(path: Path, header, rows) -> None:
@@ -87,7 +117,7 @@ def _write_csv(path: Path, header, rows) -> None:
         w.writerows(rows)
 
 
-def _session_toml(sc: Scenario, camera: Camera, init_bbox, init_t: float) -> str:
+def _session_toml(sc: Scenario, camera: SimCamera, init_bbox, init_t: float | None) -> str:
     s, m = sc.site, sc.mount
 
     def vec(x):
@@ -115,11 +145,17 @@ camera_offset_m = {vec(m.camera_offset_m)}
 [water]
 {water}
 refractive_index = {s.refractive_index!r}
+""" + _tracker_toml(init_bbox, init_t) + _uncertainty_toml(sc)
 
+
+def _tracker_toml(init_bbox, init_t) -> str:
+    if init_bbox is None:
+        return ""
+    return f"""
 [tracker]
 init_bbox = [{", ".join(str(int(x)) for x in init_bbox)}]
 init_t = {init_t!r}
-""" + _uncertainty_toml(sc)
+"""
 
 
 def _uncertainty_toml(sc: Scenario) -> str:
@@ -156,53 +192,10 @@ class Encoder:
             raise RuntimeError(f"ffmpeg exited with status {self.proc.returncode}")
 
 
-@dataclass(frozen=True)
-class Report:
-    session: Path
-    frames: int
-    render_s: float  # rendering + encoding time
-    total_s: float
-    messages: dict
-
-
-def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None) -> Report:
-    """Write the session for ``sc`` into ``out_dir``.
-
-    The directory is created; a session generated earlier is overwritten, any other
-    session (a real recording) is refused with :class:`ConfigError`.
-    """
-    t0 = time.perf_counter()
-    out = Path(out_dir)
-    existing = out / "session.toml"
-    if existing.is_file() and not existing.read_text(errors="replace").startswith(MARK):
-        raise ConfigError(str(out), "--out", str(out), "holds a session not made by skyfix sim; refusing to overwrite it")
-    out.mkdir(parents=True, exist_ok=True)
-    camera = camera_of(sc)
-    motion = Motion(sc)
-    truth = frame_truth(sc, motion, camera)
-    clock = Clock.of(sc)
-    rng = np.random.default_rng([sc.seed, 404])
-
-    messages = write_tlog(out / "uav.tlog", sc, motion, clock, rng)
-    tel = sc.telemetry
-    tau_d = np.arange(-tel.lead_s, sc.duration_s + 1.0, 1.0 / tel.depth_hz)
-    tau_d = tau_d + rng.uniform(0.0, 0.2 / tel.depth_hz, len(tau_d))
-    depth = motion.uuv_depth_m(tau_d) + rng.normal(0.0, 1.0, len(tau_d)) * tel.depth_noise_m
-    with open(out / "depth.jsonl", "w") as f:
-        f.writelines(json.dumps({"t": round(sc.start_unix + tau, 6), "depth_m": round(float(d), 5)}) + "\n"
-                     for tau, d in zip(tau_d, depth))
-
-    s = sc.site
-    lat, lon, _ = ned_to_geodetic(truth.uuv_ned[:, 0], truth.uuv_ned[:, 1], truth.uuv_ned[:, 2],
-                                  s.lat_deg, s.lon_deg, s.surface_amsl_m)
-    _write_csv(out / "truth.csv", ("t", "lat", "lon", "depth_m"),
-               ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}")
-                for t, a, b, d in zip(truth.t_unix, lat, lon, truth.uuv_ned[:, 2])))
-    _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(truth.t_unix)))
-
-    t1 = time.perf_counter()
+def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path):
+    """Render and encode every frame; returns where the UUV can be seen and its first box with its frame time."""
     renderer = Renderer(sc, camera)
-    encoder = Encoder(out / "video.mp4", camera.width, camera.height, sc.fps, sc.render.crf)
+    encoder = Encoder(path, camera.width, camera.height, sc.fps, sc.render.crf)
     init = None
     in_view = np.zeros(len(truth.t_unix), bool)  # the UUV can be seen in the frame (see Renderer.render)
     try:
@@ -214,18 +207,70 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
             encoder.write(img)
     finally:
         encoder.close()
+    return in_view, init
+
+
+@dataclass(frozen=True)
+class Report:
+    session: Path
+    frames: int
+    render_s: float  # rendering + encoding time
+    total_s: float
+    messages: dict
+
+
+def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None, video: bool = True) -> Report:
+    """Write the session for ``sc`` into ``out_dir``.
+
+    The directory is created; a session generated earlier is overwritten, any other
+    session (a real recording) is refused with :class:`ConfigError`. ``video=False``
+    renders nothing (fast: telemetry, depth, truth and track.csv only): no video.mp4
+    and no ``[tracker]`` table, and track.csv counts the UUV as seen wherever it is in
+    the image and not occluded (the renderer's contrast test needs the rendering).
+    """
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    existing = out / "session.toml"
+    if existing.is_file() and not existing.read_text(errors="replace").startswith(MARK):
+        raise ConfigError(str(out), "--out", str(out), "holds a session not made by skyfix sim; refusing to overwrite it")
+    out.mkdir(parents=True, exist_ok=True)
+    camera = camera_of(sc)
+    motion = Motion(sc)
+    truth = frame_truth(sc, motion, camera)
+    clock = Clock.of(sc)
+
+    messages = write_tlog(out / "uav.tlog", sc, motion, clock)
+    with open(out / "depth.jsonl", "w") as f:
+        f.writelines(json.dumps(rec) + "\n" for rec in depth_records(sc, motion, clock))
+
+    s = sc.site
+    lat, lon, _ = ned_to_geodetic(truth.uuv_ned, s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    _write_csv(out / "truth.csv", ("t", "lat", "lon", "depth_m"),
+               ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}")
+                for t, a, b, d in zip(truth.t_unix, lat, lon, truth.uuv_ned[:, 2])))
+    _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(truth.t_unix)))
+
+    t1 = time.perf_counter()
+    if video:
+        in_view, init = _render(sc, camera, truth, out / "video.mp4")
+    else:
+        for old in out.glob("video.*"):
+            old.unlink()
+        in_view, init = truth.visible.copy(), None
     render_s = time.perf_counter() - t1
     seen = in_view & camera.contains(np.nan_to_num(truth.u, nan=-1e9), np.nan_to_num(truth.v, nan=-1e9))
     _write_csv(out / "track.csv", ("t", "u", "v"),
                ((f"{t:.6f}", f"{u:.4f}" if ok else "", f"{v:.4f}" if ok else "")
                 for t, u, v, ok in zip(truth.t_unix, truth.u, truth.v, seen)))
-    if init is None:
-        raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
-    pad = 3
-    x, y, w, h = init[0]
-    x0, y0 = max(0, x - pad), max(0, y - pad)
-    box = (x0, y0, min(camera.width, x + w + pad) - x0, min(camera.height, y + h + pad) - y0)
-    (out / "session.toml").write_text(_session_toml(sc, camera, box, init[1]))
+    box = init_t = None
+    if video:
+        if init is None:
+            raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
+        pad = 3
+        (x, y, w, h), init_t = init
+        x0, y0 = max(0, x - pad), max(0, y - pad)
+        box = (x0, y0, min(camera.width, x + w + pad) - x0, min(camera.height, y + h + pad) - y0)
+    (out / "session.toml").write_text(_session_toml(sc, camera, box, init_t))
     if scenario_text is not None:
         (out / "scenario.toml").write_text(scenario_text)
     return Report(out, len(truth.t_unix), render_s, time.perf_counter() - t0, messages)

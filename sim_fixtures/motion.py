@@ -2,18 +2,28 @@
 
 Times ``tau_s`` are seconds since the scenario's first frame (arrays). Positions
 are in the scenario's world frame (local NED, origin on the water surface, metres);
-attitudes are Z-Y-X Euler angles in radians. Every motion is a sum of slow
-sinusoids, so telemetry sampled at its usual rates and interpolated linearly
-reproduces the state to far below a millimetre. Random phases come from the seed.
+attitudes are Z-Y-X Euler angles in radians, turned into rotations by scipy
+(:mod:`sim_fixtures.geometry`). Every motion is a sum of slow sinusoids (plus an
+optional faster airframe wobble), so telemetry sampled at its usual rates and
+interpolated reproduces the state closely. Random phases come from the seed.
+
+The camera's true attitude depends on the mount (``[mount]``):
+
+- ``attitude_source = "fixed"``: rigid on the airframe, ``R_body · R(fixed_rpy_deg)``;
+- ``kind = "stabilised"``: the gimbal holds roll 0 and ``pitch_deg`` relative to the
+  horizon (plus a small jitter) and ``yaw_deg`` from North (``yaw_mode = "earth"``) or
+  from the vehicle's heading (``"vehicle"``, follow mode);
+- ``kind = "servo"`` (ArduPilot ``MNT1_TYPE 1``): the autopilot stabilises the camera by
+  servo angles = target − the vehicle's lean (roll_servo = −roll, pitch_servo =
+  pitch_deg − pitch, yaw relative to the vehicle), so the camera truly points at
+  ``R_body · R(roll_servo, pitch_servo, yaw_rel)``, which is not exactly the target.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from localizer.attitude import euler_to_R
-from localizer.refraction import offset_from_ray
-
+from .geometry import body_rates, matrix_zyx, reach_offset, rotation_zyx
 from .scenario import Scenario
 
 TAU = 2 * np.pi
@@ -21,6 +31,11 @@ TAU = 2 * np.pi
 
 def _wave(tau, amplitude, freq_hz, phase):
     return amplitude * np.sin(TAU * freq_hz * np.asarray(tau, dtype=float) + phase)
+
+
+def wrap_pi(angle):
+    """Angles in radians wrapped to [-pi, pi)."""
+    return (np.asarray(angle, dtype=float) + np.pi) % TAU - np.pi
 
 
 def _eased(tau, keyframes):
@@ -42,6 +57,7 @@ class Motion:
         self.sc = sc
         rng = np.random.default_rng([sc.seed, 101])
         self._ph = rng.uniform(0, TAU, 16)
+        self._ph_wobble = rng.uniform(0, TAU, 2)  # drawn after the others: they keep their values
         self.uav_centre_ne_m = self._uav_centre()
 
     # --- UAV -----------------------------------------------------------------------------------
@@ -51,7 +67,25 @@ class Motion:
         yaw = np.radians(u.yaw_deg) + _wave(tau_s, np.radians(u.yaw_swing_deg), 1.0 / u.yaw_period_s, ph[0])
         tilt = np.radians(u.tilt_deg) + _wave(tau_s, np.radians(u.gust_deg), 0.27, ph[1])
         lean = np.radians(u.wind_from_deg) - yaw  # the airframe leans towards where the wind comes from
-        return np.stack([tilt * np.sin(lean), -tilt * np.cos(lean), yaw], axis=-1)
+        roll, pitch = tilt * np.sin(lean), -tilt * np.cos(lean)
+        if u.wobble_deg:
+            w = np.radians(u.wobble_deg)
+            roll = roll + _wave(tau_s, w, u.wobble_hz, self._ph_wobble[0])
+            pitch = pitch + _wave(tau_s, w, u.wobble_hz, self._ph_wobble[1])
+        return np.stack([roll, pitch, yaw], axis=-1)
+
+    def body_rotation(self, tau_s):
+        """The UAV body's rotation into NED (a scipy Rotation, one per time)."""
+        rpy = self.uav_rpy(tau_s)
+        return rotation_zyx(rpy[..., 0], rpy[..., 1], rpy[..., 2])
+
+    def R_ned_from_body(self, tau_s):
+        rpy = self.uav_rpy(tau_s)
+        return matrix_zyx(rpy[..., 0], rpy[..., 1], rpy[..., 2])
+
+    def body_rates(self, tau_s):
+        """The body's angular velocity (p, q, r) in rad/s, in the body frame (FRD), (..., 3)."""
+        return body_rates(self.body_rotation, tau_s)
 
     def uav_ned(self, tau_s):
         """Position the autopilot reports (GLOBAL_POSITION_INT's point), world NED (..., 3)."""
@@ -61,30 +95,63 @@ class Motion:
         d = -(u.height_m + _wave(tau_s, u.height_swing_m, 0.05, ph[6]))
         return np.stack([n, e, d], axis=-1)
 
+    def uav_velocity_ned(self, tau_s, h_s: float = 1e-3):
+        """Velocity of the reported point, NED m/s (..., 3) (central difference; the motion is slow)."""
+        tau = np.asarray(tau_s, dtype=float)
+        return (self.uav_ned(tau + h_s) - self.uav_ned(tau - h_s)) / (2 * h_s)
+
     # --- camera --------------------------------------------------------------------------------
-    def gimbal_rpy(self, tau_s):
-        """Stabilised gimbal's FRD attitude in NED (roll, pitch relative to the horizon, yaw from North)."""
+    def gimbal_target(self, tau_s):
+        """The mount's target attitude: (..., 4) roll, pitch (relative to the horizon), yaw relative
+        to the vehicle's heading, yaw from North (radians). Includes the gimbal's small jitter."""
         m, ph = self.sc.mount, self._ph
         j = np.radians(m.jitter_deg)
         roll = _wave(tau_s, j, 0.4, ph[7])
         pitch = np.radians(m.pitch_deg) + _wave(tau_s, j, 0.7, ph[8])
-        yaw = np.radians(m.yaw_deg) + _wave(tau_s, j, 0.5, ph[9])
-        return np.stack([roll, pitch, yaw], axis=-1)
+        vehicle_yaw = self.uav_rpy(tau_s)[..., 2]
+        if m.yaw_mode == "vehicle":
+            yaw_rel = np.radians(m.yaw_deg) + _wave(tau_s, j, 0.5, ph[9])
+            yaw = vehicle_yaw + yaw_rel
+        else:
+            yaw = np.radians(m.yaw_deg) + _wave(tau_s, j, 0.5, ph[9])
+            yaw_rel = wrap_pi(yaw - vehicle_yaw)
+        return np.stack([roll, pitch, yaw_rel, yaw], axis=-1)
+
+    def gimbal_rpy(self, tau_s):
+        """A stabilised gimbal's FRD attitude in NED: roll, pitch relative to the horizon, yaw from North."""
+        return self.gimbal_target(tau_s)[..., [0, 1, 3]]
+
+    def servo_angles(self, tau_s):
+        """A servo mount's demands (..., 3): roll, pitch = target − the vehicle's lean, yaw relative to
+        the vehicle; the camera's attitude relative to the body as Z-Y-X Euler angles."""
+        g = self.gimbal_target(tau_s)
+        body = self.uav_rpy(tau_s)
+        return np.stack([g[..., 0] - body[..., 0], g[..., 1] - body[..., 1], g[..., 2]], axis=-1)
+
+    def reported_gimbal(self, tau_s):
+        """What the autopilot reports of the camera: (..., 3) roll, pitch, yaw relative to the vehicle.
+
+        A stabilised gimbal reports its horizon-relative attitude; a servo mount its servo
+        demands, which ArduPilot flags as horizon-relative all the same.
+        """
+        if self.sc.mount.kind == "servo":
+            return self.servo_angles(tau_s)
+        return self.gimbal_target(tau_s)[..., :3]
 
     def R_ned_from_gimbal(self, tau_s):
-        """The camera's gimbal FRD frame (x = optical axis) in NED, (..., 3, 3)."""
-        if self.sc.mount.attitude_source == "fixed":
-            body = self.uav_rpy(tau_s)
-            fixed = np.radians(self.sc.mount.fixed_rpy_deg)
-            return euler_to_R(body[..., 0], body[..., 1], body[..., 2]) @ euler_to_R(*fixed)
+        """The camera's gimbal FRD frame (x = optical axis) in NED, (..., 3, 3): the true attitude."""
+        m = self.sc.mount
+        if m.attitude_source == "fixed":
+            return self.R_ned_from_body(tau_s) @ matrix_zyx(*np.radians(m.fixed_rpy_deg))
+        if m.kind == "servo":
+            s = self.servo_angles(tau_s)
+            return self.R_ned_from_body(tau_s) @ matrix_zyx(s[..., 0], s[..., 1], s[..., 2])
         g = self.gimbal_rpy(tau_s)
-        return euler_to_R(g[..., 0], g[..., 1], g[..., 2])
+        return matrix_zyx(g[..., 0], g[..., 1], g[..., 2])
 
     def camera_ned(self, tau_s):
         """Camera position, world NED (..., 3): the reported point plus the body-frame offset."""
-        rpy = self.uav_rpy(tau_s)
-        R_body = euler_to_R(rpy[..., 0], rpy[..., 1], rpy[..., 2])
-        return self.uav_ned(tau_s) + R_body @ np.asarray(self.sc.mount.camera_offset_m)
+        return self.uav_ned(tau_s) + self.R_ned_from_body(tau_s) @ np.asarray(self.sc.mount.camera_offset_m)
 
     # --- UUV -----------------------------------------------------------------------------------
     def uuv_ne(self, tau_s):
@@ -118,15 +185,21 @@ class Motion:
     # --- placement -----------------------------------------------------------------------------
     def _uav_centre(self):
         """Mean UAV position: given, or where the mean optical axis meets the UUV's path centre."""
-        u, v = self.sc.uav, self.sc.uuv
+        u, v, m = self.sc.uav, self.sc.uuv, self.sc.mount
         if u.standoff == "given":
             return np.array([u.north_m, u.east_m])
-        if self.sc.mount.attitude_source == "fixed":
-            r, p, y = np.radians(self.sc.mount.fixed_rpy_deg)
-            axis = (euler_to_R(0.0, 0.0, np.radians(u.yaw_deg)) @ euler_to_R(r, p, y))[:, 0]
+        yaw = np.radians(u.yaw_deg)
+        if m.attitude_source == "fixed":
+            R = matrix_zyx(0.0, 0.0, yaw) @ matrix_zyx(*np.radians(m.fixed_rpy_deg))
+        elif m.kind == "servo":  # the mean lean matters: the servos do not quite cancel it
+            lean, tilt = np.radians(u.wind_from_deg) - yaw, np.radians(u.tilt_deg)
+            roll, pitch = tilt * np.sin(lean), -tilt * np.cos(lean)
+            yaw_rel = np.radians(m.yaw_deg) if m.yaw_mode == "vehicle" else np.radians(m.yaw_deg) - yaw
+            R = matrix_zyx(roll, pitch, yaw) @ matrix_zyx(-roll, np.radians(m.pitch_deg) - pitch, yaw_rel)
         else:
-            axis = euler_to_R(0.0, np.radians(self.sc.mount.pitch_deg), np.radians(self.sc.mount.yaw_deg))[:, 0]
-        off, reaches = offset_from_ray(axis, u.height_m, v.depth_m, self.sc.site.refractive_index)
-        if not reaches:
+            gimbal_yaw = np.radians(m.yaw_deg) + (yaw if m.yaw_mode == "vehicle" else 0.0)
+            R = matrix_zyx(0.0, np.radians(m.pitch_deg), gimbal_yaw)
+        off = reach_offset(R[:, 0], u.height_m, v.depth_m, self.sc.site.refractive_index)
+        if not np.all(np.isfinite(off)):
             raise ValueError(f"scenario {self.sc.name}: the camera's optical axis does not reach the water")
         return np.array([v.north_m, v.east_m]) - off

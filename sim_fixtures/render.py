@@ -1,9 +1,9 @@
 """Per-pixel ray casting of the underwater scene as the UAV's camera sees it.
 
-Each pixel's ray comes from :func:`localizer.camera.pixel_to_ray` (so the image
-carries the lens distortion), is turned into NED by the camera's true attitude,
-bent at the flat surface with :func:`localizer.refraction.refract_down`, and
-followed to the seafloor (a world-fixed texture) or to the UUV, a box of the
+Each pixel's ray comes from OpenCV's undistortion (:func:`~sim_fixtures.geometry.pixel_rays`,
+so the image carries the lens distortion), is turned into NED by the camera's true
+attitude, bent at the flat surface by Snell's law in vector form
+(:func:`~sim_fixtures.geometry.refract_into_water`), and followed to the seafloor (a world-fixed texture) or to the UUV, a box of the
 BlueROV2's size whose reference point is the centre of its top face. Light is
 attenuated along the water path per colour channel; caustics move over the
 floor; the surface reflects the sky (Schlick's Fresnel) and, optionally, the sun.
@@ -17,10 +17,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from localizer.camera import Camera, pixel_to_ray
-from localizer.refraction import refract_down
-
 from . import texture
+from .geometry import SimCamera, pixel_rays, refract_into_water
 from .scenario import Scenario
 
 FLOOR_M_PER_PX = 0.015
@@ -54,7 +52,7 @@ def water_path(ray_cv, view: View, n_water: float):
     d = np.where(wet[:, None], d, np.array([0.0, 0.0, 1.0], ray_cv.dtype))
     height = -view.camera_ned[2]
     surface = view.camera_ned[:2].astype(ray_cv.dtype) + d[:, :2] * (height / d[:, 2])[:, None]
-    return surface, refract_down(d, n_water).astype(ray_cv.dtype), wet
+    return surface, refract_into_water(d, n_water).astype(ray_cv.dtype), wet
 
 
 def to_body(surface_ne, dir_water, view: View):
@@ -115,7 +113,7 @@ class Renderer:
 
     COARSE = 4
 
-    def __init__(self, sc: Scenario, camera: Camera):
+    def __init__(self, sc: Scenario, camera: SimCamera):
         self.sc = sc
         self.camera = camera
         rng = np.random.default_rng([sc.seed, 202])
@@ -130,7 +128,7 @@ class Renderer:
         # grid point j sits at floor pixel c*(j-1) + (c-1)/2, so cv2.resize by c lands on floor pixel
         # centres (offset c); floor pixel i is centred on image pixel div*i + (div-1)/2
         fu, fv = c * (u - 1) + (c - 1) / 2, c * (v - 1) + (c - 1) / 2
-        self.grid_rays = pixel_to_ray(camera, div * fu + (div - 1) / 2, div * fv + (div - 1) / 2).reshape(-1, 3)
+        self.grid_rays = pixel_rays(camera, div * fu + (div - 1) / 2, div * fv + (div - 1) / 2).reshape(-1, 3)
         self.floor = texture.seafloor(rng, m_per_px=FLOOR_M_PER_PX)
         self.caustics = (texture.caustics(rng), texture.caustics(rng))
         self.sparkle = np.clip(texture.fractal_noise(rng, 512, 0.6) - 1.5, 0.0, None)
@@ -144,7 +142,7 @@ class Renderer:
     # --- geometry shared with the tests ------------------------------------------------------------
     def body_rays(self, u, v, view: View):
         """Body-frame origins and directions of the rays through distorted pixels (u, v)."""
-        ray = pixel_to_ray(self.camera, np.ravel(u), np.ravel(v))
+        ray = pixel_rays(self.camera, np.ravel(u), np.ravel(v))
         surface, dir_water, wet = water_path(ray, view, self.n_water)
         origin, direction = to_body(surface, dir_water, view)
         origin[~wet] = np.nan

@@ -26,6 +26,7 @@ class Site:
     takeoff_height_above_surface_m: float = 1.80  # the take-off point above the water
     refractive_index: float = 1.34
     floor_depth_m: float = 4.0  # flat seafloor below the surface
+    geoid_separation_m: float = 40.0  # WGS84 ellipsoid height of mean sea level (GPS_RAW_INT alt_ellipsoid)
     attenuation_bgr_per_m: tuple = (0.05, 0.08, 0.22)  # light attenuation coefficients (1/m)
     water_bgr: tuple = (120.0, 105.0, 50.0)  # colour of deep water (0-255)
 
@@ -41,9 +42,14 @@ class CameraSpec:
 @dataclass(frozen=True)
 class MountSpec:
     attitude_source: str = "gimbal_device"  # "gimbal_device", "mount_orientation" or "fixed"
-    gimbal_frame: str = "earth"  # gimbal_device yaw reported "earth" (flags 64) or "vehicle" (flags 32)
-    pitch_deg: float = -90.0  # gimbal attitude held relative to the horizon / North
-    yaw_deg: float = 0.0  # gimbal heading held (degrees from North)
+    # "stabilised": the gimbal holds its attitude itself and reports it; "servo" (ArduPilot MNT1_TYPE 1):
+    # the autopilot commands servo angles = target - the vehicle's lean and reports those demands
+    kind: str = "stabilised"
+    # gimbal_device yaw reported "earth" (flags 4|8|64 = 76) or "vehicle" (flags 4|8|32 = 44, as ArduPilot)
+    gimbal_frame: str = "earth"
+    pitch_deg: float = -90.0  # target pitch relative to the horizon (-90 = straight down)
+    yaw_mode: str = "earth"  # yaw_deg held from North ("earth") or from the vehicle's heading ("vehicle", follow)
+    yaw_deg: float = 0.0  # target yaw (degrees), from North or from the vehicle's heading as yaw_mode says
     jitter_deg: float = 0.05  # amplitude of the gimbal's residual wobble (0.4 and 0.7 Hz)
     fixed_rpy_deg: tuple = (0.0, -90.0, 0.0)  # "fixed": camera in the body FRD frame
     camera_offset_m: tuple = (0.10, 0.0, 0.20)  # camera in body FRD relative to the reported position
@@ -63,6 +69,10 @@ class UavSpec:
     tilt_deg: float = 4.0  # wind tilt: the airframe leans into the wind by this much
     wind_from_deg: float = 250.0
     gust_deg: float = 0.8  # amplitude of the tilt's oscillation
+    wobble_deg: float = 0.0  # amplitude of an extra airframe roll and pitch oscillation (a camera fixed to it wobbles)
+    wobble_hz: float = 0.0
+    gnss_fix_type: int = 3  # GPS_RAW_INT fix_type (3 = 3D, 6 = RTK fixed)
+    gnss_h_acc_m: float = 0.02  # GPS_RAW_INT h_acc (v_acc twice that); the simulated position itself is exact
 
 
 @dataclass(frozen=True)
@@ -86,6 +96,16 @@ class LinkSpec:
     delay_s: float = 0.045  # telemetry link delay (sample to ground-station receipt)
     jitter_s: float = 0.012  # mean of the exponential extra delay; the link stays in order
     boot_s_at_start: float = 412.0  # autopilot uptime when the scenario starts
+    depth_delay_s: float = 0.03  # UUV depth link: measurement to ground-station receipt
+    depth_jitter_s: float = 0.005  # mean of its exponential extra delay; arrivals stay in order
+    reboot_at_s: float | None = None  # the autopilot reboots at this scenario time (None: never)...
+    reboot_down_s: float = 3.0  # ... is silent this long, then talks again with its boot clock restarted
+
+
+@dataclass(frozen=True)
+class ClockSpec:
+    station_offset_s: float = 0.0  # ground station (laptop) clock minus true GNSS time: stamps frames, tlog, t_recv
+    uuv_offset_s: float = 0.0  # the UUV's clock minus true time: stamps depth.jsonl's t
 
 
 @dataclass(frozen=True)
@@ -93,6 +113,10 @@ class TelemetrySpec:
     attitude_hz: float = 50.0
     position_hz: float = 10.0
     gimbal_hz: float = 20.0
+    system_time_hz: float = 1.0  # 0: not sent
+    gps_raw_hz: float = 5.0  # 0: not sent
+    gps_raw_time: str = "unix"  # GPS_RAW_INT time_usec: true UNIX time ("unix") or boot time ("boot", as ArduPilot)
+    timesync_hz: float = 1.0  # the ground station's TIMESYNC requests (each answered by the autopilot); 0: none
     depth_hz: float = 8.0
     lead_s: float = 2.0  # telemetry starts this long before the first frame
     attitude_noise_deg: float = 0.0  # 1-sigma white noise on reported roll, pitch, yaw
@@ -127,20 +151,27 @@ class Scenario:
     uav: UavSpec = field(default_factory=UavSpec)
     uuv: UuvSpec = field(default_factory=UuvSpec)
     link: LinkSpec = field(default_factory=LinkSpec)
+    clock: ClockSpec = field(default_factory=ClockSpec)
     telemetry: TelemetrySpec = field(default_factory=TelemetrySpec)
     render: RenderSpec = field(default_factory=RenderSpec)
 
 
 _TABLES = {"site": Site, "camera": CameraSpec, "mount": MountSpec, "uav": UavSpec, "uuv": UuvSpec,
-           "link": LinkSpec, "telemetry": TelemetrySpec, "render": RenderSpec}
+           "link": LinkSpec, "clock": ClockSpec, "telemetry": TelemetrySpec, "render": RenderSpec}
 _CHOICES = {"site.water_reference": ("takeoff", "amsl"),
             "mount.attitude_source": ("gimbal_device", "mount_orientation", "fixed"),
-            "mount.gimbal_frame": ("earth", "vehicle"), "uav.standoff": ("auto", "given")}
+            "mount.gimbal_frame": ("earth", "vehicle"), "uav.standoff": ("auto", "given"),
+            "mount.kind": ("stabilised", "servo"), "mount.yaw_mode": ("earth", "vehicle"),
+            "telemetry.gps_raw_time": ("unix", "boot")}
 
 
 def _checked(source: str, key: str, value, default):
     """``value`` converted to the type of ``default``, or ConfigError."""
-    if isinstance(default, bool):
+    if default is None:  # an optional number
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        value = float(value) if ok else value
+        default = 1.0
+    elif isinstance(default, bool):
         ok = isinstance(value, bool)
     elif isinstance(default, int):
         ok = isinstance(value, int) and not isinstance(value, bool)
@@ -211,9 +242,7 @@ def scenario_from_dict(data: dict, source: str = "scenario.toml") -> Scenario:
         tables["uuv"] = replace(tables["uuv"], depth_profile=_depth_profile(source, data["uuv"]["depth_profile"]))
     occl = _occlusions(source, data["occlusions"]) if "occlusions" in data else ()
     sc = Scenario(name=data["name"], occlusions=occl, **top, **tables)
-    for key, value in (("duration_s", sc.duration_s), ("fps", sc.fps)):
-        if not value > 0:
-            raise ConfigError(source, key, value, "must be > 0")
+    _check_ranges(sc, source)
     v = sc.uuv
     if v.depth_profile:
         key, value, depths = "uuv.depth_profile", [list(k) for k in v.depth_profile], [d for _, d in v.depth_profile]
@@ -223,6 +252,33 @@ def scenario_from_dict(data: dict, source: str = "scenario.toml") -> Scenario:
         raise ConfigError(source, key, value,
                           "the UUV must stay between the surface and the seafloor (site.floor_depth_m)")
     return sc
+
+
+def _check_ranges(sc: Scenario, source: str) -> None:
+    """Values of the right type but outside what the generator can simulate."""
+    tel, link, uav = sc.telemetry, sc.link, sc.uav
+    positive = {"duration_s": sc.duration_s, "fps": sc.fps, "telemetry.attitude_hz": tel.attitude_hz,
+                "telemetry.position_hz": tel.position_hz, "telemetry.gimbal_hz": tel.gimbal_hz,
+                "telemetry.depth_hz": tel.depth_hz, "link.reboot_down_s": link.reboot_down_s}
+    for key, value in positive.items():
+        if not value > 0:
+            raise ConfigError(source, key, value, "must be > 0")
+    not_negative = {"telemetry.system_time_hz": tel.system_time_hz, "telemetry.gps_raw_hz": tel.gps_raw_hz,
+                    "telemetry.timesync_hz": tel.timesync_hz, "link.delay_s": link.delay_s,
+                    "link.jitter_s": link.jitter_s, "link.depth_delay_s": link.depth_delay_s,
+                    "link.depth_jitter_s": link.depth_jitter_s, "uav.wobble_deg": uav.wobble_deg,
+                    "uav.wobble_hz": uav.wobble_hz, "uav.gnss_h_acc_m": uav.gnss_h_acc_m}
+    for key, value in not_negative.items():
+        if not value >= 0:
+            raise ConfigError(source, key, value, "must be >= 0")
+    if not 0 <= uav.gnss_fix_type <= 8:
+        raise ConfigError(source, "uav.gnss_fix_type", uav.gnss_fix_type, "expected a GPS_FIX_TYPE, 0 to 8")
+    if link.reboot_at_s is not None and not -tel.lead_s <= link.reboot_at_s <= sc.duration_s:
+        raise ConfigError(source, "link.reboot_at_s", link.reboot_at_s,
+                          f"must lie in the telemetry's span [-{tel.lead_s:g}, {sc.duration_s:g}] s")
+    if sc.mount.kind == "servo" and sc.mount.attitude_source == "fixed":
+        raise ConfigError(source, "mount.kind", "servo", 'a servo mount needs attitude_source "gimbal_device" '
+                          'or "mount_orientation", not "fixed"')
 
 
 def load_scenario(path: str | Path) -> Scenario:

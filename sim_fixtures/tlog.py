@@ -1,10 +1,33 @@
 """The UAV's telemetry as a standard tlog: real MAVLink 2 frames with link delay and jitter.
 
+Clocks (all integer microseconds):
+
+- *true* time: GNSS/UNIX time; the scenario's ``start_unix`` is the first frame's;
+- the *station* clock (the ground station's laptop): true + ``[clock] station_offset_s``.
+  It stamps every record of the tlog (the receive time), the frames and depth arrivals;
+- the autopilot's *boot* clock (``time_boot_ms``): zero ``link.boot_s_at_start`` before the
+  first frame, and again at ``link.reboot_at_s`` when the autopilot reboots; it then sends
+  nothing for ``link.reboot_down_s``.
+
 Each message's values are the true state at its ``time_boot_ms`` (plus the
 scenario's optional noise), so geometry from this telemetry alone can reach the
-truth. Record times are the ground station's receive times: send time + the
-link's delay + an exponential jitter, kept in order as a real link delivers them.
-Integer microseconds of UNIX time throughout.
+truth. Messages (system 1, component 1, as ArduPilot's):
+
+- HEARTBEAT (1 Hz); SYSTEM_TIME (``system_time_hz``): ``time_unix_usec`` is true time;
+- ATTITUDE (``attitude_hz``): roll, pitch, yaw and the true body rates (p, q, r in rad/s, FRD);
+- GLOBAL_POSITION_INT (``position_hz``) with its NED velocity (cm/s);
+- GPS_RAW_INT (``gps_raw_hz``): see :func:`_gps_raw`;
+- GIMBAL_DEVICE_ATTITUDE_STATUS or MOUNT_ORIENTATION (``gimbal_hz``) unless the camera is fixed;
+- TIMESYNC replies: the ground station sends requests (``tc1`` 0, ``ts1`` its station-clock
+  send time in ns) at ``timesync_hz``; the autopilot answers like ArduPilot with
+  ``tc1`` = its boot time in ns when the request arrived and ``ts1`` echoed. The uplink
+  takes ``link.delay_s`` plus the same exponential jitter as the downlink;
+- PARAM_VALUE ``MNT1_TYPE`` = 1 for a servo mount, as if the ground station had asked for it.
+
+Record times are the ground station's receive times: send time (sample + 0.8 ms) +
+the link's delay + an exponential jitter, kept in order as a real link delivers them.
+Every random draw comes from its own stream, independent of the clock offsets, so a
+scenario and its twin with other offsets have the same samples, values and delays.
 """
 
 from __future__ import annotations
@@ -16,119 +39,230 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.mavlink_io import mavutil
-from localizer.attitude import (
-    GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME,
-    GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
-    euler_to_quat,
-)
-from localizer.geodesy import ned_to_geodetic
 
-from .motion import Motion
+from .geometry import ned_to_geodetic, quat_wxyz, rotation_zyx
+from .motion import Motion, wrap_pi
 from .scenario import Scenario
 
-GIMBAL_DEVICE_FLAGS_ROLL_LOCK = 4  # roll and pitch relative to the horizon
-GIMBAL_DEVICE_FLAGS_PITCH_LOCK = 8
+# MAVLink GIMBAL_DEVICE_FLAGS (common.xml)
+GIMBAL_DEVICE_FLAGS_ROLL_LOCK = 4  # roll relative to the horizon
+GIMBAL_DEVICE_FLAGS_PITCH_LOCK = 8  # pitch relative to the horizon
+GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME = 32
+GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME = 64
+SEND_LATENCY_US = 800  # the autopilot sends a message this long after sampling it
+GCS_PARAM_COUNT = 1200  # PARAM_VALUE param_count: the autopilot's number of parameters (illustrative)
+
+# independent random streams: np.random.default_rng([seed, 404, STREAM[name]])
+STREAM = {"heartbeat": 1, "system_time": 2, "attitude": 3, "position": 4, "gimbal": 5, "gps_raw": 6,
+          "timesync": 7, "downlink": 8, "depth": 9, "depth_link": 10}
+
+
+def stream(sc: Scenario, name: str):
+    return np.random.default_rng([sc.seed, 404, STREAM[name]])
+
+
+def exponential(rng, mean_s: float, n: int) -> np.ndarray:
+    return rng.exponential(mean_s, n) if mean_s > 0 else np.zeros(n)
 
 
 @dataclass(frozen=True)
 class Clock:
-    """The autopilot's boot clock: UNIX microseconds at ``time_boot_ms = 0``."""
+    """The clocks of a scenario, in integer UNIX microseconds (see the module's docstring)."""
 
-    boot_epoch_us: int
-    start_us: int  # UNIX microseconds of the scenario's first frame
+    boot_epoch_us: int  # true time at time_boot_ms = 0 (the first boot)
+    start_us: int  # true time of the scenario's first frame
+    station_offset_us: int = 0  # station clock minus true time
+    uuv_offset_us: int = 0  # UUV clock minus true time
+    reboot_us: int | None = None  # true time of the reboot: the second boot clock's zero
+    back_us: int | None = None  # true time the rebooted autopilot talks again
 
     @classmethod
     def of(cls, sc: Scenario) -> Clock:
         start_us = round(sc.start_unix * 1e6)
-        return cls(start_us - round(sc.link.boot_s_at_start * 1e6), start_us)
+        reboot = back = None
+        if sc.link.reboot_at_s is not None:
+            reboot = start_us + round(sc.link.reboot_at_s * 1e6)
+            back = reboot + round(sc.link.reboot_down_s * 1e6)
+        return cls(start_us - round(sc.link.boot_s_at_start * 1e6), start_us,
+                   round(sc.clock.station_offset_s * 1e6), round(sc.clock.uuv_offset_s * 1e6), reboot, back)
 
-    def tau_s(self, boot_ms):
-        """Scenario time (s since the first frame) of boot-clock milliseconds."""
-        return (np.asarray(boot_ms, dtype=np.int64) * 1000 + self.boot_epoch_us - self.start_us) / 1e6
+    def true_us(self, tau_s) -> np.ndarray:
+        """True time of scenario times (seconds since the first frame)."""
+        return self.start_us + np.round(np.asarray(tau_s, dtype=float) * 1e6).astype(np.int64)
+
+    def tau_of_us(self, true_us) -> np.ndarray:
+        return (np.asarray(true_us, dtype=np.int64) - self.start_us) / 1e6
+
+    def up(self, true_us) -> np.ndarray:
+        """Whether the autopilot is running (not in its reboot) at these true times."""
+        t = np.asarray(true_us, dtype=np.int64)
+        if self.reboot_us is None:
+            return np.ones(t.shape, bool)
+        return (t < self.reboot_us) | (t >= self.back_us)
+
+    def epoch_us(self, true_us) -> np.ndarray:
+        """The boot clock's zero in force at these true times."""
+        t = np.asarray(true_us, dtype=np.int64)
+        if self.reboot_us is None:
+            return np.full(t.shape, self.boot_epoch_us, np.int64)
+        return np.where(t >= self.reboot_us, self.reboot_us, self.boot_epoch_us).astype(np.int64)
+
+    def tau_s(self, boot_ms, rebooted=False):
+        """Scenario time (s since the first frame) of boot-clock milliseconds (of the second boot if ``rebooted``)."""
+        epoch = np.where(rebooted, self.reboot_us if self.reboot_us is not None else 0, self.boot_epoch_us)
+        return (np.asarray(boot_ms, dtype=np.int64) * 1000 + epoch - self.start_us) / 1e6
+
+    def station_us(self, true_us) -> np.ndarray:
+        return np.asarray(true_us, dtype=np.int64) + self.station_offset_us
 
 
-def sample_times_ms(clock: Clock, rate_hz: float, tau0_s: float, tau1_s: float, rng) -> np.ndarray:
-    """Boot-clock milliseconds of a stream at ``rate_hz`` over [tau0, tau1], with ±10 % scheduling jitter."""
+def sample_times(clock: Clock, rate_hz: float, tau0_s: float, tau1_s: float, rng):
+    """A stream at ``rate_hz`` over [tau0, tau1] with ±10 % scheduling jitter, on whole boot milliseconds.
+
+    Returns ``(true_us, boot_ms)``, strictly increasing true times; none while the autopilot reboots.
+    """
     period = 1.0 / rate_hz
     tau = np.arange(tau0_s, tau1_s, period)
     tau = tau + rng.uniform(-0.1, 0.1, len(tau)) * period
-    ms = np.round((clock.start_us - clock.boot_epoch_us) / 1000 + tau * 1000).astype(np.int64)
-    return np.unique(ms)  # strictly increasing
+    t = clock.true_us(tau)
+    t = t[clock.up(t)]
+    epoch = clock.epoch_us(t)
+    ms = (t - epoch) // 1000
+    t, first = np.unique(epoch + ms * 1000, return_index=True)
+    return t, ms[first]
 
 
-def _messages(sc: Scenario, motion: Motion, clock: Clock, rng):
-    """Every message as ``(sample_us, encode_name, args)`` in no particular order."""
+def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
+    """GPS_RAW_INT arguments: the reported point as GLOBAL_POSITION_INT has it (the simulated GNSS is exact).
+
+    ``time_usec`` true UNIX µs (``gps_raw_time = "unix"``) or boot µs (``"boot"``, ArduPilot's
+    ``last_fix_time_ms``·1000); ``fix_type`` from ``uav.gnss_fix_type``; ``eph`` 70 (HDOP 0.7),
+    ``epv`` 110; ``vel`` ground speed cm/s, ``cog`` course over ground cdeg; 14 satellites;
+    ``alt_ellipsoid`` = alt + ``site.geoid_separation_m`` (mm); ``h_acc`` = ``uav.gnss_h_acc_m``,
+    ``v_acc`` twice that (mm); ``vel_acc`` 30 mm/s; ``hdg_acc`` and ``yaw`` 0 (no GNSS yaw).
+    """
+    s, u = sc.site, sc.uav
+    tau = clock.tau_of_us(t_us)
+    lat, lon, alt = ned_to_geodetic(motion.uav_ned(tau), s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    alt = alt + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m
+    vel = motion.uav_velocity_ned(tau)
+    speed = np.hypot(vel[:, 0], vel[:, 1])
+    cog = np.round(np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360 * 100).astype(int) % 36000
+    time_usec = t_us if sc.telemetry.gps_raw_time == "unix" else ms * 1000
+    h_acc = round(u.gnss_h_acc_m * 1000)
+    return [(int(tu), u.gnss_fix_type, round(la * 1e7), round(lo * 1e7), round(a * 1000), 70, 110, round(v * 100),
+             int(c), 14, round((a + s.geoid_separation_m) * 1000), h_acc, 2 * h_acc, 30, 0, 0)
+            for tu, la, lo, a, v, c in zip(time_usec, lat, lon, alt, speed, cog)]
+
+
+def _gimbal(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
+    """``(encode_name, rows)`` of the camera-attitude message: what the autopilot reports (see
+    :meth:`Motion.reported_gimbal`), with yaw relative to the vehicle or to North as the flags say."""
+    tau = clock.tau_of_us(t_us)
+    att_noise = np.radians(sc.telemetry.attitude_noise_deg)
+    g = motion.reported_gimbal(tau) + rng.normal(0.0, 1.0, (len(tau), 3)) * att_noise
+    vehicle_yaw = motion.uav_rpy(tau)[:, 2]
+    yaw_abs = g[:, 2] + vehicle_yaw
+    if sc.mount.attitude_source == "mount_orientation":
+        return "mount_orientation", [
+            (int(m), *np.degrees([r, p, wrap_pi(yr)]), float(np.degrees(ya) % 360))
+            for m, r, p, yr, ya in zip(ms, g[:, 0], g[:, 1], g[:, 2], yaw_abs)]
+    earth = sc.mount.gimbal_frame == "earth"
+    flags = GIMBAL_DEVICE_FLAGS_ROLL_LOCK | GIMBAL_DEVICE_FLAGS_PITCH_LOCK | (
+        GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME if earth else GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME)
+    q = quat_wxyz(rotation_zyx(g[:, 0], g[:, 1], yaw_abs if earth else g[:, 2]))
+    nan = float("nan")
+    # as ArduPilot: sent by the autopilot for gimbal device 1, angular velocities and delta_yaw unknown
+    return "gimbal_device_attitude_status", [
+        (0, 0, int(m), flags, [float(x) for x in qq], nan, nan, nan, 0, nan, nan, 1) for m, qq in zip(ms, q)]
+
+
+def _timesync(sc: Scenario, clock: Clock, tau0: float, tau1: float, rng):
+    """The autopilot's TIMESYNC replies as ``(true_us, (tc1, ts1))``, stamped when each request arrived."""
+    period = 1.0 / sc.telemetry.timesync_hz
+    tau = np.arange(tau0 + rng.uniform(0.0, period), tau1, period)
+    sent = clock.true_us(tau)
+    arrived = sent + np.round((sc.link.delay_s + exponential(rng, sc.link.jitter_s, len(tau))) * 1e6).astype(np.int64)
+    up = clock.up(arrived)
+    tc1 = (arrived - clock.epoch_us(arrived)) * 1000  # the autopilot's boot time in ns
+    ts1 = clock.station_us(sent) * 1000  # the request's station-clock send time in ns, echoed
+    return [(int(a), (int(c), int(s))) for a, c, s, ok in zip(arrived, tc1, ts1, up) if ok]
+
+
+def _messages(sc: Scenario, motion: Motion, clock: Clock):
+    """Every message as ``(sample_true_us, encode_name, args)`` in no particular order."""
     mav = mavutil().mavlink
     tel = sc.telemetry
     tau0, tau1 = -tel.lead_s, sc.duration_s + 1.0
-    att_noise = np.radians(tel.attitude_noise_deg)
     out = []
 
-    def add(ms, name, rows):
-        us = ms * 1000 + clock.boot_epoch_us
-        out.extend((int(u), name, args) for u, args in zip(us, rows))
+    def add(t_us, name, rows):
+        out.extend((int(t), name, args) for t, args in zip(t_us, rows))
 
-    ms = sample_times_ms(clock, 1.0, tau0, tau1, rng)
+    t, _ = sample_times(clock, 1.0, tau0, tau1, stream(sc, "heartbeat"))
     armed = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_SAFETY_ARMED
     loiter = 5  # ArduCopter's LOITER flight mode
-    add(ms, "heartbeat", [(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, armed, loiter, mav.MAV_STATE_ACTIVE)] * len(ms))
-    ms = sample_times_ms(clock, 1.0, tau0, tau1, rng)
-    add(ms, "system_time", [(int(m * 1000 + clock.boot_epoch_us), int(m)) for m in ms])
+    add(t, "heartbeat", [(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, armed, loiter, mav.MAV_STATE_ACTIVE)] * len(t))
+    if tel.system_time_hz > 0:
+        t, ms = sample_times(clock, tel.system_time_hz, tau0, tau1, stream(sc, "system_time"))
+        add(t, "system_time", [(int(tu), int(m)) for tu, m in zip(t, ms)])
 
-    ms = sample_times_ms(clock, tel.attitude_hz, tau0, tau1, rng)
-    tau = clock.tau_s(ms)
-    rpy = motion.uav_rpy(tau) + rng.normal(0.0, 1.0, (len(ms), 3)) * att_noise
-    rates = (motion.uav_rpy(tau + 0.005) - motion.uav_rpy(tau - 0.005)) / 0.01
-    rpy[:, 2] = (rpy[:, 2] + np.pi) % (2 * np.pi) - np.pi
-    add(ms, "attitude", [(int(m), *map(float, a), *map(float, r)) for m, a, r in zip(ms, rpy, rates)])
+    rng = stream(sc, "attitude")
+    t, ms = sample_times(clock, tel.attitude_hz, tau0, tau1, rng)
+    tau = clock.tau_of_us(t)
+    rpy = motion.uav_rpy(tau) + rng.normal(0.0, 1.0, (len(t), 3)) * np.radians(tel.attitude_noise_deg)
+    rpy[:, 2] = wrap_pi(rpy[:, 2])
+    rates = motion.body_rates(tau)
+    add(t, "attitude", [(int(m), *map(float, a), *map(float, r)) for m, a, r in zip(ms, rpy, rates)])
 
-    ms = sample_times_ms(clock, tel.position_hz, tau0, tau1, rng)
-    tau = clock.tau_s(ms)
+    rng = stream(sc, "position")
+    t, ms = sample_times(clock, tel.position_hz, tau0, tau1, rng)
+    tau = clock.tau_of_us(t)
     ned = motion.uav_ned(tau)
-    vel = (motion.uav_ned(tau + 0.05) - motion.uav_ned(tau - 0.05)) / 0.1
+    vel = motion.uav_velocity_ned(tau)
     s = sc.site
-    lat, lon, alt = ned_to_geodetic(ned[:, 0], ned[:, 1], ned[:, 2], s.lat_deg, s.lon_deg, s.surface_amsl_m)
-    alt = alt + rng.normal(0.0, 1.0, len(ms)) * tel.height_noise_m
-    rel = -ned[:, 2] - s.takeoff_height_above_surface_m + rng.normal(0.0, 1.0, len(ms)) * tel.height_noise_m
+    lat, lon, alt = ned_to_geodetic(ned, s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    alt = alt + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m
+    rel = -ned[:, 2] - s.takeoff_height_above_surface_m + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m
     hdg = np.round(np.degrees(motion.uav_rpy(tau)[:, 2]) % 360 * 100).astype(int) % 36000
-    add(ms, "global_position_int", [
+    add(t, "global_position_int", [
         (int(m), round(la * 1e7), round(lo * 1e7), round(a * 1000), round(r * 1000),
          round(v[0] * 100), round(v[1] * 100), round(v[2] * 100), int(h))
         for m, la, lo, a, r, v, h in zip(ms, lat, lon, alt, rel, vel, hdg)
     ])
 
+    if tel.gps_raw_hz > 0:
+        rng = stream(sc, "gps_raw")
+        t, ms = sample_times(clock, tel.gps_raw_hz, tau0, tau1, rng)
+        add(t, "gps_raw_int", _gps_raw(sc, motion, clock, t, ms, rng))
+
     if sc.mount.attitude_source != "fixed":
-        ms = sample_times_ms(clock, tel.gimbal_hz, tau0, tau1, rng)
-        tau = clock.tau_s(ms)
-        g = motion.gimbal_rpy(tau) + rng.normal(0.0, 1.0, (len(ms), 3)) * att_noise
-        yaw_rel = g[:, 2] - motion.uav_rpy(tau)[:, 2]
-        if sc.mount.attitude_source == "mount_orientation":
-            add(ms, "mount_orientation", [
-                (int(m), *np.degrees([r, p, (yr + np.pi) % (2 * np.pi) - np.pi]), float(np.degrees(y) % 360))
-                for m, r, p, yr, y in zip(ms, g[:, 0], g[:, 1], yaw_rel, g[:, 2])
-            ])
-        else:
-            earth = sc.mount.gimbal_frame == "earth"
-            flags = GIMBAL_DEVICE_FLAGS_ROLL_LOCK | GIMBAL_DEVICE_FLAGS_PITCH_LOCK | (
-                GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME if earth else GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME)
-            q = euler_to_quat(g[:, 0], g[:, 1], g[:, 2] if earth else yaw_rel)
-            nan = float("nan")
-            add(ms, "gimbal_device_attitude_status", [
-                (0, 0, int(m), flags, [float(x) for x in qq], nan, nan, nan, 0) for m, qq in zip(ms, q)
-            ])
+        rng = stream(sc, "gimbal")
+        t, ms = sample_times(clock, tel.gimbal_hz, tau0, tau1, rng)
+        name, rows = _gimbal(sc, motion, clock, t, ms, rng)
+        add(t, name, rows)
+
+    if tel.timesync_hz > 0:
+        replies = _timesync(sc, clock, tau0, tau1, stream(sc, "timesync"))
+        add([a for a, _ in replies], "timesync", [args for _, args in replies])
+
+    if sc.mount.kind == "servo":
+        t = clock.true_us([tau0 + 0.3])
+        if clock.up(t)[0]:  # ArduPilot answers PARAM_REQUEST_READ by name: index -1, value cast to float
+            add(t, "param_value", [(b"MNT1_TYPE", 1.0, mav.MAV_PARAM_TYPE_INT8, GCS_PARAM_COUNT, 65535)])
     return out
 
 
-def write_tlog(path: Path, sc: Scenario, motion: Motion, clock: Clock, rng) -> dict[str, int]:
+def write_tlog(path: Path, sc: Scenario, motion: Motion, clock: Clock) -> dict[str, int]:
     """Write ``uav.tlog``; returns the number of messages of each type."""
     mav = mavutil().mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
-    msgs = sorted(_messages(sc, motion, clock, rng), key=lambda m: m[0])
-    send_us = np.array([m[0] for m in msgs], dtype=np.int64) + 800  # the autopilot sends ~1 ms after sampling
-    extra = rng.exponential(sc.link.jitter_s, len(msgs)) if sc.link.jitter_s > 0 else np.zeros(len(msgs))
+    msgs = sorted(_messages(sc, motion, clock), key=lambda m: m[0])  # stable: ties keep their order
+    send_us = np.array([m[0] for m in msgs], dtype=np.int64) + SEND_LATENCY_US
+    extra = exponential(stream(sc, "downlink"), sc.link.jitter_s, len(msgs))
     recv_us = np.maximum.accumulate(send_us + np.round((sc.link.delay_s + extra) * 1e6).astype(np.int64))
     counts: dict[str, int] = {}
     with open(path, "wb") as f:
-        for (_, name, args), t_us in zip(msgs, recv_us):
+        for (_, name, args), t_us in zip(msgs, clock.station_us(recv_us)):
             msg = getattr(mav, name + "_encode")(*args)
             f.write(struct.pack(">Q", int(t_us)) + msg.pack(mav))
             counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1

@@ -1,8 +1,9 @@
-"""The renderer and the localizer agree on where the UUV's reference point appears.
+"""The renderer and the truth agree on where the UUV's reference point appears.
 
-Two independent paths: track.csv's pixel comes from the localizer's forward
-projection (target → Snell bisection → ray → distortion); the renderer casts rays
-from pixels (undistortion → rotation → refraction → box). Newton's method on the
+Two paths in the simulator: track.csv's pixel comes from the forward projection
+(target → the surface crossing by Fermat's principle → cv2.projectPoints); the
+renderer casts rays from pixels (cv2.undistortPoints → rotation → vector Snell →
+box). The localizer agrees with both (test_sim_accuracy, test_sim_independent). Newton's method on the
 renderer's rays finds the pixel whose ray meets the top face's centre; it must be
 track.csv's pixel.
 """

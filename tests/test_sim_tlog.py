@@ -12,7 +12,8 @@ from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario
 from sim_fixtures.tlog import Clock
 
-RATES = {"ATTITUDE": 50.0, "GLOBAL_POSITION_INT": 10.0, "SYSTEM_TIME": 1.0, "HEARTBEAT": 1.0}
+RATES = {"ATTITUDE": 50.0, "GLOBAL_POSITION_INT": 10.0, "SYSTEM_TIME": 1.0, "HEARTBEAT": 1.0, "GPS_RAW_INT": 5.0,
+         "TIMESYNC": 1.0}
 GIMBAL = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
 
 
@@ -90,6 +91,13 @@ def test_values_are_the_true_state_at_time_boot_ms(tlog):
     R_true = euler_to_R(R_true[:, 0], R_true[:, 1], R_true[:, 2])
     R_msg = euler_to_R(*np.array([[m.roll, m.pitch, m.yaw] for m in att]).T)
     assert np.abs(R_msg - R_true).max() < 1e-6  # float32
+    # rates: the body's angular velocity, R(t)ᵀ·dR/dt, by finite differences of the true attitude
+    h = 1e-4
+    rpy0, rpy1 = motion.uav_rpy(tau - h), motion.uav_rpy(tau + h)
+    dR = (euler_to_R(*rpy1.T) - euler_to_R(*rpy0.T)) / (2 * h)
+    W = np.einsum("nji,njk->nik", R_true, dR)  # skew-symmetric [ω]×
+    pqr = np.array([[m.rollspeed, m.pitchspeed, m.yawspeed] for m in att])
+    assert np.abs(pqr - np.column_stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]])).max() < 1e-6
     kind = GIMBAL.get(sc.mount.attitude_source)
     if kind is None:
         return
