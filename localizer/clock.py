@@ -7,10 +7,9 @@ every other source is mapped onto it by what arrives when:
   UUV's own UNIX clock) by the least ``arrival − source time`` over a sliding
   window: the source clock's offset plus the link's smallest delay. The window
   follows drift; a source time going backwards starts a new segment (a reboot).
-- :class:`RoundTrip` measures a link's delay from MAVLink TIMESYNC exchanges
-  (ours out, the autopilot's reply back): with the delay split evenly both ways,
-  the best exchange gives the autopilot clock's offset without the delay, and the
-  difference to :class:`ClockMap`'s offset is the one-way delay.
+- :class:`RoundTrip` measures a link's one-way delay from MAVLink TIMESYNC
+  exchanges (ours out, stamped by the autopilot on receipt, back) together with
+  the :class:`ClockMap` of the autopilot's own messages.
 - :class:`Median` keeps the median of recent values (GNSS time offsets from
   SYSTEM_TIME), so one bad pair cannot move it.
 
@@ -97,42 +96,55 @@ class ClockMap:
 
 
 class RoundTrip:
-    """A remote clock's offset from request/reply exchanges (MAVLink TIMESYNC), delay split evenly.
+    """MAVLink TIMESYNC exchanges with a remote clock: what the link's delay is, one way.
 
     ``add(remote_s, sent_s, arrival_s)``: our request left at ``sent_s`` (station),
-    the remote stamped its receipt ``remote_s`` (its clock) and the reply arrived at
-    ``arrival_s``. The exchange with the shortest round trip in the window gives
-    ``offset_s = (sent + arrival) / 2 − remote``: station minus remote time, with an
-    error of at most half the round trip's asymmetry.
+    the remote stamped its receipt ``remote_s`` (its own clock) and the reply arrived
+    at ``arrival_s``. Each direction's least delay is measured on its own:
+    ``least_up_s`` = min(remote − sent) is the uplink's least delay minus the remote
+    clock's offset; a :class:`ClockMap` of the remote's messages holds the
+    downlink's least delay plus that offset. Their mean is the one-way delay,
+    provided the least delays are the same both ways (:func:`one_way_delay_s`) —
+    a weaker assumption than splitting each round trip evenly, and one that
+    converges with every exchange instead of waiting for one with no queueing
+    either way.
     """
 
     MAX_ROUND_TRIP_S = 2.0
 
     def __init__(self, window_s: float = 30.0):
-        self._min = _WindowMin(window_s)
+        self._up = _WindowMin(window_s)
+        self._rtt = _WindowMin(window_s)
         self.exchanges = 0
 
     def clear(self) -> None:
-        self._min.clear()
+        self._up.clear()
+        self._rtt.clear()
 
     def add(self, remote_s: float, sent_s: float, arrival_s: float) -> bool:
         """One exchange; False (ignored) when its round trip is negative or implausibly long."""
         rtt = arrival_s - sent_s
         if not 0.0 <= rtt <= self.MAX_ROUND_TRIP_S:
             return False
-        self._min.add(arrival_s, rtt, (sent_s + arrival_s) / 2.0 - remote_s)
+        self._up.add(arrival_s, remote_s - sent_s)
+        self._rtt.add(arrival_s, rtt)
         self.exchanges += 1
         return True
 
     @property
-    def offset_s(self) -> float | None:
-        best = self._min.best
-        return None if best is None else best[2]
+    def least_up_s(self) -> float | None:
+        best = self._up.best
+        return None if best is None else best[1]
 
     @property
     def round_trip_s(self) -> float | None:
-        best = self._min.best
+        best = self._rtt.best
         return None if best is None else best[1]
+
+    def one_way_delay_s(self, downlink: ClockMap) -> float | None:
+        """The link's one-way delay (s) from these exchanges and the remote's ``downlink`` map; None without both."""
+        up, down = self.least_up_s, downlink.offset_s
+        return None if up is None or down is None else (up + down) / 2.0
 
 
 class Median:
@@ -146,6 +158,9 @@ class Median:
 
     def clear(self) -> None:
         self._v.clear()
+
+    def __len__(self) -> int:
+        return len(self._v)
 
     @property
     def value(self) -> float | None:

@@ -207,7 +207,7 @@ class Telemetry:
             return True  # the autopilot has no UNIX time yet
         self._gnss.add(t - time_unix_usec / 1e6)
         off = self.station_minus_gnss_s
-        if off is not None and abs(off) > CLOCK_NOTICE_S:
+        if len(self._gnss) >= _NOTICE_AFTER and abs(off) > CLOCK_NOTICE_S:
             way = "behind" if off < 0 else "ahead of"
             self._notice_once("gnss", off, f"the station clock is {abs(off):.2f} s {way} GNSS time (SYSTEM_TIME): "
                               "telemetry is aligned by receive times, GPS_INPUT carries GNSS time")
@@ -218,9 +218,9 @@ class Telemetry:
         if tc1_ns <= 0 or not self.timesync.add(tc1_ns / 1e9, ts1_ns / 1e9, receive_s):
             self.refusal = "not a reply to a request of this station"
             return False
-        off = self.uav_clock.offset_s
-        if off is not None:
-            self._measured_latency_s = max(0.0, off - self.timesync.offset_s)
+        delay = self.timesync.one_way_delay_s(self.uav_clock)
+        if delay is not None:
+            self._measured_latency_s = max(0.0, delay)
         return True
 
     def add_gps_raw(self, h_acc_m: float, geoid_separation_m: float, receive_s: float) -> bool:

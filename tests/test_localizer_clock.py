@@ -51,15 +51,21 @@ def test_reboot_and_station_clock_step_start_new_segments():
     assert c.segments == 2 and c.offset_s == pytest.approx(1987.0)
 
 
-def test_round_trip_takes_the_fastest_exchange_and_splits_it_evenly():
+def test_one_way_delay_from_the_least_delays_each_way():
+    """Requests up with 20–90 ms delays, the autopilot's messages down with 20–70 ms: the least delays are
+    20 ms both ways, and their mean is found although no single exchange had 20 ms both ways."""
     rt = RoundTrip(window_s=30.0)
-    remote_minus_station = -1_700_000_000.0 + 412.0  # a boot clock
-    for i, (up, down) in enumerate([(0.05, 0.07), (0.02, 0.02), (0.09, 0.01), (0.03, 0.04)]):
+    down = ClockMap(window_s=30.0)
+    station_minus_boot = 1_700_000_000.0 - 412.0
+    ups = [0.05, 0.02, 0.09, 0.03]
+    downs = [0.07, 0.04, 0.02, 0.05]
+    for i, (up, dn) in enumerate(zip(ups, downs)):
         sent = 1_700_000_100.0 + i
-        remote = sent + up + remote_minus_station
-        assert rt.add(remote, sent, sent + up + down)
-    assert rt.round_trip_s == pytest.approx(0.04)
-    assert rt.offset_s == pytest.approx(-remote_minus_station, abs=1e-9)
+        remote = sent + up - station_minus_boot  # the autopilot's boot clock at receipt
+        assert rt.add(remote, sent, sent + up + dn)
+        down.add(remote + 0.5, remote + 0.5 + station_minus_boot + dn)  # a message it sends 0.5 s later
+    assert rt.round_trip_s == pytest.approx(0.06)  # the fastest exchange: 20 ms up but 40 ms down
+    assert rt.one_way_delay_s(down) == pytest.approx(0.02, abs=1e-6)  # float64 UNIX seconds: ~0.2 µs
     assert not rt.add(5.0, 100.0, 99.0)  # came back before it left
     assert not rt.add(5.0, 100.0, 103.0)  # 3 s round trip: not an answer to this request
     assert rt.exchanges == 4
