@@ -17,6 +17,7 @@ SUBCOMMANDS = (
     "sim_fixtures.cli",
     "groundstation.service",
     "groundstation.replay",
+    "groundstation.calibrate",
 )
 
 
