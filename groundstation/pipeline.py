@@ -14,12 +14,14 @@ own frame, with an uncertainty growing with the time since the fix
 the UUV's top face, the point its depth refers to
 (:func:`localizer.tracking.predict.init_target`).
 
-A tracked frame then waits, in order, until the camera's attitude telemetry
-(ATTITUDE, and the gimbal message) has a sample after its time, so that it is
-interpolated as offline rather than extrapolated; at most ``telemetry_wait_s``
-after the frame arrived (a slow radio: ATTITUDE at 4 Hz needs about 0.3 s), then
-it is located with what there is (extrapolated within ``[timing]`` limits, with
-the accuracy grown to match, or a ``stale_…`` status). Tracking goes on meanwhile.
+A tracked frame is located at once when the camera's attitude telemetry
+(ATTITUDE, and the gimbal message) reaches to within :data:`EXTRAPOLATE_S` of its
+time: a short extrapolation with the rates costs little, and the accuracy grows to
+match. Otherwise it waits, in order, for a sample after its time, so that it is
+interpolated as offline; at most ``telemetry_wait_s`` after the frame arrived (a
+slow radio: ATTITUDE at 4 Hz needs about 0.3 s), then it is located with what
+there is (extrapolated within ``[timing]`` limits, or a ``stale_…`` status).
+Tracking goes on meanwhile.
 Frames the video reader marks ``buffered`` (their exposure time is unknown) are
 tracked but get the status ``buffered`` and no position.
 """
@@ -43,6 +45,9 @@ from localizer.tracking.predict import follow, init_target, project_uuv
 from .sources.video_live import LiveFrame
 
 log = logging.getLogger("skyfix.pipeline")
+
+#: A frame up to this far (s) after the newest attitude sample is located without waiting for the next one.
+EXTRAPOLATE_S = 0.03
 
 
 @dataclass(frozen=True)
@@ -114,10 +119,10 @@ class Pipeline:
             self._tracked_ready.set()
 
     def _needs_telemetry(self, frame: LiveFrame, result: TrackResult) -> bool:
-        """Whether a tracked frame would be located before its attitude telemetry brackets it."""
+        """Whether a tracked frame is further past its newest attitude telemetry than :data:`EXTRAPOLATE_S`."""
         if not result.ok or frame.buffered:
             return False
-        t = float(self.tel.uav_time(frame.t_unix))
+        t = float(self.tel.uav_time(frame.t_unix)) - EXTRAPOLATE_S
         return any(s.last_t is None or s.last_t < t for s in self._angle_series)
 
     async def _locate_frames(self) -> None:
