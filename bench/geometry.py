@@ -55,9 +55,9 @@ def telemetry(duration_s: float = 30.0, rate_hz: float = 50.0) -> Telemetry:
         boot_ms = BOOT0_MS + round(i * 1000 / rate_hz)
         t = T0_UNIX + (boot_ms - BOOT0_MS) / 1000
         yaw = 0.02 * i / rate_hz
-        tel.clock.add_system_time(boot_ms, round(t * 1e6))
-        tel.add_attitude(boot_ms, 0.01, -0.02, yaw)
-        tel.add_position(boot_ms, 47.5, 8.5, 412.0, 27.9)
+        tel.add_system_time(boot_ms, round(t * 1e6), t)
+        tel.add_attitude(boot_ms, 0.01, -0.02, yaw, (0.0, 0.0, 0.02), t)
+        tel.add_position(boot_ms, 47.5, 8.5, 412.0, 27.9, (0.0, 0.0, 0.0), t)
         half_p, half_y = math.radians(-55.0) / 2, (yaw + 0.3) / 2
         q = (
             math.cos(half_y) * math.cos(half_p),
@@ -65,7 +65,7 @@ def telemetry(duration_s: float = 30.0, rate_hz: float = 50.0) -> Telemetry:
             math.cos(half_y) * math.sin(half_p),
             math.sin(half_y) * math.cos(half_p),
         )
-        tel.add_gimbal(boot_ms, q, 64)
+        tel.add_gimbal(boot_ms, q, 64, t)
         tel.add_depth(t, 2.0)
     return tel
 
