@@ -73,8 +73,7 @@ def test_projected_pixels_map_back_to_their_points_within_a_millimetre(size):
     # the localizer: its own rotation from the quaternion the simulator would send, in both yaw frames
     q_earth = g.quat_wxyz(g.rotation_zyx(roll, pitch, yaw))
     q_vehicle = g.quat_wxyz(g.rotation_zyx(roll, pitch, yaw_rel))
-    straight_down = pitch == -np.pi / 2  # the localizer's Euler split loses the yaw there: see the xfail below
-    for q, flags, ok in ((q_earth, 76, keep), (q_vehicle, 44, keep & ~straight_down)):
+    for q, flags, ok in ((q_earth, 76, keep), (q_vehicle, 44, keep)):  # straight down included
         R_loc = latt.R_ned_from_cv(latt.R_ned_from_gimbal_device(q[ok], flags, vehicle_yaw[ok]))
         off, reaches = pixel_to_offset(loc_cam, R_loc, u[ok], v[ok], height[ok], depth[ok], N_WATER)
         assert reaches.all()
@@ -97,8 +96,6 @@ def test_float32_quaternion_straight_down_is_the_localizers_rotation():
     assert w > 0 and abs(y + w) < 1e-15 and abs(z - x) < 1e-15 and np.isclose(w * w + x * x, 0.5)
 
 
-@pytest.mark.xfail(strict=False, reason="localizer on main: R_ned_from_gimbal_device splits the quaternion into "
-                   "Euler angles, which lose the yaw at pitch exactly -90 deg (facts.md); the rewrite fixes it")
 def test_vehicle_frame_straight_down_composes_with_the_vehicle_yaw():
     rng = np.random.default_rng(3)
     for _ in range(20):
