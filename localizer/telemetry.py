@@ -231,7 +231,7 @@ class Telemetry:
     def add_param(self, name: str, value: float) -> None:
         """A PARAM_VALUE of the autopilot; MNT1_TYPE tells what its gimbal reports."""
         if name == "MNT1_TYPE" and math.isfinite(value):
-            self.mount_type = int(round(value))
+            self.mount_type = round(value)
 
     # -- depth -----------------------------------------------------------------------------------
     def add_depth(self, t_source: float | None, depth_m: float, receive_s: float | None = None) -> bool:

@@ -140,7 +140,10 @@ def test_keep_s_bounds_memory_and_keeps_recent_samples():
 # ---- Hermite interpolation with rates ----
 
 
-def _wobble(t, amp=math.radians(2.0), hz=1.2):
+WOBBLE_RAD = math.radians(2.0)
+
+
+def _wobble(t, amp=WOBBLE_RAD, hz=1.2):
     w = 2 * math.pi * hz
     return amp * np.sin(w * t + 0.3), amp * w * np.cos(w * t + 0.3)
 
