@@ -1,9 +1,11 @@
 """End to end on loopback with real parts: ``skyfix replay`` of a bundled session → ``skyfix run`` →
 an independent Zenoh subscriber (its own process) and the replay's pymavlink UUV endpoint.
 
-Checked: fixes arrive on Zenoh (JSON, timestamped) and match truth; GPS_INPUT arrives at ≥ 5 Hz
-with no gap over 245 ms, from skyfix's system/component, valid fixes matching truth (MAE ≤ 0.1 m)
-and explicit no-fix messages otherwise; the run's recording loads as a session."""
+Checked: fixes arrive on Zenoh (JSON, timestamped) and match truth, within 1.5× the offline error of
+the same session with the same tracker; GPS_INPUT arrives at ≥ 5 Hz with no gap over 245 ms, from
+skyfix's system/component, valid fixes matching truth (MAE ≤ 0.1 m) and explicit no-fix messages
+otherwise; the run's recording loads as a session. Also run on ``clock_offset``: a station clock 2.5 s
+behind GNSS time and a UUV clock 291 s ahead, which the status reports while the fixes stay right."""
 
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from live_helpers import (
     ROOT,
     SUBSCRIBER,
@@ -27,16 +30,28 @@ from live_helpers import (
     wait_for,
 )
 
+from groundstation.process import process_session
 from groundstation.session import load_session
 
+BUNDLED = ROOT / "sim_fixtures" / "bundled"
 # SKYFIX_LIVE_SESSION may name another session (with truth.csv) to rehearse
-SESSION = Path(os.environ.get("SKYFIX_LIVE_SESSION", ROOT / "sim_fixtures" / "bundled" / "nadir_hover"))
+SESSIONS = [Path(os.environ["SKYFIX_LIVE_SESSION"])] if "SKYFIX_LIVE_SESSION" in os.environ else [
+    BUNDLED / "nadir_hover", BUNDLED / "clock_offset"]
 # Send → frame-decoded delay of this replay chain (ffmpeg -re copying the session's H.264, which has
 # B-frames, into MPEG-TS over UDP; OpenCV decoding), measured on this machine at 45–65 ms.
 VIDEO_LATENCY_MS = 55
 
 
-def test_replay_run_subscriber_uuv(tmp_path):
+def _offline_mae(session: Path) -> float:
+    """MAE of ``skyfix process`` (tracking the video) on the same session."""
+    s = load_session(session)
+    fixes = process_session(s, use_track=False)
+    ok = fixes.status == "ok"
+    return float(truth_errors_m(session, fixes.t_unix[ok], fixes.lat[ok], fixes.lon[ok]).mean())
+
+
+@pytest.mark.parametrize("SESSION", SESSIONS, ids=lambda p: p.name)
+def test_replay_run_subscriber_uuv(tmp_path, SESSION):
     mav, video, uuv = free_port(), free_port(), free_port()
     zport = free_port(socket.SOCK_STREAM)
     zenoh_ep = f"tcp/127.0.0.1:{zport}"
@@ -83,10 +98,18 @@ def test_replay_run_subscriber_uuv(tmp_path):
     assert len(ok) >= 0.8 * n_frames, {f["status"] for f in fix}
     err = truth_errors_m(SESSION, np.array([f["t"] for f in ok]) - shift, np.array([f["lat"] for f in ok]),
                     np.array([f["lon"] for f in ok]))
-    print(f"Zenoh: {len(fix)} fixes, {len(ok)} ok, MAE {err.mean():.4f} m, max {err.max():.4f} m")
+    offline = _offline_mae(SESSION)
+    print(f"Zenoh: {len(fix)} fixes, {len(ok)} ok, MAE {err.mean():.4f} m, max {err.max():.4f} m; "
+          f"offline MAE {offline:.4f} m")
     assert err.mean() <= 0.1, f"Zenoh fixes: MAE {err.mean():.3f} m, max {err.max():.3f} m"
+    assert err.mean() <= 1.5 * offline, f"live MAE {err.mean():.4f} m vs offline {offline:.4f} m"
     status = [json.loads(s["payload"]) for s in samples if s["key"] == "skyfix/status"]
     assert status[-1]["uav"]["bad_data"] == 0 and status[-1]["pipeline"]["processed"] > 0
+    clocks = status[-1]["uav"]["clocks"]
+    assert clocks["uav_link_latency_source"] == "timesync"
+    if SESSION.name == "clock_offset":  # the status names the clocks that disagree
+        assert abs(clocks["station_minus_gnss_s"] + 2.5) < 0.01 and clocks["depth_aligned_by"] == "arrival"
+        assert 293.0 < clocks["uuv_clock_minus_station_s"] < 294.0
 
     # GPS_INPUT at the UUV's endpoint while the service runs
     gps = read_jsonl(tmp_path / "uuv.jsonl")
@@ -99,7 +122,9 @@ def test_replay_run_subscriber_uuv(tmp_path):
     valid = [g for g in gps if g["fix_type"] == 3]
     assert len(valid) >= 0.5 * len(gps)
     assert all(g["satellites_visible"] >= 6 and g["time_week"] > 2000 for g in valid)
-    err = truth_errors_m(SESSION, np.array([g["time_usec"] / 1e6 for g in valid]) - shift,
+    # GPS_INPUT carries GNSS time: back to the station clock with the offset the status measured
+    to_station = clocks["station_minus_gnss_s"] or 0.0
+    err = truth_errors_m(SESSION, np.array([g["time_usec"] / 1e6 for g in valid]) + to_station - shift,
                     np.array([g["lat"] / 1e7 for g in valid]), np.array([g["lon"] / 1e7 for g in valid]))
     print(f"GPS_INPUT: {len(gps)} messages, {rate_hz:.1f} Hz, largest gap {np.diff(t_recv).max() * 1000:.0f} ms, "
           f"{len(valid)} valid, MAE {err.mean():.4f} m, max {err.max():.4f} m")
