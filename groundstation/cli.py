@@ -10,6 +10,7 @@ from localizer.calibration import ConfigError
 
 from .mavlink_io import LinkError
 from .session import SessionError
+from .zenoh_session import ZenohError
 
 SUBCOMMANDS = (
     "groundstation.process",
@@ -29,7 +30,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (SessionError, ConfigError, LinkError) as e:
+    except (SessionError, ConfigError, LinkError, ZenohError) as e:
         print(f"skyfix {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -25,6 +25,7 @@ from localizer.fix import Fixes
 from localizer.geodesy import geodetic_to_ned, horizontal_error_m
 from localizer.tracking import TRACKERS
 
+from .outputs import output_dir
 from .positions import write_positions_csv
 from .process import frame_pixels, locate_frames, print_warnings
 from .session import Session, SessionError, load_session
@@ -187,7 +188,7 @@ def write_table_csv(path: Path, results: list[tuple[str, str, Scores]]) -> None:
 
 def run(args) -> int:
     """Evaluate every session it can; a session that fails is reported and skipped (exit code 2)."""
-    out = Path(args.out)
+    out = output_dir(args.out)
     results, failed = [], 0
     for path in args.sessions:
         try:

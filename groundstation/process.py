@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import sys
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 
@@ -16,6 +15,7 @@ from localizer.fix import Fixes, locate
 from localizer.pose import camera_pose
 from localizer.tracking import TRACKERS
 
+from .outputs import output_dir
 from .positions import write_positions_csv
 from .session import Session, SessionError, load_session
 
@@ -78,6 +78,7 @@ def print_warnings(session: Session) -> None:
 
 
 def run(args) -> int:
+    out = output_dir(args.out)
     session = load_session(args.session)
     try:
         fixes = process_session(
@@ -86,8 +87,6 @@ def run(args) -> int:
         )
     finally:
         print_warnings(session)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     write_positions_csv(out / "positions.csv", fixes)
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
     return 0

@@ -28,7 +28,8 @@ agrees with itself:
   writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
   stdout), with its receive time: what the UUV's autopilot would get.
 
-Replay ends after the session (plus ``--tail-s``) or ``--duration-s``.
+Replay ends after the session (plus ``--tail-s``) or ``--duration-s``; its exit code is 1 when a
+UUV-side endpoint was listening and no GPS_INPUT came back.
 """
 
 from __future__ import annotations
@@ -254,6 +255,10 @@ class Replay:
             print(json.dumps({"event": "end", **self.counts}), flush=True)
             if out is not sys.stdout:
                 out.close()
+        if args.uuv_listen and self.counts["gps_input"] == 0:
+            print(f"skyfix replay: no GPS_INPUT came back on {args.uuv_listen} (is skyfix run's --gps-input "
+                  "pointed there?)", file=sys.stderr)
+            return 1
         return 0
 
 

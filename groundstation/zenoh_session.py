@@ -10,9 +10,23 @@ given here are applied on top of it.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 
 import zenoh
+
+_RUST_LOCATION = re.compile(r"\s+at\s+/\S+?\.rs:\d+\.?")
+_JSON5_MESSAGE = re.compile(r'Json5Err\(Message \{ msg: "(.*?)", location: .*')
+
+
+class ZenohError(OSError):
+    """A Zenoh session that cannot be opened or configured; the message is one line without Rust internals."""
+
+
+def _clean(e: Exception) -> str:
+    """Zenoh's error text without source locations and debug wrappers."""
+    text = _JSON5_MESSAGE.sub(r"\1", _RUST_LOCATION.sub("", str(e)))
+    return " ".join(text.split()).rstrip(".")
 
 
 def make_config(connect: Sequence[str] = (), listen: Sequence[str] = (), *, multicast: bool = False,
@@ -32,8 +46,16 @@ def make_config(connect: Sequence[str] = (), listen: Sequence[str] = (), *, mult
 
 def open_session(connect: Sequence[str] = (), listen: Sequence[str] = (), *, multicast: bool = False,
                  mode: str | None = None, config_file: str | None = None) -> zenoh.Session:
-    """An open Zenoh session; the caller must ``close()`` it (in ``finally``), or the process hangs at exit."""
-    return zenoh.open(make_config(connect, listen, multicast=multicast, mode=mode, config_file=config_file))
+    """An open Zenoh session; the caller must ``close()`` it (in ``finally``), or the process hangs at exit.
+
+    Raises :class:`ZenohError` (one line naming the endpoints or file) when it cannot be opened.
+    """
+    where = ", ".join([f"connect {c}" for c in connect] + [f"listen {e}" for e in listen]
+                      + ([f"config {config_file}"] if config_file else [])) or "defaults"
+    try:
+        return zenoh.open(make_config(connect, listen, multicast=multicast, mode=mode, config_file=config_file))
+    except zenoh.ZError as e:
+        raise ZenohError(f"Zenoh ({where}): {_clean(e)}") from None
 
 
 def put_json(target, obj: dict, session: zenoh.Session) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from groundstation.outputs import output_dir
+
 from .generate import generate
 from .scenario import load_scenario
 
@@ -11,6 +13,7 @@ from .scenario import load_scenario
 def run(args) -> int:
     path = Path(args.scenario)
     sc = load_scenario(path)
+    output_dir(args.out)
     report = generate(sc, args.out, scenario_text=path.read_text(), video=not args.no_video)
     counts = ", ".join(f"{k} {n}" for k, n in sorted(report.messages.items()))
     made = (f"rendered and encoded in {report.render_s:.1f} s" if not args.no_video else "without video")

@@ -116,9 +116,14 @@ class Recorder:
     def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None,
                  depth_latency_s: float = 0.0):
         self.dir = Path(directory)
+        if self.dir.exists() and not self.dir.is_dir():
+            raise FileExistsError(f"--record {directory}: exists and is not a directory")
         if self.dir.exists() and any(self.dir.iterdir()):
             raise FileExistsError(f"--record {directory}: exists and is not empty (a recording is never overwritten)")
-        self.dir.mkdir(parents=True, exist_ok=True)
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise OSError(f"--record {directory}: cannot create it: {e.strerror}") from None
         calibration = tomllib.loads(Path(cal_source).read_text())
         (self.dir / "session.toml").write_text(session_toml(calibration))
         # append-only files, open for the whole run and closed when the worker ends
