@@ -27,6 +27,7 @@ class RunConfig:
     video_latency_ms: float = 0.0  # exposure → receive delay subtracted from each frame's receive time
     no_request_rates: bool = False  # leave the autopilot's telemetry rates alone
     telemetry_wait_ms: float = 300.0  # how long a frame may wait for attitude telemetry after it
+    require_inputs: bool = False  # stop (exit 2) if an input has sent nothing 10 s after start
     zenoh_connect: tuple[str, ...] = ()
     zenoh_listen: tuple[str, ...] = ()
     zenoh_config: str | None = None  # a Zenoh JSON5 config file; endpoints above are added to it
@@ -55,6 +56,8 @@ _HELP = {
     "video_latency_ms": "delay from exposure to frame receipt, subtracted from receive times",
     "no_request_rates": "do not ask the autopilot for the telemetry rates skyfix needs (a shared link)",
     "telemetry_wait_ms": "longest wait of a frame for the attitude sample after it (slow radios need ~300)",
+    "require_inputs": "exit 2 when the UAV's MAVLink, the depth or the video has sent nothing 10 s after start "
+                      "(default: keep running and keep saying so)",
     "zenoh_connect": "Zenoh endpoint to connect to, e.g. tcp/192.168.2.2:7447 (repeatable)",
     "zenoh_listen": "Zenoh endpoint to listen on (repeatable)",
     "zenoh_config": "Zenoh JSON5 config file (deploy/zenoh/*.json5)",

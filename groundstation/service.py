@@ -34,6 +34,7 @@ from .sources.depth_zenoh import BLUEOS_KEY, DepthZenoh
 from .sources.rates import needed_rates
 from .sources.uav_mavlink import UavMavlink
 from .sources.video_live import VideoLive
+from .watchdog import REQUIRE_S, InputMissing, Watchdog
 from .zenoh_session import open_session
 
 log = logging.getLogger("skyfix.run")
@@ -108,9 +109,22 @@ async def serve(cfg: config.RunConfig) -> dict:
             uav.listeners.append(recorder.on_mavlink)
             depth.listeners.append(recorder.on_depth)
 
+        def inputs(now: float) -> dict:
+            out = {"uav": uav.status(now), "depth": depth.status(now)}
+            if video:
+                out["video"] = video.status(now)
+            return out
+
+        def zenoh_peers() -> int:
+            return len(list(session.info.peers_zid())) + len(list(session.info.routers_zid()))
+
+        watchdog = Watchdog(inputs, tuple(needed_rates(cal.mount.attitude_source)), zenoh_peers,
+                            require_s=REQUIRE_S if cfg.require_inputs else None)
+        pipeline.sinks.append(watchdog)
+
         def status(now: float) -> dict:
             out = {"uav": uav.status(now), "depth": depth.status(now), "pipeline": pipeline.status(),
-                   "fixes_published": fix_sink.published}
+                   "fixes_published": fix_sink.published, "problems": dict(watchdog.problems)}
             if video:
                 out["video"] = video.status(now)
             if gps:
@@ -120,7 +134,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 out["record"] = recorder.status()
             return out
 
-        workers = [uav, depth, pipeline, ZenohStatus(session, cfg.status_key, cfg.alive_key, status)]
+        workers = [uav, depth, pipeline, watchdog, ZenohStatus(session, cfg.status_key, cfg.alive_key, status)]
         workers += [w for w in (video, gps, recorder) if w is not None]
         log.info("skyfix run: UAV %s, video %s, depth %s, fixes on %s, GPS_INPUT %s", cfg.mavlink, cfg.video,
                  depth_key, cfg.fix_key, cfg.gps_input)
@@ -147,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
     final = None
     try:
         final = asyncio.run(serve(cfg))
-    except* (OSError, zenoh.ZError) as eg:  # a link that cannot be opened: one line each, no traceback
+    except* (OSError, zenoh.ZError, InputMissing) as eg:  # a link that cannot be opened: one line each
         for e in eg.exceptions:
             print(f"skyfix run: error: {e}", file=sys.stderr)
     if final is None:
