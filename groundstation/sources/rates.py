@@ -29,7 +29,7 @@ SETTLE_S = 3.0  # measure this long after the autopilot appears before asking
 RETRY_S = 10.0  # ask again this often while a message stays slow
 ACK_TIMEOUT_S = 2.0
 WINDOW_S = 5.0  # rates are measured over this window
-SLOW = 0.9  # a message below this share of its needed rate counts as slow
+SLOW = 0.8  # a message below this share of its needed rate counts as slow (scheduling jitter stays above)
 
 
 def needed_rates(attitude_source: str) -> dict[str, float]:
@@ -53,12 +53,14 @@ class RateMeter:
             q.popleft()
 
     def rate_hz(self, kind: str, now: float) -> float:
+        """Messages per second over the window: intervals between the first and the newest received,
+        or one interval's worth when the newest is older than the typical interval (a stream that stopped)."""
         q = self._times.get(kind)
-        if not q or now - q[-1] > WINDOW_S:
+        if not q or len(q) < 2 or now - q[-1] > WINDOW_S:
             return 0.0
-        first = max(q[0], now - WINDOW_S)
-        n = sum(1 for t in q if t >= first)
-        return (n - 1) / (now - first) if n > 1 and now > first else 0.0
+        span = q[-1] - q[0]
+        interval = span / (len(q) - 1)
+        return (len(q) - 1) / max(span + max(0.0, now - q[-1] - interval), 1e-9)
 
     def rates(self, now: float) -> dict[str, float]:
         return {k: round(self.rate_hz(k, now), 1) for k in sorted(self._times)}
