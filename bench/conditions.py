@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from live_helpers import SUBSCRIBER, free_port, read_jsonl, replay_shift, truth_errors_m, wait_for  # noqa: E402
+from live_helpers import SUBSCRIBER, free_port, read_jsonl, replay_shift, truth_errors_m, wait_for
 
 CONDITIONS = ("clock_sync", "clock_offset", "nadir_vehicle_frame", "slow_attitude", "servo_mount", "reboot")
 VIDEO_LATENCY_MS = 55  # the replay chain's, as the live tests configure it
