@@ -14,7 +14,7 @@ import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from localizer.calibration import Calibration, ConfigError, calibration_from_dict
+from localizer.calibration import Calibration, ConfigError
 from localizer.tracking import TRACKERS
 
 
@@ -158,4 +158,4 @@ def load_calibration(path: str) -> Calibration:
         raise ConfigError(path, "file", path, e.strerror or str(e)) from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(path, "file", path, f"malformed TOML: {e}") from None
-    return calibration_from_dict(data, source=path)
+    return Calibration.from_dict(data, source=path)

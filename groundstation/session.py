@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from localizer.calibration import Calibration, ConfigError, calibration_from_dict
+from localizer.calibration import Calibration, ConfigError
 from localizer.telemetry import Telemetry
 
 from .mavlink_io import ingest, mavutil
@@ -201,7 +201,7 @@ def load_session(path) -> Session:
     if version != SUPPORTED_VERSION:
         raise SessionError(f"{toml_path}: version = {version!r}: this skyfix reads version {SUPPORTED_VERSION}")
     try:
-        cal = calibration_from_dict(meta, source=str(toml_path))
+        cal = Calibration.from_dict(meta, source=str(toml_path))
     except ConfigError as e:
         raise SessionError(str(e)) from None
 
