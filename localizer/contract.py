@@ -44,6 +44,7 @@ Number = Annotated[float, Strict(), AllowInfNan(False)]
 Positive = Annotated[Number, Gt(0)]
 NonNegative = Annotated[Number, Ge(0)]
 Whole = Annotated[int, Strict()]
+Flag = Annotated[bool, Strict()]
 Text = Annotated[str, Strict()]
 Vector3 = Annotated[tuple[Number, ...], Len(3, 3)]
 Vector4 = Annotated[tuple[Number, ...], Len(4, 4)]
@@ -71,16 +72,18 @@ def adapter(cls) -> TypeAdapter:
     return _ADAPTERS[cls]
 
 
-def validate(cls, data: Any, source: str, prefix: str = "", key_name=None):
+def validate(cls, data: Any, source: str, prefix: str = ""):
     """``data`` (parsed TOML) as a ``cls``, or :class:`ConfigError` for the first problem.
 
-    ``prefix`` is prepended to keys (``"camera"`` when validating one table);
-    ``key_name(key) -> str`` renames keys in messages (``--gps-input-hz`` for a flag).
+    ``prefix`` is prepended to keys (``"camera"`` when validating one table).
     """
     try:
         return adapter(cls).validate_python(data)
     except ValidationError as e:
-        raise error_of(cls, e.errors()[0], source, prefix, key_name) from None
+        errors = e.errors()
+        # a wrong or misspelt key first: it often explains a missing one
+        first = next((err for err in errors if err["type"] != "missing"), errors[0])
+        raise error_of(cls, first, source, prefix) from None
 
 
 def _join(parts) -> str:
@@ -139,6 +142,7 @@ _WHY = {
     "tuple_type": "expected a list",
     "finite_number": "must be finite",
     "missing": "missing",
+    "string_too_short": "must not be empty",
 }
 
 
@@ -161,14 +165,14 @@ def _why(err: dict, table) -> str:
     return err["msg"].removeprefix("Value error, ").replace("Input should be", "expected")
 
 
-def error_of(cls, err: dict, source: str, prefix: str = "", key_name=None) -> ConfigError:
+def error_of(cls, err: dict, source: str, prefix: str = "") -> ConfigError:
     """One pydantic error record as a :class:`ConfigError`."""
     loc = tuple(err["loc"])
     value = err["input"]
     exc = (err.get("ctx") or {}).get("error")
     if isinstance(exc, Invalid):
         key = _join((*((prefix,) if prefix else ()), *loc, *(exc.key.split(".") if exc.key else ())))
-        return ConfigError(source, key_name(key) if key_name else key, exc.value, exc.why)
+        return ConfigError(source, key, exc.value, exc.why)
     parts = (*((prefix,) if prefix else ()), *loc)
     key = _join(parts) or "(top level)"
     if err["type"] == "missing":
@@ -179,7 +183,7 @@ def error_of(cls, err: dict, source: str, prefix: str = "", key_name=None) -> Co
     table = _field_class(cls, loc[:-1]) if loc else cls
     if err["type"] in ("extra_forbidden", "unexpected_keyword_argument") and table is None:
         table = cls if len(loc) == 1 else None
-    return ConfigError(source, key_name(key) if key_name else key, value, _why(err, table))
+    return ConfigError(source, key, value, _why(err, table))
 
 
 def unknown_keys(cls, data: Any, prefix: str = "") -> list[str]:
