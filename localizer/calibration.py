@@ -54,7 +54,8 @@ class Mount:
         "says MNT1_TYPE = 1, else horizon")
 
 
-@dataclass(frozen=True, config=OPEN)
+@dataclass(frozen=True, config=ConfigDict(**OPEN, json_schema_extra={
+    "oneOf": [{"required": ["takeoff_height_above_surface_m"]}, {"required": ["surface_amsl_m"]}]}))
 class Water:
     """``[water]``: the water surface, by exactly one of two references, and its refractive index."""
 

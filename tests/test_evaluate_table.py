@@ -37,12 +37,7 @@ def test_no_fix_at_all():
 
 
 def fixes_at(t, lat, lon, status):
-    n = len(t)
-    nan = np.full(n, np.nan)
-    return Fixes(t_unix=np.asarray(t, float), status=np.array(status, dtype=object), u=nan, v=nan,
-                 lat=np.asarray(lat, float), lon=np.asarray(lon, float), alt_amsl_m=nan, depth_m=nan,
-                 h_acc_m=nan, v_acc_m=nan, north_m=nan, east_m=nan, sigma_n_m=nan, sigma_e_m=nan,
-                 cov_ne_m2=nan, t_gnss=nan)
+    return Fixes.of(t, status, lat=lat, lon=lon)
 
 
 def test_errors_against_geodesic_offsets():

@@ -1,7 +1,8 @@
 """End to end on loopback with real parts: ``skyfix replay`` of a bundled session → ``skyfix run`` →
 an independent Zenoh subscriber (its own process) and the replay's pymavlink UUV endpoint.
 
-Checked: fixes arrive on Zenoh (JSON, timestamped) and match truth; GPS_INPUT arrives at ≥ 5 Hz
+Checked: fixes arrive on Zenoh (JSON, timestamped) and match truth; every fix and status message
+validates against its JSON Schema (groundstation/schemas/, with the jsonschema package); GPS_INPUT arrives at ≥ 5 Hz
 with no gap over 245 ms, from skyfix's system/component, valid fixes matching truth (MAE ≤ 0.1 m)
 and explicit no-fix messages otherwise; the run's recording loads as a session."""
 
@@ -14,6 +15,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from jsonschema import Draft202012Validator
 from live_helpers import (
     ROOT,
     SUBSCRIBER,
@@ -27,6 +29,7 @@ from live_helpers import (
     wait_for,
 )
 
+from groundstation.contracts import path_of
 from groundstation.session import load_session
 
 # SKYFIX_LIVE_SESSION may name another session (with truth.csv) to rehearse
@@ -87,6 +90,14 @@ def test_replay_run_subscriber_uuv(tmp_path):
     assert err.mean() <= 0.1, f"Zenoh fixes: MAE {err.mean():.3f} m, max {err.max():.3f} m"
     status = [json.loads(s["payload"]) for s in samples if s["key"] == "skyfix/status"]
     assert status[-1]["uav"]["bad_data"] == 0 and status[-1]["pipeline"]["processed"] > 0
+
+    # Every message as its schema says: the contract, checked by an independent validator
+    for name, messages in (("fix", fix), ("status", status)):
+        schema = Draft202012Validator(json.loads(path_of(name).read_text()))
+        bad = [(m, e.message) for m in messages for e in schema.iter_errors(m)]
+        assert not bad, f"{len(bad)} {name} messages break {path_of(name).name}, first: {bad[0]}"
+    assert all(f["alt_ellipsoid_m"] is not None and f["t_gnss"] is not None and f["sigma_n_m"] > 0 for f in ok)
+    assert {"video", "gps_input", "latency", "record"} <= set(status[-1])
 
     # GPS_INPUT at the UUV's endpoint while the service runs
     gps = read_jsonl(tmp_path / "uuv.jsonl")
