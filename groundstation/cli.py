@@ -19,6 +19,7 @@ SUBCOMMANDS = (
     "groundstation.service",
     "groundstation.replay",
     "groundstation.calibrate",
+    "groundstation.export",
 )
 
 

@@ -41,3 +41,14 @@ STATUSES: dict[str, str] = {
 }
 
 Status = Literal[tuple(STATUSES)]
+
+
+def runs(status) -> list[tuple[int, int, str]]:
+    """Consecutive frames with the same status: ``(first, last + 1, word)`` in order."""
+    out: list[tuple[int, int, str]] = []
+    start = 0
+    for i in range(1, len(status) + 1):
+        if i == len(status) or status[i] != status[start]:
+            out.append((start, i, str(status[start])))
+            start = i
+    return out
