@@ -20,6 +20,7 @@ SUBCOMMANDS = (
     "groundstation.replay",
     "groundstation.calibrate",
     "groundstation.export",
+    "groundstation.report",
 )
 
 

@@ -89,7 +89,7 @@ def test_cli_table_matches_independent_computation(tmp_path, capsys):
         assert float(row["p95_m"]) == pytest.approx(np.sort(d)[int(np.ceil(0.95 * len(d))) - 1], abs=2e-3)
         within = np.mean(d <= 2 * pos.h_acc_m[ok])
         assert float(row["within_2sigma"]) == pytest.approx(within, abs=1.5 / len(d))
-    for png in ("track_top.png", "error_time.png"):
+    for png in ("top_view.png", "timeline.png", "status.png"):
         assert (tmp_path / "occlusion" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
