@@ -30,8 +30,8 @@ CAUSES = {
     "tracking": ("#d62728", ("lost", "no_track", "not_initialized", "no_init_bbox", "bad_init_bbox", "awaiting_target",
                              "released", "before_init")),
     "video": ("#9467bd", ("no_video", "buffered")),
-    "telemetry": ("#7f7f7f", tuple(w for w in STATUSES if w.startswith(("no_", "stale_")) and w not in
-                                   ("no_track", "no_init_bbox", "no_video", "no_water")) + ("bad_time",)),
+    "telemetry": ("#7f7f7f", ("no_attitude", "stale_attitude", "no_position", "stale_position", "no_gimbal",
+                              "stale_gimbal", "no_depth", "stale_depth", "bad_time")),
     "geometry": ("#ff7f0e", ("bad_pixel", "no_water", "below_surface")),
 }
 OK_COLOUR = "#2ca02c"

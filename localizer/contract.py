@@ -102,7 +102,7 @@ def _field_class(cls, loc) -> type | None:
         f = by_alias.get(name)
         if f is None:
             return None
-        cls = _table_type(adapter_field_type(cls, f.name))
+        cls = _table_type(_field_type(cls, f.name))
     return cls
 
 
@@ -111,7 +111,7 @@ def _alias(cls, name: str) -> str:
     return (info.alias or name) if info is not None else name
 
 
-def adapter_field_type(cls, name: str):
+def _field_type(cls, name: str):
     """The resolved annotation of field ``name`` of a pydantic dataclass."""
     return cls.__pydantic_fields__[name].annotation
 
@@ -199,7 +199,7 @@ def unknown_keys(cls, data: Any, prefix: str = "") -> list[str]:
             if config.get("extra") == "ignore":
                 out.append(full)
             continue
-        sub = _table_type(adapter_field_type(cls, known[key].name))
+        sub = _table_type(_field_type(cls, known[key].name))
         if sub is not None:
             out += unknown_keys(sub, value, full)
     return out

@@ -90,3 +90,10 @@ def test_long_runs_show_progress_with_an_eta_unless_quiet(tmp_path):
 def test_evaluate_writes_the_same_plots(tmp_path, argv):
     assert main([*argv, "--out", str(tmp_path)]) == 0
     _pngs(tmp_path / "occlusion")
+
+
+def test_every_status_word_has_a_cause_colour():
+    from groundstation.plots import cause
+    from localizer.status import STATUSES
+
+    assert [w for w in STATUSES if w != "ok" and cause(w) == "other"] == []
