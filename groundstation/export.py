@@ -260,7 +260,9 @@ def run(args) -> int:
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("export", help="positions.csv as GeoJSON, KML, GPX or CSV (QGIS, Google Earth)",
-                              description=__doc__.split("\n\n")[0].strip("`"))
+                              description="Writes the fixes of positions.csv, with each fix's accuracy, status and heights "
+                              "(above mean sea level and above the WGS84 ellipsoid), for QGIS (any format), Google "
+                              "Earth (kml) or GPS tools (gpx).")
     p.add_argument("session", metavar="SESSION|positions.csv",
                    help="a folder with positions.csv (a recorded session, skyfix process's output) or the file")
     p.add_argument("--format", required=True, choices=FORMATS, help="output format")

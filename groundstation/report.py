@@ -66,7 +66,9 @@ def run(args) -> int:
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("report", help="PNG plots of a run: top view, error/accuracy over time, statuses",
-                              description=__doc__.split("\n\n")[0].strip("`"))
+                              description="Writes top_view.png (the fixes from above, origin and north stated), timeline.png "
+                              "(error against truth, when there is one, and the claimed accuracy over time, gaps "
+                              "shaded by cause) and status.png (frames per status) and prints a summary.")
     p.add_argument("session", metavar="SESSION|positions.csv",
                    help="a folder with positions.csv (a recorded session, skyfix process's output) or the file")
     p.add_argument("--truth", metavar="FILE", help="truth.csv (t,lat,lon,depth_m); default: beside positions.csv")
