@@ -9,7 +9,8 @@ refraction and straight ray, or ``report``'s positions.csv):
   accuracy (one run) or the method (several);
 - ``timeline.png``: the horizontal error against truth and the claimed accuracy
   (h_acc and 2·h_acc) over time, or h_acc alone without truth, and a status strip;
-  stretches without a fix shaded in both, by cause;
+  stretches without a fix shaded in both, by cause, and times without any frame
+  (the video stopped) hatched;
 - ``status.png``: frames per status word, with their share, the time they cover and
   the longest stretch.
 """
@@ -126,14 +127,28 @@ def top_view(path: Path, name: str, fixes_by_run: dict[str, Fixes], truth: dict 
     plt.close(fig)
 
 
-def _shade(ax, fixes: Fixes, t0: float) -> set[str]:
-    """Shade the stretches without a fix by cause; returns the causes shaded."""
+def frame_gaps(t_unix: np.ndarray) -> list[tuple[float, float]]:
+    """Intervals with no frame at all (the video stopped): more than 3 frame periods between frames."""
+    if len(t_unix) < 3:
+        return []
+    dt = np.diff(t_unix)
+    period = float(np.median(dt))
+    return [(float(t_unix[i]), float(t_unix[i + 1])) for i in np.flatnonzero(dt > 3 * period)]
+
+
+def _shade(axes, fixes: Fixes, t0: float, alpha: float) -> set[str]:
+    """Shade the stretches without a fix by cause, and those without frames; returns what was shaded."""
     shaded = set()
     half = 0.5 * (float(np.median(np.diff(fixes.t_unix))) if len(fixes) > 1 else 0.0)
-    for a, b, w in runs(fixes.status):
-        if w != "ok":
-            ax.axvspan(fixes.t_unix[a] - t0 - half, fixes.t_unix[b - 1] - t0 + half, color=colour(w), alpha=0.18, lw=0)
-            shaded.add(cause(w))
+    for ax in axes:
+        for a, b, w in runs(fixes.status):
+            if w != "ok" or alpha == 1.0:
+                ax.axvspan(fixes.t_unix[a] - t0 - half, fixes.t_unix[b - 1] - t0 + half, color=colour(w),
+                           alpha=alpha, lw=0)
+                shaded.add(cause(w) if w != "ok" else "ok")
+        for a, b in frame_gaps(fixes.t_unix):
+            ax.axvspan(a - t0 + half, b - t0 - half, facecolor="none", edgecolor="#555555", hatch="//", lw=0)
+            shaded.add("no frames")
     return shaded
 
 
@@ -152,18 +167,19 @@ def timeline(path: Path, name: str, fixes_by_run: dict[str, Fixes], errors_by_ru
             ax.plot(t, errors_by_run[method], ".", ms=3, color=c, label=f"{label}error against truth")
             ax.plot(t, 2 * fixes.h_acc_m, "--", lw=0.9, color=c, label=f"{label}2·h_acc (95% if the claim holds)")
         ax.plot(t, fixes.h_acc_m, "-", lw=1.2, color=c, alpha=0.7, label=f"{label}h_acc (claimed 1σ)")
-    shaded = _shade(ax, first, t0)
+    shaded = _shade([ax], first, t0, alpha=0.18)
     ax.set_ylabel("horizontal (m)")
     ax.set_ylim(bottom=0)
     ax.grid(True, alpha=0.3)
     ax.set_title(f"{name}: {'error and ' if errors_by_run is not None else ''}claimed accuracy over time", fontsize=11)
     handles, _ = ax.get_legend_handles_labels()
     handles += [Patch(color=CAUSES[c][0], alpha=0.3, label=f"no fix: {c}") for c in CAUSES if c in shaded]
+    if "no frames" in shaded:
+        handles.append(Patch(facecolor="none", edgecolor="#555555", hatch="//", label="no frames (video stopped)"))
     ax.legend(handles=handles, fontsize=8, loc="upper right", framealpha=0.9)
 
-    half = 0.5 * (float(np.median(np.diff(first.t_unix))) if len(first) > 1 else 0.0)
+    _shade([strip], first, t0, alpha=1.0)
     for a, b, w in runs(first.status):
-        strip.axvspan(first.t_unix[a] - t0 - half, first.t_unix[b - 1] - t0 + half, color=colour(w), lw=0)
         if b - a >= 0.06 * len(first):
             strip.text(0.5 * (first.t_unix[a] + first.t_unix[b - 1]) - t0, 0.5, w, ha="center", va="center",
                        fontsize=8, color="white" if w == "ok" else "black")

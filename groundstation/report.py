@@ -16,7 +16,7 @@ from localizer.status import runs
 
 from .evaluate import errors_m
 from .export import positions_path
-from .plots import write_plots
+from .plots import frame_gaps, write_plots
 from .positions import read_positions_csv
 from .session import SessionError, read_table
 
@@ -36,6 +36,9 @@ def summary(fixes, err: np.ndarray | None) -> str:
     if gaps:
         longest, word = max(gaps)
         lines.append(f"{len(gaps)} stretches without a fix, longest {longest:.1f} s ({word})")
+    stops = frame_gaps(fixes.t_unix)
+    if stops:
+        lines.append(f"{len(stops)} pauses in the frames (video stopped), longest {max(b - a for a, b in stops):.1f} s")
     return "; ".join(lines)
 
 

@@ -50,13 +50,15 @@ def test_report_without_truth_names_each_gap(tmp_path, capsys):
     statuses = ["ok"] * 10 + ["lost"] * 5 + ["ok"] * 3 + ["stale_attitude"] * 12 + ["no_depth"] * 2 + ["ok"] * 8
     for i, s in enumerate(statuses):
         ll = f"{63.44 + i * 1e-6:.9f},{10.4 + i * 2e-6:.9f}" if s == "ok" else ","
-        rows.append(f"{1763800000 + i * 0.1:.3f},{ll},1.0,{0.2 if s == 'ok' else ''},{s}")
+        t = 1763800000 + i * 0.1 + (2.0 if i >= 35 else 0.0)  # the video stops for 2 s before frame 35
+        rows.append(f"{t:.3f},{ll},1.0,{0.2 if s == 'ok' else ''},{s}")
     (tmp_path / "positions.csv").write_text("\n".join(rows) + "\n")
     assert main(["report", str(tmp_path), "--out", str(tmp_path / "plots")]) == 0
     text = capsys.readouterr().out
     _pngs(tmp_path / "plots")
     assert "40 frames, 21 with a fix (52.5%)" in text and "error against truth" not in text
     assert "3 stretches without a fix, longest 1.1 s (stale_attitude)" in text
+    assert "1 pauses in the frames (video stopped), longest 2.1 s" in text
 
 
 def test_report_of_nothing_is_one_line(tmp_path, capsys):
