@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from localizer.calibration import calibration_from_dict
+from localizer.calibration import Calibration
 from localizer.camera import pixel_to_ray
 from localizer.fix import locate
 from localizer.pose import camera_pose
@@ -79,7 +79,7 @@ def per_call_us(fn, calls: int) -> float:
 
 
 def main() -> int:
-    cal = calibration_from_dict(CALIBRATION, "bench")
+    cal = Calibration.from_dict(CALIBRATION, "bench")
     cam = cal.camera
     tel = telemetry()
     rng = np.random.default_rng(0)

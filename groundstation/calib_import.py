@@ -29,7 +29,8 @@ import cv2
 import numpy as np
 import yaml
 
-from localizer.calibration import ConfigError, calibration_from_dict
+from localizer.camera import Camera
+from localizer.contract import ConfigError, validate
 
 from .calib_board import CalibrateError, camera_table
 
@@ -90,7 +91,7 @@ def _table(src: str, width, height, fx, fy, cx, cy, distortion) -> dict:
     K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=float)
     cam = camera_table(width, height, K, distortion)
     # the loader's own checks (positive focal lengths, principal point inside the image, ...)
-    calibration_from_dict({"camera": cam, "mount": {}, "water": {"surface_amsl_m": 0.0}}, source=src)
+    validate(Camera, cam, src, prefix="camera")
     return cam
 
 

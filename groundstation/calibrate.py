@@ -35,7 +35,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from localizer.calibration import ConfigError, calibration_from_dict
+from localizer.camera import Camera
+from localizer.contract import ConfigError, validate
 
 from . import calib_board as cb
 from .calib_board import Board, CalibrateError, Detector, View
@@ -172,7 +173,7 @@ def run_camera(args) -> int:
           + (f" (not in {_names(missed)})" if missed else ""))
     res = cb.calibrate(views, size, fix_k3=args.fix_k3)
     cam = res.camera
-    calibration_from_dict({"camera": cam, "mount": {}, "water": {"surface_amsl_m": 0.0}}, source=str(src))
+    validate(Camera, cam, str(src), prefix="camera")
     cov = cb.coverage(res.views, res.width, res.height, cam["cx"], cam["cy"])
 
     report = []

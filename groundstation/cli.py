@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from importlib.metadata import version
 
 from localizer.calibration import ConfigError
 
@@ -19,11 +20,14 @@ SUBCOMMANDS = (
     "groundstation.service",
     "groundstation.replay",
     "groundstation.calibrate",
+    "groundstation.export",
+    "groundstation.report",
 )
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="skyfix", description="UUV position from UAV imagery")
+    parser.add_argument("--version", action="version", version=f"skyfix {version('skyfix')}")
     sub = parser.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:
         importlib.import_module(name).register(sub)

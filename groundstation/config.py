@@ -1,164 +1,207 @@
-"""Options of ``skyfix run``: command-line flags over an optional config TOML.
+"""Options of ``skyfix run``: one contract, :class:`RunConfig`, for the flags and the config TOML.
 
-Every option has one entry in :data:`OPTIONS`; the flag ``--video-latency-ms``
-is the config key ``video_latency_ms``. A config file is a flat TOML table of
-such keys (see ``deploy/field.toml``); relative paths in it are relative to the
-file. A flag given on the command line wins over the file; the file wins over the
-defaults. Unknown keys and wrong types are errors naming the key and value.
+Every option is one field of :class:`RunConfig`: its type (choices are a ``Literal``),
+default and description make the flag ``--video-latency-ms``, its ``--help`` line, the
+config key ``video_latency_ms`` and the JSON Schema (``groundstation/schemas/run-config.schema.json``).
+A config file is a flat TOML table of such keys (see ``deploy/field.toml``); paths in
+it (fields typed :data:`FilePath`) are relative to the file. A flag given on the
+command line wins over the file; the file wins over the defaults. Unknown keys and
+wrong values are one-line errors naming the file (or ``options`` for a flag), the key
+and the value.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import logging
 import tomllib
-from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Annotated, Literal, get_args, get_origin
 
-from localizer.calibration import Calibration, ConfigError, calibration_from_dict
+from annotated_types import Ge
+from pydantic import Field, model_validator
+from pydantic.dataclasses import dataclass
+
+from localizer.calibration import Calibration
+from localizer.contract import (
+    CLOSED,
+    ConfigError,
+    Flag,
+    Invalid,
+    NonNegative,
+    Number,
+    Text,
+    validate,
+    within,
+)
 from localizer.tracking import TRACKERS
 
+log = logging.getLogger("skyfix.config")
 
-@dataclass
+
+@dataclasses.dataclass(frozen=True)
+class _RelativeToFile:
+    """Marks a path option: a relative path in a config file is relative to that file."""
+
+    metavar: str
+
+
+FilePath = Annotated[Text, _RelativeToFile("FILE")]
+DirPath = Annotated[Text, _RelativeToFile("DIR")]
+
+
+@dataclass(frozen=True, kw_only=True, config=CLOSED)
 class RunConfig:
-    calibration: str | None = None  # TOML with [camera], [mount], [water], [tracker] of session.toml v1
-    mavlink: str = "udpin:0.0.0.0:14550"  # the UAV, a pymavlink connection string
-    mavlink_backend: str = "pymavlink"
-    video: str | None = None  # anything FFmpeg opens
-    video_latency_ms: float = 0.0  # exposure → receive delay subtracted from each frame's receive time
-    no_request_rates: bool = False  # leave the autopilot's telemetry rates alone
-    telemetry_wait_ms: float = 300.0  # how long a frame may wait for attitude telemetry after it
-    require_inputs: bool = False  # stop (exit 2) if an input has sent nothing 10 s after start
-    zenoh_connect: tuple[str, ...] = ()
-    zenoh_listen: tuple[str, ...] = ()
-    zenoh_config: str | None = None  # a Zenoh JSON5 config file; endpoints above are added to it
-    zenoh_multicast: bool = False
-    depth_key: str = "uuv/depth"
-    depth_source: str = "skyfix"  # "skyfix": {"t", "depth_m"} JSON; "blueos": mavlink-server VFR_HUD
-    fix_key: str = "skyfix/uuv/fix"
-    status_key: str = "skyfix/status"
-    alive_key: str = "skyfix/alive"
-    gps_input: str | None = None  # the UUV autopilot: pymavlink string, or "zenoh:mavlink/in" (BlueOS)
-    gps_input_hz: float = 10.0
-    fix_max_age_ms: float = 500.0  # an ok fix older than this goes out as "no fix"
-    tracker: str = "default"
-    record: str | None = None
-    duration_s: float | None = None  # stop after this many seconds (tests, benchmarks)
-    stats: str | None = None  # write final counters and latencies to this JSON file at exit
+    """The options of ``skyfix run`` (flags and config file keys)."""
+
+    calibration: FilePath = Field(description="TOML with the [camera], [mount], [water], [tracker] tables of "
+                                  "session.toml v1 (and optionally [uncertainty], [timing])")
+    mavlink: Text = Field("udpin:0.0.0.0:14550", description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
+                          "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)")
+    mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
+    video: Text | None = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
+                               "a file (anything FFmpeg opens)")
+    video_latency_ms: NonNegative = Field(0.0, description="delay from exposure to frame receipt, subtracted from "
+                                          "receive times")
+    no_request_rates: Flag = Field(False, description="do not ask the autopilot for the telemetry rates skyfix needs "
+                                   "(a shared link)")
+    telemetry_wait_ms: within(0, 2000) = Field(300.0, description="longest wait of a frame for the attitude sample "
+                                               "after it (slow radios need ~300)")
+    require_inputs: Flag = Field(False, description="exit 2 when the UAV's MAVLink, the depth or the video has sent "
+                                 "nothing 10 s after start (default: keep running and keep saying so)")
+    zenoh_connect: tuple[Text, ...] = Field((), description="Zenoh endpoint to connect to, e.g. "
+                                            "tcp/192.168.2.2:7447 (repeatable)")
+    zenoh_listen: tuple[Text, ...] = Field((), description="Zenoh endpoint to listen on (repeatable)")
+    zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
+                                          "endpoints above are added to it")
+    zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
+    depth_key: Text = Field("uuv/depth", description="Zenoh key of the UUV's depth (mavlink/*/*/VFR_HUD with "
+                            "--depth-source blueos)")
+    depth_source: Literal["skyfix", "blueos"] = Field("skyfix", description="depth payload: skyfix JSON "
+                                                      "{t, depth_m} or BlueOS mavlink-server VFR_HUD")
+    fix_key: Text = Field("skyfix/uuv/fix", description="Zenoh key the fixes are published on")
+    status_key: Text = Field("skyfix/status", description="Zenoh key of the 1 Hz health/status JSON")
+    alive_key: Text = Field("skyfix/alive", description="Zenoh liveliness token key")
+    gps_input: Text | None = Field(None, description="the UUV autopilot for GPS_INPUT: a pymavlink string "
+                                   "(udpout:192.168.2.2:14550) or zenoh:mavlink/in (BlueOS)")
+    gps_input_hz: Annotated[Number, Ge(5)] = Field(10.0, description="minimum GPS_INPUT rate (Hz; ArduPilot needs "
+                                                   "≥ 5); each new fix is also sent at once")
+    fix_max_age_ms: NonNegative = Field(500.0, description="an ok fix older than this is sent to the autopilot as "
+                                        "'no fix'")
+    tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
+                                       "template matching), mil (the paper's), ...")
+    record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
+    duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
+    stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
+                                   "file at exit")
+
+    @model_validator(mode="after")
+    def _record_needs_pymavlink(self):
+        if self.record and self.mavlink_backend == "mavsdk":
+            raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
+        return self
 
 
-CHOICES = {"mavlink_backend": ("pymavlink", "mavsdk"), "depth_source": ("skyfix", "blueos")}
-_PATHS = ("calibration", "zenoh_config", "record", "stats")
-_HELP = {
-    "calibration": "TOML with the [camera], [mount], [water], [tracker] tables of session.toml v1",
-    "mavlink": "the UAV's MAVLink, e.g. udpin:0.0.0.0:14550, tcp:host:port, /dev/ttyUSB0",
-    "mavlink_backend": "library reading the UAV's MAVLink",
-    "video": "the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., a file",
-    "video_latency_ms": "delay from exposure to frame receipt, subtracted from receive times",
-    "no_request_rates": "do not ask the autopilot for the telemetry rates skyfix needs (a shared link)",
-    "telemetry_wait_ms": "longest wait of a frame for the attitude sample after it (slow radios need ~300)",
-    "require_inputs": "exit 2 when the UAV's MAVLink, the depth or the video has sent nothing 10 s after start "
-                      "(default: keep running and keep saying so)",
-    "zenoh_connect": "Zenoh endpoint to connect to, e.g. tcp/192.168.2.2:7447 (repeatable)",
-    "zenoh_listen": "Zenoh endpoint to listen on (repeatable)",
-    "zenoh_config": "Zenoh JSON5 config file (deploy/zenoh/*.json5)",
-    "zenoh_multicast": "enable Zenoh multicast scouting",
-    "depth_key": "Zenoh key of the UUV's depth (default uuv/depth; mavlink/*/*/VFR_HUD with --depth-source blueos)",
-    "depth_source": "depth payload: skyfix JSON {t, depth_m} or BlueOS mavlink-server VFR_HUD",
-    "fix_key": "Zenoh key the fixes are published on",
-    "status_key": "Zenoh key of the 1 Hz health/status JSON",
-    "alive_key": "Zenoh liveliness token key",
-    "gps_input": "UUV autopilot for GPS_INPUT: pymavlink string (udpout:192.168.2.2:14550) or zenoh:mavlink/in",
-    "gps_input_hz": "minimum GPS_INPUT rate (Hz); each new fix is also sent at once",
-    "fix_max_age_ms": "a fix older than this is sent to the autopilot as 'no fix'",
-    "tracker": "tracker backend name",
-    "record": "record the run as a session directory (format v1)",
-    "duration_s": "stop after this many seconds",
-    "stats": "write final counters and latency percentiles to this JSON file",
-}
+def _base(tp):
+    """``(kind, choices)`` of a field type: kind is bool, int, float, str or tuple."""
+    if get_origin(tp) is Annotated:
+        return _base(get_args(tp)[0])
+    if get_origin(tp) is Literal:
+        return str, get_args(tp)
+    if get_origin(tp) is tuple:
+        return tuple, None
+    args = [a for a in get_args(tp) if a is not type(None)]
+    if args:  # X | None
+        return _base(args[0])
+    return tp, None
+
+
+def _path_marker(name: str) -> _RelativeToFile | None:
+    """The path marker of a field (FilePath, DirPath, or either | None), None for other fields."""
+    info = RunConfig.__pydantic_fields__[name]
+    metadata = [*info.metadata, *(m for a in get_args(info.annotation) for m in getattr(a, "__metadata__", ()))]
+    return next((m for m in metadata if isinstance(m, _RelativeToFile)), None)
+
+
+def _metavar(name: str, kind) -> str:
+    marker = _path_marker(name)
+    if marker:
+        return marker.metavar
+    if kind is not str:
+        return name.rsplit("_", 1)[-1].upper()  # MS, HZ, S: the unit
+    return "KEY" if name.endswith("_key") else "URL"
+
+
+def flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--config`` and one flag per :class:`RunConfig` field (default None: not given)."""
-    parser.add_argument("--config", help="TOML file of run options (flags win over it)")
-    for f in fields(RunConfig):
-        flag = "--" + f.name.replace("_", "-")
-        kind = f.type
-        kw = {"help": _HELP[f.name], "default": None, "dest": f.name}
-        if f.name in CHOICES:
-            kw["choices"] = CHOICES[f.name]
-        if kind == "bool":
-            parser.add_argument(flag, action="store_true", **kw)
-        elif kind.startswith("tuple"):
-            parser.add_argument(flag, action="append", metavar="ENDPOINT", **kw)
-        elif "float" in kind:
-            parser.add_argument(flag, type=float, **kw)
+    """``--config`` and one flag per :class:`RunConfig` field (argparse default None: not given)."""
+    required = parser.add_argument_group("required (a flag, or a key in the --config file)")
+    options = parser.add_argument_group("optional (a flag wins over the same key in the --config file)")
+    options.add_argument("--config", metavar="FILE", help="TOML file of run options, keys as the flags' names with "
+                         "underscores (deploy/field.toml)")
+    for name, info in RunConfig.__pydantic_fields__.items():
+        kind, choices = _base(info.annotation)
+        text = info.description
+        if not info.is_required() and info.default not in (None, False, ()):
+            text += f" (default: {info.default})"
+        kw = {"help": text, "default": None, "dest": name}
+        group = required if info.is_required() else options
+        if kind is bool:
+            group.add_argument(flag(name), action="store_true", **kw)
+        elif kind is tuple:
+            group.add_argument(flag(name), action="append", metavar="ENDPOINT", **kw)
+        elif choices:
+            group.add_argument(flag(name), choices=choices, **kw)
         else:
-            parser.add_argument(flag, **kw)
+            group.add_argument(flag(name), type=kind, metavar=_metavar(name, kind), **kw)
 
 
-def _check(key: str, value, kind: str, source: str):
-    ok = {
-        "bool": isinstance(value, bool),
-        "float": isinstance(value, (int, float)) and not isinstance(value, bool),
-        "tuple": isinstance(value, list) and all(isinstance(v, str) for v in value),
-        "str": isinstance(value, str),
-    }
-    base = "tuple" if kind.startswith("tuple") else "float" if "float" in kind else "bool" if kind == "bool" else "str"
-    if not ok[base]:
-        raise ConfigError(source, key, value, f"expected {base}")
-    if key in CHOICES and value not in CHOICES[key]:
-        raise ConfigError(source, key, value, f"expected one of {', '.join(CHOICES[key])}")
-    return tuple(value) if base == "tuple" else float(value) if base == "float" else value
+def read_toml(path) -> dict:
+    """A TOML file's contents, or :class:`ConfigError` naming the file."""
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except OSError as e:
+        raise ConfigError(str(path), "(file)", str(path), f"cannot read: {e.strerror or e}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(str(path), "(file)", str(path), f"malformed TOML: {e}") from None
 
 
 def read_config_file(path: str) -> dict:
-    """The options a config TOML sets, checked; relative paths resolved against its directory."""
-    p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text())
-    except OSError as e:
-        raise ConfigError(path, "file", path, e.strerror or str(e)) from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(path, "file", path, f"malformed TOML: {e}") from None
-    kinds = {f.name: f.type for f in fields(RunConfig)}
-    out = {}
+    """The options a config TOML sets (checked in :func:`run_config`), relative paths resolved against its folder."""
+    data = read_toml(path)
     for key, value in data.items():
-        if key not in kinds:
-            raise ConfigError(path, key, value, f"unknown option (known: {', '.join(kinds)})")
-        value = _check(key, value, kinds[key], path)
-        if key in _PATHS and not Path(value).is_absolute():
-            value = str(p.parent / value)
-        out[key] = value
-    return out
+        if key in RunConfig.__pydantic_fields__ and _path_marker(key) and isinstance(value, str) \
+                and not Path(value).is_absolute():
+            data[key] = str(Path(path).parent / value)
+    return data
 
 
 def run_config(args: argparse.Namespace) -> RunConfig:
-    """Defaults, then the config file, then the flags given."""
-    values = read_config_file(args.config) if getattr(args, "config", None) else {}
-    for f in fields(RunConfig):
-        given = getattr(args, f.name, None)
+    """Defaults, then the config file, then the flags given; a bad value names where it came from."""
+    file_values = read_config_file(args.config) if getattr(args, "config", None) else {}
+    flags = {}
+    for name in RunConfig.__pydantic_fields__:
+        given = getattr(args, name, None)
         if given is not None and given is not False:
-            values[f.name] = tuple(given) if isinstance(given, list) else given
-    cfg = RunConfig(**values)
-    if cfg.calibration is None:
-        raise ConfigError("options", "--calibration", None, "required (flag or config file)")
-    if cfg.tracker not in TRACKERS:
-        raise ConfigError("options", "--tracker", cfg.tracker, f"expected one of {', '.join(TRACKERS)}")
-    if cfg.record and cfg.mavlink_backend == "mavsdk":
-        raise ConfigError("options", "--record", cfg.record, "recording needs --mavlink-backend pymavlink")
-    if not cfg.gps_input_hz >= 5.0:
-        raise ConfigError("options", "--gps-input-hz", cfg.gps_input_hz, "ArduPilot needs ≥ 5 Hz")
-    if not 0.0 <= cfg.telemetry_wait_ms <= 2000.0:
-        raise ConfigError("options", "--telemetry-wait-ms", cfg.telemetry_wait_ms, "expected 0 … 2000")
-    return cfg
+            flags[name] = tuple(given) if isinstance(given, list) else given
+    try:
+        return validate(RunConfig, {**file_values, **flags}, "options")
+    except ConfigError as e:
+        top = e.key.split(".")[0].split("[")[0]
+        if top in file_values and top not in flags:
+            raise ConfigError(args.config, e.key, e.value, e.why) from None
+        why = "required (a flag or the --config file)" if e.why == "missing" else e.why
+        raise ConfigError("options", flag(top) if top in RunConfig.__pydantic_fields__ else e.key,
+                          e.value, why) from None
 
 
 def load_calibration(path: str) -> Calibration:
-    """The calibration tables of a TOML file (session.toml or a calibration-only file)."""
-    try:
-        data = tomllib.loads(Path(path).read_text())
-    except OSError as e:
-        raise ConfigError(path, "file", path, e.strerror or str(e)) from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(path, "file", path, f"malformed TOML: {e}") from None
-    return calibration_from_dict(data, source=path)
+    """The calibration tables of a TOML file (session.toml or a calibration-only file); warnings logged."""
+    cal = Calibration.from_dict(read_toml(path), source=path)
+    for warning in cal.warnings:
+        log.warning("%s", warning)
+    return cal

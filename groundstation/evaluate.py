@@ -7,8 +7,9 @@ local tangent plane (:func:`localizer.geodesy.horizontal_error_m`). Per method:
 MAE, RMSE, p95 and max of the horizontal error (metres) over frames with a fix;
 coverage = frames with a fix / frames; ``in 2σ`` = share of fixes whose error is
 within twice their reported ``h_acc_m``. Writes, per session,
-``DIR/<session>/<method>/positions.csv``, ``track_top.png`` (recovered track over
-the truth, seen from above) and ``error_time.png``, and ``DIR/evaluation.csv``.
+``DIR/<session>/<method>/positions.csv`` and the plots of :mod:`groundstation.plots`
+(``top_view.png``, ``timeline.png``, ``status.png``: both methods against the truth),
+and ``DIR/evaluation.csv``.
 """
 
 from __future__ import annotations
@@ -22,13 +23,14 @@ import numpy as np
 
 from localizer.calibration import ConfigError
 from localizer.fix import Fixes
-from localizer.geodesy import geodetic_to_ned, horizontal_error_m
+from localizer.geodesy import horizontal_error_m
 from localizer.tracking import TRACKERS
 
 from .outputs import output_dir
+from .plots import write_plots
 from .positions import write_positions_csv
 from .process import frame_pixels, locate_frames, print_warnings
-from .session import Session, SessionError, load_session
+from .session import SessionError, load_session
 
 METHODS = (("refraction", True), ("straight", False))
 
@@ -105,52 +107,6 @@ def format_table(results: list[tuple[str, str, Scores]]) -> str:
     return "\n".join(lines)
 
 
-def plot_session(out_dir: Path, name: str, session: Session, runs: dict[str, tuple[Fixes, np.ndarray]]) -> None:
-    """``track_top.png`` and ``error_time.png`` for one session."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    truth = session.truth
-    lat0, lon0 = truth["lat"][0], truth["lon"][0]
-
-    def ne(lat, lon):
-        n, e, _ = geodetic_to_ned(lat, lon, 0.0, lat0, lon0, 0.0)
-        return n, e
-
-    colours = {"refraction": "tab:blue", "straight": "tab:orange"}
-    fig, ax = plt.subplots(figsize=(6, 6))
-    n, e = ne(truth["lat"], truth["lon"])
-    ax.plot(e, n, "k-", lw=2, label="truth")
-    for method, (fixes, _) in runs.items():
-        ok = fixes.status == "ok"
-        n, e = ne(fixes.lat[ok], fixes.lon[ok])
-        ax.plot(e, n, ".", ms=3, color=colours[method], label=method)
-    ax.set_xlabel("east (m)")
-    ax.set_ylabel("north (m)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(f"{name}: recovered track vs truth (top view)")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(out_dir / "track_top.png", dpi=100)
-    plt.close(fig)
-
-    fig, ax = plt.subplots(figsize=(8, 4))
-    t0 = truth["t"][0]
-    for method, (fixes, err) in runs.items():
-        ax.plot(fixes.t_unix - t0, err, ".-", ms=2, lw=0.5, color=colours[method], label=f"{method} error")
-        ax.plot(fixes.t_unix - t0, 2 * fixes.h_acc_m, "--", lw=0.8, color=colours[method], label=f"{method} 2σ")
-    ax.set_xlabel("time since first truth sample (s)")
-    ax.set_ylabel("horizontal error (m)")
-    ax.set_yscale("log")
-    ax.set_title(f"{name}: horizontal error over time")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out_dir / "error_time.png", dpi=100)
-    plt.close(fig)
-
-
 def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False):
     """Score both methods on one session; returns ``[(name, method, Scores), ...]`` and writes outputs."""
     session = load_session(path)
@@ -174,7 +130,8 @@ def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str 
         err = errors_m(fixes, session.truth)
         runs[method] = (fixes, err)
         results.append((name, method, score(err, fixes.h_acc_m, frames or len(fixes))))
-    plot_session(sess_dir, name, session, runs)
+    write_plots(sess_dir, name, {m: f for m, (f, _) in runs.items()}, session.truth,
+                {m: e for m, (_, e) in runs.items()})
     return results
 
 

@@ -1,9 +1,14 @@
 """``positions.csv``: one row per processed frame (session format v1 output).
 
 Columns: the spec's ``t,lat,lon,depth_m,h_acc_m,status`` first, then skyfix's
-``alt_amsl_m,v_acc_m,u,v,north_m,east_m``. Empty cells where there is no value
-(lat/lon are empty whenever status is not ``ok``). Written to a temporary file
-and renamed, so a reader never sees a half-written table passed off as complete.
+``alt_amsl_m,v_acc_m,u,v,north_m,east_m,t_gnss,alt_ellipsoid_m,sigma_n_m,sigma_e_m,cov_ne_m2``
+(the fix message's names; ``t`` is the frame's exposure on the station clock). Empty
+cells where there is no value (lat/lon are empty whenever status is not ``ok``;
+``alt_ellipsoid_m`` without GPS_RAW_INT ``alt_ellipsoid``; ``t_gnss`` before the
+station clock's offset from GNSS time is known). Written to a temporary file and
+renamed, so a reader never sees a half-written table passed off as complete. Read
+back as :class:`~localizer.fix.Fixes`; a file from another tool needs only the spec's
+six columns.
 """
 
 from __future__ import annotations
@@ -13,14 +18,19 @@ import math
 import os
 from pathlib import Path
 
-import numpy as np
-
 from localizer.fix import Fixes
 
-COLUMNS = ("t", "lat", "lon", "depth_m", "h_acc_m", "status", "alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m")
+from .session import read_table
+
+SPEC_COLUMNS = ("t", "lat", "lon", "depth_m", "h_acc_m", "status")
+COLUMNS = (*SPEC_COLUMNS, "alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m",
+           "t_gnss", "alt_ellipsoid_m", "sigma_n_m", "sigma_e_m", "cov_ne_m2")
+#: column → (Fix attribute, decimals)
 _FIELDS = {"t": ("t_unix", 6), "lat": ("lat", 9), "lon": ("lon", 9), "depth_m": ("depth_m", 4),
            "h_acc_m": ("h_acc_m", 4), "alt_amsl_m": ("alt_amsl_m", 4), "v_acc_m": ("v_acc_m", 4),
-           "u": ("u", 3), "v": ("v", 3), "north_m": ("north_m", 4), "east_m": ("east_m", 4)}
+           "u": ("u", 3), "v": ("v", 3), "north_m": ("north_m", 4), "east_m": ("east_m", 4),
+           "t_gnss": ("t_gnss", 6), "alt_ellipsoid_m": ("alt_ellipsoid_m", 4), "sigma_n_m": ("sigma_n_m", 4),
+           "sigma_e_m": ("sigma_e_m", 4), "cov_ne_m2": ("cov_ne_m2", 6)}
 
 
 def _cell(value: float, digits: int) -> str:
@@ -54,14 +64,8 @@ def write_positions_csv(path: Path, fixes: Fixes) -> None:
     os.replace(tmp, path)
 
 
-def read_positions_csv(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a positions.csv as arrays (numbers as float with NaN for empty; status as str)."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    out = {}
-    for col in rows[0].keys() if rows else COLUMNS:
-        if col == "status":
-            out[col] = np.array([r[col] for r in rows], dtype=object)
-        else:
-            out[col] = np.array([float(r[col]) if r[col] != "" else np.nan for r in rows])
-    return out
+def read_positions_csv(path: Path) -> Fixes:
+    """A positions.csv as :class:`~localizer.fix.Fixes` (columns it lacks are NaN); bad cells are SessionError."""
+    numbers = [c for c in COLUMNS if c not in ("t", "status")]
+    table = read_table(Path(path), SPEC_COLUMNS, allow_empty=tuple(numbers), optional=COLUMNS[6:], text=("status",))
+    return Fixes.of(table["t"], table["status"], **{_FIELDS[c][0]: v for c, v in table.items() if c in numbers})

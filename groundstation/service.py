@@ -174,8 +174,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("run", help="the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out",
-                              description=__doc__.split("\n\n")[0])
+    p = subparsers.add_parser(
+        "run", help="the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out",
+        usage="%(prog)s --calibration FILE [--config FILE] [options]",
+        description="The live service: reads the UAV's MAVLink telemetry and video and the UUV's depth (Zenoh); "
+                    "publishes each fix on Zenoh (--fix-key) and sends GPS_INPUT to the UUV's autopilot "
+                    "(--gps-input); health on --status-key once a second. Stops on Ctrl-C or SIGTERM.",
+        epilog="example: skyfix run --calibration cal.toml --mavlink udpin:0.0.0.0:14550 --video udp://0.0.0.0:5600 "
+               "--zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
     config.add_arguments(p)
     p.set_defaults(func=run)
 

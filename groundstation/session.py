@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from localizer.calibration import Calibration, ConfigError, calibration_from_dict
+from localizer.calibration import Calibration, ConfigError
 from localizer.telemetry import Telemetry
 
 from .mavlink_io import ingest, mavutil
@@ -56,24 +56,36 @@ def _number(text: str, where: str, col: str, allow_empty: bool) -> float:
     return value
 
 
-def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
-    """A CSV with at least ``columns`` in its header, as float arrays; checks times increase."""
+def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...] = (),
+               optional: tuple[str, ...] = (), text: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """A CSV with at least ``columns`` in its header, as float arrays; checks times increase.
+
+    ``optional`` columns are read when the header has them; ``text`` columns are kept as
+    non-empty strings (object arrays); ``allow_empty`` numbers may be empty (NaN).
+    """
     try:
         with open(path, newline="") as f:
             reader = csv.DictReader(f)
-            missing = [c for c in columns if c not in (reader.fieldnames or [])]
+            header = reader.fieldnames or []
+            missing = [c for c in columns if c not in header]
             if missing:
-                raise SessionError(f"{path}: header {reader.fieldnames!r} lacks {', '.join(missing)}")
-            cols: dict[str, list[float]] = {c: [] for c in columns}
+                raise SessionError(f"{path}: header {header!r} lacks {', '.join(missing)}")
+            wanted = [*columns, *(c for c in optional if c in header)]
+            cols: dict[str, list] = {c: [] for c in wanted}
             for row in reader:
                 where = f"{path}:{reader.line_num}"
-                for c in columns:
+                for c in wanted:
                     if row[c] is None:
                         raise SessionError(f"{where}: row too short, no {c}")
-                    cols[c].append(_number(row[c], where, c, c in allow_empty))
+                    if c in text:
+                        if not row[c].strip():
+                            raise SessionError(f"{where}: {c} = {row[c]!r}: empty")
+                        cols[c].append(row[c].strip())
+                    else:
+                        cols[c].append(_number(row[c], where, c, c in allow_empty))
     except (OSError, UnicodeDecodeError) as e:
         raise SessionError(f"{path}: cannot read: {e}") from None
-    out = {c: np.array(v, dtype=float) for c, v in cols.items()}
+    out = {c: np.array(v, dtype=object if c in text else float) for c, v in cols.items()}
     t = out.get("t")
     if t is not None and len(t) > 1 and not np.all(np.diff(t) > 0):
         i = int(np.flatnonzero(np.diff(t) <= 0)[0])
@@ -201,7 +213,7 @@ def load_session(path) -> Session:
     if version != SUPPORTED_VERSION:
         raise SessionError(f"{toml_path}: version = {version!r}: this skyfix reads version {SUPPORTED_VERSION}")
     try:
-        cal = calibration_from_dict(meta, source=str(toml_path))
+        cal = Calibration.from_dict(meta, source=str(toml_path))
     except ConfigError as e:
         raise SessionError(str(e)) from None
 

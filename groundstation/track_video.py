@@ -20,7 +20,6 @@ did since".
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass, field, fields
 
@@ -31,6 +30,7 @@ from localizer.pose import CameraPose, camera_pose
 from localizer.tracking import TrackResult, make_tracker
 from localizer.tracking.predict import follow, init_target, project_uuv
 
+from .progress import progress as progress_bar
 from .session import Session, SessionError
 from .video import VideoError, open_video
 
@@ -68,25 +68,6 @@ def _init_row(session: Session, t: np.ndarray) -> int:
             f"({t[0]:.3f} … {t[-1]:.3f})"
         )
     return i
-
-
-class _Progress:
-    """A one-line progress indicator on stderr, redrawn at most twice a second."""
-
-    def __init__(self, total: int, enabled: bool):
-        self.total, self.enabled = total, enabled
-        self.start = self.last = time.perf_counter()
-
-    def show(self, done: int, final: bool = False) -> None:
-        now = time.perf_counter()
-        if not self.enabled or (not final and now - self.last < 0.5):
-            return
-        self.last = now
-        fps = done / max(now - self.start, 1e-9)
-        pct = 100.0 * done / max(self.total, 1)
-        print(f"\rtracking: {done}/{self.total} frames ({pct:3.0f}%) {fps:6.1f} fps", end="", file=sys.stderr)
-        if final:
-            print(file=sys.stderr)
 
 
 class _Predictor:
@@ -168,7 +149,7 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     predictor = _Predictor(session, pose)
     timings["pose"] = time.perf_counter() - t0
 
-    bar = _Progress(n - init_row, progress)
+    bar = progress_bar(n - init_row, f"{session.path.name}: tracking", progress)
     extra = 0
     done = 0
     started = False
@@ -210,12 +191,13 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
                 predictor.observe(row, result)
                 status[row], u[row], v[row], conf[row] = result.status, result.u, result.v, result.confidence
                 done += 1
-                bar.show(done)
+                bar.update()
             if video.bad_reads:
                 warnings.append(f"{session.video_path}: {video.bad_reads} unreadable frames skipped")
     except VideoError as e:
         raise SessionError(str(e)) from None
-    bar.show(done, final=True)
+    finally:
+        bar.close()
     if not started:
         raise SessionError(f"{session.video_path}: no frame of video_frames.csv could be decoded")
     missing = int(np.sum(status == "no_video"))

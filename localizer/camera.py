@@ -8,22 +8,36 @@ shape) and returns arrays of that shape.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
+from annotated_types import Ge, Le
+from pydantic import Field, model_validator
+from pydantic.dataclasses import dataclass
+
+from .contract import OPEN, Invalid, Number, Positive, Vector5, Whole
+
+Pixels = Annotated[Whole, Ge(16), Le(16384)]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=OPEN)
 class Camera:
-    """Intrinsics in pixels and distortion ``(k1, k2, p1, p2, k3)``."""
+    """Intrinsics in pixels and distortion ``(k1, k2, p1, p2, k3)``: the ``[camera]`` table of session.toml."""
 
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    width: Pixels = Field(description="image width, pixels")
+    height: Pixels = Field(description="image height, pixels")
+    fx: Positive = Field(description="focal length along u, pixels")
+    fy: Positive = Field(description="focal length along v, pixels")
+    cx: Number = Field(description="principal point u, pixels (OpenCV: the top-left pixel's centre is 0)")
+    cy: Number = Field(description="principal point v, pixels")
+    distortion: Vector5 = Field((0.0, 0.0, 0.0, 0.0, 0.0), description="OpenCV k1, k2, p1, p2, k3")
+
+    @model_validator(mode="after")
+    def _principal_point_inside(self):
+        for key, value, size in (("cx", self.cx, self.width), ("cy", self.cy, self.height)):
+            if not -0.5 <= value <= size - 0.5:
+                raise Invalid(key, value, f"must be within [-0.5, {size - 0.5}] (inside the image)")
+        return self
 
     @property
     def K(self) -> np.ndarray:

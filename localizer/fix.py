@@ -1,15 +1,20 @@
 """The fix: one typed result per frame, from tracker to every sink.
 
 :func:`locate` turns tracked pixels and aligned camera poses into fixes. Status
-words: ``ok``; ``no_track``/``lost`` (tracker); ``bad_pixel`` (outside the image
-or outside the lens model); ``no_<input>``/``stale_<input>`` for attitude,
-position, gimbal, depth; ``below_surface``; ``no_water`` (the ray never reaches
-the water); ``bad_time``.
+words (:data:`localizer.status.STATUSES`): ``ok``; ``no_track``/``lost`` (tracker);
+``bad_pixel`` (outside the image or outside the lens model);
+``no_<input>``/``stale_<input>`` for attitude, position, gimbal, depth;
+``below_surface``; ``no_water`` (the ray never reaches the water); ``bad_time``.
+
+Heights: ``alt_amsl_m`` is above mean sea level as the UAV's GLOBAL_POSITION_INT
+``alt`` is (the autopilot's geoid); ``alt_ellipsoid_m`` above the WGS84 ellipsoid,
+from the geoid separation GPS_RAW_INT gives (``alt_ellipsoid − alt``), NaN when the
+autopilot sends no ``alt_ellipsoid``.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -31,6 +36,7 @@ class Fix:
     lat: float = float("nan")
     lon: float = float("nan")
     alt_amsl_m: float = float("nan")
+    alt_ellipsoid_m: float = float("nan")  # NaN without GPS_RAW_INT alt_ellipsoid
     depth_m: float = float("nan")
     h_acc_m: float = float("nan")
     v_acc_m: float = float("nan")
@@ -62,6 +68,7 @@ class Fixes:
     lat: np.ndarray
     lon: np.ndarray
     alt_amsl_m: np.ndarray
+    alt_ellipsoid_m: np.ndarray
     depth_m: np.ndarray
     h_acc_m: np.ndarray
     v_acc_m: np.ndarray
@@ -71,6 +78,15 @@ class Fixes:
     sigma_e_m: np.ndarray
     cov_ne_m2: np.ndarray
     t_gnss: np.ndarray
+
+    @classmethod
+    def of(cls, t_unix, status, **columns) -> Fixes:
+        """Fixes from some columns; the others NaN (a positions.csv from another tool, a test)."""
+        t = np.asarray(t_unix, dtype=float)
+        nan = np.full(len(t), np.nan)
+        given = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
+        return cls(t_unix=t, status=np.asarray(status, dtype=object),
+                   **{f.name: given.get(f.name, nan.copy()) for f in fields(cls) if f.name not in ("t_unix", "status")})
 
     def __len__(self) -> int:
         return len(self.t_unix)
@@ -94,7 +110,7 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
     n_water = cal.water.refractive_index if refraction else None
 
     nan = np.full(len(u), np.nan)
-    lat, lon, alt, north, east, h_acc, v_acc, sig_n, sig_e, cov_ne = (nan.copy() for _ in range(10))
+    lat, lon, alt, alt_ellipsoid, north, east, h_acc, v_acc, sig_n, sig_e, cov_ne = (nan.copy() for _ in range(11))
     idx = np.flatnonzero(status == "ok")
     if len(idx):
         R = pose.R_ned_from_cv[idx]
@@ -114,6 +130,7 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
             north[idx], east[idx], down, pose.lat_deg[idx], pose.lon_deg[idx], pose.alt_amsl_m[idx]
         )
         alt[idx] = pose.alt_amsl_m[idx] - down
+        alt_ellipsoid[idx] = alt[idx] + pose.geoid_separation_m[idx]
         h_acc[idx], v_acc[idx], cov = accuracy(
             cal.camera, R, u[idx], v[idx], h, d, n_water, cal.sigmas,
             sigma_tilt_rad=pose.sigma_tilt_rad[idx], sigma_yaw_rad=pose.sigma_yaw_rad[idx],
@@ -122,7 +139,7 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
         )
         sig_n[idx], sig_e[idx], cov_ne[idx] = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1]), cov[:, 0, 1]
     return Fixes(
-        t_unix=pose.t_unix, status=status, u=u, v=v, lat=lat, lon=lon, alt_amsl_m=alt,
+        t_unix=pose.t_unix, status=status, u=u, v=v, lat=lat, lon=lon, alt_amsl_m=alt, alt_ellipsoid_m=alt_ellipsoid,
         depth_m=pose.depth_m.copy(), h_acc_m=h_acc, v_acc_m=v_acc, north_m=north, east_m=east,
         sigma_n_m=sig_n, sigma_e_m=sig_e, cov_ne_m2=cov_ne, t_gnss=pose.t_gnss.copy(),
     )

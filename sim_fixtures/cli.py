@@ -14,7 +14,7 @@ def run(args) -> int:
     path = Path(args.scenario)
     sc = load_scenario(path)
     output_dir(args.out)
-    report = generate(sc, args.out, scenario_text=path.read_text(), video=not args.no_video)
+    report = generate(sc, args.out, scenario_text=path.read_text(), video=not args.no_video, progress=not args.quiet)
     counts = ", ".join(f"{k} {n}" for k, n in sorted(report.messages.items()))
     made = (f"rendered and encoded in {report.render_s:.1f} s" if not args.no_video else "without video")
     print(f"{sc.name}: {report.frames} frames {sc.camera.width}x{sc.camera.height} {made} "
@@ -28,4 +28,5 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, help="session directory to write")
     p.add_argument("--no-video", action="store_true",
                    help="no video.mp4 (fast): telemetry, depth, truth and track.csv for geometry-only tests")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)

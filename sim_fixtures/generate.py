@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from groundstation.progress import progress as progress_bar
 from localizer.calibration import ConfigError
 
 from .geometry import R_GIMBAL_FROM_CV, SimCamera, ned_to_geodetic, project, surface_crossing
@@ -192,12 +193,13 @@ class Encoder:
             raise RuntimeError(f"ffmpeg exited with status {self.proc.returncode}")
 
 
-def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path):
+def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress: bool = False):
     """Render and encode every frame; returns where the UUV can be seen and its first box with its frame time."""
     renderer = Renderer(sc, camera)
     encoder = Encoder(path, camera.width, camera.height, sc.fps, sc.render.crf)
     init = None
     in_view = np.zeros(len(truth.t_unix), bool)  # the UUV can be seen in the frame (see Renderer.render)
+    bar = progress_bar(len(truth.t_unix), f"{sc.name}: rendering", progress)
     try:
         for i in range(len(truth.t_unix)):
             img, box = renderer.render(truth.view(i))
@@ -205,7 +207,9 @@ def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path):
             if init is None and box is not None:
                 init = (box, float(truth.t_unix[i]))
             encoder.write(img)
+            bar.update()
     finally:
+        bar.close()
         encoder.close()
     return in_view, init
 
@@ -219,7 +223,8 @@ class Report:
     messages: dict
 
 
-def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None, video: bool = True) -> Report:
+def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None, video: bool = True,
+             progress: bool = False) -> Report:
     """Write the session for ``sc`` into ``out_dir``.
 
     The directory is created; a session generated earlier is overwritten, any other
@@ -252,7 +257,7 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
 
     t1 = time.perf_counter()
     if video:
-        in_view, init = _render(sc, camera, truth, out / "video.mp4")
+        in_view, init = _render(sc, camera, truth, out / "video.mp4", progress)
     else:
         for old in out.glob("video.*"):
             old.unlink()

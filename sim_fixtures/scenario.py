@@ -1,300 +1,264 @@
 """A synthetic scenario: what the generator is asked to simulate, read from a small TOML file.
 
-Every table and key is optional except ``name``; unknown keys and wrong types are
-refused with a one-line :class:`~localizer.calibration.ConfigError` naming the
-file, key and value. Units are in the key names (``_m``, ``_deg``, ``_s``, ``_hz``).
-World frame: local North-East-Down with its origin on the water surface at
-``[site] lat_deg, lon_deg``; the water surface is the plane ``down = 0``.
+One contract (see :mod:`localizer.contract`): these frozen pydantic dataclasses
+validate the parsed TOML, hold the defaults and document every knob;
+``groundstation/schemas/scenario.schema.json`` is generated from them. Every table
+and key is optional except ``name``; unknown keys and wrong values are refused with
+a one-line :class:`~localizer.contract.ConfigError` naming the file, key and value.
+Units are in the key names (``_m``, ``_deg``, ``_s``, ``_hz``). World frame: local
+North-East-Down with its origin on the water surface at ``[site] lat_deg, lon_deg``;
+the water surface is the plane ``down = 0``.
 """
 
 from __future__ import annotations
 
-import tomllib
-from dataclasses import dataclass, field, fields, replace
+import dataclasses
 from itertools import pairwise
 from pathlib import Path
+from typing import Annotated, Literal
 
-from localizer.calibration import ConfigError
+from annotated_types import Ge, Le, MinLen
+from pydantic import Field, field_validator, model_validator
+from pydantic.dataclasses import dataclass
+
+from groundstation.config import read_toml
+from localizer.contract import (
+    CLOSED,
+    Invalid,
+    NonNegative,
+    Number,
+    Pair,
+    Positive,
+    Text,
+    Vector3,
+    Vector5,
+    Whole,
+    validate,
+)
+
+Rgb = Vector3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class Site:
-    lat_deg: float = 63.4400  # origin of the world frame, on the water surface
-    lon_deg: float = 10.4000
-    surface_amsl_m: float = 0.40  # the water surface's altitude above mean sea level
-    water_reference: str = "takeoff"  # session.toml [water] key written: "takeoff" or "amsl"
-    takeoff_height_above_surface_m: float = 1.80  # the take-off point above the water
-    refractive_index: float = 1.34
-    floor_depth_m: float = 4.0  # flat seafloor below the surface
-    geoid_separation_m: float = 40.0  # WGS84 ellipsoid height of mean sea level (GPS_RAW_INT alt_ellipsoid)
-    attenuation_bgr_per_m: tuple = (0.05, 0.08, 0.22)  # light attenuation coefficients (1/m)
-    water_bgr: tuple = (120.0, 105.0, 50.0)  # colour of deep water (0-255)
+    """``[site]``: where, and the water."""
+
+    lat_deg: Number = Field(63.4400, description="origin of the world frame, on the water surface")
+    lon_deg: Number = Field(10.4000, description="origin of the world frame, on the water surface")
+    surface_amsl_m: Number = Field(0.40, description="the water surface's altitude above mean sea level")
+    water_reference: Literal["takeoff", "amsl"] = Field(
+        "takeoff", description="session.toml [water] key written: takeoff_height_above_surface_m or surface_amsl_m")
+    takeoff_height_above_surface_m: Number = Field(1.80, description="the take-off point above the water")
+    refractive_index: Annotated[Number, Ge(1.0), Le(2.0)] = Field(1.34, description="of the water")
+    floor_depth_m: Positive = Field(4.0, description="flat seafloor below the surface")
+    geoid_separation_m: Number = Field(40.0, description="WGS84 ellipsoid height of mean sea level "
+                                       "(GPS_RAW_INT alt_ellipsoid - alt)")
+    attenuation_bgr_per_m: Vector3 = Field((0.05, 0.08, 0.22), description="light attenuation coefficients (1/m)")
+    water_bgr: Rgb = Field((120.0, 105.0, 50.0), description="colour of deep water (0-255)")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class CameraSpec:
-    width: int = 640
-    height: int = 360
-    hfov_deg: float = 62.0  # horizontal field of view of the undistorted pinhole (fx = fy)
-    distortion: tuple = (-0.12, 0.08, 0.0004, -0.0002, -0.01)  # k1, k2, p1, p2, k3
+    """``[camera]``: the simulated camera (fx = fy, principal point at the centre)."""
+
+    width: Annotated[Whole, Ge(16)] = Field(640, description="pixels")
+    height: Annotated[Whole, Ge(16)] = Field(360, description="pixels")
+    hfov_deg: Annotated[Positive, Le(170)] = Field(62.0, description="horizontal field of view of the undistorted "
+                                                   "pinhole")
+    distortion: Vector5 = Field((-0.12, 0.08, 0.0004, -0.0002, -0.01), description="k1, k2, p1, p2, k3")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class MountSpec:
-    attitude_source: str = "gimbal_device"  # "gimbal_device", "mount_orientation" or "fixed"
-    # "stabilised": the gimbal holds its attitude itself and reports it; "servo" (ArduPilot MNT1_TYPE 1):
-    # the autopilot commands servo angles = target - the vehicle's lean and reports those demands
-    kind: str = "stabilised"
-    # gimbal_device yaw reported "earth" (flags 4|8|64 = 76) or "vehicle" (flags 4|8|32 = 44, as ArduPilot)
-    gimbal_frame: str = "earth"
-    pitch_deg: float = -90.0  # target pitch relative to the horizon (-90 = straight down)
-    yaw_mode: str = "earth"  # yaw_deg held from North ("earth") or from the vehicle's heading ("vehicle", follow)
-    yaw_deg: float = 0.0  # target yaw (degrees), from North or from the vehicle's heading as yaw_mode says
-    jitter_deg: float = 0.05  # amplitude of the gimbal's residual wobble (0.4 and 0.7 Hz)
-    fixed_rpy_deg: tuple = (0.0, -90.0, 0.0)  # "fixed": camera in the body FRD frame
-    camera_offset_m: tuple = (0.10, 0.0, 0.20)  # camera in body FRD relative to the reported position
+    """``[mount]``: how the camera is carried and which message reports its attitude."""
+
+    attitude_source: Literal["gimbal_device", "mount_orientation", "fixed"] = Field(
+        "gimbal_device", description="the message reporting the camera's attitude, or a camera fixed to the airframe")
+    kind: Literal["stabilised", "servo"] = Field(
+        "stabilised", description="stabilised: the gimbal holds its attitude itself and reports it; servo (ArduPilot "
+        "MNT1_TYPE 1): the autopilot commands servo angles = target - the vehicle's lean and reports those demands")
+    gimbal_frame: Literal["earth", "vehicle"] = Field(
+        "earth", description="gimbal_device yaw reported in the earth frame (flags 76) or the vehicle's (flags 44, "
+        "as ArduPilot)")
+    pitch_deg: Number = Field(-90.0, description="target pitch relative to the horizon (-90 = straight down)")
+    yaw_mode: Literal["earth", "vehicle"] = Field(
+        "earth", description="yaw_deg held from North (earth) or from the vehicle's heading (vehicle, follow)")
+    yaw_deg: Number = Field(0.0, description="target yaw (degrees), from North or from the vehicle's heading")
+    jitter_deg: NonNegative = Field(0.05, description="amplitude of the gimbal's residual wobble (0.4 and 0.7 Hz)")
+    fixed_rpy_deg: Vector3 = Field((0.0, -90.0, 0.0), description="fixed: the camera in the body FRD frame")
+    camera_offset_m: Vector3 = Field((0.10, 0.0, 0.20), description="camera in body FRD relative to the reported "
+                                     "position")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class UavSpec:
-    height_m: float = 10.0  # mean height of the reported position above the water
-    height_swing_m: float = 0.3  # amplitude of slow height changes
-    standoff: str = "auto"  # "auto": placed so the optical axis meets the UUV's path centre; "given"
-    north_m: float = 0.0  # mean position when standoff = "given"
-    east_m: float = 0.0
-    drift_m: float = 0.4  # amplitude of the hover's horizontal drift
-    yaw_deg: float = 20.0  # mean heading
-    yaw_swing_deg: float = 10.0  # amplitude of the heading's sinusoidal changes
-    yaw_period_s: float = 12.0
-    tilt_deg: float = 4.0  # wind tilt: the airframe leans into the wind by this much
-    wind_from_deg: float = 250.0
-    gust_deg: float = 0.8  # amplitude of the tilt's oscillation
-    wobble_deg: float = 0.0  # amplitude of an extra airframe roll and pitch oscillation (a camera fixed to it wobbles)
-    wobble_hz: float = 0.0
-    gnss_fix_type: int = 3  # GPS_RAW_INT fix_type (3 = 3D, 6 = RTK fixed)
-    gnss_h_acc_m: float = 0.02  # GPS_RAW_INT h_acc (v_acc twice that); the simulated position itself is exact
+    """``[uav]``: the hover."""
+
+    height_m: Positive = Field(10.0, description="mean height of the reported position above the water")
+    height_swing_m: NonNegative = Field(0.3, description="amplitude of slow height changes")
+    standoff: Literal["auto", "given"] = Field(
+        "auto", description="auto: placed so the optical axis meets the UUV's path centre; given: north_m, east_m")
+    north_m: Number = Field(0.0, description="mean position when standoff = given")
+    east_m: Number = Field(0.0, description="mean position when standoff = given")
+    drift_m: NonNegative = Field(0.4, description="amplitude of the hover's horizontal drift")
+    yaw_deg: Number = Field(20.0, description="mean heading")
+    yaw_swing_deg: Number = Field(10.0, description="amplitude of the heading's sinusoidal changes")
+    yaw_period_s: Positive = Field(12.0, description="period of the heading's changes")
+    tilt_deg: Number = Field(4.0, description="wind tilt: the airframe leans into the wind by this much")
+    wind_from_deg: Number = Field(250.0, description="where the wind comes from, degrees from North")
+    gust_deg: Number = Field(0.8, description="amplitude of the tilt's oscillation")
+    wobble_deg: NonNegative = Field(0.0, description="amplitude of an extra airframe roll and pitch oscillation "
+                                    "(a camera fixed to it wobbles)")
+    wobble_hz: NonNegative = Field(0.0, description="frequency of that oscillation")
+    gnss_fix_type: Annotated[Whole, Ge(0), Le(8)] = Field(3, description="GPS_RAW_INT fix_type (a GPS_FIX_TYPE: "
+                                                          "3 = 3D, 6 = RTK fixed)")
+    gnss_h_acc_m: NonNegative = Field(0.02, description="GPS_RAW_INT h_acc (v_acc twice that); the simulated "
+                                      "position itself is exact")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class UuvSpec:
-    north_m: float = 0.0  # centre of the figure-eight path
-    east_m: float = 0.0
-    path_n_m: float = 0.8  # half extent of the path along North and East
-    path_e_m: float = 0.6
-    period_s: float = 24.0  # one loop of the figure eight
-    depth_m: float = 1.0  # mean depth of the top face (the reference point)
-    depth_swing_m: float = 0.25
-    depth_period_s: float = 15.0
-    # ((t_s, depth_m), ...) keyframes, times from the first frame and increasing: when given, the depth
-    # follows them (cosine-eased in between, held outside) instead of depth_m ± depth_swing_m; a dive
-    depth_profile: tuple = ()
-    size_m: tuple = (0.46, 0.34, 0.25)  # length, width, height (BlueROV2)
+    """``[uuv]``: the vehicle's figure-eight path and depth."""
+
+    north_m: Number = Field(0.0, description="centre of the figure-eight path")
+    east_m: Number = Field(0.0, description="centre of the figure-eight path")
+    path_n_m: Number = Field(0.8, description="half extent of the path along North")
+    path_e_m: Number = Field(0.6, description="half extent of the path along East")
+    period_s: Positive = Field(24.0, description="one loop of the figure eight")
+    depth_m: Number = Field(1.0, description="mean depth of the top face (the reference point)")
+    depth_swing_m: Number = Field(0.25, description="amplitude of the depth's slow changes")
+    depth_period_s: Positive = Field(15.0, description="period of the depth's changes")
+    depth_profile: tuple[Pair, ...] = Field(
+        (), description="[[t_s, depth_m], ...] keyframes, times from the first frame and increasing: when given, the "
+        "depth follows them (cosine-eased in between, held outside) instead of depth_m ± depth_swing_m; a dive")
+    size_m: Vector3 = Field((0.46, 0.34, 0.25), description="length, width, height (BlueROV2)")
+
+    @field_validator("depth_profile")
+    @classmethod
+    def _increasing(cls, profile):
+        if not all(t0 < t1 for (t0, _), (t1, _) in pairwise(profile)):
+            raise Invalid("", [list(p) for p in profile], "expected [t_s, depth_m] pairs with increasing t_s")
+        return profile
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class LinkSpec:
-    delay_s: float = 0.045  # telemetry link delay (sample to ground-station receipt)
-    jitter_s: float = 0.012  # mean of the exponential extra delay; the link stays in order
-    boot_s_at_start: float = 412.0  # autopilot uptime when the scenario starts
-    depth_delay_s: float = 0.03  # UUV depth link: measurement to ground-station receipt
-    depth_jitter_s: float = 0.005  # mean of its exponential extra delay; arrivals stay in order
-    reboot_at_s: float | None = None  # the autopilot reboots at this scenario time (None: never)...
-    reboot_down_s: float = 3.0  # ... is silent this long, then talks again with its boot clock restarted
+    """``[link]``: the telemetry and depth links."""
+
+    delay_s: NonNegative = Field(0.045, description="telemetry link delay (sample to ground-station receipt)")
+    jitter_s: NonNegative = Field(0.012, description="mean of the exponential extra delay; the link stays in order")
+    boot_s_at_start: NonNegative = Field(412.0, description="autopilot uptime when the scenario starts")
+    depth_delay_s: NonNegative = Field(0.03, description="UUV depth link: measurement to ground-station receipt")
+    depth_jitter_s: NonNegative = Field(0.005, description="mean of its exponential extra delay; arrivals stay "
+                                        "in order")
+    reboot_at_s: Number | None = Field(None, description="the autopilot reboots at this scenario time (unset: never)")
+    reboot_down_s: Positive = Field(3.0, description="... is silent this long, then talks again with its boot clock "
+                                    "restarted")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class ClockSpec:
-    station_offset_s: float = 0.0  # ground station (laptop) clock minus true GNSS time: stamps frames, tlog, t_recv
-    uuv_offset_s: float = 0.0  # the UUV's clock minus true time: stamps depth.jsonl's t
+    """``[clock]``: clocks that disagree with true (GNSS) time."""
+
+    station_offset_s: Number = Field(0.0, description="ground station (laptop) clock minus true GNSS time: stamps "
+                                     "frames, tlog, t_recv")
+    uuv_offset_s: Number = Field(0.0, description="the UUV's clock minus true time: stamps depth.jsonl's t")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class TelemetrySpec:
-    attitude_hz: float = 50.0
-    position_hz: float = 10.0
-    gimbal_hz: float = 20.0
-    system_time_hz: float = 1.0  # 0: not sent
-    gps_raw_hz: float = 5.0  # 0: not sent
-    gps_raw_time: str = "unix"  # GPS_RAW_INT time_usec: true UNIX time ("unix") or boot time ("boot", as ArduPilot)
-    timesync_hz: float = 1.0  # the ground station's TIMESYNC requests (each answered by the autopilot); 0: none
-    depth_hz: float = 8.0
-    lead_s: float = 2.0  # telemetry starts this long before the first frame
-    attitude_noise_deg: float = 0.0  # 1-sigma white noise on reported roll, pitch, yaw
-    height_noise_m: float = 0.0  # 1-sigma noise on reported altitudes
-    depth_noise_m: float = 0.0  # 1-sigma noise on reported UUV depth
+    """``[telemetry]``: message rates (Hz) and noise."""
+
+    attitude_hz: Positive = Field(50.0, description="ATTITUDE rate")
+    position_hz: Positive = Field(10.0, description="GLOBAL_POSITION_INT rate")
+    gimbal_hz: Positive = Field(20.0, description="gimbal message rate")
+    system_time_hz: NonNegative = Field(1.0, description="SYSTEM_TIME rate; 0: not sent")
+    gps_raw_hz: NonNegative = Field(5.0, description="GPS_RAW_INT rate; 0: not sent")
+    gps_raw_time: Literal["unix", "boot"] = Field(
+        "unix", description="GPS_RAW_INT time_usec: true UNIX time (unix) or boot time (boot, as ArduPilot)")
+    timesync_hz: NonNegative = Field(1.0, description="the ground station's TIMESYNC requests (each answered by the "
+                                     "autopilot); 0: none")
+    depth_hz: Positive = Field(8.0, description="the UUV's depth samples")
+    lead_s: NonNegative = Field(2.0, description="telemetry starts this long before the first frame")
+    attitude_noise_deg: NonNegative = Field(0.0, description="1-sigma white noise on reported roll, pitch, yaw")
+    height_noise_m: NonNegative = Field(0.0, description="1-sigma noise on reported altitudes")
+    depth_noise_m: NonNegative = Field(0.0, description="1-sigma noise on reported UUV depth")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class RenderSpec:
-    exposure: float = 1.4  # sunlight just below the surface, relative to the albedo
-    caustics: float = 0.5  # strength of the moving caustic pattern (0 = none)
-    glint: float = 0.0  # strength of sun glint (0 = none)
-    sun_azimuth_deg: float = 140.0
-    sun_elevation_deg: float = 55.0
-    noise_sigma: float = 2.0  # sensor noise, grey levels
-    crf: int = 23  # x264 quality (lower is better)
-    supersample: int = 2  # rays per pixel side on the UUV (anti-aliasing)
+    """``[render]``: the picture."""
+
+    exposure: Positive = Field(1.4, description="sunlight just below the surface, relative to the albedo")
+    caustics: NonNegative = Field(0.5, description="strength of the moving caustic pattern (0 = none)")
+    glint: NonNegative = Field(0.0, description="strength of sun glint (0 = none)")
+    sun_azimuth_deg: Number = Field(140.0, description="degrees from North")
+    sun_elevation_deg: Number = Field(55.0, description="degrees above the horizon")
+    noise_sigma: NonNegative = Field(2.0, description="sensor noise, grey levels")
+    crf: Annotated[Whole, Ge(0), Le(51)] = Field(23, description="x264 quality (lower is better)")
+    supersample: Annotated[Whole, Ge(1)] = Field(2, description="rays per pixel side on the UUV (anti-aliasing)")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, config=CLOSED)
 class Scenario:
-    name: str
-    description: str = ""
-    seed: int = 1
-    duration_s: float = 8.0
-    fps: float = 30.0
-    start_unix: float = 1763800000.0
-    occlusions: tuple = ()  # ((start_s, end_s), ...) relative to the first frame: the UUV is hidden
-    site: Site = field(default_factory=Site)
-    camera: CameraSpec = field(default_factory=CameraSpec)
-    mount: MountSpec = field(default_factory=MountSpec)
-    uav: UavSpec = field(default_factory=UavSpec)
-    uuv: UuvSpec = field(default_factory=UuvSpec)
-    link: LinkSpec = field(default_factory=LinkSpec)
-    clock: ClockSpec = field(default_factory=ClockSpec)
-    telemetry: TelemetrySpec = field(default_factory=TelemetrySpec)
-    render: RenderSpec = field(default_factory=RenderSpec)
+    """A synthetic scenario (``sim_fixtures/scenarios/*.toml``): top-level keys and one table per part."""
 
+    name: Annotated[Text, MinLen(1)] = Field(description="the scenario's name (the bundled session's folder)")
+    description: Text = Field("", description="what the scenario is for")
+    seed: Whole = Field(1, description="random seed: the same seed gives the same session")
+    duration_s: Positive = Field(8.0, description="video length")
+    fps: Positive = Field(30.0, description="frame rate")
+    start_unix: Number = Field(1763800000.0, description="true UNIX time of the first frame")
+    occlusions: tuple[Pair, ...] = Field((), description="[[start_s, end_s], ...] from the first frame: the UUV is "
+                                         "hidden")
+    site: Site = Field(default_factory=Site)
+    camera: CameraSpec = Field(default_factory=CameraSpec)
+    mount: MountSpec = Field(default_factory=MountSpec)
+    uav: UavSpec = Field(default_factory=UavSpec)
+    uuv: UuvSpec = Field(default_factory=UuvSpec)
+    link: LinkSpec = Field(default_factory=LinkSpec)
+    clock: ClockSpec = Field(default_factory=ClockSpec)
+    telemetry: TelemetrySpec = Field(default_factory=TelemetrySpec)
+    render: RenderSpec = Field(default_factory=RenderSpec)
 
-_TABLES = {"site": Site, "camera": CameraSpec, "mount": MountSpec, "uav": UavSpec, "uuv": UuvSpec,
-           "link": LinkSpec, "clock": ClockSpec, "telemetry": TelemetrySpec, "render": RenderSpec}
-_CHOICES = {"site.water_reference": ("takeoff", "amsl"),
-            "mount.attitude_source": ("gimbal_device", "mount_orientation", "fixed"),
-            "mount.gimbal_frame": ("earth", "vehicle"), "uav.standoff": ("auto", "given"),
-            "mount.kind": ("stabilised", "servo"), "mount.yaw_mode": ("earth", "vehicle"),
-            "telemetry.gps_raw_time": ("unix", "boot")}
+    @field_validator("occlusions")
+    @classmethod
+    def _start_before_end(cls, spans):
+        if not all(a < b for a, b in spans):
+            raise Invalid("", [list(w) for w in spans], "expected [start_s, end_s] pairs, start < end")
+        return spans
 
-
-def _checked(source: str, key: str, value, default):
-    """``value`` converted to the type of ``default``, or ConfigError."""
-    if default is None:  # an optional number
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        value = float(value) if ok else value
-        default = 1.0
-    elif isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        value = float(value) if ok else value
-    elif isinstance(default, str):
-        ok = isinstance(value, str) and (key not in _CHOICES or value in _CHOICES[key])
-    else:  # a tuple of numbers of fixed length
-        ok = (isinstance(value, list) and len(value) == len(default)
-              and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value))
-        value = tuple(float(x) for x in value) if ok else value
-    if not ok:
-        want = f"one of {', '.join(_CHOICES[key])}" if key in _CHOICES else f"a value like {default!r}"
-        raise ConfigError(source, key, value, f"expected {want}")
-    return value
-
-
-def _build(cls, source: str, prefix: str, table: dict, skip=()):
-    known = {f.name: f for f in fields(cls)}
-    if not isinstance(table, dict):
-        raise ConfigError(source, prefix or "(top level)", table, "expected a table")
-    kwargs = {}
-    for key, value in table.items():
-        if key in skip:
-            continue
-        full = f"{prefix}.{key}" if prefix else key
-        if key not in known:
-            raise ConfigError(source, full, value, f"unknown key (known: {', '.join(sorted(known))})")
-        default = cls.__dataclass_fields__[key].default
-        kwargs[key] = _checked(source, full, value, default)
-    return kwargs
-
-
-def _pairs(value) -> tuple | None:
-    """A TOML list of number pairs as a tuple of float pairs, or None if it is not one."""
-    if not isinstance(value, list) or not all(
-        isinstance(w, list) and len(w) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in w)
-        for w in value
-    ):
-        return None
-    return tuple((float(a), float(b)) for a, b in value)
-
-
-def _occlusions(source: str, value) -> tuple:
-    pairs = _pairs(value)
-    if pairs is None or not all(a < b for a, b in pairs):
-        raise ConfigError(source, "occlusions", value, "expected a list of [start_s, end_s] pairs, start < end")
-    return pairs
-
-
-def _depth_profile(source: str, value) -> tuple:
-    pairs = _pairs(value)
-    if not pairs or not all(t0 < t1 for (t0, _), (t1, _) in pairwise(pairs)):
-        raise ConfigError(source, "uuv.depth_profile", value,
-                          "expected a non-empty list of [t_s, depth_m] pairs with increasing t_s")
-    return pairs
+    @model_validator(mode="after")
+    def _simulable(self):
+        """Values of the right type but outside what the generator can simulate."""
+        tel, link, v = self.telemetry, self.link, self.uuv
+        if link.reboot_at_s is not None and not -tel.lead_s <= link.reboot_at_s <= self.duration_s:
+            raise Invalid("link.reboot_at_s", link.reboot_at_s,
+                          f"must lie in the telemetry's span [-{tel.lead_s:g}, {self.duration_s:g}] s")
+        if self.mount.kind == "servo" and self.mount.attitude_source == "fixed":
+            raise Invalid("mount.kind", "servo", 'a servo mount needs attitude_source "gimbal_device" or '
+                          '"mount_orientation", not "fixed"')
+        if v.depth_profile:
+            key, value, depths = "uuv.depth_profile", [list(k) for k in v.depth_profile], [d for _, d in v.depth_profile]
+        else:
+            key, value = "uuv.depth_m", v.depth_m
+            depths = (v.depth_m - abs(v.depth_swing_m), v.depth_m + abs(v.depth_swing_m))
+        if not (min(depths) > 0 and max(depths) + v.size_m[2] < self.site.floor_depth_m):
+            raise Invalid(key, value, "the UUV must stay between the surface and the seafloor (site.floor_depth_m)")
+        return self
 
 
 def scenario_from_dict(data: dict, source: str = "scenario.toml") -> Scenario:
     """Validate parsed TOML and build a :class:`Scenario`."""
-    if not isinstance(data.get("name"), str) or not data["name"]:
-        raise ConfigError(source, "name", data.get("name"), "expected a non-empty string")
-    top = _build(Scenario, source, "", data, skip=("name", "occlusions", *_TABLES))
-    skip = {"uuv": ("depth_profile",)}  # a list of pairs, checked below
-    tables = {k: cls(**_build(cls, source, k, data.get(k, {}), skip.get(k, ()))) for k, cls in _TABLES.items()}
-    if "depth_profile" in data.get("uuv", {}):
-        tables["uuv"] = replace(tables["uuv"], depth_profile=_depth_profile(source, data["uuv"]["depth_profile"]))
-    occl = _occlusions(source, data["occlusions"]) if "occlusions" in data else ()
-    sc = Scenario(name=data["name"], occlusions=occl, **top, **tables)
-    _check_ranges(sc, source)
-    v = sc.uuv
-    if v.depth_profile:
-        key, value, depths = "uuv.depth_profile", [list(k) for k in v.depth_profile], [d for _, d in v.depth_profile]
-    else:
-        key, value, depths = "uuv.depth_m", v.depth_m, (v.depth_m - abs(v.depth_swing_m), v.depth_m + abs(v.depth_swing_m))
-    if not (min(depths) > 0 and max(depths) + v.size_m[2] < sc.site.floor_depth_m):
-        raise ConfigError(source, key, value,
-                          "the UUV must stay between the surface and the seafloor (site.floor_depth_m)")
-    return sc
-
-
-def _check_ranges(sc: Scenario, source: str) -> None:
-    """Values of the right type but outside what the generator can simulate."""
-    tel, link, uav = sc.telemetry, sc.link, sc.uav
-    positive = {"duration_s": sc.duration_s, "fps": sc.fps, "telemetry.attitude_hz": tel.attitude_hz,
-                "telemetry.position_hz": tel.position_hz, "telemetry.gimbal_hz": tel.gimbal_hz,
-                "telemetry.depth_hz": tel.depth_hz, "link.reboot_down_s": link.reboot_down_s}
-    for key, value in positive.items():
-        if not value > 0:
-            raise ConfigError(source, key, value, "must be > 0")
-    not_negative = {"telemetry.system_time_hz": tel.system_time_hz, "telemetry.gps_raw_hz": tel.gps_raw_hz,
-                    "telemetry.timesync_hz": tel.timesync_hz, "link.delay_s": link.delay_s,
-                    "link.jitter_s": link.jitter_s, "link.depth_delay_s": link.depth_delay_s,
-                    "link.depth_jitter_s": link.depth_jitter_s, "uav.wobble_deg": uav.wobble_deg,
-                    "uav.wobble_hz": uav.wobble_hz, "uav.gnss_h_acc_m": uav.gnss_h_acc_m}
-    for key, value in not_negative.items():
-        if not value >= 0:
-            raise ConfigError(source, key, value, "must be >= 0")
-    if not 0 <= uav.gnss_fix_type <= 8:
-        raise ConfigError(source, "uav.gnss_fix_type", uav.gnss_fix_type, "expected a GPS_FIX_TYPE, 0 to 8")
-    if link.reboot_at_s is not None and not -tel.lead_s <= link.reboot_at_s <= sc.duration_s:
-        raise ConfigError(source, "link.reboot_at_s", link.reboot_at_s,
-                          f"must lie in the telemetry's span [-{tel.lead_s:g}, {sc.duration_s:g}] s")
-    if sc.mount.kind == "servo" and sc.mount.attitude_source == "fixed":
-        raise ConfigError(source, "mount.kind", "servo", 'a servo mount needs attitude_source "gimbal_device" '
-                          'or "mount_orientation", not "fixed"')
+    return validate(Scenario, data, source)
 
 
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario TOML file."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as e:
-        raise ConfigError(str(path), "(file)", str(path), f"cannot read: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(str(path), "(syntax)", str(path), str(e)) from None
-    return scenario_from_dict(data, str(path))
+    return scenario_from_dict(read_toml(path), str(path))
 
 
 def with_overrides(sc: Scenario, **tables) -> Scenario:
     """A copy of ``sc`` with some fields of its tables replaced, e.g. ``camera={"width": 1280}``."""
-    changes = {k: replace(getattr(sc, k), **v) for k, v in tables.items() if k in _TABLES}
-    top = {k: v for k, v in tables.items() if k not in _TABLES}
-    return replace(sc, **changes, **top)
+    changes = {k: dataclasses.replace(getattr(sc, k), **v) if isinstance(v, dict) else v for k, v in tables.items()}
+    return dataclasses.replace(sc, **changes)

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from localizer.calibration import calibration_from_dict
+from localizer.calibration import Calibration
 from localizer.telemetry import Telemetry
 
 T0_UNIX = 1_763_800_000.0  # UNIX time of the first telemetry sample
@@ -99,7 +99,7 @@ def _telemetry(
 @pytest.fixture
 def make_cal():
     """``make_cal(**tables) -> Calibration`` from the spec's example with tables replaced."""
-    return lambda **tables: calibration_from_dict(_cal_dict(**tables))
+    return lambda **tables: Calibration.from_dict(_cal_dict(**tables))
 
 
 @pytest.fixture

@@ -22,7 +22,7 @@ from calib_render import TrueCamera, charuco_texture, chessboard_texture, poses,
 
 from groundstation.calib_board import Board, Detector
 from groundstation.cli import main
-from localizer.calibration import calibration_from_dict
+from localizer.calibration import Calibration
 from localizer.camera import Camera, pixel_to_ray, ray_to_pixel
 
 TRUE = TrueCamera()
@@ -87,7 +87,7 @@ def _check_recovered(cam: dict, q: dict) -> None:
 
 
 def _loads_cleanly(cam: dict, source: str) -> None:
-    cal = calibration_from_dict({"camera": cam, **MOUNT_WATER}, source=source)
+    cal = Calibration.from_dict({"camera": cam, **MOUNT_WATER}, source=source)
     assert cal.warnings == ()
     assert cal.camera.distortion == tuple(cam["distortion"])
 

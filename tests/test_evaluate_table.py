@@ -37,12 +37,7 @@ def test_no_fix_at_all():
 
 
 def fixes_at(t, lat, lon, status):
-    n = len(t)
-    nan = np.full(n, np.nan)
-    return Fixes(t_unix=np.asarray(t, float), status=np.array(status, dtype=object), u=nan, v=nan,
-                 lat=np.asarray(lat, float), lon=np.asarray(lon, float), alt_amsl_m=nan, depth_m=nan,
-                 h_acc_m=nan, v_acc_m=nan, north_m=nan, east_m=nan, sigma_n_m=nan, sigma_e_m=nan,
-                 cov_ne_m2=nan, t_gnss=nan)
+    return Fixes.of(t, status, lat=lat, lon=lon)
 
 
 def test_errors_against_geodesic_offsets():
@@ -82,19 +77,19 @@ def test_cli_table_matches_independent_computation(tmp_path, capsys):
     assert set(rows) == {"refraction", "straight"}
     for method, row in rows.items():
         pos = read_positions_csv(tmp_path / "occlusion" / method / "positions.csv")
-        ok = pos["status"] == "ok"
-        lat_t = np.interp(pos["t"][ok], truth["t"], truth["lat"])
-        lon_t = np.interp(pos["t"][ok], truth["t"], truth["lon"])
-        _, _, d = GEOD.inv(pos["lon"][ok], pos["lat"][ok], lon_t, lat_t)  # positions.csv: 1e-9 deg ~ 0.1 mm
+        ok = pos.status == "ok"
+        lat_t = np.interp(pos.t_unix[ok], truth["t"], truth["lat"])
+        lon_t = np.interp(pos.t_unix[ok], truth["t"], truth["lon"])
+        _, _, d = GEOD.inv(pos.lon[ok], pos.lat[ok], lon_t, lat_t)  # positions.csv: 1e-9 deg ~ 0.1 mm
         assert int(row["fixes"]) == ok.sum() < n_frames == int(row["frames"])  # occluded frames have no fix
         assert float(row["coverage"]) == pytest.approx(ok.sum() / n_frames)
         assert float(row["mae_m"]) == pytest.approx(np.mean(d), abs=1e-4)
         assert float(row["rmse_m"]) == pytest.approx(np.sqrt(np.mean(d**2)), abs=1e-4)
         assert float(row["max_m"]) == pytest.approx(np.max(d), abs=1e-4)
         assert float(row["p95_m"]) == pytest.approx(np.sort(d)[int(np.ceil(0.95 * len(d))) - 1], abs=2e-3)
-        within = np.mean(d <= 2 * pos["h_acc_m"][ok])
+        within = np.mean(d <= 2 * pos.h_acc_m[ok])
         assert float(row["within_2sigma"]) == pytest.approx(within, abs=1.5 / len(d))
-    for png in ("track_top.png", "error_time.png"):
+    for png in ("top_view.png", "timeline.png", "status.png"):
         assert (tmp_path / "occlusion" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
@@ -103,10 +98,10 @@ def test_default_tracks_the_video(tmp_path):
     assert run_evaluate(str(session), "--out", str(tmp_path), "--quiet") == 0
     pos = read_positions_csv(tmp_path / "nadir_hover" / "refraction" / "positions.csv")
     track = read_table(session / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
-    ok = pos["status"] == "ok"
+    ok = pos.status == "ok"
     assert ok.mean() > 0.9
-    assert not np.allclose(pos["u"][ok], track["u"][ok], atol=1e-3)  # pixels came from the tracker
-    assert np.nanmax(np.abs(pos["u"][ok] - track["u"][ok])) < 5.0
+    assert not np.allclose(pos.u[ok], track["u"][ok], atol=1e-3)  # pixels came from the tracker
+    assert np.nanmax(np.abs(pos.u[ok] - track["u"][ok])) < 5.0
 
 
 def test_a_bad_session_is_reported_and_the_others_evaluated(tmp_path, capsys):

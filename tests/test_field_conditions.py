@@ -11,6 +11,7 @@ to within 1 cm, with an accuracy that covers the errors.
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 
@@ -101,8 +102,8 @@ def test_the_servo_mount_is_read_from_mnt1_type(sessions):
     _, err = _errors(session, _fixes(session))
     assert err.mean() <= 0.01
     forced = load_session(sessions["servo_mount"])
-    forced.calibration = type(forced.calibration)(**{**vars(forced.calibration), "mount": type(
-        forced.calibration.mount)(**{**vars(forced.calibration.mount), "gimbal_roll_pitch": "horizon"})})
+    cal = forced.calibration
+    forced.calibration = dataclasses.replace(cal, mount=dataclasses.replace(cal.mount, gimbal_roll_pitch="horizon"))
     _, err = _errors(forced, _fixes(forced))
     assert err.mean() > 1.0
 

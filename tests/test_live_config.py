@@ -41,8 +41,61 @@ def test_bad_config_keys_are_named(tmp_path, text, key):
 def test_required_and_range_checks():
     with pytest.raises(ConfigError, match="--calibration"):
         config.run_config(_parse([]))
-    with pytest.raises(ConfigError, match="5 Hz"):
+    with pytest.raises(ConfigError, match=r"^options: --gps-input-hz = 4.0: must be ≥ 5$"):
         config.run_config(_parse(["--calibration", "x.toml", "--gps-input-hz", "4"]))
+
+
+def test_a_bad_value_names_where_it_came_from(tmp_path):
+    """A key from the file is named as written there, with the file; a flag as the flag, with "options"."""
+    (tmp_path / "c.toml").write_text('calibration = "cal.toml"\ntelemetry_wait_ms = 5000\n')
+    with pytest.raises(ConfigError) as e:
+        config.run_config(_parse(["--config", str(tmp_path / "c.toml")]))
+    assert str(e.value) == f"{tmp_path / 'c.toml'}: telemetry_wait_ms = 5000: must be ≤ 2000"
+    with pytest.raises(ConfigError) as e:
+        config.run_config(_parse(["--config", str(tmp_path / "c.toml"), "--telemetry-wait-ms", "-1"]))
+    assert str(e.value) == "options: --telemetry-wait-ms = -1.0: must be ≥ 0"
+    with pytest.raises(ConfigError, match="recording needs --mavlink-backend pymavlink"):
+        config.run_config(_parse(["--calibration", "x", "--record", "r", "--mavlink-backend", "mavsdk"]))
+
+
+def test_help_shows_defaults_choices_and_the_required_calibration(capsys):
+    from groundstation.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["run", "--help"])
+    assert e.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+    assert "usage: skyfix run --calibration FILE" in text
+    assert "required (a flag, or a key in the --config file): --calibration FILE" in text
+    assert "--tracker {default,ncc,mil,kcf,csrt}" in text
+    assert "(default: udpin:0.0.0.0:14550)" in text and "(default: 10.0)" in text
+    for name, info in config.RunConfig.__pydantic_fields__.items():  # every option has its flag and help
+        assert config.flag(name) in text and info.description.split()[0] in text
+
+
+def test_version(capsys):
+    from importlib.metadata import version
+
+    from groundstation.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert capsys.readouterr().out.strip() == f"skyfix {version('skyfix')}"
+
+
+def test_unknown_calibration_keys_are_logged_by_run(tmp_path, caplog):
+    """As ``process`` prints them: an unknown key in a spec table is a warning naming it; in skyfix's tables an error."""
+    from groundstation.cli import main
+
+    bundled = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"
+    cal = tmp_path / "cal.toml"
+    cal.write_text(bundled.read_text().replace("[mount]\n", "[mount]\ncamera_ofset_m = [0.0, 0.0, 0.3]\n"))
+    argv = ["run", "--calibration", str(cal), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "0.2"]
+    with caplog.at_level("WARNING"):
+        assert main(argv) == 0
+    assert f"{cal}: mount.camera_ofset_m is not a key skyfix knows; ignored (a typo?)" in caplog.messages
+    cal.write_text(bundled.read_text() + "\n[timing]\nattitude_gap = 0.5\n")
+    assert main(argv) == 2
 
 
 @pytest.mark.parametrize("option", ["--mavlink", "--gps-input"])

@@ -3,13 +3,14 @@ calibration are accepted by skyfix run's parsers, the systemd unit runs skyfix r
 
 from __future__ import annotations
 
+import argparse
 import configparser
 
 import pytest
 import zenoh
 from live_helpers import ROOT
 
-from groundstation.config import load_calibration, read_config_file
+from groundstation.config import load_calibration, run_config
 from groundstation.zenoh_session import make_config
 
 DEPLOY = ROOT / "deploy"
@@ -23,9 +24,9 @@ def test_zenoh_configs_load(name):
 
 
 def test_field_config_and_calibration():
-    options = read_config_file(str(DEPLOY / "field.toml"))
-    assert options["calibration"] == str(DEPLOY / "calibration.toml")
-    cal = load_calibration(options["calibration"])
+    cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
+    assert cfg.calibration == str(DEPLOY / "calibration.toml") and cfg.depth_source == "blueos"
+    cal = load_calibration(cfg.calibration)
     assert cal.init_bbox is not None and cal.camera.width == 1920
 
 

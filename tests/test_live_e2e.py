@@ -2,8 +2,9 @@
 an independent Zenoh subscriber (its own process) and the replay's pymavlink UUV endpoint.
 
 Checked: fixes arrive on Zenoh (JSON, timestamped) and match truth, within 1.5× the offline error of
-the same session with the same tracker; GPS_INPUT arrives at ≥ 5 Hz with no gap over 245 ms, from
-skyfix's system/component, valid fixes matching truth (MAE ≤ 0.1 m) and explicit no-fix messages
+the same session with the same tracker; every fix and status message validates against its JSON Schema
+(groundstation/schemas/, with the jsonschema package); GPS_INPUT arrives at ≥ 5 Hz with no gap over 245 ms,
+from skyfix's system/component, valid fixes matching truth (MAE ≤ 0.1 m) and explicit no-fix messages
 otherwise; the run's recording loads as a session. Also run on ``clock_offset``: a station clock 2.5 s
 behind GNSS time and a UUV clock 291 s ahead, which the status reports while the fixes stay right."""
 
@@ -17,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from jsonschema import Draft202012Validator
 from live_helpers import (
     ROOT,
     SUBSCRIBER,
@@ -30,6 +32,7 @@ from live_helpers import (
     wait_for,
 )
 
+from groundstation.contracts import path_of
 from groundstation.process import process_session
 from groundstation.session import load_session
 
@@ -110,6 +113,14 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
     if SESSION.name == "clock_offset":  # the status names the clocks that disagree
         assert abs(clocks["station_minus_gnss_s"] + 2.5) < 0.01 and clocks["depth_aligned_by"] == "arrival"
         assert 293.0 < clocks["uuv_clock_minus_station_s"] < 294.0
+
+    # Every message as its schema says: the contract, checked by an independent validator
+    for name, messages in (("fix", fix), ("status", status)):
+        schema = Draft202012Validator(json.loads(path_of(name).read_text()))
+        bad = [(m, e.message) for m in messages for e in schema.iter_errors(m)]
+        assert not bad, f"{len(bad)} {name} messages break {path_of(name).name}, first: {bad[0]}"
+    assert all(f["alt_ellipsoid_m"] is not None and f["t_gnss"] is not None and f["sigma_n_m"] > 0 for f in ok)
+    assert {"video", "gps_input", "latency", "record"} <= set(status[-1])
 
     # GPS_INPUT at the UUV's endpoint while the service runs
     gps = read_jsonl(tmp_path / "uuv.jsonl")

@@ -1,11 +1,11 @@
-"""calibration_from_dict: good input parses; each bad value: a one-line ConfigError naming it."""
+"""Calibration.from_dict: good input parses; each bad value: a one-line ConfigError naming it."""
 
 import copy
 import math
 
 import pytest
 
-from localizer.calibration import ConfigError, Sigmas, Timing, calibration_from_dict
+from localizer.calibration import Calibration, ConfigError, Sigmas, Timing
 
 
 def test_spec_example_parses(cal_dict):
@@ -18,7 +18,7 @@ def test_spec_example_parses(cal_dict):
         water={"takeoff_height_above_surface_m": 2.10, "refractive_index": 1.34},
         tracker={"init_bbox": [912, 508, 96, 64]},
     )
-    cal = calibration_from_dict(data)
+    cal = Calibration.from_dict(data)
     assert cal.camera.width == 1920 and cal.camera.fx == 1664.0
     assert cal.camera.distortion == (-0.12, 0.08, 0.0004, -0.0002, -0.01)
     assert cal.mount.camera_offset_m == (0.1, 0.0, 0.25)
@@ -28,7 +28,7 @@ def test_spec_example_parses(cal_dict):
 
 
 def test_optional_tables(cal_dict):
-    cal = calibration_from_dict(
+    cal = Calibration.from_dict(
         cal_dict(
             water={"surface_amsl_m": 0.35},
             uncertainty={"pixel_px": 3.5},
@@ -100,7 +100,7 @@ BAD = [
 @pytest.mark.parametrize("path, value, named", BAD, ids=[f"{p}={v!r}" for p, v, _ in BAD])
 def test_bad_values_raise_config_error_naming_them(cal_dict, path, value, named):
     with pytest.raises(ConfigError) as exc:
-        calibration_from_dict(_with(cal_dict(), path, value), source="flight7/session.toml")
+        Calibration.from_dict(_with(cal_dict(), path, value), source="flight7/session.toml")
     msg = str(exc.value)
     assert "\n" not in msg
     assert msg.startswith("flight7/session.toml: ")
@@ -110,7 +110,7 @@ def test_bad_values_raise_config_error_naming_them(cal_dict, path, value, named)
 
 def test_unknown_key_message_lists_known_keys(cal_dict):
     with pytest.raises(ConfigError) as exc:
-        calibration_from_dict(cal_dict(uncertainty={"pixel_sigma": 2.0}))
+        Calibration.from_dict(cal_dict(uncertainty={"pixel_sigma": 2.0}))
     assert "pixel_px" in str(exc.value)
     assert exc.value.key == "uncertainty.pixel_sigma" and exc.value.value == 2.0
 
@@ -118,8 +118,8 @@ def test_unknown_key_message_lists_known_keys(cal_dict):
 def test_unknown_keys_in_spec_tables_are_warnings_not_silence(cal_dict):
     """Other tools may add keys (the spec allows it), but a typo must not pass unnoticed."""
     d = copy.deepcopy(cal_dict())
-    assert not calibration_from_dict(d).warnings
+    assert not Calibration.from_dict(d).warnings
     d["mount"]["camera_ofset_m"] = [9.0, 0.0, 0.2]
-    cal = calibration_from_dict(d, source="s.toml")
-    assert cal.mount.camera_offset_m == calibration_from_dict(cal_dict()).mount.camera_offset_m
+    cal = Calibration.from_dict(d, source="s.toml")
+    assert cal.mount.camera_offset_m == Calibration.from_dict(cal_dict()).mount.camera_offset_m
     assert len(cal.warnings) == 1 and "mount.camera_ofset_m" in cal.warnings[0]

@@ -136,3 +136,16 @@ def test_pixel_statuses(make_cal, make_telemetry):
     fixes = locate(cal, pose, [np.nan, -3.0, 1919.4, 500.0], [100.0, 100.0, 1079.4, 2000.0])
     assert list(fixes.status) == ["no_track", "bad_pixel", "ok", "bad_pixel"]
     assert np.isfinite(fixes.lat[2]) and np.all(np.isnan(fixes.lat[[0, 1, 3]]))
+
+
+def test_heights_above_the_ellipsoid_follow_gps_raw_int(make_cal, make_telemetry):
+    """alt_ellipsoid_m = alt_amsl_m + the geoid separation GPS_RAW_INT gives; NaN (unknown) without it."""
+    cal = make_cal()
+    tel = make_telemetry(depth_m=2.0, alt_amsl_m=412.0)
+    without = fix_at_principal_point(cal, tel)
+    assert without.status == "ok" and math.isnan(without.alt_ellipsoid_m)
+    for i in range(40):  # GPS_RAW_INT at 10 Hz over the telemetry's span: alt_ellipsoid 47.25 m above alt
+        tel.add_gps_raw(0.8, 47.25, T0_UNIX + i * 0.1)
+    f = fix_at_principal_point(cal, tel)
+    assert f.alt_amsl_m == pytest.approx(412.0 - 30.0 - 2.0)  # the UUV: the UAV's alt − height − depth
+    assert f.alt_ellipsoid_m == pytest.approx(f.alt_amsl_m + 47.25)

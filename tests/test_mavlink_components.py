@@ -15,7 +15,7 @@ import pytest
 
 from groundstation.mavlink_io import ingest, mavutil
 from localizer.attitude import euler_to_quat
-from localizer.calibration import calibration_from_dict
+from localizer.calibration import Calibration
 from localizer.pose import camera_pose
 from localizer.telemetry import Telemetry
 
@@ -66,7 +66,7 @@ def _feed(tel: Telemetry, rng, gimbal_component: int, gimbal_boot0_ms: int, extr
 
 
 def _cal():
-    return calibration_from_dict({
+    return Calibration.from_dict({
         "camera": {"width": 640, "height": 360, "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 179.5},
         "mount": {"attitude_source": "gimbal_device"},
         "water": {"takeoff_height_above_surface_m": 2.0},

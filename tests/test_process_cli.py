@@ -18,6 +18,7 @@ import pytest
 
 from groundstation.cli import main
 from groundstation.positions import read_positions_csv
+from groundstation.session import SessionError
 from localizer.geodesy import horizontal_error_m
 
 BUNDLED = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled"
@@ -58,14 +59,14 @@ def test_positions_match_truth_and_spec_columns(session, tmp_path, capsys):
     assert header[:6] == ["t", "lat", "lon", "depth_m", "h_acc_m", "status"]
     pos = read_positions_csv(out / "positions.csv")
     track = np.loadtxt(session / "track.csv", delimiter=",", skiprows=1, ndmin=2)
-    assert len(pos["t"]) == len(track)
-    ok = pos["status"] == "ok"
+    assert len(pos.t_unix) == len(track)
+    ok = pos.status == "ok"
     assert ok.mean() > 0.9
-    assert np.all(np.isnan(pos["lat"][~ok]))
+    assert np.all(np.isnan(pos.lat[~ok]))
     truth = np.genfromtxt(session / "truth.csv", delimiter=",", names=True)
-    lat = np.interp(pos["t"][ok], truth["t"], truth["lat"])
-    lon = np.interp(pos["t"][ok], truth["t"], truth["lon"])
-    err = horizontal_error_m(pos["lat"][ok], pos["lon"][ok], lat, lon)
+    lat = np.interp(pos.t_unix[ok], truth["t"], truth["lat"])
+    lon = np.interp(pos.t_unix[ok], truth["t"], truth["lon"])
+    err = horizontal_error_m(pos.lat[ok], pos.lon[ok], lat, lon)
     assert err.mean() < 0.005, f"geometry-only MAE {err.mean():.4f} m"
 
 
@@ -75,8 +76,8 @@ def test_straight_ray_is_worse_off_nadir(session, tmp_path, capsys):
         assert _run(capsys, "process", str(session), "--out", str(tmp_path / name), "--use-track", *flag)[0] == 0
     bent = read_positions_csv(tmp_path / "bent" / "positions.csv")
     straight = read_positions_csv(tmp_path / "straight" / "positions.csv")
-    ok = (bent["status"] == "ok") & (straight["status"] == "ok")
-    shift = horizontal_error_m(bent["lat"][ok], bent["lon"][ok], straight["lat"][ok], straight["lon"][ok])
+    ok = (bent.status == "ok") & (straight.status == "ok")
+    shift = horizontal_error_m(bent.lat[ok], bent.lon[ok], straight.lat[ok], straight.lon[ok])
     assert np.median(shift) > 0.15
 
 
@@ -168,3 +169,24 @@ def test_truncated_last_depth_line_is_a_warning(session, tmp_path, capsys):
     code, _, err = _run(capsys, "process", str(session), "--out", str(tmp_path / "o"), "--use-track")
     assert code == 0
     assert "truncated last line" in err
+
+
+def test_positions_csv_round_trip_and_other_tools_files(session, tmp_path, capsys):
+    """skyfix's extra columns come back as they went out; a file with only the spec's six columns reads too."""
+    out = tmp_path / "out"
+    assert _run(capsys, "process", str(session), "--out", str(out), "--use-track")[0] == 0
+    header = (out / "positions.csv").read_text().splitlines()[0].split(",")
+    assert header[6:] == ["alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m", "t_gnss", "alt_ellipsoid_m",
+                          "sigma_n_m", "sigma_e_m", "cov_ne_m2"]
+    pos = read_positions_csv(out / "positions.csv")
+    ok = pos.status == "ok"
+    # the bundled sessions carry GPS_RAW_INT with alt_ellipsoid: 40 m of geoid separation (scenario default)
+    assert np.allclose(pos.alt_ellipsoid_m[ok] - pos.alt_amsl_m[ok], 40.0, atol=2e-4)
+    assert np.allclose(np.hypot(pos.sigma_n_m[ok], pos.sigma_e_m[ok]), pos.h_acc_m[ok], atol=2e-4)
+    spec_only = tmp_path / "spec_only.csv"
+    spec_only.write_text("t,lat,lon,depth_m,h_acc_m,status\n1.5,63.4,10.4,1.0,0.2,ok\n2.5,,,1.0,,lost\n")
+    other = read_positions_csv(spec_only)
+    assert list(other.status) == ["ok", "lost"] and other.lat[0] == 63.4 and np.isnan(other.alt_ellipsoid_m).all()
+    spec_only.write_text("t,lat,lon,depth_m,h_acc_m,status\n1.5,63.4,north,1.0,0.2,ok\n")
+    with pytest.raises(SessionError, match=r"spec_only.csv:2: lon = 'north': not a number"):
+        read_positions_csv(spec_only)

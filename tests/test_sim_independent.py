@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from localizer import attitude as latt
-from localizer.calibration import calibration_from_dict
+from localizer.calibration import Calibration
 from localizer.geodesy import ned_to_geodetic as l_ned_to_geodetic
 from localizer.ray import pixel_to_offset
 from sim_fixtures import geometry as g
@@ -37,7 +37,7 @@ def test_the_simulator_does_not_import_the_localizers_geometry():
 
 def calibration_camera(sc):
     """The camera as the localizer reads it from the session.toml the simulator writes."""
-    return calibration_from_dict(tomllib.loads(_session_toml(sc, camera_of(sc), None, None))).camera
+    return Calibration.from_dict(tomllib.loads(_session_toml(sc, camera_of(sc), None, None))).camera
 
 
 def random_poses(rng, n):

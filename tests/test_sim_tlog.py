@@ -51,7 +51,8 @@ def test_every_record_parses_and_times_are_receive_times(tlog):
     assert np.allclose([m._timestamp for m in msgs], t_rec / 1e6, atol=1e-6, rtol=0)
     clock = Clock.of(sc)
     timed = [(m._timestamp, m.time_boot_ms) for m in msgs if hasattr(m, "time_boot_ms")]
-    delay = np.array([t - (clock.boot_epoch_us + ms * 1000) / 1e6 for t, ms in timed])
+    station = sc.clock.station_offset_s  # record times are on the station's clock
+    delay = np.array([t - (clock.boot_epoch_us + ms * 1000) / 1e6 - station for t, ms in timed])
     assert delay.min() >= sc.link.delay_s and np.median(delay) < sc.link.delay_s + 5 * sc.link.jitter_s
     assert np.std(delay) > 0.2 * sc.link.jitter_s  # there is jitter
 

@@ -1,28 +1,14 @@
 """Zenoh outputs: each fix as JSON, a 1 Hz health/status JSON, and a liveliness token.
 
-Fix schema (``skyfix.fix/1``), one JSON object per processed frame on ``--fix-key``
-(encoding ``application/json``, Zenoh timestamp set by the publisher)::
-
-    {"schema": "skyfix.fix/1",
-     "t": 1763800000.033,      # the frame's exposure time, UNIX seconds
-     "frame": 1,               # running frame number of this run
-     "status": "ok",           # or why there is no fix: lost, stale_attitude, no_depth, ...
-     "lat": 59.9, "lon": 10.7, # WGS84 degrees of the UUV (null unless status is ok)
-     "alt_amsl_m": -1.6,       # the UUV's altitude above mean sea level, metres
-     "depth_m": 1.2,           # depth used, metres below the surface (positive down)
-     "h_acc_m": 0.21,          # horizontal 1-sigma accuracy (DRMS), metres
-     "v_acc_m": 0.5,           # vertical 1-sigma accuracy, metres
-     "u": 960.2, "v": 540.8,   # the UUV's pixel in the frame (distorted, OpenCV convention)
-     "north_m": 1.3, "east_m": -0.4,  # the UUV relative to the UAV's reported position, metres
-     "confidence": null}       # the tracker's, 0..1, when it has one
-
-Every number that is not available is ``null`` (JSON has no NaN).
+The messages are contracts (:mod:`groundstation.messages`, JSON Schema in
+``groundstation/schemas/``): the fix message (``skyfix.fix/1``) on ``--fix-key``, one
+per processed frame, and the status (``skyfix.status/1``) on ``--status-key``; both
+with encoding ``application/json`` and a Zenoh timestamp set by the publisher.
 """
 
 from __future__ import annotations
 
 import asyncio
-import math
 import time
 from collections.abc import Callable
 
@@ -30,24 +16,13 @@ import zenoh
 
 from localizer.fix import Fix
 
+from ..messages import STATUS_SCHEMA, FixMessage
 from ..zenoh_session import put_json
-
-SCHEMA = "skyfix.fix/1"
-_NUMBERS = ("lat", "lon", "alt_amsl_m", "depth_m", "h_acc_m", "v_acc_m", "u", "v", "north_m", "east_m", "confidence")
-
-
-def _num(x: float):
-    return float(x) if math.isfinite(x) else None
 
 
 def fix_to_json(fix: Fix) -> dict:
-    """The fix as a JSON-ready dict (schema above)."""
-    out = {"schema": SCHEMA, "t": fix.t_unix, "frame": fix.frame, "status": fix.status}
-    for name in _NUMBERS:
-        out[name] = _num(getattr(fix, name))
-    if not fix.ok:
-        out["lat"] = out["lon"] = None
-    return out
+    """The fix message of a fix (see :class:`~groundstation.messages.FixMessage`)."""
+    return FixMessage.of(fix).to_json()
 
 
 class ZenohFixSink:
@@ -84,7 +59,7 @@ class ZenohStatus:
         try:
             while True:
                 now = time.time()
-                put_json(pub, {"t": now, **self.status(now)}, self.session)
+                put_json(pub, {"schema": STATUS_SCHEMA, "t": now, **self.status(now)}, self.session)
                 await asyncio.sleep(self.period_s)
         finally:
             pub.undeclare()

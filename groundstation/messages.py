@@ -1,0 +1,226 @@
+"""The two Zenoh messages skyfix publishes, as contracts: the fix and the status.
+
+Each is a pydantic model; ``groundstation/schemas/fix.schema.json`` and
+``status.schema.json`` are generated from them (``python -m groundstation.contracts``)
+and a test fails when the checked-in files are stale. Both carry ``schema``, the
+message's name and major version: it changes only when a key is removed or changes
+meaning; new keys may appear within a version, so consumers ignore keys they do not
+know. JSON has no NaN: every number that is not available is ``null``.
+
+The fix (one per processed frame, on ``--fix-key``) is built here from the
+:class:`~localizer.fix.Fix`. The status (once a second, on ``--status-key``) is
+assembled by the service from its workers' ``status()`` dicts; the model describes
+it and the end-to-end test validates every status the service publishes against it,
+so a key added to a worker's status needs its line here.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from annotated_types import Ge, Le
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from localizer.fix import Fix
+from localizer.status import STATUSES, Status
+
+FIX_SCHEMA = "skyfix.fix/1"
+STATUS_SCHEMA = "skyfix.status/1"
+
+Metres = float | None
+Seconds = float | None
+NonNegative = Annotated[float, Ge(0)] | None
+
+
+def _status_doc() -> str:
+    return "ok, or why there is no position: " + "; ".join(f"{k}: {v}" for k, v in STATUSES.items())
+
+
+class Message(BaseModel):
+    """A published message: closed (a key not described here is a contract change), keys by alias."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True, allow_inf_nan=False)
+
+
+class FixMessage(Message):
+    """One processed video frame: the UUV's position, or why there is none."""
+
+    model_config = ConfigDict(json_schema_extra={
+        # a valid fix has a position and its accuracy; any other status has no position
+        "if": {"properties": {"status": {"const": "ok"}}},
+        "then": {"properties": {k: {"type": "number"} for k in ("lat", "lon", "h_acc_m", "sigma_n_m", "sigma_e_m")}},
+        "else": {"properties": {"lat": {"type": "null"}, "lon": {"type": "null"}}},
+    })
+
+    schema_: Literal[FIX_SCHEMA] = Field(alias="schema", description="message name and major version")
+    t: float = Field(description="the frame's exposure time on the station clock, UNIX seconds")
+    t_gnss: Seconds = Field(description="the exposure as GNSS (UNIX) time: t minus the station clock's measured "
+                            "offset from the UAV's GNSS clock (SYSTEM_TIME); null until it is measured")
+    frame: int = Field(description="running frame number of this run")
+    status: Status = Field(description=_status_doc())
+    lat: Annotated[float, Ge(-90), Le(90)] | None = Field(description="WGS84 latitude of the UUV, degrees (null "
+                                                          "unless status is ok)")
+    lon: Annotated[float, Ge(-180), Le(180)] | None = Field(description="WGS84 longitude of the UUV, degrees (null "
+                                                            "unless status is ok)")
+    alt_amsl_m: Metres = Field(description="the UUV's height above mean sea level, metres (the UAV autopilot's "
+                               "GLOBAL_POSITION_INT alt minus the UAV's height above the water and the depth)")
+    alt_ellipsoid_m: Metres = Field(description="the UUV's height above the WGS84 ellipsoid, metres: alt_amsl_m plus "
+                                    "the geoid separation GPS_RAW_INT gives (alt_ellipsoid - alt); null when the "
+                                    "autopilot sends no alt_ellipsoid (then only alt_amsl_m is known)")
+    depth_m: Metres = Field(description="the UUV depth used, metres below the surface (positive down)")
+    h_acc_m: NonNegative = Field(description="horizontal 1-sigma accuracy, metres: DRMS, sqrt(sigma_n² + sigma_e²)")
+    v_acc_m: NonNegative = Field(description="vertical 1-sigma accuracy, metres")
+    sigma_n_m: NonNegative = Field(description="1-sigma of the north coordinate, metres")
+    sigma_e_m: NonNegative = Field(description="1-sigma of the east coordinate, metres")
+    cov_ne_m2: float | None = Field(description="north-east covariance, m² (the off-diagonal of the 2×2 "
+                                    "horizontal covariance [[sigma_n², cov_ne], [cov_ne, sigma_e²]])")
+    u: float | None = Field(description="the UUV's pixel, right (distorted, OpenCV: the top-left pixel's centre "
+                            "is 0)")
+    v: float | None = Field(description="the UUV's pixel, down")
+    north_m: Metres = Field(description="the UUV north of the UAV's reported position, metres")
+    east_m: Metres = Field(description="the UUV east of the UAV's reported position, metres")
+    confidence: Annotated[float, Ge(0), Le(1)] | None = Field(description="the tracker's confidence, 0..1, when it "
+                                                              "has one")
+
+    @model_validator(mode="after")
+    def _position_iff_ok(self):
+        if (self.status == "ok") != (self.lat is not None and self.lon is not None):
+            raise ValueError(f"status {self.status!r} with lat {self.lat}, lon {self.lon}")
+        return self
+
+    @classmethod
+    def of(cls, fix: Fix) -> FixMessage:
+        """The message of a fix (NaN → null; no position unless the status is ok)."""
+        def num(name):
+            x = float(getattr(fix, name))
+            return x if math.isfinite(x) else None
+
+        values = {name: num(name) for name in cls.model_fields if name not in ("schema_", "t", "frame", "status")}
+        if not fix.ok:
+            values["lat"] = values["lon"] = None
+        return cls(schema_=FIX_SCHEMA, t=fix.t_unix, frame=fix.frame, status=fix.status, **values)
+
+    def to_json(self) -> dict:
+        return self.model_dump(mode="json", by_alias=True)
+
+
+# --- the status -----------------------------------------------------------------------------------
+
+Age = NonNegative
+
+
+class Section(BaseModel):
+    """A part of the status: closed, so that a key added without its description fails the e2e test."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Clocks(Section):
+    station_minus_gnss_s: float | None = Field(description="the station clock minus GNSS time (SYSTEM_TIME)")
+    uav_link_latency_ms: float = Field(description="the UAV link's one-way delay in use")
+    uav_link_latency_source: str = Field(description="configured, timesync, or 'assumed 0 (no TIMESYNC reply)'")
+    uav_link_latency_measured_ms: float | None = Field(description="what TIMESYNC measured, used or not")
+    uav_reboots: int = Field(description="autopilot reboots seen (new clock segments)")
+    uuv_clock_minus_station_s: float | None = Field(description="the UUV's clock minus the station's")
+    depth_aligned_by: Literal["uuv_clock", "arrival"] | None = Field(
+        description="uuv_clock: depth stamps used as they are; arrival: arrival minus depth_latency_s")
+
+
+class UavStatus(Section):
+    """The UAV's MAVLink link."""
+
+    url: str
+    backend: Literal["mavsdk"] | None = Field(None, description="present with --mavlink-backend mavsdk")
+    sysid: int | None = Field(description="the UAV's MAVLink system id, once heard")
+    clocks: Clocks
+    rate_requests: dict[str, str] | None = Field(None, description="per message: what skyfix asked for and the "
+                                                 "autopilot's answer (pymavlink backend)")
+    received: int = Field(description="messages received")
+    bad_data: int = Field(description="undecodable frames")
+    other_systems: int = Field(description="messages from other systems, ignored")
+    refused: int = Field(description="samples refused (out of range, out of order)")
+    age_s: dict[str, Age] = Field(description="per message type: seconds since the newest")
+    rates_hz: dict[str, NonNegative] = Field(description="per message type: measured rate")
+
+
+class DepthStatus(Section):
+    """The UUV's depth over Zenoh."""
+
+    key: str
+    shape: Literal["skyfix", "blueos"]
+    received: int
+    bad: int = Field(description="payloads that could not be read")
+    refused: int = Field(description="samples refused (out of range or order)")
+    age_s: Age = Field(description="seconds since the newest sample")
+    depth_m: float | None = Field(description="the newest depth")
+
+
+class PipelineStatus(Section):
+    """Frames through tracker and geometry."""
+
+    processed: int
+    dropped: int = Field(description="frames dropped because the tracker fell behind")
+    queued: int
+    waiting_for_telemetry: int
+    waited_s: NonNegative = Field(description="total time frames waited for telemetry")
+    last_status: Status | None
+    statuses: dict[Status, int] = Field(description="frames per status word")
+
+
+class VideoStatus(Section):
+    """The UAV's video stream."""
+
+    url: str
+    frames: int
+    connects: int
+    age_s: Age
+    decode_errors: int
+    buffered: int = Field(description="frames whose exposure time could not be told")
+    error: str | None = Field(description="the last problem, null once frames flow again")
+
+
+class GpsInputStatus(Section):
+    """GPS_INPUT to the UUV's autopilot."""
+
+    url: str
+    sent: int
+    sent_valid: int = Field(description="messages with fix_type 3")
+    autopilot_age_s: Age = Field(description="seconds since the autopilot was last heard on that link")
+
+
+class LatencyStatus(Section):
+    """Frame arrival → GPS_INPUT sent, over the last 1000 new fixes, ms."""
+
+    n: int
+    p50_ms: NonNegative
+    p99_ms: NonNegative
+    max_ms: NonNegative
+
+
+class RecordStatus(Section):
+    """``--record``: what was written."""
+
+    dir: str
+    mavlink_frames: int
+    depth_samples: int
+    fixes: int
+    video_frames: int | None = None
+    video_dropped: int | None = None
+
+
+class StatusMessage(Message):
+    """The service's health, once a second; sections for optional parts only when they run."""
+
+    schema_: Literal[STATUS_SCHEMA] = Field(alias="schema", description="message name and major version")
+    t: float = Field(description="when the status was taken, station clock, UNIX seconds")
+    uav: UavStatus
+    depth: DepthStatus
+    pipeline: PipelineStatus
+    fixes_published: int
+    problems: dict[str, str] = Field(description="what is wrong with each input now, one line per input (uav, "
+                                     "depth, video, zenoh); empty when all is well")
+    video: VideoStatus | None = Field(None, description="with --video")
+    gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
+    latency: LatencyStatus | None = Field(None, description="with --gps-input")
+    record: RecordStatus | None = Field(None, description="with --record")
