@@ -40,9 +40,17 @@ def test_queue_drops_oldest_but_keeps_the_init_frame(tmp_path):
     for i in range(6):
         p.submit(_frame(i))
     assert [f.index for f in p._queue] == [0, 4, 5] and p.dropped == 3
-    p._tracker = object()  # once initialised, the oldest waiting frame goes first
+    p._started = True  # once the init frame was taken, the oldest waiting frame goes first
     p.submit(_frame(6))
     assert [f.index for f in p._queue] == [4, 5, 6] and p.dropped == 4
+
+
+def test_without_init_bbox_no_frame_is_kept_for_it(tmp_path):
+    (tmp_path / "cal.toml").write_text(CAL.replace("init_bbox = [10, 10, 8, 6]\n", ""))
+    p = Pipeline(load_calibration(str(tmp_path / "cal.toml")), Telemetry(), "default", [], queue_len=3)
+    for i in range(6):
+        p.submit(_frame(i))
+    assert [f.index for f in p._queue] == [3, 4, 5] and p.dropped == 3
 
 
 def test_fix_json_has_no_nan_and_no_position_without_fix():
