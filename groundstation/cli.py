@@ -16,6 +16,7 @@ SUBCOMMANDS = (
     "groundstation.evaluate",
     "sim_fixtures.cli",
     "groundstation.service",
+    "groundstation.console",
     "groundstation.replay",
     "groundstation.calibrate",
 )

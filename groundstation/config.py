@@ -17,6 +17,8 @@ from pathlib import Path
 from localizer.calibration import Calibration, ConfigError, calibration_from_dict
 from localizer.tracking import TRACKERS
 
+from .sources.uuv_position import parse_hint
+
 
 @dataclass
 class RunConfig:
@@ -40,6 +42,11 @@ class RunConfig:
     gps_input_hz: float = 10.0
     fix_max_age_ms: float = 500.0  # an ok fix older than this goes out as "no fix"
     tracker: str = "default"
+    uuv_position_key: str | None = None  # the UUV's own GLOBAL_POSITION_INT (BlueOS JSON): where to look for it
+    uuv_hint: str | None = None  # "LAT,LON": where to look for the UUV until (or without) its own estimate
+    uuv_prior_sigma_m: float = 3.0  # 1-sigma of those positions
+    select_history_s: float = 1.0  # tracked frames held so a selection can name a frame the operator saw
+    control_prefix: str = "skyfix/cmd"  # Zenoh queryables <prefix>/select, /release, /acquire, /status
     record: str | None = None
     duration_s: float | None = None  # stop after this many seconds (tests, benchmarks)
     stats: str | None = None  # write final counters and latencies to this JSON file at exit
@@ -68,6 +75,12 @@ _HELP = {
     "gps_input_hz": "minimum GPS_INPUT rate (Hz); each new fix is also sent at once",
     "fix_max_age_ms": "a fix older than this is sent to the autopilot as 'no fix'",
     "tracker": "tracker backend name",
+    "uuv_position_key": "Zenoh key of the UUV's own GLOBAL_POSITION_INT as BlueOS publishes it "
+                        "(mavlink/1/1/GLOBAL_POSITION_INT): acquire the UUV near it without a selection",
+    "uuv_hint": "LAT,LON (degrees) where to look for the UUV until its own estimate arrives",
+    "uuv_prior_sigma_m": "1-sigma (m) of the UUV's own estimate or hint (the search covers 3 sigma)",
+    "select_history_s": "seconds of tracked frames held so a selection can refer to a frame the operator saw",
+    "control_prefix": "Zenoh key prefix of the operator commands (<prefix>/select, release, acquire, status)",
     "record": "record the run as a session directory (format v1)",
     "duration_s": "stop after this many seconds",
     "stats": "write final counters and latency percentiles to this JSON file",
@@ -147,6 +160,15 @@ def run_config(args: argparse.Namespace) -> RunConfig:
         raise ConfigError("options", "--gps-input-hz", cfg.gps_input_hz, "ArduPilot needs ≥ 5 Hz")
     if not 0.0 <= cfg.telemetry_wait_ms <= 2000.0:
         raise ConfigError("options", "--telemetry-wait-ms", cfg.telemetry_wait_ms, "expected 0 … 2000")
+    if cfg.uuv_hint is not None:
+        try:
+            parse_hint(cfg.uuv_hint)
+        except ValueError as e:
+            raise ConfigError("options", "--uuv-hint", cfg.uuv_hint, str(e).split(": ", 1)[1]) from None
+    if not 0.0 < cfg.uuv_prior_sigma_m <= 1000.0:
+        raise ConfigError("options", "--uuv-prior-sigma-m", cfg.uuv_prior_sigma_m, "expected > 0 and ≤ 1000")
+    if not 0.0 <= cfg.select_history_s <= 10.0:
+        raise ConfigError("options", "--select-history-s", cfg.select_history_s, "expected 0 … 10")
     return cfg
 
 

@@ -26,7 +26,8 @@ def test_field_config_and_calibration():
     options = read_config_file(str(DEPLOY / "field.toml"))
     assert options["calibration"] == str(DEPLOY / "calibration.toml")
     cal = load_calibration(options["calibration"])
-    assert cal.init_bbox is not None and cal.camera.width == 1920
+    assert cal.init_bbox is None and cal.camera.width == 1920  # live, the target is selected or acquired
+    assert options["uuv_position_key"] == "mavlink/1/1/GLOBAL_POSITION_INT"
 
 
 def test_systemd_unit_runs_the_service():
