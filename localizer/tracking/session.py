@@ -104,6 +104,9 @@ class TrackingSession:
         """
         if (box is None) == (point is None):
             raise SelectionError("give either a box [x, y, w, h] or a point [u, v]")
+        given = box if box is not None else point
+        if not all(math.isfinite(c) for c in given):
+            raise SelectionError(f"{'box' if box is not None else 'point'} {list(given)}: expected finite pixels")
         one = take(pose, [i])
         if point is not None:
             box = self._outline_click(frame_bgr, one, point)
