@@ -102,7 +102,7 @@ class Pipeline:
         self._tracked_ready = asyncio.Event()
         self._telemetry = asyncio.Event()
         self._held: deque[Tracked] = deque()  # recent tracked frames, for selections
-        self._started = False  # the first frame was taken (init_bbox belongs to it)
+        self._started = False  # the first frame was taken, or a command came first: init_bbox no longer applies
         self._angle_series = [tel.attitude] + (
             [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
             else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
@@ -182,6 +182,7 @@ class Pipeline:
                 "caught_up": len(later), "target": self.target}
 
     async def _release(self) -> dict:
+        self._started = True  # the operator's word wins over init_bbox
         self.session.release()
         for item in self._tracked:  # tracked before the release, not yet located: no fix from them
             item.result = TrackResult("released")
@@ -190,6 +191,7 @@ class Pipeline:
         return {"target": self.target}
 
     async def _acquire(self) -> dict:
+        self._started = True
         self.session.acquire()
         self.target = self.session.status()
         log.info("awaiting a target")
