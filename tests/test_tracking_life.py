@@ -109,6 +109,8 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
         ts.select(clip.frames[1], clip.pose, 1, point=(40.0, 320.0))  # open water, far from the UUV
     with pytest.raises(SelectionError, match="either a box"):
         ts.select(clip.frames[1], clip.pose, 1)
+    with pytest.raises(SelectionError, match=r"point \[-50, 20\]: bad_pixel: not a place on the water in the image"):
+        ts.select(clip.frames[1], clip.pose, 1, point=(-50.0, 20.0))
     with pytest.raises(SelectionError, match=r"point \[nan, 20.0\]: expected finite pixels"):
         ts.select(clip.frames[1], clip.pose, 1, point=(math.nan, 20.0))
     no_pose = camera_pose(clip.cal, clip.session.telemetry, [clip.t[-1] + 60.0])

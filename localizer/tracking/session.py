@@ -226,8 +226,9 @@ class TrackingSession:
         u, v = float(point[0]), float(point[1])
         _, px_per_m = self._locate(one, (u, v))
         if not px_per_m > 0:
-            raise SelectionError(f"point [{u:g}, {v:g}]: no camera pose at that frame ({one.status[0]}) to "
-                                 "size the vehicle; select with a box")
+            why = (f"no camera pose at that frame ({one.status[0]}) to size the vehicle" if one.status[0] != "ok"
+                   else f"{locate(self.cal, one, [u], [v]).status[0]}: not a place on the water in the image")
+            raise SelectionError(f"point [{u:g}, {v:g}]: {why}; select with a box")
         guess = prediction_at(u, v, px_per_m, 0.0)
         reach = CLICK_REACH * math.hypot(guess.width_px, guess.height_px) / self.detect_params.search_sigmas
         found = detect(frame_bgr, Prediction(u, v, guess.width_px, guess.height_px, reach, px_per_m),
