@@ -5,13 +5,19 @@ default ``skyfix/cmd``) taking a JSON payload and answering JSON (encoding
 ``application/json``)::
 
     select   {"box": [x, y, w, h], "frame": 1234}    # or {"point": [u, v], "frame": 1234}; "frame" optional
-             -> {"frame": 1234, "u": 331.2, "v": 190.8, "box": [..], "caught_up": 6, "target": {...}}
-    release  (no payload)  -> {"target": {...}}
-    acquire  (no payload)  -> {"target": {...}}      # await a target again: automatic acquisition from the prior
+             -> {"frame": 1234, "u": 331.2, "v": 190.8, "box": [..], "caught_up": 6, "latest_frame": 1240,
+                 "target": {...}}
+    release  (no payload)  -> {"latest_frame": 1240, "target": {...}}
+    acquire  (no payload)  -> {"latest_frame": 1240, "target": {...}}   # await a target again (from the prior)
     status   (no payload)  -> the service's status now, as published on the status key
 
 ``frame`` is the running frame number of the fixes (``"frame"`` in the fix JSON); it
 must still be held (the last ``--select-history-s``); without it, the newest frame.
+``latest_frame`` is the newest frame tracked when the command ran: every fix of a later
+frame follows it (after a release, every later fix is ``released`` until a new selection;
+frames tracked before it but not yet sent are ``released`` too). ``u``, ``v`` is the
+selected frame's tracked pixel (the top face's centre), ``caught_up`` the held frames
+tracked since it.
 Pixels follow OpenCV (distorted image, u right, v down, top-left pixel centre (0, 0)).
 ``target`` is the tracking session's status: ``state`` (``awaiting_target``,
 ``tracking``, ``lost``, ``confirming``, ``released``), ``origin`` (``box``, ``click``,

@@ -179,7 +179,7 @@ class Pipeline:
                  "point" if point is not None else "box", list(point if point is not None else box), len(later),
                  self.target["state"])
         return {"frame": held.frame.index, "u": result.u, "v": result.v, "box": list(result.box),
-                "caught_up": len(later), "target": self.target}
+                "caught_up": len(later), "latest_frame": self._latest_frame(), "target": self.target}
 
     async def _release(self) -> dict:
         self._started = True  # the operator's word wins over init_bbox
@@ -188,14 +188,18 @@ class Pipeline:
             item.result = TrackResult("released")
         self.target = self.session.status()
         log.info("target released")
-        return {"target": self.target}
+        return {"latest_frame": self._latest_frame(), "target": self.target}
 
     async def _acquire(self) -> dict:
         self._started = True
         self.session.acquire()
         self.target = self.session.status()
         log.info("awaiting a target")
-        return {"target": self.target}
+        return {"latest_frame": self._latest_frame(), "target": self.target}
+
+    def _latest_frame(self) -> int | None:
+        """The newest frame tracked: the command applies to every later frame."""
+        return self._held[-1].frame.index if self._held else None
 
     # -- frames --------------------------------------------------------------------------------------
     async def _track_frames(self) -> None:
