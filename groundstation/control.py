@@ -15,7 +15,9 @@ default ``skyfix/cmd``) taking a JSON payload and answering JSON (encoding
 must still be held (the last ``--select-history-s``); without it, the newest frame.
 ``latest_frame`` is the newest frame tracked when the command ran: every fix of a later
 frame follows it (after a release, every later fix is ``released`` until a new selection;
-frames tracked before it but not yet sent are ``released`` too). ``u``, ``v`` is the
+frames tracked before it but not yet sent are ``released`` too). GPS_INPUT says no fix
+from the first released fix on: until then (one frame) it may repeat the previous fix,
+and without frames that fix expires after ``--fix-max-age-ms``. ``u``, ``v`` is the
 selected frame's tracked pixel (the top face's centre), ``caught_up`` the held frames
 tracked since it.
 Pixels follow OpenCV (distorted image, u right, v down, top-left pixel centre (0, 0)).
