@@ -18,6 +18,7 @@ SUBCOMMANDS = (
     "groundstation.evaluate",
     "sim_fixtures.cli",
     "groundstation.service",
+    "groundstation.console",
     "groundstation.replay",
     "groundstation.calibrate",
     "groundstation.export",

@@ -37,6 +37,8 @@ from localizer.contract import (
 )
 from localizer.tracking import TRACKERS
 
+from .sources.uuv_position import parse_hint
+
 log = logging.getLogger("skyfix.config")
 
 
@@ -91,6 +93,17 @@ class RunConfig:
                                         "'no fix'")
     tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
                                        "template matching), mil (the paper's), ...")
+    uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
+                                          "BlueOS publishes it (mavlink/1/1/GLOBAL_POSITION_INT): acquire the UUV "
+                                          "near it without a selection")
+    uuv_hint: Text | None = Field(None, description="LAT,LON (degrees) where to look for the UUV until its own "
+                                  "estimate arrives")
+    uuv_prior_sigma_m: within(0.01, 1000) = Field(3.0, description="1-sigma (m) of the UUV's own estimate or hint "
+                                                   "(the search covers 3 sigma)")
+    select_history_s: within(0, 10) = Field(1.0, description="seconds of tracked frames held so a selection can "
+                                            "refer to a frame the operator saw")
+    control_prefix: Text = Field("skyfix/cmd", description="Zenoh key prefix of the operator commands "
+                                 "(<prefix>/select, release, acquire, status)")
     record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
     duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
     stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
@@ -100,6 +113,15 @@ class RunConfig:
     def _record_needs_pymavlink(self):
         if self.record and self.mavlink_backend == "mavsdk":
             raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
+        return self
+
+    @model_validator(mode="after")
+    def _hint_is_a_position(self):
+        if self.uuv_hint is not None:
+            try:
+                parse_hint(self.uuv_hint)
+            except ValueError as e:
+                raise Invalid("uuv_hint", self.uuv_hint, str(e).split(": ", 1)[1]) from None
         return self
 
 

@@ -164,6 +164,7 @@ class PipelineStatus(Section):
     queued: int
     waiting_for_telemetry: int
     waited_s: NonNegative = Field(description="total time frames waited for telemetry")
+    held_frames: int = Field(description="recent frames held so a selection can name one the operator saw")
     last_status: Status | None
     statuses: dict[Status, int] = Field(description="frames per status word")
 
@@ -209,6 +210,44 @@ class RecordStatus(Section):
     video_dropped: int | None = None
 
 
+class TargetStatus(Section):
+    """The tracking session: the target's life."""
+
+    state: Literal["awaiting_target", "tracking", "lost", "confirming", "released"]
+    tracker: str = Field(description="the tracker backend")
+    origin: Literal["box", "click", "prior"] | None = Field(description="how the target was chosen")
+    since_t: float | None = Field(description="when the state began, station clock")
+    frames_in_state: int
+    status: str = Field(description="the latest frame's tracking status")
+    u: float | None = Field(description="the latest pixel of the UUV (distorted)")
+    v: float | None
+    box: list[int] | None = Field(description="x, y, w, h of the latest match")
+    confidence: float | None
+    seen_t: float | None = Field(description="when the UUV was last seen, station clock")
+
+
+class UuvPositionStatus(Section):
+    """The UUV's own position estimate, where acquisition looks for it."""
+
+    key: str | None = Field(description="the Zenoh key of its GLOBAL_POSITION_INT (--uuv-position-key)")
+    received: int
+    bad: int
+    unknown: int = Field(description="messages without a position (lat/lon 0/0)")
+    age_s: Age
+    lat: float | None
+    lon: float | None
+    hint: bool = Field(description="whether --uuv-hint gives the position until the UUV's own arrives")
+    sigma_m: float = Field(description="1-sigma of that position (m)")
+
+
+class ControlStatus(Section):
+    """The operator commands over Zenoh."""
+
+    prefix: str
+    answered: int
+    refused: int
+
+
 class StatusMessage(Message):
     """The service's health, once a second; sections for optional parts only when they run."""
 
@@ -220,6 +259,10 @@ class StatusMessage(Message):
     fixes_published: int
     problems: dict[str, str] = Field(description="what is wrong with each input now, one line per input (uav, "
                                      "depth, video, zenoh); empty when all is well")
+    target: TargetStatus
+    uuv_position: UuvPositionStatus
+    fix: FixMessage | None = Field(description="the latest fix message (also answered to late joiners on the fix key)")
+    control: ControlStatus
     video: VideoStatus | None = Field(None, description="with --video")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     latency: LatencyStatus | None = Field(None, description="with --gps-input")

@@ -1,29 +1,35 @@
-"""The per-frame pipeline of the live service: tracker → time alignment → geometry → sinks.
+"""The per-frame pipeline of the live service: tracking session → time alignment → geometry → sinks.
 
 Frames wait in a short queue; when the tracker falls behind, the oldest waiting
 frame is dropped (and counted), so a fix is never computed for a frame that is
-already old. The tracker runs in a worker thread (OpenCV releases the GIL); the
-telemetry is only read on the event loop, where it is written. The first frame
-initialises the tracker with the calibration's ``[tracker] init_bbox`` (its
-``init_t`` is for recorded sessions and is not used live). After a good fix, each
-frame's tracker gets a prediction the way the offline tracking makes it
-(:mod:`groundstation.track_video`): that fix's position projected into the new
-frame, shifted by the residual between the fix's pixel and the projection at its
-own frame, with an uncertainty growing with the time since the fix
-(:func:`localizer.tracking.predict.follow`). The tracker reports the centre of
-the UUV's top face, the point its depth refers to
-(:func:`localizer.tracking.predict.init_target`).
+already old. Each frame's camera pose is computed once, on the event loop (where
+the telemetry is written), when the frame is taken for tracking; the
+:class:`~localizer.tracking.session.TrackingSession` (the same as offline) tracks it
+in a worker thread (OpenCV releases the GIL) with that pose, and the geometry
+locates the tracked pixel with the same pose. The first frame is selected with the
+calibration's ``[tracker] init_bbox`` when there is one (its ``init_t`` is for
+recorded sessions and is not used live); otherwise the session awaits a target: the
+operator's selection (:meth:`Pipeline.select`), or a candidate found near the UUV's
+own position estimate (``prior``) and confirmed over several frames.
 
 A tracked frame is located at once when the camera's attitude telemetry
-(ATTITUDE, and the gimbal message) reaches to within :data:`EXTRAPOLATE_S` of its
-time: a short extrapolation with the rates costs little, and the accuracy grows to
-match. Otherwise it waits, in order, for a sample after its time, so that it is
-interpolated as offline; at most ``telemetry_wait_s`` after the frame arrived (a
-slow radio: ATTITUDE at 4 Hz needs about 0.3 s), then it is located with what
-there is (extrapolated within ``[timing]`` limits, or a ``stale_…`` status).
-Tracking goes on meanwhile.
+(ATTITUDE, and the gimbal message) reached to within :data:`EXTRAPOLATE_S` of its
+time when it was tracked: a short extrapolation with the rates costs little, and
+the accuracy grows to match. Otherwise it waits, in order, for a sample after its
+time, so that it is interpolated as offline; at most ``telemetry_wait_s`` after the
+frame arrived (a slow radio: ATTITUDE at 4 Hz needs about 0.3 s); then its pose is
+computed again with what there is (extrapolated within ``[timing]`` limits, or a
+``stale_…`` status). Tracking goes on meanwhile.
 Frames the video reader marks ``buffered`` (their exposure time is unknown) are
 tracked but get the status ``buffered`` and no position.
+
+Operator commands (:meth:`Pipeline.select`, :meth:`Pipeline.release`,
+:meth:`Pipeline.acquire`) run in the tracking worker between frames. The last
+``history_s`` seconds of tracked frames are held with their poses, so a selection
+refers to a frame the operator saw: the session is re-initialised there and then
+catches up through the held frames after it before the next live frame. A release
+also turns frames tracked before it but not yet located into ``released`` ones: no
+fix goes out after it.
 """
 
 from __future__ import annotations
@@ -32,15 +38,15 @@ import asyncio
 import logging
 import time
 from collections import Counter, deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from localizer.calibration import Calibration
 from localizer.fix import Fix, locate
-from localizer.pose import camera_pose
+from localizer.pose import CameraPose, camera_pose
 from localizer.telemetry import Telemetry
-from localizer.tracking import TrackResult, make_tracker
-from localizer.tracking.predict import follow, init_target, project_uuv
+from localizer.tracking import TrackResult
+from localizer.tracking.session import Prior, SelectionError, TrackingSession
 
 from .sources.video_live import LiveFrame
 
@@ -48,6 +54,8 @@ log = logging.getLogger("skyfix.pipeline")
 
 #: A frame up to this far (s) after the newest attitude sample is located without waiting for the next one.
 EXTRAPOLATE_S = 0.03
+#: At most this many frames are held for selections, whatever ``history_s``.
+MAX_HELD = 300
 
 
 @dataclass(frozen=True)
@@ -59,41 +67,59 @@ class FrameInfo:
     t_fix: float
 
 
+@dataclass
+class Tracked:
+    """A tracked frame on its way to the geometry, with the pose it was tracked with."""
+
+    frame: LiveFrame
+    pose: CameraPose
+    result: TrackResult
+    early: bool  # the pose was computed more than EXTRAPOLATE_S past the newest attitude sample
+
+
 class Pipeline:
-    """Worker turning frames into :class:`~localizer.fix.Fix` es for every sink (``on_fix(fix, info)``)."""
+    """Worker turning frames into :class:`~localizer.fix.Fix` es for every sink (``on_fix(fix, info)``).
+
+    ``prior(t_unix)``: the UUV's own position estimate at a frame's time (None: none);
+    ``history_s``: how long tracked frames are held for selections.
+    """
 
     def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
-                 telemetry_wait_s: float = 0.3):
+                 telemetry_wait_s: float = 0.3, prior: Callable[[float], Prior | None] | None = None,
+                 history_s: float = 1.0):
         self.cal = cal
         self.tel = tel
-        self.tracker_name = tracker
-        make_tracker(tracker, cal)  # fail early on a wrong name
+        self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
         self.sinks = list(sinks)
         self.queue_len = queue_len
         self.telemetry_wait_s = telemetry_wait_s
+        self.prior = prior or (lambda t_unix: None)
+        self.history_s = history_s
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
-        self._tracked: deque[tuple[LiveFrame, TrackResult]] = deque()  # waiting for their telemetry
+        self._commands: deque[tuple[Callable, asyncio.Future]] = deque()
+        self._tracked: deque[Tracked] = deque()  # waiting for their telemetry
         self._tracked_ready = asyncio.Event()
         self._telemetry = asyncio.Event()
+        self._held: deque[Tracked] = deque()  # recent tracked frames, for selections
+        self._started = False  # the first frame was taken, or a command came first: init_bbox no longer applies
         self._angle_series = [tel.attitude] + (
             [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
             else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
         self.waited_s = 0.0  # total time frames waited for telemetry
-        self._tracker = None
-        self._last_ok: Fix | None = None
         self.processed = 0
         self.dropped = 0
         self.statuses: Counter[str] = Counter()
         self.last_status: str | None = None
+        self.target = self.session.status()  # the tracking session's status after the latest frame or command
 
     def submit(self, frame: LiveFrame) -> None:
         """Queue a frame (on the event loop); drops the oldest waiting frame when the queue is full.
 
-        The very first frame is never dropped: ``init_bbox`` belongs to it.
+        The very first frame is never dropped when ``init_bbox`` belongs to it.
         """
         if len(self._queue) >= self.queue_len:
-            first_waiting = self._tracker is None and self.processed == 0 and self._queue[0].index == 0
+            first_waiting = self.cal.init_bbox is not None and not self._started and self._queue[0].index == 0
             del self._queue[1 if first_waiting else 0]
             self.dropped += 1
         self._queue.append(frame)
@@ -108,22 +134,120 @@ class Pipeline:
             tg.create_task(self._track_frames())
             tg.create_task(self._locate_frames())
 
+    # -- operator commands -------------------------------------------------------------------------
+    async def select(self, frame: int | None = None, box=None, point=None) -> dict:
+        """Track the UUV in ``box`` (x, y, w, h) or at ``point`` (u, v) of held frame ``frame`` (default: the newest).
+
+        Raises :class:`~localizer.tracking.session.SelectionError` for a frame no longer
+        held, a box outside it, a click with nothing there.
+        """
+        return await self._command(lambda: self._select(frame, box, point))
+
+    async def release(self) -> dict:
+        """Let go of the target: no fix until a new selection (or :meth:`acquire`)."""
+        return await self._command(self._release)
+
+    async def acquire(self) -> dict:
+        """Await a target again: a selection, or automatic acquisition from the prior."""
+        return await self._command(self._acquire)
+
+    async def _command(self, command: Callable) -> dict:
+        done = asyncio.get_running_loop().create_future()
+        self._commands.append((command, done))
+        self._ready.set()
+        return await done
+
+    async def _select(self, index: int | None, box, point) -> dict:
+        if not self._held:
+            raise SelectionError("no frame received yet")
+        held = self._held[-1] if index is None else next((h for h in self._held if h.frame.index == index), None)
+        if held is None:
+            raise SelectionError(f"frame {index} is not held (held: frames {self._held[0].frame.index}"
+                                 f"…{self._held[-1].frame.index}, the last {self.history_s:g} s)")
+        later = [h for h in self._held if h.frame.index > held.frame.index]
+
+        def select_and_catch_up() -> TrackResult:
+            result = self.session.select(held.frame.image, held.pose, box=box, point=point)
+            for h in later:
+                self.session.step(h.frame.image, h.pose)
+            return result
+
+        result = await asyncio.to_thread(select_and_catch_up)
+        self._started = True
+        self.target = self.session.status()
+        log.info("target selected on frame %d (%s %s), caught up %d frames: %s", held.frame.index,
+                 "point" if point is not None else "box", list(point if point is not None else box), len(later),
+                 self.target["state"])
+        return {"frame": held.frame.index, "u": result.u, "v": result.v, "box": list(result.box),
+                "caught_up": len(later), "latest_frame": self._latest_frame(), "target": self.target}
+
+    async def _release(self) -> dict:
+        self._started = True  # the operator's word wins over init_bbox
+        self.session.release()
+        for item in self._tracked:  # tracked before the release, not yet located: no fix from them
+            item.result = TrackResult("released")
+        self.target = self.session.status()
+        log.info("target released")
+        return {"latest_frame": self._latest_frame(), "target": self.target}
+
+    async def _acquire(self) -> dict:
+        self._started = True
+        self.session.acquire()
+        self.target = self.session.status()
+        log.info("awaiting a target")
+        return {"latest_frame": self._latest_frame(), "target": self.target}
+
+    def _latest_frame(self) -> int | None:
+        """The newest frame tracked: the command applies to every later frame."""
+        return self._held[-1].frame.index if self._held else None
+
+    # -- frames --------------------------------------------------------------------------------------
     async def _track_frames(self) -> None:
         while True:
+            if self._commands:
+                command, done = self._commands.popleft()
+                try:
+                    done.set_result(await command())
+                except (SelectionError, ValueError) as e:
+                    done.set_exception(e)
+                continue
             if not self._queue:
                 self._ready.clear()
                 await self._ready.wait()
                 continue
             frame = self._queue.popleft()
-            self._tracked.append((frame, await self._track(frame)))
+            self._tracked.append(await self._track(frame))
             self._tracked_ready.set()
 
-    def _needs_telemetry(self, frame: LiveFrame, result: TrackResult) -> bool:
-        """Whether a tracked frame is further past its newest attitude telemetry than :data:`EXTRAPOLATE_S`."""
-        if not result.ok or frame.buffered:
+    def _early(self, frame: LiveFrame) -> bool:
+        """Whether the frame is further past its newest attitude telemetry than :data:`EXTRAPOLATE_S`."""
+        if frame.buffered:
             return False
         t = float(self.tel.uav_time(frame.t_unix)) - EXTRAPOLATE_S
         return any(s.last_t is None or s.last_t < t for s in self._angle_series)
+
+    async def _track(self, frame: LiveFrame) -> Tracked:
+        """Track one frame with its pose (computed here, on the loop) and hold it for selections."""
+        pose = camera_pose(self.cal, self.tel, frame.t_unix)
+        early = self._early(frame)
+        prior = self.prior(frame.t_unix)
+        result = await asyncio.to_thread(self._step, frame, pose, prior)
+        item = Tracked(frame, pose, result, early)
+        self._held.append(item)
+        while len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s:
+            self._held.popleft()
+        self.target = self.session.status()
+        return item
+
+    def _step(self, frame: LiveFrame, pose: CameraPose, prior: Prior | None) -> TrackResult:
+        if not self._started:
+            self._started = True
+            if self.cal.init_bbox is not None:
+                try:
+                    return self.session.select(frame.image, pose, box=self.cal.init_bbox)
+                except SelectionError as e:
+                    log.warning("tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e)
+        return self.session.step(frame.image, pose, prior=prior)
 
     async def _locate_frames(self) -> None:
         loop = asyncio.get_running_loop()
@@ -132,19 +256,21 @@ class Pipeline:
                 self._tracked_ready.clear()
                 await self._tracked_ready.wait()
                 continue
-            frame, result = self._tracked[0]
-            left = frame.t_recv + self.telemetry_wait_s - time.time()
-            if left > 0 and self._needs_telemetry(frame, result):
-                self._telemetry.clear()
-                t0 = loop.time()
-                try:
-                    await asyncio.wait_for(self._telemetry.wait(), timeout=left)
-                except TimeoutError:
-                    pass
-                self.waited_s += loop.time() - t0
-                continue
+            item = self._tracked[0]
+            if item.early and item.result.ok:
+                left = item.frame.t_recv + self.telemetry_wait_s - time.time()
+                if left > 0 and self._early(item.frame):
+                    self._telemetry.clear()
+                    t0 = loop.time()
+                    try:
+                        await asyncio.wait_for(self._telemetry.wait(), timeout=left)
+                    except TimeoutError:
+                        pass
+                    self.waited_s += loop.time() - t0
+                    continue
+                item.pose, item.early = camera_pose(self.cal, self.tel, item.frame.t_unix), False
             self._tracked.popleft()
-            self._emit(frame, self._locate(frame, result))
+            self._emit(item.frame, self._locate(item))
 
     def _emit(self, frame: LiveFrame, fix: Fix) -> None:
         info = FrameInfo(frame.index, frame.t_recv, time.time())
@@ -158,45 +284,23 @@ class Pipeline:
 
     async def process(self, frame: LiveFrame) -> Fix:
         """The fix of one frame with the telemetry there is now (status says why when there is none)."""
-        return self._locate(frame, await self._track(frame))
+        item = await self._track(frame)
+        if item.early:
+            item.pose = camera_pose(self.cal, self.tel, frame.t_unix)
+        return self._locate(item)
 
-    def _locate(self, frame: LiveFrame, result: TrackResult) -> Fix:
-        """A tracked frame's fix; ``buffered`` frames are only tracked."""
+    def _locate(self, item: Tracked) -> Fix:
+        """A tracked frame's fix, with its pose; ``buffered`` frames are only tracked."""
+        frame, result = item.frame, item.result
         if not result.ok or frame.buffered:
             fix = Fix(frame.t_unix, result.status if not result.ok else "buffered")
         else:
-            fix = locate(self.cal, camera_pose(self.cal, self.tel, frame.t_unix), result.u, result.v)[0]
+            fix = locate(self.cal, item.pose, result.u, result.v)[0]
         fix.frame = frame.index
         fix.confidence = result.confidence
-        if fix.ok:
-            self._last_ok = fix
         return fix
-
-    async def _track(self, frame: LiveFrame) -> TrackResult:
-        if self._tracker is None:
-            box = self.cal.init_bbox
-            if box is None:
-                return TrackResult("no_init_bbox")
-            tracker = make_tracker(self.tracker_name, self.cal)
-            point, prediction = init_target(self.cal, camera_pose(self.cal, self.tel, frame.t_unix), box)
-            try:
-                await asyncio.to_thread(tracker.init, frame.image, box, prediction, point)
-            except ValueError as e:
-                log.warning("tracker init on frame %d: %s", frame.index, e)
-                return TrackResult("bad_init_bbox")
-            self._tracker = tracker
-            return TrackResult("ok", point[0], point[1], box)
-        return await asyncio.to_thread(self._tracker.update, frame.image, self._predict(frame.t_unix))
-
-    def _predict(self, t_unix: float):
-        last = self._last_ok
-        if last is None:
-            return None
-        pose = camera_pose(self.cal, self.tel, [t_unix, last.t_unix])
-        u, v, px_per_m = project_uuv(self.cal, pose, last.lat, last.lon)
-        return follow((u[0], v[0], px_per_m[0]), (u[1], v[1]), (last.u, last.v), t_unix - last.t_unix)
 
     def status(self) -> dict:
         return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),
                 "waiting_for_telemetry": len(self._tracked), "waited_s": round(self.waited_s, 3),
-                "last_status": self.last_status, "statuses": dict(self.statuses)}
+                "held_frames": len(self._held), "last_status": self.last_status, "statuses": dict(self.statuses)}

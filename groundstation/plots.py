@@ -28,7 +28,7 @@ from localizer.status import STATUSES, runs
 
 #: cause → (colour, the status words)
 CAUSES = {
-    "tracking": ("#d62728", ("lost", "no_track", "not_initialized", "no_init_bbox", "bad_init_bbox", "awaiting_target",
+    "tracking": ("#d62728", ("lost", "no_track", "not_initialized", "awaiting_target",
                              "released", "before_init")),
     "video": ("#9467bd", ("no_video", "buffered")),
     "telemetry": ("#7f7f7f", ("no_attitude", "stale_attitude", "no_position", "stale_position", "no_gimbal",

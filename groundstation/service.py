@@ -1,10 +1,11 @@
 """``skyfix run``: the live service. One asyncio task per link, all in one TaskGroup.
 
 Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth over
-Zenoh (:mod:`.sources.depth_zenoh`), the UAV's video (:mod:`.sources.video_live`),
+Zenoh (:mod:`.sources.depth_zenoh`), the UUV's own position estimate
+(:mod:`.sources.uuv_position`), the UAV's video (:mod:`.sources.video_live`),
 the per-frame :mod:`.pipeline`, GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
-the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`) and, with ``--record``, the
-recorder (:mod:`.sinks.recorder`). Blocking I/O lives in threads owned by the
+the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`), the operator's commands
+(:mod:`.control`) and, with ``--record``, the recorder (:mod:`.sinks.recorder`). Blocking I/O lives in threads owned by the
 workers; all telemetry is written and read on the event loop. SIGINT/SIGTERM (or
 ``--duration-s``) cancel every worker; a worker that fails cancels the others and
 the service exits with its error. The Zenoh session is closed in ``finally``.
@@ -26,6 +27,7 @@ import zenoh
 from localizer.telemetry import Telemetry
 
 from . import config
+from .control import Control, ZenohControl
 from .pipeline import Pipeline
 from .sinks.gps_input import GpsInputSink, MavlinkLink, ZenohMavlinkIn
 from .sinks.recorder import Recorder
@@ -33,6 +35,7 @@ from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from .sources.depth_zenoh import BLUEOS_KEY, DepthZenoh
 from .sources.rates import needed_rates
 from .sources.uav_mavlink import UavMavlink
+from .sources.uuv_position import UuvPosition, parse_hint
 from .sources.video_live import VideoLive
 from .watchdog import REQUIRE_S, InputMissing, Watchdog
 from .zenoh_session import open_session
@@ -84,7 +87,10 @@ async def serve(cfg: config.RunConfig) -> dict:
             sinks.append(gps)
         if recorder:
             sinks.append(recorder)
-        pipeline = Pipeline(cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0)
+        uuv_position = UuvPosition(session, cfg.uuv_position_key, cfg.uuv_prior_sigma_m,
+                                   parse_hint(cfg.uuv_hint) if cfg.uuv_hint else None)
+        pipeline = Pipeline(cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0,
+                            prior=uuv_position.prior, history_s=cfg.select_history_s)
 
         if cfg.mavlink_backend == "mavsdk":
             from .sources.uav_mavsdk import UavMavsdk
@@ -124,7 +130,9 @@ async def serve(cfg: config.RunConfig) -> dict:
 
         def status(now: float) -> dict:
             out = {"uav": uav.status(now), "depth": depth.status(now), "pipeline": pipeline.status(),
-                   "fixes_published": fix_sink.published, "problems": dict(watchdog.problems)}
+                   "target": pipeline.target, "uuv_position": uuv_position.status(now),
+                   "fixes_published": fix_sink.published, "fix": fix_sink.latest, "control": control.status(),
+                   "problems": dict(watchdog.problems)}
             if video:
                 out["video"] = video.status(now)
             if gps:
@@ -134,10 +142,16 @@ async def serve(cfg: config.RunConfig) -> dict:
                 out["record"] = recorder.status()
             return out
 
-        workers = [uav, depth, pipeline, watchdog, ZenohStatus(session, cfg.status_key, cfg.alive_key, status)]
+        status_sink = ZenohStatus(session, cfg.status_key, cfg.alive_key, status)
+        control = ZenohControl(session, Control(pipeline, status), cfg.control_prefix,
+                               {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
+        workers = [uav, depth, uuv_position, pipeline, watchdog, status_sink, control]
         workers += [w for w in (video, gps, recorder) if w is not None]
-        log.info("skyfix run: UAV %s, video %s, depth %s, fixes on %s, GPS_INPUT %s", cfg.mavlink, cfg.video,
-                 depth_key, cfg.fix_key, cfg.gps_input)
+        log.info("skyfix run: UAV %s, video %s, depth %s, fixes on %s, GPS_INPUT %s, commands on %s/*", cfg.mavlink,
+                 cfg.video, depth_key, cfg.fix_key, cfg.gps_input, control.prefix)
+        if cal.init_bbox is None:
+            log.info("no tracker.init_bbox: awaiting a target (%s/select%s)", control.prefix,
+                     ", or near the UUV's own position" if cfg.uuv_position_key or cfg.uuv_hint else "")
         async with asyncio.TaskGroup() as tg:
             tasks = [tg.create_task(w.run(), name=type(w).__name__) for w in workers]
             await _stopper(stop, cfg.duration_s)

@@ -11,7 +11,7 @@ velocity come along, so a time-alignment error can be turned into metres.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -47,6 +47,11 @@ class CameraPose:
     velocity_ned_mps: np.ndarray  # (N, 3) the UAV's velocity in NED, m/s
     t_gnss: np.ndarray  # the frame's time as GNSS (UNIX) time; NaN without SYSTEM_TIME
     geoid_separation_m: np.ndarray  # ellipsoid minus mean sea level at the UAV (GPS_RAW_INT); NaN if unknown
+
+
+def take(pose: CameraPose, idx) -> CameraPose:
+    """The poses of some frames (index array or slice)."""
+    return CameraPose(**{f.name: getattr(pose, f.name)[idx] for f in fields(CameraPose)})
 
 
 def _mark(status, series_status, name):

@@ -17,8 +17,6 @@ STATUSES: dict[str, str] = {
     "lost": "the tracker lost the UUV (weak match, or it left the predicted window)",
     "no_track": "no pixel for this frame (track.csv row without u, v)",
     "not_initialized": "the tracker has not been given the UUV yet",
-    "no_init_bbox": "live: no [tracker] init_bbox to start the tracker with",
-    "bad_init_bbox": "live: the tracker refused init_bbox on the first frame",
     "awaiting_target": "live: waiting for the operator to designate the UUV",
     "released": "live: the operator released the target; no tracking until a new one",
     "before_init": "offline: a frame before the one init_bbox belongs to",

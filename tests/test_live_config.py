@@ -98,6 +98,26 @@ def test_unknown_calibration_keys_are_logged_by_run(tmp_path, caplog):
     assert main(argv) == 2
 
 
+@pytest.mark.parametrize("flags,message", [
+    (["--uuv-hint", "63.44"], "--uuv-hint = '63.44': expected LAT,LON in degrees"),
+    (["--uuv-hint", "63.44,190"], "--uuv-hint = '63.44,190': expected LAT within ±90 and LON within ±180"),
+    (["--uuv-prior-sigma-m", "0"], "--uuv-prior-sigma-m = 0.0: must be ≥ 0.01"),
+    (["--select-history-s", "60"], "--select-history-s = 60.0: must be ≤ 10"),
+])
+def test_target_options_are_checked(flags, message):
+    with pytest.raises(ConfigError) as e:
+        config.run_config(_parse(["--calibration", "x.toml", *flags]))
+    assert str(e.value) == f"options: {message}"
+
+
+def test_target_options_from_a_config_file(tmp_path):
+    (tmp_path / "c.toml").write_text('calibration = "cal.toml"\nuuv_position_key = "mavlink/1/1/GLOBAL_POSITION_INT"\n'
+                                     'uuv_hint = "63.44,10.40"\nuuv_prior_sigma_m = 5\ncontrol_prefix = "boat/skyfix"\n')
+    cfg = config.run_config(_parse(["--config", str(tmp_path / "c.toml")]))
+    assert cfg.uuv_position_key == "mavlink/1/1/GLOBAL_POSITION_INT" and cfg.uuv_hint == "63.44,10.40"
+    assert cfg.uuv_prior_sigma_m == 5.0 and cfg.control_prefix == "boat/skyfix" and cfg.select_history_s == 1.0
+
+
 @pytest.mark.parametrize("option", ["--mavlink", "--gps-input"])
 def test_a_link_that_cannot_open_is_one_line_and_exit_2(tmp_path, option, capsys):
     """A mistyped connection string stops the service with one line naming it, not a traceback."""

@@ -27,7 +27,8 @@ def test_field_config_and_calibration():
     cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
     assert cfg.calibration == str(DEPLOY / "calibration.toml") and cfg.depth_source == "blueos"
     cal = load_calibration(cfg.calibration)
-    assert cal.init_bbox is not None and cal.camera.width == 1920
+    assert cal.init_bbox is None and cal.camera.width == 1920  # live, the target is selected or acquired
+    assert cfg.uuv_position_key == "mavlink/1/1/GLOBAL_POSITION_INT"
 
 
 def test_systemd_unit_runs_the_service():

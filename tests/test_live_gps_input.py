@@ -91,8 +91,9 @@ def test_sender_over_pymavlink_rate_fix_and_expiry():
     assert 19 <= len(got) <= 26  # 2.2 s at 10 Hz plus the fix sent at once
 
 
-def test_tracker_loss_ends_the_fix_at_once():
-    """A lost track must not keep the last position alive for max_age_s."""
+@pytest.mark.parametrize("status", ["lost", "awaiting_target", "released"])
+def test_tracker_loss_ends_the_fix_at_once(status):
+    """A lost, dropped or released target must not keep the last position alive for max_age_s."""
     port = free_port()
     uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
 
@@ -103,7 +104,7 @@ def test_tracker_loss_ends_the_fix_at_once():
         t = time.time()
         sink.on_fix(_fix(t), info=type("I", (), {"t_recv": t})())
         await asyncio.sleep(0.05)
-        sink.on_fix(_fix(t + 0.03, status="lost"), info=type("I", (), {"t_recv": t + 0.03})())
+        sink.on_fix(_fix(t + 0.03, status=status), info=type("I", (), {"t_recv": t + 0.03})())
         await asyncio.sleep(0.3)
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)

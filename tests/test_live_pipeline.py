@@ -40,9 +40,17 @@ def test_queue_drops_oldest_but_keeps_the_init_frame(tmp_path):
     for i in range(6):
         p.submit(_frame(i))
     assert [f.index for f in p._queue] == [0, 4, 5] and p.dropped == 3
-    p._tracker = object()  # once initialised, the oldest waiting frame goes first
+    p._started = True  # once the init frame was taken, the oldest waiting frame goes first
     p.submit(_frame(6))
     assert [f.index for f in p._queue] == [4, 5, 6] and p.dropped == 4
+
+
+def test_without_init_bbox_no_frame_is_kept_for_it(tmp_path):
+    (tmp_path / "cal.toml").write_text(CAL.replace("init_bbox = [10, 10, 8, 6]\n", ""))
+    p = Pipeline(load_calibration(str(tmp_path / "cal.toml")), Telemetry(), "default", [], queue_len=3)
+    for i in range(6):
+        p.submit(_frame(i))
+    assert [f.index for f in p._queue] == [3, 4, 5] and p.dropped == 3
 
 
 def test_fix_json_has_no_nan_and_no_position_without_fix():
@@ -52,3 +60,62 @@ def test_fix_json_has_no_nan_and_no_position_without_fix():
     assert lost["lat"] is None and lost["lon"] is None and lost["status"] == "lost"
     json.dumps(ok, allow_nan=False)
     json.dumps(lost, allow_nan=False)
+
+
+def test_operator_commands_run_between_frames_on_held_frames():
+    """A release before the first frame wins over init_bbox; a selection on a held frame catches up; a frame no
+    longer held is refused; after a release every frame is released. Real frames and telemetry of a bundled session."""
+    import asyncio
+    from pathlib import Path
+
+    import pytest
+
+    from groundstation.session import load_session
+    from groundstation.video import open_video
+    from localizer.tracking.session import SelectionError
+
+    session = load_session(Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover")
+    cal, t = session.calibration, session.frames["t"]
+    with open_video(session.video_path) as video:
+        images = [f.image for f in video][:60]
+    fixes = []
+
+    class Collect:
+        def on_fix(self, fix, info):
+            fixes.append(fix)
+
+    async def until(n: int):
+        async with asyncio.timeout(30):
+            while len(fixes) < n:
+                await asyncio.sleep(0.01)
+
+    async def feed(pipeline, frames):
+        for i in frames:  # one at a time: nothing is dropped
+            pipeline.submit(LiveFrame(i, float(t[i]), float(t[i]), images[i]))
+            await until(i + 1)
+
+    async def scenario():
+        pipeline = Pipeline(cal, session.telemetry, "default", [Collect()], history_s=0.5)
+        task = asyncio.create_task(pipeline.run())
+        try:
+            released = await pipeline.release()
+            assert released["target"]["state"] == "released"
+            await feed(pipeline, range(20))
+            assert {f.status for f in fixes} == {"released"}  # init_bbox did not take over
+            tr = session.track
+            u, v = np.interp(t[12], tr["t"], tr["u"]), np.interp(t[12], tr["t"], tr["v"])
+            w, h = cal.init_bbox[2:]
+            answer = await pipeline.select(12, box=(u - (w - 1) / 2, v - (h - 1) / 2, w, h))
+            assert answer["frame"] == 12 and answer["caught_up"] == 7 and answer["target"]["state"] == "tracking"
+            with pytest.raises(SelectionError, match=r"frame 3 is not held \(held: frames [45]…19, the last 0.5 s\)"):
+                await pipeline.select(3, box=(u, v, w, h))
+            await feed(pipeline, range(20, 40))
+            assert all(f.ok for f in fixes[20:40])
+            await pipeline.release()
+            await feed(pipeline, range(40, 60))
+            assert {f.status for f in fixes[40:]} == {"released"}
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+
+    asyncio.run(scenario())

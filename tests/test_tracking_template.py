@@ -1,4 +1,5 @@
-"""Trackers on generated frames: a textured seafloor, a rotating vehicle-like target that moves, hides and returns."""
+"""Matchers and the target's life in the image on generated frames: a textured seafloor, a rotating vehicle-like
+target that moves, hides and returns; hand-made predictions stand in for the telemetry."""
 
 import math
 
@@ -6,8 +7,9 @@ import cv2
 import numpy as np
 import pytest
 
-from localizer.tracking import TRACKERS, Prediction, make_tracker
-from localizer.tracking.template import TemplateParams, TemplateTracker
+from localizer.tracking import TRACKERS, Prediction, make_matcher
+from localizer.tracking.target import Target, TargetParams, TargetState
+from localizer.tracking.template import TemplateMatcher
 
 W, H = 320, 240
 LENGTH, BEAM = 34, 24  # target size (pixels)
@@ -68,11 +70,15 @@ def _box(truth0):
     return (round(cx - (side - 1) / 2), round(cy - (side - 1) / 2), side, side)
 
 
-def _run(tracker, frames, truth, predictions=None):
-    tracker.init(frames[0], _box(truth[0]), point=tuple(truth[0]))
+def _target(name="default", params: TargetParams | None = None) -> Target:
+    return Target(lambda: make_matcher(name), params)
+
+
+def _run(target, frames, truth, predictions=None):
+    target.select(frames[0], _box(truth[0]), point=tuple(truth[0]))
     out = []
     for i in range(1, len(frames)):
-        out.append(tracker.update(frames[i], None if predictions is None else predictions[i]))
+        out.append(target.update(frames[i], None if predictions is None else predictions[i]))
     return out
 
 
@@ -94,7 +100,7 @@ def _predictions(truth, sigma_px=6.0, seed=9):
 def test_template_follows_a_moving_turning_target(with_prediction):
     frames, truth, _ = make_clip(n=120)
     preds = _predictions(truth) if with_prediction else None
-    results = _run(TemplateTracker(), frames, truth, preds)
+    results = _run(_target(), frames, truth, preds)
     assert all(r.ok for r in results)
     err = [math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(results, truth[1:])]
     assert np.mean(err) < 0.5 and max(err) < 1.5
@@ -106,7 +112,8 @@ def test_template_reports_loss_while_hidden_and_reacquires(with_prediction):
     hidden = (40, 70)
     frames, truth, _ = make_clip(n=110, hidden=[hidden])
     preds = _predictions(truth) if with_prediction else None
-    results = _run(TemplateTracker(), frames, truth, preds)
+    target = _target()
+    results = _run(target, frames, truth, preds)
     status = [r.status for r in results]  # results[i] is frame i + 1
     hidden_frames = range(hidden[0] - 1, hidden[1] - 1)
     assert not any(status[i] == "ok" for i in hidden_frames)
@@ -117,16 +124,17 @@ def test_template_reports_loss_while_hidden_and_reacquires(with_prediction):
     assert all(status[i] == "ok" for i in range(back[0], len(status)))
     err = [math.hypot(results[i].u - truth[i + 1][0], results[i].v - truth[i + 1][1]) for i in back]
     assert np.mean(err) < 1.0 and max(err) < 3.0
+    assert target.state is TargetState.TRACKING
 
 
 @pytest.mark.parametrize("with_prediction", [True, False])
 def test_template_searches_less_often_the_longer_it_is_lost_and_still_reacquires(with_prediction):
-    p = TemplateParams()
+    p = TargetParams()
     a = 20  # hidden from frame a to frame b - 1
     b = a + p.long_loss_frames + 8 * p.search_every_long + 3
     frames, truth, _ = make_clip(n=b + 20, hidden=[(a, b)])
     preds = _predictions(truth) if with_prediction else None
-    results = _run(TemplateTracker(p), frames, truth, preds)  # results[i] is frame i + 1
+    results = _run(_target(params=p), frames, truth, preds)  # results[i] is frame i + 1
     assert not any(r.ok for r in results[a - 1 : b - 1])
     # a search while lost reports its best score; frames without one report none
     searched = [i + 1 for i in range(a, b - 1) if np.isfinite(results[i].confidence)]
@@ -135,20 +143,22 @@ def test_template_searches_less_often_the_longer_it_is_lost_and_still_reacquires
     assert np.all(gaps[lost_for[1:] <= p.long_loss_frames] == p.search_every)
     assert np.all(gaps[lost_for[:-1] >= p.long_loss_frames] == p.search_every_long)
     back = next(i + 1 for i in range(b - 1, len(results)) if results[i].ok)
-    assert back - b <= p.search_every_long + p.reacquire_frames - 2, "re-acquired by the first search after it is back"
+    assert back - b <= p.search_every_long + p.confirm_frames - 2, "re-acquired by the first search after it is back"
     assert all(r.ok for r in results[back - 1 :])
 
 
-def test_template_follows_the_predicted_apparent_size():
+@pytest.mark.parametrize("scale_at_start", [True, False])
+def test_template_follows_the_predicted_apparent_size(scale_at_start):
+    """Without the image scale at the selection (no pose there), the first prediction's is the reference."""
     n, grow = 100, 0.5
     frames, truth, _ = make_clip(n=n, grow=grow)
     preds = [
         Prediction(p.u, p.v, p.width_px, p.height_px, p.sigma_px, px_per_m=100.0 * (1.0 + grow * i / n))
         for i, p in enumerate(_predictions(truth))
     ]
-    tracker = TemplateTracker()
-    tracker.init(frames[0], _box(truth[0]), preds[0], point=tuple(truth[0]))
-    results = [tracker.update(frames[i], preds[i]) for i in range(1, n)]
+    target = _target()
+    target.select(frames[0], _box(truth[0]), tuple(truth[0]), preds[0].px_per_m if scale_at_start else math.nan)
+    results = [target.update(frames[i], preds[i]) for i in range(1, n)]
     assert all(r.ok for r in results)
     err = [math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(results, truth[1:])]
     assert np.mean(err) < 0.7 and max(err) < 2.0
@@ -157,22 +167,27 @@ def test_template_follows_the_predicted_apparent_size():
 
 def test_template_never_takes_the_floor_for_a_target_that_never_returns():
     frames, truth, _ = make_clip(n=90, hidden=[(20, 90)])
-    results = _run(TemplateTracker(), frames, truth, _predictions(truth))
+    results = _run(_target(), frames, truth, _predictions(truth))
     assert not any(r.ok for r in results[19:])
 
 
-def test_template_rejects_an_init_box_outside_the_frame():
-    frames, _truth, _ = make_clip(n=2)
+def test_a_box_outside_the_frame_is_refused_and_changes_nothing():
+    frames, truth, _ = make_clip(n=2)
+    with pytest.raises(ValueError, match=r"box \(310, 5, 30, 30\) does not lie inside the 320x240 frame"):
+        TemplateMatcher().start(frames[0], (W - 10, 5, 30, 30))
+    target = _target()
+    target.select(frames[0], _box(truth[0]), point=tuple(truth[0]))
     with pytest.raises(ValueError, match="does not lie inside"):
-        TemplateTracker().init(frames[0], (W - 10, 5, 30, 30))
+        target.select(frames[1], (W - 10, 5, 30, 30))
+    assert target.state is TargetState.TRACKING and target.update(frames[1], None).ok
 
 
 @pytest.mark.parametrize("name", TRACKERS)
 def test_every_backend_tracks_a_short_clip(name):
     frames, truth, _ = make_clip(n=25)
-    tracker = make_tracker(name)
-    assert tracker.update(frames[0]).status == "not_initialized"  # OpenCV's own update() would crash here
-    results = _run(tracker, frames, truth)
+    target = _target(name)
+    assert target.update(frames[0], None).status == "awaiting_target"  # no matcher runs before a selection
+    results = _run(target, frames, truth)
     ok = [r for r in results if r.ok]
     assert len(ok) >= 20
     err = [math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(results, truth[1:]) if r.ok]
@@ -181,4 +196,50 @@ def test_every_backend_tracks_a_short_clip(name):
 
 def test_unknown_backend_is_named():
     with pytest.raises(ValueError, match="'nope'"):
-        make_tracker("nope")
+        make_matcher("nope")
+
+
+def test_release_stops_every_fix_until_a_new_selection():
+    frames, truth, _ = make_clip(n=40)
+    target = _target()
+    results = _run(target, frames[:10], truth[:10])
+    assert all(r.ok for r in results)
+    target.release()
+    assert target.state is TargetState.RELEASED
+    assert [target.update(frames[i], None).status for i in range(10, 15)] == ["released"] * 5
+    target.acquire()
+    assert target.update(frames[15], None).status == "awaiting_target"
+    target.select(frames[16], _box(truth[16]), point=tuple(truth[16]))
+    back = [target.update(frames[i], None) for i in range(17, 40)]
+    assert all(r.ok for r in back)
+    assert max(math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(back, truth[17:])) < 1.5
+
+
+def test_a_proposed_candidate_becomes_the_target_only_after_confirming_frames():
+    frames, truth, _ = make_clip(n=40)
+    preds = _predictions(truth)
+    p = TargetParams()
+    target = _target()
+    first = target.propose(frames[5], _box(truth[5]), tuple(truth[5]), 100.0, preds[5])
+    assert first.status == "awaiting_target" and target.state is TargetState.CONFIRMING
+    results = [target.update(frames[i], preds[i]) for i in range(6, 40)]
+    n_waiting = p.confirm_frames - 1  # the proposal itself was the first match
+    assert [r.status for r in results[: n_waiting - 1]] == ["awaiting_target"] * (n_waiting - 1)
+    assert all(r.ok for r in results[n_waiting - 1 :]) and target.state is TargetState.TRACKING
+    err = [math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(results[n_waiting - 1 :], truth[5 + n_waiting :])]
+    assert np.mean(err) < 0.7
+
+
+@pytest.mark.parametrize("why", ["moves_against_the_camera", "hidden"])
+def test_a_proposed_candidate_that_does_not_confirm_is_dropped(why):
+    hidden = [(7, 40)] if why == "hidden" else []
+    frames, truth, _ = make_clip(n=20, hidden=hidden)
+    preds = _predictions(make_clip(n=20)[1])
+    if why == "moves_against_the_camera":  # the prediction (the camera's motion) jumps 40 px the other way
+        preds = [Prediction(q.u - 40.0 * (i > 5), q.v, q.width_px, q.height_px, q.sigma_px, q.px_per_m)
+                 for i, q in enumerate(preds)]
+    target = _target()
+    target.propose(frames[5], _box(truth[5]), tuple(truth[5]), 100.0, preds[5])
+    results = [target.update(frames[i], preds[i]) for i in range(6, 20)]
+    assert not any(r.ok for r in results)
+    assert {r.status for r in results} == {"awaiting_target"} and target.state is TargetState.AWAITING_TARGET

@@ -26,16 +26,18 @@ def fix_to_json(fix: Fix) -> dict:
 
 
 class ZenohFixSink:
-    """Publishes every fix on ``key``."""
+    """Publishes every fix on ``key``; ``latest`` is the last one published (JSON-ready)."""
 
     def __init__(self, session: zenoh.Session, key: str):
         self.session = session
         self.key = key
         self.published = 0
+        self.latest: dict | None = None
         self._pub = session.declare_publisher(key, encoding=zenoh.Encoding.APPLICATION_JSON)
 
     def on_fix(self, fix: Fix, info) -> None:
-        put_json(self._pub, fix_to_json(fix), self.session)
+        self.latest = fix_to_json(fix)
+        put_json(self._pub, self.latest, self.session)
         self.published += 1
 
     def close(self) -> None:
@@ -43,7 +45,8 @@ class ZenohFixSink:
 
 
 class ZenohStatus:
-    """Worker publishing ``status()`` (a JSON-ready dict) on ``key`` every ``period_s``, with a liveliness token."""
+    """Worker publishing ``status()`` (a JSON-ready dict) on ``key`` every ``period_s``, with a liveliness token;
+    ``latest`` is the last one published."""
 
     def __init__(self, session: zenoh.Session, key: str, alive_key: str, status: Callable[[float], dict],
                  period_s: float = 1.0):
@@ -52,6 +55,7 @@ class ZenohStatus:
         self.alive_key = alive_key
         self.status = status
         self.period_s = period_s
+        self.latest: dict | None = None
 
     async def run(self) -> None:
         token = self.session.liveliness().declare_token(self.alive_key)
@@ -59,7 +63,8 @@ class ZenohStatus:
         try:
             while True:
                 now = time.time()
-                put_json(pub, {"schema": STATUS_SCHEMA, "t": now, **self.status(now)}, self.session)
+                self.latest = {"schema": STATUS_SCHEMA, "t": now, **self.status(now)}
+                put_json(pub, self.latest, self.session)
                 await asyncio.sleep(self.period_s)
         finally:
             pub.undeclare()

@@ -1,16 +1,22 @@
-"""Tracking the UUV in video frames: a frame in; box, pixel, confidence and status out.
+"""Tracking the UUV in video frames: a target's life from selection to release.
 
-Interface shared by every backend (see ``make_tracker``)::
+Layers, each usable alone:
 
-    tracker = make_tracker("default", calibration)
-    tracker.init(frame_bgr, (x, y, w, h), prediction, point)
-    result = tracker.update(frame_bgr, prediction)   # prediction: Prediction | None
-    result.status   # "ok", "lost", ...; result.u, result.v: the UUV's distorted pixel
+- A *matcher* (:class:`Matcher`, see ``make_matcher``) is an appearance model: started
+  on the UUV's box in one frame, it says where the UUV is in the next
+  (``follow``), looks for it anywhere the telemetry allows (``search``) and checks
+  a candidate again (``confirm``). ``ncc`` (the default, :mod:`.template`), and
+  OpenCV's ``mil`` (the paper's), ``kcf``, ``csrt`` (:mod:`.opencv`).
+- :class:`~.target.Target` is the state machine in the image: awaiting a target,
+  tracking, lost, confirming a candidate, released (:class:`~.target.TargetState`).
+- :class:`~.session.TrackingSession` adds the telemetry: each frame's
+  :class:`~localizer.pose.CameraPose` gives the prediction (:mod:`.predict`), the
+  vehicle's size for a click, and the UUV's own position estimate becomes a place to
+  search without any template (:mod:`.detect`). ``skyfix process``, ``skyfix run`` and
+  the operator's commands all drive a ``TrackingSession``.
 
-``prediction`` carries what the telemetry says about where the UUV should be
-(pixel, expected size and uncertainty in pixels; see :mod:`.predict`); backends
-may ignore it. Status words: ``ok``; ``lost`` (the target is not where it should
-be and has not been found again yet); ``not_initialized``.
+``prediction`` (:class:`Prediction`) carries what the telemetry says about where the
+UUV should be: pixel, expected size and uncertainty in pixels; matchers may ignore it.
 """
 
 from __future__ import annotations
@@ -37,41 +43,61 @@ class Prediction:
 class TrackResult:
     """One frame's tracking result."""
 
-    status: str  # "ok" or why not: "lost", "not_initialized"
+    status: str  # "ok" or why not: "lost", "awaiting_target", "released"
     u: float = float("nan")  # the UUV's centre, distorted pixels
     v: float = float("nan")
     box: tuple[int, int, int, int] | None = None  # x, y, w, h
-    confidence: float = float("nan")  # 0..1
+    confidence: float = float("nan")  # 0..1; while lost or acquiring, the best candidate's score when one was sought
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
 
 
-class Tracker(Protocol):
-    """A tracking backend: ``init`` once with the UUV's box, then ``update`` every frame."""
+@dataclass(frozen=True)
+class Match:
+    """A matcher's answer for one frame: the best place found and whether it passes for the UUV."""
 
-    def init(
-        self, frame_bgr: np.ndarray, box: tuple[int, int, int, int], prediction: Prediction | None = None,
-        point: tuple[float, float] | None = None,
-    ) -> None:
-        """Start on the UUV inside ``box`` (x, y, w, h); ``point``: the pixel to report (default the box centre)."""
+    found: bool
+    score: float = -1.0  # the matcher's similarity (NCC for ``ncc``; NaN when it has none)
+    u: float = float("nan")  # the tracked point (the UUV's reference pixel), distorted pixels
+    v: float = float("nan")
+    box: tuple[int, int, int, int] | None = None  # x, y, w, h around the UUV
 
-    def update(self, frame_bgr: np.ndarray, prediction: Prediction | None = None) -> TrackResult:
-        """Track into the next frame; never ``ok`` unless the UUV was found."""
+
+class Matcher(Protocol):
+    """An appearance model of the UUV, started on a box; each frame exactly one of follow/search/confirm."""
+
+    def start(self, frame_bgr: np.ndarray, box: tuple[int, int, int, int], point: tuple[float, float] | None = None,
+              px_per_m: float = float("nan")) -> None:
+        """Learn the UUV inside ``box`` (x, y, w, h); ``point``: the pixel to report (default the box centre);
+        ``px_per_m``: the image scale there (NaN: unknown, the first prediction's is taken). ValueError for a box
+        outside the frame."""
+
+    def follow(self, frame_bgr: np.ndarray, prediction: Prediction | None) -> Match:
+        """While tracking: the UUV near the prediction (or its last place); ``found`` False when it is not there."""
+
+    def search(self, frame_bgr: np.ndarray, prediction: Prediction | None) -> Match:
+        """While lost: the best candidate anywhere the prediction allows (the whole frame without one)."""
+
+    def confirm(self, frame_bgr: np.ndarray, u: float, v: float, prediction: Prediction | None) -> Match:
+        """The candidate again, expected at (u, v) (its last place moved as the camera moved)."""
+
+    def resume(self, match: Match) -> None:
+        """Tracking again from a confirmed candidate."""
 
 
 TRACKERS = ("default", "ncc", "mil", "kcf", "csrt")  # "default" is "ncc"
 
 
-def make_tracker(name: str, calibration=None) -> Tracker:
-    """A new tracker by backend name (one of :data:`TRACKERS`); raises ValueError for others."""
+def make_matcher(name: str) -> Matcher:
+    """A new matcher by backend name (one of :data:`TRACKERS`); raises ValueError for others."""
     if name in ("default", "ncc"):
-        from .template import TemplateTracker
+        from .template import TemplateMatcher
 
-        return TemplateTracker()
+        return TemplateMatcher()
     if name in ("mil", "kcf", "csrt"):
-        from .opencv import OpenCVTracker
+        from .opencv import OpenCVMatcher
 
-        return OpenCVTracker(name)
+        return OpenCVMatcher(name)
     raise ValueError(f"tracker = {name!r}: unknown (known: {', '.join(TRACKERS)})")

@@ -20,7 +20,6 @@ import math
 import numpy as np
 
 from ..calibration import Calibration
-from ..fix import locate
 from ..geodesy import geodetic_to_ned
 from ..pose import CameraPose
 from ..ray import offset_to_pixel, pixel_to_offset
@@ -106,20 +105,3 @@ def follow(projected_now, projected_then, pixel_then, dt_s: float) -> Prediction
         shift = (0.0, 0.0)
     u, v, px_per_m = projected_now[:3]
     return prediction_at(u, v, px_per_m, BASE_SIGMA_M + UUV_SPEED_MPS * abs(dt_s), shift)
-
-
-def init_target(cal: Calibration, pose: CameraPose, box) -> tuple[tuple[float, float], Prediction | None]:
-    """For a tracker's init box (x, y, w, h) in the pose's (single) frame: the pixel to track and a prediction.
-
-    The pixel is the top face's centre (:func:`top_face_pixel`); the prediction
-    (None without a usable pose) gives the tracker the UUV's apparent size there,
-    to which later predictions are compared when the range or depth changes.
-    """
-    x, y, w, h = box
-    u, v = top_face_pixel(cal, pose, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
-    point = (float(u[0]), float(v[0]))
-    fix = locate(cal, pose, u[:1], v[:1])
-    if fix.status[0] != "ok":
-        return point, None
-    pu, pv, k = project_uuv(cal, pose, fix.lat[0], fix.lon[0])
-    return point, prediction_at(pu[0], pv[0], k[0], BASE_SIGMA_M, (point[0] - pu[0], point[1] - pv[0]))

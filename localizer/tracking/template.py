@@ -1,7 +1,7 @@
-"""The default tracker: normalized cross-correlation in the window the telemetry predicts.
+"""The default matcher: normalized cross-correlation in the window the telemetry predicts.
 
 The UUV's grey-level appearance is kept as a *canonical* template (upright, at
-the size it had at init). Each frame it is rotated to the UUV's current heading
+the size it had at start). Each frame it is rotated to the UUV's current heading
 in the image and scaled to the predicted apparent size, then matched
 (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``) inside a window centred on the
 prediction and as large as its uncertainty; the peak is refined to sub-pixel
@@ -15,22 +15,23 @@ spread are not learnt: a UUV fading into turbid water as it dives would
 otherwise teach the template the water's noise.
 Images are block-averaged by an integer factor so the template keeps about
 ``work_px`` pixels across whatever the UUV's size: the cost per frame is nearly
-independent of resolution. The reported pixel is the init ``point`` (default:
+independent of resolution. The reported pixel is the start ``point`` (default:
 the box centre), carried along as the vehicle moves and turns.
 
-Loss: a peak below ``ok_score`` (or ``level_drop`` below the recent level), or
-outside the predicted window, or a matched patch with less than ``min_contrast``
-of the first appearance's grey-level spread (the UUV has dived out of sight: NCC
-alone would match the water's noise), means the UUV is not where it should be:
-status ``lost``, no position. While lost, a candidate is searched every ``search_every``
-frames (every ``search_every_long`` once lost ``long_loss_frames``) in a window that
-grows with the prediction's uncertainty (the whole frame without a prediction), at
-``reacquire_headings`` headings refined by turn steps (a wide window is searched
-block-averaged first, and its best places again at working resolution);
-a candidate is then followed frame by frame, and the track resumes only after
-``reacquire_frames`` consecutive matches above ``reacquire_score`` (and near the
-recent level, with ``min_contrast``) that move as the camera motion predicts, so a hidden UUV is not
-replaced by a look-alike patch of seafloor.
+What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Target`'s):
+
+- :meth:`~TemplateMatcher.follow`: a peak of at least ``ok_score`` (and no more than
+  ``level_drop`` below the recent level), inside the predicted window, on a patch with
+  at least ``min_contrast`` of the first appearance's grey-level spread (a UUV that has
+  dived out of sight would otherwise leave NCC matching the water's noise).
+- :meth:`~TemplateMatcher.search`: the best match over ``reacquire_headings`` headings
+  (refined by turn steps) in a window that grows with the prediction's uncertainty
+  (the whole frame without a prediction; a wide window is searched block-averaged
+  first, and its best places again at working resolution), with at least
+  ``reacquire_score`` (and within ``reacquire_below_level`` of the recent level) and
+  ``min_contrast``.
+- :meth:`~TemplateMatcher.confirm`: the same bar within ``reacquire_tolerance``
+  template sides of where the candidate is expected.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from . import Prediction, TrackResult
+from . import Match, Prediction
 from .opencv import check_box
 
 
@@ -64,12 +65,8 @@ class TemplateParams:
     default_radius_px: float = 40.0  # window half-size without a prediction while tracking
     reacquire_score: float = 0.7
     reacquire_below_level: float = 0.15  # re-acquisition also needs a score within this of the level
-    reacquire_frames: int = 3
     reacquire_tolerance: float = 0.3  # agreement between consecutive matches, in template sides
     reacquire_headings: int = 8  # headings tried while lost (then refined by turn steps)
-    search_every: int = 2  # while lost with no candidate, search every this many frames...
-    long_loss_frames: int = 60  # ... and once lost this many frames (2 s at 30 fps), ...
-    search_every_long: int = 6  # ... every this many
     scale_step: float = 0.01  # re-scale the template when the predicted size changes by more than this
     coarse_side: int = 96  # windows wider than this (working pixels) are searched block-averaged first
     coarse_px: int = 8  # ... with the template about this many blocks across
@@ -101,19 +98,18 @@ def _warp(src: np.ndarray, centre, angle_deg: float, scale: float, side: int) ->
                           borderMode=cv2.BORDER_REPLICATE)
 
 
-class TemplateTracker:
+class TemplateMatcher:
     """Rotating, scaling NCC template steered by the telemetry's :class:`Prediction` (optional)."""
 
     def __init__(self, params: TemplateParams | None = None):
         self.p = params or TemplateParams()
-        self._ready = False
         self._grey = None  # (bx0, by0, blocks): the largest area of the current frame converted (see _blocks)
 
     # -- images at working resolution ------------------------------------------------------
     def _blocks(self, frame_bgr, bx0: int, by0: int, bw: int, bh: int) -> np.ndarray:
         """Grey blocks [bx0, bx0 + bw) × [by0, by0 + bh) of k×k pixels (clipped to the frame): float32, read-only.
 
-        Within one :meth:`update`, blocks inside the largest area converted so far
+        Within one frame, blocks inside the largest area converted so far
         are a view of it: a frame is converted once, not once per look.
         """
         k = self.k
@@ -183,14 +179,14 @@ class TemplateTracker:
         return self._cache[key]
 
     # -- setup -----------------------------------------------------------------------------
-    def init(self, frame_bgr, box, prediction: Prediction | None = None, point=None) -> None:
+    def start(self, frame_bgr, box, point=None, px_per_m: float = float("nan")) -> None:
         x, y, w, h = check_box(frame_bgr, box)
         self.k = max(1, round(max(w, h) / self.p.work_px))
         self.S = math.ceil(max(w, h) / self.k) | 1  # matching template side (odd)
         self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
         self._grey = None
         self._angle, self._scale = 0.0, 1.0
-        self._ref_px_per_m = prediction.px_per_m if prediction is not None else float("nan")
+        self._ref_px_per_m = px_per_m
         self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
         self._cache: dict = {}
         self._canon = self._upright(frame_bgr, self.u, self.v)
@@ -200,17 +196,18 @@ class TemplateTracker:
         self._velocity = (0.0, 0.0)
         self._level = 1.0
         self._frames = 0
-        self._lost_frames = 0
-        self._tracking = True
-        self._hits: list[tuple[float, float, float, float]] = []  # u, v, predicted u, v
-        self._ready = True
 
-    def _rescale(self, prediction: Prediction | None) -> None:
-        """Follow the predicted apparent size relative to that at init (in steps of ``scale_step``)."""
-        if prediction is not None and self._ref_px_per_m > 0 and prediction.px_per_m > 0:
-            scale = prediction.px_per_m / self._ref_px_per_m
-            if abs(scale / self._scale - 1.0) > self.p.scale_step:
-                self._scale = scale
+    def _begin(self, prediction: Prediction | None) -> None:
+        """A new frame: follow the predicted apparent size relative to that at start (in steps of
+        ``scale_step``; without a scale at start, the first prediction's is the reference)."""
+        self._grey = None
+        if prediction is None or not prediction.px_per_m > 0:
+            return
+        if not self._ref_px_per_m > 0:
+            self._ref_px_per_m = prediction.px_per_m / self._scale
+        scale = prediction.px_per_m / self._ref_px_per_m
+        if abs(scale / self._scale - 1.0) > self.p.scale_step:
+            self._scale = scale
 
     # -- matching ----------------------------------------------------------------------------
     def _region(self, frame_bgr, cu: float, cv_: float, radius_px: float, side: int):
@@ -308,7 +305,7 @@ class TemplateTracker:
         """Blend the upright patch into the template, then hold the template on its first appearance.
 
         Each blend may be off by a fraction of a pixel; summed, that would slide the
-        template off the vehicle. The learnt template's offset from the init
+        template off the vehicle. The learnt template's offset from the first
         template is measured and undone whenever it exceeds ``recentre_px``.
         """
         patch = self._upright(frame_bgr, u, v)
@@ -327,13 +324,6 @@ class TemplateTracker:
                                          borderMode=cv2.BORDER_REPLICATE)
 
     # -- per frame ---------------------------------------------------------------------------
-    def update(self, frame_bgr, prediction: Prediction | None = None) -> TrackResult:
-        if not self._ready:
-            return TrackResult("not_initialized")
-        self._rescale(prediction)
-        self._grey = None  # a new frame
-        return self._follow(frame_bgr, prediction) if self._tracking else self._reacquire(frame_bgr, prediction)
-
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
         if prediction is None or not math.isfinite(prediction.sigma_px):
             return fallback
@@ -343,18 +333,13 @@ class TemplateTracker:
         """Whether the patch at (u, v) stands out of the water: at least ``min_contrast`` (see :meth:`_contrast`)."""
         return self._contrast(frame_bgr, u, v) >= self.p.min_contrast
 
-    def _result(self, u: float, v: float, score: float) -> TrackResult:
+    def _match(self, found: bool, score: float, u: float, v: float) -> Match:
         side = round(self.S * self.k * self._scale)
-        box = (round(u - (side - 1) / 2.0), round(v - (side - 1) / 2.0), side, side)
-        return TrackResult("ok", u, v, box, max(0.0, score))
+        box = (round(u - (side - 1) / 2.0), round(v - (side - 1) / 2.0), side, side) if found else None
+        return Match(found, score, u, v, box)
 
-    def _lose(self, score: float) -> TrackResult:
-        self._tracking = False
-        self._hits = []
-        self._lost_frames = -1  # search on the next frame, then every search_every frames
-        return TrackResult("lost", confidence=max(0.0, score))
-
-    def _follow(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
+    def follow(self, frame_bgr, prediction: Prediction | None) -> Match:
+        self._begin(prediction)
         if prediction is not None:
             cu, cv_ = prediction.u, prediction.v
         else:
@@ -368,46 +353,34 @@ class TemplateTracker:
             score, u, v = self._refine(frame_bgr, (score, u, v))
         floor = max(self.p.ok_score, self._level - self.p.level_drop)
         if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k and self._visible(frame_bgr, u, v)):
-            return self._lose(score)
+            return self._match(False, score, u, v)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v = u, v
         self._level += 0.1 * (score - self._level)
         if score >= self.p.update_score and slow_step:
             self._learn(frame_bgr, u, v)
-        return self._result(u, v, score)
+        return self._match(True, score, u, v)
 
-    def _reacquire(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
-        """While lost: find a candidate anywhere the UUV may be, then follow it until it has proved itself."""
-        pu, pv = (prediction.u, prediction.v) if prediction is not None else (0.0, 0.0)
-        tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
-        if self._hits:
-            # the candidate must move as the prediction moved (camera motion), within tol
-            lu, lv, lpu, lpv = self._hits[-1]
-            self._prepare(frame_bgr, lu + pu - lpu, lv + pv - lpv, tol)
-            score, u, v, _ = self._search(frame_bgr, lu + pu - lpu, lv + pv - lpv, tol, (self._angle,))
-            if score >= self.p.ok_score:
-                score, u, v = self._refine(frame_bgr, (score, u, v))
-        else:
-            self._lost_frames += 1
-            long_loss = self._lost_frames >= self.p.long_loss_frames
-            if self._lost_frames % (self.p.search_every_long if long_loss else self.p.search_every):
-                return TrackResult("lost")
-            score, u, v = self._candidate(frame_bgr, prediction)
+    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float) -> Match:
         need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
-        if not (score >= need and self._visible(frame_bgr, u, v)):
-            self._hits = []
-            return TrackResult("lost", confidence=max(0.0, score))
-        self._hits.append((u, v, pu, pv))
-        if len(self._hits) < self.p.reacquire_frames:
-            return TrackResult("lost", confidence=score)
-        self._tracking = True
-        self._hits = []
-        self._velocity = (0.0, 0.0)
-        self.u, self.v = u, v
-        return self._result(u, v, score)
+        return self._match(bool(score >= need and self._visible(frame_bgr, u, v)), score, u, v)
 
-    def _candidate(self, frame_bgr, prediction: Prediction | None):
-        """Best match over every heading in the prediction's window (the whole frame without one): (score, u, v)."""
+    def confirm(self, frame_bgr, u: float, v: float, prediction: Prediction | None) -> Match:
+        self._begin(prediction)
+        tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
+        self._prepare(frame_bgr, u, v, tol)
+        score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,))
+        if score >= self.p.ok_score:
+            score, u, v = self._refine(frame_bgr, (score, u, v))
+        return self._candidate_passes(frame_bgr, score, u, v)
+
+    def resume(self, match: Match) -> None:
+        self._velocity = (0.0, 0.0)
+        self.u, self.v = match.u, match.v
+
+    def search(self, frame_bgr, prediction: Prediction | None) -> Match:
+        """Best match over every heading in the prediction's window (the whole frame without one)."""
+        self._begin(prediction)
         H, W = frame_bgr.shape[:2]
         if prediction is not None and math.isfinite(prediction.sigma_px):
             cu, cv_, radius = prediction.u, prediction.v, self._radius(prediction, float(max(W, H)))
@@ -417,9 +390,9 @@ class TemplateTracker:
         angles = [self._angle + 360.0 * m / n for m in range(n)]
         score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles)
         if score < self.p.ok_score:  # not even a candidate (headings are coarse here: refined below)
-            return score, u, v
+            return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
         if score < self.p.reacquire_score:
             self._angle = saved
-        return score, u, v
+        return self._candidate_passes(frame_bgr, score, u, v)

@@ -1,0 +1,260 @@
+"""One tracking session: a target's life with the telemetry, the same for ``process``, ``run`` and the operator.
+
+:class:`TrackingSession` owns a :class:`~localizer.tracking.target.Target` (the
+state machine in the image) and gives it, frame by frame, what the telemetry says.
+Every call takes the frame's image and its :class:`~localizer.pose.CameraPose`
+(``pose`` with the frame at index ``i``: a batch offline, one frame live), computed
+once by the caller and shared with the geometry.
+
+- :meth:`~TrackingSession.select`: the operator's box, or a click (the object
+  outlined there by :func:`~localizer.tracking.detect.detect`, at the size the
+  pose gives), on that frame; tracking starts there at once. The tracked pixel is
+  the top face's centre (:func:`~localizer.tracking.predict.top_face_pixel`).
+- :meth:`~TrackingSession.step`: the next frame. Its prediction is the UUV's last
+  sighting moved by what the camera did since: the sighting is located (an *anchor*,
+  re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
+  pose, and shifted by the residual between the sighting's pixel and the anchor's
+  projection there (:func:`~localizer.tracking.predict.follow`). Projections are
+  made for up to :data:`REANCHOR_FRAMES` frames of the pose batch at once.
+- While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
+  every ``search_every`` frames the prior is projected into the frame at the UUV's
+  depth and the window its uncertainty spans is searched for a vehicle-sized object
+  (:func:`~localizer.tracking.detect.detect`); a candidate is confirmed like a
+  re-acquisition, moving as the camera moves, before any ``ok`` frame.
+- :meth:`~TrackingSession.release` and :meth:`~TrackingSession.acquire`: let go; await
+  a target again.
+
+Pure: no I/O, no clock; a frame's time is its pose's ``t_unix``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..calibration import Calibration
+from ..fix import locate
+from ..pose import CameraPose, take
+from . import Prediction, TrackResult, make_matcher
+from .detect import DetectParams, detect
+from .predict import BASE_SIGMA_M, follow, prediction_at, project_uuv, top_face_pixel
+from .target import Target, TargetParams, TargetState
+
+#: A sighting's located position is reused for the predictions of this many frames, then located afresh.
+REANCHOR_FRAMES = 64
+#: A click asks for an object within this share of the vehicle's diagonal of it (the window's 3 sigma).
+CLICK_REACH = 1.0
+
+
+@dataclass(frozen=True)
+class Prior:
+    """Where the UUV says it is (its own estimate, or an operator's hint): WGS84 degrees and a 1-sigma in metres."""
+
+    lat: float
+    lon: float
+    sigma_m: float
+
+
+class SelectionError(ValueError):
+    """A selection that cannot be used; the message is one line naming the value."""
+
+
+@dataclass
+class _Sighting:
+    """The last frame the UUV was seen in: its pixel, the anchor's projection there, that frame's pose."""
+
+    t_unix: float
+    u: float
+    v: float
+    pu: float  # NaN without an anchor
+    pv: float
+    pose: CameraPose  # one frame
+
+
+class TrackingSession:
+    """A target's life, frame by frame (see the module doc); ``tracker`` names the matcher (ValueError if unknown)."""
+
+    def __init__(self, cal: Calibration, tracker: str = "default", target_params: TargetParams | None = None,
+                 detect_params: DetectParams | None = None):
+        make_matcher(tracker)  # fail early on an unknown name
+        self.cal = cal
+        self.tracker = tracker
+        self.target = Target(lambda: make_matcher(tracker), target_params)
+        self.detect_params = detect_params or DetectParams()
+        self.origin: str | None = None  # how the current target was chosen: "box", "click", "prior"
+        self.last = TrackResult("awaiting_target")
+        self._forget()
+        self._awaiting_frames = 0
+        self._noted_state = None
+        self.since_t = math.nan  # the first frame (t_unix) in the current state
+        self.frames_in_state = 0
+
+    @property
+    def state(self) -> TargetState:
+        return self.target.state
+
+    # -- the operator's commands ------------------------------------------------------------------
+    def select(self, frame_bgr, pose: CameraPose, i: int = 0, *, box=None, point=None) -> TrackResult:
+        """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of this frame, from now on.
+
+        Raises :class:`SelectionError` (and changes nothing) for a box outside the
+        frame, or a click with no object standing out near it or without a pose.
+        """
+        if (box is None) == (point is None):
+            raise SelectionError("give either a box [x, y, w, h] or a point [u, v]")
+        given = box if box is not None else point
+        if not all(math.isfinite(c) for c in given):
+            raise SelectionError(f"{'box' if box is not None else 'point'} {list(given)}: expected finite pixels")
+        one = take(pose, [i])
+        if point is not None:
+            box = self._outline_click(frame_bgr, one, point)
+        x, y, w, h = box
+        cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
+        centre = (float(cu[0]), float(cv_[0]))
+        anchor, px_per_m = self._locate(one, centre)
+        try:
+            result = self.target.select(frame_bgr, box, centre, px_per_m)
+        except ValueError as e:
+            raise SelectionError(str(e)) from None
+        self._start(one, centre, anchor)
+        self.origin = "click" if point is not None else "box"
+        self._note(float(one.t_unix[0]), result)
+        return result
+
+    def release(self) -> None:
+        """Let go of the target: every frame is ``released`` until a new selection or :meth:`acquire`."""
+        self.target.release()
+        self._forget()
+
+    def acquire(self) -> None:
+        """Drop the target and await one: a selection, or automatic acquisition from a prior."""
+        self.target.acquire()
+        self._forget()
+
+    # -- per frame ----------------------------------------------------------------------------------
+    def step(self, frame_bgr, pose: CameraPose, i: int = 0, prior: Prior | None = None) -> TrackResult:
+        """The UUV in the next frame (``pose``'s frame ``i``); ``prior`` is used while awaiting a target."""
+        if self.target.state is TargetState.AWAITING_TARGET:
+            result = self._acquire(frame_bgr, pose, i, prior) if prior is not None else TrackResult("awaiting_target")
+        else:
+            result = self.target.update(frame_bgr, self._predict(pose, i))
+            if result.ok:
+                self._saw(pose, i, result.u, result.v)
+            elif self.target.state is TargetState.AWAITING_TARGET:
+                self._forget()  # a candidate that did not confirm
+        self._note(float(pose.t_unix[i]), result)
+        return result
+
+    def status(self) -> dict:
+        """JSON-ready: state, how the target was chosen, since when, and the last frame's result."""
+        r = self.last
+        seen = self._seen
+
+        def num(x):
+            return round(float(x), 3) if math.isfinite(x) else None
+
+        return {"state": self.state.value, "tracker": self.tracker, "origin": self.origin,
+                "since_t": num(self.since_t), "frames_in_state": self.frames_in_state, "status": r.status,
+                "u": num(r.u), "v": num(r.v), "box": list(r.box) if r.box else None, "confidence": num(r.confidence),
+                "seen_t": num(seen.t_unix) if seen else None}
+
+    # -- internals ----------------------------------------------------------------------------------
+    def _note(self, t_unix: float, result: TrackResult) -> None:
+        self.last = result
+        if self.state is not self._noted_state:
+            self._noted_state, self.since_t, self.frames_in_state = self.state, t_unix, 0
+        self.frames_in_state += 1
+
+    def _forget(self) -> None:
+        self._seen: _Sighting | None = None
+        self._anchor: tuple[float, float] | None = None  # lat, lon of a sighting
+        self._anchor_age = 0  # frames predicted from it
+        self._anchor_tried: _Sighting | None = None  # the sighting last located
+        self._proj: tuple[CameraPose, int, np.ndarray] | None = None  # anchor projected: pose, first index, (n, 3)
+
+    def _locate(self, one: CameraPose, point) -> tuple[tuple[float, float] | None, float]:
+        """The pixel's position at the UUV's depth and the image scale there: ``((lat, lon) or None, px_per_m)``."""
+        fix = locate(self.cal, one, [point[0]], [point[1]])
+        if fix.status[0] != "ok":
+            return None, math.nan
+        _, _, px_per_m = project_uuv(self.cal, one, fix.lat[0], fix.lon[0])
+        return (float(fix.lat[0]), float(fix.lon[0])), float(px_per_m[0])
+
+    def _start(self, one: CameraPose, point, anchor) -> None:
+        """A new target seen at ``point`` in the one-frame pose ``one`` (located at ``anchor``, or None)."""
+        self._forget()
+        pu, pv = point if anchor is not None else (math.nan, math.nan)
+        self._seen = _Sighting(float(one.t_unix[0]), point[0], point[1], pu, pv, one)
+        self._anchor, self._anchor_tried = anchor, self._seen
+
+    def _saw(self, pose: CameraPose, i: int, u: float, v: float) -> None:
+        proj = self._projection(pose, i)
+        pu, pv = (proj[0], proj[1]) if proj is not None else (math.nan, math.nan)
+        self._seen = _Sighting(float(pose.t_unix[i]), u, v, pu, pv, take(pose, [i]))
+
+    def _predict(self, pose: CameraPose, i: int) -> Prediction | None:
+        seen = self._seen
+        if seen is None:
+            return None
+        self._anchor_age += 1
+        if (self._anchor is None or self._anchor_age > REANCHOR_FRAMES) and seen is not self._anchor_tried:
+            self._anchor_tried = seen
+            anchor, _ = self._locate(seen.pose, (seen.u, seen.v))
+            if anchor is not None:
+                self._anchor, self._anchor_age, self._proj = anchor, 1, None
+                seen.pu, seen.pv = seen.u, seen.v  # the anchor is where this pixel is
+        proj = self._projection(pose, i)
+        if proj is None:
+            return None
+        return follow(proj, (seen.pu, seen.pv), (seen.u, seen.v), float(pose.t_unix[i]) - seen.t_unix)
+
+    def _projection(self, pose: CameraPose, i: int):
+        """``(u, v, px_per_m)`` of the anchor in the pose's frame ``i`` (None without an anchor)."""
+        if self._anchor is None:
+            return None
+        cached = self._proj
+        if cached is not None and cached[0] is pose and cached[1] <= i < cached[1] + len(cached[2]):
+            return cached[2][i - cached[1]]
+        ahead = take(pose, slice(i, min(i + REANCHOR_FRAMES, len(pose.t_unix))))
+        u, v, px_per_m = project_uuv(self.cal, ahead, *self._anchor)
+        self._proj = (pose, i, np.stack([u, v, px_per_m], axis=-1))
+        return self._proj[2][0]
+
+    def _outline_click(self, frame_bgr, one: CameraPose, point) -> tuple[int, int, int, int]:
+        u, v = float(point[0]), float(point[1])
+        _, px_per_m = self._locate(one, (u, v))
+        if not px_per_m > 0:
+            why = (f"no camera pose at that frame ({one.status[0]}) to size the vehicle" if one.status[0] != "ok"
+                   else f"{locate(self.cal, one, [u], [v]).status[0]}: not a place on the water in the image")
+            raise SelectionError(f"point [{u:g}, {v:g}]: {why}; select with a box")
+        guess = prediction_at(u, v, px_per_m, 0.0)
+        reach = CLICK_REACH * math.hypot(guess.width_px, guess.height_px) / self.detect_params.search_sigmas
+        found = detect(frame_bgr, Prediction(u, v, guess.width_px, guess.height_px, reach, px_per_m),
+                       self.detect_params)
+        if found is None:
+            raise SelectionError(f"point [{u:g}, {v:g}]: no vehicle-sized object stands out there; "
+                                 "select with a box")
+        return found.box
+
+    def _acquire(self, frame_bgr, pose: CameraPose, i: int, prior: Prior) -> TrackResult:
+        """Awaiting a target, with the UUV's own estimate: search near it for a candidate to confirm."""
+        self._awaiting_frames += 1
+        if (self._awaiting_frames - 1) % self.target.p.search_every:
+            return TrackResult("awaiting_target")
+        one = take(pose, [i])
+        u, v, px_per_m = project_uuv(self.cal, one, prior.lat, prior.lon)
+        near_prior = prediction_at(u[0], v[0], px_per_m[0], prior.sigma_m)
+        found = detect(frame_bgr, near_prior, self.detect_params) if near_prior is not None else None
+        if found is None:
+            return TrackResult("awaiting_target")
+        cu, cv_ = top_face_pixel(self.cal, one, [found.u], [found.v])
+        centre = (float(cu[0]), float(cv_[0]))
+        anchor, scale = self._locate(one, centre)
+        if anchor is None:
+            return TrackResult("awaiting_target")
+        self._start(one, centre, anchor)
+        self.origin = "prior"
+        here = prediction_at(centre[0], centre[1], scale, BASE_SIGMA_M)
+        return self.target.propose(frame_bgr, found.box, centre, scale, here)
