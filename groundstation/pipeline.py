@@ -60,11 +60,13 @@ MAX_HELD = 300
 
 @dataclass(frozen=True)
 class FrameInfo:
-    """Timing of one processed frame (UNIX seconds): when it arrived and when its fix was ready."""
+    """One processed frame beside its fix: when it arrived and when its fix was ready (UNIX seconds), and
+    the tracker's box (x, y, w, h) around the UUV in it, when it has one."""
 
     index: int
     t_recv: float
     t_fix: float
+    box: tuple[int, int, int, int] | None = None
 
 
 @dataclass
@@ -270,10 +272,10 @@ class Pipeline:
                     continue
                 item.pose, item.early = camera_pose(self.cal, self.tel, item.frame.t_unix), False
             self._tracked.popleft()
-            self._emit(item.frame, self._locate(item))
+            self._emit(item.frame, self._locate(item), item.result.box)
 
-    def _emit(self, frame: LiveFrame, fix: Fix) -> None:
-        info = FrameInfo(frame.index, frame.t_recv, time.time())
+    def _emit(self, frame: LiveFrame, fix: Fix, box=None) -> None:
+        info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None)
         self.processed += 1
         self.statuses[fix.status] += 1
         if fix.status != self.last_status:

@@ -143,6 +143,13 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
     no_fix = [g for g in gps if g["fix_type"] != 3]
     assert all(g["fix_type"] == 1 and g["ignore_flags"] == 255 for g in no_fix)
 
-    # The recording is a session that loads
+    # The recording is a session that loads, and that skyfix process tracks from where the live run started
     rec = load_session(record)
     assert len(rec.telemetry.attitude) > 100 and rec.frames is not None and len(rec.frames["t"]) > 0.8 * n_frames
+    assert rec.calibration.init_t == ok[0]["t"]  # the live run's first fix, not the calibration file's init_t
+    for use_track in (True, False):
+        fixes = process_session(rec, use_track=use_track)
+        good = fixes.status == "ok"
+        assert good.sum() >= 0.8 * len(ok), (use_track, good.sum())
+        err = truth_errors_m(SESSION, fixes.t_unix[good] - shift, fixes.lat[good], fixes.lon[good])
+        assert err.mean() <= 0.1, (use_track, err.mean())

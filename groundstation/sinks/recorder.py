@@ -1,10 +1,13 @@
 """``--record DIR``: the live run written as a session directory (format v1) as it goes.
 
-``session.toml`` (version 1 and the calibration's tables) is written first;
+``session.toml`` (version 1 and the calibration's tables) is written first, and
+again with ``[tracker] init_bbox``/``init_t`` at the first fix: the tracker's box on
+that frame, so ``skyfix process`` starts the tracker where the live run had it;
 ``uav.tlog`` gets every good MAVLink frame from the UAV with its receive time,
 ``depth.jsonl`` every accepted depth sample (``t`` the UUV's own stamp, or the
 arrival minus the depth latency when the source has none, and ``t_recv`` its
-arrival on the station clock), ``positions.csv`` every fix, and
+arrival on the station clock), ``positions.csv`` every fix, ``track.csv`` the
+tracked pixel of every frame (empty when there is no fix), and
 ``video.ts`` + ``video_frames.csv`` the received frames (raw frames piped into an
 ``ffmpeg`` process encoding H.264 into MPEG-TS, with wall-clock timestamps so a
 replay keeps the real pacing). Every file is append-only and flushed at least
@@ -20,6 +23,7 @@ import asyncio
 import csv
 import json
 import logging
+import os
 import queue
 import struct
 import subprocess
@@ -124,8 +128,13 @@ class Recorder:
             self.dir.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise OSError(f"--record {directory}: cannot create it: {e.strerror}") from None
-        calibration = tomllib.loads(Path(cal_source).read_text())
-        (self.dir / "session.toml").write_text(session_toml(calibration))
+        # [tracker] is the live run's own: the first frame the target was tracked on (see on_fix), not the
+        # calibration file's, whose init_t belongs to another recording
+        self._calibration = {k: v for k, v in tomllib.loads(Path(cal_source).read_text()).items() if k != "tracker"}
+        self._write_toml()
+        self._track = open(self.dir / "track.csv", "a", newline="")  # noqa: SIM115
+        self._track_csv = csv.writer(self._track)
+        self._track_csv.writerow(("t", "u", "v"))
         # append-only files, open for the whole run and closed when the worker ends
         self._tlog = open(self.dir / "uav.tlog", "ab")  # noqa: SIM115
         self._depth = open(self.dir / "depth.jsonl", "a")  # noqa: SIM115
@@ -152,12 +161,23 @@ class Recorder:
         """A received frame (of the ``video_size`` given at the start)."""
         self._video.put(frame.t_unix, frame.image)
 
+    def _write_toml(self) -> None:
+        """session.toml, replaced atomically."""
+        tmp = self.dir / "session.toml.partial"
+        tmp.write_text(session_toml(self._calibration))
+        os.replace(tmp, self.dir / "session.toml")
+
     def on_fix(self, fix: Fix, info) -> None:
         self._pos_csv.writerow(format_row(fix))
+        ok = fix.ok
+        self._track_csv.writerow((f"{fix.t_unix:.6f}", f"{fix.u:.3f}" if ok else "", f"{fix.v:.3f}" if ok else ""))
+        if ok and "tracker" not in self._calibration and getattr(info, "box", None) is not None:
+            self._calibration["tracker"] = {"init_bbox": list(info.box), "init_t": fix.t_unix}
+            self._write_toml()
         self.fixes += 1
 
     def flush(self) -> None:
-        for f in (self._tlog, self._depth, self._positions):
+        for f in (self._tlog, self._depth, self._positions, self._track):
             f.flush()
         if self._video:
             self._video.flush()
@@ -171,7 +191,7 @@ class Recorder:
             self.flush()
             if self._video:
                 await asyncio.to_thread(self._video.close)
-            for f in (self._tlog, self._depth, self._positions):
+            for f in (self._tlog, self._depth, self._positions, self._track):
                 f.close()
 
     def status(self) -> dict:
