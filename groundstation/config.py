@@ -39,6 +39,9 @@ class RunConfig:
     gps_input: str | None = None  # the UUV autopilot: pymavlink string, or "zenoh:mavlink/in" (BlueOS)
     gps_input_hz: float = 10.0
     fix_max_age_ms: float = 500.0  # an ok fix older than this goes out as "no fix"
+    gps_input_signing_key: str | None = None  # file with the 32-byte MAVLink 2 signing key of the GPS_INPUT link
+    uuv_max_speed_mps: float = 1.5  # safety gate: fixes further apart than this speed allows are not sent
+    fix_max_h_acc_m: float = 2.5  # safety gate: fixes less accurate than this are not sent
     tracker: str = "default"
     record: str | None = None
     duration_s: float | None = None  # stop after this many seconds (tests, benchmarks)
@@ -46,7 +49,7 @@ class RunConfig:
 
 
 CHOICES = {"mavlink_backend": ("pymavlink", "mavsdk"), "depth_source": ("skyfix", "blueos")}
-_PATHS = ("calibration", "zenoh_config", "record", "stats")
+_PATHS = ("calibration", "zenoh_config", "record", "stats", "gps_input_signing_key")
 _HELP = {
     "calibration": "TOML with the [camera], [mount], [water], [tracker] tables of session.toml v1",
     "mavlink": "the UAV's MAVLink, e.g. udpin:0.0.0.0:14550, tcp:host:port, /dev/ttyUSB0",
@@ -67,6 +70,9 @@ _HELP = {
     "gps_input": "UUV autopilot for GPS_INPUT: pymavlink string (udpout:192.168.2.2:14550) or zenoh:mavlink/in",
     "gps_input_hz": "minimum GPS_INPUT rate (Hz); each new fix is also sent at once",
     "fix_max_age_ms": "a fix older than this is sent to the autopilot as 'no fix'",
+    "gps_input_signing_key": "sign GPS_INPUT (MAVLink 2) with the key in this file: 32 bytes, or 64 hex digits",
+    "uuv_max_speed_mps": "the UUV's top speed (default 1.5, a BlueROV2): a fix jumping further is not sent",
+    "fix_max_h_acc_m": "a fix whose horizontal accuracy is worse than this (m) is not sent as valid",
     "tracker": "tracker backend name",
     "record": "record the run as a session directory (format v1)",
     "duration_s": "stop after this many seconds",
@@ -145,6 +151,12 @@ def run_config(args: argparse.Namespace) -> RunConfig:
         raise ConfigError("options", "--record", cfg.record, "recording needs --mavlink-backend pymavlink")
     if not cfg.gps_input_hz >= 5.0:
         raise ConfigError("options", "--gps-input-hz", cfg.gps_input_hz, "ArduPilot needs ≥ 5 Hz")
+    for name in ("uuv_max_speed_mps", "fix_max_h_acc_m", "fix_max_age_ms"):
+        if not getattr(cfg, name) > 0.0:
+            raise ConfigError("options", "--" + name.replace("_", "-"), getattr(cfg, name), "expected > 0")
+    if cfg.gps_input_signing_key and (not cfg.gps_input or cfg.gps_input.startswith("zenoh:")):
+        raise ConfigError("options", "--gps-input-signing-key", cfg.gps_input_signing_key,
+                          "signing needs a MAVLink --gps-input link (not zenoh:)")
     if not 0.0 <= cfg.telemetry_wait_ms <= 2000.0:
         raise ConfigError("options", "--telemetry-wait-ms", cfg.telemetry_wait_ms, "expected 0 … 2000")
     return cfg
