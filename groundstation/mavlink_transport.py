@@ -13,7 +13,8 @@ strings are pymavlink's:
 - ``DEVICE`` or ``DEVICE,BAUD`` a serial port (default 115200 baud).
 
 :func:`open_transport` opens one (or raises :class:`OSError`, ``EINVAL`` for a malformed string); a
-transport's ``read()`` returns what is there (``b""``: nothing yet), ``write(buf)``
+transport's ``read()`` returns what is there (``b""``: nothing yet; one datagram at a time where
+``datagrams`` is true, so that a frame is never taken to continue in the next), ``write(buf)``
 sends all of it or raises (a write that cannot finish in :data:`WRITE_TIMEOUT_S` is a
 failure: a serial port or TCP peer that stopped reading), ``close()`` may be called twice.
 The end of a TCP connection is :class:`ConnectionResetError`. None of them retries:
@@ -65,6 +66,8 @@ def _host_port(url: str, rest: str) -> tuple[str, int]:
 class TcpClient:
     """``tcp:HOST:PORT``."""
 
+    datagrams = False
+
     def __init__(self, url: str, addr: tuple[str, int]):
         self.url = url
         self.sock = socket.create_connection(addr, timeout=CONNECT_TIMEOUT_S)
@@ -87,6 +90,8 @@ class TcpClient:
 
 class TcpServer:
     """``tcpin:HOST:PORT``: the newest client is the peer; its end returns the transport to listening."""
+
+    datagrams = False
 
     def __init__(self, url: str, addr: tuple[str, int]):
         self.url = url
@@ -138,7 +143,10 @@ class TcpServer:
 
 
 class Udp:
-    """``udpout:`` (a fixed destination) or ``udpin:``/``udp:`` (bound; answers the last sender)."""
+    """``udpout:`` (a fixed destination) or ``udpin:``/``udp:`` (bound; answers the sender the caller names
+    with :meth:`answer_last_sender`: the last one whose datagram held its peer's messages)."""
+
+    datagrams = True
 
     def __init__(self, url: str, addr: tuple[str, int], listen: bool):
         self.url = url
@@ -151,6 +159,7 @@ class Udp:
         else:
             self.dest = (socket.gethostbyname(addr[0]), addr[1])
         self.listen = listen
+        self.last_from: tuple[str, int] | None = None
 
     @property
     def peer_known(self) -> bool:
@@ -164,9 +173,12 @@ class Udp:
             data, addr = self.sock.recvfrom(_READ_MAX)
         except (BlockingIOError, ConnectionRefusedError):  # ICMP port unreachable of an earlier datagram
             return b""
-        if self.listen:
-            self.dest = addr
+        self.last_from = addr
         return data
+
+    def answer_last_sender(self) -> None:
+        if self.listen:
+            self.dest = self.last_from
 
     def write(self, buf: bytes) -> None:
         if self.dest is not None:
@@ -180,6 +192,7 @@ class Serial:
     """``DEVICE[,BAUD]`` through pyserial."""
 
     peer_known = True
+    datagrams = False
 
     def __init__(self, url: str, device: str, baud: int):
         import serial

@@ -28,9 +28,9 @@ from localizer.fix_gate import FixGate
 from localizer.telemetry import Telemetry
 
 from . import config
+from .mavlink_link import read_signing_key
 from .pipeline import Pipeline
-from .sinks.gps_input import GpsInputSink
-from .sinks.mavlink_link import MavlinkLink, read_signing_key
+from .sinks.gps_input import GpsInputSink, mavlink_gps_link
 from .sinks.recorder import Recorder
 from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from .sinks.zenoh_mavlink import ZenohMavlinkIn
@@ -83,7 +83,7 @@ async def serve(cfg: config.RunConfig) -> dict:
         if cfg.gps_input:
             key = read_signing_key(cfg.gps_input_signing_key) if cfg.gps_input_signing_key else None
             link = (ZenohMavlinkIn(session, cfg.gps_input.removeprefix("zenoh:")) if cfg.gps_input.startswith("zenoh:")
-                    else MavlinkLink(cfg.gps_input, signing_key=key))
+                    else mavlink_gps_link(cfg.gps_input, signing_key=key))
             max_age_s = cfg.fix_max_age_ms / 1000.0
             gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s)
             gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)

@@ -10,8 +10,7 @@ import pytest
 from live_helpers import free_port
 
 from groundstation.mavlink_io import mavutil
-from groundstation.sinks.gps_input import GpsInputSink
-from groundstation.sinks.mavlink_link import MavlinkLink
+from groundstation.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from localizer.fix import Fix
 from localizer.fix_gate import CONFIRM, K_SIGMA, FixGate, distance_m
 
@@ -99,7 +98,7 @@ def test_gps_input_never_carries_a_rejected_fix():
     offered: list[tuple[Fix, bool]] = []  # (fix, whether it may go out)
 
     async def scenario() -> GpsInputSink:
-        sink = GpsInputSink(MavlinkLink(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
+        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
         task = asyncio.create_task(sink.run())
         t0 = time.time()
         plan = [(0.0, 0.3, True)] * 12 + [(9.0, 0.3, False)] + [(0.0, 0.3, True)] * 3 + [(0.0, 4.0, False)] \

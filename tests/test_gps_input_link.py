@@ -24,8 +24,8 @@ import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
 from groundstation.mavlink_io import mavutil
-from groundstation.sinks.gps_input import GpsInputSink
-from groundstation.sinks.mavlink_link import MavlinkLink, read_signing_key
+from groundstation.mavlink_link import MavlinkLink, read_signing_key
+from groundstation.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.zenoh_session import open_session
 from localizer.calibration import ConfigError
 from localizer.fix import Fix
@@ -165,7 +165,7 @@ def test_heartbeat_and_last_no_fix():
     port = free_port()
     rx = _receiver(port, None)
     try:
-        sink = asyncio.run(_run_sink(MavlinkLink(f"udpout:127.0.0.1:{port}"), 2.5, fixes=True))
+        sink = asyncio.run(_run_sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), 2.5, fixes=True))
         got = _collect(rx, 0.5)
     finally:
         rx.close()
@@ -188,7 +188,7 @@ def test_signing(tmp_path, sender_key):
     port = free_port()
     rx = _receiver(port, key)
     try:
-        asyncio.run(_run_sink(MavlinkLink(f"udpout:127.0.0.1:{port}", signing_key=sender), 1.0))
+        asyncio.run(_run_sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}", signing_key=sender), 1.0))
         got = _collect(rx, 0.3)
     finally:
         rx.close()

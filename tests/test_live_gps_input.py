@@ -10,8 +10,13 @@ import pytest
 from live_helpers import free_port
 
 from groundstation.mavlink_io import mavutil
-from groundstation.sinks.gps_input import IGNORE_ALL, GpsInputSink, gps_input_fields, gps_time
-from groundstation.sinks.mavlink_link import MavlinkLink
+from groundstation.sinks.gps_input import (
+    IGNORE_ALL,
+    GpsInputSink,
+    gps_input_fields,
+    gps_time,
+    mavlink_gps_link,
+)
 from localizer.fix import Fix
 
 
@@ -69,7 +74,7 @@ def test_sender_over_pymavlink_rate_fix_and_expiry():
     got = []
 
     async def scenario():
-        sink = GpsInputSink(MavlinkLink(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
+        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(1.0)  # no fix yet: no-fix messages at 10 Hz
         t_fix = time.time()
@@ -102,7 +107,7 @@ def test_tracker_loss_ends_the_fix_at_once():
     uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
 
     async def scenario():
-        sink = GpsInputSink(MavlinkLink(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=5.0)
+        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=5.0)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(0.3)
         t = time.time()

@@ -38,9 +38,10 @@ Stopping (:meth:`GpsInputSink.stop`, also on cancellation): one last no-fix mess
 the autopilot drops the position at once instead of after its 4 s timeout, then the
 link is closed.
 
-Links: :class:`~.mavlink_link.MavlinkLink` (system 245, component 220, its own
-pymavlink-framed link and thread, reconnecting, HEARTBEAT, optional signing; not
-MAVSDK, which sends to every link and reports success on failure), or
+Links: :func:`mavlink_gps_link` (system 245, component 220, a
+:class:`~groundstation.mavlink_link.MavlinkLink` with its own thread, reconnecting,
+HEARTBEAT, optional signing; not MAVSDK, which sends to every link and reports
+success on failure), or
 :class:`~.zenoh_mavlink.ZenohMavlinkIn` for ``zenoh:KEY`` (BlueOS's mavlink-server).
 """
 
@@ -55,8 +56,13 @@ from collections import deque
 from localizer.fix import Fix
 from localizer.fix_gate import FixGate
 
+from ..mavlink_io import mavutil
+from ..mavlink_link import MavlinkLink
+
 log = logging.getLogger("skyfix.gps_input")
 
+GPS_SYSID = 245  # the same system as skyfix's ground-station heartbeat on the UAV link
+GPS_COMPID = 220  # MAV_COMP_ID_GPS
 SATELLITES = 10
 UERE_M = 1.0
 GPS_EPOCH_UNIX = 315964800  # 1980-01-06T00:00:00Z
@@ -111,8 +117,20 @@ def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> d
             "satellites_visible": SATELLITES, "yaw": 0}
 
 
+def mavlink_gps_link(url: str, signing_key: bytes | None = None) -> MavlinkLink:
+    """GPS_INPUT's own MAVLink link: system 245, component 220, a HEARTBEAT as ``MAV_TYPE_ONBOARD_CONTROLLER``.
+
+    The HEARTBEAT (``MAV_AUTOPILOT_INVALID``: a component, neither a vehicle nor a ground station,
+    so it plays no part in ArduPilot's GCS failsafe) lets routers learn the route, and MAVProxy or
+    QGroundControl in between see a live component.
+    """
+    m = mavutil().mavlink
+    return MavlinkLink(url, GPS_SYSID, GPS_COMPID, name="GPS_INPUT link", signing_key=signing_key,
+                       heartbeat=(m.MAV_TYPE_ONBOARD_CONTROLLER, m.MAV_AUTOPILOT_INVALID))
+
+
 class GpsInputSink:
-    """Worker sending GPS_INPUT through ``link`` (:class:`~.mavlink_link.MavlinkLink` or
+    """Worker sending GPS_INPUT through ``link`` (:func:`mavlink_gps_link` or
     :class:`~.zenoh_mavlink.ZenohMavlinkIn`); ``ok`` fixes pass ``gate`` first (:mod:`localizer.fix_gate`).
 
     :meth:`stop` ends it cleanly: one last no-fix GPS_INPUT (so the autopilot drops the
@@ -172,7 +190,7 @@ class GpsInputSink:
         self._stopping = self._closed = True
         self._new.set()
         final = gps_input_fields(None, time.time(), self.max_age_s)
-        delivered = await asyncio.to_thread(self.link.close, final)
+        delivered = await asyncio.to_thread(self.link.close, ("GPS_INPUT", final))
         self.sent += 1
         self.not_delivered += not delivered
         log.info("GPS_INPUT %s: stopped; %s", self.link.url,
@@ -181,7 +199,7 @@ class GpsInputSink:
     def _send(self, fresh: bool) -> None:
         now = time.time()
         fields = gps_input_fields(self._last_ok, now, self.max_age_s)
-        delivered = self.link.send(fields)
+        delivered = self.link.send("GPS_INPUT", fields)
         t_sent = time.time()
         self.sent += 1
         self.not_delivered += not delivered

@@ -27,11 +27,14 @@ import time
 
 import zenoh
 
-from .mavlink_link import GPS_COMPID, GPS_SYSID, HEARTBEAT_PERIOD_S
+from ..mavlink_link import HEARTBEAT_PERIOD_S
+from .gps_input import GPS_COMPID, GPS_SYSID
 
 log = logging.getLogger("skyfix.gps_input")
 
 AUTOPILOT_HEARTBEAT_KEY = "mavlink/*/1/HEARTBEAT"
+#: Bitmask fields, which mavlink-server's JSON writes as ``{"bits": N}``.
+BITMASKS = {"GPS_INPUT": ("ignore_flags",)}
 HEARTBEAT = {"type": "HEARTBEAT", "custom_mode": 0, "mavtype": {"type": "MAV_TYPE_ONBOARD_CONTROLLER"},
              "autopilot": {"type": "MAV_AUTOPILOT_INVALID"}, "base_mode": {"bits": 0},
              "system_status": {"type": "MAV_STATE_ACTIVE"}, "mavlink_version": 3}
@@ -86,24 +89,25 @@ class ZenohMavlinkIn:
         if not self.matching:
             self.sent_unmatched += 1
 
-    def send(self, fields: dict) -> bool:
-        """Put one GPS_INPUT (and the HEARTBEAT when one is due); False when nobody is subscribed."""
+    def send(self, kind: str, fields: dict) -> bool:
+        """Put one ``kind`` message (and the HEARTBEAT when one is due); False when nobody is subscribed."""
         now = time.monotonic()
         if now >= self._next_beat:
             self._put(HEARTBEAT)
             self.heartbeats += 1
             self._next_beat = now + HEARTBEAT_PERIOD_S
-        self._put({"type": "GPS_INPUT", **fields, "ignore_flags": {"bits": fields["ignore_flags"]}})
+        bits = {name: {"bits": fields[name]} for name in BITMASKS.get(kind, ())}
+        self._put({"type": kind, **fields, **bits})
         self.written += 1
         return self.matching
 
-    def close(self, final: dict | None = None) -> bool:
-        """Put ``final`` (the last no-fix GPS_INPUT) if given, then undeclare; True if a subscriber matched.
+    def close(self, last: tuple[str, dict] | None = None) -> bool:
+        """Put ``last`` ``(kind, fields)`` if given, then undeclare; True if a subscriber matched.
 
         May be called twice."""
         if self._pub is None:
             return False
-        delivered = final is not None and self.send(final)
+        delivered = last is not None and self.send(*last)
         self._sub.undeclare()
         self._listener.undeclare()
         self._pub.undeclare()
