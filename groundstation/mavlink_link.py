@@ -9,7 +9,7 @@ closes the transport and opens it again with back-off (:data:`BACKOFF_S`, doubli
 second). Nothing else opens, writes or closes the transport.
 
 Reading: every message, BAD_DATA included, goes to ``on_message(msg, t_recv_unix)`` on the
-link's thread. A UDP datagram is parsed on its own: bytes of a frame it leaves unfinished
+link's thread; a message id no dialect knows (pymavlink cannot check its CRC) is BAD_DATA. A UDP datagram is parsed on its own: bytes of a frame it leaves unfinished
 are dropped (one BAD_DATA) instead of being joined to the next datagram's — else one
 truncated or random datagram swallows the valid frame after it. On ``udpin:`` the link
 answers the last sender whose datagram held a message ``is_peer`` accepts (the vehicle,
@@ -318,7 +318,10 @@ class MavlinkLink:
                 msgs.append(self._mavlink.MAVLink_bad_data(bytearray(data[-left:][:64]),
                                                            f"datagram ends inside a frame ({left} bytes)"))
         peer = False
-        for msg in msgs:
+        for i, msg in enumerate(msgs):
+            if msg.get_type().startswith("UNKNOWN_"):  # an id no dialect has: its CRC cannot even be checked
+                msg = msgs[i] = self._mavlink.MAVLink_bad_data(bytearray(msg.get_msgbuf()[:64]),
+                                                               f"unknown message id {msg.get_msgId()}")
             if msg.get_type() != "BAD_DATA" and self.is_peer(msg):
                 peer = True
             self.on_message(msg, now)

@@ -58,7 +58,7 @@ def _recv(sock: socket.socket, what: str) -> bytes:
 
 def _host_port(url: str, rest: str) -> tuple[str, int]:
     host, sep, port = rest.rpartition(":")
-    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+    if not sep or not port.isdigit() or not 0 <= int(port) < 65536:
         raise OSError(errno.EINVAL, f"expected HOST:PORT, got {rest!r}")
     return host or "0.0.0.0", int(port)
 
