@@ -134,7 +134,7 @@ class MavlinkLink:
         self.error: str | None = None
         self.state_since = time.time()
         self.counts = dict.fromkeys(("connects", "disconnects", "written", "heartbeats", "dropped_while_down",
-                                     "superseded", "outbox_dropped", "write_errors", "unfinished_frames"), 0)
+                                     "superseded", "outbox_dropped", "write_errors", "reads", "unfinished_frames"), 0)
         self.final_written = False
         self._outbox: deque[bytes] = deque()
         self._newest: dict[str, bytes] = {}
@@ -306,6 +306,7 @@ class MavlinkLink:
         if not data:
             return
         now = time.time()
+        self.counts["reads"] += 1
         try:
             msgs = self.parser.parse_buffer(data) or []
         except Exception as e:  # noqa: BLE001 - pymavlink raises bare errors on some corrupt input

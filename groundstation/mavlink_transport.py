@@ -29,6 +29,7 @@ import socket
 import time
 
 WRITE_TIMEOUT_S = 1.0
+UDP_RCVBUF = 4 << 20  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
 CONNECT_TIMEOUT_S = 1.0
 DEFAULT_BAUD = 115200
 _READ_MAX = 65536
@@ -152,6 +153,7 @@ class Udp:
         self.url = url
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)  # the kernel caps it (rmem_max)
         if listen:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self.sock.bind(addr)
