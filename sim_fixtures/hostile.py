@@ -127,10 +127,9 @@ class MavlinkFuzzer:
             return bytes(good)
         if kind == "truncated":
             return bytes(good[: rng.randint(1, len(good) - 1)])
-        if kind == "bit_flip":
-            for _ in range(rng.randint(1, 8)):
-                i = rng.randrange(1, len(good))
-                good[i] ^= 1 << rng.randrange(8)
+        if kind == "bit_flip":  # distinct bits: two flips of the same bit would give the poisoned frame back intact
+            for bit in rng.sample(range(8, 8 * len(good)), rng.randint(1, 8)):
+                good[bit // 8] ^= 1 << (bit % 8)
             return bytes(good)
         raise ValueError(f"unknown MAVLink fuzz kind {kind!r}")
 
