@@ -68,7 +68,7 @@ def test_router_loss_is_named(caplog):
                 await asyncio.sleep(0.05)
 
         await until(lambda: sink.status(time.time())["link"]["state"] == "up" and len(got) >= 5, "the link up")
-        await until(lambda: sink.status(time.time())["link"]["autopilot_age_s"] is not None, "a heartbeat")
+        await until(lambda: sink.status(time.time())["link"]["peer_age_s"] is not None, "a heartbeat")
         states["up"] = sink.status(time.time())["link"]
         router.kill()
         router.wait()

@@ -7,7 +7,7 @@ import time
 from datetime import UTC, datetime, timedelta
 
 import pytest
-from live_helpers import free_port
+from live_helpers import free_port, wait_for
 
 from groundstation.mavlink_io import mavutil
 from groundstation.sinks.gps_input import (
@@ -152,8 +152,12 @@ def test_injection_through_blueos_mavlink_in():
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
 
+    def last_is_no_fix() -> bool:  # the stop's no-fix, the newest sample (Zenoh delivers after the put returns)
+        return bool(got) and json.loads(got[-1][1])["message"].get("fix_type") == 1
+
     try:
         asyncio.run(scenario())
+        wait_for(last_is_no_fix, 5.0, "the last GPS_INPUT (no fix) at mavlink/in")
     finally:
         sub.undeclare()
         blueos_side.close()

@@ -8,7 +8,7 @@ below ~5 Hz or after two gaps over 245 ms) and at most the video's frame rate
 
 What (:func:`gps_input_fields`):
 
-- The newest fix with status ``ok``, while it is at most ``max_age_s`` old: ``fix_type``
+- The newest ``ok`` fix that passed the gates (below), while at most ``max_age_s`` old: ``fix_type``
   3; ``lat``/``lon`` degE7; ``alt`` the UUV's altitude AMSL (m);
   ``horiz_accuracy``/``vert_accuracy`` the fix's ``h_acc_m``/``v_acc_m``;
   ``hdop`` = ``h_acc_m / UERE_M`` and ``vdop`` = ``v_acc_m / UERE_M`` with a

@@ -122,4 +122,4 @@ class ZenohMavlinkIn:
                 "error": None if self.matching else f"no subscriber on {self.key} reachable",
                 "zenoh_routers": len(info.routers_zid()), "zenoh_peers": len(info.peers_zid()),
                 "written": self.written, "heartbeats": self.heartbeats, "sent_unmatched": self.sent_unmatched,
-                "autopilot_age_s": None if self.last_heard is None else round(now - self.last_heard, 3)}
+                "peer_age_s": None if self.last_heard is None else round(now - self.last_heard, 3)}
