@@ -19,7 +19,7 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Literal, get_args, get_origin
 
-from annotated_types import Ge
+from annotated_types import Ge, Gt
 from pydantic import Field, model_validator
 from pydantic.dataclasses import dataclass
 
@@ -93,6 +93,12 @@ class RunConfig:
                                         "'no fix'")
     tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
                                        "template matching), mil (the paper's), ...")
+    gps_input_signing_key: FilePath | None = Field(None, description="sign GPS_INPUT (MAVLink 2) with the key in "
+                                                   "this file: 32 bytes, or 64 hex digits")
+    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(1.5, description="safety gate: the UUV's top speed (a "
+                                                        "BlueROV2); a fix jumping further is not sent")
+    fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
+                                                      "accuracy is worse than this (m) is not sent as valid")
     uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
                                           "BlueOS publishes it (mavlink/1/1/GLOBAL_POSITION_INT): acquire the UUV "
                                           "near it without a selection")
@@ -113,6 +119,13 @@ class RunConfig:
     def _record_needs_pymavlink(self):
         if self.record and self.mavlink_backend == "mavsdk":
             raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
+        return self
+
+    @model_validator(mode="after")
+    def _signing_needs_a_mavlink_link(self):
+        if self.gps_input_signing_key and (not self.gps_input or self.gps_input.startswith("zenoh:")):
+            raise Invalid("gps_input_signing_key", self.gps_input_signing_key,
+                          "signing needs a MAVLink --gps-input link (not zenoh:)")
         return self
 
     @model_validator(mode="after")

@@ -127,6 +127,41 @@ class Clocks(Section):
         description="uuv_clock: depth stamps used as they are; arrival: arrival minus depth_latency_s")
 
 
+class LinkStatus(Section):
+    """A MAVLink link's own thread, or the Zenoh route of GPS_INPUT through BlueOS (mavlink/in)."""
+
+    url: str
+    state: Literal["up", "waiting", "down", "closed"] = Field(description="up: connected (or a subscriber reachable)")
+    state_for_s: NonNegative = Field(description="seconds in that state")
+    error: str | None = Field(description="why it is not up")
+    written: int = Field(description="messages written")
+    heartbeats: int = Field(description="HEARTBEATs sent on it")
+    peer_age_s: Age = Field(description="seconds since the other end was last heard")
+    signed: bool | None = Field(None, description="MAVLink 2 signing on (MAVLink links)")
+    connects: int | None = Field(None, description="connections made (MAVLink links)")
+    disconnects: int | None = None
+    dropped_while_down: int | None = Field(None, description="messages dropped while the link was down")
+    superseded: int | None = Field(None, description="messages replaced by a newer one before they were written")
+    outbox_dropped: int | None = None
+    write_errors: int | None = None
+    reads: int | None = None
+    unfinished_frames: int | None = Field(None, description="datagrams ending inside a frame")
+    zenoh_routers: int | None = Field(None, description="Zenoh routers connected (zenoh:mavlink/in)")
+    zenoh_peers: int | None = Field(None, description="Zenoh peers connected (zenoh:mavlink/in)")
+    sent_unmatched: int | None = Field(None, description="messages published with no subscriber reachable")
+
+
+class GateStatus(Section):
+    """The safety gates on what goes out as a valid fix (localizer/fix_gate.py)."""
+
+    max_speed_mps: float
+    max_h_acc_m: float
+    max_age_s: float
+    accepted: int
+    rejected: dict[str, int] = Field(description="fixes not sent as valid, by reason: h_acc, age, out_of_order, "
+                                     "jump, unconfirmed")
+
+
 class UavStatus(Section):
     """The UAV's MAVLink link."""
 
@@ -142,6 +177,7 @@ class UavStatus(Section):
     refused: int = Field(description="samples refused (out of range, out of order)")
     age_s: dict[str, Age] = Field(description="per message type: seconds since the newest")
     rates_hz: dict[str, NonNegative] = Field(description="per message type: measured rate")
+    link: LinkStatus | None = Field(None, description="the link's own state (pymavlink backend)")
 
 
 class DepthStatus(Section):
@@ -187,7 +223,9 @@ class GpsInputStatus(Section):
     url: str
     sent: int
     sent_valid: int = Field(description="messages with fix_type 3")
-    autopilot_age_s: Age = Field(description="seconds since the autopilot was last heard on that link")
+    not_delivered: int = Field(description="messages the link could not take (down)")
+    link: LinkStatus
+    gates: GateStatus
 
 
 class LatencyStatus(Section):

@@ -225,7 +225,7 @@ class Replay:
         links = [connect(args.mavlink_out, input=False)]
         if args.uuv_listen:
             links.append(connect(args.uuv_listen, source_system=1, source_component=1))
-        session = open_session(args.zenoh_connect or (), args.zenoh_listen or ())
+        session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), config_file=args.zenoh_config)
         ffmpeg = None
         threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True),
                    threading.Thread(target=self._send_depth, args=(shift, session), name="depth", daemon=True)]
@@ -276,6 +276,7 @@ def register(subparsers) -> None:
     p.add_argument("--no-video", action="store_true", help="do not stream the video")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
+    p.add_argument("--zenoh-config", help="Zenoh JSON5 config file (deploy/zenoh/*.json5); endpoints above are added")
     p.add_argument("--depth-key", default="uuv/depth", help="Zenoh key the depth is published on")
     p.add_argument("--uuv-listen", default="udpin:127.0.0.1:14660",
                    help="UUV-side endpoint logging GPS_INPUT ('' for none)")

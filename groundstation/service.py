@@ -7,8 +7,9 @@ the per-frame :mod:`.pipeline`, GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
 the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`), the operator's commands
 (:mod:`.control`) and, with ``--record``, the recorder (:mod:`.sinks.recorder`). Blocking I/O lives in threads owned by the
 workers; all telemetry is written and read on the event loop. SIGINT/SIGTERM (or
-``--duration-s``) cancel every worker; a worker that fails cancels the others and
-the service exits with its error. The Zenoh session is closed in ``finally``.
+``--duration-s``) cancel every worker, then stop the GPS_INPUT sink (its last message
+says "no fix"); a worker that fails cancels the others (the sink still sends its
+no-fix) and the service exits with its error. The Zenoh session is closed in ``finally``.
 """
 
 from __future__ import annotations
@@ -24,14 +25,17 @@ import time
 import numpy as np
 import zenoh
 
+from localizer.fix_gate import FixGate
 from localizer.telemetry import Telemetry
 
 from . import config
 from .control import Control, ZenohControl
+from .mavlink_link import read_signing_key
 from .pipeline import Pipeline
-from .sinks.gps_input import GpsInputSink, MavlinkLink, ZenohMavlinkIn
+from .sinks.gps_input import GpsInputSink, mavlink_gps_link
 from .sinks.recorder import Recorder
 from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
+from .sinks.zenoh_mavlink import ZenohMavlinkIn
 from .sources.depth_zenoh import BLUEOS_KEY, DepthZenoh
 from .sources.rates import needed_rates
 from .sources.uav_mavlink import UavMavlink
@@ -81,9 +85,12 @@ async def serve(cfg: config.RunConfig) -> dict:
         sinks = [fix_sink]
         gps = None
         if cfg.gps_input:
+            key = read_signing_key(cfg.gps_input_signing_key) if cfg.gps_input_signing_key else None
             link = (ZenohMavlinkIn(session, cfg.gps_input.removeprefix("zenoh:")) if cfg.gps_input.startswith("zenoh:")
-                    else MavlinkLink(cfg.gps_input))
-            gps = GpsInputSink(link, cfg.gps_input_hz, cfg.fix_max_age_ms / 1000.0)
+                    else mavlink_gps_link(cfg.gps_input, signing_key=key))
+            max_age_s = cfg.fix_max_age_ms / 1000.0
+            gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s)
+            gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
             sinks.append(gps)
         if recorder:
             sinks.append(recorder)
@@ -153,10 +160,14 @@ async def serve(cfg: config.RunConfig) -> dict:
             log.info("no tracker.init_bbox: awaiting a target (%s/select%s)", control.prefix,
                      ", or near the UUV's own position" if cfg.uuv_position_key or cfg.uuv_hint else "")
         async with asyncio.TaskGroup() as tg:
-            tasks = [tg.create_task(w.run(), name=type(w).__name__) for w in workers]
+            tasks = {w: tg.create_task(w.run(), name=type(w).__name__) for w in workers}
             await _stopper(stop, cfg.duration_s)
-            for task in tasks:
+            others = [t for w, t in tasks.items() if w is not gps]
+            for task in others:
                 task.cancel()
+            if gps:  # last, once nothing feeds it: a no-fix GPS_INPUT, then its link closed
+                await asyncio.wait(others)
+                await gps.stop()
         final = status(time.time())
         if gps:
             final["latency"] = latency_summary(gps.latencies_s)

@@ -47,39 +47,99 @@ class _WindowMin:
         return self._q[0] if self._q else None
 
 
+OK, RESTART, STEP, OUTLIER = "ok", "restart", "step", "outlier"
+
+
 class ClockMap:
     """A source clock on the station clock: ``station ≈ source + offset_s − latency``.
 
     ``offset_s`` is the least ``arrival − source`` over the last ``window_s`` seconds
     of arrivals, so it includes the link's smallest delay (subtract it where it is
-    known: :class:`RoundTrip`, or a configured latency). A source time more than
-    ``reboot_s`` earlier than the latest one, or a station clock that stepped back,
-    empties the window and counts a new segment: samples already mapped keep their
-    station times, later ones are mapped from the new segment alone.
+    known: :class:`RoundTrip`, or a configured latency).
+
+    A sample that does not fit the clock so far — its source time more than
+    ``reboot_s`` before the latest, or arriving more than ``early_s`` sooner than the
+    fastest delivery yet (its source time jumped ahead) — is an *outlier* and is not
+    used: one garbage or spoofed frame must not move the clock. It becomes the clock
+    only when at least ``confirm`` consecutive outliers, spread over ``confirm_s`` or more
+    of arrival time, agree with each other (source times not decreasing, ``arrival −
+    source`` within ``early_s``) and no fitting sample came in between (the old clock
+    fell silent, as it does when its source reboots): a reboot (the source time went back; a new segment: the window restarts
+    from them, samples already mapped keep their station times) or a clock that stepped
+    ahead or a link that got faster (the window restarts from them, no new segment).
+    A station clock that stepped back (our own clock: trusted) starts a new segment at once.
     """
 
-    def __init__(self, window_s: float = 30.0, reboot_s: float = 1.0):
+    def __init__(self, window_s: float = 30.0, reboot_s: float = 1.0, early_s: float = 0.25, confirm: int = 3,
+                 confirm_s: float = 0.3):
         self.reboot_s = reboot_s
+        self.early_s = early_s
+        self.confirm = confirm
+        self.confirm_s = confirm_s
         self._min = _WindowMin(window_s)
         self._last_source: float | None = None
         self._last_arrival: float | None = None
+        self._candidates: list[tuple[float, float]] = []  # outliers that may be a new clock: (source, arrival)
         self.segments = 0  # restarts seen (reboots of the source, steps of the station clock)
+        self.outliers = 0  # samples not used
         self.last_restart: tuple[float, float] | None = None  # (source time before, source time after)
 
-    def add(self, source_s: float, arrival_s: float) -> bool:
-        """One sample's source and arrival times; True when it started a new segment."""
-        restarted = False
-        last = self._last_source
-        if last is not None and (source_s < last - self.reboot_s or arrival_s < self._last_arrival - self.reboot_s):
-            self._min.clear()
-            self.segments += 1
-            self.last_restart = (last, source_s)
-            restarted = True
-            last = None
+    def _fits(self, source_s: float, arrival_s: float) -> bool:
+        off = self.offset_s
+        return source_s >= self._last_source - self.reboot_s and arrival_s - source_s >= off - self.early_s
+
+    def add(self, source_s: float, arrival_s: float) -> str:
+        """One sample's source and arrival times: :data:`OK`, :data:`OUTLIER` (not used), or, when it
+        confirms the outliers before it, :data:`RESTART` (a new segment begins with them) or :data:`STEP`."""
+        if self._last_source is None:
+            self._take(source_s, arrival_s)
+            return OK
+        if arrival_s < self._last_arrival - self.reboot_s:  # the station clock stepped back
+            self._restart(self._last_source, [(source_s, arrival_s)])
+            return RESTART
+        if self._fits(source_s, arrival_s):
+            self._candidates.clear()
+            self._take(source_s, arrival_s)
+            return OK
+        c = self._candidates
+        if c and not (source_s >= c[-1][0] and abs((arrival_s - source_s) - (c[-1][1] - c[-1][0])) <= self.early_s):
+            c.clear()
+        c.append((source_s, arrival_s))
+        if len(c) < self.confirm or c[-1][1] - c[0][1] < self.confirm_s:
+            self.outliers += 1
+            return OUTLIER
+        went_back = c[0][0] < self._last_source - self.reboot_s
+        confirmed, self._candidates = list(c), []
+        if went_back:
+            self._restart(self._last_source, confirmed)
+            return RESTART
+        self._min.clear()
+        for src, arr in confirmed:
+            self._take(src, arr)
+        return STEP
+
+    @property
+    def candidates(self) -> int:
+        """Outliers so far that agree with each other (a new clock once there are enough)."""
+        return len(self._candidates)
+
+    @property
+    def last_source_s(self) -> float | None:
+        return self._last_source
+
+    def _restart(self, before: float, samples: list[tuple[float, float]]) -> None:
+        self._min.clear()
+        self.segments += 1
+        self.last_restart = (before, samples[0][0])
+        self._last_source = self._last_arrival = None
+        for src, arr in samples:
+            self._take(src, arr)
+
+    def _take(self, source_s: float, arrival_s: float) -> None:
+        last, last_arrival = self._last_source, self._last_arrival
         self._last_source = source_s if last is None else max(source_s, last)
-        self._last_arrival = arrival_s if self._last_arrival is None or restarted else max(arrival_s, self._last_arrival)
+        self._last_arrival = arrival_s if last_arrival is None else max(arrival_s, last_arrival)
         self._min.add(arrival_s, arrival_s - source_s)
-        return restarted
 
     @property
     def offset_s(self) -> float | None:

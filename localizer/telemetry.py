@@ -28,13 +28,14 @@ import numpy as np
 
 from .attitude import euler_rates
 from .calibration import Timing
-from .clock import ClockMap, Median, RoundTrip
+from .clock import OUTLIER, RESTART, STEP, ClockMap, Median, RoundTrip
 from .timeline import Series
 
 #: Station-clock disagreements (seconds) worth telling the operator about.
 CLOCK_NOTICE_S = 0.1
 DEG_PER_M = math.degrees(1.0 / 6_378_137.0)  # latitude degrees per metre north (sphere; for rates only)
 _NOTICE_AFTER = 3  # samples before a clock offset is reported
+_ASIDE_MAX = 256  # samples kept aside while a clock waits for a reboot's confirmation
 
 
 class Telemetry:
@@ -73,6 +74,7 @@ class Telemetry:
         self.mount_type: int | None = None  # the autopilot's MNT1_TYPE parameter, once seen
         self.refusal: str | None = None
         self._boot_s = math.nan  # the boot time of the sample being added
+        self._aside: dict[int, list] = {}  # per clock: samples that did not fit it, until it confirms or drops them
         self._last_boot: dict[int, float] = {}  # per series: the boot time of its newest sample
         self.notices: list[str] = []
         self._noticed: dict[str, float] = {}
@@ -119,20 +121,45 @@ class Telemetry:
             self._noticed[key] = value
             self.notices.append(text)
 
-    def _uav_t(self, time_boot_ms, receive_s: float, component: int | None) -> float:
-        """A sample's time on the UAV buffers' scale; feeds the clock of its component."""
+    def _uav_t(self, time_boot_ms, receive_s: float, component: int | None, series: Series | None = None,
+               values=None) -> float | None:
+        """A sample's time on the UAV buffers' scale, feeding the clock of its component.
+
+        None (the reason in :attr:`refusal`, ``series`` counting a rejection) when its boot time does
+        not fit that clock (:class:`~localizer.clock.ClockMap`): such a sample is kept aside, and
+        appended after all when the next ones confirm the new time (a reboot)."""
         boot_s = float(time_boot_ms) / 1000.0
-        self._boot_s = boot_s
         own = component is None or component == self.autopilot_component
         clock = self.uav_clock if own else self._component_clocks.setdefault(component, ClockMap(self.timing.clock_window_s))
-        if clock.add(boot_s, receive_s):
-            before, after = clock.last_restart
+        before = clock.last_source_s
+        result = clock.add(boot_s, receive_s)
+        aside = self._aside.setdefault(id(clock), [])
+        if result == OUTLIER:
+            if clock.candidates == 1:
+                aside.clear()
+            if series is not None and len(aside) < _ASIDE_MAX:
+                aside.append((series, boot_s, values))
+                series.rejected += 1
+            elif series is not None:
+                series.rejected += 1
+            self.refusal = (f"time_boot_ms {boot_s:.3f} s does not fit the clock of its other messages "
+                            f"(latest {before:.3f} s); a reboot is taken once samples agree for {clock.confirm_s} s")
+            return None
+        if result == RESTART:
+            was, now = clock.last_restart
             who = "autopilot" if own else f"component {component}"
-            self.notices.append(f"{who} rebooted (time_boot_ms went back from {before:.1f} s to {after:.1f} s): "
+            self.notices.append(f"{who} rebooted (time_boot_ms went back from {was:.1f} s to {now:.1f} s): "
                                 "a new clock segment; the telemetry before it is kept")
             if own:
                 self.timesync.clear()
                 self._gnss.clear()
+        if result in (RESTART, STEP):
+            for s, b, v in aside:  # confirmed after all
+                s.rejected -= 1
+                self._boot_s = b
+                self._append_uav(s, b + clock.offset_s, v)
+        aside.clear()
+        self._boot_s = boot_s
         return boot_s + clock.offset_s
 
     def _refuse(self, series: Series, why: str) -> bool:
@@ -167,8 +194,9 @@ class Telemetry:
         p, q, r = (math.nan,) * 3 if rates is None else rates
         if not all(abs(x) < 100.0 for x in (p, q, r)):  # NaN and absurd rates alike: interpolate linearly
             p = q = r = math.nan
-        t = self._uav_t(time_boot_ms, receive_s, None)
-        return self._append_uav(self.attitude, t, (roll, pitch, yaw, *euler_rates(roll, pitch, p, q, r)))
+        values = (roll, pitch, yaw, *euler_rates(roll, pitch, p, q, r))
+        t = self._uav_t(time_boot_ms, receive_s, None, self.attitude, values)
+        return t is not None and self._append_uav(self.attitude, t, values)
 
     def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m, velocity_ned_mps,
                      receive_s: float) -> bool:
@@ -181,28 +209,33 @@ class Telemetry:
             return self._refuse(self.position, "altitude not finite")
         vn, ve, vd = (math.nan,) * 3 if velocity_ned_mps is None else velocity_ned_mps
         rates = (vn * DEG_PER_M, ve * DEG_PER_M / math.cos(math.radians(lat_deg)), -vd, -vd)
-        t = self._uav_t(time_boot_ms, receive_s, None)
-        return self._append_uav(self.position, t, (lat_deg, lon_deg, alt_amsl_m, relative_alt_m, *rates))
+        values = (lat_deg, lon_deg, alt_amsl_m, relative_alt_m, *rates)
+        t = self._uav_t(time_boot_ms, receive_s, None, self.position, values)
+        return t is not None and self._append_uav(self.position, t, values)
 
     def add_gimbal(self, time_boot_ms, q_wxyz, flags, receive_s: float, component: int | None = None) -> bool:
         """GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z), which must be near unit length."""
         q = np.asarray(q_wxyz, dtype=float)
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 0.1:
             return self._refuse(self.gimbal, "quaternion not finite or not of unit length")
-        t = self._uav_t(time_boot_ms, receive_s, component)
-        return self._append_uav(self.gimbal, t, (*q, flags))
+        values = (*q, flags)
+        t = self._uav_t(time_boot_ms, receive_s, component, self.gimbal, values)
+        return t is not None and self._append_uav(self.gimbal, t, values)
 
     def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg, receive_s: float,
                   component: int | None = None) -> bool:
         """MOUNT_ORIENTATION (degrees; yaw relative to the vehicle)."""
         if not all(abs(a) <= 360.0 for a in (roll_deg, pitch_deg, yaw_deg)):
             return self._refuse(self.mount, "angles not finite or beyond ±360°")
-        t = self._uav_t(time_boot_ms, receive_s, component)
-        return self._append_uav(self.mount, t, np.radians((roll_deg, pitch_deg, yaw_deg)))
+        values = np.radians((roll_deg, pitch_deg, yaw_deg))
+        t = self._uav_t(time_boot_ms, receive_s, component, self.mount, values)
+        return t is not None and self._append_uav(self.mount, t, values)
 
     def add_system_time(self, time_boot_ms, time_unix_usec: int, receive_s: float) -> bool:
         """SYSTEM_TIME: feeds the autopilot's clock; a GNSS time (nonzero) measures the station's offset."""
         t = self._uav_t(time_boot_ms, receive_s, None)
+        if t is None:
+            return False
         if time_unix_usec <= 0:
             return True  # the autopilot has no UNIX time yet
         self._gnss.add(t - time_unix_usec / 1e6)
@@ -251,7 +284,9 @@ class Telemetry:
         else:
             if not math.isfinite(t_source):
                 return self._refuse(self.depth, "time not finite")
-            self.uuv_clock.add(t_source, receive_s)
+            if self.uuv_clock.add(t_source, receive_s) == OUTLIER:
+                return self._refuse(self.depth, f"t {t_source:.3f} does not fit the UUV's clock of its other samples; "
+                                    f"a clock step is taken once samples agree for {self.uuv_clock.confirm_s} s")
             station_minus_uuv = self.uuv_clock.offset_s - latency
             if abs(station_minus_uuv) <= self.timing.depth_clock_tolerance_s:
                 t, self.depth_aligned_by = t_source, "uuv_clock"

@@ -7,15 +7,15 @@ import time
 from datetime import UTC, datetime, timedelta
 
 import pytest
-from live_helpers import free_port
+from live_helpers import free_port, wait_for
 
 from groundstation.mavlink_io import mavutil
 from groundstation.sinks.gps_input import (
     IGNORE_ALL,
     GpsInputSink,
-    MavlinkLink,
     gps_input_fields,
     gps_time,
+    mavlink_gps_link,
 )
 from localizer.fix import Fix
 
@@ -34,6 +34,16 @@ def _fix(t, **kw):
     base = {"t_unix": t, "status": "ok", "u": 100.0, "v": 200.0, "lat": 63.44, "lon": 10.4, "alt_amsl_m": -0.7,
             "depth_m": 1.1, "h_acc_m": 0.3, "v_acc_m": 0.5}
     return Fix(**{**base, **kw})
+
+
+def _info(t_recv):
+    return type("I", (), {"t_recv": t_recv})()
+
+
+def _offer_confirmed(sink, t, **kw):
+    """The fix at ``t`` after the two frames before it at the same place: the gate's confirmation (CONFIRM = 3)."""
+    for dt in (2 / 30, 1 / 30, 0.0):
+        sink.on_fix(_fix(t - dt, **kw), info=_info(t - dt))
 
 
 def test_fresh_fix_fields():
@@ -64,11 +74,11 @@ def test_sender_over_pymavlink_rate_fix_and_expiry():
     got = []
 
     async def scenario():
-        sink = GpsInputSink(MavlinkLink(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
+        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(1.0)  # no fix yet: no-fix messages at 10 Hz
         t_fix = time.time()
-        sink.on_fix(_fix(t_fix), info=type("I", (), {"t_recv": t_fix})())
+        _offer_confirmed(sink, t_fix)
         await asyncio.sleep(1.2)  # valid until 0.5 s old, then no-fix again
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
@@ -98,13 +108,13 @@ def test_tracker_loss_ends_the_fix_at_once(status):
     uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
 
     async def scenario():
-        sink = GpsInputSink(MavlinkLink(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=5.0)
+        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=5.0)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(0.3)
         t = time.time()
-        sink.on_fix(_fix(t), info=type("I", (), {"t_recv": t})())
+        _offer_confirmed(sink, t)
         await asyncio.sleep(0.05)
-        sink.on_fix(_fix(t + 0.03, status=status), info=type("I", (), {"t_recv": t + 0.03})())
+        sink.on_fix(_fix(t + 0.03, status=status), info=_info(t + 0.03))
         await asyncio.sleep(0.3)
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
@@ -125,7 +135,7 @@ def test_injection_through_blueos_mavlink_in():
     import json
     import socket
 
-    from groundstation.sinks.gps_input import ZenohMavlinkIn
+    from groundstation.sinks.zenoh_mavlink import ZenohMavlinkIn
     from groundstation.zenoh_session import open_session
 
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
@@ -138,14 +148,17 @@ def test_injection_through_blueos_mavlink_in():
         sink = GpsInputSink(ZenohMavlinkIn(skyfix_side, "mavlink/in"), hz=10.0, max_age_s=0.5)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(0.25)
-        t = time.time()
-        sink.on_fix(_fix(t), info=type("I", (), {"t_recv": t})())
+        _offer_confirmed(sink, time.time())
         await asyncio.sleep(0.2)
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
 
+    def last_is_no_fix() -> bool:  # the stop's no-fix, the newest sample (Zenoh delivers after the put returns)
+        return bool(got) and json.loads(got[-1][1])["message"].get("fix_type") == 1
+
     try:
         asyncio.run(scenario())
+        wait_for(last_is_no_fix, 5.0, "the last GPS_INPUT (no fix) at mavlink/in")
     finally:
         sub.undeclare()
         blueos_side.close()
@@ -154,7 +167,10 @@ def test_injection_through_blueos_mavlink_in():
     assert all(enc == "application/json" for enc, _ in got) and len(msgs) >= 4
     assert {(m["header"]["system_id"], m["header"]["component_id"]) for m in msgs} == {(245, 220)}
     assert [m["header"]["sequence"] for m in msgs] == list(range(len(msgs)))
-    assert msgs[0]["message"]["type"] == "GPS_INPUT" and msgs[0]["message"]["fix_type"] == 1
-    assert msgs[0]["message"]["ignore_flags"] == {"bits": IGNORE_ALL}
-    valid = [m["message"] for m in msgs if m["message"]["fix_type"] == 3]
+    assert msgs[0]["message"]["type"] == "HEARTBEAT"
+    assert msgs[0]["message"]["mavtype"] == {"type": "MAV_TYPE_ONBOARD_CONTROLLER"}
+    gps = [m["message"] for m in msgs if m["message"]["type"] == "GPS_INPUT"]
+    assert gps[0]["fix_type"] == 1 and gps[0]["ignore_flags"] == {"bits": IGNORE_ALL}
+    assert gps[-1]["fix_type"] == 1  # stopping: the last message says no fix
+    valid = [m for m in gps if m["fix_type"] == 3]
     assert valid and valid[0]["lat"] == 634400000 and valid[0]["ignore_flags"] == {"bits": 56}

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from localizer.clock import ClockMap, Median, RoundTrip
+from localizer.clock import OK, OUTLIER, RESTART, STEP, ClockMap, Median, RoundTrip
 
 
 def test_least_delay_offset_and_its_window():
@@ -39,16 +39,51 @@ def test_window_follows_a_drifting_clock():
 
 
 def test_reboot_and_station_clock_step_start_new_segments():
-    c = ClockMap(reboot_s=1.0)
+    c = ClockMap(reboot_s=1.0, confirm=3, confirm_s=0.25)
     for i in range(10):
-        assert not c.add(600.0 + 0.1 * i, 2000.0 + 0.1 * i + 0.02)
+        assert c.add(600.0 + 0.1 * i, 2000.0 + 0.1 * i + 0.02) == OK
     assert c.offset_s == pytest.approx(1400.02)
-    assert not c.add(600.95, 2001.02)  # 0.05 s back (reordered): not a reboot
-    assert c.add(2.0, 2003.0 + 0.02)  # boot clock back by 599 s: rebooted
+    assert c.add(600.95, 2001.02) == OK  # 0.05 s back (reordered): not a reboot
+    # boot clock back by 599 s: a reboot once samples agree for 0.25 s
+    assert [c.add(2.0 + 0.1 * i, 2003.02 + 0.1 * i) for i in range(4)] == [OUTLIER] * 3 + [RESTART]
     assert c.segments == 1 and c.last_restart == (pytest.approx(600.95), 2.0)
     assert c.offset_s == pytest.approx(2001.02)
-    assert c.add(3.0, 1990.0)  # the station clock stepped back 13 s (NTP)
+    assert c.add(3.0, 1990.0) == RESTART  # the station clock stepped back 13 s (NTP): our own clock, at once
     assert c.segments == 2 and c.offset_s == pytest.approx(1987.0)
+
+
+def test_stray_times_do_not_move_the_clock():
+    """Single samples 5 s to an hour off, back or ahead, between good ones: not used, no segment, offset kept."""
+    rng = np.random.default_rng(5)
+    c = ClockMap(reboot_s=1.0, early_s=0.25, confirm=3)
+    off = 1_700_000_000.0
+    results = []
+    for i in range(400):
+        source = 100.0 + 0.02 * i
+        results.append(c.add(source, off + source + 0.03 + rng.exponential(0.01)))
+        if i % 2:
+            stray = source + rng.choice([-1, 1]) * rng.uniform(5.0, 3600.0)
+            assert c.add(stray, off + source + 0.04) == OUTLIER
+    assert set(results) == {OK} and c.segments == 0 and c.outliers == 200
+    assert c.offset_s == pytest.approx(off + 0.03, abs=0.005)
+
+
+def test_a_burst_of_agreeing_strays_is_not_a_reboot():
+    """Ten frames at once with the same made-up boot time, then the old clock again: no reboot."""
+    c = ClockMap(confirm=3, confirm_s=0.3)
+    for i in range(10):
+        c.add(600.0 + 0.1 * i, 2000.0 + 0.1 * i)
+    assert [c.add(0.001, 2001.0 + 0.001 * k) for k in range(10)] == [OUTLIER] * 10
+    assert c.add(601.0, 2001.01) == OK and c.segments == 0 and c.candidates == 0
+
+
+def test_a_clock_that_steps_ahead_is_followed_after_confirmation():
+    """A UUV computer's clock synchronised mid-run (+40 s): three samples on the new clock, then it is used."""
+    c = ClockMap(early_s=0.25, confirm=3, confirm_s=0.25)
+    for i in range(10):
+        assert c.add(1000.0 + 0.1 * i, 5000.0 + 0.1 * i) == OK
+    assert [c.add(1041.0 + 0.1 * i, 5001.0 + 0.1 * i) for i in range(5)] == [OUTLIER] * 3 + [STEP, OK]
+    assert c.offset_s == pytest.approx(3960.0) and c.segments == 0
 
 
 def test_one_way_delay_from_the_least_delays_each_way():

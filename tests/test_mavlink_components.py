@@ -103,18 +103,22 @@ def test_other_components_attitude_is_not_the_autopilots():
 
 
 def test_a_garbage_frame_cannot_fake_a_reboot_but_a_real_reboot_is_seen():
-    """time_boot_ms 0 with a NaN roll is refused before it reaches the clock; a valid one is a reboot,
-    after which the earlier samples still serve the earlier frames."""
+    """time_boot_ms 0 with a NaN roll is refused before it reaches the clock, and so is a valid-looking one
+    among the old clock's messages; a real reboot (the old clock silent, the new one going on for 0.3 s) is
+    one, its first samples appended once it is confirmed, and the earlier samples still serve earlier frames."""
     mav = mavutil().mavlink
     tel = Telemetry()
     garbage = _decode(mav.MAVLink_attitude_message(0, float("nan"), 0.0, 0.3, 0, 0, 0), 1)
-    _feed(tel, np.random.default_rng(5), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.0, garbage)])
-    assert tel.uav_clock.segments == 0 and tel.attitude.rejected >= 1
+    stray = _decode(mav.MAVLink_attitude_message(5, 0.4, 0.0, 0.3, 0, 0, 0), 1)
+    _feed(tel, np.random.default_rng(5), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.0, garbage), (T0 + 1.5, stray)])
+    assert tel.uav_clock.segments == 0 and tel.attitude.rejected >= 2
+    assert not np.any(np.isclose(tel.attitude.values[:, 0], 0.4))
     assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]
 
     n = len(tel.attitude)
-    rebooted = _decode(mav.MAVLink_attitude_message(1200, 0.0, 0.0, 0.3, 0, 0, 0), 1)
-    assert ingest(tel, rebooted, T0 + 3.5)
-    assert tel.uav_clock.segments == 1 and len(tel.attitude) == n + 1
-    assert any("rebooted" in notice for notice in tel.notices)
+    taken = [ingest(tel, _decode(mav.MAVLink_attitude_message(1200 + 20 * i, 0.0, 0.0, 0.3, 0, 0, 0), 1),
+                    T0 + 3.5 + 0.02 * i) for i in range(20)]
+    assert taken.index(True) >= 2 and all(taken[taken.index(True):])  # held back until confirmed
+    assert tel.uav_clock.segments == 1 and len(tel.attitude) == n + 20  # then the held ones appended too
+    assert sum("rebooted" in notice for notice in tel.notices) == 1
     assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]

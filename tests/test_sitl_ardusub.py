@@ -233,14 +233,16 @@ class ArduSub:
         self.observer: Observer | None = None
         self.ports: dict = {}
         self.log = self.dir / "ardusub.log"  # one per attempt: ardusub-I<N>.log
+        self.instance: int | None = None
 
-    def start(self, attempts: int = 3) -> None:
+    def start(self, attempts: int = 3, instance: int | None = None) -> None:
+        """Start on a free instance (``instance``: on that one, e.g. again after :meth:`stop`)."""
         tried: set[int] = set()
         for _ in range(attempts):
-            n = free_instance(tried)
+            n = free_instance(tried) if instance is None else instance
             tried.add(n)
-            self.ports = instance_ports(n)
-            self.log = self.dir / f"ardusub-I{n}.log"
+            self.ports, self.instance = instance_ports(n), n
+            self.log = self.dir / f"ardusub-I{n}-{len(list(self.dir.glob('ardusub-*.log')))}.log"
             cmd = [str(self.binary), "--model", "vectored", "--speedup", "1", "-w", f"-I{n}",
                    "--home", ",".join(f"{v:g}" for v in self.home),
                    "--defaults", f"{self.sub_parm},{self.dir / 'extra.parm'}"]

@@ -8,7 +8,7 @@ below ~5 Hz or after two gaps over 245 ms) and at most the video's frame rate
 
 What (:func:`gps_input_fields`):
 
-- The newest fix with status ``ok``, while it is at most ``max_age_s`` old: ``fix_type``
+- The newest ``ok`` fix that passed the gates (below), while at most ``max_age_s`` old: ``fix_type``
   3; ``lat``/``lon`` degE7; ``alt`` the UUV's altitude AMSL (m);
   ``horiz_accuracy``/``vert_accuracy`` the fix's ``h_acc_m``/``v_acc_m``;
   ``hdop`` = ``h_acc_m / UERE_M`` and ``vdop`` = ``v_acc_m / UERE_M`` with a
@@ -29,10 +29,20 @@ What (:func:`gps_input_fields`):
   confused with a broken cable. Either way the EKF (which needs a 3D fix) stops
   using GPS position; a stale fix is never sent as valid.
 
-Identity: system :data:`GPS_SYSID`, component 220 (``MAV_COMP_ID_GPS``) on its
-own pymavlink link (not MAVSDK, which sends to every link and reports success on
-failure). With ``zenoh:KEY`` the message is injected through BlueOS's
-mavlink-server instead (JSON on ``mavlink/in``).
+Which fixes: only those that pass the safety gates (:mod:`localizer.fix_gate`: accuracy,
+age, order, a jump beyond the UUV's top speed, and a first fix not yet confirmed by the
+next ones), counted by reason in the status; a refused fix leaves the last accepted one
+in place until it ages out. A loss of the track resets the gates.
+
+Stopping (:meth:`GpsInputSink.stop`, also on cancellation): one last no-fix message, so
+the autopilot drops the position at once instead of after its 4 s timeout, then the
+link is closed.
+
+Links: :func:`mavlink_gps_link` (system 245, component 220, a
+:class:`~groundstation.mavlink_link.MavlinkLink` with its own thread, reconnecting,
+HEARTBEAT, optional signing; not MAVSDK, which sends to every link and reports
+success on failure), or
+:class:`~.zenoh_mavlink.ZenohMavlinkIn` for ``zenoh:KEY`` (BlueOS's mavlink-server).
 """
 
 from __future__ import annotations
@@ -40,16 +50,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import threading
 import time
 from collections import deque
 
-import zenoh
-
 from localizer.fix import Fix
+from localizer.fix_gate import FixGate
 
-from ..mavlink_io import connect
-from ..zenoh_session import put_json
+from ..mavlink_io import mavutil
+from ..mavlink_link import MavlinkLink
 
 log = logging.getLogger("skyfix.gps_input")
 
@@ -109,87 +117,50 @@ def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> d
             "satellites_visible": SATELLITES, "yaw": 0}
 
 
-class MavlinkLink:
-    """GPS_INPUT over a dedicated pymavlink connection; a reader thread drains what the autopilot sends
-    (needed for ``udpin:`` to learn its address) and notes when it was last heard."""
+def mavlink_gps_link(url: str, signing_key: bytes | None = None) -> MavlinkLink:
+    """GPS_INPUT's own MAVLink link: system 245, component 220, a HEARTBEAT as ``MAV_TYPE_ONBOARD_CONTROLLER``.
 
-    def __init__(self, url: str):
-        self.url = url
-        self.last_heard: float | None = None
-        self._conn = None
-        self._stop = threading.Event()
-        self._reader: threading.Thread | None = None
-
-    def open(self) -> None:
-        self._conn = connect(self.url, source_system=GPS_SYSID, source_component=GPS_COMPID,
-                                                  autoreconnect=True)
-        self._reader = threading.Thread(target=self._drain, name="gps-input-link", daemon=True)
-        self._reader.start()
-
-    def _drain(self) -> None:
-        while not self._stop.is_set():
-            try:
-                msg = self._conn.recv_match(blocking=True, timeout=0.5)
-            except Exception as e:  # noqa: BLE001 - pymavlink raises bare errors on corrupt input
-                log.debug("GPS_INPUT link: unreadable input from the autopilot: %s", e)
-                continue
-            if msg is not None and msg.get_type() != "BAD_DATA":
-                self.last_heard = time.time()
-
-    def send(self, fields: dict) -> None:
-        self._conn.mav.send(self._conn.mav.gps_input_encode(**fields))
-
-    def close(self) -> None:
-        self._stop.set()
-        if self._reader is not None:
-            self._reader.join(2.0)
-        if self._conn is not None:
-            self._conn.close()
-
-
-class ZenohMavlinkIn:
-    """GPS_INPUT injected through BlueOS's mavlink-server: its JSON shape on ``key`` (``mavlink/in``)."""
-
-    def __init__(self, session: zenoh.Session, key: str):
-        self.session = session
-        self.url = f"zenoh:{key}"
-        self.key = key
-        self.last_heard = None
-        self._seq = 0
-
-    def open(self) -> None:
-        pass
-
-    def send(self, fields: dict) -> None:
-        message = {"type": "GPS_INPUT", **fields, "ignore_flags": {"bits": fields["ignore_flags"]}}
-        header = {"system_id": GPS_SYSID, "component_id": GPS_COMPID, "sequence": self._seq}
-        self._seq = (self._seq + 1) % 256
-        put_json(self.key, {"header": header, "message": message}, self.session)
-
-    def close(self) -> None:
-        pass
+    The HEARTBEAT (``MAV_AUTOPILOT_INVALID``: a component, neither a vehicle nor a ground station,
+    so it plays no part in ArduPilot's GCS failsafe) lets routers learn the route, and MAVProxy or
+    QGroundControl in between see a live component.
+    """
+    m = mavutil().mavlink
+    return MavlinkLink(url, GPS_SYSID, GPS_COMPID, name="GPS_INPUT link", signing_key=signing_key,
+                       heartbeat=(m.MAV_TYPE_ONBOARD_CONTROLLER, m.MAV_AUTOPILOT_INVALID))
 
 
 class GpsInputSink:
-    """Worker sending GPS_INPUT through ``link`` (:class:`MavlinkLink` or :class:`ZenohMavlinkIn`)."""
+    """Worker sending GPS_INPUT through ``link`` (:func:`mavlink_gps_link` or
+    :class:`~.zenoh_mavlink.ZenohMavlinkIn`); ``ok`` fixes pass ``gate`` first (:mod:`localizer.fix_gate`).
 
-    def __init__(self, link, hz: float, max_age_s: float):
+    :meth:`stop` ends it cleanly: one last no-fix GPS_INPUT (so the autopilot drops the
+    position at once rather than after its 4 s timeout), then the link is closed.
+    Cancelling :meth:`run` does the same.
+    """
+
+    def __init__(self, link, hz: float, max_age_s: float, gate: FixGate | None = None):
         self.link = link
         self.period_s = 1.0 / hz
         self.max_age_s = max_age_s
+        self.gate = gate if gate is not None else FixGate(max_age_s=max_age_s)
         self.sent = 0
         self.sent_valid = 0
+        self.not_delivered = 0  # handed to a link that was down
         self.latencies_s: deque[float] = deque(maxlen=100_000)  # frame arrival → GPS_INPUT sent, new fixes
         self._fix: Fix | None = None
         self._info = None
         self._new = asyncio.Event()
         self._last_ok: Fix | None = None
+        self._stopping = False
+        self._closed = False
 
     def on_fix(self, fix: Fix, info) -> None:
         if fix.ok:
-            self._last_ok = fix
+            if self.gate.check(fix, time.time()) is None:
+                self._last_ok = fix
         elif fix.status in LOSS_STATUSES:
             self._last_ok = None
+            self.gate.reset()
         self._fix, self._info = fix, info
         self._new.set()
 
@@ -198,30 +169,45 @@ class GpsInputSink:
         await asyncio.to_thread(self.link.open)
         try:
             next_due = loop.time()
-            while True:
+            while not self._stopping:
                 try:
                     await asyncio.wait_for(self._new.wait(), timeout=max(0.0, next_due - loop.time()))
                 except TimeoutError:
                     pass
+                if self._stopping:
+                    break
                 fresh = self._new.is_set()
                 self._new.clear()
                 self._send(fresh)
                 next_due = loop.time() + self.period_s
         finally:
-            await asyncio.to_thread(self.link.close)
+            await self.stop()
+
+    async def stop(self) -> None:
+        """The last GPS_INPUT, no fix, then the link closed; further calls do nothing."""
+        if self._closed:
+            return
+        self._stopping = self._closed = True
+        self._new.set()
+        final = gps_input_fields(None, time.time(), self.max_age_s)
+        delivered = await asyncio.to_thread(self.link.close, ("GPS_INPUT", final))
+        self.sent += 1
+        self.not_delivered += not delivered
+        log.info("GPS_INPUT %s: stopped; %s", self.link.url,
+                 "the last message said no fix" if delivered else "the link was down: no last message")
 
     def _send(self, fresh: bool) -> None:
         now = time.time()
         fields = gps_input_fields(self._last_ok, now, self.max_age_s)
-        self.link.send(fields)
+        delivered = self.link.send("GPS_INPUT", fields)
         t_sent = time.time()
         self.sent += 1
-        if fields["fix_type"] == FIX_3D:
+        self.not_delivered += not delivered
+        if fields["fix_type"] == FIX_3D and delivered:
             self.sent_valid += 1
             if fresh and self._fix is self._last_ok:
                 self.latencies_s.append(t_sent - self._info.t_recv)
 
     def status(self, now: float) -> dict:
-        heard = self.link.last_heard
         return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
-                "autopilot_age_s": None if heard is None else round(now - heard, 3)}
+                "not_delivered": self.not_delivered, "link": self.link.status(now), "gates": self.gate.status()}

@@ -1,9 +1,11 @@
 """The UAV's telemetry over pymavlink, live.
 
-A reader thread blocks in ``recv_match`` and hands every message, with its
-receive time (station clock, UNIX seconds), to the event loop, where it is fed
-into the :class:`~localizer.telemetry.Telemetry` (only the loop touches the
-telemetry). As a ground station (``MAV_TYPE_GCS``, system ``GCS_SYSID`` /
+The link (:class:`~groundstation.mavlink_link.MavlinkLink`: its own thread, reconnecting
+a TCP or serial link that drops, each UDP datagram parsed on its own) hands every
+message, with its receive time (station clock, UNIX seconds), to the event loop,
+where it is fed into the :class:`~localizer.telemetry.Telemetry` (only the loop
+touches the telemetry); what skyfix sends is queued for the link's thread, so the
+event loop never blocks on a write. As a ground station (``MAV_TYPE_GCS``, system ``GCS_SYSID`` /
 component ``GCS_COMPID``, not 255, so it does not clash with QGroundControl on the
 same link) the worker, once per second, heartbeats and sends a TIMESYNC request
 (the autopilot's replies measure the link's delay); once the autopilot is known
@@ -20,14 +22,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import threading
 import time
 from collections.abc import Callable
 
 from localizer.telemetry import Telemetry
 
 from ..logs import Throttle
-from ..mavlink_io import USED, connect, ingest, mavutil
+from ..mavlink_io import USED, ingest, mavutil
+from ..mavlink_link import MavlinkLink
 from .rates import RateMeter, RateRequests, send_interval, send_stream
 
 log = logging.getLogger("skyfix.uav")
@@ -93,31 +95,38 @@ class UavMavlink:
         self._params_asked = 0
         self._params_last = 0.0
         self._throttle = Throttle()
-        self._stop = threading.Event()
+        self.link = MavlinkLink(url, GCS_SYSID, GCS_COMPID, name="UAV MAVLink", is_peer=self._from_uav)
         self._low_warned: set[str] = set()
         self._denied: list[str] = []  # rate requests the autopilot refused, to ask again the older way
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
-        conn = await asyncio.to_thread(
-            connect, self.url, source_system=GCS_SYSID, source_component=GCS_COMPID,
-            autoreconnect=True,
-        )
-        reader = threading.Thread(target=self._read, args=(conn, loop), name="uav-mavlink", daemon=True)
-        reader.start()
+
+        def on_message(msg, t_recv: float) -> None:  # the link's thread: hand over only
+            try:
+                loop.call_soon_threadsafe(self._on_message, msg, t_recv)
+            except RuntimeError:  # loop closed: shutting down
+                pass
+
+        self.link.on_message = on_message
+        await asyncio.to_thread(self.link.open)
         try:
             next_beat = 0.0
             while True:
                 now = time.time()
                 if now >= next_beat:
-                    self._beat(conn, now)
+                    self._beat(self.link, now)
                     next_beat = now + 1.0
-                self._ask(conn, now)
+                self._ask(self.link, now)
                 await asyncio.sleep(0.25)
         finally:
-            self._stop.set()
-            await asyncio.to_thread(reader.join, 2.0)
-            conn.close()
+            await asyncio.to_thread(self.link.close)
+
+    def _from_uav(self, msg) -> bool:
+        """Whether a message (on the link's thread) is the UAV's: the link answers where those come from."""
+        return msg.get_srcSystem() == self.uav_sysid if self.uav_sysid is not None else (
+            msg.get_type() == "HEARTBEAT" and msg.autopilot != mavutil().mavlink.MAV_AUTOPILOT_INVALID
+            or msg.get_type() in USED)
 
     def _beat(self, conn, now: float) -> None:
         """Once a second: heartbeat as a ground station and a TIMESYNC request (ts1: our clock in ns)."""
@@ -157,25 +166,6 @@ class UavMavlink:
         log.info("UAV MAVLink: SET_MESSAGE_INTERVAL for %s: %s; asking with REQUEST_DATA_STREAM", kind, why)
         send_stream(conn, self.autopilot, kind, hz)
         self.requests.state[kind] = f"{self.requests.state[kind]}; stream requested at {hz:g} Hz"
-
-    def _read(self, conn, loop: asyncio.AbstractEventLoop) -> None:
-        while not self._stop.is_set():
-            try:
-                msg = conn.recv_match(blocking=True, timeout=0.5)
-            except Exception as e:  # noqa: BLE001 - pymavlink raises bare errors on some corrupt input
-                try:
-                    loop.call_soon_threadsafe(self._bad, repr(e), b"")
-                except RuntimeError:  # loop closed: shutting down
-                    return
-                self._stop.wait(0.2)  # an unplugged serial radio raises at once, every time
-                continue
-            if msg is None:
-                continue
-            t = time.time()
-            try:
-                loop.call_soon_threadsafe(self._on_message, msg, t)
-            except RuntimeError:  # loop closed: shutting down
-                return
 
     def _bad(self, reason: str, data: bytes) -> None:
         self.health.bad_data += 1
@@ -227,4 +217,5 @@ class UavMavlink:
 
     def status(self, now: float) -> dict:
         return {"url": self.url, "sysid": self.uav_sysid, "clocks": clock_status(self.tel),
-                "rate_requests": dict(self.requests.state), **self.health.as_dict(now)}
+                "rate_requests": dict(self.requests.state), **self.health.as_dict(now),
+                "link": self.link.status(now)}

@@ -1,0 +1,237 @@
+"""Byte transports for a MAVLink link skyfix owns: every failure an :class:`OSError`, no hidden retries.
+
+pymavlink's connections reconnect (and sleep) inside reads and writes, from whichever
+thread calls them, swallow write errors and print to stdout. A link whose failures
+must be seen and survived — GPS_INPUT to the UUV's autopilot — uses these instead and
+pymavlink's ``MAVLink`` object only for framing, parsing and signing. The connection
+strings are pymavlink's:
+
+- ``tcp:HOST:PORT`` connect to a TCP server (ArduSub SITL's serial ports, a BlueOS "TCP Server" endpoint);
+- ``tcpin:HOST:PORT`` listen, one client at a time (a newer one replaces the older);
+- ``udpout:HOST:PORT`` send to HOST:PORT, read replies on the same socket;
+- ``udpin:HOST:PORT`` (or ``udp:``) listen, send to whoever sent last (nothing before);
+- ``DEVICE`` or ``DEVICE,BAUD`` a serial port (default 115200 baud).
+
+:func:`open_transport` opens one (or raises :class:`OSError`, ``EINVAL`` for a malformed string); a
+transport's ``read()`` returns what is there (``b""``: nothing yet; one datagram at a time where
+``datagrams`` is true, so that a frame is never taken to continue in the next), ``write(buf)``
+sends all of it or raises (a write that cannot finish in :data:`WRITE_TIMEOUT_S` is a
+failure: a serial port or TCP peer that stopped reading), ``close()`` may be called twice.
+The end of a TCP connection is :class:`ConnectionResetError`. None of them retries:
+the caller decides when to open again.
+"""
+
+from __future__ import annotations
+
+import errno
+import select
+import socket
+import time
+
+WRITE_TIMEOUT_S = 1.0
+UDP_RCVBUF = 4 << 20  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
+CONNECT_TIMEOUT_S = 1.0
+DEFAULT_BAUD = 115200
+_READ_MAX = 65536
+
+
+def _send_all(sock: socket.socket, buf: bytes) -> None:
+    """All of ``buf`` on a non-blocking stream socket within :data:`WRITE_TIMEOUT_S`, else TimeoutError."""
+    view, deadline = memoryview(buf), time.monotonic() + WRITE_TIMEOUT_S
+    while view:
+        try:
+            view = view[sock.send(view):]
+        except BlockingIOError:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([], [sock], [], left)[1]:
+                raise TimeoutError(errno.ETIMEDOUT, f"the peer took no data for {WRITE_TIMEOUT_S:g} s") from None
+
+
+def _recv(sock: socket.socket, what: str) -> bytes:
+    try:
+        data = sock.recv(_READ_MAX)
+    except BlockingIOError:
+        return b""
+    if not data:
+        raise ConnectionResetError(errno.ECONNRESET, what)
+    return data
+
+
+def _host_port(url: str, rest: str) -> tuple[str, int]:
+    host, sep, port = rest.rpartition(":")
+    if not sep or not port.isdigit() or not 0 <= int(port) < 65536:
+        raise OSError(errno.EINVAL, f"expected HOST:PORT, got {rest!r}")
+    return host or "0.0.0.0", int(port)
+
+
+class TcpClient:
+    """``tcp:HOST:PORT``."""
+
+    datagrams = False
+
+    def __init__(self, url: str, addr: tuple[str, int]):
+        self.url = url
+        self.sock = socket.create_connection(addr, timeout=CONNECT_TIMEOUT_S)
+        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.sock.setblocking(False)
+        self.peer_known = True
+
+    def filenos(self) -> list[int]:
+        return [self.sock.fileno()]
+
+    def read(self) -> bytes:
+        return _recv(self.sock, "connection closed by the autopilot's end")
+
+    def write(self, buf: bytes) -> None:
+        _send_all(self.sock, buf)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class TcpServer:
+    """``tcpin:HOST:PORT``: the newest client is the peer; its end returns the transport to listening."""
+
+    datagrams = False
+
+    def __init__(self, url: str, addr: tuple[str, int]):
+        self.url = url
+        self.listener = socket.create_server(addr, reuse_port=False)
+        self.listener.setblocking(False)
+        self.client: socket.socket | None = None
+
+    @property
+    def peer_known(self) -> bool:
+        return self.client is not None
+
+    def filenos(self) -> list[int]:
+        return [self.listener.fileno()] + ([self.client.fileno()] if self.client else [])
+
+    def read(self) -> bytes:
+        try:
+            conn, _ = self.listener.accept()
+        except BlockingIOError:
+            pass
+        else:
+            self._drop_client()
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.setblocking(False)
+            self.client = conn
+        if self.client is None:
+            return b""
+        try:
+            return _recv(self.client, "the autopilot's client disconnected")
+        except OSError:
+            self._drop_client()
+            raise
+
+    def write(self, buf: bytes) -> None:
+        if self.client is not None:
+            try:
+                _send_all(self.client, buf)
+            except OSError:
+                self._drop_client()
+                raise
+
+    def _drop_client(self) -> None:
+        if self.client is not None:
+            self.client.close()
+            self.client = None
+
+    def close(self) -> None:
+        self._drop_client()
+        self.listener.close()
+
+
+class Udp:
+    """``udpout:`` (a fixed destination) or ``udpin:``/``udp:`` (bound; answers the sender the caller names
+    with :meth:`answer_last_sender`: the last one whose datagram held its peer's messages)."""
+
+    datagrams = True
+
+    def __init__(self, url: str, addr: tuple[str, int], listen: bool):
+        self.url = url
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)  # the kernel caps it (rmem_max)
+        if listen:
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.sock.bind(addr)
+            self.dest = None
+        else:
+            self.dest = (socket.gethostbyname(addr[0]), addr[1])
+        self.listen = listen
+        self.last_from: tuple[str, int] | None = None
+
+    @property
+    def peer_known(self) -> bool:
+        return self.dest is not None
+
+    def filenos(self) -> list[int]:
+        return [self.sock.fileno()]
+
+    def read(self) -> bytes:
+        try:
+            data, addr = self.sock.recvfrom(_READ_MAX)
+        except (BlockingIOError, ConnectionRefusedError):  # ICMP port unreachable of an earlier datagram
+            return b""
+        self.last_from = addr
+        return data
+
+    def answer_last_sender(self) -> None:
+        if self.listen:
+            self.dest = self.last_from
+
+    def write(self, buf: bytes) -> None:
+        if self.dest is not None:
+            self.sock.sendto(buf, self.dest)  # unconnected: no ICMP errors, but a missing route raises
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class Serial:
+    """``DEVICE[,BAUD]`` through pyserial."""
+
+    peer_known = True
+    datagrams = False
+
+    def __init__(self, url: str, device: str, baud: int):
+        import serial
+
+        self.url = url
+        try:
+            self.port = serial.Serial(device, baud, timeout=0, write_timeout=WRITE_TIMEOUT_S)
+        except (serial.SerialException, ValueError) as e:
+            raise OSError(errno.ENODEV, str(e)) from None
+
+    def filenos(self) -> list[int]:
+        return [self.port.fileno()]
+
+    def read(self) -> bytes:
+        return self.port.read(max(1, self.port.in_waiting))
+
+    def write(self, buf: bytes) -> None:
+        self.port.write(buf)  # SerialTimeoutException and SerialException are OSErrors
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def open_transport(url: str):
+    """An open transport for a pymavlink-style connection string; :class:`OSError` when it cannot be opened."""
+    kind, _, rest = url.partition(":")
+    if kind == "tcp":
+        return TcpClient(url, _host_port(url, rest))
+    if kind == "tcpin":
+        return TcpServer(url, _host_port(url, rest))
+    if kind == "udpout":
+        return Udp(url, _host_port(url, rest), listen=False)
+    if kind in ("udpin", "udp"):
+        return Udp(url, _host_port(url, rest), listen=True)
+    device, _, baud = url.partition(",")
+    if not device.startswith("/") and not device.upper().startswith("COM"):
+        raise OSError(errno.EINVAL, "expected tcp:, tcpin:, udpout:, udpin: or a serial device")
+    if baud and not baud.isdigit():
+        raise OSError(errno.EINVAL, f"baud rate {baud!r} is not a number")
+    return Serial(url, device, int(baud) if baud else DEFAULT_BAUD)
