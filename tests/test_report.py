@@ -72,7 +72,7 @@ def _skyfix(*args):
                           timeout=300, check=False)
 
 
-ETA = re.compile(r"tiny: (rendering|tracking): 100% (\d+)/\2 frames \[\d\d:\d\d elapsed, ETA 00:00, [\d.]+ frames/s\]")
+ETA = re.compile(r"tiny: (rendering|tracking): 100% (\d+)/\2 frames \[\d\d:\d\d elapsed, ETA 00:00, +[\d.]+ frames/s\]")
 
 
 def test_long_runs_show_progress_with_an_eta_unless_quiet(tmp_path):
