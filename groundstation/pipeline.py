@@ -22,8 +22,6 @@ interpolated as offline; at most ``telemetry_wait_s`` after the frame arrived (a
 slow radio: ATTITUDE at 4 Hz needs about 0.3 s), then it is located with what
 there is (extrapolated within ``[timing]`` limits, or a ``stale_…`` status).
 Tracking goes on meanwhile.
-Frames the video reader marks ``buffered`` (their exposure time is unknown) are
-tracked but get the status ``buffered`` and no position.
 """
 
 from __future__ import annotations
@@ -120,7 +118,7 @@ class Pipeline:
 
     def _needs_telemetry(self, frame: LiveFrame, result: TrackResult) -> bool:
         """Whether a tracked frame is further past its newest attitude telemetry than :data:`EXTRAPOLATE_S`."""
-        if not result.ok or frame.buffered:
+        if not result.ok:
             return False
         t = float(self.tel.uav_time(frame.t_unix)) - EXTRAPOLATE_S
         return any(s.last_t is None or s.last_t < t for s in self._angle_series)
@@ -161,9 +159,9 @@ class Pipeline:
         return self._locate(frame, await self._track(frame))
 
     def _locate(self, frame: LiveFrame, result: TrackResult) -> Fix:
-        """A tracked frame's fix; ``buffered`` frames are only tracked."""
-        if not result.ok or frame.buffered:
-            fix = Fix(frame.t_unix, result.status if not result.ok else "buffered")
+        """A tracked frame's fix."""
+        if not result.ok:
+            fix = Fix(frame.t_unix, result.status)
         else:
             fix = locate(self.cal, camera_pose(self.cal, self.tel, frame.t_unix), result.u, result.v)[0]
         fix.frame = frame.index

@@ -126,11 +126,16 @@ def pipeable(video: Path) -> bool:
 
 
 def ffmpeg_command(video: Path, url: str, from_pipe: bool) -> list[str]:
-    """``ffmpeg -re`` streaming ``video`` (or the same bytes on stdin) as MPEG-TS to a UDP URL."""
+    """``ffmpeg -re`` streaming ``video`` (or the same bytes on stdin) as MPEG-TS to a UDP URL.
+
+    Each video PES carries its length, so a receiver can hand a frame over as soon as
+    its last packet is in instead of waiting for the next frame's first one.
+    """
     codec = ["-c:v", "copy"] if video_codec(video) in COPY_CODECS else [
         "-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency", "-pix_fmt", "yuv420p"]
     sep = "&" if "?" in url else "?"
-    return ["ffmpeg", "-loglevel", "error", "-re", "-i", "pipe:0" if from_pipe else str(video), "-an", *codec, "-muxdelay", "0", "-muxpreload", "0", "-f", "mpegts",
+    return ["ffmpeg", "-loglevel", "error", "-re", "-i", "pipe:0" if from_pipe else str(video), "-an", *codec, "-muxdelay", "0", "-muxpreload", "0",
+            "-omit_video_pes_length", "0", "-f", "mpegts",
             f"{url}{sep}pkt_size=1316"]
 
 
