@@ -17,7 +17,9 @@ value is a :class:`~groundstation.video.VideoError` naming it.
 
 from __future__ import annotations
 
+import errno
 import re
+import socket
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,6 +50,21 @@ class VideoInput:
     @property
     def live(self) -> bool:
         return self.kind != "file"
+
+    def port_in_use(self) -> bool:
+        """Whether another program holds the UDP port this input listens on (RTCP's next port too, for RTP).
+
+        Checked before FFmpeg binds: its failed bind is reported as another error.
+        """
+        ports = () if self.port is None else (self.port, self.port + 1) if self.kind in ("rtp", "sdp") else (self.port,)
+        for port in ports:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                try:
+                    s.bind(("0.0.0.0", port))
+                except OSError as e:
+                    if e.errno == errno.EADDRINUSE:
+                        return True
+        return False
 
 
 def _port(url: str, parts) -> int:

@@ -16,9 +16,9 @@ camera + encoder + network). Decoding delay, jitter and bursts move neither.
 Each connection starts a new map (a camera that restarts restarts its clock).
 The packets read while a connection is being opened are stamped when the open
 returns, late: the first frames of a connection may be late by that much until a
-packet read live lowers the offset. Slots are kept increasing within a
-connection (a frame after such a correction gets at least its predecessor's
-slot + 1 ms).
+packet read live lowers the offset (so a slot may be earlier than the one before
+it just after a connection starts). A frame without a PTS (RTP's first access
+unit may lose it) takes its arrival as its slot.
 
 Failures: a stream that cannot be opened (nothing sent yet, refused, a port
 another program holds) is retried with back-off from :data:`RETRY_MIN_S` to
@@ -51,7 +51,6 @@ log = logging.getLogger("skyfix.video")
 
 RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
-MIN_SLOT_STEP_S = 0.001  # least step between the slots of consecutive frames
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
 
 
@@ -105,7 +104,6 @@ class VideoLive:
         self.last_recv: float | None = None
         self.last_error: str | None = None
         self.clock: ClockMap | None = None
-        self._last_slot: float | None = None
         self._late_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv − t_slot
         self._decode_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv → frame handed over
         self._stop = threading.Event()
@@ -126,6 +124,8 @@ class VideoLive:
         while not self._stop.is_set():
             t_try = time.time()
             try:
+                if self.source.port_in_use():
+                    raise OSError(errno.EADDRINUSE, "port in use")
                 container = av.open(self.source.file, format=self.source.format, options=self.source.options,
                                     timeout=(self.open_timeout_s, self.read_timeout_s))
             except (av.error.FFmpegError, OSError) as e:
@@ -135,11 +135,8 @@ class VideoLive:
                 backoff = min(2.0 * backoff, self.retry_max_s)
                 continue
             frames_before = self.frames
+            self.state = "open"  # opened; receiving from the first packet on
             try:
-                self.connects += 1
-                self.state = "receiving"
-                self.last_error = None
-                log.info("video: receiving %s (connection %d)", self.url, self.connects)
                 ended = self._receive(container, loop)
             except (av.error.FFmpegError, OSError) as e:
                 ended = _reason(self.source, e, t_try, self.read_timeout_s)
@@ -166,12 +163,13 @@ class VideoLive:
         ctx.flags |= av.codec.context.Flags.low_delay
         tb = float(stream.time_base)
         self.clock = clock = ClockMap(window_s=CLOCK_WINDOW_S)
-        self._last_slot = None
         first_recv: dict[int, float] = {}
         for packet in container.demux(stream):
             t_recv = time.time()
             if self._stop.is_set():
                 return None
+            if clock.offset_s is None:
+                self._connected()
             if packet.pts is not None:
                 clock.add(packet.pts * tb, t_recv)
                 first_recv.setdefault(packet.pts, t_recv)
@@ -190,6 +188,13 @@ class VideoLive:
             return None
         return f"{self.url}: the stream ended after frame {self.frames - 1}"
 
+    def _connected(self) -> None:
+        """The first packet of a connection."""
+        self.connects += 1
+        self.state = "receiving"
+        self.last_error = None
+        log.info("video: receiving %s (connection %d)", self.url, self.connects)
+
     def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float, loop) -> bool:
         image = frame.to_ndarray(format="bgr24")
         h, w = image.shape[:2]
@@ -197,9 +202,6 @@ class VideoLive:
             ew, eh = self.expected_size
             raise VideoError(f"{self.url}: frames are {w}x{h} pixels, the calibration's camera is {ew}x{eh}")
         t_slot = float(clock.to_arrival(frame.pts * tb)) if frame.pts is not None else t_recv
-        if self._last_slot is not None:
-            t_slot = max(t_slot, self._last_slot + MIN_SLOT_STEP_S)
-        self._last_slot = t_slot
         live = LiveFrame(self.frames, t_slot - self.latency_s, t_recv, image, t_slot)
         self.frames += 1
         self.last_recv = t_recv
