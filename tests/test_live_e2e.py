@@ -31,9 +31,8 @@ from groundstation.session import load_session
 
 # SKYFIX_LIVE_SESSION may name another session (with truth.csv) to rehearse
 SESSION = Path(os.environ.get("SKYFIX_LIVE_SESSION", ROOT / "sim_fixtures" / "bundled" / "nadir_hover"))
-# Send → frame-decoded delay of this replay chain (ffmpeg -re copying the session's H.264, which has
-# B-frames, into MPEG-TS over UDP; OpenCV decoding), measured on this machine at 45–65 ms.
-VIDEO_LATENCY_MS = 55
+# Glass to first packet of this replay chain: the replay sends each frame at its exposure time.
+VIDEO_LATENCY_MS = 0
 
 
 def test_replay_run_subscriber_uuv(tmp_path):

@@ -29,7 +29,10 @@ from ..video import VideoError
 
 # No "fflags nobuffer": it throws away the packets read while probing, and with them the
 # keyframe a camera may not repeat for seconds; probing reads little with these limits.
-LOW_DELAY = {"flags": "low_delay", "probesize": "32", "analyzeduration": "0"}
+# Format and protocol options only (the decoder's low delay is set on it): they go to
+# av.open as container_options, since PyAV 16's per-stream options array overflows
+# (segfault) when a stream appears while probing, as an MPEG-TS stream joined late does.
+LOW_DELAY = {"probesize": "32", "analyzeduration": "0"}
 UDP_OPTIONS = {"overrun_nonfatal": "1", "buffer_size": str(4 << 20)}
 RTP_OPTIONS = {"protocol_whitelist": "file,udp,rtp", "max_delay": "0", "reorder_queue_size": "0"}
 RTP_CODECS = {"h264": "H264", "h265": "H265", "hevc": "H265"}
@@ -38,7 +41,7 @@ V4L2_KEYS = ("video_size", "framerate", "input_format", "pixel_format", "standar
 
 @dataclass(frozen=True)
 class VideoInput:
-    """An input ready for ``av.open(file, format=format, options=options)``."""
+    """An input ready for ``av.open(file, format=format, container_options=options)``."""
 
     url: str  # as given
     kind: str  # udp, rtp, sdp, rtsp, v4l2, url, file

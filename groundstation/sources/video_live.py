@@ -126,7 +126,8 @@ class VideoLive:
             try:
                 if self.source.port_in_use():
                     raise OSError(errno.EADDRINUSE, "port in use")
-                container = av.open(self.source.file, format=self.source.format, options=self.source.options,
+                container = av.open(self.source.file, format=self.source.format,
+                                    container_options=self.source.options,
                                     timeout=(self.open_timeout_s, self.read_timeout_s))
             except (av.error.FFmpegError, OSError) as e:
                 self.state = "waiting"
