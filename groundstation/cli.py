@@ -18,6 +18,7 @@ SUBCOMMANDS = (
     "groundstation.service",
     "groundstation.replay",
     "groundstation.calibrate",
+    "groundstation.latency",
 )
 
 

@@ -78,6 +78,8 @@ class Pipeline:
             [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
             else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
         self.waited_s = 0.0  # total time frames waited for telemetry
+        self.held = 0  # frames that waited for telemetry
+        self._holding: int | None = None
         self._tracker = None
         self._last_ok: Fix | None = None
         self.processed = 0
@@ -133,6 +135,9 @@ class Pipeline:
             frame, result = self._tracked[0]
             left = frame.t_recv + self.telemetry_wait_s - time.time()
             if left > 0 and self._needs_telemetry(frame, result):
+                if self._holding != frame.index:
+                    self._holding = frame.index
+                    self.held += 1
                 self._telemetry.clear()
                 t0 = loop.time()
                 try:
@@ -196,5 +201,6 @@ class Pipeline:
 
     def status(self) -> dict:
         return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),
-                "waiting_for_telemetry": len(self._tracked), "waited_s": round(self.waited_s, 3),
+                "waiting_for_telemetry": len(self._tracked), "held_for_telemetry": self.held,
+                "waited_s": round(self.waited_s, 3),
                 "last_status": self.last_status, "statuses": dict(self.statuses)}
