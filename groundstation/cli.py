@@ -19,6 +19,7 @@ SUBCOMMANDS = (
     "groundstation.replay",
     "groundstation.calibrate",
     "groundstation.latency",
+    "groundstation.latency_estimate",
 )
 
 

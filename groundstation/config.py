@@ -24,7 +24,7 @@ class RunConfig:
     mavlink: str = "udpin:0.0.0.0:14550"  # the UAV, a pymavlink connection string
     mavlink_backend: str = "pymavlink"
     video: str | None = None  # anything FFmpeg opens
-    video_latency_ms: float = 0.0  # exposure → receive delay subtracted from each frame's receive time
+    video_latency_ms: float | str = 0.0  # glass to first packet, ms, or "auto" (estimated from the image's motion)
     no_request_rates: bool = False  # leave the autopilot's telemetry rates alone
     telemetry_wait_ms: float = 300.0  # how long a frame may wait for attitude telemetry after it
     zenoh_connect: tuple[str, ...] = ()
@@ -52,7 +52,8 @@ _HELP = {
     "mavlink": "the UAV's MAVLink, e.g. udpin:0.0.0.0:14550, tcp:host:port, /dev/ttyUSB0",
     "mavlink_backend": "library reading the UAV's MAVLink",
     "video": "the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., a file",
-    "video_latency_ms": "delay from exposure to frame receipt, subtracted from receive times",
+    "video_latency_ms": "glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
+                        "'auto': estimated from the image's motion against the camera attitude",
     "no_request_rates": "do not ask the autopilot for the telemetry rates skyfix needs (a shared link)",
     "telemetry_wait_ms": "longest wait of a frame for the attitude sample after it (slow radios need ~300)",
     "zenoh_connect": "Zenoh endpoint to connect to, e.g. tcp/192.168.2.2:7447 (repeatable)",
@@ -83,7 +84,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         kw = {"help": _HELP[f.name], "default": None, "dest": f.name}
         if f.name in CHOICES:
             kw["choices"] = CHOICES[f.name]
-        if kind == "bool":
+        if f.name == "video_latency_ms":
+            parser.add_argument(flag, type=_latency_ms, **kw)
+        elif kind == "bool":
             parser.add_argument(flag, action="store_true", **kw)
         elif kind.startswith("tuple"):
             parser.add_argument(flag, action="append", metavar="ENDPOINT", **kw)
@@ -93,7 +96,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             parser.add_argument(flag, **kw)
 
 
+def _latency_ms(text: str) -> float | str:
+    """A ``--video-latency-ms`` value: a number of ms, or "auto"."""
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a number of ms nor auto") from None
+
+
 def _check(key: str, value, kind: str, source: str):
+    if key == "video_latency_ms" and value == "auto":
+        return value
     ok = {
         "bool": isinstance(value, bool),
         "float": isinstance(value, (int, float)) and not isinstance(value, bool),
@@ -145,6 +160,8 @@ def run_config(args: argparse.Namespace) -> RunConfig:
         raise ConfigError("options", "--record", cfg.record, "recording needs --mavlink-backend pymavlink")
     if not cfg.gps_input_hz >= 5.0:
         raise ConfigError("options", "--gps-input-hz", cfg.gps_input_hz, "ArduPilot needs ≥ 5 Hz")
+    if cfg.video_latency_ms != "auto" and not 0.0 <= cfg.video_latency_ms <= 2000.0:
+        raise ConfigError("options", "--video-latency-ms", cfg.video_latency_ms, "expected 0 … 2000 or auto")
     if not 0.0 <= cfg.telemetry_wait_ms <= 2000.0:
         raise ConfigError("options", "--telemetry-wait-ms", cfg.telemetry_wait_ms, "expected 0 … 2000")
     return cfg

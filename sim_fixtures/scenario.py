@@ -106,6 +106,7 @@ class LinkSpec:
 class ClockSpec:
     station_offset_s: float = 0.0  # ground station (laptop) clock minus true GNSS time: stamps frames, tlog, t_recv
     uuv_offset_s: float = 0.0  # the UUV's clock minus true time: stamps depth.jsonl's t
+    video_time_error_s: float = 0.0  # video_frames.csv's times minus the frames' true exposures (a wrong latency)
 
 
 @dataclass(frozen=True)
