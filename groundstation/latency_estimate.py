@@ -51,6 +51,9 @@ OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
 APPLY_PAIRS = 150  # ... from at least this many frame pairs
+#: Weights of the rotation's components (camera x right, y down, z optical axis). The UAV's drift looks
+#: like a rotation about x and y (a few tenths of a mrad a frame at 10 m); about the optical axis it does not.
+AXIS_WEIGHTS = np.array([0.1, 0.1, 1.0])
 
 
 @dataclass(frozen=True)
@@ -106,7 +109,7 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
     k, j = len(t0), len(offsets)
     pred = track.relative((t0[None, :] + offsets[:, None]).ravel(),
                           (t1[None, :] + offsets[:, None]).ravel()).reshape(j, k, 3)
-    sq = np.sum((pred - meas[None]) ** 2, axis=2)  # (J, K)
+    sq = np.sum(((pred - meas[None]) * AXIS_WEIGHTS) ** 2, axis=2)  # (J, K)
     use = np.ones(k, bool)
     for _ in range(2):  # fit, then again without the pairs it explains worst
         best = int(np.argmin(sq[:, use].sum(axis=1)))
@@ -121,7 +124,7 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
         if curvature > 0:
             offset += OFFSET_STEP_S * 0.5 * (c0 - c2) / curvature
     lo, hi = max(best - 1, 0), min(best + 1, j - 1)
-    slope = (pred[hi, use] - pred[lo, use]) / ((hi - lo) * OFFSET_STEP_S)
+    slope = (pred[hi, use] - pred[lo, use]) * AXIS_WEIGHTS / ((hi - lo) * OFFSET_STEP_S)
     n = int(use.sum())
     s2 = cost[best] / max(3 * n - 1, 1)
     info = float(np.sum(slope ** 2))
