@@ -271,3 +271,33 @@ def test_stop_while_the_stream_is_down_exits_cleanly(tmp_path):
     text = log.read_text()
     assert proc.returncode == 0, text[-3000:]
     assert "terminate called" not in text and "Traceback" not in text, text[-3000:]
+
+
+def test_ffmpeg_complaints_are_thinned_out(clips, tmp_path, caplog):
+    """A damaged stream makes FFmpeg complain about nearly every frame; the log names each complaint a few
+    times, then every 100th, and the damaged frames are counted, not fatal."""
+    data = bytearray(clips["h264"].read_bytes())
+    rng = np.random.default_rng(5)
+    for at in range(0, len(data) - 188, 188 * 7):  # every 7th TS packet: payload scrambled, sync byte kept
+        data[at + 8 : at + 188] = rng.integers(0, 256, 180, dtype=np.uint8).tobytes()
+    damaged = tmp_path / "damaged.ts"
+    damaged.write_bytes(bytes(data))
+    port = free_port()
+    caplog.set_level(logging.WARNING, logger="skyfix")
+    with Receiver(f"udp://127.0.0.1:{port}") as rx:
+        sender = _send(damaged, 6, "-f", "mpegts", f"udp://127.0.0.1:{port}?pkt_size=1316")
+        try:
+            sender.wait(30)
+            wait_for(lambda: len(rx.frames) >= 30, 10, "frames from the damaged stream")
+        finally:
+            sender.kill()
+            sender.wait()
+    ffmpeg_lines = [r.getMessage() for r in caplog.records if r.name == "skyfix.ffmpeg"]
+    libav_records = sum(1 for r in caplog.records if r.name.startswith("libav"))
+    said = logging.getLogger("libav").handlers[0].throttle.counts  # every complaint FFmpeg made, by kind
+    allowed = sum(min(n, 3) + n // 100 for n in said.values())
+    print(f"FFmpeg said {sum(said.values())} things of {len(said)} kinds; {len(ffmpeg_lines)} lines logged; "
+          f"{len(rx.frames)} frames")
+    assert ffmpeg_lines and libav_records == 0  # in the log, never straight from PyAV's loggers
+    assert sum(said.values()) >= 2 * len(ffmpeg_lines)
+    assert len(ffmpeg_lines) <= allowed
