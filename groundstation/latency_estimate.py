@@ -5,8 +5,10 @@ The camera's rotation between consecutive frames is measured in the image
 (:func:`localizer.pose.camera_pose`, sampled every :data:`TRACK_STEP_S` and
 interpolated) for the frames' times shifted by each candidate offset; the offset
 whose predictions match best (least squares, refined on a parabola; pairs the fit
-explains worst left out) is the estimate, its 1-sigma from the residuals and how
-fast the predictions change with the offset. A UAV that yaws, sways or tilts
+explains worst left out) is the estimate, its 1-sigma from the residuals (and
+their correlation from pair to pair) and how fast the predictions change with
+the offset: the camera's angular acceleration carries the information, so a
+slow, steady turn says little. A UAV that yaws, sways or tilts
 gives a sharp estimate; one that holds perfectly still gives none (σ large).
 
 - :func:`estimate_offset`: one estimate from measured rotations and an
@@ -50,7 +52,7 @@ TRACK_STEP_S = 0.005  # the camera attitude is sampled this often for the predic
 OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
-APPLY_PAIRS = 150  # ... from at least this many frame pairs
+APPLY_PAIRS = 90  # ... from at least this many frame pairs
 #: Weights of the rotation's components (camera x right, y down, z optical axis). The UAV's drift looks
 #: like a rotation about x and y (a few tenths of a mrad a frame at 10 m); about the optical axis it does not.
 AXIS_WEIGHTS = np.array([0.1, 0.1, 1.0])
@@ -129,7 +131,29 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
     s2 = cost[best] / max(3 * n - 1, 1)
     info = float(np.sum(slope ** 2))
     sigma = float(np.sqrt(s2 / info)) if info > 0 else float("inf")
+    resid = (meas[use] - pred[best, use]) * AXIS_WEIGHTS
+    sigma *= np.sqrt(_correlation_factor(np.sum(slope * resid, axis=1)))
     return OffsetEstimate(offset, sigma, n, float(np.sqrt(s2)) * 1000.0)
+
+
+def _correlation_factor(g: np.ndarray, max_lag: int = 60) -> float:
+    """How much more a sum of the series ``g`` varies than if its terms were independent (≥ 1).
+
+    Residuals of neighbouring frame pairs can be alike (waves, texture moving with the light): the
+    offset's σ from independent residuals would then be too small. Sums the autocorrelation up to
+    its first negative lag.
+    """
+    g = g - g.mean()
+    var = float(np.dot(g, g))
+    if var <= 0 or len(g) < 8:
+        return 1.0
+    total = 1.0
+    for lag in range(1, min(max_lag, len(g) // 4)):
+        rho = float(np.dot(g[:-lag], g[lag:])) / var
+        if rho <= 0:
+            break
+        total += 2.0 * rho
+    return total
 
 
 def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[OffsetEstimate | None, int]:

@@ -29,7 +29,7 @@ ERROR_S = 0.080
 TOLERANCE_S = 0.010
 SCENARIO = """
 name = "motion_{name}"
-description = "11 s, UAV yawing (camera follows) and drifting, frames stamped 80 ms late"
+description = "11 s, UAV yawing ±10° every 4 s (camera follows) and drifting, frames stamped 80 ms late"
 seed = 7
 duration_s = 11.0
 [camera]
@@ -42,7 +42,8 @@ pitch_deg = -90.0
 yaw_mode = "vehicle"
 [uav]
 height_m = 10.0
-yaw_swing_deg = 15.0
+yaw_swing_deg = 10.0
+yaw_period_s = 4.0
 drift_m = 0.6
 [clock]
 video_time_error_s = {error}

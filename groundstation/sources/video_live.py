@@ -49,6 +49,8 @@ from .video_inputs import VideoInput, parse_video_input
 
 log = logging.getLogger("skyfix.video")
 
+OPEN_TIMEOUT_S = 2.0  # an open waits this long for the stream (a stop waits for it too)
+RTSP_OPEN_TIMEOUT_S = 5.0
 RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
@@ -87,9 +89,11 @@ class VideoLive:
     """Worker owning the video link; ``on_frame(LiveFrame)`` is called on the event loop."""
 
     def __init__(self, url: str, latency_s: float, on_frame: Callable[[LiveFrame], None],
-                 expected_size: tuple[int, int] | None = None, open_timeout_s: float = 5.0,
+                 expected_size: tuple[int, int] | None = None, open_timeout_s: float | None = None,
                  read_timeout_s: float = 2.0, retry_max_s: float = 1.0):
         self.source = parse_video_input(url)
+        if open_timeout_s is None:  # an RTSP session takes several round trips to set up
+            open_timeout_s = RTSP_OPEN_TIMEOUT_S if self.source.kind == "rtsp" else OPEN_TIMEOUT_S
         self.url = url
         self.latency_s = latency_s
         self.on_frame = on_frame
