@@ -7,9 +7,9 @@ interpolated) for the frames' times shifted by each candidate offset; the offset
 whose predictions match best (least squares, refined on a parabola; pairs the fit
 explains worst left out) is the estimate, its 1-sigma from the residuals (and
 their correlation from pair to pair) and how fast the predictions change with
-the offset: the camera's angular acceleration carries the information, so a
-slow, steady turn says little. A UAV that yaws, sways or tilts
-gives a sharp estimate; one that holds perfectly still gives none (σ large).
+the offset: the changes of the camera's turn rate about its optical axis carry
+the information, so a slow, steady turn says little and a camera held on a
+heading (a gimbal locked to North) nothing (σ large).
 
 - :func:`estimate_offset`: one estimate from measured rotations and an
   :class:`AttitudeTrack`.
@@ -50,12 +50,14 @@ log = logging.getLogger("skyfix.latency")
 
 TRACK_STEP_S = 0.005  # the camera attitude is sampled this often for the predictions
 OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
+MEASURE_HZ = 15.0  # frames measured live, at most (every other one at 30 fps: half the CPU)
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
-APPLY_PAIRS = 90  # ... from at least this many frame pairs
+APPLY_PAIRS = 60  # ... from at least this many frame pairs
 #: Weights of the rotation's components (camera x right, y down, z optical axis). The UAV's drift looks
-#: like a rotation about x and y (a few tenths of a mrad a frame at 10 m); about the optical axis it does not.
-AXIS_WEIGHTS = np.array([0.1, 0.1, 1.0])
+#: like a rotation about x and y (a few tenths of a mrad a frame at 10 m, as much as a gimbal's wobble),
+#: and would pull the estimate; about the optical axis it does not. So only the image's turning counts.
+AXIS_WEIGHTS = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -69,37 +71,29 @@ class OffsetEstimate:
 
 
 class AttitudeTrack:
-    """The camera's attitude (``R_ned_from_cv``) on a uniform time grid, extended as telemetry comes."""
+    """The camera's attitude (``R_ned_from_cv``) sampled every :data:`TRACK_STEP_S` from ``t_from`` to ``t_to``
+    where the telemetry gives a pose; rotations between any two times inside by interpolation."""
 
-    def __init__(self, cal: Calibration, keep_s: float = 60.0):
-        self.cal = cal
-        self.keep_s = keep_s
-        self.t = np.empty(0)
-        self.q = np.empty((0, 4))
+    def __init__(self, cal: Calibration, tel: Telemetry, t_from: float, t_to: float):
+        times = np.arange(t_from, t_to, TRACK_STEP_S)
+        pose = camera_pose(cal, tel, times) if len(times) else None
+        ok = np.zeros(len(times), bool) if pose is None else (
+            (pose.status == "ok") & np.all(np.isfinite(pose.R_ned_from_cv), axis=(1, 2)))
+        self.t = times[ok]
+        self._slerp = Slerp(self.t, Rot.from_matrix(pose.R_ned_from_cv[ok])) if ok.sum() >= 2 else None
 
-    def extend(self, tel: Telemetry, t_from: float, t_to: float) -> None:
-        """Sample from after the last sample (or ``t_from``) up to ``t_to`` where the telemetry gives a pose."""
-        start = t_from if len(self.t) == 0 else max(t_from, self.t[-1] + TRACK_STEP_S)
-        times = np.arange(start, t_to, TRACK_STEP_S)
-        if len(times) == 0:
-            return
-        pose = camera_pose(self.cal, tel, times)
-        ok = (pose.status == "ok") & np.all(np.isfinite(pose.R_ned_from_cv), axis=(1, 2))
-        if ok.any():
-            self.t = np.r_[self.t, times[ok]]
-            self.q = np.r_[self.q, Rot.from_matrix(pose.R_ned_from_cv[ok]).as_quat()]
-        keep = self.t >= self.t[-1] - self.keep_s if len(self.t) else slice(None)
-        self.t, self.q = self.t[keep], self.q[keep]
+    @property
+    def ready(self) -> bool:
+        return self._slerp is not None
 
     def relative(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
         """Rotation vectors of ``R_cv1_from_cv0`` = R(t1)ᵀ R(t0), for arrays of times inside the track."""
-        slerp = Slerp(self.t, Rot.from_quat(self.q))
-        return (slerp(t1).inv() * slerp(t0)).as_rotvec()
+        return (self._slerp(t1).inv() * self._slerp(t0)).as_rotvec()
 
 
 def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets: np.ndarray) -> OffsetEstimate | None:
     """The offset (one of ``offsets``, refined) that best predicts the measured rotations; None without enough."""
-    if len(track.t) < 2:
+    if not track.ready:
         return None
     t0 = np.array([r.t0 for r in rotations])
     t1 = np.array([r.t1 for r in rotations])
@@ -172,8 +166,7 @@ def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[OffsetEstim
                     rotations.append(r)
     except VideoError as e:
         raise SessionError(str(e)) from None
-    track = AttitudeTrack(cal, keep_s=float(t[-1] - t[0]) + 2 * search_s + 1.0)
-    track.extend(session.telemetry, float(t[0]) - search_s - 0.1, float(t[-1]) + search_s + 0.1)
+    track = AttitudeTrack(cal, session.telemetry, float(t[0]) - search_s - 0.1, float(t[-1]) + search_s + 0.1)
     offsets = np.arange(-search_s, search_s + OFFSET_STEP_S / 2, OFFSET_STEP_S)
     return estimate_offset(rotations, track, offsets), len(rotations) + 1
 
@@ -181,8 +174,8 @@ def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[OffsetEstim
 class OnlineLatency:
     """Worker estimating the glass-to-first-packet latency of the live video (see the module doc).
 
-    ``on_frame`` (event loop) hands frames to a thread that measures their rotation
-    (frames arriving while it is busy are skipped); once a second the telemetry is
+    ``on_frame`` (event loop) hands frames, at most :data:`MEASURE_HZ` a second, to a
+    thread that measures their rotation (frames arriving while it is busy are skipped); once a second the telemetry is
     copied on the loop and the thread extends the attitude track and estimates.
     ``apply(latency_s)``, when given (``auto``), is called on the loop with each
     estimate sure enough to use.
@@ -203,8 +196,12 @@ class OnlineLatency:
         self._tel: tuple[Telemetry, float] | None = None
         self._stop = threading.Event()
         self._rotations: deque[Rotation] = deque()
+        self._last_slot: float | None = None
 
     def on_frame(self, frame) -> None:
+        if self._last_slot is not None and frame.t_slot - self._last_slot < 1.0 / MEASURE_HZ - 0.005:
+            return
+        self._last_slot = frame.t_slot
         try:
             self._frames.put_nowait((frame.t_slot, frame.image))
         except queue.Full:
@@ -224,7 +221,6 @@ class OnlineLatency:
 
     def _work(self, loop: asyncio.AbstractEventLoop) -> None:
         meter = RotationMeter(self.cal.camera)
-        track = AttitudeTrack(self.cal, keep_s=self.window_s + 2.0)
         while not self._stop.is_set():
             try:
                 t_slot, image = self._frames.get(timeout=0.2)
@@ -240,7 +236,8 @@ class OnlineLatency:
                 self._rotations.popleft()
             if not self._rotations:
                 continue
-            track.extend(tel, self._rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3)
+            # sampled anew each time: the telemetry's alignment to the station clock sharpens as it comes
+            track = AttitudeTrack(self.cal, tel, self._rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3)
             estimate = estimate_offset(list(self._rotations), track, self.offsets)
             if estimate is not None:
                 self.estimate = estimate
@@ -250,7 +247,7 @@ class OnlineLatency:
         latency = -e.offset_s
         off = self.configured_s is not None and abs(latency - self.configured_s) > WARN_S
         news = self._warned is None or abs(latency - self._warned) > WARN_S / 3
-        if off and news and e.sigma_s <= WARN_S / 3:
+        if off and news and e.sigma_s <= APPLY_SIGMA_S and e.pairs >= APPLY_PAIRS:
             self._warned = latency
             log.warning("video: the image's motion puts the glass-to-first-packet latency at %.0f ± %.0f ms, "
                         "not the configured %.0f ms (--video-latency-ms)", latency * 1000, e.sigma_s * 1000,

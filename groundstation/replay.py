@@ -16,9 +16,9 @@ agrees with itself:
   (``t`` + shift when it has none), so a UUV clock that was off stays off.
 - The video: sent in-process as MPEG-TS to ``--video-out`` (default
   ``udp://127.0.0.1:5600``; ``rtp://host:port`` sends RTP), each frame at its
-  ``video_frames.csv`` time + shift by the file's timestamps
-  (:func:`groundstation.video_send.send_video`): a camera with zero
-  glass-to-first-packet latency.
+  ``video_frames.csv`` time + shift (+ ``--video-delay-ms``) by the file's
+  timestamps (:func:`groundstation.video_send.send_video`): a camera whose
+  glass-to-first-packet latency is ``--video-delay-ms`` (default 0).
 - A UUV-side endpoint (``--uuv-listen``, default ``udpin:127.0.0.1:14660``)
   writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
   stdout), with its receive time: what the UUV's autopilot would get.
@@ -166,7 +166,7 @@ class Replay:
         if args.uuv_listen:
             threads.append(threading.Thread(target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True))
         if self.video is not None:
-            t0 = float(self.frames["t"][0]) + shift
+            t0 = float(self.frames["t"][0]) + shift + args.video_delay_ms / 1000.0
             threads.append(threading.Thread(target=send_video, args=(self.video, args.video_out, t0, self.stop),
                                             name="video", daemon=True))
         try:
@@ -204,6 +204,8 @@ def register(subparsers) -> None:
     p.add_argument("--video-out", default="udp://127.0.0.1:5600",
                    help="where the video goes: udp://host:port (MPEG-TS) or rtp://host:port (RTP)")
     p.add_argument("--no-video", action="store_true", help="do not stream the video")
+    p.add_argument("--video-delay-ms", type=float, default=0.0,
+                   help="send each frame this long after its exposure: a camera with this glass-to-first-packet latency")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
     p.add_argument("--depth-key", default="uuv/depth", help="Zenoh key the depth is published on")

@@ -20,7 +20,7 @@ from pathlib import Path
 import av
 
 COPY_CODECS = ("h264", "hevc", "mpeg2video")
-MPEGTS_OPTIONS = {"omit_video_pes_length": "0", "muxdelay": "0", "muxpreload": "0"}
+MPEGTS_OPTIONS = {"omit_video_pes_length": "0"}
 
 
 def _wait_until(t_unix: float, stop: threading.Event) -> bool:
