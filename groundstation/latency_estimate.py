@@ -16,9 +16,9 @@ heading (a gimbal locked to North) nothing (σ large).
 - ``skyfix estimate-latency SESSION``: for a recording: by how much the frames'
   times in ``video_frames.csv`` are off.
 - :class:`OnlineLatency`: in ``skyfix run``, the glass-to-first-packet latency
-  (frames timed by their stream slots), in the status; a warning when it differs
-  from ``--video-latency-ms`` by more than :data:`WARN_S`; applied to the video
-  with ``--video-latency-ms auto``.
+  (frames timed by their stream slots), in the status; once sure and steady, a
+  warning when it differs from ``--video-latency-ms`` by more than
+  :data:`WARN_S`, and applied to the video with ``--video-latency-ms auto``.
 """
 
 from __future__ import annotations
@@ -53,7 +53,8 @@ OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
 MEASURE_HZ = 15.0  # frames measured live, at most (every other one at 30 fps: half the CPU)
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
-APPLY_PAIRS = 60  # ... from at least this many frame pairs
+APPLY_PAIRS = 120  # ... from at least this many frame pairs ...
+STEADY_COUNT, STEADY_S = 3, 0.005  # ... when the last estimates (one a second) all were, within 5 ms
 #: Weights of the rotation's components (camera x right, y down, z optical axis). The UAV's drift looks
 #: like a rotation about x and y (a few tenths of a mrad a frame at 10 m, as much as a gimbal's wobble),
 #: and would pull the estimate; about the optical axis it does not. So only the image's turning counts.
@@ -192,6 +193,7 @@ class OnlineLatency:
         self.applied_s: float | None = None
         self.skipped = 0
         self._warned: float | None = None
+        self._recent: deque[OffsetEstimate | None] = deque(maxlen=STEADY_COUNT)
         self._frames: queue.Queue = queue.Queue(maxsize=2)
         self._tel: tuple[Telemetry, float] | None = None
         self._stop = threading.Event()
@@ -245,15 +247,18 @@ class OnlineLatency:
 
     def _judge(self, e: OffsetEstimate) -> None:
         latency = -e.offset_s
+        self._recent.append(e if e.sigma_s <= APPLY_SIGMA_S and e.pairs >= APPLY_PAIRS else None)
+        recent = [r.offset_s for r in self._recent if r is not None]
+        if len(recent) < self._recent.maxlen or max(recent) - min(recent) > STEADY_S:
+            return  # not sure yet, or not steady
         off = self.configured_s is not None and abs(latency - self.configured_s) > WARN_S
         news = self._warned is None or abs(latency - self._warned) > WARN_S / 3
-        if off and news and e.sigma_s <= APPLY_SIGMA_S and e.pairs >= APPLY_PAIRS:
+        if off and news:
             self._warned = latency
             log.warning("video: the image's motion puts the glass-to-first-packet latency at %.0f ± %.0f ms, "
                         "not the configured %.0f ms (--video-latency-ms)", latency * 1000, e.sigma_s * 1000,
                         self.configured_s * 1000)
-        sure = e.sigma_s <= APPLY_SIGMA_S and e.pairs >= APPLY_PAIRS
-        if self.apply is None or not sure or (self.applied_s is not None and abs(latency - self.applied_s) <= 0.002):
+        if self.apply is None or (self.applied_s is not None and abs(latency - self.applied_s) <= 0.002):
             return
         if self.applied_s is None:
             log.info("video: latency %.1f ± %.1f ms from the image's motion, applied", latency * 1000, e.sigma_s * 1000)

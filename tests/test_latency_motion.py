@@ -130,7 +130,7 @@ def test_online_estimate_and_auto(session, tmp_path):
     err_auto = _errors(session, gps_auto, shift_auto, since_unix=_applied_at(log_auto))
     err_right = _errors(session, gps_right, shift_right)
     common = sorted(set(err_auto) & set(err_right))
-    assert len(common) >= 60, f"only {len(common)} frames with fixes in both runs after the latency was applied"
+    assert len(common) >= 30, f"only {len(common)} frames with fixes in both runs after the latency was applied"
     mae_auto = float(np.mean([err_auto[t] for t in common]))
     mae_right = float(np.mean([err_right[t] for t in common]))
     print(f"MAE over {len(common)} frames after auto applied: auto {mae_auto:.4f} m, configured {mae_right:.4f} m")
@@ -140,8 +140,11 @@ def test_online_estimate_and_auto(session, tmp_path):
 def test_a_wrong_configured_latency_is_warned_about(caplog):
     """The warning, from an estimate 80 ms off the configured 0 ms (the estimator's own judgement, no video)."""
     online = OnlineLatency(load_session(ROOT / "sim_fixtures" / "bundled" / "nadir_hover").calibration, None, 0.0)
-    online._judge(OffsetEstimate(-0.080, 0.004, 200, 0.1))
-    online._judge(OffsetEstimate(-0.081, 0.004, 210, 0.1))  # the same news again: not repeated
-    online._judge(OffsetEstimate(-0.020, 0.004, 210, 0.1))  # within 30 ms: no warning
+    for offset_s in (-0.080, -0.081, -0.079):  # sure, and steady over three estimates: one warning
+        online._judge(OffsetEstimate(offset_s, 0.004, 200, 0.1))
+    for offset_s in (-0.020, -0.021, -0.020):  # within 30 ms of the configured: no warning
+        online._judge(OffsetEstimate(offset_s, 0.004, 210, 0.1))
+    for offset_s in (-0.200, -0.150, -0.250):  # far off but not steady: no warning
+        online._judge(OffsetEstimate(offset_s, 0.004, 210, 0.1))
     lines = [r.getMessage() for r in caplog.records if "not the configured" in r.getMessage()]
-    assert len(lines) == 1 and "80 ± 4 ms" in lines[0] and "configured 0 ms" in lines[0]
+    assert len(lines) == 1 and "79 ± 4 ms" in lines[0] and "configured 0 ms" in lines[0]
