@@ -95,6 +95,7 @@ def _live(session: Path, latency: str, tmp: Path) -> tuple[dict, list[dict], flo
         stop(run, timeout_s=20)
     log = (tmp / "run.log").read_text()
     assert run.returncode == 0 and replay.returncode == 0, log[-3000:]
+    (tmp / "replay.out").write_text(replay.stdout)
     shift = json.loads(replay.stdout.splitlines()[0])["shift_s"]
     return json.loads((tmp / "stats.json").read_text()), read_jsonl(tmp / "uuv.jsonl"), shift, log
 
@@ -130,7 +131,9 @@ def test_online_estimate_and_auto(session, tmp_path):
     err_auto = _errors(session, gps_auto, shift_auto, since_unix=_applied_at(log_auto))
     err_right = _errors(session, gps_right, shift_right)
     common = sorted(set(err_auto) & set(err_right))
-    assert len(common) >= 30, f"only {len(common)} frames with fixes in both runs after the latency was applied"
+    assert len(common) >= 30, (f"only {len(common)} frames with fixes in both runs after the latency was applied "
+                               f"(auto: {len(err_auto)} frames {min(err_auto, default=None)} … "
+                               f"{max(err_auto, default=None)}; configured: {len(err_right)} frames)")
     mae_auto = float(np.mean([err_auto[t] for t in common]))
     mae_right = float(np.mean([err_right[t] for t in common]))
     print(f"MAE over {len(common)} frames after auto applied: auto {mae_auto:.4f} m, configured {mae_right:.4f} m")
