@@ -27,6 +27,7 @@ import argparse
 import asyncio
 import copy
 import logging
+import os
 import queue
 import threading
 import time
@@ -50,7 +51,8 @@ log = logging.getLogger("skyfix.latency")
 
 TRACK_STEP_S = 0.005  # the camera attitude is sampled this often for the predictions
 OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
-MEASURE_HZ = 15.0  # frames measured live, at most (every other one at 30 fps: half the CPU)
+MEASURE_HZ = 10.0  # frames measured live, at most (every third at 30 fps: a third of the CPU)
+NICE = 10  # the measuring thread yields the CPU to decoding and tracking
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
 APPLY_PAIRS = 90  # ... from at least this many frame pairs ...
@@ -176,7 +178,8 @@ class OnlineLatency:
     """Worker estimating the glass-to-first-packet latency of the live video (see the module doc).
 
     ``on_frame`` (event loop) hands frames, at most :data:`MEASURE_HZ` a second, to a
-    thread that measures their rotation (frames arriving while it is busy are skipped); once a second the telemetry is
+    low-priority thread that measures their rotation (frames arriving while it is busy
+    are skipped); once a second the telemetry is
     copied on the loop and the thread extends the attitude track and estimates.
     ``apply(latency_s)``, when given (``auto``), is called on the loop with each
     estimate sure enough to use.
@@ -222,6 +225,7 @@ class OnlineLatency:
             await asyncio.to_thread(worker.join, 5.0)
 
     def _work(self, loop: asyncio.AbstractEventLoop) -> None:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)  # Linux: this thread only
         meter = RotationMeter(self.cal.camera)
         while not self._stop.is_set():
             try:

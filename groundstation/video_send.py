@@ -20,7 +20,8 @@ from pathlib import Path
 import av
 
 COPY_CODECS = ("h264", "hevc", "mpeg2video")
-MPEGTS_OPTIONS = {"omit_video_pes_length": "0"}
+# each PES with its length, and every frame's packets sent at once (not its tail held until the next frame's)
+MPEGTS_OPTIONS = {"omit_video_pes_length": "0", "flush_packets": "1"}
 
 
 def _wait_until(t_unix: float, stop: threading.Event) -> bool:
@@ -31,7 +32,7 @@ def _wait_until(t_unix: float, stop: threading.Event) -> bool:
 
 def _open_output(url: str):
     if url.startswith("rtp://"):
-        return av.open(url, "w", format="rtp")
+        return av.open(url, "w", format="rtp", options={"flush_packets": "1"})
     sep = "&" if "?" in url else "?"
     return av.open(f"{url}{sep}pkt_size=1316", "w", format="mpegts", options=MPEGTS_OPTIONS)
 

@@ -16,6 +16,7 @@ import pytest
 from live_helpers import free_port, skyfix, start, stop, wait_for
 
 from groundstation.timecode import read_timecode, render_timecode
+from groundstation.video_send import MPEGTS_OPTIONS
 
 T_MS = 1_796_151_234_567  # a UNIX time in ms
 DISPLAY_HZ = 60.0
@@ -43,7 +44,7 @@ def test_timecode_reads_back_exactly(flip):
 def _camera(url: str, delay_s: float, seconds: float, sent: list, stop_: threading.Event) -> None:
     """A camera filming the time code with ``delay_s`` from glass to first packet: frame i is due at
     t_i, shows the code the screen showed at t_i − delay_s (a 60 Hz display), and leaves when encoded."""
-    out = av.open(f"{url}?pkt_size=1316", "w", format="mpegts", options={"omit_video_pes_length": "0"})
+    out = av.open(f"{url}?pkt_size=1316", "w", format="mpegts", options=MPEGTS_OPTIONS)
     stream = out.add_stream("libx264", options={"preset": "ultrafast", "tune": "zerolatency", "g": "30"})
     stream.width, stream.height, stream.pix_fmt = 640, 360, "yuv420p"
     stream.codec_context.time_base = Fraction(1, FPS)
@@ -57,9 +58,11 @@ def _camera(url: str, delay_s: float, seconds: float, sent: list, stop_: threadi
             shown_ms = int(np.floor(glass * DISPLAY_HZ) / DISPLAY_HZ * 1000.0)
             frame = av.VideoFrame.from_ndarray(render_timecode(shown_ms, 640, 360), format="bgr24")
             frame.pts = i
-            packets = stream.encode(frame)
-            sent.append(time.time() - glass)  # this camera's true glass-to-first-packet latency
-            out.mux(packets)
+            for packet in stream.encode(frame):  # the encoder may hand out an earlier frame's packet
+                index = packet.pts  # in frames (1/FPS) until muxed
+                out.mux(packet)
+                # this camera's true glass-to-packet latency (a frame is a few UDP packets, sent at once)
+                sent.append(time.time() - (t0 + index / FPS - delay_s))
     finally:
         out.close()
 

@@ -271,6 +271,7 @@ def test_stop_while_the_stream_is_down_exits_cleanly(tmp_path):
     text = log.read_text()
     assert proc.returncode == 0, text[-3000:]
     assert "terminate called" not in text and "Traceback" not in text, text[-3000:]
+    assert "skyfix.ffmpeg" in text and " libav." not in text  # FFmpeg's words only through skyfix's throttle
 
 
 def test_ffmpeg_complaints_are_thinned_out(clips, tmp_path, caplog):
@@ -293,11 +294,10 @@ def test_ffmpeg_complaints_are_thinned_out(clips, tmp_path, caplog):
             sender.kill()
             sender.wait()
     ffmpeg_lines = [r.getMessage() for r in caplog.records if r.name == "skyfix.ffmpeg"]
-    libav_records = sum(1 for r in caplog.records if r.name.startswith("libav"))
     said = logging.getLogger("libav").handlers[0].throttle.counts  # every complaint FFmpeg made, by kind
     allowed = sum(min(n, 3) + n // 100 for n in said.values())
     print(f"FFmpeg said {sum(said.values())} things of {len(said)} kinds; {len(ffmpeg_lines)} lines logged; "
           f"{len(rx.frames)} frames")
-    assert ffmpeg_lines and libav_records == 0  # in the log, never straight from PyAV's loggers
+    assert ffmpeg_lines
     assert sum(said.values()) >= 2 * len(ffmpeg_lines)
     assert len(ffmpeg_lines) <= allowed

@@ -33,7 +33,9 @@ from ..video import VideoError
 # av.open as container_options, since PyAV 16's per-stream options array overflows
 # (segfault) when a stream appears while probing, as an MPEG-TS stream joined late does.
 LOW_DELAY = {"probesize": "32", "analyzeduration": "0"}
-UDP_OPTIONS = {"overrun_nonfatal": "1", "buffer_size": str(4 << 20)}
+# MPEG-TS carries a frame per PES (FFmpeg, GStreamer and camera encoders do): without FFmpeg's parser,
+# which holds each frame until the next one starts, a frame is handed over as soon as its PES is in.
+UDP_OPTIONS = {"overrun_nonfatal": "1", "buffer_size": str(4 << 20), "fflags": "+noparse"}
 RTP_OPTIONS = {"protocol_whitelist": "file,udp,rtp", "max_delay": "0", "reorder_queue_size": "0"}
 RTP_CODECS = {"h264": "H264", "h265": "H265", "hevc": "H265"}
 V4L2_KEYS = ("video_size", "framerate", "input_format", "pixel_format", "standard")
