@@ -23,6 +23,8 @@ SUBCOMMANDS = (
     "groundstation.calibrate",
     "groundstation.export",
     "groundstation.report",
+    "groundstation.latency",
+    "groundstation.latency_estimate",
 )
 
 

@@ -64,8 +64,9 @@ class RunConfig:
     mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
     video: Text | None = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
                                "a file (anything FFmpeg opens)")
-    video_latency_ms: NonNegative = Field(0.0, description="delay from exposure to frame receipt, subtracted from "
-                                          "receive times")
+    video_latency_ms: within(0, 2000) | Literal["auto"] = Field(
+        0.0, description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
+        "'auto': estimated from the image's motion against the camera attitude")
     no_request_rates: Flag = Field(False, description="do not ask the autopilot for the telemetry rates skyfix needs "
                                    "(a shared link)")
     telemetry_wait_ms: within(0, 2000) = Field(300.0, description="longest wait of a frame for the attitude sample "
@@ -168,6 +169,20 @@ def _metavar(name: str, kind) -> str:
     return "KEY" if name.endswith("_key") else "URL"
 
 
+def _admits_auto(tp) -> bool:
+    """Whether a field type takes the word "auto" beside a number."""
+    return any(get_origin(a) is Literal and "auto" in get_args(a) for a in get_args(tp))
+
+
+def _number_or_auto(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a number nor auto") from None
+
+
 def flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
@@ -187,6 +202,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         group = required if info.is_required() else options
         if kind is bool:
             group.add_argument(flag(name), action="store_true", **kw)
+        elif _admits_auto(info.annotation):
+            group.add_argument(flag(name), type=_number_or_auto, metavar="MS|auto", **kw)
         elif kind is tuple:
             group.add_argument(flag(name), action="append", metavar="ENDPOINT", **kw)
         elif choices:

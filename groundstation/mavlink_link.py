@@ -215,9 +215,9 @@ class MavlinkLink:
 
     def status(self, now: float) -> dict:
         with self._lock:
-            return {"url": self.url, "state": self.state, "state_for_s": round(now - self.state_since, 3),
+            return {"url": self.url, "state": self.state, "state_for_s": round(max(0.0, now - self.state_since), 3),
                     "error": self.error, "signed": self.signed, **self.counts,
-                    "peer_age_s": None if self.last_heard is None else round(now - self.last_heard, 3)}
+                    "peer_age_s": None if self.last_heard is None else round(max(0.0, now - self.last_heard), 3)}
 
     def _wake(self) -> None:
         try:

@@ -199,22 +199,46 @@ class PipelineStatus(Section):
     dropped: int = Field(description="frames dropped because the tracker fell behind")
     queued: int
     waiting_for_telemetry: int
+    held_for_telemetry: int = Field(description="frames that waited for attitude telemetry after them")
     waited_s: NonNegative = Field(description="total time frames waited for telemetry")
     held_frames: int = Field(description="recent frames held so a selection can name one the operator saw")
     last_status: Status | None
     statuses: dict[Status, int] = Field(description="frames per status word")
 
 
+class Percentiles(Section):
+    p50: float | None
+    p99: float | None
+
+
+class MotionLatencyStatus(Section):
+    """The video's latency estimated from the image's motion against the camera attitude."""
+
+    configured_ms: float | None = Field(description="--video-latency-ms, unless auto")
+    applied_ms: float | None = Field(description="with auto: the estimate in use, once sure")
+    frames_skipped: int = Field(description="frames not measured (the measuring thread was busy)")
+    estimate_ms: float | None = Field(None, description="glass-to-first-packet latency the motion says")
+    sigma_ms: float | None = Field(None, description="its 1-sigma")
+    pairs: int | None = Field(None, description="frame pairs measured")
+    rms_mrad: float | None = Field(None, description="residual of the fit")
+
+
 class VideoStatus(Section):
     """The UAV's video stream."""
 
     url: str
+    kind: str = Field(description="the input kind: udp (MPEG-TS), rtp, sdp, rtsp, v4l2, file")
+    state: str = Field(description="starting, open, receiving, waiting, ended, stopped")
     frames: int
     connects: int
     age_s: Age
     decode_errors: int
-    buffered: int = Field(description="frames whose exposure time could not be told")
-    error: str | None = Field(description="the last problem, null once frames flow again")
+    latency_ms: float = Field(description="glass to first packet in use (configured, or from motion with auto)")
+    arrival_after_slot_ms: Percentiles = Field(description="how late frames arrive after their stream slot")
+    decode_ms: Percentiles = Field(description="decoding time per frame")
+    stream_offset_s: float | None = Field(description="the stream clock's offset on the station clock")
+    error: str | None = Field(description="the last problem (FFmpeg's words), null once frames flow again")
+    latency_from_motion: MotionLatencyStatus | None = None
 
 
 class GpsInputStatus(Section):
@@ -246,6 +270,7 @@ class RecordStatus(Section):
     fixes: int
     video_frames: int | None = None
     video_dropped: int | None = None
+    video_error: str | None = None
 
 
 class TargetStatus(Section):

@@ -20,8 +20,6 @@ time, so that it is interpolated as offline; at most ``telemetry_wait_s`` after 
 frame arrived (a slow radio: ATTITUDE at 4 Hz needs about 0.3 s); then its pose is
 computed again with what there is (extrapolated within ``[timing]`` limits, or a
 ``stale_…`` status). Tracking goes on meanwhile.
-Frames the video reader marks ``buffered`` (their exposure time is unknown) are
-tracked but get the status ``buffered`` and no position.
 
 Operator commands (:meth:`Pipeline.select`, :meth:`Pipeline.release`,
 :meth:`Pipeline.acquire`) run in the tracking worker between frames. The last
@@ -109,6 +107,8 @@ class Pipeline:
             [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
             else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
         self.waited_s = 0.0  # total time frames waited for telemetry
+        self.held = 0  # frames that waited for telemetry
+        self._holding: int | None = None
         self.processed = 0
         self.dropped = 0
         self.statuses: Counter[str] = Counter()
@@ -223,8 +223,6 @@ class Pipeline:
 
     def _early(self, frame: LiveFrame) -> bool:
         """Whether the frame is further past its newest attitude telemetry than :data:`EXTRAPOLATE_S`."""
-        if frame.buffered:
-            return False
         t = float(self.tel.uav_time(frame.t_unix)) - EXTRAPOLATE_S
         return any(s.last_t is None or s.last_t < t for s in self._angle_series)
 
@@ -262,6 +260,9 @@ class Pipeline:
             if item.early and item.result.ok:
                 left = item.frame.t_recv + self.telemetry_wait_s - time.time()
                 if left > 0 and self._early(item.frame):
+                    if self._holding != item.frame.index:
+                        self._holding = item.frame.index
+                        self.held += 1
                     self._telemetry.clear()
                     t0 = loop.time()
                     try:
@@ -292,10 +293,10 @@ class Pipeline:
         return self._locate(item)
 
     def _locate(self, item: Tracked) -> Fix:
-        """A tracked frame's fix, with its pose; ``buffered`` frames are only tracked."""
+        """A tracked frame's fix, with its pose."""
         frame, result = item.frame, item.result
-        if not result.ok or frame.buffered:
-            fix = Fix(frame.t_unix, result.status if not result.ok else "buffered")
+        if not result.ok:
+            fix = Fix(frame.t_unix, result.status)
         else:
             fix = locate(self.cal, item.pose, result.u, result.v)[0]
         fix.frame = frame.index
@@ -304,5 +305,6 @@ class Pipeline:
 
     def status(self) -> dict:
         return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),
-                "waiting_for_telemetry": len(self._tracked), "waited_s": round(self.waited_s, 3),
-                "held_frames": len(self._held), "last_status": self.last_status, "statuses": dict(self.statuses)}
+                "waiting_for_telemetry": len(self._tracked), "held_for_telemetry": self.held,
+                "waited_s": round(self.waited_s, 3), "held_frames": len(self._held),
+                "last_status": self.last_status, "statuses": dict(self.statuses)}

@@ -14,16 +14,11 @@ agrees with itself:
 - ``depth.jsonl``: each sample is published over Zenoh on ``--depth-key`` as
   ``{"t": t + shift, "depth_m": ...}`` at its recorded arrival ``t_recv`` + shift
   (``t`` + shift when it has none), so a UUV clock that was off stays off.
-- The video: the ``ffmpeg`` command streams it as MPEG-TS to ``--video-out``
-  (default ``udp://127.0.0.1:5600``) with ``-re`` (real time, by the file's
-  timestamps). ffmpeg is started ahead and waits on a pipe; the file is fed to
-  it at ``video_frames.csv`` t₀ + shift, so frame 0 leaves then (ffmpeg's own
-  start-up, 0.1–0.5 s on a busy machine, would otherwise shift every frame) and
-  frame i at about t_i + shift when the file's timestamps follow
-  ``video_frames.csv`` (true for recordings and generated sessions). An MP4
-  whose index is at its end cannot be piped and is opened by path (start-up
-  delay included). H.264, HEVC and MPEG-2 are copied; other codecs are
-  re-encoded (H.264, zero latency).
+- The video: sent in-process as MPEG-TS to ``--video-out`` (default
+  ``udp://127.0.0.1:5600``; ``rtp://host:port`` sends RTP), each frame at its
+  ``video_frames.csv`` time + shift (+ ``--video-delay-ms``) by the file's
+  timestamps (:func:`groundstation.video_send.send_video`): a camera whose
+  glass-to-first-packet latency is ``--video-delay-ms`` (default 0).
 - A UUV-side endpoint (``--uuv-listen``, default ``udpin:127.0.0.1:14660``)
   writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
   stdout), with its receive time: what the UUV's autopilot would get.
@@ -37,7 +32,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import subprocess
 import sys
 import threading
 import time
@@ -45,12 +39,11 @@ from pathlib import Path
 
 from .mavlink_io import connect, mavutil
 from .session import SessionError, read_table
+from .video_send import send_video
 from .zenoh_session import open_session, put_json
 
 log = logging.getLogger("skyfix.replay")
 
-COPY_CODECS = ("h264", "hevc", "mpeg2video")
-FFMPEG_WARMUP_S = 0.5  # ffmpeg is started this long before the video's first frame is due
 
 
 def read_tlog(path: Path) -> list[tuple[float, object]]:
@@ -103,36 +96,6 @@ def frame_bytes(msg, shift_s: float) -> bytes:
     mav.seq = msg.get_seq()
     setattr(msg, name, int(getattr(msg, name) + round(shift_s * per_s)))
     return msg.pack(mav)
-
-
-def video_codec(path: Path) -> str:
-    out = subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-show_entries", "stream=codec_name",
-                          "-of", "default=nw=1:nk=1", str(path)], capture_output=True, text=True, check=False)
-    return out.stdout.strip()
-
-
-def pipeable(video: Path) -> bool:
-    """False for an MP4/MOV whose index (``moov``) comes after its data: ffmpeg cannot read it from a pipe."""
-    if video.suffix.lower() not in (".mp4", ".mov", ".m4v"):
-        return True
-    with open(video, "rb") as f:
-        while len(head := f.read(8)) == 8:
-            size, kind = int.from_bytes(head[:4], "big"), head[4:]
-            if kind in (b"moov", b"mdat"):
-                return kind == b"moov"
-            if size < 8:
-                return False
-            f.seek(size - 8, 1)
-    return False
-
-
-def ffmpeg_command(video: Path, url: str, from_pipe: bool) -> list[str]:
-    """``ffmpeg -re`` streaming ``video`` (or the same bytes on stdin) as MPEG-TS to a UDP URL."""
-    codec = ["-c:v", "copy"] if video_codec(video) in COPY_CODECS else [
-        "-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency", "-pix_fmt", "yuv420p"]
-    sep = "&" if "?" in url else "?"
-    return ["ffmpeg", "-loglevel", "error", "-re", "-i", "pipe:0" if from_pipe else str(video), "-an", *codec, "-muxdelay", "0", "-muxpreload", "0", "-f", "mpegts",
-            f"{url}{sep}pkt_size=1316"]
 
 
 def _sleep_until(t_unix: float, stop: threading.Event) -> bool:
@@ -189,33 +152,6 @@ class Replay:
             out.flush()
             self.counts["gps_input"] += 1
 
-    def _stream_video(self, t0_unix: float) -> subprocess.Popen | None:
-        """Start ffmpeg so that the video's first frame leaves at ``t0_unix``."""
-        from_pipe = pipeable(self.video)
-        if not from_pipe:
-            log.warning("%s: index at the end of the file; streamed by path, frames late by ffmpeg's start-up",
-                        self.video)
-        if not _sleep_until(t0_unix - (FFMPEG_WARMUP_S if from_pipe else 0.0), self.stop):
-            return None
-        cmd = ffmpeg_command(self.video, self.args.video_out, from_pipe)
-        if not from_pipe:
-            return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
-        proc = subprocess.Popen(cmd, stdin=subprocess.PIPE)
-
-        def feed():
-            if not _sleep_until(t0_unix, self.stop):
-                return
-            try:
-                with open(self.video, "rb") as f:
-                    while (chunk := f.read(1 << 16)) and not self.stop.is_set():
-                        proc.stdin.write(chunk)
-                proc.stdin.close()
-            except (BrokenPipeError, ValueError):  # ffmpeg ended or was stopped
-                pass
-
-        threading.Thread(target=feed, name="video-feed", daemon=True).start()
-        return proc
-
     def run(self) -> int:
         args = self.args
         shift = time.time() + args.lead_s - self.t_start
@@ -226,16 +162,17 @@ class Replay:
         if args.uuv_listen:
             links.append(connect(args.uuv_listen, source_system=1, source_component=1))
         session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), config_file=args.zenoh_config)
-        ffmpeg = None
         threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True),
                    threading.Thread(target=self._send_depth, args=(shift, session), name="depth", daemon=True)]
         if args.uuv_listen:
             threads.append(threading.Thread(target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True))
+        if self.video is not None:
+            t0 = float(self.frames["t"][0]) + shift + args.video_delay_ms / 1000.0
+            threads.append(threading.Thread(target=send_video, args=(self.video, args.video_out, t0, self.stop),
+                                            name="video", daemon=True))
         try:
             for th in threads:
                 th.start()
-            if self.video is not None:
-                ffmpeg = self._stream_video(float(self.frames["t"][0]) + shift)
             t_stop = self.t_end + shift + args.tail_s
             if args.duration_s is not None:
                 t_stop = min(t_stop, time.time() + args.duration_s)
@@ -244,9 +181,6 @@ class Replay:
             pass
         finally:
             self.stop.set()
-            if ffmpeg is not None:
-                ffmpeg.terminate()
-                ffmpeg.wait(5.0)
             for th in threads:
                 th.join(2.0)
             for link in links:
@@ -272,8 +206,11 @@ def register(subparsers) -> None:
                               description=__doc__.split("\n\n")[0])
     p.add_argument("session", help="session directory (format v1)")
     p.add_argument("--mavlink-out", default="udpout:127.0.0.1:14550", help="where the UAV's MAVLink goes")
-    p.add_argument("--video-out", default="udp://127.0.0.1:5600", help="where the MPEG-TS video goes")
+    p.add_argument("--video-out", default="udp://127.0.0.1:5600",
+                   help="where the video goes: udp://host:port (MPEG-TS) or rtp://host:port (RTP)")
     p.add_argument("--no-video", action="store_true", help="do not stream the video")
+    p.add_argument("--video-delay-ms", type=float, default=0.0,
+                   help="send each frame this long after its exposure: a camera with this glass-to-first-packet latency")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
     p.add_argument("--zenoh-config", help="Zenoh JSON5 config file (deploy/zenoh/*.json5); endpoints above are added")

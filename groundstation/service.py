@@ -30,6 +30,7 @@ from localizer.telemetry import Telemetry
 
 from . import config
 from .control import Control, ZenohControl
+from .latency_estimate import OnlineLatency
 from .mavlink_link import read_signing_key
 from .pipeline import Pipeline
 from .sinks.gps_input import GpsInputSink, mavlink_gps_link
@@ -109,15 +110,26 @@ async def serve(cfg: config.RunConfig) -> dict:
         uav.listeners.append(pipeline.telemetry_arrived)
         depth_key = BLUEOS_KEY if cfg.depth_source == "blueos" and cfg.depth_key == "uuv/depth" else cfg.depth_key
         depth = DepthZenoh(session, depth_key, tel, cfg.depth_source)
-        video = None
+        video = motion = None
         if cfg.video:
             submit = pipeline.submit
             if recorder:
                 def submit(frame, _submit=pipeline.submit):
                     recorder.on_frame(frame)
                     _submit(frame)
-            video = VideoLive(cfg.video, cfg.video_latency_ms / 1000.0, submit,
-                              expected_size=size)
+            auto = cfg.video_latency_ms == "auto"
+            video = VideoLive(cfg.video, 0.0 if auto else cfg.video_latency_ms / 1000.0, submit, expected_size=size)
+
+            def apply(latency_s: float) -> None:
+                video.latency_s = latency_s
+
+            motion = OnlineLatency(cal, tel, None if auto else video.latency_s, apply if auto else None)
+
+            def submit(frame, _submit=submit):
+                motion.on_frame(frame)
+                _submit(frame)
+
+            video.on_frame = submit
         if recorder:
             uav.listeners.append(recorder.on_mavlink)
             depth.listeners.append(recorder.on_depth)
@@ -141,7 +153,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                    "fixes_published": fix_sink.published, "fix": fix_sink.latest, "control": control.status(),
                    "problems": dict(watchdog.problems)}
             if video:
-                out["video"] = video.status(now)
+                out["video"] = video.status(now) | {"latency_from_motion": motion.status()}
             if gps:
                 out["gps_input"] = gps.status(now)
                 out["latency"] = latency_summary(list(gps.latencies_s)[-1000:])
@@ -153,7 +165,7 @@ async def serve(cfg: config.RunConfig) -> dict:
         control = ZenohControl(session, Control(pipeline, status), cfg.control_prefix,
                                {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
         workers = [uav, depth, uuv_position, pipeline, watchdog, status_sink, control]
-        workers += [w for w in (video, gps, recorder) if w is not None]
+        workers += [w for w in (video, motion, gps, recorder) if w is not None]
         log.info("skyfix run: UAV %s, video %s, depth %s, fixes on %s, GPS_INPUT %s, commands on %s/*", cfg.mavlink,
                  cfg.video, depth_key, cfg.fix_key, cfg.gps_input, control.prefix)
         if cal.init_bbox is None:

@@ -1,34 +1,43 @@
-"""Reading video through FFmpeg (OpenCV's CAP_FFMPEG backend): files and live URLs.
+"""Reading video files through FFmpeg (PyAV): frames with their index and container time.
 
-:func:`open_video` opens a file or a URL (``udp://127.0.0.1:5600``, ``rtsp://…``,
-an ``.sdp`` file) and checks the frame size against the calibration's;
-:meth:`Video.read` returns one decoded BGR frame with its index, or None at the
-end. Every failure the caller should report is a :class:`VideoError` with a
-one-line message naming the video and the offending value.
+:func:`open_video` opens a file and checks the frame size against the
+calibration's; :meth:`Video.read` returns one decoded BGR frame with its index
+and presentation time, or None at the end. Every failure the caller should report
+is a :class:`VideoError` with a one-line message naming the video and the
+offending value. Live streams are read by :mod:`groundstation.sources.video_live`.
 
-Damaged files: FFmpeg skips a frame it cannot decode and OpenCV reports a failed
-read; :meth:`Video.read` retries past up to ``max_bad_reads`` such failures and
-numbers frames by their presentation time, so a skipped frame leaves a gap in the
-indices instead of shifting every later frame onto the wrong time.
+A frame's index comes from the container's timestamps, found by reading every
+packet's presentation time first (demuxing only, no decoding):
+
+- regular timestamps (a camera's or an encoder's constant frame rate, where
+  every step is a whole number of frame periods): index = (pts − first pts) /
+  period, so a frame lost to damage leaves a gap in the indices instead of
+  shifting every later frame onto the wrong time;
+- irregular timestamps (a live recording, stamped as the frames arrived): index
+  = the frame's rank in presentation order.
+
+Either way the n-th frame of the video is frame n of ``video_frames.csv``.
+Damaged files: a packet FFmpeg cannot decode is skipped and counted
+(:attr:`Video.bad_reads`).
 """
 
 from __future__ import annotations
 
-import math
-import os
 import queue
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import Self
 
-import cv2
+import av
 import numpy as np
 
-# FFmpeg's own per-packet complaints about damaged files would flood the terminal;
-# damage is reported once per video instead (Video.bad_reads, missing frame indices).
-os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "8")  # AV_LOG_FATAL
+from .ffmpeg_log import route_ffmpeg_log
+
+#: A step between timestamps within this share of a whole number of periods counts as regular.
+REGULAR_TOLERANCE = 0.05
 
 
 class VideoError(RuntimeError):
@@ -37,67 +46,87 @@ class VideoError(RuntimeError):
 
 @dataclass
 class VideoFrame:
-    """One decoded frame: ``index`` 0-based (by presentation time for files), ``image`` BGR uint8."""
+    """One decoded frame: ``index`` 0-based (see the module doc), ``image`` BGR uint8,
+    ``t_s`` its presentation time in seconds from the video's first frame."""
 
     index: int
     image: np.ndarray
+    t_s: float = 0.0
 
 
-def _is_url(url: str) -> bool:
-    return "://" in url
+def ffmpeg_reason(e: Exception) -> str:
+    """FFmpeg's own words for a failure (PyAV's message without the URL it repeats)."""
+    text = getattr(e, "strerror", None) or str(e)
+    return str(text).splitlines()[0] if text else type(e).__name__
+
+
+def frame_indices(pts: list[int]) -> dict[int, int]:
+    """Presentation timestamps (any order, in stream ticks) → 0-based frame index (see the module doc)."""
+    ordered = sorted(set(pts))
+    if len(ordered) < 2:
+        return {p: i for i, p in enumerate(ordered)}
+    steps = np.diff(ordered)
+    period = float(np.min(steps))
+    ratio = steps / period
+    if period > 0 and np.all(np.abs(ratio - np.round(ratio)) <= REGULAR_TOLERANCE):
+        return {p: round((p - ordered[0]) / period) for p in ordered}
+    return {p: i for i, p in enumerate(ordered)}
 
 
 class Video:
-    """An open video; use :func:`open_video`. Iterating yields :class:`VideoFrame`."""
+    """An open video file; use :func:`open_video`. Iterating yields :class:`VideoFrame`."""
 
-    def __init__(self, cap, url: str, expected_size, max_bad_reads: int):
-        self._cap = cap
+    def __init__(self, container, url: str, expected_size, max_bad_reads: int, index_of: dict[int, int]):
+        self._container = container
+        self._stream = container.streams.video[0]
         self.url = url
         self.expected_size = expected_size
         self.max_bad_reads = max_bad_reads
-        self.fps = cap.get(cv2.CAP_PROP_FPS)
-        self.frame_count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))  # -1 or 0 when unknown (streams)
-        self.bad_reads = 0  # failed reads skipped so far
+        rate = self._stream.average_rate or self._stream.guessed_rate
+        self.fps = float(rate) if rate else 0.0
+        self.frame_count = len(index_of)
+        self.bad_reads = 0  # packets that could not be decoded, skipped
+        self._index_of = index_of
+        self._t0 = min(index_of) if index_of else 0
+        self._tb = float(self._stream.time_base or Fraction(1, 90000))
         self._last_index = -1
-        self._pts_origin: int | None = None
-        self._by_pts = not _is_url(url) and self.fps > 0 and math.isfinite(self.fps)
+        self._frames = self._decode()
         self._prefetching: tuple[threading.Event, threading.Thread] | None = None
 
     @property
     def size(self) -> tuple[int, int]:
         """(width, height) the container declares, in pixels (0 when unknown)."""
-        return int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        ctx = self._stream.codec_context
+        return int(ctx.width or 0), int(ctx.height or 0)
 
-    def _index(self) -> int:
-        """The frame's index from its presentation time (files), else its arrival order."""
-        index = self._last_index + 1
-        if self._by_pts:
-            pos_ms = self._cap.get(cv2.CAP_PROP_POS_MSEC)
-            if math.isfinite(pos_ms) and pos_ms >= 0:
-                by_pts = round(pos_ms * self.fps / 1000.0)
-                if self._pts_origin is None:
-                    self._pts_origin = by_pts
-                index = max(index, by_pts - self._pts_origin)
-        return index
+    def _decode(self) -> Iterator[av.VideoFrame]:
+        ctx = self._stream.codec_context
+        for packet in self._container.demux(self._stream):
+            try:
+                yield from ctx.decode(packet)
+            except av.error.InvalidDataError:
+                self.bad_reads += 1
+                if self.bad_reads > self.max_bad_reads > 0:
+                    return
+            except av.error.EOFError:
+                return
 
     def read(self) -> VideoFrame | None:
-        """The next decodable frame, or None at the end of the video (or after too many bad reads)."""
-        failures = 0
-        while True:
-            try:
-                ok, image = self._cap.read()
-            except cv2.error:
-                ok, image = False, None
-            if ok and image is not None:
-                break
-            failures += 1
-            if failures > self.max_bad_reads:
-                return None  # the end (failures at the end of a file are not counted as bad)
-        self.bad_reads += failures
+        """The next decodable frame, or None at the end of the video."""
+        try:
+            frame = next(self._frames, None)
+        except av.error.FFmpegError as e:
+            raise VideoError(f"{self.url}: {ffmpeg_reason(e)}") from None
+        if frame is None:
+            return None
+        image = frame.to_ndarray(format="bgr24")
         self._check_size(image)
-        index = self._index()
+        pts = frame.pts if frame.pts is not None else None
+        index = self._index_of.get(pts, self._last_index + 1) if pts is not None else self._last_index + 1
+        index = max(index, self._last_index + 1)
         self._last_index = index
-        return VideoFrame(index, image)
+        t_s = (pts - self._t0) * self._tb if pts is not None else index / (self.fps or 30.0)
+        return VideoFrame(index, image, t_s)
 
     def _check_size(self, image: np.ndarray) -> None:
         if self.expected_size is None:
@@ -167,7 +196,7 @@ class Video:
             stop.set()
             worker.join()
             self._prefetching = None
-        self._cap.release()
+        self._container.close()
 
     def __enter__(self) -> Self:
         return self
@@ -176,43 +205,45 @@ class Video:
         self.close()
 
 
-def open_video(
-    url,
-    expected_size: tuple[int, int] | None = None,
-    open_timeout_ms: int = 10_000,
-    read_timeout_ms: int = 5_000,
-    threads: int = 0,
-    max_bad_reads: int = 25,
-) -> Video:
-    """Open a video file or stream with FFmpeg.
+def _presentation_times(path: str) -> list[int]:
+    """Every video packet's pts (demuxing only), packets the container marks to discard left out."""
+    with av.open(path) as container:
+        stream = container.streams.video[0]
+        return [p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard]
+
+
+def open_video(url, expected_size: tuple[int, int] | None = None, threads: int = 0,
+               max_bad_reads: int = 0) -> Video:
+    """Open a video file with FFmpeg.
 
     ``expected_size`` (width, height) in pixels, usually the calibration's: a
     different frame size is a :class:`VideoError` (checked on open when the
     container declares it, and on every frame). ``threads`` is FFmpeg's decoding
-    thread count (0: FFmpeg chooses). Timeouts apply to network streams.
+    thread count (slice threads; 0: FFmpeg chooses). ``max_bad_reads`` > 0 ends the video after
+    that many undecodable packets (0: no limit).
     """
+    route_ffmpeg_log()
     url = str(url)
-    if not _is_url(url):
-        path = Path(url)
-        if not path.exists():
-            raise VideoError(f"{url}: missing")
-        if not path.is_file():
-            raise VideoError(f"{url}: not a file")
-        if path.stat().st_size == 0:
-            raise VideoError(f"{url}: empty file")
-    params = [
-        cv2.CAP_PROP_N_THREADS, int(threads),
-        cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, int(open_timeout_ms),
-        cv2.CAP_PROP_READ_TIMEOUT_MSEC, int(read_timeout_ms),
-    ]
-    if url.endswith(".sdp") and "OPENCV_FFMPEG_CAPTURE_OPTIONS" not in os.environ:
-        os.environ["OPENCV_FFMPEG_CAPTURE_OPTIONS"] = "protocol_whitelist;file,rtp,udp"
-    cap = cv2.VideoCapture(url, cv2.CAP_FFMPEG, params)
-    if not cap.isOpened():
-        cap.release()
-        why = "FFmpeg cannot open it (truncated, not a video, or no stream)"
-        raise VideoError(f"{url}: {why}")
-    video = Video(cap, url, expected_size, max_bad_reads)
+    path = Path(url)
+    if not path.exists():
+        raise VideoError(f"{url}: missing")
+    if not path.is_file():
+        raise VideoError(f"{url}: not a file")
+    if path.stat().st_size == 0:
+        raise VideoError(f"{url}: empty file")
+    try:
+        index_of = frame_indices(_presentation_times(url))
+        container = av.open(url)
+        if not container.streams.video:
+            container.close()
+            raise VideoError(f"{url}: FFmpeg cannot open it (no video stream)")
+    except (av.error.FFmpegError, IndexError) as e:
+        why = ffmpeg_reason(e) if isinstance(e, av.error.FFmpegError) else "no video stream"
+        raise VideoError(f"{url}: FFmpeg cannot open it ({why})") from None
+    ctx = container.streams.video[0].codec_context
+    ctx.thread_type = "SLICE"  # frame threads lose the frames in flight when a damaged packet fails
+    ctx.thread_count = int(threads)
+    video = Video(container, url, expected_size, max_bad_reads, index_of)
     w, h = video.size
     if expected_size is not None and w > 0 and h > 0 and (w, h) != tuple(expected_size):
         video.close()

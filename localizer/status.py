@@ -21,7 +21,7 @@ STATUSES: dict[str, str] = {
     "released": "live: the operator released the target; no tracking until a new one",
     "before_init": "offline: a frame before the one init_bbox belongs to",
     "no_video": "offline: the frame is listed in video_frames.csv but could not be decoded",
-    "buffered": "live: the video reader cannot tell this frame's exposure time",
+    "buffered": "live, older recordings: the video reader could not tell this frame's exposure time",
     # geometry
     "bad_pixel": "the pixel is outside the image or the lens model",
     "no_water": "the ray through the pixel never reaches the water",

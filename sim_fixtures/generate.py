@@ -14,7 +14,8 @@ by ray casting (:mod:`sim_fixtures.render`) and encoded by the ``ffmpeg`` CLI
 
 Times: the frames' exposure times in ``video_frames.csv``, ``track.csv`` and
 ``truth.csv`` are on the ground station's clock (true time + ``[clock]
-station_offset_s``), as a recording laptop stamps them. ``depth.jsonl`` has one line
+station_offset_s``), as a recording laptop stamps them; ``video_frames.csv``'s are
+``[clock] video_time_error_s`` later than that (a frame time from a wrong latency). ``depth.jsonl`` has one line
 per depth measurement, ``{"t": <the UUV's clock when it measured>, "depth_m": <m, positive
 down>, "t_recv": <the station's clock when the ground station received it>}``; the UUV's
 clock is true time + ``uuv_offset_s``; the depth link takes ``link.depth_delay_s`` plus an
@@ -174,13 +175,15 @@ depth_m = {t.depth_noise_m!r}
 
 
 class Encoder:
-    """``ffmpeg`` reading raw BGR frames on stdin, writing H.264 (libx264, yuv420p) MP4."""
+    """``ffmpeg`` reading raw BGR frames on stdin, writing H.264 (libx264, yuv420p, a keyframe a second) MP4."""
 
     def __init__(self, path: Path, width: int, height: int, fps: float, crf: int):
         if shutil.which("ffmpeg") is None:
             raise RuntimeError("ffmpeg not found on PATH; install it (apt install ffmpeg) to render video")
         cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24", "-s", f"{width}x{height}",
                "-r", f"{fps:g}", "-i", "-", "-an", "-c:v", "libx264", "-preset", "veryfast", "-crf", str(crf),
+               "-g", str(max(1, round(fps))),  # a keyframe every second, as field cameras send: a live decoder
+               # that joins late starts within a second
                "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(path)]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE)
 
@@ -253,7 +256,8 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     _write_csv(out / "truth.csv", ("t", "lat", "lon", "depth_m"),
                ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}")
                 for t, a, b, d in zip(truth.t_unix, lat, lon, truth.uuv_ned[:, 2])))
-    _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(truth.t_unix)))
+    stamped = truth.t_unix + sc.clock.video_time_error_s
+    _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(stamped)))
 
     t1 = time.perf_counter()
     if video:

@@ -163,6 +163,8 @@ class ClockSpec:
     station_offset_s: Number = Field(0.0, description="ground station (laptop) clock minus true GNSS time: stamps "
                                      "frames, tlog, t_recv")
     uuv_offset_s: Number = Field(0.0, description="the UUV's clock minus true time: stamps depth.jsonl's t")
+    video_time_error_s: Number = Field(0.0, description="video_frames.csv's times minus the frames' true exposures "
+                                       "(a wrong latency)")
 
 
 @dataclass(frozen=True, config=CLOSED)

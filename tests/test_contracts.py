@@ -169,5 +169,5 @@ def _status_words_in_code() -> set[str]:
 
 def test_every_status_word_the_code_produces_is_enumerated():
     words = _status_words_in_code()
-    assert {"lost", "no_water", "bad_pixel", "stale_depth", "no_gimbal", "buffered", "before_init"} <= words
+    assert {"lost", "no_water", "bad_pixel", "stale_depth", "no_gimbal", "awaiting_target", "before_init"} <= words
     assert words <= set(STATUSES), f"add to localizer/status.py: {sorted(words - set(STATUSES))}"

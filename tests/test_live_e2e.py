@@ -40,9 +40,8 @@ BUNDLED = ROOT / "sim_fixtures" / "bundled"
 # SKYFIX_LIVE_SESSION may name another session (with truth.csv) to rehearse
 SESSIONS = [Path(os.environ["SKYFIX_LIVE_SESSION"])] if "SKYFIX_LIVE_SESSION" in os.environ else [
     BUNDLED / "nadir_hover", BUNDLED / "clock_offset"]
-# Send → frame-decoded delay of this replay chain (ffmpeg -re copying the session's H.264, which has
-# B-frames, into MPEG-TS over UDP; OpenCV decoding), measured on this machine at 45–65 ms.
-VIDEO_LATENCY_MS = 55
+# Glass to first packet of this replay chain: the replay sends each frame at its exposure time.
+VIDEO_LATENCY_MS = 0
 
 
 def _offline_mae(session: Path) -> float:

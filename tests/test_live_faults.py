@@ -1,5 +1,5 @@
 """Faults injected into a live ``skyfix run`` on loopback, with real parts only: ``skyfix replay``,
-real UDP, real Zenoh, real ffmpeg streams.
+real UDP, real Zenoh, real H.264 streams.
 
 1. Garbage while a session replays: random datagrams, truncated, bad-CRC and well-formed but
    impossible (NaN attitude, latitude 95°) MAVLink frames on the UAV's port; non-JSON, NaN,
@@ -40,17 +40,17 @@ from live_helpers import (
 )
 
 from groundstation.mavlink_io import mavutil
-from groundstation.replay import ffmpeg_command, read_tlog
+from groundstation.replay import read_tlog
+from groundstation.video_send import send_video
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Timing
 
 BUNDLED = ROOT / "sim_fixtures" / "bundled"
-VIDEO_LATENCY_MS = 55  # this replay chain's send → decode delay (see test_live_e2e)
+VIDEO_LATENCY_MS = 0  # the replay sends each frame at its exposure time (see test_live_e2e)
 MAX_AGE_S = 0.5  # --fix-max-age-ms 500
 PERIOD_S = 0.1  # --gps-input-hz 10
 SLACK_S = 0.1  # loopback delivery and scheduling on a busy 2-core machine
 MAX_ERROR_M = 0.2
-FFMPEG_WARMUP_S = 0.5
 
 
 def _run_cmd(session: Path, mav: int, video: int, zenoh_ep: str, uuv: int, stats: Path) -> list[str]:
@@ -224,18 +224,9 @@ def _video_parts(session: Path, tmp: Path) -> tuple[Path, Path]:
     return part_a, part_b
 
 
-def _stream_at(video: Path, url: str, t_unix: float, procs: list, stop_: threading.Event) -> None:
-    """Stream ``video`` as the replay does (ffmpeg -re waiting on a pipe) so that its first frame leaves at t_unix."""
-    if not _sleep_until(t_unix - FFMPEG_WARMUP_S, stop_):
-        return
-    proc = subprocess.Popen(ffmpeg_command(video, url, from_pipe=True), stdin=subprocess.PIPE)
-    procs.append(proc)
-    if _sleep_until(t_unix, stop_):
-        try:
-            proc.stdin.write(video.read_bytes())
-            proc.stdin.close()
-        except BrokenPipeError:
-            pass
+def _stream_at(video: Path, url: str, t_unix: float, stop_: threading.Event) -> None:
+    """Stream ``video`` as the replay does, its first frame leaving at t_unix."""
+    send_video(video, url, t_unix, stop_)
 
 
 def _session_with_depth_until(session: Path, t_end_s: float, out: Path) -> float:
@@ -260,7 +251,7 @@ def test_video_and_depth_cut(tmp_path):
     zenoh_ep = f"tcp/127.0.0.1:{zport}"
     url = f"udp://127.0.0.1:{video}"
     stats, uuv_log, run_log = tmp_path / "stats.json", tmp_path / "uuv.jsonl", tmp_path / "run.log"
-    procs, streams, halt = [], [], threading.Event()
+    procs, halt = [], threading.Event()
     threads = []
     try:
         service = start(_run_cmd(session, mav, video, zenoh_ep, uuv, stats), run_log)
@@ -270,7 +261,7 @@ def test_video_and_depth_cut(tmp_path):
         procs.append(replay)
         shift = replay_shift(tmp_path / "replay.log")
         for part, t_s in ((part_a, t0), (part_b, t0 + VIDEO_BACK_S)):
-            th = threading.Thread(target=_stream_at, args=(part, url, t_s + shift, streams, halt))
+            th = threading.Thread(target=_stream_at, args=(part, url, t_s + shift, halt))
             th.start()
             threads.append(th)
         replay.wait(30)
@@ -280,7 +271,7 @@ def test_video_and_depth_cut(tmp_path):
         halt.set()
         for th in threads:
             th.join(5)
-        _kill_all(procs + streams)
+        _kill_all(procs)
     log = run_log.read_text()
     assert service.returncode == 0 and replay.returncode == 0, log[-3000:]
     assert "Traceback" not in log, log[-5000:]

@@ -8,9 +8,9 @@ that frame, so ``skyfix process`` starts the tracker where the live run had it;
 arrival minus the depth latency when the source has none, and ``t_recv`` its
 arrival on the station clock), ``positions.csv`` every fix, ``track.csv`` the
 tracked pixel of every frame (empty when there is no fix), and
-``video.ts`` + ``video_frames.csv`` the received frames (raw frames piped into an
-``ffmpeg`` process encoding H.264 into MPEG-TS, with wall-clock timestamps so a
-replay keeps the real pacing). Every file is append-only and flushed at least
+``video.ts`` + ``video_frames.csv`` the received frames (H.264 in MPEG-TS, encoded
+in-process, each frame's timestamp its exposure time, so a replay keeps the real
+pacing and the offline reader finds each frame's row). Every file is append-only and flushed at least
 once a second; MPEG-TS stays readable when cut off, so a crash loses at most the
 last second and never corrupts what is already written. When the encoder falls
 behind, frames are left out of the recording (counted), and ``video_frames.csv``
@@ -26,10 +26,13 @@ import logging
 import os
 import queue
 import struct
-import subprocess
 import threading
+import time
 import tomllib
+from fractions import Fraction
 from pathlib import Path
+
+import av
 
 from localizer.fix import Fix
 
@@ -37,6 +40,7 @@ from ..positions import COLUMNS, format_row
 
 log = logging.getLogger("skyfix.record")
 
+TICK = Fraction(1, 90000)  # MPEG-TS timestamp unit, seconds
 CALIBRATION_TABLES = ("camera", "mount", "water", "tracker", "uncertainty", "timing")
 
 
@@ -62,24 +66,22 @@ def session_toml(calibration: dict) -> str:
 
 
 class VideoWriter:
-    """Raw BGR frames → ``ffmpeg`` → H.264 in MPEG-TS, in a thread; ``frames.csv`` rows for each encoded frame."""
+    """Frames → H.264 (libx264 in-process, PyAV) in MPEG-TS, ``frames.csv`` a row per encoded frame.
+
+    One thread owns the encoder and both files: it takes frames from a queue, stamps
+    each with its exposure time (90 kHz ticks from the first frame's), encodes it, and
+    flushes ``frames.csv`` at least once a second. A frame not later than the one
+    before (a stream reconnected on another clock) is left out and counted as dropped.
+    """
 
     def __init__(self, path: Path, frames_csv: Path, size: tuple[int, int], queue_len: int = 30):
         self.path = path
+        self.frames_csv = frames_csv
         self.size = size
         self.written = 0
         self.dropped = 0
+        self.error: str | None = None
         self._queue: queue.Queue = queue.Queue(maxsize=queue_len)
-        self._frames = open(frames_csv, "w", newline="")  # noqa: SIM115 - closed in close()
-        self._csv = csv.writer(self._frames)
-        self._csv.writerow(("frame", "t"))
-        w, h = size
-        self._proc = subprocess.Popen(
-            ["ffmpeg", "-loglevel", "error", "-use_wallclock_as_timestamps", "1", "-f", "rawvideo",
-             "-pix_fmt", "bgr24", "-s", f"{w}x{h}", "-i", "-", "-fps_mode", "passthrough", "-c:v", "libx264",
-             "-preset", "ultrafast", "-tune", "zerolatency", "-pix_fmt", "yuv420p", "-f", "mpegts", str(path)],
-            stdin=subprocess.PIPE,
-        )
         self._thread = threading.Thread(target=self._write, name="record-video", daemon=True)
         self._thread.start()
 
@@ -89,29 +91,61 @@ class VideoWriter:
         except queue.Full:
             self.dropped += 1
 
-    def _write(self) -> None:
-        while (item := self._queue.get()) is not None:
-            t, image = item
-            try:
-                self._proc.stdin.write(image.tobytes())
-            except (BrokenPipeError, ValueError):
-                log.warning("record: ffmpeg stopped; no more video recorded")
-                return
-            self._csv.writerow((self.written, f"{t:.6f}"))
-            self.written += 1
+    def _open(self):
+        container = av.open(str(self.path), "w", format="mpegts")
+        stream = container.add_stream("libx264", options={"preset": "ultrafast", "tune": "zerolatency"})
+        stream.width, stream.height = self.size
+        stream.pix_fmt = "yuv420p"
+        stream.codec_context.time_base = TICK
+        stream.time_base = TICK
+        return container, stream
 
-    def flush(self) -> None:
-        self._frames.flush()
+    def _write(self) -> None:
+        container, stream = self._open()
+        t0, t_last, last_pts = None, None, -1
+        next_flush = time.monotonic() + 1.0
+        with open(self.frames_csv, "w", newline="") as frames:
+            rows = csv.writer(frames)
+            rows.writerow(("frame", "t"))
+            try:
+                while True:
+                    try:
+                        item = self._queue.get(timeout=1.0)
+                    except queue.Empty:
+                        frames.flush()
+                        continue
+                    if item is None:
+                        break
+                    if self.error is not None:
+                        continue  # drained: the encoder failed
+                    t, image = item
+                    if t0 is not None and t <= t_last:  # a reconnected stream's clock went back: out of order
+                        self.dropped += 1
+                        continue
+                    t0, t_last = (t if t0 is None else t0), t
+                    frame = av.VideoFrame.from_ndarray(image, format="bgr24")
+                    frame.pts = last_pts = max(last_pts + 1, round((t - t0) / TICK))
+                    frame.time_base = TICK
+                    try:
+                        container.mux(stream.encode(frame))
+                    except (av.error.FFmpegError, ValueError) as e:
+                        self.error = f"{self.path}: {e}"
+                        log.warning("record: video encoder failed, no more video recorded: %s", self.error)
+                        continue
+                    rows.writerow((self.written, f"{t:.6f}"))
+                    self.written += 1
+                    if time.monotonic() >= next_flush:
+                        frames.flush()
+                        next_flush = time.monotonic() + 1.0
+            finally:
+                try:
+                    container.mux(stream.encode(None))
+                finally:
+                    container.close()
 
     def close(self) -> None:
         self._queue.put(None)
         self._thread.join(10.0)
-        self._frames.close()
-        try:
-            self._proc.stdin.close()
-        except BrokenPipeError:
-            pass
-        self._proc.wait(10.0)
 
 
 class Recorder:
@@ -141,7 +175,7 @@ class Recorder:
         self._positions = open(self.dir / "positions.csv", "a", newline="")  # noqa: SIM115
         self._pos_csv = csv.writer(self._positions)
         self._pos_csv.writerow(COLUMNS)
-        # started now, not at the first frame: spawning ffmpeg takes tens of ms the event loop cannot spare
+        # started now, not at the first frame: opening the encoder takes time the event loop cannot spare
         self._video = VideoWriter(self.dir / "video.ts", self.dir / "video_frames.csv", video_size) if video_size else None
         self.depth_latency_s = depth_latency_s
         self.mavlink_frames = 0
@@ -179,8 +213,6 @@ class Recorder:
     def flush(self) -> None:
         for f in (self._tlog, self._depth, self._positions, self._track):
             f.flush()
-        if self._video:
-            self._video.flush()
 
     async def run(self) -> None:
         try:
@@ -198,5 +230,6 @@ class Recorder:
         out = {"dir": str(self.dir), "mavlink_frames": self.mavlink_frames, "depth_samples": self.depth_samples,
                "fixes": self.fixes}
         if self._video:
-            out.update(video_frames=self._video.written, video_dropped=self._video.dropped)
+            out.update(video_frames=self._video.written, video_dropped=self._video.dropped,
+                       video_error=self._video.error)
         return out

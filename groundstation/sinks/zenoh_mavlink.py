@@ -118,8 +118,8 @@ class ZenohMavlinkIn:
         info = self.session.info
         with self._lock:
             state, since = ("up" if self.matching else "down"), self.state_since
-        return {"url": self.url, "state": state, "state_for_s": round(now - since, 3),
+        return {"url": self.url, "state": state, "state_for_s": round(max(0.0, now - since), 3),
                 "error": None if self.matching else f"no subscriber on {self.key} reachable",
                 "zenoh_routers": len(info.routers_zid()), "zenoh_peers": len(info.peers_zid()),
                 "written": self.written, "heartbeats": self.heartbeats, "sent_unmatched": self.sent_unmatched,
-                "peer_age_s": None if self.last_heard is None else round(now - self.last_heard, 3)}
+                "peer_age_s": None if self.last_heard is None else round(max(0.0, now - self.last_heard), 3)}

@@ -117,6 +117,6 @@ class DepthZenoh:
             listener(t, depth, t_recv)
 
     def status(self, now: float) -> dict:
-        age = None if self.last_recv is None else round(now - self.last_recv, 3)
+        age = None if self.last_recv is None else round(max(0.0, now - self.last_recv), 3)
         return {"key": self.key, "shape": self.shape, "received": self.received, "bad": self.bad,
                 "refused": self.refused, "age_s": age, "depth_m": self.last_depth_m}

@@ -57,7 +57,7 @@ class LinkHealth:
         self.meter.add(kind, t)
 
     def ages_s(self, now: float) -> dict[str, float]:
-        return {k: round(now - t, 3) for k, t in sorted(self.last_seen.items())}
+        return {k: round(max(0.0, now - t), 3) for k, t in sorted(self.last_seen.items())}
 
     def as_dict(self, now: float) -> dict:
         return {"received": self.received, "bad_data": self.bad_data, "other_systems": self.other_systems,

@@ -139,7 +139,7 @@ class UuvPosition:
         self.last = (*position, t_recv)
 
     def status(self, now: float) -> dict:
-        age = None if self.last is None else round(now - self.last[2], 3)
+        age = None if self.last is None else round(max(0.0, now - self.last[2]), 3)
         lat, lon = (self.last[0], self.last[1]) if self.last else (self.hint or (None, None))
         return {"key": self.key, "received": self.received, "bad": self.bad, "unknown": self.unknown,
                 "age_s": age, "lat": lat, "lon": lon, "hint": self.hint is not None, "sigma_m": self.sigma_m}

@@ -1,145 +1,222 @@
-"""The UAV's video, live: frames with their exposure time, reconnecting by itself.
+"""The UAV's video, live: frames timed by the stream, reconnecting by itself.
 
-A reader thread opens the URL with :func:`groundstation.video.open_video`
-(FFmpeg: ``udp://127.0.0.1:5600`` MPEG-TS, an ``.sdp`` for RTP, ``rtsp://``, a
-file) and hands each decoded frame to the event loop. A frame's exposure time is
-its receive time minus ``latency_s`` (the camera → decoder delay, measured once
-per setup; ``--video-latency-ms``). Frames that come out of a buffer (after
-FFmpeg's probing at connection, or after a stall) are marked ``buffered``: their
-time is unknown, so they get no fix. When the stream stops (read timeout) or
-cannot be opened, the reader closes it and retries every ``retry_s`` until it
-comes back (a read that fails at once is an undecodable frame, counted and
-skipped); frame numbers keep counting across reconnects. A file (not a URL) is
-read once, as fast as it decodes.
+A reader thread opens ``--video`` (:mod:`.video_inputs`: MPEG-TS over UDP, RTP
+with or without an SDP file, RTSP, a V4L2 camera, a file) with PyAV for low
+delay, and for each packet notes when its data was read from the network
+(``t_recv``, before decoding). The decoder runs in the same thread (slice
+threads only: no frame held back for threading), and each decoded frame is
+handed to the event loop as a :class:`LiveFrame`.
+
+Time: a frame's presentation timestamp (PTS: the RTP timestamp for RTP/RTSP, the
+MPEG-TS PTS) is put on the station clock by the least ``arrival − PTS`` over a
+sliding window (:class:`localizer.clock.ClockMap`), which is the stream slot: when
+the frame's packets arrive over the fastest path. Its exposure ``t_unix`` is that
+slot minus ``latency_s`` (``--video-latency-ms``: glass to first packet, i.e.
+camera + encoder + network). Decoding delay, jitter and bursts move neither.
+Each connection starts a new map (a camera that restarts restarts its clock).
+The packets read while a connection is being opened are stamped when the open
+returns, late: the first frames of a connection may be late by that much until a
+packet read live lowers the offset (so a slot may be earlier than the one before
+it just after a connection starts). A frame without a PTS (RTP's first access
+unit may lose it) takes its arrival as its slot.
+
+Failures: a stream that cannot be opened (nothing sent yet, refused, a port
+another program holds) is retried with back-off from :data:`RETRY_MIN_S` to
+``retry_max_s``; one that stops sending for ``read_timeout_s`` is closed and
+reopened. FFmpeg's own error text goes into the log (once per distinct text) and
+into :meth:`VideoLive.status` ``error``. A file is read once, as fast as it decodes.
 """
 
 from __future__ import annotations
 
 import asyncio
+import errno
 import logging
-import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import av
 import numpy as np
 
-from ..video import VideoError, open_video
+from localizer.clock import ClockMap
+
+from ..ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
+from ..video import VideoError, ffmpeg_reason
+from .video_inputs import VideoInput, parse_video_input
 
 log = logging.getLogger("skyfix.video")
 
-# FFmpeg probes a UDP stream for several seconds by default, then delivers the probed frames
-# in a burst. Probing must see a keyframe, or OpenCV decodes nothing on that connection:
-# 1 s suits cameras sending a keyframe at least every second.
-UDP_CAPTURE_OPTIONS = "analyzeduration;1000000|probesize;5000000"
-MAX_QUICK_FAILURES = 30  # undecodable frames in a row before reconnecting
-MIN_OPEN_TIMEOUT_MS = 10_000  # an open interrupted while probing leaves a capture that decodes nothing
-STALL_FRAMES = 4  # a frame decoded this many frame intervals after the previous one may have waited in the decoder
+OPEN_TIMEOUT_S = 2.0  # an open waits this long for the stream (a stop waits for it too)
+RTSP_OPEN_TIMEOUT_S = 5.0
+RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
+CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
+STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
 
 
 @dataclass
 class LiveFrame:
-    """A received frame: running index, exposure and receive times (UNIX s), BGR image.
+    """A received frame (UNIX seconds on the station clock).
 
-    ``buffered``: the frame may have waited in a buffer (the first frame of a
-    connection, one decoded less than half a frame interval after the previous
-    one, or one decoded more than :data:`STALL_FRAMES` intervals after it: the
-    decoder holds frames back and releases them when the stream stalls or stops),
-    so its receive time is not when it arrived and its exposure time is unknown;
-    such frames only keep the tracker going.
+    ``t_unix`` its exposure: ``t_slot`` − the configured glass-to-first-packet latency;
+    ``t_recv`` when its first packet was read from the network (before decoding);
+    ``t_slot`` its stream slot: its PTS on the station clock (least arrival − PTS), ≤ ``t_recv``.
     """
 
     index: int
     t_unix: float
     t_recv: float
     image: np.ndarray
-    buffered: bool = False
+    t_slot: float | None = None
+
+
+def _reason(source: VideoInput, e: Exception, t_try: float, timeout_s: float) -> str:
+    """One line saying why ``source`` could not be read, in FFmpeg's words where it has any."""
+    code = getattr(e, "errno", None)
+    if code == errno.EADDRINUSE:
+        return f"{source.url}: UDP port {source.port} is already in use by another program"
+    if isinstance(e, av.error.ExitError):
+        text = f"{source.url}: nothing received for {timeout_s:g} s"
+    else:
+        text = f"{source.url}: {ffmpeg_reason(e)}"
+    said = last_ffmpeg_error(t_try)
+    return f"{text} (ffmpeg {said})" if said and said not in text else text
 
 
 class VideoLive:
     """Worker owning the video link; ``on_frame(LiveFrame)`` is called on the event loop."""
 
     def __init__(self, url: str, latency_s: float, on_frame: Callable[[LiveFrame], None],
-                 expected_size: tuple[int, int] | None = None, read_timeout_ms: int = 2000, retry_s: float = 0.5):
+                 expected_size: tuple[int, int] | None = None, open_timeout_s: float | None = None,
+                 read_timeout_s: float = 2.0, retry_max_s: float = 1.0):
+        self.source = parse_video_input(url)
+        if open_timeout_s is None:  # an RTSP session takes several round trips to set up
+            open_timeout_s = RTSP_OPEN_TIMEOUT_S if self.source.kind == "rtsp" else OPEN_TIMEOUT_S
         self.url = url
         self.latency_s = latency_s
         self.on_frame = on_frame
         self.expected_size = expected_size
-        self.read_timeout_ms = read_timeout_ms
-        self.retry_s = retry_s
+        self.open_timeout_s = open_timeout_s
+        self.read_timeout_s = read_timeout_s
+        self.retry_max_s = retry_max_s
         self.frames = 0
         self.connects = 0
         self.decode_errors = 0
-        self.buffered = 0
+        self.state = "starting"
         self.last_recv: float | None = None
         self.last_error: str | None = None
+        self.clock: ClockMap | None = None
+        self._late_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv − t_slot
+        self._decode_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv → frame handed over
         self._stop = threading.Event()
 
     async def run(self) -> None:
+        route_ffmpeg_log()
         loop = asyncio.get_running_loop()
-        if self.url.startswith("udp://"):
-            os.environ.setdefault("OPENCV_FFMPEG_CAPTURE_OPTIONS", UDP_CAPTURE_OPTIONS)
         reader = threading.Thread(target=self._read, args=(loop,), name="video", daemon=True)
         reader.start()
         try:
             await asyncio.Event().wait()
         finally:
             self._stop.set()
-            await asyncio.to_thread(reader.join, self.read_timeout_ms / 1000.0 + 3.0)
+            await asyncio.to_thread(reader.join, self.open_timeout_s + self.read_timeout_s + 2.0)
 
     def _read(self, loop: asyncio.AbstractEventLoop) -> None:
+        backoff = RETRY_MIN_S
         while not self._stop.is_set():
+            t_try = time.time()
             try:
-                video = open_video(self.url, self.expected_size,
-                                   open_timeout_ms=max(self.read_timeout_ms, MIN_OPEN_TIMEOUT_MS),
-                                   read_timeout_ms=self.read_timeout_ms, threads=1, max_bad_reads=0)
-            except VideoError as e:
-                self._error(str(e))
-                self._stop.wait(self.retry_s)
+                if self.source.port_in_use():
+                    raise OSError(errno.EADDRINUSE, "port in use")
+                container = av.open(self.source.file, format=self.source.format,
+                                    container_options=self.source.options,
+                                    timeout=(self.open_timeout_s, self.read_timeout_s))
+            except (av.error.FFmpegError, OSError) as e:
+                self.state = "waiting"
+                self._error(_reason(self.source, e, t_try, self.open_timeout_s))
+                self._stop.wait(backoff)
+                backoff = min(2.0 * backoff, self.retry_max_s)
                 continue
-            self.connects += 1
-            self.last_error = None
-            log.info("video: receiving %s (connection %d)", self.url, self.connects)
-            fps = video.fps if 1.0 <= video.fps <= 240.0 else 30.0
+            frames_before = self.frames
+            self.state = "open"  # opened; receiving from the first packet on
             try:
-                quick_failures = 0
-                t_prev = None
-                while not self._stop.is_set():
-                    t_read = time.monotonic()
-                    frame = video.read()
-                    t_recv = time.time()
-                    if frame is None:
-                        if "://" not in self.url:
-                            log.info("video: end of file %s after %d frames", self.url, self.frames)
-                            return
-                        # a read failing at once is a frame FFmpeg could not decode (joined mid-GOP, lost
-                        # packets); only a read that waited for the timeout means the stream stopped
-                        quick = time.monotonic() - t_read < self.read_timeout_ms / 2000.0
-                        if quick and quick_failures < MAX_QUICK_FAILURES:
-                            quick_failures += 1
-                            self.decode_errors += 1
-                            continue
-                        self._error(f"{self.url}: stream stopped after frame {self.frames - 1}; reconnecting")
-                        break
-                    quick_failures = 0
-                    # the first frame of a connection may have waited through FFmpeg's probing, and the
-                    # first after a stall in the decoder (H.264 with B-frames holds frames back)
-                    gap_s = None if t_prev is None else t_recv - t_prev
-                    buffered = gap_s is None or gap_s < 0.5 / fps or gap_s > STALL_FRAMES / fps
-                    t_prev = t_recv
-                    self.buffered += buffered
-                    live = LiveFrame(self.frames, t_recv - self.latency_s, t_recv, frame.image, buffered)
-                    self.frames += 1
-                    self.last_recv = t_recv
-                    try:
-                        loop.call_soon_threadsafe(self.on_frame, live)
-                    except RuntimeError:  # loop closed: shutting down
-                        return
+                ended = self._receive(container, loop)
+            except (av.error.FFmpegError, OSError) as e:
+                ended = _reason(self.source, e, t_try, self.read_timeout_s)
             except VideoError as e:
-                self._error(str(e))
+                ended = str(e)
             finally:
-                video.close()
+                container.close()
+            if ended is None:  # the end of a file, or stopping
+                self.state = "ended" if not self._stop.is_set() else "stopped"
+                return
+            self.state = "waiting"
+            self._error(f"{ended}; reconnecting")
+            if self.frames > frames_before:
+                backoff = RETRY_MIN_S
+            self._stop.wait(RETRY_MIN_S)
+
+    def _receive(self, container, loop: asyncio.AbstractEventLoop) -> str | None:
+        """Demux and decode until the stream ends; a reason to reconnect, or None at a file's end or a stop."""
+        if not container.streams.video:
+            raise VideoError(f"{self.url}: no video stream in it")
+        stream = container.streams.video[0]
+        ctx = stream.codec_context
+        ctx.thread_type = "SLICE"
+        ctx.flags |= av.codec.context.Flags.low_delay
+        tb = float(stream.time_base)
+        self.clock = clock = ClockMap(window_s=CLOCK_WINDOW_S)
+        first_recv: dict[int, float] = {}
+        for packet in container.demux(stream):
+            t_recv = time.time()
+            if self._stop.is_set():
+                return None
+            if clock.offset_s is None:
+                self._connected()
+            if packet.pts is not None:
+                clock.add(packet.pts * tb, t_recv)
+                first_recv.setdefault(packet.pts, t_recv)
+            try:
+                decoded = ctx.decode(packet)
+            except av.error.InvalidDataError:
+                self.decode_errors += 1
+                continue
+            for frame in decoded:
+                if not self._hand_over(frame, tb, clock, first_recv.pop(frame.pts, t_recv), loop):
+                    return None
+            while len(first_recv) > 64:  # packets whose frame never came out (undecodable)
+                del first_recv[next(iter(first_recv))]
+        if not self.source.live:
+            log.info("video: end of file %s after %d frames", self.url, self.frames)
+            return None
+        return f"{self.url}: the stream ended after frame {self.frames - 1}"
+
+    def _connected(self) -> None:
+        """The first packet of a connection."""
+        self.connects += 1
+        self.state = "receiving"
+        self.last_error = None
+        log.info("video: receiving %s (connection %d)", self.url, self.connects)
+
+    def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float, loop) -> bool:
+        image = frame.to_ndarray(format="bgr24")
+        h, w = image.shape[:2]
+        if self.expected_size is not None and (w, h) != tuple(self.expected_size):
+            ew, eh = self.expected_size
+            raise VideoError(f"{self.url}: frames are {w}x{h} pixels, the calibration's camera is {ew}x{eh}")
+        t_slot = float(clock.to_arrival(frame.pts * tb)) if frame.pts is not None else t_recv
+        live = LiveFrame(self.frames, t_slot - self.latency_s, t_recv, image, t_slot)
+        self.frames += 1
+        self.last_recv = t_recv
+        self._late_s.append(t_recv - t_slot)
+        self._decode_s.append(time.time() - t_recv)
+        try:
+            loop.call_soon_threadsafe(self.on_frame, live)
+        except RuntimeError:  # loop closed: shutting down
+            return False
+        return True
 
     def _error(self, why: str) -> None:
         if why != self.last_error:
@@ -147,7 +224,17 @@ class VideoLive:
         self.last_error = why
 
     def status(self, now: float) -> dict:
-        age = None if self.last_recv is None else round(now - self.last_recv, 3)
-        return {"url": self.url, "frames": self.frames, "connects": self.connects, "age_s": age,
-                "decode_errors": self.decode_errors, "buffered": self.buffered,
+        age = None if self.last_recv is None else round(max(0.0, now - self.last_recv), 3)
+
+        def p(values, q):
+            return round(float(np.percentile(values, q)) * 1000.0, 1) if values else None
+
+        late, dec = list(self._late_s), list(self._decode_s)
+        offset = self.clock.offset_s if self.clock is not None else None
+        return {"url": self.url, "kind": self.source.kind, "state": self.state, "frames": self.frames,
+                "connects": self.connects, "age_s": age, "decode_errors": self.decode_errors,
+                "latency_ms": round(self.latency_s * 1000.0, 1),
+                "arrival_after_slot_ms": {"p50": p(late, 50), "p99": p(late, 99)},
+                "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},
+                "stream_offset_s": None if offset is None else round(offset, 6),
                 "error": self.last_error}

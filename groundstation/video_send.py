@@ -1,0 +1,78 @@
+"""Sending a video file live, as a camera would: each frame leaves when its time comes.
+
+:func:`send_video` streams a file's video over UDP (MPEG-TS, or RTP with
+``rtp://``) in-process with PyAV. A frame's *slot* is ``t0_unix`` plus its
+presentation time after the first frame's; its packets leave at that slot, in
+decoding order, never before the packet before them (a B-frame's reference goes
+first and the B-frame right after it, as an encoder sends them). So the stream's
+glass-to-first-packet latency is zero: ``--video-latency-ms 0`` is the truth for
+a replay on one machine. H.264, HEVC and MPEG-2 are sent as they are (each PES
+with its length, so a receiver hands a frame over as soon as it is in); other
+codecs are re-encoded to H.264 (zero latency).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import av
+
+COPY_CODECS = ("h264", "hevc", "mpeg2video")
+# each PES with its length, and every frame's packets sent at once (not its tail held until the next frame's)
+MPEGTS_OPTIONS = {"omit_video_pes_length": "0", "flush_packets": "1"}
+
+
+def _wait_until(t_unix: float, stop: threading.Event) -> bool:
+    """Wait for a UNIX time; False if stopped first."""
+    delay = t_unix - time.time()
+    return not stop.wait(delay) if delay > 0 else not stop.is_set()
+
+
+def _open_output(url: str):
+    if url.startswith("rtp://"):
+        return av.open(url, "w", format="rtp", options={"flush_packets": "1"})
+    sep = "&" if "?" in url else "?"
+    return av.open(f"{url}{sep}pkt_size=1316", "w", format="mpegts", options=MPEGTS_OPTIONS)
+
+
+def _packets(container, stream, out):
+    """``(pts seconds, packet for out)`` in decoding order: copied, or re-encoded to H.264."""
+    tb = float(stream.time_base)
+    if stream.codec_context.name in COPY_CODECS:
+        ost = out.add_stream_from_template(stream)
+        for packet in container.demux(stream):
+            if packet.dts is None or packet.pts is None:
+                continue
+            packet.stream = ost
+            yield packet.pts * tb, packet
+        return
+    ost = out.add_stream("libx264", options={"preset": "ultrafast", "tune": "zerolatency"})
+    ost.width, ost.height, ost.pix_fmt = stream.codec_context.width, stream.codec_context.height, "yuv420p"
+    ost.codec_context.time_base = stream.time_base
+    pts_s = 0.0
+    for frame in container.decode(stream):
+        if frame.pts is None:
+            continue
+        frame.pict_type = av.video.frame.PictureType.NONE
+        pts_s = frame.pts * tb
+        for packet in ost.encode(frame):
+            yield pts_s, packet
+    for packet in ost.encode(None):
+        yield pts_s, packet
+
+
+def send_video(path: Path, url: str, t0_unix: float, stop: threading.Event) -> int:
+    """Stream ``path`` to ``url`` so that its first frame leaves at ``t0_unix``; the number of packets sent."""
+    sent = 0
+    with av.open(str(path)) as container, _open_output(url) as out:
+        stream = container.streams.video[0]
+        pts0 = None
+        for pts_s, packet in _packets(container, stream, out):
+            pts0 = pts_s if pts0 is None else pts0
+            if not _wait_until(t0_unix + pts_s - pts0, stop):
+                break
+            out.mux(packet)
+            sent += 1
+    return sent
