@@ -38,6 +38,7 @@ from localizer.contract import (
 from localizer.tracking import TRACKERS
 
 from .sources.uuv_position import parse_hint
+from .ui.bind import check_token, parse_bind
 
 log = logging.getLogger("skyfix.config")
 
@@ -104,6 +105,12 @@ class RunConfig:
                                             "refer to a frame the operator saw")
     control_prefix: Text = Field("skyfix/cmd", description="Zenoh key prefix of the operator commands "
                                  "(<prefix>/select, release, acquire, status)")
+    ui: Text = Field("127.0.0.1:8080", description="HOST:PORT of the web page (video, target selection, map, "
+                     "health); beyond localhost (0.0.0.0:8080) it needs the token in the URL skyfix prints; port 0: "
+                     "any free port")
+    no_ui: Flag = Field(False, description="serve no web page")
+    ui_token: Text | None = Field(None, description="the web page's token (default: none on localhost, a random one "
+                                  "beyond it); given, every request needs it, on localhost too")
     record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
     duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
     stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
@@ -113,6 +120,17 @@ class RunConfig:
     def _record_needs_pymavlink(self):
         if self.record and self.mavlink_backend == "mavsdk":
             raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
+        return self
+
+    @model_validator(mode="after")
+    def _ui_is_an_address(self):
+        for key, check in (("ui", parse_bind), ("ui_token", check_token)):
+            value = getattr(self, key)
+            if value is not None:
+                try:
+                    check(value)
+                except ValueError as e:
+                    raise Invalid(key, value, str(e)) from None
         return self
 
     @model_validator(mode="after")

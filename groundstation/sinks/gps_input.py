@@ -179,6 +179,7 @@ class GpsInputSink:
         self.max_age_s = max_age_s
         self.sent = 0
         self.sent_valid = 0
+        self.last_fix_type: int | None = None
         self.latencies_s: deque[float] = deque(maxlen=100_000)  # frame arrival → GPS_INPUT sent, new fixes
         self._fix: Fix | None = None
         self._info = None
@@ -216,6 +217,7 @@ class GpsInputSink:
         self.link.send(fields)
         t_sent = time.time()
         self.sent += 1
+        self.last_fix_type = fields["fix_type"]
         if fields["fix_type"] == FIX_3D:
             self.sent_valid += 1
             if fresh and self._fix is self._last_ok:
@@ -224,4 +226,4 @@ class GpsInputSink:
     def status(self, now: float) -> dict:
         heard = self.link.last_heard
         return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
-                "autopilot_age_s": None if heard is None else round(now - heard, 3)}
+                "last_fix_type": self.last_fix_type, "autopilot_age_s": None if heard is None else round(now - heard, 3)}
