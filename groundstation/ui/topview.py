@@ -93,7 +93,7 @@ class TopView:
         out["horizon"] = bool(not good.all())
         if good.sum() >= 3:
             pts = off[good] + pose.cam_offset_ned_m[0, :2] + uav
-            out["footprint"] = [[round(float(a), 2), round(float(b), 2)] for a, b in pts]
+            out["footprint"] = [[round(float(a), 3), round(float(b), 3)] for a, b in pts]
             out["top_edge"] = int(good[:EDGE_SAMPLES].sum())  # the first points are the image's top edge
         return out
 

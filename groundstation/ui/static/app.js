@@ -361,7 +361,7 @@ function showHealth() {
   const count = Object.keys(problems).length;
   $("problem-count").textContent = count ? `${count} input problem${count > 1 ? "s" : ""}` : "inputs OK";
   $("problem-count").className = count ? "bad" : "ok";
-  const st = (k) => (problems[k] ? "no" : "ok");
+  const st = (k) => (problems[k] ? "problem" : "ok");
   const hz = (x) => (x === null || x === undefined ? "—" : `${x.toFixed(1)}/s`);
   const age = (x) => (x === null || x === undefined ? "never" : `${x.toFixed(2)} s`);
   const rows = [];
