@@ -83,6 +83,7 @@ def test_run_without_init_bbox_acquires_near_the_uuvs_own_estimate(tmp_path):
             summary = subprocess.run(skyfix("status", "--zenoh-connect", live.ep, "--timeout-s", "10"),
                                      capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
             assert summary.returncode == 0 and "target tracking (prior)" in summary.stdout, summary
+            assert "web page http://127.0.0.1:" in summary.stdout  # the run's page (live_helpers: a free port)
             # late joiners: the latest fix and status on their own keys
             zs = open_session(connect=[live.ep])
             try:

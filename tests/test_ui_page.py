@@ -7,7 +7,7 @@ open water is refused with the reason shown, and GPS_INPUT stays "no fix"; a box
 true pixel from the simulator's track.csv at the exposure time of the frame on screen, through the replay's
 printed time shift) selects it on that very frame, and ``ok`` fixes follow, near the truth; the map (track,
 footprint, the last fix's lat/lon) and health (per-input rates, GPS_INPUT's fix_type, clocks, CPU) panels fill
-in; "Release target" turns GPS_INPUT to "no fix". Screenshots of each step are kept (out/ui-screenshots/).
+in; a click on the UUV re-selects it; "Release target" turns GPS_INPUT to "no fix". Screenshots of each step are kept (out/ui-screenshots/).
 """
 
 from __future__ import annotations
@@ -120,6 +120,17 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
             assert re.search(r"CPU\s+\d+ % of one core", health), health
             map_info = page.inner_text("#map-info")
             assert re.search(r"camera \d+\.\d m above the water", map_info) and "no footprint" not in map_info
+
+            # a click on the UUV re-selects it there
+            frame = int(_dataset(page, "frame"))
+            u, v = track_pixel(SESSION, float(_dataset(page, "t")) - live.shift)
+            r = page.eval_on_selector("#video", "c => { const r = c.getBoundingClientRect(); "
+                                                "return [r.left, r.top, r.width]; }")
+            page.mouse.click(r[0] + (u + 0.5) * r[2] / camera_width, r[1] + (v + 0.5) * r[2] / camera_width)
+            wait_for(lambda: (m := re.fullmatch(r"selected on frame (\d+) \(caught up \d+\): tracking",
+                                                page.inner_text("#cmd-result"))) and int(m[1]) >= frame, 10,
+                     "the click's answer")  # on that frame, or the next if it came in before the click
+            wait_for(lambda: page.inner_text("#target-state") == "target tracking (click)", 5, "the click's target")
 
             # release: no fix until a new selection
             page.click("#release")
