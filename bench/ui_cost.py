@@ -8,8 +8,10 @@ change in the machine's load falls on all of them:
 
 - ``no-ui``: ``--no-ui``;
 - ``ui-idle``: the page served, nobody watching;
+- ``ws-reader``: a small Python program (its own process) reading the page's WebSocket, video and state, and
+  nothing else: the service's own work for a watching page, without a browser competing for the cores;
 - ``page-open``: the page open in a headless Chromium (Debian's, driven by Playwright) for the whole replay,
-  receiving the video (at most 10 frames a second, 960 px wide JPEG) and the state.
+  receiving the video (at most 10 frames a second, 960 px wide JPEG) and the state, drawing both.
 
 Per run, from the service's own ``--stats``: the latency from a frame's arrival to the GPS_INPUT carrying its fix
 (p50/p99), frames dropped by the pipeline; sampled from /proc: the service's CPU (% of one core) over the video
@@ -66,7 +68,29 @@ height_m = 10.0
 depth_m = 1.0
 """
 DEFAULT_SESSION = Path("/tmp/skyfix-ui-bench/ui_1080p")
-MODES = ("no-ui", "ui-idle", "page-open")
+MODES = ("no-ui", "ui-idle", "ws-reader", "page-open")
+# ws-reader: reads the page's WebSocket until SIGINT, then prints how many video frames came
+WS_READER = r"""
+import asyncio, signal, sys
+import aiohttp
+
+async def main(url):
+    frames = 0
+    stop = asyncio.Event()
+    asyncio.get_running_loop().add_signal_handler(signal.SIGINT, stop.set)
+    async with aiohttp.ClientSession() as s, s.ws_connect(url) as ws:
+        reader = asyncio.ensure_future(stop.wait())
+        while not stop.is_set():
+            msg = asyncio.ensure_future(ws.receive())
+            await asyncio.wait([msg, reader], return_when=asyncio.FIRST_COMPLETED)
+            if msg.done() and msg.result().type == aiohttp.WSMsgType.BINARY:
+                frames += 1
+            elif not msg.done():
+                msg.cancel()
+    print(frames, flush=True)
+
+asyncio.run(main(sys.argv[1]))
+"""
 SKIP_S = 2.0
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
@@ -154,7 +178,7 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
     received = None
     with open(run_log, "w") as rl, open(replay_log, "w") as pl, tempfile.TemporaryDirectory() as profile:
         service = subprocess.Popen(run, stdout=rl, stderr=subprocess.STDOUT, cwd=ROOT)
-        rep = None
+        rep = reader = None
         pw = context = None
         try:
             url = None
@@ -164,6 +188,9 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
                     url = m[1] if m else None
                     break
                 time.sleep(0.1)
+            if mode == "ws-reader":
+                reader = subprocess.Popen([py, "-c", WS_READER, url.replace("http://", "ws://") + "ws"],
+                                          stdout=subprocess.PIPE, text=True)
             if mode == "page-open":
                 from playwright.sync_api import sync_playwright
 
@@ -183,6 +210,9 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
                     time.sleep(0.5)
             if context:
                 received = int(page.eval_on_selector("#video", "c => c.dataset.received"))
+            if reader:
+                reader.send_signal(signal.SIGINT)
+                received = int(reader.communicate(timeout=30)[0].strip())
             service.send_signal(signal.SIGINT)
             service.wait(60)
         finally:
@@ -190,7 +220,7 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
                 context.close()
             if pw:
                 pw.stop()
-            for p in (service, rep):
+            for p in (service, rep, reader):
                 if p is not None and p.poll() is None:
                     p.kill()
     final = json.loads(stats.read_text())
@@ -257,11 +287,18 @@ def main() -> int:
                      f"{med(mode, lambda x: x['latency']['p50_ms']):>8.1f} "
                      f"{med(mode, lambda x: x['latency']['p99_ms']):>8.1f} {med(mode, lambda x: x['dropped']):>8.0f} "
                      f"{page_fps:>9.1f} {med(mode, lambda x: x['browser_cpu_pct']):>14.1f}")
-    d_cpu = med("page-open", lambda x: x["cpu_pct"]) - med("no-ui", lambda x: x["cpu_pct"])
-    d_p50 = med("page-open", lambda x: x["latency"]["p50_ms"]) - med("no-ui", lambda x: x["latency"]["p50_ms"])
-    d_p99 = med("page-open", lambda x: x["latency"]["p99_ms"]) - med("no-ui", lambda x: x["latency"]["p99_ms"])
-    lines.append(f"page open vs --no-ui: service CPU {d_cpu:+.1f} % of one core (baseline predicts "
-                 f"{base['cpu_pct_at_page_fps']:+.1f}), latency p50 {d_p50:+.1f} ms, p99 {d_p99:+.1f} ms")
+    def paired(mode, get):  # per round, the mode minus --no-ui (the same round's load): their median
+        a = [get(x) for x in runs if x["mode"] == mode]
+        b = [get(x) for x in runs if x["mode"] == "no-ui"]
+        return statistics.median(x - y for x, y in zip(a, b, strict=True)), [round(float(x - y), 1) for x, y in zip(a, b)]
+
+    for mode in MODES[1:]:
+        d_cpu, each_cpu = paired(mode, lambda x: x["cpu_pct"])
+        d_p50, _ = paired(mode, lambda x: x["latency"]["p50_ms"])
+        d_p99, _ = paired(mode, lambda x: x["latency"]["p99_ms"])
+        lines.append(f"{mode} minus --no-ui: service CPU {d_cpu:+.1f} % of one core (per round {each_cpu}), "
+                     f"latency p50 {d_p50:+.1f} ms, p99 {d_p99:+.1f} ms")
+    lines.append(f"(the baseline predicts {base['cpu_pct_at_page_fps']:+.1f} % for a watching page)")
     text = "\n".join(lines) + "\n"
     print(text, end="")
     args.out.parent.mkdir(parents=True, exist_ok=True)

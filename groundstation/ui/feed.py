@@ -3,10 +3,11 @@
 A frame is shown once its fix is out (:meth:`VideoFeed.on_fix`, a pipeline sink), so
 its overlay is that frame's own: the tracker's box, the window the telemetry had it
 searched in, the status word and the fix's accuracy. At most ``max_fps`` frames a
-second are encoded, one at a time, in a worker thread (downscaled to at most
-``max_width`` pixels wide with ``cv2.INTER_AREA``, then ``cv2.imencode``); a frame that
-comes while one is encoding is skipped, never queued. Without a watching page
-nothing is kept and nothing is encoded.
+second are encoded, one at a time, in the feed's own thread (downscaled to at most
+``max_width`` pixels wide with ``cv2.INTER_AREA``, then ``cv2.imencode``), which runs at a
+lower priority (nice +10, on Linux) so that on a busy machine the tracker and the video
+decoder go first; a frame that comes while one is encoding is skipped, never queued.
+Without a watching page nothing is kept and nothing is encoded.
 
 A packet is ``[4 bytes: length of the JSON, big-endian][overlay JSON][JPEG]``; the
 overlay's pixels are full-resolution (OpenCV's: the top-left pixel's centre is 0, 0)
@@ -18,17 +19,29 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import os
 import struct
+import threading
 import time
 from collections import OrderedDict, deque
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
 from localizer.fix import Fix
 
+ENCODER_NICE = 10  # the encoding thread's niceness, above the service's other threads
 KEEP_FRAMES = 16  # frames kept (references) while a page watches: enough for the telemetry wait at 30 fps
+
+
+def _lower_priority() -> None:
+    """Make the calling thread nicer than the rest of the process (Linux: a thread is a task); elsewhere a no-op."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), ENCODER_NICE)
+    except (AttributeError, OSError):
+        pass
 
 
 def encode_jpeg(image: np.ndarray, max_width: int, quality: int) -> bytes:
@@ -73,6 +86,7 @@ class VideoFeed:
         self._ready = asyncio.Event()
         self._busy = False
         self._last_taken = -math.inf
+        self._encoder = ThreadPoolExecutor(1, thread_name_prefix="ui-jpeg", initializer=_lower_priority)
 
     def on_frame(self, frame) -> None:
         """Every received frame (a reference, no copy), kept only while a page watches."""
@@ -102,19 +116,23 @@ class VideoFeed:
         self._ready.set()
 
     async def run(self) -> None:
-        while True:
-            await self._ready.wait()
-            self._ready.clear()
-            image, overlay = self._pending
-            self._pending = None
-            try:
-                t0 = time.perf_counter()
-                jpeg = await asyncio.to_thread(encode_jpeg, image, self.max_width, self.quality)
-                self.encode_s.append(time.perf_counter() - t0)
-            finally:
-                self._busy = False
-            self.encoded += 1
-            self.deliver(pack(overlay, jpeg))
+        loop = asyncio.get_running_loop()
+        try:
+            while True:
+                await self._ready.wait()
+                self._ready.clear()
+                image, overlay = self._pending
+                self._pending = None
+                try:
+                    t0 = time.perf_counter()
+                    jpeg = await loop.run_in_executor(self._encoder, encode_jpeg, image, self.max_width, self.quality)
+                    self.encode_s.append(time.perf_counter() - t0)
+                finally:
+                    self._busy = False
+                self.encoded += 1
+                self.deliver(pack(overlay, jpeg))
+        finally:
+            self._encoder.shutdown(wait=False, cancel_futures=True)
 
     def status(self) -> dict:
         mean = sum(self.encode_s) / len(self.encode_s) if self.encode_s else None

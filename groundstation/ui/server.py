@@ -11,7 +11,7 @@ operator's commands (JSON as on Zenoh, :mod:`groundstation.control`; an error is
 400 with ``{"error": "<one line>"}``); ``GET /api/status`` the status now.
 
 The WebSocket sends, to each page: ``{"type": "hello", ...}`` once (the camera's size,
-the run's settings, the track so far); ``{"type": "state", ...}`` twice a second (the
+the run's settings, the track so far); ``{"type": "state", ...}`` once a second (the
 service's status, input rates measured here, the map's :meth:`TopView.snapshot` and
 the track points that page has not seen); and the video packets of
 :mod:`.feed` as binary messages. A page sends ``{"video": false}`` when hidden, and
@@ -52,7 +52,7 @@ log = logging.getLogger("skyfix.ui")
 
 STATIC = resources.files("groundstation.ui") / "static"
 COOKIE = "skyfix_token"
-STATE_PERIOD_S = 0.5
+STATE_PERIOD_S = 1.0
 RATE_WINDOW_S = 3.0
 COMMANDS = ("select", "release", "acquire")
 SECURITY_HEADERS = {
