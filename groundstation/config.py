@@ -164,10 +164,15 @@ def _path_marker(name: str) -> _RelativeToFile | None:
     return next((m for m in metadata if isinstance(m, _RelativeToFile)), None)
 
 
+METAVARS = {"ui": "HOST:PORT", "ui_token": "TOKEN"}  # options whose value is neither a path, a key nor a URL
+
+
 def _metavar(name: str, kind) -> str:
     marker = _path_marker(name)
     if marker:
         return marker.metavar
+    if name in METAVARS:
+        return METAVARS[name]
     if kind is not str:
         return name.rsplit("_", 1)[-1].upper()  # MS, HZ, S: the unit
     return "KEY" if name.endswith("_key") else "URL"
