@@ -47,9 +47,10 @@ def _drag(page, box: tuple[float, float, float, float], camera_width: int) -> No
 
 def _select_on_shown_frame(page, live: LiveRun, camera_width: int) -> dict:
     """Drag a box around the UUV on the frame the page shows; returns that frame's number and time."""
-    for _ in range(10):
+    end = time.time() + 10.0
+    while time.time() < end:
         if _dataset(page, "status") != "awaiting_target":  # a frame out of the decoder's buffer: its time is unknown
-            time.sleep(0.05)
+            time.sleep(0.03)
             continue
         frame, t = int(_dataset(page, "frame")), float(_dataset(page, "t"))
         u, v = track_pixel(SESSION, t - live.shift)
@@ -68,7 +69,7 @@ def _select_on_shown_frame(page, live: LiveRun, camera_width: int) -> dict:
         page.mouse.move(r[0] + (x + w) * s, r[1] + (y + h) * s, steps=4)
         page.mouse.up()
         return {"frame": frame, "t": t, "box": (x, y, w, h)}
-    raise AssertionError("the frame on screen kept changing under the mouse")
+    raise AssertionError("no frame with a known exposure time stayed on screen under the mouse")
 
 
 def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
@@ -136,7 +137,8 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
             page.click("#release")
             wait_for(lambda: "release: released" in page.inner_text("#cmd-result"), 10, "the release's answer")
             t_released = time.time()
-            wait_for(lambda: page.inner_text("#status-word") == "released", 5, "the page showing released")
+            wait_for(lambda: page.inner_text("#target-state") == "target released (click)", 5,
+                     "the page showing the target released")
             wait_for(lambda: sum(g["fix_type"] == 1 and g["t_recv"] > t_released + 0.3 for g in live.gps_input()) >= 3,
                      10, "GPS_INPUT without a fix after the release")
             browser.screenshot("4-released")
@@ -164,5 +166,5 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
     stop_at = next(i for i, g in enumerate(after) if g["fix_type"] != 3)
     assert stop_at <= 3 and len(after) - stop_at >= 5, [g["fix_type"] for g in after]
     assert all(g["fix_type"] == 1 and g["ignore_flags"] == 255 for g in after[stop_at:])
-    released = [f["status"] for f in fixes if f["t_recv"] > t_released + 0.3]
-    assert released and set(released) <= {"released", "buffered"}, set(released)
+    released = [f["status"] for f in fixes if f["t_recv"] > t_released + 0.3]  # frames after it, if any came
+    assert set(released) <= {"released", "buffered"}, set(released)
