@@ -270,7 +270,7 @@ class UiStatus(Section):
     viewers: int = Field(description="pages open now")
     refused: int = Field(description="requests refused (no or wrong token, another site)")
     frames_encoded: int = Field(description="video frames sent to pages as JPEG")
-    encode_ms: NonNegative = Field(description="mean time to encode one (last 100)")
+    encode_ms: NonNegative = Field(description="mean CPU time to encode one, ms (the encoding thread's, last 100)")
 
 
 class StatusMessage(Message):

@@ -409,7 +409,7 @@ function showHealth() {
   }
   if (s.process) {
     rows.push(row("CPU", null, "", "", `${fmt(s.process.cpu_pct, 0, " %")} of one core · ${fmt(s.process.rss_mb, 0)}`
-                  + ` MB resident${s.ui ? ` · page video: ${s.ui.frames_encoded} JPEG, ${fmt(s.ui.encode_ms, 1)} ms each` : ""}`));
+                  + ` MB resident${s.ui ? ` · page video: ${s.ui.frames_encoded} JPEG, ${fmt(s.ui.encode_ms, 1)} ms CPU each` : ""}`));
   }
   $("health").tBodies[0].replaceChildren(...rows);
   $("health-time").textContent = new Date(s.t * 1000).toLocaleTimeString();
