@@ -103,7 +103,7 @@ def _counts(status: dict) -> dict[str, int | None]:
 
     return {"video_frames": get("video", "frames"), "processed": get("pipeline", "processed"),
             "depth": get("depth", "received"), "gps_input": get("gps_input", "sent"),
-            "uav": get("uav", "received"), "fixes": status.get("fixes_published")}
+            "uav": get("uav", "received")}
 
 
 class WebUi:
@@ -256,7 +256,8 @@ class WebUi:
         return web.json_response(result, dumps=lambda o: json.dumps(o, allow_nan=False))
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
-        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096)
+        # no permessage-deflate: the JPEGs do not compress, and zlib would cost the service CPU for every frame
+        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096, compress=False, timeout=2.0)
         await ws.prepare(request)
         viewer = Viewer()
         hello = {"type": "hello", "camera": {"width": self.camera_size[0], "height": self.camera_size[1]},
