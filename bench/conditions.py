@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from live_helpers import SUBSCRIBER, free_port, read_jsonl, replay_shift, truth_errors_m, wait_for
 
 CONDITIONS = ("clock_sync", "clock_offset", "nadir_vehicle_frame", "slow_attitude", "servo_mount", "reboot")
-VIDEO_LATENCY_MS = 55  # the replay chain's, as the live tests configure it
+VIDEO_LATENCY_MS = 0  # the replay sends each frame at its exposure time, as in the live tests
 
 
 def generate(name: str, work: Path) -> Path:
@@ -56,6 +56,12 @@ def offline(skyfix: list[str], cwd: Path, session: Path, work: Path, use_track: 
     return float(row["mae_m"]) if row["mae_m"] not in ("", "nan") else float("nan"), float(row["coverage"])
 
 
+def no_ui(skyfix: list[str], cwd: Path) -> list[str]:
+    """``--no-ui`` where that skyfix serves a web page (it would take port 8080), else nothing."""
+    out = subprocess.run([*skyfix, "run", "--help"], check=True, cwd=cwd, capture_output=True, text=True)
+    return ["--no-ui"] if "--no-ui" in out.stdout else []
+
+
 def live(skyfix: list[str], cwd: Path, session: Path, work: Path) -> tuple[float, float]:
     """(MAE m, share of frames fixed) of the live service on a replay of ``session``."""
     d = work / "live" / session.name
@@ -66,7 +72,7 @@ def live(skyfix: list[str], cwd: Path, session: Path, work: Path) -> tuple[float
     sub_out.unlink(missing_ok=True)
     run = [*skyfix, "run", "--calibration", str(session / "session.toml"), "--mavlink", f"udpin:127.0.0.1:{mav}",
            "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", str(VIDEO_LATENCY_MS), "--zenoh-listen", ep,
-           "--gps-input", f"udpout:127.0.0.1:{uuv}", "--duration-s", "40"]
+           "--gps-input", f"udpout:127.0.0.1:{uuv}", "--duration-s", "40", *no_ui(skyfix, cwd)]
     replay = [*skyfix, "replay", str(session), "--mavlink-out", f"udpout:127.0.0.1:{mav}", "--video-out",
               f"udp://127.0.0.1:{video}", "--zenoh-connect", ep, "--uuv-listen", f"udpin:127.0.0.1:{uuv}",
               "--uuv-log", str(d / "uuv.jsonl"), "--tail-s", "1.5"]

@@ -181,7 +181,7 @@ def live(session_dir: Path, work: Path) -> dict:
     py = sys.executable
     run = [py, "-m", "groundstation.cli", "run", "--calibration", str(session_dir / "session.toml"),
            "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", str(CAMERA_LATENCY_MS),
-           "--zenoh-listen", ep, "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(stats)]
+           "--zenoh-listen", ep, "--no-ui", "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(stats)]
     replay = [py, "-m", "groundstation.cli", "replay", str(session_dir), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
               "--video-out", f"udp://127.0.0.1:{video}", "--video-delay-ms", str(CAMERA_LATENCY_MS),
               "--zenoh-connect", ep, "--uuv-listen",

@@ -58,7 +58,7 @@ class ServiceRun:
             f.unlink(missing_ok=True)
         self.cmd = [sys.executable, "-m", "groundstation.cli", "run", "--calibration", str(session / "session.toml"),
                     "--mavlink", f"udpin:127.0.0.1:{self.mav}", "--video", f"udp://127.0.0.1:{self.video}",
-                    "--video-latency-ms", str(video_latency_ms), "--zenoh-listen", self.zenoh,
+                    "--video-latency-ms", str(video_latency_ms), "--zenoh-listen", self.zenoh, "--no-ui",
                     "--gps-input", f"udpout:127.0.0.1:{self.uuv}", "--stats", str(self.stats), *extra]
         self.proc: subprocess.Popen | None = None
         self.final: dict | None = None

@@ -38,6 +38,7 @@ from localizer.contract import (
 from localizer.tracking import TRACKERS
 
 from .sources.uuv_position import parse_hint
+from .ui.bind import check_token, parse_bind
 
 log = logging.getLogger("skyfix.config")
 
@@ -111,6 +112,12 @@ class RunConfig:
                                             "refer to a frame the operator saw")
     control_prefix: Text = Field("skyfix/cmd", description="Zenoh key prefix of the operator commands "
                                  "(<prefix>/select, release, acquire, status)")
+    ui: Text = Field("127.0.0.1:8080", description="HOST:PORT of the web page (video, target selection, map, "
+                     "health); beyond localhost (0.0.0.0:8080) it needs the token in the URL skyfix prints; port 0: "
+                     "any free port")
+    no_ui: Flag = Field(False, description="serve no web page")
+    ui_token: Text | None = Field(None, description="the web page's token (default: none on localhost, a random one "
+                                  "beyond it); given, every request needs it, on localhost too")
     record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
     duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
     stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
@@ -127,6 +134,17 @@ class RunConfig:
         if self.gps_input_signing_key and (not self.gps_input or self.gps_input.startswith("zenoh:")):
             raise Invalid("gps_input_signing_key", self.gps_input_signing_key,
                           "signing needs a MAVLink --gps-input link (not zenoh:)")
+        return self
+
+    @model_validator(mode="after")
+    def _ui_is_an_address(self):
+        for key, check in (("ui", parse_bind), ("ui_token", check_token)):
+            value = getattr(self, key)
+            if value is not None:
+                try:
+                    check(value)
+                except ValueError as e:
+                    raise Invalid(key, value, str(e)) from None
         return self
 
     @model_validator(mode="after")
@@ -160,10 +178,15 @@ def _path_marker(name: str) -> _RelativeToFile | None:
     return next((m for m in metadata if isinstance(m, _RelativeToFile)), None)
 
 
+METAVARS = {"ui": "HOST:PORT", "ui_token": "TOKEN"}  # options whose value is neither a path, a key nor a URL
+
+
 def _metavar(name: str, kind) -> str:
     marker = _path_marker(name)
     if marker:
         return marker.metavar
+    if name in METAVARS:
+        return METAVARS[name]
     if kind is not str:
         return name.rsplit("_", 1)[-1].upper()  # MS, HZ, S: the unit
     return "KEY" if name.endswith("_key") else "URL"

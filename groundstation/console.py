@@ -47,7 +47,7 @@ def _age(now: float, t) -> str:
 
 
 def summary(status: dict) -> str:
-    """A few lines an operator reads at a glance: the target, the latest fix, the inputs, GPS_INPUT."""
+    """A few lines an operator reads at a glance: the target, the latest fix, the inputs, GPS_INPUT, the web page."""
     now = status.get("t", time.time())
     target = status.get("target") or {}
     line = [time.strftime("%H:%M:%S", time.localtime(now)) + f"  target {target.get('state')}"]
@@ -76,6 +76,10 @@ def summary(status: dict) -> str:
     if gps:
         inputs.append(f"GPS_INPUT sent {gps.get('sent')} (valid {gps.get('sent_valid')})")
     lines.append("  " + ", ".join(inputs))
+    ui = status.get("ui")
+    if ui and ui.get("url"):
+        lines.append(f"  web page {ui['url']}{' (with its token)' if ui.get('token') else ''}, "
+                     f"{ui.get('viewers')} open")
     return "\n".join(lines)
 
 

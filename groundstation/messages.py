@@ -248,6 +248,7 @@ class GpsInputStatus(Section):
     sent: int
     sent_valid: int = Field(description="messages with fix_type 3")
     not_delivered: int = Field(description="messages the link could not take (down)")
+    last_fix_type: int | None = Field(None, description="fix_type of the last message sent: 3 a fix, 1 no fix")
     link: LinkStatus
     gates: GateStatus
 
@@ -311,6 +312,30 @@ class ControlStatus(Section):
     refused: int
 
 
+class ZenohLinkStatus(Section):
+    """The Zenoh session."""
+
+    peers: int = Field(description="peers and routers connected")
+
+
+class ProcessStatus(Section):
+    """The service's own use of the machine."""
+
+    cpu_pct: NonNegative = Field(description="CPU, % of one core (all threads), over the last 5 s; null at first")
+    rss_mb: NonNegative = Field(description="resident memory, MB")
+
+
+class UiStatus(Section):
+    """The web page (``--ui``)."""
+
+    url: str | None = Field(description="where it is served (without its token)")
+    token: bool = Field(description="whether requests need the token")
+    viewers: int = Field(description="pages open now")
+    refused: int = Field(description="requests refused (no or wrong token, another site)")
+    frames_encoded: int = Field(description="video frames sent to pages as JPEG")
+    encode_ms: NonNegative = Field(description="mean CPU time to encode one, ms (the encoding thread's, last 100)")
+
+
 class StatusMessage(Message):
     """The service's health, once a second; sections for optional parts only when they run."""
 
@@ -326,7 +351,10 @@ class StatusMessage(Message):
     uuv_position: UuvPositionStatus
     fix: FixMessage | None = Field(description="the latest fix message (also answered to late joiners on the fix key)")
     control: ControlStatus
+    zenoh: ZenohLinkStatus
+    process: ProcessStatus
     video: VideoStatus | None = Field(None, description="with --video")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     latency: LatencyStatus | None = Field(None, description="with --gps-input")
     record: RecordStatus | None = Field(None, description="with --record")
+    ui: UiStatus | None = Field(None, description="while the web page is served (not with --no-ui)")

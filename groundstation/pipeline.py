@@ -25,7 +25,9 @@ Operator commands (:meth:`Pipeline.select`, :meth:`Pipeline.release`,
 :meth:`Pipeline.acquire`) run in the tracking worker between frames. The last
 ``history_s`` seconds of tracked frames are held with their poses, so a selection
 refers to a frame the operator saw: the session is re-initialised there and then
-catches up through the held frames after it before the next live frame. A release
+catches up through the held frames after it before the next live frame. An operator's
+box must hold a vehicle-sized object standing out of the water (a box on open water is
+refused, not tracked as the seafloor; ``init_bbox`` is taken as configured). A release
 also turns frames tracked before it but not yet located into ``released`` ones: no
 fix goes out after it.
 """
@@ -44,6 +46,7 @@ from localizer.fix import Fix, locate
 from localizer.pose import CameraPose, camera_pose
 from localizer.telemetry import Telemetry
 from localizer.tracking import TrackResult
+from localizer.tracking.predict import window as search_window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession
 
 from .sources.video_live import LiveFrame
@@ -58,13 +61,15 @@ MAX_HELD = 300
 
 @dataclass(frozen=True)
 class FrameInfo:
-    """One processed frame beside its fix: when it arrived and when its fix was ready (UNIX seconds), and
-    the tracker's box (x, y, w, h) around the UUV in it, when it has one."""
+    """One processed frame beside its fix: when it arrived and when its fix was ready (UNIX seconds), the
+    tracker's box (x, y, w, h) around the UUV in it, when it has one, and the window (x, y, w, h, pixels) the
+    telemetry's prediction had it searched in, when there was one."""
 
     index: int
     t_recv: float
     t_fix: float
     box: tuple[int, int, int, int] | None = None
+    window: tuple[float, float, float, float] | None = None
 
 
 @dataclass
@@ -75,6 +80,7 @@ class Tracked:
     pose: CameraPose
     result: TrackResult
     early: bool  # the pose was computed more than EXTRAPOLATE_S past the newest attitude sample
+    window: tuple[float, float, float, float] | None = None  # where the prediction had the UUV searched
 
 
 class Pipeline:
@@ -169,7 +175,7 @@ class Pipeline:
         later = [h for h in self._held if h.frame.index > held.frame.index]
 
         def select_and_catch_up() -> TrackResult:
-            result = self.session.select(held.frame.image, held.pose, box=box, point=point)
+            result = self.session.select(held.frame.image, held.pose, box=box, point=point, verify=True)
             for h in later:
                 self.session.step(h.frame.image, h.pose)
             return result
@@ -232,7 +238,7 @@ class Pipeline:
         early = self._early(frame)
         prior = self.prior(frame.t_unix)
         result = await asyncio.to_thread(self._step, frame, pose, prior)
-        item = Tracked(frame, pose, result, early)
+        item = Tracked(frame, pose, result, early, search_window(self.session.prediction))
         self._held.append(item)
         while len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s:
             self._held.popleft()
@@ -244,7 +250,7 @@ class Pipeline:
             self._started = True
             if self.cal.init_bbox is not None:
                 try:
-                    return self.session.select(frame.image, pose, box=self.cal.init_bbox)
+                    return self.session.select(frame.image, pose, box=self.cal.init_bbox)  # as configured
                 except SelectionError as e:
                     log.warning("tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e)
         return self.session.step(frame.image, pose, prior=prior)
@@ -273,10 +279,10 @@ class Pipeline:
                     continue
                 item.pose, item.early = camera_pose(self.cal, self.tel, item.frame.t_unix), False
             self._tracked.popleft()
-            self._emit(item.frame, self._locate(item), item.result.box)
+            self._emit(item.frame, self._locate(item), item.result.box, item.window)
 
-    def _emit(self, frame: LiveFrame, fix: Fix, box=None) -> None:
-        info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None)
+    def _emit(self, frame: LiveFrame, fix: Fix, box=None, window=None) -> None:
+        info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None, window)
         self.processed += 1
         self.statuses[fix.status] += 1
         if fix.status != self.last_status:

@@ -5,7 +5,9 @@ Zenoh (:mod:`.sources.depth_zenoh`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`.sources.video_live`),
 the per-frame :mod:`.pipeline`, GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
 the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`), the operator's commands
-(:mod:`.control`) and, with ``--record``, the recorder (:mod:`.sinks.recorder`). Blocking I/O lives in threads owned by the
+(:mod:`.control`), the web page (:mod:`.ui`, unless ``--no-ui``) and, with ``--record``,
+the recorder (:mod:`.sinks.recorder`). The web page's port is taken before any worker
+starts, so a port in use stops the service at once (exit 2). Blocking I/O lives in threads owned by the
 workers; all telemetry is written and read on the event loop. SIGINT/SIGTERM (or
 ``--duration-s``) cancel every worker, then stop the GPS_INPUT sink (its last message
 says "no fix"); a worker that fails cancels the others (the sink still sends its
@@ -42,6 +44,9 @@ from .sources.rates import needed_rates
 from .sources.uav_mavlink import UavMavlink
 from .sources.uuv_position import UuvPosition, parse_hint
 from .sources.video_live import VideoLive
+from .ui.server import WebUi, settings_of
+from .ui.topview import TopView
+from .usage import Usage
 from .watchdog import REQUIRE_S, InputMissing, Watchdog
 from .zenoh_session import open_session
 
@@ -77,6 +82,7 @@ async def serve(cfg: config.RunConfig) -> dict:
     session = open_session(cfg.zenoh_connect, cfg.zenoh_listen, multicast=cfg.zenoh_multicast,
                            config_file=cfg.zenoh_config)
     closers = []
+    usage = Usage()
     try:
         size = (cal.camera.width, cal.camera.height)
         recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
@@ -110,26 +116,28 @@ async def serve(cfg: config.RunConfig) -> dict:
         uav.listeners.append(pipeline.telemetry_arrived)
         depth_key = BLUEOS_KEY if cfg.depth_source == "blueos" and cfg.depth_key == "uuv/depth" else cfg.depth_key
         depth = DepthZenoh(session, depth_key, tel, cfg.depth_source)
+        control = Control(pipeline, lambda now: status(now))
+        ui = None
+        if not cfg.no_ui:
+            topview = TopView(cal, tel)
+            ui = WebUi(cfg.ui, cfg.ui_token, control, topview, size, settings_of(cfg))
+            pipeline.sinks += [ui.feed, topview]
         video = motion = None
         if cfg.video:
-            submit = pipeline.submit
-            if recorder:
-                def submit(frame, _submit=pipeline.submit):
-                    recorder.on_frame(frame)
-                    _submit(frame)
             auto = cfg.video_latency_ms == "auto"
+            frame_listeners = [listener.on_frame for listener in (recorder, ui and ui.feed) if listener]
+
+            def submit(frame):
+                for listener in frame_listeners:
+                    listener(frame)
+                pipeline.submit(frame)
             video = VideoLive(cfg.video, 0.0 if auto else cfg.video_latency_ms / 1000.0, submit, expected_size=size)
 
             def apply(latency_s: float) -> None:
                 video.latency_s = latency_s
 
             motion = OnlineLatency(cal, tel, None if auto else video.latency_s, apply if auto else None)
-
-            def submit(frame, _submit=submit):
-                motion.on_frame(frame)
-                _submit(frame)
-
-            video.on_frame = submit
+            frame_listeners.append(motion.on_frame)
         if recorder:
             uav.listeners.append(recorder.on_mavlink)
             depth.listeners.append(recorder.on_depth)
@@ -150,8 +158,9 @@ async def serve(cfg: config.RunConfig) -> dict:
         def status(now: float) -> dict:
             out = {"uav": uav.status(now), "depth": depth.status(now), "pipeline": pipeline.status(),
                    "target": pipeline.target, "uuv_position": uuv_position.status(now),
-                   "fixes_published": fix_sink.published, "fix": fix_sink.latest, "control": control.status(),
-                   "problems": dict(watchdog.problems)}
+                   "fixes_published": fix_sink.published, "fix": fix_sink.latest, "control": zenoh_control.status(),
+                   "problems": dict(watchdog.problems), "zenoh": {"peers": zenoh_peers()},
+                   "process": usage.status(now)}
             if video:
                 out["video"] = video.status(now) | {"latency_from_motion": motion.status()}
             if gps:
@@ -159,17 +168,22 @@ async def serve(cfg: config.RunConfig) -> dict:
                 out["latency"] = latency_summary(list(gps.latencies_s)[-1000:])
             if recorder:
                 out["record"] = recorder.status()
+            if ui:
+                out["ui"] = ui.status()
             return out
 
         status_sink = ZenohStatus(session, cfg.status_key, cfg.alive_key, status)
-        control = ZenohControl(session, Control(pipeline, status), cfg.control_prefix,
-                               {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
-        workers = [uav, depth, uuv_position, pipeline, watchdog, status_sink, control]
-        workers += [w for w in (video, motion, gps, recorder) if w is not None]
+        zenoh_control = ZenohControl(session, control, cfg.control_prefix,
+                                     {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
+        workers = [uav, depth, uuv_position, pipeline, watchdog, status_sink, zenoh_control]
+        workers += [w for w in (video, motion, gps, recorder, ui) if w is not None]
+        if ui:
+            await ui.start()  # UiError (an OSError) when its port is taken: exit 2 before anything runs
         log.info("skyfix run: UAV %s, video %s, depth %s, fixes on %s, GPS_INPUT %s, commands on %s/*", cfg.mavlink,
-                 cfg.video, depth_key, cfg.fix_key, cfg.gps_input, control.prefix)
+                 cfg.video, depth_key, cfg.fix_key, cfg.gps_input, zenoh_control.prefix)
         if cal.init_bbox is None:
-            log.info("no tracker.init_bbox: awaiting a target (%s/select%s)", control.prefix,
+            log.info("no tracker.init_bbox: awaiting a target (%s/select%s%s)", zenoh_control.prefix,
+                     f", the web page {ui.url}" if ui else "",
                      ", or near the UUV's own position" if cfg.uuv_position_key or cfg.uuv_hint else "")
         async with asyncio.TaskGroup() as tg:
             tasks = {w: tg.create_task(w.run(), name=type(w).__name__) for w in workers}

@@ -39,7 +39,7 @@ def test_record_naming_a_file(tmp_path, capsys):
     target = tmp_path / "rec"
     target.write_text("x")
     argv = ["run", "--calibration", str(BUNDLED / "nadir_hover" / "session.toml"), "--mavlink",
-            f"udpin:127.0.0.1:{free_port()}", "--record", str(target), "--duration-s", "5"]
+            f"udpin:127.0.0.1:{free_port()}", "--record", str(target), "--duration-s", "5", "--no-ui"]
     assert main(argv) == 2
     lines = _errors(capsys)
     assert len(lines) == 1 and lines[0] == f"skyfix run: error: --record {target}: exists and is not a directory"
@@ -52,7 +52,8 @@ def test_a_zenoh_port_in_use_is_one_plain_line(capsys):
     port = busy.getsockname()[1]
     try:
         argv = ["run", "--calibration", str(BUNDLED / "nadir_hover" / "session.toml"), "--mavlink",
-                f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", f"tcp/127.0.0.1:{port}", "--duration-s", "5"]
+                f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", f"tcp/127.0.0.1:{port}", "--duration-s", "5",
+                "--no-ui"]
         assert main(argv) == 2
     finally:
         busy.close()
@@ -71,3 +72,19 @@ def test_replay_that_no_service_answered_exits_1(tmp_path):
     assert out.returncode == 1, out.stderr[-2000:]
     assert "no GPS_INPUT came back on udpin:127.0.0.1:" in out.stderr
     assert Path(tmp_path / "uuv.jsonl").exists()
+
+
+def test_a_web_page_port_in_use_is_one_line_naming_ui(capsys):
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    port = busy.getsockname()[1]
+    try:
+        argv = ["run", "--calibration", str(BUNDLED / "nadir_hover" / "session.toml"), "--mavlink",
+                f"udpin:127.0.0.1:{free_port()}", "--ui", f"127.0.0.1:{port}", "--duration-s", "5"]
+        assert main(argv) == 2
+    finally:
+        busy.close()
+    lines = _errors(capsys)
+    assert lines == [(f"skyfix run: error: --ui 127.0.0.1:{port}: port {port} is already in use (another skyfix "
+                     "run?); choose another with --ui HOST:PORT, or --no-ui")], lines

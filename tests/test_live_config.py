@@ -90,7 +90,7 @@ def test_unknown_calibration_keys_are_logged_by_run(tmp_path, caplog):
     bundled = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"
     cal = tmp_path / "cal.toml"
     cal.write_text(bundled.read_text().replace("[mount]\n", "[mount]\ncamera_ofset_m = [0.0, 0.0, 0.3]\n"))
-    argv = ["run", "--calibration", str(cal), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "0.2"]
+    argv = ["run", "--calibration", str(cal), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "0.2", "--no-ui"]
     with caplog.at_level("WARNING"):
         assert main(argv) == 0
     assert f"{cal}: mount.camera_ofset_m is not a key skyfix knows; ignored (a typo?)" in caplog.messages
@@ -110,6 +110,26 @@ def test_target_options_are_checked(flags, message):
     assert str(e.value) == f"options: {message}"
 
 
+@pytest.mark.parametrize("flags,message", [
+    (["--ui", "8080"], "--ui = '8080': expected HOST:PORT, e.g. 127.0.0.1:8080 or 0.0.0.0:8080"),
+    (["--ui", "127.0.0.1:70000"], "--ui = '127.0.0.1:70000': port 70000 is not 0..65535"),
+    (["--ui-token", "short"], ("--ui-token = 'short': expected 8-128 characters of A-Z a-z 0-9 . _ ~ - (it goes "
+                              "into a URL)")),
+])
+def test_web_page_options_are_checked(flags, message):
+    with pytest.raises(ConfigError) as e:
+        config.run_config(_parse(["--calibration", "x.toml", *flags]))
+    assert str(e.value) == f"options: {message}"
+
+
+def test_web_page_options():
+    cfg = config.run_config(_parse(["--calibration", "x.toml"]))
+    assert cfg.ui == "127.0.0.1:8080" and not cfg.no_ui and cfg.ui_token is None  # on by default, on localhost
+    cfg = config.run_config(_parse(["--calibration", "x.toml", "--ui", "[::1]:0", "--ui-token", "abcdefgh12"]))
+    assert cfg.ui == "[::1]:0" and cfg.ui_token == "abcdefgh12"
+    assert config.run_config(_parse(["--calibration", "x.toml", "--no-ui"])).no_ui
+
+
 def test_target_options_from_a_config_file(tmp_path):
     (tmp_path / "c.toml").write_text('calibration = "cal.toml"\nuuv_position_key = "mavlink/1/1/GLOBAL_POSITION_INT"\n'
                                      'uuv_hint = "63.44,10.40"\nuuv_prior_sigma_m = 5\ncontrol_prefix = "boat/skyfix"\n')
@@ -124,7 +144,7 @@ def test_a_link_that_cannot_open_is_one_line_and_exit_2(tmp_path, option, capsys
     from groundstation.cli import main
 
     bundled = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"
-    argv = ["run", "--calibration", str(bundled), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "3",
+    argv = ["run", "--calibration", str(bundled), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "3", "--no-ui",
             option, "udpin:127.0.0.1:notaport"]
     assert main(argv) == 2
     err_lines = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]

@@ -12,107 +12,28 @@
 from __future__ import annotations
 
 import json
-import re
-import socket
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 import pymap3d
-from live_helpers import (
-    ROOT,
-    SUBSCRIBER,
-    free_port,
-    read_jsonl,
-    replay_shift,
-    skyfix,
-    start,
-    stop,
-    truth_errors_m,
-    wait_for,
-)
+from live_helpers import ROOT, LiveRun, skyfix, track_pixel, wait_for
 
 from groundstation.zenoh_session import open_session
 
 SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
-VIDEO_LATENCY_MS = 55  # this replay chain's send → decode delay (see test_live_e2e)
+VIDEO_LATENCY_MS = 0  # the replay sends each frame at its exposure time (see test_live_e2e)
 POSITION_KEY = "mavlink/1/1/GLOBAL_POSITION_INT"
 ESTIMATE_OFF_M = (2.5, -2.0)  # the UUV's own estimate: north, east of the truth
 
 
-def _calibration_without_init_bbox(tmp_path: Path) -> Path:
-    text = (SESSION / "session.toml").read_text()
-    stripped = re.sub(r"(?m)^init_(bbox|t) = .*\n", "", text)
-    assert "init_bbox" not in stripped
-    path = tmp_path / "calibration.toml"
-    path.write_text(stripped)
-    return path
-
-
-class Live:
-    """``skyfix run`` (no init_bbox), a subscriber to ``skyfix/**`` in its own process, then ``skyfix replay``."""
+class Live(LiveRun):
+    """``skyfix run`` without init_bbox on nadir_hover (see :class:`live_helpers.LiveRun`)."""
 
     def __init__(self, tmp_path: Path, *run_args: str):
-        self.tmp = tmp_path
-        mav, video, self.uuv = free_port(), free_port(), free_port()
-        self.ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
-        self.sub_out = tmp_path / "zenoh.jsonl"
-        self.uuv_log = tmp_path / "uuv.jsonl"
-        cal = _calibration_without_init_bbox(tmp_path)
-        self.run_cmd = skyfix("run", "--calibration", str(cal), "--mavlink", f"udpin:127.0.0.1:{mav}",
-                              "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", str(VIDEO_LATENCY_MS),
-                              "--zenoh-listen", self.ep, "--gps-input", f"udpout:127.0.0.1:{self.uuv}",
-                              "--duration-s", "40", *run_args)
-        self.replay_cmd = skyfix("replay", str(SESSION), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
-                                 "--video-out", f"udp://127.0.0.1:{video}", "--zenoh-connect", self.ep,
-                                 "--uuv-listen", f"udpin:127.0.0.1:{self.uuv}", "--uuv-log", str(self.uuv_log),
-                                 "--tail-s", "1.5")
-        self.procs: list[subprocess.Popen] = []
-
-    def __enter__(self):
-        self.service = start(self.run_cmd, self.tmp / "run.log")
-        self.procs.append(self.service)
-        self.procs.append(start([sys.executable, "-c", SUBSCRIBER, self.ep, "skyfix/**", str(self.sub_out)],
-                                self.tmp / "sub.log"))
-        wait_for(lambda: any(r["key"] == "skyfix/status" for r in read_jsonl(self.sub_out)), 20,
-                 "skyfix status on Zenoh")
-        self.replay = start(self.replay_cmd, self.tmp / "replay.log")
-        self.procs.append(self.replay)
-        self.shift = replay_shift(self.tmp / "replay.log")
-        return self
-
-    def __exit__(self, *exc):
-        for p in self.procs:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
-
-    def finish(self) -> None:
-        """Wait for the replay to end, then stop the service and the subscriber."""
-        self.replay.wait(30)
-        stop(self.service)
-        stop(self.procs[1])
-        log = (self.tmp / "run.log").read_text()
-        assert self.service.returncode == 0, log[-3000:]
-        assert self.replay.returncode == 0, (self.tmp / "replay.log").read_text()[-3000:]
-
-    def fixes(self) -> list[dict]:
-        return [json.loads(s["payload"]) | {"t_recv": s["t_recv"]} for s in read_jsonl(self.sub_out)
-                if s["key"] == "skyfix/uuv/fix"]
-
-    def gps_input(self) -> list[dict]:
-        return read_jsonl(self.uuv_log)
-
-    def fix_errors_m(self, fixes: list[dict]) -> np.ndarray:
-        return truth_errors_m(SESSION, np.array([f["t"] for f in fixes]) - self.shift,
-                              [f["lat"] for f in fixes], [f["lon"] for f in fixes])
-
-    def gps_errors_m(self, valid: list[dict]) -> np.ndarray:
-        return truth_errors_m(SESSION, np.array([g["time_usec"] / 1e6 for g in valid]) - self.shift,
-                              [g["lat"] / 1e7 for g in valid], [g["lon"] / 1e7 for g in valid])
+        super().__init__(tmp_path, SESSION, *run_args, video_latency_ms=VIDEO_LATENCY_MS)
 
 
 def _publish_estimate(live: Live, stop_: threading.Event) -> None:
@@ -162,6 +83,7 @@ def test_run_without_init_bbox_acquires_near_the_uuvs_own_estimate(tmp_path):
             summary = subprocess.run(skyfix("status", "--zenoh-connect", live.ep, "--timeout-s", "10"),
                                      capture_output=True, text=True, cwd=ROOT, timeout=60, check=False)
             assert summary.returncode == 0 and "target tracking (prior)" in summary.stdout, summary
+            assert "web page http://127.0.0.1:" in summary.stdout  # the run's page (live_helpers: a free port)
             # late joiners: the latest fix and status on their own keys
             zs = open_session(connect=[live.ep])
             try:
@@ -202,8 +124,7 @@ def test_run_without_init_bbox_acquires_near_the_uuvs_own_estimate(tmp_path):
 
 
 def _track_pixel(t_session: float) -> tuple[float, float]:
-    tr = np.genfromtxt(SESSION / "track.csv", delimiter=",", names=True)
-    return float(np.interp(t_session, tr["t"], tr["u"])), float(np.interp(t_session, tr["t"], tr["v"]))
+    return track_pixel(SESSION, t_session)
 
 
 def test_select_release_and_select_again_over_zenoh(tmp_path):

@@ -19,6 +19,7 @@ import pytest
 from groundstation.session import load_session
 from groundstation.video import open_video
 from localizer.pose import camera_pose
+from localizer.tracking.predict import window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession
 from localizer.tracking.target import TargetParams, TargetState
 
@@ -113,11 +114,20 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
         ts.select(clip.frames[1], clip.pose, 1, point=(-50.0, 20.0))
     with pytest.raises(SelectionError, match=r"point \[nan, 20.0\]: expected finite pixels"):
         ts.select(clip.frames[1], clip.pose, 1, point=(math.nan, 20.0))
+    with pytest.raises(SelectionError, match=r"box \[40, 300, 33, 34\]: no vehicle-sized object stands out"):
+        ts.select(clip.frames[1], clip.pose, 1, box=(40, 300, 33, 34), verify=True)  # an operator's box on water
     no_pose = camera_pose(clip.cal, clip.session.telemetry, [clip.t[-1] + 60.0])
     with pytest.raises(SelectionError, match=r"no camera pose at that frame \(stale_attitude\)"):
         ts.select(clip.frames[1], no_pose, 0, point=(clip.u[1], clip.v[1]))
     result = ts.step(clip.frames[1], clip.pose, 1)
     assert ts.state is TargetState.TRACKING and result.ok and clip.error_px(1, result) < 2.0
+    # a box around the UUV passes the same check, and the matcher's window is reported with the next frame
+    w, h = 33, 34
+    ts.select(clip.frames[2], clip.pose, 2, box=(clip.u[2] - (w - 1) / 2, clip.v[2] - (h - 1) / 2, w, h), verify=True)
+    assert ts.prediction is None
+    result = ts.step(clip.frames[3], clip.pose, 3)
+    x, y, ww, wh = window(ts.prediction)
+    assert result.ok and x < clip.u[3] < x + ww and y < clip.v[3] < y + wh and ww < 200, (x, y, ww, wh)
 
 
 @pytest.mark.parametrize(("name", "north_m", "east_m"), [("nadir_hover", 2.5, -2.0), ("oblique_2m", -3.0, 1.5),

@@ -146,6 +146,7 @@ class GpsInputSink:
         self.sent = 0
         self.sent_valid = 0
         self.not_delivered = 0  # handed to a link that was down
+        self.last_fix_type: int | None = None
         self.latencies_s: deque[float] = deque(maxlen=100_000)  # frame arrival → GPS_INPUT sent, new fixes
         self._fix: Fix | None = None
         self._info = None
@@ -203,6 +204,7 @@ class GpsInputSink:
         t_sent = time.time()
         self.sent += 1
         self.not_delivered += not delivered
+        self.last_fix_type = fields["fix_type"]
         if fields["fix_type"] == FIX_3D and delivered:
             self.sent_valid += 1
             if fresh and self._fix is self._last_ok:
@@ -210,4 +212,5 @@ class GpsInputSink:
 
     def status(self, now: float) -> dict:
         return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
-                "not_delivered": self.not_delivered, "link": self.link.status(now), "gates": self.gate.status()}
+                "not_delivered": self.not_delivered, "last_fix_type": self.last_fix_type,
+                "link": self.link.status(now), "gates": self.gate.status()}

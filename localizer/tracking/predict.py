@@ -30,6 +30,7 @@ VEHICLE_HEIGHT_M = 0.25  # from the top face down to the bottom
 UUV_SPEED_MPS = 1.0  # how fast the UUV may move unseen: the prediction's 1-sigma grows by this per second
 BASE_SIGMA_M = 0.08  # the prediction's 1-sigma from the telemetry itself (attitude, timing)
 _STEP_M = 0.05  # finite-difference step for the image scale
+WINDOW_SIGMAS = 3.0  # the search window the matchers use: the prediction ± this many sigmas
 
 
 def project_uuv(cal: Calibration, pose: CameraPose, lat_deg, lon_deg, depth_m=None):
@@ -89,6 +90,15 @@ def prediction_at(u: float, v: float, px_per_m: float, sigma_m: float, shift_px=
         width_px=float(length_m * px_per_m), height_px=float(beam_m * px_per_m),
         sigma_px=float(sigma_m * px_per_m), px_per_m=float(px_per_m),
     )
+
+
+def window(prediction: Prediction | None, sigmas: float = WINDOW_SIGMAS) -> tuple[float, float, float, float] | None:
+    """``(x, y, w, h)`` pixels where the predicted vehicle may lie: its centre ± ``sigmas`` of the prediction's
+    uncertainty, widened by half the vehicle's diagonal (None without a prediction, or one of unknown uncertainty)."""
+    if prediction is None or not math.isfinite(prediction.sigma_px):
+        return None
+    half = sigmas * prediction.sigma_px + math.hypot(prediction.width_px, prediction.height_px) / 2.0
+    return (prediction.u - half, prediction.v - half, 2.0 * half, 2.0 * half)
 
 
 def follow(projected_now, projected_then, pixel_then, dt_s: float) -> Prediction | None:

@@ -9,7 +9,10 @@ once by the caller and shared with the geometry.
 - :meth:`~TrackingSession.select`: the operator's box, or a click (the object
   outlined there by :func:`~localizer.tracking.detect.detect`, at the size the
   pose gives), on that frame; tracking starts there at once. The tracked pixel is
-  the top face's centre (:func:`~localizer.tracking.predict.top_face_pixel`).
+  the top face's centre (:func:`~localizer.tracking.predict.top_face_pixel`). With
+  ``verify`` (the operator's live selections), a box must hold a vehicle-sized object
+  standing out of the water, as a click must: a box on open water would otherwise be
+  tracked as the seafloor's texture, and every fix would be wrong.
 - :meth:`~TrackingSession.step`: the next frame. Its prediction is the UUV's last
   sighting moved by what the camera did since: the sighting is located (an *anchor*,
   re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
@@ -84,6 +87,7 @@ class TrackingSession:
         self.target = Target(lambda: make_matcher(tracker), target_params)
         self.detect_params = detect_params or DetectParams()
         self.origin: str | None = None  # how the current target was chosen: "box", "click", "prior"
+        self.prediction: Prediction | None = None  # where the latest step looked for the UUV (None: nowhere in particular)
         self.last = TrackResult("awaiting_target")
         self._forget()
         self._awaiting_frames = 0
@@ -96,11 +100,14 @@ class TrackingSession:
         return self.target.state
 
     # -- the operator's commands ------------------------------------------------------------------
-    def select(self, frame_bgr, pose: CameraPose, i: int = 0, *, box=None, point=None) -> TrackResult:
+    def select(self, frame_bgr, pose: CameraPose, i: int = 0, *, box=None, point=None,
+               verify: bool = False) -> TrackResult:
         """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of this frame, from now on.
 
         Raises :class:`SelectionError` (and changes nothing) for a box outside the
-        frame, or a click with no object standing out near it or without a pose.
+        frame, or a click with no object standing out near it or without a pose;
+        with ``verify``, also for a box with no object standing out in it (checked
+        when the pose can size the vehicle).
         """
         if (box is None) == (point is None):
             raise SelectionError("give either a box [x, y, w, h] or a point [u, v]")
@@ -110,6 +117,8 @@ class TrackingSession:
         one = take(pose, [i])
         if point is not None:
             box = self._outline_click(frame_bgr, one, point)
+        elif verify:
+            self._verify_box(frame_bgr, one, box)
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
         centre = (float(cu[0]), float(cv_[0]))
@@ -120,6 +129,7 @@ class TrackingSession:
             raise SelectionError(str(e)) from None
         self._start(one, centre, anchor)
         self.origin = "click" if point is not None else "box"
+        self.prediction = None
         self._note(float(one.t_unix[0]), result)
         return result
 
@@ -136,10 +146,12 @@ class TrackingSession:
     # -- per frame ----------------------------------------------------------------------------------
     def step(self, frame_bgr, pose: CameraPose, i: int = 0, prior: Prior | None = None) -> TrackResult:
         """The UUV in the next frame (``pose``'s frame ``i``); ``prior`` is used while awaiting a target."""
+        self.prediction = None
         if self.target.state is TargetState.AWAITING_TARGET:
             result = self._acquire(frame_bgr, pose, i, prior) if prior is not None else TrackResult("awaiting_target")
         else:
-            result = self.target.update(frame_bgr, self._predict(pose, i))
+            self.prediction = self._predict(pose, i)
+            result = self.target.update(frame_bgr, self.prediction)
             if result.ok:
                 self._saw(pose, i, result.u, result.v)
             elif self.target.state is TargetState.AWAITING_TARGET:
@@ -238,6 +250,21 @@ class TrackingSession:
                                  "select with a box")
         return found.box
 
+    def _verify_box(self, frame_bgr, one: CameraPose, box) -> None:
+        """SelectionError unless a vehicle-sized object stands out of the water within ``box`` (see the module doc)."""
+        x, y, w, h = (float(c) for c in box)
+        cu, cv_ = x + (w - 1) / 2.0, y + (h - 1) / 2.0
+        _, px_per_m = self._locate(one, (cu, cv_))
+        guess = prediction_at(cu, cv_, px_per_m, 0.0)
+        if guess is None:
+            return  # no pose to size the vehicle: the operator's box is all there is
+        reach = math.hypot(w, h) / 2.0 / self.detect_params.search_sigmas
+        found = detect(frame_bgr, Prediction(cu, cv_, guess.width_px, guess.height_px, reach, px_per_m),
+                       self.detect_params)
+        if found is None or not _overlap(found.box, (x, y, w, h)):
+            raise SelectionError(f"box [{x:g}, {y:g}, {w:g}, {h:g}]: no vehicle-sized object stands out of the "
+                                 "water in it; draw the box around the UUV")
+
     def _acquire(self, frame_bgr, pose: CameraPose, i: int, prior: Prior) -> TrackResult:
         """Awaiting a target, with the UUV's own estimate: search near it for a candidate to confirm."""
         self._awaiting_frames += 1
@@ -245,7 +272,7 @@ class TrackingSession:
             return TrackResult("awaiting_target")
         one = take(pose, [i])
         u, v, px_per_m = project_uuv(self.cal, one, prior.lat, prior.lon)
-        near_prior = prediction_at(u[0], v[0], px_per_m[0], prior.sigma_m)
+        near_prior = self.prediction = prediction_at(u[0], v[0], px_per_m[0], prior.sigma_m)
         found = detect(frame_bgr, near_prior, self.detect_params) if near_prior is not None else None
         if found is None:
             return TrackResult("awaiting_target")
@@ -258,3 +285,8 @@ class TrackingSession:
         self.origin = "prior"
         here = prediction_at(centre[0], centre[1], scale, BASE_SIGMA_M)
         return self.target.propose(frame_bgr, found.box, centre, scale, here)
+
+
+def _overlap(a, b) -> bool:
+    """Whether two boxes (x, y, w, h) share any area."""
+    return a[0] < b[0] + b[2] and b[0] < a[0] + a[2] and a[1] < b[1] + b[3] and b[1] < a[1] + a[3]

@@ -1,0 +1,146 @@
+"""The video for the web page: tracked frames as JPEG with their fix's overlay, only while a page watches.
+
+A frame is shown once its fix is out (:meth:`VideoFeed.on_fix`, a pipeline sink), so
+its overlay is that frame's own: the tracker's box, the window the telemetry had it
+searched in, the status word and the fix's accuracy. At most ``max_fps`` frames a
+second are encoded, one at a time, in the feed's own thread (downscaled to at most
+``max_width`` pixels wide with ``cv2.INTER_AREA``, then ``cv2.imencode``), which runs at a
+lower priority (nice +10, on Linux) so that on a busy machine the tracker and the video
+decoder go first; a frame that comes while one is encoding is skipped, never queued.
+Without a watching page nothing is kept and nothing is encoded.
+
+A packet is ``[4 bytes: length of the JSON, big-endian][overlay JSON][JPEG]``; the
+overlay's pixels are full-resolution (OpenCV's: the top-left pixel's centre is 0, 0)
+and ``frame`` is the running frame number a selection names.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import os
+import struct
+import threading
+import time
+from collections import OrderedDict, deque
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+import cv2
+import numpy as np
+
+from localizer.fix import Fix
+
+ENCODER_NICE = 10  # the encoding thread's niceness, above the service's other threads
+KEEP_FRAMES = 16  # frames kept (references) while a page watches: enough for the telemetry wait at 30 fps
+
+
+def _lower_priority() -> None:
+    """Make the calling thread nicer than the rest of the process (Linux: a thread is a task); elsewhere a no-op."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), ENCODER_NICE)
+    except (AttributeError, OSError):
+        pass
+
+
+def encode_jpeg(image: np.ndarray, max_width: int, quality: int) -> bytes:
+    """The image as JPEG, downscaled to at most ``max_width`` pixels wide."""
+    h, w = image.shape[:2]
+    if w > max_width:
+        image = cv2.resize(image, (max_width, max(1, round(h * max_width / w))), interpolation=cv2.INTER_AREA)
+    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise ValueError(f"cv2.imencode could not encode a {w}x{h} frame")
+    return buf.tobytes()
+
+
+def _timed(image: np.ndarray, max_width: int, quality: int) -> tuple[bytes, float]:
+    """:func:`encode_jpeg` and the CPU time it took this thread (waiting for a core not counted)."""
+    t0 = time.thread_time()
+    jpeg = encode_jpeg(image, max_width, quality)
+    return jpeg, time.thread_time() - t0
+
+
+def pack(overlay: dict, jpeg: bytes) -> bytes:
+    head = json.dumps(overlay, allow_nan=False).encode()
+    return struct.pack(">I", len(head)) + head + jpeg
+
+
+def _num(x) -> float | None:
+    return round(float(x), 3) if x is not None and math.isfinite(x) else None
+
+
+class VideoFeed:
+    """Frame listener (``on_frame``), pipeline sink (``on_fix``) and worker (``run``) making the page's video.
+
+    ``deliver(packet)`` hands each packet to the watching pages; ``watching()`` says whether any page wants video;
+    ``target()`` is the tracking session's status (its state word goes into the overlay).
+    """
+
+    def __init__(self, deliver: Callable[[bytes], None], watching: Callable[[], bool], target: Callable[[], dict],
+                 max_fps: float = 10.0, max_width: int = 960, quality: int = 80):
+        self.deliver = deliver
+        self.watching = watching
+        self.target = target
+        self.min_interval_s = 1.0 / max_fps
+        self.max_width = max_width
+        self.quality = quality
+        self.encoded = 0
+        self.encode_s: deque[float] = deque(maxlen=100)  # CPU time per frame, the encoding thread's
+        self._recent: OrderedDict[int, np.ndarray] = OrderedDict()
+        self._pending: tuple[np.ndarray, dict] | None = None
+        self._ready = asyncio.Event()
+        self._busy = False
+        self._last_taken = -math.inf
+        self._encoder = ThreadPoolExecutor(1, thread_name_prefix="ui-jpeg", initializer=_lower_priority)
+
+    def on_frame(self, frame) -> None:
+        """Every received frame (a reference, no copy), kept only while a page watches."""
+        if not self.watching():
+            self._recent.clear()
+            return
+        self._recent[frame.index] = frame.image
+        while len(self._recent) > KEEP_FRAMES:
+            self._recent.popitem(last=False)
+
+    def on_fix(self, fix: Fix, info) -> None:
+        now = time.monotonic()
+        if self._busy or now - self._last_taken < self.min_interval_s or not self.watching():
+            return
+        image = self._recent.get(info.index)
+        if image is None:
+            return
+        self._last_taken = now
+        target = self.target()
+        overlay = {"frame": info.index, "t": _num(fix.t_unix), "status": fix.status, "state": target.get("state"),
+                   "origin": target.get("origin"), "h_acc_m": _num(fix.h_acc_m), "u": _num(fix.u),
+                   "v": _num(fix.v), "box": list(info.box) if info.box else None,
+                   "window": [round(c, 1) for c in info.window] if info.window else None,
+                   "width": int(image.shape[1]), "height": int(image.shape[0])}
+        self._pending = (image, overlay)
+        self._busy = True
+        self._ready.set()
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            while True:
+                await self._ready.wait()
+                self._ready.clear()
+                image, overlay = self._pending
+                self._pending = None
+                try:
+                    jpeg, cpu_s = await loop.run_in_executor(self._encoder, _timed, image, self.max_width,
+                                                             self.quality)
+                    self.encode_s.append(cpu_s)
+                finally:
+                    self._busy = False
+                self.encoded += 1
+                self.deliver(pack(overlay, jpeg))
+        finally:
+            self._encoder.shutdown(wait=False, cancel_futures=True)
+
+    def status(self) -> dict:
+        mean = sum(self.encode_s) / len(self.encode_s) if self.encode_s else None
+        return {"frames_encoded": self.encoded, "encode_ms": None if mean is None else round(mean * 1000.0, 2)}
