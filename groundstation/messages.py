@@ -233,6 +233,8 @@ class VideoStatus(Section):
     connects: int
     age_s: Age
     decode_errors: int
+    backlog: int = Field(description="packets read but not yet decoded")
+    skipped_behind: int = Field(description="frames decoded but not used: the decoder was behind (CPU)")
     latency_ms: float = Field(description="glass to first packet in use (configured, or from motion with auto)")
     arrival_after_slot_ms: Percentiles = Field(description="how late frames arrive after their stream slot")
     decode_ms: Percentiles = Field(description="decoding time per frame")

@@ -29,9 +29,9 @@ ERROR_S = 0.080
 TOLERANCE_S = 0.010
 SCENARIO = """
 name = "motion_{name}"
-description = "16 s, UAV yawing ±10° every 4 s (camera follows) and drifting, frames stamped 80 ms late"
+description = "22 s, UAV yawing ±10° every 4 s (camera follows) and drifting, frames stamped 80 ms late"
 seed = 7
-duration_s = 16.0
+duration_s = 22.0
 [camera]
 width = {w}
 height = {h}

@@ -2,10 +2,15 @@
 
 A reader thread opens ``--video`` (:mod:`.video_inputs`: MPEG-TS over UDP, RTP
 with or without an SDP file, RTSP, a V4L2 camera, a file) with PyAV for low
-delay, and for each packet notes when its data was read from the network
-(``t_recv``, before decoding). The decoder runs in the same thread (slice
-threads only: no frame held back for threading), and each decoded frame is
-handed to the event loop as a :class:`LiveFrame`.
+delay. A demuxing thread reads its packets as they come and notes when each was
+read from the network (``t_recv``); the reader decodes them (slice threads only:
+no frame held back for threading) and hands each frame to the event loop as a
+:class:`LiveFrame`. Reading apart from decoding keeps ``t_recv`` true when the
+decoder falls behind (a loaded laptop, 1080p): the packets wait in a queue of
+at most :data:`PACKET_BACKLOG`, not in the socket. While more than
+:data:`BEHIND_PACKETS` wait, a live stream's decoded frames are not converted
+nor handed over (they would be stale; ``skipped_behind`` in the status), so the
+decoder catches up instead of falling further behind.
 
 Time: a frame's presentation timestamp (PTS: the RTP timestamp for RTP/RTSP, the
 MPEG-TS PTS) is put on the station clock by the least ``arrival − PTS`` over a
@@ -32,6 +37,7 @@ from __future__ import annotations
 import asyncio
 import errno
 import logging
+import queue
 import threading
 import time
 from collections import deque
@@ -54,6 +60,8 @@ RTSP_OPEN_TIMEOUT_S = 5.0
 RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
+PACKET_BACKLOG = 120  # packets read but not yet decoded, at most (4 s at 30 fps); then reading waits
+BEHIND_PACKETS = 2  # live: with more than this many packets waiting, decoded frames are skipped
 
 
 @dataclass
@@ -70,6 +78,39 @@ class LiveFrame:
     t_recv: float
     image: np.ndarray
     t_slot: float | None = None
+
+
+_END = object()  # the demuxer's last word: the stream or file ended
+
+
+def _demux(container, stream, packets: queue.Queue, done: threading.Event) -> None:
+    """Read ``stream``'s packets into ``packets`` as ``(packet, t_recv)``, then :data:`_END` or the exception that
+    ended the reading; until ``done``."""
+
+    def put(item) -> bool:
+        while not done.is_set():
+            try:
+                packets.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    try:
+        for packet in container.demux(stream):
+            if not put((packet, time.time())):
+                return
+        put(_END)
+    except (av.error.FFmpegError, OSError) as e:
+        put(e)
+
+
+def _drain(packets: queue.Queue) -> None:
+    while True:
+        try:
+            packets.get_nowait()
+        except queue.Empty:
+            return
 
 
 def _reason(source: VideoInput, e: Exception, t_try: float, timeout_s: float) -> str:
@@ -104,6 +145,8 @@ class VideoLive:
         self.frames = 0
         self.connects = 0
         self.decode_errors = 0
+        self.skipped_behind = 0
+        self.backlog = 0
         self.state = "starting"
         self.last_recv: float | None = None
         self.last_error: str | None = None
@@ -159,20 +202,44 @@ class VideoLive:
             self._stop.wait(RETRY_MIN_S)
 
     def _receive(self, container, loop: asyncio.AbstractEventLoop) -> str | None:
-        """Demux and decode until the stream ends; a reason to reconnect, or None at a file's end or a stop."""
+        """Demux (in a thread of its own) and decode until the stream ends; a reason to reconnect, or None at a
+        file's end or a stop. The demuxing thread has ended when this returns: the container can be closed."""
         if not container.streams.video:
             raise VideoError(f"{self.url}: no video stream in it")
         stream = container.streams.video[0]
         ctx = stream.codec_context
         ctx.thread_type = "SLICE"
         ctx.flags |= av.codec.context.Flags.low_delay
-        tb = float(stream.time_base)
+        packets: queue.Queue = queue.Queue(maxsize=PACKET_BACKLOG)
+        done = threading.Event()
+        demuxer = threading.Thread(target=_demux, args=(container, stream, packets, done), name="video-demux",
+                                   daemon=True)
+        demuxer.start()
+        try:
+            return self._decode(ctx, float(stream.time_base), packets, loop)
+        finally:
+            done.set()
+            while demuxer.is_alive():  # it waits on a full queue, or on the network for read_timeout_s at most
+                _drain(packets)
+                demuxer.join(0.05)
+
+    def _decode(self, ctx, tb: float, packets: queue.Queue, loop: asyncio.AbstractEventLoop) -> str | None:
         self.clock = clock = ClockMap(window_s=CLOCK_WINDOW_S)
         first_recv: dict[int, float] = {}
-        for packet in container.demux(stream):
-            t_recv = time.time()
+        while True:
+            try:
+                item = packets.get(timeout=0.1)
+            except queue.Empty:
+                if self._stop.is_set():
+                    return None
+                continue
             if self._stop.is_set():
                 return None
+            if isinstance(item, BaseException):
+                raise item
+            if item is _END:
+                break
+            packet, t_recv = item
             if clock.offset_s is None:
                 self._connected()
             if packet.pts is not None:
@@ -183,8 +250,13 @@ class VideoLive:
             except av.error.InvalidDataError:
                 self.decode_errors += 1
                 continue
+            self.backlog = packets.qsize()
+            behind = self.source.live and self.backlog > BEHIND_PACKETS
             for frame in decoded:
-                if not self._hand_over(frame, tb, clock, first_recv.pop(frame.pts, t_recv), loop):
+                t_first = first_recv.pop(frame.pts, t_recv)
+                if behind:
+                    self.skipped_behind += 1
+                elif not self._hand_over(frame, tb, clock, t_first, loop):
                     return None
             while len(first_recv) > 64:  # packets whose frame never came out (undecodable)
                 del first_recv[next(iter(first_recv))]
@@ -233,6 +305,7 @@ class VideoLive:
         offset = self.clock.offset_s if self.clock is not None else None
         return {"url": self.url, "kind": self.source.kind, "state": self.state, "frames": self.frames,
                 "connects": self.connects, "age_s": age, "decode_errors": self.decode_errors,
+                "backlog": self.backlog, "skipped_behind": self.skipped_behind,
                 "latency_ms": round(self.latency_s * 1000.0, 1),
                 "arrival_after_slot_ms": {"p50": p(late, 50), "p99": p(late, 99)},
                 "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},

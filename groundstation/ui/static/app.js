@@ -377,7 +377,7 @@ function showHealth() {
     const v = s.video;
     rows.push(row("video", st("video"), age(v.age_s), `${fmt(rates.video_frames, 1)} fps`,
                   `${v.frames} frames · tracked ${fmt(rates.processed, 1)} fps · dropped ${s.pipeline.dropped}`
-                  + ` · decode errors ${v.decode_errors} · buffered ${v.buffered}${v.error ? ` · ${v.error}` : ""}`));
+                  + ` · decode errors ${v.decode_errors} · decoder backlog ${v.backlog}, skipped behind ${v.skipped_behind}${v.error ? ` · ${v.error}` : ""}`));
   }
   const d = s.depth;
   rows.push(row("depth (Zenoh)", st("depth"), age(d.age_s), hz(rates.depth),
