@@ -163,7 +163,8 @@ def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[OffsetEstim
     meter = RotationMeter(cal.camera)
     rotations = []
     try:
-        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height)) as video:
+        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
+                        indices=session.frames["frame"]) as video:
             for frame in video.prefetch():
                 if frame.index < len(t) and (r := meter.measure(float(t[frame.index]), frame.image)) is not None:
                     rotations.append(r)

@@ -97,7 +97,8 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     done = 0
     started = False
     try:
-        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height)) as video:
+        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
+                        indices=frame_idx) as video:
             frames = video.prefetch()
             while True:
                 t0 = time.perf_counter()

@@ -14,9 +14,12 @@ packet's presentation time first (demuxing only, no decoding):
   period, so a frame lost to damage leaves a gap in the indices instead of
   shifting every later frame onto the wrong time;
 - irregular timestamps (a live recording, stamped as the frames arrived): index
-  = the frame's rank in presentation order.
-
-Either way the n-th frame of the video is frame n of ``video_frames.csv``.
+  = the frame's rank in presentation order;
+- given the session's frame indices (``video_frames.csv``'s ``frame`` column), when
+  the video holds exactly that many frames: the n-th frame is the n-th row's. A
+  live recording is one: its timestamps are the camera's regular slots, with a gap
+  wherever the service skipped frames (its decoder behind), and every frame it kept
+  has its row.
 Damaged files: a packet FFmpeg cannot decode is skipped and counted
 (:attr:`Video.bad_reads`).
 """
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 import queue
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -60,9 +63,12 @@ def ffmpeg_reason(e: Exception) -> str:
     return str(text).splitlines()[0] if text else type(e).__name__
 
 
-def frame_indices(pts: list[int]) -> dict[int, int]:
-    """Presentation timestamps (any order, in stream ticks) → 0-based frame index (see the module doc)."""
+def frame_indices(pts: list[int], indices: Sequence[int] | None = None) -> dict[int, int]:
+    """Presentation timestamps (any order, in stream ticks) → 0-based frame index (see the module doc);
+    ``indices``: the session's frame indices, one per row, in order."""
     ordered = sorted(set(pts))
+    if indices is not None and len(indices) == len(ordered):
+        return {p: int(i) for p, i in zip(ordered, indices, strict=True)}
     if len(ordered) < 2:
         return {p: i for i, p in enumerate(ordered)}
     steps = np.diff(ordered)
@@ -213,14 +219,15 @@ def _presentation_times(path: str) -> list[int]:
 
 
 def open_video(url, expected_size: tuple[int, int] | None = None, threads: int = 0,
-               max_bad_reads: int = 0) -> Video:
+               max_bad_reads: int = 0, indices: Sequence[int] | None = None) -> Video:
     """Open a video file with FFmpeg.
 
     ``expected_size`` (width, height) in pixels, usually the calibration's: a
     different frame size is a :class:`VideoError` (checked on open when the
     container declares it, and on every frame). ``threads`` is FFmpeg's decoding
     thread count (slice threads; 0: FFmpeg chooses). ``max_bad_reads`` > 0 ends the video after
-    that many undecodable packets (0: no limit).
+    that many undecodable packets (0: no limit). ``indices``: the session's frame
+    indices (``video_frames.csv``), which number the frames when the counts agree.
     """
     route_ffmpeg_log()
     url = str(url)
@@ -232,7 +239,7 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     if path.stat().st_size == 0:
         raise VideoError(f"{url}: empty file")
     try:
-        index_of = frame_indices(_presentation_times(url))
+        index_of = frame_indices(_presentation_times(url), indices)
         container = av.open(url)
         if not container.streams.video:
             container.close()

@@ -48,3 +48,26 @@ def test_irregular_frame_times_map_each_frame_to_its_row(tmp_path):
     assert [_bar_column(f.image) for f in frames] == [2 * i for i in range(N)]
     # the container's timestamps are the exposure times (90 kHz ticks)
     assert [f.t_s for f in frames] == pytest.approx(list(t - t[0]), abs=2 / 90000)
+
+
+def test_regular_times_with_skipped_frames_map_each_frame_to_its_row(tmp_path):
+    """A live recording of a regular camera whose decoder fell behind: its times are the camera's 30 fps slots
+    with gaps where frames were skipped, and every kept frame has its row. Read with the session's frame
+    indices, each frame lands on its row; without them the gaps read as damage (frames lost in the file)."""
+    slots = [0, 1, 2, 5, 6, 7, 11, 12, 20, 21, 22, 23, 30, 31, 32, 33, 34, 35, 40, 41]
+    t = 1_796_000_000.0 + np.array(slots) / 30.0
+    writer = VideoWriter(tmp_path / "video.ts", tmp_path / "video_frames.csv", SIZE, queue_len=len(slots) + 5)
+    for i, ti in enumerate(t):
+        writer.put(float(ti), _image(i))
+    writer.close()
+    assert writer.written == len(slots) and writer.error is None
+    with open(tmp_path / "video_frames.csv") as f:
+        rows = [int(r["frame"]) for r in csv.DictReader(f)]
+    assert rows == list(range(len(slots)))
+
+    with open_video(tmp_path / "video.ts", expected_size=SIZE, indices=rows) as video:
+        frames = list(video)
+    assert [f.index for f in frames] == rows
+    assert [_bar_column(f.image) for f in frames] == [2 * i for i in range(len(slots))]
+    with open_video(tmp_path / "video.ts", expected_size=SIZE) as video:
+        assert [f.index for f in video] == slots
