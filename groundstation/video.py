@@ -157,14 +157,7 @@ class Video:
         stop = threading.Event()
 
         def put(item) -> bool:
-            """Hand an item over unless the consumer has stopped; False if it has."""
-            while not stop.is_set():
-                try:
-                    q.put(item, timeout=0.1)
-                    return True
-                except queue.Full:
-                    continue
-            return False
+            return put_until(q, item, stop)
 
         def work():
             try:
@@ -209,6 +202,17 @@ class Video:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:
+    """Put ``item`` into the bounded ``q``, waiting for room, unless ``stop`` is set first (then False)."""
+    while not stop.is_set():
+        try:
+            q.put(item, timeout=0.1)
+            return True
+        except queue.Full:
+            continue
+    return False
 
 
 def _presentation_times(path: str) -> list[int]:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -45,18 +46,26 @@ def test_record_naming_a_file(tmp_path, capsys):
     assert len(lines) == 1 and lines[0] == f"skyfix run: error: --record {target}: exists and is not a directory"
 
 
-def test_a_zenoh_port_in_use_is_one_plain_line(capsys):
+@contextmanager
+def _busy_tcp_port():
+    """A loopback TCP port another program (this test) listens on."""
     busy = socket.socket()
     busy.bind(("127.0.0.1", 0))
     busy.listen()
-    port = busy.getsockname()[1]
     try:
-        argv = ["run", "--calibration", str(BUNDLED / "nadir_hover" / "session.toml"), "--mavlink",
-                f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", f"tcp/127.0.0.1:{port}", "--duration-s", "5",
-                "--no-ui"]
-        assert main(argv) == 2
+        yield busy.getsockname()[1]
     finally:
         busy.close()
+
+
+def _run_with(*options: str) -> int:
+    return main(["run", "--calibration", str(BUNDLED / "nadir_hover" / "session.toml"), "--mavlink",
+                 f"udpin:127.0.0.1:{free_port()}", "--duration-s", "5", *options])
+
+
+def test_a_zenoh_port_in_use_is_one_plain_line(capsys):
+    with _busy_tcp_port() as port:
+        assert _run_with("--zenoh-listen", f"tcp/127.0.0.1:{port}", "--no-ui") == 2
     lines = _errors(capsys)
     assert len(lines) == 1 and f"Zenoh (listen tcp/127.0.0.1:{port})" in lines[0]
     assert "Address already in use" in lines[0] and ".rs:" not in lines[0] and "cargo" not in lines[0]
@@ -75,16 +84,8 @@ def test_replay_that_no_service_answered_exits_1(tmp_path):
 
 
 def test_a_web_page_port_in_use_is_one_line_naming_ui(capsys):
-    busy = socket.socket()
-    busy.bind(("127.0.0.1", 0))
-    busy.listen()
-    port = busy.getsockname()[1]
-    try:
-        argv = ["run", "--calibration", str(BUNDLED / "nadir_hover" / "session.toml"), "--mavlink",
-                f"udpin:127.0.0.1:{free_port()}", "--ui", f"127.0.0.1:{port}", "--duration-s", "5"]
-        assert main(argv) == 2
-    finally:
-        busy.close()
+    with _busy_tcp_port() as port:
+        assert _run_with("--ui", f"127.0.0.1:{port}") == 2
     lines = _errors(capsys)
     assert lines == [(f"skyfix run: error: --ui 127.0.0.1:{port}: port {port} is already in use (another skyfix "
                      "run?); choose another with --ui HOST:PORT, or --no-ui")], lines

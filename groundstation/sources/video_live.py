@@ -50,7 +50,7 @@ import numpy as np
 from localizer.clock import ClockMap
 
 from ..ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
-from ..video import VideoError, ffmpeg_reason
+from ..video import VideoError, ffmpeg_reason, put_until
 from .video_inputs import VideoInput, parse_video_input
 
 log = logging.getLogger("skyfix.video")
@@ -87,22 +87,13 @@ def _demux(container, stream, packets: queue.Queue, done: threading.Event) -> No
     """Read ``stream``'s packets into ``packets`` as ``(packet, t_recv)``, then :data:`_END` or the exception that
     ended the reading; until ``done``."""
 
-    def put(item) -> bool:
-        while not done.is_set():
-            try:
-                packets.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
-
     try:
         for packet in container.demux(stream):
-            if not put((packet, time.time())):
+            if not put_until(packets, (packet, time.time()), done):
                 return
-        put(_END)
+        put_until(packets, _END, done)
     except (av.error.FFmpegError, OSError) as e:
-        put(e)
+        put_until(packets, e, done)
 
 
 def _drain(packets: queue.Queue) -> None:
