@@ -5,7 +5,12 @@ with or without an SDP file, RTSP, a V4L2 camera, a file) with PyAV for low
 delay, and for each packet notes when its data was read from the network
 (``t_recv``, before decoding). The decoder runs in the same thread (slice
 threads only: no frame held back for threading), and each decoded frame is
-handed to the event loop as a :class:`LiveFrame`.
+handed to the event loop as a :class:`LiveFrame` through a bounded
+:class:`~groundstation.threads.Handoff` (:data:`HANDOFF_FRAMES`; beyond, the oldest
+is dropped and counted). The thread is :class:`~groundstation.threads.Supervised`
+(a bug in it is one log line and a restart with back-off). A stop does not wait for
+it: FFmpeg's open or read cannot be interrupted from outside and may block for up to
+its timeout, so the daemon thread is left to see the stop and end by itself.
 
 Time: a frame's presentation timestamp (PTS: the RTP timestamp for RTP/RTSP, the
 MPEG-TS PTS) is put on the station clock by the least ``arrival − PTS`` over a
@@ -44,16 +49,18 @@ import numpy as np
 from localizer.clock import ClockMap
 
 from ..ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
+from ..threads import Handoff, Supervised
 from ..video import VideoError, ffmpeg_reason
 from .video_inputs import VideoInput, parse_video_input
 
 log = logging.getLogger("skyfix.video")
 
-OPEN_TIMEOUT_S = 2.0  # an open waits this long for the stream (a stop waits for it too)
+OPEN_TIMEOUT_S = 2.0  # an open waits this long for the stream
 RTSP_OPEN_TIMEOUT_S = 5.0
 RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
+HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
 
 
 @dataclass
@@ -110,22 +117,22 @@ class VideoLive:
         self.clock: ClockMap | None = None
         self._late_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv − t_slot
         self._decode_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv → frame handed over
-        self._stop = threading.Event()
+        self.handoff: Handoff | None = None
+        self.reader = Supervised("video", self._read)
 
     async def run(self) -> None:
         route_ffmpeg_log()
-        loop = asyncio.get_running_loop()
-        reader = threading.Thread(target=self._read, args=(loop,), name="video", daemon=True)
-        reader.start()
+        self.handoff = Handoff(asyncio.get_running_loop(), self.on_frame, HANDOFF_FRAMES)
+        self.reader.start()
         try:
             await asyncio.Event().wait()
         finally:
-            self._stop.set()
-            await asyncio.to_thread(reader.join, self.open_timeout_s + self.read_timeout_s + 2.0)
+            self.reader.stop.set()  # the thread ends by itself once FFmpeg returns (see the module doc)
+            self.handoff.close()
 
-    def _read(self, loop: asyncio.AbstractEventLoop) -> None:
+    def _read(self, stop: threading.Event) -> None:
         backoff = RETRY_MIN_S
-        while not self._stop.is_set():
+        while not stop.is_set():
             t_try = time.time()
             try:
                 if self.source.port_in_use():
@@ -136,13 +143,13 @@ class VideoLive:
             except (av.error.FFmpegError, OSError) as e:
                 self.state = "waiting"
                 self._error(_reason(self.source, e, t_try, self.open_timeout_s))
-                self._stop.wait(backoff)
+                stop.wait(backoff)
                 backoff = min(2.0 * backoff, self.retry_max_s)
                 continue
             frames_before = self.frames
             self.state = "open"  # opened; receiving from the first packet on
             try:
-                ended = self._receive(container, loop)
+                ended = self._receive(container, stop)
             except (av.error.FFmpegError, OSError) as e:
                 ended = _reason(self.source, e, t_try, self.read_timeout_s)
             except VideoError as e:
@@ -150,15 +157,15 @@ class VideoLive:
             finally:
                 container.close()
             if ended is None:  # the end of a file, or stopping
-                self.state = "ended" if not self._stop.is_set() else "stopped"
+                self.state = "ended" if not stop.is_set() else "stopped"
                 return
             self.state = "waiting"
             self._error(f"{ended}; reconnecting")
             if self.frames > frames_before:
                 backoff = RETRY_MIN_S
-            self._stop.wait(RETRY_MIN_S)
+            stop.wait(RETRY_MIN_S)
 
-    def _receive(self, container, loop: asyncio.AbstractEventLoop) -> str | None:
+    def _receive(self, container, stop: threading.Event) -> str | None:
         """Demux and decode until the stream ends; a reason to reconnect, or None at a file's end or a stop."""
         if not container.streams.video:
             raise VideoError(f"{self.url}: no video stream in it")
@@ -171,7 +178,7 @@ class VideoLive:
         first_recv: dict[int, float] = {}
         for packet in container.demux(stream):
             t_recv = time.time()
-            if self._stop.is_set():
+            if stop.is_set():
                 return None
             if clock.offset_s is None:
                 self._connected()
@@ -184,8 +191,7 @@ class VideoLive:
                 self.decode_errors += 1
                 continue
             for frame in decoded:
-                if not self._hand_over(frame, tb, clock, first_recv.pop(frame.pts, t_recv), loop):
-                    return None
+                self._hand_over(frame, tb, clock, first_recv.pop(frame.pts, t_recv))
             while len(first_recv) > 64:  # packets whose frame never came out (undecodable)
                 del first_recv[next(iter(first_recv))]
         if not self.source.live:
@@ -200,7 +206,7 @@ class VideoLive:
         self.last_error = None
         log.info("video: receiving %s (connection %d)", self.url, self.connects)
 
-    def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float, loop) -> bool:
+    def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float) -> None:
         image = frame.to_ndarray(format="bgr24")
         h, w = image.shape[:2]
         if self.expected_size is not None and (w, h) != tuple(self.expected_size):
@@ -212,11 +218,7 @@ class VideoLive:
         self.last_recv = t_recv
         self._late_s.append(t_recv - t_slot)
         self._decode_s.append(time.time() - t_recv)
-        try:
-            loop.call_soon_threadsafe(self.on_frame, live)
-        except RuntimeError:  # loop closed: shutting down
-            return False
-        return True
+        self.handoff.put(live)
 
     def _error(self, why: str) -> None:
         if why != self.last_error:
@@ -237,4 +239,5 @@ class VideoLive:
                 "arrival_after_slot_ms": {"p50": p(late, 50), "p99": p(late, 99)},
                 "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},
                 "stream_offset_s": None if offset is None else round(offset, 6),
-                "error": self.last_error}
+                "error": self.last_error, **self.reader.status(),
+                "handoff": self.handoff.status() if self.handoff else None}
