@@ -361,7 +361,7 @@ class StatusMessage(Message):
     pipeline: PipelineStatus
     fixes_published: int
     problems: dict[str, str] = Field(description="what is wrong with each input now, one line per input (uav, "
-                                     "depth, video, zenoh); empty when all is well")
+                                     "depth, video, zenoh; record once the recording stopped); empty when all is well")
     target: TargetStatus
     uuv_position: UuvPositionStatus
     fix: FixMessage | None = Field(description="the latest fix message (also answered to late joiners on the fix key)")

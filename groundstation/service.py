@@ -167,6 +167,8 @@ async def serve(cfg: config.RunConfig) -> dict:
             out = {"uav": uav.status(now), "depth": depth.status(now)}
             if video:
                 out["video"] = video.status(now)
+            if recorder:
+                out["record"] = recorder.status()
             return out
 
         def zenoh_peers() -> int:
