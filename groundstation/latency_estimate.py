@@ -44,6 +44,7 @@ from localizer.pose import camera_pose
 from localizer.telemetry import Telemetry
 
 from .session import SessionError, load_session
+from .threads import Supervised
 from .video import VideoError, open_video
 from .video_motion import Rotation, RotationMeter
 
@@ -199,7 +200,8 @@ class OnlineLatency:
         self._recent: deque[OffsetEstimate | None] = deque(maxlen=STEADY_COUNT)
         self._frames: queue.Queue = queue.Queue(maxsize=2)
         self._tel: tuple[Telemetry, float] | None = None
-        self._stop = threading.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self.worker = Supervised("video-latency", self._work)
         self._rotations: deque[Rotation] = deque()
         self._last_slot: float | None = None
 
@@ -213,21 +215,20 @@ class OnlineLatency:
             self.skipped += 1
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
-        worker = threading.Thread(target=self._work, args=(loop,), name="video-latency", daemon=True)
-        worker.start()
+        self._loop = asyncio.get_running_loop()
+        self.worker.start()
         try:
             while True:
                 await asyncio.sleep(1.0)
                 self._tel = (copy.deepcopy(self.tel), time.time())
         finally:
-            self._stop.set()
-            await asyncio.to_thread(worker.join, 5.0)
+            self.worker.stop.set()  # it ends by itself within a measurement; nobody waits for it
 
-    def _work(self, loop: asyncio.AbstractEventLoop) -> None:
+    def _work(self, stop: threading.Event) -> None:
+        loop = self._loop
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)  # Linux: this thread only
         meter = RotationMeter(self.cal.camera)
-        while not self._stop.is_set():
+        while not stop.is_set():
             try:
                 t_slot, image = self._frames.get(timeout=0.2)
                 if (r := meter.measure(t_slot, image)) is not None:
@@ -247,7 +248,10 @@ class OnlineLatency:
             estimate = estimate_offset(list(self._rotations), track, self.offsets)
             if estimate is not None:
                 self.estimate = estimate
-                loop.call_soon_threadsafe(self._judge, estimate)
+                try:
+                    loop.call_soon_threadsafe(self._judge, estimate)
+                except RuntimeError:  # the loop is closed: stopped
+                    return
 
     def _judge(self, e: OffsetEstimate) -> None:
         latency = -e.offset_s
@@ -273,7 +277,7 @@ class OnlineLatency:
         e = self.estimate
         out = {"configured_ms": None if self.configured_s is None else round(self.configured_s * 1000, 1),
                "applied_ms": None if self.applied_s is None else round(self.applied_s * 1000, 1),
-               "frames_skipped": self.skipped}
+               "frames_skipped": self.skipped, **self.worker.status()}
         if e is not None:
             out.update(estimate_ms=round(-e.offset_s * 1000, 1), sigma_ms=round(e.sigma_s * 1000, 2), pairs=e.pairs,
                        rms_mrad=round(e.rms_mrad, 3))

@@ -232,6 +232,8 @@ class MotionLatencyStatus(Section):
     sigma_ms: float | None = Field(None, description="its 1-sigma")
     pairs: int | None = Field(None, description="frame pairs measured")
     rms_mrad: float | None = Field(None, description="residual of the fit")
+    restarts: int = Field(0, description="times the measuring thread failed (a bug) and started over")
+    failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
 class VideoStatus(Section):
