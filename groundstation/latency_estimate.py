@@ -44,7 +44,7 @@ from localizer.pose import camera_pose
 from localizer.telemetry import Telemetry
 
 from .session import SessionError, load_session
-from .threads import Supervised
+from .threads import Supervised, in_thread
 from .video import VideoError, open_video
 from .video_motion import Rotation, RotationMeter
 
@@ -53,6 +53,7 @@ log = logging.getLogger("skyfix.latency")
 TRACK_STEP_S = 0.005  # the camera attitude is sampled this often for the predictions
 OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
 MEASURE_HZ = 10.0  # frames measured live, at most (every third at 30 fps: a third of the CPU)
+STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
 NICE = 10  # the measuring thread yields the CPU to decoding and tracking
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
@@ -222,7 +223,8 @@ class OnlineLatency:
                 await asyncio.sleep(1.0)
                 self._tel = (copy.deepcopy(self.tel), time.time())
         finally:
-            self.worker.stop.set()  # it ends by itself within a measurement; nobody waits for it
+            # waited for (within a measurement): a thread left inside OpenCV when the process exits aborts it
+            await in_thread(self.worker.join, STOP_WAIT_S, name="video-latency stop")
 
     def _work(self, stop: threading.Event) -> None:
         loop = self._loop

@@ -49,7 +49,7 @@ import numpy as np
 from localizer.clock import ClockMap
 
 from ..ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
-from ..threads import Handoff, Supervised
+from ..threads import Handoff, Supervised, in_thread
 from ..video import VideoError, ffmpeg_reason
 from .video_inputs import VideoInput, parse_video_input
 
@@ -61,6 +61,7 @@ RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
 HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
+READER_STOP_S = 0.3  # a stop waits this long for the reader thread
 
 
 @dataclass
@@ -127,8 +128,9 @@ class VideoLive:
         try:
             await asyncio.Event().wait()
         finally:
-            self.reader.stop.set()  # the thread ends by itself once FFmpeg returns (see the module doc)
             self.handoff.close()
+            # a reader between packets ends at once; one blocked in FFmpeg is left to end by itself (module doc)
+            await in_thread(self.reader.join, READER_STOP_S, name="video stop")
 
     def _read(self, stop: threading.Event) -> None:
         backoff = RETRY_MIN_S
