@@ -25,9 +25,11 @@ packet read live lowers the offset (so a slot may be earlier than the one before
 it just after a connection starts). A frame without a PTS (RTP's first access
 unit may lose it) takes its arrival as its slot.
 
-Failures: a stream that cannot be opened (nothing sent yet, refused, a port
-another program holds) is retried with back-off from :data:`RETRY_MIN_S` to
-``retry_max_s``; one that stops sending for ``read_timeout_s`` is closed and
+Failures: a stream that cannot be opened (refused, a port another program holds)
+is retried with back-off from :data:`RETRY_MIN_S` to ``retry_max_s``; one that
+sent nothing for ``open_timeout_s`` is opened again at once (a UDP port is not
+left unbound between attempts, where a camera starting then would lose its first
+keyframe, and with it up to a second of frames); one that stops sending for ``read_timeout_s`` is closed and
 reopened. FFmpeg's own error text goes into the log (once per distinct text) and
 into :meth:`VideoLive.status` ``error``. A file is read once, as fast as it decodes.
 """
@@ -145,8 +147,9 @@ class VideoLive:
             except (av.error.FFmpegError, OSError) as e:
                 self.state = "waiting"
                 self._error(_reason(self.source, e, t_try, self.open_timeout_s))
-                stop.wait(backoff)
-                backoff = min(2.0 * backoff, self.retry_max_s)
+                if not isinstance(e, av.error.ExitError):  # a timeout already waited: listen again at once
+                    stop.wait(backoff)
+                    backoff = min(2.0 * backoff, self.retry_max_s)
                 continue
             frames_before = self.frames
             self.state = "open"  # opened; receiving from the first packet on
