@@ -15,7 +15,7 @@ import time
 
 import av.logging
 
-from .logs import Throttle
+from .logs import Throttle, kind_of
 
 log = logging.getLogger("skyfix.ffmpeg")
 
@@ -36,7 +36,7 @@ class _Handler(logging.Handler):
         with _lock:
             if record.levelno >= logging.ERROR:
                 _latest = (time.time(), text)
-            n = self.throttle(text)
+            n = self.throttle(kind_of(text))
         if n is not None:
             log.log(record.levelno, "ffmpeg %s%s", text, f" (seen {n} times)" if n > 1 else "")
 

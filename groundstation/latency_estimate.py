@@ -44,6 +44,7 @@ from localizer.pose import camera_pose
 from localizer.telemetry import Telemetry
 
 from .session import SessionError, load_session
+from .threads import Supervised, in_thread
 from .video import VideoError, open_video
 from .video_motion import Rotation, RotationMeter
 
@@ -52,6 +53,7 @@ log = logging.getLogger("skyfix.latency")
 TRACK_STEP_S = 0.005  # the camera attitude is sampled this often for the predictions
 OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
 MEASURE_HZ = 10.0  # frames measured live, at most (every third at 30 fps: a third of the CPU)
+STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
 NICE = 10  # the measuring thread yields the CPU to decoding and tracking
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
@@ -200,7 +202,8 @@ class OnlineLatency:
         self._recent: deque[OffsetEstimate | None] = deque(maxlen=STEADY_COUNT)
         self._frames: queue.Queue = queue.Queue(maxsize=2)
         self._tel: tuple[Telemetry, float] | None = None
-        self._stop = threading.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self.worker = Supervised("video-latency", self._work)
         self._rotations: deque[Rotation] = deque()
         self._last_slot: float | None = None
 
@@ -214,21 +217,21 @@ class OnlineLatency:
             self.skipped += 1
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
-        worker = threading.Thread(target=self._work, args=(loop,), name="video-latency", daemon=True)
-        worker.start()
+        self._loop = asyncio.get_running_loop()
+        self.worker.start()
         try:
             while True:
                 await asyncio.sleep(1.0)
                 self._tel = (copy.deepcopy(self.tel), time.time())
         finally:
-            self._stop.set()
-            await asyncio.to_thread(worker.join, 5.0)
+            # waited for (within a measurement): a thread left inside OpenCV when the process exits aborts it
+            await in_thread(self.worker.join, STOP_WAIT_S, name="video-latency stop")
 
-    def _work(self, loop: asyncio.AbstractEventLoop) -> None:
+    def _work(self, stop: threading.Event) -> None:
+        loop = self._loop
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)  # Linux: this thread only
         meter = RotationMeter(self.cal.camera)
-        while not self._stop.is_set():
+        while not stop.is_set():
             try:
                 t_slot, image = self._frames.get(timeout=0.2)
                 if (r := meter.measure(t_slot, image)) is not None:
@@ -248,7 +251,10 @@ class OnlineLatency:
             estimate = estimate_offset(list(self._rotations), track, self.offsets)
             if estimate is not None:
                 self.estimate = estimate
-                loop.call_soon_threadsafe(self._judge, estimate)
+                try:
+                    loop.call_soon_threadsafe(self._judge, estimate)
+                except RuntimeError:  # the loop is closed: stopped
+                    return
 
     def _judge(self, e: OffsetEstimate) -> None:
         latency = -e.offset_s
@@ -274,7 +280,7 @@ class OnlineLatency:
         e = self.estimate
         out = {"configured_ms": None if self.configured_s is None else round(self.configured_s * 1000, 1),
                "applied_ms": None if self.applied_s is None else round(self.applied_s * 1000, 1),
-               "frames_skipped": self.skipped}
+               "frames_skipped": self.skipped, **self.worker.status()}
         if e is not None:
             out.update(estimate_ms=round(-e.offset_s * 1000, 1), sigma_ms=round(e.sigma_s * 1000, 2), pairs=e.pairs,
                        rms_mrad=round(e.rms_mrad, 3))

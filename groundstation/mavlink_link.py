@@ -6,7 +6,12 @@ Used for the UAV's telemetry (:mod:`.sources.uav_mavlink`) and for GPS_INPUT to 
 handed over, sends the HEARTBEAT (if the link has one) every second, and on any error
 closes the transport and opens it again with back-off (:data:`BACKOFF_S`, doubling up to
 :data:`BACKOFF_MAX_S`, so a returning peer is talked to again within about half a
-second). Nothing else opens, writes or closes the transport.
+second; a connection that drops within :data:`STABLE_S` of opening, as an unplugged
+serial radio or a server that accepts and closes, keeps the back-off growing). The log
+says "down" once per kind of error while the link is away, and "up" once it is back for
+good (:data:`STABLE_S`). Nothing else opens, writes or closes the transport. The thread is
+:class:`~.threads.Supervised`: a bug in it (or in ``on_message``) is one log line, the
+transport is closed and the thread starts over with back-off (``restarts`` in the status).
 
 Reading: every message, BAD_DATA included, goes to ``on_message(msg, t_recv_unix)`` on the
 link's thread; a message id no dialect knows (pymavlink cannot check its CRC) is BAD_DATA. A UDP datagram is parsed on its own: bytes of a frame it leaves unfinished
@@ -44,6 +49,7 @@ from localizer.calibration import ConfigError
 
 from .mavlink_io import LinkError, mavutil
 from .mavlink_transport import open_transport
+from .threads import Supervised
 
 log = logging.getLogger("skyfix.mavlink")
 
@@ -53,7 +59,8 @@ BACKOFF_MAX_S = 0.4
 OUTBOX = 64
 SIGNING_LINK_ID = 1
 KEY_BYTES = 32
-STOP_TIMEOUT_S = 2.0
+STABLE_S = 1.0
+STOP_TIMEOUT_S = 0.5  # a stop waits this long for the last message, then leaves the thread to end by itself
 _SIGNING_EPOCH = 1420070400  # 2015-01-01, MAVLink signing's time origin
 #: First-open errors that mean "the other end is not there yet", not a wrong option: keep trying.
 _NOT_YET = (ConnectionError, TimeoutError)
@@ -139,11 +146,13 @@ class MavlinkLink:
         self._outbox: deque[bytes] = deque()
         self._newest: dict[str, bytes] = {}
         self._final: bytes | None = None
-        self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_w, False)
         self._transport = None
-        self._thread: threading.Thread | None = None
+        self._thread = Supervised(name, self._run)
+        self._started = False
+        self._connected_at = 0.0  # time.monotonic() of the latest connect
+        self._outage: set[str] = set()  # kinds of error logged since the link was last up for good
 
     # -- callers' side ---------------------------------------------------------------------------
     def open(self) -> None:
@@ -159,7 +168,7 @@ class MavlinkLink:
             self._set_down(e)
         if transport is not None:
             self._set_up(transport)
-        self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
+        self._started = True
         self._thread.start()
 
     def pack(self, kind: str, fields: dict) -> bytes:
@@ -200,23 +209,22 @@ class MavlinkLink:
         True if ``last`` was written. Blocks up to :data:`STOP_TIMEOUT_S` (call it from a worker
         thread); may be called twice.
         """
-        if self._thread is None:
+        if not self._started:
             return self.final_written
+        self._started = False
         with self._lock:
             self._final = self.pack(*last) if last is not None else None
-        self._stop.set()
+        self._thread.stop.set()
         self._wake()
-        self._thread.join(STOP_TIMEOUT_S)
-        if not self._thread.is_alive():
+        if self._thread.join(STOP_TIMEOUT_S):
             os.close(self._wake_r)
             os.close(self._wake_w)
-        self._thread = None
         return self.final_written
 
     def status(self, now: float) -> dict:
         with self._lock:
             return {"url": self.url, "state": self.state, "state_for_s": round(max(0.0, now - self.state_since), 3),
-                    "error": self.error, "signed": self.signed, **self.counts,
+                    "error": self.error, "signed": self.signed, **self.counts, **self._thread.status(),
                     "peer_age_s": None if self.last_heard is None else round(max(0.0, now - self.last_heard), 3)}
 
     def _wake(self) -> None:
@@ -232,12 +240,21 @@ class MavlinkLink:
             self.counts["connects"] += 1
             self.state = "up" if transport.peer_known else "waiting"
             self.state_since, self.error = time.time(), None
-        log.info("%s %s: %s", self.name, self.url, "up" if transport.peer_known else "open, waiting for its peer")
+        self._connected_at = time.monotonic()
+        if not self._outage:  # after an outage: said once it holds (_stable)
+            log.info("%s %s: %s", self.name, self.url, "up" if transport.peer_known else "open, waiting for its peer")
 
-    def _set_down(self, e: OSError) -> None:
-        why = f"{type(e).__name__}: {e.strerror or e}"
+    def _stable(self) -> None:
+        """Up for :data:`STABLE_S`: an outage that was logged is over."""
+        if self._outage and self._transport is not None and time.monotonic() - self._connected_at >= STABLE_S:
+            self._outage.clear()
+            log.info("%s %s: up again", self.name, self.url)
+
+    def _set_down(self, e: Exception) -> None:
+        why = f"{type(e).__name__}: {e.strerror or e}" if isinstance(e, OSError) else f"{e}"
+        kind = f"{type(e).__name__} {getattr(e, 'errno', None)}"
         with self._lock:
-            was, first = self.state, self.error is None
+            was = self.state
             if self._transport is not None:
                 self._transport.close()
                 self._transport = None
@@ -247,28 +264,39 @@ class MavlinkLink:
             if was != "down":
                 self.state_since = time.time()
             self.state, self.error = "down", why
-        if was != "down" or first:
+        if kind not in self._outage:
+            self._outage.add(kind)
             log.warning("%s %s: down (%s); reconnecting, messages to it are dropped meanwhile", self.name, self.url,
                         why)
 
-    def _run(self) -> None:
+    def _run(self, stop: threading.Event) -> None:
+        """The link's thread (under :class:`~.threads.Supervised`): connect, serve, reconnect with back-off."""
         backoff = BACKOFF_S
         next_beat = 0.0
-        while not self._stop.is_set():
-            if self._transport is None:
+        try:
+            while not stop.is_set():
+                if self._transport is None:
+                    try:
+                        transport = open_transport(self.url)
+                    except OSError as e:
+                        self._set_down(e)
+                        stop.wait(backoff)
+                        backoff = min(2 * backoff, BACKOFF_MAX_S)
+                        continue
+                    self._set_up(transport)
+                    next_beat = 0.0
                 try:
-                    transport = open_transport(self.url)
+                    next_beat = self._serve(self._transport, next_beat)
+                    self._stable()
                 except OSError as e:
+                    if time.monotonic() - self._connected_at >= STABLE_S:
+                        backoff = BACKOFF_S
                     self._set_down(e)
-                    self._stop.wait(backoff)
+                    stop.wait(backoff)
                     backoff = min(2 * backoff, BACKOFF_MAX_S)
-                    continue
-                self._set_up(transport)
-                backoff, next_beat = BACKOFF_S, 0.0
-            try:
-                next_beat = self._serve(self._transport, next_beat)
-            except OSError as e:
-                self._set_down(e)
+        except Exception as e:
+            self._set_down(e)  # a bug: start over on a new connection
+            raise
         self._finish()
 
     def _serve(self, t, next_beat: float) -> float:

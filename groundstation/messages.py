@@ -127,6 +127,13 @@ class Clocks(Section):
         description="uuv_clock: depth stamps used as they are; arrival: arrival minus depth_latency_s")
 
 
+class HandoffStatus(Section):
+    """What a reader thread handed to the event loop through its bounded queue."""
+
+    handed: int = Field(description="items taken by the event loop")
+    dropped: int = Field(description="items dropped, oldest first, because the event loop fell behind")
+
+
 class LinkStatus(Section):
     """A MAVLink link's own thread, or the Zenoh route of GPS_INPUT through BlueOS (mavlink/in)."""
 
@@ -149,6 +156,8 @@ class LinkStatus(Section):
     zenoh_routers: int | None = Field(None, description="Zenoh routers connected (zenoh:mavlink/in)")
     zenoh_peers: int | None = Field(None, description="Zenoh peers connected (zenoh:mavlink/in)")
     sent_unmatched: int | None = Field(None, description="messages published with no subscriber reachable")
+    restarts: int | None = Field(None, description="times the link's thread failed (a bug) and started over")
+    failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
 class GateStatus(Section):
@@ -178,6 +187,7 @@ class UavStatus(Section):
     age_s: dict[str, Age] = Field(description="per message type: seconds since the newest")
     rates_hz: dict[str, NonNegative] = Field(description="per message type: measured rate")
     link: LinkStatus | None = Field(None, description="the link's own state (pymavlink backend)")
+    handoff: HandoffStatus | None = Field(None, description="messages from the link's thread (pymavlink backend)")
 
 
 class DepthStatus(Section):
@@ -190,6 +200,7 @@ class DepthStatus(Section):
     refused: int = Field(description="samples refused (out of range or order)")
     age_s: Age = Field(description="seconds since the newest sample")
     depth_m: float | None = Field(description="the newest depth")
+    handoff: HandoffStatus | None = Field(None, description="samples from Zenoh's thread")
 
 
 class PipelineStatus(Section):
@@ -221,6 +232,8 @@ class MotionLatencyStatus(Section):
     sigma_ms: float | None = Field(None, description="its 1-sigma")
     pairs: int | None = Field(None, description="frame pairs measured")
     rms_mrad: float | None = Field(None, description="residual of the fit")
+    restarts: int = Field(0, description="times the measuring thread failed (a bug) and started over")
+    failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
 class VideoStatus(Section):
@@ -241,6 +254,9 @@ class VideoStatus(Section):
     stream_offset_s: float | None = Field(description="the stream clock's offset on the station clock")
     error: str | None = Field(description="the last problem (FFmpeg's words), null once frames flow again")
     latency_from_motion: MotionLatencyStatus | None = None
+    restarts: int = Field(0, description="times the reader thread failed (a bug) and started over")
+    failure: str | None = Field(None, description="the last such failure: its kind and message")
+    handoff: HandoffStatus | None = Field(None, description="frames from the reader thread")
 
 
 class GpsInputStatus(Section):
@@ -271,9 +287,10 @@ class RecordStatus(Section):
     mavlink_frames: int
     depth_samples: int
     fixes: int
-    video_frames: int | None = None
-    video_dropped: int | None = None
-    video_error: str | None = None
+    dropped: int = Field(0, description="records left out because the writer fell behind")
+    error: str | None = Field(None, description="why the recording stopped (a full disk): nothing more is written")
+    video_frames: int | None = Field(None, description="frames encoded")
+    video_dropped: int | None = Field(None, description="frames left out: the encoder fell behind, or out of order")
 
 
 class TargetStatus(Section):
@@ -348,7 +365,7 @@ class StatusMessage(Message):
     pipeline: PipelineStatus
     fixes_published: int
     problems: dict[str, str] = Field(description="what is wrong with each input now, one line per input (uav, "
-                                     "depth, video, zenoh); empty when all is well")
+                                     "depth, video, zenoh; record once the recording stopped); empty when all is well")
     target: TargetStatus
     uuv_position: UuvPositionStatus
     fix: FixMessage | None = Field(description="the latest fix message (also answered to late joiners on the fix key)")

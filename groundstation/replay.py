@@ -23,6 +23,12 @@ agrees with itself:
   writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
   stdout), with its receive time: what the UUV's autopilot would get.
 
+``--cut INPUT:START_S:DURATION_S`` (repeatable; INPUT ``mavlink``, ``depth`` or ``video``) leaves that
+input out from START_S to START_S + DURATION_S seconds after the session's start while the others
+keep flowing: a radio link, a depth publisher or a camera link that drops out. The video comes back
+at its first keyframe after the cut, as a camera's stream does. When an input comes back the replay
+prints ``{"event": "back", "input": ..., "t": <UNIX s of its first message or packet>}``.
+
 Replay ends after the session (plus ``--tail-s``) or ``--duration-s``; its exit code is 1 when a
 UUV-side endpoint was listening and no GPS_INPUT came back.
 """
@@ -43,6 +49,40 @@ from .video_send import send_video
 from .zenoh_session import open_session, put_json
 
 log = logging.getLogger("skyfix.replay")
+
+CUT_INPUTS = ("mavlink", "depth", "video")
+
+
+def parse_cut(text: str) -> tuple[str, float, float]:
+    """``INPUT:START_S:DURATION_S`` → ``(input, start_s, end_s)``; argparse's type for ``--cut``."""
+    parts = text.split(":")
+    try:
+        name, start_s, duration_s = parts[0], float(parts[1]), float(parts[2])
+        if len(parts) != 3 or name not in CUT_INPUTS or not start_s >= 0 or not duration_s > 0:
+            raise ValueError
+    except (IndexError, ValueError):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected INPUT:START_S:DURATION_S with INPUT one of "
+                                         f"{', '.join(CUT_INPUTS)}, START_S ≥ 0 and DURATION_S > 0") from None
+    return name, start_s, start_s + duration_s
+
+
+class Cuts:
+    """Which of an input's messages a ``--cut`` leaves out, by session seconds after the start; says when it is back."""
+
+    def __init__(self, cuts, input_: str):
+        self.input = input_
+        self.windows = sorted((a, b) for name, a, b in cuts or () if name == input_)
+        self._in_cut = False
+
+    def skip(self, t_s: float, resumable: bool = True) -> bool:
+        """Whether the message at ``t_s`` is left out (``resumable``: it can start the input again)."""
+        if any(a <= t_s < b for a, b in self.windows) or (self._in_cut and not resumable):
+            self._in_cut = True
+            return True
+        if self._in_cut:
+            self._in_cut = False
+            print(json.dumps({"event": "back", "input": self.input, "t": time.time()}), flush=True)
+        return False
 
 
 
@@ -127,16 +167,22 @@ class Replay:
         self.counts = {"mavlink": 0, "depth": 0, "gps_input": 0}
 
     def _send_tlog(self, conn, shift: float) -> None:
+        cuts = Cuts(self.args.cut, "mavlink")
         for t, msg in self.tlog:
             if not _sleep_until(t + shift, self.stop):
                 return
+            if cuts.skip(t - self.t_start):
+                continue
             conn.write(frame_bytes(msg, shift))
             self.counts["mavlink"] += 1
 
     def _send_depth(self, shift: float, session) -> None:
+        cuts = Cuts(self.args.cut, "depth")
         for t_send, t, depth in self.depth:
             if not _sleep_until(t_send + shift, self.stop):
                 return
+            if cuts.skip(t_send - self.t_start):
+                continue
             put_json(self.args.depth_key, {"t": t + shift, "depth_m": depth}, session)
             self.counts["depth"] += 1
 
@@ -167,9 +213,13 @@ class Replay:
         if args.uuv_listen:
             threads.append(threading.Thread(target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True))
         if self.video is not None:
-            t0 = float(self.frames["t"][0]) + shift + args.video_delay_ms / 1000.0
-            threads.append(threading.Thread(target=send_video, args=(self.video, args.video_out, t0, self.stop),
-                                            name="video", daemon=True))
+            t_first = float(self.frames["t"][0])
+            t0 = t_first + shift + args.video_delay_ms / 1000.0
+            cuts = Cuts(args.cut, "video")
+            threads.append(threading.Thread(
+                target=send_video, args=(self.video, args.video_out, t0, self.stop,
+                                         lambda t_s, key: cuts.skip(t_first - self.t_start + t_s, key)),
+                name="video", daemon=True))
         try:
             for th in threads:
                 th.start()
@@ -221,5 +271,8 @@ def register(subparsers) -> None:
     p.add_argument("--lead-s", type=float, default=1.0, help="delay before the session's first message")
     p.add_argument("--tail-s", type=float, default=1.0, help="keep listening this long after the session ends")
     p.add_argument("--duration-s", type=float, help="stop after this many seconds")
+    p.add_argument("--cut", action="append", type=parse_cut, metavar="INPUT:START_S:DURATION_S",
+                   help="leave out mavlink, depth or video from START_S for DURATION_S seconds after the session's "
+                        "start (a link dropping out; repeatable)")
     p.set_defaults(func=replay)
 

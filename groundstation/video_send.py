@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import av
@@ -63,8 +64,13 @@ def _packets(container, stream, out):
         yield pts_s, packet
 
 
-def send_video(path: Path, url: str, t0_unix: float, stop: threading.Event) -> int:
-    """Stream ``path`` to ``url`` so that its first frame leaves at ``t0_unix``; the number of packets sent."""
+def send_video(path: Path, url: str, t0_unix: float, stop: threading.Event,
+               skip: Callable[[float, bool], bool] | None = None) -> int:
+    """Stream ``path`` to ``url`` so that its first frame leaves at ``t0_unix``; the number of packets sent.
+
+    ``skip(t_s, keyframe)`` (seconds after the first frame, whether the packet starts a keyframe), when given,
+    says which packets are left out (a cut link).
+    """
     sent = 0
     with av.open(str(path)) as container, _open_output(url) as out:
         stream = container.streams.video[0]
@@ -73,6 +79,8 @@ def send_video(path: Path, url: str, t0_unix: float, stop: threading.Event) -> i
             pts0 = pts_s if pts0 is None else pts0
             if not _wait_until(t0_unix + pts_s - pts0, stop):
                 break
+            if skip is not None and skip(pts_s - pts0, packet.is_keyframe):
+                continue
             out.mux(packet)
             sent += 1
     return sent

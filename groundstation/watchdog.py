@@ -7,7 +7,8 @@ when it is back:
 - the UAV's MAVLink: nothing received yet, silent, or needed messages missing;
 - the UUV's depth: no sample yet on its Zenoh key, or none for a while;
 - the video: no frame decoded yet (with FFmpeg's reason), or none for a while;
-- Zenoh: no peer or router connected.
+- Zenoh: no peer or router connected;
+- ``--record``: the recording stopped (a full disk).
 
 The current problems are in the status (``problems``, per input). Every
 :data:`SUMMARY_S` a one-line summary: frames per second, the share of ``ok``
@@ -75,6 +76,9 @@ def problems(status: dict, needed: tuple[str, ...], zenoh_peers: int | None) -> 
             out["video"] = f"video: no frame for {video['age_s']:.0f} s from {video['url']}{why}"
     if zenoh_peers == 0:
         out["zenoh"] = "Zenoh: no peer or router connected"
+    record = status.get("record")
+    if record is not None and record["error"]:
+        out["record"] = f"record: stopped: {record['error']}"
     return out
 
 

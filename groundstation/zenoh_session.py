@@ -4,17 +4,23 @@ Peer mode by default, multicast scouting off unless asked (a field laptop should
 not discover every Zenoh node on the boat's network by surprise), explicit
 ``connect``/``listen`` endpoints such as ``tcp/192.168.2.2:7447``. A JSON5 config
 file (see ``deploy/zenoh/``) may set everything else; the endpoints and flags
-given here are applied on top of it.
+given here are applied on top of it. Unless the file says otherwise, a lost router or
+peer is tried again every :data:`RETRY` ms (Zenoh's default backs off to 4 s), so a
+router that restarts is back in use within about half a second.
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import re
+import time
 from collections.abc import Sequence
 
 import zenoh
 
+#: connect/retry: 100 ms, doubling to 500 ms
+RETRY = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 2}
 _RUST_LOCATION = re.compile(r"\s+at\s+/\S+?\.rs:\d+\.?")
 _JSON5_MESSAGE = re.compile(r'Json5Err\(Message \{ msg: "(.*?)", location: .*')
 
@@ -37,6 +43,8 @@ def make_config(connect: Sequence[str] = (), listen: Sequence[str] = (), *, mult
         conf.insert_json5("mode", json.dumps(mode or "peer"))
     if not multicast:
         conf.insert_json5("scouting/multicast/enabled", "false")
+    if json.loads(conf.get_json("connect/retry")) is None:
+        conf.insert_json5("connect/retry", json.dumps(RETRY))
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if listen:
@@ -65,3 +73,17 @@ def put_json(target, obj: dict, session: zenoh.Session) -> None:
         session.put(target, payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp())
     else:
         target.put(payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp())
+
+
+async def subscribe(session: zenoh.Session, key: str, handoff) -> None:
+    """Subscribe to ``key`` until cancelled: Zenoh's thread hands each sample over as ``(key, payload bytes,
+    t_recv_unix)`` through ``handoff`` (a bounded :class:`~groundstation.threads.Handoff`), nothing more."""
+    def on_sample(sample: zenoh.Sample) -> None:
+        handoff.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
+
+    sub = session.declare_subscriber(key, on_sample)
+    try:
+        await asyncio.Event().wait()
+    finally:
+        handoff.close()
+        sub.undeclare()

@@ -14,35 +14,18 @@ import json
 import logging
 import socket
 import subprocess
-import sys
 import time
 
+from link_scenarios import start_router
 from live_helpers import free_port
 
 from groundstation.sinks.gps_input import GpsInputSink
 from groundstation.sinks.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.zenoh_session import open_session
 
-ROUTER = r"""
-import json, sys, time, zenoh
-c = zenoh.Config()
-c.insert_json5("mode", '"router"')
-c.insert_json5("scouting/multicast/enabled", "false")
-c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
-s = zenoh.open(c)
-print("ready", flush=True)
-try:
-    while True:
-        time.sleep(1)
-finally:
-    s.close()
-"""
-
 
 def _router(ep: str) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-c", ROUTER, ep], stdout=subprocess.PIPE, text=True)
-    assert proc.stdout.readline().strip() == "ready"
-    return proc
+    return start_router(ep)[0]
 
 
 def test_router_loss_is_named(caplog):

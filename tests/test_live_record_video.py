@@ -30,12 +30,12 @@ def test_irregular_frame_times_map_each_frame_to_its_row(tmp_path):
     steps = rng.uniform(0.012, 0.070, N)  # a live stream's arrival-paced, jittery frame times
     steps[20] = 0.25  # and a stall
     t = 1_796_000_000.0 + np.cumsum(steps)
-    writer = VideoWriter(tmp_path / "video.ts", tmp_path / "video_frames.csv", SIZE, queue_len=N + 5)
+    writer = VideoWriter(tmp_path / "video.ts", tmp_path / "video_frames.csv", SIZE)
     for i in range(N):
-        writer.put(float(t[i]), _image(i))
-    writer.put(float(t[N - 1]) - 0.5, _image(0))  # out of order (a reconnected stream on another clock): left out
+        writer.write(float(t[i]), _image(i))
+    writer.write(float(t[N - 1]) - 0.5, _image(0))  # out of order (a reconnected stream on another clock): left out
     writer.close()
-    assert writer.written == N and writer.dropped == 1 and writer.error is None
+    assert writer.written == N and writer.dropped == 1
 
     with open(tmp_path / "video_frames.csv") as f:
         rows = list(csv.DictReader(f))
@@ -56,11 +56,11 @@ def test_regular_times_with_skipped_frames_map_each_frame_to_its_row(tmp_path):
     indices, each frame lands on its row; without them the gaps read as damage (frames lost in the file)."""
     slots = [0, 1, 2, 5, 6, 7, 11, 12, 20, 21, 22, 23, 30, 31, 32, 33, 34, 35, 40, 41]
     t = 1_796_000_000.0 + np.array(slots) / 30.0
-    writer = VideoWriter(tmp_path / "video.ts", tmp_path / "video_frames.csv", SIZE, queue_len=len(slots) + 5)
+    writer = VideoWriter(tmp_path / "video.ts", tmp_path / "video_frames.csv", SIZE)
     for i, ti in enumerate(t):
-        writer.put(float(ti), _image(i))
+        writer.write(float(ti), _image(i))
     writer.close()
-    assert writer.written == len(slots) and writer.error is None
+    assert writer.written == len(slots) and writer.dropped == 0
     with open(tmp_path / "video_frames.csv") as f:
         rows = [int(r["frame"]) for r in csv.DictReader(f)]
     assert rows == list(range(len(slots)))

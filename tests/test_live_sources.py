@@ -12,6 +12,7 @@ import time
 import pytest
 from live_helpers import free_port
 
+from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink_io import mavutil
 from groundstation.sources.depth_zenoh import DepthZenoh, parse_depth
 from groundstation.sources.rates import needed_rates
@@ -95,6 +96,19 @@ def test_a_flood_of_one_problem_stays_a_trickle_in_the_log(caplog):
     assert depth.bad == 1001
     assert sum("not JSON" in m for m in lines) == 5 + 1000 // 100
     assert any("'deep'" in m or "deep" in m for m in lines)
+
+
+def test_throttle_is_keyed_by_the_kind_with_bounded_memory():
+    """pymavlink's CRC complaints differ in their numbers only: one kind. Endless distinct kinds stay bounded."""
+    throttle = Throttle()
+    crcs = [f"invalid MAVLink CRC in msgID {i % 250} 0x{i:04x} should be 0x{(i * 7) & 0xFFFF:04x}" for i in range(1000)]
+    logged = [n for text in crcs if (n := throttle(kind_of(text)))]
+    assert list(throttle.counts) == ["invalid MAVLink CRC in msgID # # should be #"]
+    assert logged == [1, 2, 3, 4, 5, *range(100, 1001, 100)]
+    assert kind_of("message type 'GPS_RAW_INT' is not VFR_HUD") == "message type # is not VFR_HUD"
+    for i in range(10_000):
+        throttle(f"kind {i}")
+    assert len(throttle.counts) == throttle.max_kinds + 1  # the last one: "(other)"
 
 
 def test_parse_depth_rejects_non_numbers():

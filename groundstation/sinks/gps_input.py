@@ -58,6 +58,7 @@ from localizer.fix_gate import FixGate
 
 from ..mavlink_io import mavutil
 from ..mavlink_link import MavlinkLink
+from ..threads import in_thread
 
 log = logging.getLogger("skyfix.gps_input")
 
@@ -167,7 +168,7 @@ class GpsInputSink:
 
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
-        await asyncio.to_thread(self.link.open)
+        await in_thread(self.link.open, name="GPS_INPUT open")
         try:
             next_due = loop.time()
             while not self._stopping:
@@ -191,7 +192,7 @@ class GpsInputSink:
         self._stopping = self._closed = True
         self._new.set()
         final = gps_input_fields(None, time.time(), self.max_age_s)
-        delivered = await asyncio.to_thread(self.link.close, ("GPS_INPUT", final))
+        delivered = await in_thread(self.link.close, ("GPS_INPUT", final), name="GPS_INPUT close")
         self.sent += 1
         self.not_delivered += not delivered
         log.info("GPS_INPUT %s: stopped; %s", self.link.url,

@@ -12,9 +12,15 @@ tracked pixel of every frame (empty when there is no fix), and
 in-process, each frame's timestamp its exposure time, so a replay keeps the real
 pacing and the offline reader finds each frame's row). Every file is append-only and flushed at least
 once a second; MPEG-TS stays readable when cut off, so a crash loses at most the
-last second and never corrupts what is already written. When the encoder falls
-behind, frames are left out of the recording (counted), and ``video_frames.csv``
-lists only the frames that were encoded.
+last second and never corrupts what is already written.
+
+One thread owns every file: it opens, writes, flushes and closes them (and rewrites
+session.toml); the event loop only queues what is to be written (:data:`QUEUE_ITEMS`
+records, :data:`QUEUE_FRAMES` video frames; beyond, the item is left out and counted in
+``dropped``/``video_dropped``), so no disk write ever blocks the loop, and a stop asks
+the thread to finish and close, never closes a file under it. ``video_frames.csv`` lists
+only the frames that were encoded. A write that fails (a full disk) stops the recording
+with one log line and ``error`` in the status; the service goes on without it.
 """
 
 from __future__ import annotations
@@ -37,11 +43,16 @@ import av
 from localizer.fix import Fix
 
 from ..positions import COLUMNS, format_row
+from ..threads import failure_kind, in_thread
 
 log = logging.getLogger("skyfix.record")
 
 TICK = Fraction(1, 90000)  # MPEG-TS timestamp unit, seconds
 CALIBRATION_TABLES = ("camera", "mount", "water", "tracker", "uncertainty", "timing")
+QUEUE_ITEMS = 20000  # records waiting for the writer (MAVLink frames, depth samples, fixes): ~2 min of telemetry
+QUEUE_FRAMES = 30  # video frames waiting for the encoder
+FLUSH_S = 1.0
+CLOSE_WAIT_S = 0.5  # a stop waits this long for the writer to close its files, then leaves it to finish
 
 
 def _toml_value(value) -> str:
@@ -68,84 +79,52 @@ def session_toml(calibration: dict) -> str:
 class VideoWriter:
     """Frames → H.264 (libx264 in-process, PyAV) in MPEG-TS, ``frames.csv`` a row per encoded frame.
 
-    One thread owns the encoder and both files: it takes frames from a queue, stamps
-    each with its exposure time (90 kHz ticks from the first frame's), encodes it, and
-    flushes ``frames.csv`` at least once a second. A frame not later than the one
+    Used by one thread only (the recorder's): :meth:`write` stamps each frame with its exposure
+    time (90 kHz ticks from the first frame's) and encodes it. A frame not later than the one
     before (a stream reconnected on another clock) is left out and counted as dropped.
     """
 
-    def __init__(self, path: Path, frames_csv: Path, size: tuple[int, int], queue_len: int = 30):
+    def __init__(self, path: Path, frames_csv: Path, size: tuple[int, int]):
         self.path = path
-        self.frames_csv = frames_csv
         self.size = size
         self.written = 0
         self.dropped = 0
-        self.error: str | None = None
-        self._queue: queue.Queue = queue.Queue(maxsize=queue_len)
-        self._thread = threading.Thread(target=self._write, name="record-video", daemon=True)
-        self._thread.start()
-
-    def put(self, t_unix: float, image) -> None:
-        try:
-            self._queue.put_nowait((t_unix, image))
-        except queue.Full:
-            self.dropped += 1
-
-    def _open(self):
-        container = av.open(str(self.path), "w", format="mpegts")
-        stream = container.add_stream("libx264", options={"preset": "ultrafast", "tune": "zerolatency"})
-        stream.width, stream.height = self.size
+        self._container = av.open(str(path), "w", format="mpegts")
+        self._stream = stream = self._container.add_stream(
+            "libx264", options={"preset": "ultrafast", "tune": "zerolatency"})
+        stream.width, stream.height = size
         stream.pix_fmt = "yuv420p"
         stream.codec_context.time_base = TICK
         stream.time_base = TICK
-        return container, stream
+        self._frames = open(frames_csv, "w", newline="")  # noqa: SIM115 - closed in close()
+        self._rows = csv.writer(self._frames)
+        self._rows.writerow(("frame", "t"))
+        self._t0: float | None = None
+        self._t_last: float | None = None
+        self._last_pts = -1
 
-    def _write(self) -> None:
-        container, stream = self._open()
-        t0, t_last, last_pts = None, None, -1
-        next_flush = time.monotonic() + 1.0
-        with open(self.frames_csv, "w", newline="") as frames:
-            rows = csv.writer(frames)
-            rows.writerow(("frame", "t"))
-            try:
-                while True:
-                    try:
-                        item = self._queue.get(timeout=1.0)
-                    except queue.Empty:
-                        frames.flush()
-                        continue
-                    if item is None:
-                        break
-                    if self.error is not None:
-                        continue  # drained: the encoder failed
-                    t, image = item
-                    if t0 is not None and t <= t_last:  # a reconnected stream's clock went back: out of order
-                        self.dropped += 1
-                        continue
-                    t0, t_last = (t if t0 is None else t0), t
-                    frame = av.VideoFrame.from_ndarray(image, format="bgr24")
-                    frame.pts = last_pts = max(last_pts + 1, round((t - t0) / TICK))
-                    frame.time_base = TICK
-                    try:
-                        container.mux(stream.encode(frame))
-                    except (av.error.FFmpegError, ValueError) as e:
-                        self.error = f"{self.path}: {e}"
-                        log.warning("record: video encoder failed, no more video recorded: %s", self.error)
-                        continue
-                    rows.writerow((self.written, f"{t:.6f}"))
-                    self.written += 1
-                    if time.monotonic() >= next_flush:
-                        frames.flush()
-                        next_flush = time.monotonic() + 1.0
-            finally:
-                try:
-                    container.mux(stream.encode(None))
-                finally:
-                    container.close()
+    def write(self, t_unix: float, image) -> None:
+        if self._t0 is not None and t_unix <= self._t_last:  # a reconnected stream's clock went back: out of order
+            self.dropped += 1
+            return
+        self._t0 = t_unix if self._t0 is None else self._t0
+        self._t_last = t_unix
+        frame = av.VideoFrame.from_ndarray(image, format="bgr24")
+        frame.pts = self._last_pts = max(self._last_pts + 1, round((t_unix - self._t0) / TICK))
+        frame.time_base = TICK
+        self._container.mux(self._stream.encode(frame))
+        self._rows.writerow((self.written, f"{t_unix:.6f}"))
+        self.written += 1
+
+    def flush(self) -> None:
+        self._frames.flush()
 
     def close(self) -> None:
-        self._queue.put(None)
-        self._thread.join(10.0)
+        try:
+            self._container.mux(self._stream.encode(None))
+        finally:
+            self._container.close()
+            self._frames.close()
 
 
 class Recorder:
@@ -165,71 +144,133 @@ class Recorder:
         # [tracker] is the live run's own: the first frame the target was tracked on (see on_fix), not the
         # calibration file's, whose init_t belongs to another recording
         self._calibration = {k: v for k, v in tomllib.loads(Path(cal_source).read_text()).items() if k != "tracker"}
-        self._write_toml()
-        self._track = open(self.dir / "track.csv", "a", newline="")  # noqa: SIM115
-        self._track_csv = csv.writer(self._track)
-        self._track_csv.writerow(("t", "u", "v"))
-        # append-only files, open for the whole run and closed when the worker ends
-        self._tlog = open(self.dir / "uav.tlog", "ab")  # noqa: SIM115
-        self._depth = open(self.dir / "depth.jsonl", "a")  # noqa: SIM115
-        self._positions = open(self.dir / "positions.csv", "a", newline="")  # noqa: SIM115
-        self._pos_csv = csv.writer(self._positions)
-        self._pos_csv.writerow(COLUMNS)
-        # started now, not at the first frame: opening the encoder takes time the event loop cannot spare
-        self._video = VideoWriter(self.dir / "video.ts", self.dir / "video_frames.csv", video_size) if video_size else None
+        self._write_toml(session_toml(self._calibration))
+        self.video_size = video_size
         self.depth_latency_s = depth_latency_s
         self.mavlink_frames = 0
         self.depth_samples = 0
         self.fixes = 0
+        self.dropped = 0
+        self.video_dropped = 0
+        self.error: str | None = None
+        self._video: VideoWriter | None = None
+        self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_ITEMS)
+        self._frames_queued = 0  # frames in the queue (written on the loop, lowered by the writer)
+        self._frames_lock = threading.Lock()
+        self._closing = threading.Event()
+        # started now, not at the first frame: opening the encoder takes time the event loop cannot spare
+        self._thread = threading.Thread(target=self._write, name="record", daemon=True)
+        self._thread.start()
+
+    # -- the event loop's side: queue only ---------------------------------------------------------------
+    def _put(self, item) -> bool:
+        if self.error is not None:
+            return False
+        try:
+            self._queue.put_nowait(item)
+        except queue.Full:
+            self.dropped += 1
+            return False
+        return True
 
     def on_mavlink(self, msg, t_recv: float) -> None:
-        self._tlog.write(struct.pack(">Q", int(t_recv * 1e6)) + msg.get_msgbuf())
-        self.mavlink_frames += 1
+        self.mavlink_frames += self._put(("tlog", struct.pack(">Q", int(t_recv * 1e6)) + msg.get_msgbuf()))
 
     def on_depth(self, t_uuv: float | None, depth_m: float, t_recv: float) -> None:
         t = t_recv - self.depth_latency_s if t_uuv is None else t_uuv
-        self._depth.write(json.dumps({"t": t, "depth_m": depth_m, "t_recv": t_recv}) + "\n")
-        self.depth_samples += 1
+        self.depth_samples += self._put(("depth", json.dumps({"t": t, "depth_m": depth_m, "t_recv": t_recv}) + "\n"))
 
     def on_frame(self, frame) -> None:
         """A received frame (of the ``video_size`` given at the start)."""
-        self._video.put(frame.t_unix, frame.image)
-
-    def _write_toml(self) -> None:
-        """session.toml, replaced atomically."""
-        tmp = self.dir / "session.toml.partial"
-        tmp.write_text(session_toml(self._calibration))
-        os.replace(tmp, self.dir / "session.toml")
+        with self._frames_lock:
+            if self._frames_queued >= QUEUE_FRAMES:
+                self.video_dropped += 1
+                return
+            self._frames_queued += 1
+        if not self._put(("frame", (frame.t_unix, frame.image))):
+            with self._frames_lock:
+                self._frames_queued -= 1
 
     def on_fix(self, fix: Fix, info) -> None:
-        self._pos_csv.writerow(format_row(fix))
         ok = fix.ok
-        self._track_csv.writerow((f"{fix.t_unix:.6f}", f"{fix.u:.3f}" if ok else "", f"{fix.v:.3f}" if ok else ""))
+        track = (f"{fix.t_unix:.6f}", f"{fix.u:.3f}" if ok else "", f"{fix.v:.3f}" if ok else "")
+        self.fixes += self._put(("fix", (format_row(fix), track)))
         if ok and "tracker" not in self._calibration and getattr(info, "box", None) is not None:
             self._calibration["tracker"] = {"init_bbox": list(info.box), "init_t": fix.t_unix}
-            self._write_toml()
-        self.fixes += 1
-
-    def flush(self) -> None:
-        for f in (self._tlog, self._depth, self._positions, self._track):
-            f.flush()
+            self._put(("toml", session_toml(self._calibration)))
 
     async def run(self) -> None:
         try:
-            while True:
-                await asyncio.sleep(1.0)
-                self.flush()
+            await asyncio.Event().wait()
         finally:
-            self.flush()
-            if self._video:
-                await asyncio.to_thread(self._video.close)
-            for f in (self._tlog, self._depth, self._positions, self._track):
-                f.close()
+            self._closing.set()
+            await in_thread(self._thread.join, CLOSE_WAIT_S, name="record close")
+            if self._thread.is_alive():
+                log.warning("record: the writer was still busy %g s after the stop (%d items queued); it finishes "
+                            "on its own unless the process ends first", CLOSE_WAIT_S, self._queue.qsize())
+
+    # -- the writer thread: owns every file ----------------------------------------------------------------
+    def _write_toml(self, text: str) -> None:
+        """session.toml, replaced atomically."""
+        tmp = self.dir / "session.toml.partial"
+        tmp.write_text(text)
+        os.replace(tmp, self.dir / "session.toml")
+
+    def _write(self) -> None:
+        files = []
+        try:
+            tlog = open(self.dir / "uav.tlog", "ab")  # noqa: SIM115 - closed below
+            depth = open(self.dir / "depth.jsonl", "a")  # noqa: SIM115
+            positions = open(self.dir / "positions.csv", "a", newline="")  # noqa: SIM115
+            track = open(self.dir / "track.csv", "a", newline="")  # noqa: SIM115
+            files = [tlog, depth, positions, track]
+            pos_csv, track_csv = csv.writer(positions), csv.writer(track)
+            pos_csv.writerow(COLUMNS)
+            track_csv.writerow(("t", "u", "v"))
+            if self.video_size:
+                self._video = VideoWriter(self.dir / "video.ts", self.dir / "video_frames.csv", self.video_size)
+            next_flush = time.monotonic() + FLUSH_S
+            while True:
+                try:
+                    kind, data = self._queue.get(timeout=0.1)
+                except queue.Empty:
+                    if self._closing.is_set():
+                        break
+                    kind = None
+                if kind == "tlog":
+                    tlog.write(data)
+                elif kind == "depth":
+                    depth.write(data)
+                elif kind == "fix":
+                    pos_csv.writerow(data[0])
+                    track_csv.writerow(data[1])
+                elif kind == "toml":
+                    self._write_toml(data)
+                elif kind == "frame":
+                    with self._frames_lock:
+                        self._frames_queued -= 1
+                    self._video.write(*data)
+                if time.monotonic() >= next_flush:
+                    for f in files:
+                        f.flush()
+                    if self._video:
+                        self._video.flush()
+                    next_flush = time.monotonic() + FLUSH_S
+        except Exception as e:  # noqa: BLE001 - a full disk, an encoder error or a bug: the recording stops
+            self.error = f"{failure_kind(e)}: {e}"
+            log.error("record: stopped, nothing more is recorded: %s", self.error)
+        finally:
+            for close in [f.close for f in files] + ([self._video.close] if self._video else []):
+                try:
+                    close()
+                except Exception as e:  # noqa: BLE001 - closing what can be closed
+                    log.warning("record: closing: %s", e)
 
     def status(self) -> dict:
         out = {"dir": str(self.dir), "mavlink_frames": self.mavlink_frames, "depth_samples": self.depth_samples,
-               "fixes": self.fixes}
-        if self._video:
-            out.update(video_frames=self._video.written, video_dropped=self._video.dropped,
-                       video_error=self._video.error)
+               "fixes": self.fixes, "dropped": self.dropped, "error": self.error}
+        if self.video_size:
+            video = self._video
+            out.update(video_frames=video.written if video else 0,
+                       video_dropped=self.video_dropped + (video.dropped if video else 0))
         return out

@@ -10,7 +10,8 @@ telemetry aligns it by the arrival times (:meth:`localizer.telemetry.Telemetry.a
 ArduSub's depth is ``-alt``. VFR_HUD carries no time, so the sample's time is
 its arrival minus ``[timing] depth_latency_s``.
 
-Zenoh's callback thread only copies the payload and hands it to the event loop.
+Zenoh's callback thread only copies the payload and hands it to the event loop
+(:func:`~groundstation.zenoh_session.subscribe`, a bounded hand-off).
 A payload that does not parse is logged in one line with the offending value
 and counted; the service keeps running.
 """
@@ -21,18 +22,20 @@ import asyncio
 import json
 import logging
 import math
-import time
 from collections.abc import Callable
 
 import zenoh
 
 from localizer.telemetry import Telemetry
 
-from ..logs import Throttle
+from ..logs import Throttle, kind_of
+from ..threads import Handoff
+from ..zenoh_session import subscribe
 
 log = logging.getLogger("skyfix.depth")
 
 BLUEOS_KEY = "mavlink/*/*/VFR_HUD"
+HANDOFF_SAMPLES = 256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
 
 
 class BadDepth(ValueError):
@@ -76,25 +79,13 @@ class DepthZenoh:
         self.bad = 0
         self.refused = 0
         self._throttle = Throttle()
+        self.handoff: Handoff | None = None
         self.last_recv: float | None = None
         self.last_depth_m: float | None = None
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
-
-        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh's thread: copy and hand over only
-            data = sample.payload.to_bytes()
-            key = str(sample.key_expr)
-            try:
-                loop.call_soon_threadsafe(self._on_payload, key, data, time.time())
-            except RuntimeError:  # loop closed: shutting down
-                pass
-
-        sub = self.session.declare_subscriber(self.key, on_sample)
-        try:
-            await asyncio.Event().wait()
-        finally:
-            sub.undeclare()
+        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_SAMPLES)
+        await subscribe(self.session, self.key, self.handoff)
 
     def _on_payload(self, key: str, data: bytes, t_recv: float) -> None:
         self.received += 1
@@ -102,12 +93,12 @@ class DepthZenoh:
             t, depth = parse_depth(data, self.shape)
         except BadDepth as e:
             self.bad += 1
-            if self._throttle(str(e)):
+            if self._throttle(kind_of(str(e))):
                 log.warning("depth on %s: %s: %r", key, e, data[:120])
             return
         if not self.tel.add_depth(t, depth, t_recv):
             self.refused += 1
-            if self._throttle(f"refused: {self.tel.refusal}"):
+            if self._throttle(kind_of(f"refused: {self.tel.refusal}")):
                 log.warning("depth on %s refused (%s): t=%r depth_m=%r", key, self.tel.refusal, t, depth)
             return
         while self.tel.notices:
@@ -119,4 +110,5 @@ class DepthZenoh:
     def status(self, now: float) -> dict:
         age = None if self.last_recv is None else round(max(0.0, now - self.last_recv), 3)
         return {"key": self.key, "shape": self.shape, "received": self.received, "bad": self.bad,
-                "refused": self.refused, "age_s": age, "depth_m": self.last_depth_m}
+                "refused": self.refused, "age_s": age, "depth_m": self.last_depth_m,
+                "handoff": self.handoff.status() if self.handoff else None}

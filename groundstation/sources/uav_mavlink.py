@@ -2,7 +2,9 @@
 
 The link (:class:`~groundstation.mavlink_link.MavlinkLink`: its own thread, reconnecting
 a TCP or serial link that drops, each UDP datagram parsed on its own) hands every
-message, with its receive time (station clock, UNIX seconds), to the event loop,
+message, with its receive time (station clock, UNIX seconds), to the event loop
+through a bounded :class:`~groundstation.threads.Handoff` (:data:`HANDOFF_MESSAGES`;
+when the loop falls that far behind the oldest are dropped, counted in ``handoff``),
 where it is fed into the :class:`~localizer.telemetry.Telemetry` (only the loop
 touches the telemetry); what skyfix sends is queued for the link's thread, so the
 event loop never blocks on a write. As a ground station (``MAV_TYPE_GCS``, system ``GCS_SYSID`` /
@@ -27,9 +29,10 @@ from collections.abc import Callable
 
 from localizer.telemetry import Telemetry
 
-from ..logs import Throttle
+from ..logs import Throttle, kind_of
 from ..mavlink_io import USED, ingest, mavutil
 from ..mavlink_link import MavlinkLink
+from ..threads import Handoff, in_thread
 from .rates import RateMeter, RateRequests, send_interval, send_stream
 
 log = logging.getLogger("skyfix.uav")
@@ -38,6 +41,7 @@ GCS_SYSID = 245
 GCS_COMPID = 190  # MAV_COMP_ID_MISSIONPLANNER: a ground station
 PARAM_RETRY_S = 5.0
 PARAM_TRIES = 3
+HANDOFF_MESSAGES = 2000  # ~10 s of telemetry at the rates skyfix asks for
 
 
 class LinkHealth:
@@ -98,18 +102,12 @@ class UavMavlink:
         self.link = MavlinkLink(url, GCS_SYSID, GCS_COMPID, name="UAV MAVLink", is_peer=self._from_uav)
         self._low_warned: set[str] = set()
         self._denied: list[str] = []  # rate requests the autopilot refused, to ask again the older way
+        self.handoff: Handoff | None = None
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
-
-        def on_message(msg, t_recv: float) -> None:  # the link's thread: hand over only
-            try:
-                loop.call_soon_threadsafe(self._on_message, msg, t_recv)
-            except RuntimeError:  # loop closed: shutting down
-                pass
-
-        self.link.on_message = on_message
-        await asyncio.to_thread(self.link.open)
+        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_message(*item), HANDOFF_MESSAGES)
+        self.link.on_message = lambda msg, t_recv: self.handoff.put((msg, t_recv))  # the link's thread
+        await in_thread(self.link.open, name="UAV MAVLink open")
         try:
             next_beat = 0.0
             while True:
@@ -120,7 +118,7 @@ class UavMavlink:
                 self._ask(self.link, now)
                 await asyncio.sleep(0.25)
         finally:
-            await asyncio.to_thread(self.link.close)
+            await in_thread(self.link.close, name="UAV MAVLink close")
 
     def _from_uav(self, msg) -> bool:
         """Whether a message (on the link's thread) is the UAV's: the link answers where those come from."""
@@ -169,7 +167,7 @@ class UavMavlink:
 
     def _bad(self, reason: str, data: bytes) -> None:
         self.health.bad_data += 1
-        if self._throttle(reason):
+        if self._throttle(kind_of(reason)):
             shown = data[:16].hex() + ("…" if len(data) > 16 else "")
             log.warning("UAV MAVLink: malformed frame #%d on %s: %s (bytes %s)", self.health.bad_data, self.url,
                         reason, shown)
@@ -207,7 +205,7 @@ class UavMavlink:
                 self._denied.append(denied)
         if kind in USED and not used and self.tel.refusal:
             self.health.refused += 1
-            n = self._throttle(f"{kind}: {self.tel.refusal}")
+            n = self._throttle(kind_of(f"{kind}: {self.tel.refusal}"))
             if n:
                 log.warning("UAV MAVLink: %s #%d refused: %s: %s", kind, n, self.tel.refusal, msg)
         while self.tel.notices:
@@ -218,4 +216,4 @@ class UavMavlink:
     def status(self, now: float) -> dict:
         return {"url": self.url, "sysid": self.uav_sysid, "clocks": clock_status(self.tel),
                 "rate_requests": dict(self.requests.state), **self.health.as_dict(now),
-                "link": self.link.status(now)}
+                "link": self.link.status(now), "handoff": self.handoff.status() if self.handoff else None}

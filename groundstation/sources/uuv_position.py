@@ -19,19 +19,21 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import time
 
 import zenoh
 
 from localizer.tracking.predict import UUV_SPEED_MPS
 from localizer.tracking.session import Prior
 
-from ..logs import Throttle
+from ..logs import Throttle, kind_of
+from ..threads import Handoff
+from ..zenoh_session import subscribe
 
 log = logging.getLogger("skyfix.uuv_position")
 
 #: An estimate older than this (s) is no longer a prior.
 MAX_AGE_S = 30.0
+HANDOFF_SAMPLES = 256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
 
 
 class BadPosition(ValueError):
@@ -91,6 +93,7 @@ class UuvPosition:
         self.unknown = 0
         self.last: tuple[float, float, float] | None = None  # lat, lon, t_recv
         self._throttle = Throttle()
+        self.handoff: Handoff | None = None
 
     def prior(self, t_unix: float) -> Prior | None:
         """The UUV's estimate at a frame's time: the latest received (if fresh), else the hint, else None."""
@@ -106,21 +109,8 @@ class UuvPosition:
     async def run(self) -> None:
         if self.key is None:
             await asyncio.Event().wait()
-        loop = asyncio.get_running_loop()
-
-        def on_sample(sample: zenoh.Sample) -> None:  # Zenoh's thread: copy and hand over only
-            data = sample.payload.to_bytes()
-            key = str(sample.key_expr)
-            try:
-                loop.call_soon_threadsafe(self._on_payload, key, data, time.time())
-            except RuntimeError:  # loop closed: shutting down
-                pass
-
-        sub = self.session.declare_subscriber(self.key, on_sample)
-        try:
-            await asyncio.Event().wait()
-        finally:
-            sub.undeclare()
+        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_SAMPLES)
+        await subscribe(self.session, self.key, self.handoff)
 
     def _on_payload(self, key: str, data: bytes, t_recv: float) -> None:
         self.received += 1
@@ -128,7 +118,7 @@ class UuvPosition:
             position = parse_global_position(data)
         except BadPosition as e:
             self.bad += 1
-            if self._throttle(str(e)):
+            if self._throttle(kind_of(str(e))):
                 log.warning("UUV position on %s: %s: %r", key, e, data[:120])
             return
         if position is None:

@@ -4,13 +4,18 @@ A reader thread opens ``--video`` (:mod:`.video_inputs`: MPEG-TS over UDP, RTP
 with or without an SDP file, RTSP, a V4L2 camera, a file) with PyAV for low
 delay. A demuxing thread reads its packets as they come and notes when each was
 read from the network (``t_recv``); the reader decodes them (slice threads only:
-no frame held back for threading) and hands each frame to the event loop as a
-:class:`LiveFrame`. Reading apart from decoding keeps ``t_recv`` true when the
-decoder falls behind (a loaded laptop, 1080p): the packets wait in a queue of
-at most :data:`PACKET_BACKLOG`, not in the socket. While more than
-:data:`BEHIND_PACKETS` wait, a live stream's decoded frames are not converted
-nor handed over (they would be stale; ``skipped_behind`` in the status), so the
-decoder catches up instead of falling further behind.
+no frame held back for threading). Reading apart from decoding keeps ``t_recv``
+true when the decoder falls behind (a loaded laptop, 1080p): the packets wait in a
+queue of at most :data:`PACKET_BACKLOG`, not in the socket. While more than
+:data:`BEHIND_PACKETS` wait, a live stream's decoded frames are not converted nor
+handed over (they would be stale; ``skipped_behind`` in the status), so the
+decoder catches up instead of falling further behind. Each frame handed over goes
+to the event loop as a :class:`LiveFrame` through a bounded
+:class:`~groundstation.threads.Handoff` (:data:`HANDOFF_FRAMES`; beyond, the oldest
+is dropped and counted). The thread is :class:`~groundstation.threads.Supervised`
+(a bug in it is one log line and a restart with back-off). A stop does not wait for
+it: FFmpeg's open or read cannot be interrupted from outside and may block for up to
+its timeout, so the daemon thread is left to see the stop and end by itself.
 
 Time: a frame's presentation timestamp (PTS: the RTP timestamp for RTP/RTSP, the
 MPEG-TS PTS) is put on the station clock by the least ``arrival − PTS`` over a
@@ -25,9 +30,11 @@ packet read live lowers the offset (so a slot may be earlier than the one before
 it just after a connection starts). A frame without a PTS (RTP's first access
 unit may lose it) takes its arrival as its slot.
 
-Failures: a stream that cannot be opened (nothing sent yet, refused, a port
-another program holds) is retried with back-off from :data:`RETRY_MIN_S` to
-``retry_max_s``; one that stops sending for ``read_timeout_s`` is closed and
+Failures: a stream that cannot be opened (refused, a port another program holds)
+is retried with back-off from :data:`RETRY_MIN_S` to ``retry_max_s``; one that
+sent nothing for ``open_timeout_s`` is opened again at once (a UDP port is not
+left unbound between attempts, where a camera starting then would lose its first
+keyframe, and with it up to a second of frames); one that stops sending for ``read_timeout_s`` is closed and
 reopened. FFmpeg's own error text goes into the log (once per distinct text) and
 into :meth:`VideoLive.status` ``error``. A file is read once, as fast as it decodes.
 """
@@ -50,18 +57,21 @@ import numpy as np
 from localizer.clock import ClockMap
 
 from ..ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
+from ..threads import Handoff, Supervised, in_thread
 from ..video import VideoError, ffmpeg_reason, put_until
 from .video_inputs import VideoInput, parse_video_input
 
 log = logging.getLogger("skyfix.video")
 
-OPEN_TIMEOUT_S = 2.0  # an open waits this long for the stream (a stop waits for it too)
+OPEN_TIMEOUT_S = 2.0  # an open waits this long for the stream
 RTSP_OPEN_TIMEOUT_S = 5.0
 RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
 PACKET_BACKLOG = 120  # packets read but not yet decoded, at most (4 s at 30 fps); then reading waits
 BEHIND_PACKETS = 2  # live: with more than this many packets waiting, decoded frames are skipped
+HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
+READER_STOP_S = 0.3  # a stop waits this long for the reader thread
 
 
 @dataclass
@@ -86,7 +96,6 @@ _END = object()  # the demuxer's last word: the stream or file ended
 def _demux(container, stream, packets: queue.Queue, done: threading.Event) -> None:
     """Read ``stream``'s packets into ``packets`` as ``(packet, t_recv)``, then :data:`_END` or the exception that
     ended the reading; until ``done``."""
-
     try:
         for packet in container.demux(stream):
             if not put_until(packets, (packet, time.time()), done):
@@ -144,22 +153,23 @@ class VideoLive:
         self.clock: ClockMap | None = None
         self._late_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv − t_slot
         self._decode_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv → frame handed over
-        self._stop = threading.Event()
+        self.handoff: Handoff | None = None
+        self.reader = Supervised("video", self._read)
 
     async def run(self) -> None:
         route_ffmpeg_log()
-        loop = asyncio.get_running_loop()
-        reader = threading.Thread(target=self._read, args=(loop,), name="video", daemon=True)
-        reader.start()
+        self.handoff = Handoff(asyncio.get_running_loop(), self.on_frame, HANDOFF_FRAMES)
+        self.reader.start()
         try:
             await asyncio.Event().wait()
         finally:
-            self._stop.set()
-            await asyncio.to_thread(reader.join, self.open_timeout_s + self.read_timeout_s + 2.0)
+            self.handoff.close()
+            # a reader between packets ends at once; one blocked in FFmpeg is left to end by itself (module doc)
+            await in_thread(self.reader.join, READER_STOP_S, name="video stop")
 
-    def _read(self, loop: asyncio.AbstractEventLoop) -> None:
+    def _read(self, stop: threading.Event) -> None:
         backoff = RETRY_MIN_S
-        while not self._stop.is_set():
+        while not stop.is_set():
             t_try = time.time()
             try:
                 if self.source.port_in_use():
@@ -170,13 +180,14 @@ class VideoLive:
             except (av.error.FFmpegError, OSError) as e:
                 self.state = "waiting"
                 self._error(_reason(self.source, e, t_try, self.open_timeout_s))
-                self._stop.wait(backoff)
-                backoff = min(2.0 * backoff, self.retry_max_s)
+                if not isinstance(e, av.error.ExitError):  # a timeout already waited: listen again at once
+                    stop.wait(backoff)
+                    backoff = min(2.0 * backoff, self.retry_max_s)
                 continue
             frames_before = self.frames
             self.state = "open"  # opened; receiving from the first packet on
             try:
-                ended = self._receive(container, loop)
+                ended = self._receive(container, stop)
             except (av.error.FFmpegError, OSError) as e:
                 ended = _reason(self.source, e, t_try, self.read_timeout_s)
             except VideoError as e:
@@ -184,15 +195,15 @@ class VideoLive:
             finally:
                 container.close()
             if ended is None:  # the end of a file, or stopping
-                self.state = "ended" if not self._stop.is_set() else "stopped"
+                self.state = "ended" if not stop.is_set() else "stopped"
                 return
             self.state = "waiting"
             self._error(f"{ended}; reconnecting")
             if self.frames > frames_before:
                 backoff = RETRY_MIN_S
-            self._stop.wait(RETRY_MIN_S)
+            stop.wait(RETRY_MIN_S)
 
-    def _receive(self, container, loop: asyncio.AbstractEventLoop) -> str | None:
+    def _receive(self, container, stop: threading.Event) -> str | None:
         """Demux (in a thread of its own) and decode until the stream ends; a reason to reconnect, or None at a
         file's end or a stop. The demuxing thread has ended when this returns: the container can be closed."""
         if not container.streams.video:
@@ -207,25 +218,21 @@ class VideoLive:
                                    daemon=True)
         demuxer.start()
         try:
-            return self._decode(ctx, float(stream.time_base), packets, loop)
+            return self._decode(ctx, float(stream.time_base), packets, stop)
         finally:
             done.set()
             while demuxer.is_alive():  # it waits on a full queue, or on the network for read_timeout_s at most
                 _drain(packets)
                 demuxer.join(0.05)
 
-    def _decode(self, ctx, tb: float, packets: queue.Queue, loop: asyncio.AbstractEventLoop) -> str | None:
+    def _decode(self, ctx, tb: float, packets: queue.Queue, stop: threading.Event) -> str | None:
         self.clock = clock = ClockMap(window_s=CLOCK_WINDOW_S)
         first_recv: dict[int, float] = {}
-        while True:
+        while not stop.is_set():
             try:
                 item = packets.get(timeout=0.1)
             except queue.Empty:
-                if self._stop.is_set():
-                    return None
                 continue
-            if self._stop.is_set():
-                return None
             if isinstance(item, BaseException):
                 raise item
             if item is _END:
@@ -247,10 +254,12 @@ class VideoLive:
                 t_first = first_recv.pop(frame.pts, t_recv)
                 if behind:
                     self.skipped_behind += 1
-                elif not self._hand_over(frame, tb, clock, t_first, loop):
-                    return None
+                else:
+                    self._hand_over(frame, tb, clock, t_first)
             while len(first_recv) > 64:  # packets whose frame never came out (undecodable)
                 del first_recv[next(iter(first_recv))]
+        else:
+            return None  # stopping
         if not self.source.live:
             log.info("video: end of file %s after %d frames", self.url, self.frames)
             return None
@@ -263,7 +272,7 @@ class VideoLive:
         self.last_error = None
         log.info("video: receiving %s (connection %d)", self.url, self.connects)
 
-    def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float, loop) -> bool:
+    def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float) -> None:
         image = frame.to_ndarray(format="bgr24")
         h, w = image.shape[:2]
         if self.expected_size is not None and (w, h) != tuple(self.expected_size):
@@ -275,11 +284,7 @@ class VideoLive:
         self.last_recv = t_recv
         self._late_s.append(t_recv - t_slot)
         self._decode_s.append(time.time() - t_recv)
-        try:
-            loop.call_soon_threadsafe(self.on_frame, live)
-        except RuntimeError:  # loop closed: shutting down
-            return False
-        return True
+        self.handoff.put(live)
 
     def _error(self, why: str) -> None:
         if why != self.last_error:
@@ -301,4 +306,5 @@ class VideoLive:
                 "arrival_after_slot_ms": {"p50": p(late, 50), "p99": p(late, 99)},
                 "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},
                 "stream_offset_s": None if offset is None else round(offset, 6),
-                "error": self.last_error}
+                "error": self.last_error, **self.reader.status(),
+                "handoff": self.handoff.status() if self.handoff else None}

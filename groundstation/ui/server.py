@@ -53,6 +53,7 @@ log = logging.getLogger("skyfix.ui")
 STATIC = resources.files("groundstation.ui") / "static"
 COOKIE = "skyfix_token"
 STATE_PERIOD_S = 1.0
+WS_CLOSE_S = 0.5  # a stop waits this long for open pages to take the close
 RATE_WINDOW_S = 3.0
 COMMANDS = ("select", "release", "acquire")
 SECURITY_HEADERS = {
@@ -163,8 +164,9 @@ class WebUi:
                 tg.create_task(self.feed.run())
                 tg.create_task(self._push_state())
         finally:
-            for ws in list(self._sockets):
-                await ws.close()
+            closing = [asyncio.ensure_future(ws.close()) for ws in list(self._sockets)]
+            if closing:  # together, and not waiting for a page that does not answer
+                await asyncio.wait(closing, timeout=WS_CLOSE_S)
             if self._runner is not None:
                 await self._runner.cleanup()
 

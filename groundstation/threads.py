@@ -1,0 +1,158 @@
+"""The service's own threads and how their work reaches the event loop.
+
+- :class:`Handoff`: items crossing from a thread into the loop (MAVLink messages, video
+  frames, Zenoh samples) go into a bounded deque; one ``call_soon_threadsafe`` wakes the
+  loop for a whole batch, and when the loop falls behind the oldest items are dropped and
+  counted (``dropped``), never an unbounded pile of callbacks.
+- :class:`Supervised`: a thread that owns a link or a reader runs its body under
+  supervision: an unexpected exception (a bug, not the link's own I/O errors, which the
+  body handles) is logged in one line (the kind: exception type and where it was raised;
+  the same kind again only every 100th time) and the body restarts after a back-off
+  (:data:`RESTART_S` doubling to :data:`RESTART_MAX_S`, back to the start once it ran
+  :data:`STEADY_S`); ``restarts`` and ``failure`` go into the owner's status.
+- :func:`in_thread`: a blocking call in a daemon thread of its own, awaited from the loop.
+  Cancelling the await abandons the thread instead of waiting for it (a TCP connect or a
+  thread join cannot be interrupted), so a stop never waits for I/O; the thread ends by itself.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable
+
+from .logs import Throttle
+
+log = logging.getLogger("skyfix.threads")
+
+RESTART_S = 0.25
+RESTART_MAX_S = 5.0
+STEADY_S = 10.0
+
+
+class Handoff:
+    """Thread → event loop: :meth:`put` on any thread, ``consume(item)`` on the loop, at most ``maxlen`` waiting."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, consume: Callable, maxlen: int):
+        self.loop = loop
+        self.consume = consume
+        self.maxlen = maxlen
+        self.dropped = 0
+        self.handed = 0
+        self._items: deque = deque()
+        self._lock = threading.Lock()
+        self._scheduled = False
+        self.closed = False
+
+    def put(self, item) -> None:
+        with self._lock:
+            if len(self._items) >= self.maxlen:
+                self._items.popleft()
+                self.dropped += 1
+            self._items.append(item)
+            if self._scheduled:
+                return
+            self._scheduled = True
+        try:
+            self.loop.call_soon_threadsafe(self._drain)
+        except RuntimeError:  # the loop is closed: shutting down
+            pass
+
+    def _drain(self) -> None:
+        with self._lock:
+            items, self._items = self._items, deque()
+            self._scheduled = False
+        for item in items:
+            if self.closed:
+                return
+            self.handed += 1
+            self.consume(item)
+
+    def close(self) -> None:
+        """Hand nothing more over (the worker stopped; its thread may still be finishing)."""
+        self.closed = True
+
+    def status(self) -> dict:
+        return {"handed": self.handed, "dropped": self.dropped}
+
+
+def failure_kind(e: BaseException) -> str:
+    """An exception's kind: its type and the innermost place it was raised (``ValueError at video_live.py:123``)."""
+    tb = traceback.extract_tb(e.__traceback__)
+    where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
+    return f"{type(e).__name__}{where}"
+
+
+class Supervised:
+    """``body(stop)`` in a daemon thread named ``name``, restarted after an unexpected exception (see the module doc).
+
+    ``body`` returns when ``stop`` (a :class:`threading.Event`) is set or its work is done.
+    """
+
+    def __init__(self, name: str, body: Callable[[threading.Event], None]):
+        self.name = name
+        self.body = body
+        self.stop = threading.Event()
+        self.restarts = 0
+        self.failure: str | None = None
+        self._throttle = Throttle(first=1, every=100)
+        self.thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def _run(self) -> None:
+        wait_s = RESTART_S
+        while not self.stop.is_set():
+            t_start = time.monotonic()
+            try:
+                self.body(self.stop)
+                return
+            except Exception as e:  # noqa: BLE001 - any bug: one line, then the body again
+                kind = failure_kind(e)
+                self.failure = f"{kind}: {e}"
+                self.restarts += 1
+                if time.monotonic() - t_start >= STEADY_S:
+                    wait_s = RESTART_S
+                n = self._throttle(kind)
+                if n:
+                    log.error("%s thread failed (%s, #%d); restarting in %.2f s", self.name, self.failure, n, wait_s)
+                self.stop.wait(wait_s)
+                wait_s = min(2.0 * wait_s, RESTART_MAX_S)
+
+    def join(self, timeout_s: float) -> bool:
+        """Set ``stop`` and wait up to ``timeout_s`` for the thread; True if it ended."""
+        self.stop.set()
+        if self.thread.ident is not None:
+            self.thread.join(timeout_s)
+        return not self.thread.is_alive()
+
+    def status(self) -> dict:
+        return {"restarts": self.restarts, "failure": self.failure}
+
+
+async def in_thread(fn: Callable, *args, name: str = "skyfix-io"):
+    """``fn(*args)`` in a daemon thread of its own; its result or exception. Cancelling abandons the thread."""
+    loop = asyncio.get_running_loop()
+    done = loop.create_future()
+
+    def settle(ok: bool, value) -> None:
+        if not done.done():
+            (done.set_result if ok else done.set_exception)(value)
+
+    def main() -> None:
+        try:
+            result, ok = fn(*args), True
+        except BaseException as e:  # noqa: BLE001 - handed to the awaiting task
+            result, ok = e, False
+        try:
+            loop.call_soon_threadsafe(settle, ok, result)
+        except RuntimeError:  # the loop is gone: nobody waits any more
+            pass
+
+    threading.Thread(target=main, name=name, daemon=True).start()
+    return await done

@@ -1,0 +1,300 @@
+"""Live scenarios shared by ``tests/test_live_links.py`` (generous bounds) and ``bench/links.py`` (the 1 s
+requirement, several trials): ``skyfix run`` stopped by a signal whatever its inputs are doing, and its
+links cut and coming back. Real parts only: ``skyfix replay``, a pymavlink GPS_INPUT listener, a Zenoh
+router process, a depth publisher process, a TCP server that never answers RTSP.
+
+Times are measured from outside the service: the signal to the process's exit; an input's return (the
+replay's ``back`` event, the restarted router's or publisher's first moment) to the first valid GPS_INPUT
+the listener receives after it.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import tomllib
+from pathlib import Path
+
+from live_helpers import ROOT, free_port, read_jsonl, replay_shift, skyfix, start, wait_for
+
+from groundstation.mavlink_io import mavutil
+
+BUNDLED = ROOT / "sim_fixtures" / "bundled"
+SHUTDOWN_STATES = ("flowing", "udp_silent", "rtsp_silent", "mavlink_silent")
+LINK_INPUTS = ("mavlink", "depth", "router", "video")
+CUT_FROM_S = 3.0  # session seconds after the start
+CUT_S = {"mavlink": 10.0, "depth": 6.0, "router": 6.0, "video": 6.0}  # > the watchdog's 3 s + its 1 s period
+SESSION_S = 16.0  # the generated session: long enough for a 10 s MAVLink cut with fixes before and after
+SESSION_FPS = 15.0
+
+# A Zenoh router (the only router on PyPI is zenoh's own, in a Python session of mode "router"), its own process.
+ROUTER = r"""
+import json, sys, time, zenoh
+c = zenoh.Config()
+c.insert_json5("mode", '"router"')
+c.insert_json5("scouting/multicast/enabled", "false")
+c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+s = zenoh.open(c)
+print("ready", time.time(), flush=True)
+try:
+    while True:
+        time.sleep(1)
+finally:
+    s.close()
+"""
+
+# A UUV's depth publisher, its own process: the session's depth at (now − shift), 10 Hz, until killed.
+DEPTH_PUBLISHER = r"""
+import json, sys, time
+import numpy as np
+from groundstation.zenoh_session import open_session
+session_dir, shift, endpoint = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+rows = [json.loads(line) for line in open(session_dir + "/depth.jsonl") if line.strip()]
+t, d = np.array([r["t"] for r in rows]), np.array([r["depth_m"] for r in rows])
+z = open_session([endpoint])
+first = True
+try:
+    while True:
+        now = time.time()
+        z.put("uuv/depth", json.dumps({"t": now, "depth_m": float(np.interp(now - shift, t, d))}))
+        if first:
+            print("first", now, flush=True)
+            first = False
+        time.sleep(0.1)
+finally:
+    z.close()
+"""
+
+
+def start_router(endpoint: str) -> tuple[subprocess.Popen, float]:
+    """A router listening on ``endpoint``; the process and when it was ready (UNIX s)."""
+    proc = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdout=subprocess.PIPE, text=True)
+    word, t_ready = proc.stdout.readline().split()
+    assert word == "ready"
+    return proc, float(t_ready)
+
+
+def kill(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait()
+
+
+class GpsListener:
+    """The UUV's autopilot side of GPS_INPUT: a pymavlink ``udpin:`` endpoint; ``got`` holds (t_recv, fix_type)."""
+
+    def __init__(self, port: int):
+        self.conn = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=1, source_component=1)
+        self.got: list[tuple[float, int]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            msg = self.conn.recv_match(type="GPS_INPUT", blocking=True, timeout=0.1)
+            if msg is not None:
+                self.got.append((time.time(), msg.fix_type))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+        self.conn.close()
+
+    def first_valid_after(self, t: float) -> float | None:
+        return next((tr for tr, ft in list(self.got) if tr >= t and ft == 3), None)
+
+
+class SilentServer:
+    """A TCP server that accepts and never says a word (an RTSP camera that hangs); ``accepted`` counts."""
+
+    def __init__(self):
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self.accepted = 0
+        self._conns: list[socket.socket] = []
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn, _ = self.sock.accept()
+            except OSError:
+                return
+            self._conns.append(conn)
+            self.accepted += 1
+
+    def close(self) -> None:
+        self.sock.close()
+        for c in self._conns:
+            c.close()
+
+
+def _run_cmd(cal: Path, mav: str, video: str, uuv: int, *extra: str) -> list[str]:
+    return skyfix("run", "--calibration", str(cal), "--mavlink", mav, "--video", video, "--video-latency-ms", "0",
+                  "--gps-input", f"udpout:127.0.0.1:{uuv}", "--fix-max-age-ms", "500", *extra)
+
+
+def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
+    """``skyfix run`` in ``state`` (:data:`SHUTDOWN_STATES`), stopped by ``sig``: how long it took, its exit code,
+    and the GPS_INPUT the UUV got after the signal."""
+    session = BUNDLED / "nadir_hover"
+    tmp.mkdir(parents=True, exist_ok=True)
+    mav, video, uuv = free_port(), free_port(), free_port()
+    zenoh = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    video_url = f"udp://127.0.0.1:{video}"
+    server = SilentServer() if state == "rtsp_silent" else None
+    if server:
+        video_url = f"rtsp://127.0.0.1:{server.port}/camera?transport=tcp"
+    listener = GpsListener(uuv)
+    run_log = tmp / "run.log"
+    procs = []
+    try:
+        service = start(_run_cmd(session / "session.toml", f"udpin:127.0.0.1:{mav}", video_url, uuv,
+                                 "--zenoh-listen", zenoh), run_log)
+        procs.append(service)
+        wait_for(lambda: "skyfix run: UAV" in run_log.read_text(), 30, "the service to start")
+        if state in ("flowing", "mavlink_silent"):
+            mav_out = f"udpout:127.0.0.1:{mav if state == 'flowing' else free_port()}"  # nobody listens there
+            procs.append(start(skyfix("replay", str(session), "--mavlink-out", mav_out, "--video-out",
+                                      f"udp://127.0.0.1:{video}", "--zenoh-connect", zenoh, "--uuv-listen", ""),
+                               tmp / "replay.log"))
+            want = 3 if state == "flowing" else 1
+            wait_for(lambda: any(ft == want for _, ft in listener.got), 30, f"GPS_INPUT fix_type {want}")
+            if state == "mavlink_silent":
+                wait_for(lambda: "video: receiving" in run_log.read_text(), 30, "the video flowing")
+        elif state == "rtsp_silent":
+            wait_for(lambda: server.accepted > 0, 30, "the RTSP open pending")
+        else:
+            wait_for(lambda: "nothing received" in run_log.read_text(), 30, "a video open that timed out")
+            wait_for(lambda: len(listener.got) > 0, 30, "GPS_INPUT")
+        t_signal = time.time()
+        service.send_signal(sig)
+        try:
+            service.wait(30)
+        except subprocess.TimeoutExpired:
+            pass
+        exit_s = time.time() - t_signal if service.returncode is not None else None
+        time.sleep(0.2)  # a datagram sent just before the exit is still on its way through loopback
+        after = [ft for tr, ft in listener.got if tr >= t_signal]
+    finally:
+        for p in procs:
+            kill(p)
+        listener.close()
+        if server:
+            server.close()
+    return {"state": state, "signal": signal.Signals(sig).name, "exit_s": exit_s, "rc": service.returncode,
+            "gps_after_signal": after, "log": run_log.read_text()}
+
+
+def make_session(out: Path) -> Path:
+    """nadir_hover rendered for :data:`SESSION_S` s at :data:`SESSION_FPS` fps (once per directory)."""
+    if (out / "session.toml").exists():
+        return out
+    from sim_fixtures.generate import generate
+    from sim_fixtures.scenario import scenario_from_dict
+
+    text = (ROOT / "sim_fixtures" / "scenarios" / "nadir_hover.toml").read_text().replace(
+        "duration_s = 7.0", f"duration_s = {SESSION_S}\nfps = {SESSION_FPS}")
+    assert tomllib.loads(text)["fps"] == SESSION_FPS
+    generate(scenario_from_dict(tomllib.loads(text)), out, text)
+    return out
+
+
+class _Statuses:
+    """Every ``skyfix/status`` message (t_recv, message) seen by an own Zenoh session."""
+
+    def __init__(self, endpoint: str):
+        from groundstation.zenoh_session import open_session
+
+        self.got: list[tuple[float, dict]] = []
+        self.session = open_session([endpoint])
+        self.sub = self.session.declare_subscriber(
+            "skyfix/status", lambda s: self.got.append((time.time(), json.loads(s.payload.to_bytes()))))
+
+    def close(self) -> None:
+        self.sub.undeclare()
+        self.session.close()
+
+
+def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
+    """``skyfix run`` fed by ``skyfix replay`` of ``session``; ``which`` (:data:`LINK_INPUTS`) goes away
+    :data:`CUT_FROM_S` s into the session for :data:`CUT_S` s and comes back. Returned: when it went and came
+    back, the first valid GPS_INPUT after (``back_s``), the GPS_INPUT and the status's ``problems`` meanwhile."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    mav, video, uuv = free_port(), free_port(), free_port()
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    listener = GpsListener(uuv)
+    run_log, replay_log = tmp / "run.log", tmp / "replay.log"
+    procs, router, statuses = [], None, None
+    zenoh_args = ("--zenoh-listen", endpoint)
+    if which == "router":  # skyfix a client of a router, as on BlueOS; the replay a peer of it
+        router, _ = start_router(endpoint)
+        zenoh_args = ("--zenoh-config", str(ROOT / "deploy" / "zenoh" / "client.json5"), "--zenoh-connect", endpoint)
+    replay_extra = ["--cut", f"{which}:{CUT_FROM_S}:{CUT_S[which]}"] if which in ("mavlink", "video") else []
+    if which == "depth":
+        replay_extra = ["--cut", f"depth:0:{SESSION_S + 10}"]  # the depth comes from its own publisher
+    try:
+        service = start(_run_cmd(session / "session.toml", f"udpin:127.0.0.1:{mav}", f"udp://127.0.0.1:{video}",
+                                 uuv, *zenoh_args), run_log)
+        procs.append(service)
+        wait_for(lambda: "skyfix run: UAV" in run_log.read_text(), 30, "the service to start")
+        statuses = _Statuses(endpoint)
+        wait_for(lambda: statuses.got, 30, "the service's status on Zenoh")
+        replay = start(skyfix("replay", str(session), "--mavlink-out", f"udpout:127.0.0.1:{mav}", "--video-out",
+                              f"udp://127.0.0.1:{video}", "--zenoh-connect", endpoint, "--uuv-listen", "",
+                              "--lead-s", "0.5", *replay_extra), replay_log)
+        procs.append(replay)
+        shift = replay_shift(replay_log)
+        t_start = json.loads(replay_log.read_text().splitlines()[0])["t_start"]
+        publisher = None
+        if which == "depth":
+            publisher = subprocess.Popen([sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
+                                         stdout=subprocess.PIPE, text=True, cwd=ROOT)
+            procs.append(publisher)
+        t_cut, t_return = t_start + CUT_FROM_S, t_start + CUT_FROM_S + CUT_S[which]
+        wait_for(lambda: time.time() >= t_cut, 60, "the cut")
+        if which == "depth":
+            kill(publisher)
+        elif which == "router":
+            kill(router)
+        wait_for(lambda: time.time() >= t_return, 60, "the end of the cut")
+        if which == "depth":
+            publisher = subprocess.Popen([sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
+                                         stdout=subprocess.PIPE, text=True, cwd=ROOT)
+            procs.append(publisher)
+            _, t_back = publisher.stdout.readline().split()
+            t_back = float(t_back)
+        elif which == "router":
+            router, t_back = start_router(endpoint)
+        else:
+            def back() -> float | None:
+                return next((r["t"] for r in read_jsonl(replay_log) if r.get("event") == "back"), None)
+
+            wait_for(lambda: back() is not None, 30, f"{which} back")
+            t_back = back()
+        wait_for(lambda: listener.first_valid_after(t_back) is not None, 20, "a valid GPS_INPUT after the return")
+        t_valid = listener.first_valid_after(t_back)
+        replay.wait(30)
+        service.send_signal(signal.SIGINT)
+        service.wait(30)
+    finally:
+        for p in procs:
+            kill(p)
+        if statuses:
+            statuses.close()
+        if router:
+            kill(router)
+        listener.close()
+    named = {"mavlink": "uav", "depth": "depth", "router": "zenoh", "video": "video"}[which]
+    missing = [(t, st["problems"]) for t, st in statuses.got if t_cut + 4.5 <= t < t_return]  # none via a lost router
+    gone = [ft for tr, ft in listener.got if t_cut + 2.5 <= tr < t_back]
+    return {"input": which, "back_s": t_valid - t_back, "t_cut": t_cut, "t_back": t_back, "rc": service.returncode,
+            "named": named, "problems_while_missing": missing, "gps_while_missing": gone,
+            "valid_before_cut": sum(ft == 3 for tr, ft in listener.got if tr < t_cut),
+            "log": run_log.read_text()}
