@@ -42,6 +42,10 @@ SESSIONS = [Path(os.environ["SKYFIX_LIVE_SESSION"])] if "SKYFIX_LIVE_SESSION" in
     BUNDLED / "nadir_hover", BUNDLED / "clock_offset"]
 # Glass to first packet of this replay chain: the replay sends each frame at its exposure time.
 VIDEO_LATENCY_MS = 0
+#: Share of the frames that must get a fix. A loaded machine (CI: two cores, other jobs) gets fewer: the service
+#: skips frames while its decoder is behind and drops them while the tracker is, rather than send late fixes.
+#: The share on a quiet machine is bench/live_latency.py's business; here every fix made must be right.
+MIN_SHARE = 0.6
 
 
 def _offline_mae(session: Path) -> float:
@@ -93,11 +97,11 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
     # Fixes over Zenoh, seen by an independent process
     samples = read_jsonl(sub_out)
     fixes = [s for s in samples if s["key"] == "skyfix/uuv/fix"]
-    assert len(fixes) >= 0.8 * n_frames, f"{len(fixes)} fixes for {n_frames} frames\n{run_log[-3000:]}"
+    assert len(fixes) >= MIN_SHARE * n_frames, f"{len(fixes)} fixes for {n_frames} frames\n{run_log[-3000:]}"
     assert all(s["encoding"] == "application/json" and s["timestamp"] for s in fixes)
     fix = [json.loads(s["payload"]) for s in fixes]
     ok = [f for f in fix if f["status"] == "ok"]
-    assert len(ok) >= 0.8 * n_frames, {f["status"] for f in fix}
+    assert len(ok) >= MIN_SHARE * n_frames, {f["status"] for f in fix}
     err = truth_errors_m(SESSION, np.array([f["t"] for f in ok]) - shift, np.array([f["lat"] for f in ok]),
                     np.array([f["lon"] for f in ok]))
     offline = _offline_mae(SESSION)
@@ -144,7 +148,7 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
 
     # The recording is a session that loads, and that skyfix process tracks from where the live run started
     rec = load_session(record)
-    assert len(rec.telemetry.attitude) > 100 and rec.frames is not None and len(rec.frames["t"]) > 0.8 * n_frames
+    assert len(rec.telemetry.attitude) > 100 and rec.frames is not None and len(rec.frames["t"]) > MIN_SHARE * n_frames
     assert rec.calibration.init_t == ok[0]["t"]  # the live run's first fix, not the calibration file's init_t
     for use_track in (True, False):
         fixes = process_session(rec, use_track=use_track)
