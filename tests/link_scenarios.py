@@ -180,7 +180,11 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
         except subprocess.TimeoutExpired:
             pass
         exit_s = time.time() - t_signal if service.returncode is not None else None
-        time.sleep(0.2)  # a datagram sent just before the exit is still on its way through loopback
+        # the last GPS_INPUT, sent just before the exit, may still be on its way through loopback: wait for a
+        # no-fix after the signal (the test then asserts it is the last), for 2 s at most
+        deadline = time.time() + 2.0
+        while time.time() < deadline and not any(tr >= t_signal and ft < 2 for tr, ft in listener.got):
+            time.sleep(0.02)
         after = [ft for tr, ft in listener.got if tr >= t_signal]
     finally:
         for p in procs:
