@@ -37,7 +37,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation as Rot
-from scipy.spatial.transform import Slerp
 
 from localizer.calibration import Calibration
 from localizer.pose import camera_pose
@@ -77,23 +76,54 @@ class OffsetEstimate:
 
 class AttitudeTrack:
     """The camera's attitude (``R_ned_from_cv``) sampled every :data:`TRACK_STEP_S` from ``t_from`` to ``t_to``
-    where the telemetry gives a pose; rotations between any two times inside by interpolation."""
+    where the telemetry gives a pose; rotations between any two times inside by interpolation.
 
-    def __init__(self, cal: Calibration, tel: Telemetry, t_from: float, t_to: float):
+    Plain numpy on quaternions (scalar last), not scipy's ``Slerp``: an estimate asks for some
+    20 000 relative rotations a second, and scipy's rotation objects hold the GIL for tens of
+    milliseconds doing it, stalling the decoder and the tracker behind them.
+    """
+
+    def __init__(self, t: np.ndarray, R_ned_from_cv: np.ndarray):
+        """Samples at increasing times ``t`` (s) of the camera's attitude, rotation matrices (N, 3, 3)."""
+        self.t = np.asarray(t, dtype=float)
+        q = Rot.from_matrix(R_ned_from_cv).as_quat() if len(self.t) else np.empty((0, 4))
+        # each sample in the hemisphere of the one before, so that neighbours interpolate the short way
+        sign = np.cumprod(np.where(np.sum(q[1:] * q[:-1], axis=1) < 0.0, -1.0, 1.0))
+        self._q = q * np.concatenate([[1.0], sign])[:, None]
+
+    @classmethod
+    def from_telemetry(cls, cal: Calibration, tel: Telemetry, t_from: float, t_to: float) -> AttitudeTrack:
+        """Sampled every :data:`TRACK_STEP_S` from ``t_from`` to ``t_to`` (s) where the telemetry gives a pose."""
         times = np.arange(t_from, t_to, TRACK_STEP_S)
         pose = camera_pose(cal, tel, times) if len(times) else None
-        ok = np.zeros(len(times), bool) if pose is None else (
-            (pose.status == "ok") & np.all(np.isfinite(pose.R_ned_from_cv), axis=(1, 2)))
-        self.t = times[ok]
-        self._slerp = Slerp(self.t, Rot.from_matrix(pose.R_ned_from_cv[ok])) if ok.sum() >= 2 else None
+        if pose is None:
+            return cls(times[:0], np.empty((0, 3, 3)))
+        ok = (pose.status == "ok") & np.all(np.isfinite(pose.R_ned_from_cv), axis=(1, 2))
+        return cls(times[ok], pose.R_ned_from_cv[ok])
 
     @property
     def ready(self) -> bool:
-        return self._slerp is not None
+        return len(self.t) >= 2
+
+    def _at(self, t: np.ndarray) -> np.ndarray:
+        """Unit quaternions at times inside the track: normalised linear interpolation between the
+        neighbouring samples (:data:`TRACK_STEP_S` apart, where it is slerp to far below a microradian)."""
+        i = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 2)
+        w = ((t - self.t[i]) / (self.t[i + 1] - self.t[i]))[:, None]
+        q = self._q[i] * (1.0 - w) + self._q[i + 1] * w
+        return q / np.linalg.norm(q, axis=1, keepdims=True)
 
     def relative(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
         """Rotation vectors of ``R_cv1_from_cv0`` = R(t1)ᵀ R(t0), for arrays of times inside the track."""
-        return (self._slerp(t1).inv() * self._slerp(t0)).as_rotvec()
+        a, b = self._at(t1), self._at(t0)
+        av, aw, bv, bw = -a[:, :3], a[:, 3:], b[:, :3], b[:, 3:]  # conj(a) ⊗ b, Hamilton product
+        v = aw * bv + bw * av + np.cross(av, bv)
+        w = aw * bw - np.sum(av * bv, axis=1, keepdims=True)
+        v = np.where(w < 0.0, -v, v)  # the same rotation, by the shorter way
+        n = np.linalg.norm(v, axis=1, keepdims=True)
+        angle_per_n = np.where(n > 1e-12, 2.0 * np.arctan2(n, np.abs(w)) / np.maximum(n, 1e-300),
+                               2.0 / np.maximum(np.abs(w), 1e-300))
+        return v * angle_per_n
 
 
 def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets: np.ndarray) -> OffsetEstimate | None:
@@ -172,7 +202,7 @@ def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[OffsetEstim
                     rotations.append(r)
     except VideoError as e:
         raise SessionError(str(e)) from None
-    track = AttitudeTrack(cal, session.telemetry, float(t[0]) - search_s - 0.1, float(t[-1]) + search_s + 0.1)
+    track = AttitudeTrack.from_telemetry(cal, session.telemetry, float(t[0]) - search_s - 0.1, float(t[-1]) + search_s + 0.1)
     offsets = np.arange(-search_s, search_s + OFFSET_STEP_S / 2, OFFSET_STEP_S)
     return estimate_offset(rotations, track, offsets), len(rotations) + 1
 
@@ -247,7 +277,7 @@ class OnlineLatency:
             if not self._rotations:
                 continue
             # sampled anew each time: the telemetry's alignment to the station clock sharpens as it comes
-            track = AttitudeTrack(self.cal, tel, self._rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3)
+            track = AttitudeTrack.from_telemetry(self.cal, tel, self._rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3)
             estimate = estimate_offset(list(self._rotations), track, self.offsets)
             if estimate is not None:
                 self.estimate = estimate

@@ -19,8 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_helpers import ROOT, free_port, read_jsonl, skyfix, start, stop, truth_errors_m
+from scipy.spatial.transform import Rotation as Rot
+from scipy.spatial.transform import Slerp
 
-from groundstation.latency_estimate import OffsetEstimate, OnlineLatency
+from groundstation.latency_estimate import AttitudeTrack, OffsetEstimate, OnlineLatency
 from groundstation.session import load_session, read_table
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import scenario_from_dict
@@ -151,3 +153,37 @@ def test_a_wrong_configured_latency_is_warned_about(caplog):
         online._judge(OffsetEstimate(offset_s, 0.004, 210, 0.1))
     lines = [r.getMessage() for r in caplog.records if "not the configured" in r.getMessage()]
     assert len(lines) == 1 and "79 ± 4 ms" in lines[0] and "configured 0 ms" in lines[0]
+
+
+def _rodrigues(rotvec: np.ndarray) -> np.ndarray:
+    """Rotation matrices of rotation vectors (N, 3), written out here (Rodrigues' formula)."""
+    angle = np.linalg.norm(rotvec, axis=1)
+    k = rotvec / angle[:, None]
+    kx = np.zeros((len(k), 3, 3))
+    kx[:, 0, 1], kx[:, 0, 2], kx[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    kx -= kx.transpose(0, 2, 1)
+    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3) + s * kx + (1 - c) * kx @ kx
+
+
+def test_attitude_track_relative_rotations():
+    """The track's relative rotations R(t1)ᵀ R(t0) between and on its samples, against rotations
+    worked out independently: a steady turn of 4 rad/s about a fixed axis (through ±π, where the
+    quaternions of neighbouring samples change sign) has R(t1)ᵀ R(t0) = a turn of −4 (t1 − t0) rad;
+    a wobble about two axes is checked against scipy's Slerp on the same samples."""
+    rng = np.random.default_rng(3)
+    t = 0.01 + np.arange(0.0, 2.0, 0.005)  # no zero angle: the formula divides by it
+    axis = np.array([0.6, -0.48, 0.64])
+    track = AttitudeTrack(t, _rodrigues(4.0 * t[:, None] * axis))
+    t0 = rng.uniform(0.01, 1.8, 2000)
+    t1 = t0 + rng.uniform(0.0, 0.15, 2000)
+    expected = -4.0 * (t1 - t0)[:, None] * axis
+    assert np.abs(track.relative(t0, t1) - expected).max() < 1e-6
+    assert np.abs(track.relative(t[10:20], t[30:40]) - (-4.0 * 0.1 * axis)).max() < 1e-9
+
+    wobble = np.stack([0.8 * np.sin(3.0 * t), 0.5 * np.cos(2.0 * t), 0.3 + 0.0 * t], axis=1)
+    R = _rodrigues(wobble)
+    track = AttitudeTrack(t, R)
+    slerp = Slerp(t, Rot.from_matrix(R))
+    expected = (slerp(t1).inv() * slerp(t0)).as_rotvec()
+    assert np.abs(track.relative(t0, t1) - expected).max() < 1e-6
