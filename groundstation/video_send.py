@@ -19,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import av
+import av.bitstream
 
 COPY_CODECS = ("h264", "hevc", "mpeg2video")
 # each PES with its length, and every frame's packets sent at once (not its tail held until the next frame's)
@@ -38,16 +39,29 @@ def _open_output(url: str):
     return av.open(f"{url}{sep}pkt_size=1316", "w", format="mpegts", options=MPEGTS_OPTIONS)
 
 
+def _annexb_filter(stream, ost, out):
+    """For RTP, H.264/H.265 from an MP4 (parameter sets only in the header) put in the stream before each
+    keyframe, as cameras send them: a receiver without them in its session description (QGroundControl's
+    convention, skyfix's own) cannot decode otherwise. None where nothing is to be done."""
+    name = stream.codec_context.name
+    extradata = stream.codec_context.extradata or b""
+    if out.format.name != "rtp" or name not in ("h264", "hevc") or not extradata.startswith(b"\x01"):
+        return None
+    return av.bitstream.BitStreamFilterContext(f"{name}_mp4toannexb", stream, ost)
+
+
 def _packets(container, stream, out):
     """``(pts seconds, packet for out)`` in decoding order: copied, or re-encoded to H.264."""
     tb = float(stream.time_base)
     if stream.codec_context.name in COPY_CODECS:
         ost = out.add_stream_from_template(stream)
+        annexb = _annexb_filter(stream, ost, out)
         for packet in container.demux(stream):
             if packet.dts is None or packet.pts is None:
                 continue
-            packet.stream = ost
-            yield packet.pts * tb, packet
+            for p in [packet] if annexb is None else annexb.filter(packet):
+                p.stream = ost
+                yield p.pts * tb, p
         return
     ost = out.add_stream("libx264", options={"preset": "ultrafast", "tune": "zerolatency"})
     ost.width, ost.height, ost.pix_fmt = stream.codec_context.width, stream.codec_context.height, "yuv420p"

@@ -125,6 +125,71 @@ def test_rtp_without_sdp_file(clips, codec):
     _check_timing(rx.frames)
 
 
+def _small_gray(image) -> np.ndarray:
+    import cv2
+
+    gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    return cv2.resize(gray, (80, 60), interpolation=cv2.INTER_AREA).astype(np.float32)
+
+
+@pytest.mark.parametrize("scheme", ["udp", "rtp", "rtp-from-mp4"])
+def test_stream_slot_is_when_the_frame_was_sent(clips, scheme, tmp_path):
+    """Each frame's stream slot is when its packets left the sender: sent in-process at known times
+    (slot = start + PTS after the first), and each frame received recognised by its image among the
+    clip's (not by count or timestamp). Over RTP, FFmpeg hands an H.264 access unit over only when
+    the next one starts: timed by its hand-over, every frame was one frame interval (33 ms) late.
+    ``rtp-from-mp4``: ``skyfix replay`` of an MP4 (parameter sets in its header only) over RTP puts
+    them in the stream, as a camera does, or nothing could be decoded."""
+    import av
+
+    from groundstation.video_send import send_video
+
+    clip_file = clips["h264"]
+    if scheme == "rtp-from-mp4":
+        clip_file = tmp_path / "clip.mp4"
+        subprocess.run(["ffmpeg", "-v", "error", "-i", str(clips["h264"]), "-c:v", "libx264", "-preset", "ultrafast",
+                        "-tune", "zerolatency", "-g", "15", str(clip_file)], check=True, timeout=60)
+    with av.open(str(clip_file)) as c:
+        clip = [(f.time, _small_gray(f.to_ndarray(format="gray"))) for f in c.decode(video=0)]
+    times = np.array([t for t, _ in clip]) - clip[0][0]
+    images = np.array([img for _, img in clip])
+    port = next(p for p in range(free_port() & ~1, 65534, 2) if _pair_free(p))
+    url = f"udp://127.0.0.1:{port}" if scheme == "udp" else f"rtp://127.0.0.1:{port}?codec=h264"
+    stop_ = threading.Event()
+    with Receiver(url) as rx:
+        wait_for(lambda: rx.status()["state"] != "starting", 10, "the receiver to start")
+        t0 = time.time() + 0.5
+        sender = threading.Thread(target=send_video, args=(clip_file, url.split("?")[0], t0, stop_))
+        sender.start()
+        try:
+            wait_for(lambda: len(rx.frames) >= 240, 30, f"240 frames over {scheme}")
+        finally:
+            stop_.set()
+            sender.join(10)
+        status = rx.status()
+    assert status["decode_errors"] == 0 and status["failure"] is None, status
+    late_ms = []
+    for f in rx.frames:
+        k = int(np.argmin(np.mean((images - _small_gray(f.image)) ** 2, axis=(1, 2))))
+        late_ms.append((f.t_slot - (t0 + times[k])) * 1000.0)
+    settled = np.array(late_ms[FPS:])  # after the first second: the connection's first packets are stamped late
+    print(f"{scheme}: {len(late_ms)} frames, slot − send time p50 {np.median(settled):.2f} ms, "
+          f"range {settled.min():.2f} … {settled.max():.2f} ms")
+    assert abs(np.median(settled)) <= 5.0
+    assert np.abs(settled).max() <= 15.0
+
+
+def _pair_free(port: int) -> bool:
+    """Whether UDP ``port`` and ``port + 1`` (RTP and its RTCP) are free on 127.0.0.1."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as a, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as b:
+        try:
+            a.bind(("127.0.0.1", port))
+            b.bind(("127.0.0.1", port + 1))
+        except OSError:
+            return False
+    return True
+
+
 def test_sdp_file_camera_late_and_pausing(clips, tmp_path, caplog):
     """A hand-written .sdp; the camera starts 12 s after skyfix, sends 3 s, pauses 4 s, sends 3 s again."""
     port = free_port()

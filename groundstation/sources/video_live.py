@@ -28,7 +28,11 @@ The packets read while a connection is being opened are stamped when the open
 returns, late: the first frames of a connection may be late by that much until a
 packet read live lowers the offset (so a slot may be earlier than the one before
 it just after a connection starts). A frame without a PTS (RTP's first access
-unit may lose it) takes its arrival as its slot.
+unit may lose it) takes its arrival as its slot. H.264/H.265 over RTP (and RTSP)
+reach skyfix one frame late: FFmpeg ends an access unit only when the next one
+starts, so an access unit's arrival is taken as the hand-over of the one before
+it (timed as if it came when it was handed over, every frame was a frame interval
+late: 33 ms at 30 fps, centimetres on a moving UAV).
 
 Failures: a stream that cannot be opened (refused, a port another program holds)
 is retried with back-off from :data:`RETRY_MIN_S` to ``retry_max_s``; one that
@@ -72,6 +76,7 @@ PACKET_BACKLOG = 120  # packets read but not yet decoded, at most (4 s at 30 fps
 BEHIND_PACKETS = 2  # live: with more than this many packets waiting, decoded frames are skipped
 HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
 READER_STOP_S = 0.3  # a stop waits this long for the reader thread
+RTP_KINDS = ("rtp", "sdp", "rtsp")  # inputs FFmpeg depacketizes from RTP
 
 
 @dataclass
@@ -217,17 +222,24 @@ class VideoLive:
         demuxer = threading.Thread(target=_demux, args=(container, stream, packets, done), name="video-demux",
                                    daemon=True)
         demuxer.start()
+        ends_at_next = self.source.kind in RTP_KINDS and ctx.name in ("h264", "hevc")
         try:
-            return self._decode(ctx, float(stream.time_base), packets, stop)
+            return self._decode(ctx, float(stream.time_base), packets, stop, ends_at_next)
         finally:
             done.set()
             while demuxer.is_alive():  # it waits on a full queue, or on the network for read_timeout_s at most
                 _drain(packets)
                 demuxer.join(0.05)
 
-    def _decode(self, ctx, tb: float, packets: queue.Queue, stop: threading.Event) -> str | None:
+    def _decode(self, ctx, tb: float, packets: queue.Queue, stop: threading.Event, ends_at_next: bool) -> str | None:
+        """Decode and hand over frames. ``ends_at_next``: the demuxer hands an access unit over when the next
+        one's first packet comes (FFmpeg's H.264/H.265 RTP depacketizer ignores the marker bit that ends a
+        frame, and its parser waits for the next frame's start): an access unit's own first packet then
+        came when the one before it was handed over, and its slot is timed by that."""
         self.clock = clock = ClockMap(window_s=CLOCK_WINDOW_S)
         first_recv: dict[int, float] = {}
+        connected = False
+        previous_out: float | None = None  # ends_at_next: when the previous access unit was handed over
         while not stop.is_set():
             try:
                 item = packets.get(timeout=0.1)
@@ -238,11 +250,16 @@ class VideoLive:
             if item is _END:
                 break
             packet, t_recv = item
-            if clock.offset_s is None:
+            if not connected:
+                connected = True
                 self._connected()
             if packet.pts is not None:
-                clock.add(packet.pts * tb, t_recv)
-                first_recv.setdefault(packet.pts, t_recv)
+                t_first: float | None = t_recv
+                if ends_at_next:
+                    t_first, previous_out = previous_out, t_recv
+                if t_first is not None:
+                    clock.add(packet.pts * tb, t_first)
+                    first_recv.setdefault(packet.pts, t_first)
             try:
                 decoded = ctx.decode(packet)
             except av.error.InvalidDataError:
@@ -254,8 +271,9 @@ class VideoLive:
                 t_first = first_recv.pop(frame.pts, t_recv)
                 if behind:
                     self.skipped_behind += 1
-                else:
+                elif frame.pts is None or clock.offset_s is not None:
                     self._hand_over(frame, tb, clock, t_first)
+                # else: RTP's first access unit, whose first packet's arrival (and so its time) is unknown
             while len(first_recv) > 64:  # packets whose frame never came out (undecodable)
                 del first_recv[next(iter(first_recv))]
         else:
