@@ -236,6 +236,15 @@ class MotionLatencyStatus(Section):
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
+class RtpStatus(Section):
+    """An ``rtp://`` input, depacketized by skyfix: what the network lost, since the start."""
+
+    lost_packets: int = Field(description="RTP sequence numbers never received")
+    dropped_frames: int = Field(description="frames not decoded: damaged by a loss, or depending on one that was "
+                                            "(until the next keyframe)")
+    bad_packets: int = Field(description="datagrams that are not RTP of the configured payload type")
+
+
 class VideoStatus(Section):
     """The UAV's video stream."""
 
@@ -257,6 +266,7 @@ class VideoStatus(Section):
     restarts: int = Field(0, description="times the reader thread failed (a bug) and started over")
     failure: str | None = Field(None, description="the last such failure: its kind and message")
     handoff: HandoffStatus | None = Field(None, description="frames from the reader thread")
+    rtp: RtpStatus | None = Field(None, description="rtp:// inputs only")
 
 
 class GpsInputStatus(Section):

@@ -3,7 +3,7 @@
 | ``--video`` | kind | opened as |
 |---|---|---|
 | ``udp://HOST:PORT`` | udp | MPEG-TS over UDP |
-| ``rtp://HOST:PORT?codec=h264\\|h265[&pt=96]`` | rtp | RTP without a session description: skyfix writes the SDP (QGroundControl/BlueOS send H.264 RTP to 5600) |
+| ``rtp://HOST:PORT?codec=h264\\|h265[&pt=96]`` | rtp | RTP without a session description (QGroundControl/BlueOS send H.264 RTP to 5600), depacketized by skyfix (:mod:`.rtp_receive`), decoded by FFmpeg |
 | ``FILE.sdp`` | sdp | the RTP stream the file describes, live |
 | ``rtsp://…[?transport=tcp\\|udp]`` | rtsp | RTSP, over TCP or UDP (default: FFmpeg tries UDP first) |
 | ``/dev/videoN``, ``v4l2:N`` ``[?video_size=WxH&framerate=F&input_format=mjpeg]`` | v4l2 | a V4L2 camera |
@@ -20,7 +20,6 @@ from __future__ import annotations
 import errno
 import re
 import socket
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
@@ -37,7 +36,7 @@ LOW_DELAY = {"probesize": "32", "analyzeduration": "0"}
 # which holds each frame until the next one starts, a frame is handed over as soon as its PES is in.
 UDP_OPTIONS = {"overrun_nonfatal": "1", "buffer_size": str(4 << 20), "fflags": "+noparse"}
 RTP_OPTIONS = {"protocol_whitelist": "file,udp,rtp", "max_delay": "0", "reorder_queue_size": "0"}
-RTP_CODECS = {"h264": "H264", "h265": "H265", "hevc": "H265"}
+RTP_CODECS = ("h264", "h265", "hevc")
 V4L2_KEYS = ("video_size", "framerate", "input_format", "pixel_format", "standard")
 
 
@@ -51,6 +50,8 @@ class VideoInput:
     format: str | None = None
     options: dict[str, str] = field(default_factory=dict)
     port: int | None = None  # the local UDP port it binds (udp, rtp), for "in use" messages
+    codec: str | None = None  # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp_receive`; ``file`` the address)
+    payload_type: int | None = None  # rtp
 
     @property
     def live(self) -> bool:
@@ -82,12 +83,6 @@ def _port(url: str, parts) -> int:
     return port
 
 
-def rtp_sdp(host: str, port: int, codec: str, pt: int) -> str:
-    """A session description for one RTP video stream arriving on ``port``."""
-    return (f"v=0\r\no=- 0 0 IN IP4 {host}\r\ns=skyfix\r\nc=IN IP4 {host}\r\nt=0 0\r\n"
-            f"m=video {port} RTP/AVP {pt}\r\na=rtpmap:{pt} {RTP_CODECS[codec]}/90000\r\n")
-
-
 def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
     port = _port(url, parts)
     codec = query.pop("codec", "h264").lower()
@@ -98,9 +93,8 @@ def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
         raise VideoError(f"{url}: pt={pt_text} is not a dynamic RTP payload type (96 … 127)")
     if query:
         raise VideoError(f"{url}: unknown option {next(iter(query))} (known: codec, pt)")
-    sdp = Path(tempfile.mkdtemp(prefix="skyfix-rtp-")) / f"rtp_{port}.sdp"
-    sdp.write_text(rtp_sdp(parts.hostname or "0.0.0.0", port, codec, int(pt_text)))
-    return VideoInput(url, "rtp", str(sdp), "sdp", {**LOW_DELAY, **RTP_OPTIONS}, port)
+    return VideoInput(url, "rtp", parts.hostname or "0.0.0.0", None, {}, port, "h265" if codec == "hevc" else codec,
+                      int(pt_text))
 
 
 def _sdp_port(path: Path) -> int | None:

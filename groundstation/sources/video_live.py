@@ -63,6 +63,7 @@ from localizer.clock import ClockMap
 from ..ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
 from ..threads import Handoff, Supervised, in_thread
 from ..video import VideoError, ffmpeg_reason, put_until
+from .rtp_receive import RtpInput
 from .video_inputs import VideoInput, parse_video_input
 
 log = logging.getLogger("skyfix.video")
@@ -76,7 +77,7 @@ PACKET_BACKLOG = 120  # packets read but not yet decoded, at most (4 s at 30 fps
 BEHIND_PACKETS = 2  # live: with more than this many packets waiting, decoded frames are skipped
 HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
 READER_STOP_S = 0.3  # a stop waits this long for the reader thread
-RTP_KINDS = ("rtp", "sdp", "rtsp")  # inputs FFmpeg depacketizes from RTP
+RTP_KINDS = ("sdp", "rtsp")  # inputs FFmpeg depacketizes from RTP (rtp://: skyfix itself, .rtp_receive)
 
 
 @dataclass
@@ -123,7 +124,7 @@ def _reason(source: VideoInput, e: Exception, t_try: float, timeout_s: float) ->
     code = getattr(e, "errno", None)
     if code == errno.EADDRINUSE:
         return f"{source.url}: UDP port {source.port} is already in use by another program"
-    if isinstance(e, av.error.ExitError):
+    if isinstance(e, (av.error.ExitError, TimeoutError)):
         text = f"{source.url}: nothing received for {timeout_s:g} s"
     else:
         text = f"{source.url}: {ffmpeg_reason(e)}"
@@ -160,6 +161,8 @@ class VideoLive:
         self._decode_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv → frame handed over
         self.handoff: Handoff | None = None
         self.reader = Supervised("video", self._read)
+        self._rtp: RtpInput | None = None  # the open rtp:// input
+        self._rtp_before = {"lost_packets": 0, "dropped_frames": 0, "bad_packets": 0}  # its predecessors'
 
     async def run(self) -> None:
         route_ffmpeg_log()
@@ -179,9 +182,7 @@ class VideoLive:
             try:
                 if self.source.port_in_use():
                     raise OSError(errno.EADDRINUSE, "port in use")
-                container = av.open(self.source.file, format=self.source.format,
-                                    container_options=self.source.options,
-                                    timeout=(self.open_timeout_s, self.read_timeout_s))
+                container = self._open()
             except (av.error.FFmpegError, OSError) as e:
                 self.state = "waiting"
                 self._error(_reason(self.source, e, t_try, self.open_timeout_s))
@@ -199,6 +200,9 @@ class VideoLive:
                 ended = str(e)
             finally:
                 container.close()
+                if self._rtp is not None:
+                    self._rtp_before = self._rtp_counts()
+                    self._rtp = None
             if ended is None:  # the end of a file, or stopping
                 self.state = "ended" if not stop.is_set() else "stopped"
                 return
@@ -207,6 +211,14 @@ class VideoLive:
             if self.frames > frames_before:
                 backoff = RETRY_MIN_S
             stop.wait(RETRY_MIN_S)
+
+    def _open(self):
+        src = self.source
+        if src.kind == "rtp":
+            self._rtp = RtpInput(src.file, src.port, src.codec, src.payload_type, self.read_timeout_s)
+            return self._rtp
+        return av.open(src.file, format=src.format, container_options=src.options,
+                       timeout=(self.open_timeout_s, self.read_timeout_s))
 
     def _receive(self, container, stop: threading.Event) -> str | None:
         """Demux (in a thread of its own) and decode until the stream ends; a reason to reconnect, or None at a
@@ -309,6 +321,14 @@ class VideoLive:
             log.warning("video: %s", why)
         self.last_error = why
 
+    def _rtp_counts(self) -> dict:
+        """What the network lost on ``rtp://``, since the start (all connections)."""
+        if self._rtp is None:
+            return dict(self._rtp_before)
+        d = self._rtp.depacketizer
+        now = {"lost_packets": d.lost_packets, "dropped_frames": d.dropped_units, "bad_packets": d.bad_packets}
+        return {k: self._rtp_before[k] + now[k] for k in now}
+
     def status(self, now: float) -> dict:
         age = None if self.last_recv is None else round(max(0.0, now - self.last_recv), 3)
 
@@ -325,4 +345,5 @@ class VideoLive:
                 "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},
                 "stream_offset_s": None if offset is None else round(offset, 6),
                 "error": self.last_error, **self.reader.status(),
-                "handoff": self.handoff.status() if self.handoff else None}
+                "handoff": self.handoff.status() if self.handoff else None,
+                "rtp": self._rtp_counts() if self.source.kind == "rtp" else None}
