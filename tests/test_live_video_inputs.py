@@ -13,6 +13,7 @@ import socket
 import subprocess
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -132,12 +133,13 @@ def _small_gray(image) -> np.ndarray:
     return cv2.resize(gray, (80, 60), interpolation=cv2.INTER_AREA).astype(np.float32)
 
 
-@pytest.mark.parametrize("scheme", ["udp", "rtp", "rtp-from-mp4"])
+@pytest.mark.parametrize("scheme", ["udp", "rtp", "rtp-from-mp4", "sdp"])
 def test_stream_slot_is_when_the_frame_was_sent(clips, scheme, tmp_path):
     """Each frame's stream slot is when its packets left the sender: sent in-process at known times
     (slot = start + PTS after the first), and each frame received recognised by its image among the
     clip's (not by count or timestamp). Over RTP, FFmpeg hands an H.264 access unit over only when
-    the next one starts: timed by its hand-over, every frame was one frame interval (33 ms) late.
+    the next one starts (``sdp``: FFmpeg reads it): timed by its hand-over, every frame was one frame
+    interval (33 ms) late; ``rtp``: skyfix reads it, and ends a frame at its marker bit.
     ``rtp-from-mp4``: ``skyfix replay`` of an MP4 (parameter sets in its header only) over RTP puts
     them in the stream, as a camera does, or nothing could be decoded."""
     import av
@@ -155,11 +157,16 @@ def test_stream_slot_is_when_the_frame_was_sent(clips, scheme, tmp_path):
     images = np.array([img for _, img in clip])
     port = next(p for p in range(free_port() & ~1, 65534, 2) if _pair_free(p))
     url = f"udp://127.0.0.1:{port}" if scheme == "udp" else f"rtp://127.0.0.1:{port}?codec=h264"
+    send_url = url.split("?")[0]
+    if scheme == "sdp":
+        url = str(tmp_path / "camera.sdp")
+        Path(url).write_text("v=0\no=- 0 0 IN IP4 127.0.0.1\ns=camera\nc=IN IP4 127.0.0.1\nt=0 0\n"
+                             f"m=video {port} RTP/AVP 96\na=rtpmap:96 H264/90000\n")
     stop_ = threading.Event()
     with Receiver(url) as rx:
         wait_for(lambda: rx.status()["state"] != "starting", 10, "the receiver to start")
         t0 = time.time() + 0.5
-        sender = threading.Thread(target=send_video, args=(clip_file, url.split("?")[0], t0, stop_))
+        sender = threading.Thread(target=send_video, args=(clip_file, send_url, t0, stop_))
         sender.start()
         try:
             wait_for(lambda: len(rx.frames) >= 240, 30, f"240 frames over {scheme}")

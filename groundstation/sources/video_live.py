@@ -28,11 +28,12 @@ The packets read while a connection is being opened are stamped when the open
 returns, late: the first frames of a connection may be late by that much until a
 packet read live lowers the offset (so a slot may be earlier than the one before
 it just after a connection starts). A frame without a PTS (RTP's first access
-unit may lose it) takes its arrival as its slot. H.264/H.265 over RTP (and RTSP)
-reach skyfix one frame late: FFmpeg ends an access unit only when the next one
-starts, so an access unit's arrival is taken as the hand-over of the one before
-it (timed as if it came when it was handed over, every frame was a frame interval
-late: 33 ms at 30 fps, centimetres on a moving UAV).
+unit may lose it) takes its arrival as its slot. H.264/H.265 from an ``.sdp``
+file or RTSP reach skyfix one frame late: FFmpeg ends an access unit only when
+the next one starts, so an access unit's arrival is taken as the hand-over of the
+one before it (timed as if it came when it was handed over, every frame was a
+frame interval late: 33 ms at 30 fps, centimetres on a moving UAV). ``rtp://`` is
+read by skyfix itself (:mod:`.rtp_receive`), which ends a frame at its marker bit.
 
 Failures: a stream that cannot be opened (refused, a port another program holds)
 is retried with back-off from :data:`RETRY_MIN_S` to ``retry_max_s``; one that
