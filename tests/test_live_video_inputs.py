@@ -319,7 +319,7 @@ def test_inputs_are_parsed_and_bad_options_named(tmp_path):
     assert (rtp.kind, rtp.file, rtp.port, rtp.codec, rtp.payload_type) == ("rtp", "0.0.0.0", 5600, "h265", 97)
     assert parse_video_input(str(tmp_path / "v.mp4")).kind == "file"
     for url, needle in (("rtp://127.0.0.1:5600?codec=vp8", "codec=vp8"), ("rtp://127.0.0.1:5600?pt=33", "pt=33"),
-                        ("rtp://127.0.0.1?codec=h264", "no port"), ("rtsp://h/x?transport=quic", "transport=quic"),
+                        ("rtp://127.0.0.1?codec=h264", "no port"), ("rtp://239.1.2.3:5600", "multicast"), ("rtsp://h/x?transport=quic", "transport=quic"),
                         ("v4l2:0?size=big", "unknown option size"), ("v4l2:0?video_size=big", "video_size=big"),
                         (str(tmp_path / "nothere.sdp"), "missing")):
         with pytest.raises(VideoError, match=needle) as e:

@@ -18,6 +18,7 @@ value is a :class:`~groundstation.video.VideoError` naming it.
 from __future__ import annotations
 
 import errno
+import ipaddress
 import re
 import socket
 from dataclasses import dataclass, field
@@ -62,7 +63,7 @@ class VideoInput:
 
         Checked before FFmpeg binds: its failed bind is reported as another error.
         """
-        ports = () if self.port is None else (self.port, self.port + 1) if self.kind in ("rtp", "sdp") else (self.port,)
+        ports = () if self.port is None else (self.port, self.port + 1) if self.kind == "sdp" else (self.port,)
         for port in ports:
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
                 try:
@@ -93,8 +94,14 @@ def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
         raise VideoError(f"{url}: pt={pt_text} is not a dynamic RTP payload type (96 … 127)")
     if query:
         raise VideoError(f"{url}: unknown option {next(iter(query))} (known: codec, pt)")
-    return VideoInput(url, "rtp", parts.hostname or "0.0.0.0", None, {}, port, "h265" if codec == "hevc" else codec,
-                      int(pt_text))
+    host = parts.hostname or "0.0.0.0"
+    try:
+        multicast = ipaddress.ip_address(host).is_multicast
+    except ValueError:  # a host name: the address it is bound by
+        multicast = False
+    if multicast:
+        raise VideoError(f"{url}: a multicast group: describe the stream in an .sdp file (FFmpeg joins the group)")
+    return VideoInput(url, "rtp", host, None, {}, port, "h265" if codec == "hevc" else codec, int(pt_text))
 
 
 def _sdp_port(path: Path) -> int | None:
