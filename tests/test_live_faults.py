@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import zenoh
 from live_helpers import (
     ROOT,
     ardupilot_gps_unhealthy,
@@ -140,8 +141,8 @@ def _send_garbage(session: Path, shift: float, t_from: float, t_to: float, mav_p
                 return
             once = [b"[" * 100_000, b'{"t": 1, "depth_m": "' + b"x" * 2_000_000 + b'"}',
                     json.dumps({"t": time.time() + 1e6, "depth_m": 1.0}).encode()]
-            for payload in once:
-                z.put("uuv/depth", payload)
+            for payload in once:  # blocking when the queue is full: a 2 MB put is dropped by default on a busy machine
+                z.put("uuv/depth", payload, congestion_control=zenoh.CongestionControl.BLOCK)
                 sent["depth"] += 1
             i = 0
             while time.time() < t_to and _sleep_until(t_from + 0.1 * i, stop_):
