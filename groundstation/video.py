@@ -156,17 +156,14 @@ class Video:
         q: queue.Queue = queue.Queue(maxsize=depth)
         stop = threading.Event()
 
-        def put(item) -> bool:
-            return put_until(q, item, stop)
-
         def work():
             try:
                 for frame in self:
-                    if not put(frame):
+                    if not put_until(q, frame, stop):
                         return
-                put(None)
+                put_until(q, None, stop)
             except VideoError as e:
-                put(e)
+                put_until(q, e, stop)
 
         worker = threading.Thread(target=work, name="video-decode", daemon=True)
         self._prefetching = (stop, worker)

@@ -20,7 +20,16 @@ import time
 import tomllib
 from pathlib import Path
 
-from live_helpers import ROOT, free_port, read_jsonl, replay_shift, skyfix, start, wait_for
+from live_helpers import (
+    ROOT,
+    free_port,
+    read_jsonl,
+    replay_shift,
+    skyfix,
+    start,
+    wait_for,
+    wait_until,
+)
 
 from groundstation.mavlink_io import mavutil
 
@@ -182,9 +191,7 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
         exit_s = time.time() - t_signal if service.returncode is not None else None
         # the last GPS_INPUT, sent just before the exit, may still be on its way through loopback: wait for a
         # no-fix after the signal (the test then asserts it is the last), for 2 s at most
-        deadline = time.time() + 2.0
-        while time.time() < deadline and not any(tr >= t_signal and ft < 2 for tr, ft in listener.got):
-            time.sleep(0.02)
+        wait_until(lambda: any(tr >= t_signal and ft < 2 for tr, ft in listener.got), 2.0, poll_s=0.02)
         after = [ft for tr, ft in listener.got if tr >= t_signal]
     finally:
         for p in procs:

@@ -56,13 +56,19 @@ def read_jsonl(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
-def wait_for(predicate, timeout_s: float, what: str) -> None:
+def wait_until(predicate, timeout_s: float, poll_s: float = 0.1) -> bool:
+    """Whether ``predicate()`` came true within ``timeout_s``, checked every ``poll_s``."""
     end = time.time() + timeout_s
     while time.time() < end:
         if predicate():
-            return
-        time.sleep(0.1)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+            return True
+        time.sleep(poll_s)
+    return False
+
+
+def wait_for(predicate, timeout_s: float, what: str) -> None:
+    if not wait_until(predicate, timeout_s):
+        raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
 # An independent Zenoh subscriber (run in its own process): every sample on the key

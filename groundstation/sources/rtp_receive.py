@@ -157,18 +157,12 @@ class Depacketizer:
             self._nals.append(nal)
 
     def _finish(self) -> AccessUnit | None:
-        damaged = self._damaged or self._fragment is not None or not self._nals
-        unit = AccessUnit(b"".join(START_CODE + n for n in self._nals), self._ts, self._keyframe)
-        keyframe = self._keyframe
+        whole = bool(self._nals) and not self._damaged and self._fragment is None
+        usable = whole and (self._keyframe or not self._need_keyframe)
+        unit = AccessUnit(b"".join(START_CODE + n for n in self._nals), self._ts, self._keyframe) if usable else None
+        self.dropped_units += not usable
+        self._need_keyframe = not usable and (self._need_keyframe or not whole)
         self._reset()
-        if damaged:
-            self.dropped_units += 1
-            self._need_keyframe = True
-            return None
-        if self._need_keyframe and not keyframe:
-            self.dropped_units += 1
-            return None
-        self._need_keyframe = False
         return unit
 
     def _drop_unit(self) -> None:
