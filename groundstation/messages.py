@@ -82,6 +82,15 @@ class FixMessage(Message):
     east_m: Metres = Field(description="the UUV east of the UAV's reported position, metres")
     confidence: Annotated[float, Ge(0), Le(1)] | None = Field(description="the tracker's confidence, 0..1, when it "
                                                               "has one")
+    height_m: Metres = Field(None, description="the camera's height above the water used, metres")
+    sigma_height_m: NonNegative = Field(None, description="1-sigma of that height as it went into h_acc_m, metres")
+    sigma_depth_m: NonNegative = Field(None, description="1-sigma of depth_m as it went into h_acc_m, metres")
+    sigma_time_s: NonNegative = Field(None, description="1-sigma of the frame's time against the telemetry's as it "
+                                      "went into h_acc_m, seconds")
+    height_source: str | None = Field(None, description="where the height came from (see the README's inputs "
+                                      "table)")
+    depth_source: str | None = Field(None, description="where the depth came from")
+    time_source: str | None = Field(None, description="where the UAV link's delay came from")
 
     @model_validator(mode="after")
     def _position_iff_ok(self):
@@ -96,7 +105,10 @@ class FixMessage(Message):
             x = float(getattr(fix, name))
             return x if math.isfinite(x) else None
 
-        values = {name: num(name) for name in cls.model_fields if name not in ("schema_", "t", "frame", "status")}
+        words = ("height_source", "depth_source", "time_source")
+        values = {name: num(name) for name in cls.model_fields
+                  if name not in ("schema_", "t", "frame", "status", *words)}
+        values |= {name: getattr(fix, name) or None for name in words}
         if not fix.ok:
             values["lat"] = values["lon"] = None
         return cls(schema_=FIX_SCHEMA, t=fix.t_unix, frame=fix.frame, status=fix.status, **values)

@@ -61,7 +61,7 @@ def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...
     """A CSV with at least ``columns`` in its header, as float arrays; checks times increase.
 
     ``optional`` columns are read when the header has them; ``text`` columns are kept as
-    non-empty strings (object arrays); ``allow_empty`` numbers may be empty (NaN).
+    non-empty strings (object arrays); ``allow_empty`` columns may be empty (NaN, or "" for text).
     """
     try:
         with open(path, newline="") as f:
@@ -78,7 +78,7 @@ def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...
                     if row[c] is None:
                         raise SessionError(f"{where}: row too short, no {c}")
                     if c in text:
-                        if not row[c].strip():
+                        if not row[c].strip() and c not in allow_empty:
                             raise SessionError(f"{where}: {c} = {row[c]!r}: empty")
                         cols[c].append(row[c].strip())
                     else:

@@ -46,6 +46,13 @@ class Fix:
     sigma_e_m: float = float("nan")
     cov_ne_m2: float = float("nan")
     t_gnss: float = float("nan")  # the exposure as GNSS (UNIX) time; NaN without SYSTEM_TIME
+    height_m: float = float("nan")  # the camera's height above the water used
+    sigma_height_m: float = float("nan")  # 1-sigma of the inputs as they went into h_acc_m: the height ...
+    sigma_depth_m: float = float("nan")  # ... the depth ...
+    sigma_time_s: float = float("nan")  # ... and the frame's time against the telemetry
+    height_source: str = ""  # where each input came from (see localizer.pose.CameraPose)
+    depth_source: str = ""
+    time_source: str = ""
     frame: int = -1
     confidence: float = float("nan")  # tracker's, 0..1
 
@@ -55,6 +62,10 @@ class Fix:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+#: The columns of :class:`Fixes` that hold words, not numbers.
+WORDS = ("height_source", "depth_source", "time_source")
 
 
 @dataclass
@@ -78,21 +89,32 @@ class Fixes:
     sigma_e_m: np.ndarray
     cov_ne_m2: np.ndarray
     t_gnss: np.ndarray
+    height_m: np.ndarray
+    sigma_height_m: np.ndarray
+    sigma_depth_m: np.ndarray
+    sigma_time_s: np.ndarray
+    height_source: np.ndarray  # object arrays of str
+    depth_source: np.ndarray
+    time_source: np.ndarray
 
     @classmethod
     def of(cls, t_unix, status, **columns) -> Fixes:
-        """Fixes from some columns; the others NaN (a positions.csv from another tool, a test)."""
+        """Fixes from some columns; the others NaN, or "" for words (a positions.csv from another tool, a test)."""
         t = np.asarray(t_unix, dtype=float)
-        nan = np.full(len(t), np.nan)
-        given = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
-        return cls(t_unix=t, status=np.asarray(status, dtype=object),
-                   **{f.name: given.get(f.name, nan.copy()) for f in fields(cls) if f.name not in ("t_unix", "status")})
+        out = {}
+        for f in fields(cls):
+            if f.name in ("t_unix", "status"):
+                continue
+            word = f.name in WORDS
+            default = np.full(len(t), "" if word else np.nan, dtype=object if word else float)
+            out[f.name] = np.asarray(columns[f.name], dtype=object if word else float) if f.name in columns else default
+        return cls(t_unix=t, status=np.asarray(status, dtype=object), **out)
 
     def __len__(self) -> int:
         return len(self.t_unix)
 
     def __getitem__(self, i: int) -> Fix:
-        return Fix(**{k: (v[i] if k == "status" else float(v[i])) for k, v in vars(self).items()})
+        return Fix(**{k: (str(v[i]) if k == "status" or k in WORDS else float(v[i])) for k, v in vars(self).items()})
 
 
 def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) -> Fixes:
@@ -135,11 +157,16 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
             cal.camera, R, u[idx], v[idx], h, d, n_water, cal.sigmas,
             sigma_tilt_rad=pose.sigma_tilt_rad[idx], sigma_yaw_rad=pose.sigma_yaw_rad[idx],
             sigma_uav_m=pose.sigma_uav_m[idx], omega_ned=pose.omega_ned[idx],
-            velocity_ned_mps=pose.velocity_ned_mps[idx],
+            velocity_ned_mps=pose.velocity_ned_mps[idx], sigma_height_m=pose.sigma_height_m[idx],
+            sigma_depth_m=pose.sigma_depth_m[idx], sigma_time_s=pose.sigma_time_s[idx],
         )
         sig_n[idx], sig_e[idx], cov_ne[idx] = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1]), cov[:, 0, 1]
     return Fixes(
         t_unix=pose.t_unix, status=status, u=u, v=v, lat=lat, lon=lon, alt_amsl_m=alt, alt_ellipsoid_m=alt_ellipsoid,
         depth_m=pose.depth_m.copy(), h_acc_m=h_acc, v_acc_m=v_acc, north_m=north, east_m=east,
         sigma_n_m=sig_n, sigma_e_m=sig_e, cov_ne_m2=cov_ne, t_gnss=pose.t_gnss.copy(),
+        height_m=pose.height_m.copy(), sigma_height_m=pose.sigma_height_m.copy(),
+        sigma_depth_m=pose.sigma_depth_m.copy(), sigma_time_s=pose.sigma_time_s.copy(),
+        height_source=pose.height_source.copy(), depth_source=pose.depth_source.copy(),
+        time_source=pose.time_source.copy(),
     )

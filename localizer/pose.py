@@ -47,6 +47,13 @@ class CameraPose:
     velocity_ned_mps: np.ndarray  # (N, 3) the UAV's velocity in NED, m/s
     t_gnss: np.ndarray  # the frame's time as GNSS (UNIX) time; NaN without SYSTEM_TIME
     geoid_separation_m: np.ndarray  # ellipsoid minus mean sea level at the UAV (GPS_RAW_INT); NaN if unknown
+    # each input's 1-sigma as it goes into the fix's accuracy, and where the input came from (a word per frame)
+    sigma_height_m: np.ndarray  # the camera's height above the water
+    sigma_depth_m: np.ndarray  # the UUV's depth
+    sigma_time_s: np.ndarray  # the frame's time against the telemetry's
+    height_source: np.ndarray  # object array of str, e.g. "takeoff" (relative_alt + the take-off height), "amsl"
+    depth_source: np.ndarray
+    time_source: np.ndarray
 
 
 def take(pose: CameraPose, idx) -> CameraPose:
@@ -129,6 +136,8 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
     )
     cam_h = uav_h - offset_ned[:, 2]
     status[(status == "ok") & ~(cam_h > 0)] = "below_surface"
+    sig = cal.sigmas
+    height_source = "amsl" if cal.water.surface_amsl_m is not None else "takeoff"
     return CameraPose(
         t_unix=t,
         status=status,
@@ -147,4 +156,10 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
         velocity_ned_mps=velocity,
         t_gnss=t - offset_gnss if offset_gnss is not None else np.full(n, np.nan),
         geoid_separation_m=gnss[:, 1],
+        sigma_height_m=np.full(n, sig.height_m),
+        sigma_depth_m=np.full(n, sig.depth_m),
+        sigma_time_s=np.full(n, sig.time_s),
+        height_source=np.full(n, height_source, dtype=object),
+        depth_source=np.full(n, "depth", dtype=object),
+        time_source=np.full(n, tel.latency_source, dtype=object),
     )

@@ -29,13 +29,16 @@ _AXES = np.eye(3)  # north, east, down
 
 
 def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, sigmas: Sigmas, *,
-             sigma_tilt_rad=0.0, sigma_yaw_rad=0.0, sigma_uav_m=0.0, omega_ned=None, velocity_ned_mps=None):
+             sigma_tilt_rad=0.0, sigma_yaw_rad=0.0, sigma_uav_m=0.0, omega_ned=None, velocity_ned_mps=None,
+             sigma_height_m=None, sigma_depth_m=None, sigma_time_s=None):
     """``(h_acc_m, v_acc_m, cov_ne_m2)`` for fixes made from these inputs (shapes as ``u``; cov ``(..., 2, 2)``).
 
     ``sigma_tilt_rad``/``sigma_yaw_rad`` add to the calibration's tilt and heading
     sigmas (extrapolated telemetry); ``sigma_uav_m`` is the UAV position's
     horizontal 1-sigma; ``omega_ned`` (rad/s) and ``velocity_ned_mps`` (m/s) (``(..., 3)``)
-    turn ``sigmas.time_s`` into metres.
+    turn the time sigma into metres. ``sigma_height_m``, ``sigma_depth_m`` and
+    ``sigma_time_s`` (scalars or shaped as ``u``) replace the calibration's ``height_m``,
+    ``depth_m`` and ``time_s`` when given: the inputs' own sigmas, per frame.
     """
     u = np.asarray(u, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -54,14 +57,17 @@ def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, si
     off, _ = offset_from_ray(all_dirs, all_h, all_d, n_water)
     # columns of the Jacobian: d(offset)/d(u, v, rot N, rot E, rot D, height, depth)
     J = [(off[k] - off[0]) / step for k, step in enumerate((px, px, ang, ang, ang, dl, dl), start=1)]
+    sig_h = sigmas.height_m if sigma_height_m is None else sigma_height_m
+    sig_d = sigmas.depth_m if sigma_depth_m is None else sigma_depth_m
+    sig_t = np.broadcast_to(np.asarray(sigmas.time_s if sigma_time_s is None else sigma_time_s, dtype=float), u.shape)
     tilt = np.hypot(np.radians(sigmas.tilt_deg), sigma_tilt_rad)
     yaw = np.hypot(np.radians(sigmas.yaw_deg), sigma_yaw_rad)
-    sig = [sigmas.pixel_px, sigmas.pixel_px, tilt, tilt, yaw, sigmas.height_m, sigmas.depth_m]
+    sig = [sigmas.pixel_px, sigmas.pixel_px, tilt, tilt, yaw, sig_h, sig_d]
     cov = np.zeros(u.shape + (2, 2))
     for j, s in zip(J, sig):
         js = j * np.asarray(s, dtype=float)[..., None]
         cov += js[..., :, None] * js[..., None, :]
-    if sigmas.time_s > 0 and (omega_ned is not None or velocity_ned_mps is not None):
+    if np.any(sig_t > 0) and (omega_ned is not None or velocity_ned_mps is not None):
         rate = np.zeros(u.shape + (2,))
         if omega_ned is not None:
             w = np.asarray(omega_ned, dtype=float)
@@ -69,11 +75,11 @@ def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, si
         if velocity_ned_mps is not None:
             vel = np.asarray(velocity_ned_mps, dtype=float)
             rate += vel[..., :2] - J[5] * vel[..., 2:3]  # descending lowers the camera
-        js = rate * sigmas.time_s
+        js = rate * sig_t[..., None]
         cov += js[..., :, None] * js[..., None, :]
     uav = np.broadcast_to(np.asarray(sigma_uav_m, dtype=float), u.shape)
     cov[..., 0, 0] += uav**2 / 2.0  # isotropic: the DRMS grows by sigma_uav
     cov[..., 1, 1] += uav**2 / 2.0
     h_acc = np.sqrt(cov[..., 0, 0] + cov[..., 1, 1])
-    v_acc = np.broadcast_to(np.hypot(sigmas.depth_m, sigmas.surface_amsl_m), h_acc.shape).copy()
+    v_acc = np.broadcast_to(np.hypot(sig_d, sigmas.surface_amsl_m), h_acc.shape).copy()
     return h_acc, v_acc, cov

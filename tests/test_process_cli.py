@@ -177,9 +177,11 @@ def test_positions_csv_round_trip_and_other_tools_files(session, tmp_path, capsy
     assert _run(capsys, "process", str(session), "--out", str(out), "--use-track")[0] == 0
     header = (out / "positions.csv").read_text().splitlines()[0].split(",")
     assert header[6:] == ["alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m", "t_gnss", "alt_ellipsoid_m",
-                          "sigma_n_m", "sigma_e_m", "cov_ne_m2"]
+                          "sigma_n_m", "sigma_e_m", "cov_ne_m2", "height_m", "sigma_height_m", "sigma_depth_m",
+                          "sigma_time_s", "height_source", "depth_source", "time_source"]
     pos = read_positions_csv(out / "positions.csv")
     ok = pos.status == "ok"
+    assert set(pos.height_source[ok]) == {"takeoff"} and all(pos.time_source[ok])  # words come back as words
     # the bundled sessions carry GPS_RAW_INT with alt_ellipsoid: 40 m of geoid separation (scenario default)
     assert np.allclose(pos.alt_ellipsoid_m[ok] - pos.alt_amsl_m[ok], 40.0, atol=2e-4)
     assert np.allclose(np.hypot(pos.sigma_n_m[ok], pos.sigma_e_m[ok]), pos.h_acc_m[ok], atol=2e-4)
