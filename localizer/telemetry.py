@@ -70,6 +70,10 @@ class Telemetry:
         self.gnss = Series("ss", math.inf, 10.0, keep_s)
         # UUV depth below the surface (m, positive down), station seconds
         self.depth = Series("l", timing.depth_gap_s, timing.depth_hold_s, keep_s)
+        # absolute measurements of the UAV's height above the water, per source ("rangefinder", "size", ...):
+        # the reported position's height (m) and its 1-sigma (m), on the UAV buffers' time scale
+        self.height_fixes: dict[str, Series] = {}
+        self._keep_s = keep_s
         self.autopilot_component: int | None = None
         self.mount_type: int | None = None  # the autopilot's MNT1_TYPE parameter, once seen
         self.refusal: str | None = None
@@ -265,6 +269,15 @@ class Telemetry:
         """A PARAM_VALUE of the autopilot; MNT1_TYPE tells what its gimbal reports."""
         if name == "MNT1_TYPE" and math.isfinite(value):
             self.mount_type = round(value)
+
+    # -- height above the water ------------------------------------------------------------------
+    def add_height(self, source: str, t_uav: float, uav_height_m: float, sigma_m: float) -> bool:
+        """An absolute measurement of the height of the UAV's reported position above the water (m, with
+        its 1-sigma) at ``t_uav`` (the UAV buffers' time scale: :meth:`uav_time` of a station time)."""
+        series = self.height_fixes.setdefault(source, Series("ll", math.inf, math.inf, self._keep_s))
+        if not (0.0 < uav_height_m < 10_000.0 and 0.0 < sigma_m < 1_000.0):
+            return self._refuse(series, f"height {uav_height_m!r} m or its sigma {sigma_m!r} m not finite and positive")
+        return self._append(series, t_uav, (uav_height_m, sigma_m))
 
     # -- depth -----------------------------------------------------------------------------------
     def add_depth(self, t_source: float | None, depth_m: float, receive_s: float | None = None) -> bool:
