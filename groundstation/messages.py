@@ -228,6 +228,8 @@ class ArduSubDepthStatus(Section):
     vertical_speed_mps: float | None = Field(description="GLOBAL_POSITION_INT vz, positive down")
     ekf_origin_amsl_m: float | None = Field(description="the EKF origin's altitude (GPS_GLOBAL_ORIGIN)")
     ekf_has_origin: bool | None = Field(description="GLOBAL_POSITION_INT alt is not 0: the EKF has an origin")
+    zero_not_followed_pa: float | None = Field(description="a ground pressure ArduSub took under water, which skyfix "
+                                               "does not follow (nor compare the EKF's depth while it lasts)")
     autopilot_reboots: int
 
 

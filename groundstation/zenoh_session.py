@@ -15,7 +15,7 @@ import asyncio
 import json
 import re
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import zenoh
 
@@ -75,14 +75,11 @@ def put_json(target, obj: dict, session: zenoh.Session) -> None:
         target.put(payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp())
 
 
-async def subscribe(session: zenoh.Session, key: str, handoff, keep: Callable[[str], bool] | None = None) -> None:
+async def subscribe(session: zenoh.Session, key: str, handoff) -> None:
     """Subscribe to ``key`` until cancelled: Zenoh's thread hands each sample over as ``(key, payload bytes,
-    t_recv_unix)`` through ``handoff`` (a bounded :class:`~groundstation.threads.Handoff`), nothing more; with
-    ``keep``, only samples whose key it accepts."""
+    t_recv_unix)`` through ``handoff`` (a bounded :class:`~groundstation.threads.Handoff`), nothing more."""
     def on_sample(sample: zenoh.Sample) -> None:
-        name = str(sample.key_expr)
-        if keep is None or keep(name):
-            handoff.put((name, sample.payload.to_bytes(), time.time()))
+        handoff.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
 
     sub = session.declare_subscriber(key, on_sample)
     try:

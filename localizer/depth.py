@@ -20,10 +20,15 @@ What ArduSub reports, read in ArduPilot's source and checked on the ArduSub SITL
   (``GPS_GLOBAL_ORIGIN``) minus alt after (:func:`ekf_depth_m`). ``VFR_HUD.alt`` is never a depth.
 
 :class:`ArduSubDepth` follows both: the pressure depth is the measurement (``ardusub_pressure``) once its
-parameters are known, the EKF's depth stands in until then (``ardusub_ekf``), and each pressure depth is
-cross-checked against the EKF's: a disagreement beyond :data:`DISAGREE_M` is one warning line with both
-values and goes into that depth's sigma. :class:`DepthGate` refuses a depth that moved faster than the
-vehicle can dive. :func:`frame_sigma_m` grows a depth's sigma with its age by the vehicle's vertical speed.
+parameters are known; the EKF's depth stands in only until the first pressure depth after the autopilot's
+(re)boot (``ardusub_ekf``), never when the pressure pauses later (measured: while ArduSub recalibrates its
+barometer, its EKF's depth wanders by metres); each pressure depth is cross-checked against the EKF's: a
+disagreement beyond :data:`DISAGREE_M` is one warning line with both values and goes into that depth's sigma.
+A ground pressure that would move the zero more than :data:`RECAL_MAX_DEPTH_M` down was taken under water
+(measured: MAV_CMD_PREFLIGHT_CALIBRATION at 4 m sets BARO1_GND_PRESS to the pressure there): it is not
+followed, and while ArduSub's EKF works from that other zero it is not compared. :class:`DepthGate` refuses
+a depth that moved faster than the vehicle can dive. :func:`frame_sigma_m` grows a depth's sigma with its age
+by the vehicle's vertical speed.
 
 Units: metres (depth positive down), pascals, seconds; times of samples on the station clock.
 """
@@ -54,8 +59,6 @@ SOURCE_WORDS = tuple(SOURCES)
 DISAGREE_M = 0.2
 #: An EKF depth this close in time (s) to a pressure depth cross-checks it.
 CROSSCHECK_S = 0.5
-#: The pressure depth is the measurement while its newest sample is this fresh (s); else the EKF's depth is.
-PRESSURE_FRESH_S = 1.0
 #: A new ground pressure that puts the old zero this deep (m) was taken under water: not followed.
 RECAL_MAX_DEPTH_M = 0.5
 #: Depths (m) that can be real: a little above the surface (waves, a sensor zeroed under water) to the deepest sea.
@@ -184,11 +187,11 @@ class ArduSubDepth:
         self.disagreement_m: float | None = None  # pressure depth − EKF depth at the newest cross-check
         self.disagreeing = False
         self.reboots = 0
+        self.zero_not_followed_pa: float | None = None  # ArduSub's depth sensor zero taken under water, not followed
         self.refusal: str | None = None
         self.notices: list[str] = []
         self._received: set[str] = set()  # parameters received since the autopilot's last (re)boot
         self._last_pressure_pa: float | None = None
-        self._kept_zero: dict[int, float] = {}  # ground pressures not followed (taken under water), said once
 
     # -- what the autopilot is asked for ------------------------------------------------------------------
     def wanted_params(self) -> list[str]:
@@ -255,20 +258,24 @@ class ArduSubDepth:
             self._received.discard(name)
             return
         old = self.ground_pa.get(instance)
-        if old is None or pa == old:
+        if instance != self.primary or old is None or pa == old:  # another barometer's, the first, the same
             self.ground_pa[instance] = pa
+            if instance == self.primary:
+                self.zero_not_followed_pa = None
             return
         moved_m = float(depth_from_pressure_m(pa, old, self.specific_gravity or 1.0))
         if moved_m > RECAL_MAX_DEPTH_M:
-            if self._kept_zero.get(instance) != pa:
-                self._kept_zero[instance] = pa
+            if self.zero_not_followed_pa != pa:
+                self.zero_not_followed_pa = pa
                 self.notices.append(f"ArduSub's {name} changed {old:.0f} → {pa:.0f} Pa: a depth zero {moved_m:.2f} m "
                                     "below the old one (recalibrated under water): skyfix keeps the old zero; "
-                                    f"ArduSub's own depth now reads {moved_m:.2f} m shallow")
+                                    f"ArduSub's own depth and its EKF's now read {moved_m:.2f} m shallow (not compared "
+                                    "until the sensor is zeroed at the surface again)")
             return
         self.notices.append(f"ArduSub's {name} changed {old:.0f} → {pa:.0f} Pa (recalibrated): the depth zero moved "
                             f"{moved_m:+.2f} m")
         self.ground_pa[instance] = pa
+        self.zero_not_followed_pa = None
 
     def origin(self, alt_amsl_m: float) -> None:
         """GPS_GLOBAL_ORIGIN's altitude (m above mean sea level)."""
@@ -280,7 +287,7 @@ class ArduSubDepth:
 
     def position(self, time_boot_ms: float, relative_alt_m: float, alt_amsl_m: float, vz_mps: float,
                  receive_s: float) -> DepthSample | None:
-        """GLOBAL_POSITION_INT: the EKF's depth; a sample when the pressure is not the measurement."""
+        """GLOBAL_POSITION_INT: the EKF's depth; a sample until the first pressure depth (since the last boot)."""
         t = self._station_t(time_boot_ms, receive_s)
         if t is None:
             return None
@@ -288,7 +295,7 @@ class ArduSubDepth:
         self.vspeed_mps = vz_mps
         depth = ekf_depth_m(relative_alt_m, alt_amsl_m, self.origin_amsl_m)
         self.ekf = None if depth is None else (t, depth)
-        if depth is None or (self.calibrated and self.pressure is not None and t - self.pressure[0] <= PRESSURE_FRESH_S):
+        if depth is None or self.pressure is not None:
             return None
         return DepthSample(t, depth, self.sigma_m, "ardusub_ekf", vz_mps)
 
@@ -309,7 +316,7 @@ class ArduSubDepth:
 
     def _crosscheck(self, t: float, depth: float) -> float:
         """The pressure depth's sigma: its own, and the disagreement with the EKF's depth when beyond DISAGREE_M."""
-        if self.ekf is None or abs(t - self.ekf[0]) > CROSSCHECK_S:
+        if self.ekf is None or abs(t - self.ekf[0]) > CROSSCHECK_S or self.zero_not_followed_pa is not None:
             self.disagreement_m = None
             return self.sigma_m
         te, de = self.ekf
@@ -335,4 +342,5 @@ class ArduSubDepth:
                 "pressure_depth_m": r(self.pressure and self.pressure[1]), "ekf_depth_m": r(self.ekf and self.ekf[1]),
                 "disagreement_m": r(self.disagreement_m), "vertical_speed_mps": r(self.vspeed_mps, 2),
                 "ekf_origin_amsl_m": r(self.origin_amsl_m), "ekf_has_origin": self.has_origin,
+                "zero_not_followed_pa": self.zero_not_followed_pa,
                 "autopilot_reboots": self.reboots}

@@ -73,6 +73,7 @@ def test_ekf_depth_stands_in_until_the_parameters_come():
     # cross-checked against the EKF 0.25 s before, moving 0.2 m/s down: 1.234 + 0.05 = 1.284, 0.012 apart
     assert d.disagreement_m == pytest.approx(1.29609 - 1.284, abs=1e-4) and s.sigma_m == 0.05
     assert gpi(d, 0.3, relative_alt_mm=-1300) is None  # the pressure is the measurement now
+    assert gpi(d, 5.0, relative_alt_mm=-1300) is None  # and stays so when it pauses: no silent switch to the EKF
 
 
 def test_a_home_turns_relative_alt_into_an_altitude_which_is_never_taken_as_depth():
@@ -114,8 +115,12 @@ def test_a_recalibration_at_the_surface_is_followed_one_under_water_is_not():
     feed(d, "PARAM_VALUE", 0.2, param_id="BARO1_GND_PRESS", param_value=100980.0 + 3.0 * 9800.0)
     assert d.ground_pa[0] == 100980.0 and "3.00 m below the old one" in d.notices.pop()
     feed(d, "PARAM_VALUE", 30.0, param_id="BARO1_GND_PRESS", param_value=100980.0 + 3.0 * 9800.0)  # read again
-    assert not d.notices
-    assert feed(d, "SCALED_PRESSURE", 30.1, press_abs=1009.8 + 3.0 * 98.0).depth_m == pytest.approx(3.0)
+    assert not d.notices and d.zero_not_followed_pa == 100980.0 + 3.0 * 9800.0
+    gpi(d, 30.05, relative_alt_mm=0)  # ArduSub's EKF now says 0 m: on its new zero, not compared
+    s = feed(d, "SCALED_PRESSURE", 30.1, press_abs=1009.8 + 3.0 * 98.0)
+    assert s.depth_m == pytest.approx(3.0) and s.sigma_m == 0.05 and d.disagreement_m is None
+    feed(d, "PARAM_VALUE", 60.0, param_id="BARO1_GND_PRESS", param_value=100980.0)  # zeroed at the surface again
+    assert d.zero_not_followed_pa is None and not d.notices
 
 
 def test_a_reboot_is_confirmed_before_it_is_taken_and_the_parameters_are_read_again():

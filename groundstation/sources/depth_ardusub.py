@@ -4,9 +4,9 @@ What is read and how it becomes a depth is :mod:`localizer.depth` (the depth sen
 own parameters and formula, cross-checked against its EKF; never VFR_HUD). The two transports:
 
 - ``--depth-source blueos``: BlueOS's mavlink-server publishes each message of the autopilot as JSON on
-  ``mavlink/{system}/{component}/{MESSAGE}``; skyfix subscribes to ``{prefix}/*`` (``--depth-key``,
-  ``mavlink/1/1``: ArduSub's system and component) and keeps the messages it uses (Zenoh's thread does only
-  that and a bounded hand-off). It asks through mavlink-server's ``mavlink/in``, which writes to the autopilot
+  ``mavlink/{system}/{component}/{MESSAGE}``; skyfix subscribes to the messages it uses under the prefix
+  ``--depth-key`` (``mavlink/1/1``: ArduSub's system and component; Zenoh's thread does only a bounded
+  hand-off). It asks through mavlink-server's ``mavlink/in``, which writes to the autopilot
   on BlueOS's own link: the rates it sets there are that link's, shared by BlueOS's other clients
   (QGroundControl): skyfix only raises one that is below what it needs.
 - ``--depth-source mavlink``: a link of skyfix's own (``--depth-mavlink``: ArduSub's spare serial port, a BlueOS
@@ -130,6 +130,11 @@ class ArduSubReader:
             self._refuse(f"{kind} refused: {self.depth.refusal}")
         if sample is None:
             return
+        last_t = self.tel.depth.last_t
+        if last_t is not None and sample.t <= last_t:
+            # not after the newest on the station clock: the first samples of a link (the least-delay offset still
+            # shrinking), or the EKF's depth handing over to the pressure's; dropped without complaint
+            return
         why = self.gate.check(sample.t, sample.depth_m, sample.sigma_m)
         while self.gate.notices:
             log.warning("ArduSub depth: %s", self.gate.notices.pop(0))
@@ -225,10 +230,10 @@ class ArduSubZenoh:
     async def run(self) -> None:
         self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_MESSAGES)
         self._in = MavlinkIn(self.session, "mavlink/in", GCS_SYSID, GCS_COMPID)
-        used = {f"{self.key}/{kind}" for kind in DEPTH_USED}
         try:
             async with asyncio.TaskGroup() as tg:
-                tg.create_task(subscribe(self.session, f"{self.key}/*", self.handoff, keep=used.__contains__))
+                for kind in DEPTH_USED:  # one key each: the router forwards only these, not all of ArduSub's
+                    tg.create_task(subscribe(self.session, f"{self.key}/{kind}", self.handoff))
                 while True:
                     self.reader.ask(time.time())
                     await asyncio.sleep(ASK_PERIOD_S)
