@@ -151,7 +151,7 @@ class DepthGate:
                 f"{self.max_vertical_speed_mps:g})")
 
 
-#: ArduSub's pressure messages by BARO instance (0-based), and the parameters of one.
+#: ArduSub's pressure messages by barometer instance (0-based).
 PRESSURE_MESSAGES = ("SCALED_PRESSURE", "SCALED_PRESSURE2", "SCALED_PRESSURE3")
 
 
@@ -191,7 +191,6 @@ class ArduSubDepth:
         self.refusal: str | None = None
         self.notices: list[str] = []
         self._received: set[str] = set()  # parameters received since the autopilot's last (re)boot
-        self._last_pressure_pa: float | None = None
 
     # -- what the autopilot is asked for ------------------------------------------------------------------
     def wanted_params(self) -> list[str]:
@@ -238,7 +237,7 @@ class ArduSubDepth:
         """A PARAM_VALUE of the autopilot (the others are ignored)."""
         if not math.isfinite(value):
             return
-        if name == "BARO_PRIMARY" and 0 <= value < len(PRESSURE_MESSAGES):
+        if name == "BARO_PRIMARY" and value in range(len(PRESSURE_MESSAGES)):
             self._received.add(name)
             if self.primary is not None and round(value) != self.primary:
                 self.notices.append(f"ArduSub's BARO_PRIMARY changed {self.primary} → {round(value)}: the depth "
@@ -307,7 +306,6 @@ class ArduSubDepth:
         t = self._station_t(time_boot_ms, receive_s)
         if t is None:
             return None
-        self._last_pressure_pa = pressure_pa
         if not self.calibrated:
             return None
         depth = float(depth_from_pressure_m(pressure_pa, self.ground_pa[instance], self.specific_gravity))

@@ -285,22 +285,19 @@ class Telemetry:
         return self._append(series, t_uav, (uav_height_m, sigma_m))
 
     # -- depth -----------------------------------------------------------------------------------
-    def add_depth(self, t_source: float | None, depth_m: float, receive_s: float | None = None, *,
+    def add_depth(self, t_source: float, depth_m: float, receive_s: float | None = None, *,
                   sigma_m: float = math.nan, source: str = "skyfix", vspeed_mps: float = math.nan) -> bool:
         """The UUV's depth (m, positive down), stamped ``t_source`` by the UUV and received at ``receive_s``.
 
         Without ``receive_s`` (sessions that did not record arrivals) the UUV's stamp
-        is taken as station time; without ``t_source`` (a source that sends none) the
-        arrival minus ``depth_latency_s`` is. ``sigma_m`` (NaN: the calibration's), ``source``
-        and ``vspeed_mps`` (positive down, NaN: unknown) are kept with it.
+        is taken as station time. ``sigma_m`` (NaN: the calibration's), ``source`` and
+        ``vspeed_mps`` (positive down, NaN: unknown) are kept with it.
         """
         if not self._depth_ok(depth_m, source):
             return False
         latency = self.timing.depth_latency_s
         if receive_s is None:
             t = t_source
-        elif t_source is None:
-            t, self.depth_aligned_by = receive_s - latency, "arrival"
         else:
             if not math.isfinite(t_source):
                 return self._refuse(self.depth, "time not finite")

@@ -49,7 +49,14 @@ from localizer.depth import (
 from localizer.telemetry import Telemetry
 
 from ..logs import Throttle, kind_of
-from ..mavlink_io import DEPTH_USED, NOT_AUTOPILOTS, BadMessage, ingest_ardusub, mavutil
+from ..mavlink_io import (
+    DEPTH_USED,
+    MAV_AUTOPILOT_INVALID,
+    NOT_AUTOPILOTS,
+    BadMessage,
+    ingest_ardusub,
+    mavutil,
+)
 from ..mavlink_link import MavlinkLink
 from ..sinks.zenoh_mavlink import MavlinkIn
 from ..threads import Handoff, in_thread
@@ -66,7 +73,6 @@ ASK_PERIOD_S = 0.25
 HANDOFF_MESSAGES = 512  # messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
 MAV_CMD_REQUEST_MESSAGE = 512
 GPS_GLOBAL_ORIGIN_ID = 49
-MAV_AUTOPILOT_INVALID = 8
 _PREFIX = re.compile(r"mavlink/(\d+)/(\d+)")
 
 
