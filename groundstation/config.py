@@ -35,12 +35,16 @@ from localizer.contract import (
     validate,
     within,
 )
+from localizer.depth import BLUEROV2_MAX_VERTICAL_SPEED_MPS
 from localizer.tracking import TRACKERS
 
+from .sources.depth_ardusub import autopilot_prefix
 from .sources.uuv_position import parse_hint
 from .ui.bind import check_token, parse_bind
 
 log = logging.getLogger("skyfix.config")
+
+BLUEOS_PREFIX = "mavlink/1/1"  # ArduSub's system and component under BlueOS
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,10 +84,18 @@ class RunConfig:
     zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
                                           "endpoints above are added to it")
     zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
-    depth_key: Text = Field("uuv/depth", description="Zenoh key of the UUV's depth (mavlink/*/*/VFR_HUD with "
-                            "--depth-source blueos)")
-    depth_source: Literal["skyfix", "blueos"] = Field("skyfix", description="depth payload: skyfix JSON "
-                                                      "{t, depth_m} or BlueOS mavlink-server VFR_HUD")
+    depth_source: Literal["skyfix", "blueos", "mavlink"] = Field(
+        "skyfix", description="the UUV's depth: skyfix JSON {t, depth_m} on --depth-key; blueos: ArduSub's depth "
+        "sensor from BlueOS's mavlink-server on Zenoh (--depth-key mavlink/1/1); mavlink: ArduSub's over "
+        "--depth-mavlink")
+    depth_key: Text = Field("uuv/depth", description="Zenoh key of the depth: skyfix JSON's key, or with "
+                            "--depth-source blueos the autopilot's prefix mavlink/{system}/{component} (default "
+                            "there: mavlink/1/1)")
+    depth_mavlink: Text | None = Field(None, description="with --depth-source mavlink: ArduSub's MAVLink, a pymavlink "
+                                       "string (tcp:192.168.2.2:5777, udpin:0.0.0.0:14770, /dev/ttyUSB1,115200)")
+    uuv_max_vertical_speed_mps: Annotated[Number, Gt(0)] = Field(
+        BLUEROV2_MAX_VERTICAL_SPEED_MPS, description="the UUV's top vertical speed (a BlueROV2); a depth jumping "
+        "further is refused")
     fix_key: Text = Field("skyfix/uuv/fix", description="Zenoh key the fixes are published on")
     status_key: Text = Field("skyfix/status", description="Zenoh key of the 1 Hz health/status JSON")
     alive_key: Text = Field("skyfix/alive", description="Zenoh liveliness token key")
@@ -146,6 +158,29 @@ class RunConfig:
                 except ValueError as e:
                     raise Invalid(key, value, str(e)) from None
         return self
+
+    @model_validator(mode="after")
+    def _depth_input(self):
+        if self.depth_source == "blueos" and self.depth_key != BLUEOS_PREFIX:
+            try:
+                autopilot_prefix(self.depth_key)
+            except ValueError as e:
+                if self.depth_key != "uuv/depth":  # the skyfix default: BLUEOS_PREFIX is meant
+                    raise Invalid("depth_key", self.depth_key, str(e)) from None
+        if self.depth_source == "mavlink" and not self.depth_mavlink:
+            raise Invalid("depth_mavlink", self.depth_mavlink, "--depth-source mavlink needs the link: "
+                          "depth_mavlink = \"tcp:HOST:PORT\" (or udpin:, a serial device)")
+        if self.depth_mavlink and self.depth_source != "mavlink":
+            raise Invalid("depth_mavlink", self.depth_mavlink, f"used only with depth_source = \"mavlink\" "
+                          f"(it is {self.depth_source!r})")
+        return self
+
+    @property
+    def depth_input_key(self) -> str:
+        """The Zenoh key the depth is read from (blueos: the autopilot's prefix)."""
+        if self.depth_source == "blueos" and self.depth_key == "uuv/depth":
+            return BLUEOS_PREFIX
+        return self.depth_key
 
     @model_validator(mode="after")
     def _hint_is_a_position(self):

@@ -70,6 +70,10 @@ def summary(status: dict) -> str:
         part = status.get(name)
         if part:
             inputs.append(f"{name} age {part.get('age_s', '-')} s")
+            if name == "depth" and part.get("depth_m") is not None:
+                sigma = part.get("sigma_m")
+                inputs[-1] += (f" ({part['depth_m']:.2f} m" + (f" ±{sigma:.2f}" if sigma is not None else "")
+                               + f", {part.get('source')})")
     pipeline = status.get("pipeline") or {}
     inputs.append(f"frames {pipeline.get('processed')} (dropped {pipeline.get('dropped')})")
     gps = status.get("gps_input")

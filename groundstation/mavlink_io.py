@@ -5,7 +5,9 @@ rad/s (FRD body in NED) as they are; GLOBAL_POSITION_INT degE7 → degrees, mm �
 metres, cm/s → m/s; GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z) and
 flags as they are; MOUNT_ORIENTATION degrees; GPS_RAW_INT mm → metres; TIMESYNC
 ns. Samples keep the autopilot's ``time_boot_ms``; the telemetry maps it onto
-the station clock with the receive times.
+the station clock with the receive times. The UUV autopilot's (ArduSub's) depth messages
+(:func:`ingest_ardusub`): GLOBAL_POSITION_INT mm → metres, cm/s → m/s; SCALED_PRESSURE{,2,3}
+hPa → Pa; GPS_GLOBAL_ORIGIN mm → metres; PARAM_VALUE as it is.
 """
 
 from __future__ import annotations
@@ -14,14 +16,20 @@ import os
 
 os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's import to parse MAVLink 2
 
+import math
+from collections.abc import Mapping
+
 from pymavlink import mavutil as _mavutil
 
+from localizer.depth import PRESSURE_MESSAGES, ArduSubDepth, DepthSample
 from localizer.telemetry import Telemetry
 
 #: Message types the localizer uses.
 USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION",
         "GPS_RAW_INT", "TIMESYNC", "PARAM_VALUE")
 GIMBAL_MESSAGES = ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")
+#: Message types the UUV depth reader uses (COMMAND_ACK: the answers to its rate requests).
+DEPTH_USED = ("GLOBAL_POSITION_INT", *PRESSURE_MESSAGES, "PARAM_VALUE", "GPS_GLOBAL_ORIGIN", "COMMAND_ACK")
 MAV_AUTOPILOT_INVALID = 8
 NOT_AUTOPILOTS = (6, 18, 26, 30)  # MAV_TYPE GCS, ONBOARD_CONTROLLER, GIMBAL, CAMERA
 
@@ -95,3 +103,44 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
     tel.add_param(name.rstrip("\x00"), float(msg.param_value))
     return True
+
+
+class BadMessage(ValueError):
+    """A message whose fields cannot be used; the text names the field and its value."""
+
+
+def _number(kind: str, fields: Mapping, name: str) -> float:
+    value = fields.get(name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise BadMessage(f"{kind}.{name} = {value!r}: not a finite number")
+    return float(value)
+
+
+def param_name(value) -> str:
+    """A PARAM_VALUE's ``param_id`` as text: pymavlink's str or bytes, mavlink-server's string (or, from older
+    versions, a list of single characters), without the trailing NULs."""
+    if isinstance(value, bytes):
+        value = value.decode(errors="replace")
+    elif isinstance(value, list) and all(isinstance(c, str) for c in value):
+        value = "".join(value)
+    if not isinstance(value, str):
+        raise BadMessage(f"PARAM_VALUE.param_id = {value!r}: not a name")
+    return value.split("\x00", 1)[0]
+
+
+def ingest_ardusub(depth: ArduSubDepth, kind: str, fields: Mapping, receive_unix_s: float) -> DepthSample | None:
+    """One message of the UUV's autopilot (its fields: pymavlink's ``to_dict()`` or mavlink-server's JSON
+    ``message``) into ``depth``; the depth sample it makes, if any. :class:`BadMessage` for a field that is not
+    a finite number (one line naming it)."""
+    if kind == "GLOBAL_POSITION_INT":
+        return depth.position(_number(kind, fields, "time_boot_ms"), _number(kind, fields, "relative_alt") / 1000.0,
+                              _number(kind, fields, "alt") / 1000.0, _number(kind, fields, "vz") / 100.0,
+                              receive_unix_s)
+    if kind in PRESSURE_MESSAGES:
+        return depth.scaled_pressure(PRESSURE_MESSAGES.index(kind), _number(kind, fields, "time_boot_ms"),
+                                     _number(kind, fields, "press_abs") * 100.0, receive_unix_s)
+    if kind == "PARAM_VALUE":
+        depth.param(param_name(fields.get("param_id")), _number(kind, fields, "param_value"))
+    elif kind == "GPS_GLOBAL_ORIGIN":
+        depth.origin(_number(kind, fields, "altitude") / 1000.0)
+    return None

@@ -192,6 +192,10 @@ class MavlinkLink:
         self._wake()
         return True
 
+    def queue(self, kind: str, fields: dict) -> None:
+        """Hand one ``kind`` message to the thread after those before it (never replaced; dropped while down)."""
+        self._queue(self.pack(kind, fields))
+
     def _queue(self, buf: bytes) -> None:
         with self._lock:
             if self.state != "up":

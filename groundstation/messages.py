@@ -84,12 +84,17 @@ class FixMessage(Message):
                                                               "has one")
     height_m: Metres = Field(None, description="the camera's height above the water used, metres")
     sigma_height_m: NonNegative = Field(None, description="1-sigma of that height as it went into h_acc_m, metres")
-    sigma_depth_m: NonNegative = Field(None, description="1-sigma of depth_m as it went into h_acc_m, metres")
+    sigma_depth_m: NonNegative = Field(None, description="1-sigma of depth_m as it went into h_acc_m, metres: the "
+                                       "source's, a disagreement of ArduSub's two readings, and the depth's age "
+                                       "times the vertical speed")
     sigma_time_s: NonNegative = Field(None, description="1-sigma of the frame's time against the telemetry's as it "
                                       "went into h_acc_m, seconds")
     height_source: str | None = Field(None, description="where the height came from (see the README's inputs "
                                       "table)")
-    depth_source: str | None = Field(None, description="where the depth came from")
+    depth_source: str | None = Field(None, description="where the depth came from: skyfix (skyfix's JSON on Zenoh), "
+                                     "session (a recording's depth.jsonl naming none), ardusub_pressure (ArduSub's "
+                                     "depth sensor), ardusub_ekf (ArduSub's EKF, until the sensor's parameters are "
+                                     "known)")
     time_source: str | None = Field(None, description="where the UAV link's delay came from")
 
     @model_validator(mode="after")
@@ -135,8 +140,9 @@ class Clocks(Section):
     uav_link_latency_measured_ms: float | None = Field(description="what TIMESYNC measured, used or not")
     uav_reboots: int = Field(description="autopilot reboots seen (new clock segments)")
     uuv_clock_minus_station_s: float | None = Field(description="the UUV's clock minus the station's")
-    depth_aligned_by: Literal["uuv_clock", "arrival"] | None = Field(
-        description="uuv_clock: depth stamps used as they are; arrival: arrival minus depth_latency_s")
+    depth_aligned_by: Literal["uuv_clock", "arrival", "autopilot_clock"] | None = Field(
+        description="uuv_clock: depth stamps used as they are; arrival: arrival minus depth_latency_s; "
+        "autopilot_clock: ArduSub's time_boot_ms mapped by least delay, minus depth_latency_s")
 
 
 class HandoffStatus(Section):
@@ -202,17 +208,55 @@ class UavStatus(Section):
     handoff: HandoffStatus | None = Field(None, description="messages from the link's thread (pymavlink backend)")
 
 
-class DepthStatus(Section):
-    """The UUV's depth over Zenoh."""
+class ArduSubParams(Section):
+    """The ArduSub parameters its depth is computed with."""
 
-    key: str
-    shape: Literal["skyfix", "blueos"]
-    received: int
-    bad: int = Field(description="payloads that could not be read")
-    refused: int = Field(description="samples refused (out of range or order)")
-    age_s: Age = Field(description="seconds since the newest sample")
+    BARO_PRIMARY: int | None = Field(description="the depth sensor's barometer instance (0-based)")
+    BARO_SPEC_GRAV: float | None = Field(description="the water's specific gravity (1.0 fresh, 1.024 sea)")
+    ground_pressure_pa: float | None = Field(description="BARO{n}_GND_PRESS of the depth sensor in use: depth zero")
+    pressure_message: str | None = Field(description="the message carrying the depth sensor's pressure")
+    missing: list[str] = Field(description="parameters not received yet (since the autopilot's boot)")
+
+
+class ArduSubDepthStatus(Section):
+    """ArduSub's two depth readings (localizer/depth.py)."""
+
+    params: ArduSubParams
+    pressure_depth_m: float | None = Field(description="the newest depth from the depth sensor's pressure")
+    ekf_depth_m: float | None = Field(description="the newest depth of ArduSub's EKF (GLOBAL_POSITION_INT)")
+    disagreement_m: float | None = Field(description="pressure depth - EKF depth at the newest cross-check")
+    vertical_speed_mps: float | None = Field(description="GLOBAL_POSITION_INT vz, positive down")
+    ekf_origin_amsl_m: float | None = Field(description="the EKF origin's altitude (GPS_GLOBAL_ORIGIN)")
+    ekf_has_origin: bool | None = Field(description="GLOBAL_POSITION_INT alt is not 0: the EKF has an origin")
+    zero_not_followed_pa: float | None = Field(description="a ground pressure ArduSub took under water, which skyfix "
+                                               "does not follow (nor compare the EKF's depth while it lasts)")
+    autopilot_reboots: int
+
+
+class DepthStatus(Section):
+    """The UUV's depth: skyfix JSON on Zenoh, or ArduSub's over BlueOS's Zenoh or MAVLink."""
+
+    key: str | None = Field(description="the Zenoh key (blueos: the autopilot's prefix); null over MAVLink")
+    url: str | None = Field(description="the MAVLink link (mavlink); null over Zenoh")
+    shape: Literal["skyfix", "blueos", "mavlink"] = Field(
+        description="skyfix: JSON {t, depth_m}; blueos: ArduSub's MAVLink as BlueOS's mavlink-server publishes it; "
+        "mavlink: ArduSub's MAVLink on a link of skyfix's own")
+    received: int = Field(description="payloads or messages received (of those used)")
+    bad: int = Field(description="payloads or messages that could not be read")
+    refused: int = Field(description="samples refused (out of range or order, clock, or a jump)")
+    jumps: int = Field(description="samples refused as faster than the vehicle can dive")
+    other: int = Field(description="messages of other systems or components (mavlink)")
+    age_s: Age = Field(description="seconds since the newest accepted sample arrived")
+    t: float | None = Field(description="the newest sample's time (station clock: when it was measured)")
     depth_m: float | None = Field(description="the newest depth")
-    handoff: HandoffStatus | None = Field(None, description="samples from Zenoh's thread")
+    sigma_m: NonNegative = Field(description="its 1-sigma (null: the calibration's [uncertainty] depth_m)")
+    source: str | None = Field(description="where it came from: skyfix, ardusub_pressure, ardusub_ekf")
+    vertical_speed_mps: float | None = Field(description="the vehicle's vertical speed, positive down (ArduSub)")
+    rates_hz: dict[str, NonNegative] | None = Field(description="per message type used: measured rate (ArduSub)")
+    rate_requests: dict[str, str] | None = Field(description="per message: what skyfix asked for, the answer")
+    ardusub: ArduSubDepthStatus | None = Field(description="ArduSub's readings (blueos, mavlink)")
+    link: LinkStatus | None = Field(description="the MAVLink link's own state (mavlink)")
+    handoff: HandoffStatus | None = Field(None, description="samples from Zenoh's or the link's thread")
 
 
 class PipelineStatus(Section):

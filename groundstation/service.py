@@ -1,7 +1,8 @@
 """``skyfix run``: the live service. One asyncio task per link, all in one TaskGroup.
 
-Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth over
-Zenoh (:mod:`.sources.depth_zenoh`), the UUV's own position estimate
+Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth (skyfix's JSON over
+Zenoh, :mod:`.sources.depth_zenoh`, or ArduSub's own over BlueOS's Zenoh or MAVLink,
+:mod:`.sources.depth_ardusub`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`.sources.video_live`),
 the per-frame :mod:`.pipeline`, GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
 the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`), the operator's commands
@@ -33,6 +34,7 @@ import time
 import numpy as np
 import zenoh
 
+from localizer.depth import DepthGate
 from localizer.fix_gate import FixGate
 from localizer.telemetry import Telemetry
 
@@ -45,7 +47,8 @@ from .sinks.gps_input import GpsInputSink, mavlink_gps_link
 from .sinks.recorder import Recorder
 from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from .sinks.zenoh_mavlink import ZenohMavlinkIn
-from .sources.depth_zenoh import BLUEOS_KEY, DepthZenoh
+from .sources.depth_ardusub import ArduSubMavlink, ArduSubZenoh
+from .sources.depth_zenoh import DepthZenoh
 from .sources.rates import needed_rates
 from .sources.uav_mavlink import UavMavlink
 from .sources.uuv_position import UuvPosition, parse_hint
@@ -106,8 +109,7 @@ async def serve(cfg: config.RunConfig) -> dict:
     usage = Usage()
     try:
         size = (cal.camera.width, cal.camera.height)
-        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
-                            depth_latency_s=cal.timing.depth_latency_s) if cfg.record else None
+        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None) if cfg.record else None
         fix_sink = ZenohFixSink(session, cfg.fix_key)
         closers.append(fix_sink.close)
         sinks = [fix_sink]
@@ -135,8 +137,14 @@ async def serve(cfg: config.RunConfig) -> dict:
             uav = UavMavlink(cfg.mavlink, tel, needed_rates(cal.mount.attitude_source),
                              request_rates=not cfg.no_request_rates)
         uav.listeners.append(pipeline.telemetry_arrived)
-        depth_key = BLUEOS_KEY if cfg.depth_source == "blueos" and cfg.depth_key == "uuv/depth" else cfg.depth_key
-        depth = DepthZenoh(session, depth_key, tel, cfg.depth_source)
+        depth_key = cfg.depth_input_key
+        gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
+        if cfg.depth_source == "mavlink":
+            depth = ArduSubMavlink(cfg.depth_mavlink, tel, gate, cal.sigmas.depth_m)
+        elif cfg.depth_source == "blueos":
+            depth = ArduSubZenoh(session, depth_key, tel, gate, cal.sigmas.depth_m)
+        else:
+            depth = DepthZenoh(session, depth_key, tel, gate)
         control = Control(pipeline, lambda now: status(now))
         ui = None
         if not cfg.no_ui:
@@ -204,8 +212,9 @@ async def serve(cfg: config.RunConfig) -> dict:
         workers = [w for stage in stages for w in stage] + ([gps] if gps else [])
         if ui:
             await ui.start()  # UiError (an OSError) when its port is taken: exit 2 before anything runs
-        log.info("skyfix run: UAV %s, video %s, depth %s, fixes on %s, GPS_INPUT %s, commands on %s/*", cfg.mavlink,
-                 cfg.video, depth_key, cfg.fix_key, cfg.gps_input, zenoh_control.prefix)
+        log.info("skyfix run: UAV %s, video %s, depth %s (%s), fixes on %s, GPS_INPUT %s, commands on %s/*",
+                 cfg.mavlink, cfg.video, cfg.depth_mavlink or depth_key, cfg.depth_source, cfg.fix_key, cfg.gps_input,
+                 zenoh_control.prefix)
         if cal.init_bbox is None:
             log.info("no tracker.init_bbox: awaiting a target (%s/select%s%s)", zenoh_control.prefix,
                      f", the web page {ui.url}" if ui else "",

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from localizer.calibration import Calibration, ConfigError
+from localizer.depth import DEPTH_RANGE_M, SOURCE_WORDS
 from localizer.telemetry import Telemetry
 
 from .mavlink_io import ingest, mavutil
@@ -93,8 +94,15 @@ def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...
     return out
 
 
+def _optional(value) -> float:
+    """An extra key's number, NaN where it is absent or not a finite number (extra keys are not checked)."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    return float(value) if ok else math.nan
+
+
 def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
-    """Feed depth.jsonl into ``tel``: ``t`` (the UUV's stamp) and, when recorded, ``t_recv`` (its arrival)."""
+    """Feed depth.jsonl into ``tel``: ``t`` (the UUV's stamp) and, when recorded, ``t_recv`` (its arrival), and
+    the ``source``, ``sigma_m`` and ``vspeed_mps`` a recording wrote (the source "session" where none is named)."""
     try:
         text = path.read_text()
     except OSError as e:
@@ -118,12 +126,15 @@ def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
             raise SessionError(f"{path}:{i}: expected {{\"t\": number, \"depth_m\": number}}, got {line[:80]!r}") from None
         if not (math.isfinite(t) and math.isfinite(depth) and math.isfinite(t_recv or 0.0)):
             raise SessionError(f"{path}:{i}: non-finite value in {line[:80]!r}")
-        if not -5.0 <= depth <= 11000.0:
-            raise SessionError(f"{path}:{i}: depth_m = {depth!r} out of range [-5, 11000]")
+        if not DEPTH_RANGE_M[0] <= depth <= DEPTH_RANGE_M[1]:
+            raise SessionError(f"{path}:{i}: depth_m = {depth!r} out of range [{DEPTH_RANGE_M[0]:g}, {DEPTH_RANGE_M[1]:g}]")
         if t <= last_t:
             raise SessionError(f"{path}:{i}: t = {t!r} does not increase")
         last_t = t
-        if tel.add_depth(float(t), float(depth), None if t_recv is None else float(t_recv)):
+        source, sigma, vspeed = rec.get("source"), rec.get("sigma_m"), rec.get("vspeed_mps")
+        if tel.add_depth(float(t), float(depth), None if t_recv is None else float(t_recv),
+                         sigma_m=_optional(sigma), source=source if source in SOURCE_WORDS else "session",
+                         vspeed_mps=_optional(vspeed)):
             count += 1
         else:
             refused += 1

@@ -5,7 +5,8 @@ start, then again with back-off (10, 20, 40, 60 s …) while it lasts, and once
 when it is back:
 
 - the UAV's MAVLink: nothing received yet, silent, or needed messages missing;
-- the UUV's depth: no sample yet on its Zenoh key, or none for a while;
+- the UUV's depth: nothing yet on its Zenoh key or MAVLink link, no depth from it, none for a while, or
+  only ArduSub's EKF depth (its depth sensor's parameters or message not received);
 - the video: no frame decoded yet (with FFmpeg's reason), or none for a while;
 - Zenoh: no peer or router connected;
 - ``--record``: the recording stopped (a full disk).
@@ -61,12 +62,18 @@ def problems(status: dict, needed: tuple[str, ...], zenoh_peers: int | None) -> 
         if missing:
             out["uav"] = f"UAV MAVLink: no {', '.join(missing)} (receiving {', '.join(sorted(ages))})"
     depth = status["depth"]
+    where = f"Zenoh key {depth['key']}" if depth["key"] else depth["url"]
     if depth["received"] == 0:
-        out["depth"] = f"depth: no sample on Zenoh key {depth['key']}"
+        out["depth"] = f"depth: nothing received on {where}"
     elif depth["age_s"] is None:
-        out["depth"] = f"depth: {depth['received']} samples on {depth['key']}, none usable"
+        missing = (depth["ardusub"] or {}).get("params", {}).get("missing")
+        why = f" (ArduSub has not answered {', '.join(missing)} yet)" if missing else ""
+        out["depth"] = f"depth: {depth['received']} messages on {where}, no depth from them{why}"
     elif depth["age_s"] > SILENT_S:
-        out["depth"] = f"depth: none for {depth['age_s']:.0f} s on {depth['key']}"
+        out["depth"] = f"depth: none for {depth['age_s']:.0f} s on {where}"
+    elif depth["source"] == "ardusub_ekf":
+        missing = ", ".join(depth["ardusub"]["params"]["missing"]) or "its depth sensor's message"
+        out["depth"] = f"depth: ArduSub's EKF only, unchecked: {missing} not received yet on {where}"
     video = status.get("video")
     if video is not None:
         why = f": {video['error']}" if video.get("error") else ""

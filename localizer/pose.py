@@ -17,6 +17,7 @@ import numpy as np
 
 from . import attitude as att
 from .calibration import UAV_HORIZONTAL_FALLBACK_M, Calibration
+from .depth import SOURCE_WORDS, frame_sigma_m
 from .surface import height_above_surface_m
 from .telemetry import DEG_PER_M, Telemetry
 from .timeline import BEFORE_FIRST, OK
@@ -112,8 +113,12 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
     R_gimbal, R_body, sig_tilt, sig_yaw = _rotations(cal, tel, tq, status)
     p, sp, ep = tel.position.sample(tq)
     _mark(status, sp, "position")
-    dep, sd, _ = tel.depth.sample(t)
+    dep, sd, ed = tel.depth.sample(t)
     _mark(status, sd, "depth")
+    depth_age_s = np.maximum(0.0, t - tel.depth.last_t) if len(tel.depth) else np.zeros(n)
+    sigma_depth = frame_sigma_m(dep[:, 1], dep[:, 2], ed[:, 0], depth_age_s, cal.sigmas.depth_m)
+    words = np.array((*SOURCE_WORDS, ""), dtype=object)  # "": no depth at that frame
+    depth_source = words[np.where(np.isfinite(dep[:, 3]), dep[:, 3], len(SOURCE_WORDS)).astype(int)]
 
     R_cv = att.R_ned_from_cv(R_gimbal)
     R_before = att.R_ned_from_cv(_rotations(cal, tel, tq - RATE_STEP_S)[0])
@@ -157,9 +162,9 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
         t_gnss=t - offset_gnss if offset_gnss is not None else np.full(n, np.nan),
         geoid_separation_m=gnss[:, 1],
         sigma_height_m=np.full(n, sig.height_m),
-        sigma_depth_m=np.full(n, sig.depth_m),
+        sigma_depth_m=sigma_depth,
         sigma_time_s=np.full(n, sig.time_s),
         height_source=np.full(n, height_source, dtype=object),
-        depth_source=np.full(n, "depth", dtype=object),
+        depth_source=depth_source,
         time_source=np.full(n, tel.latency_source, dtype=object),
     )

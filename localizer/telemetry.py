@@ -15,7 +15,10 @@ SYSTEM_TIME does not align anything: it measures the station clock's offset from
 GNSS time (:attr:`Telemetry.station_minus_gnss_s`), which gives GPS_INPUT its
 week time. The UUV's depth is stored at station time: by the UUV's own stamp when
 its clock agrees with the station's (within ``depth_clock_tolerance_s``), else
-mapped by its arrival times minus ``depth_latency_s``.
+mapped by its arrival times minus ``depth_latency_s``; a depth from the UUV's autopilot
+comes already mapped from its boot clock (:class:`localizer.depth.ArduSubDepth`). Each depth
+sample keeps its 1-sigma, its source (a word of :data:`localizer.depth.SOURCE_WORDS`) and the
+vehicle's vertical speed, which :func:`localizer.depth.frame_sigma_m` grows its sigma with.
 
 Angles in radians, positions in degrees and metres, rates per second.
 """
@@ -29,6 +32,7 @@ import numpy as np
 from .attitude import euler_rates
 from .calibration import Timing
 from .clock import OUTLIER, RESTART, STEP, ClockMap, Median, RoundTrip
+from .depth import DEPTH_RANGE_M, SOURCE_WORDS
 from .timeline import Series
 
 #: Station-clock disagreements (seconds) worth telling the operator about.
@@ -57,7 +61,7 @@ class Telemetry:
         self._measured_latency_s: float | None = None
         self._gnss = Median()  # arrival-scale minus GNSS time, per SYSTEM_TIME
         self.uuv_clock = ClockMap(w)  # the UUV's own depth stamps
-        self.depth_aligned_by: str | None = None  # "uuv_clock" or "arrival"
+        self.depth_aligned_by: str | None = None  # "uuv_clock", "arrival" or "autopilot_clock"
         # roll, pitch, yaw of the UAV body (FRD in NED) and their rates
         self.attitude = Series("HHHddd", timing.attitude_gap_s, timing.attitude_hold_s, keep_s)
         # lat_deg, lon_deg, alt_amsl_m, relative_alt_m and their rates
@@ -68,8 +72,9 @@ class Telemetry:
         self.mount = Series("aaa", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
         # GPS_RAW_INT: the receiver's horizontal accuracy (m) and geoid separation (m), receive times
         self.gnss = Series("ss", math.inf, 10.0, keep_s)
-        # UUV depth below the surface (m, positive down), station seconds
-        self.depth = Series("l", timing.depth_gap_s, timing.depth_hold_s, keep_s)
+        # UUV depth below the surface (m, positive down), its 1-sigma (m; NaN: the calibration's), the vehicle's
+        # vertical speed (m/s, positive down; NaN: unknown) and its source (index into SOURCE_WORDS), station seconds
+        self.depth = Series("lsss", timing.depth_gap_s, timing.depth_hold_s, keep_s)
         # absolute measurements of the UAV's height above the water, per source ("rangefinder", "size", ...):
         # the reported position's height (m) and its 1-sigma (m), on the UAV buffers' time scale
         self.height_fixes: dict[str, Series] = {}
@@ -280,20 +285,19 @@ class Telemetry:
         return self._append(series, t_uav, (uav_height_m, sigma_m))
 
     # -- depth -----------------------------------------------------------------------------------
-    def add_depth(self, t_source: float | None, depth_m: float, receive_s: float | None = None) -> bool:
+    def add_depth(self, t_source: float, depth_m: float, receive_s: float | None = None, *,
+                  sigma_m: float = math.nan, source: str = "skyfix", vspeed_mps: float = math.nan) -> bool:
         """The UUV's depth (m, positive down), stamped ``t_source`` by the UUV and received at ``receive_s``.
 
         Without ``receive_s`` (sessions that did not record arrivals) the UUV's stamp
-        is taken as station time; without ``t_source`` (BlueOS VFR_HUD, which carries
-        none) the arrival minus ``depth_latency_s`` is.
+        is taken as station time. ``sigma_m`` (NaN: the calibration's), ``source`` and
+        ``vspeed_mps`` (positive down, NaN: unknown) are kept with it.
         """
-        if not (isinstance(depth_m, (int, float)) and -5.0 <= depth_m <= 11000.0):
-            return self._refuse(self.depth, "depth_m not finite or outside [-5, 11000]")
+        if not self._depth_ok(depth_m, source):
+            return False
         latency = self.timing.depth_latency_s
         if receive_s is None:
             t = t_source
-        elif t_source is None:
-            t, self.depth_aligned_by = receive_s - latency, "arrival"
         else:
             if not math.isfinite(t_source):
                 return self._refuse(self.depth, "time not finite")
@@ -308,4 +312,19 @@ class Telemetry:
                 if self.uuv_clock.segments or len(self.depth) >= _NOTICE_AFTER:
                     self._notice_once("uuv", -station_minus_uuv, f"the UUV's clock is {-station_minus_uuv:+.2f} s "
                                       "off the station's: its depth is aligned by arrival times")
-        return self._append(self.depth, t, (depth_m,))
+        return self._append(self.depth, t, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source)))
+
+    def add_autopilot_depth(self, t_station: float, depth_m: float, sigma_m: float, source: str,
+                            vspeed_mps: float) -> bool:
+        """A depth from the UUV's autopilot, already on the station clock (mapped from its boot clock)."""
+        if not self._depth_ok(depth_m, source):
+            return False
+        self.depth_aligned_by = "autopilot_clock"
+        return self._append(self.depth, t_station, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source)))
+
+    def _depth_ok(self, depth_m: float, source: str) -> bool:
+        if source not in SOURCE_WORDS:
+            return self._refuse(self.depth, f"depth source {source!r} is not one of {', '.join(SOURCE_WORDS)}")
+        if not (isinstance(depth_m, (int, float)) and DEPTH_RANGE_M[0] <= depth_m <= DEPTH_RANGE_M[1]):
+            return self._refuse(self.depth, f"depth_m not finite or outside [{DEPTH_RANGE_M[0]:g}, {DEPTH_RANGE_M[1]:g}]")
+        return True

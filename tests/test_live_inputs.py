@@ -31,7 +31,7 @@ def test_every_silent_input_is_named_and_the_service_keeps_running(tmp_path):
     out, mav, video = _run(tmp_path, "--duration-s", "12")
     log = out.stdout + out.stderr
     assert out.returncode == 0, log[-3000:]
-    for line in (f"UAV MAVLink: nothing received on udpin:127.0.0.1:{mav}", "depth: no sample on Zenoh key uuv/depth",
+    for line in (f"UAV MAVLink: nothing received on udpin:127.0.0.1:{mav}", "depth: nothing received on Zenoh key uuv/depth",
                  f"video: no frame from udp://127.0.0.1:{video}", "Zenoh: no peer or router connected"):
         assert line in log, line
     assert re.search(r"skyfix\.inputs INFO: [\d.]+ fps; no frames; no fix yet; UAV never; depth never; video never",
@@ -46,7 +46,7 @@ def test_require_inputs_stops_with_one_line_and_exit_2(tmp_path):
     errors = [ln for ln in out.stderr.splitlines() if ln.startswith("skyfix run: error:")]
     assert len(errors) == 1
     assert f"UAV MAVLink: nothing received on udpin:127.0.0.1:{mav}" in errors[0]
-    assert "depth: no sample" in errors[0] and "video: no frame" in errors[0] and "--require-inputs" in errors[0]
+    assert "depth: nothing received" in errors[0] and "video: no frame" in errors[0] and "--require-inputs" in errors[0]
 
 
 def test_require_inputs_is_content_with_a_running_session(tmp_path):

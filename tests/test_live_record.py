@@ -73,5 +73,7 @@ def test_recording_is_flushed_and_survives_kill(tmp_path):
     session = load_session(rec)
     assert sent - 60 <= len(session.telemetry.attitude) <= sent  # at most the last second lost
     assert len(session.telemetry.position) >= sent - 60 and len(session.telemetry.depth) >= 20
+    first = json.loads((rec / "depth.jsonl").read_text().splitlines()[0])
+    assert first["source"] == "skyfix" and "sigma_m" not in first  # what the service used: the calibration's sigma
     assert session.calibration.mount.attitude_source == "fixed"
     assert (rec / "positions.csv").read_text().startswith("t,lat,lon,depth_m,h_acc_m,status")

@@ -32,22 +32,23 @@ async def _run_for(worker, seconds, during=None):
     await asyncio.gather(task, return_exceptions=True)
 
 
-def test_depth_over_zenoh_both_shapes_and_garbage(caplog):
+def test_depth_over_zenoh_clocks_garbage_and_jumps(caplog):
     """Depth stamped by a UUV clock an hour ahead is aligned by its arrival (and says so); one that agrees
-    with the station is taken as stamped; BlueOS's VFR_HUD has no time and is taken at its arrival."""
+    with the station is taken as stamped; garbage is named in one line; a jump faster than the vehicle can
+    dive is refused with the values."""
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     service = open_session(listen=[ep])
     publisher = open_session(connect=[ep])
-    tel_own, tel_sync, tel_blueos = Telemetry(), Telemetry(), Telemetry()
+    tel_own, tel_sync = Telemetry(), Telemetry()
     own = DepthZenoh(service, "uuv/depth", tel_own)
     synced = DepthZenoh(service, "uuv/depth_synced", tel_sync)
-    blueos = DepthZenoh(service, "mavlink/*/*/VFR_HUD", tel_blueos, shape="blueos")
     stamps = []
 
     async def publish():
         await asyncio.sleep(0.5)  # let the subscriptions propagate
         for i in range(3):
-            publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.0 + i, "extra": "x"}))
+            publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.0 + 0.02 * i,
+                                                   "extra": "x"}))
             stamps.append(time.time())
             publisher.put("uuv/depth_synced", json.dumps({"t": stamps[-1], "depth_m": 0.5}))
             await asyncio.sleep(0.05)
@@ -55,33 +56,32 @@ def test_depth_over_zenoh_both_shapes_and_garbage(caplog):
         publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": "deep"}))
         publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0}))  # out of range
         await asyncio.sleep(0.05)
-        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0}))
-        hud = {"header": {"system_id": 1, "component_id": 1, "sequence": 5, "message_id": 74},
-               "message": {"type": "VFR_HUD", "alt": -1.25, "airspeed": 0.0}}
-        publisher.put("mavlink/1/1/VFR_HUD", json.dumps(hud))
-        publisher.put("mavlink/1/1/VFR_HUD", json.dumps({"message": {"type": "VFR_HUD"}}))
+        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0}))  # 2.96 m in 0.1 s
+        await asyncio.sleep(0.05)
+        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.06}))
 
-    async def all_three():
-        await asyncio.gather(_run_for(own, 0.8, publish), _run_for(synced, 1.3), _run_for(blueos, 1.3))
+    async def both():
+        await asyncio.gather(_run_for(own, 0.8, publish), _run_for(synced, 1.3))
 
     caplog.set_level(logging.WARNING)
     t_start = time.time()
     try:
-        asyncio.run(all_three())
+        asyncio.run(both())
     finally:
         publisher.close()
         service.close()
-    assert list(tel_own.depth.values[:, 0]) == [1.0, 2.0, 3.0, 4.0]
-    assert own.bad == 2 and own.refused == 1
+    assert list(tel_own.depth.values[:, 0]) == [1.0, 1.02, 1.04, 1.06]
+    assert own.bad == 2 and own.refused == 2 and own.gate.refused == 1
     assert tel_own.depth_aligned_by == "arrival"
     assert tel_own.uuv_clock_minus_station_s == pytest.approx(3600.0, abs=0.2)
     assert t_start < tel_own.depth.times[0] < time.time()  # on the station clock, not an hour ahead
     assert any("UUV's clock is +3600" in r.message for r in caplog.records)
     assert tel_sync.depth_aligned_by == "uuv_clock" and list(tel_sync.depth.times) == stamps
-    assert list(tel_blueos.depth.values[:, 0]) == [1.25] and blueos.bad == 1
-    assert t_start < tel_blueos.depth.times[0] < time.time()
     assert any("deep" in r.message for r in caplog.records)
     assert any("garbage" in r.message for r in caplog.records)
+    jump = [r.message for r in caplog.records if "faster than the vehicle can dive" in r.message]
+    assert len(jump) == 1 and "depth 4.00 m refused: 2.96 m from 1.04 m" in jump[0], jump
+    assert own.status(time.time())["source"] == "skyfix"
 
 
 def test_a_flood_of_one_problem_stays_a_trickle_in_the_log(caplog):
@@ -113,9 +113,9 @@ def test_throttle_is_keyed_by_the_kind_with_bounded_memory():
 
 def test_parse_depth_rejects_non_numbers():
     with pytest.raises(ValueError, match="depth_m"):
-        parse_depth(b'{"t": 1.0, "depth_m": NaN}', "skyfix")
-    with pytest.raises(ValueError, match="not VFR_HUD"):
-        parse_depth(b'{"message": {"type": "ATTITUDE", "alt": 1}}', "blueos")
+        parse_depth(b'{"t": 1.0, "depth_m": NaN}')
+    with pytest.raises(ValueError, match="t missing"):
+        parse_depth(b'{"message": {"type": "VFR_HUD", "alt": 1}}')
 
 
 def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():

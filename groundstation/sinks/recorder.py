@@ -4,9 +4,10 @@
 again with ``[tracker] init_bbox``/``init_t`` at the first fix: the tracker's box on
 that frame, so ``skyfix process`` starts the tracker where the live run had it;
 ``uav.tlog`` gets every good MAVLink frame from the UAV with its receive time,
-``depth.jsonl`` every accepted depth sample (``t`` the UUV's own stamp, or the
-arrival minus the depth latency when the source has none, and ``t_recv`` its
-arrival on the station clock), ``positions.csv`` every fix, ``track.csv`` the
+``depth.jsonl`` every accepted depth sample (``t`` the UUV's own stamp, or the station time
+ArduSub's was mapped to from its boot clock, ``t_recv`` its arrival on the station clock, and
+what the service used with it: ``source``, ``sigma_m`` and ``vspeed_mps`` where known),
+``positions.csv`` every fix, ``track.csv`` the
 tracked pixel of every frame (empty when there is no fix), and
 ``video.ts`` + ``video_frames.csv`` the received frames (H.264 in MPEG-TS, encoded
 in-process, each frame's timestamp its exposure time, so a replay keeps the real
@@ -29,6 +30,7 @@ import asyncio
 import csv
 import json
 import logging
+import math
 import os
 import queue
 import struct
@@ -40,6 +42,7 @@ from pathlib import Path
 
 import av
 
+from localizer.depth import DepthSample
 from localizer.fix import Fix
 
 from ..positions import COLUMNS, format_row
@@ -130,8 +133,7 @@ class VideoWriter:
 class Recorder:
     """Worker and sink writing the session; see the module docstring."""
 
-    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None,
-                 depth_latency_s: float = 0.0):
+    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None):
         self.dir = Path(directory)
         if self.dir.exists() and not self.dir.is_dir():
             raise FileExistsError(f"--record {directory}: exists and is not a directory")
@@ -146,7 +148,6 @@ class Recorder:
         self._calibration = {k: v for k, v in tomllib.loads(Path(cal_source).read_text()).items() if k != "tracker"}
         self._write_toml(session_toml(self._calibration))
         self.video_size = video_size
-        self.depth_latency_s = depth_latency_s
         self.mavlink_frames = 0
         self.depth_samples = 0
         self.fixes = 0
@@ -176,9 +177,10 @@ class Recorder:
     def on_mavlink(self, msg, t_recv: float) -> None:
         self.mavlink_frames += self._put(("tlog", struct.pack(">Q", int(t_recv * 1e6)) + msg.get_msgbuf()))
 
-    def on_depth(self, t_uuv: float | None, depth_m: float, t_recv: float) -> None:
-        t = t_recv - self.depth_latency_s if t_uuv is None else t_uuv
-        self.depth_samples += self._put(("depth", json.dumps({"t": t, "depth_m": depth_m, "t_recv": t_recv}) + "\n"))
+    def on_depth(self, sample: DepthSample, t_recv: float) -> None:
+        rec = {"t": sample.t, "depth_m": sample.depth_m, "t_recv": t_recv, "source": sample.source}
+        rec |= {k: v for k, v in (("sigma_m", sample.sigma_m), ("vspeed_mps", sample.vspeed_mps)) if math.isfinite(v)}
+        self.depth_samples += self._put(("depth", json.dumps(rec) + "\n"))
 
     def on_frame(self, frame) -> None:
         """A received frame (of the ``video_size`` given at the start)."""

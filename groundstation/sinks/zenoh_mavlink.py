@@ -16,6 +16,11 @@ age of the autopilot's last HEARTBEAT on ``mavlink/*/1/HEARTBEAT``.
 Messages put while nobody matches are counted (``sent_unmatched``). A HEARTBEAT
 (``MAV_TYPE_ONBOARD_CONTROLLER``, 245/220, as on a MAVLink link) goes out with the
 first GPS_INPUT of every second.
+
+:func:`mavlink_json` writes a message the way mavlink-server (rust-mavlink's serde) reads it:
+enums as ``{"type": "ENTRY_NAME"}``, bitmasks as ``{"bits": N}``, char arrays as strings, and
+HEARTBEAT's ``type`` named ``mavtype``; :class:`MavlinkIn` puts such messages on ``mavlink/in``
+as one system and component (the UUV depth reader asks ArduSub through it too).
 """
 
 from __future__ import annotations
@@ -27,17 +32,52 @@ import time
 
 import zenoh
 
+from ..mavlink_io import mavutil
 from ..mavlink_link import HEARTBEAT_PERIOD_S
 from .gps_input import GPS_COMPID, GPS_SYSID
 
 log = logging.getLogger("skyfix.gps_input")
 
 AUTOPILOT_HEARTBEAT_KEY = "mavlink/*/1/HEARTBEAT"
-#: Bitmask fields, which mavlink-server's JSON writes as ``{"bits": N}``.
-BITMASKS = {"GPS_INPUT": ("ignore_flags",)}
-HEARTBEAT = {"type": "HEARTBEAT", "custom_mode": 0, "mavtype": {"type": "MAV_TYPE_ONBOARD_CONTROLLER"},
-             "autopilot": {"type": "MAV_AUTOPILOT_INVALID"}, "base_mode": {"bits": 0},
-             "system_status": {"type": "MAV_STATE_ACTIVE"}, "mavlink_version": 3}
+RENAMED = {"type": "mavtype"}  # rust-mavlink's names of MAVLink fields that are Rust keywords
+HEARTBEAT = {"type": 18, "autopilot": 8, "base_mode": 0, "custom_mode": 0,  # MAV_TYPE_ONBOARD_CONTROLLER, no autopilot
+             "system_status": 4, "mavlink_version": 3}  # MAV_STATE_ACTIVE
+
+
+def mavlink_json(kind: str, fields: dict) -> dict:
+    """A message (``kind`` and its fields as pymavlink names them) as mavlink-server's JSON ``message`` object."""
+    mavlink = mavutil().mavlink
+    cls = getattr(mavlink, f"MAVLink_{kind.lower()}_message")
+    out = {"type": kind}
+    for name, value in fields.items():
+        if cls.fielddisplays_by_name.get(name) == "bitmask":
+            value = {"bits": value}
+        elif name in cls.fieldenums_by_name:
+            entry = mavlink.enums[cls.fieldenums_by_name[name]].get(value)
+            value = {"type": entry.name} if entry is not None else value
+        elif isinstance(value, bytes):
+            value = value.decode()
+        out[RENAMED.get(name, name)] = value
+    return out
+
+
+class MavlinkIn:
+    """Messages put on mavlink-server's ``key`` (``mavlink/in``) from one MAVLink system and component."""
+
+    def __init__(self, session: zenoh.Session, key: str, system: int, component: int):
+        self.session = session
+        self.system, self.component = system, component
+        self.publisher = session.declare_publisher(key, encoding=zenoh.Encoding.APPLICATION_JSON)
+        self._seq = 0
+
+    def put(self, kind: str, fields: dict) -> None:
+        header = {"system_id": self.system, "component_id": self.component, "sequence": self._seq}
+        self._seq = (self._seq + 1) % 256
+        self.publisher.put(json.dumps({"header": header, "message": mavlink_json(kind, fields)}, allow_nan=False),
+                           timestamp=self.session.new_timestamp())
+
+    def close(self) -> None:
+        self.publisher.undeclare()
 
 
 class ZenohMavlinkIn:
@@ -53,17 +93,16 @@ class ZenohMavlinkIn:
         self.written = 0
         self.heartbeats = 0
         self.sent_unmatched = 0
-        self._seq = 0
         self._next_beat = 0.0
         self._lock = threading.Lock()
-        self._pub = None
+        self._in: MavlinkIn | None = None
         self._listener = None
         self._sub = None
 
     def open(self) -> None:
-        self._pub = self.session.declare_publisher(self.key, encoding=zenoh.Encoding.APPLICATION_JSON)
-        self._listener = self._pub.declare_matching_listener(self._on_matching)
-        self._on_matching(self._pub.matching_status)
+        self._in = MavlinkIn(self.session, self.key, GPS_SYSID, GPS_COMPID)
+        self._listener = self._in.publisher.declare_matching_listener(self._on_matching)
+        self._on_matching(self._in.publisher.matching_status)
         self._sub = self.session.declare_subscriber(AUTOPILOT_HEARTBEAT_KEY, self._on_heartbeat)
 
     def _on_matching(self, status) -> None:  # Zenoh's thread: state and a log line only
@@ -81,11 +120,8 @@ class ZenohMavlinkIn:
     def _on_heartbeat(self, _sample) -> None:  # Zenoh's thread
         self.last_heard = time.time()
 
-    def _put(self, message: dict) -> None:
-        header = {"system_id": GPS_SYSID, "component_id": GPS_COMPID, "sequence": self._seq}
-        self._seq = (self._seq + 1) % 256
-        self._pub.put(json.dumps({"header": header, "message": message}, allow_nan=False),
-                      timestamp=self.session.new_timestamp())
+    def _put(self, kind: str, fields: dict) -> None:
+        self._in.put(kind, fields)
         if not self.matching:
             self.sent_unmatched += 1
 
@@ -93,11 +129,10 @@ class ZenohMavlinkIn:
         """Put one ``kind`` message (and the HEARTBEAT when one is due); False when nobody is subscribed."""
         now = time.monotonic()
         if now >= self._next_beat:
-            self._put(HEARTBEAT)
+            self._put("HEARTBEAT", HEARTBEAT)
             self.heartbeats += 1
             self._next_beat = now + HEARTBEAT_PERIOD_S
-        bits = {name: {"bits": fields[name]} for name in BITMASKS.get(kind, ())}
-        self._put({"type": kind, **fields, **bits})
+        self._put(kind, fields)
         self.written += 1
         return self.matching
 
@@ -105,13 +140,13 @@ class ZenohMavlinkIn:
         """Put ``last`` ``(kind, fields)`` if given, then undeclare; True if a subscriber matched.
 
         May be called twice."""
-        if self._pub is None:
+        if self._in is None:
             return False
         delivered = last is not None and self.send(*last)
         self._sub.undeclare()
         self._listener.undeclare()
-        self._pub.undeclare()
-        self._pub = None
+        self._in.close()
+        self._in = None
         return delivered
 
     def status(self, now: float) -> dict:

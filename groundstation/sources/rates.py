@@ -1,9 +1,10 @@
-"""The telemetry rates skyfix needs from the UAV, what arrives, and what to ask the autopilot for.
+"""The telemetry rates skyfix needs from an autopilot, what arrives, and what to ask it for.
 
-Needed (per second): ATTITUDE 25 (the camera's attitude between frames; slower is
+Needed from the UAV (per second): ATTITUDE 25 (the camera's attitude between frames; slower is
 interpolated with its body rates, at a cost), GLOBAL_POSITION_INT 10, the gimbal
-message 20, SYSTEM_TIME 1, GPS_RAW_INT 2 (the UAV's own accuracy). As a ground
-station skyfix asks for the ones that arrive slower with
+message 20, SYSTEM_TIME 1, GPS_RAW_INT 2 (the UAV's own accuracy); from the UUV's
+autopilot (ArduSub) its depth sensor's SCALED_PRESSURE message and GLOBAL_POSITION_INT
+at :data:`DEPTH_HZ`. As a ground station skyfix asks for the ones that arrive slower with
 ``MAV_CMD_SET_MESSAGE_INTERVAL``; a refusal or no answer falls back to the older
 ``REQUEST_DATA_STREAM`` for the stream that carries the message (ArduPilot's
 stream tables). A message already faster than needed is left alone. Every
@@ -18,11 +19,14 @@ from dataclasses import dataclass, field
 NEEDED_HZ = {"ATTITUDE": 25.0, "GLOBAL_POSITION_INT": 10.0, "SYSTEM_TIME": 1.0, "GPS_RAW_INT": 2.0}
 GIMBAL_HZ = 20.0
 GIMBAL_MESSAGE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+DEPTH_HZ = 5.0
 MESSAGE_ID = {"ATTITUDE": 30, "GLOBAL_POSITION_INT": 33, "SYSTEM_TIME": 2, "GPS_RAW_INT": 24,
-              "GIMBAL_DEVICE_ATTITUDE_STATUS": 285, "MOUNT_ORIENTATION": 265}
-# MAV_DATA_STREAM carrying each message on ArduPilot: EXTRA1, POSITION, EXTRA3, EXTENDED_STATUS
+              "GIMBAL_DEVICE_ATTITUDE_STATUS": 285, "MOUNT_ORIENTATION": 265,
+              "SCALED_PRESSURE": 29, "SCALED_PRESSURE2": 137, "SCALED_PRESSURE3": 143}
+# MAV_DATA_STREAM carrying each message on ArduPilot: EXTRA1, POSITION, EXTRA3, EXTENDED_STATUS, RAW_SENSORS
 STREAM = {"ATTITUDE": 10, "GLOBAL_POSITION_INT": 6, "SYSTEM_TIME": 12, "GPS_RAW_INT": 2,
-          "GIMBAL_DEVICE_ATTITUDE_STATUS": 12, "MOUNT_ORIENTATION": 12}
+          "GIMBAL_DEVICE_ATTITUDE_STATUS": 12, "MOUNT_ORIENTATION": 12,
+          "SCALED_PRESSURE": 1, "SCALED_PRESSURE2": 1, "SCALED_PRESSURE3": 1}
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_RESULT_ACCEPTED = 0
 SETTLE_S = 3.0  # measure this long after the autopilot appears before asking
@@ -76,6 +80,7 @@ class RateRequests:
     _since: float | None = None
     _asked: dict[str, float] = field(default_factory=dict)
     _pending: deque = field(default_factory=deque)  # (kind, sent at) awaiting COMMAND_ACK, in order
+    _denied: list = field(default_factory=list)  # refused requests, to ask again the older way
 
     def start(self, now: float) -> None:
         """The autopilot has appeared: requests may follow after :data:`SETTLE_S`."""
@@ -101,13 +106,14 @@ class RateRequests:
                 out.append((kind, MESSAGE_ID[kind], hz))
         return out
 
-    def on_ack(self, command: int, result: int) -> str | None:
-        """A COMMAND_ACK; returns the message kind it answered when it was for a rate request."""
+    def on_ack(self, command: int, result: int) -> None:
+        """A COMMAND_ACK (a refused rate request is asked for again the older way by :meth:`messages`)."""
         if command != MAV_CMD_SET_MESSAGE_INTERVAL or not self._pending:
-            return None
+            return
         kind, _ = self._pending.popleft()
         self.state[kind] = "accepted" if result == MAV_RESULT_ACCEPTED else f"denied (MAV_RESULT {result})"
-        return kind if result != MAV_RESULT_ACCEPTED else None
+        if result != MAV_RESULT_ACCEPTED:
+            self._denied.append(kind)
 
     def unanswered(self, now: float) -> list[str]:
         """Requests with no COMMAND_ACK within :data:`ACK_TIMEOUT_S` (dropped from the pending list)."""
@@ -119,11 +125,31 @@ class RateRequests:
         return out
 
 
-def send_interval(conn, target: tuple[int, int], msg_id: int, hz: float) -> None:
-    """``MAV_CMD_SET_MESSAGE_INTERVAL`` for one message."""
-    conn.mav.command_long_send(*target, MAV_CMD_SET_MESSAGE_INTERVAL, 0, float(msg_id), 1e6 / hz, 0, 0, 0, 0, 0)
+    def messages(self, meter: RateMeter, now: float, target: tuple[int, int]) -> list[tuple[str, str, dict]]:
+        """The requests to send now, as ``(a line for the log, message type, fields)``: SET_MESSAGE_INTERVAL for
+        the slow messages, REQUEST_DATA_STREAM for those whose request was refused or not answered."""
+        out = [(f"{kind} at {meter.rate_hz(kind, now):.1f} Hz; asking for {hz:g} Hz (SET_MESSAGE_INTERVAL)",
+                *interval_request(target, msg_id, hz)) for kind, msg_id, hz in self.due(meter, now)]
+        fall_back = [(kind, "no answer") for kind in self.unanswered(now)] + [(kind, "denied") for kind in self._denied]
+        self._denied.clear()
+        for kind, why in fall_back:
+            hz = self.needed[kind]
+            self.state[kind] = f"{self.state[kind]}; stream requested at {hz:g} Hz"
+            out.append((f"SET_MESSAGE_INTERVAL for {kind}: {why}; asking with REQUEST_DATA_STREAM",
+                        *stream_request(target, kind, hz)))
+        return out
 
 
-def send_stream(conn, target: tuple[int, int], kind: str, hz: float) -> None:
-    """The older ``REQUEST_DATA_STREAM`` for the stream that carries ``kind``."""
-    conn.mav.request_data_stream_send(*target, STREAM[kind], max(1, round(hz)), 1)
+def interval_request(target: tuple[int, int], msg_id: int, hz: float) -> tuple[str, dict]:
+    """``MAV_CMD_SET_MESSAGE_INTERVAL`` for one message: ``(message type, fields)``."""
+    return "COMMAND_LONG", {"target_system": target[0], "target_component": target[1],
+                            "command": MAV_CMD_SET_MESSAGE_INTERVAL, "confirmation": 0, "param1": float(msg_id),
+                            "param2": 1e6 / hz, "param3": 0.0, "param4": 0.0, "param5": 0.0, "param6": 0.0,
+                            "param7": 0.0}
+
+
+def stream_request(target: tuple[int, int], kind: str, hz: float) -> tuple[str, dict]:
+    """The older ``REQUEST_DATA_STREAM`` for the stream that carries ``kind``: ``(message type, fields)``."""
+    return "REQUEST_DATA_STREAM", {"target_system": target[0], "target_component": target[1],
+                                   "req_stream_id": STREAM[kind], "req_message_rate": max(1, round(hz)),
+                                   "start_stop": 1}

@@ -33,7 +33,7 @@ from ..logs import Throttle, kind_of
 from ..mavlink_io import USED, ingest, mavutil
 from ..mavlink_link import MavlinkLink
 from ..threads import Handoff, in_thread
-from .rates import RateMeter, RateRequests, send_interval, send_stream
+from .rates import RateMeter, RateRequests
 
 log = logging.getLogger("skyfix.uav")
 
@@ -101,7 +101,6 @@ class UavMavlink:
         self._throttle = Throttle()
         self.link = MavlinkLink(url, GCS_SYSID, GCS_COMPID, name="UAV MAVLink", is_peer=self._from_uav)
         self._low_warned: set[str] = set()
-        self._denied: list[str] = []  # rate requests the autopilot refused, to ask again the older way
         self.handoff: Handoff | None = None
 
     async def run(self) -> None:
@@ -150,20 +149,9 @@ class UavMavlink:
             conn.mav.param_request_read_send(*self.autopilot, b"MNT1_TYPE", -1)
             self._params_asked += 1
             self._params_last = now
-        for kind, msg_id, hz in self.requests.due(self.health.meter, now):
-            log.info("UAV MAVLink: %s at %.1f Hz; asking for %g Hz (SET_MESSAGE_INTERVAL)", kind,
-                     self.health.meter.rate_hz(kind, now), hz)
-            send_interval(conn, self.autopilot, msg_id, hz)
-        for kind in self.requests.unanswered(now):
-            self._fall_back(conn, kind, "no answer")
-        while self._denied:
-            self._fall_back(conn, self._denied.pop(0), "denied")
-
-    def _fall_back(self, conn, kind: str, why: str) -> None:
-        hz = self.requests.needed[kind]
-        log.info("UAV MAVLink: SET_MESSAGE_INTERVAL for %s: %s; asking with REQUEST_DATA_STREAM", kind, why)
-        send_stream(conn, self.autopilot, kind, hz)
-        self.requests.state[kind] = f"{self.requests.state[kind]}; stream requested at {hz:g} Hz"
+        for line, kind, fields in self.requests.messages(self.health.meter, now, self.autopilot):
+            log.info("UAV MAVLink: %s", line)
+            conn.queue(kind, fields)
 
     def _bad(self, reason: str, data: bytes) -> None:
         self.health.bad_data += 1
@@ -200,9 +188,7 @@ class UavMavlink:
             self.autopilot = (msg.get_srcSystem(), self.tel.autopilot_component)
             self.requests.start(t_recv)
         if kind == "COMMAND_ACK" and self.autopilot is not None:
-            denied = self.requests.on_ack(msg.command, msg.result)
-            if denied is not None:
-                self._denied.append(denied)
+            self.requests.on_ack(msg.command, msg.result)
         if kind in USED and not used and self.tel.refusal:
             self.health.refused += 1
             n = self._throttle(kind_of(f"{kind}: {self.tel.refusal}"))

@@ -380,8 +380,12 @@ function showHealth() {
                   + ` · decode errors ${v.decode_errors} · decoder backlog ${v.backlog}, skipped behind ${v.skipped_behind}${v.error ? ` · ${v.error}` : ""}`));
   }
   const d = s.depth;
-  rows.push(row("depth (Zenoh)", st("depth"), age(d.age_s), hz(rates.depth),
-                `${d.key} · ${fmt(d.depth_m)} m · ${d.received} samples, ${d.bad} bad, ${d.refused} refused`));
+  const a = d.ardusub;
+  rows.push(row(`depth (${d.shape})`, st("depth"), age(d.age_s), hz(rates.depth),
+                `${d.key ?? d.url} · ${fmt(d.depth_m)} m ± ${fmt(d.sigma_m)} (${d.source ?? "—"})`
+                + (a ? ` · EKF ${fmt(a.ekf_depth_m)} m, Δ ${fmt(a.disagreement_m)} m, ${fmt(a.vertical_speed_mps)} m/s`
+                       + (a.params.missing.length ? ` · waiting for ${a.params.missing.join(", ")}` : "") : "")
+                + ` · ${d.received} received, ${d.bad} bad, ${d.refused} refused (${d.jumps} jumps)`));
   const up = s.uuv_position;
   if (up.key || up.hint) {
     rows.push(row("UUV position", up.received ? "ok" : "—", age(up.age_s), "",

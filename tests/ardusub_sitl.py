@@ -1,0 +1,227 @@
+"""ArduPilot's ArduSub firmware (SITL) for the tests that put it in the loop: finding the binary, starting it
+on free ports in a scratch directory, and a ground station on one of its serial ports (:class:`Observer`).
+
+The binary is ``$SKYFIX_ARDUSUB``, else ``../shared/tools/ardusub/ardusub`` next to the project; without
+either the tests are skipped. ArduPilot's ``sub.parm`` must lie next to the binary
+(``deploy/build_ardusub.sh`` builds both).
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import socket
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from live_helpers import ROOT, wait_for
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+DEFAULT_ARDUSUB = ROOT.parent / "shared" / "tools" / "ardusub" / "ardusub"
+
+# ArduSub's README (../shared/tools/ardusub/README.md): positions from GPS_INPUT, no simulated GPS,
+# EKF3 horizontal position from the GPS, height from the barometer (depth), yaw from the compass.
+EXTRA_PARM = """\
+GPS1_TYPE 14
+GPS1_DELAY_MS 65
+SIM_GPS1_ENABLE 0
+EK3_SRC1_POSXY 3
+EK3_SRC1_VELXY 0
+EK3_SRC1_POSZ 1
+EK3_SRC1_VELZ 0
+EK3_SRC1_YAW 1
+"""
+
+
+def ardusub_files() -> tuple[Path, Path]:
+    """The binary and its ``sub.parm``: skip when neither ``$SKYFIX_ARDUSUB`` nor the default exists."""
+    given = os.environ.get("SKYFIX_ARDUSUB")
+    if not given and not DEFAULT_ARDUSUB.exists():
+        pytest.skip(f"ArduSub SITL not found: set SKYFIX_ARDUSUB to an ardusub binary "
+                    f"(deploy/build_ardusub.sh builds one) or provide {DEFAULT_ARDUSUB}")
+    binary = Path(given) if given else DEFAULT_ARDUSUB
+    assert binary.is_file() and os.access(binary, os.X_OK), f"SKYFIX_ARDUSUB={binary}: not an executable file"
+    parm = binary.parent / "sub.parm"
+    assert parm.is_file(), (f"{parm} missing: ArduPilot's Tools/autotest/default_params/sub.parm must lie next "
+                            "to the binary (deploy/build_ardusub.sh copies it there)")
+    return binary, parm
+
+
+def _port_free(port: int, kind: int) -> bool:
+    with socket.socket(socket.AF_INET, kind) as s:
+        try:
+            s.bind(("0.0.0.0", port))  # ArduSub SITL binds every interface
+        except OSError:
+            return False
+    return True
+
+
+def instance_ports(n: int) -> dict:
+    """ArduSub SITL's ports for ``-I n``: TCP SERIAL0/1/2, UDP RC input."""
+    return {"serial0": 5760 + 10 * n, "serial1": 5762 + 10 * n, "serial2": 5763 + 10 * n, "rc_in": 5501 + 10 * n}
+
+
+def free_instance(exclude: set[int]) -> int:
+    for n in random.sample(range(10, 100), 90):
+        p = instance_ports(n)
+        if n not in exclude and all(_port_free(p[k], socket.SOCK_STREAM) for k in ("serial0", "serial1", "serial2")) \
+                and _port_free(p["rc_in"], socket.SOCK_DGRAM):
+            return n
+    raise AssertionError("no free ArduSub SITL instance (ports 5860-6753 busy)")
+
+
+class Observer:
+    """A GCS on one ArduSub serial port: every message it receives, stamped with its receive time (UNIX s)."""
+
+    KEEP = ("HEARTBEAT", "STATUSTEXT", "COMMAND_ACK", "GPS_INPUT", "GPS_RAW_INT", "GLOBAL_POSITION_INT",
+            "EKF_STATUS_REPORT")
+
+    def __init__(self, port: int, keep: tuple[str, ...] = KEEP):
+        self.keep = keep
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=5.0)
+        self.sock.settimeout(0.5)
+        self.rx = mavlink2.MAVLink(None)
+        self.rx.robust_parsing = True
+        self.tx = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.msgs: list[tuple[float, object]] = []
+        self.closed = False
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads = [threading.Thread(target=self._read, name="observer-rx", daemon=True),
+                         threading.Thread(target=self._heartbeat, name="observer-hb", daemon=True)]
+        for th in self._threads:
+            th.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self.sock.recv(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                break
+            if not data:
+                break
+            t = time.time()
+            for m in self.rx.parse_buffer(data) or ():
+                if m.get_type() in self.keep:
+                    self.msgs.append((t, m))
+        self.closed = True
+
+    def _heartbeat(self) -> None:  # a GCS heartbeat: ArduSub learns a route to us and forwards broadcasts
+        while True:
+            self.send(mavlink2.MAVLink_heartbeat_message(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID,
+                                                         0, 0, 0, 3))
+            if self._stop.wait(1.0):
+                return
+
+    def send(self, msg) -> None:
+        with self._lock:
+            try:
+                self.sock.sendall(msg.pack(self.tx))
+            except OSError:
+                pass
+
+    def of(self, kind: str, since: float = 0.0) -> list[tuple[float, object]]:
+        return [(t, m) for t, m in list(self.msgs) if t >= since and m.get_type() == kind]
+
+    def request_interval(self, msg_id: int, hz: float, timeout_s: float = 20.0) -> None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL, repeated until ArduSub accepts it."""
+        end = time.time() + timeout_s
+        while time.time() < end:
+            t_sent = time.time()
+            self.send(mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
+                                                            1e6 / hz, 0, 0, 0, 0, 0))
+            try:
+                wait_for(lambda t=t_sent: any(m.command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL and m.result == 0
+                                              for _, m in self.of("COMMAND_ACK", t)), 2.0, "ack")
+                return
+            except AssertionError:
+                continue
+        raise AssertionError(f"ArduSub did not accept a {hz} Hz interval for message {msg_id}")
+
+    def close(self) -> None:
+        self._stop.set()
+        for th in self._threads:
+            th.join(2.0)
+        self.sock.close()
+
+
+class ArduSub:
+    """ArduSub SITL in a scratch directory; :attr:`observer` is connected to SERIAL0, SERIAL1 is free."""
+
+    def __init__(self, binary: Path, sub_parm: Path, workdir: Path, home: tuple[float, float, float, float],
+                 extra_parm: str = EXTRA_PARM, keep: tuple[str, ...] = Observer.KEEP):
+        self.binary, self.sub_parm, self.dir, self.home, self.keep = binary, sub_parm, workdir, home, keep
+        self.dir.mkdir(parents=True, exist_ok=True)
+        (self.dir / "extra.parm").write_text(extra_parm)
+        self.proc: subprocess.Popen | None = None
+        self.observer: Observer | None = None
+        self.ports: dict = {}
+        self.log = self.dir / "ardusub.log"  # one per attempt: ardusub-I<N>.log
+        self.instance: int | None = None
+
+    def start(self, attempts: int = 3, instance: int | None = None) -> None:
+        """Start on a free instance (``instance``: on that one, e.g. again after :meth:`stop`)."""
+        tried: set[int] = set()
+        for _ in range(attempts):
+            n = free_instance(tried) if instance is None else instance
+            tried.add(n)
+            self.ports, self.instance = instance_ports(n), n
+            self.log = self.dir / f"ardusub-I{n}-{len(list(self.dir.glob('ardusub-*.log')))}.log"
+            cmd = [str(self.binary), "--model", "vectored", "--speedup", "1", "-w", f"-I{n}",
+                   "--home", ",".join(f"{v:g}" for v in self.home),
+                   "--defaults", f"{self.sub_parm},{self.dir / 'extra.parm'}"]
+            with open(self.log, "w") as log:
+                log.write(" ".join(cmd) + "\n")
+                log.flush()
+                self.proc = subprocess.Popen(cmd, cwd=self.dir, stdout=log, stderr=subprocess.STDOUT,
+                                             stdin=subprocess.DEVNULL)
+            if self._connect():
+                wait_for(lambda: self.observer.of("HEARTBEAT") or self.proc.poll() is not None, 30,
+                         "ArduSub's first heartbeat")
+                if self.proc.poll() is None:
+                    return
+            self.stop()  # the port was taken meanwhile (bind failed), or it died: another instance
+        raise AssertionError(f"ArduSub SITL did not start:\n{self.tail()}")
+
+    def _connect(self, timeout_s: float = 30.0) -> bool:
+        end = time.time() + timeout_s
+        while time.time() < end and self.proc.poll() is None:
+            if "SERIAL0 on TCP port" in self.log.read_text():  # bound: it waits for this connection to boot
+                try:
+                    self.observer = Observer(self.ports["serial0"], self.keep)
+                    return True
+                except OSError:
+                    pass
+            time.sleep(0.1)
+        return False
+
+    def boot_s(self) -> float:
+        """ArduSub's uptime (its own clock: GLOBAL_POSITION_INT.time_boot_ms)."""
+        gpi = self.observer.of("GLOBAL_POSITION_INT")
+        return gpi[-1][1].time_boot_ms / 1000.0 if gpi else 0.0
+
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def tail(self, n: int = 3000) -> str:
+        return self.log.read_text()[-n:] if self.log.exists() else ""
+
+    def stop(self) -> None:
+        if self.observer is not None:
+            self.observer.close()
+            self.observer = None
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
