@@ -2,7 +2,11 @@
 
 ``session.toml`` (version 1 and the calibration's tables) is written first, and
 again with ``[tracker] init_bbox``/``init_t`` at the first fix: the tracker's box on
-that frame, so ``skyfix process`` starts the tracker where the live run had it;
+that frame, so ``skyfix process`` starts the tracker where the live run had it; and
+again whenever what the run measured and used for time changes (checked once a
+second: ``timing()``, e.g. the link delay TIMESYNC measured and since when, the video
+latency in use with its source and sigma), written into ``[timing]``'s recorded keys
+(:data:`RECORDED_TIMING`; those of the calibration file, another recording's, are dropped);
 ``uav.tlog`` gets every good MAVLink frame from the UAV with its receive time,
 ``depth.jsonl`` every accepted depth sample (``t`` the UUV's own stamp, or the
 arrival minus the depth latency when the source has none, and ``t_recv`` its
@@ -35,6 +39,7 @@ import struct
 import threading
 import time
 import tomllib
+from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
@@ -53,6 +58,10 @@ QUEUE_ITEMS = 20000  # records waiting for the writer (MAVLink frames, depth sam
 QUEUE_FRAMES = 30  # video frames waiting for the encoder
 FLUSH_S = 1.0
 CLOSE_WAIT_S = 0.5  # a stop waits this long for the writer to close its files, then leaves it to finish
+#: ``[timing]`` keys that say what a live run measured and used (localizer.calibration.Timing)
+RECORDED_TIMING = ("mavlink_latency_measured_s", "mavlink_latency_measured_from_t", "video_latency_s",
+                   "video_latency_source", "video_latency_sigma_s", "video_latency_from_t")
+TIMING_CHECK_S = 1.0
 
 
 def _toml_value(value) -> str:
@@ -131,7 +140,7 @@ class Recorder:
     """Worker and sink writing the session; see the module docstring."""
 
     def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None,
-                 depth_latency_s: float = 0.0):
+                 depth_latency_s: float = 0.0, timing: Callable[[], dict] | None = None):
         self.dir = Path(directory)
         if self.dir.exists() and not self.dir.is_dir():
             raise FileExistsError(f"--record {directory}: exists and is not a directory")
@@ -144,6 +153,10 @@ class Recorder:
         # [tracker] is the live run's own: the first frame the target was tracked on (see on_fix), not the
         # calibration file's, whose init_t belongs to another recording
         self._calibration = {k: v for k, v in tomllib.loads(Path(cal_source).read_text()).items() if k != "tracker"}
+        if "timing" in self._calibration:  # another recording's measurements are not this one's
+            self._calibration["timing"] = {k: v for k, v in self._calibration["timing"].items()
+                                           if k not in RECORDED_TIMING}
+        self.timing = timing or dict
         self._write_toml(session_toml(self._calibration))
         self.video_size = video_size
         self.depth_latency_s = depth_latency_s
@@ -199,10 +212,21 @@ class Recorder:
             self._calibration["tracker"] = {"init_bbox": list(info.box), "init_t": fix.t_unix}
             self._put(("toml", session_toml(self._calibration)))
 
+    def _record_timing(self) -> None:
+        """``[timing]``'s recorded keys from ``timing()``; session.toml rewritten when they changed."""
+        table = self._calibration.get("timing", {})
+        recorded = {k: v for k, v in self.timing().items() if v is not None}
+        if recorded != {k: table[k] for k in RECORDED_TIMING if k in table}:
+            self._calibration["timing"] = {k: v for k, v in table.items() if k not in RECORDED_TIMING} | recorded
+            self._put(("toml", session_toml(self._calibration)))
+
     async def run(self) -> None:
         try:
-            await asyncio.Event().wait()
+            while True:
+                self._record_timing()
+                await asyncio.sleep(TIMING_CHECK_S)
         finally:
+            self._record_timing()  # what the run ended with
             self._closing.set()
             await in_thread(self._thread.join, CLOSE_WAIT_S, name="record close")
             if self._thread.is_alive():
