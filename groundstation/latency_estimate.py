@@ -208,8 +208,8 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
     info = float(np.sum(slope ** 2))
     sigma = float(np.sqrt(s2 / info)) if info > 0 else float("inf")
     resid = meas[use] - pred[best, use]
-    sigma *= np.sqrt(_correlation_factor(np.sum(slope * resid * weights, axis=1)))
-    return OffsetEstimate(offset, sigma, n, float(np.sqrt(np.mean(resid ** 2))) * 1000.0)
+    sigma *= float(np.sqrt(_correlation_factor(np.sum(slope * resid * weights, axis=1))))
+    return OffsetEstimate(float(offset), sigma, n, float(np.sqrt(np.mean(resid ** 2))) * 1000.0)
 
 
 def axis_weights(residuals: np.ndarray) -> np.ndarray:

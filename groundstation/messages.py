@@ -322,7 +322,8 @@ class RecordStatus(Section):
     mavlink_frames: int
     depth_samples: int
     fixes: int
-    dropped: int = Field(0, description="records left out because the writer fell behind")
+    dropped: int = Field(0, description="records left out because the writer fell behind, or fixes not later than "
+                         "the one before (auto applying its latency moves the frames' times back)")
     error: str | None = Field(None, description="why the recording stopped (a full disk): nothing more is written")
     video_frames: int | None = Field(None, description="frames encoded")
     video_dropped: int | None = Field(None, description="frames left out: the encoder fell behind, or out of order")

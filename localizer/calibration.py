@@ -146,7 +146,8 @@ class Timing:
                                               "as it is")
     clock_window_s: Positive = Field(30.0, description="sliding window of the least-delay clock alignment")
     # written by `skyfix run --record` (what the live run measured and used), read as a record: processing
-    # measures the link delay again from the tlog's TIMESYNC, and video_frames.csv's times already hold the latency
+    # measures the link delay again from the tlog's TIMESYNC; video_frames.csv's times hold the latency, except
+    # those stamped before video_latency_from_t (auto, not yet settled), which reading moves back by video_latency_s
     mavlink_latency_measured_s: NonNegative | None = Field(
         None, description="recorded: the UAV link's one-way delay TIMESYNC measured in the live run (the last value)")
     mavlink_latency_measured_from_t: Number | None = Field(

@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
 import socket
 import time
 import tomllib
 
+import numpy as np
 from live_helpers import free_port, skyfix, start, stop, wait_for
 
 from groundstation.mavlink_io import ingest, mavutil
-from groundstation.session import load_session
+from groundstation.session import load_session, read_table
+from groundstation.sinks.recorder import Recorder
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration
+from localizer.fix import Fix
 from localizer.telemetry import Telemetry
 
 CAL = """
@@ -137,3 +142,29 @@ def test_recording_says_when_the_link_delay_was_measured(tmp_path):
         ingest(tel, m, m._timestamp)
     tlog.close()
     assert tel.latency_source == "timesync" and abs(tel.measured_latency_s - timing["mavlink_latency_measured_s"]) < 1e-3
+
+
+def test_recorded_tables_keep_their_times_increasing(tmp_path):
+    """--video-latency-ms auto applying its estimate moves the frames' times back: fixes not later than the one
+    before are left out (as the video writer leaves out such frames), so positions.csv and track.csv stay
+    readable; [timing] gets what the run used as plain TOML numbers, and not another recording's."""
+    (tmp_path / "cal.toml").write_text(CAL + "[timing]\nclock_window_s = 20.0\nmavlink_latency_measured_s = 0.5\n")
+    used = {"video_latency_s": np.float64(0.0794), "video_latency_source": "motion"}
+    rec = Recorder(str(tmp_path / "rec"), str(tmp_path / "cal.toml"), timing=lambda: used)
+    for t, status in ((100.000, "latency_unsettled"), (100.033, "latency_unsettled"), (99.987, "lost"),
+                      (100.020, "lost"), (100.054, "lost")):
+        rec.on_fix(Fix(t, status), None)
+
+    async def record_a_moment():
+        task = asyncio.create_task(rec.run())
+        await asyncio.sleep(0.3)
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    asyncio.run(record_a_moment())
+    assert rec.dropped == 2 and rec.fixes == 3
+    for name in ("positions.csv", "track.csv"):
+        assert list(read_table(tmp_path / "rec" / name, ("t",), allow_empty=("u", "v"))["t"]) == [100.0, 100.033, 100.054]
+    timing = tomllib.loads((tmp_path / "rec" / "session.toml").read_text())["timing"]
+    assert timing == {"clock_window_s": 20.0, "video_latency_s": 0.0794, "video_latency_source": "motion"}

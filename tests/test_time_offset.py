@@ -161,3 +161,23 @@ def test_settled_needs_every_third_sure_and_agreeing():
     assert not SessionOffset(whole, (e(20.0), None, e(20.0))).settled
     assert not SessionOffset(e(20.0, 5.1, 300), (e(20.0), e(20.0), e(20.0))).settled
     assert "not settled" in SessionOffset(whole, (e(19.0), None, e(20.0))).describe()
+
+
+def test_frames_stamped_before_auto_settled_are_moved_back(tmp_path):
+    """A recording made with --video-latency-ms auto: its frames before the estimate settled were stamped with
+    no latency (late by it), the next two left out when the times jumped back; reading it moves them back."""
+    session = tmp_path / "auto"
+    shutil.copytree(ROOT / "sim_fixtures" / "bundled" / "nadir_hover", session)
+    with open(session / "video_frames.csv", newline="") as f:
+        rows = [(int(r["frame"]), float(r["t"])) for r in csv.DictReader(f)]
+    latency, settled = 0.0794, 90
+    recorded = [(i, t + latency) for i, t in rows[:settled]] + rows[settled + 2:]
+    with open(session / "video_frames.csv", "w", newline="") as f:
+        csv.writer(f).writerows([("frame", "t"), *((i, f"{t:.6f}") for i, t in recorded)])
+    with open(session / "session.toml", "a") as f:
+        f.write(f'\n[timing]\nvideo_latency_s = {latency}\nvideo_latency_source = "motion"\n'
+                f"video_latency_sigma_s = 0.0007\nvideo_latency_from_t = {rows[settled + 2][1]}\n")
+    s = load_session(session)
+    truth = [t for _, t in rows[:settled] + rows[settled + 2:]]
+    assert s.frames["t"] == pytest.approx(truth, abs=2e-6)
+    assert any(f"{settled} frames stamped before the live run's video latency had settled" in w for w in s.warnings)

@@ -23,7 +23,9 @@ session.toml); the event loop only queues what is to be written (:data:`QUEUE_IT
 records, :data:`QUEUE_FRAMES` video frames; beyond, the item is left out and counted in
 ``dropped``/``video_dropped``), so no disk write ever blocks the loop, and a stop asks
 the thread to finish and close, never closes a file under it. ``video_frames.csv`` lists
-only the frames that were encoded. A write that fails (a full disk) stops the recording
+only the frames that were encoded. Times only increase in every table: a frame or fix not later
+than the one before (a reconnected stream on another clock; ``--video-latency-ms auto``
+applying its estimate, which moves the frames' times back by it) is left out and counted. A write that fails (a full disk) stops the recording
 with one log line and ``error`` in the status; the service goes on without it.
 """
 
@@ -67,8 +69,10 @@ TIMING_CHECK_S = 1.0
 def _toml_value(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(value)
+    if isinstance(value, int):
+        return repr(int(value))
+    if isinstance(value, float):  # numpy's floats too, written as plain numbers
+        return repr(float(value))
     if isinstance(value, str):
         return json.dumps(value)
     if isinstance(value, list):
@@ -166,6 +170,7 @@ class Recorder:
         self.dropped = 0
         self.video_dropped = 0
         self.error: str | None = None
+        self._last_fix_t: float | None = None
         self._video: VideoWriter | None = None
         self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_ITEMS)
         self._frames_queued = 0  # frames in the queue (written on the loop, lowered by the writer)
@@ -205,6 +210,11 @@ class Recorder:
                 self._frames_queued -= 1
 
     def on_fix(self, fix: Fix, info) -> None:
+        if self._last_fix_t is not None and not fix.t_unix > self._last_fix_t:
+            # frames' times went back (auto applying its first latency): left out, as the video writer does
+            self.dropped += 1
+            return
+        self._last_fix_t = fix.t_unix
         ok = fix.ok
         track = (f"{fix.t_unix:.6f}", f"{fix.u:.3f}" if ok else "", f"{fix.v:.3f}" if ok else "")
         self.fixes += self._put(("fix", (format_row(fix), track)))
