@@ -29,7 +29,7 @@ from localizer.tracking import TRACKERS
 from .outputs import output_dir
 from .plots import write_plots
 from .positions import write_positions_csv
-from .process import frame_pixels, locate_frames, print_warnings
+from .process import add_motion_offset_flag, frame_pixels, locate_frames, print_warnings
 from .session import SessionError, load_session
 
 METHODS = (("refraction", True), ("straight", False))
@@ -107,7 +107,8 @@ def format_table(results: list[tuple[str, str, Scores]]) -> str:
     return "\n".join(lines)
 
 
-def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False):
+def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False,
+                     motion: bool = True):
     """Score both methods on one session; returns ``[(name, method, Scores), ...]`` and writes outputs."""
     session = load_session(path)
     if session.truth is None or len(session.truth["t"]) == 0:
@@ -117,7 +118,7 @@ def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str 
     if not use_track and from_track:
         print(f"{name}: no video: pixels from track.csv", file=sys.stderr)
     try:
-        pixels = frame_pixels(session, from_track, tracker, progress)
+        pixels = frame_pixels(session, from_track, tracker, progress, motion)
     finally:
         print_warnings(session)
     frames = len(session.frames["t"]) if session.frames is not None else None
@@ -150,7 +151,7 @@ def run(args) -> int:
     for path in args.sessions:
         try:
             results.extend(evaluate_session(path, out, use_track=args.use_track, tracker=args.tracker,
-                                            progress=not args.quiet))
+                                            progress=not args.quiet, motion=not args.no_motion_offset))
         except (SessionError, ConfigError) as e:
             print(f"skyfix evaluate: error: {e}", file=sys.stderr)
             failed += 1
@@ -169,4 +170,5 @@ def register(subparsers) -> None:
                    help="take pixels from track.csv (geometry only) instead of tracking the video")
     p.add_argument("--tracker", default="default", choices=TRACKERS, help="tracker backend for video tracking")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    add_motion_offset_flag(p)
     p.set_defaults(func=run)

@@ -13,10 +13,20 @@ heading (a gimbal locked to North) nothing (σ large).
 
 - :func:`estimate_offset`: one estimate from measured rotations and an
   :class:`AttitudeTrack`.
+- **Settled** (:func:`settled`), the one rule for using an estimate: :data:`STEADY_COUNT`
+  estimates, each *sure* (1-sigma at most :data:`APPLY_SIGMA_S` from at least
+  :data:`APPLY_PAIRS` frame pairs), within :data:`STEADY_S` of each other. Live they
+  are the last estimates (one a second, over the last 20 s); offline the estimates
+  from consecutive thirds of the session (:func:`offset_from_rotations`), whose whole
+  estimate is then the one used.
 - ``skyfix estimate-latency SESSION``: for a recording: by how much the frames'
   times in ``video_frames.csv`` are off.
+- ``skyfix process``/``evaluate`` of a session with video whose link delay is neither
+  stated nor measured (:attr:`~localizer.telemetry.Telemetry.latency_source` "unknown"):
+  the rotations are measured while the video is tracked and a settled estimate is
+  applied as the link's delay (time source "motion").
 - :class:`OnlineLatency`: in ``skyfix run``, the glass-to-first-packet latency
-  (frames timed by their stream slots), in the status; once sure and steady, a
+  (frames timed by their stream slots), in the status; once settled, a
   warning when it differs from ``--video-latency-ms`` by more than
   :data:`WARN_S`, and applied to the video with ``--video-latency-ms auto``.
 """
@@ -26,6 +36,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import copy
+import itertools
 import logging
 import os
 import queue
@@ -55,13 +66,10 @@ MEASURE_HZ = 10.0  # frames measured live, at most (every third at 30 fps: a thi
 STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
 NICE = 10  # the measuring thread yields the CPU to decoding and tracking
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
-APPLY_SIGMA_S = 0.005  # --video-latency-ms auto applies an estimate this sure ...
-APPLY_PAIRS = 60  # ... from at least this many frame pairs (6 s at MEASURE_HZ; fewer when the machine is busy) ...
-STEADY_COUNT, STEADY_S = 3, 0.005  # ... when the last estimates (one a second) all were, within 5 ms
-#: Weights of the rotation's components (camera x right, y down, z optical axis). The UAV's drift looks
-#: like a rotation about x and y (a few tenths of a mrad a frame at 10 m, as much as a gimbal's wobble),
-#: and would pull the estimate; about the optical axis it does not. So only the image's turning counts.
-AXIS_WEIGHTS = np.array([0.0, 0.0, 1.0])
+APPLY_SIGMA_S = 0.005  # an estimate is sure with this 1-sigma at most ...
+APPLY_PAIRS = 60  # ... from at least this many frame pairs (6 s at MEASURE_HZ; fewer when the machine is busy);
+STEADY_COUNT, STEADY_S = 3, 0.005  # settled: this many sure estimates, within 5 ms of each other
+NOISE_FLOOR_RAD = 1e-5  # an axis's residual is taken as at least this (the image measures no better)
 
 
 @dataclass(frozen=True)
@@ -72,6 +80,44 @@ class OffsetEstimate:
     sigma_s: float
     pairs: int  # frame pairs used
     rms_mrad: float  # residual per rotation component
+
+
+def sure(e: OffsetEstimate | None) -> bool:
+    """Whether one estimate is sure: 1-sigma at most :data:`APPLY_SIGMA_S` from :data:`APPLY_PAIRS` pairs or more."""
+    return e is not None and e.sigma_s <= APPLY_SIGMA_S and e.pairs >= APPLY_PAIRS
+
+
+def settled(estimates: Sequence[OffsetEstimate | None]) -> bool:
+    """Whether :data:`STEADY_COUNT` estimates (or more) are all sure and within :data:`STEADY_S` of each other."""
+    if len(estimates) < STEADY_COUNT or not all(sure(e) for e in estimates):
+        return False
+    offsets = [e.offset_s for e in estimates]
+    return max(offsets) - min(offsets) <= STEADY_S
+
+
+@dataclass(frozen=True)
+class SessionOffset:
+    """A recording's estimate from all its frame pairs, and from each of :data:`STEADY_COUNT` consecutive parts."""
+
+    estimate: OffsetEstimate | None
+    parts: tuple[OffsetEstimate | None, ...]
+
+    @property
+    def settled(self) -> bool:
+        """The whole estimate is sure and the parts' estimates settled (:func:`settled`): it may be applied."""
+        return sure(self.estimate) and settled(self.parts)
+
+    def describe(self) -> str:
+        """One line: the estimate, its sigma, the pairs, the parts', and whether it is settled."""
+        e = self.estimate
+        if e is None:
+            return "no estimate (the image's motion could not be measured or the telemetry does not cover the video)"
+        parts = ", ".join("—" if p is None else f"{p.offset_s * 1000:+.1f} ± {p.sigma_s * 1000:.1f}" for p in self.parts)
+        verdict = ("settled" if self.settled else
+                   f"not settled: needs ± {APPLY_SIGMA_S * 1000:.0f} ms or better from {APPLY_PAIRS}+ pairs in each "
+                   f"third, the thirds within {STEADY_S * 1000:.0f} ms")
+        return (f"{e.offset_s * 1000:+.1f} ± {e.sigma_s * 1000:.1f} ms (1-sigma) from {e.pairs} frame pairs "
+                f"(thirds: {parts} ms): {verdict}")
 
 
 class AttitudeTrack:
@@ -140,7 +186,8 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
     k, j = len(t0), len(offsets)
     pred = track.relative((t0[None, :] + offsets[:, None]).ravel(),
                           (t1[None, :] + offsets[:, None]).ravel()).reshape(j, k, 3)
-    sq = np.sum(((pred - meas[None]) * AXIS_WEIGHTS) ** 2, axis=2)  # (J, K)
+    weights = axis_weights(pred - meas[None])
+    sq = np.sum(((pred - meas[None]) * weights) ** 2, axis=2)  # (J, K)
     use = np.ones(k, bool)
     for _ in range(2):  # fit, then again without the pairs it explains worst
         best = int(np.argmin(sq[:, use].sum(axis=1)))
@@ -155,14 +202,29 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
         if curvature > 0:
             offset += OFFSET_STEP_S * 0.5 * (c0 - c2) / curvature
     lo, hi = max(best - 1, 0), min(best + 1, j - 1)
-    slope = (pred[hi, use] - pred[lo, use]) * AXIS_WEIGHTS / ((hi - lo) * OFFSET_STEP_S)
+    slope = (pred[hi, use] - pred[lo, use]) * weights / ((hi - lo) * OFFSET_STEP_S)
     n = int(use.sum())
     s2 = cost[best] / max(3 * n - 1, 1)
     info = float(np.sum(slope ** 2))
     sigma = float(np.sqrt(s2 / info)) if info > 0 else float("inf")
-    resid = (meas[use] - pred[best, use]) * AXIS_WEIGHTS
-    sigma *= np.sqrt(_correlation_factor(np.sum(slope * resid, axis=1)))
-    return OffsetEstimate(offset, sigma, n, float(np.sqrt(s2)) * 1000.0)
+    resid = meas[use] - pred[best, use]
+    sigma *= float(np.sqrt(_correlation_factor(np.sum(slope * resid * weights, axis=1))))
+    return OffsetEstimate(float(offset), sigma, n, float(np.sqrt(np.mean(resid ** 2))) * 1000.0)
+
+
+def axis_weights(residuals: np.ndarray) -> np.ndarray:
+    """Weights (3,) of the rotation's components (camera x right, y down, z optical axis): one over each
+    component's own residual spread (robust: 1.4826 × MAD), at the candidate offset where it is least.
+
+    The image's turning about x and y is also the UAV's drift seen as a rotation (a few tenths of a mrad
+    a frame at 10 m); about the optical axis it is not. Under a gimbal that holds the camera steady the
+    drift is most of what x and y show: their residuals are large and they weigh little. A camera fixed
+    to a wobbling airframe turns about x and y far more than about its optical axis: there they carry the
+    information, and their residuals are small beside it. ``residuals``: (offsets, pairs, 3), radians.
+    """
+    med = np.median(residuals, axis=1, keepdims=True)
+    spread = 1.4826 * np.median(np.abs(residuals - med), axis=1)  # (offsets, 3)
+    return 1.0 / np.maximum(spread.min(axis=0), NOISE_FLOOR_RAD)
 
 
 def _correlation_factor(g: np.ndarray, max_lag: int = 60) -> float:
@@ -185,7 +247,21 @@ def _correlation_factor(g: np.ndarray, max_lag: int = 60) -> float:
     return total
 
 
-def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[OffsetEstimate | None, int]:
+def offset_from_rotations(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotation],
+                          search_s: float = 0.3) -> SessionOffset:
+    """A recording's frames' offset to its telemetry (within ± ``search_s``), from the rotations measured between
+    its frames (in order), as a whole and in :data:`STEADY_COUNT` consecutive parts."""
+    if not rotations:
+        return SessionOffset(None, (None,) * STEADY_COUNT)
+    track = AttitudeTrack.from_telemetry(cal, tel, rotations[0].t0 - search_s - 0.1, rotations[-1].t1 + search_s + 0.1)
+    offsets = np.arange(-search_s, search_s + OFFSET_STEP_S / 2, OFFSET_STEP_S)
+    n = len(rotations)
+    bounds = [round(i * n / STEADY_COUNT) for i in range(STEADY_COUNT + 1)]
+    parts = tuple(estimate_offset(rotations[a:b], track, offsets) for a, b in itertools.pairwise(bounds))
+    return SessionOffset(estimate_offset(rotations, track, offsets), parts)
+
+
+def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[SessionOffset, int]:
     """The offset of a recorded session's frame times (``video_frames.csv``) to its telemetry; and frames read."""
     session = load_session(session_dir)
     cal = session.calibration
@@ -202,9 +278,7 @@ def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[OffsetEstim
                     rotations.append(r)
     except VideoError as e:
         raise SessionError(str(e)) from None
-    track = AttitudeTrack.from_telemetry(cal, session.telemetry, float(t[0]) - search_s - 0.1, float(t[-1]) + search_s + 0.1)
-    offsets = np.arange(-search_s, search_s + OFFSET_STEP_S / 2, OFFSET_STEP_S)
-    return estimate_offset(rotations, track, offsets), len(rotations) + 1
+    return offset_from_rotations(cal, session.telemetry, rotations, search_s), len(rotations) + 1
 
 
 class OnlineLatency:
@@ -215,7 +289,8 @@ class OnlineLatency:
     are skipped); once a second the telemetry is
     copied on the loop and the thread extends the attitude track and estimates.
     ``apply(latency_s)``, when given (``auto``), is called on the loop with each
-    estimate sure enough to use.
+    settled estimate (:func:`settled`) that moved by more than 2 ms; :attr:`applied_s` and
+    :attr:`applied_sigma_s` are what is in use (None before the first).
     """
 
     def __init__(self, cal: Calibration, tel: Telemetry, configured_s: float | None,
@@ -227,6 +302,8 @@ class OnlineLatency:
         self.offsets = np.arange(-max_latency_s, 0.05 + OFFSET_STEP_S / 2, OFFSET_STEP_S)
         self.estimate: OffsetEstimate | None = None
         self.applied_s: float | None = None
+        self.applied_sigma_s: float | None = None
+        self.settled = False  # the last STEADY_COUNT estimates are settled
         self.skipped = 0
         self._warned: float | None = None
         self._recent: deque[OffsetEstimate | None] = deque(maxlen=STEADY_COUNT)
@@ -288,10 +365,10 @@ class OnlineLatency:
 
     def _judge(self, e: OffsetEstimate) -> None:
         latency = -e.offset_s
-        self._recent.append(e if e.sigma_s <= APPLY_SIGMA_S and e.pairs >= APPLY_PAIRS else None)
-        recent = [r.offset_s for r in self._recent if r is not None]
-        if len(recent) < self._recent.maxlen or max(recent) - min(recent) > STEADY_S:
-            return  # not sure yet, or not steady
+        self._recent.append(e)
+        self.settled = settled(self._recent)
+        if not self.settled:
+            return
         off = self.configured_s is not None and abs(latency - self.configured_s) > WARN_S
         news = self._warned is None or abs(latency - self._warned) > WARN_S / 3
         if off and news:
@@ -299,18 +376,28 @@ class OnlineLatency:
             log.warning("video: the image's motion puts the glass-to-first-packet latency at %.0f ± %.0f ms, "
                         "not the configured %.0f ms (--video-latency-ms)", latency * 1000, e.sigma_s * 1000,
                         self.configured_s * 1000)
-        if self.apply is None or (self.applied_s is not None and abs(latency - self.applied_s) <= 0.002):
+        if self.apply is None:
+            return
+        self.applied_sigma_s = e.sigma_s
+        if self.applied_s is not None and abs(latency - self.applied_s) <= 0.002:
             return
         if self.applied_s is None:
-            log.info("video: latency %.1f ± %.1f ms from the image's motion, applied", latency * 1000, e.sigma_s * 1000)
+            log.info("video: latency %.1f ± %.1f ms from the image's motion, applied: fixes from here on",
+                     latency * 1000, e.sigma_s * 1000)
         self.applied_s = latency
         self.apply(latency)
+
+    @property
+    def state(self) -> str:
+        """``none`` (no estimate yet), ``unsettled`` or ``settled`` (the last estimates, :func:`settled`)."""
+        return "none" if self.estimate is None else "settled" if self.settled else "unsettled"
 
     def status(self) -> dict:
         e = self.estimate
         out = {"configured_ms": None if self.configured_s is None else round(self.configured_s * 1000, 1),
                "applied_ms": None if self.applied_s is None else round(self.applied_s * 1000, 1),
-               "frames_skipped": self.skipped, **self.worker.status()}
+               "applied_sigma_ms": None if self.applied_sigma_s is None else round(self.applied_sigma_s * 1000, 2),
+               "state": self.state, "frames_skipped": self.skipped, **self.worker.status()}
         if e is not None:
             out.update(estimate_ms=round(-e.offset_s * 1000, 1), sigma_ms=round(e.sigma_s * 1000, 2), pairs=e.pairs,
                        rms_mrad=round(e.rms_mrad, 3))
@@ -318,7 +405,8 @@ class OnlineLatency:
 
 
 def estimate_latency(args: argparse.Namespace) -> int:
-    estimate, frames = session_offset(args.session, args.search_ms / 1000.0)
+    found, frames = session_offset(args.session, args.search_ms / 1000.0)
+    estimate = found.estimate
     if estimate is None:
         print(f"skyfix estimate-latency: {args.session}: no estimate ({frames} frames; the image's motion could not "
               "be measured or the telemetry does not cover the video)")
@@ -327,6 +415,7 @@ def estimate_latency(args: argparse.Namespace) -> int:
           f"{estimate.offset_s * 1000:+.1f} ms (1-sigma {estimate.sigma_s * 1000:.1f} ms, {estimate.pairs} frame pairs, "
           f"residual {estimate.rms_mrad:.3f} mrad): the frames were exposed that much "
           f"{'later' if estimate.offset_s > 0 else 'earlier'} than video_frames.csv says")
+    print(f"estimate {found.describe()}")
     print(f"for a live run: --video-latency-ms {-estimate.offset_s * 1000:+.1f} relative to the one recorded with")
     return 0
 

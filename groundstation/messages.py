@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from localizer.fix import Fix
 from localizer.status import STATUSES, Status
+from localizer.telemetry import LATENCY_SOURCES
 
 FIX_SCHEMA = "skyfix.fix/1"
 STATUS_SCHEMA = "skyfix.status/1"
@@ -125,6 +126,7 @@ class FixMessage(Message):
 # --- the status -----------------------------------------------------------------------------------
 
 Age = NonNegative
+LatencySource = Literal[tuple(LATENCY_SOURCES)]
 
 
 class Section(BaseModel):
@@ -136,7 +138,12 @@ class Section(BaseModel):
 class Clocks(Section):
     station_minus_gnss_s: float | None = Field(description="the station clock minus GNSS time (SYSTEM_TIME)")
     uav_link_latency_ms: float = Field(description="the UAV link's one-way delay in use")
-    uav_link_latency_source: str = Field(description="configured, timesync, or 'assumed 0 (no TIMESYNC reply)'")
+    uav_link_latency_source: LatencySource = Field(
+        description="where it comes from: configured ([timing] mavlink_latency_s), timesync (measured), or unknown "
+        "(neither: taken as 0)")
+    uav_link_latency_sigma_ms: float = Field(
+        description="its 1-sigma in each fix's h_acc beyond [uncertainty] time_s: 0 when configured or measured, "
+        "[timing] unknown_latency_sigma_s when unknown")
     uav_link_latency_measured_ms: float | None = Field(description="what TIMESYNC measured, used or not")
     uav_reboots: int = Field(description="autopilot reboots seen (new clock segments)")
     uuv_clock_minus_station_s: float | None = Field(description="the UUV's clock minus the station's")
@@ -282,7 +289,12 @@ class MotionLatencyStatus(Section):
     """The video's latency estimated from the image's motion against the camera attitude."""
 
     configured_ms: float | None = Field(description="--video-latency-ms, unless auto")
-    applied_ms: float | None = Field(description="with auto: the estimate in use, once sure")
+    applied_ms: float | None = Field(description="with auto: the estimate in use, once settled; null before (no "
+                                     "valid fix: status latency_unsettled)")
+    applied_sigma_ms: float | None = Field(description="with auto: the 1-sigma of the settled estimate in use")
+    state: Literal["none", "unsettled", "settled"] = Field(
+        description="none: no estimate yet; settled: the last 3 estimates (one a second) each 1-sigma ≤ 5 ms from "
+        "≥ 60 frame pairs and within 5 ms of each other; unsettled: not (yet)")
     frames_skipped: int = Field(description="frames not measured (the measuring thread was busy)")
     estimate_ms: float | None = Field(None, description="glass-to-first-packet latency the motion says")
     sigma_ms: float | None = Field(None, description="its 1-sigma")
@@ -313,7 +325,8 @@ class VideoStatus(Section):
     decode_errors: int
     backlog: int = Field(description="packets read but not yet decoded")
     skipped_behind: int = Field(description="frames decoded but not used: the decoder was behind (CPU)")
-    latency_ms: float = Field(description="glass to first packet in use (configured, or from motion with auto)")
+    latency_ms: float | None = Field(description="glass to first packet in use (configured, or from motion with "
+                                     "auto); null with auto until its estimate has settled")
     arrival_after_slot_ms: Percentiles = Field(description="how late frames arrive after their stream slot")
     decode_ms: Percentiles = Field(description="decoding time per frame")
     stream_offset_s: float | None = Field(description="the stream clock's offset on the station clock")
@@ -353,7 +366,8 @@ class RecordStatus(Section):
     mavlink_frames: int
     depth_samples: int
     fixes: int
-    dropped: int = Field(0, description="records left out because the writer fell behind")
+    dropped: int = Field(0, description="records left out because the writer fell behind, or fixes not later than "
+                         "the one before (auto applying its latency moves the frames' times back)")
     error: str | None = Field(None, description="why the recording stopped (a full disk): nothing more is written")
     video_frames: int | None = Field(None, description="frames encoded")
     video_dropped: int | None = Field(None, description="frames left out: the encoder fell behind, or out of order")

@@ -21,6 +21,12 @@ frame arrived (a slow radio: ATTITUDE at 4 Hz needs about 0.3 s); then its pose 
 computed again with what there is (extrapolated within ``[timing]`` limits, or a
 ``stale_…`` status). Tracking goes on meanwhile.
 
+Time: a frame is aligned to the telemetry by the UAV link's delay (configured, measured
+by TIMESYNC, or unknown: taken as 0 with its sigma in h_acc, logged once), unless
+``alignment`` (``--video-latency-ms auto``) says the video's latency from the image's
+motion aligns it. A frame stamped before that estimate settled (``LiveFrame.aligned``
+False) is tracked but gets no fix: status ``latency_unsettled``.
+
 Operator commands (:meth:`Pipeline.select`, :meth:`Pipeline.release`,
 :meth:`Pipeline.acquire`) run in the tracking worker between frames. The last
 ``history_s`` seconds of tracked frames are held with their poses, so a selection
@@ -87,7 +93,8 @@ class Pipeline:
     """Worker turning frames into :class:`~localizer.fix.Fix` es for every sink (``on_fix(fix, info)``).
 
     ``prior(t_unix)``: the UUV's own position estimate at a frame's time (None: none);
-    ``history_s``: how long tracked frames are held for selections.
+    ``history_s``: how long tracked frames are held for selections; ``alignment()``: the (source word,
+    1-sigma s) of aligned frames' times when not the link delay's (see the module doc).
     """
 
     def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
@@ -101,6 +108,8 @@ class Pipeline:
         self.telemetry_wait_s = telemetry_wait_s
         self.prior = prior or (lambda t_unix: None)
         self.history_s = history_s
+        self.alignment: Callable[[], tuple[str, float]] | None = None
+        self._told_unknown = False
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
         self._commands: deque[tuple[Callable, asyncio.Future]] = deque()
@@ -232,9 +241,14 @@ class Pipeline:
         t = float(self.tel.uav_time(frame.t_unix)) - EXTRAPOLATE_S
         return any(s.last_t is None or s.last_t < t for s in self._angle_series)
 
+    def _pose(self, frame: LiveFrame) -> CameraPose:
+        """The camera at the frame's time, with the telemetry there is now (on the loop)."""
+        alignment = self.alignment() if self.alignment is not None and frame.aligned else None
+        return camera_pose(self.cal, self.tel, frame.t_unix, alignment)
+
     async def _track(self, frame: LiveFrame) -> Tracked:
         """Track one frame with its pose (computed here, on the loop) and hold it for selections."""
-        pose = camera_pose(self.cal, self.tel, frame.t_unix)
+        pose = self._pose(frame)
         early = self._early(frame)
         prior = self.prior(frame.t_unix)
         result = await asyncio.to_thread(self._step, frame, pose, prior)
@@ -277,7 +291,7 @@ class Pipeline:
                         pass
                     self.waited_s += loop.time() - t0
                     continue
-                item.pose, item.early = camera_pose(self.cal, self.tel, item.frame.t_unix), False
+                item.pose, item.early = self._pose(item.frame), False
             self._tracked.popleft()
             self._emit(item.frame, self._locate(item), item.result.box, item.window)
 
@@ -295,7 +309,7 @@ class Pipeline:
         """The fix of one frame with the telemetry there is now (status says why when there is none)."""
         item = await self._track(frame)
         if item.early:
-            item.pose = camera_pose(self.cal, self.tel, frame.t_unix)
+            item.pose = self._pose(frame)
         return self._locate(item)
 
     def _locate(self, item: Tracked) -> Fix:
@@ -303,8 +317,15 @@ class Pipeline:
         frame, result = item.frame, item.result
         if not result.ok:
             fix = Fix(frame.t_unix, result.status)
+        elif not frame.aligned:
+            fix = Fix(frame.t_unix, "latency_unsettled", result.u, result.v)
         else:
             fix = locate(self.cal, item.pose, result.u, result.v)[0]
+            if fix.ok and fix.time_source == "unknown" and not self._told_unknown:
+                self._told_unknown = True
+                log.warning("frame %d: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC "
+                            "reply yet): taken as 0, h_acc includes ±%.0f ms of it ([timing] "
+                            "unknown_latency_sigma_s) × the camera's motion", frame.index, self.tel.latency_sigma_s * 1000)
         fix.frame = frame.index
         fix.confidence = result.confidence
         return fix

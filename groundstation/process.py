@@ -2,6 +2,14 @@
 
 Pixels come from ``track.csv`` (``--use-track``, geometry only) or from tracking
 the session's video. ``--no-refraction`` runs the paper's straight-ray method.
+
+Time: when the UAV link's delay is neither stated (``[timing] mavlink_latency_s``)
+nor measured (TIMESYNC in the tlog), the frames' offset to the telemetry is
+estimated from the video's motion while it is tracked
+(:mod:`groundstation.latency_estimate`) and, when settled, applied as that delay
+(time source ``motion``); one line on stderr says what was found. Otherwise (not
+settled, ``--use-track``, ``--no-motion-offset``) the delay stays unknown: taken as
+0, its 1-sigma ``[timing] unknown_latency_sigma_s`` in each fix's h_acc, and a warning says so.
 """
 
 from __future__ import annotations
@@ -15,6 +23,7 @@ from localizer.fix import Fixes, locate
 from localizer.pose import camera_pose
 from localizer.tracking import TRACKERS
 
+from .latency_estimate import offset_from_rotations
 from .outputs import output_dir
 from .positions import write_positions_csv
 from .session import Session, SessionError, load_session
@@ -23,21 +32,50 @@ from .session import Session, SessionError, load_session
 _GEOMETRY_FAILURES = ("no_water", "below_surface", "bad_pixel")
 
 
-def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False):
-    """``(t, u, v, track_status)`` per frame: from track.csv or from tracking the video."""
+def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False,
+                 motion: bool = True):
+    """``(t, u, v, track_status)`` per frame: from track.csv or from tracking the video.
+
+    Tracking the video of a session whose link delay is unknown, with ``motion``, also estimates the frames'
+    offset to the telemetry and applies it when settled (see the module doc); an unknown delay is a warning.
+    """
     if use_track:
         if session.track is None:
             raise SessionError(f"{session.path / 'track.csv'}: missing (needed by --use-track)")
         tr = session.track
         status = np.full(len(tr["t"]), "ok", dtype=object)
+        _warn_unknown_delay(session, "pixels from track.csv: no video to estimate it from")
         return tr["t"], tr["u"], tr["v"], status
     if session.video_path is None:
         raise SessionError(f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)")
     from .track_video import track_session
 
-    tracked = track_session(session, tracker_name=tracker, progress=progress)
+    measure = motion and session.telemetry.latency_source == "unknown"
+    tracked = track_session(session, tracker_name=tracker, progress=progress, measure_motion=measure)
     session.warnings.extend(tracked.warnings)
+    if measure:
+        _align_by_motion(session, tracked.rotations)
+    _warn_unknown_delay(session, "--no-motion-offset" if not motion else "no settled estimate from the video")
     return tracked.t, tracked.u, tracked.v, tracked.status
+
+
+def _align_by_motion(session: Session, rotations) -> None:
+    """Estimate the frames' offset to the telemetry from the measured rotations; apply it when settled."""
+    found = offset_from_rotations(session.calibration, session.telemetry, rotations)
+    applied = found.settled
+    if applied:
+        session.telemetry.set_motion_latency(found.estimate.offset_s, found.estimate.sigma_s)
+    print(f"{session.path.name}: the frames' offset to the telemetry from the video's motion: {found.describe()}"
+          + (f"; applied as the UAV link's delay: {session.telemetry.uav_latency_s * 1000:.1f} ms" if applied else ""),
+          file=sys.stderr)
+
+
+def _warn_unknown_delay(session: Session, why: str) -> None:
+    if session.telemetry.latency_source == "unknown":
+        session.warnings.append(
+            f"{session.path}: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC in the tlog, "
+            f"{why}): taken as 0; h_acc includes ±{session.telemetry.latency_sigma_s * 1000:.0f} ms of it "
+            "([timing] unknown_latency_sigma_s) × the camera's motion")
 
 
 def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
@@ -59,10 +97,11 @@ def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
 
 
 def process_session(
-    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False
+    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False,
+    motion: bool = True,
 ) -> Fixes:
     """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
-    return locate_frames(session, frame_pixels(session, use_track, tracker, progress), refraction)
+    return locate_frames(session, frame_pixels(session, use_track, tracker, progress, motion), refraction)
 
 
 def summary(fixes: Fixes) -> str:
@@ -83,7 +122,7 @@ def run(args) -> int:
     try:
         fixes = process_session(
             session, use_track=args.use_track, refraction=not args.no_refraction,
-            tracker=args.tracker, progress=not args.quiet,
+            tracker=args.tracker, progress=not args.quiet, motion=not args.no_motion_offset,
         )
     finally:
         print_warnings(session)
@@ -101,4 +140,11 @@ def register(subparsers) -> None:
     p.add_argument("--tracker", default="default", choices=TRACKERS,
                    help="tracker backend; default: telemetry-guided template matching; mil: the paper's")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_motion_offset_flag(p)
     p.set_defaults(func=run)
+
+
+def add_motion_offset_flag(p) -> None:
+    p.add_argument("--no-motion-offset", action="store_true",
+                   help="do not estimate the frames' offset to the telemetry from the video's motion where the UAV "
+                        "link's delay is neither stated nor measured (it stays unknown: 0, with its sigma in h_acc)")

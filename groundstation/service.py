@@ -109,7 +109,27 @@ async def serve(cfg: config.RunConfig) -> dict:
     usage = Usage()
     try:
         size = (cal.camera.width, cal.camera.height)
-        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None) if cfg.record else None
+        video = motion = None
+        auto = cfg.video_latency_ms == "auto"
+        first_aligned: list[float] = []  # auto: the exposure of the first frame stamped with the estimate
+
+        def recorded_timing() -> dict:
+            """What the run measured and used for time, for the recording's [timing]."""
+            measured = tel.measured_latency_s
+            out = {"mavlink_latency_measured_s": None if measured is None else round(measured, 4),
+                   "mavlink_latency_measured_from_t": tel.measured_latency_from_s}
+            if video is None:
+                return out
+            if not auto:
+                return out | {"video_latency_s": cfg.video_latency_ms / 1000.0, "video_latency_source": "configured"}
+            if motion.applied_s is None:
+                return out
+            return out | {"video_latency_s": round(motion.applied_s, 4), "video_latency_source": "motion",
+                          "video_latency_sigma_s": round(motion.applied_sigma_s, 4),
+                          "video_latency_from_t": first_aligned[0] if first_aligned else None}
+
+        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
+                            timing=recorded_timing) if cfg.record else None
         fix_sink = ZenohFixSink(session, cfg.fix_key)
         closers.append(fix_sink.close)
         sinks = [fix_sink]
@@ -151,22 +171,26 @@ async def serve(cfg: config.RunConfig) -> dict:
             topview = TopView(cal, tel)
             ui = WebUi(cfg.ui, cfg.ui_token, control, topview, size, settings_of(cfg))
             pipeline.sinks += [ui.feed, topview]
-        video = motion = None
         if cfg.video:
-            auto = cfg.video_latency_ms == "auto"
             frame_listeners = [listener.on_frame for listener in (recorder, ui and ui.feed) if listener]
 
             def submit(frame):
+                if frame.aligned and auto and not first_aligned:
+                    first_aligned.append(frame.t_unix)
                 for listener in frame_listeners:
                     listener(frame)
                 pipeline.submit(frame)
-            video = VideoLive(cfg.video, 0.0 if auto else cfg.video_latency_ms / 1000.0, submit, expected_size=size)
+            video = VideoLive(cfg.video, None if auto else cfg.video_latency_ms / 1000.0, submit, expected_size=size)
 
             def apply(latency_s: float) -> None:
                 video.latency_s = latency_s
 
             motion = OnlineLatency(cal, tel, None if auto else video.latency_s, apply if auto else None)
             frame_listeners.append(motion.on_frame)
+            if auto:
+                pipeline.alignment = lambda: ("motion", motion.applied_sigma_s)
+                log.info("--video-latency-ms auto: no valid fix until the video's latency from the image's motion "
+                         "has settled (status latency_unsettled)")
         if recorder:
             uav.listeners.append(recorder.on_mavlink)
             depth.listeners.append(recorder.on_depth)

@@ -248,4 +248,20 @@ def load_session(path) -> Session:
         if not (path / "video_frames.csv").is_file():
             raise SessionError(f"{path / 'video_frames.csv'}: missing (required with {videos[0].name})")
         session.frames = read_table(path / "video_frames.csv", ("frame", "t"))
+        _restamp_unsettled(session)
     return session
+
+
+def _restamp_unsettled(session: Session) -> None:
+    """A live run with ``--video-latency-ms auto`` stamped its frames with no latency until its estimate
+    settled (``[timing] video_latency_from_t``): those frames are moved back by the estimate it recorded."""
+    timing, t = session.calibration.timing, session.frames["t"]
+    if timing.video_latency_source != "motion" or timing.video_latency_from_t is None or timing.video_latency_s is None:
+        return
+    early = t < timing.video_latency_from_t
+    if early.any():
+        t[early] -= timing.video_latency_s
+        session.warnings.append(
+            f"{session.path / 'video_frames.csv'}: {int(early.sum())} frames stamped before the live run's video "
+            f"latency had settled moved back by the {timing.video_latency_s * 1000:.1f} ms it settled at "
+            "([timing] video_latency_s)")

@@ -11,7 +11,10 @@ the one ``init_bbox`` belongs to); ``no_video`` (the frame is listed but could n
 be decoded: truncated or corrupt video).
 
 The camera poses of all frames are computed at once and shared with the session
-(which projects its predictions for many frames at a time).
+(which projects its predictions for many frames at a time). With ``measure_motion``
+the camera's rotation between consecutive frames is measured too
+(:class:`~groundstation.video_motion.RotationMeter`), for the frames' offset to the
+telemetry (:func:`groundstation.latency_estimate.offset_from_rotations`).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from localizer.tracking.session import SelectionError, TrackingSession
 from .progress import progress as progress_bar
 from .session import Session, SessionError
 from .video import VideoError, open_video
+from .video_motion import RotationMeter
 
 
 @dataclass
@@ -42,6 +46,7 @@ class TrackedVideo:
     confidence: np.ndarray  # tracker's 0..1, NaN when it has none
     timings_s: dict = field(default_factory=dict)  # seconds spent per stage
     warnings: list = field(default_factory=list)
+    rotations: list = field(default_factory=list)  # video_motion.Rotation between consecutive frames (measure_motion)
 
 
 def _init_row(session: Session, t: np.ndarray) -> int:
@@ -60,7 +65,8 @@ def _init_row(session: Session, t: np.ndarray) -> int:
 
 
 
-def track_session(session: Session, tracker_name: str = "default", progress: bool = False) -> TrackedVideo:
+def track_session(session: Session, tracker_name: str = "default", progress: bool = False,
+                  measure_motion: bool = False) -> TrackedVideo:
     """Track the UUV through the session's video (see the module doc for statuses).
 
     Raises :class:`SessionError` for what makes tracking impossible: no video, no
@@ -85,8 +91,10 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     status = np.full(n, "no_video", dtype=object)
     status[:init_row] = "before_init"
     u, v, conf = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
-    timings = {"decode_wait": 0.0, "track": 0.0}
+    timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0}
     warnings: list[str] = []
+    meter = RotationMeter(cal.camera) if measure_motion else None
+    rotations = []
 
     t0 = time.perf_counter()
     pose = camera_pose(cal, session.telemetry, t)
@@ -110,6 +118,11 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
                 if row is None:
                     extra += 1
                     continue
+                if meter is not None:
+                    t0 = time.perf_counter()
+                    if (r := meter.measure(float(t[row]), frame.image)) is not None:
+                        rotations.append(r)
+                    timings["motion"] += time.perf_counter() - t0
                 if row < init_row:
                     continue
                 t0 = time.perf_counter()
@@ -145,4 +158,4 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
         warnings.append(f"{session.video_path}: {extra} frames beyond video_frames.csv ignored")
     not_ok = status != "ok"
     u[not_ok], v[not_ok] = np.nan, np.nan
-    return TrackedVideo(frame_idx, t, u, v, status, conf, timings, warnings)
+    return TrackedVideo(frame_idx, t, u, v, status, conf, timings, warnings, rotations)

@@ -134,12 +134,36 @@ class Timing:
     depth_gap_s: Positive = Field(2.0, description="longest depth interval interpolated")
     depth_hold_s: Positive = Field(1.0, description="depth held this long past the newest sample")
     mavlink_latency_s: NonNegative | None = Field(
-        None, description="the UAV link's one-way delay; unset: measured with MAVLink TIMESYNC, 0 until it is")
+        None, description="the UAV link's one-way delay; unset: measured with MAVLink TIMESYNC, else estimated from "
+        "the video's motion (skyfix process), else unknown: taken as 0 ± unknown_latency_sigma_s")
+    unknown_latency_sigma_s: NonNegative = Field(
+        0.05, description="1-sigma of the UAV link's delay while it is unknown (neither stated, measured nor "
+        "estimated), added to [uncertainty] time_s: a telemetry radio's delay is some tens of ms, a wired or WiFi "
+        "link's a few")
     depth_latency_s: NonNegative = Field(0.05, description="the UUV's depth, measurement to arrival, used when its "
                                          "clock disagrees with the station's")
     depth_clock_tolerance_s: Positive = Field(0.1, description="a UUV clock this close to the station's is trusted "
                                               "as it is")
     clock_window_s: Positive = Field(30.0, description="sliding window of the least-delay clock alignment")
+    # written by `skyfix run --record` (what the live run measured and used), read as a record: processing
+    # measures the link delay again from the tlog's TIMESYNC; video_frames.csv's times hold the latency, except
+    # those stamped before video_latency_from_t (auto, not yet settled), which reading moves back by video_latency_s
+    mavlink_latency_measured_s: NonNegative | None = Field(
+        None, description="recorded: the UAV link's one-way delay TIMESYNC measured in the live run (the last value)")
+    mavlink_latency_measured_from_t: Number | None = Field(
+        None, description="recorded: station time (UNIX s) of the live run's first TIMESYNC measurement; the fixes "
+        "before it had the link delay unknown (unless mavlink_latency_s was set)")
+    video_latency_s: Number | None = Field(
+        None, description="recorded: the video's glass-to-first-packet latency in use (video_frames.csv's t = the "
+        "frame's stream slot minus it)")
+    video_latency_source: Literal["configured", "motion"] | None = Field(
+        None, description="recorded: configured (--video-latency-ms) or motion (auto: estimated from the image's "
+        "motion against the camera attitude)")
+    video_latency_sigma_s: NonNegative | None = Field(
+        None, description="recorded: the motion estimate's 1-sigma (video_latency_source = motion)")
+    video_latency_from_t: Number | None = Field(
+        None, description="recorded, auto: station time (UNIX s) of the first frame stamped with the estimate; the "
+        "frames before it are stamped with 0 latency and had no valid fix (status latency_unsettled)")
 
 
 @dataclass(frozen=True, config=ConfigDict(**OPEN, validate_by_name=True))

@@ -54,7 +54,7 @@ class CameraPose:
     sigma_time_s: np.ndarray  # the frame's time against the telemetry's
     height_source: np.ndarray  # object array of str, e.g. "takeoff" (relative_alt + the take-off height), "amsl"
     depth_source: np.ndarray
-    time_source: np.ndarray
+    time_source: np.ndarray  # how the frame is aligned to the telemetry: configured, timesync, motion or unknown
 
 
 def take(pose: CameraPose, idx) -> CameraPose:
@@ -102,8 +102,14 @@ def _rotations(cal: Calibration, tel: Telemetry, tq, status=None):
     return R_gimbal, R_body, np.hypot(sig_tilt, g_tilt), np.hypot(sig_yaw, g_yaw)
 
 
-def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
-    """The camera at station time(s) ``t_unix`` (see the module doc)."""
+def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, float] | None = None) -> CameraPose:
+    """The camera at station time(s) ``t_unix`` (see the module doc).
+
+    The frames' alignment to the telemetry is the UAV link delay's (its source word and 1-sigma,
+    :attr:`~localizer.telemetry.Telemetry.latency_source` and ``latency_sigma_s``) unless
+    ``alignment`` = (word, 1-sigma s) says the frames' times were aligned otherwise (live: the video latency
+    estimated from the image's motion). Either sigma adds to ``[uncertainty] time_s``.
+    """
     t = np.atleast_1d(np.asarray(t_unix, dtype=float))
     n = len(t)
     status = np.full(n, "ok", dtype=object)
@@ -143,6 +149,7 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
     status[(status == "ok") & ~(cam_h > 0)] = "below_surface"
     sig = cal.sigmas
     height_source = "amsl" if cal.water.surface_amsl_m is not None else "takeoff"
+    time_source, sigma_alignment_s = alignment or (tel.latency_source, tel.latency_sigma_s)
     return CameraPose(
         t_unix=t,
         status=status,
@@ -163,8 +170,8 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
         geoid_separation_m=gnss[:, 1],
         sigma_height_m=np.full(n, sig.height_m),
         sigma_depth_m=sigma_depth,
-        sigma_time_s=np.full(n, sig.time_s),
+        sigma_time_s=np.full(n, np.hypot(sig.time_s, sigma_alignment_s)),
         height_source=np.full(n, height_source, dtype=object),
         depth_source=depth_source,
-        time_source=np.full(n, tel.latency_source, dtype=object),
+        time_source=np.full(n, time_source, dtype=object),
     )

@@ -27,6 +27,8 @@ STATUSES: dict[str, str] = {
     "no_water": "the ray through the pixel never reaches the water",
     "below_surface": "the camera is at or below the water surface (check [water])",
     "bad_time": "the frame's time is not a finite number",
+    "latency_unsettled": "live, --video-latency-ms auto: the video's latency is not yet settled from the image's "
+                         "motion, so the frame's exposure time is not known",
     # telemetry ([timing] sets how far apart and how old samples may be)
     "no_attitude": "no ATTITUDE sample at or before the frame",
     "stale_attitude": "the ATTITUDE samples around the frame are too far apart or too old",

@@ -6,7 +6,10 @@ times are stamped with it). The UAV's samples carry its autopilot's
 ``receive − boot`` over a sliding window (:class:`~localizer.clock.ClockMap`), i.e.
 when the fastest delivery would have brought it. A frame at station time ``t`` is
 looked up at ``t + uav_latency_s``, the link's one-way delay: configured
-(``[timing] mavlink_latency_s``), else measured with MAVLink TIMESYNC, else 0.
+(``[timing] mavlink_latency_s``), else measured with MAVLink TIMESYNC, else the
+frames' offset to the telemetry estimated from the video's motion
+(:meth:`Telemetry.set_motion_latency`, offline), else unknown and taken as 0
+(:attr:`Telemetry.latency_source` says which: :data:`LATENCY_SOURCES`).
 A reboot of the autopilot (its boot clock going back) starts a new clock segment;
 samples from before it keep their times and stay usable. A MAVLink gimbal with
 its own boot clock gets its own :class:`~localizer.clock.ClockMap` onto the same scale.
@@ -40,6 +43,13 @@ CLOCK_NOTICE_S = 0.1
 DEG_PER_M = math.degrees(1.0 / 6_378_137.0)  # latitude degrees per metre north (sphere; for rates only)
 _NOTICE_AFTER = 3  # samples before a clock offset is reported
 _ASIDE_MAX = 256  # samples kept aside while a clock waits for a reboot's confirmation
+#: Where the UAV link's delay in use comes from (a frame's ``time_source``), and what each word means.
+LATENCY_SOURCES = {
+    "configured": "[timing] mavlink_latency_s",
+    "timesync": "measured with MAVLink TIMESYNC",
+    "motion": "the frames' offset to the telemetry, estimated from the video's motion against the camera attitude",
+    "unknown": "neither stated, measured nor estimated: taken as 0, its 1-sigma [timing] unknown_latency_sigma_s",
+}
 
 
 class Telemetry:
@@ -59,6 +69,8 @@ class Telemetry:
         self._component_clocks: dict[int, ClockMap] = {}  # other components' boot clocks (a MAVLink gimbal)
         self.timesync = RoundTrip(w)
         self._measured_latency_s: float | None = None
+        self.measured_latency_from_s: float | None = None  # arrival (station s) of the first TIMESYNC measurement
+        self._motion_latency: tuple[float, float] | None = None  # (delay, 1-sigma) from the video's motion, s
         self._gnss = Median()  # arrival-scale minus GNSS time, per SYSTEM_TIME
         self.uuv_clock = ClockMap(w)  # the UUV's own depth stamps
         self.depth_aligned_by: str | None = None  # "uuv_clock", "arrival" or "autopilot_clock"
@@ -94,13 +106,33 @@ class Telemetry:
         """The UAV link's one-way delay (s) subtracted from the least-delay alignment."""
         if self.timing.mavlink_latency_s is not None:
             return self.timing.mavlink_latency_s
-        return self._measured_latency_s or 0.0
+        if self._measured_latency_s is not None:
+            return self._measured_latency_s
+        return self._motion_latency[0] if self._motion_latency is not None else 0.0
 
     @property
     def latency_source(self) -> str:
+        """Where :attr:`uav_latency_s` comes from: a word of :data:`LATENCY_SOURCES`."""
         if self.timing.mavlink_latency_s is not None:
             return "configured"
-        return "timesync" if self._measured_latency_s is not None else "assumed 0 (no TIMESYNC reply)"
+        if self._measured_latency_s is not None:
+            return "timesync"
+        return "motion" if self._motion_latency is not None else "unknown"
+
+    @property
+    def latency_sigma_s(self) -> float:
+        """The 1-sigma (s) of :attr:`uav_latency_s` beyond ``[uncertainty] time_s``: 0 when stated or measured,
+        the estimate's from the video's motion, ``[timing] unknown_latency_sigma_s`` when unknown."""
+        source = self.latency_source
+        if source == "motion":
+            return self._motion_latency[1]
+        return self.timing.unknown_latency_sigma_s if source == "unknown" else 0.0
+
+    def set_motion_latency(self, offset_s: float, sigma_s: float) -> None:
+        """The frames' offset to the telemetry (s; a frame at ``t`` matches the telemetry at ``t + offset_s``
+        as aligned now), estimated from the video's motion: taken as the link's delay where it is neither
+        configured nor measured. Signed: frames stamped late (a video latency set too low) give a negative one."""
+        self._motion_latency = (self.uav_latency_s + offset_s, sigma_s)
 
     @property
     def measured_latency_s(self) -> float | None:
@@ -262,6 +294,8 @@ class Telemetry:
             return False
         delay = self.timesync.one_way_delay_s(self.uav_clock)
         if delay is not None:
+            if self._measured_latency_s is None:
+                self.measured_latency_from_s = receive_s
             self._measured_latency_s = max(0.0, delay)
         return True
 

@@ -4,8 +4,9 @@ late (``[clock] video_time_error_s``): the UAV yaws (the camera follows its head
 - ``skyfix estimate-latency`` finds the stamps' error in a recording;
 - live, a replay sends each frame at its stamped time, so the camera's glass-to-first-packet latency
   is 80 ms: with ``--video-latency-ms 80`` the online estimate agrees within 10 ms after 10 s; with
-  ``--video-latency-ms 0`` it warns; with ``auto`` it is applied, and the fixes from then on are as
-  accurate as with the right latency configured (MAE within 1.2×, +3 mm for noise)."""
+  ``--video-latency-ms 0`` it warns; with ``auto`` it is applied, no GPS_INPUT before it is valid (the
+  frames meanwhile are ``latency_unsettled``), and the fixes from then on are as accurate as with the
+  right latency configured (MAE within 1.2×, +3 mm for noise)."""
 
 from __future__ import annotations
 
@@ -130,7 +131,13 @@ def test_online_estimate_and_auto(session, tmp_path):
     assert abs(est["estimate_ms"] / 1000 - ERROR_S) <= TOLERANCE_S and est["sigma_ms"] <= 10
     assert "not the configured" not in log_right
     assert applied["applied_ms"] is not None and abs(applied["applied_ms"] / 1000 - ERROR_S) <= TOLERANCE_S
-    err_auto = _errors(session, gps_auto, shift_auto, since_unix=_applied_at(log_auto))
+    assert 0 < applied["applied_sigma_ms"] <= 5 and auto["video"]["latency_ms"] == applied["applied_ms"]
+    applied_at = _applied_at(log_auto)  # logged before the first frame is stamped with it
+    before = [g for g in gps_auto if g["t_recv"] < applied_at]
+    assert len(before) > 20 and all(g["fix_type"] == 1 for g in before), "a valid GPS_INPUT before auto settled"
+    assert auto["pipeline"]["statuses"].get("latency_unsettled", 0) > 20, auto["pipeline"]["statuses"]
+    assert "latency_unsettled" not in right["pipeline"]["statuses"]
+    err_auto = _errors(session, gps_auto, shift_auto, since_unix=applied_at)
     err_right = _errors(session, gps_right, shift_right)
     common = sorted(set(err_auto) & set(err_right))
     assert len(common) >= 30, (f"only {len(common)} frames with fixes in both runs after the latency was applied "

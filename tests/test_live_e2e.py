@@ -152,6 +152,12 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
     rec = load_session(record)
     assert len(rec.telemetry.attitude) > 100 and rec.frames is not None and len(rec.frames["t"]) > MIN_SHARE * n_frames
     assert rec.calibration.init_t == ok[0]["t"]  # the live run's first fix, not the calibration file's init_t
+    # ... whose [timing] says what the run measured and used: the link delay TIMESYNC measured, the video latency
+    timing = rec.calibration.timing
+    assert abs(timing.mavlink_latency_measured_s * 1000 - clocks["uav_link_latency_measured_ms"]) < 1.0
+    assert (timing.video_latency_s, timing.video_latency_source) == (VIDEO_LATENCY_MS / 1000, "configured")
+    sources = [f["time_source"] for f in ok]  # unknown until the first TIMESYNC reply, then measured
+    assert sources[-1] == "timesync" and sources == sorted(sources, key=lambda w: w == "timesync"), set(sources)
     for use_track in (True, False):
         fixes = process_session(rec, use_track=use_track)
         good = fixes.status == "ok"

@@ -262,24 +262,39 @@ def _yaw_at(cal, tel, t):
 
 def test_frame_time_maps_through_receive_times(make_cal):
     """Yaw turning 0.1 rad/s: the pose at a station time shows that instant's yaw once the link delay is
-    known, from TIMESYNC or configured; without it, the pose is the least delay (20 ms) late."""
+    known, from TIMESYNC, configured or estimated from the video's motion; without it, the pose is the least
+    delay (20 ms) late, and the frame's time sigma carries [timing] unknown_latency_sigma_s on top of time_s."""
     fixed = {"attitude_source": "fixed", "fixed_rpy_deg": [0.0, 0.0, 0.0]}
-    cal = make_cal(mount=fixed)
+    cal = make_cal(mount=fixed, uncertainty={"time_s": 0.03}, timing={"unknown_latency_sigma_s": 0.04})
     delays = [0.045, 0.02, 0.07, 0.033]
     t = T0_UNIX + 1.234
-    tel = Telemetry()
+
+    def time_of(cal, tel):
+        pose = camera_pose(cal, tel, t)
+        return pose.time_source[0], pose.sigma_time_s[0]
+
+    tel = Telemetry(cal.timing)
     _turning(tel, delays)
-    assert tel.latency_source.startswith("assumed 0")
+    assert tel.latency_source == "unknown" and tel.latency_sigma_s == 0.04
     assert _yaw_at(cal, tel, t) == pytest.approx(0.1234 - 0.1 * 0.02, abs=1e-7)
-    tel = Telemetry()
+    assert time_of(cal, tel) == ("unknown", pytest.approx(0.05, abs=1e-12))  # √(0.03² + 0.04²)
+    tel.set_motion_latency(0.02, 0.004)  # the frames' offset to the telemetry as aligned so far
+    assert tel.latency_source == "motion" and tel.uav_latency_s == pytest.approx(0.02, abs=1e-12)
+    assert _yaw_at(cal, tel, t) == pytest.approx(0.1234, abs=1e-6)
+    assert time_of(cal, tel) == ("motion", pytest.approx(np.hypot(0.03, 0.004), abs=1e-12))
+    tel = Telemetry(cal.timing)
     _turning(tel, delays, timesync=True)
     assert tel.latency_source == "timesync" and tel.uav_latency_s == pytest.approx(0.02, abs=1e-6)
     assert _yaw_at(cal, tel, t) == pytest.approx(0.1234, abs=1e-6)
+    tel.set_motion_latency(0.05, 0.004)  # a measured delay wins over an estimate
+    assert tel.latency_source == "timesync" and tel.uav_latency_s == pytest.approx(0.02, abs=1e-6)
+    assert time_of(cal, tel) == ("timesync", pytest.approx(0.03, abs=1e-12))
     cal_timed = make_cal(mount=fixed, timing={"mavlink_latency_s": 0.02})
     tel = Telemetry(cal_timed.timing)
     _turning(tel, delays)
     assert tel.latency_source == "configured"
     assert _yaw_at(cal_timed, tel, t) == pytest.approx(0.1234, abs=1e-6)
+    assert time_of(cal_timed, tel) == ("configured", pytest.approx(0.02, abs=1e-12))
 
 
 def test_station_clock_off_gnss_changes_nothing_but_gnss_time(make_cal, make_telemetry):

@@ -2,7 +2,11 @@
 
 ``session.toml`` (version 1 and the calibration's tables) is written first, and
 again with ``[tracker] init_bbox``/``init_t`` at the first fix: the tracker's box on
-that frame, so ``skyfix process`` starts the tracker where the live run had it;
+that frame, so ``skyfix process`` starts the tracker where the live run had it; and
+again whenever what the run measured and used for time changes (checked once a
+second: ``timing()``, e.g. the link delay TIMESYNC measured and since when, the video
+latency in use with its source and sigma), written into ``[timing]``'s recorded keys
+(:data:`RECORDED_TIMING`; those of the calibration file, another recording's, are dropped);
 ``uav.tlog`` gets every good MAVLink frame from the UAV with its receive time,
 ``depth.jsonl`` every accepted depth sample (``t`` the UUV's own stamp, or the station time
 ArduSub's was mapped to from its boot clock, ``t_recv`` its arrival on the station clock, and
@@ -20,7 +24,9 @@ session.toml); the event loop only queues what is to be written (:data:`QUEUE_IT
 records, :data:`QUEUE_FRAMES` video frames; beyond, the item is left out and counted in
 ``dropped``/``video_dropped``), so no disk write ever blocks the loop, and a stop asks
 the thread to finish and close, never closes a file under it. ``video_frames.csv`` lists
-only the frames that were encoded. A write that fails (a full disk) stops the recording
+only the frames that were encoded. Times only increase in every table: a frame or fix not later
+than the one before (a reconnected stream on another clock; ``--video-latency-ms auto``
+applying its estimate, which moves the frames' times back by it) is left out and counted. A write that fails (a full disk) stops the recording
 with one log line and ``error`` in the status; the service goes on without it.
 """
 
@@ -37,6 +43,7 @@ import struct
 import threading
 import time
 import tomllib
+from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
@@ -56,13 +63,19 @@ QUEUE_ITEMS = 20000  # records waiting for the writer (MAVLink frames, depth sam
 QUEUE_FRAMES = 30  # video frames waiting for the encoder
 FLUSH_S = 1.0
 CLOSE_WAIT_S = 0.5  # a stop waits this long for the writer to close its files, then leaves it to finish
+#: ``[timing]`` keys that say what a live run measured and used (localizer.calibration.Timing)
+RECORDED_TIMING = ("mavlink_latency_measured_s", "mavlink_latency_measured_from_t", "video_latency_s",
+                   "video_latency_source", "video_latency_sigma_s", "video_latency_from_t")
+TIMING_CHECK_S = 1.0
 
 
 def _toml_value(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(value)
+    if isinstance(value, int):
+        return repr(int(value))
+    if isinstance(value, float):  # numpy's floats too, written as plain numbers
+        return repr(float(value))
     if isinstance(value, str):
         return json.dumps(value)
     if isinstance(value, list):
@@ -133,7 +146,8 @@ class VideoWriter:
 class Recorder:
     """Worker and sink writing the session; see the module docstring."""
 
-    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None):
+    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None,
+                 timing: Callable[[], dict] | None = None):
         self.dir = Path(directory)
         if self.dir.exists() and not self.dir.is_dir():
             raise FileExistsError(f"--record {directory}: exists and is not a directory")
@@ -146,6 +160,10 @@ class Recorder:
         # [tracker] is the live run's own: the first frame the target was tracked on (see on_fix), not the
         # calibration file's, whose init_t belongs to another recording
         self._calibration = {k: v for k, v in tomllib.loads(Path(cal_source).read_text()).items() if k != "tracker"}
+        if "timing" in self._calibration:  # another recording's measurements are not this one's
+            self._calibration["timing"] = {k: v for k, v in self._calibration["timing"].items()
+                                           if k not in RECORDED_TIMING}
+        self.timing = timing or dict
         self._write_toml(session_toml(self._calibration))
         self.video_size = video_size
         self.mavlink_frames = 0
@@ -154,6 +172,7 @@ class Recorder:
         self.dropped = 0
         self.video_dropped = 0
         self.error: str | None = None
+        self._last_fix_t: float | None = None
         self._video: VideoWriter | None = None
         self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_ITEMS)
         self._frames_queued = 0  # frames in the queue (written on the loop, lowered by the writer)
@@ -194,6 +213,11 @@ class Recorder:
                 self._frames_queued -= 1
 
     def on_fix(self, fix: Fix, info) -> None:
+        if self._last_fix_t is not None and not fix.t_unix > self._last_fix_t:
+            # frames' times went back (auto applying its first latency): left out, as the video writer does
+            self.dropped += 1
+            return
+        self._last_fix_t = fix.t_unix
         ok = fix.ok
         track = (f"{fix.t_unix:.6f}", f"{fix.u:.3f}" if ok else "", f"{fix.v:.3f}" if ok else "")
         self.fixes += self._put(("fix", (format_row(fix), track)))
@@ -201,10 +225,21 @@ class Recorder:
             self._calibration["tracker"] = {"init_bbox": list(info.box), "init_t": fix.t_unix}
             self._put(("toml", session_toml(self._calibration)))
 
+    def _record_timing(self) -> None:
+        """``[timing]``'s recorded keys from ``timing()``; session.toml rewritten when they changed."""
+        table = self._calibration.get("timing", {})
+        recorded = {k: v for k, v in self.timing().items() if v is not None}
+        if recorded != {k: table[k] for k in RECORDED_TIMING if k in table}:
+            self._calibration["timing"] = {k: v for k, v in table.items() if k not in RECORDED_TIMING} | recorded
+            self._put(("toml", session_toml(self._calibration)))
+
     async def run(self) -> None:
         try:
-            await asyncio.Event().wait()
+            while True:
+                self._record_timing()
+                await asyncio.sleep(TIMING_CHECK_S)
         finally:
+            self._record_timing()  # what the run ended with
             self._closing.set()
             await in_thread(self._thread.join, CLOSE_WAIT_S, name="record close")
             if self._thread.is_alive():

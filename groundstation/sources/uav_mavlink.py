@@ -77,6 +77,7 @@ def clock_status(tel: Telemetry) -> dict:
         "station_minus_gnss_s": None if gnss is None else round(gnss, 3),
         "uav_link_latency_ms": round(tel.uav_latency_s * 1000.0, 1),
         "uav_link_latency_source": tel.latency_source,
+        "uav_link_latency_sigma_ms": round(tel.latency_sigma_s * 1000.0, 1),
         "uav_link_latency_measured_ms": None if measured is None else round(measured * 1000.0, 1),
         "uav_reboots": tel.uav_clock.segments,
         "uuv_clock_minus_station_s": None if uuv is None else round(uuv, 3),
@@ -179,6 +180,7 @@ class UavMavlink:
             self.health.other_systems += 1
             return
         self.health.seen(kind, t_recv)
+        measured_before = self.tel.measured_latency_s
         try:
             used = ingest(self.tel, msg, t_recv)
         except (AttributeError, TypeError, ValueError) as e:
@@ -196,6 +198,10 @@ class UavMavlink:
                 log.warning("UAV MAVLink: %s #%d refused: %s: %s", kind, n, self.tel.refusal, msg)
         while self.tel.notices:
             log.warning("UAV MAVLink: %s", self.tel.notices.pop(0))
+        if measured_before is None and self.tel.measured_latency_s is not None:
+            log.info("UAV MAVLink: the link's one-way delay measured with TIMESYNC: %.1f ms%s",
+                     self.tel.measured_latency_s * 1000.0, "" if self.tel.latency_source == "timesync"
+                     else f" (not used: {self.tel.latency_source})")
         for listener in self.listeners:
             listener(msg, t_recv)
 

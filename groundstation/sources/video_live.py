@@ -22,7 +22,9 @@ MPEG-TS PTS) is put on the station clock by the least ``arrival − PTS`` over a
 sliding window (:class:`localizer.clock.ClockMap`), which is the stream slot: when
 the frame's packets arrive over the fastest path. Its exposure ``t_unix`` is that
 slot minus ``latency_s`` (``--video-latency-ms``: glass to first packet, i.e.
-camera + encoder + network). Decoding delay, jitter and bursts move neither.
+camera + encoder + network; None with ``auto`` until the estimate from the image's
+motion has settled: the slot itself, the frame marked not ``aligned``). Decoding
+delay, jitter and bursts move neither.
 Each connection starts a new map (a camera that restarts restarts its clock).
 The packets read while a connection is being opened are stamped when the open
 returns, late: the first frames of a connection may be late by that much until a
@@ -87,7 +89,8 @@ class LiveFrame:
 
     ``t_unix`` its exposure: ``t_slot`` − the configured glass-to-first-packet latency;
     ``t_recv`` when its first packet was read from the network (before decoding);
-    ``t_slot`` its stream slot: its PTS on the station clock (least arrival − PTS), ≤ ``t_recv``.
+    ``t_slot`` its stream slot: its PTS on the station clock (least arrival − PTS), ≤ ``t_recv``;
+    ``aligned`` False while the latency is not known yet (``auto`` before its estimate settled).
     """
 
     index: int
@@ -95,6 +98,7 @@ class LiveFrame:
     t_recv: float
     image: np.ndarray
     t_slot: float | None = None
+    aligned: bool = True
 
 
 _END = object()  # the demuxer's last word: the stream or file ended
@@ -136,7 +140,7 @@ def _reason(source: VideoInput, e: Exception, t_try: float, timeout_s: float) ->
 class VideoLive:
     """Worker owning the video link; ``on_frame(LiveFrame)`` is called on the event loop."""
 
-    def __init__(self, url: str, latency_s: float, on_frame: Callable[[LiveFrame], None],
+    def __init__(self, url: str, latency_s: float | None, on_frame: Callable[[LiveFrame], None],
                  expected_size: tuple[int, int] | None = None, open_timeout_s: float | None = None,
                  read_timeout_s: float = 2.0, retry_max_s: float = 1.0):
         self.source = parse_video_input(url)
@@ -310,7 +314,8 @@ class VideoLive:
             ew, eh = self.expected_size
             raise VideoError(f"{self.url}: frames are {w}x{h} pixels, the calibration's camera is {ew}x{eh}")
         t_slot = float(clock.to_arrival(frame.pts * tb)) if frame.pts is not None else t_recv
-        live = LiveFrame(self.frames, t_slot - self.latency_s, t_recv, image, t_slot)
+        latency_s = self.latency_s  # read once: the event loop may set it meanwhile (auto)
+        live = LiveFrame(self.frames, t_slot - (latency_s or 0.0), t_recv, image, t_slot, latency_s is not None)
         self.frames += 1
         self.last_recv = t_recv
         self._late_s.append(t_recv - t_slot)
@@ -341,7 +346,7 @@ class VideoLive:
         return {"url": self.url, "kind": self.source.kind, "state": self.state, "frames": self.frames,
                 "connects": self.connects, "age_s": age, "decode_errors": self.decode_errors,
                 "backlog": self.backlog, "skipped_behind": self.skipped_behind,
-                "latency_ms": round(self.latency_s * 1000.0, 1),
+                "latency_ms": None if self.latency_s is None else round(self.latency_s * 1000.0, 1),
                 "arrival_after_slot_ms": {"p50": p(late, 50), "p99": p(late, 99)},
                 "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},
                 "stream_offset_s": None if offset is None else round(offset, 6),

@@ -352,6 +352,19 @@ function row(input, state, age, rate, details, sub) {
   return tr;
 }
 
+// where the video's latency comes from: configured, or (auto) the image's motion once settled; the estimate beside
+function videoLatency(v) {
+  if (!v) return "";
+  const m = v.latency_from_motion || {};
+  const est = m.estimate_ms === null || m.estimate_ms === undefined ? "image motion: no estimate yet"
+    : `image motion ${fmt(m.estimate_ms, 1, " ms")} ± ${fmt(m.sigma_ms, 1, " ms")} from ${m.pairs} pairs, ${m.state}`;
+  if (m.configured_ms !== null && m.configured_ms !== undefined) {
+    return ` · video latency ${fmt(v.latency_ms, 0, " ms")} (configured; ${est})`;
+  }
+  if (v.latency_ms === null) return ` · video latency not settled (auto: no valid fix yet; ${est})`;
+  return ` · video latency ${fmt(v.latency_ms, 1, " ms")} (motion ± ${fmt(m.applied_sigma_ms, 1, " ms")}; ${est})`;
+}
+
 function showHealth() {
   const s = page.status, rates = page.rates, problems = s.problems || {};
   const list = $("problems");
@@ -405,11 +418,11 @@ function showHealth() {
   }
   const c = uav.clocks;
   rows.push(row("clocks", null, "", "", `station − GNSS ${fmt(c.station_minus_gnss_s, 3, " s")} · UAV link `
-                + `${fmt(c.uav_link_latency_ms, 1, " ms")} (${c.uav_link_latency_source}; measured `
+                + `${fmt(c.uav_link_latency_ms, 1, " ms")} (${c.uav_link_latency_source} ± `
+                + `${fmt(c.uav_link_latency_sigma_ms, 1, " ms")}; measured `
                 + `${fmt(c.uav_link_latency_measured_ms, 1, " ms")}) · UUV − station `
                 + `${fmt(c.uuv_clock_minus_station_s, 3, " s")} · depth by ${c.depth_aligned_by ?? "—"}`
-                + ` · video latency ${fmt(page.settings.video_latency_ms, 0, " ms")} (configured)`
-                + ` · reboots ${c.uav_reboots}`));
+                + videoLatency(s.video) + ` · reboots ${c.uav_reboots}`));
   if (s.latency) {
     rows.push(row("latency", null, "", "", `frame → GPS_INPUT p50 ${fmt(s.latency.p50_ms, 1, " ms")}, p99 `
                   + `${fmt(s.latency.p99_ms, 1, " ms")} over ${s.latency.n}`));
