@@ -11,6 +11,12 @@ edges found in the image (:mod:`localizer.tracking.silhouette`) measures the cam
 
 Pixels follow OpenCV (the top-left pixel's centre at (0, 0)); an outline runs so that
 ``(e_v, -e_u)`` of each edge ``e`` points outwards. Batched over leading dimensions.
+
+A frame's fit becomes the height of the UAV's reported position above the water with two
+1-sigmas (:func:`size_height`): the fit's own, and the error every frame shares (the vehicle's
+size, :data:`SIZE_SIGMA`; the edges' bias, :data:`EDGE_BIAS_PX`; the depth), which no average
+reduces. :class:`HeightBias` estimates the configured height's bias over a sliding window and
+says when it is sure.
 """
 
 from __future__ import annotations
