@@ -2,6 +2,8 @@
 
 Pixels come from ``track.csv`` (``--use-track``, geometry only) or from tracking
 the session's video. ``--no-refraction`` runs the paper's straight-ray method.
+Tracking the video also measures the camera's height from the UUV's size
+(``--height-from-size``, :mod:`groundstation.size_estimate`) and prints its estimate.
 """
 
 from __future__ import annotations
@@ -18,13 +20,17 @@ from localizer.tracking import TRACKERS
 from .outputs import output_dir
 from .positions import write_positions_csv
 from .session import Session, SessionError, load_session
+from .size_estimate import MODES as SIZE_MODES
+from .size_estimate import HeightFromSize
 
 # Per-frame statuses that, when no frame at all has a fix, mean the session itself is wrong.
 _GEOMETRY_FAILURES = ("no_water", "below_surface", "bad_pixel")
 
 
-def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False):
-    """``(t, u, v, track_status)`` per frame: from track.csv or from tracking the video."""
+def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False,
+                 size: HeightFromSize | None = None):
+    """``(t, u, v, track_status)`` per frame: from track.csv or from tracking the video (``size``: measuring the
+    camera's height from the UUV's size in the same pass; its warnings join the session's)."""
     if use_track:
         if session.track is None:
             raise SessionError(f"{session.path / 'track.csv'}: missing (needed by --use-track)")
@@ -35,8 +41,10 @@ def frame_pixels(session: Session, use_track: bool, tracker: str = "default", pr
         raise SessionError(f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)")
     from .track_video import track_session
 
-    tracked = track_session(session, tracker_name=tracker, progress=progress)
+    tracked = track_session(session, tracker_name=tracker, progress=progress, size=size)
     session.warnings.extend(tracked.warnings)
+    if size is not None:
+        session.warnings.extend(size.warnings)
     return tracked.t, tracked.u, tracked.v, tracked.status
 
 
@@ -59,10 +67,18 @@ def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
 
 
 def process_session(
-    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False
+    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False,
+    size: HeightFromSize | None = None,
 ) -> Fixes:
     """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
-    return locate_frames(session, frame_pixels(session, use_track, tracker, progress), refraction)
+    return locate_frames(session, frame_pixels(session, use_track, tracker, progress, size), refraction)
+
+
+def size_of(session: Session, mode: str, use_track: bool) -> HeightFromSize | None:
+    """The height-from-size measurement ``--height-from-size`` asks for, when the video is tracked."""
+    if mode == "off" or use_track or session.video_path is None:
+        return None
+    return HeightFromSize(session.calibration, session.telemetry, mode)
 
 
 def summary(fixes: Fixes) -> str:
@@ -80,15 +96,18 @@ def print_warnings(session: Session) -> None:
 def run(args) -> int:
     out = output_dir(args.out)
     session = load_session(args.session)
+    size = size_of(session, args.height_from_size, args.use_track)
     try:
         fixes = process_session(
             session, use_track=args.use_track, refraction=not args.no_refraction,
-            tracker=args.tracker, progress=not args.quiet,
+            tracker=args.tracker, progress=not args.quiet, size=size,
         )
     finally:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
+    if size is not None:
+        print(size.summary())
     return 0
 
 
@@ -100,5 +119,13 @@ def register(subparsers) -> None:
     p.add_argument("--no-refraction", action="store_true", help="the paper's straight ray (no Snell refraction)")
     p.add_argument("--tracker", default="default", choices=TRACKERS,
                    help="tracker backend; default: telemetry-guided template matching; mil: the paper's")
+    add_size_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+def add_size_argument(p) -> None:
+    p.add_argument("--height-from-size", choices=SIZE_MODES, default="check",
+                   help="the camera's height from the UUV's size in the tracked video: check (default: estimate it, "
+                   "warn when the configured height disagrees), auto (also hand it to the height's fusion once sure), "
+                   "off")

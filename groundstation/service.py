@@ -3,7 +3,8 @@
 Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth over
 Zenoh (:mod:`.sources.depth_zenoh`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`.sources.video_live`),
-the per-frame :mod:`.pipeline`, GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
+the per-frame :mod:`.pipeline` (and the height from the UUV's size, :mod:`.size_estimate`),
+GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
 the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`), the operator's commands
 (:mod:`.control`), the web page (:mod:`.ui`, unless ``--no-ui``) and, with ``--record``,
 the recorder (:mod:`.sinks.recorder`). The web page's port is taken before any worker
@@ -45,6 +46,7 @@ from .sinks.gps_input import GpsInputSink, mavlink_gps_link
 from .sinks.recorder import Recorder
 from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from .sinks.zenoh_mavlink import ZenohMavlinkIn
+from .size_estimate import HeightFromSize, OnlineHeightFromSize
 from .sources.depth_zenoh import BLUEOS_KEY, DepthZenoh
 from .sources.rates import needed_rates
 from .sources.uav_mavlink import UavMavlink
@@ -143,7 +145,7 @@ async def serve(cfg: config.RunConfig) -> dict:
             topview = TopView(cal, tel)
             ui = WebUi(cfg.ui, cfg.ui_token, control, topview, size, settings_of(cfg))
             pipeline.sinks += [ui.feed, topview]
-        video = motion = None
+        video = motion = size = None
         if cfg.video:
             auto = cfg.video_latency_ms == "auto"
             frame_listeners = [listener.on_frame for listener in (recorder, ui and ui.feed) if listener]
@@ -159,6 +161,9 @@ async def serve(cfg: config.RunConfig) -> dict:
 
             motion = OnlineLatency(cal, tel, None if auto else video.latency_s, apply if auto else None)
             frame_listeners.append(motion.on_frame)
+            if cfg.height_from_size != "off":
+                size = OnlineHeightFromSize(HeightFromSize(cal, tel, cfg.height_from_size))
+                pipeline.on_tracked.append(size.on_tracked)
         if recorder:
             uav.listeners.append(recorder.on_mavlink)
             depth.listeners.append(recorder.on_depth)
@@ -186,6 +191,8 @@ async def serve(cfg: config.RunConfig) -> dict:
                    "process": usage.status(now)}
             if video:
                 out["video"] = video.status(now) | {"latency_from_motion": motion.status()}
+            if size:
+                out["height_from_size"] = size.status()
             if gps:
                 out["gps_input"] = gps.status(now)
                 out["latency"] = latency_summary(list(gps.latencies_s)[-1000:])
@@ -199,7 +206,7 @@ async def serve(cfg: config.RunConfig) -> dict:
         zenoh_control = ZenohControl(session, control, cfg.control_prefix,
                                      {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
         # the order of the stop: inputs (and the operator's side), the pipeline, the sinks; GPS_INPUT last
-        stages = [[w for w in (uav, depth, uuv_position, video, motion, zenoh_control, ui) if w is not None],
+        stages = [[w for w in (uav, depth, uuv_position, video, motion, size, zenoh_control, ui) if w is not None],
                   [pipeline, watchdog], [w for w in (status_sink, recorder) if w is not None]]
         workers = [w for stage in stages for w in stage] + ([gps] if gps else [])
         if ui:
