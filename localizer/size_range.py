@@ -222,7 +222,7 @@ class HeightBias:
         if not self.heights:
             return None
         b = np.array([h.bias_m for h in self.heights])
-        s = np.array([h.sigma_m for h in self.heights])
+        s = np.maximum([h.sigma_m for h in self.heights], 1e-3)  # a perfect fit is not an infinite weight
         t = np.array([h.t_unix for h in self.heights])
         median = float(np.median(b))
         spread = 1.4826 * float(np.median(np.abs(b - median)))

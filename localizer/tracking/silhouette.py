@@ -140,7 +140,7 @@ def measure(frame_bgr: np.ndarray, camera: Camera, R_ned_from_cv, u: float, v: f
     x = xs[int(np.argmax(support[:, k])), k]
     steps = np.array([0.005 * height_m, 0.01, 0.25, 0.25])  # finite differences: height, heading, u, v
     settled = np.array([0.002 * height_m, 0.02, 0.25, 0.25])  # a pass moving less: done
-    for k in range(p.passes):
+    for n in range(p.passes):
         c = corners(x + np.concatenate([np.zeros((1, 4)), np.diag(steps)]))
         if c is None:
             return "no_water"
@@ -151,7 +151,7 @@ def measure(frame_bgr: np.ndarray, camera: Camera, R_ned_from_cv, u: float, v: f
         if np.all(np.abs(moved) < settled):
             x = fit.x
             break
-        x = x + moved * 0.5 ** max(0, k - 1)  # damped more and more: edges flipping from pass to pass would cycle
+        x = x + moved * 0.5 ** max(0, n - 1)  # damped more and more: edges flipping from pass to pass would cycle
     else:
         return "no_convergence"
     if not 0.5 * height_m <= x[0] <= 2.0 * height_m:
@@ -311,21 +311,13 @@ def _outermost(edges, within_px: float, step_px: float):
 
 def _supports(frame_bgr, corners, texture: float, p: SilhouetteParams) -> np.ndarray:
     """The share of points each outline of ``corners`` (S, 8, 2) is supported at (S,). The outlines differ in size
-    only: the middle one's edges and number of points serve for all."""
+    only: the middle one's edges and points, moved with the corners, serve for all."""
     mid = corners[len(corners) // 2]
-    hull = outline(mid)
-    firsts, seconds, alongs = [], [], []
-    for k, i in enumerate(hull):
-        j = hull[(k + 1) % len(hull)]
-        length = float(np.hypot(*(mid[j] - mid[i])))
-        count = max(2, int(length * (1.0 - 2.0 * p.trim) / p.spacing_px) + 1)
-        firsts.append(np.full(count, i))
-        seconds.append(np.full(count, j))
-        alongs.append(np.linspace(p.trim, 1.0 - p.trim, count))
-    first, second, along = np.concatenate(firsts), np.concatenate(seconds), np.concatenate(alongs)[:, None]
-    a, b = corners[:, first], corners[:, second]
-    xy = (1.0 - along) * a + along * b  # (S, K, 2)
-    e = b - a
-    normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.maximum(np.linalg.norm(e, axis=-1, keepdims=True), 1e-9)
+    pts = edge_points(mid, outline(mid), p.spacing_px, p.trim)
+    if len(pts.xy) < 8:
+        return np.zeros(len(corners))
+    xy = pts.moved(corners)  # (S, K, 2)
+    e = corners[:, pts.second] - corners[:, pts.first]
+    normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
     window, origin = _window(frame_bgr, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0)
     return _supported(_edges(window, xy - origin, normal, texture, p), p).mean(axis=-1)
