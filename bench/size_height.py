@@ -39,17 +39,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from groundstation.evaluate import errors_m  # noqa: E402
-from groundstation.process import locate_frames  # noqa: E402
-from groundstation.session import load_session  # noqa: E402
-from groundstation.size_estimate import HeightFromSize  # noqa: E402
-from groundstation import track_video  # noqa: E402
-from groundstation.track_video import track_session  # noqa: E402
-from localizer.tracking.session import TrackingSession  # noqa: E402
-from localizer.size_range import SizeHeight  # noqa: E402
-from sim_fixtures.generate import generate  # noqa: E402
-from sim_fixtures.motion import Motion  # noqa: E402
-from sim_fixtures.scenario import load_scenario, with_overrides  # noqa: E402
+from groundstation import track_video
+from groundstation.evaluate import errors_m
+from groundstation.process import locate_frames
+from groundstation.session import load_session
+from groundstation.size_estimate import HeightFromSize
+from groundstation.track_video import track_session
+from localizer.size_range import SizeHeight
+from localizer.tracking.session import TrackingSession
+from sim_fixtures.generate import generate
+from sim_fixtures.motion import Motion
+from sim_fixtures.scenario import load_scenario, with_overrides
 
 BASE = ROOT / "sim_fixtures" / "scenarios" / "size_surface.toml"
 

@@ -17,7 +17,7 @@ import pytest
 from localizer.calibration import Uuv
 from localizer.camera import Camera
 from localizer.size_range import size_height
-from localizer.tracking.silhouette import REJECTIONS, SizeMeasurement, measure
+from localizer.tracking.silhouette import REJECTIONS, measure
 from sim_fixtures.generate import camera_of, frame_truth
 from sim_fixtures.motion import Motion
 from sim_fixtures.render import Renderer
