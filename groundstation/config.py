@@ -72,6 +72,10 @@ class RunConfig:
     video_latency_ms: within(0, 2000) | Literal["auto"] = Field(
         0.0, description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
         "'auto': estimated from the image's motion against the camera attitude")
+    height_from_size: Literal["auto", "check", "off"] = Field(
+        "check", description="the camera's height above the water from the UUV's size in the video ([uuv]): check "
+        "(estimate it, show it, warn when the configured height disagrees), auto (also hand it to the height's "
+        "fusion once sure), off")
     no_request_rates: Flag = Field(False, description="do not ask the autopilot for the telemetry rates skyfix needs "
                                    "(a shared link)")
     telemetry_wait_ms: within(0, 2000) = Field(300.0, description="longest wait of a frame for the attitude sample "

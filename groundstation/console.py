@@ -47,7 +47,8 @@ def _age(now: float, t) -> str:
 
 
 def summary(status: dict) -> str:
-    """A few lines an operator reads at a glance: the target, the latest fix, the inputs, GPS_INPUT, the web page."""
+    """A few lines an operator reads at a glance: the target, the latest fix, the inputs, GPS_INPUT, the height from
+    the UUV's size, the web page."""
     now = status.get("t", time.time())
     target = status.get("target") or {}
     line = [time.strftime("%H:%M:%S", time.localtime(now)) + f"  target {target.get('state')}"]
@@ -80,6 +81,10 @@ def summary(status: dict) -> str:
     if gps:
         inputs.append(f"GPS_INPUT sent {gps.get('sent')} (valid {gps.get('sent_valid')})")
     lines.append("  " + ", ".join(inputs))
+    size = status.get("height_from_size")
+    if size and size.get("frames"):
+        lines.append(f"  height from the UUV's size: configured - measured {size['bias_m']:+.2f} ± {size['sigma_m']:.2f} m"
+                     f" over {size['frames']} frames ({'sure' if size['sure'] else 'not sure'})")
     ui = status.get("ui")
     if ui and ui.get("url"):
         lines.append(f"  web page {ui['url']}{' (with its token)' if ui.get('token') else ''}, "

@@ -29,7 +29,14 @@ from localizer.tracking import TRACKERS
 from .outputs import output_dir
 from .plots import write_plots
 from .positions import write_positions_csv
-from .process import add_motion_offset_flag, frame_pixels, locate_frames, print_warnings
+from .process import (
+    add_motion_offset_flag,
+    add_size_argument,
+    frame_pixels,
+    locate_frames,
+    print_warnings,
+    size_of,
+)
 from .session import SessionError, load_session
 
 METHODS = (("refraction", True), ("straight", False))
@@ -108,8 +115,9 @@ def format_table(results: list[tuple[str, str, Scores]]) -> str:
 
 
 def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False,
-                     motion: bool = True):
-    """Score both methods on one session; returns ``[(name, method, Scores), ...]`` and writes outputs."""
+                     motion: bool = True, height_from_size: str = "check"):
+    """Score both methods on one session; returns ``[(name, method, Scores), ...]`` and writes outputs (the height
+    from the UUV's size: its summary line on stderr)."""
     session = load_session(path)
     if session.truth is None or len(session.truth["t"]) == 0:
         raise SessionError(f"{session.path / 'truth.csv'}: missing (evaluate needs ground truth)")
@@ -117,10 +125,13 @@ def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str 
     from_track = use_track or session.video_path is None
     if not use_track and from_track:
         print(f"{name}: no video: pixels from track.csv", file=sys.stderr)
+    size = size_of(session, height_from_size, from_track)
     try:
-        pixels = frame_pixels(session, from_track, tracker, progress, motion)
+        pixels = frame_pixels(session, from_track, tracker, progress, motion, size)
     finally:
         print_warnings(session)
+    if size is not None:
+        print(f"{name}: {size.summary()}", file=sys.stderr)
     frames = len(session.frames["t"]) if session.frames is not None else None
     sess_dir = out_dir / name
     runs, results = {}, []
@@ -151,7 +162,8 @@ def run(args) -> int:
     for path in args.sessions:
         try:
             results.extend(evaluate_session(path, out, use_track=args.use_track, tracker=args.tracker,
-                                            progress=not args.quiet, motion=not args.no_motion_offset))
+                                            progress=not args.quiet, motion=not args.no_motion_offset,
+                                            height_from_size=args.height_from_size))
         except (SessionError, ConfigError) as e:
             print(f"skyfix evaluate: error: {e}", file=sys.stderr)
             failed += 1
@@ -169,6 +181,7 @@ def register(subparsers) -> None:
     p.add_argument("--use-track", action="store_true",
                    help="take pixels from track.csv (geometry only) instead of tracking the video")
     p.add_argument("--tracker", default="default", choices=TRACKERS, help="tracker backend for video tracking")
+    add_size_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress output")
     add_motion_offset_flag(p)
     p.set_defaults(func=run)

@@ -304,6 +304,33 @@ class MotionLatencyStatus(Section):
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
+class HeightFromSizeStatus(Section):
+    """The camera's height above the water from the UUV's size in the video (--height-from-size)."""
+
+    mode: Literal["auto", "check"]
+    measured: int = Field(description="frames measured")
+    rejected: dict[str, int] = Field(description="frames without a measurement, by why (localizer/tracking/"
+                                     "silhouette.py REJECTIONS, no_pose)")
+    applied: int = Field(description="measurements handed to the height's fusion (auto)")
+    bias_m: float | None = Field(description="the configured height minus the measured one, over the window")
+    sigma_m: float | None = Field(description="its 1-sigma")
+    sigma_common_m: float | None = Field(description="... of which the error every measurement shares (the "
+                                         "vehicle's size, the edges' bias, the depth): no average goes below it")
+    frames: int = Field(description="measurements in the window's estimate")
+    outliers: int = Field(description="measurements in the window left out (more than 3 sigmas off)")
+    seconds: int = Field(description="seconds of the window with measurements")
+    sure: bool = Field(description="enough measurements, agreeing, with a 1-sigma of at most 0.25 m")
+    at_surface_share: float | None = Field(description="share of the window's measurements with the UUV at the "
+                                           "surface (top face at most 0.3 m deep: the most precise)")
+    last_t: float | None = Field(description="the latest measurement's frame, station clock")
+    last_height_m: float | None = Field(description="the latest measured height of the UAV's reported position "
+                                        "above the water")
+    last_sigma_m: float | None = Field(description="its 1-sigma")
+    frames_skipped: int = Field(description="frames not measured: the measuring thread was busy")
+    restarts: int = Field(0, description="times the measuring thread failed (a bug) and started over")
+    failure: str | None = Field(None, description="the last such failure: its kind and message")
+
+
 class RtpStatus(Section):
     """An ``rtp://`` input, depacketized by skyfix: what the network lost, since the start."""
 
@@ -453,6 +480,8 @@ class StatusMessage(Message):
     zenoh: ZenohLinkStatus
     process: ProcessStatus
     video: VideoStatus | None = Field(None, description="with --video")
+    height_from_size: HeightFromSizeStatus | None = Field(None, description="with --video, unless "
+                                                          "--height-from-size off")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     latency: LatencyStatus | None = Field(None, description="with --gps-input")
     record: RecordStatus | None = Field(None, description="with --record")

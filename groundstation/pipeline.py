@@ -10,7 +10,9 @@ locates the tracked pixel with the same pose. The first frame is selected with t
 calibration's ``[tracker] init_bbox`` when there is one (its ``init_t`` is for
 recorded sessions and is not used live); otherwise the session awaits a target: the
 operator's selection (:meth:`Pipeline.select`), or a candidate found near the UUV's
-own position estimate (``prior``) and confirmed over several frames.
+own position estimate (``prior``) and confirmed over several frames. Each located frame
+the UUV was tracked in goes, with its final pose, to the ``on_tracked`` listeners (the
+height from the UUV's size) before its fix goes out.
 
 A tracked frame is located at once when the camera's attitude telemetry
 (ATTITUDE, and the gimbal message) reached to within :data:`EXTRAPOLATE_S` of its
@@ -129,6 +131,8 @@ class Pipeline:
         self.statuses: Counter[str] = Counter()
         self.last_status: str | None = None
         self.target = self.session.status()  # the tracking session's status after the latest frame or command
+        #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
+        self.on_tracked: list[Callable] = []
 
     def submit(self, frame: LiveFrame) -> None:
         """Queue a frame (on the event loop); drops the oldest waiting frame when the queue is full.
@@ -293,6 +297,9 @@ class Pipeline:
                     continue
                 item.pose, item.early = self._pose(item.frame), False
             self._tracked.popleft()
+            if item.result.ok:
+                for listener in self.on_tracked:
+                    listener(item.frame.image, item.pose, item.result.u, item.result.v)
             self._emit(item.frame, self._locate(item), item.result.box, item.window)
 
     def _emit(self, frame: LiveFrame, fix: Fix, box=None, window=None) -> None:

@@ -10,6 +10,9 @@ estimated from the video's motion while it is tracked
 (time source ``motion``); one line on stderr says what was found. Otherwise (not
 settled, ``--use-track``, ``--no-motion-offset``) the delay stays unknown: taken as
 0, its 1-sigma ``[timing] unknown_latency_sigma_s`` in each fix's h_acc, and a warning says so.
+
+Tracking the video also measures the camera's height from the UUV's size
+(``--height-from-size``, :mod:`groundstation.size_estimate`) and prints its estimate.
 """
 
 from __future__ import annotations
@@ -27,17 +30,20 @@ from .latency_estimate import offset_from_rotations
 from .outputs import output_dir
 from .positions import write_positions_csv
 from .session import Session, SessionError, load_session
+from .size_estimate import MODES as SIZE_MODES
+from .size_estimate import HeightFromSize
 
 # Per-frame statuses that, when no frame at all has a fix, mean the session itself is wrong.
 _GEOMETRY_FAILURES = ("no_water", "below_surface", "bad_pixel")
 
 
 def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False,
-                 motion: bool = True):
+                 motion: bool = True, size: HeightFromSize | None = None):
     """``(t, u, v, track_status)`` per frame: from track.csv or from tracking the video.
 
     Tracking the video of a session whose link delay is unknown, with ``motion``, also estimates the frames'
     offset to the telemetry and applies it when settled (see the module doc); an unknown delay is a warning.
+    ``size``: measuring the camera's height from the UUV's size in the same pass; its warnings join the session's.
     """
     if use_track:
         if session.track is None:
@@ -51,8 +57,10 @@ def frame_pixels(session: Session, use_track: bool, tracker: str = "default", pr
     from .track_video import track_session
 
     measure = motion and session.telemetry.latency_source == "unknown"
-    tracked = track_session(session, tracker_name=tracker, progress=progress, measure_motion=measure)
+    tracked = track_session(session, tracker_name=tracker, progress=progress, measure_motion=measure, size=size)
     session.warnings.extend(tracked.warnings)
+    if size is not None:
+        session.warnings.extend(size.warnings)
     if measure:
         _align_by_motion(session, tracked.rotations)
     _warn_unknown_delay(session, "--no-motion-offset" if not motion else "no settled estimate from the video")
@@ -99,9 +107,17 @@ def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
 def process_session(
     session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False,
     motion: bool = True,
+    size: HeightFromSize | None = None,
 ) -> Fixes:
     """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
-    return locate_frames(session, frame_pixels(session, use_track, tracker, progress, motion), refraction)
+    return locate_frames(session, frame_pixels(session, use_track, tracker, progress, motion, size), refraction)
+
+
+def size_of(session: Session, mode: str, use_track: bool) -> HeightFromSize | None:
+    """The height-from-size measurement ``--height-from-size`` asks for, when the video is tracked."""
+    if mode == "off" or use_track or session.video_path is None:
+        return None
+    return HeightFromSize(session.calibration, session.telemetry, mode)
 
 
 def summary(fixes: Fixes) -> str:
@@ -119,15 +135,18 @@ def print_warnings(session: Session) -> None:
 def run(args) -> int:
     out = output_dir(args.out)
     session = load_session(args.session)
+    size = size_of(session, args.height_from_size, args.use_track)
     try:
         fixes = process_session(
             session, use_track=args.use_track, refraction=not args.no_refraction,
-            tracker=args.tracker, progress=not args.quiet, motion=not args.no_motion_offset,
+            tracker=args.tracker, progress=not args.quiet, motion=not args.no_motion_offset, size=size,
         )
     finally:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
+    if size is not None:
+        print(size.summary())
     return 0
 
 
@@ -139,6 +158,7 @@ def register(subparsers) -> None:
     p.add_argument("--no-refraction", action="store_true", help="the paper's straight ray (no Snell refraction)")
     p.add_argument("--tracker", default="default", choices=TRACKERS,
                    help="tracker backend; default: telemetry-guided template matching; mil: the paper's")
+    add_size_argument(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_motion_offset_flag(p)
     p.set_defaults(func=run)
@@ -148,3 +168,10 @@ def add_motion_offset_flag(p) -> None:
     p.add_argument("--no-motion-offset", action="store_true",
                    help="do not estimate the frames' offset to the telemetry from the video's motion where the UAV "
                         "link's delay is neither stated nor measured (it stays unknown: 0, with its sigma in h_acc)")
+
+
+def add_size_argument(p) -> None:
+    p.add_argument("--height-from-size", choices=SIZE_MODES, default="check",
+                   help="the camera's height from the UUV's size in the tracked video: check (default: estimate it, "
+                   "warn when the configured height disagrees), auto (also hand it to the height's fusion once sure), "
+                   "off")

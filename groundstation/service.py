@@ -4,7 +4,8 @@ Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth (skyfi
 Zenoh, :mod:`.sources.depth_zenoh`, or ArduSub's own over BlueOS's Zenoh or MAVLink,
 :mod:`.sources.depth_ardusub`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`.sources.video_live`),
-the per-frame :mod:`.pipeline`, GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
+the per-frame :mod:`.pipeline` (and the height from the UUV's size, :mod:`.size_estimate`),
+GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
 the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`), the operator's commands
 (:mod:`.control`), the web page (:mod:`.ui`, unless ``--no-ui``) and, with ``--record``,
 the recorder (:mod:`.sinks.recorder`). The web page's port is taken before any worker
@@ -47,6 +48,7 @@ from .sinks.gps_input import GpsInputSink, mavlink_gps_link
 from .sinks.recorder import Recorder
 from .sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from .sinks.zenoh_mavlink import ZenohMavlinkIn
+from .size_estimate import HeightFromSize, OnlineHeightFromSize
 from .sources.depth_ardusub import ArduSubMavlink, ArduSubZenoh
 from .sources.depth_zenoh import DepthZenoh
 from .sources.rates import needed_rates
@@ -171,6 +173,7 @@ async def serve(cfg: config.RunConfig) -> dict:
             topview = TopView(cal, tel)
             ui = WebUi(cfg.ui, cfg.ui_token, control, topview, size, settings_of(cfg))
             pipeline.sinks += [ui.feed, topview]
+        from_size = None
         if cfg.video:
             frame_listeners = [listener.on_frame for listener in (recorder, ui and ui.feed) if listener]
 
@@ -191,6 +194,9 @@ async def serve(cfg: config.RunConfig) -> dict:
                 pipeline.alignment = lambda: ("motion", motion.applied_sigma_s)
                 log.info("--video-latency-ms auto: no valid fix until the video's latency from the image's motion "
                          "has settled (status latency_unsettled)")
+            if cfg.height_from_size != "off":
+                from_size = OnlineHeightFromSize(HeightFromSize(cal, tel, cfg.height_from_size))
+                pipeline.on_tracked.append(from_size.on_tracked)
         if recorder:
             uav.listeners.append(recorder.on_mavlink)
             depth.listeners.append(recorder.on_depth)
@@ -218,6 +224,8 @@ async def serve(cfg: config.RunConfig) -> dict:
                    "process": usage.status(now)}
             if video:
                 out["video"] = video.status(now) | {"latency_from_motion": motion.status()}
+            if from_size:
+                out["height_from_size"] = from_size.status()
             if gps:
                 out["gps_input"] = gps.status(now)
                 out["latency"] = latency_summary(list(gps.latencies_s)[-1000:])
@@ -231,7 +239,7 @@ async def serve(cfg: config.RunConfig) -> dict:
         zenoh_control = ZenohControl(session, control, cfg.control_prefix,
                                      {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
         # the order of the stop: inputs (and the operator's side), the pipeline, the sinks; GPS_INPUT last
-        stages = [[w for w in (uav, depth, uuv_position, video, motion, zenoh_control, ui) if w is not None],
+        stages = [[w for w in (uav, depth, uuv_position, video, motion, from_size, zenoh_control, ui) if w is not None],
                   [pipeline, watchdog], [w for w in (status_sink, recorder) if w is not None]]
         workers = [w for stage in stages for w in stage] + ([gps] if gps else [])
         if ui:

@@ -14,7 +14,9 @@ The camera poses of all frames are computed at once and shared with the session
 (which projects its predictions for many frames at a time). With ``measure_motion``
 the camera's rotation between consecutive frames is measured too
 (:class:`~groundstation.video_motion.RotationMeter`), for the frames' offset to the
-telemetry (:func:`groundstation.latency_estimate.offset_from_rotations`).
+telemetry (:func:`groundstation.latency_estimate.offset_from_rotations`). With a
+:class:`~groundstation.size_estimate.HeightFromSize`, frames the UUV is tracked in are
+also measured for the camera's height from its size, in the same pass (``timings_s["size"]``).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from localizer.tracking.session import SelectionError, TrackingSession
 
 from .progress import progress as progress_bar
 from .session import Session, SessionError
+from .size_estimate import HeightFromSize
 from .video import VideoError, open_video
 from .video_motion import RotationMeter
 
@@ -66,8 +69,9 @@ def _init_row(session: Session, t: np.ndarray) -> int:
 
 
 def track_session(session: Session, tracker_name: str = "default", progress: bool = False,
-                  measure_motion: bool = False) -> TrackedVideo:
-    """Track the UUV through the session's video (see the module doc for statuses).
+                  measure_motion: bool = False, size: HeightFromSize | None = None) -> TrackedVideo:
+    """Track the UUV through the session's video (see the module doc for statuses); ``size`` measures the camera's
+    height from the UUV's size in the frames it is tracked in.
 
     Raises :class:`SessionError` for what makes tracking impossible: no video, no
     ``init_bbox``, an unknown tracker, a video that cannot be opened or whose frame
@@ -91,7 +95,7 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     status = np.full(n, "no_video", dtype=object)
     status[:init_row] = "before_init"
     u, v, conf = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
-    timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0}
+    timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0}
     warnings: list[str] = []
     meter = RotationMeter(cal.camera) if measure_motion else None
     rotations = []
@@ -141,6 +145,10 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
                     result = tracking.step(frame.image, pose, row)
                 timings["track"] += time.perf_counter() - t0
                 status[row], u[row], v[row], conf[row] = result.status, result.u, result.v, result.confidence
+                if size is not None and result.ok and size.due(float(t[row])):
+                    t0 = time.perf_counter()
+                    size.take(size.measure(frame.image, pose, row, result.u, result.v))
+                    timings["size"] += time.perf_counter() - t0
                 done += 1
                 bar.update()
             if video.bad_reads:

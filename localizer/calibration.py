@@ -1,5 +1,5 @@
 """The calibration: ``[camera]``, ``[mount]``, ``[water]``, ``[tracker]`` of session.toml v1, and
-skyfix's own ``[uncertainty]`` (:class:`Sigmas`) and ``[timing]`` (:class:`Timing`).
+skyfix's own ``[uncertainty]`` (:class:`Sigmas`), ``[timing]`` (:class:`Timing`) and ``[uuv]`` (:class:`Uuv`).
 
 One contract (see :mod:`localizer.contract`): these classes validate the parsed TOML,
 hold the defaults and document every key; ``groundstation/schemas/calibration.schema.json``
@@ -32,7 +32,7 @@ from .contract import (
     within,
 )
 
-__all__ = ["Calibration", "ConfigError", "Mount", "Sigmas", "Timing", "Tracker", "Water"]
+__all__ = ["Calibration", "ConfigError", "Mount", "Sigmas", "Timing", "Tracker", "Uuv", "Water"]
 
 AttitudeSource = Literal["gimbal_device", "mount_orientation", "fixed"]
 RollPitchReference = Literal["auto", "horizon", "body"]
@@ -166,13 +166,28 @@ class Timing:
         "frames before it are stamped with 0 latency and had no valid fix (status latency_unsettled)")
 
 
+@dataclass(frozen=True, config=CLOSED)
+class Uuv:
+    """``[uuv]``: the vehicle, as a box around its hull (defaults: a BlueROV2's frame, metres).
+
+    Its size against its size in the image gives the camera's range, so the camera's height
+    above the water (:mod:`localizer.size_range`). Measure your vehicle with what it carries:
+    a 1 % error in its size is a 1 % error in that height.
+    """
+
+    length_m: within(0.05, 20.0) = Field(0.457, description="bow to stern")
+    width_m: within(0.05, 20.0) = Field(0.338, description="side to side")
+    height_m: within(0.02, 20.0) = Field(0.254, description="top to bottom (the depth's reference point is the centre "
+                                         "of its top face)")
+
+
 @dataclass(frozen=True, config=ConfigDict(**OPEN, validate_by_name=True))
 class Calibration:
     """The calibration tables of session.toml v1 (a session, or a ``--calibration`` file).
 
     Read as ``cal.camera`` (a :class:`~localizer.camera.Camera`), ``cal.mount``,
     ``cal.water``, ``cal.init_bbox``/``cal.init_t`` (``[tracker]``), ``cal.sigmas``
-    (``[uncertainty]``), ``cal.timing``; ``cal.warnings`` lists the unknown keys.
+    (``[uncertainty]``), ``cal.timing``, ``cal.uuv``; ``cal.warnings`` lists the unknown keys.
     """
 
     camera: Camera = Field(description="pinhole + OpenCV radial-tangential distortion")
@@ -182,6 +197,7 @@ class Calibration:
     sigmas: Sigmas = Field(default_factory=Sigmas, alias="uncertainty",
                            description="1-sigma inputs of each fix's accuracy (skyfix's own table)")
     timing: Timing = Field(default_factory=Timing, description="time alignment and staleness limits (skyfix's own table)")
+    uuv: Uuv = Field(default_factory=Uuv, description="the vehicle's size (skyfix's own table)")
     version: Literal[1] | None = Field(None, description="session format version (session.toml; absent in a "
                                        "calibration-only file)")
     warnings: SkipJsonSchema[tuple[str, ...]] = dataclasses.field(default=(), init=False, compare=False)

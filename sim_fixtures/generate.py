@@ -147,6 +147,11 @@ camera_offset_m = {vec(m.camera_offset_m)}
 [water]
 {water}
 refractive_index = {s.refractive_index!r}
+
+[uuv]  # the simulated vehicle's box
+length_m = {float(sc.uuv.size_m[0])!r}
+width_m = {float(sc.uuv.size_m[1])!r}
+height_m = {float(sc.uuv.size_m[2])!r}
 """ + _tracker_toml(init_bbox, init_t) + _uncertainty_toml(sc)
 
 

@@ -124,7 +124,9 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
         bad = [(m, e.message) for m in messages for e in schema.iter_errors(m)]
         assert not bad, f"{len(bad)} {name} messages break {path_of(name).name}, first: {bad[0]}"
     assert all(f["alt_ellipsoid_m"] is not None and f["t_gnss"] is not None and f["sigma_n_m"] > 0 for f in ok)
-    assert {"video", "gps_input", "latency", "record"} <= set(status[-1])
+    assert {"video", "gps_input", "latency", "record", "height_from_size"} <= set(status[-1])
+    size = status[-1]["height_from_size"]  # the default, check: frames measured (or why not), nothing applied
+    assert size["mode"] == "check" and size["measured"] + sum(size["rejected"].values()) > 10 and size["applied"] == 0
 
     # GPS_INPUT at the UUV's endpoint while the service runs
     gps = read_jsonl(tmp_path / "uuv.jsonl")

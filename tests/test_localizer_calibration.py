@@ -25,6 +25,7 @@ def test_spec_example_parses(cal_dict):
     assert cal.water.takeoff_height_above_surface_m == 2.10 and cal.water.surface_amsl_m is None
     assert cal.init_bbox == (912, 508, 96, 64) and cal.init_t is None
     assert cal.sigmas == Sigmas() and cal.timing == Timing()
+    assert (cal.uuv.length_m, cal.uuv.width_m, cal.uuv.height_m) == (0.457, 0.338, 0.254)  # a BlueROV2
 
 
 def test_optional_tables(cal_dict):
@@ -33,12 +34,14 @@ def test_optional_tables(cal_dict):
             water={"surface_amsl_m": 0.35},
             uncertainty={"pixel_px": 3.5},
             timing={"depth_hold_s": 2.5},
+            uuv={"length_m": 0.62},
             tracker={"init_bbox": [0, 0, 10, 10], "init_t": 1763800000.5},
         )
     )
     assert cal.water.surface_amsl_m == 0.35 and cal.water.refractive_index == 1.34
     assert cal.sigmas.pixel_px == 3.5 and cal.sigmas.yaw_deg == Sigmas().yaw_deg
     assert cal.timing.depth_hold_s == 2.5
+    assert cal.uuv.length_m == 0.62 and cal.uuv.width_m == 0.338
     assert cal.init_t == 1763800000.5
 
 
@@ -94,6 +97,9 @@ BAD = [
     ("uncertainty", {"pixel_sigma": 2.0}, "uncertainty.pixel_sigma = 2.0"),
     ("uncertainty", {"yaw_deg": -1.0}, "uncertainty.yaw_deg = -1.0"),
     ("timing", {"attitude_gap_s": 0}, "timing.attitude_gap_s = 0"),
+    ("uuv", {"length_m": 0.0}, "uuv.length_m = 0.0: must be ≥ 0.05"),
+    ("uuv", {"width_m": "0.34"}, "uuv.width_m = '0.34'"),
+    ("uuv", {"height": 0.25}, "uuv.height = 0.25: unknown key (known: height_m, length_m, width_m)"),
 ]
 
 

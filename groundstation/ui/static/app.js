@@ -392,6 +392,18 @@ function showHealth() {
                   `${v.frames} frames · tracked ${fmt(rates.processed, 1)} fps · dropped ${s.pipeline.dropped}`
                   + ` · decode errors ${v.decode_errors} · decoder backlog ${v.backlog}, skipped behind ${v.skipped_behind}${v.error ? ` · ${v.error}` : ""}`));
   }
+  if (s.height_from_size) {  // the camera's height from the UUV's size: the configured height's bias
+    const h = s.height_from_size;
+    const off = h.sure && Math.abs(h.bias_m) > 2 * h.sigma_m;
+    const state = !h.frames ? "—" : !h.sure ? "warn: not sure yet" : off ? "warn: configured height off" : "ok";
+    rows.push(row("height from size", state, "", "",
+                  (h.frames ? `configured − measured ${fmt(h.bias_m, 2, " m")} ± ${fmt(h.sigma_m, 2, " m")} over `
+                    + `${h.frames} frames (${h.seconds} s, ${fmt(100 * h.at_surface_share, 0, " %")} at the surface)`
+                    : "no measurement yet")
+                  + ` · last ${fmt(h.last_height_m, 2, " m")} ± ${fmt(h.last_sigma_m, 2, " m")} · ${h.mode}`
+                  + (h.mode === "auto" ? `, ${h.applied} applied` : "")
+                  + ` · ${h.measured} measured, ${Object.values(h.rejected).reduce((a, b) => a + b, 0)} without`));
+  }
   const d = s.depth;
   const a = d.ardusub;
   rows.push(row(`depth (${d.shape})`, st("depth"), age(d.age_s), hz(rates.depth),
