@@ -17,6 +17,8 @@ import numpy as np
 
 from . import attitude as att
 from .calibration import UAV_HORIZONTAL_FALLBACK_M, Calibration
+from .gnss import horizontal_sigma_m
+from .height import ekf_height_error
 from .surface import height_above_surface_m
 from .telemetry import DEG_PER_M, Telemetry
 from .timeline import BEFORE_FIRST, OK
@@ -51,7 +53,7 @@ class CameraPose:
     sigma_height_m: np.ndarray  # the camera's height above the water
     sigma_depth_m: np.ndarray  # the UUV's depth
     sigma_time_s: np.ndarray  # the frame's time against the telemetry's
-    height_source: np.ndarray  # object array of str, e.g. "takeoff" (relative_alt + the take-off height), "amsl"
+    height_source: np.ndarray  # object array of str: what measured the height (localizer.height), e.g. "gnss_rtk"
     depth_source: np.ndarray
     time_source: np.ndarray
 
@@ -121,23 +123,24 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
     cos_lat = np.cos(np.radians(p[:, 0]))
     velocity = np.nan_to_num(np.stack([p[:, 4] / DEG_PER_M, p[:, 5] * cos_lat / DEG_PER_M, -p[:, 6]], axis=-1))
 
-    gnss, _, _ = tel.gnss.sample(tq)
+    gnss, _, _ = tel.gnss.sample(tq)  # h_acc, geoid separation, fix type, alt, v_acc, HDOP, VDOP
     if cal.sigmas.uav_horizontal_m is not None:
         sigma_uav = np.full(n, cal.sigmas.uav_horizontal_m)
     else:
-        sigma_uav = np.where(np.isfinite(gnss[:, 0]), gnss[:, 0], UAV_HORIZONTAL_FALLBACK_M)
+        sigma_uav = horizontal_sigma_m(gnss[:, 2], gnss[:, 0], gnss[:, 5])
+        sigma_uav = np.where(np.isfinite(sigma_uav), sigma_uav, UAV_HORIZONTAL_FALLBACK_M)
     drift_m = np.hypot(ep[:, 0], ep[:, 1] * cos_lat) / DEG_PER_M  # extrapolated or held position
     sigma_uav = np.hypot(sigma_uav, np.nan_to_num(drift_m))
     offset_gnss = tel.station_minus_gnss_s
 
     offset_ned = np.einsum("nij,j->ni", R_body, np.asarray(cal.mount.camera_offset_m))
+    height = ekf_height_error(cal.water, cal.sigmas, tel, tq)  # the barometer's drift, from GNSS, a rangefinder, ...
     uav_h = height_above_surface_m(
         p[:, 2], p[:, 3], cal.water.takeoff_height_above_surface_m, cal.water.surface_amsl_m
-    )
+    ) - height.bias_m
     cam_h = uav_h - offset_ned[:, 2]
     status[(status == "ok") & ~(cam_h > 0)] = "below_surface"
     sig = cal.sigmas
-    height_source = "amsl" if cal.water.surface_amsl_m is not None else "takeoff"
     return CameraPose(
         t_unix=t,
         status=status,
@@ -156,10 +159,10 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix) -> CameraPose:
         velocity_ned_mps=velocity,
         t_gnss=t - offset_gnss if offset_gnss is not None else np.full(n, np.nan),
         geoid_separation_m=gnss[:, 1],
-        sigma_height_m=np.full(n, sig.height_m),
+        sigma_height_m=height.sigma_m,
         sigma_depth_m=np.full(n, sig.depth_m),
         sigma_time_s=np.full(n, sig.time_s),
-        height_source=np.full(n, height_source, dtype=object),
+        height_source=height.source,
         depth_source=np.full(n, "depth", dtype=object),
         time_source=np.full(n, tel.latency_source, dtype=object),
     )
