@@ -34,7 +34,8 @@ The height's error is ``b = e`` (take-off reference) or ``e + s`` (amsl). Measur
   size in the image, ...): ``h_ekf − h = b`` ± its own sigma.
 
 A measurement more than :data:`GATE_SIGMAS` sigmas from the estimate is not used; one more than
-:data:`NOTICE_SIGMAS` off is a one-line notice (:attr:`Telemetry.notices`) naming both heights.
+:data:`NOTICE_SIGMAS` off is a one-line notice naming both heights (:func:`take_notices`; again
+after :data:`NOTICE_REPEAT_S` while it lasts).
 The filter is causal: a frame's height uses the measurements up to its time, offline as live;
 measurements that arrive late (the UUV's size is measured after the frame) are fused in time
 order by re-running the filter from just before them.
@@ -329,8 +330,11 @@ class HeightEstimator:
         return out
 
     def summary(self, tel: Telemetry, t_uav: float) -> dict:
-        """The estimate now and what went into it (for the status): the reference's age, each source's use."""
+        """The estimate at ``t_uav`` and what went into it (for the status): the EKF's height and the corrected
+        one (the reported position's, metres above the water), the reference and how long ago it was set,
+        and each source's measurements used and refused (over the history kept) with the newest's age."""
         at = self.at(tel, [t_uav])
+        h_ekf = float(ekf_height_m(self.water, tel, [t_uav])[0])
         anchor = "boot" if self.amsl or not tel.arm_times else "arming"
         since = tel.arm_times[-1] if anchor == "arming" else (self._base[0] if self._base else None)
         sources = {}
@@ -340,10 +344,11 @@ class HeightEstimator:
                     d = sources.setdefault(word, {"used": 0, "refused": 0, "age_s": None})
                     d[key] += 1
                     d["age_s"] = round(max(0.0, t_uav - self._t[j]), 2)
-        return {"bias_m": _num(at.bias_m[0]), "sigma_m": _num(at.sigma_m[0]), "source": at.source[0],
-                "reference": self.word, "reference_set_at": anchor,
+        return {"height_m": _num(h_ekf - at.bias_m[0]), "sigma_m": _num(at.sigma_m[0]), "source": at.source[0],
+                "ekf_height_m": _num(h_ekf), "bias_m": _num(at.bias_m[0]), "reference": self.word,
+                "reference_set_at": anchor, "armed": tel.armed,
                 "since_reference_s": None if since is None else round(max(0.0, t_uav - since), 1),
-                "sources": sources}
+                "rangefinder_out_of_range": tel.rangefinder_out_of_range, "sources": sources}
 
 
 def _num(x: float, digits: int = 3) -> float | None:
@@ -360,10 +365,20 @@ def estimator(water: Water, sigmas: Sigmas, tel: Telemetry) -> HeightEstimator:
 
 
 def ekf_height_error(water: Water, sigmas: Sigmas, tel: Telemetry, t_uav) -> HeightAt:
-    """The EKF height's estimated error at UAV-scale times (the telemetry's :class:`HeightEstimator`); its
-    notices go to the telemetry's."""
-    est = estimator(water, sigmas, tel)
-    at = est.at(tel, t_uav)
-    tel.notices.extend(est.notices)
-    est.notices.clear()
-    return at
+    """The EKF height's estimated error at UAV-scale times (the telemetry's :class:`HeightEstimator`)."""
+    return estimator(water, sigmas, tel).at(tel, t_uav)
+
+
+def take_notices(tel: Telemetry) -> list[str]:
+    """The height estimator's one-line news since the last call (sources that disagree), taken out."""
+    est = tel.height_estimator
+    if est is None or not est.notices:
+        return []
+    out, est.notices = est.notices, []
+    return out
+
+
+def status(water: Water, sigmas: Sigmas, tel: Telemetry) -> dict | None:
+    """:meth:`HeightEstimator.summary` at the newest GLOBAL_POSITION_INT (None before one came)."""
+    t = tel.position.last_t
+    return None if t is None else estimator(water, sigmas, tel).summary(tel, t)
