@@ -33,9 +33,13 @@ The height's error is ``b = e`` (take-off reference) or ``e + s`` (amsl). Measur
 - an absolute height ``h`` (:attr:`Telemetry.height_fixes`: a downward rangefinder, the UUV's
   size in the image, ...): ``h_ekf − h = b`` ± its own sigma.
 
-A measurement more than :data:`GATE_SIGMAS` sigmas from the estimate is not used; one more than
-:data:`NOTICE_SIGMAS` off is a one-line notice naming both heights (:func:`take_notices`; again
-after :data:`NOTICE_REPEAT_S` while it lasts).
+Cross-check: a measurement more than :data:`GATE_SIGMAS` sigmas from the estimate is not used,
+and its source then disagrees until one of its measurements comes within :data:`AGREE_SIGMAS`
+(so a wrong source cannot slip in as the barometer's sigma grows). While a source disagrees
+(its newest measurement refused, within :data:`CONFLICT_HOLD_S`), the height's sigma covers
+both: ``hypot(sigma, disagreement / 2)``; which one is right is not known, so h_acc says so
+(when in doubt, no fix: GPS_INPUT's gate on h_acc). A disagreement starting and ending is one
+line each (:func:`take_notices`), naming both heights.
 The filter is causal: a frame's height uses the measurements up to its time, offline as live;
 measurements that arrive late (the UUV's size is measured after the frame) are fused in time
 order by re-running the filter from just before them.
@@ -56,7 +60,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -73,9 +77,9 @@ GNSS_TAU_S = 300.0  # correlation time of a GNSS altitude's error (satellite geo
 GNSS_WHITE = 0.3  # share of a GNSS altitude's 1-sigma that is new with each fix (multipath, its timing against
 # the EKF's height): white noise of GNSS_WHITE·sigma, the slow error g the rest, sqrt(1 − GNSS_WHITE²)·sigma
 SURFACE_UNKNOWN_M = 1000.0  # 1-sigma of a water altitude nobody gave
-GATE_SIGMAS = 5.0
-NOTICE_SIGMAS = 3.0
-NOTICE_REPEAT_S = 60.0  # a source's disagreement is told again after this long
+GATE_SIGMAS = 5.0  # a measurement this far from the estimate is refused: the source disagrees ...
+AGREE_SIGMAS = 3.0  # ... until it comes back within this
+CONFLICT_HOLD_S = 10.0  # a disagreement counts in the sigma until this long after the source's last refused measurement
 SOURCE_WINDOW_S = 30.0
 RANGEFINDER_FLOOR_M = 0.05  # laser rangefinders' data sheets: ±5 cm up to a few metres ...
 RANGEFINDER_SHARE = 0.01  # ... and 1 % of the range beyond (e.g. Benewake TFmini Plus, TF03)
@@ -112,10 +116,21 @@ class HeightAt:
     source: np.ndarray  # object array of words
 
 
+class _Aux(NamedTuple):
+    """What the filter carries besides its state, after an entry."""
+
+    sigma_g: float  # the GNSS altitude's slow error's 1-sigma in force (NaN before one came)
+    fix: int  # its fix type (-1 before)
+    S: float | None  # the water altitude GNSS altitudes are referred to (take-off: the first difference)
+    conflicts: frozenset  # sources whose newest measurement was refused
+
+
 class HeightEstimator:
     """The Kalman filter of the module doc over a :class:`~localizer.telemetry.Telemetry`'s measurements.
 
-    :meth:`at` pulls what arrived since the last call and answers for UAV-scale times.
+    :meth:`at` pulls what arrived since the last call and answers for UAV-scale times. Entries
+    (measurements and armings) are kept in time order with the filter's state after each; a
+    measurement older than the newest processed one re-runs the filter from there.
     """
 
     def __init__(self, water: Water, sigmas: Sigmas):
@@ -132,12 +147,14 @@ class HeightEstimator:
         self._t = np.empty(0)
         self._x = np.empty((0, 3))
         self._P = np.empty((0, 3, 3))
-        self._aux: list[tuple] = []  # per processed entry: (sigma_g, fix_type, S) in force after it
-        self._used: list[str | None] = []  # per processed entry: the source word it was used as, or None
-        self._rejected: list[str | None] = []  # ... or the source it was refused from
+        self._aux: list[_Aux] = []  # per processed entry
+        self._src: list[str | None] = []  # per processed entry: the source word of its measurement
+        self._ok: list[bool] = []  # ... whether it was used
+        self._gap: list[float] = []  # ... the disagreement (m) of a refused one, else NaN
+        self._cache: dict | None = None  # numpy views of the three above for the answers
         self._taken: dict[str, float] = {}  # per input: the time of the newest sample taken
         self._arms_taken = 0
-        self._noticed: dict[str, float] = {}  # per source: the time of the last disagreement told
+        self._told: set = set()  # notices given, by (source, entry time): a re-run repeats none
         self.notices: list[str] = []
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -171,7 +188,7 @@ class HeightEstimator:
                 return
             P = np.diag([self.sigmas.height_m ** 2, (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2,
                          0.0])
-            self._base = (boot, np.zeros(3), P, (math.nan, -1, self.water.surface_amsl_m if self.amsl else None))
+            self._base = (boot, np.zeros(3), P, _Aux(math.nan, -1, self.water.surface_amsl_m, frozenset()))
         new = sorted(self._pull(tel), key=lambda e: e[0])
         if new:
             first = len(self._entries)
@@ -201,82 +218,82 @@ class HeightEstimator:
 
     def _run(self, tel: Telemetry) -> None:
         k = self._n
-        del self._aux[k:], self._used[k:], self._rejected[k:]
+        for col in (self._aux, self._src, self._ok, self._gap):
+            del col[k:]
         t0, x, P, aux = self._base if k == 0 else (self._t[k - 1], self._x[k - 1], self._P[k - 1], self._aux[k - 1])
         entries = self._entries[k:]
         h_ekf = ekf_height_m(self.water, tel, [e[0] for e in entries])
         ts, xs, Ps = [], [], []
         for (t, kind, data), h_e in zip(entries, h_ekf):
-            x, P = self._predict(x, P, max(0.0, t - t0), aux[0])
-            x, P, aux, used, refused = self._step(t, kind, data, float(h_e), x, P, aux)
+            x, P = self._predict(x, P, max(0.0, t - t0), aux.sigma_g)
+            x, P, aux, word, ok, gap = self._step(t, kind, data, float(h_e), x, P, aux)
             ts.append(t)
             xs.append(x)
             Ps.append(P)
             self._aux.append(aux)
-            self._used.append(used)
-            self._rejected.append(refused)
+            self._src.append(word)
+            self._ok.append(ok)
+            self._gap.append(gap)
             t0 = t
         self._t = np.concatenate([self._t[:k], ts])
         self._x = np.concatenate([self._x[:k], np.reshape(xs, (-1, 3))])
         self._P = np.concatenate([self._P[:k], np.reshape(Ps, (-1, 3, 3))])
         self._n = len(self._entries)
+        self._cache = None
 
-    def _step(self, t, kind, data, h_e, x, P, aux):
-        """One entry: ``(x, P, aux, used word or None, refused source or None)``."""
-        sigma_g, fix_prev, S = aux
+    def _step(self, t, kind, data, h_e, x, P, aux: _Aux):
+        """One entry: ``(x, P, aux, source word or None, used, disagreement m or NaN)``."""
         if kind == _ARM:  # the take-off reference is set again: e starts over
             x, P = x.copy(), P.copy()
             x[0] = 0.0
             P[0, :] = P[:, 0] = 0.0
             P[0, 0] = self.sigmas.height_m ** 2
-            return x, P, aux, None, None
+            return x, P, aux, None, False, math.nan
         if not math.isfinite(h_e):
-            return x, P, aux, None, None
+            return x, P, aux, None, False, math.nan
         if kind == _GNSS:
             fix, alt, stated = data
             sigma = stated * math.sqrt(1.0 - GNSS_WHITE ** 2)
             x, P = x.copy(), P.copy()
-            if fix != fix_prev or not math.isfinite(sigma_g):  # a new error source: g starts afresh
+            if fix != aux.fix or not math.isfinite(aux.sigma_g):  # a new error source: g starts afresh
                 x[2] = 0.0
                 P[2, :] = P[:, 2] = 0.0
                 P[2, 2] = sigma ** 2
-            elif sigma != sigma_g:  # the receiver's accuracy changed: the same error, rescaled
-                x[2] *= sigma / sigma_g
-                P[2, :] *= sigma / sigma_g
-                P[:, 2] *= sigma / sigma_g
-            if S is None:
-                S = alt - h_e
-            aux = (sigma, fix, S)
-            row = np.array([-1.0, 0.0 if self.amsl else 1.0, 1.0])
+            elif sigma != aux.sigma_g:  # the receiver's accuracy changed: the same error, rescaled
+                x[2] *= sigma / aux.sigma_g
+                P[2, :] *= sigma / aux.sigma_g
+                P[:, 2] *= sigma / aux.sigma_g
+            S = alt - h_e if aux.S is None else aux.S
+            aux = aux._replace(sigma_g=sigma, fix=fix, S=S)
             word = ("" if self.amsl else "baro+") + ("gnss_rtk" if gnss.is_rtk(fix) else "gnss")
-            x, P, ok = self._update(x, P, row, alt - h_e - S, (GNSS_WHITE * stated) ** 2 + 1e-6, word, t,
-                                    alt - S, stated)
-            return x, P, aux, word if ok else None, None if ok else word
-        name, h, sigma = data
-        x, P, ok = self._update(x, P, self.c, h_e - h, sigma ** 2, name, t, h, sigma)
-        return x, P, aux, name if ok else None, None if ok else name
-
-    def _update(self, x, P, row, z, r, source, t, said_m, said_sigma):
-        """A scalar Kalman update (Joseph form), or none beyond :data:`GATE_SIGMAS`; notices beyond
-        :data:`NOTICE_SIGMAS`. ``said_m`` is the height the source gives, for the notice."""
+            row = np.array([-1.0, 0.0 if self.amsl else 1.0, 1.0])
+            z, r, said_m = alt - h_e - S, (GNSS_WHITE * stated) ** 2 + 1e-6, alt - S
+        else:
+            word, said_m, stated = data
+            row, z, r = self.c, h_e - said_m, stated ** 2
         innovation = z - row @ x
         s = row @ P @ row + r
         apart = abs(innovation) / math.sqrt(s)
-        ok = apart <= GATE_SIGMAS
-        if apart > NOTICE_SIGMAS and t > self._noticed.get(source, -math.inf) + NOTICE_REPEAT_S:
-            self._noticed[source] = t
-            est = self.c @ x
-            self.notices.append(
-                f"height: {source} gives {said_m:.2f} ± {said_sigma:.2f} m above the water, the estimate so far "
-                f"(EKF height − {est:+.2f} m) differs by {innovation:+.2f} m ({apart:.1f} sigma): "
-                + ("used" if ok else f"not used while beyond {GATE_SIGMAS:g} sigma"))
-        if not ok:
-            return x, P, False
+        conflict = word in aux.conflicts  # back only once it agrees within AGREE_SIGMAS
+        if apart > (AGREE_SIGMAS if conflict else GATE_SIGMAS):
+            if not conflict:
+                est, sigma = h_e - self.c @ x, math.sqrt(self.c @ P @ self.c)
+                self._tell(word, t, f"height: {word} gives {said_m:.2f} ± {stated:.2f} m above the water, the estimate "
+                           f"{est:.2f} ± {sigma:.2f} m (EKF height {h_e:.2f} m): {apart:.1f} sigma apart; not used "
+                           "while they disagree, the height's sigma covers both")
+            return x, P, aux._replace(conflicts=aux.conflicts | {word}), word, False, innovation
+        if conflict:
+            self._tell(word, t, f"height: {word} agrees with the estimate again ({apart:.1f} sigma): used")
         K = P @ row / s
         x = x + K * innovation
         A = np.eye(3) - np.outer(K, row)
         P = A @ P @ A.T + np.outer(K, K) * r
-        return x, P, True
+        return x, P, aux._replace(conflicts=aux.conflicts - {word}), word, True, math.nan
+
+    def _tell(self, source: str, t: float, text: str) -> None:
+        if (source, t) not in self._told:
+            self._told.add((source, t))
+            self.notices.append(text)
 
     def _trim(self, tel: Telemetry) -> None:
         """Live: forget entries older than twice the telemetry's history; the newest forgotten becomes the base."""
@@ -287,12 +304,23 @@ class HeightEstimator:
         if k < 0:
             return
         self._base = (self._t[k], self._x[k], self._P[k], self._aux[k])
-        del self._entries[: k + 1], self._entry_t[: k + 1], self._aux[: k + 1], self._used[: k + 1]
-        del self._rejected[: k + 1]
+        for col in (self._entries, self._entry_t, self._aux, self._src, self._ok, self._gap):
+            del col[: k + 1]
         self._t, self._x, self._P = self._t[k + 1 :], self._x[k + 1 :], self._P[k + 1 :]
         self._n -= k + 1
+        self._told = {told for told in self._told if told[1] > self._base[0]}
+        self._cache = None
 
     # -- answers --------------------------------------------------------------------------------
+    def _columns(self) -> dict:
+        """Per source word: the times of its measurements, whether each was used, and the refused ones' gaps."""
+        if self._cache is None:
+            src = np.array(self._src, dtype=object)
+            ok, gap = np.array(self._ok, dtype=bool), np.array(self._gap, dtype=float)
+            self._cache = {w: (self._t[src == w], ok[src == w], gap[src == w])
+                           for w in sorted({w for w in self._src if w is not None}, key=lambda w: ("gnss" in w, w))}
+        return self._cache
+
     def at(self, tel: Telemetry, t_uav) -> HeightAt:
         """The EKF height's error at UAV-scale times (see the module doc); NaN before the autopilot is heard."""
         self.update(tel)
@@ -302,53 +330,50 @@ class HeightEstimator:
             return HeightAt(np.full(n, np.nan), np.full(n, np.nan), np.full(n, self.word, dtype=object))
         i = np.searchsorted(self._t[: self._n], tq, side="right") - 1
         t0b, xb, Pb, auxb = self._base
-        t0 = np.where(i >= 0, self._t[np.maximum(i, 0)] if self._n else t0b, t0b)
-        x = np.where((i >= 0)[:, None], self._x[np.maximum(i, 0)] if self._n else xb, xb)
-        P = np.where((i >= 0)[:, None, None], self._P[np.maximum(i, 0)] if self._n else Pb, Pb)
-        sigma_g = np.array([self._aux[j][0] if j >= 0 else auxb[0] for j in i])
+        j = np.maximum(i, 0)
+        t0 = np.where(i >= 0, self._t[j] if self._n else t0b, t0b)
+        x = np.where((i >= 0)[:, None], self._x[j] if self._n else xb, xb)
+        P = np.where((i >= 0)[:, None, None], self._P[j] if self._n else Pb, Pb)
+        sigma_g = np.array([self._aux[k].sigma_g if k >= 0 else auxb.sigma_g for k in i])
         x, P = self._predict(x, P, np.maximum(np.nan_to_num(tq - t0), 0.0), sigma_g)
         bias = x @ self.c
         sigma = np.sqrt(np.einsum("i,nij,j->n", self.c, P, self.c))
+        words = np.full(n, self.word, dtype=object)
+        for word, (times, ok, gap) in self._columns().items():
+            recent = _age(times[ok], tq) <= SOURCE_WINDOW_S
+            words = np.where(recent, np.where(words == self.word, word, words + "+" + word), words)
+            # its newest measurement refused, lately: the two disagree, the sigma covers both
+            k = np.searchsorted(times, tq, side="right") - 1
+            lately = (k >= 0) & (_age(times, tq) <= CONFLICT_HOLD_S)
+            gaps = np.where(lately, gap[np.maximum(k, 0)], np.nan)
+            sigma = np.where(np.isfinite(gaps), np.hypot(sigma, np.nan_to_num(gaps) / 2), sigma)
         bad = ~np.isfinite(tq)
         bias[bad] = sigma[bad] = np.nan
-        return HeightAt(bias, sigma, self._words(tq))
-
-    def _words(self, tq) -> np.ndarray:
-        """Each time's source word: what updated the estimate within :data:`SOURCE_WINDOW_S` before it."""
-        used = np.array(self._used[: self._n], dtype=object)
-        recent = []
-        for word in sorted({w for w in self._used if w is not None}, key=lambda w: ("gnss" in w, w)):
-            times = self._t[: self._n][used == word]
-            j = np.searchsorted(times, tq, side="right") - 1
-            last = np.where(j >= 0, times[np.maximum(j, 0)], -np.inf)
-            recent.append((word, tq - last <= SOURCE_WINDOW_S))
-        out = np.full(len(tq), self.word, dtype=object)
-        for k in range(len(tq)):
-            words = [w for w, r in recent if r[k]]
-            if words:
-                out[k] = "+".join(words)
-        return out
+        return HeightAt(bias, sigma, words)
 
     def summary(self, tel: Telemetry, t_uav: float) -> dict:
         """The estimate at ``t_uav`` and what went into it (for the status): the EKF's height and the corrected
         one (the reported position's, metres above the water), the reference and how long ago it was set,
-        and each source's measurements used and refused (over the history kept) with the newest's age."""
+        and each source's measurements used and refused (over the history kept), the newest's age and,
+        while it disagrees, by how much."""
         at = self.at(tel, [t_uav])
         h_ekf = float(ekf_height_m(self.water, tel, [t_uav])[0])
         anchor = "boot" if self.amsl or not tel.arm_times else "arming"
         since = tel.arm_times[-1] if anchor == "arming" else (self._base[0] if self._base else None)
-        sources = {}
-        for j in range(self._n):
-            for word, key in ((self._used[j], "used"), (self._rejected[j], "refused")):
-                if word is not None:
-                    d = sources.setdefault(word, {"used": 0, "refused": 0, "age_s": None})
-                    d[key] += 1
-                    d["age_s"] = round(max(0.0, t_uav - self._t[j]), 2)
+        sources = {word: {"used": int(ok.sum()), "refused": int((~ok).sum()),
+                          "age_s": round(max(0.0, t_uav - times[-1]), 2), "disagrees_m": _num(gap[-1])}
+                   for word, (times, ok, gap) in self._columns().items()}
         return {"height_m": _num(h_ekf - at.bias_m[0]), "sigma_m": _num(at.sigma_m[0]), "source": at.source[0],
                 "ekf_height_m": _num(h_ekf), "bias_m": _num(at.bias_m[0]), "reference": self.word,
                 "reference_set_at": anchor, "armed": tel.armed,
                 "since_reference_s": None if since is None else round(max(0.0, t_uav - since), 1),
                 "rangefinder_out_of_range": tel.rangefinder_out_of_range, "sources": sources}
+
+
+def _age(times, tq) -> np.ndarray:
+    """Seconds from the newest of ``times`` (sorted) at or before each of ``tq`` to it; inf where none."""
+    k = np.searchsorted(times, tq, side="right") - 1
+    return tq - (times[np.maximum(k, 0)] if len(times) else 0.0) + np.where(k >= 0, 0.0, np.inf)
 
 
 def _num(x: float, digits: int = 3) -> float | None:

@@ -208,7 +208,8 @@ def _rangefinder(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     """
     rf = sc.rangefinder
     tau = clock.tau_of_us(t_us)
-    distance = rangefinder_distance_m(sc, motion, tau) + rng.normal(0.0, 1.0, len(tau)) * rf.noise_m
+    noise = rng.normal(0.0, 1.0, len(tau)) * rf.noise_m
+    distance = rangefinder_distance_m(sc, motion, tau) + (noise if rf.sees != "nothing" else 0.0)
     keep = np.ones(len(tau), bool)
     for a, b in rf.dropouts:
         keep &= ~((tau >= a) & (tau < b))

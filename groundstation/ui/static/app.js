@@ -404,8 +404,10 @@ function showHealth() {
   if (s.height) {
     const h = s.height;
     const used = Object.entries(h.sources || {}).map(([k, v]) => `${k} ${v.used} used`
-      + `${v.refused ? `, ${v.refused} refused` : ""}, ${age(v.age_s)} ago`).join(" · ");
-    rows.push(row("height", Object.values(h.sources || {}).some((v) => v.refused) ? "warn: refused" : null, "", "",
+      + `${v.refused ? `, ${v.refused} refused` : ""}, ${age(v.age_s)} ago`
+      + `${v.disagrees_m !== null ? `, DISAGREES by ${fmt(v.disagrees_m, 2, " m")}` : ""}`).join(" · ");
+    const disagree = Object.values(h.sources || {}).some((v) => v.disagrees_m !== null);
+    rows.push(row("height", disagree ? "warn: sources disagree" : null, "", "",
                   `${fmt(h.height_m)} ± ${fmt(h.sigma_m, 2, " m")} above the water (${h.source}) · EKF ${fmt(h.ekf_height_m)} m,`
                   + ` bias ${fmt(h.bias_m, 2, " m")} · ${h.reference} reference set at ${h.reference_set_at}`
                   + ` ${fmt(h.since_reference_s, 0, " s")} ago${used ? ` · ${used}` : ""}`
