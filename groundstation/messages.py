@@ -87,8 +87,9 @@ class FixMessage(Message):
     sigma_depth_m: NonNegative = Field(None, description="1-sigma of depth_m as it went into h_acc_m, metres")
     sigma_time_s: NonNegative = Field(None, description="1-sigma of the frame's time against the telemetry's as it "
                                       "went into h_acc_m, seconds")
-    height_source: str | None = Field(None, description="where the height came from (see the README's inputs "
-                                      "table)")
+    height_source: str | None = Field(None, description="what measured the height within the last 30 s (README, "
+                                      "'The height above the water'): takeoff or amsl (nothing: the EKF's height), "
+                                      "gnss_rtk, gnss, baro+gnss_rtk, baro+gnss, rangefinder, size, joined by +")
     depth_source: str | None = Field(None, description="where the depth came from")
     time_source: str | None = Field(None, description="where the UAV link's delay came from")
 
