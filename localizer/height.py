@@ -157,6 +157,14 @@ class HeightEstimator:
         self._told: set = set()  # notices given, by (source, entry time): a re-run repeats none
         self.notices: list[str] = []
 
+    def __deepcopy__(self, memo) -> HeightEstimator:
+        """A copy for another thread (the live latency estimate copies the telemetry once a second), made in
+        microseconds: the containers are copied, their items are immutable (tuples, floats, words) and the
+        arrays are never written in place (each update makes new ones)."""
+        new = object.__new__(HeightEstimator)
+        new.__dict__ = {k: type(v)(v) if isinstance(v, (list, dict, set)) else v for k, v in self.__dict__.items()}
+        return new
+
     # -- inputs ---------------------------------------------------------------------------------
     def _pull(self, tel: Telemetry) -> list[tuple]:
         new = []

@@ -255,3 +255,20 @@ def test_status_says_what_measured_the_height():
     assert s["ekf_height_m"] == pytest.approx(TRUE_H) and s["source"] == "rangefinder"
     rf = s["sources"]["rangefinder"]
     assert (rf["used"], rf["refused"]) == (1, 1) and rf["disagrees_m"] == pytest.approx(-9.0, abs=0.01)
+
+
+def test_a_copy_of_the_telemetry_goes_its_own_way():
+    """The live latency estimate works on a copy of the telemetry: the estimator's copy is cheap but separate."""
+    import copy
+
+    c, tel = cal(), telemetry(duration_s=30.0, ekf_error=lambda tau: 0.7)
+    for k in range(10):
+        tel.add_height("rangefinder", T0 + k, TRUE_H, 0.05)
+    before = at(c, tel, [5.0, 25.0])
+    twin = copy.deepcopy(tel)
+    for k in range(10, 20):  # only the original hears these: 3 m off
+        tel.add_height("rangefinder", T0 + k, TRUE_H - 3.0, 0.05)
+    gps(tel, 4.5, SURFACE + TRUE_H, v_acc=0.2)  # late, before them all: the original re-runs
+    after_twin, after = at(c, twin, [5.0, 25.0]), at(c, tel, [5.0, 25.0])
+    assert np.array_equal(after_twin[0], before[0]) and np.array_equal(after_twin[1], before[1])
+    assert not np.allclose(after[1], before[1]) and take_notices(twin) == []
