@@ -29,11 +29,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from groundstation.positions import read_positions_csv  # noqa: E402
-from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR  # noqa: E402
-from sim_fixtures.generate import generate  # noqa: E402
-from sim_fixtures.motion import Motion  # noqa: E402
-from sim_fixtures.scenario import load_scenario, with_overrides  # noqa: E402
+from groundstation.positions import read_positions_csv
+from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR
+from sim_fixtures.generate import generate
+from sim_fixtures.motion import Motion
+from sim_fixtures.scenario import load_scenario, with_overrides
 
 SCENARIOS = ("height_rtk_drift", "height_gnss_drift", "height_rangefinder", "height_rangefinder:nothing",
              "height_rangefinder:floor")
@@ -85,8 +85,9 @@ def main() -> int:
     if args.skyfix:
         runs.insert(0, ("before", shlex.split(args.skyfix), Path(args.skyfix_cwd)))
     names = args.only or SCENARIOS
-    lines = [f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} "
-             f"{'in 2σh':>6s} {'σh med':>6s}  height source"]
+    header = (f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} "
+              f"{'in 2σh':>6s} {'σh med':>6s}  height source")
+    lines = [header]
     for name in names:
         path = session(name, work)
         for label, skyfix, cwd in runs:

@@ -5,13 +5,13 @@ import csv
 
 import numpy as np
 import pytest
+from test_sim_knobs import SCENARIOS
 
 from groundstation.cli import main
 from groundstation.positions import read_positions_csv
 from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides
-from test_sim_knobs import SCENARIOS
 
 # shortened, the barometer drifting at the scenarios' rates (baro_drift_m is over the whole session)
 RTK = with_overrides(load_scenario(SCENARIOS / "height_rtk_drift.toml"), duration_s=120.0,
@@ -62,5 +62,5 @@ def test_rangefinder_that_sees_the_water_or_the_seafloor(capsys, tmp_path):
 def test_the_uuv_at_the_surface(capsys, tmp_path, reference):
     sc = with_overrides(load_scenario(SCENARIOS / "surface_uuv.toml"), site={"water_reference": reference},
                         uav={"baro_bias_m": 0.0, "baro_drift_m": 0.0, "gnss_fix_type": 0}, duration_s=4.0)
-    scores, pos, dh, _ = evaluate(capsys, sc, tmp_path, reference)
+    scores, pos, _, _ = evaluate(capsys, sc, tmp_path, reference)
     assert scores["coverage"] == 1.0 and scores["mae_m"] < 0.01 and np.all(pos.depth_m == 0.0)

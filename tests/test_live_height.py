@@ -11,7 +11,16 @@ import sys
 
 import numpy as np
 from jsonschema import Draft202012Validator
-from live_helpers import SUBSCRIBER, free_port, read_jsonl, replay_shift, skyfix, start, stop, wait_for
+from live_helpers import (
+    SUBSCRIBER,
+    free_port,
+    read_jsonl,
+    replay_shift,
+    skyfix,
+    start,
+    stop,
+    wait_for,
+)
 from test_sim_knobs import SCENARIOS
 
 from groundstation.contracts import path_of

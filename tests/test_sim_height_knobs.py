@@ -9,6 +9,8 @@ ATTITUDE (the airframe's tilt); no localizer code.
 
 import numpy as np
 import pytest
+from test_sim_knobs import SCENARIOS, of_kind, read_tlog
+from test_sim_render import pixel_of_reference_point
 
 from groundstation.mavlink_io import mavutil
 from sim_fixtures.generate import camera_of, frame_truth, generate
@@ -16,8 +18,6 @@ from sim_fixtures.motion import Motion
 from sim_fixtures.render import Renderer
 from sim_fixtures.scenario import load_scenario, with_overrides
 from sim_fixtures.tlog import Clock
-from test_sim_knobs import SCENARIOS, of_kind, read_tlog
-from test_sim_render import pixel_of_reference_point
 
 RTK = with_overrides(load_scenario(SCENARIOS / "height_rtk_drift.toml"), duration_s=120.0)
 PLAIN = with_overrides(load_scenario(SCENARIOS / "height_gnss_drift.toml"), duration_s=120.0)
@@ -136,7 +136,7 @@ def test_the_uuv_at_the_surface_is_rendered_where_the_truth_says():
     assert np.all(truth.uuv_ned[:, 2] == 0.0)  # the top face at the surface
     renderer = Renderer(sc, camera)
     for i in (0, len(truth.u) - 1):
-        img, box = renderer.render(truth.view(i))
+        _, box = renderer.render(truth.view(i))
         x, y, w, h = box
         assert x <= truth.u[i] <= x + w and y <= truth.v[i] <= y + h
         p = pixel_of_reference_point(renderer, truth.view(i), truth.u[i] + 2.0, truth.v[i] - 3.0)
