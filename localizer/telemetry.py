@@ -284,6 +284,8 @@ class Telemetry:
         def given(x):
             return x if math.isfinite(x) and x > 0 else math.nan
 
+        if fix_type >= 3 and not -1000.0 < alt_amsl_m < 10_000.0:
+            return self._refuse(self.gnss, f"GNSS altitude {alt_amsl_m!r} m outside (-1000, 10000) (mm not converted?)")
         t = receive_s
         if 0 < time_usec < _BOOT_USEC_MAX and self.uav_clock.offset_s is not None:
             t = time_usec / 1e6 + self.uav_clock.offset_s

@@ -107,3 +107,12 @@ def test_gps_raw_int_altitude_accuracies_and_dops(tel):
     assert np.allclose(v[0], [0.014, 40.0, 6, 32.0, 0.025, 0.7, 1.2])
     assert v[1][2] == 3 and v[1][3] == 32.0 and np.isnan(v[1][[0, 4, 5, 6]]).all()
     assert v[2][2] == 2 and np.isnan(v[2][3]) and v[2][5] == pytest.approx(0.9)
+
+
+def test_an_absurd_gnss_altitude_is_refused(tel):
+    mav = mavutil().mavlink
+    msg = _decode(mav.MAVLink_gps_raw_int_message((BOOT0_MS + 900) * 1000, 3, 470000000, 80000000, 2_000_000_000, 70,
+                                                  110, 0, 0, 14, 0, 800, 1600, 0, 0, 0))
+    assert not ingest(tel, msg, T0 + 1.0)
+    assert tel.refusal == "GNSS altitude 2000000.0 m outside (-1000, 10000) (mm not converted?)"
+    assert len(tel.gnss) == 0 and tel.gnss.rejected == 1
