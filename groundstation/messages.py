@@ -202,10 +202,10 @@ class HeightSourceStatus(Section):
     """One source of the height estimate, over the history kept."""
 
     used: int = Field(description="measurements used")
-    refused: int = Field(description="measurements not used: beyond 5 sigma of the estimate (or 3 while it disagrees)")
+    refused: int = Field(description="measurements not used: beyond 5 sigma of the estimate, or 3 after one refused")
     age_s: Age = Field(description="seconds since its newest measurement")
-    disagrees_m: Metres = Field(description="while it disagrees (its newest measurement refused): by how much, metres; "
-                                "the height's sigma covers it")
+    disagrees_m: Metres = Field(description="while it disagrees (3 or more refused in a row, the last within 10 s): by "
+                                "how much, metres; the height's sigma covers it")
 
 
 class HeightStatus(Section):

@@ -34,12 +34,12 @@ The height's error is ``b = e`` (take-off reference) or ``e + s`` (amsl). Measur
   size in the image, ...): ``h_ekf − h = b`` ± its own sigma.
 
 Cross-check: a measurement more than :data:`GATE_SIGMAS` sigmas from the estimate is not used,
-and its source then disagrees until one of its measurements comes within :data:`AGREE_SIGMAS`
-(so a wrong source cannot slip in as the barometer's sigma grows). While a source disagrees
-(its newest measurement refused, within :data:`CONFLICT_HOLD_S`), the height's sigma covers
-both: ``hypot(sigma, disagreement / 2)``; which one is right is not known, so h_acc says so
+and its source's next ones are used only within :data:`AGREE_SIGMAS` (so a wrong source cannot
+slip in as the barometer's sigma grows). After :data:`CONFLICT_AFTER` refused in a row the source
+disagrees: until :data:`CONFLICT_HOLD_S` after its last refused one, the height's sigma covers
+both (``hypot(sigma, disagreement / 2)``); which one is right is not known, so h_acc says so
 (when in doubt, no fix: GPS_INPUT's gate on h_acc). A disagreement starting and ending is one
-line each (:func:`take_notices`), naming both heights.
+line each (:func:`take_notices`), naming both heights; a single glitch is neither.
 The filter is causal: a frame's height uses the measurements up to its time, offline as live;
 measurements that arrive late (the UUV's size is measured after the frame) are fused in time
 order by re-running the filter from just before them.
@@ -79,6 +79,7 @@ GNSS_WHITE = 0.3  # share of a GNSS altitude's 1-sigma that is new with each fix
 SURFACE_UNKNOWN_M = 1000.0  # 1-sigma of a water altitude nobody gave
 GATE_SIGMAS = 5.0  # a measurement this far from the estimate is refused: the source disagrees ...
 AGREE_SIGMAS = 3.0  # ... until it comes back within this
+CONFLICT_AFTER = 3  # a source disagrees once this many of its measurements in a row were refused (not one glitch)
 CONFLICT_HOLD_S = 10.0  # a disagreement counts in the sigma until this long after the source's last refused measurement
 SOURCE_WINDOW_S = 30.0
 RANGEFINDER_FLOOR_M = 0.05  # laser rangefinders' data sheets: ±5 cm up to a few metres ...
@@ -122,7 +123,7 @@ class _Aux(NamedTuple):
     sigma_g: float  # the GNSS altitude's slow error's 1-sigma in force (NaN before one came)
     fix: int  # its fix type (-1 before)
     S: float | None  # the water altitude GNSS altitudes are referred to (take-off: the first difference)
-    conflicts: frozenset  # sources whose newest measurement was refused
+    refused: tuple = ()  # (source, measurements refused in a row) of the sources whose newest was refused
 
 
 class HeightEstimator:
@@ -196,7 +197,7 @@ class HeightEstimator:
                 return
             P = np.diag([self.sigmas.height_m ** 2, (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2,
                          0.0])
-            self._base = (boot, np.zeros(3), P, _Aux(math.nan, -1, self.water.surface_amsl_m, frozenset()))
+            self._base = (boot, np.zeros(3), P, _Aux(math.nan, -1, self.water.surface_amsl_m))
         new = sorted(self._pull(tel), key=lambda e: e[0])
         if new:
             first = len(self._entries)
@@ -282,21 +283,24 @@ class HeightEstimator:
         innovation = z - row @ x
         s = row @ P @ row + r
         apart = abs(innovation) / math.sqrt(s)
-        conflict = word in aux.conflicts  # back only once it agrees within AGREE_SIGMAS
-        if apart > (AGREE_SIGMAS if conflict else GATE_SIGMAS):
-            if not conflict:
+        streaks = dict(aux.refused)
+        streak = streaks.pop(word, 0)
+        if apart > (AGREE_SIGMAS if streak else GATE_SIGMAS):  # once refused, back only within AGREE_SIGMAS
+            if streak + 1 == CONFLICT_AFTER:
                 est, sigma = h_e - self.c @ x, math.sqrt(self.c @ P @ self.c)
                 self._tell(word, t, f"height: {word} gives {said_m:.2f} ± {stated:.2f} m above the water, the estimate "
                            f"{est:.2f} ± {sigma:.2f} m (EKF height {h_e:.2f} m): {apart:.1f} sigma apart; not used "
                            "while they disagree, the height's sigma covers both")
-            return x, P, aux._replace(conflicts=aux.conflicts | {word}), word, False, innovation
-        if conflict:
+            streaks[word] = streak + 1
+            return x, P, aux._replace(refused=tuple(sorted(streaks.items()))), word, False, innovation
+        if streak >= CONFLICT_AFTER:
             self._tell(word, t, f"height: {word} agrees with the estimate again ({apart:.1f} sigma): used")
+        aux = aux._replace(refused=tuple(sorted(streaks.items())))
         K = P @ row / s
         x = x + K * innovation
         A = np.eye(3) - np.outer(K, row)
         P = A @ P @ A.T + np.outer(K, K) * r
-        return x, P, aux._replace(conflicts=aux.conflicts - {word}), word, True, math.nan
+        return x, P, aux, word, True, math.nan
 
     def _tell(self, source: str, t: float, text: str) -> None:
         if (source, t) not in self._told:
@@ -321,12 +325,18 @@ class HeightEstimator:
 
     # -- answers --------------------------------------------------------------------------------
     def _columns(self) -> dict:
-        """Per source word: the times of its measurements, whether each was used, and the refused ones' gaps."""
+        """Per source word: the times of its measurements, whether each was used, and the disagreement of each
+        refused one that was the :data:`CONFLICT_AFTER`-th or later in a row (NaN otherwise)."""
         if self._cache is None:
             src = np.array(self._src, dtype=object)
             ok, gap = np.array(self._ok, dtype=bool), np.array(self._gap, dtype=float)
-            self._cache = {w: (self._t[src == w], ok[src == w], gap[src == w])
-                           for w in sorted({w for w in self._src if w is not None}, key=lambda w: ("gnss" in w, w))}
+            self._cache = {}
+            for w in sorted({w for w in self._src if w is not None}, key=lambda w: ("gnss" in w, w)):
+                sel = src == w
+                refused_in_a_row = np.zeros(sel.sum(), int)
+                for i, used in enumerate(ok[sel]):
+                    refused_in_a_row[i] = 0 if used else (refused_in_a_row[i - 1] if i else 0) + 1
+                self._cache[w] = (self._t[sel], ok[sel], np.where(refused_in_a_row >= CONFLICT_AFTER, gap[sel], np.nan))
         return self._cache
 
     def at(self, tel: Telemetry, t_uav) -> HeightAt:

@@ -10,6 +10,7 @@ from localizer import gnss
 from localizer.calibration import Calibration
 from localizer.height import (
     AGREE_SIGMAS,
+    CONFLICT_AFTER,
     CONFLICT_HOLD_S,
     DRIFT_REFERENCE_S,
     GATE_SIGMAS,
@@ -182,8 +183,9 @@ def test_one_absolute_height_is_a_kalman_update():
 
 
 def test_a_source_that_disagrees_is_not_used_and_widens_the_sigma():
-    """A lidar reading the seafloor: 6 sigma off, refused, one line; while it disagrees the sigma covers both;
-    a disagreeing source is taken back only within AGREE_SIGMAS, not as soon as it is inside the gate."""
+    """A lidar reading the seafloor: 6 sigma off, refused; the third in a row makes it disagree: one line, and
+    the sigma covers both; once refused it is taken back only within AGREE_SIGMAS, not as soon as it is inside
+    the gate."""
     c = cal(height_m=1.0, baro_drift_10min_m=0.0)
     tel = telemetry(duration_s=60.0)
     for k, off in enumerate((6.0, 6.1, 4.0, 4.1)):  # metres below what the EKF says: 6σ, 6σ, 4σ, 4σ
@@ -193,7 +195,7 @@ def test_a_source_that_disagrees_is_not_used_and_widens_the_sigma():
     assert sigma[0] == pytest.approx(math.hypot(1.0, 4.1 / 2))
     assert sigma[1] == pytest.approx(1.0)  # the disagreement counts until CONFLICT_HOLD_S after its last reading
     notices = take_notices(tel)
-    assert len(notices) == 1 and "rangefinder gives 26.00" in notices[0] and "6.0 sigma apart" in notices[0]
+    assert len(notices) == 1 and "rangefinder gives 24.00" in notices[0] and "4.0 sigma apart" in notices[0]
     assert tel.add_height("rangefinder", T0 + 20.0, TRUE_H + 2.0, 0.01)  # 2σ: agrees again, used
     bias, _, source = at(c, tel, 20.0)
     assert bias[0] == pytest.approx(-2.0, abs=1e-3) and source[0] == "rangefinder"
@@ -202,7 +204,17 @@ def test_a_source_that_disagrees_is_not_used_and_widens_the_sigma():
     tel2 = telemetry(duration_s=10.0)
     tel2.add_height("rangefinder", T0 + 1.0, TRUE_H + 4.0, 0.01)
     assert at(c, tel2, 1.0)[0][0] == pytest.approx(-4.0, abs=1e-3)
-    assert AGREE_SIGMAS < 4.0 < GATE_SIGMAS
+    assert AGREE_SIGMAS < 4.0 < GATE_SIGMAS and CONFLICT_AFTER == 3
+
+
+def test_one_glitch_is_refused_quietly():
+    c = cal(height_m=1.0, baro_drift_10min_m=0.0)
+    tel = telemetry(duration_s=10.0)
+    for k, off in enumerate((0.0, 20.0, 0.0)):
+        tel.add_height("rangefinder", T0 + 1.0 + k, TRUE_H + off, 0.01)
+    bias, sigma, _ = at(c, tel, [2.5, 3.5])
+    assert sigma[0] < 0.01 and bias[1] == pytest.approx(0.0, abs=1e-6)  # not widened; the next one used
+    assert take_notices(tel) == []
 
 
 def test_late_measurements_are_fused_in_time_order():
@@ -248,13 +260,14 @@ def test_status_says_what_measured_the_height():
     tel.add_heartbeat(False, T0)
     tel.add_heartbeat(True, T0 + 1.0)
     tel.add_height("rangefinder", T0 + 5.0, TRUE_H, 0.05)
-    tel.add_height("rangefinder", T0 + 6.0, TRUE_H + 9.0, 0.05)
+    for k in range(3):  # the third in a row: it disagrees
+        tel.add_height("rangefinder", T0 + 17.0 + k, TRUE_H + 9.0, 0.05)
     s = status(c.water, c.sigmas, tel)
     assert s["reference"] == "takeoff" and s["reference_set_at"] == "arming" and s["armed"] is True
-    assert s["since_reference_s"] == pytest.approx(19.0, abs=0.01)
+    assert s["since_reference_s"] == pytest.approx(19.0, abs=0.01) and s["sigma_m"] > 4.5  # covers both
     assert s["ekf_height_m"] == pytest.approx(TRUE_H) and s["source"] == "rangefinder"
     rf = s["sources"]["rangefinder"]
-    assert (rf["used"], rf["refused"]) == (1, 1) and rf["disagrees_m"] == pytest.approx(-9.0, abs=0.01)
+    assert (rf["used"], rf["refused"]) == (1, 3) and rf["disagrees_m"] == pytest.approx(-9.0, abs=0.01)
 
 
 def test_a_copy_of_the_telemetry_goes_its_own_way():
