@@ -77,8 +77,8 @@ GNSS_TAU_S = 300.0  # correlation time of a GNSS altitude's error (satellite geo
 GNSS_WHITE = 0.3  # share of a GNSS altitude's 1-sigma that is new with each fix (multipath, its timing against
 # the EKF's height): white noise of GNSS_WHITE·sigma, the slow error g the rest, sqrt(1 − GNSS_WHITE²)·sigma
 SURFACE_UNKNOWN_M = 1000.0  # 1-sigma of a water altitude nobody gave
-GATE_SIGMAS = 5.0  # a measurement this far from the estimate is refused: the source disagrees ...
-AGREE_SIGMAS = 3.0  # ... until it comes back within this
+GATE_SIGMAS = 5.0  # a measurement this far from the estimate is refused ...
+AGREE_SIGMAS = 3.0  # ... and its source's next ones until one comes within this
 CONFLICT_AFTER = 3  # a source disagrees once this many of its measurements in a row were refused (not one glitch)
 CONFLICT_HOLD_S = 10.0  # a disagreement counts in the sigma until this long after the source's last refused measurement
 SOURCE_WINDOW_S = 30.0

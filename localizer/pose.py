@@ -6,7 +6,11 @@ how sure each is.
 calibration names, as rotations. A frame whose inputs are missing or too old gets
 a status word and NaNs; one just past the newest sample gets an extrapolated
 value with its estimated error in ``sigma_*``. The camera's angular and linear
-velocity come along, so a time-alignment error can be turned into metres.
+velocity come along, so a time-alignment error can be turned into metres. The
+height above the water is the EKF's corrected by :mod:`localizer.height` (the
+barometer's drift, from GNSS altitudes, a rangefinder, the UUV's size), with its
+sigma and source word; the UAV's horizontal sigma follows GPS_RAW_INT
+(:mod:`localizer.gnss`).
 """
 
 from __future__ import annotations
