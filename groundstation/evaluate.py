@@ -137,6 +137,7 @@ def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str 
     runs, results = {}, []
     for method, refraction in METHODS:
         fixes = locate_frames(session, pixels, refraction)
+        print_warnings(session)
         (sess_dir / method).mkdir(parents=True, exist_ok=True)
         write_positions_csv(sess_dir / method / "positions.csv", fixes)
         err = errors_m(fixes, session.truth)

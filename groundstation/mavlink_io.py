@@ -3,9 +3,11 @@
 The one place where MAVLink units become the localizer's: ATTITUDE radians and
 rad/s (FRD body in NED) as they are; GLOBAL_POSITION_INT degE7 → degrees, mm →
 metres, cm/s → m/s; GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z) and
-flags as they are; MOUNT_ORIENTATION degrees; GPS_RAW_INT mm → metres; TIMESYNC
-ns. Samples keep the autopilot's ``time_boot_ms``; the telemetry maps it onto
-the station clock with the receive times. The UUV autopilot's (ArduSub's) depth messages
+flags as they are; MOUNT_ORIENTATION degrees; GPS_RAW_INT mm → metres, eph/epv
+(DOP × 100) → DOP; DISTANCE_SENSOR cm → metres, covariance cm² → a 1-sigma in
+metres; RANGEFINDER metres; HEARTBEAT ``base_mode`` → armed; TIMESYNC ns. Samples
+keep the autopilot's ``time_boot_ms``; the telemetry maps it onto the station clock
+with the receive times. The UUV autopilot's (ArduSub's) depth messages
 (:func:`ingest_ardusub`): GLOBAL_POSITION_INT mm → metres, cm/s → m/s; SCALED_PRESSURE{,2,3}
 hPa → Pa; GPS_GLOBAL_ORIGIN mm → metres; PARAM_VALUE as it is.
 """
@@ -24,14 +26,20 @@ from pymavlink import mavutil as _mavutil
 from localizer.depth import PRESSURE_MESSAGES, ArduSubDepth, DepthSample
 from localizer.telemetry import Telemetry
 
-#: Message types the localizer uses.
+#: Message types the localizer uses (and the autopilot's HEARTBEAT: whether it is armed).
 USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION",
-        "GPS_RAW_INT", "TIMESYNC", "PARAM_VALUE")
+        "GPS_RAW_INT", "TIMESYNC", "PARAM_VALUE", "DISTANCE_SENSOR", "RANGEFINDER")
 GIMBAL_MESSAGES = ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")
+RANGEFINDER_MESSAGES = ("DISTANCE_SENSOR", "RANGEFINDER")
 #: Message types the UUV depth reader uses (COMMAND_ACK: the answers to its rate requests).
 DEPTH_USED = ("GLOBAL_POSITION_INT", *PRESSURE_MESSAGES, "PARAM_VALUE", "GPS_GLOBAL_ORIGIN", "COMMAND_ACK")
 MAV_AUTOPILOT_INVALID = 8
 NOT_AUTOPILOTS = (6, 18, 26, 30)  # MAV_TYPE GCS, ONBOARD_CONTROLLER, GIMBAL, CAMERA
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+MAV_SENSOR_ROTATION_PITCH_270 = 25  # DISTANCE_SENSOR orientation: looking down the body's z axis
+SIGNAL_QUALITY_INVALID = 1  # DISTANCE_SENSOR signal_quality: 0 unknown, 1 invalid, 2..100
+COVARIANCE_UNKNOWN = (0, 255)  # DISTANCE_SENSOR covariance (cm²): 0 (ArduPilot) or UINT8_MAX: not given
+DOP_UNKNOWN = 65535
 
 
 def mavutil():
@@ -56,8 +64,9 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
 
     The autopilot is the component whose HEARTBEAT names an autopilot, or that sends
     ATTITUDE first: its clock is the buffers' clock, and its copies alone of
-    ATTITUDE, GLOBAL_POSITION_INT, SYSTEM_TIME, GPS_RAW_INT, TIMESYNC and
-    PARAM_VALUE are used (before it is known, nothing else is). A gimbal message
+    ATTITUDE, GLOBAL_POSITION_INT, SYSTEM_TIME, GPS_RAW_INT, TIMESYNC, PARAM_VALUE,
+    its downward rangefinder (DISTANCE_SENSOR, else ArduPilot's RANGEFINDER) and its
+    HEARTBEAT's armed flag are used (before it is known, nothing else is). A gimbal message
     from another component (a MAVLink gimbal with its own ``time_boot_ms``) is
     aligned by its own clock. Samples with values outside their physical range,
     non-finite values or times out of order are refused by the telemetry store
@@ -67,11 +76,12 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     kind = msg.get_type()
     component = msg.get_srcComponent()
     tel.refusal = None
-    if tel.autopilot_component is None and (
-        kind == "ATTITUDE"
-        or kind == "HEARTBEAT" and msg.autopilot != MAV_AUTOPILOT_INVALID and msg.type not in NOT_AUTOPILOTS
-    ):
+    autopilot_beat = kind == "HEARTBEAT" and msg.autopilot != MAV_AUTOPILOT_INVALID and msg.type not in NOT_AUTOPILOTS
+    if tel.autopilot_component is None and (kind == "ATTITUDE" or autopilot_beat):
         tel.autopilot_component = component
+    if autopilot_beat and component == tel.autopilot_component:
+        tel.add_heartbeat(bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED), receive_unix_s)
+        return False
     if kind not in USED:
         return False
     if tel.autopilot_component is None:
@@ -83,6 +93,8 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
             return tel.add_mount(msg.time_boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s, other)
         return tel.add_gimbal(msg.time_boot_ms, msg.q, msg.flags, receive_unix_s, other)
     if not own:
+        if kind in RANGEFINDER_MESSAGES:  # another component's sensor, on its own clock: not used
+            return False
         tel.refusal = f"from component {component}, not the autopilot ({tel.autopilot_component})"
         return False
     if kind == "ATTITUDE":
@@ -99,7 +111,27 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     if kind == "GPS_RAW_INT":
         alt_ellipsoid_mm = getattr(msg, "alt_ellipsoid", 0) or 0  # MAVLink 2 extensions: 0 when not sent
         geoid = (alt_ellipsoid_mm - msg.alt) / 1000.0 if alt_ellipsoid_mm else float("nan")
-        return tel.add_gps_raw((getattr(msg, "h_acc", 0) or 0) / 1000.0, geoid, receive_unix_s)
+
+        def dop(x):
+            return x / 100.0 if x != DOP_UNKNOWN else float("nan")
+
+        return tel.add_gps_raw(msg.time_usec, msg.fix_type, msg.alt / 1000.0, (getattr(msg, "h_acc", 0) or 0) / 1000.0,
+                               (getattr(msg, "v_acc", 0) or 0) / 1000.0, dop(msg.eph), dop(msg.epv), geoid,
+                               receive_unix_s)
+    if kind == "DISTANCE_SENSOR":  # a downward one; the others look elsewhere
+        if msg.orientation != MAV_SENSOR_ROTATION_PITCH_270:
+            return False
+        tel.distance_sensor_seen = True
+        if (getattr(msg, "signal_quality", 0) or 0) == SIGNAL_QUALITY_INVALID:
+            tel.rangefinder_out_of_range += 1
+            return False
+        sigma = None if msg.covariance in COVARIANCE_UNKNOWN else msg.covariance ** 0.5 / 100.0
+        return tel.add_rangefinder(msg.time_boot_ms, msg.current_distance / 100.0, msg.min_distance / 100.0,
+                                   msg.max_distance / 100.0, receive_unix_s, sigma)
+    if kind == "RANGEFINDER":  # ArduPilot's copy of its downward rangefinder: used only without DISTANCE_SENSOR
+        if tel.distance_sensor_seen:
+            return False
+        return tel.add_rangefinder(None, msg.distance, 0.0, float("inf"), receive_unix_s)
     name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
     tel.add_param(name.rstrip("\x00"), float(msg.param_value))
     return True

@@ -90,8 +90,9 @@ class FixMessage(Message):
                                        "times the vertical speed")
     sigma_time_s: NonNegative = Field(None, description="1-sigma of the frame's time against the telemetry's as it "
                                       "went into h_acc_m, seconds")
-    height_source: str | None = Field(None, description="where the height came from (see the README's inputs "
-                                      "table)")
+    height_source: str | None = Field(None, description="what measured the height within the last 30 s (README, "
+                                      "'The height above the water'): takeoff or amsl (nothing: the EKF's height), "
+                                      "gnss_rtk, gnss, baro+gnss_rtk, baro+gnss, rangefinder, size, joined by +")
     depth_source: str | None = Field(None, description="where the depth came from: skyfix (skyfix's JSON on Zenoh), "
                                      "session (a recording's depth.jsonl naming none), ardusub_pressure (ArduSub's "
                                      "depth sensor), ardusub_ekf (ArduSub's EKF, until the sensor's parameters are "
@@ -196,6 +197,50 @@ class GateStatus(Section):
                                      "jump, unconfirmed")
 
 
+class GnssStatus(Section):
+    """The UAV's GNSS receiver as its newest GPS_RAW_INT says (localizer/gnss.py)."""
+
+    fix_type: int = Field(description="GPS_FIX_TYPE: 3 3D, 4 DGPS, 5 RTK float, 6 RTK fixed")
+    h_acc_m: NonNegative = Field(description="the receiver's horizontal accuracy, null when it gives none")
+    v_acc_m: NonNegative = Field(description="the receiver's vertical accuracy, null when it gives none")
+    hdop: NonNegative = Field(description="HDOP (eph / 100), null when unknown")
+    vdop: NonNegative = Field(description="VDOP (epv / 100), null when unknown")
+    sigma_horizontal_m: NonNegative = Field(description="the UAV position's 1-sigma skyfix takes from it: h_acc, else "
+                                            "HDOP times the fix type's typical error")
+    sigma_vertical_m: NonNegative = Field(description="the GNSS altitude's 1-sigma: v_acc, else VDOP times the fix "
+                                          "type's typical error; null without a 3D fix")
+
+
+class HeightSourceStatus(Section):
+    """One source of the height estimate, over the history kept."""
+
+    used: int = Field(description="measurements used")
+    refused: int = Field(description="measurements not used: beyond 5 sigma of the estimate, or 3 after one refused")
+    age_s: Age = Field(description="seconds since its newest measurement")
+    disagrees_m: Metres = Field(description="while it disagrees (3 or more refused in a row, the last within 10 s): by "
+                                "how much, metres; the height's sigma covers it")
+
+
+class HeightStatus(Section):
+    """The UAV's height above the water (localizer/height.py), at the newest GLOBAL_POSITION_INT."""
+
+    height_m: Metres = Field(description="the reported position's height above the water: the EKF's, corrected")
+    sigma_m: NonNegative = Field(description="its 1-sigma, as it goes into h_acc")
+    source: str = Field(description="what measured it within the last 30 s (takeoff or amsl: nothing, the EKF's "
+                        "height by the calibration's reference; gnss_rtk, gnss, baro+gnss, rangefinder, size, joined "
+                        "by +)")
+    ekf_height_m: Metres = Field(description="the EKF's height by the calibration's [water] reference")
+    bias_m: Metres = Field(description="the EKF height's estimated error (EKF height minus true)")
+    reference: Literal["takeoff", "amsl"] = Field(description="the calibration's [water] reference")
+    reference_set_at: Literal["arming", "boot"] = Field(description="when the EKF height's reference was set: "
+                                                        "an arming seen, else the autopilot's boot")
+    armed: bool | None = Field(description="the autopilot's HEARTBEAT armed flag, null before one came")
+    since_reference_s: NonNegative = Field(description="seconds since then: the barometer's drift grows with it")
+    rangefinder_out_of_range: int = Field(description="rangefinder readings outside its range (no return from the "
+                                          "water)")
+    sources: dict[str, HeightSourceStatus] = Field(description="per source word: its measurements")
+
+
 class UavStatus(Section):
     """The UAV's MAVLink link."""
 
@@ -203,6 +248,7 @@ class UavStatus(Section):
     backend: Literal["mavsdk"] | None = Field(None, description="present with --mavlink-backend mavsdk")
     sysid: int | None = Field(description="the UAV's MAVLink system id, once heard")
     clocks: Clocks
+    gnss: GnssStatus | None = Field(None, description="the UAV's GNSS receiver, once GPS_RAW_INT came")
     rate_requests: dict[str, str] | None = Field(None, description="per message: what skyfix asked for and the "
                                                  "autopilot's answer (pymavlink backend)")
     received: int = Field(description="messages received")
@@ -469,6 +515,8 @@ class StatusMessage(Message):
     t: float = Field(description="when the status was taken, station clock, UNIX seconds")
     uav: UavStatus
     depth: DepthStatus
+    height: HeightStatus | None = Field(None, description="the UAV's height above the water, once "
+                                        "GLOBAL_POSITION_INT came")
     pipeline: PipelineStatus
     fixes_published: int
     problems: dict[str, str] = Field(description="what is wrong with each input now, one line per input (uav, "

@@ -51,6 +51,7 @@ from dataclasses import dataclass
 
 from localizer.calibration import Calibration
 from localizer.fix import Fix, locate
+from localizer.height import take_notices
 from localizer.pose import CameraPose, camera_pose
 from localizer.telemetry import Telemetry
 from localizer.tracking import TrackResult
@@ -303,6 +304,8 @@ class Pipeline:
             self._emit(item.frame, self._locate(item), item.result.box, item.window)
 
     def _emit(self, frame: LiveFrame, fix: Fix, box=None, window=None) -> None:
+        for notice in take_notices(self.tel):  # height sources that disagree
+            log.warning("%s", notice)
         info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None, window)
         self.processed += 1
         self.statuses[fix.status] += 1

@@ -23,6 +23,7 @@ from collections import Counter
 import numpy as np
 
 from localizer.fix import Fixes, locate
+from localizer.height import take_notices
 from localizer.pose import camera_pose
 from localizer.tracking import TRACKERS
 
@@ -90,6 +91,7 @@ def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
     """Fixes for ``pixels = (t, u, v, track_status)`` (see :func:`frame_pixels`)."""
     t, u, v, track_status = pixels
     pose = camera_pose(session.calibration, session.telemetry, t)
+    session.warnings.extend(f"{session.path}: {notice}" for notice in take_notices(session.telemetry))
     fixes = locate(session.calibration, pose, u, v, refraction=refraction)
     lost = (track_status != "ok") & (pose.status == "ok")
     fixes.status[lost] = track_status[lost]
@@ -127,9 +129,10 @@ def summary(fixes: Fixes) -> str:
 
 
 def print_warnings(session: Session) -> None:
-    """The session's warnings (reading, tracking), one line each on stderr."""
+    """The session's warnings not printed yet (reading, tracking, height sources), one line each on stderr."""
     for w in session.warnings:
         print(f"warning: {w}", file=sys.stderr)
+    session.warnings.clear()
 
 
 def run(args) -> int:

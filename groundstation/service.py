@@ -37,6 +37,7 @@ import zenoh
 
 from localizer.depth import DepthGate
 from localizer.fix_gate import FixGate
+from localizer.height import status as height_status
 from localizer.telemetry import Telemetry
 
 from . import config
@@ -217,7 +218,8 @@ async def serve(cfg: config.RunConfig) -> dict:
         pipeline.sinks.append(watchdog)
 
         def status(now: float) -> dict:
-            out = {"uav": uav.status(now), "depth": depth.status(now), "pipeline": pipeline.status(),
+            out = {"uav": uav.status(now), "depth": depth.status(now), "height": height_status(cal.water, cal.sigmas, tel),
+                   "pipeline": pipeline.status(),
                    "target": pipeline.target, "uuv_position": uuv_position.status(now),
                    "fixes_published": fix_sink.published, "fix": fix_sink.latest, "control": zenoh_control.status(),
                    "problems": dict(watchdog.problems), "zenoh": {"peers": zenoh_peers()},

@@ -99,18 +99,26 @@ class Sigmas:
                                   "30-100 px long")
     tilt_deg: NonNegative = Field(0.5, description="camera roll/pitch: a consumer gimbal's IMU with the autopilot's AHRS")
     yaw_deg: NonNegative = Field(1.5, description="camera heading: a calibrated compass away from magnetic interference")
-    height_m: NonNegative = Field(0.3, description="camera height above the water: barometric altitude over minutes")
+    height_m: NonNegative = Field(0.3, description="the EKF's height above the water when its reference was set: "
+                                  "the take-off height's measurement (at arming), or in the amsl reference the EKF "
+                                  "origin's altitude (at boot); it then drifts (baro_drift_10min_m) unless GNSS, a "
+                                  "rangefinder or the UUV's size measure it")
+    baro_drift_10min_m: NonNegative = Field(
+        0.7, description="1-sigma of the barometric height's drift 10 minutes after that reference, growing as a "
+        "random walk (with the square root of time): the weather's pressure tendency, 'falling slowly' being up to "
+        "1.5 hPa in 3 h, at 8.3 m per hPa near sea level")
     depth_m: NonNegative = Field(0.05, description="UUV depth: a pressure sensor with the surface pressure zeroed")
     uav_horizontal_m: NonNegative | None = Field(
         None, description="the UAV position's own horizontal accuracy (m); unset: GPS_RAW_INT's h_acc (the receiver's "
-        "own estimate), or 1.5 (plain GNSS) when it sends none")
+        "own estimate), else its HDOP times its fix type's typical error (localizer/gnss.py), or 1.5 (plain GNSS) "
+        "without GPS_RAW_INT")
     time_s: NonNegative = Field(0.02, description="frames vs telemetry time alignment, turned into metres by the "
                                 "camera's motion")
-    surface_amsl_m: NonNegative = Field(0.5, description="the water surface's altitude reference, for the vertical "
-                                        "accuracy")
+    surface_amsl_m: NonNegative = Field(0.5, description="the water surface's altitude reference: the vertical "
+                                        "accuracy, and with [water] surface_amsl_m the height's from GNSS altitudes")
 
 
-#: The UAV's horizontal accuracy (m, 1-sigma) assumed when neither the calibration nor GPS_RAW_INT gives it.
+#: The UAV's horizontal accuracy (m, 1-sigma) assumed when neither the calibration nor a GPS_RAW_INT gives it.
 UAV_HORIZONTAL_FALLBACK_M = 1.5
 
 

@@ -6,7 +6,11 @@ how sure each is.
 calibration names, as rotations. A frame whose inputs are missing or too old gets
 a status word and NaNs; one just past the newest sample gets an extrapolated
 value with its estimated error in ``sigma_*``. The camera's angular and linear
-velocity come along, so a time-alignment error can be turned into metres.
+velocity come along, so a time-alignment error can be turned into metres. The
+height above the water is the EKF's corrected by :mod:`localizer.height` (the
+barometer's drift, from GNSS altitudes, a rangefinder, the UUV's size), with its
+sigma and source word; the UAV's horizontal sigma follows GPS_RAW_INT
+(:mod:`localizer.gnss`).
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ import numpy as np
 from . import attitude as att
 from .calibration import UAV_HORIZONTAL_FALLBACK_M, Calibration
 from .depth import SOURCE_WORDS, frame_sigma_m
+from .gnss import horizontal_sigma_m
+from .height import ekf_height_error
 from .surface import height_above_surface_m
 from .telemetry import DEG_PER_M, Telemetry
 from .timeline import BEFORE_FIRST, OK
@@ -52,7 +58,7 @@ class CameraPose:
     sigma_height_m: np.ndarray  # the camera's height above the water
     sigma_depth_m: np.ndarray  # the UUV's depth
     sigma_time_s: np.ndarray  # the frame's time against the telemetry's
-    height_source: np.ndarray  # object array of str, e.g. "takeoff" (relative_alt + the take-off height), "amsl"
+    height_source: np.ndarray  # object array of str: what measured the height (localizer.height), e.g. "gnss_rtk"
     depth_source: np.ndarray
     time_source: np.ndarray  # how the frame is aligned to the telemetry: configured, timesync, motion or unknown
 
@@ -132,23 +138,24 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, 
     cos_lat = np.cos(np.radians(p[:, 0]))
     velocity = np.nan_to_num(np.stack([p[:, 4] / DEG_PER_M, p[:, 5] * cos_lat / DEG_PER_M, -p[:, 6]], axis=-1))
 
-    gnss, _, _ = tel.gnss.sample(tq)
+    gnss, _, _ = tel.gnss.sample(tq)  # h_acc, geoid separation, fix type, alt, v_acc, HDOP, VDOP
     if cal.sigmas.uav_horizontal_m is not None:
         sigma_uav = np.full(n, cal.sigmas.uav_horizontal_m)
     else:
-        sigma_uav = np.where(np.isfinite(gnss[:, 0]), gnss[:, 0], UAV_HORIZONTAL_FALLBACK_M)
+        sigma_uav = horizontal_sigma_m(gnss[:, 2], gnss[:, 0], gnss[:, 5])
+        sigma_uav = np.where(np.isfinite(sigma_uav), sigma_uav, UAV_HORIZONTAL_FALLBACK_M)
     drift_m = np.hypot(ep[:, 0], ep[:, 1] * cos_lat) / DEG_PER_M  # extrapolated or held position
     sigma_uav = np.hypot(sigma_uav, np.nan_to_num(drift_m))
     offset_gnss = tel.station_minus_gnss_s
 
     offset_ned = np.einsum("nij,j->ni", R_body, np.asarray(cal.mount.camera_offset_m))
+    height = ekf_height_error(cal.water, cal.sigmas, tel, tq)  # the barometer's drift, from GNSS, a rangefinder, ...
     uav_h = height_above_surface_m(
         p[:, 2], p[:, 3], cal.water.takeoff_height_above_surface_m, cal.water.surface_amsl_m
-    )
+    ) - height.bias_m
     cam_h = uav_h - offset_ned[:, 2]
     status[(status == "ok") & ~(cam_h > 0)] = "below_surface"
     sig = cal.sigmas
-    height_source = "amsl" if cal.water.surface_amsl_m is not None else "takeoff"
     time_source, sigma_alignment_s = alignment or (tel.latency_source, tel.latency_sigma_s)
     return CameraPose(
         t_unix=t,
@@ -168,10 +175,10 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, 
         velocity_ned_mps=velocity,
         t_gnss=t - offset_gnss if offset_gnss is not None else np.full(n, np.nan),
         geoid_separation_m=gnss[:, 1],
-        sigma_height_m=np.full(n, sig.height_m),
+        sigma_height_m=height.sigma_m,
         sigma_depth_m=sigma_depth,
         sigma_time_s=np.full(n, np.hypot(sig.time_s, sigma_alignment_s)),
-        height_source=np.full(n, height_source, dtype=object),
+        height_source=height.source,
         depth_source=depth_source,
         time_source=np.full(n, time_source, dtype=object),
     )

@@ -36,6 +36,7 @@ from .attitude import euler_rates
 from .calibration import Timing
 from .clock import OUTLIER, RESTART, STEP, ClockMap, Median, RoundTrip
 from .depth import DEPTH_RANGE_M, SOURCE_WORDS
+from .height import rangefinder_height_m, rangefinder_sigma_m
 from .timeline import Series
 
 #: Station-clock disagreements (seconds) worth telling the operator about.
@@ -50,6 +51,8 @@ LATENCY_SOURCES = {
     "motion": "the frames' offset to the telemetry, estimated from the video's motion against the camera attitude",
     "unknown": "neither stated, measured nor estimated: taken as 0, its 1-sigma [timing] unknown_latency_sigma_s",
 }
+
+_BOOT_USEC_MAX = 10**15  # a GPS_RAW_INT time_usec below this (31 years) counts from the autopilot's boot
 
 
 class Telemetry:
@@ -82,14 +85,20 @@ class Telemetry:
         self.gimbal = Series("qqqqs", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
         # MOUNT_ORIENTATION: roll, pitch, yaw relative to the vehicle
         self.mount = Series("aaa", timing.gimbal_gap_s, timing.gimbal_hold_s, keep_s)
-        # GPS_RAW_INT: the receiver's horizontal accuracy (m) and geoid separation (m), receive times
-        self.gnss = Series("ss", math.inf, 10.0, keep_s)
+        # GPS_RAW_INT at receive times: the receiver's horizontal accuracy (m), the geoid separation (m), fix_type,
+        # the GNSS altitude (m AMSL), vertical accuracy (m), HDOP and VDOP (NaN: not given); see add_gps_raw
+        self.gnss = Series("sssssss", math.inf, 10.0, keep_s)
         # UUV depth below the surface (m, positive down), its 1-sigma (m; NaN: the calibration's), the vehicle's
         # vertical speed (m/s, positive down; NaN: unknown) and its source (index into SOURCE_WORDS), station seconds
         self.depth = Series("lsss", timing.depth_gap_s, timing.depth_hold_s, keep_s)
         # absolute measurements of the UAV's height above the water, per source ("rangefinder", "size", ...):
         # the reported position's height (m) and its 1-sigma (m), on the UAV buffers' time scale
         self.height_fixes: dict[str, Series] = {}
+        self.height_estimator = None  # the height filter over them (localizer.height), made on first use
+        self.armed: bool | None = None  # the autopilot's HEARTBEAT SAFETY_ARMED flag, once seen
+        self.arm_times: list[float] = []  # when it armed (UAV buffers' scale), transitions seen
+        self.distance_sensor_seen = False  # a downward DISTANCE_SENSOR came: ArduPilot's RANGEFINDER is its copy
+        self.rangefinder_out_of_range = 0  # readings at or beyond their range: no return from the water
         self._keep_s = keep_s
         self.autopilot_component: int | None = None
         self.mount_type: int | None = None  # the autopilot's MNT1_TYPE parameter, once seen
@@ -99,6 +108,11 @@ class Telemetry:
         self._last_boot: dict[int, float] = {}  # per series: the boot time of its newest sample
         self.notices: list[str] = []
         self._noticed: dict[str, float] = {}
+
+    @property
+    def keep_s(self) -> float | None:
+        """How long the buffers keep samples (live), or None (offline: everything)."""
+        return self._keep_s
 
     # -- clocks --------------------------------------------------------------------------------
     @property
@@ -299,10 +313,36 @@ class Telemetry:
             self._measured_latency_s = max(0.0, delay)
         return True
 
-    def add_gps_raw(self, h_acc_m: float, geoid_separation_m: float, receive_s: float) -> bool:
-        """GPS_RAW_INT's horizontal accuracy and geoid separation (m; NaN where the receiver gives none)."""
-        h_acc = h_acc_m if math.isfinite(h_acc_m) and h_acc_m > 0 else math.nan
-        return self._append(self.gnss, receive_s, (h_acc, geoid_separation_m))
+    def add_gps_raw(self, time_usec: int, fix_type: int, alt_amsl_m: float, h_acc_m: float, v_acc_m: float,
+                    hdop: float, vdop: float, geoid_separation_m: float, receive_s: float) -> bool:
+        """GPS_RAW_INT: its time, fix type, the GNSS altitude (m AMSL), the receiver's accuracies (m), HDOP, VDOP
+        and the geoid separation (m); NaN (or 0 for the accuracies and DOPs) where the receiver gives none.
+
+        Stored at the fix's own time on the UAV buffers' scale where it can be told (GNSS altitudes are
+        compared with the EKF's height at that time): ``time_usec`` since boot (ArduPilot: the last fix's
+        time) on the autopilot's clock, or UNIX time through SYSTEM_TIME's GNSS time; else at its arrival."""
+        def given(x):
+            return x if math.isfinite(x) and x > 0 else math.nan
+
+        if fix_type >= 3 and not -1000.0 < alt_amsl_m < 10_000.0:
+            return self._refuse(self.gnss, f"GNSS altitude {alt_amsl_m!r} m outside (-1000, 10000) (mm not converted?)")
+        t = receive_s
+        if 0 < time_usec < _BOOT_USEC_MAX and self.uav_clock.offset_s is not None:
+            t = time_usec / 1e6 + self.uav_clock.offset_s
+        elif time_usec >= _BOOT_USEC_MAX and self._gnss.value is not None:
+            t = time_usec / 1e6 + self._gnss.value
+        if not abs(t - receive_s) < 1.0:  # a stale or mistimed fix: at its arrival
+            t = receive_s
+        alt = alt_amsl_m if fix_type >= 3 and math.isfinite(alt_amsl_m) else math.nan
+        values = (given(h_acc_m), geoid_separation_m, float(fix_type), alt, given(v_acc_m), given(hdop), given(vdop))
+        return self._append(self.gnss, t, values)
+
+    def add_heartbeat(self, armed: bool, receive_s: float) -> None:
+        """The autopilot's HEARTBEAT: whether it is armed; an arming seen (disarmed, then armed) is kept in
+        :attr:`arm_times` at its receive time (a take-off's height reference is set then)."""
+        if armed and self.armed is False:
+            self.arm_times.append(receive_s)
+        self.armed = armed
 
     def add_param(self, name: str, value: float) -> None:
         """A PARAM_VALUE of the autopilot; MNT1_TYPE tells what its gimbal reports."""
@@ -310,6 +350,30 @@ class Telemetry:
             self.mount_type = round(value)
 
     # -- height above the water ------------------------------------------------------------------
+    def add_rangefinder(self, time_boot_ms, distance_m: float, min_m: float, max_m: float, receive_s: float,
+                        sigma_m: float | None = None) -> bool:
+        """A downward rangefinder's reading (m along the body's down axis; ``time_boot_ms`` None: stamped by
+        its arrival, ArduPilot's RANGEFINDER), added as a height above the water (``"rangefinder"``,
+        :meth:`add_height`) with the attitude at its time. A reading outside ``[min_m, max_m)`` is no
+        return (counted in :attr:`rangefinder_out_of_range`, not refused); ``sigma_m`` the sensor's own
+        1-sigma, else :func:`localizer.height.rangefinder_sigma_m`."""
+        if not (math.isfinite(distance_m) and min_m <= distance_m < max_m and distance_m > 0):
+            self.rangefinder_out_of_range += 1
+            return False
+        if time_boot_ms is None:
+            t = receive_s
+        else:
+            t = self._uav_t(time_boot_ms, receive_s, None)
+            if t is None:
+                return False
+        att, status, _ = self.attitude.sample(np.array([t]))
+        if status[0] != 0:
+            self.refusal = "no ATTITUDE at its time to turn the slant range into a height"
+            return False
+        height = float(rangefinder_height_m(distance_m, att[0, 0], att[0, 1]))
+        sigma = rangefinder_sigma_m(distance_m) if sigma_m is None else sigma_m
+        return self.add_height("rangefinder", t, height, sigma)
+
     def add_height(self, source: str, t_uav: float, uav_height_m: float, sigma_m: float) -> bool:
         """An absolute measurement of the height of the UAV's reported position above the water (m, with
         its 1-sigma) at ``t_uav`` (the UAV buffers' time scale: :meth:`uav_time` of a station time)."""

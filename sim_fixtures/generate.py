@@ -166,17 +166,22 @@ init_t = {init_t!r}
 
 
 def _uncertainty_toml(sc: Scenario) -> str:
-    """An ``[uncertainty]`` table stating the scenario's telemetry noise, when it has any."""
-    t = sc.telemetry
-    if not (t.attitude_noise_deg or t.height_noise_m or t.depth_noise_m):
+    """An ``[uncertainty]`` table stating the scenario's telemetry noise, when it has any, and how well the
+    water's altitude is known (``site.surface_amsl_sigma_m``), when given."""
+    t, known = sc.telemetry, sc.site.surface_amsl_sigma_m
+    noise = bool(t.attitude_noise_deg or t.height_noise_m or t.depth_noise_m)
+    if not noise and known is None:
         return ""
-    return f"""
-[uncertainty]  # the simulated telemetry noise (1-sigma per sample)
-tilt_deg = {t.attitude_noise_deg!r}
+    text = "\n[uncertainty]" + ("  # the simulated telemetry noise (1-sigma per sample)\n" if noise else "\n")
+    if noise:
+        text += f"""tilt_deg = {t.attitude_noise_deg!r}
 yaw_deg = {t.attitude_noise_deg!r}
 height_m = {t.height_noise_m!r}
 depth_m = {t.depth_noise_m!r}
 """
+    if known is not None:
+        text += f"surface_amsl_m = {known!r}  # how well the water's altitude is known\n"
+    return text
 
 
 class Encoder:

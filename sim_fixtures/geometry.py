@@ -216,6 +216,9 @@ def surface_crossing(camera_ned, point_ned, n_water: float) -> np.ndarray:
         if rho == 0.0:
             out[i] = (c[0], c[1], 0.0)
             continue
+        if d == 0.0:  # a point on the surface is its own crossing
+            out[i] = (p[0], p[1], 0.0)
+            continue
 
         def slope(s, h=h, d=d, rho=rho):
             return s / np.hypot(s, h) - n_water * (rho - s) / np.hypot(rho - s, d)

@@ -3,16 +3,16 @@
 Every item has at least one reason to be refused, and every item that decodes carries a
 *poisoned* payload — values within physical range that, were they used, would move a fix
 by metres to tens of metres: the UAV 0.001° (≈ 110 m) off, its attitude 0.4 rad off, the
-gimbal 25° off, the UUV 3 m deeper. A run with this input mixed into a valid session must
+gimbal 25° off, its GNSS altitude 30 m off (the height's), the UUV 3 m deeper. A run with this input mixed into a valid session must
 therefore send the same GPS_INPUT as the valid input alone, within the fixes' own noise.
 
 MAVLink kinds (:data:`MAVLINK_KINDS`, with the service's counter each must land in):
 ``random`` bytes, ``bit_flip`` (a frame with flipped bits), ``bad_crc``, ``truncated``,
 ``unknown_id`` (a well-formed MAVLink 2 frame of a message id no dialect has) — all
 ``bad_data``; ``other_system`` (the UAV's messages from another system id) —
-``other_systems``; ``other_component`` (ATTITUDE, GLOBAL_POSITION_INT or SYSTEM_TIME
-from a component that is not the autopilot), ``absurd`` (NaN, infinite or out-of-range
-values), ``time_back`` and ``time_forward`` (the autopilot's boot clock 5 s to 1 h off
+``other_systems``; ``other_component`` (ATTITUDE, GLOBAL_POSITION_INT, SYSTEM_TIME or
+GPS_RAW_INT from a component that is not the autopilot), ``absurd`` (NaN, infinite or
+out-of-range values: a GNSS altitude of ±thousands of km too), ``time_back`` and ``time_forward`` (the autopilot's boot clock 5 s to 1 h off
 the one its other messages follow, valid CRC) — all ``refused``.
 
 Depth kinds (:data:`DEPTH_KINDS`): ``not_json``, ``nan``, ``wrong_type``, ``missing``,
@@ -78,10 +78,13 @@ class MavlinkFuzzer:
             return mavlink2.MAVLink_gimbal_device_attitude_status_message(0, 0, boot, 12, _Q_PITCH_M32, math.nan,
                                                                            math.nan, math.nan, 0, math.nan,
                                                                            math.nan, 1)
+        if kind == "gps":  # an RTK altitude 30 m above the UAV's (its time since boot, as ArduPilot sends it)
+            return mavlink2.MAVLink_gps_raw_int_message(boot * 1000, 6, round(self.lat * 1e7), round(self.lon * 1e7),
+                                                        42_000, 70, 110, 0, 0, 14, 82_000, 10, 20, 0, 0, 0)
         return mavlink2.MAVLink_system_time_message(int((1_763_800_000 + self.rng.uniform(-1e6, 1e6)) * 1e6), boot)
 
     def _absurd(self, boot: int):
-        r = self.rng.randrange(6)
+        r = self.rng.randrange(7)
         bad = self.rng.choice((math.nan, math.inf, -math.inf, 7.0, -1e9))
         if r == 0:
             return mavlink2.MAVLink_attitude_message(boot, bad, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -95,6 +98,10 @@ class MavlinkFuzzer:
         if r == 3:
             return mavlink2.MAVLink_global_position_int_message(boot, round(self.lat * 1e7), 2_000_000_000,
                                                                 12_000, 8_000, 0, 0, 0, 0)
+        if r == 6:  # a 3D fix at ±2000 km
+            return mavlink2.MAVLink_gps_raw_int_message(boot * 1000, 3, round(self.lat * 1e7), round(self.lon * 1e7),
+                                                        self.rng.choice((2_000_000_000, -2_000_000_000)), 70, 110, 0,
+                                                        0, 14, 0, 800, 1600, 0, 0, 0)
         q = self.rng.choice(((0.0, 0.0, 0.0, 0.0), (math.nan, 0.0, 0.0, 1.0), (2.0, 0.0, 0.0, 0.0)))
         return mavlink2.MAVLink_gimbal_device_attitude_status_message(0, 0, boot, 12, q, 0.0, 0.0, 0.0, 0, 0.0,
                                                                        0.0, 1)
@@ -115,7 +122,7 @@ class MavlinkFuzzer:
             return self._pack(self._poisoned(boot), sysid=sysid)
         if kind == "other_component":
             compid = rng.choice([c for c in (25, 100, 154, 191, 240) if c != self.compid])
-            return self._pack(self._poisoned(boot, ("att", "pos", "time")), compid=compid)
+            return self._pack(self._poisoned(boot, ("att", "pos", "time", "gps")), compid=compid)
         if kind == "absurd":
             return self._pack(self._absurd(boot))
         if kind in ("time_back", "time_forward"):

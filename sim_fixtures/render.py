@@ -82,7 +82,7 @@ def hit_box(origin, direction, size_m):
     t_far = np.maximum(t1, t2)
     t_far = np.where(np.isnan(t_far), np.inf, t_far)
     t_in = t_near.max(axis=1)
-    hit = (t_in <= t_far.min(axis=1)) & (t_in > 0)
+    hit = (t_in <= t_far.min(axis=1)) & (t_in >= 0)  # 0: a top face at the surface, where the rays enter
     return hit, t_in, t_near.argmax(axis=1), origin + t_in[:, None] * direction
 
 

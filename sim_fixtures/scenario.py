@@ -24,6 +24,7 @@ from pydantic.dataclasses import dataclass
 from groundstation.config import read_toml
 from localizer.contract import (
     CLOSED,
+    Flag,
     Invalid,
     NonNegative,
     Number,
@@ -53,6 +54,9 @@ class Site:
     floor_depth_m: Positive = Field(4.0, description="flat seafloor below the surface")
     geoid_separation_m: Number = Field(40.0, description="WGS84 ellipsoid height of mean sea level "
                                        "(GPS_RAW_INT alt_ellipsoid - alt)")
+    surface_amsl_sigma_m: NonNegative | None = Field(
+        None, description="how well the operator knows the water's altitude: written as session.toml's "
+        "[uncertainty] surface_amsl_m (the written surface_amsl_m itself is exact); unset: not written")
     attenuation_bgr_per_m: Vector3 = Field((0.05, 0.08, 0.22), description="light attenuation coefficients (1/m)")
     water_bgr: Rgb = Field((120.0, 105.0, 50.0), description="colour of deep water (0-255)")
 
@@ -110,10 +114,26 @@ class UavSpec:
     wobble_deg: NonNegative = Field(0.0, description="amplitude of an extra airframe roll and pitch oscillation "
                                     "(a camera fixed to it wobbles)")
     wobble_hz: NonNegative = Field(0.0, description="frequency of that oscillation")
+    armed_at_s: Number | None = Field(None, description="scenario time the autopilot arms (HEARTBEAT base_mode "
+                                      "SAFETY_ARMED from then on); unset: armed before the telemetry starts")
+    baro_bias_m: Number = Field(0.0, description="error of the EKF's heights (GLOBAL_POSITION_INT alt and "
+                                "relative_alt, which follow the barometer with ArduPilot's EK3_SRC1_POSZ = 1) at the "
+                                "first frame, positive: they read high; GPS_RAW_INT is not affected")
+    baro_drift_m: Number = Field(0.0, description="change of that error from the first frame to the last, linear in "
+                                 "time (it goes on before and after)")
     gnss_fix_type: Annotated[Whole, Ge(0), Le(8)] = Field(3, description="GPS_RAW_INT fix_type (a GPS_FIX_TYPE: "
                                                           "3 = 3D, 6 = RTK fixed)")
-    gnss_h_acc_m: NonNegative = Field(0.02, description="GPS_RAW_INT h_acc (v_acc twice that); the simulated "
-                                      "position itself is exact")
+    gnss_h_acc_m: NonNegative = Field(0.02, description="GPS_RAW_INT h_acc; the simulated position (lat, lon) "
+                                      "itself is exact")
+    gnss_v_acc_m: NonNegative | None = Field(None, description="GPS_RAW_INT v_acc; unset: twice gnss_h_acc_m")
+    gnss_accuracy: Literal["reported", "dop_only"] = Field(
+        "reported", description="dop_only: h_acc and v_acc are 0 (not reported), only eph and epv, as some receivers")
+    gnss_hdop: Positive = Field(0.7, description="GPS_RAW_INT eph (HDOP x 100)")
+    gnss_vdop: Positive = Field(1.1, description="GPS_RAW_INT epv (VDOP x 100)")
+    gnss_alt_error_m: NonNegative = Field(0.0, description="RMS of the GNSS altitude's slowly wandering error "
+                                          "(GPS_RAW_INT alt and alt_ellipsoid; not the EKF's heights)")
+    gnss_alt_error_period_s: Positive = Field(300.0, description="its typical period: three sinusoids of this "
+                                              "period, 0.61 and 0.37 of it, random phases")
 
 
 @dataclass(frozen=True, config=CLOSED)
@@ -125,7 +145,7 @@ class UuvSpec:
     path_n_m: Number = Field(0.8, description="half extent of the path along North")
     path_e_m: Number = Field(0.6, description="half extent of the path along East")
     period_s: Positive = Field(24.0, description="one loop of the figure eight")
-    depth_m: Number = Field(1.0, description="mean depth of the top face (the reference point)")
+    depth_m: Number = Field(1.0, description="mean depth of the top face (the reference point); 0: at the surface")
     depth_swing_m: Number = Field(0.25, description="amplitude of the depth's slow changes")
     depth_period_s: Positive = Field(15.0, description="period of the depth's changes")
     depth_profile: tuple[Pair, ...] = Field(
@@ -139,6 +159,32 @@ class UuvSpec:
         if not all(t0 < t1 for (t0, _), (t1, _) in pairwise(profile)):
             raise Invalid("", [list(p) for p in profile], "expected [t_s, depth_m] pairs with increasing t_s")
         return profile
+
+
+@dataclass(frozen=True, config=CLOSED)
+class RangefinderSpec:
+    """``[rangefinder]``: a downward rangefinder (ArduPilot orientation 25, MAV_SENSOR_ROTATION_PITCH_270) at the
+    reported position, sent as DISTANCE_SENSOR and ArduPilot's RANGEFINDER at ``rate_hz``."""
+
+    enabled: Flag = Field(False, description="the UAV has one")
+    sees: Literal["water", "nothing", "floor"] = Field(
+        "water", description="water: the distance along the body's down axis to the surface (a tilted airframe "
+        "reads long); nothing: no return from the water, it reports max_m + 1 m (out of range) as ArduPilot's lidar "
+        "drivers do; floor: a lidar seeing the seafloor through clear water, approximately (height + n x floor "
+        "depth) along the down axis")
+    rate_hz: Positive = Field(10.0, description="readings per second")
+    noise_m: NonNegative = Field(0.03, description="1-sigma white noise of each reading (waves included)")
+    min_m: NonNegative = Field(0.2, description="DISTANCE_SENSOR min_distance")
+    max_m: Positive = Field(40.0, description="DISTANCE_SENSOR max_distance")
+    dropouts: tuple[Pair, ...] = Field((), description="[[start_s, end_s], ...] from the first frame: no reading is "
+                                       "sent (ArduPilot sends none while its driver has no data)")
+
+    @field_validator("dropouts")
+    @classmethod
+    def _start_before_end(cls, spans):
+        if not all(a < b for a, b in spans):
+            raise Invalid("", [list(w) for w in spans], "expected [start_s, end_s] pairs, start < end")
+        return spans
 
 
 @dataclass(frozen=True, config=CLOSED)
@@ -220,6 +266,7 @@ class Scenario:
     uuv: UuvSpec = Field(default_factory=UuvSpec)
     link: LinkSpec = Field(default_factory=LinkSpec)
     clock: ClockSpec = Field(default_factory=ClockSpec)
+    rangefinder: RangefinderSpec = Field(default_factory=RangefinderSpec)
     telemetry: TelemetrySpec = Field(default_factory=TelemetrySpec)
     render: RenderSpec = Field(default_factory=RenderSpec)
 
@@ -237,6 +284,9 @@ class Scenario:
         if link.reboot_at_s is not None and not -tel.lead_s <= link.reboot_at_s <= self.duration_s:
             raise Invalid("link.reboot_at_s", link.reboot_at_s,
                           f"must lie in the telemetry's span [-{tel.lead_s:g}, {self.duration_s:g}] s")
+        if not self.rangefinder.min_m < self.rangefinder.max_m:
+            raise Invalid("rangefinder.min_m", self.rangefinder.min_m, f"must be < rangefinder.max_m "
+                          f"({self.rangefinder.max_m:g})")
         if self.mount.kind == "servo" and self.mount.attitude_source == "fixed":
             raise Invalid("mount.kind", "servo", 'a servo mount needs attitude_source "gimbal_device" or '
                           '"mount_orientation", not "fixed"')
@@ -245,8 +295,9 @@ class Scenario:
         else:
             key, value = "uuv.depth_m", v.depth_m
             depths = (v.depth_m - abs(v.depth_swing_m), v.depth_m + abs(v.depth_swing_m))
-        if not (min(depths) > 0 and max(depths) + v.size_m[2] < self.site.floor_depth_m):
-            raise Invalid(key, value, "the UUV must stay between the surface and the seafloor (site.floor_depth_m)")
+        if not (min(depths) >= 0 and max(depths) + v.size_m[2] < self.site.floor_depth_m):
+            raise Invalid(key, value, "the UUV must stay between the surface (its top face at depth 0 or below) and "
+                          "the seafloor (site.floor_depth_m)")
         return self
 
 

@@ -13,10 +13,14 @@ Each message's values are the true state at its ``time_boot_ms`` (plus the
 scenario's optional noise), so geometry from this telemetry alone can reach the
 truth. Messages (system 1, component 1, as ArduPilot's):
 
-- HEARTBEAT (1 Hz); SYSTEM_TIME (``system_time_hz``): ``time_unix_usec`` is true time;
+- HEARTBEAT (1 Hz): armed (``base_mode`` SAFETY_ARMED) from ``uav.armed_at_s`` on, or throughout;
+  SYSTEM_TIME (``system_time_hz``): ``time_unix_usec`` is true time;
 - ATTITUDE (``attitude_hz``): roll, pitch, yaw and the true body rates (p, q, r in rad/s, FRD);
-- GLOBAL_POSITION_INT (``position_hz``) with its NED velocity (cm/s);
+- GLOBAL_POSITION_INT (``position_hz``) with its NED velocity (cm/s); its heights ``alt`` and
+  ``relative_alt`` carry the barometer's error (:func:`baro_error_m`), as ArduPilot's EKF's do when
+  the barometer is its height source (EK3_SRC1_POSZ = 1);
 - GPS_RAW_INT (``gps_raw_hz``): see :func:`_gps_raw`;
+- DISTANCE_SENSOR and ArduPilot's RANGEFINDER (``[rangefinder]``): see :func:`_rangefinder`;
 - GIMBAL_DEVICE_ATTITUDE_STATUS or MOUNT_ORIENTATION (``gimbal_hz``) unless the camera is fixed;
 - TIMESYNC replies: the ground station sends requests (``tc1`` 0, ``ts1`` its station-clock
   send time in ns) at ``timesync_hz``; the autopilot answers like ArduPilot with
@@ -54,7 +58,9 @@ GCS_PARAM_COUNT = 1200  # PARAM_VALUE param_count: the autopilot's number of par
 
 # independent random streams: np.random.default_rng([seed, 404, STREAM[name]])
 STREAM = {"heartbeat": 1, "system_time": 2, "attitude": 3, "position": 4, "gimbal": 5, "gps_raw": 6,
-          "timesync": 7, "downlink": 8, "depth": 9, "depth_link": 10}
+          "timesync": 7, "downlink": 8, "depth": 9, "depth_link": 10, "gnss_alt": 11, "rangefinder": 12}
+MAV_SENSOR_ROTATION_PITCH_270 = 25  # a rangefinder looking down the body's z axis
+OUT_OF_RANGE_ADD_M = 1.0  # ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
 
 
 def stream(sc: Scenario, name: str):
@@ -132,27 +138,86 @@ def sample_times(clock: Clock, rate_hz: float, tau0_s: float, tau1_s: float, rng
     return t, ms[first]
 
 
+def baro_error_m(sc: Scenario, tau_s):
+    """The EKF heights' error (m, positive: they read high) at scenario times: ``uav.baro_bias_m`` at the
+    first frame, changing linearly by ``uav.baro_drift_m`` up to the last."""
+    u = sc.uav
+    return u.baro_bias_m + u.baro_drift_m * np.asarray(tau_s, dtype=float) / sc.duration_s
+
+
+def gnss_alt_error_m(sc: Scenario, tau_s):
+    """The GNSS altitude's error (m) at scenario times: three sinusoids of ``uav.gnss_alt_error_period_s``,
+    0.61 and 0.37 of it, random phases, together of RMS ``uav.gnss_alt_error_m``."""
+    u = sc.uav
+    tau = np.asarray(tau_s, dtype=float)
+    phases = stream(sc, "gnss_alt").uniform(0.0, 2 * np.pi, 3)
+    amplitude = u.gnss_alt_error_m / np.sqrt(1.5)  # three sinusoids of amplitude a: RMS a·sqrt(3/2)
+    return sum(amplitude * np.sin(2 * np.pi * tau / (u.gnss_alt_error_period_s * k) + ph)
+               for k, ph in zip((1.0, 0.61, 0.37), phases))
+
+
 def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
-    """GPS_RAW_INT arguments: the reported point as GLOBAL_POSITION_INT has it (the simulated GNSS is exact).
+    """GPS_RAW_INT arguments: the reported point's position as GLOBAL_POSITION_INT has it (exact), its
+    altitude with the GNSS's own error (:func:`gnss_alt_error_m`), not the barometer's.
 
     ``time_usec`` true UNIX µs (``gps_raw_time = "unix"``) or boot µs (``"boot"``, ArduPilot's
-    ``last_fix_time_ms``·1000); ``fix_type`` from ``uav.gnss_fix_type``; ``eph`` 70 (HDOP 0.7),
-    ``epv`` 110; ``vel`` ground speed cm/s, ``cog`` course over ground cdeg; 14 satellites;
-    ``alt_ellipsoid`` = alt + ``site.geoid_separation_m`` (mm); ``h_acc`` = ``uav.gnss_h_acc_m``,
-    ``v_acc`` twice that (mm); ``vel_acc`` 30 mm/s; ``hdg_acc`` and ``yaw`` 0 (no GNSS yaw).
+    ``last_fix_time_ms``·1000); ``fix_type`` from ``uav.gnss_fix_type``; ``eph``/``epv`` HDOP/VDOP × 100
+    (``uav.gnss_hdop``, ``gnss_vdop``); ``vel`` ground speed cm/s, ``cog`` course over ground cdeg;
+    14 satellites; ``alt_ellipsoid`` = alt + ``site.geoid_separation_m`` (mm); ``h_acc`` =
+    ``uav.gnss_h_acc_m``, ``v_acc`` = ``uav.gnss_v_acc_m`` or twice h_acc (mm), both 0 with
+    ``gnss_accuracy = "dop_only"``; ``vel_acc`` 30 mm/s; ``hdg_acc`` and ``yaw`` 0 (no GNSS yaw).
     """
     s, u = sc.site, sc.uav
     tau = clock.tau_of_us(t_us)
     lat, lon, alt = ned_to_geodetic(motion.uav_ned(tau), s.lat_deg, s.lon_deg, s.surface_amsl_m)
-    alt = alt + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m
+    alt = alt + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m + gnss_alt_error_m(sc, tau)
     vel = motion.uav_velocity_ned(tau)
     speed = np.hypot(vel[:, 0], vel[:, 1])
     cog = np.round(np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360 * 100).astype(int) % 36000
     time_usec = t_us if sc.telemetry.gps_raw_time == "unix" else ms * 1000
     h_acc = round(u.gnss_h_acc_m * 1000)
-    return [(int(tu), u.gnss_fix_type, round(la * 1e7), round(lo * 1e7), round(a * 1000), 70, 110, round(v * 100),
-             int(c), 14, round((a + s.geoid_separation_m) * 1000), h_acc, 2 * h_acc, 30, 0, 0)
+    v_acc = 2 * h_acc if u.gnss_v_acc_m is None else round(u.gnss_v_acc_m * 1000)
+    if u.gnss_accuracy == "dop_only":
+        h_acc = v_acc = 0
+    eph, epv = round(u.gnss_hdop * 100), round(u.gnss_vdop * 100)
+    return [(int(tu), u.gnss_fix_type, round(la * 1e7), round(lo * 1e7), round(a * 1000), eph, epv, round(v * 100),
+             int(c), 14, round((a + s.geoid_separation_m) * 1000), h_acc, v_acc, 30, 0, 0)
             for tu, la, lo, a, v, c in zip(time_usec, lat, lon, alt, speed, cog)]
+
+
+def rangefinder_distance_m(sc: Scenario, motion: Motion, tau_s):
+    """What a downward rangefinder at the reported position measures (m, before noise): the distance along
+    the body's down axis to what it sees (``[rangefinder] sees``)."""
+    tau = np.asarray(tau_s, dtype=float)
+    rf, s = sc.rangefinder, sc.site
+    if rf.sees == "nothing":
+        return np.full(tau.shape, rf.max_m + OUT_OF_RANGE_ADD_M)
+    height = -motion.uav_ned(tau)[..., 2]
+    if rf.sees == "floor":  # light travels n times slower in water: the time of flight reads n × the depth
+        height = height + s.refractive_index * s.floor_depth_m
+    down_axis_down = motion.R_ned_from_body(tau)[..., 2, 2]  # the body's z axis, its NED down component
+    return height / down_axis_down
+
+
+def _rangefinder(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
+    """``(t_us, DISTANCE_SENSOR rows, RANGEFINDER rows)`` as ArduPilot sends them for a downward rangefinder.
+
+    DISTANCE_SENSOR: ``time_boot_ms``, min/max/current distance in cm, type 0 (laser), id 0, orientation 25
+    (PITCH_270), covariance 0 (unknown), no FOV or quaternion, signal_quality 0 (unknown); RANGEFINDER:
+    the distance in metres and voltage 0. None during ``[rangefinder] dropouts``.
+    """
+    rf = sc.rangefinder
+    tau = clock.tau_of_us(t_us)
+    noise = rng.normal(0.0, 1.0, len(tau)) * rf.noise_m
+    distance = rangefinder_distance_m(sc, motion, tau) + (noise if rf.sees != "nothing" else 0.0)
+    keep = np.ones(len(tau), bool)
+    for a, b in rf.dropouts:
+        keep &= ~((tau >= a) & (tau < b))
+    cm = np.clip(np.round(distance * 100), 0, 65535).astype(int)
+    lo, hi = round(rf.min_m * 100), round(rf.max_m * 100)
+    ds = [(int(m), lo, hi, int(c), 0, 0, MAV_SENSOR_ROTATION_PITCH_270, 0) for m, c in zip(ms[keep], cm[keep])]
+    rng_rows = [(float(c) / 100.0, 0.0) for c in cm[keep]]
+    return t_us[keep], ds, rng_rows
 
 
 def _gimbal(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
@@ -201,8 +266,14 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
 
     t, _ = sample_times(clock, 1.0, tau0, tau1, stream(sc, "heartbeat"))
     armed = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_SAFETY_ARMED
+    disarmed = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     loiter = 5  # ArduCopter's LOITER flight mode
-    add(t, "heartbeat", [(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, armed, loiter, mav.MAV_STATE_ACTIVE)] * len(t))
+    arm_at = sc.uav.armed_at_s
+    add(t, "heartbeat", [
+        (mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, armed, loiter, mav.MAV_STATE_ACTIVE)
+        if arm_at is None or tau >= arm_at else
+        (mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, disarmed, loiter, mav.MAV_STATE_STANDBY)
+        for tau in clock.tau_of_us(t)])
     if tel.system_time_hz > 0:
         t, ms = sample_times(clock, tel.system_time_hz, tau0, tau1, stream(sc, "system_time"))
         add(t, "system_time", [(int(tu), int(m)) for tu, m in zip(t, ms)])
@@ -222,8 +293,9 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
     vel = motion.uav_velocity_ned(tau)
     s = sc.site
     lat, lon, alt = ned_to_geodetic(ned, s.lat_deg, s.lon_deg, s.surface_amsl_m)
-    alt = alt + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m
-    rel = -ned[:, 2] - s.takeoff_height_above_surface_m + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m
+    baro = baro_error_m(sc, tau)
+    alt = alt + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m + baro
+    rel = -ned[:, 2] - s.takeoff_height_above_surface_m + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m + baro
     hdg = np.round(np.degrees(motion.uav_rpy(tau)[:, 2]) % 360 * 100).astype(int) % 36000
     add(t, "global_position_int", [
         (int(m), round(la * 1e7), round(lo * 1e7), round(a * 1000), round(r * 1000),
@@ -235,6 +307,13 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
         rng = stream(sc, "gps_raw")
         t, ms = sample_times(clock, tel.gps_raw_hz, tau0, tau1, rng)
         add(t, "gps_raw_int", _gps_raw(sc, motion, clock, t, ms, rng))
+
+    if sc.rangefinder.enabled:
+        rng = stream(sc, "rangefinder")
+        t, ms = sample_times(clock, sc.rangefinder.rate_hz, tau0, tau1, rng)
+        t, ds, rf = _rangefinder(sc, motion, clock, t, ms, rng)
+        add(t, "distance_sensor", ds)
+        add(t, "rangefinder", rf)
 
     if sc.mount.attitude_source != "fixed":
         rng = stream(sc, "gimbal")

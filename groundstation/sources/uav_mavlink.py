@@ -13,7 +13,8 @@ same link) the worker, once per second, heartbeats and sends a TIMESYNC request
 (the autopilot's replies measure the link's delay); once the autopilot is known
 it asks for its ``MNT1_TYPE`` parameter (what the gimbal message's roll and
 pitch are relative to) and for the telemetry rates skyfix needs
-(:mod:`.rates`; ``--no-request-rates`` leaves them alone). Only the UAV's
+(:mod:`.rates`, DISTANCE_SENSOR's once a downward one came; ``--no-request-rates``
+leaves them alone). Only the UAV's
 messages are used: the system id of the first autopilot heartbeat or used
 message; others are counted. Malformed frames (pymavlink's BAD_DATA) and refused
 samples are counted and logged with their reason, never fatal; so are the
@@ -24,16 +25,18 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from collections.abc import Callable
 
+from localizer.gnss import horizontal_sigma_m, vertical_sigma_m
 from localizer.telemetry import Telemetry
 
 from ..logs import Throttle, kind_of
 from ..mavlink_io import USED, ingest, mavutil
 from ..mavlink_link import MavlinkLink
 from ..threads import Handoff, in_thread
-from .rates import RateMeter, RateRequests
+from .rates import RANGEFINDER_HZ, RateMeter, RateRequests
 
 log = logging.getLogger("skyfix.uav")
 
@@ -83,6 +86,20 @@ def clock_status(tel: Telemetry) -> dict:
         "uuv_clock_minus_station_s": None if uuv is None else round(uuv, 3),
         "depth_aligned_by": tel.depth_aligned_by,
     }
+
+
+def gnss_status(tel: Telemetry) -> dict | None:
+    """The UAV's GNSS receiver as its newest GPS_RAW_INT says, and the 1-sigmas skyfix takes from it."""
+    if not len(tel.gnss):
+        return None
+    h_acc, _, fix, _, v_acc, hdop, vdop = tel.gnss.values[-1]
+
+    def num(x):
+        return round(float(x), 3) if math.isfinite(x) else None
+
+    return {"fix_type": int(fix), "h_acc_m": num(h_acc), "v_acc_m": num(v_acc), "hdop": num(hdop), "vdop": num(vdop),
+            "sigma_horizontal_m": num(horizontal_sigma_m(fix, h_acc, hdop)),
+            "sigma_vertical_m": num(vertical_sigma_m(fix, v_acc, vdop))}
 
 
 class UavMavlink:
@@ -189,6 +206,8 @@ class UavMavlink:
         if self.autopilot is None and self.tel.autopilot_component is not None:
             self.autopilot = (msg.get_srcSystem(), self.tel.autopilot_component)
             self.requests.start(t_recv)
+        if kind == "DISTANCE_SENSOR" and self.tel.distance_sensor_seen and kind not in self.requests.needed:
+            self.requests.needed[kind] = RANGEFINDER_HZ  # the UAV has a downward rangefinder: its rate too
         if kind == "COMMAND_ACK" and self.autopilot is not None:
             self.requests.on_ack(msg.command, msg.result)
         if kind in USED and not used and self.tel.refusal:
@@ -206,6 +225,6 @@ class UavMavlink:
             listener(msg, t_recv)
 
     def status(self, now: float) -> dict:
-        return {"url": self.url, "sysid": self.uav_sysid, "clocks": clock_status(self.tel),
+        return {"url": self.url, "sysid": self.uav_sysid, "clocks": clock_status(self.tel), "gnss": gnss_status(self.tel),
                 "rate_requests": dict(self.requests.state), **self.health.as_dict(now),
                 "link": self.link.status(now), "handoff": self.handoff.status() if self.handoff else None}

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from localizer.telemetry import Telemetry
 
 from ..mavlink_io import USED, ingest
-from .uav_mavlink import LinkHealth, clock_status
+from .uav_mavlink import LinkHealth, clock_status, gnss_status
 
 log = logging.getLogger("skyfix.uav")
 
@@ -87,7 +87,7 @@ class UavMavsdk:
                 system = await drone.first_autopilot(timeout_s=1.0)
             direct = MavlinkDirectAsync(system)
             async with asyncio.TaskGroup() as tg:
-                for name in USED:
+                for name in (*USED, "HEARTBEAT"):  # the autopilot's HEARTBEAT: whether it is armed
                     tg.create_task(self._follow(direct, name))
 
     async def _follow(self, direct, name: str) -> None:
@@ -115,4 +115,5 @@ class UavMavsdk:
 
     def status(self, now: float) -> dict:
         return {"url": self.url, "backend": "mavsdk", "sysid": self.uav_sysid, "clocks": clock_status(self.tel),
+                "gnss": gnss_status(self.tel),
                 **self.health.as_dict(now)}

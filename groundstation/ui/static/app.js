@@ -219,6 +219,8 @@ function showStatus() {
   word.textContent = fix ? fix.status : "no frames";
   word.className = `word ${fix && fix.status === "ok" ? "ok" : "bad"}`;
   $("hacc").textContent = `h_acc ${fmt(fix && fix.h_acc_m, 2, " m")}`;
+  const h = s.height;  // the UAV's height above the water, as the fixes use it
+  $("height").textContent = h ? `height ${fmt(h.height_m, 2)} ± ${fmt(h.sigma_m, 2, " m")} (${h.source})` : "height —";
   const t = s.target;
   $("target-state").textContent = `target ${t.state}${t.origin ? ` (${t.origin})` : ""}`;
   const okFix = fix && fix.status === "ok";
@@ -427,6 +429,24 @@ function showHealth() {
                   `last fix_type ${ft} · ${g.sent_valid}/${g.sent} valid · ${g.not_delivered} not delivered`
                   + ` · ${g.gates ? Object.values(g.gates.rejected).reduce((a, b) => a + b, 0) : 0} held by the gates · ${g.url}`
                   + ` · link ${link.state ?? "—"}${link.error ? ` (${link.error})` : ""} · autopilot last heard ${heard}`));
+  }
+  if (s.height) {
+    const h = s.height;
+    const used = Object.entries(h.sources || {}).map(([k, v]) => `${k} ${v.used} used`
+      + `${v.refused ? `, ${v.refused} refused` : ""}, ${age(v.age_s)} ago`
+      + `${v.disagrees_m !== null ? `, DISAGREES by ${fmt(v.disagrees_m, 2, " m")}` : ""}`).join(" · ");
+    const disagree = Object.values(h.sources || {}).some((v) => v.disagrees_m !== null);
+    rows.push(row("height", disagree ? "warn: sources disagree" : null, "", "",
+                  `${fmt(h.height_m)} ± ${fmt(h.sigma_m, 2, " m")} above the water (${h.source}) · EKF ${fmt(h.ekf_height_m)} m,`
+                  + ` bias ${fmt(h.bias_m, 2, " m")} · ${h.reference} reference set at ${h.reference_set_at}`
+                  + ` ${fmt(h.since_reference_s, 0, " s")} ago${used ? ` · ${used}` : ""}`
+                  + `${h.rangefinder_out_of_range ? ` · rangefinder out of range ${h.rangefinder_out_of_range}` : ""}`));
+  }
+  if (uav.gnss) {
+    const g = uav.gnss;
+    rows.push(row("GNSS", null, "", "", `fix_type ${g.fix_type} · horizontal ${fmt(g.sigma_horizontal_m, 2, " m")}`
+                  + ` (h_acc ${fmt(g.h_acc_m, 2, " m")}, HDOP ${fmt(g.hdop, 1)}) · vertical ${fmt(g.sigma_vertical_m, 2, " m")}`
+                  + ` (v_acc ${fmt(g.v_acc_m, 2, " m")}, VDOP ${fmt(g.vdop, 1)})`));
   }
   const c = uav.clocks;
   rows.push(row("clocks", null, "", "", `station − GNSS ${fmt(c.station_minus_gnss_s, 3, " s")} · UAV link `

@@ -1,0 +1,110 @@
+"""The camera's height above the water: what each height source buys, geometry only.
+
+    .venv/bin/python bench/height.py [--work /tmp/skyfix-height] [--out bench/results/height.txt]
+                                     [--skyfix "PYTHON -m groundstation.cli" --skyfix-cwd DIR] [--only NAME ...]
+
+For each scenario (``sim_fixtures/scenarios/<name>.toml``, generated once into ``--work`` without
+video, and two variants of the rangefinder scenario: a lidar that gets no return from the water,
+one that sees the seafloor) it runs ``skyfix evaluate --use-track`` and reports, for the refraction
+method: the MAE against truth and the share of fixes within 2·h_acc (evaluate's own table), and
+from ``positions.csv`` the camera's height against its truth (the scenario's motion): mean and
+largest error, the share within 2·sigma_height_m, the median sigma and the source words.
+``--skyfix``/``--skyfix-cwd`` run another skyfix (an older checkout: before/after) on the same
+sessions. ``sim_fixtures/bundled/*`` is evaluated too (geometry only), the sessions that must not
+get worse.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import shlex
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from groundstation.positions import read_positions_csv
+from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR
+from sim_fixtures.generate import generate
+from sim_fixtures.motion import Motion
+from sim_fixtures.scenario import load_scenario, with_overrides
+
+SCENARIOS = ("height_rtk_drift", "height_gnss_drift", "height_rangefinder", "height_rangefinder:nothing",
+             "height_rangefinder:floor")
+
+
+def scenario(name: str):
+    base, _, sees = name.partition(":")
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / f"{base}.toml")
+    return with_overrides(sc, rangefinder={"sees": sees}) if sees else sc
+
+
+def session(name: str, work: Path) -> Path:
+    out = work / name.replace(":", "_")
+    if not (out / "uav.tlog").is_file():
+        generate(scenario(name), out, video=False)
+    return out
+
+
+def evaluate(skyfix: list[str], cwd: Path, path: Path, out: Path) -> dict:
+    """evaluate's refraction row for ``path`` and its positions.csv."""
+    subprocess.run([*skyfix, "evaluate", str(path), "--use-track", "--out", str(out), "--quiet"], cwd=cwd,
+                   capture_output=True, check=False)
+    with open(out / "evaluation.csv", newline="") as f:
+        row = next(r for r in csv.DictReader(f) if r["method"] == "refraction")
+    return {"mae_m": float(row["mae_m"]), "in_2sigma": float(row["within_2sigma"]),
+            "positions": read_positions_csv(out / path.name / "refraction" / "positions.csv")}
+
+
+def height_columns(name: str, pos) -> str:
+    sc = scenario(name)
+    true_h = -Motion(sc).camera_ned(np.arange(len(pos.t_unix)) / sc.fps)[:, 2]  # frame i at i / fps
+    err, sigma = pos.height_m - true_h, pos.sigma_height_m
+    ok = np.isfinite(err)
+    words = ", ".join(f"{w} {n / ok.sum():.0%}" for w, n in Counter(pos.height_source[ok]).most_common())
+    return (f"{np.mean(np.abs(err[ok])):7.3f} {np.max(np.abs(err[ok])):7.3f} "
+            f"{np.mean(np.abs(err[ok]) <= 2 * sigma[ok]):6.1%} {np.median(sigma[ok]):6.3f}  {words}")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", default="/tmp/skyfix-height")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "height.txt"))
+    ap.add_argument("--skyfix", help="another skyfix to compare, e.g. '/old/.venv/bin/python -m groundstation.cli'")
+    ap.add_argument("--skyfix-cwd", default=str(ROOT))
+    ap.add_argument("--only", nargs="*")
+    args = ap.parse_args()
+    work = Path(args.work)
+    runs = [("after", [sys.executable, "-m", "groundstation.cli"], ROOT)]
+    if args.skyfix:
+        runs.insert(0, ("before", shlex.split(args.skyfix), Path(args.skyfix_cwd)))
+    names = args.only or SCENARIOS
+    header = (f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} "
+              f"{'in 2σh':>6s} {'σh med':>6s}  height source")
+    lines = [header]
+    for name in names:
+        path = session(name, work)
+        for label, skyfix, cwd in runs:
+            r = evaluate(skyfix, cwd, path, work / label / path.name)
+            lines.append(f"{name:28s} {label:6s} {r['mae_m']:7.4f} {r['in_2sigma']:6.1%}  "
+                         + height_columns(name, r["positions"]))
+            print(lines[-1], flush=True)
+    for name in BUNDLED if not args.only else ():
+        for label, skyfix, cwd in runs:
+            r = evaluate(skyfix, cwd, BUNDLED_DIR / name, work / label / "bundled")
+            lines.append(f"{'bundled/' + name:28s} {label:6s} {r['mae_m']:7.4f} {r['in_2sigma']:6.1%}")
+            print(lines[-1], flush=True)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text("\n".join(lines) + "\n")
+    print(f"-> {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,427 @@
+"""The height of the UAV's reported position above the water, per frame, with its 1-sigma and its sources.
+
+The EKF's height (GLOBAL_POSITION_INT ``relative_alt`` + ``[water] takeoff_height_above_surface_m``,
+or ``alt`` − ``[water] surface_amsl_m``: :mod:`localizer.surface`) is the smooth reference at the
+telemetry's rate. With the barometer as the EKF's height source (ArduPilot's EK3_SRC1_POSZ = 1)
+both follow the barometer, which drifts. Its error ``b`` = EKF height − true height is estimated
+by a small Kalman filter (:class:`HeightEstimator`) over whatever measures it, and a frame's
+height is the EKF height − ``b``. States ``x = (e, s, g)``, metres:
+
+- ``e``: the EKF height's own error. 0 ± ``[uncertainty] height_m`` when its reference was set:
+  the take-off (ArduPilot sets home, so ``relative_alt`` 0, when it arms: an arming seen in
+  the HEARTBEATs starts ``e`` again) or, in the amsl reference or when no arming was seen, the
+  autopilot's boot (its EKF origin): a conservative bound on the flight time. It then drifts as
+  a random walk (as PX4's EKF2 models a barometer's bias) of 1-sigma ``[uncertainty]
+  baro_drift_10min_m`` after 10 minutes: without any measurement the height's sigma grows
+  with the square root of the time since the reference was set. A random walk, not a drift
+  rate: a rate learnt over seconds would be extrapolated over the whole flight.
+- ``s``: the water's altitude minus the reference used for GNSS altitudes: with ``[water]
+  surface_amsl_m`` ± ``[uncertainty] surface_amsl_m``; with the take-off reference unknown
+  (± :data:`SURFACE_UNKNOWN_M`), so that GNSS altitudes give the barometer's drift (their trend
+  since the first), not its offset.
+- ``g``: the GNSS altitude's slow error, first-order Gauss-Markov of correlation time
+  :data:`GNSS_TAU_S`; with each fix's own white noise (:data:`GNSS_WHITE`) its 1-sigma is the
+  receiver's vertical accuracy (:func:`localizer.gnss.vertical_sigma_m`). It starts afresh when
+  the fix type changes.
+
+The height's error is ``b = e`` (take-off reference) or ``e + s`` (amsl). Measurements:
+
+- a GNSS altitude ``a`` (GPS_RAW_INT, 3D fix or better): ``a − h_ekf − S = s + g − e`` (take-off;
+  ``S`` the first such difference) or ``g − e`` (amsl, ``S`` = ``surface_amsl_m``). An RTK fix's
+  centimetre accuracy makes it the height when the water's altitude is known; a plain fix's
+  metres give little more than the barometer;
+- an absolute height ``h`` (:attr:`Telemetry.height_fixes`: a downward rangefinder, the UUV's
+  size in the image, ...): ``h_ekf − h = b`` ± its own sigma.
+
+Cross-check: a measurement more than :data:`GATE_SIGMAS` sigmas from the estimate is not used,
+and its source's next ones are used only within :data:`AGREE_SIGMAS` (so a wrong source cannot
+slip in as the barometer's sigma grows). After :data:`CONFLICT_AFTER` refused in a row the source
+disagrees: until :data:`CONFLICT_HOLD_S` after its last refused one, the height's sigma covers
+both (``hypot(sigma, disagreement / 2)``); which one is right is not known, so h_acc says so
+(when in doubt, no fix: GPS_INPUT's gate on h_acc). A disagreement starting and ending is one
+line each (:func:`take_notices`), naming both heights; a single glitch is neither.
+The filter is causal: a frame's height uses the measurements up to its time, offline as live;
+measurements that arrive late (the UUV's size is measured after the frame) are fused in time
+order by re-running the filter from just before them.
+
+A frame's source word names what updated the estimate within :data:`SOURCE_WINDOW_S` before it,
+joined by ``+``: ``rangefinder``, ``size`` (any absolute source by its name), ``gnss_rtk`` / ``gnss``
+(amsl reference: RTK, or plain GNSS altitudes), ``baro+gnss_rtk`` / ``baro+gnss`` (take-off
+reference: the barometer's drift followed against the GNSS altitude's trend); with none,
+``takeoff`` or ``amsl``: the EKF height by the calibration's reference, its sigma grown with time.
+
+Downward rangefinders: :func:`rangefinder_height_m` (the slant range along the body's down axis
+times its vertical component, over flat water), :func:`rangefinder_sigma_m`. The rangefinder is
+taken to sit at the reported position.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+
+from . import gnss
+from .calibration import Sigmas, Water
+from .surface import height_above_surface_m
+from .timeline import OK
+
+if TYPE_CHECKING:
+    from .telemetry import Telemetry
+
+DRIFT_REFERENCE_S = 600.0  # [uncertainty] baro_drift_10min_m is the drift's 1-sigma after this long
+GNSS_TAU_S = 300.0  # correlation time of a GNSS altitude's error (satellite geometry, multipath)
+GNSS_WHITE = 0.3  # share of a GNSS altitude's 1-sigma that is new with each fix (multipath, its timing against
+# the EKF's height): white noise of GNSS_WHITE·sigma, the slow error g the rest, sqrt(1 − GNSS_WHITE²)·sigma
+SURFACE_UNKNOWN_M = 1000.0  # 1-sigma of a water altitude nobody gave
+GATE_SIGMAS = 5.0  # a measurement this far from the estimate is refused ...
+AGREE_SIGMAS = 3.0  # ... and its source's next ones until one comes within this
+CONFLICT_AFTER = 3  # a source disagrees once this many of its measurements in a row were refused (not one glitch)
+CONFLICT_HOLD_S = 10.0  # a disagreement counts in the sigma until this long after the source's last refused measurement
+SOURCE_WINDOW_S = 30.0
+RANGEFINDER_FLOOR_M = 0.05  # laser rangefinders' data sheets: ±5 cm up to a few metres ...
+RANGEFINDER_SHARE = 0.01  # ... and 1 % of the range beyond (e.g. Benewake TFmini Plus, TF03)
+
+_ARM, _GNSS, _FIX = 0, 1, 2
+
+
+def rangefinder_height_m(distance_m, roll_rad, pitch_rad):
+    """Height above flat water (m) of a rangefinder looking down the body's z axis that reads ``distance_m``:
+    the distance times the axis's vertical component (cos roll · cos pitch): a tilted airframe reads long."""
+    return np.asarray(distance_m, dtype=float) * np.cos(roll_rad) * np.cos(pitch_rad)
+
+
+def rangefinder_sigma_m(distance_m):
+    """1-sigma of a rangefinder's reading (m) when it states none: :data:`RANGEFINDER_FLOOR_M` and
+    :data:`RANGEFINDER_SHARE` of the range, together."""
+    return np.hypot(RANGEFINDER_FLOOR_M, RANGEFINDER_SHARE * np.asarray(distance_m, dtype=float))
+
+
+def ekf_height_m(water: Water, tel: Telemetry, t_uav) -> np.ndarray:
+    """The EKF's height of the reported position above the water at UAV-scale times (NaN where
+    GLOBAL_POSITION_INT has no fresh sample)."""
+    p, status, _ = tel.position.sample(np.asarray(t_uav, dtype=float))
+    h = height_above_surface_m(p[..., 2], p[..., 3], water.takeoff_height_above_surface_m, water.surface_amsl_m)
+    return np.where(status == OK, h, np.nan)
+
+
+@dataclass
+class HeightAt:
+    """The EKF height's estimated error at some times: height = EKF height − ``bias_m``."""
+
+    bias_m: np.ndarray
+    sigma_m: np.ndarray
+    source: np.ndarray  # object array of words
+
+
+class _Aux(NamedTuple):
+    """What the filter carries besides its state, after an entry."""
+
+    sigma_g: float  # the GNSS altitude's slow error's 1-sigma in force (NaN before one came)
+    fix: int  # its fix type (-1 before)
+    S: float | None  # the water altitude GNSS altitudes are referred to (take-off: the first difference)
+    refused: tuple = ()  # (source, measurements refused in a row) of the sources whose newest was refused
+
+
+class HeightEstimator:
+    """The Kalman filter of the module doc over a :class:`~localizer.telemetry.Telemetry`'s measurements.
+
+    :meth:`at` pulls what arrived since the last call and answers for UAV-scale times. Entries
+    (measurements and armings) are kept in time order with the filter's state after each; a
+    measurement older than the newest processed one re-runs the filter from there.
+    """
+
+    def __init__(self, water: Water, sigmas: Sigmas):
+        self.water, self.sigmas = water, sigmas
+        self.key = (water, sigmas)
+        self.amsl = water.surface_amsl_m is not None
+        self.word = "amsl" if self.amsl else "takeoff"
+        self.c = np.array([1.0, 1.0 if self.amsl else 0.0, 0.0])  # b = c·x
+        self.walk_m2_per_s = sigmas.baro_drift_10min_m ** 2 / DRIFT_REFERENCE_S
+        self._base: tuple | None = None  # (t, x, P, aux) at the autopilot's boot
+        self._entries: list[tuple] = []  # (t, kind, data), sorted by t
+        self._entry_t: list[float] = []  # their times
+        self._n = 0  # entries processed: their states are valid
+        self._t = np.empty(0)
+        self._x = np.empty((0, 3))
+        self._P = np.empty((0, 3, 3))
+        self._aux: list[_Aux] = []  # per processed entry
+        self._src: list[str | None] = []  # per processed entry: the source word of its measurement
+        self._ok: list[bool] = []  # ... whether it was used
+        self._gap: list[float] = []  # ... the disagreement (m) of a refused one, else NaN
+        self._cache: dict | None = None  # numpy views of the three above for the answers
+        self._taken: dict[str, float] = {}  # per input: the time of the newest sample taken
+        self._arms_taken = 0
+        self._told: set = set()  # notices given, by (source, entry time): a re-run repeats none
+        self.notices: list[str] = []
+
+    def __deepcopy__(self, memo) -> HeightEstimator:
+        """A copy for another thread (the live latency estimate copies the telemetry once a second), made in
+        microseconds: the containers are copied, their items are immutable (tuples, floats, words) and the
+        arrays are never written in place (each update makes new ones)."""
+        new = object.__new__(HeightEstimator)
+        new.__dict__ = {k: type(v)(v) if isinstance(v, (list, dict, set)) else v for k, v in self.__dict__.items()}
+        return new
+
+    # -- inputs ---------------------------------------------------------------------------------
+    def _pull(self, tel: Telemetry) -> list[tuple]:
+        new = []
+        if tel.gnss.last_t is not None and tel.gnss.last_t > self._taken.get("gnss", -math.inf):
+            times, values = tel.gnss.times, tel.gnss.values
+            sel = times > self._taken.get("gnss", -math.inf)
+            for t, v in zip(times[sel], values[sel]):
+                fix, alt, v_acc, vdop = v[2], v[3], v[4], v[6]
+                sigma = float(gnss.vertical_sigma_m(fix, v_acc, vdop))
+                if math.isfinite(alt) and math.isfinite(sigma):
+                    new.append((float(t), _GNSS, (int(fix), float(alt), sigma)))
+            self._taken["gnss"] = tel.gnss.last_t
+        for name, series in tel.height_fixes.items():
+            if series.last_t is None or series.last_t <= self._taken.get(name, -math.inf):
+                continue
+            sel = series.times > self._taken.get(name, -math.inf)
+            new += [(float(t), _FIX, (name, float(h), float(s))) for t, (h, s) in zip(series.times[sel], series.values[sel])]
+            self._taken[name] = series.last_t
+        if not self.amsl:
+            new += [(t, _ARM, None) for t in tel.arm_times[self._arms_taken:]]
+        self._arms_taken = len(tel.arm_times)
+        return new
+
+    def update(self, tel: Telemetry) -> None:
+        """Fuse what arrived since the last call (re-running the filter from the earliest new time)."""
+        if self._base is None:
+            boot = tel.uav_clock.offset_s  # the autopilot's boot on the UAV buffers' scale
+            if boot is None:
+                return
+            P = np.diag([self.sigmas.height_m ** 2, (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2,
+                         0.0])
+            self._base = (boot, np.zeros(3), P, _Aux(math.nan, -1, self.water.surface_amsl_m))
+        new = sorted(self._pull(tel), key=lambda e: e[0])
+        if new:
+            first = len(self._entries)
+            for e in new:
+                i = bisect.bisect_right(self._entry_t, e[0])
+                self._entry_t.insert(i, e[0])
+                self._entries.insert(i, e)
+                first = min(first, i)
+            self._n = min(self._n, first)
+        if self._n < len(self._entries):
+            self._run(tel)
+        self._trim(tel)
+
+    # -- the filter -----------------------------------------------------------------------------
+    def _predict(self, x, P, dt, sigma_g):
+        """State and covariance ``dt`` s later (arrays broadcast over leading axes)."""
+        dt = np.asarray(dt, dtype=float)
+        phi = np.exp(-dt / GNSS_TAU_S)
+        x = np.array(x, dtype=float)
+        x[..., 2] *= phi
+        P = np.array(P, dtype=float)
+        P[..., 2, :2] *= phi[..., None]
+        P[..., :2, 2] *= phi[..., None]
+        P[..., 2, 2] = P[..., 2, 2] * phi ** 2 + np.nan_to_num(np.asarray(sigma_g, dtype=float)) ** 2 * (1.0 - phi ** 2)
+        P[..., 0, 0] += self.walk_m2_per_s * dt
+        return x, P
+
+    def _run(self, tel: Telemetry) -> None:
+        k = self._n
+        for col in (self._aux, self._src, self._ok, self._gap):
+            del col[k:]
+        t0, x, P, aux = self._base if k == 0 else (self._t[k - 1], self._x[k - 1], self._P[k - 1], self._aux[k - 1])
+        entries = self._entries[k:]
+        h_ekf = ekf_height_m(self.water, tel, [e[0] for e in entries])
+        ts, xs, Ps = [], [], []
+        for (t, kind, data), h_e in zip(entries, h_ekf):
+            x, P = self._predict(x, P, max(0.0, t - t0), aux.sigma_g)
+            x, P, aux, word, ok, gap = self._step(t, kind, data, float(h_e), x, P, aux)
+            ts.append(t)
+            xs.append(x)
+            Ps.append(P)
+            self._aux.append(aux)
+            self._src.append(word)
+            self._ok.append(ok)
+            self._gap.append(gap)
+            t0 = t
+        self._t = np.concatenate([self._t[:k], ts])
+        self._x = np.concatenate([self._x[:k], np.reshape(xs, (-1, 3))])
+        self._P = np.concatenate([self._P[:k], np.reshape(Ps, (-1, 3, 3))])
+        self._n = len(self._entries)
+        self._cache = None
+
+    def _step(self, t, kind, data, h_e, x, P, aux: _Aux):
+        """One entry: ``(x, P, aux, source word or None, used, disagreement m or NaN)``."""
+        if kind == _ARM:  # the take-off reference is set again: e starts over
+            x, P = x.copy(), P.copy()
+            x[0] = 0.0
+            P[0, :] = P[:, 0] = 0.0
+            P[0, 0] = self.sigmas.height_m ** 2
+            return x, P, aux, None, False, math.nan
+        if not math.isfinite(h_e):
+            return x, P, aux, None, False, math.nan
+        if kind == _GNSS:
+            fix, alt, stated = data
+            sigma = stated * math.sqrt(1.0 - GNSS_WHITE ** 2)
+            x, P = x.copy(), P.copy()
+            if fix != aux.fix or not math.isfinite(aux.sigma_g):  # a new error source: g starts afresh
+                x[2] = 0.0
+                P[2, :] = P[:, 2] = 0.0
+                P[2, 2] = sigma ** 2
+            elif sigma != aux.sigma_g:  # the receiver's accuracy changed: the same error, rescaled
+                x[2] *= sigma / aux.sigma_g
+                P[2, :] *= sigma / aux.sigma_g
+                P[:, 2] *= sigma / aux.sigma_g
+            S = alt - h_e if aux.S is None else aux.S
+            aux = aux._replace(sigma_g=sigma, fix=fix, S=S)
+            word = ("" if self.amsl else "baro+") + ("gnss_rtk" if gnss.is_rtk(fix) else "gnss")
+            row = np.array([-1.0, 0.0 if self.amsl else 1.0, 1.0])
+            z, r, said_m = alt - h_e - S, (GNSS_WHITE * stated) ** 2 + 1e-6, alt - S
+        else:
+            word, said_m, stated = data
+            row, z, r = self.c, h_e - said_m, stated ** 2
+        innovation = z - row @ x
+        s = row @ P @ row + r
+        apart = abs(innovation) / math.sqrt(s)
+        streaks = dict(aux.refused)
+        streak = streaks.pop(word, 0)
+        if apart > (AGREE_SIGMAS if streak else GATE_SIGMAS):  # once refused, back only within AGREE_SIGMAS
+            if streak + 1 == CONFLICT_AFTER:
+                est, sigma = h_e - self.c @ x, math.sqrt(self.c @ P @ self.c)
+                self._tell(word, t, f"height: {word} gives {said_m:.2f} ± {stated:.2f} m above the water, the estimate "
+                           f"{est:.2f} ± {sigma:.2f} m (EKF height {h_e:.2f} m): {apart:.1f} sigma apart; not used "
+                           "while they disagree, the height's sigma covers both")
+            streaks[word] = streak + 1
+            return x, P, aux._replace(refused=tuple(sorted(streaks.items()))), word, False, innovation
+        if streak >= CONFLICT_AFTER:
+            self._tell(word, t, f"height: {word} agrees with the estimate again ({apart:.1f} sigma): used")
+        aux = aux._replace(refused=tuple(sorted(streaks.items())))
+        K = P @ row / s
+        x = x + K * innovation
+        A = np.eye(3) - np.outer(K, row)
+        P = A @ P @ A.T + np.outer(K, K) * r
+        return x, P, aux, word, True, math.nan
+
+    def _tell(self, source: str, t: float, text: str) -> None:
+        if (source, t) not in self._told:
+            self._told.add((source, t))
+            self.notices.append(text)
+
+    def _trim(self, tel: Telemetry) -> None:
+        """Live: forget entries older than twice the telemetry's history; the newest forgotten becomes the base."""
+        keep = tel.keep_s
+        if keep is None or self._n < 2 or self._t[0] >= self._t[self._n - 1] - 2 * keep:
+            return
+        k = int(np.searchsorted(self._t[: self._n], self._t[self._n - 1] - keep)) - 1
+        if k < 0:
+            return
+        self._base = (self._t[k], self._x[k], self._P[k], self._aux[k])
+        for col in (self._entries, self._entry_t, self._aux, self._src, self._ok, self._gap):
+            del col[: k + 1]
+        self._t, self._x, self._P = self._t[k + 1 :], self._x[k + 1 :], self._P[k + 1 :]
+        self._n -= k + 1
+        self._told = {told for told in self._told if told[1] > self._base[0]}
+        self._cache = None
+
+    # -- answers --------------------------------------------------------------------------------
+    def _columns(self) -> dict:
+        """Per source word: the times of its measurements, whether each was used, and the disagreement of each
+        refused one that was the :data:`CONFLICT_AFTER`-th or later in a row (NaN otherwise)."""
+        if self._cache is None:
+            src = np.array(self._src, dtype=object)
+            ok, gap = np.array(self._ok, dtype=bool), np.array(self._gap, dtype=float)
+            self._cache = {}
+            for w in sorted({w for w in self._src if w is not None}, key=lambda w: ("gnss" in w, w)):
+                sel = src == w
+                refused_in_a_row = np.zeros(sel.sum(), int)
+                for i, used in enumerate(ok[sel]):
+                    refused_in_a_row[i] = 0 if used else (refused_in_a_row[i - 1] if i else 0) + 1
+                self._cache[w] = (self._t[sel], ok[sel], np.where(refused_in_a_row >= CONFLICT_AFTER, gap[sel], np.nan))
+        return self._cache
+
+    def at(self, tel: Telemetry, t_uav) -> HeightAt:
+        """The EKF height's error at UAV-scale times (see the module doc); NaN before the autopilot is heard."""
+        self.update(tel)
+        tq = np.atleast_1d(np.asarray(t_uav, dtype=float))
+        n = len(tq)
+        if self._base is None:
+            return HeightAt(np.full(n, np.nan), np.full(n, np.nan), np.full(n, self.word, dtype=object))
+        i = np.searchsorted(self._t[: self._n], tq, side="right") - 1
+        t0b, xb, Pb, auxb = self._base
+        j = np.maximum(i, 0)
+        t0 = np.where(i >= 0, self._t[j] if self._n else t0b, t0b)
+        x = np.where((i >= 0)[:, None], self._x[j] if self._n else xb, xb)
+        P = np.where((i >= 0)[:, None, None], self._P[j] if self._n else Pb, Pb)
+        sigma_g = np.array([self._aux[k].sigma_g if k >= 0 else auxb.sigma_g for k in i])
+        x, P = self._predict(x, P, np.maximum(np.nan_to_num(tq - t0), 0.0), sigma_g)
+        bias = x @ self.c
+        sigma = np.sqrt(np.einsum("i,nij,j->n", self.c, P, self.c))
+        words = np.full(n, self.word, dtype=object)
+        for word, (times, ok, gap) in self._columns().items():
+            recent = _age(times[ok], tq) <= SOURCE_WINDOW_S
+            words = np.where(recent, np.where(words == self.word, word, words + "+" + word), words)
+            # its newest measurement refused, lately: the two disagree, the sigma covers both
+            k = np.searchsorted(times, tq, side="right") - 1
+            lately = (k >= 0) & (_age(times, tq) <= CONFLICT_HOLD_S)
+            gaps = np.where(lately, gap[np.maximum(k, 0)], np.nan)
+            sigma = np.where(np.isfinite(gaps), np.hypot(sigma, np.nan_to_num(gaps) / 2), sigma)
+        bad = ~np.isfinite(tq)
+        bias[bad] = sigma[bad] = np.nan
+        return HeightAt(bias, sigma, words)
+
+    def summary(self, tel: Telemetry, t_uav: float) -> dict:
+        """The estimate at ``t_uav`` and what went into it (for the status): the EKF's height and the corrected
+        one (the reported position's, metres above the water), the reference and how long ago it was set,
+        and each source's measurements used and refused (over the history kept), the newest's age and,
+        while it disagrees, by how much."""
+        at = self.at(tel, [t_uav])
+        h_ekf = float(ekf_height_m(self.water, tel, [t_uav])[0])
+        anchor = "boot" if self.amsl or not tel.arm_times else "arming"
+        since = tel.arm_times[-1] if anchor == "arming" else (self._base[0] if self._base else None)
+        sources = {word: {"used": int(ok.sum()), "refused": int((~ok).sum()),
+                          "age_s": round(max(0.0, t_uav - times[-1]), 2), "disagrees_m": _num(gap[-1])}
+                   for word, (times, ok, gap) in self._columns().items()}
+        return {"height_m": _num(h_ekf - at.bias_m[0]), "sigma_m": _num(at.sigma_m[0]), "source": at.source[0],
+                "ekf_height_m": _num(h_ekf), "bias_m": _num(at.bias_m[0]), "reference": self.word,
+                "reference_set_at": anchor, "armed": tel.armed,
+                "since_reference_s": None if since is None else round(max(0.0, t_uav - since), 1),
+                "rangefinder_out_of_range": tel.rangefinder_out_of_range, "sources": sources}
+
+
+def _age(times, tq) -> np.ndarray:
+    """Seconds from the newest of ``times`` (sorted) at or before each of ``tq`` to it; inf where none."""
+    k = np.searchsorted(times, tq, side="right") - 1
+    return tq - (times[np.maximum(k, 0)] if len(times) else 0.0) + np.where(k >= 0, 0.0, np.inf)
+
+
+def _num(x: float, digits: int = 3) -> float | None:
+    return round(float(x), digits) if math.isfinite(x) else None
+
+
+def estimator(water: Water, sigmas: Sigmas, tel: Telemetry) -> HeightEstimator:
+    """The telemetry's :class:`HeightEstimator` for this calibration (made on first use, or anew when the
+    calibration's water reference or sigmas differ)."""
+    est = tel.height_estimator
+    if est is None or est.key != (water, sigmas):
+        est = tel.height_estimator = HeightEstimator(water, sigmas)
+    return est
+
+
+def ekf_height_error(water: Water, sigmas: Sigmas, tel: Telemetry, t_uav) -> HeightAt:
+    """The EKF height's estimated error at UAV-scale times (the telemetry's :class:`HeightEstimator`)."""
+    return estimator(water, sigmas, tel).at(tel, t_uav)
+
+
+def take_notices(tel: Telemetry) -> list[str]:
+    """The height estimator's one-line news since the last call (sources that disagree), taken out."""
+    est = tel.height_estimator
+    if est is None or not est.notices:
+        return []
+    out, est.notices = est.notices, []
+    return out
+
+
+def status(water: Water, sigmas: Sigmas, tel: Telemetry) -> dict | None:
+    """:meth:`HeightEstimator.summary` at the newest GLOBAL_POSITION_INT (None before one came)."""
+    t = tel.position.last_t
+    return None if t is None else estimator(water, sigmas, tel).summary(tel, t)
