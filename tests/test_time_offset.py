@@ -54,7 +54,7 @@ delay_s = {DELAY_S}
 timesync_hz = 0.0
 """
 #: every input's sigma but the time's zero: h_acc is the time alignment's (and the UAV GNSS's 2 cm)
-ONLY_TIME = "\n[uncertainty]\npixel_px = 0.0\ntilt_deg = 0.0\nyaw_deg = 0.0\nheight_m = 0.0\ndepth_m = 0.0\ntime_s = 0.0\n"
+ONLY_TIME = "\n[uncertainty]\npixel_px = 0.0\ntilt_deg = 0.0\nyaw_deg = 0.0\nheight_m = 0.0\nbaro_drift_10min_m = 0.0\ndepth_m = 0.0\ntime_s = 0.0\n"
 
 
 @pytest.fixture(scope="module")
