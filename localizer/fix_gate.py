@@ -19,7 +19,9 @@ only when every test passes; otherwise it names the first that failed:
   the velocity; what lies beyond, over a covariance that is the track's own plus the
   *white* part of the fix's — the part that changes from frame to frame, measured on the
   fixes (:class:`~localizer.uuv_track.Scatter`) — not the whole claimed accuracy, most of
-  which is an error every frame shares: see :mod:`localizer.uuv_track`);
+  which is an error every frame shares: see :mod:`localizer.uuv_track`). After frames
+  without a fix (telemetry or depth missing, the video stopped) while the tracker kept the
+  target, the same test holds with the bounds grown by the gap;
 - ``diverged``: the fixes left the track — refused for longer than :data:`HOLD_S` — so the
   tracker now follows something the UUV cannot have become (a jump it cannot make). Every
   fix is refused for :data:`DIVERGED_S`, or until the tracker reports the target lost (a
@@ -28,21 +30,22 @@ only when every test passes; otherwise it names the first that failed:
   gone the top speed times the time since, and the fixes' shared error can have changed
   too. The gate does not forget where the UUV was: a look-alike found after a loss is
   refused while the UUV cannot be there;
-- ``unconfirmed``: while acquiring (the first target, after a loss, after the track went
-  :data:`HOLD_S` without an accepted fix, after ``diverged``): a fix of a candidate chain not
-  yet :data:`CONFIRM_S` (and :data:`CONFIRM_FIXES` fixes) long. Each chain fix must agree
-  with the chain's own track (innovation) and lie within reach; one that does not is left
-  out, and after :data:`CHAIN_MISSES` such in a row the next starts a new chain. When the
-  chain is long enough it is checked once more with the white share measured over it, and
-  becomes the track.
+- ``unconfirmed``: while acquiring (the first target, after the tracker lost it or it was
+  released, after ``diverged``): a fix of a candidate chain not yet :data:`CONFIRM_S` (and
+  :data:`CONFIRM_FIXES` fixes) long. Each chain fix must agree with the chain's own track
+  (innovation) and lie within reach; one that does not is left out, and after
+  :data:`CHAIN_MISSES` such in a row the next starts a new chain. When the chain is long
+  enough it is checked once more with the white share measured over it, and becomes the
+  track.
 
 What the gate cannot do, measured (``bench/gate_streams.py``): tell a UUV starting to move
 from a tracker starting to drift, unless the start is faster than the UUV can make it. A
 ramp starting abruptly at 0.35 m/s (the issue's: 0.7 m in 2 s) is 2 cm ahead of a BlueROV2
 starting at its acceleration bound (3 m/s²), and a motion within the bound follows it to
 4 mm: it passes, as the real start must. An abrupt start at top speed (7 cm from any
-motion within the bound) is refused after its first two frames; a smooth drift, never. A
-look-alike where the UUV could be by now that holds still for a second is taken. Drifts
+motion within the bound) is refused from its third frame until the track's UUV could have
+caught up with it (about 0.5 s); a smooth drift, never. A look-alike where the UUV could be
+by now that holds still for a second is taken. Drifts
 and look-alikes are the tracker's to catch (its match against the UUV's first appearance).
 
 Pure computation; times are station-clock UNIX seconds; the local frame is metres north
@@ -63,7 +66,7 @@ from .uuv_track import Scatter, UuvTrack, fix_covariance_m2
 
 #: A fix further than this many sigmas from the track (innovation, reach) is refused.
 GATE_SIGMAS = 5.0
-#: The track alone judges a fix while its last accepted fix is at most this old (s).
+#: Fixes refused by the track (innovation, prediction) for longer than this (s): the gate is ``diverged``.
 HOLD_S = 0.5
 #: A new or re-acquired target is valid after a chain of consistent fixes at least this long (s) ...
 CONFIRM_S = 1.0
@@ -164,32 +167,33 @@ class FixGate:
                 return "diverged"
             self._enter("acquiring", seen.t)
         if self.state == "tracking":
-            if seen.t - self.track.t <= HOLD_S:
-                return self._track_step(seen)
-            if self._refusing_since is not None:  # refused ever since: the fixes follow something else
-                left = self._refusing_since
-                self._diverged_until = left + DIVERGED_S
-                self._enter("diverged", seen.t)
-                self.last_refusal = (f"diverged: the fixes left the track {seen.t - left:.1f} s ago; refused until "
-                                     f"{DIVERGED_S:g} s after that, or until the target is lost or released")
-                return "diverged"
-            self._enter("acquiring", seen.t)  # a gap without fixes: the track alone no longer tells
+            return self._track_step(seen)
         return self._chain_step(seen)
 
     def _refuse(self, t: float, reason: str, why: str, leaves_track: bool = False) -> str:
-        """A refusal that breaks a chain; ``leaves_track``: the fix is not where the track is (tracking: counts
-        towards ``diverged``)."""
+        """A refusal that breaks a chain; ``leaves_track``: the fix is not where the track is — tracking, once such
+        refusals have gone on for longer than :data:`HOLD_S`, the gate is ``diverged``."""
         self.last_refusal = f"{reason}: {why}"
-        if leaves_track and self.state == "tracking" and self._refusing_since is None:
-            self._refusing_since = t
         self._chain.clear()
+        if not (leaves_track and self.state == "tracking"):
+            return reason
+        if self._refusing_since is None:
+            self._refusing_since = t
+        elif t - self._refusing_since > HOLD_S:
+            left = self._refusing_since
+            self._diverged_until = left + DIVERGED_S
+            self._enter("diverged", t)
+            self.last_refusal = (f"diverged: the fixes left the track {t - left:.1f} s ago ({why}); refused until "
+                                 f"{DIVERGED_S:g} s after that, or until the target is lost or released")
+            return "diverged"
         return reason
 
     def _track_step(self, f: _Seen) -> str | None:
         share = self.scatter.share
         d = self.track.distance(f.t, f.z, f.C, share)[0]
         if d > GATE_SIGMAS:
-            return self._refuse(f.t, "innovation", f"{d:.1f} sigma from the track (gate {GATE_SIGMAS:g})",
+            return self._refuse(f.t, "innovation", f"{d:.1f} sigma beyond where the UUV can be "
+                                f"{f.t - self.track.t:.2f} s after the track's last fix (gate {GATE_SIGMAS:g})",
                                 leaves_track=True)
         self.track.update(f.t, f.z, f.C, share)
         self.scatter.add(f.t, f.z, f.C)
