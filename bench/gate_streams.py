@@ -48,7 +48,7 @@ def old_gate_class(commit: str, work: Path):
 
 def streams(h_acc_m: float) -> list:
     return [gs.ramp(h_acc_m), gs.ramp(h_acc_m, 1.5, 1.0), gs.step(h_acc_m, 0.8), gs.step(h_acc_m, 10.0), gs.lookalike(h_acc_m, 3.0),
-            gs.lookalike(h_acc_m, 1.0), gs.accelerate(h_acc_m, A, V), gs.turn(h_acc_m, V, A)]
+            gs.lookalike(h_acc_m, 1.0), gs.crossing(h_acc_m), gs.accelerate(h_acc_m, A, V), gs.turn(h_acc_m, V, A)]
 
 
 def score(stream, valid: np.ndarray) -> tuple[str, str, str]:

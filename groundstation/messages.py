@@ -224,8 +224,9 @@ class GateStatus(Section):
     max_age_s: float
     state: Literal[tuple(GATE_STATES)] = Field(
         description="acquiring: a new or re-acquired target's fixes are being confirmed (none valid yet); tracking: "
-        "each fix is judged against the track; diverged: the fixes left the track (a jump the UUV cannot make): "
-        "none is valid for 5 s, or until the target is lost or released")
+        "each fix is judged against the track; diverged: the fixes left the track (a jump the UUV cannot make), or "
+        "a target found again where the UUV cannot be: none is valid for 5 s, or until the target is lost or "
+        "released")
     state_since_t: float | None = Field(description="the fix (exposure, station clock) the state began at")
     accepted: int
     rejected: dict[str, int] = Field(description="fixes not sent as valid, by reason: h_acc, age, out_of_order, "

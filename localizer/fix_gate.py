@@ -22,14 +22,17 @@ only when every test passes; otherwise it names the first that failed:
   which is an error every frame shares: see :mod:`localizer.uuv_track`). After frames
   without a fix (telemetry or depth missing, the video stopped) while the tracker kept the
   target, the same test holds with the bounds grown by the gap;
-- ``diverged``: the fixes left the track — refused for longer than :data:`HOLD_S` — so the
-  tracker now follows something the UUV cannot have become (a jump it cannot make). Every
-  fix is refused for :data:`DIVERGED_S`, or until the tracker reports the target lost (a
-  release, a new acquisition), then the gate acquires again;
+- ``diverged``: the fixes left the track — refused for longer than :data:`HOLD_S` — or the
+  tracker found a target again where the UUV cannot be (the first fix after a loss out of
+  reach, below): the tracker follows something else. Every fix is refused for
+  :data:`DIVERGED_S`, or until the tracker reports the target lost (a release, a new
+  acquisition), then the gate acquires again;
 - ``reach``: while acquiring, the same test against the last good track: the UUV can have
   gone the top speed times the time since, and the fixes' shared error can have changed
-  too. The gate does not forget where the UUV was: a look-alike found after a loss is
-  refused while the UUV cannot be there;
+  too. The gate does not forget where the UUV was: a target found again after a loss whose
+  first fix is out of reach is another object (``diverged``: none of that lock's fixes goes
+  out, even once the UUV could have got there); a later fix out of reach starts the
+  confirmation over;
 - ``unconfirmed``: while acquiring (the first target, after the tracker lost it or it was
   released, after ``diverged``): a fix of a candidate chain not yet :data:`CONFIRM_S` (and
   :data:`CONFIRM_FIXES` fixes) long. Each chain fix must agree with the chain's own track
@@ -44,8 +47,8 @@ ramp starting abruptly at 0.35 m/s (the issue's: 0.7 m in 2 s) is 2 cm ahead of 
 starting at its acceleration bound (3 m/s²), and a motion within the bound follows it to
 4 mm: it passes, as the real start must. An abrupt start at top speed (7 cm from any
 motion within the bound) is refused from its third frame until the track's UUV could have
-caught up with it (about 0.5 s); a smooth drift, never. A look-alike where the UUV could be
-by now that holds still for a second is taken. Drifts
+caught up with it (about 0.5 s); a smooth drift, never. A look-alike found after a loss where
+the UUV could be by then, and consistent for a second, is taken. Drifts
 and look-alikes are the tracker's to catch (its match against the UUV's first appearance).
 
 Pure computation; times are station-clock UNIX seconds; the local frame is metres north
@@ -128,6 +131,7 @@ class FixGate:
         self._refusing_since: float | None = None  # tracking: the first refused fix since the last accepted
         self._diverged_until = -math.inf
         self._last_t = -math.inf
+        self._new_lock = True  # the next ok fix is the first of the tracker's lock (after a loss)
         self.accepted = 0
         self.rejected: Counter[str] = Counter()
         self.last_refusal: str | None = None
@@ -147,8 +151,9 @@ class FixGate:
         return reason
 
     def target_lost(self) -> None:
-        """The tracker lost the target (or it was released): the next fixes are a re-acquisition."""
+        """The tracker lost the target (or it was released): the next fixes are a re-acquisition, a new lock."""
         self._enter("acquiring", self._last_t if math.isfinite(self._last_t) else None)
+        self._new_lock = True
 
     # -- the tests -----------------------------------------------------------------------------
     def _reason(self, fix: Fix, now: float, window) -> str | None:
@@ -204,6 +209,13 @@ class FixGate:
     def _chain_step(self, f: _Seen) -> str | None:
         share = self.scatter.share
         why = self._out_of_reach(f, share)
+        first_of_lock, self._new_lock = self._new_lock, False
+        if why and first_of_lock:  # the tracker locked onto something where the UUV cannot be: not the UUV
+            self._diverged_until = f.t + DIVERGED_S
+            self._enter("diverged", f.t)
+            self.last_refusal = (f"diverged: the target found again is not the UUV: {why}; refused for "
+                                 f"{DIVERGED_S:g} s or until the target is lost or released")
+            return "diverged"
         if why:
             self.last_refusal = f"reach: {why}"
             self._chain.clear()

@@ -88,6 +88,19 @@ def lookalike(h_acc_m: float, distance_m: float, loss_s: float = 1.0, seconds: f
                    seed, status)
 
 
+def crossing(h_acc_m: float, miss_m: float = 0.3, speed_mps: float = 1.2, loss_s: float = 2 / 30,
+             seconds: float = 3.0, seed: int = 6) -> Stream:
+    """The UUV stays put; another vehicle crosses ``miss_m`` beside it at ``speed_mps``; the tracker loses the
+    UUV for ``loss_s`` (two frames) as they meet and comes back on the other one (``second_vehicle``'s failure)."""
+    n_loss, n_after = round(loss_s * HZ), round(seconds * HZ)
+    t = np.arange(1, n_after + 1) / HZ + loss_s
+    other = np.stack([np.full_like(t, miss_m), speed_mps * t], axis=1)
+    seen = np.vstack([_still(BEFORE_S), _still(loss_s), other])
+    status = ["ok"] * round(BEFORE_S * HZ) + ["lost"] * n_loss + ["ok"] * n_after
+    return _stream(f"vehicle crossing {miss_m:g} m beside, lost {n_loss} frames", np.zeros_like(seen), seen, h_acc_m,
+                   seed, status)
+
+
 def accelerate(h_acc_m: float, accel_mps2: float, speed_mps: float, seconds: float = 3.0, seed: int = 4) -> Stream:
     """The UUV rests, then accelerates north-east at ``accel_mps2`` from rest to ``speed_mps`` and goes on."""
     t = np.arange(1, round(seconds * HZ) + 1) / HZ
