@@ -9,7 +9,7 @@ how many fixes that are not the UUV went out as valid (of how many), the largest
 fix, and how many fixes of the real UUV were refused more than a second after its (re)acquisition.
 Then, for an abrupt start: how well a motion within the acceleration bound can explain it (the
 smallest largest-residual of a bounded-acceleration fit), the reason a slow one cannot be told from
-a real start.
+a real start. Last, what a check costs (the GPS_INPUT sink runs it on the event loop for every fix).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import importlib.util
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +89,14 @@ def main() -> int:
     for v in (0.35, 0.7, 1.5):
         fits = ", ".join(f"{gs.bounded_fit_residual_m(v, a) * 1000:.1f} mm at a = {a:g} m/s²" for a in (1.0, 2.5, A))
         lines.append(f"  v = {v:.2f} m/s: largest residual {fits}")
+    stream = gs.turn(0.4, V, A, seconds=20.0)
+    gate, cost_us = FixGate(), []
+    for f in stream.fixes:
+        t0 = time.perf_counter()
+        gate.check(f, f.t_unix + 0.05)
+        cost_us.append((time.perf_counter() - t0) * 1e6)
+    lines.append(f"\ncost of a check (tracking, {len(cost_us)} fixes): median {np.median(cost_us):.0f} µs, "
+                 f"p99 {np.percentile(cost_us, 99):.0f} µs, max {max(cost_us):.0f} µs")
     text = "\n".join(lines)
     print(text)
     if args.out:

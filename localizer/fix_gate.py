@@ -77,7 +77,8 @@ CONFIRM_S = 1.0
 CONFIRM_FIXES = 10
 #: A chain goes on past this many fixes in a row that disagree with it (refused); one more starts a new chain.
 CHAIN_MISSES = 2
-#: Fixes that left the track are refused this long (s) unless the tracker reports the target lost.
+#: ``diverged`` (fixes that left the track, a target found again out of reach) lasts this long (s) unless the
+#: tracker reports the target lost.
 DIVERGED_S = 5.0
 #: Top speeds (m/s) of vehicle classes, for ``--uuv-max-speed-mps``'s default.
 MAX_SPEED_MPS = {"bluerov2": 1.5}
