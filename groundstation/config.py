@@ -36,6 +36,7 @@ from localizer.contract import (
     within,
 )
 from localizer.depth import BLUEROV2_MAX_VERTICAL_SPEED_MPS
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
 from localizer.tracking import TRACKERS
 
 from .sources.depth_ardusub import autopilot_prefix
@@ -113,8 +114,13 @@ class RunConfig:
                                        "template matching), mil (the paper's), ...")
     gps_input_signing_key: FilePath | None = Field(None, description="sign GPS_INPUT (MAVLink 2) with the key in "
                                                    "this file: 32 bytes, or 64 hex digits")
-    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(1.5, description="safety gate: the UUV's top speed (a "
-                                                        "BlueROV2); a fix jumping further is not sent")
+    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(MAX_SPEED_MPS["bluerov2"], description="safety gate: the "
+                                                        "UUV's top speed (a BlueROV2): fixes are judged against a track "
+                                                        "of the UUV that cannot move faster")
+    uuv_max_accel_mps2: Annotated[Number, Gt(0)] = Field(MAX_ACCEL_MPS2["bluerov2"], description="safety gate: the "
+                                                         "UUV's largest horizontal acceleration (a BlueROV2 at full "
+                                                         "thrust from rest, about 3 m/s²): a fix the track's UUV "
+                                                         "cannot reach is not sent")
     fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
                                                       "accuracy is worse than this (m) is not sent as valid")
     uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "

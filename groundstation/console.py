@@ -79,10 +79,11 @@ def summary(status: dict) -> str:
     inputs.append(f"frames {pipeline.get('processed')} (dropped {pipeline.get('dropped')})")
     gps = status.get("gps_input")
     if gps:
-        inputs.append(f"GPS_INPUT sent {gps.get('sent')} (valid {gps.get('sent_valid')})")
+        gates = gps.get("gates") or {}
+        inputs.append(f"GPS_INPUT sent {gps.get('sent')} (valid {gps.get('sent_valid')}), gates {gates.get('state')}")
     lines.append("  " + ", ".join(inputs))
     size = status.get("height_from_size")
-    if size and size.get("frames"):
+    if size and size.get("frames") and size.get("bias_m") is not None and size.get("sigma_m") is not None:
         lines.append(f"  height from the UUV's size: configured - measured {size['bias_m']:+.2f} ± {size['sigma_m']:.2f} m"
                      f" over {size['frames']} frames ({'sure' if size['sure'] else 'not sure'})")
     ui = status.get("ui")

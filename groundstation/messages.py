@@ -23,6 +23,7 @@ from annotated_types import Ge, Le
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from localizer.fix import Fix
+from localizer.fix_gate import STATES as GATE_STATES
 from localizer.status import STATUSES, Status
 from localizer.telemetry import LATENCY_SOURCES
 
@@ -186,15 +187,60 @@ class LinkStatus(Section):
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
-class GateStatus(Section):
-    """The safety gates on what goes out as a valid fix (localizer/fix_gate.py)."""
+class GateTrackStatus(Section):
+    """The gates' track of the UUV (localizer/uuv_track.py): its fixes filtered, at its last accepted fix."""
 
-    max_speed_mps: float
+    t: float = Field(description="the last accepted fix's exposure, station clock")
+    age_s: NonNegative = Field(description="seconds since then")
+    lat: float = Field(description="the track's position, WGS84 degrees: shown, never sent (GPS_INPUT carries the "
+                       "measured fix)")
+    lon: float
+    vn_mps: float = Field(description="its velocity north, m/s")
+    ve_mps: float = Field(description="its velocity east, m/s")
+    sigma_n_m: NonNegative = Field(description="1-sigma of the position north against the truth: the track's own and "
+                                   "the error the fixes share (attitude, height, GNSS), which no filtering removes")
+    sigma_e_m: NonNegative = Field(description="the same, east")
+    cov_ne_m2: float = Field(description="their covariance, m²")
+    sigma_own_m: NonNegative = Field(description="how well the track knows where the fixes are (DRMS, m): what a new "
+                                     "fix is compared with, besides its own frame-to-frame error")
+    sigma_vn_mps: NonNegative = Field(description="1-sigma of the velocity north")
+    sigma_ve_mps: NonNegative = Field(description="1-sigma of the velocity east")
+
+
+class GateChainStatus(Section):
+    """A new or re-acquired target's fixes being confirmed."""
+
+    fixes: int = Field(description="consistent fixes so far")
+    span_s: NonNegative = Field(description="seconds they span")
+    needed_s: float = Field(description="seconds needed (and at least 10 fixes)")
+
+
+class GateStatus(Section):
+    """The safety gates on what goes out as a valid fix (localizer/fix_gate.py): a track of the UUV."""
+
+    max_speed_mps: float = Field(description="the UUV's top speed (--uuv-max-speed-mps)")
+    max_accel_mps2: float = Field(description="the UUV's largest acceleration (--uuv-max-accel-mps2)")
     max_h_acc_m: float
     max_age_s: float
+    state: Literal[tuple(GATE_STATES)] = Field(
+        description="acquiring: a new or re-acquired target's fixes are being confirmed (none valid yet); tracking: "
+        "each fix is judged against the track; diverged: the fixes left the track (a jump the UUV cannot make), or "
+        "a target found again where the UUV cannot be: none is valid for 5 s, or until the target is lost or "
+        "released")
+    state_since_t: float | None = Field(description="the fix (exposure, station clock) the state began at")
     accepted: int
     rejected: dict[str, int] = Field(description="fixes not sent as valid, by reason: h_acc, age, out_of_order, "
-                                     "jump, unconfirmed")
+                                     "prediction (outside the window the telemetry predicted), innovation (off the "
+                                     "track), diverged, reach (where the UUV cannot be since the last good fix), "
+                                     "unconfirmed (a target not confirmed yet)")
+    last_refusal: str | None = Field(description="the latest refusal that says more than its reason, one line")
+    white_share: NonNegative = Field(description="the share of the fixes' claimed covariance that changes from frame "
+                                     "to frame, measured on the fixes (null before); the rest is an error they share")
+    diverged_until_t: float | None = Field(description="while diverged: until when (station clock)")
+    chain: GateChainStatus | None = Field(description="while acquiring: the fixes being confirmed")
+    track: GateTrackStatus | None = Field(description="the last confirmed track (while acquiring: where the UUV was)")
+    reach_m: NonNegative = Field(description="while acquiring or diverged: how far from the track's position the UUV "
+                                 "can be by now (top speed × the time since the last good fix)")
 
 
 class GnssStatus(Section):

@@ -142,7 +142,8 @@ async def serve(cfg: config.RunConfig) -> dict:
             link = (ZenohMavlinkIn(session, cfg.gps_input.removeprefix("zenoh:")) if cfg.gps_input.startswith("zenoh:")
                     else mavlink_gps_link(cfg.gps_input, signing_key=key))
             max_age_s = cfg.fix_max_age_ms / 1000.0
-            gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s)
+            gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_accel_mps2=cfg.uuv_max_accel_mps2,
+                           max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s)
             gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
             sinks.append(gps)
         if recorder:

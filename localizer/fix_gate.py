@@ -1,112 +1,315 @@
-"""Safety gates: which ``ok`` fixes may be sent to a vehicle as a valid position.
+"""Safety gates: which ``ok`` fixes may be sent to a vehicle as a valid position, judged against a track.
 
 A fix that reaches a UUV's autopilot moves its EKF; a wrong one (the tracker on a
-glint, a telemetry glitch) is worse than none. :class:`FixGate` lets a fix through
-only when every test passes, and otherwise names the first that failed:
+glint, on the UUV's shadow, on another vehicle) is worse than none. :class:`FixGate`
+keeps a track of the UUV (:class:`~localizer.uuv_track.UuvTrack`: its fixes filtered
+with constant velocity, the vehicle's top speed and acceleration) and lets a fix through
+only when every test passes; otherwise it names the first that failed:
 
 - ``h_acc``: its horizontal accuracy ``h_acc_m`` is not finite or above ``max_h_acc_m``
   (default 2.5 m, EKF3's own alignment limit hdop ≤ 2.5 with skyfix's 1 m per unit of hdop);
-- ``age``: it is older than ``max_age_s`` when offered (``now − t_unix``; the same limit
-  after which the sender stops repeating it);
-- ``out_of_order``: its exposure is not after the last accepted fix's;
-- ``jump``: it is further from the last accepted fix than the UUV can have moved:
-  ``max_speed_mps · Δt + K_SIGMA · √(h_acc₁² + h_acc₂²)`` (each fix's own 1-sigma
-  error, :data:`K_SIGMA` of them; default speed 1.5 m/s, a BlueROV2's top speed);
-- ``unconfirmed``: there is no reference to compare with — the first fix, the first
-  after a loss of the track (:meth:`FixGate.reset`), or the first after
-  ``reference_s`` without an accepted fix (past a second the speed bound is too loose
-  to tell a wrong fix from a move). Such a fix starts a candidate chain and is held
-  back; once :data:`CONFIRM` consecutive fixes each pass the jump test against the
-  one before, the last is accepted and becomes the reference. One stray fix (a single
-  false match) is then never sent, at the cost of two frames' delay (~70 ms at 30 fps)
-  after a loss; a fix rejected by another test breaks the chain.
+- ``age``: it is older than ``max_age_s`` when offered (``now − t_unix``);
+- ``out_of_order``: its exposure is not after the last fix the gate took;
+- ``prediction``: its pixel lies outside the window where the telemetry's prediction had
+  the tracker look (the frame's ``window``; a tracker that ignores the prediction, such as
+  OpenCV's, can report a match anywhere);
+- ``innovation``: while tracking, it lies more than :data:`GATE_SIGMAS` beyond where the
+  track's UUV can be (:meth:`~localizer.uuv_track.UuvTrack.distance`: within its top speed
+  of the track's position and within its acceleration bound of that position moved on with
+  the velocity; what lies beyond, over a covariance that is the track's own plus the
+  *white* part of the fix's — the part that changes from frame to frame, measured on the
+  fixes (:class:`~localizer.uuv_track.Scatter`) — not the whole claimed accuracy, most of
+  which is an error every frame shares: see :mod:`localizer.uuv_track`). After frames
+  without a fix (telemetry or depth missing, the video stopped) while the tracker kept the
+  target, the same test holds with the bounds grown by the gap;
+- ``diverged``: the fixes left the track — refused for longer than :data:`HOLD_S` — or the
+  tracker found a target again where the UUV cannot be (the first fix after a loss out of
+  reach, below): the tracker follows something else. Every fix is refused for
+  :data:`DIVERGED_S`, or until the tracker reports the target lost (a release, a new
+  acquisition), then the gate acquires again;
+- ``reach``: while acquiring, the same test against the last good track: the UUV can have
+  gone the top speed times the time since, and the fixes' shared error can have changed
+  too. The gate does not forget where the UUV was: a target found again after a loss whose
+  first fix is out of reach is another object (``diverged``: none of that lock's fixes goes
+  out, even once the UUV could have got there); a later fix out of reach starts the
+  confirmation over;
+- ``unconfirmed``: while acquiring (the first target, after the tracker lost it or it was
+  released, after ``diverged``): a fix of a candidate chain not yet :data:`CONFIRM_S` (and
+  :data:`CONFIRM_FIXES` fixes) long. Each chain fix must agree with the chain's own track
+  (innovation) and lie within reach; one that does not is left out, and after
+  :data:`CHAIN_MISSES` such in a row the next starts a new chain. When the chain is long
+  enough it is checked once more with the white share measured over it, and becomes the
+  track.
 
-A fix failing ``jump`` against an established reference also starts a candidate
-chain: if the vehicle really is there (the reference was the wrong one), the chain
-confirms it and the gate follows after :data:`CONFIRM` fixes, instead of rejecting
-every fix for ever. Pure computation; times are station-clock UNIX seconds.
+What the gate cannot do, measured (``bench/gate_streams.py``): tell a UUV starting to move
+from a tracker starting to drift, unless the start is faster than the UUV can make it. A
+ramp starting abruptly at 0.35 m/s (the issue's: 0.7 m in 2 s) is 2 cm ahead of a BlueROV2
+starting at its acceleration bound (3 m/s²), and a motion within the bound follows it to
+4 mm: it passes, as the real start must. An abrupt start at top speed (7 cm from any
+motion within the bound) is refused from its third frame until the track's UUV could have
+caught up with it (about 0.5 s); a smooth drift, never. A look-alike found after a loss where
+the UUV could be by then, and consistent for a second, is taken. Drifts
+and look-alikes are the tracker's to catch (its match against the UUV's first appearance).
+
+Pure computation; times are station-clock UNIX seconds; the local frame is metres north
+and east of the first fix the gate saw.
 """
 
 from __future__ import annotations
 
 import math
 from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
 
 from .fix import Fix
+from .geodesy import geodetic_to_ned, ned_to_geodetic
+from .uuv_track import Scatter, UuvTrack, fix_covariance_m2
 
-K_SIGMA = 3.0
-CONFIRM = 3
+#: A fix further than this many sigmas from the track (innovation, reach) is refused.
+GATE_SIGMAS = 5.0
+#: Fixes refused by the track (innovation, prediction) for longer than this (s): the gate is ``diverged``.
+HOLD_S = 0.5
+#: A new or re-acquired target is valid after a chain of consistent fixes at least this long (s) ...
+CONFIRM_S = 1.0
+#: ... of at least this many fixes.
+CONFIRM_FIXES = 10
+#: A chain goes on past this many fixes in a row that disagree with it (refused); one more starts a new chain.
+CHAIN_MISSES = 2
+#: ``diverged`` (fixes that left the track, a target found again out of reach) lasts this long (s) unless the
+#: tracker reports the target lost.
+DIVERGED_S = 5.0
 #: Top speeds (m/s) of vehicle classes, for ``--uuv-max-speed-mps``'s default.
 MAX_SPEED_MPS = {"bluerov2": 1.5}
-_M_PER_DEG = math.pi / 180.0 * 6_371_000.0
-REASONS = ("h_acc", "age", "out_of_order", "jump", "unconfirmed")
+#: Horizontal accelerations (m/s²) vehicle classes can reach, for ``--uuv-max-accel-mps2``'s default. A
+#: BlueROV2: the thrust that holds its top speed, 4.03·1.5 + 18.18·1.5² = 47 N by the surge damping Wu
+#: (2018) identified, over its mass with the added mass, 11.5 + 5.5 kg: 2.8 m/s² from rest (sway: 58 N
+#: over 24 kg, 2.4 m/s²). ArduSub's position modes ask for less: POSHOLD PILOT_ACCEL_Z (1 m/s²),
+#: AUTO and GUIDED WPNAV_ACCEL (2.5 m/s²).
+MAX_ACCEL_MPS2 = {"bluerov2": 3.0}
+REASONS = ("h_acc", "age", "out_of_order", "prediction", "innovation", "diverged", "reach", "unconfirmed")
+STATES = ("acquiring", "tracking", "diverged")
 
 
-def distance_m(a: Fix, b: Fix) -> float:
-    """Horizontal distance (m) between two fixes a few metres apart (equirectangular)."""
-    dn = (a.lat - b.lat) * _M_PER_DEG
-    de = (a.lon - b.lon) * _M_PER_DEG * math.cos(math.radians((a.lat + b.lat) / 2.0))
-    return math.hypot(dn, de)
+@dataclass(frozen=True)
+class _Seen:
+    """A fix in the gate's local frame."""
+
+    t: float
+    z: np.ndarray  # north, east (m)
+    C: np.ndarray  # its covariance (m²)
+
+
+def in_window(fix: Fix, window) -> bool:
+    """Whether the fix's pixel lies in ``window`` (x, y, w, h; None: no prediction, nothing to check)."""
+    if window is None:
+        return True
+    x, y, w, h = window
+    return x <= fix.u <= x + w and y <= fix.v <= y + h
 
 
 class FixGate:
-    """The gates of the module doc; :attr:`rejected` counts rejections by reason, :attr:`accepted` the rest."""
+    """The gates of the module doc; :attr:`rejected` counts refusals by reason, :attr:`accepted` the rest."""
 
-    def __init__(self, max_speed_mps: float = MAX_SPEED_MPS["bluerov2"], max_h_acc_m: float = 2.5,
-                 max_age_s: float = 0.5, reference_s: float = 1.0):
+    def __init__(self, max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
+                 max_accel_mps2: float = MAX_ACCEL_MPS2["bluerov2"], max_h_acc_m: float = 2.5,
+                 max_age_s: float = 0.5, confirm_s: float = CONFIRM_S, confirm_fixes: int = CONFIRM_FIXES):
         self.max_speed_mps = max_speed_mps
+        self.max_accel_mps2 = max_accel_mps2
         self.max_h_acc_m = max_h_acc_m
         self.max_age_s = max_age_s
-        self.reference_s = reference_s
-        self.reference: Fix | None = None
-        self._chain: list[Fix] = []
+        self.confirm_s = confirm_s
+        self.confirm_fixes = confirm_fixes
+        self.state = "acquiring"
+        self.state_since_t: float | None = None
+        self.track: UuvTrack | None = None  # the last confirmed track: while acquiring, where the UUV was
+        self.scatter = Scatter()
+        self._ref: tuple[float, float] | None = None  # lat, lon of the local frame's origin
+        self._chain: list[_Seen] = []
+        self._chain_track: UuvTrack | None = None
+        self._chain_misses = 0  # fixes in a row that disagreed with the chain
+        self._refusing_since: float | None = None  # tracking: the first refused fix since the last accepted
+        self._diverged_until = -math.inf
+        self._last_t = -math.inf
+        self._new_lock = True  # the next ok fix is the first of the tracker's lock (after a loss)
         self.accepted = 0
         self.rejected: Counter[str] = Counter()
+        self.last_refusal: str | None = None
 
-    def reset(self) -> None:
-        """The track was lost: the next fix needs confirming."""
-        self.reference = None
-        self._chain.clear()
+    # -- the interface -------------------------------------------------------------------------
+    def check(self, fix: Fix, now: float, window=None) -> str | None:
+        """None if ``fix`` (status ok) may go out as valid, else the reason; counts either way.
 
-    def consistent(self, a: Fix, b: Fix) -> bool:
-        """Whether ``b`` is within reach of ``a`` (the jump test)."""
-        dt = max(0.0, b.t_unix - a.t_unix)
-        return distance_m(a, b) <= self.max_speed_mps * dt + K_SIGMA * math.hypot(a.h_acc_m, b.h_acc_m)
-
-    def check(self, fix: Fix, now: float) -> str | None:
-        """None if ``fix`` (status ok) may go out as valid, else the reason; counts either way."""
-        reason = self._reason(fix, now)
+        ``window``: (x, y, w, h) pixels where the telemetry's prediction had the tracker look
+        for this frame, or None.
+        """
+        reason = self._reason(fix, now, window)
         if reason is None:
             self.accepted += 1
         else:
             self.rejected[reason] += 1
         return reason
 
-    def _reason(self, fix: Fix, now: float) -> str | None:
-        if not (math.isfinite(fix.h_acc_m) and fix.h_acc_m <= self.max_h_acc_m):
-            self._chain.clear()
-            return "h_acc"
-        if not now - fix.t_unix <= self.max_age_s:
-            self._chain.clear()
-            return "age"
-        ref = self.reference
-        if ref is not None and fix.t_unix <= ref.t_unix:
-            return "out_of_order"
-        if ref is not None and fix.t_unix - ref.t_unix > self.reference_s:
-            self.reference = ref = None
-        if ref is not None and self.consistent(ref, fix):
-            self.reference = fix
-            self._chain.clear()
-            return None
-        if self._chain and (fix.t_unix <= self._chain[-1].t_unix or not self.consistent(self._chain[-1], fix)):
-            self._chain.clear()
-        self._chain.append(fix)
-        if len(self._chain) >= CONFIRM:
-            self.reference = fix
-            self._chain.clear()
-            return None
-        return "jump" if ref is not None else "unconfirmed"
+    def target_lost(self) -> None:
+        """The tracker lost the target (or it was released): the next fixes are a re-acquisition, a new lock."""
+        self._enter("acquiring", self._last_t if math.isfinite(self._last_t) else None)
+        self._new_lock = True
 
-    def status(self) -> dict:
-        return {"max_speed_mps": self.max_speed_mps, "max_h_acc_m": self.max_h_acc_m, "max_age_s": self.max_age_s,
-                "accepted": self.accepted, "rejected": {r: self.rejected[r] for r in REASONS}}
+    # -- the tests -----------------------------------------------------------------------------
+    def _reason(self, fix: Fix, now: float, window) -> str | None:
+        if not (math.isfinite(fix.h_acc_m) and fix.h_acc_m <= self.max_h_acc_m):
+            return self._refuse(fix.t_unix, "h_acc", f"h_acc {fix.h_acc_m:.2f} m above {self.max_h_acc_m:g} m")
+        if not now - fix.t_unix <= self.max_age_s:
+            return self._refuse(fix.t_unix, "age", f"{now - fix.t_unix:.2f} s old when offered")
+        if fix.t_unix <= self._last_t:
+            return "out_of_order"
+        if not in_window(fix, window):
+            return self._refuse(fix.t_unix, "prediction", f"pixel ({fix.u:.0f}, {fix.v:.0f}) outside the window "
+                                "the telemetry predicted", leaves_track=True)
+        seen = self._local(fix)
+        if self.state == "diverged":
+            if seen.t < self._diverged_until:
+                return "diverged"
+            self._enter("acquiring", seen.t)
+        if self.state == "tracking":
+            return self._track_step(seen)
+        return self._chain_step(seen)
+
+    def _refuse(self, t: float, reason: str, why: str, leaves_track: bool = False) -> str:
+        """A refusal that breaks a chain; ``leaves_track``: the fix is not where the track is — tracking, once such
+        refusals have gone on for longer than :data:`HOLD_S`, the gate is ``diverged``."""
+        self.last_refusal = f"{reason}: {why}"
+        self._chain.clear()
+        if not (leaves_track and self.state == "tracking"):
+            return reason
+        if self._refusing_since is None:
+            self._refusing_since = t
+        elif t - self._refusing_since > HOLD_S:
+            left = self._refusing_since
+            self._diverged_until = left + DIVERGED_S
+            self._enter("diverged", t)
+            self.last_refusal = (f"diverged: the fixes left the track {t - left:.1f} s ago ({why}); refused until "
+                                 f"{DIVERGED_S:g} s after that, or until the target is lost or released")
+            return "diverged"
+        return reason
+
+    def _track_step(self, f: _Seen) -> str | None:
+        share = self.scatter.share
+        d = self.track.distance(f.t, f.z, f.C, share)[0]
+        if d > GATE_SIGMAS:
+            return self._refuse(f.t, "innovation", f"{d:.1f} sigma beyond where the UUV can be "
+                                f"{f.t - self.track.t:.2f} s after the track's last fix (gate {GATE_SIGMAS:g})",
+                                leaves_track=True)
+        self.track.update(f.t, f.z, f.C, share)
+        self.scatter.add(f.t, f.z, f.C)
+        self._refusing_since = None
+        self._last_t = f.t
+        return None
+
+    def _chain_step(self, f: _Seen) -> str | None:
+        share = self.scatter.share
+        why = self._out_of_reach(f, share)
+        first_of_lock, self._new_lock = self._new_lock, False
+        if why and first_of_lock:  # the tracker locked onto something where the UUV cannot be: not the UUV
+            self._diverged_until = f.t + DIVERGED_S
+            self._enter("diverged", f.t)
+            self.last_refusal = (f"diverged: the target found again is not the UUV: {why}; refused for "
+                                 f"{DIVERGED_S:g} s or until the target is lost or released")
+            return "diverged"
+        if why:
+            self.last_refusal = f"reach: {why}"
+            self._chain.clear()
+            self.scatter.restart()
+            return "reach"
+        self._last_t = f.t
+        if self._chain and self._chain_track.distance(f.t, f.z, f.C, share)[0] <= GATE_SIGMAS:
+            self._chain.append(f)
+            self._chain_track.update(f.t, f.z, f.C, share)
+            self._chain_misses = 0
+        elif self._chain and self._chain_misses < CHAIN_MISSES:  # one stray fix does not start the chain over
+            self._chain_misses += 1
+            return "unconfirmed"
+        else:
+            self._chain = [f]
+            self._chain_track = self._new_track(f, share)
+            self._chain_misses = 0
+            self.scatter.restart()
+        self.scatter.add(f.t, f.z, f.C)
+        if f.t - self._chain[0].t >= self.confirm_s and len(self._chain) >= self.confirm_fixes:
+            track, failed = self._replay(self._chain, self.scatter.share)
+            if failed is None:
+                self.track = track
+                self._enter("tracking", f.t)
+                return None
+            self._chain = self._chain[failed:]
+            self._chain_track = self._replay(self._chain, self.scatter.share, check=False)[0]
+        return "unconfirmed"
+
+    def _replay(self, chain: list[_Seen], share: float, check: bool = True) -> tuple[UuvTrack, int | None]:
+        """The chain's track, and the index of the first fix that fails (reach, innovation) with ``share``."""
+        track = self._new_track(chain[0], share)
+        for i, f in enumerate(chain):
+            if check and (self._out_of_reach(f, share)
+                          or (i and track.distance(f.t, f.z, f.C, share)[0] > GATE_SIGMAS)):
+                return track, max(i, 1)
+            if i:
+                track.update(f.t, f.z, f.C, share)
+        return track, None
+
+    def _out_of_reach(self, f: _Seen, share: float) -> str | None:
+        """Why the UUV cannot be at ``f`` given the last good track (None: it can, or there is none)."""
+        if self.track is None:
+            return None
+        d, radius, margin = self.track.distance(f.t, f.z, f.C, share)
+        if d <= GATE_SIGMAS:
+            return None
+        return (f"{d:.1f} sigma beyond where the UUV can be {f.t - self.track.t:.1f} s after the last good fix "
+                f"(it can have moved {radius:.2f} m; 1 sigma {margin:.2f} m)")
+
+    def _new_track(self, f: _Seen, share: float) -> UuvTrack:
+        return UuvTrack(self.max_speed_mps, self.max_accel_mps2, f.t, f.z, f.C, share)
+
+    def _local(self, fix: Fix) -> _Seen:
+        if self._ref is None:
+            self._ref = (fix.lat, fix.lon)
+        n, e, _ = geodetic_to_ned(fix.lat, fix.lon, 0.0, *self._ref, 0.0)
+        C = fix_covariance_m2(fix.sigma_n_m, fix.sigma_e_m, fix.cov_ne_m2, fix.h_acc_m)
+        return _Seen(fix.t_unix, np.array([float(n), float(e)]), C)
+
+    def _enter(self, state: str, t: float | None) -> None:
+        self._chain.clear()
+        self._refusing_since = None
+        if state != "tracking":
+            self.scatter.restart()
+        self.state, self.state_since_t = state, t
+
+    # -- the status ----------------------------------------------------------------------------
+    def status(self, now: float) -> dict:
+        """JSON-ready: the limits, the state, refusals by reason, the chain being confirmed and the track."""
+        def num(x, digits=3):
+            return round(float(x), digits) if x is not None and math.isfinite(x) else None
+
+        out = {"max_speed_mps": self.max_speed_mps, "max_accel_mps2": self.max_accel_mps2,
+               "max_h_acc_m": self.max_h_acc_m, "max_age_s": self.max_age_s, "state": self.state,
+               "state_since_t": num(self.state_since_t), "accepted": self.accepted,
+               "rejected": {r: self.rejected[r] for r in REASONS}, "last_refusal": self.last_refusal,
+               "white_share": num(self.scatter.share, 4) if self.scatter.samples else None,
+               "diverged_until_t": num(self._diverged_until) if self.state == "diverged" else None,
+               "chain": None, "track": None, "reach_m": None}
+        if self._chain:
+            out["chain"] = {"fixes": len(self._chain), "span_s": num(self._chain[-1].t - self._chain[0].t),
+                            "needed_s": self.confirm_s}
+        tr = self.track
+        if tr is None:
+            return out
+        lat, lon, _ = ned_to_geodetic(tr.x[0], tr.x[1], 0.0, *self._ref, 0.0)
+        A = tr.absolute_m2()
+        out["track"] = {"t": num(tr.t), "age_s": num(now - tr.t), "lat": num(lat, 8), "lon": num(lon, 8),
+                        "vn_mps": num(tr.x[2]), "ve_mps": num(tr.x[3]),
+                        "sigma_n_m": num(math.sqrt(A[0, 0])), "sigma_e_m": num(math.sqrt(A[1, 1])),
+                        "cov_ne_m2": num(A[0, 1], 5), "sigma_own_m": num(math.sqrt(tr.P[0, 0] + tr.P[1, 1])),
+                        "sigma_vn_mps": num(math.sqrt(tr.P[2, 2])), "sigma_ve_mps": num(math.sqrt(tr.P[3, 3]))}
+        if self.state != "tracking":
+            out["reach_m"] = num(tr.reach_m(now))
+        return out

@@ -36,7 +36,7 @@ from groundstation.mavlink_io import mavutil
 BUNDLED = ROOT / "sim_fixtures" / "bundled"
 SHUTDOWN_STATES = ("flowing", "udp_silent", "rtsp_silent", "mavlink_silent")
 LINK_INPUTS = ("mavlink", "depth", "router", "video")
-CUT_FROM_S = 3.0  # session seconds after the start
+CUT_FROM_S = 4.0  # session seconds after the start: the first fixes come 2 s in, and a target is valid a second later
 CUT_S = {"mavlink": 10.0, "depth": 6.0, "router": 6.0, "video": 6.0}  # > the watchdog's 3 s + its 1 s period
 SESSION_S = 16.0  # the generated session: long enough for a 10 s MAVLink cut with fixes before and after
 SESSION_FPS = 15.0

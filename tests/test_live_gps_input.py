@@ -18,6 +18,7 @@ from groundstation.sinks.gps_input import (
     mavlink_gps_link,
 )
 from localizer.fix import Fix
+from localizer.fix_gate import FixGate
 
 
 @pytest.mark.parametrize("t_unix", [1763800000.0, 1763800000.2504, 1_700_000_000.999, 1483228800.0])
@@ -40,8 +41,14 @@ def _info(t_recv):
     return type("I", (), {"t_recv": t_recv})()
 
 
+def _sink(link, max_age_s: float) -> GpsInputSink:
+    """A sink whose gate confirms a target over 3 frames, not a second: these tests are about the sender."""
+    return GpsInputSink(link, hz=10.0, max_age_s=max_age_s,
+                        gate=FixGate(max_age_s=max_age_s, confirm_s=0.05, confirm_fixes=3))
+
+
 def _offer_confirmed(sink, t, **kw):
-    """The fix at ``t`` after the two frames before it at the same place: the gate's confirmation (CONFIRM = 3)."""
+    """The fix at ``t`` after the two frames before it at the same place: the confirmation of :func:`_sink`'s gate."""
     for dt in (2 / 30, 1 / 30, 0.0):
         sink.on_fix(_fix(t - dt, **kw), info=_info(t - dt))
 
@@ -74,7 +81,7 @@ def test_sender_over_pymavlink_rate_fix_and_expiry():
     got = []
 
     async def scenario():
-        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
+        sink = _sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), max_age_s=0.5)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(1.0)  # no fix yet: no-fix messages at 10 Hz
         t_fix = time.time()
@@ -108,7 +115,7 @@ def test_tracker_loss_ends_the_fix_at_once(status):
     uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
 
     async def scenario():
-        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=5.0)
+        sink = _sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), max_age_s=5.0)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(0.3)
         t = time.time()
@@ -145,7 +152,7 @@ def test_injection_through_blueos_mavlink_in():
 
     async def scenario():
         await asyncio.sleep(0.3)
-        sink = GpsInputSink(ZenohMavlinkIn(skyfix_side, "mavlink/in"), hz=10.0, max_age_s=0.5)
+        sink = _sink(ZenohMavlinkIn(skyfix_side, "mavlink/in"), max_age_s=0.5)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(0.25)
         _offer_confirmed(sink, time.time())

@@ -7,7 +7,8 @@ open water is refused with the reason shown, and GPS_INPUT stays "no fix"; a box
 true pixel from the simulator's track.csv at the exposure time of the frame on screen, through the replay's
 printed time shift) selects it on that very frame, and ``ok`` fixes follow, near the truth; the map (track,
 footprint, the last fix's lat/lon) and health (per-input rates, GPS_INPUT's fix_type, clocks, CPU) panels fill
-in; a click on the UUV re-selects it; "Release target" turns GPS_INPUT to "no fix". Screenshots of each step are kept (out/ui-screenshots/).
+in, with the safety gates tracking the UUV (header, health, the track on the map); a click on the UUV re-selects
+it; "Release target" turns GPS_INPUT to "no fix" and the gates to acquiring. Screenshots of each step are kept (out/ui-screenshots/).
 """
 
 from __future__ import annotations
@@ -128,6 +129,12 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
             assert measured + without > 0
             map_info = page.inner_text("#map-info")
             assert re.search(r"camera \d+\.\d m above the water", map_info) and "no footprint" not in map_info
+            # the safety gates: tracking, in the header, the health table and on the map (the track's diamond)
+            assert page.inner_text("#gate-state") == "gates tracking"
+            gates = re.search(r"safety gates\s+ok\s+.*?tracking · (\d+) accepted · refused: .*unconfirmed (\d+).*"
+                              r"track [\d.]+ m/s, ± [\d.]+ m \(own [\d.]+ m\)", health)
+            assert gates and int(gates[1]) > 0 and int(gates[2]) >= 10, health
+            assert page.eval_on_selector("#map", "m => m.dataset.gate") == "tracking"
 
             # a click on the UUV re-selects it there
             frame = int(_dataset(page, "frame"))
@@ -148,6 +155,9 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
                      "the page showing the target released")
             wait_for(lambda: sum(g["fix_type"] == 1 and g["t_recv"] > t_released + 0.3 for g in live.gps_input()) >= 3,
                      10, "GPS_INPUT without a fix after the release")
+            wait_for(lambda: page.inner_text("#gate-state") == "gates acquiring"
+                     and page.eval_on_selector("#map", "m => m.dataset.gate") == "acquiring", 5,
+                     "the gates acquiring again after the release")
             browser.screenshot("4-released")
             assert not browser.errors, browser.errors
             assert browser.outside == [] and all(u.startswith(origin) for u in browser.requests), browser.requests

@@ -3,7 +3,7 @@
 The camera's footprint, projected back into the image with the simulator's own projection (OpenCV's
 projectPoints with the lens's distortion, not the localizer's ray code), lies on the image's outline, top edge
 first; the track keeps ok fixes at most one per 0.1 s, in metres from the UAV's first position (pymap3d), each
-sent once.
+sent once; the safety gates' track is placed the same way.
 """
 
 from __future__ import annotations
@@ -69,3 +69,18 @@ def test_the_track_keeps_ok_fixes_sent_once():
     assert view.points_since(points[-1][0]) == []
     view.on_fix(Fix(t0 + 1.0, "ok", lat=63.44, lon=10.4, h_acc_m=0.3), None)
     assert [p[3] for p in view.points_since(points[-1][0])] == [0.3]
+
+
+def test_the_gates_track_is_placed_like_the_fixes():
+    session = load_session(BUNDLED / "nadir_hover")
+    view = TopView(session.calibration, session.telemetry)
+    gates = {"state": "acquiring", "reach_m": 1.5, "track": {"lat": 63.44001, "lon": 10.40002, "vn_mps": 0.1,
+                                                              "ve_mps": -0.2, "sigma_n_m": 0.3, "sigma_e_m": 0.2,
+                                                              "cov_ne_m2": 0.01}}
+    assert view.gate_view(None) is None
+    assert view.gate_view(gates) == {"state": "acquiring", "reach_m": 1.5, "track": None}  # no origin yet
+    snap = view.snapshot(float(session.frames["t"][10]))
+    shown = view.gate_view(gates)
+    n, e, _ = pymap3d.geodetic2ned(63.44001, 10.40002, 0.0, snap["origin"]["lat"], snap["origin"]["lon"], 0.0)
+    assert shown["track"]["n"] == pytest.approx(n, abs=1e-3) and shown["track"]["e"] == pytest.approx(e, abs=1e-3)
+    assert (shown["track"]["vn"], shown["track"]["sigma_e"], shown["track"]["cov_ne"]) == (0.1, 0.2, 0.01)

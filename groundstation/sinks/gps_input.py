@@ -30,9 +30,11 @@ What (:func:`gps_input_fields`):
   using GPS position; a stale fix is never sent as valid.
 
 Which fixes: only those that pass the safety gates (:mod:`localizer.fix_gate`: accuracy,
-age, order, a jump beyond the UUV's top speed, and a first fix not yet confirmed by the
-next ones), counted by reason in the status; a refused fix leaves the last accepted one
-in place until it ages out. A loss of the track resets the gates.
+age, order, the frame's prediction window, and a track of the UUV — a fix off the track,
+out of the UUV's reach after a loss, or of a target not yet confirmed over a second is
+refused), counted by reason in the status; a refused fix leaves the last accepted one in
+place until it ages out. The fix itself goes out, never the track's estimate (the UUV's
+EKF does the filtering). A loss of the track makes the next fixes a re-acquisition.
 
 Stopping (:meth:`GpsInputSink.stop`, also on cancellation): one last no-fix message, so
 the autopilot drops the position at once instead of after its 4 s timeout, then the
@@ -158,11 +160,11 @@ class GpsInputSink:
 
     def on_fix(self, fix: Fix, info) -> None:
         if fix.ok:
-            if self.gate.check(fix, time.time()) is None:
+            if self.gate.check(fix, time.time(), getattr(info, "window", None)) is None:
                 self._last_ok = fix
         elif fix.status in LOSS_STATUSES:
             self._last_ok = None
-            self.gate.reset()
+            self.gate.target_lost()
         self._fix, self._info = fix, info
         self._new.set()
 
@@ -214,4 +216,4 @@ class GpsInputSink:
     def status(self, now: float) -> dict:
         return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
                 "not_delivered": self.not_delivered, "last_fix_type": self.last_fix_type,
-                "link": self.link.status(now), "gates": self.gate.status()}
+                "link": self.link.status(now), "gates": self.gate.status(now)}

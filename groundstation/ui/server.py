@@ -191,8 +191,9 @@ class WebUi:
                 continue
             now = time.time()
             status = self.control.status()
+            gates = (status.get("gps_input") or {}).get("gates")
             state = {"type": "state", "status": status, "rates": self.rates.update(now, _counts(status)),
-                     "map": self.topview.snapshot(now)}
+                     "map": {**self.topview.snapshot(now), "gate": self.topview.gate_view(gates)}}
             for v in self.viewers:
                 track = self.topview.points_since(v.seq)
                 if track:

@@ -8,6 +8,8 @@ projected onto the water surface with that frame's camera pose
 rays above the horizon never reach the water and are left out (``horizon``). The
 UUV's track is every ``ok`` fix (at most one per ``min_dt_s``) with its horizontal
 accuracy, numbered so that each page is sent only what it has not seen.
+:meth:`TopView.gate_view` places the safety gates' track of the UUV (its state, filtered
+position, velocity and covariance, and its reach while a target is being acquired).
 """
 
 from __future__ import annotations
@@ -95,6 +97,19 @@ class TopView:
             pts = off[good] + pose.cam_offset_ned_m[0, :2] + uav
             out["footprint"] = [[round(float(a), 3), round(float(b), 3)] for a, b in pts]
             out["top_edge"] = int(good[:EDGE_SAMPLES].sum())  # the first points are the image's top edge
+        return out
+
+    def gate_view(self, gates: dict | None) -> dict | None:
+        """The safety gates' state and track (their status, ``gps_input.gates``) on the map: position in metres
+        north and east of the origin, velocity, 1-sigma covariance and, while acquiring, the UUV's reach."""
+        if not gates:
+            return None
+        out = {"state": gates["state"], "reach_m": gates["reach_m"], "track": None}
+        tr = gates["track"]
+        if tr is not None and self.origin is not None:
+            n, e, _ = geodetic_to_ned(tr["lat"], tr["lon"], 0.0, *self.origin, 0.0)
+            out["track"] = {"n": round(float(n), 3), "e": round(float(e), 3), "vn": tr["vn_mps"], "ve": tr["ve_mps"],
+                            "sigma_n": tr["sigma_n_m"], "sigma_e": tr["sigma_e_m"], "cov_ne": tr["cov_ne_m2"]}
         return out
 
     def _origin_json(self) -> dict | None:

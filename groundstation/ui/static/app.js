@@ -223,6 +223,11 @@ function showStatus() {
   $("height").textContent = h ? `height ${fmt(h.height_m, 2)} ± ${fmt(h.sigma_m, 2, " m")} (${h.source})` : "height —";
   const t = s.target;
   $("target-state").textContent = `target ${t.state}${t.origin ? ` (${t.origin})` : ""}`;
+  const g = s.gps_input && s.gps_input.gates;  // the safety gates: what GPS_INPUT lets through
+  const gate = $("gate-state");
+  gate.textContent = !g ? "gates —" : g.state === "acquiring" && g.chain
+    ? `gates acquiring ${g.chain.span_s.toFixed(1)}/${g.chain.needed_s.toFixed(1)} s` : `gates ${g.state}`;
+  gate.className = !g ? "" : g.state === "tracking" ? "ok" : g.state === "diverged" ? "bad" : "warn";
   const okFix = fix && fix.status === "ok";
   $("fix-text").textContent = okFix
     ? `UUV ${fix.lat.toFixed(7)}, ${fix.lon.toFixed(7)} ± ${fix.h_acc_m.toFixed(2)} m, depth ${fmt(fix.depth_m)} m`
@@ -253,6 +258,9 @@ function drawMap() {
   if (m.footprint) pts.push(...m.footprint);
   const recent = page.track.filter((p) => p[4] > (page.track.length ? page.track.at(-1)[4] : 0) - 30);
   recent.forEach((p) => pts.push([p[1], p[2]]));
+  const gt = m.gate && m.gate.track;
+  if (gt) pts.push([gt.n, gt.e]);
+  map.dataset.gate = m.gate ? m.gate.state : "";
   if (!pts.length) {
     ctx.fillStyle = "#000";
     ctx.font = `bold ${16 * dpr}px system-ui, sans-serif`;
@@ -305,6 +313,7 @@ function drawMap() {
     ctx.arc(X(last[2]), Y(last[1]), Math.max(last[3] * pxPerM, 5 * dpr), 0, 2 * Math.PI);
     ctx.stroke();
   }
+  if (gt) drawGateTrack(ctx, m.gate, X, Y, pxPerM, dpr);
   if (m.uav) {  // the UAV: a black cross in a ring
     const x = X(m.uav[1]), y = Y(m.uav[0]), s = 9 * dpr;
     ctx.strokeStyle = "#000";
@@ -335,6 +344,41 @@ function drawMap() {
     + (m.horizon ? " · horizon in view: footprint cut" : "")
     + (m.footprint ? "" : ` · no footprint (${m.pose})`)
     + (o ? ` · origin ${o.lat.toFixed(6)}, ${o.lon.toFixed(6)}` : "");
+}
+
+// The safety gates' track: a blue diamond, its 2-sigma ellipse (own and shared error), its velocity over the next
+// second; while a target is being acquired, a dashed circle where the UUV can be by now.
+function drawGateTrack(ctx, gate, X, Y, pxPerM, dpr) {
+  const t = gate.track;
+  const x = X(t.e), y = Y(t.n);
+  const a = t.sigma_n ** 2, b = t.cov_ne ?? 0, c = t.sigma_e ** 2;  // [[nn, ne], [ne, ee]]
+  const mid = (a + c) / 2, half = Math.sqrt(((a - c) / 2) ** 2 + b * b);
+  const angle = Math.atan2(half + (a - c) / 2, b || 1e-12);  // of the major axis, from east towards north
+  ctx.strokeStyle = "#0050c8";
+  ctx.lineWidth = 2 * dpr;
+  ctx.beginPath();
+  ctx.ellipse(x, y, Math.max(2 * Math.sqrt(mid + half) * pxPerM, 2), Math.max(2 * Math.sqrt(Math.max(mid - half, 0)) * pxPerM, 2),
+              -angle, 0, 2 * Math.PI);
+  ctx.stroke();
+  ctx.beginPath();
+  ctx.moveTo(x, y);
+  ctx.lineTo(X(t.e + t.ve), Y(t.n + t.vn));
+  ctx.lineWidth = 3 * dpr;
+  ctx.stroke();
+  const s = 7 * dpr;
+  ctx.fillStyle = "#0050c8";
+  ctx.beginPath();
+  ctx.moveTo(x, y - s); ctx.lineTo(x + s, y); ctx.lineTo(x, y + s); ctx.lineTo(x - s, y);
+  ctx.closePath();
+  ctx.fill();
+  if (gate.state !== "tracking" && gate.reach_m !== null) {
+    ctx.setLineDash([8 * dpr, 6 * dpr]);
+    ctx.lineWidth = 2 * dpr;
+    ctx.beginPath();
+    ctx.arc(x, y, gate.reach_m * pxPerM, 0, 2 * Math.PI);
+    ctx.stroke();
+    ctx.setLineDash([]);
+  }
 }
 
 // ---- health ---------------------------------------------------------------------------------------
@@ -429,6 +473,22 @@ function showHealth() {
                   `last fix_type ${ft} · ${g.sent_valid}/${g.sent} valid · ${g.not_delivered} not delivered`
                   + ` · ${g.gates ? Object.values(g.gates.rejected).reduce((a, b) => a + b, 0) : 0} held by the gates · ${g.url}`
                   + ` · link ${link.state ?? "—"}${link.error ? ` (${link.error})` : ""} · autopilot last heard ${heard}`));
+  }
+  if (s.gps_input && s.gps_input.gates) {
+    const g = s.gps_input.gates, t = g.track;
+    const refused = Object.entries(g.rejected).filter(([, n]) => n).map(([k, n]) => `${k} ${n}`).join(", ");
+    const state = g.state === "tracking" ? "ok" : g.state === "diverged" ? "bad: diverged" : "warn: acquiring";
+    rows.push(row("safety gates", state, t ? age(t.age_s) : "", "",
+                  `${g.state}${g.chain ? ` (${g.chain.fixes} fixes over ${g.chain.span_s.toFixed(1)} of `
+                    + `${g.chain.needed_s.toFixed(1)} s)` : ""}`
+                  + (g.diverged_until_t !== null ? ` until ${new Date(g.diverged_until_t * 1000).toLocaleTimeString()}` : "")
+                  + ` · ${g.accepted} accepted · refused: ${refused || "none"}`
+                  + (t ? ` · track ${Math.hypot(t.vn_mps, t.ve_mps).toFixed(2)} m/s, ± ${fmt(Math.hypot(t.sigma_n_m, t.sigma_e_m), 2, " m")}`
+                         + ` (own ${fmt(t.sigma_own_m, 3, " m")})` : " · no track yet")
+                  + (g.reach_m !== null ? ` · UUV within ${fmt(g.reach_m, 1, " m")} of it` : "")
+                  + ` · frame-to-frame share ${g.white_share === null ? "—" : fmt(100 * g.white_share, 2, " %")}`
+                  + ` · limits ${g.max_speed_mps} m/s, ${g.max_accel_mps2} m/s²`
+                  + (g.last_refusal ? ` · last: ${g.last_refusal}` : "")));
   }
   if (s.height) {
     const h = s.height;

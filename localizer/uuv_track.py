@@ -1,0 +1,219 @@
+"""The UUV's track: a constant-velocity Kalman filter over its fixes, in metres north and east of a reference.
+
+What a fix is made of, as the track sees it::
+
+    fix = UUV + common(t) + white
+
+- ``white``: what changes from one frame to the next — the tracker's pixel jitter, the
+  gimbal's shake, the frame time's jitter against the telemetry. Its covariance is taken
+  as a share ``s²`` of the fix's own covariance ``C`` (``sigma_n_m``, ``sigma_e_m``,
+  ``cov_ne_m2``), plus :data:`WHITE_FLOOR_M` (a tracker's sub-pixel limit); the share is
+  measured on the fixes themselves by :class:`Scatter` (see there). Before enough fixes
+  were seen it is 1: the whole claim.
+- ``common``: the rest of ``C`` — the camera's attitude bias, the height's, the depth's,
+  the UAV's GNSS error — the same in consecutive frames. No averaging removes it, and a
+  frame-to-frame comparison must not be made against it: two fixes 2·h_acc apart are not
+  "within their accuracy" of each other when they share one bias. On the generated
+  sessions ``C`` claims 0.1–0.4 m (1-sigma per axis) while consecutive fixes differ by
+  3–7 mm, or 4–7 cm with ``field_like``'s noisy telemetry. The common error changes
+  smoothly, over seconds (:func:`common_change_m2`): little from one frame to the next,
+  much across a long loss.
+
+The state is the position and velocity of the fixes (the UUV plus its slowly changing
+common error). It moves with constant velocity between fixes; for the filter's gain the
+UUV's acceleration enters as the process noise of a piecewise-constant white acceleration
+of 1-sigma :data:`PROCESS_ACCEL_SHARE` times the bound ``max_accel_mps2`` over each
+prediction step (Bar-Shalom's DWPA model: ``Q = σ² G Gᵀ``, ``G = (Δ²/2, Δ)`` per axis),
+and the velocity is held within the top speed ``max_speed_mps``. The velocity starts unknown (1-sigma the
+top speed). Each fix updates it with the white part of its covariance only
+(:meth:`UuvTrack.white_m2`). Whether a new fix can be the UUV (:meth:`UuvTrack.distance`)
+takes the bounds as bounds, not as a Gaussian: the offset the UUV's speed and
+acceleration allow is free, only what lies beyond it is measured against the noise.
+
+The track's absolute uncertainty is its own (how well it knows where the fixes are) plus
+the common error, which it cannot know: :meth:`UuvTrack.absolute_m2`.
+Pure computation: times are station-clock UNIX seconds, positions metres (north, east).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+#: Time scale (s) over which the fixes' common error changes: the attitude, height and GNSS errors of a
+#: hovering UAV drift over tens of seconds; its turning rotates an attitude bias's footprint within seconds.
+TAU_COMMON_S = 5.0
+#: The white part of a fix's error is never taken below this (m, 1-sigma per axis): half a pixel to a pixel of
+#: a tracker's jitter at the usual image scales (1–2 cm per pixel from 9–10 m).
+WHITE_FLOOR_M = 0.01
+#: The filter's process noise: a white acceleration of this share of the bound, 1-sigma (see the module doc).
+#: Manoeuvres at the bounds (stopping from top speed, accelerating from rest, ±a every 0.3 s, turning at top speed)
+#: stay within 3.4 sigma at 10–60 fps with this; at 0.2 they reach 11 at 30 fps (refused), at 1.0 an abrupt start at top
+#: speed is no longer refused.
+PROCESS_ACCEL_SHARE = 0.4
+#: :class:`Scatter` keeps this many second differences (3 s at 30 fps) ...
+SCATTER_KEEP = 90
+#: ... and measures nothing from fewer than this many.
+SCATTER_MIN = 8
+#: :class:`Scatter` compares the middle of this many consecutive fixes with a line through the others ...
+SCATTER_FIXES = 7
+#: ... when they span at most this long (s).
+SCATTER_SPAN_S = 0.7
+_H = np.hstack([np.eye(2), np.zeros((2, 2))])
+
+
+def fix_covariance_m2(sigma_n_m: float, sigma_e_m: float, cov_ne_m2: float, h_acc_m: float) -> np.ndarray:
+    """A fix's 2×2 north-east covariance (m²); isotropic from ``h_acc_m`` (its DRMS) when the per-axis
+    values are missing (a positions.csv of another tool)."""
+    if math.isfinite(sigma_n_m) and math.isfinite(sigma_e_m):
+        c = cov_ne_m2 if math.isfinite(cov_ne_m2) else 0.0
+        return np.array([[sigma_n_m**2, c], [c, sigma_e_m**2]])
+    return np.eye(2) * h_acc_m**2 / 2.0
+
+
+def common_change_m2(C: np.ndarray, gap_s: float) -> np.ndarray:
+    """Covariance (m²) of the change of a common error of covariance ``C`` over ``gap_s`` seconds: a smooth
+    error (correlation ``exp(−Δ²/2τ²)``, τ = :data:`TAU_COMMON_S`), so a frame's change is tiny and a minute's
+    is as large as the error itself."""
+    return 2.0 * (1.0 - math.exp(-0.5 * (gap_s / TAU_COMMON_S) ** 2)) * C
+
+
+class Scatter:
+    """How much of the fixes' claimed covariance changes from frame to frame, measured on the fixes.
+
+    Each fix in the middle of :data:`SCATTER_FIXES` consecutive ones (spanning at most
+    :data:`SCATTER_SPAN_S`) is compared with the straight line fitted through the others
+    (least squares in time): the line takes out the position, the velocity and every slowly
+    changing error; what is left is the white part (its noise correlated over a frame or two
+    too, as telemetry interpolated between samples is; plus the UUV's acceleration times the
+    span squared over 12: under a centimetre at 1 m/s² and 0.3 s). With the white part
+    ``s²·C`` of each fix, ``q = rᵀ (C·(1 + h))⁻¹ r`` (``h``: the line's own variance at that
+    time, in units of one fix's) is ``s²`` times a chi-square with 2 degrees of freedom, so
+    ``s² = mean(q) / 2`` over the last :data:`SCATTER_KEEP`. The mean, not a median: a
+    tracker's jitter is heavy-tailed (on the generated sessions most frames move by a tenth
+    of a pixel and single frames by half a pixel: the 99th percentile of ``q`` is up to 100
+    times its median, 6.6 for a Gaussian), and the gates must cover the tail.
+    """
+
+    def __init__(self):
+        self._q: deque[float] = deque(maxlen=SCATTER_KEEP)
+        self._last: deque[tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=SCATTER_FIXES)
+
+    def add(self, t: float, z: np.ndarray, C: np.ndarray) -> None:
+        """A fix of the stream (time, north-east position, covariance)."""
+        self._last.append((t, z, C))
+        if len(self._last) < SCATTER_FIXES or t - self._last[0][0] > SCATTER_SPAN_S:
+            return
+        mid = SCATTER_FIXES // 2
+        ts = np.array([f[0] for f in self._last])
+        zs = np.array([f[1] for f in self._last])
+        others = np.arange(SCATTER_FIXES) != mid
+        tc = ts[others] - ts[others].mean()
+        sxx = float(tc @ tc)
+        slope = tc @ zs[others] / sxx
+        dt = ts[mid] - ts[others].mean()
+        r = zs[mid] - (zs[others].mean(axis=0) + slope * dt)
+        h = 1.0 / others.sum() + dt * dt / sxx
+        Cn = self._last[mid][2] * (1.0 + h) + np.eye(2) * WHITE_FLOOR_M**2 * (1.0 + h)
+        self._q.append(float(r @ np.linalg.solve(Cn, r)))
+
+    def restart(self) -> None:
+        """The next fix does not follow the last one (another target, a gap): measured shares stay."""
+        self._last.clear()
+
+    @property
+    def samples(self) -> int:
+        return len(self._q)
+
+    @property
+    def share(self) -> float:
+        """``s²``, at most 1; 1 until :data:`SCATTER_MIN` fixes were measured."""
+        if len(self._q) < SCATTER_MIN:
+            return 1.0
+        return min(1.0, float(np.mean(self._q)) / 2.0)
+
+
+class UuvTrack:
+    """The fixes' position and velocity (north, east; m, m/s) at time :attr:`t`, with covariance :attr:`P`.
+
+    Started from one fix ``z`` (covariance ``C``) at ``t``, the white share ``share`` of ``C``
+    taken as the position's uncertainty.
+    """
+
+    def __init__(self, max_speed_mps: float, max_accel_mps2: float, t: float, z: np.ndarray, C: np.ndarray,
+                 share: float):
+        self.max_speed_mps = max_speed_mps
+        self.max_accel_mps2 = max_accel_mps2
+        self.t = t
+        self.x = np.array([z[0], z[1], 0.0, 0.0])
+        self.P = np.zeros((4, 4))
+        self.P[:2, :2] = self.white_m2(C, share)
+        self.P[2:, 2:] = np.eye(2) * max_speed_mps**2
+        self.C = C  # the newest fix's covariance (m²) ...
+        self.common = (1.0 - share) * C  # ... and its common part
+
+    @staticmethod
+    def white_m2(C: np.ndarray, share: float) -> np.ndarray:
+        """The white part of a fix's covariance ``C`` (m²): ``share·C`` and the floor."""
+        return share * C + np.eye(2) * WHITE_FLOOR_M**2
+
+    def predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """State and covariance at ``t`` (not before :attr:`t`), the acceleration's process noise included."""
+        dt = max(0.0, t - self.t)
+        F = np.eye(4)
+        F[0, 2] = F[1, 3] = dt
+        G = np.vstack([np.eye(2) * dt * dt / 2.0, np.eye(2) * dt])
+        return F @ self.x, F @ self.P @ F.T + (PROCESS_ACCEL_SHARE * self.max_accel_mps2) ** 2 * (G @ G.T)
+
+    def update(self, t: float, z: np.ndarray, C: np.ndarray, share: float) -> None:
+        """Take the fix ``z`` (covariance ``C``) at ``t``; the velocity is held within the top speed."""
+        R = self.white_m2(C, share)
+        x, P = self.predict(t)
+        S = P[:2, :2] + R
+        K = P @ _H.T @ np.linalg.inv(S)
+        x = x + K @ (z - x[:2])
+        IKH = np.eye(4) - K @ _H
+        P = IKH @ P @ IKH.T + K @ R @ K.T  # Joseph form: stays symmetric and positive
+        speed = math.hypot(x[2], x[3])
+        if speed > self.max_speed_mps:
+            x[2:] *= self.max_speed_mps / speed
+        self.t, self.x, self.P, self.C, self.common = t, x, P, C, (1.0 - share) * C
+
+    def distance(self, t: float, z: np.ndarray, C: np.ndarray, share: float) -> tuple[float, float, float]:
+        """How far a fix ``z`` (covariance ``C``) at ``t`` is from where the fixes can be: ``(d, radius_m, margin_m)``.
+
+        Two bounds, both must hold: the UUV is at most ``v_top·Δ`` from the track's position
+        (its top speed), and at most ``½·a·Δ²`` from that position moved on with the
+        track's velocity (its acceleration bound). For each, the fix's offset beyond the
+        bound, over its covariance — the track's own (carried over Δ for the second), the
+        fix's white part and how much the common error can have changed
+        (:func:`common_change_m2`) — is a Mahalanobis distance; ``d`` is the larger.
+        ``radius_m`` and ``margin_m`` (1-sigma of that covariance along its widest axis) are
+        those of the bound that gives ``d``.
+        """
+        dt = max(0.0, t - self.t)
+        F = np.eye(4)
+        F[0, 2] = F[1, 3] = dt
+        extra = self.white_m2(C, share) + common_change_m2(C, dt)
+        moved_on, P_moved = (F @ self.x)[:2], (F @ self.P @ F.T)[:2, :2]
+        return max(_beyond(z - self.x[:2], self.max_speed_mps * dt, self.P[:2, :2] + extra),
+                   _beyond(z - moved_on, 0.5 * self.max_accel_mps2 * dt * dt, P_moved + extra))
+
+    def reach_m(self, t: float) -> float:
+        """How far from the track's position the UUV can be at ``t``: its top speed times the time since."""
+        return self.max_speed_mps * max(0.0, t - self.t)
+
+    def absolute_m2(self) -> np.ndarray:
+        """The position's covariance against the truth (m²): the track's own plus the common error."""
+        return self.P[:2, :2] + self.common
+
+
+def _beyond(offset: np.ndarray, radius_m: float, U: np.ndarray) -> tuple[float, float, float]:
+    """``(d, radius_m, margin_m)``: the Mahalanobis distance (covariance ``U``) of the part of ``offset`` beyond
+    ``radius_m``, and 1-sigma of ``U`` along its widest axis."""
+    off = math.hypot(*offset)
+    beyond = offset * (max(0.0, off - radius_m) / off) if off > 0 else offset
+    d = math.sqrt(max(0.0, float(beyond @ np.linalg.solve(U, beyond))))
+    return d, radius_m, math.sqrt(float(np.linalg.eigvalsh(U)[-1]))
