@@ -4,12 +4,19 @@ The UUV's grey-level appearance is kept as a *canonical* template (upright, at
 the size it had at start). Each frame it is rotated to the UUV's current heading
 in the image and scaled to the predicted apparent size, then matched
 (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``) inside a window centred on the
-prediction and as large as its uncertainty; the peak is refined to sub-pixel
-precision by a parabola fit, and every ``adapt_every`` frames (at once when the
-score sags) the heading is followed by trying ±``turn_step_deg`` steps. The
+prediction and as large as its uncertainty. Candidates are ranked by their score
+less a penalty for their distance from the prediction (``distance_weight`` × half
+the squared distance in prediction sigmas: a look-alike further from where the UUV
+should be needs a better score to win); the best is refined to sub-pixel precision
+by a parabola fit of the raw scores, and every ``adapt_every`` frames (at once when
+the score sags) the heading is followed by trying ±``turn_step_deg`` steps. The
 matched patch, turned back upright, is blended slowly into the canonical
-template when the match is confident, and the template is held on its first
-appearance, so it follows lighting and depth without sliding off the vehicle.
+template when the match is confident, so it follows lighting, depth and the side
+the vehicle shows. A drift is refused, not learnt: a clear match (see
+:meth:`~TemplateMatcher._visible`) must show the UUV's first appearance at the
+tracked point (within ``anchor_drift_px``, NCC at least ``anchor_score``), else it
+is no match (the template was sliding onto a shadow, a rock, the seafloor), and a
+blend after which the template would not show it is not made.
 Patches with less than ``learn_contrast`` of the first appearance's grey-level
 spread are not learnt: a UUV fading into turbid water as it dives would
 otherwise teach the template the water's noise.
@@ -23,7 +30,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
 - :meth:`~TemplateMatcher.follow`: a peak of at least ``ok_score`` (and no more than
   ``level_drop`` below the recent level), inside the predicted window, on a patch with
   at least ``min_contrast`` of the first appearance's grey-level spread (a UUV that has
-  dived out of sight would otherwise leave NCC matching the water's noise).
+  dived out of sight would otherwise leave NCC matching the water's noise) that, when
+  clear enough to tell, shows the first appearance at the tracked point.
 - :meth:`~TemplateMatcher.search`: the best match over ``reacquire_headings`` headings
   (refined by turn steps) in a window that grows with the prediction's uncertainty
   (the whole frame without a prediction; a wide window is searched block-averaged
@@ -57,6 +65,10 @@ class TemplateParams:
     learn_contrast: float = 0.2  # learn only from patches with at least this share of the first appearance's contrast
     min_contrast: float = 0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
     recentre_px: float = 0.2  # undo the learnt template's drift from its first appearance beyond this
+    anchor_score: float = 0.2  # a clear match (learn_contrast) shows the first appearance at least this well (NCC) ...
+    anchor_drift_px: float = 2.0  # ... within this many working pixels of the tracked point (else: a drift) ...
+    anchor_shift_px: int = 4  # ... sought within this many working pixels of it
+    distance_weight: float = 0.1  # a candidate's score less this × half its squared distance from the prediction in sigmas
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
     turn_drop: float = 0.05  # try other headings at once when the score falls this far below the level
@@ -79,13 +91,26 @@ def _parabola(a: float, b: float, c: float) -> float:
     return 0.0 if den >= 0 else min(0.5, max(-0.5, 0.5 * (a - c) / den))
 
 
-def _peak(scores: np.ndarray) -> tuple[float, float, float]:
-    """(score, x, y) of the best match with sub-pixel offsets."""
-    _, best, _, (j, i) = cv2.minMaxLoc(scores)
+def _peak(scores: np.ndarray, penalty: np.ndarray | None = None) -> tuple[float, float, float, float]:
+    """(rank, score, x, y) of the best match with sub-pixel offsets.
+
+    With a ``penalty`` map (as ``scores``), the best place is the one whose score minus
+    its penalty (the rank) is highest, moved uphill to the raw scores' own peak there:
+    the penalty picks the peak, never shifts it.
+    """
+    _, rank, _, (j, i) = cv2.minMaxLoc(scores if penalty is None else scores - penalty)
     h, w = scores.shape
+    if penalty is not None:
+        while True:
+            di, dj = divmod(int(np.argmax(scores[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2])), min(j + 2, w) - max(j - 1, 0))
+            ni, nj = max(i - 1, 0) + di, max(j - 1, 0) + dj
+            if (ni, nj) == (i, j):
+                break
+            i, j = ni, nj
+        rank = float(scores[i, j] - penalty[i, j])
     dx = _parabola(scores[i, j - 1], scores[i, j], scores[i, j + 1]) if 0 < j < w - 1 else 0.0
     dy = _parabola(scores[i - 1, j], scores[i, j], scores[i + 1, j]) if 0 < i < h - 1 else 0.0
-    return float(best), float(j + dx), float(i + dy)
+    return float(rank), float(scores[i, j]), float(j + dx), float(i + dy)
 
 
 def _warp(src: np.ndarray, centre, angle_deg: float, scale: float, side: int) -> np.ndarray:
@@ -158,7 +183,7 @@ class TemplateMatcher:
 
     def _contrast(self, frame_bgr, u: float, v: float) -> float:
         """The grey-level spread at (u, v) relative to the first appearance's (see :meth:`_spread`)."""
-        return self._spread(frame_bgr, u, v) / max(self._anchor_spread, 1e-6)
+        return self._spread(frame_bgr, u, v) / max(self._first_spread, 1e-6)
 
     def _template(self, angle_deg: float, shrink: int = 1) -> np.ndarray:
         """The template at a heading and the current scale, block-averaged by ``shrink`` (cached until the next change).
@@ -191,8 +216,8 @@ class TemplateMatcher:
         self._cache: dict = {}
         self._canon = self._upright(frame_bgr, self.u, self.v)
         lo = (self.D - self.S) // 2
-        self._anchor = self._canon[lo : lo + self.S, lo : lo + self.S].copy()  # the first appearance
-        self._anchor_spread = self._spread(frame_bgr, self.u, self.v)
+        self._first = self._canon[lo : lo + self.S, lo : lo + self.S].copy()  # the first appearance
+        self._first_spread = self._spread(frame_bgr, self.u, self.v)
         self._velocity = (0.0, 0.0)
         self._level = 1.0
         self._frames = 0
@@ -228,12 +253,26 @@ class TemplateMatcher:
         refinement and the contrast check around its match read (see :meth:`_blocks`)."""
         self._region(frame_bgr, cu, cv_, radius_px + 4 * self.k, self.S)
 
-    def _match_in(self, region, bx0: int, by0: int, template: np.ndarray):
-        """(score, u, v) of the template's best match in a working-resolution region."""
-        best, j, i = _peak(cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED))
+    def _penalty(self, shape, x0: float, y0: float, step: float, prior) -> np.ndarray | None:
+        """The distance penalty (see :data:`TemplateParams.distance_weight`) of a score map whose cell (i, j) puts
+        the template's centre at working-resolution (x0 + j·step, y0 + i·step); None without a ``prior``."""
+        if prior is None:
+            return None
+        cu, cv_, sigma_px = prior
+        qx, qy = self._to_work(cu, cv_)
+        s = sigma_px / self.k
+        dx = (x0 + step * np.arange(shape[1], dtype=np.float32) - qx) / s
+        dy = (y0 + step * np.arange(shape[0], dtype=np.float32) - qy) / s
+        return (0.5 * self.p.distance_weight) * (dy[:, None] ** 2 + dx[None, :] ** 2)
+
+    def _match_in(self, region, bx0: int, by0: int, template: np.ndarray, prior=None):
+        """(rank, score, u, v) of the template's best match in a working-resolution region (rank: the score less
+        the distance penalty from ``prior`` = (u, v, sigma_px), full-resolution pixels; the score without one)."""
+        scores = cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED)
         half = (template.shape[0] - 1) / 2.0
+        rank, best, j, i = _peak(scores, self._penalty(scores.shape, bx0 + half, by0 + half, 1.0, prior))
         u, v = self._to_full(bx0 + j + half, by0 + i + half)
-        return best, u, v
+        return rank, best, u, v
 
     def _refine(self, frame_bgr, found0):
         """Best heading near the match ``found0`` = (score, u, v) at the current heading: (score, u, v).
@@ -247,7 +286,7 @@ class TemplateMatcher:
             return found0
 
         def at(angle):
-            return self._match_in(region, bx0, by0, self._template(angle))
+            return self._match_in(region, bx0, by0, self._template(angle))[1:]
 
         left, right = at(self._angle - step), at(self._angle + step)
         if found0[0] >= left[0] and found0[0] >= right[0]:
@@ -263,29 +302,35 @@ class TemplateMatcher:
         self._angle = angle
         return best
 
-    def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles):
+    def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles, sigma_px: float = math.nan):
         """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_).
 
+        With a finite ``sigma_px`` the best is the one whose score less its distance
+        penalty from (cu, cv_) is highest (see :data:`TemplateParams.distance_weight`).
         A window wider than ``coarse_side`` is first searched block-averaged (the
         template about ``coarse_px`` across); the ``coarse_keep`` best places
         found there are matched again at working resolution, and the best of those counts.
         """
+        prior = (cu, cv_, sigma_px) if sigma_px > 0 else None
         region, bx0, by0 = self._region(frame_bgr, cu, cv_, radius_px, self.S)
         if region is None:
             return -1.0, math.nan, math.nan, self._angle
         if max(region.shape) <= self.p.coarse_side:
-            return max((*self._match_in(region, bx0, by0, self._template(a)), a) for a in angles)
+            best = max((*self._match_in(region, bx0, by0, self._template(a), prior), a) for a in angles)
+            return best[1:]
         f = max(2, self.S // self.p.coarse_px)
         h, w = region.shape[0] // f, region.shape[1] // f
         small = cv2.resize(region[: h * f, : w * f], (w, h), interpolation=cv2.INTER_AREA)
-        places = []  # (coarse score, working-resolution x, y of the template's centre, heading)
+        places = []  # (coarse rank, working-resolution x, y of the template's centre, heading)
         for a in angles:
             t = self._template(a, shrink=f)
             if t.shape[0] < min(h, w):
-                s, j, i = _peak(cv2.matchTemplate(small, t, cv2.TM_CCOEFF_NORMED))
+                scores = cv2.matchTemplate(small, t, cv2.TM_CCOEFF_NORMED)
                 half = (t.shape[0] - 1) / 2.0
-                places.append((s, (j + half) * f + (f - 1) / 2.0, (i + half) * f + (f - 1) / 2.0, a))
-        best = (-1.0, math.nan, math.nan, self._angle)
+                c = half * f + (f - 1) / 2.0  # the first cell's centre, working pixels from the region's corner
+                r, _, j, i = _peak(scores, self._penalty(scores.shape, bx0 + c, by0 + c, float(f), prior))
+                places.append((r, c + j * f, c + i * f, a))
+        best = (-math.inf, -1.0, math.nan, math.nan, self._angle)
         kept: list[tuple[float, float]] = []
         for _, x, y, a in sorted(places, reverse=True):
             if len(kept) == self.p.coarse_keep:
@@ -297,31 +342,44 @@ class TemplateMatcher:
             x0, y0 = max(round(x) - r, 0), max(round(y) - r, 0)
             window = region[y0 : round(y) + r + 1, x0 : round(x) + r + 1]
             if min(window.shape) > self.S:
-                found = (*self._match_in(window, bx0 + x0, by0 + y0, self._template(a)), a)
+                found = (*self._match_in(window, bx0 + x0, by0 + y0, self._template(a), prior), a)
                 best = max(best, found)
-        return best
+        return best[1:]
+
+    def _first_at(self, upright: np.ndarray) -> tuple[float, float] | None:
+        """Where an upright canonical image (side D) shows the UUV's first appearance: its (dx, dy) offset from the
+        centre (working pixels), or None when it is not there (NCC below ``anchor_score``) or further than
+        ``anchor_drift_px`` (the image's centre has drifted off the place the first appearance was tracked at)."""
+        m = min(self.p.anchor_shift_px, (self.D - self.S) // 2)
+        lo = (self.D - self.S) // 2 - m
+        window = upright[lo : lo + self.S + 2 * m, lo : lo + self.S + 2 * m]
+        _, score, dx, dy = _peak(cv2.matchTemplate(window, self._first, cv2.TM_CCOEFF_NORMED))
+        dx, dy = dx - m, dy - m
+        return (dx, dy) if score >= self.p.anchor_score and math.hypot(dx, dy) <= self.p.anchor_drift_px else None
 
     def _learn(self, frame_bgr, u: float, v: float) -> None:
-        """Blend the upright patch into the template, then hold the template on its first appearance.
+        """Blend the upright patch (a match :meth:`_visible` passed) into the template, held on the first appearance.
 
-        Each blend may be off by a fraction of a pixel; summed, that would slide the
-        template off the vehicle. The learnt template's offset from the first
-        template is measured and undone whenever it exceeds ``recentre_px``.
+        The template may follow the UUV's lighting, depth and the side it shows, never
+        slide onto something else: a blend after which it would no longer show the
+        first appearance at its centre (:meth:`_first_at`) is refused. Each blend may
+        be off by a fraction of a pixel; summed, that would slide the template off the
+        vehicle: the learnt template's offset from the first appearance is undone
+        whenever it exceeds ``recentre_px``.
         """
         patch = self._upright(frame_bgr, u, v)
         if patch is None or self._contrast(frame_bgr, u, v) < self.p.learn_contrast:
             return  # fading (deep, turbid water): keep the vehicle's structure rather than learn the noise
-        cv2.accumulateWeighted(patch, self._canon, self.p.learn_rate)
-        self._cache.clear()
-        m = 3
-        lo = (self.D - self.S) // 2 - m
-        window = self._canon[lo : lo + self.S + 2 * m, lo : lo + self.S + 2 * m]
-        _, dx, dy = _peak(cv2.matchTemplate(window, self._anchor, cv2.TM_CCOEFF_NORMED))
-        dx, dy = dx - m, dy - m
+        canon = cv2.accumulateWeighted(patch, self._canon.copy(), self.p.learn_rate)
+        offset = self._first_at(canon)
+        if offset is None:
+            return
+        dx, dy = offset
         if math.hypot(dx, dy) > self.p.recentre_px:
             M = np.array([[1.0, 0.0, -dx], [0.0, 1.0, -dy]])
-            self._canon = cv2.warpAffine(self._canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR,
-                                         borderMode=cv2.BORDER_REPLICATE)
+            canon = cv2.warpAffine(canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        self._canon = canon
+        self._cache.clear()
 
     # -- per frame ---------------------------------------------------------------------------
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
@@ -330,8 +388,14 @@ class TemplateMatcher:
         return max(self.p.min_radius_px, self.p.search_sigmas * prediction.sigma_px)
 
     def _visible(self, frame_bgr, u: float, v: float) -> bool:
-        """Whether the patch at (u, v) stands out of the water: at least ``min_contrast`` (see :meth:`_contrast`)."""
-        return self._contrast(frame_bgr, u, v) >= self.p.min_contrast
+        """Whether the patch at (u, v) stands out of the water (at least ``min_contrast``, see :meth:`_contrast`)
+        and, when it is clear enough to tell (``learn_contrast``), shows the UUV's first appearance there
+        (:meth:`_first_at`: not a drift onto something else)."""
+        contrast = self._contrast(frame_bgr, u, v)
+        if contrast < self.p.learn_contrast:
+            return contrast >= self.p.min_contrast  # fading into the water: its structure is lost, the template judges
+        patch = self._upright(frame_bgr, u, v)
+        return patch is not None and self._first_at(patch) is not None
 
     def _match(self, found: bool, score: float, u: float, v: float) -> Match:
         side = round(self.S * self.k * self._scale)
@@ -346,7 +410,7 @@ class TemplateMatcher:
             cu, cv_ = self.u + self._velocity[0], self.v + self._velocity[1]
         radius = self._radius(prediction, self.p.default_radius_px)
         self._prepare(frame_bgr, cu, cv_, radius)
-        score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,))
+        score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,), radius / self.p.search_sigmas)
         self._frames += 1
         slow_step = self._frames % self.p.adapt_every == 0
         if score >= self.p.ok_score and (slow_step or score < self._level - self.p.turn_drop):
@@ -369,7 +433,7 @@ class TemplateMatcher:
         self._begin(prediction)
         tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
         self._prepare(frame_bgr, u, v, tol)
-        score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,))
+        score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas)
         if score >= self.p.ok_score:
             score, u, v = self._refine(frame_bgr, (score, u, v))
         return self._candidate_passes(frame_bgr, score, u, v)
@@ -384,11 +448,12 @@ class TemplateMatcher:
         H, W = frame_bgr.shape[:2]
         if prediction is not None and math.isfinite(prediction.sigma_px):
             cu, cv_, radius = prediction.u, prediction.v, self._radius(prediction, float(max(W, H)))
+            sigma = radius / self.p.search_sigmas
         else:
-            cu, cv_, radius = W / 2.0, H / 2.0, float(max(W, H))
+            cu, cv_, radius, sigma = W / 2.0, H / 2.0, float(max(W, H)), math.nan
         n = self.p.reacquire_headings
         angles = [self._angle + 360.0 * m / n for m in range(n)]
-        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles)
+        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles, sigma)
         if score < self.p.ok_score:  # not even a candidate (headings are coarse here: refined below)
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
