@@ -18,7 +18,7 @@ import pytest
 
 from groundstation.session import load_session
 from groundstation.video import open_video
-from localizer.pose import camera_pose
+from localizer.pose import camera_pose, take
 from localizer.tracking.predict import window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession
 from localizer.tracking.target import TargetParams, TargetState
@@ -128,6 +128,24 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
     result = ts.step(clip.frames[3], clip.pose, 3)
     x, y, ww, wh = window(ts.prediction)
     assert result.ok and x < clip.u[3] < x + ww and y < clip.v[3] < y + wh and ww < 200, (x, y, ww, wh)
+
+
+@pytest.mark.parametrize("bad", [30, 50])
+def test_a_frame_without_a_pose_never_sends_the_search_back_to_an_old_anchor(occlusion, bad):
+    """Frame ``bad`` has no camera pose (stale attitude): its sighting cannot be located. The next frame's
+    prediction starts from the last sighting that could (one frame older), not from the anchor located at the
+    selection, which the moving UUV left long ago."""
+    clip = occlusion
+    pose = take(clip.pose, slice(None))
+    pose.status = pose.status.copy()
+    pose.status[bad] = "stale_attitude"
+    ts = TrackingSession(clip.cal)
+    ts.select(clip.frames[0], pose, 0, box=clip.cal.init_bbox)
+    results = _run(clip, ts, range(1, bad + 2))
+    assert all(r.ok for r in results.values())
+    p = ts.prediction
+    assert math.hypot(p.u - clip.u[bad + 1], p.v - clip.v[bad + 1]) < 3.0
+    assert clip.error_px(bad + 1, results[bad + 1]) < 2.0
 
 
 @pytest.mark.parametrize(("name", "north_m", "east_m"), [("nadir_hover", 2.5, -2.0), ("oblique_2m", -3.0, 1.5),

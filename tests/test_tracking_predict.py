@@ -92,7 +92,6 @@ def test_follow_carries_the_last_residual_and_widens_with_time():
     p2 = follow((500.0, 300.0, 40.0), (480.0, 310.0, 40.0), (483.0, 308.5), dt_s=1.1)
     assert (p1.u, p1.v) == pytest.approx((503.0, 298.5))
     assert p2.sigma_px - p1.sigma_px == pytest.approx(UUV_SPEED_MPS * 1.0 * 40.0)
-    # an unusable residual (no earlier projection) predicts the plain projection
-    p3 = follow((500.0, 300.0, 40.0), (float("nan"), float("nan")), (483.0, 308.5), dt_s=0.1)
-    assert (p3.u, p3.v) == pytest.approx((500.0, 300.0))
+    # an unusable residual (no earlier projection) predicts nothing: never the located position's stale place
+    assert follow((500.0, 300.0, 40.0), (float("nan"), float("nan")), (483.0, 308.5), dt_s=0.1) is None
     assert follow((float("nan"), 300.0, 40.0), (480.0, 310.0), (483.0, 308.5), dt_s=0.1) is None

@@ -109,9 +109,10 @@ def follow(projected_now, projected_then, pixel_then, dt_s: float) -> Prediction
     into the frame it was tracked in; ``pixel_then``: the pixel tracked there. The
     residual between that pixel and its projection is carried over, and the
     uncertainty grows at :data:`UUV_SPEED_MPS` over the ``dt_s`` seconds since.
+    None without a residual: the located position alone may be long out of date.
     """
     shift = (pixel_then[0] - projected_then[0], pixel_then[1] - projected_then[1])
     if not (math.isfinite(shift[0]) and math.isfinite(shift[1])):
-        shift = (0.0, 0.0)
+        return None
     u, v, px_per_m = projected_now[:3]
     return prediction_at(u, v, px_per_m, BASE_SIGMA_M + UUV_SPEED_MPS * abs(dt_s), shift)

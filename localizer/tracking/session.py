@@ -17,7 +17,9 @@ once by the caller and shared with the geometry.
   sighting moved by what the camera did since: the sighting is located (an *anchor*,
   re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
   pose, and shifted by the residual between the sighting's pixel and the anchor's
-  projection there (:func:`~localizer.tracking.predict.follow`). Projections are
+  projection there (:func:`~localizer.tracking.predict.follow`). A sighting in a
+  frame without a pose has no residual: the last one with a pose stays the
+  prediction's start, its uncertainty growing with its age. Projections are
   made for up to :data:`REANCHOR_FRAMES` frames of the pose batch at once.
 - While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
   every ``search_every`` frames the prior is projected into the frame at the UUV's
@@ -202,7 +204,15 @@ class TrackingSession:
         self._anchor, self._anchor_tried = anchor, self._seen
 
     def _saw(self, pose: CameraPose, i: int, u: float, v: float) -> None:
+        """The UUV seen at (u, v) in frame ``i``: the sighting later predictions start from.
+
+        A frame without a camera pose cannot say where the UUV was relative to the
+        anchor: the last sighting that could stays (its age widens the prediction),
+        never the anchor's own place, which may be many frames old.
+        """
         proj = self._projection(pose, i)
+        if proj is not None and not (math.isfinite(proj[0]) and math.isfinite(proj[1])):
+            return
         pu, pv = (proj[0], proj[1]) if proj is not None else (math.nan, math.nan)
         self._seen = _Sighting(float(pose.t_unix[i]), u, v, pu, pv, take(pose, [i]))
 
