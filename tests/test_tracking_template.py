@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from localizer.tracking import TRACKERS, Prediction, make_matcher
+from localizer.tracking import TRACKERS, WITHOUT_LOSS_SIGNAL, Prediction, make_matcher
 from localizer.tracking.target import Target, TargetParams, TargetState
 from localizer.tracking.template import TemplateMatcher
 
@@ -192,6 +192,19 @@ def test_every_backend_tracks_a_short_clip(name):
     assert len(ok) >= 20
     err = [math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(results, truth[1:]) if r.ok]
     assert np.median(err) < 6.0
+
+
+@pytest.mark.parametrize("name", TRACKERS)
+def test_only_the_backends_listed_without_a_loss_signal_go_on_reporting_a_hidden_target(name):
+    """What ``WITHOUT_LOSS_SIGNAL`` (refused for GPS_INPUT) rests on: hidden for 30 frames, the UUV is reported
+    lost by every other backend; MIL goes on reporting it."""
+    frames, truth, _ = make_clip(n=75, hidden=[(40, 70)])
+    results = _run(_target(name), frames, truth)
+    ok_while_hidden = sum(r.ok for r in results[39:69])  # results[i] is frame i + 1
+    if name in WITHOUT_LOSS_SIGNAL:
+        assert ok_while_hidden == 30
+    else:
+        assert ok_while_hidden == 0
 
 
 def test_unknown_backend_is_named():

@@ -88,6 +88,10 @@ class Matcher(Protocol):
 
 
 TRACKERS = ("default", "ncc", "mil", "kcf", "csrt")  # "default" is "ncc"
+#: Backends that never report a loss (OpenCV's MIL reports a match even after drifting off the UUV): fine offline
+#: and as a baseline, never a position source for the UUV's autopilot (``skyfix run --gps-input`` refuses them).
+#: KCF and CSRT report one (``update`` False below their detection and PSR thresholds).
+WITHOUT_LOSS_SIGNAL = ("mil",)
 
 
 def make_matcher(name: str) -> Matcher:
