@@ -14,7 +14,7 @@ matched patch, turned back upright, is blended slowly into the canonical
 template when the match is confident, so it follows lighting, depth and the side
 the vehicle shows. A drift is refused, not learnt: a clear match (see
 :meth:`~TemplateMatcher._visible`) must show the UUV's first appearance at the
-tracked point (within ``anchor_drift_px``, NCC at least ``anchor_score``), else it
+tracked point (within ``anchor_drift`` of its side, NCC at least ``anchor_score``), else it
 is no match (the template was sliding onto a shadow, a rock, the seafloor), and a
 blend after which the template would not show it is not made.
 Patches with less than ``learn_contrast`` of the first appearance's grey-level
@@ -33,7 +33,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   dived out of sight would otherwise leave NCC matching the water's noise) that, when
   clear enough to tell, shows the first appearance at the tracked point.
 - :meth:`~TemplateMatcher.search`: the best match over ``reacquire_headings`` headings
-  (refined by turn steps) in a window that grows with the prediction's uncertainty
+  (only those within the prediction's ``turn_deg`` of the last one, as far apart;
+  refined by turn steps) in a window that grows with the prediction's uncertainty
   (the whole frame without a prediction; a wide window is searched block-averaged
   first, and its best places again at working resolution), with at least
   ``reacquire_score`` (and within ``reacquire_below_level`` of the recent level) and
@@ -63,11 +64,19 @@ class TemplateParams:
     adapt_every: int = 2  # try other headings and learn the appearance every this many frames
     learn_rate: float = 0.08  # fraction of the template replaced per learning step
     learn_contrast: float = 0.2  # learn only from patches with at least this share of the first appearance's contrast
+    check_contrast: float = 0.5  # check a match against the first appearance when it has at least this share of it
     min_contrast: float = 0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
     recentre_px: float = 0.2  # undo the learnt template's drift from its first appearance beyond this
     anchor_score: float = 0.2  # a clear match (learn_contrast) shows the first appearance at least this well (NCC) ...
-    anchor_drift_px: float = 2.0  # ... within this many working pixels of the tracked point (else: a drift) ...
-    anchor_shift_px: int = 4  # ... sought within this many working pixels of it
+    anchor_drift: float = 0.12  # ... within this share of the template's side of the tracked point (else: a drift),
+    anchor_drift_px: float = 2.0  # ... or this many working pixels if more ...
+    anchor_shift_px: int = 4  # ... sought within this many working pixels of it; further off only if it matches
+    anchor_level: float = 0.05  # ... at the tracked point no more than this less well
+    core_share: float = 0.6  # the first appearance compared: the central square of this share of the template's
+    #                          side, the vehicle at any heading (the corners hold the seafloor, which changes) ...
+    first_turn_deg: float = 15.0  # ... turned up to this much either way from the learnt template's own turn from
+    #                               it (the heading followed strays slowly) ...
+    first_turn_step_deg: float = 5.0  # ... in these steps
     distance_weight: float = 0.1  # a candidate's score less this × half its squared distance from the prediction in sigmas
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
@@ -211,12 +220,15 @@ class TemplateMatcher:
         self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
         self._grey = None
         self._angle, self._scale = 0.0, 1.0
+        self._seen_angle = 0.0  # the heading the UUV was last seen at (a candidate's own may differ)
         self._ref_px_per_m = px_per_m
         self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
         self._cache: dict = {}
         self._canon = self._upright(frame_bgr, self.u, self.v)
-        lo = (self.D - self.S) // 2
-        self._first = self._canon[lo : lo + self.S, lo : lo + self.S].copy()  # the first appearance
+        self._first = self._canon.copy()  # the first appearance; compared: its core (the vehicle alone) ...
+        self._core = max(5, round(self.p.core_share * self.S)) | 1
+        self._first_turn = 0.0  # ... turned as the learnt template has turned from it
+        self._firsts: dict = {}  # the core at turns (multiples of first_turn_step_deg)
         self._first_spread = self._spread(frame_bgr, self.u, self.v)
         self._velocity = (0.0, 0.0)
         self._level = 1.0
@@ -346,16 +358,40 @@ class TemplateMatcher:
                 best = max(best, found)
         return best[1:]
 
-    def _first_at(self, upright: np.ndarray) -> tuple[float, float] | None:
-        """Where an upright canonical image (side D) shows the UUV's first appearance: its (dx, dy) offset from the
-        centre (working pixels), or None when it is not there (NCC below ``anchor_score``) or further than
-        ``anchor_drift_px`` (the image's centre has drifted off the place the first appearance was tracked at)."""
-        m = min(self.p.anchor_shift_px, (self.D - self.S) // 2)
-        lo = (self.D - self.S) // 2 - m
-        window = upright[lo : lo + self.S + 2 * m, lo : lo + self.S + 2 * m]
-        _, score, dx, dy = _peak(cv2.matchTemplate(window, self._first, cv2.TM_CCOEFF_NORMED))
+    def _first_core(self, turn_deg: float) -> np.ndarray:
+        """The first appearance's core turned by ``turn_deg`` (a multiple of ``first_turn_step_deg``; cached)."""
+        key = round(turn_deg / self.p.first_turn_step_deg) % round(360.0 / self.p.first_turn_step_deg)
+        if key not in self._firsts:
+            c = (self.D - 1) / 2.0
+            self._firsts[key] = _warp(self._first, (c, c), key * self.p.first_turn_step_deg, 1.0, self._core)
+        return self._firsts[key]
+
+    def _first_at(self, upright: np.ndarray) -> tuple[float, float, float] | None:
+        """Where an upright canonical image (side D) shows the UUV's first appearance: ``(dx, dy, turn_deg)``, its
+        offset from the centre (working pixels) and the turn that matches it best (within ``first_turn_deg`` of
+        the learnt template's), or None when it is not there (NCC below ``anchor_score``) or further than
+        ``anchor_drift`` of the template's side (the image's centre has drifted off the place the first appearance
+        was tracked at)."""
+        core = self._core
+        m = min(self.p.anchor_shift_px, (self.D - core) // 2)
+        lo = (self.D - core) // 2 - m
+        window = upright[lo : lo + core + 2 * m, lo : lo + core + 2 * m]
+        step = self.p.first_turn_step_deg
+        n = round(self.p.first_turn_deg / step)
+        turns = [step * (round(self._first_turn / step) + j) for j in range(-n, n + 1)]
+        maps = [cv2.matchTemplate(window, self._first_core(a), cv2.TM_CCOEFF_NORMED) for a in turns]
+        found = [_peak(scores)[1:] for scores in maps]
+        j = max(range(len(found)), key=lambda j: found[j][0])
+        score, dx, dy = found[j]
+        turn = turns[j] + (step * _parabola(found[j - 1][0], score, found[j + 1][0]) if 0 < j < 2 * n else 0.0)
         dx, dy = dx - m, dy - m
-        return (dx, dy) if score >= self.p.anchor_score and math.hypot(dx, dy) <= self.p.anchor_drift_px else None
+        if score < self.p.anchor_score:
+            return None
+        if math.hypot(dx, dy) <= max(self.p.anchor_drift * self.S, self.p.anchor_drift_px):
+            return dx, dy, turn
+        # further off: a drift, unless the first appearance matches (nearly) as well at the centre (a hull's
+        # uniform middle matches all along itself)
+        return (0.0, 0.0, turn) if maps[j][m, m] >= score - self.p.anchor_level else None
 
     def _learn(self, frame_bgr, u: float, v: float) -> None:
         """Blend the upright patch (a match :meth:`_visible` passed) into the template, held on the first appearance.
@@ -371,10 +407,10 @@ class TemplateMatcher:
         if patch is None or self._contrast(frame_bgr, u, v) < self.p.learn_contrast:
             return  # fading (deep, turbid water): keep the vehicle's structure rather than learn the noise
         canon = cv2.accumulateWeighted(patch, self._canon.copy(), self.p.learn_rate)
-        offset = self._first_at(canon)
-        if offset is None:
+        held = self._first_at(canon)
+        if held is None:
             return
-        dx, dy = offset
+        dx, dy, self._first_turn = held
         if math.hypot(dx, dy) > self.p.recentre_px:
             M = np.array([[1.0, 0.0, -dx], [0.0, 1.0, -dy]])
             canon = cv2.warpAffine(canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
@@ -387,15 +423,24 @@ class TemplateMatcher:
             return fallback
         return max(self.p.min_radius_px, self.p.search_sigmas * prediction.sigma_px)
 
-    def _visible(self, frame_bgr, u: float, v: float) -> bool:
+    def _visible(self, frame_bgr, u: float, v: float, either_way: bool = False) -> bool:
         """Whether the patch at (u, v) stands out of the water (at least ``min_contrast``, see :meth:`_contrast`)
-        and, when it is clear enough to tell (``learn_contrast``), shows the UUV's first appearance there
-        (:meth:`_first_at`: not a drift onto something else)."""
+        and, when it is clear enough to tell (``check_contrast``), shows the UUV's first appearance there
+        (:meth:`_first_at`: not a drift onto something else). ``either_way`` (a candidate found by a search): a
+        vehicle looks much the same end for end, so the heading may be half a turn off; it is turned round then."""
         contrast = self._contrast(frame_bgr, u, v)
-        if contrast < self.p.learn_contrast:
+        if contrast < self.p.check_contrast:
             return contrast >= self.p.min_contrast  # fading into the water: its structure is lost, the template judges
         patch = self._upright(frame_bgr, u, v)
-        return patch is not None and self._first_at(patch) is not None
+        if patch is not None and self._first_at(patch) is not None:
+            return True
+        if not either_way:
+            return False
+        self._angle += 180.0
+        if (patch := self._upright(frame_bgr, u, v)) is not None and self._first_at(patch) is not None:
+            return True
+        self._angle -= 180.0
+        return False
 
     def _match(self, found: bool, score: float, u: float, v: float) -> Match:
         side = round(self.S * self.k * self._scale)
@@ -419,15 +464,21 @@ class TemplateMatcher:
         if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k and self._visible(frame_bgr, u, v)):
             return self._match(False, score, u, v)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
-        self.u, self.v = u, v
+        self.u, self.v, self._seen_angle = u, v, self._angle
         self._level += 0.1 * (score - self._level)
         if score >= self.p.update_score and slow_step:
             self._learn(frame_bgr, u, v)
         return self._match(True, score, u, v)
 
-    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float) -> Match:
-        need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
-        return self._match(bool(score >= need and self._visible(frame_bgr, u, v)), score, u, v)
+    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float, prediction: Prediction | None) -> Match:
+        """A candidate while lost: the re-acquisition's bar, or the bar of :meth:`follow` when the prediction's
+        window is no wider than the vehicle (lost a moment ago: nothing else fits where it can be)."""
+        side = self.S * self.k * self._scale
+        if prediction is not None and self._radius(prediction, math.inf) <= side:
+            need = max(self.p.ok_score, self._level - self.p.level_drop)
+        else:
+            need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
+        return self._match(bool(score >= need and self._visible(frame_bgr, u, v, either_way=True)), score, u, v)
 
     def confirm(self, frame_bgr, u: float, v: float, prediction: Prediction | None) -> Match:
         self._begin(prediction)
@@ -436,11 +487,11 @@ class TemplateMatcher:
         score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas)
         if score >= self.p.ok_score:
             score, u, v = self._refine(frame_bgr, (score, u, v))
-        return self._candidate_passes(frame_bgr, score, u, v)
+        return self._candidate_passes(frame_bgr, score, u, v, prediction)
 
     def resume(self, match: Match) -> None:
         self._velocity = (0.0, 0.0)
-        self.u, self.v = match.u, match.v
+        self.u, self.v, self._seen_angle = match.u, match.v, self._angle
 
     def search(self, frame_bgr, prediction: Prediction | None) -> Match:
         """Best match over every heading in the prediction's window (the whole frame without one)."""
@@ -452,12 +503,21 @@ class TemplateMatcher:
         else:
             cu, cv_, radius, sigma = W / 2.0, H / 2.0, float(max(W, H)), math.nan
         n = self.p.reacquire_headings
-        angles = [self._angle + 360.0 * m / n for m in range(n)]
+        turn = prediction.turn_deg if prediction is not None and prediction.turn_deg < 180.0 else 180.0
+        self._angle = self._seen_angle  # not a candidate's that did not confirm
+        if turn < 180.0:  # only the headings it can have turned to since it was seen, as far apart as at most
+            m = math.ceil(2.0 * turn * n / 360.0) + 1
+            angles = [self._angle - turn + 2.0 * turn * j / (m - 1) for j in range(m)]
+        else:
+            angles = [self._angle + 360.0 * j / n for j in range(n)]
         score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles, sigma)
         if score < self.p.ok_score:  # not even a candidate (headings are coarse here: refined below)
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
-        if score < self.p.reacquire_score:
+        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
+        if abs(self._angle - saved) > turn:  # refined to a heading it cannot have turned to: something else
+            candidate = self._match(False, score, u, v)
+        if not candidate.found:
             self._angle = saved
-        return self._candidate_passes(frame_bgr, score, u, v)
+        return candidate
