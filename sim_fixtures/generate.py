@@ -7,6 +7,7 @@ exact distorted pixel of the truth point, one row per frame: where the light fro
 it crosses the surface (Fermat's principle), projected by OpenCV
 (:mod:`sim_fixtures.geometry`, independent of the localizer); where the UUV cannot
 be seen, ``u`` and ``v`` are empty: hidden by an occlusion window, outside the image,
+less than half of it showing past a second vehicle (``[second_uuv]``),
 or too deep in turbid water, its contrast below the sensor noise (see
 :meth:`~sim_fixtures.render.Renderer.render`); ``truth.csv`` has every frame. The video is rendered
 by ray casting (:mod:`sim_fixtures.render`) and encoded by the ``ffmpeg`` CLI
@@ -29,7 +30,7 @@ import json
 import shutil
 import subprocess
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +40,7 @@ from localizer.calibration import ConfigError
 
 from .geometry import R_GIMBAL_FROM_CV, SimCamera, ned_to_geodetic, project, surface_crossing
 from .motion import Motion
-from .render import Renderer, View
+from .render import Box, Renderer, View
 from .scenario import Scenario
 from .tlog import Clock, exponential, stream, write_tlog
 
@@ -59,10 +60,18 @@ class Truth:
     visible: np.ndarray  # not occluded
     u: np.ndarray  # exact distorted pixel of the reference point
     v: np.ndarray
+    second_ned: np.ndarray | None = None  # (N, 3) the second vehicle's top-face centre, if there is one
+    second_box: Box | None = None  # ... its heading, size and look
+    rock: Box | None = None
+
+    def others(self, i: int) -> tuple[Box, ...]:
+        """The look-alikes at frame ``i``."""
+        second = () if self.second_box is None else (replace(self.second_box, ned=self.second_ned[i]),)
+        return second + (() if self.rock is None else (self.rock,))
 
     def view(self, i: int) -> View:
         return View(self.R_ned_from_cv[i], self.camera_ned[i], self.uuv_ned[i], float(self.uuv_heading[i]),
-                    bool(self.visible[i]), float(self.tau_s[i]))
+                    bool(self.visible[i]), float(self.tau_s[i]), self.others(i))
 
 
 def camera_of(sc: Scenario) -> SimCamera:
@@ -95,7 +104,13 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
     for a, b in sc.occlusions:
         visible &= ~((tau >= a) & (tau < b))
     u, v = reference_pixel(camera, R, cam, uuv, sc.site.refractive_index)
-    return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v)
+    second = rock = None
+    if sc.second_uuv.enabled:
+        second = Box(motion.second_ned(0.0), motion.second_heading, sc.uuv.size_m, "vehicle")
+    if sc.rock.enabled:
+        rock = Box(motion.rock_ned, motion.rock_heading, sc.rock.size_m, "rock")
+    return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v,
+                 motion.second_ned(tau) if second else None, second, rock)
 
 
 def depth_records(sc: Scenario, motion: Motion, clock: Clock) -> list[dict]:

@@ -17,6 +17,10 @@ The camera's true attitude depends on the mount (``[mount]``):
   servo angles = target − the vehicle's lean (roll_servo = −roll, pitch_servo =
   pitch_deg − pitch, yaw relative to the vehicle), so the camera truly points at
   ``R_body · R(roll_servo, pitch_servo, yaw_rel)``, which is not exactly the target.
+
+The UUV follows a slow figure eight or cruises (``[uuv] path``); the UAV hovers over a
+fixed point or follows the UUV (``[uav] standoff = "follow"``). A second vehicle
+(``[second_uuv]``) runs a straight line past the UUV; a rock (``[rock]``) lies by its path.
 """
 
 from __future__ import annotations
@@ -58,7 +62,20 @@ class Motion:
         rng = np.random.default_rng([sc.seed, 101])
         self._ph = rng.uniform(0, TAU, 16)
         self._ph_wobble = rng.uniform(0, TAU, 2)  # drawn after the others: they keep their values
-        self.uav_centre_ne_m = self._uav_centre()
+        u, v = sc.uav, sc.uuv
+        if u.standoff == "given":
+            self._centre_ne_m = np.array([u.north_m, u.east_m])
+        else:
+            self._axis_offset_ne_m = self._axis_offset()
+            self._centre_ne_m = np.array([v.north_m, v.east_m]) - self._axis_offset_ne_m
+        s = sc.second_uuv
+        course = self.uuv_heading(s.pass_at_s) + np.radians(s.course_rel_deg)
+        self.second_heading = float(wrap_pi(course))
+        self._second_dir_ne = np.array([np.cos(course), np.sin(course)])
+        self._second_at_pass_ne_m = self.uuv_ne(s.pass_at_s) + s.miss_m * np.array([-np.sin(course), np.cos(course)])
+        r = sc.rock
+        self.rock_ned = np.append(self.uuv_ne(r.at_s) + np.asarray(r.offset_m), sc.site.floor_depth_m - r.size_m[2])
+        self.rock_heading = float(np.radians(r.heading_deg))
 
     # --- UAV -----------------------------------------------------------------------------------
     def uav_rpy(self, tau_s):
@@ -90,10 +107,19 @@ class Motion:
     def uav_ned(self, tau_s):
         """Position the autopilot reports (GLOBAL_POSITION_INT's point), world NED (..., 3)."""
         u, ph = self.sc.uav, self._ph
-        n = self.uav_centre_ne_m[0] + _wave(tau_s, 0.7 * u.drift_m, 0.031, ph[2]) + _wave(tau_s, 0.3 * u.drift_m, 0.083, ph[3])
-        e = self.uav_centre_ne_m[1] + _wave(tau_s, 0.7 * u.drift_m, 0.037, ph[4]) + _wave(tau_s, 0.3 * u.drift_m, 0.071, ph[5])
+        c = self.uav_centre_ne(tau_s)
+        n = c[..., 0] + _wave(tau_s, 0.7 * u.drift_m, 0.031, ph[2]) + _wave(tau_s, 0.3 * u.drift_m, 0.083, ph[3])
+        e = c[..., 1] + _wave(tau_s, 0.7 * u.drift_m, 0.037, ph[4]) + _wave(tau_s, 0.3 * u.drift_m, 0.071, ph[5])
         d = -(u.height_m + _wave(tau_s, u.height_swing_m, 0.05, ph[6]))
         return np.stack([n, e, d], axis=-1)
+
+    def uav_centre_ne(self, tau_s):
+        """The point the UAV's drift wanders about, world (north, east) (..., 2): fixed, or for ``standoff =
+        "follow"`` where the optical axis meets the UUV's depth when the UUV was there ``follow_lag_s`` ago."""
+        tau = np.asarray(tau_s, dtype=float)
+        if self.sc.uav.standoff == "follow":
+            return self.uuv_ne(tau - self.sc.uav.follow_lag_s) - self._axis_offset_ne_m
+        return np.broadcast_to(self._centre_ne_m, tau.shape + (2,))
 
     def uav_velocity_ned(self, tau_s, h_s: float = 1e-3):
         """Velocity of the reported point, NED m/s (..., 3) (central difference; the motion is slow)."""
@@ -155,8 +181,17 @@ class Motion:
 
     # --- UUV -----------------------------------------------------------------------------------
     def uuv_ne(self, tau_s):
-        """Horizontal position of the UUV (world north, east), (..., 2): a figure eight."""
+        """Horizontal position of the UUV (world north, east), (..., 2): a figure eight, or a cruise from
+        (north_m, east_m) along course_deg at speed_mps, weaving sideways (positive: to the course's right)."""
         v, ph = self.sc.uuv, self._ph
+        if v.path == "cruise":
+            tau = np.asarray(tau_s, dtype=float)
+            course = np.radians(v.course_deg)
+            along = v.speed_mps * tau
+            side = v.weave_m * np.sin(TAU * tau / v.weave_period_s)
+            n = v.north_m + along * np.cos(course) - side * np.sin(course)
+            e = v.east_m + along * np.sin(course) + side * np.cos(course)
+            return np.stack([n, e], axis=-1)
         f = 1.0 / v.period_s
         n = v.north_m + _wave(tau_s, v.path_n_m, f, ph[10])
         e = v.east_m + _wave(tau_s, v.path_e_m, 2 * f, 2 * ph[10] + ph[11])
@@ -182,12 +217,20 @@ class Motion:
         """The UUV's reference point (centre of the top face), world NED (..., 3)."""
         return np.concatenate([self.uuv_ne(tau_s), self.uuv_depth_m(tau_s)[..., None]], axis=-1)
 
+    # --- the look-alikes ----------------------------------------------------------------------------
+    def second_ned(self, tau_s):
+        """The second vehicle's reference point (centre of its top face), world NED (..., 3): a straight line at
+        ``speed_mps`` through its place at ``pass_at_s``; its heading is :attr:`second_heading` (radians)."""
+        s = self.sc.second_uuv
+        tau = np.asarray(tau_s, dtype=float)
+        ne = self._second_at_pass_ne_m + (s.speed_mps * (tau - s.pass_at_s))[..., None] * self._second_dir_ne
+        return np.concatenate([ne, np.full(tau.shape + (1,), s.depth_m)], axis=-1)
+
     # --- placement -----------------------------------------------------------------------------
-    def _uav_centre(self):
-        """Mean UAV position: given, or where the mean optical axis meets the UUV's path centre."""
+    def _axis_offset(self):
+        """Horizontal offset (north, east) from the mean UAV position to where its mean optical axis meets the
+        UUV's mean depth."""
         u, v, m = self.sc.uav, self.sc.uuv, self.sc.mount
-        if u.standoff == "given":
-            return np.array([u.north_m, u.east_m])
         yaw = np.radians(u.yaw_deg)
         if m.attitude_source == "fixed":
             R = matrix_zyx(0.0, 0.0, yaw) @ matrix_zyx(*np.radians(m.fixed_rpy_deg))
@@ -202,4 +245,25 @@ class Motion:
         off = reach_offset(R[:, 0], u.height_m, v.depth_m, self.sc.site.refractive_index)
         if not np.all(np.isfinite(off)):
             raise ValueError(f"scenario {self.sc.name}: the camera's optical axis does not reach the water")
-        return np.array([v.north_m, v.east_m]) - off
+        return off
+
+
+def first_contact(sc: Scenario, motion: Motion, other: str, step_s: float = 0.02):
+    """The first scenario time (telemetry lead included) at which the UUV and ``other`` ("the second vehicle" or
+    "the rock", when enabled) might touch, or None: their depth spans overlap while their centres are closer than
+    the sum of their half diagonals (a conservative test: boxes that pass it never touch)."""
+    v = sc.uuv
+    if other == "the second vehicle" and sc.second_uuv.enabled:
+        size, top = v.size_m, None
+    elif other == "the rock" and sc.rock.enabled:
+        size, top = sc.rock.size_m, motion.rock_ned
+    else:
+        return None
+    tau = np.arange(-sc.telemetry.lead_s, sc.duration_s + step_s, step_s)
+    uuv = motion.uuv_ned(tau)
+    there = motion.second_ned(tau) if top is None else np.broadcast_to(top, uuv.shape)
+    reach = 0.5 * (np.hypot(v.size_m[0], v.size_m[1]) + np.hypot(size[0], size[1]))
+    close = np.hypot(*(uuv[:, :2] - there[:, :2]).T) < reach
+    overlap = (uuv[:, 2] < there[:, 2] + size[2]) & (there[:, 2] < uuv[:, 2] + v.size_m[2])
+    hit = np.flatnonzero(close & overlap)
+    return float(tau[hit[0]]) if len(hit) else None

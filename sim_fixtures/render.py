@@ -8,6 +8,12 @@ BlueROV2's size whose reference point is the centre of its top face. Light is
 attenuated along the water path per colour channel; caustics move over the
 floor; the surface reflects the sky (Schlick's Fresnel) and, optionally, the sun.
 The UUV is ray cast only in a window around it, with supersampling.
+
+Look-alikes (``[second_uuv]``, ``[rock]``) are boxes too, ray cast in windows of their own:
+each ray takes the nearest box it meets. With ``[render] shadow`` > 0 the boxes cast
+shadows: a point on the floor or on a box is in shadow where the ray from it towards the
+sun (the sunlight refracted at the flat surface, straight in the water) meets another box;
+there the sun's share of the light (and the caustics, which are sunlight) is missing.
 """
 
 from __future__ import annotations
@@ -29,6 +35,17 @@ GREY_BGR = np.array([0.114, 0.587, 0.299])  # luma weights (as cv2.COLOR_BGR2GRA
 
 
 @dataclass(frozen=True)
+class Box:
+    """A box in the water, level: its body frame has the origin at the centre of its top face, x forward (along
+    ``heading``, radians from North), y right, z down; it spans x∈±L/2, y∈±W/2, z∈[0, H]."""
+
+    ned: np.ndarray  # (3,) centre of its top face, world NED
+    heading: float
+    size_m: tuple  # length, width, height
+    look: str  # "vehicle" (a BlueROV2) or "rock"
+
+
+@dataclass(frozen=True)
 class View:
     """The true geometry of one frame (world NED, metres, radians)."""
 
@@ -38,6 +55,7 @@ class View:
     uuv_heading: float
     uuv_visible: bool
     tau_s: float
+    others: tuple = ()  # Boxes of the look-alikes at this frame (the second vehicle, the rock)
 
 
 def water_path(ray_cv, view: View, n_water: float):
@@ -55,15 +73,16 @@ def water_path(ray_cv, view: View, n_water: float):
     return surface, refract_into_water(d, n_water).astype(ray_cv.dtype), wet
 
 
-def to_body(surface_ne, dir_water, view: View):
-    """Ray origins (on the surface) and directions in the UUV's body frame.
+def to_body(surface_ne, dir_water, box: Box, depth_m=0.0):
+    """Ray origins and directions (N, 3) in a box's body frame (see :class:`Box`).
 
-    Body frame: origin at the top face's centre, x forward, y right, z down (the UUV is level).
+    ``surface_ne`` (N, 2) the origins' north and east, at ``depth_m`` (a scalar or (N,); 0: on the surface).
     """
-    c, s = np.cos(view.uuv_heading), np.sin(view.uuv_heading)
-    dn = surface_ne[:, 0] - view.uuv_ned[0]
-    de = surface_ne[:, 1] - view.uuv_ned[1]
-    origin = np.stack([c * dn + s * de, -s * dn + c * de, np.full_like(dn, -view.uuv_ned[2])], axis=-1)
+    c, s = np.cos(box.heading), np.sin(box.heading)
+    dn = surface_ne[:, 0] - box.ned[0]
+    de = surface_ne[:, 1] - box.ned[1]
+    z = np.full_like(dn, -box.ned[2]) if np.isscalar(depth_m) and depth_m == 0.0 else depth_m - box.ned[2]
+    origin = np.stack([c * dn + s * de, -s * dn + c * de, z], axis=-1)
     direction = np.stack([c * dir_water[:, 0] + s * dir_water[:, 1], -s * dir_water[:, 0] + c * dir_water[:, 1],
                           dir_water[:, 2]], axis=-1)
     return origin, direction
@@ -98,6 +117,38 @@ def uuv_albedo(point, face_axis):
     col[(np.abs(y) < 0.03) & (x > 0.16) & (x < 0.2)] = (40.0, 200.0, 235.0)  # yellow dome rim, the nose
     shade = np.where(face_axis == 2, 1.0, 0.55)
     return col * shade[:, None]
+
+
+def rock_albedo(point, face_axis):
+    """A dark, mottled rock (BGR): the sand's darkest pebbles' colour, blotched."""
+    x, y = point[:, 0], point[:, 1]
+    mottle = 1.0 + 0.25 * np.sin(37.0 * x + 1.3) * np.sin(29.0 * y + 0.4) + 0.12 * np.sin(61.0 * (x + y))
+    col = np.array([40.0, 47.0, 46.0]) * mottle[:, None]
+    return col * np.where(face_axis == 2, 1.0, 0.55)[:, None]
+
+
+ALBEDO = {"vehicle": uuv_albedo, "rock": rock_albedo}
+
+
+def pixels_of(windows, height: int, width: int):
+    """Rows and columns (row-major) of the pixels in the union of windows ``(v0, v1, u0, u1)``."""
+    mask = np.zeros((height, width), bool)
+    for v0, v1, u0, u1 in windows:
+        mask[v0:v1, u0:u1] = True
+    return np.nonzero(mask)
+
+
+def subsamples(rows, cols, ss: int, scale: int = 1):
+    """Image coordinates (u, v), each (P, ss, ss), of ss x ss rays spread over pixels (rows, cols) of an image
+    ``scale`` times coarser than the camera's (its pixel i centred on camera pixel scale·i + (scale − 1)/2)."""
+    sub = (np.arange(ss) + 0.5) / ss - 0.5
+    if scale == 1:
+        u, v = cols[:, None, None] + sub[None, None, :], rows[:, None, None] + sub[None, :, None]
+    else:
+        centre = (scale - 1) / 2
+        u = scale * cols[:, None, None] + centre + scale * sub[None, None, :]
+        v = scale * rows[:, None, None] + centre + scale * sub[None, :, None]
+    return np.broadcast_arrays(u, v)
 
 
 class Renderer:
@@ -138,13 +189,18 @@ class Renderer:
         self.noise_rng = np.random.default_rng([sc.seed, 303])
         el, az = np.radians(sc.render.sun_elevation_deg), np.radians(sc.render.sun_azimuth_deg)
         self.sun_up_ned = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
+        self.shadow = sc.render.shadow if sc.render.sun_elevation_deg > 0 else 0.0
+        self.sunlight_in_water = refract_into_water(-self.sun_up_ned, self.n_water)  # going down, unit
 
     # --- geometry shared with the tests ------------------------------------------------------------
+    def uuv_box(self, view: View) -> Box:
+        return Box(view.uuv_ned, view.uuv_heading, self.sc.uuv.size_m, "vehicle")
+
     def body_rays(self, u, v, view: View):
-        """Body-frame origins and directions of the rays through distorted pixels (u, v)."""
+        """The UUV's body-frame origins and directions of the rays through distorted pixels (u, v)."""
         ray = pixel_rays(self.camera, np.ravel(u), np.ravel(v))
         surface, dir_water, wet = water_path(ray, view, self.n_water)
-        origin, direction = to_body(surface, dir_water, view)
+        origin, direction = to_body(surface, dir_water, self.uuv_box(view))
         origin[~wet] = np.nan
         return origin, direction, ray
 
@@ -180,9 +236,9 @@ class Renderer:
         return 1.0 - fresnel, add
 
     # --- image ---------------------------------------------------------------------------------------
-    def _coarse(self, view: View):
-        """Floor-resolution smooth fields from the coarse grid (dict of float32 arrays), and the
-        grid points whose rays pass near the UUV."""
+    def _coarse(self, view: View, boxes):
+        """Floor-resolution smooth fields from the coarse grid (dict of float32 arrays), per box the
+        grid points whose rays pass near it, and per box the grid points whose floor its shadow may reach."""
         surface, dir_water, wet = water_path(self.grid_rays, view, self.n_water)
         depth = self.sc.site.floor_depth_m
         t = depth / dir_water[:, 2]
@@ -202,16 +258,65 @@ class Renderer:
             grid = f.reshape(self.grid_h, self.grid_w, -1).astype(np.float32)
             full = cv2.resize(grid, (self.grid_w * c, self.grid_h * c), interpolation=cv2.INTER_LINEAR)
             out[key] = full.reshape(self.grid_h * c, self.grid_w * c, -1)[c : c + self.floor_h, c : c + self.floor_w]
-        near = self._near_uuv(surface, dir_water, wet, view).reshape(self.grid_h, self.grid_w)
-        return out, near
+        grid = (self.grid_h, self.grid_w)
+        near = [self._near(surface, dir_water, wet, b).reshape(grid) for b in boxes]
+        shade = [self._shade_near(fn, fe, wet, b).reshape(grid) for b in boxes] if self.shadow > 0 else []
+        return out, near, shade
 
-    def _near_uuv(self, surface, dir_water, wet, view: View):
-        """Rays passing within reach of the UUV at its mid-height (to bound its window)."""
-        L, W, H = self.sc.uuv.size_m
-        t = (view.uuv_ned[2] + H / 2) / dir_water[:, 2]
-        dist = np.hypot(surface[:, 0] + dir_water[:, 0] * t - view.uuv_ned[0],
-                        surface[:, 1] + dir_water[:, 1] * t - view.uuv_ned[1])
+    def _near(self, surface, dir_water, wet, box: Box):
+        """Rays passing within reach of a box at its mid-height (to bound its window)."""
+        L, W, H = box.size_m
+        t = (box.ned[2] + H / 2) / dir_water[:, 2]
+        dist = np.hypot(surface[:, 0] + dir_water[:, 0] * t - box.ned[0],
+                        surface[:, 1] + dir_water[:, 1] * t - box.ned[1])
         return wet & (dist < 0.5 * np.hypot(L, W) + 0.5 * H * np.tan(np.arcsin(1 / self.n_water)) + 0.05)
+
+    def _shade_near(self, floor_n, floor_e, wet, box: Box):
+        """Rays whose floor point is within reach of a box's shadow (to bound the shadow's window)."""
+        L, W, H = box.size_m
+        sun = self.sunlight_in_water
+        mid = box.ned[2] + H / 2
+        centre = box.ned[:2] + sun[:2] * (self.sc.site.floor_depth_m - mid) / sun[2]
+        reach = 0.5 * np.hypot(L, W) + 0.5 * H * np.hypot(sun[0], sun[1]) / sun[2] + 0.05
+        return wet & (np.hypot(floor_n - centre[0], floor_e - centre[1]) < reach)
+
+    def _window(self, near, scale: int, height: int, width: int):
+        """The window ``(v0, v1, u0, u1)`` of an image ``scale`` pixels per grid step around a grid mask, or None."""
+        rows, cols = np.nonzero(near)
+        if len(rows) == 0:
+            return None
+        v0, v1 = max(0, scale * (rows.min() - 2)), min(height, scale * (rows.max() + 1))
+        u0, u1 = max(0, scale * (cols.min() - 2)), min(width, scale * (cols.max() + 1))
+        if v0 >= v1 or u0 >= u1:
+            return None
+        return v0, v1, u0, u1
+
+    def _in_shadow(self, points_ned, boxes, skip=None):
+        """Where the sunlight to points (N, 3) is blocked by one of the boxes (but box number ``skip``)."""
+        blocked = np.zeros(len(points_ned), bool)
+        up = np.broadcast_to(-self.sunlight_in_water, points_ned.shape)
+        for k, b in enumerate(boxes):
+            if k != skip:
+                origin, direction = to_body(points_ned[:, :2], up, b, points_ned[:, 2])
+                blocked |= hit_box(origin, direction, b.size_m)[0]
+        return blocked
+
+    def _floor_lit(self, view: View, boxes, shade):
+        """The sunlit share of each floor pixel in the shadows' windows: ``(rows, cols, lit)``, or None."""
+        c = self.COARSE
+        windows = [w for m in shade if (w := self._window(m, c, self.floor_h, self.floor_w)) is not None]
+        if not windows:
+            return None
+        rows, cols = pixels_of(windows, self.floor_h, self.floor_w)
+        ss = self.sc.render.supersample
+        uu, vv = subsamples(rows, cols, ss, self.floor_div)
+        ray = pixel_rays(self.camera, uu.ravel(), vv.ravel())
+        surface, dir_water, wet = water_path(ray, view, self.n_water)
+        depth = self.sc.site.floor_depth_m
+        floor = np.column_stack([surface + dir_water[:, :2] * (depth / dir_water[:, 2])[:, None],
+                                 np.full(len(ray), depth)])
+        blocked = wet & self._in_shadow(floor, boxes)
+        return rows, cols, 1.0 - blocked.reshape(len(rows), ss * ss).mean(axis=1)
 
     def _caustic_texture(self, tau_s):
         """The two caustic layers drifting over the floor, combined (in floor-texture pixels)."""
@@ -223,60 +328,91 @@ class Renderer:
                                          borderMode=cv2.BORDER_WRAP))
         return np.sqrt(layers[0] * layers[1])
 
-    def _uuv(self, view: View, img, near):
-        """Blend the UUV into ``img`` (H, W, 3) in a window around it; returns its bounding box, or None
-        where it cannot be seen: no pixel mostly covered, or its contrast below the sensor noise.
+    def _boxes(self, view: View, img, boxes, near):
+        """Blend the boxes (the UUV first when it is not hidden) into ``img`` (H, W, 3) in windows around them; returns
+        the UUV's bounding box, or None where it cannot be seen: hidden, no pixel mostly covered, less than half
+        of it showing (the rest behind a look-alike), or its contrast below the sensor noise.
 
         Contrast: the RMS change (grey levels) the vehicle makes to the pixels of its box, before
         noise. Deep in turbid water it fades into the water's colour and drops below the noise's
         ``noise_sigma`` (at least ``MIN_CONTRAST``): the UUV is then drawn but counts as not visible.
         """
-        rows, cols = np.nonzero(near)
-        if len(rows) == 0:
+        cam = self.camera
+        windows = [w for m in near if (w := self._window(m, self.COARSE * self.floor_div, cam.height, cam.width))
+                   is not None]
+        if not windows:
             return None
-        c, cam = self.COARSE * self.floor_div, self.camera
-        v0, v1 = max(0, c * (rows.min() - 2)), min(cam.height, c * (rows.max() + 1))
-        u0, u1 = max(0, c * (cols.min() - 2)), min(cam.width, c * (cols.max() + 1))
-        if v0 >= v1 or u0 >= u1:
-            return None
+        vv, uu = pixels_of(windows, cam.height, cam.width)
         ss = self.sc.render.supersample
-        sub = (np.arange(ss) + 0.5) / ss - 0.5
-        vv, uu, sv, su = np.meshgrid(np.arange(v0, v1), np.arange(u0, u1), sub, sub, indexing="ij")
-        origin, direction, ray = self.body_rays(uu + su, vv + sv, view)
-        hit, t_in, face, point = hit_box(origin, direction, self.sc.uuv.size_m)
-        hit &= np.isfinite(origin[:, 0])
-        if not hit.any():
+        su, sv = subsamples(vv, uu, ss)
+        ray = pixel_rays(cam, su.ravel(), sv.ravel())
+        surface, dir_water, wet = water_path(ray, view, self.n_water)
+        owner, nearest, hits = np.full(len(ray), -1), np.full(len(ray), np.inf), []
+        for k, b in enumerate(boxes):
+            origin, direction = to_body(surface, dir_water, b)
+            origin[~wet] = np.nan
+            hit, t_in, face, point = hit_box(origin, direction, b.size_m)
+            hit &= np.isfinite(origin[:, 0])
+            hits.append((hit, t_in, face, point))
+            closer = hit & (t_in < nearest)
+            owner[closer], nearest[closer] = k, t_in[closer]
+        if not (owner >= 0).any():
             return None
-        gain, veil = self._through_water(view.uuv_ned[2] + point[hit, 2], t_in[hit])
-        keep, add = self._surface(ray[hit], view)
-        colour = np.zeros((len(hit), 3))
-        colour[hit] = (uuv_albedo(point[hit], face[hit]) * gain + veil) * keep + add
-        shape = (v1 - v0, u1 - u0, ss * ss)
-        cover = hit.reshape(shape).mean(axis=2)[..., None]
-        mean_hit = colour.reshape(shape + (3,)).sum(axis=2) / np.maximum(cover * ss * ss, 1)
-        win = img[v0:v1, u0:u1]
-        change = (mean_hit - win) * cover
-        win[:] = win * (1 - cover) + mean_hit * cover
-        ys, xs = np.nonzero(cover[..., 0] > 0.25)
-        if len(ys) == 0:
+        colour = np.zeros((len(ray), 3))
+        for k, (b, (_, t_in, face, point)) in enumerate(zip(boxes, hits)):
+            own = owner == k
+            if not own.any():
+                continue
+            gain, veil = self._through_water(b.ned[2] + point[own, 2], t_in[own])
+            if self.shadow > 0:
+                at = np.column_stack([surface[own] + dir_water[own, :2] * t_in[own, None], dir_water[own, 2] * t_in[own]])
+                gain = gain * np.where(self._in_shadow(at, boxes, skip=k), 1.0 - self.shadow, 1.0)[:, None]
+            keep, add = self._surface(ray[own], view)
+            colour[own] = (ALBEDO[b.look](point[own], face[own]) * gain + veil) * keep + add
+        n = ss * ss
+        cover = (owner >= 0).reshape(len(vv), n).mean(axis=1)[:, None]
+        mean_hit = colour.reshape(len(vv), n, 3).sum(axis=1) / np.maximum(cover * n, 1)
+        before = img[vv, uu]
+        img[vv, uu] = before * (1 - cover) + mean_hit * cover
+        if not view.uuv_visible:
             return None
-        x, y = u0 + xs.min(), v0 + ys.min()
-        w, h = u0 + xs.max() - x + 1, v0 + ys.max() - y + 1
-        grey = change[y - v0 : y - v0 + h, x - u0 : x - u0 + w] @ GREY_BGR
+        own = (owner == 0).reshape(len(vv), n)
+        if own.sum() < 0.5 * hits[0][0].sum():  # mostly behind a look-alike
+            return None
+        cover = own.mean(axis=1)[:, None]
+        mean_hit = np.where(own[..., None], colour.reshape(len(vv), n, 3), 0.0).sum(axis=1) / np.maximum(cover * n, 1)
+        shown = cover[:, 0] > 0.25
+        if not shown.any():
+            return None
+        x, y = uu[shown].min(), vv[shown].min()
+        w, h = uu[shown].max() - x + 1, vv[shown].max() - y + 1
+        r0, c0 = vv.min(), uu.min()
+        change = np.zeros((vv.max() - r0 + 1, uu.max() - c0 + 1, 3))
+        change[vv - r0, uu - c0] = (mean_hit - before) * cover
+        grey = change[y - r0 : y - r0 + h, x - c0 : x - c0 + w] @ GREY_BGR
         if np.sqrt(np.mean(grey**2)) < max(self.sc.render.noise_sigma, MIN_CONTRAST):
             return None
         return int(x), int(y), int(w), int(h)
 
     def render(self, view: View):
         """One frame: ``(image (H, W, 3) uint8 BGR, UUV bounding box (x, y, w, h) or None where it cannot be seen)``."""
-        fields, near = self._coarse(view)
+        boxes = ((self.uuv_box(view),) if view.uuv_visible else ()) + tuple(view.others)
+        fields, near, shade = self._coarse(view, boxes)
         fmap = np.ascontiguousarray(fields["map"])
         albedo = cv2.remap(self.floor, fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
         gain = fields["gain"]
         k = self.sc.render.caustics
+        sun = None  # the sunlight's factor on the floor: the caustics, and the shadows
         if k > 0:
             caus = cv2.remap(self._caustic_texture(view.tau_s), fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
-            gain = gain * (1.0 + k * (2.0 * caus - 0.3))[..., None]
+            sun = 1.0 + k * (2.0 * caus - 0.3)
+        lit = self._floor_lit(view, boxes, shade) if shade else None
+        if lit is not None:
+            rows, cols, share = lit
+            sun = np.ones((self.floor_h, self.floor_w), np.float32) if sun is None else sun
+            sun[rows, cols] = share * sun[rows, cols] + (1.0 - share) * (1.0 - self.shadow)
+        if sun is not None:
+            gain = gain * sun[..., None]
         img = albedo * gain + fields["veil"]
         if self.sc.render.glint > 0:
             smap = np.ascontiguousarray(fields["sparkle_map"])
@@ -285,7 +421,7 @@ class Renderer:
             img += fields["glint"] * sparkle[..., None]
         if self.floor_div > 1:
             img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_LINEAR)
-        box = self._uuv(view, img, near) if view.uuv_visible else None
+        box = self._boxes(view, img, boxes, near) if boxes else None
         if self.sc.render.noise_sigma > 0:
             dy, dx = self.noise_rng.integers(0, 64, 2)
             img = cv2.add(img, self.noise[dy : dy + self.camera.height, dx : dx + self.camera.width])

@@ -100,8 +100,11 @@ class UavSpec:
 
     height_m: Positive = Field(10.0, description="mean height of the reported position above the water")
     height_swing_m: NonNegative = Field(0.3, description="amplitude of slow height changes")
-    standoff: Literal["auto", "given"] = Field(
-        "auto", description="auto: placed so the optical axis meets the UUV's path centre; given: north_m, east_m")
+    standoff: Literal["auto", "given", "follow"] = Field(
+        "auto", description="auto: placed so the optical axis meets the UUV's path centre (a cruise: where it starts); "
+        "given: north_m, east_m; follow: flies after the UUV, the optical axis on where the UUV was follow_lag_s "
+        "earlier (the seafloor slides through the image)")
+    follow_lag_s: NonNegative = Field(1.0, description="follow: how far behind the UUV the UAV aims, in time")
     north_m: Number = Field(0.0, description="mean position when standoff = given")
     east_m: Number = Field(0.0, description="mean position when standoff = given")
     drift_m: NonNegative = Field(0.4, description="amplitude of the hover's horizontal drift")
@@ -138,13 +141,21 @@ class UavSpec:
 
 @dataclass(frozen=True, config=CLOSED)
 class UuvSpec:
-    """``[uuv]``: the vehicle's figure-eight path and depth."""
+    """``[uuv]``: the vehicle's path (a slow figure eight, or a cruise) and depth."""
 
-    north_m: Number = Field(0.0, description="centre of the figure-eight path")
-    east_m: Number = Field(0.0, description="centre of the figure-eight path")
+    path: Literal["figure_eight", "cruise"] = Field(
+        "figure_eight", description="figure_eight: path_n_m x path_e_m loops of period_s; cruise: speed_mps along "
+        "course_deg from north_m, east_m, weaving sideways by weave_m")
+    north_m: Number = Field(0.0, description="centre of the figure-eight path; cruise: where it is at the first frame")
+    east_m: Number = Field(0.0, description="centre of the figure-eight path; cruise: where it is at the first frame")
     path_n_m: Number = Field(0.8, description="half extent of the path along North")
     path_e_m: Number = Field(0.6, description="half extent of the path along East")
     period_s: Positive = Field(24.0, description="one loop of the figure eight")
+    speed_mps: Positive = Field(1.2, description="cruise: speed along the mean course (the weave adds a little)")
+    course_deg: Number = Field(0.0, description="cruise: mean course, degrees from North")
+    weave_m: NonNegative = Field(0.0, description="cruise: amplitude of a sideways sinusoid about the mean course "
+                                 "(a gently curving path); 0: a straight line")
+    weave_period_s: Positive = Field(20.0, description="cruise: period of the weave")
     depth_m: Number = Field(1.0, description="mean depth of the top face (the reference point); 0: at the surface")
     depth_swing_m: Number = Field(0.25, description="amplitude of the depth's slow changes")
     depth_period_s: Positive = Field(15.0, description="period of the depth's changes")
@@ -245,6 +256,45 @@ class RenderSpec:
     noise_sigma: NonNegative = Field(2.0, description="sensor noise, grey levels")
     crf: Annotated[Whole, Ge(0), Le(51)] = Field(23, description="x264 quality (lower is better)")
     supersample: Annotated[Whole, Ge(1)] = Field(2, description="rays per pixel side on the UUV (anti-aliasing)")
+    shadow: Annotated[Number, Ge(0), Le(1)] = Field(
+        0.0, description="share of the light under water that comes straight from the sun (the rest is diffuse): the "
+        "vehicles and the rock cast shadows of the sunlight refracted at the flat surface (sun_azimuth_deg, "
+        "sun_elevation_deg) on the seafloor and on each other, where that share and the caustics are missing; 0: no "
+        "shadows")
+
+
+@dataclass(frozen=True, config=CLOSED)
+class SecondUuvSpec:
+    """``[second_uuv]``: another vehicle of the UUV's size and look, on a straight line at a constant depth, that
+    passes the UUV (a look-alike crossing; the truth stays the UUV's)."""
+
+    enabled: Flag = Field(False, description="the second vehicle is there")
+    pass_at_s: Number = Field(10.0, description="scenario time at which it passes the UUV")
+    miss_m: Number = Field(0.0, description="where it is at pass_at_s: this far from the UUV's reference point, "
+                           "square to its own course, to its right (negative: its left); 0: right over or under it")
+    course_rel_deg: Number = Field(90.0, description="its course relative to the UUV's heading at pass_at_s "
+                                   "(90: crossing from the UUV's left to its right; 180: head on)")
+    speed_mps: Positive = Field(1.0, description="its speed")
+    depth_m: NonNegative = Field(0.5, description="depth of its top face")
+
+
+@dataclass(frozen=True, config=CLOSED)
+class RockSpec:
+    """``[rock]``: a dark rock, a box of about the UUV's size lying still on the seafloor, placed by the UUV's
+    path (a look-alike the UUV passes close by or over)."""
+
+    enabled: Flag = Field(False, description="the rock is there")
+    at_s: Number = Field(10.0, description="the rock lies below where the UUV is at this scenario time ...")
+    offset_m: Pair = Field((0.5, 0.0), description="... shifted by this (north, east)")
+    heading_deg: Number = Field(0.0, description="direction of its long side from North")
+    size_m: Vector3 = Field((0.46, 0.34, 0.25), description="length, width, height")
+
+    @field_validator("size_m")
+    @classmethod
+    def _positive(cls, size):
+        if not all(x > 0 for x in size):
+            raise Invalid("", list(size), "expected three lengths > 0")
+        return size
 
 
 @dataclass(frozen=True, config=CLOSED)
@@ -269,6 +319,8 @@ class Scenario:
     rangefinder: RangefinderSpec = Field(default_factory=RangefinderSpec)
     telemetry: TelemetrySpec = Field(default_factory=TelemetrySpec)
     render: RenderSpec = Field(default_factory=RenderSpec)
+    second_uuv: SecondUuvSpec = Field(default_factory=SecondUuvSpec)
+    rock: RockSpec = Field(default_factory=RockSpec)
 
     @field_validator("occlusions")
     @classmethod
@@ -298,6 +350,22 @@ class Scenario:
         if not (min(depths) >= 0 and max(depths) + v.size_m[2] < self.site.floor_depth_m):
             raise Invalid(key, value, "the UUV must stay between the surface (its top face at depth 0 or below) and "
                           "the seafloor (site.floor_depth_m)")
+        floor = self.site.floor_depth_m
+        if self.second_uuv.enabled and not self.second_uuv.depth_m + v.size_m[2] < floor:
+            raise Invalid("second_uuv.depth_m", self.second_uuv.depth_m, f"its bottom must stay above the seafloor "
+                          f"(site.floor_depth_m = {floor:g})")
+        if self.rock.enabled and not self.rock.size_m[2] < floor:
+            raise Invalid("rock.size_m", list(self.rock.size_m), f"taller than the water (site.floor_depth_m = {floor:g})")
+        if self.second_uuv.enabled or self.rock.enabled:
+            from .motion import Motion, first_contact  # the paths are the motion's
+
+            motion = Motion(self)
+            for key, value, other in (("second_uuv.miss_m", self.second_uuv.miss_m, "the second vehicle"),
+                                      ("rock.offset_m", list(self.rock.offset_m), "the rock")):
+                hit_s = first_contact(self, motion, other)
+                if hit_s is not None:
+                    raise Invalid(key, value, f"{other} and the UUV would touch at {hit_s:.2f} s: pass them further "
+                                  "apart or at other depths")
         return self
 
 
