@@ -61,8 +61,8 @@ class TemplateParams:
     ok_score: float = 0.5  # NCC below this: the UUV is not there
     level_drop: float = 0.25  # ... or this far below the recent level of confident matches
     update_score: float = 0.7  # NCC above this: blend the match into the template
-    adapt_every: int = 2  # try other headings and learn the appearance every this many frames
-    learn_rate: float = 0.08  # fraction of the template replaced per learning step
+    adapt_every: int = 1  # try other headings and learn the appearance every this many frames
+    learn_rate: float = 0.04  # fraction of the template replaced per learning step
     learn_contrast: float = 0.2  # learn only from patches with at least this share of the first appearance's contrast
     check_contrast: float = 0.5  # check a match against the first appearance when it has at least this share of it
     min_contrast: float = 0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
@@ -77,7 +77,7 @@ class TemplateParams:
     first_turn_deg: float = 15.0  # ... turned up to this much either way from the learnt template's own turn from
     #                               it (the heading followed strays slowly) ...
     first_turn_step_deg: float = 5.0  # ... in these steps
-    distance_weight: float = 0.1  # a candidate's score less this × half its squared distance from the prediction in sigmas
+    distance_weight: float = 0.2  # a candidate's score less this × half its squared distance from the prediction in sigmas
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
     turn_drop: float = 0.05  # try other headings at once when the score falls this far below the level
