@@ -33,10 +33,9 @@ UUV_TOP_SPEED_MPS = 1.5  # a BlueROV2's top speed (``skyfix run --uuv-max-speed-
 #: Its horizontal acceleration from rest (m/s²): the thrust holding its top speed, 47 N by the surge damping Wu
 #: (2018) identified, over its mass with the added mass, 17 kg (the safety gates' bound, localizer.fix_gate).
 UUV_ACCEL_MPS2 = 3.0
-#: How fast the UUV may turn (deg/s): ArduSub's yaw rate at full stick, ACRO_YAW_P (4.5) × 45°, at its default
-#: joystick gain (JS_GAIN_DEFAULT 0.5). A pilot who turns the gain up turns faster: the UUV is then lost for longer.
-UUV_YAW_RATE_DPS = 100.0
-TURN_MARGIN_DEG = 10.0  # ... plus this, for the camera's own turning and the heading followed being a little off
+#: How fast the UUV may turn (deg/s): ArduSub's yaw rate at full stick and full joystick gain, ACRO_YAW_P (4.5) × 45°.
+UUV_YAW_RATE_DPS = 200.0
+TURN_MARGIN_DEG = 10.0  # ... plus this: the camera's own turning, and the heading followed lagging a turn
 BASE_SIGMA_M = 0.08  # the prediction's 1-sigma from the telemetry itself (attitude, timing)
 _STEP_M = 0.05  # finite-difference step for the image scale
 WINDOW_SIGMAS = 3.0  # the search window the matchers use: the prediction ± this many sigmas

@@ -33,7 +33,7 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   dived out of sight would otherwise leave NCC matching the water's noise) that, when
   clear enough to tell, shows the first appearance at the tracked point.
 - :meth:`~TemplateMatcher.search`: the best match over ``reacquire_headings`` headings
-  (only those within the prediction's ``turn_deg`` of the last one, as far apart;
+  (only those within the prediction's ``turn_deg`` of the last one or of its reverse, as far apart;
   refined by turn steps) in a window that grows with the prediction's uncertainty
   (the whole frame without a prediction; a wide window is searched block-averaged
   first, and its best places again at working resolution), with at least
@@ -77,10 +77,13 @@ class TemplateParams:
     first_turn_deg: float = 15.0  # ... turned up to this much either way from the learnt template's own turn from
     #                               it (the heading followed strays slowly) ...
     first_turn_step_deg: float = 5.0  # ... in these steps
+    there_score: float = 0.5  # a candidate away from the prediction is refused while the first appearance matches
+    #                           this well (NCC) nearer the prediction (the UUV partly hidden beside a look-alike)
     distance_weight: float = 0.2  # a candidate's score less this × half its squared distance from the prediction in sigmas
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
     turn_drop: float = 0.05  # try other headings at once when the score falls this far below the level
+    turn_gain: float = 0.01  # turn a whole step only to a heading that matches better by this much
     search_sigmas: float = 3.0  # window half-size in prediction sigmas
     min_radius_px: float = 6.0  # smallest window half-size (full-resolution pixels)
     default_radius_px: float = 40.0  # window half-size without a prediction while tracking
@@ -289,8 +292,10 @@ class TemplateMatcher:
     def _refine(self, frame_bgr, found0):
         """Best heading near the match ``found0`` = (score, u, v) at the current heading: (score, u, v).
 
-        Tries the heading ±``turn_step_deg``, and keeps turning (up to
-        ``max_turn_steps`` steps) while the score still improves; updates the heading.
+        Tries the heading ±``turn_step_deg``: a whole step only to one that matches better by
+        ``turn_gain`` (a vehicle seen from above matches nearly as well a little turned: its
+        heading would wander), keeps turning (up to ``max_turn_steps`` steps) while the score
+        still improves; updates the heading.
         """
         step = self.p.turn_step_deg
         region, bx0, by0 = self._region(frame_bgr, found0[1], found0[2], 3.0 * self.k, self.S)
@@ -301,7 +306,7 @@ class TemplateMatcher:
             return self._match_in(region, bx0, by0, self._template(angle))[1:]
 
         left, right = at(self._angle - step), at(self._angle + step)
-        if found0[0] >= left[0] and found0[0] >= right[0]:
+        if found0[0] + self.p.turn_gain >= max(left[0], right[0]):  # no clearly better heading: stay near this one
             self._angle += step * _parabola(left[0], found0[0], right[0])
             return found0
         direction, best = (-1.0, left) if left[0] > right[0] else (1.0, right)
@@ -458,7 +463,7 @@ class TemplateMatcher:
         score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,), radius / self.p.search_sigmas)
         self._frames += 1
         slow_step = self._frames % self.p.adapt_every == 0
-        if score >= self.p.ok_score and (slow_step or score < self._level - self.p.turn_drop):
+        if slow_step or score < self._level - self.p.turn_drop:
             score, u, v = self._refine(frame_bgr, (score, u, v))
         floor = max(self.p.ok_score, self._level - self.p.level_drop)
         if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k and self._visible(frame_bgr, u, v)):
@@ -505,9 +510,10 @@ class TemplateMatcher:
         n = self.p.reacquire_headings
         turn = prediction.turn_deg if prediction is not None and prediction.turn_deg < 180.0 else 180.0
         self._angle = self._seen_angle  # not a candidate's that did not confirm
-        if turn < 180.0:  # only the headings it can have turned to since it was seen, as far apart as at most
+        if turn < 90.0:  # only the headings it can have turned to since it was seen (either way round: it looks
+            #              much the same end for end), as far apart as at most
             m = math.ceil(2.0 * turn * n / 360.0) + 1
-            angles = [self._angle - turn + 2.0 * turn * j / (m - 1) for j in range(m)]
+            angles = [self._angle + flip - turn + 2.0 * turn * j / (m - 1) for flip in (0.0, 180.0) for j in range(m)]
         else:
             angles = [self._angle + 360.0 * j / n for j in range(n)]
         score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles, sigma)
@@ -516,8 +522,29 @@ class TemplateMatcher:
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
         candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
-        if abs(self._angle - saved) > turn:  # refined to a heading it cannot have turned to: something else
+        if abs((self._angle - saved + 90.0) % 180.0 - 90.0) > turn:  # a heading it cannot have turned to (either
+            #                                                           way round): something else
             candidate = self._match(False, score, u, v)
+        if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, saved, u, v):
+            candidate = self._match(False, score, u, v)  # a look-alike beside the UUV, which is partly hidden
         if not candidate.found:
             self._angle = saved
         return candidate
+
+    def _still_there(self, frame_bgr, prediction: Prediction, angle: float, u: float, v: float) -> bool:
+        """Whether a candidate at (u, v), away from the prediction, has the UUV itself beside it: its first
+        appearance, at the heading it was last seen at, where the prediction has it (partly hidden, say by a
+        vehicle passing over it, it matches the template less well than the look-alike does)."""
+        side = self.S * self.k * self._scale
+        if math.hypot(u - prediction.u, v - prediction.v) <= self.p.reacquire_tolerance * side:
+            return False
+        found, self._angle = self._angle, angle
+        patch = self._upright(frame_bgr, prediction.u, prediction.v)
+        self._angle = found
+        if patch is None:
+            return False
+        scores = cv2.matchTemplate(patch, self._first_core(self._first_turn), cv2.TM_CCOEFF_NORMED)
+        _, best, _, (j, i) = cv2.minMaxLoc(scores)
+        c = (scores.shape[0] - 1) / 2.0  # the prediction's place; the candidate is further than the patch reaches
+        return best >= self.p.there_score and math.hypot(j - c, i - c) * self.k < 0.5 * math.hypot(u - prediction.u,
+                                                                                                   v - prediction.v)
