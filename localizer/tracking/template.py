@@ -41,6 +41,9 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   ``min_contrast``.
 - :meth:`~TemplateMatcher.confirm`: the same bar within ``reacquire_tolerance``
   template sides of where the candidate is expected.
+- Neither takes a candidate away from the prediction while the UUV's first appearance
+  still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
+  partly hidden, say by a vehicle passing over it, beside a look-alike).
 """
 
 from __future__ import annotations
@@ -492,7 +495,11 @@ class TemplateMatcher:
         score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas)
         if score >= self.p.ok_score:
             score, u, v = self._refine(frame_bgr, (score, u, v))
-        return self._candidate_passes(frame_bgr, score, u, v, prediction)
+        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
+        if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, self._seen_angle,
+                                                                            u, v):
+            return self._match(False, score, u, v)
+        return candidate
 
     def resume(self, match: Match) -> None:
         self._velocity = (0.0, 0.0)
