@@ -50,6 +50,8 @@ from .target import Target, TargetParams, TargetState
 
 #: A sighting's located position is reused for the predictions of this many frames, then located afresh.
 REANCHOR_FRAMES = 64
+#: How a target was chosen when skyfix outlined it itself (its pixel carries the outline's error).
+OUTLINED = ("click", "prior")
 #: A click asks for an object within this share of the vehicle's diagonal of it (the window's 3 sigma).
 CLICK_REACH = 1.0
 #: The UUV's speed is measured over its sightings of the last this many seconds ...
@@ -184,7 +186,7 @@ class TrackingSession:
     # -- internals ----------------------------------------------------------------------------------
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
         """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
-        the match's score, the prediction's window, the time since the UUV was (re)acquired)."""
+        the match's score, the prediction's window, the time since the UUV was (re)acquired, how it was chosen)."""
         if self.state is not self._noted_state:
             self._noted_state, self.since_t, self.frames_in_state = self.state, t_unix, 0
         self.frames_in_state += 1
@@ -194,7 +196,7 @@ class TrackingSession:
         if result.ok:
             window = p.sigma_px if p is not None else math.nan
             result = replace(result, sigma_px=pixel_sigma_px(self._length_px, result.confidence, window,
-                                                             t_unix - self.since_t))
+                                                             t_unix - self.since_t, self.origin in OUTLINED))
         self.last = result
         return result
 
