@@ -44,7 +44,14 @@ from ..fix import locate
 from ..pose import CameraPose, take
 from . import Prediction, TrackResult, make_matcher
 from .detect import DetectParams, detect
-from .predict import BASE_SIGMA_M, VEHICLE_FOOTPRINT_M, follow, prediction_at, project_uuv, top_face_pixel
+from .predict import (
+    BASE_SIGMA_M,
+    VEHICLE_FOOTPRINT_M,
+    follow,
+    prediction_at,
+    project_uuv,
+    top_face_pixel,
+)
 from .sigma import pixel_sigma_px
 from .target import Target, TargetParams, TargetState
 
