@@ -37,7 +37,7 @@ from localizer.contract import (
 )
 from localizer.depth import BLUEROV2_MAX_VERTICAL_SPEED_MPS
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
-from localizer.tracking import TRACKERS
+from localizer.tracking import TRACKERS, WITHOUT_LOSS_SIGNAL
 
 from .sources.depth_ardusub import autopilot_prefix
 from .sources.uuv_position import parse_hint
@@ -111,7 +111,8 @@ class RunConfig:
     fix_max_age_ms: NonNegative = Field(500.0, description="an ok fix older than this is sent to the autopilot as "
                                         "'no fix'")
     tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
-                                       "template matching), mil (the paper's), ...")
+                                       "template matching), kcf, csrt; mil (the paper's, never reports a loss: "
+                                       "refused with --gps-input)")
     gps_input_signing_key: FilePath | None = Field(None, description="sign GPS_INPUT (MAVLink 2) with the key in "
                                                    "this file: 32 bytes, or 64 hex digits")
     uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(MAX_SPEED_MPS["bluerov2"], description="safety gate: the "
@@ -156,6 +157,13 @@ class RunConfig:
         if self.gps_input_signing_key and (not self.gps_input or self.gps_input.startswith("zenoh:")):
             raise Invalid("gps_input_signing_key", self.gps_input_signing_key,
                           "signing needs a MAVLink --gps-input link (not zenoh:)")
+        return self
+
+    @model_validator(mode="after")
+    def _gps_input_needs_a_tracker_that_reports_a_loss(self):
+        if self.gps_input and self.tracker in WITHOUT_LOSS_SIGNAL:
+            raise Invalid("tracker", self.tracker, "this tracker never reports losing the UUV: not a source for "
+                          "GPS_INPUT (use default, kcf or csrt; mil is for offline comparisons)")
         return self
 
     @model_validator(mode="after")

@@ -91,6 +91,10 @@ class FixMessage(Message):
                                        "times the vertical speed")
     sigma_time_s: NonNegative = Field(None, description="1-sigma of the frame's time against the telemetry's as it "
                                       "went into h_acc_m, seconds")
+    sigma_pixel_px: NonNegative = Field(None, description="1-sigma of each of u and v as it went into h_acc_m, "
+                                        "pixels: the tracker's own (its match, the window it searched, the frames "
+                                        "since its last match and since it (re)acquired the UUV; README, 'How sure "
+                                        "the pixel is')")
     height_source: str | None = Field(None, description="what measured the height within the last 30 s (README, "
                                       "'The height above the water'): takeoff or amsl (nothing: the EKF's height), "
                                       "gnss_rtk, gnss, baro+gnss_rtk, baro+gnss, rangefinder, size, joined by +")

@@ -330,7 +330,7 @@ class Pipeline:
         elif not frame.aligned:
             fix = Fix(frame.t_unix, "latency_unsettled", result.u, result.v)
         else:
-            fix = locate(self.cal, item.pose, result.u, result.v)[0]
+            fix = locate(self.cal, item.pose, result.u, result.v, sigma_px=result.sigma_px)[0]
             if fix.ok and fix.time_source == "unknown" and not self._told_unknown:
                 self._told_unknown = True
                 log.warning("frame %d: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC "

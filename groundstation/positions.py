@@ -2,8 +2,8 @@
 
 Columns: the spec's ``t,lat,lon,depth_m,h_acc_m,status`` first, then skyfix's
 ``alt_amsl_m,v_acc_m,u,v,north_m,east_m,t_gnss,alt_ellipsoid_m,sigma_n_m,sigma_e_m,cov_ne_m2``
-and each input's provenance ``height_m,sigma_height_m,sigma_depth_m,sigma_time_s,height_source,depth_source,time_source``
-(the fix message's names; ``t`` is the frame's exposure on the station clock). Empty
+and each input's provenance ``height_m,sigma_height_m,sigma_depth_m,sigma_time_s,height_source,depth_source,time_source``,
+then the tracker's pixel 1-sigma ``sigma_pixel_px`` (the fix message's names; ``t`` is the frame's exposure on the station clock). Empty
 cells where there is no value (lat/lon are empty whenever status is not ``ok``;
 ``alt_ellipsoid_m`` without GPS_RAW_INT ``alt_ellipsoid``; ``t_gnss`` before the
 station clock's offset from GNSS time is known). Written to a temporary file and
@@ -26,7 +26,7 @@ from .session import read_table
 SPEC_COLUMNS = ("t", "lat", "lon", "depth_m", "h_acc_m", "status")
 COLUMNS = (*SPEC_COLUMNS, "alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m",
            "t_gnss", "alt_ellipsoid_m", "sigma_n_m", "sigma_e_m", "cov_ne_m2",
-           "height_m", "sigma_height_m", "sigma_depth_m", "sigma_time_s", *WORDS)
+           "height_m", "sigma_height_m", "sigma_depth_m", "sigma_time_s", *WORDS, "sigma_pixel_px")
 #: column → (Fix attribute, decimals)
 _FIELDS = {"t": ("t_unix", 6), "lat": ("lat", 9), "lon": ("lon", 9), "depth_m": ("depth_m", 4),
            "h_acc_m": ("h_acc_m", 4), "alt_amsl_m": ("alt_amsl_m", 4), "v_acc_m": ("v_acc_m", 4),
@@ -34,7 +34,7 @@ _FIELDS = {"t": ("t_unix", 6), "lat": ("lat", 9), "lon": ("lon", 9), "depth_m": 
            "t_gnss": ("t_gnss", 6), "alt_ellipsoid_m": ("alt_ellipsoid_m", 4), "sigma_n_m": ("sigma_n_m", 4),
            "sigma_e_m": ("sigma_e_m", 4), "cov_ne_m2": ("cov_ne_m2", 6), "height_m": ("height_m", 4),
            "sigma_height_m": ("sigma_height_m", 4), "sigma_depth_m": ("sigma_depth_m", 4),
-           "sigma_time_s": ("sigma_time_s", 4)}
+           "sigma_time_s": ("sigma_time_s", 4), "sigma_pixel_px": ("sigma_pixel_px", 3)}
 
 
 def _cell(value: float, digits: int) -> str:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import sys
 from collections import Counter
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,9 +39,20 @@ from .size_estimate import HeightFromSize
 _GEOMETRY_FAILURES = ("no_water", "below_surface", "bad_pixel")
 
 
+class Pixels(NamedTuple):
+    """The UUV's pixel per frame: times, pixels, the tracker's status words and its 1-sigma of each of u and v
+    (None: the calibration's ``[uncertainty] pixel_px``, as for pixels from track.csv)."""
+
+    t: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    status: np.ndarray
+    sigma_px: np.ndarray | None = None
+
+
 def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False,
-                 motion: bool = True, size: HeightFromSize | None = None):
-    """``(t, u, v, track_status)`` per frame: from track.csv or from tracking the video.
+                 motion: bool = True, size: HeightFromSize | None = None) -> Pixels:
+    """The UUV's :class:`Pixels` per frame: from track.csv or from tracking the video.
 
     Tracking the video of a session whose link delay is unknown, with ``motion``, also estimates the frames'
     offset to the telemetry and applies it when settled (see the module doc); an unknown delay is a warning.
@@ -52,7 +64,7 @@ def frame_pixels(session: Session, use_track: bool, tracker: str = "default", pr
         tr = session.track
         status = np.full(len(tr["t"]), "ok", dtype=object)
         _warn_unknown_delay(session, "pixels from track.csv: no video to estimate it from")
-        return tr["t"], tr["u"], tr["v"], status
+        return Pixels(tr["t"], tr["u"], tr["v"], status)
     if session.video_path is None:
         raise SessionError(f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)")
     from .track_video import track_session
@@ -65,7 +77,7 @@ def frame_pixels(session: Session, use_track: bool, tracker: str = "default", pr
     if measure:
         _align_by_motion(session, tracked.rotations)
     _warn_unknown_delay(session, "--no-motion-offset" if not motion else "no settled estimate from the video")
-    return tracked.t, tracked.u, tracked.v, tracked.status
+    return Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
 
 
 def _align_by_motion(session: Session, rotations) -> None:
@@ -88,11 +100,11 @@ def _warn_unknown_delay(session: Session, why: str) -> None:
 
 
 def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
-    """Fixes for ``pixels = (t, u, v, track_status)`` (see :func:`frame_pixels`)."""
-    t, u, v, track_status = pixels
+    """Fixes for :class:`Pixels` (or a tuple of its first four, e.g. track.csv's; see :func:`frame_pixels`)."""
+    t, u, v, track_status, sigma_px = Pixels(*pixels)
     pose = camera_pose(session.calibration, session.telemetry, t)
     session.warnings.extend(f"{session.path}: {notice}" for notice in take_notices(session.telemetry))
-    fixes = locate(session.calibration, pose, u, v, refraction=refraction)
+    fixes = locate(session.calibration, pose, u, v, refraction=refraction, sigma_px=sigma_px)
     lost = (track_status != "ok") & (pose.status == "ok")
     fixes.status[lost] = track_status[lost]
     if len(fixes) and not np.any(fixes.status == "ok"):

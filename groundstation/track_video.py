@@ -47,6 +47,7 @@ class TrackedVideo:
     v: np.ndarray
     status: np.ndarray  # object array of str
     confidence: np.ndarray  # tracker's 0..1, NaN when it has none
+    sigma_px: np.ndarray  # tracker's 1-sigma of each of u and v (pixels), NaN without a track
     timings_s: dict = field(default_factory=dict)  # seconds spent per stage
     warnings: list = field(default_factory=list)
     rotations: list = field(default_factory=list)  # video_motion.Rotation between consecutive frames (measure_motion)
@@ -94,7 +95,7 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     init_row = _init_row(session, t)
     status = np.full(n, "no_video", dtype=object)
     status[:init_row] = "before_init"
-    u, v, conf = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    u, v, conf, sigma = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
     timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0}
     warnings: list[str] = []
     meter = RotationMeter(cal.camera) if measure_motion else None
@@ -145,6 +146,7 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
                     result = tracking.step(frame.image, pose, row)
                 timings["track"] += time.perf_counter() - t0
                 status[row], u[row], v[row], conf[row] = result.status, result.u, result.v, result.confidence
+                sigma[row] = result.sigma_px
                 if size is not None and result.ok and size.due(float(t[row])):
                     t0 = time.perf_counter()
                     size.take(size.measure(frame.image, pose, row, result.u, result.v))
@@ -165,5 +167,5 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     if extra:
         warnings.append(f"{session.video_path}: {extra} frames beyond video_frames.csv ignored")
     not_ok = status != "ok"
-    u[not_ok], v[not_ok] = np.nan, np.nan
-    return TrackedVideo(frame_idx, t, u, v, status, conf, timings, warnings, rotations)
+    u[not_ok], v[not_ok], sigma[not_ok] = np.nan, np.nan, np.nan
+    return TrackedVideo(frame_idx, t, u, v, status, conf, sigma, timings, warnings, rotations)

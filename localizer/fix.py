@@ -50,6 +50,7 @@ class Fix:
     sigma_height_m: float = float("nan")  # 1-sigma of the inputs as they went into h_acc_m: the height ...
     sigma_depth_m: float = float("nan")  # ... the depth ...
     sigma_time_s: float = float("nan")  # ... and the frame's time against the telemetry
+    sigma_pixel_px: float = float("nan")  # the tracker's 1-sigma of each of u and v as it went into h_acc_m (pixels)
     height_source: str = ""  # where each input came from (see localizer.pose.CameraPose)
     depth_source: str = ""
     time_source: str = ""
@@ -93,6 +94,7 @@ class Fixes:
     sigma_height_m: np.ndarray
     sigma_depth_m: np.ndarray
     sigma_time_s: np.ndarray
+    sigma_pixel_px: np.ndarray
     height_source: np.ndarray  # object arrays of str
     depth_source: np.ndarray
     time_source: np.ndarray
@@ -117,14 +119,18 @@ class Fixes:
         return Fix(**{k: (str(v[i]) if k == "status" or k in WORDS else float(v[i])) for k, v in vars(self).items()})
 
 
-def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) -> Fixes:
+def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True, sigma_px=None) -> Fixes:
     """Fixes for pixels (u, v) seen at the poses' times; ``refraction=False`` is the paper's straight ray.
 
     Pixels that are NaN mean the tracker had nothing (status ``no_track``) unless
-    the pose already failed.
+    the pose already failed. ``sigma_px``: the tracker's 1-sigma of each of u and v per
+    pixel (scalar or shaped as ``u``); None or NaN: the calibration's ``[uncertainty] pixel_px``.
     """
     u = np.atleast_1d(np.asarray(u, dtype=float))
     v = np.atleast_1d(np.asarray(v, dtype=float))
+    sig_px = np.broadcast_to(np.asarray(cal.sigmas.pixel_px if sigma_px is None else sigma_px, dtype=float), u.shape)
+    sig_px = np.where(np.isfinite(sig_px), sig_px, cal.sigmas.pixel_px)
+    sig_px[~(np.isfinite(u) & np.isfinite(v))] = np.nan  # no pixel, no pixel error
     status = pose.status.copy()
     ok = status == "ok"
     status[ok & ~(np.isfinite(u) & np.isfinite(v))] = "no_track"
@@ -158,7 +164,7 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
             sigma_tilt_rad=pose.sigma_tilt_rad[idx], sigma_yaw_rad=pose.sigma_yaw_rad[idx],
             sigma_uav_m=pose.sigma_uav_m[idx], omega_ned=pose.omega_ned[idx],
             velocity_ned_mps=pose.velocity_ned_mps[idx], sigma_height_m=pose.sigma_height_m[idx],
-            sigma_depth_m=pose.sigma_depth_m[idx], sigma_time_s=pose.sigma_time_s[idx],
+            sigma_depth_m=pose.sigma_depth_m[idx], sigma_time_s=pose.sigma_time_s[idx], sigma_pixel_px=sig_px[idx],
         )
         sig_n[idx], sig_e[idx], cov_ne[idx] = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1]), cov[:, 0, 1]
     return Fixes(
@@ -166,7 +172,7 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True) ->
         depth_m=pose.depth_m.copy(), h_acc_m=h_acc, v_acc_m=v_acc, north_m=north, east_m=east,
         sigma_n_m=sig_n, sigma_e_m=sig_e, cov_ne_m2=cov_ne, t_gnss=pose.t_gnss.copy(),
         height_m=pose.height_m.copy(), sigma_height_m=pose.sigma_height_m.copy(),
-        sigma_depth_m=pose.sigma_depth_m.copy(), sigma_time_s=pose.sigma_time_s.copy(),
+        sigma_depth_m=pose.sigma_depth_m.copy(), sigma_time_s=pose.sigma_time_s.copy(), sigma_pixel_px=sig_px.copy(),
         height_source=pose.height_source.copy(), depth_source=pose.depth_source.copy(),
         time_source=pose.time_source.copy(),
     )

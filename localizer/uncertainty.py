@@ -30,15 +30,16 @@ _AXES = np.eye(3)  # north, east, down
 
 def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, sigmas: Sigmas, *,
              sigma_tilt_rad=0.0, sigma_yaw_rad=0.0, sigma_uav_m=0.0, omega_ned=None, velocity_ned_mps=None,
-             sigma_height_m=None, sigma_depth_m=None, sigma_time_s=None):
+             sigma_height_m=None, sigma_depth_m=None, sigma_time_s=None, sigma_pixel_px=None):
     """``(h_acc_m, v_acc_m, cov_ne_m2)`` for fixes made from these inputs (shapes as ``u``; cov ``(..., 2, 2)``).
 
     ``sigma_tilt_rad``/``sigma_yaw_rad`` add to the calibration's tilt and heading
     sigmas (extrapolated telemetry); ``sigma_uav_m`` is the UAV position's
     horizontal 1-sigma; ``omega_ned`` (rad/s) and ``velocity_ned_mps`` (m/s) (``(..., 3)``)
-    turn the time sigma into metres. ``sigma_height_m``, ``sigma_depth_m`` and
-    ``sigma_time_s`` (scalars or shaped as ``u``) replace the calibration's ``height_m``,
-    ``depth_m`` and ``time_s`` when given: the inputs' own sigmas, per frame.
+    turn the time sigma into metres. ``sigma_height_m``, ``sigma_depth_m``, ``sigma_time_s``
+    and ``sigma_pixel_px`` (scalars or shaped as ``u``) replace the calibration's ``height_m``,
+    ``depth_m``, ``time_s`` and ``pixel_px`` when given: the inputs' own sigmas, per frame
+    (the pixel's: the tracker's, for each of u and v).
     """
     u = np.asarray(u, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -62,7 +63,8 @@ def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, si
     sig_t = np.broadcast_to(np.asarray(sigmas.time_s if sigma_time_s is None else sigma_time_s, dtype=float), u.shape)
     tilt = np.hypot(np.radians(sigmas.tilt_deg), sigma_tilt_rad)
     yaw = np.hypot(np.radians(sigmas.yaw_deg), sigma_yaw_rad)
-    sig = [sigmas.pixel_px, sigmas.pixel_px, tilt, tilt, yaw, sig_h, sig_d]
+    sig_px = sigmas.pixel_px if sigma_pixel_px is None else sigma_pixel_px
+    sig = [sig_px, sig_px, tilt, tilt, yaw, sig_h, sig_d]
     cov = np.zeros(u.shape + (2, 2))
     for j, s in zip(J, sig):
         js = j * np.asarray(s, dtype=float)[..., None]

@@ -110,6 +110,20 @@ def test_target_options_are_checked(flags, message):
     assert str(e.value) == f"options: {message}"
 
 
+def test_a_tracker_that_never_reports_a_loss_is_refused_for_gps_input(tmp_path):
+    with pytest.raises(ConfigError) as e:
+        config.run_config(_parse(["--calibration", "x.toml", "--tracker", "mil", "--gps-input", "udpout:127.0.0.1:1"]))
+    assert str(e.value) == ("options: --tracker = 'mil': this tracker never reports losing the UUV: not a source for "
+                            "GPS_INPUT (use default, kcf or csrt; mil is for offline comparisons)")
+    (tmp_path / "c.toml").write_text('calibration = "cal.toml"\ntracker = "mil"\ngps_input = "zenoh:mavlink/in"\n')
+    with pytest.raises(ConfigError, match=r"c\.toml: tracker = 'mil': this tracker never reports losing the UUV"):
+        config.run_config(_parse(["--config", str(tmp_path / "c.toml")]))
+    assert config.run_config(_parse(["--calibration", "x.toml", "--tracker", "mil"])).tracker == "mil"  # no GPS_INPUT
+    for name in ("default", "kcf", "csrt"):  # they report losses
+        cfg = config.run_config(_parse(["--calibration", "x.toml", "--tracker", name, "--gps-input", "udpout:127.0.0.1:1"]))
+        assert cfg.tracker == name
+
+
 @pytest.mark.parametrize("flags,message", [
     (["--ui", "8080"], "--ui = '8080': expected HOST:PORT, e.g. 127.0.0.1:8080 or 0.0.0.0:8080"),
     (["--ui", "127.0.0.1:70000"], "--ui = '127.0.0.1:70000': port 70000 is not 0..65535"),

@@ -178,9 +178,11 @@ def test_positions_csv_round_trip_and_other_tools_files(session, tmp_path, capsy
     header = (out / "positions.csv").read_text().splitlines()[0].split(",")
     assert header[6:] == ["alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m", "t_gnss", "alt_ellipsoid_m",
                           "sigma_n_m", "sigma_e_m", "cov_ne_m2", "height_m", "sigma_height_m", "sigma_depth_m",
-                          "sigma_time_s", "height_source", "depth_source", "time_source"]
+                          "sigma_time_s", "height_source", "depth_source", "time_source", "sigma_pixel_px"]
     pos = read_positions_csv(out / "positions.csv")
     ok = pos.status == "ok"
+    # pixels from track.csv have no tracker of their own: the calibration's [uncertainty] pixel_px
+    assert np.all(pos.sigma_pixel_px[ok] == 2.0)
     # words come back as words; the bundled take-off sessions' GPS_RAW_INT altitudes follow the barometer's drift
     assert set(pos.height_source[ok]) == {"baro+gnss"} and all(pos.time_source[ok])
     # the bundled sessions carry GPS_RAW_INT with alt_ellipsoid: 40 m of geoid separation (scenario default)

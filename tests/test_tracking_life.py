@@ -18,7 +18,7 @@ import pytest
 
 from groundstation.session import load_session
 from groundstation.video import open_video
-from localizer.pose import camera_pose
+from localizer.pose import camera_pose, take
 from localizer.tracking.predict import window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession
 from localizer.tracking.target import TargetParams, TargetState
@@ -130,6 +130,24 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
     assert result.ok and x < clip.u[3] < x + ww and y < clip.v[3] < y + wh and ww < 200, (x, y, ww, wh)
 
 
+@pytest.mark.parametrize("bad", [30, 50])
+def test_a_frame_without_a_pose_never_sends_the_search_back_to_an_old_anchor(occlusion, bad):
+    """Frame ``bad`` has no camera pose (stale attitude): its sighting cannot be located. The next frame's
+    prediction starts from the last sighting that could (one frame older), not from the anchor located at the
+    selection, which the moving UUV left long ago."""
+    clip = occlusion
+    pose = take(clip.pose, slice(None))
+    pose.status = pose.status.copy()
+    pose.status[bad] = "stale_attitude"
+    ts = TrackingSession(clip.cal)
+    ts.select(clip.frames[0], pose, 0, box=clip.cal.init_bbox)
+    results = _run(clip, ts, range(1, bad + 2))
+    assert all(r.ok for r in results.values())
+    p = ts.prediction
+    assert math.hypot(p.u - clip.u[bad + 1], p.v - clip.v[bad + 1]) < 3.0
+    assert clip.error_px(bad + 1, results[bad + 1]) < 2.0
+
+
 @pytest.mark.parametrize(("name", "north_m", "east_m"), [("nadir_hover", 2.5, -2.0), ("oblique_2m", -3.0, 1.5),
                                                          ("vehicle_yaw", 1.0, 3.5)])
 def test_acquires_near_the_uuvs_own_estimate_and_confirms_before_any_fix(name, north_m, east_m):
@@ -141,8 +159,10 @@ def test_acquires_near_the_uuvs_own_estimate_and_confirms_before_any_fix(name, n
     assert first_ok >= CONFIRM - 1, "confirmed over several frames before the first fix"
     assert first_ok <= 8
     assert {results[i].status for i in range(first_ok)} == {"awaiting_target"}
-    # as from an operator's box: a short loss where the vehicle turns fast (vehicle_yaw) is allowed
-    assert np.mean([r.ok for i, r in results.items() if i >= first_ok]) > 0.97
+    # as from an operator's box: a short loss where the vehicle turns fast is allowed (vehicle_yaw reverses the
+    # UUV's heading within 3 frames, ~1700°/s, where a BlueROV2 turns at most 200°/s: the tracker, which seeks it
+    # only at headings it can have turned to, finds it again 7 frames later)
+    assert np.mean([r.ok for i, r in results.items() if i >= first_ok]) > 0.96
     err = np.array([clip.error_px(i, r) for i, r in results.items() if r.ok])
     assert err.mean() < 3.0 and err.max() < 4.0
     assert ts.origin == "prior" and ts.state is TargetState.TRACKING

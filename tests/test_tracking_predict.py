@@ -10,7 +10,10 @@ from localizer.geodesy import ned_to_geodetic
 from localizer.pose import camera_pose
 from localizer.ray import offset_to_pixel
 from localizer.tracking.predict import (
-    UUV_SPEED_MPS,
+    TURN_MARGIN_DEG,
+    UUV_ACCEL_MPS2,
+    UUV_TOP_SPEED_MPS,
+    UUV_YAW_RATE_DPS,
     VEHICLE_FOOTPRINT_M,
     VEHICLE_HEIGHT_M,
     follow,
@@ -91,8 +94,15 @@ def test_follow_carries_the_last_residual_and_widens_with_time():
     p1 = follow((500.0, 300.0, 40.0), (480.0, 310.0, 40.0), (483.0, 308.5), dt_s=0.1)
     p2 = follow((500.0, 300.0, 40.0), (480.0, 310.0, 40.0), (483.0, 308.5), dt_s=1.1)
     assert (p1.u, p1.v) == pytest.approx((503.0, 298.5))
-    assert p2.sigma_px - p1.sigma_px == pytest.approx(UUV_SPEED_MPS * 1.0 * 40.0)
-    # an unusable residual (no earlier projection) predicts the plain projection
-    p3 = follow((500.0, 300.0, 40.0), (float("nan"), float("nan")), (483.0, 308.5), dt_s=0.1)
-    assert (p3.u, p3.v) == pytest.approx((500.0, 300.0))
+    # the window (3 sigma) grows by how far a BlueROV2 can go: at its top speed when its speed is unknown
+    assert 3.0 * (p2.sigma_px - p1.sigma_px) == pytest.approx(UUV_TOP_SPEED_MPS * 1.0 * 40.0)
+    # seen moving at 0.2 m/s: 0.2 m/s on, and up to 3 m/s² faster (never beyond the top speed)
+    slow = [follow((500.0, 300.0, 40.0), (480.0, 310.0, 40.0), (483.0, 308.5), dt_s=dt, speed_mps=0.2) for dt in
+            (0.0, 0.2, 2.0)]
+    reach = [3.0 * (p.sigma_px - slow[0].sigma_px) / 40.0 for p in slow[1:]]
+    assert reach == pytest.approx([0.2 * 0.2 + 0.5 * UUV_ACCEL_MPS2 * 0.2**2, UUV_TOP_SPEED_MPS * 2.0])
+    assert slow[1].turn_deg == pytest.approx(UUV_YAW_RATE_DPS * 0.2 + TURN_MARGIN_DEG)
+    assert slow[2].turn_deg == 180.0
+    # an unusable residual (no earlier projection) predicts nothing: never the located position's stale place
+    assert follow((500.0, 300.0, 40.0), (float("nan"), float("nan")), (483.0, 308.5), dt_s=0.1) is None
     assert follow((float("nan"), 300.0, 40.0), (480.0, 310.0), (483.0, 308.5), dt_s=0.1) is None

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from localizer.tracking import TRACKERS, Prediction, make_matcher
+from localizer.tracking import TRACKERS, WITHOUT_LOSS_SIGNAL, Prediction, make_matcher
 from localizer.tracking.target import Target, TargetParams, TargetState
 from localizer.tracking.template import TemplateMatcher
 
@@ -194,6 +194,19 @@ def test_every_backend_tracks_a_short_clip(name):
     assert np.median(err) < 6.0
 
 
+@pytest.mark.parametrize("name", TRACKERS)
+def test_only_the_backends_listed_without_a_loss_signal_go_on_reporting_a_hidden_target(name):
+    """What ``WITHOUT_LOSS_SIGNAL`` (refused for GPS_INPUT) rests on: hidden for 30 frames, the UUV is reported
+    lost by every other backend; MIL goes on reporting it."""
+    frames, truth, _ = make_clip(n=75, hidden=[(40, 70)])
+    results = _run(_target(name), frames, truth)
+    ok_while_hidden = sum(r.ok for r in results[39:69])  # results[i] is frame i + 1
+    if name in WITHOUT_LOSS_SIGNAL:
+        assert ok_while_hidden == 30
+    else:
+        assert ok_while_hidden == 0
+
+
 def test_unknown_backend_is_named():
     with pytest.raises(ValueError, match="'nope'"):
         make_matcher("nope")
@@ -243,3 +256,58 @@ def test_a_proposed_candidate_that_does_not_confirm_is_dropped(why):
     results = [target.update(frames[i], preds[i]) for i in range(6, 20)]
     assert not any(r.ok for r in results)
     assert {r.status for r in results} == {"awaiting_target"} and target.state is TargetState.AWAITING_TARGET
+
+
+def _draw_rock(img, cx, cy):
+    """A dark, vehicle-sized stone: an irregular blob with a lighter patch off its centre, nothing like the hull."""
+    pts = [(cx + r * math.cos(a), cy + 0.8 * r * math.sin(a))
+           for a, r in zip(np.linspace(0, 2 * math.pi, 9)[:-1], (19, 15, 18, 20, 14, 17, 21, 16))]
+    cv2.fillPoly(img, [np.round(np.array(pts) * 8).astype(np.int32)], (55, 60, 62), cv2.LINE_AA, shift=3)
+    cv2.circle(img, (round((cx - 8) * 8), round((cy + 5) * 8)), 6 * 8, (120, 125, 120), -1, cv2.LINE_AA, shift=3)
+
+
+def test_the_template_does_not_learn_its_way_onto_something_else():
+    """The UUV turns slowly into a rock beside it (a cross-fade slow enough for the template to learn along), then
+    the rock moves off: checked against the UUV's first appearance, the rock is never taken for it nor followed."""
+    floor = _floor(5)[:H, :W]
+    rng = np.random.default_rng(6)
+    c = (W / 2, H / 2)
+    fade, n = (10, 250), 300
+    frames = []
+    for i in range(n):
+        a = np.clip((i - fade[0]) / (fade[1] - fade[0]), 0.0, 1.0)  # the rock's share
+        uuv, rock = floor.copy(), floor.copy()
+        _draw_target(uuv, *c, heading_deg=25)
+        _draw_rock(rock, c[0] + 4 + max(0, i - fade[1]), c[1] + 3)
+        img = (1 - a) * uuv.astype(float) + a * rock.astype(float)
+        frames.append(np.clip(img + rng.normal(0, 3.0, img.shape), 0, 255).astype(np.uint8))
+    matcher = TemplateMatcher()
+    matcher.start(frames[0], _box(c), point=c)
+    found = [matcher.follow(f, None) for f in frames[1:]]  # found[i] is frame i + 1
+    assert all(m.found for m in found[: (fade[0] + fade[1]) // 2])  # the UUV while it shows
+    assert all(math.hypot(m.u - c[0], m.v - c[1]) < 2.0 for m in found if m.found), "followed the rock"
+    assert not any(m.found for m in found[fade[1] - 10 :])  # (nearly) only the rock is left: the UUV is lost
+
+
+@pytest.mark.parametrize("how", ["follow", "search"])
+def test_a_wide_window_prefers_the_candidate_near_the_prediction(how):
+    """Frames were skipped (or the UUV was lost): the window is wide and holds the UUV, a little blurred, near the
+    prediction and a sharper copy of it 2.3 sigmas away. The copy matches better; the UUV is nearer: it wins."""
+    floor = _floor(7)[:H, :W]
+    c = (W / 2 - 20, H / 2)
+    first = floor.copy()
+    _draw_target(first, *c, heading_deg=25)
+    matcher = TemplateMatcher()
+    matcher.start(first, _box(c), point=c)
+    sigma = 15.0
+    uuv = (c[0] + 2.0, c[1] + 1.0)
+    twin = (c[0] + 2.3 * sigma, c[1])
+    img = floor.copy()
+    _draw_target(img, *uuv, heading_deg=25)
+    near = _box(uuv)
+    x, y, w, h = near
+    img[y : y + h, x : x + w] = cv2.GaussianBlur(img[y : y + h, x : x + w], (0, 0), 1.6)
+    _draw_target(img, *twin, heading_deg=25)
+    prediction = Prediction(c[0], c[1], LENGTH, BEAM, sigma_px=sigma, px_per_m=100.0)
+    m = matcher.follow(img, prediction) if how == "follow" else matcher.search(img, prediction)
+    assert m.found and math.hypot(m.u - uuv[0], m.v - uuv[1]) < 1.5, (m.u - c[0], m.v - c[1], m.score)

@@ -37,6 +37,7 @@ class Prediction:
     height_px: float
     sigma_px: float = float("nan")  # 1-sigma uncertainty of (u, v); NaN: unknown
     px_per_m: float = float("nan")  # image scale at the UUV (pixels per metre); NaN: unknown
+    turn_deg: float = float("nan")  # how far its heading may have turned since it was last seen (deg); NaN: any
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,7 @@ class TrackResult:
     v: float = float("nan")
     box: tuple[int, int, int, int] | None = None  # x, y, w, h
     confidence: float = float("nan")  # 0..1; while lost or acquiring, the best candidate's score when one was sought
+    sigma_px: float = float("nan")  # 1-sigma of each of u and v (pixels) when ok (:mod:`.sigma`); NaN: unknown
 
     @property
     def ok(self) -> bool:
@@ -88,6 +90,10 @@ class Matcher(Protocol):
 
 
 TRACKERS = ("default", "ncc", "mil", "kcf", "csrt")  # "default" is "ncc"
+#: Backends that never report a loss (OpenCV's MIL reports a match even after drifting off the UUV): fine offline
+#: and as a baseline, never a position source for the UUV's autopilot (``skyfix run --gps-input`` refuses them).
+#: KCF and CSRT report one (``update`` False below their detection and PSR thresholds).
+WITHOUT_LOSS_SIGNAL = ("mil",)
 
 
 def make_matcher(name: str) -> Matcher:

@@ -16,8 +16,14 @@ looks there for the place that stands out most from its surroundings at that siz
    times the best place elsewhere (one vehicle, not one bright patch among many).
 4. Its outline (:func:`outline`): at full resolution, pixels deviating from a median
    background by more than Otsu's threshold (and ``noise_sigmas`` robust sigmas)
-   near it; the box around the largest such region and those touching it must be
-   vehicle-sized (its longer side ``size_range`` × the footprint's diagonal).
+   near it, less the shade (:func:`shade`: the seafloor darkened evenly in every colour,
+   in a patch too broad to be the vehicle's dark frame: the UUV's shadow on a shallow
+   sunlit bottom, touching it or not); the box around the largest such region and those
+   touching it must be vehicle-sized (its longer side ``size_range`` × the footprint's
+   diagonal).
+
+The shade is left out of the saliency too: a shadow beside the vehicle is dark and
+vehicle-sized, and would otherwise stand out as much as the vehicle.
 
 The box is around the whole visible vehicle, like an operator's; the caller turns
 its centre into the top face's (:func:`~localizer.tracking.predict.top_face_pixel`).
@@ -39,10 +45,13 @@ class DetectParams:
     search_sigmas: float = 3.0  # window half-size in prediction sigmas
     block_px: float = 8.0  # the footprint's side (geometric mean) after block averaging
     background_sides: float = 3.0  # the local background: a box this many footprint sides wide
-    min_saliency: float = 40.0  # the object's deviation energy over the window's median
+    min_saliency: float = 25.0  # the object's deviation energy over the window's median
     distinct: float = 2.0  # ... and this many times the best elsewhere in the window
     noise_sigmas: float = 4.0  # outline: pixels deviating more than this many robust sigmas ...
     size_range: tuple[float, float] = (0.5, 2.0)  # ... whose box's longer side is this × the footprint's diagonal
+    shade_range: tuple[float, float] = (0.15, 0.85)  # shade: the background darkened to this share of itself ...
+    shade_hue: float = 0.12  # ... each colour within this share of the others' darkening ...
+    shade_width: float = 0.25  # ... in a patch at least this share of the footprint's side wide
 
 
 @dataclass(frozen=True)
@@ -81,6 +90,7 @@ def detect(frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams |
     s = side / f
     background = cv2.blur(small, (_odd(p.background_sides * s),) * 2).reshape(h, w, -1)
     energy = np.sum((small - background) ** 2, axis=2)
+    energy[shade(small, background, s, p)] = 0.0
     saliency = cv2.blur(energy, (_odd(0.8 * s),) * 2) / max(float(np.median(energy)), 1e-6)
     # only places within the window (block centres in full-resolution pixels)
     bu = x0 + np.arange(w) * f + (f - 1) / 2.0
@@ -99,6 +109,27 @@ def detect(frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams |
         return None
     x, y, bw, bh = box
     return Detection(box, x + (bw - 1) / 2.0, y + (bh - 1) / 2.0, float(best))
+
+
+def shade(image: np.ndarray, background: np.ndarray, side_px: float, params: DetectParams | None = None) -> np.ndarray:
+    """Where ``image`` is its ``background`` in shade: boolean mask (a grey image has no colour to tell: none).
+
+    Shade darkens the seafloor evenly in every colour (to ``shade_range`` of itself, each
+    colour within ``shade_hue`` of the others); a vehicle's parts change its colour. Only
+    patches at least ``shade_width`` × ``side_px`` (the footprint's side, in the images'
+    pixels) wide count, so a dark, thin frame around a vehicle's hull is never shade; with
+    their soft rim (2 pixels).
+    """
+    p = params or DetectParams()
+    if image.ndim != 3 or image.shape[2] != 3:
+        return np.zeros(image.shape[:2], bool)
+    ratio = image.astype(np.float32) / np.maximum(background.astype(np.float32), 1.0)
+    dark = ratio.mean(axis=2)
+    even = np.abs(ratio - dark[..., None]).max(axis=2) <= p.shade_hue * dark
+    mask = ((dark >= p.shade_range[0]) & (dark <= p.shade_range[1]) & even).astype(np.uint8)
+    k = max(3, round(p.shade_width * side_px) | 1)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((k, k), np.uint8))
+    return cv2.dilate(mask, np.ones((5, 5), np.uint8)).astype(bool)  # with its soft rim
 
 
 def outline(frame_bgr: np.ndarray, u: float, v: float, diag_px: float,
@@ -120,6 +151,7 @@ def outline(frame_bgr: np.ndarray, u: float, v: float, diag_px: float,
     win = win.reshape(h, w, -1)
     background = cv2.medianBlur(win, min(_odd(2.5 * r), 255)).reshape(h, w, -1)
     dev = np.sqrt(np.sum((win.astype(np.float32) - background) ** 2, axis=2))
+    dev[shade(win, background, r / math.sqrt(2.0), p)] = 0.0  # the seafloor in shade is no part of the vehicle
     yy, xx = np.mgrid[0:h, 0:w]
     near = np.hypot(xx - ((u - x0) - (g - 1) / 2.0) / g, yy - ((v - y0) - (g - 1) / 2.0) / g) < r
     top = float(dev[near].max()) if near.any() else 0.0
@@ -129,6 +161,19 @@ def outline(frame_bgr: np.ndarray, u: float, v: float, diag_px: float,
                             cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     threshold = max(otsu * top / 255.0, p.noise_sigmas * 1.4826 * float(np.median(dev)))
     mask = cv2.morphologyEx(((dev > threshold) & near).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    found = _region_box(mask)
+    if found is None:
+        return None
+    bx, by, bw, bh = found
+    box = (int(x0 + bx * g), int(y0 + by * g), int(bw * g), int(bh * g))
+    lo, hi = p.size_range
+    if not lo * diag_px <= max(box[2], box[3]) <= hi * diag_px:
+        return None
+    return box
+
+
+def _region_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """Box (x, y, w, h) around a mask's largest region and the regions touching its box; None for an empty mask."""
     n, _, stats, _ = cv2.connectedComponentsWithStats(mask)
     if n < 2:
         return None
@@ -140,8 +185,4 @@ def outline(frame_bgr: np.ndarray, u: float, v: float, diag_px: float,
     by0 = min(stats[c, 1] for c in touching)
     bx1 = max(stats[c, 0] + stats[c, 2] for c in touching)
     by1 = max(stats[c, 1] + stats[c, 3] for c in touching)
-    box = (int(x0 + bx0 * g), int(y0 + by0 * g), int((bx1 - bx0) * g), int((by1 - by0) * g))
-    lo, hi = p.size_range
-    if not lo * diag_px <= max(box[2], box[3]) <= hi * diag_px:
-        return None
-    return box
+    return int(bx0), int(by0), int(bx1 - bx0), int(by1 - by0)

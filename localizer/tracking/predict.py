@@ -16,6 +16,7 @@ times the vehicle's footprint. Batched over the pose's frames.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -27,7 +28,14 @@ from . import Prediction
 
 VEHICLE_FOOTPRINT_M = (0.46, 0.34)  # BlueROV2-sized: length, beam (metres)
 VEHICLE_HEIGHT_M = 0.25  # from the top face down to the bottom
-UUV_SPEED_MPS = 1.0  # how fast the UUV may move unseen: the prediction's 1-sigma grows by this per second
+UUV_SPEED_MPS = 1.0  # how fast the UUV's own position estimate's 1-sigma grows with its age (m/s)
+UUV_TOP_SPEED_MPS = 1.5  # a BlueROV2's top speed (``skyfix run --uuv-max-speed-mps``'s default)
+#: Its horizontal acceleration from rest (m/s²): the thrust holding its top speed, 47 N by the surge damping Wu
+#: (2018) identified, over its mass with the added mass, 17 kg (the safety gates' bound, localizer.fix_gate).
+UUV_ACCEL_MPS2 = 3.0
+#: How fast the UUV may turn (deg/s): ArduSub's yaw rate at full stick and full joystick gain, ACRO_YAW_P (4.5) × 45°.
+UUV_YAW_RATE_DPS = 200.0
+TURN_MARGIN_DEG = 10.0  # ... plus this: the camera's own turning, and the heading followed lagging a turn
 BASE_SIGMA_M = 0.08  # the prediction's 1-sigma from the telemetry itself (attitude, timing)
 _STEP_M = 0.05  # finite-difference step for the image scale
 WINDOW_SIGMAS = 3.0  # the search window the matchers use: the prediction ± this many sigmas
@@ -101,17 +109,30 @@ def window(prediction: Prediction | None, sigmas: float = WINDOW_SIGMAS) -> tupl
     return (prediction.u - half, prediction.v - half, 2.0 * half, 2.0 * half)
 
 
-def follow(projected_now, projected_then, pixel_then, dt_s: float) -> Prediction | None:
+def reach_m(dt_s: float, speed_mps: float = math.nan) -> float:
+    """How far (m) from where it was seen ``dt_s`` ago the UUV can be: moving on at ``speed_mps`` (NaN: unknown,
+    its top speed) and speeding up at most at :data:`UUV_ACCEL_MPS2`, never beyond :data:`UUV_TOP_SPEED_MPS`; plus
+    the telemetry's own error, :data:`WINDOW_SIGMAS` × :data:`BASE_SIGMA_M`."""
+    dt = abs(dt_s)
+    v = min(speed_mps, UUV_TOP_SPEED_MPS) if speed_mps >= 0 else UUV_TOP_SPEED_MPS
+    return min(v * dt + 0.5 * UUV_ACCEL_MPS2 * dt * dt, UUV_TOP_SPEED_MPS * dt) + WINDOW_SIGMAS * BASE_SIGMA_M
+
+
+def follow(projected_now, projected_then, pixel_then, dt_s: float, speed_mps: float = math.nan) -> Prediction | None:
     """Prediction for a frame: the last tracked pixel moved by what the camera did since.
 
     ``projected_now`` ``(u, v, px_per_m)`` and ``projected_then`` ``(u, v, ...)``: the
     UUV's last located position projected (:func:`project_uuv`) into this frame and
     into the frame it was tracked in; ``pixel_then``: the pixel tracked there. The
-    residual between that pixel and its projection is carried over, and the
-    uncertainty grows at :data:`UUV_SPEED_MPS` over the ``dt_s`` seconds since.
+    residual between that pixel and its projection is carried over; the window
+    (:data:`WINDOW_SIGMAS` sigmas) is as wide as the UUV, last seen moving at ``speed_mps``
+    (NaN: unknown), can have gone in the ``dt_s`` seconds since (:func:`reach_m`), and its
+    heading may have turned by :data:`UUV_YAW_RATE_DPS` over them (plus :data:`TURN_MARGIN_DEG`).
+    None without a residual: the located position alone may be long out of date.
     """
     shift = (pixel_then[0] - projected_then[0], pixel_then[1] - projected_then[1])
     if not (math.isfinite(shift[0]) and math.isfinite(shift[1])):
-        shift = (0.0, 0.0)
+        return None
     u, v, px_per_m = projected_now[:3]
-    return prediction_at(u, v, px_per_m, BASE_SIGMA_M + UUV_SPEED_MPS * abs(dt_s), shift)
+    p = prediction_at(u, v, px_per_m, reach_m(dt_s, speed_mps) / WINDOW_SIGMAS, shift)
+    return None if p is None else replace(p, turn_deg=min(180.0, UUV_YAW_RATE_DPS * abs(dt_s) + TURN_MARGIN_DEG))

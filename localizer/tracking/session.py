@@ -17,7 +17,9 @@ once by the caller and shared with the geometry.
   sighting moved by what the camera did since: the sighting is located (an *anchor*,
   re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
   pose, and shifted by the residual between the sighting's pixel and the anchor's
-  projection there (:func:`~localizer.tracking.predict.follow`). Projections are
+  projection there (:func:`~localizer.tracking.predict.follow`). A sighting in a
+  frame without a pose has no residual: the last one with a pose stays the
+  prediction's start, its uncertainty growing with its age. Projections are
   made for up to :data:`REANCHOR_FRAMES` frames of the pose batch at once.
 - While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
   every ``search_every`` frames the prior is projected into the frame at the UUV's
@@ -33,7 +35,7 @@ Pure: no I/O, no clock; a frame's time is its pose's ``t_unix``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,13 +44,29 @@ from ..fix import locate
 from ..pose import CameraPose, take
 from . import Prediction, TrackResult, make_matcher
 from .detect import DetectParams, detect
-from .predict import BASE_SIGMA_M, follow, prediction_at, project_uuv, top_face_pixel
+from .predict import (
+    BASE_SIGMA_M,
+    VEHICLE_FOOTPRINT_M,
+    follow,
+    prediction_at,
+    project_uuv,
+    top_face_pixel,
+)
+from .sigma import pixel_sigma_px
 from .target import Target, TargetParams, TargetState
 
 #: A sighting's located position is reused for the predictions of this many frames, then located afresh.
 REANCHOR_FRAMES = 64
+#: How a target was chosen when skyfix outlined it itself (its pixel carries the outline's error).
+OUTLINED = ("click", "prior")
 #: A click asks for an object within this share of the vehicle's diagonal of it (the window's 3 sigma).
 CLICK_REACH = 1.0
+#: The UUV's speed is measured over its sightings of the last this many seconds ...
+SPEED_WINDOW_S = 0.5
+#: ... at least this long apart ...
+SPEED_SPAN_S = 0.2
+#: ... and taken this much faster (m/s): the sightings' own scatter.
+SPEED_MARGIN_MPS = 0.1
 
 
 @dataclass(frozen=True)
@@ -89,6 +107,7 @@ class TrackingSession:
         self.origin: str | None = None  # how the current target was chosen: "box", "click", "prior"
         self.prediction: Prediction | None = None  # where the latest step looked for the UUV (None: nowhere in particular)
         self.last = TrackResult("awaiting_target")
+        self._length_px = math.nan  # the vehicle's apparent length at the latest prediction or selection
         self._forget()
         self._awaiting_frames = 0
         self._noted_state = None
@@ -130,8 +149,8 @@ class TrackingSession:
         self._start(one, centre, anchor)
         self.origin = "click" if point is not None else "box"
         self.prediction = None
-        self._note(float(one.t_unix[0]), result)
-        return result
+        self._length_px = VEHICLE_FOOTPRINT_M[0] * px_per_m
+        return self._note(float(one.t_unix[0]), result)
 
     def release(self) -> None:
         """Let go of the target: every frame is ``released`` until a new selection or :meth:`acquire`."""
@@ -156,8 +175,7 @@ class TrackingSession:
                 self._saw(pose, i, result.u, result.v)
             elif self.target.state is TargetState.AWAITING_TARGET:
                 self._forget()  # a candidate that did not confirm
-        self._note(float(pose.t_unix[i]), result)
-        return result
+        return self._note(float(pose.t_unix[i]), result)
 
     def status(self) -> dict:
         """JSON-ready: state, how the target was chosen, since when, and the last frame's result."""
@@ -173,11 +191,21 @@ class TrackingSession:
                 "seen_t": num(seen.t_unix) if seen else None}
 
     # -- internals ----------------------------------------------------------------------------------
-    def _note(self, t_unix: float, result: TrackResult) -> None:
-        self.last = result
+    def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
+        """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
+        the match's score, the prediction's window, the time since the UUV was (re)acquired, how it was chosen)."""
         if self.state is not self._noted_state:
             self._noted_state, self.since_t, self.frames_in_state = self.state, t_unix, 0
         self.frames_in_state += 1
+        p = self.prediction
+        if p is not None:
+            self._length_px = p.width_px
+        if result.ok:
+            window = p.sigma_px if p is not None else math.nan
+            result = replace(result, sigma_px=pixel_sigma_px(self._length_px, result.confidence, window,
+                                                             t_unix - self.since_t, self.origin in OUTLINED))
+        self.last = result
+        return result
 
     def _forget(self) -> None:
         self._seen: _Sighting | None = None
@@ -185,6 +213,8 @@ class TrackingSession:
         self._anchor_age = 0  # frames predicted from it
         self._anchor_tried: _Sighting | None = None  # the sighting last located
         self._proj: tuple[CameraPose, int, np.ndarray] | None = None  # anchor projected: pose, first index, (n, 3)
+        self._moves: list[tuple[float, float, float, float]] = []  # recent sightings: t, residual u, v, px_per_m
+        self.speed_mps = math.nan  # how fast the UUV was last seen moving (NaN: not known)
 
     def _locate(self, one: CameraPose, point) -> tuple[tuple[float, float] | None, float]:
         """The pixel's position at the UUV's depth and the image scale there: ``((lat, lon) or None, px_per_m)``."""
@@ -202,9 +232,30 @@ class TrackingSession:
         self._anchor, self._anchor_tried = anchor, self._seen
 
     def _saw(self, pose: CameraPose, i: int, u: float, v: float) -> None:
+        """The UUV seen at (u, v) in frame ``i``: the sighting later predictions start from.
+
+        A frame without a camera pose cannot say where the UUV was relative to the
+        anchor: the last sighting that could stays (its age widens the prediction),
+        never the anchor's own place, which may be many frames old.
+        """
         proj = self._projection(pose, i)
+        if proj is not None and not (math.isfinite(proj[0]) and math.isfinite(proj[1])):
+            return
         pu, pv = (proj[0], proj[1]) if proj is not None else (math.nan, math.nan)
         self._seen = _Sighting(float(pose.t_unix[i]), u, v, pu, pv, take(pose, [i]))
+        if proj is not None:
+            self._moved(float(pose.t_unix[i]), u - pu, v - pv, float(proj[2]))
+
+    def _moved(self, t: float, ru: float, rv: float, px_per_m: float) -> None:
+        """A sighting's residual from the anchor's projection (pixels): the UUV's own motion, the camera's taken
+        out. Its speed: the residuals' trend over the last :data:`SPEED_WINDOW_S` (least squares), in metres."""
+        self._moves = [m for m in self._moves if t - m[0] <= SPEED_WINDOW_S] + [(t, ru, rv, px_per_m)]
+        if t - self._moves[0][0] < SPEED_SPAN_S or not px_per_m > 0:
+            return
+        ts, us, vs, _ = np.array(self._moves).T
+        ts = ts - ts.mean()
+        du, dv = (float(np.dot(ts, x - x.mean()) / np.dot(ts, ts)) for x in (us, vs))
+        self.speed_mps = math.hypot(du, dv) / px_per_m + SPEED_MARGIN_MPS
 
     def _predict(self, pose: CameraPose, i: int) -> Prediction | None:
         seen = self._seen
@@ -216,11 +267,13 @@ class TrackingSession:
             anchor, _ = self._locate(seen.pose, (seen.u, seen.v))
             if anchor is not None:
                 self._anchor, self._anchor_age, self._proj = anchor, 1, None
+                ru, rv = seen.u - seen.pu, seen.v - seen.pv  # residuals so far: now from the new anchor
+                self._moves = [(t, u - ru, v - rv, s) for t, u, v, s in self._moves] if math.isfinite(ru + rv) else []
                 seen.pu, seen.pv = seen.u, seen.v  # the anchor is where this pixel is
         proj = self._projection(pose, i)
         if proj is None:
             return None
-        return follow(proj, (seen.pu, seen.pv), (seen.u, seen.v), float(pose.t_unix[i]) - seen.t_unix)
+        return follow(proj, (seen.pu, seen.pv), (seen.u, seen.v), float(pose.t_unix[i]) - seen.t_unix, self.speed_mps)
 
     def _projection(self, pose: CameraPose, i: int):
         """``(u, v, px_per_m)`` of the anchor in the pose's frame ``i`` (None without an anchor)."""

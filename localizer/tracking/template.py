@@ -4,12 +4,19 @@ The UUV's grey-level appearance is kept as a *canonical* template (upright, at
 the size it had at start). Each frame it is rotated to the UUV's current heading
 in the image and scaled to the predicted apparent size, then matched
 (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``) inside a window centred on the
-prediction and as large as its uncertainty; the peak is refined to sub-pixel
-precision by a parabola fit, and every ``adapt_every`` frames (at once when the
-score sags) the heading is followed by trying ±``turn_step_deg`` steps. The
+prediction and as large as its uncertainty. Candidates are ranked by their score
+less a penalty for their distance from the prediction (``distance_weight`` × half
+the squared distance in prediction sigmas: a look-alike further from where the UUV
+should be needs a better score to win); the best is refined to sub-pixel precision
+by a parabola fit of the raw scores, and every ``adapt_every`` frames (at once when
+the score sags) the heading is followed by trying ±``turn_step_deg`` steps. The
 matched patch, turned back upright, is blended slowly into the canonical
-template when the match is confident, and the template is held on its first
-appearance, so it follows lighting and depth without sliding off the vehicle.
+template when the match is confident, so it follows lighting, depth and the side
+the vehicle shows. A drift is refused, not learnt: a clear match (see
+:meth:`~TemplateMatcher._visible`) must show the UUV's first appearance at the
+tracked point (within ``anchor_drift`` of its side, NCC at least ``anchor_score``), else it
+is no match (the template was sliding onto a shadow, a rock, the seafloor), and a
+blend after which the template would not show it is not made.
 Patches with less than ``learn_contrast`` of the first appearance's grey-level
 spread are not learnt: a UUV fading into turbid water as it dives would
 otherwise teach the template the water's noise.
@@ -23,15 +30,20 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
 - :meth:`~TemplateMatcher.follow`: a peak of at least ``ok_score`` (and no more than
   ``level_drop`` below the recent level), inside the predicted window, on a patch with
   at least ``min_contrast`` of the first appearance's grey-level spread (a UUV that has
-  dived out of sight would otherwise leave NCC matching the water's noise).
+  dived out of sight would otherwise leave NCC matching the water's noise) that, when
+  clear enough to tell, shows the first appearance at the tracked point.
 - :meth:`~TemplateMatcher.search`: the best match over ``reacquire_headings`` headings
-  (refined by turn steps) in a window that grows with the prediction's uncertainty
+  (only those within the prediction's ``turn_deg`` of the last one or of its reverse, as far apart;
+  refined by turn steps) in a window that grows with the prediction's uncertainty
   (the whole frame without a prediction; a wide window is searched block-averaged
   first, and its best places again at working resolution), with at least
   ``reacquire_score`` (and within ``reacquire_below_level`` of the recent level) and
   ``min_contrast``.
 - :meth:`~TemplateMatcher.confirm`: the same bar within ``reacquire_tolerance``
   template sides of where the candidate is expected.
+- Neither takes a candidate away from the prediction while the UUV's first appearance
+  still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
+  partly hidden, say by a vehicle passing over it, beside a look-alike).
 """
 
 from __future__ import annotations
@@ -52,14 +64,29 @@ class TemplateParams:
     ok_score: float = 0.5  # NCC below this: the UUV is not there
     level_drop: float = 0.25  # ... or this far below the recent level of confident matches
     update_score: float = 0.7  # NCC above this: blend the match into the template
-    adapt_every: int = 2  # try other headings and learn the appearance every this many frames
-    learn_rate: float = 0.08  # fraction of the template replaced per learning step
+    adapt_every: int = 1  # try other headings and learn the appearance every this many frames
+    learn_rate: float = 0.04  # fraction of the template replaced per learning step
     learn_contrast: float = 0.2  # learn only from patches with at least this share of the first appearance's contrast
+    check_contrast: float = 0.5  # check a match against the first appearance when it has at least this share of it
     min_contrast: float = 0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
     recentre_px: float = 0.2  # undo the learnt template's drift from its first appearance beyond this
+    anchor_score: float = 0.2  # a clear match (check_contrast) shows the first appearance at least this well (NCC) ...
+    anchor_drift: float = 0.12  # ... within this share of the template's side of the tracked point (else: a drift),
+    anchor_drift_px: float = 2.0  # ... or this many working pixels if more ...
+    anchor_shift_px: int = 4  # ... sought within this many working pixels of it; further off only if it matches
+    anchor_level: float = 0.05  # ... at the tracked point no more than this less well
+    core_share: float = 0.6  # the first appearance compared: the central square of this share of the template's
+    #                          side, the vehicle at any heading (the corners hold the seafloor, which changes) ...
+    first_turn_deg: float = 15.0  # ... turned up to this much either way from the learnt template's own turn from
+    #                               it (the heading followed strays slowly) ...
+    first_turn_step_deg: float = 5.0  # ... in these steps
+    there_score: float = 0.5  # a candidate away from the prediction is refused while the first appearance matches
+    #                           this well (NCC) nearer the prediction (the UUV partly hidden beside a look-alike)
+    distance_weight: float = 0.2  # a candidate's score less this × half its squared distance from the prediction in sigmas
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
     turn_drop: float = 0.05  # try other headings at once when the score falls this far below the level
+    turn_gain: float = 0.01  # turn a whole step only to a heading that matches better by this much
     search_sigmas: float = 3.0  # window half-size in prediction sigmas
     min_radius_px: float = 6.0  # smallest window half-size (full-resolution pixels)
     default_radius_px: float = 40.0  # window half-size without a prediction while tracking
@@ -79,13 +106,26 @@ def _parabola(a: float, b: float, c: float) -> float:
     return 0.0 if den >= 0 else min(0.5, max(-0.5, 0.5 * (a - c) / den))
 
 
-def _peak(scores: np.ndarray) -> tuple[float, float, float]:
-    """(score, x, y) of the best match with sub-pixel offsets."""
-    _, best, _, (j, i) = cv2.minMaxLoc(scores)
+def _peak(scores: np.ndarray, penalty: np.ndarray | None = None) -> tuple[float, float, float, float]:
+    """(rank, score, x, y) of the best match with sub-pixel offsets.
+
+    With a ``penalty`` map (as ``scores``), the best place is the one whose score minus
+    its penalty (the rank) is highest, moved uphill to the raw scores' own peak there:
+    the penalty picks the peak, never shifts it.
+    """
+    _, rank, _, (j, i) = cv2.minMaxLoc(scores if penalty is None else scores - penalty)
     h, w = scores.shape
+    if penalty is not None:
+        while True:
+            di, dj = divmod(int(np.argmax(scores[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2])), min(j + 2, w) - max(j - 1, 0))
+            ni, nj = max(i - 1, 0) + di, max(j - 1, 0) + dj
+            if (ni, nj) == (i, j):
+                break
+            i, j = ni, nj
+        rank = float(scores[i, j] - penalty[i, j])
     dx = _parabola(scores[i, j - 1], scores[i, j], scores[i, j + 1]) if 0 < j < w - 1 else 0.0
     dy = _parabola(scores[i - 1, j], scores[i, j], scores[i + 1, j]) if 0 < i < h - 1 else 0.0
-    return float(best), float(j + dx), float(i + dy)
+    return float(rank), float(scores[i, j]), float(j + dx), float(i + dy)
 
 
 def _warp(src: np.ndarray, centre, angle_deg: float, scale: float, side: int) -> np.ndarray:
@@ -158,7 +198,7 @@ class TemplateMatcher:
 
     def _contrast(self, frame_bgr, u: float, v: float) -> float:
         """The grey-level spread at (u, v) relative to the first appearance's (see :meth:`_spread`)."""
-        return self._spread(frame_bgr, u, v) / max(self._anchor_spread, 1e-6)
+        return self._spread(frame_bgr, u, v) / max(self._first_spread, 1e-6)
 
     def _template(self, angle_deg: float, shrink: int = 1) -> np.ndarray:
         """The template at a heading and the current scale, block-averaged by ``shrink`` (cached until the next change).
@@ -186,13 +226,16 @@ class TemplateMatcher:
         self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
         self._grey = None
         self._angle, self._scale = 0.0, 1.0
+        self._seen_angle = 0.0  # the heading the UUV was last seen at (a candidate's own may differ)
         self._ref_px_per_m = px_per_m
         self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
         self._cache: dict = {}
         self._canon = self._upright(frame_bgr, self.u, self.v)
-        lo = (self.D - self.S) // 2
-        self._anchor = self._canon[lo : lo + self.S, lo : lo + self.S].copy()  # the first appearance
-        self._anchor_spread = self._spread(frame_bgr, self.u, self.v)
+        self._first = self._canon.copy()  # the first appearance; compared: its core (the vehicle alone) ...
+        self._core = max(5, round(self.p.core_share * self.S)) | 1
+        self._first_turn = 0.0  # ... turned as the learnt template has turned from it
+        self._firsts: dict = {}  # the core at turns (multiples of first_turn_step_deg)
+        self._first_spread = self._spread(frame_bgr, self.u, self.v)
         self._velocity = (0.0, 0.0)
         self._level = 1.0
         self._frames = 0
@@ -228,18 +271,34 @@ class TemplateMatcher:
         refinement and the contrast check around its match read (see :meth:`_blocks`)."""
         self._region(frame_bgr, cu, cv_, radius_px + 4 * self.k, self.S)
 
-    def _match_in(self, region, bx0: int, by0: int, template: np.ndarray):
-        """(score, u, v) of the template's best match in a working-resolution region."""
-        best, j, i = _peak(cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED))
+    def _penalty(self, shape, x0: float, y0: float, step: float, prior) -> np.ndarray | None:
+        """The distance penalty (see :data:`TemplateParams.distance_weight`) of a score map whose cell (i, j) puts
+        the template's centre at working-resolution (x0 + j·step, y0 + i·step); None without a ``prior``."""
+        if prior is None:
+            return None
+        cu, cv_, sigma_px = prior
+        qx, qy = self._to_work(cu, cv_)
+        s = sigma_px / self.k
+        dx = (x0 + step * np.arange(shape[1], dtype=np.float32) - qx) / s
+        dy = (y0 + step * np.arange(shape[0], dtype=np.float32) - qy) / s
+        return (0.5 * self.p.distance_weight) * (dy[:, None] ** 2 + dx[None, :] ** 2)
+
+    def _match_in(self, region, bx0: int, by0: int, template: np.ndarray, prior=None):
+        """(rank, score, u, v) of the template's best match in a working-resolution region (rank: the score less
+        the distance penalty from ``prior`` = (u, v, sigma_px), full-resolution pixels; the score without one)."""
+        scores = cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED)
         half = (template.shape[0] - 1) / 2.0
+        rank, best, j, i = _peak(scores, self._penalty(scores.shape, bx0 + half, by0 + half, 1.0, prior))
         u, v = self._to_full(bx0 + j + half, by0 + i + half)
-        return best, u, v
+        return rank, best, u, v
 
     def _refine(self, frame_bgr, found0):
         """Best heading near the match ``found0`` = (score, u, v) at the current heading: (score, u, v).
 
-        Tries the heading ±``turn_step_deg``, and keeps turning (up to
-        ``max_turn_steps`` steps) while the score still improves; updates the heading.
+        Tries the heading ±``turn_step_deg``: a whole step only to one that matches better by
+        ``turn_gain`` (a vehicle seen from above matches nearly as well a little turned: its
+        heading would wander), keeps turning (up to ``max_turn_steps`` steps) while the score
+        still improves; updates the heading.
         """
         step = self.p.turn_step_deg
         region, bx0, by0 = self._region(frame_bgr, found0[1], found0[2], 3.0 * self.k, self.S)
@@ -247,10 +306,10 @@ class TemplateMatcher:
             return found0
 
         def at(angle):
-            return self._match_in(region, bx0, by0, self._template(angle))
+            return self._match_in(region, bx0, by0, self._template(angle))[1:]
 
         left, right = at(self._angle - step), at(self._angle + step)
-        if found0[0] >= left[0] and found0[0] >= right[0]:
+        if found0[0] + self.p.turn_gain >= max(left[0], right[0]):  # no clearly better heading: stay near this one
             self._angle += step * _parabola(left[0], found0[0], right[0])
             return found0
         direction, best = (-1.0, left) if left[0] > right[0] else (1.0, right)
@@ -263,29 +322,35 @@ class TemplateMatcher:
         self._angle = angle
         return best
 
-    def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles):
+    def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles, sigma_px: float = math.nan):
         """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_).
 
+        With a finite ``sigma_px`` the best is the one whose score less its distance
+        penalty from (cu, cv_) is highest (see :data:`TemplateParams.distance_weight`).
         A window wider than ``coarse_side`` is first searched block-averaged (the
         template about ``coarse_px`` across); the ``coarse_keep`` best places
         found there are matched again at working resolution, and the best of those counts.
         """
+        prior = (cu, cv_, sigma_px) if sigma_px > 0 else None
         region, bx0, by0 = self._region(frame_bgr, cu, cv_, radius_px, self.S)
         if region is None:
             return -1.0, math.nan, math.nan, self._angle
         if max(region.shape) <= self.p.coarse_side:
-            return max((*self._match_in(region, bx0, by0, self._template(a)), a) for a in angles)
+            best = max((*self._match_in(region, bx0, by0, self._template(a), prior), a) for a in angles)
+            return best[1:]
         f = max(2, self.S // self.p.coarse_px)
         h, w = region.shape[0] // f, region.shape[1] // f
         small = cv2.resize(region[: h * f, : w * f], (w, h), interpolation=cv2.INTER_AREA)
-        places = []  # (coarse score, working-resolution x, y of the template's centre, heading)
+        places = []  # (coarse rank, working-resolution x, y of the template's centre, heading)
         for a in angles:
             t = self._template(a, shrink=f)
             if t.shape[0] < min(h, w):
-                s, j, i = _peak(cv2.matchTemplate(small, t, cv2.TM_CCOEFF_NORMED))
+                scores = cv2.matchTemplate(small, t, cv2.TM_CCOEFF_NORMED)
                 half = (t.shape[0] - 1) / 2.0
-                places.append((s, (j + half) * f + (f - 1) / 2.0, (i + half) * f + (f - 1) / 2.0, a))
-        best = (-1.0, math.nan, math.nan, self._angle)
+                c = half * f + (f - 1) / 2.0  # the first cell's centre, working pixels from the region's corner
+                r, _, j, i = _peak(scores, self._penalty(scores.shape, bx0 + c, by0 + c, float(f), prior))
+                places.append((r, c + j * f, c + i * f, a))
+        best = (-math.inf, -1.0, math.nan, math.nan, self._angle)
         kept: list[tuple[float, float]] = []
         for _, x, y, a in sorted(places, reverse=True):
             if len(kept) == self.p.coarse_keep:
@@ -297,31 +362,68 @@ class TemplateMatcher:
             x0, y0 = max(round(x) - r, 0), max(round(y) - r, 0)
             window = region[y0 : round(y) + r + 1, x0 : round(x) + r + 1]
             if min(window.shape) > self.S:
-                found = (*self._match_in(window, bx0 + x0, by0 + y0, self._template(a)), a)
+                found = (*self._match_in(window, bx0 + x0, by0 + y0, self._template(a), prior), a)
                 best = max(best, found)
-        return best
+        return best[1:]
+
+    def _first_core(self, turn_deg: float) -> np.ndarray:
+        """The first appearance's core turned by ``turn_deg`` (a multiple of ``first_turn_step_deg``; cached)."""
+        key = round(turn_deg / self.p.first_turn_step_deg) % round(360.0 / self.p.first_turn_step_deg)
+        if key not in self._firsts:
+            c = (self.D - 1) / 2.0
+            self._firsts[key] = _warp(self._first, (c, c), key * self.p.first_turn_step_deg, 1.0, self._core)
+        return self._firsts[key]
+
+    def _first_at(self, upright: np.ndarray) -> tuple[float, float, float] | None:
+        """Where an upright canonical image (side D) shows the UUV's first appearance: ``(dx, dy, turn_deg)``, its
+        offset from the centre (working pixels) and the turn that matches it best (within ``first_turn_deg`` of
+        the learnt template's), or None when it is not there (NCC below ``anchor_score``) or further than
+        ``anchor_drift`` of the template's side (the image's centre has drifted off the place the first appearance
+        was tracked at)."""
+        core = self._core
+        m = min(self.p.anchor_shift_px, (self.D - core) // 2)
+        lo = (self.D - core) // 2 - m
+        window = upright[lo : lo + core + 2 * m, lo : lo + core + 2 * m]
+        step = self.p.first_turn_step_deg
+        n = round(self.p.first_turn_deg / step)
+        turns = [step * (round(self._first_turn / step) + j) for j in range(-n, n + 1)]
+        maps = [cv2.matchTemplate(window, self._first_core(a), cv2.TM_CCOEFF_NORMED) for a in turns]
+        found = [_peak(scores)[1:] for scores in maps]
+        j = max(range(len(found)), key=lambda j: found[j][0])
+        score, dx, dy = found[j]
+        turn = turns[j] + (step * _parabola(found[j - 1][0], score, found[j + 1][0]) if 0 < j < 2 * n else 0.0)
+        dx, dy = dx - m, dy - m
+        if score < self.p.anchor_score:
+            return None
+        if math.hypot(dx, dy) <= max(self.p.anchor_drift * self.S, self.p.anchor_drift_px):
+            return dx, dy, turn
+        # further off: a drift, unless the first appearance matches (nearly) as well at the centre (a hull's
+        # uniform middle matches all along itself)
+        return (0.0, 0.0, turn) if maps[j][m, m] >= score - self.p.anchor_level else None
 
     def _learn(self, frame_bgr, u: float, v: float) -> None:
-        """Blend the upright patch into the template, then hold the template on its first appearance.
+        """Blend the upright patch (a match :meth:`_visible` passed) into the template, held on the first appearance.
 
-        Each blend may be off by a fraction of a pixel; summed, that would slide the
-        template off the vehicle. The learnt template's offset from the first
-        template is measured and undone whenever it exceeds ``recentre_px``.
+        The template may follow the UUV's lighting, depth and the side it shows, never
+        slide onto something else: a blend after which it would no longer show the
+        first appearance at its centre (:meth:`_first_at`) is refused. Each blend may
+        be off by a fraction of a pixel; summed, that would slide the template off the
+        vehicle: the learnt template's offset from the first appearance is undone
+        whenever it exceeds ``recentre_px``.
         """
         patch = self._upright(frame_bgr, u, v)
         if patch is None or self._contrast(frame_bgr, u, v) < self.p.learn_contrast:
             return  # fading (deep, turbid water): keep the vehicle's structure rather than learn the noise
-        cv2.accumulateWeighted(patch, self._canon, self.p.learn_rate)
-        self._cache.clear()
-        m = 3
-        lo = (self.D - self.S) // 2 - m
-        window = self._canon[lo : lo + self.S + 2 * m, lo : lo + self.S + 2 * m]
-        _, dx, dy = _peak(cv2.matchTemplate(window, self._anchor, cv2.TM_CCOEFF_NORMED))
-        dx, dy = dx - m, dy - m
+        canon = cv2.accumulateWeighted(patch, self._canon.copy(), self.p.learn_rate)
+        held = self._first_at(canon)
+        if held is None:
+            return
+        dx, dy, self._first_turn = held
         if math.hypot(dx, dy) > self.p.recentre_px:
             M = np.array([[1.0, 0.0, -dx], [0.0, 1.0, -dy]])
-            self._canon = cv2.warpAffine(self._canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR,
-                                         borderMode=cv2.BORDER_REPLICATE)
+            canon = cv2.warpAffine(canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        self._canon = canon
+        self._cache.clear()
 
     # -- per frame ---------------------------------------------------------------------------
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
@@ -329,9 +431,24 @@ class TemplateMatcher:
             return fallback
         return max(self.p.min_radius_px, self.p.search_sigmas * prediction.sigma_px)
 
-    def _visible(self, frame_bgr, u: float, v: float) -> bool:
-        """Whether the patch at (u, v) stands out of the water: at least ``min_contrast`` (see :meth:`_contrast`)."""
-        return self._contrast(frame_bgr, u, v) >= self.p.min_contrast
+    def _visible(self, frame_bgr, u: float, v: float, either_way: bool = False) -> bool:
+        """Whether the patch at (u, v) stands out of the water (at least ``min_contrast``, see :meth:`_contrast`)
+        and, when it is clear enough to tell (``check_contrast``), shows the UUV's first appearance there
+        (:meth:`_first_at`: not a drift onto something else). ``either_way`` (a candidate found by a search): a
+        vehicle looks much the same end for end, so the heading may be half a turn off; it is turned round then."""
+        contrast = self._contrast(frame_bgr, u, v)
+        if contrast < self.p.check_contrast:
+            return contrast >= self.p.min_contrast  # fading into the water: its structure is lost, the template judges
+        patch = self._upright(frame_bgr, u, v)
+        if patch is not None and self._first_at(patch) is not None:
+            return True
+        if not either_way:
+            return False
+        self._angle += 180.0
+        if (patch := self._upright(frame_bgr, u, v)) is not None and self._first_at(patch) is not None:
+            return True
+        self._angle -= 180.0
+        return False
 
     def _match(self, found: bool, score: float, u: float, v: float) -> Match:
         side = round(self.S * self.k * self._scale)
@@ -346,37 +463,47 @@ class TemplateMatcher:
             cu, cv_ = self.u + self._velocity[0], self.v + self._velocity[1]
         radius = self._radius(prediction, self.p.default_radius_px)
         self._prepare(frame_bgr, cu, cv_, radius)
-        score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,))
+        score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,), radius / self.p.search_sigmas)
         self._frames += 1
         slow_step = self._frames % self.p.adapt_every == 0
-        if score >= self.p.ok_score and (slow_step or score < self._level - self.p.turn_drop):
+        if slow_step or score < self._level - self.p.turn_drop:
             score, u, v = self._refine(frame_bgr, (score, u, v))
         floor = max(self.p.ok_score, self._level - self.p.level_drop)
         if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k and self._visible(frame_bgr, u, v)):
             return self._match(False, score, u, v)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
-        self.u, self.v = u, v
+        self.u, self.v, self._seen_angle = u, v, self._angle
         self._level += 0.1 * (score - self._level)
         if score >= self.p.update_score and slow_step:
             self._learn(frame_bgr, u, v)
         return self._match(True, score, u, v)
 
-    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float) -> Match:
-        need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
-        return self._match(bool(score >= need and self._visible(frame_bgr, u, v)), score, u, v)
+    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float, prediction: Prediction | None) -> Match:
+        """A candidate while lost: the re-acquisition's bar, or the bar of :meth:`follow` when the prediction's
+        window is no wider than the vehicle (lost a moment ago: nothing else fits where it can be)."""
+        side = self.S * self.k * self._scale
+        if prediction is not None and self._radius(prediction, math.inf) <= side:
+            need = max(self.p.ok_score, self._level - self.p.level_drop)
+        else:
+            need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
+        return self._match(bool(score >= need and self._visible(frame_bgr, u, v, either_way=True)), score, u, v)
 
     def confirm(self, frame_bgr, u: float, v: float, prediction: Prediction | None) -> Match:
         self._begin(prediction)
         tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
         self._prepare(frame_bgr, u, v, tol)
-        score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,))
+        score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas)
         if score >= self.p.ok_score:
             score, u, v = self._refine(frame_bgr, (score, u, v))
-        return self._candidate_passes(frame_bgr, score, u, v)
+        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
+        if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, self._seen_angle,
+                                                                            u, v):
+            return self._match(False, score, u, v)
+        return candidate
 
     def resume(self, match: Match) -> None:
         self._velocity = (0.0, 0.0)
-        self.u, self.v = match.u, match.v
+        self.u, self.v, self._seen_angle = match.u, match.v, self._angle
 
     def search(self, frame_bgr, prediction: Prediction | None) -> Match:
         """Best match over every heading in the prediction's window (the whole frame without one)."""
@@ -384,15 +511,47 @@ class TemplateMatcher:
         H, W = frame_bgr.shape[:2]
         if prediction is not None and math.isfinite(prediction.sigma_px):
             cu, cv_, radius = prediction.u, prediction.v, self._radius(prediction, float(max(W, H)))
+            sigma = radius / self.p.search_sigmas
         else:
-            cu, cv_, radius = W / 2.0, H / 2.0, float(max(W, H))
+            cu, cv_, radius, sigma = W / 2.0, H / 2.0, float(max(W, H)), math.nan
         n = self.p.reacquire_headings
-        angles = [self._angle + 360.0 * m / n for m in range(n)]
-        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles)
+        turn = prediction.turn_deg if prediction is not None and prediction.turn_deg < 180.0 else 180.0
+        self._angle = self._seen_angle  # not a candidate's that did not confirm
+        if turn < 90.0:  # only the headings it can have turned to since it was seen (either way round: it looks
+            #              much the same end for end), as far apart as at most
+            m = math.ceil(2.0 * turn * n / 360.0) + 1
+            angles = [self._angle + flip - turn + 2.0 * turn * j / (m - 1) for flip in (0.0, 180.0) for j in range(m)]
+        else:
+            angles = [self._angle + 360.0 * j / n for j in range(n)]
+        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles, sigma)
         if score < self.p.ok_score:  # not even a candidate (headings are coarse here: refined below)
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
-        if score < self.p.reacquire_score:
+        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
+        if abs((self._angle - saved + 90.0) % 180.0 - 90.0) > turn:  # a heading it cannot have turned to (either
+            #                                                           way round): something else
+            candidate = self._match(False, score, u, v)
+        if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, saved, u, v):
+            candidate = self._match(False, score, u, v)  # a look-alike beside the UUV, which is partly hidden
+        if not candidate.found:
             self._angle = saved
-        return self._candidate_passes(frame_bgr, score, u, v)
+        return candidate
+
+    def _still_there(self, frame_bgr, prediction: Prediction, angle: float, u: float, v: float) -> bool:
+        """Whether a candidate at (u, v), away from the prediction, has the UUV itself beside it: its first
+        appearance, at the heading it was last seen at, where the prediction has it (partly hidden, say by a
+        vehicle passing over it, it matches the template less well than the look-alike does)."""
+        side = self.S * self.k * self._scale
+        if math.hypot(u - prediction.u, v - prediction.v) <= self.p.reacquire_tolerance * side:
+            return False
+        found, self._angle = self._angle, angle
+        patch = self._upright(frame_bgr, prediction.u, prediction.v)
+        self._angle = found
+        if patch is None:
+            return False
+        scores = cv2.matchTemplate(patch, self._first_core(self._first_turn), cv2.TM_CCOEFF_NORMED)
+        _, best, _, (j, i) = cv2.minMaxLoc(scores)
+        c = (scores.shape[0] - 1) / 2.0  # the prediction's place; the candidate is further than the patch reaches
+        return best >= self.p.there_score and math.hypot(j - c, i - c) * self.k < 0.5 * math.hypot(u - prediction.u,
+                                                                                                   v - prediction.v)
