@@ -81,7 +81,8 @@ finally:
 
 
 def start_router(endpoint: str) -> tuple[subprocess.Popen, float]:
-    """A router listening on ``endpoint``; the process and when it was ready (UNIX s)."""
+    """A router listening on ``endpoint``; the process and when it said it was ready (UNIX s). It listens before
+    it says so: a client may be connected through it a little before that moment."""
     proc = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdout=subprocess.PIPE, text=True)
     word, t_ready = proc.stdout.readline().split()
     assert word == "ready"
@@ -282,6 +283,7 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
             _, t_back = publisher.stdout.readline().split()
             t_back = float(t_back)
         elif which == "router":
+            t_launch = time.time()  # the router may carry traffic before it prints "ready": the cut ends here
             router, t_back = start_router(endpoint)
         else:
             def back() -> float | None:
@@ -304,8 +306,11 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
         listener.close()
     named = {"mavlink": "uav", "depth": "depth", "router": "zenoh", "video": "video"}[which]
     missing = [(t, st["problems"]) for t, st in statuses.got if t_cut + 4.5 <= t < t_return]  # none via a lost router
-    gone = [ft for tr, ft in listener.got if t_cut + 2.5 <= tr < t_back]
+    t_gone_end = t_launch if which == "router" else t_back
+    gone = [ft for tr, ft in listener.got if t_cut + 2.5 <= tr < t_gone_end]
+    gone_at = [(round(tr - t_cut, 3), ft) for tr, ft in listener.got if t_cut + 2.5 <= tr < t_back and ft != 1]
     return {"input": which, "back_s": t_valid - t_back, "t_cut": t_cut, "t_back": t_back, "rc": service.returncode,
             "named": named, "problems_while_missing": missing, "gps_while_missing": gone,
+            "fixes_while_missing_at": gone_at,
             "valid_before_cut": sum(ft == 3 for tr, ft in listener.got if tr < t_cut),
             "log": run_log.read_text()}

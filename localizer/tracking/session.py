@@ -12,7 +12,9 @@ once by the caller and shared with the geometry.
   the top face's centre (:func:`~localizer.tracking.predict.top_face_pixel`). With
   ``verify`` (the operator's live selections), a box must hold a vehicle-sized object
   standing out of the water, as a click must: a box on open water would otherwise be
-  tracked as the seafloor's texture, and every fix would be wrong.
+  tracked as the seafloor's texture, and every fix would be wrong. The object's outline
+  then replaces the drawn box: a box dragged by hand is pixels off the vehicle, and a
+  tracker that never drifts toward the vehicle would keep that offset in every fix.
 - :meth:`~TrackingSession.step`: the next frame. Its prediction is the UUV's last
   sighting moved by what the camera did since: the sighting is located (an *anchor*,
   re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
@@ -57,8 +59,6 @@ from .target import Target, TargetParams, TargetState
 
 #: A sighting's located position is reused for the predictions of this many frames, then located afresh.
 REANCHOR_FRAMES = 64
-#: How a target was chosen when skyfix outlined it itself (its pixel carries the outline's error).
-OUTLINED = ("click", "prior")
 #: A click asks for an object within this share of the vehicle's diagonal of it (the window's 3 sigma).
 CLICK_REACH = 1.0
 #: The UUV's speed is measured over its sightings of the last this many seconds ...
@@ -105,6 +105,7 @@ class TrackingSession:
         self.target = Target(lambda: make_matcher(tracker), target_params)
         self.detect_params = detect_params or DetectParams()
         self.origin: str | None = None  # how the current target was chosen: "box", "click", "prior"
+        self._outlined = False  # the target's box is an outline skyfix found (its pixel carries the outline's error)
         self.prediction: Prediction | None = None  # where the latest step looked for the UUV (None: nowhere in particular)
         self.last = TrackResult("awaiting_target")
         self._length_px = math.nan  # the vehicle's apparent length at the latest prediction or selection
@@ -134,10 +135,12 @@ class TrackingSession:
         if not all(math.isfinite(c) for c in given):
             raise SelectionError(f"{'box' if box is not None else 'point'} {list(given)}: expected finite pixels")
         one = take(pose, [i])
+        outlined = None
         if point is not None:
-            box = self._outline_click(frame_bgr, one, point)
+            outlined = self._outline_click(frame_bgr, one, point)
         elif verify:
-            self._verify_box(frame_bgr, one, box)
+            outlined = self._outline_box(frame_bgr, one, box)
+        box = outlined or box
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
         centre = (float(cu[0]), float(cv_[0]))
@@ -148,6 +151,7 @@ class TrackingSession:
             raise SelectionError(str(e)) from None
         self._start(one, centre, anchor)
         self.origin = "click" if point is not None else "box"
+        self._outlined = outlined is not None
         self.prediction = None
         self._length_px = VEHICLE_FOOTPRINT_M[0] * px_per_m
         return self._note(float(one.t_unix[0]), result)
@@ -203,7 +207,7 @@ class TrackingSession:
         if result.ok:
             window = p.sigma_px if p is not None else math.nan
             result = replace(result, sigma_px=pixel_sigma_px(self._length_px, result.confidence, window,
-                                                             t_unix - self.since_t, self.origin in OUTLINED))
+                                                             t_unix - self.since_t, self._outlined))
         self.last = result
         return result
 
@@ -303,20 +307,22 @@ class TrackingSession:
                                  "select with a box")
         return found.box
 
-    def _verify_box(self, frame_bgr, one: CameraPose, box) -> None:
-        """SelectionError unless a vehicle-sized object stands out of the water within ``box`` (see the module doc)."""
+    def _outline_box(self, frame_bgr, one: CameraPose, box) -> tuple[int, int, int, int] | None:
+        """The outline of the vehicle-sized object standing out of the water within ``box`` (see the module doc);
+        SelectionError if there is none; None without a pose to size the vehicle."""
         x, y, w, h = (float(c) for c in box)
         cu, cv_ = x + (w - 1) / 2.0, y + (h - 1) / 2.0
         _, px_per_m = self._locate(one, (cu, cv_))
         guess = prediction_at(cu, cv_, px_per_m, 0.0)
         if guess is None:
-            return  # no pose to size the vehicle: the operator's box is all there is
+            return None  # no pose to size the vehicle: the operator's box is all there is
         reach = math.hypot(w, h) / 2.0 / self.detect_params.search_sigmas
         found = detect(frame_bgr, Prediction(cu, cv_, guess.width_px, guess.height_px, reach, px_per_m),
                        self.detect_params)
         if found is None or not _overlap(found.box, (x, y, w, h)):
             raise SelectionError(f"box [{x:g}, {y:g}, {w:g}, {h:g}]: no vehicle-sized object stands out of the "
                                  "water in it; draw the box around the UUV")
+        return found.box
 
     def _acquire(self, frame_bgr, pose: CameraPose, i: int, prior: Prior) -> TrackResult:
         """Awaiting a target, with the UUV's own estimate: search near it for a candidate to confirm."""
@@ -336,6 +342,7 @@ class TrackingSession:
             return TrackResult("awaiting_target")
         self._start(one, centre, anchor)
         self.origin = "prior"
+        self._outlined = True
         here = prediction_at(centre[0], centre[1], scale, BASE_SIGMA_M)
         return self.target.propose(frame_bgr, found.box, centre, scale, here)
 

@@ -18,10 +18,10 @@ a while. :func:`pixel_sigma_px` adds these terms in quadrature:
   match);
 - the (re)acquisition: ``ACQUIRED_SHARE × length_px``, fading with the time since the UUV
   was (re)acquired (``ACQUIRED_S``, e-folding);
-- the selection: a target skyfix outlined itself (a click, or the UUV's own position estimate:
-  :func:`~localizer.tracking.detect.outline`) carries the outline's error, ``OUTLINED_SHARE ×
-  length_px``, for as long as it is tracked (the template holds the point it started on); an
-  operator's box is taken as drawn.
+- the selection: a target skyfix outlined itself (a click, a live box snapped to the object in
+  it, or the UUV's own position estimate: :func:`~localizer.tracking.detect.outline`) carries
+  the outline's error, ``OUTLINED_SHARE × length_px``, for as long as it is tracked (the
+  template holds the point it started on); a box given as exact (``init_bbox``) is taken as drawn.
 
 The constants are calibrated on generated sessions against the exact pixel the simulator
 writes (``bench/pixel_sigma.py``; the README's "How sure the pixel is" gives the numbers):
@@ -46,7 +46,7 @@ TRACKING_WINDOW = 0.5  # a frame after a frame: the prediction's 1-sigma is up t
 WINDOW_SHARE = 0.05  # a wider window adds this share of its 1-sigma beyond that
 ACQUIRED_SHARE = 0.03  # just (re)acquired: this share of the length ...
 ACQUIRED_S = 1.0  # ... fading with this time constant (s)
-OUTLINED_SHARE = 0.08  # a target skyfix outlined (a click, the UUV's own estimate): this share of the length
+OUTLINED_SHARE = 0.08  # a target skyfix outlined (a click, a live box, the UUV's own estimate): this share of the length
 
 def pixel_sigma_px(length_px: float, score: float, window_px: float, since_acquired_s: float,
                    outlined: bool = False) -> float:
@@ -54,8 +54,8 @@ def pixel_sigma_px(length_px: float, score: float, window_px: float, since_acqui
 
     ``length_px``: the vehicle's apparent length; ``score``: the match's (0..1; NaN: the tracker has none);
     ``window_px``: the 1-sigma of the prediction it was sought with (NaN: none); ``since_acquired_s``: time since
-    the UUV was selected or (re)acquired; ``outlined``: the target was outlined by skyfix (a click, a prior), not
-    boxed by the operator. NaN when the length is unknown.
+    the UUV was selected or (re)acquired; ``outlined``: the target was outlined by skyfix (a click, a live box, a
+    prior), not a box given as exact. NaN when the length is unknown.
     """
     if not length_px > 0:
         return math.nan
