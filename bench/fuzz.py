@@ -44,8 +44,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from live_run import ROOT, ServiceRun, proc_sample
 
 sys.path.insert(0, str(ROOT))
-from groundstation.mavlink_io import mavutil
-from groundstation.replay import read_tlog
+from groundstation.mavlink.ingest import mavutil
+from groundstation.session.tlog import read_tlog
 from groundstation.zenoh_session import open_session
 from localizer.geodesy import horizontal_error_m
 from sim_fixtures.hostile import DEPTH_KINDS, MAVLINK_KINDS, DepthFuzzer, MavlinkFuzzer, schedule

@@ -29,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from groundstation.positions import read_positions_csv
+from groundstation.session.positions import read_positions_csv
 from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR
 from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion

@@ -34,7 +34,7 @@ Measured, per size:
 
 Baselines in the same run: decode-only (PyAV demux + decode + BGR conversion per
 frame, offline, the live decoder's settings) and the per-frame work
-(:meth:`groundstation.pipeline.Pipeline.process`: tracker + pose + locate) timed
+(:meth:`groundstation.live.pipeline.Pipeline.process`: tracker + pose + locate) timed
 offline on decoded frames.
 """
 
@@ -57,10 +57,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from groundstation.pipeline import Pipeline
-from groundstation.session import load_session
-from groundstation.sources.video_live import LiveFrame
-from groundstation.video import open_video
+from groundstation.live.pipeline import Pipeline
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
+from groundstation.video.frames import LiveFrame
 from localizer.geodesy import horizontal_error_m
 
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080)}

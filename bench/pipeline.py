@@ -25,10 +25,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from groundstation import track_video
-from groundstation.process import process_session
-from groundstation.session import load_session
-from groundstation.video import open_video
+from groundstation.offline import track as track_video
+from groundstation.offline.process import process_session
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
 from localizer.geodesy import horizontal_error_m
 
 HIDDEN_BAD_M = 1.0

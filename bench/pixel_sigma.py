@@ -33,10 +33,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from groundstation.evaluate import errors_m
-from groundstation.process import Pixels, locate_frames
-from groundstation.session import load_session
-from groundstation.video import open_video
+from groundstation.offline.evaluate import errors_m
+from groundstation.offline.process import Pixels, locate_frames
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
 from localizer.calibration import Sigmas
 from localizer.pose import camera_pose
 from localizer.tracking.session import TrackingSession

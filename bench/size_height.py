@@ -7,7 +7,7 @@ the surface and 1.5-2 m deep, nadir and 20-35° off nadir, 720p and 1080p, 8-20 
 with video is generated (kept in ``--sessions`` and reused unless ``--regenerate``), its
 ``[water] takeoff_height_above_surface_m`` written ``error_m`` wrong (the configured height is that
 much off, as a barometer that drifted), and the video tracked by ``skyfix process``'s own pass with
-the height measured from the UUV's size (:class:`groundstation.size_estimate.HeightFromSize`, mode
+the height measured from the UUV's size (:class:`groundstation.height_from_size.HeightFromSize`, mode
 ``check``). Against the truth, computed from the scenario's motion (:class:`sim_fixtures.motion.Motion`,
 independent of the localizer):
 
@@ -39,12 +39,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from groundstation import track_video
-from groundstation.evaluate import errors_m
-from groundstation.process import locate_frames
-from groundstation.session import load_session
-from groundstation.size_estimate import HeightFromSize
-from groundstation.track_video import track_session
+from groundstation.height_from_size import HeightFromSize
+from groundstation.offline import track as track_video
+from groundstation.offline.evaluate import errors_m
+from groundstation.offline.process import locate_frames
+from groundstation.offline.track import track_session
+from groundstation.session.read import load_session
 from localizer.size_range import SizeHeight
 from localizer.tracking.session import TrackingSession
 from sim_fixtures.generate import generate

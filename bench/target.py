@@ -6,7 +6,7 @@ On a session's decoded frames (default: the bundled ``nadir_hover``), all in one
 
 - baseline: :meth:`TrackingSession.step` while tracking, with the session's poses
   computed at once (what ``skyfix process`` does per frame);
-- live per frame: :meth:`groundstation.pipeline.Pipeline.process` (the frame's pose
+- live per frame: :meth:`groundstation.live.pipeline.Pipeline.process` (the frame's pose
   computed once, the step, the geometry with the same pose), telemetry preloaded;
 - awaiting a target near the UUV's own estimate (3 m off, 1-sigma 3 m), until it is
   confirmed, and with an estimate 40 m off (never found: the steady cost of searching);
@@ -32,10 +32,10 @@ import pymap3d
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from groundstation.pipeline import Pipeline
-from groundstation.session import load_session
-from groundstation.sources.video_live import LiveFrame
-from groundstation.video import open_video
+from groundstation.live.pipeline import Pipeline
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
+from groundstation.video.frames import LiveFrame
 from localizer.pose import camera_pose
 from localizer.tracking.session import Prior, TrackingSession
 

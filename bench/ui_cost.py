@@ -19,7 +19,7 @@ thread's mean CPU time per frame, without OpenCV's helper threads, about a tenth
 process's CPU swings with the machine's other load); sampled from /proc: the service's CPU (% of one core) over the video
 (its first 2 s, the decoder's start-up burst, left out), and with the page open the browser's CPU (all its
 processes) and the frames the page received. Baseline in the same run: the page's per-frame work alone
-(:func:`groundstation.ui.feed.encode_jpeg` on one of the session's 1080p frames) times its rate, the CPU the
+(:func:`groundstation.live.ui.feed.encode_jpeg` on one of the session's 1080p frames) times its rate, the CPU the
 page should cost. Without ``--session`` a 30 s session is generated once into ``/tmp/skyfix-ui-bench``.
 """
 
@@ -44,9 +44,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from groundstation.session import load_session
-from groundstation.ui.feed import encode_jpeg
-from groundstation.video import open_video
+from groundstation.live.ui.feed import encode_jpeg
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
 
 SCENARIO = """\
 name = "ui_1080p"
@@ -98,7 +98,7 @@ CLK_TCK = os.sysconf("SC_CLK_TCK")
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
          "--disable-component-update", "--disable-sync", "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1"]
-PAGE_FPS = 10.0  # the feed's rate limit (groundstation.ui.feed)
+PAGE_FPS = 10.0  # the feed's rate limit (groundstation.live.ui.feed)
 
 
 def ensure_session(path: Path) -> Path:

@@ -7,24 +7,23 @@ import importlib
 import sys
 from importlib.metadata import version
 
+from groundstation.mavlink.ingest import LinkError
+from groundstation.session.read import SessionError
+from groundstation.zenoh_session import ZenohError
 from localizer.calibration import ConfigError
 
-from .mavlink_io import LinkError
-from .session import SessionError
-from .zenoh_session import ZenohError
-
 SUBCOMMANDS = (
-    "groundstation.process",
-    "groundstation.evaluate",
+    "groundstation.offline.process",
+    "groundstation.offline.evaluate",
     "sim_fixtures.cli",
-    "groundstation.service",
-    "groundstation.console",
+    "groundstation.live.service",
+    "groundstation.live.console",
     "groundstation.replay",
-    "groundstation.calibrate",
-    "groundstation.export",
-    "groundstation.report",
-    "groundstation.latency",
-    "groundstation.latency_estimate",
+    "groundstation.calibration.command",
+    "groundstation.offline.export",
+    "groundstation.offline.report",
+    "groundstation.latency.meter",
+    "groundstation.latency.estimate",
 )
 
 

@@ -12,12 +12,11 @@ import json
 import sys
 from pathlib import Path
 
+from groundstation.live.config import RunConfig
+from groundstation.messages import FixMessage, StatusMessage
 from localizer.calibration import Calibration
 from localizer.contract import adapter
 from sim_fixtures.scenario import Scenario
-
-from .config import RunConfig
-from .messages import FixMessage, StatusMessage
 
 SCHEMA_DIR = Path(__file__).parent / "schemas"
 DRAFT = "https://json-schema.org/draft/2020-12/schema"

@@ -17,7 +17,7 @@ agrees with itself:
 - The video: sent in-process as MPEG-TS to ``--video-out`` (default
   ``udp://127.0.0.1:5600``; ``rtp://host:port`` sends RTP), each frame at its
   ``video_frames.csv`` time + shift (+ ``--video-delay-ms``) by the file's
-  timestamps (:func:`groundstation.video_send.send_video`): a camera whose
+  timestamps (:func:`groundstation.video.send.send_video`): a camera whose
   glass-to-first-packet latency is ``--video-delay-ms`` (default 0).
 - A UUV-side endpoint (``--uuv-listen``, default ``udpin:127.0.0.1:14660``)
   writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
@@ -43,10 +43,12 @@ import threading
 import time
 from pathlib import Path
 
-from .mavlink_io import connect, mavutil
-from .session import SessionError, read_table
-from .video_send import send_video
-from .zenoh_session import open_session, put_json
+from groundstation.mavlink.ingest import connect, mavutil
+from groundstation.session.depth import read_depth
+from groundstation.session.read import SessionError, read_table
+from groundstation.session.tlog import read_tlog
+from groundstation.video.send import send_video
+from groundstation.zenoh_session import open_session, put_json
 
 log = logging.getLogger("skyfix.replay")
 
@@ -86,36 +88,13 @@ class Cuts:
 
 
 
-def read_tlog(path: Path) -> list[tuple[float, object]]:
-    """``(record time UNIX s, message)`` of every decodable frame of a tlog, in file order."""
-    if not path.is_file():
-        raise SessionError(f"{path}: missing")
-    conn = mavutil().mavlink_connection(str(path), robust_parsing=True)
-    out = []
-    try:
-        while (m := conn.recv_msg()) is not None:
-            if m.get_type() != "BAD_DATA":
-                out.append((m._timestamp, m))
-    finally:
-        conn.close()
-    if not out:
-        raise SessionError(f"{path}: no MAVLink frames")
-    return out
-
-
-def read_depth(path: Path) -> list[tuple[float, float, float]]:
-    """``(t_send, t, depth_m)`` of every well-formed line of depth.jsonl (a truncated last line is skipped);
-    ``t_send`` is the recorded arrival ``t_recv``, or ``t`` without one."""
-    out = []
-    for i, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            rec = json.loads(line)
-            t = float(rec["t"])
-            out.append((float(rec.get("t_recv", t)), t, float(rec["depth_m"])))
-        except (ValueError, KeyError, TypeError, AttributeError):
-            log.warning("%s:%d: skipped: %r", path, i, line[:80])
+def depth_to_send(path: Path) -> list[tuple[float, float, float]]:
+    """``(t_send, t, depth_m)`` of depth.jsonl's records (read leniently: a bad line is skipped with a warning),
+    in sending order; ``t_send`` is the recorded arrival ``t_recv``, or ``t`` without one."""
+    warnings: list[str] = []
+    out = [(r.t if r.t_recv is None else r.t_recv, r.t, r.depth_m) for r in read_depth(path, warnings, strict=False)]
+    for w in warnings:
+        log.warning("%s", w)
     out.sort(key=lambda r: r[0])
     return out
 
@@ -153,7 +132,9 @@ class Replay:
         if not (self.dir / "session.toml").is_file():
             raise SessionError(f"{self.dir}: not a session directory (no session.toml)")
         self.tlog = read_tlog(self.dir / "uav.tlog")
-        self.depth = read_depth(self.dir / "depth.jsonl") if (self.dir / "depth.jsonl").is_file() else []
+        if not self.tlog:
+            raise SessionError(f"{self.dir / 'uav.tlog'}: no MAVLink frames")
+        self.depth = depth_to_send(self.dir / "depth.jsonl") if (self.dir / "depth.jsonl").is_file() else []
         videos = sorted(p for p in self.dir.glob("video.*") if p.is_file())
         self.video = videos[0] if videos and not args.no_video else None
         self.frames = read_table(self.dir / "video_frames.csv", ("frame", "t")) if self.video else None

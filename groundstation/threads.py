@@ -25,7 +25,7 @@ import traceback
 from collections import deque
 from collections.abc import Callable
 
-from .logs import Throttle
+from groundstation.logs import Throttle
 
 log = logging.getLogger("skyfix.threads")
 
@@ -81,7 +81,7 @@ class Handoff:
 
 
 def failure_kind(e: BaseException) -> str:
-    """An exception's kind: its type and the innermost place it was raised (``ValueError at video_live.py:123``)."""
+    """An exception's kind: its type and the innermost place it was raised (``ValueError at pipeline.py:123``)."""
     tb = traceback.extract_tb(e.__traceback__)
     where = f" at {tb[-1].filename.rsplit('/', 1)[-1]}:{tb[-1].lineno}" if tb else ""
     return f"{type(e).__name__}{where}"

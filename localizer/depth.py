@@ -161,7 +161,7 @@ def ground_pressure_param(instance: int) -> str:
 
 
 class ArduSubDepth:
-    """ArduSub's depth from its messages (values in SI units: :func:`groundstation.mavlink_io.ingest_ardusub`
+    """ArduSub's depth from its messages (values in SI units: :func:`groundstation.mavlink.ingest.ingest_ardusub`
     converts them), as :class:`DepthSample` on the station clock; see the module doc.
 
     ``sigma_m`` is the depth sensor's 1-sigma (the calibration's ``[uncertainty] depth_m``), ``latency_s`` the

@@ -21,7 +21,7 @@ from annotated_types import Ge, Le, MinLen
 from pydantic import Field, field_validator, model_validator
 from pydantic.dataclasses import dataclass
 
-from groundstation.config import read_toml
+from groundstation.live.config import read_toml
 from localizer.contract import (
     CLOSED,
     Flag,

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.mavlink_io import mavutil
+from groundstation.mavlink.ingest import mavutil
 
 from .geometry import ned_to_geodetic, quat_wxyz, rotation_zyx
 from .motion import Motion, wrap_pi

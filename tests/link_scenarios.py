@@ -31,7 +31,7 @@ from live_helpers import (
     wait_until,
 )
 
-from groundstation.mavlink_io import mavutil
+from groundstation.mavlink.ingest import mavutil
 
 BUNDLED = ROOT / "sim_fixtures" / "bundled"
 SHUTDOWN_STATES = ("flowing", "udp_silent", "rtsp_silent", "mavlink_silent")

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from calib_render import TrueCamera, charuco_texture, chessboard_texture, poses, project, render
 
-from groundstation.calib_board import Board, Detector
+from groundstation.calibration.board import Board, Detector
 from groundstation.cli import main
 from localizer.calibration import Calibration
 from localizer.camera import Camera, pixel_to_ray, ray_to_pixel

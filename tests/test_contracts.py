@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from jsonschema import Draft202012Validator
 
-from groundstation.config import RunConfig
 from groundstation.contracts import CONTRACTS, path_of, schema_text, stale
+from groundstation.live.config import RunConfig
 from groundstation.messages import FixMessage
 from localizer.calibration import Calibration
 from localizer.contract import ConfigError, validate

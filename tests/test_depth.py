@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 from conftest import T0_UNIX
 
-from groundstation import config
-from groundstation.mavlink_io import BadMessage, ingest_ardusub
-from groundstation.sources.depth_ardusub import ArduSubZenoh, autopilot_prefix
+from groundstation.live import config
+from groundstation.live.sources.depth_ardusub import ArduSubZenoh, autopilot_prefix
+from groundstation.mavlink.ingest import BadMessage, ingest_ardusub
 from localizer.calibration import ConfigError
 from localizer.depth import ArduSubDepth, DepthGate, depth_from_pressure_m, ekf_depth_m
 from localizer.fix import locate
@@ -247,7 +247,7 @@ def test_a_recording_keeps_each_depth_s_source_and_sigma_for_process(tmp_path):
     """depth.jsonl's extra keys as the recorder writes them are used offline; another tool's are ignored."""
     import shutil
 
-    from groundstation.session import load_session
+    from groundstation.session.read import load_session
 
     session = tmp_path / "s"
     shutil.copytree(Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover", session)
@@ -268,7 +268,7 @@ def test_a_recording_keeps_each_depth_s_source_and_sigma_for_process(tmp_path):
 
 
 def test_the_watchdog_says_when_the_depth_is_only_ardusubs_ekf():
-    from groundstation.watchdog import problems
+    from groundstation.live.watchdog import problems
 
     src = ArduSubZenoh(None, "mavlink/1/1", Telemetry(), DepthGate(), 0.05)
     now = time.time()

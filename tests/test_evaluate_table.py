@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from pyproj import Geod
 
-from groundstation import evaluate
-from groundstation.evaluate import errors_m, score
-from groundstation.positions import read_positions_csv
-from groundstation.session import read_table
+from groundstation.offline import evaluate
+from groundstation.offline.evaluate import errors_m, score
+from groundstation.session.positions import read_positions_csv
+from groundstation.session.read import read_table
 from localizer.fix import Fixes
 from sim_fixtures.bundle import BUNDLED_DIR
 

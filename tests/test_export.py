@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from groundstation.cli import main
-from groundstation.positions import read_positions_csv
+from groundstation.session.positions import read_positions_csv
 from localizer.status import runs
 from sim_fixtures.bundle import BUNDLED_DIR
 

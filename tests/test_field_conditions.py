@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from live_helpers import ROOT
 
-from groundstation.mavlink_io import mavutil
-from groundstation.process import locate_frames
-from groundstation.session import load_session
+from groundstation.mavlink.ingest import mavutil
+from groundstation.offline.process import locate_frames
+from groundstation.session.read import load_session
 from localizer.geodesy import horizontal_error_m
 
 CONDITIONS = ("clock_offset", "clock_sync", "nadir_vehicle_frame", "slow_attitude", "servo_mount", "reboot")

@@ -32,10 +32,10 @@ from gate_streams import (
 )
 from live_helpers import free_port
 
-from groundstation.mavlink_io import mavutil
-from groundstation.process import process_session
-from groundstation.session import load_session
-from groundstation.sinks.gps_input import LOSS_STATUSES, GpsInputSink, mavlink_gps_link
+from groundstation.live.sinks.gps_input import LOSS_STATUSES, GpsInputSink, mavlink_gps_link
+from groundstation.mavlink.ingest import mavutil
+from groundstation.offline.process import process_session
+from groundstation.session.read import load_session
 from localizer.fix import Fix
 from localizer.fix_gate import CONFIRM_S, DIVERGED_S, MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
 from localizer.uuv_track import WHITE_FLOOR_M, Scatter, UuvTrack, common_change_m2

@@ -23,9 +23,9 @@ import time
 import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
-from groundstation.mavlink_io import mavutil
-from groundstation.mavlink_link import MavlinkLink, read_signing_key
-from groundstation.sinks.gps_input import GpsInputSink, mavlink_gps_link
+from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
+from groundstation.mavlink.ingest import mavutil
+from groundstation.mavlink.link import MavlinkLink, read_signing_key
 from groundstation.zenoh_session import open_session
 from localizer.calibration import ConfigError
 from localizer.fix import Fix

@@ -8,7 +8,7 @@ import pytest
 from test_sim_knobs import SCENARIOS
 
 from groundstation.cli import main
-from groundstation.positions import read_positions_csv
+from groundstation.session.positions import read_positions_csv
 from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides

@@ -23,8 +23,8 @@ from live_helpers import ROOT, free_port, read_jsonl, skyfix, start, stop, truth
 from scipy.spatial.transform import Rotation as Rot
 from scipy.spatial.transform import Slerp
 
-from groundstation.latency_estimate import AttitudeTrack, OffsetEstimate, OnlineLatency
-from groundstation.session import load_session, read_table
+from groundstation.latency.estimate import AttitudeTrack, OffsetEstimate, OnlineLatency
+from groundstation.session.read import load_session, read_table
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import scenario_from_dict
 

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from live_helpers import free_port, skyfix, start, stop, wait_for
 
-from groundstation.timecode import read_timecode, render_timecode
-from groundstation.video_send import MPEGTS_OPTIONS
+from groundstation.latency.timecode import read_timecode, render_timecode
+from groundstation.video.send import MPEGTS_OPTIONS
 
 T_MS = 1_796_151_234_567  # a UNIX time in ms
 DISPLAY_HZ = 60.0

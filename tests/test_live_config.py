@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from groundstation import config
+from groundstation.live import config
 from localizer.calibration import ConfigError
 
 

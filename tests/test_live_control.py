@@ -13,9 +13,9 @@ import time
 import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
-from groundstation.config import load_calibration
-from groundstation.control import ControlError, jsonable, parse_select
-from groundstation.sources.uuv_position import (
+from groundstation.live.config import load_calibration
+from groundstation.live.control import ControlError, jsonable, parse_select
+from groundstation.live.sources.uuv_position import (
     MAX_AGE_S,
     BadPosition,
     UuvPosition,

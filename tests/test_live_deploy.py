@@ -10,7 +10,7 @@ import pytest
 import zenoh
 from live_helpers import ROOT
 
-from groundstation.config import load_calibration, run_config
+from groundstation.live.config import load_calibration, run_config
 from groundstation.zenoh_session import make_config
 
 DEPLOY = ROOT / "deploy"

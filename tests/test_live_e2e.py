@@ -34,8 +34,8 @@ from live_helpers import (
 )
 
 from groundstation.contracts import path_of
-from groundstation.process import process_session
-from groundstation.session import load_session
+from groundstation.offline.process import process_session
+from groundstation.session.read import load_session
 
 BUNDLED = ROOT / "sim_fixtures" / "bundled"
 # SKYFIX_LIVE_SESSION may name another session (with truth.csv) to rehearse

@@ -41,9 +41,9 @@ from live_helpers import (
     wait_for,
 )
 
-from groundstation.mavlink_io import mavutil
-from groundstation.replay import read_tlog
-from groundstation.video_send import send_video
+from groundstation.mavlink.ingest import mavutil
+from groundstation.session.tlog import read_tlog
+from groundstation.video.send import send_video
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Timing
 

@@ -9,14 +9,14 @@ from datetime import UTC, datetime, timedelta
 import pytest
 from live_helpers import free_port, wait_for
 
-from groundstation.mavlink_io import mavutil
-from groundstation.sinks.gps_input import (
+from groundstation.live.sinks.gps_input import (
     IGNORE_ALL,
     GpsInputSink,
     gps_input_fields,
     gps_time,
     mavlink_gps_link,
 )
+from groundstation.mavlink.ingest import mavutil
 from localizer.fix import Fix
 from localizer.fix_gate import FixGate
 
@@ -142,7 +142,7 @@ def test_injection_through_blueos_mavlink_in():
     import json
     import socket
 
-    from groundstation.sinks.zenoh_mavlink import ZenohMavlinkIn
+    from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
     from groundstation.zenoh_session import open_session
 
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"

@@ -23,8 +23,8 @@ import pytest
 from link_scenarios import LINK_INPUTS, link_comes_back, make_session, shutdown
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
-from groundstation.mavlink_io import mavutil
-from groundstation.mavlink_link import MavlinkLink
+from groundstation.mavlink.ingest import mavutil
+from groundstation.mavlink.link import MavlinkLink
 
 STOP_BOUND_S = 5.0  # generous for a loaded 2-core CI; the requirement (1 s) is checked by bench/links.py
 BACK_BOUND_S = 3.0

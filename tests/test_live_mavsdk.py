@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from live_helpers import free_port
 
-from groundstation.mavlink_io import mavutil
-from groundstation.sources.rates import needed_rates
-from groundstation.sources.uav_mavlink import UavMavlink
-from groundstation.sources.uav_mavsdk import UavMavsdk, mavsdk_url
+from groundstation.live.sources.rates import needed_rates
+from groundstation.live.sources.uav_mavlink import UavMavlink
+from groundstation.live.sources.uav_mavsdk import UavMavsdk, mavsdk_url
+from groundstation.mavlink.ingest import mavutil
 from localizer.telemetry import Telemetry
 
 

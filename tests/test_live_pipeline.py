@@ -6,10 +6,10 @@ import json
 
 import numpy as np
 
-from groundstation.config import load_calibration
-from groundstation.pipeline import Pipeline
-from groundstation.sinks.zenoh_fix import fix_to_json
-from groundstation.sources.video_live import LiveFrame
+from groundstation.live.config import load_calibration
+from groundstation.live.pipeline import Pipeline
+from groundstation.live.sinks.zenoh_fix import fix_to_json
+from groundstation.video.frames import LiveFrame
 from localizer.fix import Fix
 from localizer.telemetry import Telemetry
 
@@ -70,8 +70,8 @@ def test_operator_commands_run_between_frames_on_held_frames():
 
     import pytest
 
-    from groundstation.session import load_session
-    from groundstation.video import open_video
+    from groundstation.session.read import load_session
+    from groundstation.video.file import open_video
     from localizer.tracking.session import SelectionError
 
     session = load_session(Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover")

@@ -16,9 +16,9 @@ import time
 import pytest
 from live_helpers import free_port
 
-from groundstation.mavlink_io import mavutil
-from groundstation.sources.rates import needed_rates
-from groundstation.sources.uav_mavlink import UavMavlink
+from groundstation.live.sources.rates import needed_rates
+from groundstation.live.sources.uav_mavlink import UavMavlink
+from groundstation.mavlink.ingest import mavutil
 from localizer.telemetry import Telemetry
 
 BOOT0_S = 412.0

@@ -12,9 +12,9 @@ import tomllib
 import numpy as np
 from live_helpers import free_port, skyfix, start, stop, wait_for
 
-from groundstation.mavlink_io import ingest, mavutil
-from groundstation.session import load_session, read_table
-from groundstation.sinks.recorder import Recorder
+from groundstation.live.sinks.recorder import Recorder
+from groundstation.mavlink.ingest import ingest, mavutil
+from groundstation.session.read import load_session, read_table
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration
 from localizer.fix import Fix

@@ -8,8 +8,8 @@ import csv
 import numpy as np
 import pytest
 
-from groundstation.sinks.recorder import VideoWriter
-from groundstation.video import open_video
+from groundstation.live.sinks.recorder import VideoWriter
+from groundstation.video.file import open_video
 
 SIZE = (160, 120)
 N = 60

@@ -3,7 +3,7 @@ with the record times, boot times and everything else byte for byte."""
 
 from __future__ import annotations
 
-from groundstation.mavlink_io import mavutil
+from groundstation.mavlink.ingest import mavutil
 from groundstation.replay import frame_bytes
 
 

@@ -12,12 +12,13 @@ import time
 import pytest
 from live_helpers import free_port
 
+from groundstation.live.sources.depth_zenoh import DepthZenoh, parse_depth
+from groundstation.live.sources.rates import needed_rates
+from groundstation.live.sources.uav_mavlink import UavMavlink
 from groundstation.logs import Throttle, kind_of
-from groundstation.mavlink_io import mavutil
-from groundstation.sources.depth_zenoh import DepthZenoh, parse_depth
-from groundstation.sources.rates import needed_rates
-from groundstation.sources.uav_mavlink import GCS_SYSID, UavMavlink
-from groundstation.sources.video_live import VideoLive
+from groundstation.mavlink.ids import SKYFIX_SYSID
+from groundstation.mavlink.ingest import mavutil
+from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
 from localizer.telemetry import Telemetry
 
@@ -152,7 +153,7 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
     status = uav.status(time.time())
     assert abs(status["clocks"]["station_minus_gnss_s"]) < 0.1  # SYSTEM_TIME was stamped when sent
     assert set(status["age_s"]) >= {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME"}
-    assert hb is not None and hb.type == mav.mavlink.MAV_TYPE_GCS and hb.get_srcSystem() == GCS_SYSID
+    assert hb is not None and hb.type == mav.mavlink.MAV_TYPE_GCS and hb.get_srcSystem() == SKYFIX_SYSID
 
 
 def _stream(port: int, seconds: float) -> subprocess.Popen:

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
-from groundstation.sources.video_inputs import parse_video_input
-from groundstation.sources.video_live import VideoLive
-from groundstation.video import VideoError
+from groundstation.video.frames import VideoError
+from groundstation.video.inputs import parse_video_input
+from groundstation.video.live import VideoLive
 
 SIZE = (320, 240)
 FPS = 30
@@ -144,7 +144,7 @@ def test_stream_slot_is_when_the_frame_was_sent(clips, scheme, tmp_path):
     them in the stream, as a camera does, or nothing could be decoded."""
     import av
 
-    from groundstation.video_send import send_video
+    from groundstation.video.send import send_video
 
     clip_file = clips["h264"]
     if scheme == "rtp-from-mp4":

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.mavlink_io import ingest, mavutil
+from groundstation.mavlink.ingest import ingest, mavutil
 from localizer.attitude import euler_to_quat
 from localizer.calibration import Calibration
 from localizer.pose import camera_pose

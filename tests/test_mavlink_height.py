@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.mavlink_io import ingest, mavutil
+from groundstation.mavlink.ingest import ingest, mavutil
 from localizer.telemetry import Telemetry
 
 T0 = 1_763_800_000.0

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from groundstation.cli import main
-from groundstation.positions import read_positions_csv
-from groundstation.session import SessionError
+from groundstation.session.positions import read_positions_csv
+from groundstation.session.read import SessionError
 from localizer.geodesy import horizontal_error_m
 
 BUNDLED = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled"

@@ -13,7 +13,7 @@ from matplotlib.image import imread
 from pyproj import Geod
 
 from groundstation.cli import main
-from groundstation.positions import read_positions_csv
+from groundstation.session.positions import read_positions_csv
 from sim_fixtures.bundle import BUNDLED_DIR
 
 GEOD = Geod(ellps="WGS84")
@@ -95,7 +95,7 @@ def test_evaluate_writes_the_same_plots(tmp_path, argv):
 
 
 def test_every_status_word_has_a_cause_colour():
-    from groundstation.plots import cause
+    from groundstation.offline.plots import cause
     from localizer.status import STATUSES
 
     assert [w for w in STATUSES if w != "ok" and cause(w) == "other"] == []

@@ -14,7 +14,7 @@ import av
 import numpy as np
 import pytest
 
-from groundstation.sources.rtp_receive import Depacketizer
+from groundstation.video.rtp import Depacketizer
 
 ENCODERS = {"h264": ["libx264", "-tune", "zerolatency", "-x264-params", "slices=4"],
             "h265": ["libx265", "-x265-params", "bframes=0:log-level=error"]}

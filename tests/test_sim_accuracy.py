@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from pyproj import Geod
 
-from groundstation.evaluate import errors_m
-from groundstation.process import process_session
-from groundstation.session import load_session
+from groundstation.offline.evaluate import errors_m
+from groundstation.offline.process import process_session
+from groundstation.session.read import load_session
 from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR, SCENARIOS
 from sim_fixtures.generate import camera_of, frame_truth
 from sim_fixtures.motion import Motion

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from groundstation.session import load_session
+from groundstation.session.read import load_session
 from localizer.calibration import ConfigError
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import scenario_from_dict

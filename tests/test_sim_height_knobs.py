@@ -12,7 +12,7 @@ import pytest
 from test_sim_knobs import SCENARIOS, of_kind, read_tlog
 from test_sim_render import pixel_of_reference_point
 
-from groundstation.mavlink_io import mavutil
+from groundstation.mavlink.ingest import mavutil
 from sim_fixtures.generate import camera_of, frame_truth, generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.render import Renderer

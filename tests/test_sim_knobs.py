@@ -17,8 +17,8 @@ import pymap3d
 import pytest
 from scipy.spatial.transform import Rotation
 
-from groundstation.mavlink_io import mavutil
-from groundstation.session import load_session
+from groundstation.mavlink.ingest import mavutil
+from groundstation.session.read import load_session
 from localizer.attitude import euler_to_R, quat_to_R
 from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion

@@ -17,7 +17,7 @@ import pytest
 from test_sim_height_knobs import gpi
 from test_sim_knobs import SCENARIOS, read_tlog
 
-from groundstation.session import read_table
+from groundstation.session.read import read_table
 from localizer.calibration import ConfigError
 from sim_fixtures.generate import camera_of, frame_truth, generate, reference_pixel
 from sim_fixtures.motion import Motion

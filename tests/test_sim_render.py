@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from groundstation.session import read_table
+from groundstation.session.read import read_table
 from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR, SCENARIOS
 from sim_fixtures.generate import camera_of, frame_truth
 from sim_fixtures.motion import Motion

@@ -5,7 +5,7 @@ import struct
 import numpy as np
 import pytest
 
-from groundstation.mavlink_io import mavutil
+from groundstation.mavlink.ingest import mavutil
 from localizer.attitude import euler_to_R, quat_to_R
 from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR, SCENARIOS
 from sim_fixtures.motion import Motion

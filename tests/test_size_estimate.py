@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.size_estimate import HeightFromSize
+from groundstation.height_from_size import HeightFromSize
 from localizer.calibration import Calibration
 from localizer.size_range import SizeHeight
 from localizer.telemetry import Telemetry

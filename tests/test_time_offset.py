@@ -21,11 +21,11 @@ from pathlib import Path
 import pytest
 from live_helpers import ROOT, skyfix
 
-from groundstation.evaluate import evaluate_session
-from groundstation.latency_estimate import APPLY_PAIRS, OffsetEstimate, SessionOffset
-from groundstation.mavlink_io import mavutil
-from groundstation.process import frame_pixels
-from groundstation.session import load_session
+from groundstation.latency.estimate import APPLY_PAIRS, OffsetEstimate, SessionOffset
+from groundstation.mavlink.ingest import mavutil
+from groundstation.offline.evaluate import evaluate_session
+from groundstation.offline.process import frame_pixels
+from groundstation.session.read import load_session
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import scenario_from_dict
 

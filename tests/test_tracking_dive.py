@@ -15,9 +15,9 @@ import cv2
 import numpy as np
 import pytest
 
-from groundstation.process import process_session
-from groundstation.session import load_session
-from groundstation.video import open_video
+from groundstation.offline.process import process_session
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
 from localizer.geodesy import horizontal_error_m
 from sim_fixtures.generate import camera_of, frame_truth, generate
 from sim_fixtures.motion import Motion

@@ -16,8 +16,8 @@ import numpy as np
 import pymap3d
 import pytest
 
-from groundstation.session import load_session
-from groundstation.video import open_video
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
 from localizer.pose import camera_pose, take
 from localizer.tracking.predict import window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession

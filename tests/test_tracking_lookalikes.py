@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.process import process_session
-from groundstation.session import load_session
-from groundstation.video import open_video
+from groundstation.offline.process import process_session
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
 from localizer.geodesy import horizontal_error_m
 from localizer.pose import camera_pose
 from localizer.tracking.session import Prior, TrackingSession

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from groundstation.cli import main as skyfix
-from groundstation.process import process_session
-from groundstation.session import SessionError, load_session
-from groundstation.track_video import track_session
+from groundstation.offline.process import process_session
+from groundstation.offline.track import track_session
+from groundstation.session.read import SessionError, load_session
 from localizer.geodesy import horizontal_error_m
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides

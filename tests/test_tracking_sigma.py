@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.session import load_session
-from groundstation.video import open_video
+from groundstation.session.read import load_session
+from groundstation.video.file import open_video
 from localizer.pose import camera_pose
 from localizer.tracking.session import TrackingSession
 from localizer.tracking.sigma import pixel_sigma_px

@@ -1,4 +1,4 @@
-"""Reading video with groundstation.video: real files made by the ffmpeg CLI, damaged on purpose."""
+"""Reading video with groundstation.video.file: real files made by the ffmpeg CLI, damaged on purpose."""
 
 import shutil
 import subprocess
@@ -6,7 +6,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from groundstation.video import VideoError, open_video
+from groundstation.video.file import open_video
+from groundstation.video.frames import VideoError
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
 

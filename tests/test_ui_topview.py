@@ -1,4 +1,4 @@
-"""The web page's map (groundstation/ui/topview.py) on bundled sessions' telemetry.
+"""The web page's map (groundstation/live/ui/topview.py) on bundled sessions' telemetry.
 
 The camera's footprint, projected back into the image with the simulator's own projection (OpenCV's
 projectPoints with the lens's distortion, not the localizer's ray code), lies on the image's outline, top edge
@@ -15,8 +15,8 @@ import pymap3d
 import pytest
 from live_helpers import ROOT
 
-from groundstation.session import load_session
-from groundstation.ui.topview import EDGE_SAMPLES, TopView
+from groundstation.live.ui.topview import EDGE_SAMPLES, TopView
+from groundstation.session.read import load_session
 from localizer.fix import Fix
 from localizer.pose import camera_pose
 from sim_fixtures.generate import camera_of

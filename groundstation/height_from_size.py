@@ -1,0 +1,190 @@
+"""The camera's height over the water from the UUV's size in the video: measured frame by frame, estimated over a
+window, checked against the configured height and (``auto``) handed to the height's fusion.
+
+``--height-from-size`` (``skyfix run``, ``process``, ``evaluate``):
+
+- ``off``: nothing is measured;
+- ``check`` (the default): frames whose tracker status is ``ok`` are measured (at most
+  :data:`MEASURE_HZ` a second: :func:`localizer.tracking.silhouette.measure`, the vehicle's size from
+  ``[uuv]``), the bias of the configured height against them estimated over a sliding window
+  (:class:`localizer.size_range.HeightBias`) and shown (the status's ``height_from_size``, the web
+  page); once the estimate is sure, one warning line when the configured height is off by more than
+  twice both uncertainties together (again only when the bias has changed by half that since);
+- ``auto``: also, while the estimate is sure, each measurement that agrees with it (3 sigmas) is
+  handed to the height's fusion as an absolute measurement: ``Telemetry.add_height("size", ...)``
+  with its 1-sigma (its own and the error every measurement shares); those of the window before it
+  became sure too. A single frame, an outline locked on the vehicle's inner structure, never is.
+
+:class:`HeightFromSize` is the work, the same offline (in the tracker's pass over the video,
+:mod:`groundstation.offline.track`) and live; :class:`OnlineHeightFromSize` runs it in ``skyfix run``
+like the video latency's estimate: frames handed from the pipeline, on the event loop, to a
+low-priority thread (skipped while it is busy: never stalling decoding or tracking), the results
+handed back to the loop, where the telemetry is written.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import os
+import queue
+import threading
+from collections import Counter
+
+import numpy as np
+
+from groundstation.threads import Supervised, in_thread
+from localizer.calibration import Calibration
+from localizer.pose import CameraPose
+from localizer.size_range import BiasEstimate, HeightBias, SizeHeight, size_height
+from localizer.telemetry import Telemetry
+from localizer.tracking.silhouette import measure
+
+log = logging.getLogger("skyfix.size")
+
+MODES = ("auto", "check", "off")
+SOURCE = "size"  # the height source's word (Telemetry.add_height)
+MEASURE_HZ = 5.0  # frames measured a second, at most
+NICE = 10  # the measuring thread yields the CPU to decoding and tracking
+STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
+
+
+class HeightFromSize:
+    """Measurements of one run and their estimate (see the module doc); :meth:`measure` is pure (any thread),
+    :meth:`take` and :meth:`due` change the state (one thread: the event loop live)."""
+
+    def __init__(self, cal: Calibration, tel: Telemetry, mode: str, measure_hz: float = MEASURE_HZ):
+        if mode not in MODES[:2]:
+            raise ValueError(f"height_from_size = {mode!r}: expected one of {', '.join(MODES[:2])} to measure")
+        self.cal, self.tel, self.mode = cal, tel, mode
+        self.period_s = 1.0 / measure_hz
+        self.window = HeightBias()
+        self.estimate: BiasEstimate | None = None
+        self.last: SizeHeight | None = None
+        self.measured = 0
+        self.rejected: Counter[str] = Counter()
+        self.applied = 0
+        self.warnings: list[str] = []
+        self._last_t = -math.inf
+        self._applied_t = -math.inf
+        self._warned: float | None = None
+
+    def due(self, t_unix: float) -> bool:
+        """Whether the frame at ``t_unix`` is to be measured (at most ``measure_hz`` a second); counts it if so."""
+        if t_unix - self._last_t < self.period_s - 0.005:
+            return False
+        self._last_t = t_unix
+        return True
+
+    def measure(self, image: np.ndarray, pose: CameraPose, i: int, u: float, v: float) -> SizeHeight | str:
+        """The UAV's height above the water at the pose's frame ``i`` from the UUV's outline around its tracked pixel
+        (u, v), or why not (a word of :data:`localizer.tracking.silhouette.REJECTIONS`, or ``no_pose``)."""
+        if pose.status[i] != "ok":
+            return "no_pose"
+        n = self.cal.water.refractive_index
+        m = measure(image, self.cal.camera, pose.R_ned_from_cv[i], u, v, self.cal.uuv, float(pose.height_m[i]),
+                    float(pose.depth_m[i]), n)
+        if isinstance(m, str):
+            return m
+        return size_height(float(pose.t_unix[i]), m.camera_height_m, m.sigma_m, m.size_px,
+                           float(pose.cam_offset_ned_m[i, 2]), float(pose.uav_height_m[i]),
+                           float(pose.sigma_height_m[i]), float(pose.depth_m[i]), float(pose.sigma_depth_m[i]), n)
+
+    def take(self, result: SizeHeight | str) -> None:
+        """A measurement (or why there is none): into the window; the estimate, the warning and, with ``auto``,
+        the measurements handed to the height's fusion."""
+        if isinstance(result, str):
+            self.rejected[result] += 1
+            return
+        self.measured += 1
+        self.last = result
+        self.window.add(result)
+        e = self.estimate = self.window.estimate()
+        if not e.sure:
+            return
+        limit = 2.0 * math.hypot(e.sigma_m, e.configured_sigma_m)
+        if abs(e.bias_m) > limit and (self._warned is None or abs(e.bias_m - self._warned) > limit / 2.0):
+            self._warned = e.bias_m
+            text = (f"height from the UUV's size: the configured height above the water is {abs(e.bias_m):.2f} m "
+                    f"{'above' if e.bias_m > 0 else 'below'} what the UUV's size in the image says (± {e.sigma_m:.2f} m, "
+                    f"{e.frames} frames over {e.blocks} s, {e.at_surface:.0%} with the UUV at the surface; the "
+                    f"configured height's own 1-sigma {e.configured_sigma_m:.2f} m): check [water] "
+                    "takeoff_height_above_surface_m or surface_amsl_m, the barometer, and [uuv] (the vehicle's size)")
+            log.warning("%s", text)
+            self.warnings.append(text)
+        if self.mode != "auto":
+            return
+        for h in self.window.heights:
+            if h.t_unix > self._applied_t and e.agrees(h):
+                if self.tel.add_height(SOURCE, float(self.tel.uav_time(h.t_unix)), h.uav_height_m, h.sigma_total_m):
+                    self.applied += 1
+                self._applied_t = h.t_unix
+
+    def summary(self) -> str:
+        """One line: the estimate, or why there is none."""
+        e = self.estimate
+        if e is None:
+            why = ", ".join(f"{k} {n}" for k, n in self.rejected.most_common()) or "no frame with the UUV tracked"
+            return f"height from the UUV's size: no measurement ({why})"
+        return (f"height from the UUV's size: configured - measured {e.bias_m:+.2f} ± {e.sigma_m:.2f} m over "
+                f"{e.frames} frames ({e.blocks} s, {e.at_surface:.0%} at the surface, {e.outliers} outliers left out, "
+                f"{sum(self.rejected.values())} frames without a measurement), {'sure' if e.sure else 'not sure'}"
+                + (f"; {self.applied} measurements applied" if self.mode == "auto" else ""))
+
+    def status(self) -> dict:
+        def num(x, digits=3):
+            return None if x is None or not math.isfinite(x) else round(float(x), digits)
+
+        e, last = self.estimate, self.last
+        return {"mode": self.mode, "measured": self.measured, "rejected": dict(self.rejected), "applied": self.applied,
+                "bias_m": num(e and e.bias_m), "sigma_m": num(e and e.sigma_m),
+                "sigma_common_m": num(e and e.sigma_common_m), "frames": e.frames if e else 0,
+                "outliers": e.outliers if e else 0, "seconds": e.blocks if e else 0, "sure": bool(e and e.sure),
+                "at_surface_share": num(e and e.at_surface, 2), "last_t": num(last and last.t_unix),
+                "last_height_m": num(last and last.uav_height_m), "last_sigma_m": num(last and last.sigma_total_m)}
+
+
+class OnlineHeightFromSize:
+    """The live worker (see the module doc): ``on_tracked`` on the loop, the measuring in its own thread."""
+
+    def __init__(self, work: HeightFromSize):
+        self.work = work
+        self.skipped = 0
+        self._frames: queue.Queue = queue.Queue(maxsize=1)
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self.worker = Supervised("height-from-size", self._run)
+
+    def on_tracked(self, image: np.ndarray, pose: CameraPose, u: float, v: float) -> None:
+        """A located frame whose tracker status is ok, with its final one-frame pose (event loop)."""
+        if pose.status[0] != "ok" or not self.work.due(float(pose.t_unix[0])):
+            return
+        try:
+            self._frames.put_nowait((image, pose, u, v))
+        except queue.Full:
+            self.skipped += 1
+
+    async def run(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self.worker.start()
+        try:
+            await asyncio.Event().wait()
+        finally:
+            # waited for (within a measurement): a thread left inside OpenCV when the process exits aborts it
+            await in_thread(self.worker.join, STOP_WAIT_S, name="height-from-size stop")
+
+    def _run(self, stop: threading.Event) -> None:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)  # Linux: this thread only
+        while not stop.is_set():
+            try:
+                image, pose, u, v = self._frames.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            result = self.work.measure(image, pose, 0, u, v)
+            try:
+                self._loop.call_soon_threadsafe(self.work.take, result)
+            except RuntimeError:  # the loop is closed: stopped
+                return
+
+    def status(self) -> dict:
+        return self.work.status() | {"frames_skipped": self.skipped, **self.worker.status()}

@@ -1,0 +1,334 @@
+"""Options of ``skyfix run``: one contract, :class:`RunConfig`, for the flags and the config TOML.
+
+Every option is one field of :class:`RunConfig`: its type (choices are a ``Literal``),
+default and description make the flag ``--video-latency-ms``, its ``--help`` line, the
+config key ``video_latency_ms`` and the JSON Schema (``groundstation/schemas/run-config.schema.json``).
+A config file is a flat TOML table of such keys (see ``deploy/field.toml``); paths in
+it (fields typed :data:`FilePath`) are relative to the file. A flag given on the
+command line wins over the file; the file wins over the defaults. Unknown keys and
+wrong values are one-line errors naming the file (or ``options`` for a flag), the key
+and the value.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal, get_args, get_origin
+
+from annotated_types import Ge, Gt
+from pydantic import Field, model_validator
+from pydantic.dataclasses import dataclass
+
+from groundstation.live.sources.depth_ardusub import autopilot_prefix
+from groundstation.live.sources.uuv_position import parse_hint
+from groundstation.live.ui.bind import check_token, parse_bind
+from localizer.calibration import Calibration
+from localizer.contract import (
+    CLOSED,
+    ConfigError,
+    Flag,
+    Invalid,
+    NonNegative,
+    Number,
+    Text,
+    validate,
+    within,
+)
+from localizer.depth import BLUEROV2_MAX_VERTICAL_SPEED_MPS
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
+from localizer.tracking import TRACKERS, WITHOUT_LOSS_SIGNAL
+
+log = logging.getLogger("skyfix.config")
+
+BLUEOS_PREFIX = "mavlink/1/1"  # ArduSub's system and component under BlueOS
+
+
+@dataclasses.dataclass(frozen=True)
+class _RelativeToFile:
+    """Marks a path option: a relative path in a config file is relative to that file."""
+
+    metavar: str
+
+
+FilePath = Annotated[Text, _RelativeToFile("FILE")]
+DirPath = Annotated[Text, _RelativeToFile("DIR")]
+
+
+@dataclass(frozen=True, kw_only=True, config=CLOSED)
+class RunConfig:
+    """The options of ``skyfix run`` (flags and config file keys)."""
+
+    calibration: FilePath = Field(description="TOML with the [camera], [mount], [water], [tracker] tables of "
+                                  "session.toml v1 (and optionally [uncertainty], [timing])")
+    mavlink: Text = Field("udpin:0.0.0.0:14550", description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
+                          "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)")
+    mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
+    video: Text | None = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
+                               "a file (anything FFmpeg opens)")
+    video_latency_ms: within(0, 2000) | Literal["auto"] = Field(
+        0.0, description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
+        "'auto': estimated from the image's motion against the camera attitude")
+    height_from_size: Literal["auto", "check", "off"] = Field(
+        "check", description="the camera's height above the water from the UUV's size in the video ([uuv]): check "
+        "(estimate it, show it, warn when the configured height disagrees), auto (also hand it to the height's "
+        "fusion once sure), off")
+    no_request_rates: Flag = Field(False, description="do not ask the autopilot for the telemetry rates skyfix needs "
+                                   "(a shared link)")
+    telemetry_wait_ms: within(0, 2000) = Field(300.0, description="longest wait of a frame for the attitude sample "
+                                               "after it (slow radios need ~300)")
+    require_inputs: Flag = Field(False, description="exit 2 when the UAV's MAVLink, the depth or the video has sent "
+                                 "nothing 10 s after start (default: keep running and keep saying so)")
+    zenoh_connect: tuple[Text, ...] = Field((), description="Zenoh endpoint to connect to, e.g. "
+                                            "tcp/192.168.2.2:7447 (repeatable)")
+    zenoh_listen: tuple[Text, ...] = Field((), description="Zenoh endpoint to listen on (repeatable)")
+    zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
+                                          "endpoints above are added to it")
+    zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
+    depth_source: Literal["skyfix", "blueos", "mavlink"] = Field(
+        "skyfix", description="the UUV's depth: skyfix JSON {t, depth_m} on --depth-key; blueos: ArduSub's depth "
+        "sensor from BlueOS's mavlink-server on Zenoh (--depth-key mavlink/1/1); mavlink: ArduSub's over "
+        "--depth-mavlink")
+    depth_key: Text = Field("uuv/depth", description="Zenoh key of the depth: skyfix JSON's key, or with "
+                            "--depth-source blueos the autopilot's prefix mavlink/{system}/{component} (default "
+                            "there: mavlink/1/1)")
+    depth_mavlink: Text | None = Field(None, description="with --depth-source mavlink: ArduSub's MAVLink, a pymavlink "
+                                       "string (tcp:192.168.2.2:5777, udpin:0.0.0.0:14770, /dev/ttyUSB1,115200)")
+    uuv_max_vertical_speed_mps: Annotated[Number, Gt(0)] = Field(
+        BLUEROV2_MAX_VERTICAL_SPEED_MPS, description="the UUV's top vertical speed (a BlueROV2); a depth jumping "
+        "further is refused")
+    fix_key: Text = Field("skyfix/uuv/fix", description="Zenoh key the fixes are published on")
+    status_key: Text = Field("skyfix/status", description="Zenoh key of the 1 Hz health/status JSON")
+    alive_key: Text = Field("skyfix/alive", description="Zenoh liveliness token key")
+    gps_input: Text | None = Field(None, description="the UUV autopilot for GPS_INPUT: a pymavlink string "
+                                   "(udpout:192.168.2.2:14550) or zenoh:mavlink/in (BlueOS)")
+    gps_input_hz: Annotated[Number, Ge(5)] = Field(10.0, description="minimum GPS_INPUT rate (Hz; ArduPilot needs "
+                                                   "≥ 5); each new fix is also sent at once")
+    fix_max_age_ms: NonNegative = Field(500.0, description="an ok fix older than this is sent to the autopilot as "
+                                        "'no fix'")
+    tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
+                                       "template matching), kcf, csrt; mil (the paper's, never reports a loss: "
+                                       "refused with --gps-input)")
+    gps_input_signing_key: FilePath | None = Field(None, description="sign GPS_INPUT (MAVLink 2) with the key in "
+                                                   "this file: 32 bytes, or 64 hex digits")
+    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(MAX_SPEED_MPS["bluerov2"], description="safety gate: the "
+                                                        "UUV's top speed (a BlueROV2): fixes are judged against a track "
+                                                        "of the UUV that cannot move faster")
+    uuv_max_accel_mps2: Annotated[Number, Gt(0)] = Field(MAX_ACCEL_MPS2["bluerov2"], description="safety gate: the "
+                                                         "UUV's largest horizontal acceleration (a BlueROV2 at full "
+                                                         "thrust from rest, about 3 m/s²): a fix the track's UUV "
+                                                         "cannot reach is not sent")
+    fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
+                                                      "accuracy is worse than this (m) is not sent as valid")
+    uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
+                                          "BlueOS publishes it (mavlink/1/1/GLOBAL_POSITION_INT): acquire the UUV "
+                                          "near it without a selection")
+    uuv_hint: Text | None = Field(None, description="LAT,LON (degrees) where to look for the UUV until its own "
+                                  "estimate arrives")
+    uuv_prior_sigma_m: within(0.01, 1000) = Field(3.0, description="1-sigma (m) of the UUV's own estimate or hint "
+                                                   "(the search covers 3 sigma)")
+    select_history_s: within(0, 10) = Field(1.0, description="seconds of tracked frames held so a selection can "
+                                            "refer to a frame the operator saw")
+    control_prefix: Text = Field("skyfix/cmd", description="Zenoh key prefix of the operator commands "
+                                 "(<prefix>/select, release, acquire, status)")
+    ui: Text = Field("127.0.0.1:8080", description="HOST:PORT of the web page (video, target selection, map, "
+                     "health); beyond localhost (0.0.0.0:8080) it needs the token in the URL skyfix prints; port 0: "
+                     "any free port")
+    no_ui: Flag = Field(False, description="serve no web page")
+    ui_token: Text | None = Field(None, description="the web page's token (default: none on localhost, a random one "
+                                  "beyond it); given, every request needs it, on localhost too")
+    record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
+    duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
+    stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
+                                   "file at exit")
+
+    @model_validator(mode="after")
+    def _record_needs_pymavlink(self):
+        if self.record and self.mavlink_backend == "mavsdk":
+            raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
+        return self
+
+    @model_validator(mode="after")
+    def _signing_needs_a_mavlink_link(self):
+        if self.gps_input_signing_key and (not self.gps_input or self.gps_input.startswith("zenoh:")):
+            raise Invalid("gps_input_signing_key", self.gps_input_signing_key,
+                          "signing needs a MAVLink --gps-input link (not zenoh:)")
+        return self
+
+    @model_validator(mode="after")
+    def _gps_input_needs_a_tracker_that_reports_a_loss(self):
+        if self.gps_input and self.tracker in WITHOUT_LOSS_SIGNAL:
+            raise Invalid("tracker", self.tracker, "this tracker never reports losing the UUV: not a source for "
+                          "GPS_INPUT (use default, kcf or csrt; mil is for offline comparisons)")
+        return self
+
+    @model_validator(mode="after")
+    def _ui_is_an_address(self):
+        for key, check in (("ui", parse_bind), ("ui_token", check_token)):
+            value = getattr(self, key)
+            if value is not None:
+                try:
+                    check(value)
+                except ValueError as e:
+                    raise Invalid(key, value, str(e)) from None
+        return self
+
+    @model_validator(mode="after")
+    def _depth_input(self):
+        if self.depth_source == "blueos" and self.depth_key != BLUEOS_PREFIX:
+            try:
+                autopilot_prefix(self.depth_key)
+            except ValueError as e:
+                if self.depth_key != "uuv/depth":  # the skyfix default: BLUEOS_PREFIX is meant
+                    raise Invalid("depth_key", self.depth_key, str(e)) from None
+        if self.depth_source == "mavlink" and not self.depth_mavlink:
+            raise Invalid("depth_mavlink", self.depth_mavlink, "--depth-source mavlink needs the link: "
+                          "depth_mavlink = \"tcp:HOST:PORT\" (or udpin:, a serial device)")
+        if self.depth_mavlink and self.depth_source != "mavlink":
+            raise Invalid("depth_mavlink", self.depth_mavlink, f"used only with depth_source = \"mavlink\" "
+                          f"(it is {self.depth_source!r})")
+        return self
+
+    @property
+    def depth_input_key(self) -> str:
+        """The Zenoh key the depth is read from (blueos: the autopilot's prefix)."""
+        if self.depth_source == "blueos" and self.depth_key == "uuv/depth":
+            return BLUEOS_PREFIX
+        return self.depth_key
+
+    @model_validator(mode="after")
+    def _hint_is_a_position(self):
+        if self.uuv_hint is not None:
+            try:
+                parse_hint(self.uuv_hint)
+            except ValueError as e:
+                raise Invalid("uuv_hint", self.uuv_hint, str(e).split(": ", 1)[1]) from None
+        return self
+
+
+def _base(tp):
+    """``(kind, choices)`` of a field type: kind is bool, int, float, str or tuple."""
+    if get_origin(tp) is Annotated:
+        return _base(get_args(tp)[0])
+    if get_origin(tp) is Literal:
+        return str, get_args(tp)
+    if get_origin(tp) is tuple:
+        return tuple, None
+    args = [a for a in get_args(tp) if a is not type(None)]
+    if args:  # X | None
+        return _base(args[0])
+    return tp, None
+
+
+def _path_marker(name: str) -> _RelativeToFile | None:
+    """The path marker of a field (FilePath, DirPath, or either | None), None for other fields."""
+    info = RunConfig.__pydantic_fields__[name]
+    metadata = [*info.metadata, *(m for a in get_args(info.annotation) for m in getattr(a, "__metadata__", ()))]
+    return next((m for m in metadata if isinstance(m, _RelativeToFile)), None)
+
+
+METAVARS = {"ui": "HOST:PORT", "ui_token": "TOKEN"}  # options whose value is neither a path, a key nor a URL
+
+
+def _metavar(name: str, kind) -> str:
+    marker = _path_marker(name)
+    if marker:
+        return marker.metavar
+    if name in METAVARS:
+        return METAVARS[name]
+    if kind is not str:
+        return name.rsplit("_", 1)[-1].upper()  # MS, HZ, S: the unit
+    return "KEY" if name.endswith("_key") else "URL"
+
+
+def _admits_auto(tp) -> bool:
+    """Whether a field type takes the word "auto" beside a number."""
+    return any(get_origin(a) is Literal and "auto" in get_args(a) for a in get_args(tp))
+
+
+def _number_or_auto(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a number nor auto") from None
+
+
+def flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--config`` and one flag per :class:`RunConfig` field (argparse default None: not given)."""
+    required = parser.add_argument_group("required (a flag, or a key in the --config file)")
+    options = parser.add_argument_group("optional (a flag wins over the same key in the --config file)")
+    options.add_argument("--config", metavar="FILE", help="TOML file of run options, keys as the flags' names with "
+                         "underscores (deploy/field.toml)")
+    for name, info in RunConfig.__pydantic_fields__.items():
+        kind, choices = _base(info.annotation)
+        text = info.description
+        if not info.is_required() and info.default not in (None, False, ()):
+            text += f" (default: {info.default})"
+        kw = {"help": text, "default": None, "dest": name}
+        group = required if info.is_required() else options
+        if kind is bool:
+            group.add_argument(flag(name), action="store_true", **kw)
+        elif _admits_auto(info.annotation):
+            group.add_argument(flag(name), type=_number_or_auto, metavar="MS|auto", **kw)
+        elif kind is tuple:
+            group.add_argument(flag(name), action="append", metavar="ENDPOINT", **kw)
+        elif choices:
+            group.add_argument(flag(name), choices=choices, **kw)
+        else:
+            group.add_argument(flag(name), type=kind, metavar=_metavar(name, kind), **kw)
+
+
+def read_toml(path) -> dict:
+    """A TOML file's contents, or :class:`ConfigError` naming the file."""
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except OSError as e:
+        raise ConfigError(str(path), "(file)", str(path), f"cannot read: {e.strerror or e}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(str(path), "(file)", str(path), f"malformed TOML: {e}") from None
+
+
+def read_config_file(path: str) -> dict:
+    """The options a config TOML sets (checked in :func:`run_config`), relative paths resolved against its folder."""
+    data = read_toml(path)
+    for key, value in data.items():
+        if key in RunConfig.__pydantic_fields__ and _path_marker(key) and isinstance(value, str) \
+                and not Path(value).is_absolute():
+            data[key] = str(Path(path).parent / value)
+    return data
+
+
+def run_config(args: argparse.Namespace) -> RunConfig:
+    """Defaults, then the config file, then the flags given; a bad value names where it came from."""
+    file_values = read_config_file(args.config) if getattr(args, "config", None) else {}
+    flags = {}
+    for name in RunConfig.__pydantic_fields__:
+        given = getattr(args, name, None)
+        if given is not None and given is not False:
+            flags[name] = tuple(given) if isinstance(given, list) else given
+    try:
+        return validate(RunConfig, {**file_values, **flags}, "options")
+    except ConfigError as e:
+        top = e.key.split(".")[0].split("[")[0]
+        if top in file_values and top not in flags:
+            raise ConfigError(args.config, e.key, e.value, e.why) from None
+        why = "required (a flag or the --config file)" if e.why == "missing" else e.why
+        raise ConfigError("options", flag(top) if top in RunConfig.__pydantic_fields__ else e.key,
+                          e.value, why) from None
+
+
+def load_calibration(path: str) -> Calibration:
+    """The calibration tables of a TOML file (session.toml or a calibration-only file); warnings logged."""
+    cal = Calibration.from_dict(read_toml(path), source=path)
+    for warning in cal.warnings:
+        log.warning("%s", warning)
+    return cal

@@ -1,0 +1,218 @@
+"""The operator's commands: in-process (:class:`Control`) and as Zenoh queryables (:class:`ZenohControl`).
+
+Commands, each a Zenoh queryable on ``<prefix>/<command>`` (``--control-prefix``,
+default ``skyfix/cmd``) taking a JSON payload and answering JSON (encoding
+``application/json``)::
+
+    select   {"box": [x, y, w, h], "frame": 1234}    # or {"point": [u, v], "frame": 1234}; "frame" optional
+             -> {"frame": 1234, "u": 331.2, "v": 190.8, "box": [..], "caught_up": 6, "latest_frame": 1240,
+                 "target": {...}}
+    release  (no payload)  -> {"latest_frame": 1240, "target": {...}}
+    acquire  (no payload)  -> {"latest_frame": 1240, "target": {...}}   # await a target again (from the prior)
+    status   (no payload)  -> the service's status now, as published on the status key
+
+``frame`` is the running frame number of the fixes (``"frame"`` in the fix JSON); it
+must still be held (the last ``--select-history-s``); without it, the newest frame.
+``latest_frame`` is the newest frame tracked when the command ran: every fix of a later
+frame follows it (after a release, every later fix is ``released`` until a new selection;
+frames tracked before it but not yet sent are ``released`` too). GPS_INPUT says no fix
+from the first released fix on: until then (one frame) it may repeat the previous fix,
+and without frames that fix expires after ``--fix-max-age-ms``. ``u``, ``v`` is the
+selected frame's tracked pixel (the top face's centre), ``caught_up`` the held frames
+tracked since it.
+Pixels follow OpenCV (distorted image, u right, v down, top-left pixel centre (0, 0)).
+``target`` is the tracking session's status: ``state`` (``awaiting_target``,
+``tracking``, ``lost``, ``confirming``, ``released``), ``origin`` (``box``, ``click``,
+``prior``), ``since_t``, the last frame's ``status``, ``u``, ``v``, ``box``,
+``confidence``. A command that cannot be done (bad payload, frame no longer held, a
+click on nothing) gets a Zenoh error reply ``{"error": "<one line>"}`` and changes nothing.
+select and release act only on queries for their exact key (a ``skyfix/**`` query
+does not run them).
+
+Late joiners: queryables on the fix key and the status key answer the latest fix
+and status published there.
+
+Zenoh calls back on its own threads: the callbacks only hand the query to the event
+loop (``call_soon_threadsafe``), where it is answered and dropped.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import json
+import logging
+import math
+import time
+from collections.abc import Callable
+
+import zenoh
+
+from groundstation.live.pipeline import Pipeline
+from localizer.tracking.session import SelectionError
+
+log = logging.getLogger("skyfix.control")
+
+COMMANDS = ("select", "release", "acquire", "status")
+
+
+class ControlError(ValueError):
+    """A command that cannot be done; the message is one line naming the value."""
+
+
+def jsonable(obj):
+    """``obj`` with non-finite floats as None (JSON has no NaN) and tuples as lists."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    return obj
+
+
+def _numbers(key: str, value, n: int) -> tuple[float, ...]:
+    if (not isinstance(value, list) or len(value) != n
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)):
+        raise ControlError(f"select: {key} = {json.dumps(value)}: expected {n} finite numbers")
+    return tuple(float(x) for x in value)
+
+
+def parse_select(payload: bytes) -> dict:
+    """``{"frame": int | None, "box": (x, y, w, h) | None, "point": (u, v) | None}`` of a select payload."""
+    try:
+        obj = json.loads(payload)
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        raise ControlError(f"select: payload {payload[:80]!r}: expected JSON {{\"box\": [x, y, w, h]}} or "
+                           "{\"point\": [u, v]}, optionally with \"frame\"") from None
+    if not isinstance(obj, dict):
+        raise ControlError(f"select: payload {json.dumps(obj)[:80]}: expected a JSON object")
+    unknown = sorted(set(obj) - {"frame", "box", "point"})
+    if unknown:
+        raise ControlError(f"select: unknown key {unknown[0]!r} (known: frame, box, point)")
+    if ("box" in obj) == ("point" in obj):
+        raise ControlError("select: give either \"box\": [x, y, w, h] or \"point\": [u, v]")
+    frame = obj.get("frame")
+    if frame is not None and (isinstance(frame, bool) or not isinstance(frame, int) or frame < 0):
+        raise ControlError(f"select: frame = {json.dumps(frame)}: expected a frame number ≥ 0")
+    box = _numbers("box", obj["box"], 4) if "box" in obj else None
+    if box is not None and not (box[2] > 0 and box[3] > 0):
+        raise ControlError(f"select: box = {json.dumps(obj['box'])}: width and height must be > 0")
+    point = _numbers("point", obj["point"], 2) if "point" in obj else None
+    return {"frame": frame, "box": box, "point": point}
+
+
+class Control:
+    """The commands in-process (for the Zenoh queryables and a web page); ``status(now)`` is the service's."""
+
+    def __init__(self, pipeline: Pipeline, status: Callable[[float], dict]):
+        self.pipeline = pipeline
+        self._status = status
+
+    async def select(self, frame: int | None = None, box=None, point=None) -> dict:
+        """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of frame ``frame`` (default newest)."""
+        try:
+            return jsonable(await self.pipeline.select(frame, box, point))
+        except SelectionError as e:
+            raise ControlError(f"select: {e}") from None
+
+    async def release(self) -> dict:
+        return jsonable(await self.pipeline.release())
+
+    async def acquire(self) -> dict:
+        return jsonable(await self.pipeline.acquire())
+
+    def status(self) -> dict:
+        now = time.time()
+        return jsonable({"t": now, **self._status(now)})
+
+    async def handle(self, command: str, payload: bytes) -> dict:
+        """Run a command with its JSON payload (see the module doc); raises :class:`ControlError`."""
+        if command == "select":
+            return await self.select(**parse_select(payload))
+        if payload.strip() not in (b"", b"{}", b"null"):
+            raise ControlError(f"{command}: payload {payload[:80]!r}: takes none")
+        if command == "release":
+            return await self.release()
+        if command == "acquire":
+            return await self.acquire()
+        if command == "status":
+            return self.status()
+        raise ControlError(f"unknown command {command!r} (known: {', '.join(COMMANDS)})")
+
+
+class ZenohControl:
+    """Worker declaring the command queryables under ``prefix`` and the late joiners' ones (``latest``:
+    key → function giving the latest JSON-ready value published there, or None)."""
+
+    def __init__(self, session: zenoh.Session, control: Control, prefix: str,
+                 latest: dict[str, Callable[[], dict | None]]):
+        self.session = session
+        self.control = control
+        self.prefix = prefix.rstrip("/")
+        self.latest = latest
+        self.answered = 0
+        self.refused = 0
+        self._tasks: set[asyncio.Task] = set()
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+
+        def hand_over(handler):
+            def on_query(query: zenoh.Query) -> None:  # Zenoh's thread: hand over only
+                try:
+                    loop.call_soon_threadsafe(handler, query)
+                except RuntimeError:  # loop closed: shutting down
+                    query.drop()
+            return on_query
+
+        queryables = [self.session.declare_queryable(f"{self.prefix}/{name}",
+                                                     hand_over(functools.partial(self._command, name)))
+                      for name in COMMANDS]
+        queryables += [self.session.declare_queryable(key, hand_over(functools.partial(self._latest, key, latest)))
+                       for key, latest in self.latest.items()]
+        try:
+            await asyncio.Event().wait()
+        finally:
+            for task in self._tasks:
+                task.cancel()
+            await asyncio.gather(*self._tasks, return_exceptions=True)
+            for q in queryables:
+                q.undeclare()
+
+    def _command(self, name: str, query: zenoh.Query) -> None:
+        key = f"{self.prefix}/{name}"
+        if name in ("select", "release", "acquire") and str(query.key_expr) != key:
+            query.drop()  # a wildcard query (skyfix/**) does not run commands
+            return
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        task = asyncio.create_task(self._answer(query, key, name, payload))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _answer(self, query: zenoh.Query, key: str, name: str, payload: bytes) -> None:
+        with query:
+            try:
+                result = await self.control.handle(name, payload)
+            except ControlError as e:
+                self.refused += 1
+                log.warning("command %s refused: %s", key, e)
+                query.reply_err(json.dumps({"error": str(e)}), encoding=zenoh.Encoding.APPLICATION_JSON)
+                return
+            except Exception as e:  # a bug in one command must not stop the service
+                log.exception("command %s failed", key)
+                query.reply_err(json.dumps({"error": f"{name}: internal error: {e}"}),
+                                encoding=zenoh.Encoding.APPLICATION_JSON)
+                return
+            query.reply(key, json.dumps(result, allow_nan=False), encoding=zenoh.Encoding.APPLICATION_JSON)
+            self.answered += 1
+
+    def _latest(self, key: str, latest: Callable[[], dict | None], query: zenoh.Query) -> None:
+        with query:
+            value = latest()
+            if value is not None:
+                query.reply(key, json.dumps(jsonable(value), allow_nan=False),
+                            encoding=zenoh.Encoding.APPLICATION_JSON)
+
+    def status(self) -> dict:
+        return {"prefix": self.prefix, "answered": self.answered, "refused": self.refused}

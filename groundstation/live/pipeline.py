@@ -1,0 +1,346 @@
+"""The per-frame pipeline of the live service: tracking session → time alignment → geometry → sinks.
+
+Frames wait in a short queue; when the tracker falls behind, the oldest waiting
+frame is dropped (and counted), so a fix is never computed for a frame that is
+already old. Each frame's camera pose is computed once, on the event loop (where
+the telemetry is written), when the frame is taken for tracking; the
+:class:`~localizer.tracking.session.TrackingSession` (the same as offline) tracks it
+in a worker thread (OpenCV releases the GIL) with that pose, and the geometry
+locates the tracked pixel with the same pose. The first frame is selected with the
+calibration's ``[tracker] init_bbox`` when there is one (its ``init_t`` is for
+recorded sessions and is not used live); otherwise the session awaits a target: the
+operator's selection (:meth:`Pipeline.select`), or a candidate found near the UUV's
+own position estimate (``prior``) and confirmed over several frames. Each located frame
+the UUV was tracked in goes, with its final pose, to the ``on_tracked`` listeners (the
+height from the UUV's size) before its fix goes out.
+
+A tracked frame is located at once when the camera's attitude telemetry
+(ATTITUDE, and the gimbal message) reached to within :data:`EXTRAPOLATE_S` of its
+time when it was tracked: a short extrapolation with the rates costs little, and
+the accuracy grows to match. Otherwise it waits, in order, for a sample after its
+time, so that it is interpolated as offline; at most ``telemetry_wait_s`` after the
+frame arrived (a slow radio: ATTITUDE at 4 Hz needs about 0.3 s); then its pose is
+computed again with what there is (extrapolated within ``[timing]`` limits, or a
+``stale_…`` status). Tracking goes on meanwhile.
+
+Time: a frame is aligned to the telemetry by the UAV link's delay (configured, measured
+by TIMESYNC, or unknown: taken as 0 with its sigma in h_acc, logged once), unless
+``alignment`` (``--video-latency-ms auto``) says the video's latency from the image's
+motion aligns it. A frame stamped before that estimate settled (``LiveFrame.aligned``
+False) is tracked but gets no fix: status ``latency_unsettled``.
+
+Operator commands (:meth:`Pipeline.select`, :meth:`Pipeline.release`,
+:meth:`Pipeline.acquire`) run in the tracking worker between frames. The last
+``history_s`` seconds of tracked frames are held with their poses, so a selection
+refers to a frame the operator saw: the session is re-initialised there and then
+catches up through the held frames after it before the next live frame. An operator's
+box must hold a vehicle-sized object standing out of the water (a box on open water is
+refused, not tracked as the seafloor; ``init_bbox`` is taken as configured). A release
+also turns frames tracked before it but not yet located into ``released`` ones: no
+fix goes out after it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections import Counter, deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from groundstation.video.frames import LiveFrame
+from localizer.calibration import Calibration
+from localizer.fix import Fix, locate
+from localizer.height import take_notices
+from localizer.pose import CameraPose, camera_pose
+from localizer.telemetry import Telemetry
+from localizer.tracking import TrackResult
+from localizer.tracking.predict import window as search_window
+from localizer.tracking.session import Prior, SelectionError, TrackingSession
+
+log = logging.getLogger("skyfix.pipeline")
+
+#: A frame up to this far (s) after the newest attitude sample is located without waiting for the next one.
+EXTRAPOLATE_S = 0.03
+#: At most this many frames are held for selections, whatever ``history_s``.
+MAX_HELD = 300
+
+
+@dataclass(frozen=True)
+class FrameInfo:
+    """One processed frame beside its fix: when it arrived and when its fix was ready (UNIX seconds), the
+    tracker's box (x, y, w, h) around the UUV in it, when it has one, and the window (x, y, w, h, pixels) the
+    telemetry's prediction had it searched in, when there was one."""
+
+    index: int
+    t_recv: float
+    t_fix: float
+    box: tuple[int, int, int, int] | None = None
+    window: tuple[float, float, float, float] | None = None
+
+
+@dataclass
+class Tracked:
+    """A tracked frame on its way to the geometry, with the pose it was tracked with."""
+
+    frame: LiveFrame
+    pose: CameraPose
+    result: TrackResult
+    early: bool  # the pose was computed more than EXTRAPOLATE_S past the newest attitude sample
+    window: tuple[float, float, float, float] | None = None  # where the prediction had the UUV searched
+
+
+class Pipeline:
+    """Worker turning frames into :class:`~localizer.fix.Fix` es for every sink (``on_fix(fix, info)``).
+
+    ``prior(t_unix)``: the UUV's own position estimate at a frame's time (None: none);
+    ``history_s``: how long tracked frames are held for selections; ``alignment()``: the (source word,
+    1-sigma s) of aligned frames' times when not the link delay's (see the module doc).
+    """
+
+    def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
+                 telemetry_wait_s: float = 0.3, prior: Callable[[float], Prior | None] | None = None,
+                 history_s: float = 1.0):
+        self.cal = cal
+        self.tel = tel
+        self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
+        self.sinks = list(sinks)
+        self.queue_len = queue_len
+        self.telemetry_wait_s = telemetry_wait_s
+        self.prior = prior or (lambda t_unix: None)
+        self.history_s = history_s
+        self.alignment: Callable[[], tuple[str, float]] | None = None
+        self._told_unknown = False
+        self._queue: deque[LiveFrame] = deque()
+        self._ready = asyncio.Event()
+        self._commands: deque[tuple[Callable, asyncio.Future]] = deque()
+        self._tracked: deque[Tracked] = deque()  # waiting for their telemetry
+        self._tracked_ready = asyncio.Event()
+        self._telemetry = asyncio.Event()
+        self._held: deque[Tracked] = deque()  # recent tracked frames, for selections
+        self._started = False  # the first frame was taken, or a command came first: init_bbox no longer applies
+        self._angle_series = [tel.attitude] + (
+            [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
+            else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
+        self.waited_s = 0.0  # total time frames waited for telemetry
+        self.held = 0  # frames that waited for telemetry
+        self._holding: int | None = None
+        self.processed = 0
+        self.dropped = 0
+        self.statuses: Counter[str] = Counter()
+        self.last_status: str | None = None
+        self.target = self.session.status()  # the tracking session's status after the latest frame or command
+        #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
+        self.on_tracked: list[Callable] = []
+
+    def submit(self, frame: LiveFrame) -> None:
+        """Queue a frame (on the event loop); drops the oldest waiting frame when the queue is full.
+
+        The very first frame is never dropped when ``init_bbox`` belongs to it.
+        """
+        if len(self._queue) >= self.queue_len:
+            first_waiting = self.cal.init_bbox is not None and not self._started and self._queue[0].index == 0
+            del self._queue[1 if first_waiting else 0]
+            self.dropped += 1
+        self._queue.append(frame)
+        self._ready.set()
+
+    def telemetry_arrived(self, *_) -> None:
+        """Called (on the loop) whenever UAV telemetry arrives: waiting frames look again."""
+        self._telemetry.set()
+
+    async def run(self) -> None:
+        async with asyncio.TaskGroup() as tg:
+            tg.create_task(self._track_frames())
+            tg.create_task(self._locate_frames())
+
+    # -- operator commands -------------------------------------------------------------------------
+    async def select(self, frame: int | None = None, box=None, point=None) -> dict:
+        """Track the UUV in ``box`` (x, y, w, h) or at ``point`` (u, v) of held frame ``frame`` (default: the newest).
+
+        Raises :class:`~localizer.tracking.session.SelectionError` for a frame no longer
+        held, a box outside it, a click with nothing there.
+        """
+        return await self._command(lambda: self._select(frame, box, point))
+
+    async def release(self) -> dict:
+        """Let go of the target: no fix until a new selection (or :meth:`acquire`)."""
+        return await self._command(self._release)
+
+    async def acquire(self) -> dict:
+        """Await a target again: a selection, or automatic acquisition from the prior."""
+        return await self._command(self._acquire)
+
+    async def _command(self, command: Callable) -> dict:
+        done = asyncio.get_running_loop().create_future()
+        self._commands.append((command, done))
+        self._ready.set()
+        return await done
+
+    async def _select(self, index: int | None, box, point) -> dict:
+        if not self._held:
+            raise SelectionError("no frame received yet")
+        held = self._held[-1] if index is None else next((h for h in self._held if h.frame.index == index), None)
+        if held is None:
+            raise SelectionError(f"frame {index} is not held (held: frames {self._held[0].frame.index}"
+                                 f"…{self._held[-1].frame.index}, the last {self.history_s:g} s)")
+        later = [h for h in self._held if h.frame.index > held.frame.index]
+
+        def select_and_catch_up() -> TrackResult:
+            result = self.session.select(held.frame.image, held.pose, box=box, point=point, verify=True)
+            for h in later:
+                self.session.step(h.frame.image, h.pose)
+            return result
+
+        result = await asyncio.to_thread(select_and_catch_up)
+        self._started = True
+        self.target = self.session.status()
+        log.info("target selected on frame %d (%s %s), caught up %d frames: %s", held.frame.index,
+                 "point" if point is not None else "box", list(point if point is not None else box), len(later),
+                 self.target["state"])
+        return {"frame": held.frame.index, "u": result.u, "v": result.v, "box": list(result.box),
+                "caught_up": len(later), "latest_frame": self._latest_frame(), "target": self.target}
+
+    async def _release(self) -> dict:
+        self._started = True  # the operator's word wins over init_bbox
+        self.session.release()
+        for item in self._tracked:  # tracked before the release, not yet located: no fix from them
+            item.result = TrackResult("released")
+        self.target = self.session.status()
+        log.info("target released")
+        return {"latest_frame": self._latest_frame(), "target": self.target}
+
+    async def _acquire(self) -> dict:
+        self._started = True
+        self.session.acquire()
+        self.target = self.session.status()
+        log.info("awaiting a target")
+        return {"latest_frame": self._latest_frame(), "target": self.target}
+
+    def _latest_frame(self) -> int | None:
+        """The newest frame tracked: the command applies to every later frame."""
+        return self._held[-1].frame.index if self._held else None
+
+    # -- frames --------------------------------------------------------------------------------------
+    async def _track_frames(self) -> None:
+        while True:
+            if self._commands:
+                command, done = self._commands.popleft()
+                try:
+                    done.set_result(await command())
+                except (SelectionError, ValueError) as e:
+                    done.set_exception(e)
+                continue
+            if not self._queue:
+                self._ready.clear()
+                await self._ready.wait()
+                continue
+            frame = self._queue.popleft()
+            self._tracked.append(await self._track(frame))
+            self._tracked_ready.set()
+
+    def _early(self, frame: LiveFrame) -> bool:
+        """Whether the frame is further past its newest attitude telemetry than :data:`EXTRAPOLATE_S`."""
+        t = float(self.tel.uav_time(frame.t_unix)) - EXTRAPOLATE_S
+        return any(s.last_t is None or s.last_t < t for s in self._angle_series)
+
+    def _pose(self, frame: LiveFrame) -> CameraPose:
+        """The camera at the frame's time, with the telemetry there is now (on the loop)."""
+        alignment = self.alignment() if self.alignment is not None and frame.aligned else None
+        return camera_pose(self.cal, self.tel, frame.t_unix, alignment)
+
+    async def _track(self, frame: LiveFrame) -> Tracked:
+        """Track one frame with its pose (computed here, on the loop) and hold it for selections."""
+        pose = self._pose(frame)
+        early = self._early(frame)
+        prior = self.prior(frame.t_unix)
+        result = await asyncio.to_thread(self._step, frame, pose, prior)
+        item = Tracked(frame, pose, result, early, search_window(self.session.prediction))
+        self._held.append(item)
+        while len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s:
+            self._held.popleft()
+        self.target = self.session.status()
+        return item
+
+    def _step(self, frame: LiveFrame, pose: CameraPose, prior: Prior | None) -> TrackResult:
+        if not self._started:
+            self._started = True
+            if self.cal.init_bbox is not None:
+                try:
+                    return self.session.select(frame.image, pose, box=self.cal.init_bbox)  # as configured
+                except SelectionError as e:
+                    log.warning("tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e)
+        return self.session.step(frame.image, pose, prior=prior)
+
+    async def _locate_frames(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            if not self._tracked:
+                self._tracked_ready.clear()
+                await self._tracked_ready.wait()
+                continue
+            item = self._tracked[0]
+            if item.early and item.result.ok:
+                left = item.frame.t_recv + self.telemetry_wait_s - time.time()
+                if left > 0 and self._early(item.frame):
+                    if self._holding != item.frame.index:
+                        self._holding = item.frame.index
+                        self.held += 1
+                    self._telemetry.clear()
+                    t0 = loop.time()
+                    try:
+                        await asyncio.wait_for(self._telemetry.wait(), timeout=left)
+                    except TimeoutError:
+                        pass
+                    self.waited_s += loop.time() - t0
+                    continue
+                item.pose, item.early = self._pose(item.frame), False
+            self._tracked.popleft()
+            if item.result.ok:
+                for listener in self.on_tracked:
+                    listener(item.frame.image, item.pose, item.result.u, item.result.v)
+            self._emit(item.frame, self._locate(item), item.result.box, item.window)
+
+    def _emit(self, frame: LiveFrame, fix: Fix, box=None, window=None) -> None:
+        for notice in take_notices(self.tel):  # height sources that disagree
+            log.warning("%s", notice)
+        info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None, window)
+        self.processed += 1
+        self.statuses[fix.status] += 1
+        if fix.status != self.last_status:
+            log.info("frame %d: status %s", frame.index, fix.status)
+        self.last_status = fix.status
+        for sink in self.sinks:
+            sink.on_fix(fix, info)
+
+    async def process(self, frame: LiveFrame) -> Fix:
+        """The fix of one frame with the telemetry there is now (status says why when there is none)."""
+        item = await self._track(frame)
+        if item.early:
+            item.pose = self._pose(frame)
+        return self._locate(item)
+
+    def _locate(self, item: Tracked) -> Fix:
+        """A tracked frame's fix, with its pose."""
+        frame, result = item.frame, item.result
+        if not result.ok:
+            fix = Fix(frame.t_unix, result.status)
+        elif not frame.aligned:
+            fix = Fix(frame.t_unix, "latency_unsettled", result.u, result.v)
+        else:
+            fix = locate(self.cal, item.pose, result.u, result.v, sigma_px=result.sigma_px)[0]
+            if fix.ok and fix.time_source == "unknown" and not self._told_unknown:
+                self._told_unknown = True
+                log.warning("frame %d: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC "
+                            "reply yet): taken as 0, h_acc includes ±%.0f ms of it ([timing] "
+                            "unknown_latency_sigma_s) × the camera's motion", frame.index, self.tel.latency_sigma_s * 1000)
+        fix.frame = frame.index
+        fix.confidence = result.confidence
+        return fix
+
+    def status(self) -> dict:
+        return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),
+                "waiting_for_telemetry": len(self._tracked), "held_for_telemetry": self.held,
+                "waited_s": round(self.waited_s, 3), "held_frames": len(self._held),
+                "last_status": self.last_status, "statuses": dict(self.statuses)}

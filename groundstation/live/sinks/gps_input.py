@@ -1,0 +1,217 @@
+"""MAVLink ``GPS_INPUT`` to the UUV's autopilot, filled the way ArduSub's AP_GPS_MAV reads it.
+
+When: every new fix is sent as soon as it is ready, and whenever ``1 / hz`` has
+passed without a message, the latest state is sent again; so the autopilot sees
+at least ``hz`` messages per second (ArduPilot calls a MAVLink GPS unhealthy
+below ~5 Hz or after two gaps over 245 ms) and at most the video's frame rate
+(EKF3 fuses GPS at most every 70 ms and skips the rest).
+
+What (:func:`gps_input_fields`):
+
+- The newest ``ok`` fix that passed the gates (below), while at most ``max_age_s`` old: ``fix_type``
+  3; ``lat``/``lon`` degE7; ``alt`` the UUV's altitude AMSL (m);
+  ``horiz_accuracy``/``vert_accuracy`` the fix's ``h_acc_m``/``v_acc_m``;
+  ``hdop`` = ``h_acc_m / UERE_M`` and ``vdop`` = ``v_acc_m / UERE_M`` with a
+  nominal 1 m user range error, so EKF3's alignment gate hdop ≤ 2.5 means
+  h_acc ≤ 2.5 m; ``satellites_visible`` the constant :data:`SATELLITES` (EKF3
+  wants ≥ 6 to align; there are no satellites, the number only passes that
+  gate); ``time_week``/``time_week_ms`` the frame's exposure time as GPS time
+  (UTC + 18 leap seconds), used by ArduPilot's jitter correction; velocities
+  are not estimated and flagged ignored.
+- Once the newest ok fix is older than ``max_age_s`` (telemetry stale, video
+  stopped; ``--fix-max-age-ms``, default 500 ms), or at once when the tracker
+  reports the UUV lost, awaits a target or was released (:data:`LOSS_STATUSES`):
+  ``fix_type`` 1 (NO_FIX), lat/lon/alt 0, every ``ignore_flags`` bit set, 0
+  satellites, hdop/vdop 99.99. Why 1 and not 0: AP_GPS copies ``fix_type`` into
+  the GPS status, and 0 is NO_GPS ("no GPS connected") while 1 is NO_FIX ("GPS
+  connected, no position"): the link is fine and only the position is missing,
+  so the pilot's "GPS: no fix" is the true message and a lost UUV track is not
+  confused with a broken cable. Either way the EKF (which needs a 3D fix) stops
+  using GPS position; a stale fix is never sent as valid.
+
+Which fixes: only those that pass the safety gates (:mod:`localizer.fix_gate`: accuracy,
+age, order, the frame's prediction window, and a track of the UUV — a fix off the track,
+out of the UUV's reach after a loss, or of a target not yet confirmed over a second is
+refused), counted by reason in the status; a refused fix leaves the last accepted one in
+place until it ages out. The fix itself goes out, never the track's estimate (the UUV's
+EKF does the filtering). A loss of the track makes the next fixes a re-acquisition.
+
+Stopping (:meth:`GpsInputSink.stop`, also on cancellation): one last no-fix message, so
+the autopilot drops the position at once instead of after its 4 s timeout, then the
+link is closed.
+
+Links: :func:`mavlink_gps_link` (system 245, component 220, a
+:class:`~groundstation.mavlink.link.MavlinkLink` with its own thread, reconnecting,
+HEARTBEAT, optional signing; not MAVSDK, which sends to every link and reports
+success on failure), or
+:class:`~.zenoh_mavlink.ZenohMavlinkIn` for ``zenoh:KEY`` (BlueOS's mavlink-server).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections import deque
+
+from groundstation.mavlink.ids import GPS_COMPID, SKYFIX_SYSID
+from groundstation.mavlink.ingest import mavutil
+from groundstation.mavlink.link import MavlinkLink
+from groundstation.threads import in_thread
+from localizer.fix import Fix
+from localizer.fix_gate import FixGate
+
+log = logging.getLogger("skyfix.gps_input")
+
+SATELLITES = 10
+UERE_M = 1.0
+GPS_EPOCH_UNIX = 315964800  # 1980-01-06T00:00:00Z
+LEAP_S = 18  # GPS − UTC since 2017
+WEEK_S = 604800
+IGNORE_ALT, IGNORE_HDOP, IGNORE_VDOP = 1, 2, 4
+IGNORE_VEL_HORIZ, IGNORE_VEL_VERT, IGNORE_SPEED_ACC = 8, 16, 32
+IGNORE_HORIZ_ACC, IGNORE_VERT_ACC = 64, 128
+IGNORE_VELOCITY = IGNORE_VEL_HORIZ | IGNORE_VEL_VERT | IGNORE_SPEED_ACC
+IGNORE_ALL = 255
+FIX_NONE, FIX_3D = 1, 3
+DOP_MAX = 99.99
+#: Frame statuses meaning the UUV is no longer where the last fix put it: the last fix is dropped at once.
+LOSS_STATUSES = ("lost", "no_track", "awaiting_target", "released")
+
+
+def gps_time(t_unix: float) -> tuple[int, int]:
+    """``(week, ms of week)`` of a UNIX time, in GPS time (UTC + 18 leap seconds)."""
+    ms = round((t_unix - GPS_EPOCH_UNIX + LEAP_S) * 1000.0)
+    week, ms_of_week = divmod(ms, WEEK_S * 1000)
+    return week, ms_of_week
+
+
+def _dop(acc_m: float) -> float:
+    return min(max(acc_m / UERE_M, 0.01), DOP_MAX)
+
+
+def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> dict:
+    """GPS_INPUT fields for the newest fix at send time (a no-fix message unless it is ok and fresh)."""
+    valid = (fix is not None and fix.ok and abs(t_send_unix - fix.t_unix) <= max_age_s
+             and math.isfinite(fix.lat) and math.isfinite(fix.lon) and math.isfinite(fix.alt_amsl_m))
+    if not valid:
+        week, week_ms = gps_time(t_send_unix)
+        return {"time_usec": int(t_send_unix * 1e6), "gps_id": 0, "ignore_flags": IGNORE_ALL,
+                "time_week_ms": week_ms, "time_week": week, "fix_type": FIX_NONE, "lat": 0, "lon": 0, "alt": 0.0,
+                "hdop": DOP_MAX, "vdop": DOP_MAX, "vn": 0.0, "ve": 0.0, "vd": 0.0, "speed_accuracy": 0.0,
+                "horiz_accuracy": 0.0, "vert_accuracy": 0.0, "satellites_visible": 0, "yaw": 0}
+    t_exposure = fix.t_gnss if math.isfinite(fix.t_gnss) else fix.t_unix
+    week, week_ms = gps_time(t_exposure)
+    ignore = IGNORE_VELOCITY
+    h_acc, v_acc = fix.h_acc_m, fix.v_acc_m
+    if not math.isfinite(h_acc):
+        ignore |= IGNORE_HORIZ_ACC | IGNORE_HDOP
+        h_acc = 0.0
+    if not math.isfinite(v_acc):
+        ignore |= IGNORE_VERT_ACC | IGNORE_VDOP
+        v_acc = 0.0
+    return {"time_usec": int(t_exposure * 1e6), "gps_id": 0, "ignore_flags": ignore, "time_week_ms": week_ms,
+            "time_week": week, "fix_type": FIX_3D, "lat": round(fix.lat * 1e7), "lon": round(fix.lon * 1e7),
+            "alt": float(fix.alt_amsl_m), "hdop": _dop(h_acc), "vdop": _dop(v_acc), "vn": 0.0, "ve": 0.0, "vd": 0.0,
+            "speed_accuracy": 0.0, "horiz_accuracy": float(h_acc), "vert_accuracy": float(v_acc),
+            "satellites_visible": SATELLITES, "yaw": 0}
+
+
+def mavlink_gps_link(url: str, signing_key: bytes | None = None) -> MavlinkLink:
+    """GPS_INPUT's own MAVLink link: system 245, component 220, a HEARTBEAT as ``MAV_TYPE_ONBOARD_CONTROLLER``.
+
+    The HEARTBEAT (``MAV_AUTOPILOT_INVALID``: a component, neither a vehicle nor a ground station,
+    so it plays no part in ArduPilot's GCS failsafe) lets routers learn the route, and MAVProxy or
+    QGroundControl in between see a live component.
+    """
+    m = mavutil().mavlink
+    return MavlinkLink(url, SKYFIX_SYSID, GPS_COMPID, name="GPS_INPUT link", signing_key=signing_key,
+                       heartbeat=(m.MAV_TYPE_ONBOARD_CONTROLLER, m.MAV_AUTOPILOT_INVALID))
+
+
+class GpsInputSink:
+    """Worker sending GPS_INPUT through ``link`` (:func:`mavlink_gps_link` or
+    :class:`~.zenoh_mavlink.ZenohMavlinkIn`); ``ok`` fixes pass ``gate`` first (:mod:`localizer.fix_gate`).
+
+    :meth:`stop` ends it cleanly: one last no-fix GPS_INPUT (so the autopilot drops the
+    position at once rather than after its 4 s timeout), then the link is closed.
+    Cancelling :meth:`run` does the same.
+    """
+
+    def __init__(self, link, hz: float, max_age_s: float, gate: FixGate | None = None):
+        self.link = link
+        self.period_s = 1.0 / hz
+        self.max_age_s = max_age_s
+        self.gate = gate if gate is not None else FixGate(max_age_s=max_age_s)
+        self.sent = 0
+        self.sent_valid = 0
+        self.not_delivered = 0  # handed to a link that was down
+        self.last_fix_type: int | None = None
+        self.latencies_s: deque[float] = deque(maxlen=100_000)  # frame arrival → GPS_INPUT sent, new fixes
+        self._fix: Fix | None = None
+        self._info = None
+        self._new = asyncio.Event()
+        self._last_ok: Fix | None = None
+        self._stopping = False
+        self._closed = False
+
+    def on_fix(self, fix: Fix, info) -> None:
+        if fix.ok:
+            if self.gate.check(fix, time.time(), getattr(info, "window", None)) is None:
+                self._last_ok = fix
+        elif fix.status in LOSS_STATUSES:
+            self._last_ok = None
+            self.gate.target_lost()
+        self._fix, self._info = fix, info
+        self._new.set()
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        await in_thread(self.link.open, name="GPS_INPUT open")
+        try:
+            next_due = loop.time()
+            while not self._stopping:
+                try:
+                    await asyncio.wait_for(self._new.wait(), timeout=max(0.0, next_due - loop.time()))
+                except TimeoutError:
+                    pass
+                if self._stopping:
+                    break
+                fresh = self._new.is_set()
+                self._new.clear()
+                self._send(fresh)
+                next_due = loop.time() + self.period_s
+        finally:
+            await self.stop()
+
+    async def stop(self) -> None:
+        """The last GPS_INPUT, no fix, then the link closed; further calls do nothing."""
+        if self._closed:
+            return
+        self._stopping = self._closed = True
+        self._new.set()
+        final = gps_input_fields(None, time.time(), self.max_age_s)
+        delivered = await in_thread(self.link.close, ("GPS_INPUT", final), name="GPS_INPUT close")
+        self.sent += 1
+        self.not_delivered += not delivered
+        log.info("GPS_INPUT %s: stopped; %s", self.link.url,
+                 "the last message said no fix" if delivered else "the link was down: no last message")
+
+    def _send(self, fresh: bool) -> None:
+        now = time.time()
+        fields = gps_input_fields(self._last_ok, now, self.max_age_s)
+        delivered = self.link.send("GPS_INPUT", fields)
+        t_sent = time.time()
+        self.sent += 1
+        self.not_delivered += not delivered
+        self.last_fix_type = fields["fix_type"]
+        if fields["fix_type"] == FIX_3D and delivered:
+            self.sent_valid += 1
+            if fresh and self._fix is self._last_ok:
+                self.latencies_s.append(t_sent - self._info.t_recv)
+
+    def status(self, now: float) -> dict:
+        return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
+                "not_delivered": self.not_delivered, "last_fix_type": self.last_fix_type,
+                "link": self.link.status(now), "gates": self.gate.status(now)}

@@ -1,0 +1,316 @@
+"""The web page's server: an aiohttp application on the service's own event loop.
+
+Why aiohttp: it is asyncio itself (the server, its WebSocket and the service's workers
+share one loop, with no second server loop or thread to hand data across), has
+WebSocket and static files built in, and is a well-kept aio-libs project. (Starlette
+needs uvicorn, which wants to own the process's signals and loop.)
+
+Routes: ``/`` the page and ``/static/*`` its files (package data, nothing from the
+internet); ``/ws`` the page's WebSocket; ``POST /api/select|release|acquire`` the
+operator's commands (JSON as on Zenoh, :mod:`groundstation.live.control`; an error is HTTP
+400 with ``{"error": "<one line>"}``); ``GET /api/status`` the status now.
+
+The WebSocket sends, to each page: ``{"type": "hello", ...}`` once (the camera's size,
+the run's settings, the track so far); ``{"type": "state", ...}`` once a second (the
+service's status, input rates measured here, the map's :meth:`TopView.snapshot` and
+the track points that page has not seen); and the video packets of
+:mod:`.feed` as binary messages. A page sends ``{"video": false}`` when hidden, and
+``{"video": true}`` again. A page that reads slowly gets the newest of each, never a
+backlog.
+
+Access: bound to a loopback address (``127.0.0.1``, ``::1``, ``localhost``) the page
+needs no token, and requests naming another host (DNS rebinding) are refused;
+bound beyond (``0.0.0.0:8080``), or with ``--ui-token``, every request needs the token:
+``?token=`` in the URL (skyfix prints the URL with it; the page then keeps it in a
+cookie), or ``Authorization: Bearer``. Without it: 401; a wrong one: 403. Commands
+and the WebSocket from another site's page (an ``Origin`` that is not this server)
+are refused (403).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import hmac
+import json
+import logging
+import secrets
+import socket
+import time
+from collections import deque
+from importlib import resources
+from urllib.parse import urlsplit
+
+from aiohttp import WSMsgType, web
+
+from groundstation.live.control import Control, ControlError
+from groundstation.live.ui.bind import is_loopback, parse_bind
+from groundstation.live.ui.feed import VideoFeed
+from groundstation.live.ui.topview import TopView
+
+log = logging.getLogger("skyfix.ui")
+
+STATIC = resources.files("groundstation.live.ui") / "static"
+COOKIE = "skyfix_token"
+STATE_PERIOD_S = 1.0
+WS_CLOSE_S = 0.5  # a stop waits this long for open pages to take the close
+RATE_WINDOW_S = 3.0
+COMMANDS = ("select", "release", "acquire")
+SECURITY_HEADERS = {
+    "Content-Security-Policy": "default-src 'self'; img-src 'self' blob:; connect-src 'self'; frame-ancestors 'none'",
+    "X-Frame-Options": "DENY",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+    "Cache-Control": "no-store",
+}
+
+
+class UiError(OSError):
+    """The page cannot be served (its port is taken, its address is not this machine's); one line naming --ui."""
+
+
+class CounterRates:
+    """Rates (per second) of growing counters (frames sent, bytes), over the last :data:`RATE_WINDOW_S`; a
+    message kind's receive rate is :class:`~groundstation.live.sources.rates.RateMeter`'s."""
+
+    def __init__(self, window_s: float = RATE_WINDOW_S):
+        self.window_s = window_s
+        self._samples: deque[tuple[float, dict]] = deque()
+
+    def update(self, now: float, counts: dict[str, int | None]) -> dict[str, float | None]:
+        self._samples.append((now, counts))
+        while len(self._samples) > 2 and now - self._samples[1][0] >= self.window_s:
+            self._samples.popleft()
+        t0, first = self._samples[0]
+        dt = now - t0
+        return {k: (round((v - first[k]) / dt, 2) if dt > 0.2 and v is not None and first.get(k) is not None
+                    else None) for k, v in counts.items()}
+
+
+class Viewer:
+    """One open page: the newest state and video packet not yet sent to it."""
+
+    def __init__(self):
+        self.video = True
+        self.seq = 0  # the last track point sent
+        self.state: str | None = None
+        self.packet: bytes | None = None
+        self.ready = asyncio.Event()
+
+
+def _counts(status: dict) -> dict[str, int | None]:
+    def get(section: str, key: str):
+        part = status.get(section)
+        return part.get(key) if isinstance(part, dict) else None
+
+    return {"video_frames": get("video", "frames"), "processed": get("pipeline", "processed"),
+            "depth": get("depth", "received"), "gps_input": get("gps_input", "sent"),
+            "uav": get("uav", "received")}
+
+
+class WebUi:
+    """Worker serving the page (see the module doc); :meth:`start` binds (UiError), :meth:`run` serves.
+
+    ``settings``: what the page shows about the run's configuration.
+    """
+
+    def __init__(self, bind: str, token: str | None, control: Control, topview: TopView,
+                 camera_size: tuple[int, int], settings: dict):
+        self.host, self.port = parse_bind(bind)
+        self.bind = bind
+        self.token = token if token is not None else (None if is_loopback(self.host) else secrets.token_urlsafe(16))
+        self.control = control
+        self.topview = topview
+        self.camera_size = camera_size
+        self.settings = settings
+        self.viewers: set[Viewer] = set()
+        self.feed = VideoFeed(self._deliver, self._watching, lambda: control.pipeline.target)
+        self.rates = CounterRates()
+        self.url: str | None = None
+        self.refused = 0
+        self._runner: web.AppRunner | None = None
+        self._sockets: set[web.WebSocketResponse] = set()
+
+    # -- life ------------------------------------------------------------------------------------------
+    async def start(self) -> None:
+        """Listen on ``--ui``; :class:`UiError` naming the option when that cannot be done."""
+        app = web.Application(middlewares=[self._guard], client_max_size=64 * 1024)
+        app.router.add_get("/", self._index)
+        app.router.add_get("/ws", self._websocket)
+        app.router.add_get("/favicon.ico", self._no_icon)
+        app.router.add_get("/api/status", self._status)
+        app.router.add_post("/api/{command}", self._command)
+        app.router.add_static("/static/", str(STATIC))
+        app.on_response_prepare.append(self._headers)
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        await self._runner.setup()
+        try:
+            await web.TCPSite(self._runner, self.host, self.port, reuse_port=False).start()
+        except OSError as e:
+            await self._runner.cleanup()
+            why = {errno.EADDRINUSE: f"port {self.port} is already in use (another skyfix run?); choose another "
+                                     "with --ui HOST:PORT, or --no-ui",
+                   errno.EADDRNOTAVAIL: f"{self.host} is not an address of this machine"}.get(
+                e.errno, e.strerror or str(e))
+            raise UiError(f"--ui {self.bind}: {why}") from None
+        port = self._runner.addresses[0][1]
+        host = socket.gethostname() if self.host in ("0.0.0.0", "::", "") else (
+            f"[{self.host}]" if ":" in self.host else self.host)
+        self.url = f"http://{host}:{port}/"
+        log.info("web page: %s%s", self.url, f"?token={self.token}" if self.token else "")
+
+    async def run(self) -> None:
+        try:
+            async with asyncio.TaskGroup() as tg:
+                tg.create_task(self.feed.run())
+                tg.create_task(self._push_state())
+        finally:
+            closing = [asyncio.ensure_future(ws.close()) for ws in list(self._sockets)]
+            if closing:  # together, and not waiting for a page that does not answer
+                await asyncio.wait(closing, timeout=WS_CLOSE_S)
+            if self._runner is not None:
+                await self._runner.cleanup()
+
+    def status(self) -> dict:
+        return {"url": self.url, "token": self.token is not None, "viewers": len(self.viewers),
+                "refused": self.refused, **self.feed.status()}
+
+    # -- pushing -----------------------------------------------------------------------------------------
+    def _watching(self) -> bool:
+        return any(v.video for v in self.viewers)
+
+    def _deliver(self, packet: bytes) -> None:
+        for v in self.viewers:
+            if v.video:
+                v.packet = packet
+                v.ready.set()
+
+    async def _push_state(self) -> None:
+        while True:
+            await asyncio.sleep(STATE_PERIOD_S)
+            if not self.viewers:
+                continue
+            now = time.time()
+            status = self.control.status()
+            gates = (status.get("gps_input") or {}).get("gates")
+            state = {"type": "state", "status": status, "rates": self.rates.update(now, _counts(status)),
+                     "map": {**self.topview.snapshot(now), "gate": self.topview.gate_view(gates)}}
+            for v in self.viewers:
+                track = self.topview.points_since(v.seq)
+                if track:
+                    v.seq = track[-1][0]
+                v.state = json.dumps({**state, "track": track}, allow_nan=False)
+                v.ready.set()
+
+    # -- handlers ----------------------------------------------------------------------------------------
+    @web.middleware
+    async def _guard(self, request: web.Request, handler):
+        given = request.query.get("token") or request.cookies.get(COOKIE)
+        auth = request.headers.get("Authorization", "")
+        if auth.startswith("Bearer "):
+            given = auth[7:]
+        if self.token is not None:
+            if not given:
+                return self._refuse(401, "this page needs its token: open the URL skyfix run printed (…/?token=…)")
+            if not hmac.compare_digest(given.encode(), self.token.encode()):
+                return self._refuse(403, "wrong token: open the URL skyfix run printed")
+        elif not is_loopback(urlsplit(f"//{request.host}").hostname or ""):
+            return self._refuse(403, f"host {request.host!r} is not this machine's loopback address")
+        origin = request.headers.get("Origin")
+        if (request.method != "GET" or request.path == "/ws") and origin is not None \
+                and urlsplit(origin).netloc != request.host:
+            return self._refuse(403, f"a request from another site ({origin}) is refused")
+        response = await handler(request)
+        if self.token is not None and request.query.get("token") == self.token:
+            response.set_cookie(COOKIE, self.token, httponly=True, samesite="Strict")
+        return response
+
+    def _refuse(self, code: int, why: str) -> web.Response:
+        self.refused += 1
+        return web.json_response({"error": why}, status=code)
+
+    @staticmethod
+    async def _headers(request: web.Request, response: web.StreamResponse) -> None:
+        response.headers.update(SECURITY_HEADERS)
+
+    @staticmethod
+    async def _no_icon(request: web.Request) -> web.Response:
+        return web.Response(status=204)
+
+    async def _index(self, request: web.Request) -> web.StreamResponse:
+        return web.FileResponse(STATIC / "index.html")
+
+    async def _status(self, request: web.Request) -> web.Response:
+        return web.json_response(self.control.status(), dumps=lambda o: json.dumps(o, allow_nan=False))
+
+    async def _command(self, request: web.Request) -> web.Response:
+        command = request.match_info["command"]
+        if command not in COMMANDS:
+            return web.json_response({"error": f"unknown command {command!r} (known: {', '.join(COMMANDS)})"},
+                                     status=404)
+        try:
+            result = await self.control.handle(command, await request.read())
+        except ControlError as e:
+            log.warning("page: command %s refused: %s", command, e)
+            return web.json_response({"error": str(e)}, status=400)
+        except Exception as e:  # a bug in one command must not stop the service
+            log.exception("page: command %s failed", command)
+            return web.json_response({"error": f"{command}: internal error: {e}"}, status=500)
+        log.info("page: %s done (latest frame %s)", command, result.get("latest_frame"))
+        return web.json_response(result, dumps=lambda o: json.dumps(o, allow_nan=False))
+
+    async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
+        # no permessage-deflate: the JPEGs do not compress, and zlib would cost the service CPU for every frame
+        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096, compress=False, timeout=2.0)
+        await ws.prepare(request)
+        viewer = Viewer()
+        hello = {"type": "hello", "camera": {"width": self.camera_size[0], "height": self.camera_size[1]},
+                 "video": {"max_fps": round(1.0 / self.feed.min_interval_s, 2), "max_width": self.feed.max_width},
+                 "settings": self.settings, "track": self.topview.points_since(0)}
+        if hello["track"]:
+            viewer.seq = hello["track"][-1][0]
+        self._sockets.add(ws)
+        self.viewers.add(viewer)
+        sender = asyncio.create_task(self._send(ws, viewer))
+        try:
+            await ws.send_str(json.dumps(hello, allow_nan=False))
+            async for msg in ws:
+                if msg.type == WSMsgType.TEXT:
+                    self._from_page(viewer, msg.data)
+        finally:
+            self.viewers.discard(viewer)
+            self._sockets.discard(ws)
+            sender.cancel()
+        return ws
+
+    @staticmethod
+    def _from_page(viewer: Viewer, text: str) -> None:
+        try:
+            message = json.loads(text)
+        except ValueError:
+            return
+        if isinstance(message, dict) and isinstance(message.get("video"), bool):
+            viewer.video = message["video"]
+
+    @staticmethod
+    async def _send(ws: web.WebSocketResponse, viewer: Viewer) -> None:
+        while not ws.closed:
+            await viewer.ready.wait()
+            viewer.ready.clear()
+            state, packet = viewer.state, viewer.packet
+            viewer.state = viewer.packet = None
+            try:
+                if state is not None:
+                    await ws.send_str(state)
+                if packet is not None:
+                    await ws.send_bytes(packet)
+            except ConnectionError:
+                return
+
+
+def settings_of(cfg) -> dict:
+    """What the page shows about a run's configuration (:class:`~groundstation.live.config.RunConfig`)."""
+    return {"video_latency_ms": cfg.video_latency_ms, "gps_input_hz": cfg.gps_input_hz if cfg.gps_input else None,
+            "fix_max_age_ms": cfg.fix_max_age_ms, "select_history_s": cfg.select_history_s,
+            "tracker": cfg.tracker}
+

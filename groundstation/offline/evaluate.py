@@ -1,0 +1,187 @@
+"""``skyfix evaluate SESSION... [--out DIR]``: accuracy against ground truth, in the spirit of the paper's Table I.
+
+Each session (it needs ``truth.csv``) is processed twice, with Snell refraction
+and with the paper's straight ray, and each method's fixes are scored against
+the truth interpolated at the fix times. Horizontal error is the distance in the
+local tangent plane (:func:`localizer.geodesy.horizontal_error_m`). Per method:
+MAE, RMSE, p95 and max of the horizontal error (metres) over frames with a fix;
+coverage = frames with a fix / frames; ``in 2σ`` = share of fixes whose error is
+within twice their reported ``h_acc_m``. Writes, per session,
+``DIR/<session>/<method>/positions.csv`` and the plots of :mod:`groundstation.offline.plots`
+(``top_view.png``, ``timeline.png``, ``status.png``: both methods against the truth),
+and ``DIR/evaluation.csv``.
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from groundstation.offline.plots import write_plots
+from groundstation.offline.process import (
+    add_motion_offset_flag,
+    add_size_argument,
+    frame_pixels,
+    locate_frames,
+    print_warnings,
+    size_of,
+)
+from groundstation.outputs import output_dir
+from groundstation.session.positions import write_positions_csv
+from groundstation.session.read import SessionError, load_session
+from localizer.calibration import ConfigError
+from localizer.fix import Fixes
+from localizer.geodesy import horizontal_error_m
+from localizer.tracking import TRACKERS
+
+METHODS = (("refraction", True), ("straight", False))
+
+
+@dataclass(frozen=True)
+class Scores:
+    """One method on one session. Errors in metres; NaN when there is no fix at all."""
+
+    frames: int
+    fixes: int
+    coverage: float
+    mae_m: float
+    rmse_m: float
+    p95_m: float
+    max_m: float
+    within_2sigma: float
+
+
+def truth_at(truth: dict, t_unix) -> tuple[np.ndarray, np.ndarray]:
+    """Truth latitude and longitude (degrees) linearly interpolated at ``t_unix``; NaN outside its span."""
+    t = np.asarray(t_unix, dtype=float)
+    inside = (t >= truth["t"][0]) & (t <= truth["t"][-1])
+    lat = np.where(inside, np.interp(t, truth["t"], truth["lat"]), np.nan)
+    lon = np.where(inside, np.interp(t, truth["t"], truth["lon"]), np.nan)
+    return lat, lon
+
+
+def errors_m(fixes: Fixes, truth: dict) -> np.ndarray:
+    """Horizontal error (m) of each fix against the truth; NaN where there is no fix or no truth."""
+    lat, lon = truth_at(truth, fixes.t_unix)
+    ok = (fixes.status == "ok") & np.isfinite(lat)
+    err = np.full(len(fixes), np.nan)
+    err[ok] = horizontal_error_m(fixes.lat[ok], fixes.lon[ok], lat[ok], lon[ok])
+    return err
+
+
+def score(err_m: np.ndarray, h_acc_m: np.ndarray, frames: int) -> Scores:
+    """Table numbers from per-fix errors (NaN = no fix) and the fixes' reported 1-sigma accuracy."""
+    ok = np.isfinite(err_m)
+    e = err_m[ok]
+    if len(e) == 0:
+        nan = float("nan")
+        return Scores(frames, 0, 0.0, nan, nan, nan, nan, nan)
+    return Scores(
+        frames=frames,
+        fixes=len(e),
+        coverage=len(e) / frames,
+        mae_m=float(np.mean(e)),
+        rmse_m=float(np.sqrt(np.mean(e * e))),
+        p95_m=float(np.percentile(e, 95)),
+        max_m=float(np.max(e)),
+        within_2sigma=float(np.mean(e <= 2.0 * h_acc_m[ok])),
+    )
+
+
+HEADER = ("session", "method", "fixes", "coverage", "MAE m", "RMSE m", "p95 m", "max m", "in 2σ")
+
+
+def table_rows(results: list[tuple[str, str, Scores]]) -> list[tuple[str, ...]]:
+    """Formatted cells of the table, one row per (session, method)."""
+    return [
+        (name, method, f"{s.fixes}/{s.frames}", f"{s.coverage:.1%}", f"{s.mae_m:.4f}", f"{s.rmse_m:.4f}",
+         f"{s.p95_m:.4f}", f"{s.max_m:.4f}", f"{s.within_2sigma:.1%}")
+        for name, method, s in results
+    ]
+
+
+def format_table(results: list[tuple[str, str, Scores]]) -> str:
+    """The table as aligned text."""
+    rows = [HEADER, *table_rows(results)]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(HEADER))]
+    lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))) for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False,
+                     motion: bool = True, height_from_size: str = "check"):
+    """Score both methods on one session; returns ``[(name, method, Scores), ...]`` and writes outputs (the height
+    from the UUV's size: its summary line on stderr)."""
+    session = load_session(path)
+    if session.truth is None or len(session.truth["t"]) == 0:
+        raise SessionError(f"{session.path / 'truth.csv'}: missing (evaluate needs ground truth)")
+    name = session.path.resolve().name
+    from_track = use_track or session.video_path is None
+    if not use_track and from_track:
+        print(f"{name}: no video: pixels from track.csv", file=sys.stderr)
+    size = size_of(session, height_from_size, from_track)
+    try:
+        pixels = frame_pixels(session, from_track, tracker, progress, motion, size)
+    finally:
+        print_warnings(session)
+    if size is not None:
+        print(f"{name}: {size.summary()}", file=sys.stderr)
+    frames = len(session.frames["t"]) if session.frames is not None else None
+    sess_dir = out_dir / name
+    runs, results = {}, []
+    for method, refraction in METHODS:
+        fixes = locate_frames(session, pixels, refraction)
+        print_warnings(session)
+        (sess_dir / method).mkdir(parents=True, exist_ok=True)
+        write_positions_csv(sess_dir / method / "positions.csv", fixes)
+        err = errors_m(fixes, session.truth)
+        runs[method] = (fixes, err)
+        results.append((name, method, score(err, fixes.h_acc_m, frames or len(fixes))))
+    write_plots(sess_dir, name, {m: f for m, (f, _) in runs.items()}, session.truth,
+                {m: e for m, (_, e) in runs.items()})
+    return results
+
+
+def write_table_csv(path: Path, results: list[tuple[str, str, Scores]]) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(("session", "method", *(fl.name for fl in fields(Scores))))
+        for name, method, s in results:
+            w.writerow((name, method, *asdict(s).values()))
+
+
+def run(args) -> int:
+    """Evaluate every session it can; a session that fails is reported and skipped (exit code 2)."""
+    out = output_dir(args.out)
+    results, failed = [], 0
+    for path in args.sessions:
+        try:
+            results.extend(evaluate_session(path, out, use_track=args.use_track, tracker=args.tracker,
+                                            progress=not args.quiet, motion=not args.no_motion_offset,
+                                            height_from_size=args.height_from_size))
+        except (SessionError, ConfigError) as e:
+            print(f"skyfix evaluate: error: {e}", file=sys.stderr)
+            failed += 1
+    if results:
+        print(format_table(results))
+        write_table_csv(out / "evaluation.csv", results)
+        print(f"positions, plots and evaluation.csv -> {out}")
+    return 2 if failed else 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("evaluate", help="accuracy of sessions with truth.csv: refraction vs straight ray")
+    p.add_argument("sessions", nargs="+", metavar="SESSION", help="session directories with truth.csv")
+    p.add_argument("--out", default="out/evaluate", help="output directory (default: out/evaluate)")
+    p.add_argument("--use-track", action="store_true",
+                   help="take pixels from track.csv (geometry only) instead of tracking the video")
+    p.add_argument("--tracker", default="default", choices=TRACKERS, help="tracker backend for video tracking")
+    add_size_argument(p)
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    add_motion_offset_flag(p)
+    p.set_defaults(func=run)

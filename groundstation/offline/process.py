@@ -1,0 +1,191 @@
+"""``skyfix process``: a recorded session in, ``positions.csv`` out.
+
+Pixels come from ``track.csv`` (``--use-track``, geometry only) or from tracking
+the session's video. ``--no-refraction`` runs the paper's straight-ray method.
+
+Time: when the UAV link's delay is neither stated (``[timing] mavlink_latency_s``)
+nor measured (TIMESYNC in the tlog), the frames' offset to the telemetry is
+estimated from the video's motion while it is tracked
+(:mod:`groundstation.latency.estimate`) and, when settled, applied as that delay
+(time source ``motion``); one line on stderr says what was found. Otherwise (not
+settled, ``--use-track``, ``--no-motion-offset``) the delay stays unknown: taken as
+0, its 1-sigma ``[timing] unknown_latency_sigma_s`` in each fix's h_acc, and a warning says so.
+
+Tracking the video also measures the camera's height from the UUV's size
+(``--height-from-size``, :mod:`groundstation.height_from_size`) and prints its estimate.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+from typing import NamedTuple
+
+import numpy as np
+
+from groundstation.height_from_size import MODES as SIZE_MODES
+from groundstation.height_from_size import HeightFromSize
+from groundstation.latency.estimate import offset_from_rotations
+from groundstation.outputs import output_dir
+from groundstation.session.positions import write_positions_csv
+from groundstation.session.read import Session, SessionError, load_session
+from localizer.fix import Fixes, locate
+from localizer.height import take_notices
+from localizer.pose import camera_pose
+from localizer.tracking import TRACKERS
+
+# Per-frame statuses that, when no frame at all has a fix, mean the session itself is wrong.
+_GEOMETRY_FAILURES = ("no_water", "below_surface", "bad_pixel")
+
+
+class Pixels(NamedTuple):
+    """The UUV's pixel per frame: times, pixels, the tracker's status words and its 1-sigma of each of u and v
+    (None: the calibration's ``[uncertainty] pixel_px``, as for pixels from track.csv)."""
+
+    t: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    status: np.ndarray
+    sigma_px: np.ndarray | None = None
+
+
+def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False,
+                 motion: bool = True, size: HeightFromSize | None = None) -> Pixels:
+    """The UUV's :class:`Pixels` per frame: from track.csv or from tracking the video.
+
+    Tracking the video of a session whose link delay is unknown, with ``motion``, also estimates the frames'
+    offset to the telemetry and applies it when settled (see the module doc); an unknown delay is a warning.
+    ``size``: measuring the camera's height from the UUV's size in the same pass; its warnings join the session's.
+    """
+    if use_track:
+        if session.track is None:
+            raise SessionError(f"{session.path / 'track.csv'}: missing (needed by --use-track)")
+        tr = session.track
+        status = np.full(len(tr["t"]), "ok", dtype=object)
+        _warn_unknown_delay(session, "pixels from track.csv: no video to estimate it from")
+        return Pixels(tr["t"], tr["u"], tr["v"], status)
+    if session.video_path is None:
+        raise SessionError(f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)")
+    from groundstation.offline.track import track_session
+
+    measure = motion and session.telemetry.latency_source == "unknown"
+    tracked = track_session(session, tracker_name=tracker, progress=progress, measure_motion=measure, size=size)
+    session.warnings.extend(tracked.warnings)
+    if size is not None:
+        session.warnings.extend(size.warnings)
+    if measure:
+        _align_by_motion(session, tracked.rotations)
+    _warn_unknown_delay(session, "--no-motion-offset" if not motion else "no settled estimate from the video")
+    return Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
+
+
+def _align_by_motion(session: Session, rotations) -> None:
+    """Estimate the frames' offset to the telemetry from the measured rotations; apply it when settled."""
+    found = offset_from_rotations(session.calibration, session.telemetry, rotations)
+    applied = found.settled
+    if applied:
+        session.telemetry.set_motion_latency(found.estimate.offset_s, found.estimate.sigma_s)
+    print(f"{session.path.name}: the frames' offset to the telemetry from the video's motion: {found.describe()}"
+          + (f"; applied as the UAV link's delay: {session.telemetry.uav_latency_s * 1000:.1f} ms" if applied else ""),
+          file=sys.stderr)
+
+
+def _warn_unknown_delay(session: Session, why: str) -> None:
+    if session.telemetry.latency_source == "unknown":
+        session.warnings.append(
+            f"{session.path}: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC in the tlog, "
+            f"{why}): taken as 0; h_acc includes ±{session.telemetry.latency_sigma_s * 1000:.0f} ms of it "
+            "([timing] unknown_latency_sigma_s) × the camera's motion")
+
+
+def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
+    """Fixes for :class:`Pixels` (or a tuple of its first four, e.g. track.csv's; see :func:`frame_pixels`)."""
+    t, u, v, track_status, sigma_px = Pixels(*pixels)
+    pose = camera_pose(session.calibration, session.telemetry, t)
+    session.warnings.extend(f"{session.path}: {notice}" for notice in take_notices(session.telemetry))
+    fixes = locate(session.calibration, pose, u, v, refraction=refraction, sigma_px=sigma_px)
+    lost = (track_status != "ok") & (pose.status == "ok")
+    fixes.status[lost] = track_status[lost]
+    if len(fixes) and not np.any(fixes.status == "ok"):
+        geo = np.flatnonzero(np.isin(fixes.status, _GEOMETRY_FAILURES))
+        if len(geo):
+            i = geo[0]
+            raise SessionError(
+                f"{session.path}: no frame has a fix; first frame (t = {t[i]:.3f}, u = {u[i]:.1f}, v = {v[i]:.1f}) "
+                f"is {fixes.status[i]} (camera height {pose.height_m[i]:.2f} m): check [mount] and [water]"
+            )
+    return fixes
+
+
+def process_session(
+    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False,
+    motion: bool = True,
+    size: HeightFromSize | None = None,
+) -> Fixes:
+    """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
+    return locate_frames(session, frame_pixels(session, use_track, tracker, progress, motion, size), refraction)
+
+
+def size_of(session: Session, mode: str, use_track: bool) -> HeightFromSize | None:
+    """The height-from-size measurement ``--height-from-size`` asks for, when the video is tracked."""
+    if mode == "off" or use_track or session.video_path is None:
+        return None
+    return HeightFromSize(session.calibration, session.telemetry, mode)
+
+
+def summary(fixes: Fixes) -> str:
+    counts = Counter(fixes.status)
+    parts = ", ".join(f"{k} {n}" for k, n in counts.most_common())
+    return f"{len(fixes)} frames: {parts}"
+
+
+def print_warnings(session: Session) -> None:
+    """The session's warnings not printed yet (reading, tracking, height sources), one line each on stderr."""
+    for w in session.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    session.warnings.clear()
+
+
+def run(args) -> int:
+    out = output_dir(args.out)
+    session = load_session(args.session)
+    size = size_of(session, args.height_from_size, args.use_track)
+    try:
+        fixes = process_session(
+            session, use_track=args.use_track, refraction=not args.no_refraction,
+            tracker=args.tracker, progress=not args.quiet, motion=not args.no_motion_offset, size=size,
+        )
+    finally:
+        print_warnings(session)
+    write_positions_csv(out / "positions.csv", fixes)
+    print(f"{summary(fixes)} -> {out / 'positions.csv'}")
+    if size is not None:
+        print(size.summary())
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("process", help="process a recorded session into positions.csv")
+    p.add_argument("session", help="session directory (format v1)")
+    p.add_argument("--out", required=True, help="output directory for positions.csv")
+    p.add_argument("--use-track", action="store_true", help="take the UUV pixels from track.csv (no tracker)")
+    p.add_argument("--no-refraction", action="store_true", help="the paper's straight ray (no Snell refraction)")
+    p.add_argument("--tracker", default="default", choices=TRACKERS,
+                   help="tracker backend; default: telemetry-guided template matching; mil: the paper's")
+    add_size_argument(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_motion_offset_flag(p)
+    p.set_defaults(func=run)
+
+
+def add_motion_offset_flag(p) -> None:
+    p.add_argument("--no-motion-offset", action="store_true",
+                   help="do not estimate the frames' offset to the telemetry from the video's motion where the UAV "
+                        "link's delay is neither stated nor measured (it stays unknown: 0, with its sigma in h_acc)")
+
+
+def add_size_argument(p) -> None:
+    p.add_argument("--height-from-size", choices=SIZE_MODES, default="check",
+                   help="the camera's height from the UUV's size in the tracked video: check (default: estimate it, "
+                   "warn when the configured height disagrees), auto (also hand it to the height's fusion once sure), "
+                   "off")

@@ -1,0 +1,171 @@
+"""Tracking the UUV through a session's video, steered by the session's telemetry.
+
+:func:`track_session` decodes the video (in a background thread), selects the UUV
+with ``[tracker] init_bbox`` on the frame of ``init_t`` (the first frame without
+it), tracks it with a :class:`~localizer.tracking.session.TrackingSession` (the
+same as the live service's) and returns per-frame pixels with a status word for
+every row of ``video_frames.csv``:
+
+``ok``; ``lost`` (the tracker has lost the UUV); ``before_init`` (a frame before
+the one ``init_bbox`` belongs to); ``no_video`` (the frame is listed but could not
+be decoded: truncated or corrupt video).
+
+The camera poses of all frames are computed at once and shared with the session
+(which projects its predictions for many frames at a time). With ``measure_motion``
+the camera's rotation between consecutive frames is measured too
+(:class:`~groundstation.latency.video_motion.RotationMeter`), for the frames' offset to the
+telemetry (:func:`groundstation.latency.estimate.offset_from_rotations`). With a
+:class:`~groundstation.height_from_size.HeightFromSize`, frames the UUV is tracked in are
+also measured for the camera's height from its size, in the same pass (``timings_s["size"]``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from groundstation.height_from_size import HeightFromSize
+from groundstation.latency.video_motion import RotationMeter
+from groundstation.progress import progress as progress_bar
+from groundstation.session.read import Session, SessionError
+from groundstation.video.file import open_video
+from groundstation.video.frames import VideoError
+from localizer.pose import camera_pose
+from localizer.tracking.session import SelectionError, TrackingSession
+
+
+@dataclass
+class TrackedVideo:
+    """Per-frame results, one entry per row of ``video_frames.csv``."""
+
+    frame: np.ndarray  # frame index
+    t: np.ndarray  # UNIX seconds
+    u: np.ndarray  # distorted pixels, NaN without a track
+    v: np.ndarray
+    status: np.ndarray  # object array of str
+    confidence: np.ndarray  # tracker's 0..1, NaN when it has none
+    sigma_px: np.ndarray  # tracker's 1-sigma of each of u and v (pixels), NaN without a track
+    timings_s: dict = field(default_factory=dict)  # seconds spent per stage
+    warnings: list = field(default_factory=list)
+    rotations: list = field(default_factory=list)  # video_motion.Rotation between consecutive frames (measure_motion)
+
+
+def _init_row(session: Session, t: np.ndarray) -> int:
+    cal = session.calibration
+    if cal.init_t is None:
+        return 0
+    i = int(np.argmin(np.abs(t - cal.init_t)))
+    period = float(np.median(np.diff(t))) if len(t) > 1 else math.inf
+    if abs(t[i] - cal.init_t) > 0.5 * period:
+        raise SessionError(
+            f"{session.path / 'session.toml'}: tracker.init_t = {cal.init_t!r} matches no frame of video_frames.csv "
+            f"({t[0]:.3f} … {t[-1]:.3f})"
+        )
+    return i
+
+
+
+
+def track_session(session: Session, tracker_name: str = "default", progress: bool = False,
+                  measure_motion: bool = False, size: HeightFromSize | None = None) -> TrackedVideo:
+    """Track the UUV through the session's video (see the module doc for statuses); ``size`` measures the camera's
+    height from the UUV's size in the frames it is tracked in.
+
+    Raises :class:`SessionError` for what makes tracking impossible: no video, no
+    ``init_bbox``, an unknown tracker, a video that cannot be opened or whose frame
+    size differs from the calibration, an init frame that cannot be decoded.
+    """
+    cal = session.calibration
+    if session.video_path is None or session.frames is None:
+        raise SessionError(f"{session.path}: no video.* with video_frames.csv to track")
+    if cal.init_bbox is None:
+        raise SessionError(f"{session.path / 'session.toml'}: tracker.init_bbox missing (needed to track the video)")
+    try:
+        tracking = TrackingSession(cal, tracker_name)
+    except ValueError as e:
+        raise SessionError(str(e)) from None
+
+    frame_idx = session.frames["frame"].astype(int)
+    t = session.frames["t"]
+    n = len(t)
+    row_of = {int(f): i for i, f in enumerate(frame_idx)}
+    init_row = _init_row(session, t)
+    status = np.full(n, "no_video", dtype=object)
+    status[:init_row] = "before_init"
+    u, v, conf, sigma = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0}
+    warnings: list[str] = []
+    meter = RotationMeter(cal.camera) if measure_motion else None
+    rotations = []
+
+    t0 = time.perf_counter()
+    pose = camera_pose(cal, session.telemetry, t)
+    timings["pose"] = time.perf_counter() - t0
+
+    bar = progress_bar(n - init_row, f"{session.path.name}: tracking", progress)
+    extra = 0
+    done = 0
+    started = False
+    try:
+        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
+                        indices=frame_idx) as video:
+            frames = video.prefetch()
+            while True:
+                t0 = time.perf_counter()
+                frame = next(frames, None)
+                timings["decode_wait"] += time.perf_counter() - t0
+                if frame is None:
+                    break
+                row = row_of.get(frame.index)
+                if row is None:
+                    extra += 1
+                    continue
+                if meter is not None:
+                    t0 = time.perf_counter()
+                    if (r := meter.measure(float(t[row]), frame.image)) is not None:
+                        rotations.append(r)
+                    timings["motion"] += time.perf_counter() - t0
+                if row < init_row:
+                    continue
+                t0 = time.perf_counter()
+                if not started:
+                    if row != init_row:
+                        raise SessionError(
+                            f"{session.video_path}: frame {frame_idx[init_row]} (t = {t[init_row]:.3f}), the one "
+                            "tracker.init_bbox belongs to, could not be decoded"
+                        )
+                    try:
+                        result = tracking.select(frame.image, pose, row, box=cal.init_bbox)
+                    except SelectionError as e:
+                        raise SessionError(f"{session.path / 'session.toml'}: tracker.init_bbox: {e}") from None
+                    started = True
+                else:
+                    result = tracking.step(frame.image, pose, row)
+                timings["track"] += time.perf_counter() - t0
+                status[row], u[row], v[row], conf[row] = result.status, result.u, result.v, result.confidence
+                sigma[row] = result.sigma_px
+                if size is not None and result.ok and size.due(float(t[row])):
+                    t0 = time.perf_counter()
+                    size.take(size.measure(frame.image, pose, row, result.u, result.v))
+                    timings["size"] += time.perf_counter() - t0
+                done += 1
+                bar.update()
+            if video.bad_reads:
+                warnings.append(f"{session.video_path}: {video.bad_reads} unreadable frames skipped")
+    except VideoError as e:
+        raise SessionError(str(e)) from None
+    finally:
+        bar.close()
+    if not started:
+        raise SessionError(f"{session.video_path}: no frame of video_frames.csv could be decoded")
+    missing = int(np.sum(status == "no_video"))
+    if missing:
+        warnings.append(f"{session.video_path}: {missing} frames of video_frames.csv not in the video (status no_video)")
+    if extra:
+        warnings.append(f"{session.video_path}: {extra} frames beyond video_frames.csv ignored")
+    not_ok = status != "ok"
+    u[not_ok], v[not_ok], sigma[not_ok] = np.nan, np.nan, np.nan
+    return TrackedVideo(frame_idx, t, u, v, status, conf, sigma, timings, warnings, rotations)

@@ -1,0 +1,210 @@
+"""Reading a session directory (format version 1) into calibration, telemetry and tables.
+
+Every problem is a :class:`SessionError` whose one-line message names the file,
+the line or key, and the offending value. Recoverable oddities (undecodable
+MAVLink frames, messages from other systems, a truncated last line of a log that
+was being written when power went) are kept as warnings on the session.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from groundstation.mavlink.ids import uav_system
+from groundstation.mavlink.ingest import ingest
+from groundstation.session import SessionError
+from groundstation.session.depth import read_depth
+from groundstation.session.tlog import read_tlog
+from localizer.calibration import Calibration, ConfigError
+from localizer.depth import SOURCE_WORDS
+from localizer.telemetry import Telemetry
+
+SUPPORTED_VERSION = 1
+_NEEDED_FOR_SOURCE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+
+
+@dataclass
+class Session:
+    path: Path
+    calibration: Calibration
+    telemetry: Telemetry
+    track: dict[str, np.ndarray] | None = None  # t, u, v (NaN where the UUV was not seen)
+    frames: dict[str, np.ndarray] | None = None  # frame, t
+    video_path: Path | None = None
+    truth: dict[str, np.ndarray] | None = None  # t, lat, lon, depth_m
+    warnings: list[str] = field(default_factory=list)
+    uav_sysid: int | None = None
+
+
+def _number(text: str, where: str, col: str, allow_empty: bool) -> float:
+    text = text.strip()
+    if text == "" and allow_empty:
+        return math.nan
+    try:
+        value = float(text)
+    except ValueError:
+        raise SessionError(f"{where}: {col} = {text!r}: not a number") from None
+    if not math.isfinite(value) and not allow_empty:
+        raise SessionError(f"{where}: {col} = {text!r}: must be finite")
+    return value
+
+
+def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...] = (),
+               optional: tuple[str, ...] = (), text: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+    """A CSV with at least ``columns`` in its header, as float arrays; checks times increase.
+
+    ``optional`` columns are read when the header has them; ``text`` columns are kept as
+    non-empty strings (object arrays); ``allow_empty`` columns may be empty (NaN, or "" for text).
+    """
+    try:
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            header = reader.fieldnames or []
+            missing = [c for c in columns if c not in header]
+            if missing:
+                raise SessionError(f"{path}: header {header!r} lacks {', '.join(missing)}")
+            wanted = [*columns, *(c for c in optional if c in header)]
+            cols: dict[str, list] = {c: [] for c in wanted}
+            for row in reader:
+                where = f"{path}:{reader.line_num}"
+                for c in wanted:
+                    if row[c] is None:
+                        raise SessionError(f"{where}: row too short, no {c}")
+                    if c in text:
+                        if not row[c].strip() and c not in allow_empty:
+                            raise SessionError(f"{where}: {c} = {row[c]!r}: empty")
+                        cols[c].append(row[c].strip())
+                    else:
+                        cols[c].append(_number(row[c], where, c, c in allow_empty))
+    except (OSError, UnicodeDecodeError) as e:
+        raise SessionError(f"{path}: cannot read: {e}") from None
+    out = {c: np.array(v, dtype=object if c in text else float) for c, v in cols.items()}
+    t = out.get("t")
+    if t is not None and len(t) > 1 and not np.all(np.diff(t) > 0):
+        i = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise SessionError(f"{path}: t = {t[i + 1]!r} on data row {i + 2} does not increase")
+    return out
+
+
+def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
+    """Feed depth.jsonl into ``tel`` (:func:`~groundstation.session.depth.read_depth`, strict): ``t`` (the
+    UUV's stamp), ``t_recv`` (its arrival) when recorded, and the ``source``, ``sigma_m`` and ``vspeed_mps`` a
+    recording wrote (the source "session" where none is named)."""
+    count = refused = 0
+    for r in read_depth(path, warnings):
+        if tel.add_depth(r.t, r.depth_m, r.t_recv, sigma_m=r.sigma_m,
+                         source=r.source if r.source in SOURCE_WORDS else "session", vspeed_mps=r.vspeed_mps):
+            count += 1
+        else:
+            refused += 1
+    if refused:
+        warnings.append(f"{path}: {refused} depth samples out of order once aligned to the station clock, skipped")
+    if count == 0:
+        raise SessionError(f"{path}: no depth samples")
+    return count
+
+
+def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> int:
+    """Ingest the UAV's messages; returns the UAV's system id (:func:`~groundstation.mavlink.ids.uav_system`)."""
+    msgs = [m for _, m in read_tlog(path, warnings)]
+    sysid = uav_system(msgs)
+    if sysid is None:
+        raise SessionError(f"{path}: no ATTITUDE message or autopilot HEARTBEAT (is this the UAV's telemetry?)")
+    others = 0
+    counts: dict[str, int] = {}
+    for m in msgs:
+        if m.get_srcSystem() != sysid:
+            others += 1
+            continue
+        if ingest(tel, m, m._timestamp):
+            counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
+    if others:
+        warnings.append(f"{path}: {others} messages from systems other than the UAV (sysid {sysid}) ignored")
+    needed = ["ATTITUDE", "GLOBAL_POSITION_INT"]
+    if source in _NEEDED_FOR_SOURCE:
+        needed.append(_NEEDED_FOR_SOURCE[source])
+    for kind in needed:
+        if not counts.get(kind):
+            raise SessionError(f"{path}: no usable {kind} message (mount.attitude_source = {source!r})")
+    for name, series in (("ATTITUDE", tel.attitude), ("GLOBAL_POSITION_INT", tel.position)):
+        if series.rejected:
+            warnings.append(f"{path}: {series.rejected} {name} samples out of order or non-finite, skipped")
+    return sysid
+
+
+def clock_summary(tel: Telemetry) -> str:
+    """One line on how the session's clocks were aligned."""
+    parts = [f"UAV link delay {tel.uav_latency_s * 1000:.0f} ms ({tel.latency_source})"]
+    gnss = tel.station_minus_gnss_s
+    parts.append("no GNSS time (SYSTEM_TIME)" if gnss is None else f"station − GNSS {gnss:+.3f} s")
+    if tel.uav_clock.segments:
+        parts.append(f"{tel.uav_clock.segments} autopilot reboot(s)")
+    uuv = tel.uuv_clock_minus_station_s
+    if uuv is not None:
+        parts.append(f"UUV clock − station {uuv:+.3f} s, depth aligned by {tel.depth_aligned_by}")
+    return "clocks: " + ", ".join(parts)
+
+
+def load_session(path) -> Session:
+    """Read and validate a session directory."""
+    path = Path(path)
+    if not path.is_dir():
+        raise SessionError(f"{path}: not a session directory")
+    toml_path = path / "session.toml"
+    try:
+        meta = tomllib.loads(toml_path.read_text())
+    except FileNotFoundError:
+        raise SessionError(f"{toml_path}: missing") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise SessionError(f"{toml_path}: malformed TOML: {e}") from None
+    version = meta.get("version")
+    if version != SUPPORTED_VERSION:
+        raise SessionError(f"{toml_path}: version = {version!r}: this skyfix reads version {SUPPORTED_VERSION}")
+    try:
+        cal = Calibration.from_dict(meta, source=str(toml_path))
+    except ConfigError as e:
+        raise SessionError(str(e)) from None
+
+    warnings: list[str] = list(cal.warnings)
+    tel = Telemetry(cal.timing)
+    sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings)
+    if not (path / "depth.jsonl").is_file():
+        raise SessionError(f"{path / 'depth.jsonl'}: missing (the UUV's depth is required)")
+    _read_depth(path / "depth.jsonl", tel, warnings)
+    warnings.extend(f"{path}: {notice}" for notice in tel.notices)
+    tel.notices.clear()
+
+    session = Session(path=path, calibration=cal, telemetry=tel, warnings=warnings, uav_sysid=sysid)
+    if (path / "track.csv").is_file():
+        session.track = read_table(path / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    if (path / "truth.csv").is_file():
+        session.truth = read_table(path / "truth.csv", ("t", "lat", "lon", "depth_m"))
+    videos = sorted(p for p in path.glob("video.*") if p.is_file())
+    if videos:
+        session.video_path = videos[0]
+        if not (path / "video_frames.csv").is_file():
+            raise SessionError(f"{path / 'video_frames.csv'}: missing (required with {videos[0].name})")
+        session.frames = read_table(path / "video_frames.csv", ("frame", "t"))
+        _restamp_unsettled(session)
+    return session
+
+
+def _restamp_unsettled(session: Session) -> None:
+    """A live run with ``--video-latency-ms auto`` stamped its frames with no latency until its estimate
+    settled (``[timing] video_latency_from_t``): those frames are moved back by the estimate it recorded."""
+    timing, t = session.calibration.timing, session.frames["t"]
+    if timing.video_latency_source != "motion" or timing.video_latency_from_t is None or timing.video_latency_s is None:
+        return
+    early = t < timing.video_latency_from_t
+    if early.any():
+        t[early] -= timing.video_latency_s
+        session.warnings.append(
+            f"{session.path / 'video_frames.csv'}: {int(early.sum())} frames stamped before the live run's video "
+            f"latency had settled moved back by the {timing.video_latency_s * 1000:.1f} ms it settled at "
+            "([timing] video_latency_s)")

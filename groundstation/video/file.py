@@ -1,0 +1,229 @@
+"""Reading video files through FFmpeg (PyAV): frames with their index and container time.
+
+:func:`open_video` opens a file and checks the frame size against the
+calibration's; :meth:`Video.read` returns one decoded BGR frame with its index
+and presentation time, or None at the end. Every failure the caller should report
+is a :class:`VideoError` with a one-line message naming the video and the
+offending value. Live streams are read by :mod:`groundstation.video.live`.
+
+A frame's index comes from the container's timestamps, found by reading every
+packet's presentation time first (demuxing only, no decoding):
+
+- regular timestamps (a camera's or an encoder's constant frame rate, where
+  every step is a whole number of frame periods): index = (pts − first pts) /
+  period, so a frame lost to damage leaves a gap in the indices instead of
+  shifting every later frame onto the wrong time;
+- irregular timestamps (a live recording, stamped as the frames arrived): index
+  = the frame's rank in presentation order;
+- given the session's frame indices (``video_frames.csv``'s ``frame`` column), when
+  the video holds exactly that many frames: the n-th frame is the n-th row's. A
+  live recording is one: its timestamps are the camera's regular slots, with a gap
+  wherever the service skipped frames (its decoder behind), and every frame it kept
+  has its row.
+Damaged files: a packet FFmpeg cannot decode is skipped and counted
+(:attr:`Video.bad_reads`).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Iterator, Sequence
+from fractions import Fraction
+from pathlib import Path
+from typing import Self
+
+import av
+import numpy as np
+
+from groundstation.video.ffmpeg_log import route_ffmpeg_log
+from groundstation.video.frames import VideoError, VideoFrame, ffmpeg_reason, put_until
+
+#: A step between timestamps within this share of a whole number of periods counts as regular.
+REGULAR_TOLERANCE = 0.05
+
+
+def frame_indices(pts: list[int], indices: Sequence[int] | None = None) -> dict[int, int]:
+    """Presentation timestamps (any order, in stream ticks) → 0-based frame index (see the module doc);
+    ``indices``: the session's frame indices, one per row, in order."""
+    ordered = sorted(set(pts))
+    if indices is not None and len(indices) == len(ordered):
+        return {p: int(i) for p, i in zip(ordered, indices, strict=True)}
+    if len(ordered) < 2:
+        return {p: i for i, p in enumerate(ordered)}
+    steps = np.diff(ordered)
+    period = float(np.min(steps))
+    ratio = steps / period
+    if period > 0 and np.all(np.abs(ratio - np.round(ratio)) <= REGULAR_TOLERANCE):
+        return {p: round((p - ordered[0]) / period) for p in ordered}
+    return {p: i for i, p in enumerate(ordered)}
+
+
+class Video:
+    """An open video file; use :func:`open_video`. Iterating yields :class:`VideoFrame`."""
+
+    def __init__(self, container, url: str, expected_size, max_bad_reads: int, index_of: dict[int, int]):
+        self._container = container
+        self._stream = container.streams.video[0]
+        self.url = url
+        self.expected_size = expected_size
+        self.max_bad_reads = max_bad_reads
+        rate = self._stream.average_rate or self._stream.guessed_rate
+        self.fps = float(rate) if rate else 0.0
+        self.frame_count = len(index_of)
+        self.bad_reads = 0  # packets that could not be decoded, skipped
+        self._index_of = index_of
+        self._t0 = min(index_of) if index_of else 0
+        self._tb = float(self._stream.time_base or Fraction(1, 90000))
+        self._last_index = -1
+        self._frames = self._decode()
+        self._prefetching: tuple[threading.Event, threading.Thread] | None = None
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) the container declares, in pixels (0 when unknown)."""
+        ctx = self._stream.codec_context
+        return int(ctx.width or 0), int(ctx.height or 0)
+
+    def _decode(self) -> Iterator[av.VideoFrame]:
+        ctx = self._stream.codec_context
+        for packet in self._container.demux(self._stream):
+            try:
+                yield from ctx.decode(packet)
+            except av.error.InvalidDataError:
+                self.bad_reads += 1
+                if self.bad_reads > self.max_bad_reads > 0:
+                    return
+            except av.error.EOFError:
+                return
+
+    def read(self) -> VideoFrame | None:
+        """The next decodable frame, or None at the end of the video."""
+        try:
+            frame = next(self._frames, None)
+        except av.error.FFmpegError as e:
+            raise VideoError(f"{self.url}: {ffmpeg_reason(e)}") from None
+        if frame is None:
+            return None
+        image = frame.to_ndarray(format="bgr24")
+        self._check_size(image)
+        pts = frame.pts if frame.pts is not None else None
+        index = self._index_of.get(pts, self._last_index + 1) if pts is not None else self._last_index + 1
+        index = max(index, self._last_index + 1)
+        self._last_index = index
+        t_s = (pts - self._t0) * self._tb if pts is not None else index / (self.fps or 30.0)
+        return VideoFrame(index, image, t_s)
+
+    def _check_size(self, image: np.ndarray) -> None:
+        if self.expected_size is None:
+            return
+        h, w = image.shape[:2]
+        if (w, h) != tuple(self.expected_size):
+            ew, eh = self.expected_size
+            raise VideoError(
+                f"{self.url}: frame {self._last_index + 1} is {w}x{h} pixels, the calibration's camera is {ew}x{eh}"
+            )
+
+    def __iter__(self) -> Iterator[VideoFrame]:
+        while (frame := self.read()) is not None:
+            yield frame
+
+    def prefetch(self, depth: int = 8) -> Iterator[VideoFrame]:
+        """Iterate with decoding in a background thread (FFmpeg releases the GIL), ``depth`` frames ahead.
+
+        A :class:`VideoError` raised while decoding is re-raised in the caller's thread.
+        """
+        q: queue.Queue = queue.Queue(maxsize=depth)
+        stop = threading.Event()
+
+        def work():
+            try:
+                for frame in self:
+                    if not put_until(q, frame, stop):
+                        return
+                put_until(q, None, stop)
+            except VideoError as e:
+                put_until(q, e, stop)
+
+        worker = threading.Thread(target=work, name="video-decode", daemon=True)
+        self._prefetching = (stop, worker)
+        worker.start()
+        try:
+            while True:
+                try:
+                    item = q.get(timeout=0.1)
+                except queue.Empty:
+                    if stop.is_set() or not worker.is_alive():
+                        return  # closed under us
+                    continue
+                if item is None:
+                    return
+                if isinstance(item, VideoError):
+                    raise item
+                yield item
+        finally:
+            stop.set()
+            worker.join()
+
+    def close(self) -> None:
+        """Release the decoder (after stopping a :meth:`prefetch` thread still reading from it)."""
+        if self._prefetching is not None:
+            stop, worker = self._prefetching
+            stop.set()
+            worker.join()
+            self._prefetching = None
+        self._container.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _presentation_times(path: str) -> list[int]:
+    """Every video packet's pts (demuxing only), packets the container marks to discard left out."""
+    with av.open(path) as container:
+        stream = container.streams.video[0]
+        return [p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard]
+
+
+def open_video(url, expected_size: tuple[int, int] | None = None, threads: int = 0,
+               max_bad_reads: int = 0, indices: Sequence[int] | None = None) -> Video:
+    """Open a video file with FFmpeg.
+
+    ``expected_size`` (width, height) in pixels, usually the calibration's: a
+    different frame size is a :class:`VideoError` (checked on open when the
+    container declares it, and on every frame). ``threads`` is FFmpeg's decoding
+    thread count (slice threads; 0: FFmpeg chooses). ``max_bad_reads`` > 0 ends the video after
+    that many undecodable packets (0: no limit). ``indices``: the session's frame
+    indices (``video_frames.csv``), which number the frames when the counts agree.
+    """
+    route_ffmpeg_log()
+    url = str(url)
+    path = Path(url)
+    if not path.exists():
+        raise VideoError(f"{url}: missing")
+    if not path.is_file():
+        raise VideoError(f"{url}: not a file")
+    if path.stat().st_size == 0:
+        raise VideoError(f"{url}: empty file")
+    try:
+        index_of = frame_indices(_presentation_times(url), indices)
+        container = av.open(url)
+        if not container.streams.video:
+            container.close()
+            raise VideoError(f"{url}: FFmpeg cannot open it (no video stream)")
+    except (av.error.FFmpegError, IndexError) as e:
+        why = ffmpeg_reason(e) if isinstance(e, av.error.FFmpegError) else "no video stream"
+        raise VideoError(f"{url}: FFmpeg cannot open it ({why})") from None
+    ctx = container.streams.video[0].codec_context
+    ctx.thread_type = "SLICE"  # frame threads lose the frames in flight when a damaged packet fails
+    ctx.thread_count = int(threads)
+    video = Video(container, url, expected_size, max_bad_reads, index_of)
+    w, h = video.size
+    if expected_size is not None and w > 0 and h > 0 and (w, h) != tuple(expected_size):
+        video.close()
+        ew, eh = expected_size
+        raise VideoError(f"{url}: frame size {w}x{h} pixels differs from the calibration's camera {ew}x{eh}")
+    return video

@@ -1,0 +1,59 @@
+"""What the video readers hand on: frames (a file's :class:`VideoFrame`, a live stream's :class:`LiveFrame`),
+their one error type, and the helpers both readers share."""
+
+from __future__ import annotations
+
+import queue
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class VideoError(RuntimeError):
+    """A video that cannot be read as required; the message is one line."""
+
+
+@dataclass
+class VideoFrame:
+    """One decoded frame: ``index`` 0-based (see the module doc), ``image`` BGR uint8,
+    ``t_s`` its presentation time in seconds from the video's first frame."""
+
+    index: int
+    image: np.ndarray
+    t_s: float = 0.0
+
+
+def ffmpeg_reason(e: Exception) -> str:
+    """FFmpeg's own words for a failure (PyAV's message without the URL it repeats)."""
+    text = getattr(e, "strerror", None) or str(e)
+    return str(text).splitlines()[0] if text else type(e).__name__
+
+
+@dataclass
+class LiveFrame:
+    """A received frame (UNIX seconds on the station clock).
+
+    ``t_unix`` its exposure: ``t_slot`` − the configured glass-to-first-packet latency;
+    ``t_recv`` when its first packet was read from the network (before decoding);
+    ``t_slot`` its stream slot: its PTS on the station clock (least arrival − PTS), ≤ ``t_recv``;
+    ``aligned`` False while the latency is not known yet (``auto`` before its estimate settled).
+    """
+
+    index: int
+    t_unix: float
+    t_recv: float
+    image: np.ndarray
+    t_slot: float | None = None
+    aligned: bool = True
+
+
+def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:
+    """Put ``item`` into the bounded ``q``, waiting for room, unless ``stop`` is set first (then False)."""
+    while not stop.is_set():
+        try:
+            q.put(item, timeout=0.1)
+            return True
+        except queue.Full:
+            continue
+    return False

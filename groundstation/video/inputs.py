@@ -1,0 +1,156 @@
+"""What ``--video`` names, as FFmpeg (PyAV) opens it: input, format, per-stream options.
+
+| ``--video`` | kind | opened as |
+|---|---|---|
+| ``udp://HOST:PORT`` | udp | MPEG-TS over UDP |
+| ``rtp://HOST:PORT?codec=h264\\|h265[&pt=96]`` | rtp | RTP without a session description (QGroundControl/BlueOS send H.264 RTP to 5600), depacketized by skyfix (:mod:`.rtp`), decoded by FFmpeg |
+| ``FILE.sdp`` | sdp | the RTP stream the file describes, live |
+| ``rtsp://…[?transport=tcp\\|udp]`` | rtsp | RTSP, over TCP or UDP (default: FFmpeg tries UDP first) |
+| ``/dev/videoN``, ``v4l2:N`` ``[?video_size=WxH&framerate=F&input_format=mjpeg]`` | v4l2 | a V4L2 camera |
+| other ``scheme://`` | url | whatever FFmpeg opens, live |
+| a path | file | a file, read once |
+
+Every live kind is opened for low delay: the smallest probe (its packets are
+kept, not dropped), no RTP reordering wait. A malformed
+value is a :class:`~groundstation.video.file.VideoError` naming it.
+"""
+
+from __future__ import annotations
+
+import errno
+import ipaddress
+import re
+import socket
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
+
+from groundstation.video.frames import VideoError
+
+# No "fflags nobuffer": it throws away the packets read while probing, and with them the
+# keyframe a camera may not repeat for seconds; probing reads little with these limits.
+# Format and protocol options only (the decoder's low delay is set on it): they go to
+# av.open as container_options, since PyAV 16's per-stream options array overflows
+# (segfault) when a stream appears while probing, as an MPEG-TS stream joined late does.
+LOW_DELAY = {"probesize": "32", "analyzeduration": "0"}
+# MPEG-TS carries a frame per PES (FFmpeg, GStreamer and camera encoders do): without FFmpeg's parser,
+# which holds each frame until the next one starts, a frame is handed over as soon as its PES is in.
+UDP_OPTIONS = {"overrun_nonfatal": "1", "buffer_size": str(4 << 20), "fflags": "+noparse"}
+RTP_OPTIONS = {"protocol_whitelist": "file,udp,rtp", "max_delay": "0", "reorder_queue_size": "0"}
+RTP_CODECS = ("h264", "h265", "hevc")
+V4L2_KEYS = ("video_size", "framerate", "input_format", "pixel_format", "standard")
+
+
+@dataclass(frozen=True)
+class VideoInput:
+    """An input ready for ``av.open(file, format=format, container_options=options)``."""
+
+    url: str  # as given
+    kind: str  # udp, rtp, sdp, rtsp, v4l2, url, file
+    file: str
+    format: str | None = None
+    options: dict[str, str] = field(default_factory=dict)
+    port: int | None = None  # the local UDP port it binds (udp, rtp), for "in use" messages
+    codec: str | None = None  # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp`; ``file`` the address)
+    payload_type: int | None = None  # rtp
+
+    @property
+    def live(self) -> bool:
+        return self.kind != "file"
+
+    def port_in_use(self) -> bool:
+        """Whether another program holds the UDP port this input listens on (RTCP's next port too, for RTP).
+
+        Checked before FFmpeg binds: its failed bind is reported as another error.
+        """
+        ports = () if self.port is None else (self.port, self.port + 1) if self.kind == "sdp" else (self.port,)
+        for port in ports:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                try:
+                    s.bind(("0.0.0.0", port))
+                except OSError as e:
+                    if e.errno == errno.EADDRINUSE:
+                        return True
+        return False
+
+
+def _port(url: str, parts) -> int:
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if port is None:
+        raise VideoError(f"{url}: no port (expected {parts.scheme}://HOST:PORT)")
+    return port
+
+
+def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
+    port = _port(url, parts)
+    codec = query.pop("codec", "h264").lower()
+    if codec not in RTP_CODECS:
+        raise VideoError(f"{url}: codec={codec} is not one of {', '.join(RTP_CODECS)}")
+    pt_text = query.pop("pt", "96")
+    if not pt_text.isdigit() or not 96 <= int(pt_text) <= 127:
+        raise VideoError(f"{url}: pt={pt_text} is not a dynamic RTP payload type (96 … 127)")
+    if query:
+        raise VideoError(f"{url}: unknown option {next(iter(query))} (known: codec, pt)")
+    host = parts.hostname or "0.0.0.0"
+    try:
+        multicast = ipaddress.ip_address(host).is_multicast
+    except ValueError:  # a host name: the address it is bound by
+        multicast = False
+    if multicast:
+        raise VideoError(f"{url}: a multicast group: describe the stream in an .sdp file (FFmpeg joins the group)")
+    return VideoInput(url, "rtp", host, None, {}, port, "h265" if codec == "hevc" else codec, int(pt_text))
+
+
+def _sdp_port(path: Path) -> int | None:
+    match = re.search(r"^m=video (\d+)", path.read_text(errors="replace"), re.MULTILINE)
+    return int(match.group(1)) if match else None
+
+
+def _v4l2(url: str, device: str, query: dict[str, str]) -> VideoInput:
+    unknown = [k for k in query if k not in V4L2_KEYS]
+    if unknown:
+        raise VideoError(f"{url}: unknown option {unknown[0]} (known: {', '.join(V4L2_KEYS)})")
+    if "video_size" in query and not re.fullmatch(r"\d+x\d+", query["video_size"]):
+        raise VideoError(f"{url}: video_size={query['video_size']} is not WIDTHxHEIGHT")
+    if device.isdigit():
+        device = f"/dev/video{device}"
+    return VideoInput(url, "v4l2", device, "v4l2", {**LOW_DELAY, **query})
+
+
+def parse_video_input(url: str) -> VideoInput:
+    """The :class:`VideoInput` for a ``--video`` value (see the module doc)."""
+    url = str(url)
+    base, _, query_text = url.partition("?")
+    query = dict(parse_qsl(query_text, keep_blank_values=True))
+    if url.startswith("v4l2:"):
+        return _v4l2(url, base.removeprefix("v4l2:"), query)
+    if base.startswith("/dev/video"):
+        return _v4l2(url, base, query)
+    if "://" not in url:
+        path = Path(url)
+        if path.suffix.lower() == ".sdp":
+            if not path.is_file():
+                raise VideoError(f"{url}: missing")
+            return VideoInput(url, "sdp", url, "sdp", {**LOW_DELAY, **RTP_OPTIONS}, _sdp_port(path))
+        return VideoInput(url, "file", url)
+    parts = urlsplit(url)
+    scheme = parts.scheme.lower()
+    if scheme == "udp":
+        return VideoInput(url, "udp", url, "mpegts", {**LOW_DELAY, **UDP_OPTIONS}, _port(url, parts))
+    if scheme == "rtp":
+        return _rtp(url, parts, query)
+    if scheme in ("rtsp", "rtsps"):
+        transport = query.pop("transport", None)
+        options = dict(LOW_DELAY)
+        if transport is not None:
+            if transport not in ("tcp", "udp"):
+                raise VideoError(f"{url}: transport={transport} is not tcp or udp")
+            options["rtsp_transport"] = transport
+        if transport != "tcp":
+            options.update(max_delay="0", reorder_queue_size="0")
+        file = urlunsplit(parts._replace(query=urlencode(query)))
+        return VideoInput(url, "rtsp", file, "rtsp", options)
+    return VideoInput(url, "url", url, None, dict(LOW_DELAY))
