@@ -1,4 +1,5 @@
-"""Who is who on a MAVLink link: skyfix's own ids, and the one rule for which system is the UAV.
+"""Who is who on a MAVLink link: skyfix's own ids, and what an autopilot's HEARTBEAT looks like (the one rule
+for which system is the UAV is :func:`groundstation.mavlink.ingest.names_the_uav`).
 
 skyfix is system :data:`SKYFIX_SYSID` (not 255, so it does not clash with QGroundControl on the same
 link): component :data:`GCS_COMPID` as a ground station on the UAV's and the UUV's links, component
@@ -18,14 +19,3 @@ def is_autopilot_heartbeat(msg) -> bool:
     """A HEARTBEAT that names an autopilot (not a ground station, companion computer, gimbal or camera)."""
     return (msg.get_type() == "HEARTBEAT" and getattr(msg, "autopilot", MAV_AUTOPILOT_INVALID) != MAV_AUTOPILOT_INVALID
             and getattr(msg, "type", None) not in NOT_AUTOPILOTS)
-
-
-def names_the_uav(msg) -> bool:
-    """Whether ``msg`` makes its system the UAV, while none is known: an autopilot's HEARTBEAT or an ATTITUDE
-    (the first of either, live or in a tlog; ArduPilot sends both, a camera or a GCS neither)."""
-    return msg.get_type() == "ATTITUDE" or is_autopilot_heartbeat(msg)
-
-
-def uav_system(msgs) -> int | None:
-    """The UAV's system id among ``msgs`` (in order): that of the first message that :func:`names_the_uav`."""
-    return next((m.get_srcSystem() for m in msgs if names_the_uav(m)), None)

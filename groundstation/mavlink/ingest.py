@@ -23,7 +23,7 @@ from collections.abc import Mapping
 
 from pymavlink import mavutil as _mavutil
 
-from groundstation.mavlink.ids import is_autopilot_heartbeat, names_the_uav
+from groundstation.mavlink.ids import is_autopilot_heartbeat
 from localizer.depth import PRESSURE_MESSAGES, ArduSubDepth, DepthSample
 from localizer.telemetry import Telemetry
 
@@ -58,6 +58,17 @@ def connect(url: str, **kwargs):
         raise LinkError(f"MAVLink {url!r}: cannot open: {e}") from None
 
 
+def names_the_uav(msg) -> bool:
+    """Whether ``msg`` makes its system the UAV while none is known: an autopilot's HEARTBEAT or a message the
+    localizer uses (:data:`USED`). The one rule, live (pymavlink and MAVSDK) and in a tlog."""
+    return is_autopilot_heartbeat(msg) or msg.get_type() in USED
+
+
+def uav_system(msgs) -> int | None:
+    """The UAV's system id among ``msgs`` (in order): that of the first message that :func:`names_the_uav`."""
+    return next((m.get_srcSystem() for m in msgs if names_the_uav(m)), None)
+
+
 def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     """Feed one decoded pymavlink message of the UAV's system into ``tel``; True if it was used.
 
@@ -76,7 +87,7 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     component = msg.get_srcComponent()
     tel.refusal = None
     autopilot_beat = is_autopilot_heartbeat(msg)
-    if tel.autopilot_component is None and names_the_uav(msg):
+    if tel.autopilot_component is None and (kind == "ATTITUDE" or autopilot_beat):
         tel.autopilot_component = component
     if autopilot_beat and component == tel.autopilot_component:
         tel.add_heartbeat(bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED), receive_unix_s)

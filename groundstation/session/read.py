@@ -16,8 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.mavlink.ids import uav_system
-from groundstation.mavlink.ingest import ingest
+from groundstation.mavlink.ingest import ingest, uav_system
 from groundstation.session import SessionError
 from groundstation.session.depth import read_depth
 from groundstation.session.tlog import read_tlog
@@ -111,11 +110,11 @@ def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
 
 
 def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> int:
-    """Ingest the UAV's messages; returns the UAV's system id (:func:`~groundstation.mavlink.ids.uav_system`)."""
+    """Ingest the UAV's messages; returns the UAV's system id (:func:`~groundstation.mavlink.ingest.uav_system`)."""
     msgs = [m for _, m in read_tlog(path, warnings)]
     sysid = uav_system(msgs)
     if sysid is None:
-        raise SessionError(f"{path}: no ATTITUDE message or autopilot HEARTBEAT (is this the UAV's telemetry?)")
+        raise SessionError(f"{path}: no ATTITUDE message nor any other from an autopilot (is this the UAV's telemetry?)")
     others = 0
     counts: dict[str, int] = {}
     for m in msgs:

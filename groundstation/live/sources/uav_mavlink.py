@@ -31,8 +31,8 @@ from collections.abc import Callable
 
 from groundstation.live.sources.rates import RANGEFINDER_HZ, RateMeter, RateRequests
 from groundstation.logs import Throttle, kind_of
-from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID, names_the_uav
-from groundstation.mavlink.ingest import USED, ingest, mavutil
+from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID
+from groundstation.mavlink.ingest import USED, ingest, mavutil, names_the_uav
 from groundstation.mavlink.link import MavlinkLink
 from groundstation.threads import Handoff, in_thread
 from localizer.gnss import horizontal_sigma_m, vertical_sigma_m

@@ -25,8 +25,7 @@ import time
 from collections.abc import Callable
 
 from groundstation.live.sources.uav_mavlink import LinkHealth, clock_status, gnss_status
-from groundstation.mavlink.ids import names_the_uav
-from groundstation.mavlink.ingest import USED, ingest
+from groundstation.mavlink.ingest import USED, ingest, names_the_uav
 from localizer.telemetry import Telemetry
 
 log = logging.getLogger("skyfix.uav")
