@@ -9,7 +9,7 @@ where it is fed into the :class:`~localizer.telemetry.Telemetry` (only the loop
 touches the telemetry); what skyfix sends is queued for the link's thread, so the
 event loop never blocks on a write. As a ground station (``MAV_TYPE_GCS``, system ``SKYFIX_SYSID`` /
 component ``GCS_COMPID``, not 255, so it does not clash with QGroundControl on the
-same link) the worker, once per second, heartbeats and sends a TIMESYNC request
+same link) its link heartbeats and the worker, once per second, sends a TIMESYNC request
 (the autopilot's replies measure the link's delay); once the autopilot is known
 it asks for its ``MNT1_TYPE`` parameter (what the gimbal message's roll and
 pitch are relative to) and for the telemetry rates skyfix needs
@@ -115,7 +115,9 @@ class UavMavlink:
         self._params_asked = 0
         self._params_last = 0.0
         self._throttle = Throttle()
-        self.link = MavlinkLink(url, SKYFIX_SYSID, GCS_COMPID, name="UAV MAVLink", is_peer=self._from_uav)
+        mav = mavutil().mavlink
+        self.link = MavlinkLink(url, SKYFIX_SYSID, GCS_COMPID, name="UAV MAVLink", is_peer=self._from_uav,
+                                heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID))
         self._low_warned: set[str] = set()
         self.handoff: Handoff | None = None
 
@@ -140,9 +142,7 @@ class UavMavlink:
         return msg.get_srcSystem() == self.uav_sysid if self.uav_sysid is not None else names_the_uav(msg)
 
     def _beat(self, conn, now: float) -> None:
-        """Once a second: heartbeat as a ground station and a TIMESYNC request (ts1: our clock in ns)."""
-        mav = mavutil().mavlink
-        conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE)
+        """Once a second: a TIMESYNC request (ts1: our clock in ns; the link itself heartbeats as a ground station)."""
         conn.mav.timesync_send(0, time.time_ns())
         for kind, hz in self.requests.needed.items():
             rate = self.health.meter.rate_hz(kind, now)
