@@ -37,7 +37,7 @@ import av
 import numpy as np
 
 from groundstation.video.ffmpeg_log import route_ffmpeg_log
-from groundstation.video.frames import VideoError, VideoFrame, ffmpeg_reason, put_until
+from groundstation.video.frames import VideoError, VideoFrame, decoder, ffmpeg_reason, put_until
 
 #: A step between timestamps within this share of a whole number of periods counts as regular.
 REGULAR_TOLERANCE = 0.05
@@ -217,9 +217,7 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     except (av.error.FFmpegError, IndexError) as e:
         why = ffmpeg_reason(e) if isinstance(e, av.error.FFmpegError) else "no video stream"
         raise VideoError(f"{url}: FFmpeg cannot open it ({why})") from None
-    ctx = container.streams.video[0].codec_context
-    ctx.thread_type = "SLICE"  # frame threads lose the frames in flight when a damaged packet fails
-    ctx.thread_count = int(threads)
+    decoder(container.streams.video[0], threads=threads)
     video = Video(container, url, expected_size, max_bad_reads, index_of)
     w, h = video.size
     if expected_size is not None and w > 0 and h > 0 and (w, h) != tuple(expected_size):

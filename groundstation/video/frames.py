@@ -1,5 +1,5 @@
 """What the video readers hand on: frames (a file's :class:`VideoFrame`, a live stream's :class:`LiveFrame`),
-their one error type, and the helpers both readers share."""
+their one error type, and what both readers share: the decoder's set-up, a bounded hand-over."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import queue
 import threading
 from dataclasses import dataclass
 
+import av
 import numpy as np
 
 
@@ -57,3 +58,15 @@ def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:
         except queue.Full:
             continue
     return False
+
+
+def decoder(stream, *, threads: int = 0, low_delay: bool = False):
+    """The video ``stream``'s codec context, set up as both readers decode: slice threads (frame threads lose the
+    frames in flight when a damaged packet fails), ``threads`` of them (0: FFmpeg's choice); ``low_delay`` for a
+    live stream (each frame out as soon as it is decoded)."""
+    ctx = stream.codec_context
+    ctx.thread_type = "SLICE"
+    ctx.thread_count = int(threads)
+    if low_delay:
+        ctx.flags |= av.codec.context.Flags.low_delay
+    return ctx

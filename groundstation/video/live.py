@@ -62,7 +62,7 @@ import numpy as np
 
 from groundstation.threads import Handoff, Supervised, in_thread
 from groundstation.video.ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
-from groundstation.video.frames import LiveFrame, VideoError, ffmpeg_reason, put_until
+from groundstation.video.frames import LiveFrame, VideoError, decoder, ffmpeg_reason, put_until
 from groundstation.video.inputs import VideoInput, parse_video_input
 from groundstation.video.rtp import RtpInput
 from localizer.clock import ClockMap
@@ -211,9 +211,7 @@ class VideoLive:
         if not container.streams.video:
             raise VideoError(f"{self.url}: no video stream in it")
         stream = container.streams.video[0]
-        ctx = stream.codec_context
-        ctx.thread_type = "SLICE"
-        ctx.flags |= av.codec.context.Flags.low_delay
+        ctx = decoder(stream, low_delay=True)
         packets: queue.Queue = queue.Queue(maxsize=PACKET_BACKLOG)
         done = threading.Event()
         demuxer = threading.Thread(target=_demux, args=(container, stream, packets, done), name="video-demux",
