@@ -142,8 +142,7 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
         if tel.distance_sensor_seen:
             return False
         return tel.add_rangefinder(None, msg.distance, 0.0, float("inf"), receive_unix_s)
-    name = msg.param_id.decode(errors="replace") if isinstance(msg.param_id, bytes) else str(msg.param_id)
-    tel.add_param(name.rstrip("\x00"), float(msg.param_value))
+    tel.add_param(param_name(msg.param_id), float(msg.param_value))
     return True
 
 

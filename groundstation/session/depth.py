@@ -42,9 +42,10 @@ def _record(line: str) -> DepthRecord | str:
     try:
         rec = json.loads(line)
         t, depth, t_recv = rec["t"], rec["depth_m"], rec.get("t_recv")
+        shaped = all(_number(x) for x in (t, depth, t_recv or 0.0))
     except (ValueError, KeyError, TypeError, AttributeError):
-        return f"expected {{\"t\": number, \"depth_m\": number}}, got {line[:80]!r}"
-    if not all(_number(x) for x in (t, depth, t_recv or 0.0)):
+        shaped = False
+    if not shaped:
         return f"expected {{\"t\": number, \"depth_m\": number}}, got {line[:80]!r}"
     if not (math.isfinite(t) and math.isfinite(depth) and math.isfinite(t_recv or 0.0)):
         return f"non-finite value in {line[:80]!r}"
