@@ -7,6 +7,9 @@ Feeds the streams of ``tests/gate_streams.py`` (30 Hz, white error 3 mm per axis
 805dfec, the gate that compared each fix with the previous accepted one) and to today's. For each:
 how many fixes that are not the UUV went out as valid (of how many), the largest error of a valid
 fix, and how many fixes of the real UUV were refused more than a second after its (re)acquisition.
+A third column: today's gate told by the UUV's autopilot whether its thrusters push
+(``localizer/thrusters.py``; ArduSub's outputs at 10 Hz): idle while the UUV is at rest, pushing
+throughout where it really moves.
 Then, for an abrupt start: how well a motion within the acceleration bound can explain it (the
 smallest largest-residual of a bounded-acceleration fit), the reason a slow one cannot be told from
 a real start. Last, what a check costs (the GPS_INPUT sink runs it on the event loop for every fix).
@@ -76,15 +79,19 @@ def main() -> int:
              ("wrong valid: fixes not of the UUV sent as valid / such fixes; worst: largest error of a valid fix (m); "
               "real refused: fixes of the UUV refused more than 1 s after its (re)acquisition"), ""]
     head = f"{'stream':44} {'h_acc':>5}  {'before: wrong valid':>19} {'worst':>6} {'real refused':>12}  " \
-           f"{'after: wrong valid':>18} {'worst':>6} {'real refused':>12}"
+           f"{'after: wrong valid':>18} {'worst':>6} {'real refused':>12}  " \
+           f"{'thrusters: wrong valid':>22} {'worst':>6} {'real refused':>12}"
     lines += [head, "-" * len(head)]
     for h_acc in (0.4, 0.05):
         for s in streams(h_acc):
             old, new = Before(), FixGate()
             before = score(s, gs.offer(old, s, old.reset))
             after = score(s, gs.offer(new, s, new.target_lost))
+            told = FixGate(thrusters=gs.vectored_thrusters())
+            moves = bool(np.ptp(s.truth_ne) > 0)
+            thr = score(s, gs.offer(told, s, told.target_lost, told.thrusters, lambda t, m=moves: m))
             lines.append(f"{s.name:44} {h_acc:5.2f}  {before[0]:>19} {before[1]:>6} {before[2]:>12}  "
-                         f"{after[0]:>18} {after[1]:>6} {after[2]:>12}")
+                         f"{after[0]:>18} {after[1]:>6} {after[2]:>12}  {thr[0]:>22} {thr[1]:>6} {thr[2]:>12}")
     lines += ["", "an abrupt start at v against the best motion within the acceleration bound a (noise-free):"]
     for v in (0.35, 0.7, 1.5):
         fits = ", ".join(f"{gs.bounded_fit_residual_m(v, a) * 1000:.1f} mm at a = {a:g} m/s²" for a in (1.0, 2.5, A))

@@ -245,6 +245,11 @@ class GateStatus(Section):
     track: GateTrackStatus | None = Field(description="the last confirmed track (while acquiring: where the UUV was)")
     reach_m: NonNegative = Field(description="while acquiring or diverged: how far from the track's position the UUV "
                                  "can be by now (top speed × the time since the last good fix)")
+    thrusters: Literal["idle", "pushing", "unknown"] | None = Field(
+        description="whether the UUV's horizontal thrusters push now, as its autopilot's outputs say (null: not read: "
+        "the depth is not ArduSub's)")
+    accel_bound_mps2: NonNegative = Field(description="the acceleration bound of the last fix judged: the UUV's, or "
+                                          "while its thrusters were idle what the water and the drag can do")
 
 
 class GnssStatus(Section):
@@ -336,6 +341,21 @@ class ArduSubDepthStatus(Section):
     autopilot_reboots: int
 
 
+class ThrustersStatus(Section):
+    """The UUV's horizontal thrusters from ArduSub's SERVO_OUTPUT_RAW (localizer/thrusters.py)."""
+
+    state: Literal["idle", "pushing", "unknown"] = Field(description="idle: every horizontal motor's pulse within the "
+                                                         "deadband of 1500 µs; unknown: see why_unknown, or no fresh "
+                                                         "outputs")
+    why_unknown: str | None = Field(description="why the horizontal motors' channels are not known")
+    frame: int | None = Field(description="FRAME_CONFIG (1: vectored, 2: vectored 6DOF)")
+    channels: list[int] | None = Field(description="the output channels of the horizontal motors (SERVOn_FUNCTION)")
+    deadband_us: NonNegative = Field(description="pulses within this of 1500 µs do not turn a thruster")
+    pulses_us: list[int] | None = Field(description="the horizontal motors' newest pulses")
+    received: int = Field(description="SERVO_OUTPUT_RAW messages received")
+    unusable: int = Field(description="of them, with a horizontal motor's channel not output (0 µs)")
+
+
 class DepthStatus(Section):
     """The UUV's depth: skyfix JSON on Zenoh, or ArduSub's over BlueOS's Zenoh or MAVLink."""
 
@@ -358,6 +378,7 @@ class DepthStatus(Section):
     rates_hz: dict[str, NonNegative] | None = Field(description="per message type used: measured rate (ArduSub)")
     rate_requests: dict[str, str] | None = Field(description="per message: what skyfix asked for, the answer")
     ardusub: ArduSubDepthStatus | None = Field(description="ArduSub's readings (blueos, mavlink)")
+    thrusters: ThrustersStatus | None = Field(None, description="ArduSub's horizontal thrusters (blueos, mavlink)")
     link: LinkStatus | None = Field(description="the MAVLink link's own state (mavlink)")
     handoff: HandoffStatus | None = Field(None, description="samples from Zenoh's or the link's thread")
 

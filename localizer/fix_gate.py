@@ -41,15 +41,23 @@ only when every test passes; otherwise it names the first that failed:
   enough it is checked once more with the white share measured over it, and becomes the
   track.
 
-What the gate cannot do, measured (``bench/gate_streams.py``): tell a UUV starting to move
+The acceleration bound is the vehicle's (``max_accel_mps2``) unless a second source says it
+is not pushing: with ``thrusters`` (:class:`~localizer.thrusters.Thrusters`, the UUV's
+autopilot's outputs) idle from the track's last fix until now, the bound over that step is
+what the water and the drag can do (:func:`~localizer.thrusters.idle_accel_mps2`, with
+``water_accel_mps2``, default :data:`WATER_ACCEL_MPS2`), for the track's speed plus two sigma.
+
+What the fixes alone cannot tell, measured (``bench/gate_streams.py``): a UUV starting to move
 from a tracker starting to drift, unless the start is faster than the UUV can make it. A
 ramp starting abruptly at 0.35 m/s (the issue's: 0.7 m in 2 s) is 2 cm ahead of a BlueROV2
 starting at its acceleration bound (3 m/s²), and a motion within the bound follows it to
-4 mm: it passes, as the real start must. An abrupt start at top speed (7 cm from any
-motion within the bound) is refused from its third frame until the track's UUV could have
-caught up with it (about 0.5 s); a smooth drift, never. A look-alike found after a loss where
-the UUV could be by then, and consistent for a second, is taken. Drifts
-and look-alikes are the tracker's to catch (its match against the UUV's first appearance).
+4 mm: without the thrusters' word it passes, as the real start must. An abrupt start at top
+speed (7 cm from any motion within the bound) is refused from its third frame until the
+track's UUV could have caught up with it (about 0.5 s). With the thrusters idle the same
+ramp, and any drift faster than the water moves the UUV, is refused within a few frames and
+the gate is ``diverged`` half a second later. A look-alike found after a loss where the UUV
+could be by then, and consistent for a second, is taken. Drifts and look-alikes are also
+the tracker's to catch (its match against the UUV's first appearance).
 
 Pure computation; times are station-clock UNIX seconds; the local frame is metres north
 and east of the first fix the gate saw.
@@ -65,6 +73,7 @@ import numpy as np
 
 from .fix import Fix
 from .geodesy import geodetic_to_ned, ned_to_geodetic
+from .thrusters import STALE_S, Thrusters, idle_accel_mps2
 from .uuv_track import Scatter, UuvTrack, fix_covariance_m2
 
 #: A fix further than this many sigmas from the track (innovation, reach) is refused.
@@ -88,6 +97,11 @@ MAX_SPEED_MPS = {"bluerov2": 1.5}
 #: over 24 kg, 2.4 m/s²). ArduSub's position modes ask for less: POSHOLD PILOT_ACCEL_Z (1 m/s²),
 #: AUTO and GUIDED WPNAV_ACCEL (2.5 m/s²).
 MAX_ACCEL_MPS2 = {"bluerov2": 3.0}
+#: What the water can do to a UUV whose thrusters are idle (m/s²): sheltered shallow water, a slack tether — a current
+#: that changes by 0.5 m/s within 10 s (a current itself is a velocity, which the track follows). Waves move a vehicle
+#: near the surface by their orbital acceleration (ω·u: 0.3–0.5 m/s² for 0.2 m waves of 3–4 s over 2 m of water): set
+#: ``--uuv-water-accel-mps2`` to it there, or a UUV rocked by the waves is refused (no fix, never a wrong one).
+WATER_ACCEL_MPS2 = 0.05
 REASONS = ("h_acc", "age", "out_of_order", "prediction", "innovation", "diverged", "reach", "unconfirmed")
 STATES = ("acquiring", "tracking", "diverged")
 
@@ -114,13 +128,18 @@ class FixGate:
 
     def __init__(self, max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
                  max_accel_mps2: float = MAX_ACCEL_MPS2["bluerov2"], max_h_acc_m: float = 2.5,
-                 max_age_s: float = 0.5, confirm_s: float = CONFIRM_S, confirm_fixes: int = CONFIRM_FIXES):
+                 max_age_s: float = 0.5, confirm_s: float = CONFIRM_S, confirm_fixes: int = CONFIRM_FIXES,
+                 thrusters: Thrusters | None = None, water_accel_mps2: float = WATER_ACCEL_MPS2):
         self.max_speed_mps = max_speed_mps
         self.max_accel_mps2 = max_accel_mps2
         self.max_h_acc_m = max_h_acc_m
         self.max_age_s = max_age_s
         self.confirm_s = confirm_s
         self.confirm_fixes = confirm_fixes
+        self.thrusters = thrusters
+        self.water_accel_mps2 = water_accel_mps2
+        self.accel_bound_mps2: float | None = None  # the bound of the last step judged
+        self._now = -math.inf
         self.state = "acquiring"
         self.state_since_t: float | None = None
         self.track: UuvTrack | None = None  # the last confirmed track: while acquiring, where the UUV was
@@ -158,6 +177,7 @@ class FixGate:
 
     # -- the tests -----------------------------------------------------------------------------
     def _reason(self, fix: Fix, now: float, window) -> str | None:
+        self._now = now
         if not (math.isfinite(fix.h_acc_m) and fix.h_acc_m <= self.max_h_acc_m):
             return self._refuse(fix.t_unix, "h_acc", f"h_acc {fix.h_acc_m:.2f} m above {self.max_h_acc_m:g} m")
         if not now - fix.t_unix <= self.max_age_s:
@@ -196,12 +216,14 @@ class FixGate:
 
     def _track_step(self, f: _Seen) -> str | None:
         share = self.scatter.share
-        d = self.track.distance(f.t, f.z, f.C, share)[0]
+        a = self._accel(self.track)
+        d = self.track.distance(f.t, f.z, f.C, share, a)[0]
         if d > GATE_SIGMAS:
+            idle = f", its thrusters idle: {a:.2f} m/s²" if a < self.max_accel_mps2 else ""
             return self._refuse(f.t, "innovation", f"{d:.1f} sigma beyond where the UUV can be "
-                                f"{f.t - self.track.t:.2f} s after the track's last fix (gate {GATE_SIGMAS:g})",
+                                f"{f.t - self.track.t:.2f} s after the track's last fix (gate {GATE_SIGMAS:g}{idle})",
                                 leaves_track=True)
-        self.track.update(f.t, f.z, f.C, share)
+        self.track.update(f.t, f.z, f.C, share, a)
         self.scatter.add(f.t, f.z, f.C)
         self._refusing_since = None
         self._last_t = f.t
@@ -223,9 +245,10 @@ class FixGate:
             self.scatter.restart()
             return "reach"
         self._last_t = f.t
-        if self._chain and self._chain_track.distance(f.t, f.z, f.C, share)[0] <= GATE_SIGMAS:
+        a = self._accel(self._chain_track) if self._chain else None
+        if self._chain and self._chain_track.distance(f.t, f.z, f.C, share, a)[0] <= GATE_SIGMAS:
             self._chain.append(f)
-            self._chain_track.update(f.t, f.z, f.C, share)
+            self._chain_track.update(f.t, f.z, f.C, share, a)
             self._chain_misses = 0
         elif self._chain and self._chain_misses < CHAIN_MISSES:  # one stray fix does not start the chain over
             self._chain_misses += 1
@@ -250,22 +273,39 @@ class FixGate:
         """The chain's track, and the index of the first fix that fails (reach, innovation) with ``share``."""
         track = self._new_track(chain[0], share)
         for i, f in enumerate(chain):
+            a = self._accel(track)
             if check and (self._out_of_reach(f, share)
-                          or (i and track.distance(f.t, f.z, f.C, share)[0] > GATE_SIGMAS)):
+                          or (i and track.distance(f.t, f.z, f.C, share, a)[0] > GATE_SIGMAS)):
                 return track, max(i, 1)
             if i:
-                track.update(f.t, f.z, f.C, share)
+                track.update(f.t, f.z, f.C, share, a)
         return track, None
 
     def _out_of_reach(self, f: _Seen, share: float) -> str | None:
         """Why the UUV cannot be at ``f`` given the last good track (None: it can, or there is none)."""
         if self.track is None:
             return None
-        d, radius, margin = self.track.distance(f.t, f.z, f.C, share)
+        d, radius, margin = self.track.distance(f.t, f.z, f.C, share, self._accel(self.track))
         if d <= GATE_SIGMAS:
             return None
         return (f"{d:.1f} sigma beyond where the UUV can be {f.t - self.track.t:.1f} s after the last good fix "
                 f"(it can have moved {radius:.2f} m; 1 sigma {margin:.2f} m)")
+
+    def _accel(self, track: UuvTrack) -> float:
+        """The acceleration bound (m/s²) from ``track``'s last fix until now: the water's and the drag's while the
+        thrusters were idle all along, else the vehicle's. A track filtered with the idle bound whose thrusters
+        push now is widened by :data:`~localizer.thrusters.STALE_S` of the vehicle's: the push can have begun that
+        long before its first output arrived."""
+        a = self.max_accel_mps2
+        idle = self.thrusters is not None and self.thrusters.idle_since(track.t, self._now)
+        if idle:
+            speed = math.hypot(track.x[2], track.x[3]) + 2.0 * math.sqrt(max(track.P[2, 2], track.P[3, 3]))
+            a = min(a, idle_accel_mps2(speed, self.water_accel_mps2))
+        elif track.tight:
+            track.widen(STALE_S)
+        track.tight = idle
+        self.accel_bound_mps2 = a
+        return a
 
     def _new_track(self, f: _Seen, share: float) -> UuvTrack:
         return UuvTrack(self.max_speed_mps, self.max_accel_mps2, f.t, f.z, f.C, share)
@@ -296,7 +336,9 @@ class FixGate:
                "rejected": {r: self.rejected[r] for r in REASONS}, "last_refusal": self.last_refusal,
                "white_share": num(self.scatter.share, 4) if self.scatter.samples else None,
                "diverged_until_t": num(self._diverged_until) if self.state == "diverged" else None,
-               "chain": None, "track": None, "reach_m": None}
+               "chain": None, "track": None, "reach_m": None,
+               "thrusters": self.thrusters.state(now) if self.thrusters is not None else None,
+               "accel_bound_mps2": num(self.accel_bound_mps2)}
         if self._chain:
             out["chain"] = {"fixes": len(self._chain), "span_s": num(self._chain[-1].t - self._chain[0].t),
                             "needed_s": self.confirm_s}

@@ -153,24 +153,26 @@ class UuvTrack:
         self.P[2:, 2:] = np.eye(2) * max_speed_mps**2
         self.C = C  # the newest fix's covariance (m²) ...
         self.common = (1.0 - share) * C  # ... and its common part
+        self.tight = False  # its last step was judged (and filtered) with a bound tighter than the vehicle's
 
     @staticmethod
     def white_m2(C: np.ndarray, share: float) -> np.ndarray:
         """The white part of a fix's covariance ``C`` (m²): ``share·C`` and the floor."""
         return share * C + np.eye(2) * WHITE_FLOOR_M**2
 
-    def predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """State and covariance at ``t`` (not before :attr:`t`), the acceleration's process noise included."""
+    def predict(self, t: float, accel_mps2: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """State and covariance at ``t`` (not before :attr:`t`), the acceleration's process noise included
+        (``accel_mps2``: the bound over this step, if not :attr:`max_accel_mps2`)."""
+        a = self.max_accel_mps2 if accel_mps2 is None else accel_mps2
         dt = max(0.0, t - self.t)
         F = np.eye(4)
         F[0, 2] = F[1, 3] = dt
-        G = np.vstack([np.eye(2) * dt * dt / 2.0, np.eye(2) * dt])
-        return F @ self.x, F @ self.P @ F.T + (PROCESS_ACCEL_SHARE * self.max_accel_mps2) ** 2 * (G @ G.T)
+        return F @ self.x, F @ self.P @ F.T + _process_noise(a, dt)
 
-    def update(self, t: float, z: np.ndarray, C: np.ndarray, share: float) -> None:
+    def update(self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None) -> None:
         """Take the fix ``z`` (covariance ``C``) at ``t``; the velocity is held within the top speed."""
         R = self.white_m2(C, share)
-        x, P = self.predict(t)
+        x, P = self.predict(t, accel_mps2)
         S = P[:2, :2] + R
         K = P @ _H.T @ np.linalg.inv(S)
         x = x + K @ (z - x[:2])
@@ -181,7 +183,8 @@ class UuvTrack:
             x[2:] *= self.max_speed_mps / speed
         self.t, self.x, self.P, self.C, self.common = t, x, P, C, (1.0 - share) * C
 
-    def distance(self, t: float, z: np.ndarray, C: np.ndarray, share: float) -> tuple[float, float, float]:
+    def distance(self, t: float, z: np.ndarray, C: np.ndarray, share: float,
+                 accel_mps2: float | None = None) -> tuple[float, float, float]:
         """How far a fix ``z`` (covariance ``C``) at ``t`` is from where the fixes can be: ``(d, radius_m, margin_m)``.
 
         Two bounds, both must hold: the UUV is at most ``v_top·Δ`` from the track's position
@@ -191,15 +194,22 @@ class UuvTrack:
         fix's white part and how much the common error can have changed
         (:func:`common_change_m2`) — is a Mahalanobis distance; ``d`` is the larger.
         ``radius_m`` and ``margin_m`` (1-sigma of that covariance along its widest axis) are
-        those of the bound that gives ``d``.
+        those of the bound that gives ``d``. ``accel_mps2``: the acceleration bound over this
+        step, if not :attr:`max_accel_mps2`.
         """
+        a = self.max_accel_mps2 if accel_mps2 is None else accel_mps2
         dt = max(0.0, t - self.t)
         F = np.eye(4)
         F[0, 2] = F[1, 3] = dt
         extra = self.white_m2(C, share) + common_change_m2(C, dt)
         moved_on, P_moved = (F @ self.x)[:2], (F @ self.P @ F.T)[:2, :2]
         return max(_beyond(z - self.x[:2], self.max_speed_mps * dt, self.P[:2, :2] + extra),
-                   _beyond(z - moved_on, 0.5 * self.max_accel_mps2 * dt * dt, P_moved + extra))
+                   _beyond(z - moved_on, 0.5 * a * dt * dt, P_moved + extra))
+
+    def widen(self, seconds: float) -> None:
+        """The vehicle's acceleration bound may have held for ``seconds`` that the track was filtered with a
+        tighter one (a push heard of late): its covariance grows by that much process noise."""
+        self.P = self.P + _process_noise(self.max_accel_mps2, seconds)
 
     def reach_m(self, t: float) -> float:
         """How far from the track's position the UUV can be at ``t``: its top speed times the time since."""
@@ -208,6 +218,13 @@ class UuvTrack:
     def absolute_m2(self) -> np.ndarray:
         """The position's covariance against the truth (m²): the track's own plus the common error."""
         return self.P[:2, :2] + self.common
+
+
+def _process_noise(accel_mps2: float, dt: float) -> np.ndarray:
+    """The process noise (4×4) of a white acceleration of 1-sigma :data:`PROCESS_ACCEL_SHARE` × ``accel_mps2`` over
+    ``dt`` seconds (see the module doc)."""
+    G = np.vstack([np.eye(2) * dt * dt / 2.0, np.eye(2) * dt])
+    return (PROCESS_ACCEL_SHARE * accel_mps2) ** 2 * (G @ G.T)
 
 
 def _beyond(offset: np.ndarray, radius_m: float, U: np.ndarray) -> tuple[float, float, float]:

@@ -118,15 +118,36 @@ def turn(h_acc_m: float, speed_mps: float, accel_mps2: float, seconds: float = 6
     return _stream(f"turning at {speed_mps:g} m/s, radius {r:.2f} m", path, path, h_acc_m, seed)
 
 
-def offer(gate, stream: Stream, lose) -> np.ndarray:
-    """Offer each fix as it is made (0.05 s later); ``lose()`` on a lost frame. Accepted mask, per fix."""
+def offer(gate, stream: Stream, lose, thrusters=None, pushing=lambda t: False, outputs_hz: float = 10.0) -> np.ndarray:
+    """Offer each fix as it is made (0.05 s later); ``lose()`` on a lost frame. Accepted mask, per fix.
+
+    With ``thrusters`` (a :class:`~localizer.thrusters.Thrusters` that knows a vectored frame), ArduSub's
+    outputs arrive at ``outputs_hz`` from 2 s before the stream: the four horizontal motors at 1500 µs, or
+    at 1580 µs (forward, 20 % of full) when ``pushing(t)`` says the UUV pushes at that arrival."""
     out = np.zeros(len(stream.fixes), dtype=bool)
+    t_out = stream.fixes[0].t_unix - 2.0
     for i, f in enumerate(stream.fixes):
+        now = f.t_unix + 0.05
+        while thrusters is not None and t_out <= now:
+            pulse = 1580 if pushing(t_out) else 1500
+            thrusters.outputs(t_out, {1: 3000 - pulse, 2: 3000 - pulse, 3: pulse, 4: pulse, 5: 1620, 6: 1620})
+            t_out += 1.0 / outputs_hz
         if f.ok:
-            out[i] = gate.check(f, f.t_unix + 0.05) is None
+            out[i] = gate.check(f, now) is None
         else:
             lose()
     return out
+
+
+def vectored_thrusters():
+    """ArduSub's outputs as a BlueROV2's SITL reports its parameters: FRAME_CONFIG 1, SERVO1-6 motors 1-6."""
+    from localizer.thrusters import Thrusters
+
+    th = Thrusters()
+    th.param("FRAME_CONFIG", 1.0)
+    for n in range(1, 17):
+        th.param(f"SERVO{n}_FUNCTION", 32.0 + n if n <= 6 else 0.0)
+    return th
 
 
 def seconds_since_start(stream: Stream) -> np.ndarray:

@@ -14,11 +14,15 @@ import shutil
 import time
 from pathlib import Path
 
+import gate_streams
 import numpy as np
 import pytest
 from gate_streams import (
     BEFORE_S,
     HZ,
+    LAT0,
+    LON0,
+    M_PER_DEG,
     T0,
     accelerate,
     bounded_fit_residual_m,
@@ -29,6 +33,7 @@ from gate_streams import (
     ramp,
     step,
     turn,
+    vectored_thrusters,
 )
 from live_helpers import free_port
 
@@ -38,6 +43,7 @@ from groundstation.offline.process import process_session
 from groundstation.session.read import load_session
 from localizer.fix import Fix
 from localizer.fix_gate import CONFIRM_S, DIVERGED_S, MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
+from localizer.thrusters import DRAG_LINEAR, DRAG_QUADRATIC, MASS_KG
 from localizer.uuv_track import WHITE_FLOOR_M, Scatter, UuvTrack, common_change_m2
 from sim_fixtures.bundle import BUNDLED_DIR
 from sim_fixtures.generate import generate
@@ -193,8 +199,6 @@ MANOEUVRES = {
 @pytest.mark.parametrize("hz", [10.0, 30.0, 60.0])
 @pytest.mark.parametrize("name", list(MANOEUVRES))
 def test_real_motion_at_the_bounds_is_never_refused(name, hz, monkeypatch):
-    import gate_streams
-
     monkeypatch.setattr(gate_streams, "HZ", hz)
     v0, accel = MANOEUVRES[name]
     path = _path_from_acceleration(accel, v0, hz)
@@ -210,6 +214,86 @@ def test_accelerating_from_rest_to_top_speed_and_turning_are_never_refused(h_acc
     for stream in (accelerate(h_acc_m, A, V), turn(h_acc_m, V, A)):
         _, valid = gate_on(stream)
         assert valid[stream.real_after(CONFIRM_S)].all(), stream.name
+
+
+# -- the thrusters' word --------------------------------------------------------------------------
+def gate_with_thrusters(stream, pushing=lambda t: False, outputs_hz: float = 10.0) -> tuple[FixGate, np.ndarray]:
+    gate = FixGate(thrusters=vectored_thrusters())
+    return gate, offer(gate, stream, gate.target_lost, gate.thrusters, pushing, outputs_hz)
+
+
+def offset_m(stream) -> np.ndarray:
+    """Each fix's distance from the truth (m), on the streams' own spherical Earth."""
+    seen = np.array([[(f.lat - LAT0) * M_PER_DEG, (f.lon - LON0) * M_PER_DEG * math.cos(math.radians(LAT0))]
+                     for f in stream.fixes])
+    return np.linalg.norm(seen - stream.truth_ne, axis=1)
+
+
+@pytest.mark.parametrize("h_acc_m", [0.4, 0.05])
+def test_the_issue_ramp_with_the_thrusters_idle_is_refused(h_acc_m):
+    """The issue's ramp (0.7 m in 2 s) while ArduSub's horizontal thrusters stay at 1500 µs: what the water can do
+    (0.05 m/s²) follows it for a few frames only. Nothing more than 6 cm off goes out (the first 5 frames), and
+    within HOLD_S more the gate is ``diverged``: the rest of the ramp is refused."""
+    stream = ramp(h_acc_m)
+    gate, valid = gate_with_thrusters(stream)
+    off = offset_m(stream)
+    start = round(BEFORE_S * HZ)
+    assert valid[:start][stream.real_after(CONFIRM_S)[:start]].all()  # the UUV at rest before it: taken
+    assert off[valid & stream.wrong].max() <= 0.06, off[valid & stream.wrong]
+    assert not valid[start + 6:].any() and gate.state == "diverged", gate.last_refusal
+    assert "diverged" in gate.rejected and gate.status(stream.fixes[-1].t_unix)["thrusters"] == "idle"
+
+
+def test_the_same_ramp_with_the_thrusters_pushing_passes_as_a_real_start():
+    """The same fixes while the thrusters push: the UUV starting, as far as the fixes can tell."""
+    stream = ramp(0.05)
+    _, valid = gate_with_thrusters(stream, pushing=lambda t: t >= T0 + BEFORE_S - 0.1)
+    assert valid[stream.wrong].all()
+
+
+@pytest.mark.parametrize("late_s", [-0.1, 0.0, 0.1])
+@pytest.mark.parametrize("name", list(MANOEUVRES))
+def test_real_motion_at_the_bounds_with_the_thrusters_pushing_is_never_refused(name, late_s):
+    """The manoeuvres at 30 Hz with the thrusters idle until the motion begins (``late_s``: the first pushing
+    output arrives that long after the motion's start — one output period late at 10 Hz), pushing after."""
+    v0, accel = MANOEUVRES[name]
+    path = _path_from_acceleration(accel, v0, HZ)
+    moves = 2.0 if name != "turning at top speed" else 0.0
+    stream = gate_streams._stream(name, path, path, 0.05, seed=7)
+    _, valid = gate_with_thrusters(stream, pushing=lambda t: t >= T0 + moves + late_s)
+    late = stream.real_after(CONFIRM_S)
+    assert valid[late].all(), f"{name}, outputs {late_s:+g} s: {(~valid[late]).sum()} refused"
+
+
+@pytest.mark.parametrize("h_acc_m", [0.4, 0.05])
+def test_coasting_and_drifting_with_the_thrusters_idle_are_never_refused(h_acc_m):
+    """Thrusters idle: a BlueROV2 coasting from top speed, slowed by its drag alone (Wu's surge damping, integrated
+    here at 1 kHz), and one carried by a current of 0.3 m/s whose direction turns at the water's 0.05 m/s²."""
+    def coast(t, v):
+        speed = math.hypot(*v)
+        return -(DRAG_LINEAR * speed + DRAG_QUADRATIC * speed**2) / MASS_KG * v / max(speed, 1e-12)
+
+    def current(t, v):
+        return 0.05 * np.array([-v[1], v[0]]) / max(math.hypot(*v), 1e-12)
+
+    for name, v0, accel in (("coasting", [V, 0.0], coast), ("current", [0.3, 0.0], current)):
+        path = _path_from_acceleration(accel, v0, HZ, seconds=6.0)
+        stream = gate_streams._stream(name, path, path, h_acc_m, seed=8)
+        gate, valid = gate_with_thrusters(stream)
+        late = stream.real_after(CONFIRM_S)
+        assert valid[late].all(), f"{name}: {(~valid[late]).sum()} refused: {gate.last_refusal}"
+
+
+def test_stale_or_unknown_thrusters_leave_the_vehicle_bound():
+    """Outputs at 1 Hz (gaps over STALE_S), or a frame whose motors are not known here: no evidence, the ramp
+    passes as without them (the fixes alone cannot tell)."""
+    stream = ramp(0.05)
+    _, valid = gate_with_thrusters(stream, outputs_hz=1.0)
+    assert valid[stream.wrong].all()
+    gate = FixGate(thrusters=vectored_thrusters())
+    gate.thrusters.param("FRAME_CONFIG", 7.0)  # custom
+    valid = offer(gate, stream, gate.target_lost, gate.thrusters)
+    assert valid[stream.wrong].all() and gate.status(stream.fixes[-1].t_unix)["thrusters"] == "unknown"
 
 
 # -- the simple gates ------------------------------------------------------------------------------

@@ -48,17 +48,19 @@ DEPTH_PARM = EXTRA_PARM + "BARO_SPEC_GRAV 1.024\nARMING_CHECK 0\n"
 KEEP = (*Observer.KEEP, "SIM_STATE", "PARAM_VALUE", "HOME_POSITION")
 ALT_HOLD = 2  # ArduSub custom mode
 DIVE, HOLD, RISE = 200, 500, 800  # MANUAL_CONTROL z: ~0.5 m/s down, hold the depth, ~0.5 m/s up
-# the flight: (what, seconds); "origin" and "gps" happen at the start of their phase
+FORWARD = 500  # MANUAL_CONTROL x: half ahead
+# the flight: (what, seconds); "origin", "gps" and "disarm" happen at the start of their phase
 FLIGHT = (("surface", 3.0), ("dive", 8.0), ("hold", 3.0), ("origin", 3.0), ("gps", 4.0), ("rise", 5.0),
-          ("hold", 2.0), ("dive", 3.0), ("hold", 3.0))
-STICK = {"surface": HOLD, "dive": DIVE, "hold": HOLD, "origin": HOLD, "gps": HOLD, "rise": RISE}
+          ("hold", 2.0), ("dive", 3.0), ("hold", 3.0), ("forward", 3.0), ("disarm", 3.0))
+STICK = {"surface": HOLD, "dive": DIVE, "hold": HOLD, "origin": HOLD, "gps": HOLD, "rise": RISE, "forward": HOLD,
+         "disarm": HOLD}
 
 
 class Pilot:
     """MANUAL_CONTROL at 10 Hz on the observer's link, and GPS_INPUT at 5 Hz once :attr:`gps` is set."""
 
     def __init__(self, obs: Observer):
-        self.obs, self.z, self.gps = obs, HOLD, False
+        self.obs, self.x, self.z, self.gps = obs, 0, HOLD, False
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="pilot", daemon=True)
         self._thread.start()
@@ -66,7 +68,7 @@ class Pilot:
     def _run(self) -> None:
         n = 0
         while not self._stop.wait(0.1):
-            self.obs.send(mavlink2.MAVLink_manual_control_message(1, 0, 0, self.z, 0, 0))
+            self.obs.send(mavlink2.MAVLink_manual_control_message(1, self.x, 0, self.z, 0, 0))
             n += 1
             if self.gps and n % 2 == 0:
                 gps_s = time.time() - 315964800 + 18  # GPS time: UTC + 18 leap seconds
@@ -95,6 +97,10 @@ def fly(obs: Observer, pilot: Pilot) -> dict[str, float]:
                                                                     int(ORIGIN_AMSL_M * 1000), 0))
         if what == "gps":
             pilot.gps = True
+        if what == "disarm":
+            obs.send(mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                                           0, 0, 0, 0, 0, 0, 0))
+        pilot.x = FORWARD if what == "forward" else 0
         pilot.z = STICK[what]
         time.sleep(seconds)  # the flight's own pace (the simulator runs in real time), not a condition
     marks["end"] = time.time()
@@ -241,3 +247,20 @@ def test_ardusub_depth_through_blueos_and_mavlink(tmp_path):
         assert max(check) <= 0.2 and last["jumps"] == 0, why
         assert min(last["rates_hz"][k] for k in ("GLOBAL_POSITION_INT", "SCALED_PRESSURE")) >= 4.0, last
     assert any(m.relative_alt > 50_000 for _, m in gpi), "ArduSub's home did not turn relative_alt into an altitude"
+    thrusters_follow_the_pilot(statuses.got, keys, marks)
+
+
+def thrusters_follow_the_pilot(got: dict[str, list[dict]], keys: dict[str, str], marks: dict[str, float]) -> None:
+    """ArduSub's horizontal thrusters as both skyfix read them (SERVO_OUTPUT_RAW, FRAME_CONFIG, SERVOn_FUNCTION):
+    pushing while the pilot asks for half ahead, idle once disarmed (1500 µs), from a second into each."""
+    def states(key: str, phase: str, until: str) -> list[str]:
+        return [st["depth"]["thrusters"]["state"] for st in got[key] if marks[phase] + 1.0 <= st["t"] <= marks[until]]
+
+    for name, key in keys.items():
+        forward, disarmed = states(key, "forward", "disarm"), states(key, "disarm", "end")
+        last = got[key][-1]["depth"]["thrusters"]
+        print(f"{name}: thrusters {last['frame']=} {last['channels']=}: half ahead {forward}, disarmed {disarmed}; "
+              f"SERVO_OUTPUT_RAW {got[key][-1]['depth']['rates_hz'].get('SERVO_OUTPUT_RAW')} Hz")
+        assert last["frame"] == 1 and last["channels"] == [1, 2, 3, 4], last
+        assert forward and set(forward) == {"pushing"}, (name, forward, last)
+        assert disarmed and set(disarmed) == {"idle"}, (name, disarmed, last)

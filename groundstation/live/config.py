@@ -39,7 +39,8 @@ from localizer.contract import (
     within,
 )
 from localizer.depth import BLUEROV2_MAX_VERTICAL_SPEED_MPS
-from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS, WATER_ACCEL_MPS2
+from localizer.thrusters import DEADBAND_US
 from localizer.tracking import TRACKERS, WITHOUT_LOSS_SIGNAL
 
 log = logging.getLogger("skyfix.config")
@@ -121,6 +122,12 @@ class RunConfig:
                                                          "UUV's largest horizontal acceleration (a BlueROV2 at full "
                                                          "thrust from rest, about 3 m/s²): a fix the track's UUV "
                                                          "cannot reach is not sent")
+    uuv_water_accel_mps2: Annotated[Number, Ge(0)] = Field(WATER_ACCEL_MPS2, description="safety gate: the "
+                                                           "largest horizontal acceleration the water gives the UUV "
+                                                           "while ArduSub's horizontal thrusters are idle (read with "
+                                                           "depth_source blueos or mavlink); raise it in waves")
+    thruster_deadband_us: within(0, 400) = Field(DEADBAND_US, description="pulses within this of 1500 µs do not "
+                                                 "turn the UUV's thrusters (its ESCs' deadband)")
     fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
                                                       "accuracy is worse than this (m) is not sent as valid")
     uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "

@@ -60,6 +60,7 @@ from localizer.depth import DepthGate
 from localizer.fix_gate import FixGate
 from localizer.height import status as height_status
 from localizer.telemetry import Telemetry
+from localizer.thrusters import Thrusters
 
 log = logging.getLogger("skyfix.run")
 
@@ -136,13 +137,16 @@ async def serve(cfg: config.RunConfig) -> dict:
         closers.append(fix_sink.close)
         sinks = [fix_sink]
         gps = None
+        # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
+        thrusters = Thrusters(cfg.thruster_deadband_us) if cfg.depth_source in ("blueos", "mavlink") else None
         if cfg.gps_input:
             key = read_signing_key(cfg.gps_input_signing_key) if cfg.gps_input_signing_key else None
             link = (ZenohMavlinkIn(session, cfg.gps_input.removeprefix("zenoh:")) if cfg.gps_input.startswith("zenoh:")
                     else mavlink_gps_link(cfg.gps_input, signing_key=key))
             max_age_s = cfg.fix_max_age_ms / 1000.0
             gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_accel_mps2=cfg.uuv_max_accel_mps2,
-                           max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s)
+                           max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s, thrusters=thrusters,
+                           water_accel_mps2=cfg.uuv_water_accel_mps2)
             gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
             sinks.append(gps)
         if recorder:
@@ -163,9 +167,9 @@ async def serve(cfg: config.RunConfig) -> dict:
         depth_key = cfg.depth_input_key
         gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
         if cfg.depth_source == "mavlink":
-            depth = ArduSubMavlink(cfg.depth_mavlink, tel, gate, cal.sigmas.depth_m)
+            depth = ArduSubMavlink(cfg.depth_mavlink, tel, gate, cal.sigmas.depth_m, thrusters=thrusters)
         elif cfg.depth_source == "blueos":
-            depth = ArduSubZenoh(session, depth_key, tel, gate, cal.sigmas.depth_m)
+            depth = ArduSubZenoh(session, depth_key, tel, gate, cal.sigmas.depth_m, thrusters=thrusters)
         else:
             depth = DepthZenoh(session, depth_key, tel, gate)
         control = Control(pipeline, lambda now: status(now))

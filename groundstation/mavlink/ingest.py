@@ -32,8 +32,10 @@ USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUD
         "GPS_RAW_INT", "TIMESYNC", "PARAM_VALUE", "DISTANCE_SENSOR", "RANGEFINDER")
 GIMBAL_MESSAGES = ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")
 RANGEFINDER_MESSAGES = ("DISTANCE_SENSOR", "RANGEFINDER")
-#: Message types the UUV depth reader uses (COMMAND_ACK: the answers to its rate requests).
-DEPTH_USED = ("GLOBAL_POSITION_INT", *PRESSURE_MESSAGES, "PARAM_VALUE", "GPS_GLOBAL_ORIGIN", "COMMAND_ACK")
+#: Message types the UUV's autopilot reader uses: its depth, its thrusters' outputs (COMMAND_ACK: the answers to its
+#: rate requests).
+ARDUSUB_USED = ("GLOBAL_POSITION_INT", *PRESSURE_MESSAGES, "PARAM_VALUE", "GPS_GLOBAL_ORIGIN", "SERVO_OUTPUT_RAW",
+                "COMMAND_ACK")
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # DISTANCE_SENSOR orientation: looking down the body's z axis
 SIGNAL_QUALITY_INVALID = 1  # DISTANCE_SENSOR signal_quality: 0 unknown, 1 invalid, 2..100
@@ -167,6 +169,18 @@ def param_name(value) -> str:
     if not isinstance(value, str):
         raise BadMessage(f"PARAM_VALUE.param_id = {value!r}: not a name")
     return value.split("\x00", 1)[0]
+
+
+def servo_pulses_us(fields: Mapping) -> dict[int, int]:
+    """SERVO_OUTPUT_RAW's pulses (µs) by output channel, 1–16 (9–16 are MAVLink 2 extensions: missing or 0 when a
+    channel is not output); :class:`BadMessage` for one that is not a whole number of microseconds."""
+    out = {}
+    for n in range(1, 17):
+        value = fields.get(f"servo{n}_raw", 0)
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 65535:
+            raise BadMessage(f"SERVO_OUTPUT_RAW.servo{n}_raw = {value!r}: not a pulse in µs")
+        out[n] = value
+    return out
 
 
 def ingest_ardusub(depth: ArduSubDepth, kind: str, fields: Mapping, receive_unix_s: float) -> DepthSample | None:

@@ -22,6 +22,11 @@ was missed), ``GPS_GLOBAL_ORIGIN`` when the EKF has an origin whose altitude is 
 :data:`~groundstation.live.sources.rates.DEPTH_HZ` when they arrive slower (SET_MESSAGE_INTERVAL, falling back to
 REQUEST_DATA_STREAM).
 
+The same reader takes the autopilot's thruster outputs (SERVO_OUTPUT_RAW at
+:data:`~groundstation.live.sources.rates.THRUSTERS_HZ`, with ``FRAME_CONFIG`` and ``SERVOn_FUNCTION``
+asked for as the depth parameters are) into a :class:`~localizer.thrusters.Thrusters` that the fix
+gate shares: whether the UUV pushes, a second source of its motion.
+
 Every accepted sample passes :class:`localizer.depth.DepthGate` (a jump faster than the vehicle can dive is
 refused with one log line) and goes into the telemetry with its sigma, source word and the vehicle's
 vertical speed; ``listeners`` (the recorder) get ``(sample, t_recv)``. A message that does not parse is one
@@ -40,14 +45,16 @@ from collections.abc import Callable
 import zenoh
 
 from groundstation.live.sinks.zenoh_mavlink import MavlinkIn
-from groundstation.live.sources.rates import DEPTH_HZ, RateMeter, RateRequests
+from groundstation.live.sources.rates import DEPTH_HZ, THRUSTERS_HZ, RateMeter, RateRequests
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID, is_autopilot_heartbeat
 from groundstation.mavlink.ingest import (
-    DEPTH_USED,
+    ARDUSUB_USED,
     BadMessage,
     ingest_ardusub,
     mavutil,
+    param_name,
+    servo_pulses_us,
 )
 from groundstation.mavlink.link import MavlinkLink
 from groundstation.threads import Handoff, in_thread
@@ -60,6 +67,7 @@ from localizer.depth import (
     ground_pressure_param,
 )
 from localizer.telemetry import Telemetry
+from localizer.thrusters import Thrusters
 
 log = logging.getLogger("skyfix.depth")
 
@@ -96,14 +104,15 @@ class ArduSubReader:
     """The transport-independent part: messages in (on the event loop), samples to the telemetry, requests out."""
 
     def __init__(self, tel: Telemetry, gate: DepthGate, sigma_m: float, send: Callable[[str, dict], None],
-                 listeners: list[Callable] | None = None):
+                 listeners: list[Callable] | None = None, thrusters: Thrusters | None = None):
         self.tel = tel
         self.gate = gate
         self.send = send  # (message type, fields) to the autopilot
         self.listeners = listeners or []
         self.depth = ArduSubDepth(sigma_m, tel.timing.depth_latency_s, tel.timing.clock_window_s)
+        self.thrusters = thrusters if thrusters is not None else Thrusters()
         self.meter = RateMeter()
-        self.requests = RateRequests({"GLOBAL_POSITION_INT": DEPTH_HZ})
+        self.requests = RateRequests({"GLOBAL_POSITION_INT": DEPTH_HZ, "SERVO_OUTPUT_RAW": THRUSTERS_HZ})
         self.autopilot: tuple[int, int] | None = None
         self.received = self.bad = self.refused = 0
         self.last: tuple[DepthSample, float] | None = None  # the newest accepted sample and its arrival
@@ -120,13 +129,21 @@ class ArduSubReader:
                 self.requests.on_ack(_enum(fields.get("command")), _enum(fields.get("result")))
             return
         self.depth.refusal = None
+        reboots = self.depth.reboots
         try:
+            if kind == "SERVO_OUTPUT_RAW":
+                self.thrusters.outputs(t_recv, servo_pulses_us(fields))
+                return
             sample = ingest_ardusub(self.depth, kind, fields, t_recv)
+            if kind == "PARAM_VALUE":
+                self.thrusters.param(param_name(fields.get("param_id")), float(fields["param_value"]))
         except BadMessage as e:
             self.bad += 1
             if self._throttle(kind_of(str(e))):
                 log.warning("ArduSub depth: %s", e)
             return
+        if self.depth.reboots != reboots:
+            self.thrusters.restarted()
         while self.depth.notices:
             log.warning("ArduSub depth: %s", self.depth.notices.pop(0))
         if self.depth.refusal:
@@ -169,7 +186,7 @@ class ArduSubReader:
         if self.autopilot is None:
             return
         sysid, compid = self.autopilot
-        names = self.depth.wanted_params()
+        names = self.depth.wanted_params() + self.thrusters.wanted_params()
         if self.depth.primary is not None and now - self._asked.get("refresh", now) >= PARAM_REFRESH_S:
             names.append(ground_pressure_param(self.depth.primary))
         for name in dict.fromkeys(names):
@@ -203,8 +220,9 @@ class ArduSubReader:
                 "sigma_m": None if sample is None else round(sample.sigma_m, 3),
                 "source": None if sample is None else sample.source,
                 "vertical_speed_mps": self.depth.status()["vertical_speed_mps"],
-                "rates_hz": {k: v for k, v in self.meter.rates(now).items() if k in DEPTH_USED},
-                "rate_requests": dict(self.requests.state), "ardusub": self.depth.status()}
+                "rates_hz": {k: v for k, v in self.meter.rates(now).items() if k in ARDUSUB_USED},
+                "rate_requests": dict(self.requests.state), "ardusub": self.depth.status(),
+                "thrusters": self.thrusters.status(now)}
 
 
 class ArduSubZenoh:
@@ -213,12 +231,12 @@ class ArduSubZenoh:
     shape = "blueos"
 
     def __init__(self, session: zenoh.Session, key: str, tel: Telemetry, gate: DepthGate, sigma_m: float,
-                 listeners: list[Callable] | None = None):
+                 listeners: list[Callable] | None = None, thrusters: Thrusters | None = None):
         self.session = session
         self.key = key.rstrip("/")
         self.target = autopilot_prefix(self.key)
         self._in: MavlinkIn | None = None
-        self.reader = ArduSubReader(tel, gate, sigma_m, self._send, listeners)
+        self.reader = ArduSubReader(tel, gate, sigma_m, self._send, listeners, thrusters)
         self.handoff: Handoff | None = None
         self._throttle = Throttle()
 
@@ -235,7 +253,7 @@ class ArduSubZenoh:
         self._in = MavlinkIn(self.session, "mavlink/in", SKYFIX_SYSID, GCS_COMPID)
         try:
             async with asyncio.TaskGroup() as tg:
-                for kind in DEPTH_USED:  # one key each: the router forwards only these, not all of ArduSub's
+                for kind in ARDUSUB_USED:  # one key each: the router forwards only these, not all of ArduSub's
                     tg.create_task(subscribe(self.session, f"{self.key}/{kind}", self.handoff))
                 while True:
                     self.reader.ask(time.time())
@@ -272,12 +290,12 @@ class ArduSubMavlink:
     shape = "mavlink"
 
     def __init__(self, url: str, tel: Telemetry, gate: DepthGate, sigma_m: float,
-                 listeners: list[Callable] | None = None):
+                 listeners: list[Callable] | None = None, thrusters: Thrusters | None = None):
         self.url = url
         mav = mavutil().mavlink
         self.link = MavlinkLink(url, SKYFIX_SYSID, GCS_COMPID, name="UUV MAVLink",
                                 heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID), is_peer=self._from_autopilot)
-        self.reader = ArduSubReader(tel, gate, sigma_m, self.link.queue, listeners)
+        self.reader = ArduSubReader(tel, gate, sigma_m, self.link.queue, listeners, thrusters)
         self.handoff: Handoff | None = None
         self.other = 0  # messages of other systems and components
 
@@ -313,7 +331,7 @@ class ArduSubMavlink:
         if source != self.reader.autopilot:
             self.other += 1
             return
-        if kind in DEPTH_USED:
+        if kind in ARDUSUB_USED:
             self.reader.on_message(kind, msg.to_dict(), t_recv)
 
     def status(self, now: float) -> dict:

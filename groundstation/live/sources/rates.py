@@ -6,7 +6,8 @@ message 20, SYSTEM_TIME 1, GPS_RAW_INT 2 (the UAV's own accuracy and its GNSS
 altitude), and DISTANCE_SENSOR 10 (a downward rangefinder's height) once the
 autopilot has sent one (a UAV without a rangefinder sends none); from the UUV's
 autopilot (ArduSub) its depth sensor's SCALED_PRESSURE message and GLOBAL_POSITION_INT
-at :data:`DEPTH_HZ`. As a ground station skyfix asks for the ones that arrive slower with
+at :data:`DEPTH_HZ`, its thrusters' SERVO_OUTPUT_RAW at :data:`THRUSTERS_HZ`. As a
+ground station skyfix asks for the ones that arrive slower with
 ``MAV_CMD_SET_MESSAGE_INTERVAL``; a refusal or no answer falls back to the older
 ``REQUEST_DATA_STREAM`` for the stream that carries the message (ArduPilot's
 stream tables). A message already faster than needed is left alone. Every
@@ -23,13 +24,15 @@ GIMBAL_HZ = 20.0
 RANGEFINDER_HZ = 10.0  # DISTANCE_SENSOR, asked for once one has come
 GIMBAL_MESSAGE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
 DEPTH_HZ = 5.0
+THRUSTERS_HZ = 10.0  # the UUV's SERVO_OUTPUT_RAW (localizer.thrusters)
 MESSAGE_ID = {"ATTITUDE": 30, "GLOBAL_POSITION_INT": 33, "SYSTEM_TIME": 2, "GPS_RAW_INT": 24,
               "GIMBAL_DEVICE_ATTITUDE_STATUS": 285, "MOUNT_ORIENTATION": 265, "DISTANCE_SENSOR": 132,
-              "SCALED_PRESSURE": 29, "SCALED_PRESSURE2": 137, "SCALED_PRESSURE3": 143}
-# MAV_DATA_STREAM carrying each message on ArduPilot: EXTRA1, POSITION, EXTRA3, EXTENDED_STATUS, RAW_SENSORS
+              "SCALED_PRESSURE": 29, "SCALED_PRESSURE2": 137, "SCALED_PRESSURE3": 143, "SERVO_OUTPUT_RAW": 36}
+# MAV_DATA_STREAM carrying each message on ArduPilot: EXTRA1, POSITION, EXTRA3, EXTENDED_STATUS, RAW_SENSORS,
+# RC_CHANNELS
 STREAM = {"ATTITUDE": 10, "GLOBAL_POSITION_INT": 6, "SYSTEM_TIME": 12, "GPS_RAW_INT": 2,
           "GIMBAL_DEVICE_ATTITUDE_STATUS": 12, "MOUNT_ORIENTATION": 12, "DISTANCE_SENSOR": 12,
-          "SCALED_PRESSURE": 1, "SCALED_PRESSURE2": 1, "SCALED_PRESSURE3": 1}
+          "SCALED_PRESSURE": 1, "SCALED_PRESSURE2": 1, "SCALED_PRESSURE3": 1, "SERVO_OUTPUT_RAW": 3}
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_RESULT_ACCEPTED = 0
 SETTLE_S = 3.0  # measure this long after the autopilot appears before asking

@@ -488,6 +488,9 @@ function showHealth() {
                   + (g.reach_m !== null ? ` · UUV within ${fmt(g.reach_m, 1, " m")} of it` : "")
                   + ` · frame-to-frame share ${g.white_share === null ? "—" : fmt(100 * g.white_share, 2, " %")}`
                   + ` · limits ${g.max_speed_mps} m/s, ${g.max_accel_mps2} m/s²`
+                  + (g.thrusters !== null ? ` · thrusters ${g.thrusters}` : "")
+                  + (g.accel_bound_mps2 !== null && g.accel_bound_mps2 < g.max_accel_mps2
+                     ? ` (bound ${fmt(g.accel_bound_mps2, 2, " m/s²")})` : "")
                   + (g.last_refusal ? ` · last: ${g.last_refusal}` : "")));
   }
   if (s.height) {
