@@ -579,6 +579,15 @@ class UiStatus(Section):
     encode_ms: NonNegative = Field(description="mean CPU time to encode one, ms (the encoding thread's, last 100)")
 
 
+class InputsStatus(Section):
+    """The inputs' sections of the status, as the watchdog judges them (groundstation/live/watchdog.py)."""
+
+    uav: UavStatus
+    depth: DepthStatus
+    video: VideoStatus | None = None
+    record: RecordStatus | None = None
+
+
 class StatusMessage(Message):
     """The service's health, once a second; sections for optional parts only when they run."""
 

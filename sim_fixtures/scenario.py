@@ -2,7 +2,7 @@
 
 One contract (see :mod:`localizer.contract`): these frozen pydantic dataclasses
 validate the parsed TOML, hold the defaults and document every knob;
-``groundstation/schemas/scenario.schema.json`` is generated from them. Every table
+``sim_fixtures/schemas/scenario.schema.json`` is generated from them. Every table
 and key is optional except ``name``; unknown keys and wrong values are refused with
 a one-line :class:`~localizer.contract.ConfigError` naming the file, key and value.
 Units are in the key names (``_m``, ``_deg``, ``_s``, ``_hz``). World frame: local

@@ -17,29 +17,42 @@ from pathlib import Path
 import pytest
 from jsonschema import Draft202012Validator
 
-from groundstation.contracts import CONTRACTS, path_of, schema_text, stale
+from groundstation.contracts import GROUNDSTATION
 from groundstation.live.config import RunConfig
 from groundstation.messages import FixMessage
 from localizer.calibration import Calibration
 from localizer.contract import ConfigError, validate
 from localizer.fix import Fix
 from localizer.status import STATUSES
+from sim_fixtures.contracts import SIM_FIXTURES
 from sim_fixtures.scenario import scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
+OWNER = {name: contracts for contracts in (GROUNDSTATION, SIM_FIXTURES) for name in contracts.models}
 
 
 def validator(name: str) -> Draft202012Validator:
-    return Draft202012Validator(json.loads(path_of(name).read_text()))
+    return Draft202012Validator(json.loads(OWNER[name].path_of(name).read_text()))
 
 
-def test_schema_files_are_current():
-    assert stale() == [], "stale schema files: run `.venv/bin/python -m groundstation.contracts` and commit them"
+@pytest.mark.parametrize("contracts", [GROUNDSTATION, SIM_FIXTURES], ids=lambda c: c.module)
+def test_schema_files_are_current(contracts):
+    assert contracts.stale() == [], f"stale schema files: run `.venv/bin/python -m {contracts.module}` and commit them"
 
 
-@pytest.mark.parametrize("name", CONTRACTS)
+def test_the_groundstation_does_not_import_the_simulator():
+    """The layers: sim_fixtures may use groundstation, never the other way (the scenario's contract is its own)."""
+    offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "groundstation").rglob("*.py")
+                 if any(isinstance(node, (ast.Import, ast.ImportFrom))
+                        and any(n.startswith("sim_fixtures") for n in ([node.module or ""] if isinstance(node, ast.ImportFrom)
+                                                                       else [a.name for a in node.names]))
+                        for node in ast.walk(ast.parse(p.read_text())))]
+    assert offenders == []
+
+
+@pytest.mark.parametrize("name", OWNER)
 def test_schemas_are_valid_draft_2020_12(name):
-    Draft202012Validator.check_schema(json.loads(schema_text(name)))
+    Draft202012Validator.check_schema(json.loads(OWNER[name].schema_text(name)))
 
 
 SHIPPED = ([("scenario", p) for p in sorted((ROOT / "sim_fixtures" / "scenarios").glob("*.toml"))]

@@ -268,13 +268,16 @@ def test_a_recording_keeps_each_depth_s_source_and_sigma_for_process(tmp_path):
 
 
 def test_the_watchdog_says_when_the_depth_is_only_ardusubs_ekf():
+    from groundstation.live.sources.uav_mavlink import UavMavlink
     from groundstation.live.watchdog import problems
+    from groundstation.messages import InputsStatus
 
     src = ArduSubZenoh(None, "mavlink/1/1", Telemetry(), DepthGate(), 0.05)
     now = time.time()
     message = {"type": "GLOBAL_POSITION_INT", "time_boot_ms": 5000, "relative_alt": -1500, "alt": 0, "vz": 0}
     src._on_payload("mavlink/1/1/GLOBAL_POSITION_INT", json.dumps({"message": message}).encode(), now)
-    status = {"uav": {"received": 1, "url": "u", "age_s": {"ATTITUDE": 0.1}}, "depth": src.status(now)}
-    assert status["depth"]["source"] == "ardusub_ekf" and status["depth"]["depth_m"] == 1.5
+    uav = UavMavlink("udpin:127.0.0.1:14550", Telemetry(), {"ATTITUDE": 25.0})  # not opened: its status only
+    status = InputsStatus.model_validate({"uav": uav.status(now), "depth": src.status(now)})
+    assert status.depth.source == "ardusub_ekf" and status.depth.depth_m == 1.5
     assert problems(status, ("ATTITUDE",), 1)["depth"] == ("depth: ArduSub's EKF only, unchecked: BARO_PRIMARY, "
                                                            "BARO_SPEC_GRAV not received yet on Zenoh key mavlink/1/1")

@@ -33,7 +33,7 @@ from live_helpers import (
     wait_for,
 )
 
-from groundstation.contracts import path_of
+from groundstation.contracts import GROUNDSTATION
 from groundstation.offline.process import process_session
 from groundstation.session.read import load_session
 
@@ -120,9 +120,10 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
 
     # Every message as its schema says: the contract, checked by an independent validator
     for name, messages in (("fix", fix), ("status", status)):
-        schema = Draft202012Validator(json.loads(path_of(name).read_text()))
+        schema = Draft202012Validator(json.loads(GROUNDSTATION.path_of(name).read_text()))
         bad = [(m, e.message) for m in messages for e in schema.iter_errors(m)]
-        assert not bad, f"{len(bad)} {name} messages break {path_of(name).name}, first: {bad[0]}"
+        assert not bad, f"{len(bad)} {name} messages break {GROUNDSTATION.path_of(name).name}, first: {bad[0]}"
+    assert "does not fit its schema" not in run_log  # and as the service's own model says, where it is assembled
     assert all(f["alt_ellipsoid_m"] is not None and f["t_gnss"] is not None and f["sigma_n_m"] > 0 for f in ok)
     assert {"video", "gps_input", "latency", "record", "height_from_size"} <= set(status[-1])
     size = status[-1]["height_from_size"]  # the default, check: frames measured (or why not), nothing applied

@@ -23,7 +23,7 @@ from live_helpers import (
 )
 from test_sim_knobs import SCENARIOS
 
-from groundstation.contracts import path_of
+from groundstation.contracts import GROUNDSTATION
 from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -60,7 +60,7 @@ def test_live_status_says_what_measured_the_height(tmp_path):
         for p in procs:
             stop(p)
     status = _statuses(sub_out)
-    schema = Draft202012Validator(json.loads(path_of("status").read_text()))
+    schema = Draft202012Validator(json.loads(GROUNDSTATION.path_of("status").read_text()))
     bad = [e.message for s in status for e in schema.iter_errors(s)]
     assert not bad, bad[0]
     s = status[-1]

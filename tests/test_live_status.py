@@ -13,7 +13,9 @@ from groundstation.live.sinks.zenoh_fix import ZenohStatus
 from groundstation.zenoh_session import open_session
 
 
-def test_status_and_liveliness():
+def test_status_and_liveliness(caplog):
+    """A status that does not fit its model (this one has no depth, a uav section of the wrong shape, an unknown key)
+    is still published, and each misfit is logged once, naming the field, however often it is published."""
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     service, watcher = open_session(listen=[ep]), open_session(connect=[ep])
     got = []
@@ -26,10 +28,11 @@ def test_status_and_liveliness():
         return {"uav": {"age_s": {"ATTITUDE": 0.02}}, "n": len(calls)}
 
     alive = {}
+    sink = ZenohStatus(service, "skyfix/status", "skyfix/alive", status, 0.2)
 
     async def scenario():
         await asyncio.sleep(0.3)
-        task = asyncio.create_task(ZenohStatus(service, "skyfix/status", "skyfix/alive", status, 0.2).run())
+        task = asyncio.create_task(sink.run())
         await asyncio.sleep(0.7)
         alive["during"] = [str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=2.0)]
         task.cancel()
@@ -47,3 +50,7 @@ def test_status_and_liveliness():
     assert len(got) >= 3
     assert all(enc == "application/json" and stamped for enc, stamped, _ in got)
     assert got[-1][2]["uav"]["age_s"]["ATTITUDE"] == 0.02 and abs(got[-1][2]["t"] - time.time()) < 2.0
+    assert sink.invalid == len(calls) >= 3
+    misfits = [r.getMessage() for r in caplog.records if "does not fit its schema" in r.getMessage()]
+    assert len(misfits) == len(set(misfits)) and any(m.startswith("status: depth does not fit") for m in misfits)
+    assert any(m.startswith("status: n = 1 ") for m in misfits), misfits

@@ -96,12 +96,15 @@ class Pipeline:
 
     ``prior(t_unix)``: the UUV's own position estimate at a frame's time (None: none);
     ``history_s``: how long tracked frames are held for selections; ``alignment()``: the (source word,
-    1-sigma s) of aligned frames' times when not the link delay's (see the module doc).
+    1-sigma s) of aligned frames' times when not the link delay's (see the module doc);
+    ``frame_listeners``: called with every submitted frame (the recorder, the page's feed, the video
+    latency's estimator), before it is queued; ``on_tracked``: see :attr:`on_tracked`.
     """
 
     def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
                  telemetry_wait_s: float = 0.3, prior: Callable[[float], Prior | None] | None = None,
-                 history_s: float = 1.0):
+                 history_s: float = 1.0, frame_listeners: Sequence[Callable] = (),
+                 on_tracked: Sequence[Callable] = (), alignment: Callable[[], tuple[str, float]] | None = None):
         self.cal = cal
         self.tel = tel
         self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
@@ -110,7 +113,8 @@ class Pipeline:
         self.telemetry_wait_s = telemetry_wait_s
         self.prior = prior or (lambda t_unix: None)
         self.history_s = history_s
-        self.alignment: Callable[[], tuple[str, float]] | None = None
+        self.alignment = alignment
+        self.frame_listeners = list(frame_listeners)
         self._told_unknown = False
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
@@ -132,13 +136,15 @@ class Pipeline:
         self.last_status: str | None = None
         self.target = self.session.status()  # the tracking session's status after the latest frame or command
         #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
-        self.on_tracked: list[Callable] = []
+        self.on_tracked: list[Callable] = list(on_tracked)
 
     def submit(self, frame: LiveFrame) -> None:
         """Queue a frame (on the event loop); drops the oldest waiting frame when the queue is full.
 
         The very first frame is never dropped when ``init_bbox`` belongs to it.
         """
+        for listener in self.frame_listeners:
+            listener(frame)
         if len(self._queue) >= self.queue_len:
             first_waiting = self.cal.init_bbox is not None and not self._started and self._queue[0].index == 0
             del self._queue[1 if first_waiting else 0]

@@ -13,10 +13,14 @@ starts, so a port in use stops the service at once (exit 2). Blocking I/O lives 
 workers (:mod:`groundstation.threads`: bounded hand-offs to the loop, supervised, never waited for at a stop);
 all telemetry is written and read on the event loop.
 
+The workers are declared in one registry (:mod:`.workers`): each with its stop stage, its
+status section and whether the watchdog judges it as an input; the status is the
+registry's. The pipeline is built with its sinks and frame listeners.
+
 Stopping: SIGINT/SIGTERM (or ``--duration-s``) stop the workers in order — the inputs
 (and the operator's commands and web page), then the pipeline, then the sinks — each stage
-cancelled and awaited before the next (a stage slower than :data:`STAGE_S` is logged), and
-last the GPS_INPUT sink, whose last message says "no fix". Nothing waits for a blocked
+cancelled and awaited before the next (a stage slower than
+:data:`~groundstation.live.workers.STAGE_S` is logged), and last the GPS_INPUT sink, whose last message says "no fix". Nothing waits for a blocked
 read or open: the whole stop takes well under a second whatever the inputs are doing
 (``bench/links.py`` measures it). A worker that fails cancels the others (the sink still
 sends its no-fix) and the service exits with its error. The Zenoh session is closed in ``finally``.
@@ -49,10 +53,12 @@ from groundstation.live.sources.depth_zenoh import DepthZenoh
 from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uav_mavlink import UavMavlink
 from groundstation.live.sources.uuv_position import UuvPosition, parse_hint
+from groundstation.live.ui.feed import VideoFeed
 from groundstation.live.ui.server import WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.usage import Usage
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
+from groundstation.live.workers import INPUTS, LAST, OUTPUTS, PIPELINE, Workers
 from groundstation.mavlink.link import read_signing_key
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
@@ -65,7 +71,6 @@ from localizer.thrusters import Thrusters
 log = logging.getLogger("skyfix.run")
 
 TELEMETRY_KEEP_S = 60.0
-STAGE_S = 0.3  # a stage of the stop longer than this is logged
 
 
 def latency_summary(latencies_s) -> dict:
@@ -84,20 +89,6 @@ async def _stopper(stop: asyncio.Event, duration_s: float | None) -> None:
         pass
 
 
-async def _stop_in_order(stages: list[list[asyncio.Task]]) -> None:
-    """Cancel each stage's tasks and wait for them before the next stage."""
-    loop = asyncio.get_running_loop()
-    for stage in stages:
-        if not stage:
-            continue
-        t0 = loop.time()
-        for task in stage:
-            task.cancel()
-        await asyncio.wait(stage)
-        if loop.time() - t0 > STAGE_S:
-            log.warning("stopping %s took %.2f s", ", ".join(t.get_name() for t in stage), loop.time() - t0)
-
-
 async def serve(cfg: config.RunConfig) -> dict:
     """Run the service until stopped; returns the final status."""
     loop = asyncio.get_running_loop()
@@ -112,9 +103,48 @@ async def serve(cfg: config.RunConfig) -> dict:
     usage = Usage()
     try:
         size = (cal.camera.width, cal.camera.height)
-        video = motion = None
         auto = cfg.video_latency_ms == "auto"
+        fixed_latency_s = None if auto else cfg.video_latency_ms / 1000.0
         first_aligned: list[float] = []  # auto: the exposure of the first frame stamped with the estimate
+        workers = Workers()
+        pipeline: Pipeline  # built once its sinks and listeners are (below); the closures read it then
+
+        # -- the inputs: the UAV, the UUV's depth (and thrusters), its own position, the video ----------------------
+        if cfg.mavlink_backend == "mavsdk":
+            from groundstation.live.sources.uav_mavsdk import UavMavsdk
+
+            uav = UavMavsdk(cfg.mavlink, tel)
+        else:
+            uav = UavMavlink(cfg.mavlink, tel, needed_rates(cal.mount.attitude_source),
+                             request_rates=not cfg.no_request_rates)
+        uav.listeners.append(lambda *a: pipeline.telemetry_arrived(*a))
+        workers.add(uav, INPUTS, "uav", is_input=True)
+        depth_gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
+        # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
+        thrusters = Thrusters(cfg.thruster_deadband_us) if cfg.depth_source in ("blueos", "mavlink") else None
+        if cfg.depth_source == "mavlink":
+            depth = ArduSubMavlink(cfg.depth_mavlink, tel, depth_gate, cal.sigmas.depth_m, thrusters=thrusters)
+        elif cfg.depth_source == "blueos":
+            depth = ArduSubZenoh(session, cfg.depth_input_key, tel, depth_gate, cal.sigmas.depth_m,
+                                 thrusters=thrusters)
+        else:
+            depth = DepthZenoh(session, cfg.depth_input_key, tel, depth_gate)
+        workers.add(depth, INPUTS, "depth", is_input=True)
+        workers.section("height", lambda now: height_status(cal.water, cal.sigmas, tel))
+        uuv_position = workers.add(UuvPosition(session, cfg.uuv_position_key, cfg.uuv_prior_sigma_m,
+                                               parse_hint(cfg.uuv_hint) if cfg.uuv_hint else None),
+                                   INPUTS, "uuv_position")
+        video = motion = from_size = None
+        if cfg.video:
+            video = VideoLive(cfg.video, fixed_latency_s, lambda frame: pipeline.submit(frame), expected_size=size)
+            motion = OnlineLatency(cal, tel, fixed_latency_s,
+                                   (lambda s: setattr(video, "latency_s", s)) if auto else None)
+            workers.add(video, INPUTS, "video", lambda now: video.status(now)
+                        | {"latency_from_motion": motion.status()}, is_input=True)
+            workers.add(motion, INPUTS)
+            if cfg.height_from_size != "off":
+                from_size = workers.add(OnlineHeightFromSize(HeightFromSize(cal, tel, cfg.height_from_size)), INPUTS,
+                                        "height_from_size", lambda now: from_size.status())
 
         def recorded_timing() -> dict:
             """What the run measured and used for time, for the recording's [timing]."""
@@ -124,21 +154,17 @@ async def serve(cfg: config.RunConfig) -> dict:
             if video is None:
                 return out
             if not auto:
-                return out | {"video_latency_s": cfg.video_latency_ms / 1000.0, "video_latency_source": "configured"}
+                return out | {"video_latency_s": fixed_latency_s, "video_latency_source": "configured"}
             if motion.applied_s is None:
                 return out
             return out | {"video_latency_s": round(motion.applied_s, 4), "video_latency_source": "motion",
                           "video_latency_sigma_s": round(motion.applied_sigma_s, 4),
                           "video_latency_from_t": first_aligned[0] if first_aligned else None}
 
-        recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
-                            timing=recorded_timing) if cfg.record else None
+        # -- the outputs: fixes on Zenoh, GPS_INPUT (through the gates), the recording, the watchdog, the page -----
         fix_sink = ZenohFixSink(session, cfg.fix_key)
         closers.append(fix_sink.close)
-        sinks = [fix_sink]
         gps = None
-        # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
-        thrusters = Thrusters(cfg.thruster_deadband_us) if cfg.depth_source in ("blueos", "mavlink") else None
         if cfg.gps_input:
             key = read_signing_key(cfg.gps_input_signing_key) if cfg.gps_input_signing_key else None
             link = (ZenohMavlinkIn(session, cfg.gps_input.removeprefix("zenoh:")) if cfg.gps_input.startswith("zenoh:")
@@ -148,123 +174,70 @@ async def serve(cfg: config.RunConfig) -> dict:
                            max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s, thrusters=thrusters,
                            water_accel_mps2=cfg.uuv_water_accel_mps2)
             gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
-            sinks.append(gps)
-        if recorder:
-            sinks.append(recorder)
-        uuv_position = UuvPosition(session, cfg.uuv_position_key, cfg.uuv_prior_sigma_m,
-                                   parse_hint(cfg.uuv_hint) if cfg.uuv_hint else None)
-        pipeline = Pipeline(cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0,
-                            prior=uuv_position.prior, history_s=cfg.select_history_s)
-
-        if cfg.mavlink_backend == "mavsdk":
-            from groundstation.live.sources.uav_mavsdk import UavMavsdk
-
-            uav = UavMavsdk(cfg.mavlink, tel)
-        else:
-            uav = UavMavlink(cfg.mavlink, tel, needed_rates(cal.mount.attitude_source),
-                             request_rates=not cfg.no_request_rates)
-        uav.listeners.append(pipeline.telemetry_arrived)
-        depth_key = cfg.depth_input_key
-        gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
-        if cfg.depth_source == "mavlink":
-            depth = ArduSubMavlink(cfg.depth_mavlink, tel, gate, cal.sigmas.depth_m, thrusters=thrusters)
-        elif cfg.depth_source == "blueos":
-            depth = ArduSubZenoh(session, depth_key, tel, gate, cal.sigmas.depth_m, thrusters=thrusters)
-        else:
-            depth = DepthZenoh(session, depth_key, tel, gate)
-        control = Control(pipeline, lambda now: status(now))
-        ui = None
-        if not cfg.no_ui:
-            topview = TopView(cal, tel)
-            ui = WebUi(cfg.ui, cfg.ui_token, control, topview, size, settings_of(cfg))
-            pipeline.sinks += [ui.feed, topview]
-        from_size = None
-        if cfg.video:
-            frame_listeners = [listener.on_frame for listener in (recorder, ui and ui.feed) if listener]
-
-            def submit(frame):
-                if frame.aligned and auto and not first_aligned:
-                    first_aligned.append(frame.t_unix)
-                for listener in frame_listeners:
-                    listener(frame)
-                pipeline.submit(frame)
-            video = VideoLive(cfg.video, None if auto else cfg.video_latency_ms / 1000.0, submit, expected_size=size)
-
-            def apply(latency_s: float) -> None:
-                video.latency_s = latency_s
-
-            motion = OnlineLatency(cal, tel, None if auto else video.latency_s, apply if auto else None)
-            frame_listeners.append(motion.on_frame)
-            if auto:
-                pipeline.alignment = lambda: ("motion", motion.applied_sigma_s)
-                log.info("--video-latency-ms auto: no valid fix until the video's latency from the image's motion "
-                         "has settled (status latency_unsettled)")
-            if cfg.height_from_size != "off":
-                from_size = OnlineHeightFromSize(HeightFromSize(cal, tel, cfg.height_from_size))
-                pipeline.on_tracked.append(from_size.on_tracked)
-        if recorder:
+        recorder = None
+        if cfg.record:
+            recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
+                                timing=recorded_timing)
             uav.listeners.append(recorder.on_mavlink)
             depth.listeners.append(recorder.on_depth)
-
-        def inputs(now: float) -> dict:
-            out = {"uav": uav.status(now), "depth": depth.status(now)}
-            if video:
-                out["video"] = video.status(now)
-            if recorder:
-                out["record"] = recorder.status()
-            return out
+            workers.add(recorder, OUTPUTS, "record", lambda now: recorder.status(), is_input=True)
 
         def zenoh_peers() -> int:
             return len(list(session.info.peers_zid())) + len(list(session.info.routers_zid()))
 
-        watchdog = Watchdog(inputs, tuple(needed_rates(cal.mount.attitude_source)), zenoh_peers,
+        watchdog = Watchdog(workers.inputs, tuple(needed_rates(cal.mount.attitude_source)), zenoh_peers,
                             require_s=REQUIRE_S if cfg.require_inputs else None)
-        pipeline.sinks.append(watchdog)
+        topview = feed = None
+        if not cfg.no_ui:
+            topview = TopView(cal, tel)
+            feed = VideoFeed(lambda: pipeline.target)
 
-        def status(now: float) -> dict:
-            out = {"uav": uav.status(now), "depth": depth.status(now), "height": height_status(cal.water, cal.sigmas, tel),
-                   "pipeline": pipeline.status(),
-                   "target": pipeline.target, "uuv_position": uuv_position.status(now),
-                   "fixes_published": fix_sink.published, "fix": fix_sink.latest, "control": zenoh_control.status(),
-                   "problems": dict(watchdog.problems), "zenoh": {"peers": zenoh_peers()},
-                   "process": usage.status(now)}
-            if video:
-                out["video"] = video.status(now) | {"latency_from_motion": motion.status()}
-            if from_size:
-                out["height_from_size"] = from_size.status()
-            if gps:
-                out["gps_input"] = gps.status(now)
-                out["latency"] = latency_summary(list(gps.latencies_s)[-1000:])
-            if recorder:
-                out["record"] = recorder.status()
-            if ui:
-                out["ui"] = ui.status()
-            return out
+        def first_aligned_frame(frame) -> None:
+            if frame.aligned and not first_aligned:
+                first_aligned.append(frame.t_unix)
 
-        status_sink = ZenohStatus(session, cfg.status_key, cfg.alive_key, status)
+        frame_listeners = [f for f in (recorder and recorder.on_frame, feed and feed.on_frame,
+                                       motion and motion.on_frame, motion and auto and first_aligned_frame) if f]
+        sinks = [s for s in (fix_sink, gps, recorder, feed, topview, watchdog) if s is not None]
+        pipeline = Pipeline(cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0,
+                            prior=uuv_position.prior, history_s=cfg.select_history_s, frame_listeners=frame_listeners,
+                            on_tracked=[from_size.on_tracked] if from_size else [],
+                            alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None)
+        if video and auto:
+            log.info("--video-latency-ms auto: no valid fix until the video's latency from the image's motion "
+                     "has settled (status latency_unsettled)")
+        workers.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
+        workers.section("target", lambda now: pipeline.target)
+        workers.section("fixes_published", lambda now: fix_sink.published)
+        workers.section("fix", lambda now: fix_sink.latest)
+        workers.add(watchdog, PIPELINE, "problems", lambda now: dict(watchdog.problems))
+        workers.section("zenoh", lambda now: {"peers": zenoh_peers()})
+        workers.section("process", usage.status)
+        if gps:
+            workers.add(gps, LAST, "gps_input")
+            workers.section("latency", lambda now: latency_summary(list(gps.latencies_s)[-1000:]))
+
+        # -- the operator's side: commands over Zenoh and the page ---------------------------------------------------
+        control = Control(pipeline, workers.status)
+        ui = WebUi(cfg.ui, cfg.ui_token, control, topview, feed, size, settings_of(cfg)) if feed else None
+        status_sink = ZenohStatus(session, cfg.status_key, cfg.alive_key, workers.status)
         zenoh_control = ZenohControl(session, control, cfg.control_prefix,
                                      {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
-        # the order of the stop: inputs (and the operator's side), the pipeline, the sinks; GPS_INPUT last
-        stages = [[w for w in (uav, depth, uuv_position, video, motion, from_size, zenoh_control, ui) if w is not None],
-                  [pipeline, watchdog], [w for w in (status_sink, recorder) if w is not None]]
-        workers = [w for stage in stages for w in stage] + ([gps] if gps else [])
+        workers.add(zenoh_control, INPUTS, "control", lambda now: zenoh_control.status())
+        if ui:
+            workers.add(ui, INPUTS, "ui", lambda now: ui.status())
+        workers.add(status_sink, OUTPUTS)
         if ui:
             await ui.start()  # UiError (an OSError) when its port is taken: exit 2 before anything runs
         log.info("skyfix run: UAV %s, video %s, depth %s (%s), fixes on %s, GPS_INPUT %s, commands on %s/*",
-                 cfg.mavlink, cfg.video, cfg.depth_mavlink or depth_key, cfg.depth_source, cfg.fix_key, cfg.gps_input,
-                 zenoh_control.prefix)
+                 cfg.mavlink, cfg.video, cfg.depth_mavlink or cfg.depth_input_key, cfg.depth_source, cfg.fix_key,
+                 cfg.gps_input, zenoh_control.prefix)
         if cal.init_bbox is None:
             log.info("no tracker.init_bbox: awaiting a target (%s/select%s%s)", zenoh_control.prefix,
                      f", the web page {ui.url}" if ui else "",
                      ", or near the UUV's own position" if cfg.uuv_position_key or cfg.uuv_hint else "")
-        async with asyncio.TaskGroup() as tg:
-            tasks = {w: tg.create_task(w.run(), name=type(w).__name__) for w in workers}
-            await _stopper(stop, cfg.duration_s)
-            log.info("stopping")
-            await _stop_in_order([[tasks[w] for w in stage] for stage in stages])
-            if gps:  # last, once nothing feeds it: a no-fix GPS_INPUT, then its link closed
-                await gps.stop()
-        final = status(time.time())
+        await workers.run(_stopper(stop, cfg.duration_s))
+        final = workers.status(time.time())
         if gps:
             final["latency"] = latency_summary(gps.latencies_s)
             final["latencies_ms"] = [round(x * 1000.0, 3) for x in gps.latencies_s]

@@ -11,7 +11,8 @@ when it is back:
 - Zenoh: no peer or router connected;
 - ``--record``: the recording stopped (a full disk).
 
-The current problems are in the status (``problems``, per input). Every
+It reads the inputs' sections of the status as their models (:class:`~groundstation.messages.InputsStatus`),
+field by field. The current problems are in the status (``problems``, per input). Every
 :data:`SUMMARY_S` a one-line summary: frames per second, the share of ``ok``
 fixes, the last fix and every input's age. With ``require_s`` (``--require-inputs``),
 an input never heard from by then stops the service: :class:`InputMissing`.
@@ -25,6 +26,9 @@ import math
 import time
 from collections.abc import Callable
 
+from pydantic import ValidationError
+
+from groundstation.messages import InputsStatus
 from localizer.fix import Fix
 
 log = logging.getLogger("skyfix.inputs")
@@ -40,52 +44,49 @@ class InputMissing(RuntimeError):
     """An input required by ``--require-inputs`` was never heard from; the message is one line."""
 
 
-def never_heard(status: dict) -> list[str]:
+def never_heard(inputs: InputsStatus) -> list[str]:
     """The inputs that have not delivered anything yet: ``uav``, ``depth``, ``video``."""
-    video = status.get("video")
-    return [name for name, silent in (("uav", status["uav"]["received"] == 0),
-                                      ("depth", status["depth"]["received"] == 0),
-                                      ("video", video is not None and video["frames"] == 0)) if silent]
+    return [name for name, silent in (("uav", inputs.uav.received == 0), ("depth", inputs.depth.received == 0),
+                                      ("video", inputs.video is not None and inputs.video.frames == 0)) if silent]
 
 
-def problems(status: dict, needed: tuple[str, ...], zenoh_peers: int | None) -> dict[str, str]:
-    """What is wrong with each input, from the service's status dict (empty when all is well)."""
+def problems(inputs: InputsStatus, needed: tuple[str, ...], zenoh_peers: int | None) -> dict[str, str]:
+    """What is wrong with each input, from the inputs' status (empty when all is well)."""
     out = {}
-    uav = status["uav"]
-    ages = uav.get("age_s", {})
-    if uav["received"] == 0:
-        out["uav"] = f"UAV MAVLink: nothing received on {uav['url']}"
+    uav = inputs.uav
+    ages = uav.age_s
+    if uav.received == 0:
+        out["uav"] = f"UAV MAVLink: nothing received on {uav.url}"
     elif min(ages.values()) > SILENT_S:
-        out["uav"] = f"UAV MAVLink: silent for {min(ages.values()):.0f} s on {uav['url']}"
+        out["uav"] = f"UAV MAVLink: silent for {min(ages.values()):.0f} s on {uav.url}"
     else:
         missing = [k for k in needed if ages.get(k, math.inf) > SILENT_S]
         if missing:
             out["uav"] = f"UAV MAVLink: no {', '.join(missing)} (receiving {', '.join(sorted(ages))})"
-    depth = status["depth"]
-    where = f"Zenoh key {depth['key']}" if depth["key"] else depth["url"]
-    if depth["received"] == 0:
+    depth = inputs.depth
+    where = f"Zenoh key {depth.key}" if depth.key else depth.url
+    if depth.received == 0:
         out["depth"] = f"depth: nothing received on {where}"
-    elif depth["age_s"] is None:
-        missing = (depth["ardusub"] or {}).get("params", {}).get("missing")
+    elif depth.age_s is None:
+        missing = depth.ardusub.params.missing if depth.ardusub else None
         why = f" (ArduSub has not answered {', '.join(missing)} yet)" if missing else ""
-        out["depth"] = f"depth: {depth['received']} messages on {where}, no depth from them{why}"
-    elif depth["age_s"] > SILENT_S:
-        out["depth"] = f"depth: none for {depth['age_s']:.0f} s on {where}"
-    elif depth["source"] == "ardusub_ekf":
-        missing = ", ".join(depth["ardusub"]["params"]["missing"]) or "its depth sensor's message"
+        out["depth"] = f"depth: {depth.received} messages on {where}, no depth from them{why}"
+    elif depth.age_s > SILENT_S:
+        out["depth"] = f"depth: none for {depth.age_s:.0f} s on {where}"
+    elif depth.source == "ardusub_ekf":
+        missing = ", ".join(depth.ardusub.params.missing) or "its depth sensor's message"
         out["depth"] = f"depth: ArduSub's EKF only, unchecked: {missing} not received yet on {where}"
-    video = status.get("video")
+    video = inputs.video
     if video is not None:
-        why = f": {video['error']}" if video.get("error") else ""
-        if video["frames"] == 0:
-            out["video"] = f"video: no frame from {video['url']}{why}"
-        elif video["age_s"] is not None and video["age_s"] > SILENT_S:
-            out["video"] = f"video: no frame for {video['age_s']:.0f} s from {video['url']}{why}"
+        why = f": {video.error}" if video.error else ""
+        if video.frames == 0:
+            out["video"] = f"video: no frame from {video.url}{why}"
+        elif video.age_s is not None and video.age_s > SILENT_S:
+            out["video"] = f"video: no frame for {video.age_s:.0f} s from {video.url}{why}"
     if zenoh_peers == 0:
         out["zenoh"] = "Zenoh: no peer or router connected"
-    record = status.get("record")
-    if record is not None and record["error"]:
-        out["record"] = f"record: stopped: {record['error']}"
+    if inputs.record is not None and inputs.record.error:
+        out["record"] = f"record: stopped: {inputs.record.error}"
     return out
 
 
@@ -116,7 +117,11 @@ class Watchdog:
         while True:
             await asyncio.sleep(1.0)
             now = time.time()
-            status = self.status(now)
+            try:
+                status = InputsStatus.model_validate(self.status(now))
+            except ValidationError as e:  # a bug, not the field's: the status sink names the field; judge the next
+                log.debug("inputs' status does not fit its model: %s", e)
+                continue
             peers = self.zenoh_peers() if self.zenoh_peers is not None else None
             self.problems = problems(status, self.needed, peers)
             self._report(now, t0)
@@ -141,17 +146,17 @@ class Watchdog:
             if self._next_report.pop(key)[1]:
                 log.info("%s: back", key)
 
-    def summary(self, now: float, status: dict) -> str:
+    def summary(self, now: float, status: InputsStatus) -> str:
         """One line: frames per second, ok share, the last fix and the inputs' ages, over the last interval."""
         ok = f"{100.0 * self._ok / self._fixes:.0f}% ok" if self._fixes else "no frames"
         fix = self._last_ok
         last = ("no fix yet" if fix is None else
                 f"last fix {fix.lat:.7f}, {fix.lon:.7f} ±{fix.h_acc_m:.2f} m {now - fix.t_unix:.1f} s ago")
-        ages = status["uav"].get("age_s", {})
+        ages = status.uav.age_s
         parts = [f"{self._fixes / SUMMARY_S:.1f} fps", ok, last, f"UAV {_age(min(ages.values()) if ages else None)}",
-                 f"depth {_age(status['depth']['age_s'])}"]
-        if "video" in status:
-            parts.append(f"video {_age(status['video']['age_s'])}")
+                 f"depth {_age(status.depth.age_s)}"]
+        if status.video is not None:
+            parts.append(f"video {_age(status.video.age_s)}")
         return "; ".join(parts)
 
 

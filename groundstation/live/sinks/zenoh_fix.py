@@ -9,14 +9,18 @@ with encoding ``application/json`` and a Zenoh timestamp set by the publisher.
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections.abc import Callable
 
 import zenoh
+from pydantic import ValidationError
 
-from groundstation.messages import STATUS_SCHEMA, FixMessage
+from groundstation.messages import STATUS_SCHEMA, FixMessage, StatusMessage
 from groundstation.zenoh_session import put_json
 from localizer.fix import Fix
+
+log = logging.getLogger("skyfix.status")
 
 
 def fix_to_json(fix: Fix) -> dict:
@@ -45,7 +49,12 @@ class ZenohFixSink:
 
 class ZenohStatus:
     """Worker publishing ``status()`` (a JSON-ready dict) on ``key`` every ``period_s``, with a liveliness token;
-    ``latest`` is the last one published."""
+    ``latest`` is the last one published.
+
+    Each status is validated against its model (:class:`~groundstation.messages.StatusMessage`, the schema
+    its readers rely on) where it is assembled: one that does not fit is still published — the operator's view
+    matters more than its shape — and the misfit is logged once per field and counted (:attr:`invalid`).
+    """
 
     def __init__(self, session: zenoh.Session, key: str, alive_key: str, status: Callable[[float], dict],
                  period_s: float = 1.0):
@@ -55,6 +64,20 @@ class ZenohStatus:
         self.status = status
         self.period_s = period_s
         self.latest: dict | None = None
+        self.invalid = 0
+        self._told: set[str] = set()
+
+    def _check(self, status: dict) -> None:
+        try:
+            StatusMessage.model_validate(status)
+        except ValidationError as e:
+            self.invalid += 1
+            for err in e.errors():
+                where = ".".join(str(x) for x in err["loc"])
+                if where not in self._told:
+                    self._told.add(where)
+                    value = "" if err["type"] == "missing" else f" = {repr(err.get('input'))[:80]}"
+                    log.warning("status: %s%s does not fit its schema: %s", where, value, err["msg"])
 
     async def run(self) -> None:
         token = self.session.liveliness().declare_token(self.alive_key)
@@ -63,6 +86,7 @@ class ZenohStatus:
             while True:
                 now = time.time()
                 self.latest = {"schema": STATUS_SCHEMA, "t": now, **self.status(now)}
+                self._check(self.latest)
                 put_json(pub, self.latest, self.session)
                 await asyncio.sleep(self.period_s)
         finally:

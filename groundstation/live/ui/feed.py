@@ -74,14 +74,15 @@ def _num(x) -> float | None:
 class VideoFeed:
     """Frame listener (``on_frame``), pipeline sink (``on_fix``) and worker (``run``) making the page's video.
 
-    ``deliver(packet)`` hands each packet to the watching pages; ``watching()`` says whether any page wants video;
-    ``target()`` is the tracking session's status (its state word goes into the overlay).
+    ``target()`` is the tracking session's status (its state word goes into the overlay). The page's server
+    (:class:`~groundstation.live.ui.server.WebUi`) takes the feed when it is built and sets ``deliver(packet)``,
+    which hands each packet to the watching pages, and ``watching()``, whether any page wants video; until then
+    nobody watches.
     """
 
-    def __init__(self, deliver: Callable[[bytes], None], watching: Callable[[], bool], target: Callable[[], dict],
-                 max_fps: float = 10.0, max_width: int = 960, quality: int = 80):
-        self.deliver = deliver
-        self.watching = watching
+    def __init__(self, target: Callable[[], dict], max_fps: float = 10.0, max_width: int = 960, quality: int = 80):
+        self.deliver: Callable[[bytes], None] = lambda packet: None
+        self.watching: Callable[[], bool] = lambda: False
         self.target = target
         self.min_interval_s = 1.0 / max_fps
         self.max_width = max_width

@@ -114,7 +114,7 @@ class WebUi:
     ``settings``: what the page shows about the run's configuration.
     """
 
-    def __init__(self, bind: str, token: str | None, control: Control, topview: TopView,
+    def __init__(self, bind: str, token: str | None, control: Control, topview: TopView, feed: VideoFeed,
                  camera_size: tuple[int, int], settings: dict):
         self.host, self.port = parse_bind(bind)
         self.bind = bind
@@ -124,7 +124,8 @@ class WebUi:
         self.camera_size = camera_size
         self.settings = settings
         self.viewers: set[Viewer] = set()
-        self.feed = VideoFeed(self._deliver, self._watching, lambda: control.pipeline.target)
+        self.feed = feed  # a sink and frame listener of the pipeline: the page is where it delivers
+        feed.deliver, feed.watching = self._deliver, self._watching
         self.rates = CounterRates()
         self.url: str | None = None
         self.refused = 0

@@ -1,0 +1,84 @@
+"""The service's workers in one place: each with its run, its stop stage, its status section and whether it is an input.
+
+A worker is an object with ``async run()``; :meth:`Workers.add` declares the rest:
+
+- ``stage``: when it is stopped — :data:`INPUTS` (the links in, the operator's commands
+  and page) first, then :data:`PIPELINE`, then :data:`OUTPUTS` (the status, the
+  recording), and :data:`LAST` (GPS_INPUT, whose last message says "no fix") once
+  nothing feeds it;
+- ``key`` and ``status``: the section of the service's status it fills, and the callable
+  ``status(now)`` that fills it (by default the worker's own ``status(now)``);
+- ``is_input``: the watchdog judges it (its status section is in :meth:`Workers.inputs`).
+
+The service's status is :meth:`Workers.status`: every section in the order the
+workers were added, plus the sections that are no worker's (:meth:`Workers.section`).
+Adding an input is one :meth:`~Workers.add`. Stopping (:meth:`Workers.run`): each stage's
+tasks cancelled and awaited before the next; a stage slower than :data:`STAGE_S` is logged.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+
+log = logging.getLogger("skyfix.run")
+
+INPUTS, PIPELINE, OUTPUTS, LAST = range(4)
+STAGE_S = 0.3  # a stage of the stop longer than this is logged
+
+
+@dataclass(frozen=True)
+class _Entry:
+    worker: object
+    stage: int
+    key: str | None
+    status: Callable[[float], dict] | None
+    is_input: bool
+
+
+class Workers:
+    """The registry of the module doc."""
+
+    def __init__(self):
+        self._entries: list[_Entry] = []
+        self._sections: list[tuple[str, Callable[[float], object]]] = []
+
+    def add(self, worker, stage: int, key: str | None = None, status: Callable[[float], dict] | None = None,
+            is_input: bool = False):
+        """Declare ``worker``; returns it."""
+        if key is not None and status is None:
+            status = worker.status
+        self._entries.append(_Entry(worker, stage, key, status, is_input))
+        return worker
+
+    def section(self, key: str, status: Callable[[float], object]) -> None:
+        """A status section that is no worker's (the height, the process's usage)."""
+        self._sections.append((key, status))
+
+    def inputs(self, now: float) -> dict:
+        """The inputs' status sections (the watchdog's view)."""
+        return {e.key: e.status(now) for e in self._entries if e.is_input}
+
+    def status(self, now: float) -> dict:
+        """Every section: the workers' in the order they were added, then the others."""
+        out = {e.key: e.status(now) for e in self._entries if e.key is not None}
+        out.update((key, status(now)) for key, status in self._sections)
+        return out
+
+    async def run(self, until: Awaitable) -> None:
+        """Run every worker until ``until`` completes (or one fails), then stop them stage by stage."""
+        async with asyncio.TaskGroup() as tg:
+            tasks = [(e.stage, tg.create_task(e.worker.run(), name=type(e.worker).__name__)) for e in self._entries]
+            await until
+            log.info("stopping")
+            loop = asyncio.get_running_loop()
+            for stage in sorted({s for s, _ in tasks}):
+                now = [t for s, t in tasks if s == stage]
+                t0 = loop.time()
+                for task in now:
+                    task.cancel()
+                await asyncio.wait(now)
+                if loop.time() - t0 > STAGE_S:
+                    log.warning("stopping %s took %.2f s", ", ".join(t.get_name() for t in now), loop.time() - t0)
