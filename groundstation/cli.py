@@ -14,6 +14,7 @@ from localizer.calibration import ConfigError
 
 SUBCOMMANDS = (
     "groundstation.offline.process",
+    "groundstation.offline.import_flight",
     "groundstation.offline.evaluate",
     "sim_fixtures.cli",
     "groundstation.live.service",

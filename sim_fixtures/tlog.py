@@ -36,13 +36,13 @@ scenario and its twin with other offsets have the same samples, values and delay
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from groundstation.mavlink.ingest import mavutil
+from groundstation.session.tlog import tlog_record
 
 from .geometry import ned_to_geodetic, quat_wxyz, rotation_zyx
 from .motion import Motion, wrap_pi
@@ -343,6 +343,6 @@ def write_tlog(path: Path, sc: Scenario, motion: Motion, clock: Clock) -> dict[s
     with open(path, "wb") as f:
         for (_, name, args), t_us in zip(msgs, clock.station_us(recv_us)):
             msg = getattr(mav, name + "_encode")(*args)
-            f.write(struct.pack(">Q", int(t_us)) + msg.pack(mav))
+            f.write(tlog_record(int(t_us), msg.pack(mav)))
             counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
     return counts

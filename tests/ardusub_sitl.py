@@ -3,7 +3,9 @@ on free ports in a scratch directory, and a ground station on one of its serial 
 
 The binary is ``$SKYFIX_ARDUSUB``, else ``../shared/tools/ardusub/ardusub`` next to the project; without
 either the tests are skipped. ArduPilot's ``sub.parm`` must lie next to the binary
-(``deploy/build_ardusub.sh`` builds both).
+(``deploy/build_ardusub.sh`` builds both). ArduCopter (:class:`ArduCopter`, the UAV with a gimbal, writing
+DataFlash logs) the same way: ``$SKYFIX_ARDUCOPTER``, else ``../shared/tools/arducopter/arducopter``, with
+``copter.parm`` and ``mount_brushless.parm`` beside it.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from live_helpers import ROOT, wait_for
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 DEFAULT_ARDUSUB = ROOT.parent / "shared" / "tools" / "ardusub" / "ardusub"
+DEFAULT_ARDUCOPTER = ROOT.parent / "shared" / "tools" / "arducopter" / "arducopter"
 
 # ArduSub's README (../shared/tools/ardusub/README.md): positions from GPS_INPUT, no simulated GPS,
 # EKF3 horizontal position from the GPS, height from the barometer (depth), yaw from the compass.
@@ -37,18 +40,28 @@ EK3_SRC1_YAW 1
 """
 
 
+def _sitl_files(variable: str, default: Path, parms: tuple[str, ...]) -> tuple[Path, tuple[Path, ...]]:
+    given = os.environ.get(variable)
+    if not given and not default.exists():
+        pytest.skip(f"{default.name} SITL not found: set {variable} to its binary or provide {default}")
+    binary = Path(given) if given else default
+    assert binary.is_file() and os.access(binary, os.X_OK), f"{variable}={binary}: not an executable file"
+    files = tuple(binary.parent / p for p in parms)
+    for f in files:
+        assert f.is_file(), f"{f} missing: it must lie next to the binary"
+    return binary, files
+
+
 def ardusub_files() -> tuple[Path, Path]:
-    """The binary and its ``sub.parm``: skip when neither ``$SKYFIX_ARDUSUB`` nor the default exists."""
-    given = os.environ.get("SKYFIX_ARDUSUB")
-    if not given and not DEFAULT_ARDUSUB.exists():
-        pytest.skip(f"ArduSub SITL not found: set SKYFIX_ARDUSUB to an ardusub binary "
-                    f"(deploy/build_ardusub.sh builds one) or provide {DEFAULT_ARDUSUB}")
-    binary = Path(given) if given else DEFAULT_ARDUSUB
-    assert binary.is_file() and os.access(binary, os.X_OK), f"SKYFIX_ARDUSUB={binary}: not an executable file"
-    parm = binary.parent / "sub.parm"
-    assert parm.is_file(), (f"{parm} missing: ArduPilot's Tools/autotest/default_params/sub.parm must lie next "
-                            "to the binary (deploy/build_ardusub.sh copies it there)")
+    """The binary and its ``sub.parm`` (ArduPilot's Tools/autotest/default_params; deploy/build_ardusub.sh copies
+    it): skip when neither ``$SKYFIX_ARDUSUB`` nor the default exists."""
+    binary, (parm,) = _sitl_files("SKYFIX_ARDUSUB", DEFAULT_ARDUSUB, ("sub.parm",))
     return binary, parm
+
+
+def arducopter_files() -> tuple[Path, tuple[Path, ...]]:
+    """ArduCopter's binary, ``copter.parm`` and ``mount_brushless.parm`` (a gimbal): skip without them."""
+    return _sitl_files("SKYFIX_ARDUCOPTER", DEFAULT_ARDUCOPTER, ("copter.parm", "mount_brushless.parm"))
 
 
 def _port_free(port: int, kind: int) -> bool:
@@ -152,11 +165,16 @@ class Observer:
 
 
 class ArduSub:
-    """ArduSub SITL in a scratch directory; :attr:`observer` is connected to SERIAL0, SERIAL1 is free."""
+    """ArduSub SITL in a scratch directory; :attr:`observer` is connected to SERIAL0, SERIAL1 is free.
+    ``parms``: the parameter files before ``extra_parm`` (``sub.parm``)."""
 
-    def __init__(self, binary: Path, sub_parm: Path, workdir: Path, home: tuple[float, float, float, float],
-                 extra_parm: str = EXTRA_PARM, keep: tuple[str, ...] = Observer.KEEP):
-        self.binary, self.sub_parm, self.dir, self.home, self.keep = binary, sub_parm, workdir, home, keep
+    MODEL = "vectored"
+
+    def __init__(self, binary: Path, parms: Path | tuple[Path, ...], workdir: Path,
+                 home: tuple[float, float, float, float], extra_parm: str = EXTRA_PARM,
+                 keep: tuple[str, ...] = Observer.KEEP):
+        self.binary, self.dir, self.home, self.keep = binary, workdir, home, keep
+        self.parms = (parms,) if isinstance(parms, Path) else tuple(parms)
         self.dir.mkdir(parents=True, exist_ok=True)
         (self.dir / "extra.parm").write_text(extra_parm)
         self.proc: subprocess.Popen | None = None
@@ -173,9 +191,9 @@ class ArduSub:
             tried.add(n)
             self.ports, self.instance = instance_ports(n), n
             self.log = self.dir / f"ardusub-I{n}-{len(list(self.dir.glob('ardusub-*.log')))}.log"
-            cmd = [str(self.binary), "--model", "vectored", "--speedup", "1", "-w", f"-I{n}",
+            cmd = [str(self.binary), "--model", self.MODEL, "--speedup", "1", "-w", f"-I{n}",
                    "--home", ",".join(f"{v:g}" for v in self.home),
-                   "--defaults", f"{self.sub_parm},{self.dir / 'extra.parm'}"]
+                   "--defaults", ",".join(str(p) for p in (*self.parms, self.dir / "extra.parm"))]
             with open(self.log, "w") as log:
                 log.write(" ".join(cmd) + "\n")
                 log.flush()
@@ -225,3 +243,10 @@ class ArduSub:
                 self.proc.wait()
 
 
+
+
+class ArduCopter(ArduSub):
+    """ArduCopter SITL (a quad; with ``mount_brushless.parm`` a gimbal), started as :class:`ArduSub`; its DataFlash
+    logs are in ``logs/`` of its directory."""
+
+    MODEL = "quad"

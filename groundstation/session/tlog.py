@@ -1,10 +1,13 @@
 """``uav.tlog``: the UAV's MAVLink as recorded, each frame with its record time (pymavlink's tlog format).
 
-Read once here for everything that reads a session: the session reader, the replay, the benches.
+Read once here for everything that reads a session: the session reader, the replay, the benches; its
+record written by :func:`tlog_record` for everything that writes one: the live recorder, ``skyfix sim``
+and ``skyfix import``.
 """
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 from groundstation.mavlink.ingest import mavutil
@@ -39,3 +42,8 @@ def read_tlog(path: Path, warnings: list[str] | None = None) -> list[tuple[float
     if bad and warnings is not None:
         warnings.append(f"{path}: {bad} undecodable MAVLink frames skipped")
     return out
+
+
+def tlog_record(t_unix_us: int, frame: bytes) -> bytes:
+    """One record: the record time (UNIX µs, a big-endian uint64) and one MAVLink frame."""
+    return struct.pack(">Q", t_unix_us) + frame

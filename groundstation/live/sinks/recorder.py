@@ -39,7 +39,6 @@ import logging
 import math
 import os
 import queue
-import struct
 import threading
 import time
 import tomllib
@@ -50,6 +49,7 @@ from pathlib import Path
 import av
 
 from groundstation.session.positions import COLUMNS, format_row
+from groundstation.session.tlog import tlog_record
 from groundstation.threads import failure_kind, in_thread
 from localizer.depth import DepthSample
 from localizer.fix import Fix
@@ -193,7 +193,7 @@ class Recorder:
         return True
 
     def on_mavlink(self, msg, t_recv: float) -> None:
-        self.mavlink_frames += self._put(("tlog", struct.pack(">Q", int(t_recv * 1e6)) + msg.get_msgbuf()))
+        self.mavlink_frames += self._put(("tlog", tlog_record(int(t_recv * 1e6), msg.get_msgbuf())))
 
     def on_depth(self, sample: DepthSample, t_recv: float) -> None:
         rec = {"t": sample.t, "depth_m": sample.depth_m, "t_recv": t_recv, "source": sample.source}

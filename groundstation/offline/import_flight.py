@@ -1,0 +1,244 @@
+"""``skyfix import``: a field day's own records as a session (format v1) that every offline command reads.
+
+    skyfix import --dataflash FLIGHT.bin --video CAMERA.mp4 --depth DEPTH --calibration CAL.toml --out SESSION
+
+- The drone's DataFlash log (:mod:`groundstation.session.dataflash`) becomes the session's
+  ``uav.tlog``: the MAVLink messages its records stand for, each at its own record's time —
+  ATTITUDE (ATT, with the IMU's body rates), GLOBAL_POSITION_INT (POS), GPS_RAW_INT (GPS,
+  GPA), SYSTEM_TIME (the log's clock on UNIX time from the GPS fixes' week and ms),
+  MOUNT_ORIENTATION (MNT) when the calibration's camera is on a gimbal
+  (``attitude_source = "mount_orientation"``), DISTANCE_SENSOR (RFND), HEARTBEAT (armed as
+  the log's ARM / EV records say) and PARAM_VALUE ``MNT1_TYPE``. Nothing is resampled: one
+  message per record; times are whole milliseconds of the autopilot's clock (its MAVLink
+  ``time_boot_ms``), the record time the same instant on UNIX time (a log has no radio delay).
+- The camera's own video has no per-frame station times: its frames are timed by the
+  container (PTS) from a start on UNIX time — ``--video-start-unix``, or ``--video-start
+  trigger``: the first CAM/TRIG record of the log (the camera started recording when
+  triggered). A video that does not lie within the log's attitude is an error naming both
+  spans. The video is linked into the session (a hard link where the file system allows,
+  else copied).
+- The depth: skyfix's ``depth.jsonl`` (read strictly), or a CSV with a header naming ``t``
+  (UNIX s) and ``depth_m`` (metres below the surface) columns, as ``--depth-columns`` says.
+- ``session.toml``: the calibration's text, with ``version = 1`` first when it lacks it.
+- ``import.json``: what the import found: the log's clock to UNIX offset and its sigma, the
+  video's start and where it came from, the records used per kind, and the warnings.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shutil
+import sys
+import tomllib
+from pathlib import Path
+
+import av
+import numpy as np
+
+from groundstation.live.config import load_calibration
+from groundstation.mavlink.ingest import mavutil
+from groundstation.outputs import output_dir
+from groundstation.session import SessionError
+from groundstation.session.dataflash import DOWNWARD, FlightLog, read_dataflash
+from groundstation.session.depth import read_depth
+from groundstation.session.tlog import tlog_record
+from groundstation.video.file import frame_indices
+
+HEARTBEAT_HZ = 1.0
+
+
+def telemetry_messages(flight: FlightLog, mount: bool) -> list[tuple[float, object]]:
+    """``(boot s, message)`` for every record (see the module doc), in time order."""
+    mav = mavutil().mavlink
+    out: list[tuple[float, object]] = []
+
+    def ms(t: float) -> int:
+        return round(t * 1000.0)
+
+    for t, roll, pitch, yaw, p, q, r in flight.att:
+        out.append((t, mav.MAVLink_attitude_message(ms(t), roll, pitch, yaw, p, q, r)))
+    yaw_at = np.degrees(np.interp(flight.pos[:, 0], flight.att[:, 0], np.unwrap(flight.att[:, 3]))) % 360.0
+    for (t, lat, lon, alt, rel), hdg in zip(flight.pos, yaw_at, strict=True):
+        out.append((t, mav.MAVLink_global_position_int_message(ms(t), round(lat * 1e7), round(lon * 1e7),
+                                                                round(alt * 1000), round(rel * 1000), 0, 0, 0,
+                                                                round(hdg * 100) % 36000)))
+    for t, unix, status, sats, hdop, alt, h_acc, v_acc, lat, lon in flight.gps:
+        known = math.isfinite(unix)
+        out.append((t, mav.MAVLink_gps_raw_int_message(
+            round(unix * 1e6) if known else 0, int(status), round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
+            round(hdop * 100) if math.isfinite(hdop) else 65535, 65535, 65535, 65535, int(sats),
+            h_acc=round(h_acc * 1000) if math.isfinite(h_acc) else 0,
+            v_acc=round(v_acc * 1000) if math.isfinite(v_acc) else 0)))
+        if known and status >= 3:
+            out.append((t, mav.MAVLink_system_time_message(round(float(flight.unix(t)) * 1e6), ms(t))))
+    if mount:
+        for t, roll, pitch, yaw_body, yaw_earth in flight.mnt:
+            out.append((t, mav.MAVLink_mount_orientation_message(ms(t), roll, pitch, yaw_body, yaw_earth)))
+    for t, dist in flight.rangefinder:
+        out.append((t, mav.MAVLink_distance_sensor_message(ms(t), 0, 0, round(dist * 100), 0, 0, DOWNWARD, 0)))
+    armed, events = False, list(flight.armed)
+    for t in np.arange(flight.att[0, 0], flight.att[-1, 0], 1.0 / HEARTBEAT_HZ):
+        while events and events[0][0] <= t:
+            armed = events.pop(0)[1]
+        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+        out.append((t, mav.MAVLink_heartbeat_message(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base,
+                                                     0, mav.MAV_STATE_ACTIVE, 3)))
+    if "MNT1_TYPE" in flight.params:
+        name = b"MNT1_TYPE"
+        out.append((flight.att[0, 0], mav.MAVLink_param_value_message(name, flight.params["MNT1_TYPE"],
+                                                                      mav.MAV_PARAM_TYPE_REAL32, 0, 65535)))
+    out.sort(key=lambda item: item[0])
+    return out
+
+
+def write_tlog(path: Path, flight: FlightLog, messages: list[tuple[float, object]]) -> dict[str, int]:
+    """``uav.tlog`` of ``messages``, each at its time on UNIX time; the count per type."""
+    mav = mavutil().mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    counts: dict[str, int] = {}
+    with open(path, "wb") as f:
+        for t, msg in messages:
+            f.write(tlog_record(round(float(flight.unix(t)) * 1e6), msg.pack(mav)))
+            counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
+    return counts
+
+
+def frame_times_s(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The video's frame indices (as the session reader numbers them) and their times from the first frame (s),
+    from the container's presentation times (demuxing only)."""
+    try:
+        with av.open(str(path)) as container:
+            stream = container.streams.video[0]
+            base = stream.time_base
+            pts = sorted({p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard})
+    except (av.error.FFmpegError, IndexError) as e:
+        raise SessionError(f"{path}: FFmpeg cannot read its frames' times ({e})") from None
+    if not pts:
+        raise SessionError(f"{path}: no video frames")
+    index_of = frame_indices(pts)
+    return (np.array([index_of[p] for p in pts]), np.array([float((p - pts[0]) * base) for p in pts]))
+
+
+def video_start(flight: FlightLog, how: str | None, start_unix: float | None) -> tuple[float, str]:
+    """The video's first frame on UNIX time and where it came from."""
+    if start_unix is not None:
+        return start_unix, "given (--video-start-unix)"
+    if how == "trigger":
+        if not len(flight.triggers_s):
+            raise SessionError(f"{flight.path}: no CAM or TRIG record: the camera's start is not in the log "
+                               "(give --video-start-unix)")
+        return float(flight.unix(flight.triggers_s[0])), f"the log's first CAM/TRIG record ({len(flight.triggers_s)})"
+    raise SessionError("the video's start: give --video-start-unix T or --video-start trigger")
+
+
+def depth_records(path: Path, columns: tuple[str, str], warnings: list[str]) -> list[dict]:
+    """``{"t", "depth_m"}`` records from a depth.jsonl or a CSV with the named columns."""
+    if path.suffix == ".jsonl":
+        return [{"t": r.t, "depth_m": r.depth_m} for r in read_depth(path, warnings)]
+    t_col, d_col = columns
+    try:
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            missing = [c for c in columns if c not in (reader.fieldnames or [])]
+            if missing:
+                raise SessionError(f"{path}: no column {', '.join(missing)} (header {reader.fieldnames}); "
+                                   "name them with --depth-columns T,DEPTH")
+            out = []
+            for i, row in enumerate(reader, start=2):
+                try:
+                    t, d = float(row[t_col]), float(row[d_col])
+                except (TypeError, ValueError):
+                    raise SessionError(f"{path}:{i}: {t_col} = {row[t_col]!r}, {d_col} = {row[d_col]!r}: "
+                                       "not numbers") from None
+                if not (math.isfinite(t) and math.isfinite(d)) or (out and t <= out[-1]["t"]):
+                    raise SessionError(f"{path}:{i}: {t_col} = {t!r}, {d_col} = {d!r}: not finite, or the time "
+                                       "does not increase")
+                out.append({"t": t, "depth_m": d})
+    except OSError as e:
+        raise SessionError(f"{path}: cannot read: {e.strerror}") from None
+    return out
+
+
+def link_or_copy(src: Path, dst: Path) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copyfile(src, dst)
+
+
+def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration: Path, out: Path,
+                  video_start_how: str | None = None, video_start_unix: float | None = None,
+                  depth_columns: tuple[str, str] = ("t", "depth_m")) -> dict:
+    """Write the session (see the module doc); returns what ``import.json`` holds."""
+    cal = load_calibration(str(calibration))
+    source = cal.mount.attitude_source
+    if source == "gimbal_device":
+        raise SessionError(f"{calibration}: [mount] attitude_source = \"gimbal_device\": a DataFlash log has the "
+                           "gimbal as MNT records: say \"mount_orientation\" (or \"fixed\" for a rigid camera)")
+    flight = read_dataflash(dataflash)
+    mount = source == "mount_orientation"
+    if mount and not len(flight.mnt):
+        raise SessionError(f"{dataflash}: no MNT records, while the calibration's camera is on a gimbal (log the "
+                           "camera bit of LOG_BITMASK)")
+    warnings = list(flight.warnings)
+    depth_out = depth_records(depth, depth_columns, warnings)
+    if not depth_out:
+        raise SessionError(f"{depth}: no depth records")
+    report: dict = {"dataflash": str(dataflash), "unix_minus_boot_s": round(flight.unix_minus_boot_s, 6),
+                    "unix_minus_boot_sigma_s": round(flight.unix_minus_boot_sigma_s, 6),
+                    "log_span_unix": [round(x, 3) for x in flight.span_unix]}
+    frames = None
+    if video is not None:
+        index, t_rel = frame_times_s(video)
+        start, how = video_start(flight, video_start_how, video_start_unix)
+        span, log_span = (start, start + float(t_rel[-1])), flight.span_unix
+        if span[0] < log_span[0] or span[1] > log_span[1]:
+            raise SessionError(f"{video}: its frames span {span[0]:.3f}–{span[1]:.3f} (UNIX s), not within the log's "
+                               f"attitude {log_span[0]:.3f}–{log_span[1]:.3f}")
+        frames = (index, start + t_rel)
+        report |= {"video": str(video), "video_start_unix": round(start, 6), "video_start_from": how,
+                   "frames": len(index)}
+    out.mkdir(parents=True, exist_ok=True)
+    text = Path(calibration).read_text()
+    if "version" not in tomllib.loads(text):
+        text = "version = 1\n" + text
+    (out / "session.toml").write_text(text)
+    report["messages"] = write_tlog(out / "uav.tlog", flight, telemetry_messages(flight, mount))
+    (out / "depth.jsonl").write_text("".join(json.dumps(r) + "\n" for r in depth_out))
+    if frames is not None:
+        link_or_copy(video, out / f"video{video.suffix.lower() or '.mp4'}")
+        with open(out / "video_frames.csv", "w") as f:
+            f.write("frame,t\n" + "".join(f"{i},{t:.6f}\n" for i, t in zip(*frames, strict=True)))
+    report["warnings"] = warnings
+    (out / "import.json").write_text(json.dumps(report, indent=1) + "\n")
+    return report
+
+
+def run(args) -> int:
+    out = output_dir(args.out)
+    report = import_flight(Path(args.dataflash), Path(args.video) if args.video else None, Path(args.depth),
+                           Path(args.calibration), out, args.video_start, args.video_start_unix,
+                           tuple(args.depth_columns.split(",")))
+    for w in report["warnings"]:
+        print(f"skyfix import: warning: {w}", file=sys.stderr)
+    print(f"skyfix import: {out}: log clock on UNIX time {report['unix_minus_boot_s']:.3f} s "
+          f"± {report['unix_minus_boot_sigma_s'] * 1000:.1f} ms; telemetry {report['messages']}"
+          + (f"; video {report['frames']} frames from {report['video_start_unix']:.3f} "
+             f"({report['video_start_from']})" if "frames" in report else ""))
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("import", help="a flight's own records (DataFlash log, camera video, depth) as a "
+                              "session")
+    p.add_argument("--dataflash", required=True, help="the drone's ArduPilot DataFlash log (.bin)")
+    p.add_argument("--video", help="the camera's own video file")
+    p.add_argument("--depth", required=True, help="the UUV's depth: skyfix's depth.jsonl or a CSV")
+    p.add_argument("--depth-columns", default="t,depth_m", help="a CSV's time (UNIX s) and depth (m) columns")
+    p.add_argument("--calibration", required=True, help="the camera's calibration (TOML, session.toml tables)")
+    p.add_argument("--video-start", choices=("trigger",), help="the video's first frame: the log's first CAM/TRIG")
+    p.add_argument("--video-start-unix", type=float, help="the video's first frame, UNIX s")
+    p.add_argument("--out", required=True, help="the session directory to write")
+    p.set_defaults(func=run)

@@ -1,0 +1,155 @@
+"""``skyfix import`` on DataFlash logs written here, record by record, in ArduPilot's binary layout (FMT records, then
+messages), so every value and time is known by construction; ArduCopter's own log is test_sitl_arducopter_import.py.
+The log also carries a simulator's ``SIM`` truth with other values: nothing of it may reach the session."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import numpy as np
+import pytest
+from live_helpers import ROOT
+
+from groundstation.cli import main
+from groundstation.offline.import_flight import import_flight
+from groundstation.session import SessionError
+from groundstation.session.read import load_session
+from groundstation.session.tlog import read_tlog
+
+WEEK, WEEK_MS = 2447, 316_382_800  # the first GPS fix's time ...
+BOOT_AT_FIX_S = 10.0  # ... arriving 10 s after the autopilot booted
+UNIX_AT_FIX = 315964800 + WEEK * 604800 + WEEK_MS / 1000 - 18  # GPS epoch, weeks, ms, minus 18 leap seconds
+FORMATS = {  # name: (type, struct format, ArduPilot format letters, columns)
+    "ATT": (1, "<QffffffB", "QffffffB", "TimeUS,DesRoll,Roll,DesPitch,Pitch,DesYaw,Yaw,AEKF"),
+    "POS": (2, "<Qiifff", "QLLfff", "TimeUS,Lat,Lng,Alt,RelHomeAlt,RelOriginAlt"),
+    "GPS": (3, "<QBBIHBhiiiffffB", "QBBIHBcLLeffffB", "TimeUS,I,Status,GMS,GWk,NSats,HDop,Lat,Lng,Alt,Spd,GCrs,VZ,Yaw,U"),
+    "MNT": (4, "<QBfffffffff", "QBfffffffff", "TimeUS,I,DRoll,Roll,DPitch,Pitch,DYawB,YawB,DYawE,YawE,Dist"),
+    "SIM": (5, "<QhhHfiiffff", "QccCfLLffff", "TimeUS,Roll,Pitch,Yaw,Alt,Lat,Lng,Q1,Q2,Q3,Q4"),
+    "TRIG": (6, "<QH", "QH", "TimeUS,Img"),
+}
+
+
+class DataflashWriter:
+    def __init__(self, path: Path, names=tuple(FORMATS)):
+        self.f = open(path, "wb")  # noqa: SIM115 - closed by close()
+        for name in names:
+            kind, fmt, letters, columns = FORMATS[name]
+            length = 3 + struct.calcsize(fmt)
+            self.f.write(bytes([0xA3, 0x95, 0x80]) + struct.pack("<BB4s16s64s", kind, length, name.encode(),
+                                                                   letters.encode(), columns.encode()))
+
+    def write(self, name: str, *values) -> None:
+        kind, fmt, _, _ = FORMATS[name]
+        self.f.write(bytes([0xA3, 0x95, kind]) + struct.pack(fmt, *values))
+
+    def close(self) -> None:
+        self.f.close()
+
+
+def roll_deg(t):
+    return 5.0 * math.sin(t)
+
+
+def write_flight(path: Path, seconds: float = 20.0, gps_week: int = WEEK, trigger_at_s: float | None = None) -> None:
+    """ATT and MNT at 10 Hz, POS at 10 Hz, GPS at 5 Hz (weeks and ms on a clock BOOT_AT_FIX_S behind), SIM at 10 Hz
+    with other values, from boot 5 s on."""
+    w = DataflashWriter(path)
+    for k in range(round(seconds * 10)):
+        t = 5.0 + k / 10
+        us = round(t * 1e6)
+        w.write("ATT", us, 0.0, roll_deg(t), 0.0, -2.0, 0.0, 90.0, 0)
+        w.write("MNT", us, 0, 0.0, 0.5, -60.0, -60.0, 10.0, 10.0, 100.0, 100.0, float("nan"))
+        w.write("POS", us + 500, round(63.44 * 1e7), round(10.4 * 1e7), 60.0 + t / 100, 10.0, 10.0)
+        w.write("SIM", us, 3000, 1000, 18000, 99.0, round(60.0 * 1e7), round(11.0 * 1e7), 1.0, 0.0, 0.0, 0.0)
+        if k % 2 == 0:
+            week_ms = WEEK_MS + round((t - BOOT_AT_FIX_S) * 1000)
+            w.write("GPS", us, 0, 6, week_ms, gps_week, 12, 80, round(63.44 * 1e7), round(10.4 * 1e7), 6000,
+                    0.0, 0.0, 0.0, 0.0, 1)
+        if trigger_at_s is not None and abs(t - trigger_at_s) < 1e-6:
+            w.write("TRIG", us, 1)
+    w.close()
+
+
+def write_video(path: Path, frames: int = 30, fps: int = 30) -> None:
+    with av.open(str(path), "w") as out:
+        s = out.add_stream("libx264", rate=fps)
+        s.width, s.height, s.pix_fmt = 1920, 1080, "yuv420p"
+        s.time_base = Fraction(1, fps)
+        for i in range(frames):
+            f = av.VideoFrame.from_ndarray(np.full((1080, 1920, 3), i * 8 % 255, np.uint8), format="bgr24")
+            f.pts = i
+            for p in s.encode(f):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+
+
+@pytest.fixture
+def field_day(tmp_path):
+    log, video, depth, cal = (tmp_path / n for n in ("flight.bin", "camera.mp4", "depth.csv", "cal.toml"))
+    write_flight(log, trigger_at_s=12.0)
+    write_video(video)
+    start = UNIX_AT_FIX + 2.0  # boot 12 s
+    depth.write_text("time_unix,depth\n" + "".join(f"{start + i * 0.5:.3f},{1.0 + i * 0.01:.2f}\n" for i in range(20)))
+    cal.write_text((ROOT / "deploy" / "calibration.toml").read_text()
+                   .replace('attitude_source = "gimbal_device"', 'attitude_source = "mount_orientation"'))
+    return log, video, depth, cal, start
+
+
+def test_a_log_becomes_a_session_on_gps_time_without_the_simulators_truth(field_day, tmp_path):
+    log, video, depth, cal, start = field_day
+    out = tmp_path / "session"
+    report = import_flight(log, video, depth, cal, out, video_start_unix=start, depth_columns=("time_unix", "depth"))
+    assert report["unix_minus_boot_s"] == pytest.approx(UNIX_AT_FIX - BOOT_AT_FIX_S, abs=1e-6)
+    assert report["unix_minus_boot_sigma_s"] == pytest.approx(0.0, abs=1e-6)
+    msgs = read_tlog(out / "uav.tlog")
+    kinds = {m.get_type() for _, m in msgs}
+    assert {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "MOUNT_ORIENTATION", "GPS_RAW_INT"} <= kinds
+    for t_rec, m in msgs:  # every record at its own time on UNIX time, the log's values (not SIM's)
+        if m.get_type() == "ATTITUDE":
+            t = m.time_boot_ms / 1000
+            assert t_rec == pytest.approx(UNIX_AT_FIX - BOOT_AT_FIX_S + t, abs=1e-6)
+            assert math.degrees(m.roll) == pytest.approx(roll_deg(t), abs=1e-4) and math.degrees(m.yaw) == pytest.approx(90.0, abs=1e-4)
+        if m.get_type() == "GLOBAL_POSITION_INT":
+            assert (m.lat, m.lon) == (634400000, 104000000) and abs(m.alt - 60_050) < 200
+        if m.get_type() == "MOUNT_ORIENTATION":
+            assert (m.pitch, m.yaw, m.yaw_absolute) == (-60.0, 10.0, 100.0)
+        if m.get_type() == "SYSTEM_TIME":
+            assert m.time_unix_usec / 1e6 - m.time_boot_ms / 1e3 == pytest.approx(UNIX_AT_FIX - BOOT_AT_FIX_S,
+                                                                                  abs=2e-3)
+    frames = (out / "video_frames.csv").read_text().splitlines()
+    assert frames[0] == "frame,t" and len(frames) == 31
+    assert [float(r.split(",")[1]) for r in frames[1:]] == pytest.approx([start + i / 30 for i in range(30)], abs=1e-6)
+    depth_rows = [json.loads(line) for line in (out / "depth.jsonl").read_text().splitlines()]
+    assert depth_rows[3] == {"t": pytest.approx(start + 1.5), "depth_m": 1.03}
+    session = load_session(out)  # what process, evaluate, report, export and replay read
+    assert session.telemetry.mount_type is None and len(session.frames["t"]) == 30
+    assert json.loads((out / "import.json").read_text())["video_start_from"] == "given (--video-start-unix)"
+
+
+def test_the_video_start_from_the_trigger_and_errors_that_name_the_value(field_day, tmp_path):
+    log, video, depth, cal, start = field_day
+    columns = ("time_unix", "depth")
+    report = import_flight(log, video, depth, cal, tmp_path / "a", video_start_how="trigger", depth_columns=columns)
+    assert report["video_start_unix"] == pytest.approx(UNIX_AT_FIX + 2.0, abs=1e-6)
+    with pytest.raises(SessionError, match=r"its frames span .* not within the log's attitude"):
+        import_flight(log, video, depth, cal, tmp_path / "b", video_start_unix=start + 60.0, depth_columns=columns)
+    with pytest.raises(SessionError, match=r"no column t, depth_m \(header \[.time_unix., .depth.\]\)"):
+        import_flight(log, video, depth, cal, tmp_path / "c", video_start_unix=start)
+    bare = tmp_path / "bare.bin"
+    write_flight(bare, gps_week=0)
+    with pytest.raises(SessionError, match=r"no GPS time"):
+        import_flight(bare, None, depth, cal, tmp_path / "d", depth_columns=columns)
+    gimbal_device = tmp_path / "gd.toml"
+    gimbal_device.write_text((ROOT / "deploy" / "calibration.toml").read_text())
+    with pytest.raises(SessionError, match=r"MNT records"):
+        import_flight(log, None, depth, gimbal_device, tmp_path / "e", depth_columns=columns)
+    not_a_log = tmp_path / "video.bin"
+    not_a_log.write_bytes(video.read_bytes())
+    assert main(["import", "--dataflash", str(not_a_log), "--depth", str(depth), "--depth-columns", "time_unix,depth",
+                 "--calibration", str(cal), "--out", str(tmp_path / "f")]) == 2
