@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import struct
 from fractions import Fraction
 from pathlib import Path
@@ -31,6 +32,7 @@ FORMATS = {  # name: (type, struct format, ArduPilot format letters, columns)
     "MNT": (4, "<QBfffffffff", "QBfffffffff", "TimeUS,I,DRoll,Roll,DPitch,Pitch,DYawB,YawB,DYawE,YawE,Dist"),
     "SIM": (5, "<QhhHfiiffff", "QccCfLLffff", "TimeUS,Roll,Pitch,Yaw,Alt,Lat,Lng,Q1,Q2,Q3,Q4"),
     "TRIG": (6, "<QH", "QH", "TimeUS,Img"),
+    "IMU": (7, "<QBfff", "QBfff", "TimeUS,I,GyrX,GyrY,GyrZ"),
 }
 
 
@@ -75,13 +77,13 @@ def write_flight(path: Path, seconds: float = 20.0, gps_week: int = WEEK, trigge
     w.close()
 
 
-def write_video(path: Path, frames: int = 30, fps: int = 30) -> None:
+def write_video(path: Path, frames: int = 30, fps: int = 30, size: tuple[int, int] = (1920, 1080)) -> None:
     with av.open(str(path), "w") as out:
         s = out.add_stream("libx264", rate=fps)
-        s.width, s.height, s.pix_fmt = 1920, 1080, "yuv420p"
+        s.width, s.height, s.pix_fmt = *size, "yuv420p"
         s.time_base = Fraction(1, fps)
         for i in range(frames):
-            f = av.VideoFrame.from_ndarray(np.full((1080, 1920, 3), i * 8 % 255, np.uint8), format="bgr24")
+            f = av.VideoFrame.from_ndarray(np.full((size[1], size[0], 3), i * 8 % 255, np.uint8), format="bgr24")
             f.pts = i
             for p in s.encode(f):
                 out.mux(p)
@@ -153,3 +155,74 @@ def test_the_video_start_from_the_trigger_and_errors_that_name_the_value(field_d
     not_a_log.write_bytes(video.read_bytes())
     assert main(["import", "--dataflash", str(not_a_log), "--depth", str(depth), "--depth-columns", "time_unix,depth",
                  "--calibration", str(cal), "--out", str(tmp_path / "f")]) == 2
+
+
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    """A generated flight (``fixed_camera``: the camera rigid on an airframe that tilts, gusts and swings its yaw)
+    whose telemetry starts 20 s before its 6 s of video; its own truth says where the UUV was."""
+    from sim_fixtures.generate import generate
+    from sim_fixtures.scenario import load_scenario, with_overrides
+
+    if shutil.which("ffmpeg") is None:
+        pytest.skip("ffmpeg is needed to render the video")
+    sc = with_overrides(load_scenario(ROOT / "sim_fixtures" / "scenarios" / "fixed_camera.toml"), duration_s=6.0,
+                        telemetry={"lead_s": 20.0})
+    out = tmp_path_factory.mktemp("generated") / "flight"
+    generate(sc, out)
+    return out
+
+
+def dataflash_of(session: Path, path: Path) -> None:
+    """The generated flight's telemetry as its autopilot would have logged it: ATT (and IMU: its rates) from
+    ATTITUDE, POS from GLOBAL_POSITION_INT, GPS fixes (week and ms) from SYSTEM_TIME, each at its time_boot_ms."""
+    w = DataflashWriter(path, ("ATT", "POS", "GPS", "IMU"))
+    for _, m in read_tlog(session / "uav.tlog"):
+        us = m.time_boot_ms * 1000 if hasattr(m, "time_boot_ms") else None
+        if m.get_type() == "ATTITUDE":
+            w.write("ATT", us, 0.0, math.degrees(m.roll), 0.0, math.degrees(m.pitch), 0.0,
+                    math.degrees(m.yaw) % 360.0, 0)
+            w.write("IMU", us, 0, m.rollspeed, m.pitchspeed, m.yawspeed)
+        elif m.get_type() == "GLOBAL_POSITION_INT":
+            w.write("POS", us, m.lat, m.lon, m.alt / 1000, m.relative_alt / 1000, m.relative_alt / 1000)
+        elif m.get_type() == "SYSTEM_TIME" and m.time_unix_usec:
+            gps_s = m.time_unix_usec / 1e6 + 18 - 315964800
+            week = int(gps_s // 604800)
+            w.write("GPS", us, 0, 6, round((gps_s - week * 604800) * 1000), week, 12, 80, 0, 0, 0, 0.0, 0.0, 0.0,
+                    0.0, 1)
+    w.close()
+
+
+def test_the_videos_start_is_found_from_its_motion_and_the_flight_is_located(generated, tmp_path):
+    """The generated flight's video given to ``skyfix import`` with no start: the image's motion against the logged
+    attitude, searched across the 26 s of log, finds its first frame within one frame of the truth, and ``skyfix
+    process`` of the imported session locates the UUV as in the generated one."""
+    from groundstation.offline.evaluate import errors_m
+    from groundstation.offline.process import process_session
+
+    log = tmp_path / "flight.bin"
+    dataflash_of(generated, log)
+    out = tmp_path / "imported"
+    report = import_flight(log, generated / "video.mp4", generated / "depth.jsonl", generated / "session.toml", out)
+    true_start = float((generated / "video_frames.csv").read_text().splitlines()[1].split(",")[1])
+    error_s = report["video_start_unix"] - true_start
+    print(f"\nvideo start from its motion: {error_s * 1000:+.1f} ms ± {report['video_start_sigma_s'] * 1000:.1f} ms "
+          f"(contrast {report['video_start_contrast']}) over {report['video_start_pairs']} pairs")
+    assert abs(error_s) <= 1 / 30 and report["video_start_from"].startswith("the image's motion")
+    session = load_session(out)
+    session.truth = load_session(generated).truth
+    fixes = process_session(session, use_track=False)
+    ok = fixes.status == "ok"
+    err = errors_m(fixes, session.truth)[ok]
+    err = err[np.isfinite(err)]  # the truth is sampled at the true frame times: the ends may fall just outside
+    print(f"imported: {ok.mean():.1%} of frames fixed, MAE {err.mean():.4f} m, max {err.max():.4f} m")
+    assert ok.mean() >= 0.9 and len(err) >= 0.9 * len(ok) and err.mean() <= 0.05
+
+
+def test_a_video_the_log_cannot_place_is_an_error_naming_both_spans(generated, tmp_path):
+    log = tmp_path / "flight.bin"
+    dataflash_of(generated, log)
+    still = tmp_path / "still.mp4"
+    write_video(still, frames=90, size=(640, 360))  # no motion at all
+    with pytest.raises(SessionError, match=r"still.mp4: .* against the log's attitude \d+\.\d+–\d+\.\d+"):
+        import_flight(log, still, generated / "depth.jsonl", generated / "session.toml", tmp_path / "s")

@@ -261,23 +261,90 @@ def offset_from_rotations(cal: Calibration, tel: Telemetry, rotations: Sequence[
     return SessionOffset(estimate_offset(rotations, track, offsets), parts)
 
 
+@dataclass(frozen=True)
+class VideoStart:
+    """Where a video with no station times starts on the telemetry's clock, found from its motion."""
+
+    start_s: float  # the first frame's exposure
+    sigma_s: float  # 1-sigma
+    pairs: int
+    rms_mrad: float
+    contrast: float  # the best start's misfit over the best elsewhere (beyond :data:`START_APART_S`): < 1, the lower the surer
+
+
+START_STEP_S = 0.02  # the coarse search's grid
+START_PAIRS = 80  # frame pairs the coarse search compares (spread over the video)
+START_APART_S = 0.5  # a rival start this far from the best ...
+START_CONTRAST = 0.7  # ... must misfit by at least 1 / this as much, or the start is ambiguous
+
+
+def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotation],
+                     span: tuple[float, float]) -> VideoStart:
+    """The exposure of a video's first frame on the telemetry's clock, within ``span`` (where the telemetry gives a
+    pose), from the rotations between its frames (their times relative to the first frame, s).
+
+    Coarse: every start :data:`START_STEP_S` apart across ``span`` is scored by how well the camera's
+    attitude then predicts :data:`START_PAIRS` of the rotations (the same misfit as
+    :func:`estimate_offset`); then :func:`estimate_offset` refines the best within a step or two with all
+    of them. :class:`ValueError` (one line naming both spans) when the video does not fit in ``span``, the
+    image's motion says too little, or another start fits nearly as well."""
+    if len(rotations) < 10:
+        raise ValueError(f"the image's motion was measured between {len(rotations)} frame pairs: too few to place "
+                         "the video on the log's clock")
+    length = rotations[-1].t1
+    lo, hi = span[0], span[1] - length
+    if hi <= lo:
+        raise ValueError(f"the video ({length:.1f} s) is longer than the telemetry's span {span[0]:.3f}–{span[1]:.3f}")
+    track = AttitudeTrack.from_telemetry(cal, tel, span[0], span[1])
+    pick = np.unique(np.linspace(0, len(rotations) - 1, min(START_PAIRS, len(rotations))).round().astype(int))
+    t0 = np.array([rotations[i].t0 for i in pick])
+    t1 = np.array([rotations[i].t1 for i in pick])
+    meas = np.array([rotations[i].rotvec for i in pick])
+    starts = np.arange(lo, hi, START_STEP_S)
+    cost = np.empty(len(starts))
+    for a in range(0, len(starts), 2000):  # in chunks: 2000 starts × the pairs at once
+        s_ = starts[a:a + 2000]
+        pred = track.relative((t0[None, :] + s_[:, None]).ravel(), (t1[None, :] + s_[:, None]).ravel())
+        r = pred.reshape(len(s_), len(pick), 3) - meas[None]
+        sq = np.sum(r ** 2, axis=2)
+        cost[a:a + 2000] = np.sum(np.minimum(sq, 9.0 * np.median(sq, axis=1, keepdims=True)), axis=1)  # robust
+    best = int(np.argmin(cost))
+    rivals = np.abs(starts - starts[best]) > START_APART_S
+    contrast = float(cost[best] / cost[rivals].min()) if rivals.any() else 0.0
+    if contrast > START_CONTRAST:
+        raise ValueError(f"the video's start is ambiguous: {starts[best]:.3f} and "
+                         f"{starts[rivals][np.argmin(cost[rivals])]:.3f} fit nearly as well (the camera's motion "
+                         "repeats or says too little); give the start")
+    shifted = [Rotation(r.t0 + starts[best], r.t1 + starts[best], r.rotvec, r.tracks) for r in rotations]
+    fine = estimate_offset(shifted, track, np.arange(-2 * START_STEP_S, 2 * START_STEP_S + OFFSET_STEP_S / 2,
+                                                     OFFSET_STEP_S))
+    if fine is None:
+        raise ValueError("the video's start could not be refined (the telemetry does not cover its frames)")
+    return VideoStart(float(starts[best] + fine.offset_s), fine.sigma_s, fine.pairs, fine.rms_mrad, contrast)
+
+
+def measure_rotations(path, cal: Calibration, times_s: np.ndarray, indices=None) -> list[Rotation]:
+    """The camera's rotation between consecutive frames of a video file, at the frames' times ``times_s`` (by
+    frame index); :class:`SessionError` for a video FFmpeg cannot read."""
+    meter = RotationMeter(cal.camera)
+    rotations = []
+    try:
+        with open_video(path, expected_size=(cal.camera.width, cal.camera.height), indices=indices) as video:
+            for frame in video.prefetch():
+                if frame.index < len(times_s) and (r := meter.measure(float(times_s[frame.index]), frame.image)):
+                    rotations.append(r)
+    except VideoError as e:
+        raise SessionError(str(e)) from None
+    return rotations
+
+
 def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[SessionOffset, int]:
     """The offset of a recorded session's frame times (``video_frames.csv``) to its telemetry; and frames read."""
     session = load_session(session_dir)
     cal = session.calibration
     if session.video_path is None or session.frames is None:
         raise SessionError(f"{session_dir}: no video.* with video_frames.csv")
-    t = session.frames["t"]
-    meter = RotationMeter(cal.camera)
-    rotations = []
-    try:
-        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
-                        indices=session.frames["frame"]) as video:
-            for frame in video.prefetch():
-                if frame.index < len(t) and (r := meter.measure(float(t[frame.index]), frame.image)) is not None:
-                    rotations.append(r)
-    except VideoError as e:
-        raise SessionError(str(e)) from None
+    rotations = measure_rotations(session.video_path, cal, session.frames["t"], session.frames["frame"])
     return offset_from_rotations(cal, session.telemetry, rotations, search_s), len(rotations) + 1
 
 

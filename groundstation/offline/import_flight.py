@@ -12,11 +12,15 @@
   message per record; times are whole milliseconds of the autopilot's clock (its MAVLink
   ``time_boot_ms``), the record time the same instant on UNIX time (a log has no radio delay).
 - The camera's own video has no per-frame station times: its frames are timed by the
-  container (PTS) from a start on UNIX time — ``--video-start-unix``, or ``--video-start
-  trigger``: the first CAM/TRIG record of the log (the camera started recording when
-  triggered). A video that does not lie within the log's attitude is an error naming both
-  spans. The video is linked into the session (a hard link where the file system allows,
-  else copied).
+  container (PTS) from a start on UNIX time — found from the image's motion against the
+  logged attitude (``--video-start motion``, the default: the camera's rotation between
+  frames against the attitude's, :func:`~groundstation.latency.estimate.find_video_start`,
+  searched across the whole log and refined by the estimator that measures the live video's
+  latency; its sigma and residual printed and kept), or ``--video-start trigger``: the first
+  CAM/TRIG record of the log (the camera started recording when triggered), or
+  ``--video-start-unix``. A video that does not lie within the log's attitude is an error
+  naming both spans. The video is linked into the session (a hard link where the file
+  system allows, else copied).
 - The depth: skyfix's ``depth.jsonl`` (read strictly), or a CSV with a header naming ``t``
   (UNIX s) and ``depth_m`` (metres below the surface) columns, as ``--depth-columns`` says.
 - ``session.toml``: the calibration's text, with ``version = 1`` first when it lacks it.
@@ -38,12 +42,14 @@ from pathlib import Path
 import av
 import numpy as np
 
+from groundstation.latency.estimate import VideoStart, find_video_start, measure_rotations
 from groundstation.live.config import load_calibration
 from groundstation.mavlink.ingest import mavutil
 from groundstation.outputs import output_dir
 from groundstation.session import SessionError
 from groundstation.session.dataflash import DOWNWARD, FlightLog, read_dataflash
 from groundstation.session.depth import read_depth
+from groundstation.session.read import load_session
 from groundstation.session.tlog import tlog_record
 from groundstation.video.file import frame_indices
 
@@ -121,16 +127,31 @@ def frame_times_s(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return (np.array([index_of[p] for p in pts]), np.array([float((p - pts[0]) * base) for p in pts]))
 
 
-def video_start(flight: FlightLog, how: str | None, start_unix: float | None) -> tuple[float, str]:
-    """The video's first frame on UNIX time and where it came from."""
+def video_start(flight: FlightLog, how: str, start_unix: float | None) -> tuple[float, str]:
+    """The video's first frame on UNIX time and where it came from (given or triggered; the motion's is found once
+    the telemetry is written: :func:`start_from_motion`)."""
     if start_unix is not None:
         return start_unix, "given (--video-start-unix)"
     if how == "trigger":
         if not len(flight.triggers_s):
             raise SessionError(f"{flight.path}: no CAM or TRIG record: the camera's start is not in the log "
-                               "(give --video-start-unix)")
+                               "(give --video-start-unix, or let the image's motion find it)")
         return float(flight.unix(flight.triggers_s[0])), f"the log's first CAM/TRIG record ({len(flight.triggers_s)})"
-    raise SessionError("the video's start: give --video-start-unix T or --video-start trigger")
+    return flight.span_unix[0], "motion"
+
+
+def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.ndarray,
+                      span: tuple[float, float]) -> VideoStart:
+    """The video's start from its motion against the session's (just written) telemetry."""
+    s = load_session(session)
+    times = np.full(int(index.max()) + 1, np.nan)
+    times[index] = t_rel
+    rotations = measure_rotations(video, s.calibration, times)
+    try:
+        return find_video_start(s.calibration, s.telemetry, rotations, span)
+    except ValueError as e:
+        raise SessionError(f"{video}: {e} (its {t_rel[-1]:.1f} s against the log's attitude "
+                           f"{span[0]:.3f}–{span[1]:.3f})") from None
 
 
 def depth_records(path: Path, columns: tuple[str, str], warnings: list[str]) -> list[dict]:
@@ -161,6 +182,11 @@ def depth_records(path: Path, columns: tuple[str, str], warnings: list[str]) -> 
     return out
 
 
+def write_frames(session: Path, index: np.ndarray, t_unix: np.ndarray) -> None:
+    with open(session / "video_frames.csv", "w") as f:
+        f.write("frame,t\n" + "".join(f"{i},{t:.6f}\n" for i, t in zip(index, t_unix, strict=True)))
+
+
 def link_or_copy(src: Path, dst: Path) -> None:
     try:
         os.link(src, dst)
@@ -169,7 +195,7 @@ def link_or_copy(src: Path, dst: Path) -> None:
 
 
 def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration: Path, out: Path,
-                  video_start_how: str | None = None, video_start_unix: float | None = None,
+                  video_start_how: str = "motion", video_start_unix: float | None = None,
                   depth_columns: tuple[str, str] = ("t", "depth_m")) -> dict:
     """Write the session (see the module doc); returns what ``import.json`` holds."""
     cal = load_calibration(str(calibration))
@@ -194,7 +220,7 @@ def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration:
         index, t_rel = frame_times_s(video)
         start, how = video_start(flight, video_start_how, video_start_unix)
         span, log_span = (start, start + float(t_rel[-1])), flight.span_unix
-        if span[0] < log_span[0] or span[1] > log_span[1]:
+        if how != "motion" and (span[0] < log_span[0] or span[1] > log_span[1]):
             raise SessionError(f"{video}: its frames span {span[0]:.3f}–{span[1]:.3f} (UNIX s), not within the log's "
                                f"attitude {log_span[0]:.3f}–{log_span[1]:.3f}")
         frames = (index, start + t_rel)
@@ -208,9 +234,17 @@ def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration:
     report["messages"] = write_tlog(out / "uav.tlog", flight, telemetry_messages(flight, mount))
     (out / "depth.jsonl").write_text("".join(json.dumps(r) + "\n" for r in depth_out))
     if frames is not None:
-        link_or_copy(video, out / f"video{video.suffix.lower() or '.mp4'}")
-        with open(out / "video_frames.csv", "w") as f:
-            f.write("frame,t\n" + "".join(f"{i},{t:.6f}\n" for i, t in zip(*frames, strict=True)))
+        target = out / f"video{video.suffix.lower() or '.mp4'}"
+        link_or_copy(video, target)
+        write_frames(out, *frames)
+        if report["video_start_from"] == "motion":
+            found = start_from_motion(out, video, frames[0], frames[1] - frames[1][0], flight.span_unix)
+            write_frames(out, frames[0], found.start_s + frames[1] - frames[1][0])
+            report |= {"video_start_unix": round(found.start_s, 6),
+                       "video_start_from": "the image's motion against the logged attitude",
+                       "video_start_sigma_s": round(found.sigma_s, 6), "video_start_pairs": found.pairs,
+                       "video_start_rms_mrad": round(found.rms_mrad, 4),
+                       "video_start_contrast": round(found.contrast, 3)}
     report["warnings"] = warnings
     (out / "import.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
@@ -226,7 +260,10 @@ def run(args) -> int:
     print(f"skyfix import: {out}: log clock on UNIX time {report['unix_minus_boot_s']:.3f} s "
           f"± {report['unix_minus_boot_sigma_s'] * 1000:.1f} ms; telemetry {report['messages']}"
           + (f"; video {report['frames']} frames from {report['video_start_unix']:.3f} "
-             f"({report['video_start_from']})" if "frames" in report else ""))
+             f"({report['video_start_from']}"
+             + (f": ± {report['video_start_sigma_s'] * 1000:.1f} ms, residual {report['video_start_rms_mrad']:.2f} "
+                f"mrad over {report['video_start_pairs']} frame pairs" if "video_start_sigma_s" in report else "")
+             + ")" if "frames" in report else ""))
     return 0
 
 
@@ -238,7 +275,9 @@ def register(subparsers) -> None:
     p.add_argument("--depth", required=True, help="the UUV's depth: skyfix's depth.jsonl or a CSV")
     p.add_argument("--depth-columns", default="t,depth_m", help="a CSV's time (UNIX s) and depth (m) columns")
     p.add_argument("--calibration", required=True, help="the camera's calibration (TOML, session.toml tables)")
-    p.add_argument("--video-start", choices=("trigger",), help="the video's first frame: the log's first CAM/TRIG")
+    p.add_argument("--video-start", choices=("motion", "trigger"), default="motion",
+                   help="the video's first frame: found from the image's motion against the logged attitude "
+                        "(default), or the log's first CAM/TRIG record")
     p.add_argument("--video-start-unix", type=float, help="the video's first frame, UNIX s")
     p.add_argument("--out", required=True, help="the session directory to write")
     p.set_defaults(func=run)

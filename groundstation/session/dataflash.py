@@ -7,7 +7,9 @@ firmware versions; a missing column is an error naming it). Times are the autopi
 - ``ATT``: ``Roll``, ``Pitch``, ``Yaw`` (degrees; the body FRD against local NED: MAVLink's
   ATTITUDE in degrees);
 - ``IMU`` (instance 0): ``GyrX/Y/Z``, body rates (rad/s) — ATTITUDE's rates, at each ATT
-  record the nearest;
+  record the nearest (a log without IMU records: the rates from the attitude's own
+  differences, :func:`attitude_rates`; zero rates would bend the interpolation between
+  samples and shift a video's start found from its motion by 20 ms, measured);
 - ``POS``: ``Lat``, ``Lng`` (degrees), ``Alt`` (m AMSL), ``RelHomeAlt`` (m above home) —
   GLOBAL_POSITION_INT's;
 - ``GPS`` (instance 0) and ``GPA``: ``GWk``/``GMS`` (GPS week and ms of week) of each fix,
@@ -33,6 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from groundstation.mavlink.ingest import mavutil
 from groundstation.session import SessionError
@@ -82,6 +85,18 @@ class FlightLog:
     def span_unix(self) -> tuple[float, float]:
         """The UNIX times of the first and last attitude record."""
         return float(self.unix(self.att[0, 0])), float(self.unix(self.att[-1, 0]))
+
+
+def attitude_rates(t_s: np.ndarray, rpy_rad: np.ndarray) -> np.ndarray:
+    """Body rates (rad/s, FRD) from attitude samples alone: the rotation from each sample's neighbour before to its
+    neighbour after, over the time between (one-sided at the ends)."""
+    if len(t_s) < 2:
+        return np.zeros((len(t_s), 3))
+    R = Rotation.from_euler("ZYX", rpy_rad[:, ::-1])
+    before = np.r_[0, np.arange(len(t_s) - 1)]
+    after = np.r_[np.arange(1, len(t_s)), len(t_s) - 1]
+    turn = (R[before].inv() * R[after]).as_rotvec()
+    return turn / (t_s[after] - t_s[before])[:, None]
 
 
 def _columns(reader, name: str) -> None:
@@ -135,8 +150,8 @@ def read_dataflash(path: str | Path) -> FlightLog:
         nearest -= (att_t - imu_t[nearest - 1]) < (imu_t[nearest] - att_t)
         rates = gyro[nearest]
     else:
-        warnings.append(f"{path}: no IMU records: the attitude's body rates are not known (taken as 0)")
-        rates = np.zeros((len(att_t), 3))
+        warnings.append(f"{path}: no IMU records: the attitude's body rates are taken from its own differences")
+        rates = attitude_rates(att_t, att[:, 1:4])
     pos = np.array([[m.TimeUS / 1e6, m.Lat, m.Lng, m.Alt, m.RelHomeAlt] for m in rows["POS"]])
     arrival = {m.TimeUS: m.SMS / 1000.0 for m in rows["GPA"]}  # GPA is written with its GPS record
     acc = {m.TimeUS: (getattr(m, "HAcc", math.nan), getattr(m, "VAcc", math.nan)) for m in rows["GPA"]}
