@@ -38,6 +38,7 @@ import asyncio
 import copy
 import itertools
 import logging
+import math
 import os
 import queue
 import threading
@@ -323,16 +324,25 @@ def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotat
     return VideoStart(float(starts[best] + fine.offset_s), fine.sigma_s, fine.pairs, fine.rms_mrad, contrast)
 
 
-def measure_rotations(path, cal: Calibration, times_s: np.ndarray, indices=None) -> list[Rotation]:
+def measure_rotations(path, cal: Calibration, times_s: np.ndarray, indices=None, until_s: float = math.inf,
+                      bar=None) -> list[Rotation]:
     """The camera's rotation between consecutive frames of a video file, at the frames' times ``times_s`` (by
-    frame index); :class:`SessionError` for a video FFmpeg cannot read."""
+    frame index), up to the first frame after ``until_s``; ``bar``: a progress bar updated per frame.
+    :class:`SessionError` for a video FFmpeg cannot read."""
     meter = RotationMeter(cal.camera)
     rotations = []
     try:
         with open_video(path, expected_size=(cal.camera.width, cal.camera.height), indices=indices) as video:
             for frame in video.prefetch():
-                if frame.index < len(times_s) and (r := meter.measure(float(times_s[frame.index]), frame.image)):
+                if frame.index >= len(times_s):
+                    continue
+                t = float(times_s[frame.index])
+                if (r := meter.measure(t, frame.image)) is not None:
                     rotations.append(r)
+                if bar is not None:
+                    bar.update()
+                if t > until_s:
+                    break
     except VideoError as e:
         raise SessionError(str(e)) from None
     return rotations

@@ -16,7 +16,8 @@
   logged attitude (``--video-start motion``, the default: the camera's rotation between
   frames against the attitude's, :func:`~groundstation.latency.estimate.find_video_start`,
   searched across the whole log and refined by the estimator that measures the live video's
-  latency; its sigma and residual printed and kept), or ``--video-start trigger``: the first
+  latency, on the video's first :data:`MOTION_S` seconds — a long video is not decoded whole;
+  its sigma and residual printed and kept), or ``--video-start trigger``: the first
   CAM/TRIG record of the log (the camera started recording when triggered), or
   ``--video-start-unix``. A video that does not lie within the log's attitude is an error
   naming both spans. The video is linked into the session (a hard link where the file
@@ -46,6 +47,7 @@ from groundstation.latency.estimate import VideoStart, find_video_start, measure
 from groundstation.live.config import load_calibration
 from groundstation.mavlink.ingest import mavutil
 from groundstation.outputs import output_dir
+from groundstation.progress import progress as progress_bar
 from groundstation.session import SessionError
 from groundstation.session.dataflash import DOWNWARD, FlightLog, read_dataflash
 from groundstation.session.depth import read_depth
@@ -54,6 +56,7 @@ from groundstation.session.tlog import tlog_record
 from groundstation.video.file import frame_indices
 
 HEARTBEAT_HZ = 1.0
+MOTION_S = 60.0  # the video's start is found from the motion of its first this many seconds
 
 
 def telemetry_messages(flight: FlightLog, mount: bool) -> list[tuple[float, object]]:
@@ -141,12 +144,17 @@ def video_start(flight: FlightLog, how: str, start_unix: float | None) -> tuple[
 
 
 def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.ndarray,
-                      span: tuple[float, float]) -> VideoStart:
-    """The video's start from its motion against the session's (just written) telemetry."""
+                      span: tuple[float, float], progress: bool = False) -> VideoStart:
+    """The video's start from its motion (its first :data:`MOTION_S` s) against the session's (just written)
+    telemetry."""
     s = load_session(session)
     times = np.full(int(index.max()) + 1, np.nan)
     times[index] = t_rel
-    rotations = measure_rotations(video, s.calibration, times)
+    bar = progress_bar(int(np.sum(t_rel <= MOTION_S)), f"{video.name}: the image's motion", progress)
+    try:
+        rotations = measure_rotations(video, s.calibration, times, until_s=MOTION_S, bar=bar)
+    finally:
+        bar.close()
     try:
         return find_video_start(s.calibration, s.telemetry, rotations, span)
     except ValueError as e:
@@ -196,7 +204,7 @@ def link_or_copy(src: Path, dst: Path) -> None:
 
 def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration: Path, out: Path,
                   video_start_how: str = "motion", video_start_unix: float | None = None,
-                  depth_columns: tuple[str, str] = ("t", "depth_m")) -> dict:
+                  depth_columns: tuple[str, str] = ("t", "depth_m"), progress: bool = False) -> dict:
     """Write the session (see the module doc); returns what ``import.json`` holds."""
     cal = load_calibration(str(calibration))
     source = cal.mount.attitude_source
@@ -238,7 +246,7 @@ def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration:
         link_or_copy(video, target)
         write_frames(out, *frames)
         if report["video_start_from"] == "motion":
-            found = start_from_motion(out, video, frames[0], frames[1] - frames[1][0], flight.span_unix)
+            found = start_from_motion(out, video, frames[0], frames[1] - frames[1][0], flight.span_unix, progress)
             write_frames(out, frames[0], found.start_s + frames[1] - frames[1][0])
             report |= {"video_start_unix": round(found.start_s, 6),
                        "video_start_from": "the image's motion against the logged attitude",
@@ -254,7 +262,7 @@ def run(args) -> int:
     out = output_dir(args.out)
     report = import_flight(Path(args.dataflash), Path(args.video) if args.video else None, Path(args.depth),
                            Path(args.calibration), out, args.video_start, args.video_start_unix,
-                           tuple(args.depth_columns.split(",")))
+                           tuple(args.depth_columns.split(",")), progress=not args.quiet)
     for w in report["warnings"]:
         print(f"skyfix import: warning: {w}", file=sys.stderr)
     print(f"skyfix import: {out}: log clock on UNIX time {report['unix_minus_boot_s']:.3f} s "
@@ -280,4 +288,5 @@ def register(subparsers) -> None:
                         "(default), or the log's first CAM/TRIG record")
     p.add_argument("--video-start-unix", type=float, help="the video's first frame, UNIX s")
     p.add_argument("--out", required=True, help="the session directory to write")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
