@@ -202,6 +202,48 @@ def test_signing(tmp_path, sender_key):
         assert len(bad) >= 9 and all("signature" in str(m.reason).lower() for m in bad)
 
 
+def test_a_signed_link_writes_its_timestamps_in_order():
+    """Two threads hand a signed link messages as fast as they can — one replacing its newest GPS_INPUT, one queueing
+    STATUSTEXTs — while the link heartbeats: a receiver that checks signatures, and refuses a timestamp not after the
+    last (MAVLink's replay protection, as ArduPilot's), takes every one. Packed when handed over, a message could
+    be written after a later-signed one (the heartbeat, the other thread's) and be refused."""
+    key = os.urandom(32)
+    port = free_port()
+    rx = _receiver(port, key)
+    link = mavlink_gps_link(f"udpout:127.0.0.1:{port}", signing_key=key)
+    m = mavutil().mavlink
+    stop_at = time.time() + 2.5
+
+    def gps():
+        while time.time() < stop_at:
+            link.send("GPS_INPUT", {"time_usec": 0, "gps_id": 0, "ignore_flags": 0, "time_week_ms": 0,
+                                    "time_week": 0, "fix_type": 1, "lat": 0, "lon": 0, "alt": 0.0, "hdop": 99.0,
+                                    "vdop": 99.0, "vn": 0.0, "ve": 0.0, "vd": 0.0, "speed_accuracy": 0.0,
+                                    "horiz_accuracy": 0.0, "vert_accuracy": 0.0, "satellites_visible": 0})
+            time.sleep(0.001)
+
+    def text():
+        while time.time() < stop_at:
+            link.queue("STATUSTEXT", {"severity": m.MAV_SEVERITY_INFO, "text": b"skyfix"})
+            time.sleep(0.002)
+
+    got = []
+    try:
+        link.open()
+        threads = [threading.Thread(target=gps), threading.Thread(target=text)]
+        for th in threads:
+            th.start()
+        got = _collect(rx, 3.0)
+        for th in threads:
+            th.join()
+    finally:
+        link.close()
+        rx.close()
+    kinds = [msg.get_type() for msg in got]
+    assert kinds.count("BAD_DATA") == 0, f"{kinds.count('BAD_DATA')} refused of {len(kinds)}"
+    assert kinds.count("GPS_INPUT") > 100 and kinds.count("STATUSTEXT") > 100 and kinds.count("HEARTBEAT") >= 2
+
+
 @pytest.mark.parametrize("content", [b"short", b"x" * 33, b"zz" * 32])
 def test_signing_key_file_must_hold_32_bytes(tmp_path, content):
     path = tmp_path / "k"

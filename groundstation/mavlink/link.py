@@ -30,7 +30,12 @@ timeout) counts in ``write_errors`` and takes the link down; the frame is lost.
 
 Signing (``signing_key``, 32 bytes): every message goes out MAVLink 2 signed (link id 1, the
 timestamp pymavlink's: 10 µs units since 2015, rising by one per message); incoming messages
-are read signed or not (only the link's own outgoing side is secured).
+are read signed or not (only the link's own outgoing side is secured). A receiver refuses a
+signed message whose timestamp is not after the last it took (replay protection), so what
+:meth:`~MavlinkLink.send` and :meth:`~MavlinkLink.queue` hand over is numbered and signed by the
+link's thread as it writes it, in the order written (the heartbeat and the last message too); the
+fields are checked when they are handed over (a value that does not fit raises there).
+``mav.<message>_send(...)`` packs at once: it is for unsigned links.
 """
 
 from __future__ import annotations
@@ -127,6 +132,7 @@ class MavlinkLink:
         self.mav = _Locked(_Outbox(self), srcSystem=system, srcComponent=component)
         self.parser = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
         self.parser.robust_parsing = True
+        self._checker = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)  # packs to check, unsigned
         if signing_key is not None:
             s = self.mav.signing
             s.secret_key, s.sign_outgoing, s.link_id = signing_key, True, SIGNING_LINK_ID
@@ -170,9 +176,15 @@ class MavlinkLink:
         self._started = True
         self._thread.start()
 
-    def pack(self, kind: str, fields: dict) -> bytes:
-        """One frame of message ``kind`` (e.g. ``"GPS_INPUT"``) from its fields, numbered and signed as the link's."""
+    def message(self, kind: str, fields: dict):
+        """Message ``kind`` (e.g. ``"GPS_INPUT"``) from its fields, checked by packing it once unnumbered and
+        unsigned (a field that does not fit raises here, in the caller)."""
         msg = getattr(self._mavlink, f"MAVLink_{kind.lower()}_message")(**fields)
+        msg.pack(self._checker)
+        return msg
+
+    def _pack(self, msg) -> bytes:
+        """The frame of ``msg``, numbered and signed as the link's next (the link's thread, as it writes)."""
         with self._lock:
             buf = msg.pack(self.mav)
             self.mav.seq = (self.mav.seq + 1) % 256
@@ -181,7 +193,7 @@ class MavlinkLink:
     def send(self, kind: str, fields: dict) -> bool:
         """Hand one ``kind`` message to the thread, replacing one of that kind not yet written; False (dropped,
         counted) while the link is down."""
-        buf = self.pack(kind, fields)
+        buf = self.message(kind, fields)
         with self._lock:
             if self.state != "up":
                 self.counts["dropped_while_down"] += 1
@@ -193,9 +205,10 @@ class MavlinkLink:
 
     def queue(self, kind: str, fields: dict) -> None:
         """Hand one ``kind`` message to the thread after those before it (never replaced; dropped while down)."""
-        self._queue(self.pack(kind, fields))
+        self._queue(self.message(kind, fields))
 
-    def _queue(self, buf: bytes) -> None:
+    def _queue(self, buf) -> None:
+        """Queue a packed frame (bytes: pymavlink's ``mav.*_send``) or a message to pack as it is written."""
         with self._lock:
             if self.state != "up":
                 self.counts["dropped_while_down"] += 1
@@ -216,7 +229,7 @@ class MavlinkLink:
             return self.final_written
         self._started = False
         with self._lock:
-            self._final = self.pack(*last) if last is not None else None
+            self._final = self.message(*last) if last is not None else None
         self._thread.stop.set()
         self._wake()
         if self._thread.join(STOP_TIMEOUT_S):
@@ -316,9 +329,9 @@ class MavlinkLink:
         if self.heartbeat and time.monotonic() >= next_beat:
             kind, autopilot = self.heartbeat
             m = self._mavlink
-            self._write(t, self.pack("HEARTBEAT", {"type": kind, "autopilot": autopilot, "base_mode": 0,
-                                                   "custom_mode": 0, "system_status": m.MAV_STATE_ACTIVE,
-                                                   "mavlink_version": 3}))
+            self._write(t, self.message("HEARTBEAT", {"type": kind, "autopilot": autopilot, "base_mode": 0,
+                                                      "custom_mode": 0, "system_status": m.MAV_STATE_ACTIVE,
+                                                      "mavlink_version": 3}))
             self.counts["heartbeats"] += 1
             next_beat = time.monotonic() + HEARTBEAT_PERIOD_S
         while True:
@@ -362,7 +375,9 @@ class MavlinkLink:
             if t.datagrams:
                 t.answer_last_sender()
 
-    def _write(self, t, buf: bytes) -> None:
+    def _write(self, t, item) -> None:
+        """Write a frame, or a message packed now (numbered and signed in the order written)."""
+        buf = item if isinstance(item, bytes | bytearray) else self._pack(item)
         try:
             t.write(buf)
         except OSError:
