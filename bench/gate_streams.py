@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 import gate_streams as gs
+from emit import emit
 
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
 
@@ -104,11 +105,7 @@ def main() -> int:
         cost_us.append((time.perf_counter() - t0) * 1e6)
     lines.append(f"\ncost of a check (tracking, {len(cost_us)} fixes): median {np.median(cost_us):.0f} µs, "
                  f"p99 {np.percentile(cost_us, 99):.0f} µs, max {max(cost_us):.0f} µs")
-    text = "\n".join(lines)
-    print(text)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
+    emit(lines, args.out)
     return 0
 
 

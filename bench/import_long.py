@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from dataflash_log import DataflashWriter
+from emit import emit
 
 UNIX0 = 1_796_000_000.0  # the log's first fix, UNIX s
 BOOT0 = 10.0  # ... at this boot time
@@ -139,11 +140,7 @@ def main() -> int:
              f"video), peak RSS {motion[1]:.0f} MB, exit {motion[2]}; found "
              f"{(found.get('video_start_unix', math.nan) - (UNIX0 + start_s)) * 1000:+.1f} ms from the truth "
              f"(± {found.get('video_start_sigma_s', math.nan) * 1000:.1f} ms)")]
-    text = "\n".join(lines)
-    print(text)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
+    emit(lines, args.out)
     return 0
 
 
