@@ -35,7 +35,7 @@ KEEP = (*Observer.KEEP, "ATTITUDE", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATU
 GUIDED = 4
 # (pitch, yaw relative to the vehicle) of the gimbal, each held this long (s), while the vehicle turns
 GIMBAL = ((-60.0, 30.0), (-90.0, 0.0), (-45.0, -40.0), (-75.0, 15.0))
-HOLD_S = 4.0
+HOLD_SAMPLES = 60  # each held until this many gimbal reports (20 Hz) said so: 3 s
 
 
 def command(obs: Observer, cmd: int, *params: float) -> None:
@@ -58,9 +58,20 @@ def fly(obs: Observer) -> None:
     command(obs, mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 10.0)
     wait_for(lambda: any(m.relative_alt > 8000 for _, m in obs.of("GLOBAL_POSITION_INT")), 40, "the take-off")
     for i, (pitch, yaw) in enumerate(GIMBAL):
+        since = time.time()
         command(obs, mavlink2.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, pitch, yaw, float("nan"), float("nan"), 0, 0, 0)
         command(obs, mavlink2.MAV_CMD_CONDITION_YAW, 45.0, 20.0, 1 if i % 2 == 0 else -1, 1)  # relative turn
-        time.sleep(HOLD_S)  # the flight's own pace (the simulator runs in real time), not a condition
+        wait_for(lambda p=pitch, t=since: gimbal_samples_at(obs, p, t) >= HOLD_SAMPLES, 30, f"the gimbal at {pitch}°")
+
+
+def gimbal_samples_at(obs: Observer, pitch_deg: float, since: float) -> int:
+    """GIMBAL_DEVICE_ATTITUDE_STATUS received since ``since`` with the gimbal within 1° of ``pitch_deg``."""
+    q = [m.q for t, m in obs.of("GIMBAL_DEVICE_ATTITUDE_STATUS", since) if m.get_srcComponent() == 1]
+    if not q:
+        return 0
+    w, x, y, z = np.array(q).T
+    pitch = Rotation.from_quat(np.column_stack([x, y, z, w])).as_euler("ZYX", degrees=True)[:, 1]
+    return int(np.sum(np.abs(pitch - pitch_deg) <= 1.0))
 
 
 def live(obs: Observer, kind: str) -> list:

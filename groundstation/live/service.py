@@ -20,8 +20,8 @@ registry's. The pipeline is built with its sinks and frame listeners.
 Stopping: SIGINT/SIGTERM (or ``--duration-s``) stop the workers in order — the inputs
 (and the operator's commands and web page), then the pipeline, then the sinks — each stage
 cancelled and awaited before the next (a stage slower than
-:data:`~groundstation.live.workers.STAGE_S` is logged), and last the GPS_INPUT sink, whose last message says "no fix". Nothing waits for a blocked
-read or open: the whole stop takes well under a second whatever the inputs are doing
+:data:`~groundstation.live.workers.STAGE_S` is logged), and last the GPS_INPUT sink, whose
+last message says "no fix". Nothing waits for a blocked read or open: the whole stop takes well under a second whatever the inputs are doing
 (``bench/links.py`` measures it). A worker that fails cancels the others (the sink still
 sends its no-fix) and the service exits with its error. The Zenoh session is closed in ``finally``.
 """

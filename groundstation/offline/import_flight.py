@@ -40,7 +40,6 @@ import sys
 import tomllib
 from pathlib import Path
 
-import av
 import numpy as np
 
 from groundstation.latency.estimate import VideoStart, find_video_start, measure_rotations
@@ -53,7 +52,8 @@ from groundstation.session.dataflash import DOWNWARD, FlightLog, read_dataflash
 from groundstation.session.depth import read_depth
 from groundstation.session.read import load_session
 from groundstation.session.tlog import tlog_record
-from groundstation.video.file import frame_indices
+from groundstation.video.file import frame_times
+from groundstation.video.frames import VideoError
 
 HEARTBEAT_HZ = 1.0
 MOTION_S = 60.0  # the video's start is found from the motion of its first this many seconds
@@ -112,22 +112,6 @@ def write_tlog(path: Path, flight: FlightLog, messages: list[tuple[float, object
             f.write(tlog_record(round(float(flight.unix(t)) * 1e6), msg.pack(mav)))
             counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
     return counts
-
-
-def frame_times_s(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """The video's frame indices (as the session reader numbers them) and their times from the first frame (s),
-    from the container's presentation times (demuxing only)."""
-    try:
-        with av.open(str(path)) as container:
-            stream = container.streams.video[0]
-            base = stream.time_base
-            pts = sorted({p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard})
-    except (av.error.FFmpegError, IndexError) as e:
-        raise SessionError(f"{path}: FFmpeg cannot read its frames' times ({e})") from None
-    if not pts:
-        raise SessionError(f"{path}: no video frames")
-    index_of = frame_indices(pts)
-    return (np.array([index_of[p] for p in pts]), np.array([float((p - pts[0]) * base) for p in pts]))
 
 
 def video_start(flight: FlightLog, how: str, start_unix: float | None) -> tuple[float, str]:
@@ -225,7 +209,10 @@ def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration:
                     "log_span_unix": [round(x, 3) for x in flight.span_unix]}
     frames = None
     if video is not None:
-        index, t_rel = frame_times_s(video)
+        try:
+            index, t_rel = frame_times(video)
+        except VideoError as e:
+            raise SessionError(str(e)) from None
         start, how = video_start(flight, video_start_how, video_start_unix)
         span, log_span = (start, start + float(t_rel[-1])), flight.span_unix
         if how != "motion" and (span[0] < log_span[0] or span[1] > log_span[1]):

@@ -181,11 +181,27 @@ class Video:
         self.close()
 
 
-def _presentation_times(path: str) -> list[int]:
-    """Every video packet's pts (demuxing only), packets the container marks to discard left out."""
+def _presentation_times(path: str) -> tuple[list[int], Fraction]:
+    """Every video packet's pts (demuxing only), packets the container marks to discard left out, and the stream's
+    time base (s per tick)."""
     with av.open(path) as container:
         stream = container.streams.video[0]
-        return [p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard]
+        return [p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard], stream.time_base
+
+
+def frame_times(url) -> tuple[np.ndarray, np.ndarray]:
+    """A video file's frame indices (numbered as :func:`open_video` numbers them) and their container times from
+    the first frame (s), in order (demuxing only); :class:`VideoError` for a file FFmpeg cannot read."""
+    try:
+        pts, base = _presentation_times(str(url))
+    except (av.error.FFmpegError, IndexError) as e:
+        why = ffmpeg_reason(e) if isinstance(e, av.error.FFmpegError) else "no video stream"
+        raise VideoError(f"{url}: FFmpeg cannot read its frames' times ({why})") from None
+    if not pts:
+        raise VideoError(f"{url}: no video frames")
+    ordered = sorted(set(pts))
+    index_of = frame_indices(ordered)
+    return np.array([index_of[p] for p in ordered]), np.array([float((p - ordered[0]) * base) for p in ordered])
 
 
 def open_video(url, expected_size: tuple[int, int] | None = None, threads: int = 0,
@@ -209,7 +225,7 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     if path.stat().st_size == 0:
         raise VideoError(f"{url}: empty file")
     try:
-        index_of = frame_indices(_presentation_times(url), indices)
+        index_of = frame_indices(_presentation_times(url)[0], indices)
         container = av.open(url)
         if not container.streams.video:
             container.close()
