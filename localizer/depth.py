@@ -88,6 +88,13 @@ def ekf_depth_m(relative_alt_m: float, alt_amsl_m: float, origin_amsl_m: float |
     return None if origin_amsl_m is None else origin_amsl_m - alt_amsl_m
 
 
+def crosscheck_sigma_m(sigma_m: float, disagreement_m):
+    """A pressure depth's 1-sigma (m) given its difference from the EKF's depth (m, scalar or array): its own within
+    :data:`DISAGREE_M`, else with the difference added in quadrature."""
+    d = np.asarray(disagreement_m, dtype=float)
+    return np.where(np.abs(d) <= DISAGREE_M, sigma_m, np.hypot(sigma_m, d))
+
+
 def frame_sigma_m(sigma_m, vspeed_mps, held_error_m, age_s, default_sigma_m: float):
     """A depth's 1-sigma at frames ``age_s`` past its newest sample (0 between samples).
 
@@ -320,16 +327,14 @@ class ArduSubDepth:
         te, de = self.ekf
         ekf = de + (self.vspeed_mps if math.isfinite(self.vspeed_mps) else 0.0) * (t - te)
         diff = self.disagreement_m = depth - ekf
-        if abs(diff) <= DISAGREE_M:
-            if self.disagreeing:
-                self.disagreeing = False
-                self.notices.append(f"ArduSub's pressure depth {depth:.2f} m and its EKF's {ekf:.2f} m agree again")
-            return self.sigma_m
-        if not self.disagreeing:
-            self.disagreeing = True
+        agree = abs(diff) <= DISAGREE_M
+        if agree and self.disagreeing:
+            self.notices.append(f"ArduSub's pressure depth {depth:.2f} m and its EKF's {ekf:.2f} m agree again")
+        if not agree and not self.disagreeing:
             self.notices.append(f"ArduSub's pressure depth {depth:.2f} m and its EKF's {ekf:.2f} m disagree by "
                                 f"{diff:+.2f} m (more than {DISAGREE_M:g} m): the difference goes into the depth's sigma")
-        return math.hypot(self.sigma_m, diff)
+        self.disagreeing = not agree
+        return float(crosscheck_sigma_m(self.sigma_m, diff))
 
     def status(self) -> dict:
         def r(x, nd=3):

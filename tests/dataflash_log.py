@@ -14,6 +14,10 @@ FORMATS = {  # name: (type, struct format, ArduPilot format letters, columns)
     "SIM": (5, "<QhhHfiiffff", "QccCfLLffff", "TimeUS,Roll,Pitch,Yaw,Alt,Lat,Lng,Q1,Q2,Q3,Q4"),
     "TRIG": (6, "<QH", "QH", "TimeUS,Img"),
     "IMU": (7, "<QBfff", "QBfff", "TimeUS,I,GyrX,GyrY,GyrZ"),
+    "BARO": (8, "<QBfffIfB", "QBfffIfB", "TimeUS,I,Alt,Press,CRt,SMS,Offset,H"),
+    "CTUN": (9, "<Qf", "Qf", "TimeUS,Alt"),
+    "PARM": (10, "<Q16sf", "QNf", "TimeUS,Name,Value"),
+    "GPA": (11, "<QBI", "QBI", "TimeUS,I,SMS"),
 }
 
 

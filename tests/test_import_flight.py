@@ -80,7 +80,7 @@ def test_a_log_becomes_a_session_on_gps_time_without_the_simulators_truth(field_
     out = tmp_path / "session"
     report = import_flight(log, video, depth, cal, out, video_start_unix=start, depth_columns=("time_unix", "depth"))
     assert report["unix_minus_boot_s"] == pytest.approx(UNIX_AT_FIX - BOOT_AT_FIX_S, abs=1e-6)
-    assert report["unix_minus_boot_sigma_s"] == pytest.approx(0.0, abs=1e-6)
+    assert report["unix_minus_boot_sigma_s"] <= 0.0005  # the fixes agree: only the stamps' whole milliseconds
     msgs = read_tlog(out / "uav.tlog")
     kinds = {m.get_type() for _, m in msgs}
     assert {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "MOUNT_ORIENTATION", "GPS_RAW_INT"} <= kinds

@@ -15,7 +15,9 @@ a few centimetres deep). True depth = −SIM_STATE.alt − that zero, interpolat
 
 Checked, per run, on its 1 Hz status: ``depth.depth_m`` follows the truth within :data:`MAX_ERROR_M` at the
 time of its newest sample (``depth.t``) throughout the flight, or is None — never 0 while submerged — and
-is None for at most :data:`MAX_WITHOUT_S` of the flight. The numbers are printed.
+is None for at most :data:`MAX_WITHOUT_S` of the flight. ArduSub's own DataFlash log of the dive, read as
+``skyfix import --depth`` reads it, has its clock within :data:`MAX_CLOCK_ERROR_S` of its live messages' and its
+depths within :data:`MAX_ERROR_M` of the truth. The numbers are printed.
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ from ardusub_sitl import EXTRA_PARM, ArduSub, Observer, ardusub_files
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for, wait_until
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from groundstation.session.ardusub_log import read_ardusub_depth
+
 pytestmark = pytest.mark.sitl
 
 LAT, LON = 63.4400, 10.4000
@@ -45,6 +49,8 @@ MAX_WITHOUT_S = 2.0  # the first status may come before the first depth: at most
 # The vehicle's water is sea water (1024 kg/m³): ArduSub's BARO_SPEC_GRAV says so (else its depths are 2.4 % long);
 # arming checks off (no GPS at arming, as under water)
 DEPTH_PARM = EXTRA_PARM + "BARO_SPEC_GRAV 1.024\nARMING_CHECK 0\n"
+FIX_AGE_S = 0.065  # the GPS_INPUT's age on arrival: EXTRA_PARM's GPS1_DELAY_MS
+MAX_CLOCK_ERROR_S = 0.02  # ArduSub's own log on UNIX time against its live messages' clock
 KEEP = (*Observer.KEEP, "SIM_STATE", "PARAM_VALUE", "HOME_POSITION")
 ALT_HOLD = 2  # ArduSub custom mode
 DIVE, HOLD, RISE = 200, 500, 800  # MANUAL_CONTROL z: ~0.5 m/s down, hold the depth, ~0.5 m/s up
@@ -71,10 +77,11 @@ class Pilot:
             self.obs.send(mavlink2.MAVLink_manual_control_message(1, self.x, 0, self.z, 0, 0))
             n += 1
             if self.gps and n % 2 == 0:
-                gps_s = time.time() - 315964800 + 18  # GPS time: UTC + 18 leap seconds
+                exposed = time.time() - FIX_AGE_S  # a fix carries its frame's time, as skyfix's do
+                gps_s = exposed - 315964800 + 18  # GPS time: UTC + 18 leap seconds
                 week, ms = int(gps_s // 604800), int(gps_s % 604800 * 1000)
                 self.obs.send(mavlink2.MAVLink_gps_input_message(
-                    int(time.time() * 1e6), 0, 56, ms, week, 3, int(LAT * 1e7), int(LON * 1e7), 0.0, 0.5, 0.5,
+                    int(exposed * 1e6), 0, 56, ms, week, 3, int(LAT * 1e7), int(LON * 1e7), 0.0, 0.5, 0.5,
                     0, 0, 0, 0, 0.5, 0.5, 10))
 
     def close(self) -> None:
@@ -248,6 +255,31 @@ def test_ardusub_depth_through_blueos_and_mavlink(tmp_path):
         assert min(last["rates_hz"][k] for k in ("GLOBAL_POSITION_INT", "SCALED_PRESSURE")) >= 4.0, last
     assert any(m.relative_alt > 50_000 for _, m in gpi), "ArduSub's home did not turn relative_alt into an altitude"
     thrusters_follow_the_pilot(statuses.got, keys, marks)
+    own_log_follows_the_truth(sitl.dir, obs, t_truth, d_truth, marks)
+
+
+def own_log_follows_the_truth(sitl_dir: Path, obs: Observer, t_truth, d_truth, marks: dict[str, float]) -> None:
+    """ArduSub's own DataFlash log of the flight as ``skyfix import --depth`` reads it: its clock against the clock
+    of ArduSub's live messages (the earliest arrival of GLOBAL_POSITION_INT against its time_boot_ms), its depths
+    against the truth at their times."""
+    logs = sorted((sitl_dir / "logs").glob("*.BIN"))
+    assert logs, f"ArduSub wrote no DataFlash log in {sitl_dir / 'logs'}"
+    warnings: list[str] = []
+    records, found = read_ardusub_depth(logs[-1], 0.05, warnings)
+    live = [(t, t - m.time_boot_ms / 1000) for t, m in obs.of("GLOBAL_POSITION_INT")]
+    live_clock = min(c for t, c in live if t >= marks["gps"])  # the simulator's clock may drift from the station's
+    drift_ms = [round(1000 * (min(c for t, c in live if t0 <= t < t0 + 5) - live_clock), 1)
+                for t0 in np.arange(live[0][0], live[-1][0] - 5, 5)]
+    flight = [r for r in records if marks["armed"] <= r["t"] <= marks["end"]]
+    errors = np.array([r["depth_m"] - np.interp(r["t"], t_truth, d_truth) for r in flight])
+    print(f"ArduSub's own log {logs[-1].name}: {found}; clock {1000 * (found['unix_minus_boot_s'] - live_clock):+.1f} "
+          f"ms against its live messages'; {len(flight)} depths in the flight, error max {np.abs(errors).max():.3f} m, "
+          f"median {np.median(np.abs(errors)):.3f} m; the simulator's clock against the station's by 5 s (ms) {drift_ms}; "
+          f"warnings {warnings}")
+    assert abs(found["unix_minus_boot_s"] - live_clock) <= MAX_CLOCK_ERROR_S, (found, live_clock)
+    assert len(flight) >= 8 * (marks["end"] - marks["armed"]) - 10, found  # BARO at 10 Hz
+    assert np.abs(errors).max() <= MAX_ERROR_M, errors
+    assert {r["source"] for r in records} == {"ardusub_pressure"}
 
 
 def thrusters_follow_the_pilot(got: dict[str, list[dict]], keys: dict[str, str], marks: dict[str, float]) -> None:

@@ -22,8 +22,14 @@
   ``--video-start-unix``. A video that does not lie within the log's attitude is an error
   naming both spans. The video is linked into the session (a hard link where the file
   system allows, else copied).
-- The depth: skyfix's ``depth.jsonl`` (read strictly), or a CSV with a header naming ``t``
-  (UNIX s) and ``depth_m`` (metres below the surface) columns, as ``--depth-columns`` says.
+- Or a DJI drone's flight record exported as CSV (``--dji-csv``, :mod:`groundstation.session.dji`):
+  the same messages from its OSD and GIMBAL columns; and the camera's ``.SRT`` (``--srt``) gives
+  the video's start: its frames' camera-clock times, that clock's zone found by matching the
+  SRT's per-frame track against the record's (or ``--srt-utc-offset-h``).
+- The depth: skyfix's ``depth.jsonl`` (read strictly), ArduSub's own DataFlash log (``.bin``: its depth sensor's
+  depth as ArduSub logged it, on UNIX time from the GPS_INPUT it received:
+  :mod:`groundstation.session.ardusub_log`), or a CSV with a header naming ``t`` (UNIX s) and ``depth_m``
+  (metres below the surface) columns, as ``--depth-columns`` says.
 - ``session.toml``: the calibration's text, with ``version = 1`` first when it lacks it.
 - ``import.json``: what the import found: the log's clock to UNIX offset and its sigma, the
   video's start and where it came from, the records used per kind, and the warnings.
@@ -48,8 +54,10 @@ from groundstation.mavlink.ingest import mavutil
 from groundstation.outputs import output_dir
 from groundstation.progress import progress as progress_bar
 from groundstation.session import SessionError
+from groundstation.session.ardusub_log import read_ardusub_depth
 from groundstation.session.dataflash import DOWNWARD, FlightLog, read_dataflash
 from groundstation.session.depth import read_depth
+from groundstation.session.dji import read_dji_csv, read_srt, srt_clock, srt_video_start
 from groundstation.session.read import load_session
 from groundstation.session.tlog import tlog_record
 from groundstation.video.file import frame_times
@@ -127,6 +135,21 @@ def video_start(flight: FlightLog, how: str, start_unix: float | None) -> tuple[
     return flight.span_unix[0], "motion"
 
 
+def start_from_srt(flight: FlightLog, srt: Path, utc_offset_h: float | None) -> tuple[float, str, dict]:
+    """The video's first frame on UNIX time from the camera's SRT, where it came from, and what goes into
+    ``import.json``."""
+    track = read_srt(srt)
+    clock = srt_clock(track, flight, utc_offset_h)
+    start, spread = srt_video_start(track, clock)
+    hours = clock.offset_s / 3600.0
+    how = (f"the SRT's frame times, camera clock UTC{hours:+.4f} h "
+           f"({'found from its track against the record' if clock.found else 'given'}: track residual "
+           f"{clock.residual_m:.2f} m over {clock.frames} frames)")
+    return start, how, {"srt": str(srt), "srt_utc_offset_h": round(hours, 6), "srt_utc_offset_found": clock.found,
+                        "srt_track_residual_m": round(clock.residual_m, 3), "srt_frames": clock.frames,
+                        "srt_start_spread_s": round(spread, 6)}
+
+
 def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.ndarray,
                       span: tuple[float, float], progress: bool = False) -> VideoStart:
     """The video's start from its motion (its first :data:`MOTION_S` s) against the session's (just written)
@@ -146,10 +169,13 @@ def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.n
                            f"{span[0]:.3f}–{span[1]:.3f})") from None
 
 
-def depth_records(path: Path, columns: tuple[str, str], warnings: list[str]) -> list[dict]:
-    """``{"t", "depth_m"}`` records from a depth.jsonl or a CSV with the named columns."""
+def depth_records(path: Path, columns: tuple[str, str], sigma_m: float, warnings: list[str]) -> tuple[list[dict], dict]:
+    """``depth.jsonl`` records from a depth.jsonl, ArduSub's DataFlash log (``.bin``: its sensor's 1-sigma
+    ``sigma_m``) or a CSV with the named columns; and what the reader found."""
     if path.suffix == ".jsonl":
-        return [{"t": r.t, "depth_m": r.depth_m} for r in read_depth(path, warnings)]
+        return [{"t": r.t, "depth_m": r.depth_m} for r in read_depth(path, warnings)], {"depth": str(path)}
+    if path.suffix.lower() == ".bin":
+        return read_ardusub_depth(path, sigma_m, warnings)
     t_col, d_col = columns
     try:
         with open(path, newline="") as f:
@@ -171,7 +197,7 @@ def depth_records(path: Path, columns: tuple[str, str], warnings: list[str]) -> 
                 out.append({"t": t, "depth_m": d})
     except OSError as e:
         raise SessionError(f"{path}: cannot read: {e.strerror}") from None
-    return out
+    return out, {"depth": str(path), "columns": list(columns)}
 
 
 def write_frames(session: Path, index: np.ndarray, t_unix: np.ndarray) -> None:
@@ -186,34 +212,46 @@ def link_or_copy(src: Path, dst: Path) -> None:
         shutil.copyfile(src, dst)
 
 
-def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration: Path, out: Path,
+def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calibration: Path, out: Path,
                   video_start_how: str = "motion", video_start_unix: float | None = None,
-                  depth_columns: tuple[str, str] = ("t", "depth_m"), progress: bool = False) -> dict:
-    """Write the session (see the module doc); returns what ``import.json`` holds."""
+                  depth_columns: tuple[str, str] = ("t", "depth_m"), progress: bool = False,
+                  dji_csv: Path | None = None, dji_csv_utc_offset_h: float | None = None, srt: Path | None = None,
+                  srt_utc_offset_h: float | None = None) -> dict:
+    """Write the session (see the module doc) from a DataFlash log or a DJI flight record (``dji_csv``); returns
+    what ``import.json`` holds."""
+    if srt is not None and (video is None or video_start_unix is not None):
+        raise SessionError("options: --srt needs --video, and gives the video's start (not with --video-start-unix)")
     cal = load_calibration(str(calibration))
     source = cal.mount.attitude_source
     if source == "gimbal_device":
-        raise SessionError(f"{calibration}: [mount] attitude_source = \"gimbal_device\": a DataFlash log has the "
-                           "gimbal as MNT records: say \"mount_orientation\" (or \"fixed\" for a rigid camera)")
-    flight = read_dataflash(dataflash)
+        raise SessionError(f"{calibration}: [mount] attitude_source = \"gimbal_device\": a flight log has the "
+                           "gimbal as MNT records (a DJI record: GIMBAL columns): say \"mount_orientation\" (or "
+                           "\"fixed\" for a rigid camera)")
+    log = dji_csv if dji_csv is not None else dataflash
+    flight = read_dji_csv(dji_csv, dji_csv_utc_offset_h) if dji_csv is not None else read_dataflash(dataflash)
     mount = source == "mount_orientation"
     if mount and not len(flight.mnt):
         raise SessionError(f"{dataflash}: no MNT records, while the calibration's camera is on a gimbal (log the "
                            "camera bit of LOG_BITMASK)")
     warnings = list(flight.warnings)
-    depth_out = depth_records(depth, depth_columns, warnings)
+    depth_out, depth_found = depth_records(depth, depth_columns, cal.sigmas.depth_m, warnings)
     if not depth_out:
         raise SessionError(f"{depth}: no depth records")
-    report: dict = {"dataflash": str(dataflash), "unix_minus_boot_s": round(flight.unix_minus_boot_s, 6),
+    report: dict = {"dji_csv" if dji_csv is not None else "dataflash": str(log),
+                    "unix_minus_boot_s": round(flight.unix_minus_boot_s, 6),
                     "unix_minus_boot_sigma_s": round(flight.unix_minus_boot_sigma_s, 6),
-                    "log_span_unix": [round(x, 3) for x in flight.span_unix]}
+                    "log_span_unix": [round(x, 3) for x in flight.span_unix], "depth": depth_found}
     frames = None
     if video is not None:
         try:
             index, t_rel = frame_times(video)
         except VideoError as e:
             raise SessionError(str(e)) from None
-        start, how = video_start(flight, video_start_how, video_start_unix)
+        if srt is not None:
+            start, how, srt_report = start_from_srt(flight, srt, srt_utc_offset_h)
+            report |= srt_report
+        else:
+            start, how = video_start(flight, video_start_how, video_start_unix)
         span, log_span = (start, start + float(t_rel[-1])), flight.span_unix
         if how != "motion" and (span[0] < log_span[0] or span[1] > log_span[1]):
             raise SessionError(f"{video}: its frames span {span[0]:.3f}–{span[1]:.3f} (UNIX s), not within the log's "
@@ -246,10 +284,15 @@ def import_flight(dataflash: Path, video: Path | None, depth: Path, calibration:
 
 
 def run(args) -> int:
+    def path(arg):
+        return Path(arg) if arg else None
+
     out = output_dir(args.out)
-    report = import_flight(Path(args.dataflash), Path(args.video) if args.video else None, Path(args.depth),
+    report = import_flight(path(args.dataflash), path(args.video), Path(args.depth),
                            Path(args.calibration), out, args.video_start, args.video_start_unix,
-                           tuple(args.depth_columns.split(",")), progress=not args.quiet)
+                           tuple(args.depth_columns.split(",")), progress=not args.quiet,
+                           dji_csv=path(args.dji_csv), dji_csv_utc_offset_h=args.dji_csv_utc_offset_h,
+                           srt=path(args.srt), srt_utc_offset_h=args.srt_utc_offset_h)
     for w in report["warnings"]:
         print(f"skyfix import: warning: {w}", file=sys.stderr)
     print(f"skyfix import: {out}: log clock on UNIX time {report['unix_minus_boot_s']:.3f} s "
@@ -265,9 +308,16 @@ def run(args) -> int:
 def register(subparsers) -> None:
     p = subparsers.add_parser("import", help="a flight's own records (DataFlash log, camera video, depth) as a "
                               "session")
-    p.add_argument("--dataflash", required=True, help="the drone's ArduPilot DataFlash log (.bin)")
+    log = p.add_mutually_exclusive_group(required=True)
+    log.add_argument("--dataflash", help="the drone's ArduPilot DataFlash log (.bin)")
+    log.add_argument("--dji-csv", help="a DJI drone's flight record as CSV (dji-log-parser's or PhantomHelp's)")
+    p.add_argument("--dji-csv-utc-offset-h", type=float,
+                   help="the zone (hours east of UTC) of a DJI CSV that has local times only (PhantomHelp's)")
+    p.add_argument("--srt", help="the DJI camera's .SRT beside the video: the frames' times give the video's start")
+    p.add_argument("--srt-utc-offset-h", type=float,
+                   help="the SRT's camera clock zone (hours east of UTC); default: found from its track")
     p.add_argument("--video", help="the camera's own video file")
-    p.add_argument("--depth", required=True, help="the UUV's depth: skyfix's depth.jsonl or a CSV")
+    p.add_argument("--depth", required=True, help="the UUV's depth: skyfix's depth.jsonl, ArduSub's DataFlash log (.bin) or a CSV")
     p.add_argument("--depth-columns", default="t,depth_m", help="a CSV's time (UNIX s) and depth (m) columns")
     p.add_argument("--calibration", required=True, help="the camera's calibration (TOML, session.toml tables)")
     p.add_argument("--video-start", choices=("motion", "trigger"), default="motion",

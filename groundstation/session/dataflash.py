@@ -43,8 +43,8 @@ from groundstation.session import SessionError
 GPS_EPOCH_UNIX = 315964800.0  # 1980-01-06T00:00:00Z
 LEAP_S = 18.0  # GPS − UTC since 2017-01-01
 MIN_3D_STATUS = 3  # AP_GPS GPS_OK_FIX_3D and better
+WHOLE_MS_SIGMA_S = 0.001 * math.sqrt(2.0 / 12.0)  # the difference of two times rounded to whole ms
 DOWNWARD = 25  # MAV_SENSOR_ROTATION_PITCH_270
-USED = ("ATT", "IMU", "POS", "GPS", "GPA", "MNT", "RFND", "CAM", "TRIG", "ARM", "EV", "PARM")
 EV_ARMED, EV_DISARMED = 10, 11  # AP_Logger's LogEvent
 COLUMNS = {"ATT": ("TimeUS", "Roll", "Pitch", "Yaw"), "IMU": ("TimeUS", "GyrX", "GyrY", "GyrZ"),
            "POS": ("TimeUS", "Lat", "Lng", "Alt", "RelHomeAlt"),
@@ -99,19 +99,19 @@ def attitude_rates(t_s: np.ndarray, rpy_rad: np.ndarray) -> np.ndarray:
     return turn / (t_s[after] - t_s[before])[:, None]
 
 
-def _columns(reader, name: str) -> None:
+def _columns(reader, name: str, columns: tuple[str, ...]) -> None:
     fmt = next((f for f in reader.formats.values() if f.name == name), None)
     if fmt is None:
         return
-    missing = [c for c in COLUMNS[name] if c not in fmt.columns]
+    missing = [c for c in columns if c not in fmt.columns]
     if missing:
         raise SessionError(f"{name} records without {', '.join(missing)} (columns {','.join(fmt.columns)}): "
                            "not a layout skyfix reads")
 
 
-def read_dataflash(path: str | Path) -> FlightLog:
-    """The flight's records; :class:`SessionError` (one line) for a file that is not a usable DataFlash log."""
-    path = Path(path)
+def read_records(path: Path, columns: dict[str, tuple[str, ...]]) -> dict[str, list]:
+    """Every record of the kinds ``columns`` names, by kind in log order; each kind's FMT must hold the named columns.
+    :class:`SessionError` (one line) for a file that is not a readable DataFlash log."""
     if not path.is_file():
         raise SessionError(f"{path}: no such DataFlash log")
     try:
@@ -120,19 +120,47 @@ def read_dataflash(path: str | Path) -> FlightLog:
         raise SessionError(f"{path}: not a DataFlash log ({e})") from None
     if not hasattr(reader, "formats"):
         raise SessionError(f"{path}: not a DataFlash log")
-    rows: dict[str, list] = {k: [] for k in USED}
+    rows: dict[str, list] = {k: [] for k in columns}
     try:
-        for name in USED:
-            _columns(reader, name)
-        while (m := reader.recv_match(type=list(USED))) is not None:
-            kind = m.get_type()
-            if kind in ("IMU", "GPS", "GPA", "MNT") and getattr(m, "I", 0) != 0:
-                continue
-            if kind == "RFND" and getattr(m, "Orient", DOWNWARD) != DOWNWARD:
-                continue
-            rows[kind].append(m)
+        for name, needed in columns.items():
+            _columns(reader, name, needed)
+        while (m := reader.recv_match(type=list(columns))) is not None:
+            rows[m.get_type()].append(m)
     finally:
         reader.close()
+    return rows
+
+
+def log_clock(path: Path, gps_rows: list, gpa_rows: list) -> tuple[np.ndarray, float, float]:
+    """The GPS fixes as :attr:`FlightLog.gps` rows, and the log's clock to UNIX time (s) with its sigma: the median
+    over 3D fixes of (the fix's GPS time − the boot time it arrived at), its spread as the sigma (at least the two
+    stamps' whole milliseconds')."""
+    arrival = {m.TimeUS: m.SMS / 1000.0 for m in gpa_rows}  # GPA is written with its GPS record
+    acc = {m.TimeUS: (getattr(m, "HAcc", math.nan), getattr(m, "VAcc", math.nan)) for m in gpa_rows}
+    gps = np.array([[arrival.get(m.TimeUS, m.TimeUS / 1e6), gps_to_unix(m.GWk, m.GMS) if m.GWk else math.nan,
+                     m.Status, m.NSats, m.HDop, m.Alt, *acc.get(m.TimeUS, (math.nan, math.nan)), m.Lat, m.Lng]
+                    for m in gps_rows]).reshape(-1, 10)
+    good = (gps[:, 2] >= MIN_3D_STATUS) & np.isfinite(gps[:, 1])
+    if good.sum() < 2:
+        raise SessionError(f"{path}: no GPS time (GWk/GMS of a 3D fix) in the log: its clock cannot be put on UNIX "
+                           "time")
+    offsets = gps[good, 1] - gps[good, 0]
+    offset = float(np.median(offsets))
+    return gps, offset, max(float(1.4826 * np.median(np.abs(offsets - offset))), WHOLE_MS_SIGMA_S)
+
+
+def first_instance(rows: list) -> list:
+    """The records of instance 0 (``I``) of a kind logged per instance."""
+    return [m for m in rows if getattr(m, "I", 0) == 0]
+
+
+def read_dataflash(path: str | Path) -> FlightLog:
+    """The flight's records; :class:`SessionError` (one line) for a file that is not a usable DataFlash log."""
+    path = Path(path)
+    rows = read_records(path, COLUMNS)
+    for kind in ("IMU", "GPS", "GPA", "MNT"):
+        rows[kind] = first_instance(rows[kind])
+    rows["RFND"] = [m for m in rows["RFND"] if getattr(m, "Orient", DOWNWARD) == DOWNWARD]
     for kind in ("ATT", "POS", "GPS"):
         if not rows[kind]:
             raise SessionError(f"{path}: no {kind} records: not a flight log skyfix can use")
@@ -153,18 +181,7 @@ def read_dataflash(path: str | Path) -> FlightLog:
         warnings.append(f"{path}: no IMU records: the attitude's body rates are taken from its own differences")
         rates = attitude_rates(att_t, att[:, 1:4])
     pos = np.array([[m.TimeUS / 1e6, m.Lat, m.Lng, m.Alt, m.RelHomeAlt] for m in rows["POS"]])
-    arrival = {m.TimeUS: m.SMS / 1000.0 for m in rows["GPA"]}  # GPA is written with its GPS record
-    acc = {m.TimeUS: (getattr(m, "HAcc", math.nan), getattr(m, "VAcc", math.nan)) for m in rows["GPA"]}
-    gps = np.array([[arrival.get(m.TimeUS, m.TimeUS / 1e6), gps_to_unix(m.GWk, m.GMS) if m.GWk else math.nan,
-                     m.Status, m.NSats, m.HDop, m.Alt, *acc.get(m.TimeUS, (math.nan, math.nan)), m.Lat, m.Lng]
-                    for m in rows["GPS"]])
-    good = (gps[:, 2] >= MIN_3D_STATUS) & np.isfinite(gps[:, 1])
-    if good.sum() < 2:
-        raise SessionError(f"{path}: no GPS time (GWk/GMS of a 3D fix) in the log: its clock cannot be put on UNIX "
-                           "time")
-    offsets = gps[good, 1] - gps[good, 0]
-    offset = float(np.median(offsets))
-    sigma = float(1.4826 * np.median(np.abs(offsets - offset)))
+    gps, offset, sigma = log_clock(path, rows["GPS"], rows["GPA"])
     mnt = np.array([[m.TimeUS / 1e6, m.Roll, m.Pitch, m.YawB, m.YawE] for m in rows["MNT"]]).reshape(-1, 5)
     rangefinder = np.array([[m.TimeUS / 1e6, m.Dist] for m in rows["RFND"]]).reshape(-1, 2)
     triggers = np.sort(np.concatenate([t(rows["CAM"]), t(rows["TRIG"])]))
