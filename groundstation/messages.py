@@ -448,13 +448,14 @@ class HeightFromSizeStatus(Section):
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
-class RtpStatus(Section):
-    """An ``rtp://`` input, depacketized by skyfix: what the network lost, since the start."""
+class DatagramStatus(Section):
+    """An ``rtp://`` or ``udp://`` (MPEG-TS) input, depacketized by skyfix: what the network lost, since the start."""
 
-    lost_packets: int = Field(description="RTP sequence numbers never received")
+    lost_packets: int = Field(description="RTP sequence numbers never received; MPEG-TS packets missing (continuity "
+                                          "counter gaps) or marked in error")
     dropped_frames: int = Field(description="frames not decoded: damaged by a loss, or depending on one that was "
                                             "(until the next keyframe)")
-    bad_packets: int = Field(description="datagrams that are not RTP of the configured payload type")
+    bad_packets: int = Field(description="datagrams that are not RTP of the configured payload type, or not MPEG-TS")
 
 
 class VideoStatus(Section):
@@ -479,7 +480,8 @@ class VideoStatus(Section):
     restarts: int = Field(0, description="times the reader thread failed (a bug) and started over")
     failure: str | None = Field(None, description="the last such failure: its kind and message")
     handoff: HandoffStatus | None = Field(None, description="frames from the reader thread")
-    rtp: RtpStatus | None = Field(None, description="rtp:// inputs only")
+    rtp: DatagramStatus | None = Field(None, description="rtp:// inputs only")
+    mpegts: DatagramStatus | None = Field(None, description="udp:// (MPEG-TS) inputs only")
 
 
 class GpsInputStatus(Section):

@@ -2,7 +2,7 @@
 
 | ``--video`` | kind | opened as |
 |---|---|---|
-| ``udp://HOST:PORT`` | udp | MPEG-TS over UDP |
+| ``udp://HOST:PORT`` | udp | MPEG-TS over UDP (a multicast group joined), depacketized by skyfix (:mod:`.mpegts`), decoded by FFmpeg |
 | ``rtp://HOST:PORT?codec=h264\\|h265[&pt=96]`` | rtp | RTP without a session description (QGroundControl/BlueOS send H.264 RTP to 5600), depacketized by skyfix (:mod:`.rtp`), decoded by FFmpeg |
 | ``FILE.sdp`` | sdp | the RTP stream the file describes, live |
 | ``rtsp://…[?transport=tcp\\|udp]`` | rtsp | RTSP, over TCP or UDP (default: FFmpeg tries UDP first) |
@@ -33,9 +33,6 @@ from groundstation.video.frames import VideoError
 # av.open as container_options, since PyAV 16's per-stream options array overflows
 # (segfault) when a stream appears while probing, as an MPEG-TS stream joined late does.
 LOW_DELAY = {"probesize": "32", "analyzeduration": "0"}
-# MPEG-TS carries a frame per PES (FFmpeg, GStreamer and camera encoders do): without FFmpeg's parser,
-# which holds each frame until the next one starts, a frame is handed over as soon as its PES is in.
-UDP_OPTIONS = {"overrun_nonfatal": "1", "buffer_size": str(4 << 20), "fflags": "+noparse"}
 RTP_OPTIONS = {"protocol_whitelist": "file,udp,rtp", "max_delay": "0", "reorder_queue_size": "0"}
 RTP_CODECS = ("h264", "h265", "hevc")
 V4L2_KEYS = ("video_size", "framerate", "input_format", "pixel_format", "standard")
@@ -82,6 +79,12 @@ def _port(url: str, parts) -> int:
     if port is None:
         raise VideoError(f"{url}: no port (expected {parts.scheme}://HOST:PORT)")
     return port
+
+
+def _udp(url: str, parts, query: dict[str, str]) -> VideoInput:
+    if query:
+        raise VideoError(f"{url}: unknown option {next(iter(query))} (udp:// takes none: skyfix reads the port itself)")
+    return VideoInput(url, "udp", parts.hostname or "0.0.0.0", None, {}, _port(url, parts))
 
 
 def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
@@ -139,7 +142,7 @@ def parse_video_input(url: str) -> VideoInput:
     parts = urlsplit(url)
     scheme = parts.scheme.lower()
     if scheme == "udp":
-        return VideoInput(url, "udp", url, "mpegts", {**LOW_DELAY, **UDP_OPTIONS}, _port(url, parts))
+        return _udp(url, parts, query)
     if scheme == "rtp":
         return _rtp(url, parts, query)
     if scheme in ("rtsp", "rtsps"):

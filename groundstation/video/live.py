@@ -34,8 +34,9 @@ unit may lose it) takes its arrival as its slot. H.264/H.265 from an ``.sdp``
 file or RTSP reach skyfix one frame late: FFmpeg ends an access unit only when
 the next one starts, so an access unit's arrival is taken as the hand-over of the
 one before it (timed as if it came when it was handed over, every frame was a
-frame interval late: 33 ms at 30 fps, centimetres on a moving UAV). ``rtp://`` is
-read by skyfix itself (:mod:`.rtp`), which ends a frame at its marker bit.
+frame interval late: 33 ms at 30 fps, centimetres on a moving UAV). ``rtp://`` and
+``udp://`` (MPEG-TS) are read by skyfix itself (:mod:`.udp`), which ends a frame at its
+marker bit (:mod:`.rtp`) or its PES's last packet (:mod:`.mpegts`).
 
 Failures: a stream that cannot be opened (refused, a port another program holds)
 is retried with back-off from :data:`RETRY_MIN_S` to ``retry_max_s``; one that
@@ -64,7 +65,9 @@ from groundstation.threads import Handoff, Supervised, in_thread
 from groundstation.video.ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
 from groundstation.video.frames import LiveFrame, VideoError, decoder, ffmpeg_reason, put_until
 from groundstation.video.inputs import VideoInput, parse_video_input
-from groundstation.video.rtp import RtpInput
+from groundstation.video.mpegts import TsDepacketizer
+from groundstation.video.rtp import Depacketizer
+from groundstation.video.udp import DatagramInput
 from localizer.clock import ClockMap
 
 log = logging.getLogger("skyfix.video")
@@ -146,8 +149,8 @@ class VideoLive:
         self._decode_s: deque[float] = deque(maxlen=STATS_FRAMES)  # t_recv → frame handed over
         self.handoff: Handoff | None = None
         self.reader = Supervised("video", self._read)
-        self._rtp: RtpInput | None = None  # the open rtp:// input
-        self._rtp_before = {"lost_packets": 0, "dropped_frames": 0, "bad_packets": 0}  # its predecessors'
+        self._datagrams: DatagramInput | None = None  # the open rtp:// or udp:// input
+        self._datagrams_before = {"lost_packets": 0, "dropped_frames": 0, "bad_packets": 0}  # its predecessors'
 
     async def run(self) -> None:
         route_ffmpeg_log()
@@ -168,10 +171,11 @@ class VideoLive:
                 if self.source.port_in_use():
                     raise OSError(errno.EADDRINUSE, "port in use")
                 container = self._open()
-            except (av.error.FFmpegError, OSError) as e:
+            except (av.error.FFmpegError, OSError, VideoError) as e:
                 self.state = "waiting"
-                self._error(_reason(self.source, e, t_try, self.open_timeout_s))
-                if not isinstance(e, av.error.ExitError):  # a timeout already waited: listen again at once
+                self._error(f"{self.url}: {e}" if isinstance(e, VideoError) else
+                            _reason(self.source, e, t_try, self.open_timeout_s))
+                if not isinstance(e, (av.error.ExitError, TimeoutError)):  # a timeout already waited: listen again
                     stop.wait(backoff)
                     backoff = min(2.0 * backoff, self.retry_max_s)
                 continue
@@ -185,9 +189,9 @@ class VideoLive:
                 ended = str(e)
             finally:
                 container.close()
-                if self._rtp is not None:
-                    self._rtp_before = self._rtp_counts()
-                    self._rtp = None
+                if self._datagrams is not None:
+                    self._datagrams_before = self._datagram_counts()
+                    self._datagrams = None
             if ended is None:  # the end of a file, or stopping
                 self.state = "ended" if not stop.is_set() else "stopped"
                 return
@@ -199,9 +203,10 @@ class VideoLive:
 
     def _open(self):
         src = self.source
-        if src.kind == "rtp":
-            self._rtp = RtpInput(src.file, src.port, src.codec, src.payload_type, self.read_timeout_s)
-            return self._rtp
+        if src.kind in ("rtp", "udp"):
+            depacketizer = Depacketizer(src.codec, src.payload_type) if src.kind == "rtp" else TsDepacketizer()
+            self._datagrams = DatagramInput(src.file, src.port, depacketizer, self.open_timeout_s, self.read_timeout_s)
+            return self._datagrams
         return av.open(src.file, format=src.format, container_options=src.options,
                        timeout=(self.open_timeout_s, self.read_timeout_s))
 
@@ -305,13 +310,13 @@ class VideoLive:
             log.warning("video: %s", why)
         self.last_error = why
 
-    def _rtp_counts(self) -> dict:
-        """What the network lost on ``rtp://``, since the start (all connections)."""
-        if self._rtp is None:
-            return dict(self._rtp_before)
-        d = self._rtp.depacketizer
+    def _datagram_counts(self) -> dict:
+        """What the network lost on ``rtp://`` or ``udp://``, since the start (all connections)."""
+        if self._datagrams is None:
+            return dict(self._datagrams_before)
+        d = self._datagrams.depacketizer
         now = {"lost_packets": d.lost_packets, "dropped_frames": d.dropped_units, "bad_packets": d.bad_packets}
-        return {k: self._rtp_before[k] + now[k] for k in now}
+        return {k: self._datagrams_before[k] + now[k] for k in now}
 
     def status(self, now: float) -> dict:
         age = None if self.last_recv is None else round(max(0.0, now - self.last_recv), 3)
@@ -330,4 +335,5 @@ class VideoLive:
                 "stream_offset_s": None if offset is None else round(offset, 6),
                 "error": self.last_error, **self.reader.status(),
                 "handoff": self.handoff.status() if self.handoff else None,
-                "rtp": self._rtp_counts() if self.source.kind == "rtp" else None}
+                "rtp": self._datagram_counts() if self.source.kind == "rtp" else None,
+                "mpegts": self._datagram_counts() if self.source.kind == "udp" else None}

@@ -10,9 +10,8 @@ convention) skyfix reads the datagrams itself:
   the marker bit is in. Single NAL units, aggregation (STAP-A, AP) and fragmentation
   (FU-A, FU) packets. A lost packet (a gap in the sequence numbers) loses its access
   unit and everything up to the next keyframe: frames decoded from a damaged picture
-  would be tracked where the picture is wrong.
-- :class:`RtpInput`: a UDP socket with the shape of the PyAV container the video reader
-  uses (``streams.video[0]`` with its decoder, ``demux``, ``close``).
+  would be tracked where the picture is wrong. Read from a UDP port by
+  :class:`~groundstation.video.udp.DatagramInput`.
 
 The stream's parameter sets must come in the stream (cameras repeat them before each
 keyframe; there is no session description to carry them), as with FFmpeg's reading.
@@ -20,35 +19,30 @@ keyframe; there is no session description to carry them), as with FFmpeg's readi
 
 from __future__ import annotations
 
-import socket
-from collections.abc import Iterator
 from dataclasses import dataclass
-from fractions import Fraction
-
-import av
 
 START_CODE = b"\x00\x00\x00\x01"
-RTP_HZ = 90_000  # the RTP clock of H.264/H.265 video
-DATAGRAM_BYTES = 65_536
-SOCKET_BUFFER_BYTES = 4 << 20  # a 1080p keyframe comes as a burst of some 150 datagrams
+VIDEO_HZ = 90_000  # the clock of RTP timestamps and MPEG-TS PTS of H.264/H.265 video
 
 
 @dataclass
 class AccessUnit:
-    """One frame's NAL units as an Annex B byte stream; ``timestamp`` the RTP timestamp, unwrapped (1/90 000 s)."""
+    """One frame's NAL units as an Annex B byte stream; ``timestamp`` the RTP timestamp or MPEG-TS PTS, unwrapped
+    (1/90 000 s; None: a PES without a PTS)."""
 
     data: bytes
-    timestamp: int
+    timestamp: int | None
     keyframe: bool
 
 
-def _nal_type(codec: str, header: int) -> int:
+def nal_type(codec: str, header: int) -> int:
+    """The NAL unit type in its header's first byte."""
     return header & 0x1F if codec == "h264" else (header >> 1) & 0x3F
 
 
-def _is_keyframe_nal(codec: str, nal_type: int) -> bool:
+def is_keyframe_nal(codec: str, kind: int) -> bool:
     """An IDR picture or a parameter set (H.264 5, 7, 8); an IRAP picture or a parameter set (H.265 16–23, 32–34)."""
-    return nal_type in (5, 7, 8) if codec == "h264" else 16 <= nal_type <= 23 or 32 <= nal_type <= 34
+    return kind in (5, 7, 8) if codec == "h264" else 16 <= kind <= 23 or 32 <= kind <= 34
 
 
 class Depacketizer:
@@ -72,8 +66,13 @@ class Depacketizer:
         self._need_keyframe = False
         self._keyframe = False
 
-    def push(self, datagram: bytes) -> AccessUnit | None:
-        """Take one datagram; the access unit it completes, if it has the marker bit and the unit is whole."""
+    def push(self, datagram: bytes) -> list[AccessUnit]:
+        """Take one datagram; the access unit it completes (none or one), if it has the marker bit and the unit is
+        whole."""
+        unit = self._push(datagram)
+        return [] if unit is None else [unit]
+
+    def _push(self, datagram: bytes) -> AccessUnit | None:
         if len(datagram) < 12 or datagram[0] >> 6 != 2 or datagram[1] & 0x7F != self.payload_type:
             self.bad_packets += 1
             return None
@@ -111,7 +110,7 @@ class Depacketizer:
 
     def _payload(self, payload: bytes) -> None:
         h264 = self.codec == "h264"
-        kind = _nal_type(self.codec, payload[0])
+        kind = nal_type(self.codec, payload[0])
         if (h264 and 1 <= kind <= 23) or (not h264 and kind < 48):  # a single NAL unit
             self._add_nal(payload)
         elif (h264 and kind == 24) or (not h264 and kind == 48):  # aggregation: 16-bit size, NAL, ...
@@ -153,7 +152,7 @@ class Depacketizer:
 
     def _add_nal(self, nal: bytes) -> None:
         if nal:
-            self._keyframe |= _is_keyframe_nal(self.codec, _nal_type(self.codec, nal[0]))
+            self._keyframe |= is_keyframe_nal(self.codec, nal_type(self.codec, nal[0]))
             self._nals.append(nal)
 
     def _finish(self) -> AccessUnit | None:
@@ -174,54 +173,3 @@ class Depacketizer:
     def _reset(self) -> None:
         self._nals, self._fragment, self._damaged, self._keyframe = [], None, False, False
         self._ts = None
-
-
-class _Stream:
-    def __init__(self, codec: str):
-        self.codec_context = av.CodecContext.create("hevc" if codec == "h265" else codec, "r")
-        self.time_base = Fraction(1, RTP_HZ)
-
-
-class _Streams:
-    def __init__(self, stream: _Stream):
-        self.video = [stream]
-
-
-class RtpInput:
-    """An RTP port read by skyfix (``host``, ``port``, ``codec``, ``payload_type``), shaped as the PyAV
-    container the reader uses.
-
-    :meth:`demux` yields one ``av.Packet`` per whole access unit (``pts`` its RTP timestamp, time
-    base 1/90 000 s), and raises ``TimeoutError`` when nothing came for ``read_timeout_s``.
-    """
-
-    def __init__(self, host: str, port: int, codec: str, payload_type: int, read_timeout_s: float):
-        self.depacketizer = Depacketizer(codec, payload_type)
-        self.streams = _Streams(_Stream(codec))
-        self.read_timeout_s = read_timeout_s
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER_BYTES)
-            self._sock.bind((host, port))
-        except OSError:
-            self._sock.close()
-            raise
-        self._sock.settimeout(read_timeout_s)
-
-    def demux(self, stream) -> Iterator[av.Packet]:
-        while True:
-            try:
-                datagram = self._sock.recv(DATAGRAM_BYTES)
-            except TimeoutError:
-                raise TimeoutError(f"nothing received for {self.read_timeout_s:g} s") from None
-            unit = self.depacketizer.push(datagram)
-            if unit is not None:
-                packet = av.Packet(unit.data)
-                packet.pts = packet.dts = unit.timestamp
-                packet.time_base = stream.time_base
-                packet.is_keyframe = unit.keyframe
-                yield packet
-
-    def close(self) -> None:
-        self._sock.close()
-

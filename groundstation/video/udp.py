@@ -1,0 +1,105 @@
+"""A UDP port whose video skyfix depacketizes itself, shaped as the PyAV container the live reader uses.
+
+``udp://`` (MPEG-TS, :mod:`.mpegts`) and ``rtp://`` (:mod:`.rtp`) are read here so that a frame is
+handed over as soon as its last packet is in (FFmpeg's demuxers wait for the next frame's start in
+both cases, see those modules). :class:`DatagramInput` binds the port (joining a multicast group
+when the address is one), feeds each datagram to its depacketizer, and :meth:`~DatagramInput.demux`
+yields one ``av.Packet`` per whole access unit (``pts`` in 1/90 000 s); the decoder is FFmpeg's.
+The codec is the depacketizer's: given for RTP, read from the PMT for MPEG-TS — the open waits
+for it as FFmpeg's open waits for its probe, and raises ``TimeoutError`` after ``open_timeout_s``
+(:class:`~groundstation.video.frames.VideoError` for a program without H.264/H.265 video).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import socket
+import time
+from collections import deque
+from collections.abc import Iterator
+from fractions import Fraction
+
+import av
+
+from groundstation.video.frames import VideoError
+from groundstation.video.rtp import VIDEO_HZ
+
+DATAGRAM_BYTES = 65_536
+SOCKET_BUFFER_BYTES = 4 << 20  # a 1080p keyframe comes as a burst of some 150 datagrams
+
+
+class _Stream:
+    def __init__(self, codec: str):
+        self.codec_context = av.CodecContext.create("hevc" if codec == "h265" else codec, "r")
+        self.time_base = Fraction(1, VIDEO_HZ)
+
+
+class _Streams:
+    def __init__(self, stream: _Stream):
+        self.video = [stream]
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER_BYTES)
+        try:
+            multicast = ipaddress.ip_address(host).is_multicast
+        except ValueError:  # a host name: the address it is bound by
+            multicast = False
+        if multicast:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind(("", port))
+            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
+                            socket.inet_aton(host) + socket.inet_aton("0.0.0.0"))
+        else:
+            sock.bind((host, port))
+    except OSError:
+        sock.close()
+        raise
+    return sock
+
+
+class DatagramInput:
+    """``host``:``port`` read through ``depacketizer`` (an :class:`~.rtp.Depacketizer` or
+    :class:`~.mpegts.TsDepacketizer`: ``push(datagram)`` → access units, ``codec``); see the module doc.
+    :meth:`demux` raises ``TimeoutError`` when nothing came for ``read_timeout_s``."""
+
+    def __init__(self, host: str, port: int, depacketizer, open_timeout_s: float, read_timeout_s: float):
+        self.depacketizer = depacketizer
+        self.read_timeout_s = read_timeout_s
+        self._sock = _bind(host, port)
+        self._units: deque = deque()
+        try:
+            deadline = time.monotonic() + open_timeout_s
+            while depacketizer.codec is None:
+                self._sock.settimeout(max(0.001, deadline - time.monotonic()))
+                try:
+                    self._units.extend(depacketizer.push(self._sock.recv(DATAGRAM_BYTES)))
+                except TimeoutError:
+                    raise TimeoutError(f"no video stream described within {open_timeout_s:g} s") from None
+                if getattr(depacketizer, "unreadable", None):
+                    raise VideoError(depacketizer.unreadable)
+        except BaseException:
+            self._sock.close()
+            raise
+        self._sock.settimeout(read_timeout_s)
+        self.streams = _Streams(_Stream(depacketizer.codec))
+
+    def demux(self, stream) -> Iterator[av.Packet]:
+        while True:
+            while self._units:
+                unit = self._units.popleft()
+                packet = av.Packet(unit.data)
+                packet.pts = packet.dts = unit.timestamp
+                packet.time_base = stream.time_base
+                packet.is_keyframe = unit.keyframe
+                yield packet
+            try:
+                datagram = self._sock.recv(DATAGRAM_BYTES)
+            except TimeoutError:
+                raise TimeoutError(f"nothing received for {self.read_timeout_s:g} s") from None
+            self._units.extend(self.depacketizer.push(datagram))
+
+    def close(self) -> None:
+        self._sock.close()
