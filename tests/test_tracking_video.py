@@ -3,11 +3,12 @@
 import shutil
 import subprocess
 
+import av
 import numpy as np
 import pytest
 
 from groundstation.video.file import open_video
-from groundstation.video.frames import VideoError
+from groundstation.video.frames import VideoError, decoder
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
 
@@ -114,3 +115,34 @@ def test_closing_while_prefetching_stops_the_reader_first(clip):
     video.close()  # the reader thread is still decoding: it must stop before the decoder goes
     rest = list(frames)  # what was already decoded, then the end (no hang, no crash)
     assert len(rest) <= 3
+
+
+def _slice_decoded(path) -> list[int]:
+    """The bar column of every frame a slice-threaded decoder makes of ``path`` (packets that fail skipped), in order."""
+    columns = []
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        ctx = decoder(stream, threads=4)
+        for packet in container.demux(stream):
+            try:
+                columns += [_bar_column(f.to_ndarray(format="bgr24")) for f in ctx.decode(packet)]
+            except av.error.InvalidDataError:
+                continue
+            except av.error.EOFError:
+                break
+    return columns
+
+
+def test_a_cut_packet_loses_no_decodable_frame_to_frame_threads(clip, tmp_path):
+    """Frame threads decode several frames at once: the packet a cut recording ends inside fails, and took those in
+    flight with it (3 here). Every frame slice threads decode comes out, with its own index and time."""
+    data = clip.read_bytes()
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(data[: len(data) * 3 // 4])
+    with open_video(cut, threads=4) as video:
+        frames = list(video)
+        assert video.bad_reads >= 1
+    assert 10 < len(frames) < N
+    assert [_bar_column(f.image) for f in frames] == _slice_decoded(cut)
+    assert all(_bar_column(f.image) == 2 * f.index for f in frames)
+    assert [f.t_s for f in frames] == pytest.approx([f.index / FPS for f in frames])

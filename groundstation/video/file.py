@@ -20,12 +20,18 @@ packet's presentation time first (demuxing only, no decoding):
   live recording is one: its timestamps are the camera's regular slots, with a gap
   wherever the service skipped frames (its decoder behind), and every frame it kept
   has its row.
-Damaged files: a packet FFmpeg cannot decode is skipped and counted
+Decoding is throughput work: frame and slice threads. A packet FFmpeg cannot decode fails the
+frames decoded beside it in the other frame threads too (PyAV raises before handing them over, and
+at the end no more can be drained), so at the first failure the file is opened again and decoded
+with slice threads only from the keyframe before the first frame not yet handed on (the frames
+handed on already are skipped): every frame the slice-threaded decoder can decode is delivered,
+with its own index and time. Each packet that fails to decode is then skipped and counted
 (:attr:`Video.bad_reads`).
 """
 
 from __future__ import annotations
 
+import math
 import queue
 import threading
 from collections.abc import Iterator, Sequence
@@ -62,12 +68,14 @@ def frame_indices(pts: list[int], indices: Sequence[int] | None = None) -> dict[
 class Video:
     """An open video file; use :func:`open_video`. Iterating yields :class:`VideoFrame`."""
 
-    def __init__(self, container, url: str, expected_size, max_bad_reads: int, index_of: dict[int, int]):
+    def __init__(self, container, url: str, expected_size, max_bad_reads: int, index_of: dict[int, int],
+                 threads: int = 0):
         self._container = container
         self._stream = container.streams.video[0]
         self.url = url
         self.expected_size = expected_size
         self.max_bad_reads = max_bad_reads
+        self.threads = threads
         rate = self._stream.average_rate or self._stream.guessed_rate
         self.fps = float(rate) if rate else 0.0
         self.frame_count = len(index_of)
@@ -86,16 +94,48 @@ class Video:
         return int(ctx.width or 0), int(ctx.height or 0)
 
     def _decode(self) -> Iterator[av.VideoFrame]:
-        ctx = self._stream.codec_context
-        for packet in self._container.demux(self._stream):
+        """Decoded frames in presentation order: frame-threaded until a packet fails, then slice-threaded from the
+        keyframe before the first frame not handed on yet (see the module doc)."""
+        ctx = decoder(self._stream, threads=self.threads, frame_threads=True)
+        keyframes: list[tuple[int, int]] = []  # (pts, packet number) of the keyframe packets demuxed
+        last = None  # pts of the last frame handed on
+        for number, packet in enumerate(self._container.demux(self._stream)):
+            if packet.is_keyframe and packet.pts is not None:
+                keyframes.append((packet.pts, number))
             try:
-                yield from ctx.decode(packet)
+                frames = ctx.decode(packet)
+            except av.error.InvalidDataError:
+                break
+            except av.error.EOFError:
+                return
+            for frame in frames:
+                last = frame.pts if frame.pts is not None else last
+                yield frame
+        else:
+            return
+        first = min((p for p in self._index_of if last is None or p > last), default=math.inf)
+        yield from self._decode_slices(max((n for pts, n in keyframes if pts <= first), default=0), last)
+
+    def _decode_slices(self, start: int, last: int | None) -> Iterator[av.VideoFrame]:
+        """The file opened again and decoded with slice threads from packet number ``start`` on, frames up to pts
+        ``last`` (handed on already) left out; each packet that fails is counted and skipped."""
+        self._container.close()
+        self._container = av.open(self.url)
+        self._stream = self._container.streams.video[0]
+        ctx = decoder(self._stream, threads=self.threads)
+        for number, packet in enumerate(self._container.demux(self._stream)):
+            if number < start:
+                continue
+            try:
+                frames = ctx.decode(packet)
             except av.error.InvalidDataError:
                 self.bad_reads += 1
                 if self.bad_reads > self.max_bad_reads > 0:
                     return
+                continue
             except av.error.EOFError:
                 return
+            yield from (f for f in frames if last is None or f.pts is None or f.pts > last)
 
     def read(self) -> VideoFrame | None:
         """The next decodable frame, or None at the end of the video."""
@@ -211,7 +251,7 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     ``expected_size`` (width, height) in pixels, usually the calibration's: a
     different frame size is a :class:`VideoError` (checked on open when the
     container declares it, and on every frame). ``threads`` is FFmpeg's decoding
-    thread count (slice threads; 0: FFmpeg chooses). ``max_bad_reads`` > 0 ends the video after
+    thread count (frame and slice threads, see the module doc; 0: FFmpeg chooses). ``max_bad_reads`` > 0 ends the video after
     that many undecodable packets (0: no limit). ``indices``: the session's frame
     indices (``video_frames.csv``), which number the frames when the counts agree.
     """
@@ -233,8 +273,7 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     except (av.error.FFmpegError, IndexError) as e:
         why = ffmpeg_reason(e) if isinstance(e, av.error.FFmpegError) else "no video stream"
         raise VideoError(f"{url}: FFmpeg cannot open it ({why})") from None
-    decoder(container.streams.video[0], threads=threads)
-    video = Video(container, url, expected_size, max_bad_reads, index_of)
+    video = Video(container, url, expected_size, max_bad_reads, index_of, threads)
     w, h = video.size
     if expected_size is not None and w > 0 and h > 0 and (w, h) != tuple(expected_size):
         video.close()

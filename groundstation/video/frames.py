@@ -60,12 +60,13 @@ def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:
     return False
 
 
-def decoder(stream, *, threads: int = 0, low_delay: bool = False):
-    """The video ``stream``'s codec context, set up as both readers decode: slice threads (frame threads lose the
-    frames in flight when a damaged packet fails), ``threads`` of them (0: FFmpeg's choice); ``low_delay`` for a
-    live stream (each frame out as soon as it is decoded)."""
+def decoder(stream, *, threads: int = 0, frame_threads: bool = False, low_delay: bool = False):
+    """The video ``stream``'s codec context, set up as the readers decode: ``threads`` threads (0: FFmpeg's choice),
+    slice threads, and with ``frame_threads`` frame threads too (a file read for throughput: a damaged packet can then
+    take the frames in flight with it, see :mod:`groundstation.video.file`); ``low_delay`` for a live stream (each
+    frame out as soon as it is decoded, no frame threads)."""
     ctx = stream.codec_context
-    ctx.thread_type = "SLICE"
+    ctx.thread_type = "AUTO" if frame_threads else "SLICE"
     ctx.thread_count = int(threads)
     if low_delay:
         ctx.flags |= av.codec.context.Flags.low_delay

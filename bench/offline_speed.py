@@ -1,0 +1,162 @@
+"""``skyfix process`` against decoding the same video alone, at 1080p and 4K (issue 18).
+
+    .venv/bin/python bench/offline_speed.py [--sizes 1080p,4k] [--repeats 3] [--mil] [--tree LABEL=DIR ...]
+                                            [--out bench/results/offline_speed.txt]
+
+Sessions (generated once into /tmp/skyfix-bench: 40 s of 1080p, 10 s of 4K, 30 fps, a nadir hover with the
+UUV hidden for a second) are timed end to end as child processes, interpreter start included, interleaved over
+``--repeats`` rounds; medians count. Each round: decode-only with OpenCV (a ``cv2.VideoCapture`` read loop, BGR
+frames) and with PyAV (frame and slice threads, BGR frames), then ``skyfix process`` (its defaults: the height from
+the UUV's size measured), ``skyfix process --height-from-size off``, and with ``--mil`` the paper's MIL tracker
+(first round only: it is slow). The ratio is process fps / OpenCV decode-only fps (target ≥ 0.95). CPU seconds
+(the child's user + sys) show what the work costs beside the wall time: on a machine whose cores decoding alone
+keeps busy, process cannot be faster than its CPU seconds over the cores. ``--tree LABEL=DIR`` also times
+``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C DIR``: before and after in the
+same run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from emit import emit
+
+SIZES = {"1080p": (1920, 1080, 40), "4k": (3840, 2160, 10)}
+SCENARIO = """\
+name = "offline_{name}"
+description = "{duration} s of {w}x{h} at 30 fps, nadir hover with a 1 s occlusion: the offline speed benchmark"
+seed = 7
+duration_s = {duration}
+occlusions = [[1.5, 2.5]]
+
+[camera]
+width = {w}
+height = {h}
+
+[uav]
+height_m = 12.0
+
+[uuv]
+depth_m = 1.5
+"""
+BENCH_DIR = Path("/tmp/skyfix-bench")
+
+
+def ensure_session(name: str) -> Path:
+    """The benchmark session of one size, generated once."""
+    w, h, duration = SIZES[name]
+    path = BENCH_DIR / f"offline_{name}_{duration}s"
+    if (path / "video_frames.csv").exists():
+        return path
+    import tomllib
+
+    from sim_fixtures.generate import generate
+    from sim_fixtures.scenario import scenario_from_dict
+
+    text = SCENARIO.format(name=name, duration=duration, w=w, h=h)
+    print(f"generating {path} (once) ...", flush=True)
+    generate(scenario_from_dict(tomllib.loads(text)), path, text)
+    return path
+
+
+def decode_only(kind: str, video: str) -> int:
+    """Decode every frame of ``video`` to BGR: ``opencv`` or ``pyav``; the number of frames."""
+    n = 0
+    if kind == "opencv":
+        import cv2
+
+        cap = cv2.VideoCapture(video)
+        while cap.read()[0]:
+            n += 1
+        return n
+    import av
+
+    with av.open(video) as container:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        for frame in container.decode(stream):
+            frame.to_ndarray(format="bgr24")
+            n += 1
+    return n
+
+
+def child(cmd: list[str], tree: Path = ROOT) -> tuple[float, float]:
+    """Wall seconds and CPU seconds (user + sys) of a child process run from source ``tree``, which must succeed."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, check=False, capture_output=True, text=True, cwd=tree,
+                          env=dict(os.environ, PYTHONPATH=str(tree)))
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode:
+        raise SystemExit(f"{' '.join(cmd)}: exit {done.returncode}\n{done.stderr[-2000:]}")
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work: Path) -> list[str]:
+    """One size's rounds (see the module doc); its result lines."""
+    session = ensure_session(name)
+    video = str(next(session.glob("video.*")))
+    frames = len((session / "video_frames.csv").read_text().splitlines()) - 1
+    me = [sys.executable, str(Path(__file__).resolve())]
+    runs: dict[str, list[tuple[float, float]]] = {}
+    process = [sys.executable, "-m", "groundstation.cli", "process", str(session), "--quiet", "--out", str(work)]
+    variants = {"decode-only OpenCV": (me + ["--decode-only", "opencv", video], ROOT),
+                "decode-only PyAV": (me + ["--decode-only", "pyav", video], ROOT)}
+    for label, tree in trees.items():
+        variants[f"process{label}"] = (process, tree)
+        variants[f"process{label} --height-from-size off"] = (process + ["--height-from-size", "off"], tree)
+    for r in range(repeats):
+        for variant, (cmd, tree) in variants.items():
+            runs.setdefault(variant, []).append(child(cmd, tree))
+            print(f"  {name} round {r + 1}: {variant}: {runs[variant][-1][0]:.2f} s", flush=True)
+        if mil and r == 0:
+            runs["process --tracker mil"] = [child(process + ["--tracker", "mil"])]
+    w, h, duration = SIZES[name]
+    reference = frames / statistics.median(wall for wall, _ in runs["decode-only OpenCV"])
+    lines = [(f"{name}: {w}x{h}, {duration} s, {frames} frames; median of {repeats} interleaved rounds "
+              f"(MIL: 1), {os.cpu_count()} cores")]
+    for variant, rs in runs.items():
+        walls = [wall for wall, _ in rs]
+        fps = frames / statistics.median(walls)
+        lines.append(f"  {variant:44s} {fps:6.1f} fps  {fps / reference:5.2f}x decode-only  "
+                     f"CPU {statistics.median(cpu for _, cpu in rs):6.1f} s  "
+                     f"(wall {', '.join(f'{x:.1f}' for x in walls)} s)")
+    return lines
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", default="1080p,4k", help="comma-separated: 1080p, 4k (default both)")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--mil", action="store_true", help="also the MIL tracker's pipeline (once per size)")
+    p.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
+                   help="also time skyfix process from this source tree")
+    p.add_argument("--out", type=Path, help="also write the results here")
+    p.add_argument("--decode-only", nargs=2, metavar=("KIND", "VIDEO"), help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.decode_only:
+        decode_only(*args.decode_only)
+        return 0
+    trees = {"": ROOT} | {f" [{label}]": Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)}
+    lines = []
+    with tempfile.TemporaryDirectory() as work:
+        for name in args.sizes.split(","):
+            lines += bench_size(name, args.repeats, args.mil, trees, Path(work))
+    emit(lines, args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
