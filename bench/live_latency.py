@@ -1,7 +1,7 @@
 """Benchmark of the live service: stream slot → GPS_INPUT at the UUV, at 720p30 and 1080p30.
 
     .venv/bin/python bench/live_latency.py [--sizes 720p,1080p] [--transports mpegts,rtp] [--duration-s 30]
-        [--out bench/results/live_latency.txt]
+        [--out bench/results/live_latency.txt] [--variant NAME=ARGS ...]
 
 For each size a session is generated once into ``/tmp/skyfix-bench/`` by the
 simulator (the UAV hovering 10 m up, yawing and drifting; several minutes at
@@ -44,6 +44,7 @@ import argparse
 import asyncio
 import json
 import os
+import shlex
 import signal
 import socket
 import subprocess
@@ -203,7 +204,7 @@ def nearest_times(sorted_t: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.where(np.abs(right - t) < np.abs(left - t), right, left)
 
 
-def live(session_dir: Path, work: Path, transport: str) -> dict:
+def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> dict:
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     if transport == "rtp":  # RTP on an even port, RTCP on the next
         video = next(p for p in range(video & ~1, 65534, 2) if port_pair_free(p))
@@ -214,7 +215,8 @@ def live(session_dir: Path, work: Path, transport: str) -> dict:
     py = sys.executable
     run = [py, "-m", "groundstation.cli", "run", "--calibration", str(session_dir / "session.toml"),
            "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", receive_url, "--video-latency-ms", str(CAMERA_LATENCY_MS),
-           "--zenoh-listen", ep, "--no-ui", "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(stats)]
+           "--zenoh-listen", ep, "--no-ui", "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(stats),
+           *run_args]
     replay = [py, "-m", "groundstation.cli", "replay", str(session_dir), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
               "--video-out", send_url, "--video-delay-ms", str(CAMERA_LATENCY_MS),
               "--zenoh-connect", ep, "--uuv-listen",
@@ -310,7 +312,11 @@ def main() -> int:
     ap.add_argument("--duration-s", type=float, default=30.0, help="session length (generated once per length)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "live_latency.txt")
     ap.add_argument("--baseline-frames", type=int, default=300)
+    ap.add_argument("--variant", action="append", default=[], metavar="NAME=ARGS",
+                    help="a run of the service with these extra `skyfix run` arguments, e.g. "
+                         "'no-size=--height-from-size off' (repeatable; default: the service as configured)")
     args = ap.parse_args()
+    variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [("", [])]
     lines = [(f"skyfix live latency benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
              f"load average {os.getloadavg()[0]:.1f}")]
     results = {}
@@ -319,13 +325,14 @@ def main() -> int:
         baselines = {"decode_only_ms": decode_baseline(session),
                      "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames)}
         for transport in args.transports.split(","):
-            name = f"{size} {transport}"
-            work = BENCH_DIR / f"run_{size}_{transport}"
-            work.mkdir(parents=True, exist_ok=True)
-            for f in work.iterdir():
-                f.unlink()
-            results[name] = res = {**baselines, **live(session, work, transport)}
-            lines += report(name, session, res)
+            for variant, run_args in variants:
+                name = f"{size} {transport}" + (f" {variant}" if variant else "")
+                work = BENCH_DIR / f"run_{size}_{transport}{'_' + variant if variant else ''}"
+                work.mkdir(parents=True, exist_ok=True)
+                for f in work.iterdir():
+                    f.unlink()
+                results[name] = res = {**baselines, **live(session, work, transport, run_args)}
+                lines += report(name, session, res)
     text = "\n".join(lines) + "\n"
     print(text, end="")
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -17,9 +17,12 @@ window, checked against the configured height and (``auto``) handed to the heigh
 
 :class:`HeightFromSize` is the work, the same offline (in the tracker's pass over the video,
 :mod:`groundstation.offline.track`) and live; :class:`OnlineHeightFromSize` runs it in ``skyfix run``
-like the video latency's estimate: frames handed from the pipeline, on the event loop, to a
-low-priority thread (skipped while it is busy: never stalling decoding or tracking), the results
-handed back to the loop, where the telemetry is written.
+like the video latency's estimate: frames handed from the pipeline, on the event loop, to a thread
+(skipped while it is busy: never stalling decoding or tracking) that has each measured in a
+low-priority process of its own (:func:`measure_frame`: a measurement is 60 ms of Python and
+NumPy at 720p, 120 ms at 1080p; in a thread it held the interpreter's lock against decoding and
+tracking — measured with ``bench/live_latency.py``, see the README), the results handed back to
+the loop, where the telemetry is written.
 """
 
 from __future__ import annotations
@@ -27,10 +30,12 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import multiprocessing
 import os
 import queue
 import threading
 from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -46,8 +51,28 @@ log = logging.getLogger("skyfix.size")
 MODES = ("auto", "check", "off")
 SOURCE = "size"  # the height source's word (Telemetry.add_height)
 MEASURE_HZ = 5.0  # frames measured a second, at most
-NICE = 10  # the measuring thread yields the CPU to decoding and tracking
+NICE = 10  # the measuring process yields the CPU to decoding and tracking
 STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
+
+
+def measure_frame(cal: Calibration, image: np.ndarray, pose: CameraPose, i: int, u: float,
+                  v: float) -> SizeHeight | str:
+    """:meth:`HeightFromSize.measure`, a function of its arguments alone (run in the live service's measuring
+    process)."""
+    if pose.status[i] != "ok":
+        return "no_pose"
+    n = cal.water.refractive_index
+    m = measure(image, cal.camera, pose.R_ned_from_cv[i], u, v, cal.uuv, float(pose.height_m[i]),
+                float(pose.depth_m[i]), n)
+    if isinstance(m, str):
+        return m
+    return size_height(float(pose.t_unix[i]), m.camera_height_m, m.sigma_m, m.size_px,
+                       float(pose.cam_offset_ned_m[i, 2]), float(pose.uav_height_m[i]),
+                       float(pose.sigma_height_m[i]), float(pose.depth_m[i]), float(pose.sigma_depth_m[i]), n)
+
+
+def _lower_priority() -> None:
+    os.nice(NICE)
 
 
 class HeightFromSize:
@@ -80,16 +105,7 @@ class HeightFromSize:
     def measure(self, image: np.ndarray, pose: CameraPose, i: int, u: float, v: float) -> SizeHeight | str:
         """The UAV's height above the water at the pose's frame ``i`` from the UUV's outline around its tracked pixel
         (u, v), or why not (a word of :data:`localizer.tracking.silhouette.REJECTIONS`, or ``no_pose``)."""
-        if pose.status[i] != "ok":
-            return "no_pose"
-        n = self.cal.water.refractive_index
-        m = measure(image, self.cal.camera, pose.R_ned_from_cv[i], u, v, self.cal.uuv, float(pose.height_m[i]),
-                    float(pose.depth_m[i]), n)
-        if isinstance(m, str):
-            return m
-        return size_height(float(pose.t_unix[i]), m.camera_height_m, m.sigma_m, m.size_px,
-                           float(pose.cam_offset_ned_m[i, 2]), float(pose.uav_height_m[i]),
-                           float(pose.sigma_height_m[i]), float(pose.depth_m[i]), float(pose.sigma_depth_m[i]), n)
+        return measure_frame(self.cal, image, pose, i, u, v)
 
     def take(self, result: SizeHeight | str) -> None:
         """A measurement (or why there is none): into the window; the estimate, the warning and, with ``auto``,
@@ -170,21 +186,24 @@ class OnlineHeightFromSize:
         try:
             await asyncio.Event().wait()
         finally:
-            # waited for (within a measurement): a thread left inside OpenCV when the process exits aborts it
             await in_thread(self.worker.join, STOP_WAIT_S, name="height-from-size stop")
 
     def _run(self, stop: threading.Event) -> None:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)  # Linux: this thread only
-        while not stop.is_set():
-            try:
-                image, pose, u, v = self._frames.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            result = self.work.measure(image, pose, 0, u, v)
-            try:
-                self._loop.call_soon_threadsafe(self.work.take, result)
-            except RuntimeError:  # the loop is closed: stopped
-                return
+        """Hands each frame to the measuring process (started here: a restart after a failure starts a new one)."""
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_lower_priority)
+        try:
+            while not stop.is_set():
+                try:
+                    image, pose, u, v = self._frames.get(timeout=0.2)
+                except queue.Empty:
+                    continue
+                result = pool.submit(measure_frame, self.work.cal, image, pose, 0, u, v).result()
+                try:
+                    self._loop.call_soon_threadsafe(self.work.take, result)
+                except RuntimeError:  # the loop is closed: stopped
+                    return
+        finally:
+            pool.shutdown(wait=False, cancel_futures=True)
 
     def status(self) -> dict:
         return self.work.status() | {"frames_skipped": self.skipped, **self.worker.status()}
