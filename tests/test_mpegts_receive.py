@@ -8,12 +8,12 @@ the next keyframe, never a damaged picture; garbage is counted and ignored."""
 from __future__ import annotations
 
 import random
-import socket
 import subprocess
 
 import av
 import numpy as np
 import pytest
+from datagram_capture import mux_to_datagrams
 
 from groundstation.video.mpegts import TS_BYTES, TsDepacketizer
 
@@ -36,28 +36,8 @@ def clip(tmp_path_factory):
 def stream(request, clip):
     """(variant, the datagrams FFmpeg's MPEG-TS muxer sends, the index after each frame's last datagram, each
     frame's size)."""
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-    rx.bind(("127.0.0.1", 0))
-    rx.setblocking(False)
-    datagrams, ends, sizes = [], [], []
-    options = {**VARIANTS[request.param], "flush_packets": "1"}
-    with av.open(str(clip)) as src, av.open(f"udp://127.0.0.1:{rx.getsockname()[1]}?pkt_size=1316", "w",
-                                            format="mpegts", options=options) as out:
-        ost = out.add_stream_from_template(src.streams.video[0])
-        for packet in src.demux(video=0):
-            if not packet.size:
-                continue
-            sizes.append(packet.size)
-            packet.stream = ost
-            out.mux(packet)
-            while True:  # as they come, so that the socket's buffer never overflows
-                try:
-                    datagrams.append(rx.recv(65536))
-                except BlockingIOError:
-                    break
-            ends.append(len(datagrams))
-    rx.close()
+    datagrams, ends, sizes = mux_to_datagrams(clip, "udp", "mpegts", {**VARIANTS[request.param], "flush_packets": "1"},
+                                              "?pkt_size=1316")
     return request.param, datagrams, ends, sizes
 
 

@@ -7,12 +7,12 @@ and ignored."""
 from __future__ import annotations
 
 import random
-import socket
 import subprocess
 
 import av
 import numpy as np
 import pytest
+from datagram_capture import mux_to_datagrams
 
 from groundstation.video.rtp import Depacketizer
 
@@ -34,24 +34,7 @@ def stream(request, tmp_path_factory):
     subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc=size=320x240:rate=30", "-t", "2",
                     "-c:v", *encoder, "-preset", "ultrafast", "-g", "15", "-pix_fmt", "yuv420p",
                     "-f", "mpegts", str(clip)], check=True, timeout=120)
-    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-    rx.bind(("127.0.0.1", 0))
-    datagrams = []
-    with av.open(str(clip)) as src, av.open(f"rtp://127.0.0.1:{rx.getsockname()[1]}", "w", format="rtp",
-                                            options=options) as out:
-        ost = out.add_stream_from_template(src.streams.video[0])
-        rx.setblocking(False)
-        for packet in src.demux(video=0):
-            if packet.size:
-                packet.stream = ost
-                out.mux(packet)
-            while True:  # as they come, so that the socket's buffer never overflows
-                try:
-                    datagrams.append(rx.recv(65536))
-                except BlockingIOError:
-                    break
-    rx.close()
+    datagrams, _, _ = mux_to_datagrams(clip, "rtp", "rtp", options)
     return codec, clip, request.param, datagrams
 
 
