@@ -13,8 +13,8 @@ import subprocess
 import sys
 
 import zenoh
-from live_helpers import free_port, skyfix, start, stop, wait_for
-from test_zenoh_security import ROUTER, SESSION, deployed
+from live_helpers import free_port, stop
+from test_zenoh_security import ROUTER, deployed, replayed_through
 
 ROUTER_ENDPOINTS = '["tcp/192.168.2.2:7447", "tcp/192.168.2.3:7447"]'
 
@@ -40,31 +40,17 @@ def test_fixes_cross_two_routers_to_the_companion_and_late_joiners_get_the_lates
         assert [r.stdout.readline().strip() for r in routers] == ["ready", "ready"]
         uuv_side = zenoh.open(zenoh.Config.from_file(str(companion_client)))
         sub = uuv_side.declare_subscriber("skyfix/uuv/fix", lambda s: fixes.append(json.loads(s.payload.to_bytes())))
-        mav, video = free_port(), free_port()
-        run_log = tmp_path / "run.log"
-        service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--zenoh-config",
-                               str(laptop_client), "--mavlink", f"udpin:127.0.0.1:{mav}", "--video",
-                               f"udp://127.0.0.1:{video}", "--video-latency-ms", "55", "--duration-s", "120"), run_log)
-        procs.append(service)
-        wait_for(lambda: "skyfix run: UAV" in run_log.read_text() or service.poll() is not None, 30, "the service")
-        assert service.poll() is None, run_log.read_text()[-3000:]
-        replay = start(skyfix("replay", str(SESSION), "--zenoh-config", str(laptop_client), "--mavlink-out",
-                              f"udpout:127.0.0.1:{mav}", "--video-out", f"udp://127.0.0.1:{video}",
-                              "--uuv-listen", "", "--tail-s", "1"), tmp_path / "replay.log")
-        procs.append(replay)
-        assert replay.wait(90) == 0, (tmp_path / "replay.log").read_text()[-3000:]
+        service = replayed_through(tmp_path, laptop_client, procs)
         # a console joining at the companion after the flight: the service's latest fix, through both routers
         late = zenoh.open(zenoh.Config.from_file(str(companion_client)))
         replies = [r.ok for r in late.get("skyfix/uuv/fix", timeout=10.0) if r.ok is not None]
         stop(service)
-        assert service.returncode == 0, run_log.read_text()[-3000:]
+        assert service.returncode == 0, (tmp_path / "run.log").read_text()[-3000:]
     finally:
-        for s in (sub,):
-            if s is not None:
-                s.undeclare()
-        for session in (uuv_side, late):
-            if session is not None:
-                session.close()
+        if sub is not None:
+            sub.undeclare()
+        for session in [s for s in (uuv_side, late) if s is not None]:
+            session.close()
         for p in procs:
             stop(p, 5.0)
     ok = [f for f in fixes if f["status"] == "ok"]

@@ -94,6 +94,25 @@ def setup_usrpwd(d: Path, port: int) -> tuple[Path, Path, list[Path]]:
     return client, router, [wrong, none]
 
 
+def replayed_through(tmp_path: Path, client: Path, procs: list) -> subprocess.Popen:
+    """``skyfix run`` with the Zenoh config ``client``, and the bundled session replayed into it (its Zenoh side
+    through the same config) to its end; the service, still running (added to ``procs``)."""
+    mav, video = free_port(), free_port()
+    run_log = tmp_path / "run.log"
+    service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--zenoh-config", str(client),
+                           "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", f"udp://127.0.0.1:{video}",
+                           "--video-latency-ms", "55", "--duration-s", "120"), run_log)
+    procs.append(service)
+    wait_for(lambda: "skyfix run: UAV" in run_log.read_text() or service.poll() is not None, 30, "the service")
+    assert service.poll() is None, run_log.read_text()[-3000:]
+    replay = start(skyfix("replay", str(SESSION), "--zenoh-config", str(client), "--mavlink-out",
+                          f"udpout:127.0.0.1:{mav}", "--video-out", f"udp://127.0.0.1:{video}",
+                          "--uuv-listen", "", "--tail-s", "1"), tmp_path / "replay.log")
+    procs.append(replay)
+    assert replay.wait(90) == 0, (tmp_path / "replay.log").read_text()[-3000:]
+    return service
+
+
 @pytest.mark.parametrize("kind", ["tls", "usrpwd"])
 def test_secured_zenoh_carries_fixes_and_refuses_strangers(tmp_path, kind):
     port = free_port(socket.SOCK_STREAM)
@@ -109,21 +128,9 @@ def test_secured_zenoh_carries_fixes_and_refuses_strangers(tmp_path, kind):
         for cfg in lacking:
             with pytest.raises(zenoh.ZError, match="Unable to connect"):
                 zenoh.open(zenoh.Config.from_file(str(cfg)))
-        mav, video = free_port(), free_port()
-        run_log = tmp_path / "run.log"
-        service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--zenoh-config", str(client),
-                               "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", f"udp://127.0.0.1:{video}",
-                               "--video-latency-ms", "55", "--duration-s", "90"), run_log)
-        procs.append(service)
-        wait_for(lambda: "skyfix run: UAV" in run_log.read_text() or service.poll() is not None, 30, "the service")
-        assert service.poll() is None, run_log.read_text()[-3000:]
-        replay = start(skyfix("replay", str(SESSION), "--zenoh-config", str(client), "--mavlink-out",
-                              f"udpout:127.0.0.1:{mav}", "--video-out", f"udp://127.0.0.1:{video}",
-                              "--uuv-listen", "", "--tail-s", "1"), tmp_path / "replay.log")
-        procs.append(replay)
-        assert replay.wait(90) == 0, (tmp_path / "replay.log").read_text()[-3000:]
+        service = replayed_through(tmp_path, client, procs)
         stop(service)
-        assert service.returncode == 0, run_log.read_text()[-3000:]
+        assert service.returncode == 0, (tmp_path / "run.log").read_text()[-3000:]
     finally:
         if sub is not None:
             sub.undeclare()
