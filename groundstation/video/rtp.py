@@ -52,6 +52,7 @@ class Depacketizer:
         if codec not in ("h264", "h265"):
             raise ValueError(f"RTP codec {codec!r}: h264 or h265")
         self.codec = codec
+        self.unreadable: str | None = None  # never set: the codec is given (MPEG-TS's comes from its PMT)
         self.payload_type = payload_type
         self.lost_packets = 0  # sequence numbers never seen
         self.dropped_units = 0  # access units not handed over: damaged, or depending on one that was

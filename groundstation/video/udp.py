@@ -62,7 +62,8 @@ def _bind(host: str, port: int) -> socket.socket:
 
 class DatagramInput:
     """``host``:``port`` read through ``depacketizer`` (an :class:`~.rtp.Depacketizer` or
-    :class:`~.mpegts.TsDepacketizer`: ``push(datagram)`` → access units, ``codec``); see the module doc.
+    :class:`~.mpegts.TsDepacketizer`: ``push(datagram)`` → access units, ``codec``, ``unreadable``); see the
+    module doc.
     :meth:`demux` raises ``TimeoutError`` when nothing came for ``read_timeout_s``."""
 
     def __init__(self, host: str, port: int, depacketizer, open_timeout_s: float, read_timeout_s: float):
@@ -78,7 +79,7 @@ class DatagramInput:
                     self._units.extend(depacketizer.push(self._sock.recv(DATAGRAM_BYTES)))
                 except TimeoutError:
                     raise TimeoutError(f"no video stream described within {open_timeout_s:g} s") from None
-                if getattr(depacketizer, "unreadable", None):
+                if depacketizer.unreadable:
                     raise VideoError(depacketizer.unreadable)
         except BaseException:
             self._sock.close()
