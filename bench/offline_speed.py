@@ -10,7 +10,8 @@ frames) and with PyAV (frame and slice threads, BGR frames), then ``skyfix proce
 the UUV's size measured), ``skyfix process --height-from-size off``, and with ``--mil`` the paper's MIL tracker
 (first round only: it is slow). The ratio is process fps / OpenCV decode-only fps (target ≥ 0.95). CPU seconds
 (the child's user + sys) show what the work costs beside the wall time: on a machine whose cores decoding alone
-keeps busy, process cannot be faster than its CPU seconds over the cores. ``--tree LABEL=DIR`` also times
+keeps busy, process cannot be faster than its CPU seconds over the cores. ``skyfix process --help`` is timed too:
+the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
 ``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C DIR``: before and after in the
 same run).
 """
@@ -117,6 +118,7 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
     for label, tree in trees.items():
         variants[f"process{label}"] = (process, tree)
         variants[f"process{label} --height-from-size off"] = (process + ["--height-from-size", "off"], tree)
+        variants[f"start-up{label}: process --help"] = (process[:4] + ["--help"], tree)
     for r in range(repeats):
         for variant, (cmd, tree) in variants.items():
             runs.setdefault(variant, []).append(child(cmd, tree))
@@ -130,8 +132,9 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
     for variant, rs in runs.items():
         walls = [wall for wall, _ in rs]
         fps = frames / statistics.median(walls)
-        lines.append(f"  {variant:44s} {fps:6.1f} fps  {fps / reference:5.2f}x decode-only  "
-                     f"CPU {statistics.median(cpu for _, cpu in rs):6.1f} s  "
+        speed = (f"{'':35s}" if variant.startswith("start-up")
+                 else f"{fps:6.1f} fps  {fps / reference:5.2f}x decode-only  ")
+        lines.append(f"  {variant:44s} {speed}CPU {statistics.median(cpu for _, cpu in rs):6.1f} s  "
                      f"(wall {', '.join(f'{x:.1f}' for x in walls)} s)")
     return lines
 

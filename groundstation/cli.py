@@ -19,6 +19,7 @@ SUBCOMMANDS = (
     "sim_fixtures.cli",
     "groundstation.live.service",
     "groundstation.live.console",
+    "groundstation.fuse.service",
     "groundstation.replay",
     "groundstation.calibration.command",
     "groundstation.offline.export",

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from groundstation.live.config import RunConfig
-from groundstation.messages import FixMessage, StatusMessage
+from groundstation.messages import FixMessage, FuseStatusMessage, StatusMessage
 from localizer.calibration import Calibration
 from localizer.contract import adapter
 
@@ -69,6 +69,7 @@ class Contracts:
 GROUNDSTATION = Contracts({
     "fix": (FixMessage, "skyfix fix message (Zenoh, JSON)"),
     "status": (StatusMessage, "skyfix status message (Zenoh, JSON)"),
+    "fuse-status": (FuseStatusMessage, "skyfix fuse status message (Zenoh, JSON)"),
     "calibration": (Calibration, "skyfix calibration: the session.toml v1 tables (TOML)"),
     "run-config": (RunConfig, "skyfix run options: the --config file (TOML)"),
 }, Path(__file__).parent / "schemas", "groundstation.contracts")

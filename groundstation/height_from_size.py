@@ -19,8 +19,9 @@ window, checked against the configured height and (``auto``) handed to the heigh
 :mod:`groundstation.offline.track`) and live; :class:`OnlineHeightFromSize` runs it in ``skyfix run``
 like the video latency's estimate: frames handed from the pipeline, on the event loop, to a thread
 (skipped while it is busy: never stalling decoding or tracking) that has each measured in a
-low-priority process of its own (:func:`measure_frame`: a measurement is 60 ms of Python and
-NumPy at 720p, 120 ms at 1080p; in a thread it held the interpreter's lock against decoding and
+low-priority process of its own (:func:`measure_frame`: a measurement was 60 ms of Python and
+NumPy at 720p, 120 ms at 1080p, ~20 ms at 1080p since its corners' rays meet the water by Newton's
+method and its support scan samples less (issue 18); in a thread it held the interpreter's lock against decoding and
 tracking — measured with ``bench/live_latency.py``, see the README), the results handed back to
 the loop, where the telemetry is written.
 """

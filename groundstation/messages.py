@@ -16,13 +16,14 @@ so a key added to a worker's status needs its line here.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Annotated, Literal
 
 from annotated_types import Ge, Le
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from localizer.fix import Fix
+from localizer.fix import WORDS, Fix
 from localizer.fix_gate import STATES as GATE_STATES
 from localizer.status import STATUSES, Status
 from localizer.telemetry import LATENCY_SOURCES
@@ -117,16 +118,23 @@ class FixMessage(Message):
             x = float(getattr(fix, name))
             return x if math.isfinite(x) else None
 
-        words = ("height_source", "depth_source", "time_source")
         values = {name: num(name) for name in cls.model_fields
-                  if name not in ("schema_", "t", "frame", "status", *words)}
-        values |= {name: getattr(fix, name) or None for name in words}
+                  if name not in ("schema_", "t", "frame", "status", *WORDS)}
+        values |= {name: getattr(fix, name) or None for name in WORDS}
         if not fix.ok:
             values["lat"] = values["lon"] = None
         return cls(schema_=FIX_SCHEMA, t=fix.t_unix, frame=fix.frame, status=fix.status, **values)
 
     def to_json(self) -> dict:
         return self.model_dump(mode="json", by_alias=True)
+
+    def to_fix(self) -> Fix:
+        """The fix this message carries (null → NaN, or "" for words; the inverse of :meth:`of`)."""
+        nan = float("nan")
+        kept = {f.name for f in dataclasses.fields(Fix)} - {"t_unix", "status", "frame"}
+        values = {k: (v if v is not None else ("" if k in WORDS else nan))
+                  for k, v in self.model_dump(include=kept).items()}
+        return Fix(t_unix=self.t, status=self.status, frame=self.frame, **values)
 
 
 # --- the status -----------------------------------------------------------------------------------
@@ -616,3 +624,59 @@ class StatusMessage(Message):
     latency: LatencyStatus | None = Field(None, description="with --gps-input")
     record: RecordStatus | None = Field(None, description="with --record")
     ui: UiStatus | None = Field(None, description="while the web page is served (not with --no-ui)")
+
+
+# --- skyfix fuse's status ---------------------------------------------------------------------------
+
+FUSE_STATUS_SCHEMA = "skyfix.fuse-status/1"
+
+
+class FuseSourceStatus(Section):
+    """One drone's fixes as the fuser takes them (groundstation/fuse/fuser.py)."""
+
+    received: int = Field(description="fix messages received from it")
+    used: int = Field(description="fusions it took part in")
+    rejected: int = Field(description="fusions it was left out of: it disagreed beyond the sigmas")
+    in_use: bool = Field(description="it took part in the last fusion")
+    refused: dict[str, int] = Field(description="its ok fixes its own gates refused, by reason (as gates.rejected)")
+    gate_state: Literal[tuple(GATE_STATES)] = Field(description="its own gates' state")
+    last_status: Status | None = Field(description="the status of its last fix")
+    age_s: Age = Field(description="seconds since its last fix arrived")
+    delay_s: float | None = Field(description="its last fix's arrival on the fuser's clock minus the fix's time (GNSS "
+                                  "time where it has one): the drone's latency, plus the clocks' offset without GNSS "
+                                  "time")
+    time_base: Literal["gnss", "station"] | None = Field(description="the time its fixes are aligned by")
+    h_acc_m: NonNegative = Field(description="its last ok fix's h_acc_m")
+
+
+class FusionStatus(Section):
+    """What the fuser did."""
+
+    published: int = Field(description="fused messages published (ok and disagree)")
+    disagreements: int = Field(description="fusions with no fix: the sources disagreed and nothing decided")
+    last_sources: list[str] = Field(description="the sources (their fix keys) of the last fusion")
+    sources: dict[str, FuseSourceStatus] = Field(description="per source, by its fix key")
+
+
+class FuseInputStatus(Section):
+    """The fix messages subscribed to."""
+
+    key: str = Field(description="the key expression of the drones' fixes")
+    received: int
+    bad: int = Field(description="payloads that are not a skyfix.fix/1 message (logged, one line each kind)")
+    handoff: HandoffStatus | None = None
+
+
+class FuseStatusMessage(Message):
+    """``skyfix fuse``'s health, once a second."""
+
+    schema_: Literal[FUSE_STATUS_SCHEMA] = Field(alias="schema", description="message name and major version")
+    t: float = Field(description="when the status was taken, the fuser's clock, UNIX seconds")
+    uuv: str = Field(description="the UUV's id")
+    input: FuseInputStatus
+    fusion: FusionStatus
+    fix: FixMessage | None = Field(description="the latest fused fix message (also answered to late joiners)")
+    gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
+    control: ControlStatus
+    zenoh: ZenohLinkStatus
+    process: ProcessStatus

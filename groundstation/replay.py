@@ -1,7 +1,7 @@
 """``skyfix replay SESSION``: re-stream a recorded session live, with its original pacing.
 
 Everything is shifted in time by one offset ``shift_s`` (now + a short lead − the
-session's first time), printed first as a JSON line, so that the replayed world
+session's first time, or ``--shift-s``), printed first as a JSON line, so that the replayed world
 agrees with itself:
 
 - ``uav.tlog``: each MAVLink frame is sent over UDP (``--mavlink-out``, default
@@ -181,7 +181,11 @@ class Replay:
 
     def run(self) -> int:
         args = self.args
-        shift = time.time() + args.lead_s - self.t_start
+        shift = time.time() + args.lead_s - self.t_start if args.shift_s is None else args.shift_s
+        if self.t_start + shift < time.time():
+            print(f"skyfix replay: error: --shift-s {args.shift_s}: the session would have started "
+                  f"{time.time() - self.t_start - shift:.1f} s ago", file=sys.stderr)
+            return 2
         out = open(args.uuv_log, "a") if args.uuv_log else sys.stdout  # noqa: SIM115 - closed in finally
         print(json.dumps({"event": "start", "session": str(self.dir), "shift_s": shift,
                           "t_start": self.t_start + shift, "t_end": self.t_end + shift}), flush=True)
@@ -189,8 +193,9 @@ class Replay:
         if args.uuv_listen:
             links.append(connect(args.uuv_listen, source_system=1, source_component=1))
         session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), config_file=args.zenoh_config)
-        threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True),
-                   threading.Thread(target=self._send_depth, args=(shift, session), name="depth", daemon=True)]
+        threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True)]
+        if args.depth_key:
+            threads.append(threading.Thread(target=self._send_depth, args=(shift, session), name="depth", daemon=True))
         if args.uuv_listen:
             threads.append(threading.Thread(target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True))
         if self.video is not None:
@@ -245,11 +250,15 @@ def register(subparsers) -> None:
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
     p.add_argument("--zenoh-config", help="Zenoh JSON5 config file (deploy/zenoh/*.json5); endpoints above are added")
-    p.add_argument("--depth-key", default="uuv/depth", help="Zenoh key the depth is published on")
+    p.add_argument("--depth-key", default="uuv/depth", help="Zenoh key the depth is published on ('' for none: "
+                   "another replay of the same dive publishes it)")
     p.add_argument("--uuv-listen", default="udpin:127.0.0.1:14660",
                    help="UUV-side endpoint logging GPS_INPUT ('' for none)")
     p.add_argument("--uuv-log", help="file the GPS_INPUT JSON lines are appended to (default stdout)")
     p.add_argument("--lead-s", type=float, default=1.0, help="delay before the session's first message")
+    p.add_argument("--shift-s", type=float, help="shift the session's times by exactly this (UNIX s − session s) "
+                   "instead of now + --lead-s − its first time: replays of sessions recorded at once (two drones "
+                   "over one UUV) given the same shift play in step")
     p.add_argument("--tail-s", type=float, default=1.0, help="keep listening this long after the session ends")
     p.add_argument("--duration-s", type=float, help="stop after this many seconds")
     p.add_argument("--cut", action="append", type=parse_cut, metavar="INPUT:START_S:DURATION_S",

@@ -124,12 +124,18 @@ def in_window(fix: Fix, window) -> bool:
 
 
 class FixGate:
-    """The gates of the module doc; :attr:`rejected` counts refusals by reason, :attr:`accepted` the rest."""
+    """The gates of the module doc; :attr:`rejected` counts refusals by reason, :attr:`accepted` the rest.
+
+    ``judge_track=False``: only ``h_acc``, ``age`` and ``out_of_order`` — for fixes whose every input was judged
+    against its own track already (``skyfix fuse``'s, :mod:`groundstation.fuse`).
+    """
 
     def __init__(self, max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
                  max_accel_mps2: float = MAX_ACCEL_MPS2["bluerov2"], max_h_acc_m: float = 2.5,
                  max_age_s: float = 0.5, confirm_s: float = CONFIRM_S, confirm_fixes: int = CONFIRM_FIXES,
-                 thrusters: Thrusters | None = None, water_accel_mps2: float = WATER_ACCEL_MPS2):
+                 thrusters: Thrusters | None = None, water_accel_mps2: float = WATER_ACCEL_MPS2,
+                 judge_track: bool = True):
+        self.judge_track = judge_track
         self.max_speed_mps = max_speed_mps
         self.max_accel_mps2 = max_accel_mps2
         self.max_h_acc_m = max_h_acc_m
@@ -184,6 +190,9 @@ class FixGate:
             return self._refuse(fix.t_unix, "age", f"{now - fix.t_unix:.2f} s old when offered")
         if fix.t_unix <= self._last_t:
             return "out_of_order"
+        if not self.judge_track:
+            self._last_t = fix.t_unix
+            return None
         if not in_window(fix, window):
             return self._refuse(fix.t_unix, "prediction", f"pixel ({fix.u:.0f}, {fix.v:.0f}) outside the window "
                                 "the telemetry predicted", leaves_track=True)

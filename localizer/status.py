@@ -38,6 +38,8 @@ STATUSES: dict[str, str] = {
     "stale_gimbal": "the gimbal attitude samples around the frame are too far apart or too old",
     "no_depth": "no UUV depth sample at or before the frame",
     "stale_depth": "the UUV depth samples around the frame are too far apart or too old",
+    # several drones over one UUV (skyfix fuse)
+    "disagree": "skyfix fuse: the drones' fixes disagree beyond their sigmas and none of them can be told right",
 }
 
 Status = Literal[tuple(STATUSES)]

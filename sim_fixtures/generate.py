@@ -21,6 +21,12 @@ per depth measurement, ``{"t": <the UUV's clock when it measured>, "depth_m": <m
 down>, "t_recv": <the station's clock when the ground station received it>}``; the UUV's
 clock is true time + ``uuv_offset_s``; the depth link takes ``link.depth_delay_s`` plus an
 exponential jitter of mean ``link.depth_jitter_s``, arrivals in order.
+
+A second UUV (``[second_uuv] role = "uuv"``) gets the same records in ``uuvs/<id>/`` (the
+layout :mod:`groundstation.session.read` reads): ``truth.csv`` and ``track.csv`` of its own
+reference point (its track empty where it cannot be seen, less than half of it showing past
+the first UUV included), ``depth.jsonl`` by the same sensor and link model (its own random
+streams), and ``uuv.toml`` with its ``[tracker]`` box in the first frame it can be seen.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.progress import progress as progress_bar
+from groundstation.session.read import UUV_TOML, UUVS_DIR
 from localizer.calibration import ConfigError
 
 from .geometry import R_GIMBAL_FROM_CV, SimCamera, ned_to_geodetic, project, surface_crossing
@@ -63,6 +70,8 @@ class Truth:
     second_ned: np.ndarray | None = None  # (N, 3) the second vehicle's top-face centre, if there is one
     second_box: Box | None = None  # ... its heading, size and look
     rock: Box | None = None
+    second_u: np.ndarray | None = None  # exact distorted pixel of a second UUV's reference point (role = "uuv")
+    second_v: np.ndarray | None = None
 
     def others(self, i: int) -> tuple[Box, ...]:
         """The look-alikes at frame ``i``."""
@@ -104,24 +113,31 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
     for a, b in sc.occlusions:
         visible &= ~((tau >= a) & (tau < b))
     u, v = reference_pixel(camera, R, cam, uuv, sc.site.refractive_index)
-    second = rock = None
+    second = second_ned = rock = second_u = second_v = None
     if sc.second_uuv.enabled:
         second = Box(motion.second_ned(0.0), motion.second_heading, sc.uuv.size_m, "vehicle")
+        second_ned = motion.second_ned(tau)
+    if sc.second_uuv.role == "uuv":
+        second_u, second_v = reference_pixel(camera, R, cam, second_ned, sc.site.refractive_index)
     if sc.rock.enabled:
         rock = Box(motion.rock_ned, motion.rock_heading, sc.rock.size_m, "rock")
-    return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v,
-                 motion.second_ned(tau) if second else None, second, rock)
+    return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v, second_ned, second, rock,
+                 second_u, second_v)
 
 
-def depth_records(sc: Scenario, motion: Motion, clock: Clock) -> list[dict]:
-    """The lines of ``depth.jsonl``: the UUV's measurements with its clock's time and the station's arrival time."""
+def depth_records(sc: Scenario, depth_m_at, clock: Clock, streams: tuple[str, str] = ("depth", "depth_link")
+                  ) -> list[dict]:
+    """The lines of ``depth.jsonl``: a UUV's measurements with its clock's time and the station's arrival time.
+
+    ``depth_m_at(tau_s)`` is its true depth; ``streams`` name the random streams of the sensor and of the link.
+    """
     tel = sc.telemetry
-    rng = stream(sc, "depth")
+    rng = stream(sc, streams[0])
     tau = np.arange(-tel.lead_s, sc.duration_s + 1.0, 1.0 / tel.depth_hz)
     tau = tau + rng.uniform(0.0, 0.2 / tel.depth_hz, len(tau))
-    depth = motion.uuv_depth_m(tau) + rng.normal(0.0, 1.0, len(tau)) * tel.depth_noise_m
+    depth = depth_m_at(tau) + rng.normal(0.0, 1.0, len(tau)) * tel.depth_noise_m
     measured = clock.true_us(tau)
-    delay = sc.link.depth_delay_s + exponential(stream(sc, "depth_link"), sc.link.depth_jitter_s, len(tau))
+    delay = sc.link.depth_delay_s + exponential(stream(sc, streams[1]), sc.link.depth_jitter_s, len(tau))
     arrived = np.maximum.accumulate(measured + np.round(delay * 1e6).astype(np.int64))
     return [{"t": round((m + clock.uuv_offset_us) / 1e6, 6), "depth_m": round(float(d), 5),
              "t_recv": round(clock.station_us(a) / 1e6, 6)} for m, d, a in zip(measured, depth, arrived)]
@@ -132,6 +148,44 @@ def _write_csv(path: Path, header, rows) -> None:
         w = csv.writer(f)
         w.writerow(header)
         w.writerows(rows)
+
+
+def _write_depth(path: Path, records: list[dict]) -> None:
+    with open(path, "w") as f:
+        f.writelines(json.dumps(rec) + "\n" for rec in records)
+
+
+def _write_truth(path: Path, sc: Scenario, t_unix, ned) -> None:
+    """``truth.csv``: a UUV's reference point at each frame time, WGS84 and depth."""
+    s = sc.site
+    lat, lon, _ = ned_to_geodetic(ned, s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    _write_csv(path, ("t", "lat", "lon", "depth_m"),
+               ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}") for t, a, b, d in zip(t_unix, lat, lon, ned[:, 2])))
+
+
+def _write_track(path: Path, camera: SimCamera, t_unix, u, v, in_view) -> None:
+    """``track.csv``: a UUV's exact pixel at each frame time, empty where it is not ``in_view`` or not in the image."""
+    seen = in_view & camera.contains(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
+    _write_csv(path, ("t", "u", "v"), ((f"{t:.6f}", f"{a:.4f}" if ok else "", f"{b:.4f}" if ok else "")
+                                       for t, a, b, ok in zip(t_unix, u, v, seen)))
+
+
+def _in_view(boxes, otherwise: np.ndarray) -> np.ndarray:
+    """The frames a vehicle can be seen in: where it has a rendered box (``boxes``, one per frame, None where it
+    cannot be seen), or ``otherwise`` without video (``boxes`` None)."""
+    return otherwise if boxes is None else np.array([b is not None for b in boxes])
+
+
+def _first_box(boxes, t_unix, camera: SimCamera, pad_px: int = 3):
+    """``(init_bbox, init_t)``: a vehicle's bounding box in the first frame it can be seen in (``boxes``, one per
+    frame, None where it cannot), grown by ``pad_px`` within the image; None where it is never seen."""
+    i = next((i for i, b in enumerate(boxes) if b is not None), None)
+    if i is None:
+        return None
+    x, y, w, h = boxes[i]
+    x0, y0 = max(0, x - pad_px), max(0, y - pad_px)
+    box = (x0, y0, min(camera.width, x + w + pad_px) - x0, min(camera.height, y + h + pad_px) - y0)
+    return box, float(t_unix[i])
 
 
 def _session_toml(sc: Scenario, camera: SimCamera, init_bbox, init_t: float | None) -> str:
@@ -168,6 +222,12 @@ length_m = {float(sc.uuv.size_m[0])!r}
 width_m = {float(sc.uuv.size_m[1])!r}
 height_m = {float(sc.uuv.size_m[2])!r}
 """ + _tracker_toml(init_bbox, init_t) + _uncertainty_toml(sc)
+
+
+def _uuv_toml(sc: Scenario, uuv_id: str, init) -> str:
+    """A second UUV's ``uuv.toml``: its ``[tracker]`` table (none where it is never seen, or without video)."""
+    head = f"{MARK} from scenario \"{sc.name}\": the UUV \"{uuv_id}\", its records beside this file\n"
+    return head + (_tracker_toml(*init) if init is not None else "")
 
 
 def _tracker_toml(init_bbox, init_t) -> str:
@@ -221,25 +281,38 @@ class Encoder:
             raise RuntimeError(f"ffmpeg exited with status {self.proc.returncode}")
 
 
-def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress: bool = False):
-    """Render and encode every frame; returns where the UUV can be seen and its first box with its frame time."""
+def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress: bool = False) -> list[tuple]:
+    """Render and encode every frame; returns per frame the bounding box of the UUV and of each look-alike where it
+    can be seen, else None (see :meth:`~sim_fixtures.render.Renderer.render_seen`)."""
     renderer = Renderer(sc, camera)
     encoder = Encoder(path, camera.width, camera.height, sc.fps, sc.render.crf)
-    init = None
-    in_view = np.zeros(len(truth.t_unix), bool)  # the UUV can be seen in the frame (see Renderer.render)
+    seen = []
     bar = progress_bar(len(truth.t_unix), f"{sc.name}: rendering", progress)
     try:
         for i in range(len(truth.t_unix)):
-            img, box = renderer.render(truth.view(i))
-            in_view[i] = box is not None
-            if init is None and box is not None:
-                init = (box, float(truth.t_unix[i]))
+            img, boxes = renderer.render_seen(truth.view(i))
+            seen.append(boxes)
             encoder.write(img)
             bar.update()
     finally:
         bar.close()
         encoder.close()
-    return in_view, init
+    return seen
+
+
+def _write_second_uuv(out: Path, sc: Scenario, camera: SimCamera, truth: Truth, motion: Motion, clock: Clock,
+                      boxes: list | None) -> None:
+    """A second UUV's records in ``uuvs/<id>/``; ``boxes`` its bounding box per frame where it can be seen (None
+    without video: then it counts as seen wherever it is in the image, and has no first box)."""
+    folder = out / UUVS_DIR / sc.second_uuv.id
+    folder.mkdir(parents=True, exist_ok=True)
+    _write_depth(folder / "depth.jsonl",
+                 depth_records(sc, lambda tau: motion.second_ned(tau)[..., 2], clock, ("second_depth", "second_link")))
+    _write_truth(folder / "truth.csv", sc, truth.t_unix, truth.second_ned)
+    _write_track(folder / "track.csv", camera, truth.t_unix, truth.second_u, truth.second_v,
+                 _in_view(boxes, np.ones(len(truth.t_unix), bool)))
+    init = None if boxes is None else _first_box(boxes, truth.t_unix, camera)
+    (folder / UUV_TOML).write_text(_uuv_toml(sc, sc.second_uuv.id, init))
 
 
 @dataclass(frozen=True)
@@ -266,6 +339,8 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     existing = out / "session.toml"
     if existing.is_file() and not existing.read_text(errors="replace").startswith(MARK):
         raise ConfigError(str(out), "--out", str(out), "holds a session not made by skyfix sim; refusing to overwrite it")
+    if existing.is_file() and (out / UUVS_DIR).is_dir():  # an earlier generated session's other UUVs
+        shutil.rmtree(out / UUVS_DIR)
     out.mkdir(parents=True, exist_ok=True)
     camera = camera_of(sc)
     motion = Motion(sc)
@@ -273,38 +348,27 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     clock = Clock.of(sc)
 
     messages = write_tlog(out / "uav.tlog", sc, motion, clock)
-    with open(out / "depth.jsonl", "w") as f:
-        f.writelines(json.dumps(rec) + "\n" for rec in depth_records(sc, motion, clock))
-
-    s = sc.site
-    lat, lon, _ = ned_to_geodetic(truth.uuv_ned, s.lat_deg, s.lon_deg, s.surface_amsl_m)
-    _write_csv(out / "truth.csv", ("t", "lat", "lon", "depth_m"),
-               ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}")
-                for t, a, b, d in zip(truth.t_unix, lat, lon, truth.uuv_ned[:, 2])))
+    _write_depth(out / "depth.jsonl", depth_records(sc, motion.uuv_depth_m, clock))
+    _write_truth(out / "truth.csv", sc, truth.t_unix, truth.uuv_ned)
     stamped = truth.t_unix + sc.clock.video_time_error_s
     _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(stamped)))
 
     t1 = time.perf_counter()
+    seen = None  # per frame, the boxes of the UUV and the look-alikes where they can be seen (with video)
     if video:
-        in_view, init = _render(sc, camera, truth, out / "video.mp4", progress)
+        seen = _render(sc, camera, truth, out / "video.mp4", progress)
     else:
         for old in out.glob("video.*"):
             old.unlink()
-        in_view, init = truth.visible.copy(), None
     render_s = time.perf_counter() - t1
-    seen = in_view & camera.contains(np.nan_to_num(truth.u, nan=-1e9), np.nan_to_num(truth.v, nan=-1e9))
-    _write_csv(out / "track.csv", ("t", "u", "v"),
-               ((f"{t:.6f}", f"{u:.4f}" if ok else "", f"{v:.4f}" if ok else "")
-                for t, u, v, ok in zip(truth.t_unix, truth.u, truth.v, seen)))
-    box = init_t = None
-    if video:
-        if init is None:
-            raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
-        pad = 3
-        (x, y, w, h), init_t = init
-        x0, y0 = max(0, x - pad), max(0, y - pad)
-        box = (x0, y0, min(camera.width, x + w + pad) - x0, min(camera.height, y + h + pad) - y0)
-    (out / "session.toml").write_text(_session_toml(sc, camera, box, init_t))
+    uuv_boxes = None if seen is None else [boxes[0] for boxes in seen]
+    _write_track(out / "track.csv", camera, truth.t_unix, truth.u, truth.v, _in_view(uuv_boxes, truth.visible))
+    init = None if seen is None else _first_box(uuv_boxes, truth.t_unix, camera)
+    if seen is not None and init is None:
+        raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
+    (out / "session.toml").write_text(_session_toml(sc, camera, *(init or (None, None))))
+    if sc.second_uuv.role == "uuv":
+        _write_second_uuv(out, sc, camera, truth, motion, clock, None if seen is None else [b[1] for b in seen])
     if scenario_text is not None:
         (out / "scenario.toml").write_text(scenario_text)
     return Report(out, len(truth.t_unix), render_s, time.perf_counter() - t0, messages)

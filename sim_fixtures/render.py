@@ -328,20 +328,21 @@ class Renderer:
                                          borderMode=cv2.BORDER_WRAP))
         return np.sqrt(layers[0] * layers[1])
 
-    def _boxes(self, view: View, img, boxes, near):
+    def _boxes(self, view: View, img, boxes, near) -> tuple:
         """Blend the boxes (the UUV first when it is not hidden) into ``img`` (H, W, 3) in windows around them; returns
-        the UUV's bounding box, or None where it cannot be seen: hidden, no pixel mostly covered, less than half
-        of it showing (the rest behind a look-alike), or its contrast below the sensor noise.
+        per box its bounding box, or None where it cannot be seen: no pixel mostly covered, less than half of it
+        showing (the rest behind another box), or its contrast below the sensor noise.
 
         Contrast: the RMS change (grey levels) the vehicle makes to the pixels of its box, before
         noise. Deep in turbid water it fades into the water's colour and drops below the noise's
         ``noise_sigma`` (at least ``MIN_CONTRAST``): the UUV is then drawn but counts as not visible.
         """
         cam = self.camera
+        unseen = (None,) * len(boxes)
         windows = [w for m in near if (w := self._window(m, self.COARSE * self.floor_div, cam.height, cam.width))
                    is not None]
         if not windows:
-            return None
+            return unseen
         vv, uu = pixels_of(windows, cam.height, cam.width)
         ss = self.sc.render.supersample
         su, sv = subsamples(vv, uu, ss)
@@ -357,7 +358,7 @@ class Renderer:
             closer = hit & (t_in < nearest)
             owner[closer], nearest[closer] = k, t_in[closer]
         if not (owner >= 0).any():
-            return None
+            return unseen
         colour = np.zeros((len(ray), 3))
         for k, (b, (_, t_in, face, point)) in enumerate(zip(boxes, hits)):
             own = owner == k
@@ -374,13 +375,22 @@ class Renderer:
         mean_hit = colour.reshape(len(vv), n, 3).sum(axis=1) / np.maximum(cover * n, 1)
         before = img[vv, uu]
         img[vv, uu] = before * (1 - cover) + mean_hit * cover
-        if not view.uuv_visible:
-            return None
-        own = (owner == 0).reshape(len(vv), n)
-        if own.sum() < 0.5 * hits[0][0].sum():  # mostly behind a look-alike
+        colour = colour.reshape(len(vv), n, 3)
+        return tuple(self._seen((owner == k).reshape(len(vv), n), hits[k][0].sum(), colour, before, vv, uu)
+                     for k in range(len(boxes)))
+
+    def _seen(self, own, rays_hit: int, colour, before, vv, uu):
+        """A box's bounding box (x, y, w, h) where it can be seen, else None (see :meth:`_boxes`).
+
+        ``own`` (P, n): which of each window pixel's n rays see it first; ``rays_hit``: how many meet it at all;
+        ``colour`` (P, n, 3) what each ray sees; ``before`` (P, 3) the pixels without the boxes; ``vv``, ``uu`` the
+        pixels' rows and columns.
+        """
+        n = own.shape[1]
+        if own.sum() < 0.5 * rays_hit:  # mostly behind another box
             return None
         cover = own.mean(axis=1)[:, None]
-        mean_hit = np.where(own[..., None], colour.reshape(len(vv), n, 3), 0.0).sum(axis=1) / np.maximum(cover * n, 1)
+        mean_hit = np.where(own[..., None], colour, 0.0).sum(axis=1) / np.maximum(cover * n, 1)
         shown = cover[:, 0] > 0.25
         if not shown.any():
             return None
@@ -396,6 +406,12 @@ class Renderer:
 
     def render(self, view: View):
         """One frame: ``(image (H, W, 3) uint8 BGR, UUV bounding box (x, y, w, h) or None where it cannot be seen)``."""
+        img, seen = self.render_seen(view)
+        return img, seen[0]
+
+    def render_seen(self, view: View):
+        """One frame: ``(image (H, W, 3) uint8 BGR, boxes)``, ``boxes`` the bounding box (x, y, w, h) of the UUV and of
+        each of ``view.others`` in turn, or None where it cannot be seen (the UUV also where it is hidden)."""
         boxes = ((self.uuv_box(view),) if view.uuv_visible else ()) + tuple(view.others)
         fields, near, shade = self._coarse(view, boxes)
         fmap = np.ascontiguousarray(fields["map"])
@@ -421,8 +437,8 @@ class Renderer:
             img += fields["glint"] * sparkle[..., None]
         if self.floor_div > 1:
             img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_LINEAR)
-        box = self._boxes(view, img, boxes, near) if boxes else None
+        seen = (() if view.uuv_visible else (None,)) + (self._boxes(view, img, boxes, near) if boxes else ())
         if self.sc.render.noise_sigma > 0:
             dy, dx = self.noise_rng.integers(0, 64, 2)
             img = cv2.add(img, self.noise[dy : dy + self.camera.height, dx : dx + self.camera.width])
-        return np.clip(img + 0.5, 0, 255, out=img).astype(np.uint8), box
+        return np.clip(img + 0.5, 0, 255, out=img).astype(np.uint8), seen

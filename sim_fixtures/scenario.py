@@ -13,6 +13,7 @@ the water surface is the plane ``down = 0``.
 from __future__ import annotations
 
 import dataclasses
+import re
 from itertools import pairwise
 from pathlib import Path
 from typing import Annotated, Literal
@@ -22,6 +23,7 @@ from pydantic import Field, field_validator, model_validator
 from pydantic.dataclasses import dataclass
 
 from groundstation.live.config import read_toml
+from groundstation.session.read import PRIMARY_UUV
 from localizer.contract import (
     CLOSED,
     Flag,
@@ -266,9 +268,15 @@ class RenderSpec:
 @dataclass(frozen=True, config=CLOSED)
 class SecondUuvSpec:
     """``[second_uuv]``: another vehicle of the UUV's size and look, on a straight line at a constant depth, that
-    passes the UUV (a look-alike crossing; the truth stays the UUV's)."""
+    passes the UUV: a look-alike crossing (the session's records stay the UUV's), or with ``role = "uuv"`` a second
+    tracked UUV whose own records the session holds under ``uuvs/<id>/``."""
 
     enabled: Flag = Field(False, description="the second vehicle is there")
+    role: Literal["lookalike", "uuv"] = Field(
+        "lookalike", description="lookalike: only drawn (the tracker must not jump to it); uuv: a tracked UUV too, its "
+        "truth, depth, track and first box written to uuvs/<id>/ (the session's own files stay the first UUV's)")
+    id: Text = Field("uuv2", description="role = uuv: its id, the session's folder uuvs/<id>/ (letters, digits, _ "
+                     "and -; the first UUV is uuv1)")
     pass_at_s: Number = Field(10.0, description="scenario time at which it passes the UUV")
     miss_m: Number = Field(0.0, description="where it is at pass_at_s: this far from the UUV's reference point, "
                            "square to its own course, to its right (negative: its left); 0: right over or under it")
@@ -276,6 +284,13 @@ class SecondUuvSpec:
                                    "(90: crossing from the UUV's left to its right; 180: head on)")
     speed_mps: Positive = Field(1.0, description="its speed")
     depth_m: NonNegative = Field(0.5, description="depth of its top face")
+
+    @field_validator("id")
+    @classmethod
+    def _folder_name(cls, uuv_id):
+        if not re.fullmatch(r"[A-Za-z0-9_-]+", uuv_id) or uuv_id == PRIMARY_UUV:
+            raise Invalid("", uuv_id, f"expected letters, digits, _ and - (a folder name), not {PRIMARY_UUV!r}")
+        return uuv_id
 
 
 @dataclass(frozen=True, config=CLOSED)
@@ -350,6 +365,8 @@ class Scenario:
         if not (min(depths) >= 0 and max(depths) + v.size_m[2] < self.site.floor_depth_m):
             raise Invalid(key, value, "the UUV must stay between the surface (its top face at depth 0 or below) and "
                           "the seafloor (site.floor_depth_m)")
+        if self.second_uuv.role == "uuv" and not self.second_uuv.enabled:
+            raise Invalid("second_uuv.role", "uuv", "a second UUV needs second_uuv.enabled = true")
         floor = self.site.floor_depth_m
         if self.second_uuv.enabled and not self.second_uuv.depth_m + v.size_m[2] < floor:
             raise Invalid("second_uuv.depth_m", self.second_uuv.depth_m, f"its bottom must stay above the seafloor "

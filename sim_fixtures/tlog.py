@@ -58,7 +58,8 @@ GCS_PARAM_COUNT = 1200  # PARAM_VALUE param_count: the autopilot's number of par
 
 # independent random streams: np.random.default_rng([seed, 404, STREAM[name]])
 STREAM = {"heartbeat": 1, "system_time": 2, "attitude": 3, "position": 4, "gimbal": 5, "gps_raw": 6,
-          "timesync": 7, "downlink": 8, "depth": 9, "depth_link": 10, "gnss_alt": 11, "rangefinder": 12}
+          "timesync": 7, "downlink": 8, "depth": 9, "depth_link": 10, "gnss_alt": 11, "rangefinder": 12,
+          "second_depth": 13, "second_link": 14}  # a second UUV's depth sensor and link
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # a rangefinder looking down the body's z axis
 OUT_OF_RANGE_ADD_M = 1.0  # ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
 

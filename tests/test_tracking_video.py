@@ -146,3 +146,19 @@ def test_a_cut_packet_loses_no_decodable_frame_to_frame_threads(clip, tmp_path):
     assert [_bar_column(f.image) for f in frames] == _slice_decoded(cut)
     assert all(_bar_column(f.image) == 2 * f.index for f in frames)
     assert [f.t_s for f in frames] == pytest.approx([f.index / FPS for f in frames])
+
+
+def test_grey_frames_are_the_luma_plane_and_give_the_same_bgr(clip):
+    """Read grey (the default tracker's frames), a yuv420p frame is its luma plane as decoded; ``bgr()`` is the
+    frame as read without grey, with the same index and time."""
+    with av.open(str(clip)) as container:
+        lumas = [f.to_ndarray()[: SIZE[1]] for f in container.decode(video=0)]
+    with open_video(clip) as colour, open_video(clip, grey=True) as grey:
+        pairs = list(zip(colour, grey, strict=True))
+    assert len(pairs) == N
+    for (a, b), luma in zip(pairs, lumas, strict=True):
+        assert (b.index, b.t_s) == (a.index, a.t_s)
+        assert b.image.shape == (SIZE[1], SIZE[0]) and b.image.dtype == np.uint8
+        np.testing.assert_array_equal(b.image, luma)
+        np.testing.assert_array_equal(b.bgr(), a.image)
+        assert int(np.argmax(b.image.mean(axis=0) > 135)) == _bar_column(a.image) == 2 * a.index

@@ -143,9 +143,10 @@ class Control:
 
 class ZenohControl:
     """Worker declaring the command queryables under ``prefix`` and the late joiners' ones (``latest``:
-    key → function giving the latest JSON-ready value published there, or None)."""
+    key → function giving the latest JSON-ready value published there, or None); ``control`` None: the late
+    joiners' only (``skyfix fuse`` takes no commands)."""
 
-    def __init__(self, session: zenoh.Session, control: Control, prefix: str,
+    def __init__(self, session: zenoh.Session, control: Control | None, prefix: str,
                  latest: dict[str, Callable[[], dict | None]]):
         self.session = session
         self.control = control
@@ -168,7 +169,7 @@ class ZenohControl:
 
         queryables = [self.session.declare_queryable(f"{self.prefix}/{name}",
                                                      hand_over(functools.partial(self._command, name)))
-                      for name in COMMANDS]
+                      for name in (COMMANDS if self.control else ())]
         queryables += [self.session.declare_queryable(key, hand_over(functools.partial(self._latest, key, latest)))
                        for key, latest in self.latest.items()]
         try:

@@ -58,7 +58,7 @@ from groundstation.live.ui.server import WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.usage import Usage
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
-from groundstation.live.workers import INPUTS, LAST, OUTPUTS, PIPELINE, Workers
+from groundstation.live.workers import INPUTS, LAST, OUTPUTS, PIPELINE, Workers, stopped
 from groundstation.mavlink.link import read_signing_key
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
@@ -80,13 +80,6 @@ def latency_summary(latencies_s) -> dict:
         return {"n": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
     return {"n": len(a), "p50_ms": round(float(np.percentile(a, 50)), 3),
             "p99_ms": round(float(np.percentile(a, 99)), 3), "max_ms": round(float(a.max()), 3)}
-
-
-async def _stopper(stop: asyncio.Event, duration_s: float | None) -> None:
-    try:
-        await asyncio.wait_for(stop.wait(), timeout=duration_s)
-    except TimeoutError:
-        pass
 
 
 async def serve(cfg: config.RunConfig) -> dict:
@@ -236,7 +229,7 @@ async def serve(cfg: config.RunConfig) -> dict:
             log.info("no tracker.init_bbox: awaiting a target (%s/select%s%s)", zenoh_control.prefix,
                      f", the web page {ui.url}" if ui else "",
                      ", or near the UUV's own position" if cfg.uuv_position_key or cfg.uuv_hint else "")
-        await workers.run(_stopper(stop, cfg.duration_s))
+        await workers.run(stopped(stop, cfg.duration_s))
         final = workers.status(time.time())
         if gps:
             final["latency"] = latency_summary(gps.latencies_s)

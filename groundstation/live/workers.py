@@ -82,3 +82,11 @@ class Workers:
                 await asyncio.wait(now)
                 if loop.time() - t0 > STAGE_S:
                     log.warning("stopping %s took %.2f s", ", ".join(t.get_name() for t in now), loop.time() - t0)
+
+
+async def stopped(stop: asyncio.Event, duration_s: float | None) -> None:
+    """Until ``stop`` is set (a signal) or ``duration_s`` has passed (None: no limit)."""
+    try:
+        await asyncio.wait_for(stop.wait(), timeout=duration_s)
+    except TimeoutError:
+        pass

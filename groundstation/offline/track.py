@@ -1,6 +1,8 @@
 """Tracking the UUV through a session's video, steered by the session's telemetry.
 
-:func:`track_session` decodes the video (in a background thread), selects the UUV
+:func:`track_session` decodes the video (in a background thread; for a tracker of grey levels,
+:data:`~localizer.tracking.GREY_TRACKERS`, to the frames' luma planes, converting to BGR only the frames
+the height is measured in), selects the UUV
 with ``[tracker] init_bbox`` on the frame of ``init_t`` (the first frame without
 it), tracks it with a :class:`~localizer.tracking.session.TrackingSession` (the
 same as the live service's) and returns per-frame pixels with a status word for
@@ -34,6 +36,7 @@ from groundstation.session.read import Session, SessionError
 from groundstation.video.file import open_video
 from groundstation.video.frames import VideoError
 from localizer.pose import camera_pose
+from localizer.tracking import GREY_TRACKERS
 from localizer.tracking.session import SelectionError, TrackingSession
 
 
@@ -111,7 +114,7 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     started = False
     try:
         with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
-                        indices=frame_idx) as video:
+                        indices=frame_idx, grey=tracker_name in GREY_TRACKERS) as video:
             frames = video.prefetch()
             while True:
                 t0 = time.perf_counter()
@@ -149,7 +152,7 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
                 sigma[row] = result.sigma_px
                 if size is not None and result.ok and size.due(float(t[row])):
                     t0 = time.perf_counter()
-                    size.take(size.measure(frame.image, pose, row, result.u, result.v))
+                    size.take(size.measure(frame.bgr(), pose, row, result.u, result.v))
                     timings["size"] += time.perf_counter() - t0
                 done += 1
                 bar.update()

@@ -4,6 +4,13 @@ Every problem is a :class:`SessionError` whose one-line message names the file,
 the line or key, and the offending value. Recoverable oddities (undecodable
 MAVLink frames, messages from other systems, a truncated last line of a log that
 was being written when power went) are kept as warnings on the session.
+
+A session may hold several UUVs (:func:`uuv_ids`): the first, :data:`PRIMARY_UUV`, is the one
+format v1 describes (``depth.jsonl``, ``truth.csv``, ``track.csv``, ``session.toml``'s
+``[tracker]``); each other has a folder ``uuvs/<id>/`` with its own ``depth.jsonl``,
+``truth.csv``, ``track.csv`` and ``uuv.toml`` (its ``[tracker]`` table). ``load_session(path,
+uuv=id)`` reads the session as that UUV's: its depth, truth, track and first box with the UAV's
+telemetry and calibration, so everything that processes a session processes it for that UUV.
 """
 
 from __future__ import annotations
@@ -26,6 +33,53 @@ from localizer.telemetry import Telemetry
 
 SUPPORTED_VERSION = 1
 _NEEDED_FOR_SOURCE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+PRIMARY_UUV = "uuv1"  # the id of the UUV whose records are the session's own files
+UUVS_DIR = "uuvs"  # the folder of the other UUVs' folders, one per id
+UUV_TOML = "uuv.toml"  # in a UUV's folder: its [tracker] table (init_bbox, init_t), as session.toml's
+
+
+@dataclass(frozen=True)
+class UuvFiles:
+    """Where one UUV's records lie in a session: the session's own files for :data:`PRIMARY_UUV`, ``uuvs/<id>/``
+    for each other (the same names; its ``[tracker]`` table in ``uuv.toml`` instead of ``session.toml``)."""
+
+    id: str
+    folder: Path
+    tracker_toml: Path  # the TOML file whose [tracker] table holds its first box
+
+    @property
+    def depth(self) -> Path:
+        return self.folder / "depth.jsonl"
+
+    @property
+    def truth(self) -> Path:
+        return self.folder / "truth.csv"
+
+    @property
+    def track(self) -> Path:
+        return self.folder / "track.csv"
+
+
+def uuv_ids(path) -> tuple[str, ...]:
+    """The ids of a session's UUVs: :data:`PRIMARY_UUV` first, then the folders of ``uuvs/`` by name."""
+    others = Path(path) / UUVS_DIR
+    found = sorted(p.name for p in others.iterdir() if p.is_dir()) if others.is_dir() else []
+    if PRIMARY_UUV in found:
+        raise SessionError(f"{others / PRIMARY_UUV}: {PRIMARY_UUV} is the session's own UUV (its files are the "
+                           "session's), not a folder of uuvs/")
+    return (PRIMARY_UUV, *found)
+
+
+def uuv_files(path, uuv_id: str = PRIMARY_UUV) -> UuvFiles:
+    """Where the records of the session's UUV ``uuv_id`` lie; :class:`SessionError` for an id it does not hold."""
+    path = Path(path)
+    if uuv_id == PRIMARY_UUV:
+        return UuvFiles(uuv_id, path, path / "session.toml")
+    ids = uuv_ids(path)
+    if uuv_id not in ids:
+        raise SessionError(f"{path / UUVS_DIR / uuv_id}: no such UUV in the session (it holds {', '.join(ids)})")
+    folder = path / UUVS_DIR / uuv_id
+    return UuvFiles(uuv_id, folder, folder / UUV_TOML)
 
 
 @dataclass
@@ -39,6 +93,7 @@ class Session:
     truth: dict[str, np.ndarray] | None = None  # t, lat, lon, depth_m
     warnings: list[str] = field(default_factory=list)
     uav_sysid: int | None = None
+    uuv_id: str = PRIMARY_UUV  # whose depth, track, truth and [tracker] these are (see uuv_ids)
 
 
 def _number(text: str, where: str, col: str, allow_empty: bool) -> float:
@@ -150,40 +205,55 @@ def clock_summary(tel: Telemetry) -> str:
     return "clocks: " + ", ".join(parts)
 
 
-def load_session(path) -> Session:
-    """Read and validate a session directory."""
+def _read_toml(path: Path) -> dict:
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise SessionError(f"{path}: missing") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise SessionError(f"{path}: malformed TOML: {e}") from None
+
+
+def _calibration(meta: dict, toml_path: Path, uuv: UuvFiles) -> Calibration:
+    """session.toml's calibration; for a UUV other than the first, with the ``[tracker]`` table of its ``uuv.toml``
+    (none when it has no such file)."""
+    source = str(toml_path)
+    if uuv.tracker_toml != toml_path:
+        tracker = _read_toml(uuv.tracker_toml).get("tracker", {}) if uuv.tracker_toml.is_file() else {}
+        meta, source = {**meta, "tracker": tracker}, f"{toml_path} with {uuv.tracker_toml}"
+    try:
+        return Calibration.from_dict(meta, source=source)
+    except ConfigError as e:
+        raise SessionError(str(e)) from None
+
+
+def load_session(path, uuv: str = PRIMARY_UUV) -> Session:
+    """Read and validate a session directory, as the records of its UUV ``uuv`` (see :func:`uuv_ids`)."""
     path = Path(path)
     if not path.is_dir():
         raise SessionError(f"{path}: not a session directory")
     toml_path = path / "session.toml"
-    try:
-        meta = tomllib.loads(toml_path.read_text())
-    except FileNotFoundError:
-        raise SessionError(f"{toml_path}: missing") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise SessionError(f"{toml_path}: malformed TOML: {e}") from None
+    meta = _read_toml(toml_path)
     version = meta.get("version")
     if version != SUPPORTED_VERSION:
         raise SessionError(f"{toml_path}: version = {version!r}: this skyfix reads version {SUPPORTED_VERSION}")
-    try:
-        cal = Calibration.from_dict(meta, source=str(toml_path))
-    except ConfigError as e:
-        raise SessionError(str(e)) from None
+    files = uuv_files(path, uuv)
+    cal = _calibration(meta, toml_path, files)
 
     warnings: list[str] = list(cal.warnings)
     tel = Telemetry(cal.timing)
     sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings)
-    if not (path / "depth.jsonl").is_file():
-        raise SessionError(f"{path / 'depth.jsonl'}: missing (the UUV's depth is required)")
-    _read_depth(path / "depth.jsonl", tel, warnings)
+    if not files.depth.is_file():
+        raise SessionError(f"{files.depth}: missing (the UUV's depth is required)")
+    _read_depth(files.depth, tel, warnings)
     warnings.extend(f"{path}: {notice}" for notice in tel.notices)
     tel.notices.clear()
 
-    session = Session(path=path, calibration=cal, telemetry=tel, warnings=warnings, uav_sysid=sysid)
-    if (path / "track.csv").is_file():
-        session.track = read_table(path / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
-    if (path / "truth.csv").is_file():
-        session.truth = read_table(path / "truth.csv", ("t", "lat", "lon", "depth_m"))
+    session = Session(path=path, calibration=cal, telemetry=tel, warnings=warnings, uav_sysid=sysid, uuv_id=files.id)
+    if files.track.is_file():
+        session.track = read_table(files.track, ("t", "u", "v"), allow_empty=("u", "v"))
+    if files.truth.is_file():
+        session.truth = read_table(files.truth, ("t", "lat", "lon", "depth_m"))
     videos = sorted(p for p in path.glob("video.*") if p.is_file())
     if videos:
         session.video_path = videos[0]

@@ -6,6 +6,12 @@ and presentation time, or None at the end. Every failure the caller should repor
 is a :class:`VideoError` with a one-line message naming the video and the
 offending value. Live streams are read by :mod:`groundstation.video.live`.
 
+Read ``grey`` (for a reader of the grey levels alone, as the default tracker), a yuv420p frame's ``image``
+is a view of its luma plane as decoded: no conversion and no copy, where FFmpeg's conversion to BGR
+(swscale, in the decoding thread) added a quarter to the CPU time of decoding (``bench/offline_speed.py``'s
+40 s of 1080p: 12.3 CPU-s decoded, 15.1 to BGR, 15.6 to grey); :meth:`VideoFrame.bgr` converts the frames
+that need colour, as they would have been. Frames in other pixel formats are read in BGR, as without ``grey``.
+
 A frame's index comes from the container's timestamps, found by reading every
 packet's presentation time first (demuxing only, no decoding):
 
@@ -69,13 +75,14 @@ class Video:
     """An open video file; use :func:`open_video`. Iterating yields :class:`VideoFrame`."""
 
     def __init__(self, container, url: str, expected_size, max_bad_reads: int, index_of: dict[int, int],
-                 threads: int = 0):
+                 threads: int = 0, grey: bool = False):
         self._container = container
         self._stream = container.streams.video[0]
         self.url = url
         self.expected_size = expected_size
         self.max_bad_reads = max_bad_reads
         self.threads = threads
+        self.grey = grey
         rate = self._stream.average_rate or self._stream.guessed_rate
         self.fps = float(rate) if rate else 0.0
         self.frame_count = len(index_of)
@@ -145,14 +152,15 @@ class Video:
             raise VideoError(f"{self.url}: {ffmpeg_reason(e)}") from None
         if frame is None:
             return None
-        image = frame.to_ndarray(format="bgr24")
+        decoded = frame if self.grey and frame.format.name == "yuv420p" else None
+        image = frame.to_ndarray(format="bgr24") if decoded is None else _luma(frame)
         self._check_size(image)
         pts = frame.pts if frame.pts is not None else None
         index = self._index_of.get(pts, self._last_index + 1) if pts is not None else self._last_index + 1
         index = max(index, self._last_index + 1)
         self._last_index = index
         t_s = (pts - self._t0) * self._tb if pts is not None else index / (self.fps or 30.0)
-        return VideoFrame(index, image, t_s)
+        return VideoFrame(index, image, t_s, decoded)
 
     def _check_size(self, image: np.ndarray) -> None:
         if self.expected_size is None:
@@ -221,6 +229,12 @@ class Video:
         self.close()
 
 
+def _luma(frame: av.VideoFrame) -> np.ndarray:
+    """A view (H, W) of a yuv420p frame's luma plane, without its rows' padding."""
+    plane = frame.planes[0]
+    return np.frombuffer(plane, np.uint8).reshape(frame.height, plane.line_size)[:, : frame.width]
+
+
 def _presentation_times(path: str) -> tuple[list[int], Fraction]:
     """Every video packet's pts (demuxing only), packets the container marks to discard left out, and the stream's
     time base (s per tick)."""
@@ -245,7 +259,7 @@ def frame_times(url) -> tuple[np.ndarray, np.ndarray]:
 
 
 def open_video(url, expected_size: tuple[int, int] | None = None, threads: int = 0,
-               max_bad_reads: int = 0, indices: Sequence[int] | None = None) -> Video:
+               max_bad_reads: int = 0, indices: Sequence[int] | None = None, grey: bool = False) -> Video:
     """Open a video file with FFmpeg.
 
     ``expected_size`` (width, height) in pixels, usually the calibration's: a
@@ -253,7 +267,8 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     container declares it, and on every frame). ``threads`` is FFmpeg's decoding
     thread count (frame and slice threads, see the module doc; 0: FFmpeg chooses). ``max_bad_reads`` > 0 ends the video after
     that many undecodable packets (0: no limit). ``indices``: the session's frame
-    indices (``video_frames.csv``), which number the frames when the counts agree.
+    indices (``video_frames.csv``), which number the frames when the counts agree. ``grey``: frames as their
+    luma plane where the video is yuv420p (see the module doc).
     """
     route_ffmpeg_log()
     url = str(url)
@@ -273,7 +288,7 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     except (av.error.FFmpegError, IndexError) as e:
         why = ffmpeg_reason(e) if isinstance(e, av.error.FFmpegError) else "no video stream"
         raise VideoError(f"{url}: FFmpeg cannot open it ({why})") from None
-    video = Video(container, url, expected_size, max_bad_reads, index_of, threads)
+    video = Video(container, url, expected_size, max_bad_reads, index_of, threads, grey)
     w, h = video.size
     if expected_size is not None and w > 0 and h > 0 and (w, h) != tuple(expected_size):
         video.close()

@@ -17,12 +17,18 @@ class VideoError(RuntimeError):
 
 @dataclass
 class VideoFrame:
-    """One decoded frame: ``index`` 0-based (see the module doc), ``image`` BGR uint8,
-    ``t_s`` its presentation time in seconds from the video's first frame."""
+    """One decoded frame: ``index`` 0-based (see the module doc), ``image`` BGR uint8 (or, read ``grey``, the luma
+    plane (H, W) uint8 of a yuv420p video: see :func:`~groundstation.video.file.open_video`), ``t_s`` its
+    presentation time in seconds from the video's first frame."""
 
     index: int
     image: np.ndarray
     t_s: float = 0.0
+    decoded: av.VideoFrame | None = None  # read grey: the decoded frame whose luma plane ``image`` is a view of
+
+    def bgr(self) -> np.ndarray:
+        """The frame in BGR uint8: ``image``, or converted from the decoded frame (as a frame not read grey is)."""
+        return self.image if self.decoded is None else self.decoded.to_ndarray(format="bgr24")
 
 
 def ffmpeg_reason(e: Exception) -> str:

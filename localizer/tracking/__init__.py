@@ -94,6 +94,10 @@ TRACKERS = ("default", "ncc", "mil", "kcf", "csrt")  # "default" is "ncc"
 #: and as a baseline, never a position source for the UUV's autopilot (``skyfix run --gps-input`` refuses them).
 #: KCF and CSRT report one (``update`` False below their detection and PSR thresholds).
 WITHOUT_LOSS_SIGNAL = ("mil",)
+#: Backends that read the frames' grey levels alone, and from a grey frame (H, W) as from a BGR one: a video's luma
+#: plane serves them without a conversion (normalized cross-correlation and contrasts relative to the first
+#: appearance's do not change with the levels' offset and gain).
+GREY_TRACKERS = ("default", "ncc")
 
 
 def make_matcher(name: str) -> Matcher:

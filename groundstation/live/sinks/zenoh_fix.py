@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 
 import zenoh
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from groundstation.messages import STATUS_SCHEMA, FixMessage, StatusMessage
 from groundstation.zenoh_session import put_json
@@ -51,13 +51,15 @@ class ZenohStatus:
     """Worker publishing ``status()`` (a JSON-ready dict) on ``key`` every ``period_s``, with a liveliness token;
     ``latest`` is the last one published.
 
-    Each status is validated against its model (:class:`~groundstation.messages.StatusMessage`, the schema
-    its readers rely on) where it is assembled: one that does not fit is still published — the operator's view
+    Each status is validated against its model (``model``: by default :class:`~groundstation.messages.StatusMessage`,
+    the schema its readers rely on; ``schema``: its name and version) where it is assembled: one that does not fit is still published — the operator's view
     matters more than its shape — and the misfit is logged once per field and counted (:attr:`invalid`).
     """
 
     def __init__(self, session: zenoh.Session, key: str, alive_key: str, status: Callable[[float], dict],
-                 period_s: float = 1.0):
+                 period_s: float = 1.0, model: type[BaseModel] = StatusMessage, schema: str = STATUS_SCHEMA):
+        self.model = model
+        self.schema = schema
         self.session = session
         self.key = key
         self.alive_key = alive_key
@@ -69,7 +71,7 @@ class ZenohStatus:
 
     def _check(self, status: dict) -> None:
         try:
-            StatusMessage.model_validate(status)
+            self.model.model_validate(status)
         except ValidationError as e:
             self.invalid += 1
             for err in e.errors():
@@ -85,7 +87,7 @@ class ZenohStatus:
         try:
             while True:
                 now = time.time()
-                self.latest = {"schema": STATUS_SCHEMA, "t": now, **self.status(now)}
+                self.latest = {"schema": self.schema, "t": now, **self.status(now)}
                 self._check(self.latest)
                 put_json(pub, self.latest, self.session)
                 await asyncio.sleep(self.period_s)

@@ -1,0 +1,1 @@
+"""``skyfix fuse``: several drones over one UUV (:mod:`.service`, the decisions in :mod:`.fuser`)."""

@@ -1,0 +1,224 @@
+"""``skyfix fuse``: several drones' fixes of one UUV in, one fused fix stream and the UUV's GPS_INPUT out.
+
+Each drone's ``skyfix run`` publishes its fixes on its own key under the UUV's
+(``--fix-key skyfix/uuv/<id>/drone/<drone>/fix``) and sends no GPS_INPUT; the fuser (on any
+laptop, or on the UUV's companion computer) subscribes to ``skyfix/uuv/<id>/drone/*/fix``,
+fuses (:mod:`groundstation.fuse.fuser`) and is the one that sends GPS_INPUT
+(:mod:`groundstation.live.sinks.gps_input`, its gate judging accuracy, age and order only: each
+source was judged against its own track). Out, on Zenoh: the fused fixes (``skyfix.fix/1``,
+unchanged) on ``skyfix/uuv/<id>/fix``, the status (``skyfix.fuse-status/1``) once a second on
+``skyfix/uuv/<id>/fuse/status`` with a liveliness token, and for late joiners queryables
+answering the latest of both. A drone that drops out leaves the others' fixes going out with
+no gap; one that joins is used after its own gate confirmed it (a second).
+
+Workers (:mod:`groundstation.live.workers`, stopped in this order): the subscription and the
+queryables, then the status, then GPS_INPUT (its last message says no fix).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass
+
+import zenoh
+from pydantic import ValidationError
+
+from groundstation.live.control import ZenohControl
+from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
+from groundstation.live.sinks.zenoh_fix import ZenohFixSink, ZenohStatus
+from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
+from groundstation.live.usage import Usage
+from groundstation.live.workers import INPUTS, LAST, OUTPUTS, Workers, stopped
+from groundstation.logs import Throttle, kind_of
+from groundstation.mavlink.link import read_signing_key
+from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
+from groundstation.threads import Handoff
+from groundstation.zenoh_session import open_session, subscribe
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
+
+from .fuser import MAX_HZ, Fuser
+
+log = logging.getLogger("skyfix.fuse")
+
+HANDOFF_FIXES = 512  # fix messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
+
+
+@dataclass(frozen=True)
+class Arrival:
+    """What the sinks know of a fused fix beyond the fix: when its newest source fix arrived; no window."""
+
+    t_recv: float
+    window: None = None
+
+
+class FixSources:
+    """Worker subscribing to the drones' fix messages and handing each to the fuser, then its result to ``sinks``."""
+
+    def __init__(self, session: zenoh.Session, key: str, fuser: Fuser, sinks: list):
+        self.session = session
+        self.key = key
+        self.fuser = fuser
+        self.sinks = sinks
+        self.received = 0
+        self.bad = 0
+        self.handoff: Handoff | None = None
+        self._throttle = Throttle()
+
+    async def run(self) -> None:
+        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self.on_payload(*item), HANDOFF_FIXES)
+        await subscribe(self.session, self.key, self.handoff)
+
+    def on_payload(self, key: str, data: bytes, t_recv: float) -> None:
+        self.received += 1
+        try:
+            fix = FixMessage.model_validate_json(data).to_fix()
+        except ValidationError as e:
+            self.bad += 1
+            err = e.errors()[0]
+            where = ".".join(str(x) for x in err["loc"]) or "payload"
+            if self._throttle(kind_of(f"{key} {where} {err['type']}")):
+                log.warning("fix on %s refused: %s: %s (%r)", key, where, err["msg"], data[:120])
+            return
+        fused = self.fuser.on_fix(key, fix, t_recv)
+        if fused is not None:
+            for sink in self.sinks:
+                sink.on_fix(fused, Arrival(t_recv))
+
+    def status(self, now: float) -> dict:
+        return {"key": self.key, "received": self.received, "bad": self.bad,
+                "handoff": self.handoff.status() if self.handoff else None}
+
+
+async def serve(args: argparse.Namespace) -> dict:
+    """Run the fuser until stopped; returns the final status."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), multicast=args.zenoh_multicast,
+                           config_file=args.zenoh_config)
+    closers = []
+    try:
+        max_age_s = args.fix_max_age_ms / 1000.0
+        fuser = Fuser(lambda: FixGate(max_speed_mps=args.uuv_max_speed_mps, max_accel_mps2=args.uuv_max_accel_mps2,
+                                      max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s),
+                      args.uuv_max_accel_mps2, args.max_hz)
+        fix_sink = ZenohFixSink(session, args.fix_key)
+        closers.append(fix_sink.close)
+        gps = None
+        if args.gps_input:
+            key = read_signing_key(args.gps_input_signing_key) if args.gps_input_signing_key else None
+            link = (ZenohMavlinkIn(session, args.gps_input.removeprefix("zenoh:"))
+                    if args.gps_input.startswith("zenoh:") else mavlink_gps_link(args.gps_input, signing_key=key))
+            gps = GpsInputSink(link, args.gps_input_hz, max_age_s,
+                               FixGate(max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s, judge_track=False))
+        workers = Workers()
+        workers.section("uuv", lambda now: args.uuv)
+        sources = workers.add(FixSources(session, args.sources, fuser, [s for s in (fix_sink, gps) if s]), INPUTS,
+                              "input")
+        workers.section("fusion", fuser.status)
+        workers.section("fix", lambda now: fix_sink.latest)
+        status_sink = ZenohStatus(session, args.status_key, args.alive_key, workers.status,
+                                  model=FuseStatusMessage, schema=FUSE_STATUS_SCHEMA)
+        queryables = ZenohControl(session, None, "skyfix/cmd",
+                                  {args.fix_key: lambda: fix_sink.latest, args.status_key: lambda: status_sink.latest})
+        workers.add(queryables, INPUTS, "control", lambda now: queryables.status())
+        workers.section("zenoh", lambda now: {"peers": len(list(session.info.peers_zid()))
+                                              + len(list(session.info.routers_zid()))})
+        workers.section("process", Usage().status)
+        workers.add(status_sink, OUTPUTS)
+        if gps:
+            workers.add(gps, LAST, "gps_input")
+        log.info("skyfix fuse: UUV %s, fixes from %s, fused on %s, GPS_INPUT %s", args.uuv, sources.key,
+                 args.fix_key, args.gps_input)
+        await workers.run(stopped(stop, args.duration_s))
+        return workers.status(time.time())
+    finally:
+        for close in closers:
+            close()
+        session.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    """``skyfix fuse``: exit code 0 after a clean stop."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    base = f"skyfix/uuv/{args.uuv}"
+    args.sources = args.sources or f"{base}/drone/*/fix"
+    args.fix_key = args.fix_key or f"{base}/fix"
+    args.status_key = args.status_key or f"{base}/fuse/status"
+    args.alive_key = args.alive_key or f"{base}/fuse/alive"
+    final = None
+    try:
+        final = asyncio.run(serve(args))
+    except* (OSError, zenoh.ZError) as eg:
+        for e in eg.exceptions:
+            print(f"skyfix fuse: error: {e}", file=sys.stderr)
+    if final is None:
+        return 2
+    if args.stats:
+        with open(args.stats, "w") as f:
+            json.dump(final, f, indent=1)
+    log.info("stopped: %s", json.dumps(final["fusion"]))
+    return 0
+
+
+def _number(low: float, name: str, strict: bool = False):
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: not a number") from None
+        if not (math.isfinite(x) and (x > low if strict else x >= low)):
+            raise argparse.ArgumentTypeError(f"{name} = {text}: must be {'>' if strict else '≥'} {low:g}")
+        return x
+    return parse
+
+
+def _chunk(text: str) -> str:
+    if not text or any(c in text for c in "/*$?#"):
+        raise argparse.ArgumentTypeError(f"--uuv = {text!r}: one Zenoh key chunk (no / * $ ? #)")
+    return text
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "fuse", help="several drones over one UUV: their fixes fused, one GPS_INPUT to the UUV",
+        description="Subscribes to every drone's fixes of one UUV (each drone's skyfix run with --fix-key "
+                    "skyfix/uuv/ID/drone/NAME/fix), aligns them in time, rejects a drone that disagrees beyond its "
+                    "sigmas, fuses the rest by their covariances, publishes the fused fixes on skyfix/uuv/ID/fix and "
+                    "sends them as GPS_INPUT (--gps-input). Stops on Ctrl-C or SIGTERM.",
+        epilog="example: skyfix fuse --uuv rov1 --zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
+    p.add_argument("--uuv", type=_chunk, metavar="ID", default="uuv", help="the UUV's id, in the keys (default %(default)s)")
+    p.add_argument("--sources", metavar="KEYEXPR", help="the drones' fixes (default skyfix/uuv/ID/drone/*/fix)")
+    p.add_argument("--fix-key", metavar="KEY", help="the fused fixes (default skyfix/uuv/ID/fix)")
+    p.add_argument("--status-key", metavar="KEY", help="the 1 Hz status (default skyfix/uuv/ID/fuse/status)")
+    p.add_argument("--alive-key", metavar="KEY", help="liveliness token (default skyfix/uuv/ID/fuse/alive)")
+    p.add_argument("--gps-input", metavar="URL", help="GPS_INPUT to the UUV's autopilot: a MAVLink URL "
+                   "(udpout:HOST:PORT, tcp:HOST:PORT, /dev/ttyUSB0,57600) or zenoh:KEY (BlueOS's mavlink/in)")
+    p.add_argument("--gps-input-hz", metavar="HZ", type=_number(5.0, "--gps-input-hz"), default=10.0,
+                   help="GPS_INPUT at least this often (the latest state again without a new fix; default 10, ≥ 5)")
+    p.add_argument("--gps-input-signing-key", metavar="FILE", help="sign GPS_INPUT (MAVLink 2) with this key file")
+    p.add_argument("--max-hz", metavar="HZ", type=_number(0.0, "--max-hz", strict=True), default=MAX_HZ,
+                   help="fused fixes per second at most (default %(default)g)")
+    p.add_argument("--fix-max-age-ms", metavar="MS", type=_number(0.0, "--fix-max-age-ms", strict=True), default=500.0,
+                   help="a fix older than this is not sent as valid (default %(default)g)")
+    p.add_argument("--fix-max-h-acc-m", metavar="M", type=_number(0.0, "--fix-max-h-acc-m", strict=True), default=2.5,
+                   help="a fix less accurate than this is not used (default %(default)g)")
+    p.add_argument("--uuv-max-speed-mps", metavar="MPS", type=_number(0.0, "--uuv-max-speed-mps", strict=True),
+                   default=MAX_SPEED_MPS["bluerov2"], help="the UUV's top speed, for each drone's gate")
+    p.add_argument("--uuv-max-accel-mps2", metavar="MPS2", type=_number(0.0, "--uuv-max-accel-mps2", strict=True),
+                   default=MAX_ACCEL_MPS2["bluerov2"], help="the UUV's largest acceleration")
+    p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
+    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
+    p.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file (deploy/zenoh/*.json5)")
+    p.add_argument("--zenoh-multicast", action="store_true", help="Zenoh multicast scouting on")
+    p.add_argument("--duration-s", metavar="S", type=_number(0.0, "--duration-s", strict=True), help="stop after this long")
+    p.add_argument("--stats", metavar="FILE", help="write the final status here as JSON")
+    p.set_defaults(func=run)
