@@ -23,7 +23,6 @@ import json
 import logging
 import math
 import signal
-import sys
 import time
 from dataclasses import dataclass
 
@@ -35,7 +34,7 @@ from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.live.sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.live.usage import Usage
-from groundstation.live.workers import INPUTS, LAST, OUTPUTS, Workers, stopped
+from groundstation.live.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.link import read_signing_key
 from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
@@ -154,17 +153,9 @@ def run(args: argparse.Namespace) -> int:
     args.fix_key = args.fix_key or f"{base}/fix"
     args.status_key = args.status_key or f"{base}/fuse/status"
     args.alive_key = args.alive_key or f"{base}/fuse/alive"
-    final = None
-    try:
-        final = asyncio.run(serve(args))
-    except* (OSError, zenoh.ZError) as eg:
-        for e in eg.exceptions:
-            print(f"skyfix fuse: error: {e}", file=sys.stderr)
+    final = run_to_end("fuse", serve(args), (OSError, zenoh.ZError), args.stats)
     if final is None:
         return 2
-    if args.stats:
-        with open(args.stats, "w") as f:
-            json.dump(final, f, indent=1)
     log.info("stopped: %s", json.dumps(final["fusion"]))
     return 0
 

@@ -33,7 +33,6 @@ import asyncio
 import json
 import logging
 import signal
-import sys
 import time
 
 import numpy as np
@@ -58,7 +57,7 @@ from groundstation.live.ui.server import WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.usage import Usage
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
-from groundstation.live.workers import INPUTS, LAST, OUTPUTS, PIPELINE, Workers, stopped
+from groundstation.live.workers import INPUTS, LAST, OUTPUTS, PIPELINE, Workers, run_to_end, stopped
 from groundstation.mavlink.link import read_signing_key
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
@@ -245,17 +244,9 @@ def run(args: argparse.Namespace) -> int:
     """``skyfix run``: exit code 0 after a clean stop."""
     cfg = config.run_config(args)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
-    final = None
-    try:
-        final = asyncio.run(serve(cfg))
-    except* (OSError, zenoh.ZError, InputMissing) as eg:  # a link that cannot be opened: one line each
-        for e in eg.exceptions:
-            print(f"skyfix run: error: {e}", file=sys.stderr)
+    final = run_to_end("run", serve(cfg), (OSError, zenoh.ZError, InputMissing), cfg.stats)
     if final is None:
         return 2
-    if cfg.stats:
-        with open(cfg.stats, "w") as f:
-            json.dump(final, f, indent=1)
     log.info("stopped: %s", json.dumps({k: v for k, v in final.items() if k != "latencies_ms"}))
     return 0
 

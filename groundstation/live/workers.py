@@ -19,8 +19,10 @@ tasks cancelled and awaited before the next; a stage slower than :data:`STAGE_S`
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
-from collections.abc import Awaitable, Callable
+import sys
+from collections.abc import Awaitable, Callable, Coroutine
 from dataclasses import dataclass
 
 log = logging.getLogger("skyfix.run")
@@ -90,3 +92,18 @@ async def stopped(stop: asyncio.Event, duration_s: float | None) -> None:
         await asyncio.wait_for(stop.wait(), timeout=duration_s)
     except TimeoutError:
         pass
+
+
+def run_to_end(command: str, main: Coroutine, errors: tuple[type[BaseException], ...], stats: str | None) -> dict | None:
+    """Run a service's ``main`` (returning its final status) to its end: the final status, also written to ``stats``
+    (JSON) when given; or None after printing each of ``errors`` in one line as ``skyfix COMMAND: error: ...``."""
+    final = None
+    try:
+        final = asyncio.run(main)
+    except* errors as eg:  # a link that cannot be opened: one line each
+        for e in eg.exceptions:
+            print(f"skyfix {command}: error: {e}", file=sys.stderr)
+    if final is not None and stats:
+        with open(stats, "w") as f:
+            json.dump(final, f, indent=1)
+    return final
