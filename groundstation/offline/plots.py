@@ -34,6 +34,7 @@ CAUSES = {
     "telemetry": ("#7f7f7f", ("no_attitude", "stale_attitude", "no_position", "stale_position", "no_gimbal",
                               "stale_gimbal", "no_depth", "stale_depth", "bad_time")),
     "geometry": ("#ff7f0e", ("bad_pixel", "no_water", "below_surface")),
+    "fusion": ("#17becf", ("disagree",)),
 }
 OK_COLOUR = "#2ca02c"
 METHOD_COLOURS = ("tab:blue", "tab:orange", "tab:purple", "tab:brown")
