@@ -9,7 +9,9 @@ frame's pixel is compared with both tracks: nearer the other UUV's than its own 
 
 from __future__ import annotations
 
+import csv
 import shutil
+import subprocess
 import tomllib
 from pathlib import Path
 
@@ -17,11 +19,13 @@ import cv2
 import numpy as np
 import pymap3d
 import pytest
+from live_helpers import ROOT, skyfix
 
 from groundstation.offline.track import track_session
 from groundstation.session import SessionError
 from groundstation.session.depth import read_depth
-from groundstation.session.read import PRIMARY_UUV, load_session, uuv_ids
+from groundstation.session.positions import read_positions_csv
+from groundstation.session.read import PRIMARY_UUV, load_session, read_table, uuv_ids
 from localizer.calibration import ConfigError
 from sim_fixtures.generate import camera_of, frame_truth, generate
 from sim_fixtures.motion import Motion
@@ -205,3 +209,27 @@ def test_a_uuvs_bad_records_are_one_line_naming_its_file(tmp_path):
     with pytest.raises(SessionError, match="uuv1 is the session's own UUV"):
         uuv_ids(path)
     assert load_session(path).uuv_id == PRIMARY_UUV  # the session's own UUV reads as ever
+
+
+def test_each_uuv_is_evaluated_against_its_own_truth(crossing, tmp_path):
+    """``skyfix evaluate`` on the crossing session tracks the video once per UUV from its own first box and scores
+    each UUV's fixes against its own truth (measured: refraction MAE 0.021 m for uuv1, 0.029 m for uuv2);
+    ``--uuv`` restricts it to one, and an id the session does not hold is one line naming the ids it does."""
+    path = crossing[1]
+    out = subprocess.run(skyfix("evaluate", str(path), "--out", str(tmp_path / "all"), "--quiet"),
+                         check=False, capture_output=True, text=True, cwd=ROOT, timeout=600)
+    assert out.returncode == 0, out.stderr
+    with open(tmp_path / "all" / "evaluation.csv", newline="") as f:
+        rows = {(r["session"], r["method"]): r for r in csv.DictReader(f)}
+    for uuv_id in IDS:
+        r = rows[(f"{path.name}/{uuv_id}", "refraction")]
+        assert float(r["mae_m"]) <= 0.05 and float(r["coverage"]) >= 0.95, (uuv_id, r)
+    one = subprocess.run(skyfix("process", str(path), "--uuv", "uuv2", "--out", str(tmp_path / "p"), "--quiet",
+                                "--use-track"), check=False, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert one.returncode == 0, one.stderr
+    fixes = read_positions_csv(tmp_path / "p" / "positions.csv")
+    own = read_table(path / "uuvs" / "uuv2" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    assert np.allclose(fixes.u, own["u"], equal_nan=True)  # uuv2's pixels, not the session's own UUV's
+    bad = subprocess.run(skyfix("evaluate", str(path), "--uuv", "uuv9", "--out", str(tmp_path / "bad"), "--quiet"),
+                         check=False, capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert bad.returncode == 2 and "uuv9" in bad.stderr and "uuv1, uuv2" in bad.stderr, bad.stderr

@@ -9,7 +9,8 @@ coverage = frames with a fix / frames; ``in 2σ`` = share of fixes whose error i
 within twice their reported ``h_acc_m``. Writes, per session,
 ``DIR/<session>/<method>/positions.csv`` and the plots of :mod:`groundstation.offline.plots`
 (``top_view.png``, ``timeline.png``, ``status.png``: both methods against the truth),
-and ``DIR/evaluation.csv``.
+and ``DIR/evaluation.csv``. A session of several UUVs is scored once per UUV against that UUV's own truth
+(``uuvs/<id>/truth.csv``), in ``DIR/<session>/<id>/``.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from groundstation.offline.plots import write_plots
 from groundstation.offline.process import (
     add_motion_offset_flag,
     add_size_argument,
+    add_uuv_argument,
     frame_pixels,
     locate_frames,
     print_warnings,
@@ -32,7 +34,7 @@ from groundstation.offline.process import (
 )
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
-from groundstation.session.read import SessionError, load_session
+from groundstation.session.read import PRIMARY_UUV, SessionError, load_session, uuv_files, uuv_ids
 from localizer.calibration import ConfigError
 from localizer.fix import Fixes
 from localizer.geodesy import horizontal_error_m
@@ -114,13 +116,24 @@ def format_table(results: list[tuple[str, str, Scores]]) -> str:
 
 
 def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False,
-                     motion: bool = True, height_from_size: str = "check"):
-    """Score both methods on one session; returns ``[(name, method, Scores), ...]`` and writes outputs (the height
-    from the UUV's size: its summary line on stderr)."""
-    session = load_session(path)
+                     motion: bool = True, height_from_size: str = "check", uuv: str | None = None):
+    """Score both methods on one session, on each of its UUVs (or on ``uuv`` alone); returns
+    ``[(name, method, Scores), ...]`` and writes outputs (the height from the UUV's size: its summary line on
+    stderr). A session of one UUV is named by its folder, each UUV of a session of several ``<folder>/<id>``."""
+    ids = uuv_ids(path) if uuv is None else (uuv,)
+    folder = Path(path).resolve().name
+    results = []
+    for uuv_id in ids:
+        name = folder if len(ids) == 1 and uuv_id == PRIMARY_UUV else f"{folder}/{uuv_id}"
+        results.extend(_evaluate_uuv(load_session(path, uuv_id), name, out_dir, use_track, tracker, progress,
+                                     motion, height_from_size))
+    return results
+
+
+def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: str, progress: bool, motion: bool,
+                  height_from_size: str):
     if session.truth is None or len(session.truth["t"]) == 0:
-        raise SessionError(f"{session.path / 'truth.csv'}: missing (evaluate needs ground truth)")
-    name = session.path.resolve().name
+        raise SessionError(f"{uuv_files(session.path, session.uuv_id).truth}: missing (evaluate needs ground truth)")
     from_track = use_track or session.video_path is None
     if not use_track and from_track:
         print(f"{name}: no video: pixels from track.csv", file=sys.stderr)
@@ -163,7 +176,7 @@ def run(args) -> int:
         try:
             results.extend(evaluate_session(path, out, use_track=args.use_track, tracker=args.tracker,
                                             progress=not args.quiet, motion=not args.no_motion_offset,
-                                            height_from_size=args.height_from_size))
+                                            height_from_size=args.height_from_size, uuv=args.uuv))
         except (SessionError, ConfigError) as e:
             print(f"skyfix evaluate: error: {e}", file=sys.stderr)
             failed += 1
@@ -182,6 +195,8 @@ def register(subparsers) -> None:
                    help="take pixels from track.csv (geometry only) instead of tracking the video")
     p.add_argument("--tracker", default="default", choices=TRACKERS, help="tracker backend for video tracking")
     add_size_argument(p)
+    add_uuv_argument(p, "evaluate this UUV of each session only (default: every UUV, each against its own truth)",
+                     default=None)
     p.add_argument("--quiet", action="store_true", help="no progress output")
     add_motion_offset_flag(p)
     p.set_defaults(func=run)

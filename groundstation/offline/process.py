@@ -1,5 +1,8 @@
 """``skyfix process``: a recorded session in, ``positions.csv`` out.
 
+A session with several UUVs (``uuvs/<id>/``) is processed as one UUV's (``--uuv``): its depth, its first box
+and its ``track.csv``; the UAV's telemetry and the video are shared.
+
 Pixels come from ``track.csv`` (``--use-track``, geometry only) or from tracking
 the session's video. ``--no-refraction`` runs the paper's straight-ray method.
 
@@ -28,7 +31,7 @@ from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.estimate import offset_from_rotations
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
-from groundstation.session.read import Session, SessionError, load_session
+from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
 from localizer.fix import Fixes, locate
 from localizer.height import take_notices
 from localizer.pose import camera_pose
@@ -148,7 +151,7 @@ def print_warnings(session: Session) -> None:
 
 def run(args) -> int:
     out = output_dir(args.out)
-    session = load_session(args.session)
+    session = load_session(args.session, args.uuv)
     size = size_of(session, args.height_from_size, args.use_track)
     try:
         fixes = process_session(
@@ -168,6 +171,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("process", help="process a recorded session into positions.csv")
     p.add_argument("session", help="session directory (format v1)")
     p.add_argument("--out", required=True, help="output directory for positions.csv")
+    add_uuv_argument(p, "the UUV to locate: its depth, first box and track (default: %(default)s, the session's own)")
     p.add_argument("--use-track", action="store_true", help="take the UUV pixels from track.csv (no tracker)")
     p.add_argument("--no-refraction", action="store_true", help="the paper's straight ray (no Snell refraction)")
     p.add_argument("--tracker", default="default", choices=TRACKERS,
@@ -176,6 +180,10 @@ def register(subparsers) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_motion_offset_flag(p)
     p.set_defaults(func=run)
+
+
+def add_uuv_argument(p, text: str, default: str | None = PRIMARY_UUV) -> None:
+    p.add_argument("--uuv", default=default, metavar="ID", help=text)
 
 
 def add_motion_offset_flag(p) -> None:
