@@ -1,48 +1,85 @@
-"""The ``skyfix`` command: one subcommand per module, each adding itself with ``register``."""
+"""The ``skyfix`` command: one subcommand per entry of :data:`COMMANDS`, each added by its module's ``register``.
+
+Only the chosen subcommand's module is imported (the modules pull in pymavlink, Zenoh, aiohttp, OpenCV, ...):
+the others are listed with their one-line help and nothing else.
+"""
 
 from __future__ import annotations
 
 import argparse
 import importlib
 import sys
-from importlib.metadata import version
 
-from groundstation.mavlink.ingest import LinkError
-from groundstation.session.read import SessionError
-from groundstation.zenoh_session import ZenohError
-from localizer.calibration import ConfigError
-
-SUBCOMMANDS = (
-    "groundstation.offline.process",
-    "groundstation.offline.import_flight",
-    "groundstation.offline.evaluate",
-    "sim_fixtures.cli",
-    "groundstation.live.service",
-    "groundstation.live.console",
-    "groundstation.fuse.service",
-    "groundstation.replay",
-    "groundstation.calibration.command",
-    "groundstation.offline.export",
-    "groundstation.offline.report",
-    "groundstation.latency.meter",
-    "groundstation.latency.estimate",
+#: Every subcommand, in ``skyfix --help``'s order: its name, the module whose
+#: ``register(subparsers, name, help)`` adds it (its arguments, its ``func``) and its one-line help.
+COMMANDS = (
+    ("process", "groundstation.offline.process", "process a recorded session into positions.csv"),
+    ("import", "groundstation.offline.import_flight",
+     "a flight's own records (DataFlash log, camera video, depth) as a session"),
+    ("evaluate", "groundstation.offline.evaluate", "accuracy of sessions with truth.csv: refraction vs straight ray"),
+    ("sim", "sim_fixtures.cli", "generate a synthetic session (video, telemetry, truth) from a scenario"),
+    ("run", "groundstation.live.service", "the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out"),
+    ("status", "groundstation.live.console", "the live service's status, once or --watch"),
+    ("select", "groundstation.live.console", "select the UUV in the live service (box or click)"),
+    ("release", "groundstation.live.console", "let go of the target: no fix until a new selection"),
+    ("acquire", "groundstation.live.console",
+     "await a target again (automatic acquisition near the UUV's own position)"),
+    ("fuse", "groundstation.fuse.service", "several drones over one UUV: their fixes fused, one GPS_INPUT to the UUV"),
+    ("replay", "groundstation.replay", "re-stream a recorded session live (MAVLink, Zenoh depth, video)"),
+    ("calibrate", "groundstation.calibration.command",
+     "camera calibration: from board images, or imported from OpenCV/Kalibr/ROS"),
+    ("export", "groundstation.offline.export", "positions.csv as GeoJSON, KML, GPX or CSV (QGIS, Google Earth)"),
+    ("report", "groundstation.offline.report", "PNG plots of a run: top view, error/accuracy over time, statuses"),
+    ("latency", "groundstation.latency.meter", "measure the camera's glass-to-first-packet latency with a time code"),
+    ("estimate-latency", "groundstation.latency.estimate",
+     "a recording's video-to-telemetry time offset, from image motion"),
 )
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed package's version, looked up only when asked for."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, nargs=0,
+                         help="show program's version number and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from importlib.metadata import version
+
+        print(f"skyfix {version('skyfix')}")
+        parser.exit()
+
+
+def _one_line_errors() -> tuple[type[Exception], ...]:
+    """The errors a subcommand reports as one line and exit code 2; imported only once one is raised."""
+    from groundstation.mavlink.ingest import LinkError
+    from groundstation.session import SessionError
+    from groundstation.zenoh_session import ZenohError
+    from localizer.calibration import ConfigError
+
+    return (SessionError, ConfigError, LinkError, ZenohError)
+
+
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     parser = argparse.ArgumentParser(prog="skyfix", description="UUV position from UAV imagery")
-    parser.add_argument("--version", action="version", version=f"skyfix {version('skyfix')}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", required=True)
-    for name in SUBCOMMANDS:
-        importlib.import_module(name).register(sub)
+    # skyfix's own options take no value: the first word that is not an option is the subcommand.
+    chosen = next((a for a in argv if not a.startswith("-")), None)
+    for name, module, help_line in COMMANDS:
+        if name == chosen:
+            importlib.import_module(module).register(sub, name, help_line)
+        else:
+            sub.add_parser(name, help=help_line)  # listed only: never the one parsed
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (SessionError, ConfigError, LinkError, ZenohError) as e:
-        print(f"skyfix {args.command}: error: {e}", file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
         return 130
+    except _one_line_errors() as e:
+        print(f"skyfix {args.command}: error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -13,7 +13,8 @@ agrees with itself:
   frame goes out byte for byte.
 - ``depth.jsonl``: each sample is published over Zenoh on ``--depth-key`` as
   ``{"t": t + shift, "depth_m": ...}`` at its recorded arrival ``t_recv`` + shift
-  (``t`` + shift when it has none), so a UUV clock that was off stays off.
+  (``t`` + shift when it has none), so a UUV clock that was off stays off. A session of several UUVs: each
+  other UUV's ``uuvs/<id>/depth.jsonl`` on its own key (``--uuv-depth-key ID=KEY``).
 - The video: sent in-process as MPEG-TS to ``--video-out`` (default
   ``udp://127.0.0.1:5600``; ``rtp://host:port`` sends RTP), each frame at its
   ``video_frames.csv`` time + shift (+ ``--video-delay-ms``) by the file's
@@ -45,7 +46,7 @@ from pathlib import Path
 
 from groundstation.mavlink.ingest import connect, mavutil
 from groundstation.session.depth import read_depth
-from groundstation.session.read import SessionError, read_table
+from groundstation.session.read import SessionError, read_table, uuv_files
 from groundstation.session.tlog import read_tlog
 from groundstation.video.send import send_video
 from groundstation.zenoh_session import open_session, put_json
@@ -53,6 +54,14 @@ from groundstation.zenoh_session import open_session, put_json
 log = logging.getLogger("skyfix.replay")
 
 CUT_INPUTS = ("mavlink", "depth", "video")
+
+
+def parse_uuv_key(text: str) -> tuple[str, str]:
+    """``ID=KEY`` → ``(id, key)``; argparse's type for ``--uuv-depth-key``."""
+    uuv_id, sep, key = text.partition("=")
+    if not (sep and uuv_id and key):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected ID=KEY (uuv2=uuv/uuv2/depth)")
+    return uuv_id, key
 
 
 def parse_cut(text: str) -> tuple[str, float, float]:
@@ -135,6 +144,8 @@ class Replay:
         if not self.tlog:
             raise SessionError(f"{self.dir / 'uav.tlog'}: no MAVLink frames")
         self.depth = depth_to_send(self.dir / "depth.jsonl") if (self.dir / "depth.jsonl").is_file() else []
+        # the other UUVs' depths (--uuv-depth-key ID=KEY): (key, samples)
+        self.uuv_depths = [(key, depth_to_send(uuv_files(self.dir, uuv_id).depth)) for uuv_id, key in args.uuv_depth_key]
         videos = sorted(p for p in self.dir.glob("video.*") if p.is_file())
         self.video = videos[0] if videos and not args.no_video else None
         self.frames = read_table(self.dir / "video_frames.csv", ("frame", "t")) if self.video else None
@@ -157,14 +168,14 @@ class Replay:
             conn.write(frame_bytes(msg, shift))
             self.counts["mavlink"] += 1
 
-    def _send_depth(self, shift: float, session) -> None:
+    def _send_depth(self, shift: float, session, key: str, samples) -> None:
         cuts = Cuts(self.args.cut, "depth")
-        for t_send, t, depth in self.depth:
+        for t_send, t, depth in samples:
             if not _sleep_until(t_send + shift, self.stop):
                 return
             if cuts.skip(t_send - self.t_start):
                 continue
-            put_json(self.args.depth_key, {"t": t + shift, "depth_m": depth}, session)
+            put_json(key, {"t": t + shift, "depth_m": depth}, session)
             self.counts["depth"] += 1
 
     def _listen_uuv(self, conn, out) -> None:
@@ -194,8 +205,9 @@ class Replay:
             links.append(connect(args.uuv_listen, source_system=1, source_component=1))
         session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), config_file=args.zenoh_config)
         threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True)]
-        if args.depth_key:
-            threads.append(threading.Thread(target=self._send_depth, args=(shift, session), name="depth", daemon=True))
+        depths = [(args.depth_key, self.depth)] * bool(args.depth_key) + self.uuv_depths
+        threads += [threading.Thread(target=self._send_depth, args=(shift, session, key, samples), name=f"depth {key}",
+                                     daemon=True) for key, samples in depths]
         if args.uuv_listen:
             threads.append(threading.Thread(target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True))
         if self.video is not None:
@@ -237,9 +249,9 @@ def replay(args: argparse.Namespace) -> int:
     return Replay(args).run()
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("replay", help="re-stream a recorded session live (MAVLink, Zenoh depth, video)",
-                              description=__doc__.split("\n\n")[0])
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help, description=__doc__.split("\n\n")[0])
     p.add_argument("session", help="session directory (format v1)")
     p.add_argument("--mavlink-out", default="udpout:127.0.0.1:14550", help="where the UAV's MAVLink goes")
     p.add_argument("--video-out", default="udp://127.0.0.1:5600",
@@ -252,6 +264,8 @@ def register(subparsers) -> None:
     p.add_argument("--zenoh-config", help="Zenoh JSON5 config file (deploy/zenoh/*.json5); endpoints above are added")
     p.add_argument("--depth-key", default="uuv/depth", help="Zenoh key the depth is published on ('' for none: "
                    "another replay of the same dive publishes it)")
+    p.add_argument("--uuv-depth-key", action="append", type=parse_uuv_key, default=[], metavar="ID=KEY",
+                   help="also publish the session's UUV ID's depth (uuvs/ID/depth.jsonl) on KEY (repeatable)")
     p.add_argument("--uuv-listen", default="udpin:127.0.0.1:14660",
                    help="UUV-side endpoint logging GPS_INPUT ('' for none)")
     p.add_argument("--uuv-log", help="file the GPS_INPUT JSON lines are appended to (default stdout)")

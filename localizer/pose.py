@@ -26,7 +26,7 @@ from .gnss import horizontal_sigma_m
 from .height import ekf_height_error
 from .surface import height_above_surface_m
 from .telemetry import DEG_PER_M, Telemetry
-from .timeline import BEFORE_FIRST, OK
+from .timeline import BEFORE_FIRST, OK, Series
 
 #: Time step (s) over which the camera's angular velocity is measured.
 RATE_STEP_S = 0.02
@@ -108,8 +108,11 @@ def _rotations(cal: Calibration, tel: Telemetry, tq, status=None):
     return R_gimbal, R_body, np.hypot(sig_tilt, g_tilt), np.hypot(sig_yaw, g_yaw)
 
 
-def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, float] | None = None) -> CameraPose:
-    """The camera at station time(s) ``t_unix`` (see the module doc).
+def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, float] | None = None,
+                depth: Series | None = None) -> CameraPose:
+    """The camera at station time(s) ``t_unix`` (see the module doc), with the UUV's depth from ``depth``
+    (:attr:`Telemetry.depth <localizer.telemetry.Telemetry.depth>` of one UUV's telemetry; default ``tel``'s own:
+    one video over several UUVs shares the UAV's telemetry and reads each UUV's depth from its own).
 
     The frames' alignment to the telemetry is the UAV link delay's (its source word and 1-sigma,
     :attr:`~localizer.telemetry.Telemetry.latency_source` and ``latency_sigma_s``) unless
@@ -125,9 +128,10 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, 
     R_gimbal, R_body, sig_tilt, sig_yaw = _rotations(cal, tel, tq, status)
     p, sp, ep = tel.position.sample(tq)
     _mark(status, sp, "position")
-    dep, sd, ed = tel.depth.sample(t)
+    depth = tel.depth if depth is None else depth
+    dep, sd, ed = depth.sample(t)
     _mark(status, sd, "depth")
-    depth_age_s = np.maximum(0.0, t - tel.depth.last_t) if len(tel.depth) else np.zeros(n)
+    depth_age_s = np.maximum(0.0, t - depth.last_t) if len(depth) else np.zeros(n)
     sigma_depth = frame_sigma_m(dep[:, 1], dep[:, 2], ed[:, 0], depth_age_s, cal.sigmas.depth_m)
     words = np.array((*SOURCE_WORDS, ""), dtype=object)  # "": no depth at that frame
     depth_source = words[np.where(np.isfinite(dep[:, 3]), dep[:, 3], len(SOURCE_WORDS)).astype(int)]

@@ -22,8 +22,9 @@ def run(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("sim", help="generate a synthetic session (video, telemetry, truth) from a scenario")
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help)
     p.add_argument("scenario", help="scenario TOML file (see sim_fixtures/scenarios/)")
     p.add_argument("--out", required=True, help="session directory to write")
     p.add_argument("--no-video", action="store_true",

@@ -241,6 +241,7 @@ def test_old_blueos_settings_say_what_to_write(tmp_path):
     with pytest.raises(ConfigError, match="used only with depth_source"):
         cfg('depth_mavlink = "tcp:127.0.0.1:5760"\n')
     assert autopilot_prefix("mavlink/1/1/") == (1, 1)
+    assert autopilot_prefix("rov1/mavlink/2/1") == (2, 1)  # under a vehicle's Zenoh namespace (a fleet)
 
 
 def test_a_recording_keeps_each_depth_s_source_and_sigma_for_process(tmp_path):

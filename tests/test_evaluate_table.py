@@ -60,7 +60,7 @@ def test_errors_against_geodesic_offsets():
 
 def run_evaluate(*argv):
     p = argparse.ArgumentParser()
-    evaluate.register(p.add_subparsers())
+    evaluate.register(p.add_subparsers(), "evaluate")
     args = p.parse_args(["evaluate", *argv])
     return args.func(args)
 

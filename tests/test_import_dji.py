@@ -18,10 +18,11 @@ from test_import_flight import write_video
 from groundstation.cli import main
 from groundstation.offline.import_flight import import_flight
 from groundstation.session import SessionError
-from groundstation.session.dji import read_dji_csv, read_srt, srt_clock
+from groundstation.session.dji import read_dji_csv, read_srt, srt_clock, srt_video_start
 from groundstation.session.read import load_session
 from groundstation.session.tlog import read_tlog
 from localizer.attitude import R_ned_from_mount_orientation, euler_to_R
+from localizer.geodesy import geodetic_to_ned
 
 FIXTURES = Path(__file__).parent / "fixtures" / "dji"
 T0_UNIX = 1684067696.789  # 2023-05-14T12:34:56.789Z (`date -u -d 2023-05-14T12:34:56Z +%s` = 1684067696)
@@ -243,10 +244,6 @@ def test_a_real_cameras_srt_excerpt():
 
 
 def test_srt_errors_and_a_given_zone(tmp_path):
-    old = tmp_path / "old.SRT"
-    old.write_text("1\n00:00:00,000 --> 00:00:01,000\n2022.06.21 16:06:17\nGPS(36.6146,-6.1120,0.0M) BAROMETER:0.3M\n")
-    with pytest.raises(SessionError, match=r"old.SRT:1: the older SRT form"):
-        read_srt(old)
     bad = tmp_path / "bad.SRT"
     write_srt(bad, frames=3)
     bad.write_text(bad.read_text().replace("[latitude: ", "[latitude: x", 1))
@@ -271,3 +268,232 @@ def test_a_hover_fits_many_zones_and_is_refused(tmp_path):
     write_srt(srt, offset_s=3600.0, at_s=5400.0, where=lambda t: (LAT0, LON0, 20.0, *truth(t)[3:]))
     with pytest.raises(SessionError, match=r"h.SRT: its track fits the record at UTC.* alike: give --srt-utc-offset-h"):
         srt_clock(read_srt(srt), read_dji_csv(csv_path))
+
+
+# Airdata's CSV export: its header as Airdata writes it (verri/m30ttools README; the ``(feet)`` variant in the
+# AirDataUAV package's README and MickWest/sitrec's notes), with the leading spaces some of its names carry.
+AIRDATA = ["time(millisecond)", "datetime(utc)", "latitude", "longitude", "height_above_takeoff(feet)",
+           "height_above_ground_at_drone_location(feet)", "ground_elevation_at_drone_location(feet)",
+           "altitude_above_seaLevel(feet)", "height_sonar(feet)", "speed(mph)", "distance(feet)", "mileage(feet)",
+           "satellites", "gpslevel", "voltage(v)", "max_altitude(feet)", "max_ascent(feet)", "max_speed(mph)",
+           "max_distance(feet)", " xSpeed(mph)", " ySpeed(mph)", " zSpeed(mph)", " compass_heading(degrees)",
+           " pitch(degrees)", " roll(degrees)", "isPhoto", "isVideo", "rc_elevator", "rc_aileron", "rc_throttle",
+           "rc_rudder", "rc_elevator(percent)", "rc_aileron(percent)", "rc_throttle(percent)", "rc_rudder(percent)",
+           "gimbal_heading(degrees)", "gimbal_pitch(degrees)", "gimbal_roll(degrees)", "battery_percent",
+           "voltageCell1", "voltageCell2", "voltageCell3", "voltageCell4", "voltageCell5", "voltageCell6",
+           "current(A)", "battery_temperature(f)", "altitude(feet)", "ascent(feet)", "flycStateRaw", "flycState",
+           "message"]
+# Four rows 100 ms apart, 15.6 s into the record; the true UTC of the first 12:34:56.750, so datetime(utc) (whole
+# seconds) reads :56, :56, :56, :57. Heading West (270), the gimbal looking North (0) 30° down; then heading 350,
+# the gimbal at 10, straight down. The second position 0.0001° north and east of the first.
+AIRDATA_ROWS = [
+    {"time(millisecond)": "15600", "datetime(utc)": "2023-05-14 12:34:56", "latitude": "43.5", "longitude": "16.4",
+     "height_above_takeoff(feet)": "100", "altitude_above_seaLevel(feet)": "1000", " compass_heading(degrees)": "270",
+     " pitch(degrees)": "0", " roll(degrees)": "0", "gimbal_heading(degrees)": "0", "gimbal_pitch(degrees)": "-30",
+     "gimbal_roll(degrees)": "0"},
+    {"time(millisecond)": "15700", "datetime(utc)": "2023-05-14 12:34:56", "latitude": "43.5001",
+     "longitude": "16.4001"},
+    {"time(millisecond)": "15800", "datetime(utc)": "2023-05-14 12:34:56", " compass_heading(degrees)": "350",
+     "gimbal_heading(degrees)": "10", "gimbal_pitch(degrees)": "-90"},
+    {"time(millisecond)": "15900", "datetime(utc)": "2023-05-14 12:34:57"},
+]
+
+
+def write_airdata(path: Path, headers=AIRDATA, rows=AIRDATA_ROWS, edit=None) -> None:
+    """Airdata's layout: each row the one before with ``rows``' cells changed (``edit(k, row)`` may change row
+    ``k``'s, that row's only)."""
+    lines, row = [",".join(headers)], {h: "0" for h in headers}
+    for k, change in enumerate(rows):
+        row = row | change
+        out = dict(row)
+        if edit:
+            edit(k, out)
+        lines.append(",".join(out.get(h, "0") for h in headers))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_airdata_layout_hand_worked(tmp_path, calibration, depth):
+    path = tmp_path / "May-14th-2023-12-34PM-Flight-Airdata.csv"
+    write_airdata(path)
+    flight = read_dji_csv(path)
+    # time(millisecond) 15600..15900 against :56 :56 :56 :57 → 15.6 s into the record is 12:34:56.70–.80
+    t56 = 1684067696.0  # 2023-05-14T12:34:56Z
+    assert flight.unix_minus_boot_s == pytest.approx(t56 + 0.75, abs=1e-6)
+    assert flight.unix_minus_boot_sigma_s == pytest.approx(0.05, abs=1e-6)
+    assert flight.att[:, 0] == pytest.approx([0.0, 0.1, 0.2, 0.3], abs=1e-6)  # (UNIX-time arithmetic: 0.2 µs)
+    assert flight.pos[0, 1:] == pytest.approx([43.5, 16.4, 304.8, 30.48])  # 1000 ft AMSL, 100 ft above take-off
+    # 0.0001° of latitude and longitude at 43.5° N: 11.1 m north (a meridian degree 111.1 km there), 8.1 m east
+    # (a parallel degree 80.8 km: 111.3 km · cos 43.5°)
+    n, e, _ = geodetic_to_ned(flight.pos[1, 1], flight.pos[1, 2], 0.0, 43.5, 16.4, 0.0)
+    assert (float(n), float(e)) == pytest.approx((11.11, 8.08), abs=0.02)
+    # heading 270 → yaw −90; gimbal North, relative to the nose: 0 − 270 → +90; heading 350 → −10, gimbal 10 → +20
+    assert np.degrees(flight.att[:, 3]) == pytest.approx([-90.0, -90.0, -10.0, -10.0])
+    assert flight.mnt[:, 3] == pytest.approx([90.0, 90.0, 20.0, 20.0]) and flight.mnt[:, 4] == pytest.approx(
+        [0.0, 0.0, 10.0, 10.0])
+    import_flight(None, None, depth, calibration, tmp_path / "s", dji_csv=path)
+    msgs = read_tlog(tmp_path / "s" / "uav.tlog")
+    att = [m for _, m in msgs if m.get_type() == "ATTITUDE"]
+    assert euler_to_R(att[0].roll, att[0].pitch, att[0].yaw) @ [1, 0, 0] == pytest.approx([0, -1, 0], abs=1e-6)
+    mounts = [m for _, m in msgs if m.get_type() == "MOUNT_ORIENTATION"]
+    axis = R_ned_from_mount_orientation(mounts[0].roll, mounts[0].pitch, mounts[0].yaw, att[0].yaw) @ [1, 0, 0]
+    assert axis == pytest.approx([math.cos(math.radians(30)), 0, 0.5], abs=1e-6)  # North, 30° down
+    axis = R_ned_from_mount_orientation(mounts[2].roll, mounts[2].pitch, mounts[2].yaw, att[2].yaw) @ [1, 0, 0]
+    assert axis == pytest.approx([0, 0, 1], abs=1e-6)
+    gpi = next(m for _, m in msgs if m.get_type() == "GLOBAL_POSITION_INT")
+    assert (gpi.alt, gpi.relative_alt) == (304800, 30480)
+
+
+def test_airdata_in_meters_and_a_clock_with_fractions(tmp_path):
+    path = tmp_path / "m.csv"
+    headers = [h.replace("(feet)", "(meters)") for h in AIRDATA]
+    rows = [{k.replace("(feet)", "(meters)"): v for k, v in r.items()} for r in AIRDATA_ROWS]
+    utc = ["2023-05-14 12:34:56.75", "2023-05-14 12:34:56.85", "2023-05-14 12:34:56.95", "2023-05-14 12:34:57.05"]
+    write_airdata(path, headers, rows, edit=lambda k, row: row.update({"datetime(utc)": utc[k]}))
+    flight = read_dji_csv(path)
+    assert flight.pos[0, 3:] == pytest.approx([1000.0, 100.0])
+    assert flight.unix_minus_boot_s == pytest.approx(1684067696.75, abs=1e-6) and flight.unix_minus_boot_sigma_s < 1e-6
+
+
+@pytest.mark.parametrize("change, message", [
+    (("height_above_takeoff(feet)", "height_above_takeoff"), r"column 'height_above_takeoff': no unit"),
+    (("altitude_above_seaLevel(feet)", "altitude_above_seaLevel(yards)"),
+     r"column 'altitude_above_seaLevel\(yards\)': unknown unit 'yards'"),
+    ((" pitch(degrees)", " pitch(radians)"), r"column 'pitch\(radians\)': unknown unit 'radians'"),
+    (("gimbal_heading(degrees)", "gimbal_yaw(degrees)"), r"no column gimbal_heading \(Airdata's CSV export has it\)"),
+])
+def test_airdata_columns_wrong_or_missing_are_errors_naming_them(tmp_path, change, message):
+    path = tmp_path / "a.csv"
+    headers = [change[1] if h == change[0] else h for h in AIRDATA]
+    write_airdata(path, headers, [{change[1] if k == change[0] else k: v for k, v in r.items()} for r in AIRDATA_ROWS])
+    with pytest.raises(SessionError, match=rf"a.csv: {message}"):
+        read_dji_csv(path)
+
+
+def test_airdata_bad_cells_are_errors_and_empty_rows_dropped(tmp_path):
+    path = tmp_path / "a.csv"
+    write_airdata(path, edit=lambda k, row: row.update({" pitch(degrees)": "abc"} if k == 2 else {}))
+    with pytest.raises(SessionError, match=r"a.csv:4: pitch\(degrees\) = 'abc': not a number"):
+        read_dji_csv(path)
+    write_airdata(path, edit=lambda k, row: row.update({"datetime(utc)": "14/05/2023"} if k == 1 else {}))
+    with pytest.raises(SessionError, match=r"a.csv:3: datetime\(utc\) = '14/05/2023': not a date and time"):
+        read_dji_csv(path)
+    # 12:34:58 at 15.9 s: ≥ 12:34:58 − 15.9 s = 12:34:42.1 at time 0, while 12:34:56 at 15.8 s puts it before :41.2
+    write_airdata(path, edit=lambda k, row: row.update({"datetime(utc)": "2023-05-14 12:34:58"} if k == 3 else {}))
+    with pytest.raises(SessionError, match=r"a.csv:5: datetime\(utc\) and time\(millisecond\) disagree with the "
+                                           r"other rows' by 0.900 s beyond its 1 s resolution"):
+        read_dji_csv(path)
+    write_airdata(path, edit=lambda k, row: row.update({"latitude": "nan", "gimbal_roll(degrees)": ""} if k == 1 else {}))
+    flight = read_dji_csv(path)
+    assert flight.att[:, 0] == pytest.approx([0.0, 0.2, 0.3]) and len(flight.warnings) == 1
+    assert "1 rows with an empty or nan value dropped (the first at line 3)" in flight.warnings[0]
+    write_airdata(path, edit=lambda k, row: row.update({"datetime(utc)": ""}))
+    with pytest.raises(SessionError, match=r"a.csv: no row with both datetime\(utc\) and time\(millisecond\)"):
+        read_dji_csv(path)
+
+
+# DJI's older SRT (DJI_SRT_Parser's samples/sample2.SRT, MIT: a Phantom/Mavic at Uluru, 131.17° E 25.21° S, so
+# GPS(longitude, latitude, ...)); its first three subtitles.
+OLD_SRT = """1
+00:00:01,000 --> 00:00:02,000
+HOME(131.1660,-25.2088) 2017.07.29 15:18:50
+GPS(131.1660,-25.2088,14) BAROMETER:0.0
+ISO:100 Shutter:60 EV: Fnum:2.2 
+
+2
+00:00:02,000 --> 00:00:03,000
+HOME(131.1660,-25.2088) 2017.07.29 15:18:51
+GPS(131.1660,-25.2088,14) BAROMETER:0.0
+ISO:100 Shutter:60 EV: Fnum:2.2 
+
+3
+00:00:03,000 --> 00:00:04,000
+HOME(131.1660,-25.2088) 2017.07.29 15:18:52
+GPS(131.1660,-25.2088,14) BAROMETER:0.0
+ISO:100 Shutter:60 EV: Fnum:2.2 
+"""
+
+
+def write_old_srt(path: Path, seconds: int = 60, offset_s: float = ZONE_H * 3600 + CAMERA_CLOCK_ERROR_S,
+                  at_s: float = VIDEO_AT_S, lon_first: bool = True, per_second: int = 1, where=truth) -> None:
+    """DJI's older SRT: ``per_second`` subtitles a second, the camera's local clock ``offset_s`` ahead of UTC in
+    whole seconds (truncated), GPS with 4 decimals as the samples have them, longitude first or latitude first."""
+    out = []
+    for i in range(seconds * per_second):
+        v = i / per_second
+        lat, lon = (float(x) for x in where(at_s + v)[:2])
+        a, b = (datetime.fromtimestamp(round(x * 1000) / 1000, UTC).strftime("%H:%M:%S,%f")[:-3]
+                for x in (v, v + 1 / per_second))
+        clock = datetime.fromtimestamp(math.floor(T0_UNIX + at_s + v + offset_s), UTC).strftime("%Y.%m.%d %H:%M:%S")
+        pair = f"{lon:.4f},{lat:.4f}" if lon_first else f"{lat:.4f},{lon:.4f}"
+        out.append(f"{i + 1}\n{a} --> {b}\nHOME({pair}) {clock}\nGPS({pair},15) BAROMETER:20.0\n"
+                   "ISO:100 Shutter:60 EV: Fnum:2.2 \n")
+    path.write_text("\n".join(out))
+
+
+def test_the_older_srt_form_is_read_as_written(tmp_path):
+    path = tmp_path / "DJI_0001.SRT"
+    path.write_text(OLD_SRT)
+    track = read_srt(path)
+    assert track.form == "older" and list(track.frame) == [0, 1, 2] and list(track.t_video_s) == [1.0, 2.0, 3.0]
+    assert track.t_camera_s[0] == 1501341530.0  # `date -u -d '2017-07-29 15:18:50' +%s`
+    assert (track.lat_deg[0], track.lon_deg[0]) == (131.166, -25.2088)  # as written: the order is not known yet
+    assert np.isnan(track.rel_alt_m).all() and np.isnan(track.gimbal_ypr_deg).all()
+    path.write_text(OLD_SRT.replace("GPS(131.1660,-25.2088,14)", "GPS(131.1660,x,14)", 1))
+    with pytest.raises(SessionError, match=r"DJI_0001.SRT:1: GPS\(131.1660,x,...\): 'x' is not a number"):
+        read_srt(path)
+    path.write_text(OLD_SRT.replace(" 2017.07.29 15:18:51", ""))
+    with pytest.raises(SessionError, match=r"DJI_0001.SRT:7: the older SRT form \(GPS\(...\)\) without the camera's"):
+        read_srt(path)
+    modern = tmp_path / "m.SRT"
+    write_srt(modern, frames=2)
+    path.write_text(modern.read_text() + "\n" + OLD_SRT.replace("1\n00:00:01", "3\n00:00:01"))
+    with pytest.raises(SessionError, match=r"DJI_0001.SRT:\d+: a subtitle of the older form among the other form's"):
+        read_srt(path)
+
+
+@pytest.mark.parametrize("lon_first, per_second", [(True, 1), (False, 1), (True, 30)])
+def test_the_older_srt_forms_order_and_zone_found_from_the_track(tmp_path, lon_first, per_second):
+    """Either order is found (the other puts the flight 3700 km away); the whole-second clock's zone and its
+    0.3 s error found from the track, so the video's start lands within a frame of the truth."""
+    csv_path, srt = tmp_path / "f.csv", tmp_path / "old.SRT"
+    write_dji_csv(csv_path, np.arange(0, 1200) / 10.0)
+    write_old_srt(srt, lon_first=lon_first, per_second=per_second)
+    track, flight = read_srt(srt), read_dji_csv(csv_path)
+    clock = srt_clock(track, flight)
+    start, _ = srt_video_start(track, clock)
+    print(f"\norder {clock.gps_order} fits {clock.order_residuals_m} m; zone {clock.offset_s - 7200:+.2f} s, "
+          f"residual {clock.residual_m:.2f} m, start {start - T0_UNIX - VIDEO_AT_S:+.4f} s")
+    assert clock.gps_order == ("lon,lat" if lon_first else "lat,lon")
+    right, wrong = sorted(clock.order_residuals_m)
+    assert right < 6.0 and wrong > 1e6
+    assert clock.found and round(clock.offset_s / 900) * 900 == 7200  # UTC+2
+    assert start == pytest.approx(T0_UNIX + VIDEO_AT_S, abs=1 / FPS)
+
+
+def test_an_older_srt_that_fits_either_order_asks_for_it(tmp_path, calibration, depth, capsys):
+    """A hover on the line latitude = longitude: GPS(a, a) reads alike both ways."""
+    csv_path, srt, video = tmp_path / "hover.csv", tmp_path / "h.SRT", tmp_path / "v.MP4"
+    write_dji_csv(csv_path, np.arange(0, 1200) / 10.0, edit=lambda k, row: row.update(
+        {"OSD.latitude": str(LAT0), "OSD.longitude": str(LAT0)}))
+    write_old_srt(srt, seconds=10, where=lambda t: (LAT0, LAT0))
+    flight = read_dji_csv(csv_path)
+    with pytest.raises(SessionError, match=r"h.SRT: the older SRT form's GPS\(...\) fits the flight record in either "
+                                           r"order \(as lat,lon 0.0 m, as lon,lat 0.0 m\): say which, --srt-gps-order"):
+        srt_clock(read_srt(srt), flight, utc_offset_h=2.0)
+    clock = srt_clock(read_srt(srt), flight, utc_offset_h=2.0, order="lon,lat")
+    assert clock.gps_order == "lon,lat" and not clock.found and clock.offset_s == 7200.0
+    with pytest.raises(SessionError, match=r"h.SRT: the older SRT form's GPS\(...\) read as lat,lon does not fit"):
+        srt_clock(read_srt(srt), read_dji_csv(tmp_path / "hover.csv"), utc_offset_h=5.0, order="lat,lon")
+    with pytest.raises(SessionError, match=r"options: --srt-utc-offset-h and --srt-gps-order are the --srt's"):
+        import_flight(None, None, depth, calibration, tmp_path / "u", dji_csv=csv_path, srt_gps_order="lat,lon")
+    write_video(video, frames=FRAMES, fps=FPS, size=(320, 240))
+    args = ["import", "--dji-csv", str(csv_path), "--srt", str(srt), "--video", str(video), "--depth", str(depth),
+            "--calibration", str(calibration), "--srt-utc-offset-h", "2", "--quiet"]
+    assert main(args + ["--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--srt-gps-order" in err[0]
+    assert main(args + ["--srt-gps-order", "lat,lon", "--out", str(tmp_path / "t")]) == 0
+    report = json.loads((tmp_path / "t" / "import.json").read_text())
+    assert (report["srt_form"], report["srt_gps_order"], report["srt_utc_offset_found"]) == ("older", "lat,lon", False)
+    # the first subtitle's clock: T0 + 40 s + 2 h 0.3 s, truncated to 14:35:37 local; minus 2 h and its start (0 s)
+    assert report["video_start_unix"] == pytest.approx(math.floor(T0_UNIX + VIDEO_AT_S + 7200.3) - 7200, abs=1e-6)

@@ -53,7 +53,7 @@ def test_cli_writes_session(tmp_path):
     scenario = tmp_path / "tiny.toml"
     scenario.write_text('name = "tiny"\nduration_s = 0.5\nfps = 10.0\n[camera]\nwidth = 96\nheight = 64\n')
     code = ("import argparse, sys; from sim_fixtures import cli; p = argparse.ArgumentParser(); "
-            "cli.register(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))")
+            "cli.register(p.add_subparsers(), 'sim'); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))")
     out = subprocess.run([sys.executable, "-c", code, "sim", str(scenario), "--out", str(tmp_path / "s")],
                          capture_output=True, text=True, check=False)
     assert out.returncode == 0, out.stderr

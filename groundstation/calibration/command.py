@@ -259,9 +259,10 @@ _AIR_HELP = ("Calibrate in air: the camera looks through air to the water surfac
              "behind a port): refraction would be folded into the calibration and applied twice.")
 
 
-def register(subparsers) -> None:
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(
-        "calibrate", help="camera calibration: from board images, or imported from OpenCV/Kalibr/ROS",
+        name, help=help,
         description="The camera's [camera] table for session.toml. " + _AIR_HELP,
     )
     sub = p.add_subparsers(dest="calibrate_command", required=True)

@@ -178,9 +178,10 @@ def _chunk(text: str) -> str:
     return text
 
 
-def register(subparsers) -> None:
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(
-        "fuse", help="several drones over one UUV: their fixes fused, one GPS_INPUT to the UUV",
+        name, help=help,
         description="Subscribes to every drone's fixes of one UUV (each drone's skyfix run with --fix-key "
                     "skyfix/uuv/ID/drone/NAME/fix), aligns them in time, rejects a drone that disagrees beyond its "
                     "sigmas, fuses the rest by their covariances, publishes the fused fixes on skyfix/uuv/ID/fix and "

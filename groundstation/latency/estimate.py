@@ -48,7 +48,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation as Rot
 
 from groundstation.latency.video_motion import Rotation, RotationMeter
 from groundstation.session.read import SessionError, load_session
@@ -132,6 +131,8 @@ class AttitudeTrack:
 
     def __init__(self, t: np.ndarray, R_ned_from_cv: np.ndarray):
         """Samples at increasing times ``t`` (s) of the camera's attitude, rotation matrices (N, 3, 3)."""
+        from scipy.spatial.transform import Rotation as Rot  # here: scipy takes ~0.3 s to import
+
         self.t = np.asarray(t, dtype=float)
         q = Rot.from_matrix(R_ned_from_cv).as_quat() if len(self.t) else np.empty((0, 4))
         # each sample in the hemisphere of the one before, so that neighbours interpolate the short way
@@ -497,8 +498,9 @@ def estimate_latency(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("estimate-latency", help="a recording's video-to-telemetry time offset, from image motion",
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help,
                               description=__doc__.split("\n\n")[0])
     p.add_argument("session", help="session directory (format v1) with video")
     p.add_argument("--search-ms", type=float, default=300.0, help="largest offset looked for, either way")

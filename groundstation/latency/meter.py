@@ -207,8 +207,9 @@ def latency(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("latency", help="measure the camera's glass-to-first-packet latency with a time code",
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help,
                               description=__doc__.split("\n\n")[0])
     p.add_argument("--video", required=True, help="the UAV's video, as for skyfix run")
     p.add_argument("--host", default="127.0.0.1", help="address the time code page is served on")

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Annotated, Literal, get_args, get_origin
 
 from annotated_types import Ge, Gt
-from pydantic import Field, model_validator
+from pydantic import Field, StringConstraints, model_validator
 from pydantic.dataclasses import dataclass
 
 from groundstation.live.sources.depth_ardusub import autopilot_prefix
@@ -35,6 +35,7 @@ from localizer.contract import (
     NonNegative,
     Number,
     Text,
+    Vector4,
     validate,
     within,
 )
@@ -60,35 +61,10 @@ DirPath = Annotated[Text, _RelativeToFile("DIR")]
 
 
 @dataclass(frozen=True, kw_only=True, config=CLOSED)
-class RunConfig:
-    """The options of ``skyfix run`` (flags and config file keys)."""
+class UuvOptions:
+    """What ``skyfix run`` needs of each UUV: its depth, its own position estimate, its GPS_INPUT link. The flags and
+    keys of one UUV, and the keys of each ``[[uuv]]`` table (:class:`UuvConfig`)."""
 
-    calibration: FilePath = Field(description="TOML with the [camera], [mount], [water], [tracker] tables of "
-                                  "session.toml v1 (and optionally [uncertainty], [timing])")
-    mavlink: Text = Field("udpin:0.0.0.0:14550", description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
-                          "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)")
-    mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
-    video: Text | None = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
-                               "a file (anything FFmpeg opens)")
-    video_latency_ms: within(0, 2000) | Literal["auto"] = Field(
-        0.0, description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
-        "'auto': estimated from the image's motion against the camera attitude")
-    height_from_size: Literal["auto", "check", "off"] = Field(
-        "check", description="the camera's height above the water from the UUV's size in the video ([uuv]): check "
-        "(estimate it, show it, warn when the configured height disagrees), auto (also hand it to the height's "
-        "fusion once sure), off")
-    no_request_rates: Flag = Field(False, description="do not ask the autopilot for the telemetry rates skyfix needs "
-                                   "(a shared link)")
-    telemetry_wait_ms: within(0, 2000) = Field(300.0, description="longest wait of a frame for the attitude sample "
-                                               "after it (slow radios need ~300)")
-    require_inputs: Flag = Field(False, description="exit 2 when the UAV's MAVLink, the depth or the video has sent "
-                                 "nothing 10 s after start (default: keep running and keep saying so)")
-    zenoh_connect: tuple[Text, ...] = Field((), description="Zenoh endpoint to connect to, e.g. "
-                                            "tcp/192.168.2.2:7447 (repeatable)")
-    zenoh_listen: tuple[Text, ...] = Field((), description="Zenoh endpoint to listen on (repeatable)")
-    zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
-                                          "endpoints above are added to it")
-    zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
     depth_source: Literal["skyfix", "blueos", "mavlink"] = Field(
         "skyfix", description="the UUV's depth: skyfix JSON {t, depth_m} on --depth-key; blueos: ArduSub's depth "
         "sensor from BlueOS's mavlink-server on Zenoh (--depth-key mavlink/1/1); mavlink: ArduSub's over "
@@ -98,89 +74,21 @@ class RunConfig:
                             "there: mavlink/1/1)")
     depth_mavlink: Text | None = Field(None, description="with --depth-source mavlink: ArduSub's MAVLink, a pymavlink "
                                        "string (tcp:192.168.2.2:5777, udpin:0.0.0.0:14770, /dev/ttyUSB1,115200)")
-    uuv_max_vertical_speed_mps: Annotated[Number, Gt(0)] = Field(
-        BLUEROV2_MAX_VERTICAL_SPEED_MPS, description="the UUV's top vertical speed (a BlueROV2); a depth jumping "
-        "further is refused")
-    fix_key: Text = Field("skyfix/uuv/fix", description="Zenoh key the fixes are published on")
-    status_key: Text = Field("skyfix/status", description="Zenoh key of the 1 Hz health/status JSON")
-    alive_key: Text = Field("skyfix/alive", description="Zenoh liveliness token key")
     gps_input: Text | None = Field(None, description="the UUV autopilot for GPS_INPUT: a pymavlink string "
                                    "(udpout:192.168.2.2:14550) or zenoh:mavlink/in (BlueOS)")
-    gps_input_hz: Annotated[Number, Ge(5)] = Field(10.0, description="minimum GPS_INPUT rate (Hz; ArduPilot needs "
-                                                   "≥ 5); each new fix is also sent at once")
-    fix_max_age_ms: NonNegative = Field(500.0, description="an ok fix older than this is sent to the autopilot as "
-                                        "'no fix'")
-    tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
-                                       "template matching), kcf, csrt; mil (the paper's, never reports a loss: "
-                                       "refused with --gps-input)")
     gps_input_signing_key: FilePath | None = Field(None, description="sign GPS_INPUT (MAVLink 2) with the key in "
                                                    "this file: 32 bytes, or 64 hex digits")
-    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(MAX_SPEED_MPS["bluerov2"], description="safety gate: the "
-                                                        "UUV's top speed (a BlueROV2): fixes are judged against a track "
-                                                        "of the UUV that cannot move faster")
-    uuv_max_accel_mps2: Annotated[Number, Gt(0)] = Field(MAX_ACCEL_MPS2["bluerov2"], description="safety gate: the "
-                                                         "UUV's largest horizontal acceleration (a BlueROV2 at full "
-                                                         "thrust from rest, about 3 m/s²): a fix the track's UUV "
-                                                         "cannot reach is not sent")
-    uuv_water_accel_mps2: Annotated[Number, Ge(0)] = Field(WATER_ACCEL_MPS2, description="safety gate: the "
-                                                           "largest horizontal acceleration the water gives the UUV "
-                                                           "while ArduSub's horizontal thrusters are idle (read with "
-                                                           "depth_source blueos or mavlink); raise it in waves")
-    thruster_deadband_us: within(0, 400) = Field(DEADBAND_US, description="pulses within this of 1500 µs do not "
-                                                 "turn the UUV's thrusters (its ESCs' deadband)")
-    fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
-                                                      "accuracy is worse than this (m) is not sent as valid")
     uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
                                           "BlueOS publishes it (mavlink/1/1/GLOBAL_POSITION_INT): acquire the UUV "
                                           "near it without a selection")
     uuv_hint: Text | None = Field(None, description="LAT,LON (degrees) where to look for the UUV until its own "
                                   "estimate arrives")
-    uuv_prior_sigma_m: within(0.01, 1000) = Field(3.0, description="1-sigma (m) of the UUV's own estimate or hint "
-                                                   "(the search covers 3 sigma)")
-    select_history_s: within(0, 10) = Field(1.0, description="seconds of tracked frames held so a selection can "
-                                            "refer to a frame the operator saw")
-    control_prefix: Text = Field("skyfix/cmd", description="Zenoh key prefix of the operator commands "
-                                 "(<prefix>/select, release, acquire, status)")
-    ui: Text = Field("127.0.0.1:8080", description="HOST:PORT of the web page (video, target selection, map, "
-                     "health); beyond localhost (0.0.0.0:8080) it needs the token in the URL skyfix prints; port 0: "
-                     "any free port")
-    no_ui: Flag = Field(False, description="serve no web page")
-    ui_token: Text | None = Field(None, description="the web page's token (default: none on localhost, a random one "
-                                  "beyond it); given, every request needs it, on localhost too")
-    record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
-    duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
-    stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
-                                   "file at exit")
-
-    @model_validator(mode="after")
-    def _record_needs_pymavlink(self):
-        if self.record and self.mavlink_backend == "mavsdk":
-            raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
-        return self
 
     @model_validator(mode="after")
     def _signing_needs_a_mavlink_link(self):
         if self.gps_input_signing_key and (not self.gps_input or self.gps_input.startswith("zenoh:")):
             raise Invalid("gps_input_signing_key", self.gps_input_signing_key,
                           "signing needs a MAVLink --gps-input link (not zenoh:)")
-        return self
-
-    @model_validator(mode="after")
-    def _gps_input_needs_a_tracker_that_reports_a_loss(self):
-        if self.gps_input and self.tracker in WITHOUT_LOSS_SIGNAL:
-            raise Invalid("tracker", self.tracker, "this tracker never reports losing the UUV: not a source for "
-                          "GPS_INPUT (use default, kcf or csrt; mil is for offline comparisons)")
-        return self
-
-    @model_validator(mode="after")
-    def _ui_is_an_address(self):
-        for key, check in (("ui", parse_bind), ("ui_token", check_token)):
-            value = getattr(self, key)
-            if value is not None:
-                try:
-                    check(value)
-                except ValueError as e:
-                    raise Invalid(key, value, str(e)) from None
         return self
 
     @model_validator(mode="after")
@@ -214,6 +122,172 @@ class RunConfig:
             except ValueError as e:
                 raise Invalid("uuv_hint", self.uuv_hint, str(e).split(": ", 1)[1]) from None
         return self
+
+
+@dataclass(frozen=True, kw_only=True, config=CLOSED)
+class UuvConfig(UuvOptions):
+    """One ``[[uuv]]`` table: a UUV of several in one video (config file only). Its keys default to ones under
+    ``skyfix/uuv/{id}/``."""
+
+    id: Annotated[Text, StringConstraints(pattern=r"^[A-Za-z0-9_-]{1,32}$")] = Field(
+        description="the UUV's id: letters, digits, - and _ (its keys are skyfix/uuv/{id}/...)")
+    fix_key: Text | None = Field(None, description="Zenoh key of its fixes (default: skyfix/uuv/{id}/fix)")
+    status_key: Text | None = Field(None, description="Zenoh key of its 1 Hz status (default: skyfix/uuv/{id}/status)")
+    alive_key: Text | None = Field(None, description="its liveliness token (default: skyfix/uuv/{id}/alive)")
+    control_prefix: Text | None = Field(None, description="prefix of its operator commands (default: "
+                                        "skyfix/uuv/{id}/cmd)")
+    init_bbox: Vector4 | None = Field(None, description="x, y, w, h (pixels) of this UUV in the first frame; "
+                                      "without it, a selection or its own position estimate")
+
+    def __post_init__(self):
+        for name in ("fix", "status", "alive"):
+            if getattr(self, f"{name}_key") is None:
+                object.__setattr__(self, f"{name}_key", f"skyfix/uuv/{self.id}/{name}")
+        if self.control_prefix is None:
+            object.__setattr__(self, "control_prefix", f"skyfix/uuv/{self.id}/cmd")
+
+
+#: A UUV's keys of its own: two UUVs never share one (GPS_INPUT names no vehicle: two UUVs on one link would
+#: each take the other's position too).
+OWN_KEYS = ("depth_input_key", "depth_mavlink", "gps_input", "uuv_position_key", "fix_key", "status_key",
+            "alive_key", "control_prefix")
+
+
+@dataclass(frozen=True, kw_only=True, config=CLOSED)
+class RunConfig(UuvOptions):
+    """The options of ``skyfix run`` (flags and config file keys)."""
+
+    calibration: FilePath = Field(description="TOML with the [camera], [mount], [water], [tracker] tables of "
+                                  "session.toml v1 (and optionally [uncertainty], [timing])")
+    mavlink: Text = Field("udpin:0.0.0.0:14550", description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
+                          "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)")
+    mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
+    video: Text | None = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
+                               "a file (anything FFmpeg opens)")
+    video_latency_ms: within(0, 2000) | Literal["auto"] = Field(
+        0.0, description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
+        "'auto': estimated from the image's motion against the camera attitude")
+    height_from_size: Literal["auto", "check", "off"] = Field(
+        "check", description="the camera's height above the water from the UUV's size in the video ([uuv]): check "
+        "(estimate it, show it, warn when the configured height disagrees), auto (also hand it to the height's "
+        "fusion once sure), off")
+    no_request_rates: Flag = Field(False, description="do not ask the autopilot for the telemetry rates skyfix needs "
+                                   "(a shared link)")
+    telemetry_wait_ms: within(0, 2000) = Field(300.0, description="longest wait of a frame for the attitude sample "
+                                               "after it (slow radios need ~300)")
+    require_inputs: Flag = Field(False, description="exit 2 when the UAV's MAVLink, the depth or the video has sent "
+                                 "nothing 10 s after start (default: keep running and keep saying so)")
+    zenoh_connect: tuple[Text, ...] = Field((), description="Zenoh endpoint to connect to, e.g. "
+                                            "tcp/192.168.2.2:7447 (repeatable)")
+    zenoh_listen: tuple[Text, ...] = Field((), description="Zenoh endpoint to listen on (repeatable)")
+    zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
+                                          "endpoints above are added to it")
+    zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
+    uuv_max_vertical_speed_mps: Annotated[Number, Gt(0)] = Field(
+        BLUEROV2_MAX_VERTICAL_SPEED_MPS, description="the UUV's top vertical speed (a BlueROV2); a depth jumping "
+        "further is refused")
+    fix_key: Text = Field("skyfix/uuv/fix", description="Zenoh key the fixes are published on")
+    status_key: Text = Field("skyfix/status", description="Zenoh key of the 1 Hz health/status JSON")
+    alive_key: Text = Field("skyfix/alive", description="Zenoh liveliness token key")
+    gps_input_hz: Annotated[Number, Ge(5)] = Field(10.0, description="minimum GPS_INPUT rate (Hz; ArduPilot needs "
+                                                   "≥ 5); each new fix is also sent at once")
+    fix_max_age_ms: NonNegative = Field(500.0, description="an ok fix older than this is sent to the autopilot as "
+                                        "'no fix'")
+    tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
+                                       "template matching), kcf, csrt; mil (the paper's, never reports a loss: "
+                                       "refused with --gps-input)")
+    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(MAX_SPEED_MPS["bluerov2"], description="safety gate: the "
+                                                        "UUV's top speed (a BlueROV2): fixes are judged against a track "
+                                                        "of the UUV that cannot move faster")
+    uuv_max_accel_mps2: Annotated[Number, Gt(0)] = Field(MAX_ACCEL_MPS2["bluerov2"], description="safety gate: the "
+                                                         "UUV's largest horizontal acceleration (a BlueROV2 at full "
+                                                         "thrust from rest, about 3 m/s²): a fix the track's UUV "
+                                                         "cannot reach is not sent")
+    uuv_water_accel_mps2: Annotated[Number, Ge(0)] = Field(WATER_ACCEL_MPS2, description="safety gate: the "
+                                                           "largest horizontal acceleration the water gives the UUV "
+                                                           "while ArduSub's horizontal thrusters are idle (read with "
+                                                           "depth_source blueos or mavlink); raise it in waves")
+    thruster_deadband_us: within(0, 400) = Field(DEADBAND_US, description="pulses within this of 1500 µs do not "
+                                                 "turn the UUV's thrusters (its ESCs' deadband)")
+    fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
+                                                      "accuracy is worse than this (m) is not sent as valid")
+    uuv_prior_sigma_m: within(0.01, 1000) = Field(3.0, description="1-sigma (m) of the UUV's own estimate or hint "
+                                                   "(the search covers 3 sigma)")
+    select_history_s: within(0, 10) = Field(1.0, description="seconds of tracked frames held so a selection can "
+                                            "refer to a frame the operator saw")
+    control_prefix: Text = Field("skyfix/cmd", description="Zenoh key prefix of the operator commands "
+                                 "(<prefix>/select, release, acquire, status)")
+    ui: Text = Field("127.0.0.1:8080", description="HOST:PORT of the web page (video, target selection, map, "
+                     "health); beyond localhost (0.0.0.0:8080) it needs the token in the URL skyfix prints; port 0: "
+                     "any free port")
+    no_ui: Flag = Field(False, description="serve no web page")
+    ui_token: Text | None = Field(None, description="the web page's token (default: none on localhost, a random one "
+                                  "beyond it); given, every request needs it, on localhost too")
+    record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
+    duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
+    stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
+                                   "file at exit")
+    uuv: tuple[UuvConfig, ...] = Field((), description="several UUVs in one video, one [[uuv]] table each (config "
+                                       "file only); the UUV's own options above are then set in each table")
+
+    @model_validator(mode="after")
+    def _one_uuv_or_tables(self):
+        if not self.uuv:
+            return self
+        single = {f: v for f, v in _uuv_defaults().items() if getattr(self, f) != v}
+        if single:
+            name = next(iter(single))
+            raise Invalid(name, getattr(self, name), "set per UUV, in each [[uuv]] table, when there are several")
+        if self.record:
+            raise Invalid("record", self.record, "a run of several [[uuv]] is not recorded yet (the session format "
+                          "holds them; the recorder writes one UUV)")
+        for key in ("id", *OWN_KEYS):
+            seen = {}
+            for i, u in enumerate(self.uuv):
+                value = getattr(u, key)
+                if value is not None and value in seen:
+                    raise Invalid(f"uuv[{i}].{key}", value, f"also uuv[{seen[value]}]'s ({self.uuv[seen[value]].id}): "
+                                  "each UUV has its own")
+                seen[value] = i
+        return self
+
+    @property
+    def uuvs(self) -> tuple[UuvConfig, ...]:
+        """The UUVs: the ``[[uuv]]`` tables, or the one UUV the flags describe (id ``uuv1``)."""
+        if self.uuv:
+            return self.uuv
+        own = {f: getattr(self, f) for f in _uuv_defaults()}
+        return (UuvConfig(id="uuv1", **own),)
+
+    @model_validator(mode="after")
+    def _record_needs_pymavlink(self):
+        if self.record and self.mavlink_backend == "mavsdk":
+            raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
+        return self
+
+    @model_validator(mode="after")
+    def _gps_input_needs_a_tracker_that_reports_a_loss(self):
+        if self.gps_input and self.tracker in WITHOUT_LOSS_SIGNAL:
+            raise Invalid("tracker", self.tracker, "this tracker never reports losing the UUV: not a source for "
+                          "GPS_INPUT (use default, kcf or csrt; mil is for offline comparisons)")
+        return self
+
+    @model_validator(mode="after")
+    def _ui_is_an_address(self):
+        for key, check in (("ui", parse_bind), ("ui_token", check_token)):
+            value = getattr(self, key)
+            if value is not None:
+                try:
+                    check(value)
+                except ValueError as e:
+                    raise Invalid(key, value, str(e)) from None
+        return self
+
+def _uuv_defaults() -> dict:
+    """The top-level options a UUV of its own has, with their defaults."""
+    fields = RunConfig.__pydantic_fields__
+    return {name: fields[name].default for name in (*UuvOptions.__pydantic_fields__, "fix_key", "status_key",
+                                                    "alive_key", "control_prefix")}
 
 
 def _base(tp):
@@ -276,6 +350,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     options.add_argument("--config", metavar="FILE", help="TOML file of run options, keys as the flags' names with "
                          "underscores (deploy/field.toml)")
     for name, info in RunConfig.__pydantic_fields__.items():
+        if name == "uuv":  # tables: the config file's [[uuv]]
+            continue
         kind, choices = _base(info.annotation)
         text = info.description
         if not info.is_required() and info.default not in (None, False, ()):
@@ -307,10 +383,12 @@ def read_toml(path) -> dict:
 def read_config_file(path: str) -> dict:
     """The options a config TOML sets (checked in :func:`run_config`), relative paths resolved against its folder."""
     data = read_toml(path)
-    for key, value in data.items():
-        if key in RunConfig.__pydantic_fields__ and _path_marker(key) and isinstance(value, str) \
-                and not Path(value).is_absolute():
-            data[key] = str(Path(path).parent / value)
+    tables = data.get("uuv") if isinstance(data.get("uuv"), list) else []
+    for table in [data, *(t for t in tables if isinstance(t, dict))]:
+        for key, value in table.items():
+            if key in RunConfig.__pydantic_fields__ and _path_marker(key) and isinstance(value, str) \
+                    and not Path(value).is_absolute():
+                table[key] = str(Path(path).parent / value)
     return data
 
 

@@ -141,7 +141,9 @@ def _status(session, key: str, args) -> int:
             return 0
 
 
-def register(subparsers) -> None:
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` (status, select, release or acquire) with its one-line ``help`` (both from
+    :data:`groundstation.cli.COMMANDS`)."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT",
                         help="Zenoh endpoint of the service (or a router), e.g. tcp/192.168.2.1:7447 (repeatable)")
@@ -149,17 +151,19 @@ def register(subparsers) -> None:
     common.add_argument("--prefix", default="skyfix/cmd", help="the service's --control-prefix (default skyfix/cmd)")
     common.add_argument("--timeout-s", type=float, default=3.0, help="how long to wait for the answer")
     common.set_defaults(func=run)
-    p = subparsers.add_parser("status", parents=[common], help="the live service's status, once or --watch",
-                              description=__doc__.split("\n\n")[0])
-    p.add_argument("--watch", action="store_true", help="ask again every --interval-s until Ctrl-C")
-    p.add_argument("--interval-s", type=float, default=1.0)
-    p.add_argument("--json", action="store_true", help="print the whole status as one JSON line")
-    p = subparsers.add_parser("select", parents=[common], help="select the UUV in the live service (box or click)")
-    what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--box", type=lambda s: _pair(s, 4, "X,Y,W,H"), metavar="X,Y,W,H",
-                      help="box around the UUV, pixels of the distorted frame")
-    what.add_argument("--point", type=lambda s: _pair(s, 2, "U,V"), metavar="U,V", help="a click on the UUV")
-    p.add_argument("--frame", type=int, help="the frame the box or click belongs to (default: the newest)")
-    subparsers.add_parser("release", parents=[common], help="let go of the target: no fix until a new selection")
-    subparsers.add_parser("acquire", parents=[common],
-                          help="await a target again (automatic acquisition near the UUV's own position)")
+    if name == "status":
+        p = subparsers.add_parser(name, parents=[common], help=help, description=__doc__.split("\n\n")[0])
+        p.add_argument("--watch", action="store_true", help="ask again every --interval-s until Ctrl-C")
+        p.add_argument("--interval-s", type=float, default=1.0)
+        p.add_argument("--json", action="store_true", help="print the whole status as one JSON line")
+    elif name == "select":
+        p = subparsers.add_parser(name, parents=[common], help=help)
+        what = p.add_mutually_exclusive_group(required=True)
+        what.add_argument("--box", type=lambda s: _pair(s, 4, "X,Y,W,H"), metavar="X,Y,W,H",
+                          help="box around the UUV, pixels of the distorted frame")
+        what.add_argument("--point", type=lambda s: _pair(s, 2, "U,V"), metavar="U,V", help="a click on the UUV")
+        p.add_argument("--frame", type=int, help="the frame the box or click belongs to (default: the newest)")
+    elif name in ("release", "acquire"):
+        subparsers.add_parser(name, parents=[common], help=help)
+    else:
+        raise ValueError(f"not a console command: {name!r}")

@@ -55,6 +55,7 @@ from localizer.fix import Fix, locate
 from localizer.height import take_notices
 from localizer.pose import CameraPose, camera_pose
 from localizer.telemetry import Telemetry
+from localizer.timeline import Series
 from localizer.tracking import TrackResult
 from localizer.tracking.predict import window as search_window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession
@@ -97,14 +98,14 @@ class Pipeline:
     ``prior(t_unix)``: the UUV's own position estimate at a frame's time (None: none);
     ``history_s``: how long tracked frames are held for selections; ``alignment()``: the (source word,
     1-sigma s) of aligned frames' times when not the link delay's (see the module doc);
-    ``frame_listeners``: called with every submitted frame (the recorder, the page's feed, the video
-    latency's estimator), before it is queued; ``on_tracked``: see :attr:`on_tracked`.
+    ``depth``: the UUV's depth series when not ``tel``'s own (one of several UUVs in the video);
+    ``on_tracked``: see :attr:`on_tracked`.
     """
 
     def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
                  telemetry_wait_s: float = 0.3, prior: Callable[[float], Prior | None] | None = None,
-                 history_s: float = 1.0, frame_listeners: Sequence[Callable] = (),
-                 on_tracked: Sequence[Callable] = (), alignment: Callable[[], tuple[str, float]] | None = None):
+                 history_s: float = 1.0, on_tracked: Sequence[Callable] = (),
+                 alignment: Callable[[], tuple[str, float]] | None = None, depth: Series | None = None):
         self.cal = cal
         self.tel = tel
         self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
@@ -114,7 +115,7 @@ class Pipeline:
         self.prior = prior or (lambda t_unix: None)
         self.history_s = history_s
         self.alignment = alignment
-        self.frame_listeners = list(frame_listeners)
+        self.depth = depth
         self._told_unknown = False
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
@@ -143,8 +144,6 @@ class Pipeline:
 
         The very first frame is never dropped when ``init_bbox`` belongs to it.
         """
-        for listener in self.frame_listeners:
-            listener(frame)
         if len(self._queue) >= self.queue_len:
             first_waiting = self.cal.init_bbox is not None and not self._started and self._queue[0].index == 0
             del self._queue[1 if first_waiting else 0]
@@ -254,7 +253,7 @@ class Pipeline:
     def _pose(self, frame: LiveFrame) -> CameraPose:
         """The camera at the frame's time, with the telemetry there is now (on the loop)."""
         alignment = self.alignment() if self.alignment is not None and frame.aligned else None
-        return camera_pose(self.cal, self.tel, frame.t_unix, alignment)
+        return camera_pose(self.cal, self.tel, frame.t_unix, alignment, self.depth)
 
     async def _track(self, frame: LiveFrame) -> Tracked:
         """Track one frame with its pose (computed here, on the loop) and hold it for selections."""

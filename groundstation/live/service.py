@@ -30,13 +30,16 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import json
 import logging
 import signal
 import time
+from collections.abc import Callable
 
 import numpy as np
 import zenoh
+from pydantic import ValidationError
 
 from groundstation.height_from_size import HeightFromSize, OnlineHeightFromSize
 from groundstation.latency.estimate import OnlineLatency
@@ -61,6 +64,7 @@ from groundstation.live.workers import INPUTS, LAST, OUTPUTS, PIPELINE, Workers,
 from groundstation.mavlink.link import read_signing_key
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
+from localizer.calibration import Calibration, ConfigError, Tracker
 from localizer.depth import DepthGate
 from localizer.fix_gate import FixGate
 from localizer.height import status as height_status
@@ -82,7 +86,8 @@ def latency_summary(latencies_s) -> dict:
 
 
 async def serve(cfg: config.RunConfig) -> dict:
-    """Run the service until stopped; returns the final status."""
+    """Run the service until stopped; returns the final status (with several UUVs: the shared sections and each
+    UUV's own under ``uuvs``)."""
     loop = asyncio.get_running_loop()
     cal = config.load_calibration(cfg.calibration)
     tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S)
@@ -98,10 +103,14 @@ async def serve(cfg: config.RunConfig) -> dict:
         auto = cfg.video_latency_ms == "auto"
         fixed_latency_s = None if auto else cfg.video_latency_ms / 1000.0
         first_aligned: list[float] = []  # auto: the exposure of the first frame stamped with the estimate
-        workers = Workers()
-        pipeline: Pipeline  # built once its sinks and listeners are (below); the closures read it then
+        workers = Workers()  # the UAV's and the video's; each UUV's own are in its chain's
+        chains: list[UuvChain] = []  # built once the shared parts are (below); the closures read them then
+        several = len(cfg.uuvs) > 1
+        if several and cal.init_bbox is not None:
+            log.warning("%s: [tracker] init_bbox is not used with several [[uuv]]: each UUV's own init_bbox is",
+                        cfg.calibration)
 
-        # -- the inputs: the UAV, the UUV's depth (and thrusters), its own position, the video ----------------------
+        # -- the shared inputs: the UAV, the video ------------------------------------------------------------------
         if cfg.mavlink_backend == "mavsdk":
             from groundstation.live.sources.uav_mavsdk import UavMavsdk
 
@@ -109,26 +118,22 @@ async def serve(cfg: config.RunConfig) -> dict:
         else:
             uav = UavMavlink(cfg.mavlink, tel, needed_rates(cal.mount.attitude_source),
                              request_rates=not cfg.no_request_rates)
-        uav.listeners.append(lambda *a: pipeline.telemetry_arrived(*a))
+        uav.listeners.append(lambda *a: [c.pipeline.telemetry_arrived(*a) for c in chains])
         workers.add(uav, INPUTS, "uav", is_input=True)
-        depth_gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
-        # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
-        thrusters = Thrusters(cfg.thruster_deadband_us) if cfg.depth_source in ("blueos", "mavlink") else None
-        if cfg.depth_source == "mavlink":
-            depth = ArduSubMavlink(cfg.depth_mavlink, tel, depth_gate, cal.sigmas.depth_m, thrusters=thrusters)
-        elif cfg.depth_source == "blueos":
-            depth = ArduSubZenoh(session, cfg.depth_input_key, tel, depth_gate, cal.sigmas.depth_m,
-                                 thrusters=thrusters)
-        else:
-            depth = DepthZenoh(session, cfg.depth_input_key, tel, depth_gate)
-        workers.add(depth, INPUTS, "depth", is_input=True)
         workers.section("height", lambda now: height_status(cal.water, cal.sigmas, tel))
-        uuv_position = workers.add(UuvPosition(session, cfg.uuv_position_key, cfg.uuv_prior_sigma_m,
-                                               parse_hint(cfg.uuv_hint) if cfg.uuv_hint else None),
-                                   INPUTS, "uuv_position")
         video = motion = from_size = None
+        frame_listeners = []
+
+        def on_frame(frame) -> None:
+            """Every frame to the listeners (the recorder, the page's feed, the latency's estimator), then to each
+            UUV's pipeline."""
+            for listener in frame_listeners:
+                listener(frame)
+            for chain in chains:
+                chain.pipeline.submit(frame)
+
         if cfg.video:
-            video = VideoLive(cfg.video, fixed_latency_s, lambda frame: pipeline.submit(frame), expected_size=size)
+            video = VideoLive(cfg.video, fixed_latency_s, on_frame, expected_size=size)
             motion = OnlineLatency(cal, tel, fixed_latency_s,
                                    (lambda s: setattr(video, "latency_s", s)) if auto else None)
             workers.add(video, INPUTS, "video", lambda now: video.status(now)
@@ -153,91 +158,152 @@ async def serve(cfg: config.RunConfig) -> dict:
                           "video_latency_sigma_s": round(motion.applied_sigma_s, 4),
                           "video_latency_from_t": first_aligned[0] if first_aligned else None}
 
-        # -- the outputs: fixes on Zenoh, GPS_INPUT (through the gates), the recording, the watchdog, the page -----
-        fix_sink = ZenohFixSink(session, cfg.fix_key)
-        closers.append(fix_sink.close)
-        gps = None
-        if cfg.gps_input:
-            key = read_signing_key(cfg.gps_input_signing_key) if cfg.gps_input_signing_key else None
-            link = (ZenohMavlinkIn(session, cfg.gps_input.removeprefix("zenoh:")) if cfg.gps_input.startswith("zenoh:")
-                    else mavlink_gps_link(cfg.gps_input, signing_key=key))
-            max_age_s = cfg.fix_max_age_ms / 1000.0
-            gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_accel_mps2=cfg.uuv_max_accel_mps2,
-                           max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s, thrusters=thrusters,
-                           water_accel_mps2=cfg.uuv_water_accel_mps2)
-            gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
+        # -- the shared outputs: the recording (one UUV), the page (the first UUV) ----------------------------------
         recorder = None
         if cfg.record:
             recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
                                 timing=recorded_timing)
             uav.listeners.append(recorder.on_mavlink)
-            depth.listeners.append(recorder.on_depth)
             workers.add(recorder, OUTPUTS, "record", lambda now: recorder.status(), is_input=True)
 
         def zenoh_peers() -> int:
             return len(list(session.info.peers_zid())) + len(list(session.info.routers_zid()))
 
-        watchdog = Watchdog(workers.inputs, tuple(needed_rates(cal.mount.attitude_source)), zenoh_peers,
-                            require_s=REQUIRE_S if cfg.require_inputs else None)
         topview = feed = None
         if not cfg.no_ui:
             topview = TopView(cal, tel)
-            feed = VideoFeed(lambda: pipeline.target)
+            feed = VideoFeed(lambda: chains[0].pipeline.target)
 
         def first_aligned_frame(frame) -> None:
             if frame.aligned and not first_aligned:
                 first_aligned.append(frame.t_unix)
 
-        frame_listeners = [f for f in (recorder and recorder.on_frame, feed and feed.on_frame,
-                                       motion and motion.on_frame, motion and auto and first_aligned_frame) if f]
-        sinks = [s for s in (fix_sink, gps, recorder, feed, topview, watchdog) if s is not None]
-        pipeline = Pipeline(cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0,
-                            prior=uuv_position.prior, history_s=cfg.select_history_s, frame_listeners=frame_listeners,
-                            on_tracked=[from_size.on_tracked] if from_size else [],
-                            alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None)
+        frame_listeners += [f for f in (recorder and recorder.on_frame, feed and feed.on_frame,
+                                        motion and motion.on_frame, motion and auto and first_aligned_frame) if f]
         if video and auto:
             log.info("--video-latency-ms auto: no valid fix until the video's latency from the image's motion "
                      "has settled (status latency_unsettled)")
-        workers.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
-        workers.section("target", lambda now: pipeline.target)
-        workers.section("fixes_published", lambda now: fix_sink.published)
-        workers.section("fix", lambda now: fix_sink.latest)
-        workers.add(watchdog, PIPELINE, "problems", lambda now: dict(watchdog.problems))
         workers.section("zenoh", lambda now: {"peers": zenoh_peers()})
         workers.section("process", usage.status)
-        if gps:
-            workers.add(gps, LAST, "gps_input")
-            workers.section("latency", lambda now: latency_summary(list(gps.latencies_s)[-1000:]))
 
-        # -- the operator's side: commands over Zenoh and the page ---------------------------------------------------
-        control = Control(pipeline, workers.status)
-        ui = WebUi(cfg.ui, cfg.ui_token, control, topview, feed, size, settings_of(cfg)) if feed else None
-        status_sink = ZenohStatus(session, cfg.status_key, cfg.alive_key, workers.status)
-        zenoh_control = ZenohControl(session, control, cfg.control_prefix,
-                                     {cfg.fix_key: lambda: fix_sink.latest, cfg.status_key: lambda: status_sink.latest})
-        workers.add(zenoh_control, INPUTS, "control", lambda now: zenoh_control.status())
+        # -- each UUV: its depth, its own position, its tracker and its outputs -------------------------------------
+        for i, u in enumerate(cfg.uuvs):
+            uuv_tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S) if several else tel
+            page = (feed, topview) if i == 0 else (None, None)
+            uuv_cal = uuv_calibration(cal, u, cfg.calibration) if several else cal
+            chain = UuvChain(cfg, u, uuv_cal, tel, uuv_tel, session, workers, page, recorder, zenoh_peers,
+                             alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None,
+                             on_tracked=[from_size.on_tracked] if from_size else [])
+            closers.append(chain.fix_sink.close)
+            chains.append(chain)
+            workers.include(chain.workers)
+
+        # -- the operator's page: the first UUV ----------------------------------------------------------------------
+        ui = WebUi(cfg.ui, cfg.ui_token, chains[0].control, topview, feed, size, settings_of(cfg)) if feed else None
         if ui:
             workers.add(ui, INPUTS, "ui", lambda now: ui.status())
-        workers.add(status_sink, OUTPUTS)
-        if ui:
             await ui.start()  # UiError (an OSError) when its port is taken: exit 2 before anything runs
-        log.info("skyfix run: UAV %s, video %s, depth %s (%s), fixes on %s, GPS_INPUT %s, commands on %s/*",
-                 cfg.mavlink, cfg.video, cfg.depth_mavlink or cfg.depth_input_key, cfg.depth_source, cfg.fix_key,
-                 cfg.gps_input, zenoh_control.prefix)
-        if cal.init_bbox is None:
-            log.info("no tracker.init_bbox: awaiting a target (%s/select%s%s)", zenoh_control.prefix,
-                     f", the web page {ui.url}" if ui else "",
-                     ", or near the UUV's own position" if cfg.uuv_position_key or cfg.uuv_hint else "")
+        for chain in chains:
+            u = chain.uuv
+            log.info("skyfix run: UAV %s, video %s, UUV %s: depth %s (%s), fixes on %s, GPS_INPUT %s, commands on "
+                     "%s/*", cfg.mavlink, cfg.video, u.id, u.depth_mavlink or u.depth_input_key, u.depth_source,
+                     u.fix_key, u.gps_input, chain.zenoh_control.prefix)
+            if chain.pipeline.cal.init_bbox is None:
+                log.info("UUV %s: no init_bbox: awaiting a target (%s/select%s%s)", u.id, chain.zenoh_control.prefix,
+                         f", the web page {ui.url}" if ui and chain is chains[0] else "",
+                         ", or near the UUV's own position" if u.uuv_position_key or u.uuv_hint else "")
         await workers.run(stopped(stop, cfg.duration_s))
-        final = workers.status(time.time())
-        if gps:
-            final["latency"] = latency_summary(gps.latencies_s)
-            final["latencies_ms"] = [round(x * 1000.0, 3) for x in gps.latencies_s]
-        return final
+        now = time.time()
+        if not several:
+            return chains[0].final(now)
+        return workers.status(now) | {"uuvs": {c.uuv.id: c.final(now, shared=False) for c in chains}}
     finally:
         for close in closers:
             close()
         session.close()
+
+
+def uuv_calibration(cal: Calibration, u: config.UuvConfig, source: str) -> Calibration:
+    """The calibration with one UUV's own first box (``[[uuv]] init_bbox``) as ``[tracker]``."""
+    try:
+        return dataclasses.replace(cal, tracker=Tracker(init_bbox=u.init_bbox))
+    except ValidationError:
+        raise ConfigError(source, f"[[uuv]] {u.id}: init_bbox", list(u.init_bbox),
+                          f"box must lie inside the {cal.camera.width}x{cal.camera.height} image") from None
+
+
+class UuvChain:
+    """One UUV's part of the service: its depth (and thrusters) and own position estimate, the pipeline that
+    tracks it in the shared video with the shared pose, its fixes on Zenoh, its GPS_INPUT through its own gates,
+    its watchdog, its operator's commands and its 1 Hz status (the shared sections and its own). Its workers are in
+    :attr:`workers`, run with the service's."""
+
+    def __init__(self, cfg: config.RunConfig, u: config.UuvConfig, cal, tel: Telemetry, uuv_tel: Telemetry,
+                 session, shared: Workers, page: tuple, recorder, zenoh_peers: Callable[[], int], alignment, on_tracked):
+        self.uuv = u
+        self.workers = own = Workers()
+        self._shared = shared
+        depth_gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
+        # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
+        thrusters = Thrusters(cfg.thruster_deadband_us) if u.depth_source in ("blueos", "mavlink") else None
+        if u.depth_source == "mavlink":
+            depth = ArduSubMavlink(u.depth_mavlink, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters=thrusters)
+        elif u.depth_source == "blueos":
+            depth = ArduSubZenoh(session, u.depth_input_key, uuv_tel, depth_gate, cal.sigmas.depth_m,
+                                 thrusters=thrusters)
+        else:
+            depth = DepthZenoh(session, u.depth_input_key, uuv_tel, depth_gate)
+        own.add(depth, INPUTS, "depth", is_input=True)
+        if recorder:
+            depth.listeners.append(recorder.on_depth)
+        uuv_position = own.add(UuvPosition(session, u.uuv_position_key, cfg.uuv_prior_sigma_m,
+                                           parse_hint(u.uuv_hint) if u.uuv_hint else None), INPUTS, "uuv_position")
+        self.fix_sink = fix_sink = ZenohFixSink(session, u.fix_key)
+        self.gps = gps = None
+        if u.gps_input:
+            key = read_signing_key(u.gps_input_signing_key) if u.gps_input_signing_key else None
+            link = (ZenohMavlinkIn(session, u.gps_input.removeprefix("zenoh:")) if u.gps_input.startswith("zenoh:")
+                    else mavlink_gps_link(u.gps_input, signing_key=key))
+            max_age_s = cfg.fix_max_age_ms / 1000.0
+            gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_accel_mps2=cfg.uuv_max_accel_mps2,
+                           max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s, thrusters=thrusters,
+                           water_accel_mps2=cfg.uuv_water_accel_mps2)
+            self.gps = gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
+        watchdog = Watchdog(lambda now: shared.inputs(now) | own.inputs(now),
+                            tuple(needed_rates(cal.mount.attitude_source)), zenoh_peers,
+                            require_s=REQUIRE_S if cfg.require_inputs else None)
+        feed, topview = page
+        sinks = [s for s in (fix_sink, gps, recorder, feed, topview, watchdog) if s is not None]
+        self.pipeline = pipeline = Pipeline(
+            cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0, prior=uuv_position.prior,
+            history_s=cfg.select_history_s, on_tracked=on_tracked, alignment=alignment,
+            depth=None if uuv_tel is tel else uuv_tel.depth)
+        own.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
+        own.section("target", lambda now: pipeline.target)
+        own.section("fixes_published", lambda now: fix_sink.published)
+        own.section("fix", lambda now: fix_sink.latest)
+        own.add(watchdog, PIPELINE, "problems", lambda now: dict(watchdog.problems))
+        if gps:
+            own.add(gps, LAST, "gps_input")
+            own.section("latency", lambda now: latency_summary(list(gps.latencies_s)[-1000:]))
+        self.control = Control(pipeline, self.status)
+        status_sink = ZenohStatus(session, u.status_key, u.alive_key, self.status)
+        self.zenoh_control = ZenohControl(session, self.control, u.control_prefix,
+                                          {u.fix_key: lambda: fix_sink.latest, u.status_key: lambda: status_sink.latest})
+        own.add(self.zenoh_control, INPUTS, "control", lambda now: self.zenoh_control.status())
+        own.add(status_sink, OUTPUTS)
+
+    def status(self, now: float) -> dict:
+        """The UUV's status: the shared sections (the UAV, the video, the page) and its own."""
+        return self._shared.status(now) | self.workers.status(now)
+
+    def final(self, now: float, shared: bool = True) -> dict:
+        """The status at the end (its own sections only unless ``shared``), with every latency measured."""
+        out = self.status(now) if shared else self.workers.status(now)
+        if self.gps:
+            out["latency"] = latency_summary(self.gps.latencies_s)
+            out["latencies_ms"] = [round(x * 1000.0, 3) for x in self.gps.latencies_s]
+        return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -251,13 +317,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def register(subparsers) -> None:
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(
-        "run", help="the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out",
+        name, help=help,
         usage="%(prog)s --calibration FILE [--config FILE] [options]",
         description="The live service: reads the UAV's MAVLink telemetry and video and the UUV's depth (Zenoh); "
                     "publishes each fix on Zenoh (--fix-key) and sends GPS_INPUT to the UUV's autopilot "
-                    "(--gps-input); health on --status-key once a second. Stops on Ctrl-C or SIGTERM.",
+                    "(--gps-input); health on --status-key once a second. Several UUVs in one video: one [[uuv]] "
+                    "table each in the --config file (id, its depth, keys, GPS_INPUT link, init_bbox). Stops on "
+                    "Ctrl-C or SIGTERM.",
         epilog="example: skyfix run --calibration cal.toml --mavlink udpin:0.0.0.0:14550 --video udp://0.0.0.0:5600 "
                "--zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
     config.add_arguments(p)

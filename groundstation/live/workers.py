@@ -46,6 +46,7 @@ class Workers:
     def __init__(self):
         self._entries: list[_Entry] = []
         self._sections: list[tuple[str, Callable[[float], object]]] = []
+        self._included: list[Workers] = []
 
     def add(self, worker, stage: int, key: str | None = None, status: Callable[[float], dict] | None = None,
             is_input: bool = False):
@@ -58,6 +59,11 @@ class Workers:
     def section(self, key: str, status: Callable[[float], object]) -> None:
         """A status section that is no worker's (the height, the process's usage)."""
         self._sections.append((key, status))
+
+    def include(self, other: Workers) -> None:
+        """Run ``other``'s workers with these, in the same stop stages (one UUV's of several); its status and inputs
+        stay its own."""
+        self._included.append(other)
 
     def inputs(self, now: float) -> dict:
         """The inputs' status sections (the watchdog's view)."""
@@ -72,7 +78,8 @@ class Workers:
     async def run(self, until: Awaitable) -> None:
         """Run every worker until ``until`` completes (or one fails), then stop them stage by stage."""
         async with asyncio.TaskGroup() as tg:
-            tasks = [(e.stage, tg.create_task(e.worker.run(), name=type(e.worker).__name__)) for e in self._entries]
+            entries = [*self._entries, *(e for other in self._included for e in other._entries)]
+            tasks = [(e.stage, tg.create_task(e.worker.run(), name=type(e.worker).__name__)) for e in entries]
             await until
             log.info("stopping")
             loop = asyncio.get_running_loop()

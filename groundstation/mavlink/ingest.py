@@ -16,12 +16,10 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's import to parse MAVLink 2
+os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's import (in mavutil()) to parse MAVLink 2
 
 import math
 from collections.abc import Mapping
-
-from pymavlink import mavutil as _mavutil
 
 from groundstation.mavlink.ids import is_autopilot_heartbeat
 from localizer.depth import PRESSURE_MESSAGES, ArduSubDepth, DepthSample
@@ -44,8 +42,10 @@ DOP_UNKNOWN = 65535
 
 
 def mavutil():
-    """pymavlink's ``mavutil`` module, imported with MAVLink 2 enabled."""
-    return _mavutil
+    """pymavlink's ``mavutil`` module, imported with MAVLink 2 enabled; imported on first use (it is slow to load)."""
+    from pymavlink import mavutil
+
+    return mavutil
 
 
 class LinkError(OSError):
@@ -55,7 +55,7 @@ class LinkError(OSError):
 def connect(url: str, **kwargs):
     """``mavutil.mavlink_connection(url, **kwargs)``, with any failure as one :class:`LinkError` line."""
     try:
-        return _mavutil.mavlink_connection(url, **kwargs)
+        return mavutil().mavlink_connection(url, **kwargs)
     except Exception as e:  # noqa: BLE001 - pymavlink fails with ValueError, OSError, serial errors, ...
         raise LinkError(f"MAVLink {url!r}: cannot open: {e}") from None
 

@@ -187,8 +187,9 @@ def run(args) -> int:
     return 2 if failed else 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("evaluate", help="accuracy of sessions with truth.csv: refraction vs straight ray")
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help)
     p.add_argument("sessions", nargs="+", metavar="SESSION", help="session directories with truth.csv")
     p.add_argument("--out", default="out/evaluate", help="output directory (default: out/evaluate)")
     p.add_argument("--use-track", action="store_true",

@@ -257,8 +257,9 @@ def run(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("export", help="positions.csv as GeoJSON, KML, GPX or CSV (QGIS, Google Earth)",
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help,
                               description="Writes the fixes of positions.csv, with each fix's accuracy, status and heights "
                               "(above mean sea level and above the WGS84 ellipsoid), for QGIS (any format), Google "
                               "Earth (kml) or GPS tools (gpx).")

@@ -25,7 +25,8 @@
 - Or a DJI drone's flight record exported as CSV (``--dji-csv``, :mod:`groundstation.session.dji`):
   the same messages from its OSD and GIMBAL columns; and the camera's ``.SRT`` (``--srt``) gives
   the video's start: its frames' camera-clock times, that clock's zone found by matching the
-  SRT's per-frame track against the record's (or ``--srt-utc-offset-h``).
+  SRT's per-frame track against the record's (or ``--srt-utc-offset-h``); the older ``GPS(...)``
+  form's latitude/longitude order found the same way (or ``--srt-gps-order``).
 - The depth: skyfix's ``depth.jsonl`` (read strictly), ArduSub's own DataFlash log (``.bin``: its depth sensor's
   depth as ArduSub logged it, on UNIX time from the GPS_INPUT it received:
   :mod:`groundstation.session.ardusub_log`), or a CSV with a header naming ``t`` (UNIX s) and ``depth_m``
@@ -135,19 +136,25 @@ def video_start(flight: FlightLog, how: str, start_unix: float | None) -> tuple[
     return flight.span_unix[0], "motion"
 
 
-def start_from_srt(flight: FlightLog, srt: Path, utc_offset_h: float | None) -> tuple[float, str, dict]:
+def start_from_srt(flight: FlightLog, srt: Path, utc_offset_h: float | None,
+                   gps_order: str | None = None) -> tuple[float, str, dict]:
     """The video's first frame on UNIX time from the camera's SRT, where it came from, and what goes into
     ``import.json``."""
     track = read_srt(srt)
-    clock = srt_clock(track, flight, utc_offset_h)
+    clock = srt_clock(track, flight, utc_offset_h, gps_order)
     start, spread = srt_video_start(track, clock)
     hours = clock.offset_s / 3600.0
     how = (f"the SRT's frame times, camera clock UTC{hours:+.4f} h "
            f"({'found from its track against the record' if clock.found else 'given'}: track residual "
-           f"{clock.residual_m:.2f} m over {clock.frames} frames)")
-    return start, how, {"srt": str(srt), "srt_utc_offset_h": round(hours, 6), "srt_utc_offset_found": clock.found,
-                        "srt_track_residual_m": round(clock.residual_m, 3), "srt_frames": clock.frames,
-                        "srt_start_spread_s": round(spread, 6)}
+           f"{clock.residual_m:.2f} m over {clock.frames} "
+           + ("frames)" if track.form == "frame" else
+              f"subtitles; the older GPS(...) form read as {clock.gps_order}, whole-second camera clock)"))
+    older = {} if track.form == "frame" else {
+        "srt_gps_order": clock.gps_order,
+        "srt_gps_order_residuals_m": [round(r, 3) if math.isfinite(r) else None for r in clock.order_residuals_m]}
+    return start, how, {"srt": str(srt), "srt_form": track.form, "srt_utc_offset_h": round(hours, 6),
+                        "srt_utc_offset_found": clock.found, "srt_track_residual_m": round(clock.residual_m, 3),
+                        "srt_frames": clock.frames, "srt_start_spread_s": round(spread, 6)} | older
 
 
 def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.ndarray,
@@ -216,11 +223,13 @@ def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calib
                   video_start_how: str = "motion", video_start_unix: float | None = None,
                   depth_columns: tuple[str, str] = ("t", "depth_m"), progress: bool = False,
                   dji_csv: Path | None = None, dji_csv_utc_offset_h: float | None = None, srt: Path | None = None,
-                  srt_utc_offset_h: float | None = None) -> dict:
+                  srt_utc_offset_h: float | None = None, srt_gps_order: str | None = None) -> dict:
     """Write the session (see the module doc) from a DataFlash log or a DJI flight record (``dji_csv``); returns
     what ``import.json`` holds."""
     if srt is not None and (video is None or video_start_unix is not None):
         raise SessionError("options: --srt needs --video, and gives the video's start (not with --video-start-unix)")
+    if srt is None and (srt_utc_offset_h is not None or srt_gps_order is not None):
+        raise SessionError("options: --srt-utc-offset-h and --srt-gps-order are the --srt's: give it")
     cal = load_calibration(str(calibration))
     source = cal.mount.attitude_source
     if source == "gimbal_device":
@@ -248,7 +257,7 @@ def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calib
         except VideoError as e:
             raise SessionError(str(e)) from None
         if srt is not None:
-            start, how, srt_report = start_from_srt(flight, srt, srt_utc_offset_h)
+            start, how, srt_report = start_from_srt(flight, srt, srt_utc_offset_h, srt_gps_order)
             report |= srt_report
         else:
             start, how = video_start(flight, video_start_how, video_start_unix)
@@ -292,7 +301,8 @@ def run(args) -> int:
                            Path(args.calibration), out, args.video_start, args.video_start_unix,
                            tuple(args.depth_columns.split(",")), progress=not args.quiet,
                            dji_csv=path(args.dji_csv), dji_csv_utc_offset_h=args.dji_csv_utc_offset_h,
-                           srt=path(args.srt), srt_utc_offset_h=args.srt_utc_offset_h)
+                           srt=path(args.srt), srt_utc_offset_h=args.srt_utc_offset_h,
+                           srt_gps_order=args.srt_gps_order)
     for w in report["warnings"]:
         print(f"skyfix import: warning: {w}", file=sys.stderr)
     print(f"skyfix import: {out}: log clock on UNIX time {report['unix_minus_boot_s']:.3f} s "
@@ -305,17 +315,20 @@ def run(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("import", help="a flight's own records (DataFlash log, camera video, depth) as a "
-                              "session")
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help)
     log = p.add_mutually_exclusive_group(required=True)
     log.add_argument("--dataflash", help="the drone's ArduPilot DataFlash log (.bin)")
-    log.add_argument("--dji-csv", help="a DJI drone's flight record as CSV (dji-log-parser's or PhantomHelp's)")
+    log.add_argument("--dji-csv", help="a DJI drone's flight record as CSV (dji-log-parser's, PhantomHelp's or "
+                     "Airdata's)")
     p.add_argument("--dji-csv-utc-offset-h", type=float,
                    help="the zone (hours east of UTC) of a DJI CSV that has local times only (PhantomHelp's)")
     p.add_argument("--srt", help="the DJI camera's .SRT beside the video: the frames' times give the video's start")
     p.add_argument("--srt-utc-offset-h", type=float,
                    help="the SRT's camera clock zone (hours east of UTC); default: found from its track")
+    p.add_argument("--srt-gps-order", choices=("lat,lon", "lon,lat"), metavar="lat,lon|lon,lat",
+                   help="the older SRT form's GPS(a, b) order; default: found from its track against the record")
     p.add_argument("--video", help="the camera's own video file")
     p.add_argument("--depth", required=True, help="the UUV's depth: skyfix's depth.jsonl, ArduSub's DataFlash log (.bin) or a CSV")
     p.add_argument("--depth-columns", default="t,depth_m", help="a CSV's time (UNIX s) and depth (m) columns")

@@ -167,8 +167,9 @@ def run(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("process", help="process a recorded session into positions.csv")
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help)
     p.add_argument("session", help="session directory (format v1)")
     p.add_argument("--out", required=True, help="output directory for positions.csv")
     add_uuv_argument(p, "the UUV to locate: its depth, first box and track (default: %(default)s, the session's own)")

@@ -66,8 +66,9 @@ def run(args) -> int:
     return 0
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser("report", help="PNG plots of a run: top view, error/accuracy over time, statuses",
+def register(subparsers, name: str, help: str | None = None) -> None:
+    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
+    p = subparsers.add_parser(name, help=help,
                               description="Writes top_view.png (the fixes from above, origin and north stated), timeline.png "
                               "(error against truth, when there is one, and the claimed accuracy over time, gaps "
                               "shaded by cause) and status.png (frames per status) and prints a summary.")

@@ -1,7 +1,7 @@
 """A DJI drone's own records: the flight record exported as CSV, and the camera's ``.SRT`` subtitles.
 
 **The flight record CSV.** DJI's ``DJIFlightRecord_*.txt`` is encrypted; exporters write it as
-CSV, one row per OSD record (10 Hz). Two header styles are read:
+CSV, one row per OSD record (10 Hz). Three header styles are read:
 
 - dji-log-parser's (github.com/lvauvillier/dji-log-parser, ``dji-log-cli/src/exporters/csv.rs``;
   the values from ``dji-log-parser/src/frame/mod.rs`` and ``record/{osd,gimbal,custom}.rs``):
@@ -18,6 +18,37 @@ CSV, one row per OSD record (10 Hz). Two header styles are read:
   (``1:00:00.00 PM``), after a first line ``sep=,``. A local time's zone is not in the file:
   it is given (``utc_offset_h``). In a file whose headers carry units, a length column
   without one is an error, as is a unit skyfix does not know (one line naming the column).
+- Airdata's "CSV export" (told by its ``time(millisecond)`` and ``datetime(utc)`` columns). Its
+  column list: Airdata's help page "Downloadable Flight Data CSV"
+  (app.airdata.com/wiki/Help/Downloadable+Flight+Data+CSV, which defines the fields in words and
+  gives no signs), and as exported, units in parentheses: ``(feet)``/``(mph)`` or
+  ``(meters)``/``(m/s)`` by the account's setting (the whole header quoted in
+  github.com/verri/m30ttools's README, in meters, and in a comment of Mick West's Sitrec next to
+  its ``parseAirdataCSV``, in feet; the AirDataUAV package's README lists the same; some names
+  carry a leading space, `` compass_heading(degrees)``, `` pitch(degrees)``, `` roll(degrees)``,
+  as m30ttools's header and other readers' column keys show — headers are stripped here). Read:
+  ``latitude``, ``longitude`` (degrees), ``height_above_takeoff(feet|meters)``,
+  ``altitude_above_seaLevel(feet|meters)`` (Airdata: "altitude above sea level"; how Airdata
+  obtains it is not stated), `` compass_heading(degrees)`` (Airdata: "compass direction of
+  aircraft"; 0..360 or ±180 alike, wrapped to ±180), `` pitch(degrees)``, `` roll(degrees)``,
+  ``gimbal_heading(degrees)`` (the camera's compass direction, 0 = North: egemose/
+  DroneVideoMeasure's ``docs/source/references/drone_logfile_input_format_AirData.md``,
+  example 190.9), ``gimbal_pitch(degrees)`` (0 the
+  horizon, −90 straight down, same source), ``gimbal_roll(degrees)``. A length column without a
+  unit in parentheses, or with one skyfix does not know, is an error naming it; an angle's unit
+  must be degrees. Times: ``datetime(utc)`` is UTC in whole seconds (``%Y-%m-%d %H:%M:%S``,
+  ``2023-03-02 10:10:59``: DroneVideoMeasure's reference, whose reader leaves "take into account
+  the time(millisecond) column" as a TODO; an ISO-8601 zone or a fraction of a second is read
+  too); ``time(millisecond)`` counts from the start of the record (Airdata:
+  "total time duration of flight"; DroneVideoMeasure: since the aircraft was turned on — only
+  its differences are used). A row's time is ``time(millisecond)`` on UTC: the whole seconds
+  taken as truncated, every row's ``datetime − time`` bounds that offset from both sides (at
+  10 Hz to 0.1 s; its half-width is the clock's sigma); a row outside the bounds is an error
+  (a clock jump). If Airdata rounds the seconds instead, the record's UTC is 0.5 s late:
+  its rounding is not documented. The angles are taken as DJI's own (below): compass_heading
+  wrapped to ±180 is the yaw; Airdata does not say its pitch and roll signs (its help gives
+  "rotation around y-axis", "around x-axis"), and no source found states them: they are
+  passed as DJI's OSD.pitch/roll (FRD: nose up, right wing down positive), unconfirmed.
 
 Frames: ``OSD.roll/pitch/yaw`` are the aircraft body (FRD) against North-East-Down, Z-Y-X
 Euler angles, yaw from North, −180..180 (DJI's SDK: North 0, East 90, West −90) — MAVLink's
@@ -27,7 +58,8 @@ not from the aircraft's nose (the flight record stores the gimbal's own attitude
 DJI's SDK support: "the yaw angle reported by the gimbal is in an absolute (Earth-fixed)
 frame", dji-sdk/Onboard-SDK-ROS issue 137, and Mobile-SDK-Android-V5 issue 259:
 ``KeyGimbalAttitude`` yaw from true North). skyfix's MOUNT_ORIENTATION wants both yaws: the
-one relative to the aircraft is ``GIMBAL.yaw − OSD.yaw`` (wrapped to ±180) at the same row.
+one relative to the aircraft is ``GIMBAL.yaw − OSD.yaw`` (wrapped to ±180) at the same row —
+Airdata's ``gimbal_heading − compass_heading``.
 
 The rows become a :class:`~groundstation.session.dataflash.FlightLog`, so the session is
 written as a DataFlash log's: the boot clock is the seconds since the first row, the first
@@ -50,9 +82,27 @@ github.com/JuanIrache/DJI_SRT_Parser, ``samples/air2s.srt`` and ``samples/matric
 and on other models ``FrameCnt: 1, DiffTime: 33ms``, ``2023-05-14 12:34:56.789``,
 ``[rel_alt: 12.300 abs_alt: 564.230]``, ``[gb_yaw: -91.4 gb_pitch: -90.0 gb_roll: 0.0]``.
 The subtitle's start is the frame's time in the video; the date line the camera's clock:
-local time of an unknown zone (milliseconds, or ``,ms,µs``). The older form (``GPS(...)``,
-``HOME(...)``, ``BAROMETER:`` lines, one subtitle per second) is not read: its samples put
-latitude and longitude in either order by model, and it times no frame.
+local time of an unknown zone (milliseconds, or ``,ms,µs``).
+
+The older form (DJI_SRT_Parser's ``samples/sample2.SRT``; an early ``index.js`` of it reads its
+``GPS`` as longitude, latitude, altitude), one subtitle a second (or a frame), no frame count::
+
+    1
+    00:00:01,000 --> 00:00:02,000
+    HOME(131.1660,-25.2088) 2017.07.29 15:18:50
+    GPS(131.1660,-25.2088,14) BAROMETER:0.0
+
+Its date line (``2017.07.29 15:18:50``, on its own line or after ``HOME(...)``) is the camera's
+local clock in whole seconds; each subtitle's start is taken as its time in the video (the
+frame the clock line stands for is not said). ``GPS(a, b, ...)``: latitude and longitude in
+either order by model (the sample above longitude first; others, ``GPS(36.6146,-6.1120,0.0M)``,
+latitude first), 4 decimals (~11 m); its third number (altitude on some, 14–16 on the
+sample) and ``BAROMETER`` are not used. The order is decided against the flight record
+(:func:`gps_order`): both orders matched at every zone (or the given one), the one that fits
+within :data:`ORDER_FIT_M` wins when the other fits at least :data:`ORDER_RATIO` times and
+:data:`ORDER_MARGIN_M` worse (a latitude beyond ±90° rules an order out); else an error asking
+for it (``--srt-gps-order``). The whole-second clock's fraction is left to the refinement
+below: the offset found carries it, as it carries the clock's own error.
 
 **The camera clock's zone** (:func:`srt_clock`): the SRT's per-frame positions are matched
 against the flight record's at every offset of the world's time zones (−12 h to +14 h in
@@ -66,7 +116,7 @@ from __future__ import annotations
 import csv
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime, timedelta, timezone
 from pathlib import Path
 
@@ -90,6 +140,17 @@ COLUMNS = {
     "gimbal_yaw_deg": ("angle", ("GIMBAL.yaw",)),
 }
 UTC_COLUMN = "CUSTOM.dateTime"
+#: Airdata's CSV: skyfix name (the keys of :data:`COLUMNS`, in their order) → (kind, its column's name before the unit)
+AIRDATA_COLUMNS = {
+    "lat_deg": ("angle", "latitude"), "lon_deg": ("angle", "longitude"),
+    "height_m": ("length", "height_above_takeoff"), "altitude_m": ("length", "altitude_above_seaLevel"),
+    "roll_deg": ("angle", "roll"), "pitch_deg": ("angle", "pitch"), "yaw_deg": ("angle", "compass_heading"),
+    "gimbal_roll_deg": ("angle", "gimbal_roll"), "gimbal_pitch_deg": ("angle", "gimbal_pitch"),
+    "gimbal_yaw_deg": ("angle", "gimbal_heading"),
+}
+AIRDATA_TIME, AIRDATA_UTC = "time(millisecond)", "datetime(utc)"
+AIRDATA_ANGLE_UNITS = {"degrees", "deg", "°"}
+AIRDATA_CLOCK_TOLERANCE_S = 0.01  # how far datetime(utc) and time(millisecond) may disagree beyond the 1 s resolution
 LOCAL_COLUMNS = ("CUSTOM.date [local]", "CUSTOM.updateTime [local]")
 LOCAL_FORMATS = ("%m/%d/%Y %I:%M:%S.%f %p", "%m/%d/%Y %H:%M:%S.%f", "%m/%d/%Y %I:%M:%S %p", "%m/%d/%Y %H:%M:%S")
 ZONES_S = np.arange(-12 * 3600, 14 * 3600 + 1, 900)  # every time zone's offset from UTC, quarter hours
@@ -184,12 +245,107 @@ def clean_rows(path: Path, t_unix: np.ndarray, values: np.ndarray, line_numbers:
     return finite & ~duplicate & ~backwards
 
 
+def split_paren(header: str) -> tuple[str, str | None]:
+    """Airdata's ``"height_above_takeoff(feet)"`` → ``("height_above_takeoff", "feet")``; ``"latitude"`` →
+    ``("latitude", None)``."""
+    m = re.fullmatch(r"\s*(.*?)\s*(?:\(\s*([^)]*?)\s*\))?\s*", header)
+    return m.group(1), m.group(2)
+
+
+def airdata_column(path: Path, headers: list[str], kind: str, name: str) -> tuple[str, float]:
+    """The header of Airdata's column ``name`` and the factor to metres ("length") or degrees ("angle") of its
+    values; :class:`SessionError` naming the column for a length without a known unit, an unknown angle unit."""
+    found = [h for h in headers if split_paren(h)[0].casefold() == name.casefold()]
+    if not found:
+        raise SessionError(f"{path}: no column {name} (Airdata's CSV export has it"
+                           + (", with its unit: (feet) or (meters))" if kind == "length" else ")"))
+    header = found[0]
+    unit = split_paren(header)[1]
+    if kind == "length":
+        if unit is None or unit.lower() not in LENGTH_UNITS_M:
+            raise SessionError(f"{path}: column {header!r}: " + ("no unit" if unit is None else f"unknown unit {unit!r}")
+                               + f" (known: {', '.join(LENGTH_UNITS_M)})")
+        return header, LENGTH_UNITS_M[unit.lower()]
+    if unit is not None and unit.lower() not in AIRDATA_ANGLE_UNITS:
+        raise SessionError(f"{path}: column {header!r}: unknown unit {unit!r} (degrees expected)")
+    return header, 1.0
+
+
+def parse_airdata_utc(path: Path, line: int, text: str) -> float:
+    """UNIX seconds of Airdata's ``datetime(utc)`` (``2023-03-02 10:10:59``, UTC; a fraction or an ISO-8601 zone
+    also read); NaN for an empty cell."""
+    text = text.strip()
+    if not text:
+        return math.nan
+    try:
+        t = datetime.fromisoformat(text)
+    except ValueError:
+        raise SessionError(f"{path}:{line}: {AIRDATA_UTC} = {text!r}: not a date and time "
+                           "(2023-03-02 10:10:59)") from None
+    return (t if t.tzinfo is not None else t.replace(tzinfo=UTC)).timestamp()
+
+
+def airdata_clock(path: Path, utc_s: np.ndarray, record_s: np.ndarray, line_numbers: np.ndarray) -> tuple[float, float]:
+    """The UNIX time of ``time(millisecond)`` 0 and its half-uncertainty (s), from every row having both: whole
+    seconds of ``datetime(utc)`` are taken as truncated (the true time within [datetime, datetime + 1 s)), so the
+    rows' ``datetime − time`` bound it from both sides; times with fractions of a second are taken as they are.
+    :class:`SessionError` when the two columns disagree beyond that."""
+    both = np.isfinite(utc_s) & np.isfinite(record_s)
+    if not both.any():
+        raise SessionError(f"{path}: no row with both {AIRDATA_UTC} and {AIRDATA_TIME}: the record has no UTC time")
+    c, lines = utc_s[both] - record_s[both], line_numbers[both]
+    whole = bool(np.all(np.mod(utc_s[both], 1.0) == 0.0))
+    lo, hi = (float(c.max()), float(c.min()) + 1.0) if whole else (float(c.min()), float(c.max()))
+    excess = lo - hi if whole else hi - lo
+    if excess > AIRDATA_CLOCK_TOLERANCE_S:
+        k = int(np.argmax(np.abs(c - np.median(c))))
+        raise SessionError(f"{path}:{int(lines[k])}: {AIRDATA_UTC} and {AIRDATA_TIME} disagree with the other rows' "
+                           f"by {excess:.3f} s{' beyond its 1 s resolution' if whole else ''}: a clock jump?")
+    return (lo + hi) / 2.0, max(hi - lo, 0.0) / 2.0
+
+
+def read_airdata(path: Path, headers: list[str], reader, first_line: int) -> FlightLog:
+    """Airdata's CSV export (module doc) as a :class:`FlightLog`; the rows after the header from ``reader``, the
+    first of them at line ``first_line``."""
+    columns, scale = {}, {}
+    for k, (kind, name) in AIRDATA_COLUMNS.items():
+        columns[k], scale[k] = airdata_column(path, headers, kind, name)
+    index = {h: i for i, h in reversed(list(enumerate(headers)))}
+    record_s, utc_s, rows, line_numbers = [], [], [], []
+    for line, row in enumerate(reader, start=first_line):
+        if not any(cell.strip() for cell in row):
+            continue
+        if len(row) < len(headers):
+            raise SessionError(f"{path}:{line}: {len(row)} cells, the header has {len(headers)}")
+        record_s.append(parse_number(path, line, AIRDATA_TIME, row[index[AIRDATA_TIME]]) / 1000.0)
+        utc_s.append(parse_airdata_utc(path, line, row[index[AIRDATA_UTC]]))
+        rows.append([parse_number(path, line, columns[k], row[index[columns[k]]]) * scale[k] for k in COLUMNS])
+        line_numbers.append(line)
+    if not rows:
+        raise SessionError(f"{path}: no rows")
+    record, lines = np.array(record_s), np.array(line_numbers)
+    zero_unix, sigma = airdata_clock(path, np.array(utc_s), record, lines)
+    return finish_rows(path, zero_unix + record, np.array(rows), lines, sigma)
+
+
+def finish_rows(path: Path, t_unix: np.ndarray, values: np.ndarray, line_numbers: np.ndarray,
+                sigma_s: float = 0.0) -> FlightLog:
+    """The rows (UNIX times, the :data:`COLUMNS` values in metres and degrees) cleaned (:func:`clean_rows`) as a
+    :class:`FlightLog` whose clock is known to ``sigma_s``."""
+    warnings: list[str] = []
+    keep = clean_rows(path, t_unix, values, line_numbers, warnings)
+    if keep.sum() < 2:
+        raise SessionError(f"{path}: fewer than 2 usable rows")
+    return flight_log(path, t_unix[keep], dict(zip(COLUMNS, values[keep].T, strict=True)), warnings, sigma_s)
+
+
 def wrap_deg(angle_deg):
     """Degrees onto (−180, 180]."""
     return 180.0 - np.mod(180.0 - np.asarray(angle_deg, dtype=float), 360.0)
 
 
-def flight_log(path: Path, t_unix: np.ndarray, v: dict[str, np.ndarray], warnings: list[str]) -> FlightLog:
+def flight_log(path: Path, t_unix: np.ndarray, v: dict[str, np.ndarray], warnings: list[str],
+               sigma_s: float = 0.0) -> FlightLog:
     """The record's rows (UNIX s, the :data:`COLUMNS` values in metres and degrees) as a :class:`FlightLog`."""
     t_s = t_unix - t_unix[0]
     yaw_deg, gimbal_yaw_deg = wrap_deg(v["yaw_deg"]), wrap_deg(v["gimbal_yaw_deg"])
@@ -197,7 +353,7 @@ def flight_log(path: Path, t_unix: np.ndarray, v: dict[str, np.ndarray], warning
     att = np.column_stack([t_s, rpy, attitude_rates(t_s, rpy)])
     located = (v["lat_deg"] != 0.0) | (v["lon_deg"] != 0.0)  # DJI writes 0, 0 without a position
     if not located.any():
-        raise SessionError(f"{path}: no row with a position (OSD.latitude, OSD.longitude all 0)")
+        raise SessionError(f"{path}: no row with a position (latitude, longitude all 0)")
     if not located.all():
         warnings.append(f"{path}: {int((~located).sum())} rows without a position (0, 0): no position written "
                         "for them")
@@ -208,8 +364,8 @@ def flight_log(path: Path, t_unix: np.ndarray, v: dict[str, np.ndarray], warning
                            np.full(n, np.nan), alt, np.full(n, np.nan), np.full(n, np.nan), lat, lon])
     mnt = np.column_stack([t_s, v["gimbal_roll_deg"], v["gimbal_pitch_deg"],
                            wrap_deg(gimbal_yaw_deg - yaw_deg), gimbal_yaw_deg])
-    return FlightLog(path, att, pos, gps, mnt, np.empty((0, 2)), np.empty(0), [], {}, float(t_unix[0]), 0.0,
-                     warnings)
+    return FlightLog(path, att, pos, gps, mnt, np.empty((0, 2)), np.empty(0), [], {}, float(t_unix[0]),
+                     sigma_s, warnings)
 
 
 def read_dji_csv(path: str | Path, utc_offset_h: float | None = None) -> FlightLog:
@@ -224,6 +380,8 @@ def read_dji_csv(path: str | Path, utc_offset_h: float | None = None) -> FlightL
     start = 1 if lines and lines[0].strip().lower().startswith("sep=") else 0
     reader = csv.reader(lines[start:])
     headers = [h.strip() for h in next(reader, [])]
+    if AIRDATA_TIME in headers and AIRDATA_UTC in headers:
+        return read_airdata(path, headers, reader, start + 2)
     units_in_headers = any(split_header(h)[1] not in (None, "360") for h in headers)
     columns = {k: find_column(path, headers, names) for k, (_, names) in COLUMNS.items()}
     scale = {k: column_scale(path, columns[k], COLUMNS[k][0], units_in_headers) for k in COLUMNS}
@@ -251,26 +409,23 @@ def read_dji_csv(path: str | Path, utc_offset_h: float | None = None) -> FlightL
         line_numbers.append(line)
     if not rows:
         raise SessionError(f"{path}: no rows")
-    warnings: list[str] = []
-    values = np.array(rows)
-    keep = clean_rows(path, np.array(times), values, np.array(line_numbers), warnings)
-    if keep.sum() < 2:
-        raise SessionError(f"{path}: fewer than 2 usable rows")
-    return flight_log(path, np.array(times)[keep], dict(zip(COLUMNS, values[keep].T, strict=True)), warnings)
+    return finish_rows(path, np.array(times), np.array(rows), np.array(line_numbers))
 
 
 @dataclass
 class SrtTrack:
-    """A DJI camera's per-frame subtitles (see the module doc); NaN where a subtitle lacks a value."""
+    """A DJI camera's subtitles (see the module doc); NaN where a subtitle lacks a value."""
 
     path: Path
-    frame: np.ndarray  # the video frame (FrameCnt / SrtCnt − 1)
+    frame: np.ndarray  # the video frame (FrameCnt / SrtCnt − 1); the older form: the subtitle's order (from 0)
     t_video_s: np.ndarray  # the subtitle's start in the video
     t_camera_s: np.ndarray  # the camera's clock, seconds since 1970-01-01 of its own (local) time
     lat_deg: np.ndarray
     lon_deg: np.ndarray
     rel_alt_m: np.ndarray  # above the take-off point
     gimbal_ypr_deg: np.ndarray  # (n, 3) gb_yaw, gb_pitch, gb_roll
+    form: str = "frame"  # "frame" (FrameCnt/SrtCnt), or "older": GPS(a, b, ...), whose order srt_clock decides —
+    #                      lat_deg holds its first number, lon_deg its second, until then
 
 
 SRT_TIMECODE = re.compile(r"(\d+):(\d{2}):(\d{2})[,.](\d{3})\s*-->")
@@ -278,6 +433,11 @@ SRT_COUNT = re.compile(r"(?:FrameCnt|SrtCnt)\s*:\s*(\d+)")
 SRT_CLOCK = re.compile(r"(\d{4})-(\d{2})-(\d{2}) (\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,3}))?(?:,(\d{3}))?")
 SRT_VALUE = re.compile(r"\b(latitude|longitude|longtitude|rel_alt|gb_yaw|gb_pitch|gb_roll)\s*:\s*([^\s\]]+)")
 SRT_KEYS = {"latitude": 0, "longitude": 1, "longtitude": 1, "rel_alt": 2, "gb_yaw": 3, "gb_pitch": 4, "gb_roll": 5}
+SRT_OLD_GPS = re.compile(r"\bGPS\s*\(\s*([^,()]*?)\s*,\s*([^,()]*?)\s*(?:,[^()]*)?\)")
+SRT_OLD_CLOCK = re.compile(r"(\d{4})[.\-/](\d{1,2})[.\-/](\d{1,2})\s+(\d{1,2}):(\d{2}):(\d{2})(?:[.,](\d{1,3}))?")
+GPS_ORDERS = ("lat,lon", "lon,lat")  # the older form's GPS(a, b): a latitude first, or a longitude first
+ORDER_FIT_M = 100.0  # the older form: the order that fits must fit the record within this (RMS m)...
+ORDER_RATIO, ORDER_MARGIN_M = 3.0, 50.0  # ...and the other must fit at least this much worse (both)
 
 
 def srt_blocks(text: str):
@@ -293,34 +453,62 @@ def srt_blocks(text: str):
 
 def srt_clock_s(match: re.Match) -> float:
     """Seconds since 1970 of an SRT date line's match, its own zone taken as UTC."""
-    y, mo, d, h, mi, s = (int(g) for g in match.groups()[:6])
-    ms = int(match.group(7).ljust(3, "0")) if match.group(7) else 0
-    us = int(match.group(8)) if match.group(8) else 0
+    groups = match.groups() + (None,) * (8 - len(match.groups()))
+    y, mo, d, h, mi, s = (int(g) for g in groups[:6])
+    ms = int(groups[6].ljust(3, "0")) if groups[6] else 0
+    us = int(groups[7]) if groups[7] else 0
     return datetime(y, mo, d, h, mi, s, tzinfo=UTC).timestamp() + ms / 1e3 + us / 1e6
 
 
+def old_srt_row(path: Path, first_line: int, block: str, tc: re.Match, order: int) -> list[float]:
+    """A subtitle of the older form (module doc) as a row of :func:`read_srt`: its order, start, camera clock, GPS's
+    first and second numbers, the rest NaN."""
+    clock, gps = SRT_OLD_CLOCK.search(block, tc.end()), SRT_OLD_GPS.search(block, tc.end())
+    if clock is None:
+        raise SessionError(f"{path}:{first_line}: the older SRT form (GPS(...)) without the camera's date and time "
+                           "(2017.08.05 14:11:51)")
+    values = []
+    for text in gps.groups():
+        try:
+            values.append(float(text))
+        except ValueError:
+            raise SessionError(f"{path}:{first_line}: GPS({gps.group(1)},{gps.group(2)},...): {text!r} is not a "
+                               "number") from None
+    return [order, srt_start_s(tc), srt_clock_s(clock)] + values + [math.nan] * 4
+
+
+def srt_start_s(tc: re.Match) -> float:
+    """Seconds into the video of a subtitle's start (its ``start --> end`` line's match)."""
+    return int(tc.group(1)) * 3600 + int(tc.group(2)) * 60 + int(tc.group(3)) + int(tc.group(4)) / 1000.0
+
+
 def read_srt(path: str | Path) -> SrtTrack:
-    """The camera's SRT (the modern bracketed form of the module doc); :class:`SessionError` (one line) else."""
+    """The camera's SRT (either form of the module doc); :class:`SessionError` (one line) else."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig", errors="replace")
     except OSError as e:
         raise SessionError(f"{path}: cannot read: {e.strerror}") from None
-    rows = []
+    rows, forms = [], set()
     for first_line, block in srt_blocks(text):
         tc = SRT_TIMECODE.search(block)
         if tc is None:
             raise SessionError(f"{path}:{first_line}: a subtitle without its 'start --> end' line: not an SRT")
         clock = SRT_CLOCK.search(block, tc.end())
         count = SRT_COUNT.search(block)
-        if clock is None or count is None:
-            if "GPS(" in block:
-                raise SessionError(f"{path}:{first_line}: the older SRT form (GPS(...), one subtitle a second): "
-                                   "not read (its latitude and longitude come in either order by model)")
-            raise SessionError(f"{path}:{first_line}: a subtitle without FrameCnt/SrtCnt or the camera's date and "
-                               "time: not a DJI camera's SRT")
-        row = [int(count.group(1)) - 1, int(tc.group(1)) * 3600 + int(tc.group(2)) * 60 + int(tc.group(3))
-               + int(tc.group(4)) / 1000.0, srt_clock_s(clock)] + [math.nan] * 6
+        form = "frame" if clock is not None and count is not None else \
+            "older" if SRT_OLD_GPS.search(block, tc.end()) else None
+        if form is None:
+            raise SessionError(f"{path}:{first_line}: a subtitle without FrameCnt/SrtCnt and the camera's date and "
+                               "time, nor GPS(...): not a DJI camera's SRT")
+        forms.add(form)
+        if len(forms) > 1:
+            raise SessionError(f"{path}:{first_line}: a subtitle of the {form} form among the other form's: not one "
+                               "camera's SRT")
+        if form == "older":
+            rows.append(old_srt_row(path, first_line, block, tc, len(rows)))
+            continue
+        row = [int(count.group(1)) - 1, srt_start_s(tc), srt_clock_s(clock)] + [math.nan] * 6
         for key, value in SRT_VALUE.findall(block[clock.end():]):
             try:
                 row[3 + SRT_KEYS[key]] = float(value)
@@ -333,7 +521,7 @@ def read_srt(path: str | Path) -> SrtTrack:
     if not np.all(np.diff(a[:, 1]) > 0):
         raise SessionError(f"{path}: subtitle {int(np.argmin(np.diff(a[:, 1]))) + 2} starts no later than the one "
                            "before")
-    return SrtTrack(path, a[:, 0].astype(int), a[:, 1], a[:, 2], a[:, 3], a[:, 4], a[:, 5], a[:, 6:9])
+    return SrtTrack(path, a[:, 0].astype(int), a[:, 1], a[:, 2], a[:, 3], a[:, 4], a[:, 5], a[:, 6:9], forms.pop())
 
 
 @dataclass
@@ -344,6 +532,8 @@ class SrtClock:
     residual_m: float  # RMS distance between the SRT's track and the record's at this offset
     frames: int  # SRT frames compared
     found: bool  # matched (else given)
+    gps_order: str | None = None  # the older form's GPS(a, b) order ("lat,lon" / "lon,lat"); None: the newer form
+    order_residuals_m: tuple[float, float] | None = None  # the older form: the best fit of each of GPS_ORDERS
 
 
 def track_residual_m(srt: SrtTrack, flight: FlightLog, offsets_s: np.ndarray) -> np.ndarray:
@@ -372,9 +562,60 @@ def track_residual_m(srt: SrtTrack, flight: FlightLog, offsets_s: np.ndarray) ->
     return out
 
 
-def srt_clock(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None = None) -> SrtClock:
+def in_order(srt: SrtTrack, order: str) -> SrtTrack:
+    """The older form's track with latitude and longitude as ``order`` (one of :data:`GPS_ORDERS`) says."""
+    return srt if order == "lat,lon" else replace(srt, lat_deg=srt.lon_deg, lon_deg=srt.lat_deg)
+
+
+def gps_order(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None,
+              given: str | None) -> tuple[str, tuple[float, float]]:
+    """The older form's GPS order: each of :data:`GPS_ORDERS` matched against the record (at every zone, or the
+    given one), the one that fits within :data:`ORDER_FIT_M` while the other fits far worse; and each one's best
+    residual (inf: impossible, a latitude beyond ±90°, or never within the record). ``given`` is checked the same
+    way against the record, not compared. :class:`SessionError` when neither fits, or both alike."""
+    offsets = ZONES_S if utc_offset_h is None else np.array([utc_offset_h * 3600.0])
+    fits = []
+    for order in GPS_ORDERS:
+        track = in_order(srt, order)
+        lat = track.lat_deg[np.isfinite(track.lat_deg)]
+        fits.append(math.inf if np.any(np.abs(lat) > 90.0) else float(np.min(track_residual_m(track, flight, offsets))))
+    fit = dict(zip(GPS_ORDERS, fits, strict=True))
+    text = ", ".join(f"as {o} {fit[o]:.1f} m" for o in GPS_ORDERS)
+    where = "at every zone" if utc_offset_h is None else f"at UTC{utc_offset_h:+g} h"
+    if given is not None:
+        if not fit[given] <= ORDER_FIT_M:
+            raise SessionError(f"{srt.path}: the older SRT form's GPS(...) read as {given} does not fit the flight "
+                               f"record {where} ({text}; within {ORDER_FIT_M:g} m expected)")
+        return given, (fits[0], fits[1])
+    best, other = sorted(GPS_ORDERS, key=fit.get)
+    if not fit[best] <= ORDER_FIT_M:
+        raise SessionError(f"{srt.path}: the older SRT form's GPS(...) fits the flight record {where} in neither "
+                           f"order ({text}; within {ORDER_FIT_M:g} m expected): not the same flight?")
+    if fit[other] < max(ORDER_RATIO * fit[best], fit[best] + ORDER_MARGIN_M):
+        raise SessionError(f"{srt.path}: the older SRT form's GPS(...) fits the flight record in either order "
+                           f"({text}): say which, --srt-gps-order lat,lon or lon,lat")
+    return best, (fits[0], fits[1])
+
+
+def srt_clock(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None = None,
+              order: str | None = None) -> SrtClock:
     """The camera clock's offset from UTC: given (``utc_offset_h``, hours east), or found by matching the SRT's
-    track against the record's (module doc). :class:`SessionError` when nothing fits or two zones fit alike."""
+    track against the record's (module doc); the older form's GPS order first (:func:`gps_order`; ``order``
+    given, checked). :class:`SessionError` when nothing fits or two zones (or orders) fit alike."""
+    if order is not None and order not in GPS_ORDERS:
+        raise SessionError(f"options: --srt-gps-order {order!r}: one of {', '.join(GPS_ORDERS)}")
+    if srt.form == "older":
+        if not np.any(np.isfinite(srt.lat_deg) & ((srt.lat_deg != 0) | (srt.lon_deg != 0))):
+            raise SessionError(f"{srt.path}: no GPS(...) position in its subtitles: its clock cannot be matched to "
+                               "the record")
+        order, fits = gps_order(srt, flight, utc_offset_h, order)
+        return replace(match_clock(in_order(srt, order), flight, utc_offset_h), gps_order=order,
+                       order_residuals_m=fits)
+    return match_clock(srt, flight, utc_offset_h)
+
+
+def match_clock(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None) -> SrtClock:
+    """:func:`srt_clock` of a track whose latitude and longitude are known."""
     frames = int(np.sum(np.isfinite(srt.lat_deg)))
     if utc_offset_h is not None:
         offset = utc_offset_h * 3600.0
@@ -387,16 +628,16 @@ def srt_clock(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None = Non
         raise SessionError(f"{srt.path}: no latitude/longitude in its subtitles: its clock's zone cannot be found "
                            "(give --srt-utc-offset-h)")
     zones = track_residual_m(srt, flight, ZONES_S)
-    order = np.argsort(zones)
-    best, second = zones[order[0]], zones[order[1]]
+    rank = np.argsort(zones)
+    best, second = zones[rank[0]], zones[rank[1]]
     if not math.isfinite(best):
         raise SessionError(f"{srt.path}: at no time zone do its frames fall within the flight record "
                            f"{flight.span_unix[0]:.3f}–{flight.span_unix[1]:.3f} (UNIX s): not the same flight?")
     if second < max(3.0 * best, best + 1.0):
-        raise SessionError(f"{srt.path}: its track fits the record at UTC{ZONES_S[order[0]] / 3600:+g} h "
-                           f"({best:.2f} m) and UTC{ZONES_S[order[1]] / 3600:+g} h ({second:.2f} m) alike: give "
+        raise SessionError(f"{srt.path}: its track fits the record at UTC{ZONES_S[rank[0]] / 3600:+g} h "
+                           f"({best:.2f} m) and UTC{ZONES_S[rank[1]] / 3600:+g} h ({second:.2f} m) alike: give "
                            "--srt-utc-offset-h")
-    fine = ZONES_S[order[0]] + np.arange(-REFINE_S, REFINE_S + REFINE_STEP_S / 2, REFINE_STEP_S)
+    fine = ZONES_S[rank[0]] + np.arange(-REFINE_S, REFINE_S + REFINE_STEP_S / 2, REFINE_STEP_S)
     residuals = track_residual_m(srt, flight, fine)
     k = int(np.argmin(residuals))
     return SrtClock(float(fine[k]), float(residuals[k]), frames, True)

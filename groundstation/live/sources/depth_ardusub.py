@@ -78,12 +78,13 @@ ASK_PERIOD_S = 0.25
 HANDOFF_MESSAGES = 512  # messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
 MAV_CMD_REQUEST_MESSAGE = 512
 GPS_GLOBAL_ORIGIN_ID = 49
-_PREFIX = re.compile(r"mavlink/(\d+)/(\d+)")
+_PREFIX = re.compile(r"(?:[^*$?#]+/)?mavlink/(\d+)/(\d+)")  # a vehicle's Zenoh namespace may come first
 
 
 def autopilot_prefix(key: str) -> tuple[int, int]:
-    """``(system, component)`` of BlueOS's key prefix ``mavlink/{system}/{component}``; ValueError saying what to
-    write otherwise (VFR_HUD, a message's key, is named: it is not ArduSub's depth)."""
+    """``(system, component)`` of BlueOS's key prefix ``mavlink/{system}/{component}`` (under a vehicle's Zenoh
+    namespace in a fleet: ``rov1/mavlink/1/1``); ValueError saying what to write otherwise (VFR_HUD, a message's
+    key, is named: it is not ArduSub's depth)."""
     m = _PREFIX.fullmatch(key.rstrip("/"))
     if m is None:
         if key.rstrip("/").endswith("/VFR_HUD"):
@@ -250,7 +251,7 @@ class ArduSubZenoh:
 
     async def run(self) -> None:
         self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_MESSAGES)
-        self._in = MavlinkIn(self.session, "mavlink/in", SKYFIX_SYSID, GCS_COMPID)
+        self._in = MavlinkIn(self.session, self.key.rsplit("mavlink/", 1)[0] + "mavlink/in", SKYFIX_SYSID, GCS_COMPID)
         try:
             async with asyncio.TaskGroup() as tg:
                 for kind in ARDUSUB_USED:  # one key each: the router forwards only these, not all of ArduSub's
