@@ -155,7 +155,7 @@ def test_recorded_tables_keep_their_times_increasing(tmp_path):
     rec = Recorder(str(tmp_path / "rec"), str(tmp_path / "cal.toml"), timing=lambda: used)
     for t, status in ((100.000, "latency_unsettled"), (100.033, "latency_unsettled"), (99.987, "lost"),
                       (100.020, "lost"), (100.054, "lost")):
-        rec.on_fix(Fix(t, status), None)
+        rec.first.on_fix(Fix(t, status), None)
 
     async def record_a_moment():
         task = asyncio.create_task(rec.run())

@@ -26,6 +26,7 @@ from pydantic.dataclasses import dataclass
 from groundstation.live.sources.depth_ardusub import autopilot_prefix
 from groundstation.live.sources.uuv_position import parse_hint
 from groundstation.live.ui.bind import check_token, parse_bind
+from groundstation.session.read import PRIMARY_UUV
 from localizer.calibration import Calibration
 from localizer.contract import (
     CLOSED,
@@ -238,9 +239,11 @@ class RunConfig(UuvOptions):
         if single:
             name = next(iter(single))
             raise Invalid(name, getattr(self, name), "set per UUV, in each [[uuv]] table, when there are several")
-        if self.record:
-            raise Invalid("record", self.record, "a run of several [[uuv]] is not recorded yet (the session format "
-                          "holds them; the recorder writes one UUV)")
+        if self.record:  # the first UUV's records are the session's own, named uuv1 when read
+            for i, u in enumerate(self.uuv[1:], 1):
+                if u.id == PRIMARY_UUV:
+                    raise Invalid(f"uuv[{i}].id", u.id, f"with --record, {PRIMARY_UUV} is the first [[uuv]]'s name "
+                                  "in the recording (its records are the session's own): give this UUV another id")
         for key in ("id", *OWN_KEYS):
             seen = {}
             for i, u in enumerate(self.uuv):
@@ -257,7 +260,7 @@ class RunConfig(UuvOptions):
         if self.uuv:
             return self.uuv
         own = {f: getattr(self, f) for f in _uuv_defaults()}
-        return (UuvConfig(id="uuv1", **own),)
+        return (UuvConfig(id=PRIMARY_UUV, **own),)
 
     @model_validator(mode="after")
     def _record_needs_pymavlink(self):

@@ -56,7 +56,7 @@ from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uav_mavlink import UavMavlink
 from groundstation.live.sources.uuv_position import UuvPosition, parse_hint
 from groundstation.live.ui.feed import VideoFeed
-from groundstation.live.ui.server import WebUi, settings_of
+from groundstation.live.ui.server import PageUuv, WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.usage import Usage
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
@@ -158,11 +158,11 @@ async def serve(cfg: config.RunConfig) -> dict:
                           "video_latency_sigma_s": round(motion.applied_sigma_s, 4),
                           "video_latency_from_t": first_aligned[0] if first_aligned else None}
 
-        # -- the shared outputs: the recording (one UUV), the page (the first UUV) ----------------------------------
+        # -- the shared outputs: the recording (one UUV), the page (every UUV) -------------------------------------
         recorder = None
         if cfg.record:
             recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
-                                timing=recorded_timing)
+                                timing=recorded_timing, uuv_ids=tuple(u.id for u in cfg.uuvs))
             uav.listeners.append(recorder.on_mavlink)
             workers.add(recorder, OUTPUTS, "record", lambda now: recorder.status(), is_input=True)
 
@@ -171,8 +171,9 @@ async def serve(cfg: config.RunConfig) -> dict:
 
         topview = feed = None
         if not cfg.no_ui:
-            topview = TopView(cal, tel)
-            feed = VideoFeed(lambda: chains[0].pipeline.target)
+            topview = TopView(cal, tel, uuvs=len(cfg.uuvs))
+            targets = [(u.id, lambda i=i: chains[i].pipeline.target) for i, u in enumerate(cfg.uuvs)]
+            feed = VideoFeed(targets if several else targets[0][1])
 
         def first_aligned_frame(frame) -> None:
             if frame.aligned and not first_aligned:
@@ -189,17 +190,19 @@ async def serve(cfg: config.RunConfig) -> dict:
         # -- each UUV: its depth, its own position, its tracker and its outputs -------------------------------------
         for i, u in enumerate(cfg.uuvs):
             uuv_tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S) if several else tel
-            page = (feed, topview) if i == 0 else (None, None)
+            page = (feed.sinks[i], topview.tracks[i]) if feed else (None, None)
             uuv_cal = uuv_calibration(cal, u, cfg.calibration) if several else cal
-            chain = UuvChain(cfg, u, uuv_cal, tel, uuv_tel, session, workers, page, recorder, zenoh_peers,
+            chain = UuvChain(cfg, u, uuv_cal, tel, uuv_tel, session, workers, page,
+                             recorder.of(u.id) if recorder else None, zenoh_peers,
                              alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None,
                              on_tracked=[from_size.on_tracked] if from_size else [])
             closers.append(chain.fix_sink.close)
             chains.append(chain)
             workers.include(chain.workers)
 
-        # -- the operator's page: the first UUV ----------------------------------------------------------------------
-        ui = WebUi(cfg.ui, cfg.ui_token, chains[0].control, topview, feed, size, settings_of(cfg)) if feed else None
+        # -- the operator's page: every UUV, each with its commands and its own status --------------------------------
+        page_uuvs = [PageUuv(c.uuv.id, c.control, c.workers.status) for c in chains]
+        ui = WebUi(cfg.ui, cfg.ui_token, page_uuvs, topview, feed, size, settings_of(cfg)) if feed else None
         if ui:
             workers.add(ui, INPUTS, "ui", lambda now: ui.status())
             await ui.start()  # UiError (an OSError) when its port is taken: exit 2 before anything runs
@@ -210,7 +213,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                      u.fix_key, u.gps_input, chain.zenoh_control.prefix)
             if chain.pipeline.cal.init_bbox is None:
                 log.info("UUV %s: no init_bbox: awaiting a target (%s/select%s%s)", u.id, chain.zenoh_control.prefix,
-                         f", the web page {ui.url}" if ui and chain is chains[0] else "",
+                         f", the web page {ui.url}" if ui else "",
                          ", or near the UUV's own position" if u.uuv_position_key or u.uuv_hint else "")
         await workers.run(stopped(stop, cfg.duration_s))
         now = time.time()
@@ -254,7 +257,7 @@ class UuvChain:
         else:
             depth = DepthZenoh(session, u.depth_input_key, uuv_tel, depth_gate)
         own.add(depth, INPUTS, "depth", is_input=True)
-        if recorder:
+        if recorder:  # its part of the recording
             depth.listeners.append(recorder.on_depth)
         uuv_position = own.add(UuvPosition(session, u.uuv_position_key, cfg.uuv_prior_sigma_m,
                                            parse_hint(u.uuv_hint) if u.uuv_hint else None), INPUTS, "uuv_position")

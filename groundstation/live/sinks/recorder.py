@@ -15,7 +15,10 @@ what the service used with it: ``source``, ``sigma_m`` and ``vspeed_mps`` where 
 tracked pixel of every frame (empty when there is no fix), and
 ``video.ts`` + ``video_frames.csv`` the received frames (H.264 in MPEG-TS, encoded
 in-process, each frame's timestamp its exposure time, so a replay keeps the real
-pacing and the offline reader finds each frame's row). Every file is append-only and flushed at least
+pacing and the offline reader finds each frame's row). A run of several UUVs (``[[uuv]]``): the first
+UUV's depth, fixes, track and ``[tracker]`` are the session's own files, each other's are in ``uuvs/<id>/``
+(``depth.jsonl``, ``positions.csv``, ``track.csv``, and ``uuv.toml`` with its ``[tracker]``), as the session
+reader reads them. Every file is append-only and flushed at least
 once a second; MPEG-TS stays readable when cut off, so a crash loses at most the
 last second and never corrupts what is already written.
 
@@ -49,6 +52,7 @@ from pathlib import Path
 import av
 
 from groundstation.session.positions import COLUMNS, format_row
+from groundstation.session.read import PRIMARY_UUV, UUV_TOML, UUVS_DIR
 from groundstation.session.tlog import tlog_record
 from groundstation.threads import failure_kind, in_thread
 from localizer.depth import DepthSample
@@ -84,10 +88,15 @@ def _toml_value(value) -> str:
 
 def session_toml(calibration: dict) -> str:
     """session.toml text: ``version = 1`` and the calibration's tables (scalars and lists)."""
-    lines = ["version = 1"]
+    return "version = 1\n" + _tables(calibration)
+
+
+def _tables(tables: dict) -> str:
+    """TOML text of ``tables``' tables of :data:`CALIBRATION_TABLES` (scalars and lists), each after a blank line."""
+    lines = []
     for name in CALIBRATION_TABLES:
-        if name in calibration:
-            lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in calibration[name].items()]
+        if name in tables:
+            lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in tables[name].items()]
     return "\n".join(lines) + "\n"
 
 
@@ -142,11 +151,44 @@ class VideoWriter:
             self._frames.close()
 
 
+class UuvRecord:
+    """One UUV's part of the recording: its depth samples (:meth:`on_depth`, a depth reader's listener), its fixes
+    and tracked pixels and its ``[tracker]`` at its first fix (:meth:`on_fix`, a sink of its pipeline). The first
+    UUV's go to the session's own files; each other's to ``uuvs/<id>/`` (``uuv.toml`` holding its ``[tracker]``)."""
+
+    def __init__(self, recorder: Recorder, uuv_id: str, folder: Path):
+        self.recorder = recorder
+        self.id = uuv_id
+        self.folder = folder
+        self.depth_samples = 0
+        self.fixes = 0
+        self.tracker: dict | None = None  # init_bbox and init_t: the box of its first fix
+        self._last_fix_t: float | None = None
+
+    def on_depth(self, sample: DepthSample, t_recv: float) -> None:
+        rec = {"t": sample.t, "depth_m": sample.depth_m, "t_recv": t_recv, "source": sample.source}
+        rec |= {k: v for k, v in (("sigma_m", sample.sigma_m), ("vspeed_mps", sample.vspeed_mps)) if math.isfinite(v)}
+        self.depth_samples += self.recorder._put(("depth", (self.folder, json.dumps(rec) + "\n")))
+
+    def on_fix(self, fix: Fix, info) -> None:
+        if self._last_fix_t is not None and not fix.t_unix > self._last_fix_t:
+            # frames' times went back (auto applying its first latency): left out, as the video writer does
+            self.recorder.dropped += 1
+            return
+        self._last_fix_t = fix.t_unix
+        ok = fix.ok
+        track = (f"{fix.t_unix:.6f}", f"{fix.u:.3f}" if ok else "", f"{fix.v:.3f}" if ok else "")
+        self.fixes += self.recorder._put(("fix", (self.folder, format_row(fix), track)))
+        if ok and self.tracker is None and getattr(info, "box", None) is not None:
+            self.tracker = {"init_bbox": list(info.box), "init_t": fix.t_unix}
+            self.recorder._tracker_found(self)
+
+
 class Recorder:
-    """Worker and sink writing the session; see the module docstring."""
+    """Worker writing the session (see the module docstring); :meth:`of` is each UUV's part of it."""
 
     def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None,
-                 timing: Callable[[], dict] | None = None):
+                 timing: Callable[[], dict] | None = None, uuv_ids: tuple[str, ...] = (PRIMARY_UUV,)):
         self.dir = Path(directory)
         if self.dir.exists() and not self.dir.is_dir():
             raise FileExistsError(f"--record {directory}: exists and is not a directory")
@@ -165,13 +207,16 @@ class Recorder:
         self.timing = timing or dict
         self._write_toml(session_toml(self._calibration))
         self.video_size = video_size
+        # the first UUV is the session's own; each other has its folder under uuvs/ (session/read.py reads them)
+        self._uuvs = {uuv_id: UuvRecord(self, uuv_id, self.dir if i == 0 else self.dir / UUVS_DIR / uuv_id)
+                      for i, uuv_id in enumerate(uuv_ids)}
+        self.first = self._uuvs[uuv_ids[0]]
+        for uuv in list(self._uuvs.values())[1:]:
+            uuv.folder.mkdir(parents=True)
         self.mavlink_frames = 0
-        self.depth_samples = 0
-        self.fixes = 0
         self.dropped = 0
         self.video_dropped = 0
         self.error: str | None = None
-        self._last_fix_t: float | None = None
         self._video: VideoWriter | None = None
         self._queue: queue.Queue = queue.Queue(maxsize=QUEUE_ITEMS)
         self._frames_queued = 0  # frames in the queue (written on the loop, lowered by the writer)
@@ -195,11 +240,6 @@ class Recorder:
     def on_mavlink(self, msg, t_recv: float) -> None:
         self.mavlink_frames += self._put(("tlog", tlog_record(int(t_recv * 1e6), msg.get_msgbuf())))
 
-    def on_depth(self, sample: DepthSample, t_recv: float) -> None:
-        rec = {"t": sample.t, "depth_m": sample.depth_m, "t_recv": t_recv, "source": sample.source}
-        rec |= {k: v for k, v in (("sigma_m", sample.sigma_m), ("vspeed_mps", sample.vspeed_mps)) if math.isfinite(v)}
-        self.depth_samples += self._put(("depth", json.dumps(rec) + "\n"))
-
     def on_frame(self, frame) -> None:
         """A received frame (of the ``video_size`` given at the start)."""
         with self._frames_lock:
@@ -211,18 +251,28 @@ class Recorder:
             with self._frames_lock:
                 self._frames_queued -= 1
 
-    def on_fix(self, fix: Fix, info) -> None:
-        if self._last_fix_t is not None and not fix.t_unix > self._last_fix_t:
-            # frames' times went back (auto applying its first latency): left out, as the video writer does
-            self.dropped += 1
-            return
-        self._last_fix_t = fix.t_unix
-        ok = fix.ok
-        track = (f"{fix.t_unix:.6f}", f"{fix.u:.3f}" if ok else "", f"{fix.v:.3f}" if ok else "")
-        self.fixes += self._put(("fix", (format_row(fix), track)))
-        if ok and "tracker" not in self._calibration and getattr(info, "box", None) is not None:
-            self._calibration["tracker"] = {"init_bbox": list(info.box), "init_t": fix.t_unix}
-            self._put(("toml", session_toml(self._calibration)))
+    def of(self, uuv_id: str) -> UuvRecord:
+        """The part of the recording of the UUV ``uuv_id``."""
+        return self._uuvs[uuv_id]
+
+    @property
+    def depth_samples(self) -> int:
+        return sum(u.depth_samples for u in self._uuvs.values())
+
+    @property
+    def fixes(self) -> int:
+        return sum(u.fixes for u in self._uuvs.values())
+
+    def _session_toml(self) -> str:
+        tracker = {"tracker": self.first.tracker} if self.first.tracker else {}
+        return session_toml(self._calibration | tracker)
+
+    def _tracker_found(self, uuv: UuvRecord) -> None:
+        """A UUV's first fix: its [tracker] written (session.toml's for the first UUV, its uuv.toml for another)."""
+        if uuv is self.first:
+            self._put(("toml", (self.dir / "session.toml", self._session_toml())))
+        else:
+            self._put(("toml", (uuv.folder / UUV_TOML, _tables({"tracker": uuv.tracker}).lstrip("\n"))))
 
     def _record_timing(self) -> None:
         """``[timing]``'s recorded keys from ``timing()``; session.toml rewritten when they changed."""
@@ -230,7 +280,7 @@ class Recorder:
         recorded = {k: v for k, v in self.timing().items() if v is not None}
         if recorded != {k: table[k] for k in RECORDED_TIMING if k in table}:
             self._calibration["timing"] = {k: v for k, v in table.items() if k not in RECORDED_TIMING} | recorded
-            self._put(("toml", session_toml(self._calibration)))
+            self._put(("toml", (self.dir / "session.toml", self._session_toml())))
 
     async def run(self) -> None:
         try:
@@ -246,23 +296,27 @@ class Recorder:
                             "on its own unless the process ends first", CLOSE_WAIT_S, self._queue.qsize())
 
     # -- the writer thread: owns every file ----------------------------------------------------------------
-    def _write_toml(self, text: str) -> None:
-        """session.toml, replaced atomically."""
-        tmp = self.dir / "session.toml.partial"
+    def _write_toml(self, text: str, path: Path | None = None) -> None:
+        """session.toml (or a UUV's uuv.toml), replaced atomically."""
+        path = path or self.dir / "session.toml"
+        tmp = path.with_name(path.name + ".partial")
         tmp.write_text(text)
-        os.replace(tmp, self.dir / "session.toml")
+        os.replace(tmp, path)
 
     def _write(self) -> None:
         files = []
         try:
             tlog = open(self.dir / "uav.tlog", "ab")  # noqa: SIM115 - closed below
-            depth = open(self.dir / "depth.jsonl", "a")  # noqa: SIM115
-            positions = open(self.dir / "positions.csv", "a", newline="")  # noqa: SIM115
-            track = open(self.dir / "track.csv", "a", newline="")  # noqa: SIM115
-            files = [tlog, depth, positions, track]
-            pos_csv, track_csv = csv.writer(positions), csv.writer(track)
-            pos_csv.writerow(COLUMNS)
-            track_csv.writerow(("t", "u", "v"))
+            files.append(tlog)
+            depth, pos_csv, track_csv = {}, {}, {}  # per UUV folder
+            for folder in (u.folder for u in self._uuvs.values()):
+                depth[folder] = open(folder / "depth.jsonl", "a")  # noqa: SIM115
+                positions = open(folder / "positions.csv", "a", newline="")  # noqa: SIM115
+                track = open(folder / "track.csv", "a", newline="")  # noqa: SIM115
+                files += [depth[folder], positions, track]
+                pos_csv[folder], track_csv[folder] = csv.writer(positions), csv.writer(track)
+                pos_csv[folder].writerow(COLUMNS)
+                track_csv[folder].writerow(("t", "u", "v"))
             if self.video_size:
                 self._video = VideoWriter(self.dir / "video.ts", self.dir / "video_frames.csv", self.video_size)
             next_flush = time.monotonic() + FLUSH_S
@@ -276,12 +330,12 @@ class Recorder:
                 if kind == "tlog":
                     tlog.write(data)
                 elif kind == "depth":
-                    depth.write(data)
+                    depth[data[0]].write(data[1])
                 elif kind == "fix":
-                    pos_csv.writerow(data[0])
-                    track_csv.writerow(data[1])
+                    pos_csv[data[0]].writerow(data[1])
+                    track_csv[data[0]].writerow(data[2])
                 elif kind == "toml":
-                    self._write_toml(data)
+                    self._write_toml(data[1], data[0])
                 elif kind == "frame":
                     with self._frames_lock:
                         self._frames_queued -= 1

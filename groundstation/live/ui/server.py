@@ -10,10 +10,20 @@ internet); ``/ws`` the page's WebSocket; ``POST /api/select|release|acquire`` th
 operator's commands (JSON as on Zenoh, :mod:`groundstation.live.control`; an error is HTTP
 400 with ``{"error": "<one line>"}``); ``GET /api/status`` the status now.
 
+Several UUVs (``[[uuv]]``, one :class:`PageUuv` each): a command's JSON body names its UUV,
+``"uuv": "<id>"`` (taken out before the command sees the rest); without it the command is
+refused (400, naming the ids), and its answer says ``"uuv"``. With one UUV the body is the
+command's alone, as on Zenoh (a ``"uuv"`` naming that UUV is allowed). ``/api/status`` is the
+first UUV's status (the shared sections and its own) as with one, plus ``uuvs``: each UUV's own
+sections by id (``target``, ``fix``, ``depth``, ``gps_input``, ``problems`` …; as in the final
+status of a run of several).
+
 The WebSocket sends, to each page: ``{"type": "hello", ...}`` once (the camera's size,
-the run's settings, the track so far); ``{"type": "state", ...}`` once a second (the
-service's status, input rates measured here, the map's :meth:`TopView.snapshot` and
-the track points that page has not seen); and the video packets of
+the run's settings, ``uuvs``: each UUV's ``id``, ``colour`` (:mod:`.palette`) and ``track``
+so far); ``{"type": "state", ...}`` once a second (the status as ``/api/status`` has it,
+input rates measured here, the map's :meth:`TopView.snapshot` and ``uuvs``: per UUV its
+``id``, the track points that page has not seen, its safety gates on the map
+(:meth:`TopView.gate_view`) and its own rates); and the video packets of
 :mod:`.feed` as binary messages. A page sends ``{"video": false}`` when hidden, and
 ``{"video": true}`` again. A page that reads slowly gets the newest of each, never a
 backlog.
@@ -38,14 +48,17 @@ import secrets
 import socket
 import time
 from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from importlib import resources
 from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
-from groundstation.live.control import Control, ControlError
+from groundstation.live.control import Control, ControlError, jsonable
 from groundstation.live.ui.bind import is_loopback, parse_bind
 from groundstation.live.ui.feed import VideoFeed
+from groundstation.live.ui.palette import colour
 from groundstation.live.ui.topview import TopView
 
 log = logging.getLogger("skyfix.ui")
@@ -87,12 +100,23 @@ class CounterRates:
                     else None) for k, v in counts.items()}
 
 
+@dataclass
+class PageUuv:
+    """One UUV on the page: its ``id``, its commands (``control``; the first UUV's status is the page's) and,
+    with several, its own status sections (``own_status(now)``; default: its control's whole status)."""
+
+    id: str
+    control: Control
+    own_status: Callable[[float], dict] | None = None
+    rates: CounterRates = field(default_factory=CounterRates)
+
+
 class Viewer:
     """One open page: the newest state and video packet not yet sent to it."""
 
-    def __init__(self):
+    def __init__(self, uuvs: int = 1):
         self.video = True
-        self.seq = 0  # the last track point sent
+        self.seq = [0] * uuvs  # per UUV, the last track point sent
         self.state: str | None = None
         self.packet: bytes | None = None
         self.ready = asyncio.Event()
@@ -111,15 +135,18 @@ def _counts(status: dict) -> dict[str, int | None]:
 class WebUi:
     """Worker serving the page (see the module doc); :meth:`start` binds (UiError), :meth:`run` serves.
 
-    ``settings``: what the page shows about the run's configuration.
+    ``control``: the one UUV's commands, or each UUV's :class:`PageUuv` in the run's order (the topview's
+    ``tracks`` in the same order). ``settings``: what the page shows about the run's configuration.
     """
 
-    def __init__(self, bind: str, token: str | None, control: Control, topview: TopView, feed: VideoFeed,
-                 camera_size: tuple[int, int], settings: dict):
+    def __init__(self, bind: str, token: str | None, control: Control | Sequence[PageUuv], topview: TopView,
+                 feed: VideoFeed, camera_size: tuple[int, int], settings: dict):
         self.host, self.port = parse_bind(bind)
         self.bind = bind
         self.token = token if token is not None else (None if is_loopback(self.host) else secrets.token_urlsafe(16))
-        self.control = control
+        self.uuvs = [PageUuv("uuv1", control)] if isinstance(control, Control) else list(control)
+        self.several = len(self.uuvs) > 1
+        self.control = self.uuvs[0].control
         self.topview = topview
         self.camera_size = camera_size
         self.settings = settings
@@ -186,21 +213,39 @@ class WebUi:
                 v.packet = packet
                 v.ready.set()
 
+    def status_now(self) -> dict:
+        """The first UUV's status (the shared sections and its own) and, with several, ``uuvs``: each one's own."""
+        first = self.control.status()
+        if not self.several:
+            return first
+        t = first["t"]
+        return first | {"uuvs": {u.id: jsonable(u.own_status(t)) if u.own_status else u.control.status()
+                                 for u in self.uuvs}}
+
+    def _own(self, status: dict, k: int) -> dict:
+        return status["uuvs"][self.uuvs[k].id] if self.several else status
+
     async def _push_state(self) -> None:
         while True:
             await asyncio.sleep(STATE_PERIOD_S)
             if not self.viewers:
                 continue
             now = time.time()
-            status = self.control.status()
-            gates = (status.get("gps_input") or {}).get("gates")
+            status = self.status_now()
             state = {"type": "state", "status": status, "rates": self.rates.update(now, _counts(status)),
-                     "map": {**self.topview.snapshot(now), "gate": self.topview.gate_view(gates)}}
+                     "map": self.topview.snapshot(now)}
+            uuvs = []
+            for k, u in enumerate(self.uuvs):
+                own = self._own(status, k)
+                uuvs.append({"id": u.id, "rates": u.rates.update(now, _counts(own)) if self.several else state["rates"],
+                             "gate": self.topview.gate_view((own.get("gps_input") or {}).get("gates"))})
             for v in self.viewers:
-                track = self.topview.points_since(v.seq)
-                if track:
-                    v.seq = track[-1][0]
-                v.state = json.dumps({**state, "track": track}, allow_nan=False)
+                for k, part in enumerate(uuvs):
+                    track = self.topview.tracks[k].points_since(v.seq[k])
+                    if track:
+                        v.seq[k] = track[-1][0]
+                    part["track"] = track
+                v.state = json.dumps({**state, "uuvs": uuvs}, allow_nan=False)
                 v.ready.set()
 
     # -- handlers ----------------------------------------------------------------------------------------
@@ -242,7 +287,26 @@ class WebUi:
         return web.FileResponse(STATIC / "index.html")
 
     async def _status(self, request: web.Request) -> web.Response:
-        return web.json_response(self.control.status(), dumps=lambda o: json.dumps(o, allow_nan=False))
+        return web.json_response(self.status_now(), dumps=lambda o: json.dumps(o, allow_nan=False))
+
+    def _addressed(self, command: str, payload: bytes) -> tuple[PageUuv, bytes]:
+        """The UUV a command's body names (``"uuv"``) and the body without it; with one UUV, the body may name
+        none. :class:`ControlError` for an unknown id, or none with several UUVs."""
+        try:
+            obj = json.loads(payload)
+        except (ValueError, UnicodeDecodeError, RecursionError):
+            obj = None
+        ids = ", ".join(u.id for u in self.uuvs)
+        if isinstance(obj, dict) and "uuv" in obj:
+            name = obj.pop("uuv")
+            uuv = next((u for u in self.uuvs if isinstance(name, str) and u.id == name), None)
+            if uuv is None:
+                raise ControlError(f"{command}: uuv = {json.dumps(name)[:40]}: not a UUV of this run ({ids})")
+            return uuv, json.dumps(obj).encode()
+        if self.several:
+            raise ControlError(f"{command}: this run tracks several UUVs ({ids}): name one in the "
+                               f"JSON body, as {{\"uuv\": \"{self.uuvs[0].id}\"}}")
+        return self.uuvs[0], payload
 
     async def _command(self, request: web.Request) -> web.Response:
         command = request.match_info["command"]
@@ -250,26 +314,33 @@ class WebUi:
             return web.json_response({"error": f"unknown command {command!r} (known: {', '.join(COMMANDS)})"},
                                      status=404)
         try:
-            result = await self.control.handle(command, await request.read())
+            uuv, payload = self._addressed(command, await request.read())
+            result = await uuv.control.handle(command, payload)
         except ControlError as e:
             log.warning("page: command %s refused: %s", command, e)
             return web.json_response({"error": str(e)}, status=400)
         except Exception as e:  # a bug in one command must not stop the service
             log.exception("page: command %s failed", command)
             return web.json_response({"error": f"{command}: internal error: {e}"}, status=500)
-        log.info("page: %s done (latest frame %s)", command, result.get("latest_frame"))
+        if self.several:
+            result = {"uuv": uuv.id, **result}
+        log.info("page: %s%s done (latest frame %s)", command, f" {uuv.id}" if self.several else "",
+                 result.get("latest_frame"))
         return web.json_response(result, dumps=lambda o: json.dumps(o, allow_nan=False))
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
         # no permessage-deflate: the JPEGs do not compress, and zlib would cost the service CPU for every frame
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096, compress=False, timeout=2.0)
         await ws.prepare(request)
-        viewer = Viewer()
+        viewer = Viewer(len(self.uuvs))
+        uuvs = [{"id": u.id, "colour": colour(k), "track": self.topview.tracks[k].points_since(0)}
+                for k, u in enumerate(self.uuvs)]
         hello = {"type": "hello", "camera": {"width": self.camera_size[0], "height": self.camera_size[1]},
                  "video": {"max_fps": round(1.0 / self.feed.min_interval_s, 2), "max_width": self.feed.max_width},
-                 "settings": self.settings, "track": self.topview.points_since(0)}
-        if hello["track"]:
-            viewer.seq = hello["track"][-1][0]
+                 "settings": self.settings, "uuvs": uuvs}
+        for k, u in enumerate(uuvs):
+            if u["track"]:
+                viewer.seq[k] = u["track"][-1][0]
         self._sockets.add(ws)
         self.viewers.add(viewer)
         sender = asyncio.create_task(self._send(ws, viewer))

@@ -5,9 +5,11 @@ shown). :meth:`TopView.snapshot` places the UAV and the camera's footprint on th
 water at the newest frame's time: the image's border, sampled along each edge, is
 projected onto the water surface with that frame's camera pose
 (:func:`localizer.pose.camera_pose`, :func:`localizer.ray.pixel_to_offset` at depth 0);
-rays above the horizon never reach the water and are left out (``horizon``). The
-UUV's track is every ``ok`` fix (at most one per ``min_dt_s``) with its horizontal
-accuracy, numbered so that each page is sent only what it has not seen.
+rays above the horizon never reach the water and are left out (``horizon``). Each
+UUV's track (:class:`UuvTrack`, one per UUV of the run, :attr:`TopView.tracks`; the first is
+the view's own ``on_fix`` and ``points_since``) is every ``ok`` fix (at most one per
+``min_dt_s``) with its horizontal accuracy, numbered so that each page is sent only what it
+has not seen; all tracks share the view's origin.
 :meth:`TopView.gate_view` places the safety gates' track of the UUV (its state, filtered
 position, velocity and covariance, and its reach while a target is being acquired).
 """
@@ -38,22 +40,18 @@ def border_pixels(width: int, height: int, n: int = EDGE_SAMPLES) -> tuple[np.nd
     return u, v
 
 
-class TopView:
-    """Pipeline sink (``on_fix``) keeping the UUV's track; :meth:`snapshot` is the map now."""
+class UuvTrack:
+    """Pipeline sink (``on_fix``) keeping one UUV's track on a :class:`TopView` (its origin, its newest frame)."""
 
-    def __init__(self, cal: Calibration, tel: Telemetry, keep: int = 3000, min_dt_s: float = 0.1):
-        self.cal = cal
-        self.tel = tel
+    def __init__(self, view: TopView, keep: int, min_dt_s: float):
+        self.view = view
         self.min_dt_s = min_dt_s
-        self.origin: tuple[float, float] | None = None
         self.track: deque[tuple[int, float, float, float, float]] = deque(maxlen=keep)  # seq, t, lat, lon, h_acc
         self._seq = 0
-        self._frame_t: float | None = None
-        self._border = border_pixels(cal.camera.width, cal.camera.height)
 
     def on_fix(self, fix: Fix, info) -> None:
         if math.isfinite(fix.t_unix):
-            self._frame_t = fix.t_unix
+            self.view._frame_t = fix.t_unix
         if not fix.ok or (self.track and fix.t_unix - self.track[-1][1] < self.min_dt_s):
             return
         self._seq += 1
@@ -62,12 +60,35 @@ class TopView:
     def points_since(self, seq: int) -> list[list[float]]:
         """Track points after ``seq``: ``[seq, north_m, east_m, h_acc_m, t]`` each."""
         new = [p for p in self.track if p[0] > seq] if self.track and self.track[-1][0] > seq else []
-        if not new or self.origin is None:
+        if not new or self.view.origin is None:
             return []
         a = np.array(new)
-        n, e, _ = geodetic_to_ned(a[:, 2], a[:, 3], 0.0, *self.origin, 0.0)
+        n, e, _ = geodetic_to_ned(a[:, 2], a[:, 3], 0.0, *self.view.origin, 0.0)
         return [[int(p[0]), round(float(ni), 3), round(float(ei), 3), round(float(p[4]), 3), round(p[1], 3)]
                 for p, ni, ei in zip(new, np.atleast_1d(n), np.atleast_1d(e), strict=True)]
+
+
+class TopView:
+    """The map: :meth:`snapshot` is the UAV and the footprint now; ``tracks``: one :class:`UuvTrack` per UUV
+    (``uuvs`` of them), each a sink of its UUV's pipeline; the view's own ``on_fix``/``points_since`` are the
+    first's."""
+
+    def __init__(self, cal: Calibration, tel: Telemetry, keep: int = 3000, min_dt_s: float = 0.1, uuvs: int = 1):
+        self.cal = cal
+        self.tel = tel
+        self.min_dt_s = min_dt_s
+        self.origin: tuple[float, float] | None = None
+        self._frame_t: float | None = None
+        self._border = border_pixels(cal.camera.width, cal.camera.height)
+        self.tracks = [UuvTrack(self, keep, min_dt_s) for _ in range(max(1, uuvs))]
+        self.track = self.tracks[0].track
+
+    def on_fix(self, fix: Fix, info) -> None:
+        self.tracks[0].on_fix(fix, info)
+
+    def points_since(self, seq: int) -> list[list[float]]:
+        """The first UUV's track points after ``seq``: ``[seq, north_m, east_m, h_acc_m, t]`` each."""
+        return self.tracks[0].points_since(seq)
 
     def snapshot(self, now: float) -> dict:
         """The UAV and the camera's footprint at the newest frame's time (or now, before any frame)."""

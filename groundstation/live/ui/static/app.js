@@ -1,4 +1,6 @@
 // skyfix's operator page: video with the tracker's overlay, target selection, map, health.
+// Several UUVs ([[uuv]]): each in its colour (box, label, track, rows); the operator picks the UUV a selection,
+// "Release" or "Await" applies to (the buttons above them, or the keys 1–9). With one, the page is as it was.
 // Everything comes from this server (WebSocket /ws, POST /api/<command>); nothing from the internet.
 "use strict";
 
@@ -15,12 +17,16 @@ const page = {
   drag: null,         // {x0, y0, x1, y1} in image pixels (continuous: 0 is the left edge of pixel 0)
   received: 0,
   shownTimes: [],
-  track: [],          // [seq, north_m, east_m, h_acc_m, t]
+  uuvs: [],           // per UUV: {id, colour, track: [[seq, north_m, east_m, h_acc_m, t]], gate, rates}
+  sel: 0,             // the UUV the operator's commands apply to
   map: null,
   status: null,
   rates: {},
   settings: {},
 };
+const several = () => page.uuvs.length > 1;
+// a UUV's own status sections (with one UUV, the status itself)
+const own = (k) => (page.status && page.status.uuvs ? page.status.uuvs[page.uuvs[k].id] : page.status) || {};
 const TRACK_KEEP = 3000;
 
 // ---- the WebSocket ------------------------------------------------------------------------------
@@ -44,7 +50,9 @@ function onText(msg) {
   if (msg.type === "hello") {
     page.camera = msg.camera;
     page.settings = msg.settings;
-    page.track = msg.track;
+    page.uuvs = msg.uuvs.map((u) => ({ id: u.id, colour: u.colour, track: u.track, gate: null, rates: {} }));
+    page.sel = Math.min(page.sel, page.uuvs.length - 1);
+    showPicker();
     sizeVideo();
     return;
   }
@@ -52,8 +60,14 @@ function onText(msg) {
     page.status = msg.status;
     page.rates = msg.rates;
     page.map = msg.map;
-    page.track.push(...msg.track);
-    if (page.track.length > TRACK_KEEP) page.track.splice(0, page.track.length - TRACK_KEEP);
+    msg.uuvs.forEach((u, k) => {
+      const mine = page.uuvs[k];
+      if (!mine) return;
+      mine.gate = u.gate;
+      mine.rates = u.rates;
+      mine.track.push(...u.track);
+      if (mine.track.length > TRACK_KEEP) mine.track.splice(0, mine.track.length - TRACK_KEEP);
+    });
     showStatus();
     drawMap();
     showHealth();
@@ -94,6 +108,74 @@ function drawVideo() {
   const s = video.width / o.width;  // canvas pixels per image pixel
   vctx.drawImage(f.bitmap, 0, 0, video.width, video.height);
   const lw = Math.max(2, video.width / 400);
+  if (o.uuvs) drawUuvs(o, s, lw);
+  else drawOne(o, s, lw);
+  if (page.drag) {
+    const d = page.drag;
+    vctx.strokeStyle = several() ? page.uuvs[page.sel].colour : "#ff00ff";
+    vctx.lineWidth = 1.5 * lw;
+    vctx.strokeRect(Math.min(d.x0, d.x1) * s, Math.min(d.y0, d.y1) * s, Math.abs(d.x1 - d.x0) * s,
+                    Math.abs(d.y1 - d.y0) * s);
+  }
+  video.dataset.frame = o.frame;
+  video.dataset.t = o.t;
+  video.dataset.status = o.status;
+  video.dataset.uuvs = o.uuvs ? o.uuvs.map((u) => `${u.id}:${u.status}`).join(" ") : "";
+  video.dataset.frozen = page.frozen ? "1" : "";
+  const fps = page.shownTimes.length > 1
+    ? (page.shownTimes.length - 1) / ((page.shownTimes.at(-1) - page.shownTimes[0]) / 1000) : 0;
+  $("video-info").textContent = `frame ${o.frame} · shown ${fps.toFixed(1)} fps`
+    + (page.frozen ? " · held while you select" : "");
+}
+
+function crosshair(u, v, s, lw) {
+  const x = (u + 0.5) * s, y = (v + 0.5) * s, r = 6 * lw;
+  vctx.strokeStyle = "#fff";
+  vctx.lineWidth = lw;
+  vctx.beginPath();
+  vctx.moveTo(x - r, y); vctx.lineTo(x + r, y); vctx.moveTo(x, y - r); vctx.lineTo(x, y + r);
+  vctx.stroke();
+}
+
+// several UUVs: each one's window (dashed) and box (solid when ok, dashed otherwise) in its colour, its id over
+// its box, and a label line per UUV at the top-left
+function drawUuvs(o, s, lw) {
+  vctx.font = `bold ${Math.round(9 * lw)}px system-ui, sans-serif`;
+  o.uuvs.forEach((u, k) => {
+    const ok = u.status === "ok";
+    if (u.window) {
+      vctx.setLineDash([4 * lw, 4 * lw]);
+      vctx.strokeStyle = u.colour;
+      vctx.lineWidth = lw;
+      vctx.strokeRect(u.window[0] * s, u.window[1] * s, u.window[2] * s, u.window[3] * s);
+      vctx.setLineDash([]);
+    }
+    if (u.box) {
+      vctx.setLineDash(ok ? [] : [6 * lw, 3 * lw]);
+      vctx.strokeStyle = u.colour;
+      vctx.lineWidth = (k === page.sel ? 2.2 : 1.5) * lw;
+      vctx.strokeRect(u.box[0] * s, u.box[1] * s, u.box[2] * s, u.box[3] * s);
+      vctx.setLineDash([]);
+      const tw = vctx.measureText(u.id).width;
+      const ty = Math.max(0, u.box[1] * s - 12 * lw);
+      vctx.fillStyle = u.colour;
+      vctx.fillRect(u.box[0] * s, ty, tw + 6 * lw, 12 * lw);
+      vctx.fillStyle = "#fff";
+      vctx.fillText(u.id, u.box[0] * s + 3 * lw, ty + 9.5 * lw);
+    }
+    if (u.u !== null && u.v !== null && ok) crosshair(u.u, u.v, s, lw);
+    const label = `${k === page.sel ? "▶ " : ""}${u.id} ${u.status}`
+      + `${u.h_acc_m !== null ? `  h_acc ${u.h_acc_m.toFixed(2)} m` : ""}${k === 0 ? `  #${o.frame}` : ""}`;
+    const w = vctx.measureText(label).width;
+    vctx.fillStyle = u.colour;
+    vctx.fillRect(0, k * 13 * lw, w + 6 * lw, 13 * lw);
+    vctx.fillStyle = "#fff";
+    vctx.fillText(label, 3 * lw, k * 13 * lw + 10 * lw);
+  });
+}
+
+// one UUV: as the page has always drawn it
+function drawOne(o, s, lw) {
   if (o.window) {
     vctx.setLineDash([8 * lw / 2, 6 * lw / 2]);
     vctx.strokeStyle = "#ffd400";
@@ -106,14 +188,7 @@ function drawVideo() {
     vctx.lineWidth = 1.5 * lw;
     vctx.strokeRect(o.box[0] * s, o.box[1] * s, o.box[2] * s, o.box[3] * s);
   }
-  if (o.u !== null && o.v !== null && o.status === "ok") {
-    const x = (o.u + 0.5) * s, y = (o.v + 0.5) * s, r = 6 * lw;
-    vctx.strokeStyle = "#fff";
-    vctx.lineWidth = lw;
-    vctx.beginPath();
-    vctx.moveTo(x - r, y); vctx.lineTo(x + r, y); vctx.moveTo(x, y - r); vctx.lineTo(x, y + r);
-    vctx.stroke();
-  }
+  if (o.u !== null && o.v !== null && o.status === "ok") crosshair(o.u, o.v, s, lw);
   const label = `${o.status}${o.h_acc_m !== null ? `  h_acc ${o.h_acc_m.toFixed(2)} m` : ""}  #${o.frame}`;
   vctx.font = `bold ${Math.round(9 * lw)}px system-ui, sans-serif`;
   const w = vctx.measureText(label).width;
@@ -121,21 +196,6 @@ function drawVideo() {
   vctx.fillRect(0, 0, w + 6 * lw, 13 * lw);
   vctx.fillStyle = "#fff";
   vctx.fillText(label, 3 * lw, 10 * lw);
-  if (page.drag) {
-    const d = page.drag;
-    vctx.strokeStyle = "#ff00ff";
-    vctx.lineWidth = 1.5 * lw;
-    vctx.strokeRect(Math.min(d.x0, d.x1) * s, Math.min(d.y0, d.y1) * s, Math.abs(d.x1 - d.x0) * s,
-                    Math.abs(d.y1 - d.y0) * s);
-  }
-  video.dataset.frame = o.frame;
-  video.dataset.t = o.t;
-  video.dataset.status = o.status;
-  video.dataset.frozen = page.frozen ? "1" : "";
-  const fps = page.shownTimes.length > 1
-    ? (page.shownTimes.length - 1) / ((page.shownTimes.at(-1) - page.shownTimes[0]) / 1000) : 0;
-  $("video-info").textContent = `frame ${o.frame} · shown ${fps.toFixed(1)} fps`
-    + (page.frozen ? " · held while you select" : "");
 }
 
 function imagePoint(ev) {  // image pixels (continuous) under the pointer
@@ -179,13 +239,21 @@ function endDrag() {
   page.frozen = null;
   drawVideo();
 }
-document.addEventListener("keydown", (ev) => { if (ev.key === "Escape" && page.drag) endDrag(); });
+document.addEventListener("keydown", (ev) => {
+  if (ev.key === "Escape" && page.drag) endDrag();
+  const k = Number(ev.key) - 1;  // 1–9: the UUV the commands apply to
+  if (several() && Number.isInteger(k) && k >= 0 && k < page.uuvs.length && !ev.ctrlKey && !ev.altKey && !ev.metaKey) {
+    pick(k);
+  }
+});
 window.addEventListener("resize", () => { sizeVideo(); drawMap(); });
 
 // ---- commands -------------------------------------------------------------------------------------
 async function command(name, body) {
   const out = $("cmd-result");
-  out.textContent = `${name}: sent…`;
+  const who = several() ? `${page.uuvs[page.sel].id} ` : "";  // several UUVs: the body names the one picked
+  if (several()) body = { ...(body || {}), uuv: page.uuvs[page.sel].id };
+  out.textContent = `${who}${name}: sent…`;
   out.className = "";
   try {
     const resp = await fetch(`/api/${name}`, { method: "POST", headers: { "Content-Type": "application/json" },
@@ -197,9 +265,9 @@ async function command(name, body) {
       return;
     }
     const t = answer.target;
-    out.textContent = name === "select"
+    out.textContent = who + (name === "select"
       ? `selected on frame ${answer.frame} (caught up ${answer.caught_up}): ${t.state}`
-      : `${name}: ${t.state} from frame ${answer.latest_frame + 1}`;
+      : `${name}: ${t.state} from frame ${answer.latest_frame + 1}`);
     out.className = "ok";
   } catch (e) {
     out.textContent = `${name}: ${e}`;
@@ -209,30 +277,104 @@ async function command(name, body) {
 $("release").onclick = () => command("release");
 $("acquire").onclick = () => command("acquire");
 
+// several UUVs: one button per UUV, in its colour, picking the one the commands apply to
+function showPicker() {
+  const box = $("uuv-pick");
+  box.hidden = !several();
+  if (!several()) return;
+  const buttons = page.uuvs.map((u, k) => {
+    const b = document.createElement("button");
+    b.type = "button";
+    b.dataset.uuv = u.id;
+    b.textContent = `${k + 1} ${u.id}`;
+    b.style.borderColor = u.colour;
+    b.onclick = () => pick(k);
+    return b;
+  });
+  box.replaceChildren(Object.assign(document.createElement("span"), { textContent: "commands for" }), ...buttons);
+  $("hint").textContent = "Pick the UUV (its button, or the keys 1–9), then drag a box around it, or click on it, "
+    + "to select it (Esc cancels a drag); Release and Await apply to the UUV picked.";
+  pick(page.sel);
+}
+
+function pick(k) {
+  page.sel = k;
+  $("uuv-pick").dataset.selected = page.uuvs[k].id;
+  for (const b of $("uuv-pick").querySelectorAll("button")) {
+    const mine = b.dataset.uuv === page.uuvs[k].id;
+    b.setAttribute("aria-pressed", mine ? "true" : "false");
+    b.style.background = mine ? page.uuvs[k].colour : "#fff";
+    b.style.color = mine ? "#fff" : "#000";
+  }
+  if (page.status) showStatus();
+  drawVideo();
+}
+
 // ---- status word, fix, target ---------------------------------------------------------------------
 const fmt = (x, d = 2, unit = "") => (x === null || x === undefined ? "—" : `${Number(x).toFixed(d)}${unit}`);
 
 function showStatus() {
-  const s = page.status;
-  const fix = s.fix;
+  const s = page.status, k = page.sel, mine = own(k);
+  const who = several() ? `${page.uuvs[k].id} ` : "";  // several UUVs: the header is the one picked
+  const fix = mine.fix;
   const word = $("status-word");
   word.textContent = fix ? fix.status : "no frames";
   word.className = `word ${fix && fix.status === "ok" ? "ok" : "bad"}`;
   $("hacc").textContent = `h_acc ${fmt(fix && fix.h_acc_m, 2, " m")}`;
   const h = s.height;  // the UAV's height above the water, as the fixes use it
   $("height").textContent = h ? `height ${fmt(h.height_m, 2)} ± ${fmt(h.sigma_m, 2, " m")} (${h.source})` : "height —";
-  const t = s.target;
-  $("target-state").textContent = `target ${t.state}${t.origin ? ` (${t.origin})` : ""}`;
-  const g = s.gps_input && s.gps_input.gates;  // the safety gates: what GPS_INPUT lets through
+  const t = mine.target;
+  $("target-state").textContent = `${who}target ${t.state}${t.origin ? ` (${t.origin})` : ""}`;
+  const g = mine.gps_input && mine.gps_input.gates;  // the safety gates: what GPS_INPUT lets through
   const gate = $("gate-state");
   gate.textContent = !g ? "gates —" : g.state === "acquiring" && g.chain
     ? `gates acquiring ${g.chain.span_s.toFixed(1)}/${g.chain.needed_s.toFixed(1)} s` : `gates ${g.state}`;
   gate.className = !g ? "" : g.state === "tracking" ? "ok" : g.state === "diverged" ? "bad" : "warn";
-  const okFix = fix && fix.status === "ok";
-  $("fix-text").textContent = okFix
-    ? `UUV ${fix.lat.toFixed(7)}, ${fix.lon.toFixed(7)} ± ${fix.h_acc_m.toFixed(2)} m, depth ${fmt(fix.depth_m)} m`
-      + ` (frame ${fix.frame}, ${(s.t - fix.t).toFixed(1)} s ago)`
-    : `no fix: ${fix ? fix.status : "no frames yet"}`;
+  const fixText = (f, name) => (f && f.status === "ok"
+    ? `${name} ${f.lat.toFixed(7)}, ${f.lon.toFixed(7)} ± ${f.h_acc_m.toFixed(2)} m, depth ${fmt(f.depth_m)} m`
+      + ` (frame ${f.frame}, ${(s.t - f.t).toFixed(1)} s ago)`
+    : `${several() ? `${name}: ` : ""}no fix: ${f ? f.status : "no frames yet"}`);
+  if (!several()) {
+    $("fix-text").textContent = fixText(fix, "UUV");
+  } else {  // a line per UUV, in its colour
+    $("fix-text").replaceChildren(...page.uuvs.map((u, j) => Object.assign(document.createElement("span"), {
+      className: "uuv-line", textContent: fixText(own(j).fix, u.id), style: `border-left: 0.6rem solid ${u.colour}`,
+    })));
+  }
+  showUuvTable();
+}
+
+// several UUVs: a row each, in its colour: its target, fix, h_acc, depth's age, GPS_INPUT and gates
+function showUuvTable() {
+  const table = $("uuvs");
+  table.hidden = !several();
+  if (!several()) return;
+  const rows = page.uuvs.map((u, k) => {
+    const o = own(k), fix = o.fix, g = o.gps_input, gates = g && g.gates, d = o.depth || {};
+    const tr = document.createElement("tr");
+    tr.dataset.uuv = u.id;
+    const gpsState = !g ? "—" : g.last_fix_type === 3 ? "ok: fix" : g.sent ? "warn: no fix" : "—";
+    const cells = [
+      [`${k === page.sel ? "▶ " : ""}${u.id}`, ""],
+      [`${o.target.state}${o.target.origin ? ` (${o.target.origin})` : ""}`,
+       o.target.state === "tracking" ? "ok" : o.target.state === "lost" ? "bad" : "warn"],
+      [fix ? fix.status : "no frames", fix && fix.status === "ok" ? "ok" : "bad"],
+      [fmt(fix && fix.h_acc_m, 2, " m"), ""],
+      [d.age_s === null || d.age_s === undefined ? "never" : `${d.age_s.toFixed(2)} s`,
+       o.problems && o.problems.depth ? "bad" : "ok"],
+      [gpsState, gpsState.startsWith("ok") ? "ok" : gpsState === "—" ? "" : "warn"],
+      [gates ? gates.state : "—", !gates ? "" : gates.state === "tracking" ? "ok" : gates.state === "diverged" ? "bad" : "warn"],
+    ];
+    cells.forEach(([text, cls], i) => {
+      const td = document.createElement("td");
+      td.textContent = text;
+      if (i === 0) td.style.cssText = `background: ${u.colour}; color: #fff`;
+      else if (cls) td.className = `state ${cls}`;
+      tr.appendChild(td);
+    });
+    return tr;
+  });
+  table.tBodies[0].replaceChildren(...rows);
 }
 
 // ---- map ------------------------------------------------------------------------------------------
@@ -250,17 +392,22 @@ function drawMap() {
   ctx.fillStyle = "#fff";
   ctx.fillRect(0, 0, W, H);
   const m = page.map;
-  map.dataset.points = page.track.length;
+  map.dataset.points = page.uuvs.length ? page.uuvs[0].track.length : 0;  // the first UUV's
+  map.dataset.tracks = page.uuvs.map((u) => `${u.id}:${u.track.length}`).join(" ");
   if (!m) return;
-  // what must be in view: the UAV, its footprint, the last 30 s of the track
+  // what must be in view: the UAV, its footprint, the last 30 s of each track
   const pts = [];
   if (m.uav) pts.push(m.uav);
   if (m.footprint) pts.push(...m.footprint);
-  const recent = page.track.filter((p) => p[4] > (page.track.length ? page.track.at(-1)[4] : 0) - 30);
-  recent.forEach((p) => pts.push([p[1], p[2]]));
-  const gt = m.gate && m.gate.track;
-  if (gt) pts.push([gt.n, gt.e]);
-  map.dataset.gate = m.gate ? m.gate.state : "";
+  for (const u of page.uuvs) {
+    const recent = u.track.filter((p) => p[4] > (u.track.length ? u.track.at(-1)[4] : 0) - 30);
+    recent.forEach((p) => pts.push([p[1], p[2]]));
+    const gt = u.gate && u.gate.track;
+    if (gt) pts.push([gt.n, gt.e]);
+  }
+  const gate0 = page.uuvs.length ? page.uuvs[0].gate : null;
+  map.dataset.gate = gate0 ? gate0.state : "";  // the first UUV's
+  map.dataset.gates = page.uuvs.map((u) => `${u.id}:${u.gate ? u.gate.state : ""}`).join(" ");
   if (!pts.length) {
     ctx.fillStyle = "#000";
     ctx.font = `bold ${16 * dpr}px system-ui, sans-serif`;
@@ -289,31 +436,21 @@ function drawMap() {
       ctx.stroke();
     }
   }
-  // the UUV's track: accuracy circles, then the line, then the last fix
-  ctx.lineWidth = 1 * dpr;
-  ctx.strokeStyle = "rgba(176, 0, 0, 0.35)";
-  for (const p of page.track) {
-    ctx.beginPath();
-    ctx.arc(X(p[2]), Y(p[1]), Math.max(p[3] * pxPerM, 1), 0, 2 * Math.PI);
-    ctx.stroke();
+  // each UUV's track in its colour: accuracy circles, then the line, then the last fix
+  for (const u of page.uuvs) drawTrack(ctx, u.track, u.colour, X, Y, pxPerM, dpr);
+  // each UUV's safety gates' track: blue with one UUV, its colour with several
+  for (const u of page.uuvs) {
+    if (u.gate && u.gate.track) drawGateTrack(ctx, u.gate, X, Y, pxPerM, dpr, several() ? u.colour : "#0050c8");
   }
-  ctx.strokeStyle = "#b00000";
-  ctx.lineWidth = 2 * dpr;
-  ctx.beginPath();
-  page.track.forEach((p, i) => (i ? ctx.lineTo(X(p[2]), Y(p[1])) : ctx.moveTo(X(p[2]), Y(p[1]))));
-  ctx.stroke();
-  const last = page.track.at(-1);
-  if (last) {
-    ctx.fillStyle = "#b00000";
-    ctx.beginPath();
-    ctx.arc(X(last[2]), Y(last[1]), 5 * dpr, 0, 2 * Math.PI);
-    ctx.fill();
-    ctx.lineWidth = 3 * dpr;
-    ctx.beginPath();
-    ctx.arc(X(last[2]), Y(last[1]), Math.max(last[3] * pxPerM, 5 * dpr), 0, 2 * Math.PI);
-    ctx.stroke();
+  if (several()) {  // the legend: each UUV's id in its colour
+    ctx.font = `bold ${14 * dpr}px system-ui, sans-serif`;
+    page.uuvs.forEach((u, k) => {
+      ctx.fillStyle = u.colour;
+      ctx.fillRect(10 * dpr, (8 + 20 * k) * dpr, 14 * dpr, 14 * dpr);
+      ctx.fillStyle = "#000";
+      ctx.fillText(u.id, 30 * dpr, (20 + 20 * k) * dpr);
+    });
   }
-  if (gt) drawGateTrack(ctx, m.gate, X, Y, pxPerM, dpr);
   if (m.uav) {  // the UAV: a black cross in a ring
     const x = X(m.uav[1]), y = Y(m.uav[0]), s = 9 * dpr;
     ctx.strokeStyle = "#000";
@@ -339,22 +476,56 @@ function drawMap() {
   ctx.fillText(`${bar} m`, x0, y0 - 10 * dpr);
   map.dataset.scaleM = bar;
   const o = m.origin;
-  $("map-info").textContent = `${page.track.length} fixes on the track · scale bar ${bar} m`
+  $("map-info").textContent = (several()
+    ? `fixes on the tracks: ${page.uuvs.map((u) => `${u.id} ${u.track.length}`).join(", ")}`
+    : `${page.uuvs[0].track.length} fixes on the track`) + ` · scale bar ${bar} m`
     + (m.height_m !== null ? ` · camera ${m.height_m.toFixed(1)} m above the water` : "")
     + (m.horizon ? " · horizon in view: footprint cut" : "")
     + (m.footprint ? "" : ` · no footprint (${m.pose})`)
     + (o ? ` · origin ${o.lat.toFixed(6)}, ${o.lon.toFixed(6)}` : "");
 }
 
-// The safety gates' track: a blue diamond, its 2-sigma ellipse (own and shared error), its velocity over the next
-// second; while a target is being acquired, a dashed circle where the UUV can be by now.
-function drawGateTrack(ctx, gate, X, Y, pxPerM, dpr) {
+// "#b00000" and an opacity → "rgba(176, 0, 0, 0.35)"
+function rgba(hex, alpha) {
+  const n = parseInt(hex.slice(1), 16);
+  return `rgba(${n >> 16}, ${(n >> 8) & 255}, ${n & 255}, ${alpha})`;
+}
+
+function drawTrack(ctx, track, colour, X, Y, pxPerM, dpr) {
+  ctx.lineWidth = 1 * dpr;
+  ctx.strokeStyle = rgba(colour, 0.35);
+  for (const p of track) {
+    ctx.beginPath();
+    ctx.arc(X(p[2]), Y(p[1]), Math.max(p[3] * pxPerM, 1), 0, 2 * Math.PI);
+    ctx.stroke();
+  }
+  ctx.strokeStyle = colour;
+  ctx.lineWidth = 2 * dpr;
+  ctx.beginPath();
+  track.forEach((p, i) => (i ? ctx.lineTo(X(p[2]), Y(p[1])) : ctx.moveTo(X(p[2]), Y(p[1]))));
+  ctx.stroke();
+  const last = track.at(-1);
+  if (last) {
+    ctx.fillStyle = colour;
+    ctx.beginPath();
+    ctx.arc(X(last[2]), Y(last[1]), 5 * dpr, 0, 2 * Math.PI);
+    ctx.fill();
+    ctx.lineWidth = 3 * dpr;
+    ctx.beginPath();
+    ctx.arc(X(last[2]), Y(last[1]), Math.max(last[3] * pxPerM, 5 * dpr), 0, 2 * Math.PI);
+    ctx.stroke();
+  }
+}
+
+// The safety gates' track: a diamond (blue with one UUV), its 2-sigma ellipse (own and shared error), its velocity
+// over the next second; while a target is being acquired, a dashed circle where the UUV can be by now.
+function drawGateTrack(ctx, gate, X, Y, pxPerM, dpr, colour) {
   const t = gate.track;
   const x = X(t.e), y = Y(t.n);
   const a = t.sigma_n ** 2, b = t.cov_ne ?? 0, c = t.sigma_e ** 2;  // [[nn, ne], [ne, ee]]
   const mid = (a + c) / 2, half = Math.sqrt(((a - c) / 2) ** 2 + b * b);
   const angle = Math.atan2(half + (a - c) / 2, b || 1e-12);  // of the major axis, from east towards north
-  ctx.strokeStyle = "#0050c8";
+  ctx.strokeStyle = colour;
   ctx.lineWidth = 2 * dpr;
   ctx.beginPath();
   ctx.ellipse(x, y, Math.max(2 * Math.sqrt(mid + half) * pxPerM, 2), Math.max(2 * Math.sqrt(Math.max(mid - half, 0)) * pxPerM, 2),
@@ -366,7 +537,7 @@ function drawGateTrack(ctx, gate, X, Y, pxPerM, dpr) {
   ctx.lineWidth = 3 * dpr;
   ctx.stroke();
   const s = 7 * dpr;
-  ctx.fillStyle = "#0050c8";
+  ctx.fillStyle = colour;
   ctx.beginPath();
   ctx.moveTo(x, y - s); ctx.lineTo(x + s, y); ctx.lineTo(x, y + s); ctx.lineTo(x - s, y);
   ctx.closePath();
@@ -411,13 +582,29 @@ function videoLatency(v) {
   return ` · video latency ${fmt(v.latency_ms, 1, " ms")} (motion ± ${fmt(m.applied_sigma_ms, 1, " ms")}; ${est})`;
 }
 
+// the problems to list: [input, text]; with several UUVs, one every UUV has (a shared input's) once, a UUV's own
+// with its id
+function problemList() {
+  if (!several()) return Object.entries(page.status.problems || {});
+  const out = [];
+  page.uuvs.forEach((u, k) => {
+    for (const [key, text] of Object.entries(own(k).problems || {})) {
+      const everyones = page.uuvs.every((_, j) => (own(j).problems || {})[key] === text);
+      if (!everyones) out.push([`${u.id}/${key}`, `${u.id}: ${text}`]);
+      else if (k === 0) out.push([key, text]);
+    }
+  });
+  return out;
+}
+
 function showHealth() {
   const s = page.status, rates = page.rates, problems = s.problems || {};
   const list = $("problems");
-  list.replaceChildren(...(Object.keys(problems).length
-    ? Object.entries(problems).map(([k, v]) => { const li = document.createElement("li"); li.className = "bad"; li.dataset.input = k; li.textContent = v; return li; })
+  const entries = problemList();
+  list.replaceChildren(...(entries.length
+    ? entries.map(([k, v]) => { const li = document.createElement("li"); li.className = "bad"; li.dataset.input = k; li.textContent = v; return li; })
     : [Object.assign(document.createElement("li"), { textContent: "every input OK" })]));
-  const count = Object.keys(problems).length;
+  const count = entries.length;
   $("problem-count").textContent = count ? `${count} input problem${count > 1 ? "s" : ""}` : "inputs OK";
   $("problem-count").className = count ? "bad" : "ok";
   const st = (k) => (problems[k] ? "problem" : "ok");
@@ -435,7 +622,9 @@ function showHealth() {
   if (s.video) {
     const v = s.video;
     rows.push(row("video", st("video"), age(v.age_s), `${fmt(rates.video_frames, 1)} fps`,
-                  `${v.frames} frames · tracked ${fmt(rates.processed, 1)} fps · dropped ${s.pipeline.dropped}`
+                  `${v.frames} frames · ` + (several()
+                    ? page.uuvs.map((u, k) => `${u.id} tracked ${fmt(u.rates.processed, 1)} fps, dropped ${own(k).pipeline.dropped}`).join(" · ")
+                    : `tracked ${fmt(rates.processed, 1)} fps · dropped ${s.pipeline.dropped}`)
                   + ` · decode errors ${v.decode_errors} · decoder backlog ${v.backlog}, skipped behind ${v.skipped_behind}${v.error ? ` · ${v.error}` : ""}`));
   }
   if (s.height_from_size) {  // the camera's height from the UUV's size: the configured height's bias
@@ -450,49 +639,56 @@ function showHealth() {
                   + (h.mode === "auto" ? `, ${h.applied} applied` : "")
                   + ` · ${h.measured} measured, ${Object.values(h.rejected).reduce((a, b) => a + b, 0)} without`));
   }
-  const d = s.depth;
-  const a = d.ardusub;
-  rows.push(row(`depth (${d.shape})`, st("depth"), age(d.age_s), hz(rates.depth),
-                `${d.key ?? d.url} · ${fmt(d.depth_m)} m ± ${fmt(d.sigma_m)} (${d.source ?? "—"})`
-                + (a ? ` · EKF ${fmt(a.ekf_depth_m)} m, Δ ${fmt(a.disagreement_m)} m, ${fmt(a.vertical_speed_mps)} m/s`
-                       + (a.params.missing.length ? ` · waiting for ${a.params.missing.join(", ")}` : "") : "")
-                + ` · ${d.received} received, ${d.bad} bad, ${d.refused} refused (${d.jumps} jumps)`));
-  const up = s.uuv_position;
-  if (up.key || up.hint) {
-    rows.push(row("UUV position", up.received ? "ok" : "—", age(up.age_s), "",
-                  `${up.key || "hint"} · ${up.received} received`));
-  }
+  // a UUV's own rows: named with its id when there are several
+  const each = (fn) => page.uuvs.forEach((u, k) => fn(own(k), several() ? `${u.id} ` : "", u.rates,
+                                                      (key) => ((own(k).problems || {})[key] ? "problem" : "ok")));
+  each((o, who, rates, st) => {
+    const d = o.depth;
+    const a = d.ardusub;
+    rows.push(row(`${who}depth (${d.shape})`, st("depth"), age(d.age_s), hz(rates.depth),
+                  `${d.key ?? d.url} · ${fmt(d.depth_m)} m ± ${fmt(d.sigma_m)} (${d.source ?? "—"})`
+                  + (a ? ` · EKF ${fmt(a.ekf_depth_m)} m, Δ ${fmt(a.disagreement_m)} m, ${fmt(a.vertical_speed_mps)} m/s`
+                         + (a.params.missing.length ? ` · waiting for ${a.params.missing.join(", ")}` : "") : "")
+                  + ` · ${d.received} received, ${d.bad} bad, ${d.refused} refused (${d.jumps} jumps)`));
+    const up = o.uuv_position;
+    if (up.key || up.hint) {
+      rows.push(row(`${who}UUV position`, up.received ? "ok" : "—", age(up.age_s), "",
+                    `${up.key || "hint"} · ${up.received} received`));
+    }
+  });
   rows.push(row("Zenoh", st("zenoh"), "", "", `${s.zenoh ? s.zenoh.peers : "—"} peers/routers connected`));
-  if (s.gps_input) {
-    const g = s.gps_input;
-    const ft = g.last_fix_type === 3 ? "3 (fix)" : g.last_fix_type === 1 ? "1 (no fix)" : fmt(g.last_fix_type, 0);
-    const link = g.link || {};
-    const heard = link.peer_age_s === null || link.peer_age_s === undefined ? "never" : `${link.peer_age_s.toFixed(1)} s ago`;
-    const state = link.state && link.state !== "up" ? `warn: link ${link.state}` : g.last_fix_type === 3 ? "ok" : g.sent ? "warn: no fix" : "—";
-    rows.push(row("GPS_INPUT", state, "", `${fmt(rates.gps_input, 1)} Hz`,
-                  `last fix_type ${ft} · ${g.sent_valid}/${g.sent} valid · ${g.not_delivered} not delivered`
-                  + ` · ${g.gates ? Object.values(g.gates.rejected).reduce((a, b) => a + b, 0) : 0} held by the gates · ${g.url}`
-                  + ` · link ${link.state ?? "—"}${link.error ? ` (${link.error})` : ""} · autopilot last heard ${heard}`));
-  }
-  if (s.gps_input && s.gps_input.gates) {
-    const g = s.gps_input.gates, t = g.track;
-    const refused = Object.entries(g.rejected).filter(([, n]) => n).map(([k, n]) => `${k} ${n}`).join(", ");
-    const state = g.state === "tracking" ? "ok" : g.state === "diverged" ? "bad: diverged" : "warn: acquiring";
-    rows.push(row("safety gates", state, t ? age(t.age_s) : "", "",
-                  `${g.state}${g.chain ? ` (${g.chain.fixes} fixes over ${g.chain.span_s.toFixed(1)} of `
-                    + `${g.chain.needed_s.toFixed(1)} s)` : ""}`
-                  + (g.diverged_until_t !== null ? ` until ${new Date(g.diverged_until_t * 1000).toLocaleTimeString()}` : "")
-                  + ` · ${g.accepted} accepted · refused: ${refused || "none"}`
-                  + (t ? ` · track ${Math.hypot(t.vn_mps, t.ve_mps).toFixed(2)} m/s, ± ${fmt(Math.hypot(t.sigma_n_m, t.sigma_e_m), 2, " m")}`
-                         + ` (own ${fmt(t.sigma_own_m, 3, " m")})` : " · no track yet")
-                  + (g.reach_m !== null ? ` · UUV within ${fmt(g.reach_m, 1, " m")} of it` : "")
-                  + ` · frame-to-frame share ${g.white_share === null ? "—" : fmt(100 * g.white_share, 2, " %")}`
-                  + ` · limits ${g.max_speed_mps} m/s, ${g.max_accel_mps2} m/s²`
-                  + (g.thrusters !== null ? ` · thrusters ${g.thrusters}` : "")
-                  + (g.accel_bound_mps2 !== null && g.accel_bound_mps2 < g.max_accel_mps2
-                     ? ` (bound ${fmt(g.accel_bound_mps2, 2, " m/s²")})` : "")
-                  + (g.last_refusal ? ` · last: ${g.last_refusal}` : "")));
-  }
+  each((o, who, rates) => {
+    if (o.gps_input) {
+      const g = o.gps_input;
+      const ft = g.last_fix_type === 3 ? "3 (fix)" : g.last_fix_type === 1 ? "1 (no fix)" : fmt(g.last_fix_type, 0);
+      const link = g.link || {};
+      const heard = link.peer_age_s === null || link.peer_age_s === undefined ? "never" : `${link.peer_age_s.toFixed(1)} s ago`;
+      const state = link.state && link.state !== "up" ? `warn: link ${link.state}` : g.last_fix_type === 3 ? "ok" : g.sent ? "warn: no fix" : "—";
+      rows.push(row(`${who}GPS_INPUT`, state, "", `${fmt(rates.gps_input, 1)} Hz`,
+                    `last fix_type ${ft} · ${g.sent_valid}/${g.sent} valid · ${g.not_delivered} not delivered`
+                    + ` · ${g.gates ? Object.values(g.gates.rejected).reduce((a, b) => a + b, 0) : 0} held by the gates · ${g.url}`
+                    + ` · link ${link.state ?? "—"}${link.error ? ` (${link.error})` : ""} · autopilot last heard ${heard}`));
+    }
+    if (o.gps_input && o.gps_input.gates) {
+      const g = o.gps_input.gates, t = g.track;
+      const refused = Object.entries(g.rejected).filter(([, n]) => n).map(([k, n]) => `${k} ${n}`).join(", ");
+      const state = g.state === "tracking" ? "ok" : g.state === "diverged" ? "bad: diverged" : "warn: acquiring";
+      rows.push(row(`${who}safety gates`, state, t ? age(t.age_s) : "", "",
+                    `${g.state}${g.chain ? ` (${g.chain.fixes} fixes over ${g.chain.span_s.toFixed(1)} of `
+                      + `${g.chain.needed_s.toFixed(1)} s)` : ""}`
+                    + (g.diverged_until_t !== null ? ` until ${new Date(g.diverged_until_t * 1000).toLocaleTimeString()}` : "")
+                    + ` · ${g.accepted} accepted · refused: ${refused || "none"}`
+                    + (t ? ` · track ${Math.hypot(t.vn_mps, t.ve_mps).toFixed(2)} m/s, ± ${fmt(Math.hypot(t.sigma_n_m, t.sigma_e_m), 2, " m")}`
+                           + ` (own ${fmt(t.sigma_own_m, 3, " m")})` : " · no track yet")
+                    + (g.reach_m !== null ? ` · UUV within ${fmt(g.reach_m, 1, " m")} of it` : "")
+                    + ` · frame-to-frame share ${g.white_share === null ? "—" : fmt(100 * g.white_share, 2, " %")}`
+                    + ` · limits ${g.max_speed_mps} m/s, ${g.max_accel_mps2} m/s²`
+                    + (g.thrusters !== null ? ` · thrusters ${g.thrusters}` : "")
+                    + (g.accel_bound_mps2 !== null && g.accel_bound_mps2 < g.max_accel_mps2
+                       ? ` (bound ${fmt(g.accel_bound_mps2, 2, " m/s²")})` : "")
+                    + (g.last_refusal ? ` · last: ${g.last_refusal}` : "")));
+    }
+  });
   if (s.height) {
     const h = s.height;
     const used = Object.entries(h.sources || {}).map(([k, v]) => `${k} ${v.used} used`
@@ -518,10 +714,12 @@ function showHealth() {
                 + `${fmt(c.uav_link_latency_measured_ms, 1, " ms")}) · UUV − station `
                 + `${fmt(c.uuv_clock_minus_station_s, 3, " s")} · depth by ${c.depth_aligned_by ?? "—"}`
                 + videoLatency(s.video) + ` · reboots ${c.uav_reboots}`));
-  if (s.latency) {
-    rows.push(row("latency", null, "", "", `frame → GPS_INPUT p50 ${fmt(s.latency.p50_ms, 1, " ms")}, p99 `
-                  + `${fmt(s.latency.p99_ms, 1, " ms")} over ${s.latency.n}`));
-  }
+  each((o, who) => {
+    if (o.latency) {
+      rows.push(row(`${who}latency`, null, "", "", `frame → GPS_INPUT p50 ${fmt(o.latency.p50_ms, 1, " ms")}, p99 `
+                    + `${fmt(o.latency.p99_ms, 1, " ms")} over ${o.latency.n}`));
+    }
+  });
   if (s.process) {
     rows.push(row("CPU", null, "", "", `${fmt(s.process.cpu_pct, 0, " %")} of one core · ${fmt(s.process.rss_mb, 0)}`
                   + ` MB resident${s.ui ? ` · page video: ${s.ui.frames_encoded} JPEG, ${fmt(s.ui.encode_ms, 1)} ms CPU each` : ""}`));
