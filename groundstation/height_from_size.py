@@ -29,11 +29,14 @@ the loop, where the telemetry is written.
 from __future__ import annotations
 
 import asyncio
+import ctypes
 import logging
 import math
 import multiprocessing
 import os
 import queue
+import signal
+import sys
 import threading
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
@@ -54,6 +57,7 @@ SOURCE = "size"  # the height source's word (Telemetry.add_height)
 MEASURE_HZ = 5.0  # frames measured a second, at most
 NICE = 10  # the measuring process yields the CPU to decoding and tracking
 STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent dies
 
 
 def measure_frame(cal: Calibration, image: np.ndarray, pose: CameraPose, i: int, u: float,
@@ -72,8 +76,14 @@ def measure_frame(cal: Calibration, image: np.ndarray, pose: CameraPose, i: int,
                        float(pose.sigma_height_m[i]), float(pose.depth_m[i]), float(pose.sigma_depth_m[i]), n)
 
 
-def _lower_priority() -> None:
+def start_measuring_process() -> None:
+    """The measuring process yields the CPU, and ends with the service even when the service is killed (Linux's
+    parent-death signal): a ``kill -9`` of ``skyfix run`` leaves no process behind."""
     os.nice(NICE)
+    if sys.platform == "linux":
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        if os.getppid() == 1:  # the service died before the signal was asked for
+            os._exit(0)
 
 
 class HeightFromSize:
@@ -191,7 +201,7 @@ class OnlineHeightFromSize:
 
     def _run(self, stop: threading.Event) -> None:
         """Hands each frame to the measuring process (started here: a restart after a failure starts a new one)."""
-        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=_lower_priority)
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process)
         try:
             while not stop.is_set():
                 try:

@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -112,3 +113,37 @@ def test_process_finds_the_configured_heights_error(tmp_path):
     bias, sigma, frames, sure = float(m[1]), float(m[2]), int(m[3]), m[4]
     assert sure == "sure" and frames >= 20 and abs(bias - 2.0) <= 2 * sigma and sigma < 0.2, run.stdout
     assert "m above what the UUV's size in the image says" in run.stderr, run.stderr
+
+
+MEASURING_POOL = """
+import multiprocessing, os, time
+from concurrent.futures import ProcessPoolExecutor
+from groundstation.height_from_size import start_measuring_process
+pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process)
+print(pool.submit(os.getpid).result(), flush=True)
+time.sleep(120)
+"""
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie (an exited child nobody reaped)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="the parent-death signal is Linux's")
+def test_the_measuring_process_ends_when_the_service_is_killed():
+    """``kill -9`` of a service leaves no measuring process behind (its pool's initializer, as the service uses it)."""
+    service = subprocess.Popen([sys.executable, "-c", MEASURING_POOL], stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        child = int(service.stdout.readline())
+        assert _running(child)
+    finally:
+        service.kill()
+        service.wait()
+    deadline = time.monotonic() + 20
+    while _running(child) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _running(child), f"measuring process {child} outlived its killed service"
