@@ -116,7 +116,8 @@ def outline(points) -> list[int]:
 def polygon_area(polygon) -> float:
     """The area (pixels²) of a simple polygon's vertices (N, 2)."""
     x, y = np.asarray(polygon, dtype=float).T
-    return abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))) / 2.0
+    x_next, y_next = np.append(x[1:], x[:1]), np.append(y[1:], y[:1])
+    return abs(float(np.sum(x * y_next - x_next * y))) / 2.0
 
 
 @dataclass(frozen=True)
@@ -131,33 +132,36 @@ class EdgePoints:
 
     def moved(self, corners) -> np.ndarray:
         """The points' positions (..., K, 2) on the same edges of other corner positions (..., 8, 2)."""
-        a = self.along[:, None]
-        return (1.0 - a) * corners[..., self.first, :] + a * corners[..., self.second, :]
+        c = np.asarray(corners, dtype=float)
+        lead = c.shape[:-2]
+        a = np.repeat(self.along, 2)  # (2K,): x and y alike, so that NumPy's loops run along the points
+        first = np.take(c, self.first, axis=-2).reshape(*lead, -1)
+        second = np.take(c, self.second, axis=-2).reshape(*lead, -1)
+        return ((1.0 - a) * first + a * second).reshape(*lead, len(self.along), 2)
 
 
 def edge_points(corners, hull: list[int], spacing_px: float = 1.0, trim: float = 0.15,
                 min_edge_px: float = 3.0) -> EdgePoints:
     """Points ``spacing_px`` apart along each edge of the outline ``hull`` of ``corners`` (8, 2), leaving out
-    ``trim`` of each edge at both ends (the blurred corners) and edges shorter than ``min_edge_px``."""
+    ``trim`` of each edge at both ends (the blurred corners) and edges shorter than ``min_edge_px``.
+
+    All edges at once (each edge's places ``along`` it are ``np.linspace(trim, 1 - trim, count)``'s, computed as
+    it computes them): a height measurement takes the points of some ten outlines."""
     c = np.asarray(corners, dtype=float)
-    xy, normal, first, second, along = [], [], [], [], []
-    for k, i in enumerate(hull):
-        j = hull[(k + 1) % len(hull)]
-        e = c[j] - c[i]
-        length = float(np.hypot(e[0], e[1]))
-        if not length >= min_edge_px:
-            continue
-        lam = np.linspace(trim, 1.0 - trim, max(2, int(length * (1.0 - 2.0 * trim) / spacing_px) + 1))
-        xy.append(c[i] + lam[:, None] * e)
-        normal.append(np.broadcast_to(np.array([e[1], -e[0]]) / length, (len(lam), 2)))
-        first.append(np.full(len(lam), i))
-        second.append(np.full(len(lam), j))
-        along.append(lam)
-    if not xy:
-        empty = np.empty((0, 2))
-        return EdgePoints(empty, empty, np.empty(0, int), np.empty(0, int), np.empty(0))
-    return EdgePoints(np.concatenate(xy), np.concatenate(normal), np.concatenate(first), np.concatenate(second),
-                      np.concatenate(along))
+    first = np.asarray(hull, dtype=int)
+    second = np.asarray(hull[1:] + hull[:1], dtype=int)
+    e = c[second] - c[first]  # (E, 2)
+    length_px = np.hypot(e[:, 0], e[:, 1])
+    keep = length_px >= min_edge_px  # also leaves out NaN
+    first, second, e, length_px = first[keep], second[keep], e[keep], length_px[keep]
+    count = np.maximum(2, (length_px * (1.0 - 2.0 * trim) / spacing_px).astype(int) + 1)  # points per edge
+    edge = np.repeat(np.arange(len(count)), count)  # each point's edge
+    last = np.cumsum(count) - 1  # each edge's last point
+    index = np.arange(len(edge)) - (last - count + 1)[edge]  # each point's place on its edge: 0, 1, ...
+    along = index * (((1.0 - trim) - trim) / (count - 1))[edge] + trim
+    along[last] = 1.0 - trim
+    normal = np.stack([e[:, 1], -e[:, 0]], axis=-1) / length_px[:, None]
+    return EdgePoints(c[first][edge] + along[:, None] * e[edge], normal[edge], first[edge], second[edge], along)
 
 
 # --- the camera's height, frame by frame and over a window -------------------------------------------------

@@ -38,7 +38,10 @@ STATUSES: dict[str, str] = {
     "stale_gimbal": "the gimbal attitude samples around the frame are too far apart or too old",
     "no_depth": "no UUV depth sample at or before the frame",
     "stale_depth": "the UUV depth samples around the frame are too far apart or too old",
-    # several drones over one UUV (skyfix fuse)
+    # several UUVs in one video, several drones over one UUV (skyfix fuse)
+    "same_vehicle": "live, several UUVs: this UUV's tracker box coincides with another UUV's (both trackers on one "
+                    "vehicle, or the two right over each other): no fix for either until they part or one is selected "
+                    "again",
     "disagree": "skyfix fuse: the drones' fixes disagree beyond their sigmas and none of them can be told right",
 }
 

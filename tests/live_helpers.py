@@ -66,9 +66,10 @@ def wait_until(predicate, timeout_s: float, poll_s: float = 0.1) -> bool:
     return False
 
 
-def wait_for(predicate, timeout_s: float, what: str) -> None:
+def wait_for(predicate, timeout_s: float, what) -> None:
+    """Wait for ``predicate()``; else fail naming ``what`` (a string, or a callable giving one: what was seen)."""
     if not wait_until(predicate, timeout_s):
-        raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        raise AssertionError(f"timed out after {timeout_s} s waiting for {what() if callable(what) else what}")
 
 
 # An independent Zenoh subscriber (run in its own process): every sample on the key
@@ -244,3 +245,19 @@ class LiveRun:
 
         return truth_errors_m(self.session, np.array([g["time_usec"] / 1e6 for g in valid]) - self.shift,
                               [g["lat"] / 1e7 for g in valid], [g["lon"] / 1e7 for g in valid])
+
+
+def as_camera_sends_it(video: Path) -> None:
+    """A simulated session's video re-encoded in place as a drone's camera streams it: H.264 without B-frames
+    (x264's zerolatency tuning), a keyframe a second. ``skyfix sim`` writes B-frames: a decoder then holds each
+    frame until the next two have come (133 ms at 15 fps) and hands them over in bursts, which no field camera
+    does and which a live service's two-frame queue partly drops."""
+    import av
+
+    with av.open(str(video)) as container:
+        fps = container.streams.video[0].average_rate
+    tmp = video.with_name("camera" + video.suffix)
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(video), "-an", "-c:v", "libx264", "-preset", "veryfast",
+                    "-tune", "zerolatency", "-crf", "23", "-g", str(round(fps)), "-pix_fmt", "yuv420p", str(tmp)],
+                   check=True)
+    tmp.replace(video)

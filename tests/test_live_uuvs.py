@@ -12,7 +12,8 @@ UUVs one GPS_INPUT link is refused in one line.
 The operator's page of such a run (a run of its own): ``/api/status`` has both UUVs; the WebSocket's hello, state
 and video packets carry both (ids, colours, tracks, gates, each one's box on the one JPEG); a command naming no
 UUV is refused naming the ids; ``release`` with ``"uuv": "uuv2"`` releases uuv2 alone (its fixes and GPS_INPUT
-stop, uuv1's go on); in a headless Chromium (when there is one) the page shows a row, a label and a track per
+stop, uuv1's go on); uuv2 selected on uuv1's vehicle: both UUVs' fixes ``same_vehicle`` and uuv1's GPS_INPUT no
+fix until uuv2 is released again; in a headless Chromium (when there is one) the page shows a row, a label and a track per
 UUV, and "Await target" for the UUV picked with the key 2 applies to uuv2.
 """
 
@@ -40,6 +41,7 @@ from live_helpers import (
     ROOT,
     SUBSCRIBER,
     ardupilot_gps_unhealthy,
+    as_camera_sends_it,
     free_port,
     read_jsonl,
     replay_shift,
@@ -106,8 +108,10 @@ def own_and_other_errors_m(session, uuv_id, t_session, lat, lon):
 
 @pytest.fixture(scope="module")
 def crossing(tmp_path_factory):
-    """The generated two_uuvs_crossing session (video included), shared by this module's runs."""
-    return generate(load_scenario(SCENARIO), tmp_path_factory.mktemp("crossing") / "s").session
+    """The generated two_uuvs_crossing session, its video as a camera sends it, shared by this module's runs."""
+    session = generate(load_scenario(SCENARIO), tmp_path_factory.mktemp("crossing") / "s").session
+    as_camera_sends_it(session / "video.mp4")
+    return session
 
 
 def run_toml(tmp_path, session, ports: dict, endpoints: dict, record=None) -> str:
@@ -196,6 +200,7 @@ def test_two_uuvs_in_one_video_each_with_its_own_fixes_and_gps_input(tmp_path, c
         fixes = [json.loads(s["payload"]) for s in samples if s["key"] == f"skyfix/uuv/{uuv_id}/fix"]
         ok = [f for f in fixes if f["status"] == "ok"]
         assert len(ok) >= MIN_SHARE * n_frames, (uuv_id, len(ok), {f["status"] for f in fixes}, run_log[-3000:])
+        assert not [f for f in fixes if f["status"] == "same_vehicle"]  # passing 0.3 m apart: two vehicles
         own, other, apart = own_and_other_errors_m(session, uuv_id, np.array([f["t"] for f in ok]) - shift,
                                                    [f["lat"] for f in ok], [f["lon"] for f in ok])
         print(f"{uuv_id} Zenoh: {len(fixes)} fixes, {len(ok)} ok, MAE {own.mean():.4f} m, max {own.max():.4f} m, "
@@ -327,6 +332,25 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         assert status["uuvs"]["uuv2"]["target"]["state"] == "released"
         assert status["uuvs"]["uuv1"]["target"]["state"] == "tracking" and status["target"]["state"] == "tracking"
 
+        # uuv2 selected on uuv1's vehicle (as a tracker re-locking onto the other would): neither gives a fix, and
+        # GPS_INPUT says no fix to both; uuv2 released again, uuv1's fixes come back
+        t_same = time.time()
+        box1 = _http(base + "/api/status")[1]["uuvs"]["uuv1"]["target"]["box"]
+        code, answer = _http(base + "/api/select", {"uuv": "uuv2", "box": box1})
+        assert code == 200 and answer["target"]["state"] == "tracking", answer
+        wait_for(lambda: all(len(run.fixes(i)) > 3 and {f["status"] for f in run.fixes(i)[-3:]} == {"same_vehicle"}
+                             for i in IDS), 5,
+                 lambda: f"both UUVs' fixes same_vehicle (last: {[[f['status'] for f in run.fixes(i)[-3:]] for i in IDS]})")
+        t_both = time.time()
+        wait_for(lambda: [g["fix_type"] for _, g in run.endpoints["uuv1"].received[-3:]] == [1, 1, 1], 5,
+                 "uuv1's GPS_INPUT no fix")
+        t_no_fix = time.time()
+        time.sleep(0.5)
+        t_parting = time.time()
+        assert _http(base + "/api/release", {"uuv": "uuv2"})[0] == 200
+        t_parted = time.time()
+        wait_for(lambda: run.fixes("uuv1")[-1]["status"] == "ok", 5, "uuv1's fixes back")
+
         browser_checked = available() is None
         if browser_checked:
             with chromium(tmp_path, base) as browser:
@@ -354,14 +378,21 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
                 assert browser.outside == []
         run.finish()
     endpoints, fixes = run.endpoints, run.fixes
-    # after the release: uuv2 has no fix to the end, uuv1 keeps fixing
-    after = {i: [f for f in fixes(i) if f["t_recv"] > t_released + 0.5] for i in IDS}
+    # after the release (but while uuv2 was on uuv1's vehicle): uuv2 has no fix, uuv1 keeps fixing
+    def released(t: float) -> bool:
+        return t > t_released + 0.5 and not t_same <= t <= t_parted + 0.5
+
+    after = {i: [f for f in fixes(i) if released(f["t_recv"])] for i in IDS}
     assert {f["status"] for f in after["uuv2"]} <= {"released", "buffered", "awaiting_target"}, after["uuv2"][:3]
     ok1 = [f for f in after["uuv1"] if f["status"] == "ok"]
     assert len(after["uuv2"]) >= 30 and len(ok1) >= 0.8 * len(after["uuv1"]) >= 30, (len(ok1), len(after["uuv1"]))
     gps2 = [g for t, g in endpoints["uuv2"].received if t > t_released + 0.5]
     assert gps2 and all(g["fix_type"] == 1 for g in gps2), {g["fix_type"] for g in gps2}
-    gps1 = [g for t, g in endpoints["uuv1"].received if t > t_released + 0.5]
+    gps1 = [g for t, g in endpoints["uuv1"].received if t_released + 0.5 < t < t_same]
     assert sum(g["fix_type"] == 3 for g in gps1) >= 0.8 * len(gps1) > 0
+    # both on one vehicle: from the first same_vehicle on, no fix and no valid GPS_INPUT for either until parted
+    same = {i: [f["status"] for f in fixes(i) if t_both <= f["t_recv"] <= t_parting] for i in IDS}
+    assert all(same[i] and set(same[i]) == {"same_vehicle"} for i in IDS), same
+    assert all(g["fix_type"] == 1 for t, g in endpoints["uuv1"].received if t_no_fix <= t <= t_parting)
     print(f"page: released uuv2; after it uuv1 {len(ok1)}/{len(after['uuv1'])} ok fixes, uuv2 "
           f"{len(after['uuv2'])} fixes, none ok; browser {'checked' if browser_checked else 'not available'}")

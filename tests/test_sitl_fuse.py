@@ -30,6 +30,7 @@ from ardusub_sitl import ArduSub, ardusub_files
 from live_helpers import (
     SUBSCRIBER,
     ardupilot_gps_unhealthy,
+    as_camera_sends_it,
     free_port,
     read_jsonl,
     skyfix,
@@ -93,16 +94,6 @@ crf = 28
 """
 ROUTER_CONFIG = """{{ mode: "router", listen: {{ endpoints: ["tcp/127.0.0.1:{port}"] }},
   scouting: {{ multicast: {{ enabled: false }} }} }}"""
-
-
-def as_camera_sends_it(video):
-    """The simulator's video re-encoded as a drone's camera streams it: H.264 without B-frames (x264's zerolatency
-    tuning). With them a decoder holds each frame until the next two have come: 133 ms at 15 fps, which no field
-    camera adds and which would make every fix arrive that much older at the fuser."""
-    tmp = video.with_name("camera.mp4")
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(video), "-an", "-c:v", "libx264", "-preset", "veryfast",
-                    "-tune", "zerolatency", "-crf", "28", "-g", "15", "-pix_fmt", "yuv420p", str(tmp)], check=True)
-    tmp.replace(video)
 
 
 def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):

@@ -16,8 +16,9 @@ import pytest
 
 from localizer.calibration import Uuv
 from localizer.camera import Camera
-from localizer.size_range import size_height
-from localizer.tracking.silhouette import REJECTIONS, measure
+from localizer.size_range import box_corners_px, edge_points, outline, size_height
+from localizer.tracking import silhouette
+from localizer.tracking.silhouette import REJECTIONS, SilhouetteParams, measure
 from sim_fixtures.generate import camera_of, frame_truth
 from sim_fixtures.motion import Motion
 from sim_fixtures.render import Renderer
@@ -82,3 +83,31 @@ def test_at_the_frame_edge_or_too_small_it_says_why():
     uuv, h, d, n = Uuv(*sc.uuv.size_m), -truth.camera_ned[0, 2], truth.uuv_ned[0, 2], sc.site.refractive_index
     assert measure(image, *args, 8.0, 180.0, uuv, h, d, n) == "border"
     assert measure(image, *args, truth.u[0], truth.v[0], uuv, 3.0 * h, d, n) == "too_small"  # configured 3× too high
+
+
+def test_the_size_scan_samples_further_out_only_where_it_must():
+    """The scan's supports (sampling beyond ``agree_px`` only at the points with an edge within it) are those of
+    sampling every point at every offset."""
+    sc, camera, truth, renderer = _scene(-68.0, 6.5, 1.5, 73)
+    i = 40
+    image, _ = renderer.render(truth.view(i))
+    p = SilhouetteParams()
+    R, u, v = truth.R_ned_from_cv[i], truth.u[i], truth.v[i]
+    uuv, h, depth, n = Uuv(*sc.uuv.size_m), -truth.camera_ned[i, 2], truth.uuv_ned[i, 2], sc.site.refractive_index
+    heading = silhouette._headings(image, camera, R, u, v, uuv, h, depth, n, p)[0]
+    scales = np.exp(np.linspace(np.log(p.scan_to), np.log(p.scan_from), 25))
+    corners = box_corners_px(camera, R, u, v, heading, uuv, h * scales, depth, n)  # (25, 8, 2)
+    texture = silhouette._texture(image, corners[-1], p)  # beyond the largest outline (the lowest height)
+    mid = corners[len(corners) // 2]
+    pts = edge_points(mid, outline(mid), p.spacing_px, p.trim)
+    e = corners[:, pts.second] - corners[:, pts.first]
+    normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
+    window, origin = silhouette._window(image, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0)
+    t = np.arange(-np.ceil(p.agree_px / p.step_px) - 1, round(p.clear_px / p.step_px) + 2) * p.step_px
+    edges = silhouette._peaks(window, pts.moved(corners) - origin, normal, t, p.noise_factor * texture)
+    every = silhouette._supported(edges, p)
+    assert np.array_equal(silhouette._supports(image, corners, texture, p), every.mean(axis=-1))
+    is_edge, tm, _ = edges
+    edge_near = is_edge[np.abs(tm) <= p.agree_px].any(axis=0)
+    assert every.mean(axis=-1).max() > 0.3  # outlines near the vehicle's are supported ...
+    assert np.mean(edge_near & ~every) > 0.1  # ... and many points with an edge near have one further out

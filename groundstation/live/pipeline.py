@@ -47,6 +47,7 @@ import logging
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 from groundstation.video.frames import LiveFrame
@@ -98,14 +99,19 @@ class Pipeline:
     ``prior(t_unix)``: the UUV's own position estimate at a frame's time (None: none);
     ``history_s``: how long tracked frames are held for selections; ``alignment()``: the (source word,
     1-sigma s) of aligned frames' times when not the link delay's (see the module doc);
-    ``depth``: the UUV's depth series when not ``tel``'s own (one of several UUVs in the video);
+    ``depth``: the UUV's depth series when not ``tel``'s own (one of several UUVs in the video); ``vet(frame,
+    box)``: a status word when a tracked box may not be this UUV's (:meth:`localizer.tracking.crowd.Crowd.vet`),
+    called with every frame's box (None when the tracker has none); ``tracking``: the thread the tracker steps run
+    in (several UUVs' pipelines share one: their steps, mostly the interpreter's work, would otherwise contend for
+    its lock and each wait for the other's; default: asyncio's pool);
     ``on_tracked``: see :attr:`on_tracked`.
     """
 
     def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
                  telemetry_wait_s: float = 0.3, prior: Callable[[float], Prior | None] | None = None,
                  history_s: float = 1.0, on_tracked: Sequence[Callable] = (),
-                 alignment: Callable[[], tuple[str, float]] | None = None, depth: Series | None = None):
+                 alignment: Callable[[], tuple[str, float]] | None = None, depth: Series | None = None,
+                 vet: Callable[[int, tuple | None], str | None] | None = None, tracking: Executor | None = None):
         self.cal = cal
         self.tel = tel
         self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
@@ -116,6 +122,8 @@ class Pipeline:
         self.history_s = history_s
         self.alignment = alignment
         self.depth = depth
+        self.vet = vet
+        self.tracking = tracking
         self._told_unknown = False
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
@@ -198,7 +206,7 @@ class Pipeline:
                 self.session.step(h.frame.image, h.pose)
             return result
 
-        result = await asyncio.to_thread(select_and_catch_up)
+        result = await asyncio.get_running_loop().run_in_executor(self.tracking, select_and_catch_up)
         self._started = True
         self.target = self.session.status()
         log.info("target selected on frame %d (%s %s), caught up %d frames: %s", held.frame.index,
@@ -260,7 +268,7 @@ class Pipeline:
         pose = self._pose(frame)
         early = self._early(frame)
         prior = self.prior(frame.t_unix)
-        result = await asyncio.to_thread(self._step, frame, pose, prior)
+        result = await asyncio.get_running_loop().run_in_executor(self.tracking, self._step, frame, pose, prior)
         item = Tracked(frame, pose, result, early, search_window(self.session.prediction))
         self._held.append(item)
         while len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s:
@@ -329,8 +337,11 @@ class Pipeline:
     def _locate(self, item: Tracked) -> Fix:
         """A tracked frame's fix, with its pose."""
         frame, result = item.frame, item.result
+        doubt = self.vet(frame.index, tuple(result.box) if result.ok else None) if self.vet else None
         if not result.ok:
             fix = Fix(frame.t_unix, result.status)
+        elif doubt:
+            fix = Fix(frame.t_unix, doubt, result.u, result.v)
         elif not frame.aligned:
             fix = Fix(frame.t_unix, "latency_unsettled", result.u, result.v)
         else:

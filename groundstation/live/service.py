@@ -36,6 +36,8 @@ import logging
 import signal
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 
 import numpy as np
 import zenoh
@@ -70,6 +72,7 @@ from localizer.fix_gate import FixGate
 from localizer.height import status as height_status
 from localizer.telemetry import Telemetry
 from localizer.thrusters import Thrusters
+from localizer.tracking.crowd import Crowd
 
 log = logging.getLogger("skyfix.run")
 
@@ -188,6 +191,10 @@ async def serve(cfg: config.RunConfig) -> dict:
         workers.section("process", usage.status)
 
         # -- each UUV: its depth, its own position, its tracker and its outputs -------------------------------------
+        crowd = Crowd() if several else None  # two trackers on one vehicle: no fix for either
+        tracking = ThreadPoolExecutor(1, thread_name_prefix="track") if several else None  # one thread for all
+        if tracking:
+            closers.append(lambda: tracking.shutdown(wait=False, cancel_futures=True))
         for i, u in enumerate(cfg.uuvs):
             uuv_tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S) if several else tel
             page = (feed.sinks[i], topview.tracks[i]) if feed else (None, None)
@@ -195,6 +202,7 @@ async def serve(cfg: config.RunConfig) -> dict:
             chain = UuvChain(cfg, u, uuv_cal, tel, uuv_tel, session, workers, page,
                              recorder.of(u.id) if recorder else None, zenoh_peers,
                              alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None,
+                             vet=partial(crowd.vet, u.id) if crowd else None, tracking=tracking,
                              on_tracked=[from_size.on_tracked] if from_size else [])
             closers.append(chain.fix_sink.close)
             chains.append(chain)
@@ -242,7 +250,8 @@ class UuvChain:
     :attr:`workers`, run with the service's."""
 
     def __init__(self, cfg: config.RunConfig, u: config.UuvConfig, cal, tel: Telemetry, uuv_tel: Telemetry,
-                 session, shared: Workers, page: tuple, recorder, zenoh_peers: Callable[[], int], alignment, on_tracked):
+                 session, shared: Workers, page: tuple, recorder, zenoh_peers: Callable[[], int], alignment, on_tracked,
+                 vet=None, tracking=None):
         self.uuv = u
         self.workers = own = Workers()
         self._shared = shared
@@ -279,7 +288,8 @@ class UuvChain:
         sinks = [s for s in (fix_sink, gps, recorder, feed, topview, watchdog) if s is not None]
         self.pipeline = pipeline = Pipeline(
             cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0, prior=uuv_position.prior,
-            history_s=cfg.select_history_s, on_tracked=on_tracked, alignment=alignment,
+            history_s=cfg.select_history_s, on_tracked=on_tracked, alignment=alignment, vet=vet,
+            tracking=tracking,
             depth=None if uuv_tel is tel else uuv_tel.depth)
         own.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
         own.section("target", lambda now: pipeline.target)

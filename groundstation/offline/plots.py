@@ -29,7 +29,7 @@ from localizer.status import STATUSES, runs
 #: cause → (colour, the status words)
 CAUSES = {
     "tracking": ("#d62728", ("lost", "no_track", "not_initialized", "awaiting_target",
-                             "released", "before_init")),
+                             "released", "before_init", "same_vehicle")),
     "video": ("#9467bd", ("no_video", "buffered", "latency_unsettled")),
     "telemetry": ("#7f7f7f", ("no_attitude", "stale_attitude", "no_position", "stale_position", "no_gimbal",
                               "stale_gimbal", "no_depth", "stale_depth", "bad_time")),

@@ -192,9 +192,10 @@ def _axes_angle(frame_bgr, u: float, v: float, radius_px: float) -> float:
     grey = (cv2.cvtColor(win, cv2.COLOR_BGR2GRAY) if win.ndim == 3 else win).astype(np.float32)
     gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3)
-    yy, xx = np.mgrid[0 : grey.shape[0], 0 : grey.shape[1]]
+    yy, xx = np.ogrid[0 : grey.shape[0], 0 : grey.shape[1]]
     near = np.hypot(xx + x0 - u, yy + y0 - v) <= radius_px
-    z = (gx[near] + 1j * gy[near]) ** 4 / np.maximum(gx[near] ** 2 + gy[near] ** 2, 1e-9)  # |g|², angle × 4
+    gx, gy = gx[near], gy[near]
+    z = (gx + 1j * gy) ** 4 / np.maximum(gx**2 + gy**2, 1e-9)  # |g|², angle × 4
     return float(np.angle(z.sum()) / 4.0)
 
 
@@ -259,14 +260,31 @@ def _window(frame_bgr, lo, hi, margin_px: float):
     return frame_bgr[y0:y1, x0:x1].astype(np.float32), np.array([x0, y0])
 
 
+#: ``cv2.remap`` takes maps narrower than this (SHRT_MAX): longer lists of points are sampled in parts.
+_REMAP_MAX_COLS = 32766
+
+
 def _changes(window: np.ndarray, xy: np.ndarray, normal: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """The colour's change (..., len(t) - 1) between consecutive samples ``t`` along the normals at points ``xy``
-    (..., 2) (window pixels)."""
-    X = (xy[..., None, 0] + t * normal[..., None, 0]).astype(np.float32).reshape(-1, len(t))
-    Y = (xy[..., None, 1] + t * normal[..., None, 1]).astype(np.float32).reshape(-1, len(t))
-    profile = cv2.remap(window, X, Y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(len(X), len(t), -1)
-    d = profile[:, 1:] - profile[:, :-1]
-    return np.sqrt(np.einsum("ijk,ijk->ij", d, d)).reshape(*xy.shape[:-1], len(t) - 1)
+    """The colour's change (len(t) - 1, ...) between consecutive samples ``t`` along the normals at points ``xy``
+    (..., 2) (window pixels).
+
+    Samples come first: each offset's samples over all points are a row (of as many points), so that NumPy's
+    element-wise work runs over long rows (with the points last it was most of a measurement's time). The sample
+    positions are computed in float64 and then rounded, as they always were: float32 arithmetic moves them by
+    1e-5 px, and that moved 9 of 182 heights of ``bench/offline_speed.py``'s 1080p session by 0.2-35 mm (the fit
+    follows edges that flip between peaks at that level)."""
+    x, y = xy[..., 0].reshape(-1), xy[..., 1].reshape(-1)
+    X, Y = t[:, None] * normal[..., 0].reshape(-1), t[:, None] * normal[..., 1].reshape(-1)  # (T, N)
+    X += x
+    Y += y
+    X, Y = X.astype(np.float32), Y.astype(np.float32)
+    parts = [cv2.remap(window, X[:, a : a + _REMAP_MAX_COLS], Y[:, a : a + _REMAP_MAX_COLS], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE) for a in range(0, len(x), _REMAP_MAX_COLS)]
+    profile = (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)).reshape(len(t), len(x), -1)
+    d = profile[1:] - profile[:-1]  # (T - 1, N, channels)
+    d *= d
+    sq = d[..., 0] + d[..., 1] + d[..., 2] if d.shape[-1] == 3 else d.sum(axis=-1)  # faster than sum() for 3
+    return np.sqrt(sq).reshape(len(t) - 1, *xy.shape[:-1])
 
 
 def _texture(frame_bgr, corners, p: SilhouetteParams) -> float:
@@ -278,52 +296,73 @@ def _texture(frame_bgr, corners, p: SilhouetteParams) -> float:
     return float(np.median(_changes(window, pts.xy - origin, pts.normal, far + np.arange(0.0, 2.01, p.step_px))))
 
 
-def _edges(window, xy, normal, texture: float, p: SilhouetteParams, inside_px: float | None = None):
-    """The edges along the outward normals at points ``xy`` (..., 2): ``(is_edge, tm, change)``, a boolean (..., M)
-    over the midpoints ``tm`` (M,) (offsets from the points, pixels, from ``reach_px`` inside, or at least
-    ``inside_px``, to ``clear_px`` outside), and the colour's change there (..., M)."""
-    inside = round(p.reach_px / p.step_px) if inside_px is None else math.ceil(inside_px / p.step_px)
-    t = np.arange(-inside - 1, round(p.clear_px / p.step_px) + 2) * p.step_px
+def _edges(window, xy, normal, texture: float, p: SilhouetteParams):
+    """The edges along the outward normals at points ``xy`` (..., 2), from ``reach_px`` inside to ``clear_px``
+    outside: :func:`_peaks` of the samples ``step_px`` apart."""
+    t = np.arange(-round(p.reach_px / p.step_px) - 1, round(p.clear_px / p.step_px) + 2) * p.step_px
+    return _peaks(window, xy, normal, t, p.noise_factor * texture)
+
+
+def _peaks(window, xy, normal, t: np.ndarray, threshold: float):
+    """``(is_edge, tm, change)`` along the normals at points ``xy`` (..., 2) sampled at offsets ``t`` (T,): the
+    colour's change (M, ...) at the midpoints ``tm`` (M,) of ``t[1:-1]`` (M = T - 3), and whether it is an edge
+    there (M, ...): a peak (not below the change before it, above the one after it) above ``threshold``. Each
+    row depends on four samples alone: rows r..r' of ``t`` are those of ``t[r : r' + 4]``."""
     g = _changes(window, xy, normal, t)
-    inner = g[..., 1:-1]
+    inner = g[1:-1]
     tm = (t[1:-2] + t[2:-1]) / 2.0
-    return (inner >= g[..., :-2]) & (inner > g[..., 2:]) & (inner > p.noise_factor * texture), tm, inner
+    return (inner >= g[:-2]) & (inner > g[2:]) & (inner > threshold), tm, inner
 
 
 def _supported(edges, p: SilhouetteParams):
     """Whether the outline is supported at each point (of :func:`_edges`): an edge within ``agree_px``, none
     further out."""
     is_edge, tm, _ = edges
-    near = np.flatnonzero(np.abs(tm) <= p.agree_px)  # tm ascends: columns near..., then further out
-    return is_edge[..., near[0] : near[-1] + 1].any(axis=-1) & ~is_edge[..., near[-1] + 1 :].any(axis=-1)
+    near = np.flatnonzero(np.abs(tm) <= p.agree_px)  # tm ascends: rows near..., then further out
+    return is_edge[near[0] : near[-1] + 1].any(axis=0) & ~is_edge[near[-1] + 1 :].any(axis=0)
 
 
 def _outermost(edges, within_px: float, step_px: float):
-    """The offset of the outermost edge (of :func:`_edges`) within ``within_px`` of each point (sub-pixel: a
-    parabola through the changes around it), and whether there is one."""
+    """The offset of the outermost edge (of :func:`_edges`, points (K,)) within ``within_px`` of each point
+    (sub-pixel: a parabola through the changes around it), and whether there is one."""
     is_edge, tm, g = edges
-    edges = is_edge & (np.abs(tm) <= within_px)
-    j = edges.shape[-1] - 1 - np.argmax(edges[:, ::-1], axis=-1)
-    k = np.arange(len(j))
-    gp = np.pad(g, ((0, 0), (1, 1)), mode="edge")
-    a, b, c = gp[k, j], gp[k, j + 1], gp[k, j + 2]
+    edges = is_edge & (np.abs(tm) <= within_px)[:, None]
+    j = len(edges) - 1 - np.argmax(edges[::-1], axis=0)
+    k = np.arange(edges.shape[1])
+    gp = np.concatenate([g[:1], g, g[-1:]])  # the changes beyond the first and last rows: theirs
+    a, b, c = gp[j, k], gp[j + 1, k], gp[j + 2, k]
     curv = a - 2.0 * b + c
     sub = np.where(curv < 0, 0.5 * (a - c) / np.where(curv < 0, curv, -1.0), 0.0)
-    return tm[j] + np.clip(sub, -0.5, 0.5) * step_px, edges.any(axis=-1)
+    return tm[j] + np.clip(sub, -0.5, 0.5) * step_px, edges.any(axis=0)
 
 
 def _supports(frame_bgr, corners, texture: float, p: SilhouetteParams) -> np.ndarray:
-    """The share of points each outline of ``corners`` (S, 8, 2) is supported at (S,). The outlines differ in size
-    only: the middle one's edges and points, moved with the corners, serve for all. Support needs the edges from
-    ``agree_px`` inside on: the colour is sampled from there (this scan is most of a measurement's time: 33 → 20
-    ms of CPU at 1080p with 4 of 21 samples per point left out and the change's norm summed directly, the same
-    heights: 20 frames of ``bench/offline_speed.py``'s session)."""
+    """The share of points each outline of ``corners`` (S, 8, 2) is supported at (S,) (:func:`_supported`).
+
+    The outlines differ in size only: the middle one's edges and points, moved with the corners, serve for all.
+    This scan is most of a measurement's time: the colour is sampled from ``agree_px`` inside on, and first only
+    up to ``agree_px`` outside; further out only at the points with an edge there (a third of them), the others
+    being unsupported whatever is further out (the same supports as sampling all, from 11 instead of 17 samples
+    per point)."""
     mid = corners[len(corners) // 2]
     pts = edge_points(mid, outline(mid), p.spacing_px, p.trim)
     if len(pts.xy) < 8:
         return np.zeros(len(corners))
-    xy = pts.moved(corners)  # (S, K, 2)
-    e = corners[:, pts.second] - corners[:, pts.first]
-    normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
     window, origin = _window(frame_bgr, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0)
-    return _supported(_edges(window, xy - origin, normal, texture, p, inside_px=p.agree_px), p).mean(axis=-1)
+    xy = pts.moved(corners).reshape(-1) - np.tile(origin, len(corners) * len(pts.xy))  # flat: long loops
+    xy = xy.reshape(-1, 2)  # (S · K, 2), window pixels
+    _, at, edge = np.unique(pts.first, return_index=True, return_inverse=True)  # the points' edges
+    e = corners[:, pts.second[at]] - corners[:, pts.first[at]]  # (S, edges, 2)
+    normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
+    normal = np.take(normal, edge, axis=1).reshape(-1, 2)
+    inside = math.ceil(p.agree_px / p.step_px)
+    t = np.arange(-inside - 1, round(p.clear_px / p.step_px) + 2) * p.step_px  # rows from agree_px inside on
+    near = np.flatnonzero(np.abs((t[1:-2] + t[2:-1]) / 2.0) <= p.agree_px)
+    threshold = p.noise_factor * texture
+    end = near[-1] + 1  # rows [0, end): up to agree_px outside; [end, ...): further out
+    supported = _peaks(window, xy, normal, t[: end + 3], threshold)[0][near[0] :].any(axis=0)
+    further = np.flatnonzero(supported)
+    if len(further):
+        supported[further] = ~_peaks(window, np.take(xy, further, axis=0), np.take(normal, further, axis=0),
+                                     t[end:], threshold)[0].any(axis=0)
+    return supported.reshape(len(corners), -1).mean(axis=-1)

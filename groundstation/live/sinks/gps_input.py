@@ -20,8 +20,8 @@ What (:func:`gps_input_fields`):
   are not estimated and flagged ignored.
 - Once the newest ok fix is older than ``max_age_s`` (telemetry stale, video
   stopped; ``--fix-max-age-ms``, default 500 ms), or at once when the tracker
-  reports the UUV lost, awaits a target or was released, or ``skyfix fuse`` finds its drones
-  disagreeing (:data:`LOSS_STATUSES`):
+  reports the UUV lost, awaits a target or was released, finds its tracker on the same vehicle as another UUV's
+  (``same_vehicle``), or ``skyfix fuse`` finds its drones disagreeing (:data:`LOSS_STATUSES`):
   ``fix_type`` 1 (NO_FIX), lat/lon/alt 0, every ``ignore_flags`` bit set, 0
   satellites, hdop/vdop 99.99. Why 1 and not 0: AP_GPS copies ``fix_type`` into
   the GPS status, and 0 is NO_GPS ("no GPS connected") while 1 is NO_FIX ("GPS
@@ -78,7 +78,7 @@ IGNORE_ALL = 255
 FIX_NONE, FIX_3D = 1, 3
 DOP_MAX = 99.99
 #: Frame statuses meaning the UUV is no longer where the last fix put it: the last fix is dropped at once.
-LOSS_STATUSES = ("lost", "no_track", "awaiting_target", "released", "disagree")
+LOSS_STATUSES = ("lost", "no_track", "awaiting_target", "released", "same_vehicle", "disagree")
 
 
 def gps_time(t_unix: float) -> tuple[int, int]:
