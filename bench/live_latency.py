@@ -107,11 +107,17 @@ def ensure_session(name: str, duration_s: float) -> Path:
     text = SCENARIO.format(name=name, duration=duration_s, w=w, h=h)
     print(f"generating {path} (once) ...", flush=True)
     generate(scenario_from_dict(tomllib.loads(text)), path, text)
+    encode_as_camera(path)
+    return path
+
+
+def encode_as_camera(path: Path) -> None:
+    """A generated session's video.mp4 re-encoded as a camera sends it (H.264 without B-frames, a keyframe a
+    second, MPEG-TS) into video.ts, in its place."""
     subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(path / "video.mp4"), "-an", "-c:v", "libx264",
                     "-preset", "veryfast", "-tune", "zerolatency", "-g", "30", "-pix_fmt", "yuv420p",
                     "-f", "mpegts", str(path / "video.ts")], check=True)
     (path / "video.mp4").unlink()
-    return path
 
 
 def free_port(kind=socket.SOCK_DGRAM) -> int:
