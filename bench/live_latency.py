@@ -58,6 +58,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from emit import emit
+
 from groundstation.live.pipeline import Pipeline
 from groundstation.session.read import load_session
 from groundstation.video.file import open_video
@@ -339,11 +341,7 @@ def main() -> int:
                     f.unlink()
                 results[name] = res = {**baselines, **live(session, work, transport, run_args)}
                 lines += report(name, session, res)
-    text = "\n".join(lines) + "\n"
-    print(text, end="")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    args.out.with_suffix(".json").write_text(json.dumps(results, indent=1))
+    emit(lines, args.out, results)
     return 0
 
 

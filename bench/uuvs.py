@@ -60,6 +60,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from emit import emit
+
 from bench.live_latency import (
     BENCH_DIR,
     CAMERA_LATENCY_MS,
@@ -359,12 +361,7 @@ def main() -> int:
             work.mkdir(parents=True)
             print(f"round {r + 1}, {n} UUV(s): {', '.join(RUNS[n])} ...", flush=True)
             rnd["runs"][n] = live(session, work, RUNS[n])
-    lines += table(rounds)
-    text = "\n".join(lines).rstrip() + "\n"
-    print(text, end="")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    args.out.with_suffix(".json").write_text(json.dumps(rounds, indent=1))
+    emit(lines + table(rounds), args.out, rounds)
     return 0
 
 

@@ -165,6 +165,9 @@ def test_garbage_and_foreign_payloads_are_counted_and_change_nothing():
     assert sources.bad == 6 and fuser.sources == {}
 
 
+#: name: (UAV height m, UAV yaw deg, gimbal pitch deg, gimbal yaw deg): a looks 80° down from 9 m, b 60° down from
+#: 13 m and another side
+DRONES = {"a": (9.0, 190.0, -80.0, 200.0), "b": (13.0, 100.0, -60.0, 110.0)}
 DRONE_SCENARIO = """
 name = "fuse_{name}"
 description = "drone {name} of two over one UUV (tests/test_fusion.py)"
@@ -195,8 +198,7 @@ def test_two_generated_drones_over_one_dive_fuse_below_the_better_one(tmp_path):
     their fixes fed to the fuser in the order they would arrive (b's 50 ms later): the fused error against the
     truth is below the better drone's."""
     fixes = {}
-    for name, (height, yaw, pitch, gimbal_yaw) in {"a": (9.0, 190.0, -80.0, 200.0),
-                                                  "b": (13.0, 100.0, -60.0, 110.0)}.items():
+    for name, (height, yaw, pitch, gimbal_yaw) in DRONES.items():
         (tmp_path / f"{name}.toml").write_text(DRONE_SCENARIO.format(name=name, height=height, yaw=yaw, pitch=pitch,
                                                                      gimbal_yaw=gimbal_yaw))
         session = tmp_path / f"session_{name}"

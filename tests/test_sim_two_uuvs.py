@@ -212,11 +212,12 @@ def test_a_uuvs_bad_records_are_one_line_naming_its_file(tmp_path):
 
 
 def test_each_uuv_is_evaluated_against_its_own_truth(crossing, tmp_path):
-    """``skyfix evaluate`` on the crossing session tracks the video once per UUV from its own first box and scores
-    each UUV's fixes against its own truth (measured: refraction MAE 0.021 m for uuv1, 0.029 m for uuv2);
-    ``--uuv`` restricts it to one, and an id the session does not hold is one line naming the ids it does."""
+    """``skyfix evaluate`` on the crossing session scores each UUV's fixes (from its own track.csv: the tracker's
+    pass per UUV is :func:`test_the_tracker_keeps_each_uuv`'s) against its own truth; tracking the video, the same
+    command measured refraction MAE 0.021 m for uuv1 and 0.029 m for uuv2. ``--uuv`` restricts it to one, and an
+    id the session does not hold is one line naming the ids it does."""
     path = crossing[1]
-    out = subprocess.run(skyfix("evaluate", str(path), "--out", str(tmp_path / "all"), "--quiet"),
+    out = subprocess.run(skyfix("evaluate", str(path), "--out", str(tmp_path / "all"), "--quiet", "--use-track"),
                          check=False, capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert out.returncode == 0, out.stderr
     with open(tmp_path / "all" / "evaluation.csv", newline="") as f:

@@ -40,6 +40,7 @@ from live_helpers import (
     wait_for,
 )
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from test_fusion import DRONE_SCENARIO, DRONES
 from test_zenoh_security import ROUTER
 
 pytestmark = pytest.mark.sitl
@@ -52,46 +53,19 @@ LEAD_S = 2.0  # the sessions' telemetry starts this long before their first fram
 CAMERA_LATENCY_MS = 55  # glass to first packet of the replayed cameras, configured as such in the services
 WARMUP_S = 30.0  # ArduSub's uptime before the fixes (its README)
 FIX_3D = 3
-DRONES = {  # name: (UAV height m, UAV yaw deg, gimbal pitch deg, gimbal yaw deg)
-    "a": (9.0, 190.0, -80.0, 200.0),
-    "b": (13.0, 100.0, -60.0, 110.0),
-}
-SCENARIO = """
-name = "fuse_{name}"
-description = "drone {name} of two over one UUV (tests/test_sitl_fuse.py)"
-seed = 16
-duration_s = {duration}
-fps = 15.0
-start_unix = {start}
+# the scenario of tests/test_fusion.py, smaller and slower (two services, two replays and ArduSub share this
+# machine's two cores), longer, at ArduSub's home
+SCENARIO_EXTRA = (f"duration_s = {DURATION_S}\nfps = 15.0\nstart_unix = {START_UNIX}\n"
+                  f"site = {{ lat_deg = {LAT}, lon_deg = {LON}, surface_amsl_m = {SURFACE_AMSL_M} }}\n"
+                  "camera = { width = 320, height = 180 }\nrender = { crf = 28 }\n")
 
-[site]
-lat_deg = {lat}
-lon_deg = {lon}
-surface_amsl_m = {surface}
 
-[camera]
-width = 320
-height = 180
+def scenario(name: str, height: float, yaw: float, pitch: float, gimbal_yaw: float) -> str:
+    text = DRONE_SCENARIO.format(name=name, height=height, yaw=yaw, pitch=pitch, gimbal_yaw=gimbal_yaw)
+    assert "duration_s = 20.0\n" in text
+    return text.replace("duration_s = 20.0\n", SCENARIO_EXTRA)
 
-[mount]
-attitude_source = "gimbal_device"
-gimbal_frame = "earth"
-pitch_deg = {pitch}
-yaw_deg = {gimbal_yaw}
 
-[uav]
-height_m = {height}
-yaw_deg = {yaw}
-
-[uuv]
-depth_m = 1.3
-
-[telemetry]
-attitude_noise_deg = 0.2
-
-[render]
-crf = 28
-"""
 ROUTER_CONFIG = """{{ mode: "router", listen: {{ endpoints: ["tcp/127.0.0.1:{port}"] }},
   scouting: {{ multicast: {{ enabled: false }} }} }}"""
 
@@ -109,9 +83,7 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
     try:
         gens = []
         for d, (height, yaw, pitch, gimbal_yaw) in DRONES.items():
-            (tmp_path / f"{d}.toml").write_text(SCENARIO.format(
-                name=d, duration=DURATION_S, start=START_UNIX, lat=LAT, lon=LON, surface=SURFACE_AMSL_M, pitch=pitch,
-                gimbal_yaw=gimbal_yaw, height=height, yaw=yaw))
+            (tmp_path / f"{d}.toml").write_text(scenario(d, height, yaw, pitch, gimbal_yaw))
             gens.append(start(skyfix("sim", str(tmp_path / f"{d}.toml"), "--out", str(sessions[d]), "--quiet"),
                               tmp_path / f"sim_{d}.log"))
         procs += gens
