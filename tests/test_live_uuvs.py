@@ -327,7 +327,8 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         code, answer = _http(base + "/api/release", {"uuv": "uuv2"})
         t_released = time.time()
         assert code == 200 and answer["uuv"] == "uuv2" and answer["target"]["state"] == "released", answer
-        time.sleep(1.5)
+        wait_for(lambda: sum(f["t_recv"] > t_released + 0.5 for f in run.fixes("uuv2")) >= 10, 10,
+                 "uuv2's fixes after the release")
         code, status = _http(base + "/api/status")
         assert status["uuvs"]["uuv2"]["target"]["state"] == "released"
         assert status["uuvs"]["uuv1"]["target"]["state"] == "tracking" and status["target"]["state"] == "tracking"
@@ -345,7 +346,8 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         wait_for(lambda: [g["fix_type"] for _, g in run.endpoints["uuv1"].received[-3:]] == [1, 1, 1], 5,
                  "uuv1's GPS_INPUT no fix")
         t_no_fix = time.time()
-        time.sleep(0.5)
+        wait_for(lambda: all(sum(f["t_recv"] > t_no_fix for f in run.fixes(i)) >= 3 for i in IDS), 5,
+                 "both UUVs' fixes while on one vehicle")
         t_parting = time.time()
         assert _http(base + "/api/release", {"uuv": "uuv2"})[0] == 200
         t_parted = time.time()

@@ -11,11 +11,11 @@ import re
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from live_helpers import wait_until
 
 from groundstation.height_from_size import HeightFromSize
 from localizer.calibration import Calibration
@@ -143,7 +143,4 @@ def test_the_measuring_process_ends_when_the_service_is_killed():
     finally:
         service.kill()
         service.wait()
-    deadline = time.monotonic() + 20
-    while _running(child) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not _running(child), f"measuring process {child} outlived its killed service"
+    assert wait_until(lambda: not _running(child), 20), f"measuring process {child} outlived its killed service"

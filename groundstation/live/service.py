@@ -161,7 +161,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                           "video_latency_sigma_s": round(motion.applied_sigma_s, 4),
                           "video_latency_from_t": first_aligned[0] if first_aligned else None}
 
-        # -- the shared outputs: the recording (one UUV), the page (every UUV) -------------------------------------
+        # -- the shared outputs: the recording and the page (each UUV its part of them) -----------------------------
         recorder = None
         if cfg.record:
             recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
@@ -288,9 +288,8 @@ class UuvChain:
         sinks = [s for s in (fix_sink, gps, recorder, feed, topview, watchdog) if s is not None]
         self.pipeline = pipeline = Pipeline(
             cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0, prior=uuv_position.prior,
-            history_s=cfg.select_history_s, on_tracked=on_tracked, alignment=alignment, vet=vet,
-            tracking=tracking,
-            depth=None if uuv_tel is tel else uuv_tel.depth)
+            history_s=cfg.select_history_s, on_tracked=on_tracked, alignment=alignment, vet=vet, tracking=tracking,
+            depth=uuv_tel.depth)
         own.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
         own.section("target", lambda now: pipeline.target)
         own.section("fixes_published", lambda now: fix_sink.published)
