@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import ctypes
+import importlib
 import logging
 import math
 import multiprocessing
@@ -204,6 +205,7 @@ class OnlineHeightFromSize:
     def _run(self, stop: threading.Event) -> None:
         """Hands each frame to the measuring process (started here: a restart after a failure starts a new one)."""
         pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process)
+        pool.submit(importlib.import_module, __name__)  # the process starts and imports now, not at the first frame
         try:
             while not stop.is_set():
                 try:
