@@ -8,7 +8,9 @@ UUV hidden for a second) are timed end to end as child processes, interpreter st
 ``--repeats`` rounds; medians count. Each round: decode-only with OpenCV (a ``cv2.VideoCapture`` read loop, BGR
 frames) and with PyAV (frame and slice threads, BGR frames), then ``skyfix process`` (its defaults: the height from
 the UUV's size measured), ``skyfix process --height-from-size off``, and with ``--mil`` the paper's MIL tracker
-(first round only: it is slow). The ratio is process fps / OpenCV decode-only fps (target ≥ 0.95). CPU seconds
+(first round only: it is slow). The ratio is process fps / OpenCV decode-only fps (target ≥ 0.95), of the medians and,
+paired by round (each round's decode-only wall / its process wall: the machine's speed drifts between rounds), the
+pairs' median [least-most]. CPU seconds
 (the child's user + sys) show what the work costs beside the wall time: on a machine whose cores decoding alone
 keeps busy, process cannot be faster than its CPU seconds over the cores. ``skyfix process --help`` is timed too:
 the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
@@ -129,11 +131,14 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
     reference = frames / statistics.median(wall for wall, _ in runs["decode-only OpenCV"])
     lines = [(f"{name}: {w}x{h}, {duration} s, {frames} frames; median of {repeats} interleaved rounds "
               f"(MIL: 1), {os.cpu_count()} cores")]
+    decode_walls = [wall for wall, _ in runs["decode-only OpenCV"]]
     for variant, rs in runs.items():
         walls = [wall for wall, _ in rs]
         fps = frames / statistics.median(walls)
-        speed = (f"{'':35s}" if variant.startswith("start-up")
-                 else f"{fps:6.1f} fps  {fps / reference:5.2f}x decode-only  ")
+        paired = sorted(d / w for d, w in zip(decode_walls, walls))  # each round against its own decode-only run
+        speed = (f"{'':49s}" if variant.startswith("start-up")
+                 else f"{fps:6.1f} fps  {fps / reference:5.2f}x decode-only  "
+                      f"{statistics.median(paired):4.2f}x [{paired[0]:4.2f}-{paired[-1]:4.2f}]  ")
         lines.append(f"  {variant:44s} {speed}CPU {statistics.median(cpu for _, cpu in rs):6.1f} s  "
                      f"(wall {', '.join(f'{x:.1f}' for x in walls)} s)")
     return lines

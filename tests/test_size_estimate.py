@@ -82,9 +82,19 @@ def test_no_warning_when_the_configured_height_agrees(cal_dict):
 
 
 def test_rate_of_measured_frames(cal_dict):
-    work = HeightFromSize(_cal(cal_dict), Telemetry(), "check", measure_hz=5.0)
+    work = HeightFromSize(_cal(cal_dict), Telemetry(), "check", measure_hz=5.0, sure_hz=1.0)
     due = [work.due(1000.0 + k / 30.0) for k in range(90)]  # 3 s at 30 fps
     assert sum(due) == 15 and due[0] and due[6] and not any(due[1:6])
+    for h in _heights(0.1, n=40, t0=1000.0):  # 8 s at 5 Hz: sure
+        work.take(h)
+    assert work.estimate.sure
+    due = [work.due(1010.0 + k / 30.0) for k in range(90)]  # sure: a frame a second
+    assert sum(due) == 3 and due[0] and due[30] and due[60]
+    for h in _heights(3.0, n=40, t0=1011.0, sigma=1.0):  # a scatter that unsettles it: back to measuring at 5 Hz
+        work.take(h)
+    assert not work.estimate.sure
+    due = [work.due(1030.0 + k / 30.0) for k in range(30)]
+    assert sum(due) == 5
 
 
 def test_off_is_not_a_measuring_mode(cal_dict):
