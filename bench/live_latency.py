@@ -149,6 +149,14 @@ def keyframes(session_dir: Path) -> np.ndarray:
         return np.array([p.is_keyframe for p in c.demux(video=0) if p.size])
 
 
+def kill_left(*procs) -> None:
+    """Kill (and reap) the child processes of ``procs`` still running (None: never started)."""
+    for p in procs:
+        if p is not None and p.poll() is None:
+            p.kill()
+            p.wait()
+
+
 def proc_sample(pid: int) -> tuple[float, float]:
     """(CPU seconds used so far, resident memory in MB) of a process."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -242,9 +250,7 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> 
             service.send_signal(signal.SIGINT)
             service.wait(30)
         finally:
-            for p in (service, rep):
-                if p is not None and p.poll() is None:
-                    p.kill()
+            kill_left(service, rep)
     final = json.loads(stats.read_text())
     shift = json.loads((work / "replay.log").read_text().splitlines()[0])["shift_s"]
     session = load_session(session_dir)

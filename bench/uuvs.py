@@ -68,6 +68,7 @@ from bench.live_latency import (
     decode_baseline,
     encode_as_camera,
     free_port,
+    kill_left,
     nearest_times,
     pct,
     pipeline_baseline,
@@ -244,10 +245,7 @@ def live(session: Path, work: Path, ids) -> dict:
             service.send_signal(signal.SIGINT)
             service.wait(30)
         finally:
-            for p in (service, rep):
-                if p is not None and p.poll() is None:
-                    p.kill()
-                    p.wait()
+            kill_left(service, rep)
             endpoints.close()
     for uuv_id, received in endpoints.received.items():
         (work / f"gps_input_{uuv_id}.jsonl").write_text("".join(json.dumps({"t_recv": t, **g}) + "\n"
