@@ -17,11 +17,14 @@ rise by exactly the hostile items sent for them, ``bad_data`` by at least one pe
 datagram, the depth's ``bad`` and ``refused`` by exactly theirs, and the genuine MAVLink
 messages received equal those the replay sent (less, by at most the kernel's drops, when
 the machine could not keep up); every valid GPS_INPUT is within the baseline's worst error (+ 0.1 m) of the
-truth, and at least 80 % as many are valid; memory is flat: the resident memory grows by at
-most 5 % (or 10 MB) from 20 % into the storm to its end, beyond what it grows over the same
-instants with the valid input alone. (Each hostile kind is sent once first: a payload of
-megabytes raises Zenoh's and the allocator's high-water mark once — about 20 MB here, not
-more with more of them — and that is a plateau, not a leak.) Without ``--session`` a 40 s variant of ``oblique_2m`` (33° off
+truth, and at least 80 % as many are valid; memory does not leak: of the storm's two halves after
+its first 20 % (20-60 %, 60-100 %), not both see the resident memory grow by more than half of 5 %
+(or 10 MB) beyond what it grows over the same instants with the valid input alone. A leak grows
+with the input, in both halves; a plateau is raised once. (Each hostile kind is sent once first: a
+payload of megabytes raises Zenoh's and the allocator's high-water mark once — about 20 MB here,
+not more with more of them — and that is a plateau, not a leak; on a loaded machine a burst of
+them, queued at once, raises it again, once: 28 MB from 20 % into a 5 000-datagram storm to its
+end, in a test run on a busy machine.) Without ``--session`` a 40 s variant of ``oblique_2m`` (33° off
 nadir, so a poisoned depth would move the fix too) is generated once into ``/tmp/skyfix-fuzz``.
 """
 
@@ -54,7 +57,8 @@ DEFAULT_SESSION = Path("/tmp/skyfix-fuzz/session")
 #: Expensive payloads (megabytes of JSON, deep nesting) are rarer: they test size, not volume.
 DEPTH_WEIGHTS = {"huge": 0.02, "nested": 0.2}
 GARBAGE = [k for k, counter in MAVLINK_KINDS.items() if counter == "bad_data"]
-WARM_SHARE = 0.2  # memory is compared between this share of the storm and its end
+WARM_SHARE = 0.2  # memory is compared between this share of the storm, ...
+MID_SHARE = 0.6  # ... this share and its end
 
 
 def ensure_session(path: Path) -> Path:
@@ -123,7 +127,7 @@ class Storm:
             i = j = 0
             while (i < n_mav or j < n_dep or time.time() < t_to) and not self._stop.is_set():
                 share = min(1.0, (time.time() - t_from) / (t_to - t_from))
-                if len(self.samples) == 1 and share >= WARM_SHARE:
+                if len(self.samples) == 1 and share >= WARM_SHARE or len(self.samples) == 2 and share >= MID_SHARE:
                     self.samples.append(proc_sample(self.run.proc.pid))
                 for kind in self.mav_kinds[i:max(i, round(share * n_mav))]:
                     data = self.mav.frame(kind, time.time())
@@ -228,17 +232,19 @@ def check(session: Path, base: dict, fuzz: dict) -> tuple[dict, list[str]]:
                       f"(baseline worst {err_b.max():.3f} m): hostile data was used")
     if len(err_f) < 0.8 * len(err_b):
         failed.append(f"{len(err_f)} valid GPS_INPUT with hostile input, {len(err_b)} without")
-    rss0, rss_warm, rss1 = (fuzz["rss"][k]["rss_mb"] for k in (0, 1, -1))
-    base0, base_warm, base1 = (base["rss"][k]["rss_mb"] for k in (0, 1, -1))
-    if rss1 - rss_warm > max(0.05 * rss_warm, 10.0) + max(0.0, base1 - base_warm):
-        failed.append(f"RSS grew from {rss_warm:.1f} MB to {rss1:.1f} MB over the storm (valid input alone: "
-                      f"{base_warm:.1f} to {base1:.1f} MB)")
+    rss = tuple(fuzz["rss"][k]["rss_mb"] for k in (0, 1, 2, -1))
+    base_rss = tuple(base["rss"][k]["rss_mb"] for k in (0, 1, 2, -1))
+    allowed = max(0.05 * rss[1], 10.0)
+    grew = [(rss[k + 1] - rss[k]) - max(0.0, base_rss[k + 1] - base_rss[k]) for k in (1, 2)]
+    if min(grew) > allowed / 2:  # a leak grows with the input, in both halves; a plateau raised once, in one
+        failed.append("RSS grew from {:.1f} to {:.1f} to {:.1f} MB over the storm's halves (valid input alone: "
+                      "{:.1f} to {:.1f} to {:.1f} MB)".format(*rss[1:], *base_rss[1:]))
     figures = {"sent_mavlink": sum(mav.values()), "sent_depth": sum(dep.values()), "counts": counts,
                "udp_drops": drops, "datagrams": datagrams, "accidental_frames": dict(acc),
                "cpu_pct": tuple(100.0 * (r["rss"][-1]["cpu_s"] - r["rss"][0]["cpu_s"])
                                 / (r["rss"][-1]["t"] - r["rss"][0]["t"]) for r in (base, fuzz)),
-               "bad_data": bad_data, "garbage_datagrams": garbage, "rss_mb": (rss0, rss_warm, rss1),
-               "baseline_rss_mb": (base0, base_warm, base1),
+               "bad_data": bad_data, "garbage_datagrams": garbage, "rss_mb": rss,
+               "baseline_rss_mb": base_rss,
                "fds": (fuzz["rss"][0]["fds"], fuzz["rss"][-1]["fds"]),
                "threads": (fuzz["rss"][0]["threads"], fuzz["rss"][-1]["threads"]),
                "valid_gps_input": (len(err_b), len(err_f)), "max_error_m": tuple(float(e.max()) if len(e) else float("nan") for e in (err_b, err_f)),
@@ -279,9 +285,9 @@ def main() -> int:
                 *figures["cpu_pct"]),
             (f"valid GPS_INPUT: baseline {figures['valid_gps_input'][0]}, fuzzed {figures['valid_gps_input'][1]}; "
             f"worst error vs truth: baseline {figures['max_error_m'][0]:.3f} m, fuzzed {figures['max_error_m'][1]:.3f} m"),
-            "RSS at the storm's start, {:.0f} % into it, its end: {:.1f}, {:.1f}, {:.1f} MB".format(
-                WARM_SHARE * 100, *figures["rss_mb"])
-            + " (valid input alone, same instants: {:.1f}, {:.1f}, {:.1f} MB)".format(*figures["baseline_rss_mb"]),
+            "RSS at the storm's start, {:.0f} % and {:.0f} % into it, its end: {:.1f}, {:.1f}, {:.1f}, {:.1f} MB".format(
+                WARM_SHARE * 100, MID_SHARE * 100, *figures["rss_mb"])
+            + " (valid input alone, same instants: {:.1f}, {:.1f}, {:.1f}, {:.1f} MB)".format(*figures["baseline_rss_mb"]),
             (f"fds {figures['fds'][0]} -> {figures['fds'][1]}; "
              f"threads {figures['threads'][0]} -> {figures['threads'][1]}"),
             f"gates (fuzzed run): {figures['gates']}; statuses {figures['statuses']}",

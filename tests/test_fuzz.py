@@ -3,7 +3,7 @@ depth payloads (random bytes, mutated frames with and without recomputed CRCs, a
 components, the boot clock and the UUV's clock jumping) mixed into a replay of a bundled session, compared with
 the same replay alone. The service must survive, count every rejection where it belongs (the counters add up),
 lose no valid MAVLink frame to the garbage around it, send no GPS_INPUT that used a refused (poisoned) value,
-and keep its memory flat. The checks are :func:`fuzz.check`'s; ``bench/fuzz.py`` runs 100 000 and 10 000.
+and not leak memory. The checks are :func:`fuzz.check`'s; ``bench/fuzz.py`` runs 100 000 and 10 000.
 """
 
 from __future__ import annotations

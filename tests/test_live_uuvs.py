@@ -66,7 +66,7 @@ from sim_fixtures.scenario import load_scenario
 
 SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
 IDS = ("uuv1", "uuv2")
-MIN_SHARE = 0.6  # of the frames with a fix: see test_live_e2e.MIN_SHARE
+MIN_SHARE = 0.3  # of the frames with a fix, at the least: see test_live_e2e.MIN_SHARE
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
 
@@ -340,18 +340,18 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         code, answer = _http(base + "/api/select", {"uuv": "uuv2", "box": box1})
         assert code == 200 and answer["target"]["state"] == "tracking", answer
         wait_for(lambda: all(len(run.fixes(i)) > 3 and {f["status"] for f in run.fixes(i)[-3:]} == {"same_vehicle"}
-                             for i in IDS), 5,
+                             for i in IDS), 10,
                  lambda: f"both UUVs' fixes same_vehicle (last: {[[f['status'] for f in run.fixes(i)[-3:]] for i in IDS]})")
         t_both = time.time()
-        wait_for(lambda: [g["fix_type"] for _, g in run.endpoints["uuv1"].received[-3:]] == [1, 1, 1], 5,
+        wait_for(lambda: [g["fix_type"] for _, g in run.endpoints["uuv1"].received[-3:]] == [1, 1, 1], 10,
                  "uuv1's GPS_INPUT no fix")
         t_no_fix = time.time()
-        wait_for(lambda: all(sum(f["t_recv"] > t_no_fix for f in run.fixes(i)) >= 3 for i in IDS), 5,
+        wait_for(lambda: all(sum(f["t_recv"] > t_no_fix for f in run.fixes(i)) >= 3 for i in IDS), 10,
                  "both UUVs' fixes while on one vehicle")
         t_parting = time.time()
         assert _http(base + "/api/release", {"uuv": "uuv2"})[0] == 200
         t_parted = time.time()
-        wait_for(lambda: run.fixes("uuv1")[-1]["status"] == "ok", 5, "uuv1's fixes back")
+        wait_for(lambda: run.fixes("uuv1")[-1]["status"] == "ok", 10, "uuv1's fixes back")
 
         browser_checked = available() is None
         if browser_checked:

@@ -97,7 +97,7 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
             refusal = page.inner_text("#cmd-result")
             assert "no vehicle-sized object stands out of the water" in refusal, refusal
             t_water = time.time()
-            wait_for(lambda: sum(g["t_recv"] > t_water for g in live.gps_input()) >= 3, 5, "GPS_INPUT after the refusal")
+            wait_for(lambda: sum(g["t_recv"] > t_water for g in live.gps_input()) >= 3, 15, "GPS_INPUT after the refusal")
             browser.screenshot("2-box-on-water-refused")
 
             # a box around the UUV, on the frame on screen
@@ -144,19 +144,21 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
             wait_for(lambda: (m := re.fullmatch(r"selected on frame (\d+) \(caught up \d+\): tracking",
                                                 page.inner_text("#cmd-result"))) and int(m[1]) >= frame, 10,
                      "the click's answer")  # on that frame, or the next if it came in before the click
-            wait_for(lambda: page.inner_text("#target-state") == "target tracking (click)", 5, "the click's target")
+            wait_for(lambda: page.inner_text("#target-state") == "target tracking (click)", 15, "the click's target")
 
             # release: no fix until a new selection
             page.click("#release")
             wait_for(lambda: "release: released" in page.inner_text("#cmd-result"), 10, "the release's answer")
             t_released = time.time()
-            wait_for(lambda: page.inner_text("#target-state") == "target released (click)", 5,
+            wait_for(lambda: page.inner_text("#target-state") == "target released (click)", 15,
                      "the page showing the target released")
             wait_for(lambda: sum(g["fix_type"] == 1 and g["t_recv"] > t_released + 0.3 for g in live.gps_input()) >= 3,
                      10, "GPS_INPUT without a fix after the release")
             wait_for(lambda: page.inner_text("#gate-state") == "gates acquiring"
-                     and page.eval_on_selector("#map", "m => m.dataset.gate") == "acquiring", 5,
-                     "the gates acquiring again after the release")
+                     and page.eval_on_selector("#map", "m => m.dataset.gate") == "acquiring", 20,
+                     lambda: "the gates acquiring again after the release; the page shows "
+                             f"{page.inner_text('#gate-state')!r}, the map "
+                             f"{page.eval_on_selector('#map', 'm => m.dataset.gate')!r}")
             browser.screenshot("4-released")
             assert not browser.errors, browser.errors
             assert browser.outside == [] and all(u.startswith(origin) for u in browser.requests), browser.requests
