@@ -311,3 +311,22 @@ def test_a_wide_window_prefers_the_candidate_near_the_prediction(how):
     prediction = Prediction(c[0], c[1], LENGTH, BEAM, sigma_px=sigma, px_per_m=100.0)
     m = matcher.follow(img, prediction) if how == "follow" else matcher.search(img, prediction)
     assert m.found and math.hypot(m.u - uuv[0], m.v - uuv[1]) < 1.5, (m.u - c[0], m.v - c[1], m.score)
+
+
+def test_several_templates_at_once_score_as_opencv_does():
+    """The drift check's one-product NCC (``_ncc_maps``) against ``cv2.matchTemplate`` template by template, on a
+    textured image with a flat (uniform) corner, where OpenCV scores 0."""
+    from localizer.tracking.template import _ncc_maps
+
+    rng = np.random.default_rng(5)
+    image = cv2.GaussianBlur(rng.normal(120.0, 25.0, (23, 23)).astype(np.float32), (0, 0), 1.0)
+    image[:16, :16] = 90.0  # the places (0..1, 0..1) are flat
+    templates = [cv2.GaussianBlur(rng.normal(120.0, 25.0, (15, 15)).astype(np.float32), (0, 0), 1.0) for _ in range(5)]
+    columns = np.stack([t.ravel().astype(np.float64) - t.mean() for t in templates], axis=1)
+    columns /= np.linalg.norm(columns, axis=0)
+    maps = _ncc_maps(image, columns, 15)
+    assert maps.shape == (5, 9, 9)
+    for t, got in zip(templates, maps, strict=True):
+        want = cv2.matchTemplate(image, t, cv2.TM_CCOEFF_NORMED)
+        np.testing.assert_allclose(got, want, atol=1e-4)
+    assert np.all(maps[:, :2, :2] == 0.0) and np.ptp(maps) > 0.5  # the flat places, and scores that vary elsewhere

@@ -56,6 +56,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from . import Match, Prediction
 from .opencv import check_box
@@ -129,6 +130,24 @@ def _peak(scores: np.ndarray, penalty: np.ndarray | None = None) -> tuple[float,
     dx = _parabola(scores[i, j - 1], scores[i, j], scores[i, j + 1]) if 0 < j < w - 1 else 0.0
     dy = _parabola(scores[i - 1, j], scores[i, j], scores[i + 1, j]) if 0 < i < h - 1 else 0.0
     return float(rank), float(scores[i, j]), float(j + dx), float(i + dy)
+
+
+def _ncc_maps(image: np.ndarray, columns: np.ndarray, side: int) -> np.ndarray:
+    """``cv2.matchTemplate(image, t, TM_CCOEFF_NORMED)`` for several side × side templates ``t`` at once: maps
+    (templates, rows, columns). ``columns``: each template flattened, less its mean, divided by its norm.
+
+    One product of matrices in place of a call per template: for a few small templates on a small image the calls'
+    own cost is most of it. As OpenCV, a flat place of the image scores 0.
+    """
+    rows, cols = image.shape[0] - side + 1, image.shape[1] - side + 1
+    places = sliding_window_view(image, (side, side)).reshape(rows * cols, side * side).astype(np.float64)
+    sums = places.sum(axis=1)
+    squares = np.einsum("ij,ij->i", places, places)
+    spread = squares - sums * sums / (side * side)
+    flat = spread <= np.minimum(0.5, 10.0 * np.finfo(np.float32).eps * squares)
+    scores = (places @ columns) / np.sqrt(np.where(flat, 1.0, spread))[:, None]
+    scores[flat] = 0.0
+    return scores.T.reshape(columns.shape[1], rows, cols)
 
 
 def _warp(src: np.ndarray, centre, angle_deg: float, scale: float, side: int) -> np.ndarray:
@@ -238,6 +257,7 @@ class TemplateMatcher:
         self._core = max(5, round(self.p.core_share * self.S)) | 1
         self._first_turn = 0.0  # ... turned as the learnt template has turned from it
         self._firsts: dict = {}  # the core at turns (multiples of first_turn_step_deg)
+        self._first_columns: dict = {}  # ... and several turns' cores ready for _ncc_maps
         self._first_spread = self._spread(frame_bgr, self.u, self.v)
         self._velocity = (0.0, 0.0)
         self._level = 1.0
@@ -377,6 +397,17 @@ class TemplateMatcher:
             self._firsts[key] = _warp(self._first, (c, c), key * self.p.first_turn_step_deg, 1.0, self._core)
         return self._firsts[key]
 
+    def _first_cores(self, turns) -> np.ndarray:
+        """The first appearance's cores at ``turns`` (see :meth:`_first_core`) as the columns of one matrix,
+        each less its mean and divided by its norm (float64, cached): the templates of :func:`_ncc_maps`."""
+        key = tuple(round(a / self.p.first_turn_step_deg) % round(360.0 / self.p.first_turn_step_deg) for a in turns)
+        if key not in self._first_columns:
+            cores = np.stack([self._first_core(a).ravel().astype(np.float64) for a in turns], axis=1)
+            cores -= cores.mean(axis=0)
+            norms = np.linalg.norm(cores, axis=0)
+            self._first_columns[key] = np.divide(cores, norms, out=np.zeros_like(cores), where=norms > 0)
+        return self._first_columns[key]
+
     def _first_at(self, upright: np.ndarray) -> tuple[float, float, float] | None:
         """Where an upright canonical image (side D) shows the UUV's first appearance: ``(dx, dy, turn_deg)``, its
         offset from the centre (working pixels) and the turn that matches it best (within ``first_turn_deg`` of
@@ -390,11 +421,11 @@ class TemplateMatcher:
         step = self.p.first_turn_step_deg
         n = round(self.p.first_turn_deg / step)
         turns = [step * (round(self._first_turn / step) + j) for j in range(-n, n + 1)]
-        maps = [cv2.matchTemplate(window, self._first_core(a), cv2.TM_CCOEFF_NORMED) for a in turns]
-        found = [_peak(scores)[1:] for scores in maps]
-        j = max(range(len(found)), key=lambda j: found[j][0])
-        score, dx, dy = found[j]
-        turn = turns[j] + (step * _parabola(found[j - 1][0], score, found[j + 1][0]) if 0 < j < 2 * n else 0.0)
+        maps = _ncc_maps(window, self._first_cores(turns), core)
+        tops = maps.reshape(len(turns), -1).max(axis=1)
+        j = int(np.argmax(tops))
+        _, score, dx, dy = _peak(maps[j])
+        turn = turns[j] + (step * _parabola(tops[j - 1], score, tops[j + 1]) if 0 < j < 2 * n else 0.0)
         dx, dy = dx - m, dy - m
         if score < self.p.anchor_score:
             return None
