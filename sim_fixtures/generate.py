@@ -10,7 +10,8 @@ be seen, ``u`` and ``v`` are empty: hidden by an occlusion window, outside the i
 less than half of it showing past a second vehicle (``[second_uuv]``),
 or too deep in turbid water, its contrast below the sensor noise (see
 :meth:`~sim_fixtures.render.Renderer.render`); ``truth.csv`` has every frame. The video is rendered
-by ray casting (:mod:`sim_fixtures.render`) and encoded by the ``ffmpeg`` CLI
+by ray casting (:mod:`sim_fixtures.render`; a large session by a process per core, each given a copy of the
+renderer and each frame's noise offset, so the frames are the same) and encoded by the ``ffmpeg`` CLI
 (libx264, yuv420p, raw BGR frames through a pipe).
 
 Times: the frames' exposure times in ``video_frames.csv``, ``track.csv`` and
@@ -33,9 +34,14 @@ from __future__ import annotations
 
 import csv
 import json
+import multiprocessing
+import os
 import shutil
 import subprocess
 import time
+from collections import deque
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -47,7 +53,7 @@ from localizer.calibration import ConfigError
 
 from .geometry import R_GIMBAL_FROM_CV, SimCamera, ned_to_geodetic, project, surface_crossing
 from .motion import Motion
-from .render import Box, Renderer, View
+from .render import Box, Renderer, View, noise_offsets
 from .scenario import Scenario
 from .tlog import Clock, exponential, stream, write_tlog
 
@@ -281,16 +287,61 @@ class Encoder:
             raise RuntimeError(f"ffmpeg exited with status {self.proc.returncode}")
 
 
+#: Sessions of at least this many pixels (frames × width × height: 2 s of 720p) are rendered by several processes.
+PARALLEL_PIXELS = 60 * 1280 * 720
+MAX_WORKERS = 4
+
+
+def render_workers(camera: SimCamera, n_frames: int) -> int:
+    """How many processes render a session: one per core this process may use (at most :data:`MAX_WORKERS`), or
+    none beside this one for a small session (a worker's start, about a second, would cost more than it saves)."""
+    if n_frames * camera.width * camera.height < PARALLEL_PIXELS:
+        return 1
+    return max(1, min(MAX_WORKERS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1))
+
+
+_worker_renderer: Renderer | None = None  # a rendering process's renderer
+
+
+def _start_worker(renderer: Renderer) -> None:
+    global _worker_renderer
+    _worker_renderer = renderer
+
+
+def _render_apart(view: View, noise_at: tuple[int, int]):
+    return _worker_renderer.render_seen(view, noise_at)
+
+
+def _frames(renderer: Renderer, sc: Scenario, truth: Truth, workers: int) -> Iterator[tuple]:
+    """``render_seen``'s (image, boxes) of every frame in order: rendered here, or by ``workers`` processes (each
+    given a copy of the renderer and each frame's noise offset: the same frames), at most two a worker ahead."""
+    n = len(truth.t_unix)
+    if workers <= 1:
+        for i in range(n):
+            yield renderer.render_seen(truth.view(i))
+        return
+    offsets = noise_offsets(sc, n)
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker,
+                             initargs=(renderer,)) as pool:
+        ahead: deque = deque()
+        for i in range(n):
+            ahead.append(pool.submit(_render_apart, truth.view(i), offsets[i]))
+            if len(ahead) >= 2 * workers:
+                yield ahead.popleft().result()
+        while ahead:
+            yield ahead.popleft().result()
+
+
 def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress: bool = False) -> list[tuple]:
-    """Render and encode every frame; returns per frame the bounding box of the UUV and of each look-alike where it
-    can be seen, else None (see :meth:`~sim_fixtures.render.Renderer.render_seen`)."""
+    """Render (in :func:`render_workers` processes) and encode every frame; returns per frame the bounding box of the
+    UUV and of each look-alike where it can be seen, else None (see :meth:`~sim_fixtures.render.Renderer.render_seen`)."""
     renderer = Renderer(sc, camera)
     encoder = Encoder(path, camera.width, camera.height, sc.fps, sc.render.crf)
+    n = len(truth.t_unix)
     seen = []
-    bar = progress_bar(len(truth.t_unix), f"{sc.name}: rendering", progress)
+    bar = progress_bar(n, f"{sc.name}: rendering", progress)
     try:
-        for i in range(len(truth.t_unix)):
-            img, boxes = renderer.render_seen(truth.view(i))
+        for img, boxes in _frames(renderer, sc, truth, render_workers(camera, n)):
             seen.append(boxes)
             encoder.write(img)
             bar.update()

@@ -151,6 +151,25 @@ def subsamples(rows, cols, ss: int, scale: int = 1):
     return np.broadcast_arrays(u, v)
 
 
+NOISE_MARGIN = 64  # the noise field is this much larger than a frame: each frame's noise is cut from it at an offset
+
+
+def noise_rng(sc: Scenario) -> np.random.Generator:
+    """The generator of the frames' noise offsets (see :meth:`Renderer.render_seen`)."""
+    return np.random.default_rng([sc.seed, 303])
+
+
+def _noise_offset(rng: np.random.Generator) -> tuple[int, int]:
+    dy, dx = rng.integers(0, NOISE_MARGIN, 2)
+    return int(dy), int(dx)
+
+
+def noise_offsets(sc: Scenario, n: int) -> list[tuple[int, int]]:
+    """The noise offsets of frames 0 … n − 1 as a renderer rendering them in turn draws them."""
+    rng = noise_rng(sc)
+    return [_noise_offset(rng) for _ in range(n)]
+
+
 class Renderer:
     """Renders frames of one scenario; textures and rays are made once.
 
@@ -183,10 +202,10 @@ class Renderer:
         self.floor = texture.seafloor(rng, m_per_px=FLOOR_M_PER_PX)
         self.caustics = (texture.caustics(rng), texture.caustics(rng))
         self.sparkle = np.clip(texture.fractal_noise(rng, 512, 0.6) - 1.5, 0.0, None)
-        margin = 64
+        margin = NOISE_MARGIN
         self.noise = (rng.standard_normal((camera.height + margin, camera.width + margin, 3))
                       * sc.render.noise_sigma).astype(np.float32)
-        self.noise_rng = np.random.default_rng([sc.seed, 303])
+        self.noise_rng = noise_rng(sc)
         el, az = np.radians(sc.render.sun_elevation_deg), np.radians(sc.render.sun_azimuth_deg)
         self.sun_up_ned = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
         self.shadow = sc.render.shadow if sc.render.sun_elevation_deg > 0 else 0.0
@@ -409,9 +428,14 @@ class Renderer:
         img, seen = self.render_seen(view)
         return img, seen[0]
 
-    def render_seen(self, view: View):
+    def render_seen(self, view: View, noise_at: tuple[int, int] | None = None):
         """One frame: ``(image (H, W, 3) uint8 BGR, boxes)``, ``boxes`` the bounding box (x, y, w, h) of the UUV and of
-        each of ``view.others`` in turn, or None where it cannot be seen (the UUV also where it is hidden)."""
+        each of ``view.others`` in turn, or None where it cannot be seen (the UUV also where it is hidden).
+
+        ``noise_at``: the (row, column) the frame's sensor noise is cut from the noise field at; by default the next
+        draw of the renderer's own generator (frames rendered in turn). Frames rendered apart (in several
+        processes) are given theirs from :func:`noise_offsets`: the same frames either way.
+        """
         boxes = ((self.uuv_box(view),) if view.uuv_visible else ()) + tuple(view.others)
         fields, near, shade = self._coarse(view, boxes)
         fmap = np.ascontiguousarray(fields["map"])
@@ -439,6 +463,6 @@ class Renderer:
             img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_LINEAR)
         seen = (() if view.uuv_visible else (None,)) + (self._boxes(view, img, boxes, near) if boxes else ())
         if self.sc.render.noise_sigma > 0:
-            dy, dx = self.noise_rng.integers(0, 64, 2)
+            dy, dx = _noise_offset(self.noise_rng) if noise_at is None else noise_at
             img = cv2.add(img, self.noise[dy : dy + self.camera.height, dx : dx + self.camera.width])
         return np.clip(img + 0.5, 0, 255, out=img).astype(np.uint8), seen

@@ -70,3 +70,20 @@ def test_refuses_to_overwrite_a_recording(tmp_path):
     with pytest.raises(ConfigError, match="refusing to overwrite"):
         generate(scenario_from_dict(TINY), rec)
     assert (rec / "uav.tlog").read_bytes() == b"precious"
+
+
+def test_frames_rendered_apart_are_the_frames_rendered_in_turn():
+    """Two rendering processes (each with a copy of the renderer, each frame given its noise offset) make the same
+    frames and boxes as one renderer in turn: the encoder is given the same frames, track.csv the same boxes."""
+    from sim_fixtures import generate as gen
+
+    sc = scenario_from_dict(TINY)
+    camera = gen.camera_of(sc)
+    truth = gen.frame_truth(sc, gen.Motion(sc), camera)
+    renderer = gen.Renderer(sc, camera)
+    apart = list(gen._frames(renderer, sc, truth, workers=2))  # copies of the renderer, its noise not drawn yet
+    in_turn = list(gen._frames(renderer, sc, truth, workers=1))
+    assert len(in_turn) == len(apart) == 10
+    for (img_a, boxes_a), (img_b, boxes_b) in zip(in_turn, apart, strict=True):
+        assert np.array_equal(img_a, img_b) and boxes_a == boxes_b
+    assert len({img.tobytes() for img, _ in in_turn}) == 10  # the noise differs frame to frame
