@@ -191,8 +191,8 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
             pass
         exit_s = time.time() - t_signal if service.returncode is not None else None
         # the last GPS_INPUT, sent just before the exit, may still be on its way through loopback: wait for a
-        # no-fix after the signal (the test then asserts it is the last), for 2 s at most
-        wait_until(lambda: any(tr >= t_signal and ft < 2 for tr, ft in listener.got), 2.0, poll_s=0.02)
+        # no-fix after the signal (the test then asserts it is the last), for 10 s at most
+        wait_until(lambda: any(tr >= t_signal and ft < 2 for tr, ft in listener.got), 10.0, poll_s=0.02)
         after = [ft for tr, ft in listener.got if tr >= t_signal]
     finally:
         for p in procs:

@@ -165,7 +165,7 @@ def test_injection_through_blueos_mavlink_in():
 
     try:
         asyncio.run(scenario())
-        wait_for(last_is_no_fix, 5.0, "the last GPS_INPUT (no fix) at mavlink/in")
+        wait_for(last_is_no_fix, 15.0, "the last GPS_INPUT (no fix) at mavlink/in")
     finally:
         sub.undeclare()
         blueos_side.close()

@@ -271,7 +271,7 @@ async def _page_messages(base: str, timeout_s: float = 15.0) -> tuple[dict, dict
     import aiohttp
 
     async with aiohttp.ClientSession() as http, http.ws_connect(base.replace("http", "ws") + "/ws") as ws:
-        hello = json.loads((await ws.receive(timeout=5)).data)
+        hello = json.loads((await ws.receive(timeout=15)).data)
         state = overlay = None
         end = time.monotonic() + timeout_s
         while (state is None or overlay is None) and time.monotonic() < end:
