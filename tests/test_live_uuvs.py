@@ -218,7 +218,12 @@ def test_two_uuvs_in_one_video_each_with_its_own_fixes_and_gps_input(tmp_path, c
         unhealthy = ardupilot_gps_unhealthy(t_recv[(t_recv > t_recv[0] + 1.0)])
         assert unhealthy is None, f"{uuv_id}: ArduPilot would call GPS_INPUT unhealthy: {unhealthy}"
         valid = [g for _, g in received if g["fix_type"] == 3]
-        assert len(valid) >= 0.5 * len(received), (uuv_id, len(valid), len(received))
+        # valid as the UUV's gates accepted (test_live_e2e.py): refused only while confirming or for age, all arrived
+        sent = status[-1]["gps_input"]
+        refused = {reason: n for reason, n in sent["gates"]["rejected"].items() if n}
+        assert set(refused) <= {"unconfirmed", "age"}, (uuv_id, refused, sent["gates"]["last_refusal"])
+        assert sent["gates"]["accepted"] >= 10 and len(valid) >= max(10, 0.9 * sent["sent_valid"]), (
+            uuv_id, len(valid), sent["sent_valid"], sent["gates"]["accepted"])
         to_station = status[-1]["uav"]["clocks"]["station_minus_gnss_s"] or 0.0
         own, other, _ = own_and_other_errors_m(session, uuv_id,
                                                np.array([g["time_usec"] / 1e6 for g in valid]) + to_station - shift,
