@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from jsonschema import Draft202012Validator
 from live_helpers import (
+    MIN_SHARE,
     ROOT,
     SUBSCRIBER,
     ardupilot_gps_unhealthy,
@@ -43,11 +44,6 @@ SESSIONS = [Path(os.environ["SKYFIX_LIVE_SESSION"])] if "SKYFIX_LIVE_SESSION" in
     BUNDLED / "nadir_hover", BUNDLED / "clock_offset"]
 # Glass to first packet of this replay chain: the replay sends each frame at its exposure time.
 VIDEO_LATENCY_MS = 0
-#: Share of the frames that must get a fix, at the least. A loaded machine (CI: two cores, other jobs) gets fewer
-#: than a quiet one (0.7-0.8 here; 0.41 once, with the decoder at 99 ms a frame): the service skips frames while
-#: its decoder is behind and drops them while the tracker is, rather than send late fixes. The share is
-#: bench/live_latency.py's business; here every frame is accounted for and every fix made must be right.
-MIN_SHARE = 0.3
 
 
 def _offline_mae(session: Path) -> float:

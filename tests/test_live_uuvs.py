@@ -38,6 +38,7 @@ import numpy as np
 import pytest
 from jsonschema import Draft202012Validator
 from live_helpers import (
+    MIN_SHARE,
     ROOT,
     SUBSCRIBER,
     ardupilot_gps_unhealthy,
@@ -66,7 +67,6 @@ from sim_fixtures.scenario import load_scenario
 
 SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
 IDS = ("uuv1", "uuv2")
-MIN_SHARE = 0.3  # of the frames with a fix, at the least: see test_live_e2e.MIN_SHARE
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
 
