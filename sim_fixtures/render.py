@@ -18,6 +18,7 @@ there the sun's share of the light (and the caustics, which are sunlight) is mis
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import cv2
@@ -151,6 +152,8 @@ def subsamples(rows, cols, ss: int, scale: int = 1):
     return np.broadcast_arrays(u, v)
 
 
+RAY_TILE = 32  # pixels a side of the tiles the UUV's rays are cached in (Renderer._rays) ...
+RAY_TILES_KEPT = 512  # ... and how many are kept (at supersample 2: 100 kB each)
 NOISE_MARGIN = 64  # the noise field is this much larger than a frame: each frame's noise is cut from it at an offset
 
 
@@ -210,6 +213,7 @@ class Renderer:
         self.sun_up_ned = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
         self.shadow = sc.render.shadow if sc.render.sun_elevation_deg > 0 else 0.0
         self.sunlight_in_water = refract_into_water(-self.sun_up_ned, self.n_water)  # going down, unit
+        self._ray_tiles: OrderedDict[int, np.ndarray] = OrderedDict()  # see _rays
 
     # --- geometry shared with the tests ------------------------------------------------------------
     def uuv_box(self, view: View) -> Box:
@@ -347,6 +351,26 @@ class Renderer:
                                          borderMode=cv2.BORDER_WRAP))
         return np.sqrt(layers[0] * layers[1])
 
+    def _rays(self, rows, cols):
+        """:func:`pixel_rays` (P·ss·ss, 3) of pixels (rows, cols) at :func:`subsamples`, from a cache of
+        ``RAY_TILE``-pixel square tiles (the UUV's windows cover the same pixels frame after frame; each ray is
+        OpenCV's for its own point, whichever points it is computed with: the same numbers)."""
+        ss, t = self.sc.render.supersample, RAY_TILE
+        tiles = rows // t * (self.camera.width // t + 1) + cols // t
+        needed, slot = np.unique(tiles, return_inverse=True)
+        for key in needed:
+            if key in self._ray_tiles:
+                self._ray_tiles.move_to_end(key)
+                continue
+            r0, c0 = divmod(int(key), self.camera.width // t + 1)
+            tv, tu = np.mgrid[r0 * t : (r0 + 1) * t, c0 * t : (c0 + 1) * t]
+            su, sv = subsamples(tv.ravel(), tu.ravel(), ss)
+            self._ray_tiles[key] = pixel_rays(self.camera, su.ravel(), sv.ravel()).reshape(t, t, ss, ss, 3)
+        stack = np.stack([self._ray_tiles[key] for key in needed])
+        while len(self._ray_tiles) > RAY_TILES_KEPT:  # the least recently used go
+            self._ray_tiles.popitem(last=False)
+        return stack[slot.ravel(), rows % t, cols % t].reshape(-1, 3)
+
     def _boxes(self, view: View, img, boxes, near) -> tuple:
         """Blend the boxes (the UUV first when it is not hidden) into ``img`` (H, W, 3) in windows around them; returns
         per box its bounding box, or None where it cannot be seen: no pixel mostly covered, less than half of it
@@ -364,8 +388,7 @@ class Renderer:
             return unseen
         vv, uu = pixels_of(windows, cam.height, cam.width)
         ss = self.sc.render.supersample
-        su, sv = subsamples(vv, uu, ss)
-        ray = pixel_rays(cam, su.ravel(), sv.ravel())
+        ray = self._rays(vv, uu)
         surface, dir_water, wet = water_path(ray, view, self.n_water)
         owner, nearest, hits = np.full(len(ray), -1), np.full(len(ray), np.inf), []
         for k, b in enumerate(boxes):

@@ -14,8 +14,10 @@ import numpy as np
 import pytest
 
 from groundstation.session.read import read_table
+from sim_fixtures import render
 from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR, SCENARIOS
 from sim_fixtures.generate import camera_of, frame_truth
+from sim_fixtures.geometry import pixel_rays
 from sim_fixtures.motion import Motion
 from sim_fixtures.render import Renderer
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -90,3 +92,19 @@ def test_occluded_frames_have_no_track_and_no_uuv():
     assert hidden.sum() == round((b - a) * sc.fps)
     assert np.all(np.isnan(track["u"][hidden])) and np.all(np.isfinite(track["u"][~hidden]))
     assert len(truth_csv["t"]) == len(track["t"]) and np.all(np.isfinite(truth_csv["lat"]))
+
+
+def test_cached_rays_are_the_rays_computed_for_the_pixels(scene, monkeypatch):
+    """The UUV's rays come from a cache of pixel tiles: for any pixels (here scattered over tile edges, the image's
+    edges and more tiles than are kept), they are the numbers pixel_rays gives for those pixels' subsamples."""
+    sc, camera, _, renderer = scene
+    monkeypatch.setattr(render, "RAY_TILES_KEPT", 3)  # eviction on every call below
+    rng = np.random.default_rng(5)
+    ss = sc.render.supersample
+    for _ in range(4):
+        rows = np.concatenate([rng.integers(0, camera.height, 200), [0, camera.height - 1, 31, 32]])
+        cols = np.concatenate([rng.integers(0, camera.width, 200), [camera.width - 1, 0, 32, 31]])
+        su, sv = render.subsamples(rows, cols, ss)
+        expected = pixel_rays(camera, su.ravel(), sv.ravel())
+        np.testing.assert_array_equal(renderer._rays(rows, cols), expected)
+        assert len(renderer._ray_tiles) == 3
