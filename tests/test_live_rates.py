@@ -36,12 +36,14 @@ class Autopilot:
             self.rate_hz["DISTANCE_SENSOR"] = rangefinder_hz
         self.commands: list = []
         self.streams: list = []
-        self.t0 = time.monotonic()
+        self.t0 = time.time()
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
 
     def boot_s(self) -> float:
-        return BOOT0_S + time.monotonic() - self.t0
+        """Its time since boot, kept on the station's clock: delays are differences of one clock then, and a step or
+        slew of the station clock against the monotonic one (a busy VM) is not taken for a link delay."""
+        return BOOT0_S + time.time() - self.t0
 
     def __enter__(self):
         self.thread.start()
