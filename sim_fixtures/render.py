@@ -356,13 +356,14 @@ class Renderer:
         ``RAY_TILE``-pixel square tiles (the UUV's windows cover the same pixels frame after frame; each ray is
         OpenCV's for its own point, whichever points it is computed with: the same numbers)."""
         ss, t = self.sc.render.supersample, RAY_TILE
-        tiles = rows // t * (self.camera.width // t + 1) + cols // t
+        per_row = self.camera.width // t + 1  # tiles in a row of them
+        tiles = rows // t * per_row + cols // t
         needed, slot = np.unique(tiles, return_inverse=True)
         for key in needed:
             if key in self._ray_tiles:
                 self._ray_tiles.move_to_end(key)
                 continue
-            r0, c0 = divmod(int(key), self.camera.width // t + 1)
+            r0, c0 = divmod(int(key), per_row)
             tv, tu = np.mgrid[r0 * t : (r0 + 1) * t, c0 * t : (c0 + 1) * t]
             su, sv = subsamples(tv.ravel(), tu.ravel(), ss)
             self._ray_tiles[key] = pixel_rays(self.camera, su.ravel(), sv.ravel()).reshape(t, t, ss, ss, 3)
