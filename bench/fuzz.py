@@ -17,7 +17,8 @@ rise by exactly the hostile items sent for them, ``bad_data`` by at least one pe
 datagram, the depth's ``bad`` and ``refused`` by exactly theirs, and the genuine MAVLink
 messages received equal those the replay sent (less, by at most the kernel's drops, when
 the machine could not keep up); every valid GPS_INPUT is within the baseline's worst error (+ 0.1 m) of the
-truth, and at least 80 % as many are valid; memory does not leak: of the storm's two halves after
+truth; the hostile input costs no fix (:func:`fixes_lost_to_poison`: the frames processed are located as often,
+and the gates refuse no more fixes for a reason other than the load's); memory does not leak: of the storm's two halves after
 its first 20 % (20-60 %, 60-100 %), not both see the resident memory grow by more than half of 5 %
 (or 10 MB) beyond what it grows over the same instants with the valid input alone. A leak grows
 with the input, in both halves; a plateau is raised once. (Each hostile kind is sent once first: a
@@ -230,8 +231,7 @@ def check(session: Path, base: dict, fuzz: dict) -> tuple[dict, list[str]]:
     if len(err_f) == 0 or err_f.max() > limit:
         failed.append(f"valid GPS_INPUT up to {err_f.max() if len(err_f) else float('nan'):.3f} m off truth "
                       f"(baseline worst {err_b.max():.3f} m): hostile data was used")
-    if len(err_f) < 0.8 * len(err_b):
-        failed.append(f"{len(err_f)} valid GPS_INPUT with hostile input, {len(err_b)} without")
+    failed += fixes_lost_to_poison(fb, ff)
     rss = tuple(fuzz["rss"][k]["rss_mb"] for k in (0, 1, 2, -1))
     base_rss = tuple(base["rss"][k]["rss_mb"] for k in (0, 1, 2, -1))
     allowed = max(0.05 * rss[1], 10.0)
@@ -247,10 +247,43 @@ def check(session: Path, base: dict, fuzz: dict) -> tuple[dict, list[str]]:
                "baseline_rss_mb": base_rss,
                "fds": (fuzz["rss"][0]["fds"], fuzz["rss"][-1]["fds"]),
                "threads": (fuzz["rss"][0]["threads"], fuzz["rss"][-1]["threads"]),
-               "valid_gps_input": (len(err_b), len(err_f)), "max_error_m": tuple(float(e.max()) if len(e) else float("nan") for e in (err_b, err_f)),
+               "valid_gps_input": (len(err_b), len(err_f)),
+               "frames_lost_to_load": (frames_lost_to_load(fb), frames_lost_to_load(ff)), "max_error_m": tuple(float(e.max()) if len(e) else float("nan") for e in (err_b, err_f)),
                "gates": ff["gps_input"]["gates"]["rejected"], "statuses": ff["pipeline"]["statuses"],
                "by_kind": {"mavlink": dict(mav), "depth": dict(dep)}}
     return figures, failed
+
+
+#: Gate refusals a busy machine causes by itself: fixes late (``age``) and a track confirmed again after a gap.
+LOAD_REFUSALS = ("age", "unconfirmed")
+
+
+def located_share(final: dict) -> float:
+    """The share of the frames the service processed that it located (status ``ok``)."""
+    p = final["pipeline"]
+    return p["statuses"].get("ok", 0) / max(p["processed"], 1)
+
+
+def frames_lost_to_load(final: dict) -> int:
+    """Frames the service never located because it was behind: skipped by the video reader, dropped by the pipeline."""
+    return final["video"]["skipped_behind"] + final["pipeline"]["dropped"]
+
+
+def fixes_lost_to_poison(base: dict, fuzz: dict) -> list[str]:
+    """Fixes the hostile input cost, from the service's own accounting (final statuses of the two runs): a frame it
+    processed and could not locate, or a fix the gates refused for a reason the valid input alone did not give
+    (a poisoned attitude, depth or clock moves the fix off the track). How many valid GPS_INPUT a run sends also
+    depends on how many frames the machine kept up with (:func:`frames_lost_to_load`); that is reported, not
+    checked: on a loaded 2-core CI it varies between two runs of the same input (133 and 94 seen)."""
+    failed = []
+    if located_share(fuzz) < located_share(base) - 0.05:
+        failed.append(f"located {located_share(fuzz):.2f} of the processed frames with hostile input, "
+                      f"{located_share(base):.2f} without: {fuzz['pipeline']['statuses']}")
+    rb, rf = base["gps_input"]["gates"]["rejected"], fuzz["gps_input"]["gates"]["rejected"]
+    grew = {k: (rb.get(k, 0), n) for k, n in rf.items() if k not in LOAD_REFUSALS and n > rb.get(k, 0)}
+    if grew:
+        failed.append(f"the gates refused more fixes with hostile input (without, with): {grew}")
+    return failed
 
 
 def fuzz_and_check(session: Path, work: Path, n_mavlink: int, n_zenoh: int, seed: int = 11) -> tuple[dict, list]:
@@ -283,7 +316,8 @@ def main() -> int:
             f"CRC found inside the garbage (counted as received or other systems): {figures['accidental_frames']}"),
             "service CPU over the storm (% of one core): valid input alone {:.0f} %, with the storm {:.0f} %".format(
                 *figures["cpu_pct"]),
-            (f"valid GPS_INPUT: baseline {figures['valid_gps_input'][0]}, fuzzed {figures['valid_gps_input'][1]}; "
+            (f"valid GPS_INPUT: baseline {figures['valid_gps_input'][0]}, fuzzed {figures['valid_gps_input'][1]} "
+            f"(frames not located because the service was behind: {figures['frames_lost_to_load']}); "
             f"worst error vs truth: baseline {figures['max_error_m'][0]:.3f} m, fuzzed {figures['max_error_m'][1]:.3f} m"),
             "RSS at the storm's start, {:.0f} % and {:.0f} % into it, its end: {:.1f}, {:.1f}, {:.1f}, {:.1f} MB".format(
                 WARM_SHARE * 100, MID_SHARE * 100, *figures["rss_mb"])

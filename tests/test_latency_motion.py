@@ -3,10 +3,10 @@ late (``[clock] video_time_error_s``): the UAV yaws (the camera follows its head
 
 - ``skyfix estimate-latency`` finds the stamps' error in a recording;
 - live, a replay sends each frame at its stamped time, so the camera's glass-to-first-packet latency
-  is 80 ms: with ``--video-latency-ms 80`` the online estimate agrees within 10 ms after 10 s; with
-  ``--video-latency-ms 0`` it warns; with ``auto`` it is applied, no GPS_INPUT before it is valid (the
-  frames meanwhile are ``latency_unsettled``), and the fixes from then on are as accurate as with the
-  right latency configured (MAE within 1.2×, +3 mm for noise)."""
+  is 80 ms: with ``--video-latency-ms 80`` the online estimate agrees within 10 ms after 10 s (720p and
+  1080p); with ``--video-latency-ms 0`` it warns; with ``auto`` (720p) it is applied, no GPS_INPUT before
+  it is valid (the frames meanwhile are ``latency_unsettled``), and the fixes from then on are as accurate
+  as with the right latency configured (MAE within 1.2×, +3 mm for noise)."""
 
 from __future__ import annotations
 
@@ -122,21 +122,36 @@ def _applied_at(log: str) -> float:
     return datetime.strptime(line[:23], "%Y-%m-%d %H:%M:%S,%f").timestamp()
 
 
-def test_online_estimate_and_auto(session, tmp_path):
-    right, gps_right, shift_right, log_right = _live(session, str(round(ERROR_S * 1000)), tmp_path / "right")
-    auto, gps_auto, shift_auto, log_auto = _live(session, "auto", tmp_path / "auto")
+@pytest.fixture(scope="module")
+def configured(session, tmp_path_factory) -> tuple[dict, list[dict], float, str]:
+    """The live run with the right latency configured, once per session."""
+    return _live(session, str(round(ERROR_S * 1000)), tmp_path_factory.mktemp("right") / "run")
+
+
+def test_online_estimate(configured):
+    right, _, _, log_right = configured
     est = right["video"]["latency_from_motion"]
-    applied = auto["video"]["latency_from_motion"]
-    print(f"configured 80 ms: {est}; auto: {applied}")
+    print(f"configured 80 ms: {est}; video {({k: right['video'][k] for k in ('frames', 'skipped_behind')})}")
     assert abs(est["estimate_ms"] / 1000 - ERROR_S) <= TOLERANCE_S and est["sigma_ms"] <= 10
     assert "not the configured" not in log_right
+
+
+# auto at 720p only: at 1080p on a loaded 2-core CI the service decodes too few frames to settle within the
+# session (52 of the 60 frame pairs one estimate needs, 19 s in; 149 on a quiet machine), which is the rule
+# working, not the estimate failing; the 1080p measurement itself is checked above
+@pytest.mark.parametrize("session", ["720p"], indirect=True)
+def test_auto_applies_the_estimate(session, configured, tmp_path):
+    _, gps_right, shift_right, _ = configured
+    auto, gps_auto, shift_auto, log_auto = _live(session, "auto", tmp_path / "auto")
+    applied = auto["video"]["latency_from_motion"]
+    print(f"auto: {applied}")
     assert applied["applied_ms"] is not None and abs(applied["applied_ms"] / 1000 - ERROR_S) <= TOLERANCE_S
     assert 0 < applied["applied_sigma_ms"] <= 5 and auto["video"]["latency_ms"] == applied["applied_ms"]
     applied_at = _applied_at(log_auto)  # logged before the first frame is stamped with it
     before = [g for g in gps_auto if g["t_recv"] < applied_at]
     assert len(before) > 20 and all(g["fix_type"] == 1 for g in before), "a valid GPS_INPUT before auto settled"
     assert auto["pipeline"]["statuses"].get("latency_unsettled", 0) > 20, auto["pipeline"]["statuses"]
-    assert "latency_unsettled" not in right["pipeline"]["statuses"]
+    assert "latency_unsettled" not in configured[0]["pipeline"]["statuses"]
     err_auto = _errors(session, gps_auto, shift_auto, since_unix=applied_at)
     err_right = _errors(session, gps_right, shift_right)
     common = sorted(set(err_auto) & set(err_right))

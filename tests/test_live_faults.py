@@ -292,7 +292,9 @@ def test_video_and_depth_cut(tmp_path):
 
     # video cut: valid until the last frame before the cut, then no fix within max age + one period
     before = valid & (s_recv < VIDEO_BACK_S)
-    assert before.sum() >= 10, "too few valid fixes before the video cut"
+    # the cut's switch is measured from the last valid frame before it: a few are enough (28 on a quiet machine,
+    # 7 seen on a loaded CI, where the first second of a stream is slow to decode)
+    assert before.sum() >= 3, f"only {before.sum()} valid fixes before the video cut"
     last_frame_s = s_fix[before].max()
     assert last_frame_s <= VIDEO_CUT_S + SLACK_S  # exposure times are estimated: receive time − latency
     switch = s_recv > last_frame_s + MAX_AGE_S + PERIOD_S + SLACK_S

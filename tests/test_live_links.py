@@ -52,7 +52,7 @@ def test_link_comes_back(tmp_path, long_session, which):
     r = link_comes_back(tmp_path, long_session, which)
     named = [p for _, p in r["problems_while_missing"] if r["named"] in p]
     print(f"{which}: valid GPS_INPUT {r['back_s']:.3f} s after the return; {r['valid_before_cut']} valid before the "
-          f"cut; fix_types while missing {sorted(set(r['gps_while_missing']))} (fixes up to the return, s after the cut: {r['fixes_while_missing_at'][:3]}); status named it "
+          f"cut, the first {r['first_valid_s']:.2f} s into the session; fix_types while missing {sorted(set(r['gps_while_missing']))} (fixes up to the return, s after the cut: {r['fixes_while_missing_at'][:3]}); status named it "
           f"{len(named)}/{len(r['problems_while_missing'])}: {named[:1]}")
     assert r["rc"] == 0, r["log"][-3000:]
     assert r["valid_before_cut"] >= 10
