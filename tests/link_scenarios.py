@@ -22,6 +22,7 @@ from pathlib import Path
 
 from live_helpers import (
     ROOT,
+    GpsInputEndpoint,
     free_port,
     read_jsonl,
     replay_shift,
@@ -30,8 +31,6 @@ from live_helpers import (
     wait_for,
     wait_until,
 )
-
-from groundstation.mavlink.ingest import mavutil
 
 BUNDLED = ROOT / "sim_fixtures" / "bundled"
 SHUTDOWN_STATES = ("flowing", "udp_silent", "rtsp_silent", "mavlink_silent")
@@ -98,29 +97,15 @@ def kill(proc: subprocess.Popen) -> None:
     proc.wait()
 
 
-class GpsListener:
-    """The UUV's autopilot side of GPS_INPUT: a pymavlink ``udpin:`` endpoint; ``got`` holds (t_recv, fix_type)."""
+class GpsListener(GpsInputEndpoint):
+    """The UUV's autopilot side of GPS_INPUT; ``got`` holds (t_recv, fix_type), t_recv the kernel's."""
 
-    def __init__(self, port: int):
-        self.conn = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=1, source_component=1)
-        self.got: list[tuple[float, int]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read, daemon=True)
-        self._thread.start()
-
-    def _read(self) -> None:
-        while not self._stop.is_set():
-            msg = self.conn.recv_match(type="GPS_INPUT", blocking=True, timeout=0.1)
-            if msg is not None:
-                self.got.append((time.time(), msg.fix_type))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(2)
-        self.conn.close()
+    @property
+    def got(self) -> list[tuple[float, int]]:
+        return [(t, g["fix_type"]) for t, g in list(self.received)]
 
     def first_valid_after(self, t: float) -> float | None:
-        return next((tr for tr, ft in list(self.got) if tr >= t and ft == 3), None)
+        return next((tr for tr, ft in self.got if tr >= t and ft == 3), None)
 
 
 class SilentServer:

@@ -27,7 +27,6 @@ import socket
 import struct
 import subprocess
 import sys
-import threading
 import time
 import tomllib
 import urllib.error
@@ -40,6 +39,7 @@ from jsonschema import Draft202012Validator
 from live_helpers import (
     ROOT,
     SUBSCRIBER,
+    GpsInputEndpoint,
     ardupilot_gps_unhealthy,
     as_camera_sends_it,
     free_port,
@@ -56,9 +56,6 @@ from ui_browser import available, chromium
 
 from groundstation.contracts import GROUNDSTATION
 from groundstation.live.ui.palette import PALETTE
-from groundstation.mavlink.ingest import (
-    mavutil,  # pymavlink, set to MAVLink 2 before its first import
-)
 from groundstation.offline.process import process_session
 from groundstation.session.read import load_session, uuv_ids
 from sim_fixtures.generate import generate
@@ -72,29 +69,6 @@ pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs th
 #: Share of the frames each UUV must get a fix in, at the least: live_helpers.MIN_SHARE's, halved for two trackers
 #: a frame (0.27 seen with the suite alone on a busy 2-core machine; 0.67-0.74 on a quiet one)
 TWO_SHARE = 0.15
-
-
-class GpsEndpoint:
-    """A UUV autopilot's MAVLink endpoint on loopback: every GPS_INPUT it receives, with its receive time."""
-
-    def __init__(self):
-        self.port = free_port()
-        self.received: list[tuple[float, dict]] = []
-        self._conn = mavutil().mavlink_connection(f"udpin:127.0.0.1:{self.port}")
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._listen, daemon=True)
-        self._thread.start()
-
-    def _listen(self) -> None:
-        while not self._stop.is_set():
-            msg = self._conn.recv_match(type="GPS_INPUT", blocking=True, timeout=0.2)
-            if msg is not None:
-                self.received.append((time.time(), msg.to_dict()))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
-        self._conn.close()
 
 
 def own_and_other_errors_m(session, uuv_id, t_session, lat, lon):
@@ -138,7 +112,7 @@ class TwoUuvRun:
     def __init__(self, tmp_path, session, record=None):
         self.tmp, self.session = tmp_path, session
         ports = {"mav": free_port(), "video": free_port(), "zenoh": free_port(socket.SOCK_STREAM)}
-        self.endpoints = {uuv_id: GpsEndpoint() for uuv_id in IDS}
+        self.endpoints = {uuv_id: GpsInputEndpoint() for uuv_id in IDS}
         config = tmp_path / "run.toml"
         config.write_text(run_toml(tmp_path, session, ports, self.endpoints, record))
         self.zenoh_ep = f"tcp/127.0.0.1:{ports['zenoh']}"
