@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import copy
+import importlib
 import itertools
 import logging
 import math
@@ -389,6 +390,10 @@ class OnlineLatency:
         self._tel: tuple[Telemetry, float] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.worker = Supervised("video-latency", self._work)
+        # scipy (AttitudeTrack's) now, as the service starts, not in the thread at the first estimate: loading its
+        # compiled modules holds the interpreter (0.67 s on a loaded 2-core machine), stalling every other thread
+        # with it, the GPS_INPUT keep-alive too
+        importlib.import_module("scipy.spatial.transform")
         self._rotations: deque[Rotation] = deque()
         self._last_slot: float | None = None
 

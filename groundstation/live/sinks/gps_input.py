@@ -1,10 +1,12 @@
 """MAVLink ``GPS_INPUT`` to the UUV's autopilot, filled the way ArduSub's AP_GPS_MAV reads it.
 
-When: every new fix is sent as soon as it is ready, and whenever ``1 / hz`` has
-passed without a message, the latest state is sent again; so the autopilot sees
-at least ``hz`` messages per second (ArduPilot calls a MAVLink GPS unhealthy
-below ~5 Hz or after two gaps over 245 ms) and at most the video's frame rate
-(EKF3 fuses GPS at most every 70 ms and skips the rest).
+When: every new fix is sent as soon as it is ready (from the event loop), and whenever ``1 / hz`` has
+passed without a message, the latest state is sent again from a thread of the sink's own (the
+keep-alive), not from the event loop: a loaded machine stretches the loop's steps (up to 0.7 s seen
+with two UUVs and two busy processes on 2 cores), and the autopilot must not see that. So the autopilot
+sees at least ``hz`` messages per second (ArduPilot calls a MAVLink GPS unhealthy below ~5 Hz or after
+two gaps over 245 ms) and at most the video's frame rate (EKF3 fuses GPS at most every 70 ms and skips
+the rest).
 
 What (:func:`gps_input_fields`):
 
@@ -53,13 +55,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import threading
 import time
 from collections import deque
 
 from groundstation.mavlink.ids import GPS_COMPID, SKYFIX_SYSID
 from groundstation.mavlink.ingest import mavutil
 from groundstation.mavlink.link import MavlinkLink
-from groundstation.threads import in_thread
+from groundstation.threads import Supervised, in_thread
 from localizer.fix import Fix
 from localizer.fix_gate import FixGate
 
@@ -77,6 +80,7 @@ IGNORE_VELOCITY = IGNORE_VEL_HORIZ | IGNORE_VEL_VERT | IGNORE_SPEED_ACC
 IGNORE_ALL = 255
 FIX_NONE, FIX_3D = 1, 3
 DOP_MAX = 99.99
+STOP_WAIT_S = 1.0  # a stop waits this long for the keep-alive thread
 #: Frame statuses meaning the UUV is no longer where the last fix put it: the last fix is dropped at once.
 LOSS_STATUSES = ("lost", "no_track", "awaiting_target", "released", "same_vehicle", "disagree")
 
@@ -156,6 +160,9 @@ class GpsInputSink:
         self._last_ok: Fix | None = None
         self._stopping = False
         self._closed = False
+        self._send_lock = threading.Lock()  # the loop (new fixes) and the keep-alive thread both send
+        self._next_due = 0.0  # time.monotonic() by which the keep-alive sends if nothing else was sent
+        self._keep_alive = Supervised("GPS_INPUT keep-alive", self._keep_alive_body)
 
     def on_fix(self, fix: Fix, info) -> None:
         if fix.ok:
@@ -168,23 +175,23 @@ class GpsInputSink:
         self._new.set()
 
     async def run(self) -> None:
-        loop = asyncio.get_running_loop()
         await in_thread(self.link.open, name="GPS_INPUT open")
+        self._keep_alive.start()
         try:
-            next_due = loop.time()
             while not self._stopping:
-                try:
-                    await asyncio.wait_for(self._new.wait(), timeout=max(0.0, next_due - loop.time()))
-                except TimeoutError:
-                    pass
+                await self._new.wait()
                 if self._stopping:
                     break
-                fresh = self._new.is_set()
                 self._new.clear()
-                self._send(fresh)
-                next_due = loop.time() + self.period_s
+                self._send(fresh=True)
         finally:
             await self.stop()
+
+    def _keep_alive_body(self, stop: threading.Event) -> None:
+        """The keep-alive thread: the latest state again whenever ``1 / hz`` passed without a message."""
+        while not stop.wait(max(0.0, self._next_due - time.monotonic())):
+            if time.monotonic() >= self._next_due:
+                self._send(fresh=False)
 
     async def stop(self) -> None:
         """The last GPS_INPUT, no fix, then the link closed; further calls do nothing."""
@@ -192,6 +199,7 @@ class GpsInputSink:
             return
         self._stopping = self._closed = True
         self._new.set()
+        await in_thread(self._keep_alive.join, STOP_WAIT_S, name="GPS_INPUT keep-alive stop")
         final = gps_input_fields(None, time.time(), self.max_age_s)
         delivered = await in_thread(self.link.close, ("GPS_INPUT", final), name="GPS_INPUT close")
         self.sent += 1
@@ -200,17 +208,21 @@ class GpsInputSink:
                  "the last message said no fix" if delivered else "the link was down: no last message")
 
     def _send(self, fresh: bool) -> None:
-        now = time.time()
-        fields = gps_input_fields(self._last_ok, now, self.max_age_s)
-        delivered = self.link.send("GPS_INPUT", fields)
-        t_sent = time.time()
-        self.sent += 1
-        self.not_delivered += not delivered
-        self.last_fix_type = fields["fix_type"]
-        if fields["fix_type"] == FIX_3D and delivered:
-            self.sent_valid += 1
-            if fresh and self._fix is self._last_ok:
-                self.latencies_s.append(t_sent - self._info.t_recv)
+        """The latest state now (the event loop for a new fix, ``fresh``; the keep-alive thread otherwise)."""
+        with self._send_lock:
+            if self._stopping:
+                return  # the last message is the no-fix stop() sends
+            self._next_due = time.monotonic() + self.period_s
+            fields = gps_input_fields(self._last_ok, time.time(), self.max_age_s)
+            delivered = self.link.send("GPS_INPUT", fields)
+            t_sent = time.time()
+            self.sent += 1
+            self.not_delivered += not delivered
+            self.last_fix_type = fields["fix_type"]
+            if fields["fix_type"] == FIX_3D and delivered:
+                self.sent_valid += 1
+                if fresh and self._fix is self._last_ok:
+                    self.latencies_s.append(t_sent - self._info.t_recv)
 
     def status(self, now: float) -> dict:
         return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
