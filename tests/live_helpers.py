@@ -22,10 +22,22 @@ MIN_SHARE = 0.3
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A port on 127.0.0.1 that is free right now (UDP or TCP)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A port on 127.0.0.1 that is free right now (UDP or TCP), below the kernel's ephemeral range: a port from
+    that range (``bind(0)``) may be taken before the service binds it, as the local end of any outgoing
+    connection (the service's Zenoh listener refused "Address already in use" once, with two busy processes
+    beside the test and a subscriber retrying to connect to it)."""
+    import random
+
+    low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    for _ in range(200):
+        port = random.randrange(10_000, low)
+        with socket.socket(socket.AF_INET, kind) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError(f"no free port between 10000 and {low}")
 
 
 #: Linux's SO_TIMESTAMPNS (asm-generic: x86-64, arm64), which Python's socket module does not name: each datagram
