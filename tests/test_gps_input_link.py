@@ -8,6 +8,7 @@
 - MAVLink 2 signing: a receiver holding the key takes signed GPS_INPUT, and rejects unsigned ones and
   ones signed with another key.
 - ``GpsInputSink.stop()``: the last message is a no-fix, even right after a valid fix.
+- The rate holds while the event loop is blocked (the keep-alive is a thread of the sink's own).
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ import subprocess
 import threading
 import time
 
+import numpy as np
 import pytest
-from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
+from live_helpers import ROOT, GpsInputEndpoint, free_port, skyfix, start, stop, wait_for
 
 from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.mavlink.ingest import mavutil
@@ -250,3 +252,41 @@ def test_signing_key_file_must_hold_32_bytes(tmp_path, content):
     path.write_bytes(content)
     with pytest.raises(ConfigError, match="32 raw bytes or 64 hex digits"):
         read_signing_key(str(path))
+
+
+def test_the_rate_holds_while_the_event_loop_is_blocked():
+    """The event loop blocked for 1.5 s (a long step on a loaded machine): GPS_INPUT still arrives at its rate
+    (no gap over ArduPilot's 245 ms), and the last fix, once older than max_age_s, goes out as no fix."""
+    port = free_port()
+    rx = GpsInputEndpoint(port)
+
+    async def blocked() -> tuple[float, float]:
+        sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
+        task = asyncio.create_task(sink.run())
+        t_end = time.time() + 1.5  # the gates confirm a target over a second
+        while (time.time() < t_end or sink.gate.status(time.time())["accepted"] < 5) and time.time() < t_end + 5:
+            t = time.time()
+            sink.on_fix(_fix(t), type("I", (), {"t_recv": t})())
+            await asyncio.sleep(1 / 30)
+        t_block = time.time()
+        time.sleep(1.5)  # noqa: ASYNC251 - the point: nothing else runs on the loop meanwhile
+        t_unblock = time.time()
+        await asyncio.sleep(0.3)
+        await sink.stop()
+        await task
+        return t_block, t_unblock
+
+    try:
+        t_block, t_unblock = asyncio.run(blocked())
+        wait_for(lambda: rx.received and rx.received[-1][1]["fix_type"] == 1, 5, "the last no-fix")
+    finally:
+        rx.close()
+    during = [(t, g["fix_type"]) for t, g in rx.received if t_block <= t <= t_unblock]
+    t_all = [t for t, _ in rx.received if t_block - 0.2 <= t <= t_unblock]
+    gaps_ms = np.diff([*t_all, t_unblock]) * 1000  # up to the end of the block: silence at its end is a gap too
+    print(f"{len(during)} GPS_INPUT while the loop was blocked for {t_unblock - t_block:.2f} s; max gap "
+          f"{gaps_ms.max():.0f} ms; fix_types {[ft for _, ft in during]}")
+    assert len(during) >= 12 and gaps_ms.max() <= 245
+    valid_until = max(t for t, ft in during if ft == 3)
+    assert {ft for t, ft in during if t > t_block + 0.5 + 0.15} == {1}, "a fix older than max_age_s sent as valid"
+    assert valid_until >= t_block + 0.2, "valid fixes should have been repeated until they aged out"
