@@ -1,14 +1,18 @@
-"""Shared helpers of the live tests: free loopback ports, the skyfix command, subprocess cleanup."""
+"""Shared helpers of the live tests: free loopback ports, a GPS_INPUT endpoint, the skyfix command, subprocess
+cleanup."""
 
 from __future__ import annotations
 
 import json
 import os
+import random
 import re
 import signal
 import socket
+import struct
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -26,8 +30,6 @@ def free_port(kind: int = socket.SOCK_DGRAM) -> int:
     that range (``bind(0)``) may be taken before the service binds it, as the local end of any outgoing
     connection (the service's Zenoh listener refused "Address already in use" once, with two busy processes
     beside the test and a subscriber retrying to connect to it)."""
-    import random
-
     low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
     for _ in range(200):
         port = random.randrange(10_000, low)
@@ -52,8 +54,6 @@ class GpsInputEndpoint:
     for the interpreter): the kernel's time is the one the autopilot would see."""
 
     def __init__(self, port: int = 0):
-        import threading
-
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", port))
         self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
@@ -69,8 +69,6 @@ class GpsInputEndpoint:
         self._thread.start()
 
     def _listen(self) -> None:
-        import struct
-
         while not self._stop.is_set():
             try:
                 data, ancillary, _, _ = self.sock.recvmsg(65535, socket.CMSG_SPACE(16))

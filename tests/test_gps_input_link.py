@@ -263,15 +263,14 @@ def test_the_rate_holds_while_the_event_loop_is_blocked():
     async def blocked() -> tuple[float, float]:
         sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
         task = asyncio.create_task(sink.run())
-        t_end = time.time() + 1.5  # the gates confirm a target over a second
-        while (time.time() < t_end or sink.gate.status(time.time())["accepted"] < 5) and time.time() < t_end + 5:
+        t_give_up = time.time() + 10.0
+        while sink.gate.status(time.time())["accepted"] < 5 and time.time() < t_give_up:  # confirmed over a second
             t = time.time()
             sink.on_fix(_fix(t), type("I", (), {"t_recv": t})())
-            await asyncio.sleep(1 / 30)
+            await asyncio.sleep(1 / 30)  # fixes at a camera's 30 fps
         t_block = time.time()
-        time.sleep(1.5)  # noqa: ASYNC251 - the point: nothing else runs on the loop meanwhile
+        time.sleep(1.5)  # noqa: ASYNC251 - the stimulus: nothing else runs on the loop meanwhile
         t_unblock = time.time()
-        await asyncio.sleep(0.3)
         await sink.stop()
         await task
         return t_block, t_unblock
