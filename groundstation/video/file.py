@@ -26,9 +26,10 @@ packet's presentation time first (demuxing only, no decoding):
   live recording is one: its timestamps are the camera's regular slots, with a gap
   wherever the service skipped frames (its decoder behind), and every frame it kept
   has its row.
-Decoding is throughput work: frame and slice threads, at least :data:`MIN_FRAME_THREADS` frames in flight
-(FFmpeg's own choice is one more than the cores, which its frames' dependencies on each other leave partly idle).
-A packet FFmpeg cannot decode fails the
+Decoding is throughput work: frame and slice threads; read ``grey``, at least :data:`GREY_FRAME_THREADS` frames
+in flight (FFmpeg's own choice, one more than the cores, leaves them partly idle on its frames' dependencies on each
+other; a BGR read keeps FFmpeg's count: its conversion, in the reading thread, is then the bottleneck, and more
+decoding threads take the cores from it). A packet FFmpeg cannot decode fails the
 frames decoded beside it in the other frame threads too (PyAV raises before handing them over, and
 at the end no more can be drained), so at the first failure the file is opened again and decoded
 with slice threads only from the keyframe before the first frame not yet handed on (the frames
@@ -56,10 +57,11 @@ from groundstation.video.frames import VideoError, VideoFrame, decoder, ffmpeg_r
 
 #: A step between timestamps within this share of a whole number of periods counts as regular.
 REGULAR_TOLERANCE = 0.05
-#: Frame threads decoding a file, at least (FFmpeg's cores + 1 when more). ``bench/offline_speed.py``'s videos
-#: decoded to grey on 2 cores: 1080p 1200 frames 4.2-4.8 s with FFmpeg's 3 (1.6 cores busy), 3.0-3.6 s with 8-16
-#: (1.9); 4K 300 frames 3.3-3.7 s with 3, 2.7-2.9 s with 8 (peak RSS 228 → 376 MB; 535 MB with 16).
-MIN_FRAME_THREADS = 8
+#: Frame threads decoding a file read grey, at least (FFmpeg's cores + 1 when more). ``bench/offline_speed.py``'s
+#: videos on 2 cores: 1080p 1200 frames 4.2-4.8 s with FFmpeg's 3 (1.6 cores busy), 3.0-3.6 s with 8-16 (1.9); 4K
+#: 300 frames 3.3-3.7 s with 3, 2.7-2.9 s with 8 (peak RSS 228 → 364 MB; 535 MB with 16). Read in BGR, 8 were
+#: slower than 3 (``bench/import_long.py``'s 4K video, 600 frames: 3.7-4.9 s → 5.5-6.3 s).
+GREY_FRAME_THREADS = 8
 
 
 def frame_indices(pts: list[int], indices: Sequence[int] | None = None) -> dict[int, int]:
@@ -110,8 +112,8 @@ class Video:
     def _decode(self) -> Iterator[av.VideoFrame]:
         """Decoded frames in presentation order: frame-threaded until a packet fails, then slice-threaded from the
         keyframe before the first frame not handed on yet (see the module doc)."""
-        frame_threads = self.threads or max(MIN_FRAME_THREADS, (os.cpu_count() or 1) + 1)
-        ctx = decoder(self._stream, threads=frame_threads, frame_threads=True)
+        threads = self.threads or (max(GREY_FRAME_THREADS, (os.cpu_count() or 1) + 1) if self.grey else 0)
+        ctx = decoder(self._stream, threads=threads, frame_threads=True)
         keyframes: list[tuple[int, int]] = []  # (pts, packet number) of the keyframe packets demuxed
         last = None  # pts of the last frame handed on
         for number, packet in enumerate(self._container.demux(self._stream)):
@@ -273,9 +275,8 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     ``expected_size`` (width, height) in pixels, usually the calibration's: a
     different frame size is a :class:`VideoError` (checked on open when the
     container declares it, and on every frame). ``threads`` is FFmpeg's decoding
-    thread count (frame and slice threads, see the module doc; 0: frame threads as the module doc says, slice
-    threads as FFmpeg chooses). ``max_bad_reads`` > 0 ends the video after
-    that many undecodable packets (0: no limit). ``indices``: the session's frame
+    thread count (frame and slice threads; 0: as the module doc says). ``max_bad_reads`` > 0 ends the
+    video after that many undecodable packets (0: no limit). ``indices``: the session's frame
     indices (``video_frames.csv``), which number the frames when the counts agree. ``grey``: frames as their
     luma plane where the video is yuv420p (see the module doc).
     """
