@@ -500,6 +500,9 @@ class GpsInputStatus(Section):
     sent_valid: int = Field(description="messages with fix_type 3")
     not_delivered: int = Field(description="messages the link could not take (down)")
     last_fix_type: int | None = Field(None, description="fix_type of the last message sent: 3 a fix, 1 no fix")
+    keep_alive_restarts: int = Field(0, description="times the keep-alive thread (the latest state again at the "
+                                     "configured rate) failed (a bug) and started over")
+    keep_alive_failure: str | None = Field(None, description="the last such failure: its kind and message")
     link: LinkStatus
     gates: GateStatus
 

@@ -8,13 +8,15 @@
 - MAVLink 2 signing: a receiver holding the key takes signed GPS_INPUT, and rejects unsigned ones and
   ones signed with another key.
 - ``GpsInputSink.stop()``: the last message is a no-fix, even right after a valid fix.
-- The rate holds while the event loop is blocked (the keep-alive is a thread of the sink's own).
+- The rate holds while the event loop is blocked (the keep-alive is a thread of the sink's own); a failing
+  keep-alive restarts and is counted in the status.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import os
 import socket
 import subprocess
@@ -289,3 +291,41 @@ def test_the_rate_holds_while_the_event_loop_is_blocked():
     valid_until = max(t for t, ft in during if ft == 3)
     assert {ft for t, ft in during if t > t_block + 0.5 + 0.15} == {1}, "a fix older than max_age_s sent as valid"
     assert valid_until >= t_block + 0.2, "valid fixes should have been repeated until they aged out"
+
+
+def test_a_failing_keep_alive_restarts_and_says_so(caplog):
+    """The keep-alive thread failing (a bug: here its first two sends) is one log line, restarts with back-off and
+    keeps sending; the sink's status counts the restarts and names the failure."""
+    port = free_port()
+    rx = GpsInputEndpoint(port)
+    link = mavlink_gps_link(f"udpout:127.0.0.1:{port}")
+    real_send, failures = link.send, [2]
+
+    def send(kind: str, fields: dict) -> bool:
+        if threading.current_thread().name == "GPS_INPUT keep-alive" and failures[0]:
+            failures[0] -= 1
+            raise KeyError("a bug in the keep-alive")
+        return real_send(kind, fields)
+
+    link.send = send
+
+    async def run() -> dict:
+        sink = GpsInputSink(link, hz=10.0, max_age_s=0.5)
+        task = asyncio.create_task(sink.run())  # no fixes: every GPS_INPUT before the stop is the keep-alive's
+        await asyncio.to_thread(wait_for, lambda: len(rx.received) >= 5, 20, "GPS_INPUT after the restarts")
+        status = sink.status(time.time())
+        await sink.stop()
+        await task
+        return status
+
+    try:
+        with caplog.at_level(logging.INFO, logger="skyfix"):
+            status = asyncio.run(run())
+    finally:
+        rx.close()
+    failed = [r.getMessage() for r in caplog.records if "thread failed" in r.getMessage()]
+    print(f"status: {status['keep_alive_restarts']} restarts, {status['keep_alive_failure']}; log: {failed}")
+    assert status["keep_alive_restarts"] == 2 and "KeyError" in status["keep_alive_failure"]
+    assert "a bug in the keep-alive" in status["keep_alive_failure"]
+    assert len(failed) == 1 and "GPS_INPUT keep-alive" in failed[0]
+    assert status["sent"] >= 5 and {g["fix_type"] for _, g in rx.received} == {1}

@@ -227,4 +227,5 @@ class GpsInputSink:
     def status(self, now: float) -> dict:
         return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
                 "not_delivered": self.not_delivered, "last_fix_type": self.last_fix_type,
+                "keep_alive_restarts": self._keep_alive.restarts, "keep_alive_failure": self._keep_alive.failure,
                 "link": self.link.status(now), "gates": self.gate.status(now)}
