@@ -22,7 +22,9 @@ agrees with itself:
   glass-to-first-packet latency is ``--video-delay-ms`` (default 0).
 - A UUV-side endpoint (``--uuv-listen``, default ``udpin:127.0.0.1:14660``)
   writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
-  stdout), with its receive time: what the UUV's autopilot would get.
+  stdout), with its receive time (a UDP datagram's as the kernel received it: the replay's own load does not
+  stretch the gaps): what the UUV's autopilot would get. Its connection strings are those of skyfix's own links
+  (``udpin:``, ``tcpin:``, ``tcp:``, a serial device: :mod:`groundstation.mavlink.transport`).
 
 ``--cut INPUT:START_S:DURATION_S`` (repeatable; INPUT ``mavlink``, ``depth`` or ``video``) leaves that
 input out from START_S to START_S + DURATION_S seconds after the session's start while the others
@@ -39,12 +41,14 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import select
 import sys
 import threading
 import time
 from pathlib import Path
 
-from groundstation.mavlink.ingest import connect, mavutil
+from groundstation.mavlink.ingest import LinkError, connect, mavutil
+from groundstation.mavlink.transport import open_transport
 from groundstation.session.depth import read_depth
 from groundstation.session.read import SessionError, read_table, uuv_files
 from groundstation.session.tlog import read_tlog
@@ -178,17 +182,27 @@ class Replay:
             put_json(key, {"t": t + shift, "depth_m": depth}, session)
             self.counts["depth"] += 1
 
-    def _listen_uuv(self, conn, out) -> None:
+    def _listen_uuv(self, transport, out) -> None:
+        """Every GPS_INPUT that reaches ``--uuv-listen``, stamped with its arrival (:mod:`~groundstation.mavlink.
+        transport`'s ``t_received``: a UDP datagram's as the kernel received it, however late this thread reads it)."""
+        parser = mavutil().mavlink.MAVLink(None)
+        parser.robust_parsing = True
         while not self.stop.is_set():
-            msg = conn.recv_match(type="GPS_INPUT", blocking=True, timeout=0.2)
-            if msg is None:
+            if not select.select(transport.filenos(), [], [], 0.2)[0]:
                 continue
-            rec = {"event": "gps_input", "t_recv": time.time(), "sysid": msg.get_srcSystem(),
-                   "compid": msg.get_srcComponent(), **msg.to_dict()}
-            rec.pop("mavpackettype", None)
-            out.write(json.dumps(rec) + "\n")
-            out.flush()
-            self.counts["gps_input"] += 1
+            try:
+                data = transport.read()
+            except OSError:  # a TCP client went away: the transport listens again
+                continue
+            for msg in parser.parse_buffer(data) or []:
+                if msg.get_type() != "GPS_INPUT":
+                    continue
+                rec = {"event": "gps_input", "t_recv": transport.t_received, "sysid": msg.get_srcSystem(),
+                       "compid": msg.get_srcComponent(), **msg.to_dict()}
+                rec.pop("mavpackettype", None)
+                out.write(json.dumps(rec) + "\n")
+                out.flush()
+                self.counts["gps_input"] += 1
 
     def run(self) -> int:
         args = self.args
@@ -202,7 +216,11 @@ class Replay:
                           "t_start": self.t_start + shift, "t_end": self.t_end + shift}), flush=True)
         links = [connect(args.mavlink_out, input=False)]
         if args.uuv_listen:
-            links.append(connect(args.uuv_listen, source_system=1, source_component=1))
+            try:
+                links.append(open_transport(args.uuv_listen))
+            except OSError as e:
+                links[0].close()
+                raise LinkError(f"--uuv-listen {args.uuv_listen!r}: cannot open: {e}") from None
         session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), config_file=args.zenoh_config)
         threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True)]
         depths = [(args.depth_key, self.depth)] * bool(args.depth_key) + self.uuv_depths

@@ -7,9 +7,9 @@ import json
 import os
 import random
 import re
+import select
 import signal
 import socket
-import struct
 import subprocess
 import sys
 import threading
@@ -42,26 +42,20 @@ def free_port(kind: int = socket.SOCK_DGRAM) -> int:
     raise RuntimeError(f"no free port between 10000 and {low}")
 
 
-#: Linux's SO_TIMESTAMPNS (asm-generic: x86-64, arm64), which Python's socket module does not name: each datagram
-#: comes with the time the kernel received it, as a struct timespec (two 64-bit integers).
-SO_TIMESTAMPNS = 35
-
-
 class GpsInputEndpoint:
-    """A UUV autopilot's MAVLink endpoint on loopback (a UDP socket, pymavlink's parser): every GPS_INPUT it gets,
-    in ``received`` as (t, fields), ``t`` the time the kernel received the datagram (UNIX s). The autopilot reads
-    its port at once; this test process, on a loaded machine, may read it hundreds of ms late (a thread waiting
-    for the interpreter): the kernel's time is the one the autopilot would see."""
+    """A UUV autopilot's MAVLink endpoint on loopback (skyfix's own ``udpin:`` transport, pymavlink's parser): every
+    GPS_INPUT it gets, in ``received`` as (t, fields), ``t`` the time the kernel received the datagram (UNIX s). The
+    autopilot reads its port at once; this test process, on a loaded machine, may read it hundreds of ms late (a
+    thread waiting for the interpreter): the kernel's time is the one the autopilot would see."""
 
     def __init__(self, port: int = 0):
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", port))
-        self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-        self.sock.settimeout(0.2)
-        self.port = self.sock.getsockname()[1]
-        self.received: list[tuple[float, dict]] = []
         from groundstation.mavlink.ingest import mavutil
+        from groundstation.mavlink.transport import open_transport
 
+        self.transport = open_transport(f"udpin:127.0.0.1:{port}")
+        assert self.transport.kernel_times, "no kernel receive times on this machine's UDP sockets (SO_TIMESTAMPNS)"
+        self.port = self.transport.sock.getsockname()[1]
+        self.received: list[tuple[float, dict]] = []
         self._mav = mavutil().mavlink.MAVLink(None)
         self._mav.robust_parsing = True
         self._stop = threading.Event()
@@ -70,24 +64,17 @@ class GpsInputEndpoint:
 
     def _listen(self) -> None:
         while not self._stop.is_set():
-            try:
-                data, ancillary, _, _ = self.sock.recvmsg(65535, socket.CMSG_SPACE(16))
-            except TimeoutError:
+            if not select.select(self.transport.filenos(), [], [], 0.2)[0]:
                 continue
-            except OSError:
-                return  # closed
-            stamps = [struct.unpack("qq", d[:16]) for level, kind, d in ancillary
-                      if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS]
-            assert stamps, "no kernel receive time on the datagram (SO_TIMESTAMPNS)"
-            t = stamps[0][0] + stamps[0][1] * 1e-9
+            data = self.transport.read()
             for msg in self._mav.parse_buffer(data) or []:
                 if msg.get_type() == "GPS_INPUT":
-                    self.received.append((t, msg.to_dict()))
+                    self.received.append((self.transport.t_received, msg.to_dict()))
 
     def close(self) -> None:
         self._stop.set()
         self._thread.join(5)
-        self.sock.close()
+        self.transport.close()
 
 
 def skyfix(*args: str) -> list[str]:

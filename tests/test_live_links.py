@@ -17,6 +17,7 @@ import logging
 import os
 import signal
 import socket
+import threading
 import time
 
 import pytest
@@ -65,6 +66,47 @@ def test_link_comes_back(tmp_path, long_session, which):
         assert r["problems_while_missing"] and len(named) == len(r["problems_while_missing"]), \
             r["problems_while_missing"]
     assert "Traceback" not in r["log"], r["log"][-3000:]
+
+
+def test_a_datagram_is_stamped_with_its_arrival_however_late_it_is_read():
+    """A UDP link's messages carry the time the kernel received their datagram: a message that arrives while the
+    link's thread is held (here by a slow receiver; on a loaded machine, by the interpreter) is stamped when it came,
+    not when it was read."""
+    port = free_port()
+    mav = mavutil().mavlink
+    got: list[tuple[int, float, float]] = []  # (custom_mode, stamp, when the receiver saw it)
+    held, release = threading.Event(), threading.Event()
+
+    def on_message(msg, t):
+        if msg.get_type() != "HEARTBEAT":
+            return
+        got.append((msg.custom_mode, t, time.time()))
+        if not held.is_set():
+            held.set()
+            release.wait(10)  # the link's thread held until the marked datagram has arrived
+
+    link = MavlinkLink(f"udpin:127.0.0.1:{port}", 245, 190, name="test link", on_message=on_message)
+    sender = mavutil().mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+    link.open()
+    try:
+        def beat(mode: int) -> None:
+            sender.mav.heartbeat_send(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, mode, 0)
+
+        wait_for(lambda: beat(0) or held.is_set(), 10, "the link's thread held by its receiver")
+        t_before = time.time()
+        beat(1)  # on loopback the datagram is in the socket's queue when sendto returns
+        t_after = time.time()
+        release.set()
+        wait_for(lambda: any(mode == 1 for mode, _, _ in got), 10, "the marked heartbeat")
+    finally:
+        release.set()
+        link.close()
+        sender.close()
+    _, stamp, seen = next(m for m in got if m[0] == 1)
+    print(f"stamped {(stamp - t_before) * 1e3:+.3f} ms after the send began, read {(seen - t_after) * 1e3:.1f} ms after "
+          "it ended")
+    assert t_before - 1e-6 <= stamp <= t_after + 1e-6, "the stamp is not the datagram's arrival"
+    assert seen > t_after
 
 
 def test_a_failing_thread_restarts_with_back_off(caplog):

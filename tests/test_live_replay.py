@@ -1,7 +1,13 @@
 """Replay's re-timing of MAVLink: the UNIX times in it (SYSTEM_TIME, GPS_RAW_INT, TIMESYNC replies' ts1) shifted
-with the record times, boot times and everything else byte for byte."""
+with the record times, boot times and everything else byte for byte. Its UUV endpoint's log: each GPS_INPUT stamped
+with its arrival, however late the replay reads it."""
 
 from __future__ import annotations
+
+import signal
+import time
+
+from live_helpers import ROOT, free_port, read_jsonl, skyfix, start, stop, wait_for
 
 from groundstation.mavlink.ingest import mavutil
 from groundstation.replay import frame_bytes
@@ -40,3 +46,38 @@ def test_timesync_replies_and_gps_time_are_shifted_but_requests_and_boot_times_a
     assert _decode(frame_bytes(gps, 2.0)).time_usec == 1_763_800_002_250_000
     boot_stamped = mav.gps_raw_int_encode(412_000_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(mav)  # ArduPilot's
     assert frame_bytes(_decode(boot_stamped), 2.0) == boot_stamped
+
+
+def test_the_uuv_log_stamps_a_gps_input_with_its_arrival_while_the_replay_is_held(tmp_path):
+    """The replay's UUV endpoint (``--uuv-listen udpin:``) held — the process stopped (SIGSTOP), a loaded machine's
+    reader at its worst — while a GPS_INPUT arrives: ``--uuv-log`` stamps it with the time the kernel received it,
+    not with when the replay read it."""
+    port = free_port()
+    log = tmp_path / "uuv.jsonl"
+    replay = start(skyfix("replay", str(ROOT / "sim_fixtures" / "bundled" / "nadir_hover"), "--no-video",
+                          "--mavlink-out", f"udpout:127.0.0.1:{free_port()}", "--uuv-listen", f"udpin:127.0.0.1:{port}",
+                          "--uuv-log", str(log), "--lead-s", "0.2", "--duration-s", "60"), tmp_path / "replay.log")
+    sender = mavutil().mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=245, source_component=220)
+
+    def gps_input(week_ms: int) -> None:
+        sender.mav.gps_input_send(0, 0, 0, week_ms, 2300, 1, 0, 0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0, 0)
+
+    def logged(week_ms: int) -> list[dict]:
+        return [r for r in read_jsonl(log) if r.get("event") == "gps_input" and r["time_week_ms"] == week_ms]
+
+    try:
+        wait_for(lambda: gps_input(1) or logged(1), 30, "the replay listening")  # the socket is bound
+        replay.send_signal(signal.SIGSTOP)
+        t_before = time.time()
+        gps_input(2)  # on loopback the datagram is in the replay's socket queue when sendto returns
+        t_after = time.time()
+        replay.send_signal(signal.SIGCONT)
+        wait_for(lambda: logged(2), 30, "the GPS_INPUT sent while the replay was stopped")
+    finally:
+        replay.send_signal(signal.SIGCONT)
+        stop(replay)
+        sender.close()
+    t_recv = logged(2)[0]["t_recv"]
+    print(f"logged t_recv {(t_recv - t_before) * 1e3:+.3f} ms after the send began ({(t_after - t_before) * 1e3:.3f} ms "
+          "to send)")
+    assert t_before - 1e-6 <= t_recv <= t_after + 1e-6, "t_recv is not the datagram's arrival"

@@ -14,7 +14,8 @@ good (:data:`STABLE_S`). Nothing else opens, writes or closes the transport. The
 transport is closed and the thread starts over with back-off (``restarts`` in the status).
 
 Reading: every message, BAD_DATA included, goes to ``on_message(msg, t_recv_unix)`` on the
-link's thread; a message id no dialect knows (pymavlink cannot check its CRC) is BAD_DATA. A UDP datagram is parsed on its own: bytes of a frame it leaves unfinished
+link's thread, ``t_recv_unix`` its arrival (a UDP datagram's as the kernel received it: the transport's
+``t_received``); a message id no dialect knows (pymavlink cannot check its CRC) is BAD_DATA. A UDP datagram is parsed on its own: bytes of a frame it leaves unfinished
 are dropped (one BAD_DATA) instead of being joined to the next datagram's — else one
 truncated or random datagram swallows the valid frame after it. On ``udpin:`` the link
 answers the last sender whose datagram held a message ``is_peer`` accepts (the vehicle,
@@ -349,7 +350,7 @@ class MavlinkLink:
         data = t.read()
         if not data:
             return
-        now = time.time()
+        now = t.t_received
         self.counts["reads"] += 1
         try:
             msgs = self.parser.parse_buffer(data) or []

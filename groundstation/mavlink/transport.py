@@ -17,6 +17,9 @@ transport's ``read()`` returns what is there (``b""``: nothing yet; one datagram
 ``datagrams`` is true, so that a frame is never taken to continue in the next), ``write(buf)``
 sends all of it or raises (a write that cannot finish in :data:`WRITE_TIMEOUT_S` is a
 failure: a serial port or TCP peer that stopped reading), ``close()`` may be called twice.
+``t_received`` is when the last read's bytes came (UNIX s): a UDP datagram's time as the kernel received it
+(Linux's ``SO_TIMESTAMPNS``: a reader a loaded machine holds back for hundreds of ms still stamps each message
+with its arrival; ``kernel_times`` says whether the socket gives them), the read's own time otherwise.
 The end of a TCP connection is :class:`ConnectionResetError`. None of them retries:
 the caller decides when to open again.
 """
@@ -26,6 +29,8 @@ from __future__ import annotations
 import errno
 import select
 import socket
+import struct
+import sys
 import time
 
 WRITE_TIMEOUT_S = 1.0
@@ -33,6 +38,10 @@ UDP_RCVBUF = 4 << 20  # a burst of datagrams (or a busy moment of the reader) is
 CONNECT_TIMEOUT_S = 1.0
 DEFAULT_BAUD = 115200
 _READ_MAX = 65536
+#: Linux's SO_TIMESTAMPNS (asm-generic: x86-64, arm64), which Python's socket module does not name: each datagram
+#: comes with the time the kernel received it, a struct timespec (two 64-bit integers).
+SO_TIMESTAMPNS = 35
+_TIMESPEC = struct.Struct("qq")
 
 
 def _send_all(sock: socket.socket, buf: bytes) -> None:
@@ -64,10 +73,14 @@ def _host_port(url: str, rest: str) -> tuple[str, int]:
     return host or "0.0.0.0", int(port)
 
 
-class TcpClient:
-    """``tcp:HOST:PORT``."""
+class _Transport:
+    datagrams = False  # a read is one datagram: a frame never continues in the next
+    kernel_times = False  # t_received is the kernel's receive time
+    t_received = 0.0
 
-    datagrams = False
+
+class TcpClient(_Transport):
+    """``tcp:HOST:PORT``."""
 
     def __init__(self, url: str, addr: tuple[str, int]):
         self.url = url
@@ -80,6 +93,7 @@ class TcpClient:
         return [self.sock.fileno()]
 
     def read(self) -> bytes:
+        self.t_received = time.time()
         return _recv(self.sock, "connection closed by the autopilot's end")
 
     def write(self, buf: bytes) -> None:
@@ -89,10 +103,8 @@ class TcpClient:
         self.sock.close()
 
 
-class TcpServer:
+class TcpServer(_Transport):
     """``tcpin:HOST:PORT``: the newest client is the peer; its end returns the transport to listening."""
-
-    datagrams = False
 
     def __init__(self, url: str, addr: tuple[str, int]):
         self.url = url
@@ -119,6 +131,7 @@ class TcpServer:
             self.client = conn
         if self.client is None:
             return b""
+        self.t_received = time.time()
         try:
             return _recv(self.client, "the autopilot's client disconnected")
         except OSError:
@@ -143,7 +156,7 @@ class TcpServer:
         self.listener.close()
 
 
-class Udp:
+class Udp(_Transport):
     """``udpout:`` (a fixed destination) or ``udpin:``/``udp:`` (bound; answers the sender the caller names
     with :meth:`answer_last_sender`: the last one whose datagram held its peer's messages)."""
 
@@ -162,6 +175,9 @@ class Udp:
             self.dest = (socket.gethostbyname(addr[0]), addr[1])
         self.listen = listen
         self.last_from: tuple[str, int] | None = None
+        self.kernel_times = sys.platform == "linux"  # elsewhere the option's number means something else
+        if self.kernel_times:
+            self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
 
     @property
     def peer_known(self) -> bool:
@@ -172,9 +188,12 @@ class Udp:
 
     def read(self) -> bytes:
         try:
-            data, addr = self.sock.recvfrom(_READ_MAX)
+            data, ancillary, _, addr = self.sock.recvmsg(_READ_MAX, socket.CMSG_SPACE(_TIMESPEC.size))
         except (BlockingIOError, ConnectionRefusedError):  # ICMP port unreachable of an earlier datagram
             return b""
+        stamps = [_TIMESPEC.unpack(d[:_TIMESPEC.size]) for level, kind, d in ancillary
+                  if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS]
+        self.t_received = stamps[0][0] + stamps[0][1] * 1e-9 if stamps else time.time()
         self.last_from = addr
         return data
 
@@ -190,11 +209,10 @@ class Udp:
         self.sock.close()
 
 
-class Serial:
+class Serial(_Transport):
     """``DEVICE[,BAUD]`` through pyserial."""
 
     peer_known = True
-    datagrams = False
 
     def __init__(self, url: str, device: str, baud: int):
         import serial
@@ -209,6 +227,7 @@ class Serial:
         return [self.port.fileno()]
 
     def read(self) -> bytes:
+        self.t_received = time.time()
         return self.port.read(max(1, self.port.in_waiting))
 
     def write(self, buf: bytes) -> None:
