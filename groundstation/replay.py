@@ -192,7 +192,8 @@ class Replay:
                 continue
             try:
                 data = transport.read()
-            except OSError:  # a TCP client went away: the transport listens again
+            except OSError:  # a TCP peer went away (tcpin: listens again): no busy loop meanwhile
+                self.stop.wait(0.2)
                 continue
             for msg in parser.parse_buffer(data) or []:
                 if msg.get_type() != "GPS_INPUT":
