@@ -329,12 +329,14 @@ def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotat
 def measure_rotations(path, cal: Calibration, times_s: np.ndarray, indices=None, until_s: float = math.inf,
                       bar=None) -> list[Rotation]:
     """The camera's rotation between consecutive frames of a video file, at the frames' times ``times_s`` (by
-    frame index), up to the first frame after ``until_s``; ``bar``: a progress bar updated per frame.
-    :class:`SessionError` for a video FFmpeg cannot read."""
+    frame index), up to the first frame after ``until_s``; ``bar``: a progress bar updated per frame. The frames are
+    read grey (the meter follows grey levels: no conversion to colour, the faster decoding of
+    :mod:`groundstation.video.file`). :class:`SessionError` for a video FFmpeg cannot read."""
     meter = RotationMeter(cal.camera)
     rotations = []
     try:
-        with open_video(path, expected_size=(cal.camera.width, cal.camera.height), indices=indices) as video:
+        with open_video(path, expected_size=(cal.camera.width, cal.camera.height), indices=indices,
+                        grey=True) as video:
             for frame in video.prefetch():
                 if frame.index >= len(times_s):
                     continue
