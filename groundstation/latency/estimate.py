@@ -108,6 +108,22 @@ class SessionOffset:
         """The whole estimate is sure and the parts' estimates settled (:func:`settled`): it may be applied."""
         return sure(self.estimate) and settled(self.parts)
 
+    @property
+    def sigma_s(self) -> float:
+        """The whole estimate's 1-sigma covering what its parts disagree on: ``hypot(σ of the whole, the sample
+        standard deviation of the parts' offsets)`` (waves, a heading estimate still settling, a delay that
+        changed: the parts' spread beyond their own σ is an error the whole's σ does not see). Infinite without
+        a whole estimate from :data:`APPLY_PAIRS` pairs or more, or with fewer than two parts' estimates."""
+        offsets = [p.offset_s for p in self.parts if p is not None]
+        if self.estimate is None or self.estimate.pairs < APPLY_PAIRS or len(offsets) < 2:
+            return math.inf
+        return float(math.hypot(self.estimate.sigma_s, np.std(offsets, ddof=1)))
+
+    def better_than(self, unknown_sigma_s: float) -> bool:
+        """Offline, with the whole recording: whether the estimate with :attr:`sigma_s` may be applied in place of
+        an unknown delay taken as 0 ± ``unknown_sigma_s``: settled, or at least surer than that."""
+        return self.settled or self.sigma_s < unknown_sigma_s
+
     def describe(self) -> str:
         """One line: the estimate, its sigma, the pairs, the parts', and whether it is settled."""
         e = self.estimate
@@ -117,8 +133,9 @@ class SessionOffset:
         verdict = ("settled" if self.settled else
                    f"not settled: needs ± {APPLY_SIGMA_S * 1000:.0f} ms or better from {APPLY_PAIRS}+ pairs in each "
                    f"third, the thirds within {STEADY_S * 1000:.0f} ms")
+        spread = f", ± {self.sigma_s * 1000:.1f} ms with the thirds' spread" if math.isfinite(self.sigma_s) else ""
         return (f"{e.offset_s * 1000:+.1f} ± {e.sigma_s * 1000:.1f} ms (1-sigma) from {e.pairs} frame pairs "
-                f"(thirds: {parts} ms): {verdict}")
+                f"(thirds: {parts} ms{spread}): {verdict}")
 
 
 class AttitudeTrack:

@@ -9,9 +9,11 @@ the session's video. ``--no-refraction`` runs the paper's straight-ray method.
 Time: when the UAV link's delay is neither stated (``[timing] mavlink_latency_s``)
 nor measured (TIMESYNC in the tlog), the frames' offset to the telemetry is
 estimated from the video's motion while it is tracked
-(:mod:`groundstation.latency.estimate`) and, when settled, applied as that delay
-(time source ``motion``); one line on stderr says what was found. Otherwise (not
-settled, ``--use-track``, ``--no-motion-offset``) the delay stays unknown: taken as
+(:mod:`groundstation.latency.estimate`) from the whole video and applied as that delay
+(time source ``motion``) with a 1-sigma that covers what the video's thirds disagree on
+(:attr:`~groundstation.latency.estimate.SessionOffset.sigma_s`), when settled or when that
+1-sigma is below the unknown delay's; one line on stderr says what was found. Otherwise (no
+such estimate, ``--use-track``, ``--no-motion-offset``) the delay stays unknown: taken as
 0, its 1-sigma ``[timing] unknown_latency_sigma_s`` in each fix's h_acc, and a warning says so.
 
 Tracking the video also measures the camera's height from the UUV's size
@@ -78,18 +80,20 @@ def frame_pixels(session: Session, use_track: bool, tracker: str = "default", pr
         session.warnings.extend(size.warnings)
     if measure:
         _align_by_motion(session, tracked.rotations)
-    _warn_unknown_delay(session, "--no-motion-offset" if not motion else "no settled estimate from the video")
+    _warn_unknown_delay(session, "--no-motion-offset" if not motion else "no estimate from the video surer than that")
     return Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
 
 
 def _align_by_motion(session: Session, rotations) -> None:
-    """Estimate the frames' offset to the telemetry from the measured rotations; apply it when settled."""
+    """Estimate the frames' offset to the telemetry from the measured rotations of the whole video; apply it, with
+    its σ covering what the video's thirds disagree on, when settled or surer than the unknown delay's σ."""
     found = offset_from_rotations(session.calibration, session.telemetry, rotations)
-    applied = found.settled
+    applied = found.better_than(session.telemetry.timing.unknown_latency_sigma_s)
     if applied:
-        session.telemetry.set_motion_latency(found.estimate.offset_s, found.estimate.sigma_s)
+        session.telemetry.set_motion_latency(found.estimate.offset_s, found.sigma_s)
     print(f"{session.path.name}: the frames' offset to the telemetry from the video's motion: {found.describe()}"
-          + (f"; applied as the UAV link's delay: {session.telemetry.uav_latency_s * 1000:.1f} ms" if applied else ""),
+          + (f"; applied as the UAV link's delay: {session.telemetry.uav_latency_s * 1000:.1f} ms "
+             f"± {found.sigma_s * 1000:.1f} ms" if applied else ""),
           file=sys.stderr)
 
 
