@@ -179,7 +179,8 @@ def test_the_videos_start_is_found_from_its_motion_and_the_flight_is_located(gen
     true_start = float((generated / "video_frames.csv").read_text().splitlines()[1].split(",")[1])
     error_s = report["video_start_unix"] - true_start
     print(f"\nvideo start from its motion: {error_s * 1000:+.1f} ms ± {report['video_start_sigma_s'] * 1000:.1f} ms "
-          f"(contrast {report['video_start_contrast']}) over {report['video_start_pairs']} pairs")
+          f"(contrast {report['video_start_contrast']}) over {report['video_start_pairs']} pairs, thirds "
+          f"{[None if t is None else round((t - true_start) * 1000, 1) for t in report['video_start_thirds_unix']]} ms")
     assert abs(error_s) <= 1 / 30 and report["video_start_from"].startswith("the image's motion")
     session = load_session(out)
     session.truth = load_session(generated).truth

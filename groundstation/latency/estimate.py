@@ -286,16 +286,19 @@ class VideoStart:
     """Where a video with no station times starts on the telemetry's clock, found from its motion."""
 
     start_s: float  # the first frame's exposure
-    sigma_s: float  # 1-sigma
+    sigma_s: float  # 1-sigma, covering what the video's thirds disagree on (:attr:`SessionOffset.sigma_s`)
     pairs: int
     rms_mrad: float
     contrast: float  # the best start's misfit over the best elsewhere (beyond :data:`START_APART_S`): < 1, the lower the surer
+    thirds_s: tuple[float | None, ...] = ()  # each third's start (None: no estimate from it)
 
 
 START_STEP_S = 0.02  # the coarse search's grid
 START_PAIRS = 80  # frame pairs the coarse search compares (spread over the video)
 START_APART_S = 0.5  # a rival start this far from the best ...
 START_CONTRAST = 0.7  # ... must misfit by at least 1 / this as much, or the start is ambiguous
+START_FLAT = 1.5  # the refinement searches every coarse start within this factor of the best's misfit next to it ...
+START_REFINE_S = 0.1  # ... and at least this far either side
 
 
 def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotation],
@@ -305,9 +308,12 @@ def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotat
 
     Coarse: every start :data:`START_STEP_S` apart across ``span`` is scored by how well the camera's
     attitude then predicts :data:`START_PAIRS` of the rotations (the same misfit as
-    :func:`estimate_offset`); then :func:`estimate_offset` refines the best within a step or two with all
-    of them. :class:`ValueError` (one line naming both spans) when the video does not fit in ``span``, the
-    image's motion says too little, or another start fits nearly as well."""
+    :func:`estimate_offset`); then :func:`estimate_offset` refines it with all of them across the flat part of the
+    coarse misfit around the best (every start next to it within :data:`START_FLAT` of its misfit, at least
+    ± :data:`START_REFINE_S`: an attitude estimate still settling leaves a wide, flat valley with several minima),
+    and the video's thirds are refined alone: the start's 1-sigma covers what they disagree on
+    (:attr:`SessionOffset.sigma_s`). :class:`ValueError` (one line naming both spans) when the video does not fit in
+    ``span``, the image's motion says too little, or another start fits nearly as well."""
     if len(rotations) < 10:
         raise ValueError(f"the image's motion was measured between {len(rotations)} frame pairs: too few to place "
                          "the video on the log's clock")
@@ -335,12 +341,24 @@ def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotat
         raise ValueError(f"the video's start is ambiguous: {starts[best]:.3f} and "
                          f"{starts[rivals][np.argmin(cost[rivals])]:.3f} fit nearly as well (the camera's motion "
                          "repeats or says too little); give the start")
+    flat = cost <= START_FLAT * cost[best]
+    a = b = best
+    while a > 0 and flat[a - 1]:
+        a -= 1
+    while b < len(starts) - 1 and flat[b + 1]:
+        b += 1
+    reach = max(START_REFINE_S, starts[best] - starts[a] + START_STEP_S, starts[b] - starts[best] + START_STEP_S)
+    offsets = np.arange(-reach, reach + OFFSET_STEP_S / 2, OFFSET_STEP_S)
     shifted = [Rotation(r.t0 + starts[best], r.t1 + starts[best], r.rotvec, r.tracks) for r in rotations]
-    fine = estimate_offset(shifted, track, np.arange(-2 * START_STEP_S, 2 * START_STEP_S + OFFSET_STEP_S / 2,
-                                                     OFFSET_STEP_S))
+    bounds = [round(i * len(shifted) / STEADY_COUNT) for i in range(STEADY_COUNT + 1)]
+    found = SessionOffset(estimate_offset(shifted, track, offsets),
+                          tuple(estimate_offset(shifted[i:j], track, offsets) for i, j in itertools.pairwise(bounds)))
+    fine = found.estimate
     if fine is None:
         raise ValueError("the video's start could not be refined (the telemetry does not cover its frames)")
-    return VideoStart(float(starts[best] + fine.offset_s), fine.sigma_s, fine.pairs, fine.rms_mrad, contrast)
+    sigma = found.sigma_s if math.isfinite(found.sigma_s) else fine.sigma_s
+    thirds = tuple(None if p is None else float(starts[best] + p.offset_s) for p in found.parts)
+    return VideoStart(float(starts[best] + fine.offset_s), sigma, fine.pairs, fine.rms_mrad, contrast, thirds)
 
 
 def measure_rotations(path, cal: Calibration, times_s: np.ndarray, indices=None, until_s: float = math.inf,

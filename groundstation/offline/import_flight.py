@@ -286,7 +286,8 @@ def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calib
                        "video_start_from": "the image's motion against the logged attitude",
                        "video_start_sigma_s": round(found.sigma_s, 6), "video_start_pairs": found.pairs,
                        "video_start_rms_mrad": round(found.rms_mrad, 4),
-                       "video_start_contrast": round(found.contrast, 3)}
+                       "video_start_contrast": round(found.contrast, 3),
+                       "video_start_thirds_unix": [None if t is None else round(t, 6) for t in found.thirds_s]}
     report["warnings"] = warnings
     (out / "import.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
