@@ -16,7 +16,7 @@
   logged attitude (``--video-start motion``, the default: the camera's rotation between
   frames against the attitude's, :func:`~groundstation.latency.estimate.find_video_start`,
   searched across the whole log and refined by the estimator that measures the live video's
-  latency, on the video's first :data:`MOTION_S` seconds — a long video is not decoded whole;
+  latency, on the whole video (read grey, never held in memory), its thirds refined alone;
   its sigma and residual printed and kept), or ``--video-start trigger``: the first
   CAM/TRIG record of the log (the camera started recording when triggered), or
   ``--video-start-unix``. A video that does not lie within the log's attitude is an error
@@ -65,7 +65,6 @@ from groundstation.video.file import frame_times
 from groundstation.video.frames import VideoError
 
 HEARTBEAT_HZ = 1.0
-MOTION_S = 60.0  # the video's start is found from the motion of its first this many seconds
 
 
 def telemetry_messages(flight: FlightLog, mount: bool) -> list[tuple[float, object]]:
@@ -159,14 +158,14 @@ def start_from_srt(flight: FlightLog, srt: Path, utc_offset_h: float | None,
 
 def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.ndarray,
                       span: tuple[float, float], progress: bool = False) -> VideoStart:
-    """The video's start from its motion (its first :data:`MOTION_S` s) against the session's (just written)
+    """The video's start from its motion (the whole video) against the session's (just written)
     telemetry."""
     s = load_session(session)
     times = np.full(int(index.max()) + 1, np.nan)
     times[index] = t_rel
-    bar = progress_bar(int(np.sum(t_rel <= MOTION_S)), f"{video.name}: the image's motion", progress)
+    bar = progress_bar(len(t_rel), f"{video.name}: the image's motion", progress)
     try:
-        rotations = measure_rotations(video, s.calibration, times, until_s=MOTION_S, bar=bar)
+        rotations = measure_rotations(video, s.calibration, times, bar=bar)
     finally:
         bar.close()
     try:
