@@ -1,0 +1,444 @@
+"""The drone's pose biases from the static seafloor: bundle adjustment of bottom features.
+
+A biased pose puts the same floor point in different places as the drone moves; this
+module finds the biases that put it back in one place. Inputs: tracks of floor points
+(the pixel of one point in many frames), each frame's reported camera pose (attitude,
+horizontal position, height above the water) and the water's refractive index. Solved
+by robust nonlinear least squares (:func:`scipy.optimize.least_squares`):
+
+- the **attitude error** (reported − true, as ``sim_fixtures`` writes it in ``truth_errors.csv``): the
+  reported camera attitude is the true one turned by the rotation vector (NED)
+  ``ε = R_z(ψ)·(tilt_fwd, tilt_right, 0) + (0, 0, yaw)``, ``R_reported = exp([ε]×) · R_true`` (both
+  ``R_ned_from_cv``): a **tilt** about the level forward and right axes of a per-frame *bias frame* of
+  heading ``ψ`` (``bias_heading_rad``: a stabilised gimbal levels the camera with its own IMU, so its
+  levelling error is about the camera's own heading, :func:`camera_heading_rad`; a servo mount or a
+  fixed camera carries the AHRS's tilt bias, about the airframe's heading; 0: about North and East),
+  and a **heading** error ``yaw`` about Down (the compass's bias: a compass reading 2° high has
+  ``yaw = +2°``);
+- the **floor depth** below the water (unless given), the floor taken flat and level;
+- each feature's horizontal position;
+- a slowly varying correction ``w(t)`` to the reported horizontal position (the GNSS walk),
+  piecewise linear in time with knots every ``knot_spacing_s``: ``true = reported + w``.
+  Its increments have a random-walk prior (``walk_rate_m``/√s) about 0, or, given the reported
+  velocity (the EKF's, from the receiver's Doppler, which a slow position error is not in), about what
+  the velocity says the position should have moved less what it did; its **mean over the knots
+  is held at 0**: a constant offset of everything is invisible in the bottom, so the
+  corrected track keeps the GNSS's mean position (the absolute offset needs a reference).
+
+A residual is a floor point's ground position seen from one frame minus the feature's,
+turned into pixels by the inverse of the ground-per-pixel Jacobian at that observation
+(a reprojection error, to first order) and divided by ``pixel_px``. The robust loss
+(``soft_l1``) downweights what does not stay on the floor (the UUV, glints).
+
+What makes the biases observable: a feature sliding through the image is seen at changing
+angles; a tilt bias moves its ground position by ``≈ (h + D/n)·δ·sec²θ`` (the constant part
+is a shift of all features, the ``sec²`` part is not), a heading bias rotates the footprint
+about the nadir, which the bottom alone cannot tell from rotating the trajectory: the position
+prior (RTK: tight; plain GNSS: loose) is what separates a heading bias from a GNSS walk. A
+hovering drone leaves all of them unobservable: their priors (``tilt_rad``, ``yaw_rad``)
+come back as their sigmas. Not trusting what is left (a body-frame tilt seen through the heading's swings
+depends on the bias frame being right), :attr:`BottomEstimate.estimated` also asks that the features slid
+across a good part of the image (:data:`MIN_SLIDE_SHARE`).
+
+Covariances are from the Jacobian at the solution (Gauss-Newton, the features eliminated by
+their Schur complement), scaled by the residuals' variance. Radians, metres, seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import least_squares
+
+from .camera import Camera, pixel_to_ray
+from .refraction import offset_from_ray
+
+#: a bias is "estimated" when its posterior 1-sigma is below this share of its prior's ...
+ESTIMATED_SHARE = 0.3
+#: ... and the features slid across at least this share of the image's diagonal (median over features)
+MIN_SLIDE_SHARE = 0.15
+#: floor depths tried for the start (m), geometric
+_DEPTH_GRID_M = np.geomspace(0.2, 60.0, 48)
+_ANGLE_STEP = 1e-5  # rad, finite difference of the global parameters
+_DEPTH_STEP = 1e-4  # m
+_PIXEL_STEP = 0.5  # px, finite difference of the ground-per-pixel Jacobian
+N_GLOBAL = 4  # tilt_fwd, tilt_right, yaw, floor depth
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Prior 1-sigmas and the model's settings."""
+
+    tilt_rad: float = np.radians(3.0)  # each tilt component's prior about 0
+    yaw_rad: float = np.radians(10.0)  # the heading bias's
+    walk_rate_m: float = 0.2  # GNSS walk: 1-sigma of its change over 1 s, growing with √time (m/√s)
+    knot_spacing_s: float = 2.0  # the walk's knots
+    pixel_px: float = 0.7  # a tracked floor point's 1-sigma in u and v
+    floor_depth_m: float | None = None  # given: not estimated
+    floor_depth_prior_m: float = 100.0  # estimated: its (weak) prior's 1-sigma about the start
+    loss_scale: float = 2.0  # soft_l1's scale, in pixel sigmas
+
+
+@dataclass
+class FramePoses:
+    """The reported camera of K frames (arrays of length K)."""
+
+    t_s: np.ndarray  # any clock
+    R_ned_from_cv: np.ndarray  # (K, 3, 3)
+    camera_ne_m: np.ndarray  # (K, 2) the camera's horizontal position in a local frame
+    height_m: np.ndarray  # the camera above the water
+    bias_heading_rad: np.ndarray | None = None  # the tilt bias's frame (see the module doc); None: 0 (North, East)
+    velocity_ne_mps: np.ndarray | None = None  # (K, 2) the reported horizontal velocity; None: not used
+
+
+@dataclass
+class Observations:
+    """M observations: frame ``frame`` (index into :class:`FramePoses`) saw feature ``feature`` at pixel (u, v)."""
+
+    frame: np.ndarray
+    feature: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+
+@dataclass
+class BottomEstimate:
+    """The solution. The attitude error (reported − true): ``tilt_rad`` = (forward, right) about the bias frame,
+    ``yaw_rad`` about Down; ``cov_bias`` the 3×3 covariance of (tilt_fwd, tilt_right, yaw) (rad²)."""
+
+    tilt_rad: np.ndarray
+    yaw_rad: float
+    cov_bias: np.ndarray
+    floor_depth_m: float
+    sigma_floor_depth_m: float  # 0 when given
+    knot_t_s: np.ndarray  # (J,)
+    walk_ne_m: np.ndarray  # (J, 2)
+    sigma_walk_ne_m: np.ndarray  # (J, 2): relative to the mean (which is held at 0)
+    features_ne_m: np.ndarray  # (F, 2)
+    rms_px: float  # of the inlying residuals, each of u and v, pixels
+    slide_share: float  # how far the features slid in the image: median over features, share of its diagonal
+    n_observations: int
+    n_features: int
+    n_frames: int
+    inliers: np.ndarray = field(repr=False)  # (M,) bool: residual within 3 loss scales
+    priors: Priors = field(default_factory=Priors, repr=False)
+
+    @property
+    def sigma_tilt_rad(self) -> float:
+        """The tilt's 1-sigma: the larger axis of its 2×2 covariance."""
+        return float(np.sqrt(np.max(np.linalg.eigvalsh(self.cov_bias[:2, :2]))))
+
+    @property
+    def sigma_yaw_rad(self) -> float:
+        return float(np.sqrt(self.cov_bias[2, 2]))
+
+    @property
+    def tilt_estimated(self) -> bool:
+        """Whether the bottom told the tilt (its sigma well below the prior's, the features slid), not the prior."""
+        return self.slide_share >= MIN_SLIDE_SHARE and self.sigma_tilt_rad < ESTIMATED_SHARE * self.priors.tilt_rad
+
+    @property
+    def yaw_estimated(self) -> bool:
+        return self.slide_share >= MIN_SLIDE_SHARE and self.sigma_yaw_rad < ESTIMATED_SHARE * self.priors.yaw_rad
+
+    @property
+    def estimated(self) -> bool:
+        return self.tilt_estimated or self.yaw_estimated
+
+    def error_rotvec(self, bias_heading_rad) -> np.ndarray:
+        """The attitude error ``ε`` (..., 3) (reported − true, NED) at frames of these bias-frame headings."""
+        return bias_rotvec(self.tilt_rad, self.yaw_rad, bias_heading_rad)
+
+    def correction(self, bias_heading_rad) -> np.ndarray:
+        """``exp(−[ε]×)`` (..., 3, 3) per frame: ``R_true = correction · R_reported``."""
+        return rodrigues(-self.error_rotvec(bias_heading_rad))
+
+    def walk_at(self, t_s) -> np.ndarray:
+        """The position correction (..., 2) at times ``t_s`` (held beyond the first and last knots)."""
+        return _interp_knots(self.knot_t_s, self.walk_ne_m, t_s)
+
+    def sigma_walk_at(self, t_s) -> np.ndarray:
+        return _interp_knots(self.knot_t_s, self.sigma_walk_ne_m, t_s)
+
+    def describe(self) -> str:
+        """One line: what was estimated and how sure."""
+        tilt = (f"tilt fwd {np.degrees(self.tilt_rad[0]):+.2f}° right {np.degrees(self.tilt_rad[1]):+.2f}° "
+                f"± {np.degrees(self.sigma_tilt_rad):.2f}°" + ("" if self.tilt_estimated else " (not observable)"))
+        yaw = (f"heading {np.degrees(self.yaw_rad):+.2f}° ± {np.degrees(self.sigma_yaw_rad):.2f}°"
+               + ("" if self.yaw_estimated else " (not observable)"))
+        depth = (f"floor {self.floor_depth_m:.2f} m" + (f" ± {self.sigma_floor_depth_m:.2f}"
+                                                          if self.sigma_floor_depth_m > 0 else " (given)"))
+        walk = np.hypot(*self.walk_ne_m.T)
+        return (f"{tilt}; {yaw}; {depth}; position walk up to {walk.max():.2f} m about the GNSS's mean; "
+                f"{self.n_features} floor features, {self.n_observations} observations in {self.n_frames} frames, "
+                f"{self.rms_px:.2f} px RMS")
+
+
+def bias_rotvec(tilt_rad, yaw_rad, bias_heading_rad) -> np.ndarray:
+    """The attitude error's rotation vector (..., 3) in NED: the tilt (forward, right) about the axes of bias frames
+    of these headings, the yaw about Down (see the module doc)."""
+    psi = np.asarray(bias_heading_rad, dtype=float)
+    a, b = float(tilt_rad[0]), float(tilt_rad[1])
+    c, s = np.cos(psi), np.sin(psi)
+    return np.stack([a * c - b * s, a * s + b * c, np.full(psi.shape, float(yaw_rad))], axis=-1)
+
+
+def camera_heading_rad(R_ned_from_cv) -> np.ndarray:
+    """The heading (radians from North) of cameras with no roll about their optical axis: the direction their image
+    right (cv x, level then) makes 90° to the right of; defined straight down too, where the optical axis has none."""
+    right = np.asarray(R_ned_from_cv, dtype=float)[..., :, 0]
+    return np.arctan2(-right[..., 0], right[..., 1])
+
+
+def slide_share(camera: Camera, obs: Observations) -> float:
+    """How far the features slid through the image: per feature the farthest any of its pixels lies from its first,
+    median over the features, as a share of the image's diagonal."""
+    f = np.asarray(obs.feature, dtype=int)
+    order = np.argsort(f, kind="stable")
+    f, u, v = f[order], np.asarray(obs.u, float)[order], np.asarray(obs.v, float)[order]
+    first = np.searchsorted(f, f)  # each observation's feature's first row
+    reach = np.hypot(u - u[first], v - v[first])
+    farthest = np.zeros(f.max() + 1)
+    np.maximum.at(farthest, f, reach)
+    return float(np.median(farthest[np.unique(f)]) / np.hypot(camera.width, camera.height))
+
+
+def rodrigues(w) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of rotation vectors (..., 3) (radians)."""
+    w = np.asarray(w, dtype=float)
+    theta = np.linalg.norm(w, axis=-1)
+    K = np.zeros(w.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = w[..., 2], -w[..., 1], w[..., 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(theta > 1e-12, np.sin(theta) / theta, 1.0)[..., None, None]
+        b = np.where(theta > 1e-12, (1 - np.cos(theta)) / theta**2, 0.5)[..., None, None]
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def _rotate(w, d):
+    """Vectors ``d`` (M, 3) rotated by rotation vectors ``w`` (M, 3) (Rodrigues' formula, no matrices)."""
+    theta = np.linalg.norm(w, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(theta > 1e-12, np.sin(theta) / theta, 1.0)
+        b = np.where(theta > 1e-12, (1 - np.cos(theta)) / theta**2, 0.5)
+    wxd = np.cross(w, d)
+    return d + a * wxd + b * np.cross(w, wxd)
+
+
+def _velocity_steps(poses: FramePoses, knots) -> np.ndarray:
+    """The walk's expected change between consecutive knots (J − 1, 2): the reported velocity integrated
+    (trapezoids) less the reported position's change; zeros without a velocity."""
+    if poses.velocity_ne_mps is None:
+        return np.zeros((len(knots) - 1, 2))
+    t = np.asarray(poses.t_s, dtype=float)
+    order = np.argsort(t)
+    t, vel, pos = t[order], np.asarray(poses.velocity_ne_mps, float)[order], np.asarray(poses.camera_ne_m, float)[order]
+    travelled = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None], axis=0)])
+    drift = _interp_knots(t, travelled - (pos - pos[0]), knots)  # true − reported, up to a constant
+    return np.diff(drift, axis=0)
+
+
+def _interp_knots(knot_t, values, t):
+    t = np.asarray(t, dtype=float)
+    return np.stack([np.interp(t, knot_t, values[:, k]) for k in range(values.shape[1])], axis=-1)
+
+
+def knot_times(t_s, spacing_s: float) -> np.ndarray:
+    """Knots from the first to the last frame, at most ``spacing_s`` apart (at least two)."""
+    t0, t1 = float(np.min(t_s)), float(np.max(t_s))
+    n = max(2, int(np.ceil((t1 - t0) / spacing_s)) + 1)
+    return np.linspace(t0, t1, n)
+
+
+class _Problem:
+    """The least-squares problem: parameters ``[tilt_fwd, tilt_right, yaw, depth, walk (J×2), features (F×2)]``."""
+
+    def __init__(self, camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors):
+        self.n_water, self.priors = n_water, priors
+        k = np.asarray(obs.frame, dtype=int)
+        self.k, self.f = k, np.asarray(obs.feature, dtype=int)
+        self.M, self.F = len(k), int(self.f.max()) + 1
+        heading = poses.bias_heading_rad if poses.bias_heading_rad is not None else np.zeros(len(poses.t_s))
+        self.psi = np.asarray(heading, dtype=float)[k]
+        self.h = np.asarray(poses.height_m, dtype=float)[k]
+        self.cam = np.asarray(poses.camera_ne_m, dtype=float)[k]
+        R = np.asarray(poses.R_ned_from_cv, dtype=float)[k]
+        u, v = np.asarray(obs.u, float), np.asarray(obs.v, float)
+        rays = pixel_to_ray(camera, np.stack([u, u + _PIXEL_STEP, u]), np.stack([v, v, v + _PIXEL_STEP]))
+        self.d0 = np.einsum("mij,kmj->kmi", R, rays)  # the reported rays in NED, and of the moved pixels
+        self.h = np.broadcast_to(self.h, (3, self.M))
+        t = np.asarray(poses.t_s, dtype=float)
+        self.knots = knot_times(t, priors.knot_spacing_s)
+        self.J = len(self.knots)
+        tk = t[k]
+        j = np.clip(np.searchsorted(self.knots, tk, side="right") - 1, 0, self.J - 2)
+        self.j = j
+        self.s = np.clip((tk - self.knots[j]) / (self.knots[j + 1] - self.knots[j]), 0.0, 1.0)
+        self.walk_steps = _velocity_steps(poses, self.knots)
+        self.depth_fixed = priors.floor_depth_m
+        self.depth0 = priors.floor_depth_m if priors.floor_depth_m is not None else self._start_depth()
+        self.n_params = N_GLOBAL + 2 * self.J + 2 * self.F
+
+    # --- geometry ---------------------------------------------------------------------------------
+    def offsets(self, g):
+        """Horizontal offsets (3, M, 2) from the camera of each observation's pixel and of the pixel moved by
+        :data:`_PIXEL_STEP` in u and in v, for globals ``g``."""
+        w = -bias_rotvec(g[:2], g[2], self.psi)  # the true rays: the reported ones turned back by the error
+        d = _rotate(np.broadcast_to(w, self.d0.shape), self.d0)
+        off, _ = offset_from_ray(d, self.h, np.full(self.h.shape, g[3]), self.n_water)
+        return off
+
+    def ground(self, g, walk_knots):
+        """Ground positions (M, 2) of every observation and the 2×2 pixels-per-metre matrices (M, 2, 2) there
+        (the inverse of d ground / d pixel), for globals ``g`` and walk knots (J, 2)."""
+        off = self.offsets(g)
+        Jg = np.stack([(off[1] - off[0]) / _PIXEL_STEP, (off[2] - off[0]) / _PIXEL_STEP], axis=-1)
+        walk = (1 - self.s)[:, None] * walk_knots[self.j] + self.s[:, None] * walk_knots[self.j + 1]
+        return self.cam + walk + off[0], np.linalg.inv(Jg)
+
+    def _start_depth(self) -> float:
+        """The grid depth at which each feature's ground positions scatter least in pixels (zero biases and walk)."""
+        zero = np.zeros((self.J, 2))
+        best, best_cost = _DEPTH_GRID_M[0], np.inf
+        for depth in _DEPTH_GRID_M:
+            gp, A = self.ground(np.array([0.0, 0.0, 0.0, depth]), zero)
+            cost = np.median(np.linalg.norm(np.einsum("mij,mj->mi", A, gp - self._means(gp)[self.f]), axis=-1))
+            if cost < best_cost:
+                best, best_cost = depth, cost
+        return float(best)
+
+    def _means(self, gp):
+        """Each feature's mean ground position (F, 2)."""
+        mean = np.zeros((self.F, 2))
+        np.add.at(mean, self.f, gp)
+        return mean / np.maximum(np.bincount(self.f, minlength=self.F), 1)[:, None]
+
+    # --- the residuals and their Jacobian ---------------------------------------------------------
+    def unpack(self, x):
+        g = x[:N_GLOBAL].copy()
+        if self.depth_fixed is not None:
+            g[3] = self.depth_fixed
+        walk = x[N_GLOBAL:N_GLOBAL + 2 * self.J].reshape(self.J, 2)
+        feats = x[N_GLOBAL + 2 * self.J:].reshape(self.F, 2)
+        return g, walk, feats
+
+    def observation_residuals(self, x, with_whitening: bool = False):
+        """Residuals (M, 2) in pixel sigmas; ``with_whitening``: also d residual / d ground (M, 2, 2)."""
+        g, walk, feats = self.unpack(x)
+        gp, A = self.ground(g, walk)
+        Aw = A / self.priors.pixel_px
+        r = np.einsum("mij,mj->mi", Aw, gp - feats[self.f])
+        return (r, Aw) if with_whitening else r
+
+    def prior_residuals(self, x):
+        g, walk, _ = self.unpack(x)
+        p = self.priors
+        rate = p.walk_rate_m * np.sqrt(np.diff(self.knots))[:, None]
+        depth = (g[3] - self.depth0) / p.floor_depth_prior_m if self.depth_fixed is None else x[3]
+        return np.concatenate([
+            [g[0] / p.tilt_rad, g[1] / p.tilt_rad, g[2] / p.yaw_rad, depth],
+            ((np.diff(walk, axis=0) - self.walk_steps) / rate).ravel(),
+            walk.mean(axis=0) / 1e-3,  # the gauge: the correction's mean is 0
+        ])
+
+    def residuals(self, x):
+        return np.concatenate([self.observation_residuals(x).ravel(), self.prior_residuals(x)])
+
+    def jacobian(self, x):
+        """Sparse Jacobian: the globals by finite differences, the walk and the features exactly (they enter the
+        ground position linearly: + (1 − s)·walk[j] + s·walk[j + 1] − feature)."""
+        M = self.M
+        base, Aw = self.observation_residuals(x, with_whitening=True)
+        glob = np.zeros((2 * M, N_GLOBAL))
+        for i, step in enumerate((_ANGLE_STEP, _ANGLE_STEP, _ANGLE_STEP, _DEPTH_STEP)):
+            if i < 3 or self.depth_fixed is None:
+                xs = x.copy()
+                xs[i] += step
+                glob[:, i] = ((self.observation_residuals(xs) - base) / step).ravel()
+        rows = np.repeat(np.arange(2 * M).reshape(M, 2), 2, axis=1)  # (M, 4): row (m, a) against columns (b = 0, 1)
+        pairs = [(N_GLOBAL + 2 * self.j, Aw * (1 - self.s)[:, None, None]),
+                 (N_GLOBAL + 2 * (self.j + 1), Aw * self.s[:, None, None]),
+                 (N_GLOBAL + 2 * self.J + 2 * self.f, -Aw)]
+        cols = [np.tile(first[:, None] + np.array([0, 1]), 2) for first, _ in pairs]
+        linear = sp.csr_matrix((np.concatenate([d.reshape(M, 4).ravel() for _, d in pairs]),
+                                (np.tile(rows.ravel(), 3), np.concatenate([c.ravel() for c in cols]))),
+                               shape=(2 * M, self.n_params))
+        dense = sp.hstack([sp.csr_matrix(glob), sp.csr_matrix((2 * M, self.n_params - N_GLOBAL))])
+        return sp.vstack([linear + dense, self._prior_jacobian()]).tocsr()
+
+    def _prior_jacobian(self):
+        p, J = self.priors, self.J
+        n = self.n_params
+        rows, cols, vals = [0, 1, 2, 3], [0, 1, 2, 3], [1 / p.tilt_rad, 1 / p.tilt_rad, 1 / p.yaw_rad,
+                                                        1 / p.floor_depth_prior_m if self.depth_fixed is None else 1.0]
+        rate = p.walk_rate_m * np.sqrt(np.diff(self.knots))
+        r = 4
+        for i in range(J - 1):
+            for c in range(2):
+                rows += [r, r]
+                cols += [N_GLOBAL + 2 * (i + 1) + c, N_GLOBAL + 2 * i + c]
+                vals += [1 / rate[i], -1 / rate[i]]
+                r += 1
+        for c in range(2):
+            rows += [r] * J
+            cols += [N_GLOBAL + 2 * i + c for i in range(J)]
+            vals += [1 / (J * 1e-3)] * J
+            r += 1
+        return sp.csr_matrix((vals, (rows, cols)), shape=(r, n))
+
+    def start(self) -> np.ndarray:
+        x = np.zeros(self.n_params)
+        x[3] = self.depth0 if self.depth_fixed is None else 0.0
+        g, walk, _ = self.unpack(x)
+        x[N_GLOBAL + 2 * self.J:] = self._means(self.ground(g, walk)[0]).ravel()
+        return x
+
+
+def _covariance(jac: sp.csr_matrix, n_dense: int, scale2: float) -> np.ndarray:
+    """Covariance of the first ``n_dense`` parameters, the rest (2×2 feature blocks) eliminated by their Schur
+    complement of the Gauss-Newton Hessian ``JᵀJ``; times ``scale2``."""
+    H = (jac.T @ jac).tocsc()
+    Hgg = H[:n_dense, :n_dense].toarray()
+    Hgp = H[:n_dense, n_dense:].toarray()
+    Hpp = H[n_dense:, n_dense:]
+    nf = Hpp.shape[0] // 2
+    blocks = np.zeros((nf, 2, 2))
+    for a in range(2):
+        for b in range(2):
+            blocks[:, a, b] = Hpp[a::2, :][:, b::2].diagonal()
+    blocks += np.eye(2) * 1e-12
+    inv = np.linalg.inv(blocks)
+    Hgp3 = Hgp.reshape(n_dense, nf, 2)
+    S = Hgg - np.einsum("gfa,fab,hfb->gh", Hgp3, inv, Hgp3)
+    return np.linalg.inv(S) * scale2
+
+
+def estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors = Priors()) -> BottomEstimate:
+    """The pose biases, floor depth, features and position walk from bottom feature tracks (see the module doc).
+
+    ``obs.feature`` numbers features 0..F-1 (each seen in ≥ 2 frames to say anything); ``n_water`` None: straight rays.
+    """
+    prob = _Problem(camera, n_water, poses, obs, priors)
+    fit = least_squares(prob.residuals, prob.start(), jac=prob.jacobian, loss="soft_l1", f_scale=priors.loss_scale,
+                        x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=60)
+    x = fit.x
+    r_obs = prob.observation_residuals(x)
+    norm = np.hypot(r_obs[:, 0], r_obs[:, 1])
+    inliers = norm < 3.0 * priors.loss_scale
+    n_dense = N_GLOBAL + 2 * prob.J
+    dof = max(1, 2 * int(inliers.sum()) - prob.n_params + 4)
+    scale2 = max(1.0, float(np.sum(norm[inliers] ** 2) / dof))  # never claim better than the pixel sigma
+    cov = _covariance(sp.csr_matrix(fit.jac), n_dense, scale2)
+    g, walk, feats = prob.unpack(x)
+    cov_walk = np.diagonal(cov[N_GLOBAL:, N_GLOBAL:]).reshape(prob.J, 2)
+    return BottomEstimate(
+        tilt_rad=g[:2].copy(), yaw_rad=float(g[2]), cov_bias=cov[:3, :3].copy(),
+        floor_depth_m=float(g[3]),
+        sigma_floor_depth_m=0.0 if priors.floor_depth_m is not None else float(np.sqrt(cov[3, 3])),
+        knot_t_s=prob.knots, walk_ne_m=walk.copy(), sigma_walk_ne_m=np.sqrt(cov_walk),
+        features_ne_m=feats.copy(), rms_px=float(np.sqrt(np.mean(norm[inliers] ** 2) / 2) * priors.pixel_px),
+        slide_share=slide_share(camera, obs), n_observations=prob.M, n_features=prob.F, n_frames=len(np.unique(prob.k)), inliers=inliers, priors=priors,
+    )

@@ -1,0 +1,103 @@
+"""The pose biases from the static bottom (localizer.bottom) on floor features made with the simulator's geometry.
+
+The features' pixels come from sim_fixtures.geometry (Fermat's crossing of the surface, cv2.projectPoints) seen
+from the true camera; the estimator gets the attitude as a drone with a biased AHRS and a levelling error would
+report it (scipy's rotations: reported = exp(error) · true, the convention of truth_errors.csv), and positions off
+by a GNSS walk. Nothing of the localizer's geometry makes the data.
+"""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from localizer import bottom
+from localizer.camera import Camera
+from sim_fixtures.geometry import R_GIMBAL_FROM_CV, SimCamera, matrix_zyx, project, surface_crossing
+
+N_WATER = 1.34
+FLOOR_M = 4.0
+TILT_DEG = (0.30, -0.25)  # the camera's levelling error, about its own heading's forward and right axes
+YAW_DEG = 2.0  # the compass reads high
+
+
+def _camera() -> SimCamera:
+    fx = 320 / np.tan(np.radians(31.0))
+    return SimCamera(640, 360, fx, fx, 319.5, 179.5, (-0.12, 0.08, 0.0004, -0.0002, -0.01))
+
+
+def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.0, rate_hz: float = 4.0):
+    """Floor features seen by a camera 10 m up at 72° down, flying along 60° at ``speed_mps`` (its gimbal's yaw held
+    on the course, the airframe's heading swinging ±10° under it); ``walk(t)`` the reported position's error (N, E)."""
+    rng = np.random.default_rng(seed)
+    cam = _camera()
+    t = np.arange(0.0, duration_s, 1.0 / rate_hz)
+    course = np.radians(60.0)
+    drift = 0.3 * np.column_stack([np.sin(0.3 * t), np.cos(0.23 * t)])
+    ne = speed_mps * t[:, None] * [np.cos(course), np.sin(course)] + drift
+    velocity = speed_mps * np.array([np.cos(course), np.sin(course)]) + 0.3 * np.column_stack(
+        [0.3 * np.cos(0.3 * t), -0.23 * np.sin(0.23 * t)])
+    height = 10.0 + 0.3 * np.sin(0.1 * t)
+    R_true = matrix_zyx(0.0, np.radians(-72.0), np.full(t.shape, course)) @ R_GIMBAL_FROM_CV
+    tilt = np.radians(TILT_DEG)
+    error = np.column_stack([np.full(t.shape, tilt[0] * np.cos(course) - tilt[1] * np.sin(course)),
+                             np.full(t.shape, tilt[0] * np.sin(course) + tilt[1] * np.cos(course)),
+                             np.full(t.shape, np.radians(YAW_DEG))])
+    R_reported = Rotation.from_rotvec(error).as_matrix() @ R_true
+    cam_ned = np.column_stack([ne, -height])
+    lo, hi = ne.min(axis=0) - 22.0, ne.max(axis=0) + 22.0
+    n = 500
+    points = np.column_stack([rng.uniform(lo[0], hi[0], n), rng.uniform(lo[1], hi[1], n), np.full(n, FLOOR_M)])
+    frame, feature, us, vs = [], [], [], []
+    for k in range(len(t)):
+        u, v = project(cam, R_true[k], cam_ned[k], surface_crossing(np.broadcast_to(cam_ned[k], points.shape), points,
+                                                                    N_WATER))
+        seen = np.flatnonzero(np.isfinite(u) & cam.contains(u, v, 4.0))
+        frame += [k] * len(seen)
+        feature += list(seen)
+        us += list(u[seen] + rng.normal(0.0, 0.3, len(seen)))
+        vs += list(v[seen] + rng.normal(0.0, 0.3, len(seen)))
+    _, feature = np.unique(feature, return_inverse=True)
+    error_ne = np.zeros_like(ne) if walk is None else walk(t)
+    poses = bottom.FramePoses(t, R_reported, ne + error_ne, height, bottom.camera_heading_rad(R_reported),
+                              velocity)
+    obs = bottom.Observations(np.array(frame), feature, np.array(us), np.array(vs))
+    lens = Camera(width=cam.width, height=cam.height, fx=cam.fx, fy=cam.fy, cx=cam.cx, cy=cam.cy,
+                  distortion=cam.distortion)
+    return lens, poses, obs, error_ne
+
+
+def test_moving_drone_recovers_the_biases_and_the_floor():
+    lens, poses, obs, _ = _session(speed_mps=1.2)
+    est = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.003))
+    assert est.estimated and est.tilt_estimated and est.yaw_estimated
+    # a wrong sign (±0.5°, ±4°) or a tilt about the wrong axes (0.39° apart) fails these
+    assert np.degrees(est.tilt_rad) == pytest.approx(TILT_DEG, abs=0.06)
+    assert np.degrees(est.yaw_rad) == pytest.approx(YAW_DEG, abs=0.5)
+    assert est.floor_depth_m == pytest.approx(FLOOR_M, abs=0.2)
+    assert np.degrees(est.sigma_tilt_rad) < 0.06 and np.degrees(est.sigma_yaw_rad) < 0.5
+    assert est.rms_px < 0.5
+    # the correction turns the reported attitude back into the true one
+    R_true = est.correction(poses.bias_heading_rad) @ poses.R_ned_from_cv
+    residual = Rotation.from_matrix(R_true @ np.swapaxes(poses.R_ned_from_cv, 1, 2)).as_rotvec()
+    assert np.degrees(np.abs(residual[:, 2])) == pytest.approx(YAW_DEG, abs=0.5)
+
+
+def test_plain_gnss_walk_is_found_about_its_mean():
+    def walk(t):
+        return np.column_stack([0.25 * np.sin(t / 5.0) + 0.02 * t, -0.15 * np.cos(t / 4.0)])
+
+    lens, poses, obs, error_ne = _session(speed_mps=1.2, walk=walk)
+    est = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.02))
+    # true = reported + w: w is minus the reported position's error, about its mean
+    expected = -(error_ne - error_ne.mean(axis=0))
+    found = est.walk_at(poses.t_s)
+    assert np.max(np.abs(found - expected)) < 0.04 < np.max(np.abs(expected))
+    assert np.degrees(est.yaw_rad) == pytest.approx(YAW_DEG, abs=0.5)
+
+
+def test_hovering_drone_does_not_claim_the_biases():
+    lens, poses, obs, _ = _session(speed_mps=0.0)
+    est = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.003))
+    assert est.slide_share < bottom.MIN_SLIDE_SHARE
+    assert not est.estimated
+    assert "not observable" in est.describe()
