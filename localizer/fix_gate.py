@@ -71,7 +71,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .fix import Fix
+from .fix import Fix, Fixes
 from .geodesy import geodetic_to_ned, ned_to_geodetic
 from .thrusters import STALE_S, Thrusters, idle_accel_mps2
 from .uuv_track import Scatter, UuvTrack, fix_covariance_m2
@@ -113,6 +113,32 @@ class _Seen:
     t: float
     z: np.ndarray  # north, east (m)
     C: np.ndarray  # its covariance (m²)
+
+
+def gate_offline(fixes: Fixes, lost: np.ndarray, gate: FixGate) -> np.ndarray:
+    """The gate over a whole recording, where no vehicle waits: what it says of each frame's fix, with the fixes
+    that the frames after them confirmed taken (an object array: None for a fix taken, the reason for one
+    refused, "" for a frame without a fix).
+
+    The fixes go through ``gate`` in time order, each offered at its own exposure (no age); ``lost``: the frames
+    whose tracker lost the target (a re-acquisition follows). Live, a new or re-acquired target's fixes are
+    ``unconfirmed`` until its chain is :data:`CONFIRM_S` long; offline the chain that the confirmation makes the
+    track is taken whole, its first fixes included. Fixes left out of a chain (they disagreed with it), and every
+    other refusal, stay refused.
+    """
+    word = np.full(len(fixes), "", dtype=object)
+    at = {}
+    for i in np.argsort(fixes.t_unix, kind="stable"):
+        if lost[i]:
+            gate.target_lost()
+        if fixes.status[i] != "ok":
+            continue
+        at[float(fixes.t_unix[i])] = i
+        word[i] = gate.check(fixes[i], float(fixes.t_unix[i]))
+        if gate.confirmed_t:
+            word[[at[t] for t in gate.confirmed_t]] = None
+            gate.confirmed_t = ()
+    return word
 
 
 def in_window(fix: Fix, window) -> bool:
@@ -158,6 +184,7 @@ class FixGate:
         self._diverged_until = -math.inf
         self._last_t = -math.inf
         self._new_lock = True  # the next ok fix is the first of the tracker's lock (after a loss)
+        self.confirmed_t: tuple[float, ...] = ()  # the exposures of the chain the last confirmation made the track
         self.accepted = 0
         self.rejected: Counter[str] = Counter()
         self.last_refusal: str | None = None
@@ -272,6 +299,7 @@ class FixGate:
             track, failed = self._replay(self._chain, self.scatter.share)
             if failed is None:
                 self.track = track
+                self.confirmed_t = tuple(s.t for s in self._chain)
                 self._enter("tracking", f.t)
                 return None
             self._chain = self._chain[failed:]

@@ -97,8 +97,9 @@ class Scatter:
     times its median, 6.6 for a Gaussian), and the gates must cover the tail.
     """
 
-    def __init__(self):
-        self._q: deque[float] = deque(maxlen=SCATTER_KEEP)
+    def __init__(self, keep: int = SCATTER_KEEP):
+        """``keep``: how many second differences the share is the mean of (offline: all of a recording's)."""
+        self._q: deque[float] = deque(maxlen=keep)
         self._last: deque[tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=SCATTER_FIXES)
 
     def add(self, t: float, z: np.ndarray, C: np.ndarray) -> None:
@@ -165,9 +166,13 @@ class UuvTrack:
         (``accel_mps2``: the bound over this step, if not :attr:`max_accel_mps2`)."""
         a = self.max_accel_mps2 if accel_mps2 is None else accel_mps2
         dt = max(0.0, t - self.t)
-        F = np.eye(4)
-        F[0, 2] = F[1, 3] = dt
+        F = transition(dt)
         return F @ self.x, F @ self.P @ F.T + _process_noise(a, dt)
+
+    def coast(self, t: float) -> None:
+        """Move on to ``t`` without a fix (the prediction becomes the state)."""
+        self.x, self.P = self.predict(t)
+        self.t = max(self.t, t)
 
     def update(self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None) -> None:
         """Take the fix ``z`` (covariance ``C``) at ``t``; the velocity is held within the top speed."""
@@ -199,8 +204,7 @@ class UuvTrack:
         """
         a = self.max_accel_mps2 if accel_mps2 is None else accel_mps2
         dt = max(0.0, t - self.t)
-        F = np.eye(4)
-        F[0, 2] = F[1, 3] = dt
+        F = transition(dt)
         extra = self.white_m2(C, share) + common_change_m2(C, dt)
         moved_on, P_moved = (F @ self.x)[:2], (F @ self.P @ F.T)[:2, :2]
         return max(_beyond(z - self.x[:2], self.max_speed_mps * dt, self.P[:2, :2] + extra),
@@ -218,6 +222,13 @@ class UuvTrack:
     def absolute_m2(self) -> np.ndarray:
         """The position's covariance against the truth (m²): the track's own plus the common error."""
         return self.P[:2, :2] + self.common
+
+
+def transition(dt: float) -> np.ndarray:
+    """The state's (north, east, v_north, v_east) constant-velocity transition over ``dt`` seconds (4×4)."""
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = dt
+    return F
 
 
 def _process_noise(accel_mps2: float, dt: float) -> np.ndarray:

@@ -5,9 +5,12 @@ and with the paper's straight ray, and each method's fixes are scored against
 the truth interpolated at the fix times. Horizontal error is the distance in the
 local tangent plane (:func:`localizer.geodesy.horizontal_error_m`). Per method:
 MAE, RMSE, p95 and max of the horizontal error (metres) over frames with a fix;
-coverage = frames with a fix / frames; ``in 2σ`` = share of fixes whose error is
-within twice their reported ``h_acc_m``. Writes, per session,
-``DIR/<session>/<method>/positions.csv`` and the plots of :mod:`groundstation.offline.plots`
+the shape's MAE (``shape``: the MAE once the best constant offset is taken out, the
+geometric median of the error vectors: what a track's form is worth when its place is
+off by a bias); coverage = frames with a fix / frames; ``in 2σ`` = share of fixes whose
+error is within twice their reported ``h_acc_m``; and the same (``smoothed_*``) for the
+smoothed offline track (:mod:`groundstation.offline.smoothed`). Writes, per session,
+``DIR/<session>/<method>/positions.csv`` and ``positions_smoothed.csv``, the plots of :mod:`groundstation.offline.plots`
 (``top_view.png``, ``timeline.png``, ``status.png``: both methods against the truth),
 and ``DIR/evaluation.csv``. A session of several UUVs is scored once per UUV against that UUV's own truth
 (``uuvs/<id>/truth.csv``), in ``DIR/<session>/<id>/``.
@@ -17,7 +20,7 @@ from __future__ import annotations
 
 import csv
 import sys
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,17 +30,21 @@ from groundstation.offline.process import (
     add_motion_offset_flag,
     add_size_argument,
     add_uuv_argument,
+    add_uuv_bounds,
     frame_pixels,
     locate_frames,
     print_warnings,
     size_of,
 )
+from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
+from groundstation.offline.smoothed import offline_track, write_smoothed_csv
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
 from groundstation.session.read import PRIMARY_UUV, SessionError, load_session, uuv_files, uuv_ids
 from localizer.calibration import ConfigError
 from localizer.fix import Fixes
-from localizer.geodesy import horizontal_error_m
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
+from localizer.geodesy import geodetic_to_ned
 from localizer.tracking import TRACKERS
 
 METHODS = (("refraction", True), ("straight", False))
@@ -45,7 +52,8 @@ METHODS = (("refraction", True), ("straight", False))
 
 @dataclass(frozen=True)
 class Scores:
-    """One method on one session. Errors in metres; NaN when there is no fix at all."""
+    """One method on one session. Errors in metres; NaN when there is no fix at all (or, ``smoothed_*``, when the
+    smoothed track was not scored)."""
 
     frames: int
     fixes: int
@@ -55,6 +63,17 @@ class Scores:
     p95_m: float
     max_m: float
     within_2sigma: float
+    shape_m: float = float("nan")
+    smoothed_fixes: int = 0
+    smoothed_coverage: float = float("nan")
+    smoothed_mae_m: float = float("nan")
+    smoothed_shape_m: float = float("nan")
+    smoothed_within_2sigma: float = float("nan")
+
+    def with_smoothed(self, sm: Scores) -> Scores:
+        """These scores with ``sm``'s (the smoothed track's) as ``smoothed_*``."""
+        return replace(self, smoothed_fixes=sm.fixes, smoothed_coverage=sm.coverage, smoothed_mae_m=sm.mae_m,
+                       smoothed_shape_m=sm.shape_m, smoothed_within_2sigma=sm.within_2sigma)
 
 
 def truth_at(truth: dict, t_unix) -> tuple[np.ndarray, np.ndarray]:
@@ -68,15 +87,38 @@ def truth_at(truth: dict, t_unix) -> tuple[np.ndarray, np.ndarray]:
 
 def errors_m(fixes: Fixes, truth: dict) -> np.ndarray:
     """Horizontal error (m) of each fix against the truth; NaN where there is no fix or no truth."""
-    lat, lon = truth_at(truth, fixes.t_unix)
-    ok = (fixes.status == "ok") & np.isfinite(lat)
-    err = np.full(len(fixes), np.nan)
-    err[ok] = horizontal_error_m(fixes.lat[ok], fixes.lon[ok], lat[ok], lon[ok])
+    return np.hypot(*error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, fixes.status == "ok", truth).T)
+
+
+def error_ne_m(t_unix, lat, lon, ok, truth: dict) -> np.ndarray:
+    """N×2 north and east error (m) of positions against the truth (the local tangent plane at the truth); NaN
+    rows where not ``ok`` or no truth."""
+    lat_t, lon_t = truth_at(truth, t_unix)
+    ok = np.asarray(ok, bool) & np.isfinite(lat_t)
+    err = np.full((len(ok), 2), np.nan)
+    n, e, _ = geodetic_to_ned(lat[ok], lon[ok], 0.0, lat_t[ok], lon_t[ok], 0.0)
+    err[ok, 0], err[ok, 1] = n, e
     return err
 
 
-def score(err_m: np.ndarray, h_acc_m: np.ndarray, frames: int) -> Scores:
-    """Table numbers from per-fix errors (NaN = no fix) and the fixes' reported 1-sigma accuracy."""
+def shape_m(err_ne_m: np.ndarray) -> float:
+    """MAE (m) of N×2 error vectors (NaN rows left out) once the constant offset that minimises it is taken out:
+    their geometric median (Weiszfeld's iteration from the mean). NaN without any."""
+    e = err_ne_m[np.all(np.isfinite(err_ne_m), axis=1)]
+    if not len(e):
+        return float("nan")
+    c = e.mean(axis=0)
+    for _ in range(200):
+        w = 1.0 / np.maximum(np.hypot(*(e - c).T), 1e-12)
+        c, before = (e * w[:, None]).sum(axis=0) / w.sum(), c
+        if np.hypot(*(c - before)) < 1e-9:
+            break
+    return float(np.mean(np.hypot(*(e - c).T)))
+
+
+def score(err_m: np.ndarray, h_acc_m: np.ndarray, frames: int, err_ne_m: np.ndarray | None = None) -> Scores:
+    """Table numbers from per-fix errors (NaN = no fix) and the fixes' reported 1-sigma accuracy; the shape's MAE
+    from the error vectors ``err_ne_m`` (N×2), when given."""
     ok = np.isfinite(err_m)
     e = err_m[ok]
     if len(e) == 0:
@@ -91,17 +133,21 @@ def score(err_m: np.ndarray, h_acc_m: np.ndarray, frames: int) -> Scores:
         p95_m=float(np.percentile(e, 95)),
         max_m=float(np.max(e)),
         within_2sigma=float(np.mean(e <= 2.0 * h_acc_m[ok])),
+        shape_m=shape_m(err_ne_m) if err_ne_m is not None else float("nan"),
     )
 
 
-HEADER = ("session", "method", "fixes", "coverage", "MAE m", "RMSE m", "p95 m", "max m", "in 2σ")
+HEADER = ("session", "method", "fixes", "coverage", "MAE m", "shape m", "RMSE m", "p95 m", "max m", "in 2σ",
+          "smoothed", "MAE m", "shape m", "in 2σ")
 
 
 def table_rows(results: list[tuple[str, str, Scores]]) -> list[tuple[str, ...]]:
-    """Formatted cells of the table, one row per (session, method)."""
+    """Formatted cells of the table, one row per (session, method); the smoothed track's last."""
     return [
-        (name, method, f"{s.fixes}/{s.frames}", f"{s.coverage:.1%}", f"{s.mae_m:.4f}", f"{s.rmse_m:.4f}",
-         f"{s.p95_m:.4f}", f"{s.max_m:.4f}", f"{s.within_2sigma:.1%}")
+        (name, method, f"{s.fixes}/{s.frames}", f"{s.coverage:.1%}", f"{s.mae_m:.4f}", f"{s.shape_m:.4f}",
+         f"{s.rmse_m:.4f}", f"{s.p95_m:.4f}", f"{s.max_m:.4f}", f"{s.within_2sigma:.1%}",
+         f"{s.smoothed_fixes}/{s.frames}", f"{s.smoothed_mae_m:.4f}", f"{s.smoothed_shape_m:.4f}",
+         f"{s.smoothed_within_2sigma:.1%}")
         for name, method, s in results
     ]
 
@@ -116,22 +162,24 @@ def format_table(results: list[tuple[str, str, Scores]]) -> str:
 
 
 def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False,
-                     motion: bool = True, height_from_size: str = "check", uuv: str | None = None):
+                     motion: bool = True, height_from_size: str = "check", uuv: str | None = None,
+                     bounds: tuple[float, float] = (MAX_SPEED_MPS["bluerov2"], MAX_ACCEL_MPS2["bluerov2"])):
     """Score both methods on one session, on each of its UUVs (or on ``uuv`` alone); returns
     ``[(name, method, Scores), ...]`` and writes outputs (the height from the UUV's size: its summary line on
-    stderr). A session of one UUV is named by its folder, each UUV of a session of several ``<folder>/<id>``."""
+    stderr). A session of one UUV is named by its folder, each UUV of a session of several ``<folder>/<id>``.
+    ``bounds``: the UUV's top speed (m/s) and acceleration (m/s²), for the smoothed track."""
     ids = uuv_ids(path) if uuv is None else (uuv,)
     folder = Path(path).resolve().name
     results = []
     for uuv_id in ids:
         name = folder if len(ids) == 1 and uuv_id == PRIMARY_UUV else f"{folder}/{uuv_id}"
         results.extend(_evaluate_uuv(load_session(path, uuv_id), name, out_dir, use_track, tracker, progress,
-                                     motion, height_from_size))
+                                     motion, height_from_size, bounds))
     return results
 
 
 def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: str, progress: bool, motion: bool,
-                  height_from_size: str):
+                  height_from_size: str, bounds: tuple[float, float]):
     if session.truth is None or len(session.truth["t"]) == 0:
         raise SessionError(f"{uuv_files(session.path, session.uuv_id).truth}: missing (evaluate needs ground truth)")
     from_track = use_track or session.video_path is None
@@ -152,9 +200,15 @@ def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: s
         print_warnings(session)
         (sess_dir / method).mkdir(parents=True, exist_ok=True)
         write_positions_csv(sess_dir / method / "positions.csv", fixes)
-        err = errors_m(fixes, session.truth)
+        err_ne = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, fixes.status == "ok", session.truth)
+        err = np.hypot(*err_ne.T)
         runs[method] = (fixes, err)
-        results.append((name, method, score(err, fixes.h_acc_m, frames or len(fixes))))
+        smoothed, status = offline_track(fixes, *bounds)
+        write_smoothed_csv(sess_dir / method / SMOOTHED_NAME, fixes, smoothed, status)
+        sm_ne = error_ne_m(fixes.t_unix, smoothed.lat, smoothed.lon, smoothed.ok, session.truth)
+        n = frames or len(fixes)
+        results.append((name, method, score(err, fixes.h_acc_m, n, err_ne).with_smoothed(
+            score(np.hypot(*sm_ne.T), smoothed.h_acc_m, n, sm_ne))))
     write_plots(sess_dir, name, {m: f for m, (f, _) in runs.items()}, session.truth,
                 {m: e for m, (_, e) in runs.items()})
     return results
@@ -176,7 +230,8 @@ def run(args) -> int:
         try:
             results.extend(evaluate_session(path, out, use_track=args.use_track, tracker=args.tracker,
                                             progress=not args.quiet, motion=not args.no_motion_offset,
-                                            height_from_size=args.height_from_size, uuv=args.uuv))
+                                            height_from_size=args.height_from_size, uuv=args.uuv,
+                                            bounds=(args.uuv_max_speed_mps, args.uuv_max_accel_mps2)))
         except (SessionError, ConfigError) as e:
             print(f"skyfix evaluate: error: {e}", file=sys.stderr)
             failed += 1
@@ -198,6 +253,7 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     add_size_argument(p)
     add_uuv_argument(p, "evaluate this UUV of each session only (default: every UUV, each against its own truth)",
                      default=None)
+    add_uuv_bounds(p)
     p.add_argument("--quiet", action="store_true", help="no progress output")
     add_motion_offset_flag(p)
     p.set_defaults(func=run)

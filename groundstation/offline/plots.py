@@ -35,6 +35,7 @@ CAUSES = {
                               "stale_gimbal", "no_depth", "stale_depth", "bad_time")),
     "geometry": ("#ff7f0e", ("bad_pixel", "no_water", "below_surface")),
     "fusion": ("#17becf", ("disagree",)),
+    "gates": ("#e377c2", ("refused",)),
 }
 OK_COLOUR = "#2ca02c"
 METHOD_COLOURS = ("tab:blue", "tab:orange", "tab:purple", "tab:brown")

@@ -1,4 +1,5 @@
-"""``skyfix process``: a recorded session in, ``positions.csv`` out.
+"""``skyfix process``: a recorded session in, ``positions.csv`` out (each frame's fix as live, causal), and beside it
+``positions_smoothed.csv`` (the fixes smoothed over the whole recording: :mod:`groundstation.offline.smoothed`).
 
 A session with several UUVs (``uuvs/<id>/``) is processed as one UUV's (``--uuv``): its depth, its first box
 and its ``track.csv``; the UAV's telemetry and the video are shared.
@@ -31,10 +32,14 @@ import numpy as np
 from groundstation.height_from_size import MODES as SIZE_MODES
 from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.estimate import offset_from_rotations
+from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
+from groundstation.offline.smoothed import offline_track, write_smoothed_csv
+from groundstation.offline.smoothed import summary as smoothed_summary
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
 from localizer.fix import Fixes, locate
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
 from localizer.height import take_notices
 from localizer.pose import camera_pose
 from localizer.tracking import TRACKERS
@@ -166,6 +171,9 @@ def run(args) -> int:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
+    smoothed, status = offline_track(fixes, args.uuv_max_speed_mps, args.uuv_max_accel_mps2)
+    write_smoothed_csv(out / SMOOTHED_NAME, fixes, smoothed, status)
+    print(f"{smoothed_summary(status, smoothed)} -> {out / SMOOTHED_NAME}")
     if size is not None:
         print(size.summary())
     return 0
@@ -175,8 +183,9 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(name, help=help)
     p.add_argument("session", help="session directory (format v1)")
-    p.add_argument("--out", required=True, help="output directory for positions.csv")
+    p.add_argument("--out", required=True, help="output directory for positions.csv and positions_smoothed.csv")
     add_uuv_argument(p, "the UUV to locate: its depth, first box and track (default: %(default)s, the session's own)")
+    add_uuv_bounds(p)
     p.add_argument("--use-track", action="store_true", help="take the UUV pixels from track.csv (no tracker)")
     p.add_argument("--no-refraction", action="store_true", help="the paper's straight ray (no Snell refraction)")
     p.add_argument("--tracker", default="default", choices=TRACKERS,
@@ -189,6 +198,14 @@ def register(subparsers, name: str, help: str | None = None) -> None:
 
 def add_uuv_argument(p, text: str, default: str | None = PRIMARY_UUV) -> None:
     p.add_argument("--uuv", default=default, metavar="ID", help=text)
+
+
+def add_uuv_bounds(p) -> None:
+    """The UUV's top speed and acceleration: the bounds of the smoothed track's model (as the live gates')."""
+    p.add_argument("--uuv-max-speed-mps", metavar="MPS", type=float, default=MAX_SPEED_MPS["bluerov2"],
+                   help="the UUV's top speed, for the smoothed track (default: a BlueROV2's, %(default)g)")
+    p.add_argument("--uuv-max-accel-mps2", metavar="MPS2", type=float, default=MAX_ACCEL_MPS2["bluerov2"],
+                   help="the UUV's largest acceleration, for the smoothed track (default %(default)g)")
 
 
 def add_motion_offset_flag(p) -> None:

@@ -57,13 +57,17 @@ def format_row(fix) -> list[str]:
 
 def write_positions_csv(path: Path, fixes: Fixes) -> None:
     """Write all fixes atomically (temporary file, then rename)."""
+    write_table(path, COLUMNS, (format_row(fixes[i]) for i in range(len(fixes))))
+
+
+def write_table(path: Path, header, rows) -> None:
+    """A CSV of ``header`` and ``rows`` written atomically (a temporary file, then renamed)."""
     path = Path(path)
     tmp = path.with_name(path.name + ".partial")
     with open(tmp, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(COLUMNS)
-        for i in range(len(fixes)):
-            w.writerow(format_row(fixes[i]))
+        w.writerow(header)
+        w.writerows(rows)
     os.replace(tmp, path)
 
 

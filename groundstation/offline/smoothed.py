@@ -1,0 +1,70 @@
+"""``positions_smoothed.csv``: the offline track, written beside ``positions.csv`` by ``process`` and ``evaluate``.
+
+``positions.csv`` is what a live run would have sent, frame by frame (causal). Offline the
+whole recording is there: the fixes go through the safety gates
+(:func:`localizer.fix_gate.gate_offline`: a fix off the UUV's track or a target never
+confirmed is left out; a re-acquired target's first second is confirmed by the fixes after
+it), and the ones taken are smoothed forward and backward
+(:func:`localizer.smooth.smooth_fixes`), gaps bridged while the smoothed position's own
+1-sigma stays within :data:`localizer.smooth.BRIDGE_SIGMA_M`.
+
+Columns: ``positions.csv``'s first six (``t,lat,lon,depth_m,h_acc_m,status``), so
+``report`` and ``export`` read it as they read positions.csv, then ``sigma_n_m,
+sigma_e_m,cov_ne_m2`` (against the truth: the smoothed part plus the error the fixes
+share), ``sigma_shared_m`` (that shared part's DRMS: the floor no smoothing goes below),
+``vn_mps,ve_mps`` (the smoothed velocity) and ``gap_s`` (0 at a frame with its own fix;
+the time between the fixes around a bridged frame). ``status``: ``ok`` where there is a
+smoothed position; else the frame's own word from positions.csv, or ``refused`` for a
+fix the gates refused that no fixes around it bridge.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from groundstation.live.sinks.gps_input import LOSS_STATUSES
+from groundstation.session.positions import write_table
+from localizer.fix import Fixes
+from localizer.fix_gate import FixGate, gate_offline
+from localizer.smooth import Smoothed, smooth_fixes
+
+NAME = "positions_smoothed.csv"
+COLUMNS = ("t", "lat", "lon", "depth_m", "h_acc_m", "status", "sigma_n_m", "sigma_e_m", "cov_ne_m2",
+           "sigma_shared_m", "vn_mps", "ve_mps", "gap_s")
+
+
+def offline_track(fixes: Fixes, max_speed_mps: float, max_accel_mps2: float) -> tuple[Smoothed, np.ndarray]:
+    """The smoothed track of a recording's fixes and its status word per frame (see the module doc)."""
+    gate = FixGate(max_speed_mps, max_accel_mps2, max_h_acc_m=math.inf, max_age_s=math.inf)
+    words = gate_offline(fixes, np.isin(fixes.status, LOSS_STATUSES), gate)
+    taken = np.array([w is None for w in words], dtype=bool)
+    smoothed = smooth_fixes(fixes, taken, max_speed_mps, max_accel_mps2)
+    status = np.where(smoothed.ok, "ok", np.where(fixes.status == "ok", "refused", fixes.status)).astype(object)
+    return smoothed, status
+
+
+def write_smoothed_csv(path: Path, fixes: Fixes, smoothed: Smoothed, status: np.ndarray) -> None:
+    """The table of the module doc, one row per frame of ``fixes``."""
+    cov, shared = smoothed.cov_m2, smoothed.cov_shared_m2
+    columns = (fixes.t_unix, smoothed.lat, smoothed.lon, fixes.depth_m, smoothed.h_acc_m, status,
+               np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1]), cov[:, 0, 1], np.sqrt(shared[:, 0, 0] + shared[:, 1, 1]),
+               smoothed.vn_mps, smoothed.ve_mps, smoothed.gap_s)
+    digits = (6, 9, 9, 4, 4, None, 4, 4, 6, 4, 4, 4, 3)
+    write_table(path, COLUMNS, ([_cell(v, d) for v, d in zip(row, digits)] for row in zip(*columns)))
+
+
+def _cell(value, digits: int | None) -> str:
+    if digits is None:
+        return str(value)
+    return f"{value:.{digits}f}" if math.isfinite(value) else ""
+
+
+def summary(status: np.ndarray, smoothed: Smoothed) -> str:
+    """One line: how many frames have a smoothed position, how many of them bridged, the white share."""
+    bridged = int(np.sum(smoothed.ok & (smoothed.gap_s > 0)))
+    return (f"smoothed: {int(smoothed.ok.sum())} of {len(status)} frames ({bridged} bridged), "
+            f"{int(np.sum(status == 'refused'))} fixes refused; frame-to-frame share of the fixes' covariance "
+            f"{smoothed.white_share:.3f}")

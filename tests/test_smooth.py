@@ -1,0 +1,215 @@
+"""The smoothed offline track (localizer/smooth.py) and the gates over a whole recording (fix_gate.gate_offline).
+
+The smoother is checked against an independent batch least-squares solution of the same
+linear-Gaussian model (the initial state and every step's white acceleration as the unknowns),
+on fixes whose truth is known: a constant-velocity UUV with white noise, a bias every fix
+shares, gaps short and long. The offline gates on a bundled occlusion session, tracked by the
+real pipeline: what the live gates hold back for a second after the re-acquisition is taken.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from groundstation.cli import main
+from groundstation.live.sinks.gps_input import LOSS_STATUSES
+from groundstation.offline.evaluate import shape_m
+from groundstation.offline.process import process_session
+from groundstation.offline.smoothed import COLUMNS, offline_track
+from groundstation.session.positions import read_positions_csv
+from groundstation.session.read import load_session, read_table
+from localizer.fix import Fixes
+from localizer.fix_gate import CONFIRM_S, FixGate, gate_offline
+from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
+from localizer.smooth import BRIDGE_SIGMA_M, smooth_fixes
+from localizer.uuv_track import PROCESS_ACCEL_SHARE, WHITE_FLOOR_M
+from sim_fixtures.bundle import BUNDLED_DIR
+
+V, A = 1.5, 3.0  # a BlueROV2's bounds
+FPS = 30.0
+LAT0, LON0 = 63.44, 10.40
+
+
+def fixes_of(t, n_m, e_m, sigma_m, status=None) -> Fixes:
+    """Fixes at local north/east (m) with a claimed isotropic 1-sigma per axis."""
+    status = np.full(len(t), "ok", dtype=object) if status is None else status
+    lat, lon, _ = ned_to_geodetic(n_m, e_m, 0.0, LAT0, LON0, 0.0)
+    lat, lon = np.where(status == "ok", lat, np.nan), np.where(status == "ok", lon, np.nan)
+    s = np.full(len(t), float(sigma_m))
+    return Fixes.of(t, status, lat=lat, lon=lon, sigma_n_m=s, sigma_e_m=s, cov_ne_m2=np.zeros(len(t)),
+                    h_acc_m=s * math.sqrt(2.0), depth_m=np.full(len(t), 1.5))
+
+
+def local(lat, lon):
+    n, e, _ = geodetic_to_ned(lat, lon, 0.0, LAT0, LON0, 0.0)
+    return np.stack([n, e], axis=1)
+
+
+def line(seconds: float, seed: int, sigma_m: float, v_ne=(0.2, -0.1)):
+    """A UUV at constant velocity, its fixes with white noise of ``sigma_m`` per axis."""
+    rng = np.random.default_rng(seed)
+    t = 1.7e9 + np.arange(int(seconds * FPS)) / FPS
+    truth = np.outer(t - t[0], v_ne)
+    return t, truth, truth + rng.normal(0.0, sigma_m, truth.shape)
+
+
+def batch(t, z, taken, R_m2: float, P0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Posterior means (N×2) and covariances (N×2×2) of the positions, by least squares over the initial state
+    and each step's white acceleration (1-sigma PROCESS_ACCEL_SHARE·A), written out from the model, not the
+    filter: x_k = F x_{k-1} + Γ w_k, Γ = σ_a (Δ²/2, Δ); the first fix is the prior's position. Third: the
+    covariance (N×2×2) of the estimate's error per unit variance of white noise on the fixes, when the truth has
+    no acceleration (the estimate is linear in the fixes: Σ_j L_kj L_kjᵀ)."""
+    n = len(t)
+    sa = PROCESS_ACCEL_SHARE * A
+    dim = 4 + 2 * (n - 1)
+    M = np.zeros((n, 4, dim))
+    M[0, :, :4] = np.eye(4)
+    for k in range(1, n):
+        d = t[k] - t[k - 1]
+        F = np.eye(4)
+        F[0, 2] = F[1, 3] = d
+        M[k] = F @ M[k - 1]
+        M[k, :, 4 + 2 * (k - 1):4 + 2 * k] = sa * np.vstack([np.eye(2) * d * d / 2, np.eye(2) * d])
+    pos = M[:, :2]
+    used = pos[np.flatnonzero(taken)].reshape(-1, dim)
+    data = used.T @ used / R_m2  # Σ Hᵀ R⁻¹ H over the fixes (the first: the prior's)
+    prior_info = np.zeros((dim, dim))
+    prior_info[:4, :4] = np.linalg.inv(P0)
+    prior_info[:2, :2] = 0.0  # the prior's position is the first fix, counted in data
+    prior_info[4:, 4:] = np.eye(dim - 4)
+    cov = np.linalg.inv(prior_info + data)
+    mean = cov @ (used.T @ z[np.flatnonzero(taken)].ravel()) / R_m2
+    gain = (pos.reshape(-1, dim) @ cov).reshape(n, 2, dim)
+    spread = (gain.reshape(-1, dim) @ (data / R_m2)).reshape(n, 2, dim)
+    return pos @ mean, np.einsum("kij,kmj->kim", gain, pos), np.einsum("kij,kmj->kim", spread, gain)
+
+
+def test_the_smoother_is_the_batch_least_squares_of_its_model():
+    t, _, z = line(4.0, 1, 0.02)
+    status = np.full(len(t), "ok", dtype=object)
+    status[(t - t[0] > 1.5) & (t - t[0] < 2.2)] = "lost"  # a gap in the middle
+    sm = smooth_fixes(fixes_of(t, z[:, 0], z[:, 1], 0.02, status), status == "ok", V, A, bridge_sigma_m=1.0)
+    R = sm.white_share * 0.02**2 + WHITE_FLOOR_M**2
+    P0 = np.diag([R, R, V * V, V * V])
+    mean, cov, _ = batch(t, z - z[0], status == "ok", R, P0)
+    assert sm.ok.all()
+    assert np.abs(local(sm.lat, sm.lon) - (mean + z[0])).max() < 1e-6
+    assert np.allclose(sm.cov_own_m2, cov, rtol=1e-6, atol=1e-12)
+
+
+def test_white_noise_is_averaged_by_the_expected_factor_and_covered():
+    sigma = 0.02
+    t, truth, z = line(20.0, 2, sigma)
+    sm = smooth_fixes(fixes_of(t, z[:, 0], z[:, 1], sigma), np.ones(len(t), bool), V, A)
+    err = local(sm.lat, sm.lon) - truth
+    R = sm.white_share * sigma**2 + WHITE_FLOOR_M**2
+    _, _, noise = batch(t, z, np.ones(len(t), bool), R, np.diag([R, R, V * V, V * V]))
+    rms_raw = math.sqrt(np.mean(np.sum((z - truth) ** 2, axis=1)))
+    rms = math.sqrt(np.mean(np.sum(err**2, axis=1)))
+    expected = sigma * math.sqrt(np.mean(noise[:, 0, 0] + noise[:, 1, 1]))
+    assert rms < 0.5 * rms_raw  # 0.0068 m against 0.028 m
+    assert 0.85 < rms / expected < 1.15
+    assert sm.white_share > 0.5  # white noise as large as claimed: most of the claim changes frame to frame
+    assert rms < math.sqrt(np.mean(sm.cov_own_m2[:, 0, 0] + sm.cov_own_m2[:, 1, 1]))  # the claim allows accelerations
+    assert np.mean(np.hypot(*err.T) <= 2.0 * sm.h_acc_m) > 0.9
+
+
+def test_a_shared_error_stays_in_the_smoothed_track_and_its_sigma():
+    """A bias every fix shares (0.3 m north, 0.2 m west) under a claim of 0.25 m per axis, with 1 cm of white noise:
+    smoothing takes out the noise, not the bias, and the smoothed claim keeps covering it."""
+    t, truth, z = line(10.0, 3, 0.01)
+    offset = np.array([0.3, -0.2])
+    fx = fixes_of(t, z[:, 0] + offset[0], z[:, 1] + offset[1], 0.25)
+    sm = smooth_fixes(fx, np.ones(len(t), bool), V, A)
+    err = local(sm.lat, sm.lon) - truth
+    assert np.abs(err.mean(axis=0) - offset).max() < 0.005
+    assert sm.white_share < 0.01  # the claim's frame-to-frame share: 1 cm of 25 cm
+    assert np.all(np.hypot(*err.T) <= 2.0 * sm.h_acc_m)
+    assert np.all(sm.h_acc_m > 0.99 * fx.h_acc_m * math.sqrt(1.0 - sm.white_share))
+    assert shape_m(err) < 0.004 < shape_m(z - truth)  # the track's form is sharpened, its place is not
+
+
+def test_gaps_are_bridged_within_the_bound_and_beyond_it_have_no_position():
+    t, truth, z = line(10.0, 4, 0.02)
+    rel = t - t[0]
+    status = np.full(len(t), "ok", dtype=object)
+    short, long_ = (rel > 2.0) & (rel < 2.4), (rel > 5.0) & (rel < 8.0)
+    status[short | long_] = "lost"
+    status[rel < 0.5] = "awaiting_target"
+    fx = fixes_of(t, z[:, 0], z[:, 1], 0.02, status)
+    sm, words = offline_track(fx, V, A)
+    err = np.hypot(*(local(sm.lat, sm.lon) - truth).T)
+    assert sm.ok[short].all() and np.all(err[short] <= 2.0 * sm.h_acc_m[short])
+    assert np.all(sm.gap_s[short] == pytest.approx(rel[short][-1] - rel[short][0] + 2 / FPS))
+    middle = long_ & (np.abs(rel - 6.5) < 0.5)
+    assert not sm.ok[middle].any() and np.isnan(sm.lat[middle]).all() and set(words[middle]) == {"lost"}
+    ends = long_ & sm.ok  # the gap's first and last frames are bridged, within the bound
+    assert ends.sum() > 10 and np.all(np.linalg.eigvalsh(sm.cov_own_m2[ends])[:, -1] <= BRIDGE_SIGMA_M**2)
+    assert np.all(err[ends] <= 2.0 * sm.h_acc_m[ends])
+    assert not sm.ok[rel < 0.5].any() and set(words[rel < 0.5]) == {"awaiting_target"}
+
+
+def test_fixes_off_the_track_are_refused_offline_and_bridged_over():
+    """Ten frames on a look-alike 2 m away: the offline gates refuse them, the smoothed track stays on the UUV."""
+    t, truth, z = line(6.0, 5, 0.01)
+    away = (t - t[0] > 3.0) & (t - t[0] < 3.0 + 10 / FPS)
+    z[away] += [2.0, 0.0]
+    sm, _ = offline_track(fixes_of(t, z[:, 0], z[:, 1], 0.02), V, A)
+    err = np.hypot(*(local(sm.lat, sm.lon) - truth).T)
+    assert sm.ok[away].all() and np.all(sm.gap_s[away] > 0)  # bridged, not measured
+    assert err[away].max() < 0.03
+    assert sm.ok[~away].all() and np.all(sm.gap_s[~away] == 0)  # the first second confirmed by those after it
+
+
+@pytest.fixture(scope="module")
+def occlusion():
+    session = load_session(BUNDLED_DIR / "occlusion")
+    fixes = process_session(session, use_track=False)  # tracked by the real pipeline
+    track = read_table(BUNDLED_DIR / "occlusion" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    visible = np.isfinite(track["u"])
+    assert len(track["t"]) == len(fixes) and np.allclose(track["t"], fixes.t_unix, atol=1e-3)
+    return fixes, visible
+
+
+def test_a_reacquired_target_is_confirmed_by_the_frames_after_it_offline(occlusion):
+    fixes, visible = occlusion
+    lost = np.isin(fixes.status, LOSS_STATUSES)
+    live, live_gate = [], FixGate()
+    for i in range(len(fixes)):  # as the live GPS_INPUT sink offers them
+        if lost[i]:
+            live_gate.target_lost()
+        live.append(live_gate.check(fixes[i], fixes.t_unix[i]) if fixes.status[i] == "ok" else "")
+    live = np.array(live, dtype=object)
+    offline = gate_offline(fixes, lost, FixGate(max_h_acc_m=math.inf, max_age_s=math.inf))
+    back = np.flatnonzero((fixes.status == "ok") & np.r_[False, lost[:-1]])  # the first fix after the loss
+    assert len(back) == 1
+    first_second = (fixes.t_unix >= fixes.t_unix[back[0]]) & (fixes.t_unix < fixes.t_unix[back[0]] + 0.9 * CONFIRM_S)
+    first_second &= fixes.status == "ok"
+    assert first_second.sum() >= 20
+    assert set(live[first_second]) == {"unconfirmed"}
+    assert all(w is None for w in offline[first_second])
+    live_cover = np.mean([w is None for w in live[visible]])
+    offline_cover = np.mean([w is None for w in offline[visible]])
+    sm, words = offline_track(fixes, V, A)
+    assert offline_cover > live_cover + 0.3  # the first acquisition's second, and the re-acquisition's
+    assert sm.ok[visible].all() and np.all(sm.gap_s[first_second] == 0)  # their own fixes, and the rest bridged
+    assert "refused" not in set(words)
+
+
+def test_process_writes_the_smoothed_track_beside_positions(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["process", str(BUNDLED_DIR / "occlusion"), "--use-track", "--out", str(out)]) == 0
+    assert "smoothed:" in capsys.readouterr().out
+    with open(out / "positions_smoothed.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert tuple(rows[0]) == COLUMNS
+    pos = read_positions_csv(out / "positions.csv")
+    again = read_positions_csv(out / "positions_smoothed.csv")  # the same six first columns: report, export
+    assert np.array_equal(again.t_unix, pos.t_unix)
+    assert np.all(again.h_acc_m[again.status == "ok"] > 0)
+    bridged = np.array([float(r["gap_s"]) > 0 for r in rows])
+    assert np.all(pos.status[bridged] != "ok")
