@@ -23,6 +23,7 @@ from typing import Annotated, Literal
 from annotated_types import Ge, Le
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from groundstation.live.sinks.no_fix import NO_FIX_WHY
 from localizer.fix import WORDS, Fix
 from localizer.fix_gate import STATES as GATE_STATES
 from localizer.status import STATUSES, Status
@@ -500,6 +501,15 @@ class GpsInputStatus(Section):
     sent_valid: int = Field(description="messages with fix_type 3")
     not_delivered: int = Field(description="messages the link could not take (down)")
     last_fix_type: int | None = Field(None, description="fix_type of the last message sent: 3 a fix, 1 no fix")
+    last_sent_t: float | None = Field(None, description="when the last message was sent, station clock, UNIX seconds")
+    no_fix_reason: Literal[tuple(NO_FIX_WHY)] | None = Field(
+        None, description="why the last message said no fix (null when it carried a fix): a fix status word (the "
+        "newest frame's), gate_<refusal> (the safety gates held the newest fix back), no_frames, no_new_fix (the "
+        "last valid fix aged out and no frame came after it), stopped (groundstation/live/sinks/no_fix.py)")
+    no_fix_why: str | None = Field(None, description="the same in the operator's words")
+    sent_h_acc_m: NonNegative = Field(None, description="h_acc_m of the fix the last message carried")
+    sent_fix_t: float | None = Field(None, description="exposure time of the fix the last message carried, station "
+                                     "clock, UNIX seconds")
     keep_alive_restarts: int = Field(0, description="times the keep-alive thread (the latest state again at the "
                                      "configured rate) failed (a bug) and started over")
     keep_alive_failure: str | None = Field(None, description="the last such failure: its kind and message")

@@ -24,7 +24,8 @@ agrees with itself:
   writes every GPS_INPUT it receives as one JSON line (``--uuv-log``, default
   stdout), with its receive time (a UDP datagram's as the kernel received it: the replay's own load does not
   stretch the gaps): what the UUV's autopilot would get. Its connection strings are those of skyfix's own links
-  (``udpin:``, ``tcpin:``, ``tcp:``, a serial device: :mod:`groundstation.mavlink.transport`).
+  (``udpin:``, ``tcpin:``, ``tcp:``, a serial device: :mod:`groundstation.mavlink.transport`). Like the
+  autopilot, it sends a HEARTBEAT (system 1, ArduPilot, submarine) a second back to GPS_INPUT's sender.
 
 ``--cut INPUT:START_S:DURATION_S`` (repeatable; INPUT ``mavlink``, ``depth`` or ``video``) leaves that
 input out from START_S to START_S + DURATION_S seconds after the session's start while the others
@@ -48,6 +49,7 @@ import time
 from pathlib import Path
 
 from groundstation.mavlink.ingest import LinkError, connect, mavutil
+from groundstation.mavlink.link import HEARTBEAT_PERIOD_S
 from groundstation.mavlink.transport import open_transport
 from groundstation.session.depth import read_depth
 from groundstation.session.read import SessionError, read_table, uuv_files
@@ -58,6 +60,7 @@ from groundstation.zenoh_session import open_session, put_json
 log = logging.getLogger("skyfix.replay")
 
 CUT_INPUTS = ("mavlink", "depth", "video")
+UUV_SYSID = 1  # the UUV endpoint's HEARTBEAT: ArduSub's system id
 
 
 def parse_uuv_key(text: str) -> tuple[str, str]:
@@ -184,10 +187,22 @@ class Replay:
 
     def _listen_uuv(self, transport, out) -> None:
         """Every GPS_INPUT that reaches ``--uuv-listen``, stamped with its arrival (:mod:`~groundstation.mavlink.
-        transport`'s ``t_received``: a UDP datagram's as the kernel received it, however late this thread reads it)."""
-        parser = mavutil().mavlink.MAVLink(None)
+        transport`'s ``t_received``: a UDP datagram's as the kernel received it, however late this thread reads it);
+        and, as the UUV's autopilot does, a HEARTBEAT a second back to its sender (so skyfix hears an autopilot)."""
+        mavlink = mavutil().mavlink
+        parser = mavlink.MAVLink(None)
         parser.robust_parsing = True
+        autopilot = mavlink.MAVLink(None, srcSystem=UUV_SYSID, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
+        next_beat = 0.0
         while not self.stop.is_set():
+            if transport.peer_known and time.monotonic() >= next_beat:
+                next_beat = time.monotonic() + HEARTBEAT_PERIOD_S
+                beat = autopilot.heartbeat_encode(mavlink.MAV_TYPE_SUBMARINE, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0,
+                                                  mavlink.MAV_STATE_ACTIVE)
+                try:
+                    transport.write(beat.pack(autopilot))
+                except OSError:  # a TCP peer went away: the read below finds out
+                    pass
             if not select.select(transport.filenos(), [], [], 0.2)[0]:
                 continue
             try:
@@ -198,6 +213,8 @@ class Replay:
             for msg in parser.parse_buffer(data) or []:
                 if msg.get_type() != "GPS_INPUT":
                     continue
+                if transport.datagrams:
+                    transport.answer_last_sender()
                 rec = {"event": "gps_input", "t_recv": transport.t_received, "sysid": msg.get_srcSystem(),
                        "compid": msg.get_srcComponent(), **msg.to_dict()}
                 rec.pop("mavpackettype", None)

@@ -181,3 +181,62 @@ def test_injection_through_blueos_mavlink_in():
     assert gps[-1]["fix_type"] == 1  # stopping: the last message says no fix
     valid = [m for m in gps if m["fix_type"] == 3]
     assert valid and valid[0]["lat"] == 634400000 and valid[0]["ignore_flags"] == {"bits": 56}
+
+
+def test_every_reason_for_no_fix_has_plain_words():
+    """Each word a no-fix message can be for (a fix status, a gate's refusal, the sink's own) has the operator's
+    words; the status's schema lists exactly these."""
+    from groundstation.live.sinks.no_fix import NO_FIX_WHY
+    from groundstation.messages import GpsInputStatus
+    from localizer.fix_gate import REASONS
+    from localizer.status import STATUSES
+
+    words = set(STATUSES) - {"ok"} | {f"gate_{r}" for r in REASONS} | {"no_frames", "no_new_fix", "stopped"}
+    assert set(NO_FIX_WHY) == words and all(NO_FIX_WHY.values())
+    schema = GpsInputStatus.model_json_schema()["properties"]["no_fix_reason"]["anyOf"][0]
+    assert set(schema["enum"]) == words
+
+
+def test_the_status_says_what_was_sent_and_why_no_fix():
+    """The status names the last message's fix (its h_acc and exposure) or why there was none: no frame yet, a
+    fix aged out with nothing after it, the newest frame's status, the gates confirming a new target, stopped."""
+    from groundstation.messages import GpsInputStatus
+
+    seen = []
+
+    async def scenario():  # to a port nobody reads: what is sent is the test's business, not what arrives
+        sink = _sink(mavlink_gps_link(f"udpout:127.0.0.1:{free_port()}"), max_age_s=0.5)
+        task = asyncio.create_task(sink.run())
+
+        async def until(sending, what):
+            end = time.monotonic() + 10.0
+            while sink.sending() != sending:
+                assert time.monotonic() < end, f"timed out waiting for {what}: {sink.status(time.time())}"
+                await asyncio.sleep(0.01)
+            seen.append(GpsInputStatus.model_validate(sink.status(time.time())))
+
+        await until((1, "no_frames"), "no fix: no frame yet")
+        t = time.time()
+        _offer_confirmed(sink, t)
+        await until((3, None), "the fix")
+        await until((1, "no_new_fix"), "the fix aged out")
+        sink.on_fix(_fix(time.time(), status="stale_attitude"), info=_info(time.time()))
+        await until((1, "stale_attitude"), "the newest frame's status")
+        sink.on_fix(_fix(time.time(), status="lost"), info=_info(time.time()))
+        await until((1, "lost"), "the loss")
+        sink.on_fix(_fix(time.time()), info=_info(time.time()))
+        await until((1, "gate_unconfirmed"), "the gates confirming the target found again")
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+        seen.append(GpsInputStatus.model_validate(sink.status(time.time())))
+        return t
+
+    t = asyncio.run(scenario())
+    first, fix, aged, stale, lost, unconfirmed, stopped = seen
+    assert first.no_fix_why == "no frame tracked yet" and first.sent_h_acc_m is None
+    assert fix.no_fix_reason is None and fix.sent_h_acc_m == pytest.approx(0.3) and fix.sent_fix_t == t
+    assert t <= fix.last_sent_t <= aged.last_sent_t
+    assert aged.no_fix_why == "no new fix: video stopped or stalled" and aged.sent_fix_t is None
+    assert (stale.no_fix_why, lost.no_fix_why) == ("attitude telemetry stale", "tracker lost the UUV")
+    assert unconfirmed.no_fix_why == "confirming the target"
+    assert (stopped.last_fix_type, stopped.no_fix_reason, stopped.no_fix_why) == (1, "stopped", "skyfix stopped")

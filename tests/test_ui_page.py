@@ -9,6 +9,9 @@ printed time shift) selects it on that very frame, and ``ok`` fixes follow, near
 footprint, the last fix's lat/lon) and health (per-input rates, GPS_INPUT's fix_type, clocks, CPU) panels fill
 in, with the safety gates tracking the UUV (header, health, the track on the map); a click on the UUV re-selects
 it; "Release target" turns GPS_INPUT to "no fix" and the gates to acquiring. Screenshots of each step are kept (out/ui-screenshots/).
+
+The header tells the truth at a glance: what GPS_INPUT sends now and why not a fix, within 2 s of every input
+being cut, and a grey page with "no status since" once the service is gone.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import time
 from urllib.parse import urlsplit
 
 import pytest
-from live_helpers import ROOT, LiveRun, track_pixel, ui_url, wait_for
+from live_helpers import ROOT, LiveRun, stop, track_pixel, ui_url, wait_for
 from ui_browser import available, chromium
 
 SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
@@ -152,6 +155,8 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
             t_released = time.time()
             wait_for(lambda: page.inner_text("#target-state") == "target released (click)", 15,
                      "the page showing the target released")
+            wait_for(lambda: (h := _header(page))["sending"] == "NO FIX" and h["sending-why"] == "target released", 10,
+                     lambda: f"the header saying no fix, the target released: {_header(page)}")
             wait_for(lambda: sum(g["fix_type"] == 1 and g["t_recv"] > t_released + 0.3 for g in live.gps_input()) >= 3,
                      10, "GPS_INPUT without a fix after the release")
             wait_for(lambda: page.inner_text("#gate-state") == "gates acquiring"
@@ -186,3 +191,74 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
     assert all(g["fix_type"] == 1 and g["ignore_flags"] == 255 for g in after[stop_at:])
     released = [f["status"] for f in fixes if f["t_recv"] > t_released + 0.3]  # frames after it, if any came
     assert set(released) <= {"released", "buffered"}, set(released)
+
+
+def _header(page) -> dict:
+    """The header's GPS_INPUT part: the big word and its class, the reason, the ages, the accuracy."""
+    return page.evaluate("""() => Object.fromEntries(["sending", "sending-why", "sent-age", "autopilot", "hacc"]
+        .map((id) => [id, document.getElementById(id).innerText])
+        .concat([["class", document.getElementById("sending").className],
+                 ["stale", document.body.classList.contains("stale")]]))""")
+
+
+def _green_share(png: bytes) -> float:
+    """The share of a screenshot's pixels that are green (the page's "ok" green, #0b6e0b, or any clearly green)."""
+    import cv2
+    import numpy as np
+
+    bgr = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR).astype(int)
+    b, g, r = bgr[..., 0], bgr[..., 1], bgr[..., 2]
+    return float(((g > r + 40) & (g > b + 40)).mean())
+
+
+def test_the_header_says_what_gps_input_sends_and_goes_grey_without_status(tmp_path):
+    """The header says what GPS_INPUT sends now, and why not a fix; every input cut (the replay, which is also the
+    UUV's autopilot, killed) turns it from a green "3D fix" to "NO FIX" with the reason within 2 s; the service
+    stopped: the page goes grey with "no status since HH:MM:SS" and nothing green on it."""
+    with LiveRun(tmp_path, SESSION, video_latency_ms=VIDEO_LATENCY_MS, replay_now=False) as live:
+        url = ui_url(tmp_path / "run.log")
+        with chromium(tmp_path, f"{urlsplit(url).scheme}://{urlsplit(url).netloc}") as browser:
+            page = browser.page
+            page.goto(url)
+            page.wait_for_selector("#conn.ok", timeout=20_000)
+            live.start_replay()
+
+            # awaiting a target: no fix, and why; the replay's UUV endpoint answers as its autopilot does
+            wait_for(lambda: (h := _header(page))["sending"] == "NO FIX" and h["sending-why"] == "awaiting a target"
+                     and h["autopilot"].startswith("autopilot heard ") and "bad" in h["class"], 25,
+                     lambda: f"the header saying no fix while awaiting a target: {_header(page)}")
+            wait_for(lambda: int(_dataset(page, "received") or 0) >= 3 and _dataset(page, "status") == "awaiting_target",
+                     25, "video frames awaiting a target")
+            _select_on_shown_frame(page, live, 640)
+            wait_for(lambda: (h := _header(page))["sending"] == "3D fix" and "ok" in h["class"], 15,
+                     lambda: f"the header saying 3D fix: {_header(page)}")
+            h = _header(page)
+            assert re.fullmatch(r"accuracy ±0\.\d\d m", h["hacc"]) and re.fullmatch(r"sent \d\.\d s ago", h["sent-age"]), h
+            assert re.fullmatch(r"position \d\.\d s old", h["sending-why"]), h
+            assert re.search(r"h_acc 0\.\d\d m", page.get_attribute("#hacc", "title"))  # the detail, on hover
+            browser.screenshot("5-header-3d-fix")
+
+            # every input cut: the header is not green within 2 s, and says why
+            live.replay.kill()
+            t_cut = time.monotonic()
+            page.wait_for_function("""() => document.getElementById("sending").innerText === "NO FIX"
+                && !document.getElementById("sending").classList.contains("ok")
+                && document.getElementById("sending-why").innerText.startsWith("no new fix")""", timeout=2_000)
+            print(f"header: NO FIX {time.monotonic() - t_cut:.2f} s after the inputs were cut: {_header(page)}")
+            # then the autopilot (the replay) is not heard, and the tracker's and gates' words over the frozen
+            # frame are no longer green either
+            wait_for(lambda: _header(page)["autopilot"] == "autopilot NOT heard"
+                     and page.eval_on_selector("#status-word", "e => e.className") == "word grey"
+                     and page.eval_on_selector("#gate-state", "e => e.className") == "grey", 15,
+                     lambda: f"the autopilot not heard, the tracker and gates grey: {_header(page)}")
+            browser.screenshot("6-inputs-cut")
+
+            # the service stopped: grey, no status since the last one, nothing green
+            stop(live.service)
+            page.wait_for_function(r"""() => document.body.classList.contains("stale")
+                && document.getElementById("sending").innerText === "NO STATUS"
+                && /^no status since \d\d:\d\d:\d\d$/.test(document.getElementById("sending-why").innerText)""",
+                                   timeout=20_000)
+            shot = browser.screenshot("7-no-status")
+            assert _green_share(shot.read_bytes()) == 0.0
+            assert not browser.errors, browser.errors

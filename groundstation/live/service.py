@@ -209,7 +209,7 @@ async def serve(cfg: config.RunConfig) -> dict:
             workers.include(chain.workers)
 
         # -- the operator's page: every UUV, each with its commands and its own status --------------------------------
-        page_uuvs = [PageUuv(c.uuv.id, c.control, c.workers.status) for c in chains]
+        page_uuvs = [PageUuv(c.uuv.id, c.control, c.workers.status, c.gps.sending if c.gps else None) for c in chains]
         ui = WebUi(cfg.ui, cfg.ui_token, page_uuvs, topview, feed, size, settings_of(cfg)) if feed else None
         if ui:
             workers.add(ui, INPUTS, "ui", lambda now: ui.status())

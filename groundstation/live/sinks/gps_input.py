@@ -30,7 +30,8 @@ What (:func:`gps_input_fields`):
   connected, no position"): the link is fine and only the position is missing,
   so the pilot's "GPS: no fix" is the true message and a lost UUV track is not
   confused with a broken cable. Either way the EKF (which needs a 3D fix) stops
-  using GPS position; a stale fix is never sent as valid.
+  using GPS position; a stale fix is never sent as valid. The status names why
+  (``no_fix_reason``, in plain words ``no_fix_why``: :mod:`.no_fix`).
 
 Which fixes: only those that pass the safety gates (:mod:`localizer.fix_gate`: accuracy,
 age, order, the frame's prediction window, and a track of the UUV — a fix off the track,
@@ -59,6 +60,7 @@ import threading
 import time
 from collections import deque
 
+from groundstation.live.sinks.no_fix import NO_FIX_WHY, no_fix_reason
 from groundstation.mavlink.ids import GPS_COMPID, SKYFIX_SYSID
 from groundstation.mavlink.ingest import mavutil
 from groundstation.mavlink.link import MavlinkLink
@@ -153,11 +155,15 @@ class GpsInputSink:
         self.sent_valid = 0
         self.not_delivered = 0  # handed to a link that was down
         self.last_fix_type: int | None = None
+        self.last_sent_t: float | None = None  # UNIX s, station clock
+        self.no_fix_reason: str | None = None  # why the last message said no fix (:mod:`.no_fix`)
+        self.sent_fix: Fix | None = None  # the fix the last message carried, when it carried one
         self.latencies_s: deque[float] = deque(maxlen=100_000)  # frame arrival → GPS_INPUT sent, new fixes
         self._fix: Fix | None = None
         self._info = None
         self._new = asyncio.Event()
         self._last_ok: Fix | None = None
+        self._refusal: str | None = None  # the gates' word for the newest ok fix (None: taken)
         self._stopping = False
         self._closed = False
         self._send_lock = threading.Lock()  # the loop (new fixes) and the keep-alive thread both send
@@ -166,7 +172,8 @@ class GpsInputSink:
 
     def on_fix(self, fix: Fix, info) -> None:
         if fix.ok:
-            if self.gate.check(fix, time.time(), getattr(info, "window", None)) is None:
+            self._refusal = self.gate.check(fix, time.time(), getattr(info, "window", None))
+            if self._refusal is None:
                 self._last_ok = fix
         elif fix.status in LOSS_STATUSES:
             self._last_ok = None
@@ -202,8 +209,7 @@ class GpsInputSink:
         await in_thread(self._keep_alive.join, STOP_WAIT_S, name="GPS_INPUT keep-alive stop")
         final = gps_input_fields(None, time.time(), self.max_age_s)
         delivered = await in_thread(self.link.close, ("GPS_INPUT", final), name="GPS_INPUT close")
-        self.sent += 1
-        self.not_delivered += not delivered
+        self._sent(final, None, "stopped", delivered)
         log.info("GPS_INPUT %s: stopped; %s", self.link.url,
                  "the last message said no fix" if delivered else "the link was down: no last message")
 
@@ -213,19 +219,34 @@ class GpsInputSink:
             if self._stopping:
                 return  # the last message is the no-fix stop() sends
             self._next_due = time.monotonic() + self.period_s
-            fields = gps_input_fields(self._last_ok, time.time(), self.max_age_s)
+            last_ok, latest = self._last_ok, self._fix
+            fields = gps_input_fields(last_ok, time.time(), self.max_age_s)
             delivered = self.link.send("GPS_INPUT", fields)
-            t_sent = time.time()
-            self.sent += 1
-            self.not_delivered += not delivered
-            self.last_fix_type = fields["fix_type"]
-            if fields["fix_type"] == FIX_3D and delivered:
-                self.sent_valid += 1
-                if fresh and self._fix is self._last_ok:
-                    self.latencies_s.append(t_sent - self._info.t_recv)
+            valid = fields["fix_type"] == FIX_3D
+            t_sent = self._sent(fields, last_ok if valid else None,
+                                None if valid else no_fix_reason(latest, self._refusal), delivered)
+            if valid and delivered and fresh and latest is last_ok:
+                self.latencies_s.append(t_sent - self._info.t_recv)
+
+    def _sent(self, fields: dict, fix: Fix | None, reason: str | None, delivered: bool) -> float:
+        """Counts a message handed to the link (``fix`` the one it carried, ``reason`` why none); its time."""
+        self.last_sent_t = time.time()
+        self.sent += 1
+        self.not_delivered += not delivered
+        self.sent_valid += fix is not None and delivered
+        self.last_fix_type, self.sent_fix, self.no_fix_reason = fields["fix_type"], fix, reason
+        return self.last_sent_t
+
+    def sending(self) -> tuple[int | None, str | None]:
+        """What the last message said: its fix_type and why no fix (the web page pushes a change at once)."""
+        return self.last_fix_type, self.no_fix_reason
 
     def status(self, now: float) -> dict:
+        fix, reason = self.sent_fix, self.no_fix_reason  # the keep-alive thread may replace them meanwhile
         return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
                 "not_delivered": self.not_delivered, "last_fix_type": self.last_fix_type,
+                "last_sent_t": self.last_sent_t, "no_fix_reason": reason, "no_fix_why": NO_FIX_WHY.get(reason),
+                "sent_h_acc_m": None if fix is None else fix.h_acc_m,  # the gates took it: finite
+                "sent_fix_t": None if fix is None else fix.t_unix,
                 "keep_alive_restarts": self._keep_alive.restarts, "keep_alive_failure": self._keep_alive.failure,
                 "link": self.link.status(now), "gates": self.gate.status(now)}

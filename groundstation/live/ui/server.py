@@ -20,7 +20,8 @@ status of a run of several).
 
 The WebSocket sends, to each page: ``{"type": "hello", ...}`` once (the camera's size,
 the run's settings, ``uuvs``: each UUV's ``id``, ``colour`` (:mod:`.palette`) and ``track``
-so far); ``{"type": "state", ...}`` once a second (the status as ``/api/status`` has it,
+so far); ``{"type": "state", ...}`` once a second, and at once when what a UUV's GPS_INPUT sends changes
+(the status as ``/api/status`` has it,
 input rates measured here, the map's :meth:`TopView.snapshot` and ``uuvs``: per UUV its
 ``id``, the track points that page has not seen, its safety gates on the map
 (:meth:`TopView.gate_view`) and its own rates); and the video packets of
@@ -66,6 +67,7 @@ log = logging.getLogger("skyfix.ui")
 STATIC = resources.files("groundstation.live.ui") / "static"
 COOKIE = "skyfix_token"
 STATE_PERIOD_S = 1.0
+CHANGE_POLL_S = 0.1  # how often the pusher asks whether what a UUV's GPS_INPUT sends changed (then it pushes at once)
 WS_CLOSE_S = 0.5  # a stop waits this long for open pages to take the close
 RATE_WINDOW_S = 3.0
 COMMANDS = ("select", "release", "acquire")
@@ -102,12 +104,14 @@ class CounterRates:
 
 @dataclass
 class PageUuv:
-    """One UUV on the page: its ``id``, its commands (``control``; the first UUV's status is the page's) and,
-    with several, its own status sections (``own_status(now)``; default: its control's whole status)."""
+    """One UUV on the page: its ``id``, its commands (``control``; the first UUV's status is the page's),
+    with several, its own status sections (``own_status(now)``; default: its control's whole status), and
+    ``sending()``: what its GPS_INPUT sends now (a value that changes when that does; None: no GPS_INPUT)."""
 
     id: str
     control: Control
     own_status: Callable[[float], dict] | None = None
+    sending: Callable[[], object] | None = None
     rates: CounterRates = field(default_factory=CounterRates)
 
 
@@ -225,9 +229,20 @@ class WebUi:
     def _own(self, status: dict, k: int) -> dict:
         return status["uuvs"][self.uuvs[k].id] if self.several else status
 
+    def _sending(self) -> list:
+        return [u.sending() if u.sending else None for u in self.uuvs]
+
     async def _push_state(self) -> None:
+        """The state once a second, and at once when what a UUV's GPS_INPUT sends changes (a fix to no fix: the
+        page's header says so within :data:`CHANGE_POLL_S`, not up to a second later)."""
+        loop = asyncio.get_running_loop()
+        pushed_at, sending = loop.time(), self._sending()
         while True:
-            await asyncio.sleep(STATE_PERIOD_S)
+            await asyncio.sleep(CHANGE_POLL_S)
+            now_sending = self._sending()
+            if loop.time() - pushed_at < STATE_PERIOD_S and now_sending == sending:
+                continue
+            pushed_at, sending = loop.time(), now_sending
             if not self.viewers:
                 continue
             now = time.time()

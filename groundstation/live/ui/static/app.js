@@ -1,4 +1,5 @@
-// skyfix's operator page: video with the tracker's overlay, target selection, map, health.
+// skyfix's operator page: what GPS_INPUT sends now (the header), video with the tracker's overlay, target
+// selection, map, health. No status for 2 s: the page turns grey ("no status since …"), nothing on it green.
 // Several UUVs ([[uuv]]): each in its colour (box, label, track, rows); the operator picks the UUV a selection,
 // "Release" or "Await" applies to (the buttons above them, or the keys 1–9). With one, the page is as it was.
 // Everything comes from this server (WebSocket /ws, POST /api/<command>); nothing from the internet.
@@ -21,6 +22,8 @@ const page = {
   sel: 0,             // the UUV the operator's commands apply to
   map: null,
   status: null,
+  statusAt: 0,        // performance.now() when the status came
+  frameAt: 0,         // performance.now() when the newest video frame came
   rates: {},
   settings: {},
 };
@@ -28,6 +31,10 @@ const several = () => page.uuvs.length > 1;
 // a UUV's own status sections (with one UUV, the status itself)
 const own = (k) => (page.status && page.status.uuvs ? page.status.uuvs[page.uuvs[k].id] : page.status) || {};
 const TRACK_KEEP = 3000;
+const STALE_MS = 2000;  // no status (or no frame) for longer: the page (the video) turns grey
+const HEARD_S = 3;      // the autopilot's HEARTBEAT comes once a second: not heard after three missed
+const SENT_S = 1;       // GPS_INPUT goes out at 5 Hz or more: none for a second before the status is a fault
+const FRESH_S = 1.5;    // a fix older than this (the status comes once a second) is not news: its word turns grey
 
 // ---- the WebSocket ------------------------------------------------------------------------------
 function connect() {
@@ -58,6 +65,7 @@ function onText(msg) {
   }
   if (msg.type === "state") {
     page.status = msg.status;
+    page.statusAt = performance.now();
     page.rates = msg.rates;
     page.map = msg.map;
     msg.uuvs.forEach((u, k) => {
@@ -69,6 +77,7 @@ function onText(msg) {
       if (mine.track.length > TRACK_KEEP) mine.track.splice(0, mine.track.length - TRACK_KEEP);
     });
     showStatus();
+    showSending();
     drawMap();
     showHealth();
   }
@@ -79,6 +88,7 @@ async function onFrame(buf) {
   const overlay = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, n)));
   const bitmap = await createImageBitmap(new Blob([new Uint8Array(buf, 4 + n)], { type: "image/jpeg" }));
   page.received += 1;
+  page.frameAt = performance.now();
   video.dataset.received = page.received;
   if (page.frozen) { bitmap.close(); return; }  // the operator is selecting on the frozen frame
   if (page.shown) page.shown.bitmap.close();
@@ -117,6 +127,14 @@ function drawVideo() {
     vctx.strokeRect(Math.min(d.x0, d.x1) * s, Math.min(d.y0, d.y1) * s, Math.abs(d.x1 - d.x0) * s,
                     Math.abs(d.y1 - d.y0) * s);
   }
+  if (!page.frozen && videoStale()) {  // the frame on screen is old: grey it, and say so
+    vctx.fillStyle = "rgba(120, 120, 120, 0.7)";
+    vctx.fillRect(0, 0, video.width, video.height);
+    const text = `no new frame for ${((performance.now() - page.frameAt) / 1000).toFixed(0)} s`;
+    vctx.font = `bold ${Math.round(14 * lw)}px system-ui, sans-serif`;
+    vctx.fillStyle = "#fff";
+    vctx.fillText(text, (video.width - vctx.measureText(text).width) / 2, video.height / 2);
+  }
   video.dataset.frame = o.frame;
   video.dataset.t = o.t;
   video.dataset.status = o.status;
@@ -127,6 +145,8 @@ function drawVideo() {
   $("video-info").textContent = `frame ${o.frame} · shown ${fps.toFixed(1)} fps`
     + (page.frozen ? " · held while you select" : "");
 }
+
+const videoStale = () => page.frameAt > 0 && performance.now() - page.frameAt > STALE_MS;
 
 function crosshair(u, v, s, lw) {
   const x = (u + 0.5) * s, y = (v + 0.5) * s, r = 6 * lw;
@@ -307,6 +327,7 @@ function pick(k) {
     b.style.color = mine ? "#fff" : "#000";
   }
   if (page.status) showStatus();
+  showSending();
   drawVideo();
 }
 
@@ -319,17 +340,22 @@ function showStatus() {
   const fix = mine.fix;
   const word = $("status-word");
   word.textContent = fix ? fix.status : "no frames";
-  word.className = `word ${fix && fix.status === "ok" ? "ok" : "bad"}`;
-  $("hacc").textContent = `h_acc ${fmt(fix && fix.h_acc_m, 2, " m")}`;
+  const old = fix && ageNow(fix.t) > FRESH_S;  // no newer fix since: an ok is not news, and never green
+  word.className = `word ${fix && fix.status === "ok" ? (old ? "grey" : "ok") : "bad"}`;
+  word.title = fix ? `the newest frame's fix (frame ${fix.frame}, exposed ${ago(ageNow(fix.t))}): ${fix.status}`
+    : "no frame tracked yet";
   const h = s.height;  // the UAV's height above the water, as the fixes use it
   $("height").textContent = h ? `height ${fmt(h.height_m, 2)} ± ${fmt(h.sigma_m, 2, " m")} (${h.source})` : "height —";
   const t = mine.target;
   $("target-state").textContent = `${who}target ${t.state}${t.origin ? ` (${t.origin})` : ""}`;
   const g = mine.gps_input && mine.gps_input.gates;  // the safety gates: what GPS_INPUT lets through
   const gate = $("gate-state");
+  const trackAge = g && g.track ? agedBy(g.track.age_s) : null;  // its last fix's, now
   gate.textContent = !g ? "gates —" : g.state === "acquiring" && g.chain
     ? `gates acquiring ${g.chain.span_s.toFixed(1)}/${g.chain.needed_s.toFixed(1)} s` : `gates ${g.state}`;
-  gate.className = !g ? "" : g.state === "tracking" ? "ok" : g.state === "diverged" ? "bad" : "warn";
+  gate.className = !g ? "" : g.state === "tracking" ? (trackAge > FRESH_S ? "grey" : "ok")  // green only when fresh
+    : g.state === "diverged" ? "bad" : "warn";
+  gate.title = trackAge === null ? "" : `the gates' track's last fix ${ago(trackAge)}`;
   const fixText = (f, name) => (f && f.status === "ok"
     ? `${name} ${f.lat.toFixed(7)}, ${f.lon.toFixed(7)} ± ${f.h_acc_m.toFixed(2)} m, depth ${fmt(f.depth_m)} m`
       + ` (frame ${f.frame}, ${(s.t - f.t).toFixed(1)} s ago)`
@@ -343,6 +369,85 @@ function showStatus() {
   }
   showUuvTable();
 }
+
+// ---- the header: what GPS_INPUT sends now, how old it is, whether the autopilot is heard ---------------------
+// Ages are the status's own (its clock when it was taken) plus the time since this page received it: the
+// browser's clock need not agree with the station's.
+const sinceStatus = () => (performance.now() - page.statusAt) / 1000;
+const ageNow = (t) => (t === null || t === undefined ? null : page.status.t - t + sinceStatus());  // t: station clock
+const agedBy = (a) => (a === null || a === undefined ? null : a + sinceStatus());  // an age in the status, now
+const clock = (t) => new Date(t * 1000).toTimeString().slice(0, 8);  // HH:MM:SS
+const ago = (a) => `${a.toFixed(1)} s ago`;
+
+function setHead(id, text, cls, title) {
+  const e = $(id);
+  e.textContent = text;
+  e.className = cls;
+  e.title = title || "";
+}
+
+function showSending() {
+  const stale = !page.status || performance.now() - page.statusAt > STALE_MS;
+  document.body.classList.toggle("stale", stale);
+  if (stale) {
+    setHead("sending", "NO STATUS", "word grey", "no status from skyfix for over 2 s: what GPS_INPUT sends now is "
+            + "not known (the service stopped, or this page lost it)");
+    setHead("sending-why", page.status ? `no status since ${clock(page.status.t)}` : "no status yet", "");
+    for (const id of ["sent-age", "autopilot"]) setHead(id, "", "");
+    setHead("hacc", "accuracy —", "");
+    return;
+  }
+  const mine = own(page.sel), g = mine.gps_input, fix = mine.fix;
+  $("sending-to").textContent = several() ? `to ${page.uuvs[page.sel].id}` : "to the UUV";
+  if (!g) {  // a run without --gps-input: nothing goes to a UUV
+    setHead("sending", "NOT SENDING", "word warn", "skyfix runs without --gps-input: no GPS_INPUT to any autopilot");
+    setHead("sending-why", "no GPS_INPUT configured", "");
+    for (const id of ["sent-age", "autopilot"]) setHead(id, "", "");
+    const ok = fix && fix.status === "ok";
+    setHead("hacc", ok ? `accuracy ±${fmt(fix.h_acc_m, 2, " m")}` : "accuracy —", "",
+            ok ? `h_acc ${fmt(fix.h_acc_m, 2, " m")} of the newest fix (not sent anywhere)` : "");
+    return;
+  }
+  const link = g.link || {};
+  const sent = ageNow(g.last_sent_t);
+  const valid = g.last_fix_type === 3;
+  const detail = `GPS_INPUT to ${g.url}: the last message fix_type ${g.last_fix_type ?? "—"}`
+    + (valid ? " (3D fix)" : g.no_fix_reason ? ` (no fix: ${g.no_fix_reason})` : "")
+    + ` · ${g.sent_valid}/${g.sent} valid · ${g.not_delivered} not delivered · link ${link.state ?? "—"}`;
+  let word, cls, why;
+  if (sent === null || page.status.t - g.last_sent_t > SENT_S) {  // judged at the status: it came once a second
+    [word, cls, why] = ["NOT SENT", "bad", sent === null ? "no GPS_INPUT sent yet" : `no GPS_INPUT for ${sent.toFixed(1)} s`];
+  } else if (link.state !== "up") {
+    [word, cls, why] = ["NOT DELIVERED", "bad", `link ${link.state}${link.error ? `: ${link.error}` : ""}`];
+  } else if (valid) {
+    [word, cls, why] = ["3D fix", "ok", `position ${fmt(ageNow(g.sent_fix_t), 1, " s")} old`];
+  } else {
+    const last = fix && fix.status === "ok" && g.no_fix_reason === "no_new_fix" ? ` (last fix ${ago(ageNow(fix.t))})` : "";
+    [word, cls, why] = ["NO FIX", "bad", `${g.no_fix_why || "no fix"}${last}`];
+  }
+  setHead("sending", word, `word ${cls}`, detail);
+  setHead("sending-why", why, "", detail);
+  setHead("sent-age", sent === null ? "" : `sent ${ago(sent)}`, "",
+          sent === null ? "" : `the last GPS_INPUT left at ${clock(g.last_sent_t)} (station clock)`);
+  const heard = agedBy(link.peer_age_s);
+  const from = g.url.startsWith("zenoh:") ? "the autopilot's HEARTBEAT on mavlink/*/1/HEARTBEAT"
+    : `any MAVLink message from the other end of ${g.url}`;
+  setHead("autopilot", heard !== null && heard <= HEARD_S ? `autopilot heard ${ago(heard)}` : "autopilot NOT heard",
+          heard !== null && heard <= HEARD_S ? "ok" : "bad",
+          `${from}: ${heard === null ? "never heard" : `last heard ${ago(heard)}`}`);
+  const acc = valid ? g.sent_h_acc_m : null;
+  setHead("hacc", acc === null ? "accuracy —" : `accuracy ±${fmt(acc, 2, " m")}`, "",
+          acc === null ? "no position sent" : `h_acc ${fmt(acc, 2, " m")}: GPS_INPUT's horiz_accuracy (hdop `
+          + `${fmt(acc, 2)}) of the fix sent, exposed at ${clock(g.sent_fix_t)}`);
+}
+
+// between statuses: the ages grow, and a status or a frame that does not come greys the page or the video
+setInterval(() => {
+  const wasStale = video.dataset.stale === "1", isStale = videoStale();
+  video.dataset.stale = isStale ? "1" : "";
+  if (isStale || wasStale) drawVideo();
+  showSending();
+}, 250);
 
 // several UUVs: a row each, in its colour: its target, fix, h_acc, depth's age, GPS_INPUT and gates
 function showUuvTable() {
