@@ -55,7 +55,14 @@ from .geometry import R_GIMBAL_FROM_CV, SimCamera, ned_to_geodetic, project, sur
 from .motion import Motion
 from .render import Box, Renderer, View, noise_offsets
 from .scenario import Scenario
-from .tlog import Clock, exponential, stream, write_tlog
+from .sensors import (
+    ahrs_error_rpy,
+    camera_error_ned,
+    has_slow_errors,
+    position_error_ne_m,
+    reported_R_ned_from_gimbal,
+)
+from .tlog import Clock, baro_error_m, exponential, gnss_alt_error_m, stream, write_tlog
 
 MARK = "# synthetic session made by skyfix sim"  # first line of session.toml
 
@@ -192,6 +199,28 @@ def _first_box(boxes, t_unix, camera: SimCamera, pad_px: int = 3):
     x0, y0 = max(0, x - pad_px), max(0, y - pad_px)
     box = (x0, y0, min(camera.width, x + w + pad_px) - x0, min(camera.height, y + h + pad_px) - y0)
     return box, float(t_unix[i])
+
+
+TRUTH_ERRORS_HEADER = ("t", "roll_err_deg", "pitch_err_deg", "yaw_err_deg", "cam_err_n_deg", "cam_err_e_deg",
+                       "cam_err_d_deg", "north_err_m", "east_err_m", "height_err_m", "gnss_alt_err_m")
+
+
+def write_truth_errors(path: Path, sc: Scenario, motion: Motion, truth: Truth) -> None:
+    """``truth_errors.csv``: the telemetry's slow errors (reported − true) at each frame time, the scene's error
+    budget (:mod:`sim_fixtures.sensors`; the white noise, new with each message, is not in it).
+
+    ``roll_err_deg``, ``pitch_err_deg``, ``yaw_err_deg``: ATTITUDE's Euler angles; ``cam_err_n_deg``, ``_e_``, ``_d_``:
+    the camera's attitude as the telemetry states it (ATTITUDE and the mount's message composed) is the true one
+    turned by this rotation vector in NED (about North and East its tilt, about Down its yaw); ``north_err_m``,
+    ``east_err_m``: GLOBAL_POSITION_INT's position (the EKF's); ``height_err_m``: its heights ``alt`` and
+    ``relative_alt`` (the barometer's); ``gnss_alt_err_m``: GPS_RAW_INT's ``alt``.
+    """
+    tau = truth.tau_s
+    cam = camera_error_ned(reported_R_ned_from_gimbal(sc, motion, tau), motion.R_ned_from_gimbal(tau))
+    columns = np.column_stack([np.degrees(ahrs_error_rpy(sc, tau)), np.degrees(cam), position_error_ne_m(sc, tau),
+                               baro_error_m(sc, tau), gnss_alt_error_m(sc, tau)])
+    _write_csv(path, TRUTH_ERRORS_HEADER, ([f"{t:.6f}", *(f"{x:.6f}" for x in row)]
+                                           for t, row in zip(truth.t_unix, columns)))
 
 
 def _session_toml(sc: Scenario, camera: SimCamera, init_bbox, init_t: float | None) -> str:
@@ -401,6 +430,10 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     messages = write_tlog(out / "uav.tlog", sc, motion, clock)
     _write_depth(out / "depth.jsonl", depth_records(sc, motion.uuv_depth_m, clock))
     _write_truth(out / "truth.csv", sc, truth.t_unix, truth.uuv_ned)
+    if has_slow_errors(sc):
+        write_truth_errors(out / "truth_errors.csv", sc, motion, truth)
+    else:
+        (out / "truth_errors.csv").unlink(missing_ok=True)  # an earlier generated session's
     stamped = truth.t_unix + sc.clock.video_time_error_s
     _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(stamped)))
 

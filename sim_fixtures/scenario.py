@@ -126,14 +126,17 @@ class UavSpec:
                                 "first frame, positive: they read high; GPS_RAW_INT is not affected")
     baro_drift_m: Number = Field(0.0, description="change of that error from the first frame to the last, linear in "
                                  "time (it goes on before and after)")
-    gnss_fix_type: Annotated[Whole, Ge(0), Le(8)] = Field(3, description="GPS_RAW_INT fix_type (a GPS_FIX_TYPE: "
-                                                          "3 = 3D, 6 = RTK fixed)")
-    gnss_h_acc_m: NonNegative = Field(0.02, description="GPS_RAW_INT h_acc; the simulated position (lat, lon) "
-                                      "itself is exact")
+    gnss_fix_type: Annotated[Whole, Ge(0), Le(8)] | None = Field(
+        None, description="GPS_RAW_INT fix_type (a GPS_FIX_TYPE: 3 = 3D, 6 = RTK fixed); unset: [sensors] gnss_mode's "
+        "(exact and plain 3, rtk 6)")
+    gnss_h_acc_m: NonNegative | None = Field(
+        None, description="GPS_RAW_INT h_acc, the receiver's claim (the position's own error is [sensors] gnss_mode's); "
+        "unset: gnss_mode's (exact and rtk 0.02, plain 2.0)")
     gnss_v_acc_m: NonNegative | None = Field(None, description="GPS_RAW_INT v_acc; unset: twice gnss_h_acc_m")
     gnss_accuracy: Literal["reported", "dop_only"] = Field(
         "reported", description="dop_only: h_acc and v_acc are 0 (not reported), only eph and epv, as some receivers")
-    gnss_hdop: Positive = Field(0.7, description="GPS_RAW_INT eph (HDOP x 100)")
+    gnss_hdop: Positive | None = Field(None, description="GPS_RAW_INT eph (HDOP x 100); unset: [sensors] gnss_mode's "
+                                       "(exact and rtk 0.7, plain 1.0)")
     gnss_vdop: Positive = Field(1.1, description="GPS_RAW_INT epv (VDOP x 100)")
     gnss_alt_error_m: NonNegative = Field(0.0, description="RMS of the GNSS altitude's slowly wandering error "
                                           "(GPS_RAW_INT alt and alt_ellipsoid; not the EKF's heights)")
@@ -246,6 +249,66 @@ class TelemetrySpec:
     depth_noise_m: NonNegative = Field(0.0, description="1-sigma noise on reported UUV depth")
 
 
+@dataclass(frozen=True)
+class GnssMode:
+    """What ``[sensors] gnss_mode`` means: the position's errors (horizontal RMS, m; the walk's correlation time, s)
+    and the receiver's claims in GPS_RAW_INT where ``[uav]`` does not state them."""
+
+    walk_m: float
+    walk_s: float
+    white_m: float
+    fix_type: int
+    h_acc_m: float
+    hdop: float
+
+
+GNSS_MODES = {"exact": GnssMode(0.0, 60.0, 0.0, 3, 0.02, 0.7),  # as before [sensors]: an exact position
+              "rtk": GnssMode(0.015, 60.0, 0.015, 6, 0.02, 0.7),  # RTK fixed
+              "plain": GnssMode(1.2, 120.0, 0.03, 3, 2.0, 1.0)}  # a single-frequency receiver, no corrections
+
+
+@dataclass(frozen=True, config=CLOSED)
+class SensorsSpec:
+    """``[sensors]``: the drone's own sensor errors, what its AHRS, gimbal, EKF position and barometer report minus the
+    truth (:mod:`sim_fixtures.sensors` says what a real ArduCopter and gimbal report); all off by default (the
+    telemetry states the true attitude and position). The scene (and its video) is the same with them on or off."""
+
+    roll_bias_deg: Number = Field(0.0, description="AHRS tilt bias: ATTITUDE's roll reads this much high (0.2-0.4 "
+                                  "typical, with pitch_bias_deg)")
+    pitch_bias_deg: Number = Field(0.0, description="AHRS tilt bias: ATTITUDE's pitch reads this much high")
+    yaw_bias_deg: Number = Field(0.0, description="compass bias: the autopilot's heading (ATTITUDE yaw, "
+                                 "GLOBAL_POSITION_INT hdg, the gimbal's earth yaw) reads this much high (1-2.5 typical)")
+    wander_deg: NonNegative = Field(0.0, description="RMS of the AHRS's slow wander on each of roll, pitch and yaw (a "
+                                    "first-order Gauss-Markov per axis; 0.05-0.1 typical)")
+    wander_s: Positive = Field(60.0, description="its correlation time (30-120 typical)")
+    gimbal_level_deg: Pair = Field((0.0, 0.0), description="a stabilised gimbal's levelling error [roll, pitch]: its "
+                                   "reported roll and pitch read high by this, a tilt about its own heading's forward "
+                                   "and right axes (its own IMU: none of the autopilot's tilt bias)")
+    gnss_mode: Literal["exact", "rtk", "plain"] = Field(
+        "exact", description="the EKF position's error (GLOBAL_POSITION_INT lat, lon; GPS_RAW_INT's follows the same "
+        "walk): exact none; rtk a 0.015 m walk of 60 s + 0.015 m white; plain a 1.2 m walk of 120 s + 0.03 m white "
+        "(horizontal RMS); also the default of [uav] gnss_fix_type, gnss_h_acc_m, gnss_hdop")
+    gnss_walk_m: NonNegative | None = Field(None, description="horizontal RMS of the position's slow error (a "
+                                            "Gauss-Markov per axis, each 1/sqrt(2) of it); unset: gnss_mode's")
+    gnss_walk_s: Positive | None = Field(None, description="its correlation time; unset: gnss_mode's")
+    gnss_white_m: NonNegative | None = Field(None, description="horizontal RMS of white noise, new with each "
+                                             "GLOBAL_POSITION_INT and each GPS_RAW_INT; unset: gnss_mode's")
+    baro_wander_m: NonNegative = Field(0.0, description="RMS of the barometer's slow wander (a Gauss-Markov; 0.1-0.2 "
+                                       "typical) in the EKF's heights (GLOBAL_POSITION_INT alt, relative_alt), on top "
+                                       "of [uav] baro_bias_m and baro_drift_m")
+    baro_wander_s: Positive = Field(30.0, description="its correlation time")
+    baro_noise_m: NonNegative = Field(0.0, description="1-sigma white noise of the EKF's heights, new with each "
+                                      "GLOBAL_POSITION_INT (alt and relative_alt alike; a few cm typical)")
+
+    @model_validator(mode="after")
+    def _exact_is_exact(self):
+        if self.gnss_mode == "exact":
+            for key in ("gnss_walk_m", "gnss_walk_s", "gnss_white_m"):
+                if getattr(self, key) is not None:
+                    raise Invalid(key, getattr(self, key), 'needs gnss_mode = "rtk" or "plain" (exact: no error)')
+        return self
+
+
 @dataclass(frozen=True, config=CLOSED)
 class RenderSpec:
     """``[render]``: the picture."""
@@ -336,6 +399,7 @@ class Scenario:
     render: RenderSpec = Field(default_factory=RenderSpec)
     second_uuv: SecondUuvSpec = Field(default_factory=SecondUuvSpec)
     rock: RockSpec = Field(default_factory=RockSpec)
+    sensors: SensorsSpec = Field(default_factory=SensorsSpec)
 
     @field_validator("occlusions")
     @classmethod

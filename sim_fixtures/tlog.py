@@ -10,15 +10,18 @@ Clocks (all integer microseconds):
   nothing for ``link.reboot_down_s``.
 
 Each message's values are the true state at its ``time_boot_ms`` (plus the
-scenario's optional noise), so geometry from this telemetry alone can reach the
-truth. Messages (system 1, component 1, as ArduPilot's):
+scenario's optional noise and the drone's sensor errors, ``[sensors]``: :mod:`sim_fixtures.sensors`),
+so without them geometry from this telemetry alone can reach the truth. Messages (system 1,
+component 1, as ArduPilot's):
 
 - HEARTBEAT (1 Hz): armed (``base_mode`` SAFETY_ARMED) from ``uav.armed_at_s`` on, or throughout;
   SYSTEM_TIME (``system_time_hz``): ``time_unix_usec`` is true time;
-- ATTITUDE (``attitude_hz``): roll, pitch, yaw and the true body rates (p, q, r in rad/s, FRD);
-- GLOBAL_POSITION_INT (``position_hz``) with its NED velocity (cm/s); its heights ``alt`` and
-  ``relative_alt`` carry the barometer's error (:func:`baro_error_m`), as ArduPilot's EKF's do when
-  the barometer is its height source (EK3_SRC1_POSZ = 1);
+- ATTITUDE (``attitude_hz``): roll, pitch, yaw (with the AHRS's errors) and the true body rates (p, q, r in
+  rad/s, FRD);
+- GLOBAL_POSITION_INT (``position_hz``) with its true NED velocity (cm/s); ``lat``, ``lon`` the EKF's position
+  (with the GNSS's walk), ``hdg`` the autopilot's heading; its heights ``alt`` and ``relative_alt`` carry the
+  barometer's error (:func:`baro_error_m` and the sensors' white noise), as ArduPilot's EKF's do when the
+  barometer is its height source (EK3_SRC1_POSZ = 1);
 - GPS_RAW_INT (``gps_raw_hz``): see :func:`_gps_raw`;
 - DISTANCE_SENSOR and ArduPilot's RANGEFINDER (``[rangefinder]``): see :func:`_rangefinder`;
 - GIMBAL_DEVICE_ATTITUDE_STATUS or MOUNT_ORIENTATION (``gimbal_hz``) unless the camera is fixed;
@@ -47,6 +50,16 @@ from groundstation.session.tlog import tlog_record
 from .geometry import ned_to_geodetic, quat_wxyz, rotation_zyx
 from .motion import Motion, wrap_pi
 from .scenario import Scenario
+from .sensors import (
+    ahrs_error_rpy,
+    baro_noise_m,
+    baro_wander_m,
+    gnss_claim,
+    levelled,
+    ned_with_error,
+    position_error_ne_m,
+    position_white_ne_m,
+)
 
 # MAVLink GIMBAL_DEVICE_FLAGS (common.xml)
 GIMBAL_DEVICE_FLAGS_ROLL_LOCK = 4  # roll relative to the horizon
@@ -140,10 +153,11 @@ def sample_times(clock: Clock, rate_hz: float, tau0_s: float, tau1_s: float, rng
 
 
 def baro_error_m(sc: Scenario, tau_s):
-    """The EKF heights' error (m, positive: they read high) at scenario times: ``uav.baro_bias_m`` at the
-    first frame, changing linearly by ``uav.baro_drift_m`` up to the last."""
+    """The EKF heights' slow error (m, positive: they read high) at scenario times: ``uav.baro_bias_m`` at the
+    first frame, changing linearly by ``uav.baro_drift_m`` up to the last, plus the barometer's wander
+    (``[sensors] baro_wander_m``)."""
     u = sc.uav
-    return u.baro_bias_m + u.baro_drift_m * np.asarray(tau_s, dtype=float) / sc.duration_s
+    return u.baro_bias_m + u.baro_drift_m * np.asarray(tau_s, dtype=float) / sc.duration_s + baro_wander_m(sc, tau_s)
 
 
 def gnss_alt_error_m(sc: Scenario, tau_s):
@@ -158,30 +172,35 @@ def gnss_alt_error_m(sc: Scenario, tau_s):
 
 
 def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
-    """GPS_RAW_INT arguments: the reported point's position as GLOBAL_POSITION_INT has it (exact), its
+    """GPS_RAW_INT arguments: the reported point's position with the receiver's error (the walk GLOBAL_POSITION_INT
+    follows, and white noise of its own: :mod:`sim_fixtures.sensors`), its
     altitude with the GNSS's own error (:func:`gnss_alt_error_m`), not the barometer's.
 
     ``time_usec`` true UNIX µs (``gps_raw_time = "unix"``) or boot µs (``"boot"``, ArduPilot's
-    ``last_fix_time_ms``·1000); ``fix_type`` from ``uav.gnss_fix_type``; ``eph``/``epv`` HDOP/VDOP × 100
-    (``uav.gnss_hdop``, ``gnss_vdop``); ``vel`` ground speed cm/s, ``cog`` course over ground cdeg;
-    14 satellites; ``alt_ellipsoid`` = alt + ``site.geoid_separation_m`` (mm); ``h_acc`` =
-    ``uav.gnss_h_acc_m``, ``v_acc`` = ``uav.gnss_v_acc_m`` or twice h_acc (mm), both 0 with
+    ``last_fix_time_ms``·1000); ``fix_type``, ``h_acc`` and ``eph`` (HDOP × 100) the receiver's claims
+    (:func:`~sim_fixtures.sensors.gnss_claim`: ``uav.gnss_fix_type``, ``gnss_h_acc_m``, ``gnss_hdop`` or
+    ``[sensors] gnss_mode``'s), ``epv`` VDOP × 100 (``uav.gnss_vdop``); ``vel`` ground speed cm/s, ``cog``
+    course over ground cdeg; 14 satellites; ``alt_ellipsoid`` = alt + ``site.geoid_separation_m`` (mm);
+    ``v_acc`` = ``uav.gnss_v_acc_m`` or twice h_acc (mm), both 0 with
     ``gnss_accuracy = "dop_only"``; ``vel_acc`` 30 mm/s; ``hdg_acc`` and ``yaw`` 0 (no GNSS yaw).
     """
     s, u = sc.site, sc.uav
     tau = clock.tau_of_us(t_us)
-    lat, lon, alt = ned_to_geodetic(motion.uav_ned(tau), s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    error_ne = position_error_ne_m(sc, tau) + position_white_ne_m(sc, "raw", len(tau))
+    lat, lon, alt = ned_to_geodetic(ned_with_error(motion.uav_ned(tau), error_ne), s.lat_deg, s.lon_deg,
+                                    s.surface_amsl_m)
     alt = alt + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m + gnss_alt_error_m(sc, tau)
     vel = motion.uav_velocity_ned(tau)
     speed = np.hypot(vel[:, 0], vel[:, 1])
     cog = np.round(np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360 * 100).astype(int) % 36000
     time_usec = t_us if sc.telemetry.gps_raw_time == "unix" else ms * 1000
-    h_acc = round(u.gnss_h_acc_m * 1000)
+    fix_type, h_acc_m, hdop = gnss_claim(sc)
+    h_acc = round(h_acc_m * 1000)
     v_acc = 2 * h_acc if u.gnss_v_acc_m is None else round(u.gnss_v_acc_m * 1000)
     if u.gnss_accuracy == "dop_only":
         h_acc = v_acc = 0
-    eph, epv = round(u.gnss_hdop * 100), round(u.gnss_vdop * 100)
-    return [(int(tu), u.gnss_fix_type, round(la * 1e7), round(lo * 1e7), round(a * 1000), eph, epv, round(v * 100),
+    eph, epv = round(hdop * 100), round(u.gnss_vdop * 100)
+    return [(int(tu), fix_type, round(la * 1e7), round(lo * 1e7), round(a * 1000), eph, epv, round(v * 100),
              int(c), 14, round((a + s.geoid_separation_m) * 1000), h_acc, v_acc, 30, 0, 0)
             for tu, la, lo, a, v, c in zip(time_usec, lat, lon, alt, speed, cog)]
 
@@ -223,11 +242,12 @@ def _rangefinder(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
 
 def _gimbal(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     """``(encode_name, rows)`` of the camera-attitude message: what the autopilot reports (see
-    :meth:`Motion.reported_gimbal`), with yaw relative to the vehicle or to North as the flags say."""
+    :meth:`Motion.reported_gimbal`; a stabilised gimbal's levelling error, :func:`~sim_fixtures.sensors.levelled`),
+    with yaw relative to the vehicle or to North (the autopilot's heading + the relative yaw) as the flags say."""
     tau = clock.tau_of_us(t_us)
     att_noise = np.radians(sc.telemetry.attitude_noise_deg)
-    g = motion.reported_gimbal(tau) + rng.normal(0.0, 1.0, (len(tau), 3)) * att_noise
-    vehicle_yaw = motion.uav_rpy(tau)[:, 2]
+    g = levelled(sc, motion.reported_gimbal(tau)) + rng.normal(0.0, 1.0, (len(tau), 3)) * att_noise
+    vehicle_yaw = motion.uav_rpy(tau)[:, 2] + ahrs_error_rpy(sc, tau)[:, 2]  # the autopilot's heading
     yaw_abs = g[:, 2] + vehicle_yaw
     if sc.mount.attitude_source == "mount_orientation":
         return "mount_orientation", [
@@ -282,7 +302,8 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
     rng = stream(sc, "attitude")
     t, ms = sample_times(clock, tel.attitude_hz, tau0, tau1, rng)
     tau = clock.tau_of_us(t)
-    rpy = motion.uav_rpy(tau) + rng.normal(0.0, 1.0, (len(t), 3)) * np.radians(tel.attitude_noise_deg)
+    rpy = motion.uav_rpy(tau) + ahrs_error_rpy(sc, tau) + rng.normal(0.0, 1.0, (len(t), 3)) * np.radians(
+        tel.attitude_noise_deg)
     rpy[:, 2] = wrap_pi(rpy[:, 2])
     rates = motion.body_rates(tau)
     add(t, "attitude", [(int(m), *map(float, a), *map(float, r)) for m, a, r in zip(ms, rpy, rates)])
@@ -293,11 +314,13 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
     ned = motion.uav_ned(tau)
     vel = motion.uav_velocity_ned(tau)
     s = sc.site
-    lat, lon, alt = ned_to_geodetic(ned, s.lat_deg, s.lon_deg, s.surface_amsl_m)
-    baro = baro_error_m(sc, tau)
+    error_ne = position_error_ne_m(sc, tau) + position_white_ne_m(sc, "ekf", len(t))
+    lat, lon, alt = ned_to_geodetic(ned_with_error(ned, error_ne), s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    baro = baro_error_m(sc, tau) + baro_noise_m(sc, len(t))
     alt = alt + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m + baro
     rel = -ned[:, 2] - s.takeoff_height_above_surface_m + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m + baro
-    hdg = np.round(np.degrees(motion.uav_rpy(tau)[:, 2]) % 360 * 100).astype(int) % 36000
+    heading = motion.uav_rpy(tau)[:, 2] + ahrs_error_rpy(sc, tau)[:, 2]
+    hdg = np.round(np.degrees(heading) % 360 * 100).astype(int) % 36000
     add(t, "global_position_int", [
         (int(m), round(la * 1e7), round(lo * 1e7), round(a * 1000), round(r * 1000),
          round(v[0] * 100), round(v[1] * 100), round(v[2] * 100), int(h))
