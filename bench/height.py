@@ -8,7 +8,8 @@ video, and two variants of the rangefinder scenario: a lidar that gets no return
 one that sees the seafloor) it runs ``skyfix evaluate --use-track`` and reports, for the refraction
 method: the MAE against truth and the share of fixes within 2·h_acc (evaluate's own table), and
 from ``positions.csv`` the camera's height against its truth (the scenario's motion): mean and
-largest error, the share within 2·sigma_height_m, the median sigma and the source words.
+largest error, the RMS of its change from frame to frame, the share within 2·sigma_height_m, the
+median sigma and the source words.
 ``--skyfix``/``--skyfix-cwd`` run another skyfix (an older checkout: before/after) on the same
 sessions. ``sim_fixtures/bundled/*`` is evaluated too (geometry only), the sessions that must not
 get worse.
@@ -35,8 +36,8 @@ from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides
 
-SCENARIOS = ("height_rtk_drift", "height_gnss_drift", "height_rangefinder", "height_rangefinder:nothing",
-             "height_rangefinder:floor")
+SCENARIOS = ("height_rtk_drift", "height_rtk_noise", "height_gnss_drift", "height_rangefinder",
+             "height_rangefinder:nothing", "height_rangefinder:floor")
 
 
 def scenario(name: str):
@@ -67,8 +68,10 @@ def height_columns(name: str, pos) -> str:
     true_h = -Motion(sc).camera_ned(np.arange(len(pos.t_unix)) / sc.fps)[:, 2]  # frame i at i / fps
     err, sigma = pos.height_m - true_h, pos.sigma_height_m
     ok = np.isfinite(err)
+    step = np.diff(err)
     words = ", ".join(f"{w} {n / ok.sum():.0%}" for w, n in Counter(pos.height_source[ok]).most_common())
     return (f"{np.mean(np.abs(err[ok])):7.3f} {np.max(np.abs(err[ok])):7.3f} "
+            f"{np.sqrt(np.nanmean(step ** 2)):7.4f} "
             f"{np.mean(np.abs(err[ok]) <= 2 * sigma[ok]):6.1%} {np.median(sigma[ok]):6.3f}  {words}")
 
 
@@ -85,7 +88,7 @@ def main() -> int:
     if args.skyfix:
         runs.insert(0, ("before", shlex.split(args.skyfix), Path(args.skyfix_cwd)))
     names = args.only or SCENARIOS
-    header = (f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} "
+    header = (f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} {'dh step':>7s} "
               f"{'in 2σh':>6s} {'σh med':>6s}  height source")
     lines = [header]
     for name in names:

@@ -104,9 +104,9 @@ class Sigmas:
                                   "origin's altitude (at boot); it then drifts (baro_drift_10min_m) unless GNSS, a "
                                   "rangefinder or the UUV's size measure it")
     baro_drift_10min_m: NonNegative = Field(
-        0.7, description="1-sigma of the barometric height's drift 10 minutes after that reference, growing as a "
-        "random walk (with the square root of time): the weather's pressure tendency, 'falling slowly' being up to "
-        "1.5 hPa in 3 h, at 8.3 m per hPa near sea level")
+        0.7, description="1-sigma of the barometric height's drift 10 minutes after that reference: a drift at a rate "
+        "that wanders over about 10 minutes (in proportion to time at first, with its square root later), the "
+        "weather's pressure tendency, 'falling slowly' being up to 1.5 hPa in 3 h, at 8.3 m per hPa near sea level")
     depth_m: NonNegative = Field(0.05, description="UUV depth: a pressure sensor with the surface pressure zeroed")
     uav_horizontal_m: NonNegative | None = Field(
         None, description="the UAV position's own horizontal accuracy (m); unset: GPS_RAW_INT's h_acc (the receiver's "

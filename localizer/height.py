@@ -5,24 +5,33 @@ or ``alt`` − ``[water] surface_amsl_m``: :mod:`localizer.surface`) is the smoo
 telemetry's rate. With the barometer as the EKF's height source (ArduPilot's EK3_SRC1_POSZ = 1)
 both follow the barometer, which drifts. Its error ``b`` = EKF height − true height is estimated
 by a small Kalman filter (:class:`HeightEstimator`) over whatever measures it, and a frame's
-height is the EKF height − ``b``. States ``x = (e, s, g)``, metres:
+height is the EKF height − ``b``. States ``x = (e, d, s, g)``, metres (``d`` m/s):
 
 - ``e``: the EKF height's own error. 0 ± ``[uncertainty] height_m`` when its reference was set:
   the take-off (ArduPilot sets home, so ``relative_alt`` 0, when it arms: an arming seen in
   the HEARTBEATs starts ``e`` again) or, in the amsl reference or when no arming was seen, the
-  autopilot's boot (its EKF origin): a conservative bound on the flight time. It then drifts as
-  a random walk (as PX4's EKF2 models a barometer's bias) of 1-sigma ``[uncertainty]
-  baro_drift_10min_m`` after 10 minutes: without any measurement the height's sigma grows
-  with the square root of the time since the reference was set. A random walk, not a drift
-  rate: a rate learnt over seconds would be extrapolated over the whole flight.
+  autopilot's boot (its EKF origin): a conservative bound on the flight time. It then drifts at
+  the rate ``d``.
+- ``d``: the barometer's drift rate (the weather's pressure tendency, the sensor warming up),
+  first-order Gauss-Markov of correlation time :data:`DRIFT_RATE_TAU_S`, its 1-sigma such that
+  the drift's 1-sigma is ``[uncertainty] baro_drift_10min_m`` 10 minutes after the reference
+  (:func:`drift_variance_m2`): without any measurement the height's sigma grows in proportion to
+  the time at first, with its square root after :data:`DRIFT_RATE_TAU_S`. A drift, smooth over
+  seconds, not a random walk (which moves centimetres in a second): the barometer carries the
+  short term, and a GNSS altitude's white noise is averaged over minutes, not followed from
+  message to message. A rate learnt is forgotten over :data:`DRIFT_RATE_TAU_S`, not extrapolated
+  over the whole flight; it is kept across an arming (the weather does not start again).
 - ``s``: the water's altitude minus the reference used for GNSS altitudes: with ``[water]
   surface_amsl_m`` ± ``[uncertainty] surface_amsl_m``; with the take-off reference unknown
   (± :data:`SURFACE_UNKNOWN_M`), so that GNSS altitudes give the barometer's drift (their trend
-  since the first), not its offset.
+  since the first, or since the arming: ``s`` starts again then), not its offset; the drift before
+  the first is not inferred from the rate they show (``e``'s correlation with ``d`` is dropped then).
 - ``g``: the GNSS altitude's slow error, first-order Gauss-Markov of correlation time
   :data:`GNSS_TAU_S`; with each fix's own white noise (:data:`GNSS_WHITE`) its 1-sigma is the
   receiver's vertical accuracy (:func:`localizer.gnss.vertical_sigma_m`). It starts afresh when
-  the fix type changes.
+  the fix type changes. The white noise is the larger of that share and what the GNSS altitudes
+  scatter against the EKF's height from one message to the next (:func:`_scattered`): an RTK
+  receiver's claimed v_acc can be optimistic.
 
 The height's error is ``b = e`` (take-off reference) or ``e + s`` (amsl). Measurements:
 
@@ -73,9 +82,11 @@ if TYPE_CHECKING:
     from .telemetry import Telemetry
 
 DRIFT_REFERENCE_S = 600.0  # [uncertainty] baro_drift_10min_m is the drift's 1-sigma after this long
+DRIFT_RATE_TAU_S = 600.0  # correlation time of the barometer's drift rate (a pressure tendency, the sensor's warming)
 GNSS_TAU_S = 300.0  # correlation time of a GNSS altitude's error (satellite geometry, multipath)
 GNSS_WHITE = 0.3  # share of a GNSS altitude's 1-sigma that is new with each fix (multipath, its timing against
 # the EKF's height): white noise of GNSS_WHITE·sigma, the slow error g the rest, sqrt(1 − GNSS_WHITE²)·sigma
+SCATTER_N = 50  # GNSS messages over which their white noise is measured (10 s at 5 Hz)
 SURFACE_UNKNOWN_M = 1000.0  # 1-sigma of a water altitude nobody gave
 GATE_SIGMAS = 5.0  # a measurement this far from the estimate is refused ...
 AGREE_SIGMAS = 3.0  # ... and its source's next ones until one comes within this
@@ -86,6 +97,21 @@ RANGEFINDER_FLOOR_M = 0.05  # laser rangefinders' data sheets: ±5 cm up to a fe
 RANGEFINDER_SHARE = 0.01  # ... and 1 % of the range beyond (e.g. Benewake TFmini Plus, TF03)
 
 _ARM, _GNSS, _FIX = 0, 1, 2
+_E, _D, _S, _G = range(4)  # the state's indices
+
+
+def drift_variance_m2(dt_s, rate_sigma_mps, tau_s=DRIFT_RATE_TAU_S):
+    """Variance (m²) of the drift over ``dt_s`` seconds of a first-order Gauss-Markov rate of stationary 1-sigma
+    ``rate_sigma_mps`` and correlation time ``tau_s``: ``2·σ²·τ²·(x − 1 + e^−x)``, ``x = dt/τ``
+    (``σ²·dt²`` for ``dt`` ≪ ``τ``, ``2·σ²·τ·dt`` for ``dt`` ≫ ``τ``)."""
+    x = np.asarray(dt_s, dtype=float) / tau_s
+    return 2.0 * rate_sigma_mps ** 2 * tau_s ** 2 * (x + np.expm1(-x))
+
+
+def drift_rate_sigma_mps(drift_10min_m: float) -> float:
+    """The drift rate's stationary 1-sigma (m/s) that makes the drift's 1-sigma ``drift_10min_m`` after
+    :data:`DRIFT_REFERENCE_S`."""
+    return drift_10min_m / math.sqrt(float(drift_variance_m2(DRIFT_REFERENCE_S, 1.0)))
 
 
 def rangefinder_height_m(distance_m, roll_rad, pitch_rad):
@@ -124,6 +150,8 @@ class _Aux(NamedTuple):
     fix: int  # its fix type (-1 before)
     S: float | None  # the water altitude GNSS altitudes are referred to (take-off: the first difference)
     refused: tuple = ()  # (source, measurements refused in a row) of the sources whose newest was refused
+    z_prev: float = math.nan  # the previous GNSS measurement (NaN: none since the fix type or the reference changed)
+    scatter: tuple = (0, 0.0)  # (differences counted, the running mean of half their squares): see _scattered
 
 
 class HeightEstimator:
@@ -139,15 +167,15 @@ class HeightEstimator:
         self.key = (water, sigmas)
         self.amsl = water.surface_amsl_m is not None
         self.word = "amsl" if self.amsl else "takeoff"
-        self.c = np.array([1.0, 1.0 if self.amsl else 0.0, 0.0])  # b = c·x
-        self.walk_m2_per_s = sigmas.baro_drift_10min_m ** 2 / DRIFT_REFERENCE_S
+        self.c = np.array([1.0, 0.0, 1.0 if self.amsl else 0.0, 0.0])  # b = c·x
+        self.rate_sigma_mps = drift_rate_sigma_mps(sigmas.baro_drift_10min_m)
         self._base: tuple | None = None  # (t, x, P, aux) at the autopilot's boot
         self._entries: list[tuple] = []  # (t, kind, data), sorted by t
         self._entry_t: list[float] = []  # their times
         self._n = 0  # entries processed: their states are valid
         self._t = np.empty(0)
-        self._x = np.empty((0, 3))
-        self._P = np.empty((0, 3, 3))
+        self._x = np.empty((0, 4))
+        self._P = np.empty((0, 4, 4))
         self._aux: list[_Aux] = []  # per processed entry
         self._src: list[str | None] = []  # per processed entry: the source word of its measurement
         self._ok: list[bool] = []  # ... whether it was used
@@ -195,9 +223,9 @@ class HeightEstimator:
             boot = tel.uav_clock.offset_s  # the autopilot's boot on the UAV buffers' scale
             if boot is None:
                 return
-            P = np.diag([self.sigmas.height_m ** 2, (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2,
-                         0.0])
-            self._base = (boot, np.zeros(3), P, _Aux(math.nan, -1, self.water.surface_amsl_m))
+            P = np.diag([self.sigmas.height_m ** 2, self.rate_sigma_mps ** 2,
+                         (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2, 0.0])
+            self._base = (boot, np.zeros(4), P, _Aux(math.nan, -1, self.water.surface_amsl_m))
         new = sorted(self._pull(tel), key=lambda e: e[0])
         if new:
             first = len(self._entries)
@@ -213,16 +241,24 @@ class HeightEstimator:
 
     # -- the filter -----------------------------------------------------------------------------
     def _predict(self, x, P, dt, sigma_g):
-        """State and covariance ``dt`` s later (arrays broadcast over leading axes)."""
+        """State and covariance ``dt`` s later (arrays broadcast over leading axes): ``e`` integrates the rate ``d``
+        (the exact discretisation of an integrated first-order Gauss-Markov process), ``g`` decays."""
         dt = np.asarray(dt, dtype=float)
-        phi = np.exp(-dt / GNSS_TAU_S)
-        x = np.array(x, dtype=float)
-        x[..., 2] *= phi
-        P = np.array(P, dtype=float)
-        P[..., 2, :2] *= phi[..., None]
-        P[..., :2, 2] *= phi[..., None]
-        P[..., 2, 2] = P[..., 2, 2] * phi ** 2 + np.nan_to_num(np.asarray(sigma_g, dtype=float)) ** 2 * (1.0 - phi ** 2)
-        P[..., 0, 0] += self.walk_m2_per_s * dt
+        tau, var_d = DRIFT_RATE_TAU_S, self.rate_sigma_mps ** 2
+        m1, m2 = np.expm1(-dt / tau), np.expm1(-2.0 * dt / tau)  # φ − 1, φ² − 1 (φ = e^(−dt/τ)), without cancellation
+        phi_g = np.exp(-dt / GNSS_TAU_S)
+        F = np.zeros(dt.shape + (4, 4))
+        F[..., _E, _E] = F[..., _S, _S] = 1.0
+        F[..., _E, _D] = -tau * m1
+        F[..., _D, _D] = 1.0 + m1
+        F[..., _G, _G] = phi_g
+        Q = np.zeros_like(F)
+        Q[..., _E, _E] = var_d * tau ** 2 * (2.0 * dt / tau + 4.0 * m1 - m2)
+        Q[..., _E, _D] = Q[..., _D, _E] = var_d * tau * m1 ** 2
+        Q[..., _D, _D] = -var_d * m2
+        Q[..., _G, _G] = np.nan_to_num(np.asarray(sigma_g, dtype=float)) ** 2 * (1.0 - phi_g ** 2)
+        x = np.einsum("...ij,...j->...i", F, x)
+        P = F @ P @ np.swapaxes(F, -1, -2) + Q
         return x, P
 
     def _run(self, tel: Telemetry) -> None:
@@ -245,19 +281,19 @@ class HeightEstimator:
             self._gap.append(gap)
             t0 = t
         self._t = np.concatenate([self._t[:k], ts])
-        self._x = np.concatenate([self._x[:k], np.reshape(xs, (-1, 3))])
-        self._P = np.concatenate([self._P[:k], np.reshape(Ps, (-1, 3, 3))])
+        self._x = np.concatenate([self._x[:k], np.reshape(xs, (-1, 4))])
+        self._P = np.concatenate([self._P[:k], np.reshape(Ps, (-1, 4, 4))])
         self._n = len(self._entries)
         self._cache = None
 
     def _step(self, t, kind, data, h_e, x, P, aux: _Aux):
         """One entry: ``(x, P, aux, source word or None, used, disagreement m or NaN)``."""
-        if kind == _ARM:  # the take-off reference is set again: e starts over
+        if kind == _ARM:  # the take-off reference is set again: e starts over, and GNSS altitudes count from here
             x, P = x.copy(), P.copy()
-            x[0] = 0.0
-            P[0, :] = P[:, 0] = 0.0
-            P[0, 0] = self.sigmas.height_m ** 2
-            return x, P, aux, None, False, math.nan
+            x[_E] = x[_S] = 0.0
+            P[_E, :] = P[:, _E] = P[_S, :] = P[:, _S] = 0.0
+            P[_E, _E], P[_S, _S] = self.sigmas.height_m ** 2, SURFACE_UNKNOWN_M ** 2
+            return x, P, aux._replace(z_prev=math.nan), None, False, math.nan
         if not math.isfinite(h_e):
             return x, P, aux, None, False, math.nan
         if kind == _GNSS:
@@ -265,18 +301,23 @@ class HeightEstimator:
             sigma = stated * math.sqrt(1.0 - GNSS_WHITE ** 2)
             x, P = x.copy(), P.copy()
             if fix != aux.fix or not math.isfinite(aux.sigma_g):  # a new error source: g starts afresh
-                x[2] = 0.0
-                P[2, :] = P[:, 2] = 0.0
-                P[2, 2] = sigma ** 2
+                x[_G] = 0.0
+                P[_G, :] = P[:, _G] = 0.0
+                P[_G, _G] = sigma ** 2
+                aux = aux._replace(z_prev=math.nan, scatter=(0, 0.0))
             elif sigma != aux.sigma_g:  # the receiver's accuracy changed: the same error, rescaled
-                x[2] *= sigma / aux.sigma_g
-                P[2, :] *= sigma / aux.sigma_g
-                P[:, 2] *= sigma / aux.sigma_g
+                x[_G] *= sigma / aux.sigma_g
+                P[_G, :] *= sigma / aux.sigma_g
+                P[:, _G] *= sigma / aux.sigma_g
+            if aux.S is None:  # the first: GNSS altitudes give the drift from here on; the drift so far, if its rate
+                P[_E, _D] = P[_D, _E] = 0.0  # is learnt, is not inferred from it (only a take-off reference's S is unset)
             S = alt - h_e if aux.S is None else aux.S
-            aux = aux._replace(sigma_g=sigma, fix=fix, S=S)
+            z = alt - h_e - S
+            scatter = _scattered(aux, z)
+            aux = aux._replace(sigma_g=sigma, fix=fix, S=S, z_prev=z, scatter=scatter)
             word = ("" if self.amsl else "baro+") + ("gnss_rtk" if gnss.is_rtk(fix) else "gnss")
-            row = np.array([-1.0, 0.0 if self.amsl else 1.0, 1.0])
-            z, r, said_m = alt - h_e - S, (GNSS_WHITE * stated) ** 2 + 1e-6, alt - S
+            row = np.array([-1.0, 0.0, 0.0 if self.amsl else 1.0, 1.0])
+            r, said_m = max((GNSS_WHITE * stated) ** 2, scatter[1]) + 1e-6, alt - S
         else:
             word, said_m, stated = data
             row, z, r = self.c, h_e - said_m, stated ** 2
@@ -298,7 +339,7 @@ class HeightEstimator:
         aux = aux._replace(refused=tuple(sorted(streaks.items())))
         K = P @ row / s
         x = x + K * innovation
-        A = np.eye(3) - np.outer(K, row)
+        A = np.eye(4) - np.outer(K, row)
         P = A @ P @ A.T + np.outer(K, K) * r
         return x, P, aux, word, True, math.nan
 
@@ -386,6 +427,18 @@ class HeightEstimator:
                 "reference_set_at": anchor, "armed": tel.armed,
                 "since_reference_s": None if since is None else round(max(0.0, t_uav - since), 1),
                 "rangefinder_out_of_range": tel.rangefinder_out_of_range, "sources": sources}
+
+
+def _scattered(aux: _Aux, z: float) -> tuple:
+    """``aux.scatter`` with the GNSS measurement ``z`` (m) counted: the variance of the white noise a GNSS altitude
+    shows against the EKF's height, half the mean square of successive differences (the barometer carries the
+    short term: what changes from one GPS_RAW_INT to the next is the GNSS's noise), over about the last
+    :data:`SCATTER_N`. A receiver's claimed accuracy can be optimistic: the white noise is the larger of the two."""
+    n, mean = aux.scatter
+    if not math.isfinite(aux.z_prev):
+        return n, mean
+    n += 1
+    return n, mean + ((z - aux.z_prev) ** 2 / 2.0 - mean) / min(n, SCATTER_N)
 
 
 def _age(times, tq) -> np.ndarray:

@@ -142,6 +142,8 @@ class UavSpec:
                                           "(GPS_RAW_INT alt and alt_ellipsoid; not the EKF's heights)")
     gnss_alt_error_period_s: Positive = Field(300.0, description="its typical period: three sinusoids of this "
                                               "period, 0.61 and 0.37 of it, random phases")
+    gnss_alt_noise_m: NonNegative = Field(0.0, description="1-sigma white noise of the GNSS altitude, new with each "
+                                          "GPS_RAW_INT (alt and alt_ellipsoid; e.g. 0.02 for an RTK fix)")
 
 
 @dataclass(frozen=True, config=CLOSED)

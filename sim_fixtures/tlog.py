@@ -72,7 +72,8 @@ GCS_PARAM_COUNT = 1200  # PARAM_VALUE param_count: the autopilot's number of par
 # independent random streams: np.random.default_rng([seed, 404, STREAM[name]])
 STREAM = {"heartbeat": 1, "system_time": 2, "attitude": 3, "position": 4, "gimbal": 5, "gps_raw": 6,
           "timesync": 7, "downlink": 8, "depth": 9, "depth_link": 10, "gnss_alt": 11, "rangefinder": 12,
-          "second_depth": 13, "second_link": 14}  # a second UUV's depth sensor and link
+          "second_depth": 13, "second_link": 14,  # a second UUV's depth sensor and link
+          "gnss_alt_noise": 15}
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # a rangefinder looking down the body's z axis
 OUT_OF_RANGE_ADD_M = 1.0  # ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
 
@@ -174,7 +175,8 @@ def gnss_alt_error_m(sc: Scenario, tau_s):
 def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     """GPS_RAW_INT arguments: the reported point's position with the receiver's error (the walk GLOBAL_POSITION_INT
     follows, and white noise of its own: :mod:`sim_fixtures.sensors`), its
-    altitude with the GNSS's own error (:func:`gnss_alt_error_m`), not the barometer's.
+    altitude with the GNSS's own error (:func:`gnss_alt_error_m`, and ``uav.gnss_alt_noise_m`` of white noise), not
+    the barometer's.
 
     ``time_usec`` true UNIX µs (``gps_raw_time = "unix"``) or boot µs (``"boot"``, ArduPilot's
     ``last_fix_time_ms``·1000); ``fix_type``, ``h_acc`` and ``eph`` (HDOP × 100) the receiver's claims
@@ -190,6 +192,7 @@ def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     lat, lon, alt = ned_to_geodetic(ned_with_error(motion.uav_ned(tau), error_ne), s.lat_deg, s.lon_deg,
                                     s.surface_amsl_m)
     alt = alt + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m + gnss_alt_error_m(sc, tau)
+    alt = alt + stream(sc, "gnss_alt_noise").normal(0.0, u.gnss_alt_noise_m, len(tau))  # its own stream: 0 adds 0
     vel = motion.uav_velocity_ned(tau)
     speed = np.hypot(vel[:, 0], vel[:, 1])
     cog = np.round(np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360 * 100).astype(int) % 36000

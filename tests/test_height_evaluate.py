@@ -16,6 +16,7 @@ from sim_fixtures.scenario import load_scenario, with_overrides
 # shortened, the barometer drifting at the scenarios' rates (baro_drift_m is over the whole session)
 RTK = with_overrides(load_scenario(SCENARIOS / "height_rtk_drift.toml"), duration_s=120.0,
                      uav={"baro_drift_m": 1.2 * 120 / 600})
+RTK_NOISE = with_overrides(load_scenario(SCENARIOS / "height_rtk_noise.toml"), duration_s=60.0)
 RANGEFINDER = with_overrides(load_scenario(SCENARIOS / "height_rangefinder.toml"), duration_s=90.0,
                              uav={"baro_drift_m": 0.8 * 90 / 300}, rangefinder={"dropouts": ((20.0, 60.0),)})
 
@@ -41,6 +42,23 @@ def test_rtk_gnss_beside_a_drifting_barometer(capsys, tmp_path):
     baro, pos, dh, _ = evaluate(capsys, with_overrides(RTK, uav={"gnss_fix_type": 0}), tmp_path, "baro")
     assert baro["mae_m"] > 0.2 and np.abs(dh).min() > 0.35 and set(pos.height_source) == {"amsl"}
     assert np.mean(np.abs(dh) <= 2 * pos.sigma_height_m) >= 0.95  # not measured, but not claimed either
+
+
+def test_white_rtk_noise_does_not_move_the_height(capsys, tmp_path):
+    """RTK altitudes with 2 cm of white noise each (take-off reference): the height moves less than a centimetre from
+    frame to frame, and a flight whose barometer is exact is located as well as without GPS_RAW_INT; with a drifting
+    barometer, the drift is followed."""
+    exact = with_overrides(RTK_NOISE, uav={"baro_drift_m": 0.0, "gnss_alt_error_m": 0.0})
+    rtk, pos, dh, _ = evaluate(capsys, exact, tmp_path, "rtk")
+    assert set(pos.height_source) == {"baro+gnss_rtk"}
+    assert np.sqrt(np.mean(np.diff(dh) ** 2)) < 0.01 and np.abs(dh).max() < 0.02  # was 1.8 cm, 5.4 cm
+    alone, pos, dh_alone, _ = evaluate(capsys, with_overrides(exact, telemetry={"gps_raw_hz": 0.0}), tmp_path, "alone")
+    assert set(pos.height_source) == {"takeoff"}
+    assert rtk["mae_m"] <= 1.25 * alone["mae_m"]  # was 2.6 times
+    drifting = with_overrides(RTK_NOISE, uav={"baro_drift_m": 0.5})  # 0.5 m in a minute
+    _, pos, dh, _ = evaluate(capsys, drifting, tmp_path, "drifting")
+    assert np.abs(dh[len(dh) // 2:]).max() < 0.03 and np.sqrt(np.mean(np.diff(dh) ** 2)) < 0.01
+    assert np.mean(np.abs(dh) <= 2 * pos.sigma_height_m) >= 0.95
 
 
 def test_rangefinder_that_sees_the_water_or_the_seafloor(capsys, tmp_path):

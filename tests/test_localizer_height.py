@@ -12,6 +12,7 @@ from localizer.height import (
     AGREE_SIGMAS,
     CONFLICT_AFTER,
     CONFLICT_HOLD_S,
+    DRIFT_RATE_TAU_S,
     DRIFT_REFERENCE_S,
     GATE_SIGMAS,
     GNSS_WHITE,
@@ -69,7 +70,12 @@ def at(c, tel, tau):
 
 
 def walk(seconds, c):
-    return c.sigmas.baro_drift_10min_m ** 2 * seconds / DRIFT_REFERENCE_S
+    """The variance of the barometer's drift ``seconds`` after its reference, as the model states it: a rate of
+    autocovariance σ²·exp(−|u − v|/τ) integrated over [0, T]², σ such that 10 minutes give baro_drift_10min_m."""
+    def integral(T):  # ∫∫ exp(−|u − v|/τ) du dv over [0, T]²
+        return 2.0 * DRIFT_RATE_TAU_S * (T - DRIFT_RATE_TAU_S * (1.0 - math.exp(-T / DRIFT_RATE_TAU_S)))
+
+    return c.sigmas.baro_drift_10min_m ** 2 * integral(seconds) / integral(DRIFT_REFERENCE_S)
 
 
 # --- conversions --------------------------------------------------------------------------------------
@@ -107,8 +113,8 @@ def test_the_uavs_horizontal_sigma_in_the_pose_follows_gps_raw_int():
 # --- the barometer alone ---------------------------------------------------------------------------------
 
 def test_without_measurements_the_sigma_grows_from_the_reference():
-    """No GNSS altitude, no rangefinder: height_m when the reference was set (the boot: no arming seen), then a
-    random walk of baro_drift_10min_m per 10 minutes; the estimate is the EKF's height itself."""
+    """No GNSS altitude, no rangefinder: height_m when the reference was set (the boot: no arming seen), then the
+    drift at a wandering rate, baro_drift_10min_m after 10 minutes; the estimate is the EKF's height itself."""
     c, tel = cal(), telemetry()
     bias, sigma, source = at(c, tel, [0.0, 10.0])
     assert np.all(bias == 0.0) and set(source) == {"takeoff"}
@@ -167,6 +173,26 @@ def test_take_off_reference_follows_the_gnss_trend_not_its_offset():
     assert bias[0] == pytest.approx(0.0, abs=0.01)
     assert bias[1] == pytest.approx(0.5, abs=0.06)
     assert sigma[1] > 0.3 and set(source) == {"baro+gnss"}  # the take-off height's own 0.3 m stays unknown
+
+
+@pytest.mark.parametrize("amsl", [False, True])
+def test_a_white_rtk_noise_does_not_move_the_height_and_a_drift_is_followed(amsl):
+    """RTK altitudes at 5 Hz with 2 cm of white noise (the receiver claiming v_acc 2 cm) beside a barometer that
+    drifts 0.4 m in 2 minutes: the barometer carries the short term (the height moves less than 1 cm from one
+    GNSS altitude to the next), the GNSS altitudes its drift (followed to about a centimetre)."""
+    c = cal(amsl=amsl, surface_amsl_m=0.01)
+    drift = lambda tau: tau / 300.0
+    tel = telemetry(duration_s=120.0, ekf_error=drift)
+    noise = np.random.default_rng(7).normal(0.0, 0.02, 600)
+    for k in range(600):
+        gps(tel, k * 0.2 + 0.1, SURFACE + TRUE_H + noise[k], v_acc=0.02, fix=6)
+    tau = np.arange(20.0, 120.0, 0.2)  # one answer between each two GNSS altitudes
+    bias, sigma, source = at(c, tel, tau)
+    err = bias - drift(tau)
+    assert np.sqrt(np.mean(np.diff(err) ** 2)) < 0.003  # was 2.1 cm: the height followed each message's noise
+    assert np.sqrt(np.mean(err ** 2)) < 0.01 and np.abs(err).max() < 0.03  # was 1.7 cm RMS: worse than one message
+    assert np.mean(np.abs(err) <= 2 * sigma) >= 0.95
+    assert set(source) == {"gnss_rtk" if amsl else "baro+gnss_rtk"}
 
 
 # --- absolute heights and the cross-check --------------------------------------------------------------
@@ -264,7 +290,9 @@ def test_status_says_what_measured_the_height():
         tel.add_height("rangefinder", T0 + 17.0 + k, TRUE_H + 9.0, 0.05)
     s = status(c.water, c.sigmas, tel)
     assert s["reference"] == "takeoff" and s["reference_set_at"] == "arming" and s["armed"] is True
-    assert s["since_reference_s"] == pytest.approx(19.0, abs=0.01) and s["sigma_m"] > 4.5  # covers both
+    # covers both: hypot(its own sigma, 9 m / 2), in millimetres (its own, 5 cm 15 s after the lidar, adds < 1 mm)
+    assert s["since_reference_s"] == pytest.approx(19.0, abs=0.01) and s["sigma_m"] >= 4.5
+    assert at(c, tel, 20.0)[1][0] > 4.5
     assert s["ekf_height_m"] == pytest.approx(TRUE_H) and s["source"] == "rangefinder"
     rf = s["sources"]["rangefinder"]
     assert (rf["used"], rf["refused"]) == (1, 3) and rf["disagrees_m"] == pytest.approx(-9.0, abs=0.01)

@@ -29,7 +29,8 @@ RANGEFINDER = with_overrides(load_scenario(SCENARIOS / "height_rangefinder.toml"
 def tlogs(tmp_path_factory):
     root = tmp_path_factory.mktemp("height_knobs")
     out = {}
-    for name, sc in (("rtk", RTK), ("plain", PLAIN), ("rangefinder", RANGEFINDER),
+    for name, sc in (("rtk", RTK), ("rtk_noisy", with_overrides(RTK, uav={"gnss_alt_noise_m": 0.02})),
+                     ("plain", PLAIN), ("rangefinder", RANGEFINDER),
                      ("nothing", with_overrides(RANGEFINDER, rangefinder={"sees": "nothing"})),
                      ("floor", with_overrides(RANGEFINDER, rangefinder={"sees": "floor", "noise_m": 0.0}))):
         generate(sc, root / name, video=False)
@@ -67,6 +68,20 @@ def test_baro_bias_and_drift_are_in_the_ekf_heights_only(tlogs):
         # a slow wander: from one fix to the next (0.2 s) it moves by a small share of its size
         assert np.abs(np.diff(gnss_err)).max() < 0.05 * u.gnss_alt_error_m + 0.002
         assert all(m.alt_ellipsoid - m.alt == round(s.geoid_separation_m * 1000) for m in raw)
+
+
+def test_gnss_altitude_white_noise_in_gps_raw_int_only(tlogs):
+    """gnss_alt_noise_m: new with each GPS_RAW_INT (alt and alt_ellipsoid alike), of that 1-sigma; nothing else in the
+    tlog changes (its own random stream)."""
+    (sc, quiet, _), (_, noisy, _) = tlogs["rtk"], tlogs["rtk_noisy"]
+    raw = [[m for _, m in of_kind(records, "GPS_RAW_INT")] for records in (quiet, noisy)]
+    noise = np.array([b.alt - a.alt for a, b in zip(*raw)]) / 1e3
+    assert len(noise) == len(raw[0]) == len(raw[1]) > 500
+    assert 0.9 * 0.02 < noise.std() < 1.1 * 0.02 and abs(noise.mean()) < 0.003
+    assert abs(np.corrcoef(noise[1:], noise[:-1])[0, 1]) < 0.1  # white: no two messages alike
+    assert all(m.alt_ellipsoid - m.alt == round(sc.site.geoid_separation_m * 1000) for m in raw[1])
+    others = [[frame for _, frame, m in records if m.get_type() != "GPS_RAW_INT"] for records in (quiet, noisy)]
+    assert others[0] == others[1]
 
 
 def test_gnss_accuracy_fields_true_to_the_fix_type(tlogs):
