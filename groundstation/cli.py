@@ -18,7 +18,7 @@ COMMANDS = (
      "a flight's own records (DataFlash log, camera video, depth) as a session"),
     ("evaluate", "groundstation.offline.evaluate", "accuracy of sessions with truth.csv: refraction vs straight ray"),
     ("sim", "sim_fixtures.cli", "generate a synthetic session (video, telemetry, truth) from a scenario"),
-    ("run", "groundstation.live.service", "the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out"),
+    ("run", "groundstation.live.command", "the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out"),
     ("status", "groundstation.live.console", "the live service's status, once or --watch"),
     ("select", "groundstation.live.console", "select the UUV in the live service (box or click)"),
     ("release", "groundstation.live.console", "let go of the target: no fix until a new selection"),
@@ -73,8 +73,11 @@ def main(argv=None) -> int:
         else:
             sub.add_parser(name, help=help_line)  # listed only: never the one parsed
     args = parser.parse_args(argv)
+    from groundstation.outputs import tidied
+
     try:
-        return args.func(args)
+        with tidied():  # a failed command leaves no empty output folder
+            return args.func(args)
     except KeyboardInterrupt:
         return 130
     except _one_line_errors() as e:

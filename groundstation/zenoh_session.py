@@ -21,6 +21,9 @@ import zenoh
 
 #: connect/retry: 100 ms, doubling to 500 ms
 RETRY = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 2}
+#: Where ``skyfix run`` listens without ``--zenoh-listen`` or ``--zenoh-config`` (this machine only), and where
+#: ``skyfix status``, ``select``, ``release`` and ``acquire`` look for it without ``--zenoh-connect``
+LOCAL_ENDPOINT = "tcp/127.0.0.1:7448"
 _RUST_LOCATION = re.compile(r"\s+at\s+/\S+?\.rs:\d+\.?")
 _JSON5_MESSAGE = re.compile(r'Json5Err\(Message \{ msg: "(.*?)", location: .*')
 

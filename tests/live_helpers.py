@@ -81,10 +81,13 @@ def skyfix(*args: str) -> list[str]:
     """The command line of ``skyfix <args>``, as the installed console script runs it.
 
     A ``run`` without ``--ui``/``--no-ui`` serves its web page on a free port (``127.0.0.1:0``): the default
-    8080 would collide between runs on one machine.
+    8080 would collide between runs on one machine; without ``--zenoh-listen`` (or a file that may name it) it
+    listens for Zenoh on a free port too, not on the default ``tcp/127.0.0.1:7448``.
     """
     if args and args[0] == "run" and "--ui" not in args and "--no-ui" not in args:
         args = (*args, "--ui", "127.0.0.1:0")
+    if args and args[0] == "run" and not {"--zenoh-listen", "--zenoh-config", "--config"} & set(args):
+        args = (*args, "--zenoh-listen", "tcp/127.0.0.1:0")
     return [sys.executable, "-m", "groundstation.cli", *args]
 
 

@@ -90,7 +90,7 @@ def test_service_survives_the_autopilot_going_away(tmp_path):
     run_log = tmp_path / "run.log"
     statuses: list[dict] = []
     service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--mavlink",
-                           f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--gps-input",
+                           f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--video", "none", "--gps-input",
                            f"tcp:127.0.0.1:{ap.port}", "--duration-s", "120"), run_log)
     watcher = open_session(connect=[ep])
     sub = watcher.declare_subscriber("skyfix/status", lambda s: statuses.append(json.loads(s.payload.to_bytes())))

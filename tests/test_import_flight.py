@@ -7,6 +7,8 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import subprocess
+import sys
 from fractions import Fraction
 from pathlib import Path
 
@@ -29,15 +31,18 @@ def roll_deg(t):
     return 5.0 * math.sin(t)
 
 
-def write_flight(path: Path, seconds: float = 20.0, gps_week: int = WEEK, trigger_at_s: float | None = None) -> None:
-    """ATT and MNT at 10 Hz, POS at 10 Hz, GPS at 5 Hz (weeks and ms on a clock BOOT_AT_FIX_S behind), SIM at 10 Hz
-    with other values, from boot 5 s on."""
+def write_flight(path: Path, seconds: float = 20.0, gps_week: int = WEEK, trigger_at_s: float | None = None,
+                 mount: bool = True) -> None:
+    """ATT and MNT (unless not ``mount``) at 10 Hz, POS at 10 Hz, GPS at 5 Hz (weeks and ms on a clock BOOT_AT_FIX_S
+    behind), SIM at 10 Hz with other values, from boot 5 s on. The gimbal: pitch -60° from the horizon, yaw 10° right
+    of the vehicle's (90°): 100° from North."""
     w = DataflashWriter(path)
     for k in range(round(seconds * 10)):
         t = 5.0 + k / 10
         us = round(t * 1e6)
         w.write("ATT", us, 0.0, roll_deg(t), 0.0, -2.0, 0.0, 90.0, 0)
-        w.write("MNT", us, 0, 0.0, 0.5, -60.0, -60.0, 10.0, 10.0, 100.0, 100.0, float("nan"))
+        if mount:
+            w.write("MNT", us, 0, 0.0, 0.5, -60.0, -60.0, 10.0, 10.0, 100.0, 100.0, float("nan"))
         w.write("POS", us + 500, round(63.44 * 1e7), round(10.4 * 1e7), 60.0 + t / 100, 10.0, 10.0)
         w.write("SIM", us, 3000, 1000, 18000, 99.0, round(60.0 * 1e7), round(11.0 * 1e7), 1.0, 0.0, 0.0, 0.0)
         if k % 2 == 0:
@@ -119,14 +124,56 @@ def test_the_video_start_from_the_trigger_and_errors_that_name_the_value(field_d
     write_flight(bare, gps_week=0)
     with pytest.raises(SessionError, match=r"no GPS time"):
         import_flight(bare, None, depth, cal, tmp_path / "d", depth_columns=columns)
-    gimbal_device = tmp_path / "gd.toml"
-    gimbal_device.write_text((ROOT / "deploy" / "calibration.toml").read_text())
-    with pytest.raises(SessionError, match=r"MNT records"):
-        import_flight(log, None, depth, gimbal_device, tmp_path / "e", depth_columns=columns)
+    no_mount = tmp_path / "no_mount.bin"
+    write_flight(no_mount, mount=False)
+    with pytest.raises(SessionError, match=r"no MNT records, while the calibration's camera is on a gimbal"):
+        import_flight(no_mount, None, depth, ROOT / "deploy" / "calibration.toml", tmp_path / "e", depth_columns=columns)
     not_a_log = tmp_path / "video.bin"
     not_a_log.write_bytes(video.read_bytes())
     assert main(["import", "--dataflash", str(not_a_log), "--depth", str(depth), "--depth-columns", "time_unix,depth",
                  "--calibration", str(cal), "--out", str(tmp_path / "f")]) == 2
+
+
+def test_the_live_calibration_imports_its_log(field_day, tmp_path):
+    """deploy/calibration.toml as the live run uses it (``attitude_source = "gimbal_device"``, what ArduCopter sends)
+    imports the same drone's log: the MNT records become GIMBAL_DEVICE_ATTITUDE_STATUS, and the camera points where
+    they say, as with ``mount_orientation``: its optical axis 60° below the horizon, 100° from North."""
+    from localizer.pose import camera_pose
+
+    log, _, depth, mount_cal, start = field_day
+    axes = {}
+    for name, cal in (("gimbal_device", ROOT / "deploy" / "calibration.toml"), ("mount_orientation", mount_cal)):
+        import_flight(log, None, depth, cal, tmp_path / name, depth_columns=("time_unix", "depth"))
+        kinds = {m.get_type() for _, m in read_tlog(tmp_path / name / "uav.tlog")}
+        assert ("GIMBAL_DEVICE_ATTITUDE_STATUS" in kinds) == (name == "gimbal_device")
+        assert ("MOUNT_ORIENTATION" in kinds) == (name == "mount_orientation")
+        session = load_session(tmp_path / name)
+        assert session.calibration.mount.attitude_source == name
+        pose = camera_pose(session.calibration, session.telemetry, start + np.arange(0.0, 5.0, 0.5))
+        assert set(pose.status) == {"ok"}
+        axes[name] = pose.R_ned_from_cv[:, :, 2]  # the optical axis (OpenCV z) in NED
+    down, azimuth = math.radians(60.0), math.radians(100.0)
+    expected = [math.cos(down) * math.cos(azimuth), math.cos(down) * math.sin(azimuth), math.sin(down)]
+    for name, axis in axes.items():
+        assert axis == pytest.approx(np.tile(expected, (len(axis), 1)), abs=1e-6), name
+
+
+def test_a_file_that_is_not_a_log_is_one_line_and_leaves_no_folder(tmp_path):
+    """4 KB of noise as --dataflash: one line naming it (pymavlink's 3,570 "bad header" lines never printed) and no
+    --out folder left behind."""
+    noise = tmp_path / "noise.bin"
+    noise.write_bytes(np.random.default_rng(29).integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    depth = tmp_path / "depth.jsonl"
+    depth.write_text('{"t": 1.0, "depth_m": 1.0}\n')
+    out = subprocess.run([sys.executable, "-m", "groundstation.cli", "import", "--dataflash", str(noise), "--depth",
+                          str(depth), "--calibration", str(ROOT / "deploy" / "calibration.toml"), "--out",
+                          str(tmp_path / "new" / "session")], check=False, capture_output=True, text=True, cwd=ROOT,
+                         timeout=120)
+    assert out.returncode == 2 and out.stdout == ""
+    begins = noise.read_bytes()[:3].hex(" ")
+    line = f"skyfix import: error: {noise}: not a DataFlash log (it begins {begins}, a binary log a3 95 80)"
+    assert out.stderr.splitlines() == [line]
+    assert not (tmp_path / "new").exists()
 
 
 @pytest.fixture(scope="module")

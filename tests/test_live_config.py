@@ -93,7 +93,8 @@ def test_unknown_calibration_keys_are_logged_by_run(tmp_path, caplog):
     bundled = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"
     cal = tmp_path / "cal.toml"
     cal.write_text(bundled.read_text().replace("[mount]\n", "[mount]\ncamera_ofset_m = [0.0, 0.0, 0.3]\n"))
-    argv = ["run", "--calibration", str(cal), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "0.2", "--no-ui"]
+    argv = ["run", "--calibration", str(cal), "--mavlink", "udpin:127.0.0.1:0", "--video", "none", "--gps-input", "none",
+            "--zenoh-listen", "tcp/127.0.0.1:0", "--duration-s", "0.2", "--no-ui"]
     with caplog.at_level("WARNING"):
         assert main(argv) == 0
     assert f"{cal}: mount.camera_ofset_m is not a key skyfix knows; ignored (a typo?)" in caplog.messages
@@ -161,9 +162,26 @@ def test_a_link_that_cannot_open_is_one_line_and_exit_2(tmp_path, option, capsys
     from groundstation.cli import main
 
     bundled = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"
-    argv = ["run", "--calibration", str(bundled), "--mavlink", "udpin:127.0.0.1:0", "--duration-s", "3", "--no-ui",
-            option, "udpin:127.0.0.1:notaport"]
+    argv = ["run", "--calibration", str(bundled), "--mavlink", "udpin:127.0.0.1:0", "--video", "none", "--gps-input",
+            "none", "--zenoh-listen", "tcp/127.0.0.1:0", "--duration-s", "3", "--no-ui", option, "udpin:127.0.0.1:notaport"]
     assert main(argv) == 2
     err_lines = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
     assert len(err_lines) == 1
     assert err_lines[0].startswith("skyfix run: error: MAVLink 'udpin:127.0.0.1:notaport': cannot open:")
+
+
+def test_video_and_gps_input_are_named_or_said_to_be_none(tmp_path):
+    """A run that forgets --video or --gps-input is refused; "none" says there is none (read as None); with [[uuv]]
+    tables each names its own GPS_INPUT."""
+    with pytest.raises(ConfigError, match=r"^options: --video = None: missing: name it, or say none"):
+        config.unnamed_inputs(_parse(["--calibration", "x.toml", "--gps-input", "udpout:127.0.0.1:1"]))
+    with pytest.raises(ConfigError, match=r"^options: --gps-input = None: missing"):
+        config.unnamed_inputs(_parse(["--calibration", "x.toml", "--video", "udp://0.0.0.0:5600"]))
+    args = _parse(["--calibration", "x.toml", "--video", "none", "--gps-input", "none"])
+    config.unnamed_inputs(args)
+    cfg = config.run_config(args)
+    assert cfg.video is None and cfg.gps_input is None and cfg.uuvs[0].gps_input is None
+    (tmp_path / "c.toml").write_text('calibration = "cal.toml"\nvideo = "none"\n[[uuv]]\nid = "a"\ngps_input = '
+                                     '"udpout:127.0.0.1:1"\n[[uuv]]\nid = "b"\ndepth_key = "b/depth"\n')
+    with pytest.raises(ConfigError, match=rf"^{tmp_path / 'c.toml'}: uuv\[1\].gps_input = None: missing"):
+        config.unnamed_inputs(_parse(["--config", str(tmp_path / "c.toml")]))

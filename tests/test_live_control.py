@@ -123,7 +123,8 @@ def test_console_commands_against_a_running_service(tmp_path):
     assert nobody.returncode == 2
     assert nobody.stderr.strip() == "skyfix status: error: no skyfix service answered on skyfix/cmd/status within 0.5 s"
     service = start(skyfix("run", "--calibration", str(tmp_path / "cal.toml"), "--mavlink",
-                           f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--duration-s", "60"),
+                           f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--video", "none", "--gps-input", "none",
+                           "--duration-s", "60"),
                     tmp_path / "run.log")
     watch = None
     try:

@@ -1,14 +1,21 @@
 """The deploy/ files are valid: Zenoh JSON5 configs load in zenoh-python, the field config and
-calibration are accepted by skyfix run's parsers, the systemd unit runs skyfix run."""
+calibration are accepted by skyfix run's parsers, the systemd unit runs skyfix run, restarts under a start limit,
+hardened, and systemd itself reads it without a warning."""
 
 from __future__ import annotations
 
 import argparse
 import configparser
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import zenoh
 from live_helpers import ROOT
+from supervisor import read_unit, systemd_seconds
 
 from groundstation.live.config import load_calibration, run_config
 from groundstation.zenoh_session import make_config
@@ -36,3 +43,38 @@ def test_systemd_unit_runs_the_service():
     unit.read(DEPLOY / "skyfix.service")
     assert "skyfix run --config" in unit["Service"]["ExecStart"]
     assert unit["Service"]["KillSignal"] == "SIGINT"
+
+
+def test_systemd_unit_restarts_within_its_limit_hardened_and_records_where_it_may_write():
+    """Restart=on-failure with a start limit; its own user on a read-only system; the recordings (field.toml's
+    ``recordings``) in its StateDirectory, the one place it may write."""
+    unit = read_unit()
+    service = unit["Service"]
+    assert service["Restart"] == "on-failure" and systemd_seconds(service["RestartSec"]) <= 1.0
+    assert systemd_seconds(unit["Unit"]["StartLimitIntervalSec"]) > 0 and int(unit["Unit"]["StartLimitBurst"]) >= 4
+    assert service["User"] == "skyfix" and service.get("DynamicUser", "no") == "no"
+    hardening = {"NoNewPrivileges": "yes", "ProtectSystem": "strict", "ProtectHome": "yes", "PrivateTmp": "yes",
+                 "CapabilityBoundingSet": "", "RestrictSUIDSGID": "yes"}
+    assert {k: service.get(k) for k in hardening} == hardening
+    assert set(service["RestrictAddressFamilies"].split()) == {"AF_INET", "AF_INET6", "AF_UNIX", "AF_NETLINK"}
+    cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
+    state = Path("/var/lib") / service["StateDirectory"]
+    assert cfg.record is None and Path(cfg.recordings).is_relative_to(state) and service["WorkingDirectory"] == str(state)
+
+
+def test_systemd_analyze_verifies_the_unit_and_rates_it_ok(tmp_path):
+    """systemd's own reading of the unit (its ExecStart pointed at this checkout's skyfix): no warning, and an
+    exposure level of at most 3 of 10 (``systemd-analyze security``)."""
+    analyze = shutil.which("systemd-analyze")
+    if analyze is None:
+        pytest.skip("systemd-analyze is not installed (Debian: apt install systemd)")
+    unit = tmp_path / "skyfix.service"
+    text = (DEPLOY / "skyfix.service").read_text()
+    unit.write_text(text.replace("/opt/skyfix/.venv/bin/skyfix", str(Path(sys.executable).parent / "skyfix")))
+    verify = subprocess.run([analyze, "verify", "--man=no", str(unit)], capture_output=True, text=True, timeout=60,
+                            check=False)
+    assert verify.returncode == 0 and verify.stderr.strip() == "", verify.stderr
+    security = subprocess.run([analyze, "security", "--offline=true", str(unit)], capture_output=True, text=True,
+                              timeout=60, check=False)
+    level = re.search(r"Overall exposure level for skyfix.service: (\d+\.\d+)", security.stdout)
+    assert level is not None and float(level[1]) <= 3.0, security.stdout[-1500:]

@@ -48,7 +48,8 @@ def test_live_status_says_what_measured_the_height(tmp_path):
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     sub_out = tmp_path / "zenoh.jsonl"
     procs = [start(skyfix("run", "--calibration", str(session / "session.toml"), "--mavlink", f"udpin:127.0.0.1:{mav}",
-                          "--zenoh-listen", ep, "--duration-s", "40"), tmp_path / "run.log"),
+                          "--zenoh-listen", ep, "--video", "none", "--gps-input", "none", "--duration-s", "40"),
+                   tmp_path / "run.log"),
              start([sys.executable, "-c", SUBSCRIBER, ep, "skyfix/status", str(sub_out)], tmp_path / "sub.log")]
     try:
         wait_for(lambda: bool(_statuses(sub_out)), 20, "skyfix status on Zenoh")

@@ -22,7 +22,7 @@ def _run(tmp_path, *extra: str, timeout_s: float = 60.0):
     zenoh = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     cmd = skyfix("run", "--calibration", str(CAL), "--mavlink", f"udpin:127.0.0.1:{mav}",
                  "--video", f"udp://127.0.0.1:{video}", "--zenoh-listen", zenoh, "--stats", str(tmp_path / "s.json"),
-                 *extra)
+                 "--gps-input", "none", *extra)
     out = subprocess.run(cmd, check=False, capture_output=True, text=True, cwd=ROOT, timeout=timeout_s)
     return out, mav, video
 

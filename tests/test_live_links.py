@@ -152,8 +152,8 @@ def test_unplugged_serial_radio(tmp_path):
     log = tmp_path / "run.log"
     proc = start(skyfix("run", "--calibration", str(ROOT / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"),
                         "--mavlink", f"{device},57600", "--no-request-rates",
-                        "--zenoh-listen", f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
-                        "--stats", str(tmp_path / "stats.json")), log)
+                        "--zenoh-listen", f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}", "--video", "none",
+                        "--gps-input", "none", "--stats", str(tmp_path / "stats.json")), log)
     mav = mavutil().mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     try:
         wait_for(lambda: "UAV MAVLink" in log.read_text() and " up" in log.read_text(), 30, "the serial link up")

@@ -41,7 +41,8 @@ def test_recording_is_flushed_and_survives_kill(tmp_path):
     port, ep = free_port(), f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     rec = tmp_path / "rec"
     service = start(skyfix("run", "--calibration", str(tmp_path / "cal.toml"), "--mavlink", f"udpin:127.0.0.1:{port}",
-                           "--zenoh-listen", ep, "--record", str(rec), "--duration-s", "25"), tmp_path / "run.log")
+                           "--zenoh-listen", ep, "--video", "none", "--gps-input", "none", "--record", str(rec),
+                           "--duration-s", "25"), tmp_path / "run.log")
     zs = open_session(connect=[ep])
     seen = []
     sub = zs.declare_subscriber("skyfix/status", lambda s: seen.append(1))
@@ -96,7 +97,8 @@ def test_recording_says_when_the_link_delay_was_measured(tmp_path):
     port, ep = free_port(), f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     rec = tmp_path / "rec"
     service = start(skyfix("run", "--calibration", str(tmp_path / "cal.toml"), "--mavlink", f"udpin:127.0.0.1:{port}",
-                           "--zenoh-listen", ep, "--record", str(rec), "--duration-s", "40"), tmp_path / "run.log")
+                           "--zenoh-listen", ep, "--video", "none", "--gps-input", "none", "--record", str(rec),
+                           "--duration-s", "40"), tmp_path / "run.log")
     mav = mavutil()
     uav = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
     t0 = time.time()

@@ -336,7 +336,7 @@ def test_stop_while_the_stream_is_down_exits_cleanly(tmp_path):
                    f"m=video {free_port()} RTP/AVP 96\na=rtpmap:96 H264/90000\n")
     proc = start(skyfix("run", "--calibration", str(session / "session.toml"), "--mavlink",
                         f"udpin:127.0.0.1:{free_port()}", "--video", str(sdp),
-                        "--zenoh-listen", f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"), log)
+                        "--zenoh-listen", f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}", "--gps-input", "none"), log)
     try:
         wait_for(lambda: "nothing received" in log.read_text(), 30, "the video's first failed attempt")
     finally:

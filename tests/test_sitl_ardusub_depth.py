@@ -180,7 +180,8 @@ def depth_settings() -> dict:
 
 def run_command(config: Path, name: str, endpoint: tuple[str, str], *extra: str) -> list[str]:
     return skyfix("run", "--config", str(config), "--calibration", str(ROOT / "deploy" / "calibration.toml"),
-                  "--mavlink", f"udpin:127.0.0.1:{free_port()}", "--no-ui", endpoint[0], endpoint[1],
+                  "--mavlink", f"udpin:127.0.0.1:{free_port()}", "--video", "none", "--gps-input", "none", "--no-ui",
+                  endpoint[0], endpoint[1],
                   "--status-key", f"test/{name}/status", "--fix-key", f"test/{name}/fix",
                   "--alive-key", f"test/{name}/alive", "--control-prefix", f"test/{name}/cmd", *extra)
 

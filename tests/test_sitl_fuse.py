@@ -116,7 +116,7 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
                 "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", str(CAMERA_LATENCY_MS), "--zenoh-connect", ep,
                 "--fix-key", f"skyfix/uuv/rov1/drone/{d}/fix", "--status-key", f"skyfix/drone/{d}/status",
                 "--alive-key", f"skyfix/drone/{d}/alive", "--control-prefix", f"skyfix/drone/{d}/cmd", "--no-ui",
-                "--height-from-size", "off",
+                "--height-from-size", "off", "--gps-input", "none",
                 "--duration-s", "600"), tmp_path / f"run_{d}.log")
             procs.append(services[d])
         for d, s in services.items():

@@ -39,7 +39,7 @@ def test_ardusub_reboot_under_a_running_service(tmp_path):
     try:
         sitl.start()
         service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--mavlink",
-                               f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--gps-input",
+                               f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--video", "none", "--gps-input",
                                f"tcp:127.0.0.1:{sitl.ports['serial1']}", "--duration-s", "300"), run_log)
         watcher = open_session(connect=[ep])
         sub = watcher.declare_subscriber("skyfix/status", lambda s: statuses.append(json.loads(s.payload.to_bytes())))

@@ -33,7 +33,7 @@ def service(tmp_path):
         log = tmp_path / f"run{len(procs)}.log"
         procs.append(start(skyfix("run", "--calibration", str(CAL), "--mavlink", f"udpin:127.0.0.1:{free_port()}",
                                   "--zenoh-listen", f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
-                                  "--duration-s", "120", *ui_args), log))
+                                  "--video", "none", "--gps-input", "none", "--duration-s", "120", *ui_args), log))
         url = urlsplit(ui_url(log))
         token = url.query.removeprefix("token=") or None
         return f"http://127.0.0.1:{url.port}", token

@@ -101,7 +101,7 @@ def replayed_through(tmp_path: Path, client: Path, procs: list) -> subprocess.Po
     run_log = tmp_path / "run.log"
     service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--zenoh-config", str(client),
                            "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", f"udp://127.0.0.1:{video}",
-                           "--video-latency-ms", "55", "--duration-s", "120"), run_log)
+                           "--video-latency-ms", "55", "--gps-input", "none", "--duration-s", "120"), run_log)
     procs.append(service)
     wait_for(lambda: "skyfix run: UAV" in run_log.read_text() or service.poll() is not None, 30, "the service")
     assert service.poll() is None, run_log.read_text()[-3000:]

@@ -20,13 +20,14 @@ from pathlib import Path
 from typing import Annotated, Literal, get_args, get_origin
 
 from annotated_types import Ge, Gt
-from pydantic import Field, StringConstraints, model_validator
+from pydantic import BeforeValidator, Field, StringConstraints, model_validator
 from pydantic.dataclasses import dataclass
 
 from groundstation.live.sources.depth_ardusub import autopilot_prefix
 from groundstation.live.sources.uuv_position import parse_hint
 from groundstation.live.ui.bind import check_token, parse_bind
 from groundstation.session.read import PRIMARY_UUV
+from groundstation.zenoh_session import LOCAL_ENDPOINT
 from localizer.calibration import Calibration
 from localizer.contract import (
     CLOSED,
@@ -59,6 +60,12 @@ class _RelativeToFile:
 
 FilePath = Annotated[Text, _RelativeToFile("FILE")]
 DirPath = Annotated[Text, _RelativeToFile("DIR")]
+#: The word that says "no such input": ``--video none``, ``--gps-input none`` (a run without them is refused)
+NONE = "none"
+#: An input that must be named, or said to be :data:`NONE` (read as None)
+NamedOrNone = Annotated[Text | None, BeforeValidator(lambda v: None if v == NONE else v)]
+#: The inputs ``skyfix run`` refuses to start without: a value, or :data:`NONE` (:func:`unnamed_inputs`)
+NAMED_INPUTS = ("video", "gps_input")
 
 
 @dataclass(frozen=True, kw_only=True, config=CLOSED)
@@ -75,8 +82,9 @@ class UuvOptions:
                             "there: mavlink/1/1)")
     depth_mavlink: Text | None = Field(None, description="with --depth-source mavlink: ArduSub's MAVLink, a pymavlink "
                                        "string (tcp:192.168.2.2:5777, udpin:0.0.0.0:14770, /dev/ttyUSB1,115200)")
-    gps_input: Text | None = Field(None, description="the UUV autopilot for GPS_INPUT: a pymavlink string "
-                                   "(udpout:192.168.2.2:14550) or zenoh:mavlink/in (BlueOS)")
+    gps_input: NamedOrNone = Field(None, description="the UUV autopilot for GPS_INPUT: a pymavlink string "
+                                   "(udpout:192.168.2.2:14550) or zenoh:mavlink/in (BlueOS); none: no GPS_INPUT "
+                                   "(required: a run that names neither is refused)")
     gps_input_signing_key: FilePath | None = Field(None, description="sign GPS_INPUT (MAVLink 2) with the key in "
                                                    "this file: 32 bytes, or 64 hex digits")
     uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
@@ -163,8 +171,9 @@ class RunConfig(UuvOptions):
     mavlink: Text = Field("udpin:0.0.0.0:14550", description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
                           "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)")
     mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
-    video: Text | None = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
-                               "a file (anything FFmpeg opens)")
+    video: NamedOrNone = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
+                               "a file (anything FFmpeg opens); none: no video (required: a run that names neither "
+                               "is refused)")
     video_latency_ms: within(0, 2000) | Literal["auto"] = Field(
         0.0, description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
         "'auto': estimated from the image's motion against the camera attitude")
@@ -180,7 +189,8 @@ class RunConfig(UuvOptions):
                                  "nothing 10 s after start (default: keep running and keep saying so)")
     zenoh_connect: tuple[Text, ...] = Field((), description="Zenoh endpoint to connect to, e.g. "
                                             "tcp/192.168.2.2:7447 (repeatable)")
-    zenoh_listen: tuple[Text, ...] = Field((), description="Zenoh endpoint to listen on (repeatable)")
+    zenoh_listen: tuple[Text, ...] = Field((), description="Zenoh endpoint to listen on (repeatable; default: "
+                                           f"{LOCAL_ENDPOINT} unless --zenoh-config, where skyfix status looks)")
     zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
                                           "endpoints above are added to it")
     zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
@@ -224,7 +234,11 @@ class RunConfig(UuvOptions):
     no_ui: Flag = Field(False, description="serve no web page")
     ui_token: Text | None = Field(None, description="the web page's token (default: none on localhost, a random one "
                                   "beyond it); given, every request needs it, on localhost too")
-    record: DirPath | None = Field(None, description="record the run as a session directory (format v1)")
+    record: DirPath | None = Field(None, description="record the run as a session directory (format v1): a new or "
+                                   "empty folder (a start into a recording is refused: see --recordings)")
+    recordings: DirPath | None = Field(None, description="record each start as a session directory of its own in "
+                                       "this folder, named by the start's UTC time YYYYmmdd-HHMMSS (-2, -3, … when "
+                                       "taken): a restart never overwrites nor refuses")
     duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
     stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
                                    "file at exit")
@@ -239,7 +253,7 @@ class RunConfig(UuvOptions):
         if single:
             name = next(iter(single))
             raise Invalid(name, getattr(self, name), "set per UUV, in each [[uuv]] table, when there are several")
-        if self.record:  # the first UUV's records are the session's own, named uuv1 when read
+        if self.recording:  # the first UUV's records are the session's own, named uuv1 when read
             for i, u in enumerate(self.uuv[1:], 1):
                 if u.id == PRIMARY_UUV:
                     raise Invalid(f"uuv[{i}].id", u.id, f"with --record, {PRIMARY_UUV} is the first [[uuv]]'s name "
@@ -262,10 +276,26 @@ class RunConfig(UuvOptions):
         own = {f: getattr(self, f) for f in _uuv_defaults()}
         return (UuvConfig(id=PRIMARY_UUV, **own),)
 
+    @property
+    def zenoh_listen_endpoints(self) -> tuple[str, ...]:
+        """The Zenoh endpoints the run listens on: those given, else (without a Zenoh configuration file, whose own
+        apply) :data:`~groundstation.zenoh_session.LOCAL_ENDPOINT`, where the console commands look by default."""
+        if self.zenoh_listen or self.zenoh_config:
+            return self.zenoh_listen
+        return (LOCAL_ENDPOINT,)
+
+    @property
+    def recording(self) -> str | None:
+        """The option that records the run (``record`` or ``recordings``, its value); None without."""
+        return self.record or self.recordings
+
     @model_validator(mode="after")
     def _record_needs_pymavlink(self):
-        if self.record and self.mavlink_backend == "mavsdk":
-            raise Invalid("record", self.record, "recording needs --mavlink-backend pymavlink")
+        if self.record and self.recordings:
+            raise Invalid("recordings", self.recordings, f"--record {self.record} is given too: one or the other")
+        if self.recording and self.mavlink_backend == "mavsdk":
+            key = "record" if self.record else "recordings"
+            raise Invalid(key, self.recording, "recording needs --mavlink-backend pymavlink")
         return self
 
     @model_validator(mode="after")
@@ -395,14 +425,37 @@ def read_config_file(path: str) -> dict:
     return data
 
 
-def run_config(args: argparse.Namespace) -> RunConfig:
-    """Defaults, then the config file, then the flags given; a bad value names where it came from."""
+def _given(args: argparse.Namespace) -> tuple[dict, dict]:
+    """The options the config file sets and the flags given."""
     file_values = read_config_file(args.config) if getattr(args, "config", None) else {}
     flags = {}
     for name in RunConfig.__pydantic_fields__:
         given = getattr(args, name, None)
         if given is not None and given is not False:
             flags[name] = tuple(given) if isinstance(given, list) else given
+    return file_values, flags
+
+
+def unnamed_inputs(args: argparse.Namespace) -> None:
+    """:class:`ConfigError` for the first of :data:`NAMED_INPUTS` neither the flags nor the config file name (in
+    each ``[[uuv]]`` table for ``gps_input`` when there are tables): a run without video or GPS_INPUT must say so
+    (``none``), never by forgetting it."""
+    file_values, flags = _given(args)
+    given = {**file_values, **flags}
+    tables = given.get("uuv") if isinstance(given.get("uuv"), list) else []
+    for name in NAMED_INPUTS:
+        where = [(f"uuv[{i}].{name}", t) for i, t in enumerate(tables) if isinstance(t, dict)] \
+            if tables and name in UuvOptions.__pydantic_fields__ else [(flag(name), given)]
+        for key, values in where:
+            if values.get(name) is None:
+                source = args.config if tables and key.startswith("uuv[") else "options"
+                raise ConfigError(source, key, None, f"missing: name it, or say {NONE} ({flag(name)} {NONE}, or "
+                                  f"{name} = \"{NONE}\" in the config file)")
+
+
+def run_config(args: argparse.Namespace) -> RunConfig:
+    """Defaults, then the config file, then the flags given; a bad value names where it came from."""
+    file_values, flags = _given(args)
     try:
         return validate(RunConfig, {**file_values, **flags}, "options")
     except ConfigError as e:

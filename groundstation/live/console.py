@@ -5,8 +5,11 @@ Each command queries the running service's queryable ``<prefix>/<command>``
 a short summary instead (``--json`` for the whole status), once or every
 ``--interval-s`` with ``--watch`` (Ctrl-C stops). No answer within ``--timeout-s``,
 or a refused command, is one line on stderr and exit code 2 (``--watch`` keeps
-asking).
+asking). Without ``--zenoh-connect`` or ``--zenoh-config`` they connect to
+:data:`~groundstation.zenoh_session.LOCAL_ENDPOINT`, where a ``skyfix run`` on this
+machine listens by default.
 
+    skyfix status --watch
     skyfix status --zenoh-connect tcp/192.168.2.1:7447 --watch
     skyfix select --box 320,180,40,36 --frame 1234
     skyfix select --point 331,190
@@ -20,7 +23,7 @@ import json
 import sys
 import time
 
-from groundstation.zenoh_session import open_session
+from groundstation.zenoh_session import LOCAL_ENDPOINT, open_session
 
 
 class ConsoleError(Exception):
@@ -105,7 +108,8 @@ def _pair(text: str, n: int, what: str) -> list[float]:
 
 def run(args: argparse.Namespace) -> int:
     prefix = args.prefix.rstrip("/")
-    session = open_session(args.zenoh_connect or (), config_file=args.zenoh_config)
+    local = not args.zenoh_connect and not args.zenoh_config
+    session = open_session((LOCAL_ENDPOINT,) if local else args.zenoh_connect or (), config_file=args.zenoh_config)
     try:
         if args.command == "status":
             return _status(session, f"{prefix}/status", args)
@@ -146,7 +150,8 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     :data:`groundstation.cli.COMMANDS`)."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT",
-                        help="Zenoh endpoint of the service (or a router), e.g. tcp/192.168.2.1:7447 (repeatable)")
+                        help="Zenoh endpoint of the service (or a router), e.g. tcp/192.168.2.1:7447 (repeatable; "
+                        f"default without --zenoh-config: {LOCAL_ENDPOINT}, where skyfix run listens by default)")
     common.add_argument("--zenoh-config", help="Zenoh JSON5 config file (deploy/zenoh/*.json5)")
     common.add_argument("--prefix", default="skyfix/cmd", help="the service's --control-prefix (default skyfix/cmd)")
     common.add_argument("--timeout-s", type=float, default=3.0, help="how long to wait for the answer")

@@ -1,4 +1,5 @@
-"""``skyfix run``: the live service. One asyncio task per link, all in one TaskGroup.
+"""The live service (``skyfix run``, its command line in :mod:`.command`). One asyncio task per link, all in one
+TaskGroup.
 
 Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth (skyfix's JSON over
 Zenoh, :mod:`.sources.depth_zenoh`, or ArduSub's own over BlueOS's Zenoh or MAVLink,
@@ -28,7 +29,6 @@ sends its no-fix) and the service exits with its error. The Zenoh session is clo
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import dataclasses
 import json
@@ -49,7 +49,7 @@ from groundstation.live import config
 from groundstation.live.control import Control, ZenohControl
 from groundstation.live.pipeline import Pipeline
 from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
-from groundstation.live.sinks.recorder import Recorder
+from groundstation.live.sinks.recorder import Recorder, new_recording
 from groundstation.live.sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.live.sources.depth_ardusub import ArduSubMavlink, ArduSubZenoh
@@ -97,7 +97,7 @@ async def serve(cfg: config.RunConfig) -> dict:
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    session = open_session(cfg.zenoh_connect, cfg.zenoh_listen, multicast=cfg.zenoh_multicast,
+    session = open_session(cfg.zenoh_connect, cfg.zenoh_listen_endpoints, multicast=cfg.zenoh_multicast,
                            config_file=cfg.zenoh_config)
     closers = []
     usage = Usage()
@@ -163,8 +163,10 @@ async def serve(cfg: config.RunConfig) -> dict:
 
         # -- the shared outputs: the recording and the page (each UUV its part of them) -----------------------------
         recorder = None
-        if cfg.record:
-            recorder = Recorder(cfg.record, cfg.calibration, video_size=size if cfg.video else None,
+        if cfg.recording:
+            folder = cfg.record or new_recording(cfg.recordings, time.time())
+            log.info("recording into %s", folder)
+            recorder = Recorder(folder, cfg.calibration, video_size=size if cfg.video else None,
                                 timing=recorded_timing, uuv_ids=tuple(u.id for u in cfg.uuvs))
             uav.listeners.append(recorder.on_mavlink)
             workers.add(recorder, OUTPUTS, "record", lambda now: recorder.status(), is_input=True)
@@ -318,29 +320,11 @@ class UuvChain:
         return out
 
 
-def run(args: argparse.Namespace) -> int:
-    """``skyfix run``: exit code 0 after a clean stop."""
-    cfg = config.run_config(args)
+def run(cfg: config.RunConfig) -> int:
+    """The service with ``cfg`` to its end: exit code 0 after a clean stop, 2 after an error (one line)."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
     final = run_to_end("run", serve(cfg), (OSError, zenoh.ZError, InputMissing), cfg.stats)
     if final is None:
         return 2
     log.info("stopped: %s", json.dumps({k: v for k, v in final.items() if k != "latencies_ms"}))
     return 0
-
-
-def register(subparsers, name: str, help: str | None = None) -> None:
-    """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
-    p = subparsers.add_parser(
-        name, help=help,
-        usage="%(prog)s --calibration FILE [--config FILE] [options]",
-        description="The live service: reads the UAV's MAVLink telemetry and video and the UUV's depth (Zenoh); "
-                    "publishes each fix on Zenoh (--fix-key) and sends GPS_INPUT to the UUV's autopilot "
-                    "(--gps-input); health on --status-key once a second. Several UUVs in one video: one [[uuv]] "
-                    "table each in the --config file (id, its depth, keys, GPS_INPUT link, init_bbox). Stops on "
-                    "Ctrl-C or SIGTERM.",
-        epilog="example: skyfix run --calibration cal.toml --mavlink udpin:0.0.0.0:14550 --video udp://0.0.0.0:5600 "
-               "--zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
-    config.add_arguments(p)
-    p.set_defaults(func=run)
-

@@ -6,8 +6,10 @@
   ``uav.tlog``: the MAVLink messages its records stand for, each at its own record's time —
   ATTITUDE (ATT, with the IMU's body rates), GLOBAL_POSITION_INT (POS), GPS_RAW_INT (GPS,
   GPA), SYSTEM_TIME (the log's clock on UNIX time from the GPS fixes' week and ms),
-  MOUNT_ORIENTATION (MNT) when the calibration's camera is on a gimbal
-  (``attitude_source = "mount_orientation"``), DISTANCE_SENSOR (RFND), HEARTBEAT (armed as
+  the gimbal's attitude (MNT) as the message the calibration names — MOUNT_ORIENTATION
+  (``attitude_source = "mount_orientation"``) or GIMBAL_DEVICE_ATTITUDE_STATUS (``"gimbal_device"``, what
+  ArduCopter sends live: roll and pitch from the horizon, the yaw relative to the vehicle), so the calibration of
+  the live run serves the import of its log —, DISTANCE_SENSOR (RFND), HEARTBEAT (armed as
   the log's ARM / EV records say) and PARAM_VALUE ``MNT1_TYPE``. Nothing is resampled: one
   message per record; times are whole milliseconds of the autopilot's clock (its MAVLink
   ``time_boot_ms``), the record time the same instant on UNIX time (a log has no radio delay).
@@ -63,12 +65,14 @@ from groundstation.session.read import load_session
 from groundstation.session.tlog import tlog_record
 from groundstation.video.file import frame_times
 from groundstation.video.frames import VideoError
+from localizer.attitude import GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME, euler_to_quat
 
 HEARTBEAT_HZ = 1.0
 
 
-def telemetry_messages(flight: FlightLog, mount: bool) -> list[tuple[float, object]]:
-    """``(boot s, message)`` for every record (see the module doc), in time order."""
+def telemetry_messages(flight: FlightLog, gimbal: str) -> list[tuple[float, object]]:
+    """``(boot s, message)`` for every record (see the module doc), in time order; the MNT records as the
+    ``gimbal`` message (``[mount] attitude_source``: none for "fixed")."""
     mav = mavutil().mavlink
     out: list[tuple[float, object]] = []
 
@@ -91,9 +95,15 @@ def telemetry_messages(flight: FlightLog, mount: bool) -> list[tuple[float, obje
             v_acc=round(v_acc * 1000) if math.isfinite(v_acc) else 0)))
         if known and status >= 3:
             out.append((t, mav.MAVLink_system_time_message(round(float(flight.unix(t)) * 1e6), ms(t))))
-    if mount:
+    if gimbal == "mount_orientation":
         for t, roll, pitch, yaw_body, yaw_earth in flight.mnt:
             out.append((t, mav.MAVLink_mount_orientation_message(ms(t), roll, pitch, yaw_body, yaw_earth)))
+    elif gimbal == "gimbal_device":  # the same angles as one rotation, its yaw flagged as the vehicle's
+        for t, roll, pitch, yaw_body, _ in flight.mnt:
+            q = euler_to_quat(*np.radians((roll, pitch, yaw_body)))
+            out.append((t, mav.MAVLink_gimbal_device_attitude_status_message(
+                0, 0, ms(t), GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME, [float(x) for x in q], math.nan, math.nan,
+                math.nan, 0, math.radians(yaw_body))))
     for t, dist in flight.rangefinder:
         out.append((t, mav.MAVLink_distance_sensor_message(ms(t), 0, 0, round(dist * 100), 0, 0, DOWNWARD, 0)))
     armed, events = False, list(flight.armed)
@@ -231,14 +241,9 @@ def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calib
         raise SessionError("options: --srt-utc-offset-h and --srt-gps-order are the --srt's: give it")
     cal = load_calibration(str(calibration))
     source = cal.mount.attitude_source
-    if source == "gimbal_device":
-        raise SessionError(f"{calibration}: [mount] attitude_source = \"gimbal_device\": a flight log has the "
-                           "gimbal as MNT records (a DJI record: GIMBAL columns): say \"mount_orientation\" (or "
-                           "\"fixed\" for a rigid camera)")
     log = dji_csv if dji_csv is not None else dataflash
     flight = read_dji_csv(dji_csv, dji_csv_utc_offset_h) if dji_csv is not None else read_dataflash(dataflash)
-    mount = source == "mount_orientation"
-    if mount and not len(flight.mnt):
+    if source != "fixed" and not len(flight.mnt):
         raise SessionError(f"{dataflash}: no MNT records, while the calibration's camera is on a gimbal (log the "
                            "camera bit of LOG_BITMASK)")
     warnings = list(flight.warnings)
@@ -272,7 +277,7 @@ def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calib
     if "version" not in tomllib.loads(text):
         text = "version = 1\n" + text
     (out / "session.toml").write_text(text)
-    report["messages"] = write_tlog(out / "uav.tlog", flight, telemetry_messages(flight, mount))
+    report["messages"] = write_tlog(out / "uav.tlog", flight, telemetry_messages(flight, source))
     (out / "depth.jsonl").write_text("".join(json.dumps(r) + "\n" for r in depth_out))
     if frames is not None:
         target = out / f"video{video.suffix.lower() or '.mp4'}"

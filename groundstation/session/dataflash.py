@@ -30,6 +30,8 @@ A SITL log also carries the simulator's own truth (``SIM``, ``SIM2``, ``SITL``):
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +48,7 @@ MIN_3D_STATUS = 3  # AP_GPS GPS_OK_FIX_3D and better
 WHOLE_MS_SIGMA_S = 0.001 * math.sqrt(2.0 / 12.0)  # the difference of two times rounded to whole ms
 DOWNWARD = 25  # MAV_SENSOR_ROTATION_PITCH_270
 EV_ARMED, EV_DISARMED = 10, 11  # AP_Logger's LogEvent
+BINARY_START = bytes((0xA3, 0x95, 0x80))  # a binary log's first record: its header and FMT's own type (128)
 COLUMNS = {"ATT": ("TimeUS", "Roll", "Pitch", "Yaw"), "IMU": ("TimeUS", "GyrX", "GyrY", "GyrZ"),
            "POS": ("TimeUS", "Lat", "Lng", "Alt", "RelHomeAlt"),
            "GPS": ("TimeUS", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt"), "GPA": ("TimeUS", "SMS"),
@@ -109,25 +112,38 @@ def _columns(reader, name: str, columns: tuple[str, ...]) -> None:
                            "not a layout skyfix reads")
 
 
-def read_records(path: Path, columns: dict[str, tuple[str, ...]]) -> dict[str, list]:
+def read_records(path: Path, columns: dict[str, tuple[str, ...]], warnings: list[str] | None = None) -> dict[str, list]:
     """Every record of the kinds ``columns`` names, by kind in log order; each kind's FMT must hold the named columns.
-    :class:`SessionError` (one line) for a file that is not a readable DataFlash log."""
+    :class:`SessionError` (one line) for a file that is not a readable DataFlash log: one that does not begin with
+    its first FMT record (:data:`BINARY_START`) is refused before pymavlink reads it. What pymavlink says of bytes it
+    skips (a line per byte on stderr) becomes one line in ``warnings``."""
     if not path.is_file():
         raise SessionError(f"{path}: no such DataFlash log")
-    try:
-        reader = mavutil().mavlink_connection(str(path), zero_time_base=True)
-    except Exception as e:  # noqa: BLE001 - pymavlink raises assorted errors on files it cannot read
-        raise SessionError(f"{path}: not a DataFlash log ({e})") from None
-    if not hasattr(reader, "formats"):
-        raise SessionError(f"{path}: not a DataFlash log")
-    rows: dict[str, list] = {k: [] for k in columns}
-    try:
-        for name, needed in columns.items():
-            _columns(reader, name, needed)
-        while (m := reader.recv_match(type=list(columns))) is not None:
-            rows[m.get_type()].append(m)
-    finally:
-        reader.close()
+    with open(path, "rb") as f:
+        start = f.read(len(BINARY_START))
+    if start != BINARY_START:
+        raise SessionError(f"{path}: not a DataFlash log (it begins {start.hex(' ') or 'empty'}, a binary log "
+                           f"{BINARY_START.hex(' ')})")
+    said = io.StringIO()
+    with contextlib.redirect_stderr(said):
+        try:
+            reader = mavutil().mavlink_connection(str(path), zero_time_base=True)
+        except Exception as e:  # noqa: BLE001 - pymavlink raises assorted errors on files it cannot read
+            raise SessionError(f"{path}: not a DataFlash log ({e})") from None
+        if not hasattr(reader, "formats"):
+            raise SessionError(f"{path}: not a DataFlash log")
+        rows: dict[str, list] = {k: [] for k in columns}
+        try:
+            for name, needed in columns.items():
+                _columns(reader, name, needed)
+            while (m := reader.recv_match(type=list(columns))) is not None:
+                rows[m.get_type()].append(m)
+        finally:
+            reader.close()
+    lines = said.getvalue().splitlines()
+    if lines and warnings is not None:
+        warnings.append(f"{path}: pymavlink skipped damaged parts of the log ({len(lines)} complaints, the first: "
+                        f"{lines[0]})")
     return rows
 
 
@@ -157,14 +173,14 @@ def first_instance(rows: list) -> list:
 def read_dataflash(path: str | Path) -> FlightLog:
     """The flight's records; :class:`SessionError` (one line) for a file that is not a usable DataFlash log."""
     path = Path(path)
-    rows = read_records(path, COLUMNS)
+    warnings: list[str] = []
+    rows = read_records(path, COLUMNS, warnings)
     for kind in ("IMU", "GPS", "GPA", "MNT"):
         rows[kind] = first_instance(rows[kind])
     rows["RFND"] = [m for m in rows["RFND"] if getattr(m, "Orient", DOWNWARD) == DOWNWARD]
     for kind in ("ATT", "POS", "GPS"):
         if not rows[kind]:
             raise SessionError(f"{path}: no {kind} records: not a flight log skyfix can use")
-    warnings: list[str] = []
 
     def t(ms) -> np.ndarray:
         return np.array([m.TimeUS for m in ms], dtype=float) / 1e6

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import asyncio
 import csv
+import itertools
 import json
 import logging
 import math
@@ -184,6 +185,25 @@ class UuvRecord:
             self.recorder._tracker_found(self)
 
 
+def new_recording(parent, t_unix: float) -> Path:
+    """A new, empty folder for one start's recording in ``parent`` (``--recordings``; created if missing): named by
+    ``t_unix`` as UTC ``YYYYmmdd-HHMMSS``, ``-2``, ``-3``, … after it when taken (made with one ``mkdir`` each, so two
+    starts in the same second never share one). :class:`OSError` naming ``parent`` when it cannot be made."""
+    parent = Path(parent)
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.gmtime(t_unix))
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        for n in itertools.count(1):
+            folder = parent / (stamp if n == 1 else f"{stamp}-{n}")
+            try:
+                folder.mkdir()
+            except FileExistsError:
+                continue
+            return folder
+    except OSError as e:
+        raise OSError(f"--recordings {parent}: cannot make a folder in it: {e.strerror or e}") from None
+
+
 class Recorder:
     """Worker writing the session (see the module docstring); :meth:`of` is each UUV's part of it."""
 
@@ -193,7 +213,8 @@ class Recorder:
         if self.dir.exists() and not self.dir.is_dir():
             raise FileExistsError(f"--record {directory}: exists and is not a directory")
         if self.dir.exists() and any(self.dir.iterdir()):
-            raise FileExistsError(f"--record {directory}: exists and is not empty (a recording is never overwritten)")
+            raise FileExistsError(f"--record {directory}: exists and is not empty (a recording is never overwritten; "
+                                  "--recordings PARENT records each start into a new folder of its own)")
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
         except OSError as e:
