@@ -208,13 +208,25 @@ def _ports(cfg: config.RunConfig) -> Iterator[tuple[str, str, int, str, int]]:
         video = parse_video_input(cfg.video)
         if video.port is not None:
             yield "video", cfg.video, socket.SOCK_DGRAM, "0.0.0.0", video.port
-    for endpoint in cfg.zenoh_listen_endpoints:
+    for endpoint in _zenoh_listeners(cfg):
         proto, _, address = endpoint.partition("/")
         host, _, port = address.partition("#")[0].rpartition(":")
         if proto in ("tcp", "tls") and port.isdigit():
             yield "zenoh_listen", endpoint, socket.SOCK_STREAM, host, int(port)
         elif proto == "udp" and port.isdigit():
             yield "zenoh_listen", endpoint, socket.SOCK_DGRAM, host, int(port)
+
+
+def _zenoh_listeners(cfg: config.RunConfig) -> list[str]:
+    """The endpoints the run's Zenoh session listens on: the flags' or the default's, else its configuration file's
+    (its own, or those of its mode when the file leaves them to Zenoh's defaults)."""
+    from groundstation.zenoh_session import make_config
+
+    if not cfg.zenoh_config:
+        return list(cfg.zenoh_listen_endpoints)
+    conf = make_config(cfg.zenoh_connect, cfg.zenoh_listen, config_file=cfg.zenoh_config)
+    listen = json.loads(conf.get_json("listen/endpoints") or "[]")
+    return listen if isinstance(listen, list) else listen.get(json.loads(conf.get_json("mode")), [])
 
 
 def _recording_folder(args, cfg: config.RunConfig) -> str:
@@ -236,8 +248,8 @@ def full_check(args: argparse.Namespace, cfg: config.RunConfig) -> str:
     start_checks(args, cfg)
     cal = config.load_calibration(cfg.calibration)
     done = [f"calibration {cfg.calibration} ({cal.camera.width}x{cal.camera.height}, {cal.mount.attitude_source})",
-            f"video {cfg.video}", f"MAVLink {cfg.mavlink}",
-            "GPS_INPUT " + ", ".join(str(u.gps_input) for u in cfg.uuvs)]
+            f"video {cfg.video or config.NONE}", f"MAVLink {cfg.mavlink}",
+            "GPS_INPUT " + ", ".join(u.gps_input or config.NONE for u in cfg.uuvs)]
     credentials = _credentials(args, cfg)
     if credentials:
         done.append(f"credentials {', '.join(credentials)}")
