@@ -32,6 +32,8 @@ import numpy as np
 from groundstation.height_from_size import MODES as SIZE_MODES
 from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.estimate import offset_from_rotations
+from groundstation.offline.bottom import MODES as BOTTOM_MODES
+from groundstation.offline.bottom import PoseCorrection, append_columns, pixels_at, pose_from_bottom
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
 from groundstation.offline.smoothed import offline_track, write_smoothed_csv
 from groundstation.offline.smoothed import summary as smoothed_summary
@@ -110,12 +112,16 @@ def _warn_unknown_delay(session: Session, why: str) -> None:
             "([timing] unknown_latency_sigma_s) × the camera's motion")
 
 
-def locate_frames(session: Session, pixels, refraction: bool = True) -> Fixes:
-    """Fixes for :class:`Pixels` (or a tuple of its first four, e.g. track.csv's; see :func:`frame_pixels`)."""
+def locate_frames(session: Session, pixels, refraction: bool = True, correction: PoseCorrection | None = None) -> Fixes:
+    """Fixes for :class:`Pixels` (or a tuple of its first four, e.g. track.csv's; see :func:`frame_pixels`), the
+    poses corrected by ``correction`` (:func:`bottom_correction`) when given."""
     t, u, v, track_status, sigma_px = Pixels(*pixels)
     pose = camera_pose(session.calibration, session.telemetry, t)
     session.warnings.extend(f"{session.path}: {notice}" for notice in take_notices(session.telemetry))
-    fixes = locate(session.calibration, pose, u, v, refraction=refraction, sigma_px=sigma_px)
+    cal = session.calibration
+    if correction is not None:
+        pose, cal = correction.apply(session, pose)
+    fixes = locate(cal, pose, u, v, refraction=refraction, sigma_px=sigma_px)
     lost = (track_status != "ok") & (pose.status == "ok")
     fixes.status[lost] = track_status[lost]
     if len(fixes) and not np.any(fixes.status == "ok"):
@@ -136,6 +142,22 @@ def process_session(
 ) -> Fixes:
     """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
     return locate_frames(session, frame_pixels(session, use_track, tracker, progress, motion, size), refraction)
+
+
+def bottom_correction(session: Session, pixels, mode: str, progress: bool = False) -> PoseCorrection | None:
+    """``--pose-from-bottom``: the pose correction from the static seafloor (:mod:`groundstation.offline.bottom`),
+    or None (``off``, or nothing to estimate from: a warning says why); one line on stderr says what was found."""
+    if mode == "off":
+        return None
+    t, u, v = Pixels(*pixels)[:3]
+    frames_t = session.frames["t"] if session.frames is not None else t
+    pose = camera_pose(session.calibration, session.telemetry, frames_t)
+    found = pose_from_bottom(session, pose, *pixels_at(frames_t, t, u, v), progress)
+    if isinstance(found, str):
+        session.warnings.append(f"{session.path}: no pose from the bottom: {found}")
+        return None
+    print(f"{session.path.name}: {found.describe()}", file=sys.stderr)
+    return found
 
 
 def size_of(session: Session, mode: str, use_track: bool) -> HeightFromSize | None:
@@ -163,13 +185,15 @@ def run(args) -> int:
     session = load_session(args.session, args.uuv)
     size = size_of(session, args.height_from_size, args.use_track)
     try:
-        fixes = process_session(
-            session, use_track=args.use_track, refraction=not args.no_refraction,
-            tracker=args.tracker, progress=not args.quiet, motion=not args.no_motion_offset, size=size,
-        )
+        pixels = frame_pixels(session, args.use_track, args.tracker, not args.quiet, not args.no_motion_offset, size)
+        correction = bottom_correction(session, pixels, args.pose_from_bottom, not args.quiet)
+        fixes = locate_frames(session, pixels, not args.no_refraction, correction)
     finally:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
+    if correction is not None:
+        append_columns(out / "positions.csv", correction.columns(
+            session, camera_pose(session.calibration, session.telemetry, fixes.t_unix)))
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
     smoothed, status = offline_track(fixes, args.uuv_max_speed_mps, args.uuv_max_accel_mps2)
     write_smoothed_csv(out / SMOOTHED_NAME, fixes, smoothed, status)
@@ -191,6 +215,10 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     p.add_argument("--tracker", default="default", choices=TRACKERS,
                    help="tracker backend; default: telemetry-guided template matching; mil: the paper's")
     add_size_argument(p)
+    p.add_argument("--pose-from-bottom", choices=BOTTOM_MODES, default="off",
+                   help="auto: estimate the drone's attitude biases and GNSS walk from the static seafloor in the "
+                   "video and correct every frame's pose by what the bottom told (positions.csv says it); "
+                   "off (default)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_motion_offset_flag(p)
     p.set_defaults(func=run)

@@ -1,0 +1,285 @@
+"""``skyfix process --pose-from-bottom auto``: the drone's pose biases from the static seafloor in its video.
+
+Floor features (:func:`cv2.goodFeaturesToTrack`) are tracked through the video at about :data:`RATE_HZ`
+(pyramidal Lucas–Kanade, kept only where the backward track returns within :data:`BACK_PX`), away from the
+UUV (a disc around its tracked pixel, :func:`uuv_radius_px`); :func:`localizer.bottom.estimate` then finds the
+camera's attitude error, the floor's depth and the position's walk (see there for what is observable).
+
+A fit whose residuals exceed :data:`MAX_RMS_PX` is not applied (a warning says why). The correction
+(:class:`PoseCorrection`) turns every frame's reported attitude back by the estimated error
+(only the parts the bottom told: a hovering drone's are left alone) and moves the reported position by the
+walk; each fix's accuracy then takes the estimate's 1-sigmas (floored at :data:`MIN_TILT_DEG`,
+:data:`MIN_YAW_DEG`: the AHRS's wander) instead of ``[uncertainty] tilt_deg``, ``yaw_deg``. The walk is
+relative to the GNSS's mean over the recording: its absolute offset stays the GNSS's, and so does the
+position's sigma in h_acc. positions.csv gets per frame (columns after skyfix's own): ``pose_source``
+(``bottom`` or empty), the estimated camera attitude error ``cam_err_n_deg``, ``cam_err_e_deg``,
+``cam_err_d_deg`` (reported − true, a rotation vector in NED, as ``truth_errors.csv``), its 1-sigmas
+``sigma_tilt_deg``, ``sigma_yaw_deg``, and the position correction applied ``walk_n_m``, ``walk_e_m``
+(true = reported + walk).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from groundstation.progress import progress as progress_bar
+from groundstation.session.read import Session
+from groundstation.video.file import open_video
+from localizer import bottom
+from localizer.calibration import Calibration
+from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
+from localizer.pose import CameraPose, servo_mount
+
+MODES = ("auto", "off")
+RATE_HZ = 5.0  # frames used per second of video
+MAX_FEATURES = 250  # corners tracked at once
+MIN_DISTANCE_PX = 12  # between corners
+BACK_PX = 0.5  # forward-backward track disagreement that drops a corner
+BORDER_PX = 8
+MIN_OBSERVATIONS = 3  # a feature seen fewer times says nothing
+MIN_FEATURES = 20  # fewer features: no estimate
+#: a fit worse than this (RMS of the inlying residuals, pixels) is not applied: the floor's image does not stay put
+#: (the simulator's caustics drifting over it: 0.85-1.0 px, against 0.41 without them), and the sigmas, which take
+#: the residuals as white, would claim far more than the estimate knows
+MAX_RMS_PX = 0.6
+VELOCITY_RATE_M = 0.05  # m/√s: the integrated EKF velocity's error, the walk's prior with a velocity
+GNSS_WALK_S = 60.0  # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
+MIN_TILT_DEG = 0.05  # the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
+MIN_YAW_DEG = 0.1
+COLUMNS = ("pose_source", "cam_err_n_deg", "cam_err_e_deg", "cam_err_d_deg", "sigma_tilt_deg", "sigma_yaw_deg",
+           "walk_n_m", "walk_e_m")
+_LK = {"winSize": (21, 21), "maxLevel": 4,
+       "criteria": (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 0.01)}
+
+
+def uuv_radius_px(cal: Calibration, pose: CameraPose) -> np.ndarray:
+    """The radius (pixels) of the disc around the UUV's pixel where no floor feature is taken: twice its longest
+    side (the diagonal of length and width) at its slant range, at least 20 px."""
+    side_m = np.hypot(cal.uuv.length_m, cal.uuv.width_m)
+    axis_down = np.clip(pose.R_ned_from_cv[:, 2, 2], 0.2, 1.0)  # the optical axis's down component
+    slant_m = (pose.height_m + np.nan_to_num(pose.depth_m)) / axis_down
+    return np.maximum(20.0, 2.0 * cal.camera.fx * side_m / slant_m)
+
+
+def track_bottom(session: Session, rows: np.ndarray, uuv_u, uuv_v, radius_px, progress: bool = False):
+    """Floor feature tracks through the frames at ``rows`` of video_frames.csv: :class:`localizer.bottom.Observations`
+    with ``frame`` indexing ``rows``. ``uuv_u``, ``uuv_v``, ``radius_px`` per row (NaN: the UUV not known there)."""
+    cal = session.calibration
+    wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
+    frame, feature, us, vs = [], [], [], []
+    prev, points, ids = None, np.zeros((0, 1, 2), np.float32), np.zeros(0, int)
+    next_id = 0
+    bar = progress_bar(len(rows), f"{session.path.name}: bottom features", progress)
+    try:
+        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
+                        indices=session.frames["frame"].astype(int), grey=True) as video:
+            for vf in video.prefetch():
+                k = wanted.get(vf.index)
+                if k is None:
+                    continue
+                grey = vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY)
+                r = rows[k]
+                if prev is not None and len(points):
+                    p1, ok1, _ = cv2.calcOpticalFlowPyrLK(prev, grey, points, None, **_LK)
+                    back, ok2, _ = cv2.calcOpticalFlowPyrLK(grey, prev, p1, None, **_LK)
+                    good = ((ok1.ravel() == 1) & (ok2.ravel() == 1)
+                            & (np.linalg.norm((back - points).reshape(-1, 2), axis=1) < BACK_PX))
+                    points, ids = p1[good], ids[good]
+                xy = points.reshape(-1, 2)
+                keep = _away(xy, cal.camera.width, cal.camera.height, uuv_u[r], uuv_v[r], radius_px[r])
+                points, ids = points[keep], ids[keep]
+                if len(points) < 0.7 * MAX_FEATURES:
+                    new = _corners(grey, points.reshape(-1, 2), uuv_u[r], uuv_v[r], radius_px[r])
+                    points = np.concatenate([points, new.reshape(-1, 1, 2).astype(np.float32)])
+                    ids = np.concatenate([ids, np.arange(next_id, next_id + len(new))])
+                    next_id += len(new)
+                xy = points.reshape(-1, 2)
+                frame += [k] * len(xy)
+                feature += list(ids)
+                us += list(xy[:, 0])
+                vs += list(xy[:, 1])
+                prev = grey
+                bar.update()
+    finally:
+        bar.close()
+    frame, feature = np.asarray(frame, int), np.asarray(feature, int)
+    counts = np.bincount(feature, minlength=next_id) if next_id else np.zeros(0, int)
+    seen = counts[feature] >= MIN_OBSERVATIONS if len(feature) else np.zeros(0, bool)
+    _, renumbered = np.unique(feature[seen], return_inverse=True)
+    return bottom.Observations(frame[seen], renumbered, np.asarray(us)[seen], np.asarray(vs)[seen])
+
+
+def _away(xy, width, height, u, v, radius):
+    """Points inside the image (by :data:`BORDER_PX`) and outside the UUV's disc."""
+    inside = ((xy[:, 0] >= BORDER_PX) & (xy[:, 0] <= width - 1 - BORDER_PX)
+              & (xy[:, 1] >= BORDER_PX) & (xy[:, 1] <= height - 1 - BORDER_PX))
+    if np.isfinite(u) and np.isfinite(v):
+        inside &= np.hypot(xy[:, 0] - u, xy[:, 1] - v) > radius
+    return inside
+
+
+def _corners(grey, existing, u, v, radius):
+    """New corners away from the existing ones, the UUV and the border."""
+    mask = np.zeros(grey.shape, np.uint8)
+    mask[BORDER_PX:-BORDER_PX, BORDER_PX:-BORDER_PX] = 255
+    for x, y in existing:
+        cv2.circle(mask, (round(float(x)), round(float(y))), MIN_DISTANCE_PX, 0, -1)
+    if np.isfinite(u) and np.isfinite(v):
+        cv2.circle(mask, (round(float(u)), round(float(v))), int(np.ceil(radius)), 0, -1)
+    want = MAX_FEATURES - len(existing)
+    found = cv2.goodFeaturesToTrack(grey, maxCorners=int(want), qualityLevel=0.01, minDistance=MIN_DISTANCE_PX,
+                                    blockSize=7, mask=mask)
+    return np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2)
+
+
+@dataclass
+class PoseCorrection:
+    """An estimate and how it is applied to the frames (see the module doc)."""
+
+    estimate: bottom.BottomEstimate
+    tilt_applied: bool
+    yaw_applied: bool
+    tilt_frame: str  # "camera" (a stabilised gimbal's own heading) or "body" (the airframe's)
+
+    def headings(self, session: Session, pose: CameraPose) -> np.ndarray:
+        """The bias frame's heading per frame of ``pose``."""
+        if self.tilt_frame == "camera":
+            return bottom.camera_heading_rad(pose.R_ned_from_cv)
+        return _body_yaw(session, pose.t_unix)
+
+    def error_rotvec(self, session: Session, pose: CameraPose) -> np.ndarray:
+        """The attitude error applied (reported − true, NED rotation vector) per frame: the told parts only."""
+        e = self.estimate
+        tilt = e.tilt_rad if self.tilt_applied else np.zeros(2)
+        return bottom.bias_rotvec(tilt, e.yaw_rad if self.yaw_applied else 0.0, self.headings(session, pose))
+
+    def apply(self, session: Session, pose: CameraPose) -> tuple[CameraPose, Calibration]:
+        """The poses with the attitude turned back and the position moved by the walk, and the calibration whose
+        tilt and heading sigmas are the estimate's (where applied)."""
+        R = bottom.rodrigues(-self.error_rotvec(session, pose)) @ pose.R_ned_from_cv
+        walk = self.estimate.walk_at(pose.t_unix)
+        lat, lon, _ = ned_to_geodetic(walk[:, 0], walk[:, 1], 0.0, pose.lat_deg, pose.lon_deg, pose.alt_amsl_m)
+        corrected = dataclasses.replace(pose, R_ned_from_cv=R, lat_deg=np.asarray(lat), lon_deg=np.asarray(lon))
+        cal, e = session.calibration, self.estimate
+        sigmas = cal.sigmas
+        if self.tilt_applied:
+            sigmas = dataclasses.replace(sigmas, tilt_deg=max(MIN_TILT_DEG, float(np.degrees(e.sigma_tilt_rad))))
+        if self.yaw_applied:
+            sigmas = dataclasses.replace(sigmas, yaw_deg=max(MIN_YAW_DEG, float(np.degrees(e.sigma_yaw_rad))))
+        return corrected, dataclasses.replace(cal, sigmas=sigmas)
+
+    def describe(self) -> str:
+        what = [w for w, on in (("tilt", self.tilt_applied), ("heading", self.yaw_applied)) if on]
+        applied = (f"applied: {' and '.join(what)} ({self.tilt_frame} frame tilt) and the position walk"
+                   if what else "applied: the position walk only")
+        return f"pose from the bottom: {self.estimate.describe()}; {applied}"
+
+    def columns(self, session: Session, pose: CameraPose) -> dict[str, list[str]]:
+        """positions.csv's extra cells per frame of ``pose`` (see the module doc)."""
+        err = np.degrees(self.error_rotvec(session, pose))
+        walk = self.estimate.walk_at(pose.t_unix)
+        e = self.estimate
+        sig_t = f"{np.degrees(e.sigma_tilt_rad):.4f}" if self.tilt_applied else ""
+        sig_y = f"{np.degrees(e.sigma_yaw_rad):.4f}" if self.yaw_applied else ""
+        n = len(pose.t_unix)
+        return {"pose_source": ["bottom"] * n,
+                **{c: [f"{x:.4f}" for x in err[:, i]] for i, c in enumerate(COLUMNS[1:4])},
+                "sigma_tilt_deg": [sig_t] * n, "sigma_yaw_deg": [sig_y] * n,
+                "walk_n_m": [f"{x:.4f}" for x in walk[:, 0]], "walk_e_m": [f"{x:.4f}" for x in walk[:, 1]]}
+
+
+def _body_yaw(session: Session, t_unix) -> np.ndarray:
+    tel = session.telemetry
+    a, _, _ = tel.attitude.sample(tel.uav_time(np.asarray(t_unix, dtype=float)))
+    return a[:, 2]
+
+
+def tilt_frame(session: Session) -> str:
+    """Where the camera's tilt error lives: a stabilised gimbal's own heading, or the airframe's (a servo mount or a
+    fixed camera carry the AHRS's tilt)."""
+    cal = session.calibration
+    if cal.mount.attitude_source == "fixed" or servo_mount(cal, session.telemetry):
+        return "body"
+    return "camera"
+
+
+def subsample_rows(t: np.ndarray, rate_hz: float = RATE_HZ) -> np.ndarray:
+    """Rows of frames about ``1/rate_hz`` apart."""
+    if len(t) < 2:
+        return np.arange(len(t))
+    period = float(np.median(np.diff(t)))
+    step = max(1, round(1.0 / (rate_hz * period)))
+    return np.arange(0, len(t), step)
+
+
+def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress: bool = False):
+    """The :class:`PoseCorrection` for a session whose frames have ``pose`` (all of video_frames.csv's rows) and the
+    UUV's pixels ``uuv_u``, ``uuv_v`` (NaN where unknown), or a string saying why there is none."""
+    if session.video_path is None or session.frames is None:
+        return "no video"
+    rows = subsample_rows(session.frames["t"])
+    rows = rows[pose.status[rows] == "ok"]
+    if len(rows) < 3:
+        return "fewer than 3 frames with a pose"
+    obs = track_bottom(session, rows, np.asarray(uuv_u, float), np.asarray(uuv_v, float), uuv_radius_px(
+        session.calibration, pose), progress)
+    n_features = int(obs.feature.max()) + 1 if len(obs.feature) else 0
+    if n_features < MIN_FEATURES:
+        return f"{n_features} floor features tracked (fewer than {MIN_FEATURES})"
+    sub = rows
+    origin = (pose.lat_deg[sub[0]], pose.lon_deg[sub[0]], pose.alt_amsl_m[sub[0]])
+    n, e, _ = geodetic_to_ned(pose.lat_deg[sub], pose.lon_deg[sub], pose.alt_amsl_m[sub], *origin)
+    camera_ne = np.column_stack([n, e]) + pose.cam_offset_ned_m[sub, :2]
+    frame_tilt = tilt_frame(session)
+    headings = (bottom.camera_heading_rad(pose.R_ned_from_cv[sub]) if frame_tilt == "camera"
+                else _body_yaw(session, pose.t_unix[sub]))
+    poses = bottom.FramePoses(pose.t_unix[sub], pose.R_ned_from_cv[sub], camera_ne, pose.height_m[sub], headings,
+                              pose.velocity_ned_mps[sub, :2])
+    gnss_rate = float(np.nanmedian(pose.sigma_uav_m[sub])) / np.sqrt(GNSS_WALK_S)
+    priors = bottom.Priors(walk_rate_m=min(gnss_rate, VELOCITY_RATE_M))
+    cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
+    est = bottom.estimate(cam, n_water, poses, obs, priors)
+    if est.rms_px > MAX_RMS_PX:
+        return (f"the floor features do not stay put as a static floor would ({est.rms_px:.2f} px RMS, more than "
+                f"{MAX_RMS_PX}: drifting light such as caustics, or a moving bottom); found but not applied: "
+                f"{est.describe()}")
+    if not (est.tilt_estimated and est.yaw_estimated):  # the walk again, with what is not applied held at 0
+        held = dataclasses.replace(priors, tilt_rad=priors.tilt_rad if est.tilt_estimated else 1e-7,
+                                   yaw_rad=priors.yaw_rad if est.yaw_estimated else 1e-7)
+        again = bottom.estimate(cam, n_water, poses, obs, held)
+        est = dataclasses.replace(again, cov_bias=est.cov_bias, priors=est.priors)  # sigmas: the free estimate's
+    return PoseCorrection(est, est.tilt_estimated, est.yaw_estimated, frame_tilt)
+
+
+def pixels_at(t_frames, t, u, v):
+    """The UUV's pixel at each frame time (NaN where none is within half a frame period)."""
+    t_frames, t = np.asarray(t_frames, float), np.asarray(t, float)
+    if len(t) == 0:
+        return np.full(len(t_frames), np.nan), np.full(len(t_frames), np.nan)
+    i = np.clip(np.searchsorted(t, t_frames), 1, max(1, len(t) - 1))
+    i = np.where((i > 0) & (np.abs(t[i - 1] - t_frames) < np.abs(t[np.minimum(i, len(t) - 1)] - t_frames)), i - 1,
+                 np.minimum(i, len(t) - 1))
+    period = float(np.median(np.diff(t_frames))) if len(t_frames) > 1 else np.inf
+    near = np.abs(t[i] - t_frames) <= 0.5 * period
+    return np.where(near, np.asarray(u, float)[i], np.nan), np.where(near, np.asarray(v, float)[i], np.nan)
+
+
+def append_columns(path: Path, cells: dict[str, list[str]]) -> None:
+    """Add columns at the end of a positions.csv (rewritten atomically: a temporary file, then renamed)."""
+    path = Path(path)
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    tmp = path.with_name(path.name + ".partial")
+    with open(tmp, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(rows[0] + list(cells))
+        for i, row in enumerate(rows[1:]):
+            w.writerow(row + [cells[c][i] for c in cells])
+    os.replace(tmp, path)
