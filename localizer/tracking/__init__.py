@@ -65,6 +65,7 @@ class Match:
     u: float = float("nan")  # the tracked point (the UUV's reference pixel), distorted pixels
     v: float = float("nan")
     box: tuple[int, int, int, int] | None = None  # x, y, w, h around the UUV
+    held: bool = False  # not found, but still followed: a frame where waves hide it for a moment, not yet a loss
 
 
 class Matcher(Protocol):

@@ -9,7 +9,8 @@ States (:class:`TargetState`) and what moves between them:
   :meth:`Target.propose` (a candidate found without a template, e.g. near the UUV's
   own position estimate) starts the matcher on it and goes to ``CONFIRMING``.
 - ``TRACKING``: each frame the matcher follows the UUV; when it is not where it
-  should be, the target is ``LOST``.
+  should be, the target is ``LOST`` (unless the matcher holds on: a frame's match
+  under waves, :attr:`~localizer.tracking.Match.held`; that frame is ``lost``).
 - ``LOST``: the matcher searches for it every ``search_every`` frames (every
   ``search_every_long`` once lost ``long_loss_frames``); a candidate goes to ``CONFIRMING``.
 - ``CONFIRMING``: the candidate must be matched again in ``confirm_frames`` consecutive
@@ -100,6 +101,8 @@ class Target:
             m = self._matcher.follow(frame_bgr, prediction)
             if m.found:
                 return TrackResult("ok", m.u, m.v, m.box, _confidence(m.score))
+            if m.held:
+                return TrackResult("lost", confidence=_confidence(m.score))
             self.state = TargetState.LOST
             self._lost_frames = -1  # search on the next frame, then every search_every frames
             return TrackResult("lost", confidence=_confidence(m.score))

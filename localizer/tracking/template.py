@@ -41,6 +41,12 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   ``min_contrast``.
 - :meth:`~TemplateMatcher.confirm`: the same bar within ``reacquire_tolerance``
   template sides of where the candidate is expected.
+- Waves (issue 28): the UUV's image wobbles, breaks up and flickers from frame to frame, and its scores scatter
+  about their recent mean. That scatter (:meth:`~TemplateMatcher._waves`, nil on a still surface: the bars above
+  as set) eases the bars (``wave_*``), smooths image and template before matching (the waves scramble the fine
+  structure, not the shape), lets the template learn the mean distorted appearance, and holds up to
+  ``wave_misses`` frames without a match before a loss (:attr:`~localizer.tracking.Match.held`); a match after
+  such frames needs nearly the re-acquisition's bar.
 - Neither takes a candidate away from the prediction while the UUV's first appearance
   still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
   partly hidden, say by a vehicle passing over it, beside a look-alike). Only a candidate
@@ -102,6 +108,16 @@ class TemplateParams:
     coarse_side: int = 96  # windows wider than this (working pixels) are searched block-averaged first
     coarse_px: int = 8  # ... with the template about this many blocks across
     coarse_keep: int = 3  # ... and this many of the best places found there matched again at full resolution
+    wobble_rate: float = 0.03  # the match score's scatter about its recent mean: a moving mean square at this rate ...
+    wobble_mean_rate: float = 0.2  # ... about a moving mean at this rate (a few frames: a slow change is no wobble)
+    wobble_cap: float = 0.2  # ... each frame's change counted up to this much (a loss is one change, waves are many)
+    wobble_flat: float = 0.04  # scatter (NCC, 1-sigma) of a still surface's matches: no wave tolerance below it ...
+    wobble_waves: float = 0.09  # ... the whole tolerance from this (waves: the UUV wobbles, breaks up, flickers)
+    wave_blur_px: float = 1.0  # waves: image and template smoothed by up to this (working pixels, Gaussian sigma)
+    wave_ok_drop: float = 0.1  # ... ok_score and reacquire_score lowered by up to this
+    wave_level_drop: float = 0.15  # ... level_drop and reacquire_below_level raised by up to this
+    wave_update_drop: float = 0.2  # ... update_score lowered by up to this (learn the mean wave-distorted appearance)
+    wave_misses: float = 3.0  # ... and up to this many frames in a row without a match are held, not yet a loss
 
 
 def _parabola(a: float, b: float, c: float) -> float:
@@ -260,8 +276,13 @@ class TemplateMatcher:
         self._first_columns: dict = {}  # ... and several turns' cores ready for _ncc_maps
         self._first_spread = self._spread(frame_bgr, self.u, self.v)
         self._velocity = (0.0, 0.0)
-        self._level = 1.0
+        self._level = 1.0  # the recent level of the matches' scores (the first appearance's own, at first) ...
+        self._levels = 0  # ... over this many matches
         self._frames = 0
+        self._mean_score = math.nan  # the follows' best scores' mean ...
+        self._scatter2 = 0.0  # ... and mean square departure from it (see _waves) ...
+        self._changes = 0  # ... over this many follows
+        self._misses = 0  # follows in a row without a match
 
     def _begin(self, prediction: Prediction | None) -> None:
         """A new frame: follow the predicted apparent size relative to that at start (in steps of
@@ -308,7 +329,11 @@ class TemplateMatcher:
 
     def _match_in(self, region, bx0: int, by0: int, template: np.ndarray, prior=None):
         """(rank, score, u, v) of the template's best match in a working-resolution region (rank: the score less
-        the distance penalty from ``prior`` = (u, v, sigma_px), full-resolution pixels; the score without one)."""
+        the distance penalty from ``prior`` = (u, v, sigma_px), full-resolution pixels; the score without one).
+        In waves both are smoothed first (:meth:`_blur_px`): the waves scramble the vehicle's fine structure, not
+        its shape."""
+        if (sigma := self._blur_px()) > 0:
+            region, template = (cv2.GaussianBlur(x, (0, 0), sigma) for x in (region, template))
         scores = cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED)
         half = (template.shape[0] - 1) / 2.0
         rank, best, j, i = _peak(scores, self._penalty(scores.shape, bx0 + half, by0 + half, 1.0, prior))
@@ -459,6 +484,54 @@ class TemplateMatcher:
         self._canon = canon
         self._cache.clear()
 
+    # -- waves ------------------------------------------------------------------------------
+    def _note_score(self, score: float) -> None:
+        """Count a follow's best score in the scatter :meth:`_waves` reads: its departure from the last few scores'
+        mean (up to ``wobble_cap``); both running means over the first follows, then moving averages."""
+        self._changes += 1
+        if math.isfinite(self._mean_score):
+            change = min(abs(score - self._mean_score), self.p.wobble_cap)
+            self._scatter2 += max(self.p.wobble_rate, 1.0 / self._changes) * (change * change - self._scatter2)
+            self._mean_score += max(self.p.wobble_mean_rate, 1.0 / self._changes) * (score - self._mean_score)
+        else:
+            self._mean_score = score
+
+    def _waves(self) -> float:
+        """How far the matches wobble as through waves: 0 (a still surface: the bars as set) to 1 (the whole wave
+        tolerance), from the follow scores' frame-to-frame scatter between ``wobble_flat`` and ``wobble_waves``.
+        A still surface's scatter is the sensor's and the codec's noise; waves move the vehicle's image from one
+        frame to the next, so its score jumps (a loss drops it once, counted up to ``wobble_cap``)."""
+        scatter = math.sqrt(self._scatter2)
+        return min(1.0, max(0.0, (scatter - self.p.wobble_flat) / (self.p.wobble_waves - self.p.wobble_flat)))
+
+    def _blur_px(self) -> float:
+        """The smoothing (working pixels, Gaussian sigma, in quarters) of images and template before matching."""
+        return round(4.0 * self.p.wave_blur_px * self._waves()) / 4.0
+
+    def _ok(self) -> float:
+        """The least NCC that passes for the UUV: ``ok_score``, lower in waves."""
+        return self.p.ok_score - self._waves() * self.p.wave_ok_drop
+
+    def _floor(self) -> float:
+        """The least NCC a match near the prediction needs: :meth:`_ok`, and no more than ``level_drop`` (more in
+        waves) below the recent level."""
+        return max(self._ok(), self._level - self.p.level_drop - self._waves() * self.p.wave_level_drop)
+
+    def _far(self) -> float:
+        """The least NCC a candidate found while lost needs: ``reacquire_score`` and within ``reacquire_below_level``
+        of the recent level (both eased in waves)."""
+        waves = self._waves()
+        return max(self.p.reacquire_score - waves * self.p.wave_ok_drop,
+                   self._level - self.p.reacquire_below_level - waves * self.p.wave_level_drop)
+
+    def _rebound(self) -> float:
+        """The least NCC a match near the prediction needs after frames without one: :meth:`_floor` on a still
+        surface (lost a moment ago: nothing else fits where it can be), nearer :meth:`_far` the more the waves make
+        a single frame's score ambiguous (a loss is what outlasted the held frames; the water where the UUV was
+        may match as well as it did at its worst)."""
+        close = self._floor()
+        return close + self._waves() * max(self._far() - close, 0.0)
+
     # -- per frame ---------------------------------------------------------------------------
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
         if prediction is None or not math.isfinite(prediction.sigma_px):
@@ -502,13 +575,19 @@ class TemplateMatcher:
         slow_step = self._frames % self.p.adapt_every == 0
         if slow_step or score < self._level - self.p.turn_drop:
             score, u, v = self._refine(frame_bgr, (score, u, v))
-        floor = max(self.p.ok_score, self._level - self.p.level_drop)
-        if not (score >= floor and math.hypot(u - cu, v - cv_) <= radius + 2 * self.k and self._visible(frame_bgr, u, v)):
-            return self._match(False, score, u, v)
+        floor = self._floor() if not self._misses else self._rebound()  # after a held frame: convincingly back
+        self._note_score(score)
+        near = math.hypot(u - cu, v - cv_) <= radius + 2 * self.k
+        if not (score >= floor and near and self._visible(frame_bgr, u, v)):
+            self._misses += 1
+            held = near and self._misses <= self.p.wave_misses * self._waves()
+            return Match(False, score, u, v, held=held)
+        self._misses = 0
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v, self._seen_angle = u, v, self._angle
-        self._level += 0.1 * (score - self._level)
-        if score >= self.p.update_score and slow_step:
+        self._levels += 1
+        self._level += max(0.1, 1.0 / self._levels) * (score - self._level)  # a running mean over the first ones
+        if score >= self.p.update_score - self._waves() * self.p.wave_update_drop and slow_step:
             self._learn(frame_bgr, u, v)
         return self._match(True, score, u, v)
 
@@ -517,9 +596,9 @@ class TemplateMatcher:
         window is no wider than the vehicle (lost a moment ago: nothing else fits where it can be)."""
         side = self.S * self.k * self._scale
         if prediction is not None and self._radius(prediction, math.inf) <= side:
-            need = max(self.p.ok_score, self._level - self.p.level_drop)
+            need = self._rebound()
         else:
-            need = max(self.p.reacquire_score, self._level - self.p.reacquire_below_level)
+            need = self._far()
         return self._match(bool(score >= need and self._visible(frame_bgr, u, v, either_way=True)), score, u, v)
 
     def confirm(self, frame_bgr, u: float, v: float, prediction: Prediction | None) -> Match:
@@ -527,7 +606,7 @@ class TemplateMatcher:
         tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
         self._prepare(frame_bgr, u, v, tol)
         score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas)
-        if score >= self.p.ok_score:
+        if score >= self._ok():
             score, u, v = self._refine(frame_bgr, (score, u, v))
         candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
         if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, self._seen_angle,
@@ -537,6 +616,7 @@ class TemplateMatcher:
 
     def resume(self, match: Match) -> None:
         self._velocity = (0.0, 0.0)
+        self._misses = 0
         self.u, self.v, self._seen_angle = match.u, match.v, self._angle
 
     def search(self, frame_bgr, prediction: Prediction | None) -> Match:
@@ -558,7 +638,7 @@ class TemplateMatcher:
         else:
             angles = [self._angle + 360.0 * j / n for j in range(n)]
         score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles, sigma)
-        if score < self.p.ok_score:  # not even a candidate (headings are coarse here: refined below)
+        if score < self._ok():  # not even a candidate (headings are coarse here: refined below)
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
