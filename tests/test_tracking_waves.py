@@ -2,7 +2,7 @@
 
 A short generated nadir hover (640x360, 3 s, the UUV ~35 px) is seen through :mod:`wave_proxy`'s waves (2 px RMS of
 refraction's displacement, caustic flicker, 1 Mbit/s x264 without B-frames, as 4 Mbit/s at 720p). The tracker before
-issue 28 located it on 3 of 90 frames (each frame's score fell below the level of the first frames, and no
+issue 28 located it on 4 of 90 frames (each frame's score fell below the level of the first frames, and no
 re-acquisition reached 0.7).
 """
 
