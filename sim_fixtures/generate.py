@@ -5,14 +5,16 @@ camera sees and the tracker follows), in WGS84 with its depth below the surface;
 ``depth.jsonl`` reports the depth of that same point. ``track.csv`` holds the
 exact distorted pixel of the truth point, one row per frame: where the light from
 it crosses the surface (Fermat's principle), projected by OpenCV
-(:mod:`sim_fixtures.geometry`, independent of the localizer); where the UUV cannot
+(:mod:`sim_fixtures.geometry`, independent of the localizer) or, under waves (``[waves]``), the pixel
+whose ray through the wavy surface meets it (:func:`frame_truth`), with ``truth_waves.csv`` beside it: the
+waves' own error of that pixel (:func:`wave_error_ne`); where the UUV cannot
 be seen, ``u`` and ``v`` are empty: hidden by an occlusion window, outside the image,
 less than half of it showing past a second vehicle (``[second_uuv]``),
 or too deep in turbid water, its contrast below the sensor noise (see
 :meth:`~sim_fixtures.render.Renderer.render`); ``truth.csv`` has every frame. The video is rendered
 by ray casting (:mod:`sim_fixtures.render`; a large session by a process per core, each given a copy of the
 renderer and each frame's noise offset, so the frames are the same) and encoded by the ``ffmpeg`` CLI
-(libx264, yuv420p, raw BGR frames through a pipe).
+(libx264, yuv420p, raw BGR frames through a pipe; ``[downlink]``: at a drone downlink's bitrate, no B-frames).
 
 Times: the frames' exposure times in ``video_frames.csv``, ``track.csv`` and
 ``truth.csv`` are on the ground station's clock (true time + ``[clock]
@@ -42,6 +44,7 @@ import time
 from collections import deque
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -51,10 +54,18 @@ from groundstation.progress import progress as progress_bar
 from groundstation.session.read import UUV_TOML, UUVS_DIR
 from localizer.calibration import ConfigError
 
-from .geometry import R_GIMBAL_FROM_CV, SimCamera, ned_to_geodetic, project, surface_crossing
+from .geometry import (
+    R_GIMBAL_FROM_CV,
+    SimCamera,
+    ned_to_geodetic,
+    pixel_rays,
+    project,
+    reach_offset,
+    surface_crossing,
+)
 from .motion import Motion
-from .render import Box, Renderer, View, noise_offsets
-from .scenario import Scenario
+from .render import Box, Renderer, View, floor_div, noise_offsets, water_path_ned
+from .scenario import DownlinkSpec, Scenario
 from .sensors import (
     ahrs_error_rpy,
     camera_error_ned,
@@ -63,6 +74,7 @@ from .sensors import (
     reported_R_ned_from_gimbal,
 )
 from .tlog import Clock, baro_error_m, exponential, gnss_alt_error_m, stream, write_tlog
+from .waves import WaveField, wave_field
 
 MARK = "# synthetic session made by skyfix sim"  # first line of session.toml
 
@@ -85,6 +97,8 @@ class Truth:
     rock: Box | None = None
     second_u: np.ndarray | None = None  # exact distorted pixel of a second UUV's reference point (role = "uuv")
     second_v: np.ndarray | None = None
+    wave_error_ne: np.ndarray | None = None  # (N, 2) the waves' own error at the UUV's pixel (wave_error_ne), if waves
+    second_wave_error_ne: np.ndarray | None = None  # ... at a second UUV's
 
     def others(self, i: int) -> tuple[Box, ...]:
         """The look-alikes at frame ``i``."""
@@ -113,8 +127,75 @@ def reference_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, point_ned, n_w
     return uv[:, 0], uv[:, 1]
 
 
+NEWTON_STEP_PX = 0.05  # the finite differences' step of apparent_pixel's Newton iteration ...
+NEWTON_TOL_PX = 1e-3  # ... which stops when no pixel moves more than this
+NEWTON_ITERATIONS = 30
+
+
+def _landing(camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, depth_m, waves: WaveField, n_water: float, u, v):
+    """Where the rays of pixels (u, v) (N, K) of N frames, through the waves, reach ``depth_m`` (N,): (N, K, 2) NE,
+    by the renderer's own path for the vehicles' rays (:func:`~sim_fixtures.render.water_path_ned` through the exact
+    waves)."""
+    n, k = u.shape
+    ray = pixel_rays(camera, u, v)
+    d = np.einsum("nij,nkj->nki", R_ned_from_cv, ray).reshape(-1, 3)
+    p = water_path_ned(d, np.repeat(camera_ned, k, axis=0), n_water, waves.at(np.repeat(tau_s, k)))
+    reach = (np.repeat(depth_m, k) - p.down_m) / p.dir_water[:, 2]
+    land = p.surface_ne + p.dir_water[:, :2] * reach[:, None]
+    land[~p.wet] = np.nan
+    return land.reshape(n, k, 2)
+
+
+def apparent_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, point_ned, waves: WaveField, n_water: float):
+    """Distorted pixel (u, v) (N,) where submerged points (N, 3) appear through the waves at times ``tau_s`` (N,): the
+    pixel whose ray, refracted through the wavy surface, passes through the point. Newton's method on the pixel with
+    finite differences, from the flat surface's pixel (:func:`reference_pixel`), to ``NEWTON_TOL_PX``; NaN where it
+    does not converge (or the point is outside the lens model)."""
+    u, v = reference_pixel(camera, R_ned_from_cv, camera_ned, point_ned, n_water)
+    px = np.column_stack([u, v])
+    todo = np.flatnonzero(np.isfinite(px).all(axis=1))
+    h = NEWTON_STEP_PX
+    for _ in range(NEWTON_ITERATIONS):
+        if len(todo) == 0:
+            break
+        uu = px[todo, :1] + np.array([0.0, h, 0.0])
+        vv = px[todo, 1:] + np.array([0.0, 0.0, h])
+        land = _landing(camera, R_ned_from_cv[todo], camera_ned[todo], tau_s[todo], point_ned[todo, 2], waves, n_water,
+                        uu, vv)
+        jac = np.stack([land[:, 1] - land[:, 0], land[:, 2] - land[:, 0]], axis=-1) / h  # (N, 2 NE, 2 uv)
+        with np.errstate(invalid="ignore"):
+            step = np.linalg.solve(jac, (land[:, 0] - point_ned[todo, :2])[..., None])[..., 0]
+        px[todo] -= step
+        moved = np.abs(step).max(axis=1)
+        px[todo[~np.isfinite(moved)]] = np.nan
+        todo = todo[np.isfinite(moved) & (moved > NEWTON_TOL_PX)]
+    px[todo] = np.nan  # did not converge
+    return px[:, 0], px[:, 1]
+
+
+def wave_error_ne(camera: SimCamera, R_ned_from_cv, camera_ned, point_ned, u, v, n_water: float) -> np.ndarray:
+    """The waves' own error (N, 2, north and east, m) of submerged points seen at pixels (u, v): where the pixel's ray
+    reaches the point's depth refracted at a flat surface (:func:`~sim_fixtures.geometry.reach_offset`), minus the
+    point. What a localizer with exact telemetry, depth and pixel makes of the scene."""
+    d = np.einsum("nij,nj->ni", R_ned_from_cv, pixel_rays(camera, u, v))
+    flat = camera_ned[:, :2] + reach_offset(d, -camera_ned[:, 2], point_ned[:, 2], n_water)
+    return flat - point_ned[:, :2]
+
+
+def apparent_radius_m(size_m) -> float:
+    """The radius (m) of the disk of a vehicle's top face's area (length × width): the waves its truth pixel is found
+    through are averaged over it (:meth:`~sim_fixtures.waves.WaveField.averaged`, see :func:`frame_truth`)."""
+    return float(np.sqrt(size_m[0] * size_m[1] / np.pi))
+
+
 def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
-    """True state at every frame's exposure time, and the truth point's exact pixel."""
+    """True state at every frame's exposure time, and the truth point's exact pixel.
+
+    Under waves (``[waves]``) the pixel is where the reference point appears through the waves averaged over the
+    top face (a disk of its area, :func:`apparent_radius_m`; :func:`apparent_pixel`): waves longer than the vehicle
+    move its image as a whole, shorter ones break it up around there (a point seen through them has several images
+    at 1-4 m depth, their displacements averaging out over the vehicle). The rendered silhouette's centroid follows
+    that pixel within 0.7-1.1 px RMS per axis at 2-5 m/s (its own break-up included)."""
     n = round(sc.duration_s * sc.fps)
     clock = Clock.of(sc)
     tau = np.arange(n) / sc.fps
@@ -125,17 +206,28 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
     visible = np.ones(n, bool)
     for a, b in sc.occlusions:
         visible &= ~((tau >= a) & (tau < b))
-    u, v = reference_pixel(camera, R, cam, uuv, sc.site.refractive_index)
-    second = second_ned = rock = second_u = second_v = None
+    n_water = sc.site.refractive_index
+    waves = wave_field(sc, camera.fx / floor_div(camera))
+    if waves is not None:
+        waves = waves.averaged(apparent_radius_m(sc.uuv.size_m))
+
+    def pixel(point):  # where a point appears, and the waves' own error there (None without waves)
+        if waves is None:
+            return (*reference_pixel(camera, R, cam, point, n_water), None)
+        pu, pv = apparent_pixel(camera, R, cam, tau, point, waves, n_water)
+        return pu, pv, wave_error_ne(camera, R, cam, point, pu, pv, n_water)
+
+    u, v, wave_error = pixel(uuv)
+    second = second_ned = rock = second_u = second_v = second_wave_error = None
     if sc.second_uuv.enabled:
         second = Box(motion.second_ned(0.0), motion.second_heading, sc.uuv.size_m, "vehicle")
         second_ned = motion.second_ned(tau)
     if sc.second_uuv.role == "uuv":
-        second_u, second_v = reference_pixel(camera, R, cam, second_ned, sc.site.refractive_index)
+        second_u, second_v, second_wave_error = pixel(second_ned)
     if sc.rock.enabled:
         rock = Box(motion.rock_ned, motion.rock_heading, sc.rock.size_m, "rock")
     return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v, second_ned, second, rock,
-                 second_u, second_v)
+                 second_u, second_v, wave_error, second_wave_error)
 
 
 def depth_records(sc: Scenario, depth_m_at, clock: Clock, streams: tuple[str, str] = ("depth", "depth_link")
@@ -176,11 +268,32 @@ def _write_truth(path: Path, sc: Scenario, t_unix, ned) -> None:
                ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}") for t, a, b, d in zip(t_unix, lat, lon, ned[:, 2])))
 
 
+def _tracked(camera: SimCamera, u, v, in_view) -> np.ndarray:
+    """The frames a UUV's pixel (u, v) is written in track.csv: ``in_view`` and in the image."""
+    return in_view & camera.contains(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
+
+
 def _write_track(path: Path, camera: SimCamera, t_unix, u, v, in_view) -> None:
     """``track.csv``: a UUV's exact pixel at each frame time, empty where it is not ``in_view`` or not in the image."""
-    seen = in_view & camera.contains(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
+    seen = _tracked(camera, u, v, in_view)
     _write_csv(path, ("t", "u", "v"), ((f"{t:.6f}", f"{a:.4f}" if ok else "", f"{b:.4f}" if ok else "")
                                        for t, a, b, ok in zip(t_unix, u, v, seen)))
+
+
+TRUTH_WAVES_CSV = "truth_waves.csv"
+
+
+def _write_truth_waves(path: Path, camera: SimCamera, t_unix, u, v, in_view, error_ne) -> None:
+    """``truth_waves.csv`` (with ``[waves]``): the waves' own error of a UUV's reference point at each frame time
+    (:func:`wave_error_ne`, ``wave_dn_m``, ``wave_de_m``: north and east, m), empty where track.csv is; an earlier
+    session's is removed without waves."""
+    if error_ne is None:
+        path.unlink(missing_ok=True)
+        return
+    seen = _tracked(camera, u, v, in_view)
+    _write_csv(path, ("t", "wave_dn_m", "wave_de_m"),
+               ((f"{t:.6f}", f"{dn:.5f}" if ok else "", f"{de:.5f}" if ok else "")
+                for t, (dn, de), ok in zip(t_unix, error_ne, seen)))
 
 
 def _in_view(boxes, otherwise: np.ndarray) -> np.ndarray:
@@ -294,16 +407,29 @@ depth_m = {t.depth_noise_m!r}
     return text
 
 
-class Encoder:
-    """``ffmpeg`` reading raw BGR frames on stdin, writing H.264 (libx264, yuv420p, a keyframe a second) MP4."""
+def rate_control(crf: int, downlink: DownlinkSpec | None, fps: float) -> list[str]:
+    """x264's rate control and GOP options: quality ``crf`` with a keyframe a second (``downlink`` None or without a
+    bitrate, and then ``keyframe_s`` sets the GOP); or as a drone's downlink, ``bitrate_mbps`` constant (``-b:v`` =
+    ``-maxrate``, ``-bufsize`` ``buffer_s`` of it) without B-frames (``-bf 0``: each frame sent as it is made)."""
+    gop = str(max(1, round((1.0 if downlink is None else downlink.keyframe_s) * fps)))
+    if downlink is None or downlink.bitrate_mbps is None:
+        return ["-crf", str(crf), "-g", gop]
+    rate = round(downlink.bitrate_mbps * 1e6)
+    return ["-b:v", str(rate), "-maxrate", str(rate), "-bufsize", str(round(rate * downlink.buffer_s)), "-bf", "0",
+            "-g", gop]
 
-    def __init__(self, path: Path, width: int, height: int, fps: float, crf: int):
+
+class Encoder:
+    """``ffmpeg`` reading raw BGR frames on stdin, writing H.264 (libx264, yuv420p, a keyframe a second) MP4;
+    ``downlink``: a scenario's ``[downlink]`` (:func:`rate_control`)."""
+
+    def __init__(self, path: Path, width: int, height: int, fps: float, crf: int, downlink: DownlinkSpec | None = None):
         if shutil.which("ffmpeg") is None:
             raise RuntimeError("ffmpeg not found on PATH; install it (apt install ffmpeg) to render video")
         cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24", "-s", f"{width}x{height}",
-               "-r", f"{fps:g}", "-i", "-", "-an", "-c:v", "libx264", "-preset", "veryfast", "-crf", str(crf),
-               "-g", str(max(1, round(fps))),  # a keyframe every second, as field cameras send: a live decoder
-               # that joins late starts within a second
+               "-r", f"{fps:g}", "-i", "-", "-an", "-c:v", "libx264", "-preset", "veryfast",
+               *rate_control(crf, downlink, fps),  # a keyframe every second by default, as field cameras send: a
+               # live decoder that joins late starts within a second
                "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(path)]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE)
 
@@ -341,6 +467,25 @@ def _render_apart(view: View, noise_at: tuple[int, int]):
     return _worker_renderer.render_seen(view, noise_at)
 
 
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextmanager
+def _one_blas_thread():
+    """Processes started meanwhile use one BLAS thread each: the rendering processes already fill the cores (the
+    waves' matrix products, each on two threads beside them, ran 3-10 times slower on a busy 2-core machine)."""
+    saved = {k: os.environ.get(k) for k in BLAS_THREADS}
+    os.environ.update(dict.fromkeys(BLAS_THREADS, "1"))
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
 def _frames(renderer: Renderer, sc: Scenario, truth: Truth, workers: int) -> Iterator[tuple]:
     """``render_seen``'s (image, boxes) of every frame in order: rendered here, or by ``workers`` processes (each
     given a copy of the renderer and each frame's noise offset: the same frames), at most two a worker ahead."""
@@ -350,8 +495,8 @@ def _frames(renderer: Renderer, sc: Scenario, truth: Truth, workers: int) -> Ite
             yield renderer.render_seen(truth.view(i))
         return
     offsets = noise_offsets(sc, n)
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker,
-                             initargs=(renderer,)) as pool:
+    with _one_blas_thread(), ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                                 initializer=_start_worker, initargs=(renderer,)) as pool:
         ahead: deque = deque()
         for i in range(n):
             ahead.append(pool.submit(_render_apart, truth.view(i), offsets[i]))
@@ -365,7 +510,7 @@ def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress:
     """Render (in :func:`render_workers` processes) and encode every frame; returns per frame the bounding box of the
     UUV and of each look-alike where it can be seen, else None (see :meth:`~sim_fixtures.render.Renderer.render_seen`)."""
     renderer = Renderer(sc, camera)
-    encoder = Encoder(path, camera.width, camera.height, sc.fps, sc.render.crf)
+    encoder = Encoder(path, camera.width, camera.height, sc.fps, sc.render.crf, sc.downlink)
     n = len(truth.t_unix)
     seen = []
     bar = progress_bar(n, f"{sc.name}: rendering", progress)
@@ -389,8 +534,10 @@ def _write_second_uuv(out: Path, sc: Scenario, camera: SimCamera, truth: Truth, 
     _write_depth(folder / "depth.jsonl",
                  depth_records(sc, lambda tau: motion.second_ned(tau)[..., 2], clock, ("second_depth", "second_link")))
     _write_truth(folder / "truth.csv", sc, truth.t_unix, truth.second_ned)
-    _write_track(folder / "track.csv", camera, truth.t_unix, truth.second_u, truth.second_v,
-                 _in_view(boxes, np.ones(len(truth.t_unix), bool)))
+    in_view = _in_view(boxes, np.ones(len(truth.t_unix), bool))
+    _write_track(folder / "track.csv", camera, truth.t_unix, truth.second_u, truth.second_v, in_view)
+    _write_truth_waves(folder / TRUTH_WAVES_CSV, camera, truth.t_unix, truth.second_u, truth.second_v, in_view,
+                       truth.second_wave_error_ne)
     init = None if boxes is None else _first_box(boxes, truth.t_unix, camera)
     (folder / UUV_TOML).write_text(_uuv_toml(sc, sc.second_uuv.id, init))
 
@@ -446,7 +593,9 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
             old.unlink()
     render_s = time.perf_counter() - t1
     uuv_boxes = None if seen is None else [boxes[0] for boxes in seen]
-    _write_track(out / "track.csv", camera, truth.t_unix, truth.u, truth.v, _in_view(uuv_boxes, truth.visible))
+    in_view = _in_view(uuv_boxes, truth.visible)
+    _write_track(out / "track.csv", camera, truth.t_unix, truth.u, truth.v, in_view)
+    _write_truth_waves(out / TRUTH_WAVES_CSV, camera, truth.t_unix, truth.u, truth.v, in_view, truth.wave_error_ne)
     init = None if seen is None else _first_box(uuv_boxes, truth.t_unix, camera)
     if seen is not None and init is None:
         raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")

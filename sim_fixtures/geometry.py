@@ -167,20 +167,37 @@ def pixel_rays(camera: SimCamera, u, v) -> np.ndarray:
 SURFACE_NORMAL_UP = np.array([0.0, 0.0, -1.0])  # NED: the surface's normal on the air side
 
 
-def refract_into_water(d_ned, n_water: float) -> np.ndarray:
+def refract_into_water(d_ned, n_water: float, normal_up=None) -> np.ndarray:
     """Direction in the water of unit rays (..., 3) going down through the surface.
 
     Snell's law in vector form: with the unit normal n on the incident side and
     cos θi = −n·i, the refracted ray is t = η·i + (η·cos θi − cos θt)·n, η = 1/n_water,
-    cos θt = √(1 − η²·(1 − cos²θi)). Rays that do not go down give NaN.
+    cos θt = √(1 − η²·(1 − cos²θi)). ``normal_up``: the surface's unit normals on the air
+    side (..., 3) where it is tilted (a wave's facet); unset: the flat surface's,
+    :data:`SURFACE_NORMAL_UP`. Rays that do not go into the water through it give NaN.
+    Float32 rays stay float32 (the floor's many rays under waves).
     """
-    d = np.asarray(d_ned, dtype=float)
+    d = np.asarray(d_ned)
+    d = d.astype(np.result_type(d.dtype, np.float32), copy=False)
     eta = 1.0 / n_water
-    cos_i = -(d @ SURFACE_NORMAL_UP)
+    if normal_up is None:
+        normal = SURFACE_NORMAL_UP
+        cos_i = -(d @ SURFACE_NORMAL_UP)
+    else:
+        normal = np.asarray(normal_up, dtype=float)
+        cos_i = -np.sum(d * normal, axis=-1)
     with np.errstate(invalid="ignore"):
         cos_t = np.sqrt(1.0 - eta**2 * (1.0 - cos_i**2))
-        t = eta * d + (eta * cos_i - cos_t)[..., None] * SURFACE_NORMAL_UP
+        t = eta * d + (eta * cos_i - cos_t)[..., None] * normal
     return np.where((cos_i > 0)[..., None], t, np.nan)
+
+
+def facet_normal_up(slope_ne) -> np.ndarray:
+    """Unit normals (..., 3) on the air side of a surface down = −η(north, east) with slopes (∂η/∂north, ∂η/∂east)
+    (..., 2): ∇(down + η) = (η_n, η_e, 1) points into the water; the air side is its opposite."""
+    s = np.asarray(slope_ne)
+    scale = -1.0 / np.sqrt(1.0 + s[..., 0] ** 2 + s[..., 1] ** 2)
+    return np.stack([s[..., 0] * scale, s[..., 1] * scale, scale], axis=-1)
 
 
 def reach_offset(d_ned, height_m, depth_m, n_water: float) -> np.ndarray:

@@ -14,19 +14,28 @@ each ray takes the nearest box it meets. With ``[render] shadow`` > 0 the boxes 
 shadows: a point on the floor or on a box is in shadow where the ray from it towards the
 sun (the sunlight refracted at the flat surface, straight in the water) meets another box;
 there the sun's share of the light (and the caustics, which are sunlight) is missing.
+
+With wind waves (``[waves]``, :mod:`sim_fixtures.waves`) every ray meets the wavy surface
+(:func:`water_path_ned`: its height included) and is refracted through the local facet's
+normal; Fresnel's reflectance and the sky are the facet's, and the sun's glint is the sun
+reflected by the facet, widened by the unresolved waves' slopes. The caustic pattern drifts
+with the waves that focus it, lights the vehicles too, and fades with depth
+(``[waves] caustic_fade_per_m``). ``[site] turbidity_per_m`` veils the line of sight.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import cv2
 import numpy as np
 
 from . import texture
-from .geometry import SimCamera, pixel_rays, refract_into_water
+from .geometry import SimCamera, facet_normal_up, pixel_rays, refract_into_water
 from .scenario import Scenario
+from .waves import downwind_rad, phase_speed, wave_field
 
 FLOOR_M_PER_PX = 0.015
 SKY_BGR = np.array([235.0, 215.0, 200.0], np.float32)
@@ -59,19 +68,49 @@ class View:
     others: tuple = ()  # Boxes of the look-alikes at this frame (the second vehicle, the rock)
 
 
-def water_path(ray_cv, view: View, n_water: float):
-    """Where camera rays cross the surface and how they continue in the water.
+class WaterPath(NamedTuple):
+    """Where camera rays (N) cross the water surface and how they go on in the water (world NED)."""
 
-    ``ray_cv`` (N, 3) unit rays in the camera frame. Returns ``(surface_ne (N, 2),
-    dir_water (N, 3) NED unit, wet (N,))``; ``wet`` is False for rays that do not
-    point down at the water (their other values are 0).
+    surface_ne: np.ndarray  # (N, 2) the crossing's north and east
+    down_m: np.ndarray  # (N,) its down coordinate: 0 on the flat surface, −η on a wave
+    dir_water: np.ndarray  # (N, 3) unit direction in the water
+    wet: np.ndarray  # (N,) False for rays that do not point down into the water (their other values are meaningless)
+    normal_up: np.ndarray | None  # (N, 3) the facets' unit normals on the air side; None: the flat surface
+
+
+CROSSING_ITERATIONS = 2  # fixed-point steps from the flat crossing to a wave's (the error shrinks by slope·tan θ each)
+
+
+def water_path(ray_cv, view: View, n_water: float, surface=None) -> WaterPath:
+    """:func:`water_path_ned` of rays ``ray_cv`` (N, 3) in the camera frame of a view."""
+    return water_path_ned(ray_cv @ view.R_ned_from_cv.T.astype(ray_cv.dtype), view.camera_ned, n_water, surface)
+
+
+def water_path_ned(d, camera_ned, n_water: float, surface=None) -> WaterPath:
+    """Where rays ``d`` (N, 3, NED unit) from a camera in the air (``camera_ned`` (3,), or (N, 3): one per ray) cross
+    the water surface and how they continue.
+
+    ``surface``: the waves at the frame's time (:class:`~sim_fixtures.waves.ExactSurface` or ``GriddedSurface``), or
+    None for the flat surface down = 0. On waves the crossing with down = −η(north, east) is found by fixed-point
+    steps from the flat crossing, r ← (h − η(c + r·d_ne))/d_down for the ray's length to the surface's height, and the
+    ray is refracted through the facet's normal there (Snell, :func:`~sim_fixtures.geometry.refract_into_water`).
     """
-    d = ray_cv @ view.R_ned_from_cv.T.astype(ray_cv.dtype)
     wet = d[:, 2] > 1e-3
-    d = np.where(wet[:, None], d, np.array([0.0, 0.0, 1.0], ray_cv.dtype))
-    height = -view.camera_ned[2]
-    surface = view.camera_ned[:2].astype(ray_cv.dtype) + d[:, :2] * (height / d[:, 2])[:, None]
-    return surface, refract_into_water(d, n_water).astype(ray_cv.dtype), wet
+    d = np.where(wet[:, None], d, np.array([0.0, 0.0, 1.0], d.dtype))
+    camera_ned = np.asarray(camera_ned)
+    height = -camera_ned[..., 2]
+    flat = camera_ned[..., :2].astype(d.dtype) + d[:, :2] * (height / d[:, 2])[:, None]
+    if surface is None:
+        return WaterPath(flat, np.zeros(len(d), d.dtype), refract_into_water(d, n_water).astype(d.dtype), wet, None)
+    ne, camera_ned, height = flat, camera_ned.astype(d.dtype), height.astype(d.dtype)
+    for _ in range(CROSSING_ITERATIONS):
+        reach = (height - surface.height(ne)) / d[:, 2]
+        ne = camera_ned[..., :2] + d[:, :2] * reach[:, None]
+    normal = facet_normal_up(surface.gradient(ne).astype(d.dtype, copy=False))
+    t = refract_into_water(d, n_water, normal)
+    wet &= np.isfinite(t[:, 0])
+    t[~wet] = (0.0, 0.0, 1.0)
+    return WaterPath(ne, camera_ned[..., 2] + reach * d[:, 2], t, wet, normal)
 
 
 def to_body(surface_ne, dir_water, box: Box, depth_m=0.0):
@@ -173,6 +212,25 @@ def noise_offsets(sc: Scenario, n: int) -> list[tuple[int, int]]:
     return [_noise_offset(rng) for _ in range(n)]
 
 
+def floor_div(camera: SimCamera) -> int:
+    """How many image pixels a side one floor pixel is (see :class:`Renderer`)."""
+    return 2 if camera.width >= 1200 and camera.width % 2 == camera.height % 2 == 0 else 1
+
+
+CAUSTIC_DRIFT_NE = ((0.11, 0.07), (-0.05, 0.13))  # m/s: the two caustic layers' drift over a flat surface
+CAUSTIC_WAVELENGTH_M = 0.4  # the caustic pattern's cells (0.12-1 m) are focused by waves about this long ...
+CAUSTIC_SPREAD_DEG = 30.0  # ... that travel downwind, ± this
+
+
+def wave_caustic_drift_ne(sc: Scenario) -> tuple:
+    """The caustic layers' drift (m/s, north and east) under waves: at the phase speed of the waves that focus them,
+    downwind ± ``CAUSTIC_SPREAD_DEG``."""
+    downwind = downwind_rad(sc)
+    speed = float(phase_speed(2 * np.pi / CAUSTIC_WAVELENGTH_M))
+    return tuple((speed * np.cos(downwind + a), speed * np.sin(downwind + a))
+                 for a in np.radians([CAUSTIC_SPREAD_DEG, -CAUSTIC_SPREAD_DEG]))
+
+
 class Renderer:
     """Renders frames of one scenario; textures and rays are made once.
 
@@ -182,6 +240,11 @@ class Renderer:
     floor is looked up at the image's resolution divided by ``floor_div`` (2 for even
     sizes from 1200 px wide: the 1.5 cm texture has no finer detail at usual heights) and
     scaled up; the UUV is always ray cast per image pixel, supersampled.
+
+    With waves (``[waves]``) the mapping is not smooth: the floor's rays are cast per floor
+    pixel (``coarse`` 1), through the waves sampled on a grid for the frame
+    (:meth:`~sim_fixtures.waves.WaveField.gridded`); the vehicles' rays through the exact
+    sums of the waves (:class:`~sim_fixtures.waves.ExactSurface`), as the truth's pixel is found.
     """
 
     COARSE = 4
@@ -193,8 +256,9 @@ class Renderer:
         self.n_water = sc.site.refractive_index
         self.atten = np.asarray(sc.site.attenuation_bgr_per_m, np.float32)
         self.water_bgr = np.asarray(sc.site.water_bgr, np.float32)
-        c = self.COARSE
-        self.floor_div = div = 2 if camera.width >= 1200 and camera.width % 2 == camera.height % 2 == 0 else 1
+        self.floor_div = div = floor_div(camera)
+        self.waves = wave_field(sc, camera.fx / div)
+        self.coarse = c = self.COARSE if self.waves is None else 1
         self.floor_w, self.floor_h = -(-camera.width // div), -(-camera.height // div)
         self.grid_w, self.grid_h = -(-self.floor_w // c) + 2, -(-self.floor_h // c) + 2
         v, u = np.mgrid[0 : self.grid_h, 0 : self.grid_w].astype(np.float64)
@@ -202,8 +266,16 @@ class Renderer:
         # centres (offset c); floor pixel i is centred on image pixel div*i + (div-1)/2
         fu, fv = c * (u - 1) + (c - 1) / 2, c * (v - 1) + (c - 1) / 2
         self.grid_rays = pixel_rays(camera, div * fu + (div - 1) / 2, div * fv + (div - 1) / 2).reshape(-1, 3)
+        if self.waves is not None:  # a ray per floor pixel: float32 is plenty (micrometres at tens of metres)
+            self.grid_rays = self.grid_rays.astype(np.float32)
+            edge = np.zeros((self.grid_h, self.grid_w), bool)
+            edge[[0, -1], :] = edge[:, [0, -1]] = True
+            self.edge_rays = self.grid_rays[edge.ravel()].astype(float)
         self.floor = texture.seafloor(rng, m_per_px=FLOOR_M_PER_PX)
         self.caustics = (texture.caustics(rng), texture.caustics(rng))
+        self.caustic_drift_ne = CAUSTIC_DRIFT_NE if self.waves is None else wave_caustic_drift_ne(sc)
+        still = self._caustic_texture(0.0)
+        self.caustic_mean, self.caustic_std = float(still.mean()), float(still.std())
         self.sparkle = np.clip(texture.fractal_noise(rng, 512, 0.6) - 1.5, 0.0, None)
         margin = NOISE_MARGIN
         self.noise = (rng.standard_normal((camera.height + margin, camera.width + margin, 3))
@@ -219,12 +291,16 @@ class Renderer:
     def uuv_box(self, view: View) -> Box:
         return Box(view.uuv_ned, view.uuv_heading, self.sc.uuv.size_m, "vehicle")
 
+    def exact_surface(self, view: View):
+        """The waves at the view's time as the vehicles' rays meet them (None: the flat surface)."""
+        return None if self.waves is None else self.waves.at(view.tau_s)
+
     def body_rays(self, u, v, view: View):
         """The UUV's body-frame origins and directions of the rays through distorted pixels (u, v)."""
         ray = pixel_rays(self.camera, np.ravel(u), np.ravel(v))
-        surface, dir_water, wet = water_path(ray, view, self.n_water)
-        origin, direction = to_body(surface, dir_water, self.uuv_box(view))
-        origin[~wet] = np.nan
+        p = water_path(ray, view, self.n_water, self.exact_surface(view))
+        origin, direction = to_body(p.surface_ne, p.dir_water, self.uuv_box(view), p.down_m)
+        origin[~p.wet] = np.nan
         return origin, direction, ray
 
     def top_face_xy(self, u, v, view: View):
@@ -236,63 +312,91 @@ class Renderer:
     # --- light ---------------------------------------------------------------------------------------
     def _through_water(self, light_depth_m, path_m):
         """``(gain, veil)``: seen colour = albedo·gain + veil for a surface at ``light_depth_m``
-        seen through ``path_m`` of water (per BGR channel, arrays (N, 3))."""
+        seen through ``path_m`` of water (per BGR channel, arrays (N, 3)); ``[site] turbidity_per_m`` attenuates
+        the line of sight too."""
         a = self.atten
-        trans = np.exp(-a * path_m[:, None])
+        trans = np.exp(-(a + self.sc.site.turbidity_per_m) * path_m[:, None])
         return self.sc.render.exposure * np.exp(-a * light_depth_m[:, None]) * trans, self.water_bgr * (1.0 - trans)
 
-    def _surface(self, ray_cv, view: View):
+    def _surface(self, ray_cv, view: View, normal_up=None):
         """``(keep, add)`` of the water surface for camera rays: seen = underwater·keep + add.
 
         ``keep`` is 1 − Fresnel reflectance (Schlick) (N, 1); ``add`` the reflected sky
-        plus the smooth part of the sun's glint (N, 3).
+        plus the smooth part of the sun's glint (N, 3). On waves (``normal_up`` (N, 3), the
+        facets' normals) both at each ray's facet, and the glint is the sun reflected by it:
+        the shorter, unresolved waves' slopes (Gaussian, mean square ``unresolved_mss``) turn
+        the reflection by twice theirs, so its brightness falls as exp(−θ²/(4·mss)), θ the angle
+        from the reflected ray to the sun (θ² ≈ 2·(1 − cos θ)).
         """
-        d = ray_cv @ view.R_ned_from_cv.T
-        cos_i = np.clip(d[:, 2], 0.0, 1.0)
+        d = ray_cv @ view.R_ned_from_cv.T.astype(ray_cv.dtype)
+        if normal_up is None:
+            cos_i = np.clip(d[:, 2], 0.0, 1.0)
+        else:
+            cos_i = np.clip(-np.sum(d * normal_up, axis=1), 0.0, 1.0)
         n = self.n_water
         f0 = ((n - 1) / (n + 1)) ** 2
         fresnel = (f0 + (1 - f0) * (1 - cos_i) ** 5)[:, None]
         add = SKY_BGR * fresnel
-        if self.sc.render.glint > 0:
+        if self.sc.render.glint > 0 and normal_up is None:
             align = (d * np.array([1.0, 1.0, -1.0])) @ self.sun_up_ned
             add = add + (GLINT_HAZE * self.sc.render.glint * 255.0 * np.exp((align - 1.0) / 0.02))[:, None]
+        elif self.sc.render.glint > 0:
+            align = (d + 2 * cos_i[:, None] * normal_up) @ self.sun_up_ned
+            glint = np.exp((align - 1.0) / (2 * self.waves.unresolved_mss))
+            add = add + (self.sc.render.glint * 255.0 * glint)[:, None]
         return 1.0 - fresnel, add
 
     # --- image ---------------------------------------------------------------------------------------
-    def _coarse(self, view: View, boxes):
+    def floor_surface(self, view: View):
+        """The waves at the view's time on a grid under the floor's rays (:meth:`~sim_fixtures.waves.WaveField.gridded`,
+        reaching 5 σ of η times the steepest ray's tan θ past their flat crossings), or None for the flat surface."""
+        if self.waves is None:
+            return None
+        d = self.edge_rays @ view.R_ned_from_cv.T  # the farthest crossings are the image's edges'
+        d = d[d[:, 2] > 1e-3]
+        if len(d) == 0:
+            return None
+        ne = view.camera_ned[:2] + d[:, :2] * (-view.camera_ned[2] / d[:, 2])[:, None]
+        reach = self.waves.grid_reach_m * np.max(np.hypot(d[:, 0], d[:, 1]) / d[:, 2])
+        return self.waves.gridded(ne.min(axis=0) - reach, ne.max(axis=0) + reach, view.tau_s)
+
+    def _coarse(self, view: View, boxes, floor_waves):
         """Floor-resolution smooth fields from the coarse grid (dict of float32 arrays), per box the
-        grid points whose rays pass near it, and per box the grid points whose floor its shadow may reach."""
-        surface, dir_water, wet = water_path(self.grid_rays, view, self.n_water)
+        grid points whose rays pass near it, and per box the grid points whose floor its shadow may reach.
+        ``floor_waves``: :meth:`floor_surface`'s."""
+        p = water_path(self.grid_rays, view, self.n_water, floor_waves)
+        surface, dir_water, wet = p.surface_ne, p.dir_water, p.wet
         depth = self.sc.site.floor_depth_m
-        t = depth / dir_water[:, 2]
+        t = (depth - p.down_m) / dir_water[:, 2]
         fn = surface[:, 0] + dir_water[:, 0] * t
         fe = surface[:, 1] + dir_water[:, 1] * t
         gain, veil = self._through_water(np.full(len(t), depth), t)
-        keep, add = self._surface(self.grid_rays, view)
+        keep, add = self._surface(self.grid_rays, view, p.normal_up)
         gain = np.where(wet[:, None], gain * keep, 0.0)
         veil = np.where(wet[:, None], veil * keep + add, SKY_BGR)
         fields = {"map": np.stack([fe, -fn], axis=-1) / FLOOR_M_PER_PX, "gain": gain, "veil": veil}
-        if self.sc.render.glint > 0:
+        if self.sc.render.glint > 0 and self.waves is None:
             fields["sparkle_map"] = np.stack([surface[:, 1], -surface[:, 0]], axis=-1) / 0.01
             fields["glint"] = (add - SKY_BGR * (1 - keep))[:, :1] / GLINT_HAZE  # grey: any channel
-        c = self.COARSE
+        c = self.coarse
         out = {}
         for key, f in fields.items():
             grid = f.reshape(self.grid_h, self.grid_w, -1).astype(np.float32)
             full = cv2.resize(grid, (self.grid_w * c, self.grid_h * c), interpolation=cv2.INTER_LINEAR)
             out[key] = full.reshape(self.grid_h * c, self.grid_w * c, -1)[c : c + self.floor_h, c : c + self.floor_w]
         grid = (self.grid_h, self.grid_w)
-        near = [self._near(surface, dir_water, wet, b).reshape(grid) for b in boxes]
+        near = [self._near(p, b).reshape(grid) for b in boxes]
         shade = [self._shade_near(fn, fe, wet, b).reshape(grid) for b in boxes] if self.shadow > 0 else []
         return out, near, shade
 
-    def _near(self, surface, dir_water, wet, box: Box):
-        """Rays passing within reach of a box at its mid-height (to bound its window)."""
+    def _near(self, p: WaterPath, box: Box):
+        """Rays (a :class:`WaterPath`) passing within reach of a box at its mid-height (to bound its window)."""
         L, W, H = box.size_m
-        t = (box.ned[2] + H / 2) / dir_water[:, 2]
+        surface, dir_water = p.surface_ne, p.dir_water
+        t = (box.ned[2] + H / 2 - p.down_m) / dir_water[:, 2]
         dist = np.hypot(surface[:, 0] + dir_water[:, 0] * t - box.ned[0],
                         surface[:, 1] + dir_water[:, 1] * t - box.ned[1])
-        return wet & (dist < 0.5 * np.hypot(L, W) + 0.5 * H * np.tan(np.arcsin(1 / self.n_water)) + 0.05)
+        return p.wet & (dist < 0.5 * np.hypot(L, W) + 0.5 * H * np.tan(np.arcsin(1 / self.n_water)) + 0.05)
 
     def _shade_near(self, floor_n, floor_e, wet, box: Box):
         """Rays whose floor point is within reach of a box's shadow (to bound the shadow's window)."""
@@ -324,9 +428,9 @@ class Renderer:
                 blocked |= hit_box(origin, direction, b.size_m)[0]
         return blocked
 
-    def _floor_lit(self, view: View, boxes, shade):
+    def _floor_lit(self, view: View, boxes, shade, floor_waves):
         """The sunlit share of each floor pixel in the shadows' windows: ``(rows, cols, lit)``, or None."""
-        c = self.COARSE
+        c = self.coarse
         windows = [w for m in shade if (w := self._window(m, c, self.floor_h, self.floor_w)) is not None]
         if not windows:
             return None
@@ -334,22 +438,40 @@ class Renderer:
         ss = self.sc.render.supersample
         uu, vv = subsamples(rows, cols, ss, self.floor_div)
         ray = pixel_rays(self.camera, uu.ravel(), vv.ravel())
-        surface, dir_water, wet = water_path(ray, view, self.n_water)
+        p = water_path(ray, view, self.n_water, floor_waves)
         depth = self.sc.site.floor_depth_m
-        floor = np.column_stack([surface + dir_water[:, :2] * (depth / dir_water[:, 2])[:, None],
+        floor = np.column_stack([p.surface_ne + p.dir_water[:, :2] * ((depth - p.down_m) / p.dir_water[:, 2])[:, None],
                                  np.full(len(ray), depth)])
-        blocked = wet & self._in_shadow(floor, boxes)
+        blocked = p.wet & self._in_shadow(floor, boxes)
         return rows, cols, 1.0 - blocked.reshape(len(rows), ss * ss).mean(axis=1)
 
     def _caustic_texture(self, tau_s):
         """The two caustic layers drifting over the floor, combined (in floor-texture pixels)."""
         (a, b), layers = self.caustics, []
-        for tex, scale, (vn, ve) in ((a, 1.0, (0.11, 0.07)), (b, 1.37, (-0.05, 0.13))):
+        for tex, scale, (vn, ve) in zip((a, b), (1.0, 1.37), self.caustic_drift_ne):
             shift = np.array([ve, -vn]) * tau_s / FLOOR_M_PER_PX
             M = np.array([[1 / scale, 0, shift[0] / scale], [0, 1 / scale, shift[1] / scale]])
             layers.append(cv2.warpAffine(tex, M, tex.shape[::-1], flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                          borderMode=cv2.BORDER_WRAP))
         return np.sqrt(layers[0] * layers[1])
+
+    def _caustic_factor(self, caus, depth_m):
+        """The sunlight's factor where the caustic texture is ``caus`` at ``depth_m``: over a flat surface
+        1 + k·(2·caus − 0.3), k = ``[render] caustics``, the same at every depth (as before waves); under waves
+        1 + k·exp(−``caustic_fade_per_m``·depth)·(caus − mean)/std: k is the light's relative flicker (standard
+        deviation over mean) just below the surface, the texture's mean and std taken over it (at 1 the bright
+        web is 6 times the mean, the dark between half of it)."""
+        k = self.sc.render.caustics
+        if self.waves is None:
+            return 1.0 + k * (2.0 * caus - 0.3)
+        fade = np.exp(-self.sc.waves.caustic_fade_per_m * np.asarray(depth_m, np.float32))
+        return 1.0 + (k / self.caustic_std) * fade * (caus - self.caustic_mean)
+
+    def _caustic_light(self, texture_now, points_ned):
+        """The sunlight's factor (N,) at points (N, 3) under waves: the frame's caustic texture there."""
+        caus = texture.sample(texture_now, points_ned[:, 1] / FLOOR_M_PER_PX, -points_ned[:, 0] / FLOOR_M_PER_PX,
+                              cv2.INTER_LINEAR, cv2.BORDER_WRAP)
+        return self._caustic_factor(caus, points_ned[:, 2])
 
     def _rays(self, rows, cols):
         """:func:`pixel_rays` (P·ss·ss, 3) of pixels (rows, cols) at :func:`subsamples`, from a cache of
@@ -372,10 +494,11 @@ class Renderer:
             self._ray_tiles.popitem(last=False)
         return stack[slot.ravel(), rows % t, cols % t].reshape(-1, 3)
 
-    def _boxes(self, view: View, img, boxes, near) -> tuple:
+    def _boxes(self, view: View, img, boxes, near, caustics=None) -> tuple:
         """Blend the boxes (the UUV first when it is not hidden) into ``img`` (H, W, 3) in windows around them; returns
         per box its bounding box, or None where it cannot be seen: no pixel mostly covered, less than half of it
-        showing (the rest behind another box), or its contrast below the sensor noise.
+        showing (the rest behind another box), or its contrast below the sensor noise. ``caustics``: the frame's
+        :meth:`_caustic_texture` where it lights the boxes too (under waves), else None.
 
         Contrast: the RMS change (grey levels) the vehicle makes to the pixels of its box, before
         noise. Deep in turbid water it fades into the water's colour and drops below the noise's
@@ -383,18 +506,19 @@ class Renderer:
         """
         cam = self.camera
         unseen = (None,) * len(boxes)
-        windows = [w for m in near if (w := self._window(m, self.COARSE * self.floor_div, cam.height, cam.width))
+        windows = [w for m in near if (w := self._window(m, self.coarse * self.floor_div, cam.height, cam.width))
                    is not None]
         if not windows:
             return unseen
         vv, uu = pixels_of(windows, cam.height, cam.width)
         ss = self.sc.render.supersample
         ray = self._rays(vv, uu)
-        surface, dir_water, wet = water_path(ray, view, self.n_water)
+        p = water_path(ray, view, self.n_water, self.exact_surface(view))
+        surface, dir_water = p.surface_ne, p.dir_water
         owner, nearest, hits = np.full(len(ray), -1), np.full(len(ray), np.inf), []
         for k, b in enumerate(boxes):
-            origin, direction = to_body(surface, dir_water, b)
-            origin[~wet] = np.nan
+            origin, direction = to_body(surface, dir_water, b, p.down_m)
+            origin[~p.wet] = np.nan
             hit, t_in, face, point = hit_box(origin, direction, b.size_m)
             hit &= np.isfinite(origin[:, 0])
             hits.append((hit, t_in, face, point))
@@ -408,10 +532,14 @@ class Renderer:
             if not own.any():
                 continue
             gain, veil = self._through_water(b.ned[2] + point[own, 2], t_in[own])
+            at = np.column_stack([surface[own] + dir_water[own, :2] * t_in[own, None],
+                                  p.down_m[own] + dir_water[own, 2] * t_in[own]])
+            light = 1.0 if caustics is None else self._caustic_light(caustics, at)
             if self.shadow > 0:
-                at = np.column_stack([surface[own] + dir_water[own, :2] * t_in[own, None], dir_water[own, 2] * t_in[own]])
-                gain = gain * np.where(self._in_shadow(at, boxes, skip=k), 1.0 - self.shadow, 1.0)[:, None]
-            keep, add = self._surface(ray[own], view)
+                light = np.where(self._in_shadow(at, boxes, skip=k), 1.0 - self.shadow, light)
+            if self.shadow > 0 or caustics is not None:
+                gain = gain * light[:, None]
+            keep, add = self._surface(ray[own], view, None if p.normal_up is None else p.normal_up[own])
             colour[own] = (ALBEDO[b.look](point[own], face[own]) * gain + veil) * keep + add
         n = ss * ss
         cover = (owner >= 0).reshape(len(vv), n).mean(axis=1)[:, None]
@@ -461,16 +589,20 @@ class Renderer:
         processes) are given theirs from :func:`noise_offsets`: the same frames either way.
         """
         boxes = ((self.uuv_box(view),) if view.uuv_visible else ()) + tuple(view.others)
-        fields, near, shade = self._coarse(view, boxes)
+        floor_waves = self.floor_surface(view)
+        fields, near, shade = self._coarse(view, boxes, floor_waves)
         fmap = np.ascontiguousarray(fields["map"])
         albedo = cv2.remap(self.floor, fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
         gain = fields["gain"]
         k = self.sc.render.caustics
         sun = None  # the sunlight's factor on the floor: the caustics, and the shadows
+        caustics = None  # the frame's caustic texture where it lights the vehicles too (under waves)
         if k > 0:
-            caus = cv2.remap(self._caustic_texture(view.tau_s), fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
-            sun = 1.0 + k * (2.0 * caus - 0.3)
-        lit = self._floor_lit(view, boxes, shade) if shade else None
+            texture_now = self._caustic_texture(view.tau_s)
+            caus = cv2.remap(texture_now, fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+            sun = self._caustic_factor(caus, self.sc.site.floor_depth_m)
+            caustics = texture_now if self.waves is not None else None
+        lit = self._floor_lit(view, boxes, shade, floor_waves) if shade else None
         if lit is not None:
             rows, cols, share = lit
             sun = np.ones((self.floor_h, self.floor_w), np.float32) if sun is None else sun
@@ -478,14 +610,14 @@ class Renderer:
         if sun is not None:
             gain = gain * sun[..., None]
         img = albedo * gain + fields["veil"]
-        if self.sc.render.glint > 0:
+        if self.sc.render.glint > 0 and self.waves is None:
             smap = np.ascontiguousarray(fields["sparkle_map"])
             smap[..., 1] += 37.0 * view.tau_s  # ripples moving over the surface
             sparkle = cv2.remap(self.sparkle, smap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
             img += fields["glint"] * sparkle[..., None]
         if self.floor_div > 1:
             img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_LINEAR)
-        seen = (() if view.uuv_visible else (None,)) + (self._boxes(view, img, boxes, near) if boxes else ())
+        seen = (() if view.uuv_visible else (None,)) + (self._boxes(view, img, boxes, near, caustics) if boxes else ())
         if self.sc.render.noise_sigma > 0:
             dy, dx = _noise_offset(self.noise_rng) if noise_at is None else noise_at
             img = cv2.add(img, self.noise[dy : dy + self.camera.height, dx : dx + self.camera.width])

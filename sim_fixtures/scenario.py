@@ -18,7 +18,7 @@ from itertools import pairwise
 from pathlib import Path
 from typing import Annotated, Literal
 
-from annotated_types import Ge, Le, MinLen
+from annotated_types import Ge, Gt, Le, MinLen
 from pydantic import Field, field_validator, model_validator
 from pydantic.dataclasses import dataclass
 
@@ -60,6 +60,10 @@ class Site:
         None, description="how well the operator knows the water's altitude: written as session.toml's "
         "[uncertainty] surface_amsl_m (the written surface_amsl_m itself is exact); unset: not written")
     attenuation_bgr_per_m: Vector3 = Field((0.05, 0.08, 0.22), description="light attenuation coefficients (1/m)")
+    turbidity_per_m: NonNegative = Field(0.0, description="scattering by suspended particles (1/m, every colour "
+                                         "alike): added to the attenuation along the line of sight, the light it "
+                                         "takes replaced by the water's colour (a veil: contrast falls faster with "
+                                         "depth); 0: clear water")
     water_bgr: Rgb = Field((120.0, 105.0, 50.0), description="colour of deep water (0-255)")
 
 
@@ -316,7 +320,9 @@ class RenderSpec:
     """``[render]``: the picture."""
 
     exposure: Positive = Field(1.4, description="sunlight just below the surface, relative to the albedo")
-    caustics: NonNegative = Field(0.5, description="strength of the moving caustic pattern (0 = none)")
+    caustics: NonNegative = Field(0.5, description="strength of the moving caustic pattern (0 = none); under "
+                                  "[waves]: the light's relative flicker (standard deviation over mean) just below "
+                                  "the surface, on the seafloor and the vehicles alike")
     glint: NonNegative = Field(0.0, description="strength of sun glint (0 = none)")
     sun_azimuth_deg: Number = Field(140.0, description="degrees from North")
     sun_elevation_deg: Number = Field(55.0, description="degrees above the horizon")
@@ -328,6 +334,44 @@ class RenderSpec:
         "vehicles and the rock cast shadows of the sunlight refracted at the flat surface (sun_azimuth_deg, "
         "sun_elevation_deg) on the seafloor and on each other, where that share and the caustics are missing; 0: no "
         "shadows")
+
+
+@dataclass(frozen=True, config=CLOSED)
+class WavesSpec:
+    """``[waves]``: wind waves on the water surface (:mod:`sim_fixtures.waves`): Elfouhaily's wind-sea spectrum for the
+    wind and fetch, its slopes scaled to Cox & Munk's, realised as a sum of random-phase linear waves (from the seed)
+    down to the shortest wave the image resolves; every camera ray is refracted through its local facet. 0 wind: the
+    flat surface."""
+
+    wind_mps: Annotated[Number, Ge(0), Le(14)] = Field(0.0, description="wind 10 m above the water (Cox & Munk "
+                                                        "measured 1-14 m/s); 0: a flat, still surface")
+    fetch_m: Annotated[Number, Ge(100)] = Field(3000.0, description="the stretch of water the wind has blown over "
+                                                "(the wave age: a short fetch, short young waves)")
+    direction_from_deg: Number | None = Field(None, description="where the wind comes from, degrees from North; "
+                                              "unset: uav.wind_from_deg")
+    components: Annotated[Whole, Ge(16), Le(2000)] = Field(300, description="how many linear waves realise the "
+                                                           "spectrum (log-spaced wavenumber bands)")
+    shortest_wavelength_m: Positive | None = Field(
+        None, description="the shortest wave realised; unset: 4 of the floor's pixels (the image's; 2x2 of them from "
+        "1200 px wide) at the surface seen straight down from uav.height_m. Shorter ones are left out (their slopes "
+        "only widen the sun's glint)")
+    caustic_fade_per_m: NonNegative = Field(0.4, description="the caustics' flicker ([render] caustics just below "
+                                            "the surface) fades as exp(-this x depth) on the seafloor and the "
+                                            "vehicles (c + K_d of the water); they drift downwind with the waves "
+                                            "that focus them")
+
+
+@dataclass(frozen=True, config=CLOSED)
+class DownlinkSpec:
+    """``[downlink]``: how the video is encoded. Unset ``bitrate_mbps``: x264 at ``[render] crf`` (the default); set:
+    as a drone's downlink does it, a constant bitrate without B-frames."""
+
+    bitrate_mbps: Annotated[Number, Ge(0.2), Le(100)] | None = Field(
+        None, description="x264 -b:v and -maxrate (Mbit/s; drones send 2-8), -bf 0; unset: [render] crf")
+    buffer_s: Annotated[Number, Gt(0), Le(10)] = Field(1.0, description="the rate control's buffer (-bufsize), "
+                                                       "in seconds of the bitrate")
+    keyframe_s: Annotated[Number, Gt(0), Le(20)] = Field(1.0, description="a keyframe this often (-g, frames "
+                                                         "rounded)")
 
 
 @dataclass(frozen=True, config=CLOSED)
@@ -401,6 +445,8 @@ class Scenario:
     render: RenderSpec = Field(default_factory=RenderSpec)
     second_uuv: SecondUuvSpec = Field(default_factory=SecondUuvSpec)
     rock: RockSpec = Field(default_factory=RockSpec)
+    waves: WavesSpec = Field(default_factory=WavesSpec)
+    downlink: DownlinkSpec = Field(default_factory=DownlinkSpec)
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
 
     @field_validator("occlusions")

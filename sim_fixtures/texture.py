@@ -7,6 +7,7 @@ the seafloor are BGR 0-255 (uint8); patterns are float32 in [0, 1].
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 
@@ -55,3 +56,15 @@ def caustics(rng, size: int = 512) -> np.ndarray:
     """Bright thin web where a smooth field crosses zero, like sunlight focused by waves: float32 [0, 1]."""
     n = fractal_noise(rng, size, 1.5, min_period_px=8.0, max_period_px=70.0)
     return np.exp(-np.abs(n) / 0.15).astype(np.float32)
+
+
+REMAP_COLS = 1024  # cv2.remap's maps are images, at most 32767 a side: points are laid out in rows of this many
+
+
+def sample(image: np.ndarray, x_px, y_px, interpolation: int, border: int) -> np.ndarray:
+    """``image`` (float32, one channel) at the points (``x_px``, ``y_px``) (N,), by cv2.remap: (N,) float32."""
+    n = len(x_px)
+    rows = -(-n // REMAP_COLS)
+    xy = np.zeros((rows * REMAP_COLS, 2), np.float32)
+    xy[:n, 0], xy[:n, 1] = x_px, y_px
+    return cv2.remap(image, xy.reshape(rows, REMAP_COLS, 2), None, interpolation, borderMode=border).ravel()[:n]
