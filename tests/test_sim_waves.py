@@ -235,7 +235,8 @@ def test_the_downlink_encode_has_its_bitrate_and_no_b_frames(tmp_path):
                           "-of", "json", str(video)], capture_output=True, text=True, check=True)
     types = [f["pict_type"] for f in json.loads(out.stdout)["frames"]]
     assert len(types) == 90 and "B" not in types
-    assert [i for i, t in enumerate(types) if t == "I"] == [0, 60]
+    keyframes = [i for i, t in enumerate(types) if t == "I"]
+    assert {0, 60} <= set(keyframes) and max(np.diff([*keyframes, 90])) <= 60  # (x264 may add one at a scene cut)
 
 
 def test_the_waves_scenarios_load():
