@@ -193,6 +193,11 @@ class LinkStatus(Section):
     write_errors: int | None = None
     reads: int | None = None
     unfinished_frames: int | None = Field(None, description="datagrams ending inside a frame")
+    foreign_datagrams: int | None = Field(None, description="udpin: datagrams from another address than the "
+                                          "peer's, dropped unread")
+    peer: str | None = Field(None, description="udpin: the address HOST:PORT the link takes datagrams from")
+    relocks: int | None = Field(None, description="udpin: times the lock moved to a new sender (the peer silent "
+                                "5 s)")
     zenoh_routers: int | None = Field(None, description="Zenoh routers connected (zenoh:mavlink/in)")
     zenoh_peers: int | None = Field(None, description="Zenoh peers connected (zenoh:mavlink/in)")
     sent_unmatched: int | None = Field(None, description="messages published with no subscriber reachable")

@@ -47,9 +47,14 @@ def read_unit(path: Path = UNIT) -> configparser.ConfigParser:
 
 def field_config(tmp: Path, gps_input_port: int) -> tuple[Path, dict]:
     """``deploy/field.toml`` as written, its endpoints on loopback (free ports; GPS_INPUT to ``gps_input_port``), the
-    calibration beside it, the recordings in ``tmp``: the file and its values."""
+    calibration beside it, the recordings in ``tmp``, its Zenoh configuration's keys made in ``tmp/team`` by
+    ``deploy/make_certs.sh``: the file and its values."""
     values = tomllib.loads((DEPLOY / "field.toml").read_text())
-    values |= {"calibration": str(DEPLOY / values["calibration"]),
+    subprocess.run([str(DEPLOY / "make_certs.sh"), str(tmp / "team"), "skyfix=127.0.0.1"], check=True,
+                   capture_output=True, timeout=60)  # this laptop's keys, where /etc/skyfix/tls/ has them
+    zenoh = tmp / "peer.json5"
+    zenoh.write_text((DEPLOY / values["zenoh_config"]).read_text().replace("/etc/skyfix/tls/", f"{tmp}/team/skyfix/"))
+    values |= {"calibration": str(DEPLOY / values["calibration"]), "zenoh_config": str(zenoh),
                "mavlink": f"udpin:127.0.0.1:{free_port()}",
                "video": f"rtp://127.0.0.1:{free_port()}?codec=h264",
                "zenoh_connect": [], "zenoh_listen": [f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"],

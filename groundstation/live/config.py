@@ -171,6 +171,12 @@ class RunConfig(UuvOptions):
     mavlink: Text = Field("udpin:0.0.0.0:14550", description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
                           "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)")
     mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
+    mavlink_peer: Text | None = Field(None, description="udpin: the UAV's address HOST:PORT, the only sender taken "
+                                      "(default: the first whose datagram holds the UAV's messages; others counted "
+                                      "in foreign_datagrams)")
+    mavlink_signing_key: FilePath | None = Field(None, description="require the UAV's MAVLink signed (MAVLink 2) "
+                                                 "with the key in this file (32 bytes, or 64 hex digits); skyfix's "
+                                                 "messages to it are signed")
     video: NamedOrNone = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
                                "a file (anything FFmpeg opens); none: no video (required: a run that names neither "
                                "is refused)")
@@ -194,6 +200,9 @@ class RunConfig(UuvOptions):
     zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
                                           "endpoints above are added to it")
     zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
+    zenoh_insecure: Flag = Field(False, description="allow Zenoh without TLS, mutual authentication and access "
+                                 "control beyond this machine (a network of the team's own only: anyone on it "
+                                 "can command skyfix and feed it; deploy/zenoh/README.md)")
     uuv_max_vertical_speed_mps: Annotated[Number, Gt(0)] = Field(
         BLUEROV2_MAX_VERTICAL_SPEED_MPS, description="the UUV's top vertical speed (a BlueROV2); a depth jumping "
         "further is refused")
@@ -296,6 +305,18 @@ class RunConfig(UuvOptions):
         if self.recording and self.mavlink_backend == "mavsdk":
             key = "record" if self.record else "recordings"
             raise Invalid(key, self.recording, "recording needs --mavlink-backend pymavlink")
+        return self
+
+    @model_validator(mode="after")
+    def _uav_link_locks(self):
+        if self.mavlink_peer is not None:
+            host, colon, port = self.mavlink_peer.rpartition(":")
+            if not (self.mavlink.startswith(("udpin:", "udp:")) and self.mavlink_backend == "pymavlink"):
+                raise Invalid("mavlink_peer", self.mavlink_peer, f"for a udpin: link (mavlink is {self.mavlink!r})")
+            if not (host and colon and port.isdigit() and int(port) < 65536):
+                raise Invalid("mavlink_peer", self.mavlink_peer, "expected HOST:PORT")
+        if self.mavlink_signing_key and self.mavlink_backend != "pymavlink":
+            raise Invalid("mavlink_signing_key", self.mavlink_signing_key, "signing needs --mavlink-backend pymavlink")
         return self
 
     @model_validator(mode="after")

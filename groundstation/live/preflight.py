@@ -117,6 +117,8 @@ def _files(cfg: config.RunConfig) -> Iterator[tuple[str, str]]:
     yield "calibration", cfg.calibration
     if cfg.zenoh_config:
         yield "zenoh_config", cfg.zenoh_config
+    if cfg.mavlink_signing_key:
+        yield "mavlink_signing_key", cfg.mavlink_signing_key
     for u in cfg.uuvs:
         if u.gps_input_signing_key:
             yield "gps_input_signing_key", u.gps_input_signing_key
@@ -137,6 +139,24 @@ def start_checks(args: argparse.Namespace, cfg: config.RunConfig) -> None:
     for name, path in _files(cfg):
         if not Path(path).is_file():
             raise ConfigError(*origin(args, name), path, "no such file")
+    _zenoh_trust(args, cfg)
+
+
+def _zenoh_trust(args: argparse.Namespace, cfg: config.RunConfig) -> None:
+    """:class:`ConfigError` when the run's Zenoh lets strangers command it or feed it
+    (:func:`~groundstation.zenoh_session.trust_problem`)."""
+    from groundstation.zenoh_session import make_config, trust_problem
+
+    name = "zenoh_config" if cfg.zenoh_config else "zenoh_connect" if cfg.zenoh_connect else "zenoh_listen"
+    value = cfg.zenoh_config or ", ".join(cfg.zenoh_connect or cfg.zenoh_listen_endpoints)
+    try:
+        conf = make_config(cfg.zenoh_connect, cfg.zenoh_listen_endpoints, multicast=cfg.zenoh_multicast,
+                           config_file=cfg.zenoh_config)
+    except Exception as e:  # noqa: BLE001 - zenoh raises ZError (and ValueError) on a bad file or endpoint
+        raise ConfigError(*origin(args, name), value, f"not a Zenoh configuration: {e}") from None
+    why = trust_problem(conf, insecure=cfg.zenoh_insecure)
+    if why:
+        raise ConfigError(*origin(args, name), value, why)
 
 
 def _private(source: str, key: str, path: str) -> None:
@@ -156,6 +176,10 @@ def _credentials(args, cfg: config.RunConfig) -> list[str]:
     from groundstation.zenoh_session import make_config
 
     checked = []
+    if cfg.mavlink_signing_key:
+        _private(*origin(args, "mavlink_signing_key"), cfg.mavlink_signing_key)
+        read_signing_key(cfg.mavlink_signing_key, "--mavlink-signing-key")
+        checked.append(cfg.mavlink_signing_key)
     for u in cfg.uuvs:
         if u.gps_input_signing_key:
             _private(*origin(args, "gps_input_signing_key"), u.gps_input_signing_key)
@@ -220,13 +244,11 @@ def _ports(cfg: config.RunConfig) -> Iterator[tuple[str, str, int, str, int]]:
 def _zenoh_listeners(cfg: config.RunConfig) -> list[str]:
     """The endpoints the run's Zenoh session listens on: the flags' or the default's, else its configuration file's
     (its own, or those of its mode when the file leaves them to Zenoh's defaults)."""
-    from groundstation.zenoh_session import make_config
+    from groundstation.zenoh_session import endpoints, make_config
 
     if not cfg.zenoh_config:
         return list(cfg.zenoh_listen_endpoints)
-    conf = make_config(cfg.zenoh_connect, cfg.zenoh_listen, config_file=cfg.zenoh_config)
-    listen = json.loads(conf.get_json("listen/endpoints") or "[]")
-    return listen if isinstance(listen, list) else listen.get(json.loads(conf.get_json("mode")), [])
+    return endpoints(make_config(cfg.zenoh_connect, cfg.zenoh_listen, config_file=cfg.zenoh_config), "listen")
 
 
 def _recording_folder(args, cfg: config.RunConfig) -> str:

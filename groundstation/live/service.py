@@ -120,7 +120,9 @@ async def serve(cfg: config.RunConfig) -> dict:
             uav = UavMavsdk(cfg.mavlink, tel)
         else:
             uav = UavMavlink(cfg.mavlink, tel, needed_rates(cal.mount.attitude_source),
-                             request_rates=not cfg.no_request_rates)
+                             request_rates=not cfg.no_request_rates, peer=cfg.mavlink_peer,
+                             signing_key=cfg.mavlink_signing_key and read_signing_key(cfg.mavlink_signing_key,
+                                                                                       "--mavlink-signing-key"))
         uav.listeners.append(lambda *a: [c.pipeline.telemetry_arrived(*a) for c in chains])
         workers.add(uav, INPUTS, "uav", is_input=True)
         workers.section("height", lambda now: height_status(cal.water, cal.sigmas, tel))

@@ -18,8 +18,10 @@ link's thread, ``t_recv_unix`` its arrival (a UDP datagram's as the kernel recei
 ``t_received``); a message id no dialect knows (pymavlink cannot check its CRC) is BAD_DATA. A UDP datagram is parsed on its own: bytes of a frame it leaves unfinished
 are dropped (one BAD_DATA) instead of being joined to the next datagram's — else one
 truncated or random datagram swallows the valid frame after it. On ``udpin:`` the link
-answers the last sender whose datagram held a message ``is_peer`` accepts (the vehicle,
-not whoever else sends there).
+locks to the first sender whose datagram held a message ``is_peer`` accepts (the vehicle,
+not whoever else sends there), or to ``peer`` (``HOST:PORT``) when given: datagrams from
+elsewhere are dropped unread, counted in ``foreign_datagrams`` (``peer`` in the status: the
+address locked to; see :mod:`~groundstation.mavlink.transport`).
 
 Writing never blocks the caller: ``mav.<message>_send(...)`` (pymavlink's API) queues the
 packed frame (at most :data:`OUTBOX`; beyond, the oldest is dropped and counted), and
@@ -31,7 +33,8 @@ timeout) counts in ``write_errors`` and takes the link down; the frame is lost.
 
 Signing (``signing_key``, 32 bytes): every message goes out MAVLink 2 signed (link id 1, the
 timestamp pymavlink's: 10 µs units since 2015, rising by one per message); incoming messages
-are read signed or not (only the link's own outgoing side is secured). A receiver refuses a
+are read signed or not, unless ``require_signed``: then an unsigned message or one signed with another key is
+BAD_DATA ("Invalid signature"), never a message. A receiver refuses a
 signed message whose timestamp is not after the last it took (replay protection), so what
 :meth:`~MavlinkLink.send` and :meth:`~MavlinkLink.queue` hand over is numbered and signed by the
 link's thread as it writes it, in the order written (the heartbeat and the last message too); the
@@ -72,12 +75,12 @@ _NOT_YET = (ConnectionError, TimeoutError)
 _NOT_YET_ERRNO = (errno.EHOSTUNREACH, errno.ENETUNREACH, errno.EHOSTDOWN)
 
 
-def read_signing_key(path: str) -> bytes:
+def read_signing_key(path: str, option: str = "--gps-input-signing-key") -> bytes:
     """A MAVLink 2 signing key from a file: 32 raw bytes, or 64 hex digits; :class:`ConfigError` otherwise."""
     try:
         data = Path(path).read_bytes()
     except OSError as e:
-        raise ConfigError(path, "--gps-input-signing-key", path, e.strerror or str(e)) from None
+        raise ConfigError(path, option, path, e.strerror or str(e)) from None
     if len(data) == KEY_BYTES:
         return data
     text = data.strip()
@@ -86,7 +89,7 @@ def read_signing_key(path: str) -> bytes:
             return bytes.fromhex(text.decode("ascii"))
         except (UnicodeDecodeError, ValueError):
             pass
-    raise ConfigError(path, "--gps-input-signing-key", f"{len(data)} bytes",
+    raise ConfigError(path, option, f"{len(data)} bytes",
                       f"expected {KEY_BYTES} raw bytes or {2 * KEY_BYTES} hex digits")
 
 
@@ -117,9 +120,10 @@ class MavlinkLink:
     """
 
     def __init__(self, url: str, system: int, component: int, *, name: str, heartbeat: tuple[int, int] | None = None,
-                 signing_key: bytes | None = None, on_message: Callable | None = None,
-                 is_peer: Callable | None = None):
+                 signing_key: bytes | None = None, require_signed: bool = False, on_message: Callable | None = None,
+                 is_peer: Callable | None = None, peer: str | None = None):
         self.url = url
+        self.peer = peer
         self.name = name
         self._mavlink = mavlink = mavutil().mavlink
         self._lock = threading.RLock()
@@ -138,6 +142,8 @@ class MavlinkLink:
             s = self.mav.signing
             s.secret_key, s.sign_outgoing, s.link_id = signing_key, True, SIGNING_LINK_ID
             s.timestamp = int((max(time.time(), _SIGNING_EPOCH) - _SIGNING_EPOCH) * 100_000)
+            if require_signed:
+                self.parser.signing.secret_key = signing_key  # and no allow_unsigned_callback: unsigned is refused
         self.signed = signing_key is not None
         self.heartbeat = heartbeat
         self.on_message = on_message or (lambda msg, t: None)
@@ -147,7 +153,8 @@ class MavlinkLink:
         self.error: str | None = None
         self.state_since = time.time()
         self.counts = dict.fromkeys(("connects", "disconnects", "written", "heartbeats", "dropped_while_down",
-                                     "superseded", "outbox_dropped", "write_errors", "reads", "unfinished_frames"), 0)
+                                     "superseded", "outbox_dropped", "write_errors", "reads", "unfinished_frames",
+                                     "foreign_datagrams"), 0)
         self.final_written = False
         self._outbox: deque[bytes] = deque()
         self._newest: dict[str, bytes] = {}
@@ -164,7 +171,7 @@ class MavlinkLink:
     def open(self) -> None:
         """Open the link once (a malformed string, a port in use: :class:`LinkError`), then keep it open."""
         try:
-            transport = open_transport(self.url)
+            transport = open_transport(self.url, self.peer)
         except OSError as e:
             if not (isinstance(e, _NOT_YET) or e.errno in _NOT_YET_ERRNO):
                 os.close(self._wake_r)
@@ -240,8 +247,12 @@ class MavlinkLink:
 
     def status(self, now: float) -> dict:
         with self._lock:
+            t = self._transport
+            dest = getattr(t, "dest", None) if getattr(t, "listen", False) else None
             return {"url": self.url, "state": self.state, "state_for_s": round(max(0.0, now - self.state_since), 3),
                     "error": self.error, "signed": self.signed, **self.counts, **self._thread.status(),
+                    "peer": None if dest is None else f"{dest[0]}:{dest[1]}",
+                    "relocks": getattr(t, "relocks", 0),
                     "peer_age_s": None if self.last_heard is None else round(max(0.0, now - self.last_heard), 3)}
 
     def _wake(self) -> None:
@@ -294,7 +305,7 @@ class MavlinkLink:
             while not stop.is_set():
                 if self._transport is None:
                     try:
-                        transport = open_transport(self.url)
+                        transport = open_transport(self.url, self.peer)
                     except OSError as e:
                         self._set_down(e)
                         stop.wait(backoff)
@@ -347,7 +358,9 @@ class MavlinkLink:
         return next_beat
 
     def _read(self, t) -> None:
+        foreign = getattr(t, "foreign", 0)
         data = t.read()
+        self.counts["foreign_datagrams"] += getattr(t, "foreign", 0) - foreign
         if not data:
             return
         now = t.t_received

@@ -9,7 +9,11 @@ strings are pymavlink's:
 - ``tcp:HOST:PORT`` connect to a TCP server (ArduSub SITL's serial ports, a BlueOS "TCP Server" endpoint);
 - ``tcpin:HOST:PORT`` listen, one client at a time (a newer one replaces the older);
 - ``udpout:HOST:PORT`` send to HOST:PORT, read replies on the same socket;
-- ``udpin:HOST:PORT`` (or ``udp:``) listen, send to whoever sent last (nothing before);
+- ``udpin:HOST:PORT`` (or ``udp:``) listen, locked to its peer: the sender the caller names with
+  :meth:`Udp.answer_last_sender` (the autopilot's first message), or the ``peer`` address given to
+  :func:`open_transport` (``--mavlink-peer``); datagrams from any other address are dropped unread and counted
+  (``foreign``). Without a given peer the lock moves to a new sender only once the peer has been silent for
+  :data:`RELOCK_S` (an autopilot's forwarder restarted on a new port), counted in ``relocks``;
 - ``DEVICE`` or ``DEVICE,BAUD`` a serial port (default 115200 baud).
 
 :func:`open_transport` opens one (or raises :class:`OSError`, ``EINVAL`` for a malformed string); a
@@ -34,6 +38,8 @@ import sys
 import time
 
 WRITE_TIMEOUT_S = 1.0
+#: A ``udpin:`` link's peer silent this long (s) may be replaced by another sender the caller accepts
+RELOCK_S = 5.0
 UDP_RCVBUF = 4 << 20  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
 CONNECT_TIMEOUT_S = 1.0
 DEFAULT_BAUD = 115200
@@ -157,12 +163,12 @@ class TcpServer(_Transport):
 
 
 class Udp(_Transport):
-    """``udpout:`` (a fixed destination) or ``udpin:``/``udp:`` (bound; answers the sender the caller names
-    with :meth:`answer_last_sender`: the last one whose datagram held its peer's messages)."""
+    """``udpout:`` (a fixed destination) or ``udpin:``/``udp:`` (bound; locked to the sender the caller names with
+    :meth:`answer_last_sender`, or to ``peer``: see the module doc)."""
 
     datagrams = True
 
-    def __init__(self, url: str, addr: tuple[str, int], listen: bool):
+    def __init__(self, url: str, addr: tuple[str, int], listen: bool, peer: tuple[str, int] | None = None):
         self.url = url
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
@@ -170,11 +176,14 @@ class Udp(_Transport):
         if listen:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self.sock.bind(addr)
-            self.dest = None
+            self.dest = None if peer is None else (socket.gethostbyname(peer[0]), peer[1])
         else:
             self.dest = (socket.gethostbyname(addr[0]), addr[1])
         self.listen = listen
+        self.fixed = listen and peer is not None  # the peer was given: never another
         self.last_from: tuple[str, int] | None = None
+        self.foreign = self.relocks = 0
+        self._peer_heard = time.monotonic()
         self.kernel_times = sys.platform == "linux"  # elsewhere the option's number means something else
         if self.kernel_times:
             self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
@@ -191,6 +200,12 @@ class Udp(_Transport):
             data, ancillary, _, addr = self.sock.recvmsg(_READ_MAX, socket.CMSG_SPACE(_TIMESPEC.size))
         except (BlockingIOError, ConnectionRefusedError):  # ICMP port unreachable of an earlier datagram
             return b""
+        if self.listen and self.dest is not None:
+            if addr == self.dest:
+                self._peer_heard = time.monotonic()
+            elif self.fixed or time.monotonic() - self._peer_heard < RELOCK_S:
+                self.foreign += 1
+                return b""
         stamps = [_TIMESPEC.unpack(d[:_TIMESPEC.size]) for level, kind, d in ancillary
                   if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS]
         self.t_received = stamps[0][0] + stamps[0][1] * 1e-9 if stamps else time.time()
@@ -198,8 +213,10 @@ class Udp(_Transport):
         return data
 
     def answer_last_sender(self) -> None:
-        if self.listen:
-            self.dest = self.last_from
+        """Lock to the sender of the last datagram read (the caller found its peer's messages in it)."""
+        if self.listen and not self.fixed and self.last_from != self.dest:
+            self.relocks += self.dest is not None
+            self.dest, self._peer_heard = self.last_from, time.monotonic()
 
     def write(self, buf: bytes) -> None:
         if self.dest is not None:
@@ -237,9 +254,12 @@ class Serial(_Transport):
         self.port.close()
 
 
-def open_transport(url: str):
-    """An open transport for a pymavlink-style connection string; :class:`OSError` when it cannot be opened."""
+def open_transport(url: str, peer: str | None = None):
+    """An open transport for a pymavlink-style connection string; :class:`OSError` when it cannot be opened.
+    ``peer`` (``HOST:PORT``, ``udpin:`` only) is the only sender it takes."""
     kind, _, rest = url.partition(":")
+    if peer is not None and kind not in ("udpin", "udp"):
+        raise OSError(errno.EINVAL, f"a peer address ({peer}) is for udpin: links only")
     if kind == "tcp":
         return TcpClient(url, _host_port(url, rest))
     if kind == "tcpin":
@@ -247,7 +267,7 @@ def open_transport(url: str):
     if kind == "udpout":
         return Udp(url, _host_port(url, rest), listen=False)
     if kind in ("udpin", "udp"):
-        return Udp(url, _host_port(url, rest), listen=True)
+        return Udp(url, _host_port(url, rest), listen=True, peer=None if peer is None else _host_port(url, peer))
     device, _, baud = url.partition(",")
     if not device.startswith("/") and not device.upper().startswith("COM"):
         raise OSError(errno.EINVAL, "expected tcp:, tcpin:, udpout:, udpin: or a serial device")

@@ -16,7 +16,8 @@ pitch are relative to) and for the telemetry rates skyfix needs
 (:mod:`.rates`, DISTANCE_SENSOR's once a downward one came; ``--no-request-rates``
 leaves them alone). Only the UAV's
 messages are used: the system id of the first autopilot heartbeat or used
-message; others are counted. Malformed frames (pymavlink's BAD_DATA) and refused
+message; others are counted. On ``udpin:`` the link takes datagrams from the UAV's address only (the first to
+send its messages, or ``--mavlink-peer``); with ``--mavlink-signing-key`` only messages signed with that key. Malformed frames (pymavlink's BAD_DATA) and refused
 samples are counted and logged with their reason, never fatal; so are the
 telemetry's notices (reboots, clocks that disagree).
 """
@@ -104,7 +105,7 @@ class UavMavlink:
     """Worker owning the UAV's MAVLink link; ``listeners`` get ``(msg, t_recv_unix)`` for every good message."""
 
     def __init__(self, url: str, tel: Telemetry, needed_hz: dict[str, float], request_rates: bool = True,
-                 listeners: list[Callable] | None = None):
+                 listeners: list[Callable] | None = None, peer: str | None = None, signing_key: bytes | None = None):
         self.url = url
         self.tel = tel
         self.listeners = listeners or []
@@ -117,7 +118,8 @@ class UavMavlink:
         self._throttle = Throttle()
         mav = mavutil().mavlink
         self.link = MavlinkLink(url, SKYFIX_SYSID, GCS_COMPID, name="UAV MAVLink", is_peer=self._from_uav,
-                                heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID))
+                                heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID), peer=peer,
+                                signing_key=signing_key, require_signed=signing_key is not None)
         self._low_warned: set[str] = set()
         self.handoff: Handoff | None = None
 
