@@ -24,6 +24,8 @@ COMMANDS = (
     ("release", "groundstation.live.console", "let go of the target: no fix until a new selection"),
     ("acquire", "groundstation.live.console",
      "await a target again (automatic acquisition near the UUV's own position)"),
+    ("confirm", "groundstation.live.console",
+     "the target tracked now is the UUV: the safety gates take it however far from the last trusted track"),
     ("fuse", "groundstation.fuse.service", "several drones over one UUV: their fixes fused, one GPS_INPUT to the UUV"),
     ("replay", "groundstation.replay", "re-stream a recorded session live (MAVLink, Zenoh depth, video)"),
     ("calibrate", "groundstation.calibration.command",

@@ -10,6 +10,8 @@ only when every test passes; otherwise it names the first that failed:
   (default 2.5 m, EKF3's own alignment limit hdop ≤ 2.5 with skyfix's 1 m per unit of hdop);
 - ``age``: it is older than ``max_age_s`` when offered (``now − t_unix``);
 - ``out_of_order``: its exposure is not after the last fix the gate took;
+- ``clock``: the frame's exposure and its arrival disagree by more than :data:`CLOCK_TOL_S` with what they were
+  (a clock mapped onto the station's stepped: see *Time* below);
 - ``prediction``: its pixel lies outside the window where the telemetry's prediction had
   the tracker look (the frame's ``window``; a tracker that ignores the prediction, such as
   OpenCV's, can report a match anywhere);
@@ -28,11 +30,15 @@ only when every test passes; otherwise it names the first that failed:
   :data:`DIVERGED_S`, or until the tracker reports the target lost (a release, a new
   acquisition), then the gate acquires again;
 - ``reach``: while acquiring, the same test against the last good track: the UUV can have
-  gone the top speed times the time since, and the fixes' shared error can have changed
-  too. The gate does not forget where the UUV was: a target found again after a loss whose
-  first fix is out of reach is another object (``diverged``: none of that lock's fixes goes
-  out, even once the UUV could have got there); a later fix out of reach starts the
-  confirmation over;
+  gone the top speed times the time since — at most ``max_reach_m`` (default
+  :data:`MAX_REACH_M`), however long since: waiting does not make a far target the UUV — and
+  the fixes' shared error can have changed too. The gate does not forget where the UUV was:
+  a new lock — a target found again after a loss, an operator's selection, the lock after
+  two trackers were on one vehicle (``same_vehicle``), the first after a restart with the
+  track kept on disk (:meth:`FixGate.memory`, :meth:`FixGate.remember`) — whose first fix is
+  out of reach is another object (``diverged``: none of that lock's fixes goes out, however
+  long, until the tracker reports the target lost or the operator confirms it,
+  :meth:`FixGate.confirm`); a later fix out of reach starts the confirmation over;
 - ``unconfirmed``: while acquiring (the first target, after the tracker lost it or it was
   released, after ``diverged``): a fix of a candidate chain not yet :data:`CONFIRM_S` (and
   :data:`CONFIRM_FIXES` fixes) long. Each chain fix must agree with the chain's own track
@@ -59,8 +65,18 @@ the gate is ``diverged`` half a second later. A look-alike found after a loss wh
 could be by then, and consistent for a second, is taken. Drifts and look-alikes are also
 the tracker's to catch (its match against the UUV's first appearance).
 
-Pure computation; times are station-clock UNIX seconds; the local frame is metres north
-and east of the first fix the gate saw.
+Time: offered with the arrival of its frame (:class:`Arrival`: its station-clock and monotonic
+times, and the monotonic time now), a fix's time on the gate's own base is its monotonic arrival
+less the exposure-to-arrival gap measured on the station clock; its age is the monotonic time
+since that. A step of the station clock (the station-clock minus monotonic offset changing by
+more than :data:`CLOCK_STEP_S` from one frame to the next) is counted and changes nothing: the
+time between fixes, which the bounds grow with, is monotonic, so a step never widens a gate. A
+frame whose exposure-to-arrival gap jumps by more than :data:`CLOCK_TOL_S` (its exposure comes
+from a clock mapping that did not step with the station's) is refused (``clock``), and starts a
+new lock. Without an arrival (offline, the fuser) the exposure times are the base.
+
+Pure computation; times are station-clock UNIX seconds (the gate's base: the station clock as it was
+at the first fix); the local frame is metres north and east of the first fix the gate saw.
 """
 
 from __future__ import annotations
@@ -68,6 +84,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -102,8 +119,26 @@ MAX_ACCEL_MPS2 = {"bluerov2": 3.0}
 #: near the surface by their orbital acceleration (ω·u: 0.3–0.5 m/s² for 0.2 m waves of 3–4 s over 2 m of water): set
 #: ``--uuv-water-accel-mps2`` to it there, or a UUV rocked by the waves is refused (no fix, never a wrong one).
 WATER_ACCEL_MPS2 = 0.05
-REASONS = ("h_acc", "age", "out_of_order", "prediction", "innovation", "diverged", "reach", "unconfirmed")
+#: However long since the last trusted fix, a new lock's first fix further than this (m) from the track (and its
+#: shared error's change) is not the UUV: a BlueROV2's second at top speed. ``--uuv-max-reach-m``.
+MAX_REACH_M = 1.5
+#: A change of the station clock against the monotonic clock larger than this (s) from one frame to the next is a step
+#: (NTP slews at most 0.5 ms/s).
+CLOCK_STEP_S = 0.05
+#: A frame whose exposure-to-arrival gap (station clock) differs from the previous frame's by more than this (s) is
+#: refused (``clock``): network and reader delays vary by less.
+CLOCK_TOL_S = 1.0
+REASONS = ("h_acc", "age", "out_of_order", "clock", "prediction", "innovation", "diverged", "reach", "unconfirmed")
 STATES = ("acquiring", "tracking", "diverged")
+
+
+class Arrival(NamedTuple):
+    """When a fix's frame arrived, on the station clock (``t_recv_unix``, UNIX s) and on the monotonic clock
+    (``t_recv_mono``, s), and the monotonic time the fix is offered at (``now_mono``)."""
+
+    t_recv_unix: float
+    t_recv_mono: float
+    now_mono: float
 
 
 @dataclass(frozen=True)
@@ -160,8 +195,9 @@ class FixGate:
                  max_accel_mps2: float = MAX_ACCEL_MPS2["bluerov2"], max_h_acc_m: float = 2.5,
                  max_age_s: float = 0.5, confirm_s: float = CONFIRM_S, confirm_fixes: int = CONFIRM_FIXES,
                  thrusters: Thrusters | None = None, water_accel_mps2: float = WATER_ACCEL_MPS2,
-                 judge_track: bool = True):
+                 judge_track: bool = True, max_reach_m: float = MAX_REACH_M):
         self.judge_track = judge_track
+        self.max_reach_m = max_reach_m
         self.max_speed_mps = max_speed_mps
         self.max_accel_mps2 = max_accel_mps2
         self.max_h_acc_m = max_h_acc_m
@@ -184,19 +220,28 @@ class FixGate:
         self._diverged_until = -math.inf
         self._last_t = -math.inf
         self._new_lock = True  # the next ok fix is the first of the tracker's lock (after a loss)
+        self._foreign = False  # this lock began where the UUV cannot be: none of its fixes goes out
+        self._operator_lock = False  # the operator confirmed this lock: no reach test until it ends
+        self._shift = 0.0  # the station clock's steps since the first arrival (s): a fix's time is t_unix − this
+        self._base: float | None = None  # station minus monotonic clock (s) at the first arrival
+        self._offset: float | None = None  # ... and at the last
+        self._gap: float | None = None  # the last frame's exposure-to-arrival gap on the station clock (s)
+        self.clock_steps = 0
+        self.last_clock_step_s: float | None = None
         self.confirmed_t: tuple[float, ...] = ()  # the exposures of the chain the last confirmation made the track
         self.accepted = 0
         self.rejected: Counter[str] = Counter()
         self.last_refusal: str | None = None
 
     # -- the interface -------------------------------------------------------------------------
-    def check(self, fix: Fix, now: float, window=None) -> str | None:
+    def check(self, fix: Fix, now: float, window=None, arrival: Arrival | None = None) -> str | None:
         """None if ``fix`` (status ok) may go out as valid, else the reason; counts either way.
 
-        ``window``: (x, y, w, h) pixels where the telemetry's prediction had the tracker look
-        for this frame, or None.
+        ``now``: the station clock (UNIX s) when offered; ``window``: (x, y, w, h) pixels where the telemetry's
+        prediction had the tracker look for this frame, or None; ``arrival``: when its frame arrived (the gate's
+        time base, see the module doc), or None.
         """
-        reason = self._reason(fix, now, window)
+        reason = self._reason(fix, now, window, arrival)
         if reason is None:
             self.accepted += 1
         else:
@@ -204,26 +249,71 @@ class FixGate:
         return reason
 
     def target_lost(self) -> None:
-        """The tracker lost the target (or it was released): the next fixes are a re-acquisition, a new lock."""
+        """The tracker lost the target (or it was released, or the operator selected one, or two trackers were on one
+        vehicle): the next fixes are a re-acquisition, a new lock, judged against the last trusted track."""
         self._enter("acquiring", self._last_t if math.isfinite(self._last_t) else None)
         self._new_lock = True
+        self._foreign = self._operator_lock = False
+
+    def confirm(self) -> dict:
+        """The operator says the target tracked now is the UUV: this lock's fixes are confirmed as a first target's
+        are (a second of consistent fixes) without the reach test, and then replace the track. Ends with the lock
+        (a loss, a release, a selection). What it did, JSON-ready."""
+        if self.state == "tracking":
+            return {"confirmed": False, "why": "the gates track the target already"}
+        self._operator_lock, self._foreign = True, False
+        if self.state == "diverged":
+            self._enter("acquiring", self._last_t if math.isfinite(self._last_t) else None)
+        self._new_lock = False
+        self.last_refusal = "unconfirmed: the operator confirmed the target; its fixes are being confirmed"
+        return {"confirmed": True, "why": f"the target's fixes are valid after {self.confirm_s:g} s of consistent "
+                "fixes, whatever the last trusted track"}
+
+    def memory(self, now: float) -> dict | None:
+        """The last trusted track, JSON-ready, for :meth:`remember` after a restart (None before the first): its
+        position (lat, lon), velocity, covariances (the track's own ``P``, the newest fix's ``C`` and its shared
+        part ``common``), time ``t`` (the gate's base, UNIX s) and age at ``now`` (station clock, UNIX s)."""
+        tr = self.track
+        if tr is None:
+            return None
+        lat, lon, _ = ned_to_geodetic(tr.x[0], tr.x[1], 0.0, *self._ref, 0.0)
+        return {"t": float(tr.t), "lat": float(lat), "lon": float(lon), "vn_mps": float(tr.x[2]),
+                "ve_mps": float(tr.x[3]), "P": tr.P.tolist(), "C": tr.C.tolist(), "common": tr.common.tolist(),
+                "age_s": max(0.0, float(now - self._shift - tr.t))}
+
+    def remember(self, memory: dict, t: float) -> None:
+        """Start from a track kept by :meth:`memory` (a restart): ``t`` is its time on this gate's base (the station
+        clock now less its age). The gate acquires: the first lock must be within reach of it."""
+        self._ref = (float(memory["lat"]), float(memory["lon"]))
+        C = np.array(memory["C"], dtype=float)
+        track = UuvTrack(self.max_speed_mps, self.max_accel_mps2, t, np.zeros(2), C, 1.0, self.max_reach_m)
+        track.x = np.array([0.0, 0.0, float(memory["vn_mps"]), float(memory["ve_mps"])])
+        track.P = np.array(memory["P"], dtype=float)
+        track.common = np.array(memory["common"], dtype=float)
+        self.track = track
+        self.target_lost()
 
     # -- the tests -----------------------------------------------------------------------------
-    def _reason(self, fix: Fix, now: float, window) -> str | None:
+    def _reason(self, fix: Fix, now: float, window, arrival: Arrival | None) -> str | None:
+        t, age, stepped = self._time(fix, now, arrival)
         self._now = now
         if not (math.isfinite(fix.h_acc_m) and fix.h_acc_m <= self.max_h_acc_m):
-            return self._refuse(fix.t_unix, "h_acc", f"h_acc {fix.h_acc_m:.2f} m above {self.max_h_acc_m:g} m")
-        if not now - fix.t_unix <= self.max_age_s:
-            return self._refuse(fix.t_unix, "age", f"{now - fix.t_unix:.2f} s old when offered")
-        if fix.t_unix <= self._last_t:
+            return self._refuse(t, "h_acc", f"h_acc {fix.h_acc_m:.2f} m above {self.max_h_acc_m:g} m")
+        if stepped:
+            self.target_lost()
+            self.last_refusal = f"clock: {stepped}"
+            return "clock"
+        if not age <= self.max_age_s:
+            return self._refuse(t, "age", f"{age:.2f} s old when offered")
+        if t <= self._last_t:
             return "out_of_order"
         if not self.judge_track:
-            self._last_t = fix.t_unix
+            self._last_t = t
             return None
         if not in_window(fix, window):
-            return self._refuse(fix.t_unix, "prediction", f"pixel ({fix.u:.0f}, {fix.v:.0f}) outside the window "
+            return self._refuse(t, "prediction", f"pixel ({fix.u:.0f}, {fix.v:.0f}) outside the window "
                                 "the telemetry predicted", leaves_track=True)
-        seen = self._local(fix)
+        seen = self._local(fix, t)
         if self.state == "diverged":
             if seen.t < self._diverged_until:
                 return "diverged"
@@ -231,6 +321,37 @@ class FixGate:
         if self.state == "tracking":
             return self._track_step(seen)
         return self._chain_step(seen)
+
+    def _time(self, fix: Fix, now: float, arrival: Arrival | None) -> tuple[float, float, str | None]:
+        """The fix's time on the gate's base, its age when offered (s), and what stepped (None: nothing).
+
+        With its frame's ``arrival``: the exposure less the station clock's change against the monotonic clock
+        since the first arrival (slews and steps: the exposure is stamped on the station clock), or, when the
+        exposure-to-arrival gap jumped (the exposure's clock did not step with the station's), as the previous one
+        moved on with the monotonic arrivals; the age is monotonic."""
+        if arrival is None:
+            return fix.t_unix, now - fix.t_unix, None
+        offset = arrival.t_recv_unix - arrival.t_recv_mono
+        gap = arrival.t_recv_unix - fix.t_unix
+        stepped = None
+        if self._base is None:
+            self._base = self._offset = offset
+        else:
+            d_offset, d_gap = offset - self._offset, gap - self._gap
+            if abs(d_gap) > CLOCK_TOL_S:  # the exposure did not move with the arrival: its clock kept its course
+                self._shift += d_offset - d_gap
+                stepped = (f"the frame's exposure moved {d_offset - d_gap:+.2f} s against its arrival's "
+                           f"{d_offset:+.2f} s on the station clock (the gates keep to the monotonic clock)")
+            else:
+                self._shift += d_offset
+            if abs(d_offset) > CLOCK_STEP_S:
+                self.clock_steps += 1
+                self.last_clock_step_s = d_offset
+                stepped = (f"the station clock stepped {d_offset:+.2f} s (the gates keep to the monotonic clock); "
+                           "the target is confirmed again")
+        self._offset, self._gap = offset, gap
+        t = fix.t_unix - self._shift
+        return t, arrival.now_mono + self._base - t, stepped
 
     def _refuse(self, t: float, reason: str, why: str, leaves_track: bool = False) -> str:
         """A refusal that breaks a chain; ``leaves_track``: the fix is not where the track is — tracking, once such
@@ -270,10 +391,11 @@ class FixGate:
         why = self._out_of_reach(f, share)
         first_of_lock, self._new_lock = self._new_lock, False
         if why and first_of_lock:  # the tracker locked onto something where the UUV cannot be: not the UUV
-            self._diverged_until = f.t + DIVERGED_S
+            self._diverged_until = math.inf
+            self._foreign = True
             self._enter("diverged", f.t)
-            self.last_refusal = (f"diverged: the target found again is not the UUV: {why}; refused for "
-                                 f"{DIVERGED_S:g} s or until the target is lost or released")
+            self.last_refusal = (f"diverged: the target found is not the UUV: {why}; refused until the target is "
+                                 "lost or released, or the operator confirms it")
             return "diverged"
         if why:
             self.last_refusal = f"reach: {why}"
@@ -319,8 +441,9 @@ class FixGate:
         return track, None
 
     def _out_of_reach(self, f: _Seen, share: float) -> str | None:
-        """Why the UUV cannot be at ``f`` given the last good track (None: it can, or there is none)."""
-        if self.track is None:
+        """Why the UUV cannot be at ``f`` given the last good track (None: it can, or there is none, or the operator
+        confirmed this lock)."""
+        if self.track is None or self._operator_lock:
             return None
         d, radius, margin = self.track.distance(f.t, f.z, f.C, share, self._accel(self.track))
         if d <= GATE_SIGMAS:
@@ -334,7 +457,7 @@ class FixGate:
         push now is widened by :data:`~localizer.thrusters.STALE_S` of the vehicle's: the push can have begun that
         long before its first output arrived."""
         a = self.max_accel_mps2
-        idle = self.thrusters is not None and self.thrusters.idle_since(track.t, self._now)
+        idle = self.thrusters is not None and self.thrusters.idle_since(track.t + self._shift, self._now)
         if idle:
             speed = math.hypot(track.x[2], track.x[3]) + 2.0 * math.sqrt(max(track.P[2, 2], track.P[3, 3]))
             a = min(a, idle_accel_mps2(speed, self.water_accel_mps2))
@@ -345,14 +468,15 @@ class FixGate:
         return a
 
     def _new_track(self, f: _Seen, share: float) -> UuvTrack:
-        return UuvTrack(self.max_speed_mps, self.max_accel_mps2, f.t, f.z, f.C, share)
+        return UuvTrack(self.max_speed_mps, self.max_accel_mps2, f.t, f.z, f.C, share, self.max_reach_m)
 
-    def _local(self, fix: Fix) -> _Seen:
+    def _local(self, fix: Fix, t: float) -> _Seen:
+        """The fix in the local frame at ``t`` (the gate's base)."""
         if self._ref is None:
             self._ref = (fix.lat, fix.lon)
         n, e, _ = geodetic_to_ned(fix.lat, fix.lon, 0.0, *self._ref, 0.0)
         C = fix_covariance_m2(fix.sigma_n_m, fix.sigma_e_m, fix.cov_ne_m2, fix.h_acc_m)
-        return _Seen(fix.t_unix, np.array([float(n), float(e)]), C)
+        return _Seen(t, np.array([float(n), float(e)]), C)
 
     def _enter(self, state: str, t: float | None) -> None:
         self._chain.clear()
@@ -375,7 +499,9 @@ class FixGate:
                "diverged_until_t": num(self._diverged_until) if self.state == "diverged" else None,
                "chain": None, "track": None, "reach_m": None,
                "thrusters": self.thrusters.state(now) if self.thrusters is not None else None,
-               "accel_bound_mps2": num(self.accel_bound_mps2)}
+               "accel_bound_mps2": num(self.accel_bound_mps2), "max_reach_m": num(self.max_reach_m),
+               "operator_confirmed": self._operator_lock, "clock_steps": self.clock_steps,
+               "last_clock_step_s": num(self.last_clock_step_s)}
         if self._chain:
             out["chain"] = {"fixes": len(self._chain), "span_s": num(self._chain[-1].t - self._chain[0].t),
                             "needed_s": self.confirm_s}
@@ -384,6 +510,7 @@ class FixGate:
             return out
         lat, lon, _ = ned_to_geodetic(tr.x[0], tr.x[1], 0.0, *self._ref, 0.0)
         A = tr.absolute_m2()
+        now = now - self._shift  # on the gate's base
         out["track"] = {"t": num(tr.t), "age_s": num(now - tr.t), "lat": num(lat, 8), "lon": num(lon, 8),
                         "vn_mps": num(tr.x[2]), "ve_mps": num(tr.x[3]),
                         "sigma_n_m": num(math.sqrt(A[0, 0])), "sigma_e_m": num(math.sqrt(A[1, 1])),

@@ -1,4 +1,4 @@
-"""``skyfix status | select | release | acquire``: the operator's console in a shell, over Zenoh.
+"""``skyfix status | select | release | acquire | confirm``: the operator's console in a shell, over Zenoh.
 
 Each command queries the running service's queryable ``<prefix>/<command>``
 (:mod:`groundstation.live.control`) and prints its JSON answer; ``skyfix status`` prints
@@ -14,6 +14,7 @@ machine listens by default.
     skyfix select --box 320,180,40,36 --frame 1234
     skyfix select --point 331,190
     skyfix release
+    skyfix confirm          # the target tracked now is the UUV (the safety gates: see groundstation.live.control)
 """
 
 from __future__ import annotations
@@ -146,7 +147,7 @@ def _status(session, key: str, args) -> int:
 
 
 def register(subparsers, name: str, help: str | None = None) -> None:
-    """Adds the subcommand ``name`` (status, select, release or acquire) with its one-line ``help`` (both from
+    """Adds the subcommand ``name`` (status, select, release, acquire or confirm) with its one-line ``help`` (both from
     :data:`groundstation.cli.COMMANDS`)."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT",
@@ -168,7 +169,7 @@ def register(subparsers, name: str, help: str | None = None) -> None:
                           help="box around the UUV, pixels of the distorted frame")
         what.add_argument("--point", type=lambda s: _pair(s, 2, "U,V"), metavar="U,V", help="a click on the UUV")
         p.add_argument("--frame", type=int, help="the frame the box or click belongs to (default: the newest)")
-    elif name in ("release", "acquire"):
+    elif name in ("release", "acquire", "confirm"):
         subparsers.add_parser(name, parents=[common], help=help)
     else:
         raise ValueError(f"not a console command: {name!r}")

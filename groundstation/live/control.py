@@ -9,6 +9,7 @@ default ``skyfix/cmd``) taking a JSON payload and answering JSON (encoding
                  "target": {...}}
     release  (no payload)  -> {"latest_frame": 1240, "target": {...}}
     acquire  (no payload)  -> {"latest_frame": 1240, "target": {...}}   # await a target again (from the prior)
+    confirm  (no payload)  -> {"confirmed": true, "why": "...", "target": {...}}   # the target tracked now is the UUV
     status   (no payload)  -> the service's status now, as published on the status key
 
 ``frame`` is the running frame number of the fixes (``"frame"`` in the fix JSON); it
@@ -26,8 +27,13 @@ Pixels follow OpenCV (distorted image, u right, v down, top-left pixel centre (0
 ``prior``), ``since_t``, the last frame's ``status``, ``u``, ``v``, ``box``,
 ``confidence``. A command that cannot be done (bad payload, frame no longer held, a
 click on nothing) gets a Zenoh error reply ``{"error": "<one line>"}`` and changes nothing.
-select and release act only on queries for their exact key (a ``skyfix/**`` query
-does not run them).
+``confirm``: the operator's word that the target tracked now is the UUV, for the safety gates
+(:meth:`localizer.fix_gate.FixGate.confirm`): after a restart, a selection or a loss, a target
+out of reach of the UUV's last trusted track is never valid without it; with it, its fixes are
+valid after a second of consistent fixes (``confirmed`` false, and why, while the gates track the
+target already; refused without GPS_INPUT). It holds until the target is lost, released or
+selected again. select, release, acquire and confirm act only on queries for their exact key (a
+``skyfix/**`` query does not run them).
 
 Late joiners: queryables on the fix key and the status key answer the latest fix
 and status published there.
@@ -53,7 +59,9 @@ from localizer.tracking.session import SelectionError
 
 log = logging.getLogger("skyfix.control")
 
-COMMANDS = ("select", "release", "acquire", "status")
+COMMANDS = ("select", "release", "acquire", "confirm", "status")
+#: The commands that change what the service does: run only for a query on their exact key.
+ACTIONS = ("select", "release", "acquire", "confirm")
 
 
 class ControlError(ValueError):
@@ -103,11 +111,13 @@ def parse_select(payload: bytes) -> dict:
 
 
 class Control:
-    """The commands in-process (for the Zenoh queryables and a web page); ``status(now)`` is the service's."""
+    """The commands in-process (for the Zenoh queryables and a web page); ``status(now)`` is the service's;
+    ``confirm()`` the safety gates' (:meth:`localizer.fix_gate.FixGate.confirm`; None: no GPS_INPUT)."""
 
-    def __init__(self, pipeline: Pipeline, status: Callable[[float], dict]):
+    def __init__(self, pipeline: Pipeline, status: Callable[[float], dict], confirm: Callable[[], dict] | None = None):
         self.pipeline = pipeline
         self._status = status
+        self._confirm = confirm
 
     async def select(self, frame: int | None = None, box=None, point=None) -> dict:
         """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of frame ``frame`` (default newest)."""
@@ -121,6 +131,14 @@ class Control:
 
     async def acquire(self) -> dict:
         return jsonable(await self.pipeline.acquire())
+
+    def confirm(self) -> dict:
+        """The target tracked now is the UUV: the safety gates take it without the reach test."""
+        if self._confirm is None:
+            raise ControlError("confirm: this run sends no GPS_INPUT: there are no safety gates to confirm to")
+        done = self._confirm()
+        log.info("the operator confirmed the target: %s", done["why"])
+        return jsonable({**done, "target": self.pipeline.target})
 
     def status(self) -> dict:
         now = time.time()
@@ -136,6 +154,8 @@ class Control:
             return await self.release()
         if command == "acquire":
             return await self.acquire()
+        if command == "confirm":
+            return self.confirm()
         if command == "status":
             return self.status()
         raise ControlError(f"unknown command {command!r} (known: {', '.join(COMMANDS)})")
@@ -183,7 +203,7 @@ class ZenohControl:
 
     def _command(self, name: str, query: zenoh.Query) -> None:
         key = f"{self.prefix}/{name}"
-        if name in ("select", "release", "acquire") and str(query.key_expr) != key:
+        if name in ACTIONS and str(query.key_expr) != key:
             query.drop()  # a wildcard query (skyfix/**) does not run commands
             return
         payload = query.payload.to_bytes() if query.payload is not None else b""

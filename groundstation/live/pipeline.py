@@ -73,13 +73,16 @@ MAX_HELD = 300
 class FrameInfo:
     """One processed frame beside its fix: when it arrived and when its fix was ready (UNIX seconds), the
     tracker's box (x, y, w, h) around the UUV in it, when it has one, and the window (x, y, w, h, pixels) the
-    telemetry's prediction had it searched in, when there was one."""
+    telemetry's prediction had it searched in, when there was one; ``t_recv_mono`` its arrival on the monotonic
+    clock (None: not known); ``lock`` the operator's commands before it was tracked (a new number: a new lock)."""
 
     index: int
     t_recv: float
     t_fix: float
     box: tuple[int, int, int, int] | None = None
     window: tuple[float, float, float, float] | None = None
+    t_recv_mono: float | None = None
+    lock: int = 0
 
 
 @dataclass
@@ -91,6 +94,7 @@ class Tracked:
     result: TrackResult
     early: bool  # the pose was computed more than EXTRAPOLATE_S past the newest attitude sample
     window: tuple[float, float, float, float] | None = None  # where the prediction had the UUV searched
+    lock: int = 0  # the operator's commands before it was tracked
 
 
 class Pipeline:
@@ -133,6 +137,7 @@ class Pipeline:
         self._telemetry = asyncio.Event()
         self._held: deque[Tracked] = deque()  # recent tracked frames, for selections
         self._started = False  # the first frame was taken, or a command came first: init_bbox no longer applies
+        self.commands = 0  # the operator's select, release and acquire commands done: a frame's FrameInfo.lock
         self._angle_series = [tel.attitude] + (
             [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
             else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
@@ -150,8 +155,11 @@ class Pipeline:
     def submit(self, frame: LiveFrame) -> None:
         """Queue a frame (on the event loop); drops the oldest waiting frame when the queue is full.
 
-        The very first frame is never dropped when ``init_bbox`` belongs to it.
+        The very first frame is never dropped when ``init_bbox`` belongs to it. Its arrival on the monotonic clock
+        is taken now when the reader did not give it.
         """
+        if frame.t_recv_mono is None:
+            frame.t_recv_mono = time.monotonic() - (time.time() - frame.t_recv)
         if len(self._queue) >= self.queue_len:
             first_waiting = self.cal.init_bbox is not None and not self._started and self._queue[0].index == 0
             del self._queue[1 if first_waiting else 0]
@@ -208,6 +216,7 @@ class Pipeline:
 
         result = await asyncio.get_running_loop().run_in_executor(self.tracking, select_and_catch_up)
         self._started = True
+        self.commands += 1
         self.target = self.session.status()
         log.info("target selected on frame %d (%s %s), caught up %d frames: %s", held.frame.index,
                  "point" if point is not None else "box", list(point if point is not None else box), len(later),
@@ -217,6 +226,7 @@ class Pipeline:
 
     async def _release(self) -> dict:
         self._started = True  # the operator's word wins over init_bbox
+        self.commands += 1
         self.session.release()
         for item in self._tracked:  # tracked before the release, not yet located: no fix from them
             item.result = TrackResult("released")
@@ -226,6 +236,7 @@ class Pipeline:
 
     async def _acquire(self) -> dict:
         self._started = True
+        self.commands += 1
         self.session.acquire()
         self.target = self.session.status()
         log.info("awaiting a target")
@@ -269,7 +280,7 @@ class Pipeline:
         early = self._early(frame)
         prior = self.prior(frame.t_unix)
         result = await asyncio.get_running_loop().run_in_executor(self.tracking, self._step, frame, pose, prior)
-        item = Tracked(frame, pose, result, early, search_window(self.session.prediction))
+        item = Tracked(frame, pose, result, early, search_window(self.session.prediction), self.commands)
         self._held.append(item)
         while len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s:
             self._held.popleft()
@@ -313,12 +324,13 @@ class Pipeline:
             if item.result.ok:
                 for listener in self.on_tracked:
                     listener(item.frame.image, item.pose, item.result.u, item.result.v)
-            self._emit(item.frame, self._locate(item), item.result.box, item.window)
+            self._emit(item.frame, self._locate(item), item.result.box, item.window, item.lock)
 
-    def _emit(self, frame: LiveFrame, fix: Fix, box=None, window=None) -> None:
+    def _emit(self, frame: LiveFrame, fix: Fix, box=None, window=None, lock: int = 0) -> None:
         for notice in take_notices(self.tel):  # height sources that disagree
             log.warning("%s", notice)
-        info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None, window)
+        info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None, window,
+                         frame.t_recv_mono, lock)
         self.processed += 1
         self.statuses[fix.status] += 1
         if fix.status != self.last_status:

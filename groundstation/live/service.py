@@ -57,6 +57,7 @@ from groundstation.live.sources.depth_zenoh import DepthZenoh
 from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uav_mavlink import UavMavlink
 from groundstation.live.sources.uuv_position import UuvPosition, parse_hint
+from groundstation.live.track_memory import TrackMemory, remember, track_path
 from groundstation.live.ui.feed import VideoFeed
 from groundstation.live.ui.server import PageUuv, WebUi, settings_of
 from groundstation.live.ui.topview import TopView
@@ -283,7 +284,11 @@ class UuvChain:
             max_age_s = cfg.fix_max_age_ms / 1000.0
             gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_accel_mps2=cfg.uuv_max_accel_mps2,
                            max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s, thrusters=thrusters,
-                           water_accel_mps2=cfg.uuv_water_accel_mps2)
+                           water_accel_mps2=cfg.uuv_water_accel_mps2, max_reach_m=cfg.uuv_max_reach_m)
+            if cfg.state_folder:  # the UUV's last trusted track, kept across restarts
+                path = track_path(cfg.state_folder, u.id)
+                keeper = TrackMemory(gate, path, remember(gate, path, cfg.track_max_age_s))
+                own.add(keeper, OUTPUTS, "track_memory", lambda now: keeper.status())
             self.gps = gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
         watchdog = Watchdog(lambda now: shared.inputs(now) | own.inputs(now),
                             tuple(needed_rates(cal.mount.attitude_source)), zenoh_peers,
@@ -302,7 +307,7 @@ class UuvChain:
         if gps:
             own.add(gps, LAST, "gps_input")
             own.section("latency", lambda now: latency_summary(list(gps.latencies_s)[-1000:]))
-        self.control = Control(pipeline, self.status)
+        self.control = Control(pipeline, self.status, gps.gate.confirm if gps else None)
         status_sink = ZenohStatus(session, u.status_key, u.alive_key, self.status)
         self.zenoh_control = ZenohControl(session, self.control, u.control_prefix,
                                           {u.fix_key: lambda: fix_sink.latest, u.status_key: lambda: status_sink.latest})

@@ -44,7 +44,8 @@ class LiveFrame:
     ``t_unix`` its exposure: ``t_slot`` − the configured glass-to-first-packet latency;
     ``t_recv`` when its first packet was read from the network (before decoding);
     ``t_slot`` its stream slot: its PTS on the station clock (least arrival − PTS), ≤ ``t_recv``;
-    ``aligned`` False while the latency is not known yet (``auto`` before its estimate settled).
+    ``aligned`` False while the latency is not known yet (``auto`` before its estimate settled);
+    ``t_recv_mono`` ``t_recv`` on the monotonic clock (s; None: not known yet, the pipeline sets it on arrival).
     """
 
     index: int
@@ -53,6 +54,7 @@ class LiveFrame:
     image: np.ndarray
     t_slot: float | None = None
     aligned: bool = True
+    t_recv_mono: float | None = None
 
 
 def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:

@@ -38,7 +38,9 @@ age, order, the frame's prediction window, and a track of the UUV — a fix off 
 out of the UUV's reach after a loss, or of a target not yet confirmed over a second is
 refused), counted by reason in the status; a refused fix leaves the last accepted one in
 place until it ages out. The fix itself goes out, never the track's estimate (the UUV's
-EKF does the filtering). A loss of the track makes the next fixes a re-acquisition.
+EKF does the filtering). A loss of the track, and an operator's command (a selection), make
+the next fixes a re-acquisition, a new lock judged against the last trusted track. The gates
+keep to the monotonic clock (each frame's arrival on it and on the station clock).
 
 Stopping (:meth:`GpsInputSink.stop`, also on cancellation): one last no-fix message, so
 the autopilot drops the position at once instead of after its 4 s timeout, then the
@@ -66,7 +68,7 @@ from groundstation.mavlink.ingest import mavutil
 from groundstation.mavlink.link import MavlinkLink
 from groundstation.threads import Supervised, in_thread
 from localizer.fix import Fix
-from localizer.fix_gate import FixGate
+from localizer.fix_gate import Arrival, FixGate
 
 log = logging.getLogger("skyfix.gps_input")
 
@@ -164,6 +166,7 @@ class GpsInputSink:
         self._new = asyncio.Event()
         self._last_ok: Fix | None = None
         self._refusal: str | None = None  # the gates' word for the newest ok fix (None: taken)
+        self._lock = 0  # the operator's commands before the newest frame (FrameInfo.lock)
         self._stopping = False
         self._closed = False
         self._send_lock = threading.Lock()  # the loop (new fixes) and the keep-alive thread both send
@@ -171,8 +174,15 @@ class GpsInputSink:
         self._keep_alive = Supervised("GPS_INPUT keep-alive", self._keep_alive_body)
 
     def on_fix(self, fix: Fix, info) -> None:
+        lock = getattr(info, "lock", 0)
+        if lock != self._lock:  # the operator selected (released, acquired): a new lock
+            self._lock = lock
+            self._last_ok = None
+            self.gate.target_lost()
         if fix.ok:
-            self._refusal = self.gate.check(fix, time.time(), getattr(info, "window", None))
+            t_mono = getattr(info, "t_recv_mono", None)
+            arrival = Arrival(info.t_recv, t_mono, time.monotonic()) if t_mono is not None else None
+            self._refusal = self.gate.check(fix, time.time(), getattr(info, "window", None), arrival)
             if self._refusal is None:
                 self._last_ok = fix
         elif fix.status in LOSS_STATUSES:

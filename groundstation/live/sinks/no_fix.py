@@ -49,6 +49,7 @@ _GATE_WORDS = {
     "h_acc": "accuracy too poor for the autopilot",
     "age": "fix too old when offered",
     "out_of_order": "fix out of order",
+    "clock": "a clock stepped: confirming again",
     "prediction": "fix outside the predicted window",
     "innovation": "fix off the UUV's track",
     "diverged": "fixes left the UUV's track",

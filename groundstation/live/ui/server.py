@@ -6,7 +6,7 @@ WebSocket and static files built in, and is a well-kept aio-libs project. (Starl
 needs uvicorn, which wants to own the process's signals and loop.)
 
 Routes: ``/`` the page and ``/static/*`` its files (package data, nothing from the
-internet); ``/ws`` the page's WebSocket; ``POST /api/select|release|acquire`` the
+internet); ``/ws`` the page's WebSocket; ``POST /api/select|release|acquire|confirm`` the
 operator's commands (JSON as on Zenoh, :mod:`groundstation.live.control`; an error is HTTP
 400 with ``{"error": "<one line>"}``); ``GET /api/status`` the status now.
 
@@ -70,7 +70,7 @@ STATE_PERIOD_S = 1.0
 CHANGE_POLL_S = 0.1  # how often the pusher asks whether what a UUV's GPS_INPUT sends changed (then it pushes at once)
 WS_CLOSE_S = 0.5  # a stop waits this long for open pages to take the close
 RATE_WINDOW_S = 3.0
-COMMANDS = ("select", "release", "acquire")
+COMMANDS = ("select", "release", "acquire", "confirm")
 SECURITY_HEADERS = {
     "Content-Security-Policy": "default-src 'self'; img-src 'self' blob:; connect-src 'self'; frame-ancestors 'none'",
     "X-Frame-Options": "DENY",

@@ -287,6 +287,7 @@ async function command(name, body) {
     const t = answer.target;
     out.textContent = who + (name === "select"
       ? `selected on frame ${answer.frame} (caught up ${answer.caught_up}): ${t.state}`
+      : name === "confirm" ? `confirm: ${answer.why}`
       : `${name}: ${t.state} from frame ${answer.latest_frame + 1}`);
     out.className = "ok";
   } catch (e) {
@@ -296,6 +297,7 @@ async function command(name, body) {
 }
 $("release").onclick = () => command("release");
 $("acquire").onclick = () => command("acquire");
+$("confirm").onclick = () => command("confirm");
 
 // several UUVs: one button per UUV, in its colour, picking the one the commands apply to
 function showPicker() {
