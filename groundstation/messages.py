@@ -242,12 +242,14 @@ class GateStatus(Section):
     max_age_s: float
     state: Literal[tuple(GATE_STATES)] = Field(
         description="acquiring: a new or re-acquired target's fixes are being confirmed (none valid yet); tracking: "
-        "each fix is judged against the track; diverged: the fixes left the track (a jump the UUV cannot make), or "
-        "a target found again where the UUV cannot be: none is valid for 5 s, or until the target is lost or "
-        "released")
+        "each fix is judged against the track; diverged: the fixes left the track (a jump the UUV cannot make): none "
+        "is valid for 5 s, or until the target is lost or released; or a target was found where the UUV cannot be "
+        "(after a loss, a selection, a restart): none of its fixes is valid until it is lost or released, or the "
+        "operator confirms it")
     state_since_t: float | None = Field(description="the fix (exposure, station clock) the state began at")
     accepted: int
     rejected: dict[str, int] = Field(description="fixes not sent as valid, by reason: h_acc, age, out_of_order, "
+                                     "clock (the frame's exposure moved against its arrival: a clock stepped), "
                                      "prediction (outside the window the telemetry predicted), innovation (off the "
                                      "track), diverged, reach (where the UUV cannot be since the last good fix), "
                                      "unconfirmed (a target not confirmed yet)")
@@ -264,6 +266,13 @@ class GateStatus(Section):
         "the depth is not ArduSub's)")
     accel_bound_mps2: NonNegative = Field(description="the acceleration bound of the last fix judged: the UUV's, or "
                                           "while its thrusters were idle what the water and the drag can do")
+    max_reach_m: NonNegative = Field(None, description="however long since the last trusted fix, a new target further "
+                                     "than this from it is not the UUV (--uuv-max-reach-m)")
+    operator_confirmed: bool = Field(False, description="the operator confirmed the target tracked now (skyfix "
+                                     "confirm, the page's button): no reach test until it is lost or released")
+    clock_steps: int = Field(0, description="steps of the station clock against the monotonic clock seen between "
+                             "frames (the gates keep to the monotonic clock)")
+    last_clock_step_s: float | None = Field(None, description="the last such step (s)")
 
 
 class GnssStatus(Section):
@@ -545,6 +554,15 @@ class RecordStatus(Section):
     video_dropped: int | None = Field(None, description="frames left out: the encoder fell behind, or out of order")
 
 
+class TrackMemoryStatus(Section):
+    """The UUV's last trusted track kept on disk for the next start (groundstation/live/track_memory.py)."""
+
+    path: str = Field(description="the file (in --state-dir)")
+    written: int = Field(description="times it was written")
+    read: dict | None = Field(description="what the start read: the track's age_s, lat, lon; null: none (or too old)")
+    failure: str | None = Field(description="why the last write failed; null once one succeeded")
+
+
 class TargetStatus(Section):
     """The tracking session: the target's life."""
 
@@ -641,6 +659,8 @@ class StatusMessage(Message):
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     latency: LatencyStatus | None = Field(None, description="with --gps-input")
     record: RecordStatus | None = Field(None, description="with --record")
+    track_memory: TrackMemoryStatus | None = Field(None, description="with --gps-input and a state folder "
+                                                   "(--state-dir, or --recordings)")
     ui: UiStatus | None = Field(None, description="while the web page is served (not with --no-ui)")
 
 
@@ -656,8 +676,7 @@ class FuseSourceStatus(Section):
     used: int = Field(description="fusions it took part in")
     rejected: int = Field(description="fusions it was left out of: it disagreed beyond the sigmas")
     in_use: bool = Field(description="it took part in the last fusion")
-    refused: dict[str, int] = Field(description="its ok fixes its own gates refused, by reason (as gates.rejected), "
-                                    "and 'future': stamped ahead of the fuser's clock beyond --clock-tolerance-ms")
+    refused: dict[str, int] = Field(description="its ok fixes its own gates refused, by reason (as gates.rejected)")
     gate_state: Literal[tuple(GATE_STATES)] = Field(description="its own gates' state")
     last_status: Status | None = Field(description="the status of its last fix")
     age_s: Age = Field(description="seconds since its last fix arrived")
@@ -686,11 +705,6 @@ class FuseInputStatus(Section):
     handoff: HandoffStatus | None = None
 
 
-    h_acc_used_m: NonNegative = Field(None, description="its claim as the last fusion weighed it, DRMS, metres: with "
-                                      "what its fixes showed beyond it (floor_m)")
-    floor_m: NonNegative = Field(None, description="DRMS of what its fixes show beyond its claim, added at the last "
-                                 "fusion: their frame-to-frame scatter beyond the whole claim, their disagreement with "
-                                 "the other drones over the last 10 s beyond both claims")
 class FuseStatusMessage(Message):
     """``skyfix fuse``'s health, once a second."""
 
@@ -698,11 +712,6 @@ class FuseStatusMessage(Message):
     t: float = Field(description="when the status was taken, the fuser's clock, UNIX seconds")
     uuv: str = Field(description="the UUV's id")
     input: FuseInputStatus
-    off_track: int = Field(0, description="fused positions beyond where the UUV can be by the fused fixes' own "
-                           "track: sent as off_track, no position")
-    configured: list[str] = Field([], description="the fix keys whose fixes may be fused (--source)")
-    unconfigured: dict[str, int] = Field({}, description="fixes from any other key, by key (32 keys, the rest as "
-                                         "'(others)'): counted, never fused")
     fusion: FusionStatus
     fix: FixMessage | None = Field(description="the latest fused fix message (also answered to late joiners)")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")

@@ -129,15 +129,11 @@ class Scatter:
         return len(self._q)
 
     @property
-    def ratio(self) -> float | None:
-        """``s²`` as measured, not capped: above 1 the fixes scatter from frame to frame by more than their whole
-        claimed covariance; None until :data:`SCATTER_MIN` fixes were measured."""
-        return float(np.mean(self._q)) / 2.0 if len(self._q) >= SCATTER_MIN else None
-
-    @property
     def share(self) -> float:
         """``s²``, at most 1; 1 until :data:`SCATTER_MIN` fixes were measured."""
-        return 1.0 if self.ratio is None else min(1.0, self.ratio)
+        if len(self._q) < SCATTER_MIN:
+            return 1.0
+        return min(1.0, float(np.mean(self._q)) / 2.0)
 
 
 class UuvTrack:
@@ -148,12 +144,13 @@ class UuvTrack:
     """
 
     def __init__(self, max_speed_mps: float, max_accel_mps2: float, t: float, z: np.ndarray, C: np.ndarray,
-                 share: float):
+                 share: float, max_reach_m: float = math.inf):
         self.max_speed_mps = max_speed_mps
         self.max_accel_mps2 = max_accel_mps2
         self.t = t
         self.x = np.array([z[0], z[1], 0.0, 0.0])
         self.P = np.zeros((4, 4))
+        self.max_reach_m = max_reach_m  # however long since its last fix, the UUV is taken within this (m) of it
         self.P[:2, :2] = self.white_m2(C, share)
         self.P[2:, 2:] = np.eye(2) * max_speed_mps**2
         self.C = C  # the newest fix's covariance (m²) ...
@@ -197,8 +194,9 @@ class UuvTrack:
         """How far a fix ``z`` (covariance ``C``) at ``t`` is from where the fixes can be: ``(d, radius_m, margin_m)``.
 
         Two bounds, both must hold: the UUV is at most ``v_top·Δ`` from the track's position
-        (its top speed), and at most ``½·a·Δ²`` from that position moved on with the
-        track's velocity (its acceleration bound). For each, the fix's offset beyond the
+        (its top speed; at most :attr:`max_reach_m`, however long Δ), and at most ``½·a·Δ²``
+        from that position moved on with the track's velocity (its acceleration bound). For
+        each, the fix's offset beyond the
         bound, over its covariance — the track's own (carried over Δ for the second), the
         fix's white part and how much the common error can have changed
         (:func:`common_change_m2`) — is a Mahalanobis distance; ``d`` is the larger.
@@ -211,7 +209,7 @@ class UuvTrack:
         F = transition(dt)
         extra = self.white_m2(C, share) + common_change_m2(C, dt)
         moved_on, P_moved = (F @ self.x)[:2], (F @ self.P @ F.T)[:2, :2]
-        return max(_beyond(z - self.x[:2], self.max_speed_mps * dt, self.P[:2, :2] + extra),
+        return max(_beyond(z - self.x[:2], self.reach_m(t), self.P[:2, :2] + extra),
                    _beyond(z - moved_on, 0.5 * a * dt * dt, P_moved + extra))
 
     def widen(self, seconds: float) -> None:
@@ -220,8 +218,9 @@ class UuvTrack:
         self.P = self.P + _process_noise(self.max_accel_mps2, seconds)
 
     def reach_m(self, t: float) -> float:
-        """How far from the track's position the UUV can be at ``t``: its top speed times the time since."""
-        return self.max_speed_mps * max(0.0, t - self.t)
+        """How far from the track's position the UUV can be at ``t``: its top speed times the time since, at most
+        :attr:`max_reach_m`."""
+        return min(self.max_speed_mps * max(0.0, t - self.t), self.max_reach_m)
 
     def absolute_m2(self) -> np.ndarray:
         """The position's covariance against the truth (m²): the track's own plus the common error."""

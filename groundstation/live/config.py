@@ -42,7 +42,7 @@ from localizer.contract import (
     within,
 )
 from localizer.depth import BLUEROV2_MAX_VERTICAL_SPEED_MPS
-from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS, WATER_ACCEL_MPS2
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_REACH_M, MAX_SPEED_MPS, WATER_ACCEL_MPS2
 from localizer.thrusters import DEADBAND_US
 from localizer.tracking import TRACKERS, WITHOUT_LOSS_SIGNAL
 
@@ -227,6 +227,10 @@ class RunConfig(UuvOptions):
                                                            "largest horizontal acceleration the water gives the UUV "
                                                            "while ArduSub's horizontal thrusters are idle (read with "
                                                            "depth_source blueos or mavlink); raise it in waves")
+    uuv_max_reach_m: Annotated[Number, Gt(0)] = Field(MAX_REACH_M, description="safety gate: however long since "
+                                                      "the last trusted fix (a loss, a restart, a selection), a new "
+                                                      "target further than this (m, and the fixes' shared error) "
+                                                      "from it is not the UUV until the operator confirms it")
     thruster_deadband_us: within(0, 400) = Field(DEADBAND_US, description="pulses within this of 1500 µs do not "
                                                  "turn the UUV's thrusters (its ESCs' deadband)")
     fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
@@ -248,6 +252,11 @@ class RunConfig(UuvOptions):
     recordings: DirPath | None = Field(None, description="record each start as a session directory of its own in "
                                        "this folder, named by the start's UTC time YYYYmmdd-HHMMSS (-2, -3, … when "
                                        "taken): a restart never overwrites nor refuses")
+    state_dir: DirPath | None = Field(None, description="folder where each UUV's last trusted track is kept for the "
+                                      "next start (track-<id>.json; default: 'state' beside the --recordings folder, "
+                                      "none without it)")
+    track_max_age_s: NonNegative = Field(300.0, description="a kept track older than this (s) is not read at the "
+                                         "start: the gates start without the UUV's last track")
     duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
     stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
                                    "file at exit")
@@ -292,6 +301,13 @@ class RunConfig(UuvOptions):
         if self.zenoh_listen or self.zenoh_config:
             return self.zenoh_listen
         return (LOCAL_ENDPOINT,)
+
+    @property
+    def state_folder(self) -> Path | None:
+        """Where the UUVs' tracks are kept: ``state_dir``, else ``state`` beside ``recordings``; None: not kept."""
+        if self.state_dir:
+            return Path(self.state_dir)
+        return Path(self.recordings).parent / "state" if self.recordings else None
 
     @property
     def recording(self) -> str | None:
