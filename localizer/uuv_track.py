@@ -146,11 +146,11 @@ class UuvTrack:
     def __init__(self, max_speed_mps: float, max_accel_mps2: float, t: float, z: np.ndarray, C: np.ndarray,
                  share: float, max_reach_m: float = math.inf):
         self.max_speed_mps = max_speed_mps
+        self.max_reach_m = max_reach_m  # however long since its last fix, the UUV is taken within this (m) of it
         self.max_accel_mps2 = max_accel_mps2
         self.t = t
         self.x = np.array([z[0], z[1], 0.0, 0.0])
         self.P = np.zeros((4, 4))
-        self.max_reach_m = max_reach_m  # however long since its last fix, the UUV is taken within this (m) of it
         self.P[:2, :2] = self.white_m2(C, share)
         self.P[2:, 2:] = np.eye(2) * max_speed_mps**2
         self.C = C  # the newest fix's covariance (m²) ...
