@@ -676,7 +676,8 @@ class FuseSourceStatus(Section):
     used: int = Field(description="fusions it took part in")
     rejected: int = Field(description="fusions it was left out of: it disagreed beyond the sigmas")
     in_use: bool = Field(description="it took part in the last fusion")
-    refused: dict[str, int] = Field(description="its ok fixes its own gates refused, by reason (as gates.rejected)")
+    refused: dict[str, int] = Field(description="its ok fixes its own gates refused, by reason (as gates.rejected), "
+                                    "and 'future': stamped ahead of the fuser's clock beyond --clock-tolerance-ms")
     gate_state: Literal[tuple(GATE_STATES)] = Field(description="its own gates' state")
     last_status: Status | None = Field(description="the status of its last fix")
     age_s: Age = Field(description="seconds since its last fix arrived")
@@ -705,6 +706,11 @@ class FuseInputStatus(Section):
     handoff: HandoffStatus | None = None
 
 
+    h_acc_used_m: NonNegative = Field(None, description="its claim as the last fusion weighed it, DRMS, metres: with "
+                                      "what its fixes showed beyond it (floor_m)")
+    floor_m: NonNegative = Field(None, description="DRMS of what its fixes show beyond its claim, added at the last "
+                                 "fusion: their frame-to-frame scatter beyond the whole claim, their disagreement with "
+                                 "the other drones over the last 10 s beyond both claims")
 class FuseStatusMessage(Message):
     """``skyfix fuse``'s health, once a second."""
 
@@ -712,6 +718,11 @@ class FuseStatusMessage(Message):
     t: float = Field(description="when the status was taken, the fuser's clock, UNIX seconds")
     uuv: str = Field(description="the UUV's id")
     input: FuseInputStatus
+    off_track: int = Field(0, description="fused positions beyond where the UUV can be by the fused fixes' own "
+                           "track: sent as off_track, no position")
+    configured: list[str] = Field([], description="the fix keys whose fixes may be fused (--source)")
+    unconfigured: dict[str, int] = Field({}, description="fixes from any other key, by key (32 keys, the rest as "
+                                         "'(others)'): counted, never fused")
     fusion: FusionStatus
     fix: FixMessage | None = Field(description="the latest fused fix message (also answered to late joiners)")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")

@@ -43,6 +43,7 @@ STATUSES: dict[str, str] = {
                     "vehicle, or the two right over each other): no fix for either until they part or one is selected "
                     "again",
     "disagree": "skyfix fuse: the drones' fixes disagree beyond their sigmas and none of them can be told right",
+    "off_track": "skyfix fuse: the fused position lies beyond where the UUV can be by the fused fixes' own track",
     # offline
     "refused": "offline, positions_smoothed.csv: the safety gates refused this frame's fix (off the UUV's track, or a "
                "target never confirmed) and the fixes around it are too far apart to bridge",

@@ -129,11 +129,15 @@ class Scatter:
         return len(self._q)
 
     @property
+    def ratio(self) -> float | None:
+        """``s²`` as measured, not capped: above 1 the fixes scatter from frame to frame by more than their whole
+        claimed covariance; None until :data:`SCATTER_MIN` fixes were measured."""
+        return float(np.mean(self._q)) / 2.0 if len(self._q) >= SCATTER_MIN else None
+
+    @property
     def share(self) -> float:
         """``s²``, at most 1; 1 until :data:`SCATTER_MIN` fixes were measured."""
-        if len(self._q) < SCATTER_MIN:
-            return 1.0
-        return min(1.0, float(np.mean(self._q)) / 2.0)
+        return 1.0 if self.ratio is None else min(1.0, self.ratio)
 
 
 class UuvTrack:

@@ -97,7 +97,7 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
             obs.request_interval(msg_id, hz)
         procs.append(start([sys.executable, "-c", SUBSCRIBER, ep, "skyfix/uuv/rov1/**", str(zlog)],
                            tmp_path / "sub.log"))
-        fuser = start(skyfix("fuse", "--uuv", "rov1", "--zenoh-connect", ep, "--gps-input",
+        fuser = start(skyfix("fuse", "--uuv", "rov1", "--source", "a", "--source", "b", "--zenoh-connect", ep, "--gps-input",
                              f"tcp:127.0.0.1:{sitl.ports['serial1']}", "--stats", str(tmp_path / "fuse.json"),
                              "--duration-s", "600"), tmp_path / "fuse.log")
         procs.append(fuser)

@@ -1,16 +1,28 @@
-"""The fuser's decisions, fix by fix: each drone's fixes through their own gates, then fused (:mod:`localizer.fusion`).
+"""The fuser's decisions, fix by fix: only the configured drones, each through its own gates, then fused
+(:mod:`localizer.fusion`), the result gated against its own track.
 
-A source is one drone's skyfix, named by the key its fixes come on. Each of its fixes is judged
-first on its own (:class:`~localizer.fix_gate.FixGate`, one per source: accuracy, age, order, and
-the source's own track of the UUV — a drone whose tracker jumps to a look-alike is refused
-there, and a drone that joins or comes back is taken only after a second of consistent
-fixes); a source reporting the UUV lost, released or awaited drops its fixes at once. Then,
-at the time of the fix that just came, every source with a recent fix is moved to that time
-and the ones that agree are fused (:func:`localizer.fusion.choose`, :func:`~localizer.fusion.fuse`).
+A source is one drone's skyfix, named by the key its fixes come on. Only the sources the fuser
+was given (``sources``) are taken: a fix from any other key is counted (``unconfigured``) and
+goes no further. A fix stamped ahead of the fuser's clock by more than ``clock_tolerance_s``
+(its station time ``t``, or its GNSS time against the source's usual offset from its
+station time, the median of its recent fixes') is refused as ``future`` and counted: it goes
+into no track, so it cannot hold back the fixes after it. Each fix is then judged on its own
+(:class:`~localizer.fix_gate.FixGate`, one per source: accuracy, age, order, and the source's
+own track of the UUV — a drone whose tracker jumps to a look-alike is refused there, and a
+drone that joins or comes back is taken only after a second of consistent fixes); a source
+reporting the UUV lost, released or awaited drops its fixes at once. Then, at the time of the
+fix that just came, every source with a recent fix is moved to that time, its claim floored
+by what its fixes show — from frame to frame (its gate's
+:attr:`~localizer.uuv_track.Scatter.ratio`, when above 1: the fixes scatter beyond their whole
+claim) and against the other sources (:class:`~localizer.fusion.Floors`) — its shared errors
+(:func:`~localizer.fusion.shared_effects`, ``shared``) split from its own, and the ones that
+agree are fused (:func:`~localizer.fusion.choose`, :func:`~localizer.fusion.fuse`).
 The fused fixes decide between two sources that disagree once they have gone on for a
 second (:data:`~localizer.fix_gate.CONFIRM_S`) without a disagreement: an incumbent drone that
 has been fused for a second outweighs a newcomer that disagrees with it; two that appear
-together and disagree get no fix until a third sides with one.
+together and disagree get no fix until a third sides with one. A fused position beyond where
+the UUV can be by the fused fixes' own track (:class:`~localizer.fusion.OutputGate`) is an
+``off_track`` fix: no position, GPS_INPUT says no fix.
 
 Time base: a fix's GNSS time (``t_gnss``, the drone's station clock corrected by its
 autopilot's SYSTEM_TIME) where it has one, else its station time ``t`` — then the drones'
@@ -34,20 +46,37 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from groundstation.live.sinks.gps_input import LOSS_STATUSES
+from localizer.clock import Median
 from localizer.fix import Fix
-from localizer.fix_gate import CONFIRM_S, FixGate
-from localizer.fusion import Estimate, Sample, SourceTrack, choose, fuse
+from localizer.fix_gate import CONFIRM_S, MAX_SPEED_MPS, FixGate
+from localizer.fusion import (
+    Estimate,
+    Floors,
+    OutputGate,
+    Sample,
+    SharedSigmas,
+    SourceTrack,
+    choose,
+    fit_shared,
+    fuse,
+    shared_effects,
+)
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
 from localizer.uuv_track import fix_covariance_m2
 
 #: Fused fixes go out at most this often per second by default.
 MAX_HZ = 30.0
+#: A fix stamped this far (s) ahead of the fuser's clock is refused as ``future`` by default: the drones' and the
+#: fuser's clocks must agree this well (their fixes' age is judged on them too).
+CLOCK_TOLERANCE_S = 0.25
+#: Fixes from names not configured are counted by name for this many names, the rest together.
+UNCONFIGURED_NAMES = 32
 
 
 def aligned_t(fix: Fix) -> float:
@@ -71,6 +100,9 @@ class Source:
     delay_s: float | None = None  # arrival (fuser's clock) minus the fix's time
     time_base: str | None = None  # "gnss" or "station"
     h_acc_m: float | None = None
+    h_acc_used_m: float | None = None  # its claim as the last fusion weighed it: shared part, floors
+    floor_m: float | None = None  # the DRMS of what the floors added to its claim at the last fusion
+    offset: Median = field(default_factory=Median)  # its fixes' aligned time minus station time (s)
 
     def status(self, now: float) -> dict:
         def num(x, digits=3):
@@ -79,18 +111,28 @@ class Source:
         return {"received": self.received, "used": self.used, "rejected": self.rejected, "in_use": self.in_use,
                 "refused": dict(self.refused), "gate_state": self.gate.state, "last_status": self.last_status,
                 "age_s": None if self.last_recv is None else num(max(0.0, now - self.last_recv)),
-                "delay_s": num(self.delay_s), "time_base": self.time_base, "h_acc_m": num(self.h_acc_m)}
+                "delay_s": num(self.delay_s), "time_base": self.time_base, "h_acc_m": num(self.h_acc_m),
+                "h_acc_used_m": num(self.h_acc_used_m), "floor_m": num(self.floor_m)}
 
 
 class Fuser:
-    """Per-source gates and the fusion (see the module doc); ``new_gate()`` makes a source's gate."""
+    """Per-source gates and the fusion (see the module doc); ``new_gate()`` makes a source's gate, ``sources`` are
+    the names (fix keys) whose fixes may be fused."""
 
-    def __init__(self, new_gate: Callable[[], FixGate], max_accel_mps2: float, max_hz: float = MAX_HZ):
+    def __init__(self, new_gate: Callable[[], FixGate], max_accel_mps2: float, max_hz: float = MAX_HZ, *,
+                 sources: Collection[str], max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
+                 clock_tolerance_s: float = CLOCK_TOLERANCE_S, shared: SharedSigmas | None = None):
         self.new_gate = new_gate
+        self.configured = frozenset(sources)
         self.max_accel_mps2 = max_accel_mps2
+        self.clock_tolerance_s = clock_tolerance_s
+        self.shared = shared or SharedSigmas()
         self.min_step_s = 0.9 / max_hz  # a little under the period: sources' frames do not tick exactly
         self.sources: dict[str, Source] = {}
+        self.unconfigured: Counter[str] = Counter()  # fixes from names not configured, by name
         self.fused = SourceTrack(max_accel_mps2)  # the fused fixes: what decides between disagreeing sources
+        self.output = OutputGate(max_speed_mps, max_accel_mps2)
+        self.floors = Floors()
         self.published = 0
         self.disagreements = 0
         self.last_t = -math.inf
@@ -100,6 +142,10 @@ class Fuser:
 
     def on_fix(self, name: str, fix: Fix, now: float) -> Fix | None:
         """Take one source's fix received at ``now`` (the fuser's clock); the fused fix to publish, or None."""
+        if name not in self.configured:
+            self.unconfigured[name if name in self.unconfigured or len(self.unconfigured) < UNCONFIGURED_NAMES
+                              else "(others)"] += 1
+            return None
         src = self.sources.get(name)
         if src is None:
             src = self.sources[name] = Source(self.new_gate(), SourceTrack(self.max_accel_mps2))
@@ -110,27 +156,50 @@ class Fuser:
                 src.gate.target_lost()
                 src.track.clear()
             return None
+        t = aligned_t(fix)
+        usual = src.offset.value
+        src.offset.add(t - fix.t_unix)
+        if fix.t_unix - now > self.clock_tolerance_s or (usual is not None and
+                                                          t - fix.t_unix - usual > self.clock_tolerance_s):
+            src.refused["future"] += 1
+            return None
         why = src.gate.check(fix, now)
         if why is not None:
             src.refused[why] += 1
             return None
-        t = aligned_t(fix)
         src.time_base = "gnss" if math.isfinite(fix.t_gnss) else "station"
         src.delay_s, src.h_acc_m = now - t, fix.h_acc_m
         z, C = self._local(fix)
-        src.track.add(Sample(t, z, C, fix.alt_amsl_m, fix.v_acc_m))
+        fitted = self.fused.velocity()
+        G = fit_shared(C, shared_effects(fix, self.shared, None if fitted is None else fitted[0]))
+        src.track.add(Sample(t, z, C, fix.alt_amsl_m, fix.v_acc_m, G))
         if t < self.last_t + self.min_step_s:
             return None  # behind the fused stream, or too soon after it: used in the next fusion
         return self._fuse(t, fix)
 
+    def _scatter_m2(self, name: str, e: Estimate) -> np.ndarray:
+        """What a source's fixes show from frame to frame beyond its whole claim (m²)."""
+        ratio = self.sources[name].gate.scatter.ratio
+        return (ratio - 1.0) * e.C if ratio is not None and ratio > 1.0 else np.zeros((2, 2))
+
     def _fuse(self, t: float, newest: Fix) -> Fix:
-        estimates: dict[str, Estimate] = {}
+        claimed: dict[str, Estimate] = {}
         for name, src in self.sources.items():
             e = src.track.at(t)
             if e is not None:
-                estimates[name] = e
+                claimed[name] = e
+        self.floors.add(t, claimed)
+        # which agree: by their claims and their own scatter (a source's bias seen by the others does not make it
+        # agree); how much each weighs: the floors from the others too
+        scattered = {name: e.floored(self._scatter_m2(name, e)) for name, e in claimed.items()}
+        estimates = {}
+        for name, e in scattered.items():
+            estimates[name] = e.floored(self.floors.excess_m2(name, t))
+            src = self.sources[name]
+            src.floor_m = math.sqrt(max(0.0, np.trace(estimates[name].C - claimed[name].C)))
+            src.h_acc_used_m = math.sqrt(np.trace(estimates[name].C))
         settled = self._fused_since is not None and t - self._fused_since >= CONFIRM_S
-        chosen = choose(estimates, self.fused.at(t) if settled else None)
+        chosen = choose(scattered, self.fused.at(t) if settled else None)
         for name, src in self.sources.items():
             src.in_use = name in chosen
             src.used += src.in_use
@@ -143,6 +212,8 @@ class Fuser:
             self._fused_since = None
             return Fix(t_unix=newest.t_unix, status="disagree", t_gnss=newest.t_gnss, frame=self.published)
         est = fuse([estimates[n] for n in chosen])
+        if self.output.check(t, est.z, est.C) is not None:
+            return Fix(t_unix=newest.t_unix, status="off_track", t_gnss=newest.t_gnss, frame=self.published)
         self.fused.add(Sample(t, est.z, est.C, est.alt_m, est.v_acc_m))
         if self._fused_since is None:
             self._fused_since = t
@@ -164,6 +235,7 @@ class Fuser:
                                                                  fix.h_acc_m)
 
     def status(self, now: float) -> dict:
-        return {"published": self.published, "disagreements": self.disagreements,
-                "last_sources": list(self.last_sources),
+        return {"published": self.published, "disagreements": self.disagreements, "off_track": self.output.refused,
+                "last_sources": list(self.last_sources), "configured": sorted(self.configured),
+                "unconfigured": dict(self.unconfigured),
                 "sources": {name: src.status(now) for name, src in sorted(self.sources.items())}}

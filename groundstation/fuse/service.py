@@ -3,7 +3,8 @@
 Each drone's ``skyfix run`` publishes its fixes on its own key under the UUV's
 (``--fix-key skyfix/uuv/<id>/drone/<drone>/fix``) and sends no GPS_INPUT; the fuser (on any
 laptop, or on the UUV's companion computer) subscribes to ``skyfix/uuv/<id>/drone/*/fix``,
-fuses (:mod:`groundstation.fuse.fuser`) and is the one that sends GPS_INPUT
+takes the drones named with ``--source`` (any other key's fixes are counted, never fused; without a
+``--source`` it does not start), fuses (:mod:`groundstation.fuse.fuser`) and is the one that sends GPS_INPUT
 (:mod:`groundstation.live.sinks.gps_input`, its gate judging accuracy, age and order only: each
 source was judged against its own track). Out, on Zenoh: the fused fixes (``skyfix.fix/1``,
 unchanged) on ``skyfix/uuv/<id>/fix``, the status (``skyfix.fuse-status/1``) once a second on
@@ -40,9 +41,11 @@ from groundstation.mavlink.link import read_signing_key
 from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
 from groundstation.threads import Handoff
 from groundstation.zenoh_session import open_session, subscribe
+from localizer.calibration import ConfigError
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
+from localizer.fusion import SharedSigmas
 
-from .fuser import MAX_HZ, Fuser
+from .fuser import CLOCK_TOLERANCE_S, MAX_HZ, Fuser
 
 log = logging.getLogger("skyfix.fuse")
 
@@ -108,7 +111,10 @@ async def serve(args: argparse.Namespace) -> dict:
         max_age_s = args.fix_max_age_ms / 1000.0
         fuser = Fuser(lambda: FixGate(max_speed_mps=args.uuv_max_speed_mps, max_accel_mps2=args.uuv_max_accel_mps2,
                                       max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s),
-                      args.uuv_max_accel_mps2, args.max_hz)
+                      args.uuv_max_accel_mps2, args.max_hz, sources=args.source_keys,
+                      max_speed_mps=args.uuv_max_speed_mps, clock_tolerance_s=args.clock_tolerance_ms / 1000.0,
+                      shared=SharedSigmas(gnss_m=args.shared_gnss_m, height_m=args.shared_height_m,
+                                          clock_s=args.shared_clock_ms / 1000.0))
         fix_sink = ZenohFixSink(session, args.fix_key)
         closers.append(fix_sink.close)
         gps = None
@@ -135,8 +141,8 @@ async def serve(args: argparse.Namespace) -> dict:
         workers.add(status_sink, OUTPUTS)
         if gps:
             workers.add(gps, LAST, "gps_input")
-        log.info("skyfix fuse: UUV %s, fixes from %s, fused on %s, GPS_INPUT %s", args.uuv, sources.key,
-                 args.fix_key, args.gps_input)
+        log.info("skyfix fuse: UUV %s, fixes from %s (taken from %s), fused on %s, GPS_INPUT %s", args.uuv,
+                 sources.key, ", ".join(args.source_keys), args.fix_key, args.gps_input)
         await workers.run(stopped(stop, args.duration_s))
         return workers.status(time.time())
     finally:
@@ -150,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
     base = f"skyfix/uuv/{args.uuv}"
     args.sources = args.sources or f"{base}/drone/*/fix"
+    args.source_keys = source_keys(args.source, base, args.sources)
     args.fix_key = args.fix_key or f"{base}/fix"
     args.status_key = args.status_key or f"{base}/fuse/status"
     args.alive_key = args.alive_key or f"{base}/fuse/alive"
@@ -158,6 +165,25 @@ def run(args: argparse.Namespace) -> int:
         return 2
     log.info("stopped: %s", json.dumps(final["fusion"]))
     return 0
+
+
+def source_keys(sources: list[str] | None, base: str, keyexpr: str) -> list[str]:
+    """The fix keys of the ``--source`` drones (an id is ``BASE/drone/ID/fix``, a key with ``/`` as it is), each within
+    the subscription ``keyexpr``; :class:`ConfigError` for none, or for one the subscription does not cover."""
+    if not sources:
+        raise ConfigError("options", "--source", None, "missing: name each drone whose fixes may be fused (--source a "
+                          "--source b): no drone is trusted by default")
+    keys = [s if "/" in s else f"{base}/drone/{s}/fix" for s in sources]
+    for s, key in zip(sources, keys, strict=True):
+        if not s or any(c in s for c in "*$?#"):
+            raise ConfigError("options", "--source", s, "one drone's id or fix key, no wildcards")
+        try:
+            covered = zenoh.KeyExpr(keyexpr).includes(zenoh.KeyExpr(key))
+        except zenoh.ZError as e:
+            raise ConfigError("options", "--source", s, f"not a Zenoh key ({e})") from None
+        if not covered:
+            raise ConfigError("options", "--source", s, f"{key} is not within --sources {keyexpr}")
+    return keys
 
 
 def _number(low: float, name: str, strict: bool = False):
@@ -182,13 +208,18 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(
         name, help=help,
-        description="Subscribes to every drone's fixes of one UUV (each drone's skyfix run with --fix-key "
-                    "skyfix/uuv/ID/drone/NAME/fix), aligns them in time, rejects a drone that disagrees beyond its "
-                    "sigmas, fuses the rest by their covariances, publishes the fused fixes on skyfix/uuv/ID/fix and "
-                    "sends them as GPS_INPUT (--gps-input). Stops on Ctrl-C or SIGTERM.",
-        epilog="example: skyfix fuse --uuv rov1 --zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
+        description="Subscribes to the drones' fixes of one UUV (each drone's skyfix run with --fix-key "
+                    "skyfix/uuv/ID/drone/NAME/fix), takes those of the --source drones only, aligns them in time, "
+                    "rejects a drone that disagrees beyond its sigmas, fuses the rest by their covariances, publishes "
+                    "the fused fixes on skyfix/uuv/ID/fix and sends them as GPS_INPUT (--gps-input). Stops on Ctrl-C "
+                    "or SIGTERM.",
+        epilog="example: skyfix fuse --uuv rov1 --source a --source b --zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
     p.add_argument("--uuv", type=_chunk, metavar="ID", default="uuv", help="the UUV's id, in the keys (default %(default)s)")
-    p.add_argument("--sources", metavar="KEYEXPR", help="the drones' fixes (default skyfix/uuv/ID/drone/*/fix)")
+    p.add_argument("--source", action="append", metavar="DRONE",
+                   help="a drone whose fixes may be fused: its id (its fixes on skyfix/uuv/ID/drone/DRONE/fix) or its "
+                        "whole fix key; once per drone, at least one. Fixes on any other key are counted, never fused")
+    p.add_argument("--sources", metavar="KEYEXPR", help="the key expression subscribed to, the --source keys within it "
+                   "(default skyfix/uuv/ID/drone/*/fix)")
     p.add_argument("--fix-key", metavar="KEY", help="the fused fixes (default skyfix/uuv/ID/fix)")
     p.add_argument("--status-key", metavar="KEY", help="the 1 Hz status (default skyfix/uuv/ID/fuse/status)")
     p.add_argument("--alive-key", metavar="KEY", help="liveliness token (default skyfix/uuv/ID/fuse/alive)")
@@ -203,6 +234,17 @@ def register(subparsers, name: str, help: str | None = None) -> None:
                    help="a fix older than this is not sent as valid (default %(default)g)")
     p.add_argument("--fix-max-h-acc-m", metavar="M", type=_number(0.0, "--fix-max-h-acc-m", strict=True), default=2.5,
                    help="a fix less accurate than this is not used (default %(default)g)")
+    p.add_argument("--clock-tolerance-ms", metavar="MS", type=_number(0.0, "--clock-tolerance-ms", strict=True),
+                   default=CLOCK_TOLERANCE_S * 1000.0, help="a fix stamped further ahead of this machine's clock is "
+                   "refused as from the future (default %(default)g)")
+    p.add_argument("--shared-gnss-m", metavar="M", type=_number(0.0, "--shared-gnss-m"), default=0.0,
+                   help="1-sigma (per axis) of the GNSS error all drones share: one sky, one RTK base; the fixes do "
+                        "not carry their GNSS error: say it (default %(default)g; about 1 for plain GNSS)")
+    p.add_argument("--shared-height-m", metavar="M", type=_number(0.0, "--shared-height-m"), default=0.3,
+                   help="1-sigma of the height error all barometers share (the weather's trend), at most each fix's "
+                        "own (default %(default)g)")
+    p.add_argument("--shared-clock-ms", metavar="MS", type=_number(0.0, "--shared-clock-ms"), default=10.0,
+                   help="1-sigma of the clock error all stations share, times the UUV's speed (default %(default)g)")
     p.add_argument("--uuv-max-speed-mps", metavar="MPS", type=_number(0.0, "--uuv-max-speed-mps", strict=True),
                    default=MAX_SPEED_MPS["bluerov2"], help="the UUV's top speed, for each drone's gate")
     p.add_argument("--uuv-max-accel-mps2", metavar="MPS2", type=_number(0.0, "--uuv-max-accel-mps2", strict=True),
