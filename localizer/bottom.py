@@ -23,7 +23,11 @@ by robust nonlinear least squares (:func:`scipy.optimize.least_squares`):
   velocity (the EKF's, from the receiver's Doppler, which a slow position error is not in), about what
   the velocity says the position should have moved less what it did; its **mean over the knots
   is held at 0**: a constant offset of everything is invisible in the bottom, so the
-  corrected track keeps the GNSS's mean position (the absolute offset needs a reference).
+  corrected track keeps the GNSS's mean position (the absolute offset needs a reference);
+- with ``white_m`` > 0, each frame's own offset ``o_k`` on top of the walk (``true = reported + w(t) + o_k``), with a
+  white prior of that 1-sigma per axis: the reported position's white noise (a receiver's few centimetres, which
+  2-second knots cannot follow and which would otherwise bend the floor to fit them). A uniform shift of one frame's
+  floor points is all it can absorb: the biases show in how the points move *across* the frames, which is not white.
 
 A residual is a floor point's ground position seen from one frame minus the feature's,
 turned into pixels by the inverse of the ground-per-pixel Jacobian at that observation
@@ -41,12 +45,18 @@ depends on the bias frame being right), :attr:`BottomEstimate.estimated` also as
 across a good part of the image (:data:`MIN_SLIDE_SHARE`).
 
 Covariances are from the Jacobian at the solution (Gauss-Newton, the features eliminated by
-their Schur complement), scaled by the residuals' variance. Radians, metres, seconds.
+their Schur complement), scaled by the residuals' variance. They take the residuals as white, and
+what is not (a floor light that drags the points, waves, a walk the knots cannot follow) they do not
+see: asked for ``parts``, :func:`estimate` also solves each of that many consecutive stretches of the
+recording alone and widens the biases' and the floor depth's sigmas by the sample standard deviation of
+the parts' values (``hypot(σ, spread)``, as :attr:`groundstation.latency.estimate.SessionOffset.sigma_s`
+does for the video's delay), so an estimate whose thirds disagree is not claimed.
+Radians, metres, seconds.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -57,8 +67,10 @@ from .refraction import offset_from_ray
 
 #: a bias is "estimated" when its posterior 1-sigma is below this share of its prior's ...
 ESTIMATED_SHARE = 0.3
-#: ... and the features slid across at least this share of the image's diagonal (median over features)
+#: ... and the features slid across at least this share of the image's diagonal (:func:`slide_share`)
 MIN_SLIDE_SHARE = 0.15
+#: a part of the recording (``estimate(parts=...)``) with fewer features seen twice in it gives no estimate
+MIN_PART_FEATURES = 10
 #: floor depths tried for the start (m), geometric
 _DEPTH_GRID_M = np.geomspace(0.2, 60.0, 48)
 _ANGLE_STEP = 1e-5  # rad, finite difference of the global parameters
@@ -75,6 +87,7 @@ class Priors:
     yaw_rad: float = np.radians(10.0)  # the heading bias's
     walk_rate_m: float = 0.2  # GNSS walk: 1-sigma of its change over 1 s, growing with √time (m/√s)
     knot_spacing_s: float = 2.0  # the walk's knots
+    white_m: float = 0.0  # the reported position's white noise, 1-sigma per axis (m): per-frame offsets; 0: none
     pixel_px: float = 0.7  # a tracked floor point's 1-sigma in u and v
     floor_depth_m: float | None = None  # given: not estimated
     floor_depth_prior_m: float = 100.0  # estimated: its (weak) prior's 1-sigma about the start
@@ -118,12 +131,15 @@ class BottomEstimate:
     sigma_walk_ne_m: np.ndarray  # (J, 2): relative to the mean (which is held at 0)
     features_ne_m: np.ndarray  # (F, 2)
     rms_px: float  # of the inlying residuals, each of u and v, pixels
-    slide_share: float  # how far the features slid in the image: median over features, share of its diagonal
+    slide_share: float  # how far the features slid in the image (:func:`slide_share`), share of its diagonal
     n_observations: int
     n_features: int
     n_frames: int
     inliers: np.ndarray = field(repr=False)  # (M,) bool: residual within 3 loss scales
     priors: Priors = field(default_factory=Priors, repr=False)
+    #: (P, 4) each part's tilt_fwd, tilt_right, yaw (rad) and floor depth (m) alone, NaN where it gave none; the
+    #: sigmas above include their spread (see the module doc); (0, 4): not asked
+    parts: np.ndarray = field(default_factory=lambda: np.zeros((0, N_GLOBAL)), repr=False)
 
     @property
     def sigma_tilt_rad(self) -> float:
@@ -171,6 +187,9 @@ class BottomEstimate:
         depth = (f"floor {self.floor_depth_m:.2f} m" + (f" ± {self.sigma_floor_depth_m:.2f}"
                                                           if self.sigma_floor_depth_m > 0 else " (given)"))
         walk = np.hypot(*self.walk_ne_m.T)
+        if len(self.parts):
+            heading = "/".join("—" if np.isnan(y) else f"{np.degrees(y):+.2f}" for y in self.parts[:, 2])
+            depth += f" (sigmas with the {len(self.parts)} parts' spread; their headings {heading}°)"
         return (f"{tilt}; {yaw}; {depth}; position walk up to {walk.max():.2f} m about the GNSS's mean; "
                 f"{self.n_features} floor features, {self.n_observations} observations in {self.n_frames} frames, "
                 f"{self.rms_px:.2f} px RMS")
@@ -194,7 +213,8 @@ def camera_heading_rad(R_ned_from_cv) -> np.ndarray:
 
 def slide_share(camera: Camera, obs: Observations) -> float:
     """How far the features slid through the image: per feature the farthest any of its pixels lies from its first,
-    median over the features, as a share of the image's diagonal."""
+    median over the observations (a feature counts as often as it was seen: a drifting light that breaks the tracks
+    into many short ones does not hide how far the floor went), as a share of the image's diagonal."""
     f = np.asarray(obs.feature, dtype=int)
     order = np.argsort(f, kind="stable")
     f, u, v = f[order], np.asarray(obs.u, float)[order], np.asarray(obs.v, float)[order]
@@ -202,7 +222,7 @@ def slide_share(camera: Camera, obs: Observations) -> float:
     reach = np.hypot(u - u[first], v - v[first])
     farthest = np.zeros(f.max() + 1)
     np.maximum.at(farthest, f, reach)
-    return float(np.median(farthest[np.unique(f)]) / np.hypot(camera.width, camera.height))
+    return float(np.median(farthest[f]) / np.hypot(camera.width, camera.height))
 
 
 def rodrigues(w) -> np.ndarray:
@@ -230,15 +250,32 @@ def _rotate(w, d):
 
 def _velocity_steps(poses: FramePoses, knots) -> np.ndarray:
     """The walk's expected change between consecutive knots (J − 1, 2): the reported velocity integrated
-    (trapezoids) less the reported position's change; zeros without a velocity."""
+    (trapezoids) less the reported position's change, fitted by the knots' piecewise-linear curve (least squares: the
+    position's white noise averages over a knot's frames); zeros without a velocity."""
     if poses.velocity_ne_mps is None:
         return np.zeros((len(knots) - 1, 2))
     t = np.asarray(poses.t_s, dtype=float)
     order = np.argsort(t)
     t, vel, pos = t[order], np.asarray(poses.velocity_ne_mps, float)[order], np.asarray(poses.camera_ne_m, float)[order]
     travelled = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None], axis=0)])
-    drift = _interp_knots(t, travelled - (pos - pos[0]), knots)  # true − reported, up to a constant
+    basis = _interp_knots(knots, np.eye(len(knots)), t)  # (K, J): each frame's weights of the knots
+    drift, *_ = np.linalg.lstsq(basis, travelled - (pos - pos[0]), rcond=None)  # true − reported, up to a constant
     return np.diff(drift, axis=0)
+
+
+def white_noise_m(poses: FramePoses) -> float | None:
+    """The reported position's white noise (1-sigma per axis, m) seen against the reported velocity: the scatter of
+    the second differences, frame to frame, of the velocity's integral less the position's change (a walk, smooth
+    over seconds, leaves them nearly nil; white noise of sigma σ makes them σ·√6), median absolute deviation.
+    None without a velocity or with fewer than 5 frames."""
+    if poses.velocity_ne_mps is None or len(poses.t_s) < 5:
+        return None
+    t = np.asarray(poses.t_s, dtype=float)
+    order = np.argsort(t)
+    t, vel, pos = t[order], np.asarray(poses.velocity_ne_mps, float)[order], np.asarray(poses.camera_ne_m, float)[order]
+    step = 0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None] - np.diff(pos, axis=0)
+    second = np.diff(step, axis=0).ravel()
+    return float(1.4826 * np.median(np.abs(second - np.median(second))) / np.sqrt(6.0))
 
 
 def _interp_knots(knot_t, values, t):
@@ -254,7 +291,8 @@ def knot_times(t_s, spacing_s: float) -> np.ndarray:
 
 
 class _Problem:
-    """The least-squares problem: parameters ``[tilt_fwd, tilt_right, yaw, depth, walk (J×2), features (F×2)]``."""
+    """The least-squares problem: parameters ``[tilt_fwd, tilt_right, yaw, depth, walk (J×2), frame offsets (K×2,
+    none when ``white_m`` is 0), features (F×2)]``."""
 
     def __init__(self, camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors):
         self.n_water, self.priors = n_water, priors
@@ -278,9 +316,11 @@ class _Problem:
         self.j = j
         self.s = np.clip((tk - self.knots[j]) / (self.knots[j + 1] - self.knots[j]), 0.0, 1.0)
         self.walk_steps = _velocity_steps(poses, self.knots)
+        self.K = len(t) if priors.white_m > 0 else 0
+        self.first_feature = N_GLOBAL + 2 * self.J + 2 * self.K
         self.depth_fixed = priors.floor_depth_m
         self.depth0 = priors.floor_depth_m if priors.floor_depth_m is not None else self._start_depth()
-        self.n_params = N_GLOBAL + 2 * self.J + 2 * self.F
+        self.n_params = self.first_feature + 2 * self.F
 
     # --- geometry ---------------------------------------------------------------------------------
     def offsets(self, g):
@@ -291,12 +331,14 @@ class _Problem:
         off, _ = offset_from_ray(d, self.h, np.full(self.h.shape, g[3]), self.n_water)
         return off
 
-    def ground(self, g, walk_knots):
+    def ground(self, g, walk_knots, white=None):
         """Ground positions (M, 2) of every observation and the 2×2 pixels-per-metre matrices (M, 2, 2) there
-        (the inverse of d ground / d pixel), for globals ``g`` and walk knots (J, 2)."""
+        (the inverse of d ground / d pixel), for globals ``g``, walk knots (J, 2) and frame offsets (K, 2) if any."""
         off = self.offsets(g)
         Jg = np.stack([(off[1] - off[0]) / _PIXEL_STEP, (off[2] - off[0]) / _PIXEL_STEP], axis=-1)
         walk = (1 - self.s)[:, None] * walk_knots[self.j] + self.s[:, None] * walk_knots[self.j + 1]
+        if white is not None and len(white):
+            walk = walk + white[self.k]
         return self.cam + walk + off[0], np.linalg.inv(Jg)
 
     def _start_depth(self) -> float:
@@ -322,19 +364,20 @@ class _Problem:
         if self.depth_fixed is not None:
             g[3] = self.depth_fixed
         walk = x[N_GLOBAL:N_GLOBAL + 2 * self.J].reshape(self.J, 2)
-        feats = x[N_GLOBAL + 2 * self.J:].reshape(self.F, 2)
-        return g, walk, feats
+        white = x[N_GLOBAL + 2 * self.J:self.first_feature].reshape(self.K, 2)
+        feats = x[self.first_feature:].reshape(self.F, 2)
+        return g, walk, white, feats
 
     def observation_residuals(self, x, with_whitening: bool = False):
         """Residuals (M, 2) in pixel sigmas; ``with_whitening``: also d residual / d ground (M, 2, 2)."""
-        g, walk, feats = self.unpack(x)
-        gp, A = self.ground(g, walk)
+        g, walk, white, feats = self.unpack(x)
+        gp, A = self.ground(g, walk, white)
         Aw = A / self.priors.pixel_px
         r = np.einsum("mij,mj->mi", Aw, gp - feats[self.f])
         return (r, Aw) if with_whitening else r
 
     def prior_residuals(self, x):
-        g, walk, _ = self.unpack(x)
+        g, walk, white, _ = self.unpack(x)
         p = self.priors
         rate = p.walk_rate_m * np.sqrt(np.diff(self.knots))[:, None]
         depth = (g[3] - self.depth0) / p.floor_depth_prior_m if self.depth_fixed is None else x[3]
@@ -342,6 +385,7 @@ class _Problem:
             [g[0] / p.tilt_rad, g[1] / p.tilt_rad, g[2] / p.yaw_rad, depth],
             ((np.diff(walk, axis=0) - self.walk_steps) / rate).ravel(),
             walk.mean(axis=0) / 1e-3,  # the gauge: the correction's mean is 0
+            (white / p.white_m).ravel() if self.K else [],
         ])
 
     def residuals(self, x):
@@ -361,10 +405,12 @@ class _Problem:
         rows = np.repeat(np.arange(2 * M).reshape(M, 2), 2, axis=1)  # (M, 4): row (m, a) against columns (b = 0, 1)
         pairs = [(N_GLOBAL + 2 * self.j, Aw * (1 - self.s)[:, None, None]),
                  (N_GLOBAL + 2 * (self.j + 1), Aw * self.s[:, None, None]),
-                 (N_GLOBAL + 2 * self.J + 2 * self.f, -Aw)]
+                 (self.first_feature + 2 * self.f, -Aw)]
+        if self.K:
+            pairs.append((N_GLOBAL + 2 * self.J + 2 * self.k, Aw))
         cols = [np.tile(first[:, None] + np.array([0, 1]), 2) for first, _ in pairs]
         linear = sp.csr_matrix((np.concatenate([d.reshape(M, 4).ravel() for _, d in pairs]),
-                                (np.tile(rows.ravel(), 3), np.concatenate([c.ravel() for c in cols]))),
+                                (np.tile(rows.ravel(), len(pairs)), np.concatenate([c.ravel() for c in cols]))),
                                shape=(2 * M, self.n_params))
         dense = sp.hstack([sp.csr_matrix(glob), sp.csr_matrix((2 * M, self.n_params - N_GLOBAL))])
         return sp.vstack([linear + dense, self._prior_jacobian()]).tocsr()
@@ -387,13 +433,18 @@ class _Problem:
             cols += [N_GLOBAL + 2 * i + c for i in range(J)]
             vals += [1 / (J * 1e-3)] * J
             r += 1
-        return sp.csr_matrix((vals, (rows, cols)), shape=(r, n))
+        n_white = 2 * self.K
+        if n_white:
+            rows += list(range(r, r + n_white))
+            cols += list(range(N_GLOBAL + 2 * J, N_GLOBAL + 2 * J + n_white))
+            vals += [1 / p.white_m] * n_white
+        return sp.csr_matrix((vals, (rows, cols)), shape=(r + n_white, n))
 
     def start(self) -> np.ndarray:
         x = np.zeros(self.n_params)
         x[3] = self.depth0 if self.depth_fixed is None else 0.0
-        g, walk, _ = self.unpack(x)
-        x[N_GLOBAL + 2 * self.J:] = self._means(self.ground(g, walk)[0]).ravel()
+        g, walk, _, _ = self.unpack(x)
+        x[self.first_feature:] = self._means(self.ground(g, walk)[0]).ravel()
         return x
 
 
@@ -416,11 +467,63 @@ def _covariance(jac: sp.csr_matrix, n_dense: int, scale2: float) -> np.ndarray:
     return np.linalg.inv(S) * scale2
 
 
-def estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors = Priors()) -> BottomEstimate:
+def estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors = Priors(),
+             parts: int = 0) -> BottomEstimate:
     """The pose biases, floor depth, features and position walk from bottom feature tracks (see the module doc).
 
     ``obs.feature`` numbers features 0..F-1 (each seen in ≥ 2 frames to say anything); ``n_water`` None: straight rays.
+    ``parts`` ≥ 2: also solved on that many consecutive stretches of time alone, and the sigmas widened by their
+    spread (:func:`with_parts`).
     """
+    est = _estimate(camera, n_water, poses, obs, priors)
+    return est if parts < 2 else with_parts(est, camera, n_water, poses, obs, parts)
+
+
+def with_parts(est: BottomEstimate, camera: Camera, n_water, poses: FramePoses, obs: Observations,
+               parts: int) -> BottomEstimate:
+    """``est`` with each of ``parts`` consecutive stretches of the frames' times solved alone (:attr:`BottomEstimate.parts`)
+    and its sigmas widened by their sample standard deviation; with fewer than two parts solved, by the priors (the
+    recording does not show that the bottom told the biases)."""
+    t = np.asarray(poses.t_s, dtype=float)
+    edges = np.linspace(t.min(), t.max(), parts + 1)
+    part = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, parts - 1)
+    values = np.array([_part_values(camera, n_water, poses, obs, est.priors, np.flatnonzero(part == i))
+                       for i in range(parts)])
+    solved = values[np.all(np.isfinite(values), axis=1)]
+    p = est.priors
+    spread = (np.std(solved, axis=0, ddof=1) if len(solved) >= 2
+              else np.array([p.tilt_rad, p.tilt_rad, p.yaw_rad, p.floor_depth_prior_m]))
+    sigma_depth = 0.0 if p.floor_depth_m is not None else float(np.hypot(est.sigma_floor_depth_m, spread[3]))
+    return replace(est, cov_bias=est.cov_bias + np.diag(spread[:3] ** 2), sigma_floor_depth_m=sigma_depth,
+                   parts=values)
+
+
+def _part_values(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors,
+                 frames: np.ndarray) -> np.ndarray:
+    """tilt_fwd, tilt_right, yaw, floor depth (4,) solved from ``frames`` (indices into ``poses``) alone; NaN with
+    fewer than :data:`MIN_PART_FEATURES` features seen in two of them."""
+    index = np.full(len(poses.t_s), -1)
+    index[frames] = np.arange(len(frames))
+    keep = index[np.asarray(obs.frame, dtype=int)] >= 0
+    feature = np.asarray(obs.feature, dtype=int)[keep]
+    frame = index[np.asarray(obs.frame, dtype=int)[keep]]
+    seen = np.zeros((int(feature.max()) + 1 if len(feature) else 0, len(frames)), bool)
+    seen[feature, frame] = True
+    twice = seen.sum(axis=1)[feature] >= 2 if len(feature) else keep[:0]
+    if len(frames) < 3 or len(np.unique(feature[twice])) < MIN_PART_FEATURES:
+        return np.full(N_GLOBAL, np.nan)
+    _, renumbered = np.unique(feature[twice], return_inverse=True)
+    sub = Observations(frame[twice], renumbered, np.asarray(obs.u, float)[keep][twice],
+                       np.asarray(obs.v, float)[keep][twice])
+    take = FramePoses(*(None if a is None else np.asarray(a)[frames] for a in (
+        poses.t_s, poses.R_ned_from_cv, poses.camera_ne_m, poses.height_m, poses.bias_heading_rad,
+        poses.velocity_ne_mps)))
+    e = _estimate(camera, n_water, take, sub, priors)
+    return np.array([*e.tilt_rad, e.yaw_rad, e.floor_depth_m])
+
+
+def _estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors) -> BottomEstimate:
+    """The whole recording's fit (:func:`estimate` without parts)."""
     prob = _Problem(camera, n_water, poses, obs, priors)
     fit = least_squares(prob.residuals, prob.start(), jac=prob.jacobian, loss="soft_l1", f_scale=priors.loss_scale,
                         x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=60)
@@ -428,12 +531,12 @@ def estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, prio
     r_obs = prob.observation_residuals(x)
     norm = np.hypot(r_obs[:, 0], r_obs[:, 1])
     inliers = norm < 3.0 * priors.loss_scale
-    n_dense = N_GLOBAL + 2 * prob.J
+    n_dense = prob.first_feature
     dof = max(1, 2 * int(inliers.sum()) - prob.n_params + 4)
     scale2 = max(1.0, float(np.sum(norm[inliers] ** 2) / dof))  # never claim better than the pixel sigma
     cov = _covariance(sp.csr_matrix(fit.jac), n_dense, scale2)
-    g, walk, feats = prob.unpack(x)
-    cov_walk = np.diagonal(cov[N_GLOBAL:, N_GLOBAL:]).reshape(prob.J, 2)
+    g, walk, _, feats = prob.unpack(x)
+    cov_walk = np.diagonal(cov[N_GLOBAL:, N_GLOBAL:])[:2 * prob.J].reshape(prob.J, 2)
     return BottomEstimate(
         tilt_rad=g[:2].copy(), yaw_rad=float(g[2]), cov_bias=cov[:3, :3].copy(),
         floor_depth_m=float(g[3]),

@@ -6,6 +6,8 @@ report it (scipy's rotations: reported = exp(error) · true, the convention of t
 by a GNSS walk. Nothing of the localizer's geometry makes the data.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -25,9 +27,11 @@ def _camera() -> SimCamera:
     return SimCamera(640, 360, fx, fx, 319.5, 179.5, (-0.12, 0.08, 0.0004, -0.0002, -0.01))
 
 
-def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.0, rate_hz: float = 4.0):
+def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.0, rate_hz: float = 4.0,
+             yaw_deg=None, white_m: float = 0.0):
     """Floor features seen by a camera 10 m up at 72° down, flying along 60° at ``speed_mps`` (its gimbal's yaw held
-    on the course, the airframe's heading swinging ±10° under it); ``walk(t)`` the reported position's error (N, E)."""
+    on the course, the airframe's heading swinging ±10° under it); ``walk(t)`` the reported position's slow error
+    (N, E), ``white_m`` its white noise per axis; ``yaw_deg(t)`` the compass's error (default :data:`YAW_DEG`)."""
     rng = np.random.default_rng(seed)
     cam = _camera()
     t = np.arange(0.0, duration_s, 1.0 / rate_hz)
@@ -41,7 +45,7 @@ def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.
     tilt = np.radians(TILT_DEG)
     error = np.column_stack([np.full(t.shape, tilt[0] * np.cos(course) - tilt[1] * np.sin(course)),
                              np.full(t.shape, tilt[0] * np.sin(course) + tilt[1] * np.cos(course)),
-                             np.full(t.shape, np.radians(YAW_DEG))])
+                             np.radians(np.full(t.shape, YAW_DEG) if yaw_deg is None else yaw_deg(t))])
     R_reported = Rotation.from_rotvec(error).as_matrix() @ R_true
     cam_ned = np.column_stack([ne, -height])
     lo, hi = ne.min(axis=0) - 22.0, ne.max(axis=0) + 22.0
@@ -58,6 +62,7 @@ def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.
         vs += list(v[seen] + rng.normal(0.0, 0.3, len(seen)))
     _, feature = np.unique(feature, return_inverse=True)
     error_ne = np.zeros_like(ne) if walk is None else walk(t)
+    error_ne = error_ne + rng.normal(0.0, white_m, error_ne.shape)
     poses = bottom.FramePoses(t, R_reported, ne + error_ne, height, bottom.camera_heading_rad(R_reported),
                               velocity)
     obs = bottom.Observations(np.array(frame), feature, np.array(us), np.array(vs))
@@ -101,3 +106,42 @@ def test_hovering_drone_does_not_claim_the_biases():
     assert est.slide_share < bottom.MIN_SLIDE_SHARE
     assert not est.estimated
     assert "not observable" in est.describe()
+
+
+def test_white_position_noise_is_taken_frame_by_frame():
+    # 3 cm of white noise on each axis of the reported position (a plain receiver's): 2-second knots cannot follow
+    # it; taken as each frame's own offset it leaves the floor and the biases where they are
+    lens, poses, obs, _ = _session(speed_mps=1.2, white_m=0.03)
+    white = bottom.white_noise_m(poses)
+    assert white == pytest.approx(0.03, rel=0.35)  # seen against the reported velocity
+    rate = bottom.Priors(walk_rate_m=0.003)
+    est = bottom.estimate(lens, N_WATER, poses, obs, dataclasses.replace(rate, white_m=white))
+    assert est.floor_depth_m == pytest.approx(FLOOR_M, abs=0.2)
+    assert np.degrees(est.tilt_rad) == pytest.approx(TILT_DEG, abs=0.08)
+    assert np.degrees(est.yaw_rad) == pytest.approx(YAW_DEG, abs=0.5)
+    assert est.rms_px < 0.5
+    # without the frame offsets the same tracks misfit: the noise lands in the residuals
+    blind = bottom.estimate(lens, N_WATER, poses, obs, rate)
+    assert blind.rms_px > est.rms_px + 0.1
+
+
+def test_parts_that_disagree_widen_the_sigmas():
+    lens, poses, obs, _ = _session(speed_mps=1.2)
+    est = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.003), parts=3)
+    assert est.parts.shape == (3, 4) and np.all(np.isfinite(est.parts))
+    assert np.degrees(est.parts[:, 2]) == pytest.approx([YAW_DEG] * 3, abs=0.5)
+    assert np.degrees(est.sigma_yaw_rad) < 0.5 and est.yaw_estimated
+
+    # the compass's error steps by 3° in the last third: the whole's fit alone claims a tight heading; the parts
+    # tell otherwise, and the sigma takes their spread
+    def stepping(t):
+        return np.where(t < 8.0, YAW_DEG, YAW_DEG + 3.0)
+
+    lens, poses, obs, _ = _session(speed_mps=1.2, yaw_deg=stepping)
+    whole = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.003))
+    split = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.003), parts=3)
+    spread = np.std(split.parts[:, 2], ddof=1)
+    assert np.degrees(spread) > 1.0
+    assert np.degrees(whole.sigma_yaw_rad) < 0.5 * np.degrees(spread)
+    assert split.sigma_yaw_rad == pytest.approx(np.hypot(whole.sigma_yaw_rad, spread), rel=1e-6)
+    assert "parts' spread" in split.describe()

@@ -5,9 +5,22 @@ Floor features (:func:`cv2.goodFeaturesToTrack`) are tracked through the video a
 UUV (a disc around its tracked pixel, :func:`uuv_radius_px`); :func:`localizer.bottom.estimate` then finds the
 camera's attitude error, the floor's depth and the position's walk (see there for what is observable).
 
-A fit whose residuals exceed :data:`MAX_RMS_PX` is not applied (a warning says why). The correction
-(:class:`PoseCorrection`) turns every frame's reported attitude back by the estimated error
-(only the parts the bottom told: a hovering drone's are left alone) and moves the reported position by the
+Sunlit shallow water lays caustics over the floor: a web of thin bright lines, focused by the waves, that
+drifts over the floor (centimetres to decimetres a second) and outshines its texture. Tracked as they come, the
+floor points follow the web a little (the simulator's: 0.07 m/s, 2.8 px RMS against the true pose, heading and
+tilt wrong by 0.7° and 0.3°). So the tracker sees the floor's small dark marks only (:func:`floor_marks`: caustics
+only add light, so a grey opening wider than the web removes it and the black top-hat keeps what is darker than
+its surroundings), and each point is matched again against the frame it was found in (:data:`ANCHOR_PX`): a chain
+of frame-to-frame matches adds up any pull of what remains of the web, a match against the first sight does not
+(0.6 px RMS, 0.007 m/s).
+
+The estimate is also made on each third of the recording alone (:data:`PARTS`), and its sigmas widened by
+the thirds' spread (:func:`localizer.bottom.with_parts`). A fit whose residuals exceed :data:`MAX_RMS_PX` is not
+applied (a warning says why); the tilt and the heading are applied each where the bottom told it
+(:attr:`~localizer.bottom.BottomEstimate.tilt_estimated`) and its widened sigma is within what the calibration
+states for it (``[uncertainty] tilt_deg``, ``yaw_deg``: else the bottom does not know it better than the platform).
+The correction (:class:`PoseCorrection`) turns every frame's reported attitude back by the estimated error
+(only the parts applied: a hovering drone's are left alone) and moves the reported position by the
 walk; each fix's accuracy then takes the estimate's 1-sigmas (floored at :data:`MIN_TILT_DEG`,
 :data:`MIN_YAW_DEG`: the AHRS's wander) instead of ``[uncertainty] tilt_deg``, ``yaw_deg``. The walk is
 relative to the GNSS's mean over the recording: its absolute offset stays the GNSS's, and so does the
@@ -42,20 +55,26 @@ RATE_HZ = 5.0  # frames used per second of video
 MAX_FEATURES = 250  # corners tracked at once
 MIN_DISTANCE_PX = 12  # between corners
 BACK_PX = 0.5  # forward-backward track disagreement that drops a corner
+ANCHOR_PX = 2.0  # a point matched against its first sight this far from the chain's match is dropped
+#: bright lines on the floor narrower than this are taken for caustics and removed (:func:`floor_marks`), and the
+#: floor's dark marks smaller than it are what is tracked (m, at the camera's slant range)
+CAUSTIC_WEB_M = 0.2
 BORDER_PX = 8
 MIN_OBSERVATIONS = 3  # a feature seen fewer times says nothing
 MIN_FEATURES = 20  # fewer features: no estimate
+PARTS = 3  # the estimate is also made on each of this many consecutive stretches alone; its sigmas take their spread
 #: a fit worse than this (RMS of the inlying residuals, pixels) is not applied: the floor's image does not stay put
 #: (the simulator's caustics drifting over it: 0.85-1.0 px, against 0.41 without them), and the sigmas, which take
 #: the residuals as white, would claim far more than the estimate knows
 MAX_RMS_PX = 0.6
 VELOCITY_RATE_M = 0.05  # m/√s: the integrated EKF velocity's error, the walk's prior with a velocity
+MIN_WHITE_M = 0.003  # the reported position's white noise (localizer.bottom.white_noise_m) taken at least this
 GNSS_WALK_S = 60.0  # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
 MIN_TILT_DEG = 0.05  # the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
 MIN_YAW_DEG = 0.1
 COLUMNS = ("pose_source", "cam_err_n_deg", "cam_err_e_deg", "cam_err_d_deg", "sigma_tilt_deg", "sigma_yaw_deg",
            "walk_n_m", "walk_e_m")
-_LK = {"winSize": (21, 21), "maxLevel": 4,
+_LK = {"winSize": (31, 31), "maxLevel": 4,
        "criteria": (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 0.01)}
 
 
@@ -68,13 +87,35 @@ def uuv_radius_px(cal: Calibration, pose: CameraPose) -> np.ndarray:
     return np.maximum(20.0, 2.0 * cal.camera.fx * side_m / slant_m)
 
 
-def track_bottom(session: Session, rows: np.ndarray, uuv_u, uuv_v, radius_px, progress: bool = False):
+def web_kernel_px(cal: Calibration, pose: CameraPose) -> int:
+    """:data:`CAUSTIC_WEB_M` in pixels (odd, at least 3) at the median slant range of the optical axis to the water."""
+    axis_down = np.clip(pose.R_ned_from_cv[:, 2, 2], 0.2, 1.0)
+    slant_m = float(np.nanmedian(pose.height_m / axis_down))
+    return max(3, 2 * round(0.5 * cal.camera.fx * CAUSTIC_WEB_M / slant_m) + 1)
+
+
+def floor_marks(grey: np.ndarray, kernel_px: int) -> np.ndarray:
+    """The floor's small dark marks, the caustics taken off (8 bits): a grey opening (the minimum, then the maximum,
+    over a disc ``kernel_px`` across) removes bright structures narrower than the disc (the caustic web: caustics only
+    add light); the black top-hat of that (its closing less itself) keeps what is darker than its surroundings and
+    smaller than the disc (stones, shells, pits; not the broad shading); smoothed (σ 1 px) and stretched (its 99.5th
+    percentile to 255)."""
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kernel_px, kernel_px))
+    opened = cv2.morphologyEx(grey, cv2.MORPH_OPEN, disc)
+    marks = cv2.GaussianBlur(cv2.morphologyEx(opened, cv2.MORPH_BLACKHAT, disc).astype(np.float32), (0, 0), 1.0)
+    top = max(float(np.percentile(marks, 99.5)), 1e-3)
+    return np.clip(marks * (255.0 / top), 0, 255).astype(np.uint8)
+
+
+def track_bottom(session: Session, rows: np.ndarray, uuv_u, uuv_v, radius_px, kernel_px: int, progress: bool = False):
     """Floor feature tracks through the frames at ``rows`` of video_frames.csv: :class:`localizer.bottom.Observations`
-    with ``frame`` indexing ``rows``. ``uuv_u``, ``uuv_v``, ``radius_px`` per row (NaN: the UUV not known there)."""
+    with ``frame`` indexing ``rows``. ``uuv_u``, ``uuv_v``, ``radius_px`` per row (NaN: the UUV not known there);
+    tracked in :func:`floor_marks` of ``kernel_px`` (:func:`web_kernel_px`)."""
     cal = session.calibration
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
     frame, feature, us, vs = [], [], [], []
     prev, points, ids = None, np.zeros((0, 1, 2), np.float32), np.zeros(0, int)
+    first_k, first_xy, images = np.zeros(0, int), np.zeros((0, 1, 2), np.float32), {}  # each point's first sight
     next_id = 0
     bar = progress_bar(len(rows), f"{session.path.name}: bottom features", progress)
     try:
@@ -84,22 +125,29 @@ def track_bottom(session: Session, rows: np.ndarray, uuv_u, uuv_v, radius_px, pr
                 k = wanted.get(vf.index)
                 if k is None:
                     continue
-                grey = vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY)
+                grey = floor_marks(vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY),
+                                   kernel_px)
+                images[k] = grey
                 r = rows[k]
                 if prev is not None and len(points):
                     p1, ok1, _ = cv2.calcOpticalFlowPyrLK(prev, grey, points, None, **_LK)
                     back, ok2, _ = cv2.calcOpticalFlowPyrLK(grey, prev, p1, None, **_LK)
                     good = ((ok1.ravel() == 1) & (ok2.ravel() == 1)
                             & (np.linalg.norm((back - points).reshape(-1, 2), axis=1) < BACK_PX))
-                    points, ids = p1[good], ids[good]
+                    p1, anchored = _match_first_sight(images, first_k, first_xy, grey, p1)
+                    good &= anchored
+                    points, ids, first_k, first_xy = p1[good], ids[good], first_k[good], first_xy[good]
                 xy = points.reshape(-1, 2)
                 keep = _away(xy, cal.camera.width, cal.camera.height, uuv_u[r], uuv_v[r], radius_px[r])
-                points, ids = points[keep], ids[keep]
+                points, ids, first_k, first_xy = points[keep], ids[keep], first_k[keep], first_xy[keep]
                 if len(points) < 0.7 * MAX_FEATURES:
                     new = _corners(grey, points.reshape(-1, 2), uuv_u[r], uuv_v[r], radius_px[r])
-                    points = np.concatenate([points, new.reshape(-1, 1, 2).astype(np.float32)])
+                    new = new.reshape(-1, 1, 2).astype(np.float32)
+                    points, first_xy = np.concatenate([points, new]), np.concatenate([first_xy, new])
+                    first_k = np.concatenate([first_k, np.full(len(new), k)])
                     ids = np.concatenate([ids, np.arange(next_id, next_id + len(new))])
                     next_id += len(new)
+                images = {j: images[j] for j in set(first_k.tolist())}
                 xy = points.reshape(-1, 2)
                 frame += [k] * len(xy)
                 feature += list(ids)
@@ -114,6 +162,19 @@ def track_bottom(session: Session, rows: np.ndarray, uuv_u, uuv_v, radius_px, pr
     seen = counts[feature] >= MIN_OBSERVATIONS if len(feature) else np.zeros(0, bool)
     _, renumbered = np.unique(feature[seen], return_inverse=True)
     return bottom.Observations(frame[seen], renumbered, np.asarray(us)[seen], np.asarray(vs)[seen])
+
+
+def _match_first_sight(images, first_k, first_xy, grey, predicted):
+    """The points (n, 1, 2) matched again in ``grey`` against their first sight (``images[first_k]`` at
+    ``first_xy``), starting from the chain's ``predicted``, and whether each held (found within :data:`ANCHOR_PX`)."""
+    matched, held = predicted.copy(), np.zeros(len(predicted), bool)
+    for k in np.unique(first_k):
+        i = np.flatnonzero(first_k == k)
+        p, ok, _ = cv2.calcOpticalFlowPyrLK(images[k], grey, first_xy[i], predicted[i].copy(), **{**_LK, "maxLevel": 1},
+                                            flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+        held[i] = (ok.ravel() == 1) & (np.linalg.norm((p - predicted[i]).reshape(-1, 2), axis=1) < ANCHOR_PX)
+        matched[i] = p
+    return matched, held
 
 
 def _away(xy, width, height, u, v, radius):
@@ -229,7 +290,7 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
     if len(rows) < 3:
         return "fewer than 3 frames with a pose"
     obs = track_bottom(session, rows, np.asarray(uuv_u, float), np.asarray(uuv_v, float), uuv_radius_px(
-        session.calibration, pose), progress)
+        session.calibration, pose), web_kernel_px(session.calibration, pose), progress)
     n_features = int(obs.feature.max()) + 1 if len(obs.feature) else 0
     if n_features < MIN_FEATURES:
         return f"{n_features} floor features tracked (fewer than {MIN_FEATURES})"
@@ -243,19 +304,30 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
     poses = bottom.FramePoses(pose.t_unix[sub], pose.R_ned_from_cv[sub], camera_ne, pose.height_m[sub], headings,
                               pose.velocity_ned_mps[sub, :2])
     gnss_rate = float(np.nanmedian(pose.sigma_uav_m[sub])) / np.sqrt(GNSS_WALK_S)
-    priors = bottom.Priors(walk_rate_m=min(gnss_rate, VELOCITY_RATE_M))
+    white = bottom.white_noise_m(poses)
+    priors = bottom.Priors(walk_rate_m=min(gnss_rate, VELOCITY_RATE_M),
+                           white_m=0.0 if white is None else max(MIN_WHITE_M, white))
     cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
-    est = bottom.estimate(cam, n_water, poses, obs, priors)
+    est = bottom.estimate(cam, n_water, poses, obs, priors, parts=PARTS)
     if est.rms_px > MAX_RMS_PX:
         return (f"the floor features do not stay put as a static floor would ({est.rms_px:.2f} px RMS, more than "
                 f"{MAX_RMS_PX}: drifting light such as caustics, or a moving bottom); found but not applied: "
                 f"{est.describe()}")
-    if not (est.tilt_estimated and est.yaw_estimated):  # the walk again, with what is not applied held at 0
-        held = dataclasses.replace(priors, tilt_rad=priors.tilt_rad if est.tilt_estimated else 1e-7,
-                                   yaw_rad=priors.yaw_rad if est.yaw_estimated else 1e-7)
+    tilt, yaw = applicable(est, session.calibration)
+    if not (tilt and yaw):  # the walk again, with what is not applied held at 0
+        held = dataclasses.replace(priors, tilt_rad=priors.tilt_rad if tilt else 1e-7,
+                                   yaw_rad=priors.yaw_rad if yaw else 1e-7)
         again = bottom.estimate(cam, n_water, poses, obs, held)
-        est = dataclasses.replace(again, cov_bias=est.cov_bias, priors=est.priors)  # sigmas: the free estimate's
-    return PoseCorrection(est, est.tilt_estimated, est.yaw_estimated, frame_tilt)
+        est = dataclasses.replace(again, cov_bias=est.cov_bias, sigma_floor_depth_m=est.sigma_floor_depth_m,
+                                  priors=est.priors, parts=est.parts)  # sigmas: the free estimate's
+    return PoseCorrection(est, tilt, yaw, frame_tilt)
+
+
+def applicable(est: bottom.BottomEstimate, cal: Calibration) -> tuple[bool, bool]:
+    """Whether the tilt and the heading may be applied: the bottom told each (not the prior) and its sigma (with the
+    parts' spread) is within the calibration's own for it (``[uncertainty] tilt_deg``, ``yaw_deg``)."""
+    return (est.tilt_estimated and np.degrees(est.sigma_tilt_rad) <= cal.sigmas.tilt_deg,
+            est.yaw_estimated and np.degrees(est.sigma_yaw_rad) <= cal.sigmas.yaw_deg)
 
 
 def pixels_at(t_frames, t, u, v):
