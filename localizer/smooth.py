@@ -27,6 +27,7 @@ station-clock UNIX seconds, positions metres (north, east) of the first fix.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from itertools import pairwise
 
@@ -34,7 +35,14 @@ import numpy as np
 
 from .fix import Fixes
 from .geodesy import geodetic_to_ned, ned_to_geodetic
-from .uuv_track import Scatter, UuvTrack, fix_covariance_m2, transition
+from .uuv_track import (
+    SCATTER_MIN,
+    WHITE_FLOOR_M,
+    Scatter,
+    UuvTrack,
+    fix_covariance_m2,
+    transition,
+)
 
 #: A frame without a fix of its own is bridged while the smoothed position's own 1-sigma (its widest axis, the
 #: shared error not included) is within this (m): a tracker's frame-to-frame jitter in waves (3.5–8.7 cm RMS per
@@ -42,6 +50,18 @@ from .uuv_track import Scatter, UuvTrack, fix_covariance_m2, transition
 #: gaps up to about 1.7 s are bridged whole (the fixes on both sides hold the middle), and the first and last
 #: 0.4–0.5 s of a longer one.
 BRIDGE_SIGMA_M = 0.05
+#: The fixes' noise is also measured over a wave's period (:func:`local_fits`): each fix against a quadratic in time
+#: through the fixes within this span (s) around it. Wind waves move a fix by refraction with periods of 0.5–2.5 s
+#: (their apparent jitter at 2–8 m/s of wind, 96–99 % of its power above 0.4 Hz on the generated sessions).
+WAVE_SPAN_S = 2.0
+#: A quadratic is fitted through at least this many fixes (else that fix measures nothing).
+WAVE_MIN_FIXES = 8
+#: The jitter is time-correlated (waves) when the share measured over :data:`WAVE_SPAN_S` is at least this many
+#: times the frame-to-frame one (:func:`white_share`); white noise gives 1 (0.9–1.1 over 4–20 s at 30 fps).
+CORRELATED_RATIO = 2.0
+#: With time-correlated jitter the acceleration bound of the process noise is the data's (:func:`data_accel_mps2`):
+#: the local acceleration with this many of its sigmas.
+ACCEL_SIGMAS = 2.0
 
 
 @dataclass(frozen=True)
@@ -63,7 +83,9 @@ class Smoothed:
     cov_own_m2: np.ndarray  # N×2×2: the smoothed white part
     cov_shared_m2: np.ndarray  # N×2×2: the error the fixes share, which smoothing cannot remove
     gap_s: np.ndarray
-    white_share: float  # s², measured over the recording
+    white_share: float  # s², measured over the recording: frame to frame, or over a wave's period when that is larger
+    wave_share: float  # the share measured over a wave's period (NaN: too few fixes)
+    accel_mps2: np.ndarray  # per frame: the acceleration bound of the process noise over the step to it
 
     @property
     def cov_m2(self) -> np.ndarray:
@@ -88,7 +110,7 @@ def smooth_fixes(fixes: Fixes, taken: np.ndarray, max_speed_mps: float, max_acce
     if not len(idx):
         empty = np.full(n, np.nan)
         return Smoothed(fixes.t_unix, np.zeros(n, bool), empty, empty, empty, empty, empty, empty, nan2, nan2.copy(),
-                        np.full(n, np.inf), 1.0)
+                        np.full(n, np.inf), 1.0, np.nan, np.full(n, float(max_accel_mps2)))
     ref = (float(fixes.lat[idx[0]]), float(fixes.lon[idx[0]]))
     zn, ze, _ = geodetic_to_ned(fixes.lat, fixes.lon, 0.0, *ref, 0.0)
     z = np.stack([zn, ze], axis=1)
@@ -96,16 +118,26 @@ def smooth_fixes(fixes: Fixes, taken: np.ndarray, max_speed_mps: float, max_acce
     for i in idx:
         C[i] = fix_covariance_m2(fixes.sigma_n_m[i], fixes.sigma_e_m[i], fixes.cov_ne_m2[i], fixes.h_acc_m[i])
     share = white_share(fixes.t_unix[idx], z[idx], C[idx])
-    x, P = _rts(fixes.t_unix, z, C, taken, idx[0], idx[-1], share, max_speed_mps, max_accel_mps2)
+    fits = local_fits(fixes.t_unix[idx], z[idx])
+    wave = jitter_share(fits, C[idx])
     gap = _gaps(fixes.t_unix, idx)
+    accel = np.full(n, float(max_accel_mps2))
+    correlated = wave >= CORRELATED_RATIO * share  # the noise does not average from frame to frame: waves' jitter
+    if correlated:
+        share = min(1.0, wave)
+        accel = data_accel_mps2(fixes.t_unix, idx, gap, fits, C[idx], share, max_accel_mps2)
+    x, P = _rts(fixes.t_unix, z, C, taken, idx[0], idx[-1], share, max_speed_mps, accel)
     shared = _shared(C, idx, share)
     own = P[:, :2, :2]
+    if correlated:
+        own = own * _passed_jitter_scale(fixes.t_unix, idx, fits, C, taken, share, max_speed_mps, accel, own)[:, None,
+                                                                                                              None]
     widest = np.array([np.linalg.eigvalsh(p)[-1] if np.all(np.isfinite(p)) else np.inf for p in own])
     ok = taken | (np.isfinite(gap) & (widest <= bridge_sigma_m**2))
     x[~ok], own[~ok], shared[~ok] = np.nan, np.nan, np.nan
     lat, lon, _ = ned_to_geodetic(x[:, 0], x[:, 1], 0.0, *ref, 0.0)
     return Smoothed(fixes.t_unix, ok, np.asarray(lat), np.asarray(lon), x[:, 0], x[:, 1], x[:, 2], x[:, 3], own,
-                    shared, gap, share)
+                    shared, gap, share, wave, accel)
 
 
 def white_share(t: np.ndarray, z: np.ndarray, C: np.ndarray) -> float:
@@ -117,20 +149,112 @@ def white_share(t: np.ndarray, z: np.ndarray, C: np.ndarray) -> float:
     return scatter.share
 
 
+@dataclass(frozen=True)
+class LocalFits:
+    """Per fix, a quadratic in time (least squares, each axis) through the fixes within half of :data:`WAVE_SPAN_S`
+    of it, itself included; NaN where fewer than :data:`WAVE_MIN_FIXES`."""
+
+    resid_m: np.ndarray  # N×2: the fix minus the quadratic at its time
+    leverage: np.ndarray  # N: the quadratic's weight on its own fix (the residual's variance: 1 − this of the noise's)
+    accel_mps2: np.ndarray  # N×2: the quadratic's acceleration (twice its second-order coefficient)
+    accel_gain: np.ndarray  # N: the acceleration's variance per unit variance of the noise on one axis
+
+
+def local_fits(t: np.ndarray, z: np.ndarray, span_s: float = WAVE_SPAN_S) -> LocalFits:
+    """:class:`LocalFits` of fixes at times ``t`` (s, increasing) and positions ``z`` (N×2, m)."""
+    n = len(t)
+    resid, accel = np.full((n, 2), np.nan), np.full((n, 2), np.nan)
+    leverage, gain = np.full(n, np.nan), np.full(n, np.nan)
+    lo = np.searchsorted(t, t - span_s / 2.0, side="left")
+    hi = np.searchsorted(t, t + span_s / 2.0, side="right")
+    for k in np.flatnonzero(hi - lo >= WAVE_MIN_FIXES):
+        dt = t[lo[k]:hi[k]] - t[k]
+        X = np.column_stack([np.ones_like(dt), dt, dt * dt])
+        inv = np.linalg.inv(X.T @ X)
+        coef = inv @ (X.T @ z[lo[k]:hi[k]])  # at its own time (dt = 0) the quadratic is its constant term
+        resid[k], leverage[k] = z[k] - coef[0], inv[0, 0]
+        accel[k], gain[k] = 2.0 * coef[2], 4.0 * inv[2, 2]
+    return LocalFits(resid, leverage, accel, gain)
+
+
+def jitter_share(fits: LocalFits, C: np.ndarray) -> float:
+    """The share of the fixes' covariances ``C`` (N×2×2) that their residuals about the local quadratics show, as
+    :class:`~localizer.uuv_track.Scatter` measures the frame-to-frame one (``q = rᵀ C⁻¹ r / (1 − h)``, a chi-square
+    with 2 degrees of freedom per unit share, the floor added to ``C``), but from their median (``2 ln 2`` per unit
+    share): a manoeuvre the quadratics cannot follow is not jitter; NaN from fewer than
+    :data:`~localizer.uuv_track.SCATTER_MIN` fixes."""
+    ok = np.isfinite(fits.leverage)
+    if ok.sum() < SCATTER_MIN:
+        return float("nan")
+    r, Cn = fits.resid_m[ok], C[ok] + np.eye(2) * WHITE_FLOOR_M**2
+    q = np.einsum("ki,ki->k", r, np.linalg.solve(Cn, r[..., None])[..., 0]) / (1.0 - fits.leverage[ok])
+    return float(np.median(q)) / (2.0 * math.log(2.0))
+
+
+def data_accel_mps2(t: np.ndarray, idx: np.ndarray, gap_s: np.ndarray, fits: LocalFits, C: np.ndarray,
+                    share: float, max_accel_mps2: float) -> np.ndarray:
+    """Per frame of ``t`` (the fixes taken at ``idx``, with their :class:`LocalFits` and covariances ``C``), the
+    acceleration bound the data give, in place of the vehicle's ``max_accel_mps2`` (at most that).
+
+    At a fix: the largest acceleration the local quadratics find within half of :data:`WAVE_SPAN_S` of it, each
+    with :data:`ACCEL_SIGMAS` of its own sigma (the noise ``share·C`` through the fit). A frame without a fix of
+    its own takes the larger of the fixes around it when they are within the span, else (a longer gap: the UUV
+    unseen, it may have done anything) the vehicle's bound; so does a fix without a quadratic of its own, and
+    every frame before the first fix or after the last.
+    """
+    noise_m2 = np.trace(share * C + np.eye(2) * WHITE_FLOOR_M**2, axis1=1, axis2=2)
+    seen = np.hypot(*fits.accel_mps2.T) + ACCEL_SIGMAS * np.sqrt(fits.accel_gain * noise_m2)
+    seen = np.where(np.isfinite(seen), seen, np.inf)
+    ti = t[idx]
+    lo = np.searchsorted(ti, ti - WAVE_SPAN_S / 2.0, side="left")
+    hi = np.searchsorted(ti, ti + WAVE_SPAN_S / 2.0, side="right")
+    level = np.array([seen[a:b].max() for a, b in zip(lo, hi)])
+    per_frame = np.full(len(t), np.inf)
+    per_frame[idx] = level
+    for (a, b), la, lb in zip(pairwise(idx), level[:-1], level[1:]):
+        if b > a + 1 and t[b] - t[a] <= WAVE_SPAN_S:
+            per_frame[a + 1:b] = max(la, lb)
+    per_frame[~np.isfinite(gap_s)] = np.inf
+    return np.minimum(per_frame, max_accel_mps2)
+
+
+def _passed_jitter_scale(t, idx, fits: LocalFits, C, taken, share: float, max_speed_mps: float, accel_mps2,
+                         own_m2: np.ndarray) -> np.ndarray:
+    """Per frame, the factor (at least 1) that makes the smoothed track's own covariance ``own_m2`` cover the jitter
+    the smoother lets through: the fixes' residuals about their local quadratics (the jitter, time-correlated as it
+    is) smoothed as the fixes were, their mean square over :data:`WAVE_SPAN_S` around the frame. The model's own
+    covariance takes the noise as white, which a wave's jitter is not: where the data's acceleration is high (a
+    manoeuvre) the smoother follows some of it."""
+    resid = np.zeros((len(t), 2))
+    resid[idx] = np.nan_to_num(fits.resid_m)
+    through, _ = _rts(t, resid, C, taken, idx[0], idx[-1], share, max_speed_mps, accel_mps2)
+    sq = np.where(np.isfinite(through[:, 0]), np.sum(through[:, :2] ** 2, axis=1), 0.0)
+    counted = np.cumsum(np.r_[0, np.isfinite(through[:, 0])])
+    summed = np.cumsum(np.r_[0.0, sq])
+    lo = np.searchsorted(t, t - WAVE_SPAN_S / 2.0, side="left")
+    hi = np.searchsorted(t, t + WAVE_SPAN_S / 2.0, side="right")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        passed = (summed[hi] - summed[lo]) / (counted[hi] - counted[lo])
+        scale = passed / np.trace(own_m2, axis1=1, axis2=2)
+    return np.where(np.isfinite(scale), np.maximum(1.0, scale), 1.0)
+
+
 def _rts(t, z, C, taken, first: int, last: int, share: float, max_speed_mps: float,
-         max_accel_mps2: float) -> tuple[np.ndarray, np.ndarray]:
-    """Smoothed states (N×4) and covariances (N×4×4) from frame ``first`` to ``last`` (NaN outside)."""
+         accel_mps2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smoothed states (N×4) and covariances (N×4×4) from frame ``first`` to ``last`` (NaN outside); ``accel_mps2``:
+    per frame, the acceleration bound over the step to it."""
     n = len(t)
     xf, Pf = np.full((n, 4), np.nan), np.full((n, 4, 4), np.nan)
     xp, Pp = xf.copy(), Pf.copy()
-    track = UuvTrack(max_speed_mps, max_accel_mps2, float(t[first]), z[first], C[first], share)
+    track = UuvTrack(max_speed_mps, float(np.max(accel_mps2)), float(t[first]), z[first], C[first], share)
     xf[first], Pf[first] = track.x, track.P
     for k in range(first + 1, last + 1):
-        xp[k], Pp[k] = track.predict(float(t[k]))
+        a = float(accel_mps2[k])
+        xp[k], Pp[k] = track.predict(float(t[k]), a)
         if taken[k]:
-            track.update(float(t[k]), z[k], C[k], share)
+            track.update(float(t[k]), z[k], C[k], share, a)
         else:
-            track.coast(float(t[k]))
+            track.coast(float(t[k]), a)
         xf[k], Pf[k] = track.x, track.P
     xs, Ps = xf.copy(), Pf.copy()
     for k in range(last - 1, first - 1, -1):

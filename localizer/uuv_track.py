@@ -174,9 +174,9 @@ class UuvTrack:
         F = transition(dt)
         return F @ self.x, F @ self.P @ F.T + _process_noise(a, dt)
 
-    def coast(self, t: float) -> None:
-        """Move on to ``t`` without a fix (the prediction becomes the state)."""
-        self.x, self.P = self.predict(t)
+    def coast(self, t: float, accel_mps2: float | None = None) -> None:
+        """Move on to ``t`` without a fix (the prediction becomes the state; ``accel_mps2`` as in :meth:`predict`)."""
+        self.x, self.P = self.predict(t, accel_mps2)
         self.t = max(self.t, t)
 
     def update(self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None) -> None:

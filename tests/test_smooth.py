@@ -165,6 +165,67 @@ def test_fixes_off_the_track_are_refused_offline_and_bridged_over():
     assert sm.ok[~away].all() and np.all(sm.gap_s[~away] == 0)  # the first second confirmed by those after it
 
 
+def jitter(t, seed: int, amp_m: float = 0.015, white_m: float = 0.005, hz: float = 1.0) -> np.ndarray:
+    """A wave's jitter: a 1 Hz oscillation of ``amp_m`` on each axis (random phases) plus white noise."""
+    rng = np.random.default_rng(seed)
+    phase = rng.uniform(0.0, 2.0 * math.pi, 2)
+    wave = amp_m * np.sin(2.0 * math.pi * hz * (t - t[0])[:, None] + phase)
+    return wave + rng.normal(0.0, white_m, wave.shape)
+
+
+@pytest.mark.parametrize("seed", [6, 7])
+def test_a_waves_jitter_is_averaged_over_its_period_and_covered(seed):
+    """A 1 Hz oscillation of 1.5 cm and 0.5 cm of white noise under a claim of 1.2 cm per axis: the frame-to-frame
+    share misses it, the share over a wave's period finds it, and the data's acceleration (far below the vehicle's
+    bound) lets the smoother average it; the smoothed claim still covers the error."""
+    t, truth, _ = line(20.0, seed, 0.0)
+    z = truth + jitter(t, seed)
+    sm = smooth_fixes(fixes_of(t, z[:, 0], z[:, 1], 0.012), np.ones(len(t), bool), V, A)
+    err = local(sm.lat, sm.lon) - truth
+    rms_raw = math.sqrt(np.mean(np.sum((z - truth) ** 2, axis=1)))
+    rms = math.sqrt(np.mean(np.sum(err**2, axis=1)))
+    assert rms < 0.25 * rms_raw  # 0.0015-0.0021 m against 0.0166 m (the vehicle's bound as the process noise: 0.006)
+    assert 0.7 < sm.wave_share < 1.2 and sm.white_share == min(1.0, sm.wave_share)  # (1.17 / 1.2)^2 = 0.95
+    assert np.median(sm.accel_mps2) < 0.1 * A
+    assert np.mean(np.hypot(*err.T) <= 2.0 * sm.h_acc_m) > 0.95
+
+
+def test_white_noise_keeps_the_vehicles_bound():
+    t, _, z = line(10.0, 8, 0.02)
+    sm = smooth_fixes(fixes_of(t, z[:, 0], z[:, 1], 0.02), np.ones(len(t), bool), V, A)
+    assert sm.wave_share < 2.0 * sm.white_share and np.all(sm.accel_mps2 == A)
+
+
+def u_turn(v_mps: float, a_mps2: float, seconds: float = 12.0, straight_s: float = 4.0):
+    """Straight at ``v_mps``, a U-turn at the acceleration ``a_mps2`` (radius v²/a), straight back: times, truth
+    (N×2) and the turn's frames."""
+    t = 1.7e9 + np.arange(int(seconds * FPS)) / FPS
+    s = t - t[0]
+    r = v_mps**2 / a_mps2
+    turn_s = math.pi * r / v_mps
+    angle = np.clip((s - straight_s) / turn_s, 0.0, 1.0) * math.pi
+    n = np.where(s < straight_s, v_mps * s, v_mps * straight_s + r * np.sin(angle))
+    n = np.where(s > straight_s + turn_s, v_mps * straight_s - v_mps * (s - straight_s - turn_s), n)
+    e = r - r * np.cos(angle)
+    return t, np.column_stack([n, e]), (s >= straight_s) & (s <= straight_s + turn_s)
+
+
+@pytest.mark.parametrize(("v_mps", "seed"), [(1.0, 9), (1.5, 10)])
+def test_a_turn_at_the_vehicles_acceleration_is_followed_through_the_jitter(v_mps, seed):
+    """A U-turn at the BlueROV2's 3 m/s² (0.33-0.75 m radius) under the same jitter: the data's acceleration rises to
+    it around the turn, the smoothed track follows (its mean error there millimetres, its largest the jitter's)."""
+    t, truth, turn = u_turn(v_mps, A)
+    z = truth + jitter(t, seed)
+    sm = smooth_fixes(fixes_of(t, z[:, 0], z[:, 1], 0.012), np.ones(len(t), bool), V, A)
+    err = local(sm.lat, sm.lon) - truth
+    near = np.convolve(turn, np.ones(31), mode="same") > 0  # the turn and half a second either side
+    assert np.median(sm.accel_mps2[turn]) > 0.4 * A > np.median(sm.accel_mps2[~near])
+    assert np.hypot(*err[near].mean(axis=0)) < 0.01
+    assert np.hypot(*err[near].T).max() < 0.04
+    assert math.sqrt(np.mean(np.sum(err**2, axis=1))) < 0.6 * math.sqrt(np.mean(np.sum((z - truth) ** 2, axis=1)))
+    assert np.mean(np.hypot(*err[near].T) <= 2.0 * sm.h_acc_m[near]) > 0.95
+
+
 @pytest.fixture(scope="module")
 def occlusion():
     session = load_session(BUNDLED_DIR / "occlusion")

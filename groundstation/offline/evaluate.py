@@ -9,7 +9,15 @@ the shape's MAE (``shape``: the MAE once the best constant offset is taken out, 
 geometric median of the error vectors: what a track's form is worth when its place is
 off by a bias); coverage = frames with a fix / frames; ``in 2σ`` = share of fixes whose
 error is within twice their reported ``h_acc_m``; and the same (``smoothed_*``) for the
-smoothed offline track (:mod:`groundstation.offline.smoothed`). Writes, per session,
+smoothed offline track (:mod:`groundstation.offline.smoothed`). Then ``visible_coverage``:
+the share of the frames where the UUV can be seen (track.csv has its pixel) that have a fix;
+and, for a generated session with wind waves (``truth_waves.csv``), ``wave_mae_m``: the
+scene's waves' own error (the mean length of ``(wave_dn_m, wave_de_m)``: the true pixel's ray
+through a flat surface against the truth, the telemetry exact), and what the session's
+telemetry allows: ``allowed_mae_m``, ``allowed_shape_m``, the flat-surface solution of the
+true pixel (track.csv) with the telemetry as the session reports it (what ``--use-track``
+scores), and this row's MAE and shape over them (``mae_ratio``, ``shape_ratio``: 1 with
+``--use-track``; the tracker's pixels against the true ones otherwise). Writes, per session,
 ``DIR/<session>/<method>/positions.csv`` and ``positions_smoothed.csv``, the plots of :mod:`groundstation.offline.plots`
 (``top_view.png``, ``timeline.png``, ``status.png``: both methods against the truth),
 and ``DIR/evaluation.csv``. A session of several UUVs is scored once per UUV against that UUV's own truth
@@ -40,7 +48,14 @@ from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
 from groundstation.offline.smoothed import offline_track, write_smoothed_csv
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
-from groundstation.session.read import PRIMARY_UUV, SessionError, load_session, uuv_files, uuv_ids
+from groundstation.session.read import (
+    PRIMARY_UUV,
+    SessionError,
+    load_session,
+    read_table,
+    uuv_files,
+    uuv_ids,
+)
 from localizer.calibration import ConfigError
 from localizer.fix import Fixes
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
@@ -69,11 +84,22 @@ class Scores:
     smoothed_mae_m: float = float("nan")
     smoothed_shape_m: float = float("nan")
     smoothed_within_2sigma: float = float("nan")
+    visible_coverage: float = float("nan")
+    wave_mae_m: float = float("nan")
+    allowed_mae_m: float = float("nan")
+    allowed_shape_m: float = float("nan")
+    mae_ratio: float = float("nan")
+    shape_ratio: float = float("nan")
 
     def with_smoothed(self, sm: Scores) -> Scores:
         """These scores with ``sm``'s (the smoothed track's) as ``smoothed_*``."""
         return replace(self, smoothed_fixes=sm.fixes, smoothed_coverage=sm.coverage, smoothed_mae_m=sm.mae_m,
                        smoothed_shape_m=sm.shape_m, smoothed_within_2sigma=sm.within_2sigma)
+
+    def with_allowed(self, allowed: Scores) -> Scores:
+        """These scores with what the telemetry allows (``allowed``: the true pixel's scores) and the ratios."""
+        return replace(self, allowed_mae_m=allowed.mae_m, allowed_shape_m=allowed.shape_m,
+                       mae_ratio=self.mae_m / allowed.mae_m, shape_ratio=self.shape_m / allowed.shape_m)
 
 
 def truth_at(truth: dict, t_unix) -> tuple[np.ndarray, np.ndarray]:
@@ -138,7 +164,7 @@ def score(err_m: np.ndarray, h_acc_m: np.ndarray, frames: int, err_ne_m: np.ndar
 
 
 HEADER = ("session", "method", "fixes", "coverage", "MAE m", "shape m", "RMSE m", "p95 m", "max m", "in 2σ",
-          "smoothed", "MAE m", "shape m", "in 2σ")
+          "smoothed", "MAE m", "shape m", "in 2σ", "visible", "waves m", "allowed", "shape m", "×MAE", "×shape")
 
 
 def table_rows(results: list[tuple[str, str, Scores]]) -> list[tuple[str, ...]]:
@@ -147,9 +173,15 @@ def table_rows(results: list[tuple[str, str, Scores]]) -> list[tuple[str, ...]]:
         (name, method, f"{s.fixes}/{s.frames}", f"{s.coverage:.1%}", f"{s.mae_m:.4f}", f"{s.shape_m:.4f}",
          f"{s.rmse_m:.4f}", f"{s.p95_m:.4f}", f"{s.max_m:.4f}", f"{s.within_2sigma:.1%}",
          f"{s.smoothed_fixes}/{s.frames}", f"{s.smoothed_mae_m:.4f}", f"{s.smoothed_shape_m:.4f}",
-         f"{s.smoothed_within_2sigma:.1%}")
+         f"{s.smoothed_within_2sigma:.1%}", _cell(s.visible_coverage, "{:.1%}"), _cell(s.wave_mae_m, "{:.4f}"),
+         _cell(s.allowed_mae_m, "{:.4f}"), _cell(s.allowed_shape_m, "{:.4f}"), _cell(s.mae_ratio, "{:.2f}"),
+         _cell(s.shape_ratio, "{:.2f}"))
         for name, method, s in results
     ]
+
+
+def _cell(value: float, form: str) -> str:
+    return form.format(value) if np.isfinite(value) else "-"
 
 
 def format_table(results: list[tuple[str, str, Scores]]) -> str:
@@ -194,6 +226,9 @@ def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: s
         print(f"{name}: {size.summary()}", file=sys.stderr)
     frames = len(session.frames["t"]) if session.frames is not None else None
     sess_dir = out_dir / name
+    waves_path = uuv_files(session.path, session.uuv_id).truth_waves
+    waves = wave_mae_m(waves_path)
+    allowed = None if use_track or not waves_path.is_file() else load_session(session.path, session.uuv_id)
     runs, results = {}, []
     for method, refraction in METHODS:
         fixes = locate_frames(session, pixels, refraction)
@@ -207,11 +242,50 @@ def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: s
         write_smoothed_csv(sess_dir / method / SMOOTHED_NAME, fixes, smoothed, status)
         sm_ne = error_ne_m(fixes.t_unix, smoothed.lat, smoothed.lon, smoothed.ok, session.truth)
         n = frames or len(fixes)
-        results.append((name, method, score(err, fixes.h_acc_m, n, err_ne).with_smoothed(
-            score(np.hypot(*sm_ne.T), smoothed.h_acc_m, n, sm_ne))))
+        s = replace(score(err, fixes.h_acc_m, n, err_ne).with_smoothed(
+            score(np.hypot(*sm_ne.T), smoothed.h_acc_m, n, sm_ne)),
+            visible_coverage=visible_coverage(fixes, session.track), wave_mae_m=waves)
+        if np.isfinite(waves):
+            s = s.with_allowed(s if allowed is None else true_pixel_scores(allowed, refraction, n))
+        results.append((name, method, s))
     write_plots(sess_dir, name, {m: f for m, (f, _) in runs.items()}, session.truth,
                 {m: e for m, (_, e) in runs.items()})
     return results
+
+
+def visible_coverage(fixes: Fixes, track: dict | None) -> float:
+    """The share of the frames where the UUV can be seen (track.csv has its pixel) that have an ok fix (the fix
+    nearest each such frame's time, within half a frame); NaN without track.csv or a frame it is seen in."""
+    if track is None or len(fixes) < 2:
+        return float("nan")
+    seen_t = track["t"][np.isfinite(track["u"])]
+    if not len(seen_t):
+        return float("nan")
+    t = fixes.t_unix
+    j = np.clip(np.searchsorted(t, seen_t), 1, len(t) - 1)
+    j = np.where(np.abs(t[j - 1] - seen_t) <= np.abs(t[j] - seen_t), j - 1, j)
+    near = np.abs(t[j] - seen_t) <= 0.5 * float(np.median(np.diff(t)))
+    return float(np.mean(near & (fixes.status[j] == "ok")))
+
+
+def wave_mae_m(path: Path) -> float:
+    """The scene's waves' own error (m): the mean length of ``truth_waves.csv``'s ``(wave_dn_m, wave_de_m)`` over
+    the frames that have one; NaN without the file (no waves)."""
+    if not path.is_file():
+        return float("nan")
+    w = read_table(path, ("t", "wave_dn_m", "wave_de_m"), allow_empty=("wave_dn_m", "wave_de_m"))
+    d = np.hypot(w["wave_dn_m"], w["wave_de_m"])
+    d = d[np.isfinite(d)]
+    return float(np.mean(d)) if len(d) else float("nan")
+
+
+def true_pixel_scores(session, refraction: bool, frames: int) -> Scores:
+    """What the session's telemetry allows: the scores of the true pixel (track.csv) located with the telemetry as
+    the session reports it, as ``--use-track`` locates it (``session``: loaded afresh, none of a tracked run's
+    alignment; its warnings are the tracked run's and are not printed again)."""
+    fixes = locate_frames(session, frame_pixels(session, True), refraction)
+    err_ne = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, fixes.status == "ok", session.truth)
+    return score(np.hypot(*err_ne.T), fixes.h_acc_m, frames, err_ne)
 
 
 def write_table_csv(path: Path, results: list[tuple[str, str, Scores]]) -> None:

@@ -63,8 +63,10 @@ def _cell(value, digits: int | None) -> str:
 
 
 def summary(status: np.ndarray, smoothed: Smoothed) -> str:
-    """One line: how many frames have a smoothed position, how many of them bridged, the white share."""
+    """One line: how many frames have a smoothed position, how many of them bridged, the noise's share of the fixes'
+    covariance (frame to frame, or over a wave's period) and the acceleration bound (median over the frames)."""
     bridged = int(np.sum(smoothed.ok & (smoothed.gap_s > 0)))
     return (f"smoothed: {int(smoothed.ok.sum())} of {len(status)} frames ({bridged} bridged), "
-            f"{int(np.sum(status == 'refused'))} fixes refused; frame-to-frame share of the fixes' covariance "
-            f"{smoothed.white_share:.3f}")
+            f"{int(np.sum(status == 'refused'))} fixes refused; noise's share of the fixes' covariance "
+            f"{smoothed.white_share:.3f} (over a wave's period {smoothed.wave_share:.3f}), acceleration bound "
+            f"{float(np.median(smoothed.accel_mps2[smoothed.ok])) if smoothed.ok.any() else float('nan'):.2f} m/s²")

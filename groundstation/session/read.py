@@ -59,6 +59,11 @@ class UuvFiles:
     def track(self) -> Path:
         return self.folder / "track.csv"
 
+    @property
+    def truth_waves(self) -> Path:
+        """A generated session's waves' own error (``skyfix sim`` with ``[waves]``: ``t,wave_dn_m,wave_de_m``)."""
+        return self.folder / "truth_waves.csv"
+
 
 def uuv_ids(path) -> tuple[str, ...]:
     """The ids of a session's UUVs: :data:`PRIMARY_UUV` first, then the folders of ``uuvs/`` by name."""
