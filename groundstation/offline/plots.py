@@ -34,7 +34,7 @@ CAUSES = {
     "telemetry": ("#7f7f7f", ("no_attitude", "stale_attitude", "no_position", "stale_position", "no_gimbal",
                               "stale_gimbal", "no_depth", "stale_depth", "bad_time")),
     "geometry": ("#ff7f0e", ("bad_pixel", "no_water", "below_surface")),
-    "fusion": ("#17becf", ("disagree",)),
+    "fusion": ("#17becf", ("disagree", "off_track")),
     "gates": ("#e377c2", ("refused",)),
 }
 OK_COLOUR = "#2ca02c"
