@@ -1,0 +1,176 @@
+"""The tracker through rendered wind waves (issue 28): wind 2-8 m/s, depth 1-3.4 m, the UUV ~15-35 px.
+
+    .venv/bin/python bench/tracker_waves.py [--work /tmp/skyfix-tracker-waves] [--tree LABEL=DIR ...]
+                                            [--only NAME ...] [--out bench/results/tracker_waves.txt]
+
+Each condition is a waves scenario (``sim_fixtures/scenarios/waves_*.toml``: its camera, drone, glint, caustics and
+downlink without B-frames) with the UUV at another depth and the camera's field of view set so the UUV spans about
+the size asked (measured once on a 3-frame render, the field of view scaled by the ratio); the UUV is hidden from
+5.0 to 6.5 s (``occlusions``). Sessions are generated once into ``--work`` (reused when there) by the simulator of
+the last ``--tree`` (an older reader may refuse a newer simulator's keys).
+
+The video is tracked as ``skyfix process`` does (:func:`groundstation.offline.track.track_session`) in a child process
+from this tree and from each ``--tree`` (e.g. ``git archive <commit> | tar -x -C DIR``: the tracker before, in the
+same run). Per condition and tree: the share of the frames where the UUV is visible (``track.csv`` has a pixel)
+located, the pixel error's median and maximum against ``track.csv`` (the UUV's reference point seen through the
+waves), wrong locks (located further than 3 x the UUV's size from it), hidden frames reported ``ok``, and the
+tracker's milliseconds per frame.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from emit import emit
+
+from groundstation.session.read import read_table
+
+SCENARIOS = ROOT / "sim_fixtures" / "scenarios"
+#: (name, base scenario, UUV size asked (px), depth of its top face (m)): each wind at three sizes and depths.
+CONDITIONS = (
+    ("w2_15px_1.0m", "waves_2mps_nadir", 15, 1.0),
+    ("w2_25px_2.0m", "waves_2mps_nadir", 25, 2.0),
+    ("w2_35px_3.4m", "waves_2mps_nadir", 35, 3.4),
+    ("w5_15px_2.0m", "waves_5mps_oblique", 15, 2.0),
+    ("w5_25px_3.4m", "waves_5mps_oblique", 25, 3.4),
+    ("w5_35px_1.0m", "waves_5mps_oblique", 35, 1.0),
+    ("w8_15px_3.4m", "waves_8mps_oblique", 15, 3.4),
+    ("w8_25px_1.0m", "waves_8mps_oblique", 25, 1.0),
+    ("w8_35px_2.0m", "waves_8mps_oblique", 35, 2.0),
+)
+OCCLUSION_S = (5.0, 6.5)
+DEPTH_SWING_M = 0.2
+WRONG_LOCK_SIZES = 3.0  # a located pixel further than this many UUV sizes from the truth is a wrong lock
+BOX_PAD_PX = 3  # the generator grows the UUV's first box by this on each side (sim_fixtures.generate._first_box)
+
+#: The child: track a session as ``skyfix process`` does; JSON per frame on stdout.
+TRACK = """\
+import json, sys
+from groundstation.offline.track import track_session
+from groundstation.session.read import load_session
+r = track_session(load_session(sys.argv[1]))
+print(json.dumps({"status": list(r.status), "u": [None if x != x else x for x in r.u.tolist()],
+                  "v": [None if x != x else x for x in r.v.tolist()], "track_s": r.timings_s["track"]}))
+"""
+#: The child: generate a session from a scenario given as JSON.
+GENERATE = """\
+import json, sys
+from sim_fixtures.generate import generate
+from sim_fixtures.scenario import scenario_from_dict
+generate(scenario_from_dict(json.loads(sys.argv[1])), sys.argv[2])
+"""
+
+
+def scenario_dict(name: str, base: str, depth_m: float, hfov_deg: float | None, duration_s: float) -> dict:
+    """The base scenario with the UUV at ``depth_m``, the field of view (None: the base's), the occlusion."""
+    data = tomllib.loads((SCENARIOS / f"{base}.toml").read_text())
+    data.update(name=name, duration_s=duration_s, occlusions=[list(OCCLUSION_S)] if duration_s > OCCLUSION_S[1] else [])
+    data["uuv"] = dict(data.get("uuv", {}), depth_m=depth_m, depth_swing_m=DEPTH_SWING_M)
+    if hfov_deg is not None:
+        data["camera"] = dict(data["camera"], hfov_deg=hfov_deg)
+    return data
+
+
+def first_size_px(path: Path) -> int:
+    """The UUV's size in the first frame (px): the longer side of its rendered box (session.toml's init_bbox)."""
+    box = tomllib.loads((path / "session.toml").read_text())["tracker"]["init_bbox"]
+    return max(box[2], box[3]) - 2 * BOX_PAD_PX
+
+
+def render(tree: Path, data: dict, out: Path) -> None:
+    """Generate the session of scenario ``data`` into ``out`` with the simulator of source ``tree`` (the oldest
+    tree compared: a newer simulator may write keys an older reader refuses)."""
+    done = subprocess.run([sys.executable, "-c", GENERATE, json.dumps(data), str(out)], cwd=tree, capture_output=True,
+                          text=True, env=dict(os.environ, PYTHONPATH=str(tree)), check=False)
+    if done.returncode:
+        raise RuntimeError(f"generating {out} from {tree}: {done.stderr.strip().splitlines()[-1:]}")
+
+
+def condition(work: Path, sim: Path, name: str, base: str, size_px: float, depth_m: float, duration_s: float) -> Path:
+    """The condition's session in ``work`` (generated once by the simulator of ``sim``): the field of view scaled
+    from a 3-frame render so the UUV spans about ``size_px``."""
+    out = work / name
+    if (out / "video.mp4").is_file():
+        return out
+    probe = scenario_dict(name, base, depth_m, None, 0.1)
+    render(sim, probe, work / "probe" / name)
+    half = math.radians(probe["camera"]["hfov_deg"]) / 2.0
+    hfov = 2.0 * math.degrees(math.atan(math.tan(half) * first_size_px(work / "probe" / name) / size_px))
+    data = scenario_dict(name, base, depth_m, round(hfov, 2), duration_s)
+    print(f"{name}: rendering (hfov {hfov:.1f} deg) ...", flush=True)
+    render(sim, data, out)
+    return out
+
+
+def track(tree: Path, session: Path) -> dict:
+    """The child's per-frame tracking of ``session`` from source ``tree``."""
+    done = subprocess.run([sys.executable, "-c", TRACK, str(session)], cwd=tree, capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=str(tree)), check=False)
+    if done.returncode:
+        raise RuntimeError(f"tracking {session} from {tree}: {done.stderr.strip().splitlines()[-1:]}")
+    return json.loads(done.stdout)
+
+
+def score(session: Path, tracked: dict) -> dict:
+    """Located share of visible frames, pixel error median/max, wrong locks, hidden frames ok, ms per frame."""
+    truth = read_table(session / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    visible = np.isfinite(truth["u"])
+    ok = np.array([s == "ok" for s in tracked["status"]])
+    u, v = (np.array([math.nan if x is None else x for x in tracked[c]]) for c in ("u", "v"))
+    err = np.hypot(u - truth["u"], v - truth["v"])
+    size = first_size_px(session)
+    seen = ok & visible
+    return {"size_px": size, "visible": int(visible.sum()), "located": int(seen.sum()),
+            "share": float(seen.sum() / max(visible.sum(), 1)),
+            "median_px": float(np.median(err[seen])) if seen.any() else math.nan,
+            "max_px": float(np.max(err[seen])) if seen.any() else math.nan,
+            "wrong": int(np.sum(seen & (err > WRONG_LOCK_SIZES * size))),
+            "hidden_ok": int(np.sum(ok & ~visible)), "hidden": int((~visible).sum()),
+            "ms": 1000.0 * tracked["track_s"] / len(ok)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", default="/tmp/skyfix-tracker-waves")
+    ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
+                    help="also track with this source tree (the tracker before)")
+    ap.add_argument("--only", nargs="*", help="condition names")
+    ap.add_argument("--duration", type=float, default=10.0, help="seconds of each session")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "tracker_waves.txt"))
+    args = ap.parse_args()
+    work = Path(args.work)
+    trees = {"now": ROOT} | {label: Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)}
+    sim = list(trees.values())[-1]
+    header = (f"{'condition':14s} {'size':>4s} {'tree':>8s} {'located':>13s} {'share':>6s} {'med px':>6s} "
+              f"{'max px':>6s} {'wrong':>5s} {'hidden ok':>9s} {'ms/fr':>6s}")
+    lines, data = [header], {}
+    print(header, flush=True)
+    for name, base, size_px, depth_m in CONDITIONS:
+        if args.only and name not in args.only:
+            continue
+        session = condition(work, sim, name, base, size_px, depth_m, args.duration)
+        for label, tree in trees.items():
+            r = score(session, track(tree, session))
+            data.setdefault(name, {})[label] = r
+            lines.append(f"{name:14s} {r['size_px']:4d} {label:>8s} {r['located']:5d} of {r['visible']:4d} "
+                         f"{r['share']:6.1%} {r['median_px']:6.2f} {r['max_px']:6.1f} {r['wrong']:5d} "
+                         f"{r['hidden_ok']:4d} of {r['hidden']:2d} {r['ms']:6.1f}")
+            print(lines[-1], flush=True)
+    emit(lines, Path(args.out), data)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
