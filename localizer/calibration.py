@@ -97,8 +97,11 @@ class Sigmas:
 
     pixel_px: NonNegative = Field(2.0, description="tracker error in the image: a template tracker on a vehicle "
                                   "30-100 px long")
-    tilt_deg: NonNegative = Field(0.5, description="camera roll/pitch: a consumer gimbal's IMU with the autopilot's AHRS")
-    yaw_deg: NonNegative = Field(1.5, description="camera heading: a calibrated compass away from magnetic interference")
+    tilt_deg: NonNegative = Field(0.5, description="camera roll/pitch, each axis: mostly a bias that does not average "
+                                  "out over a flight, a stabilised gimbal's levelling error (its own IMU), or with a "
+                                  "servo mount or a fixed camera the AHRS's tilt (0.2-0.4 typical), with their wander")
+    yaw_deg: NonNegative = Field(1.5, description="camera heading: the compass's bias (1-2.5 typical; a calibrated "
+                                 "compass away from magnetic interference), which a gimbal's heading carries too")
     height_m: NonNegative = Field(0.3, description="the EKF's height above the water when its reference was set: "
                                   "the take-off height's measurement (at arming), or in the amsl reference the EKF "
                                   "origin's altitude (at boot); it then drifts (baro_drift_10min_m) unless GNSS, a "
@@ -109,13 +112,18 @@ class Sigmas:
         "weather's pressure tendency, 'falling slowly' being up to 1.5 hPa in 3 h, at 8.3 m per hPa near sea level")
     depth_m: NonNegative = Field(0.05, description="UUV depth: a pressure sensor with the surface pressure zeroed")
     uav_horizontal_m: NonNegative | None = Field(
-        None, description="the UAV position's own horizontal accuracy (m); unset: GPS_RAW_INT's h_acc (the receiver's "
-        "own estimate), else its HDOP times its fix type's typical error (localizer/gnss.py), or 1.5 (plain GNSS) "
-        "without GPS_RAW_INT")
+        None, description="the UAV position's own horizontal accuracy (m, DRMS): the EKF's, e.g. measured hovering "
+        "over a surveyed point; unset: GPS_RAW_INT's h_acc (the receiver's own estimate), else its HDOP times its "
+        "fix type's typical error, with an RTK fix the EKF's own few centimetres added (localizer/gnss.py), or 1.5 "
+        "(plain GNSS) without GPS_RAW_INT")
     time_s: NonNegative = Field(0.02, description="frames vs telemetry time alignment, turned into metres by the "
                                 "camera's motion")
     surface_amsl_m: NonNegative = Field(0.5, description="the water surface's altitude reference: the vertical "
                                         "accuracy, and with [water] surface_amsl_m the height's from GNSS altitudes")
+    wind_mps: NonNegative = Field(
+        0.0, description="the wind over the water (m/s, 10 m up): its waves' slopes (Cox and Munk) bend each ray, "
+        "a jitter of about depth x (1 - 1/n) x slope per axis, from the share of the slopes' variance in waves long "
+        "enough to move the UUV's whole image (localizer/uncertainty.py); 0: a still surface")
 
 
 #: The UAV's horizontal accuracy (m, 1-sigma) assumed when neither the calibration nor a GPS_RAW_INT gives it.

@@ -13,6 +13,12 @@ CEP RTK; DRMS = 1.2 × CEP for a circular normal error): 3D 1.8 m, DGPS/SBAS 1.2
 0.012 m. The data sheet gives nothing for RTK float and PPP: 0.5 m (decimetres, a judgement);
 a static fix (7) counts as 3D. No fix, or a 2D fix (no usable altitude), has no accuracy (NaN).
 Metres throughout.
+
+The position a fix starts from is the EKF's (GLOBAL_POSITION_INT), not the receiver's: the EKF follows the
+receiver through its own filter (a lag behind it, the antenna's lever arm, the IMU's and the receiver's timing),
+a few centimetres that a receiver's metre hides but an RTK fix's centimetre does not.
+:func:`position_sigma_m` adds :data:`EKF_OWN_M` to an RTK fix's (a judgement: ArduPilot RTK multicopters hold
+position to 2–5 cm; the EKF's estimate against the RTK solution is of that order in steady flight).
 """
 
 from __future__ import annotations
@@ -26,6 +32,8 @@ RTK_FIXED = 6
 #: user equivalent range error (m) per GPS_FIX_TYPE: the horizontal DRMS at HDOP 1 (see the module doc)
 UERE_M = {2: 1.8, 3: 1.8, 4: 1.2, 5: 0.5, 6: 0.012, 7: 1.8, 8: 0.5}
 TYPICAL_VDOP = 1.5  # VDOP when the receiver gives none (open sky: about 1.5 × HDOP)
+#: the EKF position's own horizontal error (m, DRMS) added to an RTK receiver's accuracy (see the module doc)
+EKF_OWN_M = 0.03
 
 
 def uere_m(fix_type) -> np.ndarray:
@@ -47,6 +55,13 @@ def horizontal_sigma_m(fix_type, h_acc_m, eph_m) -> np.ndarray:
     times the fix type's UERE. NaN without a 2D/3D fix."""
     dop = np.where(_stated(eph_m), eph_m, 1.0)
     return np.where(_stated(h_acc_m), h_acc_m, dop * uere_m(fix_type))
+
+
+def position_sigma_m(fix_type, h_acc_m, eph_m) -> np.ndarray:
+    """The EKF position's horizontal 1-sigma (DRMS): the receiver's (:func:`horizontal_sigma_m`), with an RTK fix
+    :data:`EKF_OWN_M` added in quadrature. NaN without a 2D/3D fix."""
+    sigma = horizontal_sigma_m(fix_type, h_acc_m, eph_m)
+    return np.where(is_rtk(fix_type), np.hypot(sigma, EKF_OWN_M), sigma)
 
 
 def vertical_sigma_m(fix_type, v_acc_m, epv_m) -> np.ndarray:

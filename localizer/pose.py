@@ -9,8 +9,8 @@ value with its estimated error in ``sigma_*``. The camera's angular and linear
 velocity come along, so a time-alignment error can be turned into metres. The
 height above the water is the EKF's corrected by :mod:`localizer.height` (the
 barometer's drift, from GNSS altitudes, a rangefinder, the UUV's size), with its
-sigma and source word; the UAV's horizontal sigma follows GPS_RAW_INT
-(:mod:`localizer.gnss`).
+sigma and source word; the UAV's horizontal sigma follows GPS_RAW_INT and the EKF's own
+(:func:`localizer.gnss.position_sigma_m`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 from . import attitude as att
 from .calibration import UAV_HORIZONTAL_FALLBACK_M, Calibration
 from .depth import SOURCE_WORDS, frame_sigma_m
-from .gnss import horizontal_sigma_m
+from .gnss import position_sigma_m
 from .height import ekf_height_error
 from .surface import height_above_surface_m
 from .telemetry import DEG_PER_M, Telemetry
@@ -146,7 +146,7 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, 
     if cal.sigmas.uav_horizontal_m is not None:
         sigma_uav = np.full(n, cal.sigmas.uav_horizontal_m)
     else:
-        sigma_uav = horizontal_sigma_m(gnss[:, 2], gnss[:, 0], gnss[:, 5])
+        sigma_uav = position_sigma_m(gnss[:, 2], gnss[:, 0], gnss[:, 5])
         sigma_uav = np.where(np.isfinite(sigma_uav), sigma_uav, UAV_HORIZONTAL_FALLBACK_M)
     drift_m = np.hypot(ep[:, 0], ep[:, 1] * cos_lat) / DEG_PER_M  # extrapolated or held position
     sigma_uav = np.hypot(sigma_uav, np.nan_to_num(drift_m))

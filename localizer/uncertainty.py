@@ -9,11 +9,18 @@ makes the fix, so the estimate follows refraction and distortion exactly. On top
 - the time alignment: a frame matched to telemetry ``sigmas.time_s`` off sees the
   camera as it was that much earlier or later; the fix then moves by the
   camera's angular velocity through the same Jacobian, plus the UAV's velocity;
-- extrapolated or held telemetry: its estimated error adds to tilt and heading.
+- extrapolated or held telemetry: its estimated error adds to tilt and heading;
+- wind waves (``sigmas.wind_mps``; with refraction): each facet of the surface the ray
+  crosses is tilted by the waves' slope, which bends the ray in the water: a point at depth
+  d moves by about d·(1 − 1/n)·slope per axis straight down, more off nadir. The slopes' variance is Cox and
+  Munk's (:func:`wave_slope_sigma_rad`); the Jacobian is taken by turning the facet by a small
+  angle about North and about East (:func:`_facet_run`).
 
 The result is the covariance of (north, east) per fix; ``h_acc_m`` is its DRMS,
-sqrt(σ_N² + σ_E²): about 95–98 % of errors fall within 2·h_acc_m when the input
-sigmas are right.
+sqrt(σ_N² + σ_E²). For a 2-D normal error 2·DRMS holds 95.4 % (all of it along one axis)
+to 98.2 % (circular) when the input sigmas are right. The sigmas describe a platform's
+population: a tilt or compass bias is constant over one flight (all of its fixes are in or
+out together), and the share is over the flights of drones of that kind (bench/claim_calibration.py).
 """
 
 from __future__ import annotations
@@ -23,9 +30,38 @@ import numpy as np
 from .attitude import rotation_about
 from .calibration import Sigmas
 from .camera import Camera, pixel_to_ray
-from .refraction import offset_from_ray
+from .refraction import offset_from_ray, refract_down
 
 _AXES = np.eye(3)  # north, east, down
+
+#: Cox and Munk (1954), a clean sea surface: mean square slope (both axes) = a + b · wind (m/s, 12.5 m up).
+COX_MUNK_MSS = (0.003, 0.00512)
+#: The share of that slope variance that moves the UUV's image as a whole: waves several times longer than it.
+#: Shorter ones break its image up about where it is, their displacements averaging out over the vehicle (over a
+#: disk of radius r a wave of wavenumber k keeps (2·J1(kr)/(kr))² of its variance: 5 % at the vehicle's own
+#: length). 40–60 % of the slope variance is in waves longer than a half-metre vehicle at 2–10 m/s; the
+#: simulator's wind sea (Elfouhaily's spectrum scaled to Cox and Munk, averaged over the top face) keeps
+#: 15–37 % at 2–8 m/s, 1–2 m deep (bench/claim_calibration.py).
+SLOPE_SHARE_UUV = 0.35
+
+
+def wave_slope_sigma_rad(wind_mps) -> np.ndarray:
+    """The waves' slope (radians, 1-sigma per axis, North and East alike) that moves the UUV's image in wind
+    ``wind_mps``: half of Cox and Munk's mean square slope per axis, :data:`SLOPE_SHARE_UUV` of it.
+    0 for no wind (a still surface)."""
+    w = np.asarray(wind_mps, dtype=float)
+    a, b = COX_MUNK_MSS
+    return np.where(w > 0, np.sqrt(SLOPE_SHARE_UUV * (a + b * w) / 2.0), 0.0)
+
+
+def _facet_run(dir_ned, depth_m, n_water, R_facet=None):
+    """Horizontal run (north, east; m) under the surface to ``depth_m`` of rays ``dir_ned`` (..., 3) refracted at a
+    facet turned by ``R_facet`` from level (None: level): Snell in the facet's own frame."""
+    if R_facet is None:
+        w = refract_down(dir_ned, n_water)
+    else:
+        w = np.einsum("ij,...j->...i", R_facet, refract_down(np.einsum("ji,...j->...i", R_facet, dir_ned), n_water))
+    return w[..., :2] / w[..., 2:3] * np.asarray(depth_m, dtype=float)[..., None]
 
 
 def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, sigmas: Sigmas, *,
@@ -79,6 +115,12 @@ def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, si
             rate += vel[..., :2] - J[5] * vel[..., 2:3]  # descending lowers the camera
         js = rate * sig_t[..., None]
         cov += js[..., :, None] * js[..., None, :]
+    slope = float(wave_slope_sigma_rad(sigmas.wind_mps))
+    if slope > 0 and n_water is not None:
+        level = _facet_run(base, d, n_water)
+        for axis in _AXES[:2]:
+            js = (_facet_run(base, d, n_water, rotation_about(axis, ang)) - level) * (slope / ang)
+            cov += js[..., :, None] * js[..., None, :]
     uav = np.broadcast_to(np.asarray(sigma_uav_m, dtype=float), u.shape)
     cov[..., 0, 0] += uav**2 / 2.0  # isotropic: the DRMS grows by sigma_uav
     cov[..., 1, 1] += uav**2 / 2.0

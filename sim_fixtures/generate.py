@@ -70,6 +70,7 @@ from .sensors import (
     ahrs_error_rpy,
     camera_error_ned,
     has_slow_errors,
+    platform_sigmas,
     position_error_ne_m,
     reported_R_ned_from_gimbal,
 )
@@ -389,19 +390,24 @@ init_t = {init_t!r}
 
 
 def _uncertainty_toml(sc: Scenario) -> str:
-    """An ``[uncertainty]`` table stating the scenario's telemetry noise, when it has any, and how well the
-    water's altitude is known (``site.surface_amsl_sigma_m``), when given."""
+    """An ``[uncertainty]`` table stating the scenario's telemetry noise, when it has any, with the sigmas a platform
+    with its ``[sensors]`` would state (:func:`~sim_fixtures.sensors.platform_sigmas`), the wind over its waves, and
+    how well the water's altitude is known (``site.surface_amsl_sigma_m``), when given."""
     t, known = sc.telemetry, sc.site.surface_amsl_sigma_m
     noise = bool(t.attitude_noise_deg or t.height_noise_m or t.depth_noise_m)
-    if not noise and known is None:
+    keys = ({"tilt_deg": t.attitude_noise_deg, "yaw_deg": t.attitude_noise_deg, "height_m": t.height_noise_m,
+             "depth_m": t.depth_noise_m} if noise else {})
+    platform = platform_sigmas(sc)
+    for k, sigma in platform.items():
+        keys[k] = float(np.hypot(keys.get(k, 0.0), sigma))
+    if sc.waves.wind_mps:
+        platform["wind_mps"] = keys["wind_mps"] = float(sc.waves.wind_mps)
+    if not keys and known is None:
         return ""
-    text = "\n[uncertainty]" + ("  # the simulated telemetry noise (1-sigma per sample)\n" if noise else "\n")
-    if noise:
-        text += f"""tilt_deg = {t.attitude_noise_deg!r}
-yaw_deg = {t.attitude_noise_deg!r}
-height_m = {t.height_noise_m!r}
-depth_m = {t.depth_noise_m!r}
-"""
+    why = ["the simulated telemetry noise (1-sigma per sample)"] if noise else []
+    why += ["the drone's sensors as its platform would state them, the wind as its operator"] if platform else []
+    text = "\n[uncertainty]" + (f"  # {'; '.join(why)}\n" if why else "\n")
+    text += "".join(f"{k} = {round(v, 6)!r}\n" if k in platform else f"{k} = {v!r}\n" for k, v in keys.items())
     if known is not None:
         text += f"surface_amsl_m = {known!r}  # how well the water's altitude is known\n"
     return text

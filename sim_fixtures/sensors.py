@@ -193,6 +193,40 @@ def ned_with_error(ned, error_ne_m) -> np.ndarray:
     return ned
 
 
+# --- what a platform with these sensors states ------------------------------------------------------------
+
+def _rms(*values) -> float:
+    return float(np.sqrt(np.mean(np.square(values))))
+
+
+def platform_sigmas(sc: Scenario) -> dict[str, float]:
+    """The ``[uncertainty]`` sigmas a platform with these sensors would state (its configuration: the typical size
+    of each error, here the scenario's own), for the keys the sensors set; empty with the sensors off.
+
+    ``tilt_deg``: the camera's tilt per axis, a stabilised gimbal's levelling error (its own IMU), else (a servo
+    mount, a fixed camera) the AHRS's roll and pitch bias and wander; ``yaw_deg``: the compass's bias and wander;
+    ``uav_horizontal_m``: the EKF position's walk and white noise (horizontal RMS; a stated error, not the
+    receiver's claim); ``height_m``: the EKF heights' error, the take-off's bias, the barometer's wander (stationary:
+    as large at any time as when the reference was set) and white noise; ``baro_drift_10min_m``: ``[uav]
+    baro_drift_m``'s change over 10 minutes."""
+    s, u = sc.sensors, sc.uav
+    out = {}
+    if s.roll_bias_deg or s.pitch_bias_deg or s.wander_deg or any(s.gimbal_level_deg):
+        own_imu = sc.mount.kind == "stabilised" and sc.mount.attitude_source != "fixed"
+        tilt = _rms(*s.gimbal_level_deg) if own_imu else float(np.hypot(_rms(s.roll_bias_deg, s.pitch_bias_deg),
+                                                                         s.wander_deg))
+        out["tilt_deg"] = tilt
+    if s.yaw_bias_deg or s.wander_deg:
+        out["yaw_deg"] = float(np.hypot(s.yaw_bias_deg, s.wander_deg))
+    g = gnss_mode(sc)
+    if g.walk_m or g.white_m:
+        out["uav_horizontal_m"] = float(np.hypot(g.walk_m, g.white_m))
+    if s.baro_wander_m or s.baro_noise_m:
+        out["height_m"] = float(np.sqrt(u.baro_bias_m**2 + s.baro_wander_m**2 + s.baro_noise_m**2))
+        out["baro_drift_10min_m"] = abs(u.baro_drift_m) * 600.0 / sc.duration_s
+    return out
+
+
 def has_slow_errors(sc: Scenario) -> bool:
     """Whether the scenario's telemetry has any slow error (the sensors' or ``[uav]``'s heights'): then the session
     gets ``truth_errors.csv``."""
