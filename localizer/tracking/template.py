@@ -118,6 +118,20 @@ class TemplateParams:
     wave_level_drop: float = 0.15  # ... level_drop and reacquire_below_level raised by up to this
     wave_update_drop: float = 0.2  # ... update_score lowered by up to this (learn the mean wave-distorted appearance)
     wave_misses: float = 3.0  # ... and up to this many frames in a row without a match are held, not yet a loss
+    wave_mode: float = 0.5  # from this much wave (see _waves; until it is nil again) the UUV is judged on the
+    #                         evidence of several frames and on how it stands out of the water beside it:
+    wave_evidence_frames: int = 3  # ... the mean of the last this many follows' best scores (one frame's may fall
+    #                                 as low as the water's) reaching this share of the way from the water's level to
+    wave_evidence_share: float = 0.5  # the UUV's (the recent level of its matches) ...
+    wave_follow_share: float = 0.35  # ... and the frame's own score this share; a candidate while lost this share:
+    wave_reacquire_share: float = 0.75  # the seafloor holds still patches that match as well as the water's best
+    wave_background_rate: float = 0.1  # ... the water's level: a running mean at this rate of the best score in
+    #                                     windows beside the prediction's (the template on the water around the UUV)
+    wave_background_sides: float = 1.5  # ... those windows this many template sides further out, each way
+    wave_keep_contrast: float = 0.75  # a follow below those bars, right after a match, is still the UUV if its patch
+    #                                    keeps this much of the first appearance's grey-level spread (see _contrast:
+    #                                    the waves scramble its structure, not its spread; the water where it was has
+    #                                    less) and its score is above the water's level
 
 
 def _parabola(a: float, b: float, c: float) -> float:
@@ -283,6 +297,9 @@ class TemplateMatcher:
         self._scatter2 = 0.0  # ... and mean square departure from it (see _waves) ...
         self._changes = 0  # ... over this many follows
         self._misses = 0  # follows in a row without a match
+        self._recent: list[float] = []  # in waves: the last follows' best scores (see _evidence) ...
+        self._water = math.nan  # ... and the water's level (the best score beside the UUV, a running mean)
+        self._wavy = False  # judged as through waves (see _in_waves)
 
     def _begin(self, prediction: Prediction | None) -> None:
         """A new frame: follow the predicted apparent size relative to that at start (in steps of
@@ -504,6 +521,13 @@ class TemplateMatcher:
         scatter = math.sqrt(self._scatter2)
         return min(1.0, max(0.0, (scatter - self.p.wobble_flat) / (self.p.wobble_waves - self.p.wobble_flat)))
 
+    def _in_waves(self) -> bool:
+        """Whether the UUV is judged as seen through waves (:meth:`_stands_out`): from when :meth:`_waves` reaches
+        ``wave_mode`` until it is nil again (the scatter eases as the template learns the wave-distorted mean)."""
+        waves = self._waves()
+        self._wavy = waves >= self.p.wave_mode or (self._wavy and waves > 0.0)
+        return self._wavy
+
     def _blur_px(self) -> float:
         """The smoothing (working pixels, Gaussian sigma, in quarters) of images and template before matching."""
         return round(4.0 * self.p.wave_blur_px * self._waves()) / 4.0
@@ -531,6 +555,42 @@ class TemplateMatcher:
         may match as well as it did at its worst)."""
         close = self._floor()
         return close + self._waves() * max(self._far() - close, 0.0)
+
+    def _beside(self, frame_bgr, cu: float, cv_: float, radius: float) -> list[float]:
+        """The template's best scores on the water beside the prediction's window: in windows as large,
+        ``wave_background_sides`` template sides further out on each side (those inside the frame)."""
+        d = radius + self.p.wave_background_sides * self.S * self.k * self._scale
+        found = (self._search(frame_bgr, cu + du, cv_ + dv, radius, (self._angle,))[0]
+                 for du, dv in ((d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)))
+        return [s for s in found if s > -1.0]
+
+    def _wave_bar(self, share: float) -> float:
+        """In waves, an NCC ``share`` of the way from the water's level to the recent level of the UUV's matches
+        (:meth:`_floor` until the water's level is known; before any match, the follows' mean score: the first
+        appearance's own 1.0 is not what the waves let it reach)."""
+        level = self._level if self._levels else self._mean_score
+        return self._water + share * (level - self._water) if math.isfinite(self._water) else self._floor()
+
+    def _stands_out(self, frame_bgr, cu: float, cv_: float, radius: float, score: float,
+                    evidence: float | None = None) -> bool:
+        """In waves: whether the UUV is in the window of ``radius`` about (cu, cv_) whose best score is ``score``.
+        Its best stands out of the water beside the window (:meth:`_beside`). A follow (``evidence``: the mean of
+        the last ``wave_evidence_frames`` scores; one frame's does not tell, the wave-distorted UUV's falls at times
+        as low as the water's best) keeps the water's level from the water beside; ``score`` reaches
+        ``wave_follow_share`` and ``evidence`` ``wave_evidence_share`` of the way from the water's level to the
+        UUV's (:meth:`_wave_bar`). A candidate while lost: ``wave_reacquire_share``. A UUV just hidden leaves the
+        water in the window, which stands out of the water beside it no more than by chance."""
+        beside = self._beside(frame_bgr, cu, cv_, radius)
+        if beside and evidence is not None:
+            water = float(np.median(beside))
+            self._water = water if not math.isfinite(self._water) else (
+                self._water + self.p.wave_background_rate * (water - self._water))
+        if evidence is None:
+            passed = score >= self._wave_bar(self.p.wave_reacquire_share)
+        else:
+            passed = score >= self._wave_bar(self.p.wave_follow_share) and (
+                evidence >= self._wave_bar(self.p.wave_evidence_share))
+        return passed and (not beside or score > float(np.median(beside)))
 
     # -- per frame ---------------------------------------------------------------------------
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
@@ -575,12 +635,23 @@ class TemplateMatcher:
         slow_step = self._frames % self.p.adapt_every == 0
         if slow_step or score < self._level - self.p.turn_drop:
             score, u, v = self._refine(frame_bgr, (score, u, v))
+        in_waves = self._in_waves()
         floor = self._floor() if not self._misses else self._rebound()  # after a held frame: convincingly back
         self._note_score(score)
+        self._recent = (self._recent + [score])[-self.p.wave_evidence_frames:]
         near = math.hypot(u - cu, v - cv_) <= radius + 2 * self.k
-        if not (score >= floor and near and self._visible(frame_bgr, u, v)):
+        if in_waves:
+            contrast = self._contrast(frame_bgr, u, v)
+            passed = near and contrast >= self.p.min_contrast and self._stands_out(
+                frame_bgr, cu, cv_, radius, score, float(np.mean(self._recent)))
+            passed = passed or (near and not self._misses and contrast >= self.p.wave_keep_contrast
+                                and score > self._water)
+        else:
+            passed = score >= floor and near and self._visible(frame_bgr, u, v)
+        if not passed:
             self._misses += 1
-            held = near and self._misses <= self.p.wave_misses * self._waves()
+            young = self._changes <= self.p.wave_evidence_frames  # the first follows: the sea state not yet told
+            held = near and self._misses <= self.p.wave_misses * max(self._waves(), float(young))
             return Match(False, score, u, v, held=held)
         self._misses = 0
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
@@ -591,9 +662,15 @@ class TemplateMatcher:
             self._learn(frame_bgr, u, v)
         return self._match(True, score, u, v)
 
-    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float, prediction: Prediction | None) -> Match:
-        """A candidate while lost: the re-acquisition's bar, or the bar of :meth:`follow` when the prediction's
-        window is no wider than the vehicle (lost a moment ago: nothing else fits where it can be)."""
+    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float, prediction: Prediction | None,
+                          window: tuple[float, float, float]) -> Match:
+        """A candidate while lost, the best found in ``window`` (u, v, radius): the re-acquisition's bar, or the bar
+        of :meth:`follow` when the prediction's window is no wider than the vehicle (lost a moment ago: nothing else
+        fits where it can be). In waves: it stands out of the water beside the window (:meth:`_stands_out`)."""
+        if self._wavy:
+            passed = self._contrast(frame_bgr, u, v) >= self.p.min_contrast and self._stands_out(
+                frame_bgr, *window, score)
+            return self._match(passed, score, u, v)
         side = self.S * self.k * self._scale
         if prediction is not None and self._radius(prediction, math.inf) <= side:
             need = self._rebound()
@@ -605,10 +682,11 @@ class TemplateMatcher:
         self._begin(prediction)
         tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
         self._prepare(frame_bgr, u, v, tol)
+        window = (u, v, tol)
         score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas)
         if score >= self._ok():
             score, u, v = self._refine(frame_bgr, (score, u, v))
-        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
+        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction, window)
         if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, self._seen_angle,
                                                                             u, v):
             return self._match(False, score, u, v)
@@ -617,6 +695,7 @@ class TemplateMatcher:
     def resume(self, match: Match) -> None:
         self._velocity = (0.0, 0.0)
         self._misses = 0
+        self._recent = [match.score]
         self.u, self.v, self._seen_angle = match.u, match.v, self._angle
 
     def search(self, frame_bgr, prediction: Prediction | None) -> Match:
@@ -642,7 +721,7 @@ class TemplateMatcher:
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
-        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction)
+        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction, (cu, cv_, radius))
         if abs((self._angle - saved + 90.0) % 180.0 - 90.0) > turn:  # a heading it cannot have turned to (either
             #                                                           way round): something else
             candidate = self._match(False, score, u, v)
