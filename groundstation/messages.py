@@ -686,6 +686,11 @@ class FuseSourceStatus(Section):
                                   "time")
     time_base: Literal["gnss", "station"] | None = Field(description="the time its fixes are aligned by")
     h_acc_m: NonNegative = Field(description="its last ok fix's h_acc_m")
+    h_acc_used_m: NonNegative = Field(None, description="its claim as the last fusion weighed it, DRMS, metres: with "
+                                      "what its fixes showed beyond it (floor_m)")
+    floor_m: NonNegative = Field(None, description="DRMS of what its fixes show beyond its claim, added at the last "
+                                 "fusion: their frame-to-frame scatter beyond the whole claim, their disagreement with "
+                                 "the other drones over the last 10 s beyond both claims")
 
 
 class FusionStatus(Section):
@@ -693,6 +698,11 @@ class FusionStatus(Section):
 
     published: int = Field(description="fused messages published (ok and disagree)")
     disagreements: int = Field(description="fusions with no fix: the sources disagreed and nothing decided")
+    off_track: int = Field(0, description="fused positions beyond where the UUV can be by the fused fixes' own "
+                           "track: sent as off_track, no position")
+    configured: list[str] = Field([], description="the fix keys whose fixes may be fused (--source)")
+    unconfigured: dict[str, int] = Field({}, description="fixes from any other key, by key (32 keys, the rest as "
+                                         "'(others)'): counted, never fused")
     last_sources: list[str] = Field(description="the sources (their fix keys) of the last fusion")
     sources: dict[str, FuseSourceStatus] = Field(description="per source, by its fix key")
 
@@ -706,11 +716,6 @@ class FuseInputStatus(Section):
     handoff: HandoffStatus | None = None
 
 
-    h_acc_used_m: NonNegative = Field(None, description="its claim as the last fusion weighed it, DRMS, metres: with "
-                                      "what its fixes showed beyond it (floor_m)")
-    floor_m: NonNegative = Field(None, description="DRMS of what its fixes show beyond its claim, added at the last "
-                                 "fusion: their frame-to-frame scatter beyond the whole claim, their disagreement with "
-                                 "the other drones over the last 10 s beyond both claims")
 class FuseStatusMessage(Message):
     """``skyfix fuse``'s health, once a second."""
 
@@ -718,11 +723,6 @@ class FuseStatusMessage(Message):
     t: float = Field(description="when the status was taken, the fuser's clock, UNIX seconds")
     uuv: str = Field(description="the UUV's id")
     input: FuseInputStatus
-    off_track: int = Field(0, description="fused positions beyond where the UUV can be by the fused fixes' own "
-                           "track: sent as off_track, no position")
-    configured: list[str] = Field([], description="the fix keys whose fixes may be fused (--source)")
-    unconfigured: dict[str, int] = Field({}, description="fixes from any other key, by key (32 keys, the rest as "
-                                         "'(others)'): counted, never fused")
     fusion: FusionStatus
     fix: FixMessage | None = Field(description="the latest fused fix message (also answered to late joiners)")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")

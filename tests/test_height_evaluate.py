@@ -52,7 +52,7 @@ def test_white_rtk_noise_does_not_move_the_height(capsys, tmp_path):
     rtk, pos, dh, _ = evaluate(capsys, exact, tmp_path, "rtk")
     assert set(pos.height_source) == {"baro+gnss_rtk"}
     assert np.sqrt(np.mean(np.diff(dh) ** 2)) < 0.01 and np.abs(dh).max() < 0.02  # was 1.8 cm, 5.4 cm
-    alone, pos, dh_alone, _ = evaluate(capsys, with_overrides(exact, telemetry={"gps_raw_hz": 0.0}), tmp_path, "alone")
+    alone, pos, _, _ = evaluate(capsys, with_overrides(exact, telemetry={"gps_raw_hz": 0.0}), tmp_path, "alone")
     assert set(pos.height_source) == {"takeoff"}
     assert rtk["mae_m"] <= 1.25 * alone["mae_m"]  # was 2.6 times
     drifting = with_overrides(RTK_NOISE, uav={"baro_drift_m": 0.5})  # 0.5 m in a minute
