@@ -160,7 +160,8 @@ def udp_drops(port: int) -> int:
 def one_run(session: Path, work: Path, n_mavlink: int, n_zenoh: int, seed: int) -> dict:
     frames = np.genfromtxt(session / "video_frames.csv", delimiter=",", names=True)["t"]
     storm = None
-    with ServiceRun(session, work) as run:
+    # the hostile datagrams share the UAV's channel (a radio several systems talk on): every sender taken, no lock
+    with ServiceRun(session, work, "--mavlink-peer", "any") as run:
         replay, rlog = run.replay("--tail-s", "1.5")
         shift = run.shift_s(rlog)
         t_from, t_to = frames[0] + shift + 0.5, frames[-1] + shift - 0.5

@@ -18,6 +18,7 @@ from groundstation.live.sources.uav_mavlink import UavMavlink
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import SKYFIX_SYSID
 from groundstation.mavlink.ingest import mavutil
+from groundstation.mavlink.transport import ANY_PEER
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
 from localizer.telemetry import Telemetry
@@ -122,7 +123,8 @@ def test_parse_depth_rejects_non_numbers():
 def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
     port = free_port()
     tel = Telemetry()
-    uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel, needed_rates("fixed"))
+    # system 7 shares the UAV's channel (a radio several systems talk on): every sender taken, no lock
+    uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel, needed_rates("fixed"), peer=ANY_PEER)
     mav = mavutil()
     sender = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
     other = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=7, source_component=1)

@@ -26,6 +26,7 @@ from pydantic.dataclasses import dataclass
 from groundstation.live.sources.depth_ardusub import autopilot_prefix
 from groundstation.live.sources.uuv_position import parse_hint
 from groundstation.live.ui.bind import check_token, parse_bind
+from groundstation.mavlink.transport import ANY_PEER
 from groundstation.session.read import PRIMARY_UUV
 from groundstation.zenoh_session import LOCAL_ENDPOINT
 from localizer.calibration import Calibration
@@ -173,7 +174,8 @@ class RunConfig(UuvOptions):
     mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
     mavlink_peer: Text | None = Field(None, description="udpin: the UAV's address HOST:PORT, the only sender taken "
                                       "(default: the first whose datagram holds the UAV's messages; others counted "
-                                      "in foreign_datagrams)")
+                                      "in foreign_datagrams); any: every sender (a radio channel or router several "
+                                      "systems share: no lock)")
     mavlink_signing_key: FilePath | None = Field(None, description="require the UAV's MAVLink signed (MAVLink 2) "
                                                  "with the key in this file (32 bytes, or 64 hex digits); skyfix's "
                                                  "messages to it are signed")
@@ -329,8 +331,8 @@ class RunConfig(UuvOptions):
             host, colon, port = self.mavlink_peer.rpartition(":")
             if not (self.mavlink.startswith(("udpin:", "udp:")) and self.mavlink_backend == "pymavlink"):
                 raise Invalid("mavlink_peer", self.mavlink_peer, f"for a udpin: link (mavlink is {self.mavlink!r})")
-            if not (host and colon and port.isdigit() and int(port) < 65536):
-                raise Invalid("mavlink_peer", self.mavlink_peer, "expected HOST:PORT")
+            if self.mavlink_peer != ANY_PEER and not (host and colon and port.isdigit() and int(port) < 65536):
+                raise Invalid("mavlink_peer", self.mavlink_peer, f"expected HOST:PORT or {ANY_PEER}")
         if self.mavlink_signing_key and self.mavlink_backend != "pymavlink":
             raise Invalid("mavlink_signing_key", self.mavlink_signing_key, "signing needs --mavlink-backend pymavlink")
         return self

@@ -12,7 +12,8 @@ strings are pymavlink's:
 - ``udpin:HOST:PORT`` (or ``udp:``) listen, locked to its peer: the sender the caller names with
   :meth:`Udp.answer_last_sender` (the autopilot's first message), or the ``peer`` address given to
   :func:`open_transport` (``--mavlink-peer``); datagrams from any other address are dropped unread and counted
-  (``foreign``). Without a given peer the lock moves to a new sender only once the peer has been silent for
+  (``foreign``); ``peer`` :data:`ANY_PEER` turns the lock off (every sender taken: a radio channel or a router
+  several systems share; writes still go to the last sender named). Without a given peer the lock moves to a new sender only once the peer has been silent for
   :data:`RELOCK_S` (an autopilot's forwarder restarted on a new port), counted in ``relocks``;
 - ``DEVICE`` or ``DEVICE,BAUD`` a serial port (default 115200 baud).
 
@@ -38,6 +39,8 @@ import sys
 import time
 
 WRITE_TIMEOUT_S = 1.0
+#: ``--mavlink-peer`` that takes every sender on a ``udpin:`` link (no lock)
+ANY_PEER = "any"
 #: A ``udpin:`` link's peer silent this long (s) may be replaced by another sender the caller accepts
 RELOCK_S = 5.0
 UDP_RCVBUF = 4 << 20  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
@@ -168,8 +171,10 @@ class Udp(_Transport):
 
     datagrams = True
 
-    def __init__(self, url: str, addr: tuple[str, int], listen: bool, peer: tuple[str, int] | None = None):
+    def __init__(self, url: str, addr: tuple[str, int], listen: bool, peer: tuple[str, int] | None = None,
+                 locked: bool = True):
         self.url = url
+        self.locked = locked  # False: every sender's datagrams are read (ANY_PEER)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)  # the kernel caps it (rmem_max)
@@ -200,7 +205,7 @@ class Udp(_Transport):
             data, ancillary, _, addr = self.sock.recvmsg(_READ_MAX, socket.CMSG_SPACE(_TIMESPEC.size))
         except (BlockingIOError, ConnectionRefusedError):  # ICMP port unreachable of an earlier datagram
             return b""
-        if self.listen and self.dest is not None:
+        if self.listen and self.locked and self.dest is not None:
             if addr == self.dest:
                 self._peer_heard = time.monotonic()
             elif self.fixed or time.monotonic() - self._peer_heard < RELOCK_S:
@@ -256,7 +261,7 @@ class Serial(_Transport):
 
 def open_transport(url: str, peer: str | None = None):
     """An open transport for a pymavlink-style connection string; :class:`OSError` when it cannot be opened.
-    ``peer`` (``HOST:PORT``, ``udpin:`` only) is the only sender it takes."""
+    ``peer`` (``HOST:PORT``, ``udpin:`` only) is the only sender it takes; :data:`ANY_PEER`: every sender."""
     kind, _, rest = url.partition(":")
     if peer is not None and kind not in ("udpin", "udp"):
         raise OSError(errno.EINVAL, f"a peer address ({peer}) is for udpin: links only")
@@ -267,6 +272,8 @@ def open_transport(url: str, peer: str | None = None):
     if kind == "udpout":
         return Udp(url, _host_port(url, rest), listen=False)
     if kind in ("udpin", "udp"):
+        if peer == ANY_PEER:
+            return Udp(url, _host_port(url, rest), listen=True, locked=False)
         return Udp(url, _host_port(url, rest), listen=True, peer=None if peer is None else _host_port(url, peer))
     device, _, baud = url.partition(",")
     if not device.startswith("/") and not device.upper().startswith("COM"):
