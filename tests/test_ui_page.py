@@ -138,6 +138,9 @@ def test_operator_selects_tracks_and_releases_in_the_browser(tmp_path):
             assert gates and int(gates[1]) > 0 and int(gates[2]) >= 10, health
             assert page.eval_on_selector("#map", "m => m.dataset.gate") == "tracking"
 
+            # the selection's valid GPS_INPUT before the click: a re-selection is a new lock, confirmed again
+            wait_for(lambda: sum(g["fix_type"] == 3 for g in live.gps_input()) >= 10, 20,
+                     "ten valid GPS_INPUT from the selection")
             # a click on the UUV re-selects it there
             frame = int(_dataset(page, "frame"))
             u, v = track_pixel(SESSION, float(_dataset(page, "t")) - live.shift)
