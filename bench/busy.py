@@ -56,8 +56,9 @@ def ensure_session(path: Path) -> Path:
     from sim_fixtures.scenario import scenario_from_dict
 
     text = (ROOT / "sim_fixtures" / "scenarios" / "oblique_occl.toml").read_text()
-    text = text.replace("duration_s = 8.0", "duration_s = 40.0").replace("occlusions = [[3.0, 4.5]]",
-                                                                       "occlusions = [[15.0, 18.0]]")
+    text = text.replace("duration_s = 8.0", "duration_s = 40.0").replace(
+        "occlusions = [[3.0, 4.5]]", "occlusions = [[15.0, 18.0]]"
+    )
     print(f"generating {path} (once, about a minute) ...", flush=True)
     generate(scenario_from_dict(tomllib.loads(text)), path, text)
     return path
@@ -81,23 +82,36 @@ def errors_m(session: Path, gps: list[dict], loops: list[tuple[float, float]]) -
 
 def counters(status: dict) -> dict:
     pipe, video = status.get("pipeline", {}), status.get("video", {})
-    return {"frames": video.get("frames") or 0, "ok": pipe.get("statuses", {}).get("ok", 0),
-            "dropped": pipe.get("dropped") or 0, "skipped_behind": video.get("skipped_behind") or 0}
+    return {
+        "frames": video.get("frames") or 0,
+        "ok": pipe.get("statuses", {}).get("ok", 0),
+        "dropped": pipe.get("dropped") or 0,
+        "skipped_behind": video.get("skipped_behind") or 0,
+    }
 
 
-def phase_figures(name: str, session: Path, gps: list[dict], loops, first: dict, last: dict, status: dict) -> dict:
+def phase_figures(
+    name: str, session: Path, gps: list[dict], loops, first: dict, last: dict, status: dict
+) -> dict:
     err = errors_m(session, gps, loops)
     c = {k: last[k] - first[k] for k in last}
     late = status.get("latency") or {}
     slot = (status.get("video") or {}).get("arrival_after_slot_ms") or {}
-    return {"phase": name, "gps_input": len(gps), "valid": len(err),
-            "worst_m": round(float(err.max()), 3) if len(err) else None,
-            "p95_m": round(float(np.percentile(err, 95)), 3) if len(err) else None,
-            "over_0.5_m": int((err > BAD_M).sum()), "ardupilot_health": ardupilot_gps_unhealthy(
-                [g["t_recv"] for g in gps]) or "healthy",
-            "frames": c["frames"], "ok_share": round(c["ok"] / c["frames"], 3) if c["frames"] else None,
-            "dropped": c["dropped"], "skipped_behind": c["skipped_behind"],
-            "arrival_to_gps_input_p99_ms": late.get("p99_ms"), "arrival_after_slot_p99_ms": slot.get("p99")}
+    return {
+        "phase": name,
+        "gps_input": len(gps),
+        "valid": len(err),
+        "worst_m": round(float(err.max()), 3) if len(err) else None,
+        "p95_m": round(float(np.percentile(err, 95)), 3) if len(err) else None,
+        "over_0.5_m": int((err > BAD_M).sum()),
+        "ardupilot_health": ardupilot_gps_unhealthy([g["t_recv"] for g in gps]) or "healthy",
+        "frames": c["frames"],
+        "ok_share": round(c["ok"] / c["frames"], 3) if c["frames"] else None,
+        "dropped": c["dropped"],
+        "skipped_behind": c["skipped_behind"],
+        "arrival_to_gps_input_p99_ms": late.get("p99_ms"),
+        "arrival_after_slot_p99_ms": slot.get("p99"),
+    }
 
 
 def busy(session: Path, work: Path, quiet_min: float, busy_min: float, printer) -> list[dict]:
@@ -106,7 +120,9 @@ def busy(session: Path, work: Path, quiet_min: float, busy_min: float, printer) 
     spinners: list[subprocess.Popen] = []
     with ServiceRun(session, work) as run:
         watcher = open_session(connect=[run.zenoh])
-        sub = watcher.declare_subscriber("skyfix/status", lambda s: latest.update(json.loads(s.payload.to_bytes())))
+        sub = watcher.declare_subscriber(
+            "skyfix/status", lambda s: latest.update(json.loads(s.payload.to_bytes()))
+        )
         try:
             loops: list[tuple[float, float]] = []
             for name, minutes in (("quiet", quiet_min), ("busy", busy_min)):
@@ -121,7 +137,9 @@ def busy(session: Path, work: Path, quiet_min: float, busy_min: float, printer) 
                         time.sleep(0.2)
                 t1 = time.time()
                 gps = [g for g in run.gps_input() if t0 <= g["t_recv"] < t1]
-                phases.append(phase_figures(name, session, gps, loops, first, counters(latest), dict(latest)))
+                phases.append(
+                    phase_figures(name, session, gps, loops, first, counters(latest), dict(latest))
+                )
                 printer(phases[-1])
         finally:
             for p in spinners:
@@ -136,25 +154,41 @@ def busy(session: Path, work: Path, quiet_min: float, busy_min: float, printer) 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--session", type=Path, help="session to loop (default: oblique_occl rendered for 40 s, once)")
+    ap.add_argument(
+        "--session",
+        type=Path,
+        help="session to loop (default: oblique_occl rendered for 40 s, once)",
+    )
     ap.add_argument("--quiet-minutes", type=float, default=2.0)
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "busy.txt")
     args = ap.parse_args()
     session = ensure_session(args.session or DEFAULT_SESSION)
-    lines = [(f"skyfix busy, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, session {session}, "
-              f"{args.quiet_minutes:g} min quiet then {args.minutes:g} min beside two busy loops")]
+    lines = [
+        (
+            f"skyfix busy, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, session {session}, "
+            f"{args.quiet_minutes:g} min quiet then {args.minutes:g} min beside two busy loops"
+        )
+    ]
     print(lines[0], flush=True)
 
     def printer(r: dict) -> None:
         lines.append(json.dumps(r))
         print(lines[-1], flush=True)
 
-    phases = busy(session, Path("/tmp/skyfix-bench/busy"), args.quiet_minutes, args.minutes, printer)
-    failed = [f"{p['phase']}: {p['over_0.5_m']} valid fixes over {BAD_M} m (worst {p['worst_m']} m)"
-              for p in phases if p["over_0.5_m"]]
-    failed += [f"{p['phase']}: ArduPilot would call it unhealthy: {p['ardupilot_health']}" for p in phases
-               if p["ardupilot_health"] != "healthy"]
+    phases = busy(
+        session, Path("/tmp/skyfix-bench/busy"), args.quiet_minutes, args.minutes, printer
+    )
+    failed = [
+        f"{p['phase']}: {p['over_0.5_m']} valid fixes over {BAD_M} m (worst {p['worst_m']} m)"
+        for p in phases
+        if p["over_0.5_m"]
+    ]
+    failed += [
+        f"{p['phase']}: ArduPilot would call it unhealthy: {p['ardupilot_health']}"
+        for p in phases
+        if p["ardupilot_health"] != "healthy"
+    ]
     lines.append("PASS" if not failed else "FAIL: " + "; ".join(failed))
     print(lines[-1])
     args.out.parent.mkdir(parents=True, exist_ok=True)

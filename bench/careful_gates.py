@@ -46,10 +46,15 @@ def restart() -> tuple[list[str], dict]:
             gate, t = kept_gate(Path(d), h)
             back = first_valid_s(still(gate, t, 3.0, h_acc_m=h))
         fresh = first_valid_s(still(FixGate(), T0, 3.0, north_m=50.0, h_acc_m=h))
-        data[f"h_acc_{h}"] = {"lookalike_valid": lookalike, "fresh_gate_lookalike_valid_after_s": fresh,
-                              "uuv_valid_after_s": back}
-        lines.append(f"  h_acc {h:.2f} m: look-alike valid fixes {lookalike} (a fresh gate: valid after {fresh:.2f} s);"
-                     f" the UUV where it was: valid after {back:.2f} s")
+        data[f"h_acc_{h}"] = {
+            "lookalike_valid": lookalike,
+            "fresh_gate_lookalike_valid_after_s": fresh,
+            "uuv_valid_after_s": back,
+        }
+        lines.append(
+            f"  h_acc {h:.2f} m: look-alike valid fixes {lookalike} (a fresh gate: valid after {fresh:.2f} s);"
+            f" the UUV where it was: valid after {back:.2f} s"
+        )
     return lines, data
 
 
@@ -65,25 +70,41 @@ def select() -> tuple[list[str], dict]:
             before = FixGate(max_reach_m=math.inf)  # the selection unseen, the reach growing
             still(before, T0, 2.0, h_acc_m=h)
             was = first_valid_s(still(before, T0 + 2.0, 15.0, east_m=away, h_acc_m=h))
-            data[f"h_acc_{h}_{away:g}m"] = {"valid": now, "confirmed_valid_after_s": confirmed,
-                                           "before_valid_after_s": was}
-            lines.append(f"  h_acc {h:.2f} m, {away:4.1f} m away: valid fixes {now}; confirmed: valid after "
-                         f"{confirmed:.2f} s; the gate as it was: valid after {was:.2f} s")
+            data[f"h_acc_{h}_{away:g}m"] = {
+                "valid": now,
+                "confirmed_valid_after_s": confirmed,
+                "before_valid_after_s": was,
+            }
+            lines.append(
+                f"  h_acc {h:.2f} m, {away:4.1f} m away: valid fixes {now}; confirmed: valid after "
+                f"{confirmed:.2f} s; the gate as it was: valid after {was:.2f} s"
+            )
     return lines, data
 
 
 def clock() -> tuple[list[str], dict]:
-    lines, data = ["station clock steps, the tracker jumping at that moment: valid fixes > 3 h_acc off:"], {}
+    lines, data = (
+        ["station clock steps, the tracker jumping at that moment: valid fixes > 3 h_acc off:"],
+        {},
+    )
     for wrong_m, h in ((8.0, 0.4), (1.2, 0.05)):
         for step in (10.0, -10.0):
             for follows in (True, False):
                 bad, gate = off_valid(step, wrong_m, follows, h)
-                alone = off_valid(step, wrong_m, follows, h, with_arrival=False, max_reach_m=math.inf)[0]
+                alone = off_valid(
+                    step, wrong_m, follows, h, with_arrival=False, max_reach_m=math.inf
+                )[0]
                 key = f"{wrong_m:g}m_{step:+g}s_{'stepped' if follows else 'kept'}"
-                data[key] = {"off_valid": bad, "exposure_times_alone_off_valid": alone, "steps_seen": gate.clock_steps}
-                lines.append(f"  jump {wrong_m:3.1f} m (h_acc {h:.2f}), step {step:+5.1f} s, exposure "
-                             f"{'stepped  ' if follows else 'kept course'}: {bad} (the gate as it was: {alone}); "
-                             f"steps seen {gate.clock_steps}")
+                data[key] = {
+                    "off_valid": bad,
+                    "exposure_times_alone_off_valid": alone,
+                    "steps_seen": gate.clock_steps,
+                }
+                lines.append(
+                    f"  jump {wrong_m:3.1f} m (h_acc {h:.2f}), step {step:+5.1f} s, exposure "
+                    f"{'stepped  ' if follows else 'kept course'}: {bad} (the gate as it was: {alone}); "
+                    f"steps seen {gate.clock_steps}"
+                )
     return lines, data
 
 

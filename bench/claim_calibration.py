@@ -66,10 +66,18 @@ def has_waves() -> bool:
 
 
 def conditions() -> list[Condition]:
-    out = [Condition(f"{g}_{v}_{h:g}m", g, v, h) for g in ("rtk", "plain") for v in VIEWS for h in HEIGHTS_M[v]]
+    out = [
+        Condition(f"{g}_{v}_{h:g}m", g, v, h)
+        for g in ("rtk", "plain")
+        for v in VIEWS
+        for h in HEIGHTS_M[v]
+    ]
     if has_waves():
-        out += [Condition(f"rtk_{v}_{HEIGHTS_M[v][1]:g}m_wind{w:g}", "rtk", v, HEIGHTS_M[v][1], w)
-                for v in VIEWS for w in WINDS_MPS]
+        out += [
+            Condition(f"rtk_{v}_{HEIGHTS_M[v][1]:g}m_wind{w:g}", "rtk", v, HEIGHTS_M[v][1], w)
+            for v in VIEWS
+            for w in WINDS_MPS
+        ]
     return out
 
 
@@ -79,14 +87,25 @@ def draw_sensors(seed: int) -> dict:
     g, a, c = (PLATFORM[k] for k in ("gimbal_level_deg", "ahrs_tilt_deg", "compass_deg"))
     level = rng.normal(0.0, g, 2)
     roll, pitch = rng.normal(0.0, a, 2)
-    return {"gimbal_level_deg": (float(level[0]), float(level[1])), "roll_bias_deg": float(roll),
-            "pitch_bias_deg": float(pitch), "yaw_bias_deg": float(rng.normal(0.0, c)), **WANDER}
+    return {
+        "gimbal_level_deg": (float(level[0]), float(level[1])),
+        "roll_bias_deg": float(roll),
+        "pitch_bias_deg": float(pitch),
+        "yaw_bias_deg": float(rng.normal(0.0, c)),
+        **WANDER,
+    }
 
 
 def scenario(c: Condition, seed: int, duration_s: float, fps: float) -> Scenario:
     sc = load_scenario(SCENARIOS / f"{VIEWS[c.view].format(c.gnss)}.toml")
-    tables = {"name": f"{c.name}_s{seed}", "seed": 1000 + seed, "duration_s": duration_s, "fps": fps,
-              "uav": {"height_m": c.height_m}, "sensors": {**draw_sensors(seed), "gnss_mode": c.gnss}}
+    tables = {
+        "name": f"{c.name}_s{seed}",
+        "seed": 1000 + seed,
+        "duration_s": duration_s,
+        "fps": fps,
+        "uav": {"height_m": c.height_m},
+        "sensors": {**draw_sensors(seed), "gnss_mode": c.gnss},
+    }
     if c.wind_mps:
         tables["waves"] = {"wind_mps": c.wind_mps}
     return with_overrides(sc, **tables)
@@ -96,14 +115,30 @@ def platform_claim(cal, pixel_px: float):
     """The calibration with the platform's tilt and compass sigmas in ``[uncertainty]`` (see the module doc; a
     stabilised gimbal's tilt carries its own levelling error, not the AHRS's) and ``pixel_px``."""
     yaw = float(np.hypot(PLATFORM["compass_deg"], WANDER["wander_deg"]))
-    return replace(cal, sigmas=replace(cal.sigmas, tilt_deg=PLATFORM["gimbal_level_deg"], yaw_deg=yaw,
-                                       pixel_px=pixel_px))
+    return replace(
+        cal,
+        sigmas=replace(
+            cal.sigmas, tilt_deg=PLATFORM["gimbal_level_deg"], yaw_deg=yaw, pixel_px=pixel_px
+        ),
+    )
 
 
 def waves_only(cal):
     """The calibration with every sigma 0 but the wind's: the claim's wave term alone."""
-    quiet = {f: 0.0 for f in ("pixel_px", "tilt_deg", "yaw_deg", "height_m", "baro_drift_10min_m", "depth_m",
-                              "uav_horizontal_m", "time_s", "surface_amsl_m")}
+    quiet = {
+        f: 0.0
+        for f in (
+            "pixel_px",
+            "tilt_deg",
+            "yaw_deg",
+            "height_m",
+            "baro_drift_10min_m",
+            "depth_m",
+            "uav_horizontal_m",
+            "time_s",
+            "surface_amsl_m",
+        )
+    }
     return replace(cal, sigmas=replace(cal.sigmas, **quiet))
 
 
@@ -119,14 +154,20 @@ def session_errors(path: Path, pixel_px: float | None) -> tuple[np.ndarray, ...]
     err = np.hypot(*error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth).T)[ok]
     waves = wave_acc = np.full(err.shape, np.nan)
     if (path / "truth_waves.csv").is_file():
-        w = read_table(path / "truth_waves.csv", ("t", "wave_dn_m", "wave_de_m"), allow_empty=("wave_dn_m", "wave_de_m"))
+        w = read_table(
+            path / "truth_waves.csv",
+            ("t", "wave_dn_m", "wave_de_m"),
+            allow_empty=("wave_dn_m", "wave_de_m"),
+        )
         waves = np.hypot(w["wave_dn_m"], w["wave_de_m"])[ok]
         s.calibration = waves_only(s.calibration)
         wave_acc = process.process_session(s, use_track=True).h_acc_m[ok]
     return err, fixes.h_acc_m[ok], waves, wave_acc
 
 
-def fly(c: Condition, seeds: int, duration_s: float, fps: float, work: Path, pixel_px: float | None) -> list:
+def fly(
+    c: Condition, seeds: int, duration_s: float, fps: float, work: Path, pixel_px: float | None
+) -> list:
     """:func:`session_errors` of ``seeds`` drones of the platform in condition ``c`` (sessions under ``work``)."""
     per_seed = []
     for seed in range(seeds):
@@ -145,7 +186,9 @@ class Pooled:
     fixes: int
     sessions: int
     within_2sigma: float  # share of the fixes within 2·h_acc
-    within_1sigma: float  # ... within h_acc (a 2-D normal error: 63-68 % when the claim is its DRMS)
+    within_1sigma: (
+        float  # ... within h_acc (a 2-D normal error: 63-68 % when the claim is its DRMS)
+    )
     whole: float  # share of the sessions with every fix within 2·h_acc
     rms_err_m: float
     rms_acc_m: float
@@ -160,24 +203,36 @@ class Pooled:
 
 def pooled(per_seed: list) -> Pooled:
     err, acc = (np.concatenate(column) for column in list(zip(*per_seed))[:2])
-    return Pooled(len(err), len(per_seed), float(np.mean(err <= 2 * acc)), float(np.mean(err <= acc)),
-                  float(np.mean([np.all(e <= 2 * a) for e, a, _, _ in per_seed])), rms(err), rms(acc),
-                  float(np.mean(err)), float(np.median(acc)))
+    return Pooled(
+        len(err),
+        len(per_seed),
+        float(np.mean(err <= 2 * acc)),
+        float(np.mean(err <= acc)),
+        float(np.mean([np.all(e <= 2 * a) for e, a, _, _ in per_seed])),
+        rms(err),
+        rms(acc),
+        float(np.mean(err)),
+        float(np.median(acc)),
+    )
 
 
 def summary(c: Condition, per_seed: list) -> str:
     p = pooled(per_seed)
-    line = (f"{c.name:<26} {p.fixes:5d} ({p.sessions:3d})  {p.within_2sigma:6.1%}  {p.within_1sigma:6.1%}"
-            f"  {p.whole:6.1%}  {p.rms_err_m:7.3f}  {p.rms_acc_m:7.3f}  {p.ratio:5.2f}  {p.mae_m:7.3f}"
-            f"  {p.median_acc_m:7.3f}")
+    line = (
+        f"{c.name:<26} {p.fixes:5d} ({p.sessions:3d})  {p.within_2sigma:6.1%}  {p.within_1sigma:6.1%}"
+        f"  {p.whole:6.1%}  {p.rms_err_m:7.3f}  {p.rms_acc_m:7.3f}  {p.ratio:5.2f}  {p.mae_m:7.3f}"
+        f"  {p.median_acc_m:7.3f}"
+    )
     waves, wave_acc = (np.concatenate(column) for column in list(zip(*per_seed))[2:])
     if np.isfinite(waves).all() and len(waves):
         line += f"  {rms(waves):7.3f}  {rms(wave_acc):7.3f}  {np.mean(waves <= 2 * wave_acc):6.1%}"
     return line
 
 
-HEADER = (f"{'condition':<26} {'fixes (sessions)':>17}  {'in 2σ':>6}  {'in 1σ':>6}  {'whole':>6}  {'RMS err':>7}"
-          f"  {'RMS acc':>7}  {'ratio':>5}  {'MAE':>7}  {'med acc':>7}  {'waves':>7}  {'w. acc':>7}  {'w. 2σ':>6}")
+HEADER = (
+    f"{'condition':<26} {'fixes (sessions)':>17}  {'in 2σ':>6}  {'in 1σ':>6}  {'whole':>6}  {'RMS err':>7}"
+    f"  {'RMS acc':>7}  {'ratio':>5}  {'MAE':>7}  {'med acc':>7}  {'waves':>7}  {'w. acc':>7}  {'w. 2σ':>6}"
+)
 
 
 def main() -> int:
@@ -186,20 +241,46 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=20.0, help="seconds per session")
     ap.add_argument("--fps", type=float, default=2.0)
     ap.add_argument("--work", type=Path, default=Path("/tmp/skyfix-claim"))
-    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "claim_calibration.txt")
-    ap.add_argument("--only", nargs="*", default=(), help="conditions whose name contains one of these words")
-    ap.add_argument("--as-written", action="store_true", help="the sessions' own [uncertainty] (no platform sigmas)")
-    ap.add_argument("--pixel-px", type=float, default=0.0,
-                    help="[uncertainty] pixel_px with the platform's sigmas (default 0: track.csv's pixel is exact)")
+    ap.add_argument(
+        "--out", type=Path, default=ROOT / "bench" / "results" / "claim_calibration.txt"
+    )
+    ap.add_argument(
+        "--only", nargs="*", default=(), help="conditions whose name contains one of these words"
+    )
+    ap.add_argument(
+        "--as-written",
+        action="store_true",
+        help="the sessions' own [uncertainty] (no platform sigmas)",
+    )
+    ap.add_argument(
+        "--pixel-px",
+        type=float,
+        default=0.0,
+        help="[uncertainty] pixel_px with the platform's sigmas (default 0: track.csv's pixel is exact)",
+    )
     args = ap.parse_args()
     picked = [c for c in conditions() if not args.only or any(w in c.name for w in args.only)]
-    claim = "as written" if args.as_written else f"platform tilt/yaw sigmas, pixel_px {args.pixel_px:g}"
-    lines = [(f"claim calibration: {args.seeds} seeds x {args.duration:g} s at {args.fps:g} fps, true pixel, "
-              f"[uncertainty]: {claim}; platform {PLATFORM}, {WANDER}"), HEADER]
+    claim = (
+        "as written" if args.as_written else f"platform tilt/yaw sigmas, pixel_px {args.pixel_px:g}"
+    )
+    lines = [
+        (
+            f"claim calibration: {args.seeds} seeds x {args.duration:g} s at {args.fps:g} fps, true pixel, "
+            f"[uncertainty]: {claim}; platform {PLATFORM}, {WANDER}"
+        ),
+        HEADER,
+    ]
     print("\n".join(lines), flush=True)
     t0 = time.perf_counter()
     for c in picked:
-        per_seed = fly(c, args.seeds, args.duration, args.fps, args.work, None if args.as_written else args.pixel_px)
+        per_seed = fly(
+            c,
+            args.seeds,
+            args.duration,
+            args.fps,
+            args.work,
+            None if args.as_written else args.pixel_px,
+        )
         lines.append(summary(c, per_seed))
         print(lines[-1], flush=True)
     lines.append(f"({time.perf_counter() - t0:.0f} s)")

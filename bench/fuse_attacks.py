@@ -39,38 +39,48 @@ def strangers(work: Path, seconds: float, say) -> None:
     err = ok_errors(fused, t0)
     far = int(np.sum(np.hypot(err[:, 0], err[:, 1]) > 5.0))
     valid = gps_input_errors_m(gps, t0)
-    say(f"strangers x, y 20 m east (unconfigured), a configured: {len(err)} ok fused fixes, {far} of them > 5 m from "
+    say(
+        f"strangers x, y 20 m east (unconfigured), a configured: {len(err)} ok fused fixes, {far} of them > 5 m from "
         f"the UUV (largest error {np.hypot(err[:, 0], err[:, 1]).max():.3f} m); {len(valid)} valid GPS_INPUT, "
-        f"{int(np.sum(valid > 5.0))} > 5 m; counted unconfigured: {final['fusion']['unconfigured']}")
+        f"{int(np.sum(valid > 5.0))} > 5 m; counted unconfigured: {final['fusion']['unconfigured']}"
+    )
 
 
 def fake(work: Path, seconds: float, say, reals: list[Drone], *extra: str) -> None:
-    final, fused, _, t0 = run_fuser(work, [d.name for d in reals] + ["f"], [*reals, FAKE], seconds, None, *extra)
+    final, fused, _, t0 = run_fuser(
+        work, [d.name for d in reals] + ["f"], [*reals, FAKE], seconds, None, *extra
+    )
     err = ok_errors(fused, t0)
     fusion = final["fusion"]
-    late = err[len(err) // 3:]  # once the floors have some seconds of comparisons
+    late = err[len(err) // 3 :]  # once the floors have some seconds of comparisons
     dist = np.hypot(late[:, 0], late[:, 1])
     src = {n: fusion["sources"][key(n)] for n in [d.name for d in reals] + ["f"]}
-    say(f"fake f 0.8 m north claiming h_acc 0.020 m beside {'+'.join(d.name for d in reals)} "
+    say(
+        f"fake f 0.8 m north claiming h_acc 0.020 m beside {'+'.join(d.name for d in reals)} "
         f"{' '.join(extra) or '(shipped shared sigmas)'}: {len(err)} ok fused fixes; last 2/3: north error median "
         f"{np.median(late[:, 0]):.3f} m (the fake's pull {np.median(late[:, 0]) / 0.8:.0%} of its 0.8 m), error "
         f"median {np.median(dist):.3f} max {dist.max():.3f} m, fused h_acc median {np.median(late[:, 2]):.3f} m, "
         f"error/h_acc median {np.median(dist / late[:, 2]):.2f}, > 2 h_acc {np.mean(dist > 2 * late[:, 2]):.1%}; "
         f"f used in {src['f']['used']} fusions, rejected in {src['f']['rejected']}, its claim as weighed "
         f"{src['f']['h_acc_used_m']} m (floor {src['f']['floor_m']} m); "
-        + ", ".join(f"{d.name} as weighed {src[d.name]['h_acc_used_m']} m" for d in reals))
+        + ", ".join(f"{d.name} as weighed {src[d.name]['h_acc_used_m']} m" for d in reals)
+    )
 
 
 def future(work: Path, seconds: float, say) -> None:
     half = seconds / 2
-    final, fused, _, t0 = run_fuser(work, ["a", "b"], [REAL_A, REAL_B], seconds, {half: ("a", 86400.0)})
+    final, fused, _, t0 = run_fuser(
+        work, ["a", "b"], [REAL_A, REAL_B], seconds, {half: ("a", 86400.0)}
+    )
     t_ok = np.array([f["t"] for f in fused if f["status"] == "ok"]) - t0
     before, after = t_ok[(t_ok > half - 2) & (t_ok < half)], t_ok[(t_ok > half) & (t_ok < half + 2)]
     a = final["fusion"]["sources"][key("a")]
-    say(f"a fix from the future (a's, stamped +1 day at {half:g} s): refused {a['refused'].get('future', 0)} "
+    say(
+        f"a fix from the future (a's, stamped +1 day at {half:g} s): refused {a['refused'].get('future', 0)} "
         f"(a's refusals {a['refused']}); ok fused fixes 2 s before {len(before)}, 2 s after {len(after)}, longest "
         f"gap after it {np.diff(t_ok[t_ok > half - 0.5]).max():.3f} s; last fused {t_ok[-1]:.2f} s of "
-        f"{seconds:g}; last sources {final['fusion']['last_sources']}")
+        f"{seconds:g}; last sources {final['fusion']['last_sources']}"
+    )
 
 
 def main() -> None:

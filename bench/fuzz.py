@@ -68,8 +68,11 @@ def ensure_session(path: Path) -> Path:
     from sim_fixtures.generate import generate
     from sim_fixtures.scenario import scenario_from_dict
 
-    text = (ROOT / "sim_fixtures" / "scenarios" / "oblique_2m.toml").read_text().replace(
-        "duration_s = 7.0", "duration_s = 40.0")
+    text = (
+        (ROOT / "sim_fixtures" / "scenarios" / "oblique_2m.toml")
+        .read_text()
+        .replace("duration_s = 7.0", "duration_s = 40.0")
+    )
     print(f"generating {path} (once) ...", flush=True)
     generate(scenario_from_dict(tomllib.loads(text)), path, text)
     return path
@@ -78,23 +81,35 @@ def ensure_session(path: Path) -> Path:
 class Storm:
     """Sends the hostile input, evenly spread over ``[t_from, t_to]`` (station time), from its own thread."""
 
-    def __init__(self, run: ServiceRun, session: Path, shift: float, n_mavlink: int, n_zenoh: int, seed: int):
+    def __init__(
+        self, run: ServiceRun, session: Path, shift: float, n_mavlink: int, n_zenoh: int, seed: int
+    ):
         tlog = read_tlog(session / "uav.tlog")
         att = np.array([(t + shift, m.time_boot_ms) for t, m in tlog if m.get_type() == "ATTITUDE"])
         first = next(m for _, m in tlog if m.get_type() == "ATTITUDE")
         gpi = next(m for _, m in tlog if m.get_type() == "GLOBAL_POSITION_INT")
         depth = json.loads((session / "depth.jsonl").read_text().splitlines()[0])["depth_m"]
-        self.mav = MavlinkFuzzer(first.get_srcSystem(), first.get_srcComponent(),
-                                 lambda t: int(np.interp(t, att[:, 0], att[:, 1])), (gpi.lat / 1e7, gpi.lon / 1e7),
-                                 seed)
+        self.mav = MavlinkFuzzer(
+            first.get_srcSystem(),
+            first.get_srcComponent(),
+            lambda t: int(np.interp(t, att[:, 0], att[:, 1])),
+            (gpi.lat / 1e7, gpi.lon / 1e7),
+            seed,
+        )
         self.depth = DepthFuzzer(depth, seed + 1)
         # every kind once first: buffers reach their high-water mark before the memory is measured
-        self.mav_kinds = (list(MAVLINK_KINDS) + schedule(MAVLINK_KINDS, n_mavlink, seed + 2))[:n_mavlink]
-        self.depth_kinds = (list(DEPTH_KINDS) + schedule(DEPTH_KINDS, n_zenoh, seed + 3, DEPTH_WEIGHTS))[:n_zenoh]
+        self.mav_kinds = (list(MAVLINK_KINDS) + schedule(MAVLINK_KINDS, n_mavlink, seed + 2))[
+            :n_mavlink
+        ]
+        self.depth_kinds = (
+            list(DEPTH_KINDS) + schedule(DEPTH_KINDS, n_zenoh, seed + 3, DEPTH_WEIGHTS)
+        )[:n_zenoh]
         self.run = run
         self.uav_sysid = first.get_srcSystem()
         self.sent = {"mavlink": Counter(), "depth": Counter()}
-        self.accidental = Counter()  # garbage that happens to hold a frame with a valid CRC: "uav" or "other" system
+        self.accidental = (
+            Counter()
+        )  # garbage that happens to hold a frame with a valid CRC: "uav" or "other" system
         self.samples: list[dict] = []
         self._stop = threading.Event()
 
@@ -128,16 +143,21 @@ class Storm:
             i = j = 0
             while (i < n_mav or j < n_dep or time.time() < t_to) and not self._stop.is_set():
                 share = min(1.0, (time.time() - t_from) / (t_to - t_from))
-                if len(self.samples) == 1 and share >= WARM_SHARE or len(self.samples) == 2 and share >= MID_SHARE:
+                if (
+                    len(self.samples) == 1
+                    and share >= WARM_SHARE
+                    or len(self.samples) == 2
+                    and share >= MID_SHARE
+                ):
                     self.samples.append(proc_sample(self.run.proc.pid))
-                for kind in self.mav_kinds[i:max(i, round(share * n_mav))]:
+                for kind in self.mav_kinds[i : max(i, round(share * n_mav))]:
                     data = self.mav.frame(kind, time.time())
                     udp.sendto(data, ("127.0.0.1", self.run.mav))
                     self.sent["mavlink"][kind] += 1
                     if kind in GARBAGE:
                         self._oracle(data)
                 i = max(i, round(share * n_mav))
-                for kind in self.depth_kinds[j:max(j, round(share * n_dep))]:
+                for kind in self.depth_kinds[j : max(j, round(share * n_dep))]:
                     z.put("uuv/depth", self.depth.payload(kind, time.time()))
                     self.sent["depth"][kind] += 1
                 j = max(j, round(share * n_dep))
@@ -172,10 +192,22 @@ def one_run(session: Path, work: Path, n_mavlink: int, n_zenoh: int, seed: int) 
         storm.samples.append(proc_sample(run.proc.pid))
         drops = udp_drops(run.mav)
         alive = run.alive()
-    end = [json.loads(ln) for ln in rlog.read_text().splitlines() if ln.startswith('{"event": "end"')]
-    return {"alive_until_stopped": alive, "exit": run.proc.returncode, "log": run.log.read_text(),
-            "final": run.final, "gps": run.gps_input(), "shift": shift, "replayed": end[0] if end else {},
-            "sent": storm.sent, "accidental": storm.accidental, "rss": storm.samples, "udp_drops": drops}
+    end = [
+        json.loads(ln) for ln in rlog.read_text().splitlines() if ln.startswith('{"event": "end"')
+    ]
+    return {
+        "alive_until_stopped": alive,
+        "exit": run.proc.returncode,
+        "log": run.log.read_text(),
+        "final": run.final,
+        "gps": run.gps_input(),
+        "shift": shift,
+        "replayed": end[0] if end else {},
+        "sent": storm.sent,
+        "accidental": storm.accidental,
+        "rss": storm.samples,
+        "udp_drops": drops,
+    }
 
 
 def truth_error_m(session: Path, gps: list[dict], shift: float) -> np.ndarray:
@@ -184,7 +216,9 @@ def truth_error_m(session: Path, gps: list[dict], shift: float) -> np.ndarray:
     t = np.array([g["time_usec"] / 1e6 for g in valid]) - shift
     lat = np.array([g["lat"] / 1e7 for g in valid])
     lon = np.array([g["lon"] / 1e7 for g in valid])
-    return horizontal_error_m(lat, lon, np.interp(t, truth["t"], truth["lat"]), np.interp(t, truth["t"], truth["lon"]))
+    return horizontal_error_m(
+        lat, lon, np.interp(t, truth["t"], truth["lat"]), np.interp(t, truth["t"], truth["lon"])
+    )
 
 
 def check(session: Path, base: dict, fuzz: dict) -> tuple[dict, list[str]]:
@@ -192,7 +226,9 @@ def check(session: Path, base: dict, fuzz: dict) -> tuple[dict, list[str]]:
     failed = []
     for name, r in (("baseline", base), ("fuzzed", fuzz)):
         if not r["alive_until_stopped"] or r["exit"] != 0 or "Traceback" in r["log"]:
-            failed.append(f"{name} run: exit {r['exit']}, alive {r['alive_until_stopped']}:\n{r['log'][-2000:]}")
+            failed.append(
+                f"{name} run: exit {r['exit']}, alive {r['alive_until_stopped']}:\n{r['log'][-2000:]}"
+            )
     if failed:
         return {}, failed
     fb, ff = base["final"], fuzz["final"]
@@ -204,54 +240,96 @@ def check(session: Path, base: dict, fuzz: dict) -> tuple[dict, list[str]]:
     uav_b, uav_f = fb["uav"], ff["uav"]
     d_b, d_f = fb["depth"], ff["depth"]
     hostile_from_uav = by(MAVLINK_KINDS, mav, "refused")
-    acc = fuzz["accidental"]  # frames with a valid CRC inside random garbage (1 in 65 536 candidates): counted too
+    acc = fuzz[
+        "accidental"
+    ]  # frames with a valid CRC inside random garbage (1 in 65 536 candidates): counted too
     counts = {
-        "other_systems": (uav_f["other_systems"] - uav_b["other_systems"],
-                          by(MAVLINK_KINDS, mav, "other_systems") + acc["other"]),
+        "other_systems": (
+            uav_f["other_systems"] - uav_b["other_systems"],
+            by(MAVLINK_KINDS, mav, "other_systems") + acc["other"],
+        ),
         "refused": (uav_f["refused"] - uav_b["refused"], hostile_from_uav),
-        "genuine_received": (uav_f["received"] - hostile_from_uav - acc["uav"], fuzz["replayed"].get("mavlink")),
+        "genuine_received": (
+            uav_f["received"] - hostile_from_uav - acc["uav"],
+            fuzz["replayed"].get("mavlink"),
+        ),
         "depth_bad": (d_f["bad"] - d_b["bad"], by(DEPTH_KINDS, dep, "bad")),
         "depth_refused": (d_f["refused"] - d_b["refused"], by(DEPTH_KINDS, dep, "refused")),
         "depth_received": (d_f["received"], sum(dep.values()) + fuzz["replayed"].get("depth", 0)),
     }
     drops = fuzz["udp_drops"]
-    datagrams = (uav_f["link"]["reads"] + drops, sum(mav.values()) + fuzz["replayed"].get("mavlink", 0))
+    datagrams = (
+        uav_f["link"]["reads"] + drops,
+        sum(mav.values()) + fuzz["replayed"].get("mavlink", 0),
+    )
     if datagrams[0] != datagrams[1]:
-        failed.append(f"datagrams read {uav_f['link']['reads']} + dropped by the kernel {drops}, sent {datagrams[1]}")
+        failed.append(
+            f"datagrams read {uav_f['link']['reads']} + dropped by the kernel {drops}, sent {datagrams[1]}"
+        )
     for name, (got, want) in counts.items():
-        lost = drops if name in ("other_systems", "refused", "genuine_received") else 0  # the UAV port's drops
-        extra = acc["uav"] if name == "refused" else 0  # an accidental frame from the UAV may be refused too
+        lost = (
+            drops if name in ("other_systems", "refused", "genuine_received") else 0
+        )  # the UAV port's drops
+        extra = (
+            acc["uav"] if name == "refused" else 0
+        )  # an accidental frame from the UAV may be refused too
         if not want - lost <= got <= want + extra:
-            failed.append(f"{name}: counted {got}, expected {want}" + (f" ({lost} lost in the kernel)" if lost else ""))
+            failed.append(
+                f"{name}: counted {got}, expected {want}"
+                + (f" ({lost} lost in the kernel)" if lost else "")
+            )
     garbage = sum(mav[k] for k in GARBAGE)
     bad_data = uav_f["bad_data"] - uav_b["bad_data"]
     if bad_data < garbage:
         failed.append(f"bad_data counted {bad_data} for {garbage} garbage datagrams")
-    err_b, err_f = truth_error_m(session, base["gps"], base["shift"]), truth_error_m(session, fuzz["gps"], fuzz["shift"])
+    err_b, err_f = (
+        truth_error_m(session, base["gps"], base["shift"]),
+        truth_error_m(session, fuzz["gps"], fuzz["shift"]),
+    )
     limit = float(err_b.max()) + 0.1
     if len(err_f) == 0 or err_f.max() > limit:
-        failed.append(f"valid GPS_INPUT up to {err_f.max() if len(err_f) else float('nan'):.3f} m off truth "
-                      f"(baseline worst {err_b.max():.3f} m): hostile data was used")
+        failed.append(
+            f"valid GPS_INPUT up to {err_f.max() if len(err_f) else float('nan'):.3f} m off truth "
+            f"(baseline worst {err_b.max():.3f} m): hostile data was used"
+        )
     failed += fixes_lost_to_poison(fb, ff)
     rss = tuple(fuzz["rss"][k]["rss_mb"] for k in (0, 1, 2, -1))
     base_rss = tuple(base["rss"][k]["rss_mb"] for k in (0, 1, 2, -1))
     allowed = max(0.05 * rss[1], 10.0)
     grew = [(rss[k + 1] - rss[k]) - max(0.0, base_rss[k + 1] - base_rss[k]) for k in (1, 2)]
-    if min(grew) > allowed / 2:  # a leak grows with the input, in both halves; a plateau raised once, in one
-        failed.append("RSS grew from {:.1f} to {:.1f} to {:.1f} MB over the storm's halves (valid input alone: "
-                      "{:.1f} to {:.1f} to {:.1f} MB)".format(*rss[1:], *base_rss[1:]))
-    figures = {"sent_mavlink": sum(mav.values()), "sent_depth": sum(dep.values()), "counts": counts,
-               "udp_drops": drops, "datagrams": datagrams, "accidental_frames": dict(acc),
-               "cpu_pct": tuple(100.0 * (r["rss"][-1]["cpu_s"] - r["rss"][0]["cpu_s"])
-                                / (r["rss"][-1]["t"] - r["rss"][0]["t"]) for r in (base, fuzz)),
-               "bad_data": bad_data, "garbage_datagrams": garbage, "rss_mb": rss,
-               "baseline_rss_mb": base_rss,
-               "fds": (fuzz["rss"][0]["fds"], fuzz["rss"][-1]["fds"]),
-               "threads": (fuzz["rss"][0]["threads"], fuzz["rss"][-1]["threads"]),
-               "valid_gps_input": (len(err_b), len(err_f)),
-               "frames_lost_to_load": (frames_lost_to_load(fb), frames_lost_to_load(ff)), "max_error_m": tuple(float(e.max()) if len(e) else float("nan") for e in (err_b, err_f)),
-               "gates": ff["gps_input"]["gates"]["rejected"], "statuses": ff["pipeline"]["statuses"],
-               "by_kind": {"mavlink": dict(mav), "depth": dict(dep)}}
+    if (
+        min(grew) > allowed / 2
+    ):  # a leak grows with the input, in both halves; a plateau raised once, in one
+        failed.append(
+            "RSS grew from {:.1f} to {:.1f} to {:.1f} MB over the storm's halves (valid input alone: "
+            "{:.1f} to {:.1f} to {:.1f} MB)".format(*rss[1:], *base_rss[1:])
+        )
+    figures = {
+        "sent_mavlink": sum(mav.values()),
+        "sent_depth": sum(dep.values()),
+        "counts": counts,
+        "udp_drops": drops,
+        "datagrams": datagrams,
+        "accidental_frames": dict(acc),
+        "cpu_pct": tuple(
+            100.0
+            * (r["rss"][-1]["cpu_s"] - r["rss"][0]["cpu_s"])
+            / (r["rss"][-1]["t"] - r["rss"][0]["t"])
+            for r in (base, fuzz)
+        ),
+        "bad_data": bad_data,
+        "garbage_datagrams": garbage,
+        "rss_mb": rss,
+        "baseline_rss_mb": base_rss,
+        "fds": (fuzz["rss"][0]["fds"], fuzz["rss"][-1]["fds"]),
+        "threads": (fuzz["rss"][0]["threads"], fuzz["rss"][-1]["threads"]),
+        "valid_gps_input": (len(err_b), len(err_f)),
+        "frames_lost_to_load": (frames_lost_to_load(fb), frames_lost_to_load(ff)),
+        "max_error_m": tuple(float(e.max()) if len(e) else float("nan") for e in (err_b, err_f)),
+        "gates": ff["gps_input"]["gates"]["rejected"],
+        "statuses": ff["pipeline"]["statuses"],
+        "by_kind": {"mavlink": dict(mav), "depth": dict(dep)},
+    }
     return figures, failed
 
 
@@ -278,16 +356,22 @@ def fixes_lost_to_poison(base: dict, fuzz: dict) -> list[str]:
     checked: on a loaded 2-core CI it varies between two runs of the same input (133 and 94 seen)."""
     failed = []
     if located_share(fuzz) < located_share(base) - 0.05:
-        failed.append(f"located {located_share(fuzz):.2f} of the processed frames with hostile input, "
-                      f"{located_share(base):.2f} without: {fuzz['pipeline']['statuses']}")
+        failed.append(
+            f"located {located_share(fuzz):.2f} of the processed frames with hostile input, "
+            f"{located_share(base):.2f} without: {fuzz['pipeline']['statuses']}"
+        )
     rb, rf = base["gps_input"]["gates"]["rejected"], fuzz["gps_input"]["gates"]["rejected"]
-    grew = {k: (rb.get(k, 0), n) for k, n in rf.items() if k not in LOAD_REFUSALS and n > rb.get(k, 0)}
+    grew = {
+        k: (rb.get(k, 0), n) for k, n in rf.items() if k not in LOAD_REFUSALS and n > rb.get(k, 0)
+    }
     if grew:
         failed.append(f"the gates refused more fixes with hostile input (without, with): {grew}")
     return failed
 
 
-def fuzz_and_check(session: Path, work: Path, n_mavlink: int, n_zenoh: int, seed: int = 11) -> tuple[dict, list]:
+def fuzz_and_check(
+    session: Path, work: Path, n_mavlink: int, n_zenoh: int, seed: int = 11
+) -> tuple[dict, list]:
     base = one_run(session, work / "baseline", 0, 0, seed)
     fuzz = one_run(session, work / "fuzzed", n_mavlink, n_zenoh, seed)
     return check(session, base, fuzz)
@@ -295,7 +379,11 @@ def fuzz_and_check(session: Path, work: Path, n_mavlink: int, n_zenoh: int, seed
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--session", type=Path, help="session to replay (default: a 40 s oblique one, generated once)")
+    ap.add_argument(
+        "--session",
+        type=Path,
+        help="session to replay (default: a 40 s oblique one, generated once)",
+    )
     ap.add_argument("--mavlink", type=int, default=100_000, help="hostile MAVLink datagrams")
     ap.add_argument("--zenoh", type=int, default=10_000, help="hostile depth payloads")
     ap.add_argument("--seed", type=int, default=11)
@@ -303,28 +391,47 @@ def main() -> int:
     args = ap.parse_args()
     session = ensure_session(args.session or DEFAULT_SESSION)
     t0 = time.time()
-    figures, failed = fuzz_and_check(session, Path("/tmp/skyfix-bench/fuzz"), args.mavlink, args.zenoh, args.seed)
-    lines = [(f"skyfix fuzz benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
-             f"session {session}, {time.time() - t0:.0f} s")]
+    figures, failed = fuzz_and_check(
+        session, Path("/tmp/skyfix-bench/fuzz"), args.mavlink, args.zenoh, args.seed
+    )
+    lines = [
+        (
+            f"skyfix fuzz benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
+            f"session {session}, {time.time() - t0:.0f} s"
+        )
+    ]
     if figures:
         c = figures["counts"]
         lines += [
             f"hostile input: {figures['sent_mavlink']} MAVLink datagrams, {figures['sent_depth']} depth payloads",
             "counters (counted, expected): " + ", ".join(f"{k} {g}/{w}" for k, (g, w) in c.items()),
             "UAV datagrams read + dropped by the kernel (socket buffer full) / sent: {} + {} / {}".format(
-                figures["datagrams"][0] - figures["udp_drops"], figures["udp_drops"], figures["datagrams"][1]),
-            (f"bad_data {figures['bad_data']} for {figures['garbage_datagrams']} garbage datagrams; frames with a valid "
-            f"CRC found inside the garbage (counted as received or other systems): {figures['accidental_frames']}"),
+                figures["datagrams"][0] - figures["udp_drops"],
+                figures["udp_drops"],
+                figures["datagrams"][1],
+            ),
+            (
+                f"bad_data {figures['bad_data']} for {figures['garbage_datagrams']} garbage datagrams; frames with a valid "
+                f"CRC found inside the garbage (counted as received or other systems): {figures['accidental_frames']}"
+            ),
             "service CPU over the storm (% of one core): valid input alone {:.0f} %, with the storm {:.0f} %".format(
-                *figures["cpu_pct"]),
-            (f"valid GPS_INPUT: baseline {figures['valid_gps_input'][0]}, fuzzed {figures['valid_gps_input'][1]} "
-            f"(frames not located because the service was behind: {figures['frames_lost_to_load']}); "
-            f"worst error vs truth: baseline {figures['max_error_m'][0]:.3f} m, fuzzed {figures['max_error_m'][1]:.3f} m"),
+                *figures["cpu_pct"]
+            ),
+            (
+                f"valid GPS_INPUT: baseline {figures['valid_gps_input'][0]}, fuzzed {figures['valid_gps_input'][1]} "
+                f"(frames not located because the service was behind: {figures['frames_lost_to_load']}); "
+                f"worst error vs truth: baseline {figures['max_error_m'][0]:.3f} m, fuzzed {figures['max_error_m'][1]:.3f} m"
+            ),
             "RSS at the storm's start, {:.0f} % and {:.0f} % into it, its end: {:.1f}, {:.1f}, {:.1f}, {:.1f} MB".format(
-                WARM_SHARE * 100, MID_SHARE * 100, *figures["rss_mb"])
-            + " (valid input alone, same instants: {:.1f}, {:.1f}, {:.1f}, {:.1f} MB)".format(*figures["baseline_rss_mb"]),
-            (f"fds {figures['fds'][0]} -> {figures['fds'][1]}; "
-             f"threads {figures['threads'][0]} -> {figures['threads'][1]}"),
+                WARM_SHARE * 100, MID_SHARE * 100, *figures["rss_mb"]
+            )
+            + " (valid input alone, same instants: {:.1f}, {:.1f}, {:.1f}, {:.1f} MB)".format(
+                *figures["baseline_rss_mb"]
+            ),
+            (
+                f"fds {figures['fds'][0]} -> {figures['fds'][1]}; "
+                f"threads {figures['threads'][0]} -> {figures['threads'][1]}"
+            ),
             f"gates (fuzzed run): {figures['gates']}; statuses {figures['statuses']}",
             f"by kind: {json.dumps(figures['by_kind'])}",
         ]

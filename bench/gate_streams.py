@@ -41,8 +41,12 @@ V, A = MAX_SPEED_MPS["bluerov2"], MAX_ACCEL_MPS2["bluerov2"]
 def old_gate_class(commit: str, work: Path):
     """``FixGate`` of ``localizer/fix_gate.py`` at ``commit`` (written into ``work``), a module of the localizer
     package."""
-    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{commit}:localizer/fix_gate.py"], check=True,
-                         capture_output=True, text=True).stdout
+    src = subprocess.run(
+        ["git", "-C", str(ROOT), "show", f"{commit}:localizer/fix_gate.py"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     path = work / f"fix_gate_{commit}.py"
     path.write_text(src)
     spec = importlib.util.spec_from_file_location("localizer.fix_gate_before", path)
@@ -52,16 +56,28 @@ def old_gate_class(commit: str, work: Path):
 
 
 def streams(h_acc_m: float) -> list:
-    return [gs.ramp(h_acc_m), gs.ramp(h_acc_m, 1.5, 1.0), gs.step(h_acc_m, 0.8), gs.step(h_acc_m, 10.0), gs.lookalike(h_acc_m, 3.0),
-            gs.lookalike(h_acc_m, 1.0), gs.crossing(h_acc_m), gs.accelerate(h_acc_m, A, V), gs.turn(h_acc_m, V, A)]
+    return [
+        gs.ramp(h_acc_m),
+        gs.ramp(h_acc_m, 1.5, 1.0),
+        gs.step(h_acc_m, 0.8),
+        gs.step(h_acc_m, 10.0),
+        gs.lookalike(h_acc_m, 3.0),
+        gs.lookalike(h_acc_m, 1.0),
+        gs.crossing(h_acc_m),
+        gs.accelerate(h_acc_m, A, V),
+        gs.turn(h_acc_m, V, A),
+    ]
 
 
 def score(stream, valid: np.ndarray) -> tuple[str, str, str]:
     ok = np.array([f.ok for f in stream.fixes])
     seen = np.array([[f.lat, f.lon] for f in stream.fixes])
     err = np.full(len(ok), np.nan)
-    err[ok] = np.hypot((seen[ok, 0] - gs.LAT0) * gs.M_PER_DEG - stream.truth_ne[ok, 0],
-                       (seen[ok, 1] - gs.LON0) * gs.M_PER_DEG * np.cos(np.radians(gs.LAT0)) - stream.truth_ne[ok, 1])
+    err[ok] = np.hypot(
+        (seen[ok, 0] - gs.LAT0) * gs.M_PER_DEG - stream.truth_ne[ok, 0],
+        (seen[ok, 1] - gs.LON0) * gs.M_PER_DEG * np.cos(np.radians(gs.LAT0))
+        - stream.truth_ne[ok, 1],
+    )
     wrong = f"{(valid & stream.wrong).sum()}/{stream.wrong.sum()}" if stream.wrong.any() else "—"
     worst = f"{np.nanmax(np.where(valid, err, np.nan)):.3f}" if valid.any() else "—"
     right_refused = (~valid & stream.real_after(1.0)).sum()
@@ -75,13 +91,22 @@ def main() -> int:
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as work:
         Before = old_gate_class(args.before, Path(work))
-    lines = [(f"gates on 30 Hz fix streams (white error {gs.NOISE_M * 1000:g} mm per axis); before = {args.before}, "
-              f"after = today's (top speed {V:g} m/s, acceleration {A:g} m/s²)"),
-             ("wrong valid: fixes not of the UUV sent as valid / such fixes; worst: largest error of a valid fix (m); "
-              "real refused: fixes of the UUV refused more than 1 s after its (re)acquisition"), ""]
-    head = f"{'stream':44} {'h_acc':>5}  {'before: wrong valid':>19} {'worst':>6} {'real refused':>12}  " \
-           f"{'after: wrong valid':>18} {'worst':>6} {'real refused':>12}  " \
-           f"{'thrusters: wrong valid':>22} {'worst':>6} {'real refused':>12}"
+    lines = [
+        (
+            f"gates on 30 Hz fix streams (white error {gs.NOISE_M * 1000:g} mm per axis); before = {args.before}, "
+            f"after = today's (top speed {V:g} m/s, acceleration {A:g} m/s²)"
+        ),
+        (
+            "wrong valid: fixes not of the UUV sent as valid / such fixes; worst: largest error of a valid fix (m); "
+            "real refused: fixes of the UUV refused more than 1 s after its (re)acquisition"
+        ),
+        "",
+    ]
+    head = (
+        f"{'stream':44} {'h_acc':>5}  {'before: wrong valid':>19} {'worst':>6} {'real refused':>12}  "
+        f"{'after: wrong valid':>18} {'worst':>6} {'real refused':>12}  "
+        f"{'thrusters: wrong valid':>22} {'worst':>6} {'real refused':>12}"
+    )
     lines += [head, "-" * len(head)]
     for h_acc in (0.4, 0.05):
         for s in streams(h_acc):
@@ -90,12 +115,22 @@ def main() -> int:
             after = score(s, gs.offer(new, s, new.target_lost))
             told = FixGate(thrusters=gs.vectored_thrusters())
             moves = bool(np.ptp(s.truth_ne) > 0)
-            thr = score(s, gs.offer(told, s, told.target_lost, told.thrusters, lambda t, m=moves: m))
-            lines.append(f"{s.name:44} {h_acc:5.2f}  {before[0]:>19} {before[1]:>6} {before[2]:>12}  "
-                         f"{after[0]:>18} {after[1]:>6} {after[2]:>12}  {thr[0]:>22} {thr[1]:>6} {thr[2]:>12}")
-    lines += ["", "an abrupt start at v against the best motion within the acceleration bound a (noise-free):"]
+            thr = score(
+                s, gs.offer(told, s, told.target_lost, told.thrusters, lambda t, m=moves: m)
+            )
+            lines.append(
+                f"{s.name:44} {h_acc:5.2f}  {before[0]:>19} {before[1]:>6} {before[2]:>12}  "
+                f"{after[0]:>18} {after[1]:>6} {after[2]:>12}  {thr[0]:>22} {thr[1]:>6} {thr[2]:>12}"
+            )
+    lines += [
+        "",
+        "an abrupt start at v against the best motion within the acceleration bound a (noise-free):",
+    ]
     for v in (0.35, 0.7, 1.5):
-        fits = ", ".join(f"{gs.bounded_fit_residual_m(v, a) * 1000:.1f} mm at a = {a:g} m/s²" for a in (1.0, 2.5, A))
+        fits = ", ".join(
+            f"{gs.bounded_fit_residual_m(v, a) * 1000:.1f} mm at a = {a:g} m/s²"
+            for a in (1.0, 2.5, A)
+        )
         lines.append(f"  v = {v:.2f} m/s: largest residual {fits}")
     stream = gs.turn(0.4, V, A, seconds=20.0)
     gate, cost_us = FixGate(), []
@@ -103,8 +138,10 @@ def main() -> int:
         t0 = time.perf_counter()
         gate.check(f, f.t_unix + 0.05)
         cost_us.append((time.perf_counter() - t0) * 1e6)
-    lines.append(f"\ncost of a check (tracking, {len(cost_us)} fixes): median {np.median(cost_us):.0f} µs, "
-                 f"p99 {np.percentile(cost_us, 99):.0f} µs, max {max(cost_us):.0f} µs")
+    lines.append(
+        f"\ncost of a check (tracking, {len(cost_us)} fixes): median {np.median(cost_us):.0f} µs, "
+        f"p99 {np.percentile(cost_us, 99):.0f} µs, max {max(cost_us):.0f} µs"
+    )
     emit(lines, args.out)
     return 0
 

@@ -36,8 +36,14 @@ from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides
 
-SCENARIOS = ("height_rtk_drift", "height_rtk_noise", "height_gnss_drift", "height_rangefinder",
-             "height_rangefinder:nothing", "height_rangefinder:floor")
+SCENARIOS = (
+    "height_rtk_drift",
+    "height_rtk_noise",
+    "height_gnss_drift",
+    "height_rangefinder",
+    "height_rangefinder:nothing",
+    "height_rangefinder:floor",
+)
 
 
 def scenario(name: str):
@@ -55,12 +61,19 @@ def session(name: str, work: Path) -> Path:
 
 def evaluate(skyfix: list[str], cwd: Path, path: Path, out: Path) -> dict:
     """evaluate's refraction row for ``path`` and its positions.csv."""
-    subprocess.run([*skyfix, "evaluate", str(path), "--use-track", "--out", str(out), "--quiet"], cwd=cwd,
-                   capture_output=True, check=False)
+    subprocess.run(
+        [*skyfix, "evaluate", str(path), "--use-track", "--out", str(out), "--quiet"],
+        cwd=cwd,
+        capture_output=True,
+        check=False,
+    )
     with open(out / "evaluation.csv", newline="") as f:
         row = next(r for r in csv.DictReader(f) if r["method"] == "refraction")
-    return {"mae_m": float(row["mae_m"]), "in_2sigma": float(row["within_2sigma"]),
-            "positions": read_positions_csv(out / path.name / "refraction" / "positions.csv")}
+    return {
+        "mae_m": float(row["mae_m"]),
+        "in_2sigma": float(row["within_2sigma"]),
+        "positions": read_positions_csv(out / path.name / "refraction" / "positions.csv"),
+    }
 
 
 def height_columns(name: str, pos) -> str:
@@ -69,17 +82,24 @@ def height_columns(name: str, pos) -> str:
     err, sigma = pos.height_m - true_h, pos.sigma_height_m
     ok = np.isfinite(err)
     step = np.diff(err)
-    words = ", ".join(f"{w} {n / ok.sum():.0%}" for w, n in Counter(pos.height_source[ok]).most_common())
-    return (f"{np.mean(np.abs(err[ok])):7.3f} {np.max(np.abs(err[ok])):7.3f} "
-            f"{np.sqrt(np.nanmean(step ** 2)):7.4f} "
-            f"{np.mean(np.abs(err[ok]) <= 2 * sigma[ok]):6.1%} {np.median(sigma[ok]):6.3f}  {words}")
+    words = ", ".join(
+        f"{w} {n / ok.sum():.0%}" for w, n in Counter(pos.height_source[ok]).most_common()
+    )
+    return (
+        f"{np.mean(np.abs(err[ok])):7.3f} {np.max(np.abs(err[ok])):7.3f} "
+        f"{np.sqrt(np.nanmean(step**2)):7.4f} "
+        f"{np.mean(np.abs(err[ok]) <= 2 * sigma[ok]):6.1%} {np.median(sigma[ok]):6.3f}  {words}"
+    )
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", default="/tmp/skyfix-height")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "height.txt"))
-    ap.add_argument("--skyfix", help="another skyfix to compare, e.g. '/old/.venv/bin/python -m groundstation.cli'")
+    ap.add_argument(
+        "--skyfix",
+        help="another skyfix to compare, e.g. '/old/.venv/bin/python -m groundstation.cli'",
+    )
     ap.add_argument("--skyfix-cwd", default=str(ROOT))
     ap.add_argument("--only", nargs="*")
     args = ap.parse_args()
@@ -88,20 +108,26 @@ def main() -> int:
     if args.skyfix:
         runs.insert(0, ("before", shlex.split(args.skyfix), Path(args.skyfix_cwd)))
     names = args.only or SCENARIOS
-    header = (f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} {'dh step':>7s} "
-              f"{'in 2σh':>6s} {'σh med':>6s}  height source")
+    header = (
+        f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} {'dh step':>7s} "
+        f"{'in 2σh':>6s} {'σh med':>6s}  height source"
+    )
     lines = [header]
     for name in names:
         path = session(name, work)
         for label, skyfix, cwd in runs:
             r = evaluate(skyfix, cwd, path, work / label / path.name)
-            lines.append(f"{name:28s} {label:6s} {r['mae_m']:7.4f} {r['in_2sigma']:6.1%}  "
-                         + height_columns(name, r["positions"]))
+            lines.append(
+                f"{name:28s} {label:6s} {r['mae_m']:7.4f} {r['in_2sigma']:6.1%}  "
+                + height_columns(name, r["positions"])
+            )
             print(lines[-1], flush=True)
     for name in BUNDLED if not args.only else ():
         for label, skyfix, cwd in runs:
             r = evaluate(skyfix, cwd, BUNDLED_DIR / name, work / label / "bundled")
-            lines.append(f"{'bundled/' + name:28s} {label:6s} {r['mae_m']:7.4f} {r['in_2sigma']:6.1%}")
+            lines.append(
+                f"{'bundled/' + name:28s} {label:6s} {r['mae_m']:7.4f} {r['in_2sigma']:6.1%}"
+            )
             print(lines[-1], flush=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")

@@ -48,16 +48,34 @@ def write_log(path: Path, seconds: float) -> None:
     for k in range(round(seconds * 25)):
         t = BOOT0 + k / 25
         us = round(t * 1e6)
-        rate = np.radians(20.0 * 2 * np.pi / 17.0 * np.cos(2 * np.pi * (t - BOOT0) / 17.0)
-                          + 8.0 * 2 * np.pi / 5.3 * np.cos(2 * np.pi * (t - BOOT0) / 5.3))
+        rate = np.radians(
+            20.0 * 2 * np.pi / 17.0 * np.cos(2 * np.pi * (t - BOOT0) / 17.0)
+            + 8.0 * 2 * np.pi / 5.3 * np.cos(2 * np.pi * (t - BOOT0) / 5.3)
+        )
         w.write("ATT", us, 0.0, 0.0, 0.0, 0.0, 0.0, float(yaw_deg(t - BOOT0)) % 360.0, 0)
         w.write("IMU", us, 0, 0.0, 0.0, float(rate))
         if k % 5 == 0:
             w.write("POS", us, round(63.44 * 1e7), round(10.4 * 1e7), 60.0, 10.0, 10.0)
             gps_s = UNIX0 + (t - BOOT0) + 18 - 315964800
             week = int(gps_s // 604800)
-            w.write("GPS", us, 0, 6, round((gps_s - week * 604800) * 1000), week, 12, 80, round(63.44 * 1e7),
-                    round(10.4 * 1e7), 6000, 0.0, 0.0, 0.0, 0.0, 1)
+            w.write(
+                "GPS",
+                us,
+                0,
+                6,
+                round((gps_s - week * 604800) * 1000),
+                week,
+                12,
+                80,
+                round(63.44 * 1e7),
+                round(10.4 * 1e7),
+                6000,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                1,
+            )
     w.close()
 
 
@@ -73,7 +91,9 @@ def write_video(path: Path, seconds: float, size: tuple[int, int], start_s: floa
         s.width, s.height, s.pix_fmt = w, h, "yuv420p"
         s.time_base = Fraction(1, FPS)
         for i in range(n):
-            angle = float(yaw_deg(start_s + i / FPS))  # looking down, a yaw to the right turns the image left
+            angle = float(
+                yaw_deg(start_s + i / FPS)
+            )  # looking down, a yaw to the right turns the image left
             M = cv2.getRotationMatrix2D((side / 2, side / 2), angle, 1.0)
             M[:, 2] -= [(side - w) / 2, (side - h) / 2]
             img = cv2.warpAffine(floor, M, (w, h))
@@ -113,38 +133,76 @@ def main() -> int:
         t0 = time.perf_counter()
         n = write_video(work / "camera.mp4", seconds, size, start_s)
         encode_s = time.perf_counter() - t0
-        (work / "depth.csv").write_text("t,depth_m\n" + "".join(f"{UNIX0 + i:.1f},1.0\n"
-                                                                for i in range(int(seconds) + 90)))
+        (work / "depth.csv").write_text(
+            "t,depth_m\n" + "".join(f"{UNIX0 + i:.1f},1.0\n" for i in range(int(seconds) + 90))
+        )
         f = 1800.0 * size[0] / 3840  # a 4K camera's focal length, scaled
         (work / "cal.toml").write_text(
             f"[camera]\nwidth = {size[0]}\nheight = {size[1]}\nfx = {f}\nfy = {f}\ncx = {(size[0] - 1) / 2}\n"
-            f"cy = {(size[1] - 1) / 2}\ndistortion = [0.0, 0.0, 0.0, 0.0, 0.0]\n\n[mount]\nattitude_source = \"fixed\"\n"
+            f'cy = {(size[1] - 1) / 2}\ndistortion = [0.0, 0.0, 0.0, 0.0, 0.0]\n\n[mount]\nattitude_source = "fixed"\n'
             "fixed_rpy_deg = [0.0, -90.0, 0.0]\ncamera_offset_m = [0.0, 0.0, 0.0]\n\n[water]\n"
-            "takeoff_height_above_surface_m = 0.0\nrefractive_index = 1.34\n")
+            "takeoff_height_above_surface_m = 0.0\nrefractive_index = 1.34\n"
+        )
         t0 = time.perf_counter()
         with av.open(str(work / "camera.mp4")) as c:
             packets = sum(1 for _ in c.demux(c.streams.video[0]))
         demux_s = time.perf_counter() - t0
-        decode = child([sys.executable, str(ROOT / "bench" / "offline_speed.py"), "--decode-only", "opencv",
-                        str(work / "camera.mp4")])
-        base = [sys.executable, "-m", "groundstation.cli", "import", "--dataflash", str(work / "flight.bin"),
-                "--video", str(work / "camera.mp4"), "--depth", str(work / "depth.csv"), "--calibration",
-                str(work / "cal.toml"), "--quiet"]
-        given = child(base + ["--video-start-unix", f"{UNIX0 + start_s - BOOT0 + BOOT0:.3f}", "--out",
-                              str(work / "given")])
+        decode = child(
+            [
+                sys.executable,
+                str(ROOT / "bench" / "offline_speed.py"),
+                "--decode-only",
+                "opencv",
+                str(work / "camera.mp4"),
+            ]
+        )
+        base = [
+            sys.executable,
+            "-m",
+            "groundstation.cli",
+            "import",
+            "--dataflash",
+            str(work / "flight.bin"),
+            "--video",
+            str(work / "camera.mp4"),
+            "--depth",
+            str(work / "depth.csv"),
+            "--calibration",
+            str(work / "cal.toml"),
+            "--quiet",
+        ]
+        given = child(
+            base
+            + [
+                "--video-start-unix",
+                f"{UNIX0 + start_s - BOOT0 + BOOT0:.3f}",
+                "--out",
+                str(work / "given"),
+            ]
+        )
         motion = child(base + ["--out", str(work / "motion")])
         found = json.loads((work / "motion" / "import.json").read_text()) if motion[2] == 0 else {}
-    lines = [(f"skyfix import of a {args.minutes:g} min {size[0]}x{size[1]} {FPS} fps video ({n} frames, "
-             f"{packets} packets; encoded in {encode_s:.0f} s)"),
-             f"  baseline: PyAV demuxing alone: {demux_s:.2f} s ({n / demux_s:.0f} frames/s)",
-             (f"  baseline: OpenCV decoding alone (BGR): {decode[0]:.2f} s ({n / decode[0]:.0f} frames/s), "
-              f"peak RSS {decode[1]:.0f} MB"),
-             (f"  start given: {given[0]:.2f} s ({n / given[0]:.0f} frames/s of video), peak RSS {given[1]:.0f} MB, "
-             f"exit {given[2]}"),
-             (f"  start from the motion (the whole video decoded): {motion[0]:.2f} s ({n / motion[0]:.0f} frames/s of "
-             f"video), peak RSS {motion[1]:.0f} MB, exit {motion[2]}; found "
-             f"{(found.get('video_start_unix', math.nan) - (UNIX0 + start_s)) * 1000:+.1f} ms from the truth "
-             f"(± {found.get('video_start_sigma_s', math.nan) * 1000:.1f} ms)")]
+    lines = [
+        (
+            f"skyfix import of a {args.minutes:g} min {size[0]}x{size[1]} {FPS} fps video ({n} frames, "
+            f"{packets} packets; encoded in {encode_s:.0f} s)"
+        ),
+        f"  baseline: PyAV demuxing alone: {demux_s:.2f} s ({n / demux_s:.0f} frames/s)",
+        (
+            f"  baseline: OpenCV decoding alone (BGR): {decode[0]:.2f} s ({n / decode[0]:.0f} frames/s), "
+            f"peak RSS {decode[1]:.0f} MB"
+        ),
+        (
+            f"  start given: {given[0]:.2f} s ({n / given[0]:.0f} frames/s of video), peak RSS {given[1]:.0f} MB, "
+            f"exit {given[2]}"
+        ),
+        (
+            f"  start from the motion (the whole video decoded): {motion[0]:.2f} s ({n / motion[0]:.0f} frames/s of "
+            f"video), peak RSS {motion[1]:.0f} MB, exit {motion[2]}; found "
+            f"{(found.get('video_start_unix', math.nan) - (UNIX0 + start_s)) * 1000:+.1f} ms from the truth "
+            f"(± {found.get('video_start_sigma_s', math.nan) * 1000:.1f} ms)"
+        ),
+    ]
     emit(lines, args.out)
     return 0
 

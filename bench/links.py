@@ -33,8 +33,10 @@ REQUIRED_S = 1.0
 
 
 def _summary(name: str, values: list[float]) -> str:
-    return (f"{name:16s} n={len(values)}  median {statistics.median(values):.3f} s  max {max(values):.3f} s  "
-            f"[{', '.join(f'{v:.3f}' for v in values)}]  {'ok' if max(values) <= REQUIRED_S else 'OVER 1 s'}")
+    return (
+        f"{name:16s} n={len(values)}  median {statistics.median(values):.3f} s  max {max(values):.3f} s  "
+        f"[{', '.join(f'{v:.3f}' for v in values)}]  {'ok' if max(values) <= REQUIRED_S else 'OVER 1 s'}"
+    )
 
 
 def main() -> int:
@@ -43,9 +45,14 @@ def main() -> int:
     ap.add_argument("--link-trials", type=int, default=2, help="cuts per link")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "links.txt")
     args = ap.parse_args()
-    lines = [(f"bench/links.py {time.strftime('%Y-%m-%d %H:%M')} — trials {args.trials} (stop), "
-             f"{args.link_trials} (links); required ≤ {REQUIRED_S:g} s"), "",
-             "stop: signal → exit (s); every exit 0 and the last GPS_INPUT a no-fix unless noted"]
+    lines = [
+        (
+            f"bench/links.py {time.strftime('%Y-%m-%d %H:%M')} — trials {args.trials} (stop), "
+            f"{args.link_trials} (links); required ≤ {REQUIRED_S:g} s"
+        ),
+        "",
+        "stop: signal → exit (s); every exit 0 and the last GPS_INPUT a no-fix unless noted",
+    ]
 
     def say(line: str) -> None:
         print(line, flush=True)
@@ -62,7 +69,9 @@ def main() -> int:
                 r = shutdown(work / f"{state}{i}", state, sig)
                 times.append(r["exit_s"] if r["exit_s"] is not None else float("inf"))
                 if r["rc"] != 0 or not r["gps_after_signal"] or r["gps_after_signal"][-1] >= 2:
-                    notes.append(f"trial {i}: rc {r['rc']}, GPS_INPUT after the signal {r['gps_after_signal']}")
+                    notes.append(
+                        f"trial {i}: rc {r['rc']}, GPS_INPUT after the signal {r['gps_after_signal']}"
+                    )
             say(_summary(state, times) + ("  " + "; ".join(notes) if notes else ""))
         say("")
         say("links: input back → first valid GPS_INPUT (s)")
@@ -73,7 +82,9 @@ def main() -> int:
                 r = link_comes_back(work / f"{which}{i}", session, which)
                 back.append(r["back_s"])
                 if set(r["gps_while_missing"]) != {1}:
-                    notes.append(f"trial {i}: fix_types while missing {sorted(set(r['gps_while_missing']))}")
+                    notes.append(
+                        f"trial {i}: fix_types while missing {sorted(set(r['gps_while_missing']))}"
+                    )
             say(_summary(which, back) + ("  " + "; ".join(notes) if notes else ""))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")

@@ -116,9 +116,31 @@ def ensure_session(name: str, duration_s: float) -> Path:
 def encode_as_camera(path: Path) -> None:
     """A generated session's video.mp4 re-encoded as a camera sends it (H.264 without B-frames, a keyframe a
     second, MPEG-TS) into video.ts, in its place."""
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(path / "video.mp4"), "-an", "-c:v", "libx264",
-                    "-preset", "veryfast", "-tune", "zerolatency", "-g", "30", "-pix_fmt", "yuv420p",
-                    "-f", "mpegts", str(path / "video.ts")], check=True)
+    subprocess.run(
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-i",
+            str(path / "video.mp4"),
+            "-an",
+            "-c:v",
+            "libx264",
+            "-preset",
+            "veryfast",
+            "-tune",
+            "zerolatency",
+            "-g",
+            "30",
+            "-pix_fmt",
+            "yuv420p",
+            "-f",
+            "mpegts",
+            str(path / "video.ts"),
+        ],
+        check=True,
+    )
     (path / "video.mp4").unlink()
 
 
@@ -161,15 +183,20 @@ def proc_sample(pid: int) -> tuple[float, float]:
     """(CPU seconds used so far, resident memory in MB) of a process."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     cpu_s = (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime, stime
-    rss_kb = next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
-                  if line.startswith("VmRSS:"))
+    rss_kb = next(
+        int(line.split()[1])
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+        if line.startswith("VmRSS:")
+    )
     return cpu_s, rss_kb / 1024.0
 
 
 def pct(values, *qs) -> dict:
     a = np.asarray(values, dtype=float)
-    return {f"p{q}": round(float(np.percentile(a, q)), 2) for q in qs} | {"max": round(float(a.max()), 2),
-                                                                        "n": len(a)}
+    return {f"p{q}": round(float(np.percentile(a, q)), 2) for q in qs} | {
+        "max": round(float(a.max()), 2),
+        "n": len(a),
+    }
 
 
 def decode_baseline(session_dir: Path) -> dict:
@@ -200,7 +227,9 @@ def pipeline_baseline(session_dir: Path, n_frames: int) -> dict:
     times = []
 
     async def work():
-        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height)) as video:
+        with open_video(
+            session.video_path, expected_size=(cal.camera.width, cal.camera.height)
+        ) as video:
             for frame in video:
                 if frame.index >= n_frames:
                     break
@@ -229,14 +258,49 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> 
     ep = f"tcp/127.0.0.1:{zport}"
     stats = work / "stats.json"
     py = sys.executable
-    run = [py, "-m", "groundstation.cli", "run", "--calibration", str(session_dir / "session.toml"),
-           "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", receive_url, "--video-latency-ms", str(CAMERA_LATENCY_MS),
-           "--zenoh-listen", ep, "--no-ui", "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(stats),
-           *run_args]
-    replay = [py, "-m", "groundstation.cli", "replay", str(session_dir), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
-              "--video-out", send_url, "--video-delay-ms", str(CAMERA_LATENCY_MS),
-              "--zenoh-connect", ep, "--uuv-listen",
-              f"udpin:127.0.0.1:{uuv}", "--uuv-log", str(work / "uuv.jsonl"), "--lead-s", "2"]
+    run = [
+        py,
+        "-m",
+        "groundstation.cli",
+        "run",
+        "--calibration",
+        str(session_dir / "session.toml"),
+        "--mavlink",
+        f"udpin:127.0.0.1:{mav}",
+        "--video",
+        receive_url,
+        "--video-latency-ms",
+        str(CAMERA_LATENCY_MS),
+        "--zenoh-listen",
+        ep,
+        "--no-ui",
+        "--gps-input",
+        f"udpout:127.0.0.1:{uuv}",
+        "--stats",
+        str(stats),
+        *run_args,
+    ]
+    replay = [
+        py,
+        "-m",
+        "groundstation.cli",
+        "replay",
+        str(session_dir),
+        "--mavlink-out",
+        f"udpout:127.0.0.1:{mav}",
+        "--video-out",
+        send_url,
+        "--video-delay-ms",
+        str(CAMERA_LATENCY_MS),
+        "--zenoh-connect",
+        ep,
+        "--uuv-listen",
+        f"udpin:127.0.0.1:{uuv}",
+        "--uuv-log",
+        str(work / "uuv.jsonl"),
+        "--lead-s",
+        "2",
+    ]
     samples = []  # (time, cpu_s, rss_mb)
     with open(work / "run.log", "w") as run_log, open(work / "replay.log", "w") as replay_log:
         service = subprocess.Popen(run, stdout=run_log, stderr=subprocess.STDOUT, cwd=ROOT)
@@ -255,7 +319,9 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> 
     shift = json.loads((work / "replay.log").read_text().splitlines()[0])["shift_s"]
     session = load_session(session_dir)
     frames_t = session.frames["t"] + shift
-    gps = [json.loads(line) for line in (work / "uuv.jsonl").read_text().splitlines() if line.strip()]
+    gps = [
+        json.loads(line) for line in (work / "uuv.jsonl").read_text().splitlines() if line.strip()
+    ]
     valid = {}
     for g in gps:  # the first arrival of each new fix
         if g["fix_type"] == 3:
@@ -267,25 +333,44 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> 
     truth = session.truth
     lat = np.array([valid[k]["lat"] for k in sorted(valid)]) / 1e7
     lon = np.array([valid[k]["lon"] for k in sorted(valid)]) / 1e7
-    err = horizontal_error_m(lat, lon, np.interp(t_exp - shift, truth["t"], truth["lat"]),
-                             np.interp(t_exp - shift, truth["t"], truth["lon"]))
+    err = horizontal_error_m(
+        lat,
+        lon,
+        np.interp(t_exp - shift, truth["t"], truth["lat"]),
+        np.interp(t_exp - shift, truth["t"], truth["lon"]),
+    )
     latency_ms = (t_arrive - t_slot) * 1000.0
     key = keyframes(session_dir)[np.clip(np.searchsorted(frames_t, nearest), 0, len(frames_t) - 1)]
     s = np.array(samples)
     half = len(s) // 2
     return {
         "frames_sent": len(frames_t),
-        "video": {k: final["video"][k] for k in ("frames", "connects", "decode_errors", "arrival_after_slot_ms",
-                                                  "decode_ms", "latency_from_motion")},
-        "pipeline": {k: final["pipeline"][k] for k in ("processed", "dropped", "held_for_telemetry", "waited_s",
-                                                        "statuses")},
+        "video": {
+            k: final["video"][k]
+            for k in (
+                "frames",
+                "connects",
+                "decode_errors",
+                "arrival_after_slot_ms",
+                "decode_ms",
+                "latency_from_motion",
+            )
+        },
+        "pipeline": {
+            k: final["pipeline"][k]
+            for k in ("processed", "dropped", "held_for_telemetry", "waited_s", "statuses")
+        },
         "slot_to_gps_input_ms": pct(latency_ms, 50, 99),
         "slot_to_gps_input_keyframes_ms": pct(latency_ms[key], 50, 99),
         "slot_to_gps_input_other_frames_ms": pct(latency_ms[~key], 50, 99),
         "arrival_to_sent_ms": final["latency"],
         "frame_time_error_ms": pct(np.abs(t_exp - nearest) * 1000.0, 50, 99),
-        "accuracy_m": {"mae": round(float(err.mean()), 4), "p95": round(float(np.percentile(err, 95)), 4),
-                       "max": round(float(err.max()), 4), "valid": len(err)},
+        "accuracy_m": {
+            "mae": round(float(err.mean()), 4),
+            "p95": round(float(np.percentile(err, 95)), 4),
+            "max": round(float(err.max()), 4),
+            "valid": len(err),
+        },
         "cpu_pct": round(100.0 * (s[-1, 1] - s[half, 1]) / (s[-1, 0] - s[half, 0]), 1),
         "rss_mb": {"mid": round(float(s[half, 2]), 1), "end": round(float(s[-1, 2]), 1)},
     }
@@ -294,50 +379,83 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> 
 def report(name: str, session: Path, res: dict) -> list[str]:
     """The lines of one size and transport."""
     d, b, lat = res["decode_only_ms"], res["pipeline_process_ms"], res["slot_to_gps_input_ms"]
-    a, fe, acc, pl = res["arrival_to_sent_ms"], res["frame_time_error_ms"], res["accuracy_m"], res["pipeline"]
+    a, fe, acc, pl = (
+        res["arrival_to_sent_ms"],
+        res["frame_time_error_ms"],
+        res["accuracy_m"],
+        res["pipeline"],
+    )
     kf, of = res["slot_to_gps_input_keyframes_ms"], res["slot_to_gps_input_other_frames_ms"]
     motion = res["video"]["latency_from_motion"]
     return [
         f"{name} ({session.name}, {res['frames_sent']} frames):",
         f"  baseline decode only (PyAV, per frame): p50 {d['p50']} ms, p99 {d['p99']} ms",
         f"  baseline Pipeline.process (tracker + pose + locate, per frame): p50 {b['p50']} ms, p99 {b['p99']} ms",
-        (f"  live: stream slot -> GPS_INPUT at the UUV over {lat['n']} fixes: p50 {lat['p50']} ms, "
-         f"p99 {lat['p99']} ms, max {lat['max']} ms   (target p99 <= 50)"),
-        (f"    keyframes ({kf['n']}): p50 {kf['p50']} ms, max {kf['max']} ms; other frames: p50 {of['p50']} ms, "
-         f"p99 {of['p99']} ms, max {of['max']} ms"),
+        (
+            f"  live: stream slot -> GPS_INPUT at the UUV over {lat['n']} fixes: p50 {lat['p50']} ms, "
+            f"p99 {lat['p99']} ms, max {lat['max']} ms   (target p99 <= 50)"
+        ),
+        (
+            f"    keyframes ({kf['n']}): p50 {kf['p50']} ms, max {kf['max']} ms; other frames: p50 {of['p50']} ms, "
+            f"p99 {of['p99']} ms, max {of['max']} ms"
+        ),
         f"  live: packet arrival -> GPS_INPUT sent (service): p50 {a['p50_ms']} ms, p99 {a['p99_ms']} ms",
         f"  frame time error (|fix time - true exposure|): p50 {fe['p50']} ms, p99 {fe['p99']} ms, max {fe['max']} ms",
         f"  accuracy vs truth: MAE {acc['mae']} m, p95 {acc['p95']} m, max {acc['max']} m ({acc['valid']} fixes)",
-        (f"  frames: received {res['video']['frames']}, processed {pl['processed']}, dropped {pl['dropped']}, "
-         f"held for attitude telemetry {pl['held_for_telemetry']} ({pl['waited_s']} s in all); "
-         f"statuses {pl['statuses']}"),
-        (f"  latency from the image's motion (a cross-check of the frames' times): {motion.get('estimate_ms')} "
-         f"± {motion.get('sigma_ms')} ms, configured {CAMERA_LATENCY_MS} ms"),
-        (f"  video: arrival after slot {res['video']['arrival_after_slot_ms']} ms, decode "
-         f"{res['video']['decode_ms']} ms; CPU {res['cpu_pct']} % of a core; RSS {res['rss_mb']} MB"),
+        (
+            f"  frames: received {res['video']['frames']}, processed {pl['processed']}, dropped {pl['dropped']}, "
+            f"held for attitude telemetry {pl['held_for_telemetry']} ({pl['waited_s']} s in all); "
+            f"statuses {pl['statuses']}"
+        ),
+        (
+            f"  latency from the image's motion (a cross-check of the frames' times): {motion.get('estimate_ms')} "
+            f"± {motion.get('sigma_ms')} ms, configured {CAMERA_LATENCY_MS} ms"
+        ),
+        (
+            f"  video: arrival after slot {res['video']['arrival_after_slot_ms']} ms, decode "
+            f"{res['video']['decode_ms']} ms; CPU {res['cpu_pct']} % of a core; RSS {res['rss_mb']} MB"
+        ),
     ]
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", default="720p,1080p", help="comma-separated: 720p, 1080p")
-    ap.add_argument("--transports", default="mpegts,rtp",
-                    help="comma-separated: mpegts (MPEG-TS over UDP), rtp (H.264 RTP, the QGC/BlueOS 5600 convention)")
-    ap.add_argument("--duration-s", type=float, default=30.0, help="session length (generated once per length)")
+    ap.add_argument(
+        "--transports",
+        default="mpegts,rtp",
+        help="comma-separated: mpegts (MPEG-TS over UDP), rtp (H.264 RTP, the QGC/BlueOS 5600 convention)",
+    )
+    ap.add_argument(
+        "--duration-s", type=float, default=30.0, help="session length (generated once per length)"
+    )
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "live_latency.txt")
     ap.add_argument("--baseline-frames", type=int, default=300)
-    ap.add_argument("--variant", action="append", default=[], metavar="NAME=ARGS",
-                    help="a run of the service with these extra `skyfix run` arguments, e.g. "
-                         "'no-size=--height-from-size off' (repeatable; default: the service as configured)")
+    ap.add_argument(
+        "--variant",
+        action="append",
+        default=[],
+        metavar="NAME=ARGS",
+        help="a run of the service with these extra `skyfix run` arguments, e.g. "
+        "'no-size=--height-from-size off' (repeatable; default: the service as configured)",
+    )
     args = ap.parse_args()
-    variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [("", [])]
-    lines = [(f"skyfix live latency benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
-             f"load average {os.getloadavg()[0]:.1f}")]
+    variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [
+        ("", [])
+    ]
+    lines = [
+        (
+            f"skyfix live latency benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
+            f"load average {os.getloadavg()[0]:.1f}"
+        )
+    ]
     results = {}
     for size in args.sizes.split(","):
         session = ensure_session(size, args.duration_s)
-        baselines = {"decode_only_ms": decode_baseline(session),
-                     "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames)}
+        baselines = {
+            "decode_only_ms": decode_baseline(session),
+            "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames),
+        }
         for transport in args.transports.split(","):
             for variant, run_args in variants:
                 name = f"{size} {transport}" + (f" {variant}" if variant else "")

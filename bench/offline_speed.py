@@ -98,8 +98,14 @@ def child(cmd: list[str], tree: Path = ROOT) -> tuple[float, float]:
     """Wall seconds and CPU seconds (user + sys) of a child process run from source ``tree``, which must succeed."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    done = subprocess.run(cmd, check=False, capture_output=True, text=True, cwd=tree,
-                          env=dict(os.environ, PYTHONPATH=str(tree)))
+    done = subprocess.run(
+        cmd,
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd=tree,
+        env=dict(os.environ, PYTHONPATH=str(tree)),
+    )
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if done.returncode:
@@ -114,12 +120,26 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
     frames = len((session / "video_frames.csv").read_text().splitlines()) - 1
     me = [sys.executable, str(Path(__file__).resolve())]
     runs: dict[str, list[tuple[float, float]]] = {}
-    process = [sys.executable, "-m", "groundstation.cli", "process", str(session), "--quiet", "--out", str(work)]
-    variants = {"decode-only OpenCV": (me + ["--decode-only", "opencv", video], ROOT),
-                "decode-only PyAV": (me + ["--decode-only", "pyav", video], ROOT)}
+    process = [
+        sys.executable,
+        "-m",
+        "groundstation.cli",
+        "process",
+        str(session),
+        "--quiet",
+        "--out",
+        str(work),
+    ]
+    variants = {
+        "decode-only OpenCV": (me + ["--decode-only", "opencv", video], ROOT),
+        "decode-only PyAV": (me + ["--decode-only", "pyav", video], ROOT),
+    }
     for label, tree in trees.items():
         variants[f"process{label}"] = (process, tree)
-        variants[f"process{label} --height-from-size off"] = (process + ["--height-from-size", "off"], tree)
+        variants[f"process{label} --height-from-size off"] = (
+            process + ["--height-from-size", "off"],
+            tree,
+        )
         variants[f"start-up{label}: process --help"] = (process[:4] + ["--help"], tree)
     for r in range(repeats):
         for variant, (cmd, tree) in variants.items():
@@ -129,18 +149,29 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
             runs["process --tracker mil"] = [child(process + ["--tracker", "mil"])]
     w, h, duration = SIZES[name]
     reference = frames / statistics.median(wall for wall, _ in runs["decode-only OpenCV"])
-    lines = [(f"{name}: {w}x{h}, {duration} s, {frames} frames; median of {repeats} interleaved rounds "
-              f"(MIL: 1), {os.cpu_count()} cores")]
+    lines = [
+        (
+            f"{name}: {w}x{h}, {duration} s, {frames} frames; median of {repeats} interleaved rounds "
+            f"(MIL: 1), {os.cpu_count()} cores"
+        )
+    ]
     decode_walls = [wall for wall, _ in runs["decode-only OpenCV"]]
     for variant, rs in runs.items():
         walls = [wall for wall, _ in rs]
         fps = frames / statistics.median(walls)
-        paired = sorted(d / w for d, w in zip(decode_walls, walls))  # each round against its own decode-only run
-        speed = (f"{'':49s}" if variant.startswith("start-up")
-                 else f"{fps:6.1f} fps  {fps / reference:5.2f}x decode-only  "
-                      f"{statistics.median(paired):4.2f}x [{paired[0]:4.2f}-{paired[-1]:4.2f}]  ")
-        lines.append(f"  {variant:44s} {speed}CPU {statistics.median(cpu for _, cpu in rs):6.1f} s  "
-                     f"(wall {', '.join(f'{x:.1f}' for x in walls)} s)")
+        paired = sorted(
+            d / w for d, w in zip(decode_walls, walls)
+        )  # each round against its own decode-only run
+        speed = (
+            f"{'':49s}"
+            if variant.startswith("start-up")
+            else f"{fps:6.1f} fps  {fps / reference:5.2f}x decode-only  "
+            f"{statistics.median(paired):4.2f}x [{paired[0]:4.2f}-{paired[-1]:4.2f}]  "
+        )
+        lines.append(
+            f"  {variant:44s} {speed}CPU {statistics.median(cpu for _, cpu in rs):6.1f} s  "
+            f"(wall {', '.join(f'{x:.1f}' for x in walls)} s)"
+        )
     return lines
 
 
@@ -148,16 +179,25 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", default="1080p,4k", help="comma-separated: 1080p, 4k (default both)")
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--mil", action="store_true", help="also the MIL tracker's pipeline (once per size)")
-    p.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
-                   help="also time skyfix process from this source tree")
+    p.add_argument(
+        "--mil", action="store_true", help="also the MIL tracker's pipeline (once per size)"
+    )
+    p.add_argument(
+        "--tree",
+        action="append",
+        default=[],
+        metavar="LABEL=DIR",
+        help="also time skyfix process from this source tree",
+    )
     p.add_argument("--out", type=Path, help="also write the results here")
     p.add_argument("--decode-only", nargs=2, metavar=("KIND", "VIDEO"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.decode_only:
         decode_only(*args.decode_only)
         return 0
-    trees = {"": ROOT} | {f" [{label}]": Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)}
+    trees = {"": ROOT} | {
+        f" [{label}]": Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
+    }
     lines = []
     with tempfile.TemporaryDirectory() as work:
         for name in args.sizes.split(","):

@@ -125,12 +125,20 @@ def bench_session(path: str, trackers: list[str], repeats: int) -> dict:
                 runs[name].append(run_pipeline(session, name))
     fps = max(decode)
     geometry = accuracy(session, process_session(session, use_track=True))
-    res = {"session": str(path), "frames_decoded": n, "decode_fps": fps, "decode_fps_runs": decode,
-           "geometry_only": geometry, "trackers": []}
+    res = {
+        "session": str(path),
+        "frames_decoded": n,
+        "decode_fps": fps,
+        "decode_fps_runs": decode,
+        "geometry_only": geometry,
+        "trackers": [],
+    }
     cam = session.calibration.camera
     print(f"\n== {path} ({cam.width}x{cam.height}, {n} frames, best of {repeats})")
-    print(f"decode only: {fps:7.1f} fps (runs {', '.join(f'{x:.0f}' for x in decode)})   "
-          f"geometry only (track.csv): MAE {geometry['mae_m']:.4f} m")
+    print(
+        f"decode only: {fps:7.1f} fps (runs {', '.join(f'{x:.0f}' for x in decode)})   "
+        f"geometry only (track.csv): MAE {geometry['mae_m']:.4f} m"
+    )
     for name in trackers:
         r = max(runs[name], key=lambda x: x["fps"])
         r["fps_runs"] = [x["fps"] for x in runs[name]]
@@ -152,9 +160,13 @@ def bench_session(path: str, trackers: list[str], repeats: int) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("sessions", nargs="+")
-    ap.add_argument("--trackers", default="default,mil", help="comma-separated backends (default: default,mil)")
+    ap.add_argument(
+        "--trackers", default="default,mil", help="comma-separated backends (default: default,mil)"
+    )
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--repeats", type=int, default=3, help="interleaved runs; the fastest counts (default 3)")
+    ap.add_argument(
+        "--repeats", type=int, default=3, help="interleaved runs; the fastest counts (default 3)"
+    )
     args = ap.parse_args(argv)
     sys.stdout.reconfigure(line_buffering=True)  # progress is visible when the output is a file
     out = Path(args.out)

@@ -44,11 +44,31 @@ from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
-GENERATED = ("dive", "field_like", "oblique_occl", "hd_oblique", "follow_cruise", "shadow_shallow", "second_vehicle",
-             "rock_pass")
-DROP_START, DROP_MAX = 0.08, 7  # a frame starts a run of dropped frames with this chance, 1..DROP_MAX long
-EXACT = Sigmas(pixel_px=Sigmas().pixel_px, tilt_deg=0.0, yaw_deg=0.0, height_m=0.0, baro_drift_10min_m=0.0,
-               depth_m=0.0, uav_horizontal_m=0.0, time_s=0.0, surface_amsl_m=0.0)
+GENERATED = (
+    "dive",
+    "field_like",
+    "oblique_occl",
+    "hd_oblique",
+    "follow_cruise",
+    "shadow_shallow",
+    "second_vehicle",
+    "rock_pass",
+)
+DROP_START, DROP_MAX = (
+    0.08,
+    7,
+)  # a frame starts a run of dropped frames with this chance, 1..DROP_MAX long
+EXACT = Sigmas(
+    pixel_px=Sigmas().pixel_px,
+    tilt_deg=0.0,
+    yaw_deg=0.0,
+    height_m=0.0,
+    baro_drift_10min_m=0.0,
+    depth_m=0.0,
+    uav_horizontal_m=0.0,
+    time_s=0.0,
+    surface_amsl_m=0.0,
+)
 
 
 def sessions(cache: Path, names: list[str] | None) -> list[Path]:
@@ -105,13 +125,21 @@ def bench(path: Path, drops: bool) -> dict:
     fixes = locate_frames(session, pixels)
     err_m = errors_m(fixes, session.truth)
     out = {
-        "session": path.name, "drops": drops, "frames": len(pixels.t), "offered": int(np.sum(pixels.status != "dropped")),
-        "tracked": int(tracked.sum()), "px_rms": float(np.sqrt(np.mean(err_px[tracked] ** 2))),
-        "px_p95": float(np.percentile(err_px[tracked], 95)), "px_max": float(err_px[tracked].max()),
+        "session": path.name,
+        "drops": drops,
+        "frames": len(pixels.t),
+        "offered": int(np.sum(pixels.status != "dropped")),
+        "tracked": int(tracked.sum()),
+        "px_rms": float(np.sqrt(np.mean(err_px[tracked] ** 2))),
+        "px_p95": float(np.percentile(err_px[tracked], 95)),
+        "px_max": float(err_px[tracked].max()),
         "sigma_px_median": float(np.median(pixels.sigma_px[tracked])),
         "px_in_2drms": share_within(err_px, math.sqrt(2.0) * pixels.sigma_px),
-        "px_in_2drms_constant": share_within(err_px, np.full(len(err_px), math.sqrt(2.0) * Sigmas().pixel_px)),
-        "fix_mae_m": float(np.nanmean(err_m)), "fix_max_m": float(np.nanmax(err_m)),
+        "px_in_2drms_constant": share_within(
+            err_px, np.full(len(err_px), math.sqrt(2.0) * Sigmas().pixel_px)
+        ),
+        "fix_mae_m": float(np.nanmean(err_m)),
+        "fix_max_m": float(np.nanmax(err_m)),
         "h_acc_in_2sigma": share_within(err_m, fixes.h_acc_m),
         "h_acc_median_m": float(np.nanmedian(fixes.h_acc_m[np.isfinite(err_m)])),
     }
@@ -119,14 +147,18 @@ def bench(path: Path, drops: bool) -> dict:
         cal = session.calibration
         session.calibration = dataclasses.replace(cal, sigmas=EXACT)
         exact = locate_frames(session, pixels)
-        out["h_acc_pixel_only_in_2sigma"] = share_within(errors_m(exact, session.truth), exact.h_acc_m)
+        out["h_acc_pixel_only_in_2sigma"] = share_within(
+            errors_m(exact, session.truth), exact.h_acc_m
+        )
         session.calibration = cal
     return out
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--cache", default="/tmp/skyfix-bench-sessions", help="generated sessions (made once)")
+    ap.add_argument(
+        "--cache", default="/tmp/skyfix-bench-sessions", help="generated sessions (made once)"
+    )
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     ap.add_argument("--sessions", help="comma-separated session names (default: all)")
     args = ap.parse_args(argv)
@@ -134,9 +166,13 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     names = args.sessions.split(",") if args.sessions else None
-    results = [bench(p, drops) for p in sessions(Path(args.cache), names) for drops in (False, True)]
-    head = (f"{'session':18s} {'drops':5s} {'tracked':>9s} {'px rms':>6s} {'p95':>5s} {'max':>5s} {'σ_px':>5s} "
-            f"{'px in 2σ':>8s} {'(2 px)':>7s} {'MAE m':>7s} {'max m':>6s} {'h_acc':>6s} {'in 2σ':>6s} {'pixel-only':>10s}")
+    results = [
+        bench(p, drops) for p in sessions(Path(args.cache), names) for drops in (False, True)
+    ]
+    head = (
+        f"{'session':18s} {'drops':5s} {'tracked':>9s} {'px rms':>6s} {'p95':>5s} {'max':>5s} {'σ_px':>5s} "
+        f"{'px in 2σ':>8s} {'(2 px)':>7s} {'MAE m':>7s} {'max m':>6s} {'h_acc':>6s} {'in 2σ':>6s} {'pixel-only':>10s}"
+    )
     lines = [head]
     for r in results:
         pix = r.get("h_acc_pixel_only_in_2sigma", math.nan)
@@ -144,9 +180,12 @@ def main(argv=None) -> int:
             f"{r['session']:18s} {'yes' if r['drops'] else 'no':5s} {r['tracked']:4d}/{r['offered']:<4d} "
             f"{r['px_rms']:6.2f} {r['px_p95']:5.2f} {r['px_max']:5.2f} {r['sigma_px_median']:5.2f} "
             f"{r['px_in_2drms']:8.1%} {r['px_in_2drms_constant']:7.1%} {r['fix_mae_m']:7.4f} {r['fix_max_m']:6.3f} "
-            f"{r['h_acc_median_m']:6.3f} {r['h_acc_in_2sigma']:6.1%} {pix:10.1%}")
+            f"{r['h_acc_median_m']:6.3f} {r['h_acc_in_2sigma']:6.1%} {pix:10.1%}"
+        )
     pooled = [r["px_in_2drms"] for r in results]
-    lines.append(f"pixel within 2·DRMS: {min(pooled):.1%} .. {max(pooled):.1%} per session (target 90-98 %)")
+    lines.append(
+        f"pixel within 2·DRMS: {min(pooled):.1%} .. {max(pooled):.1%} per session (target 90-98 %)"
+    )
     text = "\n".join(lines)
     print(text)
     (out / "pixel_sigma.txt").write_text(text + "\n")

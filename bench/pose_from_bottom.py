@@ -36,10 +36,21 @@ from localizer.pose import camera_pose
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
-SENSORS = {"roll_bias_deg": 0.18, "pitch_bias_deg": -0.24, "yaw_bias_deg": 2.0, "wander_deg": 0.05,
-           "gimbal_level_deg": (0.2, -0.2)}
-SESSIONS = {**{f"follow_{g}{'' if c else '_nocaustics'}": (g, c, 0.0) for g in ("rtk", "plain") for c in (0.5, 0.0)},
-            **{f"follow_{g}_waves2": (g, 0.5, 2.0) for g in ("rtk", "plain")}}
+SENSORS = {
+    "roll_bias_deg": 0.18,
+    "pitch_bias_deg": -0.24,
+    "yaw_bias_deg": 2.0,
+    "wander_deg": 0.05,
+    "gimbal_level_deg": (0.2, -0.2),
+}
+SESSIONS = {
+    **{
+        f"follow_{g}{'' if c else '_nocaustics'}": (g, c, 0.0)
+        for g in ("rtk", "plain")
+        for c in (0.5, 0.0)
+    },
+    **{f"follow_{g}_waves2": (g, 0.5, 2.0) for g in ("rtk", "plain")},
+}
 
 
 def session(name: str, work: Path, duration_s: float) -> Path:
@@ -47,8 +58,14 @@ def session(name: str, work: Path, duration_s: float) -> Path:
     out = work / name
     if not (out / "video.mp4").is_file():
         sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "follow_cruise.toml")
-        sc = with_overrides(sc, name=name, duration_s=duration_s, sensors={**SENSORS, "gnss_mode": gnss},
-                            render={"caustics": caustics}, **({"waves": {"wind_mps": wind_mps}} if wind_mps else {}))
+        sc = with_overrides(
+            sc,
+            name=name,
+            duration_s=duration_s,
+            sensors={**SENSORS, "gnss_mode": gnss},
+            render={"caustics": caustics},
+            **({"waves": {"wind_mps": wind_mps}} if wind_mps else {}),
+        )
         generate(sc, out, video=True)
     return out
 
@@ -64,7 +81,13 @@ def scores(path: Path, pose_from_bottom: str):
     err = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, truth)
     e = np.hypot(*err.T)
     good = np.isfinite(e)
-    return float(np.mean(e[good])), shape_m(err), float(np.mean(e[good] <= 2 * fixes.h_acc_m[good])), correction, s
+    return (
+        float(np.mean(e[good])),
+        shape_m(err),
+        float(np.mean(e[good] <= 2 * fixes.h_acc_m[good])),
+        correction,
+        s,
+    )
 
 
 def truth_bias(path: Path, s) -> tuple[float, float, float]:
@@ -95,15 +118,19 @@ def main() -> int:
         shapes[name] = shape1
         fwd, right, yaw = truth_bias(path, s)
         est = "none" if corr is None else corr.describe()
-        lines.append(f"{name}: without MAE {mae0:.3f} m shape {shape0:.3f} m in 2σ {in0:.0%}; "
-                     f"with MAE {mae1:.3f} m shape {shape1:.3f} m in 2σ {in1:.0%}; "
-                     f"true camera error tilt fwd {fwd:+.2f}° right {right:+.2f}° heading {yaw:+.2f}°; {est}; "
-                     f"{seconds:.0f} s")
+        lines.append(
+            f"{name}: without MAE {mae0:.3f} m shape {shape0:.3f} m in 2σ {in0:.0%}; "
+            f"with MAE {mae1:.3f} m shape {shape1:.3f} m in 2σ {in1:.0%}; "
+            f"true camera error tilt fwd {fwd:+.2f}° right {right:+.2f}° heading {yaw:+.2f}°; {est}; "
+            f"{seconds:.0f} s"
+        )
         print(lines[-1], flush=True)
     for name, shape in shapes.items():
         twin = name.replace("_plain", "_rtk")
         if twin != name and twin in shapes:
-            lines.append(f"{name}: shape {shape:.3f} m = {shape / shapes[twin]:.2f}x {twin}'s {shapes[twin]:.3f} m")
+            lines.append(
+                f"{name}: shape {shape:.3f} m = {shape / shapes[twin]:.2f}x {twin}'s {shapes[twin]:.3f} m"
+            )
             print(lines[-1])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")

@@ -34,10 +34,12 @@ from supervisor import Supervisor, field_config
 
 BACK_S = 3.0
 MISTAKE_S = 1.0
-MISTAKES = {"--video /no/such/file.mp4": ["--video", "/no/such/file.mp4", "--gps-input", "none"],
-            "--video htp://…": ["--video", "htp://192.168.2.2:5600/x", "--gps-input", "none"],
-            "no --video": ["--gps-input", "udpout:192.168.2.2:14660"],
-            "no --gps-input": ["--video", "rtp://0.0.0.0:5600?codec=h264"]}
+MISTAKES = {
+    "--video /no/such/file.mp4": ["--video", "/no/such/file.mp4", "--gps-input", "none"],
+    "--video htp://…": ["--video", "htp://192.168.2.2:5600/x", "--gps-input", "none"],
+    "no --video": ["--gps-input", "udpout:192.168.2.2:14660"],
+    "no --gps-input": ["--video", "rtp://0.0.0.0:5600?codec=h264"],
+}
 
 
 def cpu_s(pid: int) -> float:
@@ -57,7 +59,9 @@ def restarts(work: Path, kills: int, say) -> None:
         with Supervisor(lambda argv: skyfix(*argv[1:-1], str(config)), work) as sup:
             say(f"RestartSec {sup.restart_s:g} s, start limit {sup.burst} in {sup.limit_s:g} s")
             if not wait_until(lambda: sup.starts and first_since(sup.starts[0][0]), 60):
-                raise SystemExit(f"the first start sent no GPS_INPUT: {sup.log(0).read_text()[-2000:]}")
+                raise SystemExit(
+                    f"the first start sent no GPS_INPUT: {sup.log(0).read_text()[-2000:]}"
+                )
             say(f"first start → GPS_INPUT {first_since(sup.starts[0][0]) - sup.starts[0][0]:.3f} s")
             for k in range(kills):
                 proc = sup.starts[-1][1]
@@ -68,11 +72,15 @@ def restarts(work: Path, kills: int, say) -> None:
                 cpu = cpu_s(sup.starts[-1][1].pid)
                 back = first_since(t_kill) - t_kill
                 t_start = sup.starts[-1][0]
-                say(f"kill -9 #{k + 1}: GPS_INPUT again after {back:.3f} s (restart at +{t_start - t_kill:.3f} s, "
+                say(
+                    f"kill -9 #{k + 1}: GPS_INPUT again after {back:.3f} s (restart at +{t_start - t_kill:.3f} s, "
                     f"its first GPS_INPUT {back - (t_start - t_kill):.3f} s after, {cpu:.2f} s of CPU)  "
-                    f"{'ok' if back <= BACK_S else f'OVER {BACK_S:g} s'}")
+                    f"{'ok' if back <= BACK_S else f'OVER {BACK_S:g} s'}"
+                )
         folders = sorted(p.name for p in (work / "recordings").iterdir())
-        say(f"exits {sup.exits}; recordings: {len(folders)} folders for {len(sup.starts)} starts: {', '.join(folders)}")
+        say(
+            f"exits {sup.exits}; recordings: {len(folders)} folders for {len(sup.starts)} starts: {', '.join(folders)}"
+        )
     finally:
         endpoint.close()
 
@@ -80,14 +88,35 @@ def restarts(work: Path, kills: int, say) -> None:
 def mistakes(say) -> None:
     for name, options in MISTAKES.items():
         t0, before = time.perf_counter(), os.times()
-        out = subprocess.run([sys.executable, "-m", "groundstation.cli", "run", "--calibration",
-                              str(ROOT / "deploy" / "calibration.toml"), "--no-ui", *options], capture_output=True,
-                             text=True, cwd=ROOT, timeout=60, check=False)
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "groundstation.cli",
+                "run",
+                "--calibration",
+                str(ROOT / "deploy" / "calibration.toml"),
+                "--no-ui",
+                *options,
+            ],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=60,
+            check=False,
+        )
         took, after = time.perf_counter() - t0, os.times()
-        cpu = after.children_user + after.children_system - before.children_user - before.children_system
+        cpu = (
+            after.children_user
+            + after.children_system
+            - before.children_user
+            - before.children_system
+        )
         lines = out.stderr.splitlines()
-        say(f"{name:28s} exit {out.returncode} in {took:.3f} s ({cpu:.2f} s of CPU), {len(lines)} line(s)  "
-            f"{'ok' if took <= MISTAKE_S and out.returncode == 2 and len(lines) == 1 else 'NOT ok'}: {lines[-1][:90]}")
+        say(
+            f"{name:28s} exit {out.returncode} in {took:.3f} s ({cpu:.2f} s of CPU), {len(lines)} line(s)  "
+            f"{'ok' if took <= MISTAKE_S and out.returncode == 2 and len(lines) == 1 else 'NOT ok'}: {lines[-1][:90]}"
+        )
 
 
 def main() -> int:
@@ -101,8 +130,10 @@ def main() -> int:
         print(line, flush=True)
         lines.append(line)
 
-    say(f"bench/restart.py {time.strftime('%Y-%m-%d %H:%M')} — load {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
-        f"cores; required: back ≤ {BACK_S:g} s, a mistake ≤ {MISTAKE_S:g} s")
+    say(
+        f"bench/restart.py {time.strftime('%Y-%m-%d %H:%M')} — load {os.getloadavg()[0]:.1f} on {os.cpu_count()} "
+        f"cores; required: back ≤ {BACK_S:g} s, a mistake ≤ {MISTAKE_S:g} s"
+    )
     with tempfile.TemporaryDirectory(prefix="skyfix-restart-") as tmp:
         restarts(Path(tmp), args.kills, say)
     mistakes(say)

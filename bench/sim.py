@@ -30,17 +30,23 @@ def main(argv=None) -> int:
     sc = load_scenario(args.scenario)
     with tempfile.TemporaryDirectory() as tmp:
         report = generate(sc, Path(tmp) / "session")
-        still = np.random.default_rng(0).integers(0, 255, (sc.camera.height, sc.camera.width, 3), dtype=np.uint8)
+        still = np.random.default_rng(0).integers(
+            0, 255, (sc.camera.height, sc.camera.width, 3), dtype=np.uint8
+        )
         t0 = time.perf_counter()
-        enc = Encoder(Path(tmp) / "still.mp4", sc.camera.width, sc.camera.height, sc.fps, sc.render.crf)
+        enc = Encoder(
+            Path(tmp) / "still.mp4", sc.camera.width, sc.camera.height, sc.fps, sc.render.crf
+        )
         for _ in range(report.frames):
             enc.write(still)
         enc.close()
         encode_s = time.perf_counter() - t0
-    line = (f"{datetime.now(UTC):%Y-%m-%dT%H:%M:%SZ} {sc.name}: {report.frames} frames "
-            f"{sc.camera.width}x{sc.camera.height}, generated in {report.total_s:.1f} s "
-            f"({report.total_s / sc.duration_s:.2f} s per second of video; render+encode {report.render_s:.1f} s); "
-            f"baseline: encoding {report.frames} still frames {encode_s:.1f} s")
+    line = (
+        f"{datetime.now(UTC):%Y-%m-%dT%H:%M:%SZ} {sc.name}: {report.frames} frames "
+        f"{sc.camera.width}x{sc.camera.height}, generated in {report.total_s:.1f} s "
+        f"({report.total_s / sc.duration_s:.2f} s per second of video; render+encode {report.render_s:.1f} s); "
+        f"baseline: encoding {report.frames} still frames {encode_s:.1f} s"
+    )
     print(line)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -70,9 +70,14 @@ class TimedTracking(TrackingSession):
 
 
 def _case(width, height, pitch_deg, uav_m, depth_m, error_m, seed):
-    return {"camera": {"width": width, "height": height}, "mount": {"pitch_deg": pitch_deg},
-            "uav": {"height_m": uav_m}, "uuv": {"depth_m": depth_m, "depth_swing_m": 0.03 if depth_m < 0.3 else 0.3},
-            "seed": seed, "error_m": error_m}
+    return {
+        "camera": {"width": width, "height": height},
+        "mount": {"pitch_deg": pitch_deg},
+        "uav": {"height_m": uav_m},
+        "uuv": {"depth_m": depth_m, "depth_swing_m": 0.03 if depth_m < 0.3 else 0.3},
+        "seed": seed,
+        "error_m": error_m,
+    }
 
 
 #: name → overrides of the base scenario, and the configured height's error (m)
@@ -123,8 +128,13 @@ def session_for(name: str, case: dict, sessions: Path, regenerate: bool):
         generate(sc, out)
     toml = out / "session.toml"
     configured = sc.site.takeoff_height_above_surface_m + case["error_m"]
-    toml.write_text(re.sub(r"takeoff_height_above_surface_m = [-\d.e]+",
-                           f"takeoff_height_above_surface_m = {configured!r}", toml.read_text()))
+    toml.write_text(
+        re.sub(
+            r"takeoff_height_above_surface_m = [-\d.e]+",
+            f"takeoff_height_above_surface_m = {configured!r}",
+            toml.read_text(),
+        )
+    )
     return sc, out
 
 
@@ -161,27 +171,44 @@ def run_case(name: str, case: dict, sessions: Path, regenerate: bool) -> dict:
     pixels = (tracked.t, tracked.u, tracked.v, tracked.status)
     mae_configured = float(np.nanmean(errors_m(locate_frames(session, pixels), session.truth)))
     if final is not None:
-        water = dataclasses.replace(cal.water, takeoff_height_above_surface_m=(
-            cal.water.takeoff_height_above_surface_m - final.bias_m))
+        water = dataclasses.replace(
+            cal.water,
+            takeoff_height_above_surface_m=(
+                cal.water.takeoff_height_above_surface_m - final.bias_m
+            ),
+        )
         session.calibration = dataclasses.replace(cal, water=water)
         mae_corrected = float(np.nanmean(errors_m(locate_frames(session, pixels), session.truth)))
         session.calibration = cal
     else:
         mae_corrected = float("nan")
     out = {
-        "case": name, "width": sc.camera.width, "off_nadir_deg": 90.0 + sc.mount.pitch_deg,
-        "uav_height_m": sc.uav.height_m, "depth_m": sc.uuv.depth_m, "error_m": case["error_m"],
-        "frames": len(t_frames), "offered": len(size.results), "measured": len(heights),
+        "case": name,
+        "width": sc.camera.width,
+        "off_nadir_deg": 90.0 + sc.mount.pitch_deg,
+        "uav_height_m": sc.uav.height_m,
+        "depth_m": sc.uuv.depth_m,
+        "error_m": case["error_m"],
+        "frames": len(t_frames),
+        "offered": len(size.results),
+        "measured": len(heights),
         "rejected": dict(size.rejected),
-        "frame_err_mean_m": _stat(np.mean, err), "frame_err_std_m": _stat(np.std, err),
-        "frame_mae_m": _stat(np.mean, np.abs(err)), "frame_p95_m": _stat(lambda a: np.percentile(a, 95), np.abs(err)),
-        "frame_within_2sigma": _stat(np.mean, np.abs(err) <= 2 * sigma), "frame_sigma_median_m": _stat(np.median, sigma),
-        "final_bias_m": _f(final and final.bias_m), "final_true_bias_m": _stat(np.mean, true_bias[-20:]),
+        "frame_err_mean_m": _stat(np.mean, err),
+        "frame_err_std_m": _stat(np.std, err),
+        "frame_mae_m": _stat(np.mean, np.abs(err)),
+        "frame_p95_m": _stat(lambda a: np.percentile(a, 95), np.abs(err)),
+        "frame_within_2sigma": _stat(np.mean, np.abs(err) <= 2 * sigma),
+        "frame_sigma_median_m": _stat(np.median, sigma),
+        "final_bias_m": _f(final and final.bias_m),
+        "final_true_bias_m": _stat(np.mean, true_bias[-20:]),
         "final_bias_err_m": _f(final and final.bias_m - float(np.interp(t[-1], t, true_bias))),
-        "final_sigma_m": _f(final and final.sigma_m), "final_sure": bool(final and final.sure),
-        "sure_estimates": len(sure), "sure_within_2sigma": _stat(np.mean, np.abs(sure_err) <= 2 * sure_sig),
+        "final_sigma_m": _f(final and final.sigma_m),
+        "final_sure": bool(final and final.sure),
+        "sure_estimates": len(sure),
+        "sure_within_2sigma": _stat(np.mean, np.abs(sure_err) <= 2 * sure_sig),
         "sure_abs_err_max_m": _stat(np.max, np.abs(sure_err)),
-        "fix_mae_configured_m": mae_configured, "fix_mae_corrected_m": mae_corrected,
+        "fix_mae_configured_m": mae_configured,
+        "fix_mae_corrected_m": mae_corrected,
         "track_ms_per_frame": 1000 * TimedTracking.cpu_s / max(TimedTracking.steps, 1),
         "size_ms_per_measured": 1000 * size.cpu_s / max(len(size.results), 1),
     }
@@ -200,10 +227,15 @@ def _stat(fn, x) -> float:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="bench/size_height.py")
-    p.add_argument("cases", nargs="*", default=list(CASES), help=f"cases (default all): {', '.join(CASES)}")
+    p.add_argument(
+        "cases", nargs="*", default=list(CASES), help=f"cases (default all): {', '.join(CASES)}"
+    )
     p.add_argument("--out", default=str(ROOT / "bench" / "results"))
-    p.add_argument("--sessions", default=str(ROOT / "bench" / "results" / "size_sessions"),
-                   help="where the generated sessions are kept")
+    p.add_argument(
+        "--sessions",
+        default=str(ROOT / "bench" / "results" / "size_sessions"),
+        help="where the generated sessions are kept",
+    )
     p.add_argument("--regenerate", action="store_true")
     args = p.parse_args(argv)
     rows = []
@@ -211,14 +243,17 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         row = run_case(name, CASES[name], Path(args.sessions), args.regenerate)
         rows.append(row)
-        print(f"{name}: {row['measured']}/{row['offered']} measured; frame error {row['frame_err_mean_m']:+.3f} ± "
-              f"{row['frame_err_std_m']:.3f} m (MAE {row['frame_mae_m']:.3f}, p95 {row['frame_p95_m']:.3f}, "
-              f"{row['frame_within_2sigma']:.0%} in 2σ); estimate {row['final_bias_m']:+.3f} ± {row['final_sigma_m']:.3f}"
-              f" m vs true {row['final_true_bias_m']:+.3f} ({'sure' if row['final_sure'] else 'not sure'}; sure estimates "
-              f"in 2σ {row['sure_within_2sigma']:.0%} of {row['sure_estimates']}); fixes MAE {row['fix_mae_configured_m']:.3f}"
-              f" -> {row['fix_mae_corrected_m']:.3f} m; {row['size_ms_per_measured']:.1f} ms per measured frame vs "
-              f"{row['track_ms_per_frame']:.1f} ms tracking a frame (CPU); without a measurement: {row['rejected']} "
-              f"({time.perf_counter() - t0:.0f} s)", flush=True)
+        print(
+            f"{name}: {row['measured']}/{row['offered']} measured; frame error {row['frame_err_mean_m']:+.3f} ± "
+            f"{row['frame_err_std_m']:.3f} m (MAE {row['frame_mae_m']:.3f}, p95 {row['frame_p95_m']:.3f}, "
+            f"{row['frame_within_2sigma']:.0%} in 2σ); estimate {row['final_bias_m']:+.3f} ± {row['final_sigma_m']:.3f}"
+            f" m vs true {row['final_true_bias_m']:+.3f} ({'sure' if row['final_sure'] else 'not sure'}; sure estimates "
+            f"in 2σ {row['sure_within_2sigma']:.0%} of {row['sure_estimates']}); fixes MAE {row['fix_mae_configured_m']:.3f}"
+            f" -> {row['fix_mae_corrected_m']:.3f} m; {row['size_ms_per_measured']:.1f} ms per measured frame vs "
+            f"{row['track_ms_per_frame']:.1f} ms tracking a frame (CPU); without a measurement: {row['rejected']} "
+            f"({time.perf_counter() - t0:.0f} s)",
+            flush=True,
+        )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "size_height.json").write_text(json.dumps(rows, indent=1))

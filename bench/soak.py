@@ -47,8 +47,11 @@ def ensure_session(path: Path) -> Path:
     from sim_fixtures.generate import generate
     from sim_fixtures.scenario import scenario_from_dict
 
-    text = (ROOT / "sim_fixtures" / "scenarios" / "hd_nadir.toml").read_text().replace(
-        "duration_s = 3.0", "duration_s = 48.0")
+    text = (
+        (ROOT / "sim_fixtures" / "scenarios" / "hd_nadir.toml")
+        .read_text()
+        .replace("duration_s = 3.0", "duration_s = 48.0")
+    )
     print(f"generating {path} (once, several minutes) ...", flush=True)
     generate(scenario_from_dict(tomllib.loads(text)), path, text)
     return path
@@ -56,10 +59,18 @@ def ensure_session(path: Path) -> Path:
 
 def row(s: dict, cpu_pct: float, status: dict) -> dict:
     pipe, gps = status.get("pipeline", {}), status.get("gps_input", {})
-    return {"t_min": s["t_min"], "rss_mb": round(s["rss_mb"], 1), "fds": s["fds"], "threads": s["threads"],
-            "cpu_pct": round(cpu_pct), "frames": status.get("video", {}).get("frames"),
-            "dropped": pipe.get("dropped"), "fixes_ok": pipe.get("statuses", {}).get("ok"),
-            "gps_valid": gps.get("sent_valid"), "reboots": status.get("uav", {}).get("clocks", {}).get("uav_reboots")}
+    return {
+        "t_min": s["t_min"],
+        "rss_mb": round(s["rss_mb"], 1),
+        "fds": s["fds"],
+        "threads": s["threads"],
+        "cpu_pct": round(cpu_pct),
+        "frames": status.get("video", {}).get("frames"),
+        "dropped": pipe.get("dropped"),
+        "fixes_ok": pipe.get("statuses", {}).get("ok"),
+        "gps_valid": gps.get("sent_valid"),
+        "reboots": status.get("uav", {}).get("clocks", {}).get("uav_reboots"),
+    }
 
 
 def soak(session: Path, work: Path, minutes: float, sample_s: float, printer) -> list[dict]:
@@ -67,7 +78,9 @@ def soak(session: Path, work: Path, minutes: float, sample_s: float, printer) ->
     latest: dict = {}
     with ServiceRun(session, work) as run:
         watcher = open_session(connect=[run.zenoh])
-        sub = watcher.declare_subscriber("skyfix/status", lambda s: latest.update(json.loads(s.payload.to_bytes())))
+        sub = watcher.declare_subscriber(
+            "skyfix/status", lambda s: latest.update(json.loads(s.payload.to_bytes()))
+        )
         try:
             t0 = time.time()
             replay, _ = run.replay("--tail-s", "0.5")
@@ -103,17 +116,30 @@ def verdict(rows: list[dict], warmup_min: float, window_min: float = 1.0) -> tup
 
     warm = [r for r in rows if warmup_min <= r["t_min"] < warmup_min + window_min] or rows[:1]
     end = [r for r in rows if r["t_min"] > rows[-1]["t_min"] - window_min]
-    figures = {"warm": {"t_min": warm[0]["t_min"], "rss_mb": statistics.median(r["rss_mb"] for r in warm),
-                        "fds": max(r["fds"] for r in warm), "threads": max(r["threads"] for r in warm)},
-               "end": {"t_min": end[-1]["t_min"], "rss_mb": statistics.median(r["rss_mb"] for r in end),
-                       "fds": max(r["fds"] for r in end), "threads": max(r["threads"] for r in end)},
-               "rss_max_mb": max(r["rss_mb"] for r in rows), "last": rows[-1]}
+    figures = {
+        "warm": {
+            "t_min": warm[0]["t_min"],
+            "rss_mb": statistics.median(r["rss_mb"] for r in warm),
+            "fds": max(r["fds"] for r in warm),
+            "threads": max(r["threads"] for r in warm),
+        },
+        "end": {
+            "t_min": end[-1]["t_min"],
+            "rss_mb": statistics.median(r["rss_mb"] for r in end),
+            "fds": max(r["fds"] for r in end),
+            "threads": max(r["threads"] for r in end),
+        },
+        "rss_max_mb": max(r["rss_mb"] for r in rows),
+        "last": rows[-1],
+    }
     w, e = figures["warm"], figures["end"]
     figures["rss_growth"] = (e["rss_mb"] - w["rss_mb"]) / w["rss_mb"]
     failed = []
     if figures["rss_growth"] > RSS_GROWTH_MAX:
-        failed.append(f"median RSS {w['rss_mb']:.1f} MB after the warm-up, {e['rss_mb']:.1f} MB at the end "
-                      f"({figures['rss_growth']:+.1%}, > {RSS_GROWTH_MAX:.0%})")
+        failed.append(
+            f"median RSS {w['rss_mb']:.1f} MB after the warm-up, {e['rss_mb']:.1f} MB at the end "
+            f"({figures['rss_growth']:+.1%}, > {RSS_GROWTH_MAX:.0%})"
+        )
     for key in ("fds", "threads"):
         if e[key] > w[key]:
             failed.append(f"{key}: at most {w[key]} after the warm-up, {e[key]} at the end")
@@ -122,15 +148,21 @@ def verdict(rows: list[dict], warmup_min: float, window_min: float = 1.0) -> tup
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--session", type=Path, help="session to loop (default: hd_nadir rendered for 48 s, once)")
+    ap.add_argument(
+        "--session", type=Path, help="session to loop (default: hd_nadir rendered for 48 s, once)"
+    )
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--warmup-min", type=float, default=2.0)
     ap.add_argument("--sample-s", type=float, default=10.0)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "soak.txt")
     args = ap.parse_args()
     session = ensure_session(args.session or DEFAULT_SESSION)
-    lines = [(f"skyfix soak, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, session {session}, "
-             f"{args.minutes:g} min")]
+    lines = [
+        (
+            f"skyfix soak, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, session {session}, "
+            f"{args.minutes:g} min"
+        )
+    ]
     print(lines[0], flush=True)
 
     def printer(r: dict) -> None:
@@ -141,12 +173,16 @@ def main() -> int:
     figures, failed = verdict(rows, args.warmup_min)
     w, e, last = figures["warm"], figures["end"], figures["last"]
     lines += [
-        (f"warm-up window (from {w['t_min']} min, 1 min): median RSS {w['rss_mb']} MB, fds <= {w['fds']}, "
-        f"threads <= {w['threads']}"),
-        (f"last minute (to {e['t_min']} min, {last['loops']} loops): median RSS {e['rss_mb']} MB "
-         f"({figures['rss_growth']:+.1%}), fds <= {e['fds']}, threads <= {e['threads']}; max RSS of the run "
-         f"{figures['rss_max_mb']} MB; frames {last['frames']}, dropped {last['dropped']}, fixes ok "
-         f"{last['fixes_ok']}, valid GPS_INPUT {last['gps_valid']}, UAV reboots seen {last['reboots']}"),
+        (
+            f"warm-up window (from {w['t_min']} min, 1 min): median RSS {w['rss_mb']} MB, fds <= {w['fds']}, "
+            f"threads <= {w['threads']}"
+        ),
+        (
+            f"last minute (to {e['t_min']} min, {last['loops']} loops): median RSS {e['rss_mb']} MB "
+            f"({figures['rss_growth']:+.1%}), fds <= {e['fds']}, threads <= {e['threads']}; max RSS of the run "
+            f"{figures['rss_max_mb']} MB; frames {last['frames']}, dropped {last['dropped']}, fixes ok "
+            f"{last['fixes_ok']}, valid GPS_INPUT {last['gps_valid']}, UAV reboots seen {last['reboots']}"
+        ),
         "PASS" if not failed else "FAIL: " + "; ".join(failed),
     ]
     print("\n".join(lines[-3:]))

@@ -42,8 +42,12 @@ from localizer.tracking.session import Prior, TrackingSession
 
 def _ms(times_s) -> dict:
     a = np.asarray(times_s) * 1000.0
-    return {"n": len(a), "p50_ms": round(float(np.percentile(a, 50)), 3),
-            "p99_ms": round(float(np.percentile(a, 99)), 3), "mean_ms": round(float(a.mean()), 3)}
+    return {
+        "n": len(a),
+        "p50_ms": round(float(np.percentile(a, 50)), 3),
+        "p99_ms": round(float(np.percentile(a, 99)), 3),
+        "mean_ms": round(float(a.mean()), 3),
+    }
 
 
 def _timed(fn, *args, **kw):
@@ -60,7 +64,11 @@ def bench(path: Path) -> dict:
         frames = [f.image for f in video]
     pose = camera_pose(cal, session.telemetry, t)
     truth = session.truth
-    out = {"session": str(path), "frames": len(frames), "size": [cal.camera.width, cal.camera.height]}
+    out = {
+        "session": str(path),
+        "frames": len(frames),
+        "size": [cal.camera.width, cal.camera.height],
+    }
 
     ts = TrackingSession(cal)
     ts.select(frames[0], pose, 0, box=cal.init_bbox)
@@ -80,7 +88,10 @@ def bench(path: Path) -> dict:
     out["live_per_frame"] = _ms(live[1:])  # frame 0 is the selection
 
     def estimate(north_m: float) -> Prior:
-        lat, lon = np.interp(t[0], truth["t"], truth["lat"]), np.interp(t[0], truth["t"], truth["lon"])
+        lat, lon = (
+            np.interp(t[0], truth["t"], truth["lat"]),
+            np.interp(t[0], truth["t"], truth["lon"]),
+        )
         lat, lon, _ = pymap3d.enu2geodetic(-2.0, north_m, 0.0, lat, lon, 0.0)
         return Prior(float(lat), float(lon), 3.0)
 
@@ -99,13 +110,19 @@ def bench(path: Path) -> dict:
     out["awaiting_far_estimate"] = {**_ms(searching), "state": ts.state.value}
 
     tr = session.track
-    k = next(i for i in range(len(t) // 2, len(t)) if np.isfinite(np.interp(t[i], tr["t"], tr["u"])))  # UUV visible
+    k = next(
+        i for i in range(len(t) // 2, len(t)) if np.isfinite(np.interp(t[i], tr["t"], tr["u"]))
+    )  # UUV visible
     u, v = float(np.interp(t[k], tr["t"], tr["u"])), float(np.interp(t[k], tr["t"], tr["v"]))
-    clicks = [_timed(TrackingSession(cal).select, frames[k], pose, k, point=(u + 2.0, v - 1.0))[1]
-              for _ in range(10)]
+    clicks = [
+        _timed(TrackingSession(cal).select, frames[k], pose, k, point=(u + 2.0, v - 1.0))[1]
+        for _ in range(10)
+    ]
     out["select_click"] = _ms(clicks)
     fps = (len(t) - 1) / (t[-1] - t[0])
-    back = min(round(fps), len(t) - k - 1)  # a selection 1 s back, then the catch-up through the frames held since
+    back = min(
+        round(fps), len(t) - k - 1
+    )  # a selection 1 s back, then the catch-up through the frames held since
 
     def select_and_catch_up():
         s = TrackingSession(cal)
@@ -113,14 +130,19 @@ def bench(path: Path) -> dict:
         for j in range(k + 1, k + 1 + back):
             s.step(frames[j], pose, j)
 
-    out["select_1s_back_and_catch_up"] = {**_ms([_timed(select_and_catch_up)[1] for _ in range(5)]),
-                                          "frames_caught_up": back}
+    out["select_1s_back_and_catch_up"] = {
+        **_ms([_timed(select_and_catch_up)[1] for _ in range(5)]),
+        "frames_caught_up": back,
+    }
     held = pipeline._held
     per_frame = frames[0].nbytes
-    out["held"] = {"history_s": pipeline.history_s, "frames": len(held),
-                   "mb": round(sum(h.frame.image.nbytes for h in held) / 1e6, 1),
-                   "mb_per_s_at_this_size": round(per_frame * fps / 1e6, 1),
-                   "mb_per_s_at_1080p30": round(1920 * 1080 * 3 * 30 / 1e6, 1)}
+    out["held"] = {
+        "history_s": pipeline.history_s,
+        "frames": len(held),
+        "mb": round(sum(h.frame.image.nbytes for h in held) / 1e6, 1),
+        "mb_per_s_at_this_size": round(per_frame * fps / 1e6, 1),
+        "mb_per_s_at_1080p30": round(1920 * 1080 * 3 * 30 / 1e6, 1),
+    }
     return out
 
 
@@ -131,24 +153,38 @@ def _box_at(u: float, v: float, like) -> tuple[int, int, int, int]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("session", nargs="?", default=str(ROOT / "sim_fixtures" / "bundled" / "nadir_hover"))
+    ap.add_argument(
+        "session", nargs="?", default=str(ROOT / "sim_fixtures" / "bundled" / "nadir_hover")
+    )
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
     args = ap.parse_args(argv)
     res = bench(Path(args.session))
     lines = [f"{res['session']} ({res['size'][0]}x{res['size'][1]}, {res['frames']} frames)"]
-    for key in ("tracking_step", "live_per_frame", "acquiring", "awaiting_far_estimate", "select_click",
-                "select_1s_back_and_catch_up"):
+    for key in (
+        "tracking_step",
+        "live_per_frame",
+        "acquiring",
+        "awaiting_far_estimate",
+        "select_click",
+        "select_1s_back_and_catch_up",
+    ):
         r = res[key]
         extra = {k: v for k, v in r.items() if k not in ("n", "p50_ms", "p99_ms", "mean_ms")}
-        lines.append(f"  {key:28s} p50 {r['p50_ms']:7.2f} ms  p99 {r['p99_ms']:7.2f} ms  mean {r['mean_ms']:7.2f} ms"
-                     f"  (n {r['n']}) {extra or ''}")
+        lines.append(
+            f"  {key:28s} p50 {r['p50_ms']:7.2f} ms  p99 {r['p99_ms']:7.2f} ms  mean {r['mean_ms']:7.2f} ms"
+            f"  (n {r['n']}) {extra or ''}"
+        )
     h = res["held"]
-    lines.append(f"  held frames ({h['history_s']:g} s): {h['frames']} frames, {h['mb']} MB here; "
-                 f"{h['mb_per_s_at_this_size']} MB per second held at this size, {h['mb_per_s_at_1080p30']} at 1080p30")
+    lines.append(
+        f"  held frames ({h['history_s']:g} s): {h['frames']} frames, {h['mb']} MB here; "
+        f"{h['mb_per_s_at_this_size']} MB per second held at this size, {h['mb_per_s_at_1080p30']} at 1080p30"
+    )
     print("\n".join(lines))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"target-{Path(args.session).resolve().name}.json").write_text(json.dumps(res, indent=2) + "\n")
+    (out / f"target-{Path(args.session).resolve().name}.json").write_text(
+        json.dumps(res, indent=2) + "\n"
+    )
     print(f"results: {out}")
     return 0
 

@@ -32,8 +32,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 #: (name, seed, link delay s, ATTITUDE Hz)
-SESSIONS = (("held_41_20ms", 41, 0.020, 50.0), ("held_42_15ms", 42, 0.015, 50.0), ("held_43_25ms", 43, 0.025, 50.0),
-            ("held_44_20ms_4hz", 44, 0.020, 4.0))
+SESSIONS = (
+    ("held_41_20ms", 41, 0.020, 50.0),
+    ("held_42_15ms", 42, 0.015, 50.0),
+    ("held_43_25ms", 43, 0.025, 50.0),
+    ("held_44_20ms_4hz", 44, 0.020, 4.0),
+)
 SCENARIO = """name = "{name}"
 description = "held-out style: a camera fixed to an airframe wobbling 2 deg at 1.2 Hz, no TIMESYNC, link delay {delay} s"
 seed = {seed}
@@ -62,9 +66,15 @@ def generate(name: str, seed: int, delay: float, attitude_hz: float, work: Path)
     out = work / name
     if not (out / "video.mp4").is_file():
         scenario = work / f"{name}.toml"
-        scenario.write_text(SCENARIO.format(name=name, seed=seed, delay=delay, attitude_hz=attitude_hz))
-        subprocess.run([*SKYFIX, "sim", str(scenario), "--out", str(out), "--quiet"], check=True, cwd=ROOT,
-                       capture_output=True)
+        scenario.write_text(
+            SCENARIO.format(name=name, seed=seed, delay=delay, attitude_hz=attitude_hz)
+        )
+        subprocess.run(
+            [*SKYFIX, "sim", str(scenario), "--out", str(out), "--quiet"],
+            check=True,
+            cwd=ROOT,
+            capture_output=True,
+        )
     return out
 
 
@@ -78,11 +88,18 @@ def variant(session: Path, name: str, extra: str) -> Path:
     return out
 
 
-def evaluate(skyfix: list[str], cwd: Path, session: Path, out: Path, *flags: str) -> tuple[float, float, str]:
+def evaluate(
+    skyfix: list[str], cwd: Path, session: Path, out: Path, *flags: str
+) -> tuple[float, float, str]:
     """(MAE m, share within 2·h_acc, stderr) of ``skyfix evaluate`` (refraction)."""
     shutil.rmtree(out, ignore_errors=True)
-    done = subprocess.run([*skyfix, "evaluate", str(session), "--out", str(out), "--quiet", *flags], cwd=cwd,
-                          capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        [*skyfix, "evaluate", str(session), "--out", str(out), "--quiet", *flags],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     if not (out / "evaluation.csv").is_file():
         raise RuntimeError(f"evaluate {session} {flags}: {done.stderr[-2000:]}")
     with open(out / "evaluation.csv", newline="") as f:
@@ -91,7 +108,10 @@ def evaluate(skyfix: list[str], cwd: Path, session: Path, out: Path, *flags: str
 
 
 def estimate_of(stderr: str) -> str:
-    line = next((x for x in stderr.splitlines() if "offset to the telemetry from the video's motion" in x), "")
+    line = next(
+        (x for x in stderr.splitlines() if "offset to the telemetry from the video's motion" in x),
+        "",
+    )
     if not line:
         return "none"
     found = line.split("motion: ", 1)[1]
@@ -109,26 +129,43 @@ def main() -> int:
     work.mkdir(parents=True, exist_ok=True)
     before = shlex.split(args.before) if args.before else SKYFIX
     before_flags = () if args.before else ("--no-motion-offset",)
-    before_label = f"{args.before} in {args.before_cwd}" if args.before else "this checkout, --no-motion-offset"
-    lines = ["skyfix: a UAV link delay neither stated nor measured, offline (skyfix evaluate, tracker, refraction)",
-             f"before: {before_label}", f"command: {shlex.join(sys.argv)}   date: {time.strftime('%Y-%m-%d %H:%M:%S %Z')}",
-             "", (f"{'session':<18} {'delay':>6} {'estimate ms':>22} {'MAE stated':>10} {'before':>8} {'after':>8} "
-             f"{'after/stated':>12} {'2σ before':>9} {'2σ after':>9} {'2σ time':>8} {'σ=0':>6}")]
+    before_label = (
+        f"{args.before} in {args.before_cwd}"
+        if args.before
+        else "this checkout, --no-motion-offset"
+    )
+    lines = [
+        "skyfix: a UAV link delay neither stated nor measured, offline (skyfix evaluate, tracker, refraction)",
+        f"before: {before_label}",
+        f"command: {shlex.join(sys.argv)}   date: {time.strftime('%Y-%m-%d %H:%M:%S %Z')}",
+        "",
+        (
+            f"{'session':<18} {'delay':>6} {'estimate ms':>22} {'MAE stated':>10} {'before':>8} {'after':>8} "
+            f"{'after/stated':>12} {'2σ before':>9} {'2σ after':>9} {'2σ time':>8} {'σ=0':>6}"
+        ),
+    ]
     print("\n".join(lines), flush=True)
     for name, seed, delay, attitude_hz in SESSIONS:
         session = generate(name, seed, delay, attitude_hz, work)
         stated = variant(session, f"{name}_stated", f"\n[timing]\nmavlink_latency_s = {delay}\n")
         honest = variant(session, f"{name}_only_time", ONLY_TIME)
-        blind = variant(session, f"{name}_blind", ONLY_TIME + "\n[timing]\nunknown_latency_sigma_s = 0.0\n")
+        blind = variant(
+            session, f"{name}_blind", ONLY_TIME + "\n[timing]\nunknown_latency_sigma_s = 0.0\n"
+        )
         mae_stated, _, _ = evaluate(SKYFIX, ROOT, stated, work / "ev" / f"{name}_stated")
-        mae_before, in_before, _ = evaluate(before, Path(args.before_cwd), session, work / "ev" / f"{name}_before",
-                                            *before_flags)
+        mae_before, in_before, _ = evaluate(
+            before, Path(args.before_cwd), session, work / "ev" / f"{name}_before", *before_flags
+        )
         mae_after, in_after, err = evaluate(SKYFIX, ROOT, session, work / "ev" / f"{name}_after")
-        _, in_time, _ = evaluate(SKYFIX, ROOT, honest, work / "ev" / f"{name}_only_time", "--use-track")
+        _, in_time, _ = evaluate(
+            SKYFIX, ROOT, honest, work / "ev" / f"{name}_only_time", "--use-track"
+        )
         _, in_blind, _ = evaluate(SKYFIX, ROOT, blind, work / "ev" / f"{name}_blind", "--use-track")
-        lines.append(f"{name:<18} {delay * 1000:4.0f}ms {estimate_of(err):>22} {mae_stated:10.4f} {mae_before:8.4f} "
-                     f"{mae_after:8.4f} {mae_after / mae_stated:12.2f} {in_before:9.1%} {in_after:9.1%} {in_time:8.1%} "
-                     f"{in_blind:6.0%}")
+        lines.append(
+            f"{name:<18} {delay * 1000:4.0f}ms {estimate_of(err):>22} {mae_stated:10.4f} {mae_before:8.4f} "
+            f"{mae_after:8.4f} {mae_after / mae_stated:12.2f} {in_before:9.1%} {in_after:9.1%} {in_time:8.1%} "
+            f"{in_blind:6.0%}"
+        )
         print(lines[-1], flush=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")

@@ -52,7 +52,9 @@ CONDITIONS = (
 )
 OCCLUSION_S = (5.0, 6.5)
 DEPTH_SWING_M = 0.2
-WRONG_LOCK_SIZES = 3.0  # a located pixel further than this many UUV sizes from the truth is a wrong lock
+WRONG_LOCK_SIZES = (
+    3.0  # a located pixel further than this many UUV sizes from the truth is a wrong lock
+)
 BOX_PAD_PX = 3  # the generator grows the UUV's first box by this on each side (sim_fixtures.generate._first_box)
 
 #: The child: track a session as ``skyfix process`` does; JSON per frame on stdout.
@@ -73,10 +75,16 @@ generate(scenario_from_dict(json.loads(sys.argv[1])), sys.argv[2])
 """
 
 
-def scenario_dict(name: str, base: str, depth_m: float, hfov_deg: float | None, duration_s: float) -> dict:
+def scenario_dict(
+    name: str, base: str, depth_m: float, hfov_deg: float | None, duration_s: float
+) -> dict:
     """The base scenario with the UUV at ``depth_m``, the field of view (None: the base's), the occlusion."""
     data = tomllib.loads((SCENARIOS / f"{base}.toml").read_text())
-    data.update(name=name, duration_s=duration_s, occlusions=[list(OCCLUSION_S)] if duration_s > OCCLUSION_S[1] else [])
+    data.update(
+        name=name,
+        duration_s=duration_s,
+        occlusions=[list(OCCLUSION_S)] if duration_s > OCCLUSION_S[1] else [],
+    )
     data["uuv"] = dict(data.get("uuv", {}), depth_m=depth_m, depth_swing_m=DEPTH_SWING_M)
     if hfov_deg is not None:
         data["camera"] = dict(data["camera"], hfov_deg=hfov_deg)
@@ -92,13 +100,21 @@ def first_size_px(path: Path) -> int:
 def render(tree: Path, data: dict, out: Path) -> None:
     """Generate the session of scenario ``data`` into ``out`` with the simulator of source ``tree`` (the oldest
     tree compared: a newer simulator may write keys an older reader refuses)."""
-    done = subprocess.run([sys.executable, "-c", GENERATE, json.dumps(data), str(out)], cwd=tree, capture_output=True,
-                          text=True, env=dict(os.environ, PYTHONPATH=str(tree)), check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", GENERATE, json.dumps(data), str(out)],
+        cwd=tree,
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, PYTHONPATH=str(tree)),
+        check=False,
+    )
     if done.returncode:
         raise RuntimeError(f"generating {out} from {tree}: {done.stderr.strip().splitlines()[-1:]}")
 
 
-def condition(work: Path, sim: Path, name: str, base: str, size_px: float, depth_m: float, duration_s: float) -> Path:
+def condition(
+    work: Path, sim: Path, name: str, base: str, size_px: float, depth_m: float, duration_s: float
+) -> Path:
     """The condition's session in ``work`` (generated once by the simulator of ``sim``): the field of view scaled
     from a 3-frame render so the UUV spans about ``size_px``."""
     out = work / name
@@ -107,7 +123,9 @@ def condition(work: Path, sim: Path, name: str, base: str, size_px: float, depth
     probe = scenario_dict(name, base, depth_m, None, 0.1)
     render(sim, probe, work / "probe" / name)
     half = math.radians(probe["camera"]["hfov_deg"]) / 2.0
-    hfov = 2.0 * math.degrees(math.atan(math.tan(half) * first_size_px(work / "probe" / name) / size_px))
+    hfov = 2.0 * math.degrees(
+        math.atan(math.tan(half) * first_size_px(work / "probe" / name) / size_px)
+    )
     data = scenario_dict(name, base, depth_m, round(hfov, 2), duration_s)
     print(f"{name}: rendering (hfov {hfov:.1f} deg) ...", flush=True)
     render(sim, data, out)
@@ -116,10 +134,18 @@ def condition(work: Path, sim: Path, name: str, base: str, size_px: float, depth
 
 def track(tree: Path, session: Path) -> dict:
     """The child's per-frame tracking of ``session`` from source ``tree``."""
-    done = subprocess.run([sys.executable, "-c", TRACK, str(session)], cwd=tree, capture_output=True, text=True,
-                          env=dict(os.environ, PYTHONPATH=str(tree)), check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", TRACK, str(session)],
+        cwd=tree,
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, PYTHONPATH=str(tree)),
+        check=False,
+    )
     if done.returncode:
-        raise RuntimeError(f"tracking {session} from {tree}: {done.stderr.strip().splitlines()[-1:]}")
+        raise RuntimeError(
+            f"tracking {session} from {tree}: {done.stderr.strip().splitlines()[-1:]}"
+        )
     return json.loads(done.stdout)
 
 
@@ -132,29 +158,43 @@ def score(session: Path, tracked: dict) -> dict:
     err = np.hypot(u - truth["u"], v - truth["v"])
     size = first_size_px(session)
     seen = ok & visible
-    return {"size_px": size, "visible": int(visible.sum()), "located": int(seen.sum()),
-            "share": float(seen.sum() / max(visible.sum(), 1)),
-            "median_px": float(np.median(err[seen])) if seen.any() else math.nan,
-            "max_px": float(np.max(err[seen])) if seen.any() else math.nan,
-            "wrong": int(np.sum(seen & (err > WRONG_LOCK_SIZES * size))),
-            "hidden_ok": int(np.sum(ok & ~visible)), "hidden": int((~visible).sum()),
-            "ms": 1000.0 * tracked["track_s"] / len(ok)}
+    return {
+        "size_px": size,
+        "visible": int(visible.sum()),
+        "located": int(seen.sum()),
+        "share": float(seen.sum() / max(visible.sum(), 1)),
+        "median_px": float(np.median(err[seen])) if seen.any() else math.nan,
+        "max_px": float(np.max(err[seen])) if seen.any() else math.nan,
+        "wrong": int(np.sum(seen & (err > WRONG_LOCK_SIZES * size))),
+        "hidden_ok": int(np.sum(ok & ~visible)),
+        "hidden": int((~visible).sum()),
+        "ms": 1000.0 * tracked["track_s"] / len(ok),
+    }
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", default="/tmp/skyfix-tracker-waves")
-    ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR",
-                    help="also track with this source tree (the tracker before)")
+    ap.add_argument(
+        "--tree",
+        action="append",
+        default=[],
+        metavar="LABEL=DIR",
+        help="also track with this source tree (the tracker before)",
+    )
     ap.add_argument("--only", nargs="*", help="condition names")
     ap.add_argument("--duration", type=float, default=10.0, help="seconds of each session")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "tracker_waves.txt"))
     args = ap.parse_args()
     work = Path(args.work)
-    trees = {"now": ROOT} | {label: Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)}
+    trees = {"now": ROOT} | {
+        label: Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
+    }
     sim = list(trees.values())[-1]
-    header = (f"{'condition':14s} {'size':>4s} {'tree':>8s} {'located':>13s} {'share':>6s} {'med px':>6s} "
-              f"{'max px':>6s} {'wrong':>5s} {'hidden ok':>9s} {'ms/fr':>6s}")
+    header = (
+        f"{'condition':14s} {'size':>4s} {'tree':>8s} {'located':>13s} {'share':>6s} {'med px':>6s} "
+        f"{'max px':>6s} {'wrong':>5s} {'hidden ok':>9s} {'ms/fr':>6s}"
+    )
     lines, data = [header], {}
     print(header, flush=True)
     for name, base, size_px, depth_m in CONDITIONS:
@@ -164,9 +204,11 @@ def main() -> int:
         for label, tree in trees.items():
             r = score(session, track(tree, session))
             data.setdefault(name, {})[label] = r
-            lines.append(f"{name:14s} {r['size_px']:4d} {label:>8s} {r['located']:5d} of {r['visible']:4d} "
-                         f"{r['share']:6.1%} {r['median_px']:6.2f} {r['max_px']:6.1f} {r['wrong']:5d} "
-                         f"{r['hidden_ok']:4d} of {r['hidden']:2d} {r['ms']:6.1f}")
+            lines.append(
+                f"{name:14s} {r['size_px']:4d} {label:>8s} {r['located']:5d} of {r['visible']:4d} "
+                f"{r['share']:6.1%} {r['median_px']:6.2f} {r['max_px']:6.1f} {r['wrong']:5d} "
+                f"{r['hidden_ok']:4d} of {r['hidden']:2d} {r['ms']:6.1f}"
+            )
             print(lines[-1], flush=True)
     emit(lines, Path(args.out), data)
     return 0

@@ -96,8 +96,16 @@ asyncio.run(main(sys.argv[1]))
 SKIP_S = 2.0
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1"]
+FLAGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
+]
 PAGE_FPS = 10.0  # the feed's rate limit (groundstation.live.ui.feed)
 
 
@@ -156,11 +164,17 @@ def encode_baseline(session_dir: Path, n: int = 100) -> dict:
     with open_video(session.video_path) as video:
         image = next(iter(video)).image
     encode_jpeg(image, 960, 80)
-    t0 = time.process_time()  # CPU, OpenCV's helper threads included (this process does nothing else meanwhile)
+    t0 = (
+        time.process_time()
+    )  # CPU, OpenCV's helper threads included (this process does nothing else meanwhile)
     for _ in range(n):
         encode_jpeg(image, 960, 80)
     ms = (time.process_time() - t0) / n * 1000.0
-    return {"frame": f"{image.shape[1]}x{image.shape[0]}", "encode_ms": ms, "cpu_pct_at_page_fps": ms * PAGE_FPS / 10.0}
+    return {
+        "frame": f"{image.shape[1]}x{image.shape[0]}",
+        "encode_ms": ms,
+        "cpu_pct_at_page_fps": ms * PAGE_FPS / 10.0,
+    }
 
 
 def one_run(session_dir: Path, work: Path, mode: str) -> dict:
@@ -169,16 +183,54 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
     stats = work / f"stats-{mode}.json"
     py = sys.executable
     ui = ["--no-ui"] if mode == "no-ui" else ["--ui", "127.0.0.1:0"]
-    run = [py, "-m", "groundstation.cli", "run", "--calibration", str(session_dir / "session.toml"),
-           "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", "180",
-           "--zenoh-listen", ep, "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(stats), *ui]
-    replay = [py, "-m", "groundstation.cli", "replay", str(session_dir), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
-              "--video-out", f"udp://127.0.0.1:{video}", "--zenoh-connect", ep, "--uuv-listen",
-              f"udpin:127.0.0.1:{uuv}", "--uuv-log", str(work / f"uuv-{mode}.jsonl"), "--lead-s", "2"]
+    run = [
+        py,
+        "-m",
+        "groundstation.cli",
+        "run",
+        "--calibration",
+        str(session_dir / "session.toml"),
+        "--mavlink",
+        f"udpin:127.0.0.1:{mav}",
+        "--video",
+        f"udp://127.0.0.1:{video}",
+        "--video-latency-ms",
+        "180",
+        "--zenoh-listen",
+        ep,
+        "--gps-input",
+        f"udpout:127.0.0.1:{uuv}",
+        "--stats",
+        str(stats),
+        *ui,
+    ]
+    replay = [
+        py,
+        "-m",
+        "groundstation.cli",
+        "replay",
+        str(session_dir),
+        "--mavlink-out",
+        f"udpout:127.0.0.1:{mav}",
+        "--video-out",
+        f"udp://127.0.0.1:{video}",
+        "--zenoh-connect",
+        ep,
+        "--uuv-listen",
+        f"udpin:127.0.0.1:{uuv}",
+        "--uuv-log",
+        str(work / f"uuv-{mode}.jsonl"),
+        "--lead-s",
+        "2",
+    ]
     run_log, replay_log = work / f"run-{mode}.log", work / f"replay-{mode}.log"
     samples = []  # (time, service CPU s, browser CPU s)
     received = None
-    with open(run_log, "w") as rl, open(replay_log, "w") as pl, tempfile.TemporaryDirectory() as profile:
+    with (
+        open(run_log, "w") as rl,
+        open(replay_log, "w") as pl,
+        tempfile.TemporaryDirectory() as profile,
+    ):
         service = subprocess.Popen(run, stdout=rl, stderr=subprocess.STDOUT, cwd=ROOT)
         rep = reader = None
         pw = context = None
@@ -191,21 +243,35 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
                     break
                 time.sleep(0.1)
             if mode == "ws-reader":
-                reader = subprocess.Popen([py, "-c", WS_READER, url.replace("http://", "ws://") + "ws"],
-                                          stdout=subprocess.PIPE, text=True)
+                reader = subprocess.Popen(
+                    [py, "-c", WS_READER, url.replace("http://", "ws://") + "ws"],
+                    stdout=subprocess.PIPE,
+                    text=True,
+                )
             if mode == "page-open":
                 from playwright.sync_api import sync_playwright
 
                 pw = sync_playwright().start()
-                context = pw.chromium.launch_persistent_context(profile, executable_path=CHROMIUM, headless=True,
-                                                                args=FLAGS, viewport={"width": 1400, "height": 1000})
+                context = pw.chromium.launch_persistent_context(
+                    profile,
+                    executable_path=CHROMIUM,
+                    headless=True,
+                    args=FLAGS,
+                    viewport={"width": 1400, "height": 1000},
+                )
                 page = context.new_page()
                 page.goto(url)
                 page.wait_for_selector("#conn.ok", timeout=30_000)
             time.sleep(1.0)
             rep = subprocess.Popen(replay, stdout=pl, stderr=subprocess.STDOUT, cwd=ROOT)
             while rep.poll() is None:
-                samples.append((time.time(), cpu_s(service.pid), browser_cpu_s(os.getpid()) if context else 0.0))
+                samples.append(
+                    (
+                        time.time(),
+                        cpu_s(service.pid),
+                        browser_cpu_s(os.getpid()) if context else 0.0,
+                    )
+                )
                 if context:
                     page.wait_for_timeout(500)  # lets Playwright's event loop run
                 else:
@@ -249,7 +315,9 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--session", type=Path, help="session to replay (default: generate a 1080p30 30 s one)")
+    ap.add_argument(
+        "--session", type=Path, help="session to replay (default: generate a 1080p30 30 s one)"
+    )
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "ui_cost.txt")
     args = ap.parse_args()
@@ -263,9 +331,11 @@ def main() -> int:
     for r in range(args.rounds):
         for mode in MODES:
             res = one_run(session, work, mode)
-            print(f"round {r + 1} {mode}: CPU {res['cpu_pct']:.1f} %, latency p50 {res['latency']['p50_ms']:.1f} ms "
-                  f"p99 {res['latency']['p99_ms']:.1f} ms, dropped {res['dropped']}, page frames {res['page_frames']}",
-                  flush=True)
+            print(
+                f"round {r + 1} {mode}: CPU {res['cpu_pct']:.1f} %, latency p50 {res['latency']['p50_ms']:.1f} ms "
+                f"p99 {res['latency']['p99_ms']:.1f} ms, dropped {res['dropped']}, page frames {res['page_frames']}",
+                flush=True,
+            )
             runs.append(res)
 
     def med(mode, get):
@@ -274,35 +344,63 @@ def main() -> int:
 
     cam = load_session(session).calibration.camera
     lines = [
-        (f"skyfix web page cost benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
-        f"load average {os.getloadavg()[0]:.1f}"),
-        (f"session {session} ({cam.width}x{cam.height}, {runs[0]['video_s']:.1f} s of video), {args.rounds} rounds "
-        "per mode, interleaved; medians"),
-        (f"baseline: the page's JPEG work alone, {base['frame']} -> 960 px wide: {base['encode_ms']:.2f} ms CPU a frame, "
-         f"{base['cpu_pct_at_page_fps']:.1f} % of one core at {PAGE_FPS:g} frames/s"),
-        (f"{'mode':<10} {'service CPU %':>14} {'of it JPEG %':>13} {'p50 ms':>8} {'p99 ms':>8} {'dropped':>8} "
-        f"{'page fps':>9} {'browser CPU %':>14}"),
+        (
+            f"skyfix web page cost benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
+            f"load average {os.getloadavg()[0]:.1f}"
+        ),
+        (
+            f"session {session} ({cam.width}x{cam.height}, {runs[0]['video_s']:.1f} s of video), {args.rounds} rounds "
+            "per mode, interleaved; medians"
+        ),
+        (
+            f"baseline: the page's JPEG work alone, {base['frame']} -> 960 px wide: {base['encode_ms']:.2f} ms CPU a frame, "
+            f"{base['cpu_pct_at_page_fps']:.1f} % of one core at {PAGE_FPS:g} frames/s"
+        ),
+        (
+            f"{'mode':<10} {'service CPU %':>14} {'of it JPEG %':>13} {'p50 ms':>8} {'p99 ms':>8} {'dropped':>8} "
+            f"{'page fps':>9} {'browser CPU %':>14}"
+        ),
     ]
     for mode in MODES:
-        page_fps = med(mode, lambda x: x["page_frames"] / x["video_s"] if x["page_frames"] is not None else None)
-        jpeg = med(mode, lambda x: x["jpeg_encoded"] * x["encode_ms"] / 10.0 / x["video_s"]
-                   if x["jpeg_encoded"] and x["encode_ms"] else None)
-        lines.append(f"{mode:<10} {med(mode, lambda x: x['cpu_pct']):>14.1f} {jpeg:>13.1f} "
-                     f"{med(mode, lambda x: x['latency']['p50_ms']):>8.1f} "
-                     f"{med(mode, lambda x: x['latency']['p99_ms']):>8.1f} {med(mode, lambda x: x['dropped']):>8.0f} "
-                     f"{page_fps:>9.1f} {med(mode, lambda x: x['browser_cpu_pct']):>14.1f}")
-    def paired(mode, get):  # per round, the mode minus --no-ui (the same round's load): their median
+        page_fps = med(
+            mode,
+            lambda x: x["page_frames"] / x["video_s"] if x["page_frames"] is not None else None,
+        )
+        jpeg = med(
+            mode,
+            lambda x: (
+                x["jpeg_encoded"] * x["encode_ms"] / 10.0 / x["video_s"]
+                if x["jpeg_encoded"] and x["encode_ms"]
+                else None
+            ),
+        )
+        lines.append(
+            f"{mode:<10} {med(mode, lambda x: x['cpu_pct']):>14.1f} {jpeg:>13.1f} "
+            f"{med(mode, lambda x: x['latency']['p50_ms']):>8.1f} "
+            f"{med(mode, lambda x: x['latency']['p99_ms']):>8.1f} {med(mode, lambda x: x['dropped']):>8.0f} "
+            f"{page_fps:>9.1f} {med(mode, lambda x: x['browser_cpu_pct']):>14.1f}"
+        )
+
+    def paired(
+        mode, get
+    ):  # per round, the mode minus --no-ui (the same round's load): their median
         a = [get(x) for x in runs if x["mode"] == mode]
         b = [get(x) for x in runs if x["mode"] == "no-ui"]
-        return statistics.median(x - y for x, y in zip(a, b, strict=True)), [round(float(x - y), 1) for x, y in zip(a, b)]
+        return statistics.median(x - y for x, y in zip(a, b, strict=True)), [
+            round(float(x - y), 1) for x, y in zip(a, b)
+        ]
 
     for mode in MODES[1:]:
         d_cpu, each_cpu = paired(mode, lambda x: x["cpu_pct"])
         d_p50, _ = paired(mode, lambda x: x["latency"]["p50_ms"])
         d_p99, _ = paired(mode, lambda x: x["latency"]["p99_ms"])
-        lines.append(f"{mode} minus --no-ui: service CPU {d_cpu:+.1f} % of one core (per round {each_cpu}), "
-                     f"latency p50 {d_p50:+.1f} ms, p99 {d_p99:+.1f} ms")
-    lines.append(f"(the baseline predicts {base['cpu_pct_at_page_fps']:+.1f} % for a watching page)")
+        lines.append(
+            f"{mode} minus --no-ui: service CPU {d_cpu:+.1f} % of one core (per round {each_cpu}), "
+            f"latency p50 {d_p50:+.1f} ms, p99 {d_p99:+.1f} ms"
+        )
+    lines.append(
+        f"(the baseline predicts {base['cpu_pct_at_page_fps']:+.1f} % for a watching page)"
+    )
     text = "\n".join(lines) + "\n"
     print(text, end="")
     args.out.parent.mkdir(parents=True, exist_ok=True)

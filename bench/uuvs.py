@@ -84,7 +84,11 @@ SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
 SIZE = (1920, 1080)
 THIRD = "uuv3"  # a third tracker session on uuv1 (the scenario has two vehicles)
 RUNS = {1: ("uuv1",), 2: ("uuv1", "uuv2"), 3: ("uuv1", "uuv2", THIRD)}
-OTHER = {"uuv1": "uuv2", "uuv2": "uuv1", THIRD: "uuv2"}  # the other vehicle in the video, for the identity check
+OTHER = {
+    "uuv1": "uuv2",
+    "uuv2": "uuv1",
+    THIRD: "uuv2",
+}  # the other vehicle in the video, for the identity check
 
 
 def ensure_session(duration_s: float) -> Path:
@@ -95,8 +99,11 @@ def ensure_session(duration_s: float) -> Path:
         from sim_fixtures.generate import generate
         from sim_fixtures.scenario import load_scenario, with_overrides
 
-        sc = with_overrides(load_scenario(SCENARIO), camera={"width": SIZE[0], "height": SIZE[1]},
-                            duration_s=duration_s)
+        sc = with_overrides(
+            load_scenario(SCENARIO),
+            camera={"width": SIZE[0], "height": SIZE[1]},
+            duration_s=duration_s,
+        )
         print(f"generating {path} (once) ...", flush=True)
         generate(sc, path, progress=True)
         encode_as_camera(path)
@@ -107,8 +114,10 @@ def ensure_session(duration_s: float) -> Path:
         for f in (first.depth, first.truth, first.track):
             shutil.copy(f, third / f.name)
         box = tomllib.loads(first.tracker_toml.read_text())["tracker"]["init_bbox"]
-        (third / UUV_TOML).write_text(f"# uuv1's records: a third tracker session on the same vehicle\n"
-                                      f"[tracker]\ninit_bbox = {list(box)}\n")
+        (third / UUV_TOML).write_text(
+            f"# uuv1's records: a third tracker session on the same vehicle\n"
+            f"[tracker]\ninit_bbox = {list(box)}\n"
+        )
     return path
 
 
@@ -152,13 +161,19 @@ class GpsEndpoints:
 def run_toml(session: Path, ids, ports: dict, gps_ports: dict, stats: Path) -> str:
     """The ``skyfix run --config`` file: one ``[[uuv]]`` table per UUV, each with its depth key, its GPS_INPUT link
     and its first box."""
-    text = (f'calibration = "{session / "session.toml"}"\nmavlink = "udpin:127.0.0.1:{ports["mav"]}"\n'
-            f'video = "udp://127.0.0.1:{ports["video"]}"\nvideo_latency_ms = {CAMERA_LATENCY_MS}\n'
-            f'zenoh_listen = ["tcp/127.0.0.1:{ports["zenoh"]}"]\nno_ui = true\nstats = "{stats}"\n')
+    text = (
+        f'calibration = "{session / "session.toml"}"\nmavlink = "udpin:127.0.0.1:{ports["mav"]}"\n'
+        f'video = "udp://127.0.0.1:{ports["video"]}"\nvideo_latency_ms = {CAMERA_LATENCY_MS}\n'
+        f'zenoh_listen = ["tcp/127.0.0.1:{ports["zenoh"]}"]\nno_ui = true\nstats = "{stats}"\n'
+    )
     for uuv_id in ids:
-        box = tomllib.loads(uuv_files(session, uuv_id).tracker_toml.read_text())["tracker"]["init_bbox"]
-        text += (f'\n[[uuv]]\nid = "{uuv_id}"\ndepth_key = "bench/{uuv_id}/depth"\n'
-                 f'gps_input = "udpout:127.0.0.1:{gps_ports[uuv_id]}"\ninit_bbox = {list(box)}\n')
+        box = tomllib.loads(uuv_files(session, uuv_id).tracker_toml.read_text())["tracker"][
+            "init_bbox"
+        ]
+        text += (
+            f'\n[[uuv]]\nid = "{uuv_id}"\ndepth_key = "bench/{uuv_id}/depth"\n'
+            f'gps_input = "udpout:127.0.0.1:{gps_ports[uuv_id]}"\ninit_bbox = {list(box)}\n'
+        )
     return text
 
 
@@ -171,16 +186,31 @@ def host_cpu() -> tuple[float, float]:
 
 def peak_rss_mb(pid: int) -> float:
     """The process's peak resident memory so far (VmHWM), MB."""
-    return next(int(line.split()[1]) for line in Path(f"/proc/{pid}/status").read_text().splitlines()
-                if line.startswith("VmHWM:")) / 1024.0
+    return (
+        next(
+            int(line.split()[1])
+            for line in Path(f"/proc/{pid}/status").read_text().splitlines()
+            if line.startswith("VmHWM:")
+        )
+        / 1024.0
+    )
 
 
-def uuv_result(session: Path, uuv_id: str, own: dict, received: list, shift: float, to_station: float,
-               frames_t: np.ndarray) -> dict:
+def uuv_result(
+    session: Path,
+    uuv_id: str,
+    own: dict,
+    received: list,
+    shift: float,
+    to_station: float,
+    frames_t: np.ndarray,
+) -> dict:
     """One UUV's numbers: slot → GPS_INPUT at its endpoint, the service's arrival → sent, drops, ok share, MAE, and
     how far each fix's time lands from the nearest true exposure (``frames_t``, station clock)."""
     valid = {}
-    for t_recv, g in sorted(received, key=lambda r: r[0]):  # the first arrival of each new valid fix
+    for t_recv, g in sorted(
+        received, key=lambda r: r[0]
+    ):  # the first arrival of each new valid fix
         if g["fix_type"] == 3:
             valid.setdefault(g["time_usec"], (t_recv, g))
     keys = sorted(valid)
@@ -191,23 +221,31 @@ def uuv_result(session: Path, uuv_id: str, own: dict, received: list, shift: flo
 
     def error_m(truth_of: str) -> np.ndarray:
         truth = np.genfromtxt(uuv_files(session, truth_of).truth, delimiter=",", names=True)
-        return horizontal_error_m(lat, lon, np.interp(t, truth["t"], truth["lat"]),
-                                  np.interp(t, truth["t"], truth["lon"]))
+        return horizontal_error_m(
+            lat, lon, np.interp(t, truth["t"], truth["lat"]), np.interp(t, truth["t"], truth["lon"])
+        )
 
     err, other = error_m(uuv_id), error_m(OTHER[uuv_id])
     pl = own["pipeline"]
     return {
         "gps_input_messages": len(received),
-        "slot_to_gps_input_ms": pct((t_arrive - t_exp - CAMERA_LATENCY_MS / 1000.0) * 1000.0, 50, 99) if keys
+        "slot_to_gps_input_ms": pct(
+            (t_arrive - t_exp - CAMERA_LATENCY_MS / 1000.0) * 1000.0, 50, 99
+        )
+        if keys
         else {"p50": None, "p99": None, "max": None, "n": 0},
         "arrival_to_sent_ms": own["latency"],
         "pipeline": {k: pl[k] for k in ("processed", "dropped", "held_for_telemetry", "statuses")},
         "ok_share": round(pl["statuses"].get("ok", 0) / len(frames_t), 3),
-        "frame_time_error_ms": pct(np.abs(t_exp - nearest_times(frames_t, t_exp)) * 1000.0, 50, 99) if keys
+        "frame_time_error_ms": pct(np.abs(t_exp - nearest_times(frames_t, t_exp)) * 1000.0, 50, 99)
+        if keys
         else {"p50": None, "p99": None, "max": None, "n": 0},
         "mae_m": round(float(err.mean()), 4) if keys else None,
-        "max_err_m": round(float(err.max()), 4) if keys else None, "valid_fixes": len(err),
-        "nearer_other_vehicle": int((other <= err).sum()),  # valid GPS_INPUT nearer the other vehicle than its own
+        "max_err_m": round(float(err.max()), 4) if keys else None,
+        "valid_fixes": len(err),
+        "nearer_other_vehicle": int(
+            (other <= err).sum()
+        ),  # valid GPS_INPUT nearer the other vehicle than its own
     }
 
 
@@ -219,11 +257,28 @@ def live(session: Path, work: Path, ids) -> dict:
     config.write_text(run_toml(session, ids, ports, endpoints.ports, stats))
     py = sys.executable
     run = [py, "-m", "groundstation.cli", "run", "--config", str(config)]
-    replay = [py, "-m", "groundstation.cli", "replay", str(session), "--mavlink-out",
-              f"udpout:127.0.0.1:{ports['mav']}", "--video-out", f"udp://127.0.0.1:{ports['video']}",
-              "--video-delay-ms", str(CAMERA_LATENCY_MS), "--zenoh-connect", f"tcp/127.0.0.1:{ports['zenoh']}",
-              "--depth-key", f"bench/{ids[0]}/depth", "--uuv-listen", "", "--lead-s", "2",
-              *[a for uuv_id in ids[1:] for a in ("--uuv-depth-key", f"{uuv_id}=bench/{uuv_id}/depth")]]
+    replay = [
+        py,
+        "-m",
+        "groundstation.cli",
+        "replay",
+        str(session),
+        "--mavlink-out",
+        f"udpout:127.0.0.1:{ports['mav']}",
+        "--video-out",
+        f"udp://127.0.0.1:{ports['video']}",
+        "--video-delay-ms",
+        str(CAMERA_LATENCY_MS),
+        "--zenoh-connect",
+        f"tcp/127.0.0.1:{ports['zenoh']}",
+        "--depth-key",
+        f"bench/{ids[0]}/depth",
+        "--uuv-listen",
+        "",
+        "--lead-s",
+        "2",
+        *[a for uuv_id in ids[1:] for a in ("--uuv-depth-key", f"{uuv_id}=bench/{uuv_id}/depth")],
+    ]
     samples = []  # (time, cpu_s, rss_mb, host busy jiffies, host jiffies)
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     load = os.getloadavg()[0]
@@ -232,12 +287,18 @@ def live(session: Path, work: Path, ids) -> dict:
         rep = None
         try:
             end = time.time() + 60
-            while (work / "run.log").read_text().count("skyfix run: UAV") < len(ids):  # every UUV's chain is up
+            while (work / "run.log").read_text().count("skyfix run: UAV") < len(
+                ids
+            ):  # every UUV's chain is up
                 if service.poll() is not None or time.time() > end:
-                    raise RuntimeError(f"skyfix run did not start: {(work / 'run.log').read_text()[-2000:]}")
+                    raise RuntimeError(
+                        f"skyfix run did not start: {(work / 'run.log').read_text()[-2000:]}"
+                    )
                 time.sleep(0.2)
             time.sleep(1.0)
-            rep = subprocess.Popen(replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT, env=env)
+            rep = subprocess.Popen(
+                replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT, env=env
+            )
             while rep.poll() is None:
                 samples.append((time.time(), *proc_sample(service.pid), *host_cpu()))
                 time.sleep(0.25)
@@ -248,8 +309,9 @@ def live(session: Path, work: Path, ids) -> dict:
             kill_left(service, rep)
             endpoints.close()
     for uuv_id, received in endpoints.received.items():
-        (work / f"gps_input_{uuv_id}.jsonl").write_text("".join(json.dumps({"t_recv": t, **g}) + "\n"
-                                                                 for t, g in received))
+        (work / f"gps_input_{uuv_id}.jsonl").write_text(
+            "".join(json.dumps({"t_recv": t, **g}) + "\n" for t, g in received)
+        )
     final = json.loads(stats.read_text())
     shift = json.loads((work / "replay.log").read_text().splitlines()[0])["shift_s"]
     frames_t = load_session(session).frames["t"]
@@ -258,22 +320,45 @@ def live(session: Path, work: Path, ids) -> dict:
     t0 = frames_t[0] + shift + CAMERA_LATENCY_MS / 1000.0
     t1 = frames_t[-1] + shift + CAMERA_LATENCY_MS / 1000.0 + 1.0 / 30.0
     s = np.array(samples)
-    cpu_s, _, busy, total = (float(np.interp(t1, s[:, 0], s[:, k]) - np.interp(t0, s[:, 0], s[:, k]))
-                             for k in (1, 2, 3, 4))
+    cpu_s, _, busy, total = (
+        float(np.interp(t1, s[:, 0], s[:, k]) - np.interp(t0, s[:, 0], s[:, k]))
+        for k in (1, 2, 3, 4)
+    )
     to_station = (final.get("uav", {}).get("clocks", {}) or {}).get("station_minus_gnss_s") or 0.0
     per_uuv = final["uuvs"] if "uuvs" in final else {ids[0]: final}
     return {
         "uuvs": list(ids),
         "frames_sent": n_frames,
         "load_average": round(load, 2),
-        "video": {k: final["video"][k] for k in ("frames", "skipped_behind", "decode_errors", "decode_ms",
-                                                  "arrival_after_slot_ms", "latency_from_motion")},
+        "video": {
+            k: final["video"][k]
+            for k in (
+                "frames",
+                "skipped_behind",
+                "decode_errors",
+                "decode_ms",
+                "arrival_after_slot_ms",
+                "latency_from_motion",
+            )
+        },
         "station_minus_gnss_s": to_station,
         "cpu_s_per_video_s": round(cpu_s / (t1 - t0), 3),
-        "host_busy_pct": round(100.0 * busy / total, 1),  # the whole machine, every core, over the video's span
+        "host_busy_pct": round(
+            100.0 * busy / total, 1
+        ),  # the whole machine, every core, over the video's span
         "rss_mb": {"peak": round(peak_mb, 1), "end": round(float(s[-1, 2]), 1)},
-        "per_uuv": {uuv_id: uuv_result(session, uuv_id, per_uuv[uuv_id], endpoints.received[uuv_id], shift,
-                                       to_station, frames_t + shift) for uuv_id in ids},
+        "per_uuv": {
+            uuv_id: uuv_result(
+                session,
+                uuv_id,
+                per_uuv[uuv_id],
+                endpoints.received[uuv_id],
+                shift,
+                to_station,
+                frames_t + shift,
+            )
+            for uuv_id in ids
+        },
     }
 
 
@@ -283,8 +368,11 @@ def decode_only(session: Path) -> dict:
     c0, (busy0, total0) = time.process_time(), host_cpu()
     per_frame = decode_baseline(session)
     busy1, total1 = host_cpu()
-    return {"per_frame_ms": per_frame, "cpu_s_per_video_s": round((time.process_time() - c0) / (n_frames / 30.0), 3),
-            "host_busy_pct": round(100.0 * (busy1 - busy0) / (total1 - total0), 1)}
+    return {
+        "per_frame_ms": per_frame,
+        "cpu_s_per_video_s": round((time.process_time() - c0) / (n_frames / 30.0), 3),
+        "host_busy_pct": round(100.0 * (busy1 - busy0) / (total1 - total0), 1),
+    }
 
 
 def one_tracker(session: Path, n_frames: int) -> dict:
@@ -293,32 +381,68 @@ def one_tracker(session: Path, n_frames: int) -> dict:
     c0, (busy0, total0) = time.process_time(), host_cpu()
     per_frame = pipeline_baseline(session, n_frames)
     busy1, total1 = host_cpu()
-    return {"per_frame_ms": per_frame, "cpu_s_per_video_s": round((time.process_time() - c0) / (n_frames / 30.0), 3),
-            "host_busy_pct": round(100.0 * (busy1 - busy0) / (total1 - total0), 1)}
+    return {
+        "per_frame_ms": per_frame,
+        "cpu_s_per_video_s": round((time.process_time() - c0) / (n_frames / 30.0), 3),
+        "host_busy_pct": round(100.0 * (busy1 - busy0) / (total1 - total0), 1),
+    }
 
 
 def table(rounds: list[dict]) -> list[str]:
     """The table: per round, the decode-only baseline, then a row per run and UUV."""
-    cols = [("UUVs", 5), ("CPU-s/video-s", 13), ("peak RSS MB", 11), ("host busy %", 11), ("decoder skipped", 15),
-            ("UUV", 4), ("slot->GPS_INPUT p50/p99 ms (n)", 30), ("arrival->sent p50/p99 ms", 24),
-            ("dropped", 7), ("ok share", 8), ("MAE m", 6), ("nearer other", 12), ("t err p50 ms", 12)]
+    cols = [
+        ("UUVs", 5),
+        ("CPU-s/video-s", 13),
+        ("peak RSS MB", 11),
+        ("host busy %", 11),
+        ("decoder skipped", 15),
+        ("UUV", 4),
+        ("slot->GPS_INPUT p50/p99 ms (n)", 30),
+        ("arrival->sent p50/p99 ms", 24),
+        ("dropped", 7),
+        ("ok share", 8),
+        ("MAE m", 6),
+        ("nearer other", 12),
+        ("t err p50 ms", 12),
+    ]
     head = " | ".join(f"{name:>{w}}" for name, w in cols)
     lines = [head, "-" * len(head)]
     for r, rnd in enumerate(rounds):
-        for key, what in (("decode_only", "decode only (PyAV)"),
-                          ("one_tracker", "decode + Pipeline.process of uuv1, per frame the latter")):
+        for key, what in (
+            ("decode_only", "decode only (PyAV)"),
+            ("one_tracker", "decode + Pipeline.process of uuv1, per frame the latter"),
+        ):
             base = rnd[key]
-            lines.append(f"{'base':>5} | {base['cpu_s_per_video_s']:>13} | {'':>11} | {base['host_busy_pct']:>11} | "
-                         f"{what}, offline, round {r + 1}: per frame p50 {base['per_frame_ms']['p50']} ms, "
-                         f"p99 {base['per_frame_ms']['p99']} ms")
+            lines.append(
+                f"{'base':>5} | {base['cpu_s_per_video_s']:>13} | {'':>11} | {base['host_busy_pct']:>11} | "
+                f"{what}, offline, round {r + 1}: per frame p50 {base['per_frame_ms']['p50']} ms, "
+                f"p99 {base['per_frame_ms']['p99']} ms"
+            )
         for n, res in rnd["runs"].items():
             for i, (uuv_id, u) in enumerate(res["per_uuv"].items()):
                 lat, a = u["slot_to_gps_input_ms"], u["arrival_to_sent_ms"]
-                run = (n, res["cpu_s_per_video_s"], res["rss_mb"]["peak"], res["host_busy_pct"],
-                       f"{res['video']['skipped_behind']}/{res['frames_sent']}") if i == 0 else ("",) * 5
-                row = (*run, uuv_id, f"{lat['p50']} / {lat['p99']} ({lat['n']})", f"{a['p50_ms']} / {a['p99_ms']}",
-                       u["pipeline"]["dropped"], u["ok_share"], u["mae_m"], u["nearer_other_vehicle"],
-                       u["frame_time_error_ms"]["p50"])
+                run = (
+                    (
+                        n,
+                        res["cpu_s_per_video_s"],
+                        res["rss_mb"]["peak"],
+                        res["host_busy_pct"],
+                        f"{res['video']['skipped_behind']}/{res['frames_sent']}",
+                    )
+                    if i == 0
+                    else ("",) * 5
+                )
+                row = (
+                    *run,
+                    uuv_id,
+                    f"{lat['p50']} / {lat['p99']} ({lat['n']})",
+                    f"{a['p50_ms']} / {a['p99_ms']}",
+                    u["pipeline"]["dropped"],
+                    u["ok_share"],
+                    u["mae_m"],
+                    u["nearer_other_vehicle"],
+                    u["frame_time_error_ms"]["p50"],
+                )
                 lines.append(" | ".join(f"{v!s:>{w}}" for v, (_, w) in zip(row, cols, strict=True)))
         lines.append("")
     return lines
@@ -327,31 +451,61 @@ def table(rounds: list[dict]) -> list[str]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--counts", default="1,2,3", help="comma-separated numbers of UUVs: 1, 2, 3")
-    ap.add_argument("--rounds", type=int, default=1, help="rounds of (decode only, each count), one after another: "
-                    "on a noisy machine, the spread between rounds")
-    ap.add_argument("--baseline-frames", type=int, default=150, help="frames of the Pipeline.process baseline")
-    ap.add_argument("--duration-s", type=float, default=20.0, help="session length (generated once per length)")
+    ap.add_argument(
+        "--rounds",
+        type=int,
+        default=1,
+        help="rounds of (decode only, each count), one after another: "
+        "on a noisy machine, the spread between rounds",
+    )
+    ap.add_argument(
+        "--baseline-frames", type=int, default=150, help="frames of the Pipeline.process baseline"
+    )
+    ap.add_argument(
+        "--duration-s", type=float, default=20.0, help="session length (generated once per length)"
+    )
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "uuvs.txt")
     args = ap.parse_args()
     session = ensure_session(args.duration_s)
-    lines = [(f"skyfix several-UUV benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
-              f"load average {os.getloadavg()[0]:.1f}"),
-             (f"{session.name}: two_uuvs_crossing at {SIZE[0]}x{SIZE[1]} 30 fps, MPEG-TS over UDP, camera latency "
-              f"{CAMERA_LATENCY_MS} ms; runs: " + "; ".join(f"{n}: {', '.join(RUNS[n])}" for n in RUNS)),
-             (f"{THIRD} is a third tracker session on the same vehicle as uuv1 (a copy of its depth, truth and "
-              "first box): the cost of a third tracker, not a third vehicle's accuracy."),
-             ("CPU-s/video-s: the skyfix run process over the video's span (decode only: this process, offline); "
-              "host busy %: the whole machine, all cores, meanwhile;"),
-             ("decoder skipped: frames the service decoded but did not hand on, its decoder behind (of those sent); "
-              "dropped: frames the UUV's pipeline dropped, its tracker behind;"),
-             ("ok share: the UUV's ok fixes / frames sent; MAE: valid GPS_INPUT at its endpoint vs its own truth; "
-              "t err: |a fix's time - the nearest true exposure|;"),
-             (f"nearer other: valid GPS_INPUT nearer the other vehicle's truth than its own, an identity swap "
-              f"({THIRD}'s own is uuv1's, its other uuv2's)."), ""]
+    lines = [
+        (
+            f"skyfix several-UUV benchmark, {time.strftime('%Y-%m-%d %H:%M:%S %Z')}, {os.cpu_count()} cores, "
+            f"load average {os.getloadavg()[0]:.1f}"
+        ),
+        (
+            f"{session.name}: two_uuvs_crossing at {SIZE[0]}x{SIZE[1]} 30 fps, MPEG-TS over UDP, camera latency "
+            f"{CAMERA_LATENCY_MS} ms; runs: "
+            + "; ".join(f"{n}: {', '.join(RUNS[n])}" for n in RUNS)
+        ),
+        (
+            f"{THIRD} is a third tracker session on the same vehicle as uuv1 (a copy of its depth, truth and "
+            "first box): the cost of a third tracker, not a third vehicle's accuracy."
+        ),
+        (
+            "CPU-s/video-s: the skyfix run process over the video's span (decode only: this process, offline); "
+            "host busy %: the whole machine, all cores, meanwhile;"
+        ),
+        (
+            "decoder skipped: frames the service decoded but did not hand on, its decoder behind (of those sent); "
+            "dropped: frames the UUV's pipeline dropped, its tracker behind;"
+        ),
+        (
+            "ok share: the UUV's ok fixes / frames sent; MAE: valid GPS_INPUT at its endpoint vs its own truth; "
+            "t err: |a fix's time - the nearest true exposure|;"
+        ),
+        (
+            f"nearer other: valid GPS_INPUT nearer the other vehicle's truth than its own, an identity swap "
+            f"({THIRD}'s own is uuv1's, its other uuv2's)."
+        ),
+        "",
+    ]
     rounds = []
     for r in range(args.rounds):
-        rnd = {"decode_only": decode_only(session), "one_tracker": one_tracker(session, args.baseline_frames),
-               "runs": {}}
+        rnd = {
+            "decode_only": decode_only(session),
+            "one_tracker": one_tracker(session, args.baseline_frames),
+            "runs": {},
+        }
         rounds.append(rnd)
         for n in (int(c) for c in args.counts.split(",")):
             work = BENCH_DIR / f"run_uuvs_r{r + 1}_{n}"

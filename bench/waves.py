@@ -46,7 +46,11 @@ def session(name: str, work: Path, regenerate: bool) -> tuple[Path, str]:
 
 def wave_error(path: Path) -> tuple[np.ndarray, float]:
     """RMS (north, east) and mean horizontal length (m) of the waves' own error, over the frames with a track."""
-    t = read_table(path / TRUTH_WAVES_CSV, ("t", "wave_dn_m", "wave_de_m"), allow_empty=("wave_dn_m", "wave_de_m"))
+    t = read_table(
+        path / TRUTH_WAVES_CSV,
+        ("t", "wave_dn_m", "wave_de_m"),
+        allow_empty=("wave_dn_m", "wave_de_m"),
+    )
     e = np.column_stack([t["wave_dn_m"], t["wave_de_m"]])
     e = e[np.isfinite(e).all(axis=1)]
     return np.sqrt(np.mean(e**2, axis=0)), float(np.mean(np.hypot(*e.T)))
@@ -54,8 +58,12 @@ def wave_error(path: Path) -> tuple[np.ndarray, float]:
 
 def evaluate(path: Path, out: Path) -> dict:
     """evaluate --use-track's refraction row."""
-    subprocess.run([*SKYFIX, "evaluate", str(path), "--use-track", "--out", str(out), "--quiet"], cwd=ROOT,
-                   capture_output=True, check=False)
+    subprocess.run(
+        [*SKYFIX, "evaluate", str(path), "--use-track", "--out", str(out), "--quiet"],
+        cwd=ROOT,
+        capture_output=True,
+        check=False,
+    )
     with open(out / "evaluation.csv", newline="") as f:
         return next(r for r in csv.DictReader(f) if r["method"] == "refraction")
 
@@ -63,8 +71,12 @@ def evaluate(path: Path, out: Path) -> dict:
 def tracked(path: Path, out: Path) -> tuple[int, int, float]:
     """``skyfix process`` tracking the video: (frames located, frames, seconds)."""
     t0 = time.perf_counter()
-    subprocess.run([*SKYFIX, "process", str(path), "--out", str(out), "--quiet"], cwd=ROOT, capture_output=True,
-                   check=False)
+    subprocess.run(
+        [*SKYFIX, "process", str(path), "--out", str(out), "--quiet"],
+        cwd=ROOT,
+        capture_output=True,
+        check=False,
+    )
     fixes = read_positions_csv(out / "positions.csv")
     return int(np.sum(fixes.status == "ok")), len(fixes.status), time.perf_counter() - t0
 
@@ -77,8 +89,10 @@ def main() -> int:
     ap.add_argument("--only", nargs="*")
     args = ap.parse_args()
     work = Path(args.work)
-    header = (f"{'scenario':20s} {'s/frame':>7s}  {'wave RMS n,e m':>15s} {'wave MAE':>8s}  {'use-track MAE':>13s} "
-              f"{'shape':>6s} {'in 2h':>6s}  {'tracked: located':>16s}")
+    header = (
+        f"{'scenario':20s} {'s/frame':>7s}  {'wave RMS n,e m':>15s} {'wave MAE':>8s}  {'use-track MAE':>13s} "
+        f"{'shape':>6s} {'in 2h':>6s}  {'tracked: located':>16s}"
+    )
     lines = [header]
     print(header, flush=True)
     for name in args.only or SCENARIOS:
@@ -86,8 +100,10 @@ def main() -> int:
         rms, mae = wave_error(path)
         row = evaluate(path, work / "evaluate" / name)
         located, frames, _ = tracked(path, work / "process" / name)
-        lines.append(f"{name:20s} {per_frame:>7s}  {rms[0]:7.4f},{rms[1]:7.4f} {mae:8.4f}  {float(row['mae_m']):13.4f} "
-                     f"{float(row['shape_m']):6.4f} {float(row['within_2sigma']):6.1%}  {located:>7d} of {frames}")
+        lines.append(
+            f"{name:20s} {per_frame:>7s}  {rms[0]:7.4f},{rms[1]:7.4f} {mae:8.4f}  {float(row['mae_m']):13.4f} "
+            f"{float(row['shape_m']):6.4f} {float(row['within_2sigma']):6.1%}  {located:>7d} of {frames}"
+        )
         print(lines[-1], flush=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")

@@ -29,18 +29,30 @@ from bench.waves import session
 
 SCENARIOS = sorted(p.stem for p in (ROOT / "sim_fixtures" / "scenarios").glob("weather_*.toml"))
 SKYFIX = [sys.executable, "-m", "groundstation.cli"]
-COLUMNS = (("visible_coverage", "visible", "{:.1%}"), ("mae_m", "MAE m", "{:.4f}"), ("shape_m", "shape m", "{:.4f}"),
-           ("within_2sigma", "in 2σ", "{:.1%}"), ("wave_mae_m", "waves m", "{:.4f}"),
-           ("allowed_mae_m", "allowed", "{:.4f}"), ("allowed_shape_m", "shape m", "{:.4f}"),
-           ("mae_ratio", "×MAE", "{:.2f}"), ("shape_ratio", "×shape", "{:.2f}"),
-           ("smoothed_shape_m", "smoothed shape", "{:.4f}"), ("smoothed_within_2sigma", "in 2σ", "{:.1%}"))
+COLUMNS = (
+    ("visible_coverage", "visible", "{:.1%}"),
+    ("mae_m", "MAE m", "{:.4f}"),
+    ("shape_m", "shape m", "{:.4f}"),
+    ("within_2sigma", "in 2σ", "{:.1%}"),
+    ("wave_mae_m", "waves m", "{:.4f}"),
+    ("allowed_mae_m", "allowed", "{:.4f}"),
+    ("allowed_shape_m", "shape m", "{:.4f}"),
+    ("mae_ratio", "×MAE", "{:.2f}"),
+    ("shape_ratio", "×shape", "{:.2f}"),
+    ("smoothed_shape_m", "smoothed shape", "{:.4f}"),
+    ("smoothed_within_2sigma", "in 2σ", "{:.1%}"),
+)
 
 
 def evaluate(path: Path, out: Path, use_track: bool) -> dict:
     """``skyfix evaluate``'s refraction row (tracking the video, or ``--use-track``)."""
     extra = ["--use-track"] if use_track else []
-    subprocess.run([*SKYFIX, "evaluate", str(path), *extra, "--out", str(out), "--quiet"], cwd=ROOT,
-                   capture_output=True, check=False)
+    subprocess.run(
+        [*SKYFIX, "evaluate", str(path), *extra, "--out", str(out), "--quiet"],
+        cwd=ROOT,
+        capture_output=True,
+        check=False,
+    )
     with open(out / "evaluation.csv", newline="") as f:
         return next(r for r in csv.DictReader(f) if r["method"] == "refraction")
 
@@ -61,14 +73,21 @@ def main() -> int:
     ap.add_argument("--only", nargs="*")
     args = ap.parse_args()
     work = Path(args.work)
-    header = f"{'scenario':20s} {'pixels':10s} " + " ".join(f"{h:>{max(len(h), 7)}}" for _, h, _ in COLUMNS)
+    header = f"{'scenario':20s} {'pixels':10s} " + " ".join(
+        f"{h:>{max(len(h), 7)}}" for _, h, _ in COLUMNS
+    )
     lines = [header]
     print(header, flush=True)
     for name in args.only or SCENARIOS:
         path, _ = session(name, work, args.regenerate)
         for pixels, use_track in (("tracked", False), ("true pixel", True)):
-            lines.append(row(name, pixels, evaluate(path, work / "evaluate" / pixels.replace(" ", "_") / name,
-                                                    use_track)))
+            lines.append(
+                row(
+                    name,
+                    pixels,
+                    evaluate(path, work / "evaluate" / pixels.replace(" ", "_") / name, use_track),
+                )
+            )
             print(lines[-1], flush=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")

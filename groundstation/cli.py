@@ -14,27 +14,74 @@ import sys
 #: ``register(subparsers, name, help)`` adds it (its arguments, its ``func``) and its one-line help.
 COMMANDS = (
     ("process", "groundstation.offline.process", "process a recorded session into positions.csv"),
-    ("import", "groundstation.offline.import_flight",
-     "a flight's own records (DataFlash log, camera video, depth) as a session"),
-    ("evaluate", "groundstation.offline.evaluate", "accuracy of sessions with truth.csv: refraction vs straight ray"),
-    ("sim", "sim_fixtures.cli", "generate a synthetic session (video, telemetry, truth) from a scenario"),
-    ("run", "groundstation.live.command", "the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out"),
+    (
+        "import",
+        "groundstation.offline.import_flight",
+        "a flight's own records (DataFlash log, camera video, depth) as a session",
+    ),
+    (
+        "evaluate",
+        "groundstation.offline.evaluate",
+        "accuracy of sessions with truth.csv: refraction vs straight ray",
+    ),
+    (
+        "sim",
+        "sim_fixtures.cli",
+        "generate a synthetic session (video, telemetry, truth) from a scenario",
+    ),
+    (
+        "run",
+        "groundstation.live.command",
+        "the live service: MAVLink, Zenoh and video in; fixes and GPS_INPUT out",
+    ),
     ("status", "groundstation.live.console", "the live service's status, once or --watch"),
     ("select", "groundstation.live.console", "select the UUV in the live service (box or click)"),
     ("release", "groundstation.live.console", "let go of the target: no fix until a new selection"),
-    ("acquire", "groundstation.live.console",
-     "await a target again (automatic acquisition near the UUV's own position)"),
-    ("confirm", "groundstation.live.console",
-     "the target tracked now is the UUV: the safety gates take it however far from the last trusted track"),
-    ("fuse", "groundstation.fuse.service", "several drones over one UUV: their fixes fused, one GPS_INPUT to the UUV"),
-    ("replay", "groundstation.replay", "re-stream a recorded session live (MAVLink, Zenoh depth, video)"),
-    ("calibrate", "groundstation.calibration.command",
-     "camera calibration: from board images, or imported from OpenCV/Kalibr/ROS"),
-    ("export", "groundstation.offline.export", "positions.csv as GeoJSON, KML, GPX or CSV (QGIS, Google Earth)"),
-    ("report", "groundstation.offline.report", "PNG plots of a run: top view, error/accuracy over time, statuses"),
-    ("latency", "groundstation.latency.meter", "measure the camera's glass-to-first-packet latency with a time code"),
-    ("estimate-latency", "groundstation.latency.estimate",
-     "a recording's video-to-telemetry time offset, from image motion"),
+    (
+        "acquire",
+        "groundstation.live.console",
+        "await a target again (automatic acquisition near the UUV's own position)",
+    ),
+    (
+        "confirm",
+        "groundstation.live.console",
+        "the target tracked now is the UUV: the safety gates take it however far from the last trusted track",
+    ),
+    (
+        "fuse",
+        "groundstation.fuse.service",
+        "several drones over one UUV: their fixes fused, one GPS_INPUT to the UUV",
+    ),
+    (
+        "replay",
+        "groundstation.replay",
+        "re-stream a recorded session live (MAVLink, Zenoh depth, video)",
+    ),
+    (
+        "calibrate",
+        "groundstation.calibration.command",
+        "camera calibration: from board images, or imported from OpenCV/Kalibr/ROS",
+    ),
+    (
+        "export",
+        "groundstation.offline.export",
+        "positions.csv as GeoJSON, KML, GPX or CSV (QGIS, Google Earth)",
+    ),
+    (
+        "report",
+        "groundstation.offline.report",
+        "PNG plots of a run: top view, error/accuracy over time, statuses",
+    ),
+    (
+        "latency",
+        "groundstation.latency.meter",
+        "measure the camera's glass-to-first-packet latency with a time code",
+    ),
+    (
+        "estimate-latency",
+        "groundstation.latency.estimate",
+        "a recording's video-to-telemetry time offset, from image motion",
+    ),
 )
 
 
@@ -42,8 +89,13 @@ class _Version(argparse.Action):
     """``--version``: the installed package's version, looked up only when asked for."""
 
     def __init__(self, option_strings, dest, **kwargs):
-        super().__init__(option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, nargs=0,
-                         help="show program's version number and exit")
+        super().__init__(
+            option_strings,
+            dest=argparse.SUPPRESS,
+            default=argparse.SUPPRESS,
+            nargs=0,
+            help="show program's version number and exit",
+        )
 
     def __call__(self, parser, namespace, values, option_string=None):
         from importlib.metadata import version

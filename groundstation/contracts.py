@@ -41,15 +41,20 @@ class Contracts:
         return {"$schema": DRAFT, "$id": f"urn:skyfix:schema:{name}", **schema, "title": title}
 
     def schema_text(self, name: str) -> str:
-        return json.dumps(self.json_schema(name), indent=2, ensure_ascii=False, sort_keys=True) + "\n"
+        return (
+            json.dumps(self.json_schema(name), indent=2, ensure_ascii=False, sort_keys=True) + "\n"
+        )
 
     def path_of(self, name: str) -> Path:
         return self.folder / f"{name}.schema.json"
 
     def stale(self) -> list[str]:
         """Contracts whose checked-in schema file differs from the model's."""
-        return [n for n in self.models if not self.path_of(n).is_file() or self.path_of(n).read_text()
-                != self.schema_text(n)]
+        return [
+            n
+            for n in self.models
+            if not self.path_of(n).is_file() or self.path_of(n).read_text() != self.schema_text(n)
+        ]
 
     def main(self, argv=None) -> int:
         """Rewrite the files; ``--check``: exit 1 naming the stale ones."""
@@ -66,13 +71,17 @@ class Contracts:
         return 0
 
 
-GROUNDSTATION = Contracts({
-    "fix": (FixMessage, "skyfix fix message (Zenoh, JSON)"),
-    "status": (StatusMessage, "skyfix status message (Zenoh, JSON)"),
-    "fuse-status": (FuseStatusMessage, "skyfix fuse status message (Zenoh, JSON)"),
-    "calibration": (Calibration, "skyfix calibration: the session.toml v1 tables (TOML)"),
-    "run-config": (RunConfig, "skyfix run options: the --config file (TOML)"),
-}, Path(__file__).parent / "schemas", "groundstation.contracts")
+GROUNDSTATION = Contracts(
+    {
+        "fix": (FixMessage, "skyfix fix message (Zenoh, JSON)"),
+        "status": (StatusMessage, "skyfix status message (Zenoh, JSON)"),
+        "fuse-status": (FuseStatusMessage, "skyfix fuse status message (Zenoh, JSON)"),
+        "calibration": (Calibration, "skyfix calibration: the session.toml v1 tables (TOML)"),
+        "run-config": (RunConfig, "skyfix run options: the --config file (TOML)"),
+    },
+    Path(__file__).parent / "schemas",
+    "groundstation.contracts",
+)
 
 
 if __name__ == "__main__":

@@ -69,20 +69,39 @@ STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
 PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent dies
 
 
-def measure_frame(cal: Calibration, image: np.ndarray, pose: CameraPose, i: int, u: float,
-                  v: float) -> SizeHeight | str:
+def measure_frame(
+    cal: Calibration, image: np.ndarray, pose: CameraPose, i: int, u: float, v: float
+) -> SizeHeight | str:
     """:meth:`HeightFromSize.measure`, a function of its arguments alone (run in the live service's measuring
     process)."""
     if pose.status[i] != "ok":
         return "no_pose"
     n = cal.water.refractive_index
-    m = measure(image, cal.camera, pose.R_ned_from_cv[i], u, v, cal.uuv, float(pose.height_m[i]),
-                float(pose.depth_m[i]), n)
+    m = measure(
+        image,
+        cal.camera,
+        pose.R_ned_from_cv[i],
+        u,
+        v,
+        cal.uuv,
+        float(pose.height_m[i]),
+        float(pose.depth_m[i]),
+        n,
+    )
     if isinstance(m, str):
         return m
-    return size_height(float(pose.t_unix[i]), m.camera_height_m, m.sigma_m, m.size_px,
-                       float(pose.cam_offset_ned_m[i, 2]), float(pose.uav_height_m[i]),
-                       float(pose.sigma_height_m[i]), float(pose.depth_m[i]), float(pose.sigma_depth_m[i]), n)
+    return size_height(
+        float(pose.t_unix[i]),
+        m.camera_height_m,
+        m.sigma_m,
+        m.size_px,
+        float(pose.cam_offset_ned_m[i, 2]),
+        float(pose.uav_height_m[i]),
+        float(pose.sigma_height_m[i]),
+        float(pose.depth_m[i]),
+        float(pose.sigma_depth_m[i]),
+        n,
+    )
 
 
 def start_measuring_process() -> None:
@@ -99,10 +118,18 @@ class HeightFromSize:
     """Measurements of one run and their estimate (see the module doc); :meth:`measure` is pure (any thread),
     :meth:`take` and :meth:`due` change the state (one thread: the event loop live)."""
 
-    def __init__(self, cal: Calibration, tel: Telemetry, mode: str, measure_hz: float = MEASURE_HZ,
-                 sure_hz: float = SURE_HZ):
+    def __init__(
+        self,
+        cal: Calibration,
+        tel: Telemetry,
+        mode: str,
+        measure_hz: float = MEASURE_HZ,
+        sure_hz: float = SURE_HZ,
+    ):
         if mode not in MODES[:2]:
-            raise ValueError(f"height_from_size = {mode!r}: expected one of {', '.join(MODES[:2])} to measure")
+            raise ValueError(
+                f"height_from_size = {mode!r}: expected one of {', '.join(MODES[:2])} to measure"
+            )
         self.cal, self.tel, self.mode = cal, tel, mode
         self.period_s = 1.0 / measure_hz
         self.sure_period_s = 1.0 / sure_hz
@@ -120,13 +147,19 @@ class HeightFromSize:
     def due(self, t_unix: float) -> bool:
         """Whether the frame at ``t_unix`` is to be measured (at most ``measure_hz`` a second, ``sure_hz`` while the
         estimate is sure); counts it if so."""
-        period = self.sure_period_s if self.estimate is not None and self.estimate.sure else self.period_s
+        period = (
+            self.sure_period_s
+            if self.estimate is not None and self.estimate.sure
+            else self.period_s
+        )
         if t_unix - self._last_t < period - 0.005:
             return False
         self._last_t = t_unix
         return True
 
-    def measure(self, image: np.ndarray, pose: CameraPose, i: int, u: float, v: float) -> SizeHeight | str:
+    def measure(
+        self, image: np.ndarray, pose: CameraPose, i: int, u: float, v: float
+    ) -> SizeHeight | str:
         """The UAV's height above the water at the pose's frame ``i`` from the UUV's outline around its tracked pixel
         (u, v), or why not (a word of :data:`localizer.tracking.silhouette.REJECTIONS`, or ``no_pose``)."""
         return measure_frame(self.cal, image, pose, i, u, v)
@@ -144,20 +177,26 @@ class HeightFromSize:
         if not e.sure:
             return
         limit = 2.0 * math.hypot(e.sigma_m, e.configured_sigma_m)
-        if abs(e.bias_m) > limit and (self._warned is None or abs(e.bias_m - self._warned) > limit / 2.0):
+        if abs(e.bias_m) > limit and (
+            self._warned is None or abs(e.bias_m - self._warned) > limit / 2.0
+        ):
             self._warned = e.bias_m
-            text = (f"height from the UUV's size: the configured height above the water is {abs(e.bias_m):.2f} m "
-                    f"{'above' if e.bias_m > 0 else 'below'} what the UUV's size in the image says (± {e.sigma_m:.2f} m, "
-                    f"{e.frames} frames over {e.blocks} s, {e.at_surface:.0%} with the UUV at the surface; the "
-                    f"configured height's own 1-sigma {e.configured_sigma_m:.2f} m): check [water] "
-                    "takeoff_height_above_surface_m or surface_amsl_m, the barometer, and [uuv] (the vehicle's size)")
+            text = (
+                f"height from the UUV's size: the configured height above the water is {abs(e.bias_m):.2f} m "
+                f"{'above' if e.bias_m > 0 else 'below'} what the UUV's size in the image says (± {e.sigma_m:.2f} m, "
+                f"{e.frames} frames over {e.blocks} s, {e.at_surface:.0%} with the UUV at the surface; the "
+                f"configured height's own 1-sigma {e.configured_sigma_m:.2f} m): check [water] "
+                "takeoff_height_above_surface_m or surface_amsl_m, the barometer, and [uuv] (the vehicle's size)"
+            )
             log.warning("%s", text)
             self.warnings.append(text)
         if self.mode != "auto":
             return
         for h in self.window.heights:
             if h.t_unix > self._applied_t and e.agrees(h):
-                if self.tel.add_height(SOURCE, float(self.tel.uav_time(h.t_unix)), h.uav_height_m, h.sigma_total_m):
+                if self.tel.add_height(
+                    SOURCE, float(self.tel.uav_time(h.t_unix)), h.uav_height_m, h.sigma_total_m
+                ):
                     self.applied += 1
                 self._applied_t = h.t_unix
 
@@ -165,24 +204,40 @@ class HeightFromSize:
         """One line: the estimate, or why there is none."""
         e = self.estimate
         if e is None:
-            why = ", ".join(f"{k} {n}" for k, n in self.rejected.most_common()) or "no frame with the UUV tracked"
+            why = (
+                ", ".join(f"{k} {n}" for k, n in self.rejected.most_common())
+                or "no frame with the UUV tracked"
+            )
             return f"height from the UUV's size: no measurement ({why})"
-        return (f"height from the UUV's size: configured - measured {e.bias_m:+.2f} ± {e.sigma_m:.2f} m over "
-                f"{e.frames} frames ({e.blocks} s, {e.at_surface:.0%} at the surface, {e.outliers} outliers left out, "
-                f"{sum(self.rejected.values())} frames without a measurement), {'sure' if e.sure else 'not sure'}"
-                + (f"; {self.applied} measurements applied" if self.mode == "auto" else ""))
+        return (
+            f"height from the UUV's size: configured - measured {e.bias_m:+.2f} ± {e.sigma_m:.2f} m over "
+            f"{e.frames} frames ({e.blocks} s, {e.at_surface:.0%} at the surface, {e.outliers} outliers left out, "
+            f"{sum(self.rejected.values())} frames without a measurement), {'sure' if e.sure else 'not sure'}"
+            + (f"; {self.applied} measurements applied" if self.mode == "auto" else "")
+        )
 
     def status(self) -> dict:
         def num(x, digits=3):
             return None if x is None or not math.isfinite(x) else round(float(x), digits)
 
         e, last = self.estimate, self.last
-        return {"mode": self.mode, "measured": self.measured, "rejected": dict(self.rejected), "applied": self.applied,
-                "bias_m": num(e and e.bias_m), "sigma_m": num(e and e.sigma_m),
-                "sigma_common_m": num(e and e.sigma_common_m), "frames": e.frames if e else 0,
-                "outliers": e.outliers if e else 0, "seconds": e.blocks if e else 0, "sure": bool(e and e.sure),
-                "at_surface_share": num(e and e.at_surface, 2), "last_t": num(last and last.t_unix),
-                "last_height_m": num(last and last.uav_height_m), "last_sigma_m": num(last and last.sigma_total_m)}
+        return {
+            "mode": self.mode,
+            "measured": self.measured,
+            "rejected": dict(self.rejected),
+            "applied": self.applied,
+            "bias_m": num(e and e.bias_m),
+            "sigma_m": num(e and e.sigma_m),
+            "sigma_common_m": num(e and e.sigma_common_m),
+            "frames": e.frames if e else 0,
+            "outliers": e.outliers if e else 0,
+            "seconds": e.blocks if e else 0,
+            "sure": bool(e and e.sure),
+            "at_surface_share": num(e and e.at_surface, 2),
+            "last_t": num(last and last.t_unix),
+            "last_height_m": num(last and last.uav_height_m),
+            "last_sigma_m": num(last and last.sigma_total_m),
+        }
 
 
 class OnlineHeightFromSize:
@@ -214,8 +269,12 @@ class OnlineHeightFromSize:
 
     def _run(self, stop: threading.Event) -> None:
         """Hands each frame to the measuring process (started here: a restart after a failure starts a new one)."""
-        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process)
-        pool.submit(importlib.import_module, __name__)  # the process starts and imports now, not at the first frame
+        pool = ProcessPoolExecutor(
+            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process
+        )
+        pool.submit(
+            importlib.import_module, __name__
+        )  # the process starts and imports now, not at the first frame
         try:
             while not stop.is_set():
                 try:

@@ -44,66 +44,110 @@ def _status_doc() -> str:
 class Message(BaseModel):
     """A published message: closed (a key not described here is a contract change), keys by alias."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True, allow_inf_nan=False)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, populate_by_name=True, allow_inf_nan=False
+    )
 
 
 class FixMessage(Message):
     """One processed video frame: the UUV's position, or why there is none."""
 
-    model_config = ConfigDict(json_schema_extra={
-        # a valid fix has a position and its accuracy; any other status has no position
-        "if": {"properties": {"status": {"const": "ok"}}},
-        "then": {"properties": {k: {"type": "number"} for k in ("lat", "lon", "h_acc_m", "sigma_n_m", "sigma_e_m")}},
-        "else": {"properties": {"lat": {"type": "null"}, "lon": {"type": "null"}}},
-    })
+    model_config = ConfigDict(
+        json_schema_extra={
+            # a valid fix has a position and its accuracy; any other status has no position
+            "if": {"properties": {"status": {"const": "ok"}}},
+            "then": {
+                "properties": {
+                    k: {"type": "number"}
+                    for k in ("lat", "lon", "h_acc_m", "sigma_n_m", "sigma_e_m")
+                }
+            },
+            "else": {"properties": {"lat": {"type": "null"}, "lon": {"type": "null"}}},
+        }
+    )
 
-    schema_: Literal[FIX_SCHEMA] = Field(alias="schema", description="message name and major version")
+    schema_: Literal[FIX_SCHEMA] = Field(
+        alias="schema", description="message name and major version"
+    )
     t: float = Field(description="the frame's exposure time on the station clock, UNIX seconds")
-    t_gnss: Seconds = Field(description="the exposure as GNSS (UNIX) time: t minus the station clock's measured "
-                            "offset from the UAV's GNSS clock (SYSTEM_TIME); null until it is measured")
+    t_gnss: Seconds = Field(
+        description="the exposure as GNSS (UNIX) time: t minus the station clock's measured "
+        "offset from the UAV's GNSS clock (SYSTEM_TIME); null until it is measured"
+    )
     frame: int = Field(description="running frame number of this run")
     status: Status = Field(description=_status_doc())
-    lat: Annotated[float, Ge(-90), Le(90)] | None = Field(description="WGS84 latitude of the UUV, degrees (null "
-                                                          "unless status is ok)")
-    lon: Annotated[float, Ge(-180), Le(180)] | None = Field(description="WGS84 longitude of the UUV, degrees (null "
-                                                            "unless status is ok)")
-    alt_amsl_m: Metres = Field(description="the UUV's height above mean sea level, metres (the UAV autopilot's "
-                               "GLOBAL_POSITION_INT alt minus the UAV's height above the water and the depth)")
-    alt_ellipsoid_m: Metres = Field(description="the UUV's height above the WGS84 ellipsoid, metres: alt_amsl_m plus "
-                                    "the geoid separation GPS_RAW_INT gives (alt_ellipsoid - alt); null when the "
-                                    "autopilot sends no alt_ellipsoid (then only alt_amsl_m is known)")
-    depth_m: Metres = Field(description="the UUV depth used, metres below the surface (positive down)")
-    h_acc_m: NonNegative = Field(description="horizontal 1-sigma accuracy, metres: DRMS, sqrt(sigma_n² + sigma_e²)")
+    lat: Annotated[float, Ge(-90), Le(90)] | None = Field(
+        description="WGS84 latitude of the UUV, degrees (null unless status is ok)"
+    )
+    lon: Annotated[float, Ge(-180), Le(180)] | None = Field(
+        description="WGS84 longitude of the UUV, degrees (null unless status is ok)"
+    )
+    alt_amsl_m: Metres = Field(
+        description="the UUV's height above mean sea level, metres (the UAV autopilot's "
+        "GLOBAL_POSITION_INT alt minus the UAV's height above the water and the depth)"
+    )
+    alt_ellipsoid_m: Metres = Field(
+        description="the UUV's height above the WGS84 ellipsoid, metres: alt_amsl_m plus "
+        "the geoid separation GPS_RAW_INT gives (alt_ellipsoid - alt); null when the "
+        "autopilot sends no alt_ellipsoid (then only alt_amsl_m is known)"
+    )
+    depth_m: Metres = Field(
+        description="the UUV depth used, metres below the surface (positive down)"
+    )
+    h_acc_m: NonNegative = Field(
+        description="horizontal 1-sigma accuracy, metres: DRMS, sqrt(sigma_n² + sigma_e²)"
+    )
     v_acc_m: NonNegative = Field(description="vertical 1-sigma accuracy, metres")
     sigma_n_m: NonNegative = Field(description="1-sigma of the north coordinate, metres")
     sigma_e_m: NonNegative = Field(description="1-sigma of the east coordinate, metres")
-    cov_ne_m2: float | None = Field(description="north-east covariance, m² (the off-diagonal of the 2×2 "
-                                    "horizontal covariance [[sigma_n², cov_ne], [cov_ne, sigma_e²]])")
-    u: float | None = Field(description="the UUV's pixel, right (distorted, OpenCV: the top-left pixel's centre "
-                            "is 0)")
+    cov_ne_m2: float | None = Field(
+        description="north-east covariance, m² (the off-diagonal of the 2×2 "
+        "horizontal covariance [[sigma_n², cov_ne], [cov_ne, sigma_e²]])"
+    )
+    u: float | None = Field(
+        description="the UUV's pixel, right (distorted, OpenCV: the top-left pixel's centre is 0)"
+    )
     v: float | None = Field(description="the UUV's pixel, down")
     north_m: Metres = Field(description="the UUV north of the UAV's reported position, metres")
     east_m: Metres = Field(description="the UUV east of the UAV's reported position, metres")
-    confidence: Annotated[float, Ge(0), Le(1)] | None = Field(description="the tracker's confidence, 0..1, when it "
-                                                              "has one")
+    confidence: Annotated[float, Ge(0), Le(1)] | None = Field(
+        description="the tracker's confidence, 0..1, when it has one"
+    )
     height_m: Metres = Field(None, description="the camera's height above the water used, metres")
-    sigma_height_m: NonNegative = Field(None, description="1-sigma of that height as it went into h_acc_m, metres")
-    sigma_depth_m: NonNegative = Field(None, description="1-sigma of depth_m as it went into h_acc_m, metres: the "
-                                       "source's, a disagreement of ArduSub's two readings, and the depth's age "
-                                       "times the vertical speed")
-    sigma_time_s: NonNegative = Field(None, description="1-sigma of the frame's time against the telemetry's as it "
-                                      "went into h_acc_m, seconds")
-    sigma_pixel_px: NonNegative = Field(None, description="1-sigma of each of u and v as it went into h_acc_m, "
-                                        "pixels: the tracker's own (its match, the window it searched, the frames "
-                                        "since its last match and since it (re)acquired the UUV; README, 'How sure "
-                                        "the pixel is')")
-    height_source: str | None = Field(None, description="what measured the height within the last 30 s (README, "
-                                      "'The height above the water'): takeoff or amsl (nothing: the EKF's height), "
-                                      "gnss_rtk, gnss, baro+gnss_rtk, baro+gnss, rangefinder, size, joined by +")
-    depth_source: str | None = Field(None, description="where the depth came from: skyfix (skyfix's JSON on Zenoh), "
-                                     "session (a recording's depth.jsonl naming none), ardusub_pressure (ArduSub's "
-                                     "depth sensor), ardusub_ekf (ArduSub's EKF, until the sensor's parameters are "
-                                     "known)")
+    sigma_height_m: NonNegative = Field(
+        None, description="1-sigma of that height as it went into h_acc_m, metres"
+    )
+    sigma_depth_m: NonNegative = Field(
+        None,
+        description="1-sigma of depth_m as it went into h_acc_m, metres: the "
+        "source's, a disagreement of ArduSub's two readings, and the depth's age "
+        "times the vertical speed",
+    )
+    sigma_time_s: NonNegative = Field(
+        None,
+        description="1-sigma of the frame's time against the telemetry's as it "
+        "went into h_acc_m, seconds",
+    )
+    sigma_pixel_px: NonNegative = Field(
+        None,
+        description="1-sigma of each of u and v as it went into h_acc_m, "
+        "pixels: the tracker's own (its match, the window it searched, the frames "
+        "since its last match and since it (re)acquired the UUV; README, 'How sure "
+        "the pixel is')",
+    )
+    height_source: str | None = Field(
+        None,
+        description="what measured the height within the last 30 s (README, "
+        "'The height above the water'): takeoff or amsl (nothing: the EKF's height), "
+        "gnss_rtk, gnss, baro+gnss_rtk, baro+gnss, rangefinder, size, joined by +",
+    )
+    depth_source: str | None = Field(
+        None,
+        description="where the depth came from: skyfix (skyfix's JSON on Zenoh), "
+        "session (a recording's depth.jsonl naming none), ardusub_pressure (ArduSub's "
+        "depth sensor), ardusub_ekf (ArduSub's EKF, until the sensor's parameters are "
+        "known)",
+    )
     time_source: str | None = Field(None, description="where the UAV link's delay came from")
 
     @model_validator(mode="after")
@@ -115,12 +159,16 @@ class FixMessage(Message):
     @classmethod
     def of(cls, fix: Fix) -> FixMessage:
         """The message of a fix (NaN → null; no position unless the status is ok)."""
+
         def num(name):
             x = float(getattr(fix, name))
             return x if math.isfinite(x) else None
 
-        values = {name: num(name) for name in cls.model_fields
-                  if name not in ("schema_", "t", "frame", "status", *WORDS)}
+        values = {
+            name: num(name)
+            for name in cls.model_fields
+            if name not in ("schema_", "t", "frame", "status", *WORDS)
+        }
         values |= {name: getattr(fix, name) or None for name in WORDS}
         if not fix.ok:
             values["lat"] = values["lon"] = None
@@ -133,8 +181,10 @@ class FixMessage(Message):
         """The fix this message carries (null → NaN, or "" for words; the inverse of :meth:`of`)."""
         nan = float("nan")
         kept = {f.name for f in dataclasses.fields(Fix)} - {"t_unix", "status", "frame"}
-        values = {k: (v if v is not None else ("" if k in WORDS else nan))
-                  for k, v in self.model_dump(include=kept).items()}
+        values = {
+            k: (v if v is not None else ("" if k in WORDS else nan))
+            for k, v in self.model_dump(include=kept).items()
+        }
         return Fix(t_unix=self.t, status=self.status, frame=self.frame, **values)
 
 
@@ -151,34 +201,47 @@ class Section(BaseModel):
 
 
 class Clocks(Section):
-    station_minus_gnss_s: float | None = Field(description="the station clock minus GNSS time (SYSTEM_TIME)")
+    station_minus_gnss_s: float | None = Field(
+        description="the station clock minus GNSS time (SYSTEM_TIME)"
+    )
     uav_link_latency_ms: float = Field(description="the UAV link's one-way delay in use")
     uav_link_latency_source: LatencySource = Field(
         description="where it comes from: configured ([timing] mavlink_latency_s), timesync (measured), or unknown "
-        "(neither: taken as 0)")
+        "(neither: taken as 0)"
+    )
     uav_link_latency_sigma_ms: float = Field(
         description="its 1-sigma in each fix's h_acc beyond [uncertainty] time_s: 0 when configured or measured, "
-        "[timing] unknown_latency_sigma_s when unknown")
-    uav_link_latency_measured_ms: float | None = Field(description="what TIMESYNC measured, used or not")
+        "[timing] unknown_latency_sigma_s when unknown"
+    )
+    uav_link_latency_measured_ms: float | None = Field(
+        description="what TIMESYNC measured, used or not"
+    )
     uav_reboots: int = Field(description="autopilot reboots seen (new clock segments)")
-    uuv_clock_minus_station_s: float | None = Field(description="the UUV's clock minus the station's")
+    uuv_clock_minus_station_s: float | None = Field(
+        description="the UUV's clock minus the station's"
+    )
     depth_aligned_by: Literal["uuv_clock", "arrival", "autopilot_clock"] | None = Field(
         description="uuv_clock: depth stamps used as they are; arrival: arrival minus depth_latency_s; "
-        "autopilot_clock: ArduSub's time_boot_ms mapped by least delay, minus depth_latency_s")
+        "autopilot_clock: ArduSub's time_boot_ms mapped by least delay, minus depth_latency_s"
+    )
 
 
 class HandoffStatus(Section):
     """What a reader thread handed to the event loop through its bounded queue."""
 
     handed: int = Field(description="items taken by the event loop")
-    dropped: int = Field(description="items dropped, oldest first, because the event loop fell behind")
+    dropped: int = Field(
+        description="items dropped, oldest first, because the event loop fell behind"
+    )
 
 
 class LinkStatus(Section):
     """A MAVLink link's own thread, or the Zenoh route of GPS_INPUT through BlueOS (mavlink/in)."""
 
     url: str
-    state: Literal["up", "waiting", "down", "closed"] = Field(description="up: connected (or a subscriber reachable)")
+    state: Literal["up", "waiting", "down", "closed"] = Field(
+        description="up: connected (or a subscriber reachable)"
+    )
     state_for_s: NonNegative = Field(description="seconds in that state")
     error: str | None = Field(description="why it is not up")
     written: int = Field(description="messages written")
@@ -187,21 +250,35 @@ class LinkStatus(Section):
     signed: bool | None = Field(None, description="MAVLink 2 signing on (MAVLink links)")
     connects: int | None = Field(None, description="connections made (MAVLink links)")
     disconnects: int | None = None
-    dropped_while_down: int | None = Field(None, description="messages dropped while the link was down")
-    superseded: int | None = Field(None, description="messages replaced by a newer one before they were written")
+    dropped_while_down: int | None = Field(
+        None, description="messages dropped while the link was down"
+    )
+    superseded: int | None = Field(
+        None, description="messages replaced by a newer one before they were written"
+    )
     outbox_dropped: int | None = None
     write_errors: int | None = None
     reads: int | None = None
     unfinished_frames: int | None = Field(None, description="datagrams ending inside a frame")
-    foreign_datagrams: int | None = Field(None, description="udpin: datagrams from another address than the "
-                                          "peer's, dropped unread")
-    peer: str | None = Field(None, description="udpin: the address HOST:PORT the link takes datagrams from")
-    relocks: int | None = Field(None, description="udpin: times the lock moved to a new sender (the peer silent "
-                                "5 s)")
-    zenoh_routers: int | None = Field(None, description="Zenoh routers connected (zenoh:mavlink/in)")
+    foreign_datagrams: int | None = Field(
+        None, description="udpin: datagrams from another address than the peer's, dropped unread"
+    )
+    peer: str | None = Field(
+        None, description="udpin: the address HOST:PORT the link takes datagrams from"
+    )
+    relocks: int | None = Field(
+        None, description="udpin: times the lock moved to a new sender (the peer silent 5 s)"
+    )
+    zenoh_routers: int | None = Field(
+        None, description="Zenoh routers connected (zenoh:mavlink/in)"
+    )
     zenoh_peers: int | None = Field(None, description="Zenoh peers connected (zenoh:mavlink/in)")
-    sent_unmatched: int | None = Field(None, description="messages published with no subscriber reachable")
-    restarts: int | None = Field(None, description="times the link's thread failed (a bug) and started over")
+    sent_unmatched: int | None = Field(
+        None, description="messages published with no subscriber reachable"
+    )
+    restarts: int | None = Field(
+        None, description="times the link's thread failed (a bug) and started over"
+    )
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
@@ -210,17 +287,23 @@ class GateTrackStatus(Section):
 
     t: float = Field(description="the last accepted fix's exposure, station clock")
     age_s: NonNegative = Field(description="seconds since then")
-    lat: float = Field(description="the track's position, WGS84 degrees: shown, never sent (GPS_INPUT carries the "
-                       "measured fix)")
+    lat: float = Field(
+        description="the track's position, WGS84 degrees: shown, never sent (GPS_INPUT carries the "
+        "measured fix)"
+    )
     lon: float
     vn_mps: float = Field(description="its velocity north, m/s")
     ve_mps: float = Field(description="its velocity east, m/s")
-    sigma_n_m: NonNegative = Field(description="1-sigma of the position north against the truth: the track's own and "
-                                   "the error the fixes share (attitude, height, GNSS), which no filtering removes")
+    sigma_n_m: NonNegative = Field(
+        description="1-sigma of the position north against the truth: the track's own and "
+        "the error the fixes share (attitude, height, GNSS), which no filtering removes"
+    )
     sigma_e_m: NonNegative = Field(description="the same, east")
     cov_ne_m2: float = Field(description="their covariance, m²")
-    sigma_own_m: NonNegative = Field(description="how well the track knows where the fixes are (DRMS, m): what a new "
-                                     "fix is compared with, besides its own frame-to-frame error")
+    sigma_own_m: NonNegative = Field(
+        description="how well the track knows where the fixes are (DRMS, m): what a new "
+        "fix is compared with, besides its own frame-to-frame error"
+    )
     sigma_vn_mps: NonNegative = Field(description="1-sigma of the velocity north")
     sigma_ve_mps: NonNegative = Field(description="1-sigma of the velocity east")
 
@@ -237,7 +320,9 @@ class GateStatus(Section):
     """The safety gates on what goes out as a valid fix (localizer/fix_gate.py): a track of the UUV."""
 
     max_speed_mps: float = Field(description="the UUV's top speed (--uuv-max-speed-mps)")
-    max_accel_mps2: float = Field(description="the UUV's largest acceleration (--uuv-max-accel-mps2)")
+    max_accel_mps2: float = Field(
+        description="the UUV's largest acceleration (--uuv-max-accel-mps2)"
+    )
     max_h_acc_m: float
     max_age_s: float
     state: Literal[tuple(GATE_STATES)] = Field(
@@ -245,33 +330,58 @@ class GateStatus(Section):
         "each fix is judged against the track; diverged: the fixes left the track (a jump the UUV cannot make): none "
         "is valid for 5 s, or until the target is lost or released; or a target was found where the UUV cannot be "
         "(after a loss, a selection, a restart): none of its fixes is valid until it is lost or released, or the "
-        "operator confirms it")
-    state_since_t: float | None = Field(description="the fix (exposure, station clock) the state began at")
+        "operator confirms it"
+    )
+    state_since_t: float | None = Field(
+        description="the fix (exposure, station clock) the state began at"
+    )
     accepted: int
-    rejected: dict[str, int] = Field(description="fixes not sent as valid, by reason: h_acc, age, out_of_order, "
-                                     "clock (the frame's exposure moved against its arrival: a clock stepped), "
-                                     "prediction (outside the window the telemetry predicted), innovation (off the "
-                                     "track), diverged, reach (where the UUV cannot be since the last good fix), "
-                                     "unconfirmed (a target not confirmed yet)")
-    last_refusal: str | None = Field(description="the latest refusal that says more than its reason, one line")
-    white_share: NonNegative = Field(description="the share of the fixes' claimed covariance that changes from frame "
-                                     "to frame, measured on the fixes (null before); the rest is an error they share")
+    rejected: dict[str, int] = Field(
+        description="fixes not sent as valid, by reason: h_acc, age, out_of_order, "
+        "clock (the frame's exposure moved against its arrival: a clock stepped), "
+        "prediction (outside the window the telemetry predicted), innovation (off the "
+        "track), diverged, reach (where the UUV cannot be since the last good fix), "
+        "unconfirmed (a target not confirmed yet)"
+    )
+    last_refusal: str | None = Field(
+        description="the latest refusal that says more than its reason, one line"
+    )
+    white_share: NonNegative = Field(
+        description="the share of the fixes' claimed covariance that changes from frame "
+        "to frame, measured on the fixes (null before); the rest is an error they share"
+    )
     diverged_until_t: float | None = Field(description="while diverged: until when (station clock)")
     chain: GateChainStatus | None = Field(description="while acquiring: the fixes being confirmed")
-    track: GateTrackStatus | None = Field(description="the last confirmed track (while acquiring: where the UUV was)")
-    reach_m: NonNegative = Field(description="while acquiring or diverged: how far from the track's position the UUV "
-                                 "can be by now (top speed × the time since the last good fix)")
+    track: GateTrackStatus | None = Field(
+        description="the last confirmed track (while acquiring: where the UUV was)"
+    )
+    reach_m: NonNegative = Field(
+        description="while acquiring or diverged: how far from the track's position the UUV "
+        "can be by now (top speed × the time since the last good fix)"
+    )
     thrusters: Literal["idle", "pushing", "unknown"] | None = Field(
         description="whether the UUV's horizontal thrusters push now, as its autopilot's outputs say (null: not read: "
-        "the depth is not ArduSub's)")
-    accel_bound_mps2: NonNegative = Field(description="the acceleration bound of the last fix judged: the UUV's, or "
-                                          "while its thrusters were idle what the water and the drag can do")
-    max_reach_m: NonNegative = Field(None, description="however long since the last trusted fix, a new target further "
-                                     "than this from it is not the UUV (--uuv-max-reach-m)")
-    operator_confirmed: bool = Field(False, description="the operator confirmed the target tracked now (skyfix "
-                                     "confirm, the page's button): no reach test until it is lost or released")
-    clock_steps: int = Field(0, description="steps of the station clock against the monotonic clock seen between "
-                             "frames (the gates keep to the monotonic clock)")
+        "the depth is not ArduSub's)"
+    )
+    accel_bound_mps2: NonNegative = Field(
+        description="the acceleration bound of the last fix judged: the UUV's, or "
+        "while its thrusters were idle what the water and the drag can do"
+    )
+    max_reach_m: NonNegative = Field(
+        None,
+        description="however long since the last trusted fix, a new target further "
+        "than this from it is not the UUV (--uuv-max-reach-m)",
+    )
+    operator_confirmed: bool = Field(
+        False,
+        description="the operator confirmed the target tracked now (skyfix "
+        "confirm, the page's button): no reach test until it is lost or released",
+    )
+    clock_steps: int = Field(
+        0,
+        description="steps of the station clock against the monotonic clock seen between "
+        "frames (the gates keep to the monotonic clock)",
+    )
     last_clock_step_s: float | None = Field(None, description="the last such step (s)")
 
 
@@ -279,43 +389,68 @@ class GnssStatus(Section):
     """The UAV's GNSS receiver as its newest GPS_RAW_INT says (localizer/gnss.py)."""
 
     fix_type: int = Field(description="GPS_FIX_TYPE: 3 3D, 4 DGPS, 5 RTK float, 6 RTK fixed")
-    h_acc_m: NonNegative = Field(description="the receiver's horizontal accuracy, null when it gives none")
-    v_acc_m: NonNegative = Field(description="the receiver's vertical accuracy, null when it gives none")
+    h_acc_m: NonNegative = Field(
+        description="the receiver's horizontal accuracy, null when it gives none"
+    )
+    v_acc_m: NonNegative = Field(
+        description="the receiver's vertical accuracy, null when it gives none"
+    )
     hdop: NonNegative = Field(description="HDOP (eph / 100), null when unknown")
     vdop: NonNegative = Field(description="VDOP (epv / 100), null when unknown")
-    sigma_horizontal_m: NonNegative = Field(description="the UAV position's 1-sigma skyfix takes from it: h_acc, else "
-                                            "HDOP times the fix type's typical error")
-    sigma_vertical_m: NonNegative = Field(description="the GNSS altitude's 1-sigma: v_acc, else VDOP times the fix "
-                                          "type's typical error; null without a 3D fix")
+    sigma_horizontal_m: NonNegative = Field(
+        description="the UAV position's 1-sigma skyfix takes from it: h_acc, else "
+        "HDOP times the fix type's typical error"
+    )
+    sigma_vertical_m: NonNegative = Field(
+        description="the GNSS altitude's 1-sigma: v_acc, else VDOP times the fix "
+        "type's typical error; null without a 3D fix"
+    )
 
 
 class HeightSourceStatus(Section):
     """One source of the height estimate, over the history kept."""
 
     used: int = Field(description="measurements used")
-    refused: int = Field(description="measurements not used: beyond 5 sigma of the estimate, or 3 after one refused")
+    refused: int = Field(
+        description="measurements not used: beyond 5 sigma of the estimate, or 3 after one refused"
+    )
     age_s: Age = Field(description="seconds since its newest measurement")
-    disagrees_m: Metres = Field(description="while it disagrees (3 or more refused in a row, the last within 10 s): by "
-                                "how much, metres; the height's sigma covers it")
+    disagrees_m: Metres = Field(
+        description="while it disagrees (3 or more refused in a row, the last within 10 s): by "
+        "how much, metres; the height's sigma covers it"
+    )
 
 
 class HeightStatus(Section):
     """The UAV's height above the water (localizer/height.py), at the newest GLOBAL_POSITION_INT."""
 
-    height_m: Metres = Field(description="the reported position's height above the water: the EKF's, corrected")
+    height_m: Metres = Field(
+        description="the reported position's height above the water: the EKF's, corrected"
+    )
     sigma_m: NonNegative = Field(description="its 1-sigma, as it goes into h_acc")
-    source: str = Field(description="what measured it within the last 30 s (takeoff or amsl: nothing, the EKF's "
-                        "height by the calibration's reference; gnss_rtk, gnss, baro+gnss, rangefinder, size, joined "
-                        "by +)")
-    ekf_height_m: Metres = Field(description="the EKF's height by the calibration's [water] reference")
+    source: str = Field(
+        description="what measured it within the last 30 s (takeoff or amsl: nothing, the EKF's "
+        "height by the calibration's reference; gnss_rtk, gnss, baro+gnss, rangefinder, size, joined "
+        "by +)"
+    )
+    ekf_height_m: Metres = Field(
+        description="the EKF's height by the calibration's [water] reference"
+    )
     bias_m: Metres = Field(description="the EKF height's estimated error (EKF height minus true)")
     reference: Literal["takeoff", "amsl"] = Field(description="the calibration's [water] reference")
-    reference_set_at: Literal["arming", "boot"] = Field(description="when the EKF height's reference was set: "
-                                                        "an arming seen, else the autopilot's boot")
-    armed: bool | None = Field(description="the autopilot's HEARTBEAT armed flag, null before one came")
-    since_reference_s: NonNegative = Field(description="seconds since then: the barometer's drift grows with it")
-    rangefinder_out_of_range: int = Field(description="rangefinder readings outside its range (no return from the "
-                                          "water)")
+    reference_set_at: Literal["arming", "boot"] = Field(
+        description="when the EKF height's reference was set: "
+        "an arming seen, else the autopilot's boot"
+    )
+    armed: bool | None = Field(
+        description="the autopilot's HEARTBEAT armed flag, null before one came"
+    )
+    since_reference_s: NonNegative = Field(
+        description="seconds since then: the barometer's drift grows with it"
+    )
+    rangefinder_out_of_range: int = Field(
+        description="rangefinder readings outside its range (no return from the water)"
+    )
     sources: dict[str, HeightSourceStatus] = Field(description="per source word: its measurements")
 
 
@@ -323,12 +458,19 @@ class UavStatus(Section):
     """The UAV's MAVLink link."""
 
     url: str
-    backend: Literal["mavsdk"] | None = Field(None, description="present with --mavlink-backend mavsdk")
+    backend: Literal["mavsdk"] | None = Field(
+        None, description="present with --mavlink-backend mavsdk"
+    )
     sysid: int | None = Field(description="the UAV's MAVLink system id, once heard")
     clocks: Clocks
-    gnss: GnssStatus | None = Field(None, description="the UAV's GNSS receiver, once GPS_RAW_INT came")
-    rate_requests: dict[str, str] | None = Field(None, description="per message: what skyfix asked for and the "
-                                                 "autopilot's answer (pymavlink backend)")
+    gnss: GnssStatus | None = Field(
+        None, description="the UAV's GNSS receiver, once GPS_RAW_INT came"
+    )
+    rate_requests: dict[str, str] | None = Field(
+        None,
+        description="per message: what skyfix asked for and the "
+        "autopilot's answer (pymavlink backend)",
+    )
     received: int = Field(description="messages received")
     bad_data: int = Field(description="undecodable frames")
     other_systems: int = Field(description="messages from other systems, ignored")
@@ -336,74 +478,123 @@ class UavStatus(Section):
     age_s: dict[str, Age] = Field(description="per message type: seconds since the newest")
     rates_hz: dict[str, NonNegative] = Field(description="per message type: measured rate")
     link: LinkStatus | None = Field(None, description="the link's own state (pymavlink backend)")
-    handoff: HandoffStatus | None = Field(None, description="messages from the link's thread (pymavlink backend)")
+    handoff: HandoffStatus | None = Field(
+        None, description="messages from the link's thread (pymavlink backend)"
+    )
 
 
 class ArduSubParams(Section):
     """The ArduSub parameters its depth is computed with."""
 
     BARO_PRIMARY: int | None = Field(description="the depth sensor's barometer instance (0-based)")
-    BARO_SPEC_GRAV: float | None = Field(description="the water's specific gravity (1.0 fresh, 1.024 sea)")
-    ground_pressure_pa: float | None = Field(description="BARO{n}_GND_PRESS of the depth sensor in use: depth zero")
-    pressure_message: str | None = Field(description="the message carrying the depth sensor's pressure")
-    missing: list[str] = Field(description="parameters not received yet (since the autopilot's boot)")
+    BARO_SPEC_GRAV: float | None = Field(
+        description="the water's specific gravity (1.0 fresh, 1.024 sea)"
+    )
+    ground_pressure_pa: float | None = Field(
+        description="BARO{n}_GND_PRESS of the depth sensor in use: depth zero"
+    )
+    pressure_message: str | None = Field(
+        description="the message carrying the depth sensor's pressure"
+    )
+    missing: list[str] = Field(
+        description="parameters not received yet (since the autopilot's boot)"
+    )
 
 
 class ArduSubDepthStatus(Section):
     """ArduSub's two depth readings (localizer/depth.py)."""
 
     params: ArduSubParams
-    pressure_depth_m: float | None = Field(description="the newest depth from the depth sensor's pressure")
-    ekf_depth_m: float | None = Field(description="the newest depth of ArduSub's EKF (GLOBAL_POSITION_INT)")
-    disagreement_m: float | None = Field(description="pressure depth - EKF depth at the newest cross-check")
+    pressure_depth_m: float | None = Field(
+        description="the newest depth from the depth sensor's pressure"
+    )
+    ekf_depth_m: float | None = Field(
+        description="the newest depth of ArduSub's EKF (GLOBAL_POSITION_INT)"
+    )
+    disagreement_m: float | None = Field(
+        description="pressure depth - EKF depth at the newest cross-check"
+    )
     vertical_speed_mps: float | None = Field(description="GLOBAL_POSITION_INT vz, positive down")
-    ekf_origin_amsl_m: float | None = Field(description="the EKF origin's altitude (GPS_GLOBAL_ORIGIN)")
-    ekf_has_origin: bool | None = Field(description="GLOBAL_POSITION_INT alt is not 0: the EKF has an origin")
-    zero_not_followed_pa: float | None = Field(description="a ground pressure ArduSub took under water, which skyfix "
-                                               "does not follow (nor compare the EKF's depth while it lasts)")
+    ekf_origin_amsl_m: float | None = Field(
+        description="the EKF origin's altitude (GPS_GLOBAL_ORIGIN)"
+    )
+    ekf_has_origin: bool | None = Field(
+        description="GLOBAL_POSITION_INT alt is not 0: the EKF has an origin"
+    )
+    zero_not_followed_pa: float | None = Field(
+        description="a ground pressure ArduSub took under water, which skyfix "
+        "does not follow (nor compare the EKF's depth while it lasts)"
+    )
     autopilot_reboots: int
 
 
 class ThrustersStatus(Section):
     """The UUV's horizontal thrusters from ArduSub's SERVO_OUTPUT_RAW (localizer/thrusters.py)."""
 
-    state: Literal["idle", "pushing", "unknown"] = Field(description="idle: every horizontal motor's pulse within the "
-                                                         "deadband of 1500 µs; unknown: see why_unknown, or no fresh "
-                                                         "outputs")
+    state: Literal["idle", "pushing", "unknown"] = Field(
+        description="idle: every horizontal motor's pulse within the "
+        "deadband of 1500 µs; unknown: see why_unknown, or no fresh "
+        "outputs"
+    )
     why_unknown: str | None = Field(description="why the horizontal motors' channels are not known")
     frame: int | None = Field(description="FRAME_CONFIG (1: vectored, 2: vectored 6DOF)")
-    channels: list[int] | None = Field(description="the output channels of the horizontal motors (SERVOn_FUNCTION)")
-    deadband_us: NonNegative = Field(description="pulses within this of 1500 µs do not turn a thruster")
+    channels: list[int] | None = Field(
+        description="the output channels of the horizontal motors (SERVOn_FUNCTION)"
+    )
+    deadband_us: NonNegative = Field(
+        description="pulses within this of 1500 µs do not turn a thruster"
+    )
     pulses_us: list[int] | None = Field(description="the horizontal motors' newest pulses")
     received: int = Field(description="SERVO_OUTPUT_RAW messages received")
-    unusable: int = Field(description="of them, with a horizontal motor's channel not output (0 µs)")
+    unusable: int = Field(
+        description="of them, with a horizontal motor's channel not output (0 µs)"
+    )
 
 
 class DepthStatus(Section):
     """The UUV's depth: skyfix JSON on Zenoh, or ArduSub's over BlueOS's Zenoh or MAVLink."""
 
-    key: str | None = Field(description="the Zenoh key (blueos: the autopilot's prefix); null over MAVLink")
+    key: str | None = Field(
+        description="the Zenoh key (blueos: the autopilot's prefix); null over MAVLink"
+    )
     url: str | None = Field(description="the MAVLink link (mavlink); null over Zenoh")
     shape: Literal["skyfix", "blueos", "mavlink"] = Field(
         description="skyfix: JSON {t, depth_m}; blueos: ArduSub's MAVLink as BlueOS's mavlink-server publishes it; "
-        "mavlink: ArduSub's MAVLink on a link of skyfix's own")
+        "mavlink: ArduSub's MAVLink on a link of skyfix's own"
+    )
     received: int = Field(description="payloads or messages received (of those used)")
     bad: int = Field(description="payloads or messages that could not be read")
     refused: int = Field(description="samples refused (out of range or order, clock, or a jump)")
     jumps: int = Field(description="samples refused as faster than the vehicle can dive")
     other: int = Field(description="messages of other systems or components (mavlink)")
     age_s: Age = Field(description="seconds since the newest accepted sample arrived")
-    t: float | None = Field(description="the newest sample's time (station clock: when it was measured)")
+    t: float | None = Field(
+        description="the newest sample's time (station clock: when it was measured)"
+    )
     depth_m: float | None = Field(description="the newest depth")
-    sigma_m: NonNegative = Field(description="its 1-sigma (null: the calibration's [uncertainty] depth_m)")
-    source: str | None = Field(description="where it came from: skyfix, ardusub_pressure, ardusub_ekf")
-    vertical_speed_mps: float | None = Field(description="the vehicle's vertical speed, positive down (ArduSub)")
-    rates_hz: dict[str, NonNegative] | None = Field(description="per message type used: measured rate (ArduSub)")
-    rate_requests: dict[str, str] | None = Field(description="per message: what skyfix asked for, the answer")
+    sigma_m: NonNegative = Field(
+        description="its 1-sigma (null: the calibration's [uncertainty] depth_m)"
+    )
+    source: str | None = Field(
+        description="where it came from: skyfix, ardusub_pressure, ardusub_ekf"
+    )
+    vertical_speed_mps: float | None = Field(
+        description="the vehicle's vertical speed, positive down (ArduSub)"
+    )
+    rates_hz: dict[str, NonNegative] | None = Field(
+        description="per message type used: measured rate (ArduSub)"
+    )
+    rate_requests: dict[str, str] | None = Field(
+        description="per message: what skyfix asked for, the answer"
+    )
     ardusub: ArduSubDepthStatus | None = Field(description="ArduSub's readings (blueos, mavlink)")
-    thrusters: ThrustersStatus | None = Field(None, description="ArduSub's horizontal thrusters (blueos, mavlink)")
+    thrusters: ThrustersStatus | None = Field(
+        None, description="ArduSub's horizontal thrusters (blueos, mavlink)"
+    )
     link: LinkStatus | None = Field(description="the MAVLink link's own state (mavlink)")
-    handoff: HandoffStatus | None = Field(None, description="samples from Zenoh's or the link's thread")
+    handoff: HandoffStatus | None = Field(
+        None, description="samples from Zenoh's or the link's thread"
+    )
 
 
 class PipelineStatus(Section):
@@ -413,9 +604,13 @@ class PipelineStatus(Section):
     dropped: int = Field(description="frames dropped because the tracker fell behind")
     queued: int
     waiting_for_telemetry: int
-    held_for_telemetry: int = Field(description="frames that waited for attitude telemetry after them")
+    held_for_telemetry: int = Field(
+        description="frames that waited for attitude telemetry after them"
+    )
     waited_s: NonNegative = Field(description="total time frames waited for telemetry")
-    held_frames: int = Field(description="recent frames held so a selection can name one the operator saw")
+    held_frames: int = Field(
+        description="recent frames held so a selection can name one the operator saw"
+    )
     last_status: Status | None
     statuses: dict[Status, int] = Field(description="frames per status word")
 
@@ -429,18 +624,27 @@ class MotionLatencyStatus(Section):
     """The video's latency estimated from the image's motion against the camera attitude."""
 
     configured_ms: float | None = Field(description="--video-latency-ms, unless auto")
-    applied_ms: float | None = Field(description="with auto: the estimate in use, once settled; null before (no "
-                                     "valid fix: status latency_unsettled)")
-    applied_sigma_ms: float | None = Field(description="with auto: the 1-sigma of the settled estimate in use")
+    applied_ms: float | None = Field(
+        description="with auto: the estimate in use, once settled; null before (no "
+        "valid fix: status latency_unsettled)"
+    )
+    applied_sigma_ms: float | None = Field(
+        description="with auto: the 1-sigma of the settled estimate in use"
+    )
     state: Literal["none", "unsettled", "settled"] = Field(
         description="none: no estimate yet; settled: the last 3 estimates (one a second) each 1-sigma ≤ 5 ms from "
-        "≥ 60 frame pairs and within 5 ms of each other; unsettled: not (yet)")
+        "≥ 60 frame pairs and within 5 ms of each other; unsettled: not (yet)"
+    )
     frames_skipped: int = Field(description="frames not measured (the measuring thread was busy)")
-    estimate_ms: float | None = Field(None, description="glass-to-first-packet latency the motion says")
+    estimate_ms: float | None = Field(
+        None, description="glass-to-first-packet latency the motion says"
+    )
     sigma_ms: float | None = Field(None, description="its 1-sigma")
     pairs: int | None = Field(None, description="frame pairs measured")
     rms_mrad: float | None = Field(None, description="residual of the fit")
-    restarts: int = Field(0, description="times the measuring thread failed (a bug) and started over")
+    restarts: int = Field(
+        0, description="times the measuring thread failed (a bug) and started over"
+    )
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
@@ -449,36 +653,57 @@ class HeightFromSizeStatus(Section):
 
     mode: Literal["auto", "check"]
     measured: int = Field(description="frames measured")
-    rejected: dict[str, int] = Field(description="frames without a measurement, by why (localizer/tracking/"
-                                     "silhouette.py REJECTIONS, no_pose)")
+    rejected: dict[str, int] = Field(
+        description="frames without a measurement, by why (localizer/tracking/"
+        "silhouette.py REJECTIONS, no_pose)"
+    )
     applied: int = Field(description="measurements handed to the height's fusion (auto)")
-    bias_m: float | None = Field(description="the configured height minus the measured one, over the window")
+    bias_m: float | None = Field(
+        description="the configured height minus the measured one, over the window"
+    )
     sigma_m: float | None = Field(description="its 1-sigma")
-    sigma_common_m: float | None = Field(description="... of which the error every measurement shares (the "
-                                         "vehicle's size, the edges' bias, the depth): no average goes below it")
+    sigma_common_m: float | None = Field(
+        description="... of which the error every measurement shares (the "
+        "vehicle's size, the edges' bias, the depth): no average goes below it"
+    )
     frames: int = Field(description="measurements in the window's estimate")
-    outliers: int = Field(description="measurements in the window left out (more than 3 sigmas off)")
+    outliers: int = Field(
+        description="measurements in the window left out (more than 3 sigmas off)"
+    )
     seconds: int = Field(description="seconds of the window with measurements")
-    sure: bool = Field(description="enough measurements, agreeing, with a 1-sigma of at most 0.25 m")
-    at_surface_share: float | None = Field(description="share of the window's measurements with the UUV at the "
-                                           "surface (top face at most 0.3 m deep: the most precise)")
+    sure: bool = Field(
+        description="enough measurements, agreeing, with a 1-sigma of at most 0.25 m"
+    )
+    at_surface_share: float | None = Field(
+        description="share of the window's measurements with the UUV at the "
+        "surface (top face at most 0.3 m deep: the most precise)"
+    )
     last_t: float | None = Field(description="the latest measurement's frame, station clock")
-    last_height_m: float | None = Field(description="the latest measured height of the UAV's reported position "
-                                        "above the water")
+    last_height_m: float | None = Field(
+        description="the latest measured height of the UAV's reported position above the water"
+    )
     last_sigma_m: float | None = Field(description="its 1-sigma")
     frames_skipped: int = Field(description="frames not measured: the measuring thread was busy")
-    restarts: int = Field(0, description="times the measuring thread failed (a bug) and started over")
+    restarts: int = Field(
+        0, description="times the measuring thread failed (a bug) and started over"
+    )
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
 class DatagramStatus(Section):
     """An ``rtp://`` or ``udp://`` (MPEG-TS) input, depacketized by skyfix: what the network lost, since the start."""
 
-    lost_packets: int = Field(description="RTP sequence numbers never received; MPEG-TS packets missing (continuity "
-                                          "counter gaps) or marked in error")
-    dropped_frames: int = Field(description="frames not decoded: damaged by a loss, or depending on one that was "
-                                            "(until the next keyframe)")
-    bad_packets: int = Field(description="datagrams that are not RTP of the configured payload type, or not MPEG-TS")
+    lost_packets: int = Field(
+        description="RTP sequence numbers never received; MPEG-TS packets missing (continuity "
+        "counter gaps) or marked in error"
+    )
+    dropped_frames: int = Field(
+        description="frames not decoded: damaged by a loss, or depending on one that was "
+        "(until the next keyframe)"
+    )
+    bad_packets: int = Field(
+        description="datagrams that are not RTP of the configured payload type, or not MPEG-TS"
+    )
 
 
 class VideoStatus(Section):
@@ -492,13 +717,23 @@ class VideoStatus(Section):
     age_s: Age
     decode_errors: int
     backlog: int = Field(description="packets read but not yet decoded")
-    skipped_behind: int = Field(description="frames decoded but not used: the decoder was behind (CPU)")
-    latency_ms: float | None = Field(description="glass to first packet in use (configured, or from motion with "
-                                     "auto); null with auto until its estimate has settled")
-    arrival_after_slot_ms: Percentiles = Field(description="how late frames arrive after their stream slot")
+    skipped_behind: int = Field(
+        description="frames decoded but not used: the decoder was behind (CPU)"
+    )
+    latency_ms: float | None = Field(
+        description="glass to first packet in use (configured, or from motion with "
+        "auto); null with auto until its estimate has settled"
+    )
+    arrival_after_slot_ms: Percentiles = Field(
+        description="how late frames arrive after their stream slot"
+    )
     decode_ms: Percentiles = Field(description="decoding time per frame")
-    stream_offset_s: float | None = Field(description="the stream clock's offset on the station clock")
-    error: str | None = Field(description="the last problem (FFmpeg's words), null once frames flow again")
+    stream_offset_s: float | None = Field(
+        description="the stream clock's offset on the station clock"
+    )
+    error: str | None = Field(
+        description="the last problem (FFmpeg's words), null once frames flow again"
+    )
     latency_from_motion: MotionLatencyStatus | None = None
     restarts: int = Field(0, description="times the reader thread failed (a bug) and started over")
     failure: str | None = Field(None, description="the last such failure: its kind and message")
@@ -514,19 +749,35 @@ class GpsInputStatus(Section):
     sent: int
     sent_valid: int = Field(description="messages with fix_type 3")
     not_delivered: int = Field(description="messages the link could not take (down)")
-    last_fix_type: int | None = Field(None, description="fix_type of the last message sent: 3 a fix, 1 no fix")
-    last_sent_t: float | None = Field(None, description="when the last message was sent, station clock, UNIX seconds")
+    last_fix_type: int | None = Field(
+        None, description="fix_type of the last message sent: 3 a fix, 1 no fix"
+    )
+    last_sent_t: float | None = Field(
+        None, description="when the last message was sent, station clock, UNIX seconds"
+    )
     no_fix_reason: Literal[tuple(NO_FIX_WHY)] | None = Field(
-        None, description="why the last message said no fix (null when it carried a fix): a fix status word (the "
+        None,
+        description="why the last message said no fix (null when it carried a fix): a fix status word (the "
         "newest frame's), gate_<refusal> (the safety gates held the newest fix back), no_frames, no_new_fix (the "
-        "last valid fix aged out and no frame came after it), stopped (groundstation/live/sinks/no_fix.py)")
+        "last valid fix aged out and no frame came after it), stopped (groundstation/live/sinks/no_fix.py)",
+    )
     no_fix_why: str | None = Field(None, description="the same in the operator's words")
-    sent_h_acc_m: NonNegative = Field(None, description="h_acc_m of the fix the last message carried")
-    sent_fix_t: float | None = Field(None, description="exposure time of the fix the last message carried, station "
-                                     "clock, UNIX seconds")
-    keep_alive_restarts: int = Field(0, description="times the keep-alive thread (the latest state again at the "
-                                     "configured rate) failed (a bug) and started over")
-    keep_alive_failure: str | None = Field(None, description="the last such failure: its kind and message")
+    sent_h_acc_m: NonNegative = Field(
+        None, description="h_acc_m of the fix the last message carried"
+    )
+    sent_fix_t: float | None = Field(
+        None,
+        description="exposure time of the fix the last message carried, station "
+        "clock, UNIX seconds",
+    )
+    keep_alive_restarts: int = Field(
+        0,
+        description="times the keep-alive thread (the latest state again at the "
+        "configured rate) failed (a bug) and started over",
+    )
+    keep_alive_failure: str | None = Field(
+        None, description="the last such failure: its kind and message"
+    )
     link: LinkStatus
     gates: GateStatus
 
@@ -547,11 +798,18 @@ class RecordStatus(Section):
     mavlink_frames: int
     depth_samples: int
     fixes: int
-    dropped: int = Field(0, description="records left out because the writer fell behind, or fixes not later than "
-                         "the one before (auto applying its latency moves the frames' times back)")
-    error: str | None = Field(None, description="why the recording stopped (a full disk): nothing more is written")
+    dropped: int = Field(
+        0,
+        description="records left out because the writer fell behind, or fixes not later than "
+        "the one before (auto applying its latency moves the frames' times back)",
+    )
+    error: str | None = Field(
+        None, description="why the recording stopped (a full disk): nothing more is written"
+    )
     video_frames: int | None = Field(None, description="frames encoded")
-    video_dropped: int | None = Field(None, description="frames left out: the encoder fell behind, or out of order")
+    video_dropped: int | None = Field(
+        None, description="frames left out: the encoder fell behind, or out of order"
+    )
 
 
 class TrackMemoryStatus(Section):
@@ -559,7 +817,9 @@ class TrackMemoryStatus(Section):
 
     path: str = Field(description="the file (in --state-dir)")
     written: int = Field(description="times it was written")
-    read: dict | None = Field(description="what the start read: the track's age_s, lat, lon; null: none (or too old)")
+    read: dict | None = Field(
+        description="what the start read: the track's age_s, lat, lon; null: none (or too old)"
+    )
     failure: str | None = Field(description="why the last write failed; null once one succeeded")
 
 
@@ -582,14 +842,18 @@ class TargetStatus(Section):
 class UuvPositionStatus(Section):
     """The UUV's own position estimate, where acquisition looks for it."""
 
-    key: str | None = Field(description="the Zenoh key of its GLOBAL_POSITION_INT (--uuv-position-key)")
+    key: str | None = Field(
+        description="the Zenoh key of its GLOBAL_POSITION_INT (--uuv-position-key)"
+    )
     received: int
     bad: int
     unknown: int = Field(description="messages without a position (lat/lon 0/0)")
     age_s: Age
     lat: float | None
     lon: float | None
-    hint: bool = Field(description="whether --uuv-hint gives the position until the UUV's own arrives")
+    hint: bool = Field(
+        description="whether --uuv-hint gives the position until the UUV's own arrives"
+    )
     sigma_m: float = Field(description="1-sigma of that position (m)")
 
 
@@ -610,7 +874,9 @@ class ZenohLinkStatus(Section):
 class ProcessStatus(Section):
     """The service's own use of the machine."""
 
-    cpu_pct: NonNegative = Field(description="CPU, % of one core (all threads), over the last 5 s; null at first")
+    cpu_pct: NonNegative = Field(
+        description="CPU, % of one core (all threads), over the last 5 s; null at first"
+    )
     rss_mb: NonNegative = Field(description="resident memory, MB")
 
 
@@ -622,7 +888,9 @@ class UiStatus(Section):
     viewers: int = Field(description="pages open now")
     refused: int = Field(description="requests refused (no or wrong token, another site)")
     frames_encoded: int = Field(description="video frames sent to pages as JPEG")
-    encode_ms: NonNegative = Field(description="mean CPU time to encode one, ms (the encoding thread's, last 100)")
+    encode_ms: NonNegative = Field(
+        description="mean CPU time to encode one, ms (the encoding thread's, last 100)"
+    )
 
 
 class InputsStatus(Section):
@@ -637,30 +905,39 @@ class InputsStatus(Section):
 class StatusMessage(Message):
     """The service's health, once a second; sections for optional parts only when they run."""
 
-    schema_: Literal[STATUS_SCHEMA] = Field(alias="schema", description="message name and major version")
+    schema_: Literal[STATUS_SCHEMA] = Field(
+        alias="schema", description="message name and major version"
+    )
     t: float = Field(description="when the status was taken, station clock, UNIX seconds")
     uav: UavStatus
     depth: DepthStatus
-    height: HeightStatus | None = Field(None, description="the UAV's height above the water, once "
-                                        "GLOBAL_POSITION_INT came")
+    height: HeightStatus | None = Field(
+        None, description="the UAV's height above the water, once GLOBAL_POSITION_INT came"
+    )
     pipeline: PipelineStatus
     fixes_published: int
-    problems: dict[str, str] = Field(description="what is wrong with each input now, one line per input (uav, "
-                                     "depth, video, zenoh; record once the recording stopped); empty when all is well")
+    problems: dict[str, str] = Field(
+        description="what is wrong with each input now, one line per input (uav, "
+        "depth, video, zenoh; record once the recording stopped); empty when all is well"
+    )
     target: TargetStatus
     uuv_position: UuvPositionStatus
-    fix: FixMessage | None = Field(description="the latest fix message (also answered to late joiners on the fix key)")
+    fix: FixMessage | None = Field(
+        description="the latest fix message (also answered to late joiners on the fix key)"
+    )
     control: ControlStatus
     zenoh: ZenohLinkStatus
     process: ProcessStatus
     video: VideoStatus | None = Field(None, description="with --video")
-    height_from_size: HeightFromSizeStatus | None = Field(None, description="with --video, unless "
-                                                          "--height-from-size off")
+    height_from_size: HeightFromSizeStatus | None = Field(
+        None, description="with --video, unless --height-from-size off"
+    )
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     latency: LatencyStatus | None = Field(None, description="with --gps-input")
     record: RecordStatus | None = Field(None, description="with --record")
-    track_memory: TrackMemoryStatus | None = Field(None, description="with --gps-input and a state folder "
-                                                   "(--state-dir, or --recordings)")
+    track_memory: TrackMemoryStatus | None = Field(
+        None, description="with --gps-input and a state folder (--state-dir, or --recordings)"
+    )
     ui: UiStatus | None = Field(None, description="while the web page is served (not with --no-ui)")
 
 
@@ -676,33 +953,55 @@ class FuseSourceStatus(Section):
     used: int = Field(description="fusions it took part in")
     rejected: int = Field(description="fusions it was left out of: it disagreed beyond the sigmas")
     in_use: bool = Field(description="it took part in the last fusion")
-    refused: dict[str, int] = Field(description="its ok fixes its own gates refused, by reason (as gates.rejected), "
-                                    "and 'future': stamped ahead of the fuser's clock beyond --clock-tolerance-ms")
+    refused: dict[str, int] = Field(
+        description="its ok fixes its own gates refused, by reason (as gates.rejected), "
+        "and 'future': stamped ahead of the fuser's clock beyond --clock-tolerance-ms"
+    )
     gate_state: Literal[tuple(GATE_STATES)] = Field(description="its own gates' state")
     last_status: Status | None = Field(description="the status of its last fix")
     age_s: Age = Field(description="seconds since its last fix arrived")
-    delay_s: float | None = Field(description="its last fix's arrival on the fuser's clock minus the fix's time (GNSS "
-                                  "time where it has one): the drone's latency, plus the clocks' offset without GNSS "
-                                  "time")
-    time_base: Literal["gnss", "station"] | None = Field(description="the time its fixes are aligned by")
+    delay_s: float | None = Field(
+        description="its last fix's arrival on the fuser's clock minus the fix's time (GNSS "
+        "time where it has one): the drone's latency, plus the clocks' offset without GNSS "
+        "time"
+    )
+    time_base: Literal["gnss", "station"] | None = Field(
+        description="the time its fixes are aligned by"
+    )
     h_acc_m: NonNegative = Field(description="its last ok fix's h_acc_m")
-    h_acc_used_m: NonNegative = Field(None, description="its claim as the last fusion weighed it, DRMS, metres: with "
-                                      "what its fixes showed beyond it (floor_m)")
-    floor_m: NonNegative = Field(None, description="DRMS of what its fixes show beyond its claim, added at the last "
-                                 "fusion: their frame-to-frame scatter beyond the whole claim, their disagreement with "
-                                 "the other drones over the last 10 s beyond both claims")
+    h_acc_used_m: NonNegative = Field(
+        None,
+        description="its claim as the last fusion weighed it, DRMS, metres: with "
+        "what its fixes showed beyond it (floor_m)",
+    )
+    floor_m: NonNegative = Field(
+        None,
+        description="DRMS of what its fixes show beyond its claim, added at the last "
+        "fusion: their frame-to-frame scatter beyond the whole claim, their disagreement with "
+        "the other drones over the last 10 s beyond both claims",
+    )
 
 
 class FusionStatus(Section):
     """What the fuser did."""
 
     published: int = Field(description="fused messages published (ok and disagree)")
-    disagreements: int = Field(description="fusions with no fix: the sources disagreed and nothing decided")
-    off_track: int = Field(0, description="fused positions beyond where the UUV can be by the fused fixes' own "
-                           "track: sent as off_track, no position")
-    configured: list[str] = Field([], description="the fix keys whose fixes may be fused (--source)")
-    unconfigured: dict[str, int] = Field({}, description="fixes from any other key, by key (32 keys, the rest as "
-                                         "'(others)'): counted, never fused")
+    disagreements: int = Field(
+        description="fusions with no fix: the sources disagreed and nothing decided"
+    )
+    off_track: int = Field(
+        0,
+        description="fused positions beyond where the UUV can be by the fused fixes' own "
+        "track: sent as off_track, no position",
+    )
+    configured: list[str] = Field(
+        [], description="the fix keys whose fixes may be fused (--source)"
+    )
+    unconfigured: dict[str, int] = Field(
+        {},
+        description="fixes from any other key, by key (32 keys, the rest as "
+        "'(others)'): counted, never fused",
+    )
     last_sources: list[str] = Field(description="the sources (their fix keys) of the last fusion")
     sources: dict[str, FuseSourceStatus] = Field(description="per source, by its fix key")
 
@@ -712,19 +1011,25 @@ class FuseInputStatus(Section):
 
     key: str = Field(description="the key expression of the drones' fixes")
     received: int
-    bad: int = Field(description="payloads that are not a skyfix.fix/1 message (logged, one line each kind)")
+    bad: int = Field(
+        description="payloads that are not a skyfix.fix/1 message (logged, one line each kind)"
+    )
     handoff: HandoffStatus | None = None
 
 
 class FuseStatusMessage(Message):
     """``skyfix fuse``'s health, once a second."""
 
-    schema_: Literal[FUSE_STATUS_SCHEMA] = Field(alias="schema", description="message name and major version")
+    schema_: Literal[FUSE_STATUS_SCHEMA] = Field(
+        alias="schema", description="message name and major version"
+    )
     t: float = Field(description="when the status was taken, the fuser's clock, UNIX seconds")
     uuv: str = Field(description="the UUV's id")
     input: FuseInputStatus
     fusion: FusionStatus
-    fix: FixMessage | None = Field(description="the latest fused fix message (also answered to late joiners)")
+    fix: FixMessage | None = Field(
+        description="the latest fused fix message (also answered to late joiners)"
+    )
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     control: ControlStatus
     zenoh: ZenohLinkStatus

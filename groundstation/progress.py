@@ -17,5 +17,13 @@ FORMAT = "{desc}: {percentage:3.0f}% {n_fmt}/{total_fmt} frames [{elapsed} elaps
 def progress(total: int, desc: str, enabled: bool = True) -> tqdm:
     """A progress bar over ``total`` frames; ``update(n)`` as they are done, ``close()`` at the end."""
     tty = sys.stderr.isatty()
-    return tqdm(total=total, desc=desc, disable=not enabled, file=sys.stderr, unit=" frames",
-                mininterval=0.5 if tty else 30.0, bar_format=FORMAT, dynamic_ncols=True)
+    return tqdm(
+        total=total,
+        desc=desc,
+        disable=not enabled,
+        file=sys.stderr,
+        unit=" frames",
+        mininterval=0.5 if tty else 30.0,
+        bar_format=FORMAT,
+        dynamic_ncols=True,
+    )

@@ -79,8 +79,10 @@ def parse_cut(text: str) -> tuple[str, float, float]:
         if len(parts) != 3 or name not in CUT_INPUTS or not start_s >= 0 or not duration_s > 0:
             raise ValueError
     except (IndexError, ValueError):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected INPUT:START_S:DURATION_S with INPUT one of "
-                                         f"{', '.join(CUT_INPUTS)}, START_S ≥ 0 and DURATION_S > 0") from None
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected INPUT:START_S:DURATION_S with INPUT one of "
+            f"{', '.join(CUT_INPUTS)}, START_S ≥ 0 and DURATION_S > 0"
+        ) from None
     return name, start_s, start_s + duration_s
 
 
@@ -103,12 +105,14 @@ class Cuts:
         return False
 
 
-
 def depth_to_send(path: Path) -> list[tuple[float, float, float]]:
     """``(t_send, t, depth_m)`` of depth.jsonl's records (read leniently: a bad line is skipped with a warning),
     in sending order; ``t_send`` is the recorded arrival ``t_recv``, or ``t`` without one."""
     warnings: list[str] = []
-    out = [(r.t if r.t_recv is None else r.t_recv, r.t, r.depth_m) for r in read_depth(path, warnings, strict=False)]
+    out = [
+        (r.t if r.t_recv is None else r.t_recv, r.t, r.depth_m)
+        for r in read_depth(path, warnings, strict=False)
+    ]
     for w in warnings:
         log.warning("%s", w)
     out.sort(key=lambda r: r[0])
@@ -116,18 +120,27 @@ def depth_to_send(path: Path) -> list[tuple[float, float, float]]:
 
 
 #: UNIX-time fields re-stamped by the replay: message → (field, units per second)
-UNIX_FIELDS = {"SYSTEM_TIME": ("time_unix_usec", 1e6), "GPS_RAW_INT": ("time_usec", 1e6), "TIMESYNC": ("ts1", 1e9)}
+UNIX_FIELDS = {
+    "SYSTEM_TIME": ("time_unix_usec", 1e6),
+    "GPS_RAW_INT": ("time_usec", 1e6),
+    "TIMESYNC": ("ts1", 1e9),
+}
 _UNIX_MIN_S = 1e9  # a smaller value is a boot time or "unknown" (0), not a UNIX time: left alone
 
 
 def frame_bytes(msg, shift_s: float) -> bytes:
     """The frame to send: the original bytes, or re-packed with its UNIX time shifted (:data:`UNIX_FIELDS`)."""
     field = UNIX_FIELDS.get(msg.get_type())
-    if field is None or getattr(msg, field[0]) < _UNIX_MIN_S * field[1] or (
-            msg.get_type() == "TIMESYNC" and msg.tc1 == 0):
+    if (
+        field is None
+        or getattr(msg, field[0]) < _UNIX_MIN_S * field[1]
+        or (msg.get_type() == "TIMESYNC" and msg.tc1 == 0)
+    ):
         return msg.get_msgbuf()
     name, per_s = field
-    mav = mavutil().mavlink.MAVLink(None, srcSystem=msg.get_srcSystem(), srcComponent=msg.get_srcComponent())
+    mav = mavutil().mavlink.MAVLink(
+        None, srcSystem=msg.get_srcSystem(), srcComponent=msg.get_srcComponent()
+    )
     mav.seq = msg.get_seq()
     setattr(msg, name, int(getattr(msg, name) + round(shift_s * per_s)))
     return msg.pack(mav)
@@ -150,12 +163,19 @@ class Replay:
         self.tlog = read_tlog(self.dir / "uav.tlog")
         if not self.tlog:
             raise SessionError(f"{self.dir / 'uav.tlog'}: no MAVLink frames")
-        self.depth = depth_to_send(self.dir / "depth.jsonl") if (self.dir / "depth.jsonl").is_file() else []
+        self.depth = (
+            depth_to_send(self.dir / "depth.jsonl") if (self.dir / "depth.jsonl").is_file() else []
+        )
         # the other UUVs' depths (--uuv-depth-key ID=KEY): (key, samples)
-        self.uuv_depths = [(key, depth_to_send(uuv_files(self.dir, uuv_id).depth)) for uuv_id, key in args.uuv_depth_key]
+        self.uuv_depths = [
+            (key, depth_to_send(uuv_files(self.dir, uuv_id).depth))
+            for uuv_id, key in args.uuv_depth_key
+        ]
         videos = sorted(p for p in self.dir.glob("video.*") if p.is_file())
         self.video = videos[0] if videos and not args.no_video else None
-        self.frames = read_table(self.dir / "video_frames.csv", ("frame", "t")) if self.video else None
+        self.frames = (
+            read_table(self.dir / "video_frames.csv", ("frame", "t")) if self.video else None
+        )
         starts = [self.tlog[0][0]] + [self.depth[0][0]] * bool(self.depth)
         ends = [self.tlog[-1][0]] + [self.depth[-1][0]] * bool(self.depth)  # in arrival order
         if self.frames is not None:
@@ -192,13 +212,20 @@ class Replay:
         mavlink = mavutil().mavlink
         parser = mavlink.MAVLink(None)
         parser.robust_parsing = True
-        autopilot = mavlink.MAVLink(None, srcSystem=UUV_SYSID, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1)
+        autopilot = mavlink.MAVLink(
+            None, srcSystem=UUV_SYSID, srcComponent=mavlink.MAV_COMP_ID_AUTOPILOT1
+        )
         next_beat = 0.0
         while not self.stop.is_set():
             if transport.peer_known and time.monotonic() >= next_beat:
                 next_beat = time.monotonic() + HEARTBEAT_PERIOD_S
-                beat = autopilot.heartbeat_encode(mavlink.MAV_TYPE_SUBMARINE, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0,
-                                                  mavlink.MAV_STATE_ACTIVE)
+                beat = autopilot.heartbeat_encode(
+                    mavlink.MAV_TYPE_SUBMARINE,
+                    mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    0,
+                    0,
+                    mavlink.MAV_STATE_ACTIVE,
+                )
                 try:
                     transport.write(beat.pack(autopilot))
                 except OSError:  # a TCP peer went away: the read below finds out
@@ -215,8 +242,13 @@ class Replay:
                     continue
                 if transport.datagrams:
                     transport.answer_last_sender()
-                rec = {"event": "gps_input", "t_recv": transport.t_received, "sysid": msg.get_srcSystem(),
-                       "compid": msg.get_srcComponent(), **msg.to_dict()}
+                rec = {
+                    "event": "gps_input",
+                    "t_recv": transport.t_received,
+                    "sysid": msg.get_srcSystem(),
+                    "compid": msg.get_srcComponent(),
+                    **msg.to_dict(),
+                }
                 rec.pop("mavpackettype", None)
                 out.write(json.dumps(rec) + "\n")
                 out.flush()
@@ -226,12 +258,25 @@ class Replay:
         args = self.args
         shift = time.time() + args.lead_s - self.t_start if args.shift_s is None else args.shift_s
         if self.t_start + shift < time.time():
-            print(f"skyfix replay: error: --shift-s {args.shift_s}: the session would have started "
-                  f"{time.time() - self.t_start - shift:.1f} s ago", file=sys.stderr)
+            print(
+                f"skyfix replay: error: --shift-s {args.shift_s}: the session would have started "
+                f"{time.time() - self.t_start - shift:.1f} s ago",
+                file=sys.stderr,
+            )
             return 2
         out = open(args.uuv_log, "a") if args.uuv_log else sys.stdout  # noqa: SIM115 - closed in finally
-        print(json.dumps({"event": "start", "session": str(self.dir), "shift_s": shift,
-                          "t_start": self.t_start + shift, "t_end": self.t_end + shift}), flush=True)
+        print(
+            json.dumps(
+                {
+                    "event": "start",
+                    "session": str(self.dir),
+                    "shift_s": shift,
+                    "t_start": self.t_start + shift,
+                    "t_end": self.t_end + shift,
+                }
+            ),
+            flush=True,
+        )
         links = [connect(args.mavlink_out, input=False)]
         if args.uuv_listen:
             try:
@@ -239,21 +284,48 @@ class Replay:
             except OSError as e:
                 links[0].close()
                 raise LinkError(f"--uuv-listen {args.uuv_listen!r}: cannot open: {e}") from None
-        session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), config_file=args.zenoh_config)
-        threads = [threading.Thread(target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True)]
+        session = open_session(
+            args.zenoh_connect or (), args.zenoh_listen or (), config_file=args.zenoh_config
+        )
+        threads = [
+            threading.Thread(
+                target=self._send_tlog, args=(links[0], shift), name="tlog", daemon=True
+            )
+        ]
         depths = [(args.depth_key, self.depth)] * bool(args.depth_key) + self.uuv_depths
-        threads += [threading.Thread(target=self._send_depth, args=(shift, session, key, samples), name=f"depth {key}",
-                                     daemon=True) for key, samples in depths]
+        threads += [
+            threading.Thread(
+                target=self._send_depth,
+                args=(shift, session, key, samples),
+                name=f"depth {key}",
+                daemon=True,
+            )
+            for key, samples in depths
+        ]
         if args.uuv_listen:
-            threads.append(threading.Thread(target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True))
+            threads.append(
+                threading.Thread(
+                    target=self._listen_uuv, args=(links[1], out), name="uuv", daemon=True
+                )
+            )
         if self.video is not None:
             t_first = float(self.frames["t"][0])
             t0 = t_first + shift + args.video_delay_ms / 1000.0
             cuts = Cuts(args.cut, "video")
-            threads.append(threading.Thread(
-                target=send_video, args=(self.video, args.video_out, t0, self.stop,
-                                         lambda t_s, key: cuts.skip(t_first - self.t_start + t_s, key)),
-                name="video", daemon=True))
+            threads.append(
+                threading.Thread(
+                    target=send_video,
+                    args=(
+                        self.video,
+                        args.video_out,
+                        t0,
+                        self.stop,
+                        lambda t_s, key: cuts.skip(t_first - self.t_start + t_s, key),
+                    ),
+                    name="video",
+                    daemon=True,
+                )
+            )
         try:
             for th in threads:
                 th.start()
@@ -274,14 +346,19 @@ class Replay:
             if out is not sys.stdout:
                 out.close()
         if args.uuv_listen and self.counts["gps_input"] == 0:
-            print(f"skyfix replay: no GPS_INPUT came back on {args.uuv_listen} (is skyfix run's --gps-input "
-                  "pointed there?)", file=sys.stderr)
+            print(
+                f"skyfix replay: no GPS_INPUT came back on {args.uuv_listen} (is skyfix run's --gps-input "
+                "pointed there?)",
+                file=sys.stderr,
+            )
             return 1
         return 0
 
 
 def replay(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+    )
     return Replay(args).run()
 
 
@@ -289,30 +366,73 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(name, help=help, description=__doc__.split("\n\n")[0])
     p.add_argument("session", help="session directory (format v1)")
-    p.add_argument("--mavlink-out", default="udpout:127.0.0.1:14550", help="where the UAV's MAVLink goes")
-    p.add_argument("--video-out", default="udp://127.0.0.1:5600",
-                   help="where the video goes: udp://host:port (MPEG-TS) or rtp://host:port (RTP)")
+    p.add_argument(
+        "--mavlink-out", default="udpout:127.0.0.1:14550", help="where the UAV's MAVLink goes"
+    )
+    p.add_argument(
+        "--video-out",
+        default="udp://127.0.0.1:5600",
+        help="where the video goes: udp://host:port (MPEG-TS) or rtp://host:port (RTP)",
+    )
     p.add_argument("--no-video", action="store_true", help="do not stream the video")
-    p.add_argument("--video-delay-ms", type=float, default=0.0,
-                   help="send each frame this long after its exposure: a camera with this glass-to-first-packet latency")
-    p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
-    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
-    p.add_argument("--zenoh-config", help="Zenoh JSON5 config file (deploy/zenoh/*.json5); endpoints above are added")
-    p.add_argument("--depth-key", default="uuv/depth", help="Zenoh key the depth is published on ('' for none: "
-                   "another replay of the same dive publishes it)")
-    p.add_argument("--uuv-depth-key", action="append", type=parse_uuv_key, default=[], metavar="ID=KEY",
-                   help="also publish the session's UUV ID's depth (uuvs/ID/depth.jsonl) on KEY (repeatable)")
-    p.add_argument("--uuv-listen", default="udpin:127.0.0.1:14660",
-                   help="UUV-side endpoint logging GPS_INPUT ('' for none)")
-    p.add_argument("--uuv-log", help="file the GPS_INPUT JSON lines are appended to (default stdout)")
-    p.add_argument("--lead-s", type=float, default=1.0, help="delay before the session's first message")
-    p.add_argument("--shift-s", type=float, help="shift the session's times by exactly this (UNIX s − session s) "
-                   "instead of now + --lead-s − its first time: replays of sessions recorded at once (two drones "
-                   "over one UUV) given the same shift play in step")
-    p.add_argument("--tail-s", type=float, default=1.0, help="keep listening this long after the session ends")
+    p.add_argument(
+        "--video-delay-ms",
+        type=float,
+        default=0.0,
+        help="send each frame this long after its exposure: a camera with this glass-to-first-packet latency",
+    )
+    p.add_argument(
+        "--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to"
+    )
+    p.add_argument(
+        "--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on"
+    )
+    p.add_argument(
+        "--zenoh-config",
+        help="Zenoh JSON5 config file (deploy/zenoh/*.json5); endpoints above are added",
+    )
+    p.add_argument(
+        "--depth-key",
+        default="uuv/depth",
+        help="Zenoh key the depth is published on ('' for none: "
+        "another replay of the same dive publishes it)",
+    )
+    p.add_argument(
+        "--uuv-depth-key",
+        action="append",
+        type=parse_uuv_key,
+        default=[],
+        metavar="ID=KEY",
+        help="also publish the session's UUV ID's depth (uuvs/ID/depth.jsonl) on KEY (repeatable)",
+    )
+    p.add_argument(
+        "--uuv-listen",
+        default="udpin:127.0.0.1:14660",
+        help="UUV-side endpoint logging GPS_INPUT ('' for none)",
+    )
+    p.add_argument(
+        "--uuv-log", help="file the GPS_INPUT JSON lines are appended to (default stdout)"
+    )
+    p.add_argument(
+        "--lead-s", type=float, default=1.0, help="delay before the session's first message"
+    )
+    p.add_argument(
+        "--shift-s",
+        type=float,
+        help="shift the session's times by exactly this (UNIX s − session s) "
+        "instead of now + --lead-s − its first time: replays of sessions recorded at once (two drones "
+        "over one UUV) given the same shift play in step",
+    )
+    p.add_argument(
+        "--tail-s", type=float, default=1.0, help="keep listening this long after the session ends"
+    )
     p.add_argument("--duration-s", type=float, help="stop after this many seconds")
-    p.add_argument("--cut", action="append", type=parse_cut, metavar="INPUT:START_S:DURATION_S",
-                   help="leave out mavlink, depth or video from START_S for DURATION_S seconds after the session's "
-                        "start (a link dropping out; repeatable)")
+    p.add_argument(
+        "--cut",
+        action="append",
+        type=parse_cut,
+        metavar="INPUT:START_S:DURATION_S",
+        help="leave out mavlink, depth or video from START_S for DURATION_S seconds after the session's "
+        "start (a link dropping out; repeatable)",
+    )
     p.set_defaults(func=replay)
-

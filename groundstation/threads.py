@@ -120,7 +120,13 @@ class Supervised:
                     wait_s = RESTART_S
                 n = self._throttle(kind)
                 if n:
-                    log.error("%s thread failed (%s, #%d); restarting in %.2f s", self.name, self.failure, n, wait_s)
+                    log.error(
+                        "%s thread failed (%s, #%d); restarting in %.2f s",
+                        self.name,
+                        self.failure,
+                        n,
+                        wait_s,
+                    )
                 self.stop.wait(wait_s)
                 wait_s = min(2.0 * wait_s, RESTART_MAX_S)
 

@@ -47,8 +47,14 @@ def _clean(e: Exception) -> str:
     return " ".join(text.split()).rstrip(".")
 
 
-def make_config(connect: Sequence[str] = (), listen: Sequence[str] = (), *, multicast: bool = False,
-                mode: str | None = None, config_file: str | None = None) -> zenoh.Config:
+def make_config(
+    connect: Sequence[str] = (),
+    listen: Sequence[str] = (),
+    *,
+    multicast: bool = False,
+    mode: str | None = None,
+    config_file: str | None = None,
+) -> zenoh.Config:
     """A :class:`zenoh.Config`: ``config_file`` (JSON5) if given, then mode, scouting and endpoints."""
     conf = zenoh.Config.from_file(config_file) if config_file else zenoh.Config()
     if mode is not None or config_file is None:
@@ -99,32 +105,58 @@ def trust_problem(conf: zenoh.Config, *, insecure: bool = False) -> str | None:
     hint = "(deploy/zenoh/README.md; a network of the team's own only: zenoh_insecure = true)"
     if _setting(conf, "scouting/multicast/enabled") is not False:
         return f"multicast scouting connects to whatever answers on the network {hint}"
-    outside = [e for which in ("connect", "listen") for e in endpoints(conf, which) if not is_loopback(e)]
+    outside = [
+        e for which in ("connect", "listen") for e in endpoints(conf, which) if not is_loopback(e)
+    ]
     for endpoint in outside:
         if endpoint.partition("/")[0] not in SECURE_PROTOCOLS:
-            return (f"{endpoint}: plain {endpoint.partition('/')[0]} beyond this machine: anyone on the network could "
-                    f"command skyfix and feed it; use tls/ with the team's certificates {hint}")
+            return (
+                f"{endpoint}: plain {endpoint.partition('/')[0]} beyond this machine: anyone on the network could "
+                f"command skyfix and feed it; use tls/ with the team's certificates {hint}"
+            )
     tls = _setting(conf, "transport/link/tls") or {}
     if outside and not (tls.get("enable_mtls") and tls.get("root_ca_certificate")):
-        return (f"{outside[0]}: TLS without transport/link/tls/enable_mtls and root_ca_certificate: anyone could "
-                f"connect {hint}")
+        return (
+            f"{outside[0]}: TLS without transport/link/tls/enable_mtls and root_ca_certificate: anyone could "
+            f"connect {hint}"
+        )
     listening = [e for e in endpoints(conf, "listen") if not is_loopback(e)]
-    if listening and _setting(conf, "mode") != "client" and not _setting(conf, "access_control/enabled"):
-        return (f"{listening[0]}: listens beyond this machine without access_control: every certificate could "
-                f"command skyfix and feed it {hint}")
+    if (
+        listening
+        and _setting(conf, "mode") != "client"
+        and not _setting(conf, "access_control/enabled")
+    ):
+        return (
+            f"{listening[0]}: listens beyond this machine without access_control: every certificate could "
+            f"command skyfix and feed it {hint}"
+        )
     return None
 
 
-def open_session(connect: Sequence[str] = (), listen: Sequence[str] = (), *, multicast: bool = False,
-                 mode: str | None = None, config_file: str | None = None) -> zenoh.Session:
+def open_session(
+    connect: Sequence[str] = (),
+    listen: Sequence[str] = (),
+    *,
+    multicast: bool = False,
+    mode: str | None = None,
+    config_file: str | None = None,
+) -> zenoh.Session:
     """An open Zenoh session; the caller must ``close()`` it (in ``finally``), or the process hangs at exit.
 
     Raises :class:`ZenohError` (one line naming the endpoints or file) when it cannot be opened.
     """
-    where = ", ".join([f"connect {c}" for c in connect] + [f"listen {e}" for e in listen]
-                      + ([f"config {config_file}"] if config_file else [])) or "defaults"
+    where = (
+        ", ".join(
+            [f"connect {c}" for c in connect]
+            + [f"listen {e}" for e in listen]
+            + ([f"config {config_file}"] if config_file else [])
+        )
+        or "defaults"
+    )
     try:
-        return zenoh.open(make_config(connect, listen, multicast=multicast, mode=mode, config_file=config_file))
+        return zenoh.open(
+            make_config(connect, listen, multicast=multicast, mode=mode, config_file=config_file)
+        )
     except zenoh.ZError as e:
         raise ZenohError(f"Zenoh ({where}): {_clean(e)}") from None
 
@@ -133,14 +165,22 @@ def put_json(target, obj: dict, session: zenoh.Session) -> None:
     """Publish ``obj`` as JSON (encoding application/json, timestamped) on a publisher or key."""
     payload = json.dumps(obj, allow_nan=False)
     if isinstance(target, str):
-        session.put(target, payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp())
+        session.put(
+            target,
+            payload,
+            encoding=zenoh.Encoding.APPLICATION_JSON,
+            timestamp=session.new_timestamp(),
+        )
     else:
-        target.put(payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp())
+        target.put(
+            payload, encoding=zenoh.Encoding.APPLICATION_JSON, timestamp=session.new_timestamp()
+        )
 
 
 async def subscribe(session: zenoh.Session, key: str, handoff) -> None:
     """Subscribe to ``key`` until cancelled: Zenoh's thread hands each sample over as ``(key, payload bytes,
     t_recv_unix)`` through ``handoff`` (a bounded :class:`~groundstation.threads.Handoff`), nothing more."""
+
     def on_sample(sample: zenoh.Sample) -> None:
         handoff.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
 

@@ -24,7 +24,9 @@ R_GIMBAL_FROM_CV = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 def euler_to_R(roll, pitch, yaw):
     """``R_ned_from_frd`` for Z-Y-X Euler angles (radians)."""
-    roll, pitch, yaw = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (roll, pitch, yaw)))
+    roll, pitch, yaw = np.broadcast_arrays(
+        *(np.asarray(a, dtype=float) for a in (roll, pitch, yaw))
+    )
     cr, sr = np.cos(roll), np.sin(roll)
     cp, sp = np.cos(pitch), np.sin(pitch)
     cy, sy = np.cos(yaw), np.sin(yaw)
@@ -79,9 +81,7 @@ def rotation_about(axis, angle):
     """Rotation by ``angle`` (radians) about a unit ``axis`` (Rodrigues); broadcasts over angle."""
     axis = np.asarray(axis, dtype=float)
     angle = np.asarray(angle, dtype=float)
-    K = np.array(
-        [[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]]
-    )
+    K = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
     s = np.sin(angle)[..., None, None]
     c = np.cos(angle)[..., None, None]
     return np.eye(3) + s * K + (1 - c) * (K @ K)
@@ -92,7 +92,10 @@ def rotvec(R):
     R = np.asarray(R, dtype=float)
     cos = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
     angle = np.arccos(cos)
-    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    axis = np.stack(
+        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
+        axis=-1,
+    )
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(angle > 1e-12, angle / (2.0 * np.sin(angle)), 0.5)
     return axis * scale[..., None]
@@ -155,7 +158,9 @@ def R_ned_from_gimbal_device(q, flags, vehicle_yaw, R_ned_from_body=None):
     return np.where(earth, R, R_yaw(vehicle_yaw) @ R)
 
 
-def R_ned_from_mount_orientation(roll_deg, pitch_deg, yaw_rel_deg, vehicle_yaw, R_ned_from_body=None):
+def R_ned_from_mount_orientation(
+    roll_deg, pitch_deg, yaw_rel_deg, vehicle_yaw, R_ned_from_body=None
+):
     """Gimbal FRD attitude from ArduPilot's MOUNT_ORIENTATION.
 
     Roll and pitch are relative to the horizon, ``yaw_rel_deg`` to the vehicle's

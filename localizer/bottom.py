@@ -87,7 +87,9 @@ class Priors:
     yaw_rad: float = np.radians(10.0)  # the heading bias's
     walk_rate_m: float = 0.2  # GNSS walk: 1-sigma of its change over 1 s, growing with √time (m/√s)
     knot_spacing_s: float = 2.0  # the walk's knots
-    white_m: float = 0.0  # the reported position's white noise, 1-sigma per axis (m): per-frame offsets; 0: none
+    white_m: float = (
+        0.0  # the reported position's white noise, 1-sigma per axis (m): per-frame offsets; 0: none
+    )
     pixel_px: float = 0.7  # a tracked floor point's 1-sigma in u and v
     floor_depth_m: float | None = None  # given: not estimated
     floor_depth_prior_m: float = 100.0  # estimated: its (weak) prior's 1-sigma about the start
@@ -102,8 +104,12 @@ class FramePoses:
     R_ned_from_cv: np.ndarray  # (K, 3, 3)
     camera_ne_m: np.ndarray  # (K, 2) the camera's horizontal position in a local frame
     height_m: np.ndarray  # the camera above the water
-    bias_heading_rad: np.ndarray | None = None  # the tilt bias's frame (see the module doc); None: 0 (North, East)
-    velocity_ne_mps: np.ndarray | None = None  # (K, 2) the reported horizontal velocity; None: not used
+    bias_heading_rad: np.ndarray | None = (
+        None  # the tilt bias's frame (see the module doc); None: 0 (North, East)
+    )
+    velocity_ne_mps: np.ndarray | None = (
+        None  # (K, 2) the reported horizontal velocity; None: not used
+    )
 
 
 @dataclass
@@ -131,7 +137,9 @@ class BottomEstimate:
     sigma_walk_ne_m: np.ndarray  # (J, 2): relative to the mean (which is held at 0)
     features_ne_m: np.ndarray  # (F, 2)
     rms_px: float  # of the inlying residuals, each of u and v, pixels
-    slide_share: float  # how far the features slid in the image (:func:`slide_share`), share of its diagonal
+    slide_share: (
+        float  # how far the features slid in the image (:func:`slide_share`), share of its diagonal
+    )
     n_observations: int
     n_features: int
     n_frames: int
@@ -153,11 +161,17 @@ class BottomEstimate:
     @property
     def tilt_estimated(self) -> bool:
         """Whether the bottom told the tilt (its sigma well below the prior's, the features slid), not the prior."""
-        return self.slide_share >= MIN_SLIDE_SHARE and self.sigma_tilt_rad < ESTIMATED_SHARE * self.priors.tilt_rad
+        return (
+            self.slide_share >= MIN_SLIDE_SHARE
+            and self.sigma_tilt_rad < ESTIMATED_SHARE * self.priors.tilt_rad
+        )
 
     @property
     def yaw_estimated(self) -> bool:
-        return self.slide_share >= MIN_SLIDE_SHARE and self.sigma_yaw_rad < ESTIMATED_SHARE * self.priors.yaw_rad
+        return (
+            self.slide_share >= MIN_SLIDE_SHARE
+            and self.sigma_yaw_rad < ESTIMATED_SHARE * self.priors.yaw_rad
+        )
 
     @property
     def estimated(self) -> bool:
@@ -180,19 +194,31 @@ class BottomEstimate:
 
     def describe(self) -> str:
         """One line: what was estimated and how sure."""
-        tilt = (f"tilt fwd {np.degrees(self.tilt_rad[0]):+.2f}° right {np.degrees(self.tilt_rad[1]):+.2f}° "
-                f"± {np.degrees(self.sigma_tilt_rad):.2f}°" + ("" if self.tilt_estimated else " (not observable)"))
-        yaw = (f"heading {np.degrees(self.yaw_rad):+.2f}° ± {np.degrees(self.sigma_yaw_rad):.2f}°"
-               + ("" if self.yaw_estimated else " (not observable)"))
-        depth = (f"floor {self.floor_depth_m:.2f} m" + (f" ± {self.sigma_floor_depth_m:.2f}"
-                                                          if self.sigma_floor_depth_m > 0 else " (given)"))
+        tilt = (
+            f"tilt fwd {np.degrees(self.tilt_rad[0]):+.2f}° right {np.degrees(self.tilt_rad[1]):+.2f}° "
+            f"± {np.degrees(self.sigma_tilt_rad):.2f}°"
+            + ("" if self.tilt_estimated else " (not observable)")
+        )
+        yaw = (
+            f"heading {np.degrees(self.yaw_rad):+.2f}° ± {np.degrees(self.sigma_yaw_rad):.2f}°"
+            + ("" if self.yaw_estimated else " (not observable)")
+        )
+        depth = f"floor {self.floor_depth_m:.2f} m" + (
+            f" ± {self.sigma_floor_depth_m:.2f}" if self.sigma_floor_depth_m > 0 else " (given)"
+        )
         walk = np.hypot(*self.walk_ne_m.T)
         if len(self.parts):
-            heading = "/".join("—" if np.isnan(y) else f"{np.degrees(y):+.2f}" for y in self.parts[:, 2])
-            depth += f" (sigmas with the {len(self.parts)} parts' spread; their headings {heading}°)"
-        return (f"{tilt}; {yaw}; {depth}; position walk up to {walk.max():.2f} m about the GNSS's mean; "
-                f"{self.n_features} floor features, {self.n_observations} observations in {self.n_frames} frames, "
-                f"{self.rms_px:.2f} px RMS")
+            heading = "/".join(
+                "—" if np.isnan(y) else f"{np.degrees(y):+.2f}" for y in self.parts[:, 2]
+            )
+            depth += (
+                f" (sigmas with the {len(self.parts)} parts' spread; their headings {heading}°)"
+            )
+        return (
+            f"{tilt}; {yaw}; {depth}; position walk up to {walk.max():.2f} m about the GNSS's mean; "
+            f"{self.n_features} floor features, {self.n_observations} observations in {self.n_frames} frames, "
+            f"{self.rms_px:.2f} px RMS"
+        )
 
 
 def bias_rotvec(tilt_rad, yaw_rad, bias_heading_rad) -> np.ndarray:
@@ -256,10 +282,18 @@ def _velocity_steps(poses: FramePoses, knots) -> np.ndarray:
         return np.zeros((len(knots) - 1, 2))
     t = np.asarray(poses.t_s, dtype=float)
     order = np.argsort(t)
-    t, vel, pos = t[order], np.asarray(poses.velocity_ne_mps, float)[order], np.asarray(poses.camera_ne_m, float)[order]
-    travelled = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None], axis=0)])
+    t, vel, pos = (
+        t[order],
+        np.asarray(poses.velocity_ne_mps, float)[order],
+        np.asarray(poses.camera_ne_m, float)[order],
+    )
+    travelled = np.concatenate(
+        [np.zeros((1, 2)), np.cumsum(0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None], axis=0)]
+    )
     basis = _interp_knots(knots, np.eye(len(knots)), t)  # (K, J): each frame's weights of the knots
-    drift, *_ = np.linalg.lstsq(basis, travelled - (pos - pos[0]), rcond=None)  # true − reported, up to a constant
+    drift, *_ = np.linalg.lstsq(
+        basis, travelled - (pos - pos[0]), rcond=None
+    )  # true − reported, up to a constant
     return np.diff(drift, axis=0)
 
 
@@ -272,7 +306,11 @@ def white_noise_m(poses: FramePoses) -> float | None:
         return None
     t = np.asarray(poses.t_s, dtype=float)
     order = np.argsort(t)
-    t, vel, pos = t[order], np.asarray(poses.velocity_ne_mps, float)[order], np.asarray(poses.camera_ne_m, float)[order]
+    t, vel, pos = (
+        t[order],
+        np.asarray(poses.velocity_ne_mps, float)[order],
+        np.asarray(poses.camera_ne_m, float)[order],
+    )
     step = 0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None] - np.diff(pos, axis=0)
     second = np.diff(step, axis=0).ravel()
     return float(1.4826 * np.median(np.abs(second - np.median(second))) / np.sqrt(6.0))
@@ -294,19 +332,29 @@ class _Problem:
     """The least-squares problem: parameters ``[tilt_fwd, tilt_right, yaw, depth, walk (J×2), frame offsets (K×2,
     none when ``white_m`` is 0), features (F×2)]``."""
 
-    def __init__(self, camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors):
+    def __init__(
+        self, camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors
+    ):
         self.n_water, self.priors = n_water, priors
         k = np.asarray(obs.frame, dtype=int)
         self.k, self.f = k, np.asarray(obs.feature, dtype=int)
         self.M, self.F = len(k), int(self.f.max()) + 1
-        heading = poses.bias_heading_rad if poses.bias_heading_rad is not None else np.zeros(len(poses.t_s))
+        heading = (
+            poses.bias_heading_rad
+            if poses.bias_heading_rad is not None
+            else np.zeros(len(poses.t_s))
+        )
         self.psi = np.asarray(heading, dtype=float)[k]
         self.h = np.asarray(poses.height_m, dtype=float)[k]
         self.cam = np.asarray(poses.camera_ne_m, dtype=float)[k]
         R = np.asarray(poses.R_ned_from_cv, dtype=float)[k]
         u, v = np.asarray(obs.u, float), np.asarray(obs.v, float)
-        rays = pixel_to_ray(camera, np.stack([u, u + _PIXEL_STEP, u]), np.stack([v, v, v + _PIXEL_STEP]))
-        self.d0 = np.einsum("mij,kmj->kmi", R, rays)  # the reported rays in NED, and of the moved pixels
+        rays = pixel_to_ray(
+            camera, np.stack([u, u + _PIXEL_STEP, u]), np.stack([v, v, v + _PIXEL_STEP])
+        )
+        self.d0 = np.einsum(
+            "mij,kmj->kmi", R, rays
+        )  # the reported rays in NED, and of the moved pixels
         self.h = np.broadcast_to(self.h, (3, self.M))
         t = np.asarray(poses.t_s, dtype=float)
         self.knots = knot_times(t, priors.knot_spacing_s)
@@ -319,14 +367,18 @@ class _Problem:
         self.K = len(t) if priors.white_m > 0 else 0
         self.first_feature = N_GLOBAL + 2 * self.J + 2 * self.K
         self.depth_fixed = priors.floor_depth_m
-        self.depth0 = priors.floor_depth_m if priors.floor_depth_m is not None else self._start_depth()
+        self.depth0 = (
+            priors.floor_depth_m if priors.floor_depth_m is not None else self._start_depth()
+        )
         self.n_params = self.first_feature + 2 * self.F
 
     # --- geometry ---------------------------------------------------------------------------------
     def offsets(self, g):
         """Horizontal offsets (3, M, 2) from the camera of each observation's pixel and of the pixel moved by
         :data:`_PIXEL_STEP` in u and in v, for globals ``g``."""
-        w = -bias_rotvec(g[:2], g[2], self.psi)  # the true rays: the reported ones turned back by the error
+        w = -bias_rotvec(
+            g[:2], g[2], self.psi
+        )  # the true rays: the reported ones turned back by the error
         d = _rotate(np.broadcast_to(w, self.d0.shape), self.d0)
         off, _ = offset_from_ray(d, self.h, np.full(self.h.shape, g[3]), self.n_water)
         return off
@@ -347,7 +399,9 @@ class _Problem:
         best, best_cost = _DEPTH_GRID_M[0], np.inf
         for depth in _DEPTH_GRID_M:
             gp, A = self.ground(np.array([0.0, 0.0, 0.0, depth]), zero)
-            cost = np.median(np.linalg.norm(np.einsum("mij,mj->mi", A, gp - self._means(gp)[self.f]), axis=-1))
+            cost = np.median(
+                np.linalg.norm(np.einsum("mij,mj->mi", A, gp - self._means(gp)[self.f]), axis=-1)
+            )
             if cost < best_cost:
                 best, best_cost = depth, cost
         return float(best)
@@ -363,9 +417,9 @@ class _Problem:
         g = x[:N_GLOBAL].copy()
         if self.depth_fixed is not None:
             g[3] = self.depth_fixed
-        walk = x[N_GLOBAL:N_GLOBAL + 2 * self.J].reshape(self.J, 2)
-        white = x[N_GLOBAL + 2 * self.J:self.first_feature].reshape(self.K, 2)
-        feats = x[self.first_feature:].reshape(self.F, 2)
+        walk = x[N_GLOBAL : N_GLOBAL + 2 * self.J].reshape(self.J, 2)
+        white = x[N_GLOBAL + 2 * self.J : self.first_feature].reshape(self.K, 2)
+        feats = x[self.first_feature :].reshape(self.F, 2)
         return g, walk, white, feats
 
     def observation_residuals(self, x, with_whitening: bool = False):
@@ -381,12 +435,14 @@ class _Problem:
         p = self.priors
         rate = p.walk_rate_m * np.sqrt(np.diff(self.knots))[:, None]
         depth = (g[3] - self.depth0) / p.floor_depth_prior_m if self.depth_fixed is None else x[3]
-        return np.concatenate([
-            [g[0] / p.tilt_rad, g[1] / p.tilt_rad, g[2] / p.yaw_rad, depth],
-            ((np.diff(walk, axis=0) - self.walk_steps) / rate).ravel(),
-            walk.mean(axis=0) / 1e-3,  # the gauge: the correction's mean is 0
-            (white / p.white_m).ravel() if self.K else [],
-        ])
+        return np.concatenate(
+            [
+                [g[0] / p.tilt_rad, g[1] / p.tilt_rad, g[2] / p.yaw_rad, depth],
+                ((np.diff(walk, axis=0) - self.walk_steps) / rate).ravel(),
+                walk.mean(axis=0) / 1e-3,  # the gauge: the correction's mean is 0
+                (white / p.white_m).ravel() if self.K else [],
+            ]
+        )
 
     def residuals(self, x):
         return np.concatenate([self.observation_residuals(x).ravel(), self.prior_residuals(x)])
@@ -402,24 +458,40 @@ class _Problem:
                 xs = x.copy()
                 xs[i] += step
                 glob[:, i] = ((self.observation_residuals(xs) - base) / step).ravel()
-        rows = np.repeat(np.arange(2 * M).reshape(M, 2), 2, axis=1)  # (M, 4): row (m, a) against columns (b = 0, 1)
-        pairs = [(N_GLOBAL + 2 * self.j, Aw * (1 - self.s)[:, None, None]),
-                 (N_GLOBAL + 2 * (self.j + 1), Aw * self.s[:, None, None]),
-                 (self.first_feature + 2 * self.f, -Aw)]
+        rows = np.repeat(
+            np.arange(2 * M).reshape(M, 2), 2, axis=1
+        )  # (M, 4): row (m, a) against columns (b = 0, 1)
+        pairs = [
+            (N_GLOBAL + 2 * self.j, Aw * (1 - self.s)[:, None, None]),
+            (N_GLOBAL + 2 * (self.j + 1), Aw * self.s[:, None, None]),
+            (self.first_feature + 2 * self.f, -Aw),
+        ]
         if self.K:
             pairs.append((N_GLOBAL + 2 * self.J + 2 * self.k, Aw))
         cols = [np.tile(first[:, None] + np.array([0, 1]), 2) for first, _ in pairs]
-        linear = sp.csr_matrix((np.concatenate([d.reshape(M, 4).ravel() for _, d in pairs]),
-                                (np.tile(rows.ravel(), len(pairs)), np.concatenate([c.ravel() for c in cols]))),
-                               shape=(2 * M, self.n_params))
+        linear = sp.csr_matrix(
+            (
+                np.concatenate([d.reshape(M, 4).ravel() for _, d in pairs]),
+                (np.tile(rows.ravel(), len(pairs)), np.concatenate([c.ravel() for c in cols])),
+            ),
+            shape=(2 * M, self.n_params),
+        )
         dense = sp.hstack([sp.csr_matrix(glob), sp.csr_matrix((2 * M, self.n_params - N_GLOBAL))])
         return sp.vstack([linear + dense, self._prior_jacobian()]).tocsr()
 
     def _prior_jacobian(self):
         p, J = self.priors, self.J
         n = self.n_params
-        rows, cols, vals = [0, 1, 2, 3], [0, 1, 2, 3], [1 / p.tilt_rad, 1 / p.tilt_rad, 1 / p.yaw_rad,
-                                                        1 / p.floor_depth_prior_m if self.depth_fixed is None else 1.0]
+        rows, cols, vals = (
+            [0, 1, 2, 3],
+            [0, 1, 2, 3],
+            [
+                1 / p.tilt_rad,
+                1 / p.tilt_rad,
+                1 / p.yaw_rad,
+                1 / p.floor_depth_prior_m if self.depth_fixed is None else 1.0,
+            ],
+        )
         rate = p.walk_rate_m * np.sqrt(np.diff(self.knots))
         r = 4
         for i in range(J - 1):
@@ -444,7 +516,7 @@ class _Problem:
         x = np.zeros(self.n_params)
         x[3] = self.depth0 if self.depth_fixed is None else 0.0
         g, walk, _, _ = self.unpack(x)
-        x[self.first_feature:] = self._means(self.ground(g, walk)[0]).ravel()
+        x[self.first_feature :] = self._means(self.ground(g, walk)[0]).ravel()
         return x
 
 
@@ -467,8 +539,14 @@ def _covariance(jac: sp.csr_matrix, n_dense: int, scale2: float) -> np.ndarray:
     return np.linalg.inv(S) * scale2
 
 
-def estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors = Priors(),
-             parts: int = 0) -> BottomEstimate:
+def estimate(
+    camera: Camera,
+    n_water,
+    poses: FramePoses,
+    obs: Observations,
+    priors: Priors = Priors(),
+    parts: int = 0,
+) -> BottomEstimate:
     """The pose biases, floor depth, features and position walk from bottom feature tracks (see the module doc).
 
     ``obs.feature`` numbers features 0..F-1 (each seen in ≥ 2 frames to say anything); ``n_water`` None: straight rays.
@@ -479,27 +557,47 @@ def estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, prio
     return est if parts < 2 else with_parts(est, camera, n_water, poses, obs, parts)
 
 
-def with_parts(est: BottomEstimate, camera: Camera, n_water, poses: FramePoses, obs: Observations,
-               parts: int) -> BottomEstimate:
+def with_parts(
+    est: BottomEstimate, camera: Camera, n_water, poses: FramePoses, obs: Observations, parts: int
+) -> BottomEstimate:
     """``est`` with each of ``parts`` consecutive stretches of the frames' times solved alone (:attr:`BottomEstimate.parts`)
     and its sigmas widened by their sample standard deviation; with fewer than two parts solved, by the priors (the
     recording does not show that the bottom told the biases)."""
     t = np.asarray(poses.t_s, dtype=float)
     edges = np.linspace(t.min(), t.max(), parts + 1)
     part = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, parts - 1)
-    values = np.array([_part_values(camera, n_water, poses, obs, est.priors, np.flatnonzero(part == i))
-                       for i in range(parts)])
+    values = np.array(
+        [
+            _part_values(camera, n_water, poses, obs, est.priors, np.flatnonzero(part == i))
+            for i in range(parts)
+        ]
+    )
     solved = values[np.all(np.isfinite(values), axis=1)]
     p = est.priors
-    spread = (np.std(solved, axis=0, ddof=1) if len(solved) >= 2
-              else np.array([p.tilt_rad, p.tilt_rad, p.yaw_rad, p.floor_depth_prior_m]))
-    sigma_depth = 0.0 if p.floor_depth_m is not None else float(np.hypot(est.sigma_floor_depth_m, spread[3]))
-    return replace(est, cov_bias=est.cov_bias + np.diag(spread[:3] ** 2), sigma_floor_depth_m=sigma_depth,
-                   parts=values)
+    spread = (
+        np.std(solved, axis=0, ddof=1)
+        if len(solved) >= 2
+        else np.array([p.tilt_rad, p.tilt_rad, p.yaw_rad, p.floor_depth_prior_m])
+    )
+    sigma_depth = (
+        0.0 if p.floor_depth_m is not None else float(np.hypot(est.sigma_floor_depth_m, spread[3]))
+    )
+    return replace(
+        est,
+        cov_bias=est.cov_bias + np.diag(spread[:3] ** 2),
+        sigma_floor_depth_m=sigma_depth,
+        parts=values,
+    )
 
 
-def _part_values(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors,
-                 frames: np.ndarray) -> np.ndarray:
+def _part_values(
+    camera: Camera,
+    n_water,
+    poses: FramePoses,
+    obs: Observations,
+    priors: Priors,
+    frames: np.ndarray,
+) -> np.ndarray:
     """tilt_fwd, tilt_right, yaw, floor depth (4,) solved from ``frames`` (indices into ``poses``) alone; NaN with
     fewer than :data:`MIN_PART_FEATURES` features seen in two of them."""
     index = np.full(len(poses.t_s), -1)
@@ -513,35 +611,72 @@ def _part_values(camera: Camera, n_water, poses: FramePoses, obs: Observations, 
     if len(frames) < 3 or len(np.unique(feature[twice])) < MIN_PART_FEATURES:
         return np.full(N_GLOBAL, np.nan)
     _, renumbered = np.unique(feature[twice], return_inverse=True)
-    sub = Observations(frame[twice], renumbered, np.asarray(obs.u, float)[keep][twice],
-                       np.asarray(obs.v, float)[keep][twice])
-    take = FramePoses(*(None if a is None else np.asarray(a)[frames] for a in (
-        poses.t_s, poses.R_ned_from_cv, poses.camera_ne_m, poses.height_m, poses.bias_heading_rad,
-        poses.velocity_ne_mps)))
+    sub = Observations(
+        frame[twice],
+        renumbered,
+        np.asarray(obs.u, float)[keep][twice],
+        np.asarray(obs.v, float)[keep][twice],
+    )
+    take = FramePoses(
+        *(
+            None if a is None else np.asarray(a)[frames]
+            for a in (
+                poses.t_s,
+                poses.R_ned_from_cv,
+                poses.camera_ne_m,
+                poses.height_m,
+                poses.bias_heading_rad,
+                poses.velocity_ne_mps,
+            )
+        )
+    )
     e = _estimate(camera, n_water, take, sub, priors)
     return np.array([*e.tilt_rad, e.yaw_rad, e.floor_depth_m])
 
 
-def _estimate(camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors) -> BottomEstimate:
+def _estimate(
+    camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors
+) -> BottomEstimate:
     """The whole recording's fit (:func:`estimate` without parts)."""
     prob = _Problem(camera, n_water, poses, obs, priors)
-    fit = least_squares(prob.residuals, prob.start(), jac=prob.jacobian, loss="soft_l1", f_scale=priors.loss_scale,
-                        x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=60)
+    fit = least_squares(
+        prob.residuals,
+        prob.start(),
+        jac=prob.jacobian,
+        loss="soft_l1",
+        f_scale=priors.loss_scale,
+        x_scale="jac",
+        method="trf",
+        tr_solver="lsmr",
+        max_nfev=60,
+    )
     x = fit.x
     r_obs = prob.observation_residuals(x)
     norm = np.hypot(r_obs[:, 0], r_obs[:, 1])
     inliers = norm < 3.0 * priors.loss_scale
     n_dense = prob.first_feature
     dof = max(1, 2 * int(inliers.sum()) - prob.n_params + 4)
-    scale2 = max(1.0, float(np.sum(norm[inliers] ** 2) / dof))  # never claim better than the pixel sigma
+    scale2 = max(
+        1.0, float(np.sum(norm[inliers] ** 2) / dof)
+    )  # never claim better than the pixel sigma
     cov = _covariance(sp.csr_matrix(fit.jac), n_dense, scale2)
     g, walk, _, feats = prob.unpack(x)
-    cov_walk = np.diagonal(cov[N_GLOBAL:, N_GLOBAL:])[:2 * prob.J].reshape(prob.J, 2)
+    cov_walk = np.diagonal(cov[N_GLOBAL:, N_GLOBAL:])[: 2 * prob.J].reshape(prob.J, 2)
     return BottomEstimate(
-        tilt_rad=g[:2].copy(), yaw_rad=float(g[2]), cov_bias=cov[:3, :3].copy(),
+        tilt_rad=g[:2].copy(),
+        yaw_rad=float(g[2]),
+        cov_bias=cov[:3, :3].copy(),
         floor_depth_m=float(g[3]),
         sigma_floor_depth_m=0.0 if priors.floor_depth_m is not None else float(np.sqrt(cov[3, 3])),
-        knot_t_s=prob.knots, walk_ne_m=walk.copy(), sigma_walk_ne_m=np.sqrt(cov_walk),
-        features_ne_m=feats.copy(), rms_px=float(np.sqrt(np.mean(norm[inliers] ** 2) / 2) * priors.pixel_px),
-        slide_share=slide_share(camera, obs), n_observations=prob.M, n_features=prob.F, n_frames=len(np.unique(prob.k)), inliers=inliers, priors=priors,
+        knot_t_s=prob.knots,
+        walk_ne_m=walk.copy(),
+        sigma_walk_ne_m=np.sqrt(cov_walk),
+        features_ne_m=feats.copy(),
+        rms_px=float(np.sqrt(np.mean(norm[inliers] ** 2) / 2) * priors.pixel_px),
+        slide_share=slide_share(camera, obs),
+        n_observations=prob.M,
+        n_features=prob.F,
+        n_frames=len(np.unique(prob.k)),
+        inliers=inliers,
+        priors=priors,
     )

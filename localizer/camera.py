@@ -28,7 +28,9 @@ class Camera:
     height: Pixels = Field(description="image height, pixels")
     fx: Positive = Field(description="focal length along u, pixels")
     fy: Positive = Field(description="focal length along v, pixels")
-    cx: Number = Field(description="principal point u, pixels (OpenCV: the top-left pixel's centre is 0)")
+    cx: Number = Field(
+        description="principal point u, pixels (OpenCV: the top-left pixel's centre is 0)"
+    )
     cy: Number = Field(description="principal point v, pixels")
     distortion: Vector5 = Field((0.0, 0.0, 0.0, 0.0, 0.0), description="OpenCV k1, k2, p1, p2, k3")
 

@@ -28,7 +28,9 @@ class _WindowMin:
 
     def __init__(self, window_s: float):
         self.window_s = window_s
-        self._q: deque[tuple[float, float, object]] = deque()  # (arrival, value, payload), values increasing
+        self._q: deque[tuple[float, float, object]] = (
+            deque()
+        )  # (arrival, value, payload), values increasing
 
     def clear(self) -> None:
         self._q.clear()
@@ -70,8 +72,14 @@ class ClockMap:
     A station clock that stepped back (our own clock: trusted) starts a new segment at once.
     """
 
-    def __init__(self, window_s: float = 30.0, reboot_s: float = 1.0, early_s: float = 0.25, confirm: int = 3,
-                 confirm_s: float = 0.3):
+    def __init__(
+        self,
+        window_s: float = 30.0,
+        reboot_s: float = 1.0,
+        early_s: float = 0.25,
+        confirm: int = 3,
+        confirm_s: float = 0.3,
+    ):
         self.reboot_s = reboot_s
         self.early_s = early_s
         self.confirm = confirm
@@ -79,14 +87,21 @@ class ClockMap:
         self._min = _WindowMin(window_s)
         self._last_source: float | None = None
         self._last_arrival: float | None = None
-        self._candidates: list[tuple[float, float]] = []  # outliers that may be a new clock: (source, arrival)
+        self._candidates: list[
+            tuple[float, float]
+        ] = []  # outliers that may be a new clock: (source, arrival)
         self.segments = 0  # restarts seen (reboots of the source, steps of the station clock)
         self.outliers = 0  # samples not used
-        self.last_restart: tuple[float, float] | None = None  # (source time before, source time after)
+        self.last_restart: tuple[float, float] | None = (
+            None  # (source time before, source time after)
+        )
 
     def _fits(self, source_s: float, arrival_s: float) -> bool:
         off = self.offset_s
-        return source_s >= self._last_source - self.reboot_s and arrival_s - source_s >= off - self.early_s
+        return (
+            source_s >= self._last_source - self.reboot_s
+            and arrival_s - source_s >= off - self.early_s
+        )
 
     def add(self, source_s: float, arrival_s: float) -> str:
         """One sample's source and arrival times: :data:`OK`, :data:`OUTLIER` (not used), or, when it
@@ -102,7 +117,10 @@ class ClockMap:
             self._take(source_s, arrival_s)
             return OK
         c = self._candidates
-        if c and not (source_s >= c[-1][0] and abs((arrival_s - source_s) - (c[-1][1] - c[-1][0])) <= self.early_s):
+        if c and not (
+            source_s >= c[-1][0]
+            and abs((arrival_s - source_s) - (c[-1][1] - c[-1][0])) <= self.early_s
+        ):
             c.clear()
         c.append((source_s, arrival_s))
         if len(c) < self.confirm or c[-1][1] - c[0][1] < self.confirm_s:

@@ -151,11 +151,24 @@ def _why(err: dict, table) -> str:
     if kind in _WHY:
         return _WHY[kind]
     if kind in ("extra_forbidden", "unexpected_keyword_argument"):
-        return f"unknown key (known: {', '.join(sorted(known_keys(table)))})" if table else "unknown key"
+        return (
+            f"unknown key (known: {', '.join(sorted(known_keys(table)))})"
+            if table
+            else "unknown key"
+        )
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        op = {"greater_than": ">", "greater_than_equal": "≥", "less_than": "<", "less_than_equal": "≤"}[kind]
+        op = {
+            "greater_than": ">",
+            "greater_than_equal": "≥",
+            "less_than": "<",
+            "less_than_equal": "≤",
+        }[kind]
         bound = next(iter(ctx.values()))
-        return f"must be {op} {bound:g}" if isinstance(bound, (int, float)) else f"must be {op} {bound}"
+        return (
+            f"must be {op} {bound:g}"
+            if isinstance(bound, (int, float))
+            else f"must be {op} {bound}"
+        )
     if kind == "literal_error":
         return f"expected one of {ctx['expected']}"
     if kind in ("too_short", "too_long"):
@@ -171,13 +184,19 @@ def error_of(cls, err: dict, source: str, prefix: str = "") -> ConfigError:
     value = err["input"]
     exc = (err.get("ctx") or {}).get("error")
     if isinstance(exc, Invalid):
-        key = _join((*((prefix,) if prefix else ()), *loc, *(exc.key.split(".") if exc.key else ())))
+        key = _join(
+            (*((prefix,) if prefix else ()), *loc, *(exc.key.split(".") if exc.key else ()))
+        )
         return ConfigError(source, key, exc.value, exc.why)
     parts = (*((prefix,) if prefix else ()), *loc)
     key = _join(parts) or "(top level)"
     if err["type"] == "missing":
         value = None
-    whole_table = _field_class(cls, loc) is not None and err["type"] in ("missing", "dataclass_type", "dict_type")
+    whole_table = _field_class(cls, loc) is not None and err["type"] in (
+        "missing",
+        "dataclass_type",
+        "dict_type",
+    )
     if whole_table:
         key = f"[{key}]"
     table = _field_class(cls, loc[:-1]) if loc else cls

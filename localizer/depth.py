@@ -49,9 +49,9 @@ SOURCES = {
     "skyfix": "skyfix's JSON {t, depth_m} on Zenoh (skyfix replay, or the UUV's own publisher)",
     "session": "a recorded session's depth.jsonl that does not name its source",
     "ardusub_pressure": "ArduSub's depth sensor: SCALED_PRESSURE{BARO_PRIMARY+1} with BARO{n}_GND_PRESS and "
-                        "BARO_SPEC_GRAV, ArduSub's own formula",
+    "BARO_SPEC_GRAV, ArduSub's own formula",
     "ardusub_ekf": "ArduSub's EKF: -relative_alt before an EKF origin, the origin's altitude - alt after "
-                   "(while the pressure's parameters are not known yet)",
+    "(while the pressure's parameters are not known yet)",
 }
 SOURCE_WORDS = tuple(SOURCES)
 #: Pressure depth and EKF depth further apart than this (m) disagree (the EKF follows the same sensor: they
@@ -77,10 +77,16 @@ class DepthSample(NamedTuple):
 
 def depth_from_pressure_m(pressure_pa, ground_pressure_pa, specific_gravity):
     """ArduSub's depth (m, positive down) of a water pressure sensor reading, as ``AP_Baro::update`` computes it."""
-    return (np.asarray(pressure_pa, dtype=float) - ground_pressure_pa) / ARDUSUB_PA_PER_M / specific_gravity
+    return (
+        (np.asarray(pressure_pa, dtype=float) - ground_pressure_pa)
+        / ARDUSUB_PA_PER_M
+        / specific_gravity
+    )
 
 
-def ekf_depth_m(relative_alt_m: float, alt_amsl_m: float, origin_amsl_m: float | None) -> float | None:
+def ekf_depth_m(
+    relative_alt_m: float, alt_amsl_m: float, origin_amsl_m: float | None
+) -> float | None:
     """ArduSub's EKF depth (m) from GLOBAL_POSITION_INT (see the module doc); None when it has an origin whose
     altitude is not known."""
     if alt_amsl_m == 0.0:
@@ -103,7 +109,9 @@ def frame_sigma_m(sigma_m, vspeed_mps, held_error_m, age_s, default_sigma_m: flo
     change (``held_error_m``, already × age: :meth:`~localizer.timeline.Series.sample`'s error) times the age.
     """
     base = np.where(np.isfinite(sigma_m), sigma_m, default_sigma_m)
-    moved = np.fmax(np.abs(np.asarray(vspeed_mps, dtype=float)) * age_s, np.nan_to_num(held_error_m))
+    moved = np.fmax(
+        np.abs(np.asarray(vspeed_mps, dtype=float)) * age_s, np.nan_to_num(held_error_m)
+    )
     return np.hypot(base, np.nan_to_num(moved))
 
 
@@ -117,8 +125,13 @@ class DepthGate:
     says so (the caller takes them out).
     """
 
-    def __init__(self, max_vertical_speed_mps: float = BLUEROV2_MAX_VERTICAL_SPEED_MPS, sigma_m: float = 0.05,
-                 confirm: int = 5, confirm_s: float = 1.0):
+    def __init__(
+        self,
+        max_vertical_speed_mps: float = BLUEROV2_MAX_VERTICAL_SPEED_MPS,
+        sigma_m: float = 0.05,
+        confirm: int = 5,
+        confirm_s: float = 1.0,
+    ):
         self.max_vertical_speed_mps = max_vertical_speed_mps
         self.sigma_m = sigma_m
         self.confirm, self.confirm_s = confirm, confirm_s
@@ -130,7 +143,9 @@ class DepthGate:
 
     def _fits(self, ref, t: float, depth: float, sigma: float) -> bool:
         t0, d0, s0 = ref
-        return abs(depth - d0) <= self.max_vertical_speed_mps * abs(t - t0) + 3.0 * math.hypot(sigma, s0)
+        return abs(depth - d0) <= self.max_vertical_speed_mps * abs(t - t0) + 3.0 * math.hypot(
+            sigma, s0
+        )
 
     def check(self, t: float, depth_m: float, sigma_m: float = math.nan) -> str | None:
         """None when the sample is accepted, else why not (one line with the values); a depth outside
@@ -144,18 +159,25 @@ class DepthGate:
         if self._chain and not self._fits(self._chain[-1], *sample):
             self._chain = []
         self._chain.append(sample)
-        if len(self._chain) >= self.confirm and self._chain[-1][0] - self._chain[0][0] >= self.confirm_s:
-            self.notices.append(f"depth stepped from {self._last[1]:.2f} m to {depth_m:.2f} m and stayed there for "
-                                f"{len(self._chain)} samples over {self._chain[-1][0] - self._chain[0][0]:.1f} s: "
-                                "taken as the depth from now on")
+        if (
+            len(self._chain) >= self.confirm
+            and self._chain[-1][0] - self._chain[0][0] >= self.confirm_s
+        ):
+            self.notices.append(
+                f"depth stepped from {self._last[1]:.2f} m to {depth_m:.2f} m and stayed there for "
+                f"{len(self._chain)} samples over {self._chain[-1][0] - self._chain[0][0]:.1f} s: "
+                "taken as the depth from now on"
+            )
             self._last, self._chain = sample, []
             self.confirmed_steps += 1
             return None
         self.refused += 1
         t0, d0, _ = self._last
-        return (f"depth {depth_m:.2f} m refused: {abs(depth_m - d0):.2f} m from {d0:.2f} m {t - t0:+.2f} s "
-                f"before, faster than the vehicle can dive (uuv_max_vertical_speed_mps = "
-                f"{self.max_vertical_speed_mps:g})")
+        return (
+            f"depth {depth_m:.2f} m refused: {abs(depth_m - d0):.2f} m from {d0:.2f} m {t - t0:+.2f} s "
+            f"before, faster than the vehicle can dive (uuv_max_vertical_speed_mps = "
+            f"{self.max_vertical_speed_mps:g})"
+        )
 
 
 #: ArduSub's pressure messages by barometer instance (0-based).
@@ -191,10 +213,14 @@ class ArduSubDepth:
         self.ekf: tuple[float, float] | None = None  # (t, depth) of the newest EKF depth
         self.vspeed_mps = math.nan  # GLOBAL_POSITION_INT.vz, positive down
         self.pressure: tuple[float, float] | None = None  # (t, depth) of the newest pressure depth
-        self.disagreement_m: float | None = None  # pressure depth − EKF depth at the newest cross-check
+        self.disagreement_m: float | None = (
+            None  # pressure depth − EKF depth at the newest cross-check
+        )
         self.disagreeing = False
         self.reboots = 0
-        self.zero_not_followed_pa: float | None = None  # ArduSub's depth sensor zero taken under water, not followed
+        self.zero_not_followed_pa: float | None = (
+            None  # ArduSub's depth sensor zero taken under water, not followed
+        )
         self.refusal: str | None = None
         self.notices: list[str] = []
         self._received: set[str] = set()  # parameters received since the autopilot's last (re)boot
@@ -228,14 +254,18 @@ class ArduSubDepth:
         before = self.clock.last_source_s
         result = self.clock.add(boot_s, receive_s)
         if result == OUTLIER:
-            self.refusal = (f"time_boot_ms {boot_s:.3f} s does not fit the autopilot's clock (latest {before:.3f} s); "
-                            f"a reboot is taken once samples agree for {self.clock.confirm_s} s")
+            self.refusal = (
+                f"time_boot_ms {boot_s:.3f} s does not fit the autopilot's clock (latest {before:.3f} s); "
+                f"a reboot is taken once samples agree for {self.clock.confirm_s} s"
+            )
             return None
         if result == RESTART:
             self.reboots += 1
             was, now = self.clock.last_restart
-            self.notices.append(f"the UUV's autopilot rebooted (time_boot_ms went back from {was:.1f} s to "
-                                f"{now:.1f} s): its depth parameters and EKF origin are read again")
+            self.notices.append(
+                f"the UUV's autopilot rebooted (time_boot_ms went back from {was:.1f} s to "
+                f"{now:.1f} s): its depth parameters and EKF origin are read again"
+            )
             self._received.clear()
             self.origin_amsl_m = self.has_origin = self.ekf = self.pressure = None
         return boot_s + self.clock.offset_s - self.latency_s
@@ -247,13 +277,17 @@ class ArduSubDepth:
         if name == "BARO_PRIMARY" and value in range(len(PRESSURE_MESSAGES)):
             self._received.add(name)
             if self.primary is not None and round(value) != self.primary:
-                self.notices.append(f"ArduSub's BARO_PRIMARY changed {self.primary} → {round(value)}: the depth "
-                                    f"sensor is now {PRESSURE_MESSAGES[round(value)]}")
+                self.notices.append(
+                    f"ArduSub's BARO_PRIMARY changed {self.primary} → {round(value)}: the depth "
+                    f"sensor is now {PRESSURE_MESSAGES[round(value)]}"
+                )
             self.primary = round(value)
         elif name == "BARO_SPEC_GRAV" and value > 0:
             self._received.add(name)
             if self.specific_gravity is not None and value != self.specific_gravity:
-                self.notices.append(f"ArduSub's BARO_SPEC_GRAV changed {self.specific_gravity:g} → {value:g}")
+                self.notices.append(
+                    f"ArduSub's BARO_SPEC_GRAV changed {self.specific_gravity:g} → {value:g}"
+                )
             self.specific_gravity = value
         elif name in (ground_pressure_param(i) for i in range(len(PRESSURE_MESSAGES))):
             self._received.add(name)
@@ -264,7 +298,9 @@ class ArduSubDepth:
             self._received.discard(name)
             return
         old = self.ground_pa.get(instance)
-        if instance != self.primary or old is None or pa == old:  # another barometer's, the first, the same
+        if (
+            instance != self.primary or old is None or pa == old
+        ):  # another barometer's, the first, the same
             self.ground_pa[instance] = pa
             if instance == self.primary:
                 self.zero_not_followed_pa = None
@@ -273,13 +309,17 @@ class ArduSubDepth:
         if moved_m > RECAL_MAX_DEPTH_M:
             if self.zero_not_followed_pa != pa:
                 self.zero_not_followed_pa = pa
-                self.notices.append(f"ArduSub's {name} changed {old:.0f} → {pa:.0f} Pa: a depth zero {moved_m:.2f} m "
-                                    "below the old one (recalibrated under water): skyfix keeps the old zero; "
-                                    f"ArduSub's own depth and its EKF's now read {moved_m:.2f} m shallow (not compared "
-                                    "until the sensor is zeroed at the surface again)")
+                self.notices.append(
+                    f"ArduSub's {name} changed {old:.0f} → {pa:.0f} Pa: a depth zero {moved_m:.2f} m "
+                    "below the old one (recalibrated under water): skyfix keeps the old zero; "
+                    f"ArduSub's own depth and its EKF's now read {moved_m:.2f} m shallow (not compared "
+                    "until the sensor is zeroed at the surface again)"
+                )
             return
-        self.notices.append(f"ArduSub's {name} changed {old:.0f} → {pa:.0f} Pa (recalibrated): the depth zero moved "
-                            f"{moved_m:+.2f} m")
+        self.notices.append(
+            f"ArduSub's {name} changed {old:.0f} → {pa:.0f} Pa (recalibrated): the depth zero moved "
+            f"{moved_m:+.2f} m"
+        )
         self.ground_pa[instance] = pa
         self.zero_not_followed_pa = None
 
@@ -287,12 +327,20 @@ class ArduSubDepth:
         """GPS_GLOBAL_ORIGIN's altitude (m above mean sea level)."""
         if math.isfinite(alt_amsl_m):
             if self.origin_amsl_m is not None and alt_amsl_m != self.origin_amsl_m:
-                self.notices.append(f"ArduSub's EKF origin moved from {self.origin_amsl_m:.2f} m to {alt_amsl_m:.2f} m "
-                                    "above sea level")
+                self.notices.append(
+                    f"ArduSub's EKF origin moved from {self.origin_amsl_m:.2f} m to {alt_amsl_m:.2f} m "
+                    "above sea level"
+                )
             self.origin_amsl_m = alt_amsl_m
 
-    def position(self, time_boot_ms: float, relative_alt_m: float, alt_amsl_m: float, vz_mps: float,
-                 receive_s: float) -> DepthSample | None:
+    def position(
+        self,
+        time_boot_ms: float,
+        relative_alt_m: float,
+        alt_amsl_m: float,
+        vz_mps: float,
+        receive_s: float,
+    ) -> DepthSample | None:
         """GLOBAL_POSITION_INT: the EKF's depth; a sample until the first pressure depth (since the last boot)."""
         t = self._station_t(time_boot_ms, receive_s)
         if t is None:
@@ -305,8 +353,9 @@ class ArduSubDepth:
             return None
         return DepthSample(t, depth, self.sigma_m, "ardusub_ekf", vz_mps)
 
-    def scaled_pressure(self, instance: int, time_boot_ms: float, pressure_pa: float,
-                        receive_s: float) -> DepthSample | None:
+    def scaled_pressure(
+        self, instance: int, time_boot_ms: float, pressure_pa: float, receive_s: float
+    ) -> DepthSample | None:
         """SCALED_PRESSURE{instance+1}: a sample when it is the depth sensor's and its parameters are known."""
         if instance != self.primary:
             return None
@@ -315,13 +364,21 @@ class ArduSubDepth:
             return None
         if not self.calibrated:
             return None
-        depth = float(depth_from_pressure_m(pressure_pa, self.ground_pa[instance], self.specific_gravity))
+        depth = float(
+            depth_from_pressure_m(pressure_pa, self.ground_pa[instance], self.specific_gravity)
+        )
         self.pressure = (t, depth)
-        return DepthSample(t, depth, self._crosscheck(t, depth), "ardusub_pressure", self.vspeed_mps)
+        return DepthSample(
+            t, depth, self._crosscheck(t, depth), "ardusub_pressure", self.vspeed_mps
+        )
 
     def _crosscheck(self, t: float, depth: float) -> float:
         """The pressure depth's sigma: its own, and the disagreement with the EKF's depth when beyond DISAGREE_M."""
-        if self.ekf is None or abs(t - self.ekf[0]) > CROSSCHECK_S or self.zero_not_followed_pa is not None:
+        if (
+            self.ekf is None
+            or abs(t - self.ekf[0]) > CROSSCHECK_S
+            or self.zero_not_followed_pa is not None
+        ):
             self.disagreement_m = None
             return self.sigma_m
         te, de = self.ekf
@@ -329,21 +386,37 @@ class ArduSubDepth:
         diff = self.disagreement_m = depth - ekf
         agree = abs(diff) <= DISAGREE_M
         if agree and self.disagreeing:
-            self.notices.append(f"ArduSub's pressure depth {depth:.2f} m and its EKF's {ekf:.2f} m agree again")
+            self.notices.append(
+                f"ArduSub's pressure depth {depth:.2f} m and its EKF's {ekf:.2f} m agree again"
+            )
         if not agree and not self.disagreeing:
-            self.notices.append(f"ArduSub's pressure depth {depth:.2f} m and its EKF's {ekf:.2f} m disagree by "
-                                f"{diff:+.2f} m (more than {DISAGREE_M:g} m): the difference goes into the depth's sigma")
+            self.notices.append(
+                f"ArduSub's pressure depth {depth:.2f} m and its EKF's {ekf:.2f} m disagree by "
+                f"{diff:+.2f} m (more than {DISAGREE_M:g} m): the difference goes into the depth's sigma"
+            )
         self.disagreeing = not agree
         return float(crosscheck_sigma_m(self.sigma_m, diff))
 
     def status(self) -> dict:
         def r(x, nd=3):
             return None if x is None or not math.isfinite(x) else round(x, nd)
-        return {"params": {"BARO_PRIMARY": self.primary, "BARO_SPEC_GRAV": self.specific_gravity,
-                           "ground_pressure_pa": None if self.primary is None else self.ground_pa.get(self.primary),
-                           "pressure_message": self.pressure_message, "missing": self.wanted_params()},
-                "pressure_depth_m": r(self.pressure and self.pressure[1]), "ekf_depth_m": r(self.ekf and self.ekf[1]),
-                "disagreement_m": r(self.disagreement_m), "vertical_speed_mps": r(self.vspeed_mps, 2),
-                "ekf_origin_amsl_m": r(self.origin_amsl_m), "ekf_has_origin": self.has_origin,
-                "zero_not_followed_pa": self.zero_not_followed_pa,
-                "autopilot_reboots": self.reboots}
+
+        return {
+            "params": {
+                "BARO_PRIMARY": self.primary,
+                "BARO_SPEC_GRAV": self.specific_gravity,
+                "ground_pressure_pa": None
+                if self.primary is None
+                else self.ground_pa.get(self.primary),
+                "pressure_message": self.pressure_message,
+                "missing": self.wanted_params(),
+            },
+            "pressure_depth_m": r(self.pressure and self.pressure[1]),
+            "ekf_depth_m": r(self.ekf and self.ekf[1]),
+            "disagreement_m": r(self.disagreement_m),
+            "vertical_speed_mps": r(self.vspeed_mps, 2),
+            "ekf_origin_amsl_m": r(self.origin_amsl_m),
+            "ekf_has_origin": self.has_origin,
+            "zero_not_followed_pa": self.zero_not_followed_pa,
+            "autopilot_reboots": self.reboots,
+        }

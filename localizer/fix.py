@@ -47,10 +47,14 @@ class Fix:
     cov_ne_m2: float = float("nan")
     t_gnss: float = float("nan")  # the exposure as GNSS (UNIX) time; NaN without SYSTEM_TIME
     height_m: float = float("nan")  # the camera's height above the water used
-    sigma_height_m: float = float("nan")  # 1-sigma of the inputs as they went into h_acc_m: the height ...
+    sigma_height_m: float = float(
+        "nan"
+    )  # 1-sigma of the inputs as they went into h_acc_m: the height ...
     sigma_depth_m: float = float("nan")  # ... the depth ...
     sigma_time_s: float = float("nan")  # ... and the frame's time against the telemetry
-    sigma_pixel_px: float = float("nan")  # the tracker's 1-sigma of each of u and v as it went into h_acc_m (pixels)
+    sigma_pixel_px: float = float(
+        "nan"
+    )  # the tracker's 1-sigma of each of u and v as it went into h_acc_m (pixels)
     height_source: str = ""  # where each input came from (see localizer.pose.CameraPose)
     depth_source: str = ""
     time_source: str = ""
@@ -109,17 +113,28 @@ class Fixes:
                 continue
             word = f.name in WORDS
             default = np.full(len(t), "" if word else np.nan, dtype=object if word else float)
-            out[f.name] = np.asarray(columns[f.name], dtype=object if word else float) if f.name in columns else default
+            out[f.name] = (
+                np.asarray(columns[f.name], dtype=object if word else float)
+                if f.name in columns
+                else default
+            )
         return cls(t_unix=t, status=np.asarray(status, dtype=object), **out)
 
     def __len__(self) -> int:
         return len(self.t_unix)
 
     def __getitem__(self, i: int) -> Fix:
-        return Fix(**{k: (str(v[i]) if k == "status" or k in WORDS else float(v[i])) for k, v in vars(self).items()})
+        return Fix(
+            **{
+                k: (str(v[i]) if k == "status" or k in WORDS else float(v[i]))
+                for k, v in vars(self).items()
+            }
+        )
 
 
-def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True, sigma_px=None) -> Fixes:
+def locate(
+    cal: Calibration, pose: CameraPose, u, v, refraction: bool = True, sigma_px=None
+) -> Fixes:
     """Fixes for pixels (u, v) seen at the poses' times; ``refraction=False`` is the paper's straight ray.
 
     Pixels that are NaN mean the tracker had nothing (status ``no_track``) unless
@@ -128,17 +143,24 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True, si
     """
     u = np.atleast_1d(np.asarray(u, dtype=float))
     v = np.atleast_1d(np.asarray(v, dtype=float))
-    sig_px = np.broadcast_to(np.asarray(cal.sigmas.pixel_px if sigma_px is None else sigma_px, dtype=float), u.shape)
+    sig_px = np.broadcast_to(
+        np.asarray(cal.sigmas.pixel_px if sigma_px is None else sigma_px, dtype=float), u.shape
+    )
     sig_px = np.where(np.isfinite(sig_px), sig_px, cal.sigmas.pixel_px)
     sig_px[~(np.isfinite(u) & np.isfinite(v))] = np.nan  # no pixel, no pixel error
     status = pose.status.copy()
     ok = status == "ok"
     status[ok & ~(np.isfinite(u) & np.isfinite(v))] = "no_track"
-    status[(status == "ok") & ~cal.camera.contains(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))] = "bad_pixel"
+    status[
+        (status == "ok")
+        & ~cal.camera.contains(np.nan_to_num(u, nan=-1e9), np.nan_to_num(v, nan=-1e9))
+    ] = "bad_pixel"
     n_water = cal.water.refractive_index if refraction else None
 
     nan = np.full(len(u), np.nan)
-    lat, lon, alt, alt_ellipsoid, north, east, h_acc, v_acc, sig_n, sig_e, cov_ne = (nan.copy() for _ in range(11))
+    lat, lon, alt, alt_ellipsoid, north, east, h_acc, v_acc, sig_n, sig_e, cov_ne = (
+        nan.copy() for _ in range(11)
+    )
     idx = np.flatnonzero(status == "ok")
     if len(idx):
         R = pose.R_ned_from_cv[idx]
@@ -160,19 +182,53 @@ def locate(cal: Calibration, pose: CameraPose, u, v, refraction: bool = True, si
         alt[idx] = pose.alt_amsl_m[idx] - down
         alt_ellipsoid[idx] = alt[idx] + pose.geoid_separation_m[idx]
         h_acc[idx], v_acc[idx], cov = accuracy(
-            cal.camera, R, u[idx], v[idx], h, d, n_water, cal.sigmas,
-            sigma_tilt_rad=pose.sigma_tilt_rad[idx], sigma_yaw_rad=pose.sigma_yaw_rad[idx],
-            sigma_uav_m=pose.sigma_uav_m[idx], omega_ned=pose.omega_ned[idx],
-            velocity_ned_mps=pose.velocity_ned_mps[idx], sigma_height_m=pose.sigma_height_m[idx],
-            sigma_depth_m=pose.sigma_depth_m[idx], sigma_time_s=pose.sigma_time_s[idx], sigma_pixel_px=sig_px[idx],
+            cal.camera,
+            R,
+            u[idx],
+            v[idx],
+            h,
+            d,
+            n_water,
+            cal.sigmas,
+            sigma_tilt_rad=pose.sigma_tilt_rad[idx],
+            sigma_yaw_rad=pose.sigma_yaw_rad[idx],
+            sigma_uav_m=pose.sigma_uav_m[idx],
+            omega_ned=pose.omega_ned[idx],
+            velocity_ned_mps=pose.velocity_ned_mps[idx],
+            sigma_height_m=pose.sigma_height_m[idx],
+            sigma_depth_m=pose.sigma_depth_m[idx],
+            sigma_time_s=pose.sigma_time_s[idx],
+            sigma_pixel_px=sig_px[idx],
         )
-        sig_n[idx], sig_e[idx], cov_ne[idx] = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1]), cov[:, 0, 1]
+        sig_n[idx], sig_e[idx], cov_ne[idx] = (
+            np.sqrt(cov[:, 0, 0]),
+            np.sqrt(cov[:, 1, 1]),
+            cov[:, 0, 1],
+        )
     return Fixes(
-        t_unix=pose.t_unix, status=status, u=u, v=v, lat=lat, lon=lon, alt_amsl_m=alt, alt_ellipsoid_m=alt_ellipsoid,
-        depth_m=pose.depth_m.copy(), h_acc_m=h_acc, v_acc_m=v_acc, north_m=north, east_m=east,
-        sigma_n_m=sig_n, sigma_e_m=sig_e, cov_ne_m2=cov_ne, t_gnss=pose.t_gnss.copy(),
-        height_m=pose.height_m.copy(), sigma_height_m=pose.sigma_height_m.copy(),
-        sigma_depth_m=pose.sigma_depth_m.copy(), sigma_time_s=pose.sigma_time_s.copy(), sigma_pixel_px=sig_px.copy(),
-        height_source=pose.height_source.copy(), depth_source=pose.depth_source.copy(),
+        t_unix=pose.t_unix,
+        status=status,
+        u=u,
+        v=v,
+        lat=lat,
+        lon=lon,
+        alt_amsl_m=alt,
+        alt_ellipsoid_m=alt_ellipsoid,
+        depth_m=pose.depth_m.copy(),
+        h_acc_m=h_acc,
+        v_acc_m=v_acc,
+        north_m=north,
+        east_m=east,
+        sigma_n_m=sig_n,
+        sigma_e_m=sig_e,
+        cov_ne_m2=cov_ne,
+        t_gnss=pose.t_gnss.copy(),
+        height_m=pose.height_m.copy(),
+        sigma_height_m=pose.sigma_height_m.copy(),
+        sigma_depth_m=pose.sigma_depth_m.copy(),
+        sigma_time_s=pose.sigma_time_s.copy(),
+        sigma_pixel_px=sig_px.copy(),
+        height_source=pose.height_source.copy(),
+        depth_source=pose.depth_source.copy(),
         time_source=pose.time_source.copy(),
     )

@@ -128,7 +128,17 @@ CLOCK_STEP_S = 0.05
 #: A frame whose exposure-to-arrival gap (station clock) differs from the previous frame's by more than this (s) is
 #: refused (``clock``): network and reader delays vary by less.
 CLOCK_TOL_S = 1.0
-REASONS = ("h_acc", "age", "out_of_order", "clock", "prediction", "innovation", "diverged", "reach", "unconfirmed")
+REASONS = (
+    "h_acc",
+    "age",
+    "out_of_order",
+    "clock",
+    "prediction",
+    "innovation",
+    "diverged",
+    "reach",
+    "unconfirmed",
+)
 STATES = ("acquiring", "tracking", "diverged")
 
 
@@ -191,11 +201,19 @@ class FixGate:
     against its own track already (``skyfix fuse``'s, :mod:`groundstation.fuse`).
     """
 
-    def __init__(self, max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
-                 max_accel_mps2: float = MAX_ACCEL_MPS2["bluerov2"], max_h_acc_m: float = 2.5,
-                 max_age_s: float = 0.5, confirm_s: float = CONFIRM_S, confirm_fixes: int = CONFIRM_FIXES,
-                 thrusters: Thrusters | None = None, water_accel_mps2: float = WATER_ACCEL_MPS2,
-                 judge_track: bool = True, max_reach_m: float = MAX_REACH_M):
+    def __init__(
+        self,
+        max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
+        max_accel_mps2: float = MAX_ACCEL_MPS2["bluerov2"],
+        max_h_acc_m: float = 2.5,
+        max_age_s: float = 0.5,
+        confirm_s: float = CONFIRM_S,
+        confirm_fixes: int = CONFIRM_FIXES,
+        thrusters: Thrusters | None = None,
+        water_accel_mps2: float = WATER_ACCEL_MPS2,
+        judge_track: bool = True,
+        max_reach_m: float = MAX_REACH_M,
+    ):
         self.judge_track = judge_track
         self.max_reach_m = max_reach_m
         self.max_speed_mps = max_speed_mps
@@ -210,13 +228,17 @@ class FixGate:
         self._now = -math.inf
         self.state = "acquiring"
         self.state_since_t: float | None = None
-        self.track: UuvTrack | None = None  # the last confirmed track: while acquiring, where the UUV was
+        self.track: UuvTrack | None = (
+            None  # the last confirmed track: while acquiring, where the UUV was
+        )
         self.scatter = Scatter()
         self._ref: tuple[float, float] | None = None  # lat, lon of the local frame's origin
         self._chain: list[_Seen] = []
         self._chain_track: UuvTrack | None = None
         self._chain_misses = 0  # fixes in a row that disagreed with the chain
-        self._refusing_since: float | None = None  # tracking: the first refused fix since the last accepted
+        self._refusing_since: float | None = (
+            None  # tracking: the first refused fix since the last accepted
+        )
         self._diverged_until = -math.inf
         self._last_t = -math.inf
         self._new_lock = True  # the next ok fix is the first of the tracker's lock (after a loss)
@@ -225,16 +247,22 @@ class FixGate:
         self._shift = 0.0  # the station clock's steps since the first arrival (s): a fix's time is t_unix − this
         self._base: float | None = None  # station minus monotonic clock (s) at the first arrival
         self._offset: float | None = None  # ... and at the last
-        self._gap: float | None = None  # the last frame's exposure-to-arrival gap on the station clock (s)
+        self._gap: float | None = (
+            None  # the last frame's exposure-to-arrival gap on the station clock (s)
+        )
         self.clock_steps = 0
         self.last_clock_step_s: float | None = None
-        self.confirmed_t: tuple[float, ...] = ()  # the exposures of the chain the last confirmation made the track
+        self.confirmed_t: tuple[
+            float, ...
+        ] = ()  # the exposures of the chain the last confirmation made the track
         self.accepted = 0
         self.rejected: Counter[str] = Counter()
         self.last_refusal: str | None = None
 
     # -- the interface -------------------------------------------------------------------------
-    def check(self, fix: Fix, now: float, window=None, arrival: Arrival | None = None) -> str | None:
+    def check(
+        self, fix: Fix, now: float, window=None, arrival: Arrival | None = None
+    ) -> str | None:
         """None if ``fix`` (status ok) may go out as valid, else the reason; counts either way.
 
         ``now``: the station clock (UNIX s) when offered; ``window``: (x, y, w, h) pixels where the telemetry's
@@ -265,9 +293,14 @@ class FixGate:
         if self.state == "diverged":
             self._enter("acquiring", self._last_t if math.isfinite(self._last_t) else None)
         self._new_lock = False
-        self.last_refusal = "unconfirmed: the operator confirmed the target; its fixes are being confirmed"
-        return {"confirmed": True, "why": f"the target's fixes are valid after {self.confirm_s:g} s of consistent "
-                "fixes, whatever the last trusted track"}
+        self.last_refusal = (
+            "unconfirmed: the operator confirmed the target; its fixes are being confirmed"
+        )
+        return {
+            "confirmed": True,
+            "why": f"the target's fixes are valid after {self.confirm_s:g} s of consistent "
+            "fixes, whatever the last trusted track",
+        }
 
     def memory(self, now: float) -> dict | None:
         """The last trusted track, JSON-ready, for :meth:`remember` after a restart (None before the first): its
@@ -277,16 +310,26 @@ class FixGate:
         if tr is None:
             return None
         lat, lon, _ = ned_to_geodetic(tr.x[0], tr.x[1], 0.0, *self._ref, 0.0)
-        return {"t": float(tr.t), "lat": float(lat), "lon": float(lon), "vn_mps": float(tr.x[2]),
-                "ve_mps": float(tr.x[3]), "P": tr.P.tolist(), "C": tr.C.tolist(), "common": tr.common.tolist(),
-                "age_s": max(0.0, float(now - self._shift - tr.t))}
+        return {
+            "t": float(tr.t),
+            "lat": float(lat),
+            "lon": float(lon),
+            "vn_mps": float(tr.x[2]),
+            "ve_mps": float(tr.x[3]),
+            "P": tr.P.tolist(),
+            "C": tr.C.tolist(),
+            "common": tr.common.tolist(),
+            "age_s": max(0.0, float(now - self._shift - tr.t)),
+        }
 
     def remember(self, memory: dict, t: float) -> None:
         """Start from a track kept by :meth:`memory` (a restart): ``t`` is its time on this gate's base (the station
         clock now less its age). The gate acquires: the first lock must be within reach of it."""
         self._ref = (float(memory["lat"]), float(memory["lon"]))
         C = np.array(memory["C"], dtype=float)
-        track = UuvTrack(self.max_speed_mps, self.max_accel_mps2, t, np.zeros(2), C, 1.0, self.max_reach_m)
+        track = UuvTrack(
+            self.max_speed_mps, self.max_accel_mps2, t, np.zeros(2), C, 1.0, self.max_reach_m
+        )
         track.x = np.array([0.0, 0.0, float(memory["vn_mps"]), float(memory["ve_mps"])])
         track.P = np.array(memory["P"], dtype=float)
         track.common = np.array(memory["common"], dtype=float)
@@ -298,7 +341,9 @@ class FixGate:
         t, age, stepped = self._time(fix, now, arrival)
         self._now = now
         if not (math.isfinite(fix.h_acc_m) and fix.h_acc_m <= self.max_h_acc_m):
-            return self._refuse(t, "h_acc", f"h_acc {fix.h_acc_m:.2f} m above {self.max_h_acc_m:g} m")
+            return self._refuse(
+                t, "h_acc", f"h_acc {fix.h_acc_m:.2f} m above {self.max_h_acc_m:g} m"
+            )
         if stepped:
             self.target_lost()
             self.last_refusal = f"clock: {stepped}"
@@ -311,8 +356,12 @@ class FixGate:
             self._last_t = t
             return None
         if not in_window(fix, window):
-            return self._refuse(t, "prediction", f"pixel ({fix.u:.0f}, {fix.v:.0f}) outside the window "
-                                "the telemetry predicted", leaves_track=True)
+            return self._refuse(
+                t,
+                "prediction",
+                f"pixel ({fix.u:.0f}, {fix.v:.0f}) outside the window the telemetry predicted",
+                leaves_track=True,
+            )
         seen = self._local(fix, t)
         if self.state == "diverged":
             if seen.t < self._diverged_until:
@@ -322,7 +371,9 @@ class FixGate:
             return self._track_step(seen)
         return self._chain_step(seen)
 
-    def _time(self, fix: Fix, now: float, arrival: Arrival | None) -> tuple[float, float, str | None]:
+    def _time(
+        self, fix: Fix, now: float, arrival: Arrival | None
+    ) -> tuple[float, float, str | None]:
         """The fix's time on the gate's base, its age when offered (s), and what stepped (None: nothing).
 
         With its frame's ``arrival``: the exposure less the station clock's change against the monotonic clock
@@ -338,17 +389,23 @@ class FixGate:
             self._base = self._offset = offset
         else:
             d_offset, d_gap = offset - self._offset, gap - self._gap
-            if abs(d_gap) > CLOCK_TOL_S:  # the exposure did not move with the arrival: its clock kept its course
+            if (
+                abs(d_gap) > CLOCK_TOL_S
+            ):  # the exposure did not move with the arrival: its clock kept its course
                 self._shift += d_offset - d_gap
-                stepped = (f"the frame's exposure moved {d_offset - d_gap:+.2f} s against its arrival's "
-                           f"{d_offset:+.2f} s on the station clock (the gates keep to the monotonic clock)")
+                stepped = (
+                    f"the frame's exposure moved {d_offset - d_gap:+.2f} s against its arrival's "
+                    f"{d_offset:+.2f} s on the station clock (the gates keep to the monotonic clock)"
+                )
             else:
                 self._shift += d_offset
             if abs(d_offset) > CLOCK_STEP_S:
                 self.clock_steps += 1
                 self.last_clock_step_s = d_offset
-                stepped = (f"the station clock stepped {d_offset:+.2f} s (the gates keep to the monotonic clock); "
-                           "the target is confirmed again")
+                stepped = (
+                    f"the station clock stepped {d_offset:+.2f} s (the gates keep to the monotonic clock); "
+                    "the target is confirmed again"
+                )
         self._offset, self._gap = offset, gap
         t = fix.t_unix - self._shift
         return t, arrival.now_mono + self._base - t, stepped
@@ -366,8 +423,10 @@ class FixGate:
             left = self._refusing_since
             self._diverged_until = left + DIVERGED_S
             self._enter("diverged", t)
-            self.last_refusal = (f"diverged: the fixes left the track {t - left:.1f} s ago ({why}); refused until "
-                                 f"{DIVERGED_S:g} s after that, or until the target is lost or released")
+            self.last_refusal = (
+                f"diverged: the fixes left the track {t - left:.1f} s ago ({why}); refused until "
+                f"{DIVERGED_S:g} s after that, or until the target is lost or released"
+            )
             return "diverged"
         return reason
 
@@ -377,9 +436,13 @@ class FixGate:
         d = self.track.distance(f.t, f.z, f.C, share, a)[0]
         if d > GATE_SIGMAS:
             idle = f", its thrusters idle: {a:.2f} m/s²" if a < self.max_accel_mps2 else ""
-            return self._refuse(f.t, "innovation", f"{d:.1f} sigma beyond where the UUV can be "
-                                f"{f.t - self.track.t:.2f} s after the track's last fix (gate {GATE_SIGMAS:g}{idle})",
-                                leaves_track=True)
+            return self._refuse(
+                f.t,
+                "innovation",
+                f"{d:.1f} sigma beyond where the UUV can be "
+                f"{f.t - self.track.t:.2f} s after the track's last fix (gate {GATE_SIGMAS:g}{idle})",
+                leaves_track=True,
+            )
         self.track.update(f.t, f.z, f.C, share, a)
         self.scatter.add(f.t, f.z, f.C)
         self._refusing_since = None
@@ -390,12 +453,16 @@ class FixGate:
         share = self.scatter.share
         why = self._out_of_reach(f, share)
         first_of_lock, self._new_lock = self._new_lock, False
-        if why and first_of_lock:  # the tracker locked onto something where the UUV cannot be: not the UUV
+        if (
+            why and first_of_lock
+        ):  # the tracker locked onto something where the UUV cannot be: not the UUV
             self._diverged_until = math.inf
             self._foreign = True
             self._enter("diverged", f.t)
-            self.last_refusal = (f"diverged: the target found is not the UUV: {why}; refused until the target is "
-                                 "lost or released, or the operator confirms it")
+            self.last_refusal = (
+                f"diverged: the target found is not the UUV: {why}; refused until the target is "
+                "lost or released, or the operator confirms it"
+            )
             return "diverged"
         if why:
             self.last_refusal = f"reach: {why}"
@@ -408,7 +475,9 @@ class FixGate:
             self._chain.append(f)
             self._chain_track.update(f.t, f.z, f.C, share, a)
             self._chain_misses = 0
-        elif self._chain and self._chain_misses < CHAIN_MISSES:  # one stray fix does not start the chain over
+        elif (
+            self._chain and self._chain_misses < CHAIN_MISSES
+        ):  # one stray fix does not start the chain over
             self._chain_misses += 1
             return "unconfirmed"
         else:
@@ -428,13 +497,17 @@ class FixGate:
             self._chain_track = self._replay(self._chain, self.scatter.share, check=False)[0]
         return "unconfirmed"
 
-    def _replay(self, chain: list[_Seen], share: float, check: bool = True) -> tuple[UuvTrack, int | None]:
+    def _replay(
+        self, chain: list[_Seen], share: float, check: bool = True
+    ) -> tuple[UuvTrack, int | None]:
         """The chain's track, and the index of the first fix that fails (reach, innovation) with ``share``."""
         track = self._new_track(chain[0], share)
         for i, f in enumerate(chain):
             a = self._accel(track)
-            if check and (self._out_of_reach(f, share)
-                          or (i and track.distance(f.t, f.z, f.C, share, a)[0] > GATE_SIGMAS)):
+            if check and (
+                self._out_of_reach(f, share)
+                or (i and track.distance(f.t, f.z, f.C, share, a)[0] > GATE_SIGMAS)
+            ):
                 return track, max(i, 1)
             if i:
                 track.update(f.t, f.z, f.C, share, a)
@@ -448,8 +521,10 @@ class FixGate:
         d, radius, margin = self.track.distance(f.t, f.z, f.C, share, self._accel(self.track))
         if d <= GATE_SIGMAS:
             return None
-        return (f"{d:.1f} sigma beyond where the UUV can be {f.t - self.track.t:.1f} s after the last good fix "
-                f"(it can have moved {radius:.2f} m; 1 sigma {margin:.2f} m)")
+        return (
+            f"{d:.1f} sigma beyond where the UUV can be {f.t - self.track.t:.1f} s after the last good fix "
+            f"(it can have moved {radius:.2f} m; 1 sigma {margin:.2f} m)"
+        )
 
     def _accel(self, track: UuvTrack) -> float:
         """The acceleration bound (m/s²) from ``track``'s last fix until now: the water's and the drag's while the
@@ -457,9 +532,13 @@ class FixGate:
         push now is widened by :data:`~localizer.thrusters.STALE_S` of the vehicle's: the push can have begun that
         long before its first output arrived."""
         a = self.max_accel_mps2
-        idle = self.thrusters is not None and self.thrusters.idle_since(track.t + self._shift, self._now)
+        idle = self.thrusters is not None and self.thrusters.idle_since(
+            track.t + self._shift, self._now
+        )
         if idle:
-            speed = math.hypot(track.x[2], track.x[3]) + 2.0 * math.sqrt(max(track.P[2, 2], track.P[3, 3]))
+            speed = math.hypot(track.x[2], track.x[3]) + 2.0 * math.sqrt(
+                max(track.P[2, 2], track.P[3, 3])
+            )
             a = min(a, idle_accel_mps2(speed, self.water_accel_mps2))
         elif track.tight:
             track.widen(STALE_S)
@@ -468,7 +547,9 @@ class FixGate:
         return a
 
     def _new_track(self, f: _Seen, share: float) -> UuvTrack:
-        return UuvTrack(self.max_speed_mps, self.max_accel_mps2, f.t, f.z, f.C, share, self.max_reach_m)
+        return UuvTrack(
+            self.max_speed_mps, self.max_accel_mps2, f.t, f.z, f.C, share, self.max_reach_m
+        )
 
     def _local(self, fix: Fix, t: float) -> _Seen:
         """The fix in the local frame at ``t`` (the gate's base)."""
@@ -488,34 +569,58 @@ class FixGate:
     # -- the status ----------------------------------------------------------------------------
     def status(self, now: float) -> dict:
         """JSON-ready: the limits, the state, refusals by reason, the chain being confirmed and the track."""
+
         def num(x, digits=3):
             return round(float(x), digits) if x is not None and math.isfinite(x) else None
 
-        out = {"max_speed_mps": self.max_speed_mps, "max_accel_mps2": self.max_accel_mps2,
-               "max_h_acc_m": self.max_h_acc_m, "max_age_s": self.max_age_s, "state": self.state,
-               "state_since_t": num(self.state_since_t), "accepted": self.accepted,
-               "rejected": {r: self.rejected[r] for r in REASONS}, "last_refusal": self.last_refusal,
-               "white_share": num(self.scatter.share, 4) if self.scatter.samples else None,
-               "diverged_until_t": num(self._diverged_until) if self.state == "diverged" else None,
-               "chain": None, "track": None, "reach_m": None,
-               "thrusters": self.thrusters.state(now) if self.thrusters is not None else None,
-               "accel_bound_mps2": num(self.accel_bound_mps2), "max_reach_m": num(self.max_reach_m),
-               "operator_confirmed": self._operator_lock, "clock_steps": self.clock_steps,
-               "last_clock_step_s": num(self.last_clock_step_s)}
+        out = {
+            "max_speed_mps": self.max_speed_mps,
+            "max_accel_mps2": self.max_accel_mps2,
+            "max_h_acc_m": self.max_h_acc_m,
+            "max_age_s": self.max_age_s,
+            "state": self.state,
+            "state_since_t": num(self.state_since_t),
+            "accepted": self.accepted,
+            "rejected": {r: self.rejected[r] for r in REASONS},
+            "last_refusal": self.last_refusal,
+            "white_share": num(self.scatter.share, 4) if self.scatter.samples else None,
+            "diverged_until_t": num(self._diverged_until) if self.state == "diverged" else None,
+            "chain": None,
+            "track": None,
+            "reach_m": None,
+            "thrusters": self.thrusters.state(now) if self.thrusters is not None else None,
+            "accel_bound_mps2": num(self.accel_bound_mps2),
+            "max_reach_m": num(self.max_reach_m),
+            "operator_confirmed": self._operator_lock,
+            "clock_steps": self.clock_steps,
+            "last_clock_step_s": num(self.last_clock_step_s),
+        }
         if self._chain:
-            out["chain"] = {"fixes": len(self._chain), "span_s": num(self._chain[-1].t - self._chain[0].t),
-                            "needed_s": self.confirm_s}
+            out["chain"] = {
+                "fixes": len(self._chain),
+                "span_s": num(self._chain[-1].t - self._chain[0].t),
+                "needed_s": self.confirm_s,
+            }
         tr = self.track
         if tr is None:
             return out
         lat, lon, _ = ned_to_geodetic(tr.x[0], tr.x[1], 0.0, *self._ref, 0.0)
         A = tr.absolute_m2()
         now = now - self._shift  # on the gate's base
-        out["track"] = {"t": num(tr.t), "age_s": num(now - tr.t), "lat": num(lat, 8), "lon": num(lon, 8),
-                        "vn_mps": num(tr.x[2]), "ve_mps": num(tr.x[3]),
-                        "sigma_n_m": num(math.sqrt(A[0, 0])), "sigma_e_m": num(math.sqrt(A[1, 1])),
-                        "cov_ne_m2": num(A[0, 1], 5), "sigma_own_m": num(math.sqrt(tr.P[0, 0] + tr.P[1, 1])),
-                        "sigma_vn_mps": num(math.sqrt(tr.P[2, 2])), "sigma_ve_mps": num(math.sqrt(tr.P[3, 3]))}
+        out["track"] = {
+            "t": num(tr.t),
+            "age_s": num(now - tr.t),
+            "lat": num(lat, 8),
+            "lon": num(lon, 8),
+            "vn_mps": num(tr.x[2]),
+            "ve_mps": num(tr.x[3]),
+            "sigma_n_m": num(math.sqrt(A[0, 0])),
+            "sigma_e_m": num(math.sqrt(A[1, 1])),
+            "cov_ne_m2": num(A[0, 1], 5),
+            "sigma_own_m": num(math.sqrt(tr.P[0, 0] + tr.P[1, 1])),
+            "sigma_vn_mps": num(math.sqrt(tr.P[2, 2])),
+            "sigma_ve_mps": num(math.sqrt(tr.P[3, 3])),
+        }
         if self.state != "tracking":
             out["reach_m"] = num(tr.reach_m(now))
         return out

@@ -140,7 +140,9 @@ def fit_shared(C: np.ndarray, G: np.ndarray) -> np.ndarray:
     return G * math.sqrt(min(1.0, SHARED_MAX / worst))
 
 
-def shared_effects(fix: Fix, sigmas: SharedSigmas, velocity_ne_mps: np.ndarray | None = None) -> np.ndarray:
+def shared_effects(
+    fix: Fix, sigmas: SharedSigmas, velocity_ne_mps: np.ndarray | None = None
+) -> np.ndarray:
     """``G`` (2 × :data:`SHARED_TERMS`, m): how each shared error at 1-sigma moves this fix north and east.
 
     The depth and the height move it along the line from the UAV to the UUV (``north_m``, ``east_m``) by the
@@ -152,15 +154,28 @@ def shared_effects(fix: Fix, sigmas: SharedSigmas, velocity_ne_mps: np.ndarray |
     G = _no_shared()
     rho = math.hypot(fix.north_m, fix.east_m)
     h, d = fix.height_m, fix.depth_m
-    if math.isfinite(rho) and rho > 0 and math.isfinite(h) and h > 0 and math.isfinite(d) and d >= 0:
+    if (
+        math.isfinite(rho)
+        and rho > 0
+        and math.isfinite(h)
+        and h > 0
+        and math.isfinite(d)
+        and d >= 0
+    ):
         x = float(surface_distance(rho, h, d))
         sin_w = x / math.hypot(x, h) / 1.34
         tan_air, tan_water = x / h, sin_w / math.sqrt(1.0 - sin_w * sin_w)
         along = np.array([fix.north_m, fix.east_m]) / rho
         sigma_depth = fix.sigma_depth_m if math.isfinite(fix.sigma_depth_m) else 0.0
         own_height = any(w in fix.height_source for w in ("rangefinder", "size"))
-        sigma_height = 0.0 if own_height else min(sigmas.height_m, fix.sigma_height_m if math.isfinite(
-            fix.sigma_height_m) else sigmas.height_m)
+        sigma_height = (
+            0.0
+            if own_height
+            else min(
+                sigmas.height_m,
+                fix.sigma_height_m if math.isfinite(fix.sigma_height_m) else sigmas.height_m,
+            )
+        )
         G[:, 0] = along * tan_water * sigma_depth
         G[:, 1] = along * tan_air * sigma_height
     G[0, 2] = G[1, 3] = sigmas.gnss_m
@@ -234,15 +249,24 @@ def choose(estimates: dict[str, Estimate], prior: Estimate | None) -> tuple[str,
     """The sources to fuse (see the module doc): the largest pairwise-agreeing set, the prior deciding a tie;
     () when nothing can be chosen."""
     names = sorted(estimates)
-    agree = {(a, b): distance(estimates[a], estimates[b]) <= AGREE_SIGMAS for a, b in itertools.combinations(names, 2)}
+    agree = {
+        (a, b): distance(estimates[a], estimates[b]) <= AGREE_SIGMAS
+        for a, b in itertools.combinations(names, 2)
+    }
     for size in range(len(names), 0, -1):
-        sets = [s for s in itertools.combinations(names, size) if all(agree[p] for p in itertools.combinations(s, 2))]
+        sets = [
+            s
+            for s in itertools.combinations(names, size)
+            if all(agree[p] for p in itertools.combinations(s, 2))
+        ]
         if len(sets) == 1:
             return sets[0]
         if sets:
             if prior is None:
                 return ()
-            with_prior = [s for s in sets if distance(fuse([estimates[n] for n in s]), prior) <= AGREE_SIGMAS]
+            with_prior = [
+                s for s in sets if distance(fuse([estimates[n] for n in s]), prior) <= AGREE_SIGMAS
+            ]
             return with_prior[0] if len(with_prior) == 1 else ()
     return ()
 
@@ -256,11 +280,15 @@ def fuse(estimates: list[Estimate]) -> Estimate:
     G = np.vstack([e.G for e in estimates])
     Sigma = G @ G.T
     for i, e in enumerate(estimates):
-        Sigma[2 * i:2 * i + 2, 2 * i:2 * i + 2] += e.W
+        Sigma[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] += e.W
     SiH = np.linalg.solve(Sigma, H)
     P = np.linalg.inv(H.T @ SiH)
     z = P @ (SiH.T @ np.concatenate([e.z for e in estimates]))
-    v = [e for e in estimates if math.isfinite(e.v_acc_m) and e.v_acc_m > 0 and math.isfinite(e.alt_m)]
+    v = [
+        e
+        for e in estimates
+        if math.isfinite(e.v_acc_m) and e.v_acc_m > 0 and math.isfinite(e.alt_m)
+    ]
     if v:
         w = np.array([1.0 / e.v_acc_m**2 for e in v])
         alt = float(np.dot(w, [e.alt_m for e in v]) / w.sum())

@@ -14,8 +14,12 @@ import pymap3d
 def ned_to_geodetic(north_m, east_m, down_m, lat0_deg, lon0_deg, alt0_m):
     """Latitude, longitude (degrees) and altitude (m) of a point at a NED offset from an origin."""
     lat, lon, alt = pymap3d.ned2geodetic(
-        np.asarray(north_m, float), np.asarray(east_m, float), np.asarray(down_m, float),
-        lat0_deg, lon0_deg, alt0_m,
+        np.asarray(north_m, float),
+        np.asarray(east_m, float),
+        np.asarray(down_m, float),
+        lat0_deg,
+        lon0_deg,
+        alt0_m,
     )
     return np.asarray(lat), np.asarray(lon), np.asarray(alt)
 
@@ -23,8 +27,12 @@ def ned_to_geodetic(north_m, east_m, down_m, lat0_deg, lon0_deg, alt0_m):
 def geodetic_to_ned(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m):
     """NED offset (m) of a geodetic point from an origin."""
     n, e, d = pymap3d.geodetic2ned(
-        np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(alt_m, float),
-        lat0_deg, lon0_deg, alt0_m,
+        np.asarray(lat_deg, float),
+        np.asarray(lon_deg, float),
+        np.asarray(alt_m, float),
+        lat0_deg,
+        lon0_deg,
+        alt0_m,
     )
     return np.asarray(n), np.asarray(e), np.asarray(d)
 

@@ -105,7 +105,7 @@ def drift_variance_m2(dt_s, rate_sigma_mps, tau_s=DRIFT_RATE_TAU_S):
     ``rate_sigma_mps`` and correlation time ``tau_s``: ``2·σ²·τ²·(x − 1 + e^−x)``, ``x = dt/τ``
     (``σ²·dt²`` for ``dt`` ≪ ``τ``, ``2·σ²·τ·dt`` for ``dt`` ≫ ``τ``)."""
     x = np.asarray(dt_s, dtype=float) / tau_s
-    return 2.0 * rate_sigma_mps ** 2 * tau_s ** 2 * (x + np.expm1(-x))
+    return 2.0 * rate_sigma_mps**2 * tau_s**2 * (x + np.expm1(-x))
 
 
 def drift_rate_sigma_mps(drift_10min_m: float) -> float:
@@ -130,7 +130,9 @@ def ekf_height_m(water: Water, tel: Telemetry, t_uav) -> np.ndarray:
     """The EKF's height of the reported position above the water at UAV-scale times (NaN where
     GLOBAL_POSITION_INT has no fresh sample)."""
     p, status, _ = tel.position.sample(np.asarray(t_uav, dtype=float))
-    h = height_above_surface_m(p[..., 2], p[..., 3], water.takeoff_height_above_surface_m, water.surface_amsl_m)
+    h = height_above_surface_m(
+        p[..., 2], p[..., 3], water.takeoff_height_above_surface_m, water.surface_amsl_m
+    )
     return np.where(status == OK, h, np.nan)
 
 
@@ -148,10 +150,17 @@ class _Aux(NamedTuple):
 
     sigma_g: float  # the GNSS altitude's slow error's 1-sigma in force (NaN before one came)
     fix: int  # its fix type (-1 before)
-    S: float | None  # the water altitude GNSS altitudes are referred to (take-off: the first difference)
+    S: (
+        float | None
+    )  # the water altitude GNSS altitudes are referred to (take-off: the first difference)
     refused: tuple = ()  # (source, measurements refused in a row) of the sources whose newest was refused
-    z_prev: float = math.nan  # the previous GNSS measurement (NaN: none since the fix type or the reference changed)
-    scatter: tuple = (0, 0.0)  # (differences counted, the running mean of half their squares): see _scattered
+    z_prev: float = (
+        math.nan
+    )  # the previous GNSS measurement (NaN: none since the fix type or the reference changed)
+    scatter: tuple = (
+        0,
+        0.0,
+    )  # (differences counted, the running mean of half their squares): see _scattered
 
 
 class HeightEstimator:
@@ -191,7 +200,10 @@ class HeightEstimator:
         microseconds: the containers are copied, their items are immutable (tuples, floats, words) and the
         arrays are never written in place (each update makes new ones)."""
         new = object.__new__(HeightEstimator)
-        new.__dict__ = {k: type(v)(v) if isinstance(v, (list, dict, set)) else v for k, v in self.__dict__.items()}
+        new.__dict__ = {
+            k: type(v)(v) if isinstance(v, (list, dict, set)) else v
+            for k, v in self.__dict__.items()
+        }
         return new
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -210,10 +222,13 @@ class HeightEstimator:
             if series.last_t is None or series.last_t <= self._taken.get(name, -math.inf):
                 continue
             sel = series.times > self._taken.get(name, -math.inf)
-            new += [(float(t), _FIX, (name, float(h), float(s))) for t, (h, s) in zip(series.times[sel], series.values[sel])]
+            new += [
+                (float(t), _FIX, (name, float(h), float(s)))
+                for t, (h, s) in zip(series.times[sel], series.values[sel])
+            ]
             self._taken[name] = series.last_t
         if not self.amsl:
-            new += [(t, _ARM, None) for t in tel.arm_times[self._arms_taken:]]
+            new += [(t, _ARM, None) for t in tel.arm_times[self._arms_taken :]]
         self._arms_taken = len(tel.arm_times)
         return new
 
@@ -223,8 +238,14 @@ class HeightEstimator:
             boot = tel.uav_clock.offset_s  # the autopilot's boot on the UAV buffers' scale
             if boot is None:
                 return
-            P = np.diag([self.sigmas.height_m ** 2, self.rate_sigma_mps ** 2,
-                         (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2, 0.0])
+            P = np.diag(
+                [
+                    self.sigmas.height_m**2,
+                    self.rate_sigma_mps**2,
+                    (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2,
+                    0.0,
+                ]
+            )
             self._base = (boot, np.zeros(4), P, _Aux(math.nan, -1, self.water.surface_amsl_m))
         new = sorted(self._pull(tel), key=lambda e: e[0])
         if new:
@@ -244,8 +265,11 @@ class HeightEstimator:
         """State and covariance ``dt`` s later (arrays broadcast over leading axes): ``e`` integrates the rate ``d``
         (the exact discretisation of an integrated first-order Gauss-Markov process), ``g`` decays."""
         dt = np.asarray(dt, dtype=float)
-        tau, var_d = DRIFT_RATE_TAU_S, self.rate_sigma_mps ** 2
-        m1, m2 = np.expm1(-dt / tau), np.expm1(-2.0 * dt / tau)  # φ − 1, φ² − 1 (φ = e^(−dt/τ)), without cancellation
+        tau, var_d = DRIFT_RATE_TAU_S, self.rate_sigma_mps**2
+        m1, m2 = (
+            np.expm1(-dt / tau),
+            np.expm1(-2.0 * dt / tau),
+        )  # φ − 1, φ² − 1 (φ = e^(−dt/τ)), without cancellation
         phi_g = np.exp(-dt / GNSS_TAU_S)
         F = np.zeros(dt.shape + (4, 4))
         F[..., _E, _E] = F[..., _S, _S] = 1.0
@@ -253,10 +277,10 @@ class HeightEstimator:
         F[..., _D, _D] = 1.0 + m1
         F[..., _G, _G] = phi_g
         Q = np.zeros_like(F)
-        Q[..., _E, _E] = var_d * tau ** 2 * (2.0 * dt / tau + 4.0 * m1 - m2)
-        Q[..., _E, _D] = Q[..., _D, _E] = var_d * tau * m1 ** 2
+        Q[..., _E, _E] = var_d * tau**2 * (2.0 * dt / tau + 4.0 * m1 - m2)
+        Q[..., _E, _D] = Q[..., _D, _E] = var_d * tau * m1**2
         Q[..., _D, _D] = -var_d * m2
-        Q[..., _G, _G] = np.nan_to_num(np.asarray(sigma_g, dtype=float)) ** 2 * (1.0 - phi_g ** 2)
+        Q[..., _G, _G] = np.nan_to_num(np.asarray(sigma_g, dtype=float)) ** 2 * (1.0 - phi_g**2)
         x = np.einsum("...ij,...j->...i", F, x)
         P = F @ P @ np.swapaxes(F, -1, -2) + Q
         return x, P
@@ -265,7 +289,11 @@ class HeightEstimator:
         k = self._n
         for col in (self._aux, self._src, self._ok, self._gap):
             del col[k:]
-        t0, x, P, aux = self._base if k == 0 else (self._t[k - 1], self._x[k - 1], self._P[k - 1], self._aux[k - 1])
+        t0, x, P, aux = (
+            self._base
+            if k == 0
+            else (self._t[k - 1], self._x[k - 1], self._P[k - 1], self._aux[k - 1])
+        )
         entries = self._entries[k:]
         h_ekf = ekf_height_m(self.water, tel, [e[0] for e in entries])
         ts, xs, Ps = [], [], []
@@ -288,29 +316,37 @@ class HeightEstimator:
 
     def _step(self, t, kind, data, h_e, x, P, aux: _Aux):
         """One entry: ``(x, P, aux, source word or None, used, disagreement m or NaN)``."""
-        if kind == _ARM:  # the take-off reference is set again: e starts over, and GNSS altitudes count from here
+        if (
+            kind == _ARM
+        ):  # the take-off reference is set again: e starts over, and GNSS altitudes count from here
             x, P = x.copy(), P.copy()
             x[_E] = x[_S] = 0.0
             P[_E, :] = P[:, _E] = P[_S, :] = P[:, _S] = 0.0
-            P[_E, _E], P[_S, _S] = self.sigmas.height_m ** 2, SURFACE_UNKNOWN_M ** 2
+            P[_E, _E], P[_S, _S] = self.sigmas.height_m**2, SURFACE_UNKNOWN_M**2
             return x, P, aux._replace(z_prev=math.nan), None, False, math.nan
         if not math.isfinite(h_e):
             return x, P, aux, None, False, math.nan
         if kind == _GNSS:
             fix, alt, stated = data
-            sigma = stated * math.sqrt(1.0 - GNSS_WHITE ** 2)
+            sigma = stated * math.sqrt(1.0 - GNSS_WHITE**2)
             x, P = x.copy(), P.copy()
-            if fix != aux.fix or not math.isfinite(aux.sigma_g):  # a new error source: g starts afresh
+            if fix != aux.fix or not math.isfinite(
+                aux.sigma_g
+            ):  # a new error source: g starts afresh
                 x[_G] = 0.0
                 P[_G, :] = P[:, _G] = 0.0
-                P[_G, _G] = sigma ** 2
+                P[_G, _G] = sigma**2
                 aux = aux._replace(z_prev=math.nan, scatter=(0, 0.0))
             elif sigma != aux.sigma_g:  # the receiver's accuracy changed: the same error, rescaled
                 x[_G] *= sigma / aux.sigma_g
                 P[_G, :] *= sigma / aux.sigma_g
                 P[:, _G] *= sigma / aux.sigma_g
-            if aux.S is None:  # the first: GNSS altitudes give the drift from here on; the drift so far, if its rate
-                P[_E, _D] = P[_D, _E] = 0.0  # is learnt, is not inferred from it (only a take-off reference's S is unset)
+            if (
+                aux.S is None
+            ):  # the first: GNSS altitudes give the drift from here on; the drift so far, if its rate
+                P[_E, _D] = P[_D, _E] = (
+                    0.0  # is learnt, is not inferred from it (only a take-off reference's S is unset)
+                )
             S = alt - h_e if aux.S is None else aux.S
             z = alt - h_e - S
             scatter = _scattered(aux, z)
@@ -320,22 +356,37 @@ class HeightEstimator:
             r, said_m = max((GNSS_WHITE * stated) ** 2, scatter[1]) + 1e-6, alt - S
         else:
             word, said_m, stated = data
-            row, z, r = self.c, h_e - said_m, stated ** 2
+            row, z, r = self.c, h_e - said_m, stated**2
         innovation = z - row @ x
         s = row @ P @ row + r
         apart = abs(innovation) / math.sqrt(s)
         streaks = dict(aux.refused)
         streak = streaks.pop(word, 0)
-        if apart > (AGREE_SIGMAS if streak else GATE_SIGMAS):  # once refused, back only within AGREE_SIGMAS
+        if apart > (
+            AGREE_SIGMAS if streak else GATE_SIGMAS
+        ):  # once refused, back only within AGREE_SIGMAS
             if streak + 1 == CONFLICT_AFTER:
                 est, sigma = h_e - self.c @ x, math.sqrt(self.c @ P @ self.c)
-                self._tell(word, t, f"height: {word} gives {said_m:.2f} ± {stated:.2f} m above the water, the estimate "
-                           f"{est:.2f} ± {sigma:.2f} m (EKF height {h_e:.2f} m): {apart:.1f} sigma apart; not used "
-                           "while they disagree, the height's sigma covers both")
+                self._tell(
+                    word,
+                    t,
+                    f"height: {word} gives {said_m:.2f} ± {stated:.2f} m above the water, the estimate "
+                    f"{est:.2f} ± {sigma:.2f} m (EKF height {h_e:.2f} m): {apart:.1f} sigma apart; not used "
+                    "while they disagree, the height's sigma covers both",
+                )
             streaks[word] = streak + 1
-            return x, P, aux._replace(refused=tuple(sorted(streaks.items()))), word, False, innovation
+            return (
+                x,
+                P,
+                aux._replace(refused=tuple(sorted(streaks.items()))),
+                word,
+                False,
+                innovation,
+            )
         if streak >= CONFLICT_AFTER:
-            self._tell(word, t, f"height: {word} agrees with the estimate again ({apart:.1f} sigma): used")
+            self._tell(
+                word, t, f"height: {word} agrees with the estimate again ({apart:.1f} sigma): used"
+            )
         aux = aux._replace(refused=tuple(sorted(streaks.items())))
         K = P @ row / s
         x = x + K * innovation
@@ -372,12 +423,18 @@ class HeightEstimator:
             src = np.array(self._src, dtype=object)
             ok, gap = np.array(self._ok, dtype=bool), np.array(self._gap, dtype=float)
             self._cache = {}
-            for w in sorted({w for w in self._src if w is not None}, key=lambda w: ("gnss" in w, w)):
+            for w in sorted(
+                {w for w in self._src if w is not None}, key=lambda w: ("gnss" in w, w)
+            ):
                 sel = src == w
                 refused_in_a_row = np.zeros(sel.sum(), int)
                 for i, used in enumerate(ok[sel]):
                     refused_in_a_row[i] = 0 if used else (refused_in_a_row[i - 1] if i else 0) + 1
-                self._cache[w] = (self._t[sel], ok[sel], np.where(refused_in_a_row >= CONFLICT_AFTER, gap[sel], np.nan))
+                self._cache[w] = (
+                    self._t[sel],
+                    ok[sel],
+                    np.where(refused_in_a_row >= CONFLICT_AFTER, gap[sel], np.nan),
+                )
         return self._cache
 
     def at(self, tel: Telemetry, t_uav) -> HeightAt:
@@ -386,7 +443,9 @@ class HeightEstimator:
         tq = np.atleast_1d(np.asarray(t_uav, dtype=float))
         n = len(tq)
         if self._base is None:
-            return HeightAt(np.full(n, np.nan), np.full(n, np.nan), np.full(n, self.word, dtype=object))
+            return HeightAt(
+                np.full(n, np.nan), np.full(n, np.nan), np.full(n, self.word, dtype=object)
+            )
         i = np.searchsorted(self._t[: self._n], tq, side="right") - 1
         t0b, xb, Pb, auxb = self._base
         j = np.maximum(i, 0)
@@ -419,14 +478,28 @@ class HeightEstimator:
         h_ekf = float(ekf_height_m(self.water, tel, [t_uav])[0])
         anchor = "boot" if self.amsl or not tel.arm_times else "arming"
         since = tel.arm_times[-1] if anchor == "arming" else (self._base[0] if self._base else None)
-        sources = {word: {"used": int(ok.sum()), "refused": int((~ok).sum()),
-                          "age_s": round(max(0.0, t_uav - times[-1]), 2), "disagrees_m": _num(gap[-1])}
-                   for word, (times, ok, gap) in self._columns().items()}
-        return {"height_m": _num(h_ekf - at.bias_m[0]), "sigma_m": _num(at.sigma_m[0]), "source": at.source[0],
-                "ekf_height_m": _num(h_ekf), "bias_m": _num(at.bias_m[0]), "reference": self.word,
-                "reference_set_at": anchor, "armed": tel.armed,
-                "since_reference_s": None if since is None else round(max(0.0, t_uav - since), 1),
-                "rangefinder_out_of_range": tel.rangefinder_out_of_range, "sources": sources}
+        sources = {
+            word: {
+                "used": int(ok.sum()),
+                "refused": int((~ok).sum()),
+                "age_s": round(max(0.0, t_uav - times[-1]), 2),
+                "disagrees_m": _num(gap[-1]),
+            }
+            for word, (times, ok, gap) in self._columns().items()
+        }
+        return {
+            "height_m": _num(h_ekf - at.bias_m[0]),
+            "sigma_m": _num(at.sigma_m[0]),
+            "source": at.source[0],
+            "ekf_height_m": _num(h_ekf),
+            "bias_m": _num(at.bias_m[0]),
+            "reference": self.word,
+            "reference_set_at": anchor,
+            "armed": tel.armed,
+            "since_reference_s": None if since is None else round(max(0.0, t_uav - since), 1),
+            "rangefinder_out_of_range": tel.rangefinder_out_of_range,
+            "sources": sources,
+        }
 
 
 def _scattered(aux: _Aux, z: float) -> tuple:

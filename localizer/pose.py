@@ -53,14 +53,20 @@ class CameraPose:
     omega_ned: np.ndarray  # (N, 3) the camera's angular velocity in NED, rad/s
     velocity_ned_mps: np.ndarray  # (N, 3) the UAV's velocity in NED, m/s
     t_gnss: np.ndarray  # the frame's time as GNSS (UNIX) time; NaN without SYSTEM_TIME
-    geoid_separation_m: np.ndarray  # ellipsoid minus mean sea level at the UAV (GPS_RAW_INT); NaN if unknown
+    geoid_separation_m: (
+        np.ndarray
+    )  # ellipsoid minus mean sea level at the UAV (GPS_RAW_INT); NaN if unknown
     # each input's 1-sigma as it goes into the fix's accuracy, and where the input came from (a word per frame)
     sigma_height_m: np.ndarray  # the camera's height above the water
     sigma_depth_m: np.ndarray  # the UUV's depth
     sigma_time_s: np.ndarray  # the frame's time against the telemetry's
-    height_source: np.ndarray  # object array of str: what measured the height (localizer.height), e.g. "gnss_rtk"
+    height_source: (
+        np.ndarray
+    )  # object array of str: what measured the height (localizer.height), e.g. "gnss_rtk"
     depth_source: np.ndarray
-    time_source: np.ndarray  # how the frame is aligned to the telemetry: configured, timesync, motion or unknown
+    time_source: (
+        np.ndarray
+    )  # how the frame is aligned to the telemetry: configured, timesync, motion or unknown
 
 
 def take(pose: CameraPose, idx) -> CameraPose:
@@ -93,7 +99,12 @@ def _rotations(cal: Calibration, tel: Telemetry, tq, status=None):
     sig_tilt, sig_yaw = np.hypot(ea[:, 0], ea[:, 1]), ea[:, 2].copy()
     src = cal.mount.attitude_source
     if src == "fixed":
-        return att.R_ned_from_fixed_mount(R_body, cal.mount.fixed_rpy_deg), R_body, sig_tilt, sig_yaw
+        return (
+            att.R_ned_from_fixed_mount(R_body, cal.mount.fixed_rpy_deg),
+            R_body,
+            sig_tilt,
+            sig_yaw,
+        )
     body = R_body if servo_mount(cal, tel) else None
     if src == "gimbal_device":
         g, sg, eg = tel.gimbal.sample(tq)
@@ -108,8 +119,13 @@ def _rotations(cal: Calibration, tel: Telemetry, tq, status=None):
     return R_gimbal, R_body, np.hypot(sig_tilt, g_tilt), np.hypot(sig_yaw, g_yaw)
 
 
-def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, float] | None = None,
-                depth: Series | None = None) -> CameraPose:
+def camera_pose(
+    cal: Calibration,
+    tel: Telemetry,
+    t_unix,
+    alignment: tuple[str, float] | None = None,
+    depth: Series | None = None,
+) -> CameraPose:
     """The camera at station time(s) ``t_unix`` (see the module doc), with the UUV's depth from ``depth``
     (:attr:`Telemetry.depth <localizer.telemetry.Telemetry.depth>` of one UUV's telemetry; default ``tel``'s own:
     one video over several UUVs shares the UAV's telemetry and reads each UUV's depth from its own).
@@ -140,7 +156,9 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, 
     R_before = att.R_ned_from_cv(_rotations(cal, tel, tq - RATE_STEP_S)[0])
     omega = np.nan_to_num(att.rotvec(R_cv @ np.swapaxes(R_before, -1, -2)) / RATE_STEP_S)
     cos_lat = np.cos(np.radians(p[:, 0]))
-    velocity = np.nan_to_num(np.stack([p[:, 4] / DEG_PER_M, p[:, 5] * cos_lat / DEG_PER_M, -p[:, 6]], axis=-1))
+    velocity = np.nan_to_num(
+        np.stack([p[:, 4] / DEG_PER_M, p[:, 5] * cos_lat / DEG_PER_M, -p[:, 6]], axis=-1)
+    )
 
     gnss, _, _ = tel.gnss.sample(tq)  # h_acc, geoid separation, fix type, alt, v_acc, HDOP, VDOP
     if cal.sigmas.uav_horizontal_m is not None:
@@ -153,10 +171,15 @@ def camera_pose(cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, 
     offset_gnss = tel.station_minus_gnss_s
 
     offset_ned = np.einsum("nij,j->ni", R_body, np.asarray(cal.mount.camera_offset_m))
-    height = ekf_height_error(cal.water, cal.sigmas, tel, tq)  # the barometer's drift, from GNSS, a rangefinder, ...
-    uav_h = height_above_surface_m(
-        p[:, 2], p[:, 3], cal.water.takeoff_height_above_surface_m, cal.water.surface_amsl_m
-    ) - height.bias_m
+    height = ekf_height_error(
+        cal.water, cal.sigmas, tel, tq
+    )  # the barometer's drift, from GNSS, a rangefinder, ...
+    uav_h = (
+        height_above_surface_m(
+            p[:, 2], p[:, 3], cal.water.takeoff_height_above_surface_m, cal.water.surface_amsl_m
+        )
+        - height.bias_m
+    )
     cam_h = uav_h - offset_ned[:, 2]
     status[(status == "ok") & ~(cam_h > 0)] = "below_surface"
     sig = cal.sigmas

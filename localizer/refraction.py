@@ -81,5 +81,8 @@ def ray_to_target(offset_ne_m, height_m, depth_m, n_water=1.34):
     x = surface_distance(rho, height_m, depth_m, n_water)
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where(rho > 0, x / rho, 0.0)
-    ray = np.concatenate([ne * scale[..., None], np.broadcast_to(np.asarray(height_m, float), rho.shape)[..., None]], axis=-1)
+    ray = np.concatenate(
+        [ne * scale[..., None], np.broadcast_to(np.asarray(height_m, float), rho.shape)[..., None]],
+        axis=-1,
+    )
     return ray / np.linalg.norm(ray, axis=-1, keepdims=True)

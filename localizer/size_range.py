@@ -33,7 +33,9 @@ from .ray import pixel_to_offset
 _CORNERS = np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, -1.0], [-1.0, 1.0]])
 
 
-def box_corners_px(camera: Camera, R_ned_from_cv, u, v, heading_rad, uuv: Uuv, height_m, depth_m, n_water):
+def box_corners_px(
+    camera: Camera, R_ned_from_cv, u, v, heading_rad, uuv: Uuv, height_m, depth_m, n_water
+):
     """Pixels (..., 8, 2) of the box's corners: the top face's four (at ``depth_m``), then the bottom face's.
 
     ``(u, v)``: the distorted pixel of the top face's centre; ``heading_rad`` the vehicle's
@@ -41,13 +43,19 @@ def box_corners_px(camera: Camera, R_ned_from_cv, u, v, heading_rad, uuv: Uuv, h
     dimensions (one attitude ``R_ned_from_cv`` (3, 3)). Corners above the water (negative depth)
     are seen along straight rays. NaN where a ray does not reach the water.
     """
-    u, v, heading, h = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (u, v, heading_rad, height_m)))
+    u, v, heading, h = np.broadcast_arrays(
+        *(np.asarray(x, dtype=float) for x in (u, v, heading_rad, height_m))
+    )
     d = float(depth_m)
-    centre, _ = pixel_to_offset(camera, R_ned_from_cv, u, v, h, np.full(h.shape, d), n_water if d > 0 else None)
+    centre, _ = pixel_to_offset(
+        camera, R_ned_from_cv, u, v, h, np.full(h.shape, d), n_water if d > 0 else None
+    )
     fwd = _CORNERS[:, 0] * (uuv.length_m / 2.0)
     right = _CORNERS[:, 1] * (uuv.width_m / 2.0)
     c, s = np.cos(heading)[..., None], np.sin(heading)[..., None]
-    face = centre[..., None, :] + np.stack([c * fwd - s * right, s * fwd + c * right], axis=-1)  # (..., 4, 2)
+    face = centre[..., None, :] + np.stack(
+        [c * fwd - s * right, s * fwd + c * right], axis=-1
+    )  # (..., 4, 2)
     ne = np.concatenate([face, face], axis=-2)
     hh = np.broadcast_to(h[..., None], ne.shape[:-1])
     depth = np.broadcast_to(np.repeat([d, d + uuv.height_m], 4), ne.shape[:-1])
@@ -60,15 +68,23 @@ def point_to_pixel(camera: Camera, R_ned_from_cv, offset_ne_m, height_m, depth_m
     water ``height_m`` (...) below it: :func:`localizer.ray.offset_to_pixel`, the surface crossing found by
     :func:`_surface_distance`; points above the water (depth ≤ 0) along straight rays."""
     ne = np.asarray(offset_ne_m, dtype=float)
-    h, depth = np.broadcast_arrays(np.asarray(height_m, dtype=float), np.asarray(depth_m, dtype=float))
+    h, depth = np.broadcast_arrays(
+        np.asarray(height_m, dtype=float), np.asarray(depth_m, dtype=float)
+    )
     rho = np.hypot(ne[..., 0], ne[..., 1])
     with np.errstate(divide="ignore", invalid="ignore"):
         scale = np.where(rho > 0, _surface_distance(rho, h, depth, n_water) / rho, 0.0)
-    ray_ned = np.concatenate([ne * scale[..., None], np.broadcast_to(h, rho.shape)[..., None]], axis=-1)
-    return ray_to_pixel(camera, np.einsum("...ji,...j->...i", np.asarray(R_ned_from_cv), ray_ned))  # R^T · ray
+    ray_ned = np.concatenate(
+        [ne * scale[..., None], np.broadcast_to(h, rho.shape)[..., None]], axis=-1
+    )
+    return ray_to_pixel(
+        camera, np.einsum("...ji,...j->...i", np.asarray(R_ned_from_cv), ray_ned)
+    )  # R^T · ray
 
 
-def _surface_distance(rho_m, height_m, depth_m, n_water: float, tol_m: float = 1e-12, max_steps: int = 30):
+def _surface_distance(
+    rho_m, height_m, depth_m, n_water: float, tol_m: float = 1e-12, max_steps: int = 30
+):
     """Horizontal distance from the camera to where the ray to a point ``rho_m`` away and ``depth_m`` below the
     surface crosses it (``height_m`` below the camera): :func:`localizer.refraction.surface_distance`, solved by
     Newton's method from the straight ray's crossing (kept within the same bracket) until every step is below
@@ -101,7 +117,9 @@ def outline(points) -> list[int]:
     order = sorted(range(len(pts)), key=lambda i: (pts[i, 0], pts[i, 1]))
 
     def turn(o, a, b):
-        return (pts[a, 0] - pts[o, 0]) * (pts[b, 1] - pts[o, 1]) - (pts[a, 1] - pts[o, 1]) * (pts[b, 0] - pts[o, 0])
+        return (pts[a, 0] - pts[o, 0]) * (pts[b, 1] - pts[o, 1]) - (pts[a, 1] - pts[o, 1]) * (
+            pts[b, 0] - pts[o, 0]
+        )
 
     lower: list[int] = []
     upper: list[int] = []
@@ -134,14 +152,17 @@ class EdgePoints:
         """The points' positions (..., K, 2) on the same edges of other corner positions (..., 8, 2)."""
         c = np.asarray(corners, dtype=float)
         lead = c.shape[:-2]
-        a = np.repeat(self.along, 2)  # (2K,): x and y alike, so that NumPy's loops run along the points
+        a = np.repeat(
+            self.along, 2
+        )  # (2K,): x and y alike, so that NumPy's loops run along the points
         first = np.take(c, self.first, axis=-2).reshape(*lead, -1)
         second = np.take(c, self.second, axis=-2).reshape(*lead, -1)
         return ((1.0 - a) * first + a * second).reshape(*lead, len(self.along), 2)
 
 
-def edge_points(corners, hull: list[int], spacing_px: float = 1.0, trim: float = 0.15,
-                min_edge_px: float = 3.0) -> EdgePoints:
+def edge_points(
+    corners, hull: list[int], spacing_px: float = 1.0, trim: float = 0.15, min_edge_px: float = 3.0
+) -> EdgePoints:
     """Points ``spacing_px`` apart along each edge of the outline ``hull`` of ``corners`` (8, 2), leaving out
     ``trim`` of each edge at both ends (the blurred corners) and edges shorter than ``min_edge_px``.
 
@@ -154,14 +175,20 @@ def edge_points(corners, hull: list[int], spacing_px: float = 1.0, trim: float =
     length_px = np.hypot(e[:, 0], e[:, 1])
     keep = length_px >= min_edge_px  # also leaves out NaN
     first, second, e, length_px = first[keep], second[keep], e[keep], length_px[keep]
-    count = np.maximum(2, (length_px * (1.0 - 2.0 * trim) / spacing_px).astype(int) + 1)  # points per edge
+    count = np.maximum(
+        2, (length_px * (1.0 - 2.0 * trim) / spacing_px).astype(int) + 1
+    )  # points per edge
     edge = np.repeat(np.arange(len(count)), count)  # each point's edge
     last = np.cumsum(count) - 1  # each edge's last point
-    index = np.arange(len(edge)) - (last - count + 1)[edge]  # each point's place on its edge: 0, 1, ...
+    index = (
+        np.arange(len(edge)) - (last - count + 1)[edge]
+    )  # each point's place on its edge: 0, 1, ...
     along = index * (((1.0 - trim) - trim) / (count - 1))[edge] + trim
     along[last] = 1.0 - trim
     normal = np.stack([e[:, 1], -e[:, 0]], axis=-1) / length_px[:, None]
-    return EdgePoints(c[first][edge] + along[:, None] * e[edge], normal[edge], first[edge], second[edge], along)
+    return EdgePoints(
+        c[first][edge] + along[:, None] * e[edge], normal[edge], first[edge], second[edge], along
+    )
 
 
 # --- the camera's height, frame by frame and over a window -------------------------------------------------
@@ -203,9 +230,18 @@ class SizeHeight:
         return float(np.hypot(self.sigma_m, self.sigma_common_m))
 
 
-def size_height(t_unix: float, camera_height_m: float, sigma_fit_m: float, size_px: float, camera_below_m: float,
-                configured_m: float, configured_sigma_m: float, depth_m: float, sigma_depth_m: float,
-                n_water: float) -> SizeHeight:
+def size_height(
+    t_unix: float,
+    camera_height_m: float,
+    sigma_fit_m: float,
+    size_px: float,
+    camera_below_m: float,
+    configured_m: float,
+    configured_sigma_m: float,
+    depth_m: float,
+    sigma_depth_m: float,
+    n_water: float,
+) -> SizeHeight:
     """A frame's :class:`SizeHeight` from its outline fit: the camera's height above the water, the fit's 1-sigma and
     the outline's size (pixels); ``camera_below_m`` is how far the camera is below the reported position (the mount's
     offset, NED down).
@@ -217,8 +253,15 @@ def size_height(t_unix: float, camera_height_m: float, sigma_fit_m: float, size_
     range_m = camera_height_m + max(depth_m, 0.0) / n_water
     relative = np.hypot(SIZE_SIGMA, 2.0 * EDGE_BIAS_PX / size_px)
     common = float(np.hypot(range_m * relative, sigma_depth_m / n_water))
-    return SizeHeight(t_unix, camera_height_m + camera_below_m, sigma_fit_m, common, configured_m,
-                      configured_sigma_m, depth_m)
+    return SizeHeight(
+        t_unix,
+        camera_height_m + camera_below_m,
+        sigma_fit_m,
+        common,
+        configured_m,
+        configured_sigma_m,
+        depth_m,
+    )
 
 
 @dataclass(frozen=True)
@@ -263,7 +306,9 @@ class HeightBias:
         if not self.heights:
             return None
         b = np.array([h.bias_m for h in self.heights])
-        s = np.maximum([h.sigma_m for h in self.heights], 1e-3)  # a perfect fit is not an infinite weight
+        s = np.maximum(
+            [h.sigma_m for h in self.heights], 1e-3
+        )  # a perfect fit is not an infinite weight
         t = np.array([h.t_unix for h in self.heights])
         median = float(np.median(b))
         spread = 1.4826 * float(np.median(np.abs(b - median)))
@@ -279,11 +324,23 @@ class HeightBias:
         common = float(np.mean([h.sigma_common_m for h in kept]))
         sigma = float(np.hypot(max(float(np.sqrt(1.0 / np.sum(w))), scatter), common))
         outliers = int(np.sum(~keep))
-        sure = (len(b) >= MIN_FRAMES and len(blocks) >= MIN_BLOCKS and sigma <= SURE_SIGMA_M
-                and outliers <= MAX_OUTLIERS * len(keep))
-        return BiasEstimate(bias, sigma, common, len(b), outliers, len(blocks),
-                            float(np.mean([h.depth_m <= AT_SURFACE_M for h in kept])),
-                            float(np.mean([h.configured_sigma_m for h in kept])), sure)
+        sure = (
+            len(b) >= MIN_FRAMES
+            and len(blocks) >= MIN_BLOCKS
+            and sigma <= SURE_SIGMA_M
+            and outliers <= MAX_OUTLIERS * len(keep)
+        )
+        return BiasEstimate(
+            bias,
+            sigma,
+            common,
+            len(b),
+            outliers,
+            len(blocks),
+            float(np.mean([h.depth_m <= AT_SURFACE_M for h in kept])),
+            float(np.mean([h.configured_sigma_m for h in kept])),
+            sure,
+        )
 
 
 def _mean_sigma(x: np.ndarray) -> float:
@@ -292,5 +349,9 @@ def _mean_sigma(x: np.ndarray) -> float:
     if len(x) < 2:
         return np.inf
     d = x - x.mean()
-    r = float(np.clip(np.dot(d[:-1], d[1:]) / max(float(np.dot(d, d)), 1e-300), 0.0, 0.9)) if len(x) > 2 else 0.0
+    r = (
+        float(np.clip(np.dot(d[:-1], d[1:]) / max(float(np.dot(d, d)), 1e-300), 0.0, 0.9))
+        if len(x) > 2
+        else 0.0
+    )
     return float(np.std(x, ddof=1) / np.sqrt(len(x)) * np.sqrt((1.0 + r) / (1.0 - r)))

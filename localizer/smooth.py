@@ -85,7 +85,9 @@ class Smoothed:
     gap_s: np.ndarray
     white_share: float  # s², measured over the recording: frame to frame, or over a wave's period when that is larger
     wave_share: float  # the share measured over a wave's period (NaN: too few fixes)
-    accel_mps2: np.ndarray  # per frame: the acceleration bound of the process noise over the step to it
+    accel_mps2: (
+        np.ndarray
+    )  # per frame: the acceleration bound of the process noise over the step to it
 
     @property
     def cov_m2(self) -> np.ndarray:
@@ -99,8 +101,13 @@ class Smoothed:
         return np.sqrt(C[:, 0, 0] + C[:, 1, 1])
 
 
-def smooth_fixes(fixes: Fixes, taken: np.ndarray, max_speed_mps: float, max_accel_mps2: float,
-                 bridge_sigma_m: float = BRIDGE_SIGMA_M) -> Smoothed:
+def smooth_fixes(
+    fixes: Fixes,
+    taken: np.ndarray,
+    max_speed_mps: float,
+    max_accel_mps2: float,
+    bridge_sigma_m: float = BRIDGE_SIGMA_M,
+) -> Smoothed:
     """The smoothed track of ``fixes`` (times increasing) from those ``taken`` (ok fixes the gates took, with a
     finite ``h_acc_m``), for a UUV of top speed ``max_speed_mps`` and acceleration bound ``max_accel_mps2``."""
     taken = np.asarray(taken, bool) & (fixes.status == "ok") & np.isfinite(fixes.h_acc_m)
@@ -109,20 +116,38 @@ def smooth_fixes(fixes: Fixes, taken: np.ndarray, max_speed_mps: float, max_acce
     idx = np.flatnonzero(taken)
     if not len(idx):
         empty = np.full(n, np.nan)
-        return Smoothed(fixes.t_unix, np.zeros(n, bool), empty, empty, empty, empty, empty, empty, nan2, nan2.copy(),
-                        np.full(n, np.inf), 1.0, np.nan, np.full(n, float(max_accel_mps2)))
+        return Smoothed(
+            fixes.t_unix,
+            np.zeros(n, bool),
+            empty,
+            empty,
+            empty,
+            empty,
+            empty,
+            empty,
+            nan2,
+            nan2.copy(),
+            np.full(n, np.inf),
+            1.0,
+            np.nan,
+            np.full(n, float(max_accel_mps2)),
+        )
     ref = (float(fixes.lat[idx[0]]), float(fixes.lon[idx[0]]))
     zn, ze, _ = geodetic_to_ned(fixes.lat, fixes.lon, 0.0, *ref, 0.0)
     z = np.stack([zn, ze], axis=1)
     C = nan2.copy()
     for i in idx:
-        C[i] = fix_covariance_m2(fixes.sigma_n_m[i], fixes.sigma_e_m[i], fixes.cov_ne_m2[i], fixes.h_acc_m[i])
+        C[i] = fix_covariance_m2(
+            fixes.sigma_n_m[i], fixes.sigma_e_m[i], fixes.cov_ne_m2[i], fixes.h_acc_m[i]
+        )
     share = white_share(fixes.t_unix[idx], z[idx], C[idx])
     fits = local_fits(fixes.t_unix[idx], z[idx])
     wave = jitter_share(fits, C[idx])
     gap = _gaps(fixes.t_unix, idx)
     accel = np.full(n, float(max_accel_mps2))
-    correlated = wave >= CORRELATED_RATIO * share  # the noise does not average from frame to frame: waves' jitter
+    correlated = (
+        wave >= CORRELATED_RATIO * share
+    )  # the noise does not average from frame to frame: waves' jitter
     if correlated:
         share = min(1.0, wave)
         accel = data_accel_mps2(fixes.t_unix, idx, gap, fits, C[idx], share, max_accel_mps2)
@@ -130,14 +155,34 @@ def smooth_fixes(fixes: Fixes, taken: np.ndarray, max_speed_mps: float, max_acce
     shared = _shared(C, idx, share)
     own = P[:, :2, :2]
     if correlated:
-        own = own * _passed_jitter_scale(fixes.t_unix, idx, fits, C, taken, share, max_speed_mps, accel, own)[:, None,
-                                                                                                              None]
-    widest = np.array([np.linalg.eigvalsh(p)[-1] if np.all(np.isfinite(p)) else np.inf for p in own])
+        own = (
+            own
+            * _passed_jitter_scale(
+                fixes.t_unix, idx, fits, C, taken, share, max_speed_mps, accel, own
+            )[:, None, None]
+        )
+    widest = np.array(
+        [np.linalg.eigvalsh(p)[-1] if np.all(np.isfinite(p)) else np.inf for p in own]
+    )
     ok = taken | (np.isfinite(gap) & (widest <= bridge_sigma_m**2))
     x[~ok], own[~ok], shared[~ok] = np.nan, np.nan, np.nan
     lat, lon, _ = ned_to_geodetic(x[:, 0], x[:, 1], 0.0, *ref, 0.0)
-    return Smoothed(fixes.t_unix, ok, np.asarray(lat), np.asarray(lon), x[:, 0], x[:, 1], x[:, 2], x[:, 3], own,
-                    shared, gap, share, wave, accel)
+    return Smoothed(
+        fixes.t_unix,
+        ok,
+        np.asarray(lat),
+        np.asarray(lon),
+        x[:, 0],
+        x[:, 1],
+        x[:, 2],
+        x[:, 3],
+        own,
+        shared,
+        gap,
+        share,
+        wave,
+        accel,
+    )
 
 
 def white_share(t: np.ndarray, z: np.ndarray, C: np.ndarray) -> float:
@@ -155,9 +200,13 @@ class LocalFits:
     of it, itself included; NaN where fewer than :data:`WAVE_MIN_FIXES`."""
 
     resid_m: np.ndarray  # N×2: the fix minus the quadratic at its time
-    leverage: np.ndarray  # N: the quadratic's weight on its own fix (the residual's variance: 1 − this of the noise's)
+    leverage: (
+        np.ndarray
+    )  # N: the quadratic's weight on its own fix (the residual's variance: 1 − this of the noise's)
     accel_mps2: np.ndarray  # N×2: the quadratic's acceleration (twice its second-order coefficient)
-    accel_gain: np.ndarray  # N: the acceleration's variance per unit variance of the noise on one axis
+    accel_gain: (
+        np.ndarray
+    )  # N: the acceleration's variance per unit variance of the noise on one axis
 
 
 def local_fits(t: np.ndarray, z: np.ndarray, span_s: float = WAVE_SPAN_S) -> LocalFits:
@@ -168,10 +217,12 @@ def local_fits(t: np.ndarray, z: np.ndarray, span_s: float = WAVE_SPAN_S) -> Loc
     lo = np.searchsorted(t, t - span_s / 2.0, side="left")
     hi = np.searchsorted(t, t + span_s / 2.0, side="right")
     for k in np.flatnonzero(hi - lo >= WAVE_MIN_FIXES):
-        dt = t[lo[k]:hi[k]] - t[k]
+        dt = t[lo[k] : hi[k]] - t[k]
         X = np.column_stack([np.ones_like(dt), dt, dt * dt])
         inv = np.linalg.inv(X.T @ X)
-        coef = inv @ (X.T @ z[lo[k]:hi[k]])  # at its own time (dt = 0) the quadratic is its constant term
+        coef = inv @ (
+            X.T @ z[lo[k] : hi[k]]
+        )  # at its own time (dt = 0) the quadratic is its constant term
         resid[k], leverage[k] = z[k] - coef[0], inv[0, 0]
         accel[k], gain[k] = 2.0 * coef[2], 4.0 * inv[2, 2]
     return LocalFits(resid, leverage, accel, gain)
@@ -187,12 +238,21 @@ def jitter_share(fits: LocalFits, C: np.ndarray) -> float:
     if ok.sum() < SCATTER_MIN:
         return float("nan")
     r, Cn = fits.resid_m[ok], C[ok] + np.eye(2) * WHITE_FLOOR_M**2
-    q = np.einsum("ki,ki->k", r, np.linalg.solve(Cn, r[..., None])[..., 0]) / (1.0 - fits.leverage[ok])
+    q = np.einsum("ki,ki->k", r, np.linalg.solve(Cn, r[..., None])[..., 0]) / (
+        1.0 - fits.leverage[ok]
+    )
     return float(np.median(q)) / (2.0 * math.log(2.0))
 
 
-def data_accel_mps2(t: np.ndarray, idx: np.ndarray, gap_s: np.ndarray, fits: LocalFits, C: np.ndarray,
-                    share: float, max_accel_mps2: float) -> np.ndarray:
+def data_accel_mps2(
+    t: np.ndarray,
+    idx: np.ndarray,
+    gap_s: np.ndarray,
+    fits: LocalFits,
+    C: np.ndarray,
+    share: float,
+    max_accel_mps2: float,
+) -> np.ndarray:
     """Per frame of ``t`` (the fixes taken at ``idx``, with their :class:`LocalFits` and covariances ``C``), the
     acceleration bound the data give, in place of the vehicle's ``max_accel_mps2`` (at most that).
 
@@ -213,13 +273,22 @@ def data_accel_mps2(t: np.ndarray, idx: np.ndarray, gap_s: np.ndarray, fits: Loc
     per_frame[idx] = level
     for (a, b), la, lb in zip(pairwise(idx), level[:-1], level[1:]):
         if b > a + 1 and t[b] - t[a] <= WAVE_SPAN_S:
-            per_frame[a + 1:b] = max(la, lb)
+            per_frame[a + 1 : b] = max(la, lb)
     per_frame[~np.isfinite(gap_s)] = np.inf
     return np.minimum(per_frame, max_accel_mps2)
 
 
-def _passed_jitter_scale(t, idx, fits: LocalFits, C, taken, share: float, max_speed_mps: float, accel_mps2,
-                         own_m2: np.ndarray) -> np.ndarray:
+def _passed_jitter_scale(
+    t,
+    idx,
+    fits: LocalFits,
+    C,
+    taken,
+    share: float,
+    max_speed_mps: float,
+    accel_mps2,
+    own_m2: np.ndarray,
+) -> np.ndarray:
     """Per frame, the factor (at least 1) that makes the smoothed track's own covariance ``own_m2`` cover the jitter
     the smoother lets through: the fixes' residuals about their local quadratics (the jitter, time-correlated as it
     is) smoothed as the fixes were, their mean square over :data:`WAVE_SPAN_S` around the frame. The model's own
@@ -239,14 +308,25 @@ def _passed_jitter_scale(t, idx, fits: LocalFits, C, taken, share: float, max_sp
     return np.where(np.isfinite(scale), np.maximum(1.0, scale), 1.0)
 
 
-def _rts(t, z, C, taken, first: int, last: int, share: float, max_speed_mps: float,
-         accel_mps2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _rts(
+    t,
+    z,
+    C,
+    taken,
+    first: int,
+    last: int,
+    share: float,
+    max_speed_mps: float,
+    accel_mps2: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Smoothed states (N×4) and covariances (N×4×4) from frame ``first`` to ``last`` (NaN outside); ``accel_mps2``:
     per frame, the acceleration bound over the step to it."""
     n = len(t)
     xf, Pf = np.full((n, 4), np.nan), np.full((n, 4, 4), np.nan)
     xp, Pp = xf.copy(), Pf.copy()
-    track = UuvTrack(max_speed_mps, float(np.max(accel_mps2)), float(t[first]), z[first], C[first], share)
+    track = UuvTrack(
+        max_speed_mps, float(np.max(accel_mps2)), float(t[first]), z[first], C[first], share
+    )
     xf[first], Pf[first] = track.x, track.P
     for k in range(first + 1, last + 1):
         a = float(accel_mps2[k])
@@ -272,7 +352,7 @@ def _gaps(t: np.ndarray, idx: np.ndarray) -> np.ndarray:
     gap[idx] = 0.0
     for a, b in pairwise(idx):
         if b > a + 1:
-            gap[a + 1:b] = t[b] - t[a]
+            gap[a + 1 : b] = t[b] - t[a]
     return gap
 
 
@@ -283,5 +363,5 @@ def _shared(C: np.ndarray, idx: np.ndarray, share: float) -> np.ndarray:
     out[idx] = (1.0 - share) * C[idx]
     for a, b in pairwise(idx):
         if b > a + 1:
-            out[a + 1:b] = out[a] if np.trace(out[a]) >= np.trace(out[b]) else out[b]
+            out[a + 1 : b] = out[a] if np.trace(out[a]) >= np.trace(out[b]) else out[b]
     return out

@@ -28,7 +28,7 @@ STATUSES: dict[str, str] = {
     "below_surface": "the camera is at or below the water surface (check [water])",
     "bad_time": "the frame's time is not a finite number",
     "latency_unsettled": "live, --video-latency-ms auto: the video's latency is not yet settled from the image's "
-                         "motion, so the frame's exposure time is not known",
+    "motion, so the frame's exposure time is not known",
     # telemetry ([timing] sets how far apart and how old samples may be)
     "no_attitude": "no ATTITUDE sample at or before the frame",
     "stale_attitude": "the ATTITUDE samples around the frame are too far apart or too old",
@@ -40,13 +40,13 @@ STATUSES: dict[str, str] = {
     "stale_depth": "the UUV depth samples around the frame are too far apart or too old",
     # several UUVs in one video, several drones over one UUV (skyfix fuse)
     "same_vehicle": "live, several UUVs: this UUV's tracker box coincides with another UUV's (both trackers on one "
-                    "vehicle, or the two right over each other): no fix for either until they part or one is selected "
-                    "again",
+    "vehicle, or the two right over each other): no fix for either until they part or one is selected "
+    "again",
     "disagree": "skyfix fuse: the drones' fixes disagree beyond their sigmas and none of them can be told right",
     "off_track": "skyfix fuse: the fused position lies beyond where the UUV can be by the fused fixes' own track",
     # offline
     "refused": "offline, positions_smoothed.csv: the safety gates refused this frame's fix (off the UUV's track, or a "
-               "target never confirmed) and the fixes around it are too far apart to bridge",
+    "target never confirmed) and the fixes around it are too far apart to bridge",
 }
 
 Status = Literal[tuple(STATUSES)]

@@ -18,7 +18,9 @@ def height_above_surface_m(
 ):
     """Height of the UAV's reported position above the water (exactly one reference set)."""
     if (takeoff_height_above_surface_m is None) == (surface_amsl_m is None):
-        raise ValueError("exactly one of takeoff_height_above_surface_m and surface_amsl_m is needed")
+        raise ValueError(
+            "exactly one of takeoff_height_above_surface_m and surface_amsl_m is needed"
+        )
     if surface_amsl_m is not None:
         return np.asarray(alt_amsl_m, dtype=float) - surface_amsl_m
     return np.asarray(relative_alt_m, dtype=float) + takeoff_height_above_surface_m

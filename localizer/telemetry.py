@@ -41,7 +41,9 @@ from .timeline import Series
 
 #: Station-clock disagreements (seconds) worth telling the operator about.
 CLOCK_NOTICE_S = 0.1
-DEG_PER_M = math.degrees(1.0 / 6_378_137.0)  # latitude degrees per metre north (sphere; for rates only)
+DEG_PER_M = math.degrees(
+    1.0 / 6_378_137.0
+)  # latitude degrees per metre north (sphere; for rates only)
 _NOTICE_AFTER = 3  # samples before a clock offset is reported
 _ASIDE_MAX = 256  # samples kept aside while a clock waits for a reboot's confirmation
 #: Where the UAV link's delay in use comes from (a frame's ``time_source``), and what each word means.
@@ -52,7 +54,9 @@ LATENCY_SOURCES = {
     "unknown": "neither stated, measured nor estimated: taken as 0, its 1-sigma [timing] unknown_latency_sigma_s",
 }
 
-_BOOT_USEC_MAX = 10**15  # a GPS_RAW_INT time_usec below this (31 years) counts from the autopilot's boot
+_BOOT_USEC_MAX = (
+    10**15
+)  # a GPS_RAW_INT time_usec below this (31 years) counts from the autopilot's boot
 
 
 class Telemetry:
@@ -68,12 +72,20 @@ class Telemetry:
     def __init__(self, timing: Timing | None = None, keep_s: float | None = None):
         self.timing = timing = timing or Timing()
         w = timing.clock_window_s
-        self.uav_clock = ClockMap(w)  # the autopilot's time_boot_ms (the component that sends ATTITUDE)
-        self._component_clocks: dict[int, ClockMap] = {}  # other components' boot clocks (a MAVLink gimbal)
+        self.uav_clock = ClockMap(
+            w
+        )  # the autopilot's time_boot_ms (the component that sends ATTITUDE)
+        self._component_clocks: dict[
+            int, ClockMap
+        ] = {}  # other components' boot clocks (a MAVLink gimbal)
         self.timesync = RoundTrip(w)
         self._measured_latency_s: float | None = None
-        self.measured_latency_from_s: float | None = None  # arrival (station s) of the first TIMESYNC measurement
-        self._motion_latency: tuple[float, float] | None = None  # (delay, 1-sigma) from the video's motion, s
+        self.measured_latency_from_s: float | None = (
+            None  # arrival (station s) of the first TIMESYNC measurement
+        )
+        self._motion_latency: tuple[float, float] | None = (
+            None  # (delay, 1-sigma) from the video's motion, s
+        )
         self._gnss = Median()  # arrival-scale minus GNSS time, per SYSTEM_TIME
         self.uuv_clock = ClockMap(w)  # the UUV's own depth stamps
         self.depth_aligned_by: str | None = None  # "uuv_clock", "arrival" or "autopilot_clock"
@@ -94,17 +106,25 @@ class Telemetry:
         # absolute measurements of the UAV's height above the water, per source ("rangefinder", "size", ...):
         # the reported position's height (m) and its 1-sigma (m), on the UAV buffers' time scale
         self.height_fixes: dict[str, Series] = {}
-        self.height_estimator = None  # the height filter over them (localizer.height), made on first use
+        self.height_estimator = (
+            None  # the height filter over them (localizer.height), made on first use
+        )
         self.armed: bool | None = None  # the autopilot's HEARTBEAT SAFETY_ARMED flag, once seen
         self.arm_times: list[float] = []  # when it armed (UAV buffers' scale), transitions seen
-        self.distance_sensor_seen = False  # a downward DISTANCE_SENSOR came: ArduPilot's RANGEFINDER is its copy
-        self.rangefinder_out_of_range = 0  # readings at or beyond their range: no return from the water
+        self.distance_sensor_seen = (
+            False  # a downward DISTANCE_SENSOR came: ArduPilot's RANGEFINDER is its copy
+        )
+        self.rangefinder_out_of_range = (
+            0  # readings at or beyond their range: no return from the water
+        )
         self._keep_s = keep_s
         self.autopilot_component: int | None = None
         self.mount_type: int | None = None  # the autopilot's MNT1_TYPE parameter, once seen
         self.refusal: str | None = None
         self._boot_s = math.nan  # the boot time of the sample being added
-        self._aside: dict[int, list] = {}  # per clock: samples that did not fit it, until it confirms or drops them
+        self._aside: dict[
+            int, list
+        ] = {}  # per clock: samples that did not fit it, until it confirms or drops them
         self._last_boot: dict[int, float] = {}  # per series: the boot time of its newest sample
         self.notices: list[str] = []
         self._noticed: dict[str, float] = {}
@@ -176,8 +196,14 @@ class Telemetry:
             self._noticed[key] = value
             self.notices.append(text)
 
-    def _uav_t(self, time_boot_ms, receive_s: float, component: int | None, series: Series | None = None,
-               values=None) -> float | None:
+    def _uav_t(
+        self,
+        time_boot_ms,
+        receive_s: float,
+        component: int | None,
+        series: Series | None = None,
+        values=None,
+    ) -> float | None:
         """A sample's time on the UAV buffers' scale, feeding the clock of its component.
 
         None (the reason in :attr:`refusal`, ``series`` counting a rejection) when its boot time does
@@ -185,7 +211,11 @@ class Telemetry:
         appended after all when the next ones confirm the new time (a reboot)."""
         boot_s = float(time_boot_ms) / 1000.0
         own = component is None or component == self.autopilot_component
-        clock = self.uav_clock if own else self._component_clocks.setdefault(component, ClockMap(self.timing.clock_window_s))
+        clock = (
+            self.uav_clock
+            if own
+            else self._component_clocks.setdefault(component, ClockMap(self.timing.clock_window_s))
+        )
         before = clock.last_source_s
         result = clock.add(boot_s, receive_s)
         aside = self._aside.setdefault(id(clock), [])
@@ -197,14 +227,18 @@ class Telemetry:
                 series.rejected += 1
             elif series is not None:
                 series.rejected += 1
-            self.refusal = (f"time_boot_ms {boot_s:.3f} s does not fit the clock of its other messages "
-                            f"(latest {before:.3f} s); a reboot is taken once samples agree for {clock.confirm_s} s")
+            self.refusal = (
+                f"time_boot_ms {boot_s:.3f} s does not fit the clock of its other messages "
+                f"(latest {before:.3f} s); a reboot is taken once samples agree for {clock.confirm_s} s"
+            )
             return None
         if result == RESTART:
             was, now = clock.last_restart
             who = "autopilot" if own else f"component {component}"
-            self.notices.append(f"{who} rebooted (time_boot_ms went back from {was:.1f} s to {now:.1f} s): "
-                                "a new clock segment; the telemetry before it is kept")
+            self.notices.append(
+                f"{who} rebooted (time_boot_ms went back from {was:.1f} s to {now:.1f} s): "
+                "a new clock segment; the telemetry before it is kept"
+            )
             if own:
                 self.timesync.clear()
                 self._gnss.clear()
@@ -233,7 +267,12 @@ class Telemetry:
         (the least-delay offset just improved by more than the sample interval: the first
         samples of a link) is dropped without complaint: it carries nothing wrong."""
         last_boot = self._last_boot.get(id(series))
-        if series.last_t is not None and t <= series.last_t and last_boot is not None and self._boot_s > last_boot:
+        if (
+            series.last_t is not None
+            and t <= series.last_t
+            and last_boot is not None
+            and self._boot_s > last_boot
+        ):
             self._last_boot[id(series)] = self._boot_s
             return True
         if not self._append(series, t, values):
@@ -245,16 +284,28 @@ class Telemetry:
     def add_attitude(self, time_boot_ms, roll, pitch, yaw, rates, receive_s: float) -> bool:
         """ATTITUDE (radians) with its body rates ``(p, q, r)`` (rad/s, FRD; None or NaN: unknown)."""
         if not all(abs(a) <= 2 * np.pi for a in (roll, pitch, yaw)):
-            return self._refuse(self.attitude, "angles not finite or beyond ±2π (degrees sent as radians?)")
+            return self._refuse(
+                self.attitude, "angles not finite or beyond ±2π (degrees sent as radians?)"
+            )
         p, q, r = (math.nan,) * 3 if rates is None else rates
-        if not all(abs(x) < 100.0 for x in (p, q, r)):  # NaN and absurd rates alike: interpolate linearly
+        if not all(
+            abs(x) < 100.0 for x in (p, q, r)
+        ):  # NaN and absurd rates alike: interpolate linearly
             p = q = r = math.nan
         values = (roll, pitch, yaw, *euler_rates(roll, pitch, p, q, r))
         t = self._uav_t(time_boot_ms, receive_s, None, self.attitude, values)
         return t is not None and self._append_uav(self.attitude, t, values)
 
-    def add_position(self, time_boot_ms, lat_deg, lon_deg, alt_amsl_m, relative_alt_m, velocity_ned_mps,
-                     receive_s: float) -> bool:
+    def add_position(
+        self,
+        time_boot_ms,
+        lat_deg,
+        lon_deg,
+        alt_amsl_m,
+        relative_alt_m,
+        velocity_ned_mps,
+        receive_s: float,
+    ) -> bool:
         """GLOBAL_POSITION_INT in degrees, metres and m/s (velocity None: unknown)."""
         if lat_deg == 0 and lon_deg == 0:
             return self._refuse(self.position, "lat/lon 0/0: the UAV has no GPS fix yet")
@@ -268,7 +319,9 @@ class Telemetry:
         t = self._uav_t(time_boot_ms, receive_s, None, self.position, values)
         return t is not None and self._append_uav(self.position, t, values)
 
-    def add_gimbal(self, time_boot_ms, q_wxyz, flags, receive_s: float, component: int | None = None) -> bool:
+    def add_gimbal(
+        self, time_boot_ms, q_wxyz, flags, receive_s: float, component: int | None = None
+    ) -> bool:
         """GIMBAL_DEVICE_ATTITUDE_STATUS quaternion (w, x, y, z), which must be near unit length."""
         q = np.asarray(q_wxyz, dtype=float)
         if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1.0) > 0.1:
@@ -277,8 +330,15 @@ class Telemetry:
         t = self._uav_t(time_boot_ms, receive_s, component, self.gimbal, values)
         return t is not None and self._append_uav(self.gimbal, t, values)
 
-    def add_mount(self, time_boot_ms, roll_deg, pitch_deg, yaw_deg, receive_s: float,
-                  component: int | None = None) -> bool:
+    def add_mount(
+        self,
+        time_boot_ms,
+        roll_deg,
+        pitch_deg,
+        yaw_deg,
+        receive_s: float,
+        component: int | None = None,
+    ) -> bool:
         """MOUNT_ORIENTATION (degrees; yaw relative to the vehicle)."""
         if not all(abs(a) <= 360.0 for a in (roll_deg, pitch_deg, yaw_deg)):
             return self._refuse(self.mount, "angles not finite or beyond ±360°")
@@ -297,8 +357,12 @@ class Telemetry:
         off = self.station_minus_gnss_s
         if len(self._gnss) >= _NOTICE_AFTER and abs(off) > CLOCK_NOTICE_S:
             way = "behind" if off < 0 else "ahead of"
-            self._notice_once("gnss", off, f"the station clock is {abs(off):.2f} s {way} GNSS time (SYSTEM_TIME): "
-                              "telemetry is aligned by receive times, GPS_INPUT carries GNSS time")
+            self._notice_once(
+                "gnss",
+                off,
+                f"the station clock is {abs(off):.2f} s {way} GNSS time (SYSTEM_TIME): "
+                "telemetry is aligned by receive times, GPS_INPUT carries GNSS time",
+            )
         return True
 
     def add_timesync(self, tc1_ns: int, ts1_ns: int, receive_s: float) -> bool:
@@ -313,19 +377,33 @@ class Telemetry:
             self._measured_latency_s = max(0.0, delay)
         return True
 
-    def add_gps_raw(self, time_usec: int, fix_type: int, alt_amsl_m: float, h_acc_m: float, v_acc_m: float,
-                    hdop: float, vdop: float, geoid_separation_m: float, receive_s: float) -> bool:
+    def add_gps_raw(
+        self,
+        time_usec: int,
+        fix_type: int,
+        alt_amsl_m: float,
+        h_acc_m: float,
+        v_acc_m: float,
+        hdop: float,
+        vdop: float,
+        geoid_separation_m: float,
+        receive_s: float,
+    ) -> bool:
         """GPS_RAW_INT: its time, fix type, the GNSS altitude (m AMSL), the receiver's accuracies (m), HDOP, VDOP
         and the geoid separation (m); NaN (or 0 for the accuracies and DOPs) where the receiver gives none.
 
         Stored at the fix's own time on the UAV buffers' scale where it can be told (GNSS altitudes are
         compared with the EKF's height at that time): ``time_usec`` since boot (ArduPilot: the last fix's
         time) on the autopilot's clock, or UNIX time through SYSTEM_TIME's GNSS time; else at its arrival."""
+
         def given(x):
             return x if math.isfinite(x) and x > 0 else math.nan
 
         if fix_type >= 3 and not -1000.0 < alt_amsl_m < 10_000.0:
-            return self._refuse(self.gnss, f"GNSS altitude {alt_amsl_m!r} m outside (-1000, 10000) (mm not converted?)")
+            return self._refuse(
+                self.gnss,
+                f"GNSS altitude {alt_amsl_m!r} m outside (-1000, 10000) (mm not converted?)",
+            )
         t = receive_s
         if 0 < time_usec < _BOOT_USEC_MAX and self.uav_clock.offset_s is not None:
             t = time_usec / 1e6 + self.uav_clock.offset_s
@@ -334,7 +412,15 @@ class Telemetry:
         if not abs(t - receive_s) < 1.0:  # a stale or mistimed fix: at its arrival
             t = receive_s
         alt = alt_amsl_m if fix_type >= 3 and math.isfinite(alt_amsl_m) else math.nan
-        values = (given(h_acc_m), geoid_separation_m, float(fix_type), alt, given(v_acc_m), given(hdop), given(vdop))
+        values = (
+            given(h_acc_m),
+            geoid_separation_m,
+            float(fix_type),
+            alt,
+            given(v_acc_m),
+            given(hdop),
+            given(vdop),
+        )
         return self._append(self.gnss, t, values)
 
     def add_heartbeat(self, armed: bool, receive_s: float) -> None:
@@ -350,8 +436,15 @@ class Telemetry:
             self.mount_type = round(value)
 
     # -- height above the water ------------------------------------------------------------------
-    def add_rangefinder(self, time_boot_ms, distance_m: float, min_m: float, max_m: float, receive_s: float,
-                        sigma_m: float | None = None) -> bool:
+    def add_rangefinder(
+        self,
+        time_boot_ms,
+        distance_m: float,
+        min_m: float,
+        max_m: float,
+        receive_s: float,
+        sigma_m: float | None = None,
+    ) -> bool:
         """A downward rangefinder's reading (m along the body's down axis; ``time_boot_ms`` None: stamped by
         its arrival, ArduPilot's RANGEFINDER), added as a height above the water (``"rangefinder"``,
         :meth:`add_height`) with the attitude at its time. A reading outside ``[min_m, max_m)`` is no
@@ -377,14 +470,27 @@ class Telemetry:
     def add_height(self, source: str, t_uav: float, uav_height_m: float, sigma_m: float) -> bool:
         """An absolute measurement of the height of the UAV's reported position above the water (m, with
         its 1-sigma) at ``t_uav`` (the UAV buffers' time scale: :meth:`uav_time` of a station time)."""
-        series = self.height_fixes.setdefault(source, Series("ll", math.inf, math.inf, self._keep_s))
+        series = self.height_fixes.setdefault(
+            source, Series("ll", math.inf, math.inf, self._keep_s)
+        )
         if not (0.0 < uav_height_m < 10_000.0 and 0.0 < sigma_m < 1_000.0):
-            return self._refuse(series, f"height {uav_height_m!r} m or its sigma {sigma_m!r} m not finite and positive")
+            return self._refuse(
+                series,
+                f"height {uav_height_m!r} m or its sigma {sigma_m!r} m not finite and positive",
+            )
         return self._append(series, t_uav, (uav_height_m, sigma_m))
 
     # -- depth -----------------------------------------------------------------------------------
-    def add_depth(self, t_source: float, depth_m: float, receive_s: float | None = None, *,
-                  sigma_m: float = math.nan, source: str = "skyfix", vspeed_mps: float = math.nan) -> bool:
+    def add_depth(
+        self,
+        t_source: float,
+        depth_m: float,
+        receive_s: float | None = None,
+        *,
+        sigma_m: float = math.nan,
+        source: str = "skyfix",
+        vspeed_mps: float = math.nan,
+    ) -> bool:
         """The UUV's depth (m, positive down), stamped ``t_source`` by the UUV and received at ``receive_s``.
 
         Without ``receive_s`` (sessions that did not record arrivals) the UUV's stamp
@@ -400,29 +506,48 @@ class Telemetry:
             if not math.isfinite(t_source):
                 return self._refuse(self.depth, "time not finite")
             if self.uuv_clock.add(t_source, receive_s) == OUTLIER:
-                return self._refuse(self.depth, f"t {t_source:.3f} does not fit the UUV's clock of its other samples; "
-                                    f"a clock step is taken once samples agree for {self.uuv_clock.confirm_s} s")
+                return self._refuse(
+                    self.depth,
+                    f"t {t_source:.3f} does not fit the UUV's clock of its other samples; "
+                    f"a clock step is taken once samples agree for {self.uuv_clock.confirm_s} s",
+                )
             station_minus_uuv = self.uuv_clock.offset_s - latency
             if abs(station_minus_uuv) <= self.timing.depth_clock_tolerance_s:
                 t, self.depth_aligned_by = t_source, "uuv_clock"
             else:
                 t, self.depth_aligned_by = t_source + station_minus_uuv, "arrival"
                 if self.uuv_clock.segments or len(self.depth) >= _NOTICE_AFTER:
-                    self._notice_once("uuv", -station_minus_uuv, f"the UUV's clock is {-station_minus_uuv:+.2f} s "
-                                      "off the station's: its depth is aligned by arrival times")
-        return self._append(self.depth, t, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source)))
+                    self._notice_once(
+                        "uuv",
+                        -station_minus_uuv,
+                        f"the UUV's clock is {-station_minus_uuv:+.2f} s "
+                        "off the station's: its depth is aligned by arrival times",
+                    )
+        return self._append(
+            self.depth, t, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source))
+        )
 
-    def add_autopilot_depth(self, t_station: float, depth_m: float, sigma_m: float, source: str,
-                            vspeed_mps: float) -> bool:
+    def add_autopilot_depth(
+        self, t_station: float, depth_m: float, sigma_m: float, source: str, vspeed_mps: float
+    ) -> bool:
         """A depth from the UUV's autopilot, already on the station clock (mapped from its boot clock)."""
         if not self._depth_ok(depth_m, source):
             return False
         self.depth_aligned_by = "autopilot_clock"
-        return self._append(self.depth, t_station, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source)))
+        return self._append(
+            self.depth, t_station, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source))
+        )
 
     def _depth_ok(self, depth_m: float, source: str) -> bool:
         if source not in SOURCE_WORDS:
-            return self._refuse(self.depth, f"depth source {source!r} is not one of {', '.join(SOURCE_WORDS)}")
-        if not (isinstance(depth_m, (int, float)) and DEPTH_RANGE_M[0] <= depth_m <= DEPTH_RANGE_M[1]):
-            return self._refuse(self.depth, f"depth_m not finite or outside [{DEPTH_RANGE_M[0]:g}, {DEPTH_RANGE_M[1]:g}]")
+            return self._refuse(
+                self.depth, f"depth source {source!r} is not one of {', '.join(SOURCE_WORDS)}"
+            )
+        if not (
+            isinstance(depth_m, (int, float)) and DEPTH_RANGE_M[0] <= depth_m <= DEPTH_RANGE_M[1]
+        ):
+            return self._refuse(
+                self.depth,
+                f"depth_m not finite or outside [{DEPTH_RANGE_M[0]:g}, {DEPTH_RANGE_M[1]:g}]",
+            )
         return True

@@ -91,7 +91,7 @@ class Thrusters:
         if name == "FRAME_CONFIG":
             self.frame = round(value)
         elif name.startswith("SERVO") and name.endswith("_FUNCTION"):
-            n = name[len("SERVO"):-len("_FUNCTION")]
+            n = name[len("SERVO") : -len("_FUNCTION")]
             if n.isdigit() and 1 <= int(n) <= CHANNELS:
                 self.functions[int(n)] = round(value)
 
@@ -119,8 +119,11 @@ class Thrusters:
         if self.frame not in HORIZONTAL_MOTORS:
             return f"FRAME_CONFIG {self.frame}: a frame whose horizontal motors are not known here"
         if self.channels is None:
-            return ("waiting for SERVOn_FUNCTION" if len(self.functions) < CHANNELS
-                    else "no output channel drives one of the horizontal motors (SERVOn_FUNCTION)")
+            return (
+                "waiting for SERVOn_FUNCTION"
+                if len(self.functions) < CHANNELS
+                else "no output channel drives one of the horizontal motors (SERVOn_FUNCTION)"
+            )
         return None
 
     def outputs(self, t: float, pulses_us: dict[int, int]) -> bool | None:
@@ -131,7 +134,9 @@ class Thrusters:
         if channels is None:
             return None
         pulses = tuple(pulses_us.get(ch, 0) for ch in channels)
-        if any(p <= 0 for p in pulses):  # 0: the channel is not output (SERVO_OUTPUT_RAW's "unused")
+        if any(
+            p <= 0 for p in pulses
+        ):  # 0: the channel is not output (SERVO_OUTPUT_RAW's "unused")
             self.unusable += 1
             return None
         idle = all(abs(p - NEUTRAL_US) <= self.deadband_us for p in pulses)
@@ -171,7 +176,13 @@ class Thrusters:
         return "idle" if s[-1][1] else "pushing"
 
     def status(self, now: float) -> dict:
-        return {"state": self.state(now), "why_unknown": self.why_unknown, "frame": self.frame,
-                "channels": list(self.channels) if self.channels else None, "deadband_us": self.deadband_us,
-                "pulses_us": list(self.last_pulses_us) if self.last_pulses_us else None,
-                "received": self.received, "unusable": self.unusable}
+        return {
+            "state": self.state(now),
+            "why_unknown": self.why_unknown,
+            "frame": self.frame,
+            "channels": list(self.channels) if self.channels else None,
+            "deadband_us": self.deadband_us,
+            "pulses_us": list(self.last_pulses_us) if self.last_pulses_us else None,
+            "received": self.received,
+            "unusable": self.unusable,
+        }

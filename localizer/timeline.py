@@ -38,7 +38,9 @@ STALE = 3  # the newest sample is too old
 class Sampled(NamedTuple):
     values: np.ndarray  # (..., ncols); NaN where status is not OK
     status: np.ndarray  # (...) int8
-    error: np.ndarray  # (..., ncols) 1-sigma estimate of the extrapolation/hold error; 0 when interpolated
+    error: (
+        np.ndarray
+    )  # (..., ncols) 1-sigma estimate of the extrapolation/hold error; 0 when interpolated
 
 
 def _wrap(a):
@@ -52,7 +54,9 @@ class Series:
     newest are dropped as the buffer grows. ``None`` keeps everything (offline).
     """
 
-    def __init__(self, kinds: str, max_gap_s: float, max_hold_s: float, keep_s: float | None = None):
+    def __init__(
+        self, kinds: str, max_gap_s: float, max_hold_s: float, keep_s: float | None = None
+    ):
         if "q" in kinds and kinds.count("q") != 4:
             raise ValueError("a quaternion takes exactly four 'q' columns")
         k = np.array(list(kinds))
@@ -95,8 +99,11 @@ class Series:
         Rate (``d``) columns may be NaN: that sample is then interpolated linearly.
         """
         values = np.asarray(values, dtype=float)
-        if (not np.isfinite(t) or values.shape != (len(self.kinds),)
-                or not np.all(np.isfinite(values) | self._may_be_nan)):
+        if (
+            not np.isfinite(t)
+            or values.shape != (len(self.kinds),)
+            or not np.all(np.isfinite(values) | self._may_be_nan)
+        ):
             self.rejected += 1
             return False
         if self._n and t <= self._t[self._n - 1]:
@@ -138,7 +145,9 @@ class Series:
         i = np.searchsorted(ts, t, side="right")  # ts[i-1] <= t < ts[i]
         after_last = i >= n
         hold_ok = after_last & (t - ts[-1] <= self.max_hold_s)
-        status = np.where(i == 0, BEFORE_FIRST, np.where(after_last, np.where(hold_ok, OK, STALE), OK))
+        status = np.where(
+            i == 0, BEFORE_FIRST, np.where(after_last, np.where(hold_ok, OK, STALE), OK)
+        )
         inner = (i > 0) & ~after_last
         i0 = np.clip(i - 1, 0, n - 1)
         i1 = np.clip(i, 0, n - 1)
@@ -169,7 +178,7 @@ class Series:
             h10 = w2 * (1 - w2) ** 2  # Hermite basis in the form v0 + w·Δ + corrections
             h11 = w2 * w2 * (w2 - 1)
             # cubic Hermite = linear interpolation + the rates' departure from the chord
-            herm = (h10 * (hh * d0 - diff[:, self._herm]) + h11 * (hh * d1 - diff[:, self._herm]))
+            herm = h10 * (hh * d0 - diff[:, self._herm]) + h11 * (hh * d1 - diff[:, self._herm])
             herm = np.where(np.isfinite(herm), herm, 0.0)  # a NaN rate: linear
             res[:, self._herm] += herm
         res[:, self._angle] = _wrap(res[:, self._angle])
@@ -188,16 +197,25 @@ class Series:
             err[:] = np.abs(change) / span * dt[:, None]  # held: drifts at the last rate of change
             if self._quat.any():
                 dot = abs(float(np.dot(last[self._quat], prev[self._quat])))
-                turn = 2.0 * np.arccos(min(1.0, dot / (np.linalg.norm(last[self._quat]) * np.linalg.norm(prev[self._quat]))))
+                turn = 2.0 * np.arccos(
+                    min(
+                        1.0,
+                        dot / (np.linalg.norm(last[self._quat]) * np.linalg.norm(prev[self._quat])),
+                    )
+                )
                 err[:, self._quat] = turn / span * dt[:, None]
         if len(self._herm):
             rate = last[self._rate]
             has_rate = np.isfinite(rate)
             res[:, self._herm] += np.where(has_rate, rate * dt[:, None], 0.0)
             if n >= 2:
-                accel = np.abs(last[self._rate] - self._v[n - 2][self._rate]) / (self._t[n - 1] - self._t[n - 2])
+                accel = np.abs(last[self._rate] - self._v[n - 2][self._rate]) / (
+                    self._t[n - 1] - self._t[n - 2]
+                )
                 extra = 0.5 * accel * dt[:, None] ** 2
-                err[:, self._herm] = np.where(has_rate & np.isfinite(extra), extra, err[:, self._herm])
+                err[:, self._herm] = np.where(
+                    has_rate & np.isfinite(extra), extra, err[:, self._herm]
+                )
         err = np.where(np.isfinite(err), err, 0.0)
         err[:, self._exact] = 0.0
         res[:, self._angle] = _wrap(res[:, self._angle])

@@ -60,13 +60,34 @@ def _facet_run(dir_ned, depth_m, n_water, R_facet=None):
     if R_facet is None:
         w = refract_down(dir_ned, n_water)
     else:
-        w = np.einsum("ij,...j->...i", R_facet, refract_down(np.einsum("ji,...j->...i", R_facet, dir_ned), n_water))
+        w = np.einsum(
+            "ij,...j->...i",
+            R_facet,
+            refract_down(np.einsum("ji,...j->...i", R_facet, dir_ned), n_water),
+        )
     return w[..., :2] / w[..., 2:3] * np.asarray(depth_m, dtype=float)[..., None]
 
 
-def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, sigmas: Sigmas, *,
-             sigma_tilt_rad=0.0, sigma_yaw_rad=0.0, sigma_uav_m=0.0, omega_ned=None, velocity_ned_mps=None,
-             sigma_height_m=None, sigma_depth_m=None, sigma_time_s=None, sigma_pixel_px=None):
+def accuracy(
+    camera: Camera,
+    R_ned_from_cv,
+    u,
+    v,
+    height_m,
+    depth_m,
+    n_water,
+    sigmas: Sigmas,
+    *,
+    sigma_tilt_rad=0.0,
+    sigma_yaw_rad=0.0,
+    sigma_uav_m=0.0,
+    omega_ned=None,
+    velocity_ned_mps=None,
+    sigma_height_m=None,
+    sigma_depth_m=None,
+    sigma_time_s=None,
+    sigma_pixel_px=None,
+):
     """``(h_acc_m, v_acc_m, cov_ne_m2)`` for fixes made from these inputs (shapes as ``u``; cov ``(..., 2, 2)``).
 
     ``sigma_tilt_rad``/``sigma_yaw_rad`` add to the calibration's tilt and heading
@@ -93,10 +114,14 @@ def accuracy(camera: Camera, R_ned_from_cv, u, v, height_m, depth_m, n_water, si
     all_d = np.stack([d] * 7 + [d + dl])
     off, _ = offset_from_ray(all_dirs, all_h, all_d, n_water)
     # columns of the Jacobian: d(offset)/d(u, v, rot N, rot E, rot D, height, depth)
-    J = [(off[k] - off[0]) / step for k, step in enumerate((px, px, ang, ang, ang, dl, dl), start=1)]
+    J = [
+        (off[k] - off[0]) / step for k, step in enumerate((px, px, ang, ang, ang, dl, dl), start=1)
+    ]
     sig_h = sigmas.height_m if sigma_height_m is None else sigma_height_m
     sig_d = sigmas.depth_m if sigma_depth_m is None else sigma_depth_m
-    sig_t = np.broadcast_to(np.asarray(sigmas.time_s if sigma_time_s is None else sigma_time_s, dtype=float), u.shape)
+    sig_t = np.broadcast_to(
+        np.asarray(sigmas.time_s if sigma_time_s is None else sigma_time_s, dtype=float), u.shape
+    )
     tilt = np.hypot(np.radians(sigmas.tilt_deg), sigma_tilt_rad)
     yaw = np.hypot(np.radians(sigmas.yaw_deg), sigma_yaw_rad)
     sig_px = sigmas.pixel_px if sigma_pixel_px is None else sigma_pixel_px

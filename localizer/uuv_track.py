@@ -64,7 +64,9 @@ SCATTER_SPAN_S = 0.7
 _H = np.hstack([np.eye(2), np.zeros((2, 2))])
 
 
-def fix_covariance_m2(sigma_n_m: float, sigma_e_m: float, cov_ne_m2: float, h_acc_m: float) -> np.ndarray:
+def fix_covariance_m2(
+    sigma_n_m: float, sigma_e_m: float, cov_ne_m2: float, h_acc_m: float
+) -> np.ndarray:
     """A fix's 2×2 north-east covariance (m²); isotropic from ``h_acc_m`` (its DRMS) when the per-axis
     values are missing (a positions.csv of another tool)."""
     if math.isfinite(sigma_n_m) and math.isfinite(sigma_e_m):
@@ -147,10 +149,20 @@ class UuvTrack:
     taken as the position's uncertainty.
     """
 
-    def __init__(self, max_speed_mps: float, max_accel_mps2: float, t: float, z: np.ndarray, C: np.ndarray,
-                 share: float, max_reach_m: float = math.inf):
+    def __init__(
+        self,
+        max_speed_mps: float,
+        max_accel_mps2: float,
+        t: float,
+        z: np.ndarray,
+        C: np.ndarray,
+        share: float,
+        max_reach_m: float = math.inf,
+    ):
         self.max_speed_mps = max_speed_mps
-        self.max_reach_m = max_reach_m  # however long since its last fix, the UUV is taken within this (m) of it
+        self.max_reach_m = (
+            max_reach_m  # however long since its last fix, the UUV is taken within this (m) of it
+        )
         self.max_accel_mps2 = max_accel_mps2
         self.t = t
         self.x = np.array([z[0], z[1], 0.0, 0.0])
@@ -159,7 +171,9 @@ class UuvTrack:
         self.P[2:, 2:] = np.eye(2) * max_speed_mps**2
         self.C = C  # the newest fix's covariance (m²) ...
         self.common = (1.0 - share) * C  # ... and its common part
-        self.tight = False  # its last step was judged (and filtered) with a bound tighter than the vehicle's
+        self.tight = (
+            False  # its last step was judged (and filtered) with a bound tighter than the vehicle's
+        )
 
     @staticmethod
     def white_m2(C: np.ndarray, share: float) -> np.ndarray:
@@ -179,7 +193,9 @@ class UuvTrack:
         self.x, self.P = self.predict(t, accel_mps2)
         self.t = max(self.t, t)
 
-    def update(self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None) -> None:
+    def update(
+        self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None
+    ) -> None:
         """Take the fix ``z`` (covariance ``C``) at ``t``; the velocity is held within the top speed."""
         R = self.white_m2(C, share)
         x, P = self.predict(t, accel_mps2)
@@ -193,8 +209,9 @@ class UuvTrack:
             x[2:] *= self.max_speed_mps / speed
         self.t, self.x, self.P, self.C, self.common = t, x, P, C, (1.0 - share) * C
 
-    def distance(self, t: float, z: np.ndarray, C: np.ndarray, share: float,
-                 accel_mps2: float | None = None) -> tuple[float, float, float]:
+    def distance(
+        self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None
+    ) -> tuple[float, float, float]:
         """How far a fix ``z`` (covariance ``C``) at ``t`` is from where the fixes can be: ``(d, radius_m, margin_m)``.
 
         Two bounds, both must hold: the UUV is at most ``v_top·Δ`` from the track's position
@@ -213,8 +230,10 @@ class UuvTrack:
         F = transition(dt)
         extra = self.white_m2(C, share) + common_change_m2(C, dt)
         moved_on, P_moved = (F @ self.x)[:2], (F @ self.P @ F.T)[:2, :2]
-        return max(_beyond(z - self.x[:2], self.reach_m(t), self.P[:2, :2] + extra),
-                   _beyond(z - moved_on, 0.5 * a * dt * dt, P_moved + extra))
+        return max(
+            _beyond(z - self.x[:2], self.reach_m(t), self.P[:2, :2] + extra),
+            _beyond(z - moved_on, 0.5 * a * dt * dt, P_moved + extra),
+        )
 
     def widen(self, seconds: float) -> None:
         """The vehicle's acceleration bound may have held for ``seconds`` that the track was filtered with a

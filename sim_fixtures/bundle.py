@@ -16,7 +16,15 @@ from .scenario import load_scenario
 HERE = Path(__file__).parent
 SCENARIOS = HERE / "scenarios"
 BUNDLED_DIR = HERE / "bundled"
-BUNDLED = ("nadir_hover", "oblique_2m", "vehicle_yaw", "mount_orientation", "fixed_camera", "occlusion", "clock_offset")
+BUNDLED = (
+    "nadir_hover",
+    "oblique_2m",
+    "vehicle_yaw",
+    "mount_orientation",
+    "fixed_camera",
+    "occlusion",
+    "clock_offset",
+)
 
 
 def main(argv=None) -> int:

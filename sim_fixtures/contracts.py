@@ -12,8 +12,11 @@ from pathlib import Path
 from groundstation.contracts import Contracts
 from sim_fixtures.scenario import Scenario
 
-SIM_FIXTURES = Contracts({"scenario": (Scenario, "skyfix sim scenario (TOML)")}, Path(__file__).parent / "schemas",
-                         "sim_fixtures.contracts")
+SIM_FIXTURES = Contracts(
+    {"scenario": (Scenario, "skyfix sim scenario (TOML)")},
+    Path(__file__).parent / "schemas",
+    "sim_fixtures.contracts",
+)
 
 if __name__ == "__main__":
     sys.exit(SIM_FIXTURES.main())

@@ -84,7 +84,9 @@ MARK = "# synthetic session made by skyfix sim"  # first line of session.toml
 class Truth:
     """The true geometry at each frame (arrays over frames)."""
 
-    t_unix: np.ndarray  # exposure time on the ground station's clock (video_frames.csv, track.csv, truth.csv)
+    t_unix: (
+        np.ndarray
+    )  # exposure time on the ground station's clock (video_frames.csv, track.csv, truth.csv)
     tau_s: np.ndarray  # seconds since the first frame; true time is start_unix + tau_s
     R_ned_from_cv: np.ndarray  # (N, 3, 3)
     camera_ned: np.ndarray  # (N, 3)
@@ -93,29 +95,46 @@ class Truth:
     visible: np.ndarray  # not occluded
     u: np.ndarray  # exact distorted pixel of the reference point
     v: np.ndarray
-    second_ned: np.ndarray | None = None  # (N, 3) the second vehicle's top-face centre, if there is one
+    second_ned: np.ndarray | None = (
+        None  # (N, 3) the second vehicle's top-face centre, if there is one
+    )
     second_box: Box | None = None  # ... its heading, size and look
     rock: Box | None = None
-    second_u: np.ndarray | None = None  # exact distorted pixel of a second UUV's reference point (role = "uuv")
+    second_u: np.ndarray | None = (
+        None  # exact distorted pixel of a second UUV's reference point (role = "uuv")
+    )
     second_v: np.ndarray | None = None
-    wave_error_ne: np.ndarray | None = None  # (N, 2) the waves' own error at the UUV's pixel (wave_error_ne), if waves
+    wave_error_ne: np.ndarray | None = (
+        None  # (N, 2) the waves' own error at the UUV's pixel (wave_error_ne), if waves
+    )
     second_wave_error_ne: np.ndarray | None = None  # ... at a second UUV's
 
     def others(self, i: int) -> tuple[Box, ...]:
         """The look-alikes at frame ``i``."""
-        second = () if self.second_box is None else (replace(self.second_box, ned=self.second_ned[i]),)
+        second = (
+            () if self.second_box is None else (replace(self.second_box, ned=self.second_ned[i]),)
+        )
         return second + (() if self.rock is None else (self.rock,))
 
     def view(self, i: int) -> View:
-        return View(self.R_ned_from_cv[i], self.camera_ned[i], self.uuv_ned[i], float(self.uuv_heading[i]),
-                    bool(self.visible[i]), float(self.tau_s[i]), self.others(i))
+        return View(
+            self.R_ned_from_cv[i],
+            self.camera_ned[i],
+            self.uuv_ned[i],
+            float(self.uuv_heading[i]),
+            bool(self.visible[i]),
+            float(self.tau_s[i]),
+            self.others(i),
+        )
 
 
 def camera_of(sc: Scenario) -> SimCamera:
     """The scenario's camera: fx = fy from the horizontal field of view, principal point at the centre."""
     c = sc.camera
     f = (c.width / 2) / np.tan(np.radians(c.hfov_deg) / 2)
-    return SimCamera(c.width, c.height, f, f, (c.width - 1) / 2, (c.height - 1) / 2, tuple(c.distortion))
+    return SimCamera(
+        c.width, c.height, f, f, (c.width - 1) / 2, (c.height - 1) / 2, tuple(c.distortion)
+    )
 
 
 def reference_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, point_ned, n_water: float):
@@ -124,7 +143,9 @@ def reference_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, point_ned, n_w
     ``R_ned_from_cv`` (N, 3, 3), ``camera_ned`` and ``point_ned`` (N, 3), one pose per point.
     """
     crossing = surface_crossing(camera_ned, point_ned, n_water)
-    uv = np.array([project(camera, R, c, x) for R, c, x in zip(R_ned_from_cv, camera_ned, crossing)])
+    uv = np.array(
+        [project(camera, R, c, x) for R, c, x in zip(R_ned_from_cv, camera_ned, crossing)]
+    )
     return uv[:, 0], uv[:, 1]
 
 
@@ -133,7 +154,17 @@ NEWTON_TOL_PX = 1e-3  # ... which stops when no pixel moves more than this
 NEWTON_ITERATIONS = 30
 
 
-def _landing(camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, depth_m, waves: WaveField, n_water: float, u, v):
+def _landing(
+    camera: SimCamera,
+    R_ned_from_cv,
+    camera_ned,
+    tau_s,
+    depth_m,
+    waves: WaveField,
+    n_water: float,
+    u,
+    v,
+):
     """Where the rays of pixels (u, v) (N, K) of N frames, through the waves, reach ``depth_m`` (N,): (N, K, 2) NE,
     by the renderer's own path for the vehicles' rays (:func:`~sim_fixtures.render.water_path_ned` through the exact
     waves)."""
@@ -147,7 +178,9 @@ def _landing(camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, depth_m, waves
     return land.reshape(n, k, 2)
 
 
-def apparent_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, point_ned, waves: WaveField, n_water: float):
+def apparent_pixel(
+    camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, point_ned, waves: WaveField, n_water: float
+):
     """Distorted pixel (u, v) (N,) where submerged points (N, 3) appear through the waves at times ``tau_s`` (N,): the
     pixel whose ray, refracted through the wavy surface, passes through the point. Newton's method on the pixel with
     finite differences, from the flat surface's pixel (:func:`reference_pixel`), to ``NEWTON_TOL_PX``; NaN where it
@@ -161,9 +194,20 @@ def apparent_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, point_ne
             break
         uu = px[todo, :1] + np.array([0.0, h, 0.0])
         vv = px[todo, 1:] + np.array([0.0, 0.0, h])
-        land = _landing(camera, R_ned_from_cv[todo], camera_ned[todo], tau_s[todo], point_ned[todo, 2], waves, n_water,
-                        uu, vv)
-        jac = np.stack([land[:, 1] - land[:, 0], land[:, 2] - land[:, 0]], axis=-1) / h  # (N, 2 NE, 2 uv)
+        land = _landing(
+            camera,
+            R_ned_from_cv[todo],
+            camera_ned[todo],
+            tau_s[todo],
+            point_ned[todo, 2],
+            waves,
+            n_water,
+            uu,
+            vv,
+        )
+        jac = (
+            np.stack([land[:, 1] - land[:, 0], land[:, 2] - land[:, 0]], axis=-1) / h
+        )  # (N, 2 NE, 2 uv)
         with np.errstate(invalid="ignore"):
             step = np.linalg.solve(jac, (land[:, 0] - point_ned[todo, :2])[..., None])[..., 0]
         px[todo] -= step
@@ -174,7 +218,9 @@ def apparent_pixel(camera: SimCamera, R_ned_from_cv, camera_ned, tau_s, point_ne
     return px[:, 0], px[:, 1]
 
 
-def wave_error_ne(camera: SimCamera, R_ned_from_cv, camera_ned, point_ned, u, v, n_water: float) -> np.ndarray:
+def wave_error_ne(
+    camera: SimCamera, R_ned_from_cv, camera_ned, point_ned, u, v, n_water: float
+) -> np.ndarray:
     """The waves' own error (N, 2, north and east, m) of submerged points seen at pixels (u, v): where the pixel's ray
     reaches the point's depth refracted at a flat surface (:func:`~sim_fixtures.geometry.reach_offset`), minus the
     point. What a localizer with exact telemetry, depth and pixel makes of the scene."""
@@ -227,12 +273,29 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
         second_u, second_v, second_wave_error = pixel(second_ned)
     if sc.rock.enabled:
         rock = Box(motion.rock_ned, motion.rock_heading, sc.rock.size_m, "rock")
-    return Truth(t_unix, tau, R, cam, uuv, motion.uuv_heading(tau), visible, u, v, second_ned, second, rock,
-                 second_u, second_v, wave_error, second_wave_error)
+    return Truth(
+        t_unix,
+        tau,
+        R,
+        cam,
+        uuv,
+        motion.uuv_heading(tau),
+        visible,
+        u,
+        v,
+        second_ned,
+        second,
+        rock,
+        second_u,
+        second_v,
+        wave_error,
+        second_wave_error,
+    )
 
 
-def depth_records(sc: Scenario, depth_m_at, clock: Clock, streams: tuple[str, str] = ("depth", "depth_link")
-                  ) -> list[dict]:
+def depth_records(
+    sc: Scenario, depth_m_at, clock: Clock, streams: tuple[str, str] = ("depth", "depth_link")
+) -> list[dict]:
     """The lines of ``depth.jsonl``: a UUV's measurements with its clock's time and the station's arrival time.
 
     ``depth_m_at(tau_s)`` is its true depth; ``streams`` name the random streams of the sensor and of the link.
@@ -243,10 +306,18 @@ def depth_records(sc: Scenario, depth_m_at, clock: Clock, streams: tuple[str, st
     tau = tau + rng.uniform(0.0, 0.2 / tel.depth_hz, len(tau))
     depth = depth_m_at(tau) + rng.normal(0.0, 1.0, len(tau)) * tel.depth_noise_m
     measured = clock.true_us(tau)
-    delay = sc.link.depth_delay_s + exponential(stream(sc, streams[1]), sc.link.depth_jitter_s, len(tau))
+    delay = sc.link.depth_delay_s + exponential(
+        stream(sc, streams[1]), sc.link.depth_jitter_s, len(tau)
+    )
     arrived = np.maximum.accumulate(measured + np.round(delay * 1e6).astype(np.int64))
-    return [{"t": round((m + clock.uuv_offset_us) / 1e6, 6), "depth_m": round(float(d), 5),
-             "t_recv": round(clock.station_us(a) / 1e6, 6)} for m, d, a in zip(measured, depth, arrived)]
+    return [
+        {
+            "t": round((m + clock.uuv_offset_us) / 1e6, 6),
+            "depth_m": round(float(d), 5),
+            "t_recv": round(clock.station_us(a) / 1e6, 6),
+        }
+        for m, d, a in zip(measured, depth, arrived)
+    ]
 
 
 def _write_csv(path: Path, header, rows) -> None:
@@ -265,8 +336,14 @@ def _write_truth(path: Path, sc: Scenario, t_unix, ned) -> None:
     """``truth.csv``: a UUV's reference point at each frame time, WGS84 and depth."""
     s = sc.site
     lat, lon, _ = ned_to_geodetic(ned, s.lat_deg, s.lon_deg, s.surface_amsl_m)
-    _write_csv(path, ("t", "lat", "lon", "depth_m"),
-               ((f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}") for t, a, b, d in zip(t_unix, lat, lon, ned[:, 2])))
+    _write_csv(
+        path,
+        ("t", "lat", "lon", "depth_m"),
+        (
+            (f"{t:.6f}", f"{a:.10f}", f"{b:.10f}", f"{d:.5f}")
+            for t, a, b, d in zip(t_unix, lat, lon, ned[:, 2])
+        ),
+    )
 
 
 def _tracked(camera: SimCamera, u, v, in_view) -> np.ndarray:
@@ -277,8 +354,14 @@ def _tracked(camera: SimCamera, u, v, in_view) -> np.ndarray:
 def _write_track(path: Path, camera: SimCamera, t_unix, u, v, in_view) -> None:
     """``track.csv``: a UUV's exact pixel at each frame time, empty where it is not ``in_view`` or not in the image."""
     seen = _tracked(camera, u, v, in_view)
-    _write_csv(path, ("t", "u", "v"), ((f"{t:.6f}", f"{a:.4f}" if ok else "", f"{b:.4f}" if ok else "")
-                                       for t, a, b, ok in zip(t_unix, u, v, seen)))
+    _write_csv(
+        path,
+        ("t", "u", "v"),
+        (
+            (f"{t:.6f}", f"{a:.4f}" if ok else "", f"{b:.4f}" if ok else "")
+            for t, a, b, ok in zip(t_unix, u, v, seen)
+        ),
+    )
 
 
 TRUTH_WAVES_CSV = "truth_waves.csv"
@@ -292,9 +375,14 @@ def _write_truth_waves(path: Path, camera: SimCamera, t_unix, u, v, in_view, err
         path.unlink(missing_ok=True)
         return
     seen = _tracked(camera, u, v, in_view)
-    _write_csv(path, ("t", "wave_dn_m", "wave_de_m"),
-               ((f"{t:.6f}", f"{dn:.5f}" if ok else "", f"{de:.5f}" if ok else "")
-                for t, (dn, de), ok in zip(t_unix, error_ne, seen)))
+    _write_csv(
+        path,
+        ("t", "wave_dn_m", "wave_de_m"),
+        (
+            (f"{t:.6f}", f"{dn:.5f}" if ok else "", f"{de:.5f}" if ok else "")
+            for t, (dn, de), ok in zip(t_unix, error_ne, seen)
+        ),
+    )
 
 
 def _in_view(boxes, otherwise: np.ndarray) -> np.ndarray:
@@ -315,8 +403,19 @@ def _first_box(boxes, t_unix, camera: SimCamera, pad_px: int = 3):
     return box, float(t_unix[i])
 
 
-TRUTH_ERRORS_HEADER = ("t", "roll_err_deg", "pitch_err_deg", "yaw_err_deg", "cam_err_n_deg", "cam_err_e_deg",
-                       "cam_err_d_deg", "north_err_m", "east_err_m", "height_err_m", "gnss_alt_err_m")
+TRUTH_ERRORS_HEADER = (
+    "t",
+    "roll_err_deg",
+    "pitch_err_deg",
+    "yaw_err_deg",
+    "cam_err_n_deg",
+    "cam_err_e_deg",
+    "cam_err_d_deg",
+    "north_err_m",
+    "east_err_m",
+    "height_err_m",
+    "gnss_alt_err_m",
+)
 
 
 def write_truth_errors(path: Path, sc: Scenario, motion: Motion, truth: Truth) -> None:
@@ -330,11 +429,23 @@ def write_truth_errors(path: Path, sc: Scenario, motion: Motion, truth: Truth) -
     ``relative_alt`` (the barometer's); ``gnss_alt_err_m``: GPS_RAW_INT's ``alt``.
     """
     tau = truth.tau_s
-    cam = camera_error_ned(reported_R_ned_from_gimbal(sc, motion, tau), motion.R_ned_from_gimbal(tau))
-    columns = np.column_stack([np.degrees(ahrs_error_rpy(sc, tau)), np.degrees(cam), position_error_ne_m(sc, tau),
-                               baro_error_m(sc, tau), gnss_alt_error_m(sc, tau)])
-    _write_csv(path, TRUTH_ERRORS_HEADER, ([f"{t:.6f}", *(f"{x:.6f}" for x in row)]
-                                           for t, row in zip(truth.t_unix, columns)))
+    cam = camera_error_ned(
+        reported_R_ned_from_gimbal(sc, motion, tau), motion.R_ned_from_gimbal(tau)
+    )
+    columns = np.column_stack(
+        [
+            np.degrees(ahrs_error_rpy(sc, tau)),
+            np.degrees(cam),
+            position_error_ne_m(sc, tau),
+            baro_error_m(sc, tau),
+            gnss_alt_error_m(sc, tau),
+        ]
+    )
+    _write_csv(
+        path,
+        TRUTH_ERRORS_HEADER,
+        ([f"{t:.6f}", *(f"{x:.6f}" for x in row)] for t, row in zip(truth.t_unix, columns)),
+    )
 
 
 def _session_toml(sc: Scenario, camera: SimCamera, init_bbox, init_t: float | None) -> str:
@@ -343,9 +454,13 @@ def _session_toml(sc: Scenario, camera: SimCamera, init_bbox, init_t: float | No
     def vec(x):
         return "[" + ", ".join(repr(float(a)) for a in x) + "]"
 
-    water = (f"takeoff_height_above_surface_m = {s.takeoff_height_above_surface_m!r}" if s.water_reference == "takeoff"
-             else f"surface_amsl_m = {s.surface_amsl_m!r}")
-    return f"""{MARK} from scenario "{sc.name}" (seed {sc.seed})
+    water = (
+        f"takeoff_height_above_surface_m = {s.takeoff_height_above_surface_m!r}"
+        if s.water_reference == "takeoff"
+        else f"surface_amsl_m = {s.surface_amsl_m!r}"
+    )
+    return (
+        f"""{MARK} from scenario "{sc.name}" (seed {sc.seed})
 version = 1
 
 [camera]
@@ -370,12 +485,15 @@ refractive_index = {s.refractive_index!r}
 length_m = {float(sc.uuv.size_m[0])!r}
 width_m = {float(sc.uuv.size_m[1])!r}
 height_m = {float(sc.uuv.size_m[2])!r}
-""" + _tracker_toml(init_bbox, init_t) + _uncertainty_toml(sc)
+"""
+        + _tracker_toml(init_bbox, init_t)
+        + _uncertainty_toml(sc)
+    )
 
 
 def _uuv_toml(sc: Scenario, uuv_id: str, init) -> str:
     """A second UUV's ``uuv.toml``: its ``[tracker]`` table (none where it is never seen, or without video)."""
-    head = f"{MARK} from scenario \"{sc.name}\": the UUV \"{uuv_id}\", its records beside this file\n"
+    head = f'{MARK} from scenario "{sc.name}": the UUV "{uuv_id}", its records beside this file\n'
     return head + (_tracker_toml(*init) if init is not None else "")
 
 
@@ -395,8 +513,16 @@ def _uncertainty_toml(sc: Scenario) -> str:
     how well the water's altitude is known (``site.surface_amsl_sigma_m``), when given."""
     t, known = sc.telemetry, sc.site.surface_amsl_sigma_m
     noise = bool(t.attitude_noise_deg or t.height_noise_m or t.depth_noise_m)
-    keys = ({"tilt_deg": t.attitude_noise_deg, "yaw_deg": t.attitude_noise_deg, "height_m": t.height_noise_m,
-             "depth_m": t.depth_noise_m} if noise else {})
+    keys = (
+        {
+            "tilt_deg": t.attitude_noise_deg,
+            "yaw_deg": t.attitude_noise_deg,
+            "height_m": t.height_noise_m,
+            "depth_m": t.depth_noise_m,
+        }
+        if noise
+        else {}
+    )
     platform = platform_sigmas(sc)
     for k, sigma in platform.items():
         keys[k] = float(np.hypot(keys.get(k, 0.0), sigma))
@@ -405,9 +531,15 @@ def _uncertainty_toml(sc: Scenario) -> str:
     if not keys and known is None:
         return ""
     why = ["the simulated telemetry noise (1-sigma per sample)"] if noise else []
-    why += ["the drone's sensors as its platform would state them, the wind as its operator"] if platform else []
+    why += (
+        ["the drone's sensors as its platform would state them, the wind as its operator"]
+        if platform
+        else []
+    )
     text = "\n[uncertainty]" + (f"  # {'; '.join(why)}\n" if why else "\n")
-    text += "".join(f"{k} = {round(v, 6)!r}\n" if k in platform else f"{k} = {v!r}\n" for k, v in keys.items())
+    text += "".join(
+        f"{k} = {round(v, 6)!r}\n" if k in platform else f"{k} = {v!r}\n" for k, v in keys.items()
+    )
     if known is not None:
         text += f"surface_amsl_m = {known!r}  # how well the water's altitude is known\n"
     return text
@@ -421,22 +553,67 @@ def rate_control(crf: int, downlink: DownlinkSpec | None, fps: float) -> list[st
     if downlink is None or downlink.bitrate_mbps is None:
         return ["-crf", str(crf), "-g", gop]
     rate = round(downlink.bitrate_mbps * 1e6)
-    return ["-b:v", str(rate), "-maxrate", str(rate), "-bufsize", str(round(rate * downlink.buffer_s)), "-bf", "0",
-            "-g", gop]
+    return [
+        "-b:v",
+        str(rate),
+        "-maxrate",
+        str(rate),
+        "-bufsize",
+        str(round(rate * downlink.buffer_s)),
+        "-bf",
+        "0",
+        "-g",
+        gop,
+    ]
 
 
 class Encoder:
     """``ffmpeg`` reading raw BGR frames on stdin, writing H.264 (libx264, yuv420p, a keyframe a second) MP4;
     ``downlink``: a scenario's ``[downlink]`` (:func:`rate_control`)."""
 
-    def __init__(self, path: Path, width: int, height: int, fps: float, crf: int, downlink: DownlinkSpec | None = None):
+    def __init__(
+        self,
+        path: Path,
+        width: int,
+        height: int,
+        fps: float,
+        crf: int,
+        downlink: DownlinkSpec | None = None,
+    ):
         if shutil.which("ffmpeg") is None:
-            raise RuntimeError("ffmpeg not found on PATH; install it (apt install ffmpeg) to render video")
-        cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24", "-s", f"{width}x{height}",
-               "-r", f"{fps:g}", "-i", "-", "-an", "-c:v", "libx264", "-preset", "veryfast",
-               *rate_control(crf, downlink, fps),  # a keyframe every second by default, as field cameras send: a
-               # live decoder that joins late starts within a second
-               "-pix_fmt", "yuv420p", "-movflags", "+faststart", str(path)]
+            raise RuntimeError(
+                "ffmpeg not found on PATH; install it (apt install ffmpeg) to render video"
+            )
+        cmd = [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "bgr24",
+            "-s",
+            f"{width}x{height}",
+            "-r",
+            f"{fps:g}",
+            "-i",
+            "-",
+            "-an",
+            "-c:v",
+            "libx264",
+            "-preset",
+            "veryfast",
+            *rate_control(
+                crf, downlink, fps
+            ),  # a keyframe every second by default, as field cameras send: a
+            # live decoder that joins late starts within a second
+            "-pix_fmt",
+            "yuv420p",
+            "-movflags",
+            "+faststart",
+            str(path),
+        ]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE)
 
     def write(self, frame_bgr: np.ndarray) -> None:
@@ -458,7 +635,9 @@ def render_workers(camera: SimCamera, n_frames: int) -> int:
     none beside this one for a small session (a worker's start, about a second, would cost more than it saves)."""
     if n_frames * camera.width * camera.height < PARALLEL_PIXELS:
         return 1
-    return max(1, min(MAX_WORKERS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1))
+    return max(
+        1, min(MAX_WORKERS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+    )
 
 
 _worker_renderer: Renderer | None = None  # a rendering process's renderer
@@ -501,8 +680,15 @@ def _frames(renderer: Renderer, sc: Scenario, truth: Truth, workers: int) -> Ite
             yield renderer.render_seen(truth.view(i))
         return
     offsets = noise_offsets(sc, n)
-    with _one_blas_thread(), ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_start_worker, initargs=(renderer,)) as pool:
+    with (
+        _one_blas_thread(),
+        ProcessPoolExecutor(
+            workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_start_worker,
+            initargs=(renderer,),
+        ) as pool,
+    ):
         ahead: deque = deque()
         for i in range(n):
             ahead.append(pool.submit(_render_apart, truth.view(i), offsets[i]))
@@ -512,7 +698,9 @@ def _frames(renderer: Renderer, sc: Scenario, truth: Truth, workers: int) -> Ite
             yield ahead.popleft().result()
 
 
-def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress: bool = False) -> list[tuple]:
+def _render(
+    sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress: bool = False
+) -> list[tuple]:
     """Render (in :func:`render_workers` processes) and encode every frame; returns per frame the bounding box of the
     UUV and of each look-alike where it can be seen, else None (see :meth:`~sim_fixtures.render.Renderer.render_seen`)."""
     renderer = Renderer(sc, camera)
@@ -531,19 +719,39 @@ def _render(sc: Scenario, camera: SimCamera, truth: Truth, path: Path, progress:
     return seen
 
 
-def _write_second_uuv(out: Path, sc: Scenario, camera: SimCamera, truth: Truth, motion: Motion, clock: Clock,
-                      boxes: list | None) -> None:
+def _write_second_uuv(
+    out: Path,
+    sc: Scenario,
+    camera: SimCamera,
+    truth: Truth,
+    motion: Motion,
+    clock: Clock,
+    boxes: list | None,
+) -> None:
     """A second UUV's records in ``uuvs/<id>/``; ``boxes`` its bounding box per frame where it can be seen (None
     without video: then it counts as seen wherever it is in the image, and has no first box)."""
     folder = out / UUVS_DIR / sc.second_uuv.id
     folder.mkdir(parents=True, exist_ok=True)
-    _write_depth(folder / "depth.jsonl",
-                 depth_records(sc, lambda tau: motion.second_ned(tau)[..., 2], clock, ("second_depth", "second_link")))
+    _write_depth(
+        folder / "depth.jsonl",
+        depth_records(
+            sc, lambda tau: motion.second_ned(tau)[..., 2], clock, ("second_depth", "second_link")
+        ),
+    )
     _write_truth(folder / "truth.csv", sc, truth.t_unix, truth.second_ned)
     in_view = _in_view(boxes, np.ones(len(truth.t_unix), bool))
-    _write_track(folder / "track.csv", camera, truth.t_unix, truth.second_u, truth.second_v, in_view)
-    _write_truth_waves(folder / TRUTH_WAVES_CSV, camera, truth.t_unix, truth.second_u, truth.second_v, in_view,
-                       truth.second_wave_error_ne)
+    _write_track(
+        folder / "track.csv", camera, truth.t_unix, truth.second_u, truth.second_v, in_view
+    )
+    _write_truth_waves(
+        folder / TRUTH_WAVES_CSV,
+        camera,
+        truth.t_unix,
+        truth.second_u,
+        truth.second_v,
+        in_view,
+        truth.second_wave_error_ne,
+    )
     init = None if boxes is None else _first_box(boxes, truth.t_unix, camera)
     (folder / UUV_TOML).write_text(_uuv_toml(sc, sc.second_uuv.id, init))
 
@@ -557,8 +765,13 @@ class Report:
     messages: dict
 
 
-def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None, video: bool = True,
-             progress: bool = False) -> Report:
+def generate(
+    sc: Scenario,
+    out_dir: str | Path,
+    scenario_text: str | None = None,
+    video: bool = True,
+    progress: bool = False,
+) -> Report:
     """Write the session for ``sc`` into ``out_dir``.
 
     The directory is created; a session generated earlier is overwritten, any other
@@ -571,8 +784,15 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     out = Path(out_dir)
     existing = out / "session.toml"
     if existing.is_file() and not existing.read_text(errors="replace").startswith(MARK):
-        raise ConfigError(str(out), "--out", str(out), "holds a session not made by skyfix sim; refusing to overwrite it")
-    if existing.is_file() and (out / UUVS_DIR).is_dir():  # an earlier generated session's other UUVs
+        raise ConfigError(
+            str(out),
+            "--out",
+            str(out),
+            "holds a session not made by skyfix sim; refusing to overwrite it",
+        )
+    if (
+        existing.is_file() and (out / UUVS_DIR).is_dir()
+    ):  # an earlier generated session's other UUVs
         shutil.rmtree(out / UUVS_DIR)
     out.mkdir(parents=True, exist_ok=True)
     camera = camera_of(sc)
@@ -588,7 +808,9 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     else:
         (out / "truth_errors.csv").unlink(missing_ok=True)  # an earlier generated session's
     stamped = truth.t_unix + sc.clock.video_time_error_s
-    _write_csv(out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(stamped)))
+    _write_csv(
+        out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(stamped))
+    )
 
     t1 = time.perf_counter()
     seen = None  # per frame, the boxes of the UUV and the look-alikes where they can be seen (with video)
@@ -601,13 +823,17 @@ def generate(sc: Scenario, out_dir: str | Path, scenario_text: str | None = None
     uuv_boxes = None if seen is None else [boxes[0] for boxes in seen]
     in_view = _in_view(uuv_boxes, truth.visible)
     _write_track(out / "track.csv", camera, truth.t_unix, truth.u, truth.v, in_view)
-    _write_truth_waves(out / TRUTH_WAVES_CSV, camera, truth.t_unix, truth.u, truth.v, in_view, truth.wave_error_ne)
+    _write_truth_waves(
+        out / TRUTH_WAVES_CSV, camera, truth.t_unix, truth.u, truth.v, in_view, truth.wave_error_ne
+    )
     init = None if seen is None else _first_box(uuv_boxes, truth.t_unix, camera)
     if seen is not None and init is None:
         raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
     (out / "session.toml").write_text(_session_toml(sc, camera, *(init or (None, None))))
     if sc.second_uuv.role == "uuv":
-        _write_second_uuv(out, sc, camera, truth, motion, clock, None if seen is None else [b[1] for b in seen])
+        _write_second_uuv(
+            out, sc, camera, truth, motion, clock, None if seen is None else [b[1] for b in seen]
+        )
     if scenario_text is not None:
         (out / "scenario.toml").write_text(scenario_text)
     return Report(out, len(truth.t_unix), render_s, time.perf_counter() - t0, messages)

@@ -43,6 +43,7 @@ UNDISTORT_CHECK_PX = 1e-6
 
 # --- rotations ---------------------------------------------------------------------------------
 
+
 def rotation_zyx(roll, pitch, yaw) -> Rotation:
     """FRD → NED rotation of MAVLink Euler angles: yaw about z, then pitch about the new y, then roll.
 
@@ -80,6 +81,7 @@ def body_rates(rotation_at, tau_s, h_s: float = 1e-4) -> np.ndarray:
 
 # --- the camera --------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class SimCamera:
     """Pinhole intrinsics (pixels) and OpenCV distortion ``(k1, k2, p1, p2, k3)``."""
@@ -103,8 +105,12 @@ class SimCamera:
     def contains(self, u, v, margin_px: float = 0.0):
         """True where pixel (u, v) lies in the image (pixel centres at integers, edges at ±0.5)."""
         u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
-        return ((u >= -0.5 + margin_px) & (u <= self.width - 0.5 - margin_px)
-                & (v >= -0.5 + margin_px) & (v <= self.height - 0.5 - margin_px))
+        return (
+            (u >= -0.5 + margin_px)
+            & (u <= self.width - 0.5 - margin_px)
+            & (v >= -0.5 + margin_px)
+            & (v <= self.height - 0.5 - margin_px)
+        )
 
     def max_radius(self) -> float:
         """Largest normalized radius (tan of the off-axis angle) up to which the radial distortion
@@ -116,7 +122,9 @@ class SimCamera:
         return float(r[bad[0] - 1]) if len(bad) else float(r[-1])
 
 
-def project(camera: SimCamera, R_ned_from_cv, camera_ned, points_ned) -> tuple[np.ndarray, np.ndarray]:
+def project(
+    camera: SimCamera, R_ned_from_cv, camera_ned, points_ned
+) -> tuple[np.ndarray, np.ndarray]:
     """Distorted pixels (u, v) of world points (..., 3) seen from one camera pose, by cv2.projectPoints.
 
     NaN for points behind the camera or outside the lens model's valid cone.
@@ -155,7 +163,9 @@ def pixel_rays(camera: SimCamera, u, v) -> np.ndarray:
         xy = cv2.undistortPoints(pts, camera.K, camera.dist, None, None, None, UNDISTORT_CRITERIA)
     xy = xy.reshape(-1, 2)
     ray = np.column_stack([xy, np.ones(len(xy))])
-    back, _ = cv2.projectPoints(ray.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
+    back, _ = cv2.projectPoints(
+        ray.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist
+    )
     off = np.abs(back.reshape(-1, 2) - pts.reshape(-1, 2)).max(axis=1)
     ray[~(off < UNDISTORT_CHECK_PX)] = np.nan
     ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
@@ -248,9 +258,12 @@ def surface_crossing(camera_ned, point_ned, n_water: float) -> np.ndarray:
 
 # --- geodesy -------------------------------------------------------------------------------------
 
+
 def ned_to_geodetic(ned, lat0_deg: float, lon0_deg: float, alt0_m: float):
     """Latitude, longitude (degrees) and altitude (m) of world NED points (..., 3) from the origin,
     through pymap3d's East-North-Up conversion."""
     ned = np.asarray(ned, dtype=float)
-    lat, lon, alt = pymap3d.enu2geodetic(ned[..., 1], ned[..., 0], -ned[..., 2], lat0_deg, lon0_deg, alt0_m)
+    lat, lon, alt = pymap3d.enu2geodetic(
+        ned[..., 1], ned[..., 0], -ned[..., 2], lat0_deg, lon0_deg, alt0_m
+    )
     return np.asarray(lat), np.asarray(lon), np.asarray(alt)

@@ -72,18 +72,26 @@ class Motion:
         course = self.uuv_heading(s.pass_at_s) + np.radians(s.course_rel_deg)
         self.second_heading = float(wrap_pi(course))
         self._second_dir_ne = np.array([np.cos(course), np.sin(course)])
-        self._second_at_pass_ne_m = self.uuv_ne(s.pass_at_s) + s.miss_m * np.array([-np.sin(course), np.cos(course)])
+        self._second_at_pass_ne_m = self.uuv_ne(s.pass_at_s) + s.miss_m * np.array(
+            [-np.sin(course), np.cos(course)]
+        )
         r = sc.rock
-        self.rock_ned = np.append(self.uuv_ne(r.at_s) + np.asarray(r.offset_m), sc.site.floor_depth_m - r.size_m[2])
+        self.rock_ned = np.append(
+            self.uuv_ne(r.at_s) + np.asarray(r.offset_m), sc.site.floor_depth_m - r.size_m[2]
+        )
         self.rock_heading = float(np.radians(r.heading_deg))
 
     # --- UAV -----------------------------------------------------------------------------------
     def uav_rpy(self, tau_s):
         """UAV body (FRD) attitude in NED: array (..., 3) of roll, pitch, yaw (radians)."""
         u, ph = self.sc.uav, self._ph
-        yaw = np.radians(u.yaw_deg) + _wave(tau_s, np.radians(u.yaw_swing_deg), 1.0 / u.yaw_period_s, ph[0])
+        yaw = np.radians(u.yaw_deg) + _wave(
+            tau_s, np.radians(u.yaw_swing_deg), 1.0 / u.yaw_period_s, ph[0]
+        )
         tilt = np.radians(u.tilt_deg) + _wave(tau_s, np.radians(u.gust_deg), 0.27, ph[1])
-        lean = np.radians(u.wind_from_deg) - yaw  # the airframe leans towards where the wind comes from
+        lean = (
+            np.radians(u.wind_from_deg) - yaw
+        )  # the airframe leans towards where the wind comes from
         roll, pitch = tilt * np.sin(lean), -tilt * np.cos(lean)
         if u.wobble_deg:
             w = np.radians(u.wobble_deg)
@@ -108,8 +116,16 @@ class Motion:
         """Position the autopilot reports (GLOBAL_POSITION_INT's point), world NED (..., 3)."""
         u, ph = self.sc.uav, self._ph
         c = self.uav_centre_ne(tau_s)
-        n = c[..., 0] + _wave(tau_s, 0.7 * u.drift_m, 0.031, ph[2]) + _wave(tau_s, 0.3 * u.drift_m, 0.083, ph[3])
-        e = c[..., 1] + _wave(tau_s, 0.7 * u.drift_m, 0.037, ph[4]) + _wave(tau_s, 0.3 * u.drift_m, 0.071, ph[5])
+        n = (
+            c[..., 0]
+            + _wave(tau_s, 0.7 * u.drift_m, 0.031, ph[2])
+            + _wave(tau_s, 0.3 * u.drift_m, 0.083, ph[3])
+        )
+        e = (
+            c[..., 1]
+            + _wave(tau_s, 0.7 * u.drift_m, 0.037, ph[4])
+            + _wave(tau_s, 0.3 * u.drift_m, 0.071, ph[5])
+        )
         d = -(u.height_m + _wave(tau_s, u.height_swing_m, 0.05, ph[6]))
         return np.stack([n, e, d], axis=-1)
 
@@ -177,7 +193,9 @@ class Motion:
 
     def camera_ned(self, tau_s):
         """Camera position, world NED (..., 3): the reported point plus the body-frame offset."""
-        return self.uav_ned(tau_s) + self.R_ned_from_body(tau_s) @ np.asarray(self.sc.mount.camera_offset_m)
+        return self.uav_ned(tau_s) + self.R_ned_from_body(tau_s) @ np.asarray(
+            self.sc.mount.camera_offset_m
+        )
 
     # --- UUV -----------------------------------------------------------------------------------
     def uuv_ne(self, tau_s):
@@ -200,7 +218,9 @@ class Motion:
     def uuv_heading(self, tau_s):
         """UUV heading (radians from North): along its velocity."""
         dt = 1e-3
-        d = self.uuv_ne(np.asarray(tau_s, dtype=float) + dt) - self.uuv_ne(np.asarray(tau_s, dtype=float) - dt)
+        d = self.uuv_ne(np.asarray(tau_s, dtype=float) + dt) - self.uuv_ne(
+            np.asarray(tau_s, dtype=float) - dt
+        )
         return np.arctan2(d[..., 1], d[..., 0])
 
     def uuv_depth_m(self, tau_s):
@@ -223,7 +243,10 @@ class Motion:
         ``speed_mps`` through its place at ``pass_at_s``; its heading is :attr:`second_heading` (radians)."""
         s = self.sc.second_uuv
         tau = np.asarray(tau_s, dtype=float)
-        ne = self._second_at_pass_ne_m + (s.speed_mps * (tau - s.pass_at_s))[..., None] * self._second_dir_ne
+        ne = (
+            self._second_at_pass_ne_m
+            + (s.speed_mps * (tau - s.pass_at_s))[..., None] * self._second_dir_ne
+        )
         return np.concatenate([ne, np.full(tau.shape + (1,), s.depth_m)], axis=-1)
 
     # --- placement -----------------------------------------------------------------------------
@@ -237,14 +260,20 @@ class Motion:
         elif m.kind == "servo":  # the mean lean matters: the servos do not quite cancel it
             lean, tilt = np.radians(u.wind_from_deg) - yaw, np.radians(u.tilt_deg)
             roll, pitch = tilt * np.sin(lean), -tilt * np.cos(lean)
-            yaw_rel = np.radians(m.yaw_deg) if m.yaw_mode == "vehicle" else np.radians(m.yaw_deg) - yaw
-            R = matrix_zyx(roll, pitch, yaw) @ matrix_zyx(-roll, np.radians(m.pitch_deg) - pitch, yaw_rel)
+            yaw_rel = (
+                np.radians(m.yaw_deg) if m.yaw_mode == "vehicle" else np.radians(m.yaw_deg) - yaw
+            )
+            R = matrix_zyx(roll, pitch, yaw) @ matrix_zyx(
+                -roll, np.radians(m.pitch_deg) - pitch, yaw_rel
+            )
         else:
             gimbal_yaw = np.radians(m.yaw_deg) + (yaw if m.yaw_mode == "vehicle" else 0.0)
             R = matrix_zyx(0.0, np.radians(m.pitch_deg), gimbal_yaw)
         off = reach_offset(R[:, 0], u.height_m, v.depth_m, self.sc.site.refractive_index)
         if not np.all(np.isfinite(off)):
-            raise ValueError(f"scenario {self.sc.name}: the camera's optical axis does not reach the water")
+            raise ValueError(
+                f"scenario {self.sc.name}: the camera's optical axis does not reach the water"
+            )
         return off
 
 

@@ -39,7 +39,9 @@ from .waves import downwind_rad, phase_speed, wave_field
 
 FLOOR_M_PER_PX = 0.015
 SKY_BGR = np.array([235.0, 215.0, 200.0], np.float32)
-GLINT_HAZE = 0.1  # the smooth part of the sun's glint; the rest comes in sparkles from surface ripples
+GLINT_HAZE = (
+    0.1  # the smooth part of the sun's glint; the rest comes in sparkles from surface ripples
+)
 MIN_CONTRAST = 1.0  # grey levels: the UUV counts as visible only if it changes its box at least this much (RMS)
 GREY_BGR = np.array([0.114, 0.587, 0.299])  # luma weights (as cv2.COLOR_BGR2GRAY)
 
@@ -75,7 +77,9 @@ class WaterPath(NamedTuple):
     down_m: np.ndarray  # (N,) its down coordinate: 0 on the flat surface, −η on a wave
     dir_water: np.ndarray  # (N, 3) unit direction in the water
     wet: np.ndarray  # (N,) False for rays that do not point down into the water (their other values are meaningless)
-    normal_up: np.ndarray | None  # (N, 3) the facets' unit normals on the air side; None: the flat surface
+    normal_up: (
+        np.ndarray | None
+    )  # (N, 3) the facets' unit normals on the air side; None: the flat surface
 
 
 CROSSING_ITERATIONS = 2  # fixed-point steps from the flat crossing to a wave's (the error shrinks by slope·tan θ each)
@@ -83,7 +87,9 @@ CROSSING_ITERATIONS = 2  # fixed-point steps from the flat crossing to a wave's 
 
 def water_path(ray_cv, view: View, n_water: float, surface=None) -> WaterPath:
     """:func:`water_path_ned` of rays ``ray_cv`` (N, 3) in the camera frame of a view."""
-    return water_path_ned(ray_cv @ view.R_ned_from_cv.T.astype(ray_cv.dtype), view.camera_ned, n_water, surface)
+    return water_path_ned(
+        ray_cv @ view.R_ned_from_cv.T.astype(ray_cv.dtype), view.camera_ned, n_water, surface
+    )
 
 
 def water_path_ned(d, camera_ned, n_water: float, surface=None) -> WaterPath:
@@ -101,7 +107,13 @@ def water_path_ned(d, camera_ned, n_water: float, surface=None) -> WaterPath:
     height = -camera_ned[..., 2]
     flat = camera_ned[..., :2].astype(d.dtype) + d[:, :2] * (height / d[:, 2])[:, None]
     if surface is None:
-        return WaterPath(flat, np.zeros(len(d), d.dtype), refract_into_water(d, n_water).astype(d.dtype), wet, None)
+        return WaterPath(
+            flat,
+            np.zeros(len(d), d.dtype),
+            refract_into_water(d, n_water).astype(d.dtype),
+            wet,
+            None,
+        )
     ne, camera_ned, height = flat, camera_ned.astype(d.dtype), height.astype(d.dtype)
     for _ in range(CROSSING_ITERATIONS):
         reach = (height - surface.height(ne)) / d[:, 2]
@@ -121,10 +133,20 @@ def to_body(surface_ne, dir_water, box: Box, depth_m=0.0):
     c, s = np.cos(box.heading), np.sin(box.heading)
     dn = surface_ne[:, 0] - box.ned[0]
     de = surface_ne[:, 1] - box.ned[1]
-    z = np.full_like(dn, -box.ned[2]) if np.isscalar(depth_m) and depth_m == 0.0 else depth_m - box.ned[2]
+    z = (
+        np.full_like(dn, -box.ned[2])
+        if np.isscalar(depth_m) and depth_m == 0.0
+        else depth_m - box.ned[2]
+    )
     origin = np.stack([c * dn + s * de, -s * dn + c * de, z], axis=-1)
-    direction = np.stack([c * dir_water[:, 0] + s * dir_water[:, 1], -s * dir_water[:, 0] + c * dir_water[:, 1],
-                          dir_water[:, 2]], axis=-1)
+    direction = np.stack(
+        [
+            c * dir_water[:, 0] + s * dir_water[:, 1],
+            -s * dir_water[:, 0] + c * dir_water[:, 1],
+            dir_water[:, 2],
+        ],
+        axis=-1,
+    )
     return origin, direction
 
 
@@ -141,7 +163,9 @@ def hit_box(origin, direction, size_m):
     t_far = np.maximum(t1, t2)
     t_far = np.where(np.isnan(t_far), np.inf, t_far)
     t_in = t_near.max(axis=1)
-    hit = (t_in <= t_far.min(axis=1)) & (t_in >= 0)  # 0: a top face at the surface, where the rays enter
+    hit = (t_in <= t_far.min(axis=1)) & (
+        t_in >= 0
+    )  # 0: a top face at the surface, where the rays enter
     return hit, t_in, t_near.argmax(axis=1), origin + t_in[:, None] * direction
 
 
@@ -154,7 +178,11 @@ def uuv_albedo(point, face_axis):
         for sy in (-1, 1):
             col[np.hypot(x - sx * 0.16, y - sy * 0.115) < 0.05] = (160.0, 105.0, 40.0)
     col[(np.abs(y) < 0.055) & (np.abs(x) < 0.18)] = (200.0, 200.0, 190.0)  # acrylic tube
-    col[(np.abs(y) < 0.03) & (x > 0.16) & (x < 0.2)] = (40.0, 200.0, 235.0)  # yellow dome rim, the nose
+    col[(np.abs(y) < 0.03) & (x > 0.16) & (x < 0.2)] = (
+        40.0,
+        200.0,
+        235.0,
+    )  # yellow dome rim, the nose
     shade = np.where(face_axis == 2, 1.0, 0.55)
     return col * shade[:, None]
 
@@ -162,7 +190,9 @@ def uuv_albedo(point, face_axis):
 def rock_albedo(point, face_axis):
     """A dark, mottled rock (BGR): the sand's darkest pebbles' colour, blotched."""
     x, y = point[:, 0], point[:, 1]
-    mottle = 1.0 + 0.25 * np.sin(37.0 * x + 1.3) * np.sin(29.0 * y + 0.4) + 0.12 * np.sin(61.0 * (x + y))
+    mottle = (
+        1.0 + 0.25 * np.sin(37.0 * x + 1.3) * np.sin(29.0 * y + 0.4) + 0.12 * np.sin(61.0 * (x + y))
+    )
     col = np.array([40.0, 47.0, 46.0]) * mottle[:, None]
     return col * np.where(face_axis == 2, 1.0, 0.55)[:, None]
 
@@ -217,8 +247,13 @@ def floor_div(camera: SimCamera) -> int:
     return 2 if camera.width >= 1200 and camera.width % 2 == camera.height % 2 == 0 else 1
 
 
-CAUSTIC_DRIFT_NE = ((0.11, 0.07), (-0.05, 0.13))  # m/s: the two caustic layers' drift over a flat surface
-CAUSTIC_WAVELENGTH_M = 0.4  # the caustic pattern's cells (0.12-1 m) are focused by waves about this long ...
+CAUSTIC_DRIFT_NE = (
+    (0.11, 0.07),
+    (-0.05, 0.13),
+)  # m/s: the two caustic layers' drift over a flat surface
+CAUSTIC_WAVELENGTH_M = (
+    0.4  # the caustic pattern's cells (0.12-1 m) are focused by waves about this long ...
+)
 CAUSTIC_SPREAD_DEG = 30.0  # ... that travel downwind, ± this
 
 
@@ -227,8 +262,10 @@ def wave_caustic_drift_ne(sc: Scenario) -> tuple:
     downwind ± ``CAUSTIC_SPREAD_DEG``."""
     downwind = downwind_rad(sc)
     speed = float(phase_speed(2 * np.pi / CAUSTIC_WAVELENGTH_M))
-    return tuple((speed * np.cos(downwind + a), speed * np.sin(downwind + a))
-                 for a in np.radians([CAUSTIC_SPREAD_DEG, -CAUSTIC_SPREAD_DEG]))
+    return tuple(
+        (speed * np.cos(downwind + a), speed * np.sin(downwind + a))
+        for a in np.radians([CAUSTIC_SPREAD_DEG, -CAUSTIC_SPREAD_DEG])
+    )
 
 
 class Renderer:
@@ -265,26 +302,36 @@ class Renderer:
         # grid point j sits at floor pixel c*(j-1) + (c-1)/2, so cv2.resize by c lands on floor pixel
         # centres (offset c); floor pixel i is centred on image pixel div*i + (div-1)/2
         fu, fv = c * (u - 1) + (c - 1) / 2, c * (v - 1) + (c - 1) / 2
-        self.grid_rays = pixel_rays(camera, div * fu + (div - 1) / 2, div * fv + (div - 1) / 2).reshape(-1, 3)
-        if self.waves is not None:  # a ray per floor pixel: float32 is plenty (micrometres at tens of metres)
+        self.grid_rays = pixel_rays(
+            camera, div * fu + (div - 1) / 2, div * fv + (div - 1) / 2
+        ).reshape(-1, 3)
+        if (
+            self.waves is not None
+        ):  # a ray per floor pixel: float32 is plenty (micrometres at tens of metres)
             self.grid_rays = self.grid_rays.astype(np.float32)
             edge = np.zeros((self.grid_h, self.grid_w), bool)
             edge[[0, -1], :] = edge[:, [0, -1]] = True
             self.edge_rays = self.grid_rays[edge.ravel()].astype(float)
         self.floor = texture.seafloor(rng, m_per_px=FLOOR_M_PER_PX)
         self.caustics = (texture.caustics(rng), texture.caustics(rng))
-        self.caustic_drift_ne = CAUSTIC_DRIFT_NE if self.waves is None else wave_caustic_drift_ne(sc)
+        self.caustic_drift_ne = (
+            CAUSTIC_DRIFT_NE if self.waves is None else wave_caustic_drift_ne(sc)
+        )
         still = self._caustic_texture(0.0)
         self.caustic_mean, self.caustic_std = float(still.mean()), float(still.std())
         self.sparkle = np.clip(texture.fractal_noise(rng, 512, 0.6) - 1.5, 0.0, None)
         margin = NOISE_MARGIN
-        self.noise = (rng.standard_normal((camera.height + margin, camera.width + margin, 3))
-                      * sc.render.noise_sigma).astype(np.float32)
+        self.noise = (
+            rng.standard_normal((camera.height + margin, camera.width + margin, 3))
+            * sc.render.noise_sigma
+        ).astype(np.float32)
         self.noise_rng = noise_rng(sc)
         el, az = np.radians(sc.render.sun_elevation_deg), np.radians(sc.render.sun_azimuth_deg)
         self.sun_up_ned = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
         self.shadow = sc.render.shadow if sc.render.sun_elevation_deg > 0 else 0.0
-        self.sunlight_in_water = refract_into_water(-self.sun_up_ned, self.n_water)  # going down, unit
+        self.sunlight_in_water = refract_into_water(
+            -self.sun_up_ned, self.n_water
+        )  # going down, unit
         self._ray_tiles: OrderedDict[int, np.ndarray] = OrderedDict()  # see _rays
 
     # --- geometry shared with the tests ------------------------------------------------------------
@@ -316,7 +363,9 @@ class Renderer:
         the line of sight too."""
         a = self.atten
         trans = np.exp(-(a + self.sc.site.turbidity_per_m) * path_m[:, None])
-        return self.sc.render.exposure * np.exp(-a * light_depth_m[:, None]) * trans, self.water_bgr * (1.0 - trans)
+        return self.sc.render.exposure * np.exp(
+            -a * light_depth_m[:, None]
+        ) * trans, self.water_bgr * (1.0 - trans)
 
     def _surface(self, ray_cv, view: View, normal_up=None):
         """``(keep, add)`` of the water surface for camera rays: seen = underwater·keep + add.
@@ -339,7 +388,12 @@ class Renderer:
         add = SKY_BGR * fresnel
         if self.sc.render.glint > 0 and normal_up is None:
             align = (d * np.array([1.0, 1.0, -1.0])) @ self.sun_up_ned
-            add = add + (GLINT_HAZE * self.sc.render.glint * 255.0 * np.exp((align - 1.0) / 0.02))[:, None]
+            add = (
+                add
+                + (GLINT_HAZE * self.sc.render.glint * 255.0 * np.exp((align - 1.0) / 0.02))[
+                    :, None
+                ]
+            )
         elif self.sc.render.glint > 0:
             align = (d + 2 * cos_i[:, None] * normal_up) @ self.sun_up_ned
             glint = np.exp((align - 1.0) / (2 * self.waves.unresolved_mss))
@@ -382,11 +436,19 @@ class Renderer:
         out = {}
         for key, f in fields.items():
             grid = f.reshape(self.grid_h, self.grid_w, -1).astype(np.float32)
-            full = cv2.resize(grid, (self.grid_w * c, self.grid_h * c), interpolation=cv2.INTER_LINEAR)
-            out[key] = full.reshape(self.grid_h * c, self.grid_w * c, -1)[c : c + self.floor_h, c : c + self.floor_w]
+            full = cv2.resize(
+                grid, (self.grid_w * c, self.grid_h * c), interpolation=cv2.INTER_LINEAR
+            )
+            out[key] = full.reshape(self.grid_h * c, self.grid_w * c, -1)[
+                c : c + self.floor_h, c : c + self.floor_w
+            ]
         grid = (self.grid_h, self.grid_w)
         near = [self._near(p, b).reshape(grid) for b in boxes]
-        shade = [self._shade_near(fn, fe, wet, b).reshape(grid) for b in boxes] if self.shadow > 0 else []
+        shade = (
+            [self._shade_near(fn, fe, wet, b).reshape(grid) for b in boxes]
+            if self.shadow > 0
+            else []
+        )
         return out, near, shade
 
     def _near(self, p: WaterPath, box: Box):
@@ -394,9 +456,13 @@ class Renderer:
         L, W, H = box.size_m
         surface, dir_water = p.surface_ne, p.dir_water
         t = (box.ned[2] + H / 2 - p.down_m) / dir_water[:, 2]
-        dist = np.hypot(surface[:, 0] + dir_water[:, 0] * t - box.ned[0],
-                        surface[:, 1] + dir_water[:, 1] * t - box.ned[1])
-        return p.wet & (dist < 0.5 * np.hypot(L, W) + 0.5 * H * np.tan(np.arcsin(1 / self.n_water)) + 0.05)
+        dist = np.hypot(
+            surface[:, 0] + dir_water[:, 0] * t - box.ned[0],
+            surface[:, 1] + dir_water[:, 1] * t - box.ned[1],
+        )
+        return p.wet & (
+            dist < 0.5 * np.hypot(L, W) + 0.5 * H * np.tan(np.arcsin(1 / self.n_water)) + 0.05
+        )
 
     def _shade_near(self, floor_n, floor_e, wet, box: Box):
         """Rays whose floor point is within reach of a box's shadow (to bound the shadow's window)."""
@@ -431,7 +497,9 @@ class Renderer:
     def _floor_lit(self, view: View, boxes, shade, floor_waves):
         """The sunlit share of each floor pixel in the shadows' windows: ``(rows, cols, lit)``, or None."""
         c = self.coarse
-        windows = [w for m in shade if (w := self._window(m, c, self.floor_h, self.floor_w)) is not None]
+        windows = [
+            w for m in shade if (w := self._window(m, c, self.floor_h, self.floor_w)) is not None
+        ]
         if not windows:
             return None
         rows, cols = pixels_of(windows, self.floor_h, self.floor_w)
@@ -440,8 +508,13 @@ class Renderer:
         ray = pixel_rays(self.camera, uu.ravel(), vv.ravel())
         p = water_path(ray, view, self.n_water, floor_waves)
         depth = self.sc.site.floor_depth_m
-        floor = np.column_stack([p.surface_ne + p.dir_water[:, :2] * ((depth - p.down_m) / p.dir_water[:, 2])[:, None],
-                                 np.full(len(ray), depth)])
+        floor = np.column_stack(
+            [
+                p.surface_ne
+                + p.dir_water[:, :2] * ((depth - p.down_m) / p.dir_water[:, 2])[:, None],
+                np.full(len(ray), depth),
+            ]
+        )
         blocked = p.wet & self._in_shadow(floor, boxes)
         return rows, cols, 1.0 - blocked.reshape(len(rows), ss * ss).mean(axis=1)
 
@@ -451,8 +524,15 @@ class Renderer:
         for tex, scale, (vn, ve) in zip((a, b), (1.0, 1.37), self.caustic_drift_ne):
             shift = np.array([ve, -vn]) * tau_s / FLOOR_M_PER_PX
             M = np.array([[1 / scale, 0, shift[0] / scale], [0, 1 / scale, shift[1] / scale]])
-            layers.append(cv2.warpAffine(tex, M, tex.shape[::-1], flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                         borderMode=cv2.BORDER_WRAP))
+            layers.append(
+                cv2.warpAffine(
+                    tex,
+                    M,
+                    tex.shape[::-1],
+                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                    borderMode=cv2.BORDER_WRAP,
+                )
+            )
         return np.sqrt(layers[0] * layers[1])
 
     def _caustic_factor(self, caus, depth_m):
@@ -469,8 +549,13 @@ class Renderer:
 
     def _caustic_light(self, texture_now, points_ned):
         """The sunlight's factor (N,) at points (N, 3) under waves: the frame's caustic texture there."""
-        caus = texture.sample(texture_now, points_ned[:, 1] / FLOOR_M_PER_PX, -points_ned[:, 0] / FLOOR_M_PER_PX,
-                              cv2.INTER_LINEAR, cv2.BORDER_WRAP)
+        caus = texture.sample(
+            texture_now,
+            points_ned[:, 1] / FLOOR_M_PER_PX,
+            -points_ned[:, 0] / FLOOR_M_PER_PX,
+            cv2.INTER_LINEAR,
+            cv2.BORDER_WRAP,
+        )
         return self._caustic_factor(caus, points_ned[:, 2])
 
     def _rays(self, rows, cols):
@@ -488,7 +573,9 @@ class Renderer:
             r0, c0 = divmod(int(key), per_row)
             tv, tu = np.mgrid[r0 * t : (r0 + 1) * t, c0 * t : (c0 + 1) * t]
             su, sv = subsamples(tv.ravel(), tu.ravel(), ss)
-            self._ray_tiles[key] = pixel_rays(self.camera, su.ravel(), sv.ravel()).reshape(t, t, ss, ss, 3)
+            self._ray_tiles[key] = pixel_rays(self.camera, su.ravel(), sv.ravel()).reshape(
+                t, t, ss, ss, 3
+            )
         stack = np.stack([self._ray_tiles[key] for key in needed])
         while len(self._ray_tiles) > RAY_TILES_KEPT:  # the least recently used go
             self._ray_tiles.popitem(last=False)
@@ -506,8 +593,12 @@ class Renderer:
         """
         cam = self.camera
         unseen = (None,) * len(boxes)
-        windows = [w for m in near if (w := self._window(m, self.coarse * self.floor_div, cam.height, cam.width))
-                   is not None]
+        windows = [
+            w
+            for m in near
+            if (w := self._window(m, self.coarse * self.floor_div, cam.height, cam.width))
+            is not None
+        ]
         if not windows:
             return unseen
         vv, uu = pixels_of(windows, cam.height, cam.width)
@@ -532,14 +623,20 @@ class Renderer:
             if not own.any():
                 continue
             gain, veil = self._through_water(b.ned[2] + point[own, 2], t_in[own])
-            at = np.column_stack([surface[own] + dir_water[own, :2] * t_in[own, None],
-                                  p.down_m[own] + dir_water[own, 2] * t_in[own]])
+            at = np.column_stack(
+                [
+                    surface[own] + dir_water[own, :2] * t_in[own, None],
+                    p.down_m[own] + dir_water[own, 2] * t_in[own],
+                ]
+            )
             light = 1.0 if caustics is None else self._caustic_light(caustics, at)
             if self.shadow > 0:
                 light = np.where(self._in_shadow(at, boxes, skip=k), 1.0 - self.shadow, light)
             if self.shadow > 0 or caustics is not None:
                 gain = gain * light[:, None]
-            keep, add = self._surface(ray[own], view, None if p.normal_up is None else p.normal_up[own])
+            keep, add = self._surface(
+                ray[own], view, None if p.normal_up is None else p.normal_up[own]
+            )
             colour[own] = (ALBEDO[b.look](point[own], face[own]) * gain + veil) * keep + add
         n = ss * ss
         cover = (owner >= 0).reshape(len(vv), n).mean(axis=1)[:, None]
@@ -547,8 +644,10 @@ class Renderer:
         before = img[vv, uu]
         img[vv, uu] = before * (1 - cover) + mean_hit * cover
         colour = colour.reshape(len(vv), n, 3)
-        return tuple(self._seen((owner == k).reshape(len(vv), n), hits[k][0].sum(), colour, before, vv, uu)
-                     for k in range(len(boxes)))
+        return tuple(
+            self._seen((owner == k).reshape(len(vv), n), hits[k][0].sum(), colour, before, vv, uu)
+            for k in range(len(boxes))
+        )
 
     def _seen(self, own, rays_hit: int, colour, before, vv, uu):
         """A box's bounding box (x, y, w, h) where it can be seen, else None (see :meth:`_boxes`).
@@ -596,7 +695,9 @@ class Renderer:
         gain = fields["gain"]
         k = self.sc.render.caustics
         sun = None  # the sunlight's factor on the floor: the caustics, and the shadows
-        caustics = None  # the frame's caustic texture where it lights the vehicles too (under waves)
+        caustics = (
+            None  # the frame's caustic texture where it lights the vehicles too (under waves)
+        )
         if k > 0:
             texture_now = self._caustic_texture(view.tau_s)
             caus = cv2.remap(texture_now, fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
@@ -613,12 +714,20 @@ class Renderer:
         if self.sc.render.glint > 0 and self.waves is None:
             smap = np.ascontiguousarray(fields["sparkle_map"])
             smap[..., 1] += 37.0 * view.tau_s  # ripples moving over the surface
-            sparkle = cv2.remap(self.sparkle, smap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+            sparkle = cv2.remap(
+                self.sparkle, smap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP
+            )
             img += fields["glint"] * sparkle[..., None]
         if self.floor_div > 1:
-            img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_LINEAR)
-        seen = (() if view.uuv_visible else (None,)) + (self._boxes(view, img, boxes, near, caustics) if boxes else ())
+            img = cv2.resize(
+                img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_LINEAR
+            )
+        seen = (() if view.uuv_visible else (None,)) + (
+            self._boxes(view, img, boxes, near, caustics) if boxes else ()
+        )
         if self.sc.render.noise_sigma > 0:
             dy, dx = _noise_offset(self.noise_rng) if noise_at is None else noise_at
-            img = cv2.add(img, self.noise[dy : dy + self.camera.height, dx : dx + self.camera.width])
+            img = cv2.add(
+                img, self.noise[dy : dy + self.camera.height, dx : dx + self.camera.width]
+            )
         return np.clip(img + 0.5, 0, 255, out=img).astype(np.uint8), seen

@@ -58,9 +58,17 @@ from .geometry import matrix_zyx, rotation_zyx
 from .motion import Motion
 from .scenario import GNSS_MODES, GnssMode, Scenario
 
-STREAM = {"ahrs_wander": 1, "gnss_walk": 2, "gnss_white_ekf": 3, "gnss_white_raw": 4, "baro_wander": 5,
-          "baro_noise": 6}
-KNOTS_PER_CORRELATION = 10  # a slow error is drawn this many times per correlation time, joined by a cubic spline
+STREAM = {
+    "ahrs_wander": 1,
+    "gnss_walk": 2,
+    "gnss_white_ekf": 3,
+    "gnss_white_raw": 4,
+    "baro_wander": 5,
+    "baro_noise": 6,
+}
+KNOTS_PER_CORRELATION = (
+    10  # a slow error is drawn this many times per correlation time, joined by a cubic spline
+)
 MARGIN_S = 3.0  # ... over the telemetry's span and this much beyond
 
 
@@ -80,7 +88,9 @@ def gauss_markov(rng, sigma: float, corr_s: float, step_s: float, shape: tuple) 
     return lfilter([1.0], [1.0, -phi], w, axis=0, zi=phi * start)[0]
 
 
-def slow_error(sc: Scenario, name: str, sigma: float, corr_s: float, axes: int, tau_s) -> np.ndarray:
+def slow_error(
+    sc: Scenario, name: str, sigma: float, corr_s: float, axes: int, tau_s
+) -> np.ndarray:
     """A slow error (RMS ``sigma`` per axis, correlation time ``corr_s``) at scenario times, (..., axes); zeros
     when ``sigma`` is 0.
 
@@ -99,6 +109,7 @@ def slow_error(sc: Scenario, name: str, sigma: float, corr_s: float, axes: int, 
 
 
 # --- attitude ------------------------------------------------------------------------------------------
+
 
 def ahrs_error_rpy(sc: Scenario, tau_s) -> np.ndarray:
     """ATTITUDE's error (reported − true roll, pitch, yaw; radians, (..., 3)): the biases and the slow wander."""
@@ -127,10 +138,14 @@ def reported_R_ned_from_gimbal(sc: Scenario, motion: Motion, tau_s) -> np.ndarra
     m = sc.mount
     body = motion.uav_rpy(tau_s) + ahrs_error_rpy(sc, tau_s)
     if m.attitude_source == "fixed":
-        return matrix_zyx(body[..., 0], body[..., 1], body[..., 2]) @ matrix_zyx(*np.radians(m.fixed_rpy_deg))
+        return matrix_zyx(body[..., 0], body[..., 1], body[..., 2]) @ matrix_zyx(
+            *np.radians(m.fixed_rpy_deg)
+        )
     g = levelled(sc, motion.reported_gimbal(tau_s))  # yaw relative to the vehicle
     if m.kind == "servo":
-        return matrix_zyx(body[..., 0], body[..., 1], body[..., 2]) @ matrix_zyx(g[..., 0], g[..., 1], g[..., 2])
+        return matrix_zyx(body[..., 0], body[..., 1], body[..., 2]) @ matrix_zyx(
+            g[..., 0], g[..., 1], g[..., 2]
+        )
     return matrix_zyx(0.0, 0.0, body[..., 2]) @ matrix_zyx(g[..., 0], g[..., 1], g[..., 2])
 
 
@@ -143,22 +158,29 @@ def camera_error_ned(R_reported, R_true) -> np.ndarray:
 
 # --- position and heights ----------------------------------------------------------------------------------
 
+
 def gnss_mode(sc: Scenario) -> GnssMode:
     """The position's error model: ``gnss_mode``'s, with ``gnss_walk_m``, ``gnss_walk_s``, ``gnss_white_m`` where
     given (horizontal RMS, m; s)."""
     s, mode = sc.sensors, GNSS_MODES[sc.sensors.gnss_mode]
-    return GnssMode(mode.walk_m if s.gnss_walk_m is None else s.gnss_walk_m,
-                    mode.walk_s if s.gnss_walk_s is None else s.gnss_walk_s,
-                    mode.white_m if s.gnss_white_m is None else s.gnss_white_m,
-                    mode.fix_type, mode.h_acc_m, mode.hdop)
+    return GnssMode(
+        mode.walk_m if s.gnss_walk_m is None else s.gnss_walk_m,
+        mode.walk_s if s.gnss_walk_s is None else s.gnss_walk_s,
+        mode.white_m if s.gnss_white_m is None else s.gnss_white_m,
+        mode.fix_type,
+        mode.h_acc_m,
+        mode.hdop,
+    )
 
 
 def gnss_claim(sc: Scenario) -> tuple[int, float, float]:
     """GPS_RAW_INT's ``(fix_type, h_acc_m, hdop)``: ``[uav]``'s where given, else ``[sensors] gnss_mode``'s."""
     u, mode = sc.uav, GNSS_MODES[sc.sensors.gnss_mode]
-    return (mode.fix_type if u.gnss_fix_type is None else u.gnss_fix_type,
-            mode.h_acc_m if u.gnss_h_acc_m is None else u.gnss_h_acc_m,
-            mode.hdop if u.gnss_hdop is None else u.gnss_hdop)
+    return (
+        mode.fix_type if u.gnss_fix_type is None else u.gnss_fix_type,
+        mode.h_acc_m if u.gnss_h_acc_m is None else u.gnss_h_acc_m,
+        mode.hdop if u.gnss_hdop is None else u.gnss_hdop,
+    )
 
 
 def position_error_ne_m(sc: Scenario, tau_s) -> np.ndarray:
@@ -171,7 +193,11 @@ def position_white_ne_m(sc: Scenario, message: str, n: int) -> np.ndarray:
     """``n`` draws (n, 2) of the position's white noise (north, east; m) for ``message``: "ekf"
     (GLOBAL_POSITION_INT) or "raw" (GPS_RAW_INT); zeros when there is none."""
     sigma = gnss_mode(sc).white_m / np.sqrt(2.0)
-    return stream(sc, f"gnss_white_{message}").normal(0.0, 1.0, (n, 2)) * sigma if sigma else np.zeros((n, 2))
+    return (
+        stream(sc, f"gnss_white_{message}").normal(0.0, 1.0, (n, 2)) * sigma
+        if sigma
+        else np.zeros((n, 2))
+    )
 
 
 def baro_wander_m(sc: Scenario, tau_s) -> np.ndarray:
@@ -183,7 +209,9 @@ def baro_wander_m(sc: Scenario, tau_s) -> np.ndarray:
 def baro_noise_m(sc: Scenario, n: int) -> np.ndarray:
     """``n`` draws of the EKF heights' white noise (m)."""
     s = sc.sensors
-    return stream(sc, "baro_noise").normal(0.0, s.baro_noise_m, n) if s.baro_noise_m else np.zeros(n)
+    return (
+        stream(sc, "baro_noise").normal(0.0, s.baro_noise_m, n) if s.baro_noise_m else np.zeros(n)
+    )
 
 
 def ned_with_error(ned, error_ne_m) -> np.ndarray:
@@ -194,6 +222,7 @@ def ned_with_error(ned, error_ne_m) -> np.ndarray:
 
 
 # --- what a platform with these sensors states ------------------------------------------------------------
+
 
 def _rms(*values) -> float:
     return float(np.sqrt(np.mean(np.square(values))))
@@ -213,8 +242,11 @@ def platform_sigmas(sc: Scenario) -> dict[str, float]:
     out = {}
     if s.roll_bias_deg or s.pitch_bias_deg or s.wander_deg or any(s.gimbal_level_deg):
         own_imu = sc.mount.kind == "stabilised" and sc.mount.attitude_source != "fixed"
-        tilt = _rms(*s.gimbal_level_deg) if own_imu else float(np.hypot(_rms(s.roll_bias_deg, s.pitch_bias_deg),
-                                                                         s.wander_deg))
+        tilt = (
+            _rms(*s.gimbal_level_deg)
+            if own_imu
+            else float(np.hypot(_rms(s.roll_bias_deg, s.pitch_bias_deg), s.wander_deg))
+        )
         out["tilt_deg"] = tilt
     if s.yaw_bias_deg or s.wander_deg:
         out["yaw_deg"] = float(np.hypot(s.yaw_bias_deg, s.wander_deg))
@@ -231,5 +263,15 @@ def has_slow_errors(sc: Scenario) -> bool:
     """Whether the scenario's telemetry has any slow error (the sensors' or ``[uav]``'s heights'): then the session
     gets ``truth_errors.csv``."""
     s, u = sc.sensors, sc.uav
-    return bool(s.roll_bias_deg or s.pitch_bias_deg or s.yaw_bias_deg or s.wander_deg or any(s.gimbal_level_deg)
-                or gnss_mode(sc).walk_m or s.baro_wander_m or u.baro_bias_m or u.baro_drift_m or u.gnss_alt_error_m)
+    return bool(
+        s.roll_bias_deg
+        or s.pitch_bias_deg
+        or s.yaw_bias_deg
+        or s.wander_deg
+        or any(s.gimbal_level_deg)
+        or gnss_mode(sc).walk_m
+        or s.baro_wander_m
+        or u.baro_bias_m
+        or u.baro_drift_m
+        or u.gnss_alt_error_m
+    )

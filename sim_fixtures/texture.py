@@ -11,7 +11,9 @@ import cv2
 import numpy as np
 
 
-def fractal_noise(rng, size: int, beta: float, min_period_px: float = 2.0, max_period_px: float | None = None) -> np.ndarray:
+def fractal_noise(
+    rng, size: int, beta: float, min_period_px: float = 2.0, max_period_px: float | None = None
+) -> np.ndarray:
     """Tileable noise (size × size, float32, zero mean, unit std) with a 1/f^beta amplitude spectrum
     between periods ``min_period_px`` and ``max_period_px`` (default: the tile)."""
     f = np.fft.fftfreq(size)
@@ -67,4 +69,6 @@ def sample(image: np.ndarray, x_px, y_px, interpolation: int, border: int) -> np
     rows = -(-n // REMAP_COLS)
     xy = np.zeros((rows * REMAP_COLS, 2), np.float32)
     xy[:n, 0], xy[:n, 1] = x_px, y_px
-    return cv2.remap(image, xy.reshape(rows, REMAP_COLS, 2), None, interpolation, borderMode=border).ravel()[:n]
+    return cv2.remap(
+        image, xy.reshape(rows, REMAP_COLS, 2), None, interpolation, borderMode=border
+    ).ravel()[:n]

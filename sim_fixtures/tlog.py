@@ -67,15 +67,32 @@ GIMBAL_DEVICE_FLAGS_PITCH_LOCK = 8  # pitch relative to the horizon
 GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME = 32
 GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME = 64
 SEND_LATENCY_US = 800  # the autopilot sends a message this long after sampling it
-GCS_PARAM_COUNT = 1200  # PARAM_VALUE param_count: the autopilot's number of parameters (illustrative)
+GCS_PARAM_COUNT = (
+    1200  # PARAM_VALUE param_count: the autopilot's number of parameters (illustrative)
+)
 
 # independent random streams: np.random.default_rng([seed, 404, STREAM[name]])
-STREAM = {"heartbeat": 1, "system_time": 2, "attitude": 3, "position": 4, "gimbal": 5, "gps_raw": 6,
-          "timesync": 7, "downlink": 8, "depth": 9, "depth_link": 10, "gnss_alt": 11, "rangefinder": 12,
-          "second_depth": 13, "second_link": 14,  # a second UUV's depth sensor and link
-          "gnss_alt_noise": 15}
+STREAM = {
+    "heartbeat": 1,
+    "system_time": 2,
+    "attitude": 3,
+    "position": 4,
+    "gimbal": 5,
+    "gps_raw": 6,
+    "timesync": 7,
+    "downlink": 8,
+    "depth": 9,
+    "depth_link": 10,
+    "gnss_alt": 11,
+    "rangefinder": 12,
+    "second_depth": 13,
+    "second_link": 14,  # a second UUV's depth sensor and link
+    "gnss_alt_noise": 15,
+}
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # a rangefinder looking down the body's z axis
-OUT_OF_RANGE_ADD_M = 1.0  # ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
+OUT_OF_RANGE_ADD_M = (
+    1.0  # ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
+)
 
 
 def stream(sc: Scenario, name: str):
@@ -104,8 +121,14 @@ class Clock:
         if sc.link.reboot_at_s is not None:
             reboot = start_us + round(sc.link.reboot_at_s * 1e6)
             back = reboot + round(sc.link.reboot_down_s * 1e6)
-        return cls(start_us - round(sc.link.boot_s_at_start * 1e6), start_us,
-                   round(sc.clock.station_offset_s * 1e6), round(sc.clock.uuv_offset_s * 1e6), reboot, back)
+        return cls(
+            start_us - round(sc.link.boot_s_at_start * 1e6),
+            start_us,
+            round(sc.clock.station_offset_s * 1e6),
+            round(sc.clock.uuv_offset_s * 1e6),
+            reboot,
+            back,
+        )
 
     def true_us(self, tau_s) -> np.ndarray:
         """True time of scenario times (seconds since the first frame)."""
@@ -130,7 +153,9 @@ class Clock:
 
     def tau_s(self, boot_ms, rebooted=False):
         """Scenario time (s since the first frame) of boot-clock milliseconds (of the second boot if ``rebooted``)."""
-        epoch = np.where(rebooted, self.reboot_us if self.reboot_us is not None else 0, self.boot_epoch_us)
+        epoch = np.where(
+            rebooted, self.reboot_us if self.reboot_us is not None else 0, self.boot_epoch_us
+        )
         return (np.asarray(boot_ms, dtype=np.int64) * 1000 + epoch - self.start_us) / 1e6
 
     def station_us(self, true_us) -> np.ndarray:
@@ -158,7 +183,11 @@ def baro_error_m(sc: Scenario, tau_s):
     first frame, changing linearly by ``uav.baro_drift_m`` up to the last, plus the barometer's wander
     (``[sensors] baro_wander_m``)."""
     u = sc.uav
-    return u.baro_bias_m + u.baro_drift_m * np.asarray(tau_s, dtype=float) / sc.duration_s + baro_wander_m(sc, tau_s)
+    return (
+        u.baro_bias_m
+        + u.baro_drift_m * np.asarray(tau_s, dtype=float) / sc.duration_s
+        + baro_wander_m(sc, tau_s)
+    )
 
 
 def gnss_alt_error_m(sc: Scenario, tau_s):
@@ -168,8 +197,10 @@ def gnss_alt_error_m(sc: Scenario, tau_s):
     tau = np.asarray(tau_s, dtype=float)
     phases = stream(sc, "gnss_alt").uniform(0.0, 2 * np.pi, 3)
     amplitude = u.gnss_alt_error_m / np.sqrt(1.5)  # three sinusoids of amplitude a: RMS a·sqrt(3/2)
-    return sum(amplitude * np.sin(2 * np.pi * tau / (u.gnss_alt_error_period_s * k) + ph)
-               for k, ph in zip((1.0, 0.61, 0.37), phases))
+    return sum(
+        amplitude * np.sin(2 * np.pi * tau / (u.gnss_alt_error_period_s * k) + ph)
+        for k, ph in zip((1.0, 0.61, 0.37), phases)
+    )
 
 
 def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
@@ -189,10 +220,17 @@ def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     s, u = sc.site, sc.uav
     tau = clock.tau_of_us(t_us)
     error_ne = position_error_ne_m(sc, tau) + position_white_ne_m(sc, "raw", len(tau))
-    lat, lon, alt = ned_to_geodetic(ned_with_error(motion.uav_ned(tau), error_ne), s.lat_deg, s.lon_deg,
-                                    s.surface_amsl_m)
-    alt = alt + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m + gnss_alt_error_m(sc, tau)
-    alt = alt + stream(sc, "gnss_alt_noise").normal(0.0, u.gnss_alt_noise_m, len(tau))  # its own stream: 0 adds 0
+    lat, lon, alt = ned_to_geodetic(
+        ned_with_error(motion.uav_ned(tau), error_ne), s.lat_deg, s.lon_deg, s.surface_amsl_m
+    )
+    alt = (
+        alt
+        + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m
+        + gnss_alt_error_m(sc, tau)
+    )
+    alt = alt + stream(sc, "gnss_alt_noise").normal(
+        0.0, u.gnss_alt_noise_m, len(tau)
+    )  # its own stream: 0 adds 0
     vel = motion.uav_velocity_ned(tau)
     speed = np.hypot(vel[:, 0], vel[:, 1])
     cog = np.round(np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360 * 100).astype(int) % 36000
@@ -203,9 +241,27 @@ def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     if u.gnss_accuracy == "dop_only":
         h_acc = v_acc = 0
     eph, epv = round(hdop * 100), round(u.gnss_vdop * 100)
-    return [(int(tu), fix_type, round(la * 1e7), round(lo * 1e7), round(a * 1000), eph, epv, round(v * 100),
-             int(c), 14, round((a + s.geoid_separation_m) * 1000), h_acc, v_acc, 30, 0, 0)
-            for tu, la, lo, a, v, c in zip(time_usec, lat, lon, alt, speed, cog)]
+    return [
+        (
+            int(tu),
+            fix_type,
+            round(la * 1e7),
+            round(lo * 1e7),
+            round(a * 1000),
+            eph,
+            epv,
+            round(v * 100),
+            int(c),
+            14,
+            round((a + s.geoid_separation_m) * 1000),
+            h_acc,
+            v_acc,
+            30,
+            0,
+            0,
+        )
+        for tu, la, lo, a, v, c in zip(time_usec, lat, lon, alt, speed, cog)
+    ]
 
 
 def rangefinder_distance_m(sc: Scenario, motion: Motion, tau_s):
@@ -216,9 +272,13 @@ def rangefinder_distance_m(sc: Scenario, motion: Motion, tau_s):
     if rf.sees == "nothing":
         return np.full(tau.shape, rf.max_m + OUT_OF_RANGE_ADD_M)
     height = -motion.uav_ned(tau)[..., 2]
-    if rf.sees == "floor":  # light travels n times slower in water: the time of flight reads n × the depth
+    if (
+        rf.sees == "floor"
+    ):  # light travels n times slower in water: the time of flight reads n × the depth
         height = height + s.refractive_index * s.floor_depth_m
-    down_axis_down = motion.R_ned_from_body(tau)[..., 2, 2]  # the body's z axis, its NED down component
+    down_axis_down = motion.R_ned_from_body(tau)[
+        ..., 2, 2
+    ]  # the body's z axis, its NED down component
     return height / down_axis_down
 
 
@@ -238,7 +298,10 @@ def _rangefinder(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
         keep &= ~((tau >= a) & (tau < b))
     cm = np.clip(np.round(distance * 100), 0, 65535).astype(int)
     lo, hi = round(rf.min_m * 100), round(rf.max_m * 100)
-    ds = [(int(m), lo, hi, int(c), 0, 0, MAV_SENSOR_ROTATION_PITCH_270, 0) for m, c in zip(ms[keep], cm[keep])]
+    ds = [
+        (int(m), lo, hi, int(c), 0, 0, MAV_SENSOR_ROTATION_PITCH_270, 0)
+        for m, c in zip(ms[keep], cm[keep])
+    ]
     rng_rows = [(float(c) / 100.0, 0.0) for c in cm[keep]]
     return t_us[keep], ds, rng_rows
 
@@ -250,20 +313,32 @@ def _gimbal(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     tau = clock.tau_of_us(t_us)
     att_noise = np.radians(sc.telemetry.attitude_noise_deg)
     g = levelled(sc, motion.reported_gimbal(tau)) + rng.normal(0.0, 1.0, (len(tau), 3)) * att_noise
-    vehicle_yaw = motion.uav_rpy(tau)[:, 2] + ahrs_error_rpy(sc, tau)[:, 2]  # the autopilot's heading
+    vehicle_yaw = (
+        motion.uav_rpy(tau)[:, 2] + ahrs_error_rpy(sc, tau)[:, 2]
+    )  # the autopilot's heading
     yaw_abs = g[:, 2] + vehicle_yaw
     if sc.mount.attitude_source == "mount_orientation":
         return "mount_orientation", [
             (int(m), *np.degrees([r, p, wrap_pi(yr)]), float(np.degrees(ya) % 360))
-            for m, r, p, yr, ya in zip(ms, g[:, 0], g[:, 1], g[:, 2], yaw_abs)]
+            for m, r, p, yr, ya in zip(ms, g[:, 0], g[:, 1], g[:, 2], yaw_abs)
+        ]
     earth = sc.mount.gimbal_frame == "earth"
-    flags = GIMBAL_DEVICE_FLAGS_ROLL_LOCK | GIMBAL_DEVICE_FLAGS_PITCH_LOCK | (
-        GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME if earth else GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME)
+    flags = (
+        GIMBAL_DEVICE_FLAGS_ROLL_LOCK
+        | GIMBAL_DEVICE_FLAGS_PITCH_LOCK
+        | (
+            GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME
+            if earth
+            else GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME
+        )
+    )
     q = quat_wxyz(rotation_zyx(g[:, 0], g[:, 1], yaw_abs if earth else g[:, 2]))
     nan = float("nan")
     # as ArduPilot: sent by the autopilot for gimbal device 1, angular velocities and delta_yaw unknown
     return "gimbal_device_attitude_status", [
-        (0, 0, int(m), flags, [float(x) for x in qq], nan, nan, nan, 0, nan, nan, 1) for m, qq in zip(ms, q)]
+        (0, 0, int(m), flags, [float(x) for x in qq], nan, nan, nan, 0, nan, nan, 1)
+        for m, qq in zip(ms, q)
+    ]
 
 
 def _timesync(sc: Scenario, clock: Clock, tau0: float, tau1: float, rng):
@@ -271,7 +346,9 @@ def _timesync(sc: Scenario, clock: Clock, tau0: float, tau1: float, rng):
     period = 1.0 / sc.telemetry.timesync_hz
     tau = np.arange(tau0 + rng.uniform(0.0, period), tau1, period)
     sent = clock.true_us(tau)
-    arrived = sent + np.round((sc.link.delay_s + exponential(rng, sc.link.jitter_s, len(tau))) * 1e6).astype(np.int64)
+    arrived = sent + np.round(
+        (sc.link.delay_s + exponential(rng, sc.link.jitter_s, len(tau))) * 1e6
+    ).astype(np.int64)
     up = clock.up(arrived)
     tc1 = (arrived - clock.epoch_us(arrived)) * 1000  # the autopilot's boot time in ns
     ts1 = clock.station_us(sent) * 1000  # the request's station-clock send time in ns, echoed
@@ -293,11 +370,28 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
     disarmed = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     loiter = 5  # ArduCopter's LOITER flight mode
     arm_at = sc.uav.armed_at_s
-    add(t, "heartbeat", [
-        (mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, armed, loiter, mav.MAV_STATE_ACTIVE)
-        if arm_at is None or tau >= arm_at else
-        (mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, disarmed, loiter, mav.MAV_STATE_STANDBY)
-        for tau in clock.tau_of_us(t)])
+    add(
+        t,
+        "heartbeat",
+        [
+            (
+                mav.MAV_TYPE_QUADROTOR,
+                mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                armed,
+                loiter,
+                mav.MAV_STATE_ACTIVE,
+            )
+            if arm_at is None or tau >= arm_at
+            else (
+                mav.MAV_TYPE_QUADROTOR,
+                mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                disarmed,
+                loiter,
+                mav.MAV_STATE_STANDBY,
+            )
+            for tau in clock.tau_of_us(t)
+        ],
+    )
     if tel.system_time_hz > 0:
         t, ms = sample_times(clock, tel.system_time_hz, tau0, tau1, stream(sc, "system_time"))
         add(t, "system_time", [(int(tu), int(m)) for tu, m in zip(t, ms)])
@@ -305,11 +399,16 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
     rng = stream(sc, "attitude")
     t, ms = sample_times(clock, tel.attitude_hz, tau0, tau1, rng)
     tau = clock.tau_of_us(t)
-    rpy = motion.uav_rpy(tau) + ahrs_error_rpy(sc, tau) + rng.normal(0.0, 1.0, (len(t), 3)) * np.radians(
-        tel.attitude_noise_deg)
+    rpy = (
+        motion.uav_rpy(tau)
+        + ahrs_error_rpy(sc, tau)
+        + rng.normal(0.0, 1.0, (len(t), 3)) * np.radians(tel.attitude_noise_deg)
+    )
     rpy[:, 2] = wrap_pi(rpy[:, 2])
     rates = motion.body_rates(tau)
-    add(t, "attitude", [(int(m), *map(float, a), *map(float, r)) for m, a, r in zip(ms, rpy, rates)])
+    add(
+        t, "attitude", [(int(m), *map(float, a), *map(float, r)) for m, a, r in zip(ms, rpy, rates)]
+    )
 
     rng = stream(sc, "position")
     t, ms = sample_times(clock, tel.position_hz, tau0, tau1, rng)
@@ -318,17 +417,37 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
     vel = motion.uav_velocity_ned(tau)
     s = sc.site
     error_ne = position_error_ne_m(sc, tau) + position_white_ne_m(sc, "ekf", len(t))
-    lat, lon, alt = ned_to_geodetic(ned_with_error(ned, error_ne), s.lat_deg, s.lon_deg, s.surface_amsl_m)
+    lat, lon, alt = ned_to_geodetic(
+        ned_with_error(ned, error_ne), s.lat_deg, s.lon_deg, s.surface_amsl_m
+    )
     baro = baro_error_m(sc, tau) + baro_noise_m(sc, len(t))
     alt = alt + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m + baro
-    rel = -ned[:, 2] - s.takeoff_height_above_surface_m + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m + baro
+    rel = (
+        -ned[:, 2]
+        - s.takeoff_height_above_surface_m
+        + rng.normal(0.0, 1.0, len(t)) * tel.height_noise_m
+        + baro
+    )
     heading = motion.uav_rpy(tau)[:, 2] + ahrs_error_rpy(sc, tau)[:, 2]
     hdg = np.round(np.degrees(heading) % 360 * 100).astype(int) % 36000
-    add(t, "global_position_int", [
-        (int(m), round(la * 1e7), round(lo * 1e7), round(a * 1000), round(r * 1000),
-         round(v[0] * 100), round(v[1] * 100), round(v[2] * 100), int(h))
-        for m, la, lo, a, r, v, h in zip(ms, lat, lon, alt, rel, vel, hdg)
-    ])
+    add(
+        t,
+        "global_position_int",
+        [
+            (
+                int(m),
+                round(la * 1e7),
+                round(lo * 1e7),
+                round(a * 1000),
+                round(r * 1000),
+                round(v[0] * 100),
+                round(v[1] * 100),
+                round(v[2] * 100),
+                int(h),
+            )
+            for m, la, lo, a, r, v, h in zip(ms, lat, lon, alt, rel, vel, hdg)
+        ],
+    )
 
     if tel.gps_raw_hz > 0:
         rng = stream(sc, "gps_raw")
@@ -354,8 +473,14 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
 
     if sc.mount.kind == "servo":
         t = clock.true_us([tau0 + 0.3])
-        if clock.up(t)[0]:  # ArduPilot answers PARAM_REQUEST_READ by name: index -1, value cast to float
-            add(t, "param_value", [(b"MNT1_TYPE", 1.0, mav.MAV_PARAM_TYPE_INT8, GCS_PARAM_COUNT, 65535)])
+        if clock.up(t)[
+            0
+        ]:  # ArduPilot answers PARAM_REQUEST_READ by name: index -1, value cast to float
+            add(
+                t,
+                "param_value",
+                [(b"MNT1_TYPE", 1.0, mav.MAV_PARAM_TYPE_INT8, GCS_PARAM_COUNT, 65535)],
+            )
     return out
 
 
@@ -365,7 +490,9 @@ def write_tlog(path: Path, sc: Scenario, motion: Motion, clock: Clock) -> dict[s
     msgs = sorted(_messages(sc, motion, clock), key=lambda m: m[0])  # stable: ties keep their order
     send_us = np.array([m[0] for m in msgs], dtype=np.int64) + SEND_LATENCY_US
     extra = exponential(stream(sc, "downlink"), sc.link.jitter_s, len(msgs))
-    recv_us = np.maximum.accumulate(send_us + np.round((sc.link.delay_s + extra) * 1e6).astype(np.int64))
+    recv_us = np.maximum.accumulate(
+        send_us + np.round((sc.link.delay_s + extra) * 1e6).astype(np.int64)
+    )
     counts: dict[str, int] = {}
     with open(path, "wb") as f:
         for (_, name, args), t_us in zip(msgs, clock.station_us(recv_us)):

@@ -44,7 +44,9 @@ K_M = 370.0  # rad/m: the gravity-capillary waves' slowest wavenumber (Elfouhail
 C_M = 0.23  # m/s: their phase speed there
 K_TOTAL_MAX = 10 * K_M  # Cox & Munk's total counts slopes up to here (the spectrum is ~0 beyond)
 RESOLVE_PX = 4.0  # the shortest wave resolved, in the floor's pixels at the surface, straight down
-GRID_PER_WAVELENGTH = 5  # the floor's surface grids: points per shortest wavelength (interpolated bicubically)
+GRID_PER_WAVELENGTH = (
+    5  # the floor's surface grids: points per shortest wavelength (interpolated bicubically)
+)
 MAX_GRID_POINTS = 1_500_000  # ... and at most this many points a grid
 MARGIN = 2  # points a coarser octave's grid reaches past the finer one's on every side
 CHUNK = 1 << 21  # (points × waves) evaluated at once by the exact sums
@@ -115,7 +117,16 @@ class Spectrum:
         gamma = 1.7 if om < 1.0 else 1.7 + 6.0 * np.log(om)
         peak = gamma ** np.exp(-((np.sqrt(k / kp) - 1.0) ** 2) / (2.0 * sigma**2))
         l_pm = np.exp(-1.25 * (kp / k) ** 2)
-        long = 0.5 * 6e-3 * om**0.55 * cp / c * l_pm * peak * np.exp(-om / np.sqrt(10.0) * (np.sqrt(k / kp) - 1.0))
+        long = (
+            0.5
+            * 6e-3
+            * om**0.55
+            * cp
+            / c
+            * l_pm
+            * peak
+            * np.exp(-om / np.sqrt(10.0) * (np.sqrt(k / kp) - 1.0))
+        )
         u_star = KAPPA * self.u10_mps / np.log(10.0 / self.roughness_m)
         ratio = np.log(u_star / C_M)
         alpha_m = max(0.0, 1e-2 * (1.0 + (ratio if u_star <= C_M else 3.0 * ratio)))
@@ -150,7 +161,9 @@ class Spectrum:
 class WaveField:
     """One realisation: ``len(amplitude_m)`` linear waves (arrays over the waves)."""
 
-    k_ne: np.ndarray  # (M, 2) wave vectors, north and east (rad/m), pointing where each wave travels
+    k_ne: (
+        np.ndarray
+    )  # (M, 2) wave vectors, north and east (rad/m), pointing where each wave travels
     amplitude_m: np.ndarray  # (M,)
     omega: np.ndarray  # (M,) rad/s
     phase: np.ndarray  # (M,) rad
@@ -213,7 +226,9 @@ class WaveField:
         lo, hi = np.asarray(lo_ne, dtype=float), np.asarray(hi_ne, dtype=float)
         k = np.hypot(self.k_ne[:, 0], self.k_ne[:, 1])
         octave = np.floor(np.log2(k.max() / k)).astype(int)  # 0: the shortest waves
-        step = max(2 * np.pi / k.max() / GRID_PER_WAVELENGTH, np.sqrt(np.prod(hi - lo) / MAX_GRID_POINTS))
+        step = max(
+            2 * np.pi / k.max() / GRID_PER_WAVELENGTH, np.sqrt(np.prod(hi - lo) / MAX_GRID_POINTS)
+        )
         origin = lo - step
         shape = np.ceil((hi - origin) / step).astype(int) + 2
         grids = []  # (origin, step, shape) of each octave's grid, the finest first
@@ -221,12 +236,19 @@ class WaveField:
             grids.append((origin, step, shape))
             # a grid twice as coarse whose doubling (cv2.resize: fine point i at coarse i/2 - 1/4) lands on these
             # points, with MARGIN coarse points beyond them on every side
-            origin, step, shape = origin + step / 2 - MARGIN * 2 * step, 2 * step, -(-shape // 2) + 2 * MARGIN
+            origin, step, shape = (
+                origin + step / 2 - MARGIN * 2 * step,
+                2 * step,
+                -(-shape // 2) + 2 * MARGIN,
+            )
         fields = None
         for b in range(octave.max(), -1, -1):
             origin, step, shape = grids[b]
             if fields is not None:
-                doubled = [cv2.resize(f, (2 * f.shape[1], 2 * f.shape[0]), interpolation=cv2.INTER_CUBIC) for f in fields]
+                doubled = [
+                    cv2.resize(f, (2 * f.shape[1], 2 * f.shape[0]), interpolation=cv2.INTER_CUBIC)
+                    for f in fields
+                ]
                 m = 2 * MARGIN
                 fields = [f[m : m + shape[0], m : m + shape[1]] for f in doubled]
             waves = np.flatnonzero(octave == b)
@@ -238,14 +260,18 @@ class WaveField:
         origin, step, _ = grids[0]
         return GriddedSurface(float(origin[0]), float(origin[1]), step, tuple(fields))
 
-    def _grid(self, waves, origin_ne, step_m: float, rows: int, cols: int, t_s: float) -> list[np.ndarray]:
+    def _grid(
+        self, waves, origin_ne, step_m: float, rows: int, cols: int, t_s: float
+    ) -> list[np.ndarray]:
         """η, ∂η/∂north and ∂η/∂east (float32 (rows, cols) each) of the waves ``waves`` (indices) on a grid, by one
         complex matrix product: each wave is separable, exp(i·(k_n·n + k_e·e)) = exp(i·k_n·n)·exp(i·k_e·e)."""
         kn, ke = self.k_ne[waves, 0], self.k_ne[waves, 1]
         x = np.exp(1j * np.outer(origin_ne[0] + step_m * np.arange(rows), kn)).astype(np.complex64)
         y = np.exp(1j * np.outer(origin_ne[1] + step_m * np.arange(cols), ke)).T
         c = self.amplitude_m[waves] * np.exp(1j * (self.phase[waves] - self.omega[waves] * t_s))
-        right = np.concatenate([c[:, None] * y, (1j * kn * c)[:, None] * y, (1j * ke * c)[:, None] * y], axis=1)
+        right = np.concatenate(
+            [c[:, None] * y, (1j * kn * c)[:, None] * y, (1j * ke * c)[:, None] * y], axis=1
+        )
         fields = (x @ right.astype(np.complex64)).real
         return [np.ascontiguousarray(fields[:, i * cols : (i + 1) * cols]) for i in range(3)]
 
@@ -284,7 +310,10 @@ class GriddedSurface:
     def _sample(self, ne, which) -> np.ndarray:
         """Fields ``which`` (indices) at points ``ne`` (N, 2): (N, len(which))."""
         x, y = (ne[:, 1] - self.east0_m) / self.step_m, (ne[:, 0] - self.north0_m) / self.step_m
-        return np.stack([sample(self.fields[i], x, y, cv2.INTER_CUBIC, cv2.BORDER_REPLICATE) for i in which], axis=-1)
+        return np.stack(
+            [sample(self.fields[i], x, y, cv2.INTER_CUBIC, cv2.BORDER_REPLICATE) for i in which],
+            axis=-1,
+        )
 
     def height(self, ne):
         return self._sample(ne, (0,))[:, 0]
@@ -296,7 +325,10 @@ class GriddedSurface:
 def downwind_rad(sc: Scenario) -> float:
     """Where the wind blows to (radians from North): the waves' mean direction of travel."""
     w = sc.waves
-    return float(np.radians(sc.uav.wind_from_deg if w.direction_from_deg is None else w.direction_from_deg) + np.pi)
+    return float(
+        np.radians(sc.uav.wind_from_deg if w.direction_from_deg is None else w.direction_from_deg)
+        + np.pi
+    )
 
 
 def shortest_wavelength_m(sc: Scenario, fx_px: float) -> float:
@@ -317,8 +349,10 @@ def wave_field(sc: Scenario, fx_px: float) -> WaveField | None:
     k_lo, k_hi, m = spec.k_low, 2 * np.pi / lam, w.components
     rng = np.random.default_rng([sc.seed, SEED_STREAM])
     if not k_hi > 2 * k_lo:
-        raise ValueError(f"scenario {sc.name}: waves.shortest_wavelength_m = {lam:g}: the spectrum's longest waves are "
-                         f"{2 * np.pi / k_lo:.3g} m, resolve at least half as long")
+        raise ValueError(
+            f"scenario {sc.name}: waves.shortest_wavelength_m = {lam:g}: the spectrum's longest waves are "
+            f"{2 * np.pi / k_lo:.3g} m, resolve at least half as long"
+        )
     edges = np.geomspace(k_lo, k_hi, m + 1)
     k = np.exp(rng.uniform(np.log(edges[:-1]), np.log(edges[1:])))
     band_mss = np.array([spec.mss(a, b, 65) for a, b in pairwise(edges)])
@@ -333,5 +367,12 @@ def wave_field(sc: Scenario, fx_px: float) -> WaveField | None:
     k_ne = k[:, None] * np.column_stack([np.cos(heading), np.sin(heading)])
     omega = k * phase_speed(k, sc.site.floor_depth_m)
     resolved = spec.mss(k_lo, k_hi)
-    return WaveField(k_ne, amplitude, omega, rng.uniform(0.0, 2 * np.pi, m), resolved,
-                     cox_munk_mss(spec.u12_5_mps) - resolved, lam)
+    return WaveField(
+        k_ne,
+        amplitude,
+        omega,
+        rng.uniform(0.0, 2 * np.pi, m),
+        resolved,
+        cox_munk_mss(spec.u12_5_mps) - resolved,
+        lam,
+    )

@@ -40,12 +40,18 @@ EK3_SRC1_YAW 1
 """
 
 
-def _sitl_files(variable: str, default: Path, parms: tuple[str, ...]) -> tuple[Path, tuple[Path, ...]]:
+def _sitl_files(
+    variable: str, default: Path, parms: tuple[str, ...]
+) -> tuple[Path, tuple[Path, ...]]:
     given = os.environ.get(variable)
     if not given and not default.exists():
-        pytest.skip(f"{default.name} SITL not found: set {variable} to its binary or provide {default}")
+        pytest.skip(
+            f"{default.name} SITL not found: set {variable} to its binary or provide {default}"
+        )
     binary = Path(given) if given else default
-    assert binary.is_file() and os.access(binary, os.X_OK), f"{variable}={binary}: not an executable file"
+    assert binary.is_file() and os.access(binary, os.X_OK), (
+        f"{variable}={binary}: not an executable file"
+    )
     files = tuple(binary.parent / p for p in parms)
     for f in files:
         assert f.is_file(), f"{f} missing: it must lie next to the binary"
@@ -61,7 +67,9 @@ def ardusub_files() -> tuple[Path, Path]:
 
 def arducopter_files() -> tuple[Path, tuple[Path, ...]]:
     """ArduCopter's binary, ``copter.parm`` and ``mount_brushless.parm`` (a gimbal): skip without them."""
-    return _sitl_files("SKYFIX_ARDUCOPTER", DEFAULT_ARDUCOPTER, ("copter.parm", "mount_brushless.parm"))
+    return _sitl_files(
+        "SKYFIX_ARDUCOPTER", DEFAULT_ARDUCOPTER, ("copter.parm", "mount_brushless.parm")
+    )
 
 
 def _port_free(port: int, kind: int) -> bool:
@@ -75,14 +83,22 @@ def _port_free(port: int, kind: int) -> bool:
 
 def instance_ports(n: int) -> dict:
     """ArduSub SITL's ports for ``-I n``: TCP SERIAL0/1/2, UDP RC input."""
-    return {"serial0": 5760 + 10 * n, "serial1": 5762 + 10 * n, "serial2": 5763 + 10 * n, "rc_in": 5501 + 10 * n}
+    return {
+        "serial0": 5760 + 10 * n,
+        "serial1": 5762 + 10 * n,
+        "serial2": 5763 + 10 * n,
+        "rc_in": 5501 + 10 * n,
+    }
 
 
 def free_instance(exclude: set[int]) -> int:
     for n in random.sample(range(10, 100), 90):
         p = instance_ports(n)
-        if n not in exclude and all(_port_free(p[k], socket.SOCK_STREAM) for k in ("serial0", "serial1", "serial2")) \
-                and _port_free(p["rc_in"], socket.SOCK_DGRAM):
+        if (
+            n not in exclude
+            and all(_port_free(p[k], socket.SOCK_STREAM) for k in ("serial0", "serial1", "serial2"))
+            and _port_free(p["rc_in"], socket.SOCK_DGRAM)
+        ):
             return n
     raise AssertionError("no free ArduSub SITL instance (ports 5860-6753 busy)")
 
@@ -90,8 +106,15 @@ def free_instance(exclude: set[int]) -> int:
 class Observer:
     """A GCS on one ArduSub serial port: every message it receives, stamped with its receive time (UNIX s)."""
 
-    KEEP = ("HEARTBEAT", "STATUSTEXT", "COMMAND_ACK", "GPS_INPUT", "GPS_RAW_INT", "GLOBAL_POSITION_INT",
-            "EKF_STATUS_REPORT")
+    KEEP = (
+        "HEARTBEAT",
+        "STATUSTEXT",
+        "COMMAND_ACK",
+        "GPS_INPUT",
+        "GPS_RAW_INT",
+        "GLOBAL_POSITION_INT",
+        "EKF_STATUS_REPORT",
+    )
 
     def __init__(self, port: int, keep: tuple[str, ...] = KEEP):
         self.keep = keep
@@ -104,8 +127,10 @@ class Observer:
         self.closed = False
         self._lock = threading.Lock()
         self._stop = threading.Event()
-        self._threads = [threading.Thread(target=self._read, name="observer-rx", daemon=True),
-                         threading.Thread(target=self._heartbeat, name="observer-hb", daemon=True)]
+        self._threads = [
+            threading.Thread(target=self._read, name="observer-rx", daemon=True),
+            threading.Thread(target=self._heartbeat, name="observer-hb", daemon=True),
+        ]
         for th in self._threads:
             th.start()
 
@@ -125,10 +150,15 @@ class Observer:
                     self.msgs.append((t, m))
         self.closed = True
 
-    def _heartbeat(self) -> None:  # a GCS heartbeat: ArduSub learns a route to us and forwards broadcasts
+    def _heartbeat(
+        self,
+    ) -> None:  # a GCS heartbeat: ArduSub learns a route to us and forwards broadcasts
         while True:
-            self.send(mavlink2.MAVLink_heartbeat_message(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID,
-                                                         0, 0, 0, 3))
+            self.send(
+                mavlink2.MAVLink_heartbeat_message(
+                    mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3
+                )
+            )
             if self._stop.wait(1.0):
                 return
 
@@ -147,11 +177,20 @@ class Observer:
         end = time.time() + timeout_s
         while time.time() < end:
             t_sent = time.time()
-            self.send(mavlink2.MAVLink_command_long_message(1, 1, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id,
-                                                            1e6 / hz, 0, 0, 0, 0, 0))
+            self.send(
+                mavlink2.MAVLink_command_long_message(
+                    1, 1, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0
+                )
+            )
             try:
-                wait_for(lambda t=t_sent: any(m.command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL and m.result == 0
-                                              for _, m in self.of("COMMAND_ACK", t)), 2.0, "ack")
+                wait_for(
+                    lambda t=t_sent: any(
+                        m.command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL and m.result == 0
+                        for _, m in self.of("COMMAND_ACK", t)
+                    ),
+                    2.0,
+                    "ack",
+                )
                 return
             except AssertionError:
                 continue
@@ -170,9 +209,15 @@ class ArduSub:
 
     MODEL = "vectored"
 
-    def __init__(self, binary: Path, parms: Path | tuple[Path, ...], workdir: Path,
-                 home: tuple[float, float, float, float], extra_parm: str = EXTRA_PARM,
-                 keep: tuple[str, ...] = Observer.KEEP):
+    def __init__(
+        self,
+        binary: Path,
+        parms: Path | tuple[Path, ...],
+        workdir: Path,
+        home: tuple[float, float, float, float],
+        extra_parm: str = EXTRA_PARM,
+        keep: tuple[str, ...] = Observer.KEEP,
+    ):
         self.binary, self.dir, self.home, self.keep = binary, workdir, home, keep
         self.parms = (parms,) if isinstance(parms, Path) else tuple(parms)
         self.dir.mkdir(parents=True, exist_ok=True)
@@ -191,17 +236,35 @@ class ArduSub:
             tried.add(n)
             self.ports, self.instance = instance_ports(n), n
             self.log = self.dir / f"ardusub-I{n}-{len(list(self.dir.glob('ardusub-*.log')))}.log"
-            cmd = [str(self.binary), "--model", self.MODEL, "--speedup", "1", "-w", f"-I{n}",
-                   "--home", ",".join(f"{v:g}" for v in self.home),
-                   "--defaults", ",".join(str(p) for p in (*self.parms, self.dir / "extra.parm"))]
+            cmd = [
+                str(self.binary),
+                "--model",
+                self.MODEL,
+                "--speedup",
+                "1",
+                "-w",
+                f"-I{n}",
+                "--home",
+                ",".join(f"{v:g}" for v in self.home),
+                "--defaults",
+                ",".join(str(p) for p in (*self.parms, self.dir / "extra.parm")),
+            ]
             with open(self.log, "w") as log:
                 log.write(" ".join(cmd) + "\n")
                 log.flush()
-                self.proc = subprocess.Popen(cmd, cwd=self.dir, stdout=log, stderr=subprocess.STDOUT,
-                                             stdin=subprocess.DEVNULL)
+                self.proc = subprocess.Popen(
+                    cmd,
+                    cwd=self.dir,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    stdin=subprocess.DEVNULL,
+                )
             if self._connect():
-                wait_for(lambda: self.observer.of("HEARTBEAT") or self.proc.poll() is not None, 30,
-                         "ArduSub's first heartbeat")
+                wait_for(
+                    lambda: self.observer.of("HEARTBEAT") or self.proc.poll() is not None,
+                    30,
+                    "ArduSub's first heartbeat",
+                )
                 if self.proc.poll() is None:
                     return
             self.stop()  # the port was taken meanwhile (bind failed), or it died: another instance
@@ -210,7 +273,9 @@ class ArduSub:
     def _connect(self, timeout_s: float = 30.0) -> bool:
         end = time.time() + timeout_s
         while time.time() < end and self.proc.poll() is None:
-            if "SERIAL0 on TCP port" in self.log.read_text():  # bound: it waits for this connection to boot
+            if (
+                "SERIAL0 on TCP port" in self.log.read_text()
+            ):  # bound: it waits for this connection to boot
                 try:
                     self.observer = Observer(self.ports["serial0"], self.keep)
                     return True
@@ -241,8 +306,6 @@ class ArduSub:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
-
-
 
 
 class ArduCopter(ArduSub):

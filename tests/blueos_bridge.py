@@ -43,7 +43,11 @@ def to_json(msg) -> dict:
             entry = mavlink2.enums.get(enums[name], {}).get(value)
             value = {"type": entry.name if entry is not None else str(value)}
         fields[RENAMED.get(name, name)] = value
-    header = {"system_id": msg.get_srcSystem(), "component_id": msg.get_srcComponent(), "sequence": msg.get_seq()}
+    header = {
+        "system_id": msg.get_srcSystem(),
+        "component_id": msg.get_srcComponent(),
+        "sequence": msg.get_seq(),
+    }
     return {"header": header, "message": fields}
 
 
@@ -89,7 +93,9 @@ def main(url: str, endpoint: str) -> None:
             print(f"bridge: mavlink/in: not a message: {e!r}", flush=True)
             return
         with lock:
-            packer = packers.setdefault((sysid, compid), mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid))
+            packer = packers.setdefault(
+                (sysid, compid), mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+            )
             if conn["sock"] is not None:
                 try:
                     conn["sock"].sendall(msg.pack(packer))

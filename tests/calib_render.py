@@ -40,7 +40,9 @@ class TrueCamera:
 class Texture:
     image: np.ndarray  # uint8 grey
     px_per_m: float
-    origin_px: float  # texture coordinate of the board's (0, 0) (top-left of its squares), both axes
+    origin_px: (
+        float  # texture coordinate of the board's (0, 0) (top-left of its squares), both axes
+    )
     size_m: tuple[float, float]  # the squares' area, width and height
 
 
@@ -51,14 +53,19 @@ def chessboard_texture(cols: int, rows: int, square_m: float, px_per_square: int
     for r in range(rows):
         for c in range(cols):
             if (r + c) % 2 == 0:
-                img[(r + 1) * sq:(r + 2) * sq, (c + 1) * sq:(c + 2) * sq] = 0
+                img[(r + 1) * sq : (r + 2) * sq, (c + 1) * sq : (c + 2) * sq] = 0
     return Texture(img, sq / square_m, sq - 0.5, (cols * square_m, rows * square_m))
 
 
-def charuco_texture(cols, rows, square_m, marker_m, dictionary="DICT_5X5_100", px_per_square=64) -> Texture:
+def charuco_texture(
+    cols, rows, square_m, marker_m, dictionary="DICT_5X5_100", px_per_square=64
+) -> Texture:
     """OpenCV's own ChArUco image (``CharucoBoard.generateImage``) with a white margin one square wide."""
     board = cv2.aruco.CharucoBoard(
-        (cols, rows), square_m, marker_m, cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
+        (cols, rows),
+        square_m,
+        marker_m,
+        cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)),
     )
     sq = px_per_square
     img = board.generateImage(((cols + 2) * sq, (rows + 2) * sq), marginSize=sq, borderBits=1)
@@ -79,8 +86,12 @@ def board_points(tex: Texture, n: int = 12) -> np.ndarray:
     """Points along the outline of the board's squares area (metres, board frame, z = 0)."""
     w, h = tex.size_m
     s = np.linspace(0, 1, n)
-    edges = [np.stack([s * w, 0 * s], 1), np.stack([s * w, 0 * s + h], 1),
-             np.stack([0 * s, s * h], 1), np.stack([0 * s + w, s * h], 1)]
+    edges = [
+        np.stack([s * w, 0 * s], 1),
+        np.stack([s * w, 0 * s + h], 1),
+        np.stack([0 * s, s * h], 1),
+        np.stack([0 * s + w, s * h], 1),
+    ]
     pts = np.concatenate(edges)
     return np.concatenate([pts, np.zeros((len(pts), 1))], 1)
 
@@ -90,12 +101,23 @@ def project(cam: TrueCamera, rvec, tvec, pts: np.ndarray) -> np.ndarray:
     return img.reshape(-1, 2)
 
 
-def render(cam: TrueCamera, tex: Texture, rvec, tvec, *, ss: int = 2, blur: float = 0.7, noise: float = 2.0,
-           rng: np.random.Generator | None = None) -> np.ndarray:
+def render(
+    cam: TrueCamera,
+    tex: Texture,
+    rvec,
+    tvec,
+    *,
+    ss: int = 2,
+    blur: float = 0.7,
+    noise: float = 2.0,
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
     """The grey image of the board at pose (rvec, tvec): board frame → camera frame."""
     x, y = _rays(cam, ss)
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float))
-    H = np.column_stack([R[:, 0], R[:, 1], np.asarray(tvec, dtype=float).ravel()])  # board (X, Y, 1) → ray
+    H = np.column_stack(
+        [R[:, 0], R[:, 1], np.asarray(tvec, dtype=float).ravel()]
+    )  # board (X, Y, 1) → ray
     Hi = np.linalg.inv(H)
     a = Hi[0, 0] * x + Hi[0, 1] * y + Hi[0, 2]
     b = Hi[1, 0] * x + Hi[1, 1] * y + Hi[1, 2]
@@ -105,7 +127,9 @@ def render(cam: TrueCamera, tex: Texture, rvec, tvec, *, ss: int = 2, blur: floa
         Y = np.where(c > 0, b / c, -1e3)
     mx = (tex.origin_px + X * tex.px_per_m).astype(np.float32)
     my = (tex.origin_px + Y * tex.px_per_m).astype(np.float32)
-    sup = cv2.remap(tex.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=BACKGROUND)
+    sup = cv2.remap(
+        tex.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=BACKGROUND
+    )
     img = cv2.resize(sup.astype(np.float32), (cam.width, cam.height), interpolation=cv2.INTER_AREA)
     if blur > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur)
@@ -122,8 +146,17 @@ def _rot(rx, ry, rz) -> np.ndarray:
     return Rx @ Ry @ Rz
 
 
-def poses(cam: TrueCamera, tex: Texture, n: int, *, seed: int = 1, distance_m=(0.38, 0.6), tilt_deg=40.0,
-          spread: float = 1.0, margin_px: float = 12.0):
+def poses(
+    cam: TrueCamera,
+    tex: Texture,
+    n: int,
+    *,
+    seed: int = 1,
+    distance_m=(0.38, 0.6),
+    tilt_deg=40.0,
+    spread: float = 1.0,
+    margin_px: float = 12.0,
+):
     """``n`` board poses ``(rvec, tvec)``, fully visible, aimed across the image.
 
     Each pose aims the board's centre at a target point; targets cycle through the
@@ -153,8 +186,11 @@ def poses(cam: TrueCamera, tex: Texture, n: int, *, seed: int = 1, distance_m=(0
                 tvec = z * np.array([float(xn), float(yn), 1.0]) - R @ np.array([w / 2, h / 2, 0.0])
                 pts = project(cam, rvec, tvec, outline)
                 cam_z = (R @ outline.T).T[:, 2] + tvec[2]
-                if (np.all(cam_z > 0.05) and np.all(pts > margin_px)
-                        and np.all(pts < np.array([cam.width, cam.height]) - 1 - margin_px)):
+                if (
+                    np.all(cam_z > 0.05)
+                    and np.all(pts > margin_px)
+                    and np.all(pts < np.array([cam.width, cam.height]) - 1 - margin_px)
+                ):
                     best, best_score = tvec, fu + fv
         if best is not None:
             out.append((rvec, best))

@@ -8,8 +8,9 @@ import socket
 import av
 
 
-def mux_to_datagrams(clip, scheme: str, fmt: str, options: dict, query: str = "") -> tuple[list[bytes], list[int],
-                                                                                          list[int]]:
+def mux_to_datagrams(
+    clip, scheme: str, fmt: str, options: dict, query: str = ""
+) -> tuple[list[bytes], list[int], list[int]]:
     """The datagrams FFmpeg's ``fmt`` muxer sends of ``clip``'s video to ``scheme://127.0.0.1:PORT{query}``, the
     number of datagrams sent after each frame, and each frame's size (bytes)."""
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -17,8 +18,12 @@ def mux_to_datagrams(clip, scheme: str, fmt: str, options: dict, query: str = ""
     rx.bind(("127.0.0.1", 0))
     rx.setblocking(False)
     datagrams, ends, sizes = [], [], []
-    with av.open(str(clip)) as src, av.open(f"{scheme}://127.0.0.1:{rx.getsockname()[1]}{query}", "w", format=fmt,
-                                            options=options) as out:
+    with (
+        av.open(str(clip)) as src,
+        av.open(
+            f"{scheme}://127.0.0.1:{rx.getsockname()[1]}{query}", "w", format=fmt, options=options
+        ) as out,
+    ):
         ost = out.add_stream_from_template(src.streams.video[0])
         for packet in src.demux(video=0):
             if not packet.size:

@@ -54,16 +54,33 @@ def geodetic(n_m: float, e_m: float) -> tuple[float, float]:
 def error_ne_m(lat: float, lon: float, t: float, t0: float) -> tuple[float, float]:
     """A position's offset (m, north and east) from the UUV's at ``t`` (it left the origin at ``t0``)."""
     az, _, dist = GEOD.inv(LON0, LAT0, lon, lat)
-    return dist * math.cos(math.radians(az)) - SPEED_MPS * (t - t0), dist * math.sin(math.radians(az))
+    return dist * math.cos(math.radians(az)) - SPEED_MPS * (t - t0), dist * math.sin(
+        math.radians(az)
+    )
 
 
-def payload(drone: Drone, t: float, t0: float, rng: np.random.Generator, ahead_s: float = 0.0) -> bytes:
+def payload(
+    drone: Drone, t: float, t0: float, rng: np.random.Generator, ahead_s: float = 0.0
+) -> bytes:
     """The drone's fix message of the UUV at ``t`` (stamped ``ahead_s`` later)."""
     n, e = np.array(drone.offset_ne_m) + rng.normal(0.0, drone.white_m, 2)
     lat, lon = geodetic(SPEED_MPS * (t - t0) + n, e)
     s = drone.sigma_m
-    fix = Fix(t_unix=t + ahead_s, status="ok", lat=lat, lon=lon, alt_amsl_m=-0.9, v_acc_m=0.3, depth_m=1.3,
-              t_gnss=t + ahead_s, h_acc_m=math.sqrt(2) * s, sigma_n_m=s, sigma_e_m=s, cov_ne_m2=0.0, frame=0)
+    fix = Fix(
+        t_unix=t + ahead_s,
+        status="ok",
+        lat=lat,
+        lon=lon,
+        alt_amsl_m=-0.9,
+        v_acc_m=0.3,
+        depth_m=1.3,
+        t_gnss=t + ahead_s,
+        h_acc_m=math.sqrt(2) * s,
+        sigma_n_m=s,
+        sigma_e_m=s,
+        cov_ne_m2=0.0,
+        frame=0,
+    )
     return json.dumps(FixMessage.of(fix).to_json()).encode()
 
 
@@ -76,10 +93,24 @@ class FuserOnLoopback:
         self.log = work / "fuse.log"
         port = free_port(socket.SOCK_STREAM)
         self.uuv = GpsInputEndpoint()
-        self.proc = start(skyfix("fuse", "--uuv", UUV, *[a for s in sources for a in ("--source", s)],
-                                 "--zenoh-listen", f"tcp/127.0.0.1:{port}", "--gps-input",
-                                 f"udpout:127.0.0.1:{self.uuv.port}", "--stats", str(self.stats),
-                                 "--duration-s", "600", *extra), self.log)
+        self.proc = start(
+            skyfix(
+                "fuse",
+                "--uuv",
+                UUV,
+                *[a for s in sources for a in ("--source", s)],
+                "--zenoh-listen",
+                f"tcp/127.0.0.1:{port}",
+                "--gps-input",
+                f"udpout:127.0.0.1:{self.uuv.port}",
+                "--stats",
+                str(self.stats),
+                "--duration-s",
+                "600",
+                *extra,
+            ),
+            self.log,
+        )
         conf = zenoh.Config()
         conf.insert_json5("mode", '"peer"')
         conf.insert_json5("scouting/multicast/enabled", "false")
@@ -87,16 +118,30 @@ class FuserOnLoopback:
         self.session = zenoh.open(conf)
         self.fused: list[dict] = []  # the fused fix messages, as received
         self.statuses: list[dict] = []
-        self._subs = [self.session.declare_subscriber(f"skyfix/uuv/{UUV}/fix", lambda s: self.fused.append(
-                          json.loads(s.payload.to_bytes()))),
-                      self.session.declare_subscriber(f"skyfix/uuv/{UUV}/fuse/status", lambda s: self.statuses.append(
-                          json.loads(s.payload.to_bytes())))]
+        self._subs = [
+            self.session.declare_subscriber(
+                f"skyfix/uuv/{UUV}/fix",
+                lambda s: self.fused.append(json.loads(s.payload.to_bytes())),
+            ),
+            self.session.declare_subscriber(
+                f"skyfix/uuv/{UUV}/fuse/status",
+                lambda s: self.statuses.append(json.loads(s.payload.to_bytes())),
+            ),
+        ]
         self.publishers: dict[str, zenoh.Publisher] = {}
-        wait_for(lambda: self.statuses or self.proc.poll() is not None, 60, "the fuser's first status")
+        wait_for(
+            lambda: self.statuses or self.proc.poll() is not None, 60, "the fuser's first status"
+        )
         assert self.proc.poll() is None, self.log.read_text()[-3000:]
 
-    def stream(self, drones: list[Drone], seconds: float, t0: float, seed: int = 1,
-               ahead: dict[float, tuple[str, float]] | None = None) -> None:
+    def stream(
+        self,
+        drones: list[Drone],
+        seconds: float,
+        t0: float,
+        seed: int = 1,
+        ahead: dict[float, tuple[str, float]] | None = None,
+    ) -> None:
         """Each drone's fixes at :data:`FPS` for ``seconds`` in real time; ``ahead``: at that many seconds after
         ``t0``, one more fix of drone (name) stamped that far (s) ahead."""
         rng = np.random.default_rng(seed)
@@ -133,18 +178,34 @@ class FuserOnLoopback:
 
 def ok_errors(fused: list[dict], t0: float) -> np.ndarray:
     """(north, east, h_acc) of each ok fused fix against the truth at its time."""
-    return np.array([(*error_ne_m(f["lat"], f["lon"], f["t_gnss"], t0), f["h_acc_m"]) for f in fused
-                     if f["status"] == "ok"]).reshape(-1, 3)
+    return np.array(
+        [
+            (*error_ne_m(f["lat"], f["lon"], f["t_gnss"], t0), f["h_acc_m"])
+            for f in fused
+            if f["status"] == "ok"
+        ]
+    ).reshape(-1, 3)
 
 
 def gps_input_errors_m(received: list[tuple[float, dict]], t0: float) -> np.ndarray:
     """The distance (m) of each 3D GPS_INPUT from the UUV when the endpoint's kernel received it."""
-    return np.array([math.hypot(*error_ne_m(m["lat"] / 1e7, m["lon"] / 1e7, t, t0)) for t, m in received
-                     if m["fix_type"] >= 3])
+    return np.array(
+        [
+            math.hypot(*error_ne_m(m["lat"] / 1e7, m["lon"] / 1e7, t, t0))
+            for t, m in received
+            if m["fix_type"] >= 3
+        ]
+    )
 
 
-def run_fuser(work: Path, sources: list[str], drones: list[Drone], seconds: float,
-              ahead: dict[float, tuple[str, float]] | None = None, *extra: str) -> tuple[dict, list[dict], list, float]:
+def run_fuser(
+    work: Path,
+    sources: list[str],
+    drones: list[Drone],
+    seconds: float,
+    ahead: dict[float, tuple[str, float]] | None = None,
+    *extra: str,
+) -> tuple[dict, list[dict], list, float]:
     """The fuser taking ``sources`` while ``drones`` publish for ``seconds``: its final status, the fused fix messages,
     the GPS_INPUT received and the stream's ``t0``."""
     work.mkdir(parents=True, exist_ok=True)
@@ -152,9 +213,15 @@ def run_fuser(work: Path, sources: list[str], drones: list[Drone], seconds: floa
     try:
         t0 = time.time()
         fuser.stream(drones, seconds, t0, ahead=ahead)
-        wait_for(lambda: fuser.fused and fuser.fused[-1]["t"] >= t0 + seconds - 0.5 or fuser.proc.poll() is not None,
-                 30, "the fused fixes to catch up")
+        wait_for(
+            lambda: (
+                fuser.fused
+                and fuser.fused[-1]["t"] >= t0 + seconds - 0.5
+                or fuser.proc.poll() is not None
+            ),
+            30,
+            "the fused fixes to catch up",
+        )
     finally:
         final = fuser.close()
     return final, fuser.fused, list(fuser.uuv.received), t0
-

@@ -33,7 +33,9 @@ class Stream:
     fixes: list[Fix]
     truth_ne: np.ndarray  # (n, 2) metres north, east: where the UUV is at each fix
     wrong: np.ndarray  # (n,) bool: the fix is not the UUV (a drift, a jump, a look-alike)
-    start: np.ndarray  # (n,) bool: a (re)acquisition starts at this fix (the first, the first after a loss)
+    start: (
+        np.ndarray
+    )  # (n,) bool: a (re)acquisition starts at this fix (the first, the first after a loss)
 
     def real_after(self, seconds: float) -> np.ndarray:
         """Fixes of the UUV (ok, not wrong) more than ``seconds`` after its latest (re)acquisition began."""
@@ -47,8 +49,21 @@ def fix_at(t: float, north_m: float, east_m: float, h_acc_m: float, status: str 
     s = h_acc_m / math.sqrt(2.0)
     if status != "ok":
         return Fix(t_unix=t, status=status)
-    return Fix(t_unix=t, status="ok", u=640.0, v=360.0, lat=lat, lon=lon, alt_amsl_m=-1.0, depth_m=1.0,
-               h_acc_m=h_acc_m, v_acc_m=0.5, sigma_n_m=s, sigma_e_m=s, cov_ne_m2=0.0)
+    return Fix(
+        t_unix=t,
+        status="ok",
+        u=640.0,
+        v=360.0,
+        lat=lat,
+        lon=lon,
+        alt_amsl_m=-1.0,
+        depth_m=1.0,
+        h_acc_m=h_acc_m,
+        v_acc_m=0.5,
+        sigma_n_m=s,
+        sigma_e_m=s,
+        cov_ne_m2=0.0,
+    )
 
 
 def _stream(name, truth_ne, seen_ne, h_acc_m, seed, status=None) -> Stream:
@@ -79,17 +94,31 @@ def step(h_acc_m: float, size_m: float, seconds: float = 2.0, seed: int = 2) -> 
     return _stream(f"step {size_m:g} m", np.zeros_like(seen), seen, h_acc_m, seed)
 
 
-def lookalike(h_acc_m: float, distance_m: float, loss_s: float = 1.0, seconds: float = 2.0, seed: int = 3) -> Stream:
+def lookalike(
+    h_acc_m: float, distance_m: float, loss_s: float = 1.0, seconds: float = 2.0, seed: int = 3
+) -> Stream:
     """The UUV stays put; the tracker loses it for ``loss_s`` and comes back on something ``distance_m`` north."""
     n_loss = round(loss_s * HZ)
     seen = np.vstack([_still(BEFORE_S), _still(loss_s), _still(seconds) + [distance_m, 0.0]])
     status = ["ok"] * round(BEFORE_S * HZ) + ["lost"] * n_loss + ["ok"] * round(seconds * HZ)
-    return _stream(f"look-alike {distance_m:g} m after {loss_s:g} s lost", np.zeros_like(seen), seen, h_acc_m,
-                   seed, status)
+    return _stream(
+        f"look-alike {distance_m:g} m after {loss_s:g} s lost",
+        np.zeros_like(seen),
+        seen,
+        h_acc_m,
+        seed,
+        status,
+    )
 
 
-def crossing(h_acc_m: float, miss_m: float = 0.3, speed_mps: float = 1.2, loss_s: float = 2 / 30,
-             seconds: float = 3.0, seed: int = 6) -> Stream:
+def crossing(
+    h_acc_m: float,
+    miss_m: float = 0.3,
+    speed_mps: float = 1.2,
+    loss_s: float = 2 / 30,
+    seconds: float = 3.0,
+    seed: int = 6,
+) -> Stream:
     """The UUV stays put; another vehicle crosses ``miss_m`` beside it at ``speed_mps``; the tracker loses the
     UUV for ``loss_s`` (two frames) as they meet and comes back on the other one (``second_vehicle``'s failure)."""
     n_loss, n_after = round(loss_s * HZ), round(seconds * HZ)
@@ -97,20 +126,34 @@ def crossing(h_acc_m: float, miss_m: float = 0.3, speed_mps: float = 1.2, loss_s
     other = np.stack([np.full_like(t, miss_m), speed_mps * t], axis=1)
     seen = np.vstack([_still(BEFORE_S), _still(loss_s), other])
     status = ["ok"] * round(BEFORE_S * HZ) + ["lost"] * n_loss + ["ok"] * n_after
-    return _stream(f"vehicle crossing {miss_m:g} m beside, lost {n_loss} frames", np.zeros_like(seen), seen, h_acc_m,
-                   seed, status)
+    return _stream(
+        f"vehicle crossing {miss_m:g} m beside, lost {n_loss} frames",
+        np.zeros_like(seen),
+        seen,
+        h_acc_m,
+        seed,
+        status,
+    )
 
 
-def accelerate(h_acc_m: float, accel_mps2: float, speed_mps: float, seconds: float = 3.0, seed: int = 4) -> Stream:
+def accelerate(
+    h_acc_m: float, accel_mps2: float, speed_mps: float, seconds: float = 3.0, seed: int = 4
+) -> Stream:
     """The UUV rests, then accelerates north-east at ``accel_mps2`` from rest to ``speed_mps`` and goes on."""
     t = np.arange(1, round(seconds * HZ) + 1) / HZ
     t_full = speed_mps / accel_mps2
-    d = np.where(t < t_full, 0.5 * accel_mps2 * t**2, 0.5 * accel_mps2 * t_full**2 + speed_mps * (t - t_full))
+    d = np.where(
+        t < t_full, 0.5 * accel_mps2 * t**2, 0.5 * accel_mps2 * t_full**2 + speed_mps * (t - t_full)
+    )
     path = np.vstack([_still(BEFORE_S), np.stack([d, d], axis=1) / math.sqrt(2.0)])
-    return _stream(f"accelerating at {accel_mps2:g} m/s² to {speed_mps:g} m/s", path, path, h_acc_m, seed)
+    return _stream(
+        f"accelerating at {accel_mps2:g} m/s² to {speed_mps:g} m/s", path, path, h_acc_m, seed
+    )
 
 
-def turn(h_acc_m: float, speed_mps: float, accel_mps2: float, seconds: float = 6.0, seed: int = 5) -> Stream:
+def turn(
+    h_acc_m: float, speed_mps: float, accel_mps2: float, seconds: float = 6.0, seed: int = 5
+) -> Stream:
     """The UUV goes round a circle at ``speed_mps``, its centripetal acceleration ``accel_mps2``."""
     r = speed_mps**2 / accel_mps2
     a = speed_mps / r * np.arange(round(seconds * HZ)) / HZ
@@ -118,7 +161,9 @@ def turn(h_acc_m: float, speed_mps: float, accel_mps2: float, seconds: float = 6
     return _stream(f"turning at {speed_mps:g} m/s, radius {r:.2f} m", path, path, h_acc_m, seed)
 
 
-def offer(gate, stream: Stream, lose, thrusters=None, pushing=lambda t: False, outputs_hz: float = 10.0) -> np.ndarray:
+def offer(
+    gate, stream: Stream, lose, thrusters=None, pushing=lambda t: False, outputs_hz: float = 10.0
+) -> np.ndarray:
     """Offer each fix as it is made (0.05 s later); ``lose()`` on a lost frame. Accepted mask, per fix.
 
     With ``thrusters`` (a :class:`~localizer.thrusters.Thrusters` that knows a vectored frame), ArduSub's
@@ -130,7 +175,9 @@ def offer(gate, stream: Stream, lose, thrusters=None, pushing=lambda t: False, o
         now = f.t_unix + 0.05
         while thrusters is not None and t_out <= now:
             pulse = 1580 if pushing(t_out) else 1500
-            thrusters.outputs(t_out, {1: 3000 - pulse, 2: 3000 - pulse, 3: pulse, 4: pulse, 5: 1620, 6: 1620})
+            thrusters.outputs(
+                t_out, {1: 3000 - pulse, 2: 3000 - pulse, 3: pulse, 4: pulse, 5: 1620, 6: 1620}
+            )
             t_out += 1.0 / outputs_hz
         if f.ok:
             out[i] = gate.check(f, now) is None
@@ -157,7 +204,9 @@ def seconds_since_start(stream: Stream) -> np.ndarray:
     return t - begun
 
 
-def bounded_fit_residual_m(speed_mps: float, accel_mps2: float, before_s: float = 1.0, after_s: float = 1.0) -> float:
+def bounded_fit_residual_m(
+    speed_mps: float, accel_mps2: float, before_s: float = 1.0, after_s: float = 1.0
+) -> float:
     """The smallest largest-residual (m) of a 1-D motion with |acceleration| ≤ ``accel_mps2`` fitted to a
     noise-free 30 Hz stream at rest, then moving at ``speed_mps`` from one frame to the next (scipy's
     bounded least squares over the accelerations between frames)."""
@@ -165,11 +214,15 @@ def bounded_fit_residual_m(speed_mps: float, accel_mps2: float, before_s: float 
     t0 = t[round(before_s * HZ) - 1]
     z = np.where(t > t0, speed_mps * (t - t0), 0.0)
     dt = 1.0 / HZ
-    M = np.zeros((len(t), len(t) + 1))  # x = x0 + v0·t + Σ a_j · (what a_j, held over its frame, adds later)
+    M = np.zeros(
+        (len(t), len(t) + 1)
+    )  # x = x0 + v0·t + Σ a_j · (what a_j, held over its frame, adds later)
     M[:, 0], M[:, 1] = 1.0, t
     for j in range(len(t) - 1):
         tau = t - t[j]
-        M[:, 2 + j] = np.where(tau <= 0, 0.0, np.where(tau < dt, tau**2 / 2, dt**2 / 2 + dt * (tau - dt)))
+        M[:, 2 + j] = np.where(
+            tau <= 0, 0.0, np.where(tau < dt, tau**2 / 2, dt**2 / 2 + dt * (tau - dt))
+        )
     bound = np.r_[np.inf, np.inf, np.full(len(t) - 1, accel_mps2)]
     r = lsq_linear(M, z, bounds=(-bound, bound))
     return float(np.abs(M @ r.x - z).max())

@@ -39,8 +39,15 @@ LINK_INPUTS = ("mavlink", "depth", "router", "video")
 # GPS_INPUT 3.3 s in, on a quiet machine), and then ~4 s of valid fixes before the cut on a loaded one (0 when the
 # cut came at 4 s: CI)
 CUT_FROM_S = 7.0
-CUT_S = {"mavlink": 10.0, "depth": 6.0, "router": 6.0, "video": 6.0}  # > the watchdog's 3 s + its 1 s period
-SESSION_S = 19.0  # the generated session: long enough for a 10 s MAVLink cut with fixes before and after
+CUT_S = {
+    "mavlink": 10.0,
+    "depth": 6.0,
+    "router": 6.0,
+    "video": 6.0,
+}  # > the watchdog's 3 s + its 1 s period
+SESSION_S = (
+    19.0  # the generated session: long enough for a 10 s MAVLink cut with fixes before and after
+)
 SESSION_FPS = 15.0
 
 # A Zenoh router (the only router on PyPI is zenoh's own, in a Python session of mode "router"), its own process.
@@ -85,7 +92,9 @@ finally:
 def start_router(endpoint: str) -> tuple[subprocess.Popen, float]:
     """A router listening on ``endpoint``; the process and when it said it was ready (UNIX s). It listens before
     it says so: a client may be connected through it a little before that moment."""
-    proc = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", ROUTER, endpoint], stdout=subprocess.PIPE, text=True
+    )
     word, t_ready = proc.stdout.readline().split()
     assert word == "ready"
     return proc, float(t_ready)
@@ -134,8 +143,22 @@ class SilentServer:
 
 
 def _run_cmd(cal: Path, mav: str, video: str, uuv: int, *extra: str) -> list[str]:
-    return skyfix("run", "--calibration", str(cal), "--mavlink", mav, "--video", video, "--video-latency-ms", "0",
-                  "--gps-input", f"udpout:127.0.0.1:{uuv}", "--fix-max-age-ms", "500", *extra)
+    return skyfix(
+        "run",
+        "--calibration",
+        str(cal),
+        "--mavlink",
+        mav,
+        "--video",
+        video,
+        "--video-latency-ms",
+        "0",
+        "--gps-input",
+        f"udpout:127.0.0.1:{uuv}",
+        "--fix-max-age-ms",
+        "500",
+        *extra,
+    )
 
 
 def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
@@ -153,23 +176,50 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
     run_log = tmp / "run.log"
     procs = []
     try:
-        service = start(_run_cmd(session / "session.toml", f"udpin:127.0.0.1:{mav}", video_url, uuv,
-                                 "--zenoh-listen", zenoh), run_log)
+        service = start(
+            _run_cmd(
+                session / "session.toml",
+                f"udpin:127.0.0.1:{mav}",
+                video_url,
+                uuv,
+                "--zenoh-listen",
+                zenoh,
+            ),
+            run_log,
+        )
         procs.append(service)
         wait_for(lambda: "skyfix run: UAV" in run_log.read_text(), 30, "the service to start")
         if state in ("flowing", "mavlink_silent"):
             mav_out = f"udpout:127.0.0.1:{mav if state == 'flowing' else free_port()}"  # nobody listens there
-            procs.append(start(skyfix("replay", str(session), "--mavlink-out", mav_out, "--video-out",
-                                      f"udp://127.0.0.1:{video}", "--zenoh-connect", zenoh, "--uuv-listen", ""),
-                               tmp / "replay.log"))
+            procs.append(
+                start(
+                    skyfix(
+                        "replay",
+                        str(session),
+                        "--mavlink-out",
+                        mav_out,
+                        "--video-out",
+                        f"udp://127.0.0.1:{video}",
+                        "--zenoh-connect",
+                        zenoh,
+                        "--uuv-listen",
+                        "",
+                    ),
+                    tmp / "replay.log",
+                )
+            )
             want = 3 if state == "flowing" else 1
-            wait_for(lambda: any(ft == want for _, ft in listener.got), 30, f"GPS_INPUT fix_type {want}")
+            wait_for(
+                lambda: any(ft == want for _, ft in listener.got), 30, f"GPS_INPUT fix_type {want}"
+            )
             if state == "mavlink_silent":
                 wait_for(lambda: "video: receiving" in run_log.read_text(), 30, "the video flowing")
         elif state == "rtsp_silent":
             wait_for(lambda: server.accepted > 0, 30, "the RTSP open pending")
         else:
-            wait_for(lambda: "nothing received" in run_log.read_text(), 30, "a video open that timed out")
+            wait_for(
+                lambda: "nothing received" in run_log.read_text(), 30, "a video open that timed out"
+            )
             wait_for(lambda: len(listener.got) > 0, 30, "GPS_INPUT")
         t_signal = time.time()
         service.send_signal(sig)
@@ -180,7 +230,9 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
         exit_s = time.time() - t_signal if service.returncode is not None else None
         # the last GPS_INPUT, sent just before the exit, may still be on its way through loopback: wait for a
         # no-fix after the signal (the test then asserts it is the last), for 10 s at most
-        wait_until(lambda: any(tr >= t_signal and ft < 2 for tr, ft in listener.got), 10.0, poll_s=0.02)
+        wait_until(
+            lambda: any(tr >= t_signal and ft < 2 for tr, ft in listener.got), 10.0, poll_s=0.02
+        )
         after = [ft for tr, ft in listener.got if tr >= t_signal]
     finally:
         for p in procs:
@@ -188,8 +240,14 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
         listener.close()
         if server:
             server.close()
-    return {"state": state, "signal": signal.Signals(sig).name, "exit_s": exit_s, "rc": service.returncode,
-            "gps_after_signal": after, "log": run_log.read_text()}
+    return {
+        "state": state,
+        "signal": signal.Signals(sig).name,
+        "exit_s": exit_s,
+        "rc": service.returncode,
+        "gps_after_signal": after,
+        "log": run_log.read_text(),
+    }
 
 
 def make_session(out: Path) -> Path:
@@ -199,8 +257,11 @@ def make_session(out: Path) -> Path:
     from sim_fixtures.generate import generate
     from sim_fixtures.scenario import scenario_from_dict
 
-    text = (ROOT / "sim_fixtures" / "scenarios" / "nadir_hover.toml").read_text().replace(
-        "duration_s = 7.0", f"duration_s = {SESSION_S}\nfps = {SESSION_FPS}")
+    text = (
+        (ROOT / "sim_fixtures" / "scenarios" / "nadir_hover.toml")
+        .read_text()
+        .replace("duration_s = 7.0", f"duration_s = {SESSION_S}\nfps = {SESSION_FPS}")
+    )
     assert tomllib.loads(text)["fps"] == SESSION_FPS
     generate(scenario_from_dict(tomllib.loads(text)), out, text)
     return out
@@ -215,7 +276,9 @@ class _Statuses:
         self.got: list[tuple[float, dict]] = []
         self.session = open_session([endpoint])
         self.sub = self.session.declare_subscriber(
-            "skyfix/status", lambda s: self.got.append((time.time(), json.loads(s.payload.to_bytes()))))
+            "skyfix/status",
+            lambda s: self.got.append((time.time(), json.loads(s.payload.to_bytes()))),
+        )
 
     def close(self) -> None:
         self.sub.undeclare()
@@ -235,27 +298,64 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
     zenoh_args = ("--zenoh-listen", endpoint)
     if which == "router":  # skyfix a client of a router, as on BlueOS; the replay a peer of it
         router, _ = start_router(endpoint)
-        zenoh_args = ("--zenoh-config", str(ROOT / "deploy" / "zenoh" / "client.json5"), "--zenoh-connect", endpoint)
-    replay_extra = ["--cut", f"{which}:{CUT_FROM_S}:{CUT_S[which]}"] if which in ("mavlink", "video") else []
+        zenoh_args = (
+            "--zenoh-config",
+            str(ROOT / "deploy" / "zenoh" / "client.json5"),
+            "--zenoh-connect",
+            endpoint,
+        )
+    replay_extra = (
+        ["--cut", f"{which}:{CUT_FROM_S}:{CUT_S[which]}"] if which in ("mavlink", "video") else []
+    )
     if which == "depth":
-        replay_extra = ["--cut", f"depth:0:{SESSION_S + 10}"]  # the depth comes from its own publisher
+        replay_extra = [
+            "--cut",
+            f"depth:0:{SESSION_S + 10}",
+        ]  # the depth comes from its own publisher
     try:
-        service = start(_run_cmd(session / "session.toml", f"udpin:127.0.0.1:{mav}", f"udp://127.0.0.1:{video}",
-                                 uuv, *zenoh_args), run_log)
+        service = start(
+            _run_cmd(
+                session / "session.toml",
+                f"udpin:127.0.0.1:{mav}",
+                f"udp://127.0.0.1:{video}",
+                uuv,
+                *zenoh_args,
+            ),
+            run_log,
+        )
         procs.append(service)
         wait_for(lambda: "skyfix run: UAV" in run_log.read_text(), 30, "the service to start")
         statuses = _Statuses(endpoint)
         wait_for(lambda: statuses.got, 30, "the service's status on Zenoh")
-        replay = start(skyfix("replay", str(session), "--mavlink-out", f"udpout:127.0.0.1:{mav}", "--video-out",
-                              f"udp://127.0.0.1:{video}", "--zenoh-connect", endpoint, "--uuv-listen", "",
-                              "--lead-s", "0.5", *replay_extra), replay_log)
+        replay = start(
+            skyfix(
+                "replay",
+                str(session),
+                "--mavlink-out",
+                f"udpout:127.0.0.1:{mav}",
+                "--video-out",
+                f"udp://127.0.0.1:{video}",
+                "--zenoh-connect",
+                endpoint,
+                "--uuv-listen",
+                "",
+                "--lead-s",
+                "0.5",
+                *replay_extra,
+            ),
+            replay_log,
+        )
         procs.append(replay)
         shift = replay_shift(replay_log)
         t_start = json.loads(replay_log.read_text().splitlines()[0])["t_start"]
         publisher = None
         if which == "depth":
-            publisher = subprocess.Popen([sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
-                                         stdout=subprocess.PIPE, text=True, cwd=ROOT)
+            publisher = subprocess.Popen(
+                [sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
+                stdout=subprocess.PIPE,
+                text=True,
+                cwd=ROOT,
+            )
             procs.append(publisher)
         t_cut, t_return = t_start + CUT_FROM_S, t_start + CUT_FROM_S + CUT_S[which]
         wait_for(lambda: time.time() >= t_cut, 60, "the cut")
@@ -265,21 +365,34 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
             kill(router)
         wait_for(lambda: time.time() >= t_return, 60, "the end of the cut")
         if which == "depth":
-            publisher = subprocess.Popen([sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
-                                         stdout=subprocess.PIPE, text=True, cwd=ROOT)
+            publisher = subprocess.Popen(
+                [sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
+                stdout=subprocess.PIPE,
+                text=True,
+                cwd=ROOT,
+            )
             procs.append(publisher)
             _, t_back = publisher.stdout.readline().split()
             t_back = float(t_back)
         elif which == "router":
-            t_launch = time.time()  # the router may carry traffic before it prints "ready": the cut ends here
+            t_launch = (
+                time.time()
+            )  # the router may carry traffic before it prints "ready": the cut ends here
             router, t_back = start_router(endpoint)
         else:
+
             def back() -> float | None:
-                return next((r["t"] for r in read_jsonl(replay_log) if r.get("event") == "back"), None)
+                return next(
+                    (r["t"] for r in read_jsonl(replay_log) if r.get("event") == "back"), None
+                )
 
             wait_for(lambda: back() is not None, 30, f"{which} back")
             t_back = back()
-        wait_for(lambda: listener.first_valid_after(t_back) is not None, 20, "a valid GPS_INPUT after the return")
+        wait_for(
+            lambda: listener.first_valid_after(t_back) is not None,
+            20,
+            "a valid GPS_INPUT after the return",
+        )
         t_valid = listener.first_valid_after(t_back)
         replay.wait(30)
         service.send_signal(signal.SIGINT)
@@ -293,13 +406,27 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
             kill(router)
         listener.close()
     named = {"mavlink": "uav", "depth": "depth", "router": "zenoh", "video": "video"}[which]
-    missing = [(t, st["problems"]) for t, st in statuses.got if t_cut + 4.5 <= t < t_return]  # none via a lost router
+    missing = [
+        (t, st["problems"]) for t, st in statuses.got if t_cut + 4.5 <= t < t_return
+    ]  # none via a lost router
     t_gone_end = t_launch if which == "router" else t_back
     gone = [ft for tr, ft in listener.got if t_cut + 2.5 <= tr < t_gone_end]
-    gone_at = [(round(tr - t_cut, 3), ft) for tr, ft in listener.got if t_cut + 2.5 <= tr < t_back and ft != 1]
-    return {"input": which, "back_s": t_valid - t_back, "t_cut": t_cut, "t_back": t_back, "rc": service.returncode,
-            "named": named, "problems_while_missing": missing, "gps_while_missing": gone,
-            "fixes_while_missing_at": gone_at,
-            "valid_before_cut": sum(ft == 3 for tr, ft in listener.got if tr < t_cut),
-            "first_valid_s": listener.first_valid_after(t_start) - t_start,
-            "log": run_log.read_text()}
+    gone_at = [
+        (round(tr - t_cut, 3), ft)
+        for tr, ft in listener.got
+        if t_cut + 2.5 <= tr < t_back and ft != 1
+    ]
+    return {
+        "input": which,
+        "back_s": t_valid - t_back,
+        "t_cut": t_cut,
+        "t_back": t_back,
+        "rc": service.returncode,
+        "named": named,
+        "problems_while_missing": missing,
+        "gps_while_missing": gone,
+        "fixes_while_missing_at": gone_at,
+        "valid_before_cut": sum(ft == 3 for tr, ft in listener.got if tr < t_cut),
+        "first_valid_s": listener.first_valid_after(t_start) - t_start,
+        "log": run_log.read_text(),
+    }

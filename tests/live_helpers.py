@@ -53,7 +53,9 @@ class GpsInputEndpoint:
         from groundstation.mavlink.transport import open_transport
 
         self.transport = open_transport(f"udpin:127.0.0.1:{port}")
-        assert self.transport.kernel_times, "no kernel receive times on this machine's UDP sockets (SO_TIMESTAMPNS)"
+        assert self.transport.kernel_times, (
+            "no kernel receive times on this machine's UDP sockets (SO_TIMESTAMPNS)"
+        )
         self.port = self.transport.sock.getsockname()[1]
         self.received: list[tuple[float, dict]] = []
         self._mav = mavutil().mavlink.MAVLink(None)
@@ -86,7 +88,11 @@ def skyfix(*args: str) -> list[str]:
     """
     if args and args[0] == "run" and "--ui" not in args and "--no-ui" not in args:
         args = (*args, "--ui", "127.0.0.1:0")
-    if args and args[0] == "run" and not {"--zenoh-listen", "--zenoh-config", "--config"} & set(args):
+    if (
+        args
+        and args[0] == "run"
+        and not {"--zenoh-listen", "--zenoh-config", "--config"} & set(args)
+    ):
         args = (*args, "--zenoh-listen", "tcp/127.0.0.1:0")
     return [sys.executable, "-m", "groundstation.cli", *args]
 
@@ -127,7 +133,9 @@ def wait_until(predicate, timeout_s: float, poll_s: float = 0.1) -> bool:
 def wait_for(predicate, timeout_s: float, what) -> None:
     """Wait for ``predicate()``; else fail naming ``what`` (a string, or a callable giving one: what was seen)."""
     if not wait_until(predicate, timeout_s):
-        raise AssertionError(f"timed out after {timeout_s} s waiting for {what() if callable(what) else what}")
+        raise AssertionError(
+            f"timed out after {timeout_s} s waiting for {what() if callable(what) else what}"
+        )
 
 
 # An independent Zenoh subscriber (run in its own process): every sample on the key
@@ -160,6 +168,7 @@ finally:
 
 def replay_shift(log: Path, timeout_s: float = 15.0) -> float:
     """The time shift ``skyfix replay`` printed first (UNIX s − session s), read from its log."""
+
     def first_json() -> dict | None:
         for line in log.read_text().splitlines() if log.exists() else ():
             if line.startswith("{"):
@@ -177,8 +186,12 @@ def truth_errors_m(session: Path, t_session, lat, lon):
     from localizer.geodesy import horizontal_error_m
 
     truth = np.genfromtxt(session / "truth.csv", delimiter=",", names=True)
-    return horizontal_error_m(np.asarray(lat), np.asarray(lon), np.interp(t_session, truth["t"], truth["lat"]),
-                              np.interp(t_session, truth["t"], truth["lon"]))
+    return horizontal_error_m(
+        np.asarray(lat),
+        np.asarray(lon),
+        np.interp(t_session, truth["t"], truth["lat"]),
+        np.interp(t_session, truth["t"], truth["lon"]),
+    )
 
 
 def ardupilot_gps_unhealthy(t_recv_s) -> str | None:
@@ -197,7 +210,9 @@ def ardupilot_gps_unhealthy(t_recv_s) -> str | None:
         if gap_ms < 2000.0:
             average_ms = gap_ms if average_ms <= 0 else 0.98 * average_ms + 0.02 * gap_ms
         if delayed >= 2:
-            return f"two gaps over 245 ms in a row, the second {gap_ms:.0f} ms, after message {i + 1}"
+            return (
+                f"two gaps over 245 ms in a row, the second {gap_ms:.0f} ms, after message {i + 1}"
+            )
         if average_ms >= 215.0:
             return f"mean gap {average_ms:.0f} ms after message {i + 1}"
     return None
@@ -205,6 +220,7 @@ def ardupilot_gps_unhealthy(t_recv_s) -> str | None:
 
 def ui_url(log: Path, timeout_s: float = 20.0) -> str:
     """The web page's URL (with ``?token=`` when it has one) that ``skyfix run`` logged."""
+
     def found() -> str | None:
         m = re.search(r"web page: (\S+)", log.read_text()) if log.exists() else None
         return m[1] if m else None
@@ -227,15 +243,23 @@ def track_pixel(session: Path, t_session: float) -> tuple[float, float]:
     import numpy as np
 
     tr = np.genfromtxt(session / "track.csv", delimiter=",", names=True)
-    return float(np.interp(t_session, tr["t"], tr["u"])), float(np.interp(t_session, tr["t"], tr["v"]))
+    return float(np.interp(t_session, tr["t"], tr["u"])), float(
+        np.interp(t_session, tr["t"], tr["v"])
+    )
 
 
 class LiveRun:
     """``skyfix run`` without init_bbox, a subscriber to ``skyfix/**`` in its own process, then ``skyfix replay`` of
     ``session`` (at once, or at :meth:`start_replay` with ``replay_now=False``), all on loopback."""
 
-    def __init__(self, tmp_path: Path, session: Path, *run_args: str, video_latency_ms: float,
-                 replay_now: bool = True):
+    def __init__(
+        self,
+        tmp_path: Path,
+        session: Path,
+        *run_args: str,
+        video_latency_ms: float,
+        replay_now: bool = True,
+    ):
         self.tmp = tmp_path
         self.session = session
         self.replay_now = replay_now
@@ -244,23 +268,56 @@ class LiveRun:
         self.sub_out = tmp_path / "zenoh.jsonl"
         self.uuv_log = tmp_path / "uuv.jsonl"
         cal = calibration_without_init_bbox(session, tmp_path)
-        self.run_cmd = skyfix("run", "--calibration", str(cal), "--mavlink", f"udpin:127.0.0.1:{mav}",
-                              "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", str(video_latency_ms),
-                              "--zenoh-listen", self.ep, "--gps-input", f"udpout:127.0.0.1:{self.uuv}",
-                              "--duration-s", "40", *run_args)
-        self.replay_cmd = skyfix("replay", str(session), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
-                                 "--video-out", f"udp://127.0.0.1:{video}", "--zenoh-connect", self.ep,
-                                 "--uuv-listen", f"udpin:127.0.0.1:{self.uuv}", "--uuv-log", str(self.uuv_log),
-                                 "--tail-s", "1.5")
+        self.run_cmd = skyfix(
+            "run",
+            "--calibration",
+            str(cal),
+            "--mavlink",
+            f"udpin:127.0.0.1:{mav}",
+            "--video",
+            f"udp://127.0.0.1:{video}",
+            "--video-latency-ms",
+            str(video_latency_ms),
+            "--zenoh-listen",
+            self.ep,
+            "--gps-input",
+            f"udpout:127.0.0.1:{self.uuv}",
+            "--duration-s",
+            "40",
+            *run_args,
+        )
+        self.replay_cmd = skyfix(
+            "replay",
+            str(session),
+            "--mavlink-out",
+            f"udpout:127.0.0.1:{mav}",
+            "--video-out",
+            f"udp://127.0.0.1:{video}",
+            "--zenoh-connect",
+            self.ep,
+            "--uuv-listen",
+            f"udpin:127.0.0.1:{self.uuv}",
+            "--uuv-log",
+            str(self.uuv_log),
+            "--tail-s",
+            "1.5",
+        )
         self.procs: list[subprocess.Popen] = []
 
     def __enter__(self):
         self.service = start(self.run_cmd, self.tmp / "run.log")
         self.procs.append(self.service)
-        self.procs.append(start([sys.executable, "-c", SUBSCRIBER, self.ep, "skyfix/**", str(self.sub_out)],
-                                self.tmp / "sub.log"))
-        wait_for(lambda: any(r["key"] == "skyfix/status" for r in read_jsonl(self.sub_out)), 20,
-                 "skyfix status on Zenoh")
+        self.procs.append(
+            start(
+                [sys.executable, "-c", SUBSCRIBER, self.ep, "skyfix/**", str(self.sub_out)],
+                self.tmp / "sub.log",
+            )
+        )
+        wait_for(
+            lambda: any(r["key"] == "skyfix/status" for r in read_jsonl(self.sub_out)),
+            20,
+            "skyfix status on Zenoh",
+        )
         if self.replay_now:
             self.start_replay()
         return self
@@ -286,8 +343,11 @@ class LiveRun:
         assert self.replay.returncode == 0, (self.tmp / "replay.log").read_text()[-3000:]
 
     def fixes(self) -> list[dict]:
-        return [json.loads(s["payload"]) | {"t_recv": s["t_recv"]} for s in read_jsonl(self.sub_out)
-                if s["key"] == "skyfix/uuv/fix"]
+        return [
+            json.loads(s["payload"]) | {"t_recv": s["t_recv"]}
+            for s in read_jsonl(self.sub_out)
+            if s["key"] == "skyfix/uuv/fix"
+        ]
 
     def gps_input(self) -> list[dict]:
         return read_jsonl(self.uuv_log)
@@ -295,14 +355,22 @@ class LiveRun:
     def fix_errors_m(self, fixes: list[dict]):
         import numpy as np
 
-        return truth_errors_m(self.session, np.array([f["t"] for f in fixes]) - self.shift,
-                              [f["lat"] for f in fixes], [f["lon"] for f in fixes])
+        return truth_errors_m(
+            self.session,
+            np.array([f["t"] for f in fixes]) - self.shift,
+            [f["lat"] for f in fixes],
+            [f["lon"] for f in fixes],
+        )
 
     def gps_errors_m(self, valid: list[dict]):
         import numpy as np
 
-        return truth_errors_m(self.session, np.array([g["time_usec"] / 1e6 for g in valid]) - self.shift,
-                              [g["lat"] / 1e7 for g in valid], [g["lon"] / 1e7 for g in valid])
+        return truth_errors_m(
+            self.session,
+            np.array([g["time_usec"] / 1e6 for g in valid]) - self.shift,
+            [g["lat"] / 1e7 for g in valid],
+            [g["lon"] / 1e7 for g in valid],
+        )
 
 
 def as_camera_sends_it(video: Path) -> None:
@@ -315,7 +383,29 @@ def as_camera_sends_it(video: Path) -> None:
     with av.open(str(video)) as container:
         fps = container.streams.video[0].average_rate
     tmp = video.with_name("camera" + video.suffix)
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(video), "-an", "-c:v", "libx264", "-preset", "veryfast",
-                    "-tune", "zerolatency", "-crf", "23", "-g", str(round(fps)), "-pix_fmt", "yuv420p", str(tmp)],
-                   check=True)
+    subprocess.run(
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-i",
+            str(video),
+            "-an",
+            "-c:v",
+            "libx264",
+            "-preset",
+            "veryfast",
+            "-tune",
+            "zerolatency",
+            "-crf",
+            "23",
+            "-g",
+            str(round(fps)),
+            "-pix_fmt",
+            "yuv420p",
+            str(tmp),
+        ],
+        check=True,
+    )
     tmp.replace(video)

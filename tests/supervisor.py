@@ -50,18 +50,33 @@ def field_config(tmp: Path, gps_input_port: int) -> tuple[Path, dict]:
     calibration beside it, the recordings in ``tmp``, its Zenoh configuration's keys made in ``tmp/team`` by
     ``deploy/make_certs.sh``: the file and its values."""
     values = tomllib.loads((DEPLOY / "field.toml").read_text())
-    subprocess.run([str(DEPLOY / "make_certs.sh"), str(tmp / "team"), "skyfix=127.0.0.1"], check=True,
-                   capture_output=True, timeout=60)  # this laptop's keys, where /etc/skyfix/tls/ has them
+    subprocess.run(
+        [str(DEPLOY / "make_certs.sh"), str(tmp / "team"), "skyfix=127.0.0.1"],
+        check=True,
+        capture_output=True,
+        timeout=60,
+    )  # this laptop's keys, where /etc/skyfix/tls/ has them
     zenoh = tmp / "peer.json5"
-    zenoh.write_text((DEPLOY / values["zenoh_config"]).read_text().replace("/etc/skyfix/tls/", f"{tmp}/team/skyfix/"))
-    values |= {"calibration": str(DEPLOY / values["calibration"]), "zenoh_config": str(zenoh),
-               "mavlink": f"udpin:127.0.0.1:{free_port()}",
-               "video": f"rtp://127.0.0.1:{free_port()}?codec=h264",
-               "zenoh_connect": [], "zenoh_listen": [f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"],
-               "gps_input": f"udpout:127.0.0.1:{gps_input_port}", "ui": "127.0.0.1:0",
-               "recordings": str(tmp / "recordings")}
+    zenoh.write_text(
+        (DEPLOY / values["zenoh_config"])
+        .read_text()
+        .replace("/etc/skyfix/tls/", f"{tmp}/team/skyfix/")
+    )
+    values |= {
+        "calibration": str(DEPLOY / values["calibration"]),
+        "zenoh_config": str(zenoh),
+        "mavlink": f"udpin:127.0.0.1:{free_port()}",
+        "video": f"rtp://127.0.0.1:{free_port()}?codec=h264",
+        "zenoh_connect": [],
+        "zenoh_listen": [f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"],
+        "gps_input": f"udpout:127.0.0.1:{gps_input_port}",
+        "ui": "127.0.0.1:0",
+        "recordings": str(tmp / "recordings"),
+    }
     path = tmp / "field.toml"
-    path.write_text("".join(f"{k} = {json.dumps(v)}\n" for k, v in values.items()))  # JSON's strings, numbers, lists
+    path.write_text(
+        "".join(f"{k} = {json.dumps(v)}\n" for k, v in values.items())
+    )  # JSON's strings, numbers, lists
     return path, values
 
 
@@ -72,7 +87,9 @@ class Supervisor:
     def __init__(self, argv: Callable[[list[str]], list[str]], log_dir: Path, unit: Path = UNIT):
         u = read_unit(unit)
         if u["Service"]["Restart"] != "on-failure":
-            raise ValueError(f"{unit}: Restart={u['Service']['Restart']}: this stand-in knows on-failure only")
+            raise ValueError(
+                f"{unit}: Restart={u['Service']['Restart']}: this stand-in knows on-failure only"
+            )
         self.restart_s = systemd_seconds(u["Service"]["RestartSec"])
         self.limit_s = systemd_seconds(u["Unit"]["StartLimitIntervalSec"])
         self.burst = int(u["Unit"]["StartLimitBurst"])

@@ -18,7 +18,10 @@ from sim_fixtures.geometry import R_GIMBAL_FROM_CV, SimCamera, matrix_zyx, proje
 
 N_WATER = 1.34
 FLOOR_M = 4.0
-TILT_DEG = (0.30, -0.25)  # the camera's levelling error, about its own heading's forward and right axes
+TILT_DEG = (
+    0.30,
+    -0.25,
+)  # the camera's levelling error, about its own heading's forward and right axes
 YAW_DEG = 2.0  # the compass reads high
 
 
@@ -27,8 +30,15 @@ def _camera() -> SimCamera:
     return SimCamera(640, 360, fx, fx, 319.5, 179.5, (-0.12, 0.08, 0.0004, -0.0002, -0.01))
 
 
-def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.0, rate_hz: float = 4.0,
-             yaw_deg=None, white_m: float = 0.0):
+def _session(
+    speed_mps: float,
+    walk=None,
+    seed: int = 3,
+    duration_s: float = 12.0,
+    rate_hz: float = 4.0,
+    yaw_deg=None,
+    white_m: float = 0.0,
+):
     """Floor features seen by a camera 10 m up at 72° down, flying along 60° at ``speed_mps`` (its gimbal's yaw held
     on the course, the airframe's heading swinging ±10° under it); ``walk(t)`` the reported position's slow error
     (N, E), ``white_m`` its white noise per axis; ``yaw_deg(t)`` the compass's error (default :data:`YAW_DEG`)."""
@@ -39,22 +49,33 @@ def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.
     drift = 0.3 * np.column_stack([np.sin(0.3 * t), np.cos(0.23 * t)])
     ne = speed_mps * t[:, None] * [np.cos(course), np.sin(course)] + drift
     velocity = speed_mps * np.array([np.cos(course), np.sin(course)]) + 0.3 * np.column_stack(
-        [0.3 * np.cos(0.3 * t), -0.23 * np.sin(0.23 * t)])
+        [0.3 * np.cos(0.3 * t), -0.23 * np.sin(0.23 * t)]
+    )
     height = 10.0 + 0.3 * np.sin(0.1 * t)
     R_true = matrix_zyx(0.0, np.radians(-72.0), np.full(t.shape, course)) @ R_GIMBAL_FROM_CV
     tilt = np.radians(TILT_DEG)
-    error = np.column_stack([np.full(t.shape, tilt[0] * np.cos(course) - tilt[1] * np.sin(course)),
-                             np.full(t.shape, tilt[0] * np.sin(course) + tilt[1] * np.cos(course)),
-                             np.radians(np.full(t.shape, YAW_DEG) if yaw_deg is None else yaw_deg(t))])
+    error = np.column_stack(
+        [
+            np.full(t.shape, tilt[0] * np.cos(course) - tilt[1] * np.sin(course)),
+            np.full(t.shape, tilt[0] * np.sin(course) + tilt[1] * np.cos(course)),
+            np.radians(np.full(t.shape, YAW_DEG) if yaw_deg is None else yaw_deg(t)),
+        ]
+    )
     R_reported = Rotation.from_rotvec(error).as_matrix() @ R_true
     cam_ned = np.column_stack([ne, -height])
     lo, hi = ne.min(axis=0) - 22.0, ne.max(axis=0) + 22.0
     n = 500
-    points = np.column_stack([rng.uniform(lo[0], hi[0], n), rng.uniform(lo[1], hi[1], n), np.full(n, FLOOR_M)])
+    points = np.column_stack(
+        [rng.uniform(lo[0], hi[0], n), rng.uniform(lo[1], hi[1], n), np.full(n, FLOOR_M)]
+    )
     frame, feature, us, vs = [], [], [], []
     for k in range(len(t)):
-        u, v = project(cam, R_true[k], cam_ned[k], surface_crossing(np.broadcast_to(cam_ned[k], points.shape), points,
-                                                                    N_WATER))
+        u, v = project(
+            cam,
+            R_true[k],
+            cam_ned[k],
+            surface_crossing(np.broadcast_to(cam_ned[k], points.shape), points, N_WATER),
+        )
         seen = np.flatnonzero(np.isfinite(u) & cam.contains(u, v, 4.0))
         frame += [k] * len(seen)
         feature += list(seen)
@@ -63,11 +84,19 @@ def _session(speed_mps: float, walk=None, seed: int = 3, duration_s: float = 12.
     _, feature = np.unique(feature, return_inverse=True)
     error_ne = np.zeros_like(ne) if walk is None else walk(t)
     error_ne = error_ne + rng.normal(0.0, white_m, error_ne.shape)
-    poses = bottom.FramePoses(t, R_reported, ne + error_ne, height, bottom.camera_heading_rad(R_reported),
-                              velocity)
+    poses = bottom.FramePoses(
+        t, R_reported, ne + error_ne, height, bottom.camera_heading_rad(R_reported), velocity
+    )
     obs = bottom.Observations(np.array(frame), feature, np.array(us), np.array(vs))
-    lens = Camera(width=cam.width, height=cam.height, fx=cam.fx, fy=cam.fy, cx=cam.cx, cy=cam.cy,
-                  distortion=cam.distortion)
+    lens = Camera(
+        width=cam.width,
+        height=cam.height,
+        fx=cam.fx,
+        fy=cam.fy,
+        cx=cam.cx,
+        cy=cam.cy,
+        distortion=cam.distortion,
+    )
     return lens, poses, obs, error_ne
 
 

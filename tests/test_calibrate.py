@@ -29,12 +29,29 @@ TRUE = TrueCamera()
 CHESS = {"cols": 9, "rows": 7, "square_m": 0.03}
 CHARUCO = {"cols": 8, "rows": 6, "square_m": 0.035, "marker_m": 0.026}
 CHESS_ARGS = ["--board", "chessboard", "--cols", "9", "--rows", "7", "--square-m", "0.03"]
-CHARUCO_ARGS = ["--board", "charuco", "--cols", "8", "--rows", "6", "--square-m", "0.035", "--marker-m", "0.026",
-                "--dict", "DICT_5X5_100"]
-MOUNT_WATER = {"mount": {"attitude_source": "gimbal_device"}, "water": {"takeoff_height_above_surface_m": 2.0}}
+CHARUCO_ARGS = [
+    "--board",
+    "charuco",
+    "--cols",
+    "8",
+    "--rows",
+    "6",
+    "--square-m",
+    "0.035",
+    "--marker-m",
+    "0.026",
+    "--dict",
+    "DICT_5X5_100",
+]
+MOUNT_WATER = {
+    "mount": {"attitude_source": "gimbal_device"},
+    "water": {"takeoff_height_above_surface_m": 2.0},
+}
 
 
-def _render_folder(folder: Path, tex, n: int, *, cam=TRUE, seed=1, prefix="view", **pose_kw) -> Path:
+def _render_folder(
+    folder: Path, tex, n: int, *, cam=TRUE, seed=1, prefix="view", **pose_kw
+) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed + 100)
     for i, (rvec, tvec) in enumerate(poses(cam, tex, n, seed=seed, **pose_kw)):
@@ -50,7 +67,9 @@ def chess_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def charuco_dir(tmp_path_factory) -> Path:
-    tex = charuco_texture(CHARUCO["cols"], CHARUCO["rows"], CHARUCO["square_m"], CHARUCO["marker_m"])
+    tex = charuco_texture(
+        CHARUCO["cols"], CHARUCO["rows"], CHARUCO["square_m"], CHARUCO["marker_m"]
+    )
     return _render_folder(tmp_path_factory.mktemp("charuco"), tex, 20, seed=2, tilt_deg=35)
 
 
@@ -79,7 +98,15 @@ def _check_recovered(cam: dict, q: dict) -> None:
         assert abs(got - true) <= 3 * sigma, f"{name} {got} vs {true} (sigma {sigma})"
     assert q["rms_px"] < 0.1
     # what matters downstream: the recovered model puts rays where the true one does
-    got = Camera(cam["width"], cam["height"], cam["fx"], cam["fy"], cam["cx"], cam["cy"], tuple(cam["distortion"]))
+    got = Camera(
+        cam["width"],
+        cam["height"],
+        cam["fx"],
+        cam["fy"],
+        cam["cx"],
+        cam["cy"],
+        tuple(cam["distortion"]),
+    )
     true = Camera(TRUE.width, TRUE.height, TRUE.fx, TRUE.fy, TRUE.cx, TRUE.cy, TRUE.distortion)
     u, v = np.meshgrid(np.linspace(0, TRUE.width - 1, 33), np.linspace(0, TRUE.height - 1, 25))
     pu, pv = ray_to_pixel(true, pixel_to_ray(got, u, v))
@@ -94,6 +121,7 @@ def _loads_cleanly(cam: dict, source: str) -> None:
 
 # --- the test images themselves ---------------------------------------------------------
 
+
 def test_rendered_corners_land_where_project_points_puts_them():
     tex = chessboard_texture(CHESS["cols"], CHESS["rows"], CHESS["square_m"])
     rvec, tvec = np.array([0.25, -0.3, 0.1]), np.array([-0.12, -0.1, 0.5])
@@ -107,6 +135,7 @@ def test_rendered_corners_land_where_project_points_puts_them():
 
 
 # --- skyfix calibrate camera ------------------------------------------------------------
+
 
 def test_chessboard_folder_recovers_the_camera(chess_dir, tmp_path, capsys):
     out = tmp_path / "cam.toml"
@@ -136,12 +165,31 @@ def test_charuco_folder_recovers_the_camera(charuco_dir, tmp_path, capsys):
 def test_video_of_the_views_recovers_the_camera(chess_dir, tmp_path, capsys):
     video = tmp_path / "board.mp4"
     subprocess.run(  # each view held for 3 frames, H.264 as a camera would record it
-        ["ffmpeg", "-v", "error", "-y", "-framerate", "2", "-i", str(chess_dir / "view_%02d.png"), "-r", "6",
-         "-c:v", "libx264", "-crf", "14", "-pix_fmt", "yuv420p", str(video)],
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-framerate",
+            "2",
+            "-i",
+            str(chess_dir / "view_%02d.png"),
+            "-r",
+            "6",
+            "-c:v",
+            "libx264",
+            "-crf",
+            "14",
+            "-pix_fmt",
+            "yuv420p",
+            str(video),
+        ],
         check=True,
     )
     out = tmp_path / "cam.toml"
-    code, stdout, stderr = _run(capsys, "calibrate", "camera", video, *CHESS_ARGS, "--every", "3", "--out", out)
+    code, stdout, stderr = _run(
+        capsys, "calibrate", "camera", video, *CHESS_ARGS, "--every", "3", "--out", out
+    )
     assert code == 0, stderr
     n_images = len(list(chess_dir.glob("*.png")))
     assert re.search(rf"found in \d+ of {n_images} frames", stdout)
@@ -152,7 +200,9 @@ def test_video_of_the_views_recovers_the_camera(chess_dir, tmp_path, capsys):
 def test_views_from_another_camera_are_dropped_as_outliers(chess_dir, tmp_path, capsys):
     folder = tmp_path / "mixed"
     shutil.copytree(chess_dir, folder)
-    other = TrueCamera(fx=600.0, fy=600.0, cx=390.0, cy=310.0, distortion=(0.08, 0.0, 0.0, 0.0, 0.0))
+    other = TrueCamera(
+        fx=600.0, fy=600.0, cx=390.0, cy=310.0, distortion=(0.08, 0.0, 0.0, 0.0, 0.0)
+    )
     tex = chessboard_texture(CHESS["cols"], CHESS["rows"], CHESS["square_m"])
     _render_folder(folder, tex, 2, cam=other, seed=7, prefix="zoomed", tilt_deg=20)
     out = tmp_path / "cam.toml"
@@ -167,7 +217,9 @@ def test_views_from_another_camera_are_dropped_as_outliers(chess_dir, tmp_path, 
 
 def test_views_only_in_the_centre_warn_that_corners_are_extrapolated(tmp_path, capsys):
     tex = chessboard_texture(CHESS["cols"], CHESS["rows"], CHESS["square_m"])
-    folder = _render_folder(tmp_path / "centre", tex, 12, seed=3, spread=0.0, distance_m=(0.7, 0.9), tilt_deg=35)
+    folder = _render_folder(
+        tmp_path / "centre", tex, 12, seed=3, spread=0.0, distance_m=(0.7, 0.9), tilt_deg=35
+    )
     out = tmp_path / "cam.toml"
     code, stdout, stderr = _run(capsys, "calibrate", "camera", folder, *CHESS_ARGS, "--out", out)
     assert code == 0
@@ -194,20 +246,41 @@ def test_no_board_found_is_one_line(tmp_path, capsys):
     folder.mkdir()
     for i in range(3):
         cv2.imwrite(str(folder / f"{i}.png"), np.full((120, 160), 128, np.uint8))
-    code, _, stderr = _run(capsys, "calibrate", "camera", folder, *CHESS_ARGS, "--out", tmp_path / "c.toml")
+    code, _, stderr = _run(
+        capsys, "calibrate", "camera", folder, *CHESS_ARGS, "--out", tmp_path / "c.toml"
+    )
     assert code == 2
     assert stderr.count("\n") == 1 and str(folder) in stderr and "found in 0 of 3" in stderr
     assert not (tmp_path / "c.toml").exists()
 
 
-@pytest.mark.parametrize("argv, key", [
-    (["--board", "charuco", "--cols", "8", "--rows", "6", "--square-m", "0.035"], "--marker-m"),
-    (["--board", "charuco", "--cols", "8", "--rows", "6", "--square-m", "0.035", "--marker-m", "0.04"], "--marker-m"),
-    (CHARUCO_ARGS[:-1] + ["DICT_9X9_7"], "DICT_9X9_7"),
-    (["--board", "chessboard", "--cols", "3", "--rows", "7", "--square-m", "0.03"], "--cols"),
-])
+@pytest.mark.parametrize(
+    "argv, key",
+    [
+        (["--board", "charuco", "--cols", "8", "--rows", "6", "--square-m", "0.035"], "--marker-m"),
+        (
+            [
+                "--board",
+                "charuco",
+                "--cols",
+                "8",
+                "--rows",
+                "6",
+                "--square-m",
+                "0.035",
+                "--marker-m",
+                "0.04",
+            ],
+            "--marker-m",
+        ),
+        (CHARUCO_ARGS[:-1] + ["DICT_9X9_7"], "DICT_9X9_7"),
+        (["--board", "chessboard", "--cols", "3", "--rows", "7", "--square-m", "0.03"], "--cols"),
+    ],
+)
 def test_bad_options_are_one_line(chess_dir, tmp_path, capsys, argv, key):
-    code, _, stderr = _run(capsys, "calibrate", "camera", chess_dir, *argv, "--out", tmp_path / "c.toml")
+    code, _, stderr = _run(
+        capsys, "calibrate", "camera", chess_dir, *argv, "--out", tmp_path / "c.toml"
+    )
     assert code == 2 and stderr.count("\n") == 1 and key in stderr
 
 
@@ -239,15 +312,20 @@ def _opencv(path: Path, dist=DIST, **extra) -> Path:
     return path
 
 
-def _kalibr(path: Path, camera_model="pinhole", distortion_model="radtan", intrinsics=(FX, FY, CX, CY),
-            coeffs=DIST[:4]) -> Path:
+def _kalibr(
+    path: Path,
+    camera_model="pinhole",
+    distortion_model="radtan",
+    intrinsics=(FX, FY, CX, CY),
+    coeffs=DIST[:4],
+) -> Path:
     """A Kalibr camchain, as kalibr_calibrate_cameras writes it (two cameras)."""
     path.write_text(f"""cam0:
   cam_overlaps: [1]
   camera_model: {camera_model}
-  distortion_coeffs: [{', '.join(map(repr, coeffs))}]
+  distortion_coeffs: [{", ".join(map(repr, coeffs))}]
   distortion_model: {distortion_model}
-  intrinsics: [{', '.join(map(repr, intrinsics))}]
+  intrinsics: [{", ".join(map(repr, intrinsics))}]
   resolution: [{W}, {H}]
   rostopic: /cam0/image_raw
 cam1:
@@ -277,12 +355,12 @@ camera_name: gimbal_camera
 camera_matrix:
   rows: 3
   cols: 3
-  data: [{', '.join(map(repr, k))}]
+  data: [{", ".join(map(repr, k))}]
 distortion_model: {model}
 distortion_coefficients:
   rows: 1
   cols: {len(coeffs)}
-  data: [{', '.join(map(repr, coeffs))}]
+  data: [{", ".join(map(repr, coeffs))}]
 rectification_matrix:
   rows: 3
   cols: 3
@@ -290,7 +368,7 @@ rectification_matrix:
 projection_matrix:
   rows: 3
   cols: 4
-  data: [{', '.join(map(repr, p))}]
+  data: [{", ".join(map(repr, p))}]
 """)
     return path
 
@@ -306,8 +384,8 @@ height: {H}
 width: {W}
 distortion_model: plumb_bob
 d:
-{''.join(f'- {c!r}{chr(10)}' for c in DIST)}k:
-{''.join(f'- {float(c)!r}{chr(10)}' for c in K.ravel())}r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+{"".join(f"- {c!r}{chr(10)}" for c in DIST)}k:
+{"".join(f"- {float(c)!r}{chr(10)}" for c in K.ravel())}r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 p: [{FX}, 0.0, {CX}, 0.0, 0.0, {FY}, {CY}, 0.0, 0.0, 0.0, 1.0, 0.0]
 binning_x: 0
 binning_y: 0
@@ -347,20 +425,37 @@ def test_import_keeps_k3_and_prints_without_out(tmp_path, capsys):
 
 
 def test_import_kalibr_second_camera(tmp_path, capsys):
-    code, stdout, _ = _run(capsys, "calibrate", "import", _kalibr(tmp_path / "camchain.yaml"), "--camera", "cam1")
+    code, stdout, _ = _run(
+        capsys, "calibrate", "import", _kalibr(tmp_path / "camchain.yaml"), "--camera", "cam1"
+    )
     assert code == 0
     cam = tomllib.loads(stdout)["camera"]
-    assert (cam["width"], cam["fx"], cam["distortion"]) == (752, 457.5, [-0.28, 0.07, 0.0001, 0.0002, 0.0])
+    assert (cam["width"], cam["fx"], cam["distortion"]) == (
+        752,
+        457.5,
+        [-0.28, 0.07, 0.0001, 0.0002, 0.0],
+    )
 
 
-@pytest.mark.parametrize("name, write, model", [
-    ("kalibr_equi.yaml", lambda p: _kalibr(p, distortion_model="equidistant"), "equidistant"),
-    ("kalibr_omni.yaml", lambda p: _kalibr(p, camera_model="omni", intrinsics=(0.8, FX, FY, CX, CY)), "omni"),
-    ("ros_rational.yaml", lambda p: _ros(p, "rational_polynomial", DIST + [0.002, 0.0, 0.0]), "rational_polynomial"),
-    ("ros_fisheye.yaml", lambda p: _ros(p, "equidistant", DIST[:4]), "equidistant"),
-    ("opencv_fisheye.yml", lambda p: _opencv(p, dist=DIST[:4], fisheye_model=1), "fisheye"),
-    ("opencv_rational.xml", lambda p: _opencv(p, dist=DIST + [0.0, 0.01, 0.0]), "k5 = 0.01"),
-])
+@pytest.mark.parametrize(
+    "name, write, model",
+    [
+        ("kalibr_equi.yaml", lambda p: _kalibr(p, distortion_model="equidistant"), "equidistant"),
+        (
+            "kalibr_omni.yaml",
+            lambda p: _kalibr(p, camera_model="omni", intrinsics=(0.8, FX, FY, CX, CY)),
+            "omni",
+        ),
+        (
+            "ros_rational.yaml",
+            lambda p: _ros(p, "rational_polynomial", DIST + [0.002, 0.0, 0.0]),
+            "rational_polynomial",
+        ),
+        ("ros_fisheye.yaml", lambda p: _ros(p, "equidistant", DIST[:4]), "equidistant"),
+        ("opencv_fisheye.yml", lambda p: _opencv(p, dist=DIST[:4], fisheye_model=1), "fisheye"),
+        ("opencv_rational.xml", lambda p: _opencv(p, dist=DIST + [0.0, 0.01, 0.0]), "k5 = 0.01"),
+    ],
+)
 def test_unsupported_models_are_one_line_errors(name, write, model, tmp_path, capsys):
     src = write(tmp_path / name)
     out = tmp_path / "cam.toml"

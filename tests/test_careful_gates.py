@@ -29,8 +29,15 @@ from localizer.fix_gate import CONFIRM_S, MAX_REACH_M, Arrival, FixGate
 LATENCY_S = 0.12  # exposure to arrival
 
 
-def still(gate: FixGate, t0: float, seconds: float, north_m: float = 0.0, east_m: float = 0.0, h_acc_m: float = 0.4,
-          seed: int = 0) -> list[bool]:
+def still(
+    gate: FixGate,
+    t0: float,
+    seconds: float,
+    north_m: float = 0.0,
+    east_m: float = 0.0,
+    h_acc_m: float = 0.4,
+    seed: int = 0,
+) -> list[bool]:
     """``seconds`` of fixes of an object at rest at (north, east) offered to ``gate``: which were valid."""
     rng = np.random.default_rng(seed)
     out = []
@@ -58,10 +65,15 @@ def kept_gate(tmp_path, h_acc_m: float = 0.4, down_s: float = 3.0) -> tuple[FixG
     keeper = TrackMemory(gate, path)
     keeper.write()
     keeper.write()  # unchanged: not written again
-    assert keeper.written == 1 and path.exists() and not list(tmp_path.glob(".track-*"))  # no temporary left
+    assert (
+        keeper.written == 1 and path.exists() and not list(tmp_path.glob(".track-*"))
+    )  # no temporary left
     kept = json.loads(path.read_text())
     kept["age_s"] += down_s  # the time the service was down
-    write_track(path, {k: kept[k] for k in ("t", "lat", "lon", "vn_mps", "ve_mps", "P", "C", "common", "age_s")})
+    write_track(
+        path,
+        {k: kept[k] for k in ("t", "lat", "lon", "vn_mps", "ve_mps", "P", "C", "common", "age_s")},
+    )
     new = FixGate()
     read = remember(new, path, max_age_s=300.0)
     assert read is not None and read["age_s"] == pytest.approx(kept["age_s"], abs=0.5)
@@ -84,7 +96,7 @@ def test_after_a_restart_a_look_alike_50_m_away_is_never_valid(tmp_path, h_acc_m
 def test_after_a_restart_the_uuv_where_it_was_is_valid_after_the_usual_second(tmp_path, h_acc_m):
     gate, t = kept_gate(tmp_path, h_acc_m)
     valid = still(gate, t, 2.0, h_acc_m=h_acc_m)
-    assert valid.index(True) == round(CONFIRM_S * HZ) and all(valid[valid.index(True):])
+    assert valid.index(True) == round(CONFIRM_S * HZ) and all(valid[valid.index(True) :])
 
 
 def test_a_kept_track_too_old_or_broken_is_not_read(tmp_path):
@@ -94,7 +106,9 @@ def test_a_kept_track_too_old_or_broken_is_not_read(tmp_path):
     write_track(path, {**memory, "age_s": 301.0})
     assert read_track(path, max_age_s=300.0) is None
     assert read_track(path, max_age_s=400.0)[1] == pytest.approx(301.0, abs=1.0)
-    path.write_text('{"t": 1')  # what a torn write would leave (write_track renames a whole file into place)
+    path.write_text(
+        '{"t": 1'
+    )  # what a torn write would leave (write_track renames a whole file into place)
     assert read_track(path, 300.0) is None and read_track(tmp_path / "none.json", 300.0) is None
 
 
@@ -111,7 +125,7 @@ def test_a_selected_look_alike_is_never_valid_unless_confirmed(h_acc_m, away_m):
     assert not any(still(gate, t, 15.0, east_m=away_m, h_acc_m=h_acc_m))
     assert gate.confirm()["confirmed"]
     valid = still(gate, t + 15.0, 2.0, east_m=away_m, h_acc_m=h_acc_m)
-    assert valid.index(True) == round(CONFIRM_S * HZ) and all(valid[valid.index(True):])
+    assert valid.index(True) == round(CONFIRM_S * HZ) and all(valid[valid.index(True) :])
     assert gate.state == "tracking" and not gate.confirm()["confirmed"]
     gate.target_lost()  # the confirmation ends with its lock: the origin is now out of reach
     assert not any(still(gate, t + 17.5, 3.0, h_acc_m=h_acc_m))
@@ -155,7 +169,9 @@ def stepped_stream(step_s: float, wrong_m: float, follows: bool, h_acc_m: float 
         yield f, t_true + LATENCY_S + 0.03 + step, arrival, 0.0
 
 
-def off_valid(step_s, wrong_m, follows, h_acc_m, with_arrival=True, max_reach_m=MAX_REACH_M) -> tuple[int, FixGate]:
+def off_valid(
+    step_s, wrong_m, follows, h_acc_m, with_arrival=True, max_reach_m=MAX_REACH_M
+) -> tuple[int, FixGate]:
     """How many valid fixes are more than 3 h_acc off the truth (without the arrival: the exposure times alone)."""
     gate, bad = FixGate(max_reach_m=max_reach_m), 0
     for f, now, arrival, truth_e in stepped_stream(step_s, wrong_m, follows, h_acc_m):
@@ -167,15 +183,23 @@ def off_valid(step_s, wrong_m, follows, h_acc_m, with_arrival=True, max_reach_m=
 
 @pytest.mark.parametrize(("wrong_m", "h_acc_m"), [(8.0, 0.4), (1.2, 0.05)])
 @pytest.mark.parametrize("step_s", [10.0, -10.0])
-@pytest.mark.parametrize("follows", [True, False], ids=["exposure stepped", "exposure kept its course"])
+@pytest.mark.parametrize(
+    "follows", [True, False], ids=["exposure stepped", "exposure kept its course"]
+)
 def test_a_clock_step_never_widens_a_gate(step_s, follows, wrong_m, h_acc_m):
     """A ±10 s step of the station clock, the tracker jumping at that moment: no valid fix more than 3 h_acc off.
     The control, the exposure times alone: a +10 s step of them lets a jump within the reach through (the UUV could
     have gone 15 m in the 10 s the times say; the reach's cap stops the 8 m one)."""
     bad, gate = off_valid(step_s, wrong_m, follows, h_acc_m)
-    assert bad == 0 and gate.clock_steps == 1 and gate.last_clock_step_s == pytest.approx(step_s, abs=1e-6)
+    assert (
+        bad == 0
+        and gate.clock_steps == 1
+        and gate.last_clock_step_s == pytest.approx(step_s, abs=1e-6)
+    )
     if step_s > 0 and follows:
-        assert (off_valid(step_s, wrong_m, follows, h_acc_m, with_arrival=False)[0] > 0) == (wrong_m < MAX_REACH_M)
+        assert (off_valid(step_s, wrong_m, follows, h_acc_m, with_arrival=False)[0] > 0) == (
+            wrong_m < MAX_REACH_M
+        )
 
 
 @pytest.mark.parametrize("step_s", [10.0, -10.0])
@@ -184,7 +208,7 @@ def test_after_a_clock_step_the_uuv_is_valid_again_after_a_second(step_s):
     reasons = [gate.check(f, now, None, a) for f, now, a, _ in stepped_stream(step_s, 0.0, True)]
     k = round(2.0 * HZ)
     assert reasons[k] == "clock" and reasons[k - 1] is None
-    assert reasons[k + 1:].index(None) + 1 == round(CONFIRM_S * HZ) + 1 and reasons[-1] is None
+    assert reasons[k + 1 :].index(None) + 1 == round(CONFIRM_S * HZ) + 1 and reasons[-1] is None
 
 
 # -- the live sink: a selection is a new lock, the frames' arrivals the time base -----------------------------------
@@ -200,11 +224,16 @@ def test_gps_input_sink_takes_a_selection_as_a_new_lock():
         for i in range(round(seconds * HZ)):
             f = fix_at(t0 + start_s + i / HZ, 0.0, east_m, 0.4)
             t_recv = f.t_unix + LATENCY_S
-            sink.on_fix(f, FrameInfo(i, t_recv, t_recv + 0.02, t_recv_mono=t_recv - offset, lock=lock))
+            sink.on_fix(
+                f, FrameInfo(i, t_recv, t_recv + 0.02, t_recv_mono=t_recv - offset, lock=lock)
+            )
             valid.append(sink._last_ok is f)
         return valid
 
     assert offer(2.0, 0.0, 0.0, lock=0)[-1] and sink.gate.state == "tracking"
     assert not any(offer(6.0, 2.0, 5.0, lock=1))
     assert sink.gate.state == "diverged" and sink.gate.clock_steps == 0
-    assert sink.gate.rejected["diverged"] == round(6.0 * HZ) and "not the UUV" in sink.gate.last_refusal
+    assert (
+        sink.gate.rejected["diverged"] == round(6.0 * HZ)
+        and "not the UUV" in sink.gate.last_refusal
+    )

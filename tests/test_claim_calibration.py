@@ -41,10 +41,16 @@ def test_wave_term_against_rays_through_drawn_facets(scene, wind_mps):
     term (all other sigmas 0)."""
     R, u, v, h, d = SCENES[scene]
     slope = float(wave_slope_sigma_rad(wind_mps))
-    h_acc = float(accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(**{**vars(QUIET), "wind_mps": wind_mps}))[0])
+    h_acc = float(
+        accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(**{**vars(QUIET), "wind_mps": wind_mps}))[0]
+    )
     ray = R @ np.asarray(pixel_to_ray(CAM, u, v), dtype=float)
-    s = np.random.default_rng(7).normal(0.0, slope, (20000, 2))  # the surface rises s_n per metre north, s_e east
-    normal_up = np.column_stack([-s, -np.ones(len(s))])  # NED: (-s_n, -s_e, -1), up out of the water
+    s = np.random.default_rng(7).normal(
+        0.0, slope, (20000, 2)
+    )  # the surface rises s_n per metre north, s_e east
+    normal_up = np.column_stack(
+        [-s, -np.ones(len(s))]
+    )  # NED: (-s_n, -s_e, -1), up out of the water
     normal_up /= np.linalg.norm(normal_up, axis=1, keepdims=True)
     w = snell(np.broadcast_to(ray, (len(s), 3)), normal_up, N_WATER)
     flat = snell(ray, np.array([0.0, 0.0, -1.0]), N_WATER)
@@ -57,7 +63,10 @@ def test_wave_term_against_rays_through_drawn_facets(scene, wind_mps):
 
 def test_no_wind_no_wave_term_and_more_wind_more():
     R, u, v, h, d = SCENES["35° oblique"]
-    by_wind = [float(accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(wind_mps=w))[0]) for w in (0.0, 2.0, 5.0, 10.0)]
+    by_wind = [
+        float(accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(wind_mps=w))[0])
+        for w in (0.0, 2.0, 5.0, 10.0)
+    ]
     assert by_wind[0] == float(accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas())[0])
     assert by_wind == sorted(by_wind) and by_wind[-1] > by_wind[0]
 
@@ -75,19 +84,30 @@ def test_the_simulator_states_its_sensors_as_their_errors(tmp_path):
     has (reported − true, composed independently), the EKF's position error is the GNSS mode's, the wind the
     waves'."""
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_rtk_oblique.toml")
-    sc = with_overrides(sc, duration_s=4.0, fps=2.0, sensors={"wander_deg": 0.0, "gimbal_level_deg": (0.3, -0.1)},
-                        waves={"wind_mps": 4.0})
+    sc = with_overrides(
+        sc,
+        duration_s=4.0,
+        fps=2.0,
+        sensors={"wander_deg": 0.0, "gimbal_level_deg": (0.3, -0.1)},
+        waves={"wind_mps": 4.0},
+    )
     generate(sc, tmp_path, video=False)
     sig = tomllib.loads((tmp_path / "session.toml").read_text())["uncertainty"]
-    err = read_table(tmp_path / "truth_errors.csv", ("t", "cam_err_n_deg", "cam_err_e_deg", "cam_err_d_deg"))
+    err = read_table(
+        tmp_path / "truth_errors.csv", ("t", "cam_err_n_deg", "cam_err_e_deg", "cam_err_d_deg")
+    )
     tilt_rms = math.sqrt(np.mean(err["cam_err_n_deg"] ** 2 + err["cam_err_e_deg"] ** 2) / 2.0)
     assert sig["tilt_deg"] == pytest.approx(tilt_rms, rel=0.02)
     assert sig["yaw_deg"] == pytest.approx(np.mean(np.abs(err["cam_err_d_deg"])), rel=0.02)
-    assert sig["uav_horizontal_m"] == pytest.approx(math.hypot(0.015, 0.015), rel=1e-3)  # rtk: walk and white
+    assert sig["uav_horizontal_m"] == pytest.approx(
+        math.hypot(0.015, 0.015), rel=1e-3
+    )  # rtk: walk and white
     assert sig["wind_mps"] == 4.0
 
 
-@pytest.mark.parametrize("gnss, view, height_m", [("rtk", "oblique", 8.0), ("plain", "nadir", 10.0)])
+@pytest.mark.parametrize(
+    "gnss, view, height_m", [("rtk", "oblique", 8.0), ("plain", "nadir", 10.0)]
+)
 def test_the_claim_is_calibrated_over_a_platforms_drones(tmp_path, gnss, view, height_m):
     """40 drones of one platform (biases drawn from its sigmas, the session's [uncertainty] stating those sigmas),
     3 s each with the true pixel: most fixes within 2·h_acc, and the claim not loose: a DRMS claim holds 63-68 %

@@ -17,10 +17,18 @@ LIVE_STACK = ("zenoh", "pymavlink", "mavsdk", "aiohttp", "matplotlib")
 
 def _loaded_after(argv: list[str], names) -> list[str]:
     """Which of the modules ``names`` a fresh interpreter has loaded after ``skyfix ARGV`` (``--help``: exits)."""
-    code = ("import sys\nfrom groundstation.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n"
-            f"    pass\nprint('loaded:', *(n for n in {tuple(names)!r} if n in sys.modules), file=sys.stderr)")
-    out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=ROOT, timeout=120,
-                         check=True)
+    code = (
+        "import sys\nfrom groundstation.cli import main\ntry:\n    main(sys.argv[1:])\nexcept SystemExit:\n"
+        f"    pass\nprint('loaded:', *(n for n in {tuple(names)!r} if n in sys.modules), file=sys.stderr)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, *argv],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+        check=True,
+    )
     return out.stderr.splitlines()[-1].split()[1:]
 
 

@@ -43,7 +43,11 @@ def fixes_at(t, lat, lon, status):
 def test_errors_against_geodesic_offsets():
     lon0, lat0 = 10.4, 63.44
     lon1, lat1, _ = GEOD.fwd(lon0, lat0, 75.0, 2.0)  # truth moves 2 m in 2 s
-    truth = {"t": np.array([100.0, 102.0]), "lat": np.array([lat0, lat1]), "lon": np.array([lon0, lon1])}
+    truth = {
+        "t": np.array([100.0, 102.0]),
+        "lat": np.array([lat0, lat1]),
+        "lon": np.array([lon0, lon1]),
+    }
     mid_lon, mid_lat, _ = GEOD.fwd(lon0, lat0, 75.0, 1.0)  # truth at t = 101
     dists = [0.25, 0.05, 1.3]
     lons, lats = [], []
@@ -51,8 +55,12 @@ def test_errors_against_geodesic_offsets():
         lo, la, _ = GEOD.fwd(mid_lon, mid_lat, az, d)
         lons.append(lo)
         lats.append(la)
-    fx = fixes_at([101.0, 101.0, 101.0, 101.0, 103.0], [*lats, lats[0], lats[0]], [*lons, lons[0], lons[0]],
-                  ["ok", "ok", "ok", "lost", "ok"])
+    fx = fixes_at(
+        [101.0, 101.0, 101.0, 101.0, 103.0],
+        [*lats, lats[0], lats[0]],
+        [*lons, lons[0], lons[0]],
+        ["ok", "ok", "ok", "lost", "ok"],
+    )
     err = errors_m(fx, truth)
     assert np.allclose(err[:3], dists, atol=2e-4)
     assert np.isnan(err[3]) and np.isnan(err[4])  # no fix; outside the truth's span
@@ -80,13 +88,19 @@ def test_cli_table_matches_independent_computation(tmp_path, capsys):
         ok = pos.status == "ok"
         lat_t = np.interp(pos.t_unix[ok], truth["t"], truth["lat"])
         lon_t = np.interp(pos.t_unix[ok], truth["t"], truth["lon"])
-        _, _, d = GEOD.inv(pos.lon[ok], pos.lat[ok], lon_t, lat_t)  # positions.csv: 1e-9 deg ~ 0.1 mm
-        assert int(row["fixes"]) == ok.sum() < n_frames == int(row["frames"])  # occluded frames have no fix
+        _, _, d = GEOD.inv(
+            pos.lon[ok], pos.lat[ok], lon_t, lat_t
+        )  # positions.csv: 1e-9 deg ~ 0.1 mm
+        assert (
+            int(row["fixes"]) == ok.sum() < n_frames == int(row["frames"])
+        )  # occluded frames have no fix
         assert float(row["coverage"]) == pytest.approx(ok.sum() / n_frames)
         assert float(row["mae_m"]) == pytest.approx(np.mean(d), abs=1e-4)
         assert float(row["rmse_m"]) == pytest.approx(np.sqrt(np.mean(d**2)), abs=1e-4)
         assert float(row["max_m"]) == pytest.approx(np.max(d), abs=1e-4)
-        assert float(row["p95_m"]) == pytest.approx(np.sort(d)[int(np.ceil(0.95 * len(d))) - 1], abs=2e-3)
+        assert float(row["p95_m"]) == pytest.approx(
+            np.sort(d)[int(np.ceil(0.95 * len(d))) - 1], abs=2e-3
+        )
         within = np.mean(d <= 2 * pos.h_acc_m[ok])
         assert float(row["within_2sigma"]) == pytest.approx(within, abs=1.5 / len(d))
     for png in ("top_view.png", "timeline.png", "status.png"):
@@ -110,8 +124,14 @@ def test_a_bad_session_is_reported_and_the_others_evaluated(tmp_path, capsys):
     for f in (BUNDLED_DIR / "fixed_camera").iterdir():
         if f.name != "truth.csv":
             (no_truth / f.name).write_bytes(f.read_bytes())
-    code = run_evaluate(str(no_truth), str(BUNDLED_DIR / "fixed_camera"), "--use-track", "--out",
-                        str(tmp_path / "out"), "--quiet")
+    code = run_evaluate(
+        str(no_truth),
+        str(BUNDLED_DIR / "fixed_camera"),
+        "--use-track",
+        "--out",
+        str(tmp_path / "out"),
+        "--quiet",
+    )
     captured = capsys.readouterr()
     assert code == 2
     err_lines = captured.err.strip().splitlines()

@@ -34,7 +34,11 @@ def seen_and_fixed(session, positions):
 def weather(tmp_path_factory):
     """weather_5mps_rtk for 3 s, without video (pixels from track.csv)."""
     out = tmp_path_factory.mktemp("weather") / "weather_5mps_rtk"
-    generate(with_overrides(load_scenario(SCENARIOS / "weather_5mps_rtk.toml"), duration_s=3.0), out, video=False)
+    generate(
+        with_overrides(load_scenario(SCENARIOS / "weather_5mps_rtk.toml"), duration_s=3.0),
+        out,
+        video=False,
+    )
     return out
 
 
@@ -42,7 +46,11 @@ def test_waves_columns_against_the_sessions_files(weather, tmp_path):
     assert main(["evaluate", str(weather), "--out", str(tmp_path), "--quiet"]) == 0
     rows = rows_of(tmp_path / "evaluation.csv")
     with open(weather / "truth_waves.csv", newline="") as f:
-        waves = [math.hypot(float(r["wave_dn_m"]), float(r["wave_de_m"])) for r in csv.DictReader(f) if r["wave_dn_m"]]
+        waves = [
+            math.hypot(float(r["wave_dn_m"]), float(r["wave_de_m"]))
+            for r in csv.DictReader(f)
+            if r["wave_dn_m"]
+        ]
     assert len(waves) > 80
     for method, row in rows.items():
         assert float(row["wave_mae_m"]) == pytest.approx(np.mean(waves), abs=1e-9)
@@ -51,12 +59,18 @@ def test_waves_columns_against_the_sessions_files(weather, tmp_path):
         # no video: the run is the true pixel's, so it is what the telemetry allows, scored afresh
         assert float(row["allowed_mae_m"]) == pytest.approx(float(row["mae_m"]), rel=1e-9)
         assert float(row["allowed_shape_m"]) == pytest.approx(float(row["shape_m"]), rel=1e-9)
-        assert float(row["mae_ratio"]) == pytest.approx(1.0) and float(row["shape_ratio"]) == pytest.approx(1.0)
+        assert float(row["mae_ratio"]) == pytest.approx(1.0) and float(
+            row["shape_ratio"]
+        ) == pytest.approx(1.0)
     # the drone's own errors (a 2 deg compass, a 0.3 deg tilt at 25 m) are most of it, the waves centimetres
-    assert 0.01 < float(rows["refraction"]["wave_mae_m"]) < 0.15 < float(rows["refraction"]["mae_m"])
+    assert (
+        0.01 < float(rows["refraction"]["wave_mae_m"]) < 0.15 < float(rows["refraction"]["mae_m"])
+    )
 
 
-def test_without_waves_the_waves_columns_are_empty_and_coverage_counts_visible_frames(tmp_path, capsys):
+def test_without_waves_the_waves_columns_are_empty_and_coverage_counts_visible_frames(
+    tmp_path, capsys
+):
     session = BUNDLED_DIR / "occlusion"
     assert main(["evaluate", str(session), "--use-track", "--out", str(tmp_path), "--quiet"]) == 0
     printed = capsys.readouterr().out

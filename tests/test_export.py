@@ -31,7 +31,12 @@ SKYFIX = "{urn:skyfix:gpx:1}"
 def processed(tmp_path_factory):
     """The occlusion session processed (geometry only): fixes with a 45-frame gap, GPS_RAW_INT heights."""
     out = tmp_path_factory.mktemp("occlusion")
-    assert main(["process", str(BUNDLED_DIR / "occlusion"), "--out", str(out), "--use-track", "--quiet"]) == 0
+    assert (
+        main(
+            ["process", str(BUNDLED_DIR / "occlusion"), "--out", str(out), "--use-track", "--quiet"]
+        )
+        == 0
+    )
     for fmt in ("geojson", "kml", "gpx", "csv"):
         assert main(["export", str(out), "--format", fmt]) == 0
     return out, read_positions_csv(out / "positions.csv")
@@ -40,14 +45,17 @@ def processed(tmp_path_factory):
 def test_geojson(processed):
     out, pos = processed
     text = (out / "fixes.geojson").read_text()
-    valid = geojson.loads(text)  # the geojson package checks the structure (it rounds to 6 decimals: not for values)
+    valid = geojson.loads(
+        text
+    )  # the geojson package checks the structure (it rounds to 6 decimals: not for values)
     assert valid.is_valid, valid.errors()
     doc = json.loads(text)
     assert len(doc["features"]) == len(pos)
     ok = pos.status == "ok"
     assert 0 < ok.sum() < len(pos)
-    for f, is_ok, lat, lon, h, h_acc, status in zip(doc["features"], ok, pos.lat, pos.lon, pos.alt_ellipsoid_m,
-                                                     pos.h_acc_m, pos.status):
+    for f, is_ok, lat, lon, h, h_acc, status in zip(
+        doc["features"], ok, pos.lat, pos.lon, pos.alt_ellipsoid_m, pos.h_acc_m, pos.status
+    ):
         assert f["properties"]["status"] == status
         if is_ok:
             x, y, z = f["geometry"]["coordinates"]  # RFC 7946: lon, lat, height above the ellipsoid
@@ -65,16 +73,24 @@ def test_kml(processed):
     marks = folders["fixes"].findall(f"{KML}Placemark")
     assert len(marks) == len(ok)
     for pm, i in zip(marks, ok):
-        lon, lat, alt = map(float, pm.findtext(f".//{KML}coordinates").split(","))  # KML: lon,lat,alt (AMSL)
-        assert (lon, lat, alt) == pytest.approx((pos.lon[i], pos.lat[i], pos.alt_amsl_m[i]), abs=1e-4)
+        lon, lat, alt = map(
+            float, pm.findtext(f".//{KML}coordinates").split(",")
+        )  # KML: lon,lat,alt (AMSL)
+        assert (lon, lat, alt) == pytest.approx(
+            (pos.lon[i], pos.lat[i], pos.alt_amsl_m[i]), abs=1e-4
+        )
         assert abs(lon - pos.lon[i]) < 1e-9 and abs(lat - pos.lat[i]) < 1e-9
         data = {d.get("name"): d.text for d in pm.iter(f"{KML}SimpleData")}
-        assert data["status"] == "ok" and float(data["h_acc_m"]) == pytest.approx(pos.h_acc_m[i], abs=1e-4)
+        assert data["status"] == "ok" and float(data["h_acc_m"]) == pytest.approx(
+            pos.h_acc_m[i], abs=1e-4
+        )
         datetime.fromisoformat(pm.findtext(f".//{KML}when"))
     gaps = [(a, b, w) for a, b, w in runs(pos.status) if w != "ok"]
     names = [pm.findtext(f"{KML}name") for pm in folders["no fix"].findall(f"{KML}Placemark")]
     assert names == [f"{w}: {b - a} frames" for a, b, w in gaps]
-    assert len(folders["track"].findall(f"{KML}Placemark")) == len(gaps) + 1  # the gap splits the track
+    assert (
+        len(folders["track"].findall(f"{KML}Placemark")) == len(gaps) + 1
+    )  # the gap splits the track
 
 
 def test_gpx(processed):
@@ -89,7 +105,9 @@ def test_gpx(processed):
         assert float(p.get("lat")) == pytest.approx(pos.lat[i], abs=1e-9)
         assert float(p.get("lon")) == pytest.approx(pos.lon[i], abs=1e-9)
         assert float(p.findtext(f"{GPX}ele")) == pytest.approx(pos.alt_amsl_m[i], abs=1e-4)
-        assert float(p.findtext(f"{GPX}geoidheight")) == pytest.approx(40.0, abs=2e-4)  # the scenario's
+        assert float(p.findtext(f"{GPX}geoidheight")) == pytest.approx(
+            40.0, abs=2e-4
+        )  # the scenario's
         assert float(p.findtext(f"{GPX}hdop")) == pytest.approx(pos.h_acc_m[i], abs=1e-4)
         assert p.findtext(f"{GPX}extensions/{SKYFIX}status") == "ok"
     # the GPX 1.1 schema's order of a point's elements
@@ -111,8 +129,12 @@ def test_csv(processed):
         assert datetime.fromisoformat(row["time"]).timestamp() == pytest.approx(t_gnss, abs=1e-3)
 
 
-OGR = {"geojson": ([], None), "kml": ([], "fixes"), "gpx": ([], "track_points"),
-       "csv": (["-oo", "X_POSSIBLE_NAMES=lon", "-oo", "Y_POSSIBLE_NAMES=lat"], None)}
+OGR = {
+    "geojson": ([], None),
+    "kml": ([], "fixes"),
+    "gpx": ([], "track_points"),
+    "csv": (["-oo", "X_POSSIBLE_NAMES=lon", "-oo", "Y_POSSIBLE_NAMES=lat"], None),
+}
 
 
 @pytest.mark.parametrize("fmt", OGR)
@@ -124,10 +146,20 @@ def test_gdal_reads_the_exports(processed, fmt):
         pytest.skip("ogr2ogr (gdal-bin) not installed")
     out, pos = processed
     opts, layer = OGR[fmt]
-    cmd = ["ogr2ogr", "-f", "GeoJSON", "/vsistdout/", *opts, str(out / f"fixes.{fmt}"), *([layer] if layer else [])]
+    cmd = [
+        "ogr2ogr",
+        "-f",
+        "GeoJSON",
+        "/vsistdout/",
+        *opts,
+        str(out / f"fixes.{fmt}"),
+        *([layer] if layer else []),
+    ]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=60, check=False)
     assert res.returncode == 0, res.stderr
-    points = [f["geometry"]["coordinates"] for f in json.loads(res.stdout)["features"] if f["geometry"]]
+    points = [
+        f["geometry"]["coordinates"] for f in json.loads(res.stdout)["features"] if f["geometry"]
+    ]
     ok = pos.status == "ok"
     assert np.allclose(np.array(points)[:, :2], np.c_[pos.lon[ok], pos.lat[ok]], atol=1e-9)
 
@@ -135,11 +167,18 @@ def test_gdal_reads_the_exports(processed, fmt):
 def test_unknown_ellipsoid_height_is_left_out_not_guessed(tmp_path):
     """positions.csv from another tool (the spec's six columns): 2D GeoJSON points, no geoidheight in GPX."""
     pos = tmp_path / "positions.csv"
-    pos.write_text("t,lat,lon,depth_m,h_acc_m,status\n1763800000.0,63.44,10.4,1.0,0.2,ok\n"
-                   "1763800000.1,,,1.0,,lost\n")
-    assert main(["export", str(pos), "--format", "geojson", "--out", str(tmp_path / "a.geojson")]) == 0
+    pos.write_text(
+        "t,lat,lon,depth_m,h_acc_m,status\n1763800000.0,63.44,10.4,1.0,0.2,ok\n"
+        "1763800000.1,,,1.0,,lost\n"
+    )
+    assert (
+        main(["export", str(pos), "--format", "geojson", "--out", str(tmp_path / "a.geojson")]) == 0
+    )
     f = json.loads((tmp_path / "a.geojson").read_text())["features"]
-    assert f[0]["geometry"]["coordinates"] == [10.4, 63.44] and f[0]["properties"]["alt_ellipsoid_m"] is None
+    assert (
+        f[0]["geometry"]["coordinates"] == [10.4, 63.44]
+        and f[0]["properties"]["alt_ellipsoid_m"] is None
+    )
     assert f[1]["geometry"] is None and f[0]["properties"]["time_source"] == "station"
     assert main(["export", str(tmp_path), "--format", "gpx"]) == 0
     root = ET.parse(tmp_path / "fixes.gpx").getroot()
@@ -149,11 +188,28 @@ def test_unknown_ellipsoid_height_is_left_out_not_guessed(tmp_path):
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["export", str(tmp_path), "--format", "kml"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [(f"skyfix export: error: {tmp_path / 'positions.csv'}: missing (a recorded session has one; "
-                    f"for others run `skyfix process {tmp_path} --out DIR` and export DIR)")]
-    (tmp_path / "positions.csv").write_text("t,lat,lon,depth_m,h_acc_m,status\n1.0,63.4,x,1,0.2,ok\n")
+    assert err == [
+        (
+            f"skyfix export: error: {tmp_path / 'positions.csv'}: missing (a recorded session has one; "
+            f"for others run `skyfix process {tmp_path} --out DIR` and export DIR)"
+        )
+    ]
+    (tmp_path / "positions.csv").write_text(
+        "t,lat,lon,depth_m,h_acc_m,status\n1.0,63.4,x,1,0.2,ok\n"
+    )
     assert main(["export", str(tmp_path), "--format", "csv"]) == 2
     assert "positions.csv:2: lon = 'x': not a number" in capsys.readouterr().err
-    assert main(["export", str(tmp_path / "positions.csv"), "--format", "csv",
-                 "--out", str(tmp_path / "positions.csv")]) == 2
+    assert (
+        main(
+            [
+                "export",
+                str(tmp_path / "positions.csv"),
+                "--format",
+                "csv",
+                "--out",
+                str(tmp_path / "positions.csv"),
+            ]
+        )
+        == 2
+    )
     assert Path(tmp_path / "positions.csv").read_text().startswith("t,lat")  # nothing lost

@@ -24,7 +24,14 @@ from groundstation.offline.process import locate_frames
 from groundstation.session.read import load_session
 from localizer.geodesy import horizontal_error_m
 
-CONDITIONS = ("clock_offset", "clock_sync", "nadir_vehicle_frame", "slow_attitude", "servo_mount", "reboot")
+CONDITIONS = (
+    "clock_offset",
+    "clock_sync",
+    "nadir_vehicle_frame",
+    "slow_attitude",
+    "servo_mount",
+    "reboot",
+)
 
 
 @pytest.fixture(scope="module")
@@ -33,22 +40,41 @@ def sessions(tmp_path_factory):
     out = {}
     for name in CONDITIONS:
         d = tmp_path_factory.mktemp(name)
-        subprocess.run([sys.executable, "-m", "groundstation.cli", "sim", str(ROOT / "sim_fixtures" / "scenarios" /
-                        f"{name}.toml"), "--out", str(d), "--no-video"], check=True, capture_output=True, cwd=ROOT)
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "groundstation.cli",
+                "sim",
+                str(ROOT / "sim_fixtures" / "scenarios" / f"{name}.toml"),
+                "--out",
+                str(d),
+                "--no-video",
+            ],
+            check=True,
+            capture_output=True,
+            cwd=ROOT,
+        )
         out[name] = d
     return out
 
 
 def _fixes(session):
     tr = session.track
-    return locate_frames(session, (tr["t"], tr["u"], tr["v"], np.full(len(tr["t"]), "ok", dtype=object)))
+    return locate_frames(
+        session, (tr["t"], tr["u"], tr["v"], np.full(len(tr["t"]), "ok", dtype=object))
+    )
 
 
 def _errors(session, fixes):
     ok = fixes.status == "ok"
     truth = session.truth
-    return ok, horizontal_error_m(fixes.lat[ok], fixes.lon[ok], np.interp(fixes.t_unix[ok], truth["t"], truth["lat"]),
-                                  np.interp(fixes.t_unix[ok], truth["t"], truth["lon"]))
+    return ok, horizontal_error_m(
+        fixes.lat[ok],
+        fixes.lon[ok],
+        np.interp(fixes.t_unix[ok], truth["t"], truth["lat"]),
+        np.interp(fixes.t_unix[ok], truth["t"], truth["lon"]),
+    )
 
 
 @pytest.mark.parametrize("name", CONDITIONS)
@@ -57,9 +83,16 @@ def test_each_condition_within_a_centimetre(sessions, name):
     fixes = _fixes(session)
     seen = np.isfinite(session.track["u"])
     ok, err = _errors(session, fixes)
-    if name == "reboot":  # no telemetry while the autopilot is down: no fix there, every other frame fixed
+    if (
+        name == "reboot"
+    ):  # no telemetry while the autopilot is down: no fix there, every other frame fixed
         assert 0.5 < ok[seen].mean() < 0.9
-        assert set(fixes.status[seen & ~ok]) <= {"stale_attitude", "stale_gimbal", "no_attitude", "stale_position"}
+        assert set(fixes.status[seen & ~ok]) <= {
+            "stale_attitude",
+            "stale_gimbal",
+            "no_attitude",
+            "stale_position",
+        }
     else:
         assert ok[seen].all(), sorted(set(fixes.status[seen & ~ok]))
     assert err.mean() <= 0.01, f"{name}: MAE {err.mean():.4f} m"
@@ -103,7 +136,9 @@ def test_the_servo_mount_is_read_from_mnt1_type(sessions):
     assert err.mean() <= 0.01
     forced = load_session(sessions["servo_mount"])
     cal = forced.calibration
-    forced.calibration = dataclasses.replace(cal, mount=dataclasses.replace(cal.mount, gimbal_roll_pitch="horizon"))
+    forced.calibration = dataclasses.replace(
+        cal, mount=dataclasses.replace(cal.mount, gimbal_roll_pitch="horizon")
+    )
     _, err = _errors(forced, _fixes(forced))
     assert err.mean() > 1.0
 
@@ -114,7 +149,9 @@ def test_a_reboot_keeps_the_frames_before_it(sessions):
     seen = np.isfinite(session.track["u"])
     t = fixes.t_unix - fixes.t_unix[0]
     assert (fixes.status[seen & (t < 2.9)] == "ok").all()  # the autopilot went down at 3 s
-    assert (fixes.status[seen & (t > 6.5)] == "ok").all()  # and was back, on a new boot clock, by 5.5 s
+    assert (
+        fixes.status[seen & (t > 6.5)] == "ok"
+    ).all()  # and was back, on a new boot clock, by 5.5 s
     assert sum("rebooted" in w for w in session.warnings) == 1
 
 

@@ -73,7 +73,9 @@ def test_distance_by_hand():
     assert common_change_m2(C, 0.1)[0, 0] == pytest.approx(change)
     assert radius == pytest.approx(0.15)
     assert d == pytest.approx(0.10 / math.sqrt(2 * WHITE_FLOOR_M**2 + change), rel=1e-6)
-    by_accel = (0.25 - 0.5 * A * 0.01) / math.sqrt(WHITE_FLOOR_M**2 + 0.01 * V**2 + WHITE_FLOOR_M**2 + change)
+    by_accel = (0.25 - 0.5 * A * 0.01) / math.sqrt(
+        WHITE_FLOOR_M**2 + 0.01 * V**2 + WHITE_FLOOR_M**2 + change
+    )
     assert by_accel < d
 
 
@@ -92,13 +94,22 @@ def test_scatter_measures_the_white_share_not_the_motion_or_the_common_error():
 
 # -- streams: the failures the issue measured ------------------------------------------------------
 @pytest.mark.parametrize("h_acc_m", [0.4, 0.05])
-@pytest.mark.parametrize("make", [lambda h: step(h, 0.8), lambda h: step(h, 10.0),
-                                  lambda h: lookalike(h, 3.0, loss_s=1.0, seconds=1.5), crossing],
-                         ids=["step 0.8 m", "step 10 m", "look-alike 3 m after a loss", "a vehicle crossing"])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda h: step(h, 0.8),
+        lambda h: step(h, 10.0),
+        lambda h: lookalike(h, 3.0, loss_s=1.0, seconds=1.5),
+        crossing,
+    ],
+    ids=["step 0.8 m", "step 10 m", "look-alike 3 m after a loss", "a vehicle crossing"],
+)
 def test_no_wrong_fix_goes_out(make, h_acc_m):
     stream = make(h_acc_m)
     _, valid = gate_on(stream)
-    assert not (valid & stream.wrong).any(), f"{stream.name}: {(valid & stream.wrong).sum()} wrong fixes valid"
+    assert not (valid & stream.wrong).any(), (
+        f"{stream.name}: {(valid & stream.wrong).sum()} wrong fixes valid"
+    )
     assert valid[stream.real_after(CONFIRM_S)].all()
 
 
@@ -108,7 +119,9 @@ def test_a_jump_leaves_the_gate_diverged_until_the_target_is_lost(h_acc_m):
     DIVERGED_S; a lost target ends it, and the UUV found again where it was is valid a second later."""
     stream = step(h_acc_m, 0.8, seconds=3.0)
     gate, valid = gate_on(stream)
-    assert gate.state == "diverged" and gate.rejected["diverged"] > 0 and not valid[stream.wrong].any()
+    assert (
+        gate.state == "diverged" and gate.rejected["diverged"] > 0 and not valid[stream.wrong].any()
+    )
     gate.target_lost()
     t_back = stream.fixes[-1].t_unix + 0.5
     back = [fix_at(t_back + i / HZ, 0.0, 0.0, h_acc_m) for i in range(round(1.5 * HZ))]
@@ -123,7 +136,9 @@ def test_diverged_ends_after_its_time():
     _, valid = gate_on(stream)
     t = np.array([f.t_unix for f in stream.fixes])
     refused_for = t[valid & stream.wrong].min() - t[stream.wrong].min()
-    assert DIVERGED_S <= refused_for <= DIVERGED_S + CONFIRM_S + 0.1  # then acquired again: 0.8 m is in reach
+    assert (
+        DIVERGED_S <= refused_for <= DIVERGED_S + CONFIRM_S + 0.1
+    )  # then acquired again: 0.8 m is in reach
 
 
 def test_the_gate_does_not_forget_where_the_uuv_was():
@@ -140,7 +155,9 @@ def test_the_gate_does_not_forget_where_the_uuv_was():
     t_back = stream.fixes[-1].t_unix + 0.2
     back = [fix_at(t_back + i / HZ, 0.0, 0.0, 0.05) for i in range(round(1.5 * HZ))]
     ok = [gate.check(f, f.t_unix + 0.05) is None for f in back]
-    assert back[ok.index(True)].t_unix - t_back == pytest.approx(CONFIRM_S, abs=1.5 / HZ) and all(ok[ok.index(True):])
+    assert back[ok.index(True)].t_unix - t_back == pytest.approx(CONFIRM_S, abs=1.5 / HZ) and all(
+        ok[ok.index(True) :]
+    )
 
 
 def test_a_look_alike_where_the_uuv_could_be_is_taken():
@@ -148,7 +165,9 @@ def test_a_look_alike_where_the_uuv_could_be_is_taken():
     stream = lookalike(0.05, 1.0, loss_s=1.0, seconds=2.0)
     _, valid = gate_on(stream)
     t = np.array([f.t_unix for f in stream.fixes])
-    assert t[valid & stream.wrong].min() - t[stream.wrong].min() == pytest.approx(CONFIRM_S, abs=1.5 / HZ)
+    assert t[valid & stream.wrong].min() - t[stream.wrong].min() == pytest.approx(
+        CONFIRM_S, abs=1.5 / HZ
+    )
 
 
 def test_an_abrupt_start_at_top_speed_is_refused_until_the_uuv_could_have_caught_up():
@@ -161,7 +180,9 @@ def test_an_abrupt_start_at_top_speed_is_refused_until_the_uuv_could_have_caught
         stream = ramp(h_acc_m, V, seconds=1.0)
         _, valid = gate_on(stream)
         start = round(BEFORE_S * HZ)
-        assert valid[start:start + 2].all() and not valid[start + 2:start + round(0.4 * HZ)].any(), h_acc_m
+        assert (
+            valid[start : start + 2].all() and not valid[start + 2 : start + round(0.4 * HZ)].any()
+        ), h_acc_m
 
 
 def test_the_issue_ramp_is_a_real_start_to_within_millimetres():
@@ -189,10 +210,22 @@ def _path_from_acceleration(accel, v0, hz: float, seconds: float = 5.0) -> np.nd
 
 
 MANOEUVRES = {
-    "stop from top speed": ([V, 0.0], lambda t, v: np.array([-A, 0.0]) if t > 2 and v[0] > 0 else np.zeros(2)),
-    "zigzag ±a every 0.3 s": ([1.0, 0.0], lambda t, v: np.array([0.0, A if int(t / 0.3) % 2 else -A]) * (t > 2)),
-    "bang-bang from rest": ([0.0, 0.0], lambda t, v: np.array([A if int(t / 0.5) % 2 == 0 else -A, 0.0]) * (t > 2)),
-    "turning at top speed": ([V, 0.0], lambda t, v: A * np.array([-v[1], v[0]]) / max(np.hypot(*v), 1e-9)),
+    "stop from top speed": (
+        [V, 0.0],
+        lambda t, v: np.array([-A, 0.0]) if t > 2 and v[0] > 0 else np.zeros(2),
+    ),
+    "zigzag ±a every 0.3 s": (
+        [1.0, 0.0],
+        lambda t, v: np.array([0.0, A if int(t / 0.3) % 2 else -A]) * (t > 2),
+    ),
+    "bang-bang from rest": (
+        [0.0, 0.0],
+        lambda t, v: np.array([A if int(t / 0.5) % 2 == 0 else -A, 0.0]) * (t > 2),
+    ),
+    "turning at top speed": (
+        [V, 0.0],
+        lambda t, v: A * np.array([-v[1], v[0]]) / max(np.hypot(*v), 1e-9),
+    ),
 }
 
 
@@ -206,7 +239,9 @@ def test_real_motion_at_the_bounds_is_never_refused(name, hz, monkeypatch):
         stream = gate_streams._stream(name, path, path, h_acc_m, seed=7)
         _, valid = gate_on(stream)
         late = stream.real_after(CONFIRM_S)
-        assert valid[late].all(), f"{name} at {hz:g} Hz, h_acc {h_acc_m}: {(~valid[late]).sum()} refused"
+        assert valid[late].all(), (
+            f"{name} at {hz:g} Hz, h_acc {h_acc_m}: {(~valid[late]).sum()} refused"
+        )
 
 
 @pytest.mark.parametrize("h_acc_m", [0.4, 0.05])
@@ -217,15 +252,21 @@ def test_accelerating_from_rest_to_top_speed_and_turning_are_never_refused(h_acc
 
 
 # -- the thrusters' word --------------------------------------------------------------------------
-def gate_with_thrusters(stream, pushing=lambda t: False, outputs_hz: float = 10.0) -> tuple[FixGate, np.ndarray]:
+def gate_with_thrusters(
+    stream, pushing=lambda t: False, outputs_hz: float = 10.0
+) -> tuple[FixGate, np.ndarray]:
     gate = FixGate(thrusters=vectored_thrusters())
     return gate, offer(gate, stream, gate.target_lost, gate.thrusters, pushing, outputs_hz)
 
 
 def offset_m(stream) -> np.ndarray:
     """Each fix's distance from the truth (m), on the streams' own spherical Earth."""
-    seen = np.array([[(f.lat - LAT0) * M_PER_DEG, (f.lon - LON0) * M_PER_DEG * math.cos(math.radians(LAT0))]
-                     for f in stream.fixes])
+    seen = np.array(
+        [
+            [(f.lat - LAT0) * M_PER_DEG, (f.lon - LON0) * M_PER_DEG * math.cos(math.radians(LAT0))]
+            for f in stream.fixes
+        ]
+    )
     return np.linalg.norm(seen - stream.truth_ne, axis=1)
 
 
@@ -238,10 +279,14 @@ def test_the_issue_ramp_with_the_thrusters_idle_is_refused(h_acc_m):
     gate, valid = gate_with_thrusters(stream)
     off = offset_m(stream)
     start = round(BEFORE_S * HZ)
-    assert valid[:start][stream.real_after(CONFIRM_S)[:start]].all()  # the UUV at rest before it: taken
+    assert valid[:start][
+        stream.real_after(CONFIRM_S)[:start]
+    ].all()  # the UUV at rest before it: taken
     assert off[valid & stream.wrong].max() <= 0.06, off[valid & stream.wrong]
-    assert not valid[start + 6:].any() and gate.state == "diverged", gate.last_refusal
-    assert "diverged" in gate.rejected and gate.status(stream.fixes[-1].t_unix)["thrusters"] == "idle"
+    assert not valid[start + 6 :].any() and gate.state == "diverged", gate.last_refusal
+    assert (
+        "diverged" in gate.rejected and gate.status(stream.fixes[-1].t_unix)["thrusters"] == "idle"
+    )
 
 
 def test_the_same_ramp_with_the_thrusters_pushing_passes_as_a_real_start():
@@ -269,6 +314,7 @@ def test_real_motion_at_the_bounds_with_the_thrusters_pushing_is_never_refused(n
 def test_coasting_and_drifting_with_the_thrusters_idle_are_never_refused(h_acc_m):
     """Thrusters idle: a BlueROV2 coasting from top speed, slowed by its drag alone (Wu's surge damping, integrated
     here at 1 kHz), and one carried by a current of 0.3 m/s whose direction turns at the water's 0.05 m/s²."""
+
     def coast(t, v):
         speed = math.hypot(*v)
         return -(DRAG_LINEAR * speed + DRAG_QUADRATIC * speed**2) / MASS_KG * v / max(speed, 1e-12)
@@ -293,7 +339,9 @@ def test_stale_or_unknown_thrusters_leave_the_vehicle_bound():
     gate = FixGate(thrusters=vectored_thrusters())
     gate.thrusters.param("FRAME_CONFIG", 7.0)  # custom
     valid = offer(gate, stream, gate.target_lost, gate.thrusters)
-    assert valid[stream.wrong].all() and gate.status(stream.fixes[-1].t_unix)["thrusters"] == "unknown"
+    assert (
+        valid[stream.wrong].all() and gate.status(stream.fixes[-1].t_unix)["thrusters"] == "unknown"
+    )
 
 
 # -- the simple gates ------------------------------------------------------------------------------
@@ -306,10 +354,17 @@ def test_accuracy_age_order_and_the_prediction_window():
     assert gate.check(fix_at(t, 0, 0, float("nan")), t) == "h_acc"
     assert gate.check(fix_at(t, 0, 0, 0.3), t + 0.51) == "age"
     assert gate.check(fixes[0], fixes[0].t_unix) == "out_of_order"
-    assert gate.check(fix_at(t, 0, 0, 0.3), t, window=(700.0, 0.0, 100.0, 100.0)) == "prediction"  # pixel (640, 360)
+    assert (
+        gate.check(fix_at(t, 0, 0, 0.3), t, window=(700.0, 0.0, 100.0, 100.0)) == "prediction"
+    )  # pixel (640, 360)
     assert gate.check(fix_at(t, 0, 0, 0.3), t, window=(600.0, 300.0, 100.0, 100.0)) is None
-    assert {k: v for k, v in gate.rejected.items() if v} == {"h_acc": 2, "age": 1, "out_of_order": 1,
-                                                             "prediction": 1, "unconfirmed": round(CONFIRM_S * HZ)}
+    assert {k: v for k, v in gate.rejected.items() if v} == {
+        "h_acc": 2,
+        "age": 1,
+        "out_of_order": 1,
+        "prediction": 1,
+        "unconfirmed": round(CONFIRM_S * HZ),
+    }
 
 
 def test_status_has_the_state_the_reasons_and_the_track():
@@ -319,7 +374,9 @@ def test_status_has_the_state_the_reasons_and_the_track():
     assert s["state"] == "tracking" and s["chain"] is None and s["reach_m"] is None
     tr = s["track"]
     speed = math.hypot(tr["vn_mps"], tr["ve_mps"])
-    assert speed == pytest.approx(V, abs=0.1) and tr["vn_mps"] == pytest.approx(tr["ve_mps"], abs=0.1)  # north-east
+    assert speed == pytest.approx(V, abs=0.1) and tr["vn_mps"] == pytest.approx(
+        tr["ve_mps"], abs=0.1
+    )  # north-east
     last = stream.fixes[-1]
     assert tr["lat"] == pytest.approx(last.lat, abs=0.05 / 111_195) and tr["sigma_n_m"] >= 0.0
     gate.target_lost()
@@ -332,12 +389,17 @@ def test_status_has_the_state_the_reasons_and_the_track():
 def sessions(tmp_path_factory):
     """The bundled occlusion (a loss and a re-acquisition), vehicle_yaw and oblique_2m, and a short dive out of
     sight and back (as tests/test_tracking_dive.py), each tracked and located by the pipeline."""
-    out = {name: process_session(load_session(BUNDLED_DIR / name), use_track=False)
-           for name in ("occlusion", "vehicle_yaw", "oblique_2m")}
+    out = {
+        name: process_session(load_session(BUNDLED_DIR / name), use_track=False)
+        for name in ("occlusion", "vehicle_yaw", "oblique_2m")
+    }
     if shutil.which("ffmpeg"):
-        sc = with_overrides(load_scenario(SCENARIOS / "dive.toml"), duration_s=5.5,
-                            site={"attenuation_bgr_per_m": (1.3, 1.2, 2.0), "floor_depth_m": 8.0},
-                            uuv={"depth_profile": ((0.8, 1.0), (2.2, 4.0), (3.0, 4.0), (4.4, 1.0))})
+        sc = with_overrides(
+            load_scenario(SCENARIOS / "dive.toml"),
+            duration_s=5.5,
+            site={"attenuation_bgr_per_m": (1.3, 1.2, 2.0), "floor_depth_m": 8.0},
+            uuv={"depth_profile": ((0.8, 1.0), (2.2, 4.0), (3.0, 4.0), (4.4, 1.0))},
+        )
         path = tmp_path_factory.mktemp("sessions") / "dive"
         generate(sc, path)
         out["dive"] = process_session(load_session(path), use_track=False)
@@ -360,7 +422,9 @@ def test_generated_sessions_no_real_fix_refused_after_the_first_second(sessions)
             late += f.t_unix - t_start > CONFIRM_S + 1e-9
             if gate.check(f, f.t_unix + 0.05) is not None and f.t_unix - t_start > CONFIRM_S + 1e-9:
                 refused_late.append((round(f.t_unix - fixes.t_unix[0], 3), gate.last_refusal))
-        assert late > 20 and not refused_late, f"{name}: {late} fixes after the first second; {refused_late[:3]}"
+        assert late > 20 and not refused_late, (
+            f"{name}: {late} fixes after the first second; {refused_late[:3]}"
+        )
 
 
 # -- real GPS_INPUT --------------------------------------------------------------------------------
@@ -402,7 +466,11 @@ def test_gps_input_never_carries_a_refused_fix():
         return round(f.lat * 1e7), round(f.lon * 1e7), int(f.t_unix * 1e6)
 
     allowed = {key(f) for f, ok in offered if ok}
-    refused = {key(f) for f, ok in offered if f.ok and not ok and f.t_unix - offered[0][0].t_unix > CONFIRM_S + 2 / HZ}
+    refused = {
+        key(f)
+        for f, ok in offered
+        if f.ok and not ok and f.t_unix - offered[0][0].t_unix > CONFIRM_S + 2 / HZ
+    }
     assert valid, "no valid GPS_INPUT at all"
     assert not valid & refused, "a GPS_INPUT carried a fix the gates refused"
     assert valid <= allowed | {key(f) for f, _ in offered[: round((CONFIRM_S + 3 / HZ) * HZ)]}

@@ -65,7 +65,11 @@ def test_fuse_of_correlated_covariances_matches_the_information_form():
 
 
 def test_choose_leaves_out_the_drone_that_disagrees():
-    good = {"a": est(0.00, 0.00, 0.1, 0.1), "b": est(0.05, -0.03, 0.2, 0.2), "c": est(-0.04, 0.02, 0.15, 0.15)}
+    good = {
+        "a": est(0.00, 0.00, 0.1, 0.1),
+        "b": est(0.05, -0.03, 0.2, 0.2),
+        "c": est(-0.04, 0.02, 0.15, 0.15),
+    }
     assert choose(good, None) == ("a", "b", "c")
     off = dict(good, c=est(2.0, 0.0, 0.15, 0.15))  # 2 m off: 8 sigma from a
     assert choose(off, None) == ("a", "b")
@@ -75,8 +79,12 @@ def test_two_disagreeing_drones_need_the_prior_to_decide_or_there_is_no_fix():
     two = {"a": est(0.0, 0.0, 0.1, 0.1), "b": est(1.5, 0.0, 0.1, 0.1)}
     assert choose(two, None) == ()
     assert choose(two, est(1.45, 0.02, 0.1, 0.1)) == ("b",)
-    assert choose(two, est(0.75, 0.0, 0.1, 0.1)) == ()  # a prior halfway agrees with neither (5.3 sigma)
-    assert choose(two, est(0.75, 0.0, 1.0, 1.0)) == ()  # a vague prior agrees with both: still undecided
+    assert (
+        choose(two, est(0.75, 0.0, 0.1, 0.1)) == ()
+    )  # a prior halfway agrees with neither (5.3 sigma)
+    assert (
+        choose(two, est(0.75, 0.0, 1.0, 1.0)) == ()
+    )  # a vague prior agrees with both: still undecided
 
 
 def test_source_track_moves_a_fix_on_by_its_velocity_and_grows_its_covariance():
@@ -105,12 +113,31 @@ def geodetic(n_m: float, e_m: float) -> tuple[float, float]:
 
 def fix(t: float, n_m: float, e_m: float, sigma_m: float) -> Fix:
     lat, lon = geodetic(n_m, e_m)
-    return Fix(t_unix=t, status="ok", lat=lat, lon=lon, alt_amsl_m=-0.9, v_acc_m=0.3, depth_m=1.3, t_gnss=t,
-               h_acc_m=math.sqrt(2) * sigma_m, sigma_n_m=sigma_m, sigma_e_m=sigma_m, cov_ne_m2=0.0, frame=0)
+    return Fix(
+        t_unix=t,
+        status="ok",
+        lat=lat,
+        lon=lon,
+        alt_amsl_m=-0.9,
+        v_acc_m=0.3,
+        depth_m=1.3,
+        t_gnss=t,
+        h_acc_m=math.sqrt(2) * sigma_m,
+        sigma_n_m=sigma_m,
+        sigma_e_m=sigma_m,
+        cov_ne_m2=0.0,
+        frame=0,
+    )
 
 
-def drive(fuser: Fuser, offsets: dict[str, tuple[float, float, float]], seconds: float, t0: float = 1000.0,
-          lost: dict[str, tuple[float, float]] | None = None, from_s: float = 0.0) -> list[Fix]:
+def drive(
+    fuser: Fuser,
+    offsets: dict[str, tuple[float, float, float]],
+    seconds: float,
+    t0: float = 1000.0,
+    lost: dict[str, tuple[float, float]] | None = None,
+    from_s: float = 0.0,
+) -> list[Fix]:
     """Each source at 30 fps (staggered by a few ms) seeing the UUV going north at 0.3 m/s, with a constant
     offset (n, e) and its sigma; ``lost``: source → (from, to) seconds without fixes; ``from_s``: the first frame's
     seconds after ``t0``. The fused fixes."""
@@ -153,29 +180,41 @@ def test_fuser_weighs_the_better_drone_more_and_rejects_the_one_off_its_sigma():
 
 def test_a_drone_dropping_out_leaves_no_gap_and_it_rejoins_after_its_gate_confirms_it():
     fuser = new_fuser()
-    fused = drive(fuser, {"a": (0.05, 0.0, 0.1), "b": (-0.05, 0.0, 0.1)}, 6.0, lost={"b": (2.0, 4.0)})
+    fused = drive(
+        fuser, {"a": (0.05, 0.0, 0.1), "b": (-0.05, 0.0, 0.1)}, 6.0, lost={"b": (2.0, 4.0)}
+    )
     ok = [f for f in fused if f.ok]
     gaps = np.diff([f.t_unix for f in ok])
     assert gaps.max() < 0.1, gaps.max()  # a alone carries on through b's absence
     during = [north_east(f)[0] for f in ok if 2.3 < f.t_gnss - 1000.0 < 3.9]
     assert np.allclose(during, 0.05, atol=0.005)  # a's own
     after = [north_east(f)[0] for f in ok if f.t_gnss - 1000.0 > 5.2]
-    assert np.allclose(after, 0.0, atol=0.005)  # b back (confirmed by its gate within a second) and averaged in
+    assert np.allclose(
+        after, 0.0, atol=0.005
+    )  # b back (confirmed by its gate within a second) and averaged in
 
 
 def test_disagreeing_pair_with_nothing_to_decide_is_no_fix():
     fuser = new_fuser()
     fused = drive(fuser, {"a": (0.0, 0.0, 0.1), "b": (2.0, 0.0, 0.1)}, 2.0)
     after_confirm = [f for f in fused if f.t_gnss - 1000.0 > 1.2]
-    assert after_confirm and all(f.status == "disagree" and math.isnan(f.lat) for f in after_confirm)
+    assert after_confirm and all(
+        f.status == "disagree" and math.isnan(f.lat) for f in after_confirm
+    )
 
 
 def test_garbage_and_foreign_payloads_are_counted_and_change_nothing():
     fuser = new_fuser()
     sources = FixSources(None, "skyfix/uuv/x/drone/*/fix", fuser, [])
     good = FixMessage.of(fix(1000.0, 0.0, 0.0, 0.1)).to_json()
-    for payload in (b"\xff\xfe", b"{}", b'{"schema": "skyfix.fix/1"}', b"[" * 100000,
-                    str(good).encode(), (str(good).replace("'", '"')[:-1] + ', "extra": 1}').encode()):
+    for payload in (
+        b"\xff\xfe",
+        b"{}",
+        b'{"schema": "skyfix.fix/1"}',
+        b"[" * 100000,
+        str(good).encode(),
+        (str(good).replace("'", '"')[:-1] + ', "extra": 1}').encode(),
+    ):
         sources.on_payload("skyfix/uuv/x/drone/a/fix", payload, 1000.1)
     assert sources.bad == 6 and fuser.sources == {}
 
@@ -214,36 +253,69 @@ def test_two_generated_drones_over_one_dive_fuse_below_the_better_one(tmp_path):
     truth is below the better drone's."""
     fixes = {}
     for name, (height, yaw, pitch, gimbal_yaw) in DRONES.items():
-        (tmp_path / f"{name}.toml").write_text(DRONE_SCENARIO.format(name=name, height=height, yaw=yaw, pitch=pitch,
-                                                                     gimbal_yaw=gimbal_yaw))
+        (tmp_path / f"{name}.toml").write_text(
+            DRONE_SCENARIO.format(
+                name=name, height=height, yaw=yaw, pitch=pitch, gimbal_yaw=gimbal_yaw
+            )
+        )
         session = tmp_path / f"session_{name}"
-        for cmd in (("sim", str(tmp_path / f"{name}.toml"), "--out", str(session), "--no-video", "--quiet"),
-                    ("process", str(session), "--use-track", "--out", str(tmp_path / name), "--quiet")):
-            done = subprocess.run(skyfix(*cmd), check=False, capture_output=True, text=True, timeout=300)
+        for cmd in (
+            ("sim", str(tmp_path / f"{name}.toml"), "--out", str(session), "--no-video", "--quiet"),
+            ("process", str(session), "--use-track", "--out", str(tmp_path / name), "--quiet"),
+        ):
+            done = subprocess.run(
+                skyfix(*cmd), check=False, capture_output=True, text=True, timeout=300
+            )
             assert done.returncode == 0, done.stderr[-2000:]
         fixes[name] = read_positions_csv(tmp_path / name / "positions.csv")
     truth = (tmp_path / "session_a" / "truth.csv").read_text()
-    assert truth == (tmp_path / "session_b" / "truth.csv").read_text(), "the two drones must see the same dive"
-    arrivals = sorted((fixes[name].t_unix[i] + delay, name, i) for name, delay in (("a", 0.10), ("b", 0.15))
-                      for i in range(len(fixes[name])))
+    assert truth == (tmp_path / "session_b" / "truth.csv").read_text(), (
+        "the two drones must see the same dive"
+    )
+    arrivals = sorted(
+        (fixes[name].t_unix[i] + delay, name, i)
+        for name, delay in (("a", 0.10), ("b", 0.15))
+        for i in range(len(fixes[name]))
+    )
     fuser = Fuser(lambda: FixGate(max_age_s=0.5), 3.0, sources=tuple(fixes))
-    fused = [f for now, name, i in arrivals if (f := fuser.on_fix(name, fixes[name][i], now)) is not None]
+    fused = [
+        f for now, name, i in arrivals if (f := fuser.on_fix(name, fixes[name][i], now)) is not None
+    ]
     ok = [f for f in fused if f.ok]
     assert len(ok) > 0.9 * len(fixes["a"]) and fuser.disagreements == 0
 
     def mae(fs) -> float:
-        return float(np.mean(truth_errors_m(tmp_path / "session_a", [f.t_unix for f in fs], [f.lat for f in fs],
-                                            [f.lon for f in fs])))
+        return float(
+            np.mean(
+                truth_errors_m(
+                    tmp_path / "session_a",
+                    [f.t_unix for f in fs],
+                    [f.lat for f in fs],
+                    [f.lon for f in fs],
+                )
+            )
+        )
 
     t_fused = ok[0].t_unix  # from when both drones were confirmed by their gates
-    own = {name: mae([f for f in (fixes[name][i] for i in range(len(fixes[name])))
-                      if f.ok and f.t_unix >= t_fused]) for name in fixes}
-    print(f"\nfused MAE {mae(ok):.4f} m, drone a {own['a']:.4f} m, drone b {own['b']:.4f} m; fused h_acc "
-          f"{np.mean([f.h_acc_m for f in ok]):.3f} m")
+    own = {
+        name: mae(
+            [
+                f
+                for f in (fixes[name][i] for i in range(len(fixes[name])))
+                if f.ok and f.t_unix >= t_fused
+            ]
+        )
+        for name in fixes
+    }
+    print(
+        f"\nfused MAE {mae(ok):.4f} m, drone a {own['a']:.4f} m, drone b {own['b']:.4f} m; fused h_acc "
+        f"{np.mean([f.h_acc_m for f in ok]):.3f} m"
+    )
     assert mae(ok) < min(own.values()), (mae(ok), own)
 
 
 # -- trust: shared errors, configured sources, the future, floors, the fused track (issue 29) -------------------------
+
 
 def shared_gnss(sigma_m: float) -> np.ndarray:
     G = np.zeros((2, len(SHARED_TERMS)))
@@ -265,37 +337,67 @@ def test_drones_sharing_an_error_do_not_average_it_away_worked_by_hand():
     Ga, Gb = np.zeros((2, len(SHARED_TERMS))), np.zeros((2, len(SHARED_TERMS)))
     Ga[0, 0], Gb[0, 0] = 0.1, -0.1
     C = np.diag([0.05, 0.04])
-    f = fuse([Estimate(np.array([0.3, 0.0]), C, -1.0, 0.3, Ga), Estimate(np.array([-0.1, 0.0]), C, -1.0, 0.3, Gb)])
+    f = fuse(
+        [
+            Estimate(np.array([0.3, 0.0]), C, -1.0, 0.3, Ga),
+            Estimate(np.array([-0.1, 0.0]), C, -1.0, 0.3, Gb),
+        ]
+    )
     assert f.z == pytest.approx([0.1, 0.0]) and f.C == pytest.approx(np.diag([0.02, 0.02]))
 
 
 def test_shared_errors_are_held_within_the_claim():
-    C = np.diag([0.02**2, 0.05**2])  # claims 2 cm north, 5 cm east; the drones are said to share 10 cm
+    C = np.diag(
+        [0.02**2, 0.05**2]
+    )  # claims 2 cm north, 5 cm east; the drones are said to share 10 cm
     G = fit_shared(C, shared_gnss(0.1))
-    assert G @ G.T == pytest.approx(np.eye(2) * 0.75 * 0.02**2)  # 3/4 of the claim where it is smallest
+    assert G @ G.T == pytest.approx(
+        np.eye(2) * 0.75 * 0.02**2
+    )  # 3/4 of the claim where it is smallest
     assert np.all(np.linalg.eigvalsh(C - G @ G.T) >= 0.25 * 0.02**2 - 1e-12)
-    assert fit_shared(C, shared_gnss(0.01)) == pytest.approx(shared_gnss(0.01))  # within it: as it is
+    assert fit_shared(C, shared_gnss(0.01)) == pytest.approx(
+        shared_gnss(0.01)
+    )  # within it: as it is
 
 
 def test_shared_effects_follow_each_drones_geometry():
     # the UUV 3 m north and 4 m east of the UAV 9 m above the water, 1.3 m deep; the ray's slopes in air and water by
     # Snell, solved here independently: rho = h tan(a) + d tan(w), sin(a) = 1.34 sin(w)
-    f = Fix(t_unix=0.0, status="ok", north_m=3.0, east_m=4.0, height_m=9.0, depth_m=1.3, sigma_depth_m=0.05,
-            sigma_height_m=0.4, height_source="baro+gnss")
-    a = brentq(lambda a: 9.0 * math.tan(a) + 1.3 * math.tan(math.asin(math.sin(a) / 1.34)) - 5.0, 0.0, 1.5)
+    f = Fix(
+        t_unix=0.0,
+        status="ok",
+        north_m=3.0,
+        east_m=4.0,
+        height_m=9.0,
+        depth_m=1.3,
+        sigma_depth_m=0.05,
+        sigma_height_m=0.4,
+        height_source="baro+gnss",
+    )
+    a = brentq(
+        lambda a: 9.0 * math.tan(a) + 1.3 * math.tan(math.asin(math.sin(a) / 1.34)) - 5.0, 0.0, 1.5
+    )
     w = math.asin(math.sin(a) / 1.34)
     along = np.array([0.6, 0.8])
-    G = shared_effects(f, SharedSigmas(gnss_m=0.1, height_m=0.3, clock_s=0.01), np.array([0.3, -0.2]))
+    G = shared_effects(
+        f, SharedSigmas(gnss_m=0.1, height_m=0.3, clock_s=0.01), np.array([0.3, -0.2])
+    )
     assert G[:, 0] == pytest.approx(along * math.tan(w) * 0.05, rel=1e-6)
-    assert G[:, 1] == pytest.approx(along * math.tan(a) * 0.3, rel=1e-6)  # the shared 0.3, below the fix's 0.4
+    assert G[:, 1] == pytest.approx(
+        along * math.tan(a) * 0.3, rel=1e-6
+    )  # the shared 0.3, below the fix's 0.4
     assert G[:, 2:4] == pytest.approx(np.eye(2) * 0.1) and G[:, 4] == pytest.approx([0.003, -0.002])
-    f.height_source = "rangefinder"  # its own height measurement: the weather's trend does not enter
+    f.height_source = (
+        "rangefinder"  # its own height measurement: the weather's trend does not enter
+    )
     assert shared_effects(f, SharedSigmas(height_m=0.3))[:, 1] == pytest.approx([0.0, 0.0])
 
 
 def test_fixes_from_unconfigured_drones_are_counted_and_never_fused():
     fuser = Fuser(lambda: FixGate(max_age_s=0.5), 3.0, sources=("a",))
-    fused = drive(fuser, {"a": (0.0, 0.0, 0.1), "x": (20.0, 0.0, 0.05), "y": (20.0, 0.1, 0.05)}, 3.0)
+    fused = drive(
+        fuser, {"a": (0.0, 0.0, 0.1), "x": (20.0, 0.0, 0.05), "y": (20.0, 0.1, 0.05)}, 3.0
+    )
     ok = [f for f in fused if f.ok]
     assert len(ok) > 40 and max(abs(north_east(f)[0]) for f in ok) < 0.01
     st = fuser.status(2000.0)
@@ -318,7 +420,9 @@ def test_a_fix_from_the_future_is_refused_and_the_fusion_goes_on():
     ok_after = [f for f in after if f.ok]
     assert len(ok_after) > 50 and ok_after[-1].t_unix > 1003.9  # a's fixes still taken
     refused = fuser.status(2000.0)["sources"]["a"]["refused"]
-    assert refused["future"] == 2 and set(refused) == {"future", "unconfirmed"}, refused  # nothing held back
+    assert refused["future"] == 2 and set(refused) == {"future", "unconfirmed"}, (
+        refused
+    )  # nothing held back
     assert fuser.status(2000.0)["last_sources"] == ["a", "b"]
 
 
@@ -329,14 +433,21 @@ def test_a_source_claiming_far_less_than_it_sits_off_the_others_is_floored():
     ok = [f for f in drive(fuser, {"a": (0.0, 0.0, 0.25), "c": (0.8, 0.0, 0.014)}, 4.0) if f.ok]
     both = [f for f in ok if fuser.sources["c"].used and f.t_gnss > 1001.5]
     assert both and fuser.status(2000.0)["last_sources"] == ["a", "c"]
-    for f in both:  # the disagreement floors both (nothing tells which is right): the claim covers the error
+    for f in (
+        both
+    ):  # the disagreement floors both (nothing tells which is right): the claim covers the error
         n, _ = north_east(f)
         assert abs(n) <= 2.0 * f.sigma_n_m, (n, f.sigma_n_m)
     assert fuser.sources["c"].floor_m > 0.7
     # with two real drones beside it, the fake alone is floored and barely moves the fusion
     fuser = new_fuser()
-    ok = [f for f in drive(fuser, {"a": (0.05, 0.0, 0.25), "b": (-0.05, 0.0, 0.25), "c": (0.8, 0.0, 0.014)}, 4.0)
-          if f.ok and f.t_gnss > 1001.5]
+    ok = [
+        f
+        for f in drive(
+            fuser, {"a": (0.05, 0.0, 0.25), "b": (-0.05, 0.0, 0.25), "c": (0.8, 0.0, 0.014)}, 4.0
+        )
+        if f.ok and f.t_gnss > 1001.5
+    ]
     assert ok and fuser.status(2000.0)["last_sources"] == ["a", "b", "c"]
     assert max(abs(north_east(f)[0]) for f in ok) < 0.1  # (0.8 x 2.0) / (16 + 16 + 2.0) = 0.047
     st = fuser.status(2000.0)["sources"]
@@ -361,7 +472,12 @@ def test_a_fused_position_beyond_where_the_uuv_can_be_is_not_sent_as_valid():
     # them they outnumber a, and the fusion jumps 20 m in a frame
     fuser = new_fuser()
     fused = drive(fuser, {"a": (0.0, 0.0, 0.1)}, 2.0)
-    fused += drive(fuser, {"a": (0.0, 0.0, 0.1), "b": (0.0, 20.0, 0.1), "c": (0.0, 20.05, 0.1)}, 3.0, from_s=2.0)
+    fused += drive(
+        fuser,
+        {"a": (0.0, 0.0, 0.1), "b": (0.0, 20.0, 0.1), "c": (0.0, 20.05, 0.1)},
+        3.0,
+        from_s=2.0,
+    )
     assert fuser.status(2000.0)["last_sources"] == ["b", "c"]
     ok = [f for f in fused if f.ok]
     assert len(ok) > 60 and max(abs(north_east(f)[1]) for f in ok) < 0.01
@@ -369,28 +485,48 @@ def test_a_fused_position_beyond_where_the_uuv_can_be_is_not_sent_as_valid():
 
 
 def test_fuse_refuses_to_start_without_its_sources():
-    for extra, named in (((), "--source = None"), (("--source", "a*"), "--source = 'a*'"),
-                         (("--source", "a", "--sources", "skyfix/uuv/rov1/drone/b/fix"), "--source = 'a'")):
-        done = subprocess.run(skyfix("fuse", "--uuv", "rov1", *extra, "--duration-s", "1"), check=False,
-                              capture_output=True,
-                              text=True, timeout=60)
-        assert done.returncode == 2 and done.stderr.count("\n") == 1 and named in done.stderr, done.stderr
+    for extra, named in (
+        ((), "--source = None"),
+        (("--source", "a*"), "--source = 'a*'"),
+        (("--source", "a", "--sources", "skyfix/uuv/rov1/drone/b/fix"), "--source = 'a'"),
+    ):
+        done = subprocess.run(
+            skyfix("fuse", "--uuv", "rov1", *extra, "--duration-s", "1"),
+            check=False,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2 and done.stderr.count("\n") == 1 and named in done.stderr, (
+            done.stderr
+        )
 
 
 def test_fuse_on_zenoh_takes_its_sources_only_and_goes_on_past_a_fix_from_the_future(tmp_path):
     """A real ``skyfix fuse --source a --source b`` on loopback: two strangers publishing 20 m away on drone keys of
     the UUV reach neither the fused fixes nor GPS_INPUT; a's fix stamped a day ahead is refused and the fusion goes
     on."""
-    drones = [Drone("a", (0.02, 0.0)), Drone("b", (-0.02, 0.0)),
-              Drone("x", (0.0, 20.0), 0.01, 0.05), Drone("y", (0.0, 20.1), 0.01, 0.05)]
-    final, fused, gps_input, t0 = run_fuser(tmp_path, ["a", "b"], drones, 5.0, ahead={2.5: ("a", 86400.0)})
+    drones = [
+        Drone("a", (0.02, 0.0)),
+        Drone("b", (-0.02, 0.0)),
+        Drone("x", (0.0, 20.0), 0.01, 0.05),
+        Drone("y", (0.0, 20.1), 0.01, 0.05),
+    ]
+    final, fused, gps_input, t0 = run_fuser(
+        tmp_path, ["a", "b"], drones, 5.0, ahead={2.5: ("a", 86400.0)}
+    )
     errors = ok_errors(fused, t0)
     fusion = final["fusion"]
-    print(f"\n{len(errors)} ok fused fixes, largest error {np.abs(errors[:, :2]).max():.3f} m; unconfigured "
-          f"{fusion['unconfigured']}; a refused {fusion['sources'][peer_key('a')]['refused']}")
+    print(
+        f"\n{len(errors)} ok fused fixes, largest error {np.abs(errors[:, :2]).max():.3f} m; unconfigured "
+        f"{fusion['unconfigured']}; a refused {fusion['sources'][peer_key('a')]['refused']}"
+    )
     assert len(errors) > 30 and np.abs(errors[:, :2]).max() < 0.5
     assert set(fusion["unconfigured"]) == {peer_key("x"), peer_key("y")}
-    assert min(fusion["unconfigured"].values()) > 30 and set(fusion["sources"]) == {peer_key("a"), peer_key("b")}
+    assert min(fusion["unconfigured"].values()) > 30 and set(fusion["sources"]) == {
+        peer_key("a"),
+        peer_key("b"),
+    }
     assert fusion["sources"][peer_key("a")]["refused"]["future"] == 1
     late = [f for f in fused if f["status"] == "ok" and f["t"] > t0 + 3.5]
     assert len(late) > 10 and fusion["last_sources"] == [peer_key("a"), peer_key("b")]

@@ -17,8 +17,27 @@ import fuzz
 
 
 def test_hostile_input_is_refused_and_counted(tmp_path):
-    figures, failed = fuzz.fuzz_and_check(ROOT / "sim_fixtures" / "bundled" / "oblique_2m", tmp_path, 5_000, 500)
-    print({k: figures.get(k) for k in ("counts", "bad_data", "garbage_datagrams", "valid_gps_input", "frames_lost_to_load", "max_error_m",
-                                       "rss_mb", "baseline_rss_mb", "gates")})
+    figures, failed = fuzz.fuzz_and_check(
+        ROOT / "sim_fixtures" / "bundled" / "oblique_2m", tmp_path, 5_000, 500
+    )
+    print(
+        {
+            k: figures.get(k)
+            for k in (
+                "counts",
+                "bad_data",
+                "garbage_datagrams",
+                "valid_gps_input",
+                "frames_lost_to_load",
+                "max_error_m",
+                "rss_mb",
+                "baseline_rss_mb",
+                "gates",
+            )
+        }
+    )
     assert not failed, "\n".join(failed)
-    assert sum(figures["by_kind"]["mavlink"].values()) == 5_000 and sum(figures["by_kind"]["depth"].values()) == 500
+    assert (
+        sum(figures["by_kind"]["mavlink"].values()) == 5_000
+        and sum(figures["by_kind"]["depth"].values()) == 500
+    )

@@ -76,11 +76,19 @@ class Autopilot:
 def _autopilot_back(ap: Autopilot, service, link_state) -> float:
     """Start the autopilot's server; the seconds until the first GPS_INPUT reached it."""
     t_up = ap.up()
-    wait_for(lambda: ap.of("GPS_INPUT", t_up) or service.poll() is not None, 10, "GPS_INPUT after (re)start")
+    wait_for(
+        lambda: ap.of("GPS_INPUT", t_up) or service.poll() is not None,
+        10,
+        "GPS_INPUT after (re)start",
+    )
     assert service.poll() is None, "the service exited"
     resumed = ap.of("GPS_INPUT", t_up)[0][0] - t_up
-    wait_for(lambda: len(ap.of("GPS_INPUT", t_up)) >= 10 and ap.of("HEARTBEAT", t_up), 10, "10 GPS_INPUT")
-    wait_for(lambda: any(x["state"] == "up" for x in link_state(t_up)), 10, "a status naming the link up")
+    wait_for(
+        lambda: len(ap.of("GPS_INPUT", t_up)) >= 10 and ap.of("HEARTBEAT", t_up), 10, "10 GPS_INPUT"
+    )
+    wait_for(
+        lambda: any(x["state"] == "up" for x in link_state(t_up)), 10, "a status naming the link up"
+    )
     return resumed
 
 
@@ -89,30 +97,58 @@ def test_service_survives_the_autopilot_going_away(tmp_path):
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     run_log = tmp_path / "run.log"
     statuses: list[dict] = []
-    service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--mavlink",
-                           f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--video", "none", "--gps-input",
-                           f"tcp:127.0.0.1:{ap.port}", "--duration-s", "120"), run_log)
+    service = start(
+        skyfix(
+            "run",
+            "--calibration",
+            str(SESSION / "session.toml"),
+            "--mavlink",
+            f"udpin:127.0.0.1:{free_port()}",
+            "--zenoh-listen",
+            ep,
+            "--video",
+            "none",
+            "--gps-input",
+            f"tcp:127.0.0.1:{ap.port}",
+            "--duration-s",
+            "120",
+        ),
+        run_log,
+    )
     watcher = open_session(connect=[ep])
-    sub = watcher.declare_subscriber("skyfix/status", lambda s: statuses.append(json.loads(s.payload.to_bytes())))
+    sub = watcher.declare_subscriber(
+        "skyfix/status", lambda s: statuses.append(json.loads(s.payload.to_bytes()))
+    )
 
     def link_state(since: float) -> list[dict]:
         return [s["gps_input"]["link"] for s in list(statuses) if s["t"] >= since]
 
     try:
         # no autopilot at start: the service runs, and says why nothing is delivered
-        wait_for(lambda: any(x["state"] == "down" for x in link_state(0)) or service.poll() is not None, 30,
-                 "a status naming the GPS_INPUT link down")
+        wait_for(
+            lambda: any(x["state"] == "down" for x in link_state(0)) or service.poll() is not None,
+            30,
+            "a status naming the GPS_INPUT link down",
+        )
         assert service.poll() is None, run_log.read_text()[-3000:]
         assert "ConnectionRefusedError" in link_state(0)[-1]["error"]
         resumes = []
         for cycle in range(2):
             resumes.append(_autopilot_back(ap, service, link_state))
             t_down = ap.down()
-            wait_for(lambda t=t_down: any(x["state"] == "down" for x in link_state(t)), 10, "a status naming it down")
+            wait_for(
+                lambda t=t_down: any(x["state"] == "down" for x in link_state(t)),
+                10,
+                "a status naming it down",
+            )
             down = next(x for x in link_state(t_down) if x["state"] == "down")
-            assert down["error"] and down["disconnects"] >= cycle + 1, down  # the server closes client, then listener
+            assert down["error"] and down["disconnects"] >= cycle + 1, (
+                down
+            )  # the server closes client, then listener
             with pytest.raises(subprocess.TimeoutExpired):
-                service.wait(OUTAGE_S)  # the autopilot stays away; the service must not exit meanwhile
+                service.wait(
+                    OUTAGE_S
+                )  # the autopilot stays away; the service must not exit meanwhile
         resumes.append(_autopilot_back(ap, service, link_state))
         assert service.poll() is None, run_log.read_text()[-3000:]
         stop(service)
@@ -122,10 +158,14 @@ def test_service_survives_the_autopilot_going_away(tmp_path):
         sub.undeclare()
         watcher.close()
     log = run_log.read_text()
-    print(f"GPS_INPUT resumed {[round(r, 3) for r in resumes]} s after the autopilot's TCP server listened")
+    print(
+        f"GPS_INPUT resumed {[round(r, 3) for r in resumes]} s after the autopilot's TCP server listened"
+    )
     assert service.returncode == 0, log[-3000:]
     assert "Traceback" not in log and "NoneType" not in log, log[-3000:]
-    assert max(resumes) <= RESUME_S, f"GPS_INPUT resumed {max(resumes):.3f} s after the autopilot came back"
+    assert max(resumes) <= RESUME_S, (
+        f"GPS_INPUT resumed {max(resumes):.3f} s after the autopilot came back"
+    )
     transitions = log.count("GPS_INPUT link tcp:")
     assert 6 <= transitions <= 8, f"{transitions} log lines: each transition once, retries not"
 
@@ -147,8 +187,18 @@ def _collect(rx, seconds: float) -> list:
 
 
 def _fix(t: float) -> Fix:
-    return Fix(t_unix=t, status="ok", u=10.0, v=10.0, lat=63.44, lon=10.4, alt_amsl_m=-1.0, depth_m=1.0,
-               h_acc_m=0.3, v_acc_m=0.5)
+    return Fix(
+        t_unix=t,
+        status="ok",
+        u=10.0,
+        v=10.0,
+        lat=63.44,
+        lon=10.4,
+        alt_amsl_m=-1.0,
+        depth_m=1.0,
+        h_acc_m=0.3,
+        v_acc_m=0.5,
+    )
 
 
 async def _run_sink(link: MavlinkLink, seconds: float, fixes: bool = False) -> GpsInputSink:
@@ -176,7 +226,9 @@ def test_heartbeat_and_last_no_fix():
     beats = [m for m in got if m.get_type() == "HEARTBEAT"]
     gps = [m for m in got if m.get_type() == "GPS_INPUT"]
     assert 2 <= len(beats) <= 4, f"{len(beats)} heartbeats in 2.5 s"
-    assert {(m.get_srcSystem(), m.get_srcComponent(), m.type, m.autopilot) for m in beats} == {(245, 220, 18, 8)}
+    assert {(m.get_srcSystem(), m.get_srcComponent(), m.type, m.autopilot) for m in beats} == {
+        (245, 220, 18, 8)
+    }
     assert sum(m.fix_type == 3 for m in gps) >= 30
     assert gps[-1].fix_type == 1 and gps[-1].lat == 0, "stopping must end with a no-fix GPS_INPUT"
     assert sink.status(time.time())["link"]["state"] == "closed"
@@ -188,11 +240,15 @@ def test_signing(tmp_path, sender_key):
     key_file = tmp_path / "gps_input.key"
     key_file.write_bytes(key.hex().encode() + b"\n")  # 64 hex digits
     assert read_signing_key(str(key_file)) == key
-    sender = {"same": read_signing_key(str(key_file)), None: None, "other": os.urandom(32)}[sender_key]
+    sender = {"same": read_signing_key(str(key_file)), None: None, "other": os.urandom(32)}[
+        sender_key
+    ]
     port = free_port()
     rx = _receiver(port, key)
     try:
-        asyncio.run(_run_sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}", signing_key=sender), 1.0))
+        asyncio.run(
+            _run_sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}", signing_key=sender), 1.0)
+        )
         got = _collect(rx, 0.3)
     finally:
         rx.close()
@@ -220,10 +276,29 @@ def test_a_signed_link_writes_its_timestamps_in_order():
 
     def gps():
         while time.time() < stop_at:
-            link.send("GPS_INPUT", {"time_usec": 0, "gps_id": 0, "ignore_flags": 0, "time_week_ms": 0,
-                                    "time_week": 0, "fix_type": 1, "lat": 0, "lon": 0, "alt": 0.0, "hdop": 99.0,
-                                    "vdop": 99.0, "vn": 0.0, "ve": 0.0, "vd": 0.0, "speed_accuracy": 0.0,
-                                    "horiz_accuracy": 0.0, "vert_accuracy": 0.0, "satellites_visible": 0})
+            link.send(
+                "GPS_INPUT",
+                {
+                    "time_usec": 0,
+                    "gps_id": 0,
+                    "ignore_flags": 0,
+                    "time_week_ms": 0,
+                    "time_week": 0,
+                    "fix_type": 1,
+                    "lat": 0,
+                    "lon": 0,
+                    "alt": 0.0,
+                    "hdop": 99.0,
+                    "vdop": 99.0,
+                    "vn": 0.0,
+                    "ve": 0.0,
+                    "vd": 0.0,
+                    "speed_accuracy": 0.0,
+                    "horiz_accuracy": 0.0,
+                    "vert_accuracy": 0.0,
+                    "satellites_visible": 0,
+                },
+            )
             time.sleep(0.001)
 
     def text():
@@ -245,7 +320,11 @@ def test_a_signed_link_writes_its_timestamps_in_order():
         rx.close()
     kinds = [msg.get_type() for msg in got]
     assert kinds.count("BAD_DATA") == 0, f"{kinds.count('BAD_DATA')} refused of {len(kinds)}"
-    assert kinds.count("GPS_INPUT") > 100 and kinds.count("STATUSTEXT") > 100 and kinds.count("HEARTBEAT") >= 2
+    assert (
+        kinds.count("GPS_INPUT") > 100
+        and kinds.count("STATUSTEXT") > 100
+        and kinds.count("HEARTBEAT") >= 2
+    )
 
 
 @pytest.mark.parametrize("content", [b"short", b"x" * 33, b"zz" * 32])
@@ -266,7 +345,9 @@ def test_the_rate_holds_while_the_event_loop_is_blocked():
         sink = GpsInputSink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), hz=10.0, max_age_s=0.5)
         task = asyncio.create_task(sink.run())
         t_give_up = time.time() + 10.0
-        while sink.gate.status(time.time())["accepted"] < 5 and time.time() < t_give_up:  # confirmed over a second
+        while (
+            sink.gate.status(time.time())["accepted"] < 5 and time.time() < t_give_up
+        ):  # confirmed over a second
             t = time.time()
             sink.on_fix(_fix(t), type("I", (), {"t_recv": t})())
             await asyncio.sleep(1 / 30)  # fixes at a camera's 30 fps
@@ -284,12 +365,18 @@ def test_the_rate_holds_while_the_event_loop_is_blocked():
         rx.close()
     during = [(t, g["fix_type"]) for t, g in rx.received if t_block <= t <= t_unblock]
     t_all = [t for t, _ in rx.received if t_block - 0.2 <= t <= t_unblock]
-    gaps_ms = np.diff([*t_all, t_unblock]) * 1000  # up to the end of the block: silence at its end is a gap too
-    print(f"{len(during)} GPS_INPUT while the loop was blocked for {t_unblock - t_block:.2f} s; max gap "
-          f"{gaps_ms.max():.0f} ms; fix_types {[ft for _, ft in during]}")
+    gaps_ms = (
+        np.diff([*t_all, t_unblock]) * 1000
+    )  # up to the end of the block: silence at its end is a gap too
+    print(
+        f"{len(during)} GPS_INPUT while the loop was blocked for {t_unblock - t_block:.2f} s; max gap "
+        f"{gaps_ms.max():.0f} ms; fix_types {[ft for _, ft in during]}"
+    )
     assert len(during) >= 12 and gaps_ms.max() <= 245
     valid_until = max(t for t, ft in during if ft == 3)
-    assert {ft for t, ft in during if t > t_block + 0.5 + 0.15} == {1}, "a fix older than max_age_s sent as valid"
+    assert {ft for t, ft in during if t > t_block + 0.5 + 0.15} == {1}, (
+        "a fix older than max_age_s sent as valid"
+    )
     assert valid_until >= t_block + 0.2, "valid fixes should have been repeated until they aged out"
 
 
@@ -311,8 +398,12 @@ def test_a_failing_keep_alive_restarts_and_says_so(caplog):
 
     async def run() -> dict:
         sink = GpsInputSink(link, hz=10.0, max_age_s=0.5)
-        task = asyncio.create_task(sink.run())  # no fixes: every GPS_INPUT before the stop is the keep-alive's
-        await asyncio.to_thread(wait_for, lambda: len(rx.received) >= 5, 20, "GPS_INPUT after the restarts")
+        task = asyncio.create_task(
+            sink.run()
+        )  # no fixes: every GPS_INPUT before the stop is the keep-alive's
+        await asyncio.to_thread(
+            wait_for, lambda: len(rx.received) >= 5, 20, "GPS_INPUT after the restarts"
+        )
         status = sink.status(time.time())
         await sink.stop()
         await task
@@ -324,7 +415,9 @@ def test_a_failing_keep_alive_restarts_and_says_so(caplog):
     finally:
         rx.close()
     failed = [r.getMessage() for r in caplog.records if "thread failed" in r.getMessage()]
-    print(f"status: {status['keep_alive_restarts']} restarts, {status['keep_alive_failure']}; log: {failed}")
+    print(
+        f"status: {status['keep_alive_restarts']} restarts, {status['keep_alive_failure']}; log: {failed}"
+    )
     assert status["keep_alive_restarts"] == 2 and "KeyError" in status["keep_alive_failure"]
     assert "a bug in the keep-alive" in status["keep_alive_failure"]
     assert len(failed) == 1 and "GPS_INPUT keep-alive" in failed[0]

@@ -34,7 +34,9 @@ def test_router_loss_is_named(caplog):
     blueos = open_session(connect=[ep], mode="client")
     skyfix = open_session(connect=[ep], mode="client")
     got: list[tuple[float, dict]] = []
-    sub = blueos.declare_subscriber("mavlink/in", lambda s: got.append((time.time(), json.loads(s.payload.to_bytes()))))
+    sub = blueos.declare_subscriber(
+        "mavlink/in", lambda s: got.append((time.time(), json.loads(s.payload.to_bytes())))
+    )
     beat = blueos.declare_publisher("mavlink/1/1/HEARTBEAT")
     states: dict[str, dict] = {}
 
@@ -50,8 +52,13 @@ def test_router_loss_is_named(caplog):
                 beat.put(b'{"message": {"type": "HEARTBEAT"}}')
                 await asyncio.sleep(0.05)
 
-        await until(lambda: sink.status(time.time())["link"]["state"] == "up" and len(got) >= 5, "the link up")
-        await until(lambda: sink.status(time.time())["link"]["peer_age_s"] is not None, "a heartbeat")
+        await until(
+            lambda: sink.status(time.time())["link"]["state"] == "up" and len(got) >= 5,
+            "the link up",
+        )
+        await until(
+            lambda: sink.status(time.time())["link"]["peer_age_s"] is not None, "a heartbeat"
+        )
         states["up"] = sink.status(time.time())["link"]
         router.kill()
         router.wait()
@@ -62,7 +69,10 @@ def test_router_loss_is_named(caplog):
         router = _router(ep)
         t_back = time.time()
         await until(lambda: any(t > t_back for t, _ in got), "GPS_INPUT at mavlink-server again")
-        states["back"] = {**sink.status(time.time())["link"], "after_s": min(t for t, _ in got if t > t_back) - t_back}
+        states["back"] = {
+            **sink.status(time.time())["link"],
+            "after_s": min(t for t, _ in got if t > t_back) - t_back,
+        }
         await sink.stop()
         await task
 
@@ -76,8 +86,12 @@ def test_router_loss_is_named(caplog):
         blueos.close()
         router.kill()
         router.wait()
-    print({k: {x: v[x] for x in ("state", "zenoh_routers", "sent_unmatched", "after_s") if x in v}
-           for k, v in states.items()})
+    print(
+        {
+            k: {x: v[x] for x in ("state", "zenoh_routers", "sent_unmatched", "after_s") if x in v}
+            for k, v in states.items()
+        }
+    )
     assert states["up"]["zenoh_routers"] == 1 and states["up"]["error"] is None
     down = states["down"]
     assert down["zenoh_routers"] == 0 and "mavlink/in" in down["error"]

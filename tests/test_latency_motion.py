@@ -73,8 +73,14 @@ def test_sim_knob_stamps_frames_late(tmp_path):
 
 
 def test_estimate_latency_of_a_recording(session):
-    out = subprocess.run(skyfix("estimate-latency", str(session)), capture_output=True, text=True, cwd=ROOT, check=False,
-                         timeout=300)
+    out = subprocess.run(
+        skyfix("estimate-latency", str(session)),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        check=False,
+        timeout=300,
+    )
     print(out.stdout)
     assert out.returncode == 0, out.stdout + out.stderr
     offset_ms = float(out.stdout.split("moved by ")[1].split(" ms")[0])
@@ -86,14 +92,50 @@ def _live(session: Path, latency: str, tmp: Path) -> tuple[dict, list[dict], flo
     tmp.mkdir()
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     ep = f"tcp/127.0.0.1:{zport}"
-    run = start(skyfix("run", "--calibration", str(session / "session.toml"), "--mavlink", f"udpin:127.0.0.1:{mav}",
-                       "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", latency, "--zenoh-listen", ep,
-                       "--gps-input", f"udpout:127.0.0.1:{uuv}", "--stats", str(tmp / "stats.json")), tmp / "run.log")
+    run = start(
+        skyfix(
+            "run",
+            "--calibration",
+            str(session / "session.toml"),
+            "--mavlink",
+            f"udpin:127.0.0.1:{mav}",
+            "--video",
+            f"udp://127.0.0.1:{video}",
+            "--video-latency-ms",
+            latency,
+            "--zenoh-listen",
+            ep,
+            "--gps-input",
+            f"udpout:127.0.0.1:{uuv}",
+            "--stats",
+            str(tmp / "stats.json"),
+        ),
+        tmp / "run.log",
+    )
     try:
-        replay = subprocess.run(skyfix("replay", str(session), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
-                                       "--video-out", f"udp://127.0.0.1:{video}", "--zenoh-connect", ep,
-                                       "--uuv-listen", f"udpin:127.0.0.1:{uuv}", "--uuv-log", str(tmp / "uuv.jsonl"),
-                                       "--lead-s", "3"), capture_output=True, text=True, cwd=ROOT, timeout=120, check=False)
+        replay = subprocess.run(
+            skyfix(
+                "replay",
+                str(session),
+                "--mavlink-out",
+                f"udpout:127.0.0.1:{mav}",
+                "--video-out",
+                f"udp://127.0.0.1:{video}",
+                "--zenoh-connect",
+                ep,
+                "--uuv-listen",
+                f"udpin:127.0.0.1:{uuv}",
+                "--uuv-log",
+                str(tmp / "uuv.jsonl"),
+                "--lead-s",
+                "3",
+            ),
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=120,
+            check=False,
+        )
     finally:
         stop(run, timeout_s=20)
     log = (tmp / "run.log").read_text()
@@ -103,7 +145,9 @@ def _live(session: Path, latency: str, tmp: Path) -> tuple[dict, list[dict], flo
     return json.loads((tmp / "stats.json").read_text()), read_jsonl(tmp / "uuv.jsonl"), shift, log
 
 
-def _errors(session: Path, gps: list[dict], shift: float, since_unix: float = 0.0) -> dict[float, float]:
+def _errors(
+    session: Path, gps: list[dict], shift: float, since_unix: float = 0.0
+) -> dict[float, float]:
     """Horizontal error (m) of each new valid fix received after ``since_unix``, by its true frame time."""
     truth_t = load_session(session).truth["t"]
     fixes = {}
@@ -111,9 +155,15 @@ def _errors(session: Path, gps: list[dict], shift: float, since_unix: float = 0.
         if g["fix_type"] == 3 and g["t_recv"] >= since_unix:
             fixes.setdefault(g["time_usec"], g)
     t_fix = np.array(sorted(fixes)) / 1e6 - shift
-    err = truth_errors_m(session, t_fix, [fixes[k]["lat"] / 1e7 for k in sorted(fixes)],
-                         [fixes[k]["lon"] / 1e7 for k in sorted(fixes)])
-    frame_t = truth_t[np.abs(truth_t[None, :] - t_fix[:, None]).argmin(axis=1)]  # the same frame in either run
+    err = truth_errors_m(
+        session,
+        t_fix,
+        [fixes[k]["lat"] / 1e7 for k in sorted(fixes)],
+        [fixes[k]["lon"] / 1e7 for k in sorted(fixes)],
+    )
+    frame_t = truth_t[
+        np.abs(truth_t[None, :] - t_fix[:, None]).argmin(axis=1)
+    ]  # the same frame in either run
     return dict(zip(np.round(frame_t, 4), err))
 
 
@@ -131,7 +181,9 @@ def configured(session, tmp_path_factory) -> tuple[dict, list[dict], float, str]
 def test_online_estimate(configured):
     right, _, _, log_right = configured
     est = right["video"]["latency_from_motion"]
-    print(f"configured 80 ms: {est}; video {({k: right['video'][k] for k in ('frames', 'skipped_behind')})}")
+    print(
+        f"configured 80 ms: {est}; video { ({k: right['video'][k] for k in ('frames', 'skipped_behind')}) }"
+    )
     assert abs(est["estimate_ms"] / 1000 - ERROR_S) <= TOLERANCE_S and est["sigma_ms"] <= 10
     assert "not the configured" not in log_right
 
@@ -145,28 +197,44 @@ def test_auto_applies_the_estimate(session, configured, tmp_path):
     auto, gps_auto, shift_auto, log_auto = _live(session, "auto", tmp_path / "auto")
     applied = auto["video"]["latency_from_motion"]
     print(f"auto: {applied}")
-    assert applied["applied_ms"] is not None and abs(applied["applied_ms"] / 1000 - ERROR_S) <= TOLERANCE_S
-    assert 0 < applied["applied_sigma_ms"] <= 5 and auto["video"]["latency_ms"] == applied["applied_ms"]
+    assert (
+        applied["applied_ms"] is not None
+        and abs(applied["applied_ms"] / 1000 - ERROR_S) <= TOLERANCE_S
+    )
+    assert (
+        0 < applied["applied_sigma_ms"] <= 5
+        and auto["video"]["latency_ms"] == applied["applied_ms"]
+    )
     applied_at = _applied_at(log_auto)  # logged before the first frame is stamped with it
     before = [g for g in gps_auto if g["t_recv"] < applied_at]
-    assert len(before) > 20 and all(g["fix_type"] == 1 for g in before), "a valid GPS_INPUT before auto settled"
-    assert auto["pipeline"]["statuses"].get("latency_unsettled", 0) > 20, auto["pipeline"]["statuses"]
+    assert len(before) > 20 and all(g["fix_type"] == 1 for g in before), (
+        "a valid GPS_INPUT before auto settled"
+    )
+    assert auto["pipeline"]["statuses"].get("latency_unsettled", 0) > 20, auto["pipeline"][
+        "statuses"
+    ]
     assert "latency_unsettled" not in configured[0]["pipeline"]["statuses"]
     err_auto = _errors(session, gps_auto, shift_auto, since_unix=applied_at)
     err_right = _errors(session, gps_right, shift_right)
     common = sorted(set(err_auto) & set(err_right))
-    assert len(common) >= 30, (f"only {len(common)} frames with fixes in both runs after the latency was applied "
-                               f"(auto: {len(err_auto)} frames {min(err_auto, default=None)} … "
-                               f"{max(err_auto, default=None)}; configured: {len(err_right)} frames)")
+    assert len(common) >= 30, (
+        f"only {len(common)} frames with fixes in both runs after the latency was applied "
+        f"(auto: {len(err_auto)} frames {min(err_auto, default=None)} … "
+        f"{max(err_auto, default=None)}; configured: {len(err_right)} frames)"
+    )
     mae_auto = float(np.mean([err_auto[t] for t in common]))
     mae_right = float(np.mean([err_right[t] for t in common]))
-    print(f"MAE over {len(common)} frames after auto applied: auto {mae_auto:.4f} m, configured {mae_right:.4f} m")
+    print(
+        f"MAE over {len(common)} frames after auto applied: auto {mae_auto:.4f} m, configured {mae_right:.4f} m"
+    )
     assert mae_auto <= 1.2 * mae_right + 0.003
 
 
 def test_a_wrong_configured_latency_is_warned_about(caplog):
     """The warning, from an estimate 80 ms off the configured 0 ms (the estimator's own judgement, no video)."""
-    online = OnlineLatency(load_session(ROOT / "sim_fixtures" / "bundled" / "nadir_hover").calibration, None, 0.0)
+    online = OnlineLatency(
+        load_session(ROOT / "sim_fixtures" / "bundled" / "nadir_hover").calibration, None, 0.0
+    )
     for offset_s in (-0.080, -0.081, -0.079):  # sure, and steady over three estimates: one warning
         online._judge(OffsetEstimate(offset_s, 0.004, 200, 0.1))
     for offset_s in (-0.020, -0.021, -0.020):  # within 30 ms of the configured: no warning

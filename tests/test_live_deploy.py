@@ -34,7 +34,9 @@ def test_field_config_and_calibration():
     cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
     assert cfg.calibration == str(DEPLOY / "calibration.toml") and cfg.depth_source == "blueos"
     cal = load_calibration(cfg.calibration)
-    assert cal.init_bbox is None and cal.camera.width == 1920  # live, the target is selected or acquired
+    assert (
+        cal.init_bbox is None and cal.camera.width == 1920
+    )  # live, the target is selected or acquired
     assert cfg.uuv_position_key == "mavlink/1/1/GLOBAL_POSITION_INT"
 
 
@@ -51,15 +53,33 @@ def test_systemd_unit_restarts_within_its_limit_hardened_and_records_where_it_ma
     unit = read_unit()
     service = unit["Service"]
     assert service["Restart"] == "on-failure" and systemd_seconds(service["RestartSec"]) <= 1.0
-    assert systemd_seconds(unit["Unit"]["StartLimitIntervalSec"]) > 0 and int(unit["Unit"]["StartLimitBurst"]) >= 4
+    assert (
+        systemd_seconds(unit["Unit"]["StartLimitIntervalSec"]) > 0
+        and int(unit["Unit"]["StartLimitBurst"]) >= 4
+    )
     assert service["User"] == "skyfix" and service.get("DynamicUser", "no") == "no"
-    hardening = {"NoNewPrivileges": "yes", "ProtectSystem": "strict", "ProtectHome": "yes", "PrivateTmp": "yes",
-                 "CapabilityBoundingSet": "", "RestrictSUIDSGID": "yes"}
+    hardening = {
+        "NoNewPrivileges": "yes",
+        "ProtectSystem": "strict",
+        "ProtectHome": "yes",
+        "PrivateTmp": "yes",
+        "CapabilityBoundingSet": "",
+        "RestrictSUIDSGID": "yes",
+    }
     assert {k: service.get(k) for k in hardening} == hardening
-    assert set(service["RestrictAddressFamilies"].split()) == {"AF_INET", "AF_INET6", "AF_UNIX", "AF_NETLINK"}
+    assert set(service["RestrictAddressFamilies"].split()) == {
+        "AF_INET",
+        "AF_INET6",
+        "AF_UNIX",
+        "AF_NETLINK",
+    }
     cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
     state = Path("/var/lib") / service["StateDirectory"]
-    assert cfg.record is None and Path(cfg.recordings).is_relative_to(state) and service["WorkingDirectory"] == str(state)
+    assert (
+        cfg.record is None
+        and Path(cfg.recordings).is_relative_to(state)
+        and service["WorkingDirectory"] == str(state)
+    )
 
 
 def test_systemd_analyze_verifies_the_unit_and_rates_it_ok(tmp_path):
@@ -70,11 +90,23 @@ def test_systemd_analyze_verifies_the_unit_and_rates_it_ok(tmp_path):
         pytest.skip("systemd-analyze is not installed (Debian: apt install systemd)")
     unit = tmp_path / "skyfix.service"
     text = (DEPLOY / "skyfix.service").read_text()
-    unit.write_text(text.replace("/opt/skyfix/.venv/bin/skyfix", str(Path(sys.executable).parent / "skyfix")))
-    verify = subprocess.run([analyze, "verify", "--man=no", str(unit)], capture_output=True, text=True, timeout=60,
-                            check=False)
+    unit.write_text(
+        text.replace("/opt/skyfix/.venv/bin/skyfix", str(Path(sys.executable).parent / "skyfix"))
+    )
+    verify = subprocess.run(
+        [analyze, "verify", "--man=no", str(unit)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert verify.returncode == 0 and verify.stderr.strip() == "", verify.stderr
-    security = subprocess.run([analyze, "security", "--offline=true", str(unit)], capture_output=True, text=True,
-                              timeout=60, check=False)
+    security = subprocess.run(
+        [analyze, "security", "--offline=true", str(unit)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     level = re.search(r"Overall exposure level for skyfix.service: (\d+\.\d+)", security.stdout)
     assert level is not None and float(level[1]) <= 3.0, security.stdout[-1500:]

@@ -24,16 +24,29 @@ from localizer.fix_gate import FixGate
 @pytest.mark.parametrize("t_unix", [1763800000.0, 1763800000.2504, 1_700_000_000.999, 1483228800.0])
 def test_gps_time_matches_calendar(t_unix):
     gps_epoch = datetime(1980, 1, 6, tzinfo=UTC)
-    elapsed = datetime.fromtimestamp(t_unix, UTC) + timedelta(seconds=18) - gps_epoch  # 18 leap s since 2017
+    elapsed = (
+        datetime.fromtimestamp(t_unix, UTC) + timedelta(seconds=18) - gps_epoch
+    )  # 18 leap s since 2017
     week, ms = gps_time(t_unix)
     assert week == elapsed.days // 7
-    assert ms == pytest.approx(((elapsed.days % 7) * 86400 + elapsed.seconds) * 1000 + elapsed.microseconds / 1000,
-                               abs=1)
+    assert ms == pytest.approx(
+        ((elapsed.days % 7) * 86400 + elapsed.seconds) * 1000 + elapsed.microseconds / 1000, abs=1
+    )
 
 
 def _fix(t, **kw):
-    base = {"t_unix": t, "status": "ok", "u": 100.0, "v": 200.0, "lat": 63.44, "lon": 10.4, "alt_amsl_m": -0.7,
-            "depth_m": 1.1, "h_acc_m": 0.3, "v_acc_m": 0.5}
+    base = {
+        "t_unix": t,
+        "status": "ok",
+        "u": 100.0,
+        "v": 200.0,
+        "lat": 63.44,
+        "lon": 10.4,
+        "alt_amsl_m": -0.7,
+        "depth_m": 1.1,
+        "h_acc_m": 0.3,
+        "v_acc_m": 0.5,
+    }
     return Fix(**{**base, **kw})
 
 
@@ -43,8 +56,12 @@ def _info(t_recv):
 
 def _sink(link, max_age_s: float) -> GpsInputSink:
     """A sink whose gate confirms a target over 3 frames, not a second: these tests are about the sender."""
-    return GpsInputSink(link, hz=10.0, max_age_s=max_age_s,
-                        gate=FixGate(max_age_s=max_age_s, confirm_s=0.05, confirm_fixes=3))
+    return GpsInputSink(
+        link,
+        hz=10.0,
+        max_age_s=max_age_s,
+        gate=FixGate(max_age_s=max_age_s, confirm_s=0.05, confirm_fixes=3),
+    )
 
 
 def _offer_confirmed(sink, t, **kw):
@@ -69,7 +86,12 @@ def test_fresh_fix_fields():
 @pytest.mark.parametrize("fix,dt", [(None, 0.0), ("stale", 0.8), ("lost", 0.0), ("nan", 0.0)])
 def test_no_fix_is_explicit(fix, dt):
     t = 1763800000.0
-    f = {None: None, "stale": _fix(t), "lost": _fix(t, status="lost"), "nan": _fix(t, lat=float("nan"))}[fix]
+    f = {
+        None: None,
+        "stale": _fix(t),
+        "lost": _fix(t, status="lost"),
+        "nan": _fix(t, lat=float("nan")),
+    }[fix]
     out = gps_input_fields(f, t + dt, max_age_s=0.5)
     assert out["fix_type"] == 1 and out["ignore_flags"] == IGNORE_ALL
     assert out["lat"] == 0 and out["lon"] == 0 and out["satellites_visible"] == 0
@@ -148,7 +170,9 @@ def test_injection_through_blueos_mavlink_in():
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     skyfix_side, blueos_side = open_session(listen=[ep]), open_session(connect=[ep])
     got = []
-    sub = blueos_side.declare_subscriber("mavlink/in", lambda s: got.append((str(s.encoding), s.payload.to_string())))
+    sub = blueos_side.declare_subscriber(
+        "mavlink/in", lambda s: got.append((str(s.encoding), s.payload.to_string()))
+    )
 
     async def scenario():
         await asyncio.sleep(0.3)
@@ -160,7 +184,9 @@ def test_injection_through_blueos_mavlink_in():
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
 
-    def last_is_no_fix() -> bool:  # the stop's no-fix, the newest sample (Zenoh delivers after the put returns)
+    def last_is_no_fix() -> (
+        bool
+    ):  # the stop's no-fix, the newest sample (Zenoh delivers after the put returns)
         return bool(got) and json.loads(got[-1][1])["message"].get("fix_type") == 1
 
     try:
@@ -191,7 +217,11 @@ def test_every_reason_for_no_fix_has_plain_words():
     from localizer.fix_gate import REASONS
     from localizer.status import STATUSES
 
-    words = set(STATUSES) - {"ok"} | {f"gate_{r}" for r in REASONS} | {"no_frames", "no_new_fix", "stopped"}
+    words = (
+        set(STATUSES) - {"ok"}
+        | {f"gate_{r}" for r in REASONS}
+        | {"no_frames", "no_new_fix", "stopped"}
+    )
     assert set(NO_FIX_WHY) == words and all(NO_FIX_WHY.values())
     schema = GpsInputStatus.model_json_schema()["properties"]["no_fix_reason"]["anyOf"][0]
     assert set(schema["enum"]) == words
@@ -211,7 +241,9 @@ def test_the_status_says_what_was_sent_and_why_no_fix():
         async def until(sending, what):
             end = time.monotonic() + 10.0
             while sink.sending() != sending:
-                assert time.monotonic() < end, f"timed out waiting for {what}: {sink.status(time.time())}"
+                assert time.monotonic() < end, (
+                    f"timed out waiting for {what}: {sink.status(time.time())}"
+                )
                 await asyncio.sleep(0.01)
             seen.append(GpsInputStatus.model_validate(sink.status(time.time())))
 
@@ -234,9 +266,18 @@ def test_the_status_says_what_was_sent_and_why_no_fix():
     t = asyncio.run(scenario())
     first, fix, aged, stale, lost, unconfirmed, stopped = seen
     assert first.no_fix_why == "no frame tracked yet" and first.sent_h_acc_m is None
-    assert fix.no_fix_reason is None and fix.sent_h_acc_m == pytest.approx(0.3) and fix.sent_fix_t == t
+    assert (
+        fix.no_fix_reason is None and fix.sent_h_acc_m == pytest.approx(0.3) and fix.sent_fix_t == t
+    )
     assert t <= fix.last_sent_t <= aged.last_sent_t
     assert aged.no_fix_why == "no new fix: video stopped or stalled" and aged.sent_fix_t is None
-    assert (stale.no_fix_why, lost.no_fix_why) == ("attitude telemetry stale", "tracker lost the UUV")
+    assert (stale.no_fix_why, lost.no_fix_why) == (
+        "attitude telemetry stale",
+        "tracker lost the UUV",
+    )
     assert unconfirmed.no_fix_why == "confirming the target"
-    assert (stopped.last_fix_type, stopped.no_fix_reason, stopped.no_fix_why) == (1, "stopped", "skyfix stopped")
+    assert (stopped.last_fix_type, stopped.no_fix_reason, stopped.no_fix_why) == (
+        1,
+        "stopped",
+        "skyfix stopped",
+    )

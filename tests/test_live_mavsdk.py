@@ -20,9 +20,14 @@ def test_backends_agree_on_one_stream():
     mav = mavutil()
     ports = free_port(), free_port()
     tels = Telemetry(), Telemetry()
-    backends = (UavMavlink(f"udpin:127.0.0.1:{ports[0]}", tels[0], needed_rates("gimbal_device")),
-                UavMavsdk(f"udpin:127.0.0.1:{ports[1]}", tels[1]))
-    senders = [mav.mavlink_connection(f"udpout:127.0.0.1:{p}", source_system=1, source_component=1) for p in ports]
+    backends = (
+        UavMavlink(f"udpin:127.0.0.1:{ports[0]}", tels[0], needed_rates("gimbal_device")),
+        UavMavsdk(f"udpin:127.0.0.1:{ports[1]}", tels[1]),
+    )
+    senders = [
+        mav.mavlink_connection(f"udpout:127.0.0.1:{p}", source_system=1, source_component=1)
+        for p in ports
+    ]
     rng = np.random.default_rng(5)
 
     def send(msg):  # the very same frame to both backends
@@ -40,10 +45,18 @@ def test_backends_agree_on_one_stream():
         now = time.time()
         for i in range(25):
             boot, r = 200_000 + 20 * i, rng.uniform(-0.3, 0.3, 3)
-            q = [float(x) for x in np.r_[0.9, rng.uniform(-0.2, 0.2, 3)] / np.linalg.norm(np.r_[0.9, 0.2, 0.2, 0.2])]
+            q = [
+                float(x)
+                for x in np.r_[0.9, rng.uniform(-0.2, 0.2, 3)]
+                / np.linalg.norm(np.r_[0.9, 0.2, 0.2, 0.2])
+            ]
             send(m.system_time_encode(int((now + i * 0.02) * 1e6), boot))
             send(m.attitude_encode(boot, *r, 0, 0, 0))
-            send(m.global_position_int_encode(boot, 634400000 + i, 104000000 - i, 12000, 10000, 0, 0, 0, 0))
+            send(
+                m.global_position_int_encode(
+                    boot, 634400000 + i, 104000000 - i, 12000, 10000, 0, 0, 0, 0
+                )
+            )
             send(m.gimbal_device_attitude_status_encode(0, 0, boot, 64, q, 0, 0, 0, 0))
             await asyncio.sleep(0.02)
         await asyncio.sleep(0.5)
@@ -59,7 +72,9 @@ def test_backends_agree_on_one_stream():
     for name in ("attitude", "position", "gimbal"):
         a, b = getattr(tels[0], name), getattr(tels[1], name)
         assert len(a) == len(b) == 25, name
-        np.testing.assert_allclose(a.values, b.values, rtol=1e-6, atol=1e-7)  # MAVSDK's JSON prints floats
+        np.testing.assert_allclose(
+            a.values, b.values, rtol=1e-6, atol=1e-7
+        )  # MAVSDK's JSON prints floats
         # each backend aligns by its own receive times (MAVSDK hands messages over later, more so on a
         # loaded machine): the same boot-clock spacing, shifted by the difference of least delays
         np.testing.assert_allclose(np.diff(a.times), np.diff(b.times), atol=0.05)

@@ -36,7 +36,9 @@ def _frame(i):
 
 def test_queue_drops_oldest_but_keeps_the_init_frame(tmp_path):
     (tmp_path / "cal.toml").write_text(CAL)
-    p = Pipeline(load_calibration(str(tmp_path / "cal.toml")), Telemetry(), "default", [], queue_len=3)
+    p = Pipeline(
+        load_calibration(str(tmp_path / "cal.toml")), Telemetry(), "default", [], queue_len=3
+    )
     for i in range(6):
         p.submit(_frame(i))
     assert [f.index for f in p._queue] == [0, 4, 5] and p.dropped == 3
@@ -47,14 +49,18 @@ def test_queue_drops_oldest_but_keeps_the_init_frame(tmp_path):
 
 def test_without_init_bbox_no_frame_is_kept_for_it(tmp_path):
     (tmp_path / "cal.toml").write_text(CAL.replace("init_bbox = [10, 10, 8, 6]\n", ""))
-    p = Pipeline(load_calibration(str(tmp_path / "cal.toml")), Telemetry(), "default", [], queue_len=3)
+    p = Pipeline(
+        load_calibration(str(tmp_path / "cal.toml")), Telemetry(), "default", [], queue_len=3
+    )
     for i in range(6):
         p.submit(_frame(i))
     assert [f.index for f in p._queue] == [3, 4, 5] and p.dropped == 3
 
 
 def test_fix_json_has_no_nan_and_no_position_without_fix():
-    ok = fix_to_json(Fix(t_unix=1.5, status="ok", lat=63.4, lon=10.4, h_acc_m=0.2, u=3.0, v=4.0, frame=7))
+    ok = fix_to_json(
+        Fix(t_unix=1.5, status="ok", lat=63.4, lon=10.4, h_acc_m=0.2, u=3.0, v=4.0, frame=7)
+    )
     assert ok["lat"] == 63.4 and ok["frame"] == 7 and ok["confidence"] is None
     lost = fix_to_json(Fix(t_unix=1.5, status="lost", lat=63.4, lon=10.4))
     assert lost["lat"] is None and lost["lon"] is None and lost["status"] == "lost"
@@ -74,7 +80,9 @@ def test_operator_commands_run_between_frames_on_held_frames():
     from groundstation.video.file import open_video
     from localizer.tracking.session import SelectionError
 
-    session = load_session(Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover")
+    session = load_session(
+        Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover"
+    )
     cal, t = session.calibration, session.frames["t"]
     with open_video(session.video_path) as video:
         images = [f.image for f in video][:60]
@@ -106,8 +114,15 @@ def test_operator_commands_run_between_frames_on_held_frames():
             u, v = np.interp(t[12], tr["t"], tr["u"]), np.interp(t[12], tr["t"], tr["v"])
             w, h = cal.init_bbox[2:]
             answer = await pipeline.select(12, box=(u - (w - 1) / 2, v - (h - 1) / 2, w, h))
-            assert answer["frame"] == 12 and answer["caught_up"] == 7 and answer["target"]["state"] == "tracking"
-            with pytest.raises(SelectionError, match=r"frame 3 is not held \(held: frames [45]…19, the last 0.5 s\)"):
+            assert (
+                answer["frame"] == 12
+                and answer["caught_up"] == 7
+                and answer["target"]["state"] == "tracking"
+            )
+            with pytest.raises(
+                SelectionError,
+                match=r"frame 3 is not held \(held: frames [45]…19, the last 0.5 s\)",
+            ):
                 await pipeline.select(3, box=(u, v, w, h))
             await feed(pipeline, range(20, 40))
             assert all(f.ok for f in fixes[20:40])

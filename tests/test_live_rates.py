@@ -29,9 +29,16 @@ class Autopilot:
     """A MAVLink autopilot stand-in (system 1, component 1) in a thread."""
 
     def __init__(self, port: int, accept: bool, rangefinder_hz: float | None = None):
-        self.conn = mavutil().mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
+        self.conn = mavutil().mavlink_connection(
+            f"udpout:127.0.0.1:{port}", source_system=1, source_component=1
+        )
         self.accept = accept
-        self.rate_hz = {"ATTITUDE": 4.0, "GLOBAL_POSITION_INT": 10.0, "SYSTEM_TIME": 1.0, "GPS_RAW_INT": 5.0}
+        self.rate_hz = {
+            "ATTITUDE": 4.0,
+            "GLOBAL_POSITION_INT": 10.0,
+            "SYSTEM_TIME": 1.0,
+            "GPS_RAW_INT": 5.0,
+        }
         if rangefinder_hz:  # a downward lidar, streamed slowly
             self.rate_hz["DISTANCE_SENSOR"] = rangefinder_hz
         self.commands: list = []
@@ -63,8 +70,20 @@ class Autopilot:
         elif kind == "SYSTEM_TIME":
             m.system_time_send(int(time.time() * 1e6), boot_ms)
         elif kind == "GPS_RAW_INT":
-            m.gps_raw_int_send(int(time.time() * 1e6), 3, 634400000, 104000000, 12000, 70, 100, 0, 0, 14,
-                               alt_ellipsoid=52000, h_acc=800)
+            m.gps_raw_int_send(
+                int(time.time() * 1e6),
+                3,
+                634400000,
+                104000000,
+                12000,
+                70,
+                100,
+                0,
+                0,
+                14,
+                alt_ellipsoid=52000,
+                h_acc=800,
+            )
         elif kind == "DISTANCE_SENSOR":
             m.distance_sensor_send(boot_ms, 20, 4000, 1000, 0, 0, 25, 0)
 
@@ -73,8 +92,13 @@ class Autopilot:
         kind = msg.get_type()
         if kind == "COMMAND_LONG" and msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
             self.commands.append((int(msg.param1), msg.param2))
-            name = {30: "ATTITUDE", 33: "GLOBAL_POSITION_INT", 2: "SYSTEM_TIME", 24: "GPS_RAW_INT",
-                    132: "DISTANCE_SENSOR"}.get(int(msg.param1))
+            name = {
+                30: "ATTITUDE",
+                33: "GLOBAL_POSITION_INT",
+                2: "SYSTEM_TIME",
+                24: "GPS_RAW_INT",
+                132: "DISTANCE_SENSOR",
+            }.get(int(msg.param1))
             if self.accept and name:
                 self.rate_hz[name] = 1e6 / msg.param2
             result = mav.MAV_RESULT_ACCEPTED if self.accept else mav.MAV_RESULT_DENIED
@@ -98,7 +122,9 @@ class Autopilot:
         while not self.stop.is_set():
             now = time.monotonic()
             if now >= next_hb:
-                self.conn.mav.heartbeat_send(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4)
+                self.conn.mav.heartbeat_send(
+                    mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4
+                )
                 next_hb = now + 1.0
             for kind, hz in self.rate_hz.items():
                 if now >= due[kind]:
@@ -134,14 +160,25 @@ def test_asks_for_the_rates_it_needs_and_measures_them():
     tel = Telemetry()
     uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel, needed_rates("fixed"))
     with Autopilot(port, accept=True) as ap:
-        ok = _serve_until(uav, lambda: uav.health.meter.rate_hz("ATTITUDE", time.time()) >= 20.0
-                          and tel.mount_type == 1 and tel.measured_latency_s is not None, timeout_s=20.0)
+        ok = _serve_until(
+            uav,
+            lambda: (
+                uav.health.meter.rate_hz("ATTITUDE", time.time()) >= 20.0
+                and tel.mount_type == 1
+                and tel.measured_latency_s is not None
+            ),
+            timeout_s=20.0,
+        )
         status = uav.status(time.time())
     assert ok, status
     assert (30, pytest.approx(40000.0)) in ap.commands  # ATTITUDE at 25 Hz
-    assert all(msg_id != 33 for msg_id, _ in ap.commands)  # GLOBAL_POSITION_INT already came at 10 Hz
+    assert all(
+        msg_id != 33 for msg_id, _ in ap.commands
+    )  # GLOBAL_POSITION_INT already came at 10 Hz
     assert "accepted" in status["rate_requests"]["ATTITUDE"]
-    assert all(msg_id != 132 for msg_id, _ in ap.commands)  # no rangefinder: DISTANCE_SENSOR is not asked for
+    assert all(
+        msg_id != 132 for msg_id, _ in ap.commands
+    )  # no rangefinder: DISTANCE_SENSOR is not asked for
     assert status["rates_hz"]["ATTITUDE"] >= 20.0
     assert status["clocks"]["uav_link_latency_source"] == "timesync"
     assert status["clocks"]["uav_link_latency_ms"] == pytest.approx(LINK_DELAY_S * 1000, abs=15.0)
@@ -153,7 +190,11 @@ def test_a_rangefinders_rate_is_asked_for_once_one_comes():
     tel = Telemetry()
     uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel, needed_rates("fixed"))
     with Autopilot(port, accept=True, rangefinder_hz=2.0) as ap:
-        ok = _serve_until(uav, lambda: uav.health.meter.rate_hz("DISTANCE_SENSOR", time.time()) >= 8.0, timeout_s=25.0)
+        ok = _serve_until(
+            uav,
+            lambda: uav.health.meter.rate_hz("DISTANCE_SENSOR", time.time()) >= 8.0,
+            timeout_s=25.0,
+        )
         status = uav.status(time.time())
     assert ok, status
     assert (132, pytest.approx(100000.0)) in ap.commands  # 10 Hz
@@ -165,7 +206,9 @@ def test_a_denied_request_falls_back_to_request_data_stream():
     tel = Telemetry()
     uav = UavMavlink(f"udpin:127.0.0.1:{port}", tel, needed_rates("fixed"))
     with Autopilot(port, accept=False) as ap:
-        ok = _serve_until(uav, lambda: uav.health.meter.rate_hz("ATTITUDE", time.time()) >= 20.0, timeout_s=20.0)
+        ok = _serve_until(
+            uav, lambda: uav.health.meter.rate_hz("ATTITUDE", time.time()) >= 20.0, timeout_s=20.0
+        )
         status = uav.status(time.time())
     assert ok, status
     assert (mavutil().mavlink.MAV_DATA_STREAM_EXTRA1, 25) in ap.streams

@@ -40,9 +40,26 @@ def test_recording_is_flushed_and_survives_kill(tmp_path):
     (tmp_path / "cal.toml").write_text(CAL)
     port, ep = free_port(), f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     rec = tmp_path / "rec"
-    service = start(skyfix("run", "--calibration", str(tmp_path / "cal.toml"), "--mavlink", f"udpin:127.0.0.1:{port}",
-                           "--zenoh-listen", ep, "--video", "none", "--gps-input", "none", "--record", str(rec),
-                           "--duration-s", "25"), tmp_path / "run.log")
+    service = start(
+        skyfix(
+            "run",
+            "--calibration",
+            str(tmp_path / "cal.toml"),
+            "--mavlink",
+            f"udpin:127.0.0.1:{port}",
+            "--zenoh-listen",
+            ep,
+            "--video",
+            "none",
+            "--gps-input",
+            "none",
+            "--record",
+            str(rec),
+            "--duration-s",
+            "25",
+        ),
+        tmp_path / "run.log",
+    )
     zs = open_session(connect=[ep])
     seen = []
     sub = zs.declare_subscriber("skyfix/status", lambda s: seen.append(1))
@@ -83,7 +100,9 @@ def test_recording_is_flushed_and_survives_kill(tmp_path):
     assert sent - 60 <= len(session.telemetry.attitude) <= sent  # at most the last second lost
     assert len(session.telemetry.position) >= sent - 60 and len(session.telemetry.depth) >= 20
     first = json.loads((rec / "depth.jsonl").read_text().splitlines()[0])
-    assert first["source"] == "skyfix" and "sigma_m" not in first  # what the service used: the calibration's sigma
+    assert (
+        first["source"] == "skyfix" and "sigma_m" not in first
+    )  # what the service used: the calibration's sigma
     assert session.calibration.mount.attitude_source == "fixed"
     assert (rec / "positions.csv").read_text().startswith("t,lat,lon,depth_m,h_acc_m,status")
 
@@ -96,9 +115,26 @@ def test_recording_says_when_the_link_delay_was_measured(tmp_path):
     (tmp_path / "cal.toml").write_text(CAL)
     port, ep = free_port(), f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     rec = tmp_path / "rec"
-    service = start(skyfix("run", "--calibration", str(tmp_path / "cal.toml"), "--mavlink", f"udpin:127.0.0.1:{port}",
-                           "--zenoh-listen", ep, "--video", "none", "--gps-input", "none", "--record", str(rec),
-                           "--duration-s", "40"), tmp_path / "run.log")
+    service = start(
+        skyfix(
+            "run",
+            "--calibration",
+            str(tmp_path / "cal.toml"),
+            "--mavlink",
+            f"udpin:127.0.0.1:{port}",
+            "--zenoh-listen",
+            ep,
+            "--video",
+            "none",
+            "--gps-input",
+            "none",
+            "--record",
+            str(rec),
+            "--duration-s",
+            "40",
+        ),
+        tmp_path / "run.log",
+    )
     mav = mavutil()
     uav = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1)
     t0 = time.time()
@@ -122,7 +158,9 @@ def test_recording_says_when_the_link_delay_was_measured(tmp_path):
                 uav.mav.heartbeat_send(2, 3, 0, 0, 4)
             uav.mav.attitude_send(int(sampled * 1000), 0.0, 0.0, 0.3, 0, 0, 0)
             while (m := uav.recv_match(type="TIMESYNC", blocking=False)) is not None:
-                if m.tc1 == 0 and now >= answered_from:  # a request reached the autopilot delay_s after it left
+                if (
+                    m.tc1 == 0 and now >= answered_from
+                ):  # a request reached the autopilot delay_s after it left
                     uav.mav.timesync_send(int(boot_s(m.ts1 / 1e9 + delay_s) * 1e9), m.ts1)
             i += 1
             time.sleep(0.02)
@@ -138,25 +176,37 @@ def test_recording_says_when_the_link_delay_was_measured(tmp_path):
     assert abs(timing["mavlink_latency_measured_s"] - delay_s) < 0.003
     assert answered_from < timing["mavlink_latency_measured_from_t"] < answered_from + 3.0
     assert "video_latency_s" not in timing and "mavlink_latency_s" not in timing
-    cal = Calibration.from_dict(tomllib.loads((rec / "session.toml").read_text()))  # keys of the contract
+    cal = Calibration.from_dict(
+        tomllib.loads((rec / "session.toml").read_text())
+    )  # keys of the contract
     assert cal.timing.mavlink_latency_measured_s == timing["mavlink_latency_measured_s"]
     tel = Telemetry(cal.timing)  # the recorded tlog, as skyfix process reads it
     tlog = mav.mavlink_connection(str(rec / "uav.tlog"))
     while (m := tlog.recv_msg()) is not None:
         ingest(tel, m, m._timestamp)
     tlog.close()
-    assert tel.latency_source == "timesync" and abs(tel.measured_latency_s - timing["mavlink_latency_measured_s"]) < 1e-3
+    assert (
+        tel.latency_source == "timesync"
+        and abs(tel.measured_latency_s - timing["mavlink_latency_measured_s"]) < 1e-3
+    )
 
 
 def test_recorded_tables_keep_their_times_increasing(tmp_path):
     """--video-latency-ms auto applying its estimate moves the frames' times back: fixes not later than the one
     before are left out (as the video writer leaves out such frames), so positions.csv and track.csv stay
     readable; [timing] gets what the run used as plain TOML numbers, and not another recording's."""
-    (tmp_path / "cal.toml").write_text(CAL + "[timing]\nclock_window_s = 20.0\nmavlink_latency_measured_s = 0.5\n")
+    (tmp_path / "cal.toml").write_text(
+        CAL + "[timing]\nclock_window_s = 20.0\nmavlink_latency_measured_s = 0.5\n"
+    )
     used = {"video_latency_s": np.float64(0.0794), "video_latency_source": "motion"}
     rec = Recorder(str(tmp_path / "rec"), str(tmp_path / "cal.toml"), timing=lambda: used)
-    for t, status in ((100.000, "latency_unsettled"), (100.033, "latency_unsettled"), (99.987, "lost"),
-                      (100.020, "lost"), (100.054, "lost")):
+    for t, status in (
+        (100.000, "latency_unsettled"),
+        (100.033, "latency_unsettled"),
+        (99.987, "lost"),
+        (100.020, "lost"),
+        (100.054, "lost"),
+    ):
         rec.first.on_fix(Fix(t, status), None)
 
     async def record_a_moment():
@@ -169,6 +219,14 @@ def test_recorded_tables_keep_their_times_increasing(tmp_path):
     asyncio.run(record_a_moment())
     assert rec.dropped == 2 and rec.fixes == 3
     for name in ("positions.csv", "track.csv"):
-        assert list(read_table(tmp_path / "rec" / name, ("t",), allow_empty=("u", "v"))["t"]) == [100.0, 100.033, 100.054]
+        assert list(read_table(tmp_path / "rec" / name, ("t",), allow_empty=("u", "v"))["t"]) == [
+            100.0,
+            100.033,
+            100.054,
+        ]
     timing = tomllib.loads((tmp_path / "rec" / "session.toml").read_text())["timing"]
-    assert timing == {"clock_window_s": 20.0, "video_latency_s": 0.0794, "video_latency_source": "motion"}
+    assert timing == {
+        "clock_window_s": 20.0,
+        "video_latency_s": 0.0794,
+        "video_latency_source": "motion",
+    }

@@ -32,7 +32,10 @@ def test_system_time_is_shifted_and_others_are_untouched():
     assert out.time_boot_ms == 412_000
     assert (out.get_srcSystem(), out.get_srcComponent(), out.get_seq()) == (3, 1, 41)
     assert frame_bytes(att, 1000.5) == att_buf
-    assert _decode(frame_bytes(_decode(mav.system_time_encode(0, 5).pack(mav)), 10.0)).time_unix_usec == 0
+    assert (
+        _decode(frame_bytes(_decode(mav.system_time_encode(0, 5).pack(mav)), 10.0)).time_unix_usec
+        == 0
+    )
 
 
 def test_timesync_replies_and_gps_time_are_shifted_but_requests_and_boot_times_are_not():
@@ -40,11 +43,17 @@ def test_timesync_replies_and_gps_time_are_shifted_but_requests_and_boot_times_a
     reply = _decode(mav.timesync_encode(412_045_000_000, 1_763_800_000_123_456_789).pack(mav))
     out = _decode(frame_bytes(reply, 1000.5))
     assert out.ts1 == 1_763_800_000_123_456_789 + 1_000_500_000_000 and out.tc1 == 412_045_000_000
-    request = mav.timesync_encode(0, 412_000_000_000).pack(mav)  # the autopilot's own request: its clock
+    request = mav.timesync_encode(0, 412_000_000_000).pack(
+        mav
+    )  # the autopilot's own request: its clock
     assert frame_bytes(_decode(request), 1000.5) == request
-    gps = _decode(mav.gps_raw_int_encode(1_763_800_000_250_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(mav))
+    gps = _decode(
+        mav.gps_raw_int_encode(1_763_800_000_250_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(mav)
+    )
     assert _decode(frame_bytes(gps, 2.0)).time_usec == 1_763_800_002_250_000
-    boot_stamped = mav.gps_raw_int_encode(412_000_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(mav)  # ArduPilot's
+    boot_stamped = mav.gps_raw_int_encode(412_000_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(
+        mav
+    )  # ArduPilot's
     assert frame_bytes(_decode(boot_stamped), 2.0) == boot_stamped
 
 
@@ -54,19 +63,44 @@ def test_the_uuv_log_stamps_a_gps_input_with_its_arrival_while_the_replay_is_hel
     not with when the replay read it."""
     port = free_port()
     log = tmp_path / "uuv.jsonl"
-    replay = start(skyfix("replay", str(ROOT / "sim_fixtures" / "bundled" / "nadir_hover"), "--no-video",
-                          "--mavlink-out", f"udpout:127.0.0.1:{free_port()}", "--uuv-listen", f"udpin:127.0.0.1:{port}",
-                          "--uuv-log", str(log), "--lead-s", "0.2", "--duration-s", "60"), tmp_path / "replay.log")
-    sender = mavutil().mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=245, source_component=220)
+    replay = start(
+        skyfix(
+            "replay",
+            str(ROOT / "sim_fixtures" / "bundled" / "nadir_hover"),
+            "--no-video",
+            "--mavlink-out",
+            f"udpout:127.0.0.1:{free_port()}",
+            "--uuv-listen",
+            f"udpin:127.0.0.1:{port}",
+            "--uuv-log",
+            str(log),
+            "--lead-s",
+            "0.2",
+            "--duration-s",
+            "60",
+        ),
+        tmp_path / "replay.log",
+    )
+    sender = mavutil().mavlink_connection(
+        f"udpout:127.0.0.1:{port}", source_system=245, source_component=220
+    )
 
     def gps_input(week_ms: int) -> None:
-        sender.mav.gps_input_send(0, 0, 0, week_ms, 2300, 1, 0, 0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0, 0)
+        sender.mav.gps_input_send(
+            0, 0, 0, week_ms, 2300, 1, 0, 0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0, 0
+        )
 
     def logged(week_ms: int) -> list[dict]:
-        return [r for r in read_jsonl(log) if r.get("event") == "gps_input" and r["time_week_ms"] == week_ms]
+        return [
+            r
+            for r in read_jsonl(log)
+            if r.get("event") == "gps_input" and r["time_week_ms"] == week_ms
+        ]
 
     try:
-        wait_for(lambda: gps_input(1) or logged(1), 30, "the replay listening")  # the socket is bound
+        wait_for(
+            lambda: gps_input(1) or logged(1), 30, "the replay listening"
+        )  # the socket is bound
         replay.send_signal(signal.SIGSTOP)
         t_before = time.time()
         gps_input(2)  # on loopback the datagram is in the replay's socket queue when sendto returns
@@ -78,6 +112,8 @@ def test_the_uuv_log_stamps_a_gps_input_with_its_arrival_while_the_replay_is_hel
         stop(replay)
         sender.close()
     t_recv = logged(2)[0]["t_recv"]
-    print(f"logged t_recv {(t_recv - t_before) * 1e3:+.3f} ms after the send began ({(t_after - t_before) * 1e3:.3f} ms "
-          "to send)")
+    print(
+        f"logged t_recv {(t_recv - t_before) * 1e3:+.3f} ms after the send began ({(t_after - t_before) * 1e3:.3f} ms "
+        "to send)"
+    )
     assert t_before - 1e-6 <= t_recv <= t_after + 1e-6, "t_recv is not the datagram's arrival"

@@ -25,7 +25,9 @@ def test_starts_in_one_second_get_folders_of_their_own(tmp_path):
     assert [p.name for p in made] == ["20250615-150640", "20250615-150640-2", "20250615-150640-3"]
     assert all(p.is_dir() and not any(p.iterdir()) for p in made)
     (made[1] / "session.toml").write_text("version = 1\n")
-    assert new_recording(tmp_path / "rec", t).name == "20250615-150640-4"  # nothing made earlier is reused
+    assert (
+        new_recording(tmp_path / "rec", t).name == "20250615-150640-4"
+    )  # nothing made earlier is reused
 
 
 def _recordings(root) -> list:
@@ -36,8 +38,17 @@ def test_the_same_configuration_started_three_times_records_three_folders(tmp_pa
     endpoint = GpsInputEndpoint()
     try:
         config, _ = field_config(tmp_path, endpoint.port)
-        outs = [subprocess.run(skyfix("run", "--config", str(config), "--duration-s", "1"), capture_output=True,
-                               text=True, cwd=ROOT, timeout=120, check=False) for _ in range(3)]
+        outs = [
+            subprocess.run(
+                skyfix("run", "--config", str(config), "--duration-s", "1"),
+                capture_output=True,
+                text=True,
+                cwd=ROOT,
+                timeout=120,
+                check=False,
+            )
+            for _ in range(3)
+        ]
     finally:
         endpoint.close()
     for out in outs:
@@ -59,16 +70,24 @@ def test_kill_9_three_times_under_the_units_restart_policy(tmp_path):
 
     def back(sup: Supervisor, n: int) -> None:
         """Wait for the ``n``-th start and a GPS_INPUT from it."""
+
         def log() -> str:
             path = sup.log(len(sup.starts) - 1)
             return path.read_text()[-2000:] if path.exists() else "nothing started"
 
-        wait_for(lambda: len(sup.starts) == n and heard_since(sup.starts[-1][0]), 60,
-                 lambda: f"start {n}'s GPS_INPUT ({len(sup.starts)} starts, exits {sup.exits}: {log()})")
+        wait_for(
+            lambda: len(sup.starts) == n and heard_since(sup.starts[-1][0]),
+            60,
+            lambda: f"start {n}'s GPS_INPUT ({len(sup.starts)} starts, exits {sup.exits}: {log()})",
+        )
 
     try:
         with Supervisor(lambda argv: skyfix(*argv[1:-1], str(config)), tmp_path) as sup:
-            assert sup.command[3:6] == ["run", "--config", str(config)]  # the unit's arguments, its config replaced
+            assert sup.command[3:6] == [
+                "run",
+                "--config",
+                str(config),
+            ]  # the unit's arguments, its config replaced
             for kill in range(3):
                 back(sup, kill + 1)
                 proc = sup.starts[-1][1]

@@ -49,16 +49,22 @@ def test_depth_over_zenoh_clocks_garbage_and_jumps(caplog):
     async def publish():
         await asyncio.sleep(0.5)  # let the subscriptions propagate
         for i in range(3):
-            publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.0 + 0.02 * i,
-                                                   "extra": "x"}))
+            publisher.put(
+                "uuv/depth",
+                json.dumps({"t": time.time() + 3600.0, "depth_m": 1.0 + 0.02 * i, "extra": "x"}),
+            )
             stamps.append(time.time())
             publisher.put("uuv/depth_synced", json.dumps({"t": stamps[-1], "depth_m": 0.5}))
             await asyncio.sleep(0.05)
         publisher.put("uuv/depth", b"\xff\x00garbage")
         publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": "deep"}))
-        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0}))  # out of range
+        publisher.put(
+            "uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0})
+        )  # out of range
         await asyncio.sleep(0.05)
-        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0}))  # 2.96 m in 0.1 s
+        publisher.put(
+            "uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0})
+        )  # 2.96 m in 0.1 s
         await asyncio.sleep(0.05)
         publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.06}))
 
@@ -93,7 +99,9 @@ def test_a_flood_of_one_problem_stays_a_trickle_in_the_log(caplog):
     caplog.set_level(logging.WARNING)
     for _ in range(1000):
         depth._on_payload("uuv/depth", b"garbage", time.time())
-    depth._on_payload("uuv/depth", json.dumps({"t": time.time(), "depth_m": "deep"}).encode(), time.time())
+    depth._on_payload(
+        "uuv/depth", json.dumps({"t": time.time(), "depth_m": "deep"}).encode(), time.time()
+    )
     lines = [r.message for r in caplog.records]
     assert depth.bad == 1001
     assert sum("not JSON" in m for m in lines) == 5 + 1000 // 100
@@ -103,7 +111,10 @@ def test_a_flood_of_one_problem_stays_a_trickle_in_the_log(caplog):
 def test_throttle_is_keyed_by_the_kind_with_bounded_memory():
     """pymavlink's CRC complaints differ in their numbers only: one kind. Endless distinct kinds stay bounded."""
     throttle = Throttle()
-    crcs = [f"invalid MAVLink CRC in msgID {i % 250} 0x{i:04x} should be 0x{(i * 7) & 0xFFFF:04x}" for i in range(1000)]
+    crcs = [
+        f"invalid MAVLink CRC in msgID {i % 250} 0x{i:04x} should be 0x{(i * 7) & 0xFFFF:04x}"
+        for i in range(1000)
+    ]
     logged = [n for text in crcs if (n := throttle(kind_of(text)))]
     assert list(throttle.counts) == ["invalid MAVLink CRC in msgID # # should be #"]
     assert logged == [1, 2, 3, 4, 5, *range(100, 1001, 100)]
@@ -130,16 +141,22 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
     other = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=7, source_component=1)
 
     async def send():
-        sender.mav.heartbeat_send(mav.mavlink.MAV_TYPE_QUADROTOR, mav.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4)
+        sender.mav.heartbeat_send(
+            mav.mavlink.MAV_TYPE_QUADROTOR, mav.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4
+        )
         await asyncio.sleep(0.1)
         for i in range(10):
             boot_ms = 100_000 + i * 20
             sender.mav.system_time_send(int(time.time() * 1e6), boot_ms)
             sender.mav.attitude_send(boot_ms, 0.01, -0.02, 0.5 + i * 0.01, 0, 0, 0)
-            sender.mav.global_position_int_send(boot_ms, 634400000, 104000000, 12000, 10000, 0, 0, 0, 0)
+            sender.mav.global_position_int_send(
+                boot_ms, 634400000, 104000000, 12000, 10000, 0, 0, 0, 0
+            )
             other.mav.attitude_send(boot_ms, 1.0, 1.0, 1.0, 0, 0, 0)
             if i == 5:
-                sender.write(b"\xfd\x09\x00\x00\x00\x01\x01\x1e\x00\x00" + b"\x00" * 11)  # corrupt: bad CRC
+                sender.write(
+                    b"\xfd\x09\x00\x00\x00\x01\x01\x1e\x00\x00" + b"\x00" * 11
+                )  # corrupt: bad CRC
             await asyncio.sleep(0.02)
 
     try:
@@ -150,19 +167,46 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
         other.close()
     assert uav.uav_sysid == 1
     assert len(tel.attitude) == 10 and len(tel.position) == 10
-    assert tel.attitude.values[:, 0].max() == pytest.approx(0.01)  # system 7's attitude was not mixed in
+    assert tel.attitude.values[:, 0].max() == pytest.approx(
+        0.01
+    )  # system 7's attitude was not mixed in
     assert uav.health.other_systems == 10 and uav.health.bad_data >= 1
     status = uav.status(time.time())
     assert abs(status["clocks"]["station_minus_gnss_s"]) < 0.1  # SYSTEM_TIME was stamped when sent
     assert set(status["age_s"]) >= {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME"}
-    assert hb is not None and hb.type == mav.mavlink.MAV_TYPE_GCS and hb.get_srcSystem() == SKYFIX_SYSID
+    assert (
+        hb is not None
+        and hb.type == mav.mavlink.MAV_TYPE_GCS
+        and hb.get_srcSystem() == SKYFIX_SYSID
+    )
 
 
 def _stream(port: int, seconds: float) -> subprocess.Popen:
     return subprocess.Popen(
-        ["ffmpeg", "-loglevel", "error", "-re", "-f", "lavfi", "-i", "testsrc=size=320x240:rate=30",
-         "-t", str(seconds), "-c:v", "libx264", "-preset", "ultrafast", "-tune", "zerolatency", "-g", "15",
-         "-f", "mpegts", f"udp://127.0.0.1:{port}?pkt_size=1316"])
+        [
+            "ffmpeg",
+            "-loglevel",
+            "error",
+            "-re",
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc=size=320x240:rate=30",
+            "-t",
+            str(seconds),
+            "-c:v",
+            "libx264",
+            "-preset",
+            "ultrafast",
+            "-tune",
+            "zerolatency",
+            "-g",
+            "15",
+            "-f",
+            "mpegts",
+            f"udp://127.0.0.1:{port}?pkt_size=1316",
+        ]
+    )
 
 
 def test_video_reconnects_when_the_stream_resumes():
@@ -186,8 +230,12 @@ def test_video_reconnects_when_the_stream_resumes():
     first = [f for f in frames if f.t_recv <= ended[0] + 0.5]
     second = [f for f in frames if f.t_recv > ended[0] + 1.5]  # after the first stream timed out
     assert video.connects >= 2
-    assert len(first) >= 25 and len(second) >= 25  # 45 frames sent each time; a GOP may be lost at a start
+    assert (
+        len(first) >= 25 and len(second) >= 25
+    )  # 45 frames sent each time; a GOP may be lost at a start
     assert [f.index for f in frames] == list(range(len(frames)))
     # exposure = stream slot − latency; the slot (PTS on the station clock) is never after the arrival
-    assert all(abs(f.t_slot - f.t_unix - 0.1) < 1e-6 and f.t_slot <= f.t_recv + 1e-6 for f in frames)
+    assert all(
+        abs(f.t_slot - f.t_unix - 0.1) < 1e-6 and f.t_slot <= f.t_recv + 1e-6 for f in frames
+    )
     assert frames[0].image.shape == (240, 320, 3)

@@ -19,8 +19,12 @@ def test_status_and_liveliness(caplog):
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     service, watcher = open_session(listen=[ep]), open_session(connect=[ep])
     got = []
-    sub = watcher.declare_subscriber("skyfix/status", lambda s: got.append(
-        (str(s.encoding), s.timestamp is not None, json.loads(s.payload.to_string()))))
+    sub = watcher.declare_subscriber(
+        "skyfix/status",
+        lambda s: got.append(
+            (str(s.encoding), s.timestamp is not None, json.loads(s.payload.to_string()))
+        ),
+    )
     calls = []
 
     def status(now):
@@ -34,11 +38,15 @@ def test_status_and_liveliness(caplog):
         await asyncio.sleep(0.3)
         task = asyncio.create_task(sink.run())
         await asyncio.sleep(0.7)
-        alive["during"] = [str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=2.0)]
+        alive["during"] = [
+            str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=2.0)
+        ]
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
         await asyncio.sleep(0.3)
-        alive["after"] = [str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=1.0)]
+        alive["after"] = [
+            str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=1.0)
+        ]
 
     try:
         asyncio.run(scenario())
@@ -49,8 +57,14 @@ def test_status_and_liveliness(caplog):
     assert alive["during"] == ["skyfix/alive"] and alive["after"] == []
     assert len(got) >= 3
     assert all(enc == "application/json" and stamped for enc, stamped, _ in got)
-    assert got[-1][2]["uav"]["age_s"]["ATTITUDE"] == 0.02 and abs(got[-1][2]["t"] - time.time()) < 2.0
+    assert (
+        got[-1][2]["uav"]["age_s"]["ATTITUDE"] == 0.02 and abs(got[-1][2]["t"] - time.time()) < 2.0
+    )
     assert sink.invalid == len(calls) >= 3
-    misfits = [r.getMessage() for r in caplog.records if "does not fit its schema" in r.getMessage()]
-    assert len(misfits) == len(set(misfits)) and any(m.startswith("status: depth does not fit") for m in misfits)
+    misfits = [
+        r.getMessage() for r in caplog.records if "does not fit its schema" in r.getMessage()
+    ]
+    assert len(misfits) == len(set(misfits)) and any(
+        m.startswith("status: depth does not fit") for m in misfits
+    )
     assert any(m.startswith("status: n = 1 ") for m in misfits), misfits

@@ -78,8 +78,12 @@ def own_and_other_errors_m(session, uuv_id, t_session, lat, lon):
     own = truth_errors_m(folders[uuv_id], t_session, lat, lon)
     far = truth_errors_m(folders[other], t_session, lat, lon)
     t1 = np.genfromtxt(folders[uuv_id] / "truth.csv", delimiter=",", names=True)
-    apart = truth_errors_m(folders[other], t_session, np.interp(t_session, t1["t"], t1["lat"]),
-                           np.interp(t_session, t1["t"], t1["lon"]))
+    apart = truth_errors_m(
+        folders[other],
+        t_session,
+        np.interp(t_session, t1["t"], t1["lat"]),
+        np.interp(t_session, t1["t"], t1["lon"]),
+    )
     return own, far, apart
 
 
@@ -92,15 +96,23 @@ def crossing(tmp_path_factory):
 
 
 def run_toml(tmp_path, session, ports: dict, endpoints: dict, record=None) -> str:
-    boxes = {"uuv1": tomllib.loads((session / "session.toml").read_text())["tracker"]["init_bbox"],
-             "uuv2": tomllib.loads((session / "uuvs" / "uuv2" / "uuv.toml").read_text())["tracker"]["init_bbox"]}
-    text = (f'calibration = "{session / "session.toml"}"\nmavlink = "udpin:127.0.0.1:{ports["mav"]}"\n'
-            f'video = "udp://127.0.0.1:{ports["video"]}"\nvideo_latency_ms = 0\n'
-            f'zenoh_listen = ["tcp/127.0.0.1:{ports["zenoh"]}"]\nduration_s = 34\n'
-            f'stats = "{tmp_path / "stats.json"}"\n' + (f'record = "{record}"\n' if record else ""))
+    boxes = {
+        "uuv1": tomllib.loads((session / "session.toml").read_text())["tracker"]["init_bbox"],
+        "uuv2": tomllib.loads((session / "uuvs" / "uuv2" / "uuv.toml").read_text())["tracker"][
+            "init_bbox"
+        ],
+    }
+    text = (
+        f'calibration = "{session / "session.toml"}"\nmavlink = "udpin:127.0.0.1:{ports["mav"]}"\n'
+        f'video = "udp://127.0.0.1:{ports["video"]}"\nvideo_latency_ms = 0\n'
+        f'zenoh_listen = ["tcp/127.0.0.1:{ports["zenoh"]}"]\nduration_s = 34\n'
+        f'stats = "{tmp_path / "stats.json"}"\n' + (f'record = "{record}"\n' if record else "")
+    )
     for uuv_id in IDS:
-        text += (f'\n[[uuv]]\nid = "{uuv_id}"\ndepth_key = "test/{uuv_id}/depth"\n'
-                 f'gps_input = "udpout:127.0.0.1:{endpoints[uuv_id].port}"\ninit_bbox = {boxes[uuv_id]}\n')
+        text += (
+            f'\n[[uuv]]\nid = "{uuv_id}"\ndepth_key = "test/{uuv_id}/depth"\n'
+            f'gps_input = "udpout:127.0.0.1:{endpoints[uuv_id].port}"\ninit_bbox = {boxes[uuv_id]}\n'
+        )
     return text
 
 
@@ -117,10 +129,24 @@ class TwoUuvRun:
         config.write_text(run_toml(tmp_path, session, ports, self.endpoints, record))
         self.zenoh_ep = f"tcp/127.0.0.1:{ports['zenoh']}"
         self.run_cmd = skyfix("run", "--config", str(config))
-        self.replay_cmd = skyfix("replay", str(session), "--mavlink-out", f"udpout:127.0.0.1:{ports['mav']}",
-                                 "--video-out", f"udp://127.0.0.1:{ports['video']}", "--zenoh-connect",
-                                 self.zenoh_ep, "--depth-key", "test/uuv1/depth", "--uuv-depth-key",
-                                 "uuv2=test/uuv2/depth", "--uuv-listen", "", "--tail-s", "1.5")
+        self.replay_cmd = skyfix(
+            "replay",
+            str(session),
+            "--mavlink-out",
+            f"udpout:127.0.0.1:{ports['mav']}",
+            "--video-out",
+            f"udp://127.0.0.1:{ports['video']}",
+            "--zenoh-connect",
+            self.zenoh_ep,
+            "--depth-key",
+            "test/uuv1/depth",
+            "--uuv-depth-key",
+            "uuv2=test/uuv2/depth",
+            "--uuv-listen",
+            "",
+            "--tail-s",
+            "1.5",
+        )
         self.sub_out = tmp_path / "zenoh.jsonl"
         self.procs: list[subprocess.Popen] = []
 
@@ -128,10 +154,27 @@ class TwoUuvRun:
         try:
             self.run = start(self.run_cmd, self.tmp / "run.log")
             self.procs.append(self.run)
-            self.procs.append(start([sys.executable, "-c", SUBSCRIBER, self.zenoh_ep, "skyfix/**", str(self.sub_out)],
-                                    self.tmp / "sub.log"))
-            wait_for(lambda: {r["key"] for r in read_jsonl(self.sub_out)} >= {f"skyfix/uuv/{i}/status" for i in IDS},
-                     20, "both UUVs' status on Zenoh")
+            self.procs.append(
+                start(
+                    [
+                        sys.executable,
+                        "-c",
+                        SUBSCRIBER,
+                        self.zenoh_ep,
+                        "skyfix/**",
+                        str(self.sub_out),
+                    ],
+                    self.tmp / "sub.log",
+                )
+            )
+            wait_for(
+                lambda: (
+                    {r["key"] for r in read_jsonl(self.sub_out)}
+                    >= {f"skyfix/uuv/{i}/status" for i in IDS}
+                ),
+                20,
+                "both UUVs' status on Zenoh",
+            )
             self.replay = start(self.replay_cmd, self.tmp / "replay.log")
             self.procs.append(self.replay)
         except BaseException:
@@ -160,8 +203,11 @@ class TwoUuvRun:
 
     def fixes(self, uuv_id: str) -> list[dict]:
         """The UUV's fixes the subscriber received, with their receive time."""
-        return [json.loads(s["payload"]) | {"t_recv": s["t_recv"]} for s in read_jsonl(self.sub_out)
-                if s["key"] == f"skyfix/uuv/{uuv_id}/fix"]
+        return [
+            json.loads(s["payload"]) | {"t_recv": s["t_recv"]}
+            for s in read_jsonl(self.sub_out)
+            if s["key"] == f"skyfix/uuv/{uuv_id}/fix"
+        ]
 
 
 def test_two_uuvs_in_one_video_each_with_its_own_fixes_and_gps_input(tmp_path, crossing):
@@ -174,18 +220,36 @@ def test_two_uuvs_in_one_video_each_with_its_own_fixes_and_gps_input(tmp_path, c
     samples = read_jsonl(run.sub_out)
     status_schema = Draft202012Validator(json.loads(GROUNDSTATION.path_of("status").read_text()))
     for uuv_id in IDS:
-        fixes = [json.loads(s["payload"]) for s in samples if s["key"] == f"skyfix/uuv/{uuv_id}/fix"]
+        fixes = [
+            json.loads(s["payload"]) for s in samples if s["key"] == f"skyfix/uuv/{uuv_id}/fix"
+        ]
         ok = [f for f in fixes if f["status"] == "ok"]
-        assert len(ok) >= TWO_SHARE * n_frames, (uuv_id, len(ok), {f["status"] for f in fixes}, run_log[-3000:])
-        assert not [f for f in fixes if f["status"] == "same_vehicle"]  # passing 0.3 m apart: two vehicles
-        own, other, apart = own_and_other_errors_m(session, uuv_id, np.array([f["t"] for f in ok]) - shift,
-                                                   [f["lat"] for f in ok], [f["lon"] for f in ok])
-        print(f"{uuv_id} Zenoh: {len(fixes)} fixes, {len(ok)} ok, MAE {own.mean():.4f} m, max {own.max():.4f} m, "
-              f"nearest approach of the two {apart.min():.3f} m")
+        assert len(ok) >= TWO_SHARE * n_frames, (
+            uuv_id,
+            len(ok),
+            {f["status"] for f in fixes},
+            run_log[-3000:],
+        )
+        assert not [
+            f for f in fixes if f["status"] == "same_vehicle"
+        ]  # passing 0.3 m apart: two vehicles
+        own, other, apart = own_and_other_errors_m(
+            session,
+            uuv_id,
+            np.array([f["t"] for f in ok]) - shift,
+            [f["lat"] for f in ok],
+            [f["lon"] for f in ok],
+        )
+        print(
+            f"{uuv_id} Zenoh: {len(fixes)} fixes, {len(ok)} ok, MAE {own.mean():.4f} m, max {own.max():.4f} m, "
+            f"nearest approach of the two {apart.min():.3f} m"
+        )
         assert own.mean() <= 0.05, (uuv_id, own.mean(), own.max())
         assert (own < other).all(), f"{uuv_id}: {(own >= other).sum()} fixes nearer the other UUV"
 
-        status = [json.loads(s["payload"]) for s in samples if s["key"] == f"skyfix/uuv/{uuv_id}/status"]
+        status = [
+            json.loads(s["payload"]) for s in samples if s["key"] == f"skyfix/uuv/{uuv_id}/status"
+        ]
         bad = [e.message for m in status for e in status_schema.iter_errors(m)]
         assert not bad, bad[0]
         assert status[-1]["depth"]["received"] > 0 and status[-1]["pipeline"]["processed"] > 0
@@ -198,15 +262,30 @@ def test_two_uuvs_in_one_video_each_with_its_own_fixes_and_gps_input(tmp_path, c
         # valid as the UUV's gates accepted (test_live_e2e.py): refused only while confirming or for age, all arrived
         sent = status[-1]["gps_input"]
         refused = {reason: n for reason, n in sent["gates"]["rejected"].items() if n}
-        assert set(refused) <= {"unconfirmed", "age"}, (uuv_id, refused, sent["gates"]["last_refusal"])
-        assert sent["gates"]["accepted"] >= 10 and len(valid) >= max(10, 0.9 * sent["sent_valid"]), (
-            uuv_id, len(valid), sent["sent_valid"], sent["gates"]["accepted"])
+        assert set(refused) <= {"unconfirmed", "age"}, (
+            uuv_id,
+            refused,
+            sent["gates"]["last_refusal"],
+        )
+        assert sent["gates"]["accepted"] >= 10 and len(valid) >= max(
+            10, 0.9 * sent["sent_valid"]
+        ), (uuv_id, len(valid), sent["sent_valid"], sent["gates"]["accepted"])
         to_station = status[-1]["uav"]["clocks"]["station_minus_gnss_s"] or 0.0
-        own, other, _ = own_and_other_errors_m(session, uuv_id,
-                                               np.array([g["time_usec"] / 1e6 for g in valid]) + to_station - shift,
-                                               [g["lat"] / 1e7 for g in valid], [g["lon"] / 1e7 for g in valid])
-        print(f"{uuv_id} GPS_INPUT: {len(received)} messages, {len(valid)} valid, MAE {own.mean():.4f} m")
-        assert own.mean() <= 0.05 and (own < other).all(), (uuv_id, own.mean(), (own >= other).sum())
+        own, other, _ = own_and_other_errors_m(
+            session,
+            uuv_id,
+            np.array([g["time_usec"] / 1e6 for g in valid]) + to_station - shift,
+            [g["lat"] / 1e7 for g in valid],
+            [g["lon"] / 1e7 for g in valid],
+        )
+        print(
+            f"{uuv_id} GPS_INPUT: {len(received)} messages, {len(valid)} valid, MAE {own.mean():.4f} m"
+        )
+        assert own.mean() <= 0.05 and (own < other).all(), (
+            uuv_id,
+            own.mean(),
+            (own >= other).sum(),
+        )
 
     # the recording holds both UUVs as the reader reads them; each, processed from its own track, is where it was
     rec = tmp_path / "recorded"
@@ -216,30 +295,50 @@ def test_two_uuvs_in_one_video_each_with_its_own_fixes_and_gps_input(tmp_path, c
         assert len(recorded.telemetry.depth) > 100 and recorded.calibration.init_bbox is not None
         fixes = process_session(recorded, use_track=True)
         good = fixes.status == "ok"
-        own, other, _ = own_and_other_errors_m(session, uuv_id, fixes.t_unix[good] - shift, fixes.lat[good],
-                                               fixes.lon[good])
+        own, other, _ = own_and_other_errors_m(
+            session, uuv_id, fixes.t_unix[good] - shift, fixes.lat[good], fixes.lon[good]
+        )
         print(f"{uuv_id} recorded: {good.sum()} fixes from its track.csv, MAE {own.mean():.4f} m")
-        assert good.sum() >= TWO_SHARE * n_frames and own.mean() <= 0.05 and (own < other).all(), uuv_id
+        assert good.sum() >= TWO_SHARE * n_frames and own.mean() <= 0.05 and (own < other).all(), (
+            uuv_id
+        )
 
 
 def test_two_uuvs_on_one_gps_input_link_is_refused(tmp_path):
     """GPS_INPUT names no vehicle: two UUVs on one link would each take the other's position too."""
     config = tmp_path / "run.toml"
-    config.write_text(f'calibration = "{ROOT / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"}"\n'
-                      '[[uuv]]\nid = "a"\ndepth_key = "a/depth"\ngps_input = "udpout:127.0.0.1:14601"\n'
-                      '[[uuv]]\nid = "b"\ndepth_key = "b/depth"\ngps_input = "udpout:127.0.0.1:14601"\n')
-    out = subprocess.run(skyfix("run", "--config", str(config), "--no-ui"), capture_output=True, text=True,
-                         cwd=ROOT, timeout=60, check=False)
+    config.write_text(
+        f'calibration = "{ROOT / "sim_fixtures" / "bundled" / "nadir_hover" / "session.toml"}"\n'
+        '[[uuv]]\nid = "a"\ndepth_key = "a/depth"\ngps_input = "udpout:127.0.0.1:14601"\n'
+        '[[uuv]]\nid = "b"\ndepth_key = "b/depth"\ngps_input = "udpout:127.0.0.1:14601"\n'
+    )
+    out = subprocess.run(
+        skyfix("run", "--config", str(config), "--no-ui"),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+        check=False,
+    )
     assert out.returncode == 2
-    assert out.stderr.strip().splitlines()[-1].endswith(
-        "uuv[1].gps_input = 'udpout:127.0.0.1:14601': also uuv[0]'s (a): each UUV has its own"), out.stderr
+    assert (
+        out.stderr.strip()
+        .splitlines()[-1]
+        .endswith(
+            "uuv[1].gps_input = 'udpout:127.0.0.1:14601': also uuv[0]'s (a): each UUV has its own"
+        )
+    ), out.stderr
 
 
 def _http(url: str, body: dict | None = None) -> tuple[int, dict]:
     """GET ``url`` (or POST ``body`` as JSON): the status code and the JSON answer."""
     data = None if body is None else json.dumps(body).encode()
-    req = urllib.request.Request(url, data=data, headers={"Content-Type": "application/json"} if data else {},
-                                 method="GET" if data is None else "POST")
+    req = urllib.request.Request(
+        url,
+        data=data,
+        headers={"Content-Type": "application/json"} if data else {},
+        method="GET" if data is None else "POST",
+    )
     try:
         with urllib.request.urlopen(req, timeout=10) as r:
             return r.status, json.loads(r.read())
@@ -252,7 +351,10 @@ async def _page_messages(base: str, timeout_s: float = 15.0) -> tuple[dict, dict
     UUVs are tracked (``ok``)."""
     import aiohttp
 
-    async with aiohttp.ClientSession() as http, http.ws_connect(base.replace("http", "ws") + "/ws") as ws:
+    async with (
+        aiohttp.ClientSession() as http,
+        http.ws_connect(base.replace("http", "ws") + "/ws") as ws,
+    ):
         hello = json.loads((await ws.receive(timeout=15)).data)
         state = overlay = None
         end = time.monotonic() + timeout_s
@@ -262,8 +364,8 @@ async def _page_messages(base: str, timeout_s: float = 15.0) -> tuple[dict, dict
                 state = json.loads(msg.data)
             elif msg.type == aiohttp.WSMsgType.BINARY:
                 n = struct.unpack(">I", msg.data[:4])[0]
-                o = json.loads(msg.data[4:4 + n])
-                assert msg.data[4 + n:4 + n + 2] == b"\xff\xd8"  # one JPEG
+                o = json.loads(msg.data[4 : 4 + n])
+                assert msg.data[4 + n : 4 + n + 2] == b"\xff\xd8"  # one JPEG
                 if all(u["status"] == "ok" for u in o.get("uuvs", ())):
                     overlay = o
         return hello, state, overlay
@@ -273,8 +375,11 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
     with TwoUuvRun(tmp_path, crossing) as run:
         url = ui_url(tmp_path / "run.log")
         base = f"http://127.0.0.1:{urlsplit(url).port}"
-        wait_for(lambda: all(sum(f["status"] == "ok" for f in run.fixes(i)) >= 30 for i in IDS), 20,
-                 "ok fixes of both UUVs")
+        wait_for(
+            lambda: all(sum(f["status"] == "ok" for f in run.fixes(i)) >= 30 for i in IDS),
+            20,
+            "ok fixes of both UUVs",
+        )
 
         # GET /api/status: the first UUV's status as with one, and each UUV's own sections
         code, status = _http(base + "/api/status")
@@ -282,38 +387,63 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         assert status["target"]["state"] == "tracking" and status["uav"]["received"] > 0
         for uuv_id in IDS:
             own = status["uuvs"][uuv_id]
-            assert own["target"]["state"] == "tracking" and own["fix"]["status"] == "ok", (uuv_id, own["target"])
+            assert own["target"]["state"] == "tracking" and own["fix"]["status"] == "ok", (
+                uuv_id,
+                own["target"],
+            )
             assert own["depth"]["key"] == f"test/{uuv_id}/depth" and "uav" not in own
-        assert status["uuvs"]["uuv1"]["fix"]["frame"] == status["fix"]["frame"] or status["fix"]["frame"] > 0
+        assert (
+            status["uuvs"]["uuv1"]["fix"]["frame"] == status["fix"]["frame"]
+            or status["fix"]["frame"] > 0
+        )
 
         # the WebSocket: both UUVs in the hello, the state and on one JPEG
         hello, state, overlay = asyncio.run(_page_messages(base))
-        assert [(u["id"], u["colour"]) for u in hello["uuvs"]] == list(zip(IDS, PALETTE[:2], strict=True))
+        assert [(u["id"], u["colour"]) for u in hello["uuvs"]] == list(
+            zip(IDS, PALETTE[:2], strict=True)
+        )
         assert state and state["type"] == "state" and set(state["status"]["uuvs"]) == set(IDS)
         assert [u["id"] for u in state["uuvs"]] == list(IDS)
         assert all(u["gate"] and u["gate"]["state"] for u in state["uuvs"]), state["uuvs"]
         assert overlay is not None, "no video packet with both UUVs ok"
-        assert [(u["id"], u["colour"]) for u in overlay["uuvs"]] == list(zip(IDS, PALETTE[:2], strict=True))
+        assert [(u["id"], u["colour"]) for u in overlay["uuvs"]] == list(
+            zip(IDS, PALETTE[:2], strict=True)
+        )
         boxes = [u["box"] for u in overlay["uuvs"]]
         assert all(b and len(b) == 4 for b in boxes) and boxes[0] != boxes[1], boxes
-        assert overlay["status"] == "ok" and overlay["box"] == boxes[0]  # the first UUV's, as with one
+        assert (
+            overlay["status"] == "ok" and overlay["box"] == boxes[0]
+        )  # the first UUV's, as with one
 
         # a command must name its UUV
         code, answer = _http(base + "/api/release", {})
         assert code == 400 and "several UUVs (uuv1, uuv2)" in answer["error"], answer
         code, answer = _http(base + "/api/release", {"uuv": "uuv9"})
-        assert code == 400 and answer["error"] == 'release: uuv = "uuv9": not a UUV of this run (uuv1, uuv2)'
+        assert (
+            code == 400
+            and answer["error"] == 'release: uuv = "uuv9": not a UUV of this run (uuv1, uuv2)'
+        )
         code, answer = _http(base + "/api/select", {"uuv": "uuv2", "box": [1, 2]})
-        assert code == 400 and answer["error"] == "select: box = [1, 2]: expected 4 finite numbers", answer
+        assert (
+            code == 400 and answer["error"] == "select: box = [1, 2]: expected 4 finite numbers"
+        ), answer
 
         code, answer = _http(base + "/api/release", {"uuv": "uuv2"})
         t_released = time.time()
-        assert code == 200 and answer["uuv"] == "uuv2" and answer["target"]["state"] == "released", answer
-        wait_for(lambda: sum(f["t_recv"] > t_released + 0.5 for f in run.fixes("uuv2")) >= 10, 10,
-                 "uuv2's fixes after the release")
+        assert (
+            code == 200 and answer["uuv"] == "uuv2" and answer["target"]["state"] == "released"
+        ), answer
+        wait_for(
+            lambda: sum(f["t_recv"] > t_released + 0.5 for f in run.fixes("uuv2")) >= 10,
+            10,
+            "uuv2's fixes after the release",
+        )
         code, status = _http(base + "/api/status")
         assert status["uuvs"]["uuv2"]["target"]["state"] == "released"
-        assert status["uuvs"]["uuv1"]["target"]["state"] == "tracking" and status["target"]["state"] == "tracking"
+        assert (
+            status["uuvs"]["uuv1"]["target"]["state"] == "tracking"
+            and status["target"]["state"] == "tracking"
+        )
 
         # uuv2 selected on uuv1's vehicle (as a tracker re-locking onto the other would): neither gives a fix, and
         # GPS_INPUT says no fix to both; uuv2 released again, uuv1's fixes come back
@@ -321,15 +451,29 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         box1 = _http(base + "/api/status")[1]["uuvs"]["uuv1"]["target"]["box"]
         code, answer = _http(base + "/api/select", {"uuv": "uuv2", "box": box1})
         assert code == 200 and answer["target"]["state"] == "tracking", answer
-        wait_for(lambda: all(len(run.fixes(i)) > 3 and {f["status"] for f in run.fixes(i)[-3:]} == {"same_vehicle"}
-                             for i in IDS), 10,
-                 lambda: f"both UUVs' fixes same_vehicle (last: {[[f['status'] for f in run.fixes(i)[-3:]] for i in IDS]})")
+        wait_for(
+            lambda: all(
+                len(run.fixes(i)) > 3
+                and {f["status"] for f in run.fixes(i)[-3:]} == {"same_vehicle"}
+                for i in IDS
+            ),
+            10,
+            lambda: (
+                f"both UUVs' fixes same_vehicle (last: {[[f['status'] for f in run.fixes(i)[-3:]] for i in IDS]})"
+            ),
+        )
         t_both = time.time()
-        wait_for(lambda: [g["fix_type"] for _, g in run.endpoints["uuv1"].received[-3:]] == [1, 1, 1], 10,
-                 "uuv1's GPS_INPUT no fix")
+        wait_for(
+            lambda: [g["fix_type"] for _, g in run.endpoints["uuv1"].received[-3:]] == [1, 1, 1],
+            10,
+            "uuv1's GPS_INPUT no fix",
+        )
         t_no_fix = time.time()
-        wait_for(lambda: all(sum(f["t_recv"] > t_no_fix for f in run.fixes(i)) >= 3 for i in IDS), 10,
-                 "both UUVs' fixes while on one vehicle")
+        wait_for(
+            lambda: all(sum(f["t_recv"] > t_no_fix for f in run.fixes(i)) >= 3 for i in IDS),
+            10,
+            "both UUVs' fixes while on one vehicle",
+        )
         t_parting = time.time()
         assert _http(base + "/api/release", {"uuv": "uuv2"})[0] == 200
         t_parted = time.time()
@@ -341,35 +485,64 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
                 page = browser.page
                 page.goto(base + "/")
                 page.wait_for_selector("#conn.ok", timeout=20_000)
-                wait_for(lambda: page.eval_on_selector("#uuvs tbody", "b => b.rows.length") == 2, 10,
-                         "a row per UUV")
-                wait_for(lambda: page.eval_on_selector("#video", "c => c.dataset.uuvs") == "uuv1:ok uuv2:released",
-                         10, "both UUVs on the video: uuv1 ok, uuv2 released")
+                wait_for(
+                    lambda: page.eval_on_selector("#uuvs tbody", "b => b.rows.length") == 2,
+                    10,
+                    "a row per UUV",
+                )
+                wait_for(
+                    lambda: (
+                        page.eval_on_selector("#video", "c => c.dataset.uuvs")
+                        == "uuv1:ok uuv2:released"
+                    ),
+                    10,
+                    "both UUVs on the video: uuv1 ok, uuv2 released",
+                )
                 rows = page.inner_text("#uuvs tbody")
-                assert re.search(r"uuv1\s+tracking.*\s+ok\s", rows) and re.search(r"uuv2\s+released", rows), rows
-                tracks = dict(t.split(":") for t in page.eval_on_selector("#map", "m => m.dataset.tracks").split())
+                assert re.search(r"uuv1\s+tracking.*\s+ok\s", rows) and re.search(
+                    r"uuv2\s+released", rows
+                ), rows
+                tracks = dict(
+                    t.split(":")
+                    for t in page.eval_on_selector("#map", "m => m.dataset.tracks").split()
+                )
                 assert set(tracks) == set(IDS) and all(int(n) > 0 for n in tracks.values()), tracks
                 health = page.inner_text("#health")
-                assert "uuv1 depth" in health and "uuv2 GPS_INPUT" in health and health.count("UAV MAVLink") == 1
+                assert (
+                    "uuv1 depth" in health
+                    and "uuv2 GPS_INPUT" in health
+                    and health.count("UAV MAVLink") == 1
+                )
                 browser.screenshot("6-two-uuvs-uuv2-released")
                 page.keyboard.press("2")
                 assert page.eval_on_selector("#uuv-pick", "p => p.dataset.selected") == "uuv2"
                 page.click("#acquire")
-                wait_for(lambda: page.inner_text("#cmd-result").startswith("uuv2 acquire: awaiting_target"), 10,
-                         "the page's acquire for uuv2")
+                wait_for(
+                    lambda: page.inner_text("#cmd-result").startswith(
+                        "uuv2 acquire: awaiting_target"
+                    ),
+                    10,
+                    "the page's acquire for uuv2",
+                )
                 assert page.inner_text("#target-state").startswith("uuv2 target")
                 assert not browser.errors, browser.errors
                 assert browser.outside == []
         run.finish()
     endpoints, fixes = run.endpoints, run.fixes
+
     # after the release (but while uuv2 was on uuv1's vehicle): uuv2 has no fix, uuv1 keeps fixing
     def released(t: float) -> bool:
         return t > t_released + 0.5 and not t_same <= t <= t_parted + 0.5
 
     after = {i: [f for f in fixes(i) if released(f["t_recv"])] for i in IDS}
-    assert {f["status"] for f in after["uuv2"]} <= {"released", "buffered", "awaiting_target"}, after["uuv2"][:3]
+    assert {f["status"] for f in after["uuv2"]} <= {"released", "buffered", "awaiting_target"}, (
+        after["uuv2"][:3]
+    )
     ok1 = [f for f in after["uuv1"] if f["status"] == "ok"]
-    assert len(after["uuv2"]) >= 30 and len(ok1) >= 0.8 * len(after["uuv1"]) >= 30, (len(ok1), len(after["uuv1"]))
+    assert len(after["uuv2"]) >= 30 and len(ok1) >= 0.8 * len(after["uuv1"]) >= 30, (
+        len(ok1),
+        len(after["uuv1"]),
+    )
     gps2 = [g for t, g in endpoints["uuv2"].received if t > t_released + 0.5]
     assert gps2 and all(g["fix_type"] == 1 for g in gps2), {g["fix_type"] for g in gps2}
     gps1 = [g for t, g in endpoints["uuv1"].received if t_released + 0.5 < t < t_same]
@@ -377,6 +550,10 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
     # both on one vehicle: from the first same_vehicle on, no fix and no valid GPS_INPUT for either until parted
     same = {i: [f["status"] for f in fixes(i) if t_both <= f["t_recv"] <= t_parting] for i in IDS}
     assert all(same[i] and set(same[i]) == {"same_vehicle"} for i in IDS), same
-    assert all(g["fix_type"] == 1 for t, g in endpoints["uuv1"].received if t_no_fix <= t <= t_parting)
-    print(f"page: released uuv2; after it uuv1 {len(ok1)}/{len(after['uuv1'])} ok fixes, uuv2 "
-          f"{len(after['uuv2'])} fixes, none ok; browser {'checked' if browser_checked else 'not available'}")
+    assert all(
+        g["fix_type"] == 1 for t, g in endpoints["uuv1"].received if t_no_fix <= t <= t_parting
+    )
+    print(
+        f"page: released uuv2; after it uuv1 {len(ok1)}/{len(after['uuv1'])} ok fixes, uuv2 "
+        f"{len(after['uuv2'])} fixes, none ok; browser {'checked' if browser_checked else 'not available'}"
+    )

@@ -204,8 +204,12 @@ def rot(axis, deg_):
 Z, Y, X = 2, 1, 0
 
 
-@pytest.mark.parametrize("rel_yaw_deg, vehicle_yaw_deg", [(52.3, 20.0), (-130.0, 175.0), (0.0, -90.0)])
-def test_commanded_nadir_vehicle_frame_gimbal(make_cal, make_telemetry, rel_yaw_deg, vehicle_yaw_deg):
+@pytest.mark.parametrize(
+    "rel_yaw_deg, vehicle_yaw_deg", [(52.3, 20.0), (-130.0, 175.0), (0.0, -90.0)]
+)
+def test_commanded_nadir_vehicle_frame_gimbal(
+    make_cal, make_telemetry, rel_yaw_deg, vehicle_yaw_deg
+):
     """Pitch exactly −90° with yaw relative to the vehicle (flags 44, as ArduCopter sends it), float32 on the
     wire: the image is turned by vehicle yaw + relative yaw; built here as Rz(ψ_v)·Rz(ψ_rel)·Ry(−90°)."""
     q = _f32(euler_to_quat(0.0, math.radians(-90.0), math.radians(rel_yaw_deg)))
@@ -218,7 +222,9 @@ def test_commanded_nadir_vehicle_frame_gimbal(make_cal, make_telemetry, rel_yaw_
     assert np.allclose(pose.R_ned_from_cv[0][:, 2], [0.0, 0.0, 1.0], atol=1e-7)  # straight down
     h = math.radians(vehicle_yaw_deg + rel_yaw_deg)
     assert np.allclose(image_right(pose), [-math.sin(h), math.cos(h), 0.0], atol=1e-6)
-    assert np.allclose(pose.R_ned_from_cv[0], R_expected @ np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0.0]]), atol=1e-6)
+    assert np.allclose(
+        pose.R_ned_from_cv[0], R_expected @ np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0.0]]), atol=1e-6
+    )
 
 
 def test_facts_quaternion_keeps_its_yaw(make_cal, make_telemetry):
@@ -249,7 +255,9 @@ def test_earth_frame_nadir_ignores_vehicle_yaw(make_cal, make_telemetry):
 
 
 @pytest.mark.parametrize("roll_pitch, param", [("body", None), ("auto", 1.0)])
-def test_servo_mount_roll_pitch_are_relative_to_the_leaning_body(make_cal, make_telemetry, roll_pitch, param):
+def test_servo_mount_roll_pitch_are_relative_to_the_leaning_body(
+    make_cal, make_telemetry, roll_pitch, param
+):
     """ArduPilot's servo mount (MNT1_TYPE 1) reports servo demands: target − lean, flagged as horizon-relative.
     The vehicle leans 15° right and 10° nose down; the camera is truly at pitch −60° from the horizon, yaw 0
     relative to the vehicle heading 30°. Built here as R_body · R(servo angles)."""
@@ -268,7 +276,9 @@ def test_servo_mount_roll_pitch_are_relative_to_the_leaning_body(make_cal, make_
     R_cam = R_body @ rot(Z, servo[2]) @ rot(Y, servo[1]) @ rot(X, servo[0])
     assert np.allclose(optical_axis(pose), R_cam[:, 0], atol=1e-6)
     # read as horizon-relative (the flags' word), the same message would point elsewhere
-    horizon = pose_of(make_cal(mount={"attitude_source": "gimbal_device", "gimbal_roll_pitch": "horizon"}), tel)
+    horizon = pose_of(
+        make_cal(mount={"attitude_source": "gimbal_device", "gimbal_roll_pitch": "horizon"}), tel
+    )
     miss = math.degrees(math.acos(np.clip(optical_axis(horizon) @ optical_axis(pose), -1, 1)))
     assert miss > 10.0
 

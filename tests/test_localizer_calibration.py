@@ -25,7 +25,11 @@ def test_spec_example_parses(cal_dict):
     assert cal.water.takeoff_height_above_surface_m == 2.10 and cal.water.surface_amsl_m is None
     assert cal.init_bbox == (912, 508, 96, 64) and cal.init_t is None
     assert cal.sigmas == Sigmas() and cal.timing == Timing()
-    assert (cal.uuv.length_m, cal.uuv.width_m, cal.uuv.height_m) == (0.457, 0.338, 0.254)  # a BlueROV2
+    assert (cal.uuv.length_m, cal.uuv.width_m, cal.uuv.height_m) == (
+        0.457,
+        0.338,
+        0.254,
+    )  # a BlueROV2
 
 
 def test_optional_tables(cal_dict):
@@ -99,7 +103,11 @@ BAD = [
     ("timing", {"attitude_gap_s": 0}, "timing.attitude_gap_s = 0"),
     ("uuv", {"length_m": 0.0}, "uuv.length_m = 0.0: must be ≥ 0.05"),
     ("uuv", {"width_m": "0.34"}, "uuv.width_m = '0.34'"),
-    ("uuv", {"height": 0.25}, "uuv.height = 0.25: unknown key (known: height_m, length_m, width_m)"),
+    (
+        "uuv",
+        {"height": 0.25},
+        "uuv.height = 0.25: unknown key (known: height_m, length_m, width_m)",
+    ),
 ]
 
 

@@ -17,7 +17,9 @@ def test_least_delay_offset_and_its_window():
         c.add(100.0 + i, off + 100.0 + i + d)
     assert c.offset_s == pytest.approx(off + 0.021, abs=1e-9)
     assert float(c.to_arrival(102.5)) == pytest.approx(off + 102.521, abs=1e-9)
-    for i in range(20):  # 20 s later the 21 ms sample has left the window: the least delay now is 40 ms
+    for i in range(
+        20
+    ):  # 20 s later the 21 ms sample has left the window: the least delay now is 40 ms
         c.add(110.0 + i, off + 110.0 + i + 0.040 + 0.01 * (i % 3))
     assert c.offset_s == pytest.approx(off + 0.040, abs=1e-9)
     assert c.segments == 0
@@ -48,7 +50,9 @@ def test_reboot_and_station_clock_step_start_new_segments():
     assert [c.add(2.0 + 0.1 * i, 2003.02 + 0.1 * i) for i in range(4)] == [OUTLIER] * 3 + [RESTART]
     assert c.segments == 1 and c.last_restart == (pytest.approx(600.95), 2.0)
     assert c.offset_s == pytest.approx(2001.02)
-    assert c.add(3.0, 1990.0) == RESTART  # the station clock stepped back 13 s (NTP): our own clock, at once
+    assert (
+        c.add(3.0, 1990.0) == RESTART
+    )  # the station clock stepped back 13 s (NTP): our own clock, at once
     assert c.segments == 2 and c.offset_s == pytest.approx(1987.0)
 
 
@@ -82,7 +86,10 @@ def test_a_clock_that_steps_ahead_is_followed_after_confirmation():
     c = ClockMap(early_s=0.25, confirm=3, confirm_s=0.25)
     for i in range(10):
         assert c.add(1000.0 + 0.1 * i, 5000.0 + 0.1 * i) == OK
-    assert [c.add(1041.0 + 0.1 * i, 5001.0 + 0.1 * i) for i in range(5)] == [OUTLIER] * 3 + [STEP, OK]
+    assert [c.add(1041.0 + 0.1 * i, 5001.0 + 0.1 * i) for i in range(5)] == [OUTLIER] * 3 + [
+        STEP,
+        OK,
+    ]
     assert c.offset_s == pytest.approx(3960.0) and c.segments == 0
 
 
@@ -98,9 +105,13 @@ def test_one_way_delay_from_the_least_delays_each_way():
         sent = 1_700_000_100.0 + i
         remote = sent + up - station_minus_boot  # the autopilot's boot clock at receipt
         assert rt.add(remote, sent, sent + up + dn)
-        down.add(remote + 0.5, remote + 0.5 + station_minus_boot + dn)  # a message it sends 0.5 s later
+        down.add(
+            remote + 0.5, remote + 0.5 + station_minus_boot + dn
+        )  # a message it sends 0.5 s later
     assert rt.round_trip_s == pytest.approx(0.06)  # the fastest exchange: 20 ms up but 40 ms down
-    assert rt.one_way_delay_s(down) == pytest.approx(0.02, abs=1e-6)  # float64 UNIX seconds: ~0.2 µs
+    assert rt.one_way_delay_s(down) == pytest.approx(
+        0.02, abs=1e-6
+    )  # float64 UNIX seconds: ~0.2 µs
     assert not rt.add(5.0, 100.0, 99.0)  # came back before it left
     assert not rt.add(5.0, 100.0, 103.0)  # 3 s round trip: not an answer to this request
     assert rt.exchanges == 4

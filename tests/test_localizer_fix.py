@@ -144,23 +144,40 @@ def test_heights_above_the_ellipsoid_follow_gps_raw_int(make_cal, make_telemetry
     tel = make_telemetry(depth_m=2.0, alt_amsl_m=412.0)
     without = fix_at_principal_point(cal, tel)
     assert without.status == "ok" and math.isnan(without.alt_ellipsoid_m)
-    for i in range(40):  # GPS_RAW_INT at 10 Hz over the telemetry's span: alt_ellipsoid 47.25 m above alt
+    for i in range(
+        40
+    ):  # GPS_RAW_INT at 10 Hz over the telemetry's span: alt_ellipsoid 47.25 m above alt
         tel.add_gps_raw(0, 3, 412.0, 0.8, 1.6, 0.9, 1.3, 47.25, T0_UNIX + i * 0.1)
     f = fix_at_principal_point(cal, tel)
-    assert f.alt_amsl_m == pytest.approx(412.0 - 30.0 - 2.0)  # the UUV: the UAV's alt − height − depth
+    assert f.alt_amsl_m == pytest.approx(
+        412.0 - 30.0 - 2.0
+    )  # the UUV: the UAV's alt − height − depth
     assert f.alt_ellipsoid_m == pytest.approx(f.alt_amsl_m + 47.25)
 
 
 def test_the_trackers_pixel_sigma_goes_into_the_fix(make_cal, make_telemetry):
     """A pixel's own 1-sigma (the tracker's) is the fix's sigma_pixel_px and its share of h_acc; a pixel without
     one (NaN, or none given) takes the calibration's [uncertainty] pixel_px; no pixel, no pixel sigma."""
-    cal = make_cal(uncertainty={"pixel_px": 2.0, "tilt_deg": 0.0, "yaw_deg": 0.0, "height_m": 0.0,
-                                "baro_drift_10min_m": 0.0, "depth_m": 0.0, "time_s": 0.0, "uav_horizontal_m": 0.0})
+    cal = make_cal(
+        uncertainty={
+            "pixel_px": 2.0,
+            "tilt_deg": 0.0,
+            "yaw_deg": 0.0,
+            "height_m": 0.0,
+            "baro_drift_10min_m": 0.0,
+            "depth_m": 0.0,
+            "time_s": 0.0,
+            "uav_horizontal_m": 0.0,
+        }
+    )
     pose = camera_pose(cal, make_telemetry(), [T0_UNIX + 1.0] * 4)
     u, v = [700.0, 700.0, 700.0, np.nan], [400.0] * 4
     fixes = locate(cal, pose, u, v, sigma_px=[1.0, 4.0, np.nan, 3.0])
-    assert np.allclose(fixes.sigma_pixel_px[:3], [1.0, 4.0, 2.0]) and np.isnan(fixes.sigma_pixel_px[3])
+    assert np.allclose(fixes.sigma_pixel_px[:3], [1.0, 4.0, 2.0]) and np.isnan(
+        fixes.sigma_pixel_px[3]
+    )
     # with every other input exact, h_acc is the pixel's share alone: linear in its sigma
-    assert fixes.h_acc_m[1] == pytest.approx(4.0 * fixes.h_acc_m[0]) and fixes.h_acc_m[2] == pytest.approx(
-        2.0 * fixes.h_acc_m[0])
+    assert fixes.h_acc_m[1] == pytest.approx(4.0 * fixes.h_acc_m[0]) and fixes.h_acc_m[
+        2
+    ] == pytest.approx(2.0 * fixes.h_acc_m[0])
     assert np.allclose(locate(cal, pose, u, v).sigma_pixel_px[:3], 2.0)

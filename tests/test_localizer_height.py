@@ -34,14 +34,27 @@ TAKEOFF = 1.5  # the take-off point above the water
 
 def cal(amsl=False, **uncertainty):
     water = {"surface_amsl_m": SURFACE} if amsl else {"takeoff_height_above_surface_m": TAKEOFF}
-    return Calibration.from_dict({
-        "camera": {"width": 1920, "height": 1080, "fx": 1664.0, "fy": 1664.0, "cx": 959.5, "cy": 539.5,
-                   "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]},
-        "mount": {"attitude_source": "fixed", "fixed_rpy_deg": [0.0, -90.0, 0.0]},
-        "water": water, "uncertainty": uncertainty})
+    return Calibration.from_dict(
+        {
+            "camera": {
+                "width": 1920,
+                "height": 1080,
+                "fx": 1664.0,
+                "fy": 1664.0,
+                "cx": 959.5,
+                "cy": 539.5,
+                "distortion": [0.0, 0.0, 0.0, 0.0, 0.0],
+            },
+            "mount": {"attitude_source": "fixed", "fixed_rpy_deg": [0.0, -90.0, 0.0]},
+            "water": water,
+            "uncertainty": uncertainty,
+        }
+    )
 
 
-def telemetry(duration_s=20.0, ekf_error=lambda tau: 0.0, keep_s=None, rate_hz=10.0, roll=0.0, pitch=0.0):
+def telemetry(
+    duration_s=20.0, ekf_error=lambda tau: 0.0, keep_s=None, rate_hz=10.0, roll=0.0, pitch=0.0
+):
     """ATTITUDE and GLOBAL_POSITION_INT from T0 (received the instant they are sampled): the EKF's heights are
     the true ones plus ``ekf_error(tau)`` (both alt and relative_alt, as a barometer's drift)."""
     tel = Telemetry(keep_s=keep_s)
@@ -55,13 +68,17 @@ def feed(tel, tau0, tau1, ekf_error=lambda tau: 0.0, rate_hz=10.0, roll=0.0, pit
         t, ms = T0 + tau, round((BOOT0_S + tau) * 1000)
         err = ekf_error(tau)
         tel.add_attitude(ms, roll, pitch, 0.0, (0.0, 0.0, 0.0), t)
-        tel.add_position(ms, 47.0, 8.0, SURFACE + TRUE_H + err, TRUE_H - TAKEOFF + err, (0.0, 0.0, 0.0), t)
+        tel.add_position(
+            ms, 47.0, 8.0, SURFACE + TRUE_H + err, TRUE_H - TAKEOFF + err, (0.0, 0.0, 0.0), t
+        )
 
 
 def gps(tel, tau, alt, v_acc=0.0, fix=3, vdop=math.nan):
     """A GPS_RAW_INT at T0 + tau (its time since boot, as ArduPilot stamps it)."""
     t = T0 + tau
-    assert tel.add_gps_raw(round((BOOT0_S + tau) * 1e6), fix, alt, 0.0, v_acc, math.nan, vdop, math.nan, t)
+    assert tel.add_gps_raw(
+        round((BOOT0_S + tau) * 1e6), fix, alt, 0.0, v_acc, math.nan, vdop, math.nan, t
+    )
 
 
 def at(c, tel, tau):
@@ -72,13 +89,19 @@ def at(c, tel, tau):
 def walk(seconds, c):
     """The variance of the barometer's drift ``seconds`` after its reference, as the model states it: a rate of
     autocovariance σ²·exp(−|u − v|/τ) integrated over [0, T]², σ such that 10 minutes give baro_drift_10min_m."""
-    def integral(T):  # ∫∫ exp(−|u − v|/τ) du dv over [0, T]²
-        return 2.0 * DRIFT_RATE_TAU_S * (T - DRIFT_RATE_TAU_S * (1.0 - math.exp(-T / DRIFT_RATE_TAU_S)))
 
-    return c.sigmas.baro_drift_10min_m ** 2 * integral(seconds) / integral(DRIFT_REFERENCE_S)
+    def integral(T):  # ∫∫ exp(−|u − v|/τ) du dv over [0, T]²
+        return (
+            2.0
+            * DRIFT_RATE_TAU_S
+            * (T - DRIFT_RATE_TAU_S * (1.0 - math.exp(-T / DRIFT_RATE_TAU_S)))
+        )
+
+    return c.sigmas.baro_drift_10min_m**2 * integral(seconds) / integral(DRIFT_REFERENCE_S)
 
 
 # --- conversions --------------------------------------------------------------------------------------
+
 
 def test_a_tilted_rangefinder_reads_long():
     """Looking down the body's z axis: the slant range times cos(roll)·cos(pitch) (that axis's down component)."""
@@ -92,7 +115,9 @@ def test_a_tilted_rangefinder_reads_long():
 def test_gnss_sigmas_follow_what_the_receiver_says():
     assert gnss.horizontal_sigma_m(3, 0.9, 1.2) == 0.9  # h_acc given: the receiver's own
     assert gnss.horizontal_sigma_m(3, math.nan, 1.2) == pytest.approx(1.2 * 1.8)  # HDOP × UERE(3D)
-    assert gnss.horizontal_sigma_m(6, math.nan, math.nan) == pytest.approx(0.012)  # RTK fixed, HDOP unknown: 1
+    assert gnss.horizontal_sigma_m(6, math.nan, math.nan) == pytest.approx(
+        0.012
+    )  # RTK fixed, HDOP unknown: 1
     assert gnss.horizontal_sigma_m(4, math.nan, 0.8) == pytest.approx(0.8 * 1.2)
     assert math.isnan(gnss.horizontal_sigma_m(1, math.nan, 0.8))  # no fix
     assert gnss.vertical_sigma_m(3, 2.2, 1.0) == 2.2
@@ -104,13 +129,16 @@ def test_gnss_sigmas_follow_what_the_receiver_says():
 def test_the_uavs_horizontal_sigma_in_the_pose_follows_gps_raw_int():
     c, tel = cal(), telemetry(duration_s=3.0)
     times = T0 + np.array([1.0, 2.0])
-    assert np.allclose(camera_pose(c, tel, times).sigma_uav_m, 1.5)  # no GPS_RAW_INT: a plain GNSS assumed
+    assert np.allclose(
+        camera_pose(c, tel, times).sigma_uav_m, 1.5
+    )  # no GPS_RAW_INT: a plain GNSS assumed
     for k in range(30):  # a DOP-only receiver (h_acc 0): HDOP 0.9 × the 3D fix's 1.8 m
         tel.add_gps_raw(0, 3, SURFACE + TRUE_H, 0.0, 0.0, 0.9, 1.4, math.nan, T0 + k * 0.1)
     assert np.allclose(camera_pose(c, tel, times).sigma_uav_m, 0.9 * 1.8)
 
 
 # --- the barometer alone ---------------------------------------------------------------------------------
+
 
 def test_without_measurements_the_sigma_grows_from_the_reference():
     """No GNSS altitude, no rangefinder: height_m when the reference was set (the boot: no arming seen), then the
@@ -119,22 +147,25 @@ def test_without_measurements_the_sigma_grows_from_the_reference():
     bias, sigma, source = at(c, tel, [0.0, 10.0])
     assert np.all(bias == 0.0) and set(source) == {"takeoff"}
     for tau, s in zip((0.0, 10.0), sigma):
-        assert s == pytest.approx(math.sqrt(0.3 ** 2 + walk(BOOT0_S + tau, c)), rel=1e-9)
+        assert s == pytest.approx(math.sqrt(0.3**2 + walk(BOOT0_S + tau, c)), rel=1e-9)
     # an arming seen in the HEARTBEATs sets the take-off reference again (ArduPilot sets home then)
     tel.add_heartbeat(False, T0 + 1.0)
     tel.add_heartbeat(True, T0 + 2.0)
     _, sigma, _ = at(c, tel, [1.5, 2.0, 12.0])
-    assert sigma[0] == pytest.approx(math.sqrt(0.3 ** 2 + walk(BOOT0_S + 1.5, c)), rel=1e-9)
+    assert sigma[0] == pytest.approx(math.sqrt(0.3**2 + walk(BOOT0_S + 1.5, c)), rel=1e-9)
     assert sigma[1] == pytest.approx(0.3, rel=1e-9)
-    assert sigma[2] == pytest.approx(math.sqrt(0.3 ** 2 + walk(10.0, c)), rel=1e-9)
+    assert sigma[2] == pytest.approx(math.sqrt(0.3**2 + walk(10.0, c)), rel=1e-9)
     # the amsl reference (the EKF origin's, at boot) does not move at arming; the water level's sigma adds
     ca = cal(amsl=True, surface_amsl_m=0.2)
     _, sigma, source = at(ca, tel, [12.0])
-    assert sigma[0] == pytest.approx(math.sqrt(0.3 ** 2 + 0.2 ** 2 + walk(BOOT0_S + 12.0, ca)), rel=1e-9)
+    assert sigma[0] == pytest.approx(
+        math.sqrt(0.3**2 + 0.2**2 + walk(BOOT0_S + 12.0, ca)), rel=1e-9
+    )
     assert source[0] == "amsl"
 
 
 # --- GNSS altitudes ----------------------------------------------------------------------------------------
+
 
 def test_one_rtk_altitude_with_a_known_water_level_is_a_kalman_update():
     """amsl reference: an RTK altitude measures the EKF altitude's error e (z = g − e); the height's error
@@ -143,11 +174,11 @@ def test_one_rtk_altitude_with_a_known_water_level_is_a_kalman_update():
     tel = telemetry(ekf_error=lambda tau: 1.0)  # the barometer reads 1 m high
     gps(tel, 5.0, SURFACE + TRUE_H, v_acc=0.02, fix=6)
     bias, sigma, source = at(ca, tel, 5.0)
-    pe = 0.3 ** 2 + walk(BOOT0_S + 5.0, ca)  # the prior of e at that time
-    pg, r = (1 - GNSS_WHITE ** 2) * 0.02 ** 2, (GNSS_WHITE * 0.02) ** 2 + 1e-6
+    pe = 0.3**2 + walk(BOOT0_S + 5.0, ca)  # the prior of e at that time
+    pg, r = (1 - GNSS_WHITE**2) * 0.02**2, (GNSS_WHITE * 0.02) ** 2 + 1e-6
     z = -1.0  # GNSS altitude − EKF altitude
     assert bias[0] == pytest.approx(-z * pe / (pe + pg + r), rel=1e-9)
-    assert sigma[0] == pytest.approx(math.sqrt(0.01 ** 2 + pe * (pg + r) / (pe + pg + r)), rel=1e-9)
+    assert sigma[0] == pytest.approx(math.sqrt(0.01**2 + pe * (pg + r) / (pe + pg + r)), rel=1e-9)
     assert source[0] == "gnss_rtk"
 
 
@@ -172,7 +203,9 @@ def test_take_off_reference_follows_the_gnss_trend_not_its_offset():
     bias, sigma, source = at(c, tel, [0.0, 299.0])
     assert bias[0] == pytest.approx(0.0, abs=0.01)
     assert bias[1] == pytest.approx(0.5, abs=0.06)
-    assert sigma[1] > 0.3 and set(source) == {"baro+gnss"}  # the take-off height's own 0.3 m stays unknown
+    assert sigma[1] > 0.3 and set(source) == {
+        "baro+gnss"
+    }  # the take-off height's own 0.3 m stays unknown
 
 
 @pytest.mark.parametrize("amsl", [False, True])
@@ -189,19 +222,26 @@ def test_a_white_rtk_noise_does_not_move_the_height_and_a_drift_is_followed(amsl
     tau = np.arange(20.0, 120.0, 0.2)  # one answer between each two GNSS altitudes
     bias, sigma, source = at(c, tel, tau)
     err = bias - drift(tau)
-    assert np.sqrt(np.mean(np.diff(err) ** 2)) < 0.003  # was 2.1 cm: the height followed each message's noise
-    assert np.sqrt(np.mean(err ** 2)) < 0.01 and np.abs(err).max() < 0.03  # was 1.7 cm RMS: worse than one message
+    assert (
+        np.sqrt(np.mean(np.diff(err) ** 2)) < 0.003
+    )  # was 2.1 cm: the height followed each message's noise
+    assert (
+        np.sqrt(np.mean(err**2)) < 0.01 and np.abs(err).max() < 0.03
+    )  # was 1.7 cm RMS: worse than one message
     assert np.mean(np.abs(err) <= 2 * sigma) >= 0.95
     assert set(source) == {"gnss_rtk" if amsl else "baro+gnss_rtk"}
 
 
 # --- absolute heights and the cross-check --------------------------------------------------------------
 
+
 def test_one_absolute_height_is_a_kalman_update():
     c, tel = cal(), telemetry()
-    assert tel.add_height("size", T0 + 4.0, TRUE_H - 0.8, 0.2)  # the EKF reads 0.8 m high by this measurement
+    assert tel.add_height(
+        "size", T0 + 4.0, TRUE_H - 0.8, 0.2
+    )  # the EKF reads 0.8 m high by this measurement
     bias, sigma, source = at(c, tel, [3.9, 4.0])
-    pb = 0.3 ** 2 + walk(BOOT0_S + 4.0, c)
+    pb = 0.3**2 + walk(BOOT0_S + 4.0, c)
     assert bias[0] == 0.0 and source[0] == "takeoff"  # causal: not before its time
     assert bias[1] == pytest.approx(0.8 * pb / (pb + 0.04), rel=1e-9)
     assert sigma[1] == pytest.approx(math.sqrt(pb * 0.04 / (pb + 0.04)), rel=1e-9)
@@ -217,15 +257,25 @@ def test_a_source_that_disagrees_is_not_used_and_widens_the_sigma():
     for k, off in enumerate((6.0, 6.1, 4.0, 4.1)):  # metres below what the EKF says: 6σ, 6σ, 4σ, 4σ
         assert tel.add_height("rangefinder", T0 + 1.0 + k, TRUE_H + off, 0.01)
     bias, sigma, source = at(c, tel, [4.5, 4.0 + CONFLICT_HOLD_S + 0.5])
-    assert bias[0] == 0.0 and source[0] == "takeoff"  # none used: 4σ is inside the gate, not within 3σ
+    assert (
+        bias[0] == 0.0 and source[0] == "takeoff"
+    )  # none used: 4σ is inside the gate, not within 3σ
     assert sigma[0] == pytest.approx(math.hypot(1.0, 4.1 / 2))
-    assert sigma[1] == pytest.approx(1.0)  # the disagreement counts until CONFLICT_HOLD_S after its last reading
+    assert sigma[1] == pytest.approx(
+        1.0
+    )  # the disagreement counts until CONFLICT_HOLD_S after its last reading
     notices = take_notices(tel)
-    assert len(notices) == 1 and "rangefinder gives 24.00" in notices[0] and "4.0 sigma apart" in notices[0]
+    assert (
+        len(notices) == 1
+        and "rangefinder gives 24.00" in notices[0]
+        and "4.0 sigma apart" in notices[0]
+    )
     assert tel.add_height("rangefinder", T0 + 20.0, TRUE_H + 2.0, 0.01)  # 2σ: agrees again, used
     bias, _, source = at(c, tel, 20.0)
     assert bias[0] == pytest.approx(-2.0, abs=1e-3) and source[0] == "rangefinder"
-    assert take_notices(tel) == ["height: rangefinder agrees with the estimate again (2.0 sigma): used"]
+    assert take_notices(tel) == [
+        "height: rangefinder agrees with the estimate again (2.0 sigma): used"
+    ]
     # a fresh estimator takes the 4σ reading at once
     tel2 = telemetry(duration_s=10.0)
     tel2.add_height("rangefinder", T0 + 1.0, TRUE_H + 4.0, 0.01)
@@ -239,7 +289,9 @@ def test_one_glitch_is_refused_quietly():
     for k, off in enumerate((0.0, 20.0, 0.0)):
         tel.add_height("rangefinder", T0 + 1.0 + k, TRUE_H + off, 0.01)
     bias, sigma, _ = at(c, tel, [2.5, 3.5])
-    assert sigma[0] < 0.01 and bias[1] == pytest.approx(0.0, abs=1e-6)  # not widened; the next one used
+    assert sigma[0] < 0.01 and bias[1] == pytest.approx(
+        0.0, abs=1e-6
+    )  # not widened; the next one used
     assert take_notices(tel) == []
 
 
@@ -295,7 +347,9 @@ def test_status_says_what_measured_the_height():
     assert at(c, tel, 20.0)[1][0] > 4.5
     assert s["ekf_height_m"] == pytest.approx(TRUE_H) and s["source"] == "rangefinder"
     rf = s["sources"]["rangefinder"]
-    assert (rf["used"], rf["refused"]) == (1, 3) and rf["disagrees_m"] == pytest.approx(-9.0, abs=0.01)
+    assert (rf["used"], rf["refused"]) == (1, 3) and rf["disagrees_m"] == pytest.approx(
+        -9.0, abs=0.01
+    )
 
 
 def test_a_copy_of_the_telemetry_goes_its_own_way():

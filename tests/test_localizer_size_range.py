@@ -32,9 +32,18 @@ from sim_fixtures.geometry import SimCamera, matrix_zyx, project, surface_crossi
 N_WATER = 1.34
 UUV = Uuv(0.46, 0.34, 0.25)
 SIM = SimCamera(1280, 720, 1065.0, 1062.0, 641.3, 357.8, (-0.12, 0.08, 0.0004, -0.0002, -0.01))
-CAMERA = Camera(width=SIM.width, height=SIM.height, fx=SIM.fx, fy=SIM.fy, cx=SIM.cx, cy=SIM.cy,
-                distortion=SIM.dist.ravel().tolist())
-R_GIMBAL_FROM_CV = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # cv z (optical axis) = gimbal x
+CAMERA = Camera(
+    width=SIM.width,
+    height=SIM.height,
+    fx=SIM.fx,
+    fy=SIM.fy,
+    cx=SIM.cx,
+    cy=SIM.cy,
+    distortion=SIM.dist.ravel().tolist(),
+)
+R_GIMBAL_FROM_CV = np.array(
+    [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+)  # cv z (optical axis) = gimbal x
 
 
 def _sim_corners(R, camera_ned, top_ned, heading_rad):
@@ -48,16 +57,26 @@ def _sim_corners(R, camera_ned, top_ned, heading_rad):
     pts = np.array(pts)
     under = pts[:, 2] > 0
     seen = pts.copy()
-    seen[under] = surface_crossing(camera_ned, pts[under], N_WATER)  # what the camera sees of a submerged point
+    seen[under] = surface_crossing(
+        camera_ned, pts[under], N_WATER
+    )  # what the camera sees of a submerged point
     return np.stack(project(SIM, R, camera_ned, seen), axis=-1)
 
 
-@pytest.mark.parametrize("pitch_deg, yaw_deg, depth_m, heading_deg", [
-    (-90.0, 0.0, 1.5, 20.0),  # nadir, 1.5 m deep
-    (-58.0, 35.0, 0.1, 120.0),  # 32° off nadir, near the surface
-    (-65.0, 200.0, 2.2, -60.0),
-    (-60.0, 80.0, -0.1, 45.0),  # the top face 10 cm above the water: straight rays to the top, refracted below
-])
+@pytest.mark.parametrize(
+    "pitch_deg, yaw_deg, depth_m, heading_deg",
+    [
+        (-90.0, 0.0, 1.5, 20.0),  # nadir, 1.5 m deep
+        (-58.0, 35.0, 0.1, 120.0),  # 32° off nadir, near the surface
+        (-65.0, 200.0, 2.2, -60.0),
+        (
+            -60.0,
+            80.0,
+            -0.1,
+            45.0,
+        ),  # the top face 10 cm above the water: straight rays to the top, refracted below
+    ],
+)
 def test_corners_match_the_simulators_projection(pitch_deg, yaw_deg, depth_m, heading_deg):
     R = matrix_zyx(0.02, math.radians(pitch_deg), math.radians(yaw_deg)) @ R_GIMBAL_FROM_CV
     camera_ned = np.array([3.0, -2.0, -11.5])
@@ -87,7 +106,9 @@ def test_corners_batch_over_heights_and_headings():
 
 def test_outline_of_a_square_with_points_inside_turns_its_normals_outwards():
     square = np.array([[10.0, 10.0], [30.0, 10.0], [30.0, 30.0], [10.0, 30.0]])
-    pts = np.vstack([[20.0, 20.0], square[2], [15.0, 25.0], square[0], square[3], [29.0, 11.0], square[1]])
+    pts = np.vstack(
+        [[20.0, 20.0], square[2], [15.0, 25.0], square[0], square[3], [29.0, 11.0], square[1]]
+    )
     hull = outline(pts)
     assert sorted(hull) == [1, 3, 4, 6]
     for k, i in enumerate(hull):
@@ -95,7 +116,9 @@ def test_outline_of_a_square_with_points_inside_turns_its_normals_outwards():
         e = pts[j] - pts[i]
         normal = np.array([e[1], -e[0]]) / np.hypot(*e)
         mid = (pts[i] + pts[j]) / 2
-        assert np.hypot(*(mid + normal - (20, 20))) > np.hypot(*(mid - (20, 20)))  # away from the centre
+        assert np.hypot(*(mid + normal - (20, 20))) > np.hypot(
+            *(mid - (20, 20))
+        )  # away from the centre
     assert polygon_area(pts[hull]) == pytest.approx(400.0)
     assert polygon_area(pts[hull][::-1]) == pytest.approx(400.0)
 
@@ -107,7 +130,9 @@ def test_edge_points_leave_out_the_corners_and_follow_moved_corners():
     assert len(pts.xy) == 4 * 8  # 7 px of each 10 px edge, a point every pixel
     along_edge = np.sum(np.abs(pts.normal) * np.abs(pts.xy - 5.0), axis=1)
     assert np.allclose(along_edge, 5.0)  # on the edges
-    assert np.all(np.abs(pts.xy - 5.0).min(axis=1) <= 3.5 + 1e-9)  # at most 3.5 px from an edge's middle
+    assert np.all(
+        np.abs(pts.xy - 5.0).min(axis=1) <= 3.5 + 1e-9
+    )  # at most 3.5 px from an edge's middle
     assert np.allclose(pts.moved(square), pts.xy)
     assert np.allclose(pts.moved(square + (2.0, -1.0)), pts.xy + (2.0, -1.0))
     assert np.allclose(pts.moved(square * 2.0), pts.xy * 2.0)
@@ -115,8 +140,18 @@ def test_edge_points_leave_out_the_corners_and_follow_moved_corners():
 
 
 def test_size_height_adds_the_errors_all_frames_share():
-    h = size_height(t_unix=5.0, camera_height_m=10.0, sigma_fit_m=0.03, size_px=50.0, camera_below_m=0.2,
-                    configured_m=11.0, configured_sigma_m=0.3, depth_m=0.5, sigma_depth_m=0.05, n_water=1.34)
+    h = size_height(
+        t_unix=5.0,
+        camera_height_m=10.0,
+        sigma_fit_m=0.03,
+        size_px=50.0,
+        camera_below_m=0.2,
+        configured_m=11.0,
+        configured_sigma_m=0.3,
+        depth_m=0.5,
+        sigma_depth_m=0.05,
+        n_water=1.34,
+    )
     # hand-worked: range 10 + 0.5/1.34; relative sqrt(0.005² + (2·0.1/50)²); depth 0.05/1.34
     range_m = 10.0 + 0.5 / 1.34
     relative = math.sqrt(SIZE_SIGMA**2 + (2 * EDGE_BIAS_PX / 50.0) ** 2)
@@ -124,11 +159,15 @@ def test_size_height_adds_the_errors_all_frames_share():
     assert h.sigma_common_m == pytest.approx(math.hypot(range_m * relative, 0.05 / 1.34))
     assert h.sigma_total_m == pytest.approx(math.hypot(0.03, h.sigma_common_m))
     assert h.bias_m == pytest.approx(0.8)
-    above = size_height(5.0, 10.0, 0.03, 50.0, 0.2, 11.0, 0.3, -0.1, 0.05, 1.34)  # top face out of the water
+    above = size_height(
+        5.0, 10.0, 0.03, 50.0, 0.2, 11.0, 0.3, -0.1, 0.05, 1.34
+    )  # top face out of the water
     assert above.sigma_common_m == pytest.approx(math.hypot(10.0 * relative, 0.05 / 1.34))
 
 
-def _measurements(rng, bias, n=300, hz=10.0, sigma=0.1, common=0.05, rho=0.0, outliers=0.0, depth=1.0):
+def _measurements(
+    rng, bias, n=300, hz=10.0, sigma=0.1, common=0.05, rho=0.0, outliers=0.0, depth=1.0
+):
     """Synthetic measurements: configured 12 m, the true height 12 - bias; noise of ``sigma`` (AR(1) correlated
     ``rho`` frame to frame), one common error of ``common``, a share ``outliers`` locked on the inner structure
     (1-3 m too high)."""
@@ -171,10 +210,21 @@ def test_window_forgets_old_measurements():
     est = HeightBias(window_s=30.0)
     for h in _measurements(np.random.default_rng(4), bias=2.0, n=300, hz=10.0):  # t 100 .. 130
         est.add(h)
-    later = _measurements(np.random.default_rng(5), bias=0.2, n=400, hz=10.0)  # t 100 .. 140, moved 40 s on
+    later = _measurements(
+        np.random.default_rng(5), bias=0.2, n=400, hz=10.0
+    )  # t 100 .. 140, moved 40 s on
     for h in later:
-        est.add(SizeHeight(h.t_unix + 40.0, h.uav_height_m, h.sigma_m, h.sigma_common_m, h.configured_m,
-                           h.configured_sigma_m, h.depth_m))
+        est.add(
+            SizeHeight(
+                h.t_unix + 40.0,
+                h.uav_height_m,
+                h.sigma_m,
+                h.sigma_common_m,
+                h.configured_m,
+                h.configured_sigma_m,
+                h.depth_m,
+            )
+        )
     e = est.estimate()
     newest = max(h.t_unix for h in est.heights)
     assert newest > 179.0 and min(h.t_unix for h in est.heights) > newest - 30.0
@@ -184,7 +234,9 @@ def test_window_forgets_old_measurements():
 def test_at_surface_share():
     est = HeightBias()
     rng = np.random.default_rng(6)
-    for h in _measurements(rng, bias=0.3, n=100, depth=AT_SURFACE_M) + _measurements(rng, bias=0.3, n=100, depth=1.0):
+    for h in _measurements(rng, bias=0.3, n=100, depth=AT_SURFACE_M) + _measurements(
+        rng, bias=0.3, n=100, depth=1.0
+    ):
         est.add(h)
     assert est.estimate().at_surface == pytest.approx(0.5)
 
@@ -197,7 +249,9 @@ def test_sigma_holds_the_error_within_two_sigmas_95_percent_of_the_time(rho):
     inside, n = 0, 300
     for _ in range(n):
         est = HeightBias()
-        for h in _measurements(rng, bias=0.8, n=100, hz=5.0, sigma=0.15, common=0.06, rho=rho, outliers=0.05):
+        for h in _measurements(
+            rng, bias=0.8, n=100, hz=5.0, sigma=0.15, common=0.06, rho=rho, outliers=0.05
+        ):
             est.add(h)
         e = est.estimate()
         inside += abs(e.bias_m - 0.8) <= 2 * e.sigma_m
@@ -211,7 +265,15 @@ def test_newtons_surface_crossing_is_the_bisections():
     rho, h = rng.uniform(0.0, 60.0, 5000), rng.uniform(0.5, 120.0, 5000)
     d = np.concatenate([rng.uniform(0.0, 10.0, 4000), rng.uniform(-0.4, 0.0, 1000)])
     under = d > 0
-    np.testing.assert_allclose(_surface_distance(rho, h, d, N_WATER)[under],
-                               surface_distance(rho[under], h[under], d[under], N_WATER), rtol=0, atol=1e-11)
-    np.testing.assert_allclose(_surface_distance(rho, h, d, N_WATER)[~under],
-                               surface_distance(rho[~under], h[~under], d[~under], None), rtol=0, atol=1e-11)
+    np.testing.assert_allclose(
+        _surface_distance(rho, h, d, N_WATER)[under],
+        surface_distance(rho[under], h[under], d[under], N_WATER),
+        rtol=0,
+        atol=1e-11,
+    )
+    np.testing.assert_allclose(
+        _surface_distance(rho, h, d, N_WATER)[~under],
+        surface_distance(rho[~under], h[~under], d[~under], None),
+        rtol=0,
+        atol=1e-11,
+    )

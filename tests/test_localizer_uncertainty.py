@@ -112,10 +112,13 @@ def test_extrapolated_attitude_adds_to_tilt_and_heading():
     """Extra tilt and heading sigmas from extrapolation act like larger calibration sigmas."""
     R, u, v, h, d = SCENES["35° oblique"]
     extra_tilt, extra_yaw = math.radians(0.4), math.radians(0.9)
-    with_extra = accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(), sigma_tilt_rad=extra_tilt,
-                          sigma_yaw_rad=extra_yaw)[0]
+    with_extra = accuracy(
+        CAM, R, u, v, h, d, N_WATER, Sigmas(), sigma_tilt_rad=extra_tilt, sigma_yaw_rad=extra_yaw
+    )[0]
     wider = Sigmas(tilt_deg=math.hypot(0.5, 0.4), yaw_deg=math.hypot(1.5, 0.9))
-    assert float(with_extra) == pytest.approx(float(accuracy(CAM, R, u, v, h, d, N_WATER, wider)[0]))
+    assert float(with_extra) == pytest.approx(
+        float(accuracy(CAM, R, u, v, h, d, N_WATER, wider)[0])
+    )
 
 
 def test_time_alignment_error_against_monte_carlo():
@@ -125,12 +128,16 @@ def test_time_alignment_error_against_monte_carlo():
     omega = np.array([0.05, -0.12, 0.3])  # rad/s in NED
     vel = np.array([1.5, -0.8, 0.6])  # m/s
     quiet = Sigmas(pixel_px=0.0, tilt_deg=0.0, yaw_deg=0.0, height_m=0.0, depth_m=0.0, time_s=0.05)
-    h_acc, _, cov = accuracy(CAM, R, u, v, h, d, N_WATER, quiet, omega_ned=omega, velocity_ned_mps=vel)
+    h_acc, _, cov = accuracy(
+        CAM, R, u, v, h, d, N_WATER, quiet, omega_ned=omega, velocity_ned_mps=vel
+    )
     rng = np.random.default_rng(5)
     dt = rng.normal(0.0, quiet.time_s, 4000)
     Rs = np.stack([cv2.Rodrigues(omega * x)[0] @ R for x in dt])
     true, _ = pixel_to_offset(CAM, R, u, v, h, d, N_WATER)
-    off, _ = pixel_to_offset(CAM, Rs, np.full(len(dt), u), np.full(len(dt), v), h - vel[2] * dt, d, N_WATER)
+    off, _ = pixel_to_offset(
+        CAM, Rs, np.full(len(dt), u), np.full(len(dt), v), h - vel[2] * dt, d, N_WATER
+    )
     err = off + vel[:2] * dt[:, None] - true
     assert float(h_acc) == pytest.approx(math.sqrt(np.mean(np.sum(err**2, axis=-1))), rel=0.05)
     assert cov[0, 1] == pytest.approx(np.mean(err[:, 0] * err[:, 1]), rel=0.15, abs=1e-5)
@@ -152,7 +159,9 @@ def test_the_trackers_own_pixel_sigma_per_frame_against_monte_carlo():
     frame and 6 px at another, all else exact, give the DRMS h_acc claims for each."""
     R, u, v, h, d = SCENES["35° oblique"]
     quiet = Sigmas(pixel_px=3.0, tilt_deg=0.0, yaw_deg=0.0, height_m=0.0, depth_m=0.0, time_s=0.0)
-    h_acc, _, _ = accuracy(CAM, np.stack([R, R]), [u, u], [v, v], h, d, N_WATER, quiet, sigma_pixel_px=[1.0, 6.0])
+    h_acc, _, _ = accuracy(
+        CAM, np.stack([R, R]), [u, u], [v, v], h, d, N_WATER, quiet, sigma_pixel_px=[1.0, 6.0]
+    )
     for claimed, sigma_px in zip(h_acc, (1.0, 6.0)):
         drms, _ = monte_carlo_drms(R, u, v, h, d, dataclasses.replace(quiet, pixel_px=sigma_px))
         assert float(claimed) == pytest.approx(drms, rel=0.05)

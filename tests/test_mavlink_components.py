@@ -45,12 +45,18 @@ def _feed(tel: Telemetry, rng, gimbal_component: int, gimbal_boot0_ms: int, extr
         ap_ms = AUTOPILOT_BOOT0_MS + round((t - T0) * 1000)
         g_ms = gimbal_boot0_ms + round((t - T0) * 1000)
         delay = 0.04 + rng.exponential(0.01)
-        messages.append((t + delay, _decode(mav.MAVLink_attitude_message(ap_ms, 0.0, 0.0, 0.3, 0, 0, 0), 1)))
+        messages.append(
+            (t + delay, _decode(mav.MAVLink_attitude_message(ap_ms, 0.0, 0.0, 0.3, 0, 0, 0), 1))
+        )
         q = euler_to_quat(0.0, math.radians(_pitch_deg(t)), 0.3)
-        gimbal = mav.MAVLink_gimbal_device_attitude_status_message(0, 0, g_ms, 64, [float(x) for x in q], 0, 0, 0, 0)
+        gimbal = mav.MAVLink_gimbal_device_attitude_status_message(
+            0, 0, g_ms, 64, [float(x) for x in q], 0, 0, 0, 0
+        )
         messages.append((t + delay + 0.001, _decode(gimbal, gimbal_component)))
         if k % 5 == 0:
-            pos = mav.MAVLink_global_position_int_message(ap_ms, 434000000, 163000000, 30000, 20000, 0, 0, 0, 0)
+            pos = mav.MAVLink_global_position_int_message(
+                ap_ms, 434000000, 163000000, 30000, 20000, 0, 0, 0, 0
+            )
             messages.append((t + delay + 0.002, _decode(pos, 1)))
         if k % 50 == 0:
             st = mav.MAVLink_system_time_message(int(t * 1e6), ap_ms)
@@ -66,16 +72,28 @@ def _feed(tel: Telemetry, rng, gimbal_component: int, gimbal_boot0_ms: int, extr
 
 
 def _cal():
-    return Calibration.from_dict({
-        "camera": {"width": 640, "height": 360, "fx": 500.0, "fy": 500.0, "cx": 319.5, "cy": 179.5},
-        "mount": {"attitude_source": "gimbal_device"},
-        "water": {"takeoff_height_above_surface_m": 2.0},
-    })
+    return Calibration.from_dict(
+        {
+            "camera": {
+                "width": 640,
+                "height": 360,
+                "fx": 500.0,
+                "fy": 500.0,
+                "cx": 319.5,
+                "cy": 179.5,
+            },
+            "mount": {"attitude_source": "gimbal_device"},
+            "water": {"takeoff_height_above_surface_m": 2.0},
+        }
+    )
 
 
 @pytest.mark.parametrize(
     ("gimbal_component", "gimbal_boot0_ms"),
-    [(1, AUTOPILOT_BOOT0_MS), (154, GIMBAL_BOOT0_MS)],  # the autopilot's own mount driver; a MAVLink gimbal
+    [
+        (1, AUTOPILOT_BOOT0_MS),
+        (154, GIMBAL_BOOT0_MS),
+    ],  # the autopilot's own mount driver; a MAVLink gimbal
 )
 def test_gimbal_samples_land_on_the_autopilot_clock(gimbal_component, gimbal_boot0_ms):
     tel = Telemetry()
@@ -96,7 +114,9 @@ def test_other_components_attitude_is_not_the_autopilots():
     """An ATTITUDE from another component (e.g. a companion's estimate) must not enter the buffers."""
     tel = Telemetry()
     mav = mavutil().mavlink
-    stray = _decode(mav.MAVLink_attitude_message(AUTOPILOT_BOOT0_MS + 1510, 0.5, 0.5, 2.0, 0, 0, 0), 191)
+    stray = _decode(
+        mav.MAVLink_attitude_message(AUTOPILOT_BOOT0_MS + 1510, 0.5, 0.5, 2.0, 0, 0, 0), 191
+    )
     _feed(tel, np.random.default_rng(4), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.55, stray)])
     assert tel.autopilot_component == 1
     assert not np.any(np.isclose(tel.attitude.values[:, 2], 2.0))
@@ -110,15 +130,29 @@ def test_a_garbage_frame_cannot_fake_a_reboot_but_a_real_reboot_is_seen():
     tel = Telemetry()
     garbage = _decode(mav.MAVLink_attitude_message(0, float("nan"), 0.0, 0.3, 0, 0, 0), 1)
     stray = _decode(mav.MAVLink_attitude_message(5, 0.4, 0.0, 0.3, 0, 0, 0), 1)
-    _feed(tel, np.random.default_rng(5), 1, AUTOPILOT_BOOT0_MS, extra=[(T0 + 1.0, garbage), (T0 + 1.5, stray)])
+    _feed(
+        tel,
+        np.random.default_rng(5),
+        1,
+        AUTOPILOT_BOOT0_MS,
+        extra=[(T0 + 1.0, garbage), (T0 + 1.5, stray)],
+    )
     assert tel.uav_clock.segments == 0 and tel.attitude.rejected >= 2
     assert not np.any(np.isclose(tel.attitude.values[:, 0], 0.4))
     assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]
 
     n = len(tel.attitude)
-    taken = [ingest(tel, _decode(mav.MAVLink_attitude_message(1200 + 20 * i, 0.0, 0.0, 0.3, 0, 0, 0), 1),
-                    T0 + 3.5 + 0.02 * i) for i in range(20)]
-    assert taken.index(True) >= 2 and all(taken[taken.index(True):])  # held back until confirmed
-    assert tel.uav_clock.segments == 1 and len(tel.attitude) == n + 20  # then the held ones appended too
+    taken = [
+        ingest(
+            tel,
+            _decode(mav.MAVLink_attitude_message(1200 + 20 * i, 0.0, 0.0, 0.3, 0, 0, 0), 1),
+            T0 + 3.5 + 0.02 * i,
+        )
+        for i in range(20)
+    ]
+    assert taken.index(True) >= 2 and all(taken[taken.index(True) :])  # held back until confirmed
+    assert (
+        tel.uav_clock.segments == 1 and len(tel.attitude) == n + 20
+    )  # then the held ones appended too
     assert sum("rebooted" in notice for notice in tel.notices) == 1
     assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]

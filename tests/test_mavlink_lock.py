@@ -21,7 +21,9 @@ def heartbeat(system: int, key: bytes | None = None, timestamp: int = 1) -> byte
     if key is not None:
         s = mav.signing
         s.secret_key, s.sign_outgoing, s.link_id, s.timestamp = key, True, 1, timestamp
-    msg = mav.heartbeat_encode(mavlink2.MAV_TYPE_SUBMARINE, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4)
+    msg = mav.heartbeat_encode(
+        mavlink2.MAV_TYPE_SUBMARINE, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4
+    )
     return msg.pack(mav)
 
 
@@ -77,8 +79,15 @@ def _link(port: int, **kw) -> tuple[MavlinkLink, list]:
         with lock:
             got.append((msg.get_type(), msg.get_srcSystem(), getattr(msg, "reason", "")))
 
-    link = MavlinkLink(f"udpin:127.0.0.1:{port}", 245, 190, name="test link", on_message=on_message,
-                       is_peer=lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, **kw)
+    link = MavlinkLink(
+        f"udpin:127.0.0.1:{port}",
+        245,
+        190,
+        name="test link",
+        on_message=on_message,
+        is_peer=lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1,
+        **kw,
+    )
     link.open()
     return link, got
 
@@ -92,13 +101,20 @@ def test_a_forged_autopilot_on_another_address_is_not_heard():
         wait_for(lambda: link.status(0)["peer"] is not None, 10, "the lock")
         for _ in range(3):
             forger.sendto(heartbeat(1), ("127.0.0.1", port))
-        wait_for(lambda: link.status(0)["foreign_datagrams"] == 3, 10, lambda: f"3 foreign datagrams: {link.status(0)}")
+        wait_for(
+            lambda: link.status(0)["foreign_datagrams"] == 3,
+            10,
+            lambda: f"3 foreign datagrams: {link.status(0)}",
+        )
         autopilot.sendto(heartbeat(1), ("127.0.0.1", port))
         wait_for(lambda: len(got) == 2, 10, lambda: f"the autopilot's second heartbeat: {got}")
         status = link.status(0)
     finally:
         link.close()
-    assert status["peer"] == "{}:{}".format(*autopilot.getsockname()) and status["foreign_datagrams"] == 3, status
+    assert (
+        status["peer"] == "{}:{}".format(*autopilot.getsockname())
+        and status["foreign_datagrams"] == 3
+    ), status
     assert got == [("HEARTBEAT", 1, "")] * 2
 
 
@@ -110,7 +126,9 @@ def test_a_link_that_requires_signing_takes_only_signed_messages():
     try:
         autopilot.sendto(heartbeat(1), ("127.0.0.1", port))
         autopilot.sendto(heartbeat(1, bytes(32)), ("127.0.0.1", port))  # another key
-        autopilot.sendto(heartbeat(1, key, 2), ("127.0.0.1", port))  # (pymavlink took the forged one's time)
+        autopilot.sendto(
+            heartbeat(1, key, 2), ("127.0.0.1", port)
+        )  # (pymavlink took the forged one's time)
         wait_for(lambda: len(got) == 3, 10, lambda: f"3 messages: {got}")
         status = link.status(0)
     finally:

@@ -26,9 +26,37 @@ VARIANTS = {"lengths": {"omit_video_pes_length": "0"}, "no-lengths": {"omit_vide
 def clip(tmp_path_factory):
     """A 1280x720 H.264 clip whose keyframes are above 64 KiB (a fine quantiser on a busy test pattern)."""
     path = tmp_path_factory.mktemp("ts") / "clip.ts"
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc2=size=1280x720:rate=30", "-t",
-                    str(FRAMES / 30), "-c:v", "libx264", "-tune", "zerolatency", "-preset", "ultrafast", "-qp", "12",
-                    "-g", str(GOP), "-pix_fmt", "yuv420p", "-f", "mpegts", str(path)], check=True, timeout=120)
+    subprocess.run(
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc2=size=1280x720:rate=30",
+            "-t",
+            str(FRAMES / 30),
+            "-c:v",
+            "libx264",
+            "-tune",
+            "zerolatency",
+            "-preset",
+            "ultrafast",
+            "-qp",
+            "12",
+            "-g",
+            str(GOP),
+            "-pix_fmt",
+            "yuv420p",
+            "-f",
+            "mpegts",
+            str(path),
+        ],
+        check=True,
+        timeout=120,
+    )
     return path
 
 
@@ -36,8 +64,9 @@ def clip(tmp_path_factory):
 def stream(request, clip):
     """(variant, the datagrams FFmpeg's MPEG-TS muxer sends, the index after each frame's last datagram, each
     frame's size)."""
-    datagrams, ends, sizes = mux_to_datagrams(clip, "udp", "mpegts", {**VARIANTS[request.param], "flush_packets": "1"},
-                                              "?pkt_size=1316")
+    datagrams, ends, sizes = mux_to_datagrams(
+        clip, "udp", "mpegts", {**VARIANTS[request.param], "flush_packets": "1"}, "?pkt_size=1316"
+    )
     return request.param, datagrams, ends, sizes
 
 
@@ -75,7 +104,11 @@ def test_every_frame_decodes_to_the_files_and_comes_with_its_own_last_datagram(s
     assert d.lost_packets == d.dropped_units == d.bad_packets == 0
     assert [u.keyframe for u in units] == [i % GOP == 0 for i in range(FRAMES)]
     # frame k is complete by its own last datagram, never waiting for frame k+1's first
-    assert [a < end for a, end in zip(at, ends, strict=True)] == [True] * FRAMES, (variant, at, ends)
+    assert [a < end for a, end in zip(at, ends, strict=True)] == [True] * FRAMES, (
+        variant,
+        at,
+        ends,
+    )
     reference = _reference(clip)
     decoded = _decode(units)
     assert [p for p, _ in decoded] == sorted(reference)  # the PTS as the file's
@@ -109,15 +142,38 @@ def test_garbage_is_counted_and_the_stream_read_through_it(stream):
 
 def test_a_program_without_h264_or_h265_is_named(tmp_path):
     clip = tmp_path / "mpeg2.ts"
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc=size=160x120:rate=10", "-t", "1",
-                    "-c:v", "mpeg2video", "-f", "mpegts", str(clip)], check=True, timeout=60)
+    subprocess.run(
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc=size=160x120:rate=10",
+            "-t",
+            "1",
+            "-c:v",
+            "mpeg2video",
+            "-f",
+            "mpegts",
+            str(clip),
+        ],
+        check=True,
+        timeout=60,
+    )
     d = TsDepacketizer()
     data = clip.read_bytes()
     for i in range(0, len(data), 7 * TS_BYTES):
-        d.push(data[i:i + 7 * TS_BYTES])
+        d.push(data[i : i + 7 * TS_BYTES])
     assert d.codec is None and d.unreadable is not None and "0x02" in d.unreadable
 
 
 def test_the_33_bit_pts_is_unwrapped():
     d = TsDepacketizer()
-    assert [d._unwrap(p) for p in ((1 << 33) - 3000, 0, 3000)] == [(1 << 33) - 3000, 1 << 33, (1 << 33) + 3000]
+    assert [d._unwrap(p) for p in ((1 << 33) - 3000, 0, 3000)] == [
+        (1 << 33) - 3000,
+        1 << 33,
+        (1 << 33) + 3000,
+    ]

@@ -34,7 +34,9 @@ def _bundled(name: str) -> Path:
 @pytest.fixture
 def session(tmp_path) -> Path:
     dst = tmp_path / "session"
-    shutil.copytree(_bundled("oblique_2m"), dst, ignore=shutil.ignore_patterns("video.*", "video_frames.csv"))
+    shutil.copytree(
+        _bundled("oblique_2m"), dst, ignore=shutil.ignore_patterns("video.*", "video_frames.csv")
+    )
     return dst
 
 
@@ -73,7 +75,12 @@ def test_positions_match_truth_and_spec_columns(session, tmp_path, capsys):
 def test_straight_ray_is_worse_off_nadir(session, tmp_path, capsys):
     """The paper's method (--no-refraction) misses an oblique 2 m deep target by decimetres."""
     for flag, name in (([], "bent"), (["--no-refraction"], "straight")):
-        assert _run(capsys, "process", str(session), "--out", str(tmp_path / name), "--use-track", *flag)[0] == 0
+        assert (
+            _run(
+                capsys, "process", str(session), "--out", str(tmp_path / name), "--use-track", *flag
+            )[0]
+            == 0
+        )
     bent = read_positions_csv(tmp_path / "bent" / "positions.csv")
     straight = read_positions_csv(tmp_path / "straight" / "positions.csv")
     ok = (bent.status == "ok") & (straight.status == "ok")
@@ -84,8 +91,13 @@ def test_straight_ray_is_worse_off_nadir(session, tmp_path, capsys):
 def test_real_console_script(session, tmp_path):
     """The installed entry point, as a user runs it."""
     exe = Path(sys.executable).with_name("skyfix")
-    res = subprocess.run([str(exe), "process", str(session), "--out", str(tmp_path / "o"), "--use-track"],
-                         capture_output=True, text=True, timeout=120, check=False)
+    res = subprocess.run(
+        [str(exe), "process", str(session), "--out", str(tmp_path / "o"), "--use-track"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert res.returncode == 0, res.stderr
     assert "positions.csv" in res.stdout
 
@@ -93,30 +105,50 @@ def test_real_console_script(session, tmp_path):
 BAD_CASES = {
     "not a directory": (lambda s: shutil.rmtree(s), "not a session directory"),
     "no session.toml": (lambda s: (s / "session.toml").unlink(), "session.toml: missing"),
-    "malformed TOML": (lambda s: _edit(s / "session.toml", r"^version = 1$", "version = = 1"), "malformed TOML"),
-    "wrong version": (lambda s: _edit(s / "session.toml", r"^version = 1$", "version = 7"), "version = 7"),
-    "NaN focal length": (lambda s: _edit(s / "session.toml", r"^fx = .*$", "fx = nan"), "camera.fx = nan"),
+    "malformed TOML": (
+        lambda s: _edit(s / "session.toml", r"^version = 1$", "version = = 1"),
+        "malformed TOML",
+    ),
+    "wrong version": (
+        lambda s: _edit(s / "session.toml", r"^version = 1$", "version = 7"),
+        "version = 7",
+    ),
+    "NaN focal length": (
+        lambda s: _edit(s / "session.toml", r"^fx = .*$", "fx = nan"),
+        "camera.fx = nan",
+    ),
     "negative refractive index": (
         lambda s: _edit(s / "session.toml", r"^refractive_index = .*$", "refractive_index = -1.34"),
         "water.refractive_index = -1.34",
     ),
     "unknown attitude source": (
-        lambda s: _edit(s / "session.toml", r'^attitude_source = .*$', 'attitude_source = "compass"'),
+        lambda s: _edit(
+            s / "session.toml", r"^attitude_source = .*$", 'attitude_source = "compass"'
+        ),
         "mount.attitude_source = 'compass'",
     ),
     "no uav.tlog": (lambda s: (s / "uav.tlog").unlink(), "uav.tlog: missing"),
     "garbage uav.tlog": (
-        lambda s: (s / "uav.tlog").write_bytes(np.random.default_rng(1).bytes(20000)), "no ATTITUDE message"
+        lambda s: (s / "uav.tlog").write_bytes(np.random.default_rng(1).bytes(20000)),
+        "no ATTITUDE message",
     ),
     "no depth.jsonl": (lambda s: (s / "depth.jsonl").unlink(), "depth.jsonl: missing"),
     "garbage depth line": (
-        lambda s: _insert_line(s / "depth.jsonl", 3, "{not json"), "depth.jsonl:4: expected"
+        lambda s: _insert_line(s / "depth.jsonl", 3, "{not json"),
+        "depth.jsonl:4: expected",
     ),
-    "NaN depth": (lambda s: _insert_line(s / "depth.jsonl", 3, '{"t": 1.0, "depth_m": NaN}'), "non-finite"),
+    "NaN depth": (
+        lambda s: _insert_line(s / "depth.jsonl", 3, '{"t": 1.0, "depth_m": NaN}'),
+        "non-finite",
+    ),
     "depth out of range": (
-        lambda s: _replace_depth(s / "depth.jsonl", 2, 99999.0), "depth_m = 99999.0 out of range"
+        lambda s: _replace_depth(s / "depth.jsonl", 2, 99999.0),
+        "depth_m = 99999.0 out of range",
     ),
-    "non-numeric pixel": (lambda s: _replace_track_cell(s / "track.csv", 2, "abc"), "u = 'abc': not a number"),
+    "non-numeric pixel": (
+        lambda s: _replace_track_cell(s / "track.csv", 2, "abc"),
+        "u = 'abc': not a number",
+    ),
     "ray never reaches the water": (lambda s: _camera_looks_up(s / "session.toml"), "no_water"),
 }
 
@@ -125,7 +157,11 @@ def _camera_looks_up(path: Path) -> None:
     """A rigid camera pitched 45° above the horizon: no ray can reach the water."""
     text = re.sub(r"^fixed_rpy_deg = .*\n", "", path.read_text(), flags=re.MULTILINE)
     path.write_text(text)
-    _edit(path, r"^attitude_source = .*$", 'attitude_source = "fixed"\nfixed_rpy_deg = [0.0, 45.0, 0.0]')
+    _edit(
+        path,
+        r"^attitude_source = .*$",
+        'attitude_source = "fixed"\nfixed_rpy_deg = [0.0, 45.0, 0.0]',
+    )
 
 
 def _insert_line(path: Path, index: int, line: str) -> None:
@@ -166,7 +202,9 @@ def test_truncated_last_depth_line_is_a_warning(session, tmp_path, capsys):
     """A log cut mid-write (power loss) loses one sample, not the session."""
     with open(session / "depth.jsonl", "a") as f:
         f.write('{"t": 17')
-    code, _, err = _run(capsys, "process", str(session), "--out", str(tmp_path / "o"), "--use-track")
+    code, _, err = _run(
+        capsys, "process", str(session), "--out", str(tmp_path / "o"), "--use-track"
+    )
     assert code == 0
     assert "truncated last line" in err
 
@@ -176,9 +214,27 @@ def test_positions_csv_round_trip_and_other_tools_files(session, tmp_path, capsy
     out = tmp_path / "out"
     assert _run(capsys, "process", str(session), "--out", str(out), "--use-track")[0] == 0
     header = (out / "positions.csv").read_text().splitlines()[0].split(",")
-    assert header[6:] == ["alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m", "t_gnss", "alt_ellipsoid_m",
-                          "sigma_n_m", "sigma_e_m", "cov_ne_m2", "height_m", "sigma_height_m", "sigma_depth_m",
-                          "sigma_time_s", "height_source", "depth_source", "time_source", "sigma_pixel_px"]
+    assert header[6:] == [
+        "alt_amsl_m",
+        "v_acc_m",
+        "u",
+        "v",
+        "north_m",
+        "east_m",
+        "t_gnss",
+        "alt_ellipsoid_m",
+        "sigma_n_m",
+        "sigma_e_m",
+        "cov_ne_m2",
+        "height_m",
+        "sigma_height_m",
+        "sigma_depth_m",
+        "sigma_time_s",
+        "height_source",
+        "depth_source",
+        "time_source",
+        "sigma_pixel_px",
+    ]
     pos = read_positions_csv(out / "positions.csv")
     ok = pos.status == "ok"
     # pixels from track.csv have no tracker of their own: the calibration's [uncertainty] pixel_px
@@ -189,9 +245,15 @@ def test_positions_csv_round_trip_and_other_tools_files(session, tmp_path, capsy
     assert np.allclose(pos.alt_ellipsoid_m[ok] - pos.alt_amsl_m[ok], 40.0, atol=2e-4)
     assert np.allclose(np.hypot(pos.sigma_n_m[ok], pos.sigma_e_m[ok]), pos.h_acc_m[ok], atol=2e-4)
     spec_only = tmp_path / "spec_only.csv"
-    spec_only.write_text("t,lat,lon,depth_m,h_acc_m,status\n1.5,63.4,10.4,1.0,0.2,ok\n2.5,,,1.0,,lost\n")
+    spec_only.write_text(
+        "t,lat,lon,depth_m,h_acc_m,status\n1.5,63.4,10.4,1.0,0.2,ok\n2.5,,,1.0,,lost\n"
+    )
     other = read_positions_csv(spec_only)
-    assert list(other.status) == ["ok", "lost"] and other.lat[0] == 63.4 and np.isnan(other.alt_ellipsoid_m).all()
+    assert (
+        list(other.status) == ["ok", "lost"]
+        and other.lat[0] == 63.4
+        and np.isnan(other.alt_ellipsoid_m).all()
+    )
     spec_only.write_text("t,lat,lon,depth_m,h_acc_m,status\n1.5,63.4,north,1.0,0.2,ok\n")
     with pytest.raises(SessionError, match=r"spec_only.csv:2: lon = 'north': not a number"):
         read_positions_csv(spec_only)

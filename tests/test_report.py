@@ -37,20 +37,34 @@ def test_report_with_truth(tmp_path, capsys):
     pos = read_positions_csv(out / "positions.csv")
     ok = pos.status == "ok"
     truth = np.genfromtxt(SESSION / "truth.csv", delimiter=",", names=True)
-    lat, lon = np.interp(pos.t_unix[ok], truth["t"], truth["lat"]), np.interp(pos.t_unix[ok], truth["t"], truth["lon"])
+    lat, lon = (
+        np.interp(pos.t_unix[ok], truth["t"], truth["lat"]),
+        np.interp(pos.t_unix[ok], truth["t"], truth["lon"]),
+    )
     err = GEOD.inv(pos.lon[ok], pos.lat[ok], lon, lat)[2]
     assert f"{len(pos)} frames, {ok.sum()} with a fix ({ok.mean():.1%})" in text
-    assert f"error against truth: mean {err.mean():.3f} m, p95 {np.percentile(err, 95):.3f} m" in text
+    assert (
+        f"error against truth: mean {err.mean():.3f} m, p95 {np.percentile(err, 95):.3f} m" in text
+    )
     gap = pos.t_unix[~ok]
     assert f"1 stretches without a fix, longest {gap[-1] - gap[0]:.1f} s (no_track)" in text
 
 
 def test_report_without_truth_names_each_gap(tmp_path, capsys):
     rows = ["t,lat,lon,depth_m,h_acc_m,status"]
-    statuses = ["ok"] * 10 + ["lost"] * 5 + ["ok"] * 3 + ["stale_attitude"] * 12 + ["no_depth"] * 2 + ["ok"] * 8
+    statuses = (
+        ["ok"] * 10
+        + ["lost"] * 5
+        + ["ok"] * 3
+        + ["stale_attitude"] * 12
+        + ["no_depth"] * 2
+        + ["ok"] * 8
+    )
     for i, s in enumerate(statuses):
         ll = f"{63.44 + i * 1e-6:.9f},{10.4 + i * 2e-6:.9f}" if s == "ok" else ","
-        t = 1763800000 + i * 0.1 + (2.0 if i >= 35 else 0.0)  # the video stops for 2 s before frame 35
+        t = (
+            1763800000 + i * 0.1 + (2.0 if i >= 35 else 0.0)
+        )  # the video stops for 2 s before frame 35
         rows.append(f"{t:.3f},{ll},1.0,{0.2 if s == 'ok' else ''},{s}")
     (tmp_path / "positions.csv").write_text("\n".join(rows) + "\n")
     assert main(["report", str(tmp_path), "--out", str(tmp_path / "plots")]) == 0
@@ -64,15 +78,25 @@ def test_report_without_truth_names_each_gap(tmp_path, capsys):
 def test_report_of_nothing_is_one_line(tmp_path, capsys):
     (tmp_path / "positions.csv").write_text("t,lat,lon,depth_m,h_acc_m,status\n")
     assert main(["report", str(tmp_path)]) == 2
-    assert capsys.readouterr().err.strip() == f"skyfix report: error: {tmp_path / 'positions.csv'}: no rows"
+    assert (
+        capsys.readouterr().err.strip()
+        == f"skyfix report: error: {tmp_path / 'positions.csv'}: no rows"
+    )
 
 
 def _skyfix(*args):
-    return subprocess.run([sys.executable, "-m", "groundstation.cli", *args], capture_output=True, text=True,
-                          timeout=300, check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "groundstation.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
 
 
-ETA = re.compile(r"tiny: (rendering|tracking): 100% (\d+)/\2 frames \[\d\d:\d\d elapsed, ETA 00:00, +[\d.]+ frames/s\]")
+ETA = re.compile(
+    r"tiny: (rendering|tracking): 100% (\d+)/\2 frames \[\d\d:\d\d elapsed, ETA 00:00, +[\d.]+ frames/s\]"
+)
 
 
 def test_long_runs_show_progress_with_an_eta_unless_quiet(tmp_path):
@@ -83,8 +107,10 @@ def test_long_runs_show_progress_with_an_eta_unless_quiet(tmp_path):
     assert ETA.search(res.stderr) and "rendering" in ETA.search(res.stderr).group(0)
     res = _skyfix("process", str(tmp_path / "tiny"), "--out", str(tmp_path / "o"))
     assert res.returncode == 0 and "tracking" in ETA.search(res.stderr).group(0), res.stderr
-    quiet = [_skyfix("sim", str(scenario), "--out", str(tmp_path / "tiny"), "--quiet"),
-             _skyfix("process", str(tmp_path / "tiny"), "--out", str(tmp_path / "o"), "--quiet")]
+    quiet = [
+        _skyfix("sim", str(scenario), "--out", str(tmp_path / "tiny"), "--quiet"),
+        _skyfix("process", str(tmp_path / "tiny"), "--out", str(tmp_path / "o"), "--quiet"),
+    ]
     assert all(r.returncode == 0 and "ETA" not in r.stderr for r in quiet)
 
 

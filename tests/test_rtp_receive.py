@@ -16,11 +16,17 @@ from datagram_capture import mux_to_datagrams
 
 from groundstation.video.rtp import Depacketizer
 
-ENCODERS = {"h264": ["libx264", "-tune", "zerolatency", "-x264-params", "slices=4"],
-            "h265": ["libx265", "-x265-params", "bframes=0:log-level=error"]}
+ENCODERS = {
+    "h264": ["libx264", "-tune", "zerolatency", "-x264-params", "slices=4"],
+    "h265": ["libx265", "-x265-params", "bframes=0:log-level=error"],
+}
 # FFmpeg's RTP muxer aggregates what fits a datagram; in packetization mode 0 it sends each NAL unit
 # alone (as GStreamer's payloader does with small slices), so the slices are kept under a datagram
-VARIANTS = {"h264": ("h264", {}), "h264-single-nal": ("h264", {"rtpflags": "h264_mode0"}), "h265": ("h265", {})}
+VARIANTS = {
+    "h264": ("h264", {}),
+    "h264-single-nal": ("h264", {"rtpflags": "h264_mode0"}),
+    "h265": ("h265", {}),
+}
 
 
 @pytest.fixture(scope="module", params=list(VARIANTS))
@@ -31,9 +37,33 @@ def stream(request, tmp_path_factory):
     if options:
         encoder = ["libx264", "-tune", "zerolatency", "-x264-params", "slice-max-size=1000"]
     clip = tmp_path_factory.mktemp("rtp") / f"{request.param}.ts"
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", "testsrc=size=320x240:rate=30", "-t", "2",
-                    "-c:v", *encoder, "-preset", "ultrafast", "-g", "15", "-pix_fmt", "yuv420p",
-                    "-f", "mpegts", str(clip)], check=True, timeout=120)
+    subprocess.run(
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc=size=320x240:rate=30",
+            "-t",
+            "2",
+            "-c:v",
+            *encoder,
+            "-preset",
+            "ultrafast",
+            "-g",
+            "15",
+            "-pix_fmt",
+            "yuv420p",
+            "-f",
+            "mpegts",
+            str(clip),
+        ],
+        check=True,
+        timeout=120,
+    )
     datagrams, _, _ = mux_to_datagrams(clip, "rtp", "rtp", options)
     return codec, clip, request.param, datagrams
 
@@ -63,7 +93,11 @@ def _units(codec: str, datagrams, keep=lambda i: True):
 
 def _kinds(codec: str, datagrams) -> set[str]:
     """The payload structures among the datagrams, read from their NAL headers here."""
-    names = ({24: "aggregation", 28: "fragment"} if codec == "h264" else {48: "aggregation", 49: "fragment"})
+    names = (
+        {24: "aggregation", 28: "fragment"}
+        if codec == "h264"
+        else {48: "aggregation", 49: "fragment"}
+    )
     kinds = set()
     for g in datagrams:
         header = g[12]
@@ -74,11 +108,16 @@ def _kinds(codec: str, datagrams) -> set[str]:
 
 def test_every_access_unit_decodes_to_the_files_frame(stream):
     codec, clip, variant, datagrams = stream
-    assert _kinds(codec, datagrams) == ({"single"} if variant == "h264-single-nal" else {"aggregation", "fragment"})
+    assert _kinds(codec, datagrams) == (
+        {"single"} if variant == "h264-single-nal" else {"aggregation", "fragment"}
+    )
     d, units = _units(codec, datagrams)
     reference = _reference(clip)
     decoded = _decode(codec, units)
-    assert len(units) == len(reference) == 60 and d.lost_packets == d.dropped_units == d.bad_packets == 0
+    assert (
+        len(units) == len(reference) == 60
+        and d.lost_packets == d.dropped_units == d.bad_packets == 0
+    )
     first = units[0].timestamp
     ref_first = min(reference)
     assert [u.keyframe for u in units] == [i % 15 == 0 for i in range(60)]
@@ -117,5 +156,7 @@ def test_garbage_and_other_payload_types_are_ignored(stream):
             assert d.push(junk) == []
         noise = noise[4:] + noise[:4]
         units += d.push(g)
-    assert d.bad_packets >= len(datagrams)  # random bytes that look like RTP of this stream are rare
+    assert d.bad_packets >= len(
+        datagrams
+    )  # random bytes that look like RTP of this stream are rare
     assert len(units) == 60 and d.lost_packets == 0

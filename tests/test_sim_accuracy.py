@@ -25,7 +25,8 @@ def test_geometry_only_recovers_truth_within_5_mm(name):
     session = load_session(BUNDLED_DIR / name)
     # only clock_offset's warnings, which are its point: clocks that disagree
     assert all("GNSS time" in w or "UUV's clock" in w for w in session.warnings) and (
-        bool(session.warnings) == (name == "clock_offset"))
+        bool(session.warnings) == (name == "clock_offset")
+    )
     fixes = process_session(session, use_track=True, refraction=True)
     ok = fixes.status == "ok"
     seen = np.isfinite(session.track["u"])

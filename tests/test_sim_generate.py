@@ -12,7 +12,10 @@ from sim_fixtures.generate import generate
 from sim_fixtures.scenario import scenario_from_dict
 
 TINY = {
-    "name": "tiny", "seed": 5, "duration_s": 1.0, "fps": 10.0,
+    "name": "tiny",
+    "seed": 5,
+    "duration_s": 1.0,
+    "fps": 10.0,
     "camera": {"width": 160, "height": 96},
     "mount": {"pitch_deg": -70.0},
     "uav": {"height_m": 6.0},
@@ -29,7 +32,15 @@ def test_same_seed_same_session_other_seed_other_session(tmp_path):
     b = generate(scenario_from_dict(TINY), tmp_path / "b").session
     c = generate(scenario_from_dict({**TINY, "seed": 6}), tmp_path / "c").session
     fa, fb, fc = files(a), files(b), files(c)
-    assert set(fa) == {"session.toml", "uav.tlog", "depth.jsonl", "video.mp4", "video_frames.csv", "track.csv", "truth.csv"}
+    assert set(fa) == {
+        "session.toml",
+        "uav.tlog",
+        "depth.jsonl",
+        "video.mp4",
+        "video_frames.csv",
+        "track.csv",
+        "truth.csv",
+    }
     assert fa == fb
     assert fa["uav.tlog"] != fc["uav.tlog"] and fa["video.mp4"] != fc["video.mp4"]
 
@@ -40,22 +51,46 @@ def test_generated_session_loads_and_video_matches_frames(tmp_path):
     assert len(session.frames["t"]) == 10 and np.allclose(np.diff(session.frames["t"]), 0.1)
     assert np.array_equal(np.isnan(session.track["u"]), [False] * 5 + [True] * 2 + [False] * 3)
     x, y, w, h = session.calibration.init_bbox
-    assert abs(x + w / 2 - session.track["u"][0]) < w / 2 and abs(y + h / 2 - session.track["v"][0]) < h / 2
+    assert (
+        abs(x + w / 2 - session.track["u"][0]) < w / 2
+        and abs(y + h / 2 - session.track["v"][0]) < h / 2
+    )
     probe = subprocess.run(
-        ["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
-         "stream=nb_read_frames,width,height,codec_name,pix_fmt", "-of", "csv=p=0", str(session.video_path)],
-        capture_output=True, text=True, check=True,
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-count_frames",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "stream=nb_read_frames,width,height,codec_name,pix_fmt",
+            "-of",
+            "csv=p=0",
+            str(session.video_path),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout.strip()
     assert probe == "h264,160,96,yuv420p,10"
 
 
 def test_cli_writes_session(tmp_path):
     scenario = tmp_path / "tiny.toml"
-    scenario.write_text('name = "tiny"\nduration_s = 0.5\nfps = 10.0\n[camera]\nwidth = 96\nheight = 64\n')
-    code = ("import argparse, sys; from sim_fixtures import cli; p = argparse.ArgumentParser(); "
-            "cli.register(p.add_subparsers(), 'sim'); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))")
-    out = subprocess.run([sys.executable, "-c", code, "sim", str(scenario), "--out", str(tmp_path / "s")],
-                         capture_output=True, text=True, check=False)
+    scenario.write_text(
+        'name = "tiny"\nduration_s = 0.5\nfps = 10.0\n[camera]\nwidth = 96\nheight = 64\n'
+    )
+    code = (
+        "import argparse, sys; from sim_fixtures import cli; p = argparse.ArgumentParser(); "
+        "cli.register(p.add_subparsers(), 'sim'); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, "sim", str(scenario), "--out", str(tmp_path / "s")],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert out.returncode == 0, out.stderr
     assert "tiny: 5 frames 96x64" in out.stdout
     assert (tmp_path / "s" / "scenario.toml").read_text() == scenario.read_text()
@@ -81,7 +116,9 @@ def test_frames_rendered_apart_are_the_frames_rendered_in_turn():
     camera = gen.camera_of(sc)
     truth = gen.frame_truth(sc, gen.Motion(sc), camera)
     renderer = gen.Renderer(sc, camera)
-    apart = list(gen._frames(renderer, sc, truth, workers=2))  # copies of the renderer, its noise not drawn yet
+    apart = list(
+        gen._frames(renderer, sc, truth, workers=2)
+    )  # copies of the renderer, its noise not drawn yet
     in_turn = list(gen._frames(renderer, sc, truth, workers=1))
     assert len(in_turn) == len(apart) == 10
     for (img_a, boxes_a), (img_b, boxes_b) in zip(in_turn, apart, strict=True):

@@ -21,18 +21,25 @@ from sim_fixtures.tlog import Clock
 
 RTK = with_overrides(load_scenario(SCENARIOS / "height_rtk_drift.toml"), duration_s=120.0)
 PLAIN = with_overrides(load_scenario(SCENARIOS / "height_gnss_drift.toml"), duration_s=120.0)
-RANGEFINDER = with_overrides(load_scenario(SCENARIOS / "height_rangefinder.toml"), duration_s=60.0,
-                             rangefinder={"dropouts": ((20.0, 25.0),)})
+RANGEFINDER = with_overrides(
+    load_scenario(SCENARIOS / "height_rangefinder.toml"),
+    duration_s=60.0,
+    rangefinder={"dropouts": ((20.0, 25.0),)},
+)
 
 
 @pytest.fixture(scope="module")
 def tlogs(tmp_path_factory):
     root = tmp_path_factory.mktemp("height_knobs")
     out = {}
-    for name, sc in (("rtk", RTK), ("rtk_noisy", with_overrides(RTK, uav={"gnss_alt_noise_m": 0.02})),
-                     ("plain", PLAIN), ("rangefinder", RANGEFINDER),
-                     ("nothing", with_overrides(RANGEFINDER, rangefinder={"sees": "nothing"})),
-                     ("floor", with_overrides(RANGEFINDER, rangefinder={"sees": "floor", "noise_m": 0.0}))):
+    for name, sc in (
+        ("rtk", RTK),
+        ("rtk_noisy", with_overrides(RTK, uav={"gnss_alt_noise_m": 0.02})),
+        ("plain", PLAIN),
+        ("rangefinder", RANGEFINDER),
+        ("nothing", with_overrides(RANGEFINDER, rangefinder={"sees": "nothing"})),
+        ("floor", with_overrides(RANGEFINDER, rangefinder={"sees": "floor", "noise_m": 0.0})),
+    ):
         generate(sc, root / name, video=False)
         out[name] = (sc, read_tlog(root / name / "uav.tlog"), root / name)
     return out
@@ -47,7 +54,11 @@ def gpi(sc, records):
     """GLOBAL_POSITION_INT: (scenario times, alt m, relative_alt m)."""
     msgs = [m for _, m in of_kind(records, "GLOBAL_POSITION_INT")]
     tau = Clock.of(sc).tau_s([m.time_boot_ms for m in msgs])
-    return tau, np.array([m.alt for m in msgs]) / 1e3, np.array([m.relative_alt for m in msgs]) / 1e3
+    return (
+        tau,
+        np.array([m.alt for m in msgs]) / 1e3,
+        np.array([m.relative_alt for m in msgs]) / 1e3,
+    )
 
 
 def test_baro_bias_and_drift_are_in_the_ekf_heights_only(tlogs):
@@ -57,13 +68,19 @@ def test_baro_bias_and_drift_are_in_the_ekf_heights_only(tlogs):
         tau, alt, rel = gpi(sc, records)
         h = true_height(sc, tau)
         expected = u.baro_bias_m + u.baro_drift_m * tau / sc.duration_s  # the knobs' stated meaning
-        assert np.abs(alt - (s.surface_amsl_m + h) - expected).max() < 0.003  # mm rounding, flat-earth altitude
+        assert (
+            np.abs(alt - (s.surface_amsl_m + h) - expected).max() < 0.003
+        )  # mm rounding, flat-earth altitude
         assert np.abs(rel - (h - s.takeoff_height_above_surface_m) - expected).max() < 0.002
         raw = [m for _, m in of_kind(records, "GPS_RAW_INT")]
         t_raw = np.array([m.time_usec for m in raw]) / 1e6 - sc.start_unix
-        gnss_err = np.array([m.alt for m in raw]) / 1e3 - (s.surface_amsl_m + true_height(sc, t_raw))
-        assert abs(np.corrcoef(gnss_err, u.baro_drift_m * t_raw)[0, 1]) < 0.9  # not the barometer's ramp
-        rms = np.sqrt(np.mean(gnss_err ** 2))
+        gnss_err = np.array([m.alt for m in raw]) / 1e3 - (
+            s.surface_amsl_m + true_height(sc, t_raw)
+        )
+        assert (
+            abs(np.corrcoef(gnss_err, u.baro_drift_m * t_raw)[0, 1]) < 0.9
+        )  # not the barometer's ramp
+        rms = np.sqrt(np.mean(gnss_err**2))
         assert 0.3 * u.gnss_alt_error_m < rms < 2.0 * u.gnss_alt_error_m, (name, rms)
         # a slow wander: from one fix to the next (0.2 s) it moves by a small share of its size
         assert np.abs(np.diff(gnss_err)).max() < 0.05 * u.gnss_alt_error_m + 0.002
@@ -80,16 +97,25 @@ def test_gnss_altitude_white_noise_in_gps_raw_int_only(tlogs):
     assert 0.9 * 0.02 < noise.std() < 1.1 * 0.02 and abs(noise.mean()) < 0.003
     assert abs(np.corrcoef(noise[1:], noise[:-1])[0, 1]) < 0.1  # white: no two messages alike
     assert all(m.alt_ellipsoid - m.alt == round(sc.site.geoid_separation_m * 1000) for m in raw[1])
-    others = [[frame for _, frame, m in records if m.get_type() != "GPS_RAW_INT"] for records in (quiet, noisy)]
+    others = [
+        [frame for _, frame, m in records if m.get_type() != "GPS_RAW_INT"]
+        for records in (quiet, noisy)
+    ]
     assert others[0] == others[1]
 
 
 def test_gnss_accuracy_fields_true_to_the_fix_type(tlogs):
-    rtk = {(m.fix_type, m.h_acc, m.v_acc, m.eph, m.epv) for _, m in of_kind(tlogs["rtk"][1], "GPS_RAW_INT")}
+    rtk = {
+        (m.fix_type, m.h_acc, m.v_acc, m.eph, m.epv)
+        for _, m in of_kind(tlogs["rtk"][1], "GPS_RAW_INT")
+    }
     assert rtk == {(6, 14, 25, 70, 110)}  # RTK fixed: cm, v_acc 2.5 cm
     plain = {(m.fix_type, m.h_acc, m.v_acc) for _, m in of_kind(tlogs["plain"][1], "GPS_RAW_INT")}
     assert plain == {(3, 1200, 1600)}
-    dop_only = {(m.fix_type, m.h_acc, m.v_acc, m.eph, m.epv) for _, m in of_kind(tlogs["rangefinder"][1], "GPS_RAW_INT")}
+    dop_only = {
+        (m.fix_type, m.h_acc, m.v_acc, m.eph, m.epv)
+        for _, m in of_kind(tlogs["rangefinder"][1], "GPS_RAW_INT")
+    }
     assert dop_only == {(3, 0, 0, 90, 140)}  # only HDOP 0.9 and VDOP 1.4
 
 
@@ -97,26 +123,35 @@ def test_heartbeat_arms_at_its_time(tlogs):
     sc, records, _ = tlogs["plain"]
     clock = Clock.of(sc)
     armed = mavutil().mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-    beats = [(clock.tau_of_us(round(t) - clock.station_offset_us), m.base_mode & armed != 0)
-             for t, m in of_kind(records, "HEARTBEAT")]
+    beats = [
+        (clock.tau_of_us(round(t) - clock.station_offset_us), m.base_mode & armed != 0)
+        for t, m in of_kind(records, "HEARTBEAT")
+    ]
     # received a link delay after being sent: those just after the arming time may still be disarmed
     assert all(a for tau, a in beats if tau > sc.uav.armed_at_s + 0.3)
     assert not any(a for tau, a in beats if tau < sc.uav.armed_at_s)
     assert [a for _, a in beats][:1] == [False] and any(a for _, a in beats)
-    assert all(m.base_mode & armed for _, m in of_kind(tlogs["rtk"][1], "HEARTBEAT"))  # unset: armed throughout
+    assert all(
+        m.base_mode & armed for _, m in of_kind(tlogs["rtk"][1], "HEARTBEAT")
+    )  # unset: armed throughout
 
 
 def _attitude_at(records, boot_ms):
     att = [m for _, m in of_kind(records, "ATTITUDE")]
     t = np.array([m.time_boot_ms for m in att], dtype=float)
-    return (np.interp(boot_ms, t, [m.roll for m in att]), np.interp(boot_ms, t, [m.pitch for m in att]))
+    return (
+        np.interp(boot_ms, t, [m.roll for m in att]),
+        np.interp(boot_ms, t, [m.pitch for m in att]),
+    )
 
 
 def test_downward_rangefinder_reads_along_the_tilted_body_axis(tlogs):
     sc, records, _ = tlogs["rangefinder"]
     rf = sc.rangefinder
     ds = [m for _, m in of_kind(records, "DISTANCE_SENSOR")]
-    assert {(m.orientation, m.min_distance, m.max_distance, m.type) for m in ds} == {(25, 20, 4000, 0)}
+    assert {(m.orientation, m.min_distance, m.max_distance, m.type) for m in ds} == {
+        (25, 20, 4000, 0)
+    }
     ms = np.array([m.time_boot_ms for m in ds], dtype=float)
     tau = Clock.of(sc).tau_s(ms)
     roll, pitch = _attitude_at(records, ms)  # the tlog's own attitude
@@ -125,7 +160,9 @@ def test_downward_rangefinder_reads_along_the_tilted_body_axis(tlogs):
     assert np.abs(err).max() < 5 * rf.noise_m and 0.5 * rf.noise_m < err.std() < 1.5 * rf.noise_m
     tilt = np.degrees(np.arccos(np.cos(roll) * np.cos(pitch)))
     assert tilt.mean() > 5  # a windy day: the slant range is ~1 % long, 12 cm at 12 m
-    assert not np.any((tau >= 20.0) & (tau < 25.0)) and np.any((tau >= 25.0) & (tau < 26.0))  # the dropout
+    assert not np.any((tau >= 20.0) & (tau < 25.0)) and np.any(
+        (tau >= 25.0) & (tau < 26.0)
+    )  # the dropout
     span = sc.telemetry.lead_s + sc.duration_s + 1.0 - 5.0
     assert abs(len(ds) - rf.rate_hz * span) <= 2
     rng = [m for _, m in of_kind(records, "RANGEFINDER")]  # ArduPilot's copy of the same reading
@@ -134,7 +171,9 @@ def test_downward_rangefinder_reads_along_the_tilted_body_axis(tlogs):
 
 def test_a_lidar_without_return_or_seeing_the_seafloor(tlogs):
     sc, records, _ = tlogs["nothing"]
-    assert {m.current_distance for _, m in of_kind(records, "DISTANCE_SENSOR")} == {4100}  # max + 1 m
+    assert {m.current_distance for _, m in of_kind(records, "DISTANCE_SENSOR")} == {
+        4100
+    }  # max + 1 m
     sc, records, _ = tlogs["floor"]
     ds = [m for _, m in of_kind(records, "DISTANCE_SENSOR")]
     ms = np.array([m.time_boot_ms for m in ds], dtype=float)

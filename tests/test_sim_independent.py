@@ -28,9 +28,12 @@ N_WATER = 1.34
 
 
 def test_the_simulator_does_not_import_the_localizers_geometry():
-    pattern = re.compile(rf"^\s*(from\s+localizer\.({'|'.join(FORBIDDEN)})\b"
-                         rf"|import\s+localizer\.({'|'.join(FORBIDDEN)})\b"
-                         rf"|from\s+localizer\s+import\s+.*\b({'|'.join(FORBIDDEN)})\b)", re.MULTILINE)
+    pattern = re.compile(
+        rf"^\s*(from\s+localizer\.({'|'.join(FORBIDDEN)})\b"
+        rf"|import\s+localizer\.({'|'.join(FORBIDDEN)})\b"
+        rf"|from\s+localizer\s+import\s+.*\b({'|'.join(FORBIDDEN)})\b)",
+        re.MULTILINE,
+    )
     offenders = {p.name: pattern.findall(p.read_text()) for p in SIM.rglob("*.py")}
     assert not {k: v for k, v in offenders.items() if v}
 
@@ -44,8 +47,12 @@ def random_poses(rng, n):
     """Gimbal roll, pitch (a fifth exactly -90 deg), yaw relative to the vehicle, vehicle yaw (radians)."""
     pitch = np.radians(rng.uniform(-90.0, -30.0, n))
     pitch[::5] = -np.pi / 2
-    return (np.radians(rng.uniform(-4.0, 4.0, n)), pitch, np.radians(rng.uniform(-180, 180, n)),
-            np.radians(rng.uniform(-180, 180, n)))
+    return (
+        np.radians(rng.uniform(-4.0, 4.0, n)),
+        pitch,
+        np.radians(rng.uniform(-180, 180, n)),
+        np.radians(rng.uniform(-180, 180, n)),
+    )
 
 
 @pytest.mark.parametrize("size", [(640, 360), (1920, 1080)])
@@ -109,7 +116,10 @@ def test_euler_rotations_agree():
     rng = np.random.default_rng(5)
     rpy = rng.uniform(-np.pi, np.pi, (500, 3)) * [1, 0.5, 1]
     assert np.abs(g.matrix_zyx(*rpy.T) - latt.euler_to_R(*rpy.T)).max() < 1e-14
-    assert np.abs(latt.quat_to_R(g.quat_wxyz(g.rotation_zyx(*rpy.T))) - latt.euler_to_R(*rpy.T)).max() < 1e-14
+    assert (
+        np.abs(latt.quat_to_R(g.quat_wxyz(g.rotation_zyx(*rpy.T))) - latt.euler_to_R(*rpy.T)).max()
+        < 1e-14
+    )
     assert np.array_equal(g.R_GIMBAL_FROM_CV, latt.R_GIMBAL_FROM_CV)
 
 
@@ -127,7 +137,9 @@ def test_geodesy_through_enu_matches_the_localizers_ned():
 
 def test_undistortion_round_trip_on_the_scenario_cameras():
     for size in ((640, 360), (1280, 720), (1920, 1080)):
-        cam = camera_of(scenario_from_dict({"name": "x", "camera": {"width": size[0], "height": size[1]}}))
+        cam = camera_of(
+            scenario_from_dict({"name": "x", "camera": {"width": size[0], "height": size[1]}})
+        )
         v, u = np.mgrid[-8 : cam.height + 8 : 7.3, -8 : cam.width + 8 : 6.1]
         rays = g.pixel_rays(cam, u, v)
         assert np.all(np.isfinite(rays))

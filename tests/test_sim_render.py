@@ -52,7 +52,13 @@ def test_reference_point_lands_on_track_pixel(scene):
     for i in seen[:: max(1, len(seen) // 6)]:
         start_u, start_v = track["u"][i] + 3.0, track["v"][i] - 2.0  # start off the answer
         p = pixel_of_reference_point(renderer, truth.view(i), start_u, start_v)
-        assert np.hypot(p[0] - track["u"][i], p[1] - track["v"][i]) < 1e-4, (sc.name, i, p, track["u"][i], track["v"][i])
+        assert np.hypot(p[0] - track["u"][i], p[1] - track["v"][i]) < 1e-4, (
+            sc.name,
+            i,
+            p,
+            track["u"][i],
+            track["v"][i],
+        )
 
 
 def test_rendered_uuv_covers_track_pixel(scene):
@@ -84,10 +90,12 @@ def test_silhouette_centre_near_reference_pixel_at_nadir():
 
 def test_occluded_frames_have_no_track_and_no_uuv():
     sc = load_scenario(SCENARIOS / "occlusion.toml")
-    track = read_table(BUNDLED_DIR / "occlusion" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    track = read_table(
+        BUNDLED_DIR / "occlusion" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v")
+    )
     truth_csv = read_table(BUNDLED_DIR / "occlusion" / "truth.csv", ("t", "lat", "lon", "depth_m"))
     tau = track["t"] - sc.start_unix
-    (a, b), = sc.occlusions
+    ((a, b),) = sc.occlusions
     hidden = (tau >= a) & (tau < b)
     assert hidden.sum() == round((b - a) * sc.fps)
     assert np.all(np.isnan(track["u"][hidden])) and np.all(np.isfinite(track["u"][~hidden]))

@@ -54,9 +54,22 @@ def test_bad_values_are_named(data, key):
 def test_defaults_are_the_old_behaviour():
     sc = scenario_from_dict({"name": "x"})
     assert (sc.clock.station_offset_s, sc.clock.uuv_offset_s) == (0.0, 0.0)
-    assert (sc.mount.kind, sc.mount.yaw_mode, sc.uav.wobble_deg, sc.link.reboot_at_s) == ("stabilised", "earth", 0.0, None)
-    assert (sc.link.depth_delay_s, sc.link.depth_jitter_s, sc.site.geoid_separation_m) == (0.03, 0.005, 40.0)
-    assert (sc.telemetry.system_time_hz, sc.telemetry.gps_raw_hz, sc.telemetry.timesync_hz) == (1.0, 5.0, 1.0)
+    assert (sc.mount.kind, sc.mount.yaw_mode, sc.uav.wobble_deg, sc.link.reboot_at_s) == (
+        "stabilised",
+        "earth",
+        0.0,
+        None,
+    )
+    assert (sc.link.depth_delay_s, sc.link.depth_jitter_s, sc.site.geoid_separation_m) == (
+        0.03,
+        0.005,
+        40.0,
+    )
+    assert (sc.telemetry.system_time_hz, sc.telemetry.gps_raw_hz, sc.telemetry.timesync_hz) == (
+        1.0,
+        5.0,
+        1.0,
+    )
     assert scenario_from_dict({"name": "x", "link": {"reboot_at_s": 3}}).link.reboot_at_s == 3.0
 
 

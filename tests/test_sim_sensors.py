@@ -32,15 +32,31 @@ from sim_fixtures.scenario import SensorsSpec, load_scenario, scenario_from_dict
 from sim_fixtures.sensors import gnss_claim, position_error_ne_m
 from sim_fixtures.tlog import Clock, write_tlog
 
-BIAS = {"roll_bias_deg": 0.3, "pitch_bias_deg": -0.2, "yaw_bias_deg": 2.0, "gimbal_level_deg": (0.25, -0.15),
-        "gnss_mode": "plain", "gnss_white_m": 0.0, "baro_wander_m": 0.15}
+BIAS = {
+    "roll_bias_deg": 0.3,
+    "pitch_bias_deg": -0.2,
+    "yaw_bias_deg": 2.0,
+    "gimbal_level_deg": (0.25, -0.15),
+    "gnss_mode": "plain",
+    "gnss_white_m": 0.0,
+    "baro_wander_m": 0.15,
+}
 SMALL = {"duration_s": 2.0, "fps": 10.0, "camera": {"width": 320, "height": 180}}
-MOUNTS = ("oblique_2m", "vehicle_yaw", "nadir_vehicle_frame", "mount_orientation", "servo_mount", "fixed_camera")
+MOUNTS = (
+    "oblique_2m",
+    "vehicle_yaw",
+    "nadir_vehicle_frame",
+    "mount_orientation",
+    "servo_mount",
+    "fixed_camera",
+)
 
 
 def biased(name, **sensors):
     sc = load_scenario(SCENARIOS / f"{name}.toml")
-    return with_overrides(sc, **SMALL, sensors=dataclasses.replace(SensorsSpec(), **{**BIAS, **sensors}))
+    return with_overrides(
+        sc, **SMALL, sensors=dataclasses.replace(SensorsSpec(), **{**BIAS, **sensors})
+    )
 
 
 @pytest.fixture(scope="module")
@@ -70,18 +86,27 @@ def reported_camera(sc, records):
     yaw = np.unwrap(rpy[:, 2])
     if sc.mount.attitude_source == "fixed":
         return t_att, R_ned_from_fixed_mount(euler_to_R(*rpy.T), sc.mount.fixed_rpy_deg)
-    kind = "MOUNT_ORIENTATION" if sc.mount.attitude_source == "mount_orientation" else "GIMBAL_DEVICE_ATTITUDE_STATUS"
+    kind = (
+        "MOUNT_ORIENTATION"
+        if sc.mount.attitude_source == "mount_orientation"
+        else "GIMBAL_DEVICE_ATTITUDE_STATUS"
+    )
     gim = [m for _, m in of_kind(records, kind)]
-    inside = (boot_tau(sc, gim) >= t_att[0]) & (boot_tau(sc, gim) <= t_att[-1])  # ATTITUDE on both sides
+    inside = (boot_tau(sc, gim) >= t_att[0]) & (
+        boot_tau(sc, gim) <= t_att[-1]
+    )  # ATTITUDE on both sides
     gim = [m for m, ok in zip(gim, inside) if ok]
     tau = boot_tau(sc, gim)
     vehicle_yaw = np.interp(tau, t_att, yaw)
     body = None
     if sc.mount.kind == "servo":
-        body = euler_to_R(np.interp(tau, t_att, rpy[:, 0]), np.interp(tau, t_att, rpy[:, 1]), vehicle_yaw)
+        body = euler_to_R(
+            np.interp(tau, t_att, rpy[:, 0]), np.interp(tau, t_att, rpy[:, 1]), vehicle_yaw
+        )
     if kind == "MOUNT_ORIENTATION":
-        return tau, R_ned_from_mount_orientation(*np.array([[m.roll, m.pitch, m.yaw] for m in gim]).T, vehicle_yaw,
-                                                 body)
+        return tau, R_ned_from_mount_orientation(
+            *np.array([[m.roll, m.pitch, m.yaw] for m in gim]).T, vehicle_yaw, body
+        )
     q = np.array([m.q for m in gim], dtype=float)
     return tau, R_ned_from_gimbal_device(q, np.array([m.flags for m in gim]), vehicle_yaw, body)
 
@@ -121,7 +146,9 @@ def test_the_camera_as_reported_carries_what_a_real_mount_would(sessions, name):
     if sc.mount.kind == "servo" or sc.mount.attitude_source == "fixed":
         # no IMU of its own: the camera is off exactly as the airframe's reported attitude is
         t_att, rpy = attitude(sc, records)
-        R_body = euler_to_R(*(np.interp(tau, t_att, a) for a in (rpy[:, 0], rpy[:, 1], np.unwrap(rpy[:, 2]))))
+        R_body = euler_to_R(
+            *(np.interp(tau, t_att, a) for a in (rpy[:, 0], rpy[:, 1], np.unwrap(rpy[:, 2])))
+        )
         assert np.abs(err - error_ned_deg(R_body, motion.R_ned_from_body(tau))).max() < 2e-3
         assert np.abs(np.hypot(err[:, 0], err[:, 1]) - np.hypot(0.3, 0.2)).max() < 0.02
         # about Down the compass's bias, and the roll bias about the body's forward axis, which leans down by pitch
@@ -140,7 +167,9 @@ def test_the_camera_as_reported_carries_what_a_real_mount_would(sessions, name):
 def test_straight_down_the_levelling_error_tilts_the_optical_axis(sessions):
     sc, records, _ = sessions["nadir_vehicle_frame"]
     _, R_rep = reported_camera(sc, records)
-    off_nadir = np.degrees(np.arccos(np.clip(R_rep[:, 2, 0], -1, 1)))  # the optical axis from straight down
+    off_nadir = np.degrees(
+        np.arccos(np.clip(R_rep[:, 2, 0], -1, 1))
+    )  # the optical axis from straight down
     assert np.abs(off_nadir - np.hypot(0.25, 0.15)).max() < 1e-3
 
 
@@ -157,17 +186,32 @@ def test_truth_errors_holds_what_the_telemetry_carries(sessions, name):
     s = sc.site
     for kind in ("GLOBAL_POSITION_INT", "GPS_RAW_INT"):  # the EKF follows the receiver's walk
         msgs = [m for _, m in of_kind(records, kind)]
-        t_msg = boot_tau(sc, msgs) if kind == "GLOBAL_POSITION_INT" else np.array(
-            [m.time_usec for m in msgs]) / 1e6 - sc.start_unix
-        n, e, _ = pymap3d.geodetic2ned(np.array([m.lat for m in msgs]) / 1e7, np.array([m.lon for m in msgs]) / 1e7,
-                                       0.0, s.lat_deg, s.lon_deg, 0.0)
-        true, within = motion.uav_ned(t_msg), (t_msg >= tau[0]) & (t_msg <= tau[-1])  # the frames' span
+        t_msg = (
+            boot_tau(sc, msgs)
+            if kind == "GLOBAL_POSITION_INT"
+            else np.array([m.time_usec for m in msgs]) / 1e6 - sc.start_unix
+        )
+        n, e, _ = pymap3d.geodetic2ned(
+            np.array([m.lat for m in msgs]) / 1e7,
+            np.array([m.lon for m in msgs]) / 1e7,
+            0.0,
+            s.lat_deg,
+            s.lon_deg,
+            0.0,
+        )
+        true, within = (
+            motion.uav_ned(t_msg),
+            (t_msg >= tau[0]) & (t_msg <= tau[-1]),
+        )  # the frames' span
         for got, column in ((n - true[:, 0], "north_err_m"), (e - true[:, 1], "east_err_m")):
-            assert np.abs(got - np.interp(t_msg, tau, errors[column]))[within].max() < 0.007  # 1e-7 deg rounding
+            assert (
+                np.abs(got - np.interp(t_msg, tau, errors[column]))[within].max() < 0.007
+            )  # 1e-7 deg rounding
     gpi = [m for _, m in of_kind(records, "GLOBAL_POSITION_INT")]
     t_gpi = boot_tau(sc, gpi)
-    rel_err = np.array([m.relative_alt for m in gpi]) / 1e3 - (-motion.uav_ned(t_gpi)[:, 2]
-                                                                 - s.takeoff_height_above_surface_m)
+    rel_err = np.array([m.relative_alt for m in gpi]) / 1e3 - (
+        -motion.uav_ned(t_gpi)[:, 2] - s.takeoff_height_above_surface_m
+    )
     within = (t_gpi >= tau[0]) & (t_gpi <= tau[-1])
     assert np.abs(rel_err - np.interp(t_gpi, tau, errors["height_err_m"]))[within].max() < 0.002
     assert 0.01 < np.abs(errors["height_err_m"]).max() < 0.6  # the barometer's wander is there
@@ -182,7 +226,10 @@ def test_gps_raw_int_claims_what_the_gnss_mode_says(sessions, tmp_path):
     given = with_overrides(rtk, uav={"gnss_h_acc_m": 0.05, "gnss_fix_type": 5})
     assert gnss_claim(given) == (5, 0.05, 0.7)  # [uav]'s own keys win
     generate(given, tmp_path, video=False)
-    raw = {(m.fix_type, m.h_acc, m.eph) for _, m in of_kind(read_tlog(tmp_path / "uav.tlog"), "GPS_RAW_INT")}
+    raw = {
+        (m.fix_type, m.h_acc, m.eph)
+        for _, m in of_kind(read_tlog(tmp_path / "uav.tlog"), "GPS_RAW_INT")
+    }
     assert raw == {(5, 50, 70)}
 
 
@@ -190,18 +237,36 @@ def test_gps_raw_int_claims_what_the_gnss_mode_says(sessions, tmp_path):
 def test_the_ekf_position_walks_with_the_configured_rms(tmp_path, mode, rms_m):
     """An hour of GLOBAL_POSITION_INT at 1 Hz (fixed seed), a walk of 30 s: the horizontal RMS as configured, and
     a walk, not white noise (its autocorrelation after one correlation time is about 1/e)."""
-    sc = scenario_from_dict({"name": "walk", "seed": 7, "duration_s": 3600.0, "sensors": {
-        "gnss_mode": mode, "gnss_walk_s": 30.0, "gnss_white_m": 0.0}, "telemetry": {
-        "attitude_hz": 1.0, "position_hz": 1.0, "gimbal_hz": 1.0, "gps_raw_hz": 0.0, "system_time_hz": 0.0,
-        "timesync_hz": 0.0}})
+    sc = scenario_from_dict(
+        {
+            "name": "walk",
+            "seed": 7,
+            "duration_s": 3600.0,
+            "sensors": {"gnss_mode": mode, "gnss_walk_s": 30.0, "gnss_white_m": 0.0},
+            "telemetry": {
+                "attitude_hz": 1.0,
+                "position_hz": 1.0,
+                "gimbal_hz": 1.0,
+                "gps_raw_hz": 0.0,
+                "system_time_hz": 0.0,
+                "timesync_hz": 0.0,
+            },
+        }
+    )
     write_tlog(tmp_path / "uav.tlog", sc, Motion(sc), Clock.of(sc))
     gpi = [m for _, m in of_kind(read_tlog(tmp_path / "uav.tlog"), "GLOBAL_POSITION_INT")]
     tau = boot_tau(sc, gpi)
-    n, e, _ = pymap3d.geodetic2ned(np.array([m.lat for m in gpi]) / 1e7, np.array([m.lon for m in gpi]) / 1e7, 0.0,
-                                   sc.site.lat_deg, sc.site.lon_deg, 0.0)
+    n, e, _ = pymap3d.geodetic2ned(
+        np.array([m.lat for m in gpi]) / 1e7,
+        np.array([m.lon for m in gpi]) / 1e7,
+        0.0,
+        sc.site.lat_deg,
+        sc.site.lon_deg,
+        0.0,
+    )
     true = Motion(sc).uav_ned(tau)
     err = np.column_stack([n - true[:, 0], e - true[:, 1]])
-    assert np.sqrt(np.mean(np.sum(err ** 2, axis=1))) == pytest.approx(rms_m, rel=0.15)
+    assert np.sqrt(np.mean(np.sum(err**2, axis=1))) == pytest.approx(rms_m, rel=0.15)
     if mode == "plain":  # the degE7 rounding (about 1 cm) would hide an RTK walk's correlation
         lag = round(30.0 / np.median(np.diff(tau)))
         corr = np.mean([np.corrcoef(err[:-lag, i], err[lag:, i])[0, 1] for i in range(2)])
@@ -212,12 +277,26 @@ def test_the_ekf_position_walks_with_the_configured_rms(tmp_path, mode, rms_m):
 def test_sensors_off_the_telemetry_is_byte_for_byte_the_bundled(tmp_path):
     for name in BUNDLED:
         sc = load_scenario(SCENARIOS / f"{name}.toml")
-        for label, same in (("default", sc), ("explicit", with_overrides(sc, sensors=scenario_from_dict(
-                {"name": "x", "sensors": {"gnss_mode": "exact", "wander_deg": 0.0}}).sensors))):
+        for label, same in (
+            ("default", sc),
+            (
+                "explicit",
+                with_overrides(
+                    sc,
+                    sensors=scenario_from_dict(
+                        {"name": "x", "sensors": {"gnss_mode": "exact", "wander_deg": 0.0}}
+                    ).sensors,
+                ),
+            ),
+        ):
             out = tmp_path / f"{name}_{label}"
             generate(same, out, video=False)
             for f in ("uav.tlog", "truth.csv", "depth.jsonl", "video_frames.csv"):
-                assert (out / f).read_bytes() == (BUNDLED_DIR / name / f).read_bytes(), (name, label, f)
+                assert (out / f).read_bytes() == (BUNDLED_DIR / name / f).read_bytes(), (
+                    name,
+                    label,
+                    f,
+                )
             assert not (out / "truth_errors.csv").exists()
 
 

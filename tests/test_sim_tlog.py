@@ -12,9 +12,18 @@ from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario
 from sim_fixtures.tlog import Clock
 
-RATES = {"ATTITUDE": 50.0, "GLOBAL_POSITION_INT": 10.0, "SYSTEM_TIME": 1.0, "HEARTBEAT": 1.0, "GPS_RAW_INT": 5.0,
-         "TIMESYNC": 1.0}
-GIMBAL = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+RATES = {
+    "ATTITUDE": 50.0,
+    "GLOBAL_POSITION_INT": 10.0,
+    "SYSTEM_TIME": 1.0,
+    "HEARTBEAT": 1.0,
+    "GPS_RAW_INT": 5.0,
+    "TIMESYNC": 1.0,
+}
+GIMBAL = {
+    "gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS",
+    "mount_orientation": "MOUNT_ORIENTATION",
+}
 
 
 def read_records(path):
@@ -34,7 +43,9 @@ def read_records(path):
 @pytest.fixture(scope="module", params=BUNDLED)
 def tlog(request):
     sc = load_scenario(SCENARIOS / f"{request.param}.toml")
-    conn = mavutil().mavlink_connection(str(BUNDLED_DIR / sc.name / "uav.tlog"), dialect="ardupilotmega")
+    conn = mavutil().mavlink_connection(
+        str(BUNDLED_DIR / sc.name / "uav.tlog"), dialect="ardupilotmega"
+    )
     msgs = []
     while (m := conn.recv_msg()) is not None:
         msgs.append(m)
@@ -53,7 +64,9 @@ def test_every_record_parses_and_times_are_receive_times(tlog):
     timed = [(m._timestamp, m.time_boot_ms) for m in msgs if hasattr(m, "time_boot_ms")]
     station = sc.clock.station_offset_s  # record times are on the station's clock
     delay = np.array([t - (clock.boot_epoch_us + ms * 1000) / 1e6 - station for t, ms in timed])
-    assert delay.min() >= sc.link.delay_s and np.median(delay) < sc.link.delay_s + 5 * sc.link.jitter_s
+    assert (
+        delay.min() >= sc.link.delay_s and np.median(delay) < sc.link.delay_s + 5 * sc.link.jitter_s
+    )
     assert np.std(delay) > 0.2 * sc.link.jitter_s  # there is jitter
 
 

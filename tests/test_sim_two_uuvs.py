@@ -31,7 +31,9 @@ from sim_fixtures.generate import camera_of, frame_truth, generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, scenario_from_dict, with_overrides
 
-SCENARIO = Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
+SCENARIO = (
+    Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
+)
 IDS = (PRIMARY_UUV, "uuv2")
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
@@ -49,8 +51,9 @@ def crossing(tmp_path_factory):
 def local_ned(sc, truth):
     """truth.csv's positions in the scenario's world frame (north, east, down), by pymap3d's NED call."""
     s = sc.site
-    n, e, _ = pymap3d.geodetic2ned(truth["lat"], truth["lon"], s.surface_amsl_m, s.lat_deg, s.lon_deg,
-                                   s.surface_amsl_m)
+    n, e, _ = pymap3d.geodetic2ned(
+        truth["lat"], truth["lon"], s.surface_amsl_m, s.lat_deg, s.lon_deg, s.surface_amsl_m
+    )
     return np.column_stack([n, e, truth["depth_m"]])
 
 
@@ -60,9 +63,15 @@ def pixel_to_ned(session_toml: Path, R_ned_from_cv, camera_ned, u, v, depth_m, n
     c = tomllib.loads(session_toml.read_text())["camera"]
     K = np.array([[c["fx"], 0.0, c["cx"]], [0.0, c["fy"], c["cy"]], [0.0, 0.0, 1.0]])
     pts = np.column_stack([u, v]).reshape(-1, 1, 2).astype(np.float64)
-    dist, criteria = np.asarray(c["distortion"]), (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
-    xy = (cv2.undistortPointsIter(pts, K, dist, None, None, criteria) if hasattr(cv2, "undistortPointsIter")  # 4
-          else cv2.undistortPoints(pts, K, dist, None, None, None, criteria)).reshape(-1, 2)  # OpenCV 5
+    dist, criteria = (
+        np.asarray(c["distortion"]),
+        (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12),
+    )
+    xy = (
+        cv2.undistortPointsIter(pts, K, dist, None, None, criteria)
+        if hasattr(cv2, "undistortPointsIter")  # 4
+        else cv2.undistortPoints(pts, K, dist, None, None, None, criteria)
+    ).reshape(-1, 2)  # OpenCV 5
     d = np.einsum("nij,nj->ni", R_ned_from_cv, np.column_stack([xy, np.ones(len(xy))]))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     surface = camera_ned[:, :2] + d[:, :2] * (-camera_ned[:, 2] / d[:, 2])[:, None]
@@ -78,11 +87,15 @@ def test_reading_the_session_gives_both_uuvs(crossing):
     assert uuv_ids(path) == IDS
     plain = load_session(path)
     sessions = {i: load_session(path, uuv=i) for i in IDS}
-    assert plain.uuv_id == PRIMARY_UUV and np.array_equal(plain.truth["lat"], sessions[PRIMARY_UUV].truth["lat"])
+    assert plain.uuv_id == PRIMARY_UUV and np.array_equal(
+        plain.truth["lat"], sessions[PRIMARY_UUV].truth["lat"]
+    )
     assert plain.calibration.init_bbox == sessions[PRIMARY_UUV].calibration.init_bbox
     first, second = sessions[PRIMARY_UUV], sessions["uuv2"]
     assert second.uuv_id == "uuv2" and second.calibration.init_bbox is not None
-    assert np.all(second.truth["depth_m"] == sc.second_uuv.depth_m) and np.all(first.truth["depth_m"] < 1.2)
+    assert np.all(second.truth["depth_m"] == sc.second_uuv.depth_m) and np.all(
+        first.truth["depth_m"] < 1.2
+    )
     assert np.array_equal(first.frames["t"], second.frames["t"])  # one video
     for i, s in sessions.items():
         box, t = s.calibration.init_bbox, s.calibration.init_t
@@ -111,8 +124,15 @@ def test_each_uuvs_truth_is_where_its_track_says(crossing):
         ned = local_ned(sc, s.truth)
         seen = np.isfinite(s.track["u"])
         assert seen.mean() > 0.9, (i, seen.mean())
-        back = pixel_to_ned(path / "session.toml", truth_px.R_ned_from_cv[seen], truth_px.camera_ned[seen],
-                            s.track["u"][seen], s.track["v"][seen], ned[seen, 2], sc.site.refractive_index)
+        back = pixel_to_ned(
+            path / "session.toml",
+            truth_px.R_ned_from_cv[seen],
+            truth_px.camera_ned[seen],
+            s.track["u"][seen],
+            s.track["v"][seen],
+            ned[seen, 2],
+            sc.site.refractive_index,
+        )
         assert np.hypot(*(back - ned[seen])[:, :2].T).max() < 1e-3, i
 
 
@@ -148,9 +168,14 @@ def tracking_report(path: Path) -> dict:
         to_other = np.hypot(*(px - tracks[other]).T)
         swaps = identity_swaps(to_other < to_own)  # NaN (no fix, or a UUV hidden) compares False
         both = np.isfinite(to_own)
-        report[own] = {"swaps": swaps, "ok": int((result.status == "ok").sum()), "frames": len(px),
-                       "median_px": float(np.median(to_own[both])), "p95_px": float(np.percentile(to_own[both], 95)),
-                       "max_px": float(to_own[both].max())}
+        report[own] = {
+            "swaps": swaps,
+            "ok": int((result.status == "ok").sum()),
+            "frames": len(px),
+            "median_px": float(np.median(to_own[both])),
+            "p95_px": float(np.percentile(to_own[both], 95)),
+            "max_px": float(to_own[both].max()),
+        }
     print(report)
     return report
 
@@ -164,22 +189,32 @@ def test_the_tracker_keeps_each_uuv(crossing):
         assert r["ok"] > 0.9 * r["frames"] and r["p95_px"] < 3.0, (own, r)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 19: lost while uuv1 passes right over it, uuv2's tracker re-acquires "
-                   "uuv1 where it predicted uuv2 and stays on it")
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 19: lost while uuv1 passes right over it, uuv2's tracker re-acquires "
+    "uuv1 where it predicted uuv2 and stays on it",
+)
 def test_the_tracker_keeps_a_uuv_the_other_passes_right_over(tmp_path):
     """Six seconds of the scenario with uuv1 passing right over uuv2 (miss_m = 0): uuv2 is hidden (less than half of
     it showing) from frame 79 to 101. Measured: uuv2's tracker reports it lost in frames 82-88, takes uuv1 from frame 89
     and stays on it to the end (swap from frame 102, when uuv2 shows again, up to 97 px off); uuv1's keeps uuv1."""
-    sc = with_overrides(load_scenario(SCENARIO), duration_s=6.0, uuv={"east_m": -0.9, "weave_m": 0.0},
-                        second_uuv={"pass_at_s": 3.0, "miss_m": 0.0})
+    sc = with_overrides(
+        load_scenario(SCENARIO),
+        duration_s=6.0,
+        uuv={"east_m": -0.9, "weave_m": 0.0},
+        second_uuv={"pass_at_s": 3.0, "miss_m": 0.0},
+    )
     for own, r in tracking_report(generate(sc, tmp_path / "s").session).items():
         assert not r["swaps"], (own, r)
 
 
 def test_a_second_uuv_needs_the_vehicle_and_a_folder_name():
     base = tomllib.loads(SCENARIO.read_text())
-    for change, key in (({"enabled": False}, "second_uuv.role"), ({"id": PRIMARY_UUV}, "second_uuv.id"),
-                        ({"id": "../x"}, "second_uuv.id")):
+    for change, key in (
+        ({"enabled": False}, "second_uuv.role"),
+        ({"id": PRIMARY_UUV}, "second_uuv.id"),
+        ({"id": "../x"}, "second_uuv.id"),
+    ):
         with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
             scenario_from_dict({**base, "second_uuv": {**base["second_uuv"], **change}})
 
@@ -199,7 +234,10 @@ def test_a_uuvs_bad_records_are_one_line_naming_its_file(tmp_path):
     sc = with_overrides(load_scenario(SCENARIO), duration_s=2.0)
     path = generate(sc, tmp_path / "s", video=False).session
     (path / "uuvs" / "uuv2" / "uuv.toml").write_text("[tracker]\ninit_bbox = [470, 0, 40, 30]\n")
-    with pytest.raises(SessionError, match=r"uuvs/uuv2/uuv\.toml: tracker\.init_bbox = \[470, 0, 40, 30\]: box must"):
+    with pytest.raises(
+        SessionError,
+        match=r"uuvs/uuv2/uuv\.toml: tracker\.init_bbox = \[470, 0, 40, 30\]: box must",
+    ):
         load_session(path, uuv="uuv2")
     (path / "uuvs" / "uuv2" / "depth.jsonl").unlink()
     (path / "uuvs" / "uuv2" / "uuv.toml").unlink()
@@ -217,20 +255,49 @@ def test_each_uuv_is_evaluated_against_its_own_truth(crossing, tmp_path):
     command measured refraction MAE 0.021 m for uuv1 and 0.029 m for uuv2. ``--uuv`` restricts it to one, and an
     id the session does not hold is one line naming the ids it does."""
     path = crossing[1]
-    out = subprocess.run(skyfix("evaluate", str(path), "--out", str(tmp_path / "all"), "--quiet", "--use-track"),
-                         check=False, capture_output=True, text=True, cwd=ROOT, timeout=600)
+    out = subprocess.run(
+        skyfix("evaluate", str(path), "--out", str(tmp_path / "all"), "--quiet", "--use-track"),
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=600,
+    )
     assert out.returncode == 0, out.stderr
     with open(tmp_path / "all" / "evaluation.csv", newline="") as f:
         rows = {(r["session"], r["method"]): r for r in csv.DictReader(f)}
     for uuv_id in IDS:
         r = rows[(f"{path.name}/{uuv_id}", "refraction")]
         assert float(r["mae_m"]) <= 0.05 and float(r["coverage"]) >= 0.95, (uuv_id, r)
-    one = subprocess.run(skyfix("process", str(path), "--uuv", "uuv2", "--out", str(tmp_path / "p"), "--quiet",
-                                "--use-track"), check=False, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    one = subprocess.run(
+        skyfix(
+            "process",
+            str(path),
+            "--uuv",
+            "uuv2",
+            "--out",
+            str(tmp_path / "p"),
+            "--quiet",
+            "--use-track",
+        ),
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
     assert one.returncode == 0, one.stderr
     fixes = read_positions_csv(tmp_path / "p" / "positions.csv")
     own = read_table(path / "uuvs" / "uuv2" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
-    assert np.allclose(fixes.u, own["u"], equal_nan=True)  # uuv2's pixels, not the session's own UUV's
-    bad = subprocess.run(skyfix("evaluate", str(path), "--uuv", "uuv9", "--out", str(tmp_path / "bad"), "--quiet"),
-                         check=False, capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert np.allclose(
+        fixes.u, own["u"], equal_nan=True
+    )  # uuv2's pixels, not the session's own UUV's
+    bad = subprocess.run(
+        skyfix("evaluate", str(path), "--uuv", "uuv9", "--out", str(tmp_path / "bad"), "--quiet"),
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert bad.returncode == 2 and "uuv9" in bad.stderr and "uuv1, uuv2" in bad.stderr, bad.stderr

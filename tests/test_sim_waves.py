@@ -54,26 +54,43 @@ def test_slope_variance_is_cox_and_munks_and_the_realisation_has_the_resolved_ba
     sc = scenario_from_dict({"name": "x", "waves": {"wind_mps": wind}, "uav": {"height_m": 25.0}})
     spec = w.Spectrum(wind, sc.waves.fetch_m)
     # the whole spectrum's mean-square slope, by adaptive quadrature of B(k)/k: Cox & Munk's at 12.5 m
-    total, _ = quad(lambda k: spec.saturation(k) / k, spec.k_low, w.K_TOTAL_MAX, limit=400, points=[spec.k_peak, w.K_M])
+    total, _ = quad(
+        lambda k: spec.saturation(k) / k,
+        spec.k_low,
+        w.K_TOTAL_MAX,
+        limit=400,
+        points=[spec.k_peak, w.K_M],
+    )
     assert 1.0 < spec.u12_5_mps / wind < 1.04
     assert total == pytest.approx(0.003 + 0.00512 * spec.u12_5_mps, rel=2e-3)
     field = w.wave_field(sc, camera_of(sc).fx)
-    resolved, _ = quad(lambda k: spec.saturation(k) / k, spec.k_low, 2 * np.pi / field.shortest_wavelength_m,
-                       limit=400, points=[spec.k_peak])
+    resolved, _ = quad(
+        lambda k: spec.saturation(k) / k,
+        spec.k_low,
+        2 * np.pi / field.shortest_wavelength_m,
+        limit=400,
+        points=[spec.k_peak],
+    )
     assert field.resolved_mss == pytest.approx(resolved, rel=2e-3)
     assert field.resolved_mss + field.unresolved_mss == pytest.approx(total, rel=2e-3)
-    assert 0.3 < field.resolved_mss / total < 0.9  # a wavelength of 4 pixels from 25 m (19 cm) resolves this much
+    assert (
+        0.3 < field.resolved_mss / total < 0.9
+    )  # a wavelength of 4 pixels from 25 m (19 cm) resolves this much
 
     # measured on the realisation: the slopes at random places and times
     rng = np.random.default_rng(3)
     n = 200_000
-    slope = field.gradient(rng.uniform(-300, 300, n), rng.uniform(-300, 300, n), rng.uniform(0, 600, n))
+    slope = field.gradient(
+        rng.uniform(-300, 300, n), rng.uniform(-300, 300, n), rng.uniform(0, 600, n)
+    )
     assert np.mean(np.sum(slope**2, axis=1)) == pytest.approx(field.resolved_mss, rel=0.04)
     # Cox & Munk's crosswind/upwind ratio of the slope variances, from the spreading (loosely: 300 directions drawn)
     downwind = w.downwind_rad(sc)
     along = slope @ [np.cos(downwind), np.sin(downwind)]
     across = slope @ [-np.sin(downwind), np.cos(downwind)]
-    assert np.var(across) / np.var(along) == pytest.approx(w.cox_munk_crosswind_ratio(spec.u12_5_mps), abs=0.2)
+    assert np.var(across) / np.var(along) == pytest.approx(
+        w.cox_munk_crosswind_ratio(spec.u12_5_mps), abs=0.2
+    )
 
 
 def test_the_floors_gridded_waves_are_the_exact_sums():
@@ -92,15 +109,19 @@ def test_refraction_through_a_tilted_facet_worked_by_hand():
     """A ray straight down meets a facet tilted 20 degrees (rising to the south): sin θt = sin 20° / 1.34,
     θt = 14.7878°, and the ray leaves 20 − 14.7878 = 5.2122 degrees from the vertical, towards the south."""
     normal = facet_normal_up(np.array([-np.tan(np.radians(20.0)), 0.0]))
-    np.testing.assert_allclose(normal, [np.sin(np.radians(20.0)), 0.0, -np.cos(np.radians(20.0))], atol=1e-15)
+    np.testing.assert_allclose(
+        normal, [np.sin(np.radians(20.0)), 0.0, -np.cos(np.radians(20.0))], atol=1e-15
+    )
     t = refract_into_water(np.array([0.0, 0.0, 1.0]), N_WATER, normal)
     off = np.radians(20.0 - 14.787_8)
     np.testing.assert_allclose(t, [-np.sin(off), 0.0, np.cos(off)], atol=2e-6)
     # a level facet is the flat surface, to the last bit
     d = np.array([[0.3, -0.2, 0.9], [0.0, 0.1, 0.7]])
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    np.testing.assert_array_equal(refract_into_water(d, N_WATER, facet_normal_up(np.zeros((2, 2)))),
-                                  refract_into_water(d, N_WATER))
+    np.testing.assert_array_equal(
+        refract_into_water(d, N_WATER, facet_normal_up(np.zeros((2, 2)))),
+        refract_into_water(d, N_WATER),
+    )
 
 
 def snell_angle_form(d, normal_up, n_water):
@@ -122,7 +143,9 @@ def oblique():
 
 def test_the_truth_pixel_sees_the_reference_point_through_the_waves(oblique):
     sc, camera, truth = oblique
-    field = w.wave_field(sc, camera.fx / floor_div(camera)).averaged(apparent_radius_m(sc.uuv.size_m))
+    field = w.wave_field(sc, camera.fx / floor_div(camera)).averaged(
+        apparent_radius_m(sc.uuv.size_m)
+    )
     frames = np.arange(0, len(truth.tau_s), 7)
     assert np.isfinite(truth.u[frames]).all()
     ray = pixel_rays(camera, truth.u[frames], truth.v[frames])
@@ -130,10 +153,15 @@ def test_the_truth_pixel_sees_the_reference_point_through_the_waves(oblique):
     # forward, along the renderer's own path for the vehicles' rays
     p = water_path_ned(d, truth.camera_ned[frames], N_WATER, field.at(truth.tau_s[frames]))
     point = truth.uuv_ned[frames]
-    land = p.surface_ne + p.dir_water[:, :2] * ((point[:, 2] - p.down_m) / p.dir_water[:, 2])[:, None]
+    land = (
+        p.surface_ne + p.dir_water[:, :2] * ((point[:, 2] - p.down_m) / p.dir_water[:, 2])[:, None]
+    )
     assert np.abs(land - point[:, :2]).max() < 1e-3
     # independently: the crossing by bisection on the ray, Snell's law in angle form
-    for i, (c, di, t_s, pt) in enumerate(zip(truth.camera_ned[frames], d, truth.tau_s[frames], point)):
+    for i, (c, di, t_s, pt) in enumerate(
+        zip(truth.camera_ned[frames], d, truth.tau_s[frames], point)
+    ):
+
         def below(s, c=c, di=di, t_s=t_s):
             x = c + s * di
             return x[2] + field.height(x[0], x[1], t_s)  # down + η: 0 on the surface
@@ -153,18 +181,30 @@ def test_the_waves_own_error_is_the_localizers_flat_solution_of_the_truth_pixel(
     sc, camera, truth = oblique
     generate(sc, tmp_path, video=False)
     track = read_table(tmp_path / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
-    waves = read_table(tmp_path / TRUTH_WAVES_CSV, ("t", "wave_dn_m", "wave_de_m"), allow_empty=("wave_dn_m",
-                                                                                                    "wave_de_m"))
+    waves = read_table(
+        tmp_path / TRUTH_WAVES_CSV,
+        ("t", "wave_dn_m", "wave_de_m"),
+        allow_empty=("wave_dn_m", "wave_de_m"),
+    )
     np.testing.assert_array_equal(np.isnan(waves["wave_dn_m"]), np.isnan(track["u"]))
     ok = np.isfinite(track["u"])
     assert ok.sum() > 0.9 * len(ok)
     loc_cam = Calibration.from_dict(tomllib.loads(_session_toml(sc, camera, None, None))).camera
     R_loc = latt.R_ned_from_cv(truth.R_ned_from_cv[ok] @ R_GIMBAL_FROM_CV.T)
-    off, reaches = pixel_to_offset(loc_cam, R_loc, track["u"][ok], track["v"][ok], -truth.camera_ned[ok, 2],
-                                   truth.uuv_ned[ok, 2], N_WATER)
+    off, reaches = pixel_to_offset(
+        loc_cam,
+        R_loc,
+        track["u"][ok],
+        track["v"][ok],
+        -truth.camera_ned[ok, 2],
+        truth.uuv_ned[ok, 2],
+        N_WATER,
+    )
     assert reaches.all()
     error = truth.camera_ned[ok, :2] + off - truth.uuv_ned[ok, :2]
-    np.testing.assert_allclose(error, np.column_stack([waves["wave_dn_m"][ok], waves["wave_de_m"][ok]]), atol=2e-4)
+    np.testing.assert_allclose(
+        error, np.column_stack([waves["wave_dn_m"][ok], waves["wave_de_m"][ok]]), atol=2e-4
+    )
     rms = np.sqrt(np.mean(error**2, axis=0))
     assert (0.01 < rms).all() and (rms < 0.15).all()  # centimetres at 2 m deep in a 5 m/s wind
 
@@ -178,7 +218,11 @@ def test_a_wavy_scene_renders_and_no_wind_is_the_flat_world_to_the_byte():
     flat_truth = frame_truth(flat, Motion(flat), camera)
     np.testing.assert_array_equal(flat_truth.u, frame_truth(no_table, Motion(no_table), camera).u)
     assert flat_truth.wave_error_ne is None
-    wavy_r, flat_r, none_r = Renderer(sc, camera), Renderer(flat, camera), Renderer(no_table, camera)
+    wavy_r, flat_r, none_r = (
+        Renderer(sc, camera),
+        Renderer(flat, camera),
+        Renderer(no_table, camera),
+    )
     assert wavy_r.waves is not None and flat_r.waves is None
     for i in (0, 5):
         wavy, box = wavy_r.render(truth.view(i))
@@ -202,12 +246,16 @@ def test_caustics_flicker_on_the_vehicle_and_fade_with_depth():
     light = {}
     for depth in (0.3, 3.0):
         points[:, 2] = depth
-        light[depth] = np.array([renderer._caustic_light(renderer._caustic_texture(t), points) for t in (0.0, 0.5)])
+        light[depth] = np.array(
+            [renderer._caustic_light(renderer._caustic_texture(t), points) for t in (0.0, 0.5)]
+        )
     # at a point, from frame to frame (0.5 s apart) the light changes by about its mean just below the surface ...
     change = {d: np.std(light[d][1] - light[d][0]) for d in light}
     assert change[0.3] / np.mean(light[0.3]) > 0.5
     # ... and exp(-0.4/m x 2.7 m) = 0.34 times that at 3 m
-    assert change[3.0] / change[0.3] == pytest.approx(np.exp(-sc.waves.caustic_fade_per_m * 2.7), rel=1e-6)
+    assert change[3.0] / change[0.3] == pytest.approx(
+        np.exp(-sc.waves.caustic_fade_per_m * 2.7), rel=1e-6
+    )
 
 
 def test_scenario_keys_are_checked():
@@ -220,8 +268,18 @@ def test_scenario_keys_are_checked():
 def test_the_downlink_encode_has_its_bitrate_and_no_b_frames(tmp_path):
     assert rate_control(23, None, 30.0) == ["-crf", "23", "-g", "30"]  # the default: as before
     link = DownlinkSpec(bitrate_mbps=4.0, buffer_s=0.5, keyframe_s=2.0)
-    assert rate_control(23, link, 30.0) == ["-b:v", "4000000", "-maxrate", "4000000", "-bufsize", "2000000", "-bf",
-                                            "0", "-g", "60"]
+    assert rate_control(23, link, 30.0) == [
+        "-b:v",
+        "4000000",
+        "-maxrate",
+        "4000000",
+        "-bufsize",
+        "2000000",
+        "-bf",
+        "0",
+        "-g",
+        "60",
+    ]
     if shutil.which("ffprobe") is None:
         pytest.skip("ffprobe not installed")
     rng = np.random.default_rng(2)
@@ -231,12 +289,29 @@ def test_the_downlink_encode_has_its_bitrate_and_no_b_frames(tmp_path):
     for i in range(90):
         enc.write(np.roll(base, 3 * i, axis=1))
     enc.close()
-    out = subprocess.run(["ffprobe", "-v", "error", "-select_streams", "v:0", "-show_entries", "frame=pict_type",
-                          "-of", "json", str(video)], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [
+            "ffprobe",
+            "-v",
+            "error",
+            "-select_streams",
+            "v:0",
+            "-show_entries",
+            "frame=pict_type",
+            "-of",
+            "json",
+            str(video),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     types = [f["pict_type"] for f in json.loads(out.stdout)["frames"]]
     assert len(types) == 90 and "B" not in types
     keyframes = [i for i, t in enumerate(types) if t == "I"]
-    assert {0, 60} <= set(keyframes) and max(np.diff([*keyframes, 90])) <= 60  # (x264 may add one at a scene cut)
+    assert {0, 60} <= set(keyframes) and max(
+        np.diff([*keyframes, 90])
+    ) <= 60  # (x264 may add one at a scene cut)
 
 
 def test_the_waves_scenarios_load():

@@ -47,7 +47,11 @@ SURVEY_PITCH_DEG, SURVEY_TURNS_DEG, SURVEY_RATE_DPS = -80.0, (30.0, -60.0, 30.0)
 
 
 def command(obs: Observer, cmd: int, *params: float) -> None:
-    obs.send(mavlink2.MAVLink_command_long_message(1, 1, cmd, 0, *(list(params) + [0.0] * (7 - len(params)))))
+    obs.send(
+        mavlink2.MAVLink_command_long_message(
+            1, 1, cmd, 0, *(list(params) + [0.0] * (7 - len(params)))
+        )
+    )
 
 
 def armed(obs: Observer) -> bool:
@@ -57,20 +61,44 @@ def armed(obs: Observer) -> bool:
 
 def fly(obs: Observer) -> tuple[float, float]:
     """The flight; returns the survey's span (the simulator's UNIX s: SYSTEM_TIME's clock)."""
-    wait_for(lambda: any("is using GPS" in m.text for _, m in obs.of("STATUSTEXT")), 90, "EKF3 using GPS")
-    obs.send(mavlink2.MAVLink_set_mode_message(1, mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED))
+    wait_for(
+        lambda: any("is using GPS" in m.text for _, m in obs.of("STATUSTEXT")), 90, "EKF3 using GPS"
+    )
+    obs.send(
+        mavlink2.MAVLink_set_mode_message(1, mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED)
+    )
     for _ in range(10):
         command(obs, mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, 1)
         if wait_until(lambda: armed(obs), 3.0):
             break
     assert armed(obs), [m.text for _, m in obs.of("STATUSTEXT")][-5:]
     command(obs, mavlink2.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, float("nan"), 0, 0, 10.0)
-    wait_for(lambda: any(m.relative_alt > 8000 for _, m in obs.of("GLOBAL_POSITION_INT")), 40, "the take-off")
+    wait_for(
+        lambda: any(m.relative_alt > 8000 for _, m in obs.of("GLOBAL_POSITION_INT")),
+        40,
+        "the take-off",
+    )
     for i, (pitch, yaw) in enumerate(GIMBAL):
         since = time.time()
-        command(obs, mavlink2.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, pitch, yaw, float("nan"), float("nan"), 0, 0, 0)
-        command(obs, mavlink2.MAV_CMD_CONDITION_YAW, 45.0, 20.0, 1 if i % 2 == 0 else -1, 1)  # relative turn
-        wait_for(lambda p=pitch, t=since: gimbal_samples_at(obs, p, t) >= HOLD_SAMPLES, 30, f"the gimbal at {pitch}°")
+        command(
+            obs,
+            mavlink2.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+            pitch,
+            yaw,
+            float("nan"),
+            float("nan"),
+            0,
+            0,
+            0,
+        )
+        command(
+            obs, mavlink2.MAV_CMD_CONDITION_YAW, 45.0, 20.0, 1 if i % 2 == 0 else -1, 1
+        )  # relative turn
+        wait_for(
+            lambda p=pitch, t=since: gimbal_samples_at(obs, p, t) >= HOLD_SAMPLES,
+            30,
+            f"the gimbal at {pitch}°",
+        )
     return survey(obs)
 
 
@@ -87,20 +115,46 @@ def survey(obs: Observer) -> tuple[float, float]:
     """The camera at :data:`SURVEY_PITCH_DEG` ahead of the vehicle, which turns by :data:`SURVEY_TURNS_DEG` at
     :data:`SURVEY_RATE_DPS`, each turn awaited until its heading is reached."""
     since = time.time()
-    command(obs, mavlink2.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, SURVEY_PITCH_DEG, 0.0, float("nan"), float("nan"), 0, 0,
-            0)
-    wait_for(lambda: gimbal_samples_at(obs, SURVEY_PITCH_DEG, since) >= 20, 30, "the gimbal at the survey's pitch")
+    command(
+        obs,
+        mavlink2.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+        SURVEY_PITCH_DEG,
+        0.0,
+        float("nan"),
+        float("nan"),
+        0,
+        0,
+        0,
+    )
+    wait_for(
+        lambda: gimbal_samples_at(obs, SURVEY_PITCH_DEG, since) >= 20,
+        30,
+        "the gimbal at the survey's pitch",
+    )
     start = sim_unix(obs)
     for turn in SURVEY_TURNS_DEG:
         target = heading_deg(obs) + turn
-        command(obs, mavlink2.MAV_CMD_CONDITION_YAW, abs(turn), SURVEY_RATE_DPS, 1 if turn > 0 else -1, 1)
-        wait_for(lambda t=target: angle_deg(heading_deg(obs), t) <= 1.0, 30, f"the heading {target % 360:.0f}°")
+        command(
+            obs,
+            mavlink2.MAV_CMD_CONDITION_YAW,
+            abs(turn),
+            SURVEY_RATE_DPS,
+            1 if turn > 0 else -1,
+            1,
+        )
+        wait_for(
+            lambda t=target: angle_deg(heading_deg(obs), t) <= 1.0,
+            30,
+            f"the heading {target % 360:.0f}°",
+        )
     return start, sim_unix(obs)
 
 
 def gimbal_samples_at(obs: Observer, pitch_deg: float, since: float) -> int:
     """GIMBAL_DEVICE_ATTITUDE_STATUS received since ``since`` with the gimbal within 1° of ``pitch_deg``."""
-    q = [m.q for t, m in obs.of("GIMBAL_DEVICE_ATTITUDE_STATUS", since) if m.get_srcComponent() == 1]
+    q = [
+        m.q for t, m in obs.of("GIMBAL_DEVICE_ATTITUDE_STATUS", since) if m.get_srcComponent() == 1
+    ]
     if not q:
         return 0
     w, x, y, z = np.array(q).T
@@ -118,14 +172,23 @@ def angle_deg(a, b):
 
 def test_a_dataflash_log_imported_says_what_the_autopilot_said_live(tmp_path):
     binary, parms = arducopter_files()
-    sitl = ArduCopter(binary, parms, tmp_path / "copter", home=(LAT, LON, HOME_AMSL_M, 0.0), extra_parm=EXTRA,
-                      keep=KEEP)
+    sitl = ArduCopter(
+        binary,
+        parms,
+        tmp_path / "copter",
+        home=(LAT, LON, HOME_AMSL_M, 0.0),
+        extra_parm=EXTRA,
+        keep=KEEP,
+    )
     try:
         sitl.start()
         obs = sitl.observer
-        for msg_id, hz in ((mavlink2.MAVLINK_MSG_ID_ATTITUDE, 25.0), (mavlink2.MAVLINK_MSG_ID_SYSTEM_TIME, 2.0),
-                           (mavlink2.MAVLINK_MSG_ID_GIMBAL_DEVICE_ATTITUDE_STATUS, 20.0),
-                           (mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0)):
+        for msg_id, hz in (
+            (mavlink2.MAVLINK_MSG_ID_ATTITUDE, 25.0),
+            (mavlink2.MAVLINK_MSG_ID_SYSTEM_TIME, 2.0),
+            (mavlink2.MAVLINK_MSG_ID_GIMBAL_DEVICE_ATTITUDE_STATUS, 20.0),
+            (mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0),
+        ):
             obs.request_interval(msg_id, hz)
         survey_span = fly(obs)
     finally:
@@ -134,12 +197,22 @@ def test_a_dataflash_log_imported_says_what_the_autopilot_said_live(tmp_path):
     assert logs, sitl.tail()
     t_live = [m.time_boot_ms for m in live(obs, "ATTITUDE")]
     depth = tmp_path / "depth.jsonl"  # the UUV's depth is not this test's: a constant, on UNIX time
-    clock = np.median([m.time_unix_usec / 1e6 - m.time_boot_ms / 1e3 for m in live(obs, "SYSTEM_TIME")
-                       if m.time_unix_usec])
-    depth.write_text("".join(json.dumps({"t": clock + t / 1e3, "depth_m": 1.0}) + "\n" for t in t_live[::10]))
+    clock = np.median(
+        [
+            m.time_unix_usec / 1e6 - m.time_boot_ms / 1e3
+            for m in live(obs, "SYSTEM_TIME")
+            if m.time_unix_usec
+        ]
+    )
+    depth.write_text(
+        "".join(json.dumps({"t": clock + t / 1e3, "depth_m": 1.0}) + "\n" for t in t_live[::10])
+    )
     cal = tmp_path / "cal.toml"
-    cal.write_text((ROOT / "deploy" / "calibration.toml").read_text()
-                   .replace('attitude_source = "gimbal_device"', 'attitude_source = "mount_orientation"'))
+    cal.write_text(
+        (ROOT / "deploy" / "calibration.toml")
+        .read_text()
+        .replace('attitude_source = "gimbal_device"', 'attitude_source = "mount_orientation"')
+    )
     report = import_flight(logs[-1], None, depth, cal, tmp_path / "session")
     got = {}
     for _, m in read_tlog(tmp_path / "session" / "uav.tlog"):
@@ -162,15 +235,21 @@ def test_a_dataflash_log_imported_says_what_the_autopilot_said_live(tmp_path):
     # rotation by scipy (Z-Y-X): the angle between the two
     mnt = got["MOUNT_ORIENTATION"]
     t_m = np.array([m.time_boot_ms for m in mnt], float)
-    gim = [m for m in live(obs, "GIMBAL_DEVICE_ATTITUDE_STATUS") if t_m[0] <= m.time_boot_ms <= t_m[-1]]
+    gim = [
+        m for m in live(obs, "GIMBAL_DEVICE_ATTITUDE_STATUS") if t_m[0] <= m.time_boot_ms <= t_m[-1]
+    ]
     w, x, y, z = np.array([m.q for m in gim]).T
     r_live = Rotation.from_quat(np.column_stack([x, y, z, w]))
     flags = {m.flags & mavlink2.GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME for m in gim}
     field = "yaw_absolute" if flags == {mavlink2.GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME} else "yaw"
     t_g = np.array([m.time_boot_ms for m in gim], float)
-    zyx = [np.interp(t_g, t_m, np.unwrap([getattr(m, name) for m in mnt], period=360.0))
-           for name in (field, "pitch", "roll")]
-    gim_err = (r_live.inv() * Rotation.from_euler("ZYX", np.column_stack(zyx), degrees=True)).magnitude()
+    zyx = [
+        np.interp(t_g, t_m, np.unwrap([getattr(m, name) for m in mnt], period=360.0))
+        for name in (field, "pitch", "roll")
+    ]
+    gim_err = (
+        r_live.inv() * Rotation.from_euler("ZYX", np.column_stack(zyx), degrees=True)
+    ).magnitude()
     gim_err = np.degrees(gim_err)
     pitch = zyx[1]
     # the position, the session's interpolated to each live message's time
@@ -180,21 +259,25 @@ def test_a_dataflash_log_imported_says_what_the_autopilot_said_live(tmp_path):
     t_n = np.array([m.time_boot_ms for m in near], float)
 
     def at(name):
-        return np.interp(t_n, t_p, [getattr(m, name) for m in gpi]) - np.array([getattr(m, name) for m in near])
+        return np.interp(t_n, t_p, [getattr(m, name) for m in gpi]) - np.array(
+            [getattr(m, name) for m in near]
+        )
 
     horizontal = np.hypot(at("lat") * 0.0111, at("lon") * 0.0111 * np.cos(np.radians(LAT)))
     vertical = np.abs(at("alt")) / 1000.0
     pairs = near
-    print(f"\nArduCopter SITL {binary}: log {logs[-1].name}, {report['messages']}\n"
-          f"clock: the log's on UNIX time - SYSTEM_TIME's {clock_error_s * 1000:+.1f} ms "
-          f"(± {report['unix_minus_boot_sigma_s'] * 1000:.1f} ms)\n"
-          f"attitude: {len(t_l)} live ATTITUDE, worst axis: median {np.median(att_err):.3f}°, "
-          f"p99 {np.percentile(att_err, 99):.3f}°, max {att_err.max():.3f}°\n"
-          f"gimbal: {len(t_g)} live GIMBAL_DEVICE_ATTITUDE_STATUS ({field}): median {np.median(gim_err):.3f}°, "
-          f"p99 {np.percentile(gim_err, 99):.3f}°, max {gim_err.max():.3f}°; pitch range "
-          f"{pitch.min():.0f}…{pitch.max():.0f}°\n"
-          f"position: {len(pairs)} live GLOBAL_POSITION_INT: horizontal median {np.median(horizontal):.3f} m, max "
-          f"{horizontal.max():.3f} m; vertical median {np.median(vertical):.3f} m, max {vertical.max():.3f} m")
+    print(
+        f"\nArduCopter SITL {binary}: log {logs[-1].name}, {report['messages']}\n"
+        f"clock: the log's on UNIX time - SYSTEM_TIME's {clock_error_s * 1000:+.1f} ms "
+        f"(± {report['unix_minus_boot_sigma_s'] * 1000:.1f} ms)\n"
+        f"attitude: {len(t_l)} live ATTITUDE, worst axis: median {np.median(att_err):.3f}°, "
+        f"p99 {np.percentile(att_err, 99):.3f}°, max {att_err.max():.3f}°\n"
+        f"gimbal: {len(t_g)} live GIMBAL_DEVICE_ATTITUDE_STATUS ({field}): median {np.median(gim_err):.3f}°, "
+        f"p99 {np.percentile(gim_err, 99):.3f}°, max {gim_err.max():.3f}°; pitch range "
+        f"{pitch.min():.0f}…{pitch.max():.0f}°\n"
+        f"position: {len(pairs)} live GLOBAL_POSITION_INT: horizontal median {np.median(horizontal):.3f} m, max "
+        f"{horizontal.max():.3f} m; vertical median {np.median(vertical):.3f} m, max {vertical.max():.3f} m"
+    )
     assert abs(clock_error_s) <= 0.01
     assert len(t_l) > 300 and np.median(att_err) <= 0.05 and np.percentile(att_err, 99) <= 0.5
     assert len(t_g) > 200 and pitch.min() < -85 and np.percentile(gim_err, 99) <= 0.5
@@ -214,7 +297,9 @@ def sim_truth(log) -> tuple[np.ndarray, Rotation, np.ndarray]:
     return a[:, 0], Rotation.from_euler("ZYX", a[:, [3, 2, 1]], degrees=True), a[:, 4:7]
 
 
-def the_survey_filmed_is_located(tmp_path, log, clock_s: float, survey_span: tuple[float, float]) -> None:
+def the_survey_filmed_is_located(
+    tmp_path, log, clock_s: float, survey_span: tuple[float, float]
+) -> None:
     """The survey as the camera filmed it: ``sim_fixtures`` renders a UUV 1.5 m deep, 1 m North of where the vehicle
     hovered, seen from the simulator's own vehicle pose (its SIM records) and the gimbal as commanded (a
     self-stabilising gimbal: roll 0 and :data:`SURVEY_PITCH_DEG` to the horizon, yaw with the vehicle); the video
@@ -228,27 +313,44 @@ def the_survey_filmed_is_located(tmp_path, log, clock_s: float, survey_span: tup
     from sim_fixtures.render import Renderer, View
     from sim_fixtures.scenario import load_scenario, with_overrides
 
-    sc = with_overrides(load_scenario(ROOT / "sim_fixtures" / "scenarios" / "mount_orientation.toml"),
-                        site={"lat_deg": LAT, "lon_deg": LON, "surface_amsl_m": HOME_AMSL_M},
-                        uuv={"depth_m": UUV_DEPTH_M})
+    sc = with_overrides(
+        load_scenario(ROOT / "sim_fixtures" / "scenarios" / "mount_orientation.toml"),
+        site={"lat_deg": LAT, "lon_deg": LON, "surface_amsl_m": HOME_AMSL_M},
+        uuv={"depth_m": UUV_DEPTH_M},
+    )
     camera, fps = camera_of(sc), sc.fps
     t_sim, R_body, lla = sim_truth(log)
-    frames_t = np.arange(survey_span[0] + VIDEO_LATE_S, survey_span[1], 1.0 / fps)  # on the log's UNIX clock
+    frames_t = np.arange(
+        survey_span[0] + VIDEO_LATE_S, survey_span[1], 1.0 / fps
+    )  # on the log's UNIX clock
     boot = frames_t - clock_s
-    ned = np.column_stack(pymap3d.geodetic2ned(lla[:, 0], lla[:, 1], lla[:, 2], LAT, LON, HOME_AMSL_M))
+    ned = np.column_stack(
+        pymap3d.geodetic2ned(lla[:, 0], lla[:, 1], lla[:, 2], LAT, LON, HOME_AMSL_M)
+    )
     vehicle = np.column_stack([np.interp(boot, t_sim, ned[:, k]) for k in range(3)])
     R_ned_from_body = Slerp(t_sim, R_body)(boot)
     camera_ned = vehicle + R_ned_from_body.apply(np.asarray(sc.mount.camera_offset_m))
     heading = R_ned_from_body.as_euler("ZYX", degrees=True)[:, 0]
-    R_ned_from_gimbal = Rotation.from_euler("ZYX", np.column_stack([heading, np.full_like(heading, SURVEY_PITCH_DEG),
-                                                                     np.zeros_like(heading)]), degrees=True)
+    R_ned_from_gimbal = Rotation.from_euler(
+        "ZYX",
+        np.column_stack([heading, np.full_like(heading, SURVEY_PITCH_DEG), np.zeros_like(heading)]),
+        degrees=True,
+    )
     uuv_ned = np.array([vehicle[:, 0].mean() + 1.0, vehicle[:, 1].mean(), UUV_DEPTH_M])
     renderer, video = Renderer(sc, camera), tmp_path / "camera.mp4"
     encoder, first = Encoder(video, camera.width, camera.height, fps, sc.render.crf), None
     try:
         for i, t in enumerate(frames_t):
-            img, box = renderer.render(View(R_ned_from_gimbal[i].as_matrix() @ R_GIMBAL_FROM_CV, camera_ned[i],
-                                            uuv_ned, 0.3, True, float(t - frames_t[0])))
+            img, box = renderer.render(
+                View(
+                    R_ned_from_gimbal[i].as_matrix() @ R_GIMBAL_FROM_CV,
+                    camera_ned[i],
+                    uuv_ned,
+                    0.3,
+                    True,
+                    float(t - frames_t[0]),
+                )
+            )
             first = first or (box and (box, float(t)))
             encoder.write(img)
     finally:
@@ -258,25 +360,35 @@ def the_survey_filmed_is_located(tmp_path, log, clock_s: float, survey_span: tup
     cal_dir = tmp_path / "calibration"
     generate(sc, cal_dir, video=False)  # the scenario's camera, mount and water tables
     cal = tmp_path / "cal.toml"
-    cal.write_text((cal_dir / "session.toml").read_text()
-                   + f"\n[tracker]\ninit_bbox = [{x - 3}, {y - 3}, {w + 6}, {h + 6}]\ninit_t = {init_t}\n")
+    cal.write_text(
+        (cal_dir / "session.toml").read_text()
+        + f"\n[tracker]\ninit_bbox = [{x - 3}, {y - 3}, {w + 6}, {h + 6}]\ninit_t = {init_t}\n"
+    )
     depth = tmp_path / "uuv_depth.jsonl"
-    depth.write_text("".join(json.dumps({"t": t, "depth_m": UUV_DEPTH_M}) + "\n"
-                             for t in np.arange(frames_t[0] - 5, frames_t[-1] + 5, 0.5)))
+    depth.write_text(
+        "".join(
+            json.dumps({"t": t, "depth_m": UUV_DEPTH_M}) + "\n"
+            for t in np.arange(frames_t[0] - 5, frames_t[-1] + 5, 0.5)
+        )
+    )
     out = tmp_path / "survey"
     report = import_flight(log, video, depth, cal, out)
     start_error_s = report["video_start_unix"] - frames_t[0]
     lat, lon, _ = pymap3d.ned2geodetic(*uuv_ned, LAT, LON, HOME_AMSL_M)
-    (out / "truth.csv").write_text("t,lat,lon,depth_m\n" + "".join(f"{t:.6f},{lat:.10f},{lon:.10f},{UUV_DEPTH_M}\n"
-                                                                    for t in frames_t))
+    (out / "truth.csv").write_text(
+        "t,lat,lon,depth_m\n"
+        + "".join(f"{t:.6f},{lat:.10f},{lon:.10f},{UUV_DEPTH_M}\n" for t in frames_t)
+    )
     session = load_session(out)
     fixes = process_session(session, use_track=False)
     ok = fixes.status == "ok"
     err = errors_m(fixes, session.truth)[ok]
     err = err[np.isfinite(err)]
-    print(f"survey: {len(frames_t)} frames rendered from the simulator's pose; video start from its motion "
-          f"{start_error_s * 1000:+.1f} ms ± {report['video_start_sigma_s'] * 1000:.1f} ms (contrast "
-          f"{report['video_start_contrast']}, {report['video_start_pairs']} pairs); {ok.mean():.1%} of frames fixed, "
-          f"MAE {err.mean():.4f} m, max {err.max():.4f} m")
+    print(
+        f"survey: {len(frames_t)} frames rendered from the simulator's pose; video start from its motion "
+        f"{start_error_s * 1000:+.1f} ms ± {report['video_start_sigma_s'] * 1000:.1f} ms (contrast "
+        f"{report['video_start_contrast']}, {report['video_start_pairs']} pairs); {ok.mean():.1%} of frames fixed, "
+        f"MAE {err.mean():.4f} m, max {err.max():.4f} m"
+    )
     assert abs(start_error_s) <= 1.0 / fps, report
     assert ok.mean() >= 0.9 and len(err) >= 0.9 * len(ok) and err.mean() <= 0.05

@@ -40,7 +40,9 @@ pytestmark = pytest.mark.sitl
 LAT, LON, SURFACE_AMSL_M = 63.4400, 10.4000, 0.40  # the scenario's [site]; ArduSub's --home
 DURATION_S = 42.0
 OCCLUSION_S = (30.0, 33.0)  # the UUV is hidden (session seconds from the first frame)
-WARMUP_S = 30.0  # ArduSub's uptime before the replay starts (its README: start it ~30 s before the fixes)
+WARMUP_S = (
+    30.0  # ArduSub's uptime before the replay starts (its README: start it ~30 s before the fixes)
+)
 NO_FIX_MAX_S = 0.5  # issue 11: GPS_RAW_INT shows the loss within 0.5 s of skyfix sending fix_type 1
 # GLOBAL_POSITION_INT against the last fix ArduSub received, from 2 s after EKF3 took the GPS to the loss.
 # The simulated sub sits still, so its IMU contradicts every move of the (moving, ≤ 0.35 m/s) UUV's fixes:
@@ -89,6 +91,7 @@ sun_azimuth_deg = 200.0
 sun_elevation_deg = 62.0
 """
 
+
 def distance_m(lat1, lon1, lat2, lon2):
     """Horizontal distance (m) between degE7 positions a few metres apart (equirectangular)."""
     r = 6_371_000.0
@@ -127,28 +130,63 @@ def test_ardusub_sitl_takes_skyfix_gps_input(tmp_path):
         procs.append(gen)
         sitl.start()
         obs = sitl.observer
-        for msg_id, hz in ((mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT, 20.0), (mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0),
-                           (mavlink2.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 10.0)):
+        for msg_id, hz in (
+            (mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT, 20.0),
+            (mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0),
+            (mavlink2.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 10.0),
+        ):
             obs.request_interval(msg_id, hz)
         wait_for(lambda: gen.poll() is not None, 600, "skyfix sim to render the session")
         gen_s = time.time() - t_gen
         assert gen.returncode == 0, (tmp_path / "sim.log").read_text()[-3000:]
-        wait_for(lambda: sitl.boot_s() >= WARMUP_S or not sitl.alive(), 180, f"ArduSub up {WARMUP_S:g} s")
+        wait_for(
+            lambda: sitl.boot_s() >= WARMUP_S or not sitl.alive(), 180, f"ArduSub up {WARMUP_S:g} s"
+        )
         assert sitl.alive(), sitl.tail()
         boot_at_replay = sitl.boot_s()
 
-        run_cmd = skyfix("run", "--calibration", str(session / "session.toml"), "--mavlink", f"udpin:127.0.0.1:{mav}",
-                         "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", "55",
-                         "--zenoh-listen", zenoh_ep, "--gps-input", f"tcp:127.0.0.1:{sitl.ports['serial1']}",
-                         "--duration-s", str(DURATION_S + 240))
+        run_cmd = skyfix(
+            "run",
+            "--calibration",
+            str(session / "session.toml"),
+            "--mavlink",
+            f"udpin:127.0.0.1:{mav}",
+            "--video",
+            f"udp://127.0.0.1:{video}",
+            "--video-latency-ms",
+            "55",
+            "--zenoh-listen",
+            zenoh_ep,
+            "--gps-input",
+            f"tcp:127.0.0.1:{sitl.ports['serial1']}",
+            "--duration-s",
+            str(DURATION_S + 240),
+        )
         run = start(run_cmd, tmp_path / "run.log")
         procs.append(run)
-        wait_for(lambda: len(obs.of("GPS_INPUT")) >= 5 or run.poll() is not None, 60,
-                 "skyfix's GPS_INPUT reaching ArduSub (forwarded to the observer)")
+        wait_for(
+            lambda: len(obs.of("GPS_INPUT")) >= 5 or run.poll() is not None,
+            60,
+            "skyfix's GPS_INPUT reaching ArduSub (forwarded to the observer)",
+        )
         assert run.poll() is None, (tmp_path / "run.log").read_text()[-3000:]
-        replay = start(skyfix("replay", str(session), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
-                              "--video-out", f"udp://127.0.0.1:{video}", "--zenoh-connect", zenoh_ep,
-                              "--uuv-listen", "", "--tail-s", "2"), tmp_path / "replay.log")
+        replay = start(
+            skyfix(
+                "replay",
+                str(session),
+                "--mavlink-out",
+                f"udpout:127.0.0.1:{mav}",
+                "--video-out",
+                f"udp://127.0.0.1:{video}",
+                "--zenoh-connect",
+                zenoh_ep,
+                "--uuv-listen",
+                "",
+                "--tail-s",
+                "2",
+            ),
+            tmp_path / "replay.log",
+        )
         procs.append(replay)
         replay.wait(DURATION_S + 120)
         t_end = time.time()
@@ -185,8 +223,10 @@ def test_ardusub_sitl_takes_skyfix_gps_input(tmp_path):
     t_aligned = aligned[0]
     using = first(texts, lambda x: "EKF3 IMU0 is using GPS" in x[1])
     assert using is not None, why
-    assert t_aligned < occ0, (f"EKF3 aligned {t_aligned - occ0:.1f} s after the occlusion began "
-                              f"(first fix {t_first_fix - occ0:.1f} s){why}")
+    assert t_aligned < occ0, (
+        f"EKF3 aligned {t_aligned - occ0:.1f} s after the occlusion began "
+        f"(first fix {t_first_fix - occ0:.1f} s){why}"
+    )
 
     # GPS_RAW_INT mirrors the fixes: every 3D report is a GPS_INPUT of the last second, to 1e-7°
     raw3 = [(t, m) for t, m in raw if t > t_first_fix and m.fix_type == FIX_3D]
@@ -220,7 +260,11 @@ def test_ardusub_sitl_takes_skyfix_gps_input(tmp_path):
     resume = first(gin3, lambda x: x[0] > t_loss_fwd)
     assert resume is not None, f"skyfix never sent a 3D fix after the occlusion{why}"
     t_resume = resume[0]
-    held = [round(t - t_loss_sent, 2) for t, m in raw if no_fix[0] <= t < t_resume and m.fix_type == FIX_3D]
+    held = [
+        round(t - t_loss_sent, 2)
+        for t, m in raw
+        if no_fix[0] <= t < t_resume and m.fix_type == FIX_3D
+    ]
     assert not held, f"GPS_RAW_INT showed a 3D fix during the loss at {held[:5]} s"
     recovered = first(raw, lambda x: x[0] > t_resume and x[1].fix_type == FIX_3D)
     assert recovered is not None, f"GPS_RAW_INT never showed a 3D fix again{why}"
@@ -230,29 +274,49 @@ def test_ardusub_sitl_takes_skyfix_gps_input(tmp_path):
     # GLOBAL_POSITION_INT follows the fixes, from shortly after alignment to the loss, while skyfix sends fixes
     d = []
     for t, m in gpi:
-        if t_aligned + GPI_SETTLE_S <= t < t_loss_sent and latest_before(gin, t)[1].fix_type == FIX_3D:
+        if (
+            t_aligned + GPI_SETTLE_S <= t < t_loss_sent
+            and latest_before(gin, t)[1].fix_type == FIX_3D
+        ):
             ref = latest_before(gin3, t)
             d.append(float(distance_m(m.lat, m.lon, ref[1].lat, ref[1].lon)))
     d = np.array(d)
     assert len(d) >= 30, f"{len(d)} GLOBAL_POSITION_INT samples between alignment and the loss"
 
     print(f"\nArduSub SITL: {binary}, instance ports {sitl.ports}")
-    print(f"session generated in {gen_s:.1f} s ({DURATION_S:g} s, 320x180); replay started at ArduSub uptime "
-          f"{boot_at_replay:.1f} s; test {time.time() - t_test:.1f} s in all")
-    print(f"EKF3 alignment: EKF_POS_HORIZ_ABS {t_aligned - t_first_fix:.2f} s after the first 3D GPS_INPUT "
-          f"('is using GPS' at {using[0] - t_first_fix:.2f} s), {occ0 - t_aligned:.1f} s before the occlusion")
-    print(f"GPS_RAW_INT mirror: {len(raw3)} 3D reports, all equal to a GPS_INPUT of the last second "
-          f"({exact_latest / len(raw3):.1%} to the latest one); {len(gin3)} 3D GPS_INPUT of {len(gin)}")
-    print(f"GLOBAL_POSITION_INT vs last fix: {len(d)} samples, median {np.median(d):.3f} m, "
-          f"p95 {np.percentile(d, 95):.3f} m, max {d.max():.3f} m")
-    print(f"no-fix: GPS_RAW_INT fix_type {no_fix[1].fix_type} {no_fix_s * 1000:.0f} ms after skyfix sent fix_type 1 "
-          f"(forwarded copy {(no_fix[0] - t_loss_fwd) * 1000:.0f} ms; loss {t_loss_fwd - occ0:+.2f} s from the "
-          f"occlusion); EKF_POS_HORIZ_ABS kept through the {t_resume - t_loss_sent:.1f} s loss: "
-          f"{all(ekf_during_loss)}")
-    print(f"recovery: GPS_RAW_INT 3D {recovery_s * 1000:.0f} ms after the first 3D GPS_INPUT "
-          f"({t_resume - occ1:+.2f} s from the occlusion's end)")
+    print(
+        f"session generated in {gen_s:.1f} s ({DURATION_S:g} s, 320x180); replay started at ArduSub uptime "
+        f"{boot_at_replay:.1f} s; test {time.time() - t_test:.1f} s in all"
+    )
+    print(
+        f"EKF3 alignment: EKF_POS_HORIZ_ABS {t_aligned - t_first_fix:.2f} s after the first 3D GPS_INPUT "
+        f"('is using GPS' at {using[0] - t_first_fix:.2f} s), {occ0 - t_aligned:.1f} s before the occlusion"
+    )
+    print(
+        f"GPS_RAW_INT mirror: {len(raw3)} 3D reports, all equal to a GPS_INPUT of the last second "
+        f"({exact_latest / len(raw3):.1%} to the latest one); {len(gin3)} 3D GPS_INPUT of {len(gin)}"
+    )
+    print(
+        f"GLOBAL_POSITION_INT vs last fix: {len(d)} samples, median {np.median(d):.3f} m, "
+        f"p95 {np.percentile(d, 95):.3f} m, max {d.max():.3f} m"
+    )
+    print(
+        f"no-fix: GPS_RAW_INT fix_type {no_fix[1].fix_type} {no_fix_s * 1000:.0f} ms after skyfix sent fix_type 1 "
+        f"(forwarded copy {(no_fix[0] - t_loss_fwd) * 1000:.0f} ms; loss {t_loss_fwd - occ0:+.2f} s from the "
+        f"occlusion); EKF_POS_HORIZ_ABS kept through the {t_resume - t_loss_sent:.1f} s loss: "
+        f"{all(ekf_during_loss)}"
+    )
+    print(
+        f"recovery: GPS_RAW_INT 3D {recovery_s * 1000:.0f} ms after the first 3D GPS_INPUT "
+        f"({t_resume - occ1:+.2f} s from the occlusion's end)"
+    )
 
-    assert no_fix_s <= NO_FIX_MAX_S, f"GPS_RAW_INT no-fix {no_fix_s:.3f} s after skyfix sent fix_type 1"
+    assert no_fix_s <= NO_FIX_MAX_S, (
+        f"GPS_RAW_INT no-fix {no_fix_s:.3f} s after skyfix sent fix_type 1"
+    )
     assert np.median(d) <= GPI_MEDIAN_M and d.max() <= GPI_MAX_M, (
-        f"GLOBAL_POSITION_INT vs fixes: median {np.median(d):.3f} m, max {d.max():.3f} m")
-    assert (recovered[1].lat, recovered[1].lon) in {(g.lat, g.lon) for tg, g in gin3 if tg <= recovered[0]}
+        f"GLOBAL_POSITION_INT vs fixes: median {np.median(d):.3f} m, max {d.max():.3f} m"
+    )
+    assert (recovered[1].lat, recovered[1].lon) in {
+        (g.lat, g.lon) for tg, g in gin3 if tg <= recovered[0]
+    }

@@ -46,22 +46,30 @@ from test_zenoh_security import ROUTER
 pytestmark = pytest.mark.sitl
 
 LAT, LON, SURFACE_AMSL_M = 63.4400, 10.4000, 0.40
-START_UNIX = 1763800000.0  # the scenarios' first frame (their default start_unix), station clock = true time
+START_UNIX = (
+    1763800000.0  # the scenarios' first frame (their default start_unix), station clock = true time
+)
 DURATION_S = 36.0
 CUT_S = (14.0, 10.0)  # drone b's video is cut from 14 s after its session's start, for 10 s
 LEAD_S = 2.0  # the sessions' telemetry starts this long before their first frame (the scenarios' default lead_s)
-CAMERA_LATENCY_MS = 55  # glass to first packet of the replayed cameras, configured as such in the services
+CAMERA_LATENCY_MS = (
+    55  # glass to first packet of the replayed cameras, configured as such in the services
+)
 WARMUP_S = 30.0  # ArduSub's uptime before the fixes (its README)
 FIX_3D = 3
 # the scenario of tests/test_fusion.py, smaller and slower (two services, two replays and ArduSub share this
 # machine's two cores), longer, at ArduSub's home
-SCENARIO_EXTRA = (f"duration_s = {DURATION_S}\nfps = 15.0\nstart_unix = {START_UNIX}\n"
-                  f"site = {{ lat_deg = {LAT}, lon_deg = {LON}, surface_amsl_m = {SURFACE_AMSL_M} }}\n"
-                  "camera = { width = 320, height = 180 }\nrender = { crf = 28 }\n")
+SCENARIO_EXTRA = (
+    f"duration_s = {DURATION_S}\nfps = 15.0\nstart_unix = {START_UNIX}\n"
+    f"site = {{ lat_deg = {LAT}, lon_deg = {LON}, surface_amsl_m = {SURFACE_AMSL_M} }}\n"
+    "camera = { width = 320, height = 180 }\nrender = { crf = 28 }\n"
+)
 
 
 def scenario(name: str, height: float, yaw: float, pitch: float, gimbal_yaw: float) -> str:
-    text = DRONE_SCENARIO.format(name=name, height=height, yaw=yaw, pitch=pitch, gimbal_yaw=gimbal_yaw)
+    text = DRONE_SCENARIO.format(
+        name=name, height=height, yaw=yaw, pitch=pitch, gimbal_yaw=gimbal_yaw
+    )
     assert "duration_s = 20.0\n" in text
     return text.replace("duration_s = 20.0\n", SCENARIO_EXTRA)
 
@@ -84,22 +92,55 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
         gens = []
         for d, (height, yaw, pitch, gimbal_yaw) in DRONES.items():
             (tmp_path / f"{d}.toml").write_text(scenario(d, height, yaw, pitch, gimbal_yaw))
-            gens.append(start(skyfix("sim", str(tmp_path / f"{d}.toml"), "--out", str(sessions[d]), "--quiet"),
-                              tmp_path / f"sim_{d}.log"))
+            gens.append(
+                start(
+                    skyfix(
+                        "sim", str(tmp_path / f"{d}.toml"), "--out", str(sessions[d]), "--quiet"
+                    ),
+                    tmp_path / f"sim_{d}.log",
+                )
+            )
         procs += gens
-        router = subprocess.Popen([sys.executable, "-c", ROUTER, str(tmp_path / "router.json5")],
-                                  stdout=subprocess.PIPE, text=True)
+        router = subprocess.Popen(
+            [sys.executable, "-c", ROUTER, str(tmp_path / "router.json5")],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         procs.append(router)
         assert router.stdout.readline().strip() == "ready"
         sitl.start()
         obs = sitl.observer
-        for msg_id, hz in ((mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT, 20.0), (mavlink2.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 5.0)):
+        for msg_id, hz in (
+            (mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT, 20.0),
+            (mavlink2.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 5.0),
+        ):
             obs.request_interval(msg_id, hz)
-        procs.append(start([sys.executable, "-c", SUBSCRIBER, ep, "skyfix/uuv/rov1/**", str(zlog)],
-                           tmp_path / "sub.log"))
-        fuser = start(skyfix("fuse", "--uuv", "rov1", "--source", "a", "--source", "b", "--zenoh-connect", ep, "--gps-input",
-                             f"tcp:127.0.0.1:{sitl.ports['serial1']}", "--stats", str(tmp_path / "fuse.json"),
-                             "--duration-s", "600"), tmp_path / "fuse.log")
+        procs.append(
+            start(
+                [sys.executable, "-c", SUBSCRIBER, ep, "skyfix/uuv/rov1/**", str(zlog)],
+                tmp_path / "sub.log",
+            )
+        )
+        fuser = start(
+            skyfix(
+                "fuse",
+                "--uuv",
+                "rov1",
+                "--source",
+                "a",
+                "--source",
+                "b",
+                "--zenoh-connect",
+                ep,
+                "--gps-input",
+                f"tcp:127.0.0.1:{sitl.ports['serial1']}",
+                "--stats",
+                str(tmp_path / "fuse.json"),
+                "--duration-s",
+                "600",
+            ),
+            tmp_path / "fuse.log",
+        )
         procs.append(fuser)
         for g, d in zip(gens, DRONES, strict=True):
             wait_for(lambda g=g: g.poll() is not None, 600, f"skyfix sim of drone {d}")
@@ -111,36 +152,95 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
         ports = {d: (free_port(), free_port()) for d in DRONES}
         services = {}
         for d, (mav, video) in ports.items():
-            services[d] = start(skyfix(
-                "run", "--calibration", str(sessions[d] / "session.toml"), "--mavlink", f"udpin:127.0.0.1:{mav}",
-                "--video", f"udp://127.0.0.1:{video}", "--video-latency-ms", str(CAMERA_LATENCY_MS), "--zenoh-connect", ep,
-                "--fix-key", f"skyfix/uuv/rov1/drone/{d}/fix", "--status-key", f"skyfix/drone/{d}/status",
-                "--alive-key", f"skyfix/drone/{d}/alive", "--control-prefix", f"skyfix/drone/{d}/cmd", "--no-ui",
-                "--height-from-size", "off", "--gps-input", "none",
-                "--duration-s", "600"), tmp_path / f"run_{d}.log")
+            services[d] = start(
+                skyfix(
+                    "run",
+                    "--calibration",
+                    str(sessions[d] / "session.toml"),
+                    "--mavlink",
+                    f"udpin:127.0.0.1:{mav}",
+                    "--video",
+                    f"udp://127.0.0.1:{video}",
+                    "--video-latency-ms",
+                    str(CAMERA_LATENCY_MS),
+                    "--zenoh-connect",
+                    ep,
+                    "--fix-key",
+                    f"skyfix/uuv/rov1/drone/{d}/fix",
+                    "--status-key",
+                    f"skyfix/drone/{d}/status",
+                    "--alive-key",
+                    f"skyfix/drone/{d}/alive",
+                    "--control-prefix",
+                    f"skyfix/drone/{d}/cmd",
+                    "--no-ui",
+                    "--height-from-size",
+                    "off",
+                    "--gps-input",
+                    "none",
+                    "--duration-s",
+                    "600",
+                ),
+                tmp_path / f"run_{d}.log",
+            )
             procs.append(services[d])
         for d, s in services.items():
-            wait_for(lambda s=s, d=d: "skyfix run: UAV" in (tmp_path / f"run_{d}.log").read_text()
-                     or s.poll() is not None, 60, f"drone {d}'s service")
+            wait_for(
+                lambda s=s, d=d: (
+                    "skyfix run: UAV" in (tmp_path / f"run_{d}.log").read_text()
+                    or s.poll() is not None
+                ),
+                60,
+                f"drone {d}'s service",
+            )
             assert s.poll() is None, (tmp_path / f"run_{d}.log").read_text()[-3000:]
-        wait_for(lambda: sitl.boot_s() >= WARMUP_S or not sitl.alive(), 180, f"ArduSub up {WARMUP_S:g} s")
+        wait_for(
+            lambda: sitl.boot_s() >= WARMUP_S or not sitl.alive(), 180, f"ArduSub up {WARMUP_S:g} s"
+        )
         assert sitl.alive(), sitl.tail()
         # the sessions start 2 s before their first frame (the telemetry's lead); 15 s for two replays to start
         shift = time.time() + 15.0 - (START_UNIX - LEAD_S)
         replays = {}
         for d, (mav, video) in ports.items():
             extra = ("--cut", f"video:{CUT_S[0]}:{CUT_S[1]}", "--depth-key", "") if d == "b" else ()
-            replays[d] = start(skyfix("replay", str(sessions[d]), "--mavlink-out", f"udpout:127.0.0.1:{mav}",
-                                      "--video-out", f"udp://127.0.0.1:{video}", "--zenoh-connect", ep,
-                                      "--uuv-listen", "", "--shift-s", str(shift), "--video-delay-ms", str(CAMERA_LATENCY_MS), "--tail-s", "1", *extra),
-                               tmp_path / f"replay_{d}.log")
+            replays[d] = start(
+                skyfix(
+                    "replay",
+                    str(sessions[d]),
+                    "--mavlink-out",
+                    f"udpout:127.0.0.1:{mav}",
+                    "--video-out",
+                    f"udp://127.0.0.1:{video}",
+                    "--zenoh-connect",
+                    ep,
+                    "--uuv-listen",
+                    "",
+                    "--shift-s",
+                    str(shift),
+                    "--video-delay-ms",
+                    str(CAMERA_LATENCY_MS),
+                    "--tail-s",
+                    "1",
+                    *extra,
+                ),
+                tmp_path / f"replay_{d}.log",
+            )
             procs.append(replays[d])
         for d, r in replays.items():
             assert r.wait(DURATION_S + 120) == 0, (tmp_path / f"replay_{d}.log").read_text()[-3000:]
         t_end = time.time()
         # a console joining late (a client of the router, which routes its query): the fused fix from the queryable
-        late = zenoh.open(zenoh.Config.from_json5(json.dumps({"mode": "client", "connect": {"endpoints": [ep]},
-                                                               "scouting": {"multicast": {"enabled": False}}})))
+        late = zenoh.open(
+            zenoh.Config.from_json5(
+                json.dumps(
+                    {
+                        "mode": "client",
+                        "connect": {"endpoints": [ep]},
+                        "scouting": {"multicast": {"enabled": False}},
+                    }
+                )
+            )
+        )
         replies = [r.ok for r in late.get("skyfix/uuv/rov1/fix", timeout=10.0) if r.ok is not None]
         for s in services.values():
             stop(s)
@@ -152,7 +252,9 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
         for p in procs:
             stop(p, 5.0)
         sitl.stop()
-    logs = {name: (tmp_path / f"{name}.log").read_text()[-3000:] for name in ("fuse", "run_a", "run_b")}
+    logs = {
+        name: (tmp_path / f"{name}.log").read_text()[-3000:] for name in ("fuse", "run_a", "run_b")
+    }
     assert fuser.returncode == 0, logs["fuse"]
     assert all(s.returncode == 0 for s in services.values()), logs
 
@@ -161,14 +263,23 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
     for r in records:
         by_key.setdefault(r["key"], []).append(json.loads(r["payload"]) | {"t_recv": r["t_recv"]})
     fused = [f for f in by_key.get("skyfix/uuv/rov1/fix", []) if f["status"] == "ok"]
-    drone = {d: [f for f in by_key.get(f"skyfix/uuv/rov1/drone/{d}/fix", []) if f["status"] == "ok"] for d in DRONES}
-    assert len(fused) > 200 and all(len(v) > 100 for v in drone.values()), {k: len(v) for k, v in by_key.items()}
+    drone = {
+        d: [f for f in by_key.get(f"skyfix/uuv/rov1/drone/{d}/fix", []) if f["status"] == "ok"]
+        for d in DRONES
+    }
+    assert len(fused) > 200 and all(len(v) > 100 for v in drone.values()), {
+        k: len(v) for k, v in by_key.items()
+    }
     stats = json.loads((tmp_path / "fuse.json").read_text())
     session = sessions["a"]
 
     def errors(fixes):
-        return truth_errors_m(session, np.array([f["t"] for f in fixes]) - shift, [f["lat"] for f in fixes],
-                              [f["lon"] for f in fixes])
+        return truth_errors_m(
+            session,
+            np.array([f["t"] for f in fixes]) - shift,
+            [f["lat"] for f in fixes],
+            [f["lon"] for f in fixes],
+        )
 
     # both drones fused: from b's first ok fix + 2 s (its gate's confirmation) to its cut, and after it is back
     cut0 = START_UNIX - LEAD_S + shift + CUT_S[0]
@@ -179,9 +290,13 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
     def within(fixes, spans):
         return [f for f in fixes if any(a <= f["t"] <= b for a, b in spans)]
 
-    mae = {name: float(np.mean(errors(within(fixes, both)))) for name, fixes in
-           (("fused", fused), ("a", drone["a"]), ("b", drone["b"]))}
-    mae_all = {name: float(np.mean(errors(fixes))) for name, fixes in (("fused", fused), *drone.items())}
+    mae = {
+        name: float(np.mean(errors(within(fixes, both))))
+        for name, fixes in (("fused", fused), ("a", drone["a"]), ("b", drone["b"]))
+    }
+    mae_all = {
+        name: float(np.mean(errors(fixes))) for name, fixes in (("fused", fused), *drone.items())
+    }
 
     # GPS_INPUT at ArduSub: only the fuser's, 3D and healthy through b's cut
     gin = [(t, m) for t, m in obs.of("GPS_INPUT") if t <= t_end]
@@ -196,28 +311,52 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
     # during the cut the fuser fused a alone; b was used again after it
     fused_cut = [f for f in fused if cut0 + 1.0 <= f["t"] <= cut1 - 1.0]
     a_by_t = {round(f["t"], 3): f for f in drone["a"]}
-    same_as_a = sum(round(f["t"], 3) in a_by_t and abs(f["lat"] - a_by_t[round(f["t"], 3)]["lat"]) < 1e-9
-                    for f in fused_cut)
+    same_as_a = sum(
+        round(f["t"], 3) in a_by_t and abs(f["lat"] - a_by_t[round(f["t"], 3)]["lat"]) < 1e-9
+        for f in fused_cut
+    )
     after = [f for f in fused if f["t"] > cut1 + 3.0]
-    b_after = sum(not (round(f["t"], 3) in a_by_t and abs(f["lat"] - a_by_t[round(f["t"], 3)]["lat"]) < 1e-9)
-                  for f in after)
+    b_after = sum(
+        not (round(f["t"], 3) in a_by_t and abs(f["lat"] - a_by_t[round(f["t"], 3)]["lat"]) < 1e-9)
+        for f in after
+    )
     src = stats["fusion"]["sources"]
-    print(f"\nfused MAE {mae['fused']:.4f} m vs drone a {mae['a']:.4f} m, drone b {mae['b']:.4f} m while both were "
-          f"fused; over every fix: fused {mae_all['fused']:.4f}, a {mae_all['a']:.4f}, b {mae_all['b']:.4f}")
-    print(f"fixes: fused {len(fused)}, a {len(drone['a'])}, b {len(drone['b'])}; GPS_INPUT {len(gin)} "
-          f"({len(gin3)} 3D); during b's {CUT_S[1]:g} s cut: {len(span)} GPS_INPUT, no-fix at {no_fix[:5]}, "
-          f"GPS_RAW_INT {len(raw)} reports, below 3D at {raw_lost[:5]}; {same_as_a} of {len(fused_cut)} fused "
-          f"fixes in the cut are a's own, {b_after} of {len(after)} after it are not")
+    print(
+        f"\nfused MAE {mae['fused']:.4f} m vs drone a {mae['a']:.4f} m, drone b {mae['b']:.4f} m while both were "
+        f"fused; over every fix: fused {mae_all['fused']:.4f}, a {mae_all['a']:.4f}, b {mae_all['b']:.4f}"
+    )
+    print(
+        f"fixes: fused {len(fused)}, a {len(drone['a'])}, b {len(drone['b'])}; GPS_INPUT {len(gin)} "
+        f"({len(gin3)} 3D); during b's {CUT_S[1]:g} s cut: {len(span)} GPS_INPUT, no-fix at {no_fix[:5]}, "
+        f"GPS_RAW_INT {len(raw)} reports, below 3D at {raw_lost[:5]}; {same_as_a} of {len(fused_cut)} fused "
+        f"fixes in the cut are a's own, {b_after} of {len(after)} after it are not"
+    )
     for name, fixes in (("fused", fused), *drone.items()):  # exposure → at the subscriber
         age = np.array([f["t_recv"] - f["t"] for f in fixes])
-        print(f"age of {name} fixes: p50 {np.percentile(age, 50):.3f} p90 {np.percentile(age, 90):.3f} "
-              f"max {age.max():.3f} s")
-    print(f"fuser: {json.dumps({k: {x: v[x] for x in ('received', 'used', 'rejected', 'refused')} for k, v in src.items()})}")
+        print(
+            f"age of {name} fixes: p50 {np.percentile(age, 50):.3f} p90 {np.percentile(age, 90):.3f} "
+            f"max {age.max():.3f} s"
+        )
+    print(
+        f"fuser: {json.dumps({k: {x: v[x] for x in ('received', 'used', 'rejected', 'refused')} for k, v in src.items()})}"
+    )
     assert not no_fix, f"GPS_INPUT left 3D during b's cut at {no_fix} s"
-    assert unhealthy is None, f"GPS_INPUT through b's cut: ArduPilot would call it unhealthy: {unhealthy}"
+    assert unhealthy is None, (
+        f"GPS_INPUT through b's cut: ArduPilot would call it unhealthy: {unhealthy}"
+    )
     assert raw and not raw_lost, f"GPS_RAW_INT left 3D during b's cut at {raw_lost} s"
-    assert fused_cut and same_as_a >= 0.9 * len(fused_cut), f"{same_as_a} of {len(fused_cut)} fused in the cut are a's"
-    assert b_after >= 0.9 * len(after) > 0, f"only {b_after} of {len(after)} fused fixes after b's cut are not a's own"
-    assert src["skyfix/uuv/rov1/drone/b/fix"]["used"] > 0 and src["skyfix/uuv/rov1/drone/a/fix"]["used"] > 0
+    assert fused_cut and same_as_a >= 0.9 * len(fused_cut), (
+        f"{same_as_a} of {len(fused_cut)} fused in the cut are a's"
+    )
+    assert b_after >= 0.9 * len(after) > 0, (
+        f"only {b_after} of {len(after)} fused fixes after b's cut are not a's own"
+    )
+    assert (
+        src["skyfix/uuv/rov1/drone/b/fix"]["used"] > 0
+        and src["skyfix/uuv/rov1/drone/a/fix"]["used"] > 0
+    )
     assert mae["fused"] < min(mae["a"], mae["b"]), mae
-    assert len(replies) == 1 and json.loads(replies[0].payload.to_bytes())["status"] in ("ok", "disagree")
+    assert len(replies) == 1 and json.loads(replies[0].payload.to_bytes())["status"] in (
+        "ok",
+        "disagree",
+    )

@@ -38,26 +38,56 @@ def test_ardusub_reboot_under_a_running_service(tmp_path):
     service = watcher = sub = None
     try:
         sitl.start()
-        service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--mavlink",
-                               f"udpin:127.0.0.1:{free_port()}", "--zenoh-listen", ep, "--video", "none", "--gps-input",
-                               f"tcp:127.0.0.1:{sitl.ports['serial1']}", "--duration-s", "300"), run_log)
+        service = start(
+            skyfix(
+                "run",
+                "--calibration",
+                str(SESSION / "session.toml"),
+                "--mavlink",
+                f"udpin:127.0.0.1:{free_port()}",
+                "--zenoh-listen",
+                ep,
+                "--video",
+                "none",
+                "--gps-input",
+                f"tcp:127.0.0.1:{sitl.ports['serial1']}",
+                "--duration-s",
+                "300",
+            ),
+            run_log,
+        )
         watcher = open_session(connect=[ep])
-        sub = watcher.declare_subscriber("skyfix/status", lambda s: statuses.append(json.loads(s.payload.to_bytes())))
-        wait_for(lambda: len(sitl.observer.of("GPS_INPUT")) >= 10 or service.poll() is not None, 60,
-                 "GPS_INPUT forwarded by ArduSub")
+        sub = watcher.declare_subscriber(
+            "skyfix/status", lambda s: statuses.append(json.loads(s.payload.to_bytes()))
+        )
+        wait_for(
+            lambda: len(sitl.observer.of("GPS_INPUT")) >= 10 or service.poll() is not None,
+            60,
+            "GPS_INPUT forwarded by ArduSub",
+        )
         assert service.poll() is None, run_log.read_text()[-3000:]
 
         sitl.stop()  # SIGTERM: its TCP ports close
         t_down = time.time()
-        wait_for(lambda: any(s["t"] > t_down and s["gps_input"]["link"]["state"] == "down" for s in statuses), 10,
-                 "the status naming the GPS_INPUT link down")
+        wait_for(
+            lambda: any(
+                s["t"] > t_down and s["gps_input"]["link"]["state"] == "down" for s in statuses
+            ),
+            10,
+            "the status naming the GPS_INPUT link down",
+        )
         with pytest.raises(subprocess.TimeoutExpired):
             service.wait(DOWN_S)  # the autopilot stays away; the service keeps running
 
-        sitl.start(instance=sitl.instance)  # returns at its first HEARTBEAT: booted, SERIAL1 listening
+        sitl.start(
+            instance=sitl.instance
+        )  # returns at its first HEARTBEAT: booted, SERIAL1 listening
         t_back = sitl.observer.of("HEARTBEAT")[0][0]
-        wait_for(lambda: sitl.observer.of("GPS_INPUT", t_back) or service.poll() is not None, 30,
-                 "GPS_INPUT at the restarted ArduSub")
+        wait_for(
+            lambda: sitl.observer.of("GPS_INPUT", t_back) or service.poll() is not None,
+            30,
+            "GPS_INPUT at the restarted ArduSub",
+        )
         resumed_s = sitl.observer.of("GPS_INPUT", t_back)[0][0] - t_back
         assert service.poll() is None, run_log.read_text()[-3000:]
         stop(service)
@@ -69,8 +99,14 @@ def test_ardusub_reboot_under_a_running_service(tmp_path):
             stop(service, 5.0)
         sitl.stop()
     log = run_log.read_text()
-    down = next(s["gps_input"]["link"] for s in statuses if s["t"] > t_down and s["gps_input"]["link"]["state"] == "down")
-    print(f"ArduSub away {DOWN_S:g} s: status said {down['state']} ({down['error']}); GPS_INPUT at ArduSub again "
-          f"{resumed_s * 1000:.0f} ms after its first HEARTBEAT")
+    down = next(
+        s["gps_input"]["link"]
+        for s in statuses
+        if s["t"] > t_down and s["gps_input"]["link"]["state"] == "down"
+    )
+    print(
+        f"ArduSub away {DOWN_S:g} s: status said {down['state']} ({down['error']}); GPS_INPUT at ArduSub again "
+        f"{resumed_s * 1000:.0f} ms after its first HEARTBEAT"
+    )
     assert service.returncode == 0 and "Traceback" not in log, log[-3000:]
     assert resumed_s <= RESUME_S, f"GPS_INPUT came back {resumed_s:.3f} s after ArduSub was back"

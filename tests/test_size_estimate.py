@@ -50,11 +50,15 @@ def test_auto_hands_over_only_agreeing_measurements_once_sure(cal_dict):
             assert "size" not in tel.height_fixes  # nothing before it is sure
     assert work.estimate.sure and abs(work.estimate.bias_m - 0.8) < 2 * work.estimate.sigma_m
     fixes = tel.height_fixes["size"]
-    assert len(fixes) == work.applied == len(heights) - 2  # all but the two outliers, the early ones too
+    assert (
+        len(fixes) == work.applied == len(heights) - 2
+    )  # all but the two outliers, the early ones too
     t = [h.t_unix for h in heights]
     assert t[3] not in fixes.times and t[45] not in fixes.times and fixes.times[0] == t[0]
     values = fixes.values
-    assert np.allclose(values[:, 0], [h.uav_height_m for k, h in enumerate(heights) if k not in (3, 45)])
+    assert np.allclose(
+        values[:, 0], [h.uav_height_m for k, h in enumerate(heights) if k not in (3, 45)]
+    )
     assert np.allclose(values[:, 1], [math.hypot(0.05, 0.04)] * len(values))
     work.take("poor_fit")
     assert work.rejected == {"poor_fit": 1} and work.status()["rejected"] == {"poor_fit": 1}
@@ -66,11 +70,19 @@ def test_check_hands_nothing_over_and_warns_once(cal_dict, caplog):
     for h in _heights(0.8, n=100):
         work.take(h)
     assert "size" not in tel.height_fixes and work.applied == 0
-    assert len(work.warnings) == 1 and len([r for r in caplog.records if r.name == "skyfix.size"]) == 1
-    assert re.search(r"configured height above the water is 0\.[78]\d m above", work.warnings[0]), work.warnings[0]
+    assert (
+        len(work.warnings) == 1 and len([r for r in caplog.records if r.name == "skyfix.size"]) == 1
+    )
+    assert re.search(r"configured height above the water is 0\.[78]\d m above", work.warnings[0]), (
+        work.warnings[0]
+    )
     s = work.status()
-    assert s["sure"] and s["frames"] == 100 and s["mode"] == "check" and s["at_surface_share"] == 1.0
-    assert abs(s["bias_m"] - 0.8) < 0.05 and s["last_height_m"] == pytest.approx(work.last.uav_height_m, abs=1e-3)
+    assert (
+        s["sure"] and s["frames"] == 100 and s["mode"] == "check" and s["at_surface_share"] == 1.0
+    )
+    assert abs(s["bias_m"] - 0.8) < 0.05 and s["last_height_m"] == pytest.approx(
+        work.last.uav_height_m, abs=1e-3
+    )
     assert "configured - measured +0.8" in work.summary() and "sure" in work.summary()
 
 
@@ -90,7 +102,9 @@ def test_rate_of_measured_frames(cal_dict):
     assert work.estimate.sure
     due = [work.due(1010.0 + k / 30.0) for k in range(90)]  # sure: a frame a second
     assert sum(due) == 3 and due[0] and due[30] and due[60]
-    for h in _heights(3.0, n=40, t0=1011.0, sigma=1.0):  # a scatter that unsettles it: back to measuring at 5 Hz
+    for h in _heights(
+        3.0, n=40, t0=1011.0, sigma=1.0
+    ):  # a scatter that unsettles it: back to measuring at 5 Hz
         work.take(h)
     assert not work.estimate.sure
     due = [work.due(1030.0 + k / 30.0) for k in range(30)]
@@ -104,24 +118,53 @@ def test_off_is_not_a_measuring_mode(cal_dict):
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
 def test_process_finds_the_configured_heights_error(tmp_path):
-    sc = with_overrides(load_scenario(ROOT / "sim_fixtures" / "scenarios" / "size_surface.toml"), duration_s=7.0,
-                        camera={"width": 960, "height": 540}, uav={"height_m": 9.0})
+    sc = with_overrides(
+        load_scenario(ROOT / "sim_fixtures" / "scenarios" / "size_surface.toml"),
+        duration_s=7.0,
+        camera={"width": 960, "height": 540},
+        uav={"height_m": 9.0},
+    )
     out = tmp_path / "session"
     generate(sc, out)
     toml = out / "session.toml"
     # the configured height 2 m too high: beyond twice its own sigma (the barometer's drift since the autopilot's boot,
     # localizer/height.py) and the estimate's, so the disagreement is worth a warning
     wrong = sc.site.takeoff_height_above_surface_m + 2.0
-    toml.write_text(re.sub(r"takeoff_height_above_surface_m = [-\d.e]+", f"takeoff_height_above_surface_m = {wrong!r}",
-                           toml.read_text()))
-    run = subprocess.run([sys.executable, "-m", "groundstation.cli", "process", str(out), "--out", str(tmp_path / "p"),
-                          "--quiet"], check=False, capture_output=True, text=True, cwd=ROOT, timeout=600)
+    toml.write_text(
+        re.sub(
+            r"takeoff_height_above_surface_m = [-\d.e]+",
+            f"takeoff_height_above_surface_m = {wrong!r}",
+            toml.read_text(),
+        )
+    )
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "groundstation.cli",
+            "process",
+            str(out),
+            "--out",
+            str(tmp_path / "p"),
+            "--quiet",
+        ],
+        check=False,
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stderr
-    m = re.search(r"height from the UUV's size: configured - measured ([-+][\d.]+) ± ([\d.]+) m over (\d+) frames.*"
-                  r", (sure|not sure)", run.stdout)
+    m = re.search(
+        r"height from the UUV's size: configured - measured ([-+][\d.]+) ± ([\d.]+) m over (\d+) frames.*"
+        r", (sure|not sure)",
+        run.stdout,
+    )
     assert m, run.stdout
     bias, sigma, frames, sure = float(m[1]), float(m[2]), int(m[3]), m[4]
-    assert sure == "sure" and frames >= 20 and abs(bias - 2.0) <= 2 * sigma and sigma < 0.2, run.stdout
+    assert sure == "sure" and frames >= 20 and abs(bias - 2.0) <= 2 * sigma and sigma < 0.2, (
+        run.stdout
+    )
     assert "m above what the UUV's size in the image says" in run.stderr, run.stderr
 
 
@@ -146,11 +189,15 @@ def _running(pid: int) -> bool:
 @pytest.mark.skipif(sys.platform != "linux", reason="the parent-death signal is Linux's")
 def test_the_measuring_process_ends_when_the_service_is_killed():
     """``kill -9`` of a service leaves no measuring process behind (its pool's initializer, as the service uses it)."""
-    service = subprocess.Popen([sys.executable, "-c", MEASURING_POOL], stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    service = subprocess.Popen(
+        [sys.executable, "-c", MEASURING_POOL], stdout=subprocess.PIPE, text=True, cwd=ROOT
+    )
     try:
         child = int(service.stdout.readline())
         assert _running(child)
     finally:
         service.kill()
         service.wait()
-    assert wait_until(lambda: not _running(child), 20), f"measuring process {child} outlived its killed service"
+    assert wait_until(lambda: not _running(child), 20), (
+        f"measuring process {child} outlived its killed service"
+    )

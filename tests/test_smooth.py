@@ -40,8 +40,17 @@ def fixes_of(t, n_m, e_m, sigma_m, status=None) -> Fixes:
     lat, lon, _ = ned_to_geodetic(n_m, e_m, 0.0, LAT0, LON0, 0.0)
     lat, lon = np.where(status == "ok", lat, np.nan), np.where(status == "ok", lon, np.nan)
     s = np.full(len(t), float(sigma_m))
-    return Fixes.of(t, status, lat=lat, lon=lon, sigma_n_m=s, sigma_e_m=s, cov_ne_m2=np.zeros(len(t)),
-                    h_acc_m=s * math.sqrt(2.0), depth_m=np.full(len(t), 1.5))
+    return Fixes.of(
+        t,
+        status,
+        lat=lat,
+        lon=lon,
+        sigma_n_m=s,
+        sigma_e_m=s,
+        cov_ne_m2=np.zeros(len(t)),
+        h_acc_m=s * math.sqrt(2.0),
+        depth_m=np.full(len(t), 1.5),
+    )
 
 
 def local(lat, lon):
@@ -73,7 +82,9 @@ def batch(t, z, taken, R_m2: float, P0) -> tuple[np.ndarray, np.ndarray, np.ndar
         F = np.eye(4)
         F[0, 2] = F[1, 3] = d
         M[k] = F @ M[k - 1]
-        M[k, :, 4 + 2 * (k - 1):4 + 2 * k] = sa * np.vstack([np.eye(2) * d * d / 2, np.eye(2) * d])
+        M[k, :, 4 + 2 * (k - 1) : 4 + 2 * k] = sa * np.vstack(
+            [np.eye(2) * d * d / 2, np.eye(2) * d]
+        )
     pos = M[:, :2]
     used = pos[np.flatnonzero(taken)].reshape(-1, dim)
     data = used.T @ used / R_m2  # Σ Hᵀ R⁻¹ H over the fixes (the first: the prior's)
@@ -92,7 +103,9 @@ def test_the_smoother_is_the_batch_least_squares_of_its_model():
     t, _, z = line(4.0, 1, 0.02)
     status = np.full(len(t), "ok", dtype=object)
     status[(t - t[0] > 1.5) & (t - t[0] < 2.2)] = "lost"  # a gap in the middle
-    sm = smooth_fixes(fixes_of(t, z[:, 0], z[:, 1], 0.02, status), status == "ok", V, A, bridge_sigma_m=1.0)
+    sm = smooth_fixes(
+        fixes_of(t, z[:, 0], z[:, 1], 0.02, status), status == "ok", V, A, bridge_sigma_m=1.0
+    )
     R = sm.white_share * 0.02**2 + WHITE_FLOOR_M**2
     P0 = np.diag([R, R, V * V, V * V])
     mean, cov, _ = batch(t, z - z[0], status == "ok", R, P0)
@@ -113,8 +126,12 @@ def test_white_noise_is_averaged_by_the_expected_factor_and_covered():
     expected = sigma * math.sqrt(np.mean(noise[:, 0, 0] + noise[:, 1, 1]))
     assert rms < 0.5 * rms_raw  # 0.0068 m against 0.028 m
     assert 0.85 < rms / expected < 1.15
-    assert sm.white_share > 0.5  # white noise as large as claimed: most of the claim changes frame to frame
-    assert rms < math.sqrt(np.mean(sm.cov_own_m2[:, 0, 0] + sm.cov_own_m2[:, 1, 1]))  # the claim allows accelerations
+    assert (
+        sm.white_share > 0.5
+    )  # white noise as large as claimed: most of the claim changes frame to frame
+    assert rms < math.sqrt(
+        np.mean(sm.cov_own_m2[:, 0, 0] + sm.cov_own_m2[:, 1, 1])
+    )  # the claim allows accelerations
     assert np.mean(np.hypot(*err.T) <= 2.0 * sm.h_acc_m) > 0.9
 
 
@@ -130,7 +147,9 @@ def test_a_shared_error_stays_in_the_smoothed_track_and_its_sigma():
     assert sm.white_share < 0.01  # the claim's frame-to-frame share: 1 cm of 25 cm
     assert np.all(np.hypot(*err.T) <= 2.0 * sm.h_acc_m)
     assert np.all(sm.h_acc_m > 0.99 * fx.h_acc_m * math.sqrt(1.0 - sm.white_share))
-    assert shape_m(err) < 0.004 < shape_m(z - truth)  # the track's form is sharpened, its place is not
+    assert (
+        shape_m(err) < 0.004 < shape_m(z - truth)
+    )  # the track's form is sharpened, its place is not
 
 
 def test_gaps_are_bridged_within_the_bound_and_beyond_it_have_no_position():
@@ -146,9 +165,15 @@ def test_gaps_are_bridged_within_the_bound_and_beyond_it_have_no_position():
     assert sm.ok[short].all() and np.all(err[short] <= 2.0 * sm.h_acc_m[short])
     assert np.all(sm.gap_s[short] == pytest.approx(rel[short][-1] - rel[short][0] + 2 / FPS))
     middle = long_ & (np.abs(rel - 6.5) < 0.5)
-    assert not sm.ok[middle].any() and np.isnan(sm.lat[middle]).all() and set(words[middle]) == {"lost"}
+    assert (
+        not sm.ok[middle].any()
+        and np.isnan(sm.lat[middle]).all()
+        and set(words[middle]) == {"lost"}
+    )
     ends = long_ & sm.ok  # the gap's first and last frames are bridged, within the bound
-    assert ends.sum() > 10 and np.all(np.linalg.eigvalsh(sm.cov_own_m2[ends])[:, -1] <= BRIDGE_SIGMA_M**2)
+    assert ends.sum() > 10 and np.all(
+        np.linalg.eigvalsh(sm.cov_own_m2[ends])[:, -1] <= BRIDGE_SIGMA_M**2
+    )
     assert np.all(err[ends] <= 2.0 * sm.h_acc_m[ends])
     assert not sm.ok[rel < 0.5].any() and set(words[rel < 0.5]) == {"awaiting_target"}
 
@@ -162,10 +187,14 @@ def test_fixes_off_the_track_are_refused_offline_and_bridged_over():
     err = np.hypot(*(local(sm.lat, sm.lon) - truth).T)
     assert sm.ok[away].all() and np.all(sm.gap_s[away] > 0)  # bridged, not measured
     assert err[away].max() < 0.03
-    assert sm.ok[~away].all() and np.all(sm.gap_s[~away] == 0)  # the first second confirmed by those after it
+    assert sm.ok[~away].all() and np.all(
+        sm.gap_s[~away] == 0
+    )  # the first second confirmed by those after it
 
 
-def jitter(t, seed: int, amp_m: float = 0.015, white_m: float = 0.005, hz: float = 1.0) -> np.ndarray:
+def jitter(
+    t, seed: int, amp_m: float = 0.015, white_m: float = 0.005, hz: float = 1.0
+) -> np.ndarray:
     """A wave's jitter: a 1 Hz oscillation of ``amp_m`` on each axis (random phases) plus white noise."""
     rng = np.random.default_rng(seed)
     phase = rng.uniform(0.0, 2.0 * math.pi, 2)
@@ -184,8 +213,12 @@ def test_a_waves_jitter_is_averaged_over_its_period_and_covered(seed):
     err = local(sm.lat, sm.lon) - truth
     rms_raw = math.sqrt(np.mean(np.sum((z - truth) ** 2, axis=1)))
     rms = math.sqrt(np.mean(np.sum(err**2, axis=1)))
-    assert rms < 0.25 * rms_raw  # 0.0015-0.0021 m against 0.0166 m (the vehicle's bound as the process noise: 0.006)
-    assert 0.7 < sm.wave_share < 1.2 and sm.white_share == min(1.0, sm.wave_share)  # (1.17 / 1.2)^2 = 0.95
+    assert (
+        rms < 0.25 * rms_raw
+    )  # 0.0015-0.0021 m against 0.0166 m (the vehicle's bound as the process noise: 0.006)
+    assert 0.7 < sm.wave_share < 1.2 and sm.white_share == min(
+        1.0, sm.wave_share
+    )  # (1.17 / 1.2)^2 = 0.95
     assert np.median(sm.accel_mps2) < 0.1 * A
     assert np.mean(np.hypot(*err.T) <= 2.0 * sm.h_acc_m) > 0.95
 
@@ -222,7 +255,9 @@ def test_a_turn_at_the_vehicles_acceleration_is_followed_through_the_jitter(v_mp
     assert np.median(sm.accel_mps2[turn]) > 0.4 * A > np.median(sm.accel_mps2[~near])
     assert np.hypot(*err[near].mean(axis=0)) < 0.01
     assert np.hypot(*err[near].T).max() < 0.04
-    assert math.sqrt(np.mean(np.sum(err**2, axis=1))) < 0.6 * math.sqrt(np.mean(np.sum((z - truth) ** 2, axis=1)))
+    assert math.sqrt(np.mean(np.sum(err**2, axis=1))) < 0.6 * math.sqrt(
+        np.mean(np.sum((z - truth) ** 2, axis=1))
+    )
     assert np.mean(np.hypot(*err[near].T) <= 2.0 * sm.h_acc_m[near]) > 0.95
 
 
@@ -230,7 +265,9 @@ def test_a_turn_at_the_vehicles_acceleration_is_followed_through_the_jitter(v_mp
 def occlusion():
     session = load_session(BUNDLED_DIR / "occlusion")
     fixes = process_session(session, use_track=False)  # tracked by the real pipeline
-    track = read_table(BUNDLED_DIR / "occlusion" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    track = read_table(
+        BUNDLED_DIR / "occlusion" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v")
+    )
     visible = np.isfinite(track["u"])
     assert len(track["t"]) == len(fixes) and np.allclose(track["t"], fixes.t_unix, atol=1e-3)
     return fixes, visible
@@ -246,9 +283,13 @@ def test_a_reacquired_target_is_confirmed_by_the_frames_after_it_offline(occlusi
         live.append(live_gate.check(fixes[i], fixes.t_unix[i]) if fixes.status[i] == "ok" else "")
     live = np.array(live, dtype=object)
     offline = gate_offline(fixes, lost, FixGate(max_h_acc_m=math.inf, max_age_s=math.inf))
-    back = np.flatnonzero((fixes.status == "ok") & np.r_[False, lost[:-1]])  # the first fix after the loss
+    back = np.flatnonzero(
+        (fixes.status == "ok") & np.r_[False, lost[:-1]]
+    )  # the first fix after the loss
     assert len(back) == 1
-    first_second = (fixes.t_unix >= fixes.t_unix[back[0]]) & (fixes.t_unix < fixes.t_unix[back[0]] + 0.9 * CONFIRM_S)
+    first_second = (fixes.t_unix >= fixes.t_unix[back[0]]) & (
+        fixes.t_unix < fixes.t_unix[back[0]] + 0.9 * CONFIRM_S
+    )
     first_second &= fixes.status == "ok"
     assert first_second.sum() >= 20
     assert set(live[first_second]) == {"unconfirmed"}
@@ -256,8 +297,12 @@ def test_a_reacquired_target_is_confirmed_by_the_frames_after_it_offline(occlusi
     live_cover = np.mean([w is None for w in live[visible]])
     offline_cover = np.mean([w is None for w in offline[visible]])
     sm, words = offline_track(fixes, V, A)
-    assert offline_cover > live_cover + 0.3  # the first acquisition's second, and the re-acquisition's
-    assert sm.ok[visible].all() and np.all(sm.gap_s[first_second] == 0)  # their own fixes, and the rest bridged
+    assert (
+        offline_cover > live_cover + 0.3
+    )  # the first acquisition's second, and the re-acquisition's
+    assert sm.ok[visible].all() and np.all(
+        sm.gap_s[first_second] == 0
+    )  # their own fixes, and the rest bridged
     assert "refused" not in set(words)
 
 
@@ -269,7 +314,9 @@ def test_process_writes_the_smoothed_track_beside_positions(tmp_path, capsys):
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == COLUMNS
     pos = read_positions_csv(out / "positions.csv")
-    again = read_positions_csv(out / "positions_smoothed.csv")  # the same six first columns: report, export
+    again = read_positions_csv(
+        out / "positions_smoothed.csv"
+    )  # the same six first columns: report, export
     assert np.array_equal(again.t_unix, pos.t_unix)
     assert np.all(again.h_acc_m[again.status == "ok"] > 0)
     bridged = np.array([float(r["gap_s"]) > 0 for r in rows])

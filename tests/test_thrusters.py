@@ -19,7 +19,12 @@ def test_channels_come_from_the_frame_and_the_servo_functions():
     assert th.channels is None and th.why_unknown == "waiting for FRAME_CONFIG"
     th.param("FRAME_CONFIG", 1.0)
     assert th.channels is None and "SERVOn_FUNCTION" in th.why_unknown
-    for n, function in ((9, 33.0), (10, 34.0), (3, 35.0), (4, 36.0)):  # motors 1-4 on channels 9, 10, 3, 4
+    for n, function in (
+        (9, 33.0),
+        (10, 34.0),
+        (3, 35.0),
+        (4, 36.0),
+    ):  # motors 1-4 on channels 9, 10, 3, 4
         th.param(f"SERVO{n}_FUNCTION", function)
     assert th.channels == (9, 10, 3, 4) and th.why_unknown is None and th.wanted_params() == []
     th.param("FRAME_CONFIG", 7.0)
@@ -31,7 +36,9 @@ def test_channels_come_from_the_frame_and_the_servo_functions():
 def test_idle_is_every_horizontal_motor_within_the_deadband():
     th = vectored_thrusters()
     assert th.outputs(0.0, pulses(1500)) is True
-    assert th.outputs(0.1, pulses(1525, 1475, 1475, 1525)) is True  # ArduSub's heading hold, seen on its SITL
+    assert (
+        th.outputs(0.1, pulses(1525, 1475, 1475, 1525)) is True
+    )  # ArduSub's heading hold, seen on its SITL
     assert th.outputs(0.2, pulses(1526)) is False
     assert th.outputs(0.3, pulses(0)) is None and th.unusable == 1  # channel 1 not output
     assert Thrusters(deadband_us=0).outputs(0.0, pulses(1501)) is None  # not known: no parameters

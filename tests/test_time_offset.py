@@ -90,13 +90,26 @@ def test_estimated_offset_is_as_good_as_the_stated_delay(session, tmp_path, caps
     stated = _variant(session, tmp_path, "stated", f"\n[timing]\nmavlink_latency_s = {DELAY_S}\n")
     mae_stated, _ = _refraction(evaluate_session(stated, tmp_path / "ev"))
     mae_unknown, _ = _refraction(evaluate_session(session, tmp_path / "ev_off", motion=False))
-    out = subprocess.run(skyfix("evaluate", str(session), "--out", str(tmp_path / "ev_motion"), "--quiet"),
-                         capture_output=True, text=True, cwd=ROOT, timeout=300, check=False)
+    out = subprocess.run(
+        skyfix("evaluate", str(session), "--out", str(tmp_path / "ev_motion"), "--quiet"),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+        check=False,
+    )
     assert out.returncode == 0, out.stderr
     with open(tmp_path / "ev_motion" / "evaluation.csv", newline="") as f:
-        mae_motion = float(next(r for r in csv.DictReader(f) if r["method"] == "refraction")["mae_m"])
-    print(out.stderr, f"MAE: stated {mae_stated:.4f} m, estimated {mae_motion:.4f} m, unknown {mae_unknown:.4f} m")
-    line = next(x for x in out.stderr.splitlines() if "offset to the telemetry from the video's motion" in x)
+        mae_motion = float(
+            next(r for r in csv.DictReader(f) if r["method"] == "refraction")["mae_m"]
+        )
+    print(
+        out.stderr,
+        f"MAE: stated {mae_stated:.4f} m, estimated {mae_motion:.4f} m, unknown {mae_unknown:.4f} m",
+    )
+    line = next(
+        x for x in out.stderr.splitlines() if "offset to the telemetry from the video's motion" in x
+    )
     assert "settled; applied as the UAV link's delay" in line and "frame pairs" in line, line
     applied_ms = float(line.split("applied as the UAV link's delay: ")[1].split(" ms")[0])
     assert abs(applied_ms / 1000 - DELAY_S) < 0.003
@@ -104,7 +117,9 @@ def test_estimated_offset_is_as_good_as_the_stated_delay(session, tmp_path, caps
     assert mae_motion <= 1.2 * mae_stated
     rows = _positions(tmp_path / "ev_motion", session.name)
     assert len(rows) > 150 and {r["time_source"] for r in rows} == {"motion"}
-    assert all(0.02 <= float(r["sigma_time_s"]) < 0.0255 for r in rows)  # [uncertainty] time_s ⊕ the estimate's σ
+    assert all(
+        0.02 <= float(r["sigma_time_s"]) < 0.0255 for r in rows
+    )  # [uncertainty] time_s ⊕ the estimate's σ
     assert {r["time_source"] for r in _positions(tmp_path / "ev", "stated")} == {"configured"}
 
 
@@ -114,11 +129,17 @@ def test_an_unknown_delay_is_carried_in_h_acc(session, tmp_path, capsys):
     mae, within = _refraction(results)
     assert "the UAV link's delay is unknown" in capsys.readouterr().err
     rows = _positions(tmp_path / "ev", "honest")
-    assert {r["time_source"] for r in rows} == {"unknown"} and {float(r["sigma_time_s"]) for r in rows} == {0.05}
-    blind = _variant(session, tmp_path, "blind", ONLY_TIME + "\n[timing]\nunknown_latency_sigma_s = 0.0\n")
+    assert {r["time_source"] for r in rows} == {"unknown"} and {
+        float(r["sigma_time_s"]) for r in rows
+    } == {0.05}
+    blind = _variant(
+        session, tmp_path, "blind", ONLY_TIME + "\n[timing]\nunknown_latency_sigma_s = 0.0\n"
+    )
     _, within_blind = _refraction(evaluate_session(blind, tmp_path / "ev_blind", use_track=True))
-    print(f"geometry MAE {mae:.4f} m; within 2·h_acc: {within:.1%} with the unknown delay's sigma, "
-          f"{within_blind:.1%} without")
+    print(
+        f"geometry MAE {mae:.4f} m; within 2·h_acc: {within:.1%} with the unknown delay's sigma, "
+        f"{within_blind:.1%} without"
+    )
     assert within >= 0.9 and within_blind < 0.6
 
 
@@ -149,11 +170,19 @@ def test_a_camera_that_hardly_turns_gives_an_unsettled_estimate_with_a_wide_sigm
     err = capsys.readouterr().err
     assert "offset to the telemetry from the video's motion" in err and "not settled" in err, err
     if s.telemetry.latency_source == "unknown":
-        assert s.telemetry.uav_latency_s == 0.0 and any("the UAV link's delay is unknown" in w for w in s.warnings)
+        assert s.telemetry.uav_latency_s == 0.0 and any(
+            "the UAV link's delay is unknown" in w for w in s.warnings
+        )
     else:
         sigma = s.telemetry.latency_sigma_s
-        assert s.telemetry.latency_source == "motion" and 0.005 < sigma < s.telemetry.timing.unknown_latency_sigma_s
-        assert abs(s.telemetry.uav_latency_s - 0.045) <= 2 * sigma, (s.telemetry.uav_latency_s, sigma)
+        assert (
+            s.telemetry.latency_source == "motion"
+            and 0.005 < sigma < s.telemetry.timing.unknown_latency_sigma_s
+        )
+        assert abs(s.telemetry.uav_latency_s - 0.045) <= 2 * sigma, (
+            s.telemetry.uav_latency_s,
+            sigma,
+        )
 
 
 def test_settled_needs_every_third_sure_and_agreeing():
@@ -178,22 +207,28 @@ def test_frames_stamped_before_auto_settled_are_moved_back(tmp_path):
     with open(session / "video_frames.csv", newline="") as f:
         rows = [(int(r["frame"]), float(r["t"])) for r in csv.DictReader(f)]
     latency, settled = 0.0794, 90
-    recorded = [(i, t + latency) for i, t in rows[:settled]] + rows[settled + 2:]
+    recorded = [(i, t + latency) for i, t in rows[:settled]] + rows[settled + 2 :]
     with open(session / "video_frames.csv", "w", newline="") as f:
         csv.writer(f).writerows([("frame", "t"), *((i, f"{t:.6f}") for i, t in recorded)])
     with open(session / "session.toml", "a") as f:
-        f.write(f'\n[timing]\nvideo_latency_s = {latency}\nvideo_latency_source = "motion"\n'
-                f"video_latency_sigma_s = 0.0007\nvideo_latency_from_t = {rows[settled + 2][1]}\n")
+        f.write(
+            f'\n[timing]\nvideo_latency_s = {latency}\nvideo_latency_source = "motion"\n'
+            f"video_latency_sigma_s = 0.0007\nvideo_latency_from_t = {rows[settled + 2][1]}\n"
+        )
     s = load_session(session)
-    truth = [t for _, t in rows[:settled] + rows[settled + 2:]]
+    truth = [t for _, t in rows[:settled] + rows[settled + 2 :]]
     assert s.frames["t"] == pytest.approx(truth, abs=2e-6)
-    assert any(f"{settled} frames stamped before the live run's video latency had settled" in w for w in s.warnings)
+    assert any(
+        f"{settled} frames stamped before the live run's video latency had settled" in w
+        for w in s.warnings
+    )
 
 
 def test_offline_sigma_covers_what_the_thirds_disagree_on():
     """Offline the whole recording's estimate is applied unsettled too, with a σ that covers its thirds' spread (by
     hand: thirds at 10, 20 and 36 ms have a sample standard deviation of 13.1 ms), and only where that σ beats the
     unknown delay's."""
+
     def e(offset_ms, sigma_ms=1.0, pairs=APPLY_PAIRS):
         return OffsetEstimate(offset_ms / 1000, sigma_ms / 1000, pairs, 0.1)
 
@@ -203,6 +238,11 @@ def test_offline_sigma_covers_what_the_thirds_disagree_on():
     assert spread.better_than(0.05) and not spread.better_than(0.013)
     assert "± 13.3 ms with the thirds' spread" in spread.describe()
     assert SessionOffset(e(22.0, 2.0, 3 * APPLY_PAIRS), (e(22.0), None, None)).sigma_s == math.inf
-    assert SessionOffset(e(22.0, 2.0, APPLY_PAIRS - 1), (e(22.0), e(22.0), e(22.0))).sigma_s == math.inf
-    wild = SessionOffset(e(20.0, 1.0, 3 * APPLY_PAIRS), (e(110.0), e(-10.0), e(-26.0)))  # the issue's 8 m/s thirds
+    assert (
+        SessionOffset(e(22.0, 2.0, APPLY_PAIRS - 1), (e(22.0), e(22.0), e(22.0))).sigma_s
+        == math.inf
+    )
+    wild = SessionOffset(
+        e(20.0, 1.0, 3 * APPLY_PAIRS), (e(110.0), e(-10.0), e(-26.0))
+    )  # the issue's 8 m/s thirds
     assert not wild.better_than(0.05)

@@ -32,9 +32,12 @@ pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs th
 
 @pytest.fixture(scope="module")
 def dive(tmp_path_factory):
-    sc = with_overrides(load_scenario(SCENARIOS / "dive.toml"), duration_s=5.5,
-                        site={"attenuation_bgr_per_m": (1.3, 1.2, 2.0), "floor_depth_m": 8.0},
-                        uuv={"depth_profile": PROFILE})
+    sc = with_overrides(
+        load_scenario(SCENARIOS / "dive.toml"),
+        duration_s=5.5,
+        site={"attenuation_bgr_per_m": (1.3, 1.2, 2.0), "floor_depth_m": 8.0},
+        uuv={"depth_profile": PROFILE},
+    )
     out = tmp_path_factory.mktemp("sessions") / "dive"
     generate(sc, out)
     session = load_session(out)
@@ -51,7 +54,7 @@ def _runs(mask):
 
 def test_generator_marks_the_deep_uuv_hidden_and_the_video_does_not_show_it(dive):
     sc, session, visible, depth = dive
-    (a, b), = _runs(~visible)  # one hidden stretch, in the middle of the dive
+    ((a, b),) = _runs(~visible)  # one hidden stretch, in the middle of the dive
     assert 0 < a and b < len(visible) and b - a > 30
     assert depth[a:b].min() > 2.0 and depth[visible].min() < 1.05
     assert np.all(np.diff(depth[:a]) >= -1e-9)  # the UUV went out of sight on the way down...
@@ -83,7 +86,7 @@ def test_tracker_is_lost_while_the_uuv_is_deep_and_finds_it_again(dive):
     lon_t = np.interp(fixes.t_unix, session.truth["t"], session.truth["lon"])
     err = np.full(len(ok), np.nan)
     err[ok] = horizontal_error_m(fixes.lat[ok], fixes.lon[ok], lat_t[ok], lon_t[ok])
-    (a, b), = _runs(~visible)
+    ((a, b),) = _runs(~visible)
     # hidden: no fix more than 1 m off; none at all once the UUV is well below sight
     assert not np.any(err[~visible] > 1.0)
     assert not np.any(ok[~visible & (depth > depth[a] + 0.75)])

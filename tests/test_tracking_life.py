@@ -47,7 +47,10 @@ class Clip:
 
     def truth_moved(self, i: int, north_m: float, east_m: float) -> tuple[float, float]:
         tr = self.session.truth
-        lat, lon = np.interp(self.t[i], tr["t"], tr["lat"]), np.interp(self.t[i], tr["t"], tr["lon"])
+        lat, lon = (
+            np.interp(self.t[i], tr["t"], tr["lat"]),
+            np.interp(self.t[i], tr["t"], tr["lon"]),
+        )
         lat2, lon2, _ = pymap3d.enu2geodetic(east_m, north_m, 0.0, lat, lon, 0.0)
         return float(lat2), float(lon2)
 
@@ -68,11 +71,18 @@ def test_select_track_lose_reacquire_release_and_click(occlusion):
     clip = occlusion
     ts = TrackingSession(clip.cal)
     assert ts.state is TargetState.AWAITING_TARGET
-    assert ts.step(clip.frames[0], clip.pose, 0).status == "awaiting_target"  # no selection, no prior
+    assert (
+        ts.step(clip.frames[0], clip.pose, 0).status == "awaiting_target"
+    )  # no selection, no prior
 
     # the simulator's own box around the whole vehicle in frame 0, selected on frame 1's successor frame 0
     first = ts.select(clip.frames[0], clip.pose, 0, box=clip.cal.init_bbox)
-    assert first.ok and first.confidence == 1.0 and ts.state is TargetState.TRACKING and ts.origin == "box"
+    assert (
+        first.ok
+        and first.confidence == 1.0
+        and ts.state is TargetState.TRACKING
+        and ts.origin == "box"
+    )
     assert clip.error_px(0, first) < 1.5  # the box's centre moved to the top face's
     results = _run(clip, ts, range(1, 170))
     before = [i for i in range(1, HIDDEN[0])]
@@ -84,16 +94,22 @@ def test_select_track_lose_reacquire_release_and_click(occlusion):
     assert back - HIDDEN[1] <= 2 + CONFIRM, "re-acquired within a few frames of reappearing"
     assert all(results[i].ok for i in range(back, 170))
     assert max(clip.error_px(i, results[i]) for i in range(back, 170)) < 2.0
-    assert ts.status()["state"] == "tracking" and ts.status()["seen_t"] == pytest.approx(clip.t[169], abs=1e-3)
+    assert ts.status()["state"] == "tracking" and ts.status()["seen_t"] == pytest.approx(
+        clip.t[169], abs=1e-3
+    )
 
     ts.release()
     released = _run(clip, ts, range(170, 180))
-    assert {r.status for r in released.values()} == {"released"} and ts.state is TargetState.RELEASED
+    assert {r.status for r in released.values()} == {
+        "released"
+    } and ts.state is TargetState.RELEASED
     ts.acquire()
     assert ts.step(clip.frames[180], clip.pose, 180).status == "awaiting_target"
 
     # a click a few pixels off the vehicle: the object there is outlined and tracked
-    click = ts.select(clip.frames[181], clip.pose, 181, point=(clip.u[181] + 3.0, clip.v[181] - 2.0))
+    click = ts.select(
+        clip.frames[181], clip.pose, 181, point=(clip.u[181] + 3.0, clip.v[181] - 2.0)
+    )
     assert click.ok and ts.origin == "click" and clip.error_px(181, click) < 2.5
     results = _run(clip, ts, range(182, len(clip.t)))
     assert all(r.ok for r in results.values())
@@ -104,18 +120,28 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
     clip = occlusion
     ts = TrackingSession(clip.cal)
     ts.select(clip.frames[0], clip.pose, 0, box=clip.cal.init_bbox)
-    with pytest.raises(SelectionError, match=r"box \(630, 10, 40, 40\) does not lie inside the 640x360 frame"):
+    with pytest.raises(
+        SelectionError, match=r"box \(630, 10, 40, 40\) does not lie inside the 640x360 frame"
+    ):
         ts.select(clip.frames[1], clip.pose, 1, box=(630, 10, 40, 40))
-    with pytest.raises(SelectionError, match=r"point \[40, 320\]: no vehicle-sized object stands out there"):
+    with pytest.raises(
+        SelectionError, match=r"point \[40, 320\]: no vehicle-sized object stands out there"
+    ):
         ts.select(clip.frames[1], clip.pose, 1, point=(40.0, 320.0))  # open water, far from the UUV
     with pytest.raises(SelectionError, match="either a box"):
         ts.select(clip.frames[1], clip.pose, 1)
-    with pytest.raises(SelectionError, match=r"point \[-50, 20\]: bad_pixel: not a place on the water in the image"):
+    with pytest.raises(
+        SelectionError, match=r"point \[-50, 20\]: bad_pixel: not a place on the water in the image"
+    ):
         ts.select(clip.frames[1], clip.pose, 1, point=(-50.0, 20.0))
     with pytest.raises(SelectionError, match=r"point \[nan, 20.0\]: expected finite pixels"):
         ts.select(clip.frames[1], clip.pose, 1, point=(math.nan, 20.0))
-    with pytest.raises(SelectionError, match=r"box \[40, 300, 33, 34\]: no vehicle-sized object stands out"):
-        ts.select(clip.frames[1], clip.pose, 1, box=(40, 300, 33, 34), verify=True)  # an operator's box on water
+    with pytest.raises(
+        SelectionError, match=r"box \[40, 300, 33, 34\]: no vehicle-sized object stands out"
+    ):
+        ts.select(
+            clip.frames[1], clip.pose, 1, box=(40, 300, 33, 34), verify=True
+        )  # an operator's box on water
     no_pose = camera_pose(clip.cal, clip.session.telemetry, [clip.t[-1] + 60.0])
     with pytest.raises(SelectionError, match=r"no camera pose at that frame \(stale_attitude\)"):
         ts.select(clip.frames[1], no_pose, 0, point=(clip.u[1], clip.v[1]))
@@ -123,11 +149,22 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
     assert ts.state is TargetState.TRACKING and result.ok and clip.error_px(1, result) < 2.0
     # a box around the UUV passes the same check, and the matcher's window is reported with the next frame
     w, h = 33, 34
-    ts.select(clip.frames[2], clip.pose, 2, box=(clip.u[2] - (w - 1) / 2, clip.v[2] - (h - 1) / 2, w, h), verify=True)
+    ts.select(
+        clip.frames[2],
+        clip.pose,
+        2,
+        box=(clip.u[2] - (w - 1) / 2, clip.v[2] - (h - 1) / 2, w, h),
+        verify=True,
+    )
     assert ts.prediction is None
     result = ts.step(clip.frames[3], clip.pose, 3)
     x, y, ww, wh = window(ts.prediction)
-    assert result.ok and x < clip.u[3] < x + ww and y < clip.v[3] < y + wh and ww < 200, (x, y, ww, wh)
+    assert result.ok and x < clip.u[3] < x + ww and y < clip.v[3] < y + wh and ww < 200, (
+        x,
+        y,
+        ww,
+        wh,
+    )
 
 
 @pytest.mark.parametrize("bad", [30, 50])
@@ -148,8 +185,10 @@ def test_a_frame_without_a_pose_never_sends_the_search_back_to_an_old_anchor(occ
     assert clip.error_px(bad + 1, results[bad + 1]) < 2.0
 
 
-@pytest.mark.parametrize(("name", "north_m", "east_m"), [("nadir_hover", 2.5, -2.0), ("oblique_2m", -3.0, 1.5),
-                                                         ("vehicle_yaw", 1.0, 3.5)])
+@pytest.mark.parametrize(
+    ("name", "north_m", "east_m"),
+    [("nadir_hover", 2.5, -2.0), ("oblique_2m", -3.0, 1.5), ("vehicle_yaw", 1.0, 3.5)],
+)
 def test_acquires_near_the_uuvs_own_estimate_and_confirms_before_any_fix(name, north_m, east_m):
     clip = Clip(name)
     ts = TrackingSession(clip.cal)

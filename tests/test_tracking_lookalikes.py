@@ -27,11 +27,24 @@ from sim_fixtures.scenario import load_scenario, with_overrides
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios"
 SHORT = {  # name: (scenario, overrides)
-    "shadow_touching": ("shadow_shallow", {"duration_s": 3.0, "render": {"sun_elevation_deg": 62.0}}),
-    "crossing_close": ("second_vehicle", {"duration_s": 3.0,
-                                          "second_uuv": {"pass_at_s": 1.5, "miss_m": 0.15, "course_rel_deg": 100.0}}),
-    "crossing_turned": ("second_vehicle", {"duration_s": 3.0,
-                                           "second_uuv": {"pass_at_s": 1.5, "miss_m": 0.2, "course_rel_deg": 130.0}}),
+    "shadow_touching": (
+        "shadow_shallow",
+        {"duration_s": 3.0, "render": {"sun_elevation_deg": 62.0}},
+    ),
+    "crossing_close": (
+        "second_vehicle",
+        {
+            "duration_s": 3.0,
+            "second_uuv": {"pass_at_s": 1.5, "miss_m": 0.15, "course_rel_deg": 100.0},
+        },
+    ),
+    "crossing_turned": (
+        "second_vehicle",
+        {
+            "duration_s": 3.0,
+            "second_uuv": {"pass_at_s": 1.5, "miss_m": 0.2, "course_rel_deg": 130.0},
+        },
+    ),
     "over_the_rock": ("rock_pass", {"duration_s": 3.0, "rock": {"at_s": 1.2}, "occlusions": ()}),
     "following": ("follow_cruise", {"duration_s": 3.0}),
 }
@@ -65,7 +78,9 @@ def clips(tmp_path_factory):
         if name not in made:
             scenario, overrides = SHORT[name]
             out = tmp_path_factory.mktemp("lookalikes") / name
-            generate(with_overrides(load_scenario(SCENARIOS / f"{scenario}.toml"), **overrides), out)
+            generate(
+                with_overrides(load_scenario(SCENARIOS / f"{scenario}.toml"), **overrides), out
+            )
             made[name] = Clip(out)
         return made[name]
 
@@ -80,10 +95,16 @@ def test_a_click_beside_the_shadow_outlines_the_vehicle_alone(clips):
     for i in (0, 6, 12):
         ts = TrackingSession(clip.cal)
         r = ts.select(clip.frames[i], clip.pose, i, point=(clip.u[i] + 2.0, clip.v[i] - 1.0))
-        assert clip.error_px(i, r) < 3.5 and max(r.box[2:]) <= 1.15 * vehicle_side, (i, clip.error_px(i, r), r.box)
+        assert clip.error_px(i, r) < 3.5 and max(r.box[2:]) <= 1.15 * vehicle_side, (
+            i,
+            clip.error_px(i, r),
+            r.box,
+        )
     ts = TrackingSession(clip.cal)
     truth = clip.session.truth
-    prior = Prior(float(truth["lat"][0]) + 1e-5, float(truth["lon"][0]) + 1e-5, sigma_m=2.0)  # ~1.1 m, ~0.7 m off
+    prior = Prior(
+        float(truth["lat"][0]) + 1e-5, float(truth["lon"][0]) + 1e-5, sigma_m=2.0
+    )  # ~1.1 m, ~0.7 m off
     results = [ts.step(clip.frames[i], clip.pose, i, prior) for i in range(len(clip.frames))]
     ok = [i for i, r in enumerate(results) if r.ok]
     assert ok and max(clip.error_px(i, results[i]) for i in ok) < 3.0
@@ -113,6 +134,9 @@ def test_the_full_pipeline_gives_no_fix_off_the_truth_while_the_second_vehicle_p
     fixes = process_session(clip.session, use_track=False, tracker="default")
     ok = fixes.status == "ok"
     tr = clip.session.truth
-    lat, lon = np.interp(fixes.t_unix, tr["t"], tr["lat"]), np.interp(fixes.t_unix, tr["t"], tr["lon"])
+    lat, lon = (
+        np.interp(fixes.t_unix, tr["t"], tr["lat"]),
+        np.interp(fixes.t_unix, tr["t"], tr["lon"]),
+    )
     err = horizontal_error_m(fixes.lat[ok], fixes.lon[ok], lat[ok], lon[ok])
     assert ok.mean() > 0.8 and err.max() < 0.05

@@ -25,7 +25,9 @@ pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs th
 @pytest.fixture(scope="module")
 def session_dir(tmp_path_factory):
     """3 s of the occlusion scenario (oblique, glint), hidden from 1.2 s to 2.0 s."""
-    sc = with_overrides(load_scenario(SCENARIOS / "occlusion.toml"), duration_s=3.0, occlusions=(HIDDEN_S,))
+    sc = with_overrides(
+        load_scenario(SCENARIOS / "occlusion.toml"), duration_s=3.0, occlusions=(HIDDEN_S,)
+    )
     out = tmp_path_factory.mktemp("sessions") / "occl"
     generate(sc, out)
     return out
@@ -68,13 +70,21 @@ def test_process_with_the_tracker_gives_fixes_near_truth_and_says_why_not(sessio
     ok = fixes.status == "ok"
     assert set(fixes.status[_hidden(fixes.t_unix)]) == {"lost"}
     tr = session.truth
-    lat_t, lon_t = np.interp(fixes.t_unix, tr["t"], tr["lat"]), np.interp(fixes.t_unix, tr["t"], tr["lon"])
+    lat_t, lon_t = (
+        np.interp(fixes.t_unix, tr["t"], tr["lat"]),
+        np.interp(fixes.t_unix, tr["t"], tr["lon"]),
+    )
     err = horizontal_error_m(fixes.lat[ok], fixes.lon[ok], lat_t[ok], lon_t[ok])
     assert err.mean() < 0.05
 
 
 def test_cli_process_with_tracker_writes_positions(session_dir, tmp_path, capsys):
-    assert skyfix(["process", str(session_dir), "--out", str(tmp_path), "--tracker", "default", "--quiet"]) == 0
+    assert (
+        skyfix(
+            ["process", str(session_dir), "--out", str(tmp_path), "--tracker", "default", "--quiet"]
+        )
+        == 0
+    )
     lines = (tmp_path / "positions.csv").read_text().splitlines()
     assert len(lines) == 1 + 90
     capsys.readouterr()
@@ -104,9 +114,25 @@ def test_truncated_video_gives_no_video_status_for_the_missing_frames(session_di
 
 def test_video_of_another_size_is_refused(session_dir, tmp_path):
     s = _copy(session_dir, tmp_path)
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(session_dir / "video.mp4"), "-vf", "scale=320:180",
-                    "-c:v", "libx264", str(s / "video.mp4")], check=True)
-    with pytest.raises(SessionError, match="320x180 pixels differs from the calibration's camera 640x360"):
+    subprocess.run(
+        [
+            "ffmpeg",
+            "-v",
+            "error",
+            "-y",
+            "-i",
+            str(session_dir / "video.mp4"),
+            "-vf",
+            "scale=320:180",
+            "-c:v",
+            "libx264",
+            str(s / "video.mp4"),
+        ],
+        check=True,
+    )
+    with pytest.raises(
+        SessionError, match="320x180 pixels differs from the calibration's camera 640x360"
+    ):
         track_session(load_session(s))
 
 
@@ -127,4 +153,6 @@ def test_init_time_matching_no_frame_is_refused(session_dir, tmp_path):
 
 def test_mil_backend_runs_on_the_session(session_dir):
     tracked = track_session(load_session(session_dir), tracker_name="mil")
-    assert (tracked.status == "ok").mean() > 0.9  # MIL has no loss signal: it rarely says anything else
+    assert (
+        tracked.status == "ok"
+    ).mean() > 0.9  # MIL has no loss signal: it rarely says anything else

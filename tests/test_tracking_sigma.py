@@ -29,10 +29,18 @@ def test_each_of_the_trackers_signs_of_doubt_widens_the_sigma():
     calm = pixel_sigma_px(30.0, 0.95, 4.0, 10.0)
     assert 0.2 <= calm < 1.0
     assert pixel_sigma_px(30.0, 0.7, 4.0, 10.0) > calm  # a weaker match
-    assert pixel_sigma_px(30.0, 0.95, 40.0, 10.0) > calm  # sought in a wider window (frames skipped, a loss)
-    assert pixel_sigma_px(30.0, 0.95, 4.0, 0.0) > pixel_sigma_px(30.0, 0.95, 4.0, 0.5) > calm  # just (re)acquired
-    assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, outlined=True) > 2.0 * calm  # outlined by skyfix, not boxed
-    assert pixel_sigma_px(60.0, 0.95, 8.0, 10.0) == pytest.approx(2.0 * calm)  # in proportion to the vehicle's size
+    assert (
+        pixel_sigma_px(30.0, 0.95, 40.0, 10.0) > calm
+    )  # sought in a wider window (frames skipped, a loss)
+    assert (
+        pixel_sigma_px(30.0, 0.95, 4.0, 0.0) > pixel_sigma_px(30.0, 0.95, 4.0, 0.5) > calm
+    )  # just (re)acquired
+    assert (
+        pixel_sigma_px(30.0, 0.95, 4.0, 10.0, outlined=True) > 2.0 * calm
+    )  # outlined by skyfix, not boxed
+    assert pixel_sigma_px(60.0, 0.95, 8.0, 10.0) == pytest.approx(
+        2.0 * calm
+    )  # in proportion to the vehicle's size
     assert pixel_sigma_px(30.0, math.nan, 4.0, 10.0) > calm  # a tracker without a score
     assert math.isnan(pixel_sigma_px(math.nan, 0.95, 4.0, 10.0))
 
@@ -43,7 +51,10 @@ def test_the_claimed_pixel_sigma_holds_90_to_98_percent_of_the_errors(tmp_path):
     tracked from the simulator's box: the share of tracked pixels within 2·DRMS of the truth is 90-98 %."""
     inside, constant = [], []
     for name in ("field_like", "shadow_shallow"):
-        generate(with_overrides(load_scenario(SCENARIOS / f"{name}.toml"), duration_s=6.0), tmp_path / name)
+        generate(
+            with_overrides(load_scenario(SCENARIOS / f"{name}.toml"), duration_s=6.0),
+            tmp_path / name,
+        )
         session = load_session(tmp_path / name)
         cal, t = session.calibration, session.frames["t"]
         pose = camera_pose(cal, session.telemetry, t)
@@ -54,7 +65,9 @@ def test_the_claimed_pixel_sigma_holds_90_to_98_percent_of_the_errors(tmp_path):
         results += [ts.step(frames[i], pose, i) for i in range(1, len(frames))]
         tr = session.track
         for i, r in enumerate(results):
-            err = math.hypot(r.u - np.interp(t[i], tr["t"], tr["u"]), r.v - np.interp(t[i], tr["t"], tr["v"]))
+            err = math.hypot(
+                r.u - np.interp(t[i], tr["t"], tr["u"]), r.v - np.interp(t[i], tr["t"], tr["v"])
+            )
             if r.ok and math.isfinite(err):
                 inside.append(err <= 2.0 * math.sqrt(2.0) * r.sigma_px)
                 constant.append(err <= 2.0 * math.sqrt(2.0) * cal.sigmas.pixel_px)

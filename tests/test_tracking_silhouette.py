@@ -29,20 +29,36 @@ FRAMES = (0, 40, 80, 120)
 
 
 def _scene(pitch_deg, height_m, depth_m, seed):
-    sc = with_overrides(load_scenario(SCENARIOS / "size_surface.toml"), seed=seed, duration_s=4.5,
-                        camera={"width": 640, "height": 360}, mount={"pitch_deg": pitch_deg},
-                        uav={"height_m": height_m}, uuv={"depth_m": depth_m, "depth_swing_m": 0.02})
+    sc = with_overrides(
+        load_scenario(SCENARIOS / "size_surface.toml"),
+        seed=seed,
+        duration_s=4.5,
+        camera={"width": 640, "height": 360},
+        mount={"pitch_deg": pitch_deg},
+        uav={"height_m": height_m},
+        uuv={"depth_m": depth_m, "depth_swing_m": 0.02},
+    )
     sim = camera_of(sc)
-    camera = Camera(width=sim.width, height=sim.height, fx=sim.fx, fy=sim.fy, cx=sim.cx, cy=sim.cy,
-                    distortion=sim.dist.ravel().tolist())
+    camera = Camera(
+        width=sim.width,
+        height=sim.height,
+        fx=sim.fx,
+        fy=sim.fy,
+        cx=sim.cx,
+        cy=sim.cy,
+        distortion=sim.dist.ravel().tolist(),
+    )
     return sc, camera, frame_truth(sc, Motion(sc), sim), Renderer(sc, sim)
 
 
-@pytest.mark.parametrize("pitch_deg, height_m, depth_m, seed", [
-    (-90.0, 7.0, 0.1, 71),  # nadir, at the surface
-    (-60.0, 7.0, 0.1, 72),  # 30° off nadir, at the surface
-    (-68.0, 6.5, 1.5, 73),  # 22° off nadir, 1.5 m deep
-])
+@pytest.mark.parametrize(
+    "pitch_deg, height_m, depth_m, seed",
+    [
+        (-90.0, 7.0, 0.1, 71),  # nadir, at the surface
+        (-60.0, 7.0, 0.1, 72),  # 30° off nadir, at the surface
+        (-68.0, 6.5, 1.5, 73),  # 22° off nadir, 1.5 m deep
+    ],
+)
 def test_height_found_from_a_wrong_start(pitch_deg, height_m, depth_m, seed):
     sc, camera, truth, renderer = _scene(pitch_deg, height_m, depth_m, seed)
     uuv = Uuv(*sc.uuv.size_m)
@@ -52,18 +68,32 @@ def test_height_found_from_a_wrong_start(pitch_deg, height_m, depth_m, seed):
         image, _ = renderer.render(truth.view(i))
         true_h = -truth.camera_ned[i, 2]
         depth = truth.uuv_ned[i, 2]
-        m = measure(image, camera, truth.R_ned_from_cv[i], truth.u[i] + 0.8, truth.v[i] - 0.5, uuv, true_h * wrong,
-                    depth, n)
+        m = measure(
+            image,
+            camera,
+            truth.R_ned_from_cv[i],
+            truth.u[i] + 0.8,
+            truth.v[i] - 0.5,
+            uuv,
+            true_h * wrong,
+            depth,
+            n,
+        )
         if isinstance(m, str):  # no measurement, and why: allowed now and then, never a wrong one
             assert m in REJECTIONS
             continue
         measured += 1
-        common = size_height(0.0, m.camera_height_m, m.sigma_m, m.size_px, 0.0, true_h, 0.3, depth, 0.0, n)
+        common = size_height(
+            0.0, m.camera_height_m, m.sigma_m, m.size_px, 0.0, true_h, 0.3, depth, 0.0, n
+        )
         err = m.camera_height_m - true_h
         assert abs(err) <= 3 * common.sigma_total_m and abs(err) <= 0.02 * true_h, (i, err, m)
         # the heading (modulo 180°: the box is symmetric) and the top face's pixel come along
         turn = (m.heading_rad - truth.uuv_heading[i] + np.pi / 2) % np.pi - np.pi / 2
-        assert abs(np.degrees(turn)) < 3.0 and np.hypot(m.u - truth.u[i], m.v - truth.v[i]) < 0.5, (i, m)
+        assert abs(np.degrees(turn)) < 3.0 and np.hypot(m.u - truth.u[i], m.v - truth.v[i]) < 0.5, (
+            i,
+            m,
+        )
     assert measured >= 3
 
 
@@ -71,8 +101,17 @@ def test_no_vehicle_no_measurement():
     sc, camera, truth, renderer = _scene(-60.0, 7.0, 0.1, 72)
     for i in FRAMES:
         image, _ = renderer.render(replace(truth.view(i), uuv_visible=False))  # the water alone
-        m = measure(image, camera, truth.R_ned_from_cv[i], truth.u[i], truth.v[i], Uuv(*sc.uuv.size_m),
-                    -truth.camera_ned[i, 2], truth.uuv_ned[i, 2], sc.site.refractive_index)
+        m = measure(
+            image,
+            camera,
+            truth.R_ned_from_cv[i],
+            truth.u[i],
+            truth.v[i],
+            Uuv(*sc.uuv.size_m),
+            -truth.camera_ned[i, 2],
+            truth.uuv_ned[i, 2],
+            sc.site.refractive_index,
+        )
         assert m in REJECTIONS, (i, m)
 
 
@@ -80,9 +119,16 @@ def test_at_the_frame_edge_or_too_small_it_says_why():
     sc, camera, truth, renderer = _scene(-90.0, 7.0, 0.1, 71)
     image, _ = renderer.render(truth.view(0))
     args = (camera, truth.R_ned_from_cv[0])
-    uuv, h, d, n = Uuv(*sc.uuv.size_m), -truth.camera_ned[0, 2], truth.uuv_ned[0, 2], sc.site.refractive_index
+    uuv, h, d, n = (
+        Uuv(*sc.uuv.size_m),
+        -truth.camera_ned[0, 2],
+        truth.uuv_ned[0, 2],
+        sc.site.refractive_index,
+    )
     assert measure(image, *args, 8.0, 180.0, uuv, h, d, n) == "border"
-    assert measure(image, *args, truth.u[0], truth.v[0], uuv, 3.0 * h, d, n) == "too_small"  # configured 3× too high
+    assert (
+        measure(image, *args, truth.u[0], truth.v[0], uuv, 3.0 * h, d, n) == "too_small"
+    )  # configured 3× too high
 
 
 def test_the_size_scan_samples_further_out_only_where_it_must():
@@ -93,21 +139,37 @@ def test_the_size_scan_samples_further_out_only_where_it_must():
     image, _ = renderer.render(truth.view(i))
     p = SilhouetteParams()
     R, u, v = truth.R_ned_from_cv[i], truth.u[i], truth.v[i]
-    uuv, h, depth, n = Uuv(*sc.uuv.size_m), -truth.camera_ned[i, 2], truth.uuv_ned[i, 2], sc.site.refractive_index
+    uuv, h, depth, n = (
+        Uuv(*sc.uuv.size_m),
+        -truth.camera_ned[i, 2],
+        truth.uuv_ned[i, 2],
+        sc.site.refractive_index,
+    )
     heading = silhouette._headings(image, camera, R, u, v, uuv, h, depth, n, p)[0]
     scales = np.exp(np.linspace(np.log(p.scan_to), np.log(p.scan_from), 25))
     corners = box_corners_px(camera, R, u, v, heading, uuv, h * scales, depth, n)  # (25, 8, 2)
-    texture = silhouette._texture(image, corners[-1], p)  # beyond the largest outline (the lowest height)
+    texture = silhouette._texture(
+        image, corners[-1], p
+    )  # beyond the largest outline (the lowest height)
     mid = corners[len(corners) // 2]
     pts = edge_points(mid, outline(mid), p.spacing_px, p.trim)
     e = corners[:, pts.second] - corners[:, pts.first]
     normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
-    window, origin = silhouette._window(image, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0)
-    t = np.arange(-np.ceil(p.agree_px / p.step_px) - 1, round(p.clear_px / p.step_px) + 2) * p.step_px
-    edges = silhouette._peaks(window, pts.moved(corners) - origin, normal, t, p.noise_factor * texture)
+    window, origin = silhouette._window(
+        image, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0
+    )
+    t = (
+        np.arange(-np.ceil(p.agree_px / p.step_px) - 1, round(p.clear_px / p.step_px) + 2)
+        * p.step_px
+    )
+    edges = silhouette._peaks(
+        window, pts.moved(corners) - origin, normal, t, p.noise_factor * texture
+    )
     every = silhouette._supported(edges, p)
     assert np.array_equal(silhouette._supports(image, corners, texture, p), every.mean(axis=-1))
     is_edge, tm, _ = edges
     edge_near = is_edge[np.abs(tm) <= p.agree_px].any(axis=0)
     assert every.mean(axis=-1).max() > 0.3  # outlines near the vehicle's are supported ...
-    assert np.mean(edge_near & ~every) > 0.1  # ... and many points with an edge near have one further out
+    assert (
+        np.mean(edge_near & ~every) > 0.1
+    )  # ... and many points with an edge near have one further out

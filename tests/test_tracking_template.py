@@ -18,26 +18,48 @@ LENGTH, BEAM = 34, 24  # target size (pixels)
 def _floor(seed: int) -> np.ndarray:
     """Smooth random texture, larger than the frame so the camera can pan over it (BGR uint8)."""
     rng = np.random.default_rng(seed)
-    small = cv2.GaussianBlur(rng.normal(0.0, 1.0, (H // 3 + 40, W // 3 + 40)).astype(np.float32), (0, 0), 1.5)
+    small = cv2.GaussianBlur(
+        rng.normal(0.0, 1.0, (H // 3 + 40, W // 3 + 40)).astype(np.float32), (0, 0), 1.5
+    )
     big = cv2.resize(small, None, fx=3, fy=3, interpolation=cv2.INTER_CUBIC)
     big = 125 + 22 * (big - big.mean()) / big.std()
-    return np.clip(np.dstack([big * 0.9 + 15, big * 0.85 + 10, big * 0.55]), 0, 255).astype(np.uint8)
+    return np.clip(np.dstack([big * 0.9 + 15, big * 0.85 + 10, big * 0.55]), 0, 255).astype(
+        np.uint8
+    )
 
 
 def _draw_target(img, cx, cy, heading_deg, scale=1.0):
     """Dark hull with a light stripe along it and a bright nose, rotated about (cx, cy) (sub-pixel)."""
     s = 8  # draw at 1/8 pixel precision
+
     def poly(pts):
         a = math.radians(heading_deg)
         rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
         p = (np.asarray(pts, float) @ rot.T + (cx, cy)) * s
         return np.round(p).astype(np.int32)
+
     L, B = scale * LENGTH / 2, scale * BEAM / 2
-    cv2.fillPoly(img, [poly([(-L, -B), (L, -B), (L, B), (-L, B)])], (40, 38, 36), cv2.LINE_AA, shift=3)
-    cv2.fillPoly(img, [poly([(-0.7 * L, -0.3 * B), (0.7 * L, -0.3 * B), (0.7 * L, 0.3 * B), (-0.7 * L, 0.3 * B)])],
-                 (205, 200, 190), cv2.LINE_AA, shift=3)
-    cv2.fillPoly(img, [poly([(0.75 * L, -0.5 * B), (L, -0.5 * B), (L, 0.5 * B), (0.75 * L, 0.5 * B)])],
-                 (40, 200, 235), cv2.LINE_AA, shift=3)
+    cv2.fillPoly(
+        img, [poly([(-L, -B), (L, -B), (L, B), (-L, B)])], (40, 38, 36), cv2.LINE_AA, shift=3
+    )
+    cv2.fillPoly(
+        img,
+        [
+            poly(
+                [(-0.7 * L, -0.3 * B), (0.7 * L, -0.3 * B), (0.7 * L, 0.3 * B), (-0.7 * L, 0.3 * B)]
+            )
+        ],
+        (205, 200, 190),
+        cv2.LINE_AA,
+        shift=3,
+    )
+    cv2.fillPoly(
+        img,
+        [poly([(0.75 * L, -0.5 * B), (L, -0.5 * B), (L, 0.5 * B), (0.75 * L, 0.5 * B)])],
+        (40, 200, 235),
+        cv2.LINE_AA,
+        shift=3,
+    )
 
 
 def make_clip(n=120, hidden=(), seed=3, noise=3.0, grow=0.0):
@@ -56,7 +78,9 @@ def make_clip(n=120, hidden=(), seed=3, noise=3.0, grow=0.0):
         cx, cy = cx - (px - x0), cy - (py - y0)
         visible = not any(a <= i < b for a, b in hidden)
         if visible:
-            _draw_target(img, cx, cy, heading_deg=25 + 1.5 * i, scale=1.0 + grow * i / n)  # keeps turning
+            _draw_target(
+                img, cx, cy, heading_deg=25 + 1.5 * i, scale=1.0 + grow * i / n
+            )  # keeps turning
         img = np.clip(img + rng.normal(0, noise, img.shape), 0, 255).astype(np.uint8)
         frames.append(img)
         truth.append((cx, cy) if visible else (np.nan, np.nan))
@@ -143,7 +167,9 @@ def test_template_searches_less_often_the_longer_it_is_lost_and_still_reacquires
     assert np.all(gaps[lost_for[1:] <= p.long_loss_frames] == p.search_every)
     assert np.all(gaps[lost_for[:-1] >= p.long_loss_frames] == p.search_every_long)
     back = next(i + 1 for i in range(b - 1, len(results)) if results[i].ok)
-    assert back - b <= p.search_every_long + p.confirm_frames - 2, "re-acquired by the first search after it is back"
+    assert back - b <= p.search_every_long + p.confirm_frames - 2, (
+        "re-acquired by the first search after it is back"
+    )
     assert all(r.ok for r in results[back - 1 :])
 
 
@@ -153,11 +179,18 @@ def test_template_follows_the_predicted_apparent_size(scale_at_start):
     n, grow = 100, 0.5
     frames, truth, _ = make_clip(n=n, grow=grow)
     preds = [
-        Prediction(p.u, p.v, p.width_px, p.height_px, p.sigma_px, px_per_m=100.0 * (1.0 + grow * i / n))
+        Prediction(
+            p.u, p.v, p.width_px, p.height_px, p.sigma_px, px_per_m=100.0 * (1.0 + grow * i / n)
+        )
         for i, p in enumerate(_predictions(truth))
     ]
     target = _target()
-    target.select(frames[0], _box(truth[0]), tuple(truth[0]), preds[0].px_per_m if scale_at_start else math.nan)
+    target.select(
+        frames[0],
+        _box(truth[0]),
+        tuple(truth[0]),
+        preds[0].px_per_m if scale_at_start else math.nan,
+    )
     results = [target.update(frames[i], preds[i]) for i in range(1, n)]
     assert all(r.ok for r in results)
     err = [math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(results, truth[1:])]
@@ -173,7 +206,9 @@ def test_template_never_takes_the_floor_for_a_target_that_never_returns():
 
 def test_a_box_outside_the_frame_is_refused_and_changes_nothing():
     frames, truth, _ = make_clip(n=2)
-    with pytest.raises(ValueError, match=r"box \(310, 5, 30, 30\) does not lie inside the 320x240 frame"):
+    with pytest.raises(
+        ValueError, match=r"box \(310, 5, 30, 30\) does not lie inside the 320x240 frame"
+    ):
         TemplateMatcher().start(frames[0], (W - 10, 5, 30, 30))
     target = _target()
     target.select(frames[0], _box(truth[0]), point=tuple(truth[0]))
@@ -186,7 +221,9 @@ def test_a_box_outside_the_frame_is_refused_and_changes_nothing():
 def test_every_backend_tracks_a_short_clip(name):
     frames, truth, _ = make_clip(n=25)
     target = _target(name)
-    assert target.update(frames[0], None).status == "awaiting_target"  # no matcher runs before a selection
+    assert (
+        target.update(frames[0], None).status == "awaiting_target"
+    )  # no matcher runs before a selection
     results = _run(target, frames, truth)
     ok = [r for r in results if r.ok]
     assert len(ok) >= 20
@@ -239,7 +276,10 @@ def test_a_proposed_candidate_becomes_the_target_only_after_confirming_frames():
     n_waiting = p.confirm_frames - 1  # the proposal itself was the first match
     assert [r.status for r in results[: n_waiting - 1]] == ["awaiting_target"] * (n_waiting - 1)
     assert all(r.ok for r in results[n_waiting - 1 :]) and target.state is TargetState.TRACKING
-    err = [math.hypot(r.u - t[0], r.v - t[1]) for r, t in zip(results[n_waiting - 1 :], truth[5 + n_waiting :])]
+    err = [
+        math.hypot(r.u - t[0], r.v - t[1])
+        for r, t in zip(results[n_waiting - 1 :], truth[5 + n_waiting :])
+    ]
     assert np.mean(err) < 0.7
 
 
@@ -248,22 +288,40 @@ def test_a_proposed_candidate_that_does_not_confirm_is_dropped(why):
     hidden = [(7, 40)] if why == "hidden" else []
     frames, truth, _ = make_clip(n=20, hidden=hidden)
     preds = _predictions(make_clip(n=20)[1])
-    if why == "moves_against_the_camera":  # the prediction (the camera's motion) jumps 40 px the other way
-        preds = [Prediction(q.u - 40.0 * (i > 5), q.v, q.width_px, q.height_px, q.sigma_px, q.px_per_m)
-                 for i, q in enumerate(preds)]
+    if (
+        why == "moves_against_the_camera"
+    ):  # the prediction (the camera's motion) jumps 40 px the other way
+        preds = [
+            Prediction(q.u - 40.0 * (i > 5), q.v, q.width_px, q.height_px, q.sigma_px, q.px_per_m)
+            for i, q in enumerate(preds)
+        ]
     target = _target()
     target.propose(frames[5], _box(truth[5]), tuple(truth[5]), 100.0, preds[5])
     results = [target.update(frames[i], preds[i]) for i in range(6, 20)]
     assert not any(r.ok for r in results)
-    assert {r.status for r in results} == {"awaiting_target"} and target.state is TargetState.AWAITING_TARGET
+    assert {r.status for r in results} == {
+        "awaiting_target"
+    } and target.state is TargetState.AWAITING_TARGET
 
 
 def _draw_rock(img, cx, cy):
     """A dark, vehicle-sized stone: an irregular blob with a lighter patch off its centre, nothing like the hull."""
-    pts = [(cx + r * math.cos(a), cy + 0.8 * r * math.sin(a))
-           for a, r in zip(np.linspace(0, 2 * math.pi, 9)[:-1], (19, 15, 18, 20, 14, 17, 21, 16))]
-    cv2.fillPoly(img, [np.round(np.array(pts) * 8).astype(np.int32)], (55, 60, 62), cv2.LINE_AA, shift=3)
-    cv2.circle(img, (round((cx - 8) * 8), round((cy + 5) * 8)), 6 * 8, (120, 125, 120), -1, cv2.LINE_AA, shift=3)
+    pts = [
+        (cx + r * math.cos(a), cy + 0.8 * r * math.sin(a))
+        for a, r in zip(np.linspace(0, 2 * math.pi, 9)[:-1], (19, 15, 18, 20, 14, 17, 21, 16))
+    ]
+    cv2.fillPoly(
+        img, [np.round(np.array(pts) * 8).astype(np.int32)], (55, 60, 62), cv2.LINE_AA, shift=3
+    )
+    cv2.circle(
+        img,
+        (round((cx - 8) * 8), round((cy + 5) * 8)),
+        6 * 8,
+        (120, 125, 120),
+        -1,
+        cv2.LINE_AA,
+        shift=3,
+    )
 
 
 def test_the_template_does_not_learn_its_way_onto_something_else():
@@ -285,8 +343,12 @@ def test_the_template_does_not_learn_its_way_onto_something_else():
     matcher.start(frames[0], _box(c), point=c)
     found = [matcher.follow(f, None) for f in frames[1:]]  # found[i] is frame i + 1
     assert all(m.found for m in found[: (fade[0] + fade[1]) // 2])  # the UUV while it shows
-    assert all(math.hypot(m.u - c[0], m.v - c[1]) < 2.0 for m in found if m.found), "followed the rock"
-    assert not any(m.found for m in found[fade[1] - 10 :])  # (nearly) only the rock is left: the UUV is lost
+    assert all(math.hypot(m.u - c[0], m.v - c[1]) < 2.0 for m in found if m.found), (
+        "followed the rock"
+    )
+    assert not any(
+        m.found for m in found[fade[1] - 10 :]
+    )  # (nearly) only the rock is left: the UUV is lost
 
 
 @pytest.mark.parametrize("how", ["follow", "search"])
@@ -310,7 +372,11 @@ def test_a_wide_window_prefers_the_candidate_near_the_prediction(how):
     _draw_target(img, *twin, heading_deg=25)
     prediction = Prediction(c[0], c[1], LENGTH, BEAM, sigma_px=sigma, px_per_m=100.0)
     m = matcher.follow(img, prediction) if how == "follow" else matcher.search(img, prediction)
-    assert m.found and math.hypot(m.u - uuv[0], m.v - uuv[1]) < 1.5, (m.u - c[0], m.v - c[1], m.score)
+    assert m.found and math.hypot(m.u - uuv[0], m.v - uuv[1]) < 1.5, (
+        m.u - c[0],
+        m.v - c[1],
+        m.score,
+    )
 
 
 def test_several_templates_at_once_score_as_opencv_does():
@@ -321,7 +387,10 @@ def test_several_templates_at_once_score_as_opencv_does():
     rng = np.random.default_rng(5)
     image = cv2.GaussianBlur(rng.normal(120.0, 25.0, (23, 23)).astype(np.float32), (0, 0), 1.0)
     image[:16, :16] = 90.0  # the places (0..1, 0..1) are flat
-    templates = [cv2.GaussianBlur(rng.normal(120.0, 25.0, (15, 15)).astype(np.float32), (0, 0), 1.0) for _ in range(5)]
+    templates = [
+        cv2.GaussianBlur(rng.normal(120.0, 25.0, (15, 15)).astype(np.float32), (0, 0), 1.0)
+        for _ in range(5)
+    ]
     columns = np.stack([t.ravel().astype(np.float64) - t.mean() for t in templates], axis=1)
     columns /= np.linalg.norm(columns, axis=0)
     maps = _ncc_maps(image, columns, 15)
@@ -329,4 +398,6 @@ def test_several_templates_at_once_score_as_opencv_does():
     for t, got in zip(templates, maps, strict=True):
         want = cv2.matchTemplate(image, t, cv2.TM_CCOEFF_NORMED)
         np.testing.assert_allclose(got, want, atol=1e-4)
-    assert np.all(maps[:, :2, :2] == 0.0) and np.ptp(maps) > 0.5  # the flat places, and scores that vary elsewhere
+    assert (
+        np.all(maps[:, :2, :2] == 0.0) and np.ptp(maps) > 0.5
+    )  # the flat places, and scores that vary elsewhere

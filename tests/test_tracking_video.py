@@ -23,8 +23,30 @@ def _encode(path, frames=N, size=SIZE, gop=10, extra=()):
     raw = np.full((frames, h, w, 3), 40, np.uint8)
     for i in range(frames):
         raw[i, :, 2 * i : 2 * i + 6] = 230
-    cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24", "-s", f"{w}x{h}", "-r", str(FPS),
-           "-i", "-", "-c:v", "libx264", "-g", str(gop), "-pix_fmt", "yuv420p", *extra, str(path)]
+    cmd = [
+        "ffmpeg",
+        "-v",
+        "error",
+        "-y",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "bgr24",
+        "-s",
+        f"{w}x{h}",
+        "-r",
+        str(FPS),
+        "-i",
+        "-",
+        "-c:v",
+        "libx264",
+        "-g",
+        str(gop),
+        "-pix_fmt",
+        "yuv420p",
+        *extra,
+        str(path),
+    ]
     subprocess.run(cmd, input=raw.tobytes(), check=True)
     return path
 
@@ -65,7 +87,9 @@ def test_missing_empty_and_non_video_files_are_named(tmp_path):
 
 
 def test_size_different_from_the_calibration_is_an_error(clip):
-    with pytest.raises(VideoError, match=r"160x120 pixels differs from the calibration's camera 1920x1080"):
+    with pytest.raises(
+        VideoError, match=r"160x120 pixels differs from the calibration's camera 1920x1080"
+    ):
         open_video(clip, expected_size=(1920, 1080))
 
 

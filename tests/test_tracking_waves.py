@@ -24,9 +24,15 @@ from sim_fixtures.scenario import scenario_from_dict
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
 
-HOVER = {"name": "waves_proxy_hover", "description": "nadir hover for the wave proxy", "seed": 21,
-         "duration_s": 3.0, "mount": {"attitude_source": "gimbal_device", "gimbal_frame": "earth", "pitch_deg": -90.0},
-         "uav": {"height_m": 8.0}, "uuv": {"depth_m": 1.5}}
+HOVER = {
+    "name": "waves_proxy_hover",
+    "description": "nadir hover for the wave proxy",
+    "seed": 21,
+    "duration_s": 3.0,
+    "mount": {"attitude_source": "gimbal_device", "gimbal_frame": "earth", "pitch_deg": -90.0},
+    "uav": {"height_m": 8.0},
+    "uuv": {"depth_m": 1.5},
+}
 
 
 def _track(path):
@@ -41,7 +47,9 @@ def _track(path):
     results = [ts.select(frames[0], pose, 0, box=cal.init_bbox)]
     results += [ts.step(frames[i], pose, i) for i in range(1, len(frames))]
     ok = np.array([r.ok for r in results])
-    err = np.array([math.hypot(r.u - u[i], r.v - v[i]) for i, r in enumerate(results) if r.ok])  # NaN: hidden
+    err = np.array(
+        [math.hypot(r.u - u[i], r.v - v[i]) for i, r in enumerate(results) if r.ok]
+    )  # NaN: hidden
     return ok, np.isfinite(u), err
 
 
@@ -49,11 +57,14 @@ def _track(path):
 def test_the_uuv_is_located_through_waves_and_lost_when_gone(tmp_path, occluded):
     scenario = dict(HOVER, occlusions=[[1.8, 3.0]] if occluded else [])
     generate(scenario_from_dict(scenario), tmp_path / "flat")
-    ok, visible, err = _track(through_waves(tmp_path / "flat", tmp_path / "waves", shift_px=2.0, flicker=0.5,
-                                            kbps=1000))
+    ok, visible, err = _track(
+        through_waves(tmp_path / "flat", tmp_path / "waves", shift_px=2.0, flicker=0.5, kbps=1000)
+    )
     assert ok[visible].mean() >= 0.95, ok.astype(int)
     # the waves move its image from the true pixel by 2 px RMS per axis (2.8 px in all), at times 3 times that
-    if occluded:  # gone: lost (the water where it was still passes for it in a few frames: 2 of 36 here)
+    if (
+        occluded
+    ):  # gone: lost (the water where it was still passes for it in a few frames: 2 of 36 here)
         assert ok[~visible].mean() <= 0.1, ok.astype(int)
     err = err[np.isfinite(err)]
     assert np.median(err) < 3.0 and err.max() < 10.0

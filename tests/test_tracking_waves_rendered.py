@@ -25,7 +25,9 @@ from sim_fixtures.scenario import scenario_from_dict
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
 
-SCENARIO = Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "waves_5mps_oblique.toml"
+SCENARIO = (
+    Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "waves_5mps_oblique.toml"
+)
 
 
 def _session(path: Path, occlusions) -> Path:
@@ -42,7 +44,12 @@ def _tracked(path: Path):
     truth = read_table(path / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
     box = load_session(path).calibration.init_bbox
     ok = tracked.status == "ok"
-    return ok, np.isfinite(truth["u"]), np.hypot(tracked.u - truth["u"], tracked.v - truth["v"]), max(box[2:]) - 6
+    return (
+        ok,
+        np.isfinite(truth["u"]),
+        np.hypot(tracked.u - truth["u"], tracked.v - truth["v"]),
+        max(box[2:]) - 6,
+    )
 
 
 def test_the_uuv_is_located_through_rendered_waves(tmp_path):

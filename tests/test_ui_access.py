@@ -31,9 +31,27 @@ def service(tmp_path):
 
     def run(*ui_args: str):
         log = tmp_path / f"run{len(procs)}.log"
-        procs.append(start(skyfix("run", "--calibration", str(CAL), "--mavlink", f"udpin:127.0.0.1:{free_port()}",
-                                  "--zenoh-listen", f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
-                                  "--video", "none", "--gps-input", "none", "--duration-s", "120", *ui_args), log))
+        procs.append(
+            start(
+                skyfix(
+                    "run",
+                    "--calibration",
+                    str(CAL),
+                    "--mavlink",
+                    f"udpin:127.0.0.1:{free_port()}",
+                    "--zenoh-listen",
+                    f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
+                    "--video",
+                    "none",
+                    "--gps-input",
+                    "none",
+                    "--duration-s",
+                    "120",
+                    *ui_args,
+                ),
+                log,
+            )
+        )
         url = urlsplit(ui_url(log))
         token = url.query.removeprefix("token=") or None
         return f"http://127.0.0.1:{url.port}", token
@@ -43,8 +61,12 @@ def service(tmp_path):
         stop(p)
 
 
-def _get(url: str, headers: dict | None = None, data: bytes | None = None) -> tuple[int, dict, bytes]:
-    req = urllib.request.Request(url, data=data, headers=headers or {}, method="POST" if data is not None else "GET")
+def _get(
+    url: str, headers: dict | None = None, data: bytes | None = None
+) -> tuple[int, dict, bytes]:
+    req = urllib.request.Request(
+        url, data=data, headers=headers or {}, method="POST" if data is not None else "GET"
+    )
     try:
         with urllib.request.urlopen(req, timeout=10) as r:
             return r.status, dict(r.headers), r.read()
@@ -67,11 +89,17 @@ def test_beyond_localhost_every_request_needs_the_printed_token(service, tmp_pat
     code, _, body = _get(base + "/api/release", data=b"{}")
     assert code == 401
     code, headers, page = _get(f"{base}/?token={token}")
-    assert code == 200 and b"<canvas id=\"video\"" in page and "skyfix_token=" in headers.get("Set-Cookie", "")
+    assert (
+        code == 200
+        and b'<canvas id="video"' in page
+        and "skyfix_token=" in headers.get("Set-Cookie", "")
+    )
     assert "HttpOnly" in headers["Set-Cookie"] and "SameSite=Strict" in headers["Set-Cookie"]
     code, _, body = _get(base + "/api/status", headers={"Authorization": f"Bearer {token}"})
     status = json.loads(body)
-    assert code == 200 and status["target"]["state"] == "awaiting_target"  # the refused release changed nothing
+    assert (
+        code == 200 and status["target"]["state"] == "awaiting_target"
+    )  # the refused release changed nothing
     assert status["ui"]["token"] and status["ui"]["refused"] >= 9
 
     if available() is not None:
@@ -80,9 +108,15 @@ def test_beyond_localhost_every_request_needs_the_printed_token(service, tmp_pat
         page = browser.page
         page.goto(base + "/")  # without the token: refused, nothing of the page
         assert "needs its token" in page.inner_text("body")
-        page.goto(f"{base}/?token={token}")  # the printed URL: the page, then its WebSocket by the cookie
+        page.goto(
+            f"{base}/?token={token}"
+        )  # the printed URL: the page, then its WebSocket by the cookie
         page.wait_for_selector("#conn.ok", timeout=20_000)
-        wait_for(lambda: page.eval_on_selector("#health tbody", "b => b.rows.length") > 3, 10, "the health table")
+        wait_for(
+            lambda: page.eval_on_selector("#health tbody", "b => b.rows.length") > 3,
+            10,
+            "the health table",
+        )
         assert "UAV MAVLink: nothing received" in page.inner_text("#problems")
         browser.screenshot("5-token-page-no-inputs")
         assert not browser.errors and not browser.outside
@@ -101,11 +135,15 @@ def test_localhost_refuses_other_hosts_and_other_sites(service):
     host = urlsplit(base).netloc
     code, _, body = _get(base + "/", headers={"Host": f"attacker.example:{urlsplit(base).port}"})
     assert code == 403 and "not this machine's loopback address" in _error(body)
-    code, _, body = _get(base + "/api/release", data=b"{}", headers={"Origin": "http://attacker.example"})
+    code, _, body = _get(
+        base + "/api/release", data=b"{}", headers={"Origin": "http://attacker.example"}
+    )
     assert code == 403 and "another site" in _error(body)
     code, _, body = _get(base + "/api/explode", data=b"{}", headers={"Origin": f"http://{host}"})
     assert code == 404 and "unknown command 'explode'" in _error(body)
-    code, _, body = _get(base + "/api/select", data=b'{"box": [1, 2]}', headers={"Content-Type": "application/json"})
+    code, _, body = _get(
+        base + "/api/select", data=b'{"box": [1, 2]}', headers={"Content-Type": "application/json"}
+    )
     assert code == 400 and _error(body) == "select: box = [1, 2]: expected 4 finite numbers"
     code, _, body = _get(base + "/api/select", data=b'{"box": [300, 160, 36, 36]}')
     assert code == 400 and _error(body) == "select: no frame received yet"

@@ -24,22 +24,42 @@ def test_fixes_cross_two_routers_to_the_companion_and_late_joiners_get_the_lates
     laptop_dir, companion_dir = tmp_path / "laptop", tmp_path / "companion"
     laptop_dir.mkdir()
     companion_dir.mkdir()
-    companion_router = deployed("fleet-router.json5", companion_dir, {
-        "tcp/0.0.0.0:7447": f"tcp/127.0.0.1:{companion_port}", ROUTER_ENDPOINTS: "[]"})
-    laptop_router = deployed("fleet-router.json5", laptop_dir, {
-        "tcp/0.0.0.0:7447": f"tcp/127.0.0.1:{laptop_port}", ROUTER_ENDPOINTS: f'["tcp/127.0.0.1:{companion_port}"]'})
-    laptop_client = deployed("fleet-client.json5", laptop_dir, {"tcp/127.0.0.1:7447": f"tcp/127.0.0.1:{laptop_port}"})
-    companion_client = deployed("fleet-client.json5", companion_dir,
-                                {"tcp/127.0.0.1:7447": f"tcp/127.0.0.1:{companion_port}"})
-    routers = [subprocess.Popen([sys.executable, "-c", ROUTER, str(cfg)], stdout=subprocess.PIPE, text=True)
-               for cfg in (companion_router, laptop_router)]
+    companion_router = deployed(
+        "fleet-router.json5",
+        companion_dir,
+        {"tcp/0.0.0.0:7447": f"tcp/127.0.0.1:{companion_port}", ROUTER_ENDPOINTS: "[]"},
+    )
+    laptop_router = deployed(
+        "fleet-router.json5",
+        laptop_dir,
+        {
+            "tcp/0.0.0.0:7447": f"tcp/127.0.0.1:{laptop_port}",
+            ROUTER_ENDPOINTS: f'["tcp/127.0.0.1:{companion_port}"]',
+        },
+    )
+    laptop_client = deployed(
+        "fleet-client.json5", laptop_dir, {"tcp/127.0.0.1:7447": f"tcp/127.0.0.1:{laptop_port}"}
+    )
+    companion_client = deployed(
+        "fleet-client.json5",
+        companion_dir,
+        {"tcp/127.0.0.1:7447": f"tcp/127.0.0.1:{companion_port}"},
+    )
+    routers = [
+        subprocess.Popen(
+            [sys.executable, "-c", ROUTER, str(cfg)], stdout=subprocess.PIPE, text=True
+        )
+        for cfg in (companion_router, laptop_router)
+    ]
     procs = list(routers)
     fixes: list[dict] = []
     sub = uuv_side = late = None
     try:
         assert [r.stdout.readline().strip() for r in routers] == ["ready", "ready"]
         uuv_side = zenoh.open(zenoh.Config.from_file(str(companion_client)))
-        sub = uuv_side.declare_subscriber("skyfix/uuv/fix", lambda s: fixes.append(json.loads(s.payload.to_bytes())))
+        sub = uuv_side.declare_subscriber(
+            "skyfix/uuv/fix", lambda s: fixes.append(json.loads(s.payload.to_bytes()))
+        )
         service = replayed_through(tmp_path, laptop_client, procs)
         # a console joining at the companion after the flight: the service's latest fix, through both routers
         late = zenoh.open(zenoh.Config.from_file(str(companion_client)))
@@ -54,8 +74,13 @@ def test_fixes_cross_two_routers_to_the_companion_and_late_joiners_get_the_lates
         for p in procs:
             stop(p, 5.0)
     ok = [f for f in fixes if f["status"] == "ok"]
-    print(f"fleet: {len(fixes)} fixes at the companion's router, {len(ok)} ok; late joiner got {len(replies)} reply")
+    print(
+        f"fleet: {len(fixes)} fixes at the companion's router, {len(ok)} ok; late joiner got {len(replies)} reply"
+    )
     assert len(ok) >= 30, f"only {len(ok)} ok fixes of {len(fixes)} crossed the two routers"
     assert len(replies) == 1, replies
     latest = json.loads(replies[0].payload.to_bytes())
-    assert latest["t"] == fixes[-1]["t"] and latest["frame"] == fixes[-1]["frame"], (latest, fixes[-1])
+    assert latest["t"] == fixes[-1]["t"] and latest["frame"] == fixes[-1]["frame"], (
+        latest,
+        fixes[-1],
+    )

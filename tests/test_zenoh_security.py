@@ -48,14 +48,54 @@ def make_certificates(d: Path, names: tuple[str, ...] = ("router", "skyfix")) ->
     """A CA, and a certificate it signed for each of ``names`` (its common name; P-256, valid for a day; each names
     127.0.0.1 and localhost, for a server's side and a client's)."""
     key = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes"]
-    _openssl("req", "-x509", *key, "-keyout", "ca-key.pem", "-out", "ca.pem", "-days", "1", "-subj", "/CN=test CA",
-             cwd=d)
+    _openssl(
+        "req",
+        "-x509",
+        *key,
+        "-keyout",
+        "ca-key.pem",
+        "-out",
+        "ca.pem",
+        "-days",
+        "1",
+        "-subj",
+        "/CN=test CA",
+        cwd=d,
+    )
     for name in names:
-        _openssl("req", *key, "-keyout", f"{name}-key.pem", "-out", f"{name}.csr", "-subj", f"/CN={name}", cwd=d)
-        (d / f"{name}.ext").write_text("subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n"
-                                       "extendedKeyUsage=serverAuth,clientAuth\n")
-        _openssl("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.pem", "-CAkey", "ca-key.pem", "-CAcreateserial",
-                 "-out", f"{name}-cert.pem", "-days", "1", "-extfile", f"{name}.ext", cwd=d)
+        _openssl(
+            "req",
+            *key,
+            "-keyout",
+            f"{name}-key.pem",
+            "-out",
+            f"{name}.csr",
+            "-subj",
+            f"/CN={name}",
+            cwd=d,
+        )
+        (d / f"{name}.ext").write_text(
+            "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\n"
+            "extendedKeyUsage=serverAuth,clientAuth\n"
+        )
+        _openssl(
+            "x509",
+            "-req",
+            "-in",
+            f"{name}.csr",
+            "-CA",
+            "ca.pem",
+            "-CAkey",
+            "ca-key.pem",
+            "-CAcreateserial",
+            "-out",
+            f"{name}-cert.pem",
+            "-days",
+            "1",
+            "-extfile",
+            f"{name}.ext",
+            cwd=d,
+        )
 
 
 def deployed(name: str, out: Path, replace: dict[str, str]) -> Path:
@@ -89,7 +129,11 @@ def setup_usrpwd(d: Path, port: int) -> tuple[Path, Path, list[Path], Path]:
     users.write_text(f"skyfix:{password}\nblueos:{secrets.token_hex(12)}\n")
     ep = f"tcp/127.0.0.1:{port}"
     client = deployed("usrpwd.json5", d, {"CHANGE-ME": password, "tcp/192.168.2.2:7447": ep})
-    router = deployed("router-usrpwd.json5", d, {"/etc/skyfix/zenoh-users.txt": str(users), "tcp/0.0.0.0:7447": ep})
+    router = deployed(
+        "router-usrpwd.json5",
+        d,
+        {"/etc/skyfix/zenoh-users.txt": str(users), "tcp/0.0.0.0:7447": ep},
+    )
     wrong = d / "wrong-password.json5"
     wrong.write_text(client.read_text().replace(password, "not-" + password))
     none = d / "no-password.json5"
@@ -98,21 +142,58 @@ def setup_usrpwd(d: Path, port: int) -> tuple[Path, Path, list[Path], Path]:
     return client, router, [wrong, none], client
 
 
-def replayed_through(tmp_path: Path, client: Path, procs: list, source: Path | None = None) -> subprocess.Popen:
+def replayed_through(
+    tmp_path: Path, client: Path, procs: list, source: Path | None = None
+) -> subprocess.Popen:
     """``skyfix run`` with the Zenoh config ``client``, and the bundled session replayed into it (its Zenoh side, the
     UUV's depth, through ``source``, default the same config) to its end; the service, still running (added to
     ``procs``)."""
     mav, video = free_port(), free_port()
     run_log = tmp_path / "run.log"
-    service = start(skyfix("run", "--calibration", str(SESSION / "session.toml"), "--zenoh-config", str(client),
-                           "--mavlink", f"udpin:127.0.0.1:{mav}", "--video", f"udp://127.0.0.1:{video}",
-                           "--video-latency-ms", "55", "--gps-input", "none", "--duration-s", "120"), run_log)
+    service = start(
+        skyfix(
+            "run",
+            "--calibration",
+            str(SESSION / "session.toml"),
+            "--zenoh-config",
+            str(client),
+            "--mavlink",
+            f"udpin:127.0.0.1:{mav}",
+            "--video",
+            f"udp://127.0.0.1:{video}",
+            "--video-latency-ms",
+            "55",
+            "--gps-input",
+            "none",
+            "--duration-s",
+            "120",
+        ),
+        run_log,
+    )
     procs.append(service)
-    wait_for(lambda: "skyfix run: UAV" in run_log.read_text() or service.poll() is not None, 30, "the service")
+    wait_for(
+        lambda: "skyfix run: UAV" in run_log.read_text() or service.poll() is not None,
+        30,
+        "the service",
+    )
     assert service.poll() is None, run_log.read_text()[-3000:]
-    replay = start(skyfix("replay", str(SESSION), "--zenoh-config", str(source or client), "--mavlink-out",
-                          f"udpout:127.0.0.1:{mav}", "--video-out", f"udp://127.0.0.1:{video}",
-                          "--uuv-listen", "", "--tail-s", "1"), tmp_path / "replay.log")
+    replay = start(
+        skyfix(
+            "replay",
+            str(SESSION),
+            "--zenoh-config",
+            str(source or client),
+            "--mavlink-out",
+            f"udpout:127.0.0.1:{mav}",
+            "--video-out",
+            f"udp://127.0.0.1:{video}",
+            "--uuv-listen",
+            "",
+            "--tail-s",
+            "1",
+        ),
+        tmp_path / "replay.log",
+    )
     procs.append(replay)
     assert replay.wait(90) == 0, (tmp_path / "replay.log").read_text()[-3000:]
     return service
@@ -121,15 +202,21 @@ def replayed_through(tmp_path: Path, client: Path, procs: list, source: Path | N
 @pytest.mark.parametrize("kind", ["tls", "usrpwd"])
 def test_secured_zenoh_carries_fixes_and_refuses_strangers(tmp_path, kind):
     port = free_port(socket.SOCK_STREAM)
-    client, router_cfg, lacking, vehicle = {"tls": setup_tls, "usrpwd": setup_usrpwd}[kind](tmp_path, port)
-    router = subprocess.Popen([sys.executable, "-c", ROUTER, str(router_cfg)], stdout=subprocess.PIPE, text=True)
+    client, router_cfg, lacking, vehicle = {"tls": setup_tls, "usrpwd": setup_usrpwd}[kind](
+        tmp_path, port
+    )
+    router = subprocess.Popen(
+        [sys.executable, "-c", ROUTER, str(router_cfg)], stdout=subprocess.PIPE, text=True
+    )
     procs = [router]
     fixes: list[dict] = []
     sub = console = None
     try:
         assert router.stdout.readline().strip() == "ready"
         console = zenoh.open(zenoh.Config.from_file(str(client)))
-        sub = console.declare_subscriber("skyfix/uuv/fix", lambda s: fixes.append(json.loads(s.payload.to_bytes())))
+        sub = console.declare_subscriber(
+            "skyfix/uuv/fix", lambda s: fixes.append(json.loads(s.payload.to_bytes()))
+        )
         for cfg in lacking:
             with pytest.raises(zenoh.ZError, match="Unable to connect"):
                 zenoh.open(zenoh.Config.from_file(str(cfg)))

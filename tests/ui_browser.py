@@ -16,8 +16,16 @@ from urllib.parse import urlsplit
 from live_helpers import ROOT
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1"]
+FLAGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
+]
 SCREENSHOTS = ROOT / "out" / "ui-screenshots"
 
 
@@ -73,8 +81,12 @@ def chromium(tmp: Path, origin: str, viewport=(1400, 1400)):
     profile.mkdir()
     with sync_playwright() as p:
         context = p.chromium.launch_persistent_context(
-            str(profile), executable_path=CHROMIUM, headless=True, args=FLAGS,
-            viewport={"width": viewport[0], "height": viewport[1]})
+            str(profile),
+            executable_path=CHROMIUM,
+            headless=True,
+            args=FLAGS,
+            viewport={"width": viewport[0], "height": viewport[1]},
+        )
         try:
             yield Browser(context, origin, tmp)
         finally:

@@ -27,16 +27,31 @@ from groundstation.video.file import open_video
 class WaveProxy:
     """The displacement and light fields of one realisation over a w × h image (see the module doc)."""
 
-    def __init__(self, w: int, h: int, shift_px: float, flicker: float, seed: int = 1, px_per_m: float = 65.0,
-                 shortest_px: float = 4.0, waves: int = 60, cell_px: float = 30.0):
+    def __init__(
+        self,
+        w: int,
+        h: int,
+        shift_px: float,
+        flicker: float,
+        seed: int = 1,
+        px_per_m: float = 65.0,
+        shortest_px: float = 4.0,
+        waves: int = 60,
+        cell_px: float = 30.0,
+    ):
         rng = np.random.default_rng(seed)
-        lam = np.exp(np.linspace(math.log(shortest_px), math.log(300.0), waves) + rng.uniform(-0.05, 0.05, waves))
+        lam = np.exp(
+            np.linspace(math.log(shortest_px), math.log(300.0), waves)
+            + rng.uniform(-0.05, 0.05, waves)
+        )
         k = 2 * np.pi / lam
         heading = rng.normal(0.3, 0.8, waves)  # mostly downwind
         self.kx, self.ky = k * np.cos(heading), k * np.sin(heading)
         self.omega = np.sqrt(9.81 * k * px_per_m)  # rad/s, deep water (k in rad/px)
         self.phase = rng.uniform(0, 2 * np.pi, waves)
-        self.amp = 2.0 * shift_px / math.sqrt(waves) / k  # heights: each wave moves the image by amp·k, all alike
+        self.amp = (
+            2.0 * shift_px / math.sqrt(waves) / k
+        )  # heights: each wave moves the image by amp·k, all alike
         kc = 2 * np.pi / (cell_px * np.exp(rng.uniform(math.log(0.5), math.log(2.5), 30)))
         tc = rng.uniform(0, 2 * np.pi, 30)
         self.kcx, self.kcy = kc * np.cos(tc), kc * np.sin(tc)
@@ -47,7 +62,9 @@ class WaveProxy:
 
     def _sum(self, kx, ky, coef) -> np.ndarray:
         """Re Σ coef·exp(i(kx·x + ky·y)) over the image (h, w), float32: each wave is separable."""
-        return ((np.exp(1j * np.outer(self.ys, ky)) * coef) @ np.exp(1j * np.outer(kx, self.xs))).real.astype(np.float32)
+        return (
+            (np.exp(1j * np.outer(self.ys, ky)) * coef) @ np.exp(1j * np.outer(kx, self.xs))
+        ).real.astype(np.float32)
 
     def apply(self, frame_bgr: np.ndarray, t_s: float) -> np.ndarray:
         """The frame seen through the waves at time ``t_s`` (seconds)."""
@@ -55,15 +72,25 @@ class WaveProxy:
         fx, fy = np.meshgrid(self.xs, self.ys)
         map_x = fx + self._sum(self.kx, self.ky, 1j * self.kx * c)
         map_y = fy + self._sum(self.kx, self.ky, 1j * self.ky * c)
-        out = cv2.remap(frame_bgr, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT).astype(np.float32)
+        out = cv2.remap(
+            frame_bgr, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
+        ).astype(np.float32)
         if self.flicker > 0:
-            n = self._sum(self.kcx, self.kcy, np.exp(1j * (self.phase_c - self.omega_c * t_s))) / math.sqrt(15.0)
+            n = self._sum(
+                self.kcx, self.kcy, np.exp(1j * (self.phase_c - self.omega_c * t_s))
+            ) / math.sqrt(15.0)
             out *= (1.0 + self.flicker * (2.0 * np.exp(-np.abs(n) / 0.15) - 0.3))[..., None]
         return np.clip(out, 0, 255).astype(np.uint8)
 
 
-def through_waves(src: str | Path, dst: str | Path, shift_px: float, flicker: float, kbps: int = 4000,
-                  seed: int = 1) -> Path:
+def through_waves(
+    src: str | Path,
+    dst: str | Path,
+    shift_px: float,
+    flicker: float,
+    kbps: int = 4000,
+    seed: int = 1,
+) -> Path:
     """A copy of session ``src`` at ``dst`` whose video is seen through :class:`WaveProxy` waves, re-encoded."""
     src, dst = Path(src), Path(dst)
     shutil.copytree(src, dst)
@@ -75,9 +102,40 @@ def through_waves(src: str | Path, dst: str | Path, shift_px: float, flicker: fl
     h, w = frames[0].shape[:2]
     proxy = WaveProxy(w, h, shift_px, flicker, seed)
     video = dst / Path(session.video_path).name
-    cmd = ["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "bgr24", "-s", f"{w}x{h}", "-r", f"{fps:g}",
-           "-i", "-", "-an", "-c:v", "libx264", "-preset", "veryfast", "-b:v", f"{kbps}k", "-maxrate", f"{kbps}k",
-           "-bufsize", f"{kbps}k", "-bf", "0", "-g", f"{round(fps)}", "-pix_fmt", "yuv420p", str(video)]
+    cmd = [
+        "ffmpeg",
+        "-v",
+        "error",
+        "-y",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "bgr24",
+        "-s",
+        f"{w}x{h}",
+        "-r",
+        f"{fps:g}",
+        "-i",
+        "-",
+        "-an",
+        "-c:v",
+        "libx264",
+        "-preset",
+        "veryfast",
+        "-b:v",
+        f"{kbps}k",
+        "-maxrate",
+        f"{kbps}k",
+        "-bufsize",
+        f"{kbps}k",
+        "-bf",
+        "0",
+        "-g",
+        f"{round(fps)}",
+        "-pix_fmt",
+        "yuv420p",
+        str(video),
+    ]
     with subprocess.Popen(cmd, stdin=subprocess.PIPE) as encoder:
         for i, frame in enumerate(frames):
             bgr = frame if frame.ndim == 3 else cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)

@@ -44,8 +44,10 @@ from localizer.camera import Camera
 from localizer.contract import ConfigError, validate
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
-IN_AIR = ("Calibrated in air: the camera looks through air to the water surface; skyfix's geometry\n"
-          "refracts each ray there, so this table must not include water's refraction.")
+IN_AIR = (
+    "Calibrated in air: the camera looks through air to the water surface; skyfix's geometry\n"
+    "refracts each ray there, so this table must not include water's refraction."
+)
 
 
 def _float(v: float) -> str:
@@ -86,24 +88,41 @@ def _write(out: str, text: str) -> None:
 
 # --- skyfix calibrate camera ------------------------------------------------------------
 
+
 def _board(args) -> Board:
     for key, value, least in (("--cols", args.cols, 3), ("--rows", args.rows, 3)):
         if args.board == "chessboard":
             least = 4  # OpenCV needs at least 3 inner corners each way
         if value < least:
-            raise ConfigError("options", key, value, f"a {args.board} needs at least {least} squares")
+            raise ConfigError(
+                "options", key, value, f"a {args.board} needs at least {least} squares"
+            )
     if not args.square_m > 0:
-        raise ConfigError("options", "--square-m", args.square_m, "must be > 0 (the square's side in metres)")
+        raise ConfigError(
+            "options", "--square-m", args.square_m, "must be > 0 (the square's side in metres)"
+        )
     if args.board == "chessboard":
         return Board("chessboard", args.cols, args.rows, args.square_m)
     if args.marker_m is None:
-        raise ConfigError("options", "--marker-m", None, "required for a ChArUco board (the marker's side in metres)")
+        raise ConfigError(
+            "options",
+            "--marker-m",
+            None,
+            "required for a ChArUco board (the marker's side in metres)",
+        )
     if not 0 < args.marker_m < args.square_m:
-        raise ConfigError("options", "--marker-m", args.marker_m, f"must be > 0 and < --square-m {args.square_m:g}")
+        raise ConfigError(
+            "options",
+            "--marker-m",
+            args.marker_m,
+            f"must be > 0 and < --square-m {args.square_m:g}",
+        )
     if not args.dict.startswith("DICT_") or not hasattr(cv2.aruco, args.dict):
         names = ", ".join(n for n in dir(cv2.aruco) if n.startswith("DICT_") and n == n.upper())
         raise ConfigError("options", "--dict", args.dict, f"expected one of {names}")
-    return Board("charuco", args.cols, args.rows, args.square_m, args.marker_m, args.dict, args.legacy)
+    return Board(
+        "charuco", args.cols, args.rows, args.square_m, args.marker_m, args.dict, args.legacy
+    )
 
 
 def _frames(src: Path, every: int | None, max_frames: int):
@@ -169,8 +188,10 @@ def run_camera(args) -> int:
             f"{'images' if src.is_dir() else 'frames'}; calibration needs at least 4 views "
             "(--cols/--rows count squares, not inner corners; check --board and --dict)"
         )
-    print(f"{board.describe()}: found in {len(views)} of {seen} {'images' if src.is_dir() else 'frames'} of {src}"
-          + (f" (not in {_names(missed)})" if missed else ""))
+    print(
+        f"{board.describe()}: found in {len(views)} of {seen} {'images' if src.is_dir() else 'frames'} of {src}"
+        + (f" (not in {_names(missed)})" if missed else "")
+    )
     res = cb.calibrate(views, size, fix_k3=args.fix_k3)
     cam = res.camera
     validate(Camera, cam, str(src), prefix="camera")
@@ -178,29 +199,48 @@ def run_camera(args) -> int:
 
     report = []
     if res.dropped:
-        report.append(f"dropped {len(res.dropped)} view(s) as outliers (RMS above {res.limit_px:.3g} px): "
-                      + ", ".join(f"{n} {e:.3g} px" for n, e in res.dropped))
-    report.append(f"camera {res.width}x{res.height} from {len(res.views)} views: RMS reprojection error "
-                  f"{res.rms_px:.3g} px (per view: median {np.median(res.view_rms_px):.3g}, "
-                  f"max {np.max(res.view_rms_px):.3g})")
+        report.append(
+            f"dropped {len(res.dropped)} view(s) as outliers (RMS above {res.limit_px:.3g} px): "
+            + ", ".join(f"{n} {e:.3g} px" for n, e in res.dropped)
+        )
+    report.append(
+        f"camera {res.width}x{res.height} from {len(res.views)} views: RMS reprojection error "
+        f"{res.rms_px:.3g} px (per view: median {np.median(res.view_rms_px):.3g}, "
+        f"max {np.max(res.view_rms_px):.3g})"
+    )
     values = dict(zip(cb.PARAMS, [cam["fx"], cam["fy"], cam["cx"], cam["cy"], *cam["distortion"]]))
-    report.append("  " + "   ".join(f"{k} = {values[k]:.6g} ± {res.std[k]:.2g}" for k in cb.PARAMS[:4]) + "  (px)")
-    report.append("  " + "   ".join(f"{k} = {values[k]:.6g} ± {res.std[k]:.2g}" for k in cb.PARAMS[4:])
-                  + ("  (k3 fixed at 0)" if args.fix_k3 else ""))
+    report.append(
+        "  "
+        + "   ".join(f"{k} = {values[k]:.6g} ± {res.std[k]:.2g}" for k in cb.PARAMS[:4])
+        + "  (px)"
+    )
+    report.append(
+        "  "
+        + "   ".join(f"{k} = {values[k]:.6g} ± {res.std[k]:.2g}" for k in cb.PARAMS[4:])
+        + ("  (k3 fixed at 0)" if args.fix_k3 else "")
+    )
     report += cov.lines(res.width, res.height)
     print("\n".join(report))
 
     warnings = []
     if cov.uncovered_corners:
         c = cov.uncovered_corners
-        which = f"{c[0]} corner was" if len(c) == 1 else f"{', '.join(c[:-1])} and {c[-1]} corners were"
-        warnings.append(f"the image's {which} never covered by the board: distortion there is extrapolated; "
-                        "add views with the board in the image's corners (or use --fix-k3)")
+        which = (
+            f"{c[0]} corner was" if len(c) == 1 else f"{', '.join(c[:-1])} and {c[-1]} corners were"
+        )
+        warnings.append(
+            f"the image's {which} never covered by the board: distortion there is extrapolated; "
+            "add views with the board in the image's corners (or use --fix-k3)"
+        )
     if len(res.views) < cb.FEW_VIEWS:
-        warnings.append(f"only {len(res.views)} views used; 15-40 at varied tilts give a dependable calibration")
+        warnings.append(
+            f"only {len(res.views)} views used; 15-40 at varied tilts give a dependable calibration"
+        )
     if res.rms_px > 1.0:
-        warnings.append(f"RMS reprojection error {res.rms_px:.3g} px is high: check --square-m, --cols/--rows, "
-                        "focus and motion blur")
+        warnings.append(
+            f"RMS reprojection error {res.rms_px:.3g} px is high: check --square-m, --cols/--rows, "
+            "focus and motion blur"
+        )
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
 
@@ -228,6 +268,7 @@ def run_camera(args) -> int:
 
 # --- skyfix calibrate import ------------------------------------------------------------
 
+
 def run_import(args) -> int:
     _check_out(args.out, args.force)
     cam, kind = import_calibration(args.file, camera=args.camera)
@@ -254,50 +295,84 @@ def run(args) -> int:
         return 2
 
 
-_AIR_HELP = ("Calibrate in air: the camera looks through air to the water surface and skyfix's geometry "
-             "handles the refraction there. Do not calibrate through water (board underwater or camera "
-             "behind a port): refraction would be folded into the calibration and applied twice.")
+_AIR_HELP = (
+    "Calibrate in air: the camera looks through air to the water surface and skyfix's geometry "
+    "handles the refraction there. Do not calibrate through water (board underwater or camera "
+    "behind a port): refraction would be folded into the calibration and applied twice."
+)
 
 
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(
-        name, help=help,
+        name,
+        help=help,
         description="The camera's [camera] table for session.toml. " + _AIR_HELP,
     )
     sub = p.add_subparsers(dest="calibrate_command", required=True)
 
     c = sub.add_parser(
-        "camera", help="calibrate from a video or a folder of images of a chessboard or ChArUco board",
+        "camera",
+        help="calibrate from a video or a folder of images of a chessboard or ChArUco board",
         description=(
             "Detect the board, calibrate with OpenCV (pinhole, radial-tangential k1, k2, p1, p2, k3), drop "
             "views whose RMS reprojection error is far above the rest and recalibrate, print where in the "
             "image the board's corners were seen, and write [camera] (with the RMS error, views used and "
-            "1-sigma parameter uncertainties as comments). " + _AIR_HELP + " Use the video mode, zoom and "
+            "1-sigma parameter uncertainties as comments). "
+            + _AIR_HELP
+            + " Use the video mode, zoom and "
             "focus you fly with, and bring the board into the image's corners."
         ),
     )
     c.add_argument("input", help="a video file, or a folder of images (.png, .jpg, ...)")
     c.add_argument("--board", required=True, choices=("chessboard", "charuco"))
-    c.add_argument("--cols", type=int, required=True,
-                   help="squares along the board's width (a chessboard of 10x7 squares has 9x6 inner corners)")
+    c.add_argument(
+        "--cols",
+        type=int,
+        required=True,
+        help="squares along the board's width (a chessboard of 10x7 squares has 9x6 inner corners)",
+    )
     c.add_argument("--rows", type=int, required=True, help="squares along the board's height")
-    c.add_argument("--square-m", type=float, required=True, help="side of one square, metres (measure the print)")
+    c.add_argument(
+        "--square-m",
+        type=float,
+        required=True,
+        help="side of one square, metres (measure the print)",
+    )
     c.add_argument("--marker-m", type=float, help="ChArUco: side of one ArUco marker, metres")
-    c.add_argument("--dict", default="DICT_5X5_100", help="ChArUco: the ArUco dictionary (default DICT_5X5_100)")
-    c.add_argument("--legacy", action="store_true",
-                   help="ChArUco: a board generated by OpenCV < 4.6 (differs when --rows is even)")
-    c.add_argument("--every", type=int, help="use every N-th frame or image (default: evenly up to --max-frames)")
-    c.add_argument("--max-frames", type=int, default=100,
-                   help="frames (images) examined at most, evenly spaced (default 100)")
-    c.add_argument("--fix-k3", action="store_true",
-                   help="keep k3 at 0 (narrow lenses, or when the board never reached the image's corners)")
+    c.add_argument(
+        "--dict",
+        default="DICT_5X5_100",
+        help="ChArUco: the ArUco dictionary (default DICT_5X5_100)",
+    )
+    c.add_argument(
+        "--legacy",
+        action="store_true",
+        help="ChArUco: a board generated by OpenCV < 4.6 (differs when --rows is even)",
+    )
+    c.add_argument(
+        "--every",
+        type=int,
+        help="use every N-th frame or image (default: evenly up to --max-frames)",
+    )
+    c.add_argument(
+        "--max-frames",
+        type=int,
+        default=100,
+        help="frames (images) examined at most, evenly spaced (default 100)",
+    )
+    c.add_argument(
+        "--fix-k3",
+        action="store_true",
+        help="keep k3 at 0 (narrow lenses, or when the board never reached the image's corners)",
+    )
     c.add_argument("--out", required=True, help="the TOML file to write")
     c.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     c.set_defaults(func=run, calibrate_func=run_camera)
 
     i = sub.add_parser(
-        "import", help="convert an OpenCV (YAML/XML), Kalibr camchain or ROS camera_info calibration",
+        "import",
+        help="convert an OpenCV (YAML/XML), Kalibr camchain or ROS camera_info calibration",
         description=(
             "Read a calibration made elsewhere: OpenCV cv2.FileStorage YAML/XML (camera_matrix, "
             "distortion_coefficients, image_width, image_height), a Kalibr camchain (pinhole, radtan) or a "

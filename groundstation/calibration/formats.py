@@ -33,7 +33,9 @@ from groundstation.calibration.board import CalibrateError, camera_table
 from localizer.camera import Camera
 from localizer.contract import ConfigError, validate
 
-_MODEL = "skyfix's camera is a pinhole with OpenCV's radial-tangential distortion (k1, k2, p1, p2, k3)"
+_MODEL = (
+    "skyfix's camera is a pinhole with OpenCV's radial-tangential distortion (k1, k2, p1, p2, k3)"
+)
 _EXTRA_NAMES = ("k4", "k5", "k6", "s1", "s2", "s3", "s4", "tau_x", "tau_y")
 
 
@@ -59,7 +61,9 @@ def _intrinsics(src: str, key: str, K) -> tuple[float, float, float, float]:
     if K.shape != (3, 3):
         raise ConfigError(src, key, K.tolist(), "expected a 3x3 camera matrix")
     if abs(K[0, 1]) > 1e-9 * abs(K[0, 0]):
-        raise ConfigError(src, f"{key}[0][1]", float(K[0, 1]), f"a skewed camera is not supported: {_MODEL}")
+        raise ConfigError(
+            src, f"{key}[0][1]", float(K[0, 1]), f"a skewed camera is not supported: {_MODEL}"
+        )
     if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
         raise ConfigError(src, key, K.tolist(), "expected [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]")
     return K[0, 0], K[1, 1], K[0, 2], K[1, 2]
@@ -100,7 +104,9 @@ def _from_filestorage(path: Path) -> tuple[dict, str]:
         fs = cv2.FileStorage(src, cv2.FILE_STORAGE_READ)
     except (cv2.error, SystemError) as e:
         cause = e.__cause__ if isinstance(e, SystemError) and e.__cause__ else e
-        why = " ".join(str(getattr(cause, a, "")) for a in ("func", "err")).strip() or _one_line(cause)
+        why = " ".join(str(getattr(cause, a, "")) for a in ("func", "err")).strip() or _one_line(
+            cause
+        )
         raise CalibrateError(f"{src}: OpenCV cannot parse it: {why}") from None
     if not fs.isOpened():
         raise CalibrateError(f"{src}: OpenCV cannot open it")
@@ -114,7 +120,12 @@ def _from_filestorage(path: Path) -> tuple[dict, str]:
 
     fisheye = fs.getNode("fisheye_model")
     if not fisheye.empty() and fisheye.real() != 0:
-        raise ConfigError(src, "fisheye_model", int(fisheye.real()), f"fisheye calibrations are not supported: {_MODEL}")
+        raise ConfigError(
+            src,
+            "fisheye_model",
+            int(fisheye.real()),
+            f"fisheye calibrations are not supported: {_MODEL}",
+        )
     kname, kn = node("camera_matrix", "cameraMatrix", "K")
     dname, dn = node("distortion_coefficients", "dist_coeffs", "distCoeffs", "D")
     K, D = kn.mat(), dn.mat()
@@ -142,24 +153,38 @@ def _from_kalibr(src: str, doc: dict, camera: str | None) -> tuple[dict, str]:
     name = camera or cams[0]
     cam = doc.get(name)
     if not isinstance(cam, dict):
-        raise ConfigError(src, "--camera", name, f"no such camera in the camchain (it has {', '.join(cams)})")
+        raise ConfigError(
+            src, "--camera", name, f"no such camera in the camchain (it has {', '.join(cams)})"
+        )
     model = cam.get("camera_model")
     if model != "pinhole":
         raise ConfigError(src, f"{name}.camera_model", model, f"unsupported camera model: {_MODEL}")
     dmodel = cam.get("distortion_model", "none")
     coeffs = cam.get("distortion_coeffs", [])
     if dmodel not in ("radtan", "none"):
-        raise ConfigError(src, f"{name}.distortion_model", dmodel, f"unsupported distortion model: {_MODEL}")
+        raise ConfigError(
+            src, f"{name}.distortion_model", dmodel, f"unsupported distortion model: {_MODEL}"
+        )
     if dmodel == "radtan" and (not isinstance(coeffs, list) or len(coeffs) != 4):
-        raise ConfigError(src, f"{name}.distortion_coeffs", coeffs, "expected [k1, k2, r1, r2] for radtan")
+        raise ConfigError(
+            src, f"{name}.distortion_coeffs", coeffs, "expected [k1, k2, r1, r2] for radtan"
+        )
     intr, res = cam.get("intrinsics"), cam.get("resolution")
     if not isinstance(intr, list) or len(intr) != 4:
         raise ConfigError(src, f"{name}.intrinsics", intr, "expected [fu, fv, pu, pv] for pinhole")
     if not isinstance(res, list) or len(res) != 2:
         raise ConfigError(src, f"{name}.resolution", res, "expected [width, height]")
-    dist = [*_numbers(src, f"{name}.distortion_coeffs", coeffs).tolist(), 0.0] if dmodel == "radtan" else [0.0] * 5
+    dist = (
+        [*_numbers(src, f"{name}.distortion_coeffs", coeffs).tolist(), 0.0]
+        if dmodel == "radtan"
+        else [0.0] * 5
+    )
     intr = _numbers(src, f"{name}.intrinsics", intr).tolist()
-    note = f"Kalibr camchain ({name}: pinhole, {dmodel}" + (f"; of {', '.join(cams)}" if len(cams) > 1 else "") + ")"
+    note = (
+        f"Kalibr camchain ({name}: pinhole, {dmodel}"
+        + (f"; of {', '.join(cams)}" if len(cams) > 1 else "")
+        + ")"
+    )
     return _table(src, res[0], res[1], *intr, dist), note
 
 
@@ -172,7 +197,13 @@ def _ros_matrix(src: str, key: str, value):
 
 def _from_ros(src: str, doc: dict) -> tuple[dict, str]:
     if "camera_matrix" in doc:  # camera_calibration's file
-        wkey, hkey, kkey, dkey, form = "image_width", "image_height", "camera_matrix", "distortion_coefficients", "file"
+        wkey, hkey, kkey, dkey, form = (
+            "image_width",
+            "image_height",
+            "camera_matrix",
+            "distortion_coefficients",
+            "file",
+        )
     else:  # the CameraInfo message as echoed (ROS 2: k, d; ROS 1: K, D)
         wkey, hkey, form = "width", "height", "message"
         kkey, dkey = ("k", "d") if "k" in doc else ("K", "D")
@@ -185,7 +216,9 @@ def _from_ros(src: str, doc: dict) -> tuple[dict, str]:
     dist = _distortion(src, dkey, D, model)
     if wkey not in doc or hkey not in doc:
         raise ConfigError(src, wkey if wkey not in doc else hkey, None, "missing")
-    return _table(src, doc[wkey], doc[hkey], fx, fy, cx, cy, dist), f"ROS camera_info {form} ({model})"
+    return _table(
+        src, doc[wkey], doc[hkey], fx, fy, cx, cy, dist
+    ), f"ROS camera_info {form} ({model})"
 
 
 def import_calibration(path, camera: str | None = None) -> tuple[dict, str]:
@@ -197,16 +230,24 @@ def import_calibration(path, camera: str | None = None) -> tuple[dict, str]:
     except OSError as e:
         raise CalibrateError(f"{src}: cannot read: {e.strerror or e}") from None
     head = text.lstrip()
-    if path.suffix.lower() == ".xml" or head.startswith(("<?xml", "%YAML:")) or "!!opencv-matrix" in text:
+    if (
+        path.suffix.lower() == ".xml"
+        or head.startswith(("<?xml", "%YAML:"))
+        or "!!opencv-matrix" in text
+    ):
         return _from_filestorage(path)
     try:
         docs = [d for d in yaml.safe_load_all(text) if d is not None]
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        raise CalibrateError(f"{src}: malformed YAML: {where}{_one_line(getattr(e, 'problem', None) or e)}") from None
+        raise CalibrateError(
+            f"{src}: malformed YAML: {where}{_one_line(getattr(e, 'problem', None) or e)}"
+        ) from None
     doc = docs[0] if docs else None
-    if isinstance(doc, dict) and any(isinstance(v, dict) and "intrinsics" in v for v in doc.values()):
+    if isinstance(doc, dict) and any(
+        isinstance(v, dict) and "intrinsics" in v for v in doc.values()
+    ):
         return _from_kalibr(src, doc, camera)
     if isinstance(doc, dict) and any(k in doc for k in ("camera_matrix", "k", "K")):
         return _from_ros(src, doc)

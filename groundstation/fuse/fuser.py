@@ -100,37 +100,63 @@ class Source:
     delay_s: float | None = None  # arrival (fuser's clock) minus the fix's time
     time_base: str | None = None  # "gnss" or "station"
     h_acc_m: float | None = None
-    h_acc_used_m: float | None = None  # its claim as the last fusion weighed it: shared part, floors
-    floor_m: float | None = None  # the DRMS of what the floors added to its claim at the last fusion
+    h_acc_used_m: float | None = (
+        None  # its claim as the last fusion weighed it: shared part, floors
+    )
+    floor_m: float | None = (
+        None  # the DRMS of what the floors added to its claim at the last fusion
+    )
     offset: Median = field(default_factory=Median)  # its fixes' aligned time minus station time (s)
 
     def status(self, now: float) -> dict:
         def num(x, digits=3):
             return None if x is None or not math.isfinite(x) else round(float(x), digits)
 
-        return {"received": self.received, "used": self.used, "rejected": self.rejected, "in_use": self.in_use,
-                "refused": dict(self.refused), "gate_state": self.gate.state, "last_status": self.last_status,
-                "age_s": None if self.last_recv is None else num(max(0.0, now - self.last_recv)),
-                "delay_s": num(self.delay_s), "time_base": self.time_base, "h_acc_m": num(self.h_acc_m),
-                "h_acc_used_m": num(self.h_acc_used_m), "floor_m": num(self.floor_m)}
+        return {
+            "received": self.received,
+            "used": self.used,
+            "rejected": self.rejected,
+            "in_use": self.in_use,
+            "refused": dict(self.refused),
+            "gate_state": self.gate.state,
+            "last_status": self.last_status,
+            "age_s": None if self.last_recv is None else num(max(0.0, now - self.last_recv)),
+            "delay_s": num(self.delay_s),
+            "time_base": self.time_base,
+            "h_acc_m": num(self.h_acc_m),
+            "h_acc_used_m": num(self.h_acc_used_m),
+            "floor_m": num(self.floor_m),
+        }
 
 
 class Fuser:
     """Per-source gates and the fusion (see the module doc); ``new_gate()`` makes a source's gate, ``sources`` are
     the names (fix keys) whose fixes may be fused."""
 
-    def __init__(self, new_gate: Callable[[], FixGate], max_accel_mps2: float, max_hz: float = MAX_HZ, *,
-                 sources: Collection[str], max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
-                 clock_tolerance_s: float = CLOCK_TOLERANCE_S, shared: SharedSigmas | None = None):
+    def __init__(
+        self,
+        new_gate: Callable[[], FixGate],
+        max_accel_mps2: float,
+        max_hz: float = MAX_HZ,
+        *,
+        sources: Collection[str],
+        max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
+        clock_tolerance_s: float = CLOCK_TOLERANCE_S,
+        shared: SharedSigmas | None = None,
+    ):
         self.new_gate = new_gate
         self.configured = frozenset(sources)
         self.max_accel_mps2 = max_accel_mps2
         self.clock_tolerance_s = clock_tolerance_s
         self.shared = shared or SharedSigmas()
-        self.min_step_s = 0.9 / max_hz  # a little under the period: sources' frames do not tick exactly
+        self.min_step_s = (
+            0.9 / max_hz
+        )  # a little under the period: sources' frames do not tick exactly
         self.sources: dict[str, Source] = {}
         self.unconfigured: Counter[str] = Counter()  # fixes from names not configured, by name
-        self.fused = SourceTrack(max_accel_mps2)  # the fused fixes: what decides between disagreeing sources
+        self.fused = SourceTrack(
+            max_accel_mps2
+        )  # the fused fixes: what decides between disagreeing sources
         self.output = OutputGate(max_speed_mps, max_accel_mps2)
         self.floors = Floors()
         self.published = 0
@@ -143,8 +169,11 @@ class Fuser:
     def on_fix(self, name: str, fix: Fix, now: float) -> Fix | None:
         """Take one source's fix received at ``now`` (the fuser's clock); the fused fix to publish, or None."""
         if name not in self.configured:
-            self.unconfigured[name if name in self.unconfigured or len(self.unconfigured) < UNCONFIGURED_NAMES
-                              else "(others)"] += 1
+            self.unconfigured[
+                name
+                if name in self.unconfigured or len(self.unconfigured) < UNCONFIGURED_NAMES
+                else "(others)"
+            ] += 1
             return None
         src = self.sources.get(name)
         if src is None:
@@ -159,8 +188,9 @@ class Fuser:
         t = aligned_t(fix)
         usual = src.offset.value
         src.offset.add(t - fix.t_unix)
-        if fix.t_unix - now > self.clock_tolerance_s or (usual is not None and
-                                                          t - fix.t_unix - usual > self.clock_tolerance_s):
+        if fix.t_unix - now > self.clock_tolerance_s or (
+            usual is not None and t - fix.t_unix - usual > self.clock_tolerance_s
+        ):
             src.refused["future"] += 1
             return None
         why = src.gate.check(fix, now)
@@ -210,32 +240,58 @@ class Fuser:
             self.disagreements += 1
             self.fused.clear()
             self._fused_since = None
-            return Fix(t_unix=newest.t_unix, status="disagree", t_gnss=newest.t_gnss, frame=self.published)
+            return Fix(
+                t_unix=newest.t_unix, status="disagree", t_gnss=newest.t_gnss, frame=self.published
+            )
         est = fuse([estimates[n] for n in chosen])
         if self.output.check(t, est.z, est.C) is not None:
-            return Fix(t_unix=newest.t_unix, status="off_track", t_gnss=newest.t_gnss, frame=self.published)
+            return Fix(
+                t_unix=newest.t_unix, status="off_track", t_gnss=newest.t_gnss, frame=self.published
+            )
         self.fused.add(Sample(t, est.z, est.C, est.alt_m, est.v_acc_m))
         if self._fused_since is None:
             self._fused_since = t
         lat, lon, _ = ned_to_geodetic(est.z[0], est.z[1], 0.0, *self._ref, 0.0)
-        geoid_m = newest.alt_ellipsoid_m - newest.alt_amsl_m  # NaN without the source's ellipsoid height
-        return Fix(t_unix=newest.t_unix, status="ok", lat=float(lat), lon=float(lon), alt_amsl_m=est.alt_m,
-                   alt_ellipsoid_m=est.alt_m + geoid_m, depth_m=newest.depth_m,
-                   h_acc_m=math.sqrt(est.C[0, 0] + est.C[1, 1]), v_acc_m=est.v_acc_m,
-                   sigma_n_m=math.sqrt(est.C[0, 0]), sigma_e_m=math.sqrt(est.C[1, 1]), cov_ne_m2=float(est.C[0, 1]),
-                   t_gnss=newest.t_gnss, sigma_depth_m=newest.sigma_depth_m, height_source=newest.height_source,
-                   depth_source=newest.depth_source, time_source=newest.time_source, frame=self.published)
+        geoid_m = (
+            newest.alt_ellipsoid_m - newest.alt_amsl_m
+        )  # NaN without the source's ellipsoid height
+        return Fix(
+            t_unix=newest.t_unix,
+            status="ok",
+            lat=float(lat),
+            lon=float(lon),
+            alt_amsl_m=est.alt_m,
+            alt_ellipsoid_m=est.alt_m + geoid_m,
+            depth_m=newest.depth_m,
+            h_acc_m=math.sqrt(est.C[0, 0] + est.C[1, 1]),
+            v_acc_m=est.v_acc_m,
+            sigma_n_m=math.sqrt(est.C[0, 0]),
+            sigma_e_m=math.sqrt(est.C[1, 1]),
+            cov_ne_m2=float(est.C[0, 1]),
+            t_gnss=newest.t_gnss,
+            sigma_depth_m=newest.sigma_depth_m,
+            height_source=newest.height_source,
+            depth_source=newest.depth_source,
+            time_source=newest.time_source,
+            frame=self.published,
+        )
 
     def _local(self, fix: Fix) -> tuple[np.ndarray, np.ndarray]:
         """The fix in metres north and east of the first fix the fuser took, with its covariance."""
         if self._ref is None:
             self._ref = (fix.lat, fix.lon)
         n, e, _ = geodetic_to_ned(fix.lat, fix.lon, 0.0, *self._ref, 0.0)
-        return np.array([float(n), float(e)]), fix_covariance_m2(fix.sigma_n_m, fix.sigma_e_m, fix.cov_ne_m2,
-                                                                 fix.h_acc_m)
+        return np.array([float(n), float(e)]), fix_covariance_m2(
+            fix.sigma_n_m, fix.sigma_e_m, fix.cov_ne_m2, fix.h_acc_m
+        )
 
     def status(self, now: float) -> dict:
-        return {"published": self.published, "disagreements": self.disagreements, "off_track": self.output.refused,
-                "last_sources": list(self.last_sources), "configured": sorted(self.configured),
-                "unconfigured": dict(self.unconfigured),
-                "sources": {name: src.status(now) for name, src in sorted(self.sources.items())}}
+        return {
+            "published": self.published,
+            "disagreements": self.disagreements,
+            "off_track": self.output.refused,
+            "last_sources": list(self.last_sources),
+            "configured": sorted(self.configured),
+            "unconfigured": dict(self.unconfigured),
+            "sources": {name: src.status(now) for name, src in sorted(self.sources.items())},
+        }

@@ -74,7 +74,9 @@ class FixSources:
         self._throttle = Throttle()
 
     async def run(self) -> None:
-        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self.on_payload(*item), HANDOFF_FIXES)
+        self.handoff = Handoff(
+            asyncio.get_running_loop(), lambda item: self.on_payload(*item), HANDOFF_FIXES
+        )
         await subscribe(self.session, self.key, self.handoff)
 
     def on_payload(self, key: str, data: bytes, t_recv: float) -> None:
@@ -94,8 +96,12 @@ class FixSources:
                 sink.on_fix(fused, Arrival(t_recv))
 
     def status(self, now: float) -> dict:
-        return {"key": self.key, "received": self.received, "bad": self.bad,
-                "handoff": self.handoff.status() if self.handoff else None}
+        return {
+            "key": self.key,
+            "received": self.received,
+            "bad": self.bad,
+            "handoff": self.handoff.status() if self.handoff else None,
+        }
 
 
 async def serve(args: argparse.Namespace) -> dict:
@@ -104,45 +110,93 @@ async def serve(args: argparse.Namespace) -> dict:
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    session = open_session(args.zenoh_connect or (), args.zenoh_listen or (), multicast=args.zenoh_multicast,
-                           config_file=args.zenoh_config)
+    session = open_session(
+        args.zenoh_connect or (),
+        args.zenoh_listen or (),
+        multicast=args.zenoh_multicast,
+        config_file=args.zenoh_config,
+    )
     closers = []
     try:
         max_age_s = args.fix_max_age_ms / 1000.0
-        fuser = Fuser(lambda: FixGate(max_speed_mps=args.uuv_max_speed_mps, max_accel_mps2=args.uuv_max_accel_mps2,
-                                      max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s),
-                      args.uuv_max_accel_mps2, args.max_hz, sources=args.source_keys,
-                      max_speed_mps=args.uuv_max_speed_mps, clock_tolerance_s=args.clock_tolerance_ms / 1000.0,
-                      shared=SharedSigmas(gnss_m=args.shared_gnss_m, height_m=args.shared_height_m,
-                                          clock_s=args.shared_clock_ms / 1000.0))
+        fuser = Fuser(
+            lambda: FixGate(
+                max_speed_mps=args.uuv_max_speed_mps,
+                max_accel_mps2=args.uuv_max_accel_mps2,
+                max_h_acc_m=args.fix_max_h_acc_m,
+                max_age_s=max_age_s,
+            ),
+            args.uuv_max_accel_mps2,
+            args.max_hz,
+            sources=args.source_keys,
+            max_speed_mps=args.uuv_max_speed_mps,
+            clock_tolerance_s=args.clock_tolerance_ms / 1000.0,
+            shared=SharedSigmas(
+                gnss_m=args.shared_gnss_m,
+                height_m=args.shared_height_m,
+                clock_s=args.shared_clock_ms / 1000.0,
+            ),
+        )
         fix_sink = ZenohFixSink(session, args.fix_key)
         closers.append(fix_sink.close)
         gps = None
         if args.gps_input:
-            key = read_signing_key(args.gps_input_signing_key) if args.gps_input_signing_key else None
-            link = (ZenohMavlinkIn(session, args.gps_input.removeprefix("zenoh:"))
-                    if args.gps_input.startswith("zenoh:") else mavlink_gps_link(args.gps_input, signing_key=key))
-            gps = GpsInputSink(link, args.gps_input_hz, max_age_s,
-                               FixGate(max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s, judge_track=False))
+            key = (
+                read_signing_key(args.gps_input_signing_key) if args.gps_input_signing_key else None
+            )
+            link = (
+                ZenohMavlinkIn(session, args.gps_input.removeprefix("zenoh:"))
+                if args.gps_input.startswith("zenoh:")
+                else mavlink_gps_link(args.gps_input, signing_key=key)
+            )
+            gps = GpsInputSink(
+                link,
+                args.gps_input_hz,
+                max_age_s,
+                FixGate(max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s, judge_track=False),
+            )
         workers = Workers()
         workers.section("uuv", lambda now: args.uuv)
-        sources = workers.add(FixSources(session, args.sources, fuser, [s for s in (fix_sink, gps) if s]), INPUTS,
-                              "input")
+        sources = workers.add(
+            FixSources(session, args.sources, fuser, [s for s in (fix_sink, gps) if s]),
+            INPUTS,
+            "input",
+        )
         workers.section("fusion", fuser.status)
         workers.section("fix", lambda now: fix_sink.latest)
-        status_sink = ZenohStatus(session, args.status_key, args.alive_key, workers.status,
-                                  model=FuseStatusMessage, schema=FUSE_STATUS_SCHEMA)
-        queryables = ZenohControl(session, None, "skyfix/cmd",
-                                  {args.fix_key: lambda: fix_sink.latest, args.status_key: lambda: status_sink.latest})
+        status_sink = ZenohStatus(
+            session,
+            args.status_key,
+            args.alive_key,
+            workers.status,
+            model=FuseStatusMessage,
+            schema=FUSE_STATUS_SCHEMA,
+        )
+        queryables = ZenohControl(
+            session,
+            None,
+            "skyfix/cmd",
+            {args.fix_key: lambda: fix_sink.latest, args.status_key: lambda: status_sink.latest},
+        )
         workers.add(queryables, INPUTS, "control", lambda now: queryables.status())
-        workers.section("zenoh", lambda now: {"peers": len(list(session.info.peers_zid()))
-                                              + len(list(session.info.routers_zid()))})
+        workers.section(
+            "zenoh",
+            lambda now: {
+                "peers": len(list(session.info.peers_zid())) + len(list(session.info.routers_zid()))
+            },
+        )
         workers.section("process", Usage().status)
         workers.add(status_sink, OUTPUTS)
         if gps:
             workers.add(gps, LAST, "gps_input")
-        log.info("skyfix fuse: UUV %s, fixes from %s (taken from %s), fused on %s, GPS_INPUT %s", args.uuv,
-                 sources.key, ", ".join(args.source_keys), args.fix_key, args.gps_input)
+        log.info(
+            "skyfix fuse: UUV %s, fixes from %s (taken from %s), fused on %s, GPS_INPUT %s",
+            args.uuv,
+            sources.key,
+            ", ".join(args.source_keys),
+            args.fix_key,
+            args.gps_input,
+        )
         await workers.run(stopped(stop, args.duration_s))
         return workers.status(time.time())
     finally:
@@ -153,7 +207,9 @@ async def serve(args: argparse.Namespace) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """``skyfix fuse``: exit code 0 after a clean stop."""
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+    )
     base = f"skyfix/uuv/{args.uuv}"
     args.sources = args.sources or f"{base}/drone/*/fix"
     args.source_keys = source_keys(args.source, base, args.sources)
@@ -171,8 +227,13 @@ def source_keys(sources: list[str] | None, base: str, keyexpr: str) -> list[str]
     """The fix keys of the ``--source`` drones (an id is ``BASE/drone/ID/fix``, a key with ``/`` as it is), each within
     the subscription ``keyexpr``; :class:`ConfigError` for none, or for one the subscription does not cover."""
     if not sources:
-        raise ConfigError("options", "--source", None, "missing: name each drone whose fixes may be fused (--source a "
-                          "--source b): no drone is trusted by default")
+        raise ConfigError(
+            "options",
+            "--source",
+            None,
+            "missing: name each drone whose fixes may be fused (--source a "
+            "--source b): no drone is trusted by default",
+        )
     keys = [s if "/" in s else f"{base}/drone/{s}/fix" for s in sources]
     for s, key in zip(sources, keys, strict=True):
         if not s or any(c in s for c in "*$?#"):
@@ -193,8 +254,11 @@ def _number(low: float, name: str, strict: bool = False):
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} = {text!r}: not a number") from None
         if not (math.isfinite(x) and (x > low if strict else x >= low)):
-            raise argparse.ArgumentTypeError(f"{name} = {text}: must be {'>' if strict else '≥'} {low:g}")
+            raise argparse.ArgumentTypeError(
+                f"{name} = {text}: must be {'>' if strict else '≥'} {low:g}"
+            )
         return x
+
     return parse
 
 
@@ -207,52 +271,141 @@ def _chunk(text: str) -> str:
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(
-        name, help=help,
+        name,
+        help=help,
         description="Subscribes to the drones' fixes of one UUV (each drone's skyfix run with --fix-key "
-                    "skyfix/uuv/ID/drone/NAME/fix), takes those of the --source drones only, aligns them in time, "
-                    "rejects a drone that disagrees beyond its sigmas, fuses the rest by their covariances, publishes "
-                    "the fused fixes on skyfix/uuv/ID/fix and sends them as GPS_INPUT (--gps-input). Stops on Ctrl-C "
-                    "or SIGTERM.",
-        epilog="example: skyfix fuse --uuv rov1 --source a --source b --zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
-    p.add_argument("--uuv", type=_chunk, metavar="ID", default="uuv", help="the UUV's id, in the keys (default %(default)s)")
-    p.add_argument("--source", action="append", metavar="DRONE",
-                   help="a drone whose fixes may be fused: its id (its fixes on skyfix/uuv/ID/drone/DRONE/fix) or its "
-                        "whole fix key; once per drone, at least one. Fixes on any other key are counted, never fused")
-    p.add_argument("--sources", metavar="KEYEXPR", help="the key expression subscribed to, the --source keys within it "
-                   "(default skyfix/uuv/ID/drone/*/fix)")
+        "skyfix/uuv/ID/drone/NAME/fix), takes those of the --source drones only, aligns them in time, "
+        "rejects a drone that disagrees beyond its sigmas, fuses the rest by their covariances, publishes "
+        "the fused fixes on skyfix/uuv/ID/fix and sends them as GPS_INPUT (--gps-input). Stops on Ctrl-C "
+        "or SIGTERM.",
+        epilog="example: skyfix fuse --uuv rov1 --source a --source b --zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660",
+    )
+    p.add_argument(
+        "--uuv",
+        type=_chunk,
+        metavar="ID",
+        default="uuv",
+        help="the UUV's id, in the keys (default %(default)s)",
+    )
+    p.add_argument(
+        "--source",
+        action="append",
+        metavar="DRONE",
+        help="a drone whose fixes may be fused: its id (its fixes on skyfix/uuv/ID/drone/DRONE/fix) or its "
+        "whole fix key; once per drone, at least one. Fixes on any other key are counted, never fused",
+    )
+    p.add_argument(
+        "--sources",
+        metavar="KEYEXPR",
+        help="the key expression subscribed to, the --source keys within it "
+        "(default skyfix/uuv/ID/drone/*/fix)",
+    )
     p.add_argument("--fix-key", metavar="KEY", help="the fused fixes (default skyfix/uuv/ID/fix)")
-    p.add_argument("--status-key", metavar="KEY", help="the 1 Hz status (default skyfix/uuv/ID/fuse/status)")
-    p.add_argument("--alive-key", metavar="KEY", help="liveliness token (default skyfix/uuv/ID/fuse/alive)")
-    p.add_argument("--gps-input", metavar="URL", help="GPS_INPUT to the UUV's autopilot: a MAVLink URL "
-                   "(udpout:HOST:PORT, tcp:HOST:PORT, /dev/ttyUSB0,57600) or zenoh:KEY (BlueOS's mavlink/in)")
-    p.add_argument("--gps-input-hz", metavar="HZ", type=_number(5.0, "--gps-input-hz"), default=10.0,
-                   help="GPS_INPUT at least this often (the latest state again without a new fix; default 10, ≥ 5)")
-    p.add_argument("--gps-input-signing-key", metavar="FILE", help="sign GPS_INPUT (MAVLink 2) with this key file")
-    p.add_argument("--max-hz", metavar="HZ", type=_number(0.0, "--max-hz", strict=True), default=MAX_HZ,
-                   help="fused fixes per second at most (default %(default)g)")
-    p.add_argument("--fix-max-age-ms", metavar="MS", type=_number(0.0, "--fix-max-age-ms", strict=True), default=500.0,
-                   help="a fix older than this is not sent as valid (default %(default)g)")
-    p.add_argument("--fix-max-h-acc-m", metavar="M", type=_number(0.0, "--fix-max-h-acc-m", strict=True), default=2.5,
-                   help="a fix less accurate than this is not used (default %(default)g)")
-    p.add_argument("--clock-tolerance-ms", metavar="MS", type=_number(0.0, "--clock-tolerance-ms", strict=True),
-                   default=CLOCK_TOLERANCE_S * 1000.0, help="a fix stamped further ahead of this machine's clock is "
-                   "refused as from the future (default %(default)g)")
-    p.add_argument("--shared-gnss-m", metavar="M", type=_number(0.0, "--shared-gnss-m"), default=0.0,
-                   help="1-sigma (per axis) of the GNSS error all drones share: one sky, one RTK base; the fixes do "
-                        "not carry their GNSS error: say it (default %(default)g; about 1 for plain GNSS)")
-    p.add_argument("--shared-height-m", metavar="M", type=_number(0.0, "--shared-height-m"), default=0.3,
-                   help="1-sigma of the height error all barometers share (the weather's trend), at most each fix's "
-                        "own (default %(default)g)")
-    p.add_argument("--shared-clock-ms", metavar="MS", type=_number(0.0, "--shared-clock-ms"), default=10.0,
-                   help="1-sigma of the clock error all stations share, times the UUV's speed (default %(default)g)")
-    p.add_argument("--uuv-max-speed-mps", metavar="MPS", type=_number(0.0, "--uuv-max-speed-mps", strict=True),
-                   default=MAX_SPEED_MPS["bluerov2"], help="the UUV's top speed, for each drone's gate")
-    p.add_argument("--uuv-max-accel-mps2", metavar="MPS2", type=_number(0.0, "--uuv-max-accel-mps2", strict=True),
-                   default=MAX_ACCEL_MPS2["bluerov2"], help="the UUV's largest acceleration")
-    p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to")
-    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on")
-    p.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file (deploy/zenoh/*.json5)")
+    p.add_argument(
+        "--status-key", metavar="KEY", help="the 1 Hz status (default skyfix/uuv/ID/fuse/status)"
+    )
+    p.add_argument(
+        "--alive-key", metavar="KEY", help="liveliness token (default skyfix/uuv/ID/fuse/alive)"
+    )
+    p.add_argument(
+        "--gps-input",
+        metavar="URL",
+        help="GPS_INPUT to the UUV's autopilot: a MAVLink URL "
+        "(udpout:HOST:PORT, tcp:HOST:PORT, /dev/ttyUSB0,57600) or zenoh:KEY (BlueOS's mavlink/in)",
+    )
+    p.add_argument(
+        "--gps-input-hz",
+        metavar="HZ",
+        type=_number(5.0, "--gps-input-hz"),
+        default=10.0,
+        help="GPS_INPUT at least this often (the latest state again without a new fix; default 10, ≥ 5)",
+    )
+    p.add_argument(
+        "--gps-input-signing-key",
+        metavar="FILE",
+        help="sign GPS_INPUT (MAVLink 2) with this key file",
+    )
+    p.add_argument(
+        "--max-hz",
+        metavar="HZ",
+        type=_number(0.0, "--max-hz", strict=True),
+        default=MAX_HZ,
+        help="fused fixes per second at most (default %(default)g)",
+    )
+    p.add_argument(
+        "--fix-max-age-ms",
+        metavar="MS",
+        type=_number(0.0, "--fix-max-age-ms", strict=True),
+        default=500.0,
+        help="a fix older than this is not sent as valid (default %(default)g)",
+    )
+    p.add_argument(
+        "--fix-max-h-acc-m",
+        metavar="M",
+        type=_number(0.0, "--fix-max-h-acc-m", strict=True),
+        default=2.5,
+        help="a fix less accurate than this is not used (default %(default)g)",
+    )
+    p.add_argument(
+        "--clock-tolerance-ms",
+        metavar="MS",
+        type=_number(0.0, "--clock-tolerance-ms", strict=True),
+        default=CLOCK_TOLERANCE_S * 1000.0,
+        help="a fix stamped further ahead of this machine's clock is "
+        "refused as from the future (default %(default)g)",
+    )
+    p.add_argument(
+        "--shared-gnss-m",
+        metavar="M",
+        type=_number(0.0, "--shared-gnss-m"),
+        default=0.0,
+        help="1-sigma (per axis) of the GNSS error all drones share: one sky, one RTK base; the fixes do "
+        "not carry their GNSS error: say it (default %(default)g; about 1 for plain GNSS)",
+    )
+    p.add_argument(
+        "--shared-height-m",
+        metavar="M",
+        type=_number(0.0, "--shared-height-m"),
+        default=0.3,
+        help="1-sigma of the height error all barometers share (the weather's trend), at most each fix's "
+        "own (default %(default)g)",
+    )
+    p.add_argument(
+        "--shared-clock-ms",
+        metavar="MS",
+        type=_number(0.0, "--shared-clock-ms"),
+        default=10.0,
+        help="1-sigma of the clock error all stations share, times the UUV's speed (default %(default)g)",
+    )
+    p.add_argument(
+        "--uuv-max-speed-mps",
+        metavar="MPS",
+        type=_number(0.0, "--uuv-max-speed-mps", strict=True),
+        default=MAX_SPEED_MPS["bluerov2"],
+        help="the UUV's top speed, for each drone's gate",
+    )
+    p.add_argument(
+        "--uuv-max-accel-mps2",
+        metavar="MPS2",
+        type=_number(0.0, "--uuv-max-accel-mps2", strict=True),
+        default=MAX_ACCEL_MPS2["bluerov2"],
+        help="the UUV's largest acceleration",
+    )
+    p.add_argument(
+        "--zenoh-connect", action="append", metavar="ENDPOINT", help="Zenoh endpoint to connect to"
+    )
+    p.add_argument(
+        "--zenoh-listen", action="append", metavar="ENDPOINT", help="Zenoh endpoint to listen on"
+    )
+    p.add_argument(
+        "--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file (deploy/zenoh/*.json5)"
+    )
     p.add_argument("--zenoh-multicast", action="store_true", help="Zenoh multicast scouting on")
-    p.add_argument("--duration-s", metavar="S", type=_number(0.0, "--duration-s", strict=True), help="stop after this long")
+    p.add_argument(
+        "--duration-s",
+        metavar="S",
+        type=_number(0.0, "--duration-s", strict=True),
+        help="stop after this long",
+    )
     p.add_argument("--stats", metavar="FILE", help="write the final status here as JSON")
     p.set_defaults(func=run)

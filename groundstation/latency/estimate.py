@@ -70,7 +70,9 @@ WARN_S = 0.030  # an estimate this far from the configured latency is worth a wa
 APPLY_SIGMA_S = 0.005  # an estimate is sure with this 1-sigma at most ...
 APPLY_PAIRS = 60  # ... from at least this many frame pairs (6 s at MEASURE_HZ; fewer when the machine is busy);
 STEADY_COUNT, STEADY_S = 3, 0.005  # settled: this many sure estimates, within 5 ms of each other
-NOISE_FLOOR_RAD = 1e-5  # an axis's residual is taken as at least this (the image measures no better)
+NOISE_FLOOR_RAD = (
+    1e-5  # an axis's residual is taken as at least this (the image measures no better)
+)
 
 
 @dataclass(frozen=True)
@@ -129,13 +131,25 @@ class SessionOffset:
         e = self.estimate
         if e is None:
             return "no estimate (the image's motion could not be measured or the telemetry does not cover the video)"
-        parts = ", ".join("—" if p is None else f"{p.offset_s * 1000:+.1f} ± {p.sigma_s * 1000:.1f}" for p in self.parts)
-        verdict = ("settled" if self.settled else
-                   f"not settled: needs ± {APPLY_SIGMA_S * 1000:.0f} ms or better from {APPLY_PAIRS}+ pairs in each "
-                   f"third, the thirds within {STEADY_S * 1000:.0f} ms")
-        spread = f", ± {self.sigma_s * 1000:.1f} ms with the thirds' spread" if math.isfinite(self.sigma_s) else ""
-        return (f"{e.offset_s * 1000:+.1f} ± {e.sigma_s * 1000:.1f} ms (1-sigma) from {e.pairs} frame pairs "
-                f"(thirds: {parts} ms{spread}): {verdict}")
+        parts = ", ".join(
+            "—" if p is None else f"{p.offset_s * 1000:+.1f} ± {p.sigma_s * 1000:.1f}"
+            for p in self.parts
+        )
+        verdict = (
+            "settled"
+            if self.settled
+            else f"not settled: needs ± {APPLY_SIGMA_S * 1000:.0f} ms or better from {APPLY_PAIRS}+ pairs in each "
+            f"third, the thirds within {STEADY_S * 1000:.0f} ms"
+        )
+        spread = (
+            f", ± {self.sigma_s * 1000:.1f} ms with the thirds' spread"
+            if math.isfinite(self.sigma_s)
+            else ""
+        )
+        return (
+            f"{e.offset_s * 1000:+.1f} ± {e.sigma_s * 1000:.1f} ms (1-sigma) from {e.pairs} frame pairs "
+            f"(thirds: {parts} ms{spread}): {verdict}"
+        )
 
 
 class AttitudeTrack:
@@ -158,7 +172,9 @@ class AttitudeTrack:
         self._q = q * np.concatenate([[1.0], sign])[:, None]
 
     @classmethod
-    def from_telemetry(cls, cal: Calibration, tel: Telemetry, t_from: float, t_to: float) -> AttitudeTrack:
+    def from_telemetry(
+        cls, cal: Calibration, tel: Telemetry, t_from: float, t_to: float
+    ) -> AttitudeTrack:
         """Sampled every :data:`TRACK_STEP_S` from ``t_from`` to ``t_to`` (s) where the telemetry gives a pose."""
         times = np.arange(t_from, t_to, TRACK_STEP_S)
         pose = camera_pose(cal, tel, times) if len(times) else None
@@ -187,12 +203,17 @@ class AttitudeTrack:
         w = aw * bw - np.sum(av * bv, axis=1, keepdims=True)
         v = np.where(w < 0.0, -v, v)  # the same rotation, by the shorter way
         n = np.linalg.norm(v, axis=1, keepdims=True)
-        angle_per_n = np.where(n > 1e-12, 2.0 * np.arctan2(n, np.abs(w)) / np.maximum(n, 1e-300),
-                               2.0 / np.maximum(np.abs(w), 1e-300))
+        angle_per_n = np.where(
+            n > 1e-12,
+            2.0 * np.arctan2(n, np.abs(w)) / np.maximum(n, 1e-300),
+            2.0 / np.maximum(np.abs(w), 1e-300),
+        )
         return v * angle_per_n
 
 
-def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets: np.ndarray) -> OffsetEstimate | None:
+def estimate_offset(
+    rotations: Sequence[Rotation], track: AttitudeTrack, offsets: np.ndarray
+) -> OffsetEstimate | None:
     """The offset (one of ``offsets``, refined) that best predicts the measured rotations; None without enough."""
     if not track.ready:
         return None
@@ -204,8 +225,9 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
     t0, t1 = t0[inside], t1[inside]
     meas = np.array([r.rotvec for r, i in zip(rotations, inside) if i])
     k, j = len(t0), len(offsets)
-    pred = track.relative((t0[None, :] + offsets[:, None]).ravel(),
-                          (t1[None, :] + offsets[:, None]).ravel()).reshape(j, k, 3)
+    pred = track.relative(
+        (t0[None, :] + offsets[:, None]).ravel(), (t1[None, :] + offsets[:, None]).ravel()
+    ).reshape(j, k, 3)
     weights = axis_weights(pred - meas[None])
     sq = np.sum(((pred - meas[None]) * weights) ** 2, axis=2)  # (J, K)
     use = np.ones(k, bool)
@@ -225,11 +247,11 @@ def estimate_offset(rotations: Sequence[Rotation], track: AttitudeTrack, offsets
     slope = (pred[hi, use] - pred[lo, use]) * weights / ((hi - lo) * OFFSET_STEP_S)
     n = int(use.sum())
     s2 = cost[best] / max(3 * n - 1, 1)
-    info = float(np.sum(slope ** 2))
+    info = float(np.sum(slope**2))
     sigma = float(np.sqrt(s2 / info)) if info > 0 else float("inf")
     resid = meas[use] - pred[best, use]
     sigma *= float(np.sqrt(_correlation_factor(np.sum(slope * resid * weights, axis=1))))
-    return OffsetEstimate(float(offset), sigma, n, float(np.sqrt(np.mean(resid ** 2))) * 1000.0)
+    return OffsetEstimate(float(offset), sigma, n, float(np.sqrt(np.mean(resid**2))) * 1000.0)
 
 
 def axis_weights(residuals: np.ndarray) -> np.ndarray:
@@ -267,17 +289,22 @@ def _correlation_factor(g: np.ndarray, max_lag: int = 60) -> float:
     return total
 
 
-def offset_from_rotations(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotation],
-                          search_s: float = 0.3) -> SessionOffset:
+def offset_from_rotations(
+    cal: Calibration, tel: Telemetry, rotations: Sequence[Rotation], search_s: float = 0.3
+) -> SessionOffset:
     """A recording's frames' offset to its telemetry (within ± ``search_s``), from the rotations measured between
     its frames (in order), as a whole and in :data:`STEADY_COUNT` consecutive parts."""
     if not rotations:
         return SessionOffset(None, (None,) * STEADY_COUNT)
-    track = AttitudeTrack.from_telemetry(cal, tel, rotations[0].t0 - search_s - 0.1, rotations[-1].t1 + search_s + 0.1)
+    track = AttitudeTrack.from_telemetry(
+        cal, tel, rotations[0].t0 - search_s - 0.1, rotations[-1].t1 + search_s + 0.1
+    )
     offsets = np.arange(-search_s, search_s + OFFSET_STEP_S / 2, OFFSET_STEP_S)
     n = len(rotations)
     bounds = [round(i * n / STEADY_COUNT) for i in range(STEADY_COUNT + 1)]
-    parts = tuple(estimate_offset(rotations[a:b], track, offsets) for a, b in itertools.pairwise(bounds))
+    parts = tuple(
+        estimate_offset(rotations[a:b], track, offsets) for a, b in itertools.pairwise(bounds)
+    )
     return SessionOffset(estimate_offset(rotations, track, offsets), parts)
 
 
@@ -301,8 +328,9 @@ START_FLAT = 1.5  # the refinement searches every coarse start within this facto
 START_REFINE_S = 0.1  # ... and at least this far either side
 
 
-def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotation],
-                     span: tuple[float, float]) -> VideoStart:
+def find_video_start(
+    cal: Calibration, tel: Telemetry, rotations: Sequence[Rotation], span: tuple[float, float]
+) -> VideoStart:
     """The exposure of a video's first frame on the telemetry's clock, within ``span`` (where the telemetry gives a
     pose), from the rotations between its frames (their times relative to the first frame, s).
 
@@ -315,54 +343,79 @@ def find_video_start(cal: Calibration, tel: Telemetry, rotations: Sequence[Rotat
     (:attr:`SessionOffset.sigma_s`). :class:`ValueError` (one line naming both spans) when the video does not fit in
     ``span``, the image's motion says too little, or another start fits nearly as well."""
     if len(rotations) < 10:
-        raise ValueError(f"the image's motion was measured between {len(rotations)} frame pairs: too few to place "
-                         "the video on the log's clock")
+        raise ValueError(
+            f"the image's motion was measured between {len(rotations)} frame pairs: too few to place "
+            "the video on the log's clock"
+        )
     length = rotations[-1].t1
     lo, hi = span[0], span[1] - length
     if hi <= lo:
-        raise ValueError(f"the video ({length:.1f} s) is longer than the telemetry's span {span[0]:.3f}–{span[1]:.3f}")
+        raise ValueError(
+            f"the video ({length:.1f} s) is longer than the telemetry's span {span[0]:.3f}–{span[1]:.3f}"
+        )
     track = AttitudeTrack.from_telemetry(cal, tel, span[0], span[1])
-    pick = np.unique(np.linspace(0, len(rotations) - 1, min(START_PAIRS, len(rotations))).round().astype(int))
+    pick = np.unique(
+        np.linspace(0, len(rotations) - 1, min(START_PAIRS, len(rotations))).round().astype(int)
+    )
     t0 = np.array([rotations[i].t0 for i in pick])
     t1 = np.array([rotations[i].t1 for i in pick])
     meas = np.array([rotations[i].rotvec for i in pick])
     starts = np.arange(lo, hi, START_STEP_S)
     cost = np.empty(len(starts))
     for a in range(0, len(starts), 2000):  # in chunks: 2000 starts × the pairs at once
-        s_ = starts[a:a + 2000]
-        pred = track.relative((t0[None, :] + s_[:, None]).ravel(), (t1[None, :] + s_[:, None]).ravel())
+        s_ = starts[a : a + 2000]
+        pred = track.relative(
+            (t0[None, :] + s_[:, None]).ravel(), (t1[None, :] + s_[:, None]).ravel()
+        )
         r = pred.reshape(len(s_), len(pick), 3) - meas[None]
-        sq = np.sum(r ** 2, axis=2)
-        cost[a:a + 2000] = np.sum(np.minimum(sq, 9.0 * np.median(sq, axis=1, keepdims=True)), axis=1)  # robust
+        sq = np.sum(r**2, axis=2)
+        cost[a : a + 2000] = np.sum(
+            np.minimum(sq, 9.0 * np.median(sq, axis=1, keepdims=True)), axis=1
+        )  # robust
     best = int(np.argmin(cost))
     rivals = np.abs(starts - starts[best]) > START_APART_S
     contrast = float(cost[best] / cost[rivals].min()) if rivals.any() else 0.0
     if contrast > START_CONTRAST:
-        raise ValueError(f"the video's start is ambiguous: {starts[best]:.3f} and "
-                         f"{starts[rivals][np.argmin(cost[rivals])]:.3f} fit nearly as well (the camera's motion "
-                         "repeats or says too little); give the start")
+        raise ValueError(
+            f"the video's start is ambiguous: {starts[best]:.3f} and "
+            f"{starts[rivals][np.argmin(cost[rivals])]:.3f} fit nearly as well (the camera's motion "
+            "repeats or says too little); give the start"
+        )
     flat = cost <= START_FLAT * cost[best]
     a = b = best
     while a > 0 and flat[a - 1]:
         a -= 1
     while b < len(starts) - 1 and flat[b + 1]:
         b += 1
-    reach = max(START_REFINE_S, starts[best] - starts[a] + START_STEP_S, starts[b] - starts[best] + START_STEP_S)
+    reach = max(
+        START_REFINE_S,
+        starts[best] - starts[a] + START_STEP_S,
+        starts[b] - starts[best] + START_STEP_S,
+    )
     offsets = np.arange(-reach, reach + OFFSET_STEP_S / 2, OFFSET_STEP_S)
-    shifted = [Rotation(r.t0 + starts[best], r.t1 + starts[best], r.rotvec, r.tracks) for r in rotations]
+    shifted = [
+        Rotation(r.t0 + starts[best], r.t1 + starts[best], r.rotvec, r.tracks) for r in rotations
+    ]
     bounds = [round(i * len(shifted) / STEADY_COUNT) for i in range(STEADY_COUNT + 1)]
-    found = SessionOffset(estimate_offset(shifted, track, offsets),
-                          tuple(estimate_offset(shifted[i:j], track, offsets) for i, j in itertools.pairwise(bounds)))
+    found = SessionOffset(
+        estimate_offset(shifted, track, offsets),
+        tuple(estimate_offset(shifted[i:j], track, offsets) for i, j in itertools.pairwise(bounds)),
+    )
     fine = found.estimate
     if fine is None:
-        raise ValueError("the video's start could not be refined (the telemetry does not cover its frames)")
+        raise ValueError(
+            "the video's start could not be refined (the telemetry does not cover its frames)"
+        )
     sigma = found.sigma_s if math.isfinite(found.sigma_s) else fine.sigma_s
     thirds = tuple(None if p is None else float(starts[best] + p.offset_s) for p in found.parts)
-    return VideoStart(float(starts[best] + fine.offset_s), sigma, fine.pairs, fine.rms_mrad, contrast, thirds)
+    return VideoStart(
+        float(starts[best] + fine.offset_s), sigma, fine.pairs, fine.rms_mrad, contrast, thirds
+    )
 
 
-def measure_rotations(path, cal: Calibration, times_s: np.ndarray, indices=None, until_s: float = math.inf,
-                      bar=None) -> list[Rotation]:
+def measure_rotations(
+    path, cal: Calibration, times_s: np.ndarray, indices=None, until_s: float = math.inf, bar=None
+) -> list[Rotation]:
     """The camera's rotation between consecutive frames of a video file, at the frames' times ``times_s`` (by
     frame index), up to the first frame after ``until_s``; ``bar``: a progress bar updated per frame. The frames are
     read grey (the meter follows grey levels: no conversion to colour, the faster decoding of
@@ -370,8 +423,9 @@ def measure_rotations(path, cal: Calibration, times_s: np.ndarray, indices=None,
     meter = RotationMeter(cal.camera)
     rotations = []
     try:
-        with open_video(path, expected_size=(cal.camera.width, cal.camera.height), indices=indices,
-                        grey=True) as video:
+        with open_video(
+            path, expected_size=(cal.camera.width, cal.camera.height), indices=indices, grey=True
+        ) as video:
             for frame in video.prefetch():
                 if frame.index >= len(times_s):
                     continue
@@ -393,7 +447,9 @@ def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[SessionOffs
     cal = session.calibration
     if session.video_path is None or session.frames is None:
         raise SessionError(f"{session_dir}: no video.* with video_frames.csv")
-    rotations = measure_rotations(session.video_path, cal, session.frames["t"], session.frames["frame"])
+    rotations = measure_rotations(
+        session.video_path, cal, session.frames["t"], session.frames["frame"]
+    )
     return offset_from_rotations(cal, session.telemetry, rotations, search_s), len(rotations) + 1
 
 
@@ -409,8 +465,15 @@ class OnlineLatency:
     :attr:`applied_sigma_s` are what is in use (None before the first).
     """
 
-    def __init__(self, cal: Calibration, tel: Telemetry, configured_s: float | None,
-                 apply: Callable[[float], None] | None = None, window_s: float = 20.0, max_latency_s: float = 0.5):
+    def __init__(
+        self,
+        cal: Calibration,
+        tel: Telemetry,
+        configured_s: float | None,
+        apply: Callable[[float], None] | None = None,
+        window_s: float = 20.0,
+        max_latency_s: float = 0.5,
+    ):
         self.cal, self.tel = cal, tel
         self.configured_s = configured_s
         self.apply = apply
@@ -435,7 +498,10 @@ class OnlineLatency:
         self._last_slot: float | None = None
 
     def on_frame(self, frame) -> None:
-        if self._last_slot is not None and frame.t_slot - self._last_slot < 1.0 / MEASURE_HZ - 0.005:
+        if (
+            self._last_slot is not None
+            and frame.t_slot - self._last_slot < 1.0 / MEASURE_HZ - 0.005
+        ):
             return
         self._last_slot = frame.t_slot
         try:
@@ -474,7 +540,9 @@ class OnlineLatency:
             if not self._rotations:
                 continue
             # sampled anew each time: the telemetry's alignment to the station clock sharpens as it comes
-            track = AttitudeTrack.from_telemetry(self.cal, tel, self._rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3)
+            track = AttitudeTrack.from_telemetry(
+                self.cal, tel, self._rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3
+            )
             estimate = estimate_offset(list(self._rotations), track, self.offsets)
             if estimate is not None:
                 self.estimate = estimate
@@ -493,17 +561,24 @@ class OnlineLatency:
         news = self._warned is None or abs(latency - self._warned) > WARN_S / 3
         if off and news:
             self._warned = latency
-            log.warning("video: the image's motion puts the glass-to-first-packet latency at %.0f ± %.0f ms, "
-                        "not the configured %.0f ms (--video-latency-ms)", latency * 1000, e.sigma_s * 1000,
-                        self.configured_s * 1000)
+            log.warning(
+                "video: the image's motion puts the glass-to-first-packet latency at %.0f ± %.0f ms, "
+                "not the configured %.0f ms (--video-latency-ms)",
+                latency * 1000,
+                e.sigma_s * 1000,
+                self.configured_s * 1000,
+            )
         if self.apply is None:
             return
         self.applied_sigma_s = e.sigma_s
         if self.applied_s is not None and abs(latency - self.applied_s) <= 0.002:
             return
         if self.applied_s is None:
-            log.info("video: latency %.1f ± %.1f ms from the image's motion, applied: fixes from here on",
-                     latency * 1000, e.sigma_s * 1000)
+            log.info(
+                "video: latency %.1f ± %.1f ms from the image's motion, applied: fixes from here on",
+                latency * 1000,
+                e.sigma_s * 1000,
+            )
         self.applied_s = latency
         self.apply(latency)
 
@@ -514,13 +589,25 @@ class OnlineLatency:
 
     def status(self) -> dict:
         e = self.estimate
-        out = {"configured_ms": None if self.configured_s is None else round(self.configured_s * 1000, 1),
-               "applied_ms": None if self.applied_s is None else round(self.applied_s * 1000, 1),
-               "applied_sigma_ms": None if self.applied_sigma_s is None else round(self.applied_sigma_s * 1000, 2),
-               "state": self.state, "frames_skipped": self.skipped, **self.worker.status()}
+        out = {
+            "configured_ms": None
+            if self.configured_s is None
+            else round(self.configured_s * 1000, 1),
+            "applied_ms": None if self.applied_s is None else round(self.applied_s * 1000, 1),
+            "applied_sigma_ms": None
+            if self.applied_sigma_s is None
+            else round(self.applied_sigma_s * 1000, 2),
+            "state": self.state,
+            "frames_skipped": self.skipped,
+            **self.worker.status(),
+        }
         if e is not None:
-            out.update(estimate_ms=round(-e.offset_s * 1000, 1), sigma_ms=round(e.sigma_s * 1000, 2), pairs=e.pairs,
-                       rms_mrad=round(e.rms_mrad, 3))
+            out.update(
+                estimate_ms=round(-e.offset_s * 1000, 1),
+                sigma_ms=round(e.sigma_s * 1000, 2),
+                pairs=e.pairs,
+                rms_mrad=round(e.rms_mrad, 3),
+            )
         return out
 
 
@@ -528,22 +615,29 @@ def estimate_latency(args: argparse.Namespace) -> int:
     found, frames = session_offset(args.session, args.search_ms / 1000.0)
     estimate = found.estimate
     if estimate is None:
-        print(f"skyfix estimate-latency: {args.session}: no estimate ({frames} frames; the image's motion could not "
-              "be measured or the telemetry does not cover the video)")
+        print(
+            f"skyfix estimate-latency: {args.session}: no estimate ({frames} frames; the image's motion could not "
+            "be measured or the telemetry does not cover the video)"
+        )
         return 1
-    print(f"{args.session}: the telemetry matches the video best with each frame's time moved by "
-          f"{estimate.offset_s * 1000:+.1f} ms (1-sigma {estimate.sigma_s * 1000:.1f} ms, {estimate.pairs} frame pairs, "
-          f"residual {estimate.rms_mrad:.3f} mrad): the frames were exposed that much "
-          f"{'later' if estimate.offset_s > 0 else 'earlier'} than video_frames.csv says")
+    print(
+        f"{args.session}: the telemetry matches the video best with each frame's time moved by "
+        f"{estimate.offset_s * 1000:+.1f} ms (1-sigma {estimate.sigma_s * 1000:.1f} ms, {estimate.pairs} frame pairs, "
+        f"residual {estimate.rms_mrad:.3f} mrad): the frames were exposed that much "
+        f"{'later' if estimate.offset_s > 0 else 'earlier'} than video_frames.csv says"
+    )
     print(f"estimate {found.describe()}")
-    print(f"for a live run: --video-latency-ms {-estimate.offset_s * 1000:+.1f} relative to the one recorded with")
+    print(
+        f"for a live run: --video-latency-ms {-estimate.offset_s * 1000:+.1f} relative to the one recorded with"
+    )
     return 0
 
 
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
-    p = subparsers.add_parser(name, help=help,
-                              description=__doc__.split("\n\n")[0])
+    p = subparsers.add_parser(name, help=help, description=__doc__.split("\n\n")[0])
     p.add_argument("session", help="session directory (format v1) with video")
-    p.add_argument("--search-ms", type=float, default=300.0, help="largest offset looked for, either way")
+    p.add_argument(
+        "--search-ms", type=float, default=300.0, help="largest offset looked for, either way"
+    )
     p.set_defaults(func=estimate_latency)

@@ -116,7 +116,9 @@ class TimecodePage:
 
         self.server = ThreadingHTTPServer((host, port), Handler)
         self.url = f"http://{host}:{self.server.server_address[1]}/"
-        self._thread = threading.Thread(target=self.server.serve_forever, name="timecode-page", daemon=True)
+        self._thread = threading.Thread(
+            target=self.server.serve_forever, name="timecode-page", daemon=True
+        )
 
     def __enter__(self):
         self._thread.start()
@@ -131,11 +133,17 @@ def summary(samples_s: list[float], period_s: float) -> dict:
     """The latency distribution (ms) and the value to configure: the median less half a display period."""
     a = np.asarray(samples_s) * 1000.0
     q = {f"p{p}": round(float(np.percentile(a, p)), 1) for p in (5, 25, 50, 75, 95)}
-    return {"n": len(a), **q, "display_period_ms": round(period_s * 1000.0, 2),
-            "video_latency_ms": round(q["p50"] - period_s * 500.0, 1)}
+    return {
+        "n": len(a),
+        **q,
+        "display_period_ms": round(period_s * 1000.0, 2),
+        "video_latency_ms": round(q["p50"] - period_s * 500.0, 1),
+    }
 
 
-async def measure(url: str, duration_s: float, max_samples: int, page: TimecodePage, display_hz: float) -> dict:
+async def measure(
+    url: str, duration_s: float, max_samples: int, page: TimecodePage, display_hz: float
+) -> dict:
     """Read the time code from the stream's frames until enough samples or time; the summary."""
     samples: list[float] = []
     frames = 0
@@ -147,12 +155,16 @@ async def measure(url: str, duration_s: float, max_samples: int, page: TimecodeP
     def on_frame(frame: LiveFrame) -> None:
         nonlocal frames, busy
         frames += 1
-        if busy:  # reading a code takes longer than a frame at high resolutions: take the next free one
+        if (
+            busy
+        ):  # reading a code takes longer than a frame at high resolutions: take the next free one
             return
         busy = True
         loop.run_in_executor(pool, read_timecode, frame.image, frame.t_slot).add_done_callback(
             lambda f, t_slot=frame.t_slot: loop.call_soon_threadsafe(
-                took, t_slot, None if f.exception() is not None else f.result()))
+                took, t_slot, None if f.exception() is not None else f.result()
+            )
+        )
 
     def took(t_slot: float, t_code: float | None) -> None:
         nonlocal busy
@@ -180,28 +192,39 @@ async def measure(url: str, duration_s: float, max_samples: int, page: TimecodeP
 
 
 def latency(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    logging.basicConfig(
+        level=logging.WARNING, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+    )
     try:
         page = TimecodePage(args.host, args.port)
     except OSError as e:
         print(f"skyfix latency: error: --port {args.port}: {e.strerror}", file=sys.stderr)
         return 2
     with page:
-        print(f"Open {page.url} full screen on this laptop and film it with the UAV's camera "
-              f"({args.video}); measuring for up to {args.duration_s:g} s ...", flush=True)
+        print(
+            f"Open {page.url} full screen on this laptop and film it with the UAV's camera "
+            f"({args.video}); measuring for up to {args.duration_s:g} s ...",
+            flush=True,
+        )
         try:
-            result = asyncio.run(measure(args.video, args.duration_s, args.samples, page, args.display_hz))
+            result = asyncio.run(
+                measure(args.video, args.duration_s, args.samples, page, args.display_hz)
+            )
         except VideoError as e:
             print(f"skyfix latency: error: {e}", file=sys.stderr)
             return 2
     lat = result.get("latency")
     if lat is None:
         why = result["video"]["error"] or "no time code recognised"
-        print(f"skyfix latency: no measurement in {result['frames']} frames: {why}", file=sys.stderr)
+        print(
+            f"skyfix latency: no measurement in {result['frames']} frames: {why}", file=sys.stderr
+        )
         print(json.dumps(result))
         return 1
-    print(f"glass to first packet over {lat['n']} frames: p5 {lat['p5']} ms, p25 {lat['p25']}, "
-          f"median {lat['p50']}, p75 {lat['p75']}, p95 {lat['p95']} ms (display period {lat['display_period_ms']} ms)")
+    print(
+        f"glass to first packet over {lat['n']} frames: p5 {lat['p5']} ms, p25 {lat['p25']}, "
+        f"median {lat['p50']}, p75 {lat['p75']}, p95 {lat['p95']} ms (display period {lat['display_period_ms']} ms)"
+    )
     print(f"configure: --video-latency-ms {lat['video_latency_ms']:g}")
     print(json.dumps(result))
     return 0
@@ -209,13 +232,18 @@ def latency(args: argparse.Namespace) -> int:
 
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
-    p = subparsers.add_parser(name, help=help,
-                              description=__doc__.split("\n\n")[0])
+    p = subparsers.add_parser(name, help=help, description=__doc__.split("\n\n")[0])
     p.add_argument("--video", required=True, help="the UAV's video, as for skyfix run")
     p.add_argument("--host", default="127.0.0.1", help="address the time code page is served on")
-    p.add_argument("--port", type=int, default=8765, help="port of the time code page (0: any free one)")
+    p.add_argument(
+        "--port", type=int, default=8765, help="port of the time code page (0: any free one)"
+    )
     p.add_argument("--duration-s", type=float, default=60.0, help="stop after this many seconds")
     p.add_argument("--samples", type=int, default=300, help="stop after this many readings")
-    p.add_argument("--display-hz", type=float, default=60.0,
-                   help="display refresh rate, when the page has not reported its own")
+    p.add_argument(
+        "--display-hz",
+        type=float,
+        default=60.0,
+        help="display refresh rate, when the page has not reported its own",
+    )
     p.set_defaults(func=latency)

@@ -29,8 +29,10 @@ def marker_ids(t_ms: int) -> list[int]:
 
 def marker_cells() -> list[list[int]]:
     """Every marker of the dictionary as CELLS×CELLS cells, row-major, 1 = white (for the page)."""
-    return [(cv2.aruco.generateImageMarker(_dictionary, i, CELLS).ravel() > 127).astype(int).tolist()
-            for i in range(1000)]
+    return [
+        (cv2.aruco.generateImageMarker(_dictionary, i, CELLS).ravel() > 127).astype(int).tolist()
+        for i in range(1000)
+    ]
 
 
 def render_timecode(t_ms: int, width: int, height: int) -> np.ndarray:
@@ -41,7 +43,9 @@ def render_timecode(t_ms: int, width: int, height: int) -> np.ndarray:
     top = (height - side) // 2
     for k, marker in enumerate(marker_ids(t_ms)):
         left = gap + k * (side + gap)
-        img[top:top + side, left:left + side] = cv2.aruco.generateImageMarker(_dictionary, marker, side)[..., None]
+        img[top : top + side, left : left + side] = cv2.aruco.generateImageMarker(
+            _dictionary, marker, side
+        )[..., None]
     return img
 
 

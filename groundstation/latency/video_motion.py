@@ -66,14 +66,22 @@ class RotationMeter:
         if prev is None:
             return None
         t0, gray0 = prev
-        if p0 is None or len(p0) < REDETECT_BELOW:  # corners are found again only when too few are left
-            p0 = cv2.goodFeaturesToTrack(gray0, maxCorners=MAX_CORNERS, qualityLevel=0.01, minDistance=8, blockSize=7)
+        if (
+            p0 is None or len(p0) < REDETECT_BELOW
+        ):  # corners are found again only when too few are left
+            p0 = cv2.goodFeaturesToTrack(
+                gray0, maxCorners=MAX_CORNERS, qualityLevel=0.01, minDistance=8, blockSize=7
+            )
         if p0 is None or len(p0) < MIN_TRACKS:
             return None
         lk = {"winSize": (21, 21), "maxLevel": 3}
         p1, ok1, _ = cv2.calcOpticalFlowPyrLK(gray0, gray, p0, None, **lk)
         back, ok2, _ = cv2.calcOpticalFlowPyrLK(gray, gray0, p1, None, **lk)
-        good = (ok1.ravel() == 1) & (ok2.ravel() == 1) & (np.linalg.norm((back - p0).reshape(-1, 2), axis=1) < 0.3)
+        good = (
+            (ok1.ravel() == 1)
+            & (ok2.ravel() == 1)
+            & (np.linalg.norm((back - p0).reshape(-1, 2), axis=1) < 0.3)
+        )
         self._points = p1[good]
         if good.sum() < MIN_TRACKS:
             return None

@@ -27,17 +27,23 @@ def run(args: argparse.Namespace) -> int:
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(
-        name, help=help,
+        name,
+        help=help,
         usage="%(prog)s --calibration FILE --video URL|none --gps-input URL|none [--config FILE] [options]",
         description="The live service: reads the UAV's MAVLink telemetry and video and the UUV's depth (Zenoh); "
-                    "publishes each fix on Zenoh (--fix-key) and sends GPS_INPUT to the UUV's autopilot "
-                    "(--gps-input); health on --status-key once a second. --video and --gps-input are named, or "
-                    "said to be none. Several UUVs in one video: one [[uuv]] table each in the --config file (id, its "
-                    "depth, keys, GPS_INPUT link, init_bbox). Stops on Ctrl-C or SIGTERM.",
+        "publishes each fix on Zenoh (--fix-key) and sends GPS_INPUT to the UUV's autopilot "
+        "(--gps-input); health on --status-key once a second. --video and --gps-input are named, or "
+        "said to be none. Several UUVs in one video: one [[uuv]] table each in the --config file (id, its "
+        "depth, keys, GPS_INPUT link, init_bbox). Stops on Ctrl-C or SIGTERM.",
         epilog="example: skyfix run --calibration cal.toml --mavlink udpin:0.0.0.0:14550 --video udp://0.0.0.0:5600 "
-               "--zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660")
-    p.add_argument("--check", action="store_true", help="check the configuration end to end (files, URLs and their "
-                   "schemes, credentials, free ports), print what was checked and exit 0, or 2 at the first "
-                   "mistake; starts nothing")
+        "--zenoh-connect tcp/192.168.2.2:7447 --gps-input udpout:192.168.2.2:14660",
+    )
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="check the configuration end to end (files, URLs and their "
+        "schemes, credentials, free ports), print what was checked and exit 0, or 2 at the first "
+        "mistake; starts nothing",
+    )
     config.add_arguments(p)
     p.set_defaults(func=run)

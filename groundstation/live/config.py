@@ -75,30 +75,54 @@ class UuvOptions:
     keys of one UUV, and the keys of each ``[[uuv]]`` table (:class:`UuvConfig`)."""
 
     depth_source: Literal["skyfix", "blueos", "mavlink"] = Field(
-        "skyfix", description="the UUV's depth: skyfix JSON {t, depth_m} on --depth-key; blueos: ArduSub's depth "
+        "skyfix",
+        description="the UUV's depth: skyfix JSON {t, depth_m} on --depth-key; blueos: ArduSub's depth "
         "sensor from BlueOS's mavlink-server on Zenoh (--depth-key mavlink/1/1); mavlink: ArduSub's over "
-        "--depth-mavlink")
-    depth_key: Text = Field("uuv/depth", description="Zenoh key of the depth: skyfix JSON's key, or with "
-                            "--depth-source blueos the autopilot's prefix mavlink/{system}/{component} (default "
-                            "there: mavlink/1/1)")
-    depth_mavlink: Text | None = Field(None, description="with --depth-source mavlink: ArduSub's MAVLink, a pymavlink "
-                                       "string (tcp:192.168.2.2:5777, udpin:0.0.0.0:14770, /dev/ttyUSB1,115200)")
-    gps_input: NamedOrNone = Field(None, description="the UUV autopilot for GPS_INPUT: a pymavlink string "
-                                   "(udpout:192.168.2.2:14550) or zenoh:mavlink/in (BlueOS); none: no GPS_INPUT "
-                                   "(required: a run that names neither is refused)")
-    gps_input_signing_key: FilePath | None = Field(None, description="sign GPS_INPUT (MAVLink 2) with the key in "
-                                                   "this file: 32 bytes, or 64 hex digits")
-    uuv_position_key: Text | None = Field(None, description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
-                                          "BlueOS publishes it (mavlink/1/1/GLOBAL_POSITION_INT): acquire the UUV "
-                                          "near it without a selection")
-    uuv_hint: Text | None = Field(None, description="LAT,LON (degrees) where to look for the UUV until its own "
-                                  "estimate arrives")
+        "--depth-mavlink",
+    )
+    depth_key: Text = Field(
+        "uuv/depth",
+        description="Zenoh key of the depth: skyfix JSON's key, or with "
+        "--depth-source blueos the autopilot's prefix mavlink/{system}/{component} (default "
+        "there: mavlink/1/1)",
+    )
+    depth_mavlink: Text | None = Field(
+        None,
+        description="with --depth-source mavlink: ArduSub's MAVLink, a pymavlink "
+        "string (tcp:192.168.2.2:5777, udpin:0.0.0.0:14770, /dev/ttyUSB1,115200)",
+    )
+    gps_input: NamedOrNone = Field(
+        None,
+        description="the UUV autopilot for GPS_INPUT: a pymavlink string "
+        "(udpout:192.168.2.2:14550) or zenoh:mavlink/in (BlueOS); none: no GPS_INPUT "
+        "(required: a run that names neither is refused)",
+    )
+    gps_input_signing_key: FilePath | None = Field(
+        None,
+        description="sign GPS_INPUT (MAVLink 2) with the key in "
+        "this file: 32 bytes, or 64 hex digits",
+    )
+    uuv_position_key: Text | None = Field(
+        None,
+        description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
+        "BlueOS publishes it (mavlink/1/1/GLOBAL_POSITION_INT): acquire the UUV "
+        "near it without a selection",
+    )
+    uuv_hint: Text | None = Field(
+        None,
+        description="LAT,LON (degrees) where to look for the UUV until its own estimate arrives",
+    )
 
     @model_validator(mode="after")
     def _signing_needs_a_mavlink_link(self):
-        if self.gps_input_signing_key and (not self.gps_input or self.gps_input.startswith("zenoh:")):
-            raise Invalid("gps_input_signing_key", self.gps_input_signing_key,
-                          "signing needs a MAVLink --gps-input link (not zenoh:)")
+        if self.gps_input_signing_key and (
+            not self.gps_input or self.gps_input.startswith("zenoh:")
+        ):
+            raise Invalid(
+                "gps_input_signing_key",
+                self.gps_input_signing_key,
+                "signing needs a MAVLink --gps-input link (not zenoh:)",
+            )
         return self
 
     @model_validator(mode="after")
@@ -110,11 +134,18 @@ class UuvOptions:
                 if self.depth_key != "uuv/depth":  # the skyfix default: BLUEOS_PREFIX is meant
                     raise Invalid("depth_key", self.depth_key, str(e)) from None
         if self.depth_source == "mavlink" and not self.depth_mavlink:
-            raise Invalid("depth_mavlink", self.depth_mavlink, "--depth-source mavlink needs the link: "
-                          "depth_mavlink = \"tcp:HOST:PORT\" (or udpin:, a serial device)")
+            raise Invalid(
+                "depth_mavlink",
+                self.depth_mavlink,
+                "--depth-source mavlink needs the link: "
+                'depth_mavlink = "tcp:HOST:PORT" (or udpin:, a serial device)',
+            )
         if self.depth_mavlink and self.depth_source != "mavlink":
-            raise Invalid("depth_mavlink", self.depth_mavlink, f"used only with depth_source = \"mavlink\" "
-                          f"(it is {self.depth_source!r})")
+            raise Invalid(
+                "depth_mavlink",
+                self.depth_mavlink,
+                f'used only with depth_source = "mavlink" (it is {self.depth_source!r})',
+            )
         return self
 
     @property
@@ -140,14 +171,25 @@ class UuvConfig(UuvOptions):
     ``skyfix/uuv/{id}/``."""
 
     id: Annotated[Text, StringConstraints(pattern=r"^[A-Za-z0-9_-]{1,32}$")] = Field(
-        description="the UUV's id: letters, digits, - and _ (its keys are skyfix/uuv/{id}/...)")
-    fix_key: Text | None = Field(None, description="Zenoh key of its fixes (default: skyfix/uuv/{id}/fix)")
-    status_key: Text | None = Field(None, description="Zenoh key of its 1 Hz status (default: skyfix/uuv/{id}/status)")
-    alive_key: Text | None = Field(None, description="its liveliness token (default: skyfix/uuv/{id}/alive)")
-    control_prefix: Text | None = Field(None, description="prefix of its operator commands (default: "
-                                        "skyfix/uuv/{id}/cmd)")
-    init_bbox: Vector4 | None = Field(None, description="x, y, w, h (pixels) of this UUV in the first frame; "
-                                      "without it, a selection or its own position estimate")
+        description="the UUV's id: letters, digits, - and _ (its keys are skyfix/uuv/{id}/...)"
+    )
+    fix_key: Text | None = Field(
+        None, description="Zenoh key of its fixes (default: skyfix/uuv/{id}/fix)"
+    )
+    status_key: Text | None = Field(
+        None, description="Zenoh key of its 1 Hz status (default: skyfix/uuv/{id}/status)"
+    )
+    alive_key: Text | None = Field(
+        None, description="its liveliness token (default: skyfix/uuv/{id}/alive)"
+    )
+    control_prefix: Text | None = Field(
+        None, description="prefix of its operator commands (default: skyfix/uuv/{id}/cmd)"
+    )
+    init_bbox: Vector4 | None = Field(
+        None,
+        description="x, y, w, h (pixels) of this UUV in the first frame; "
+        "without it, a selection or its own position estimate",
+    )
 
     def __post_init__(self):
         for name in ("fix", "status", "alive"):
@@ -159,111 +201,216 @@ class UuvConfig(UuvOptions):
 
 #: A UUV's keys of its own: two UUVs never share one (GPS_INPUT names no vehicle: two UUVs on one link would
 #: each take the other's position too).
-OWN_KEYS = ("depth_input_key", "depth_mavlink", "gps_input", "uuv_position_key", "fix_key", "status_key",
-            "alive_key", "control_prefix")
+OWN_KEYS = (
+    "depth_input_key",
+    "depth_mavlink",
+    "gps_input",
+    "uuv_position_key",
+    "fix_key",
+    "status_key",
+    "alive_key",
+    "control_prefix",
+)
 
 
 @dataclass(frozen=True, kw_only=True, config=CLOSED)
 class RunConfig(UuvOptions):
     """The options of ``skyfix run`` (flags and config file keys)."""
 
-    calibration: FilePath = Field(description="TOML with the [camera], [mount], [water], [tracker] tables of "
-                                  "session.toml v1 (and optionally [uncertainty], [timing])")
-    mavlink: Text = Field("udpin:0.0.0.0:14550", description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
-                          "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)")
-    mavlink_backend: Literal["pymavlink", "mavsdk"] = Field("pymavlink", description="library reading the UAV's MAVLink")
-    mavlink_peer: Text | None = Field(None, description="udpin: the UAV's address HOST:PORT, the only sender taken "
-                                      "(default: the first whose datagram holds the UAV's messages; others counted "
-                                      "in foreign_datagrams); any: every sender (a radio channel or router several "
-                                      "systems share: no lock)")
-    mavlink_signing_key: FilePath | None = Field(None, description="require the UAV's MAVLink signed (MAVLink 2) "
-                                                 "with the key in this file (32 bytes, or 64 hex digits); skyfix's "
-                                                 "messages to it are signed")
-    video: NamedOrNone = Field(None, description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
-                               "a file (anything FFmpeg opens); none: no video (required: a run that names neither "
-                               "is refused)")
+    calibration: FilePath = Field(
+        description="TOML with the [camera], [mount], [water], [tracker] tables of "
+        "session.toml v1 (and optionally [uncertainty], [timing])"
+    )
+    mavlink: Text = Field(
+        "udpin:0.0.0.0:14550",
+        description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
+        "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)",
+    )
+    mavlink_backend: Literal["pymavlink", "mavsdk"] = Field(
+        "pymavlink", description="library reading the UAV's MAVLink"
+    )
+    mavlink_peer: Text | None = Field(
+        None,
+        description="udpin: the UAV's address HOST:PORT, the only sender taken "
+        "(default: the first whose datagram holds the UAV's messages; others counted "
+        "in foreign_datagrams); any: every sender (a radio channel or router several "
+        "systems share: no lock)",
+    )
+    mavlink_signing_key: FilePath | None = Field(
+        None,
+        description="require the UAV's MAVLink signed (MAVLink 2) "
+        "with the key in this file (32 bytes, or 64 hex digits); skyfix's "
+        "messages to it are signed",
+    )
+    video: NamedOrNone = Field(
+        None,
+        description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
+        "a file (anything FFmpeg opens); none: no video (required: a run that names neither "
+        "is refused)",
+    )
     video_latency_ms: within(0, 2000) | Literal["auto"] = Field(
-        0.0, description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
-        "'auto': estimated from the image's motion against the camera attitude")
+        0.0,
+        description="glass to first packet (camera + encoder + network), ms, as skyfix latency measures it; "
+        "'auto': estimated from the image's motion against the camera attitude",
+    )
     height_from_size: Literal["auto", "check", "off"] = Field(
-        "check", description="the camera's height above the water from the UUV's size in the video ([uuv]): check "
+        "check",
+        description="the camera's height above the water from the UUV's size in the video ([uuv]): check "
         "(estimate it, show it, warn when the configured height disagrees), auto (also hand it to the height's "
-        "fusion once sure), off")
-    no_request_rates: Flag = Field(False, description="do not ask the autopilot for the telemetry rates skyfix needs "
-                                   "(a shared link)")
-    telemetry_wait_ms: within(0, 2000) = Field(300.0, description="longest wait of a frame for the attitude sample "
-                                               "after it (slow radios need ~300)")
-    require_inputs: Flag = Field(False, description="exit 2 when the UAV's MAVLink, the depth or the video has sent "
-                                 "nothing 10 s after start (default: keep running and keep saying so)")
-    zenoh_connect: tuple[Text, ...] = Field((), description="Zenoh endpoint to connect to, e.g. "
-                                            "tcp/192.168.2.2:7447 (repeatable)")
-    zenoh_listen: tuple[Text, ...] = Field((), description="Zenoh endpoint to listen on (repeatable; default: "
-                                           f"{LOCAL_ENDPOINT} unless --zenoh-config, where skyfix status looks)")
-    zenoh_config: FilePath | None = Field(None, description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
-                                          "endpoints above are added to it")
+        "fusion once sure), off",
+    )
+    no_request_rates: Flag = Field(
+        False,
+        description="do not ask the autopilot for the telemetry rates skyfix needs (a shared link)",
+    )
+    telemetry_wait_ms: within(0, 2000) = Field(
+        300.0,
+        description="longest wait of a frame for the attitude sample "
+        "after it (slow radios need ~300)",
+    )
+    require_inputs: Flag = Field(
+        False,
+        description="exit 2 when the UAV's MAVLink, the depth or the video has sent "
+        "nothing 10 s after start (default: keep running and keep saying so)",
+    )
+    zenoh_connect: tuple[Text, ...] = Field(
+        (), description="Zenoh endpoint to connect to, e.g. tcp/192.168.2.2:7447 (repeatable)"
+    )
+    zenoh_listen: tuple[Text, ...] = Field(
+        (),
+        description="Zenoh endpoint to listen on (repeatable; default: "
+        f"{LOCAL_ENDPOINT} unless --zenoh-config, where skyfix status looks)",
+    )
+    zenoh_config: FilePath | None = Field(
+        None,
+        description="Zenoh JSON5 config file (deploy/zenoh/*.json5); the "
+        "endpoints above are added to it",
+    )
     zenoh_multicast: Flag = Field(False, description="enable Zenoh multicast scouting")
-    zenoh_insecure: Flag = Field(False, description="allow Zenoh without TLS, mutual authentication and access "
-                                 "control beyond this machine (a network of the team's own only: anyone on it "
-                                 "can command skyfix and feed it; deploy/zenoh/README.md)")
+    zenoh_insecure: Flag = Field(
+        False,
+        description="allow Zenoh without TLS, mutual authentication and access "
+        "control beyond this machine (a network of the team's own only: anyone on it "
+        "can command skyfix and feed it; deploy/zenoh/README.md)",
+    )
     uuv_max_vertical_speed_mps: Annotated[Number, Gt(0)] = Field(
-        BLUEROV2_MAX_VERTICAL_SPEED_MPS, description="the UUV's top vertical speed (a BlueROV2); a depth jumping "
-        "further is refused")
+        BLUEROV2_MAX_VERTICAL_SPEED_MPS,
+        description="the UUV's top vertical speed (a BlueROV2); a depth jumping further is refused",
+    )
     fix_key: Text = Field("skyfix/uuv/fix", description="Zenoh key the fixes are published on")
-    status_key: Text = Field("skyfix/status", description="Zenoh key of the 1 Hz health/status JSON")
+    status_key: Text = Field(
+        "skyfix/status", description="Zenoh key of the 1 Hz health/status JSON"
+    )
     alive_key: Text = Field("skyfix/alive", description="Zenoh liveliness token key")
-    gps_input_hz: Annotated[Number, Ge(5)] = Field(10.0, description="minimum GPS_INPUT rate (Hz; ArduPilot needs "
-                                                   "≥ 5); each new fix is also sent at once")
-    fix_max_age_ms: NonNegative = Field(500.0, description="an ok fix older than this is sent to the autopilot as "
-                                        "'no fix'")
-    tracker: Literal[TRACKERS] = Field("default", description="tracker backend: default (telemetry-guided "
-                                       "template matching), kcf, csrt; mil (the paper's, never reports a loss: "
-                                       "refused with --gps-input)")
-    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(MAX_SPEED_MPS["bluerov2"], description="safety gate: the "
-                                                        "UUV's top speed (a BlueROV2): fixes are judged against a track "
-                                                        "of the UUV that cannot move faster")
-    uuv_max_accel_mps2: Annotated[Number, Gt(0)] = Field(MAX_ACCEL_MPS2["bluerov2"], description="safety gate: the "
-                                                         "UUV's largest horizontal acceleration (a BlueROV2 at full "
-                                                         "thrust from rest, about 3 m/s²): a fix the track's UUV "
-                                                         "cannot reach is not sent")
-    uuv_water_accel_mps2: Annotated[Number, Ge(0)] = Field(WATER_ACCEL_MPS2, description="safety gate: the "
-                                                           "largest horizontal acceleration the water gives the UUV "
-                                                           "while ArduSub's horizontal thrusters are idle (read with "
-                                                           "depth_source blueos or mavlink); raise it in waves")
-    uuv_max_reach_m: Annotated[Number, Gt(0)] = Field(MAX_REACH_M, description="safety gate: however long since "
-                                                      "the last trusted fix (a loss, a restart, a selection), a new "
-                                                      "target further than this (m, and the fixes' shared error) "
-                                                      "from it is not the UUV until the operator confirms it")
-    thruster_deadband_us: within(0, 400) = Field(DEADBAND_US, description="pulses within this of 1500 µs do not "
-                                                 "turn the UUV's thrusters (its ESCs' deadband)")
-    fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(2.5, description="safety gate: a fix whose horizontal "
-                                                      "accuracy is worse than this (m) is not sent as valid")
-    uuv_prior_sigma_m: within(0.01, 1000) = Field(3.0, description="1-sigma (m) of the UUV's own estimate or hint "
-                                                   "(the search covers 3 sigma)")
-    select_history_s: within(0, 10) = Field(1.0, description="seconds of tracked frames held so a selection can "
-                                            "refer to a frame the operator saw")
-    control_prefix: Text = Field("skyfix/cmd", description="Zenoh key prefix of the operator commands "
-                                 "(<prefix>/select, release, acquire, status)")
-    ui: Text = Field("127.0.0.1:8080", description="HOST:PORT of the web page (video, target selection, map, "
-                     "health); beyond localhost (0.0.0.0:8080) it needs the token in the URL skyfix prints; port 0: "
-                     "any free port")
+    gps_input_hz: Annotated[Number, Ge(5)] = Field(
+        10.0,
+        description="minimum GPS_INPUT rate (Hz; ArduPilot needs "
+        "≥ 5); each new fix is also sent at once",
+    )
+    fix_max_age_ms: NonNegative = Field(
+        500.0, description="an ok fix older than this is sent to the autopilot as 'no fix'"
+    )
+    tracker: Literal[TRACKERS] = Field(
+        "default",
+        description="tracker backend: default (telemetry-guided "
+        "template matching), kcf, csrt; mil (the paper's, never reports a loss: "
+        "refused with --gps-input)",
+    )
+    uuv_max_speed_mps: Annotated[Number, Gt(0)] = Field(
+        MAX_SPEED_MPS["bluerov2"],
+        description="safety gate: the "
+        "UUV's top speed (a BlueROV2): fixes are judged against a track "
+        "of the UUV that cannot move faster",
+    )
+    uuv_max_accel_mps2: Annotated[Number, Gt(0)] = Field(
+        MAX_ACCEL_MPS2["bluerov2"],
+        description="safety gate: the "
+        "UUV's largest horizontal acceleration (a BlueROV2 at full "
+        "thrust from rest, about 3 m/s²): a fix the track's UUV "
+        "cannot reach is not sent",
+    )
+    uuv_water_accel_mps2: Annotated[Number, Ge(0)] = Field(
+        WATER_ACCEL_MPS2,
+        description="safety gate: the "
+        "largest horizontal acceleration the water gives the UUV "
+        "while ArduSub's horizontal thrusters are idle (read with "
+        "depth_source blueos or mavlink); raise it in waves",
+    )
+    uuv_max_reach_m: Annotated[Number, Gt(0)] = Field(
+        MAX_REACH_M,
+        description="safety gate: however long since "
+        "the last trusted fix (a loss, a restart, a selection), a new "
+        "target further than this (m, and the fixes' shared error) "
+        "from it is not the UUV until the operator confirms it",
+    )
+    thruster_deadband_us: within(0, 400) = Field(
+        DEADBAND_US,
+        description="pulses within this of 1500 µs do not "
+        "turn the UUV's thrusters (its ESCs' deadband)",
+    )
+    fix_max_h_acc_m: Annotated[Number, Gt(0)] = Field(
+        2.5,
+        description="safety gate: a fix whose horizontal "
+        "accuracy is worse than this (m) is not sent as valid",
+    )
+    uuv_prior_sigma_m: within(0.01, 1000) = Field(
+        3.0, description="1-sigma (m) of the UUV's own estimate or hint (the search covers 3 sigma)"
+    )
+    select_history_s: within(0, 10) = Field(
+        1.0,
+        description="seconds of tracked frames held so a selection can "
+        "refer to a frame the operator saw",
+    )
+    control_prefix: Text = Field(
+        "skyfix/cmd",
+        description="Zenoh key prefix of the operator commands "
+        "(<prefix>/select, release, acquire, status)",
+    )
+    ui: Text = Field(
+        "127.0.0.1:8080",
+        description="HOST:PORT of the web page (video, target selection, map, "
+        "health); beyond localhost (0.0.0.0:8080) it needs the token in the URL skyfix prints; port 0: "
+        "any free port",
+    )
     no_ui: Flag = Field(False, description="serve no web page")
-    ui_token: Text | None = Field(None, description="the web page's token (default: none on localhost, a random one "
-                                  "beyond it); given, every request needs it, on localhost too")
-    record: DirPath | None = Field(None, description="record the run as a session directory (format v1): a new or "
-                                   "empty folder (a start into a recording is refused: see --recordings)")
-    recordings: DirPath | None = Field(None, description="record each start as a session directory of its own in "
-                                       "this folder, named by the start's UTC time YYYYmmdd-HHMMSS (-2, -3, … when "
-                                       "taken): a restart never overwrites nor refuses")
-    state_dir: DirPath | None = Field(None, description="folder where each UUV's last trusted track is kept for the "
-                                      "next start (track-<id>.json; default: 'state' beside the --recordings folder, "
-                                      "none without it)")
-    track_max_age_s: NonNegative = Field(300.0, description="a kept track older than this (s) is not read at the "
-                                         "start: the gates start without the UUV's last track")
-    duration_s: NonNegative | None = Field(None, description="stop after this many seconds (tests, benchmarks)")
-    stats: FilePath | None = Field(None, description="write final counters and latency percentiles to this JSON "
-                                   "file at exit")
-    uuv: tuple[UuvConfig, ...] = Field((), description="several UUVs in one video, one [[uuv]] table each (config "
-                                       "file only); the UUV's own options above are then set in each table")
+    ui_token: Text | None = Field(
+        None,
+        description="the web page's token (default: none on localhost, a random one "
+        "beyond it); given, every request needs it, on localhost too",
+    )
+    record: DirPath | None = Field(
+        None,
+        description="record the run as a session directory (format v1): a new or "
+        "empty folder (a start into a recording is refused: see --recordings)",
+    )
+    recordings: DirPath | None = Field(
+        None,
+        description="record each start as a session directory of its own in "
+        "this folder, named by the start's UTC time YYYYmmdd-HHMMSS (-2, -3, … when "
+        "taken): a restart never overwrites nor refuses",
+    )
+    state_dir: DirPath | None = Field(
+        None,
+        description="folder where each UUV's last trusted track is kept for the "
+        "next start (track-<id>.json; default: 'state' beside the --recordings folder, "
+        "none without it)",
+    )
+    track_max_age_s: NonNegative = Field(
+        300.0,
+        description="a kept track older than this (s) is not read at the "
+        "start: the gates start without the UUV's last track",
+    )
+    duration_s: NonNegative | None = Field(
+        None, description="stop after this many seconds (tests, benchmarks)"
+    )
+    stats: FilePath | None = Field(
+        None, description="write final counters and latency percentiles to this JSON file at exit"
+    )
+    uuv: tuple[UuvConfig, ...] = Field(
+        (),
+        description="several UUVs in one video, one [[uuv]] table each (config "
+        "file only); the UUV's own options above are then set in each table",
+    )
 
     @model_validator(mode="after")
     def _one_uuv_or_tables(self):
@@ -272,19 +419,31 @@ class RunConfig(UuvOptions):
         single = {f: v for f, v in _uuv_defaults().items() if getattr(self, f) != v}
         if single:
             name = next(iter(single))
-            raise Invalid(name, getattr(self, name), "set per UUV, in each [[uuv]] table, when there are several")
+            raise Invalid(
+                name,
+                getattr(self, name),
+                "set per UUV, in each [[uuv]] table, when there are several",
+            )
         if self.recording:  # the first UUV's records are the session's own, named uuv1 when read
             for i, u in enumerate(self.uuv[1:], 1):
                 if u.id == PRIMARY_UUV:
-                    raise Invalid(f"uuv[{i}].id", u.id, f"with --record, {PRIMARY_UUV} is the first [[uuv]]'s name "
-                                  "in the recording (its records are the session's own): give this UUV another id")
+                    raise Invalid(
+                        f"uuv[{i}].id",
+                        u.id,
+                        f"with --record, {PRIMARY_UUV} is the first [[uuv]]'s name "
+                        "in the recording (its records are the session's own): give this UUV another id",
+                    )
         for key in ("id", *OWN_KEYS):
             seen = {}
             for i, u in enumerate(self.uuv):
                 value = getattr(u, key)
                 if value is not None and value in seen:
-                    raise Invalid(f"uuv[{i}].{key}", value, f"also uuv[{seen[value]}]'s ({self.uuv[seen[value]].id}): "
-                                  "each UUV has its own")
+                    raise Invalid(
+                        f"uuv[{i}].{key}",
+                        value,
+                        f"also uuv[{seen[value]}]'s ({self.uuv[seen[value]].id}): "
+                        "each UUV has its own",
+                    )
                 seen[value] = i
         return self
 
@@ -319,7 +478,11 @@ class RunConfig(UuvOptions):
     @model_validator(mode="after")
     def _record_needs_pymavlink(self):
         if self.record and self.recordings:
-            raise Invalid("recordings", self.recordings, f"--record {self.record} is given too: one or the other")
+            raise Invalid(
+                "recordings",
+                self.recordings,
+                f"--record {self.record} is given too: one or the other",
+            )
         if self.recording and self.mavlink_backend == "mavsdk":
             key = "record" if self.record else "recordings"
             raise Invalid(key, self.recording, "recording needs --mavlink-backend pymavlink")
@@ -329,19 +492,37 @@ class RunConfig(UuvOptions):
     def _uav_link_locks(self):
         if self.mavlink_peer is not None:
             host, colon, port = self.mavlink_peer.rpartition(":")
-            if not (self.mavlink.startswith(("udpin:", "udp:")) and self.mavlink_backend == "pymavlink"):
-                raise Invalid("mavlink_peer", self.mavlink_peer, f"for a udpin: link (mavlink is {self.mavlink!r})")
-            if self.mavlink_peer != ANY_PEER and not (host and colon and port.isdigit() and int(port) < 65536):
-                raise Invalid("mavlink_peer", self.mavlink_peer, f"expected HOST:PORT or {ANY_PEER}")
+            if not (
+                self.mavlink.startswith(("udpin:", "udp:")) and self.mavlink_backend == "pymavlink"
+            ):
+                raise Invalid(
+                    "mavlink_peer",
+                    self.mavlink_peer,
+                    f"for a udpin: link (mavlink is {self.mavlink!r})",
+                )
+            if self.mavlink_peer != ANY_PEER and not (
+                host and colon and port.isdigit() and int(port) < 65536
+            ):
+                raise Invalid(
+                    "mavlink_peer", self.mavlink_peer, f"expected HOST:PORT or {ANY_PEER}"
+                )
         if self.mavlink_signing_key and self.mavlink_backend != "pymavlink":
-            raise Invalid("mavlink_signing_key", self.mavlink_signing_key, "signing needs --mavlink-backend pymavlink")
+            raise Invalid(
+                "mavlink_signing_key",
+                self.mavlink_signing_key,
+                "signing needs --mavlink-backend pymavlink",
+            )
         return self
 
     @model_validator(mode="after")
     def _gps_input_needs_a_tracker_that_reports_a_loss(self):
         if self.gps_input and self.tracker in WITHOUT_LOSS_SIGNAL:
-            raise Invalid("tracker", self.tracker, "this tracker never reports losing the UUV: not a source for "
-                          "GPS_INPUT (use default, kcf or csrt; mil is for offline comparisons)")
+            raise Invalid(
+                "tracker",
+                self.tracker,
+                "this tracker never reports losing the UUV: not a source for "
+                "GPS_INPUT (use default, kcf or csrt; mil is for offline comparisons)",
+            )
         return self
 
     @model_validator(mode="after")
@@ -355,11 +536,20 @@ class RunConfig(UuvOptions):
                     raise Invalid(key, value, str(e)) from None
         return self
 
+
 def _uuv_defaults() -> dict:
     """The top-level options a UUV of its own has, with their defaults."""
     fields = RunConfig.__pydantic_fields__
-    return {name: fields[name].default for name in (*UuvOptions.__pydantic_fields__, "fix_key", "status_key",
-                                                    "alive_key", "control_prefix")}
+    return {
+        name: fields[name].default
+        for name in (
+            *UuvOptions.__pydantic_fields__,
+            "fix_key",
+            "status_key",
+            "alive_key",
+            "control_prefix",
+        )
+    }
 
 
 def _base(tp):
@@ -379,11 +569,17 @@ def _base(tp):
 def _path_marker(name: str) -> _RelativeToFile | None:
     """The path marker of a field (FilePath, DirPath, or either | None), None for other fields."""
     info = RunConfig.__pydantic_fields__[name]
-    metadata = [*info.metadata, *(m for a in get_args(info.annotation) for m in getattr(a, "__metadata__", ()))]
+    metadata = [
+        *info.metadata,
+        *(m for a in get_args(info.annotation) for m in getattr(a, "__metadata__", ())),
+    ]
     return next((m for m in metadata if isinstance(m, _RelativeToFile)), None)
 
 
-METAVARS = {"ui": "HOST:PORT", "ui_token": "TOKEN"}  # options whose value is neither a path, a key nor a URL
+METAVARS = {
+    "ui": "HOST:PORT",
+    "ui_token": "TOKEN",
+}  # options whose value is neither a path, a key nor a URL
 
 
 def _metavar(name: str, kind) -> str:
@@ -418,9 +614,15 @@ def flag(name: str) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``--config`` and one flag per :class:`RunConfig` field (argparse default None: not given)."""
     required = parser.add_argument_group("required (a flag, or a key in the --config file)")
-    options = parser.add_argument_group("optional (a flag wins over the same key in the --config file)")
-    options.add_argument("--config", metavar="FILE", help="TOML file of run options, keys as the flags' names with "
-                         "underscores (deploy/field.toml)")
+    options = parser.add_argument_group(
+        "optional (a flag wins over the same key in the --config file)"
+    )
+    options.add_argument(
+        "--config",
+        metavar="FILE",
+        help="TOML file of run options, keys as the flags' names with "
+        "underscores (deploy/field.toml)",
+    )
     for name, info in RunConfig.__pydantic_fields__.items():
         if name == "uuv":  # tables: the config file's [[uuv]]
             continue
@@ -447,7 +649,9 @@ def read_toml(path) -> dict:
     try:
         return tomllib.loads(Path(path).read_text())
     except OSError as e:
-        raise ConfigError(str(path), "(file)", str(path), f"cannot read: {e.strerror or e}") from None
+        raise ConfigError(
+            str(path), "(file)", str(path), f"cannot read: {e.strerror or e}"
+        ) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise ConfigError(str(path), "(file)", str(path), f"malformed TOML: {e}") from None
 
@@ -458,8 +662,12 @@ def read_config_file(path: str) -> dict:
     tables = data.get("uuv") if isinstance(data.get("uuv"), list) else []
     for table in [data, *(t for t in tables if isinstance(t, dict))]:
         for key, value in table.items():
-            if key in RunConfig.__pydantic_fields__ and _path_marker(key) and isinstance(value, str) \
-                    and not Path(value).is_absolute():
+            if (
+                key in RunConfig.__pydantic_fields__
+                and _path_marker(key)
+                and isinstance(value, str)
+                and not Path(value).is_absolute()
+            ):
                 table[key] = str(Path(path).parent / value)
     return data
 
@@ -483,13 +691,21 @@ def unnamed_inputs(args: argparse.Namespace) -> None:
     given = {**file_values, **flags}
     tables = given.get("uuv") if isinstance(given.get("uuv"), list) else []
     for name in NAMED_INPUTS:
-        where = [(f"uuv[{i}].{name}", t) for i, t in enumerate(tables) if isinstance(t, dict)] \
-            if tables and name in UuvOptions.__pydantic_fields__ else [(flag(name), given)]
+        where = (
+            [(f"uuv[{i}].{name}", t) for i, t in enumerate(tables) if isinstance(t, dict)]
+            if tables and name in UuvOptions.__pydantic_fields__
+            else [(flag(name), given)]
+        )
         for key, values in where:
             if values.get(name) is None:
                 source = args.config if tables and key.startswith("uuv[") else "options"
-                raise ConfigError(source, key, None, f"missing: name it, or say {NONE} ({flag(name)} {NONE}, or "
-                                  f"{name} = \"{NONE}\" in the config file)")
+                raise ConfigError(
+                    source,
+                    key,
+                    None,
+                    f"missing: name it, or say {NONE} ({flag(name)} {NONE}, or "
+                    f'{name} = "{NONE}" in the config file)',
+                )
 
 
 def run_config(args: argparse.Namespace) -> RunConfig:
@@ -502,8 +718,9 @@ def run_config(args: argparse.Namespace) -> RunConfig:
         if top in file_values and top not in flags:
             raise ConfigError(args.config, e.key, e.value, e.why) from None
         why = "required (a flag or the --config file)" if e.why == "missing" else e.why
-        raise ConfigError("options", flag(top) if top in RunConfig.__pydantic_fields__ else e.key,
-                          e.value, why) from None
+        raise ConfigError(
+            "options", flag(top) if top in RunConfig.__pydantic_fields__ else e.key, e.value, why
+        ) from None
 
 
 def load_calibration(path: str) -> Calibration:

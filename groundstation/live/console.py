@@ -67,8 +67,12 @@ def summary(status: dict) -> str:
         where = fix.get("status")
         if where == "ok":
             acc = fix.get("h_acc_m")
-            where = f"{fix['lat']:.7f}, {fix['lon']:.7f}" + (f" ±{acc:.2f} m" if acc is not None else "")
-        line.append(f"| fix frame {fix.get('frame')}: {where}, exposure {_age(now, fix.get('t'))} ago")
+            where = f"{fix['lat']:.7f}, {fix['lon']:.7f}" + (
+                f" ±{acc:.2f} m" if acc is not None else ""
+            )
+        line.append(
+            f"| fix frame {fix.get('frame')}: {where}, exposure {_age(now, fix.get('t'))} ago"
+        )
     lines = [" ".join(line)]
     inputs = []
     for name in ("video", "depth", "uuv_position"):
@@ -77,23 +81,37 @@ def summary(status: dict) -> str:
             inputs.append(f"{name} age {part.get('age_s', '-')} s")
             if name == "depth" and part.get("depth_m") is not None:
                 sigma = part.get("sigma_m")
-                inputs[-1] += (f" ({part['depth_m']:.2f} m" + (f" ±{sigma:.2f}" if sigma is not None else "")
-                               + f", {part.get('source')})")
+                inputs[-1] += (
+                    f" ({part['depth_m']:.2f} m"
+                    + (f" ±{sigma:.2f}" if sigma is not None else "")
+                    + f", {part.get('source')})"
+                )
     pipeline = status.get("pipeline") or {}
     inputs.append(f"frames {pipeline.get('processed')} (dropped {pipeline.get('dropped')})")
     gps = status.get("gps_input")
     if gps:
         gates = gps.get("gates") or {}
-        inputs.append(f"GPS_INPUT sent {gps.get('sent')} (valid {gps.get('sent_valid')}), gates {gates.get('state')}")
+        inputs.append(
+            f"GPS_INPUT sent {gps.get('sent')} (valid {gps.get('sent_valid')}), gates {gates.get('state')}"
+        )
     lines.append("  " + ", ".join(inputs))
     size = status.get("height_from_size")
-    if size and size.get("frames") and size.get("bias_m") is not None and size.get("sigma_m") is not None:
-        lines.append(f"  height from the UUV's size: configured - measured {size['bias_m']:+.2f} ± {size['sigma_m']:.2f} m"
-                     f" over {size['frames']} frames ({'sure' if size['sure'] else 'not sure'})")
+    if (
+        size
+        and size.get("frames")
+        and size.get("bias_m") is not None
+        and size.get("sigma_m") is not None
+    ):
+        lines.append(
+            f"  height from the UUV's size: configured - measured {size['bias_m']:+.2f} ± {size['sigma_m']:.2f} m"
+            f" over {size['frames']} frames ({'sure' if size['sure'] else 'not sure'})"
+        )
     ui = status.get("ui")
     if ui and ui.get("url"):
-        lines.append(f"  web page {ui['url']}{' (with its token)' if ui.get('token') else ''}, "
-                     f"{ui.get('viewers')} open")
+        lines.append(
+            f"  web page {ui['url']}{' (with its token)' if ui.get('token') else ''}, "
+            f"{ui.get('viewers')} open"
+        )
     return "\n".join(lines)
 
 
@@ -110,7 +128,9 @@ def _pair(text: str, n: int, what: str) -> list[float]:
 def run(args: argparse.Namespace) -> int:
     prefix = args.prefix.rstrip("/")
     local = not args.zenoh_connect and not args.zenoh_config
-    session = open_session((LOCAL_ENDPOINT,) if local else args.zenoh_connect or (), config_file=args.zenoh_config)
+    session = open_session(
+        (LOCAL_ENDPOINT,) if local else args.zenoh_connect or (), config_file=args.zenoh_config
+    )
     try:
         if args.command == "status":
             return _status(session, f"{prefix}/status", args)
@@ -150,25 +170,47 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` (status, select, release, acquire or confirm) with its one-line ``help`` (both from
     :data:`groundstation.cli.COMMANDS`)."""
     common = argparse.ArgumentParser(add_help=False)
-    common.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT",
-                        help="Zenoh endpoint of the service (or a router), e.g. tcp/192.168.2.1:7447 (repeatable; "
-                        f"default without --zenoh-config: {LOCAL_ENDPOINT}, where skyfix run listens by default)")
+    common.add_argument(
+        "--zenoh-connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="Zenoh endpoint of the service (or a router), e.g. tcp/192.168.2.1:7447 (repeatable; "
+        f"default without --zenoh-config: {LOCAL_ENDPOINT}, where skyfix run listens by default)",
+    )
     common.add_argument("--zenoh-config", help="Zenoh JSON5 config file (deploy/zenoh/*.json5)")
-    common.add_argument("--prefix", default="skyfix/cmd", help="the service's --control-prefix (default skyfix/cmd)")
-    common.add_argument("--timeout-s", type=float, default=3.0, help="how long to wait for the answer")
+    common.add_argument(
+        "--prefix", default="skyfix/cmd", help="the service's --control-prefix (default skyfix/cmd)"
+    )
+    common.add_argument(
+        "--timeout-s", type=float, default=3.0, help="how long to wait for the answer"
+    )
     common.set_defaults(func=run)
     if name == "status":
-        p = subparsers.add_parser(name, parents=[common], help=help, description=__doc__.split("\n\n")[0])
-        p.add_argument("--watch", action="store_true", help="ask again every --interval-s until Ctrl-C")
+        p = subparsers.add_parser(
+            name, parents=[common], help=help, description=__doc__.split("\n\n")[0]
+        )
+        p.add_argument(
+            "--watch", action="store_true", help="ask again every --interval-s until Ctrl-C"
+        )
         p.add_argument("--interval-s", type=float, default=1.0)
-        p.add_argument("--json", action="store_true", help="print the whole status as one JSON line")
+        p.add_argument(
+            "--json", action="store_true", help="print the whole status as one JSON line"
+        )
     elif name == "select":
         p = subparsers.add_parser(name, parents=[common], help=help)
         what = p.add_mutually_exclusive_group(required=True)
-        what.add_argument("--box", type=lambda s: _pair(s, 4, "X,Y,W,H"), metavar="X,Y,W,H",
-                          help="box around the UUV, pixels of the distorted frame")
-        what.add_argument("--point", type=lambda s: _pair(s, 2, "U,V"), metavar="U,V", help="a click on the UUV")
-        p.add_argument("--frame", type=int, help="the frame the box or click belongs to (default: the newest)")
+        what.add_argument(
+            "--box",
+            type=lambda s: _pair(s, 4, "X,Y,W,H"),
+            metavar="X,Y,W,H",
+            help="box around the UUV, pixels of the distorted frame",
+        )
+        what.add_argument(
+            "--point", type=lambda s: _pair(s, 2, "U,V"), metavar="U,V", help="a click on the UUV"
+        )
+        p.add_argument(
+            "--frame", type=int, help="the frame the box or click belongs to (default: the newest)"
+        )
     elif name in ("release", "acquire", "confirm"):
         subparsers.add_parser(name, parents=[common], help=help)
     else:

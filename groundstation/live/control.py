@@ -80,8 +80,14 @@ def jsonable(obj):
 
 
 def _numbers(key: str, value, n: int) -> tuple[float, ...]:
-    if (not isinstance(value, list) or len(value) != n
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value)):
+    if (
+        not isinstance(value, list)
+        or len(value) != n
+        or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+            for x in value
+        )
+    ):
         raise ControlError(f"select: {key} = {json.dumps(value)}: expected {n} finite numbers")
     return tuple(float(x) for x in value)
 
@@ -91,15 +97,17 @@ def parse_select(payload: bytes) -> dict:
     try:
         obj = json.loads(payload)
     except (ValueError, UnicodeDecodeError, RecursionError):
-        raise ControlError(f"select: payload {payload[:80]!r}: expected JSON {{\"box\": [x, y, w, h]}} or "
-                           "{\"point\": [u, v]}, optionally with \"frame\"") from None
+        raise ControlError(
+            f'select: payload {payload[:80]!r}: expected JSON {{"box": [x, y, w, h]}} or '
+            '{"point": [u, v]}, optionally with "frame"'
+        ) from None
     if not isinstance(obj, dict):
         raise ControlError(f"select: payload {json.dumps(obj)[:80]}: expected a JSON object")
     unknown = sorted(set(obj) - {"frame", "box", "point"})
     if unknown:
         raise ControlError(f"select: unknown key {unknown[0]!r} (known: frame, box, point)")
     if ("box" in obj) == ("point" in obj):
-        raise ControlError("select: give either \"box\": [x, y, w, h] or \"point\": [u, v]")
+        raise ControlError('select: give either "box": [x, y, w, h] or "point": [u, v]')
     frame = obj.get("frame")
     if frame is not None and (isinstance(frame, bool) or not isinstance(frame, int) or frame < 0):
         raise ControlError(f"select: frame = {json.dumps(frame)}: expected a frame number ≥ 0")
@@ -114,7 +122,12 @@ class Control:
     """The commands in-process (for the Zenoh queryables and a web page); ``status(now)`` is the service's;
     ``confirm()`` the safety gates' (:meth:`localizer.fix_gate.FixGate.confirm`; None: no GPS_INPUT)."""
 
-    def __init__(self, pipeline: Pipeline, status: Callable[[float], dict], confirm: Callable[[], dict] | None = None):
+    def __init__(
+        self,
+        pipeline: Pipeline,
+        status: Callable[[float], dict],
+        confirm: Callable[[], dict] | None = None,
+    ):
         self.pipeline = pipeline
         self._status = status
         self._confirm = confirm
@@ -135,7 +148,9 @@ class Control:
     def confirm(self) -> dict:
         """The target tracked now is the UUV: the safety gates take it without the reach test."""
         if self._confirm is None:
-            raise ControlError("confirm: this run sends no GPS_INPUT: there are no safety gates to confirm to")
+            raise ControlError(
+                "confirm: this run sends no GPS_INPUT: there are no safety gates to confirm to"
+            )
         done = self._confirm()
         log.info("the operator confirmed the target: %s", done["why"])
         return jsonable({**done, "target": self.pipeline.target})
@@ -166,8 +181,13 @@ class ZenohControl:
     key → function giving the latest JSON-ready value published there, or None); ``control`` None: the late
     joiners' only (``skyfix fuse`` takes no commands)."""
 
-    def __init__(self, session: zenoh.Session, control: Control | None, prefix: str,
-                 latest: dict[str, Callable[[], dict | None]]):
+    def __init__(
+        self,
+        session: zenoh.Session,
+        control: Control | None,
+        prefix: str,
+        latest: dict[str, Callable[[], dict | None]],
+    ):
         self.session = session
         self.control = control
         self.prefix = prefix.rstrip("/")
@@ -185,13 +205,21 @@ class ZenohControl:
                     loop.call_soon_threadsafe(handler, query)
                 except RuntimeError:  # loop closed: shutting down
                     query.drop()
+
             return on_query
 
-        queryables = [self.session.declare_queryable(f"{self.prefix}/{name}",
-                                                     hand_over(functools.partial(self._command, name)))
-                      for name in (COMMANDS if self.control else ())]
-        queryables += [self.session.declare_queryable(key, hand_over(functools.partial(self._latest, key, latest)))
-                       for key, latest in self.latest.items()]
+        queryables = [
+            self.session.declare_queryable(
+                f"{self.prefix}/{name}", hand_over(functools.partial(self._command, name))
+            )
+            for name in (COMMANDS if self.control else ())
+        ]
+        queryables += [
+            self.session.declare_queryable(
+                key, hand_over(functools.partial(self._latest, key, latest))
+            )
+            for key, latest in self.latest.items()
+        ]
         try:
             await asyncio.Event().wait()
         finally:
@@ -218,22 +246,31 @@ class ZenohControl:
             except ControlError as e:
                 self.refused += 1
                 log.warning("command %s refused: %s", key, e)
-                query.reply_err(json.dumps({"error": str(e)}), encoding=zenoh.Encoding.APPLICATION_JSON)
+                query.reply_err(
+                    json.dumps({"error": str(e)}), encoding=zenoh.Encoding.APPLICATION_JSON
+                )
                 return
             except Exception as e:  # a bug in one command must not stop the service
                 log.exception("command %s failed", key)
-                query.reply_err(json.dumps({"error": f"{name}: internal error: {e}"}),
-                                encoding=zenoh.Encoding.APPLICATION_JSON)
+                query.reply_err(
+                    json.dumps({"error": f"{name}: internal error: {e}"}),
+                    encoding=zenoh.Encoding.APPLICATION_JSON,
+                )
                 return
-            query.reply(key, json.dumps(result, allow_nan=False), encoding=zenoh.Encoding.APPLICATION_JSON)
+            query.reply(
+                key, json.dumps(result, allow_nan=False), encoding=zenoh.Encoding.APPLICATION_JSON
+            )
             self.answered += 1
 
     def _latest(self, key: str, latest: Callable[[], dict | None], query: zenoh.Query) -> None:
         with query:
             value = latest()
             if value is not None:
-                query.reply(key, json.dumps(jsonable(value), allow_nan=False),
-                            encoding=zenoh.Encoding.APPLICATION_JSON)
+                query.reply(
+                    key,
+                    json.dumps(jsonable(value), allow_nan=False),
+                    encoding=zenoh.Encoding.APPLICATION_JSON,
+                )
 
     def status(self) -> dict:
         return {"prefix": self.prefix, "answered": self.answered, "refused": self.refused}

@@ -93,7 +93,9 @@ class Tracked:
     pose: CameraPose
     result: TrackResult
     early: bool  # the pose was computed more than EXTRAPOLATE_S past the newest attitude sample
-    window: tuple[float, float, float, float] | None = None  # where the prediction had the UUV searched
+    window: tuple[float, float, float, float] | None = (
+        None  # where the prediction had the UUV searched
+    )
     lock: int = 0  # the operator's commands before it was tracked
 
 
@@ -111,11 +113,22 @@ class Pipeline:
     ``on_tracked``: see :attr:`on_tracked`.
     """
 
-    def __init__(self, cal: Calibration, tel: Telemetry, tracker: str, sinks: Sequence, queue_len: int = 2,
-                 telemetry_wait_s: float = 0.3, prior: Callable[[float], Prior | None] | None = None,
-                 history_s: float = 1.0, on_tracked: Sequence[Callable] = (),
-                 alignment: Callable[[], tuple[str, float]] | None = None, depth: Series | None = None,
-                 vet: Callable[[int, tuple | None], str | None] | None = None, tracking: Executor | None = None):
+    def __init__(
+        self,
+        cal: Calibration,
+        tel: Telemetry,
+        tracker: str,
+        sinks: Sequence,
+        queue_len: int = 2,
+        telemetry_wait_s: float = 0.3,
+        prior: Callable[[float], Prior | None] | None = None,
+        history_s: float = 1.0,
+        on_tracked: Sequence[Callable] = (),
+        alignment: Callable[[], tuple[str, float]] | None = None,
+        depth: Series | None = None,
+        vet: Callable[[int, tuple | None], str | None] | None = None,
+        tracking: Executor | None = None,
+    ):
         self.cal = cal
         self.tel = tel
         self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
@@ -136,11 +149,19 @@ class Pipeline:
         self._tracked_ready = asyncio.Event()
         self._telemetry = asyncio.Event()
         self._held: deque[Tracked] = deque()  # recent tracked frames, for selections
-        self._started = False  # the first frame was taken, or a command came first: init_bbox no longer applies
-        self.commands = 0  # the operator's select, release and acquire commands done: a frame's FrameInfo.lock
+        self._started = (
+            False  # the first frame was taken, or a command came first: init_bbox no longer applies
+        )
+        self.commands = (
+            0  # the operator's select, release and acquire commands done: a frame's FrameInfo.lock
+        )
         self._angle_series = [tel.attitude] + (
-            [tel.gimbal] if cal.mount.attitude_source == "gimbal_device"
-            else [tel.mount] if cal.mount.attitude_source == "mount_orientation" else [])
+            [tel.gimbal]
+            if cal.mount.attitude_source == "gimbal_device"
+            else [tel.mount]
+            if cal.mount.attitude_source == "mount_orientation"
+            else []
+        )
         self.waited_s = 0.0  # total time frames waited for telemetry
         self.held = 0  # frames that waited for telemetry
         self._holding: int | None = None
@@ -148,7 +169,9 @@ class Pipeline:
         self.dropped = 0
         self.statuses: Counter[str] = Counter()
         self.last_status: str | None = None
-        self.target = self.session.status()  # the tracking session's status after the latest frame or command
+        self.target = (
+            self.session.status()
+        )  # the tracking session's status after the latest frame or command
         #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
         self.on_tracked: list[Callable] = list(on_tracked)
 
@@ -161,7 +184,9 @@ class Pipeline:
         if frame.t_recv_mono is None:
             frame.t_recv_mono = time.monotonic() - (time.time() - frame.t_recv)
         if len(self._queue) >= self.queue_len:
-            first_waiting = self.cal.init_bbox is not None and not self._started and self._queue[0].index == 0
+            first_waiting = (
+                self.cal.init_bbox is not None and not self._started and self._queue[0].index == 0
+            )
             del self._queue[1 if first_waiting else 0]
             self.dropped += 1
         self._queue.append(frame)
@@ -202,27 +227,49 @@ class Pipeline:
     async def _select(self, index: int | None, box, point) -> dict:
         if not self._held:
             raise SelectionError("no frame received yet")
-        held = self._held[-1] if index is None else next((h for h in self._held if h.frame.index == index), None)
+        held = (
+            self._held[-1]
+            if index is None
+            else next((h for h in self._held if h.frame.index == index), None)
+        )
         if held is None:
-            raise SelectionError(f"frame {index} is not held (held: frames {self._held[0].frame.index}"
-                                 f"…{self._held[-1].frame.index}, the last {self.history_s:g} s)")
+            raise SelectionError(
+                f"frame {index} is not held (held: frames {self._held[0].frame.index}"
+                f"…{self._held[-1].frame.index}, the last {self.history_s:g} s)"
+            )
         later = [h for h in self._held if h.frame.index > held.frame.index]
 
         def select_and_catch_up() -> TrackResult:
-            result = self.session.select(held.frame.image, held.pose, box=box, point=point, verify=True)
+            result = self.session.select(
+                held.frame.image, held.pose, box=box, point=point, verify=True
+            )
             for h in later:
                 self.session.step(h.frame.image, h.pose)
             return result
 
-        result = await asyncio.get_running_loop().run_in_executor(self.tracking, select_and_catch_up)
+        result = await asyncio.get_running_loop().run_in_executor(
+            self.tracking, select_and_catch_up
+        )
         self._started = True
         self.commands += 1
         self.target = self.session.status()
-        log.info("target selected on frame %d (%s %s), caught up %d frames: %s", held.frame.index,
-                 "point" if point is not None else "box", list(point if point is not None else box), len(later),
-                 self.target["state"])
-        return {"frame": held.frame.index, "u": result.u, "v": result.v, "box": list(result.box),
-                "caught_up": len(later), "latest_frame": self._latest_frame(), "target": self.target}
+        log.info(
+            "target selected on frame %d (%s %s), caught up %d frames: %s",
+            held.frame.index,
+            "point" if point is not None else "box",
+            list(point if point is not None else box),
+            len(later),
+            self.target["state"],
+        )
+        return {
+            "frame": held.frame.index,
+            "u": result.u,
+            "v": result.v,
+            "box": list(result.box),
+            "caught_up": len(later),
+            "latest_frame": self._latest_frame(),
+            "target": self.target,
+        }
 
     async def _release(self) -> dict:
         self._started = True  # the operator's word wins over init_bbox
@@ -279,10 +326,16 @@ class Pipeline:
         pose = self._pose(frame)
         early = self._early(frame)
         prior = self.prior(frame.t_unix)
-        result = await asyncio.get_running_loop().run_in_executor(self.tracking, self._step, frame, pose, prior)
-        item = Tracked(frame, pose, result, early, search_window(self.session.prediction), self.commands)
+        result = await asyncio.get_running_loop().run_in_executor(
+            self.tracking, self._step, frame, pose, prior
+        )
+        item = Tracked(
+            frame, pose, result, early, search_window(self.session.prediction), self.commands
+        )
         self._held.append(item)
-        while len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s:
+        while (
+            len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s
+        ):
             self._held.popleft()
         self.target = self.session.status()
         return item
@@ -292,9 +345,13 @@ class Pipeline:
             self._started = True
             if self.cal.init_bbox is not None:
                 try:
-                    return self.session.select(frame.image, pose, box=self.cal.init_bbox)  # as configured
+                    return self.session.select(
+                        frame.image, pose, box=self.cal.init_bbox
+                    )  # as configured
                 except SelectionError as e:
-                    log.warning("tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e)
+                    log.warning(
+                        "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
+                    )
         return self.session.step(frame.image, pose, prior=prior)
 
     async def _locate_frames(self) -> None:
@@ -329,8 +386,15 @@ class Pipeline:
     def _emit(self, frame: LiveFrame, fix: Fix, box=None, window=None, lock: int = 0) -> None:
         for notice in take_notices(self.tel):  # height sources that disagree
             log.warning("%s", notice)
-        info = FrameInfo(frame.index, frame.t_recv, time.time(), tuple(box) if box is not None else None, window,
-                         frame.t_recv_mono, lock)
+        info = FrameInfo(
+            frame.index,
+            frame.t_recv,
+            time.time(),
+            tuple(box) if box is not None else None,
+            window,
+            frame.t_recv_mono,
+            lock,
+        )
         self.processed += 1
         self.statuses[fix.status] += 1
         if fix.status != self.last_status:
@@ -349,7 +413,9 @@ class Pipeline:
     def _locate(self, item: Tracked) -> Fix:
         """A tracked frame's fix, with its pose."""
         frame, result = item.frame, item.result
-        doubt = self.vet(frame.index, tuple(result.box) if result.ok else None) if self.vet else None
+        doubt = (
+            self.vet(frame.index, tuple(result.box) if result.ok else None) if self.vet else None
+        )
         if not result.ok:
             fix = Fix(frame.t_unix, result.status)
         elif doubt:
@@ -360,15 +426,26 @@ class Pipeline:
             fix = locate(self.cal, item.pose, result.u, result.v, sigma_px=result.sigma_px)[0]
             if fix.ok and fix.time_source == "unknown" and not self._told_unknown:
                 self._told_unknown = True
-                log.warning("frame %d: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC "
-                            "reply yet): taken as 0, h_acc includes ±%.0f ms of it ([timing] "
-                            "unknown_latency_sigma_s) × the camera's motion", frame.index, self.tel.latency_sigma_s * 1000)
+                log.warning(
+                    "frame %d: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC "
+                    "reply yet): taken as 0, h_acc includes ±%.0f ms of it ([timing] "
+                    "unknown_latency_sigma_s) × the camera's motion",
+                    frame.index,
+                    self.tel.latency_sigma_s * 1000,
+                )
         fix.frame = frame.index
         fix.confidence = result.confidence
         return fix
 
     def status(self) -> dict:
-        return {"processed": self.processed, "dropped": self.dropped, "queued": len(self._queue),
-                "waiting_for_telemetry": len(self._tracked), "held_for_telemetry": self.held,
-                "waited_s": round(self.waited_s, 3), "held_frames": len(self._held),
-                "last_status": self.last_status, "statuses": dict(self.statuses)}
+        return {
+            "processed": self.processed,
+            "dropped": self.dropped,
+            "queued": len(self._queue),
+            "waiting_for_telemetry": len(self._tracked),
+            "held_for_telemetry": self.held,
+            "waited_s": round(self.waited_s, 3),
+            "held_frames": len(self._held),
+            "last_status": self.last_status,
+            "statuses": dict(self.statuses),
+        }

@@ -32,12 +32,14 @@ from localizer.contract import ConfigError
 #: pymavlink connection kinds skyfix's transports open (:func:`groundstation.mavlink.transport.open_transport`)
 NETWORK_LINKS = ("tcp", "tcpin", "udpout", "udpin", "udp")
 #: Zenoh configuration keys naming credentials: (key, private: must not be readable by others)
-ZENOH_CREDENTIALS = (("transport/link/tls/root_ca_certificate", False),
-                     ("transport/link/tls/listen_certificate", False),
-                     ("transport/link/tls/listen_private_key", True),
-                     ("transport/link/tls/connect_certificate", False),
-                     ("transport/link/tls/connect_private_key", True),
-                     ("transport/auth/usrpwd/dictionary_file", True))
+ZENOH_CREDENTIALS = (
+    ("transport/link/tls/root_ca_certificate", False),
+    ("transport/link/tls/listen_certificate", False),
+    ("transport/link/tls/listen_private_key", True),
+    ("transport/link/tls/connect_certificate", False),
+    ("transport/link/tls/connect_private_key", True),
+    ("transport/auth/usrpwd/dictionary_file", True),
+)
 
 
 def origin(args: argparse.Namespace, name: str) -> tuple[str, str]:
@@ -135,7 +137,9 @@ def start_checks(args: argparse.Namespace, cfg: config.RunConfig) -> None:
         why = link_problem(url)
         if why:  # as the link itself says it (LinkError), naming the option too
             source, key = origin(args, name)
-            raise LinkError(f"MAVLink {url!r}: cannot open: {why} ({key}{'' if source == 'options' else ' in ' + source})")
+            raise LinkError(
+                f"MAVLink {url!r}: cannot open: {why} ({key}{'' if source == 'options' else ' in ' + source})"
+            )
     for name, path in _files(cfg):
         if not Path(path).is_file():
             raise ConfigError(*origin(args, name), path, "no such file")
@@ -147,11 +151,21 @@ def _zenoh_trust(args: argparse.Namespace, cfg: config.RunConfig) -> None:
     (:func:`~groundstation.zenoh_session.trust_problem`)."""
     from groundstation.zenoh_session import make_config, trust_problem
 
-    name = "zenoh_config" if cfg.zenoh_config else "zenoh_connect" if cfg.zenoh_connect else "zenoh_listen"
+    name = (
+        "zenoh_config"
+        if cfg.zenoh_config
+        else "zenoh_connect"
+        if cfg.zenoh_connect
+        else "zenoh_listen"
+    )
     value = cfg.zenoh_config or ", ".join(cfg.zenoh_connect or cfg.zenoh_listen_endpoints)
     try:
-        conf = make_config(cfg.zenoh_connect, cfg.zenoh_listen_endpoints, multicast=cfg.zenoh_multicast,
-                           config_file=cfg.zenoh_config)
+        conf = make_config(
+            cfg.zenoh_connect,
+            cfg.zenoh_listen_endpoints,
+            multicast=cfg.zenoh_multicast,
+            config_file=cfg.zenoh_config,
+        )
     except Exception as e:  # noqa: BLE001 - zenoh raises ZError (and ValueError) on a bad file or endpoint
         raise ConfigError(*origin(args, name), value, f"not a Zenoh configuration: {e}") from None
     why = trust_problem(conf, insecure=cfg.zenoh_insecure)
@@ -167,7 +181,9 @@ def _private(source: str, key: str, path: str) -> None:
     except OSError as e:
         raise ConfigError(source, key, path, f"cannot read: {e.strerror or e}") from None
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise ConfigError(source, key, path, f"others may read it (mode {stat.S_IMODE(mode):04o}): chmod 600")
+        raise ConfigError(
+            source, key, path, f"others may read it (mode {stat.S_IMODE(mode):04o}): chmod 600"
+        )
 
 
 def _credentials(args, cfg: config.RunConfig) -> list[str]:
@@ -189,7 +205,9 @@ def _credentials(args, cfg: config.RunConfig) -> list[str]:
         try:
             conf = make_config(cfg.zenoh_connect, cfg.zenoh_listen, config_file=cfg.zenoh_config)
         except Exception as e:  # noqa: BLE001 - zenoh raises ZError (and ValueError) on a bad file or endpoint
-            raise ConfigError(*origin(args, "zenoh_config"), cfg.zenoh_config, f"not a Zenoh configuration: {e}") from None
+            raise ConfigError(
+                *origin(args, "zenoh_config"), cfg.zenoh_config, f"not a Zenoh configuration: {e}"
+            ) from None
         for key, private in ZENOH_CREDENTIALS:
             path = json.loads(conf.get_json(key) or "null")
             if not path:
@@ -207,7 +225,9 @@ def _bind(kind: int, host: str, port: int) -> str | None:
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     with socket.socket(family, kind) as s:
         if kind == socket.SOCK_STREAM:
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the servers bind: TIME_WAIT is no owner
+            s.setsockopt(
+                socket.SOL_SOCKET, socket.SO_REUSEADDR, 1
+            )  # as the servers bind: TIME_WAIT is no owner
         try:
             s.bind((host.strip("[]"), port))
         except OSError as e:
@@ -227,7 +247,13 @@ def _ports(cfg: config.RunConfig) -> Iterator[tuple[str, str, int, str, int]]:
         kind, _, rest = url.partition(":")
         if kind in ("udpin", "udp", "tcpin"):
             host, _, port = rest.rpartition(":")
-            yield name, url, socket.SOCK_STREAM if kind == "tcpin" else socket.SOCK_DGRAM, host or "0.0.0.0", int(port)
+            yield (
+                name,
+                url,
+                socket.SOCK_STREAM if kind == "tcpin" else socket.SOCK_DGRAM,
+                host or "0.0.0.0",
+                int(port),
+            )
     if cfg.video:
         video = parse_video_input(cfg.video)
         if video.port is not None:
@@ -248,7 +274,9 @@ def _zenoh_listeners(cfg: config.RunConfig) -> list[str]:
 
     if not cfg.zenoh_config:
         return list(cfg.zenoh_listen_endpoints)
-    return endpoints(make_config(cfg.zenoh_connect, cfg.zenoh_listen, config_file=cfg.zenoh_config), "listen")
+    return endpoints(
+        make_config(cfg.zenoh_connect, cfg.zenoh_listen, config_file=cfg.zenoh_config), "listen"
+    )
 
 
 def _recording_folder(args, cfg: config.RunConfig) -> str:
@@ -256,11 +284,19 @@ def _recording_folder(args, cfg: config.RunConfig) -> str:
     name = "record" if cfg.record else "recordings"
     target = Path(cfg.recording)
     if cfg.record and target.is_dir() and any(target.iterdir()):
-        raise ConfigError(*origin(args, name), cfg.record, "exists and is not empty (a recording is never "
-                          "overwritten; --recordings PARENT records each start into a new folder of its own)")
+        raise ConfigError(
+            *origin(args, name),
+            cfg.record,
+            "exists and is not empty (a recording is never "
+            "overwritten; --recordings PARENT records each start into a new folder of its own)",
+        )
     existing = next(p for p in (target, *target.parents) if p.exists())
     if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
-        raise ConfigError(*origin(args, name), cfg.recording, f"cannot be made: {existing} is not a writable folder")
+        raise ConfigError(
+            *origin(args, name),
+            cfg.recording,
+            f"cannot be made: {existing} is not a writable folder",
+        )
     return f"{name} {cfg.recording}"
 
 
@@ -269,9 +305,12 @@ def full_check(args: argparse.Namespace, cfg: config.RunConfig) -> str:
     checked, or :class:`ConfigError` for the first mistake."""
     start_checks(args, cfg)
     cal = config.load_calibration(cfg.calibration)
-    done = [f"calibration {cfg.calibration} ({cal.camera.width}x{cal.camera.height}, {cal.mount.attitude_source})",
-            f"video {cfg.video or config.NONE}", f"MAVLink {cfg.mavlink}",
-            "GPS_INPUT " + ", ".join(u.gps_input or config.NONE for u in cfg.uuvs)]
+    done = [
+        f"calibration {cfg.calibration} ({cal.camera.width}x{cal.camera.height}, {cal.mount.attitude_source})",
+        f"video {cfg.video or config.NONE}",
+        f"MAVLink {cfg.mavlink}",
+        "GPS_INPUT " + ", ".join(u.gps_input or config.NONE for u in cfg.uuvs),
+    ]
     credentials = _credentials(args, cfg)
     if credentials:
         done.append(f"credentials {', '.join(credentials)}")

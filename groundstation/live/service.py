@@ -85,8 +85,12 @@ def latency_summary(latencies_s) -> dict:
     a = np.asarray(latencies_s, dtype=float) * 1000.0
     if len(a) == 0:
         return {"n": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
-    return {"n": len(a), "p50_ms": round(float(np.percentile(a, 50)), 3),
-            "p99_ms": round(float(np.percentile(a, 99)), 3), "max_ms": round(float(a.max()), 3)}
+    return {
+        "n": len(a),
+        "p50_ms": round(float(np.percentile(a, 50)), 3),
+        "p99_ms": round(float(np.percentile(a, 99)), 3),
+        "max_ms": round(float(a.max()), 3),
+    }
 
 
 async def serve(cfg: config.RunConfig) -> dict:
@@ -98,21 +102,31 @@ async def serve(cfg: config.RunConfig) -> dict:
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    session = open_session(cfg.zenoh_connect, cfg.zenoh_listen_endpoints, multicast=cfg.zenoh_multicast,
-                           config_file=cfg.zenoh_config)
+    session = open_session(
+        cfg.zenoh_connect,
+        cfg.zenoh_listen_endpoints,
+        multicast=cfg.zenoh_multicast,
+        config_file=cfg.zenoh_config,
+    )
     closers = []
     usage = Usage()
     try:
         size = (cal.camera.width, cal.camera.height)
         auto = cfg.video_latency_ms == "auto"
         fixed_latency_s = None if auto else cfg.video_latency_ms / 1000.0
-        first_aligned: list[float] = []  # auto: the exposure of the first frame stamped with the estimate
+        first_aligned: list[
+            float
+        ] = []  # auto: the exposure of the first frame stamped with the estimate
         workers = Workers()  # the UAV's and the video's; each UUV's own are in its chain's
-        chains: list[UuvChain] = []  # built once the shared parts are (below); the closures read them then
+        chains: list[
+            UuvChain
+        ] = []  # built once the shared parts are (below); the closures read them then
         several = len(cfg.uuvs) > 1
         if several and cal.init_bbox is not None:
-            log.warning("%s: [tracker] init_bbox is not used with several [[uuv]]: each UUV's own init_bbox is",
-                        cfg.calibration)
+            log.warning(
+                "%s: [tracker] init_bbox is not used with several [[uuv]]: each UUV's own init_bbox is",
+                cfg.calibration,
+            )
 
         # -- the shared inputs: the UAV, the video ------------------------------------------------------------------
         if cfg.mavlink_backend == "mavsdk":
@@ -120,10 +134,15 @@ async def serve(cfg: config.RunConfig) -> dict:
 
             uav = UavMavsdk(cfg.mavlink, tel)
         else:
-            uav = UavMavlink(cfg.mavlink, tel, needed_rates(cal.mount.attitude_source),
-                             request_rates=not cfg.no_request_rates, peer=cfg.mavlink_peer,
-                             signing_key=cfg.mavlink_signing_key and read_signing_key(cfg.mavlink_signing_key,
-                                                                                       "--mavlink-signing-key"))
+            uav = UavMavlink(
+                cfg.mavlink,
+                tel,
+                needed_rates(cal.mount.attitude_source),
+                request_rates=not cfg.no_request_rates,
+                peer=cfg.mavlink_peer,
+                signing_key=cfg.mavlink_signing_key
+                and read_signing_key(cfg.mavlink_signing_key, "--mavlink-signing-key"),
+            )
         uav.listeners.append(lambda *a: [c.pipeline.telemetry_arrived(*a) for c in chains])
         workers.add(uav, INPUTS, "uav", is_input=True)
         workers.section("height", lambda now: height_status(cal.water, cal.sigmas, tel))
@@ -140,37 +159,63 @@ async def serve(cfg: config.RunConfig) -> dict:
 
         if cfg.video:
             video = VideoLive(cfg.video, fixed_latency_s, on_frame, expected_size=size)
-            motion = OnlineLatency(cal, tel, fixed_latency_s,
-                                   (lambda s: setattr(video, "latency_s", s)) if auto else None)
-            workers.add(video, INPUTS, "video", lambda now: video.status(now)
-                        | {"latency_from_motion": motion.status()}, is_input=True)
+            motion = OnlineLatency(
+                cal,
+                tel,
+                fixed_latency_s,
+                (lambda s: setattr(video, "latency_s", s)) if auto else None,
+            )
+            workers.add(
+                video,
+                INPUTS,
+                "video",
+                lambda now: video.status(now) | {"latency_from_motion": motion.status()},
+                is_input=True,
+            )
             workers.add(motion, INPUTS)
             if cfg.height_from_size != "off":
-                from_size = workers.add(OnlineHeightFromSize(HeightFromSize(cal, tel, cfg.height_from_size)), INPUTS,
-                                        "height_from_size", lambda now: from_size.status())
+                from_size = workers.add(
+                    OnlineHeightFromSize(HeightFromSize(cal, tel, cfg.height_from_size)),
+                    INPUTS,
+                    "height_from_size",
+                    lambda now: from_size.status(),
+                )
 
         def recorded_timing() -> dict:
             """What the run measured and used for time, for the recording's [timing]."""
             measured = tel.measured_latency_s
-            out = {"mavlink_latency_measured_s": None if measured is None else round(measured, 4),
-                   "mavlink_latency_measured_from_t": tel.measured_latency_from_s}
+            out = {
+                "mavlink_latency_measured_s": None if measured is None else round(measured, 4),
+                "mavlink_latency_measured_from_t": tel.measured_latency_from_s,
+            }
             if video is None:
                 return out
             if not auto:
-                return out | {"video_latency_s": fixed_latency_s, "video_latency_source": "configured"}
+                return out | {
+                    "video_latency_s": fixed_latency_s,
+                    "video_latency_source": "configured",
+                }
             if motion.applied_s is None:
                 return out
-            return out | {"video_latency_s": round(motion.applied_s, 4), "video_latency_source": "motion",
-                          "video_latency_sigma_s": round(motion.applied_sigma_s, 4),
-                          "video_latency_from_t": first_aligned[0] if first_aligned else None}
+            return out | {
+                "video_latency_s": round(motion.applied_s, 4),
+                "video_latency_source": "motion",
+                "video_latency_sigma_s": round(motion.applied_sigma_s, 4),
+                "video_latency_from_t": first_aligned[0] if first_aligned else None,
+            }
 
         # -- the shared outputs: the recording and the page (each UUV its part of them) -----------------------------
         recorder = None
         if cfg.recording:
             folder = cfg.record or new_recording(cfg.recordings, time.time())
             log.info("recording into %s", folder)
-            recorder = Recorder(folder, cfg.calibration, video_size=size if cfg.video else None,
-                                timing=recorded_timing, uuv_ids=tuple(u.id for u in cfg.uuvs))
+            recorder = Recorder(
+                folder,
+                cfg.calibration,
+                video_size=size if cfg.video else None,
+                timing=recorded_timing,
+                uuv_ids=tuple(u.id for u in cfg.uuvs),
+            )
             uav.listeners.append(recorder.on_mavlink)
             workers.add(recorder, OUTPUTS, "record", lambda now: recorder.status(), is_input=True)
 
@@ -180,59 +225,108 @@ async def serve(cfg: config.RunConfig) -> dict:
         topview = feed = None
         if not cfg.no_ui:
             topview = TopView(cal, tel, uuvs=len(cfg.uuvs))
-            targets = [(u.id, lambda i=i: chains[i].pipeline.target) for i, u in enumerate(cfg.uuvs)]
+            targets = [
+                (u.id, lambda i=i: chains[i].pipeline.target) for i, u in enumerate(cfg.uuvs)
+            ]
             feed = VideoFeed(targets if several else targets[0][1])
 
         def first_aligned_frame(frame) -> None:
             if frame.aligned and not first_aligned:
                 first_aligned.append(frame.t_unix)
 
-        frame_listeners += [f for f in (recorder and recorder.on_frame, feed and feed.on_frame,
-                                        motion and motion.on_frame, motion and auto and first_aligned_frame) if f]
+        frame_listeners += [
+            f
+            for f in (
+                recorder and recorder.on_frame,
+                feed and feed.on_frame,
+                motion and motion.on_frame,
+                motion and auto and first_aligned_frame,
+            )
+            if f
+        ]
         if video and auto:
-            log.info("--video-latency-ms auto: no valid fix until the video's latency from the image's motion "
-                     "has settled (status latency_unsettled)")
+            log.info(
+                "--video-latency-ms auto: no valid fix until the video's latency from the image's motion "
+                "has settled (status latency_unsettled)"
+            )
         workers.section("zenoh", lambda now: {"peers": zenoh_peers()})
         workers.section("process", usage.status)
 
         # -- each UUV: its depth, its own position, its tracker and its outputs -------------------------------------
         crowd = Crowd() if several else None  # two trackers on one vehicle: no fix for either
-        tracking = ThreadPoolExecutor(1, thread_name_prefix="track") if several else None  # one thread for all
+        tracking = (
+            ThreadPoolExecutor(1, thread_name_prefix="track") if several else None
+        )  # one thread for all
         if tracking:
             closers.append(lambda: tracking.shutdown(wait=False, cancel_futures=True))
         for i, u in enumerate(cfg.uuvs):
             uuv_tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S) if several else tel
             page = (feed.sinks[i], topview.tracks[i]) if feed else (None, None)
             uuv_cal = uuv_calibration(cal, u, cfg.calibration) if several else cal
-            chain = UuvChain(cfg, u, uuv_cal, tel, uuv_tel, session, workers, page,
-                             recorder.of(u.id) if recorder else None, zenoh_peers,
-                             alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None,
-                             vet=partial(crowd.vet, u.id) if crowd else None, tracking=tracking,
-                             on_tracked=[from_size.on_tracked] if from_size else [])
+            chain = UuvChain(
+                cfg,
+                u,
+                uuv_cal,
+                tel,
+                uuv_tel,
+                session,
+                workers,
+                page,
+                recorder.of(u.id) if recorder else None,
+                zenoh_peers,
+                alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None,
+                vet=partial(crowd.vet, u.id) if crowd else None,
+                tracking=tracking,
+                on_tracked=[from_size.on_tracked] if from_size else [],
+            )
             closers.append(chain.fix_sink.close)
             chains.append(chain)
             workers.include(chain.workers)
 
         # -- the operator's page: every UUV, each with its commands and its own status --------------------------------
-        page_uuvs = [PageUuv(c.uuv.id, c.control, c.workers.status, c.gps.sending if c.gps else None) for c in chains]
-        ui = WebUi(cfg.ui, cfg.ui_token, page_uuvs, topview, feed, size, settings_of(cfg)) if feed else None
+        page_uuvs = [
+            PageUuv(c.uuv.id, c.control, c.workers.status, c.gps.sending if c.gps else None)
+            for c in chains
+        ]
+        ui = (
+            WebUi(cfg.ui, cfg.ui_token, page_uuvs, topview, feed, size, settings_of(cfg))
+            if feed
+            else None
+        )
         if ui:
             workers.add(ui, INPUTS, "ui", lambda now: ui.status())
-            await ui.start()  # UiError (an OSError) when its port is taken: exit 2 before anything runs
+            await (
+                ui.start()
+            )  # UiError (an OSError) when its port is taken: exit 2 before anything runs
         for chain in chains:
             u = chain.uuv
-            log.info("skyfix run: UAV %s, video %s, UUV %s: depth %s (%s), fixes on %s, GPS_INPUT %s, commands on "
-                     "%s/*", cfg.mavlink, cfg.video, u.id, u.depth_mavlink or u.depth_input_key, u.depth_source,
-                     u.fix_key, u.gps_input, chain.zenoh_control.prefix)
+            log.info(
+                "skyfix run: UAV %s, video %s, UUV %s: depth %s (%s), fixes on %s, GPS_INPUT %s, commands on "
+                "%s/*",
+                cfg.mavlink,
+                cfg.video,
+                u.id,
+                u.depth_mavlink or u.depth_input_key,
+                u.depth_source,
+                u.fix_key,
+                u.gps_input,
+                chain.zenoh_control.prefix,
+            )
             if chain.pipeline.cal.init_bbox is None:
-                log.info("UUV %s: no init_bbox: awaiting a target (%s/select%s%s)", u.id, chain.zenoh_control.prefix,
-                         f", the web page {ui.url}" if ui else "",
-                         ", or near the UUV's own position" if u.uuv_position_key or u.uuv_hint else "")
+                log.info(
+                    "UUV %s: no init_bbox: awaiting a target (%s/select%s%s)",
+                    u.id,
+                    chain.zenoh_control.prefix,
+                    f", the web page {ui.url}" if ui else "",
+                    ", or near the UUV's own position" if u.uuv_position_key or u.uuv_hint else "",
+                )
         await workers.run(stopped(stop, cfg.duration_s))
         now = time.time()
         if not several:
             return chains[0].final(now)
-        return workers.status(now) | {"uuvs": {c.uuv.id: c.final(now, shared=False) for c in chains}}
+        return workers.status(now) | {
+            "uuvs": {c.uuv.id: c.final(now, shared=False) for c in chains}
+        }
     finally:
         for close in closers:
             close()
@@ -244,8 +338,12 @@ def uuv_calibration(cal: Calibration, u: config.UuvConfig, source: str) -> Calib
     try:
         return dataclasses.replace(cal, tracker=Tracker(init_bbox=u.init_bbox))
     except ValidationError:
-        raise ConfigError(source, f"[[uuv]] {u.id}: init_bbox", list(u.init_bbox),
-                          f"box must lie inside the {cal.camera.width}x{cal.camera.height} image") from None
+        raise ConfigError(
+            source,
+            f"[[uuv]] {u.id}: init_bbox",
+            list(u.init_bbox),
+            f"box must lie inside the {cal.camera.width}x{cal.camera.height} image",
+        ) from None
 
 
 class UuvChain:
@@ -254,51 +352,105 @@ class UuvChain:
     its watchdog, its operator's commands and its 1 Hz status (the shared sections and its own). Its workers are in
     :attr:`workers`, run with the service's."""
 
-    def __init__(self, cfg: config.RunConfig, u: config.UuvConfig, cal, tel: Telemetry, uuv_tel: Telemetry,
-                 session, shared: Workers, page: tuple, recorder, zenoh_peers: Callable[[], int], alignment, on_tracked,
-                 vet=None, tracking=None):
+    def __init__(
+        self,
+        cfg: config.RunConfig,
+        u: config.UuvConfig,
+        cal,
+        tel: Telemetry,
+        uuv_tel: Telemetry,
+        session,
+        shared: Workers,
+        page: tuple,
+        recorder,
+        zenoh_peers: Callable[[], int],
+        alignment,
+        on_tracked,
+        vet=None,
+        tracking=None,
+    ):
         self.uuv = u
         self.workers = own = Workers()
         self._shared = shared
         depth_gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
         # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
-        thrusters = Thrusters(cfg.thruster_deadband_us) if u.depth_source in ("blueos", "mavlink") else None
+        thrusters = (
+            Thrusters(cfg.thruster_deadband_us) if u.depth_source in ("blueos", "mavlink") else None
+        )
         if u.depth_source == "mavlink":
-            depth = ArduSubMavlink(u.depth_mavlink, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters=thrusters)
+            depth = ArduSubMavlink(
+                u.depth_mavlink, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters=thrusters
+            )
         elif u.depth_source == "blueos":
-            depth = ArduSubZenoh(session, u.depth_input_key, uuv_tel, depth_gate, cal.sigmas.depth_m,
-                                 thrusters=thrusters)
+            depth = ArduSubZenoh(
+                session,
+                u.depth_input_key,
+                uuv_tel,
+                depth_gate,
+                cal.sigmas.depth_m,
+                thrusters=thrusters,
+            )
         else:
             depth = DepthZenoh(session, u.depth_input_key, uuv_tel, depth_gate)
         own.add(depth, INPUTS, "depth", is_input=True)
         if recorder:  # its part of the recording
             depth.listeners.append(recorder.on_depth)
-        uuv_position = own.add(UuvPosition(session, u.uuv_position_key, cfg.uuv_prior_sigma_m,
-                                           parse_hint(u.uuv_hint) if u.uuv_hint else None), INPUTS, "uuv_position")
+        uuv_position = own.add(
+            UuvPosition(
+                session,
+                u.uuv_position_key,
+                cfg.uuv_prior_sigma_m,
+                parse_hint(u.uuv_hint) if u.uuv_hint else None,
+            ),
+            INPUTS,
+            "uuv_position",
+        )
         self.fix_sink = fix_sink = ZenohFixSink(session, u.fix_key)
         self.gps = gps = None
         if u.gps_input:
             key = read_signing_key(u.gps_input_signing_key) if u.gps_input_signing_key else None
-            link = (ZenohMavlinkIn(session, u.gps_input.removeprefix("zenoh:")) if u.gps_input.startswith("zenoh:")
-                    else mavlink_gps_link(u.gps_input, signing_key=key))
+            link = (
+                ZenohMavlinkIn(session, u.gps_input.removeprefix("zenoh:"))
+                if u.gps_input.startswith("zenoh:")
+                else mavlink_gps_link(u.gps_input, signing_key=key)
+            )
             max_age_s = cfg.fix_max_age_ms / 1000.0
-            gate = FixGate(max_speed_mps=cfg.uuv_max_speed_mps, max_accel_mps2=cfg.uuv_max_accel_mps2,
-                           max_h_acc_m=cfg.fix_max_h_acc_m, max_age_s=max_age_s, thrusters=thrusters,
-                           water_accel_mps2=cfg.uuv_water_accel_mps2, max_reach_m=cfg.uuv_max_reach_m)
+            gate = FixGate(
+                max_speed_mps=cfg.uuv_max_speed_mps,
+                max_accel_mps2=cfg.uuv_max_accel_mps2,
+                max_h_acc_m=cfg.fix_max_h_acc_m,
+                max_age_s=max_age_s,
+                thrusters=thrusters,
+                water_accel_mps2=cfg.uuv_water_accel_mps2,
+                max_reach_m=cfg.uuv_max_reach_m,
+            )
             if cfg.state_folder:  # the UUV's last trusted track, kept across restarts
                 path = track_path(cfg.state_folder, u.id)
                 keeper = TrackMemory(gate, path, remember(gate, path, cfg.track_max_age_s))
                 own.add(keeper, OUTPUTS, "track_memory", lambda now: keeper.status())
             self.gps = gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
-        watchdog = Watchdog(lambda now: shared.inputs(now) | own.inputs(now),
-                            tuple(needed_rates(cal.mount.attitude_source)), zenoh_peers,
-                            require_s=REQUIRE_S if cfg.require_inputs else None)
+        watchdog = Watchdog(
+            lambda now: shared.inputs(now) | own.inputs(now),
+            tuple(needed_rates(cal.mount.attitude_source)),
+            zenoh_peers,
+            require_s=REQUIRE_S if cfg.require_inputs else None,
+        )
         feed, topview = page
         sinks = [s for s in (fix_sink, gps, recorder, feed, topview, watchdog) if s is not None]
         self.pipeline = pipeline = Pipeline(
-            cal, tel, cfg.tracker, sinks, telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0, prior=uuv_position.prior,
-            history_s=cfg.select_history_s, on_tracked=on_tracked, alignment=alignment, vet=vet, tracking=tracking,
-            depth=uuv_tel.depth)
+            cal,
+            tel,
+            cfg.tracker,
+            sinks,
+            telemetry_wait_s=cfg.telemetry_wait_ms / 1000.0,
+            prior=uuv_position.prior,
+            history_s=cfg.select_history_s,
+            on_tracked=on_tracked,
+            alignment=alignment,
+            vet=vet,
+            tracking=tracking,
+            depth=uuv_tel.depth,
+        )
         own.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
         own.section("target", lambda now: pipeline.target)
         own.section("fixes_published", lambda now: fix_sink.published)
@@ -309,8 +461,12 @@ class UuvChain:
             own.section("latency", lambda now: latency_summary(list(gps.latencies_s)[-1000:]))
         self.control = Control(pipeline, self.status, gps.gate.confirm if gps else None)
         status_sink = ZenohStatus(session, u.status_key, u.alive_key, self.status)
-        self.zenoh_control = ZenohControl(session, self.control, u.control_prefix,
-                                          {u.fix_key: lambda: fix_sink.latest, u.status_key: lambda: status_sink.latest})
+        self.zenoh_control = ZenohControl(
+            session,
+            self.control,
+            u.control_prefix,
+            {u.fix_key: lambda: fix_sink.latest, u.status_key: lambda: status_sink.latest},
+        )
         own.add(self.zenoh_control, INPUTS, "control", lambda now: self.zenoh_control.status())
         own.add(status_sink, OUTPUTS)
 
@@ -329,7 +485,9 @@ class UuvChain:
 
 def run(cfg: config.RunConfig) -> int:
     """The service with ``cfg`` to its end: exit code 0 after a clean stop, 2 after an error (one line)."""
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s: %(message)s"
+    )
     final = run_to_end("run", serve(cfg), (OSError, zenoh.ZError, InputMissing), cfg.stats)
     if final is None:
         return 2

@@ -55,7 +55,10 @@ def _boot() -> tuple[str | None, float]:
 def write_track(path: Path, memory: dict) -> None:
     """``memory`` (:meth:`FixGate.memory`) with when it was written, atomically; OSError when it cannot be."""
     boot_id, boot_s = _boot()
-    text = json.dumps({**memory, "written_unix": time.time(), "boot_id": boot_id, "boot_s": boot_s}, allow_nan=False)
+    text = json.dumps(
+        {**memory, "written_unix": time.time(), "boot_id": boot_id, "boot_s": boot_s},
+        allow_nan=False,
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
@@ -77,18 +80,28 @@ def read_track(path: Path, max_age_s: float) -> tuple[dict, float] | None:
         if not isinstance(kept, dict) or any(k not in kept for k in KEYS):
             raise ValueError(f"expected the keys {', '.join(KEYS)}")
         boot_id, boot_s = _boot()
-        since = (boot_s - float(kept["boot_s"]) if boot_id is not None and kept.get("boot_id") == boot_id
-                 else time.time() - float(kept["written_unix"]))
+        since = (
+            boot_s - float(kept["boot_s"])
+            if boot_id is not None and kept.get("boot_id") == boot_id
+            else time.time() - float(kept["written_unix"])
+        )
         age_s = max(0.0, float(kept["age_s"]) + since)
         if not math.isfinite(age_s):
             raise ValueError(f"age {age_s}")
     except FileNotFoundError:
         return None
     except (OSError, ValueError, TypeError, KeyError) as e:
-        log.warning("%s: not a kept track (%s): the gates start without the UUV's last track", path, e)
+        log.warning(
+            "%s: not a kept track (%s): the gates start without the UUV's last track", path, e
+        )
         return None
     if age_s > max_age_s:
-        log.info("%s: the UUV's last track is %.0f s old (over --track-max-age-s %g): not used", path, age_s, max_age_s)
+        log.info(
+            "%s: the UUV's last track is %.0f s old (over --track-max-age-s %g): not used",
+            path,
+            age_s,
+            max_age_s,
+        )
         return None
     return kept, age_s
 
@@ -100,8 +113,12 @@ def remember(gate: FixGate, path: Path, max_age_s: float) -> dict | None:
         return None
     kept, age_s = found
     gate.remember(kept, time.time() - age_s)
-    log.info("%s: the UUV's last trusted track, %.1f s old: a target further than it can have gone is not valid "
-             "until the operator confirms it", path, age_s)
+    log.info(
+        "%s: the UUV's last trusted track, %.1f s old: a target further than it can have gone is not valid "
+        "until the operator confirms it",
+        path,
+        age_s,
+    )
     return {"age_s": round(age_s, 3), "lat": kept["lat"], "lon": kept["lon"]}
 
 
@@ -140,4 +157,9 @@ class TrackMemory:
         self.written += 1
 
     def status(self) -> dict:
-        return {"path": str(self.path), "written": self.written, "read": self.read, "failure": self.failure}
+        return {
+            "path": str(self.path),
+            "written": self.written,
+            "read": self.read,
+            "failure": self.failure,
+        }

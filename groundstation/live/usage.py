@@ -32,4 +32,7 @@ class Usage:
         (t0, c0), (t1, c1) = self._samples[0], self._samples[-1]
         cpu = 100.0 * (c1 - c0) / (t1 - t0) if t1 - t0 >= 0.5 else None
         rss = rss_mb()
-        return {"cpu_pct": None if cpu is None else round(cpu, 1), "rss_mb": None if rss is None else round(rss, 1)}
+        return {
+            "cpu_pct": None if cpu is None else round(cpu, 1),
+            "rss_mb": None if rss is None else round(rss, 1),
+        }

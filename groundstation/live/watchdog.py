@@ -46,11 +46,20 @@ class InputMissing(RuntimeError):
 
 def never_heard(inputs: InputsStatus) -> list[str]:
     """The inputs that have not delivered anything yet: ``uav``, ``depth``, ``video``."""
-    return [name for name, silent in (("uav", inputs.uav.received == 0), ("depth", inputs.depth.received == 0),
-                                      ("video", inputs.video is not None and inputs.video.frames == 0)) if silent]
+    return [
+        name
+        for name, silent in (
+            ("uav", inputs.uav.received == 0),
+            ("depth", inputs.depth.received == 0),
+            ("video", inputs.video is not None and inputs.video.frames == 0),
+        )
+        if silent
+    ]
 
 
-def problems(inputs: InputsStatus, needed: tuple[str, ...], zenoh_peers: int | None) -> dict[str, str]:
+def problems(
+    inputs: InputsStatus, needed: tuple[str, ...], zenoh_peers: int | None
+) -> dict[str, str]:
     """What is wrong with each input, from the inputs' status (empty when all is well)."""
     out = {}
     uav = inputs.uav
@@ -62,7 +71,9 @@ def problems(inputs: InputsStatus, needed: tuple[str, ...], zenoh_peers: int | N
     else:
         missing = [k for k in needed if ages.get(k, math.inf) > SILENT_S]
         if missing:
-            out["uav"] = f"UAV MAVLink: no {', '.join(missing)} (receiving {', '.join(sorted(ages))})"
+            out["uav"] = (
+                f"UAV MAVLink: no {', '.join(missing)} (receiving {', '.join(sorted(ages))})"
+            )
     depth = inputs.depth
     where = f"Zenoh key {depth.key}" if depth.key else depth.url
     if depth.received == 0:
@@ -75,7 +86,9 @@ def problems(inputs: InputsStatus, needed: tuple[str, ...], zenoh_peers: int | N
         out["depth"] = f"depth: none for {depth.age_s:.0f} s on {where}"
     elif depth.source == "ardusub_ekf":
         missing = ", ".join(depth.ardusub.params.missing) or "its depth sensor's message"
-        out["depth"] = f"depth: ArduSub's EKF only, unchecked: {missing} not received yet on {where}"
+        out["depth"] = (
+            f"depth: ArduSub's EKF only, unchecked: {missing} not received yet on {where}"
+        )
     video = inputs.video
     if video is not None:
         why = f": {video.error}" if video.error else ""
@@ -93,14 +106,21 @@ def problems(inputs: InputsStatus, needed: tuple[str, ...], zenoh_peers: int | N
 class Watchdog:
     """Worker and sink (``on_fix``): the log lines above, ``problems`` for the status, the summary."""
 
-    def __init__(self, status: Callable[[float], dict], needed: tuple[str, ...],
-                 zenoh_peers: Callable[[], int] | None = None, require_s: float | None = None):
+    def __init__(
+        self,
+        status: Callable[[float], dict],
+        needed: tuple[str, ...],
+        zenoh_peers: Callable[[], int] | None = None,
+        require_s: float | None = None,
+    ):
         self.status = status
         self.needed = needed
         self.zenoh_peers = zenoh_peers
         self.require_s = require_s
         self.problems: dict[str, str] = {}
-        self._next_report: dict[str, tuple[float, int]] = {}  # input → (when to log again, repeats so far)
+        self._next_report: dict[
+            str, tuple[float, int]
+        ] = {}  # input → (when to log again, repeats so far)
         self._fixes = 0
         self._ok = 0
         self._last_ok: Fix | None = None
@@ -119,7 +139,9 @@ class Watchdog:
             now = time.time()
             try:
                 status = InputsStatus.model_validate(self.status(now))
-            except ValidationError as e:  # a bug, not the field's: the status sink names the field; judge the next
+            except (
+                ValidationError
+            ) as e:  # a bug, not the field's: the status sink names the field; judge the next
                 log.debug("inputs' status does not fit its model: %s", e)
                 continue
             peers = self.zenoh_peers() if self.zenoh_peers is not None else None
@@ -128,8 +150,10 @@ class Watchdog:
             if self.require_s is not None and now - t0 >= self.require_s:
                 never = never_heard(status)
                 if never:
-                    raise InputMissing("; ".join(self.problems[k] for k in never)
-                                       + f" within {self.require_s:g} s (--require-inputs)")
+                    raise InputMissing(
+                        "; ".join(self.problems[k] for k in never)
+                        + f" within {self.require_s:g} s (--require-inputs)"
+                    )
                 self.require_s = None
             if now >= next_summary:
                 log.info("%s", self.summary(now, status))
@@ -141,7 +165,10 @@ class Watchdog:
             when, repeats = self._next_report.get(key, (t0 + FIRST_S, 0))
             if now >= when:
                 log.warning("%s", text)
-                self._next_report[key] = (now + REPEAT_S[min(repeats, len(REPEAT_S) - 1)], repeats + 1)
+                self._next_report[key] = (
+                    now + REPEAT_S[min(repeats, len(REPEAT_S) - 1)],
+                    repeats + 1,
+                )
         for key in [k for k in self._next_report if k not in self.problems]:
             if self._next_report.pop(key)[1]:
                 log.info("%s: back", key)
@@ -150,11 +177,19 @@ class Watchdog:
         """One line: frames per second, ok share, the last fix and the inputs' ages, over the last interval."""
         ok = f"{100.0 * self._ok / self._fixes:.0f}% ok" if self._fixes else "no frames"
         fix = self._last_ok
-        last = ("no fix yet" if fix is None else
-                f"last fix {fix.lat:.7f}, {fix.lon:.7f} ±{fix.h_acc_m:.2f} m {now - fix.t_unix:.1f} s ago")
+        last = (
+            "no fix yet"
+            if fix is None
+            else f"last fix {fix.lat:.7f}, {fix.lon:.7f} ±{fix.h_acc_m:.2f} m {now - fix.t_unix:.1f} s ago"
+        )
         ages = status.uav.age_s
-        parts = [f"{self._fixes / SUMMARY_S:.1f} fps", ok, last, f"UAV {_age(min(ages.values()) if ages else None)}",
-                 f"depth {_age(status.depth.age_s)}"]
+        parts = [
+            f"{self._fixes / SUMMARY_S:.1f} fps",
+            ok,
+            last,
+            f"UAV {_age(min(ages.values()) if ages else None)}",
+            f"depth {_age(status.depth.age_s)}",
+        ]
         if status.video is not None:
             parts.append(f"video {_age(status.video.age_s)}")
         return "; ".join(parts)

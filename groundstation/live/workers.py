@@ -48,8 +48,14 @@ class Workers:
         self._sections: list[tuple[str, Callable[[float], object]]] = []
         self._included: list[Workers] = []
 
-    def add(self, worker, stage: int, key: str | None = None, status: Callable[[float], dict] | None = None,
-            is_input: bool = False):
+    def add(
+        self,
+        worker,
+        stage: int,
+        key: str | None = None,
+        status: Callable[[float], dict] | None = None,
+        is_input: bool = False,
+    ):
         """Declare ``worker``; returns it."""
         if key is not None and status is None:
             status = worker.status
@@ -79,7 +85,10 @@ class Workers:
         """Run every worker until ``until`` completes (or one fails), then stop them stage by stage."""
         async with asyncio.TaskGroup() as tg:
             entries = [*self._entries, *(e for other in self._included for e in other._entries)]
-            tasks = [(e.stage, tg.create_task(e.worker.run(), name=type(e.worker).__name__)) for e in entries]
+            tasks = [
+                (e.stage, tg.create_task(e.worker.run(), name=type(e.worker).__name__))
+                for e in entries
+            ]
             await until
             log.info("stopping")
             loop = asyncio.get_running_loop()
@@ -90,7 +99,11 @@ class Workers:
                     task.cancel()
                 await asyncio.wait(now)
                 if loop.time() - t0 > STAGE_S:
-                    log.warning("stopping %s took %.2f s", ", ".join(t.get_name() for t in now), loop.time() - t0)
+                    log.warning(
+                        "stopping %s took %.2f s",
+                        ", ".join(t.get_name() for t in now),
+                        loop.time() - t0,
+                    )
 
 
 async def stopped(stop: asyncio.Event, duration_s: float | None) -> None:
@@ -101,7 +114,9 @@ async def stopped(stop: asyncio.Event, duration_s: float | None) -> None:
         pass
 
 
-def run_to_end(command: str, main: Coroutine, errors: tuple[type[BaseException], ...], stats: str | None) -> dict | None:
+def run_to_end(
+    command: str, main: Coroutine, errors: tuple[type[BaseException], ...], stats: str | None
+) -> dict | None:
     """Run a service's ``main`` (returning its final status) to its end: the final status, also written to ``stats``
     (JSON) when given; or None after printing each of ``errors`` in one line as ``skyfix COMMAND: error: ...``."""
     final = None

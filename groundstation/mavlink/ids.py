@@ -17,5 +17,8 @@ NOT_AUTOPILOTS = (6, 18, 26, 30)  # MAV_TYPE GCS, ONBOARD_CONTROLLER, GIMBAL, CA
 
 def is_autopilot_heartbeat(msg) -> bool:
     """A HEARTBEAT that names an autopilot (not a ground station, companion computer, gimbal or camera)."""
-    return (msg.get_type() == "HEARTBEAT" and getattr(msg, "autopilot", MAV_AUTOPILOT_INVALID) != MAV_AUTOPILOT_INVALID
-            and getattr(msg, "type", None) not in NOT_AUTOPILOTS)
+    return (
+        msg.get_type() == "HEARTBEAT"
+        and getattr(msg, "autopilot", MAV_AUTOPILOT_INVALID) != MAV_AUTOPILOT_INVALID
+        and getattr(msg, "type", None) not in NOT_AUTOPILOTS
+    )

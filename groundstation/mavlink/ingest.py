@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's import (in mavutil()) to parse MAVLink 2
+os.environ.setdefault(
+    "MAVLINK20", "1"
+)  # must precede pymavlink's import (in mavutil()) to parse MAVLink 2
 
 import math
 from collections.abc import Mapping
@@ -26,18 +28,37 @@ from localizer.depth import PRESSURE_MESSAGES, ArduSubDepth, DepthSample
 from localizer.telemetry import Telemetry
 
 #: Message types the localizer uses (and the autopilot's HEARTBEAT: whether it is armed).
-USED = ("ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME", "GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION",
-        "GPS_RAW_INT", "TIMESYNC", "PARAM_VALUE", "DISTANCE_SENSOR", "RANGEFINDER")
+USED = (
+    "ATTITUDE",
+    "GLOBAL_POSITION_INT",
+    "SYSTEM_TIME",
+    "GIMBAL_DEVICE_ATTITUDE_STATUS",
+    "MOUNT_ORIENTATION",
+    "GPS_RAW_INT",
+    "TIMESYNC",
+    "PARAM_VALUE",
+    "DISTANCE_SENSOR",
+    "RANGEFINDER",
+)
 GIMBAL_MESSAGES = ("GIMBAL_DEVICE_ATTITUDE_STATUS", "MOUNT_ORIENTATION")
 RANGEFINDER_MESSAGES = ("DISTANCE_SENSOR", "RANGEFINDER")
 #: Message types the UUV's autopilot reader uses: its depth, its thrusters' outputs (COMMAND_ACK: the answers to its
 #: rate requests).
-ARDUSUB_USED = ("GLOBAL_POSITION_INT", *PRESSURE_MESSAGES, "PARAM_VALUE", "GPS_GLOBAL_ORIGIN", "SERVO_OUTPUT_RAW",
-                "COMMAND_ACK")
+ARDUSUB_USED = (
+    "GLOBAL_POSITION_INT",
+    *PRESSURE_MESSAGES,
+    "PARAM_VALUE",
+    "GPS_GLOBAL_ORIGIN",
+    "SERVO_OUTPUT_RAW",
+    "COMMAND_ACK",
+)
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # DISTANCE_SENSOR orientation: looking down the body's z axis
 SIGNAL_QUALITY_INVALID = 1  # DISTANCE_SENSOR signal_quality: 0 unknown, 1 invalid, 2..100
-COVARIANCE_UNKNOWN = (0, 255)  # DISTANCE_SENSOR covariance (cm²): 0 (ArduPilot) or UINT8_MAX: not given
+COVARIANCE_UNKNOWN = (
+    0,
+    255,
+)  # DISTANCE_SENSOR covariance (cm²): 0 (ArduPilot) or UINT8_MAX: not given
 DOP_UNKNOWN = 65535
 
 
@@ -102,7 +123,9 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     if kind in GIMBAL_MESSAGES:
         other = None if own else component
         if kind == "MOUNT_ORIENTATION":
-            return tel.add_mount(msg.time_boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s, other)
+            return tel.add_mount(
+                msg.time_boot_ms, msg.roll, msg.pitch, msg.yaw, receive_unix_s, other
+            )
         return tel.add_gimbal(msg.time_boot_ms, msg.q, msg.flags, receive_unix_s, other)
     if not own:
         if kind in RANGEFINDER_MESSAGES:  # another component's sensor, on its own clock: not used
@@ -110,26 +133,48 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
         tel.refusal = f"from component {component}, not the autopilot ({tel.autopilot_component})"
         return False
     if kind == "ATTITUDE":
-        return tel.add_attitude(msg.time_boot_ms, msg.roll, msg.pitch, msg.yaw,
-                                (msg.rollspeed, msg.pitchspeed, msg.yawspeed), receive_unix_s)
+        return tel.add_attitude(
+            msg.time_boot_ms,
+            msg.roll,
+            msg.pitch,
+            msg.yaw,
+            (msg.rollspeed, msg.pitchspeed, msg.yawspeed),
+            receive_unix_s,
+        )
     if kind == "GLOBAL_POSITION_INT":
-        return tel.add_position(msg.time_boot_ms, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0,
-                                msg.relative_alt / 1000.0, (msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0),
-                                receive_unix_s)
+        return tel.add_position(
+            msg.time_boot_ms,
+            msg.lat / 1e7,
+            msg.lon / 1e7,
+            msg.alt / 1000.0,
+            msg.relative_alt / 1000.0,
+            (msg.vx / 100.0, msg.vy / 100.0, msg.vz / 100.0),
+            receive_unix_s,
+        )
     if kind == "SYSTEM_TIME":
         return tel.add_system_time(msg.time_boot_ms, msg.time_unix_usec, receive_unix_s)
     if kind == "TIMESYNC":  # the autopilot's own requests (tc1 = 0) need nothing from us
         return msg.tc1 == 0 or tel.add_timesync(msg.tc1, msg.ts1, receive_unix_s)
     if kind == "GPS_RAW_INT":
-        alt_ellipsoid_mm = getattr(msg, "alt_ellipsoid", 0) or 0  # MAVLink 2 extensions: 0 when not sent
+        alt_ellipsoid_mm = (
+            getattr(msg, "alt_ellipsoid", 0) or 0
+        )  # MAVLink 2 extensions: 0 when not sent
         geoid = (alt_ellipsoid_mm - msg.alt) / 1000.0 if alt_ellipsoid_mm else float("nan")
 
         def dop(x):
             return x / 100.0 if x != DOP_UNKNOWN else float("nan")
 
-        return tel.add_gps_raw(msg.time_usec, msg.fix_type, msg.alt / 1000.0, (getattr(msg, "h_acc", 0) or 0) / 1000.0,
-                               (getattr(msg, "v_acc", 0) or 0) / 1000.0, dop(msg.eph), dop(msg.epv), geoid,
-                               receive_unix_s)
+        return tel.add_gps_raw(
+            msg.time_usec,
+            msg.fix_type,
+            msg.alt / 1000.0,
+            (getattr(msg, "h_acc", 0) or 0) / 1000.0,
+            (getattr(msg, "v_acc", 0) or 0) / 1000.0,
+            dop(msg.eph),
+            dop(msg.epv),
+            geoid,
+            receive_unix_s,
+        )
     if kind == "DISTANCE_SENSOR":  # a downward one; the others look elsewhere
         if msg.orientation != MAV_SENSOR_ROTATION_PITCH_270:
             return False
@@ -137,10 +182,18 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
         if (getattr(msg, "signal_quality", 0) or 0) == SIGNAL_QUALITY_INVALID:
             tel.rangefinder_out_of_range += 1
             return False
-        sigma = None if msg.covariance in COVARIANCE_UNKNOWN else msg.covariance ** 0.5 / 100.0
-        return tel.add_rangefinder(msg.time_boot_ms, msg.current_distance / 100.0, msg.min_distance / 100.0,
-                                   msg.max_distance / 100.0, receive_unix_s, sigma)
-    if kind == "RANGEFINDER":  # ArduPilot's copy of its downward rangefinder: used only without DISTANCE_SENSOR
+        sigma = None if msg.covariance in COVARIANCE_UNKNOWN else msg.covariance**0.5 / 100.0
+        return tel.add_rangefinder(
+            msg.time_boot_ms,
+            msg.current_distance / 100.0,
+            msg.min_distance / 100.0,
+            msg.max_distance / 100.0,
+            receive_unix_s,
+            sigma,
+        )
+    if (
+        kind == "RANGEFINDER"
+    ):  # ArduPilot's copy of its downward rangefinder: used only without DISTANCE_SENSOR
         if tel.distance_sensor_seen:
             return False
         return tel.add_rangefinder(None, msg.distance, 0.0, float("inf"), receive_unix_s)
@@ -183,17 +236,27 @@ def servo_pulses_us(fields: Mapping) -> dict[int, int]:
     return out
 
 
-def ingest_ardusub(depth: ArduSubDepth, kind: str, fields: Mapping, receive_unix_s: float) -> DepthSample | None:
+def ingest_ardusub(
+    depth: ArduSubDepth, kind: str, fields: Mapping, receive_unix_s: float
+) -> DepthSample | None:
     """One message of the UUV's autopilot (its fields: pymavlink's ``to_dict()`` or mavlink-server's JSON
     ``message``) into ``depth``; the depth sample it makes, if any. :class:`BadMessage` for a field that is not
     a finite number (one line naming it)."""
     if kind == "GLOBAL_POSITION_INT":
-        return depth.position(_number(kind, fields, "time_boot_ms"), _number(kind, fields, "relative_alt") / 1000.0,
-                              _number(kind, fields, "alt") / 1000.0, _number(kind, fields, "vz") / 100.0,
-                              receive_unix_s)
+        return depth.position(
+            _number(kind, fields, "time_boot_ms"),
+            _number(kind, fields, "relative_alt") / 1000.0,
+            _number(kind, fields, "alt") / 1000.0,
+            _number(kind, fields, "vz") / 100.0,
+            receive_unix_s,
+        )
     if kind in PRESSURE_MESSAGES:
-        return depth.scaled_pressure(PRESSURE_MESSAGES.index(kind), _number(kind, fields, "time_boot_ms"),
-                                     _number(kind, fields, "press_abs") * 100.0, receive_unix_s)
+        return depth.scaled_pressure(
+            PRESSURE_MESSAGES.index(kind),
+            _number(kind, fields, "time_boot_ms"),
+            _number(kind, fields, "press_abs") * 100.0,
+            receive_unix_s,
+        )
     if kind == "PARAM_VALUE":
         depth.param(param_name(fields.get("param_id")), _number(kind, fields, "param_value"))
     elif kind == "GPS_GLOBAL_ORIGIN":

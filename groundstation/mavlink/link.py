@@ -68,7 +68,9 @@ OUTBOX = 64
 SIGNING_LINK_ID = 1
 KEY_BYTES = 32
 STABLE_S = 1.0
-STOP_TIMEOUT_S = 0.5  # a stop waits this long for the last message, then leaves the thread to end by itself
+STOP_TIMEOUT_S = (
+    0.5  # a stop waits this long for the last message, then leaves the thread to end by itself
+)
 _SIGNING_EPOCH = 1420070400  # 2015-01-01, MAVLink signing's time origin
 #: First-open errors that mean "the other end is not there yet", not a wrong option: keep trying.
 _NOT_YET = (ConnectionError, TimeoutError)
@@ -89,8 +91,12 @@ def read_signing_key(path: str, option: str = "--gps-input-signing-key") -> byte
             return bytes.fromhex(text.decode("ascii"))
         except (UnicodeDecodeError, ValueError):
             pass
-    raise ConfigError(path, option, f"{len(data)} bytes",
-                      f"expected {KEY_BYTES} raw bytes or {2 * KEY_BYTES} hex digits")
+    raise ConfigError(
+        path,
+        option,
+        f"{len(data)} bytes",
+        f"expected {KEY_BYTES} raw bytes or {2 * KEY_BYTES} hex digits",
+    )
 
 
 def _reset_parser(mav) -> int:
@@ -119,9 +125,20 @@ class MavlinkLink:
     the thread send a HEARTBEAT every second; ``on_message`` and ``is_peer`` are called on the thread.
     """
 
-    def __init__(self, url: str, system: int, component: int, *, name: str, heartbeat: tuple[int, int] | None = None,
-                 signing_key: bytes | None = None, require_signed: bool = False, on_message: Callable | None = None,
-                 is_peer: Callable | None = None, peer: str | None = None):
+    def __init__(
+        self,
+        url: str,
+        system: int,
+        component: int,
+        *,
+        name: str,
+        heartbeat: tuple[int, int] | None = None,
+        signing_key: bytes | None = None,
+        require_signed: bool = False,
+        on_message: Callable | None = None,
+        is_peer: Callable | None = None,
+        peer: str | None = None,
+    ):
         self.url = url
         self.peer = peer
         self.name = name
@@ -137,13 +154,17 @@ class MavlinkLink:
         self.mav = _Locked(_Outbox(self), srcSystem=system, srcComponent=component)
         self.parser = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
         self.parser.robust_parsing = True
-        self._checker = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)  # packs to check, unsigned
+        self._checker = mavlink.MAVLink(
+            None, srcSystem=system, srcComponent=component
+        )  # packs to check, unsigned
         if signing_key is not None:
             s = self.mav.signing
             s.secret_key, s.sign_outgoing, s.link_id = signing_key, True, SIGNING_LINK_ID
             s.timestamp = int((max(time.time(), _SIGNING_EPOCH) - _SIGNING_EPOCH) * 100_000)
             if require_signed:
-                self.parser.signing.secret_key = signing_key  # and no allow_unsigned_callback: unsigned is refused
+                self.parser.signing.secret_key = (
+                    signing_key  # and no allow_unsigned_callback: unsigned is refused
+                )
         self.signed = signing_key is not None
         self.heartbeat = heartbeat
         self.on_message = on_message or (lambda msg, t: None)
@@ -152,9 +173,22 @@ class MavlinkLink:
         self.state = "down"
         self.error: str | None = None
         self.state_since = time.time()
-        self.counts = dict.fromkeys(("connects", "disconnects", "written", "heartbeats", "dropped_while_down",
-                                     "superseded", "outbox_dropped", "write_errors", "reads", "unfinished_frames",
-                                     "foreign_datagrams"), 0)
+        self.counts = dict.fromkeys(
+            (
+                "connects",
+                "disconnects",
+                "written",
+                "heartbeats",
+                "dropped_while_down",
+                "superseded",
+                "outbox_dropped",
+                "write_errors",
+                "reads",
+                "unfinished_frames",
+                "foreign_datagrams",
+            ),
+            0,
+        )
         self.final_written = False
         self._outbox: deque[bytes] = deque()
         self._newest: dict[str, bytes] = {}
@@ -249,11 +283,20 @@ class MavlinkLink:
         with self._lock:
             t = self._transport
             dest = getattr(t, "dest", None) if getattr(t, "listen", False) else None
-            return {"url": self.url, "state": self.state, "state_for_s": round(max(0.0, now - self.state_since), 3),
-                    "error": self.error, "signed": self.signed, **self.counts, **self._thread.status(),
-                    "peer": None if dest is None else f"{dest[0]}:{dest[1]}",
-                    "relocks": getattr(t, "relocks", 0),
-                    "peer_age_s": None if self.last_heard is None else round(max(0.0, now - self.last_heard), 3)}
+            return {
+                "url": self.url,
+                "state": self.state,
+                "state_for_s": round(max(0.0, now - self.state_since), 3),
+                "error": self.error,
+                "signed": self.signed,
+                **self.counts,
+                **self._thread.status(),
+                "peer": None if dest is None else f"{dest[0]}:{dest[1]}",
+                "relocks": getattr(t, "relocks", 0),
+                "peer_age_s": None
+                if self.last_heard is None
+                else round(max(0.0, now - self.last_heard), 3),
+            }
 
     def _wake(self) -> None:
         try:
@@ -270,11 +313,20 @@ class MavlinkLink:
             self.state_since, self.error = time.time(), None
         self._connected_at = time.monotonic()
         if not self._outage:  # after an outage: said once it holds (_stable)
-            log.info("%s %s: %s", self.name, self.url, "up" if transport.peer_known else "open, waiting for its peer")
+            log.info(
+                "%s %s: %s",
+                self.name,
+                self.url,
+                "up" if transport.peer_known else "open, waiting for its peer",
+            )
 
     def _stable(self) -> None:
         """Up for :data:`STABLE_S`: an outage that was logged is over."""
-        if self._outage and self._transport is not None and time.monotonic() - self._connected_at >= STABLE_S:
+        if (
+            self._outage
+            and self._transport is not None
+            and time.monotonic() - self._connected_at >= STABLE_S
+        ):
             self._outage.clear()
             log.info("%s %s: up again", self.name, self.url)
 
@@ -294,8 +346,12 @@ class MavlinkLink:
             self.state, self.error = "down", why
         if kind not in self._outage:
             self._outage.add(kind)
-            log.warning("%s %s: down (%s); reconnecting, messages to it are dropped meanwhile", self.name, self.url,
-                        why)
+            log.warning(
+                "%s %s: down (%s); reconnecting, messages to it are dropped meanwhile",
+                self.name,
+                self.url,
+                why,
+            )
 
     def _run(self, stop: threading.Event) -> None:
         """The link's thread (under :class:`~groundstation.threads.Supervised`): connect, serve, reconnect with back-off."""
@@ -341,9 +397,20 @@ class MavlinkLink:
         if self.heartbeat and time.monotonic() >= next_beat:
             kind, autopilot = self.heartbeat
             m = self._mavlink
-            self._write(t, self.message("HEARTBEAT", {"type": kind, "autopilot": autopilot, "base_mode": 0,
-                                                      "custom_mode": 0, "system_status": m.MAV_STATE_ACTIVE,
-                                                      "mavlink_version": 3}))
+            self._write(
+                t,
+                self.message(
+                    "HEARTBEAT",
+                    {
+                        "type": kind,
+                        "autopilot": autopilot,
+                        "base_mode": 0,
+                        "custom_mode": 0,
+                        "system_status": m.MAV_STATE_ACTIVE,
+                        "mavlink_version": 3,
+                    },
+                ),
+            )
             self.counts["heartbeats"] += 1
             next_beat = time.monotonic() + HEARTBEAT_PERIOD_S
         while True:
@@ -374,13 +441,19 @@ class MavlinkLink:
             left = _reset_parser(self.parser)
             if left:
                 self.counts["unfinished_frames"] += 1
-                msgs.append(self._mavlink.MAVLink_bad_data(bytearray(data[-left:][:64]),
-                                                           f"datagram ends inside a frame ({left} bytes)"))
+                msgs.append(
+                    self._mavlink.MAVLink_bad_data(
+                        bytearray(data[-left:][:64]), f"datagram ends inside a frame ({left} bytes)"
+                    )
+                )
         peer = False
         for i, msg in enumerate(msgs):
-            if msg.get_type().startswith("UNKNOWN_"):  # an id no dialect has: its CRC cannot even be checked
-                msg = msgs[i] = self._mavlink.MAVLink_bad_data(bytearray(msg.get_msgbuf()[:64]),
-                                                               f"unknown message id {msg.get_msgId()}")
+            if msg.get_type().startswith(
+                "UNKNOWN_"
+            ):  # an id no dialect has: its CRC cannot even be checked
+                msg = msgs[i] = self._mavlink.MAVLink_bad_data(
+                    bytearray(msg.get_msgbuf()[:64]), f"unknown message id {msg.get_msgId()}"
+                )
             if msg.get_type() != "BAD_DATA" and self.is_peer(msg):
                 peer = True
             self.on_message(msg, now)

@@ -43,7 +43,9 @@ WRITE_TIMEOUT_S = 1.0
 ANY_PEER = "any"
 #: A ``udpin:`` link's peer silent this long (s) may be replaced by another sender the caller accepts
 RELOCK_S = 5.0
-UDP_RCVBUF = 4 << 20  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
+UDP_RCVBUF = (
+    4 << 20
+)  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
 CONNECT_TIMEOUT_S = 1.0
 DEFAULT_BAUD = 115200
 _READ_MAX = 65536
@@ -58,11 +60,13 @@ def _send_all(sock: socket.socket, buf: bytes) -> None:
     view, deadline = memoryview(buf), time.monotonic() + WRITE_TIMEOUT_S
     while view:
         try:
-            view = view[sock.send(view):]
+            view = view[sock.send(view) :]
         except BlockingIOError:
             left = deadline - time.monotonic()
             if left <= 0 or not select.select([], [sock], [], left)[1]:
-                raise TimeoutError(errno.ETIMEDOUT, f"the peer took no data for {WRITE_TIMEOUT_S:g} s") from None
+                raise TimeoutError(
+                    errno.ETIMEDOUT, f"the peer took no data for {WRITE_TIMEOUT_S:g} s"
+                ) from None
 
 
 def _recv(sock: socket.socket, what: str) -> bytes:
@@ -171,13 +175,21 @@ class Udp(_Transport):
 
     datagrams = True
 
-    def __init__(self, url: str, addr: tuple[str, int], listen: bool, peer: tuple[str, int] | None = None,
-                 locked: bool = True):
+    def __init__(
+        self,
+        url: str,
+        addr: tuple[str, int],
+        listen: bool,
+        peer: tuple[str, int] | None = None,
+        locked: bool = True,
+    ):
         self.url = url
         self.locked = locked  # False: every sender's datagrams are read (ANY_PEER)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)  # the kernel caps it (rmem_max)
+        self.sock.setsockopt(
+            socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF
+        )  # the kernel caps it (rmem_max)
         if listen:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self.sock.bind(addr)
@@ -189,7 +201,9 @@ class Udp(_Transport):
         self.last_from: tuple[str, int] | None = None
         self.foreign = self.relocks = 0
         self._peer_heard = time.monotonic()
-        self.kernel_times = sys.platform == "linux"  # elsewhere the option's number means something else
+        self.kernel_times = (
+            sys.platform == "linux"
+        )  # elsewhere the option's number means something else
         if self.kernel_times:
             self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
 
@@ -202,8 +216,13 @@ class Udp(_Transport):
 
     def read(self) -> bytes:
         try:
-            data, ancillary, _, addr = self.sock.recvmsg(_READ_MAX, socket.CMSG_SPACE(_TIMESPEC.size))
-        except (BlockingIOError, ConnectionRefusedError):  # ICMP port unreachable of an earlier datagram
+            data, ancillary, _, addr = self.sock.recvmsg(
+                _READ_MAX, socket.CMSG_SPACE(_TIMESPEC.size)
+            )
+        except (
+            BlockingIOError,
+            ConnectionRefusedError,
+        ):  # ICMP port unreachable of an earlier datagram
             return b""
         if self.listen and self.locked and self.dest is not None:
             if addr == self.dest:
@@ -211,8 +230,11 @@ class Udp(_Transport):
             elif self.fixed or time.monotonic() - self._peer_heard < RELOCK_S:
                 self.foreign += 1
                 return b""
-        stamps = [_TIMESPEC.unpack(d[:_TIMESPEC.size]) for level, kind, d in ancillary
-                  if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS]
+        stamps = [
+            _TIMESPEC.unpack(d[: _TIMESPEC.size])
+            for level, kind, d in ancillary
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS
+        ]
         self.t_received = stamps[0][0] + stamps[0][1] * 1e-9 if stamps else time.time()
         self.last_from = addr
         return data
@@ -225,7 +247,9 @@ class Udp(_Transport):
 
     def write(self, buf: bytes) -> None:
         if self.dest is not None:
-            self.sock.sendto(buf, self.dest)  # unconnected: no ICMP errors, but a missing route raises
+            self.sock.sendto(
+                buf, self.dest
+            )  # unconnected: no ICMP errors, but a missing route raises
 
     def close(self) -> None:
         self.sock.close()
@@ -274,7 +298,12 @@ def open_transport(url: str, peer: str | None = None):
     if kind in ("udpin", "udp"):
         if peer == ANY_PEER:
             return Udp(url, _host_port(url, rest), listen=True, locked=False)
-        return Udp(url, _host_port(url, rest), listen=True, peer=None if peer is None else _host_port(url, peer))
+        return Udp(
+            url,
+            _host_port(url, rest),
+            listen=True,
+            peer=None if peer is None else _host_port(url, peer),
+        )
     device, _, baud = url.partition(",")
     if not device.startswith("/") and not device.upper().startswith("COM"):
         raise OSError(errno.EINVAL, "expected tcp:, tcpin:, udpout:, udpin: or a serial device")

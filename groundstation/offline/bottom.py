@@ -55,7 +55,9 @@ RATE_HZ = 5.0  # frames used per second of video
 MAX_FEATURES = 250  # corners tracked at once
 MIN_DISTANCE_PX = 12  # between corners
 BACK_PX = 0.5  # forward-backward track disagreement that drops a corner
-ANCHOR_PX = 2.0  # a point matched against its first sight this far from the chain's match is dropped
+ANCHOR_PX = (
+    2.0  # a point matched against its first sight this far from the chain's match is dropped
+)
 #: bright lines on the floor narrower than this are taken for caustics and removed (:func:`floor_marks`), and the
 #: floor's dark marks smaller than it are what is tracked (m, at the camera's slant range)
 CAUSTIC_WEB_M = 0.2
@@ -67,15 +69,32 @@ PARTS = 3  # the estimate is also made on each of this many consecutive stretche
 #: (the simulator's caustics drifting over it: 0.85-1.0 px, against 0.41 without them), and the sigmas, which take
 #: the residuals as white, would claim far more than the estimate knows
 MAX_RMS_PX = 0.6
-VELOCITY_RATE_M = 0.05  # m/√s: the integrated EKF velocity's error, the walk's prior with a velocity
+VELOCITY_RATE_M = (
+    0.05  # m/√s: the integrated EKF velocity's error, the walk's prior with a velocity
+)
 MIN_WHITE_M = 0.003  # the reported position's white noise (localizer.bottom.white_noise_m) taken at least this
-GNSS_WALK_S = 60.0  # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
-MIN_TILT_DEG = 0.05  # the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
+GNSS_WALK_S = (
+    60.0  # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
+)
+MIN_TILT_DEG = (
+    0.05  # the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
+)
 MIN_YAW_DEG = 0.1
-COLUMNS = ("pose_source", "cam_err_n_deg", "cam_err_e_deg", "cam_err_d_deg", "sigma_tilt_deg", "sigma_yaw_deg",
-           "walk_n_m", "walk_e_m")
-_LK = {"winSize": (31, 31), "maxLevel": 4,
-       "criteria": (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 0.01)}
+COLUMNS = (
+    "pose_source",
+    "cam_err_n_deg",
+    "cam_err_e_deg",
+    "cam_err_d_deg",
+    "sigma_tilt_deg",
+    "sigma_yaw_deg",
+    "walk_n_m",
+    "walk_e_m",
+)
+_LK = {
+    "winSize": (31, 31),
+    "maxLevel": 4,
+    "criteria": (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 0.01),
+}
 
 
 def uuv_radius_px(cal: Calibration, pose: CameraPose) -> np.ndarray:
@@ -102,12 +121,22 @@ def floor_marks(grey: np.ndarray, kernel_px: int) -> np.ndarray:
     percentile to 255)."""
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (kernel_px, kernel_px))
     opened = cv2.morphologyEx(grey, cv2.MORPH_OPEN, disc)
-    marks = cv2.GaussianBlur(cv2.morphologyEx(opened, cv2.MORPH_BLACKHAT, disc).astype(np.float32), (0, 0), 1.0)
+    marks = cv2.GaussianBlur(
+        cv2.morphologyEx(opened, cv2.MORPH_BLACKHAT, disc).astype(np.float32), (0, 0), 1.0
+    )
     top = max(float(np.percentile(marks, 99.5)), 1e-3)
     return np.clip(marks * (255.0 / top), 0, 255).astype(np.uint8)
 
 
-def track_bottom(session: Session, rows: np.ndarray, uuv_u, uuv_v, radius_px, kernel_px: int, progress: bool = False):
+def track_bottom(
+    session: Session,
+    rows: np.ndarray,
+    uuv_u,
+    uuv_v,
+    radius_px,
+    kernel_px: int,
+    progress: bool = False,
+):
     """Floor feature tracks through the frames at ``rows`` of video_frames.csv: :class:`localizer.bottom.Observations`
     with ``frame`` indexing ``rows``. ``uuv_u``, ``uuv_v``, ``radius_px`` per row (NaN: the UUV not known there);
     tracked in :func:`floor_marks` of ``kernel_px`` (:func:`web_kernel_px`)."""
@@ -115,35 +144,63 @@ def track_bottom(session: Session, rows: np.ndarray, uuv_u, uuv_v, radius_px, ke
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
     frame, feature, us, vs = [], [], [], []
     prev, points, ids = None, np.zeros((0, 1, 2), np.float32), np.zeros(0, int)
-    first_k, first_xy, images = np.zeros(0, int), np.zeros((0, 1, 2), np.float32), {}  # each point's first sight
+    first_k, first_xy, images = (
+        np.zeros(0, int),
+        np.zeros((0, 1, 2), np.float32),
+        {},
+    )  # each point's first sight
     next_id = 0
     bar = progress_bar(len(rows), f"{session.path.name}: bottom features", progress)
     try:
-        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
-                        indices=session.frames["frame"].astype(int), grey=True) as video:
+        with open_video(
+            session.video_path,
+            expected_size=(cal.camera.width, cal.camera.height),
+            indices=session.frames["frame"].astype(int),
+            grey=True,
+        ) as video:
             for vf in video.prefetch():
                 k = wanted.get(vf.index)
                 if k is None:
                     continue
-                grey = floor_marks(vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY),
-                                   kernel_px)
+                grey = floor_marks(
+                    vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY),
+                    kernel_px,
+                )
                 images[k] = grey
                 r = rows[k]
                 if prev is not None and len(points):
                     p1, ok1, _ = cv2.calcOpticalFlowPyrLK(prev, grey, points, None, **_LK)
                     back, ok2, _ = cv2.calcOpticalFlowPyrLK(grey, prev, p1, None, **_LK)
-                    good = ((ok1.ravel() == 1) & (ok2.ravel() == 1)
-                            & (np.linalg.norm((back - points).reshape(-1, 2), axis=1) < BACK_PX))
+                    good = (
+                        (ok1.ravel() == 1)
+                        & (ok2.ravel() == 1)
+                        & (np.linalg.norm((back - points).reshape(-1, 2), axis=1) < BACK_PX)
+                    )
                     p1, anchored = _match_first_sight(images, first_k, first_xy, grey, p1)
                     good &= anchored
-                    points, ids, first_k, first_xy = p1[good], ids[good], first_k[good], first_xy[good]
+                    points, ids, first_k, first_xy = (
+                        p1[good],
+                        ids[good],
+                        first_k[good],
+                        first_xy[good],
+                    )
                 xy = points.reshape(-1, 2)
-                keep = _away(xy, cal.camera.width, cal.camera.height, uuv_u[r], uuv_v[r], radius_px[r])
-                points, ids, first_k, first_xy = points[keep], ids[keep], first_k[keep], first_xy[keep]
+                keep = _away(
+                    xy, cal.camera.width, cal.camera.height, uuv_u[r], uuv_v[r], radius_px[r]
+                )
+                points, ids, first_k, first_xy = (
+                    points[keep],
+                    ids[keep],
+                    first_k[keep],
+                    first_xy[keep],
+                )
                 if len(points) < 0.7 * MAX_FEATURES:
                     new = _corners(grey, points.reshape(-1, 2), uuv_u[r], uuv_v[r], radius_px[r])
                     new = new.reshape(-1, 1, 2).astype(np.float32)
-                    points, first_xy = np.concatenate([points, new]), np.concatenate([first_xy, new])
+                    points, first_xy = (
+                        np.concatenate([points, new]),
+                        np.concatenate([first_xy, new]),
+                    )
                     first_k = np.concatenate([first_k, np.full(len(new), k)])
                     ids = np.concatenate([ids, np.arange(next_id, next_id + len(new))])
                     next_id += len(new)
@@ -170,17 +227,29 @@ def _match_first_sight(images, first_k, first_xy, grey, predicted):
     matched, held = predicted.copy(), np.zeros(len(predicted), bool)
     for k in np.unique(first_k):
         i = np.flatnonzero(first_k == k)
-        p, ok, _ = cv2.calcOpticalFlowPyrLK(images[k], grey, first_xy[i], predicted[i].copy(), **{**_LK, "maxLevel": 1},
-                                            flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-        held[i] = (ok.ravel() == 1) & (np.linalg.norm((p - predicted[i]).reshape(-1, 2), axis=1) < ANCHOR_PX)
+        p, ok, _ = cv2.calcOpticalFlowPyrLK(
+            images[k],
+            grey,
+            first_xy[i],
+            predicted[i].copy(),
+            **{**_LK, "maxLevel": 1},
+            flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+        )
+        held[i] = (ok.ravel() == 1) & (
+            np.linalg.norm((p - predicted[i]).reshape(-1, 2), axis=1) < ANCHOR_PX
+        )
         matched[i] = p
     return matched, held
 
 
 def _away(xy, width, height, u, v, radius):
     """Points inside the image (by :data:`BORDER_PX`) and outside the UUV's disc."""
-    inside = ((xy[:, 0] >= BORDER_PX) & (xy[:, 0] <= width - 1 - BORDER_PX)
-              & (xy[:, 1] >= BORDER_PX) & (xy[:, 1] <= height - 1 - BORDER_PX))
+    inside = (
+        (xy[:, 0] >= BORDER_PX)
+        & (xy[:, 0] <= width - 1 - BORDER_PX)
+        & (xy[:, 1] >= BORDER_PX)
+        & (xy[:, 1] <= height - 1 - BORDER_PX)
+    )
     if np.isfinite(u) and np.isfinite(v):
         inside &= np.hypot(xy[:, 0] - u, xy[:, 1] - v) > radius
     return inside
@@ -195,8 +264,14 @@ def _corners(grey, existing, u, v, radius):
     if np.isfinite(u) and np.isfinite(v):
         cv2.circle(mask, (round(float(u)), round(float(v))), int(np.ceil(radius)), 0, -1)
     want = MAX_FEATURES - len(existing)
-    found = cv2.goodFeaturesToTrack(grey, maxCorners=int(want), qualityLevel=0.01, minDistance=MIN_DISTANCE_PX,
-                                    blockSize=7, mask=mask)
+    found = cv2.goodFeaturesToTrack(
+        grey,
+        maxCorners=int(want),
+        qualityLevel=0.01,
+        minDistance=MIN_DISTANCE_PX,
+        blockSize=7,
+        mask=mask,
+    )
     return np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2)
 
 
@@ -219,27 +294,40 @@ class PoseCorrection:
         """The attitude error applied (reported − true, NED rotation vector) per frame: the told parts only."""
         e = self.estimate
         tilt = e.tilt_rad if self.tilt_applied else np.zeros(2)
-        return bottom.bias_rotvec(tilt, e.yaw_rad if self.yaw_applied else 0.0, self.headings(session, pose))
+        return bottom.bias_rotvec(
+            tilt, e.yaw_rad if self.yaw_applied else 0.0, self.headings(session, pose)
+        )
 
     def apply(self, session: Session, pose: CameraPose) -> tuple[CameraPose, Calibration]:
         """The poses with the attitude turned back and the position moved by the walk, and the calibration whose
         tilt and heading sigmas are the estimate's (where applied)."""
         R = bottom.rodrigues(-self.error_rotvec(session, pose)) @ pose.R_ned_from_cv
         walk = self.estimate.walk_at(pose.t_unix)
-        lat, lon, _ = ned_to_geodetic(walk[:, 0], walk[:, 1], 0.0, pose.lat_deg, pose.lon_deg, pose.alt_amsl_m)
-        corrected = dataclasses.replace(pose, R_ned_from_cv=R, lat_deg=np.asarray(lat), lon_deg=np.asarray(lon))
+        lat, lon, _ = ned_to_geodetic(
+            walk[:, 0], walk[:, 1], 0.0, pose.lat_deg, pose.lon_deg, pose.alt_amsl_m
+        )
+        corrected = dataclasses.replace(
+            pose, R_ned_from_cv=R, lat_deg=np.asarray(lat), lon_deg=np.asarray(lon)
+        )
         cal, e = session.calibration, self.estimate
         sigmas = cal.sigmas
         if self.tilt_applied:
-            sigmas = dataclasses.replace(sigmas, tilt_deg=max(MIN_TILT_DEG, float(np.degrees(e.sigma_tilt_rad))))
+            sigmas = dataclasses.replace(
+                sigmas, tilt_deg=max(MIN_TILT_DEG, float(np.degrees(e.sigma_tilt_rad)))
+            )
         if self.yaw_applied:
-            sigmas = dataclasses.replace(sigmas, yaw_deg=max(MIN_YAW_DEG, float(np.degrees(e.sigma_yaw_rad))))
+            sigmas = dataclasses.replace(
+                sigmas, yaw_deg=max(MIN_YAW_DEG, float(np.degrees(e.sigma_yaw_rad)))
+            )
         return corrected, dataclasses.replace(cal, sigmas=sigmas)
 
     def describe(self) -> str:
         what = [w for w, on in (("tilt", self.tilt_applied), ("heading", self.yaw_applied)) if on]
-        applied = (f"applied: {' and '.join(what)} ({self.tilt_frame} frame tilt) and the position walk"
-                   if what else "applied: the position walk only")
+        applied = (
+            f"applied: {' and '.join(what)} ({self.tilt_frame} frame tilt) and the position walk"
+            if what
+            else "applied: the position walk only"
+        )
         return f"pose from the bottom: {self.estimate.describe()}; {applied}"
 
     def columns(self, session: Session, pose: CameraPose) -> dict[str, list[str]]:
@@ -250,10 +338,14 @@ class PoseCorrection:
         sig_t = f"{np.degrees(e.sigma_tilt_rad):.4f}" if self.tilt_applied else ""
         sig_y = f"{np.degrees(e.sigma_yaw_rad):.4f}" if self.yaw_applied else ""
         n = len(pose.t_unix)
-        return {"pose_source": ["bottom"] * n,
-                **{c: [f"{x:.4f}" for x in err[:, i]] for i, c in enumerate(COLUMNS[1:4])},
-                "sigma_tilt_deg": [sig_t] * n, "sigma_yaw_deg": [sig_y] * n,
-                "walk_n_m": [f"{x:.4f}" for x in walk[:, 0]], "walk_e_m": [f"{x:.4f}" for x in walk[:, 1]]}
+        return {
+            "pose_source": ["bottom"] * n,
+            **{c: [f"{x:.4f}" for x in err[:, i]] for i, c in enumerate(COLUMNS[1:4])},
+            "sigma_tilt_deg": [sig_t] * n,
+            "sigma_yaw_deg": [sig_y] * n,
+            "walk_n_m": [f"{x:.4f}" for x in walk[:, 0]],
+            "walk_e_m": [f"{x:.4f}" for x in walk[:, 1]],
+        }
 
 
 def _body_yaw(session: Session, t_unix) -> np.ndarray:
@@ -289,8 +381,15 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
     rows = rows[pose.status[rows] == "ok"]
     if len(rows) < 3:
         return "fewer than 3 frames with a pose"
-    obs = track_bottom(session, rows, np.asarray(uuv_u, float), np.asarray(uuv_v, float), uuv_radius_px(
-        session.calibration, pose), web_kernel_px(session.calibration, pose), progress)
+    obs = track_bottom(
+        session,
+        rows,
+        np.asarray(uuv_u, float),
+        np.asarray(uuv_v, float),
+        uuv_radius_px(session.calibration, pose),
+        web_kernel_px(session.calibration, pose),
+        progress,
+    )
     n_features = int(obs.feature.max()) + 1 if len(obs.feature) else 0
     if n_features < MIN_FEATURES:
         return f"{n_features} floor features tracked (fewer than {MIN_FEATURES})"
@@ -299,35 +398,58 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
     n, e, _ = geodetic_to_ned(pose.lat_deg[sub], pose.lon_deg[sub], pose.alt_amsl_m[sub], *origin)
     camera_ne = np.column_stack([n, e]) + pose.cam_offset_ned_m[sub, :2]
     frame_tilt = tilt_frame(session)
-    headings = (bottom.camera_heading_rad(pose.R_ned_from_cv[sub]) if frame_tilt == "camera"
-                else _body_yaw(session, pose.t_unix[sub]))
-    poses = bottom.FramePoses(pose.t_unix[sub], pose.R_ned_from_cv[sub], camera_ne, pose.height_m[sub], headings,
-                              pose.velocity_ned_mps[sub, :2])
+    headings = (
+        bottom.camera_heading_rad(pose.R_ned_from_cv[sub])
+        if frame_tilt == "camera"
+        else _body_yaw(session, pose.t_unix[sub])
+    )
+    poses = bottom.FramePoses(
+        pose.t_unix[sub],
+        pose.R_ned_from_cv[sub],
+        camera_ne,
+        pose.height_m[sub],
+        headings,
+        pose.velocity_ned_mps[sub, :2],
+    )
     gnss_rate = float(np.nanmedian(pose.sigma_uav_m[sub])) / np.sqrt(GNSS_WALK_S)
     white = bottom.white_noise_m(poses)
-    priors = bottom.Priors(walk_rate_m=min(gnss_rate, VELOCITY_RATE_M),
-                           white_m=0.0 if white is None else max(MIN_WHITE_M, white))
+    priors = bottom.Priors(
+        walk_rate_m=min(gnss_rate, VELOCITY_RATE_M),
+        white_m=0.0 if white is None else max(MIN_WHITE_M, white),
+    )
     cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
     est = bottom.estimate(cam, n_water, poses, obs, priors, parts=PARTS)
     if est.rms_px > MAX_RMS_PX:
-        return (f"the floor features do not stay put as a static floor would ({est.rms_px:.2f} px RMS, more than "
-                f"{MAX_RMS_PX}: drifting light such as caustics, or a moving bottom); found but not applied: "
-                f"{est.describe()}")
+        return (
+            f"the floor features do not stay put as a static floor would ({est.rms_px:.2f} px RMS, more than "
+            f"{MAX_RMS_PX}: drifting light such as caustics, or a moving bottom); found but not applied: "
+            f"{est.describe()}"
+        )
     tilt, yaw = applicable(est, session.calibration)
     if not (tilt and yaw):  # the walk again, with what is not applied held at 0
-        held = dataclasses.replace(priors, tilt_rad=priors.tilt_rad if tilt else 1e-7,
-                                   yaw_rad=priors.yaw_rad if yaw else 1e-7)
+        held = dataclasses.replace(
+            priors,
+            tilt_rad=priors.tilt_rad if tilt else 1e-7,
+            yaw_rad=priors.yaw_rad if yaw else 1e-7,
+        )
         again = bottom.estimate(cam, n_water, poses, obs, held)
-        est = dataclasses.replace(again, cov_bias=est.cov_bias, sigma_floor_depth_m=est.sigma_floor_depth_m,
-                                  priors=est.priors, parts=est.parts)  # sigmas: the free estimate's
+        est = dataclasses.replace(
+            again,
+            cov_bias=est.cov_bias,
+            sigma_floor_depth_m=est.sigma_floor_depth_m,
+            priors=est.priors,
+            parts=est.parts,
+        )  # sigmas: the free estimate's
     return PoseCorrection(est, tilt, yaw, frame_tilt)
 
 
 def applicable(est: bottom.BottomEstimate, cal: Calibration) -> tuple[bool, bool]:
     """Whether the tilt and the heading may be applied: the bottom told each (not the prior) and its sigma (with the
     parts' spread) is within the calibration's own for it (``[uncertainty] tilt_deg``, ``yaw_deg``)."""
-    return (est.tilt_estimated and np.degrees(est.sigma_tilt_rad) <= cal.sigmas.tilt_deg,
-            est.yaw_estimated and np.degrees(est.sigma_yaw_rad) <= cal.sigmas.yaw_deg)
+    return (
+        est.tilt_estimated and np.degrees(est.sigma_tilt_rad) <= cal.sigmas.tilt_deg,
+        est.yaw_estimated and np.degrees(est.sigma_yaw_rad) <= cal.sigmas.yaw_deg,
+    )
 
 
 def pixels_at(t_frames, t, u, v):
@@ -336,11 +458,16 @@ def pixels_at(t_frames, t, u, v):
     if len(t) == 0:
         return np.full(len(t_frames), np.nan), np.full(len(t_frames), np.nan)
     i = np.clip(np.searchsorted(t, t_frames), 1, max(1, len(t) - 1))
-    i = np.where((i > 0) & (np.abs(t[i - 1] - t_frames) < np.abs(t[np.minimum(i, len(t) - 1)] - t_frames)), i - 1,
-                 np.minimum(i, len(t) - 1))
+    i = np.where(
+        (i > 0) & (np.abs(t[i - 1] - t_frames) < np.abs(t[np.minimum(i, len(t) - 1)] - t_frames)),
+        i - 1,
+        np.minimum(i, len(t) - 1),
+    )
     period = float(np.median(np.diff(t_frames))) if len(t_frames) > 1 else np.inf
     near = np.abs(t[i] - t_frames) <= 0.5 * period
-    return np.where(near, np.asarray(u, float)[i], np.nan), np.where(near, np.asarray(v, float)[i], np.nan)
+    return np.where(near, np.asarray(u, float)[i], np.nan), np.where(
+        near, np.asarray(v, float)[i], np.nan
+    )
 
 
 def append_columns(path: Path, cells: dict[str, list[str]]) -> None:

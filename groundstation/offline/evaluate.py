@@ -93,13 +93,24 @@ class Scores:
 
     def with_smoothed(self, sm: Scores) -> Scores:
         """These scores with ``sm``'s (the smoothed track's) as ``smoothed_*``."""
-        return replace(self, smoothed_fixes=sm.fixes, smoothed_coverage=sm.coverage, smoothed_mae_m=sm.mae_m,
-                       smoothed_shape_m=sm.shape_m, smoothed_within_2sigma=sm.within_2sigma)
+        return replace(
+            self,
+            smoothed_fixes=sm.fixes,
+            smoothed_coverage=sm.coverage,
+            smoothed_mae_m=sm.mae_m,
+            smoothed_shape_m=sm.shape_m,
+            smoothed_within_2sigma=sm.within_2sigma,
+        )
 
     def with_allowed(self, allowed: Scores) -> Scores:
         """These scores with what the telemetry allows (``allowed``: the true pixel's scores) and the ratios."""
-        return replace(self, allowed_mae_m=allowed.mae_m, allowed_shape_m=allowed.shape_m,
-                       mae_ratio=self.mae_m / allowed.mae_m, shape_ratio=self.shape_m / allowed.shape_m)
+        return replace(
+            self,
+            allowed_mae_m=allowed.mae_m,
+            allowed_shape_m=allowed.shape_m,
+            mae_ratio=self.mae_m / allowed.mae_m,
+            shape_ratio=self.shape_m / allowed.shape_m,
+        )
 
 
 def truth_at(truth: dict, t_unix) -> tuple[np.ndarray, np.ndarray]:
@@ -142,7 +153,9 @@ def shape_m(err_ne_m: np.ndarray) -> float:
     return float(np.mean(np.hypot(*(e - c).T)))
 
 
-def score(err_m: np.ndarray, h_acc_m: np.ndarray, frames: int, err_ne_m: np.ndarray | None = None) -> Scores:
+def score(
+    err_m: np.ndarray, h_acc_m: np.ndarray, frames: int, err_ne_m: np.ndarray | None = None
+) -> Scores:
     """Table numbers from per-fix errors (NaN = no fix) and the fixes' reported 1-sigma accuracy; the shape's MAE
     from the error vectors ``err_ne_m`` (N×2), when given."""
     ok = np.isfinite(err_m)
@@ -163,19 +176,55 @@ def score(err_m: np.ndarray, h_acc_m: np.ndarray, frames: int, err_ne_m: np.ndar
     )
 
 
-HEADER = ("session", "method", "fixes", "coverage", "MAE m", "shape m", "RMSE m", "p95 m", "max m", "in 2σ",
-          "smoothed", "MAE m", "shape m", "in 2σ", "visible", "waves m", "allowed", "shape m", "×MAE", "×shape")
+HEADER = (
+    "session",
+    "method",
+    "fixes",
+    "coverage",
+    "MAE m",
+    "shape m",
+    "RMSE m",
+    "p95 m",
+    "max m",
+    "in 2σ",
+    "smoothed",
+    "MAE m",
+    "shape m",
+    "in 2σ",
+    "visible",
+    "waves m",
+    "allowed",
+    "shape m",
+    "×MAE",
+    "×shape",
+)
 
 
 def table_rows(results: list[tuple[str, str, Scores]]) -> list[tuple[str, ...]]:
     """Formatted cells of the table, one row per (session, method); the smoothed track's last."""
     return [
-        (name, method, f"{s.fixes}/{s.frames}", f"{s.coverage:.1%}", f"{s.mae_m:.4f}", f"{s.shape_m:.4f}",
-         f"{s.rmse_m:.4f}", f"{s.p95_m:.4f}", f"{s.max_m:.4f}", f"{s.within_2sigma:.1%}",
-         f"{s.smoothed_fixes}/{s.frames}", f"{s.smoothed_mae_m:.4f}", f"{s.smoothed_shape_m:.4f}",
-         f"{s.smoothed_within_2sigma:.1%}", _cell(s.visible_coverage, "{:.1%}"), _cell(s.wave_mae_m, "{:.4f}"),
-         _cell(s.allowed_mae_m, "{:.4f}"), _cell(s.allowed_shape_m, "{:.4f}"), _cell(s.mae_ratio, "{:.2f}"),
-         _cell(s.shape_ratio, "{:.2f}"))
+        (
+            name,
+            method,
+            f"{s.fixes}/{s.frames}",
+            f"{s.coverage:.1%}",
+            f"{s.mae_m:.4f}",
+            f"{s.shape_m:.4f}",
+            f"{s.rmse_m:.4f}",
+            f"{s.p95_m:.4f}",
+            f"{s.max_m:.4f}",
+            f"{s.within_2sigma:.1%}",
+            f"{s.smoothed_fixes}/{s.frames}",
+            f"{s.smoothed_mae_m:.4f}",
+            f"{s.smoothed_shape_m:.4f}",
+            f"{s.smoothed_within_2sigma:.1%}",
+            _cell(s.visible_coverage, "{:.1%}"),
+            _cell(s.wave_mae_m, "{:.4f}"),
+            _cell(s.allowed_mae_m, "{:.4f}"),
+            _cell(s.allowed_shape_m, "{:.4f}"),
+            _cell(s.mae_ratio, "{:.2f}"),
+            _cell(s.shape_ratio, "{:.2f}"),
+        )
         for name, method, s in results
     ]
 
@@ -188,14 +237,25 @@ def format_table(results: list[tuple[str, str, Scores]]) -> str:
     """The table as aligned text."""
     rows = [HEADER, *table_rows(results)]
     widths = [max(len(r[i]) for r in rows) for i in range(len(HEADER))]
-    lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths))) for r in rows]
+    lines = [
+        "  ".join(c.ljust(w) if i < 2 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+        for r in rows
+    ]
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
 
 
-def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str = "default", progress: bool = False,
-                     motion: bool = True, height_from_size: str = "check", uuv: str | None = None,
-                     bounds: tuple[float, float] = (MAX_SPEED_MPS["bluerov2"], MAX_ACCEL_MPS2["bluerov2"])):
+def evaluate_session(
+    path,
+    out_dir: Path,
+    use_track: bool = False,
+    tracker: str = "default",
+    progress: bool = False,
+    motion: bool = True,
+    height_from_size: str = "check",
+    uuv: str | None = None,
+    bounds: tuple[float, float] = (MAX_SPEED_MPS["bluerov2"], MAX_ACCEL_MPS2["bluerov2"]),
+):
     """Score both methods on one session, on each of its UUVs (or on ``uuv`` alone); returns
     ``[(name, method, Scores), ...]`` and writes outputs (the height from the UUV's size: its summary line on
     stderr). A session of one UUV is named by its folder, each UUV of a session of several ``<folder>/<id>``.
@@ -205,15 +265,37 @@ def evaluate_session(path, out_dir: Path, use_track: bool = False, tracker: str 
     results = []
     for uuv_id in ids:
         name = folder if len(ids) == 1 and uuv_id == PRIMARY_UUV else f"{folder}/{uuv_id}"
-        results.extend(_evaluate_uuv(load_session(path, uuv_id), name, out_dir, use_track, tracker, progress,
-                                     motion, height_from_size, bounds))
+        results.extend(
+            _evaluate_uuv(
+                load_session(path, uuv_id),
+                name,
+                out_dir,
+                use_track,
+                tracker,
+                progress,
+                motion,
+                height_from_size,
+                bounds,
+            )
+        )
     return results
 
 
-def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: str, progress: bool, motion: bool,
-                  height_from_size: str, bounds: tuple[float, float]):
+def _evaluate_uuv(
+    session,
+    name: str,
+    out_dir: Path,
+    use_track: bool,
+    tracker: str,
+    progress: bool,
+    motion: bool,
+    height_from_size: str,
+    bounds: tuple[float, float],
+):
     if session.truth is None or len(session.truth["t"]) == 0:
-        raise SessionError(f"{uuv_files(session.path, session.uuv_id).truth}: missing (evaluate needs ground truth)")
+        raise SessionError(
+            f"{uuv_files(session.path, session.uuv_id).truth}: missing (evaluate needs ground truth)"
+        )
     from_track = use_track or session.video_path is None
     if not use_track and from_track:
         print(f"{name}: no video: pixels from track.csv", file=sys.stderr)
@@ -228,7 +310,11 @@ def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: s
     sess_dir = out_dir / name
     waves_path = uuv_files(session.path, session.uuv_id).truth_waves
     waves = wave_mae_m(waves_path)
-    allowed = None if use_track or not waves_path.is_file() else load_session(session.path, session.uuv_id)
+    allowed = (
+        None
+        if use_track or not waves_path.is_file()
+        else load_session(session.path, session.uuv_id)
+    )
     runs, results = {}, []
     for method, refraction in METHODS:
         fixes = locate_frames(session, pixels, refraction)
@@ -242,14 +328,23 @@ def _evaluate_uuv(session, name: str, out_dir: Path, use_track: bool, tracker: s
         write_smoothed_csv(sess_dir / method / SMOOTHED_NAME, fixes, smoothed, status)
         sm_ne = error_ne_m(fixes.t_unix, smoothed.lat, smoothed.lon, smoothed.ok, session.truth)
         n = frames or len(fixes)
-        s = replace(score(err, fixes.h_acc_m, n, err_ne).with_smoothed(
-            score(np.hypot(*sm_ne.T), smoothed.h_acc_m, n, sm_ne)),
-            visible_coverage=visible_coverage(fixes, session.track), wave_mae_m=waves)
+        s = replace(
+            score(err, fixes.h_acc_m, n, err_ne).with_smoothed(
+                score(np.hypot(*sm_ne.T), smoothed.h_acc_m, n, sm_ne)
+            ),
+            visible_coverage=visible_coverage(fixes, session.track),
+            wave_mae_m=waves,
+        )
         if np.isfinite(waves):
             s = s.with_allowed(s if allowed is None else true_pixel_scores(allowed, refraction, n))
         results.append((name, method, s))
-    write_plots(sess_dir, name, {m: f for m, (f, _) in runs.items()}, session.truth,
-                {m: e for m, (_, e) in runs.items()})
+    write_plots(
+        sess_dir,
+        name,
+        {m: f for m, (f, _) in runs.items()},
+        session.truth,
+        {m: e for m, (_, e) in runs.items()},
+    )
     return results
 
 
@@ -302,10 +397,19 @@ def run(args) -> int:
     results, failed = [], 0
     for path in args.sessions:
         try:
-            results.extend(evaluate_session(path, out, use_track=args.use_track, tracker=args.tracker,
-                                            progress=not args.quiet, motion=not args.no_motion_offset,
-                                            height_from_size=args.height_from_size, uuv=args.uuv,
-                                            bounds=(args.uuv_max_speed_mps, args.uuv_max_accel_mps2)))
+            results.extend(
+                evaluate_session(
+                    path,
+                    out,
+                    use_track=args.use_track,
+                    tracker=args.tracker,
+                    progress=not args.quiet,
+                    motion=not args.no_motion_offset,
+                    height_from_size=args.height_from_size,
+                    uuv=args.uuv,
+                    bounds=(args.uuv_max_speed_mps, args.uuv_max_accel_mps2),
+                )
+            )
         except (SessionError, ConfigError) as e:
             print(f"skyfix evaluate: error: {e}", file=sys.stderr)
             failed += 1
@@ -319,14 +423,24 @@ def run(args) -> int:
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(name, help=help)
-    p.add_argument("sessions", nargs="+", metavar="SESSION", help="session directories with truth.csv")
+    p.add_argument(
+        "sessions", nargs="+", metavar="SESSION", help="session directories with truth.csv"
+    )
     p.add_argument("--out", default="out/evaluate", help="output directory (default: out/evaluate)")
-    p.add_argument("--use-track", action="store_true",
-                   help="take pixels from track.csv (geometry only) instead of tracking the video")
-    p.add_argument("--tracker", default="default", choices=TRACKERS, help="tracker backend for video tracking")
+    p.add_argument(
+        "--use-track",
+        action="store_true",
+        help="take pixels from track.csv (geometry only) instead of tracking the video",
+    )
+    p.add_argument(
+        "--tracker", default="default", choices=TRACKERS, help="tracker backend for video tracking"
+    )
     add_size_argument(p)
-    add_uuv_argument(p, "evaluate this UUV of each session only (default: every UUV, each against its own truth)",
-                     default=None)
+    add_uuv_argument(
+        p,
+        "evaluate this UUV of each session only (default: every UUV, each against its own truth)",
+        default=None,
+    )
     add_uuv_bounds(p)
     p.add_argument("--quiet", action="store_true", help="no progress output")
     add_motion_offset_flag(p)

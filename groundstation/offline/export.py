@@ -46,11 +46,30 @@ KML_NS = "http://www.opengis.net/kml/2.2"
 GPX_NS = "http://www.topografix.com/GPX/1/1"
 SKYFIX_NS = "urn:skyfix:gpx:1"
 #: values per fix, as in positions.csv and the fix message (t is the station clock)
-VALUES = ("t", "t_gnss", "status", "lat", "lon", "alt_amsl_m", "alt_ellipsoid_m", "depth_m", "h_acc_m", "v_acc_m",
-          "sigma_n_m", "sigma_e_m", "cov_ne_m2", "u", "v", "north_m", "east_m")
-HEIGHTS = ("alt_amsl_m: metres above mean sea level (the UAV autopilot's GLOBAL_POSITION_INT alt, its geoid); "
-           "alt_ellipsoid_m: metres above the WGS84 ellipsoid (alt_amsl_m plus the geoid separation GPS_RAW_INT "
-           "gives), empty where the autopilot sent no alt_ellipsoid")
+VALUES = (
+    "t",
+    "t_gnss",
+    "status",
+    "lat",
+    "lon",
+    "alt_amsl_m",
+    "alt_ellipsoid_m",
+    "depth_m",
+    "h_acc_m",
+    "v_acc_m",
+    "sigma_n_m",
+    "sigma_e_m",
+    "cov_ne_m2",
+    "u",
+    "v",
+    "north_m",
+    "east_m",
+)
+HEIGHTS = (
+    "alt_amsl_m: metres above mean sea level (the UAV autopilot's GLOBAL_POSITION_INT alt, its geoid); "
+    "alt_ellipsoid_m: metres above the WGS84 ellipsoid (alt_amsl_m plus the geoid separation GPS_RAW_INT "
+    "gives), empty where the autopilot sent no alt_ellipsoid"
+)
 
 
 def _num(x) -> float | None:
@@ -68,7 +87,9 @@ def _time(fixes: Fixes, i: int) -> tuple[str, str]:
     """ISO 8601 UTC of frame ``i`` and which clock it comes from."""
     t_gnss = fixes.t_gnss[i]
     t, source = (t_gnss, "gnss") if math.isfinite(t_gnss) else (fixes.t_unix[i], "station")
-    return datetime.fromtimestamp(float(t), UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z"), source
+    return datetime.fromtimestamp(float(t), UTC).isoformat(timespec="milliseconds").replace(
+        "+00:00", "Z"
+    ), source
 
 
 def _text(x: float | None, digits: int = 4) -> str:
@@ -88,7 +109,10 @@ def to_geojson(fixes: Fixes, name: str) -> str:
         if fixes.status[i] == "ok":
             z = _num(fixes.alt_ellipsoid_m[i])
             coords = [round(float(fixes.lon[i]), 9), round(float(fixes.lat[i]), 9)]
-            geometry = {"type": "Point", "coordinates": coords if z is None else [*coords, round(z, 4)]}
+            geometry = {
+                "type": "Point",
+                "coordinates": coords if z is None else [*coords, round(z, 4)],
+            }
         features.append({"type": "Feature", "geometry": geometry, "properties": props})
     doc = {"type": "FeatureCollection", "name": name, "heights": HEIGHTS, "features": features}
     return json.dumps(doc, allow_nan=False, ensure_ascii=False) + "\n"
@@ -122,7 +146,11 @@ def to_kml(fixes: Fixes, name: str) -> str:
     icon = _sub(style, f"{k}IconStyle")
     _sub(icon, f"{k}color", "ff00ff55")
     _sub(icon, f"{k}scale", "0.5")
-    _sub(_sub(icon, f"{k}Icon"), f"{k}href", "http://maps.google.com/mapfiles/kml/shapes/shaded_dot.png")
+    _sub(
+        _sub(icon, f"{k}Icon"),
+        f"{k}href",
+        "http://maps.google.com/mapfiles/kml/shapes/shaded_dot.png",
+    )
     _sub(_sub(style, f"{k}LabelStyle"), f"{k}scale", "0")
     _sub(_sub(_sub(doc, f"{k}Style", id="track"), f"{k}LineStyle"), f"{k}color", "ff00aaff")
     schema = _sub(doc, f"{k}Schema", name="fix", id="fix_schema")
@@ -176,8 +204,12 @@ def to_gpx(fixes: Fixes, name: str) -> str:
     root = ET.Element(f"{g}gpx", version="1.1", creator="skyfix")
     meta = _sub(root, f"{g}metadata")
     _sub(meta, f"{g}name", name)
-    _sub(meta, f"{g}desc", _summary(fixes) + " hdop and vdop are the 1-sigma horizontal and vertical accuracies "
-         "in metres.")
+    _sub(
+        meta,
+        f"{g}desc",
+        _summary(fixes) + " hdop and vdop are the 1-sigma horizontal and vertical accuracies "
+        "in metres.",
+    )
     trk = _sub(root, f"{g}trk")
     _sub(trk, f"{g}name", name)
     for start, end, word in runs(fixes.status):
@@ -224,8 +256,10 @@ def positions_path(path: Path) -> Path:
     if path.is_dir():
         found = path / "positions.csv"
         if not found.is_file():
-            raise SessionError(f"{found}: missing (a recorded session has one; for others run "
-                               f"`skyfix process {path} --out DIR` and export DIR)")
+            raise SessionError(
+                f"{found}: missing (a recorded session has one; for others run "
+                f"`skyfix process {path} --out DIR` and export DIR)"
+            )
         return found
     if not path.is_file():
         raise SessionError(f"{path}: no such session folder or positions.csv")
@@ -259,12 +293,20 @@ def run(args) -> int:
 
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
-    p = subparsers.add_parser(name, help=help,
-                              description="Writes the fixes of positions.csv, with each fix's accuracy, status and heights "
-                              "(above mean sea level and above the WGS84 ellipsoid), for QGIS (any format), Google "
-                              "Earth (kml) or GPS tools (gpx).")
-    p.add_argument("session", metavar="SESSION|positions.csv",
-                   help="a folder with positions.csv (a recorded session, skyfix process's output) or the file")
+    p = subparsers.add_parser(
+        name,
+        help=help,
+        description="Writes the fixes of positions.csv, with each fix's accuracy, status and heights "
+        "(above mean sea level and above the WGS84 ellipsoid), for QGIS (any format), Google "
+        "Earth (kml) or GPS tools (gpx).",
+    )
+    p.add_argument(
+        "session",
+        metavar="SESSION|positions.csv",
+        help="a folder with positions.csv (a recorded session, skyfix process's output) or the file",
+    )
     p.add_argument("--format", required=True, choices=FORMATS, help="output format")
-    p.add_argument("--out", metavar="FILE", help="output file (default: fixes.<format> next to positions.csv)")
+    p.add_argument(
+        "--out", metavar="FILE", help="output file (default: fixes.<format> next to positions.csv)"
+    )
     p.set_defaults(func=run)

@@ -81,47 +81,125 @@ def telemetry_messages(flight: FlightLog, gimbal: str) -> list[tuple[float, obje
 
     for t, roll, pitch, yaw, p, q, r in flight.att:
         out.append((t, mav.MAVLink_attitude_message(ms(t), roll, pitch, yaw, p, q, r)))
-    yaw_at = np.degrees(np.interp(flight.pos[:, 0], flight.att[:, 0], np.unwrap(flight.att[:, 3]))) % 360.0
+    yaw_at = (
+        np.degrees(np.interp(flight.pos[:, 0], flight.att[:, 0], np.unwrap(flight.att[:, 3])))
+        % 360.0
+    )
     for (t, lat, lon, alt, rel), hdg in zip(flight.pos, yaw_at, strict=True):
-        out.append((t, mav.MAVLink_global_position_int_message(ms(t), round(lat * 1e7), round(lon * 1e7),
-                                                                round(alt * 1000), round(rel * 1000), 0, 0, 0,
-                                                                round(hdg * 100) % 36000)))
+        out.append(
+            (
+                t,
+                mav.MAVLink_global_position_int_message(
+                    ms(t),
+                    round(lat * 1e7),
+                    round(lon * 1e7),
+                    round(alt * 1000),
+                    round(rel * 1000),
+                    0,
+                    0,
+                    0,
+                    round(hdg * 100) % 36000,
+                ),
+            )
+        )
     for t, unix, status, sats, hdop, alt, h_acc, v_acc, lat, lon in flight.gps:
         known = math.isfinite(unix)
-        out.append((t, mav.MAVLink_gps_raw_int_message(
-            round(unix * 1e6) if known else 0, int(status), round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
-            round(hdop * 100) if math.isfinite(hdop) else 65535, 65535, 65535, 65535, int(sats),
-            h_acc=round(h_acc * 1000) if math.isfinite(h_acc) else 0,
-            v_acc=round(v_acc * 1000) if math.isfinite(v_acc) else 0)))
+        out.append(
+            (
+                t,
+                mav.MAVLink_gps_raw_int_message(
+                    round(unix * 1e6) if known else 0,
+                    int(status),
+                    round(lat * 1e7),
+                    round(lon * 1e7),
+                    round(alt * 1000),
+                    round(hdop * 100) if math.isfinite(hdop) else 65535,
+                    65535,
+                    65535,
+                    65535,
+                    int(sats),
+                    h_acc=round(h_acc * 1000) if math.isfinite(h_acc) else 0,
+                    v_acc=round(v_acc * 1000) if math.isfinite(v_acc) else 0,
+                ),
+            )
+        )
         if known and status >= 3:
-            out.append((t, mav.MAVLink_system_time_message(round(float(flight.unix(t)) * 1e6), ms(t))))
+            out.append(
+                (t, mav.MAVLink_system_time_message(round(float(flight.unix(t)) * 1e6), ms(t)))
+            )
     if gimbal == "mount_orientation":
         for t, roll, pitch, yaw_body, yaw_earth in flight.mnt:
-            out.append((t, mav.MAVLink_mount_orientation_message(ms(t), roll, pitch, yaw_body, yaw_earth)))
-    elif gimbal == "gimbal_device":  # the same angles as one rotation, its yaw flagged as the vehicle's
+            out.append(
+                (t, mav.MAVLink_mount_orientation_message(ms(t), roll, pitch, yaw_body, yaw_earth))
+            )
+    elif (
+        gimbal == "gimbal_device"
+    ):  # the same angles as one rotation, its yaw flagged as the vehicle's
         for t, roll, pitch, yaw_body, _ in flight.mnt:
             q = euler_to_quat(*np.radians((roll, pitch, yaw_body)))
-            out.append((t, mav.MAVLink_gimbal_device_attitude_status_message(
-                0, 0, ms(t), GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME, [float(x) for x in q], math.nan, math.nan,
-                math.nan, 0, math.radians(yaw_body))))
+            out.append(
+                (
+                    t,
+                    mav.MAVLink_gimbal_device_attitude_status_message(
+                        0,
+                        0,
+                        ms(t),
+                        GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
+                        [float(x) for x in q],
+                        math.nan,
+                        math.nan,
+                        math.nan,
+                        0,
+                        math.radians(yaw_body),
+                    ),
+                )
+            )
     for t, dist in flight.rangefinder:
-        out.append((t, mav.MAVLink_distance_sensor_message(ms(t), 0, 0, round(dist * 100), 0, 0, DOWNWARD, 0)))
+        out.append(
+            (
+                t,
+                mav.MAVLink_distance_sensor_message(
+                    ms(t), 0, 0, round(dist * 100), 0, 0, DOWNWARD, 0
+                ),
+            )
+        )
     armed, events = False, list(flight.armed)
     for t in np.arange(flight.att[0, 0], flight.att[-1, 0], 1.0 / HEARTBEAT_HZ):
         while events and events[0][0] <= t:
             armed = events.pop(0)[1]
-        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-        out.append((t, mav.MAVLink_heartbeat_message(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base,
-                                                     0, mav.MAV_STATE_ACTIVE, 3)))
+        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (
+            mav.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0
+        )
+        out.append(
+            (
+                t,
+                mav.MAVLink_heartbeat_message(
+                    mav.MAV_TYPE_QUADROTOR,
+                    mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                    base,
+                    0,
+                    mav.MAV_STATE_ACTIVE,
+                    3,
+                ),
+            )
+        )
     if "MNT1_TYPE" in flight.params:
         name = b"MNT1_TYPE"
-        out.append((flight.att[0, 0], mav.MAVLink_param_value_message(name, flight.params["MNT1_TYPE"],
-                                                                      mav.MAV_PARAM_TYPE_REAL32, 0, 65535)))
+        out.append(
+            (
+                flight.att[0, 0],
+                mav.MAVLink_param_value_message(
+                    name, flight.params["MNT1_TYPE"], mav.MAV_PARAM_TYPE_REAL32, 0, 65535
+                ),
+            )
+        )
     out.sort(key=lambda item: item[0])
     return out
 
 
-def write_tlog(path: Path, flight: FlightLog, messages: list[tuple[float, object]]) -> dict[str, int]:
+def write_tlog(
+    path: Path, flight: FlightLog, messages: list[tuple[float, object]]
+) -> dict[str, int]:
     """``uav.tlog`` of ``messages``, each at its time on UNIX time; the count per type."""
     mav = mavutil().mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     counts: dict[str, int] = {}
@@ -139,35 +217,69 @@ def video_start(flight: FlightLog, how: str, start_unix: float | None) -> tuple[
         return start_unix, "given (--video-start-unix)"
     if how == "trigger":
         if not len(flight.triggers_s):
-            raise SessionError(f"{flight.path}: no CAM or TRIG record: the camera's start is not in the log "
-                               "(give --video-start-unix, or let the image's motion find it)")
-        return float(flight.unix(flight.triggers_s[0])), f"the log's first CAM/TRIG record ({len(flight.triggers_s)})"
+            raise SessionError(
+                f"{flight.path}: no CAM or TRIG record: the camera's start is not in the log "
+                "(give --video-start-unix, or let the image's motion find it)"
+            )
+        return float(
+            flight.unix(flight.triggers_s[0])
+        ), f"the log's first CAM/TRIG record ({len(flight.triggers_s)})"
     return flight.span_unix[0], "motion"
 
 
-def start_from_srt(flight: FlightLog, srt: Path, utc_offset_h: float | None,
-                   gps_order: str | None = None) -> tuple[float, str, dict]:
+def start_from_srt(
+    flight: FlightLog, srt: Path, utc_offset_h: float | None, gps_order: str | None = None
+) -> tuple[float, str, dict]:
     """The video's first frame on UNIX time from the camera's SRT, where it came from, and what goes into
     ``import.json``."""
     track = read_srt(srt)
     clock = srt_clock(track, flight, utc_offset_h, gps_order)
     start, spread = srt_video_start(track, clock)
     hours = clock.offset_s / 3600.0
-    how = (f"the SRT's frame times, camera clock UTC{hours:+.4f} h "
-           f"({'found from its track against the record' if clock.found else 'given'}: track residual "
-           f"{clock.residual_m:.2f} m over {clock.frames} "
-           + ("frames)" if track.form == "frame" else
-              f"subtitles; the older GPS(...) form read as {clock.gps_order}, whole-second camera clock)"))
-    older = {} if track.form == "frame" else {
-        "srt_gps_order": clock.gps_order,
-        "srt_gps_order_residuals_m": [round(r, 3) if math.isfinite(r) else None for r in clock.order_residuals_m]}
-    return start, how, {"srt": str(srt), "srt_form": track.form, "srt_utc_offset_h": round(hours, 6),
-                        "srt_utc_offset_found": clock.found, "srt_track_residual_m": round(clock.residual_m, 3),
-                        "srt_frames": clock.frames, "srt_start_spread_s": round(spread, 6)} | older
+    how = (
+        f"the SRT's frame times, camera clock UTC{hours:+.4f} h "
+        f"({'found from its track against the record' if clock.found else 'given'}: track residual "
+        f"{clock.residual_m:.2f} m over {clock.frames} "
+        + (
+            "frames)"
+            if track.form == "frame"
+            else f"subtitles; the older GPS(...) form read as {clock.gps_order}, whole-second camera clock)"
+        )
+    )
+    older = (
+        {}
+        if track.form == "frame"
+        else {
+            "srt_gps_order": clock.gps_order,
+            "srt_gps_order_residuals_m": [
+                round(r, 3) if math.isfinite(r) else None for r in clock.order_residuals_m
+            ],
+        }
+    )
+    return (
+        start,
+        how,
+        {
+            "srt": str(srt),
+            "srt_form": track.form,
+            "srt_utc_offset_h": round(hours, 6),
+            "srt_utc_offset_found": clock.found,
+            "srt_track_residual_m": round(clock.residual_m, 3),
+            "srt_frames": clock.frames,
+            "srt_start_spread_s": round(spread, 6),
+        }
+        | older,
+    )
 
 
-def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.ndarray,
-                      span: tuple[float, float], progress: bool = False) -> VideoStart:
+def start_from_motion(
+    session: Path,
+    video: Path,
+    index: np.ndarray,
+    t_rel: np.ndarray,
+    span: tuple[float, float],
+    progress: bool = False,
+) -> VideoStart:
     """The video's start from its motion (the whole video) against the session's (just written)
     telemetry."""
     s = load_session(session)
@@ -181,15 +293,21 @@ def start_from_motion(session: Path, video: Path, index: np.ndarray, t_rel: np.n
     try:
         return find_video_start(s.calibration, s.telemetry, rotations, span)
     except ValueError as e:
-        raise SessionError(f"{video}: {e} (its {t_rel[-1]:.1f} s against the log's attitude "
-                           f"{span[0]:.3f}–{span[1]:.3f})") from None
+        raise SessionError(
+            f"{video}: {e} (its {t_rel[-1]:.1f} s against the log's attitude "
+            f"{span[0]:.3f}–{span[1]:.3f})"
+        ) from None
 
 
-def depth_records(path: Path, columns: tuple[str, str], sigma_m: float, warnings: list[str]) -> tuple[list[dict], dict]:
+def depth_records(
+    path: Path, columns: tuple[str, str], sigma_m: float, warnings: list[str]
+) -> tuple[list[dict], dict]:
     """``depth.jsonl`` records from a depth.jsonl, ArduSub's DataFlash log (``.bin``: its sensor's 1-sigma
     ``sigma_m``) or a CSV with the named columns; and what the reader found."""
     if path.suffix == ".jsonl":
-        return [{"t": r.t, "depth_m": r.depth_m} for r in read_depth(path, warnings)], {"depth": str(path)}
+        return [{"t": r.t, "depth_m": r.depth_m} for r in read_depth(path, warnings)], {
+            "depth": str(path)
+        }
     if path.suffix.lower() == ".bin":
         return read_ardusub_depth(path, sigma_m, warnings)
     t_col, d_col = columns
@@ -198,18 +316,24 @@ def depth_records(path: Path, columns: tuple[str, str], sigma_m: float, warnings
             reader = csv.DictReader(f)
             missing = [c for c in columns if c not in (reader.fieldnames or [])]
             if missing:
-                raise SessionError(f"{path}: no column {', '.join(missing)} (header {reader.fieldnames}); "
-                                   "name them with --depth-columns T,DEPTH")
+                raise SessionError(
+                    f"{path}: no column {', '.join(missing)} (header {reader.fieldnames}); "
+                    "name them with --depth-columns T,DEPTH"
+                )
             out = []
             for i, row in enumerate(reader, start=2):
                 try:
                     t, d = float(row[t_col]), float(row[d_col])
                 except (TypeError, ValueError):
-                    raise SessionError(f"{path}:{i}: {t_col} = {row[t_col]!r}, {d_col} = {row[d_col]!r}: "
-                                       "not numbers") from None
+                    raise SessionError(
+                        f"{path}:{i}: {t_col} = {row[t_col]!r}, {d_col} = {row[d_col]!r}: "
+                        "not numbers"
+                    ) from None
                 if not (math.isfinite(t) and math.isfinite(d)) or (out and t <= out[-1]["t"]):
-                    raise SessionError(f"{path}:{i}: {t_col} = {t!r}, {d_col} = {d!r}: not finite, or the time "
-                                       "does not increase")
+                    raise SessionError(
+                        f"{path}:{i}: {t_col} = {t!r}, {d_col} = {d!r}: not finite, or the time "
+                        "does not increase"
+                    )
                 out.append({"t": t, "depth_m": d})
     except OSError as e:
         raise SessionError(f"{path}: cannot read: {e.strerror}") from None
@@ -228,32 +352,56 @@ def link_or_copy(src: Path, dst: Path) -> None:
         shutil.copyfile(src, dst)
 
 
-def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calibration: Path, out: Path,
-                  video_start_how: str = "motion", video_start_unix: float | None = None,
-                  depth_columns: tuple[str, str] = ("t", "depth_m"), progress: bool = False,
-                  dji_csv: Path | None = None, dji_csv_utc_offset_h: float | None = None, srt: Path | None = None,
-                  srt_utc_offset_h: float | None = None, srt_gps_order: str | None = None) -> dict:
+def import_flight(
+    dataflash: Path | None,
+    video: Path | None,
+    depth: Path,
+    calibration: Path,
+    out: Path,
+    video_start_how: str = "motion",
+    video_start_unix: float | None = None,
+    depth_columns: tuple[str, str] = ("t", "depth_m"),
+    progress: bool = False,
+    dji_csv: Path | None = None,
+    dji_csv_utc_offset_h: float | None = None,
+    srt: Path | None = None,
+    srt_utc_offset_h: float | None = None,
+    srt_gps_order: str | None = None,
+) -> dict:
     """Write the session (see the module doc) from a DataFlash log or a DJI flight record (``dji_csv``); returns
     what ``import.json`` holds."""
     if srt is not None and (video is None or video_start_unix is not None):
-        raise SessionError("options: --srt needs --video, and gives the video's start (not with --video-start-unix)")
+        raise SessionError(
+            "options: --srt needs --video, and gives the video's start (not with --video-start-unix)"
+        )
     if srt is None and (srt_utc_offset_h is not None or srt_gps_order is not None):
-        raise SessionError("options: --srt-utc-offset-h and --srt-gps-order are the --srt's: give it")
+        raise SessionError(
+            "options: --srt-utc-offset-h and --srt-gps-order are the --srt's: give it"
+        )
     cal = load_calibration(str(calibration))
     source = cal.mount.attitude_source
     log = dji_csv if dji_csv is not None else dataflash
-    flight = read_dji_csv(dji_csv, dji_csv_utc_offset_h) if dji_csv is not None else read_dataflash(dataflash)
+    flight = (
+        read_dji_csv(dji_csv, dji_csv_utc_offset_h)
+        if dji_csv is not None
+        else read_dataflash(dataflash)
+    )
     if source != "fixed" and not len(flight.mnt):
-        raise SessionError(f"{dataflash}: no MNT records, while the calibration's camera is on a gimbal (log the "
-                           "camera bit of LOG_BITMASK)")
+        raise SessionError(
+            f"{dataflash}: no MNT records, while the calibration's camera is on a gimbal (log the "
+            "camera bit of LOG_BITMASK)"
+        )
     warnings = list(flight.warnings)
     depth_out, depth_found = depth_records(depth, depth_columns, cal.sigmas.depth_m, warnings)
     if not depth_out:
         raise SessionError(f"{depth}: no depth records")
-    report: dict = {"dji_csv" if dji_csv is not None else "dataflash": str(log),
-                    "unix_minus_boot_s": round(flight.unix_minus_boot_s, 6),
-                    "unix_minus_boot_sigma_s": round(flight.unix_minus_boot_sigma_s, 6),
-                    "log_span_unix": [round(x, 3) for x in flight.span_unix], "depth": depth_found}
+    report: dict = {
+        "dji_csv" if dji_csv is not None else "dataflash": str(log),
+        "unix_minus_boot_s": round(flight.unix_minus_boot_s, 6),
+        "unix_minus_boot_sigma_s": round(flight.unix_minus_boot_sigma_s, 6),
+        "log_span_unix": [round(x, 3) for x in flight.span_unix],
+        "depth": depth_found,
+    }
     frames = None
     if video is not None:
         try:
@@ -267,11 +415,17 @@ def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calib
             start, how = video_start(flight, video_start_how, video_start_unix)
         span, log_span = (start, start + float(t_rel[-1])), flight.span_unix
         if how != "motion" and (span[0] < log_span[0] or span[1] > log_span[1]):
-            raise SessionError(f"{video}: its frames span {span[0]:.3f}–{span[1]:.3f} (UNIX s), not within the log's "
-                               f"attitude {log_span[0]:.3f}–{log_span[1]:.3f}")
+            raise SessionError(
+                f"{video}: its frames span {span[0]:.3f}–{span[1]:.3f} (UNIX s), not within the log's "
+                f"attitude {log_span[0]:.3f}–{log_span[1]:.3f}"
+            )
         frames = (index, start + t_rel)
-        report |= {"video": str(video), "video_start_unix": round(start, 6), "video_start_from": how,
-                   "frames": len(index)}
+        report |= {
+            "video": str(video),
+            "video_start_unix": round(start, 6),
+            "video_start_from": how,
+            "frames": len(index),
+        }
     out.mkdir(parents=True, exist_ok=True)
     text = Path(calibration).read_text()
     if "version" not in tomllib.loads(text):
@@ -284,14 +438,21 @@ def import_flight(dataflash: Path | None, video: Path | None, depth: Path, calib
         link_or_copy(video, target)
         write_frames(out, *frames)
         if report["video_start_from"] == "motion":
-            found = start_from_motion(out, video, frames[0], frames[1] - frames[1][0], flight.span_unix, progress)
+            found = start_from_motion(
+                out, video, frames[0], frames[1] - frames[1][0], flight.span_unix, progress
+            )
             write_frames(out, frames[0], found.start_s + frames[1] - frames[1][0])
-            report |= {"video_start_unix": round(found.start_s, 6),
-                       "video_start_from": "the image's motion against the logged attitude",
-                       "video_start_sigma_s": round(found.sigma_s, 6), "video_start_pairs": found.pairs,
-                       "video_start_rms_mrad": round(found.rms_mrad, 4),
-                       "video_start_contrast": round(found.contrast, 3),
-                       "video_start_thirds_unix": [None if t is None else round(t, 6) for t in found.thirds_s]}
+            report |= {
+                "video_start_unix": round(found.start_s, 6),
+                "video_start_from": "the image's motion against the logged attitude",
+                "video_start_sigma_s": round(found.sigma_s, 6),
+                "video_start_pairs": found.pairs,
+                "video_start_rms_mrad": round(found.rms_mrad, 4),
+                "video_start_contrast": round(found.contrast, 3),
+                "video_start_thirds_unix": [
+                    None if t is None else round(t, 6) for t in found.thirds_s
+                ],
+            }
     report["warnings"] = warnings
     (out / "import.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
@@ -302,21 +463,41 @@ def run(args) -> int:
         return Path(arg) if arg else None
 
     out = output_dir(args.out)
-    report = import_flight(path(args.dataflash), path(args.video), Path(args.depth),
-                           Path(args.calibration), out, args.video_start, args.video_start_unix,
-                           tuple(args.depth_columns.split(",")), progress=not args.quiet,
-                           dji_csv=path(args.dji_csv), dji_csv_utc_offset_h=args.dji_csv_utc_offset_h,
-                           srt=path(args.srt), srt_utc_offset_h=args.srt_utc_offset_h,
-                           srt_gps_order=args.srt_gps_order)
+    report = import_flight(
+        path(args.dataflash),
+        path(args.video),
+        Path(args.depth),
+        Path(args.calibration),
+        out,
+        args.video_start,
+        args.video_start_unix,
+        tuple(args.depth_columns.split(",")),
+        progress=not args.quiet,
+        dji_csv=path(args.dji_csv),
+        dji_csv_utc_offset_h=args.dji_csv_utc_offset_h,
+        srt=path(args.srt),
+        srt_utc_offset_h=args.srt_utc_offset_h,
+        srt_gps_order=args.srt_gps_order,
+    )
     for w in report["warnings"]:
         print(f"skyfix import: warning: {w}", file=sys.stderr)
-    print(f"skyfix import: {out}: log clock on UNIX time {report['unix_minus_boot_s']:.3f} s "
-          f"± {report['unix_minus_boot_sigma_s'] * 1000:.1f} ms; telemetry {report['messages']}"
-          + (f"; video {report['frames']} frames from {report['video_start_unix']:.3f} "
-             f"({report['video_start_from']}"
-             + (f": ± {report['video_start_sigma_s'] * 1000:.1f} ms, residual {report['video_start_rms_mrad']:.2f} "
-                f"mrad over {report['video_start_pairs']} frame pairs" if "video_start_sigma_s" in report else "")
-             + ")" if "frames" in report else ""))
+    print(
+        f"skyfix import: {out}: log clock on UNIX time {report['unix_minus_boot_s']:.3f} s "
+        f"± {report['unix_minus_boot_sigma_s'] * 1000:.1f} ms; telemetry {report['messages']}"
+        + (
+            f"; video {report['frames']} frames from {report['video_start_unix']:.3f} "
+            f"({report['video_start_from']}"
+            + (
+                f": ± {report['video_start_sigma_s'] * 1000:.1f} ms, residual {report['video_start_rms_mrad']:.2f} "
+                f"mrad over {report['video_start_pairs']} frame pairs"
+                if "video_start_sigma_s" in report
+                else ""
+            )
+            + ")"
+            if "frames" in report
+            else ""
+        )
+    )
     return 0
 
 
@@ -325,22 +506,49 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     p = subparsers.add_parser(name, help=help)
     log = p.add_mutually_exclusive_group(required=True)
     log.add_argument("--dataflash", help="the drone's ArduPilot DataFlash log (.bin)")
-    log.add_argument("--dji-csv", help="a DJI drone's flight record as CSV (dji-log-parser's, PhantomHelp's or "
-                     "Airdata's)")
-    p.add_argument("--dji-csv-utc-offset-h", type=float,
-                   help="the zone (hours east of UTC) of a DJI CSV that has local times only (PhantomHelp's)")
-    p.add_argument("--srt", help="the DJI camera's .SRT beside the video: the frames' times give the video's start")
-    p.add_argument("--srt-utc-offset-h", type=float,
-                   help="the SRT's camera clock zone (hours east of UTC); default: found from its track")
-    p.add_argument("--srt-gps-order", choices=("lat,lon", "lon,lat"), metavar="lat,lon|lon,lat",
-                   help="the older SRT form's GPS(a, b) order; default: found from its track against the record")
+    log.add_argument(
+        "--dji-csv",
+        help="a DJI drone's flight record as CSV (dji-log-parser's, PhantomHelp's or Airdata's)",
+    )
+    p.add_argument(
+        "--dji-csv-utc-offset-h",
+        type=float,
+        help="the zone (hours east of UTC) of a DJI CSV that has local times only (PhantomHelp's)",
+    )
+    p.add_argument(
+        "--srt",
+        help="the DJI camera's .SRT beside the video: the frames' times give the video's start",
+    )
+    p.add_argument(
+        "--srt-utc-offset-h",
+        type=float,
+        help="the SRT's camera clock zone (hours east of UTC); default: found from its track",
+    )
+    p.add_argument(
+        "--srt-gps-order",
+        choices=("lat,lon", "lon,lat"),
+        metavar="lat,lon|lon,lat",
+        help="the older SRT form's GPS(a, b) order; default: found from its track against the record",
+    )
     p.add_argument("--video", help="the camera's own video file")
-    p.add_argument("--depth", required=True, help="the UUV's depth: skyfix's depth.jsonl, ArduSub's DataFlash log (.bin) or a CSV")
-    p.add_argument("--depth-columns", default="t,depth_m", help="a CSV's time (UNIX s) and depth (m) columns")
-    p.add_argument("--calibration", required=True, help="the camera's calibration (TOML, session.toml tables)")
-    p.add_argument("--video-start", choices=("motion", "trigger"), default="motion",
-                   help="the video's first frame: found from the image's motion against the logged attitude "
-                        "(default), or the log's first CAM/TRIG record")
+    p.add_argument(
+        "--depth",
+        required=True,
+        help="the UUV's depth: skyfix's depth.jsonl, ArduSub's DataFlash log (.bin) or a CSV",
+    )
+    p.add_argument(
+        "--depth-columns", default="t,depth_m", help="a CSV's time (UNIX s) and depth (m) columns"
+    )
+    p.add_argument(
+        "--calibration", required=True, help="the camera's calibration (TOML, session.toml tables)"
+    )
+    p.add_argument(
+        "--video-start",
+        choices=("motion", "trigger"),
+        default="motion",
+        help="the video's first frame: found from the image's motion against the logged attitude "
+        "(default), or the log's first CAM/TRIG record",
+    )
     p.add_argument("--video-start-unix", type=float, help="the video's first frame, UNIX s")
     p.add_argument("--out", required=True, help="the session directory to write")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

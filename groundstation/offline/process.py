@@ -61,8 +61,14 @@ class Pixels(NamedTuple):
     sigma_px: np.ndarray | None = None
 
 
-def frame_pixels(session: Session, use_track: bool, tracker: str = "default", progress: bool = False,
-                 motion: bool = True, size: HeightFromSize | None = None) -> Pixels:
+def frame_pixels(
+    session: Session,
+    use_track: bool,
+    tracker: str = "default",
+    progress: bool = False,
+    motion: bool = True,
+    size: HeightFromSize | None = None,
+) -> Pixels:
     """The UUV's :class:`Pixels` per frame: from track.csv or from tracking the video.
 
     Tracking the video of a session whose link delay is unknown, with ``motion``, also estimates the frames'
@@ -77,17 +83,24 @@ def frame_pixels(session: Session, use_track: bool, tracker: str = "default", pr
         _warn_unknown_delay(session, "pixels from track.csv: no video to estimate it from")
         return Pixels(tr["t"], tr["u"], tr["v"], status)
     if session.video_path is None:
-        raise SessionError(f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)")
+        raise SessionError(
+            f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)"
+        )
     from groundstation.offline.track import track_session
 
     measure = motion and session.telemetry.latency_source == "unknown"
-    tracked = track_session(session, tracker_name=tracker, progress=progress, measure_motion=measure, size=size)
+    tracked = track_session(
+        session, tracker_name=tracker, progress=progress, measure_motion=measure, size=size
+    )
     session.warnings.extend(tracked.warnings)
     if size is not None:
         session.warnings.extend(size.warnings)
     if measure:
         _align_by_motion(session, tracked.rotations)
-    _warn_unknown_delay(session, "--no-motion-offset" if not motion else "no estimate from the video surer than that")
+    _warn_unknown_delay(
+        session,
+        "--no-motion-offset" if not motion else "no estimate from the video surer than that",
+    )
     return Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
 
 
@@ -98,10 +111,16 @@ def _align_by_motion(session: Session, rotations) -> None:
     applied = found.better_than(session.telemetry.timing.unknown_latency_sigma_s)
     if applied:
         session.telemetry.set_motion_latency(found.estimate.offset_s, found.sigma_s)
-    print(f"{session.path.name}: the frames' offset to the telemetry from the video's motion: {found.describe()}"
-          + (f"; applied as the UAV link's delay: {session.telemetry.uav_latency_s * 1000:.1f} ms "
-             f"± {found.sigma_s * 1000:.1f} ms" if applied else ""),
-          file=sys.stderr)
+    print(
+        f"{session.path.name}: the frames' offset to the telemetry from the video's motion: {found.describe()}"
+        + (
+            f"; applied as the UAV link's delay: {session.telemetry.uav_latency_s * 1000:.1f} ms "
+            f"± {found.sigma_s * 1000:.1f} ms"
+            if applied
+            else ""
+        ),
+        file=sys.stderr,
+    )
 
 
 def _warn_unknown_delay(session: Session, why: str) -> None:
@@ -109,15 +128,20 @@ def _warn_unknown_delay(session: Session, why: str) -> None:
         session.warnings.append(
             f"{session.path}: the UAV link's delay is unknown (no [timing] mavlink_latency_s, no TIMESYNC in the tlog, "
             f"{why}): taken as 0; h_acc includes ±{session.telemetry.latency_sigma_s * 1000:.0f} ms of it "
-            "([timing] unknown_latency_sigma_s) × the camera's motion")
+            "([timing] unknown_latency_sigma_s) × the camera's motion"
+        )
 
 
-def locate_frames(session: Session, pixels, refraction: bool = True, correction: PoseCorrection | None = None) -> Fixes:
+def locate_frames(
+    session: Session, pixels, refraction: bool = True, correction: PoseCorrection | None = None
+) -> Fixes:
     """Fixes for :class:`Pixels` (or a tuple of its first four, e.g. track.csv's; see :func:`frame_pixels`), the
     poses corrected by ``correction`` (:func:`bottom_correction`) when given."""
     t, u, v, track_status, sigma_px = Pixels(*pixels)
     pose = camera_pose(session.calibration, session.telemetry, t)
-    session.warnings.extend(f"{session.path}: {notice}" for notice in take_notices(session.telemetry))
+    session.warnings.extend(
+        f"{session.path}: {notice}" for notice in take_notices(session.telemetry)
+    )
     cal = session.calibration
     if correction is not None:
         pose, cal = correction.apply(session, pose)
@@ -136,15 +160,23 @@ def locate_frames(session: Session, pixels, refraction: bool = True, correction:
 
 
 def process_session(
-    session: Session, use_track: bool, refraction: bool = True, tracker: str = "default", progress: bool = False,
+    session: Session,
+    use_track: bool,
+    refraction: bool = True,
+    tracker: str = "default",
+    progress: bool = False,
     motion: bool = True,
     size: HeightFromSize | None = None,
 ) -> Fixes:
     """Fixes for every frame of a session (pixels from track.csv or the tracker)."""
-    return locate_frames(session, frame_pixels(session, use_track, tracker, progress, motion, size), refraction)
+    return locate_frames(
+        session, frame_pixels(session, use_track, tracker, progress, motion, size), refraction
+    )
 
 
-def bottom_correction(session: Session, pixels, mode: str, progress: bool = False) -> PoseCorrection | None:
+def bottom_correction(
+    session: Session, pixels, mode: str, progress: bool = False
+) -> PoseCorrection | None:
     """``--pose-from-bottom``: the pose correction from the static seafloor (:mod:`groundstation.offline.bottom`),
     or None (``off``, or nothing to estimate from: a warning says why); one line on stderr says what was found."""
     if mode == "off":
@@ -185,15 +217,21 @@ def run(args) -> int:
     session = load_session(args.session, args.uuv)
     size = size_of(session, args.height_from_size, args.use_track)
     try:
-        pixels = frame_pixels(session, args.use_track, args.tracker, not args.quiet, not args.no_motion_offset, size)
+        pixels = frame_pixels(
+            session, args.use_track, args.tracker, not args.quiet, not args.no_motion_offset, size
+        )
         correction = bottom_correction(session, pixels, args.pose_from_bottom, not args.quiet)
         fixes = locate_frames(session, pixels, not args.no_refraction, correction)
     finally:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
     if correction is not None:
-        append_columns(out / "positions.csv", correction.columns(
-            session, camera_pose(session.calibration, session.telemetry, fixes.t_unix)))
+        append_columns(
+            out / "positions.csv",
+            correction.columns(
+                session, camera_pose(session.calibration, session.telemetry, fixes.t_unix)
+            ),
+        )
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
     smoothed, status = offline_track(fixes, args.uuv_max_speed_mps, args.uuv_max_accel_mps2)
     write_smoothed_csv(out / SMOOTHED_NAME, fixes, smoothed, status)
@@ -207,18 +245,37 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(name, help=help)
     p.add_argument("session", help="session directory (format v1)")
-    p.add_argument("--out", required=True, help="output directory for positions.csv and positions_smoothed.csv")
-    add_uuv_argument(p, "the UUV to locate: its depth, first box and track (default: %(default)s, the session's own)")
+    p.add_argument(
+        "--out", required=True, help="output directory for positions.csv and positions_smoothed.csv"
+    )
+    add_uuv_argument(
+        p,
+        "the UUV to locate: its depth, first box and track (default: %(default)s, the session's own)",
+    )
     add_uuv_bounds(p)
-    p.add_argument("--use-track", action="store_true", help="take the UUV pixels from track.csv (no tracker)")
-    p.add_argument("--no-refraction", action="store_true", help="the paper's straight ray (no Snell refraction)")
-    p.add_argument("--tracker", default="default", choices=TRACKERS,
-                   help="tracker backend; default: telemetry-guided template matching; mil: the paper's")
+    p.add_argument(
+        "--use-track", action="store_true", help="take the UUV pixels from track.csv (no tracker)"
+    )
+    p.add_argument(
+        "--no-refraction",
+        action="store_true",
+        help="the paper's straight ray (no Snell refraction)",
+    )
+    p.add_argument(
+        "--tracker",
+        default="default",
+        choices=TRACKERS,
+        help="tracker backend; default: telemetry-guided template matching; mil: the paper's",
+    )
     add_size_argument(p)
-    p.add_argument("--pose-from-bottom", choices=BOTTOM_MODES, default="off",
-                   help="auto: estimate the drone's attitude biases and GNSS walk from the static seafloor in the "
-                   "video and correct every frame's pose by what the bottom told (positions.csv says it); "
-                   "off (default)")
+    p.add_argument(
+        "--pose-from-bottom",
+        choices=BOTTOM_MODES,
+        default="off",
+        help="auto: estimate the drone's attitude biases and GNSS walk from the static seafloor in the "
+        "video and correct every frame's pose by what the bottom told (positions.csv says it); "
+        "off (default)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_motion_offset_flag(p)
     p.set_defaults(func=run)
@@ -230,20 +287,37 @@ def add_uuv_argument(p, text: str, default: str | None = PRIMARY_UUV) -> None:
 
 def add_uuv_bounds(p) -> None:
     """The UUV's top speed and acceleration: the bounds of the smoothed track's model (as the live gates')."""
-    p.add_argument("--uuv-max-speed-mps", metavar="MPS", type=float, default=MAX_SPEED_MPS["bluerov2"],
-                   help="the UUV's top speed, for the smoothed track (default: a BlueROV2's, %(default)g)")
-    p.add_argument("--uuv-max-accel-mps2", metavar="MPS2", type=float, default=MAX_ACCEL_MPS2["bluerov2"],
-                   help="the UUV's largest acceleration, for the smoothed track (default %(default)g)")
+    p.add_argument(
+        "--uuv-max-speed-mps",
+        metavar="MPS",
+        type=float,
+        default=MAX_SPEED_MPS["bluerov2"],
+        help="the UUV's top speed, for the smoothed track (default: a BlueROV2's, %(default)g)",
+    )
+    p.add_argument(
+        "--uuv-max-accel-mps2",
+        metavar="MPS2",
+        type=float,
+        default=MAX_ACCEL_MPS2["bluerov2"],
+        help="the UUV's largest acceleration, for the smoothed track (default %(default)g)",
+    )
 
 
 def add_motion_offset_flag(p) -> None:
-    p.add_argument("--no-motion-offset", action="store_true",
-                   help="do not estimate the frames' offset to the telemetry from the video's motion where the UAV "
-                        "link's delay is neither stated nor measured (it stays unknown: 0, with its sigma in h_acc)")
+    p.add_argument(
+        "--no-motion-offset",
+        action="store_true",
+        help="do not estimate the frames' offset to the telemetry from the video's motion where the UAV "
+        "link's delay is neither stated nor measured (it stays unknown: 0, with its sigma in h_acc)",
+    )
 
 
 def add_size_argument(p) -> None:
-    p.add_argument("--height-from-size", choices=SIZE_MODES, default="check",
-                   help="the camera's height from the UUV's size in the tracked video: check (default: estimate it, "
-                   "warn when the configured height disagrees), auto (also hand it to the height's fusion once sure), "
-                   "off")
+    p.add_argument(
+        "--height-from-size",
+        choices=SIZE_MODES,
+        default="check",
+        help="the camera's height from the UUV's size in the tracked video: check (default: estimate it, "
+        "warn when the configured height disagrees), auto (also hand it to the height's fusion once sure), "
+        "off",
+    )

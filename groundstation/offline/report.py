@@ -23,21 +23,33 @@ from localizer.status import runs
 def summary(fixes, err: np.ndarray | None) -> str:
     """One paragraph: coverage, accuracy claimed (and achieved), the longest gap."""
     ok = fixes.status == "ok"
-    lines = [f"{len(fixes)} frames, {ok.sum()} with a fix ({ok.mean():.1%})" if len(fixes) else "no frames"]
+    lines = [
+        f"{len(fixes)} frames, {ok.sum()} with a fix ({ok.mean():.1%})"
+        if len(fixes)
+        else "no frames"
+    ]
     if ok.any():
-        lines.append(f"h_acc (claimed 1σ) median {np.median(fixes.h_acc_m[ok]):.3f} m, "
-                     f"max {np.nanmax(fixes.h_acc_m[ok]):.3f} m")
+        lines.append(
+            f"h_acc (claimed 1σ) median {np.median(fixes.h_acc_m[ok]):.3f} m, "
+            f"max {np.nanmax(fixes.h_acc_m[ok]):.3f} m"
+        )
     if err is not None and np.isfinite(err).any():
         e = err[np.isfinite(err)]
-        lines.append(f"error against truth: mean {e.mean():.3f} m, p95 {np.percentile(e, 95):.3f} m, "
-                     f"max {e.max():.3f} m")
-    gaps = [(fixes.t_unix[b - 1] - fixes.t_unix[a], w) for a, b, w in runs(fixes.status) if w != "ok"]
+        lines.append(
+            f"error against truth: mean {e.mean():.3f} m, p95 {np.percentile(e, 95):.3f} m, "
+            f"max {e.max():.3f} m"
+        )
+    gaps = [
+        (fixes.t_unix[b - 1] - fixes.t_unix[a], w) for a, b, w in runs(fixes.status) if w != "ok"
+    ]
     if gaps:
         longest, word = max(gaps)
         lines.append(f"{len(gaps)} stretches without a fix, longest {longest:.1f} s ({word})")
     stops = frame_gaps(fixes.t_unix)
     if stops:
-        lines.append(f"{len(stops)} pauses in the frames (video stopped), longest {max(b - a for a, b in stops):.1f} s")
+        lines.append(
+            f"{len(stops)} pauses in the frames (video stopped), longest {max(b - a for a, b in stops):.1f} s"
+        )
     return "; ".join(lines)
 
 
@@ -55,7 +67,9 @@ def report(path, truth_path=None, out=None) -> tuple[list[Path], str]:
     err = errors_m(fixes, truth) if truth is not None else None
     name = src.parent.resolve().name
     out_dir = Path(out) if out else src.with_name("report")
-    paths = write_plots(out_dir, name, {"fixes": fixes}, truth, None if err is None else {"fixes": err})
+    paths = write_plots(
+        out_dir, name, {"fixes": fixes}, truth, None if err is None else {"fixes": err}
+    )
     return paths, summary(fixes, err)
 
 
@@ -68,12 +82,24 @@ def run(args) -> int:
 
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
-    p = subparsers.add_parser(name, help=help,
-                              description="Writes top_view.png (the fixes from above, origin and north stated), timeline.png "
-                              "(error against truth, when there is one, and the claimed accuracy over time, gaps "
-                              "shaded by cause) and status.png (frames per status) and prints a summary.")
-    p.add_argument("session", metavar="SESSION|positions.csv",
-                   help="a folder with positions.csv (a recorded session, skyfix process's output) or the file")
-    p.add_argument("--truth", metavar="FILE", help="truth.csv (t,lat,lon,depth_m); default: beside positions.csv")
-    p.add_argument("--out", metavar="DIR", help="output folder (default: report/ beside positions.csv)")
+    p = subparsers.add_parser(
+        name,
+        help=help,
+        description="Writes top_view.png (the fixes from above, origin and north stated), timeline.png "
+        "(error against truth, when there is one, and the claimed accuracy over time, gaps "
+        "shaded by cause) and status.png (frames per status) and prints a summary.",
+    )
+    p.add_argument(
+        "session",
+        metavar="SESSION|positions.csv",
+        help="a folder with positions.csv (a recorded session, skyfix process's output) or the file",
+    )
+    p.add_argument(
+        "--truth",
+        metavar="FILE",
+        help="truth.csv (t,lat,lon,depth_m); default: beside positions.csv",
+    )
+    p.add_argument(
+        "--out", metavar="DIR", help="output folder (default: report/ beside positions.csv)"
+    )
     p.set_defaults(func=run)

@@ -32,28 +32,59 @@ from localizer.fix_gate import FixGate, gate_offline
 from localizer.smooth import Smoothed, smooth_fixes
 
 NAME = "positions_smoothed.csv"
-COLUMNS = ("t", "lat", "lon", "depth_m", "h_acc_m", "status", "sigma_n_m", "sigma_e_m", "cov_ne_m2",
-           "sigma_shared_m", "vn_mps", "ve_mps", "gap_s")
+COLUMNS = (
+    "t",
+    "lat",
+    "lon",
+    "depth_m",
+    "h_acc_m",
+    "status",
+    "sigma_n_m",
+    "sigma_e_m",
+    "cov_ne_m2",
+    "sigma_shared_m",
+    "vn_mps",
+    "ve_mps",
+    "gap_s",
+)
 
 
-def offline_track(fixes: Fixes, max_speed_mps: float, max_accel_mps2: float) -> tuple[Smoothed, np.ndarray]:
+def offline_track(
+    fixes: Fixes, max_speed_mps: float, max_accel_mps2: float
+) -> tuple[Smoothed, np.ndarray]:
     """The smoothed track of a recording's fixes and its status word per frame (see the module doc)."""
     gate = FixGate(max_speed_mps, max_accel_mps2, max_h_acc_m=math.inf, max_age_s=math.inf)
     words = gate_offline(fixes, np.isin(fixes.status, LOSS_STATUSES), gate)
     taken = np.array([w is None for w in words], dtype=bool)
     smoothed = smooth_fixes(fixes, taken, max_speed_mps, max_accel_mps2)
-    status = np.where(smoothed.ok, "ok", np.where(fixes.status == "ok", "refused", fixes.status)).astype(object)
+    status = np.where(
+        smoothed.ok, "ok", np.where(fixes.status == "ok", "refused", fixes.status)
+    ).astype(object)
     return smoothed, status
 
 
 def write_smoothed_csv(path: Path, fixes: Fixes, smoothed: Smoothed, status: np.ndarray) -> None:
     """The table of the module doc, one row per frame of ``fixes``."""
     cov, shared = smoothed.cov_m2, smoothed.cov_shared_m2
-    columns = (fixes.t_unix, smoothed.lat, smoothed.lon, fixes.depth_m, smoothed.h_acc_m, status,
-               np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1]), cov[:, 0, 1], np.sqrt(shared[:, 0, 0] + shared[:, 1, 1]),
-               smoothed.vn_mps, smoothed.ve_mps, smoothed.gap_s)
+    columns = (
+        fixes.t_unix,
+        smoothed.lat,
+        smoothed.lon,
+        fixes.depth_m,
+        smoothed.h_acc_m,
+        status,
+        np.sqrt(cov[:, 0, 0]),
+        np.sqrt(cov[:, 1, 1]),
+        cov[:, 0, 1],
+        np.sqrt(shared[:, 0, 0] + shared[:, 1, 1]),
+        smoothed.vn_mps,
+        smoothed.ve_mps,
+        smoothed.gap_s,
+    )
     digits = (6, 9, 9, 4, 4, None, 4, 4, 6, 4, 4, 4, 3)
-    write_table(path, COLUMNS, ([_cell(v, d) for v, d in zip(row, digits)] for row in zip(*columns)))
+    write_table(
+        path, COLUMNS, ([_cell(v, d) for v, d in zip(row, digits)] for row in zip(*columns))
+    )
 
 
 def _cell(value, digits: int | None) -> str:
@@ -66,7 +97,9 @@ def summary(status: np.ndarray, smoothed: Smoothed) -> str:
     """One line: how many frames have a smoothed position, how many of them bridged, the noise's share of the fixes'
     covariance (frame to frame, or over a wave's period) and the acceleration bound (median over the frames)."""
     bridged = int(np.sum(smoothed.ok & (smoothed.gap_s > 0)))
-    return (f"smoothed: {int(smoothed.ok.sum())} of {len(status)} frames ({bridged} bridged), "
-            f"{int(np.sum(status == 'refused'))} fixes refused; noise's share of the fixes' covariance "
-            f"{smoothed.white_share:.3f} (over a wave's period {smoothed.wave_share:.3f}), acceleration bound "
-            f"{float(np.median(smoothed.accel_mps2[smoothed.ok])) if smoothed.ok.any() else float('nan'):.2f} m/s²")
+    return (
+        f"smoothed: {int(smoothed.ok.sum())} of {len(status)} frames ({bridged} bridged), "
+        f"{int(np.sum(status == 'refused'))} fixes refused; noise's share of the fixes' covariance "
+        f"{smoothed.white_share:.3f} (over a wave's period {smoothed.wave_share:.3f}), acceleration bound "
+        f"{float(np.median(smoothed.accel_mps2[smoothed.ok])) if smoothed.ok.any() else float('nan'):.2f} m/s²"
+    )

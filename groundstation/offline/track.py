@@ -53,7 +53,9 @@ class TrackedVideo:
     sigma_px: np.ndarray  # tracker's 1-sigma of each of u and v (pixels), NaN without a track
     timings_s: dict = field(default_factory=dict)  # seconds spent per stage
     warnings: list = field(default_factory=list)
-    rotations: list = field(default_factory=list)  # video_motion.Rotation between consecutive frames (measure_motion)
+    rotations: list = field(
+        default_factory=list
+    )  # video_motion.Rotation between consecutive frames (measure_motion)
 
 
 def _init_row(session: Session, t: np.ndarray) -> int:
@@ -70,10 +72,13 @@ def _init_row(session: Session, t: np.ndarray) -> int:
     return i
 
 
-
-
-def track_session(session: Session, tracker_name: str = "default", progress: bool = False,
-                  measure_motion: bool = False, size: HeightFromSize | None = None) -> TrackedVideo:
+def track_session(
+    session: Session,
+    tracker_name: str = "default",
+    progress: bool = False,
+    measure_motion: bool = False,
+    size: HeightFromSize | None = None,
+) -> TrackedVideo:
     """Track the UUV through the session's video (see the module doc for statuses); ``size`` measures the camera's
     height from the UUV's size in the frames it is tracked in.
 
@@ -85,7 +90,9 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     if session.video_path is None or session.frames is None:
         raise SessionError(f"{session.path}: no video.* with video_frames.csv to track")
     if cal.init_bbox is None:
-        raise SessionError(f"{session.path / 'session.toml'}: tracker.init_bbox missing (needed to track the video)")
+        raise SessionError(
+            f"{session.path / 'session.toml'}: tracker.init_bbox missing (needed to track the video)"
+        )
     try:
         tracking = TrackingSession(cal, tracker_name)
     except ValueError as e:
@@ -98,7 +105,12 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     init_row = _init_row(session, t)
     status = np.full(n, "no_video", dtype=object)
     status[:init_row] = "before_init"
-    u, v, conf, sigma = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    u, v, conf, sigma = (
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+    )
     timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0}
     warnings: list[str] = []
     meter = RotationMeter(cal.camera) if measure_motion else None
@@ -113,8 +125,12 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
     done = 0
     started = False
     try:
-        with open_video(session.video_path, expected_size=(cal.camera.width, cal.camera.height),
-                        indices=frame_idx, grey=tracker_name in GREY_TRACKERS) as video:
+        with open_video(
+            session.video_path,
+            expected_size=(cal.camera.width, cal.camera.height),
+            indices=frame_idx,
+            grey=tracker_name in GREY_TRACKERS,
+        ) as video:
             frames = video.prefetch()
             while True:
                 t0 = time.perf_counter()
@@ -143,12 +159,19 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
                     try:
                         result = tracking.select(frame.image, pose, row, box=cal.init_bbox)
                     except SelectionError as e:
-                        raise SessionError(f"{session.path / 'session.toml'}: tracker.init_bbox: {e}") from None
+                        raise SessionError(
+                            f"{session.path / 'session.toml'}: tracker.init_bbox: {e}"
+                        ) from None
                     started = True
                 else:
                     result = tracking.step(frame.image, pose, row)
                 timings["track"] += time.perf_counter() - t0
-                status[row], u[row], v[row], conf[row] = result.status, result.u, result.v, result.confidence
+                status[row], u[row], v[row], conf[row] = (
+                    result.status,
+                    result.u,
+                    result.v,
+                    result.confidence,
+                )
                 sigma[row] = result.sigma_px
                 if size is not None and result.ok and size.due(float(t[row])):
                     t0 = time.perf_counter()
@@ -157,7 +180,9 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
                 done += 1
                 bar.update()
             if video.bad_reads:
-                warnings.append(f"{session.video_path}: {video.bad_reads} unreadable frames skipped")
+                warnings.append(
+                    f"{session.video_path}: {video.bad_reads} unreadable frames skipped"
+                )
     except VideoError as e:
         raise SessionError(str(e)) from None
     finally:
@@ -166,7 +191,9 @@ def track_session(session: Session, tracker_name: str = "default", progress: boo
         raise SessionError(f"{session.video_path}: no frame of video_frames.csv could be decoded")
     missing = int(np.sum(status == "no_video"))
     if missing:
-        warnings.append(f"{session.video_path}: {missing} frames of video_frames.csv not in the video (status no_video)")
+        warnings.append(
+            f"{session.video_path}: {missing} frames of video_frames.csv not in the video (status no_video)"
+        )
     if extra:
         warnings.append(f"{session.video_path}: {extra} frames beyond video_frames.csv ignored")
     not_ok = status != "ok"

@@ -39,9 +39,13 @@ from localizer.depth import (
     ground_pressure_param,
 )
 
-COLUMNS = {"BARO": ("TimeUS", "I", "Alt", "CRt", "SMS", "Offset"), "CTUN": ("TimeUS", "Alt"),
-           "GPS": ("TimeUS", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt"), "GPA": ("TimeUS", "SMS"),
-           "PARM": ("TimeUS", "Name", "Value")}
+COLUMNS = {
+    "BARO": ("TimeUS", "I", "Alt", "CRt", "SMS", "Offset"),
+    "CTUN": ("TimeUS", "Alt"),
+    "GPS": ("TimeUS", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt"),
+    "GPA": ("TimeUS", "SMS"),
+    "PARM": ("TimeUS", "Name", "Value"),
+}
 GPS_TYPE_MAV = 14  # AP_GPS::GPS_TYPE_MAV: positions from GPS_INPUT
 
 
@@ -60,29 +64,41 @@ def read_ardusub_depth(path: Path, sigma_m: float, warnings: list[str]) -> tuple
     primary = int(params.get("BARO_PRIMARY", [(0.0, 0.0)])[-1][1])
     baro = [m for m in rows["BARO"] if m.I == primary]
     if not baro:
-        raise SessionError(f"{path}: no BARO records of BARO_PRIMARY = {primary}: not ArduSub's log of its depth")
+        raise SessionError(
+            f"{path}: no BARO records of BARO_PRIMARY = {primary}: not ArduSub's log of its depth"
+        )
     sick = [m for m in baro if not healthy(m)]
     if sick:
         warnings.append(f"{path}: {len(sick)} BARO records of sensor {primary} unhealthy, skipped")
     baro = [m for m in baro if healthy(m)]
     gps_rows = first_instance(rows["GPS"])
     if not gps_rows:
-        raise SessionError(f"{path}: no GPS records: ArduSub's clock cannot be put on UNIX time (give the depth as a "
-                           "CSV of UNIX times)")
+        raise SessionError(
+            f"{path}: no GPS records: ArduSub's clock cannot be put on UNIX time (give the depth as a "
+            "CSV of UNIX times)"
+        )
     _, offset_s, clock_sigma_s = log_clock(path, gps_rows, first_instance(rows["GPA"]))
     gps_type = params.get("GPS1_TYPE", params.get("GPS_TYPE", [(0.0, 0.0)]))[-1][1]
     delay_s = params.get("GPS1_DELAY_MS", params.get("GPS_DELAY_MS", [(0.0, 0.0)]))[-1][1] / 1000.0
     if gps_type == GPS_TYPE_MAV:
         offset_s += delay_s
-        warnings.append(f"{path}: ArduSub's clock on UNIX time takes its GPS_INPUT to have arrived GPS1_DELAY_MS = "
-                        f"{delay_s * 1000:.0f} ms after the fixes' times (the configured delay, not measured here)")
+        warnings.append(
+            f"{path}: ArduSub's clock on UNIX time takes its GPS_INPUT to have arrived GPS1_DELAY_MS = "
+            f"{delay_s * 1000:.0f} ms after the fixes' times (the configured delay, not measured here)"
+        )
     boot_s = np.array([m.SMS / 1000.0 if m.SMS else m.TimeUS / 1e6 for m in baro])
     depth_m = -np.array([m.Alt - m.Offset for m in baro])
     vspeed_mps = -np.array([m.CRt for m in baro])
-    keep = np.r_[True, np.diff(boot_s) > 0] & (depth_m >= DEPTH_RANGE_M[0]) & (depth_m <= DEPTH_RANGE_M[1])
+    keep = (
+        np.r_[True, np.diff(boot_s) > 0]
+        & (depth_m >= DEPTH_RANGE_M[0])
+        & (depth_m <= DEPTH_RANGE_M[1])
+    )
     if not keep.all():
-        warnings.append(f"{path}: {int((~keep).sum())} BARO records repeat a sample time or lie out of "
-                        f"{DEPTH_RANGE_M}: skipped")
+        warnings.append(
+            f"{path}: {int((~keep).sum())} BARO records repeat a sample time or lie out of "
+            f"{DEPTH_RANGE_M}: skipped"
+        )
     boot_s, depth_m, vspeed_mps = boot_s[keep], depth_m[keep], vspeed_mps[keep]
     sigma = np.full(len(depth_m), np.nan)
     crosschecked = 0
@@ -96,21 +112,37 @@ def read_ardusub_depth(path: Path, sigma_m: float, warnings: list[str]) -> tuple
         disagree = sigma > sigma_m
         if disagree.any():
             worst = int(np.argmax(np.abs(diff)))
-            warnings.append(f"{path}: ArduSub's pressure depth and its EKF's disagree in {int(disagree.sum())} of "
-                            f"{crosschecked} records (at most {diff[worst]:+.2f} m, boot {boot_s[worst]:.1f} s): the "
-                            "difference is in those depths' sigma")
+            warnings.append(
+                f"{path}: ArduSub's pressure depth and its EKF's disagree in {int(disagree.sum())} of "
+                f"{crosschecked} records (at most {diff[worst]:+.2f} m, boot {boot_s[worst]:.1f} s): the "
+                "difference is in those depths' sigma"
+            )
         sigma = np.where(disagree, sigma, np.nan)
     ground = params.get(ground_pressure_param(primary), [])
     for (_, before), (t, after) in pairwise(ground):
         if after != before:
-            warnings.append(f"{path}: {ground_pressure_param(primary)} {before:.1f} → {after:.1f} Pa at boot {t:.1f} s "
-                            f"(recalibrated): ArduSub's depths jump by {(before - after) / ARDUSUB_PA_PER_M:+.2f} m "
-                            "(fresh-water metres) there")
-    records = [{"t": round(float(b + offset_s), 6), "depth_m": round(float(d), 4), "source": "ardusub_pressure",
-                "vspeed_mps": round(float(v), 4)} | ({"sigma_m": round(float(s), 4)} if np.isfinite(s) else {})
-               for b, d, v, s in zip(boot_s, depth_m, vspeed_mps, sigma, strict=True)]
-    found = {"dataflash": str(path), "baro_primary": primary, "unix_minus_boot_s": round(offset_s, 6),
-             "unix_minus_boot_sigma_s": round(clock_sigma_s, 6),
-             "gps_delay_s_added": round(delay_s, 3) if gps_type == GPS_TYPE_MAV else 0.0,
-             "records": len(records), "crosschecked": crosschecked}
+            warnings.append(
+                f"{path}: {ground_pressure_param(primary)} {before:.1f} → {after:.1f} Pa at boot {t:.1f} s "
+                f"(recalibrated): ArduSub's depths jump by {(before - after) / ARDUSUB_PA_PER_M:+.2f} m "
+                "(fresh-water metres) there"
+            )
+    records = [
+        {
+            "t": round(float(b + offset_s), 6),
+            "depth_m": round(float(d), 4),
+            "source": "ardusub_pressure",
+            "vspeed_mps": round(float(v), 4),
+        }
+        | ({"sigma_m": round(float(s), 4)} if np.isfinite(s) else {})
+        for b, d, v, s in zip(boot_s, depth_m, vspeed_mps, sigma, strict=True)
+    ]
+    found = {
+        "dataflash": str(path),
+        "baro_primary": primary,
+        "unix_minus_boot_s": round(offset_s, 6),
+        "unix_minus_boot_sigma_s": round(clock_sigma_s, 6),
+        "gps_delay_s_added": round(delay_s, 3) if gps_type == GPS_TYPE_MAV else 0.0,
+        "records": len(records),
+        "crosschecked": crosschecked,
+    }
     return records, found

@@ -48,13 +48,23 @@ MIN_3D_STATUS = 3  # AP_GPS GPS_OK_FIX_3D and better
 WHOLE_MS_SIGMA_S = 0.001 * math.sqrt(2.0 / 12.0)  # the difference of two times rounded to whole ms
 DOWNWARD = 25  # MAV_SENSOR_ROTATION_PITCH_270
 EV_ARMED, EV_DISARMED = 10, 11  # AP_Logger's LogEvent
-BINARY_START = bytes((0xA3, 0x95, 0x80))  # a binary log's first record: its header and FMT's own type (128)
-COLUMNS = {"ATT": ("TimeUS", "Roll", "Pitch", "Yaw"), "IMU": ("TimeUS", "GyrX", "GyrY", "GyrZ"),
-           "POS": ("TimeUS", "Lat", "Lng", "Alt", "RelHomeAlt"),
-           "GPS": ("TimeUS", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt"), "GPA": ("TimeUS", "SMS"),
-           "MNT": ("TimeUS", "Roll", "Pitch", "YawB", "YawE"), "RFND": ("TimeUS", "Dist"),
-           "CAM": ("TimeUS",), "TRIG": ("TimeUS",), "ARM": ("TimeUS", "ArmState"), "EV": ("TimeUS", "Id"),
-           "PARM": ("TimeUS", "Name", "Value")}
+BINARY_START = bytes(
+    (0xA3, 0x95, 0x80)
+)  # a binary log's first record: its header and FMT's own type (128)
+COLUMNS = {
+    "ATT": ("TimeUS", "Roll", "Pitch", "Yaw"),
+    "IMU": ("TimeUS", "GyrX", "GyrY", "GyrZ"),
+    "POS": ("TimeUS", "Lat", "Lng", "Alt", "RelHomeAlt"),
+    "GPS": ("TimeUS", "Status", "GMS", "GWk", "NSats", "HDop", "Lat", "Lng", "Alt"),
+    "GPA": ("TimeUS", "SMS"),
+    "MNT": ("TimeUS", "Roll", "Pitch", "YawB", "YawE"),
+    "RFND": ("TimeUS", "Dist"),
+    "CAM": ("TimeUS",),
+    "TRIG": ("TimeUS",),
+    "ARM": ("TimeUS", "ArmState"),
+    "EV": ("TimeUS", "Id"),
+    "PARM": ("TimeUS", "Name", "Value"),
+}
 
 
 def gps_to_unix(week: float, week_ms: float) -> float:
@@ -69,9 +79,13 @@ class FlightLog:
     path: Path
     att: np.ndarray  # (n, 7): t_s, roll, pitch, yaw (rad), and the body rates (rad/s)
     pos: np.ndarray  # (n, 5): t_s, lat, lon (deg), alt (m AMSL), relative alt (m)
-    gps: np.ndarray  # (n, 10): t_s (arrival), unix_s, status, sats, hdop, alt (m), h_acc, v_acc (m; nan unknown),
+    gps: (
+        np.ndarray
+    )  # (n, 10): t_s (arrival), unix_s, status, sats, hdop, alt (m), h_acc, v_acc (m; nan unknown),
     #                  lat, lon (deg)
-    mnt: np.ndarray  # (n, 5): t_s, roll, pitch (earth frame), yaw relative to the vehicle, yaw from North (deg)
+    mnt: (
+        np.ndarray
+    )  # (n, 5): t_s, roll, pitch (earth frame), yaw relative to the vehicle, yaw from North (deg)
     rangefinder: np.ndarray  # (n, 2): t_s, distance (m)
     triggers_s: np.ndarray  # boot seconds of CAM / TRIG records
     armed: list[tuple[float, bool]]  # (boot s, armed) at each arming and disarming
@@ -108,11 +122,15 @@ def _columns(reader, name: str, columns: tuple[str, ...]) -> None:
         return
     missing = [c for c in columns if c not in fmt.columns]
     if missing:
-        raise SessionError(f"{name} records without {', '.join(missing)} (columns {','.join(fmt.columns)}): "
-                           "not a layout skyfix reads")
+        raise SessionError(
+            f"{name} records without {', '.join(missing)} (columns {','.join(fmt.columns)}): "
+            "not a layout skyfix reads"
+        )
 
 
-def read_records(path: Path, columns: dict[str, tuple[str, ...]], warnings: list[str] | None = None) -> dict[str, list]:
+def read_records(
+    path: Path, columns: dict[str, tuple[str, ...]], warnings: list[str] | None = None
+) -> dict[str, list]:
     """Every record of the kinds ``columns`` names, by kind in log order; each kind's FMT must hold the named columns.
     :class:`SessionError` (one line) for a file that is not a readable DataFlash log: one that does not begin with
     its first FMT record (:data:`BINARY_START`) is refused before pymavlink reads it. What pymavlink says of bytes it
@@ -122,8 +140,10 @@ def read_records(path: Path, columns: dict[str, tuple[str, ...]], warnings: list
     with open(path, "rb") as f:
         start = f.read(len(BINARY_START))
     if start != BINARY_START:
-        raise SessionError(f"{path}: not a DataFlash log (it begins {start.hex(' ') or 'empty'}, a binary log "
-                           f"{BINARY_START.hex(' ')})")
+        raise SessionError(
+            f"{path}: not a DataFlash log (it begins {start.hex(' ') or 'empty'}, a binary log "
+            f"{BINARY_START.hex(' ')})"
+        )
     said = io.StringIO()
     with contextlib.redirect_stderr(said):
         try:
@@ -142,8 +162,10 @@ def read_records(path: Path, columns: dict[str, tuple[str, ...]], warnings: list
             reader.close()
     lines = said.getvalue().splitlines()
     if lines and warnings is not None:
-        warnings.append(f"{path}: pymavlink skipped damaged parts of the log ({len(lines)} complaints, the first: "
-                        f"{lines[0]})")
+        warnings.append(
+            f"{path}: pymavlink skipped damaged parts of the log ({len(lines)} complaints, the first: "
+            f"{lines[0]})"
+        )
     return rows
 
 
@@ -153,13 +175,28 @@ def log_clock(path: Path, gps_rows: list, gpa_rows: list) -> tuple[np.ndarray, f
     stamps' whole milliseconds')."""
     arrival = {m.TimeUS: m.SMS / 1000.0 for m in gpa_rows}  # GPA is written with its GPS record
     acc = {m.TimeUS: (getattr(m, "HAcc", math.nan), getattr(m, "VAcc", math.nan)) for m in gpa_rows}
-    gps = np.array([[arrival.get(m.TimeUS, m.TimeUS / 1e6), gps_to_unix(m.GWk, m.GMS) if m.GWk else math.nan,
-                     m.Status, m.NSats, m.HDop, m.Alt, *acc.get(m.TimeUS, (math.nan, math.nan)), m.Lat, m.Lng]
-                    for m in gps_rows]).reshape(-1, 10)
+    gps = np.array(
+        [
+            [
+                arrival.get(m.TimeUS, m.TimeUS / 1e6),
+                gps_to_unix(m.GWk, m.GMS) if m.GWk else math.nan,
+                m.Status,
+                m.NSats,
+                m.HDop,
+                m.Alt,
+                *acc.get(m.TimeUS, (math.nan, math.nan)),
+                m.Lat,
+                m.Lng,
+            ]
+            for m in gps_rows
+        ]
+    ).reshape(-1, 10)
     good = (gps[:, 2] >= MIN_3D_STATUS) & np.isfinite(gps[:, 1])
     if good.sum() < 2:
-        raise SessionError(f"{path}: no GPS time (GWk/GMS of a 3D fix) in the log: its clock cannot be put on UNIX "
-                           "time")
+        raise SessionError(
+            f"{path}: no GPS time (GWk/GMS of a 3D fix) in the log: its clock cannot be put on UNIX "
+            "time"
+        )
     offsets = gps[good, 1] - gps[good, 0]
     offset = float(np.median(offsets))
     return gps, offset, max(float(1.4826 * np.median(np.abs(offsets - offset))), WHOLE_MS_SIGMA_S)
@@ -194,15 +231,37 @@ def read_dataflash(path: str | Path) -> FlightLog:
         nearest -= (att_t - imu_t[nearest - 1]) < (imu_t[nearest] - att_t)
         rates = gyro[nearest]
     else:
-        warnings.append(f"{path}: no IMU records: the attitude's body rates are taken from its own differences")
+        warnings.append(
+            f"{path}: no IMU records: the attitude's body rates are taken from its own differences"
+        )
         rates = attitude_rates(att_t, att[:, 1:4])
     pos = np.array([[m.TimeUS / 1e6, m.Lat, m.Lng, m.Alt, m.RelHomeAlt] for m in rows["POS"]])
     gps, offset, sigma = log_clock(path, rows["GPS"], rows["GPA"])
-    mnt = np.array([[m.TimeUS / 1e6, m.Roll, m.Pitch, m.YawB, m.YawE] for m in rows["MNT"]]).reshape(-1, 5)
+    mnt = np.array(
+        [[m.TimeUS / 1e6, m.Roll, m.Pitch, m.YawB, m.YawE] for m in rows["MNT"]]
+    ).reshape(-1, 5)
     rangefinder = np.array([[m.TimeUS / 1e6, m.Dist] for m in rows["RFND"]]).reshape(-1, 2)
     triggers = np.sort(np.concatenate([t(rows["CAM"]), t(rows["TRIG"])]))
-    armed = sorted([(m.TimeUS / 1e6, bool(m.ArmState)) for m in rows["ARM"]]
-                   or [(m.TimeUS / 1e6, m.Id == EV_ARMED) for m in rows["EV"] if m.Id in (EV_ARMED, EV_DISARMED)])
+    armed = sorted(
+        [(m.TimeUS / 1e6, bool(m.ArmState)) for m in rows["ARM"]]
+        or [
+            (m.TimeUS / 1e6, m.Id == EV_ARMED)
+            for m in rows["EV"]
+            if m.Id in (EV_ARMED, EV_DISARMED)
+        ]
+    )
     params = {m.Name: float(m.Value) for m in rows["PARM"]}
-    return FlightLog(path, np.column_stack([att, rates]), pos, gps, mnt, rangefinder, triggers, armed, params,
-                     offset, sigma, warnings)
+    return FlightLog(
+        path,
+        np.column_stack([att, rates]),
+        pos,
+        gps,
+        mnt,
+        rangefinder,
+        triggers,
+        armed,
+        params,
+        offset,
+        sigma,
+        warnings,
+    )

@@ -46,15 +46,20 @@ def _record(line: str) -> DepthRecord | str:
     except (ValueError, KeyError, TypeError, AttributeError):
         shaped = False
     if not shaped:
-        return f"expected {{\"t\": number, \"depth_m\": number}}, got {line[:80]!r}"
+        return f'expected {{"t": number, "depth_m": number}}, got {line[:80]!r}'
     if not (math.isfinite(t) and math.isfinite(depth) and math.isfinite(t_recv or 0.0)):
         return f"non-finite value in {line[:80]!r}"
     if not DEPTH_RANGE_M[0] <= depth <= DEPTH_RANGE_M[1]:
         return f"depth_m = {depth!r} out of range [{DEPTH_RANGE_M[0]:g}, {DEPTH_RANGE_M[1]:g}]"
     source = rec.get("source")
-    return DepthRecord(float(t), float(depth), None if t_recv is None else float(t_recv),
-                       source if isinstance(source, str) else None, _optional(rec.get("sigma_m")),
-                       _optional(rec.get("vspeed_mps")))
+    return DepthRecord(
+        float(t),
+        float(depth),
+        None if t_recv is None else float(t_recv),
+        source if isinstance(source, str) else None,
+        _optional(rec.get("sigma_m")),
+        _optional(rec.get("vspeed_mps")),
+    )
 
 
 def read_depth(path: Path, warnings: list[str], strict: bool = True) -> list[DepthRecord]:

@@ -133,27 +133,46 @@ FIX_3D = 3
 SATS_UNKNOWN = 255  # GPS_RAW_INT satellites_visible "unknown"
 #: skyfix name → (kind, the CSV's column names it may have, first preferred)
 COLUMNS = {
-    "lat_deg": ("angle", ("OSD.latitude", "OSD.lalitude")), "lon_deg": ("angle", ("OSD.longitude",)),
-    "height_m": ("length", ("OSD.height",)), "altitude_m": ("length", ("OSD.altitude",)),
-    "roll_deg": ("angle", ("OSD.roll",)), "pitch_deg": ("angle", ("OSD.pitch",)), "yaw_deg": ("angle", ("OSD.yaw",)),
-    "gimbal_roll_deg": ("angle", ("GIMBAL.roll",)), "gimbal_pitch_deg": ("angle", ("GIMBAL.pitch",)),
+    "lat_deg": ("angle", ("OSD.latitude", "OSD.lalitude")),
+    "lon_deg": ("angle", ("OSD.longitude",)),
+    "height_m": ("length", ("OSD.height",)),
+    "altitude_m": ("length", ("OSD.altitude",)),
+    "roll_deg": ("angle", ("OSD.roll",)),
+    "pitch_deg": ("angle", ("OSD.pitch",)),
+    "yaw_deg": ("angle", ("OSD.yaw",)),
+    "gimbal_roll_deg": ("angle", ("GIMBAL.roll",)),
+    "gimbal_pitch_deg": ("angle", ("GIMBAL.pitch",)),
     "gimbal_yaw_deg": ("angle", ("GIMBAL.yaw",)),
 }
 UTC_COLUMN = "CUSTOM.dateTime"
 #: Airdata's CSV: skyfix name (the keys of :data:`COLUMNS`, in their order) → (kind, its column's name before the unit)
 AIRDATA_COLUMNS = {
-    "lat_deg": ("angle", "latitude"), "lon_deg": ("angle", "longitude"),
-    "height_m": ("length", "height_above_takeoff"), "altitude_m": ("length", "altitude_above_seaLevel"),
-    "roll_deg": ("angle", "roll"), "pitch_deg": ("angle", "pitch"), "yaw_deg": ("angle", "compass_heading"),
-    "gimbal_roll_deg": ("angle", "gimbal_roll"), "gimbal_pitch_deg": ("angle", "gimbal_pitch"),
+    "lat_deg": ("angle", "latitude"),
+    "lon_deg": ("angle", "longitude"),
+    "height_m": ("length", "height_above_takeoff"),
+    "altitude_m": ("length", "altitude_above_seaLevel"),
+    "roll_deg": ("angle", "roll"),
+    "pitch_deg": ("angle", "pitch"),
+    "yaw_deg": ("angle", "compass_heading"),
+    "gimbal_roll_deg": ("angle", "gimbal_roll"),
+    "gimbal_pitch_deg": ("angle", "gimbal_pitch"),
     "gimbal_yaw_deg": ("angle", "gimbal_heading"),
 }
 AIRDATA_TIME, AIRDATA_UTC = "time(millisecond)", "datetime(utc)"
 AIRDATA_ANGLE_UNITS = {"degrees", "deg", "°"}
-AIRDATA_CLOCK_TOLERANCE_S = 0.01  # how far datetime(utc) and time(millisecond) may disagree beyond the 1 s resolution
+AIRDATA_CLOCK_TOLERANCE_S = (
+    0.01  # how far datetime(utc) and time(millisecond) may disagree beyond the 1 s resolution
+)
 LOCAL_COLUMNS = ("CUSTOM.date [local]", "CUSTOM.updateTime [local]")
-LOCAL_FORMATS = ("%m/%d/%Y %I:%M:%S.%f %p", "%m/%d/%Y %H:%M:%S.%f", "%m/%d/%Y %I:%M:%S %p", "%m/%d/%Y %H:%M:%S")
-ZONES_S = np.arange(-12 * 3600, 14 * 3600 + 1, 900)  # every time zone's offset from UTC, quarter hours
+LOCAL_FORMATS = (
+    "%m/%d/%Y %I:%M:%S.%f %p",
+    "%m/%d/%Y %H:%M:%S.%f",
+    "%m/%d/%Y %I:%M:%S %p",
+    "%m/%d/%Y %H:%M:%S",
+)
+ZONES_S = np.arange(
+    -12 * 3600, 14 * 3600 + 1, 900
+)  # every time zone's offset from UTC, quarter hours
 REFINE_S = 2.0
 REFINE_STEP_S = 0.01
 MIN_OVERLAP = 0.5  # share of the SRT's frames that must fall within the record at an offset
@@ -172,12 +191,16 @@ def column_scale(path: Path, header: str, kind: str, units_in_headers: bool) -> 
     if kind == "length":
         if unit is None:
             if units_in_headers:
-                raise SessionError(f"{path}: column {header!r}: no unit, while the other headers carry theirs "
-                                   f"(say [m] or [ft])")
+                raise SessionError(
+                    f"{path}: column {header!r}: no unit, while the other headers carry theirs "
+                    f"(say [m] or [ft])"
+                )
             return 1.0
         if unit.lower() not in LENGTH_UNITS_M:
-            raise SessionError(f"{path}: column {header!r}: unknown unit {unit!r} (known: "
-                               f"{', '.join(LENGTH_UNITS_M)})")
+            raise SessionError(
+                f"{path}: column {header!r}: unknown unit {unit!r} (known: "
+                f"{', '.join(LENGTH_UNITS_M)})"
+            )
         return LENGTH_UNITS_M[unit.lower()]
     if unit is not None and unit not in ANGLE_UNITS:
         raise SessionError(f"{path}: column {header!r}: unknown unit {unit!r} (degrees expected)")
@@ -190,8 +213,10 @@ def find_column(path: Path, headers: list[str], names: tuple[str, ...]) -> str:
         found = [h for h in headers if split_header(h)[0] == name]
         if found:
             return min(found, key=lambda h: split_header(h)[1] == "360")
-    raise SessionError(f"{path}: no column {names[0]} (a DJI flight record exported by dji-log-parser or "
-                       "PhantomHelp has it)")
+    raise SessionError(
+        f"{path}: no column {names[0]} (a DJI flight record exported by dji-log-parser or "
+        "PhantomHelp has it)"
+    )
 
 
 def parse_number(path: Path, line: int, column: str, text: str) -> float:
@@ -212,7 +237,9 @@ def parse_utc(path: Path, line: int, column: str, text: str) -> float:
     except ValueError:
         raise SessionError(f"{path}:{line}: {column} = {text!r}: not an ISO-8601 time") from None
     if t.tzinfo is None:
-        raise SessionError(f"{path}:{line}: {column} = {text!r}: no time zone (UTC expected, as 'Z')")
+        raise SessionError(
+            f"{path}:{line}: {column} = {text!r}: no time zone (UTC expected, as 'Z')"
+        )
     return t.timestamp()
 
 
@@ -225,23 +252,35 @@ def parse_local(path: Path, line: int, date: str, time: str, utc_offset_h: float
         except ValueError:
             continue
         return t.replace(tzinfo=timezone(timedelta(hours=utc_offset_h))).timestamp()
-    raise SessionError(f"{path}:{line}: {' + '.join(LOCAL_COLUMNS)} = {text!r}: not a date and time "
-                       "(6/11/2026 1:00:00.00 PM)")
+    raise SessionError(
+        f"{path}:{line}: {' + '.join(LOCAL_COLUMNS)} = {text!r}: not a date and time "
+        "(6/11/2026 1:00:00.00 PM)"
+    )
 
 
-def clean_rows(path: Path, t_unix: np.ndarray, values: np.ndarray, line_numbers: np.ndarray,
-               warnings: list[str]) -> np.ndarray:
+def clean_rows(
+    path: Path,
+    t_unix: np.ndarray,
+    values: np.ndarray,
+    line_numbers: np.ndarray,
+    warnings: list[str],
+) -> np.ndarray:
     """Which rows to keep: finite, each later than every row before; one warning per kind dropped."""
     finite = np.isfinite(t_unix) & np.isfinite(values).all(axis=1)
     t = np.where(finite, t_unix, -np.inf)
     before = np.maximum.accumulate(np.r_[-np.inf, t[:-1]])
     duplicate = finite & (t == before)
     backwards = finite & (t < before)
-    for mask, what in ((~finite, "with an empty or nan value"), (duplicate, "repeating the time before"),
-                       (backwards, "earlier than a row before")):
+    for mask, what in (
+        (~finite, "with an empty or nan value"),
+        (duplicate, "repeating the time before"),
+        (backwards, "earlier than a row before"),
+    ):
         if mask.any():
             first = int(line_numbers[np.flatnonzero(mask)[0]])
-            warnings.append(f"{path}: {int(mask.sum())} rows {what} dropped (the first at line {first})")
+            warnings.append(
+                f"{path}: {int(mask.sum())} rows {what} dropped (the first at line {first})"
+            )
     return finite & ~duplicate & ~backwards
 
 
@@ -257,14 +296,19 @@ def airdata_column(path: Path, headers: list[str], kind: str, name: str) -> tupl
     values; :class:`SessionError` naming the column for a length without a known unit, an unknown angle unit."""
     found = [h for h in headers if split_paren(h)[0].casefold() == name.casefold()]
     if not found:
-        raise SessionError(f"{path}: no column {name} (Airdata's CSV export has it"
-                           + (", with its unit: (feet) or (meters))" if kind == "length" else ")"))
+        raise SessionError(
+            f"{path}: no column {name} (Airdata's CSV export has it"
+            + (", with its unit: (feet) or (meters))" if kind == "length" else ")")
+        )
     header = found[0]
     unit = split_paren(header)[1]
     if kind == "length":
         if unit is None or unit.lower() not in LENGTH_UNITS_M:
-            raise SessionError(f"{path}: column {header!r}: " + ("no unit" if unit is None else f"unknown unit {unit!r}")
-                               + f" (known: {', '.join(LENGTH_UNITS_M)})")
+            raise SessionError(
+                f"{path}: column {header!r}: "
+                + ("no unit" if unit is None else f"unknown unit {unit!r}")
+                + f" (known: {', '.join(LENGTH_UNITS_M)})"
+            )
         return header, LENGTH_UNITS_M[unit.lower()]
     if unit is not None and unit.lower() not in AIRDATA_ANGLE_UNITS:
         raise SessionError(f"{path}: column {header!r}: unknown unit {unit!r} (degrees expected)")
@@ -280,27 +324,34 @@ def parse_airdata_utc(path: Path, line: int, text: str) -> float:
     try:
         t = datetime.fromisoformat(text)
     except ValueError:
-        raise SessionError(f"{path}:{line}: {AIRDATA_UTC} = {text!r}: not a date and time "
-                           "(2023-03-02 10:10:59)") from None
+        raise SessionError(
+            f"{path}:{line}: {AIRDATA_UTC} = {text!r}: not a date and time (2023-03-02 10:10:59)"
+        ) from None
     return (t if t.tzinfo is not None else t.replace(tzinfo=UTC)).timestamp()
 
 
-def airdata_clock(path: Path, utc_s: np.ndarray, record_s: np.ndarray, line_numbers: np.ndarray) -> tuple[float, float]:
+def airdata_clock(
+    path: Path, utc_s: np.ndarray, record_s: np.ndarray, line_numbers: np.ndarray
+) -> tuple[float, float]:
     """The UNIX time of ``time(millisecond)`` 0 and its half-uncertainty (s), from every row having both: whole
     seconds of ``datetime(utc)`` are taken as truncated (the true time within [datetime, datetime + 1 s)), so the
     rows' ``datetime − time`` bound it from both sides; times with fractions of a second are taken as they are.
     :class:`SessionError` when the two columns disagree beyond that."""
     both = np.isfinite(utc_s) & np.isfinite(record_s)
     if not both.any():
-        raise SessionError(f"{path}: no row with both {AIRDATA_UTC} and {AIRDATA_TIME}: the record has no UTC time")
+        raise SessionError(
+            f"{path}: no row with both {AIRDATA_UTC} and {AIRDATA_TIME}: the record has no UTC time"
+        )
     c, lines = utc_s[both] - record_s[both], line_numbers[both]
     whole = bool(np.all(np.mod(utc_s[both], 1.0) == 0.0))
     lo, hi = (float(c.max()), float(c.min()) + 1.0) if whole else (float(c.min()), float(c.max()))
     excess = lo - hi if whole else hi - lo
     if excess > AIRDATA_CLOCK_TOLERANCE_S:
         k = int(np.argmax(np.abs(c - np.median(c))))
-        raise SessionError(f"{path}:{int(lines[k])}: {AIRDATA_UTC} and {AIRDATA_TIME} disagree with the other rows' "
-                           f"by {excess:.3f} s{' beyond its 1 s resolution' if whole else ''}: a clock jump?")
+        raise SessionError(
+            f"{path}:{int(lines[k])}: {AIRDATA_UTC} and {AIRDATA_TIME} disagree with the other rows' "
+            f"by {excess:.3f} s{' beyond its 1 s resolution' if whole else ''}: a clock jump?"
+        )
     return (lo + hi) / 2.0, max(hi - lo, 0.0) / 2.0
 
 
@@ -319,7 +370,12 @@ def read_airdata(path: Path, headers: list[str], reader, first_line: int) -> Fli
             raise SessionError(f"{path}:{line}: {len(row)} cells, the header has {len(headers)}")
         record_s.append(parse_number(path, line, AIRDATA_TIME, row[index[AIRDATA_TIME]]) / 1000.0)
         utc_s.append(parse_airdata_utc(path, line, row[index[AIRDATA_UTC]]))
-        rows.append([parse_number(path, line, columns[k], row[index[columns[k]]]) * scale[k] for k in COLUMNS])
+        rows.append(
+            [
+                parse_number(path, line, columns[k], row[index[columns[k]]]) * scale[k]
+                for k in COLUMNS
+            ]
+        )
         line_numbers.append(line)
     if not rows:
         raise SessionError(f"{path}: no rows")
@@ -328,15 +384,22 @@ def read_airdata(path: Path, headers: list[str], reader, first_line: int) -> Fli
     return finish_rows(path, zero_unix + record, np.array(rows), lines, sigma)
 
 
-def finish_rows(path: Path, t_unix: np.ndarray, values: np.ndarray, line_numbers: np.ndarray,
-                sigma_s: float = 0.0) -> FlightLog:
+def finish_rows(
+    path: Path,
+    t_unix: np.ndarray,
+    values: np.ndarray,
+    line_numbers: np.ndarray,
+    sigma_s: float = 0.0,
+) -> FlightLog:
     """The rows (UNIX times, the :data:`COLUMNS` values in metres and degrees) cleaned (:func:`clean_rows`) as a
     :class:`FlightLog` whose clock is known to ``sigma_s``."""
     warnings: list[str] = []
     keep = clean_rows(path, t_unix, values, line_numbers, warnings)
     if keep.sum() < 2:
         raise SessionError(f"{path}: fewer than 2 usable rows")
-    return flight_log(path, t_unix[keep], dict(zip(COLUMNS, values[keep].T, strict=True)), warnings, sigma_s)
+    return flight_log(
+        path, t_unix[keep], dict(zip(COLUMNS, values[keep].T, strict=True)), warnings, sigma_s
+    )
 
 
 def wrap_deg(angle_deg):
@@ -344,8 +407,13 @@ def wrap_deg(angle_deg):
     return 180.0 - np.mod(180.0 - np.asarray(angle_deg, dtype=float), 360.0)
 
 
-def flight_log(path: Path, t_unix: np.ndarray, v: dict[str, np.ndarray], warnings: list[str],
-               sigma_s: float = 0.0) -> FlightLog:
+def flight_log(
+    path: Path,
+    t_unix: np.ndarray,
+    v: dict[str, np.ndarray],
+    warnings: list[str],
+    sigma_s: float = 0.0,
+) -> FlightLog:
     """The record's rows (UNIX s, the :data:`COLUMNS` values in metres and degrees) as a :class:`FlightLog`."""
     t_s = t_unix - t_unix[0]
     yaw_deg, gimbal_yaw_deg = wrap_deg(v["yaw_deg"]), wrap_deg(v["gimbal_yaw_deg"])
@@ -355,17 +423,52 @@ def flight_log(path: Path, t_unix: np.ndarray, v: dict[str, np.ndarray], warning
     if not located.any():
         raise SessionError(f"{path}: no row with a position (latitude, longitude all 0)")
     if not located.all():
-        warnings.append(f"{path}: {int((~located).sum())} rows without a position (0, 0): no position written "
-                        "for them")
+        warnings.append(
+            f"{path}: {int((~located).sum())} rows without a position (0, 0): no position written "
+            "for them"
+        )
     n = int(located.sum())
-    lat, lon, alt, height = (v[k][located] for k in ("lat_deg", "lon_deg", "altitude_m", "height_m"))
+    lat, lon, alt, height = (
+        v[k][located] for k in ("lat_deg", "lon_deg", "altitude_m", "height_m")
+    )
     pos = np.column_stack([t_s[located], lat, lon, alt, height])
-    gps = np.column_stack([t_s[located], t_unix[located], np.full(n, FIX_3D), np.full(n, SATS_UNKNOWN),
-                           np.full(n, np.nan), alt, np.full(n, np.nan), np.full(n, np.nan), lat, lon])
-    mnt = np.column_stack([t_s, v["gimbal_roll_deg"], v["gimbal_pitch_deg"],
-                           wrap_deg(gimbal_yaw_deg - yaw_deg), gimbal_yaw_deg])
-    return FlightLog(path, att, pos, gps, mnt, np.empty((0, 2)), np.empty(0), [], {}, float(t_unix[0]),
-                     sigma_s, warnings)
+    gps = np.column_stack(
+        [
+            t_s[located],
+            t_unix[located],
+            np.full(n, FIX_3D),
+            np.full(n, SATS_UNKNOWN),
+            np.full(n, np.nan),
+            alt,
+            np.full(n, np.nan),
+            np.full(n, np.nan),
+            lat,
+            lon,
+        ]
+    )
+    mnt = np.column_stack(
+        [
+            t_s,
+            v["gimbal_roll_deg"],
+            v["gimbal_pitch_deg"],
+            wrap_deg(gimbal_yaw_deg - yaw_deg),
+            gimbal_yaw_deg,
+        ]
+    )
+    return FlightLog(
+        path,
+        att,
+        pos,
+        gps,
+        mnt,
+        np.empty((0, 2)),
+        np.empty(0),
+        [],
+        {},
+        float(t_unix[0]),
+        sigma_s,
+        warnings,
+    )
 
 
 def read_dji_csv(path: str | Path, utc_offset_h: float | None = None) -> FlightLog:
@@ -388,14 +491,20 @@ def read_dji_csv(path: str | Path, utc_offset_h: float | None = None) -> FlightL
     index = {h: i for i, h in reversed(list(enumerate(headers)))}
     local = UTC_COLUMN not in index
     if local and not all(c in index for c in LOCAL_COLUMNS):
-        raise SessionError(f"{path}: no column {UTC_COLUMN} (nor {' + '.join(LOCAL_COLUMNS)}): the rows have no time")
+        raise SessionError(
+            f"{path}: no column {UTC_COLUMN} (nor {' + '.join(LOCAL_COLUMNS)}): the rows have no time"
+        )
     if local and utc_offset_h is None:
-        raise SessionError(f"{path}: {LOCAL_COLUMNS[1]}: local times of a zone the file does not say: give "
-                           "--dji-csv-utc-offset-h (hours east of UTC)")
+        raise SessionError(
+            f"{path}: {LOCAL_COLUMNS[1]}: local times of a zone the file does not say: give "
+            "--dji-csv-utc-offset-h (hours east of UTC)"
+        )
 
     def time_of(row: list[str], line: int) -> float:
         if local:
-            return parse_local(path, line, row[index[LOCAL_COLUMNS[0]]], row[index[LOCAL_COLUMNS[1]]], utc_offset_h)
+            return parse_local(
+                path, line, row[index[LOCAL_COLUMNS[0]]], row[index[LOCAL_COLUMNS[1]]], utc_offset_h
+            )
         return parse_utc(path, line, UTC_COLUMN, row[index[UTC_COLUMN]])
 
     times, rows, line_numbers = [], [], []
@@ -405,7 +514,12 @@ def read_dji_csv(path: str | Path, utc_offset_h: float | None = None) -> FlightL
         if len(row) < len(headers):
             raise SessionError(f"{path}:{line}: {len(row)} cells, the header has {len(headers)}")
         times.append(time_of(row, line))
-        rows.append([parse_number(path, line, columns[k], row[index[columns[k]]]) * scale[k] for k in COLUMNS])
+        rows.append(
+            [
+                parse_number(path, line, columns[k], row[index[columns[k]]]) * scale[k]
+                for k in COLUMNS
+            ]
+        )
         line_numbers.append(line)
     if not rows:
         raise SessionError(f"{path}: no rows")
@@ -417,7 +531,9 @@ class SrtTrack:
     """A DJI camera's subtitles (see the module doc); NaN where a subtitle lacks a value."""
 
     path: Path
-    frame: np.ndarray  # the video frame (FrameCnt / SrtCnt − 1); the older form: the subtitle's order (from 0)
+    frame: (
+        np.ndarray
+    )  # the video frame (FrameCnt / SrtCnt − 1); the older form: the subtitle's order (from 0)
     t_video_s: np.ndarray  # the subtitle's start in the video
     t_camera_s: np.ndarray  # the camera's clock, seconds since 1970-01-01 of its own (local) time
     lat_deg: np.ndarray
@@ -430,13 +546,32 @@ class SrtTrack:
 
 SRT_TIMECODE = re.compile(r"(\d+):(\d{2}):(\d{2})[,.](\d{3})\s*-->")
 SRT_COUNT = re.compile(r"(?:FrameCnt|SrtCnt)\s*:\s*(\d+)")
-SRT_CLOCK = re.compile(r"(\d{4})-(\d{2})-(\d{2}) (\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,3}))?(?:,(\d{3}))?")
-SRT_VALUE = re.compile(r"\b(latitude|longitude|longtitude|rel_alt|gb_yaw|gb_pitch|gb_roll)\s*:\s*([^\s\]]+)")
-SRT_KEYS = {"latitude": 0, "longitude": 1, "longtitude": 1, "rel_alt": 2, "gb_yaw": 3, "gb_pitch": 4, "gb_roll": 5}
+SRT_CLOCK = re.compile(
+    r"(\d{4})-(\d{2})-(\d{2}) (\d{2}):(\d{2}):(\d{2})(?:[.,](\d{1,3}))?(?:,(\d{3}))?"
+)
+SRT_VALUE = re.compile(
+    r"\b(latitude|longitude|longtitude|rel_alt|gb_yaw|gb_pitch|gb_roll)\s*:\s*([^\s\]]+)"
+)
+SRT_KEYS = {
+    "latitude": 0,
+    "longitude": 1,
+    "longtitude": 1,
+    "rel_alt": 2,
+    "gb_yaw": 3,
+    "gb_pitch": 4,
+    "gb_roll": 5,
+}
 SRT_OLD_GPS = re.compile(r"\bGPS\s*\(\s*([^,()]*?)\s*,\s*([^,()]*?)\s*(?:,[^()]*)?\)")
-SRT_OLD_CLOCK = re.compile(r"(\d{4})[.\-/](\d{1,2})[.\-/](\d{1,2})\s+(\d{1,2}):(\d{2}):(\d{2})(?:[.,](\d{1,3}))?")
-GPS_ORDERS = ("lat,lon", "lon,lat")  # the older form's GPS(a, b): a latitude first, or a longitude first
-ORDER_FIT_M = 100.0  # the older form: the order that fits must fit the record within this (RMS m)...
+SRT_OLD_CLOCK = re.compile(
+    r"(\d{4})[.\-/](\d{1,2})[.\-/](\d{1,2})\s+(\d{1,2}):(\d{2}):(\d{2})(?:[.,](\d{1,3}))?"
+)
+GPS_ORDERS = (
+    "lat,lon",
+    "lon,lat",
+)  # the older form's GPS(a, b): a latitude first, or a longitude first
+ORDER_FIT_M = (
+    100.0  # the older form: the order that fits must fit the record within this (RMS m)...
+)
 ORDER_RATIO, ORDER_MARGIN_M = 3.0, 50.0  # ...and the other must fit at least this much worse (both)
 
 
@@ -465,21 +600,30 @@ def old_srt_row(path: Path, first_line: int, block: str, tc: re.Match, order: in
     first and second numbers, the rest NaN."""
     clock, gps = SRT_OLD_CLOCK.search(block, tc.end()), SRT_OLD_GPS.search(block, tc.end())
     if clock is None:
-        raise SessionError(f"{path}:{first_line}: the older SRT form (GPS(...)) without the camera's date and time "
-                           "(2017.08.05 14:11:51)")
+        raise SessionError(
+            f"{path}:{first_line}: the older SRT form (GPS(...)) without the camera's date and time "
+            "(2017.08.05 14:11:51)"
+        )
     values = []
     for text in gps.groups():
         try:
             values.append(float(text))
         except ValueError:
-            raise SessionError(f"{path}:{first_line}: GPS({gps.group(1)},{gps.group(2)},...): {text!r} is not a "
-                               "number") from None
+            raise SessionError(
+                f"{path}:{first_line}: GPS({gps.group(1)},{gps.group(2)},...): {text!r} is not a "
+                "number"
+            ) from None
     return [order, srt_start_s(tc), srt_clock_s(clock)] + values + [math.nan] * 4
 
 
 def srt_start_s(tc: re.Match) -> float:
     """Seconds into the video of a subtitle's start (its ``start --> end`` line's match)."""
-    return int(tc.group(1)) * 3600 + int(tc.group(2)) * 60 + int(tc.group(3)) + int(tc.group(4)) / 1000.0
+    return (
+        int(tc.group(1)) * 3600
+        + int(tc.group(2)) * 60
+        + int(tc.group(3))
+        + int(tc.group(4)) / 1000.0
+    )
 
 
 def read_srt(path: str | Path) -> SrtTrack:
@@ -493,35 +637,60 @@ def read_srt(path: str | Path) -> SrtTrack:
     for first_line, block in srt_blocks(text):
         tc = SRT_TIMECODE.search(block)
         if tc is None:
-            raise SessionError(f"{path}:{first_line}: a subtitle without its 'start --> end' line: not an SRT")
+            raise SessionError(
+                f"{path}:{first_line}: a subtitle without its 'start --> end' line: not an SRT"
+            )
         clock = SRT_CLOCK.search(block, tc.end())
         count = SRT_COUNT.search(block)
-        form = "frame" if clock is not None and count is not None else \
-            "older" if SRT_OLD_GPS.search(block, tc.end()) else None
+        form = (
+            "frame"
+            if clock is not None and count is not None
+            else "older"
+            if SRT_OLD_GPS.search(block, tc.end())
+            else None
+        )
         if form is None:
-            raise SessionError(f"{path}:{first_line}: a subtitle without FrameCnt/SrtCnt and the camera's date and "
-                               "time, nor GPS(...): not a DJI camera's SRT")
+            raise SessionError(
+                f"{path}:{first_line}: a subtitle without FrameCnt/SrtCnt and the camera's date and "
+                "time, nor GPS(...): not a DJI camera's SRT"
+            )
         forms.add(form)
         if len(forms) > 1:
-            raise SessionError(f"{path}:{first_line}: a subtitle of the {form} form among the other form's: not one "
-                               "camera's SRT")
+            raise SessionError(
+                f"{path}:{first_line}: a subtitle of the {form} form among the other form's: not one "
+                "camera's SRT"
+            )
         if form == "older":
             rows.append(old_srt_row(path, first_line, block, tc, len(rows)))
             continue
         row = [int(count.group(1)) - 1, srt_start_s(tc), srt_clock_s(clock)] + [math.nan] * 6
-        for key, value in SRT_VALUE.findall(block[clock.end():]):
+        for key, value in SRT_VALUE.findall(block[clock.end() :]):
             try:
                 row[3 + SRT_KEYS[key]] = float(value)
             except ValueError:
-                raise SessionError(f"{path}:{first_line}: {key} = {value!r}: not a number") from None
+                raise SessionError(
+                    f"{path}:{first_line}: {key} = {value!r}: not a number"
+                ) from None
         rows.append(row)
     if not rows:
         raise SessionError(f"{path}: no subtitles: not an SRT")
     a = np.array(rows)
     if not np.all(np.diff(a[:, 1]) > 0):
-        raise SessionError(f"{path}: subtitle {int(np.argmin(np.diff(a[:, 1]))) + 2} starts no later than the one "
-                           "before")
-    return SrtTrack(path, a[:, 0].astype(int), a[:, 1], a[:, 2], a[:, 3], a[:, 4], a[:, 5], a[:, 6:9], forms.pop())
+        raise SessionError(
+            f"{path}: subtitle {int(np.argmin(np.diff(a[:, 1]))) + 2} starts no later than the one "
+            "before"
+        )
+    return SrtTrack(
+        path,
+        a[:, 0].astype(int),
+        a[:, 1],
+        a[:, 2],
+        a[:, 3],
+        a[:, 4],
+        a[:, 5],
+        a[:, 6:9],
+        forms.pop(),
+    )
 
 
 @dataclass
@@ -532,17 +701,29 @@ class SrtClock:
     residual_m: float  # RMS distance between the SRT's track and the record's at this offset
     frames: int  # SRT frames compared
     found: bool  # matched (else given)
-    gps_order: str | None = None  # the older form's GPS(a, b) order ("lat,lon" / "lon,lat"); None: the newer form
-    order_residuals_m: tuple[float, float] | None = None  # the older form: the best fit of each of GPS_ORDERS
+    gps_order: str | None = (
+        None  # the older form's GPS(a, b) order ("lat,lon" / "lon,lat"); None: the newer form
+    )
+    order_residuals_m: tuple[float, float] | None = (
+        None  # the older form: the best fit of each of GPS_ORDERS
+    )
 
 
 def track_residual_m(srt: SrtTrack, flight: FlightLog, offsets_s: np.ndarray) -> np.ndarray:
     """RMS distance (m) between the SRT's positions (and take-off heights, where both have them) and the record's
     at the same UNIX time, for each camera-clock offset (inf where less than :data:`MIN_OVERLAP` of the frames
     fall within the record)."""
-    ok = np.isfinite(srt.lat_deg) & np.isfinite(srt.lon_deg) & ((srt.lat_deg != 0) | (srt.lon_deg != 0))
+    ok = (
+        np.isfinite(srt.lat_deg)
+        & np.isfinite(srt.lon_deg)
+        & ((srt.lat_deg != 0) | (srt.lon_deg != 0))
+    )
     pick = np.flatnonzero(ok)
-    pick = pick[np.linspace(0, len(pick) - 1, min(len(pick), MATCH_FRAMES)).astype(int)] if len(pick) else pick
+    pick = (
+        pick[np.linspace(0, len(pick) - 1, min(len(pick), MATCH_FRAMES)).astype(int)]
+        if len(pick)
+        else pick
+    )
     t_rec = flight.unix(flight.pos[:, 0])
     lat0, lon0 = flight.pos[0, 1], flight.pos[0, 2]
     n_rec, e_rec, _ = geodetic_to_ned(flight.pos[:, 1], flight.pos[:, 2], 0.0, lat0, lon0, 0.0)
@@ -555,7 +736,9 @@ def track_residual_m(srt: SrtTrack, flight: FlightLog, offsets_s: np.ndarray) ->
         if not len(pick) or inside.mean() < MIN_OVERLAP:
             continue
         t = t[inside]
-        d2 = (n_srt[inside] - np.interp(t, t_rec, n_rec)) ** 2 + (e_srt[inside] - np.interp(t, t_rec, e_rec)) ** 2
+        d2 = (n_srt[inside] - np.interp(t, t_rec, n_rec)) ** 2 + (
+            e_srt[inside] - np.interp(t, t_rec, e_rec)
+        ) ** 2
         dz = rel[inside] - np.interp(t, t_rec, flight.pos[:, 4])
         d2 = d2 + np.where(np.isfinite(dz), dz, 0.0) ** 2
         out[i] = float(np.sqrt(d2.mean()))
@@ -567,8 +750,9 @@ def in_order(srt: SrtTrack, order: str) -> SrtTrack:
     return srt if order == "lat,lon" else replace(srt, lat_deg=srt.lon_deg, lon_deg=srt.lat_deg)
 
 
-def gps_order(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None,
-              given: str | None) -> tuple[str, tuple[float, float]]:
+def gps_order(
+    srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None, given: str | None
+) -> tuple[str, tuple[float, float]]:
     """The older form's GPS order: each of :data:`GPS_ORDERS` matched against the record (at every zone, or the
     given one), the one that fits within :data:`ORDER_FIT_M` while the other fits far worse; and each one's best
     residual (inf: impossible, a latitude beyond ±90°, or never within the record). ``given`` is checked the same
@@ -578,27 +762,38 @@ def gps_order(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None,
     for order in GPS_ORDERS:
         track = in_order(srt, order)
         lat = track.lat_deg[np.isfinite(track.lat_deg)]
-        fits.append(math.inf if np.any(np.abs(lat) > 90.0) else float(np.min(track_residual_m(track, flight, offsets))))
+        fits.append(
+            math.inf
+            if np.any(np.abs(lat) > 90.0)
+            else float(np.min(track_residual_m(track, flight, offsets)))
+        )
     fit = dict(zip(GPS_ORDERS, fits, strict=True))
     text = ", ".join(f"as {o} {fit[o]:.1f} m" for o in GPS_ORDERS)
     where = "at every zone" if utc_offset_h is None else f"at UTC{utc_offset_h:+g} h"
     if given is not None:
         if not fit[given] <= ORDER_FIT_M:
-            raise SessionError(f"{srt.path}: the older SRT form's GPS(...) read as {given} does not fit the flight "
-                               f"record {where} ({text}; within {ORDER_FIT_M:g} m expected)")
+            raise SessionError(
+                f"{srt.path}: the older SRT form's GPS(...) read as {given} does not fit the flight "
+                f"record {where} ({text}; within {ORDER_FIT_M:g} m expected)"
+            )
         return given, (fits[0], fits[1])
     best, other = sorted(GPS_ORDERS, key=fit.get)
     if not fit[best] <= ORDER_FIT_M:
-        raise SessionError(f"{srt.path}: the older SRT form's GPS(...) fits the flight record {where} in neither "
-                           f"order ({text}; within {ORDER_FIT_M:g} m expected): not the same flight?")
+        raise SessionError(
+            f"{srt.path}: the older SRT form's GPS(...) fits the flight record {where} in neither "
+            f"order ({text}; within {ORDER_FIT_M:g} m expected): not the same flight?"
+        )
     if fit[other] < max(ORDER_RATIO * fit[best], fit[best] + ORDER_MARGIN_M):
-        raise SessionError(f"{srt.path}: the older SRT form's GPS(...) fits the flight record in either order "
-                           f"({text}): say which, --srt-gps-order lat,lon or lon,lat")
+        raise SessionError(
+            f"{srt.path}: the older SRT form's GPS(...) fits the flight record in either order "
+            f"({text}): say which, --srt-gps-order lat,lon or lon,lat"
+        )
     return best, (fits[0], fits[1])
 
 
-def srt_clock(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None = None,
-              order: str | None = None) -> SrtClock:
+def srt_clock(
+    srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None = None, order: str | None = None
+) -> SrtClock:
     """The camera clock's offset from UTC: given (``utc_offset_h``, hours east), or found by matching the SRT's
     track against the record's (module doc); the older form's GPS order first (:func:`gps_order`; ``order``
     given, checked). :class:`SessionError` when nothing fits or two zones (or orders) fit alike."""
@@ -606,11 +801,16 @@ def srt_clock(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None = Non
         raise SessionError(f"options: --srt-gps-order {order!r}: one of {', '.join(GPS_ORDERS)}")
     if srt.form == "older":
         if not np.any(np.isfinite(srt.lat_deg) & ((srt.lat_deg != 0) | (srt.lon_deg != 0))):
-            raise SessionError(f"{srt.path}: no GPS(...) position in its subtitles: its clock cannot be matched to "
-                               "the record")
+            raise SessionError(
+                f"{srt.path}: no GPS(...) position in its subtitles: its clock cannot be matched to "
+                "the record"
+            )
         order, fits = gps_order(srt, flight, utc_offset_h, order)
-        return replace(match_clock(in_order(srt, order), flight, utc_offset_h), gps_order=order,
-                       order_residuals_m=fits)
+        return replace(
+            match_clock(in_order(srt, order), flight, utc_offset_h),
+            gps_order=order,
+            order_residuals_m=fits,
+        )
     return match_clock(srt, flight, utc_offset_h)
 
 
@@ -621,22 +821,30 @@ def match_clock(srt: SrtTrack, flight: FlightLog, utc_offset_h: float | None) ->
         offset = utc_offset_h * 3600.0
         residual = float(track_residual_m(srt, flight, [offset])[0])
         if not math.isfinite(residual):
-            raise SessionError(f"{srt.path}: at UTC{utc_offset_h:+g} h its frames fall outside the flight record "
-                               f"{flight.span_unix[0]:.3f}–{flight.span_unix[1]:.3f} (UNIX s)")
+            raise SessionError(
+                f"{srt.path}: at UTC{utc_offset_h:+g} h its frames fall outside the flight record "
+                f"{flight.span_unix[0]:.3f}–{flight.span_unix[1]:.3f} (UNIX s)"
+            )
         return SrtClock(offset, residual, frames, False)
     if not frames:
-        raise SessionError(f"{srt.path}: no latitude/longitude in its subtitles: its clock's zone cannot be found "
-                           "(give --srt-utc-offset-h)")
+        raise SessionError(
+            f"{srt.path}: no latitude/longitude in its subtitles: its clock's zone cannot be found "
+            "(give --srt-utc-offset-h)"
+        )
     zones = track_residual_m(srt, flight, ZONES_S)
     rank = np.argsort(zones)
     best, second = zones[rank[0]], zones[rank[1]]
     if not math.isfinite(best):
-        raise SessionError(f"{srt.path}: at no time zone do its frames fall within the flight record "
-                           f"{flight.span_unix[0]:.3f}–{flight.span_unix[1]:.3f} (UNIX s): not the same flight?")
+        raise SessionError(
+            f"{srt.path}: at no time zone do its frames fall within the flight record "
+            f"{flight.span_unix[0]:.3f}–{flight.span_unix[1]:.3f} (UNIX s): not the same flight?"
+        )
     if second < max(3.0 * best, best + 1.0):
-        raise SessionError(f"{srt.path}: its track fits the record at UTC{ZONES_S[rank[0]] / 3600:+g} h "
-                           f"({best:.2f} m) and UTC{ZONES_S[rank[1]] / 3600:+g} h ({second:.2f} m) alike: give "
-                           "--srt-utc-offset-h")
+        raise SessionError(
+            f"{srt.path}: its track fits the record at UTC{ZONES_S[rank[0]] / 3600:+g} h "
+            f"({best:.2f} m) and UTC{ZONES_S[rank[1]] / 3600:+g} h ({second:.2f} m) alike: give "
+            "--srt-utc-offset-h"
+        )
     fine = ZONES_S[rank[0]] + np.arange(-REFINE_S, REFINE_S + REFINE_STEP_S / 2, REFINE_STEP_S)
     residuals = track_residual_m(srt, flight, fine)
     k = int(np.argmin(residuals))

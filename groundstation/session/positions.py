@@ -23,17 +23,50 @@ from groundstation.session.read import read_table
 from localizer.fix import WORDS, Fixes
 
 SPEC_COLUMNS = ("t", "lat", "lon", "depth_m", "h_acc_m", "status")
-COLUMNS = (*SPEC_COLUMNS, "alt_amsl_m", "v_acc_m", "u", "v", "north_m", "east_m",
-           "t_gnss", "alt_ellipsoid_m", "sigma_n_m", "sigma_e_m", "cov_ne_m2",
-           "height_m", "sigma_height_m", "sigma_depth_m", "sigma_time_s", *WORDS, "sigma_pixel_px")
+COLUMNS = (
+    *SPEC_COLUMNS,
+    "alt_amsl_m",
+    "v_acc_m",
+    "u",
+    "v",
+    "north_m",
+    "east_m",
+    "t_gnss",
+    "alt_ellipsoid_m",
+    "sigma_n_m",
+    "sigma_e_m",
+    "cov_ne_m2",
+    "height_m",
+    "sigma_height_m",
+    "sigma_depth_m",
+    "sigma_time_s",
+    *WORDS,
+    "sigma_pixel_px",
+)
 #: column → (Fix attribute, decimals)
-_FIELDS = {"t": ("t_unix", 6), "lat": ("lat", 9), "lon": ("lon", 9), "depth_m": ("depth_m", 4),
-           "h_acc_m": ("h_acc_m", 4), "alt_amsl_m": ("alt_amsl_m", 4), "v_acc_m": ("v_acc_m", 4),
-           "u": ("u", 3), "v": ("v", 3), "north_m": ("north_m", 4), "east_m": ("east_m", 4),
-           "t_gnss": ("t_gnss", 6), "alt_ellipsoid_m": ("alt_ellipsoid_m", 4), "sigma_n_m": ("sigma_n_m", 4),
-           "sigma_e_m": ("sigma_e_m", 4), "cov_ne_m2": ("cov_ne_m2", 6), "height_m": ("height_m", 4),
-           "sigma_height_m": ("sigma_height_m", 4), "sigma_depth_m": ("sigma_depth_m", 4),
-           "sigma_time_s": ("sigma_time_s", 4), "sigma_pixel_px": ("sigma_pixel_px", 3)}
+_FIELDS = {
+    "t": ("t_unix", 6),
+    "lat": ("lat", 9),
+    "lon": ("lon", 9),
+    "depth_m": ("depth_m", 4),
+    "h_acc_m": ("h_acc_m", 4),
+    "alt_amsl_m": ("alt_amsl_m", 4),
+    "v_acc_m": ("v_acc_m", 4),
+    "u": ("u", 3),
+    "v": ("v", 3),
+    "north_m": ("north_m", 4),
+    "east_m": ("east_m", 4),
+    "t_gnss": ("t_gnss", 6),
+    "alt_ellipsoid_m": ("alt_ellipsoid_m", 4),
+    "sigma_n_m": ("sigma_n_m", 4),
+    "sigma_e_m": ("sigma_e_m", 4),
+    "cov_ne_m2": ("cov_ne_m2", 6),
+    "height_m": ("height_m", 4),
+    "sigma_height_m": ("sigma_height_m", 4),
+    "sigma_depth_m": ("sigma_depth_m", 4),
+    "sigma_time_s": ("sigma_time_s", 4),
+    "sigma_pixel_px": ("sigma_pixel_px", 3),
+}
 
 
 def _cell(value: float, digits: int) -> str:
@@ -74,7 +107,19 @@ def write_table(path: Path, header, rows) -> None:
 def read_positions_csv(path: Path) -> Fixes:
     """A positions.csv as :class:`~localizer.fix.Fixes` (columns it lacks are NaN); bad cells are SessionError."""
     numbers = [c for c in COLUMNS if c not in ("t", "status", *WORDS)]
-    table = read_table(Path(path), SPEC_COLUMNS, allow_empty=(*numbers, *WORDS), optional=COLUMNS[6:],
-                       text=("status", *WORDS))
-    return Fixes.of(table["t"], table["status"], **{_FIELDS[c][0] if c in numbers else c: v
-                                                     for c, v in table.items() if c in (*numbers, *WORDS)})
+    table = read_table(
+        Path(path),
+        SPEC_COLUMNS,
+        allow_empty=(*numbers, *WORDS),
+        optional=COLUMNS[6:],
+        text=("status", *WORDS),
+    )
+    return Fixes.of(
+        table["t"],
+        table["status"],
+        **{
+            _FIELDS[c][0] if c in numbers else c: v
+            for c, v in table.items()
+            if c in (*numbers, *WORDS)
+        },
+    )

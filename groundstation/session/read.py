@@ -32,10 +32,15 @@ from localizer.depth import SOURCE_WORDS
 from localizer.telemetry import Telemetry
 
 SUPPORTED_VERSION = 1
-_NEEDED_FOR_SOURCE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+_NEEDED_FOR_SOURCE = {
+    "gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS",
+    "mount_orientation": "MOUNT_ORIENTATION",
+}
 PRIMARY_UUV = "uuv1"  # the id of the UUV whose records are the session's own files
 UUVS_DIR = "uuvs"  # the folder of the other UUVs' folders, one per id
-UUV_TOML = "uuv.toml"  # in a UUV's folder: its [tracker] table (init_bbox, init_t), as session.toml's
+UUV_TOML = (
+    "uuv.toml"  # in a UUV's folder: its [tracker] table (init_bbox, init_t), as session.toml's
+)
 
 
 @dataclass(frozen=True)
@@ -70,8 +75,10 @@ def uuv_ids(path) -> tuple[str, ...]:
     others = Path(path) / UUVS_DIR
     found = sorted(p.name for p in others.iterdir() if p.is_dir()) if others.is_dir() else []
     if PRIMARY_UUV in found:
-        raise SessionError(f"{others / PRIMARY_UUV}: {PRIMARY_UUV} is the session's own UUV (its files are the "
-                           "session's), not a folder of uuvs/")
+        raise SessionError(
+            f"{others / PRIMARY_UUV}: {PRIMARY_UUV} is the session's own UUV (its files are the "
+            "session's), not a folder of uuvs/"
+        )
     return (PRIMARY_UUV, *found)
 
 
@@ -82,7 +89,9 @@ def uuv_files(path, uuv_id: str = PRIMARY_UUV) -> UuvFiles:
         return UuvFiles(uuv_id, path, path / "session.toml")
     ids = uuv_ids(path)
     if uuv_id not in ids:
-        raise SessionError(f"{path / UUVS_DIR / uuv_id}: no such UUV in the session (it holds {', '.join(ids)})")
+        raise SessionError(
+            f"{path / UUVS_DIR / uuv_id}: no such UUV in the session (it holds {', '.join(ids)})"
+        )
     folder = path / UUVS_DIR / uuv_id
     return UuvFiles(uuv_id, folder, folder / UUV_TOML)
 
@@ -114,8 +123,13 @@ def _number(text: str, where: str, col: str, allow_empty: bool) -> float:
     return value
 
 
-def read_table(path: Path, columns: tuple[str, ...], allow_empty: tuple[str, ...] = (),
-               optional: tuple[str, ...] = (), text: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
+def read_table(
+    path: Path,
+    columns: tuple[str, ...],
+    allow_empty: tuple[str, ...] = (),
+    optional: tuple[str, ...] = (),
+    text: tuple[str, ...] = (),
+) -> dict[str, np.ndarray]:
     """A CSV with at least ``columns`` in its header, as float arrays; checks times increase.
 
     ``optional`` columns are read when the header has them; ``text`` columns are kept as
@@ -157,13 +171,21 @@ def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
     recording wrote (the source "session" where none is named)."""
     count = refused = 0
     for r in read_depth(path, warnings):
-        if tel.add_depth(r.t, r.depth_m, r.t_recv, sigma_m=r.sigma_m,
-                         source=r.source if r.source in SOURCE_WORDS else "session", vspeed_mps=r.vspeed_mps):
+        if tel.add_depth(
+            r.t,
+            r.depth_m,
+            r.t_recv,
+            sigma_m=r.sigma_m,
+            source=r.source if r.source in SOURCE_WORDS else "session",
+            vspeed_mps=r.vspeed_mps,
+        ):
             count += 1
         else:
             refused += 1
     if refused:
-        warnings.append(f"{path}: {refused} depth samples out of order once aligned to the station clock, skipped")
+        warnings.append(
+            f"{path}: {refused} depth samples out of order once aligned to the station clock, skipped"
+        )
     if count == 0:
         raise SessionError(f"{path}: no depth samples")
     return count
@@ -174,7 +196,9 @@ def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> 
     msgs = [m for _, m in read_tlog(path, warnings)]
     sysid = uav_system(msgs)
     if sysid is None:
-        raise SessionError(f"{path}: no ATTITUDE message nor any other from an autopilot (is this the UAV's telemetry?)")
+        raise SessionError(
+            f"{path}: no ATTITUDE message nor any other from an autopilot (is this the UAV's telemetry?)"
+        )
     others = 0
     counts: dict[str, int] = {}
     for m in msgs:
@@ -184,16 +208,22 @@ def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> 
         if ingest(tel, m, m._timestamp):
             counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
     if others:
-        warnings.append(f"{path}: {others} messages from systems other than the UAV (sysid {sysid}) ignored")
+        warnings.append(
+            f"{path}: {others} messages from systems other than the UAV (sysid {sysid}) ignored"
+        )
     needed = ["ATTITUDE", "GLOBAL_POSITION_INT"]
     if source in _NEEDED_FOR_SOURCE:
         needed.append(_NEEDED_FOR_SOURCE[source])
     for kind in needed:
         if not counts.get(kind):
-            raise SessionError(f"{path}: no usable {kind} message (mount.attitude_source = {source!r})")
+            raise SessionError(
+                f"{path}: no usable {kind} message (mount.attitude_source = {source!r})"
+            )
     for name, series in (("ATTITUDE", tel.attitude), ("GLOBAL_POSITION_INT", tel.position)):
         if series.rejected:
-            warnings.append(f"{path}: {series.rejected} {name} samples out of order or non-finite, skipped")
+            warnings.append(
+                f"{path}: {series.rejected} {name} samples out of order or non-finite, skipped"
+            )
     return sysid
 
 
@@ -224,7 +254,9 @@ def _calibration(meta: dict, toml_path: Path, uuv: UuvFiles) -> Calibration:
     (none when it has no such file)."""
     source = str(toml_path)
     if uuv.tracker_toml != toml_path:
-        tracker = _read_toml(uuv.tracker_toml).get("tracker", {}) if uuv.tracker_toml.is_file() else {}
+        tracker = (
+            _read_toml(uuv.tracker_toml).get("tracker", {}) if uuv.tracker_toml.is_file() else {}
+        )
         meta, source = {**meta, "tracker": tracker}, f"{toml_path} with {uuv.tracker_toml}"
     try:
         return Calibration.from_dict(meta, source=source)
@@ -241,7 +273,9 @@ def load_session(path, uuv: str = PRIMARY_UUV) -> Session:
     meta = _read_toml(toml_path)
     version = meta.get("version")
     if version != SUPPORTED_VERSION:
-        raise SessionError(f"{toml_path}: version = {version!r}: this skyfix reads version {SUPPORTED_VERSION}")
+        raise SessionError(
+            f"{toml_path}: version = {version!r}: this skyfix reads version {SUPPORTED_VERSION}"
+        )
     files = uuv_files(path, uuv)
     cal = _calibration(meta, toml_path, files)
 
@@ -254,7 +288,14 @@ def load_session(path, uuv: str = PRIMARY_UUV) -> Session:
     warnings.extend(f"{path}: {notice}" for notice in tel.notices)
     tel.notices.clear()
 
-    session = Session(path=path, calibration=cal, telemetry=tel, warnings=warnings, uav_sysid=sysid, uuv_id=files.id)
+    session = Session(
+        path=path,
+        calibration=cal,
+        telemetry=tel,
+        warnings=warnings,
+        uav_sysid=sysid,
+        uuv_id=files.id,
+    )
     if files.track.is_file():
         session.track = read_table(files.track, ("t", "u", "v"), allow_empty=("u", "v"))
     if files.truth.is_file():
@@ -263,7 +304,9 @@ def load_session(path, uuv: str = PRIMARY_UUV) -> Session:
     if videos:
         session.video_path = videos[0]
         if not (path / "video_frames.csv").is_file():
-            raise SessionError(f"{path / 'video_frames.csv'}: missing (required with {videos[0].name})")
+            raise SessionError(
+                f"{path / 'video_frames.csv'}: missing (required with {videos[0].name})"
+            )
         session.frames = read_table(path / "video_frames.csv", ("frame", "t"))
         _restamp_unsettled(session)
     return session
@@ -273,7 +316,11 @@ def _restamp_unsettled(session: Session) -> None:
     """A live run with ``--video-latency-ms auto`` stamped its frames with no latency until its estimate
     settled (``[timing] video_latency_from_t``): those frames are moved back by the estimate it recorded."""
     timing, t = session.calibration.timing, session.frames["t"]
-    if timing.video_latency_source != "motion" or timing.video_latency_from_t is None or timing.video_latency_s is None:
+    if (
+        timing.video_latency_source != "motion"
+        or timing.video_latency_from_t is None
+        or timing.video_latency_s is None
+    ):
         return
     early = t < timing.video_latency_from_t
     if early.any():
@@ -281,4 +328,5 @@ def _restamp_unsettled(session: Session) -> None:
         session.warnings.append(
             f"{session.path / 'video_frames.csv'}: {int(early.sum())} frames stamped before the live run's video "
             f"latency had settled moved back by the {timing.video_latency_s * 1000:.1f} ms it settled at "
-            "([timing] video_latency_s)")
+            "([timing] video_latency_s)"
+        )

@@ -83,8 +83,16 @@ def frame_indices(pts: list[int], indices: Sequence[int] | None = None) -> dict[
 class Video:
     """An open video file; use :func:`open_video`. Iterating yields :class:`VideoFrame`."""
 
-    def __init__(self, container, url: str, expected_size, max_bad_reads: int, index_of: dict[int, int],
-                 threads: int = 0, grey: bool = False):
+    def __init__(
+        self,
+        container,
+        url: str,
+        expected_size,
+        max_bad_reads: int,
+        index_of: dict[int, int],
+        threads: int = 0,
+        grey: bool = False,
+    ):
         self._container = container
         self._stream = container.streams.video[0]
         self.url = url
@@ -112,9 +120,13 @@ class Video:
     def _decode(self) -> Iterator[av.VideoFrame]:
         """Decoded frames in presentation order: frame-threaded until a packet fails, then slice-threaded from the
         keyframe before the first frame not handed on yet (see the module doc)."""
-        threads = self.threads or (max(GREY_FRAME_THREADS, (os.cpu_count() or 1) + 1) if self.grey else 0)
+        threads = self.threads or (
+            max(GREY_FRAME_THREADS, (os.cpu_count() or 1) + 1) if self.grey else 0
+        )
         ctx = decoder(self._stream, threads=threads, frame_threads=True)
-        keyframes: list[tuple[int, int]] = []  # (pts, packet number) of the keyframe packets demuxed
+        keyframes: list[
+            tuple[int, int]
+        ] = []  # (pts, packet number) of the keyframe packets demuxed
         last = None  # pts of the last frame handed on
         for number, packet in enumerate(self._container.demux(self._stream)):
             if packet.is_keyframe and packet.pts is not None:
@@ -131,7 +143,9 @@ class Video:
         else:
             return
         first = min((p for p in self._index_of if last is None or p > last), default=math.inf)
-        yield from self._decode_slices(max((n for pts, n in keyframes if pts <= first), default=0), last)
+        yield from self._decode_slices(
+            max((n for pts, n in keyframes if pts <= first), default=0), last
+        )
 
     def _decode_slices(self, start: int, last: int | None) -> Iterator[av.VideoFrame]:
         """The file opened again and decoded with slice threads from packet number ``start`` on, frames up to pts
@@ -166,7 +180,11 @@ class Video:
         image = frame.to_ndarray(format="bgr24") if decoded is None else _luma(frame)
         self._check_size(image)
         pts = frame.pts if frame.pts is not None else None
-        index = self._index_of.get(pts, self._last_index + 1) if pts is not None else self._last_index + 1
+        index = (
+            self._index_of.get(pts, self._last_index + 1)
+            if pts is not None
+            else self._last_index + 1
+        )
         index = max(index, self._last_index + 1)
         self._last_index = index
         t_s = (pts - self._t0) * self._tb if pts is not None else index / (self.fps or 30.0)
@@ -250,7 +268,9 @@ def _presentation_times(path: str) -> tuple[list[int], Fraction]:
     time base (s per tick)."""
     with av.open(path) as container:
         stream = container.streams.video[0]
-        return [p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard], stream.time_base
+        return [
+            p.pts for p in container.demux(stream) if p.pts is not None and not p.is_discard
+        ], stream.time_base
 
 
 def frame_times(url) -> tuple[np.ndarray, np.ndarray]:
@@ -265,11 +285,19 @@ def frame_times(url) -> tuple[np.ndarray, np.ndarray]:
         raise VideoError(f"{url}: no video frames")
     ordered = sorted(set(pts))
     index_of = frame_indices(ordered)
-    return np.array([index_of[p] for p in ordered]), np.array([float((p - ordered[0]) * base) for p in ordered])
+    return np.array([index_of[p] for p in ordered]), np.array(
+        [float((p - ordered[0]) * base) for p in ordered]
+    )
 
 
-def open_video(url, expected_size: tuple[int, int] | None = None, threads: int = 0,
-               max_bad_reads: int = 0, indices: Sequence[int] | None = None, grey: bool = False) -> Video:
+def open_video(
+    url,
+    expected_size: tuple[int, int] | None = None,
+    threads: int = 0,
+    max_bad_reads: int = 0,
+    indices: Sequence[int] | None = None,
+    grey: bool = False,
+) -> Video:
     """Open a video file with FFmpeg.
 
     ``expected_size`` (width, height) in pixels, usually the calibration's: a
@@ -303,5 +331,7 @@ def open_video(url, expected_size: tuple[int, int] | None = None, threads: int =
     if expected_size is not None and w > 0 and h > 0 and (w, h) != tuple(expected_size):
         video.close()
         ew, eh = expected_size
-        raise VideoError(f"{url}: frame size {w}x{h} pixels differs from the calibration's camera {ew}x{eh}")
+        raise VideoError(
+            f"{url}: frame size {w}x{h} pixels differs from the calibration's camera {ew}x{eh}"
+        )
     return video

@@ -48,7 +48,9 @@ class VideoInput:
     format: str | None = None
     options: dict[str, str] = field(default_factory=dict)
     port: int | None = None  # the local UDP port it binds (udp, rtp), for "in use" messages
-    codec: str | None = None  # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp`; ``file`` the address)
+    codec: str | None = (
+        None  # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp`; ``file`` the address)
+    )
     payload_type: int | None = None  # rtp
 
     @property
@@ -60,7 +62,13 @@ class VideoInput:
 
         Checked before FFmpeg binds: its failed bind is reported as another error.
         """
-        ports = () if self.port is None else (self.port, self.port + 1) if self.kind == "sdp" else (self.port,)
+        ports = (
+            ()
+            if self.port is None
+            else (self.port, self.port + 1)
+            if self.kind == "sdp"
+            else (self.port,)
+        )
         for port in ports:
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
                 try:
@@ -83,7 +91,9 @@ def _port(url: str, parts) -> int:
 
 def _udp(url: str, parts, query: dict[str, str]) -> VideoInput:
     if query:
-        raise VideoError(f"{url}: unknown option {next(iter(query))} (udp:// takes none: skyfix reads the port itself)")
+        raise VideoError(
+            f"{url}: unknown option {next(iter(query))} (udp:// takes none: skyfix reads the port itself)"
+        )
     return VideoInput(url, "udp", parts.hostname or "0.0.0.0", None, {}, _port(url, parts))
 
 
@@ -103,8 +113,12 @@ def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
     except ValueError:  # a host name: the address it is bound by
         multicast = False
     if multicast:
-        raise VideoError(f"{url}: a multicast group: describe the stream in an .sdp file (FFmpeg joins the group)")
-    return VideoInput(url, "rtp", host, None, {}, port, "h265" if codec == "hevc" else codec, int(pt_text))
+        raise VideoError(
+            f"{url}: a multicast group: describe the stream in an .sdp file (FFmpeg joins the group)"
+        )
+    return VideoInput(
+        url, "rtp", host, None, {}, port, "h265" if codec == "hevc" else codec, int(pt_text)
+    )
 
 
 def _sdp_port(path: Path) -> int | None:

@@ -77,7 +77,9 @@ RTSP_OPEN_TIMEOUT_S = 5.0
 RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
-PACKET_BACKLOG = 120  # packets read but not yet decoded, at most (4 s at 30 fps); then reading waits
+PACKET_BACKLOG = (
+    120  # packets read but not yet decoded, at most (4 s at 30 fps); then reading waits
+)
 BEHIND_PACKETS = 2  # live: with more than this many packets waiting, decoded frames are skipped
 HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
 READER_STOP_S = 0.3  # a stop waits this long for the reader thread
@@ -123,9 +125,16 @@ def _reason(source: VideoInput, e: Exception, t_try: float, timeout_s: float) ->
 class VideoLive:
     """Worker owning the video link; ``on_frame(LiveFrame)`` is called on the event loop."""
 
-    def __init__(self, url: str, latency_s: float | None, on_frame: Callable[[LiveFrame], None],
-                 expected_size: tuple[int, int] | None = None, open_timeout_s: float | None = None,
-                 read_timeout_s: float = 2.0, retry_max_s: float = 1.0):
+    def __init__(
+        self,
+        url: str,
+        latency_s: float | None,
+        on_frame: Callable[[LiveFrame], None],
+        expected_size: tuple[int, int] | None = None,
+        open_timeout_s: float | None = None,
+        read_timeout_s: float = 2.0,
+        retry_max_s: float = 1.0,
+    ):
         self.source = parse_video_input(url)
         if open_timeout_s is None:  # an RTSP session takes several round trips to set up
             open_timeout_s = RTSP_OPEN_TIMEOUT_S if self.source.kind == "rtsp" else OPEN_TIMEOUT_S
@@ -150,7 +159,11 @@ class VideoLive:
         self.handoff: Handoff | None = None
         self.reader = Supervised("video", self._read)
         self._datagrams: DatagramInput | None = None  # the open rtp:// or udp:// input
-        self._datagrams_before = {"lost_packets": 0, "dropped_frames": 0, "bad_packets": 0}  # its predecessors'
+        self._datagrams_before = {
+            "lost_packets": 0,
+            "dropped_frames": 0,
+            "bad_packets": 0,
+        }  # its predecessors'
 
     async def run(self) -> None:
         route_ffmpeg_log()
@@ -173,9 +186,14 @@ class VideoLive:
                 container = self._open()
             except (av.error.FFmpegError, OSError, VideoError) as e:
                 self.state = "waiting"
-                self._error(f"{self.url}: {e}" if isinstance(e, VideoError) else
-                            _reason(self.source, e, t_try, self.open_timeout_s))
-                if not isinstance(e, (av.error.ExitError, TimeoutError)):  # a timeout already waited: listen again
+                self._error(
+                    f"{self.url}: {e}"
+                    if isinstance(e, VideoError)
+                    else _reason(self.source, e, t_try, self.open_timeout_s)
+                )
+                if not isinstance(
+                    e, (av.error.ExitError, TimeoutError)
+                ):  # a timeout already waited: listen again
                     stop.wait(backoff)
                     backoff = min(2.0 * backoff, self.retry_max_s)
                 continue
@@ -204,11 +222,19 @@ class VideoLive:
     def _open(self):
         src = self.source
         if src.kind in ("rtp", "udp"):
-            depacketizer = Depacketizer(src.codec, src.payload_type) if src.kind == "rtp" else TsDepacketizer()
-            self._datagrams = DatagramInput(src.file, src.port, depacketizer, self.open_timeout_s, self.read_timeout_s)
+            depacketizer = (
+                Depacketizer(src.codec, src.payload_type) if src.kind == "rtp" else TsDepacketizer()
+            )
+            self._datagrams = DatagramInput(
+                src.file, src.port, depacketizer, self.open_timeout_s, self.read_timeout_s
+            )
             return self._datagrams
-        return av.open(src.file, format=src.format, container_options=src.options,
-                       timeout=(self.open_timeout_s, self.read_timeout_s))
+        return av.open(
+            src.file,
+            format=src.format,
+            container_options=src.options,
+            timeout=(self.open_timeout_s, self.read_timeout_s),
+        )
 
     def _receive(self, container, stop: threading.Event) -> str | None:
         """Demux (in a thread of its own) and decode until the stream ends; a reason to reconnect, or None at a
@@ -219,19 +245,24 @@ class VideoLive:
         ctx = decoder(stream, low_delay=True)
         packets: queue.Queue = queue.Queue(maxsize=PACKET_BACKLOG)
         done = threading.Event()
-        demuxer = threading.Thread(target=_demux, args=(container, stream, packets, done), name="video-demux",
-                                   daemon=True)
+        demuxer = threading.Thread(
+            target=_demux, args=(container, stream, packets, done), name="video-demux", daemon=True
+        )
         demuxer.start()
         ends_at_next = self.source.kind in RTP_KINDS and ctx.name in ("h264", "hevc")
         try:
             return self._decode(ctx, float(stream.time_base), packets, stop, ends_at_next)
         finally:
             done.set()
-            while demuxer.is_alive():  # it waits on a full queue, or on the network for read_timeout_s at most
+            while (
+                demuxer.is_alive()
+            ):  # it waits on a full queue, or on the network for read_timeout_s at most
                 _drain(packets)
                 demuxer.join(0.05)
 
-    def _decode(self, ctx, tb: float, packets: queue.Queue, stop: threading.Event, ends_at_next: bool) -> str | None:
+    def _decode(
+        self, ctx, tb: float, packets: queue.Queue, stop: threading.Event, ends_at_next: bool
+    ) -> str | None:
         """Decode and hand over frames. ``ends_at_next``: the demuxer hands an access unit over when the next
         one's first packet comes (FFmpeg's H.264/H.265 RTP depacketizer ignores the marker bit that ends a
         frame, and its parser waits for the next frame's start): an access unit's own first packet then
@@ -239,7 +270,9 @@ class VideoLive:
         self.clock = clock = ClockMap(window_s=CLOCK_WINDOW_S)
         first_recv: dict[int, float] = {}
         connected = False
-        previous_out: float | None = None  # ends_at_next: when the previous access unit was handed over
+        previous_out: float | None = (
+            None  # ends_at_next: when the previous access unit was handed over
+        )
         while not stop.is_set():
             try:
                 item = packets.get(timeout=0.1)
@@ -295,10 +328,14 @@ class VideoLive:
         h, w = image.shape[:2]
         if self.expected_size is not None and (w, h) != tuple(self.expected_size):
             ew, eh = self.expected_size
-            raise VideoError(f"{self.url}: frames are {w}x{h} pixels, the calibration's camera is {ew}x{eh}")
+            raise VideoError(
+                f"{self.url}: frames are {w}x{h} pixels, the calibration's camera is {ew}x{eh}"
+            )
         t_slot = float(clock.to_arrival(frame.pts * tb)) if frame.pts is not None else t_recv
         latency_s = self.latency_s  # read once: the event loop may set it meanwhile (auto)
-        live = LiveFrame(self.frames, t_slot - (latency_s or 0.0), t_recv, image, t_slot, latency_s is not None)
+        live = LiveFrame(
+            self.frames, t_slot - (latency_s or 0.0), t_recv, image, t_slot, latency_s is not None
+        )
         self.frames += 1
         self.last_recv = t_recv
         self._late_s.append(t_recv - t_slot)
@@ -315,7 +352,11 @@ class VideoLive:
         if self._datagrams is None:
             return dict(self._datagrams_before)
         d = self._datagrams.depacketizer
-        now = {"lost_packets": d.lost_packets, "dropped_frames": d.dropped_units, "bad_packets": d.bad_packets}
+        now = {
+            "lost_packets": d.lost_packets,
+            "dropped_frames": d.dropped_units,
+            "bad_packets": d.bad_packets,
+        }
         return {k: self._datagrams_before[k] + now[k] for k in now}
 
     def status(self, now: float) -> dict:
@@ -326,14 +367,23 @@ class VideoLive:
 
         late, dec = list(self._late_s), list(self._decode_s)
         offset = self.clock.offset_s if self.clock is not None else None
-        return {"url": self.url, "kind": self.source.kind, "state": self.state, "frames": self.frames,
-                "connects": self.connects, "age_s": age, "decode_errors": self.decode_errors,
-                "backlog": self.backlog, "skipped_behind": self.skipped_behind,
-                "latency_ms": None if self.latency_s is None else round(self.latency_s * 1000.0, 1),
-                "arrival_after_slot_ms": {"p50": p(late, 50), "p99": p(late, 99)},
-                "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},
-                "stream_offset_s": None if offset is None else round(offset, 6),
-                "error": self.last_error, **self.reader.status(),
-                "handoff": self.handoff.status() if self.handoff else None,
-                "rtp": self._datagram_counts() if self.source.kind == "rtp" else None,
-                "mpegts": self._datagram_counts() if self.source.kind == "udp" else None}
+        return {
+            "url": self.url,
+            "kind": self.source.kind,
+            "state": self.state,
+            "frames": self.frames,
+            "connects": self.connects,
+            "age_s": age,
+            "decode_errors": self.decode_errors,
+            "backlog": self.backlog,
+            "skipped_behind": self.skipped_behind,
+            "latency_ms": None if self.latency_s is None else round(self.latency_s * 1000.0, 1),
+            "arrival_after_slot_ms": {"p50": p(late, 50), "p99": p(late, 99)},
+            "decode_ms": {"p50": p(dec, 50), "p99": p(dec, 99)},
+            "stream_offset_s": None if offset is None else round(offset, 6),
+            "error": self.last_error,
+            **self.reader.status(),
+            "handoff": self.handoff.status() if self.handoff else None,
+            "rtp": self._datagram_counts() if self.source.kind == "rtp" else None,
+            "mpegts": self._datagram_counts() if self.source.kind == "udp" else None,
+        }

@@ -76,15 +76,21 @@ class TsDepacketizer:
 
     def __init__(self):
         self.codec: str | None = None  # h264 or h265, once the PMT has said
-        self.unreadable: str | None = None  # why the program's video cannot be read (a PMT without H.264/H.265)
+        self.unreadable: str | None = (
+            None  # why the program's video cannot be read (a PMT without H.264/H.265)
+        )
         self.lost_packets = 0  # TS packets missing (continuity-counter gaps) or marked in error
-        self.dropped_units = 0  # access units not handed over: damaged, or depending on one that was
+        self.dropped_units = (
+            0  # access units not handed over: damaged, or depending on one that was
+        )
         self.bad_packets = 0  # datagrams or packets that are not MPEG-TS
         self._pmt_pid: int | None = None
         self._video_pid: int | None = None
         self._cc: int | None = None
         self._pes: bytearray | None = None  # the PES being received, from its start code
-        self._length: int | None = None  # its declared length (bytes after the length field), 0: none
+        self._length: int | None = (
+            None  # its declared length (bytes after the length field), 0: none
+        )
         self._damaged = False
         self._need_keyframe = False
         self._wraps = 0
@@ -97,7 +103,7 @@ class TsDepacketizer:
             return []
         out: list[AccessUnit] = []
         for i in range(0, len(datagram), TS_BYTES):
-            self._packet(datagram[i:i + TS_BYTES], out)
+            self._packet(datagram[i : i + TS_BYTES], out)
         return out
 
     def _packet(self, pkt: bytes, out: list[AccessUnit]) -> None:
@@ -110,7 +116,7 @@ class TsDepacketizer:
         payload_at, stuffed = 4, False
         if control & 0x02:
             af_len = pkt[4]
-            stuffed = af_len == 0 or af_len > _adaptation_used(pkt[5:5 + af_len])
+            stuffed = af_len == 0 or af_len > _adaptation_used(pkt[5 : 5 + af_len])
             payload_at = 5 + af_len
         payload = pkt[payload_at:] if control & 0x01 and payload_at < TS_BYTES else b""
         if pid == PAT_PID and start:
@@ -148,7 +154,10 @@ class TsDepacketizer:
         if section is None or section[0] != 0x00:
             return
         for j in range(8, len(section) - 4, 4):  # program loop, before the CRC
-            program, pid = (section[j] << 8) | section[j + 1], ((section[j + 2] & 0x1F) << 8) | section[j + 3]
+            program, pid = (
+                (section[j] << 8) | section[j + 1],
+                ((section[j + 2] & 0x1F) << 8) | section[j + 3],
+            )
             if program != 0:  # 0 names the network information table
                 self._pmt_pid = pid
                 return
@@ -166,18 +175,28 @@ class TsDepacketizer:
                 return
             kinds.append(f"0x{kind:02X}")
             j += 5 + (((section[j + 3] & 0x0F) << 8) | section[j + 4])
-        self.unreadable = (f"its program holds stream types {', '.join(kinds) or 'none'}: skyfix reads H.264 (0x1B) "
-                           "and H.265 (0x24) video")
+        self.unreadable = (
+            f"its program holds stream types {', '.join(kinds) or 'none'}: skyfix reads H.264 (0x1B) "
+            "and H.265 (0x24) video"
+        )
 
-    def _video(self, payload: bytes, start: bool, error: bool, stuffed: bool, out: list[AccessUnit]) -> None:
+    def _video(
+        self, payload: bytes, start: bool, error: bool, stuffed: bool, out: list[AccessUnit]
+    ) -> None:
         if start:
-            if self._pes is not None:  # the one before had no declared length and no stuffing at its end
+            if (
+                self._pes is not None
+            ):  # the one before had no declared length and no stuffing at its end
                 self._finish(out)
             if len(payload) < 9 or payload[:3] != b"\x00\x00\x01":
                 self.dropped_units += 1
                 self._need_keyframe = True
                 return
-            self._pes, self._length, self._damaged = bytearray(payload), (payload[4] << 8) | payload[5], error
+            self._pes, self._length, self._damaged = (
+                bytearray(payload),
+                (payload[4] << 8) | payload[5],
+                error,
+            )
         elif self._pes is None:
             return  # joined mid-PES, or after a damaged start
         else:
@@ -189,7 +208,7 @@ class TsDepacketizer:
         pes, self._pes = self._pes, None
         header_end = 9 + pes[8]
         pts = _pts(bytes(pes[:header_end]))
-        data = bytes(pes[header_end:6 + self._length] if self._length else pes[header_end:])
+        data = bytes(pes[header_end : 6 + self._length] if self._length else pes[header_end:])
         keyframe = self._keyframe(data)
         usable = not self._damaged and bool(data) and (keyframe or not self._need_keyframe)
         self.dropped_units += not usable

@@ -52,10 +52,14 @@ class Depacketizer:
         if codec not in ("h264", "h265"):
             raise ValueError(f"RTP codec {codec!r}: h264 or h265")
         self.codec = codec
-        self.unreadable: str | None = None  # never set: the codec is given (MPEG-TS's comes from its PMT)
+        self.unreadable: str | None = (
+            None  # never set: the codec is given (MPEG-TS's comes from its PMT)
+        )
         self.payload_type = payload_type
         self.lost_packets = 0  # sequence numbers never seen
-        self.dropped_units = 0  # access units not handed over: damaged, or depending on one that was
+        self.dropped_units = (
+            0  # access units not handed over: damaged, or depending on one that was
+        )
         self.bad_packets = 0  # datagrams that are not RTP of this stream's shape
         self._seq: int | None = None
         self._ts: int | None = None  # the current access unit's RTP timestamp, unwrapped
@@ -86,7 +90,7 @@ class Depacketizer:
             if len(datagram) < start + 4:
                 self.bad_packets += 1
                 return None
-            start += 4 + 4 * int.from_bytes(datagram[start + 2:start + 4], "big")
+            start += 4 + 4 * int.from_bytes(datagram[start + 2 : start + 4], "big")
         end = len(datagram) - (datagram[-1] if padding else 0)
         if end <= start:
             self.bad_packets += 1
@@ -94,7 +98,9 @@ class Depacketizer:
         lost = 0 if self._seq is None else (seq - self._seq - 1) & 0xFFFF
         self._seq = seq
         ts = self._unwrap(raw_ts)
-        if ts != self._ts:  # a new access unit (if the previous one is unfinished, its marker bit was lost)
+        if (
+            ts != self._ts
+        ):  # a new access unit (if the previous one is unfinished, its marker bit was lost)
             self._drop_unit()
             self._ts = ts
         if lost:  # whatever they held (this unit's start, or whole units), the pictures after depend on it
@@ -104,7 +110,11 @@ class Depacketizer:
         return self._finish() if marker else None
 
     def _unwrap(self, raw_ts: int) -> int:
-        if self._last_raw_ts is not None and raw_ts < self._last_raw_ts and self._last_raw_ts - raw_ts > 1 << 31:
+        if (
+            self._last_raw_ts is not None
+            and raw_ts < self._last_raw_ts
+            and self._last_raw_ts - raw_ts > 1 << 31
+        ):
             self._wraps += 1
         self._last_raw_ts = raw_ts
         return raw_ts + (self._wraps << 32)
@@ -114,14 +124,16 @@ class Depacketizer:
         kind = nal_type(self.codec, payload[0])
         if (h264 and 1 <= kind <= 23) or (not h264 and kind < 48):  # a single NAL unit
             self._add_nal(payload)
-        elif (h264 and kind == 24) or (not h264 and kind == 48):  # aggregation: 16-bit size, NAL, ...
+        elif (h264 and kind == 24) or (
+            not h264 and kind == 48
+        ):  # aggregation: 16-bit size, NAL, ...
             i = 1 if h264 else 2
             while i + 2 <= len(payload):
-                size = int.from_bytes(payload[i:i + 2], "big")
+                size = int.from_bytes(payload[i : i + 2], "big")
                 if size == 0 or i + 2 + size > len(payload):
                     self._damaged = True
                     return
-                self._add_nal(payload[i + 2:i + 2 + size])
+                self._add_nal(payload[i + 2 : i + 2 + size])
                 i += 2 + size
         elif (h264 and kind == 28) or (not h264 and kind == 49):  # a fragment of one NAL unit
             self._fragment_part(payload)
@@ -159,7 +171,11 @@ class Depacketizer:
     def _finish(self) -> AccessUnit | None:
         whole = bool(self._nals) and not self._damaged and self._fragment is None
         usable = whole and (self._keyframe or not self._need_keyframe)
-        unit = AccessUnit(b"".join(START_CODE + n for n in self._nals), self._ts, self._keyframe) if usable else None
+        unit = (
+            AccessUnit(b"".join(START_CODE + n for n in self._nals), self._ts, self._keyframe)
+            if usable
+            else None
+        )
         self.dropped_units += not usable
         self._need_keyframe = not usable and (self._need_keyframe or not whole)
         self._reset()

@@ -45,7 +45,11 @@ def _annexb_filter(stream, ost, out):
     convention, skyfix's own) cannot decode otherwise. None where nothing is to be done."""
     name = stream.codec_context.name
     extradata = stream.codec_context.extradata or b""
-    if out.format.name != "rtp" or name not in ("h264", "hevc") or not extradata.startswith(b"\x01"):
+    if (
+        out.format.name != "rtp"
+        or name not in ("h264", "hevc")
+        or not extradata.startswith(b"\x01")
+    ):
         return None
     return av.bitstream.BitStreamFilterContext(f"{name}_mp4toannexb", stream, ost)
 
@@ -64,7 +68,11 @@ def _packets(container, stream, out):
                 yield p.pts * tb, p
         return
     ost = out.add_stream("libx264", options={"preset": "ultrafast", "tune": "zerolatency"})
-    ost.width, ost.height, ost.pix_fmt = stream.codec_context.width, stream.codec_context.height, "yuv420p"
+    ost.width, ost.height, ost.pix_fmt = (
+        stream.codec_context.width,
+        stream.codec_context.height,
+        "yuv420p",
+    )
     ost.codec_context.time_base = stream.time_base
     pts_s = 0.0
     for frame in container.decode(stream):
@@ -78,8 +86,13 @@ def _packets(container, stream, out):
         yield pts_s, packet
 
 
-def send_video(path: Path, url: str, t0_unix: float, stop: threading.Event,
-               skip: Callable[[float, bool], bool] | None = None) -> int:
+def send_video(
+    path: Path,
+    url: str,
+    t0_unix: float,
+    stop: threading.Event,
+    skip: Callable[[float, bool], bool] | None = None,
+) -> int:
     """Stream ``path`` to ``url`` so that its first frame leaves at ``t0_unix``; the number of packets sent.
 
     ``skip(t_s, keyframe)`` (seconds after the first frame, whether the packet starts a keyframe), when given,

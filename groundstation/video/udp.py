@@ -50,8 +50,11 @@ def _bind(host: str, port: int) -> socket.socket:
         if multicast:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             sock.bind(("", port))
-            sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP,
-                            socket.inet_aton(host) + socket.inet_aton("0.0.0.0"))
+            sock.setsockopt(
+                socket.IPPROTO_IP,
+                socket.IP_ADD_MEMBERSHIP,
+                socket.inet_aton(host) + socket.inet_aton("0.0.0.0"),
+            )
         else:
             sock.bind((host, port))
     except OSError:
@@ -66,7 +69,9 @@ class DatagramInput:
     module doc.
     :meth:`demux` raises ``TimeoutError`` when nothing came for ``read_timeout_s``."""
 
-    def __init__(self, host: str, port: int, depacketizer, open_timeout_s: float, read_timeout_s: float):
+    def __init__(
+        self, host: str, port: int, depacketizer, open_timeout_s: float, read_timeout_s: float
+    ):
         self.depacketizer = depacketizer
         self.read_timeout_s = read_timeout_s
         self._sock = _bind(host, port)
@@ -78,7 +83,9 @@ class DatagramInput:
                 try:
                     self._units.extend(depacketizer.push(self._sock.recv(DATAGRAM_BYTES)))
                 except TimeoutError:
-                    raise TimeoutError(f"no video stream described within {open_timeout_s:g} s") from None
+                    raise TimeoutError(
+                        f"no video stream described within {open_timeout_s:g} s"
+                    ) from None
                 if depacketizer.unreadable:
                     raise VideoError(depacketizer.unreadable)
         except BaseException:

@@ -37,7 +37,9 @@ class Prediction:
     height_px: float
     sigma_px: float = float("nan")  # 1-sigma uncertainty of (u, v); NaN: unknown
     px_per_m: float = float("nan")  # image scale at the UUV (pixels per metre); NaN: unknown
-    turn_deg: float = float("nan")  # how far its heading may have turned since it was last seen (deg); NaN: any
+    turn_deg: float = float(
+        "nan"
+    )  # how far its heading may have turned since it was last seen (deg); NaN: any
 
 
 @dataclass(frozen=True)
@@ -48,8 +50,12 @@ class TrackResult:
     u: float = float("nan")  # the UUV's centre, distorted pixels
     v: float = float("nan")
     box: tuple[int, int, int, int] | None = None  # x, y, w, h
-    confidence: float = float("nan")  # 0..1; while lost or acquiring, the best candidate's score when one was sought
-    sigma_px: float = float("nan")  # 1-sigma of each of u and v (pixels) when ok (:mod:`.sigma`); NaN: unknown
+    confidence: float = float(
+        "nan"
+    )  # 0..1; while lost or acquiring, the best candidate's score when one was sought
+    sigma_px: float = float(
+        "nan"
+    )  # 1-sigma of each of u and v (pixels) when ok (:mod:`.sigma`); NaN: unknown
 
     @property
     def ok(self) -> bool:
@@ -71,8 +77,13 @@ class Match:
 class Matcher(Protocol):
     """An appearance model of the UUV, started on a box; each frame exactly one of follow/search/confirm."""
 
-    def start(self, frame_bgr: np.ndarray, box: tuple[int, int, int, int], point: tuple[float, float] | None = None,
-              px_per_m: float = float("nan")) -> None:
+    def start(
+        self,
+        frame_bgr: np.ndarray,
+        box: tuple[int, int, int, int],
+        point: tuple[float, float] | None = None,
+        px_per_m: float = float("nan"),
+    ) -> None:
         """Learn the UUV inside ``box`` (x, y, w, h); ``point``: the pixel to report (default the box centre);
         ``px_per_m``: the image scale there (NaN: unknown, the first prediction's is taken). ValueError for a box
         outside the frame."""
@@ -83,7 +94,9 @@ class Matcher(Protocol):
     def search(self, frame_bgr: np.ndarray, prediction: Prediction | None) -> Match:
         """While lost: the best candidate anywhere the prediction allows (the whole frame without one)."""
 
-    def confirm(self, frame_bgr: np.ndarray, u: float, v: float, prediction: Prediction | None) -> Match:
+    def confirm(
+        self, frame_bgr: np.ndarray, u: float, v: float, prediction: Prediction | None
+    ) -> Match:
         """The candidate again, expected at (u, v) (its last place moved as the camera moved)."""
 
     def resume(self, match: Match) -> None:

@@ -48,8 +48,14 @@ class DetectParams:
     min_saliency: float = 25.0  # the object's deviation energy over the window's median
     distinct: float = 2.0  # ... and this many times the best elsewhere in the window
     noise_sigmas: float = 4.0  # outline: pixels deviating more than this many robust sigmas ...
-    size_range: tuple[float, float] = (0.5, 2.0)  # ... whose box's longer side is this × the footprint's diagonal
-    shade_range: tuple[float, float] = (0.15, 0.85)  # shade: the background darkened to this share of itself ...
+    size_range: tuple[float, float] = (
+        0.5,
+        2.0,
+    )  # ... whose box's longer side is this × the footprint's diagonal
+    shade_range: tuple[float, float] = (
+        0.15,
+        0.85,
+    )  # shade: the background darkened to this share of itself ...
     shade_hue: float = 0.12  # ... each colour within this share of the others' darkening ...
     shade_width: float = 0.25  # ... in a patch at least this share of the footprint's side wide
 
@@ -68,7 +74,9 @@ def _odd(x: float) -> int:
     return max(3, round(x) | 1)
 
 
-def detect(frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams | None = None) -> Detection | None:
+def detect(
+    frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams | None = None
+) -> Detection | None:
     """The most salient vehicle-sized object in the prediction's window, or None (see the module doc)."""
     p = params or DetectParams()
     side = math.sqrt(prediction.width_px * prediction.height_px)
@@ -80,12 +88,17 @@ def detect(frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams |
     radius = p.search_sigmas * sigma + diag / 2
     pad = p.background_sides * side
     x0, y0 = max(0, int(prediction.u - radius - pad)), max(0, int(prediction.v - radius - pad))
-    x1, y1 = min(W, int(prediction.u + radius + pad) + 1), min(H, int(prediction.v + radius + pad) + 1)
+    x1, y1 = (
+        min(W, int(prediction.u + radius + pad) + 1),
+        min(H, int(prediction.v + radius + pad) + 1),
+    )
     f = max(1, round(side / p.block_px))
     w, h = (x1 - x0) // f, (y1 - y0) // f
     if w < 3 or h < 3:
         return None
-    small = cv2.resize(frame_bgr[y0 : y0 + h * f, x0 : x0 + w * f], (w, h), interpolation=cv2.INTER_AREA)
+    small = cv2.resize(
+        frame_bgr[y0 : y0 + h * f, x0 : x0 + w * f], (w, h), interpolation=cv2.INTER_AREA
+    )
     small = small.astype(np.float32).reshape(h, w, -1)
     s = side / f
     background = cv2.blur(small, (_odd(p.background_sides * s),) * 2).reshape(h, w, -1)
@@ -111,7 +124,9 @@ def detect(frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams |
     return Detection(box, x + (bw - 1) / 2.0, y + (bh - 1) / 2.0, float(best))
 
 
-def shade(image: np.ndarray, background: np.ndarray, side_px: float, params: DetectParams | None = None) -> np.ndarray:
+def shade(
+    image: np.ndarray, background: np.ndarray, side_px: float, params: DetectParams | None = None
+) -> np.ndarray:
     """Where ``image`` is its ``background`` in shade: boolean mask (a grey image has no colour to tell: none).
 
     Shade darkens the seafloor evenly in every colour (to ``shade_range`` of itself, each
@@ -132,8 +147,9 @@ def shade(image: np.ndarray, background: np.ndarray, side_px: float, params: Det
     return cv2.dilate(mask, np.ones((5, 5), np.uint8)).astype(bool)  # with its soft rim
 
 
-def outline(frame_bgr: np.ndarray, u: float, v: float, diag_px: float,
-            params: DetectParams | None = None) -> tuple[int, int, int, int] | None:
+def outline(
+    frame_bgr: np.ndarray, u: float, v: float, diag_px: float, params: DetectParams | None = None
+) -> tuple[int, int, int, int] | None:
     """Box (x, y, w, h) around the object near (u, v) whose footprint's diagonal is ``diag_px``, or None."""
     p = params or DetectParams()
     H, W = frame_bgr.shape[:2]
@@ -151,16 +167,24 @@ def outline(frame_bgr: np.ndarray, u: float, v: float, diag_px: float,
     win = win.reshape(h, w, -1)
     background = cv2.medianBlur(win, min(_odd(2.5 * r), 255)).reshape(h, w, -1)
     dev = np.sqrt(np.sum((win.astype(np.float32) - background) ** 2, axis=2))
-    dev[shade(win, background, r / math.sqrt(2.0), p)] = 0.0  # the seafloor in shade is no part of the vehicle
+    dev[shade(win, background, r / math.sqrt(2.0), p)] = (
+        0.0  # the seafloor in shade is no part of the vehicle
+    )
     yy, xx = np.mgrid[0:h, 0:w]
     near = np.hypot(xx - ((u - x0) - (g - 1) / 2.0) / g, yy - ((v - y0) - (g - 1) / 2.0) / g) < r
     top = float(dev[near].max()) if near.any() else 0.0
     if top <= 0:
         return None
-    otsu, _ = cv2.threshold(np.round(dev[near] * (255.0 / top)).astype(np.uint8), 0, 255,
-                            cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    otsu, _ = cv2.threshold(
+        np.round(dev[near] * (255.0 / top)).astype(np.uint8),
+        0,
+        255,
+        cv2.THRESH_BINARY + cv2.THRESH_OTSU,
+    )
     threshold = max(otsu * top / 255.0, p.noise_sigmas * 1.4826 * float(np.median(dev)))
-    mask = cv2.morphologyEx(((dev > threshold) & near).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    mask = cv2.morphologyEx(
+        ((dev > threshold) & near).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)
+    )
     found = _region_box(mask)
     if found is None:
         return None
@@ -179,8 +203,14 @@ def _region_box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
         return None
     main = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     mx, my, mw, mh = stats[main, :4]
-    touching = [c for c in range(1, n) if stats[c, 0] <= mx + mw + 2 and stats[c, 0] + stats[c, 2] >= mx - 2
-                and stats[c, 1] <= my + mh + 2 and stats[c, 1] + stats[c, 3] >= my - 2]
+    touching = [
+        c
+        for c in range(1, n)
+        if stats[c, 0] <= mx + mw + 2
+        and stats[c, 0] + stats[c, 2] >= mx - 2
+        and stats[c, 1] <= my + mh + 2
+        and stats[c, 1] + stats[c, 3] >= my - 2
+    ]
     bx0 = min(stats[c, 0] for c in touching)
     by0 = min(stats[c, 1] for c in touching)
     bx1 = max(stats[c, 0] + stats[c, 2] for c in touching)

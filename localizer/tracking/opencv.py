@@ -19,7 +19,9 @@ import numpy as np
 from . import Match, Prediction
 
 MIL_SEED = 1
-CONFIRM_TOLERANCE = 0.3  # a confirmed candidate lies this close (in box sides) to where it is expected
+CONFIRM_TOLERANCE = (
+    0.3  # a confirmed candidate lies this close (in box sides) to where it is expected
+)
 
 
 def check_box(frame: np.ndarray, box) -> tuple[int, int, int, int]:
@@ -57,7 +59,9 @@ class OpenCVMatcher:
         self._offset = (0.0, 0.0) if point is None else (point[0] - centre[0], point[1] - centre[1])
         if self.name == "mil":
             cv2.setRNGSeed(MIL_SEED)
-        self._tracker.init(frame_bgr, box)  # OpenCV's update() before init() would crash the process
+        self._tracker.init(
+            frame_bgr, box
+        )  # OpenCV's update() before init() would crash the process
 
     def follow(self, frame_bgr, prediction: Prediction | None = None) -> Match:
         ok, box = self._tracker.update(frame_bgr)
@@ -72,7 +76,9 @@ class OpenCVMatcher:
 
     def confirm(self, frame_bgr, u: float, v: float, prediction: Prediction | None = None) -> Match:
         m = self.follow(frame_bgr, prediction)
-        near = m.found and math.hypot(m.u - u, m.v - v) <= CONFIRM_TOLERANCE * max(m.box[2], m.box[3])
+        near = m.found and math.hypot(m.u - u, m.v - v) <= CONFIRM_TOLERANCE * max(
+            m.box[2], m.box[3]
+        )
         return m if near else Match(False, m.score, m.u, m.v)
 
     def resume(self, match: Match) -> None:

@@ -35,7 +35,9 @@ UUV_TOP_SPEED_MPS = 1.5  # a BlueROV2's top speed (``skyfix run --uuv-max-speed-
 UUV_ACCEL_MPS2 = 3.0
 #: How fast the UUV may turn (deg/s): ArduSub's yaw rate at full stick and full joystick gain, ACRO_YAW_P (4.5) × 45°.
 UUV_YAW_RATE_DPS = 200.0
-TURN_MARGIN_DEG = 10.0  # ... plus this: the camera's own turning, and the heading followed lagging a turn
+TURN_MARGIN_DEG = (
+    10.0  # ... plus this: the camera's own turning, and the heading followed lagging a turn
+)
 BASE_SIGMA_M = 0.08  # the prediction's 1-sigma from the telemetry itself (attitude, timing)
 _STEP_M = 0.05  # finite-difference step for the image scale
 WINDOW_SIGMAS = 3.0  # the search window the matchers use: the prediction ± this many sigmas
@@ -47,22 +49,37 @@ def project_uuv(cal: Calibration, pose: CameraPose, lat_deg, lon_deg, depth_m=No
     ``depth_m`` defaults to the pose's depth (the UUV's measured depth at each
     frame). NaN where the pose has no ``ok`` status or the point is not in front of the camera.
     """
-    depth = pose.depth_m if depth_m is None else np.broadcast_to(np.asarray(depth_m, float), pose.t_unix.shape)
+    depth = (
+        pose.depth_m
+        if depth_m is None
+        else np.broadcast_to(np.asarray(depth_m, float), pose.t_unix.shape)
+    )
     n, e, _ = geodetic_to_ned(lat_deg, lon_deg, 0.0, pose.lat_deg, pose.lon_deg, 0.0)
     ne = np.stack([n - pose.cam_offset_ned_m[:, 0], e - pose.cam_offset_ned_m[:, 1]], axis=-1)
     probes = ne[:, None, :] + np.array([[0.0, 0.0], [_STEP_M, 0.0], [0.0, _STEP_M]])  # (N, 3, 2)
     n_water = cal.water.refractive_index
     u, v = offset_to_pixel(
-        cal.camera, pose.R_ned_from_cv[:, None], probes, pose.height_m[:, None], depth[:, None], n_water
+        cal.camera,
+        pose.R_ned_from_cv[:, None],
+        probes,
+        pose.height_m[:, None],
+        depth[:, None],
+        n_water,
     )
     du_n, dv_n = u[:, 1] - u[:, 0], v[:, 1] - v[:, 0]
     du_e, dv_e = u[:, 2] - u[:, 0], v[:, 2] - v[:, 0]
     px_per_m = np.sqrt(np.abs(du_n * dv_e - dv_n * du_e)) / _STEP_M
     bad = pose.status != "ok"
-    return (np.where(bad, np.nan, u[:, 0]), np.where(bad, np.nan, v[:, 0]), np.where(bad, np.nan, px_per_m))
+    return (
+        np.where(bad, np.nan, u[:, 0]),
+        np.where(bad, np.nan, v[:, 0]),
+        np.where(bad, np.nan, px_per_m),
+    )
 
 
-def top_face_pixel(cal: Calibration, pose: CameraPose, box_u, box_v, height_m: float = VEHICLE_HEIGHT_M):
+def top_face_pixel(
+    cal: Calibration, pose: CameraPose, box_u, box_v, height_m: float = VEHICLE_HEIGHT_M
+):
     """The pixel of the top face's centre, given the centre (box_u, box_v) of a box around the whole vehicle.
 
     The vehicle's outline spans its top face (at the reported depth) and its
@@ -73,16 +90,22 @@ def top_face_pixel(cal: Calibration, pose: CameraPose, box_u, box_v, height_m: f
     box_u = np.asarray(box_u, dtype=float)
     box_v = np.asarray(box_v, dtype=float)
     n_water = cal.water.refractive_index
-    off, _ = pixel_to_offset(cal.camera, pose.R_ned_from_cv, box_u, box_v, pose.height_m, pose.depth_m, n_water)
+    off, _ = pixel_to_offset(
+        cal.camera, pose.R_ned_from_cv, box_u, box_v, pose.height_m, pose.depth_m, n_water
+    )
     probes = np.stack([off, off], axis=-2)  # (N, 2, 2): the same horizontal offset at both depths
     depths = np.stack([pose.depth_m, pose.depth_m + height_m], axis=-1)
-    u, v = offset_to_pixel(cal.camera, pose.R_ned_from_cv[:, None], probes, pose.height_m[:, None], depths, n_water)
+    u, v = offset_to_pixel(
+        cal.camera, pose.R_ned_from_cv[:, None], probes, pose.height_m[:, None], depths, n_water
+    )
     du, dv = (u[:, 1] - u[:, 0]) / 2.0, (v[:, 1] - v[:, 0]) / 2.0
     good = (pose.status == "ok") & np.isfinite(du) & np.isfinite(dv)
     return np.where(good, box_u - du, box_u), np.where(good, box_v - dv, box_v)
 
 
-def prediction_at(u: float, v: float, px_per_m: float, sigma_m: float, shift_px=(0.0, 0.0)) -> Prediction | None:
+def prediction_at(
+    u: float, v: float, px_per_m: float, sigma_m: float, shift_px=(0.0, 0.0)
+) -> Prediction | None:
     """A :class:`Prediction` from one frame's projection (see :func:`project_uuv`); None if it is NaN.
 
     ``sigma_m``: how far (1-sigma, metres) the UUV may have moved since the
@@ -94,18 +117,25 @@ def prediction_at(u: float, v: float, px_per_m: float, sigma_m: float, shift_px=
         return None
     length_m, beam_m = VEHICLE_FOOTPRINT_M
     return Prediction(
-        u=float(u + shift_px[0]), v=float(v + shift_px[1]),
-        width_px=float(length_m * px_per_m), height_px=float(beam_m * px_per_m),
-        sigma_px=float(sigma_m * px_per_m), px_per_m=float(px_per_m),
+        u=float(u + shift_px[0]),
+        v=float(v + shift_px[1]),
+        width_px=float(length_m * px_per_m),
+        height_px=float(beam_m * px_per_m),
+        sigma_px=float(sigma_m * px_per_m),
+        px_per_m=float(px_per_m),
     )
 
 
-def window(prediction: Prediction | None, sigmas: float = WINDOW_SIGMAS) -> tuple[float, float, float, float] | None:
+def window(
+    prediction: Prediction | None, sigmas: float = WINDOW_SIGMAS
+) -> tuple[float, float, float, float] | None:
     """``(x, y, w, h)`` pixels where the predicted vehicle may lie: its centre ± ``sigmas`` of the prediction's
     uncertainty, widened by half the vehicle's diagonal (None without a prediction, or one of unknown uncertainty)."""
     if prediction is None or not math.isfinite(prediction.sigma_px):
         return None
-    half = sigmas * prediction.sigma_px + math.hypot(prediction.width_px, prediction.height_px) / 2.0
+    half = (
+        sigmas * prediction.sigma_px + math.hypot(prediction.width_px, prediction.height_px) / 2.0
+    )
     return (prediction.u - half, prediction.v - half, 2.0 * half, 2.0 * half)
 
 
@@ -115,10 +145,15 @@ def reach_m(dt_s: float, speed_mps: float = math.nan) -> float:
     the telemetry's own error, :data:`WINDOW_SIGMAS` × :data:`BASE_SIGMA_M`."""
     dt = abs(dt_s)
     v = min(speed_mps, UUV_TOP_SPEED_MPS) if speed_mps >= 0 else UUV_TOP_SPEED_MPS
-    return min(v * dt + 0.5 * UUV_ACCEL_MPS2 * dt * dt, UUV_TOP_SPEED_MPS * dt) + WINDOW_SIGMAS * BASE_SIGMA_M
+    return (
+        min(v * dt + 0.5 * UUV_ACCEL_MPS2 * dt * dt, UUV_TOP_SPEED_MPS * dt)
+        + WINDOW_SIGMAS * BASE_SIGMA_M
+    )
 
 
-def follow(projected_now, projected_then, pixel_then, dt_s: float, speed_mps: float = math.nan) -> Prediction | None:
+def follow(
+    projected_now, projected_then, pixel_then, dt_s: float, speed_mps: float = math.nan
+) -> Prediction | None:
     """Prediction for a frame: the last tracked pixel moved by what the camera did since.
 
     ``projected_now`` ``(u, v, px_per_m)`` and ``projected_then`` ``(u, v, ...)``: the
@@ -135,4 +170,8 @@ def follow(projected_now, projected_then, pixel_then, dt_s: float, speed_mps: fl
         return None
     u, v, px_per_m = projected_now[:3]
     p = prediction_at(u, v, px_per_m, reach_m(dt_s, speed_mps) / WINDOW_SIGMAS, shift)
-    return None if p is None else replace(p, turn_deg=min(180.0, UUV_YAW_RATE_DPS * abs(dt_s) + TURN_MARGIN_DEG))
+    return (
+        None
+        if p is None
+        else replace(p, turn_deg=min(180.0, UUV_YAW_RATE_DPS * abs(dt_s) + TURN_MARGIN_DEG))
+    )

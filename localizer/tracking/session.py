@@ -97,8 +97,13 @@ class _Sighting:
 class TrackingSession:
     """A target's life, frame by frame (see the module doc); ``tracker`` names the matcher (ValueError if unknown)."""
 
-    def __init__(self, cal: Calibration, tracker: str = "default", target_params: TargetParams | None = None,
-                 detect_params: DetectParams | None = None):
+    def __init__(
+        self,
+        cal: Calibration,
+        tracker: str = "default",
+        target_params: TargetParams | None = None,
+        detect_params: DetectParams | None = None,
+    ):
         make_matcher(tracker)  # fail early on an unknown name
         self.cal = cal
         self.tracker = tracker
@@ -106,9 +111,13 @@ class TrackingSession:
         self.detect_params = detect_params or DetectParams()
         self.origin: str | None = None  # how the current target was chosen: "box", "click", "prior"
         self._outlined = False  # the target's box is an outline skyfix found (its pixel carries the outline's error)
-        self.prediction: Prediction | None = None  # where the latest step looked for the UUV (None: nowhere in particular)
+        self.prediction: Prediction | None = (
+            None  # where the latest step looked for the UUV (None: nowhere in particular)
+        )
         self.last = TrackResult("awaiting_target")
-        self._length_px = math.nan  # the vehicle's apparent length at the latest prediction or selection
+        self._length_px = (
+            math.nan
+        )  # the vehicle's apparent length at the latest prediction or selection
         self._forget()
         self._awaiting_frames = 0
         self._noted_state = None
@@ -120,8 +129,9 @@ class TrackingSession:
         return self.target.state
 
     # -- the operator's commands ------------------------------------------------------------------
-    def select(self, frame_bgr, pose: CameraPose, i: int = 0, *, box=None, point=None,
-               verify: bool = False) -> TrackResult:
+    def select(
+        self, frame_bgr, pose: CameraPose, i: int = 0, *, box=None, point=None, verify: bool = False
+    ) -> TrackResult:
         """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of this frame, from now on.
 
         Raises :class:`SelectionError` (and changes nothing) for a box outside the
@@ -133,7 +143,9 @@ class TrackingSession:
             raise SelectionError("give either a box [x, y, w, h] or a point [u, v]")
         given = box if box is not None else point
         if not all(math.isfinite(c) for c in given):
-            raise SelectionError(f"{'box' if box is not None else 'point'} {list(given)}: expected finite pixels")
+            raise SelectionError(
+                f"{'box' if box is not None else 'point'} {list(given)}: expected finite pixels"
+            )
         one = take(pose, [i])
         outlined = None
         if point is not None:
@@ -167,11 +179,17 @@ class TrackingSession:
         self._forget()
 
     # -- per frame ----------------------------------------------------------------------------------
-    def step(self, frame_bgr, pose: CameraPose, i: int = 0, prior: Prior | None = None) -> TrackResult:
+    def step(
+        self, frame_bgr, pose: CameraPose, i: int = 0, prior: Prior | None = None
+    ) -> TrackResult:
         """The UUV in the next frame (``pose``'s frame ``i``); ``prior`` is used while awaiting a target."""
         self.prediction = None
         if self.target.state is TargetState.AWAITING_TARGET:
-            result = self._acquire(frame_bgr, pose, i, prior) if prior is not None else TrackResult("awaiting_target")
+            result = (
+                self._acquire(frame_bgr, pose, i, prior)
+                if prior is not None
+                else TrackResult("awaiting_target")
+            )
         else:
             self.prediction = self._predict(pose, i)
             result = self.target.update(frame_bgr, self.prediction)
@@ -189,10 +207,19 @@ class TrackingSession:
         def num(x):
             return round(float(x), 3) if math.isfinite(x) else None
 
-        return {"state": self.state.value, "tracker": self.tracker, "origin": self.origin,
-                "since_t": num(self.since_t), "frames_in_state": self.frames_in_state, "status": r.status,
-                "u": num(r.u), "v": num(r.v), "box": list(r.box) if r.box else None, "confidence": num(r.confidence),
-                "seen_t": num(seen.t_unix) if seen else None}
+        return {
+            "state": self.state.value,
+            "tracker": self.tracker,
+            "origin": self.origin,
+            "since_t": num(self.since_t),
+            "frames_in_state": self.frames_in_state,
+            "status": r.status,
+            "u": num(r.u),
+            "v": num(r.v),
+            "box": list(r.box) if r.box else None,
+            "confidence": num(r.confidence),
+            "seen_t": num(seen.t_unix) if seen else None,
+        }
 
     # -- internals ----------------------------------------------------------------------------------
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
@@ -206,8 +233,16 @@ class TrackingSession:
             self._length_px = p.width_px
         if result.ok:
             window = p.sigma_px if p is not None else math.nan
-            result = replace(result, sigma_px=pixel_sigma_px(self._length_px, result.confidence, window,
-                                                             t_unix - self.since_t, self._outlined))
+            result = replace(
+                result,
+                sigma_px=pixel_sigma_px(
+                    self._length_px,
+                    result.confidence,
+                    window,
+                    t_unix - self.since_t,
+                    self._outlined,
+                ),
+            )
         self.last = result
         return result
 
@@ -216,8 +251,12 @@ class TrackingSession:
         self._anchor: tuple[float, float] | None = None  # lat, lon of a sighting
         self._anchor_age = 0  # frames predicted from it
         self._anchor_tried: _Sighting | None = None  # the sighting last located
-        self._proj: tuple[CameraPose, int, np.ndarray] | None = None  # anchor projected: pose, first index, (n, 3)
-        self._moves: list[tuple[float, float, float, float]] = []  # recent sightings: t, residual u, v, px_per_m
+        self._proj: tuple[CameraPose, int, np.ndarray] | None = (
+            None  # anchor projected: pose, first index, (n, 3)
+        )
+        self._moves: list[
+            tuple[float, float, float, float]
+        ] = []  # recent sightings: t, residual u, v, px_per_m
         self.speed_mps = math.nan  # how fast the UUV was last seen moving (NaN: not known)
 
     def _locate(self, one: CameraPose, point) -> tuple[tuple[float, float] | None, float]:
@@ -253,7 +292,9 @@ class TrackingSession:
     def _moved(self, t: float, ru: float, rv: float, px_per_m: float) -> None:
         """A sighting's residual from the anchor's projection (pixels): the UUV's own motion, the camera's taken
         out. Its speed: the residuals' trend over the last :data:`SPEED_WINDOW_S` (least squares), in metres."""
-        self._moves = [m for m in self._moves if t - m[0] <= SPEED_WINDOW_S] + [(t, ru, rv, px_per_m)]
+        self._moves = [m for m in self._moves if t - m[0] <= SPEED_WINDOW_S] + [
+            (t, ru, rv, px_per_m)
+        ]
         if t - self._moves[0][0] < SPEED_SPAN_S or not px_per_m > 0:
             return
         ts, us, vs, _ = np.array(self._moves).T
@@ -266,18 +307,33 @@ class TrackingSession:
         if seen is None:
             return None
         self._anchor_age += 1
-        if (self._anchor is None or self._anchor_age > REANCHOR_FRAMES) and seen is not self._anchor_tried:
+        if (
+            self._anchor is None or self._anchor_age > REANCHOR_FRAMES
+        ) and seen is not self._anchor_tried:
             self._anchor_tried = seen
             anchor, _ = self._locate(seen.pose, (seen.u, seen.v))
             if anchor is not None:
                 self._anchor, self._anchor_age, self._proj = anchor, 1, None
-                ru, rv = seen.u - seen.pu, seen.v - seen.pv  # residuals so far: now from the new anchor
-                self._moves = [(t, u - ru, v - rv, s) for t, u, v, s in self._moves] if math.isfinite(ru + rv) else []
+                ru, rv = (
+                    seen.u - seen.pu,
+                    seen.v - seen.pv,
+                )  # residuals so far: now from the new anchor
+                self._moves = (
+                    [(t, u - ru, v - rv, s) for t, u, v, s in self._moves]
+                    if math.isfinite(ru + rv)
+                    else []
+                )
                 seen.pu, seen.pv = seen.u, seen.v  # the anchor is where this pixel is
         proj = self._projection(pose, i)
         if proj is None:
             return None
-        return follow(proj, (seen.pu, seen.pv), (seen.u, seen.v), float(pose.t_unix[i]) - seen.t_unix, self.speed_mps)
+        return follow(
+            proj,
+            (seen.pu, seen.pv),
+            (seen.u, seen.v),
+            float(pose.t_unix[i]) - seen.t_unix,
+            self.speed_mps,
+        )
 
     def _projection(self, pose: CameraPose, i: int):
         """``(u, v, px_per_m)`` of the anchor in the pose's frame ``i`` (None without an anchor)."""
@@ -295,16 +351,27 @@ class TrackingSession:
         u, v = float(point[0]), float(point[1])
         _, px_per_m = self._locate(one, (u, v))
         if not px_per_m > 0:
-            why = (f"no camera pose at that frame ({one.status[0]}) to size the vehicle" if one.status[0] != "ok"
-                   else f"{locate(self.cal, one, [u], [v]).status[0]}: not a place on the water in the image")
+            why = (
+                f"no camera pose at that frame ({one.status[0]}) to size the vehicle"
+                if one.status[0] != "ok"
+                else f"{locate(self.cal, one, [u], [v]).status[0]}: not a place on the water in the image"
+            )
             raise SelectionError(f"point [{u:g}, {v:g}]: {why}; select with a box")
         guess = prediction_at(u, v, px_per_m, 0.0)
-        reach = CLICK_REACH * math.hypot(guess.width_px, guess.height_px) / self.detect_params.search_sigmas
-        found = detect(frame_bgr, Prediction(u, v, guess.width_px, guess.height_px, reach, px_per_m),
-                       self.detect_params)
+        reach = (
+            CLICK_REACH
+            * math.hypot(guess.width_px, guess.height_px)
+            / self.detect_params.search_sigmas
+        )
+        found = detect(
+            frame_bgr,
+            Prediction(u, v, guess.width_px, guess.height_px, reach, px_per_m),
+            self.detect_params,
+        )
         if found is None:
-            raise SelectionError(f"point [{u:g}, {v:g}]: no vehicle-sized object stands out there; "
-                                 "select with a box")
+            raise SelectionError(
+                f"point [{u:g}, {v:g}]: no vehicle-sized object stands out there; select with a box"
+            )
         return found.box
 
     def _outline_box(self, frame_bgr, one: CameraPose, box) -> tuple[int, int, int, int] | None:
@@ -317,11 +384,16 @@ class TrackingSession:
         if guess is None:
             return None  # no pose to size the vehicle: the operator's box is all there is
         reach = math.hypot(w, h) / 2.0 / self.detect_params.search_sigmas
-        found = detect(frame_bgr, Prediction(cu, cv_, guess.width_px, guess.height_px, reach, px_per_m),
-                       self.detect_params)
+        found = detect(
+            frame_bgr,
+            Prediction(cu, cv_, guess.width_px, guess.height_px, reach, px_per_m),
+            self.detect_params,
+        )
         if found is None or not _overlap(found.box, (x, y, w, h)):
-            raise SelectionError(f"box [{x:g}, {y:g}, {w:g}, {h:g}]: no vehicle-sized object stands out of the "
-                                 "water in it; draw the box around the UUV")
+            raise SelectionError(
+                f"box [{x:g}, {y:g}, {w:g}, {h:g}]: no vehicle-sized object stands out of the "
+                "water in it; draw the box around the UUV"
+            )
         return found.box
 
     def _acquire(self, frame_bgr, pose: CameraPose, i: int, prior: Prior) -> TrackResult:
@@ -332,7 +404,9 @@ class TrackingSession:
         one = take(pose, [i])
         u, v, px_per_m = project_uuv(self.cal, one, prior.lat, prior.lon)
         near_prior = self.prediction = prediction_at(u[0], v[0], px_per_m[0], prior.sigma_m)
-        found = detect(frame_bgr, near_prior, self.detect_params) if near_prior is not None else None
+        found = (
+            detect(frame_bgr, near_prior, self.detect_params) if near_prior is not None else None
+        )
         if found is None:
             return TrackResult("awaiting_target")
         cu, cv_ = top_face_pixel(self.cal, one, [found.u], [found.v])

@@ -42,14 +42,22 @@ MATCH_SHARE = 0.016  # a good match's error, per axis, as a share of the vehicle
 SCORE_SHARE = 0.1  # ... growing by this share of the length per unit of score lost below 1
 FLOOR_PX = 0.2  # never surer than this (pixels)
 UNSCORED_SHARE = 0.16  # a tracker without a score: this share of the length (KCF, CSRT: 1.3-4.9 px rms, 20-28 px long)
-TRACKING_WINDOW = 0.5  # a frame after a frame: the prediction's 1-sigma is up to this share of the length
+TRACKING_WINDOW = (
+    0.5  # a frame after a frame: the prediction's 1-sigma is up to this share of the length
+)
 WINDOW_SHARE = 0.05  # a wider window adds this share of its 1-sigma beyond that
 ACQUIRED_SHARE = 0.03  # just (re)acquired: this share of the length ...
 ACQUIRED_S = 1.0  # ... fading with this time constant (s)
 OUTLINED_SHARE = 0.08  # a target skyfix outlined (a click, a live box, the UUV's own estimate): this share of the length
 
-def pixel_sigma_px(length_px: float, score: float, window_px: float, since_acquired_s: float,
-                   outlined: bool = False) -> float:
+
+def pixel_sigma_px(
+    length_px: float,
+    score: float,
+    window_px: float,
+    since_acquired_s: float,
+    outlined: bool = False,
+) -> float:
     """1-sigma (pixels) of each of the tracked pixel's u and v (see the module doc).
 
     ``length_px``: the vehicle's apparent length; ``score``: the match's (0..1; NaN: the tracker has none);
@@ -63,7 +71,11 @@ def pixel_sigma_px(length_px: float, score: float, window_px: float, since_acqui
         match = length_px * math.hypot(MATCH_SHARE, SCORE_SHARE * (1.0 - min(max(score, 0.0), 1.0)))
     else:
         match = UNSCORED_SHARE * length_px
-    wide = WINDOW_SHARE * max(0.0, window_px - TRACKING_WINDOW * length_px) if math.isfinite(window_px) else 0.0
+    wide = (
+        WINDOW_SHARE * max(0.0, window_px - TRACKING_WINDOW * length_px)
+        if math.isfinite(window_px)
+        else 0.0
+    )
     fresh = ACQUIRED_SHARE * length_px * math.exp(-max(since_acquired_s, 0.0) / ACQUIRED_S)
     selected = OUTLINED_SHARE * length_px if outlined else 0.0
     return math.sqrt(max(match, FLOOR_PX) ** 2 + wide**2 + fresh**2 + selected**2)

@@ -55,7 +55,15 @@ from ..size_range import box_corners_px, edge_points, outline, point_to_pixel, p
 #: supported, or too few of its points found an edge (``few_edges``); the fit did not settle (``no_convergence``),
 #: settled more than a factor of two from the configured height (``implausible``), or with a residual above
 #: ``max_rms_px`` or a support below ``min_support`` (``poor_fit``).
-REJECTIONS = ("no_water", "border", "too_small", "few_edges", "no_convergence", "implausible", "poor_fit")
+REJECTIONS = (
+    "no_water",
+    "border",
+    "too_small",
+    "few_edges",
+    "no_convergence",
+    "implausible",
+    "poor_fit",
+)
 
 #: The outline's length over which edge errors are alike (blur of the optics, the renderer's anti-aliasing,
 #: video compression): the number of independent edge measurements is the outline's length over this.
@@ -68,10 +76,16 @@ class SilhouetteParams:
     trim: float = 0.15  # ... leaving out this share of each edge at both ends (blurred corners)
     reach_px: float = 3.0  # edges looked for this far either way along the normal ...
     step_px: float = 0.5  # ... sampled this often
-    noise_factor: float = 6.0  # an edge: a peak of the colour's change this many times the water's own
-    agree_px: float = 0.75  # an edge this close to the outline supports it, when there is none further out ...
+    noise_factor: float = (
+        6.0  # an edge: a peak of the colour's change this many times the water's own
+    )
+    agree_px: float = (
+        0.75  # an edge this close to the outline supports it, when there is none further out ...
+    )
     clear_px: float = 6.0  # ... up to this far
-    axes_radius: float = 0.7  # the vehicle's axes from gradients within this share of its diagonal of the pixel
+    axes_radius: float = (
+        0.7  # the vehicle's axes from gradients within this share of its diagonal of the pixel
+    )
     scan_from: float = 0.7  # outline sizes scanned: heights from this ...
     scan_to: float = 1.45  # ... to this times the configured height ...
     scan_step: float = 0.015  # ... this far apart (relative); the largest supported at least ...
@@ -81,8 +95,12 @@ class SilhouetteParams:
     min_found: float = 0.5  # at least this share of the points must find an edge
     min_support: float = 0.6  # the outline found must be supported at this share of its points
     max_rms_px: float = 0.6  # the fitted outline's residual, at most
-    border_px: float = 6.0  # the outline this far inside the frame (its edges are searched beyond it)
-    min_size_px: float = 20.0  # the outline's size (the square root of its area) at least: smaller, the vehicle's
+    border_px: float = (
+        6.0  # the outline this far inside the frame (its edges are searched beyond it)
+    )
+    min_size_px: float = (
+        20.0  # the outline's size (the square root of its area) at least: smaller, the vehicle's
+    )
     # inner structure and its outline are a pixel apart, and the water's texture as large as its parts
 
 
@@ -101,8 +119,18 @@ class SizeMeasurement:
     size_px: float  # the outline's size: the square root of its area
 
 
-def measure(frame_bgr: np.ndarray, camera: Camera, R_ned_from_cv, u: float, v: float, uuv: Uuv, height_m: float,
-            depth_m: float, n_water: float, params: SilhouetteParams | None = None) -> SizeMeasurement | str:
+def measure(
+    frame_bgr: np.ndarray,
+    camera: Camera,
+    R_ned_from_cv,
+    u: float,
+    v: float,
+    uuv: Uuv,
+    height_m: float,
+    depth_m: float,
+    n_water: float,
+    params: SilhouetteParams | None = None,
+) -> SizeMeasurement | str:
     """The camera height at which the vehicle's outline fits the frame (see the module doc), or why not: a word
     of :data:`REJECTIONS`.
 
@@ -115,14 +143,20 @@ def measure(frame_bgr: np.ndarray, camera: Camera, R_ned_from_cv, u: float, v: f
 
     def corners(xs):
         """Corners (..., 8, 2) of the outlines of parameters xs (..., 4): height, heading, u, v; None if any is NaN."""
-        c = box_corners_px(camera, R, xs[..., 2], xs[..., 3], xs[..., 1], uuv, xs[..., 0], depth_m, n_water)
+        c = box_corners_px(
+            camera, R, xs[..., 2], xs[..., 3], xs[..., 1], uuv, xs[..., 0], depth_m, n_water
+        )
         return c if np.all(np.isfinite(c)) else None
 
     headings = _headings(frame_bgr, camera, R, u, v, uuv, height_m, depth_m, n_water, p)
     if headings is None:
         return "no_water"
-    scales = np.exp(np.arange(math.log(p.scan_to), math.log(p.scan_from), -p.scan_step))  # the largest outline last
-    xs = np.stack(np.broadcast_arrays(height_m * scales[None, :], headings[:, None], u, v), axis=-1)  # (2, S, 4)
+    scales = np.exp(
+        np.arange(math.log(p.scan_to), math.log(p.scan_from), -p.scan_step)
+    )  # the largest outline last
+    xs = np.stack(
+        np.broadcast_arrays(height_m * scales[None, :], headings[:, None], u, v), axis=-1
+    )  # (2, S, 4)
     c = corners(xs)
     if c is None:
         return "no_water"
@@ -136,9 +170,13 @@ def measure(frame_bgr: np.ndarray, camera: Camera, R_ned_from_cv, u: float, v: f
     if not support.max() > 0:
         return "few_edges"
     good = support >= p.near_best * support.max()
-    k = int(np.flatnonzero(good.any(axis=0))[-1])  # the largest outline nearly as well supported as the best
+    k = int(
+        np.flatnonzero(good.any(axis=0))[-1]
+    )  # the largest outline nearly as well supported as the best
     x = xs[int(np.argmax(support[:, k])), k]
-    steps = np.array([0.005 * height_m, 0.01, 0.25, 0.25])  # finite differences: height, heading, u, v
+    steps = np.array(
+        [0.005 * height_m, 0.01, 0.25, 0.25]
+    )  # finite differences: height, heading, u, v
     settled = np.array([0.002 * height_m, 0.02, 0.25, 0.25])  # a pass moving less: done
     for n in range(p.passes):
         c = corners(x + np.concatenate([np.zeros((1, 4)), np.diag(steps)]))
@@ -151,18 +189,31 @@ def measure(frame_bgr: np.ndarray, camera: Camera, R_ned_from_cv, u: float, v: f
         if np.all(np.abs(moved) < settled):
             x = fit.x
             break
-        x = x + moved * 0.5 ** max(0, n - 1)  # damped more and more: edges flipping from pass to pass would cycle
+        x = x + moved * 0.5 ** max(
+            0, n - 1
+        )  # damped more and more: edges flipping from pass to pass would cycle
     else:
         return "no_convergence"
     if not 0.5 * height_m <= x[0] <= 2.0 * height_m:
         return "implausible"
     if not (fit.rms_px <= p.max_rms_px and fit.support >= p.min_support):
         return "poor_fit"
-    return SizeMeasurement(float(x[0]), fit.sigma_m, float(x[1] % math.pi), float(x[2]), float(x[3]), fit.points,
-                           fit.rms_px, fit.support, fit.size_px)
+    return SizeMeasurement(
+        float(x[0]),
+        fit.sigma_m,
+        float(x[1] % math.pi),
+        float(x[2]),
+        float(x[3]),
+        fit.points,
+        fit.rms_px,
+        fit.support,
+        fit.size_px,
+    )
 
 
-def _headings(frame_bgr, camera: Camera, R, u, v, uuv: Uuv, height_m, depth_m, n_water, p: SilhouetteParams):
+def _headings(
+    frame_bgr, camera: Camera, R, u, v, uuv: Uuv, height_m, depth_m, n_water, p: SilhouetteParams
+):
     """The two candidate headings (2,) (step 1), or None where the pixel does not see the water."""
     d = max(depth_m, 0.0)
     n = n_water if depth_m > 0 else None
@@ -173,9 +224,15 @@ def _headings(frame_bgr, camera: Camera, R, u, v, uuv: Uuv, height_m, depth_m, n
     if not (np.all(np.isfinite(au)) and np.all(np.isfinite(av))):
         return None
     along = np.arctan2(av[1:] - av[0], au[1:] - au[0])  # the forward axis in the image
-    diag = math.hypot(uuv.length_m, uuv.width_m) * 10.0 * float(np.max(np.hypot(au[1:] - au[0], av[1:] - av[0])))
+    diag = (
+        math.hypot(uuv.length_m, uuv.width_m)
+        * 10.0
+        * float(np.max(np.hypot(au[1:] - au[0], av[1:] - av[0])))
+    )
     axes = _axes_angle(frame_bgr, u, v, p.axes_radius * diag)
-    off = (along - axes + math.pi / 4) % (math.pi / 2) - math.pi / 4  # within ±45°: along either image axis
+    off = (along - axes + math.pi / 4) % (
+        math.pi / 2
+    ) - math.pi / 4  # within ±45°: along either image axis
     first = int(np.argmin(np.abs(off)))
     apart = np.abs((psi - psi[first] + math.pi / 2) % math.pi - math.pi / 2) >= math.pi / 4
     second = int(np.argmin(np.where(apart, np.abs(off), np.inf)))
@@ -202,8 +259,11 @@ def _axes_angle(frame_bgr, u: float, v: float, radius_px: float) -> float:
 def _inside(corners, W: int, H: int, border_px: float) -> bool:
     """Whether every outline of ``corners`` (..., 8, 2) lies ``border_px`` inside the frame."""
     lo, hi = corners.min(axis=-2), corners.max(axis=-2)
-    return bool(np.all(lo >= border_px) and np.all(hi[..., 0] <= W - 1 - border_px)
-                and np.all(hi[..., 1] <= H - 1 - border_px))
+    return bool(
+        np.all(lo >= border_px)
+        and np.all(hi[..., 0] <= W - 1 - border_px)
+        and np.all(hi[..., 1] <= H - 1 - border_px)
+    )
 
 
 @dataclass(frozen=True)
@@ -247,8 +307,14 @@ def _pass(frame_bgr, x, corners, steps, texture: float, p: SilhouetteParams) -> 
     rms = float(np.sqrt(np.sum(resid[use] ** 2) / (use.sum() - 4)))
     cov = np.linalg.inv(J[use].T @ J[use]) * rms**2 * max(1.0, EDGE_CORRELATION_PX / p.spacing_px)
     limit = np.array([0.2 * x[0], 0.3, p.fit_reach_px, p.fit_reach_px])
-    return _Fit(x + np.clip(step, -limit, limit), float(np.sqrt(cov[0, 0])), int(use.sum()), rms,
-                float(np.mean(_supported(edges, p))), size_px)
+    return _Fit(
+        x + np.clip(step, -limit, limit),
+        float(np.sqrt(cov[0, 0])),
+        int(use.sum()),
+        rms,
+        float(np.mean(_supported(edges, p))),
+        size_px,
+    )
 
 
 def _window(frame_bgr, lo, hi, margin_px: float):
@@ -274,16 +340,31 @@ def _changes(window: np.ndarray, xy: np.ndarray, normal: np.ndarray, t: np.ndarr
     1e-5 px, and that moved 9 of 182 heights of ``bench/offline_speed.py``'s 1080p session by 0.2-35 mm (the fit
     follows edges that flip between peaks at that level)."""
     x, y = xy[..., 0].reshape(-1), xy[..., 1].reshape(-1)
-    X, Y = t[:, None] * normal[..., 0].reshape(-1), t[:, None] * normal[..., 1].reshape(-1)  # (T, N)
+    X, Y = (
+        t[:, None] * normal[..., 0].reshape(-1),
+        t[:, None] * normal[..., 1].reshape(-1),
+    )  # (T, N)
     X += x
     Y += y
     X, Y = X.astype(np.float32), Y.astype(np.float32)
-    parts = [cv2.remap(window, X[:, a : a + _REMAP_MAX_COLS], Y[:, a : a + _REMAP_MAX_COLS], cv2.INTER_LINEAR,
-                       borderMode=cv2.BORDER_REPLICATE) for a in range(0, len(x), _REMAP_MAX_COLS)]
-    profile = (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)).reshape(len(t), len(x), -1)
+    parts = [
+        cv2.remap(
+            window,
+            X[:, a : a + _REMAP_MAX_COLS],
+            Y[:, a : a + _REMAP_MAX_COLS],
+            cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_REPLICATE,
+        )
+        for a in range(0, len(x), _REMAP_MAX_COLS)
+    ]
+    profile = (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)).reshape(
+        len(t), len(x), -1
+    )
     d = profile[1:] - profile[:-1]  # (T - 1, N, channels)
     d *= d
-    sq = d[..., 0] + d[..., 1] + d[..., 2] if d.shape[-1] == 3 else d.sum(axis=-1)  # faster than sum() for 3
+    sq = (
+        d[..., 0] + d[..., 1] + d[..., 2] if d.shape[-1] == 3 else d.sum(axis=-1)
+    )  # faster than sum() for 3
     return np.sqrt(sq).reshape(len(t) - 1, *xy.shape[:-1])
 
 
@@ -293,7 +374,11 @@ def _texture(frame_bgr, corners, p: SilhouetteParams) -> float:
     pts = edge_points(corners, outline(corners), p.spacing_px, p.trim)
     far = p.reach_px + 1.0
     window, origin = _window(frame_bgr, corners.min(axis=0), corners.max(axis=0), far + 2.0)
-    return float(np.median(_changes(window, pts.xy - origin, pts.normal, far + np.arange(0.0, 2.01, p.step_px))))
+    return float(
+        np.median(
+            _changes(window, pts.xy - origin, pts.normal, far + np.arange(0.0, 2.01, p.step_px))
+        )
+    )
 
 
 def _edges(window, xy, normal, texture: float, p: SilhouetteParams):
@@ -348,21 +433,32 @@ def _supports(frame_bgr, corners, texture: float, p: SilhouetteParams) -> np.nda
     pts = edge_points(mid, outline(mid), p.spacing_px, p.trim)
     if len(pts.xy) < 8:
         return np.zeros(len(corners))
-    window, origin = _window(frame_bgr, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0)
-    xy = pts.moved(corners).reshape(-1) - np.tile(origin, len(corners) * len(pts.xy))  # flat: long loops
+    window, origin = _window(
+        frame_bgr, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0
+    )
+    xy = pts.moved(corners).reshape(-1) - np.tile(
+        origin, len(corners) * len(pts.xy)
+    )  # flat: long loops
     xy = xy.reshape(-1, 2)  # (S · K, 2), window pixels
     _, at, edge = np.unique(pts.first, return_index=True, return_inverse=True)  # the points' edges
     e = corners[:, pts.second[at]] - corners[:, pts.first[at]]  # (S, edges, 2)
     normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
     normal = np.take(normal, edge, axis=1).reshape(-1, 2)
     inside = math.ceil(p.agree_px / p.step_px)
-    t = np.arange(-inside - 1, round(p.clear_px / p.step_px) + 2) * p.step_px  # rows from agree_px inside on
+    t = (
+        np.arange(-inside - 1, round(p.clear_px / p.step_px) + 2) * p.step_px
+    )  # rows from agree_px inside on
     near = np.flatnonzero(np.abs((t[1:-2] + t[2:-1]) / 2.0) <= p.agree_px)
     threshold = p.noise_factor * texture
     end = near[-1] + 1  # rows [0, end): up to agree_px outside; [end, ...): further out
     supported = _peaks(window, xy, normal, t[: end + 3], threshold)[0][near[0] :].any(axis=0)
     further = np.flatnonzero(supported)
     if len(further):
-        supported[further] = ~_peaks(window, np.take(xy, further, axis=0), np.take(normal, further, axis=0),
-                                     t[end:], threshold)[0].any(axis=0)
+        supported[further] = ~_peaks(
+            window,
+            np.take(xy, further, axis=0),
+            np.take(normal, further, axis=0),
+            t[end:],
+            threshold,
+        )[0].any(axis=0)
     return supported.reshape(len(corners), -1).mean(axis=-1)

@@ -75,8 +75,15 @@ class Target:
         u, v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
         return TrackResult("ok", u, v, tuple(round(c) for c in box), 1.0)
 
-    def propose(self, frame_bgr, box, point, px_per_m: float, prediction: Prediction | None,
-                score: float = float("nan")) -> TrackResult:
+    def propose(
+        self,
+        frame_bgr,
+        box,
+        point,
+        px_per_m: float,
+        prediction: Prediction | None,
+        score: float = float("nan"),
+    ) -> TrackResult:
         """A candidate found in this frame while awaiting a target: the matcher starts on it, to be confirmed."""
         matcher = self._make_matcher()
         matcher.start(frame_bgr, box, point, px_per_m)

@@ -76,59 +76,113 @@ class TemplateParams:
     update_score: float = 0.7  # NCC above this: blend the match into the template
     adapt_every: int = 1  # try other headings and learn the appearance every this many frames
     learn_rate: float = 0.04  # fraction of the template replaced per learning step
-    learn_contrast: float = 0.2  # learn only from patches with at least this share of the first appearance's contrast
-    check_contrast: float = 0.5  # check a match against the first appearance when it has at least this share of it
-    min_contrast: float = 0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
-    recentre_px: float = 0.2  # undo the learnt template's drift from its first appearance beyond this
+    learn_contrast: float = (
+        0.2  # learn only from patches with at least this share of the first appearance's contrast
+    )
+    check_contrast: float = (
+        0.5  # check a match against the first appearance when it has at least this share of it
+    )
+    min_contrast: float = (
+        0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
+    )
+    recentre_px: float = (
+        0.2  # undo the learnt template's drift from its first appearance beyond this
+    )
     anchor_score: float = 0.2  # a clear match (check_contrast) shows the first appearance at least this well (NCC) ...
-    anchor_drift: float = 0.12  # ... within this share of the template's side of the tracked point (else: a drift),
+    anchor_drift: float = (
+        0.12  # ... within this share of the template's side of the tracked point (else: a drift),
+    )
     anchor_drift_px: float = 2.0  # ... or this many working pixels if more ...
-    anchor_shift_px: int = 4  # ... sought within this many working pixels of it; further off only if it matches
+    anchor_shift_px: int = (
+        4  # ... sought within this many working pixels of it; further off only if it matches
+    )
     anchor_level: float = 0.05  # ... at the tracked point no more than this less well
-    core_share: float = 0.6  # the first appearance compared: the central square of this share of the template's
+    core_share: float = (
+        0.6  # the first appearance compared: the central square of this share of the template's
+    )
     #                          side, the vehicle at any heading (the corners hold the seafloor, which changes) ...
-    first_turn_deg: float = 15.0  # ... turned up to this much either way from the learnt template's own turn from
+    first_turn_deg: float = (
+        15.0  # ... turned up to this much either way from the learnt template's own turn from
+    )
     #                               it (the heading followed strays slowly) ...
     first_turn_step_deg: float = 5.0  # ... in these steps
-    there_score: float = 0.5  # a candidate away from the prediction is refused while the first appearance matches
+    there_score: float = (
+        0.5  # a candidate away from the prediction is refused while the first appearance matches
+    )
     #                           this well (NCC) nearer the prediction (the UUV partly hidden beside a look-alike)
     distance_weight: float = 0.2  # a candidate's score less this × half its squared distance from the prediction in sigmas
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
-    turn_drop: float = 0.05  # try other headings at once when the score falls this far below the level
+    turn_drop: float = (
+        0.05  # try other headings at once when the score falls this far below the level
+    )
     turn_gain: float = 0.01  # turn a whole step only to a heading that matches better by this much
     search_sigmas: float = 3.0  # window half-size in prediction sigmas
     min_radius_px: float = 6.0  # smallest window half-size (full-resolution pixels)
     default_radius_px: float = 40.0  # window half-size without a prediction while tracking
     reacquire_score: float = 0.7
-    reacquire_below_level: float = 0.15  # re-acquisition also needs a score within this of the level
+    reacquire_below_level: float = (
+        0.15  # re-acquisition also needs a score within this of the level
+    )
     reacquire_tolerance: float = 0.3  # agreement between consecutive matches, in template sides
     reacquire_headings: int = 8  # headings tried while lost (then refined by turn steps)
-    scale_step: float = 0.01  # re-scale the template when the predicted size changes by more than this
-    coarse_side: int = 96  # windows wider than this (working pixels) are searched block-averaged first
+    scale_step: float = (
+        0.01  # re-scale the template when the predicted size changes by more than this
+    )
+    coarse_side: int = (
+        96  # windows wider than this (working pixels) are searched block-averaged first
+    )
     coarse_px: int = 8  # ... with the template about this many blocks across
-    coarse_keep: int = 3  # ... and this many of the best places found there matched again at full resolution
+    coarse_keep: int = (
+        3  # ... and this many of the best places found there matched again at full resolution
+    )
     wobble_rate: float = 0.03  # the match score's scatter about its recent mean: a moving mean square at this rate ...
-    wobble_mean_rate: float = 0.2  # ... about a moving mean at this rate (a few frames: a slow change is no wobble)
+    wobble_mean_rate: float = (
+        0.2  # ... about a moving mean at this rate (a few frames: a slow change is no wobble)
+    )
     wobble_cap: float = 0.2  # ... each frame's change counted up to this much (a loss is one change, waves are many)
-    wobble_flat: float = 0.04  # scatter (NCC, 1-sigma) of a still surface's matches: no wave tolerance below it ...
-    wobble_waves: float = 0.09  # ... the whole tolerance from this (waves: the UUV wobbles, breaks up, flickers)
-    wave_blur_px: float = 1.0  # waves: image and template smoothed by up to this (working pixels, Gaussian sigma)
+    wobble_flat: float = (
+        0.04  # scatter (NCC, 1-sigma) of a still surface's matches: no wave tolerance below it ...
+    )
+    wobble_waves: float = (
+        0.09  # ... the whole tolerance from this (waves: the UUV wobbles, breaks up, flickers)
+    )
+    wave_blur_px: float = (
+        1.0  # waves: image and template smoothed by up to this (working pixels, Gaussian sigma)
+    )
     wave_ok_drop: float = 0.1  # ... ok_score and reacquire_score lowered by up to this
     wave_level_drop: float = 0.15  # ... level_drop and reacquire_below_level raised by up to this
-    wave_update_drop: float = 0.2  # ... update_score lowered by up to this (learn the mean wave-distorted appearance)
-    wave_misses: float = 3.0  # ... and up to this many frames in a row without a match are held, not yet a loss
-    wave_mode: float = 0.5  # from this much wave (see _waves; until it is nil again) the UUV is judged on the
+    wave_update_drop: float = (
+        0.2  # ... update_score lowered by up to this (learn the mean wave-distorted appearance)
+    )
+    wave_misses: float = (
+        3.0  # ... and up to this many frames in a row without a match are held, not yet a loss
+    )
+    wave_mode: float = (
+        0.5  # from this much wave (see _waves; until it is nil again) the UUV is judged on the
+    )
     #                         evidence of several frames and on how it stands out of the water beside it:
-    wave_evidence_frames: int = 3  # ... the mean of the last this many follows' best scores (one frame's may fall
+    wave_evidence_frames: int = (
+        3  # ... the mean of the last this many follows' best scores (one frame's may fall
+    )
     #                                 as low as the water's) reaching this share of the way from the water's level to
     wave_evidence_share: float = 0.5  # the UUV's (the recent level of its matches) ...
-    wave_follow_share: float = 0.35  # ... and the frame's own score this share; a candidate while lost this share:
-    wave_reacquire_share: float = 0.75  # the seafloor holds still patches that match as well as the water's best
-    wave_background_rate: float = 0.1  # ... the water's level: a running mean at this rate of the best score in
+    wave_follow_share: float = (
+        0.35  # ... and the frame's own score this share; a candidate while lost this share:
+    )
+    wave_reacquire_share: float = (
+        0.75  # the seafloor holds still patches that match as well as the water's best
+    )
+    wave_background_rate: float = (
+        0.1  # ... the water's level: a running mean at this rate of the best score in
+    )
     #                                     windows beside the prediction's (the template on the water around the UUV)
-    wave_background_sides: float = 1.5  # ... those windows this many template sides further out, each way
-    wave_keep_contrast: float = 0.75  # a follow below those bars, right after a match, is still the UUV if its patch
+    wave_background_sides: float = (
+        1.5  # ... those windows this many template sides further out, each way
+    )
+    wave_keep_contrast: float = (
+        0.75  # a follow below those bars, right after a match, is still the UUV if its patch
+    )
     #                                    keeps this much of the first appearance's grey-level spread (see _contrast:
     #                                    the waves scramble its structure, not its spread; the water where it was has
     #                                    less) and its score is above the water's level
@@ -140,7 +194,9 @@ def _parabola(a: float, b: float, c: float) -> float:
     return 0.0 if den >= 0 else min(0.5, max(-0.5, 0.5 * (a - c) / den))
 
 
-def _peak(scores: np.ndarray, penalty: np.ndarray | None = None) -> tuple[float, float, float, float]:
+def _peak(
+    scores: np.ndarray, penalty: np.ndarray | None = None
+) -> tuple[float, float, float, float]:
     """(rank, score, x, y) of the best match with sub-pixel offsets.
 
     With a ``penalty`` map (as ``scores``), the best place is the one whose score minus
@@ -151,7 +207,10 @@ def _peak(scores: np.ndarray, penalty: np.ndarray | None = None) -> tuple[float,
     h, w = scores.shape
     if penalty is not None:
         while True:
-            di, dj = divmod(int(np.argmax(scores[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2])), min(j + 2, w) - max(j - 1, 0))
+            di, dj = divmod(
+                int(np.argmax(scores[max(i - 1, 0) : i + 2, max(j - 1, 0) : j + 2])),
+                min(j + 2, w) - max(j - 1, 0),
+            )
             ni, nj = max(i - 1, 0) + di, max(j - 1, 0) + dj
             if (ni, nj) == (i, j):
                 break
@@ -170,7 +229,11 @@ def _ncc_maps(image: np.ndarray, columns: np.ndarray, side: int) -> np.ndarray:
     own cost is most of it. As OpenCV, a flat place of the image scores 0.
     """
     rows, cols = image.shape[0] - side + 1, image.shape[1] - side + 1
-    places = sliding_window_view(image, (side, side)).reshape(rows * cols, side * side).astype(np.float64)
+    places = (
+        sliding_window_view(image, (side, side))
+        .reshape(rows * cols, side * side)
+        .astype(np.float64)
+    )
     sums = places.sum(axis=1)
     squares = np.einsum("ij,ij->i", places, places)
     spread = squares - sums * sums / (side * side)
@@ -186,8 +249,13 @@ def _warp(src: np.ndarray, centre, angle_deg: float, scale: float, side: int) ->
     ca, sa = scale * math.cos(a), scale * math.sin(a)
     c = (side - 1) / 2.0
     M = np.array([[ca, -sa, centre[0] - (ca - sa) * c], [sa, ca, centre[1] - (sa + ca) * c]])
-    return cv2.warpAffine(src, M, (side, side), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                          borderMode=cv2.BORDER_REPLICATE)
+    return cv2.warpAffine(
+        src,
+        M,
+        (side, side),
+        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
 
 
 class TemplateMatcher:
@@ -210,7 +278,12 @@ class TemplateMatcher:
             return np.zeros((0, 0), np.float32)
         if self._grey is not None:
             gx0, gy0, grey = self._grey
-            if gx0 <= bx0 and gy0 <= by0 and bx1 <= gx0 + grey.shape[1] and by1 <= gy0 + grey.shape[0]:
+            if (
+                gx0 <= bx0
+                and gy0 <= by0
+                and bx1 <= gx0 + grey.shape[1]
+                and by1 <= gy0 + grey.shape[0]
+            ):
                 return grey[by0 - gy0 : by1 - gy0, bx0 - gx0 : bx1 - gx0]
         roi = frame_bgr[by0 * k : by1 * k, bx0 * k : bx1 * k]
         gray = cv2.cvtColor(roi, cv2.COLOR_BGR2GRAY) if roi.ndim == 3 else roi
@@ -235,7 +308,13 @@ class TemplateMatcher:
         qx, qy = self._to_work(u, v)
         half = math.ceil(self.D * self._scale * 0.75) + 2
         bx0, by0 = int(qx) - half, int(qy) - half
-        region = self._blocks(frame_bgr, max(bx0, 0), max(by0, 0), 2 * half + 1 + min(bx0, 0), 2 * half + 1 + min(by0, 0))
+        region = self._blocks(
+            frame_bgr,
+            max(bx0, 0),
+            max(by0, 0),
+            2 * half + 1 + min(bx0, 0),
+            2 * half + 1 + min(by0, 0),
+        )
         if region.shape[0] < 4 or region.shape[1] < 4:
             return None
         centre = (qx - max(bx0, 0), qy - max(by0, 0))
@@ -245,7 +324,13 @@ class TemplateMatcher:
         """Standard deviation (grey levels) of the working-resolution square the template covers at full-res (u, v)."""
         qx, qy = self._to_work(u, v)
         half = max(1, round(self.S * self._scale) // 2)
-        square = self._blocks(frame_bgr, max(round(qx) - half, 0), max(round(qy) - half, 0), 2 * half + 1, 2 * half + 1)
+        square = self._blocks(
+            frame_bgr,
+            max(round(qx) - half, 0),
+            max(round(qy) - half, 0),
+            2 * half + 1,
+            2 * half + 1,
+        )
         return float(cv2.meanStdDev(square)[1][0, 0]) if square.size else 0.0
 
     def _contrast(self, frame_bgr, u: float, v: float) -> float:
@@ -278,12 +363,16 @@ class TemplateMatcher:
         self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
         self._grey = None
         self._angle, self._scale = 0.0, 1.0
-        self._seen_angle = 0.0  # the heading the UUV was last seen at (a candidate's own may differ)
+        self._seen_angle = (
+            0.0  # the heading the UUV was last seen at (a candidate's own may differ)
+        )
         self._ref_px_per_m = px_per_m
         self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
         self._cache: dict = {}
         self._canon = self._upright(frame_bgr, self.u, self.v)
-        self._first = self._canon.copy()  # the first appearance; compared: its core (the vehicle alone) ...
+        self._first = (
+            self._canon.copy()
+        )  # the first appearance; compared: its core (the vehicle alone) ...
         self._core = max(5, round(self.p.core_share * self.S)) | 1
         self._first_turn = 0.0  # ... turned as the learnt template has turned from it
         self._firsts: dict = {}  # the core at turns (multiples of first_turn_step_deg)
@@ -297,8 +386,12 @@ class TemplateMatcher:
         self._scatter2 = 0.0  # ... and mean square departure from it (see _waves) ...
         self._changes = 0  # ... over this many follows
         self._misses = 0  # follows in a row without a match
-        self._recent: list[float] = []  # in waves: the last follows' best scores (see _evidence) ...
-        self._water = math.nan  # ... and the water's level (the best score beside the UUV, a running mean)
+        self._recent: list[
+            float
+        ] = []  # in waves: the last follows' best scores (see _evidence) ...
+        self._water = (
+            math.nan
+        )  # ... and the water's level (the best score beside the UUV, a running mean)
         self._wavy = False  # judged as through waves (see _in_waves)
 
     def _begin(self, prediction: Prediction | None) -> None:
@@ -353,7 +446,9 @@ class TemplateMatcher:
             region, template = (cv2.GaussianBlur(x, (0, 0), sigma) for x in (region, template))
         scores = cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED)
         half = (template.shape[0] - 1) / 2.0
-        rank, best, j, i = _peak(scores, self._penalty(scores.shape, bx0 + half, by0 + half, 1.0, prior))
+        rank, best, j, i = _peak(
+            scores, self._penalty(scores.shape, bx0 + half, by0 + half, 1.0, prior)
+        )
         u, v = self._to_full(bx0 + j + half, by0 + i + half)
         return rank, best, u, v
 
@@ -374,7 +469,9 @@ class TemplateMatcher:
             return self._match_in(region, bx0, by0, self._template(angle))[1:]
 
         left, right = at(self._angle - step), at(self._angle + step)
-        if found0[0] + self.p.turn_gain >= max(left[0], right[0]):  # no clearly better heading: stay near this one
+        if found0[0] + self.p.turn_gain >= max(
+            left[0], right[0]
+        ):  # no clearly better heading: stay near this one
             self._angle += step * _parabola(left[0], found0[0], right[0])
             return found0
         direction, best = (-1.0, left) if left[0] > right[0] else (1.0, right)
@@ -387,7 +484,9 @@ class TemplateMatcher:
         self._angle = angle
         return best
 
-    def _search(self, frame_bgr, cu: float, cv_: float, radius_px: float, angles, sigma_px: float = math.nan):
+    def _search(
+        self, frame_bgr, cu: float, cv_: float, radius_px: float, angles, sigma_px: float = math.nan
+    ):
         """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_).
 
         With a finite ``sigma_px`` the best is the one whose score less its distance
@@ -401,7 +500,9 @@ class TemplateMatcher:
         if region is None:
             return -1.0, math.nan, math.nan, self._angle
         if max(region.shape) <= self.p.coarse_side:
-            best = max((*self._match_in(region, bx0, by0, self._template(a), prior), a) for a in angles)
+            best = max(
+                (*self._match_in(region, bx0, by0, self._template(a), prior), a) for a in angles
+            )
             return best[1:]
         f = max(2, self.S // self.p.coarse_px)
         h, w = region.shape[0] // f, region.shape[1] // f
@@ -412,8 +513,12 @@ class TemplateMatcher:
             if t.shape[0] < min(h, w):
                 scores = cv2.matchTemplate(small, t, cv2.TM_CCOEFF_NORMED)
                 half = (t.shape[0] - 1) / 2.0
-                c = half * f + (f - 1) / 2.0  # the first cell's centre, working pixels from the region's corner
-                r, _, j, i = _peak(scores, self._penalty(scores.shape, bx0 + c, by0 + c, float(f), prior))
+                c = (
+                    half * f + (f - 1) / 2.0
+                )  # the first cell's centre, working pixels from the region's corner
+                r, _, j, i = _peak(
+                    scores, self._penalty(scores.shape, bx0 + c, by0 + c, float(f), prior)
+                )
                 places.append((r, c + j * f, c + i * f, a))
         best = (-math.inf, -1.0, math.nan, math.nan, self._angle)
         kept: list[tuple[float, float]] = []
@@ -433,21 +538,32 @@ class TemplateMatcher:
 
     def _first_core(self, turn_deg: float) -> np.ndarray:
         """The first appearance's core turned by ``turn_deg`` (a multiple of ``first_turn_step_deg``; cached)."""
-        key = round(turn_deg / self.p.first_turn_step_deg) % round(360.0 / self.p.first_turn_step_deg)
+        key = round(turn_deg / self.p.first_turn_step_deg) % round(
+            360.0 / self.p.first_turn_step_deg
+        )
         if key not in self._firsts:
             c = (self.D - 1) / 2.0
-            self._firsts[key] = _warp(self._first, (c, c), key * self.p.first_turn_step_deg, 1.0, self._core)
+            self._firsts[key] = _warp(
+                self._first, (c, c), key * self.p.first_turn_step_deg, 1.0, self._core
+            )
         return self._firsts[key]
 
     def _first_cores(self, turns) -> np.ndarray:
         """The first appearance's cores at ``turns`` (see :meth:`_first_core`) as the columns of one matrix,
         each less its mean and divided by its norm (float64, cached): the templates of :func:`_ncc_maps`."""
-        key = tuple(round(a / self.p.first_turn_step_deg) % round(360.0 / self.p.first_turn_step_deg) for a in turns)
+        key = tuple(
+            round(a / self.p.first_turn_step_deg) % round(360.0 / self.p.first_turn_step_deg)
+            for a in turns
+        )
         if key not in self._first_columns:
-            cores = np.stack([self._first_core(a).ravel().astype(np.float64) for a in turns], axis=1)
+            cores = np.stack(
+                [self._first_core(a).ravel().astype(np.float64) for a in turns], axis=1
+            )
             cores -= cores.mean(axis=0)
             norms = np.linalg.norm(cores, axis=0)
-            self._first_columns[key] = np.divide(cores, norms, out=np.zeros_like(cores), where=norms > 0)
+            self._first_columns[key] = np.divide(
+                cores, norms, out=np.zeros_like(cores), where=norms > 0
+            )
         return self._first_columns[key]
 
     def _first_at(self, upright: np.ndarray) -> tuple[float, float, float] | None:
@@ -467,7 +583,9 @@ class TemplateMatcher:
         tops = maps.reshape(len(turns), -1).max(axis=1)
         j = int(np.argmax(tops))
         _, score, dx, dy = _peak(maps[j])
-        turn = turns[j] + (step * _parabola(tops[j - 1], score, tops[j + 1]) if 0 < j < 2 * n else 0.0)
+        turn = turns[j] + (
+            step * _parabola(tops[j - 1], score, tops[j + 1]) if 0 < j < 2 * n else 0.0
+        )
         dx, dy = dx - m, dy - m
         if score < self.p.anchor_score:
             return None
@@ -497,7 +615,9 @@ class TemplateMatcher:
         dx, dy, self._first_turn = held
         if math.hypot(dx, dy) > self.p.recentre_px:
             M = np.array([[1.0, 0.0, -dx], [0.0, 1.0, -dy]])
-            canon = cv2.warpAffine(canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            canon = cv2.warpAffine(
+                canon, M, (self.D, self.D), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+            )
         self._canon = canon
         self._cache.clear()
 
@@ -508,8 +628,12 @@ class TemplateMatcher:
         self._changes += 1
         if math.isfinite(self._mean_score):
             change = min(abs(score - self._mean_score), self.p.wobble_cap)
-            self._scatter2 += max(self.p.wobble_rate, 1.0 / self._changes) * (change * change - self._scatter2)
-            self._mean_score += max(self.p.wobble_mean_rate, 1.0 / self._changes) * (score - self._mean_score)
+            self._scatter2 += max(self.p.wobble_rate, 1.0 / self._changes) * (
+                change * change - self._scatter2
+            )
+            self._mean_score += max(self.p.wobble_mean_rate, 1.0 / self._changes) * (
+                score - self._mean_score
+            )
         else:
             self._mean_score = score
 
@@ -519,7 +643,10 @@ class TemplateMatcher:
         A still surface's scatter is the sensor's and the codec's noise; waves move the vehicle's image from one
         frame to the next, so its score jumps (a loss drops it once, counted up to ``wobble_cap``)."""
         scatter = math.sqrt(self._scatter2)
-        return min(1.0, max(0.0, (scatter - self.p.wobble_flat) / (self.p.wobble_waves - self.p.wobble_flat)))
+        return min(
+            1.0,
+            max(0.0, (scatter - self.p.wobble_flat) / (self.p.wobble_waves - self.p.wobble_flat)),
+        )
 
     def _in_waves(self) -> bool:
         """Whether the UUV is judged as seen through waves (:meth:`_stands_out`): from when :meth:`_waves` reaches
@@ -539,14 +666,18 @@ class TemplateMatcher:
     def _floor(self) -> float:
         """The least NCC a match near the prediction needs: :meth:`_ok`, and no more than ``level_drop`` (more in
         waves) below the recent level."""
-        return max(self._ok(), self._level - self.p.level_drop - self._waves() * self.p.wave_level_drop)
+        return max(
+            self._ok(), self._level - self.p.level_drop - self._waves() * self.p.wave_level_drop
+        )
 
     def _far(self) -> float:
         """The least NCC a candidate found while lost needs: ``reacquire_score`` and within ``reacquire_below_level``
         of the recent level (both eased in waves)."""
         waves = self._waves()
-        return max(self.p.reacquire_score - waves * self.p.wave_ok_drop,
-                   self._level - self.p.reacquire_below_level - waves * self.p.wave_level_drop)
+        return max(
+            self.p.reacquire_score - waves * self.p.wave_ok_drop,
+            self._level - self.p.reacquire_below_level - waves * self.p.wave_level_drop,
+        )
 
     def _rebound(self) -> float:
         """The least NCC a match near the prediction needs after frames without one: :meth:`_floor` on a still
@@ -560,8 +691,10 @@ class TemplateMatcher:
         """The template's best scores on the water beside the prediction's window: in windows as large,
         ``wave_background_sides`` template sides further out on each side (those inside the frame)."""
         d = radius + self.p.wave_background_sides * self.S * self.k * self._scale
-        found = (self._search(frame_bgr, cu + du, cv_ + dv, radius, (self._angle,))[0]
-                 for du, dv in ((d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)))
+        found = (
+            self._search(frame_bgr, cu + du, cv_ + dv, radius, (self._angle,))[0]
+            for du, dv in ((d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d))
+        )
         return [s for s in found if s > -1.0]
 
     def _wave_bar(self, share: float) -> float:
@@ -569,10 +702,21 @@ class TemplateMatcher:
         (:meth:`_floor` until the water's level is known; before any match, the follows' mean score: the first
         appearance's own 1.0 is not what the waves let it reach)."""
         level = self._level if self._levels else self._mean_score
-        return self._water + share * (level - self._water) if math.isfinite(self._water) else self._floor()
+        return (
+            self._water + share * (level - self._water)
+            if math.isfinite(self._water)
+            else self._floor()
+        )
 
-    def _stands_out(self, frame_bgr, cu: float, cv_: float, radius: float, score: float,
-                    evidence: float | None = None) -> bool:
+    def _stands_out(
+        self,
+        frame_bgr,
+        cu: float,
+        cv_: float,
+        radius: float,
+        score: float,
+        evidence: float | None = None,
+    ) -> bool:
         """In waves: whether the UUV is in the window of ``radius`` about (cu, cv_) whose best score is ``score``.
         Its best stands out of the water beside the window (:meth:`_beside`). A follow (``evidence``: the mean of
         the last ``wave_evidence_frames`` scores; one frame's does not tell, the wave-distorted UUV's falls at times
@@ -583,13 +727,17 @@ class TemplateMatcher:
         beside = self._beside(frame_bgr, cu, cv_, radius)
         if beside and evidence is not None:
             water = float(np.median(beside))
-            self._water = water if not math.isfinite(self._water) else (
-                self._water + self.p.wave_background_rate * (water - self._water))
+            self._water = (
+                water
+                if not math.isfinite(self._water)
+                else (self._water + self.p.wave_background_rate * (water - self._water))
+            )
         if evidence is None:
             passed = score >= self._wave_bar(self.p.wave_reacquire_share)
         else:
             passed = score >= self._wave_bar(self.p.wave_follow_share) and (
-                evidence >= self._wave_bar(self.p.wave_evidence_share))
+                evidence >= self._wave_bar(self.p.wave_evidence_share)
+            )
         return passed and (not beside or score > float(np.median(beside)))
 
     # -- per frame ---------------------------------------------------------------------------
@@ -605,21 +753,29 @@ class TemplateMatcher:
         vehicle looks much the same end for end, so the heading may be half a turn off; it is turned round then."""
         contrast = self._contrast(frame_bgr, u, v)
         if contrast < self.p.check_contrast:
-            return contrast >= self.p.min_contrast  # fading into the water: its structure is lost, the template judges
+            return (
+                contrast >= self.p.min_contrast
+            )  # fading into the water: its structure is lost, the template judges
         patch = self._upright(frame_bgr, u, v)
         if patch is not None and self._first_at(patch) is not None:
             return True
         if not either_way:
             return False
         self._angle += 180.0
-        if (patch := self._upright(frame_bgr, u, v)) is not None and self._first_at(patch) is not None:
+        if (patch := self._upright(frame_bgr, u, v)) is not None and self._first_at(
+            patch
+        ) is not None:
             return True
         self._angle -= 180.0
         return False
 
     def _match(self, found: bool, score: float, u: float, v: float) -> Match:
         side = round(self.S * self.k * self._scale)
-        box = (round(u - (side - 1) / 2.0), round(v - (side - 1) / 2.0), side, side) if found else None
+        box = (
+            (round(u - (side - 1) / 2.0), round(v - (side - 1) / 2.0), side, side)
+            if found
+            else None
+        )
         return Match(found, score, u, v, box)
 
     def follow(self, frame_bgr, prediction: Prediction | None) -> Match:
@@ -630,65 +786,97 @@ class TemplateMatcher:
             cu, cv_ = self.u + self._velocity[0], self.v + self._velocity[1]
         radius = self._radius(prediction, self.p.default_radius_px)
         self._prepare(frame_bgr, cu, cv_, radius)
-        score, u, v, _ = self._search(frame_bgr, cu, cv_, radius, (self._angle,), radius / self.p.search_sigmas)
+        score, u, v, _ = self._search(
+            frame_bgr, cu, cv_, radius, (self._angle,), radius / self.p.search_sigmas
+        )
         self._frames += 1
         slow_step = self._frames % self.p.adapt_every == 0
         if slow_step or score < self._level - self.p.turn_drop:
             score, u, v = self._refine(frame_bgr, (score, u, v))
         in_waves = self._in_waves()
-        floor = self._floor() if not self._misses else self._rebound()  # after a held frame: convincingly back
+        floor = (
+            self._floor() if not self._misses else self._rebound()
+        )  # after a held frame: convincingly back
         self._note_score(score)
-        self._recent = (self._recent + [score])[-self.p.wave_evidence_frames:]
+        self._recent = (self._recent + [score])[-self.p.wave_evidence_frames :]
         near = math.hypot(u - cu, v - cv_) <= radius + 2 * self.k
         if in_waves:
             contrast = self._contrast(frame_bgr, u, v)
-            passed = near and contrast >= self.p.min_contrast and self._stands_out(
-                frame_bgr, cu, cv_, radius, score, float(np.mean(self._recent)))
-            passed = passed or (near and not self._misses and contrast >= self.p.wave_keep_contrast
-                                and score > self._water)
+            passed = (
+                near
+                and contrast >= self.p.min_contrast
+                and self._stands_out(
+                    frame_bgr, cu, cv_, radius, score, float(np.mean(self._recent))
+                )
+            )
+            passed = passed or (
+                near
+                and not self._misses
+                and contrast >= self.p.wave_keep_contrast
+                and score > self._water
+            )
         else:
             passed = score >= floor and near and self._visible(frame_bgr, u, v)
         if not passed:
             self._misses += 1
-            young = self._changes <= self.p.wave_evidence_frames  # the first follows: the sea state not yet told
+            young = (
+                self._changes <= self.p.wave_evidence_frames
+            )  # the first follows: the sea state not yet told
             held = near and self._misses <= self.p.wave_misses * max(self._waves(), float(young))
             return Match(False, score, u, v, held=held)
         self._misses = 0
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v, self._seen_angle = u, v, self._angle
         self._levels += 1
-        self._level += max(0.1, 1.0 / self._levels) * (score - self._level)  # a running mean over the first ones
+        self._level += max(0.1, 1.0 / self._levels) * (
+            score - self._level
+        )  # a running mean over the first ones
         if score >= self.p.update_score - self._waves() * self.p.wave_update_drop and slow_step:
             self._learn(frame_bgr, u, v)
         return self._match(True, score, u, v)
 
-    def _candidate_passes(self, frame_bgr, score: float, u: float, v: float, prediction: Prediction | None,
-                          window: tuple[float, float, float]) -> Match:
+    def _candidate_passes(
+        self,
+        frame_bgr,
+        score: float,
+        u: float,
+        v: float,
+        prediction: Prediction | None,
+        window: tuple[float, float, float],
+    ) -> Match:
         """A candidate while lost, the best found in ``window`` (u, v, radius): the re-acquisition's bar, or the bar
         of :meth:`follow` when the prediction's window is no wider than the vehicle (lost a moment ago: nothing else
         fits where it can be). In waves: it stands out of the water beside the window (:meth:`_stands_out`)."""
         if self._wavy:
             passed = self._contrast(frame_bgr, u, v) >= self.p.min_contrast and self._stands_out(
-                frame_bgr, *window, score)
+                frame_bgr, *window, score
+            )
             return self._match(passed, score, u, v)
         side = self.S * self.k * self._scale
         if prediction is not None and self._radius(prediction, math.inf) <= side:
             need = self._rebound()
         else:
             need = self._far()
-        return self._match(bool(score >= need and self._visible(frame_bgr, u, v, either_way=True)), score, u, v)
+        return self._match(
+            bool(score >= need and self._visible(frame_bgr, u, v, either_way=True)), score, u, v
+        )
 
     def confirm(self, frame_bgr, u: float, v: float, prediction: Prediction | None) -> Match:
         self._begin(prediction)
         tol = self.p.reacquire_tolerance * self.S * self.k * self._scale + self.k
         self._prepare(frame_bgr, u, v, tol)
         window = (u, v, tol)
-        score, u, v, _ = self._search(frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas)
+        score, u, v, _ = self._search(
+            frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas
+        )
         if score >= self._ok():
             score, u, v = self._refine(frame_bgr, (score, u, v))
         candidate = self._candidate_passes(frame_bgr, score, u, v, prediction, window)
-        if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, self._seen_angle,
-                                                                            u, v):
+        if (
+            candidate.found
+            and prediction is not None
+            and self._still_there(frame_bgr, prediction, self._seen_angle, u, v)
+        ):
             return self._match(False, score, u, v)
         return candidate
 
@@ -708,12 +896,20 @@ class TemplateMatcher:
         else:
             cu, cv_, radius, sigma = W / 2.0, H / 2.0, float(max(W, H)), math.nan
         n = self.p.reacquire_headings
-        turn = prediction.turn_deg if prediction is not None and prediction.turn_deg < 180.0 else 180.0
+        turn = (
+            prediction.turn_deg if prediction is not None and prediction.turn_deg < 180.0 else 180.0
+        )
         self._angle = self._seen_angle  # not a candidate's that did not confirm
-        if turn < 90.0:  # only the headings it can have turned to since it was seen (either way round: it looks
+        if (
+            turn < 90.0
+        ):  # only the headings it can have turned to since it was seen (either way round: it looks
             #              much the same end for end), as far apart as at most
             m = math.ceil(2.0 * turn * n / 360.0) + 1
-            angles = [self._angle + flip - turn + 2.0 * turn * j / (m - 1) for flip in (0.0, 180.0) for j in range(m)]
+            angles = [
+                self._angle + flip - turn + 2.0 * turn * j / (m - 1)
+                for flip in (0.0, 180.0)
+                for j in range(m)
+            ]
         else:
             angles = [self._angle + 360.0 * j / n for j in range(n)]
         score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles, sigma)
@@ -722,22 +918,33 @@ class TemplateMatcher:
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
         candidate = self._candidate_passes(frame_bgr, score, u, v, prediction, (cu, cv_, radius))
-        if abs((self._angle - saved + 90.0) % 180.0 - 90.0) > turn:  # a heading it cannot have turned to (either
+        if (
+            abs((self._angle - saved + 90.0) % 180.0 - 90.0) > turn
+        ):  # a heading it cannot have turned to (either
             #                                                           way round): something else
             candidate = self._match(False, score, u, v)
-        if candidate.found and prediction is not None and self._still_there(frame_bgr, prediction, saved, u, v):
-            candidate = self._match(False, score, u, v)  # a look-alike beside the UUV, which is partly hidden
+        if (
+            candidate.found
+            and prediction is not None
+            and self._still_there(frame_bgr, prediction, saved, u, v)
+        ):
+            candidate = self._match(
+                False, score, u, v
+            )  # a look-alike beside the UUV, which is partly hidden
         if not candidate.found:
             self._angle = saved
         return candidate
 
-    def _still_there(self, frame_bgr, prediction: Prediction, angle: float, u: float, v: float) -> bool:
+    def _still_there(
+        self, frame_bgr, prediction: Prediction, angle: float, u: float, v: float
+    ) -> bool:
         """Whether a candidate at (u, v), away from the prediction, has the UUV itself beside it: its first
         appearance, at the heading it was last seen at, where the prediction has it (partly hidden, say by a
         vehicle passing over it, it matches the template less well than the look-alike does)."""
         side = self.S * self.k * self._scale
-        if math.hypot(u - prediction.u, v - prediction.v) <= max(self.p.reacquire_tolerance * side,
-                                                                 prediction.sigma_px):
+        if math.hypot(u - prediction.u, v - prediction.v) <= max(
+            self.p.reacquire_tolerance * side, prediction.sigma_px
+        ):
             return False
         found, self._angle = self._angle, angle
         patch = self._upright(frame_bgr, prediction.u, prediction.v)
@@ -746,6 +953,9 @@ class TemplateMatcher:
             return False
         scores = cv2.matchTemplate(patch, self._first_core(self._first_turn), cv2.TM_CCOEFF_NORMED)
         _, best, _, (j, i) = cv2.minMaxLoc(scores)
-        c = (scores.shape[0] - 1) / 2.0  # the prediction's place; the candidate is further than the patch reaches
-        return best >= self.p.there_score and math.hypot(j - c, i - c) * self.k < 0.5 * math.hypot(u - prediction.u,
-                                                                                                   v - prediction.v)
+        c = (
+            scores.shape[0] - 1
+        ) / 2.0  # the prediction's place; the candidate is further than the patch reaches
+        return best >= self.p.there_score and math.hypot(j - c, i - c) * self.k < 0.5 * math.hypot(
+            u - prediction.u, v - prediction.v
+        )

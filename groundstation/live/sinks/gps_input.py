@@ -102,14 +102,37 @@ def _dop(acc_m: float) -> float:
 
 def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> dict:
     """GPS_INPUT fields for the newest fix at send time (a no-fix message unless it is ok and fresh)."""
-    valid = (fix is not None and fix.ok and abs(t_send_unix - fix.t_unix) <= max_age_s
-             and math.isfinite(fix.lat) and math.isfinite(fix.lon) and math.isfinite(fix.alt_amsl_m))
+    valid = (
+        fix is not None
+        and fix.ok
+        and abs(t_send_unix - fix.t_unix) <= max_age_s
+        and math.isfinite(fix.lat)
+        and math.isfinite(fix.lon)
+        and math.isfinite(fix.alt_amsl_m)
+    )
     if not valid:
         week, week_ms = gps_time(t_send_unix)
-        return {"time_usec": int(t_send_unix * 1e6), "gps_id": 0, "ignore_flags": IGNORE_ALL,
-                "time_week_ms": week_ms, "time_week": week, "fix_type": FIX_NONE, "lat": 0, "lon": 0, "alt": 0.0,
-                "hdop": DOP_MAX, "vdop": DOP_MAX, "vn": 0.0, "ve": 0.0, "vd": 0.0, "speed_accuracy": 0.0,
-                "horiz_accuracy": 0.0, "vert_accuracy": 0.0, "satellites_visible": 0, "yaw": 0}
+        return {
+            "time_usec": int(t_send_unix * 1e6),
+            "gps_id": 0,
+            "ignore_flags": IGNORE_ALL,
+            "time_week_ms": week_ms,
+            "time_week": week,
+            "fix_type": FIX_NONE,
+            "lat": 0,
+            "lon": 0,
+            "alt": 0.0,
+            "hdop": DOP_MAX,
+            "vdop": DOP_MAX,
+            "vn": 0.0,
+            "ve": 0.0,
+            "vd": 0.0,
+            "speed_accuracy": 0.0,
+            "horiz_accuracy": 0.0,
+            "vert_accuracy": 0.0,
+            "satellites_visible": 0,
+            "yaw": 0,
+        }
     t_exposure = fix.t_gnss if math.isfinite(fix.t_gnss) else fix.t_unix
     week, week_ms = gps_time(t_exposure)
     ignore = IGNORE_VELOCITY
@@ -120,11 +143,27 @@ def gps_input_fields(fix: Fix | None, t_send_unix: float, max_age_s: float) -> d
     if not math.isfinite(v_acc):
         ignore |= IGNORE_VERT_ACC | IGNORE_VDOP
         v_acc = 0.0
-    return {"time_usec": int(t_exposure * 1e6), "gps_id": 0, "ignore_flags": ignore, "time_week_ms": week_ms,
-            "time_week": week, "fix_type": FIX_3D, "lat": round(fix.lat * 1e7), "lon": round(fix.lon * 1e7),
-            "alt": float(fix.alt_amsl_m), "hdop": _dop(h_acc), "vdop": _dop(v_acc), "vn": 0.0, "ve": 0.0, "vd": 0.0,
-            "speed_accuracy": 0.0, "horiz_accuracy": float(h_acc), "vert_accuracy": float(v_acc),
-            "satellites_visible": SATELLITES, "yaw": 0}
+    return {
+        "time_usec": int(t_exposure * 1e6),
+        "gps_id": 0,
+        "ignore_flags": ignore,
+        "time_week_ms": week_ms,
+        "time_week": week,
+        "fix_type": FIX_3D,
+        "lat": round(fix.lat * 1e7),
+        "lon": round(fix.lon * 1e7),
+        "alt": float(fix.alt_amsl_m),
+        "hdop": _dop(h_acc),
+        "vdop": _dop(v_acc),
+        "vn": 0.0,
+        "ve": 0.0,
+        "vd": 0.0,
+        "speed_accuracy": 0.0,
+        "horiz_accuracy": float(h_acc),
+        "vert_accuracy": float(v_acc),
+        "satellites_visible": SATELLITES,
+        "yaw": 0,
+    }
 
 
 def mavlink_gps_link(url: str, signing_key: bytes | None = None) -> MavlinkLink:
@@ -135,8 +174,14 @@ def mavlink_gps_link(url: str, signing_key: bytes | None = None) -> MavlinkLink:
     QGroundControl in between see a live component.
     """
     m = mavutil().mavlink
-    return MavlinkLink(url, SKYFIX_SYSID, GPS_COMPID, name="GPS_INPUT link", signing_key=signing_key,
-                       heartbeat=(m.MAV_TYPE_ONBOARD_CONTROLLER, m.MAV_AUTOPILOT_INVALID))
+    return MavlinkLink(
+        url,
+        SKYFIX_SYSID,
+        GPS_COMPID,
+        name="GPS_INPUT link",
+        signing_key=signing_key,
+        heartbeat=(m.MAV_TYPE_ONBOARD_CONTROLLER, m.MAV_AUTOPILOT_INVALID),
+    )
 
 
 class GpsInputSink:
@@ -160,7 +205,9 @@ class GpsInputSink:
         self.last_sent_t: float | None = None  # UNIX s, station clock
         self.no_fix_reason: str | None = None  # why the last message said no fix (:mod:`.no_fix`)
         self.sent_fix: Fix | None = None  # the fix the last message carried, when it carried one
-        self.latencies_s: deque[float] = deque(maxlen=100_000)  # frame arrival → GPS_INPUT sent, new fixes
+        self.latencies_s: deque[float] = deque(
+            maxlen=100_000
+        )  # frame arrival → GPS_INPUT sent, new fixes
         self._fix: Fix | None = None
         self._info = None
         self._new = asyncio.Event()
@@ -169,8 +216,12 @@ class GpsInputSink:
         self._lock = 0  # the operator's commands before the newest frame (FrameInfo.lock)
         self._stopping = False
         self._closed = False
-        self._send_lock = threading.Lock()  # the loop (new fixes) and the keep-alive thread both send
-        self._next_due = 0.0  # time.monotonic() by which the keep-alive sends if nothing else was sent
+        self._send_lock = (
+            threading.Lock()
+        )  # the loop (new fixes) and the keep-alive thread both send
+        self._next_due = (
+            0.0  # time.monotonic() by which the keep-alive sends if nothing else was sent
+        )
         self._keep_alive = Supervised("GPS_INPUT keep-alive", self._keep_alive_body)
 
     def on_fix(self, fix: Fix, info) -> None:
@@ -182,7 +233,9 @@ class GpsInputSink:
         if fix.ok:
             t_mono = getattr(info, "t_recv_mono", None)
             arrival = Arrival(info.t_recv, t_mono, time.monotonic()) if t_mono is not None else None
-            self._refusal = self.gate.check(fix, time.time(), getattr(info, "window", None), arrival)
+            self._refusal = self.gate.check(
+                fix, time.time(), getattr(info, "window", None), arrival
+            )
             if self._refusal is None:
                 self._last_ok = fix
         elif fix.status in LOSS_STATUSES:
@@ -220,8 +273,11 @@ class GpsInputSink:
         final = gps_input_fields(None, time.time(), self.max_age_s)
         delivered = await in_thread(self.link.close, ("GPS_INPUT", final), name="GPS_INPUT close")
         self._sent(final, None, "stopped", delivered)
-        log.info("GPS_INPUT %s: stopped; %s", self.link.url,
-                 "the last message said no fix" if delivered else "the link was down: no last message")
+        log.info(
+            "GPS_INPUT %s: stopped; %s",
+            self.link.url,
+            "the last message said no fix" if delivered else "the link was down: no last message",
+        )
 
     def _send(self, fresh: bool) -> None:
         """The latest state now (the event loop for a new fix, ``fresh``; the keep-alive thread otherwise)."""
@@ -233,8 +289,12 @@ class GpsInputSink:
             fields = gps_input_fields(last_ok, time.time(), self.max_age_s)
             delivered = self.link.send("GPS_INPUT", fields)
             valid = fields["fix_type"] == FIX_3D
-            t_sent = self._sent(fields, last_ok if valid else None,
-                                None if valid else no_fix_reason(latest, self._refusal), delivered)
+            t_sent = self._sent(
+                fields,
+                last_ok if valid else None,
+                None if valid else no_fix_reason(latest, self._refusal),
+                delivered,
+            )
             if valid and delivered and fresh and latest is last_ok:
                 self.latencies_s.append(t_sent - self._info.t_recv)
 
@@ -252,11 +312,23 @@ class GpsInputSink:
         return self.last_fix_type, self.no_fix_reason
 
     def status(self, now: float) -> dict:
-        fix, reason = self.sent_fix, self.no_fix_reason  # the keep-alive thread may replace them meanwhile
-        return {"url": self.link.url, "sent": self.sent, "sent_valid": self.sent_valid,
-                "not_delivered": self.not_delivered, "last_fix_type": self.last_fix_type,
-                "last_sent_t": self.last_sent_t, "no_fix_reason": reason, "no_fix_why": NO_FIX_WHY.get(reason),
-                "sent_h_acc_m": None if fix is None else fix.h_acc_m,  # the gates took it: finite
-                "sent_fix_t": None if fix is None else fix.t_unix,
-                "keep_alive_restarts": self._keep_alive.restarts, "keep_alive_failure": self._keep_alive.failure,
-                "link": self.link.status(now), "gates": self.gate.status(now)}
+        fix, reason = (
+            self.sent_fix,
+            self.no_fix_reason,
+        )  # the keep-alive thread may replace them meanwhile
+        return {
+            "url": self.link.url,
+            "sent": self.sent,
+            "sent_valid": self.sent_valid,
+            "not_delivered": self.not_delivered,
+            "last_fix_type": self.last_fix_type,
+            "last_sent_t": self.last_sent_t,
+            "no_fix_reason": reason,
+            "no_fix_why": NO_FIX_WHY.get(reason),
+            "sent_h_acc_m": None if fix is None else fix.h_acc_m,  # the gates took it: finite
+            "sent_fix_t": None if fix is None else fix.t_unix,
+            "keep_alive_restarts": self._keep_alive.restarts,
+            "keep_alive_failure": self._keep_alive.failure,
+            "link": self.link.status(now),
+            "gates": self.gate.status(now),
+        }

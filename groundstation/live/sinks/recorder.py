@@ -66,10 +66,18 @@ CALIBRATION_TABLES = ("camera", "mount", "water", "tracker", "uncertainty", "tim
 QUEUE_ITEMS = 20000  # records waiting for the writer (MAVLink frames, depth samples, fixes): ~2 min of telemetry
 QUEUE_FRAMES = 30  # video frames waiting for the encoder
 FLUSH_S = 1.0
-CLOSE_WAIT_S = 0.5  # a stop waits this long for the writer to close its files, then leaves it to finish
+CLOSE_WAIT_S = (
+    0.5  # a stop waits this long for the writer to close its files, then leaves it to finish
+)
 #: ``[timing]`` keys that say what a live run measured and used (localizer.calibration.Timing)
-RECORDED_TIMING = ("mavlink_latency_measured_s", "mavlink_latency_measured_from_t", "video_latency_s",
-                   "video_latency_source", "video_latency_sigma_s", "video_latency_from_t")
+RECORDED_TIMING = (
+    "mavlink_latency_measured_s",
+    "mavlink_latency_measured_from_t",
+    "video_latency_s",
+    "video_latency_source",
+    "video_latency_sigma_s",
+    "video_latency_from_t",
+)
 TIMING_CHECK_S = 1.0
 
 
@@ -97,7 +105,9 @@ def _tables(tables: dict) -> str:
     lines = []
     for name in CALIBRATION_TABLES:
         if name in tables:
-            lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in tables[name].items()]
+            lines += ["", f"[{name}]"] + [
+                f"{k} = {_toml_value(v)}" for k, v in tables[name].items()
+            ]
     return "\n".join(lines) + "\n"
 
 
@@ -116,7 +126,8 @@ class VideoWriter:
         self.dropped = 0
         self._container = av.open(str(path), "w", format="mpegts")
         self._stream = stream = self._container.add_stream(
-            "libx264", options={"preset": "ultrafast", "tune": "zerolatency"})
+            "libx264", options={"preset": "ultrafast", "tune": "zerolatency"}
+        )
         stream.width, stream.height = size
         stream.pix_fmt = "yuv420p"
         stream.codec_context.time_base = TICK
@@ -129,7 +140,9 @@ class VideoWriter:
         self._last_pts = -1
 
     def write(self, t_unix: float, image) -> None:
-        if self._t0 is not None and t_unix <= self._t_last:  # a reconnected stream's clock went back: out of order
+        if (
+            self._t0 is not None and t_unix <= self._t_last
+        ):  # a reconnected stream's clock went back: out of order
             self.dropped += 1
             return
         self._t0 = t_unix if self._t0 is None else self._t0
@@ -168,7 +181,11 @@ class UuvRecord:
 
     def on_depth(self, sample: DepthSample, t_recv: float) -> None:
         rec = {"t": sample.t, "depth_m": sample.depth_m, "t_recv": t_recv, "source": sample.source}
-        rec |= {k: v for k, v in (("sigma_m", sample.sigma_m), ("vspeed_mps", sample.vspeed_mps)) if math.isfinite(v)}
+        rec |= {
+            k: v
+            for k, v in (("sigma_m", sample.sigma_m), ("vspeed_mps", sample.vspeed_mps))
+            if math.isfinite(v)
+        }
         self.depth_samples += self.recorder._put(("depth", (self.folder, json.dumps(rec) + "\n")))
 
     def on_fix(self, fix: Fix, info) -> None:
@@ -201,36 +218,51 @@ def new_recording(parent, t_unix: float) -> Path:
                 continue
             return folder
     except OSError as e:
-        raise OSError(f"--recordings {parent}: cannot make a folder in it: {e.strerror or e}") from None
+        raise OSError(
+            f"--recordings {parent}: cannot make a folder in it: {e.strerror or e}"
+        ) from None
 
 
 class Recorder:
     """Worker writing the session (see the module docstring); :meth:`of` is each UUV's part of it."""
 
-    def __init__(self, directory: str, cal_source: str, video_size: tuple[int, int] | None = None,
-                 timing: Callable[[], dict] | None = None, uuv_ids: tuple[str, ...] = (PRIMARY_UUV,)):
+    def __init__(
+        self,
+        directory: str,
+        cal_source: str,
+        video_size: tuple[int, int] | None = None,
+        timing: Callable[[], dict] | None = None,
+        uuv_ids: tuple[str, ...] = (PRIMARY_UUV,),
+    ):
         self.dir = Path(directory)
         if self.dir.exists() and not self.dir.is_dir():
             raise FileExistsError(f"--record {directory}: exists and is not a directory")
         if self.dir.exists() and any(self.dir.iterdir()):
-            raise FileExistsError(f"--record {directory}: exists and is not empty (a recording is never overwritten; "
-                                  "--recordings PARENT records each start into a new folder of its own)")
+            raise FileExistsError(
+                f"--record {directory}: exists and is not empty (a recording is never overwritten; "
+                "--recordings PARENT records each start into a new folder of its own)"
+            )
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise OSError(f"--record {directory}: cannot create it: {e.strerror}") from None
         # [tracker] is the live run's own: the first frame the target was tracked on (see on_fix), not the
         # calibration file's, whose init_t belongs to another recording
-        self._calibration = {k: v for k, v in tomllib.loads(Path(cal_source).read_text()).items() if k != "tracker"}
+        self._calibration = {
+            k: v for k, v in tomllib.loads(Path(cal_source).read_text()).items() if k != "tracker"
+        }
         if "timing" in self._calibration:  # another recording's measurements are not this one's
-            self._calibration["timing"] = {k: v for k, v in self._calibration["timing"].items()
-                                           if k not in RECORDED_TIMING}
+            self._calibration["timing"] = {
+                k: v for k, v in self._calibration["timing"].items() if k not in RECORDED_TIMING
+            }
         self.timing = timing or dict
         self._write_toml(session_toml(self._calibration))
         self.video_size = video_size
         # the first UUV is the session's own; each other has its folder under uuvs/ (session/read.py reads them)
-        self._uuvs = {uuv_id: UuvRecord(self, uuv_id, self.dir if i == 0 else self.dir / UUVS_DIR / uuv_id)
-                      for i, uuv_id in enumerate(uuv_ids)}
+        self._uuvs = {
+            uuv_id: UuvRecord(self, uuv_id, self.dir if i == 0 else self.dir / UUVS_DIR / uuv_id)
+            for i, uuv_id in enumerate(uuv_ids)
+        }
         self.first = self._uuvs[uuv_ids[0]]
         for uuv in list(self._uuvs.values())[1:]:
             uuv.folder.mkdir(parents=True)
@@ -293,14 +325,18 @@ class Recorder:
         if uuv is self.first:
             self._put(("toml", (self.dir / "session.toml", self._session_toml())))
         else:
-            self._put(("toml", (uuv.folder / UUV_TOML, _tables({"tracker": uuv.tracker}).lstrip("\n"))))
+            self._put(
+                ("toml", (uuv.folder / UUV_TOML, _tables({"tracker": uuv.tracker}).lstrip("\n")))
+            )
 
     def _record_timing(self) -> None:
         """``[timing]``'s recorded keys from ``timing()``; session.toml rewritten when they changed."""
         table = self._calibration.get("timing", {})
         recorded = {k: v for k, v in self.timing().items() if v is not None}
         if recorded != {k: table[k] for k in RECORDED_TIMING if k in table}:
-            self._calibration["timing"] = {k: v for k, v in table.items() if k not in RECORDED_TIMING} | recorded
+            self._calibration["timing"] = {
+                k: v for k, v in table.items() if k not in RECORDED_TIMING
+            } | recorded
             self._put(("toml", (self.dir / "session.toml", self._session_toml())))
 
     async def run(self) -> None:
@@ -313,8 +349,12 @@ class Recorder:
             self._closing.set()
             await in_thread(self._thread.join, CLOSE_WAIT_S, name="record close")
             if self._thread.is_alive():
-                log.warning("record: the writer was still busy %g s after the stop (%d items queued); it finishes "
-                            "on its own unless the process ends first", CLOSE_WAIT_S, self._queue.qsize())
+                log.warning(
+                    "record: the writer was still busy %g s after the stop (%d items queued); it finishes "
+                    "on its own unless the process ends first",
+                    CLOSE_WAIT_S,
+                    self._queue.qsize(),
+                )
 
     # -- the writer thread: owns every file ----------------------------------------------------------------
     def _write_toml(self, text: str, path: Path | None = None) -> None:
@@ -339,7 +379,9 @@ class Recorder:
                 pos_csv[folder].writerow(COLUMNS)
                 track_csv[folder].writerow(("t", "u", "v"))
             if self.video_size:
-                self._video = VideoWriter(self.dir / "video.ts", self.dir / "video_frames.csv", self.video_size)
+                self._video = VideoWriter(
+                    self.dir / "video.ts", self.dir / "video_frames.csv", self.video_size
+                )
             next_flush = time.monotonic() + FLUSH_S
             while True:
                 try:
@@ -378,10 +420,18 @@ class Recorder:
                     log.warning("record: closing: %s", e)
 
     def status(self) -> dict:
-        out = {"dir": str(self.dir), "mavlink_frames": self.mavlink_frames, "depth_samples": self.depth_samples,
-               "fixes": self.fixes, "dropped": self.dropped, "error": self.error}
+        out = {
+            "dir": str(self.dir),
+            "mavlink_frames": self.mavlink_frames,
+            "depth_samples": self.depth_samples,
+            "fixes": self.fixes,
+            "dropped": self.dropped,
+            "error": self.error,
+        }
         if self.video_size:
             video = self._video
-            out.update(video_frames=video.written if video else 0,
-                       video_dropped=self.video_dropped + (video.dropped if video else 0))
+            out.update(
+                video_frames=video.written if video else 0,
+                video_dropped=self.video_dropped + (video.dropped if video else 0),
+            )
         return out

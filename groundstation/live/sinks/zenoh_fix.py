@@ -56,8 +56,16 @@ class ZenohStatus:
     matters more than its shape — and the misfit is logged once per field and counted (:attr:`invalid`).
     """
 
-    def __init__(self, session: zenoh.Session, key: str, alive_key: str, status: Callable[[float], dict],
-                 period_s: float = 1.0, model: type[BaseModel] = StatusMessage, schema: str = STATUS_SCHEMA):
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        alive_key: str,
+        status: Callable[[float], dict],
+        period_s: float = 1.0,
+        model: type[BaseModel] = StatusMessage,
+        schema: str = STATUS_SCHEMA,
+    ):
         self.model = model
         self.schema = schema
         self.session = session
@@ -79,7 +87,9 @@ class ZenohStatus:
                 if where not in self._told:
                     self._told.add(where)
                     value = "" if err["type"] == "missing" else f" = {repr(err.get('input'))[:80]}"
-                    log.warning("status: %s%s does not fit its schema: %s", where, value, err["msg"])
+                    log.warning(
+                        "status: %s%s does not fit its schema: %s", where, value, err["msg"]
+                    )
 
     async def run(self) -> None:
         token = self.session.liveliness().declare_token(self.alive_key)

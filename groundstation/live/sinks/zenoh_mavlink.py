@@ -40,8 +40,14 @@ log = logging.getLogger("skyfix.gps_input")
 
 AUTOPILOT_HEARTBEAT_KEY = "mavlink/*/1/HEARTBEAT"
 RENAMED = {"type": "mavtype"}  # rust-mavlink's names of MAVLink fields that are Rust keywords
-HEARTBEAT = {"type": 18, "autopilot": 8, "base_mode": 0, "custom_mode": 0,  # MAV_TYPE_ONBOARD_CONTROLLER, no autopilot
-             "system_status": 4, "mavlink_version": 3}  # MAV_STATE_ACTIVE
+HEARTBEAT = {
+    "type": 18,
+    "autopilot": 8,
+    "base_mode": 0,
+    "custom_mode": 0,  # MAV_TYPE_ONBOARD_CONTROLLER, no autopilot
+    "system_status": 4,
+    "mavlink_version": 3,
+}  # MAV_STATE_ACTIVE
 
 
 def mavlink_json(kind: str, fields: dict) -> dict:
@@ -73,8 +79,10 @@ class MavlinkIn:
     def put(self, kind: str, fields: dict) -> None:
         header = {"system_id": self.system, "component_id": self.component, "sequence": self._seq}
         self._seq = (self._seq + 1) % 256
-        self.publisher.put(json.dumps({"header": header, "message": mavlink_json(kind, fields)}, allow_nan=False),
-                           timestamp=self.session.new_timestamp())
+        self.publisher.put(
+            json.dumps({"header": header, "message": mavlink_json(kind, fields)}, allow_nan=False),
+            timestamp=self.session.new_timestamp(),
+        )
 
     def close(self) -> None:
         self.publisher.undeclare()
@@ -114,8 +122,12 @@ class ZenohMavlinkIn:
         if self.matching:
             log.info("GPS_INPUT link %s: up (a subscriber on %s is reachable)", self.url, self.key)
         else:
-            log.warning("GPS_INPUT link %s: down: no subscriber on %s (Zenoh router or BlueOS's mavlink-server "
-                        "gone); GPS_INPUT is not delivered", self.url, self.key)
+            log.warning(
+                "GPS_INPUT link %s: down: no subscriber on %s (Zenoh router or BlueOS's mavlink-server "
+                "gone); GPS_INPUT is not delivered",
+                self.url,
+                self.key,
+            )
 
     def _on_heartbeat(self, _sample) -> None:  # Zenoh's thread
         self.last_heard = time.time()
@@ -153,8 +165,17 @@ class ZenohMavlinkIn:
         info = self.session.info
         with self._lock:
             state, since = ("up" if self.matching else "down"), self.state_since
-        return {"url": self.url, "state": state, "state_for_s": round(max(0.0, now - since), 3),
-                "error": None if self.matching else f"no subscriber on {self.key} reachable",
-                "zenoh_routers": len(info.routers_zid()), "zenoh_peers": len(info.peers_zid()),
-                "written": self.written, "heartbeats": self.heartbeats, "sent_unmatched": self.sent_unmatched,
-                "peer_age_s": None if self.last_heard is None else round(max(0.0, now - self.last_heard), 3)}
+        return {
+            "url": self.url,
+            "state": state,
+            "state_for_s": round(max(0.0, now - since), 3),
+            "error": None if self.matching else f"no subscriber on {self.key} reachable",
+            "zenoh_routers": len(info.routers_zid()),
+            "zenoh_peers": len(info.peers_zid()),
+            "written": self.written,
+            "heartbeats": self.heartbeats,
+            "sent_unmatched": self.sent_unmatched,
+            "peer_age_s": None
+            if self.last_heard is None
+            else round(max(0.0, now - self.last_heard), 3),
+        }

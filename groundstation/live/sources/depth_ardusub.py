@@ -75,10 +75,14 @@ PARAM_RETRY_S = 3.0
 PARAM_REFRESH_S = 30.0
 ORIGIN_RETRY_S = 5.0
 ASK_PERIOD_S = 0.25
-HANDOFF_MESSAGES = 512  # messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
+HANDOFF_MESSAGES = (
+    512  # messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
+)
 MAV_CMD_REQUEST_MESSAGE = 512
 GPS_GLOBAL_ORIGIN_ID = 49
-_PREFIX = re.compile(r"(?:[^*$?#]+/)?mavlink/(\d+)/(\d+)")  # a vehicle's Zenoh namespace may come first
+_PREFIX = re.compile(
+    r"(?:[^*$?#]+/)?mavlink/(\d+)/(\d+)"
+)  # a vehicle's Zenoh namespace may come first
 
 
 def autopilot_prefix(key: str) -> tuple[int, int]:
@@ -88,9 +92,13 @@ def autopilot_prefix(key: str) -> tuple[int, int]:
     m = _PREFIX.fullmatch(key.rstrip("/"))
     if m is None:
         if key.rstrip("/").endswith("/VFR_HUD"):
-            raise ValueError("VFR_HUD is not ArduSub's depth (it is the EKF's altitude above sea level: 0 before "
-                             "the EKF has an origin); give the autopilot's key prefix, e.g. mavlink/1/1")
-        raise ValueError("expected the autopilot's key prefix mavlink/{system}/{component}, e.g. mavlink/1/1")
+            raise ValueError(
+                "VFR_HUD is not ArduSub's depth (it is the EKF's altitude above sea level: 0 before "
+                "the EKF has an origin); give the autopilot's key prefix, e.g. mavlink/1/1"
+            )
+        raise ValueError(
+            "expected the autopilot's key prefix mavlink/{system}/{component}, e.g. mavlink/1/1"
+        )
     return int(m[1]), int(m[2])
 
 
@@ -104,8 +112,15 @@ def _enum(value) -> int | None:
 class ArduSubReader:
     """The transport-independent part: messages in (on the event loop), samples to the telemetry, requests out."""
 
-    def __init__(self, tel: Telemetry, gate: DepthGate, sigma_m: float, send: Callable[[str, dict], None],
-                 listeners: list[Callable] | None = None, thrusters: Thrusters | None = None):
+    def __init__(
+        self,
+        tel: Telemetry,
+        gate: DepthGate,
+        sigma_m: float,
+        send: Callable[[str, dict], None],
+        listeners: list[Callable] | None = None,
+        thrusters: Thrusters | None = None,
+    ):
         self.tel = tel
         self.gate = gate
         self.send = send  # (message type, fields) to the autopilot
@@ -113,10 +128,14 @@ class ArduSubReader:
         self.depth = ArduSubDepth(sigma_m, tel.timing.depth_latency_s, tel.timing.clock_window_s)
         self.thrusters = thrusters if thrusters is not None else Thrusters()
         self.meter = RateMeter()
-        self.requests = RateRequests({"GLOBAL_POSITION_INT": DEPTH_HZ, "SERVO_OUTPUT_RAW": THRUSTERS_HZ})
+        self.requests = RateRequests(
+            {"GLOBAL_POSITION_INT": DEPTH_HZ, "SERVO_OUTPUT_RAW": THRUSTERS_HZ}
+        )
         self.autopilot: tuple[int, int] | None = None
         self.received = self.bad = self.refused = 0
-        self.last: tuple[DepthSample, float] | None = None  # the newest accepted sample and its arrival
+        self.last: tuple[DepthSample, float] | None = (
+            None  # the newest accepted sample and its arrival
+        )
         self._asked: dict[str, float] = {}
         self._throttle = Throttle()
 
@@ -125,7 +144,10 @@ class ArduSubReader:
         self.received += 1
         self.meter.add(kind, t_recv)
         if kind == "COMMAND_ACK":
-            target = (fields.get("target_system") or SKYFIX_SYSID, fields.get("target_component") or GCS_COMPID)
+            target = (
+                fields.get("target_system") or SKYFIX_SYSID,
+                fields.get("target_component") or GCS_COMPID,
+            )
             if target == (SKYFIX_SYSID, GCS_COMPID):  # our requests' answers, not another client's
                 self.requests.on_ack(_enum(fields.get("command")), _enum(fields.get("result")))
             return
@@ -137,7 +159,9 @@ class ArduSubReader:
                 return
             sample = ingest_ardusub(self.depth, kind, fields, t_recv)
             if kind == "PARAM_VALUE":
-                self.thrusters.param(param_name(fields.get("param_id")), float(fields["param_value"]))
+                self.thrusters.param(
+                    param_name(fields.get("param_id")), float(fields["param_value"])
+                )
         except BadMessage as e:
             self.bad += 1
             if self._throttle(kind_of(str(e))):
@@ -163,7 +187,9 @@ class ArduSubReader:
             self._refuse(f"{sample.source} {why}")
             return
         if not self.tel.add_autopilot_depth(*sample):
-            self._refuse(f"{sample.source} depth {sample.depth_m:.2f} m refused: {self.tel.refusal}")
+            self._refuse(
+                f"{sample.source} depth {sample.depth_m:.2f} m refused: {self.tel.refusal}"
+            )
             return
         self.last = (sample, t_recv)
         for listener in self.listeners:
@@ -188,21 +214,43 @@ class ArduSubReader:
             return
         sysid, compid = self.autopilot
         names = self.depth.wanted_params() + self.thrusters.wanted_params()
-        if self.depth.primary is not None and now - self._asked.get("refresh", now) >= PARAM_REFRESH_S:
+        if (
+            self.depth.primary is not None
+            and now - self._asked.get("refresh", now) >= PARAM_REFRESH_S
+        ):
             names.append(ground_pressure_param(self.depth.primary))
         for name in dict.fromkeys(names):
             if now - self._asked.get(name, -1e9) >= PARAM_RETRY_S:
                 self._asked[name] = now
                 if name.endswith("_GND_PRESS"):
                     self._asked["refresh"] = now
-                self.send("PARAM_REQUEST_READ", {"target_system": sysid, "target_component": compid,
-                                                 "param_id": name.encode(), "param_index": -1})
+                self.send(
+                    "PARAM_REQUEST_READ",
+                    {
+                        "target_system": sysid,
+                        "target_component": compid,
+                        "param_id": name.encode(),
+                        "param_index": -1,
+                    },
+                )
         if self.depth.wants_origin and now - self._asked.get("origin", -1e9) >= ORIGIN_RETRY_S:
             self._asked["origin"] = now
-            self.send("COMMAND_LONG", {"target_system": sysid, "target_component": compid,
-                                       "command": MAV_CMD_REQUEST_MESSAGE, "confirmation": 0,
-                                       "param1": float(GPS_GLOBAL_ORIGIN_ID), "param2": 0.0, "param3": 0.0,
-                                       "param4": 0.0, "param5": 0.0, "param6": 0.0, "param7": 0.0})
+            self.send(
+                "COMMAND_LONG",
+                {
+                    "target_system": sysid,
+                    "target_component": compid,
+                    "command": MAV_CMD_REQUEST_MESSAGE,
+                    "confirmation": 0,
+                    "param1": float(GPS_GLOBAL_ORIGIN_ID),
+                    "param2": 0.0,
+                    "param3": 0.0,
+                    "param4": 0.0,
+                    "param5": 0.0,
+                    "param6": 0.0,
+                    "param7": 0.0,
+                },
+            )
         pressure = self.depth.pressure_message
         if pressure is not None and pressure not in self.requests.needed:
             for other in PRESSURE_MESSAGES:
@@ -214,16 +262,22 @@ class ArduSubReader:
 
     def status(self, now: float) -> dict:
         sample, t_recv = self.last if self.last else (None, None)
-        return {"received": self.received, "bad": self.bad, "refused": self.refused, "jumps": self.gate.refused,
-                "age_s": None if t_recv is None else round(max(0.0, now - t_recv), 3),
-                "t": None if sample is None else round(sample.t, 3),
-                "depth_m": None if sample is None else round(sample.depth_m, 3),
-                "sigma_m": None if sample is None else round(sample.sigma_m, 3),
-                "source": None if sample is None else sample.source,
-                "vertical_speed_mps": self.depth.status()["vertical_speed_mps"],
-                "rates_hz": {k: v for k, v in self.meter.rates(now).items() if k in ARDUSUB_USED},
-                "rate_requests": dict(self.requests.state), "ardusub": self.depth.status(),
-                "thrusters": self.thrusters.status(now)}
+        return {
+            "received": self.received,
+            "bad": self.bad,
+            "refused": self.refused,
+            "jumps": self.gate.refused,
+            "age_s": None if t_recv is None else round(max(0.0, now - t_recv), 3),
+            "t": None if sample is None else round(sample.t, 3),
+            "depth_m": None if sample is None else round(sample.depth_m, 3),
+            "sigma_m": None if sample is None else round(sample.sigma_m, 3),
+            "source": None if sample is None else sample.source,
+            "vertical_speed_mps": self.depth.status()["vertical_speed_mps"],
+            "rates_hz": {k: v for k, v in self.meter.rates(now).items() if k in ARDUSUB_USED},
+            "rate_requests": dict(self.requests.state),
+            "ardusub": self.depth.status(),
+            "thrusters": self.thrusters.status(now),
+        }
 
 
 class ArduSubZenoh:
@@ -231,8 +285,16 @@ class ArduSubZenoh:
 
     shape = "blueos"
 
-    def __init__(self, session: zenoh.Session, key: str, tel: Telemetry, gate: DepthGate, sigma_m: float,
-                 listeners: list[Callable] | None = None, thrusters: Thrusters | None = None):
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        tel: Telemetry,
+        gate: DepthGate,
+        sigma_m: float,
+        listeners: list[Callable] | None = None,
+        thrusters: Thrusters | None = None,
+    ):
         self.session = session
         self.key = key.rstrip("/")
         self.target = autopilot_prefix(self.key)
@@ -250,11 +312,17 @@ class ArduSubZenoh:
             self._in.put(kind, fields)
 
     async def run(self) -> None:
-        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_MESSAGES)
-        self._in = MavlinkIn(self.session, self.key.rsplit("mavlink/", 1)[0] + "mavlink/in", SKYFIX_SYSID, GCS_COMPID)
+        self.handoff = Handoff(
+            asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_MESSAGES
+        )
+        self._in = MavlinkIn(
+            self.session, self.key.rsplit("mavlink/", 1)[0] + "mavlink/in", SKYFIX_SYSID, GCS_COMPID
+        )
         try:
             async with asyncio.TaskGroup() as tg:
-                for kind in ARDUSUB_USED:  # one key each: the router forwards only these, not all of ArduSub's
+                for kind in (
+                    ARDUSUB_USED
+                ):  # one key each: the router forwards only these, not all of ArduSub's
                     tg.create_task(subscribe(self.session, f"{self.key}/{kind}", self.handoff))
                 while True:
                     self.reader.ask(time.time())
@@ -269,11 +337,17 @@ class ArduSubZenoh:
             obj = json.loads(data)
             message = obj["message"]
             if not isinstance(message, dict) or message.get("type", kind) != kind:
-                raise TypeError(f"message type {message.get('type') if isinstance(message, dict) else None!r} on "
-                                f"the key of {kind}")
+                raise TypeError(
+                    f"message type {message.get('type') if isinstance(message, dict) else None!r} on "
+                    f"the key of {kind}"
+                )
         except (ValueError, UnicodeDecodeError, RecursionError, KeyError, TypeError) as e:
             self.reader.bad += 1
-            why = str(e) if isinstance(e, TypeError) and str(e).startswith("message type") else "not mavlink-server JSON"
+            why = (
+                str(e)
+                if isinstance(e, TypeError) and str(e).startswith("message type")
+                else "not mavlink-server JSON"
+            )
             if self._throttle(kind_of(why)):
                 log.warning("ArduSub depth on %s: %s: %r", key, why, data[:120])
             return
@@ -281,8 +355,15 @@ class ArduSubZenoh:
         self.reader.on_message(kind, message, t_recv)
 
     def status(self, now: float) -> dict:
-        return {"key": self.key, "url": None, "shape": self.shape, **self.reader.status(now), "other": 0, "link": None,
-                "handoff": self.handoff.status() if self.handoff else None}
+        return {
+            "key": self.key,
+            "url": None,
+            "shape": self.shape,
+            **self.reader.status(now),
+            "other": 0,
+            "link": None,
+            "handoff": self.handoff.status() if self.handoff else None,
+        }
 
 
 class ArduSubMavlink:
@@ -290,12 +371,25 @@ class ArduSubMavlink:
 
     shape = "mavlink"
 
-    def __init__(self, url: str, tel: Telemetry, gate: DepthGate, sigma_m: float,
-                 listeners: list[Callable] | None = None, thrusters: Thrusters | None = None):
+    def __init__(
+        self,
+        url: str,
+        tel: Telemetry,
+        gate: DepthGate,
+        sigma_m: float,
+        listeners: list[Callable] | None = None,
+        thrusters: Thrusters | None = None,
+    ):
         self.url = url
         mav = mavutil().mavlink
-        self.link = MavlinkLink(url, SKYFIX_SYSID, GCS_COMPID, name="UUV MAVLink",
-                                heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID), is_peer=self._from_autopilot)
+        self.link = MavlinkLink(
+            url,
+            SKYFIX_SYSID,
+            GCS_COMPID,
+            name="UUV MAVLink",
+            heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID),
+            is_peer=self._from_autopilot,
+        )
         self.reader = ArduSubReader(tel, gate, sigma_m, self.link.queue, listeners, thrusters)
         self.handoff: Handoff | None = None
         self.other = 0  # messages of other systems and components
@@ -311,8 +405,12 @@ class ArduSubMavlink:
         return is_autopilot_heartbeat(msg)
 
     async def run(self) -> None:
-        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_message(*item), HANDOFF_MESSAGES)
-        self.link.on_message = lambda msg, t_recv: self.handoff.put((msg, t_recv))  # the link's thread
+        self.handoff = Handoff(
+            asyncio.get_running_loop(), lambda item: self._on_message(*item), HANDOFF_MESSAGES
+        )
+        self.link.on_message = lambda msg, t_recv: self.handoff.put(
+            (msg, t_recv)
+        )  # the link's thread
         await in_thread(self.link.open, name="UUV MAVLink open")
         try:
             while True:
@@ -336,5 +434,12 @@ class ArduSubMavlink:
             self.reader.on_message(kind, msg.to_dict(), t_recv)
 
     def status(self, now: float) -> dict:
-        return {"key": None, "url": self.url, "shape": self.shape, **self.reader.status(now), "other": self.other,
-                "link": self.link.status(now), "handoff": self.handoff.status() if self.handoff else None}
+        return {
+            "key": None,
+            "url": self.url,
+            "shape": self.shape,
+            **self.reader.status(now),
+            "other": self.other,
+            "link": self.link.status(now),
+            "handoff": self.handoff.status() if self.handoff else None,
+        }

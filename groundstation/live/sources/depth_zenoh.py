@@ -30,7 +30,9 @@ from localizer.telemetry import Telemetry
 
 log = logging.getLogger("skyfix.depth")
 
-HANDOFF_SAMPLES = 256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
+HANDOFF_SAMPLES = (
+    256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
+)
 
 
 class BadDepth(ValueError):
@@ -60,8 +62,14 @@ class DepthZenoh:
 
     shape = "skyfix"
 
-    def __init__(self, session: zenoh.Session, key: str, tel: Telemetry, gate: DepthGate | None = None,
-                 listeners: list[Callable] | None = None):
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        tel: Telemetry,
+        gate: DepthGate | None = None,
+        listeners: list[Callable] | None = None,
+    ):
         self.session = session
         self.key = key
         self.tel = tel
@@ -76,7 +84,9 @@ class DepthZenoh:
         self.last_depth_m: float | None = None
 
     async def run(self) -> None:
-        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_SAMPLES)
+        self.handoff = Handoff(
+            asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_SAMPLES
+        )
         await subscribe(self.session, self.key, self.handoff)
 
     def _refuse(self, key: str, why: str, t: float, depth: float) -> None:
@@ -112,9 +122,24 @@ class DepthZenoh:
     def status(self, now: float) -> dict:
         age = None if self.last_recv is None else round(max(0.0, now - self.last_recv), 3)
         t = self.tel.depth.last_t if self.last_recv is not None else None
-        return {"key": self.key, "url": None, "shape": self.shape, "received": self.received, "bad": self.bad,
-                "refused": self.refused, "jumps": self.gate.refused, "other": 0, "age_s": age,
-                "t": None if t is None else round(t, 3), "depth_m": self.last_depth_m, "sigma_m": None,
-                "source": None if self.last_recv is None else "skyfix", "vertical_speed_mps": None,
-                "rates_hz": None, "rate_requests": None, "ardusub": None, "link": None,
-                "handoff": self.handoff.status() if self.handoff else None}
+        return {
+            "key": self.key,
+            "url": None,
+            "shape": self.shape,
+            "received": self.received,
+            "bad": self.bad,
+            "refused": self.refused,
+            "jumps": self.gate.refused,
+            "other": 0,
+            "age_s": age,
+            "t": None if t is None else round(t, 3),
+            "depth_m": self.last_depth_m,
+            "sigma_m": None,
+            "source": None if self.last_recv is None else "skyfix",
+            "vertical_speed_mps": None,
+            "rates_hz": None,
+            "rate_requests": None,
+            "ardusub": None,
+            "link": None,
+            "handoff": self.handoff.status() if self.handoff else None,
+        }

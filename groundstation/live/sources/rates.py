@@ -22,17 +22,40 @@ from dataclasses import dataclass, field
 NEEDED_HZ = {"ATTITUDE": 25.0, "GLOBAL_POSITION_INT": 10.0, "SYSTEM_TIME": 1.0, "GPS_RAW_INT": 2.0}
 GIMBAL_HZ = 20.0
 RANGEFINDER_HZ = 10.0  # DISTANCE_SENSOR, asked for once one has come
-GIMBAL_MESSAGE = {"gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS", "mount_orientation": "MOUNT_ORIENTATION"}
+GIMBAL_MESSAGE = {
+    "gimbal_device": "GIMBAL_DEVICE_ATTITUDE_STATUS",
+    "mount_orientation": "MOUNT_ORIENTATION",
+}
 DEPTH_HZ = 5.0
 THRUSTERS_HZ = 10.0  # the UUV's SERVO_OUTPUT_RAW (localizer.thrusters)
-MESSAGE_ID = {"ATTITUDE": 30, "GLOBAL_POSITION_INT": 33, "SYSTEM_TIME": 2, "GPS_RAW_INT": 24,
-              "GIMBAL_DEVICE_ATTITUDE_STATUS": 285, "MOUNT_ORIENTATION": 265, "DISTANCE_SENSOR": 132,
-              "SCALED_PRESSURE": 29, "SCALED_PRESSURE2": 137, "SCALED_PRESSURE3": 143, "SERVO_OUTPUT_RAW": 36}
+MESSAGE_ID = {
+    "ATTITUDE": 30,
+    "GLOBAL_POSITION_INT": 33,
+    "SYSTEM_TIME": 2,
+    "GPS_RAW_INT": 24,
+    "GIMBAL_DEVICE_ATTITUDE_STATUS": 285,
+    "MOUNT_ORIENTATION": 265,
+    "DISTANCE_SENSOR": 132,
+    "SCALED_PRESSURE": 29,
+    "SCALED_PRESSURE2": 137,
+    "SCALED_PRESSURE3": 143,
+    "SERVO_OUTPUT_RAW": 36,
+}
 # MAV_DATA_STREAM carrying each message on ArduPilot: EXTRA1, POSITION, EXTRA3, EXTENDED_STATUS, RAW_SENSORS,
 # RC_CHANNELS
-STREAM = {"ATTITUDE": 10, "GLOBAL_POSITION_INT": 6, "SYSTEM_TIME": 12, "GPS_RAW_INT": 2,
-          "GIMBAL_DEVICE_ATTITUDE_STATUS": 12, "MOUNT_ORIENTATION": 12, "DISTANCE_SENSOR": 12,
-          "SCALED_PRESSURE": 1, "SCALED_PRESSURE2": 1, "SCALED_PRESSURE3": 1, "SERVO_OUTPUT_RAW": 3}
+STREAM = {
+    "ATTITUDE": 10,
+    "GLOBAL_POSITION_INT": 6,
+    "SYSTEM_TIME": 12,
+    "GPS_RAW_INT": 2,
+    "GIMBAL_DEVICE_ATTITUDE_STATUS": 12,
+    "MOUNT_ORIENTATION": 12,
+    "DISTANCE_SENSOR": 12,
+    "SCALED_PRESSURE": 1,
+    "SCALED_PRESSURE2": 1,
+    "SCALED_PRESSURE3": 1,
+    "SERVO_OUTPUT_RAW": 3,
+}
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_RESULT_ACCEPTED = 0
 SETTLE_S = 3.0  # measure this long after the autopilot appears before asking
@@ -117,7 +140,9 @@ class RateRequests:
         if command != MAV_CMD_SET_MESSAGE_INTERVAL or not self._pending:
             return
         kind, _ = self._pending.popleft()
-        self.state[kind] = "accepted" if result == MAV_RESULT_ACCEPTED else f"denied (MAV_RESULT {result})"
+        self.state[kind] = (
+            "accepted" if result == MAV_RESULT_ACCEPTED else f"denied (MAV_RESULT {result})"
+        )
         if result != MAV_RESULT_ACCEPTED:
             self._denied.append(kind)
 
@@ -130,32 +155,57 @@ class RateRequests:
             out.append(kind)
         return out
 
-
-    def messages(self, meter: RateMeter, now: float, target: tuple[int, int]) -> list[tuple[str, str, dict]]:
+    def messages(
+        self, meter: RateMeter, now: float, target: tuple[int, int]
+    ) -> list[tuple[str, str, dict]]:
         """The requests to send now, as ``(a line for the log, message type, fields)``: SET_MESSAGE_INTERVAL for
         the slow messages, REQUEST_DATA_STREAM for those whose request was refused or not answered."""
-        out = [(f"{kind} at {meter.rate_hz(kind, now):.1f} Hz; asking for {hz:g} Hz (SET_MESSAGE_INTERVAL)",
-                *interval_request(target, msg_id, hz)) for kind, msg_id, hz in self.due(meter, now)]
-        fall_back = [(kind, "no answer") for kind in self.unanswered(now)] + [(kind, "denied") for kind in self._denied]
+        out = [
+            (
+                f"{kind} at {meter.rate_hz(kind, now):.1f} Hz; asking for {hz:g} Hz (SET_MESSAGE_INTERVAL)",
+                *interval_request(target, msg_id, hz),
+            )
+            for kind, msg_id, hz in self.due(meter, now)
+        ]
+        fall_back = [(kind, "no answer") for kind in self.unanswered(now)] + [
+            (kind, "denied") for kind in self._denied
+        ]
         self._denied.clear()
         for kind, why in fall_back:
             hz = self.needed[kind]
             self.state[kind] = f"{self.state[kind]}; stream requested at {hz:g} Hz"
-            out.append((f"SET_MESSAGE_INTERVAL for {kind}: {why}; asking with REQUEST_DATA_STREAM",
-                        *stream_request(target, kind, hz)))
+            out.append(
+                (
+                    f"SET_MESSAGE_INTERVAL for {kind}: {why}; asking with REQUEST_DATA_STREAM",
+                    *stream_request(target, kind, hz),
+                )
+            )
         return out
 
 
 def interval_request(target: tuple[int, int], msg_id: int, hz: float) -> tuple[str, dict]:
     """``MAV_CMD_SET_MESSAGE_INTERVAL`` for one message: ``(message type, fields)``."""
-    return "COMMAND_LONG", {"target_system": target[0], "target_component": target[1],
-                            "command": MAV_CMD_SET_MESSAGE_INTERVAL, "confirmation": 0, "param1": float(msg_id),
-                            "param2": 1e6 / hz, "param3": 0.0, "param4": 0.0, "param5": 0.0, "param6": 0.0,
-                            "param7": 0.0}
+    return "COMMAND_LONG", {
+        "target_system": target[0],
+        "target_component": target[1],
+        "command": MAV_CMD_SET_MESSAGE_INTERVAL,
+        "confirmation": 0,
+        "param1": float(msg_id),
+        "param2": 1e6 / hz,
+        "param3": 0.0,
+        "param4": 0.0,
+        "param5": 0.0,
+        "param6": 0.0,
+        "param7": 0.0,
+    }
 
 
 def stream_request(target: tuple[int, int], kind: str, hz: float) -> tuple[str, dict]:
     """The older ``REQUEST_DATA_STREAM`` for the stream that carries ``kind``: ``(message type, fields)``."""
-    return "REQUEST_DATA_STREAM", {"target_system": target[0], "target_component": target[1],
-                                   "req_stream_id": STREAM[kind], "req_message_rate": max(1, round(hz)),
-                                   "start_stop": 1}
+    return "REQUEST_DATA_STREAM", {
+        "target_system": target[0],
+        "target_component": target[1],
+        "req_stream_id": STREAM[kind],
+        "req_message_rate": max(1, round(hz)),
+        "start_stop": 1,
+    }

@@ -66,8 +66,14 @@ class LinkHealth:
         return {k: round(max(0.0, now - t), 3) for k, t in sorted(self.last_seen.items())}
 
     def as_dict(self, now: float) -> dict:
-        return {"received": self.received, "bad_data": self.bad_data, "other_systems": self.other_systems,
-                "refused": self.refused, "age_s": self.ages_s(now), "rates_hz": self.meter.rates(now)}
+        return {
+            "received": self.received,
+            "bad_data": self.bad_data,
+            "other_systems": self.other_systems,
+            "refused": self.refused,
+            "age_s": self.ages_s(now),
+            "rates_hz": self.meter.rates(now),
+        }
 
 
 def clock_status(tel: Telemetry) -> dict:
@@ -96,16 +102,30 @@ def gnss_status(tel: Telemetry) -> dict | None:
     def num(x):
         return round(float(x), 3) if math.isfinite(x) else None
 
-    return {"fix_type": int(fix), "h_acc_m": num(h_acc), "v_acc_m": num(v_acc), "hdop": num(hdop), "vdop": num(vdop),
-            "sigma_horizontal_m": num(horizontal_sigma_m(fix, h_acc, hdop)),
-            "sigma_vertical_m": num(vertical_sigma_m(fix, v_acc, vdop))}
+    return {
+        "fix_type": int(fix),
+        "h_acc_m": num(h_acc),
+        "v_acc_m": num(v_acc),
+        "hdop": num(hdop),
+        "vdop": num(vdop),
+        "sigma_horizontal_m": num(horizontal_sigma_m(fix, h_acc, hdop)),
+        "sigma_vertical_m": num(vertical_sigma_m(fix, v_acc, vdop)),
+    }
 
 
 class UavMavlink:
     """Worker owning the UAV's MAVLink link; ``listeners`` get ``(msg, t_recv_unix)`` for every good message."""
 
-    def __init__(self, url: str, tel: Telemetry, needed_hz: dict[str, float], request_rates: bool = True,
-                 listeners: list[Callable] | None = None, peer: str | None = None, signing_key: bytes | None = None):
+    def __init__(
+        self,
+        url: str,
+        tel: Telemetry,
+        needed_hz: dict[str, float],
+        request_rates: bool = True,
+        listeners: list[Callable] | None = None,
+        peer: str | None = None,
+        signing_key: bytes | None = None,
+    ):
         self.url = url
         self.tel = tel
         self.listeners = listeners or []
@@ -117,15 +137,27 @@ class UavMavlink:
         self._params_last = 0.0
         self._throttle = Throttle()
         mav = mavutil().mavlink
-        self.link = MavlinkLink(url, SKYFIX_SYSID, GCS_COMPID, name="UAV MAVLink", is_peer=self._from_uav,
-                                heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID), peer=peer,
-                                signing_key=signing_key, require_signed=signing_key is not None)
+        self.link = MavlinkLink(
+            url,
+            SKYFIX_SYSID,
+            GCS_COMPID,
+            name="UAV MAVLink",
+            is_peer=self._from_uav,
+            heartbeat=(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID),
+            peer=peer,
+            signing_key=signing_key,
+            require_signed=signing_key is not None,
+        )
         self._low_warned: set[str] = set()
         self.handoff: Handoff | None = None
 
     async def run(self) -> None:
-        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_message(*item), HANDOFF_MESSAGES)
-        self.link.on_message = lambda msg, t_recv: self.handoff.put((msg, t_recv))  # the link's thread
+        self.handoff = Handoff(
+            asyncio.get_running_loop(), lambda item: self._on_message(*item), HANDOFF_MESSAGES
+        )
+        self.link.on_message = lambda msg, t_recv: self.handoff.put(
+            (msg, t_recv)
+        )  # the link's thread
         await in_thread(self.link.open, name="UAV MAVLink open")
         try:
             next_beat = 0.0
@@ -141,7 +173,11 @@ class UavMavlink:
 
     def _from_uav(self, msg) -> bool:
         """Whether a message (on the link's thread) is the UAV's: the link answers where those come from."""
-        return msg.get_srcSystem() == self.uav_sysid if self.uav_sysid is not None else names_the_uav(msg)
+        return (
+            msg.get_srcSystem() == self.uav_sysid
+            if self.uav_sysid is not None
+            else names_the_uav(msg)
+        )
 
     def _beat(self, conn, now: float) -> None:
         """Once a second: a TIMESYNC request (ts1: our clock in ns; the link itself heartbeats as a ground station)."""
@@ -151,8 +187,13 @@ class UavMavlink:
             if self.autopilot and now - (self.requests._since or now) > 15.0 and rate < hz / 2:
                 if kind not in self._low_warned:
                     self._low_warned.add(kind)
-                    log.warning("UAV MAVLink: %s arrives at %.1f Hz (%g Hz needed; request: %s)", kind, rate, hz,
-                                self.requests.state.get(kind, "none sent"))
+                    log.warning(
+                        "UAV MAVLink: %s arrives at %.1f Hz (%g Hz needed; request: %s)",
+                        kind,
+                        rate,
+                        hz,
+                        self.requests.state.get(kind, "none sent"),
+                    )
             elif rate >= hz / 2:
                 self._low_warned.discard(kind)
 
@@ -160,8 +201,11 @@ class UavMavlink:
         """Parameter and rate requests to the autopilot, once it is known."""
         if self.autopilot is None:
             return
-        if (self.tel.mount_type is None and self._params_asked < PARAM_TRIES
-                and now - self._params_last >= PARAM_RETRY_S):
+        if (
+            self.tel.mount_type is None
+            and self._params_asked < PARAM_TRIES
+            and now - self._params_last >= PARAM_RETRY_S
+        ):
             conn.mav.param_request_read_send(*self.autopilot, b"MNT1_TYPE", -1)
             self._params_asked += 1
             self._params_last = now
@@ -173,8 +217,13 @@ class UavMavlink:
         self.health.bad_data += 1
         if self._throttle(kind_of(reason)):
             shown = data[:16].hex() + ("…" if len(data) > 16 else "")
-            log.warning("UAV MAVLink: malformed frame #%d on %s: %s (bytes %s)", self.health.bad_data, self.url,
-                        reason, shown)
+            log.warning(
+                "UAV MAVLink: malformed frame #%d on %s: %s (bytes %s)",
+                self.health.bad_data,
+                self.url,
+                reason,
+                shown,
+            )
 
     def _is_uav(self, msg) -> bool:
         sysid = msg.get_srcSystem()
@@ -201,8 +250,14 @@ class UavMavlink:
         if self.autopilot is None and self.tel.autopilot_component is not None:
             self.autopilot = (msg.get_srcSystem(), self.tel.autopilot_component)
             self.requests.start(t_recv)
-        if kind == "DISTANCE_SENSOR" and self.tel.distance_sensor_seen and kind not in self.requests.needed:
-            self.requests.needed[kind] = RANGEFINDER_HZ  # the UAV has a downward rangefinder: its rate too
+        if (
+            kind == "DISTANCE_SENSOR"
+            and self.tel.distance_sensor_seen
+            and kind not in self.requests.needed
+        ):
+            self.requests.needed[kind] = (
+                RANGEFINDER_HZ  # the UAV has a downward rangefinder: its rate too
+            )
         if kind == "COMMAND_ACK" and self.autopilot is not None:
             self.requests.on_ack(msg.command, msg.result)
         if kind in USED and not used and self.tel.refusal:
@@ -213,13 +268,24 @@ class UavMavlink:
         while self.tel.notices:
             log.warning("UAV MAVLink: %s", self.tel.notices.pop(0))
         if measured_before is None and self.tel.measured_latency_s is not None:
-            log.info("UAV MAVLink: the link's one-way delay measured with TIMESYNC: %.1f ms%s",
-                     self.tel.measured_latency_s * 1000.0, "" if self.tel.latency_source == "timesync"
-                     else f" (not used: {self.tel.latency_source})")
+            log.info(
+                "UAV MAVLink: the link's one-way delay measured with TIMESYNC: %.1f ms%s",
+                self.tel.measured_latency_s * 1000.0,
+                ""
+                if self.tel.latency_source == "timesync"
+                else f" (not used: {self.tel.latency_source})",
+            )
         for listener in self.listeners:
             listener(msg, t_recv)
 
     def status(self, now: float) -> dict:
-        return {"url": self.url, "sysid": self.uav_sysid, "clocks": clock_status(self.tel), "gnss": gnss_status(self.tel),
-                "rate_requests": dict(self.requests.state), **self.health.as_dict(now),
-                "link": self.link.status(now), "handoff": self.handoff.status() if self.handoff else None}
+        return {
+            "url": self.url,
+            "sysid": self.uav_sysid,
+            "clocks": clock_status(self.tel),
+            "gnss": gnss_status(self.tel),
+            "rate_requests": dict(self.requests.state),
+            **self.health.as_dict(now),
+            "link": self.link.status(now),
+            "handoff": self.handoff.status() if self.handoff else None,
+        }

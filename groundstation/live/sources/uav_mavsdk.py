@@ -30,8 +30,13 @@ from localizer.telemetry import Telemetry
 
 log = logging.getLogger("skyfix.uav")
 
-_SCHEMES = {"udpin:": "udpin://", "udpout:": "udpout://", "udp:": "udpin://", "tcp:": "tcpout://",
-            "tcpin:": "tcpin://"}
+_SCHEMES = {
+    "udpin:": "udpin://",
+    "udpout:": "udpout://",
+    "udp:": "udpin://",
+    "tcp:": "tcpout://",
+    "tcpin:": "tcpin://",
+}
 
 
 def mavsdk_url(url: str) -> str:
@@ -40,7 +45,7 @@ def mavsdk_url(url: str) -> str:
         return url
     for prefix, scheme in _SCHEMES.items():
         if url.startswith(prefix):
-            return scheme + url[len(prefix):]
+            return scheme + url[len(prefix) :]
     if url.startswith("/dev/"):
         return f"serial://{url}:57600" if ":" not in url else f"serial://{url}"
     raise ValueError(f"--mavlink {url!r}: not a connection string MAVSDK understands")
@@ -79,7 +84,9 @@ class UavMavsdk:
         from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
         from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
 
-        async with Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION)) as drone:
+        async with Mavsdk(
+            Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+        ) as drone:
             await drone.add_any_connection(self.url)
             system = None
             while system is None:
@@ -113,6 +120,11 @@ class UavMavsdk:
             listener(msg, t_recv)
 
     def status(self, now: float) -> dict:
-        return {"url": self.url, "backend": "mavsdk", "sysid": self.uav_sysid, "clocks": clock_status(self.tel),
-                "gnss": gnss_status(self.tel),
-                **self.health.as_dict(now)}
+        return {
+            "url": self.url,
+            "backend": "mavsdk",
+            "sysid": self.uav_sysid,
+            "clocks": clock_status(self.tel),
+            "gnss": gnss_status(self.tel),
+            **self.health.as_dict(now),
+        }

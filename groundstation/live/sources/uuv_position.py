@@ -32,7 +32,9 @@ log = logging.getLogger("skyfix.uuv_position")
 
 #: An estimate older than this (s) is no longer a prior.
 MAX_AGE_S = 30.0
-HANDOFF_SAMPLES = 256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
+HANDOFF_SAMPLES = (
+    256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
+)
 
 
 class BadPosition(ValueError):
@@ -81,8 +83,13 @@ def parse_hint(text: str) -> tuple[float, float]:
 class UuvPosition:
     """Worker subscribing to the UUV's GLOBAL_POSITION_INT (when ``key`` is given); :meth:`prior` for the tracker."""
 
-    def __init__(self, session: zenoh.Session, key: str | None, sigma_m: float,
-                 hint: tuple[float, float] | None = None):
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str | None,
+        sigma_m: float,
+        hint: tuple[float, float] | None = None,
+    ):
         self.session = session
         self.key = key
         self.sigma_m = sigma_m
@@ -108,7 +115,9 @@ class UuvPosition:
     async def run(self) -> None:
         if self.key is None:
             await asyncio.Event().wait()
-        self.handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_SAMPLES)
+        self.handoff = Handoff(
+            asyncio.get_running_loop(), lambda item: self._on_payload(*item), HANDOFF_SAMPLES
+        )
         await subscribe(self.session, self.key, self.handoff)
 
     def _on_payload(self, key: str, data: bytes, t_recv: float) -> None:
@@ -130,5 +139,14 @@ class UuvPosition:
     def status(self, now: float) -> dict:
         age = None if self.last is None else round(max(0.0, now - self.last[2]), 3)
         lat, lon = (self.last[0], self.last[1]) if self.last else (self.hint or (None, None))
-        return {"key": self.key, "received": self.received, "bad": self.bad, "unknown": self.unknown,
-                "age_s": age, "lat": lat, "lon": lon, "hint": self.hint is not None, "sigma_m": self.sigma_m}
+        return {
+            "key": self.key,
+            "received": self.received,
+            "bad": self.bad,
+            "unknown": self.unknown,
+            "age_s": age,
+            "lat": lat,
+            "lon": lon,
+            "hint": self.hint is not None,
+            "sigma_m": self.sigma_m,
+        }

@@ -41,7 +41,9 @@ from groundstation.live.ui.palette import colour
 from localizer.fix import Fix
 
 ENCODER_NICE = 10  # the encoding thread's niceness, above the service's other threads
-KEEP_FRAMES = 16  # frames kept (references) while a page watches: enough for the telemetry wait at 30 fps
+KEEP_FRAMES = (
+    16  # frames kept (references) while a page watches: enough for the telemetry wait at 30 fps
+)
 
 
 def _lower_priority() -> None:
@@ -56,7 +58,9 @@ def encode_jpeg(image: np.ndarray, max_width: int, quality: int) -> bytes:
     """The image as JPEG, downscaled to at most ``max_width`` pixels wide."""
     h, w = image.shape[:2]
     if w > max_width:
-        image = cv2.resize(image, (max_width, max(1, round(h * max_width / w))), interpolation=cv2.INTER_AREA)
+        image = cv2.resize(
+            image, (max_width, max(1, round(h * max_width / w))), interpolation=cv2.INTER_AREA
+        )
     ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
     if not ok:
         raise ValueError(f"cv2.imencode could not encode a {w}x{h} frame")
@@ -90,8 +94,13 @@ class VideoFeed:
     nobody watches.
     """
 
-    def __init__(self, target: Callable[[], dict] | Sequence[tuple[str, Callable[[], dict]]], max_fps: float = 10.0,
-                 max_width: int = 960, quality: int = 80):
+    def __init__(
+        self,
+        target: Callable[[], dict] | Sequence[tuple[str, Callable[[], dict]]],
+        max_fps: float = 10.0,
+        max_width: int = 960,
+        quality: int = 80,
+    ):
         self.deliver: Callable[[bytes], None] = lambda packet: None
         self.watching: Callable[[], bool] = lambda: False
         several = not callable(target)
@@ -99,8 +108,12 @@ class VideoFeed:
         self._targets = [t for _, t in target] if several else [target]
         self.target = self._targets[0]
         self.sinks = [_UuvSink(self, k) for k in range(len(self._targets))] if several else [self]
-        self._parts: dict[int, dict[int, tuple]] = {}  # several UUVs: frame index → UUV → its (fix, info)
-        self._newest = [-1] * len(self._targets)  # several UUVs: the newest frame each one's fix came for
+        self._parts: dict[
+            int, dict[int, tuple]
+        ] = {}  # several UUVs: frame index → UUV → its (fix, info)
+        self._newest = [-1] * len(
+            self._targets
+        )  # several UUVs: the newest frame each one's fix came for
         self.min_interval_s = 1.0 / max_fps
         self.max_width = max_width
         self.quality = quality
@@ -111,7 +124,9 @@ class VideoFeed:
         self._ready = asyncio.Event()
         self._busy = False
         self._last_taken = -math.inf
-        self._encoder = ThreadPoolExecutor(1, thread_name_prefix="ui-jpeg", initializer=_lower_priority)
+        self._encoder = ThreadPoolExecutor(
+            1, thread_name_prefix="ui-jpeg", initializer=_lower_priority
+        )
 
     def on_frame(self, frame) -> None:
         """Every received frame (a reference, no copy), kept only while a page watches."""
@@ -127,13 +142,22 @@ class VideoFeed:
         image = self._image(info.index)
         if image is None:
             return
-        overlay = {"frame": info.index, "t": _num(fix.t_unix), **self._part(0, fix, info),
-                   "width": int(image.shape[1]), "height": int(image.shape[0])}
+        overlay = {
+            "frame": info.index,
+            "t": _num(fix.t_unix),
+            **self._part(0, fix, info),
+            "width": int(image.shape[1]),
+            "height": int(image.shape[0]),
+        }
         self._take(image, overlay)
 
     def _image(self, index: int) -> np.ndarray | None:
         """The frame to show now, if one is to be shown (no page watching, too soon, encoding: None)."""
-        if self._busy or time.monotonic() - self._last_taken < self.min_interval_s or not self.watching():
+        if (
+            self._busy
+            or time.monotonic() - self._last_taken < self.min_interval_s
+            or not self.watching()
+        ):
             return None
         return self._recent.get(index)
 
@@ -146,11 +170,16 @@ class VideoFeed:
     def _part(self, k: int, fix: Fix | None, info) -> dict:
         """The ``k``-th UUV's part of a frame's overlay (``fix`` None: its pipeline dropped the frame)."""
         target = self._targets[k]()
-        return {"status": fix.status if fix else "dropped", "state": target.get("state"),
-                "origin": target.get("origin"), "h_acc_m": _num(fix.h_acc_m) if fix else None,
-                "u": _num(fix.u) if fix else None, "v": _num(fix.v) if fix else None,
-                "box": list(info.box) if fix and info.box else None,
-                "window": [round(c, 1) for c in info.window] if fix and info.window else None}
+        return {
+            "status": fix.status if fix else "dropped",
+            "state": target.get("state"),
+            "origin": target.get("origin"),
+            "h_acc_m": _num(fix.h_acc_m) if fix else None,
+            "u": _num(fix.u) if fix else None,
+            "v": _num(fix.v) if fix else None,
+            "box": list(info.box) if fix and info.box else None,
+            "window": [round(c, 1) for c in info.window] if fix and info.window else None,
+        }
 
     def _uuv_fix(self, k: int, fix: Fix, info) -> None:
         """Several UUVs: the ``k``-th one's fix; a frame goes out once each UUV's fix for it is in (or that UUV's
@@ -172,8 +201,14 @@ class VideoFeed:
                 continue
             each = [self._part(j, *parts.get(j, (None, None))) for j in range(len(self._targets))]
             t = next((_num(f.t_unix) for f, _ in parts.values()), None)
-            overlay = {"frame": index, "t": t, **each[0], "width": int(image.shape[1]), "height": int(image.shape[0]),
-                       "uuvs": [{"id": self.ids[j], "colour": colour(j), **p} for j, p in enumerate(each)]}
+            overlay = {
+                "frame": index,
+                "t": t,
+                **each[0],
+                "width": int(image.shape[1]),
+                "height": int(image.shape[0]),
+                "uuvs": [{"id": self.ids[j], "colour": colour(j), **p} for j, p in enumerate(each)],
+            }
             self._take(image, overlay)
         while len(self._parts) > KEEP_FRAMES:
             del self._parts[min(self._parts)]
@@ -187,8 +222,9 @@ class VideoFeed:
                 image, overlay = self._pending
                 self._pending = None
                 try:
-                    jpeg, cpu_s = await loop.run_in_executor(self._encoder, _timed, image, self.max_width,
-                                                             self.quality)
+                    jpeg, cpu_s = await loop.run_in_executor(
+                        self._encoder, _timed, image, self.max_width, self.quality
+                    )
                     self.encode_s.append(cpu_s)
                 finally:
                     self._busy = False
@@ -199,7 +235,10 @@ class VideoFeed:
 
     def status(self) -> dict:
         mean = sum(self.encode_s) / len(self.encode_s) if self.encode_s else None
-        return {"frames_encoded": self.encoded, "encode_ms": None if mean is None else round(mean * 1000.0, 2)}
+        return {
+            "frames_encoded": self.encoded,
+            "encode_ms": None if mean is None else round(mean * 1000.0, 2),
+        }
 
 
 class _UuvSink:

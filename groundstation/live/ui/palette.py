@@ -5,7 +5,14 @@ the map's white."""
 
 from __future__ import annotations
 
-PALETTE = ("#b00000", "#6a1b9a", "#d35400", "#00796b", "#c2185b", "#5d4037")  # red, purple, orange, teal, pink, brown
+PALETTE = (
+    "#b00000",
+    "#6a1b9a",
+    "#d35400",
+    "#00796b",
+    "#c2185b",
+    "#5d4037",
+)  # red, purple, orange, teal, pink, brown
 
 
 def colour(i: int) -> str:

@@ -98,8 +98,14 @@ class CounterRates:
             self._samples.popleft()
         t0, first = self._samples[0]
         dt = now - t0
-        return {k: (round((v - first[k]) / dt, 2) if dt > 0.2 and v is not None and first.get(k) is not None
-                    else None) for k, v in counts.items()}
+        return {
+            k: (
+                round((v - first[k]) / dt, 2)
+                if dt > 0.2 and v is not None and first.get(k) is not None
+                else None
+            )
+            for k, v in counts.items()
+        }
 
 
 @dataclass
@@ -131,9 +137,13 @@ def _counts(status: dict) -> dict[str, int | None]:
         part = status.get(section)
         return part.get(key) if isinstance(part, dict) else None
 
-    return {"video_frames": get("video", "frames"), "processed": get("pipeline", "processed"),
-            "depth": get("depth", "received"), "gps_input": get("gps_input", "sent"),
-            "uav": get("uav", "received")}
+    return {
+        "video_frames": get("video", "frames"),
+        "processed": get("pipeline", "processed"),
+        "depth": get("depth", "received"),
+        "gps_input": get("gps_input", "sent"),
+        "uav": get("uav", "received"),
+    }
 
 
 class WebUi:
@@ -143,11 +153,23 @@ class WebUi:
     ``tracks`` in the same order). ``settings``: what the page shows about the run's configuration.
     """
 
-    def __init__(self, bind: str, token: str | None, control: Control | Sequence[PageUuv], topview: TopView,
-                 feed: VideoFeed, camera_size: tuple[int, int], settings: dict):
+    def __init__(
+        self,
+        bind: str,
+        token: str | None,
+        control: Control | Sequence[PageUuv],
+        topview: TopView,
+        feed: VideoFeed,
+        camera_size: tuple[int, int],
+        settings: dict,
+    ):
         self.host, self.port = parse_bind(bind)
         self.bind = bind
-        self.token = token if token is not None else (None if is_loopback(self.host) else secrets.token_urlsafe(16))
+        self.token = (
+            token
+            if token is not None
+            else (None if is_loopback(self.host) else secrets.token_urlsafe(16))
+        )
         self.uuvs = [PageUuv("uuv1", control)] if isinstance(control, Control) else list(control)
         self.several = len(self.uuvs) > 1
         self.control = self.uuvs[0].control
@@ -180,14 +202,18 @@ class WebUi:
             await web.TCPSite(self._runner, self.host, self.port, reuse_port=False).start()
         except OSError as e:
             await self._runner.cleanup()
-            why = {errno.EADDRINUSE: f"port {self.port} is already in use (another skyfix run?); choose another "
-                                     "with --ui HOST:PORT, or --no-ui",
-                   errno.EADDRNOTAVAIL: f"{self.host} is not an address of this machine"}.get(
-                e.errno, e.strerror or str(e))
+            why = {
+                errno.EADDRINUSE: f"port {self.port} is already in use (another skyfix run?); choose another "
+                "with --ui HOST:PORT, or --no-ui",
+                errno.EADDRNOTAVAIL: f"{self.host} is not an address of this machine",
+            }.get(e.errno, e.strerror or str(e))
             raise UiError(f"--ui {self.bind}: {why}") from None
         port = self._runner.addresses[0][1]
-        host = socket.gethostname() if self.host in ("0.0.0.0", "::", "") else (
-            f"[{self.host}]" if ":" in self.host else self.host)
+        host = (
+            socket.gethostname()
+            if self.host in ("0.0.0.0", "::", "")
+            else (f"[{self.host}]" if ":" in self.host else self.host)
+        )
         self.url = f"http://{host}:{port}/"
         log.info("web page: %s%s", self.url, f"?token={self.token}" if self.token else "")
 
@@ -204,8 +230,13 @@ class WebUi:
                 await self._runner.cleanup()
 
     def status(self) -> dict:
-        return {"url": self.url, "token": self.token is not None, "viewers": len(self.viewers),
-                "refused": self.refused, **self.feed.status()}
+        return {
+            "url": self.url,
+            "token": self.token is not None,
+            "viewers": len(self.viewers),
+            "refused": self.refused,
+            **self.feed.status(),
+        }
 
     # -- pushing -----------------------------------------------------------------------------------------
     def _watching(self) -> bool:
@@ -223,8 +254,12 @@ class WebUi:
         if not self.several:
             return first
         t = first["t"]
-        return first | {"uuvs": {u.id: jsonable(u.own_status(t)) if u.own_status else u.control.status()
-                                 for u in self.uuvs}}
+        return first | {
+            "uuvs": {
+                u.id: jsonable(u.own_status(t)) if u.own_status else u.control.status()
+                for u in self.uuvs
+            }
+        }
 
     def _own(self, status: dict, k: int) -> dict:
         return status["uuvs"][self.uuvs[k].id] if self.several else status
@@ -247,13 +282,24 @@ class WebUi:
                 continue
             now = time.time()
             status = self.status_now()
-            state = {"type": "state", "status": status, "rates": self.rates.update(now, _counts(status)),
-                     "map": self.topview.snapshot(now)}
+            state = {
+                "type": "state",
+                "status": status,
+                "rates": self.rates.update(now, _counts(status)),
+                "map": self.topview.snapshot(now),
+            }
             uuvs = []
             for k, u in enumerate(self.uuvs):
                 own = self._own(status, k)
-                uuvs.append({"id": u.id, "rates": u.rates.update(now, _counts(own)) if self.several else state["rates"],
-                             "gate": self.topview.gate_view((own.get("gps_input") or {}).get("gates"))})
+                uuvs.append(
+                    {
+                        "id": u.id,
+                        "rates": u.rates.update(now, _counts(own))
+                        if self.several
+                        else state["rates"],
+                        "gate": self.topview.gate_view((own.get("gps_input") or {}).get("gates")),
+                    }
+                )
             for v in self.viewers:
                 for k, part in enumerate(uuvs):
                     track = self.topview.tracks[k].points_since(v.seq[k])
@@ -272,14 +318,21 @@ class WebUi:
             given = auth[7:]
         if self.token is not None:
             if not given:
-                return self._refuse(401, "this page needs its token: open the URL skyfix run printed (…/?token=…)")
+                return self._refuse(
+                    401, "this page needs its token: open the URL skyfix run printed (…/?token=…)"
+                )
             if not hmac.compare_digest(given.encode(), self.token.encode()):
                 return self._refuse(403, "wrong token: open the URL skyfix run printed")
         elif not is_loopback(urlsplit(f"//{request.host}").hostname or ""):
-            return self._refuse(403, f"host {request.host!r} is not this machine's loopback address")
+            return self._refuse(
+                403, f"host {request.host!r} is not this machine's loopback address"
+            )
         origin = request.headers.get("Origin")
-        if (request.method != "GET" or request.path == "/ws") and origin is not None \
-                and urlsplit(origin).netloc != request.host:
+        if (
+            (request.method != "GET" or request.path == "/ws")
+            and origin is not None
+            and urlsplit(origin).netloc != request.host
+        ):
             return self._refuse(403, f"a request from another site ({origin}) is refused")
         response = await handler(request)
         if self.token is not None and request.query.get("token") == self.token:
@@ -316,18 +369,23 @@ class WebUi:
             name = obj.pop("uuv")
             uuv = next((u for u in self.uuvs if isinstance(name, str) and u.id == name), None)
             if uuv is None:
-                raise ControlError(f"{command}: uuv = {json.dumps(name)[:40]}: not a UUV of this run ({ids})")
+                raise ControlError(
+                    f"{command}: uuv = {json.dumps(name)[:40]}: not a UUV of this run ({ids})"
+                )
             return uuv, json.dumps(obj).encode()
         if self.several:
-            raise ControlError(f"{command}: this run tracks several UUVs ({ids}): name one in the "
-                               f"JSON body, as {{\"uuv\": \"{self.uuvs[0].id}\"}}")
+            raise ControlError(
+                f"{command}: this run tracks several UUVs ({ids}): name one in the "
+                f'JSON body, as {{"uuv": "{self.uuvs[0].id}"}}'
+            )
         return self.uuvs[0], payload
 
     async def _command(self, request: web.Request) -> web.Response:
         command = request.match_info["command"]
         if command not in COMMANDS:
-            return web.json_response({"error": f"unknown command {command!r} (known: {', '.join(COMMANDS)})"},
-                                     status=404)
+            return web.json_response(
+                {"error": f"unknown command {command!r} (known: {', '.join(COMMANDS)})"}, status=404
+            )
         try:
             uuv, payload = self._addressed(command, await request.read())
             result = await uuv.control.handle(command, payload)
@@ -339,8 +397,12 @@ class WebUi:
             return web.json_response({"error": f"{command}: internal error: {e}"}, status=500)
         if self.several:
             result = {"uuv": uuv.id, **result}
-        log.info("page: %s%s done (latest frame %s)", command, f" {uuv.id}" if self.several else "",
-                 result.get("latest_frame"))
+        log.info(
+            "page: %s%s done (latest frame %s)",
+            command,
+            f" {uuv.id}" if self.several else "",
+            result.get("latest_frame"),
+        )
         return web.json_response(result, dumps=lambda o: json.dumps(o, allow_nan=False))
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
@@ -348,11 +410,20 @@ class WebUi:
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096, compress=False, timeout=2.0)
         await ws.prepare(request)
         viewer = Viewer(len(self.uuvs))
-        uuvs = [{"id": u.id, "colour": colour(k), "track": self.topview.tracks[k].points_since(0)}
-                for k, u in enumerate(self.uuvs)]
-        hello = {"type": "hello", "camera": {"width": self.camera_size[0], "height": self.camera_size[1]},
-                 "video": {"max_fps": round(1.0 / self.feed.min_interval_s, 2), "max_width": self.feed.max_width},
-                 "settings": self.settings, "uuvs": uuvs}
+        uuvs = [
+            {"id": u.id, "colour": colour(k), "track": self.topview.tracks[k].points_since(0)}
+            for k, u in enumerate(self.uuvs)
+        ]
+        hello = {
+            "type": "hello",
+            "camera": {"width": self.camera_size[0], "height": self.camera_size[1]},
+            "video": {
+                "max_fps": round(1.0 / self.feed.min_interval_s, 2),
+                "max_width": self.feed.max_width,
+            },
+            "settings": self.settings,
+            "uuvs": uuvs,
+        }
         for k, u in enumerate(uuvs):
             if u["track"]:
                 viewer.seq[k] = u["track"][-1][0]
@@ -397,7 +468,10 @@ class WebUi:
 
 def settings_of(cfg) -> dict:
     """What the page shows about a run's configuration (:class:`~groundstation.live.config.RunConfig`)."""
-    return {"video_latency_ms": cfg.video_latency_ms, "gps_input_hz": cfg.gps_input_hz if cfg.gps_input else None,
-            "fix_max_age_ms": cfg.fix_max_age_ms, "select_history_s": cfg.select_history_s,
-            "tracker": cfg.tracker}
-
+    return {
+        "video_latency_ms": cfg.video_latency_ms,
+        "gps_input_hz": cfg.gps_input_hz if cfg.gps_input else None,
+        "fix_max_age_ms": cfg.fix_max_age_ms,
+        "select_history_s": cfg.select_history_s,
+        "tracker": cfg.tracker,
+    }

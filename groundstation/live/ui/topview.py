@@ -46,7 +46,9 @@ class UuvTrack:
     def __init__(self, view: TopView, keep: int, min_dt_s: float):
         self.view = view
         self.min_dt_s = min_dt_s
-        self.track: deque[tuple[int, float, float, float, float]] = deque(maxlen=keep)  # seq, t, lat, lon, h_acc
+        self.track: deque[tuple[int, float, float, float, float]] = deque(
+            maxlen=keep
+        )  # seq, t, lat, lon, h_acc
         self._seq = 0
 
     def on_fix(self, fix: Fix, info) -> None:
@@ -59,13 +61,23 @@ class UuvTrack:
 
     def points_since(self, seq: int) -> list[list[float]]:
         """Track points after ``seq``: ``[seq, north_m, east_m, h_acc_m, t]`` each."""
-        new = [p for p in self.track if p[0] > seq] if self.track and self.track[-1][0] > seq else []
+        new = (
+            [p for p in self.track if p[0] > seq] if self.track and self.track[-1][0] > seq else []
+        )
         if not new or self.view.origin is None:
             return []
         a = np.array(new)
         n, e, _ = geodetic_to_ned(a[:, 2], a[:, 3], 0.0, *self.view.origin, 0.0)
-        return [[int(p[0]), round(float(ni), 3), round(float(ei), 3), round(float(p[4]), 3), round(p[1], 3)]
-                for p, ni, ei in zip(new, np.atleast_1d(n), np.atleast_1d(e), strict=True)]
+        return [
+            [
+                int(p[0]),
+                round(float(ni), 3),
+                round(float(ei), 3),
+                round(float(p[4]), 3),
+                round(p[1], 3),
+            ]
+            for p, ni, ei in zip(new, np.atleast_1d(n), np.atleast_1d(e), strict=True)
+        ]
 
 
 class TopView:
@@ -73,7 +85,14 @@ class TopView:
     (``uuvs`` of them), each a sink of its UUV's pipeline; the view's own ``on_fix``/``points_since`` are the
     first's."""
 
-    def __init__(self, cal: Calibration, tel: Telemetry, keep: int = 3000, min_dt_s: float = 0.1, uuvs: int = 1):
+    def __init__(
+        self,
+        cal: Calibration,
+        tel: Telemetry,
+        keep: int = 3000,
+        min_dt_s: float = 0.1,
+        uuvs: int = 1,
+    ):
         self.cal = cal
         self.tel = tel
         self.min_dt_s = min_dt_s
@@ -94,8 +113,14 @@ class TopView:
         """The UAV and the camera's footprint at the newest frame's time (or now, before any frame)."""
         t = self._frame_t if self._frame_t is not None else now
         pose = camera_pose(self.cal, self.tel, t)
-        out = {"t": round(t, 3), "pose": str(pose.status[0]), "uav": None, "footprint": None, "horizon": False,
-               "height_m": None}
+        out = {
+            "t": round(t, 3),
+            "pose": str(pose.status[0]),
+            "uav": None,
+            "footprint": None,
+            "horizon": False,
+            "height_m": None,
+        }
         lat, lon = float(pose.lat_deg[0]), float(pose.lon_deg[0])
         if not (math.isfinite(lat) and math.isfinite(lon)):
             out["origin"] = self._origin_json()
@@ -110,14 +135,23 @@ class TopView:
             return out
         out["height_m"] = round(float(pose.height_m[0]), 2)
         u, v = self._border
-        off, reaches = pixel_to_offset(self.cal.camera, pose.R_ned_from_cv[0], u, v, pose.height_m[0], 0.0,
-                                       self.cal.water.refractive_index)
+        off, reaches = pixel_to_offset(
+            self.cal.camera,
+            pose.R_ned_from_cv[0],
+            u,
+            v,
+            pose.height_m[0],
+            0.0,
+            self.cal.water.refractive_index,
+        )
         good = reaches & np.all(np.isfinite(off), axis=-1)
         out["horizon"] = bool(not good.all())
         if good.sum() >= 3:
             pts = off[good] + pose.cam_offset_ned_m[0, :2] + uav
             out["footprint"] = [[round(float(a), 3), round(float(b), 3)] for a, b in pts]
-            out["top_edge"] = int(good[:EDGE_SAMPLES].sum())  # the first points are the image's top edge
+            out["top_edge"] = int(
+                good[:EDGE_SAMPLES].sum()
+            )  # the first points are the image's top edge
         return out
 
     def gate_view(self, gates: dict | None) -> dict | None:
@@ -129,9 +163,20 @@ class TopView:
         tr = gates["track"]
         if tr is not None and self.origin is not None:
             n, e, _ = geodetic_to_ned(tr["lat"], tr["lon"], 0.0, *self.origin, 0.0)
-            out["track"] = {"n": round(float(n), 3), "e": round(float(e), 3), "vn": tr["vn_mps"], "ve": tr["ve_mps"],
-                            "sigma_n": tr["sigma_n_m"], "sigma_e": tr["sigma_e_m"], "cov_ne": tr["cov_ne_m2"]}
+            out["track"] = {
+                "n": round(float(n), 3),
+                "e": round(float(e), 3),
+                "vn": tr["vn_mps"],
+                "ve": tr["ve_mps"],
+                "sigma_n": tr["sigma_n_m"],
+                "sigma_e": tr["sigma_e_m"],
+                "cov_ne": tr["cov_ne_m2"],
+            }
         return out
 
     def _origin_json(self) -> dict | None:
-        return None if self.origin is None else {"lat": round(self.origin[0], 8), "lon": round(self.origin[1], 8)}
+        return (
+            None
+            if self.origin is None
+            else {"lat": round(self.origin[0], 8), "lon": round(self.origin[1], 8)}
+        )
