@@ -706,6 +706,19 @@ class DatagramStatus(Section):
     )
 
 
+class SenderStatus(Section):
+    """An ``rtp://`` or ``udp://`` input's sender lock (groundstation.sender_lock)."""
+
+    peer: str | None = Field(
+        description="the address HOST:PORT datagrams are taken from (null: none yet, or every sender)"
+    )
+    locked: bool = Field(description="false: peer=any, every sender's datagrams are read")
+    foreign_datagrams: int = Field(description="datagrams from other senders, refused unread")
+    relocks: int = Field(
+        description="times the lock moved to a new sender (the peer silent for the read timeout)"
+    )
+
+
 class VideoStatus(Section):
     """The UAV's video stream."""
 
@@ -740,6 +753,7 @@ class VideoStatus(Section):
     handoff: HandoffStatus | None = Field(None, description="frames from the reader thread")
     rtp: DatagramStatus | None = Field(None, description="rtp:// inputs only")
     mpegts: DatagramStatus | None = Field(None, description="udp:// (MPEG-TS) inputs only")
+    sender: SenderStatus | None = Field(None, description="rtp:// and udp:// inputs only")
 
 
 class GpsInputStatus(Section):

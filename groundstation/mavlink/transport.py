@@ -38,11 +38,10 @@ import struct
 import sys
 import time
 
+# ANY_PEER (``--mavlink-peer any``) and RELOCK_S are the lock's, named here for the link's users
+from groundstation.sender_lock import ANY_PEER, RELOCK_S, SenderLock  # noqa: F401
+
 WRITE_TIMEOUT_S = 1.0
-#: ``--mavlink-peer`` that takes every sender on a ``udpin:`` link (no lock)
-ANY_PEER = "any"
-#: A ``udpin:`` link's peer silent this long (s) may be replaced by another sender the caller accepts
-RELOCK_S = 5.0
 UDP_RCVBUF = (
     4 << 20
 )  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
@@ -184,28 +183,41 @@ class Udp(_Transport):
         locked: bool = True,
     ):
         self.url = url
-        self.locked = locked  # False: every sender's datagrams are read (ANY_PEER)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.sock.setsockopt(
             socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF
         )  # the kernel caps it (rmem_max)
+        self.listen = listen
+        # listening: the sender lock (groundstation.sender_lock; locked False: every sender read, ANY_PEER)
+        self.lock: SenderLock | None = None
+        self._dest: tuple[str, int] | None = None
         if listen:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             self.sock.bind(addr)
-            self.dest = None if peer is None else (socket.gethostbyname(peer[0]), peer[1])
+            given = None if peer is None else (socket.gethostbyname(peer[0]), peer[1])
+            self.lock = SenderLock(given, locked)
         else:
-            self.dest = (socket.gethostbyname(addr[0]), addr[1])
-        self.listen = listen
-        self.fixed = listen and peer is not None  # the peer was given: never another
+            self._dest = (socket.gethostbyname(addr[0]), addr[1])
         self.last_from: tuple[str, int] | None = None
-        self.foreign = self.relocks = 0
-        self._peer_heard = time.monotonic()
         self.kernel_times = (
             sys.platform == "linux"
         )  # elsewhere the option's number means something else
         if self.kernel_times:
             self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+
+    @property
+    def dest(self) -> tuple[str, int] | None:
+        """Where writes go: the fixed destination, or the lock's peer."""
+        return self._dest if self.lock is None else self.lock.peer
+
+    @property
+    def foreign(self) -> int:
+        return 0 if self.lock is None else self.lock.foreign
+
+    @property
+    def relocks(self) -> int:
+        return 0 if self.lock is None else self.lock.relocks
 
     @property
     def peer_known(self) -> bool:
@@ -224,12 +236,8 @@ class Udp(_Transport):
             ConnectionRefusedError,
         ):  # ICMP port unreachable of an earlier datagram
             return b""
-        if self.listen and self.locked and self.dest is not None:
-            if addr == self.dest:
-                self._peer_heard = time.monotonic()
-            elif self.fixed or time.monotonic() - self._peer_heard < RELOCK_S:
-                self.foreign += 1
-                return b""
+        if self.lock is not None and not self.lock.admits(addr):
+            return b""
         stamps = [
             _TIMESPEC.unpack(d[: _TIMESPEC.size])
             for level, kind, d in ancillary
@@ -241,9 +249,8 @@ class Udp(_Transport):
 
     def answer_last_sender(self) -> None:
         """Lock to the sender of the last datagram read (the caller found its peer's messages in it)."""
-        if self.listen and not self.fixed and self.last_from != self.dest:
-            self.relocks += self.dest is not None
-            self.dest, self._peer_heard = self.last_from, time.monotonic()
+        if self.lock is not None and self.last_from is not None:
+            self.lock.lock(self.last_from)
 
     def write(self, buf: bytes) -> None:
         if self.dest is not None:

@@ -2,13 +2,17 @@
 
 | ``--video`` | kind | opened as |
 |---|---|---|
-| ``udp://HOST:PORT`` | udp | MPEG-TS over UDP (a multicast group joined), depacketized by skyfix (:mod:`.mpegts`), decoded by FFmpeg |
-| ``rtp://HOST:PORT?codec=h264\\|h265[&pt=96]`` | rtp | RTP without a session description (QGroundControl/BlueOS send H.264 RTP to 5600), depacketized by skyfix (:mod:`.rtp`), decoded by FFmpeg |
+| ``udp://HOST:PORT[?peer=…]`` | udp | MPEG-TS over UDP (a multicast group joined), depacketized by skyfix (:mod:`.mpegts`), decoded by FFmpeg |
+| ``rtp://HOST:PORT?codec=h264\\|h265[&pt=96][&peer=…]`` | rtp | RTP without a session description (QGroundControl/BlueOS send H.264 RTP to 5600), depacketized by skyfix (:mod:`.rtp`), decoded by FFmpeg |
 | ``FILE.sdp`` | sdp | the RTP stream the file describes, live |
 | ``rtsp://…[?transport=tcp\\|udp]`` | rtsp | RTSP, over TCP or UDP (default: FFmpeg tries UDP first) |
 | ``/dev/videoN``, ``v4l2:N`` ``[?video_size=WxH&framerate=F&input_format=mjpeg]`` | v4l2 | a V4L2 camera |
 | other ``scheme://`` | url | whatever FFmpeg opens, live |
 | a path | file | a file, read once |
+
+``udp://`` and ``rtp://`` take one sender (:mod:`groundstation.sender_lock`): the first whose datagram is
+the stream's, or ``peer=HOST:PORT`` (the camera's source address), or every sender with ``peer=any``;
+the others' datagrams are counted (the status's ``sender``), never read.
 
 Every live kind is opened for low delay: the smallest probe (its packets are
 kept, not dropped), no RTP reordering wait. A malformed
@@ -25,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
+from groundstation.sender_lock import ANY_PEER, parse_peer
 from groundstation.video.frames import VideoError
 
 # No "fflags nobuffer": it throws away the packets read while probing, and with them the
@@ -52,6 +57,8 @@ class VideoInput:
         None  # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp`; ``file`` the address)
     )
     payload_type: int | None = None  # rtp
+    peer: tuple[str, int] | None = None  # udp, rtp: the only sender taken (peer=HOST:PORT)
+    any_sender: bool = False  # udp, rtp: peer=any, every sender taken
 
     @property
     def live(self) -> bool:
@@ -89,12 +96,28 @@ def _port(url: str, parts) -> int:
     return port
 
 
+def _sender(url: str, query: dict[str, str]) -> dict:
+    """The ``peer=`` option's fields of a :class:`VideoInput` (popped from ``query``)."""
+    text = query.pop("peer", None)
+    if text is None:
+        return {}
+    if text == ANY_PEER:
+        return {"any_sender": True}
+    try:
+        return {"peer": parse_peer(text, "peer")}
+    except ValueError as e:
+        raise VideoError(f"{url}: {e}") from None
+
+
 def _udp(url: str, parts, query: dict[str, str]) -> VideoInput:
+    sender = _sender(url, query)
     if query:
         raise VideoError(
-            f"{url}: unknown option {next(iter(query))} (udp:// takes none: skyfix reads the port itself)"
+            f"{url}: unknown option {next(iter(query))} (udp:// takes peer only: skyfix reads the port itself)"
         )
-    return VideoInput(url, "udp", parts.hostname or "0.0.0.0", None, {}, _port(url, parts))
+    return VideoInput(
+        url, "udp", parts.hostname or "0.0.0.0", None, {}, _port(url, parts), **sender
+    )
 
 
 def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
@@ -105,8 +128,9 @@ def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
     pt_text = query.pop("pt", "96")
     if not pt_text.isdigit() or not 96 <= int(pt_text) <= 127:
         raise VideoError(f"{url}: pt={pt_text} is not a dynamic RTP payload type (96 … 127)")
+    sender = _sender(url, query)
     if query:
-        raise VideoError(f"{url}: unknown option {next(iter(query))} (known: codec, pt)")
+        raise VideoError(f"{url}: unknown option {next(iter(query))} (known: codec, pt, peer)")
     host = parts.hostname or "0.0.0.0"
     try:
         multicast = ipaddress.ip_address(host).is_multicast
@@ -117,7 +141,15 @@ def _rtp(url: str, parts, query: dict[str, str]) -> VideoInput:
             f"{url}: a multicast group: describe the stream in an .sdp file (FFmpeg joins the group)"
         )
     return VideoInput(
-        url, "rtp", host, None, {}, port, "h265" if codec == "hevc" else codec, int(pt_text)
+        url,
+        "rtp",
+        host,
+        None,
+        {},
+        port,
+        "h265" if codec == "hevc" else codec,
+        int(pt_text),
+        **sender,
     )
 
 

@@ -61,6 +61,7 @@ from collections.abc import Callable
 import av
 import numpy as np
 
+from groundstation.sender_lock import SenderLock
 from groundstation.threads import Handoff, Supervised, in_thread
 from groundstation.video.ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
 from groundstation.video.frames import LiveFrame, VideoError, decoder, ffmpeg_reason, put_until
@@ -159,6 +160,13 @@ class VideoLive:
         self.handoff: Handoff | None = None
         self.reader = Supervised("video", self._read)
         self._datagrams: DatagramInput | None = None  # the open rtp:// or udp:// input
+        # rtp://, udp://: the one sender taken, kept across its connections (groundstation.sender_lock)
+        src = self.source
+        self.sender_lock = (
+            SenderLock(src.peer, not src.any_sender, relock_s=read_timeout_s)
+            if src.kind in ("rtp", "udp")
+            else None
+        )
         self._datagrams_before = {
             "lost_packets": 0,
             "dropped_frames": 0,
@@ -226,7 +234,12 @@ class VideoLive:
                 Depacketizer(src.codec, src.payload_type) if src.kind == "rtp" else TsDepacketizer()
             )
             self._datagrams = DatagramInput(
-                src.file, src.port, depacketizer, self.open_timeout_s, self.read_timeout_s
+                src.file,
+                src.port,
+                depacketizer,
+                self.open_timeout_s,
+                self.read_timeout_s,
+                self.sender_lock,
             )
             return self._datagrams
         return av.open(
@@ -386,4 +399,5 @@ class VideoLive:
             "handoff": self.handoff.status() if self.handoff else None,
             "rtp": self._datagram_counts() if self.source.kind == "rtp" else None,
             "mpegts": self._datagram_counts() if self.source.kind == "udp" else None,
+            "sender": self.sender_lock.status() if self.sender_lock is not None else None,
         }

@@ -8,6 +8,11 @@ yields one ``av.Packet`` per whole access unit (``pts`` in 1/90 000 s); the deco
 The codec is the depacketizer's: given for RTP, read from the PMT for MPEG-TS — the open waits
 for it as FFmpeg's open waits for its probe, and raises ``TimeoutError`` after ``open_timeout_s``
 (:class:`~groundstation.video.frames.VideoError` for a program without H.264/H.265 video).
+Each datagram is read only when the input's :class:`~groundstation.sender_lock.SenderLock` admits its
+sender; the lock is taken by the first sender whose datagram the depacketizer reads as the stream's (one
+that adds to ``bad_packets`` does not lock), and is the caller's, kept across reconnections: a second
+sender neither splices its packets into the stream nor takes the port over while the camera sends (a
+camera silent for the read timeout has stopped: the next sender of the stream is taken, a relock).
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from fractions import Fraction
 
 import av
 
+from groundstation.sender_lock import SenderLock
 from groundstation.video.frames import VideoError
 from groundstation.video.rtp import VIDEO_HZ
 
@@ -65,23 +71,29 @@ def _bind(host: str, port: int) -> socket.socket:
 
 class DatagramInput:
     """``host``:``port`` read through ``depacketizer`` (an :class:`~.rtp.Depacketizer` or
-    :class:`~.mpegts.TsDepacketizer`: ``push(datagram)`` → access units, ``codec``, ``unreadable``); see the
-    module doc.
+    :class:`~.mpegts.TsDepacketizer`: ``push(datagram)`` → access units, ``codec``, ``unreadable``), from the
+    senders ``lock`` admits; see the module doc.
     :meth:`demux` raises ``TimeoutError`` when nothing came for ``read_timeout_s``."""
 
     def __init__(
-        self, host: str, port: int, depacketizer, open_timeout_s: float, read_timeout_s: float
+        self,
+        host: str,
+        port: int,
+        depacketizer,
+        open_timeout_s: float,
+        read_timeout_s: float,
+        lock: SenderLock | None = None,
     ):
         self.depacketizer = depacketizer
         self.read_timeout_s = read_timeout_s
+        self.lock = SenderLock() if lock is None else lock
         self._sock = _bind(host, port)
         self._units: deque = deque()
         try:
             deadline = time.monotonic() + open_timeout_s
             while depacketizer.codec is None:
-                self._sock.settimeout(max(0.001, deadline - time.monotonic()))
                 try:
-                    self._units.extend(depacketizer.push(self._sock.recv(DATAGRAM_BYTES)))
+                    self._receive(deadline)
                 except TimeoutError:
                     raise TimeoutError(
                         f"no video stream described within {open_timeout_s:g} s"
@@ -91,7 +103,6 @@ class DatagramInput:
         except BaseException:
             self._sock.close()
             raise
-        self._sock.settimeout(read_timeout_s)
         self.streams = _Streams(_Stream(depacketizer.codec))
 
     def demux(self, stream) -> Iterator[av.Packet]:
@@ -104,10 +115,24 @@ class DatagramInput:
                 packet.is_keyframe = unit.keyframe
                 yield packet
             try:
-                datagram = self._sock.recv(DATAGRAM_BYTES)
+                self._receive(time.monotonic() + self.read_timeout_s)
             except TimeoutError:
                 raise TimeoutError(f"nothing received for {self.read_timeout_s:g} s") from None
-            self._units.extend(self.depacketizer.push(datagram))
+
+    def _receive(self, deadline: float) -> None:
+        """Read datagrams until one from an admitted sender (``TimeoutError`` when none came by ``deadline``,
+        monotonic s); its access units. A datagram the depacketizer takes as the stream's locks its sender."""
+        while True:
+            self._sock.settimeout(max(0.001, deadline - time.monotonic()))
+            datagram, addr = self._sock.recvfrom(DATAGRAM_BYTES)
+            if self.lock.admits(addr):
+                break
+            if time.monotonic() > deadline:
+                raise TimeoutError
+        bad = self.depacketizer.bad_packets
+        self._units.extend(self.depacketizer.push(datagram))
+        if self.depacketizer.bad_packets == bad:
+            self.lock.lock(addr)
 
     def close(self) -> None:
         self._sock.close()
