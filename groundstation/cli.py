@@ -82,6 +82,11 @@ COMMANDS = (
         "groundstation.latency.estimate",
         "a recording's video-to-telemetry time offset, from image motion",
     ),
+    (
+        "deploy",
+        "groundstation.deploy_command",
+        "print a shipped deployment file (systemd unit, configuration, Zenoh) or copy them all",
+    ),
 )
 
 

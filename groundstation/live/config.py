@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import logging
 import tomllib
 from pathlib import Path
@@ -486,6 +487,14 @@ class RunConfig(UuvOptions):
         if self.recording and self.mavlink_backend == "mavsdk":
             key = "record" if self.record else "recordings"
             raise Invalid(key, self.recording, "recording needs --mavlink-backend pymavlink")
+        return self
+
+    @model_validator(mode="after")
+    def _mavsdk_installed(self):
+        if self.mavlink_backend == "mavsdk" and importlib.util.find_spec("mavsdk") is None:
+            raise Invalid(
+                "mavlink_backend", "mavsdk", "needs MAVSDK-Python: pip install 'skyfix[mavsdk]'"
+            )
         return self
 
     @model_validator(mode="after")
