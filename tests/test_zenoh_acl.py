@@ -207,7 +207,8 @@ def test_a_fusers_sources_come_from_their_own_drone_only(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "name", ["peer", "client", "tls", "router-tls", "vehicle-router", "fleet-client"]
+    "name",
+    ["peer", "client", "tls", "router-tls", "vehicle-router", "fleet-router", "fleet-client"],
 )
 def test_shipped_configs_trust_nobody_by_default(name):
     assert (
@@ -217,14 +218,14 @@ def test_shipped_configs_trust_nobody_by_default(name):
 
 
 def test_shipped_access_control_is_one_and_the_same():
-    """The service's peer and the router check the same rules (the one list deploy/zenoh/README.md explains)."""
+    """The service's peer and the routers check the same rules (the one list deploy/zenoh/README.md explains)."""
     acl = [
         make_config(config_file=str(ROOT / "deploy" / "zenoh" / f"{n}.json5")).get_json(
             "access_control"
         )
-        for n in ("peer", "router-tls")
+        for n in ("peer", "router-tls", "fleet-router")
     ]
-    assert acl[0] == acl[1] and json.loads(acl[0])["default_permission"] == "deny"
+    assert acl[0] == acl[1] == acl[2] and json.loads(acl[0])["default_permission"] == "deny"
 
 
 @pytest.mark.parametrize(
