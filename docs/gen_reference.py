@@ -462,6 +462,37 @@ def benches_page() -> str:
     return "\n".join(out) + "\n"
 
 
+def rates_page() -> str:
+    from groundstation.live.sources import rates
+
+    uav = {**rates.NEEDED_HZ, "the gimbal's message": rates.GIMBAL_HZ}
+    uav["DISTANCE_SENSOR (once a downward one has come)"] = rates.RANGEFINDER_HZ
+    uuv = {"its depth sensor's SCALED_PRESSURE, GLOBAL_POSITION_INT": rates.DEPTH_HZ}
+    uuv["SERVO_OUTPUT_RAW (the thrusters)"] = rates.THRUSTERS_HZ
+    rows = [f"| the UAV | {m} | {hz:g} |" for m, hz in uav.items()]
+    rows += [f"| the UUV (ArduSub) | {m} | {hz:g} |" for m, hz in uuv.items()]
+    doc = (rates.__doc__ or "").replace("``", "`").replace(":data:", "")
+    return (
+        "\n".join(
+            [
+                "# Telemetry rates",
+                "",
+                (
+                    "What skyfix needs from each autopilot and asks for when it arrives slower (generated from "
+                    "`groundstation/live/sources/rates.py`)."
+                ),
+                "",
+                "| autopilot | message | Hz |",
+                "|---|---|---|",
+                *rows,
+                "",
+                doc,
+            ]
+        )
+        + "\n"
+    )
+
+
 PAGES = {
     "reference/cli.md": cli_page,
     "reference/configuration.md": configuration_page,
@@ -471,6 +502,7 @@ PAGES = {
     "reference/gps-input.md": gps_input_page,
     "reference/positions-csv.md": positions_page,
     "reference/benches.md": benches_page,
+    "reference/telemetry-rates.md": rates_page,
 }
 
 for page, make in PAGES.items():
