@@ -12,6 +12,13 @@ unchanged) on ``skyfix/uuv/<id>/fix``, the status (``skyfix.fuse-status/1``) onc
 answering the latest of both. A drone that drops out leaves the others' fixes going out with
 no gap; one that joins is used after its own gate confirmed it (a second).
 
+Before anything is opened, the start's checks of ``skyfix run`` (:mod:`groundstation.live.preflight`): the
+drones named (``--source``), GPS_INPUT's connection string and signing key (readable by its owner only), and a
+Zenoh that trusts nobody by default (TLS with mutual authentication and access control beyond loopback, no
+multicast scouting, its credentials files readable, the private ones by their owner only; ``--zenoh-insecure``
+for a network of the team's own); without ``--zenoh-listen`` or ``--zenoh-config`` it listens on loopback only
+(:data:`LOCAL_LISTEN`). A mistake is exit 2 and one line naming the value.
+
 Workers (:mod:`groundstation.live.workers`, stopped in this order): the subscription and the
 queryables, then the status, then GPS_INPUT (its last message says no fix).
 """
@@ -26,11 +33,18 @@ import math
 import signal
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import zenoh
 from pydantic import ValidationError
 
 from groundstation.live.control import ZenohControl
+from groundstation.live.preflight import (
+    link_problem,
+    private_file,
+    zenoh_credentials,
+    zenoh_problem,
+)
 from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.live.sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
@@ -49,6 +63,8 @@ from .fuser import CLOCK_TOLERANCE_S, MAX_HZ, Fuser
 
 log = logging.getLogger("skyfix.fuse")
 
+#: the fuser's Zenoh listener without --zenoh-listen or --zenoh-config: this machine only, a port of the system's
+LOCAL_LISTEN = "tcp/127.0.0.1:0"
 HANDOFF_FIXES = 512  # fix messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
 
 
@@ -112,7 +128,7 @@ async def serve(args: argparse.Namespace) -> dict:
         loop.add_signal_handler(sig, stop.set)
     session = open_session(
         args.zenoh_connect or (),
-        args.zenoh_listen or (),
+        args.zenoh_listen,
         multicast=args.zenoh_multicast,
         config_file=args.zenoh_config,
     )
@@ -212,7 +228,7 @@ def run(args: argparse.Namespace) -> int:
     )
     base = f"skyfix/uuv/{args.uuv}"
     args.sources = args.sources or f"{base}/drone/*/fix"
-    args.source_keys = source_keys(args.source, base, args.sources)
+    preflight(args, base)
     args.fix_key = args.fix_key or f"{base}/fix"
     args.status_key = args.status_key or f"{base}/fuse/status"
     args.alive_key = args.alive_key or f"{base}/fuse/alive"
@@ -221,6 +237,48 @@ def run(args: argparse.Namespace) -> int:
         return 2
     log.info("stopped: %s", json.dumps(final["fusion"]))
     return 0
+
+
+def preflight(args: argparse.Namespace, base: str) -> None:
+    """The start's checks (see the module doc): ``args.source_keys`` and ``args.zenoh_listen`` set;
+    :class:`ConfigError` for the first mistake."""
+    args.source_keys = source_keys(args.source, base, args.sources)
+    if args.gps_input and not args.gps_input.startswith("zenoh:"):
+        why = link_problem(args.gps_input)
+        if why:
+            raise ConfigError("options", "--gps-input", args.gps_input, why)
+    if args.gps_input_signing_key:
+        private_file("options", "--gps-input-signing-key", args.gps_input_signing_key)
+        read_signing_key(args.gps_input_signing_key)
+    if args.zenoh_config and not Path(args.zenoh_config).is_file():
+        raise ConfigError("options", "--zenoh-config", args.zenoh_config, "no such file")
+    if not (args.zenoh_listen or args.zenoh_config):
+        args.zenoh_listen = [LOCAL_LISTEN]
+    flag = (
+        "--zenoh-config"
+        if args.zenoh_config
+        else "--zenoh-connect"
+        if args.zenoh_connect
+        else "--zenoh-listen"
+    )
+    value = args.zenoh_config or ", ".join(args.zenoh_connect or args.zenoh_listen or ())
+    why = zenoh_problem(
+        args.zenoh_connect or (),
+        args.zenoh_listen or (),
+        multicast=args.zenoh_multicast,
+        config_file=args.zenoh_config,
+        insecure=args.zenoh_insecure,
+    )
+    if why:
+        raise ConfigError("options", flag, value, why)
+    if args.zenoh_config:
+        zenoh_credentials(
+            args.zenoh_config,
+            args.zenoh_connect or (),
+            args.zenoh_listen or (),
+            "options",
+            "--zenoh-config",
+        )
 
 
 def source_keys(sources: list[str] | None, base: str, keyexpr: str) -> list[str]:
@@ -401,6 +459,12 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         "--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file (deploy/zenoh/*.json5)"
     )
     p.add_argument("--zenoh-multicast", action="store_true", help="Zenoh multicast scouting on")
+    p.add_argument(
+        "--zenoh-insecure",
+        action="store_true",
+        help="allow Zenoh without TLS, mutual authentication and access control beyond this machine (a network "
+        "of the team's own only: anyone on it can feed the fuser; deploy/zenoh/README.md)",
+    )
     p.add_argument(
         "--duration-s",
         metavar="S",

@@ -147,10 +147,7 @@ def start_checks(args: argparse.Namespace, cfg: config.RunConfig) -> None:
 
 
 def _zenoh_trust(args: argparse.Namespace, cfg: config.RunConfig) -> None:
-    """:class:`ConfigError` when the run's Zenoh lets strangers command it or feed it
-    (:func:`~groundstation.zenoh_session.trust_problem`)."""
-    from groundstation.zenoh_session import make_config, trust_problem
-
+    """:class:`ConfigError` when the run's Zenoh lets strangers command it or feed it (:func:`zenoh_problem`)."""
     name = (
         "zenoh_config"
         if cfg.zenoh_config
@@ -159,21 +156,33 @@ def _zenoh_trust(args: argparse.Namespace, cfg: config.RunConfig) -> None:
         else "zenoh_listen"
     )
     value = cfg.zenoh_config or ", ".join(cfg.zenoh_connect or cfg.zenoh_listen_endpoints)
-    try:
-        conf = make_config(
-            cfg.zenoh_connect,
-            cfg.zenoh_listen_endpoints,
-            multicast=cfg.zenoh_multicast,
-            config_file=cfg.zenoh_config,
-        )
-    except Exception as e:  # noqa: BLE001 - zenoh raises ZError (and ValueError) on a bad file or endpoint
-        raise ConfigError(*origin(args, name), value, f"not a Zenoh configuration: {e}") from None
-    why = trust_problem(conf, insecure=cfg.zenoh_insecure)
+    why = zenoh_problem(
+        cfg.zenoh_connect,
+        cfg.zenoh_listen_endpoints,
+        multicast=cfg.zenoh_multicast,
+        config_file=cfg.zenoh_config,
+        insecure=cfg.zenoh_insecure,
+    )
     if why:
         raise ConfigError(*origin(args, name), value, why)
 
 
-def _private(source: str, key: str, path: str) -> None:
+def zenoh_problem(
+    connect, listen, *, multicast: bool, config_file: str | None, insecure: bool
+) -> str | None:
+    """Why a Zenoh session of these settings (:func:`~groundstation.zenoh_session.make_config`'s) cannot be made or
+    lets strangers command or feed its process (:func:`~groundstation.zenoh_session.trust_problem`); None when
+    neither. ``skyfix run`` and ``skyfix fuse`` check it at every start."""
+    from groundstation.zenoh_session import make_config, trust_problem
+
+    try:
+        conf = make_config(connect, listen, multicast=multicast, config_file=config_file)
+    except Exception as e:  # noqa: BLE001 - zenoh raises ZError (and ValueError) on a bad file or endpoint
+        return f"not a Zenoh configuration: {e}"
+    return trust_problem(conf, insecure=insecure)
+
+
+def private_file(source: str, key: str, path: str) -> None:
     """:class:`ConfigError` when the credentials file ``path`` cannot be read or others may read it."""
     try:
         mode = os.stat(path).st_mode
@@ -187,36 +196,46 @@ def _private(source: str, key: str, path: str) -> None:
 
 
 def _credentials(args, cfg: config.RunConfig) -> list[str]:
-    """Checks every credentials file (:func:`_private`, certificates only readable); what was checked."""
+    """Checks every credentials file (:func:`private_file`, certificates only readable); what was checked."""
     from groundstation.mavlink.link import read_signing_key
-    from groundstation.zenoh_session import make_config
 
     checked = []
     if cfg.mavlink_signing_key:
-        _private(*origin(args, "mavlink_signing_key"), cfg.mavlink_signing_key)
+        private_file(*origin(args, "mavlink_signing_key"), cfg.mavlink_signing_key)
         read_signing_key(cfg.mavlink_signing_key, "--mavlink-signing-key")
         checked.append(cfg.mavlink_signing_key)
     for u in cfg.uuvs:
         if u.gps_input_signing_key:
-            _private(*origin(args, "gps_input_signing_key"), u.gps_input_signing_key)
+            private_file(*origin(args, "gps_input_signing_key"), u.gps_input_signing_key)
             read_signing_key(u.gps_input_signing_key)
             checked.append(u.gps_input_signing_key)
     if cfg.zenoh_config:
-        try:
-            conf = make_config(cfg.zenoh_connect, cfg.zenoh_listen, config_file=cfg.zenoh_config)
-        except Exception as e:  # noqa: BLE001 - zenoh raises ZError (and ValueError) on a bad file or endpoint
-            raise ConfigError(
-                *origin(args, "zenoh_config"), cfg.zenoh_config, f"not a Zenoh configuration: {e}"
-            ) from None
-        for key, private in ZENOH_CREDENTIALS:
-            path = json.loads(conf.get_json(key) or "null")
-            if not path:
-                continue
-            if private:
-                _private(cfg.zenoh_config, key, path)
-            elif not os.access(path, os.R_OK):
-                raise ConfigError(cfg.zenoh_config, key, path, "cannot read")
-            checked.append(path)
+        checked += zenoh_credentials(
+            cfg.zenoh_config, cfg.zenoh_connect, cfg.zenoh_listen, *origin(args, "zenoh_config")
+        )
+    return checked
+
+
+def zenoh_credentials(config_file: str, connect, listen, source: str, key: str) -> list[str]:
+    """The credentials files a Zenoh configuration names (TLS keys, a password file) read, the private ones
+    readable by their owner only (:func:`private_file`); the paths checked. :class:`ConfigError` naming ``source``
+    and ``key`` (where the configuration file was given) when the file is no Zenoh configuration."""
+    from groundstation.zenoh_session import make_config
+
+    try:
+        conf = make_config(connect, listen, config_file=config_file)
+    except Exception as e:  # noqa: BLE001 - zenoh raises ZError (and ValueError) on a bad file or endpoint
+        raise ConfigError(source, key, config_file, f"not a Zenoh configuration: {e}") from None
+    checked = []
+    for setting, private in ZENOH_CREDENTIALS:
+        path = json.loads(conf.get_json(setting) or "null")
+        if not path:
+            continue
+        if private:
+            private_file(config_file, setting, path)
+        elif not os.access(path, os.R_OK):
+            raise ConfigError(config_file, setting, path, "cannot read")
+        checked.append(path)
     return checked
 
 
