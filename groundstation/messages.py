@@ -135,6 +135,12 @@ class FixMessage(Message):
         "since its last match and since it (re)acquired the UUV; README, 'How sure "
         "the pixel is')",
     )
+    sigma_uav_m: NonNegative = Field(
+        None,
+        description="the UAV position's horizontal 1-sigma (DRMS, its GNSS receiver's or the configured) as it "
+        "went into h_acc_m, metres: an error drones under one sky (or one RTK base) share, which skyfix fuse "
+        "does not average away",
+    )
     height_source: str | None = Field(
         None,
         description="what measured the height within the last 30 s (README, "

@@ -55,6 +55,9 @@ class Fix:
     sigma_pixel_px: float = float(
         "nan"
     )  # the tracker's 1-sigma of each of u and v as it went into h_acc_m (pixels)
+    sigma_uav_m: float = float(
+        "nan"
+    )  # the UAV position's horizontal 1-sigma (GNSS) as it went into h_acc_m
     height_source: str = ""  # where each input came from (see localizer.pose.CameraPose)
     depth_source: str = ""
     time_source: str = ""
@@ -99,6 +102,7 @@ class Fixes:
     sigma_depth_m: np.ndarray
     sigma_time_s: np.ndarray
     sigma_pixel_px: np.ndarray
+    sigma_uav_m: np.ndarray
     height_source: np.ndarray  # object arrays of str
     depth_source: np.ndarray
     time_source: np.ndarray
@@ -228,6 +232,7 @@ def locate(
         sigma_depth_m=pose.sigma_depth_m.copy(),
         sigma_time_s=pose.sigma_time_s.copy(),
         sigma_pixel_px=sig_px.copy(),
+        sigma_uav_m=np.broadcast_to(np.asarray(pose.sigma_uav_m, dtype=float), u.shape).copy(),
         height_source=pose.height_source.copy(),
         depth_source=pose.depth_source.copy(),
         time_source=pose.time_source.copy(),

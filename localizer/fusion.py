@@ -80,12 +80,12 @@ def _no_shared() -> np.ndarray:
 
 @dataclass(frozen=True)
 class SharedSigmas:
-    """1-sigma of the errors every drone shares that their fixes do not carry: ``gnss_m`` (per axis, horizontal: the
-    GNSS error of receivers under one sky, or an RTK base's), ``height_m`` (the barometers' common trend: at most each
-    fix's own ``sigma_height_m``), ``clock_s`` (the stations' common clock error, times the UUV's velocity). The depth's
-    is each fix's own ``sigma_depth_m``."""
+    """1-sigma of the errors every drone shares: ``gnss_m`` (per axis, horizontal: the GNSS error of receivers under
+    one sky, or an RTK base's; None: each fix's own ``sigma_uav_m`` taken as shared whole, per axis its DRMS / √2),
+    ``height_m`` (the barometers' common trend: at most each fix's own ``sigma_height_m``), ``clock_s`` (the
+    stations' common clock error, times the UUV's velocity). The depth's is each fix's own ``sigma_depth_m``."""
 
-    gnss_m: float = 0.0
+    gnss_m: float | None = None
     height_m: float = 0.0
     clock_s: float = 0.0
 
@@ -148,8 +148,8 @@ def shared_effects(
     The depth and the height move it along the line from the UAV to the UUV (``north_m``, ``east_m``) by the
     refracted ray's slope in water and in air (Snell, :func:`~localizer.refraction.surface_distance`) times the
     fix's ``sigma_depth_m`` and the shared height sigma (none when a rangefinder or the UUV's size measured the
-    height: then it is the drone's own); the GNSS error moves it as it moves the UAV; the clock by the UUV's
-    velocity ``velocity_ne_mps`` (m/s) times ``clock_s``. A term whose inputs the fix lacks is 0.
+    height: then it is the drone's own); the GNSS error moves it as it moves the UAV (:func:`shared_gnss_m`); the
+    clock by the UUV's velocity ``velocity_ne_mps`` (m/s) times ``clock_s``. A term whose inputs the fix lacks is 0.
     """
     G = _no_shared()
     rho = math.hypot(fix.north_m, fix.east_m)
@@ -178,10 +178,19 @@ def shared_effects(
         )
         G[:, 0] = along * tan_water * sigma_depth
         G[:, 1] = along * tan_air * sigma_height
-    G[0, 2] = G[1, 3] = sigmas.gnss_m
+    G[0, 2] = G[1, 3] = shared_gnss_m(fix, sigmas)
     if velocity_ne_mps is not None:
         G[:, 4] = velocity_ne_mps * sigmas.clock_s
     return G
+
+
+def shared_gnss_m(fix: Fix, sigmas: SharedSigmas) -> float:
+    """The per-axis 1-sigma (m) of the GNSS error this fix shares with the other drones': the configured
+    ``gnss_m``, else the fix's own UAV position sigma (``sigma_uav_m``, a DRMS: / √2 per axis) whole (receivers under
+    one sky share most of theirs; an RTK base's error is every rover's); 0 when the fix does not carry it."""
+    if sigmas.gnss_m is not None:
+        return sigmas.gnss_m
+    return fix.sigma_uav_m / math.sqrt(2.0) if math.isfinite(fix.sigma_uav_m) else 0.0
 
 
 class SourceTrack:

@@ -416,9 +416,9 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         "--shared-gnss-m",
         metavar="M",
         type=_number(0.0, "--shared-gnss-m"),
-        default=0.0,
-        help="1-sigma (per axis) of the GNSS error all drones share: one sky, one RTK base; the fixes do "
-        "not carry their GNSS error: say it (default %(default)g; about 1 for plain GNSS)",
+        default=None,
+        help="1-sigma (per axis) of the GNSS error all drones share: one sky, one RTK base (default: each fix's "
+        "own GNSS sigma, sigma_uav_m, taken as shared whole; 0: the drones' receivers err independently)",
     )
     p.add_argument(
         "--shared-height-m",
