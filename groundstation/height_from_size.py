@@ -24,7 +24,7 @@ NumPy at 720p, 120 ms at 1080p, ~20 ms at 1080p since its corners' rays meet the
 method and its support scan samples less, ~12 ms since the scan samples along rows of points and further
 out only where an edge is near (issue 18: 28.8 → 17.1 ms of CPU, medians over the 195 measurements of
 ``bench/offline_speed.py``'s 1080p session on a busy machine, the same results); in a thread it held the
-interpreter's lock against decoding and tracking — measured with ``bench/live_latency.py``, see the README),
+interpreter's lock against decoding and tracking — measured with ``bench/live_latency.py``),
 the results handed back to the loop, where the telemetry is written.
 """
 

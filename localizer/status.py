@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-#: word → what it means (for the README, the schema and the reports)
+#: word → what it means (for the docs' status words page, the schema and the reports)
 STATUSES: dict[str, str] = {
     "ok": "a valid fix",
     # tracking
