@@ -564,9 +564,10 @@ class DepthStatus(Section):
         description="the Zenoh key (blueos: the autopilot's prefix); null over MAVLink"
     )
     url: str | None = Field(description="the MAVLink link (mavlink); null over Zenoh")
-    shape: Literal["skyfix", "blueos", "mavlink"] = Field(
-        description="skyfix: JSON {t, depth_m}; blueos: ArduSub's MAVLink as BlueOS's mavlink-server publishes it; "
-        "mavlink: ArduSub's MAVLink on a link of skyfix's own"
+    shape: str = Field(
+        description="the depth source's name (depth_source): skyfix: JSON {t, depth_m}; blueos: ArduSub's MAVLink "
+        "as BlueOS's mavlink-server publishes it; mavlink: ArduSub's MAVLink on a link of skyfix's own; or a "
+        "registered source's own"
     )
     received: int = Field(description="payloads or messages received (of those used)")
     bad: int = Field(description="payloads or messages that could not be read")
@@ -1013,6 +1014,11 @@ class FusionStatus(Section):
         0,
         description="fused positions beyond where the UUV can be by the fused fixes' own "
         "track: sent as off_track, no position",
+    )
+    output_restarts: int = Field(
+        0,
+        description="times the fused fixes' own track started again elsewhere: more than half of the "
+        "configured drones agreed there for a second, beyond the track's reach",
     )
     configured: list[str] = Field(
         [], description="the fix keys whose fixes may be fused (--source)"

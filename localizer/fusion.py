@@ -38,7 +38,14 @@ claim is scaled down to it: :func:`fit_shared`).
 - **Gated against its own track** (:class:`OutputGate`): the fused fixes' own track
   (:class:`~localizer.uuv_track.UuvTrack`); a fused position beyond where the UUV can be from it (more
   than :data:`~localizer.fix_gate.GATE_SIGMAS` over both fused claims, the old and the new: a source joining
-  or leaving moves the fused position by at most their difference) is not taken.
+  or leaving moves the fused position by at most their difference) is not taken. Where it can be grows with
+  the time since the track's last fix at the UUV's top speed, but never beyond ``max_reach_m`` (the live
+  gate's :data:`~localizer.fix_gate.MAX_REACH_M`): fused positions held off the track by a fake, or by the
+  real drones' absence, do not become valid by waiting. Only the caller restarts the track elsewhere
+  (:meth:`OutputGate.restart`: the fuser, once most of its configured drones agree there). The fuser also
+  holds a fusion of fewer than half its drones within the reach of where most of them last agreed
+  (:meth:`OutputGate.check`'s ``hold``, :func:`beyond_reach_sigmas`): a lone source walking slowly away, each step within the UUV's dynamics,
+  cannot drag the fused fix further than ``max_reach_m``.
 
 Pure computation: positions in metres north and east of a reference the caller chooses, times in seconds
 of one time base (GNSS time where the sources have it).
@@ -54,7 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .fix import Fix
-from .fix_gate import GATE_SIGMAS
+from .fix_gate import GATE_SIGMAS, MAX_REACH_M
 from .refraction import surface_distance
 from .uuv_track import UuvTrack
 
@@ -341,21 +348,46 @@ class Floors:
         return np.zeros((2, 2)) if best is None else best
 
 
+def beyond_reach_sigmas(
+    z: np.ndarray, C: np.ndarray, anchor_z: np.ndarray, anchor_C: np.ndarray, reach_m: float
+) -> float:
+    """How many sigmas a position ``z`` (covariance ``C``, m²) lies beyond ``reach_m`` of ``anchor_z`` (covariance
+    ``anchor_C``): the distance beyond the reach over the 1-sigma of both along the line between them; 0 within."""
+    d = z - anchor_z
+    dist = float(np.hypot(*d))
+    if dist <= reach_m:
+        return 0.0
+    u = d / dist
+    return (dist - reach_m) / math.sqrt(float(u @ (C + anchor_C) @ u))
+
+
 class OutputGate:
     """The fused fixes' own track (module doc): :meth:`check` says whether a fused position can be the UUV."""
 
-    def __init__(self, max_speed_mps: float, max_accel_mps2: float):
+    def __init__(
+        self, max_speed_mps: float, max_accel_mps2: float, max_reach_m: float = MAX_REACH_M
+    ):
         self.max_speed_mps = max_speed_mps
         self.max_accel_mps2 = max_accel_mps2
+        self.max_reach_m = max_reach_m
         self.track: UuvTrack | None = None
         self.refused = 0
+        self.restarts = 0
 
-    def check(self, t: float, z: np.ndarray, C: np.ndarray) -> float | None:
+    def check(
+        self, t: float, z: np.ndarray, C: np.ndarray, hold: Estimate | None = None
+    ) -> float | None:
         """None when the fused position ``z`` (covariance ``C``, m²) at ``t`` lies where the UUV can be by the track
         (which then takes it; the first starts it), else how many sigmas beyond (the track unchanged: what it
-        allows grows with the time since its last fix, at the UUV's top speed)."""
+        allows grows with the time since its last fix, at the UUV's top speed, up to ``max_reach_m``). ``hold``:
+        a position it must also lie within ``max_reach_m`` of (:func:`beyond_reach_sigmas`)."""
+        if hold is not None:
+            d = beyond_reach_sigmas(z, C, hold.z, hold.C, self.max_reach_m)
+            if d > GATE_SIGMAS:
+                self.refused += 1
+                return d
         if self.track is None:
-            self.track = UuvTrack(self.max_speed_mps, self.max_accel_mps2, t, z, C, 1.0)
+            self._start(t, z, C)
             return None
         d = self.track.distance(t, z, C + self.track.C, 1.0)[0]
         if d > GATE_SIGMAS:
@@ -363,3 +395,13 @@ class OutputGate:
             return d
         self.track.update(t, z, C, 1.0)
         return None
+
+    def restart(self, t: float, z: np.ndarray, C: np.ndarray) -> None:
+        """Start the track again at ``z`` (the caller has reason to trust it there; counted in ``restarts``)."""
+        self.restarts += self.track is not None
+        self._start(t, z, C)
+
+    def _start(self, t: float, z: np.ndarray, C: np.ndarray) -> None:
+        self.track = UuvTrack(
+            self.max_speed_mps, self.max_accel_mps2, t, z, C, 1.0, max_reach_m=self.max_reach_m
+        )

@@ -22,7 +22,7 @@ from annotated_types import Ge, Gt, Le, MinLen
 from pydantic import Field, field_validator, model_validator
 from pydantic.dataclasses import dataclass
 
-from groundstation.live.config import read_toml
+from groundstation.config_files import read_toml
 from groundstation.session.read import PRIMARY_UUV
 from localizer.contract import (
     CLOSED,

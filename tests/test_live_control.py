@@ -13,7 +13,7 @@ import time
 import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
-from groundstation.live.config import load_calibration
+from groundstation.config_files import load_calibration
 from groundstation.live.control import ControlError, jsonable, parse_select
 from groundstation.live.sources.uuv_position import (
     MAX_AGE_S,

@@ -17,7 +17,8 @@ import zenoh
 from live_helpers import ROOT
 from supervisor import read_unit, systemd_seconds
 
-from groundstation.live.config import load_calibration, run_config
+from groundstation.config_files import load_calibration
+from groundstation.live.config import run_config
 from groundstation.zenoh_session import make_config
 
 DEPLOY = ROOT / "deploy"

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from groundstation.live.config import load_calibration
+from groundstation.config_files import load_calibration
 from groundstation.live.pipeline import Pipeline
 from groundstation.live.sinks.zenoh_fix import fix_to_json
 from groundstation.video.frames import LiveFrame

@@ -21,8 +21,15 @@ The fused fixes decide between two sources that disagree once they have gone on 
 second (:data:`~localizer.fix_gate.CONFIRM_S`) without a disagreement: an incumbent drone that
 has been fused for a second outweighs a newcomer that disagrees with it; two that appear
 together and disagree get no fix until a third sides with one. A fused position beyond where
-the UUV can be by the fused fixes' own track (:class:`~localizer.fusion.OutputGate`) is an
-``off_track`` fix: no position, GPS_INPUT says no fix.
+the UUV can be by the fused fixes' own track (:class:`~localizer.fusion.OutputGate`, its reach capped at
+``max_reach_m`` however long since) is an ``off_track`` fix: no position, GPS_INPUT says no fix. The track
+starts again at the fused position only once more than half of the configured drones have agreed on it for
+:data:`~localizer.fix_gate.CONFIRM_S` and no source with a current fix disagrees (the UUV moved on while they
+had lost it); while one does, the fused fix stays off_track: no fix rather than a guess. A fusion of half the configured
+drones or fewer is ``off_track`` too beyond ``max_reach_m`` of the last fused position most of them agreed on
+(:meth:`~localizer.fusion.OutputGate.check`'s ``hold``; none yet: the sources' own gates judge): one drone faking fixes,
+or a minority, can neither drag the fused fix further nor restart it where they say (the price: one drone left
+alone of two follows the UUV only that far).
 
 Time base: a fix's GNSS time (``t_gnss``, the drone's station clock corrected by its
 autopilot's SYSTEM_TIME) where it has one, else its station time ``t`` — then the drones'
@@ -54,7 +61,7 @@ import numpy as np
 from groundstation.live.sinks.gps_input import LOSS_STATUSES
 from localizer.clock import Median
 from localizer.fix import Fix
-from localizer.fix_gate import CONFIRM_S, MAX_SPEED_MPS, FixGate
+from localizer.fix_gate import CONFIRM_S, MAX_REACH_M, MAX_SPEED_MPS, FixGate
 from localizer.fusion import (
     Estimate,
     Floors,
@@ -143,6 +150,7 @@ class Fuser:
         max_speed_mps: float = MAX_SPEED_MPS["bluerov2"],
         clock_tolerance_s: float = CLOCK_TOLERANCE_S,
         shared: SharedSigmas | None = None,
+        max_reach_m: float = MAX_REACH_M,
     ):
         self.new_gate = new_gate
         self.configured = frozenset(sources)
@@ -157,7 +165,7 @@ class Fuser:
         self.fused = SourceTrack(
             max_accel_mps2
         )  # the fused fixes: what decides between disagreeing sources
-        self.output = OutputGate(max_speed_mps, max_accel_mps2)
+        self.output = OutputGate(max_speed_mps, max_accel_mps2, max_reach_m)
         self.floors = Floors()
         self.published = 0
         self.disagreements = 0
@@ -165,6 +173,10 @@ class Fuser:
         self.last_sources: tuple[str, ...] = ()
         self._ref: tuple[float, float] | None = None
         self._fused_since: float | None = None  # the first fusion since the last disagreement
+        # the first of a run of fusions off the output's track with most configured sources in it, none opposed;
+        # the last fused position most configured sources agreed on
+        self._off_since: float | None = None
+        self._anchor: Estimate | None = None
 
     def on_fix(self, name: str, fix: Fix, now: float) -> Fix | None:
         """Take one source's fix received at ``now`` (the fuser's clock); the fused fix to publish, or None."""
@@ -239,15 +251,31 @@ class Fuser:
         if not chosen:
             self.disagreements += 1
             self.fused.clear()
-            self._fused_since = None
+            self._fused_since = self._off_since = None
             return Fix(
                 t_unix=newest.t_unix, status="disagree", t_gnss=newest.t_gnss, frame=self.published
             )
         est = fuse([estimates[n] for n in chosen])
-        if self.output.check(t, est.z, est.C) is not None:
-            return Fix(
-                t_unix=newest.t_unix, status="off_track", t_gnss=newest.t_gnss, frame=self.published
-            )
+        majority = 2 * len(chosen) > len(self.configured)
+        if self.output.check(t, est.z, est.C, None if majority else self._anchor) is not None:
+            # most configured sources, none with a current fix left out, off the track: for a second, a restart
+            unopposed = majority and len(chosen) == len(estimates)
+            if not unopposed:
+                self._off_since = None
+            elif self._off_since is None:
+                self._off_since = t
+            if unopposed and t - self._off_since >= CONFIRM_S:
+                self.output.restart(t, est.z, est.C)
+            else:
+                return Fix(
+                    t_unix=newest.t_unix,
+                    status="off_track",
+                    t_gnss=newest.t_gnss,
+                    frame=self.published,
+                )
+        self._off_since = None
+        if majority:
+            self._anchor = est
         self.fused.add(Sample(t, est.z, est.C, est.alt_m, est.v_acc_m))
         if self._fused_since is None:
             self._fused_since = t
@@ -290,6 +318,7 @@ class Fuser:
             "published": self.published,
             "disagreements": self.disagreements,
             "off_track": self.output.refused,
+            "output_restarts": self.output.restarts,
             "last_sources": list(self.last_sources),
             "configured": sorted(self.configured),
             "unconfigured": dict(self.unconfigured),

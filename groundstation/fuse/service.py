@@ -56,7 +56,7 @@ from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMes
 from groundstation.threads import Handoff
 from groundstation.zenoh_session import open_session, subscribe
 from localizer.calibration import ConfigError
-from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
+from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_REACH_M, MAX_SPEED_MPS, FixGate
 from localizer.fusion import SharedSigmas
 
 from .fuser import CLOCK_TOLERANCE_S, MAX_HZ, Fuser
@@ -147,6 +147,7 @@ async def serve(args: argparse.Namespace) -> dict:
             sources=args.source_keys,
             max_speed_mps=args.uuv_max_speed_mps,
             clock_tolerance_s=args.clock_tolerance_ms / 1000.0,
+            max_reach_m=args.uuv_max_reach_m,
             shared=SharedSigmas(
                 gnss_m=args.shared_gnss_m,
                 height_m=args.shared_height_m,
@@ -441,6 +442,14 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         type=_number(0.0, "--uuv-max-speed-mps", strict=True),
         default=MAX_SPEED_MPS["bluerov2"],
         help="the UUV's top speed, for each drone's gate",
+    )
+    p.add_argument(
+        "--uuv-max-reach-m",
+        metavar="M",
+        type=_number(0.0, "--uuv-max-reach-m", strict=True),
+        default=MAX_REACH_M,
+        help="the fused fixes' track reaches at most this far from its last fix, however long since "
+        "(default %(default)g, as skyfix run's gate)",
     )
     p.add_argument(
         "--uuv-max-accel-mps2",

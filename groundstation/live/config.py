@@ -14,9 +14,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
-import logging
-import tomllib
 from pathlib import Path
 from typing import Annotated, Literal, get_args, get_origin
 
@@ -24,13 +21,14 @@ from annotated_types import Ge, Gt
 from pydantic import BeforeValidator, Field, StringConstraints, model_validator
 from pydantic.dataclasses import dataclass
 
+from groundstation.config_files import read_toml
+from groundstation.live import registry
 from groundstation.live.sources.depth_ardusub import autopilot_prefix
 from groundstation.live.sources.uuv_position import parse_hint
 from groundstation.live.ui.bind import check_token, parse_bind
 from groundstation.mavlink.transport import ANY_PEER
 from groundstation.session.read import PRIMARY_UUV
 from groundstation.zenoh_session import LOCAL_ENDPOINT
-from localizer.calibration import Calibration
 from localizer.contract import (
     CLOSED,
     ConfigError,
@@ -47,8 +45,6 @@ from localizer.depth import BLUEROV2_MAX_VERTICAL_SPEED_MPS
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_REACH_M, MAX_SPEED_MPS, WATER_ACCEL_MPS2
 from localizer.thrusters import DEADBAND_US
 from localizer.tracking import TRACKERS, WITHOUT_LOSS_SIGNAL
-
-log = logging.getLogger("skyfix.config")
 
 BLUEOS_PREFIX = "mavlink/1/1"  # ArduSub's system and component under BlueOS
 
@@ -75,11 +71,9 @@ class UuvOptions:
     """What ``skyfix run`` needs of each UUV: its depth, its own position estimate, its GPS_INPUT link. The flags and
     keys of one UUV, and the keys of each ``[[uuv]]`` table (:class:`UuvConfig`)."""
 
-    depth_source: Literal["skyfix", "blueos", "mavlink"] = Field(
+    depth_source: Literal[registry.choices("depth")] = Field(
         "skyfix",
-        description="the UUV's depth: skyfix JSON {t, depth_m} on --depth-key; blueos: ArduSub's depth "
-        "sensor from BlueOS's mavlink-server on Zenoh (--depth-key mavlink/1/1); mavlink: ArduSub's over "
-        "--depth-mavlink",
+        description=f"the UUV's depth (a registered depth source): {registry.described('depth')}",
     )
     depth_key: Text = Field(
         "uuv/depth",
@@ -227,8 +221,9 @@ class RunConfig(UuvOptions):
         description="the UAV's MAVLink: udpin:0.0.0.0:14550, "
         "tcp:host:port, /dev/ttyUSB0 (a pymavlink connection string)",
     )
-    mavlink_backend: Literal["pymavlink", "mavsdk"] = Field(
-        "pymavlink", description="library reading the UAV's MAVLink"
+    mavlink_backend: Literal[registry.choices("uav")] = Field(
+        "pymavlink",
+        description=f"library reading the UAV's MAVLink (a registered UAV source): {registry.described('uav')}",
     )
     mavlink_peer: Text | None = Field(
         None,
@@ -490,11 +485,12 @@ class RunConfig(UuvOptions):
         return self
 
     @model_validator(mode="after")
-    def _mavsdk_installed(self):
-        if self.mavlink_backend == "mavsdk" and importlib.util.find_spec("mavsdk") is None:
-            raise Invalid(
-                "mavlink_backend", "mavsdk", "needs MAVSDK-Python: pip install 'skyfix[mavsdk]'"
-            )
+    def _parts_installed(self):
+        for kind, key in (("uav", "mavlink_backend"), ("depth", "depth_source")):
+            for name in {getattr(o, key) for o in (self, *self.uuv) if hasattr(o, key)}:
+                missing = registry.part(kind, name).missing()
+                if missing:
+                    raise Invalid(key, name, missing)
         return self
 
     @model_validator(mode="after")
@@ -653,18 +649,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             group.add_argument(flag(name), type=kind, metavar=_metavar(name, kind), **kw)
 
 
-def read_toml(path) -> dict:
-    """A TOML file's contents, or :class:`ConfigError` naming the file."""
-    try:
-        return tomllib.loads(Path(path).read_text())
-    except OSError as e:
-        raise ConfigError(
-            str(path), "(file)", str(path), f"cannot read: {e.strerror or e}"
-        ) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(str(path), "(file)", str(path), f"malformed TOML: {e}") from None
-
-
 def read_config_file(path: str) -> dict:
     """The options a config TOML sets (checked in :func:`run_config`), relative paths resolved against its folder."""
     data = read_toml(path)
@@ -730,11 +714,3 @@ def run_config(args: argparse.Namespace) -> RunConfig:
         raise ConfigError(
             "options", flag(top) if top in RunConfig.__pydantic_fields__ else e.key, e.value, why
         ) from None
-
-
-def load_calibration(path: str) -> Calibration:
-    """The calibration tables of a TOML file (session.toml or a calibration-only file); warnings logged."""
-    cal = Calibration.from_dict(read_toml(path), source=path)
-    for warning in cal.warnings:
-        log.warning("%s", warning)
-    return cal

@@ -25,6 +25,7 @@ from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
 
+from groundstation.config_files import load_calibration
 from groundstation.live import config
 from groundstation.mavlink.ingest import LinkError
 from localizer.contract import ConfigError
@@ -323,7 +324,7 @@ def full_check(args: argparse.Namespace, cfg: config.RunConfig) -> str:
     """``--check``: the start's checks and the longer ones (see the module doc); a one-line summary of what was
     checked, or :class:`ConfigError` for the first mistake."""
     start_checks(args, cfg)
-    cal = config.load_calibration(cfg.calibration)
+    cal = load_calibration(cfg.calibration)
     done = [
         f"calibration {cfg.calibration} ({cal.camera.width}x{cal.camera.height}, {cal.mount.attitude_source})",
         f"video {cfg.video or config.NONE}",

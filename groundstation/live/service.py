@@ -3,7 +3,8 @@ TaskGroup.
 
 Workers: the UAV's MAVLink (:mod:`.sources.uav_mavlink`), the UUV's depth (skyfix's JSON over
 Zenoh, :mod:`.sources.depth_zenoh`, or ArduSub's own over BlueOS's Zenoh or MAVLink,
-:mod:`.sources.depth_ardusub`), the UUV's own position estimate
+:mod:`.sources.depth_ardusub`; the UAV's and the depth's source are the parts the configuration names, looked up
+in :mod:`.registry`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`groundstation.video.live`),
 the per-frame :mod:`.pipeline` (and the height from the UUV's size, :mod:`groundstation.height_from_size`),
 GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
@@ -43,19 +44,18 @@ import numpy as np
 import zenoh
 from pydantic import ValidationError
 
+from groundstation.config_files import load_calibration
 from groundstation.height_from_size import HeightFromSize, OnlineHeightFromSize
 from groundstation.latency.estimate import OnlineLatency
-from groundstation.live import config
+from groundstation.live import config, registry
 from groundstation.live.control import Control, ZenohControl
 from groundstation.live.pipeline import Pipeline
+from groundstation.live.registry import DepthInput, UavInput
 from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.live.sinks.recorder import Recorder, new_recording
 from groundstation.live.sinks.zenoh_fix import ZenohFixSink, ZenohStatus
 from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
-from groundstation.live.sources.depth_ardusub import ArduSubMavlink, ArduSubZenoh
-from groundstation.live.sources.depth_zenoh import DepthZenoh
 from groundstation.live.sources.rates import needed_rates
-from groundstation.live.sources.uav_mavlink import UavMavlink
 from groundstation.live.sources.uuv_position import UuvPosition, parse_hint
 from groundstation.live.track_memory import TrackMemory, remember, track_path
 from groundstation.live.ui.feed import VideoFeed
@@ -97,7 +97,7 @@ async def serve(cfg: config.RunConfig) -> dict:
     """Run the service until stopped; returns the final status (with several UUVs: the shared sections and each
     UUV's own under ``uuvs``)."""
     loop = asyncio.get_running_loop()
-    cal = config.load_calibration(cfg.calibration)
+    cal = load_calibration(cfg.calibration)
     tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S)
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -129,20 +129,7 @@ async def serve(cfg: config.RunConfig) -> dict:
             )
 
         # -- the shared inputs: the UAV, the video ------------------------------------------------------------------
-        if cfg.mavlink_backend == "mavsdk":
-            from groundstation.live.sources.uav_mavsdk import UavMavsdk
-
-            uav = UavMavsdk(cfg.mavlink, tel)
-        else:
-            uav = UavMavlink(
-                cfg.mavlink,
-                tel,
-                needed_rates(cal.mount.attitude_source),
-                request_rates=not cfg.no_request_rates,
-                peer=cfg.mavlink_peer,
-                signing_key=cfg.mavlink_signing_key
-                and read_signing_key(cfg.mavlink_signing_key, "--mavlink-signing-key"),
-            )
+        uav = registry.part("uav", cfg.mavlink_backend).build(UavInput(cfg, cal, tel))
         uav.listeners.append(lambda *a: [c.pipeline.telemetry_arrived(*a) for c in chains])
         workers.add(uav, INPUTS, "uav", is_input=True)
         workers.section("height", lambda now: height_status(cal.water, cal.sigmas, tel))
@@ -374,24 +361,11 @@ class UuvChain:
         self._shared = shared
         depth_gate = DepthGate(cfg.uuv_max_vertical_speed_mps, cal.sigmas.depth_m)
         # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
-        thrusters = (
-            Thrusters(cfg.thruster_deadband_us) if u.depth_source in ("blueos", "mavlink") else None
+        source = registry.part("depth", u.depth_source)
+        thrusters = Thrusters(cfg.thruster_deadband_us) if source.thrusters else None
+        depth = source.build(
+            DepthInput(u, session, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters)
         )
-        if u.depth_source == "mavlink":
-            depth = ArduSubMavlink(
-                u.depth_mavlink, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters=thrusters
-            )
-        elif u.depth_source == "blueos":
-            depth = ArduSubZenoh(
-                session,
-                u.depth_input_key,
-                uuv_tel,
-                depth_gate,
-                cal.sigmas.depth_m,
-                thrusters=thrusters,
-            )
-        else:
-            depth = DepthZenoh(session, u.depth_input_key, uuv_tel, depth_gate)
         own.add(depth, INPUTS, "depth", is_input=True)
         if recorder:  # its part of the recording
             depth.listeners.append(recorder.on_depth)

@@ -51,8 +51,8 @@ from pathlib import Path
 
 import numpy as np
 
+from groundstation.config_files import load_calibration
 from groundstation.latency.estimate import VideoStart, find_video_start, measure_rotations
-from groundstation.live.config import load_calibration
 from groundstation.mavlink.ingest import mavutil
 from groundstation.outputs import output_dir
 from groundstation.progress import progress as progress_bar

@@ -44,6 +44,7 @@ from collections.abc import Callable
 
 import zenoh
 
+from groundstation.live.registry import DepthInput, register
 from groundstation.live.sinks.zenoh_mavlink import MavlinkIn
 from groundstation.live.sources.rates import DEPTH_HZ, THRUSTERS_HZ, RateMeter, RateRequests
 from groundstation.logs import Throttle, kind_of
@@ -443,3 +444,22 @@ class ArduSubMavlink:
             "link": self.link.status(now),
             "handoff": self.handoff.status() if self.handoff else None,
         }
+
+
+@register(
+    "depth",
+    "blueos",
+    "ArduSub's depth sensor from BlueOS's mavlink-server on Zenoh (--depth-key mavlink/1/1)",
+    thrusters=True,
+)
+def build_blueos(depth: DepthInput) -> ArduSubZenoh:
+    key = depth.options.depth_input_key
+    return ArduSubZenoh(
+        depth.session, key, depth.tel, depth.gate, depth.sigma_m, thrusters=depth.thrusters
+    )
+
+
+@register("depth", "mavlink", "ArduSub's over --depth-mavlink", thrusters=True)
+def build_mavlink(depth: DepthInput) -> ArduSubMavlink:
+    url = depth.options.depth_mavlink
+    return ArduSubMavlink(url, depth.tel, depth.gate, depth.sigma_m, thrusters=depth.thrusters)

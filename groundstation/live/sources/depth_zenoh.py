@@ -22,6 +22,7 @@ from collections.abc import Callable
 
 import zenoh
 
+from groundstation.live.registry import DepthInput, register
 from groundstation.logs import Throttle, kind_of
 from groundstation.threads import Handoff
 from groundstation.zenoh_session import subscribe
@@ -143,3 +144,8 @@ class DepthZenoh:
             "link": None,
             "handoff": self.handoff.status() if self.handoff else None,
         }
+
+
+@register("depth", "skyfix", "skyfix JSON {t, depth_m} on --depth-key")
+def build(depth: DepthInput) -> DepthZenoh:
+    return DepthZenoh(depth.session, depth.options.depth_input_key, depth.tel, depth.gate)

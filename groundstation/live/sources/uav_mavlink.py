@@ -30,11 +30,12 @@ import math
 import time
 from collections.abc import Callable
 
-from groundstation.live.sources.rates import RANGEFINDER_HZ, RateMeter, RateRequests
+from groundstation.live.registry import UavInput, register
+from groundstation.live.sources.rates import RANGEFINDER_HZ, RateMeter, RateRequests, needed_rates
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID
 from groundstation.mavlink.ingest import USED, ingest, mavutil, names_the_uav
-from groundstation.mavlink.link import MavlinkLink
+from groundstation.mavlink.link import MavlinkLink, read_signing_key
 from groundstation.threads import Handoff, in_thread
 from localizer.gnss import horizontal_sigma_m, vertical_sigma_m
 from localizer.telemetry import Telemetry
@@ -289,3 +290,17 @@ class UavMavlink:
             "link": self.link.status(now),
             "handoff": self.handoff.status() if self.handoff else None,
         }
+
+
+@register("uav", "pymavlink", "pymavlink (the default)")
+def build(uav: UavInput) -> UavMavlink:
+    cfg = uav.cfg
+    key = cfg.mavlink_signing_key
+    return UavMavlink(
+        cfg.mavlink,
+        uav.tel,
+        needed_rates(uav.cal.mount.attitude_source),
+        request_rates=not cfg.no_request_rates,
+        peer=cfg.mavlink_peer,
+        signing_key=key and read_signing_key(key, "--mavlink-signing-key"),
+    )

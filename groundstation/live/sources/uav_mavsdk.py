@@ -24,6 +24,7 @@ import logging
 import time
 from collections.abc import Callable
 
+from groundstation.live.registry import UavInput, register
 from groundstation.live.sources.uav_mavlink import LinkHealth, clock_status, gnss_status
 from groundstation.mavlink.ingest import USED, ingest, names_the_uav
 from localizer.telemetry import Telemetry
@@ -128,3 +129,8 @@ class UavMavsdk:
             "gnss": gnss_status(self.tel),
             **self.health.as_dict(now),
         }
+
+
+@register("uav", "mavsdk", "MAVSDK-Python (the mavsdk extra)", needs=("mavsdk", "skyfix[mavsdk]"))
+def build(uav: UavInput) -> UavMavsdk:
+    return UavMavsdk(uav.cfg.mavlink, uav.tel)

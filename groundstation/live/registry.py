@@ -1,0 +1,178 @@
+"""The live service's parts by name: one way to plug in a source (as MAVProxy's modules, BlueOS's services).
+
+A part is a :class:`Worker` (``async run()`` and ``status(now)``); a :class:`Source` also hands each accepted
+input to its ``listeners`` (the recorder); a :class:`Sink` takes each fix (``on_fix(fix, info)``). A worker is
+started by running ``run()`` as a task of the service's TaskGroup and stopped by cancelling that task, stage by
+stage (:class:`~groundstation.live.workers.Workers`): a blocked read never holds the stop.
+
+The parts a configuration chooses by name are registered here, one kind each (:data:`KINDS`):
+
+- ``depth``: the UUV's depth (``depth_source``), built from a :class:`DepthInput`;
+- ``uav``: the UAV's telemetry (``mavlink_backend``), built from a :class:`UavInput`.
+
+A part is registered by its module: ``@register("depth", "NAME", help="...")`` on a function that builds it. The
+service's own parts are the modules of :mod:`groundstation.live.sources`; another distribution's are the modules
+named by its entry points in the group :data:`ENTRY_POINTS` (``[project.entry-points."skyfix.parts"]`` in its
+pyproject.toml: ``NAME = "its_module"``), imported once when the choices are first asked for. So a new depth
+source is one module and its registration: the configuration's choices (``depth_source``'s values, its flag's
+``--help``, the JSON Schema's enum) are :func:`choices`, and :class:`~groundstation.live.service.UuvChain` builds
+the one chosen by :func:`part`'s ``build``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+from localizer.contract import ConfigError
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from groundstation.live.config import RunConfig, UuvConfig
+    from localizer.calibration import Calibration
+    from localizer.depth import DepthGate
+    from localizer.telemetry import Telemetry
+    from localizer.thrusters import Thrusters
+
+KINDS = ("depth", "uav")
+ENTRY_POINTS = "skyfix.parts"
+BUILTIN = "groundstation.live.sources"  # the package whose modules register the service's own parts
+
+
+@runtime_checkable
+class Worker(Protocol):
+    """A part the service runs: ``run()`` until cancelled (its start and its stop), ``status(now)`` its section."""
+
+    async def run(self) -> None: ...
+
+    def status(self, now: float) -> dict: ...
+
+
+@runtime_checkable
+class Source(Worker, Protocol):
+    """An input: a worker whose ``listeners`` get ``(sample, t_recv)`` of each input it accepted."""
+
+    listeners: list[Callable[..., None]]
+
+
+@runtime_checkable
+class Sink(Protocol):
+    """An output: each fix (:class:`~localizer.fix.Fix`) with its frame's info, on the event loop."""
+
+    def on_fix(self, fix: Any, info: Any) -> None: ...
+
+
+@dataclass(frozen=True)
+class DepthInput:
+    """What a depth source is built from: the UUV's options, the Zenoh session, the UUV's telemetry (the source
+    adds each depth to it), the gate every sample passes, the depth's 1-sigma (m, the calibration's) and, for a
+    part registered with ``thrusters=True``, the thrusters the fix gate reads."""
+
+    options: UuvConfig
+    session: zenoh.Session
+    tel: Telemetry
+    gate: DepthGate
+    sigma_m: float
+    thrusters: Thrusters | None
+
+
+@dataclass(frozen=True)
+class UavInput:
+    """What the UAV's telemetry source is built from: the run's options, the calibration and the telemetry."""
+
+    cfg: RunConfig
+    cal: Calibration
+    tel: Telemetry
+
+
+@dataclass(frozen=True)
+class Part:
+    """A registered part: its kind and name, the function that builds it, its one-line help; ``thrusters``: it
+    reads the UUV's thruster outputs too (the fix gate's second source of motion); ``needs``: the module it
+    imports when it runs and the pip requirement that brings it (an optional extra)."""
+
+    kind: str
+    name: str
+    build: Callable[[Any], Worker]
+    help: str
+    thrusters: bool = False
+    needs: tuple[str, str] | None = None
+
+    def missing(self) -> str | None:
+        """What to install when the module it needs is missing (one line), else None."""
+        if self.needs and importlib.util.find_spec(self.needs[0]) is None:
+            return f"needs {self.needs[0]}: pip install '{self.needs[1]}'"
+        return None
+
+
+_parts: dict[str, dict[str, Part]] = {kind: {} for kind in KINDS}
+_loaded = False
+
+
+def register(
+    kind: str,
+    name: str,
+    help: str,
+    thrusters: bool = False,
+    needs: tuple[str, str] | None = None,
+) -> Callable:
+    """Decorator: the function builds the part ``name`` of ``kind`` (from a :class:`DepthInput` or
+    :class:`UavInput`). A name taken twice is an error naming both modules."""
+    if kind not in KINDS:
+        raise ValueError(f"part kind {kind!r}: expected one of {', '.join(KINDS)}")
+
+    def decorate(build: Callable) -> Callable:
+        taken = _parts[kind].get(name)
+        if taken is not None and taken.build is not build:
+            raise ValueError(
+                f"{kind} part {name!r} registered twice: {taken.build.__module__} and {build.__module__}"
+            )
+        _parts[kind][name] = Part(kind, name, build, help, thrusters, needs)
+        return build
+
+    return decorate
+
+
+def _load() -> None:
+    """Import the modules that register parts: the service's own, then the entry points' (once)."""
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    package = importlib.import_module(BUILTIN)
+    for module in pkgutil.iter_modules(package.__path__, f"{BUILTIN}."):
+        importlib.import_module(module.name)
+    for ep in entry_points(group=ENTRY_POINTS):
+        try:
+            ep.load()
+        except Exception as e:  # another distribution's module: one line naming it
+            raise ConfigError(
+                f"entry point {ENTRY_POINTS}", ep.name, ep.value, f"cannot import: {e}"
+            ) from e
+
+
+def parts(kind: str) -> dict[str, Part]:
+    """The registered parts of ``kind`` by name, in registration order."""
+    _load()
+    return dict(_parts[kind])
+
+
+def choices(kind: str) -> tuple[str, ...]:
+    """The names a configuration may choose for ``kind``."""
+    return tuple(parts(kind))
+
+
+def part(kind: str, name: str) -> Part:
+    """The part registered as ``name`` (the configuration has checked the name is one of :func:`choices`)."""
+    return parts(kind)[name]
+
+
+def described(kind: str) -> str:
+    """Each part's name and help, for a configuration key's description: ``name: help; name: help``."""
+    return "; ".join(f"{p.name}: {p.help}" for p in parts(kind).values())
