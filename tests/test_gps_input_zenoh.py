@@ -20,7 +20,7 @@ from link_scenarios import start_router
 from live_helpers import free_port
 
 from groundstation.live.sinks.gps_input import GpsInputSink
-from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
+from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.zenoh_session import open_session
 
 

@@ -164,7 +164,7 @@ def test_injection_through_blueos_mavlink_in():
     import json
     import socket
 
-    from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
+    from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
     from groundstation.zenoh_session import open_session
 
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"

@@ -8,7 +8,7 @@ import numpy as np
 
 from groundstation.config_files import load_calibration
 from groundstation.live.pipeline import Pipeline
-from groundstation.live.sinks.zenoh_fix import fix_to_json
+from groundstation.runtime.zenoh_fix import fix_to_json
 from groundstation.video.frames import LiveFrame
 from localizer.fix import Fix
 from localizer.telemetry import Telemetry

@@ -9,7 +9,7 @@ import time
 
 from live_helpers import free_port
 
-from groundstation.live.sinks.zenoh_fix import ZenohStatus
+from groundstation.runtime.zenoh_fix import ZenohStatus
 from groundstation.zenoh_session import open_session
 
 

@@ -19,7 +19,7 @@ multicast scouting, its credentials files readable, the private ones by their ow
 for a network of the team's own); without ``--zenoh-listen`` or ``--zenoh-config`` it listens on loopback only
 (:data:`LOCAL_LISTEN`). A mistake is exit 2 and one line naming the value.
 
-Workers (:mod:`groundstation.live.workers`, stopped in this order): the subscription and the
+Workers (:mod:`groundstation.runtime.workers`, stopped in this order): the subscription and the
 queryables, then the status, then GPS_INPUT (its last message says no fix).
 """
 
@@ -46,13 +46,13 @@ from groundstation.live.preflight import (
     zenoh_problem,
 )
 from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
-from groundstation.live.sinks.zenoh_fix import ZenohFixSink, ZenohStatus
-from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
-from groundstation.live.usage import Usage
-from groundstation.live.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.link import read_signing_key
 from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
+from groundstation.runtime.usage import Usage
+from groundstation.runtime.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped
+from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
+from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.threads import Handoff
 from groundstation.zenoh_session import open_session, subscribe
 from localizer.calibration import ConfigError

@@ -3,7 +3,7 @@
 A part is a :class:`Worker` (``async run()`` and ``status(now)``); a :class:`Source` also hands each accepted
 input to its ``listeners`` (the recorder); a :class:`Sink` takes each fix (``on_fix(fix, info)``). A worker is
 started by running ``run()`` as a task of the service's TaskGroup and stopped by cancelling that task, stage by
-stage (:class:`~groundstation.live.workers.Workers`): a blocked read never holds the stop.
+stage (:class:`~groundstation.runtime.workers.Workers`): a blocked read never holds the stop.
 
 The parts a configuration chooses by name are registered here, one kind each (:data:`KINDS`):
 

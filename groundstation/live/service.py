@@ -8,21 +8,21 @@ in :mod:`.registry`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`groundstation.video.live`),
 the per-frame :mod:`.pipeline` (and the height from the UUV's size, :mod:`groundstation.height_from_size`),
 GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
-the 1 Hz Zenoh status (:mod:`.sinks.zenoh_fix`), the operator's commands
+the 1 Hz Zenoh status (:mod:`groundstation.runtime.zenoh_fix`), the operator's commands
 (:mod:`.control`), the web page (:mod:`.ui`, unless ``--no-ui``) and, with ``--record``,
 the recorder (:mod:`.sinks.recorder`). The web page's port is taken before any worker
 starts, so a port in use stops the service at once (exit 2). Blocking I/O lives in threads owned by the
 workers (:mod:`groundstation.threads`: bounded hand-offs to the loop, supervised, never waited for at a stop);
 all telemetry is written and read on the event loop.
 
-The workers are declared in one registry (:mod:`.workers`): each with its stop stage, its
+The workers are declared in one registry (:mod:`groundstation.runtime.workers`): each with its stop stage, its
 status section and whether the watchdog judges it as an input; the status is the
 registry's. The pipeline is built with its sinks and frame listeners.
 
 Stopping: SIGINT/SIGTERM (or ``--duration-s``) stop the workers in order — the inputs
 (and the operator's commands and web page), then the pipeline, then the sinks — each stage
 cancelled and awaited before the next (a stage slower than
-:data:`~groundstation.live.workers.STAGE_S` is logged), and last the GPS_INPUT sink, whose
+:data:`~groundstation.runtime.workers.STAGE_S` is logged), and last the GPS_INPUT sink, whose
 last message says "no fix". Nothing waits for a blocked read or open: the whole stop takes well under a second whatever the inputs are doing
 (``bench/links.py`` measures it). A worker that fails cancels the others (the sink still
 sends its no-fix) and the service exits with its error. The Zenoh session is closed in ``finally``.
@@ -53,18 +53,26 @@ from groundstation.live.pipeline import Pipeline
 from groundstation.live.registry import DepthInput, UavInput
 from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.live.sinks.recorder import Recorder, new_recording
-from groundstation.live.sinks.zenoh_fix import ZenohFixSink, ZenohStatus
-from groundstation.live.sinks.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uuv_position import UuvPosition, parse_hint
 from groundstation.live.track_memory import TrackMemory, remember, track_path
 from groundstation.live.ui.feed import VideoFeed
 from groundstation.live.ui.server import PageUuv, WebUi, settings_of
 from groundstation.live.ui.topview import TopView
-from groundstation.live.usage import Usage
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
-from groundstation.live.workers import INPUTS, LAST, OUTPUTS, PIPELINE, Workers, run_to_end, stopped
 from groundstation.mavlink.link import read_signing_key
+from groundstation.runtime.usage import Usage
+from groundstation.runtime.workers import (
+    INPUTS,
+    LAST,
+    OUTPUTS,
+    PIPELINE,
+    Workers,
+    run_to_end,
+    stopped,
+)
+from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
+from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration, ConfigError, Tracker

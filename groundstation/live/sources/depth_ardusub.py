@@ -45,7 +45,6 @@ from collections.abc import Callable
 import zenoh
 
 from groundstation.live.registry import DepthInput, register
-from groundstation.live.sinks.zenoh_mavlink import MavlinkIn
 from groundstation.live.sources.rates import DEPTH_HZ, THRUSTERS_HZ, RateMeter, RateRequests
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID, is_autopilot_heartbeat
@@ -58,6 +57,7 @@ from groundstation.mavlink.ingest import (
     servo_pulses_us,
 )
 from groundstation.mavlink.link import MavlinkLink
+from groundstation.runtime.zenoh_mavlink import MavlinkIn
 from groundstation.threads import Handoff, in_thread
 from groundstation.zenoh_session import subscribe
 from localizer.depth import (
