@@ -8,6 +8,11 @@ and one line within a second).
   of the service ``--kills`` times: the time from the kill to the first GPS_INPUT of the next start (the kernel's
   receive time at the UUV's endpoint), the CPU time the new process had used by then (``/proc``: what the wall
   time comes to on an idle machine), and each start's recording folder;
+- restart with fixes: the same, the bundled ``nadir_hover`` session replayed into each start (the calibration its own,
+  its depth as skyfix JSON; everything else ``field.toml``'s): each start's first valid (3D) GPS_INPUT after the kill,
+  and how far it lies from the last valid one before the kill (the track kept on disk: within the reach, or the
+  gate holds it), the valid GPS_INPUT farther than ``field.toml``'s reach plus 3 h_acc from it (must be 0), each
+  start's recording folder;
 - mistakes: each start-up mistake of tests/test_cli_first_use.py, the time from the command's start to its exit
   (exit code 2, one line), and its CPU time.
 
@@ -29,8 +34,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-from live_helpers import GpsInputEndpoint, skyfix, wait_until
+import json
+import math
+
+from live_helpers import GpsInputEndpoint, skyfix, start, stop, wait_until
 from supervisor import Supervisor, field_config
+
+from localizer.geodesy import horizontal_error_m
 
 BACK_S = 3.0
 MISTAKE_S = 1.0
@@ -85,6 +95,89 @@ def restarts(work: Path, kills: int, say) -> None:
         endpoint.close()
 
 
+SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
+
+
+def _valid(received, t: float) -> list[tuple[float, dict]]:
+    """The 3D GPS_INPUT received after ``t``."""
+    return [(tr, m) for tr, m in list(received) if tr > t and m["fix_type"] >= 3]
+
+
+def _apart_m(a: dict, b: dict) -> float:
+    return float(horizontal_error_m(a["lat"] / 1e7, a["lon"] / 1e7, b["lat"] / 1e7, b["lon"] / 1e7))
+
+
+def restarts_with_fixes(work: Path, kills: int, say) -> None:
+    endpoint = GpsInputEndpoint()
+    config, values = field_config(work, endpoint.port)
+    values |= {
+        "calibration": str(SESSION / "session.toml"),
+        "depth_source": "skyfix",
+        "depth_key": "uuv/depth",
+    }
+    config.write_text("".join(f"{k} = {json.dumps(v)}\n" for k, v in values.items()))
+    reach_m = values["uuv_max_reach_m"]
+    replays: list = []
+
+    def replay(k: int):
+        replays.append(
+            start(
+                skyfix(
+                    "replay", str(SESSION), "--zenoh-connect", values["zenoh_listen"][0],
+                    "--mavlink-out", "udpout:" + values["mavlink"].removeprefix("udpin:"),
+                    "--video-out", values["video"].partition("?")[0],
+                    "--video-delay-ms", str(values["video_latency_ms"]), "--uuv-listen", "",
+                    "--lead-s", "0.5", "--tail-s", "0",
+                ),
+                work / f"replay{k}.log",
+            )
+        )  # fmt: skip
+
+    far = 0
+    try:
+        with Supervisor(lambda argv: skyfix(*argv[1:-1], str(config)), work) as sup:
+            wait_until(lambda: sup.starts, 30)
+            replay(0)
+            if not wait_until(lambda: _valid(endpoint.received, sup.starts[0][0]), 60):
+                raise SystemExit(
+                    f"no valid GPS_INPUT from the first start: {sup.log(0).read_text()[-2000:]}"
+                )
+            for k in range(kills):
+                before = _valid(endpoint.received, sup.starts[-1][0])
+                proc, kept = sup.starts[-1][1], before[-1][1]
+                t_kill = time.time()
+                os.kill(proc.pid, signal.SIGKILL)
+                stop(replays[-1], 5.0)
+                wait_until(lambda n=k + 2: len(sup.starts) >= n, 30, poll_s=0.02)
+                replay(k + 1)
+                if not wait_until(lambda t=t_kill: _valid(endpoint.received, t), 60, poll_s=0.02):
+                    raise SystemExit(f"kill {k + 1}: no valid GPS_INPUT again within 60 s")
+                wait_until(lambda: replays[-1].poll() is not None, 30)
+                after = _valid(endpoint.received, t_kill)
+                off = [
+                    _apart_m(m, kept) for _, m in after
+                    if _apart_m(m, kept) > reach_m + 3 * math.hypot(m["horiz_accuracy"], kept["horiz_accuracy"])
+                ]  # fmt: skip
+                far += len(off)
+                say(
+                    f"kill -9 #{k + 1} (valid fixes flowing): valid GPS_INPUT again after {after[0][0] - t_kill:.3f} s, "
+                    f"{_apart_m(after[0][1], kept):.3f} m from the last valid before the kill (reach {reach_m:g} m); "
+                    f"{len(after)} valid after, {len(off)} beyond reach + 3 h_acc"
+                )
+        folders = sorted(p.name for p in (work / "recordings").iterdir())
+        state = (
+            sorted(p.name for p in (work / "state").iterdir()) if (work / "state").is_dir() else []
+        )
+        say(
+            f"exits {sup.exits}; {len(folders)} recording folders for {len(sup.starts)} starts; kept track files "
+            f"{state}; valid GPS_INPUT beyond reach + 3 h_acc of the kept track: {far}"
+        )
+    finally:
+        for r in replays:
+            stop(r, 5.0)
+        endpoint.close()
+
+
 def mistakes(say) -> None:
     for name, options in MISTAKES.items():
         t0, before = time.perf_counter(), os.times()
@@ -136,6 +229,9 @@ def main() -> int:
     )
     with tempfile.TemporaryDirectory(prefix="skyfix-restart-") as tmp:
         restarts(Path(tmp), args.kills, say)
+    with tempfile.TemporaryDirectory(prefix="skyfix-restart-fixes-") as tmp:
+        restarts_with_fixes(Path(tmp), args.kills, say)
+    say(f"load after: {os.getloadavg()[0]:.1f}")
     mistakes(say)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
