@@ -63,6 +63,7 @@ from .geometry import (
     reach_offset,
     surface_crossing,
 )
+from .marker import marker_ned, write_reference
 from .motion import Motion
 from .render import Box, Renderer, View, floor_div, noise_offsets, water_path_ned
 from .scenario import DownlinkSpec, Scenario
@@ -803,6 +804,13 @@ def generate(
     messages = write_tlog(out / "uav.tlog", sc, motion, clock)
     _write_depth(out / "depth.jsonl", depth_records(sc, motion.uuv_depth_m, clock))
     _write_truth(out / "truth.csv", sc, truth.t_unix, truth.uuv_ned)
+    marker_uv = (None, None)
+    if sc.marker.enabled:
+        point = np.broadcast_to(marker_ned(sc), truth.camera_ned.shape)
+        marker_uv = reference_pixel(
+            camera, truth.R_ned_from_cv, truth.camera_ned, point, sc.site.refractive_index
+        )
+    write_reference(out, sc, truth.t_unix, *marker_uv, camera.width, camera.height)
     if has_slow_errors(sc):
         write_truth_errors(out / "truth_errors.csv", sc, motion, truth)
     else:

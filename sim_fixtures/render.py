@@ -34,6 +34,7 @@ import numpy as np
 
 from . import texture
 from .geometry import SimCamera, facet_normal_up, pixel_rays, refract_into_water
+from .marker import paint
 from .scenario import Scenario
 from .waves import downwind_rad, phase_speed, wave_field
 
@@ -313,6 +314,7 @@ class Renderer:
             edge[[0, -1], :] = edge[:, [0, -1]] = True
             self.edge_rays = self.grid_rays[edge.ravel()].astype(float)
         self.floor = texture.seafloor(rng, m_per_px=FLOOR_M_PER_PX)
+        paint(self.floor, sc, FLOOR_M_PER_PX)
         self.caustics = (texture.caustics(rng), texture.caustics(rng))
         self.caustic_drift_ne = (
             CAUSTIC_DRIFT_NE if self.waves is None else wave_caustic_drift_ne(sc)

@@ -611,6 +611,23 @@ class SecondUuvSpec:
 
 
 @dataclass(frozen=True, config=CLOSED)
+class MarkerSpec:
+    """``[marker]``: a surveyed marker lying on the seafloor, a reference of known position: a white disc with a black
+    centre (a bullseye), painted into the floor; its position and depth are written to the session's
+    ``reference.toml`` (as a team that surveyed it would state them) and its pixel per frame to
+    ``reference_track.csv`` (the simulator's truth, as track.csv is the UUV's)."""
+
+    enabled: Flag = Field(False, description="the marker is there")
+    north_m: Number = Field(
+        1.5, description="where it lies, from the UUV's path centre (uuv.north_m)"
+    )
+    east_m: Number = Field(-1.0, description="... and (uuv.east_m)")
+    radius_m: Annotated[Number, Gt(0.05), Le(2.0)] = Field(
+        0.25, description="the white disc's radius; the black centre's is half of it"
+    )
+
+
+@dataclass(frozen=True, config=CLOSED)
 class RockSpec:
     """``[rock]``: a dark rock, a box of about the UUV's size lying still on the seafloor, placed by the UUV's
     path (a look-alike the UUV passes close by or over)."""
@@ -658,6 +675,7 @@ class Scenario:
     render: RenderSpec = Field(default_factory=RenderSpec)
     second_uuv: SecondUuvSpec = Field(default_factory=SecondUuvSpec)
     rock: RockSpec = Field(default_factory=RockSpec)
+    marker: MarkerSpec = Field(default_factory=MarkerSpec)
     waves: WavesSpec = Field(default_factory=WavesSpec)
     downlink: DownlinkSpec = Field(default_factory=DownlinkSpec)
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)

@@ -34,6 +34,8 @@ from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.estimate import offset_from_rotations
 from groundstation.offline.bottom import MODES as BOTTOM_MODES
 from groundstation.offline.bottom import PoseCorrection, append_columns, pixels_at, pose_from_bottom
+from groundstation.offline.reference import MODES as REFERENCE_MODES
+from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
 from groundstation.offline.smoothed import offline_track, write_smoothed_csv
 from groundstation.offline.smoothed import summary as smoothed_summary
@@ -222,6 +224,7 @@ def run(args) -> int:
         )
         correction = bottom_correction(session, pixels, args.pose_from_bottom, not args.quiet)
         fixes = locate_frames(session, pixels, not args.no_refraction, correction)
+        fixes, reference_cells = apply_reference(session, fixes, args.reference, correction)
     finally:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
@@ -232,6 +235,8 @@ def run(args) -> int:
                 session, camera_pose(session.calibration, session.telemetry, fixes.t_unix)
             ),
         )
+    if reference_cells is not None:
+        append_columns(out / "positions.csv", reference_cells)
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
     smoothed, status = offline_track(fixes, args.uuv_max_speed_mps, args.uuv_max_accel_mps2)
     write_smoothed_csv(out / SMOOTHED_NAME, fixes, smoothed, status)
@@ -275,6 +280,14 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         help="auto: estimate the drone's attitude biases and GNSS walk from the static seafloor in the "
         "video and correct every frame's pose by what the bottom told (positions.csv says it); "
         "off (default)",
+    )
+    p.add_argument(
+        "--reference",
+        choices=REFERENCE_MODES,
+        default="auto",
+        help="auto (default): where the session has a reference.toml (a surveyed marker of known position), find "
+        "the marker in the video and correct every fix by the drone's absolute offset it shows (positions.csv "
+        "says it); off",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_motion_offset_flag(p)

@@ -1,0 +1,153 @@
+"""``skyfix process --reference auto``: a surveyed marker of known position found in the video, and the fixes
+corrected by the drone's absolute offset it shows (:mod:`localizer.reference`).
+
+The session's ``reference.toml`` states the marker: ``lat_deg``, ``lon_deg`` (WGS84), ``depth_m`` (below the water
+surface; on the seafloor its depth there), ``sigma_m`` (the survey's 1-sigma per horizontal axis) and ``radius_m``
+(a bullseye: a light disc of that radius with a dark centre of half of it). At :data:`RATE_HZ` the marker is looked for
+around where the reported pose puts it (:func:`localizer.tracking.predict.project_uuv` at its depth), within
+:data:`SEARCH_SIGMAS` of the pose's position and attitude sigmas, by normalised cross-correlation with a bullseye of
+its size there (:func:`bullseye`); a peak below :data:`MIN_SCORE` is no sighting. positions.csv gets the offset
+applied per fix (columns ``ref_offset_n_m``, ``ref_offset_e_m``, ``ref_sigma_n_m``, ``ref_sigma_e_m``; empty where
+none), and one line on stderr says what was found.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import tomllib
+
+import cv2
+import numpy as np
+
+from groundstation.offline.bottom import subsample_rows
+from groundstation.session.read import Session, SessionError
+from groundstation.video.file import open_video
+from localizer import reference
+from localizer.fix import Fixes, locate
+from localizer.pose import camera_pose
+from localizer.tracking.predict import project_uuv
+
+MODES = ("auto", "off")
+FILE = "reference.toml"
+RATE_HZ = 5.0  # frames searched per second of video
+SEARCH_SIGMAS = 3.0
+MIN_SCORE = 0.6  # the correlation's peak that counts as a sighting
+COLUMNS = ("ref_offset_n_m", "ref_offset_e_m", "ref_sigma_n_m", "ref_sigma_e_m")
+
+
+def read_reference(session: Session) -> tuple[reference.Reference, float] | None:
+    """The session's ``reference.toml``: the reference and the marker's radius (m); None without the file."""
+    path = session.path / FILE
+    if not path.is_file():
+        return None
+    try:
+        d = tomllib.loads(path.read_text())
+        ref = reference.Reference(
+            float(d["lat_deg"]),
+            float(d["lon_deg"]),
+            float(d["depth_m"]),
+            float(d.get("sigma_m", 0.0)),
+        )
+        return ref, float(d["radius_m"])
+    except (KeyError, ValueError, TypeError, tomllib.TOMLDecodeError) as e:
+        raise SessionError(
+            f"{path}: {type(e).__name__}: {e} (needs lat_deg, lon_deg, depth_m, radius_m)"
+        ) from None
+
+
+def bullseye(radius_px: float) -> np.ndarray:
+    """A template (float32, square) of the marker ``radius_px`` across its light disc: 1 inside, −1 in the dark
+    centre, 0 in a ring of the floor around it as wide as the radius."""
+    half = int(np.ceil(2 * radius_px)) + 1
+    y, x = np.mgrid[-half : half + 1, -half : half + 1].astype(np.float32)
+    r = np.hypot(x, y)
+    t = np.where(r <= radius_px, 1.0, 0.0) - np.where(r <= radius_px / 2, 2.0, 0.0)
+    return cv2.GaussianBlur(t.astype(np.float32), (0, 0), 0.7)
+
+
+def find(grey: np.ndarray, u0: float, v0: float, radius_px: float, reach_px: float):
+    """The marker's centre (u, v) near (u0, v0) within ``reach_px``, or None (no peak of :data:`MIN_SCORE`)."""
+    tpl = bullseye(radius_px)
+    half = tpl.shape[0] // 2
+    h, w = grey.shape
+    x0, x1 = int(max(0, u0 - reach_px - half)), int(min(w, u0 + reach_px + half + 1))
+    y0, y1 = int(max(0, v0 - reach_px - half)), int(min(h, v0 + reach_px + half + 1))
+    if x1 - x0 <= tpl.shape[1] + 2 or y1 - y0 <= tpl.shape[0] + 2:
+        return None
+    score = cv2.matchTemplate(grey[y0:y1, x0:x1].astype(np.float32), tpl, cv2.TM_CCOEFF_NORMED)
+    _, best, _, (px, py) = cv2.minMaxLoc(score)
+    if best < MIN_SCORE:
+        return None
+    du = _peak(score[py, px - 1 : px + 2]) if 0 < px < score.shape[1] - 1 else 0.0
+    dv = _peak(score[py - 1 : py + 2, px]) if 0 < py < score.shape[0] - 1 else 0.0
+    return x0 + half + px + du, y0 + half + py + dv
+
+
+def _peak(three) -> float:
+    """The sub-pixel offset of a parabola's top through three samples about the middle one."""
+    a, b, c = (float(x) for x in three)
+    den = a - 2 * b + c
+    return 0.0 if den >= 0 else 0.5 * (a - c) / den
+
+
+def sightings(session: Session, ref: reference.Reference, radius_m: float):
+    """The times and pixels (NaN: not found) of the marker in the frames at :data:`RATE_HZ`."""
+    cal, tel = session.calibration, session.telemetry
+    rows = subsample_rows(session.frames["t"], RATE_HZ)
+    t = session.frames["t"][rows]
+    pose = camera_pose(cal, tel, t)
+    u0, v0, px_per_m = project_uuv(cal, pose, ref.lat_deg, ref.lon_deg, ref.depth_m)
+    slant_m = pose.height_m + ref.depth_m
+    angle = np.radians(np.hypot(cal.sigmas.tilt_deg, cal.sigmas.yaw_deg))
+    reach_m = SEARCH_SIGMAS * (np.nan_to_num(pose.sigma_uav_m) + slant_m * angle)
+    u, v = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
+    wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
+    with open_video(
+        session.video_path,
+        expected_size=(cal.camera.width, cal.camera.height),
+        indices=session.frames["frame"].astype(int),
+        grey=True,
+    ) as video:
+        for vf in video.prefetch():
+            k = wanted.get(vf.index)
+            if k is None or not np.isfinite(u0[k]):
+                continue
+            grey = vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY)
+            hit = find(grey, u0[k], v0[k], radius_m * px_per_m[k], reach_m[k] * px_per_m[k])
+            if hit is not None:
+                u[k], v[k] = hit
+    return t, u, v
+
+
+def apply(session: Session, fixes: Fixes, mode: str, correction=None):
+    """``--reference``: the fixes corrected by the marker's offset and positions.csv's cells (:data:`COLUMNS`), or
+    ``(fixes, None)`` (``off``, no reference.toml, no video: a warning says why); ``correction`` the pose's from the
+    bottom (:class:`groundstation.offline.bottom.PoseCorrection`) the fixes were made with, if any."""
+    found = None if mode == "off" else read_reference(session)
+    if found is None:
+        return fixes, None
+    if session.video_path is None or session.frames is None:
+        session.warnings.append(f"{session.path}: {FILE} but no video to find the marker in")
+        return fixes, None
+    ref, radius_m = found
+    cal, tel = session.calibration, session.telemetry
+    t, u, v = sightings(session, ref, radius_m)
+    off, seen = reference.sightings(cal, camera_pose(cal, tel, t), u, v, ref)
+    offsets = reference.offsets(t[seen], off[seen], fixes.t_unix, ref.sigma_m)
+    pose = camera_pose(cal, tel, fixes.t_unix)
+    if correction is not None:
+        pose, cal = correction.apply(session, pose)
+    quiet = dataclasses.replace(pose, sigma_uav_m=np.zeros(len(pose.t_unix)))
+    better = reference.corrected(fixes, locate(cal, quiet, fixes.u, fixes.v), offsets)
+    print(
+        f"{session.path.name}: the marker seen in {int(seen.sum())} of {len(t)} frames searched; "
+        f"{offsets.describe()}",
+        file=sys.stderr,
+    )
+    used = (fixes.status == "ok") & np.isfinite(offsets.offset_ne_m[:, 0])
+    cells = {
+        c: [f"{x:.4f}" if ok else "" for x, ok in zip(col, used)]
+        for c, col in zip(COLUMNS, [*offsets.offset_ne_m.T, *offsets.sigma_ne_m.T])
+    }
+    return better, cells
