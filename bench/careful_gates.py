@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/careful_gates.py [--out bench/results/careful_gates.txt]
 
-30 Hz fix streams with their truth (``tests/gate_streams.py``, ``tests/test_careful_gates.py``'s streams), through
+30 Hz fix streams with their truth (``groundstation/testing/gate_streams.py``, ``tests/test_careful_gates.py``'s streams), through
 :class:`~localizer.fix_gate.FixGate`:
 
 - a restart: the UUV tracked, its track kept by the real file (``groundstation/live/track_memory.py``), a new gate
@@ -27,9 +27,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from emit import emit
-from gate_streams import HZ, T0
 from test_careful_gates import kept_gate, off_valid, still, tracked
 
+from groundstation.testing.gate_streams import HZ, T0
 from localizer.fix_gate import FixGate
 
 

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/gate_streams.py [--before COMMIT] [--out bench/results/gate_streams.txt]
 
-Feeds the streams of ``tests/gate_streams.py`` (30 Hz, white error 3 mm per axis, h_acc 0.4 m and
+Feeds the streams of ``groundstation/testing/gate_streams.py`` (30 Hz, white error 3 mm per axis, h_acc 0.4 m and
 0.05 m) to the gate of ``localizer/fix_gate.py`` at ``--before`` (read with ``git show``; default
 805dfec, the gate that compared each fix with the previous accepted one) and to today's. For each:
 how many fixes that are not the UUV went out as valid (of how many), the largest error of a valid
@@ -26,14 +26,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-
-import gate_streams as gs
 from emit import emit
 
+from groundstation.testing import gate_streams as gs
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
+
+ROOT = Path(__file__).resolve().parents[1]
 
 V, A = MAX_SPEED_MPS["bluerov2"], MAX_ACCEL_MPS2["bluerov2"]
 

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/import_long.py [--minutes 2] [--size 3840x2160] [--out bench/results/import_long.txt]
 
-Writes a DataFlash log (``tests/dataflash_log.py``: ATT, IMU, POS, GPS at their usual rates, a yaw swinging
+Writes a DataFlash log (``groundstation/testing/dataflash_log.py``: ATT, IMU, POS, GPS at their usual rates, a yaw swinging
 slowly) and a video of ``--minutes`` at 30 fps and ``--size`` (x264 ultrafast: a textured floor turning with the
 logged yaw), then runs ``skyfix import`` in a child process twice: with the start given (the container's
 timestamps only: demuxing, no decoding) and with the start found from the image's motion (the whole video
@@ -27,12 +27,11 @@ from pathlib import Path
 import av
 import cv2
 import numpy as np
+from emit import emit
+
+from groundstation.testing.dataflash_log import DataflashWriter
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-
-from dataflash_log import DataflashWriter
-from emit import emit
 
 UNIX0 = 1_796_000_000.0  # the log's first fix, UNIX s
 BOOT0 = 10.0  # ... at this boot time

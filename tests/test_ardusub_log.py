@@ -8,11 +8,11 @@ import json
 import math
 
 import pytest
-from dataflash_log import DataflashWriter
 
 from groundstation.offline.import_flight import depth_records
 from groundstation.session import SessionError
 from groundstation.session.ardusub_log import read_ardusub_depth
+from groundstation.testing.dataflash_log import DataflashWriter
 
 WEEK, WEEK_MS = 2447, 316_382_800  # a GPS_INPUT's time: the fix's frame exposure ...
 UNIX_FIX = (

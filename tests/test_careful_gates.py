@@ -13,7 +13,6 @@ import time
 
 import numpy as np
 import pytest
-from gate_streams import HZ, LAT0, LON0, M_PER_DEG, NOISE_M, T0, fix_at
 
 from groundstation.live.pipeline import FrameInfo
 from groundstation.live.sinks.gps_input import GpsInputSink
@@ -24,6 +23,7 @@ from groundstation.live.track_memory import (
     track_path,
     write_track,
 )
+from groundstation.testing.gate_streams import HZ, LAT0, LON0, M_PER_DEG, NOISE_M, T0, fix_at
 from localizer.fix_gate import CONFIRM_S, MAX_REACH_M, Arrival, FixGate
 
 LATENCY_S = 0.12  # exposure to arrival

@@ -14,10 +14,16 @@ import shutil
 import time
 from pathlib import Path
 
-import gate_streams
 import numpy as np
 import pytest
-from gate_streams import (
+from live_helpers import free_port
+
+from groundstation.live.sinks.gps_input import LOSS_STATUSES, GpsInputSink, mavlink_gps_link
+from groundstation.mavlink.ingest import mavutil
+from groundstation.offline.process import process_session
+from groundstation.session.read import load_session
+from groundstation.testing import gate_streams
+from groundstation.testing.gate_streams import (
     BEFORE_S,
     HZ,
     LAT0,
@@ -35,12 +41,6 @@ from gate_streams import (
     turn,
     vectored_thrusters,
 )
-from live_helpers import free_port
-
-from groundstation.live.sinks.gps_input import LOSS_STATUSES, GpsInputSink, mavlink_gps_link
-from groundstation.mavlink.ingest import mavutil
-from groundstation.offline.process import process_session
-from groundstation.session.read import load_session
 from localizer.fix import Fix
 from localizer.fix_gate import CONFIRM_S, DIVERGED_S, MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
 from localizer.thrusters import DRAG_LINEAR, DRAG_QUADRATIC, MASS_KG

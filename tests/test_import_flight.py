@@ -15,7 +15,6 @@ from pathlib import Path
 import av
 import numpy as np
 import pytest
-from dataflash_log import DataflashWriter
 from live_helpers import ROOT
 
 from groundstation.cli import main
@@ -23,6 +22,7 @@ from groundstation.offline.import_flight import import_flight
 from groundstation.session import SessionError
 from groundstation.session.read import load_session
 from groundstation.session.tlog import read_tlog
+from groundstation.testing.dataflash_log import DataflashWriter
 
 WEEK, WEEK_MS = 2447, 316_382_800  # the first GPS fix's time ...
 BOOT_AT_FIX_S = 10.0  # ... arriving 10 s after the autopilot booted

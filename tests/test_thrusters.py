@@ -4,9 +4,9 @@ pushing, and when an interval counts as idle. ArduSub's own outputs are checked 
 from __future__ import annotations
 
 import pytest
-from gate_streams import vectored_thrusters
 
 from groundstation.mavlink.ingest import BadMessage, servo_pulses_us
+from groundstation.testing.gate_streams import vectored_thrusters
 from localizer.thrusters import MARGIN_S, STALE_S, Thrusters, idle_accel_mps2
 
 

@@ -1,0 +1,3 @@
+"""Harnesses whose data is known by construction, shared by the tests (``tests/``) and the benches (``bench/``),
+which import them from the installed package: fix streams with their truth for the safety gates
+(:mod:`.gate_streams`) and ArduPilot DataFlash logs written record by record (:mod:`.dataflash_log`)."""
