@@ -43,11 +43,8 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from live_run import ROOT, ServiceRun, proc_sample
 
-sys.path.insert(0, str(ROOT))
 from groundstation.mavlink.ingest import mavutil
 from groundstation.session.tlog import read_tlog
 from groundstation.zenoh_session import open_session

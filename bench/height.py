@@ -28,7 +28,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from groundstation.session.positions import read_positions_csv
 from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR

@@ -23,8 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from groundstation.offline import track as track_video
 from groundstation.offline.process import process_session
 from groundstation.session.read import load_session

@@ -31,8 +31,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from groundstation.offline.evaluate import errors_m
 from groundstation.offline.process import Pixels, locate_frames
 from groundstation.session.read import load_session

@@ -37,7 +37,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from groundstation.height_from_size import MEASURE_HZ, HeightFromSize
 from groundstation.offline import track as track_video

@@ -31,10 +31,8 @@ import time
 import tomllib
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from live_run import ROOT, ServiceRun, proc_sample
 
-sys.path.insert(0, str(ROOT))
 from groundstation.zenoh_session import open_session
 
 DEFAULT_SESSION = Path("/tmp/skyfix-soak/session")

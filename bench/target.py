@@ -30,7 +30,6 @@ import numpy as np
 import pymap3d
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from groundstation.live.pipeline import Pipeline
 from groundstation.session.read import load_session

@@ -42,7 +42,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from groundstation.live.ui.feed import encode_jpeg
 from groundstation.session.read import load_session

@@ -23,9 +23,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
-from bench.waves import session
+from waves import session
 
 SCENARIOS = sorted(p.stem for p in (ROOT / "sim_fixtures" / "scenarios").glob("weather_*.toml"))
 SKYFIX = [sys.executable, "-m", "groundstation.cli"]
