@@ -11,7 +11,12 @@ of this process, the drones and the strangers publishing fixes at 30 fps from on
   truth (north: the fake's pull; its share of the 0.8 m), the fused claim, and how often the error exceeds twice the
   claim; with the shipped shared-error sigmas and with a shared GNSS error of 0.1 m per axis;
 - a fix from the future: drone a's fix stamped a day ahead halfway through: refused (counted), and the fused fixes
-  before and after it (their rate, the longest gap).
+  before and after it (their rate, the longest gap);
+- a walking fake: sources a, b, c; a and b lose the UUV from 2 s to 6 s while c walks its fixes east at 1 m/s: the largest error of an ok fused fix and of a valid GPS_INPUT, the off_track count, the error once a
+  and b are back; the same with the output gate's reach unbounded (``--uuv-max-reach-m 1e6``);
+- a shared GNSS error: two real drones 0.5 m north of the UUV alike (one sky's error), claiming their GNSS sigma
+  (``sigma_uav_m`` 1.0 m) in their fix messages: the fused h_acc against one drone's, the error; the same taken
+  as independent (``--shared-gnss-m 0``).
 
 Prints the numbers and writes them to ``--out``.
 """
@@ -19,6 +24,7 @@ Prints the numbers and writes them to ``--out``.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 from pathlib import Path
@@ -83,6 +89,45 @@ def future(work: Path, seconds: float, say) -> None:
     )
 
 
+def walker(work: Path, seconds: float, say, *extra: str) -> None:
+    quiet = (
+        2.0,
+        6.0,
+    )  # the UUV goes 1.2 m meanwhile: within a and b's own gates' reach when they come back
+    drones = [
+        Drone("a", (0.02, 0.0), 0.02, 0.1, silent_s=quiet),
+        Drone("b", (-0.02, 0.0), 0.02, 0.1, silent_s=quiet),
+        Drone("c", (0.0, 0.0), 0.02, 0.1, walk_ne_mps=(0.0, 1.0), walk_from_s=2.0),
+    ]
+    final, fused, gps, t0 = run_fuser(work, ["a", "b", "c"], drones, seconds, None, *extra)
+    t_ok = np.array([f["t"] - t0 for f in fused if f["status"] == "ok"])
+    err = np.hypot(*ok_errors(fused, t0)[:, :2].T)
+    valid = gps_input_errors_m(gps, t0)
+    back = err[t_ok > quiet[1] + 1.5]
+    say(
+        f"walking fake c (1.0 m/s east from 2 s, a and b silent {quiet[0]:g}-{quiet[1]:g} s) "
+        f"{' '.join(extra) or '(reach 1.5 m)'}: largest ok fused error {err.max():.2f} m, valid GPS_INPUT "
+        f"{valid.max():.2f} m (the fake {quiet[1] - quiet[0]:.1f} m off as a and b come back); off_track "
+        f"{final['fusion']['off_track']}; a and b back: {len(back)} ok, error max "
+        f"{back.max() if len(back) else float('nan'):.3f} m"
+    )
+
+
+def shared_gnss(work: Path, seconds: float, say, *extra: str) -> None:
+    drones = [
+        Drone(n, (0.5, 0.0), 0.02, math.hypot(0.02, 1.0 / math.sqrt(2)), sigma_uav_m=1.0)
+        for n in "ab"
+    ]
+    _, fused, _, t0 = run_fuser(work, ["a", "b"], drones, seconds, None, *extra)
+    err = ok_errors(fused, t0)
+    one = math.sqrt(2) * drones[0].sigma_m
+    say(
+        f"shared GNSS error 0.5 m north in both a and b (sigma_uav_m 1.0) {' '.join(extra) or '(default)'}: fused "
+        f"h_acc median {np.median(err[:, 2]):.3f} m = {np.median(err[:, 2]) / one:.3f} of one drone's {one:.3f} m; "
+        f"error median {np.median(np.hypot(err[:, 0], err[:, 1])):.3f} m"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=8.0)
@@ -102,6 +147,10 @@ def main() -> None:
         fake(work / "fake2", args.seconds, say, [REAL_A, REAL_B])
         fake(work / "fake2_gnss", args.seconds, say, [REAL_A, REAL_B], "--shared-gnss-m", "0.1")
         future(work / "future", args.seconds, say)
+        walker(work / "walker", args.seconds + 2.0, say)
+        walker(work / "walker_unbounded", args.seconds + 2.0, say, "--uuv-max-reach-m", "1e6")
+        shared_gnss(work / "gnss", args.seconds, say)
+        shared_gnss(work / "gnss_independent", args.seconds, say, "--shared-gnss-m", "0")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
 

@@ -38,12 +38,18 @@ def key(drone: str) -> str:
 @dataclass(frozen=True)
 class Drone:
     """One publisher of fixes: ``offset_ne_m`` from the UUV (m), ``white_m`` its scatter and ``sigma_m`` its claim
-    (1-sigma per axis, m)."""
+    (1-sigma per axis, m); ``walk_ne_mps`` (m/s) moves its offset on from ``walk_from_s`` after the stream's start;
+    ``silent_s``: (from, to) seconds after the start without fixes; ``sigma_uav_m``: its GNSS sigma as its fix
+    message carries it (NaN: none)."""
 
     name: str
     offset_ne_m: tuple[float, float] = (0.0, 0.0)
     white_m: float = 0.02
     sigma_m: float = 0.1
+    walk_ne_mps: tuple[float, float] = (0.0, 0.0)
+    walk_from_s: float = 0.0
+    silent_s: tuple[float, float] | None = None
+    sigma_uav_m: float = math.nan
 
 
 def geodetic(n_m: float, e_m: float) -> tuple[float, float]:
@@ -63,7 +69,8 @@ def payload(
     drone: Drone, t: float, t0: float, rng: np.random.Generator, ahead_s: float = 0.0
 ) -> bytes:
     """The drone's fix message of the UUV at ``t`` (stamped ``ahead_s`` later)."""
-    n, e = np.array(drone.offset_ne_m) + rng.normal(0.0, drone.white_m, 2)
+    walked = np.array(drone.walk_ne_mps) * max(0.0, t - t0 - drone.walk_from_s)
+    n, e = np.array(drone.offset_ne_m) + walked + rng.normal(0.0, drone.white_m, 2)
     lat, lon = geodetic(SPEED_MPS * (t - t0) + n, e)
     s = drone.sigma_m
     fix = Fix(
@@ -79,6 +86,7 @@ def payload(
         sigma_n_m=s,
         sigma_e_m=s,
         cov_ne_m2=0.0,
+        sigma_uav_m=drone.sigma_uav_m,
         frame=0,
     )
     return json.dumps(FixMessage.of(fix).to_json()).encode()
@@ -152,6 +160,8 @@ class FuserOnLoopback:
             time.sleep(max(0.0, tick - time.time()))  # the cameras' frame rate
             for d in drones:
                 t = time.time()
+                if d.silent_s and d.silent_s[0] <= t - t0 < d.silent_s[1]:
+                    continue
                 self._put(d.name, payload(d, t, t0, rng))
             while pending and time.time() - t0 >= pending[0][0]:
                 _, (name, ahead_s) = pending.pop(0)
