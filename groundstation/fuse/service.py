@@ -38,7 +38,6 @@ from pathlib import Path
 import zenoh
 from pydantic import ValidationError
 
-from groundstation.live.control import ZenohControl
 from groundstation.live.preflight import (
     link_problem,
     private_file,
@@ -49,6 +48,7 @@ from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.link import read_signing_key
 from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
+from groundstation.runtime.queries import ZenohControl
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus

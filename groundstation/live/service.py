@@ -48,7 +48,7 @@ from groundstation.config_files import load_calibration
 from groundstation.height_from_size import HeightFromSize, OnlineHeightFromSize
 from groundstation.latency.estimate import OnlineLatency
 from groundstation.live import config, registry
-from groundstation.live.control import Control, ZenohControl
+from groundstation.live.control import Control
 from groundstation.live.pipeline import Pipeline
 from groundstation.live.registry import DepthInput, UavInput
 from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
@@ -61,6 +61,7 @@ from groundstation.live.ui.server import PageUuv, WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
 from groundstation.mavlink.link import read_signing_key
+from groundstation.runtime.queries import ZenohControl
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import (
     INPUTS,
