@@ -1,3 +1,4 @@
 """What the live service (``skyfix run``) and the fuser (``skyfix fuse``) both run on: the workers' runtime (their
 stop stages and status, :mod:`.workers`), the process's own usage (:mod:`.usage`), fixes and status on Zenoh
-(:mod:`.zenoh_fix`) and MAVLink into BlueOS's Zenoh (:mod:`.zenoh_mavlink`)."""
+(:mod:`.zenoh_fix`), MAVLink into BlueOS's Zenoh (:mod:`.zenoh_mavlink`) and the Zenoh queryables of the
+operator's commands and the late joiners (:mod:`.queries`)."""
