@@ -12,6 +12,13 @@ every row of ``video_frames.csv``:
 the one ``init_bbox`` belongs to); ``no_video`` (the frame is listed but could not
 be decoded: truncated or corrupt video).
 
+Forward and backward (``both_ways``; offline, the whole video is there): the frames the forward, causal pass
+reports without the UUV just before a re-acquisition (hidden a moment by the waves, searched for, the candidate
+being confirmed by the frames after it) are traced back from it: a second tracker starts on the re-acquired UUV
+and steps back through them (up to :data:`BACKWARD_S` of them, kept decoded meanwhile) until it loses it; the
+frames it finds the UUV in are ``ok`` too (``bridged``). An occlusion stops it as it stops the forward pass:
+a hidden UUV is not bridged.
+
 The camera poses of all frames are computed at once and shared with the session
 (which projects its predictions for many frames at a time). With ``measure_motion``
 the camera's rotation between consecutive frames is measured too
@@ -25,6 +32,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +46,10 @@ from groundstation.video.frames import VideoError
 from localizer.pose import camera_pose
 from localizer.tracking import GREY_TRACKERS
 from localizer.tracking.session import SelectionError, TrackingSession
+from localizer.tracking.target import TargetState
+
+#: Offline, frames without the UUV are traced back from a re-acquisition through at most this many seconds of them.
+BACKWARD_S = 3.0
 
 
 @dataclass
@@ -56,6 +68,9 @@ class TrackedVideo:
     rotations: list = field(
         default_factory=list
     )  # video_motion.Rotation between consecutive frames (measure_motion)
+    bridged: np.ndarray | None = (
+        None  # bool: frames found by tracing a re-acquisition back (``both_ways``); else the causal pass's
+    )
 
 
 def _init_row(session: Session, t: np.ndarray) -> int:
@@ -78,9 +93,11 @@ def track_session(
     progress: bool = False,
     measure_motion: bool = False,
     size: HeightFromSize | None = None,
+    both_ways: bool = False,
 ) -> TrackedVideo:
     """Track the UUV through the session's video (see the module doc for statuses); ``size`` measures the camera's
-    height from the UUV's size in the frames it is tracked in.
+    height from the UUV's size in the frames it is tracked in; ``both_ways``: re-acquisitions traced back too (see
+    the module doc).
 
     Raises :class:`SessionError` for what makes tracking impossible: no video, no
     ``init_bbox``, an unknown tracker, a video that cannot be opened or whose frame
@@ -111,7 +128,10 @@ def track_session(
         np.full(n, np.nan),
         np.full(n, np.nan),
     )
-    timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0}
+    timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0, "backward": 0.0}
+    bridged = np.zeros(n, dtype=bool)
+    period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
+    gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
     warnings: list[str] = []
     meter = RotationMeter(cal.camera) if measure_motion else None
     rotations = []
@@ -173,6 +193,15 @@ def track_session(
                     result.confidence,
                 )
                 sigma[row] = result.sigma_px
+                if both_ways and not result.ok:
+                    gap.append((row, frame.image.copy()))
+                elif both_ways and gap:
+                    t0 = time.perf_counter()
+                    for r, back in _trace_back(tracking, pose, row, frame.image, result, gap):
+                        status[r], u[r], v[r], conf[r] = "ok", back.u, back.v, back.confidence
+                        sigma[r], bridged[r] = back.sigma_px, True
+                    gap.clear()
+                    timings["backward"] += time.perf_counter() - t0
                 if size is not None and result.ok and size.due(float(t[row])):
                     t0 = time.perf_counter()
                     size.take(size.measure(frame.bgr(), pose, row, result.u, result.v))
@@ -198,4 +227,25 @@ def track_session(
         warnings.append(f"{session.video_path}: {extra} frames beyond video_frames.csv ignored")
     not_ok = status != "ok"
     u[not_ok], v[not_ok], sigma[not_ok] = np.nan, np.nan, np.nan
-    return TrackedVideo(frame_idx, t, u, v, status, conf, sigma, timings, warnings, rotations)
+    return TrackedVideo(
+        frame_idx, t, u, v, status, conf, sigma, timings, warnings, rotations, bridged
+    )
+
+
+def _trace_back(forward: TrackingSession, pose, row: int, image, found, gap) -> list:
+    """``(row, TrackResult)`` of the frames in ``gap`` ((row, image), the frames just before ``row`` without the UUV,
+    oldest first) a tracker started on the UUV ``found`` in frame ``row`` finds it in, stepping back until it
+    loses it."""
+    back = TrackingSession(forward.cal, forward.tracker)
+    try:
+        back.start_at(image, pose, row, found.box, (found.u, found.v))
+    except SelectionError:  # its box reaches beyond the frame
+        return []
+    traced = []
+    for r, earlier in reversed(gap):
+        result = back.step(earlier, pose, r)
+        if back.state is not TargetState.TRACKING:
+            break
+        if result.ok:
+            traced.append((r, result))
+    return traced

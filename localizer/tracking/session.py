@@ -156,14 +156,31 @@ class TrackingSession:
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
         centre = (float(cu[0]), float(cv_[0]))
+        origin = "click" if point is not None else "box"
+        return self._track_from(frame_bgr, one, box, centre, origin, outlined is not None)
+
+    def start_at(self, frame_bgr, pose: CameraPose, i: int, box, point) -> TrackResult:
+        """Track the UUV from a sighting another pass over the same video made (e.g. offline, tracing a
+        re-acquisition back in time): the top face's pixel ``point`` (u, v) inside ``box`` (x, y, w, h) of this
+        frame, taken as they are (no outline, no correction to the top face). SelectionError for a box outside
+        the frame."""
+        one = take(pose, [i])
+        return self._track_from(
+            frame_bgr, one, box, (float(point[0]), float(point[1])), "box", False
+        )
+
+    def _track_from(
+        self, frame_bgr, one: CameraPose, box, centre, origin: str, outlined: bool
+    ) -> TrackResult:
+        """Tracking starts on ``box`` with the top face's pixel ``centre`` in the one-frame pose ``one``."""
         anchor, px_per_m = self._locate(one, centre)
         try:
             result = self.target.select(frame_bgr, box, centre, px_per_m)
         except ValueError as e:
             raise SelectionError(str(e)) from None
         self._start(one, centre, anchor)
-        self.origin = "click" if point is not None else "box"
-        self._outlined = outlined is not None
+        self.origin = origin
+        self._outlined = outlined
         self.prediction = None
         self._length_px = VEHICLE_FOOTPRINT_M[0] * px_per_m
         return self._note(float(one.t_unix[0]), result)
