@@ -210,6 +210,11 @@ class Clocks(Section):
     station_minus_gnss_s: float | None = Field(
         description="the station clock minus GNSS time (SYSTEM_TIME)"
     )
+    gnss_clock_steps: int = Field(
+        0,
+        description="steps of the station clock seen against GNSS time (SYSTEM_TIME): the offset started "
+        "again from the new samples",
+    )
     uav_link_latency_ms: float = Field(description="the UAV link's one-way delay in use")
     uav_link_latency_source: LatencySource = Field(
         description="where it comes from: configured ([timing] mavlink_latency_s), timesync (measured), or unknown "

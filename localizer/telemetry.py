@@ -45,6 +45,12 @@ DEG_PER_M = math.degrees(
     1.0 / 6_378_137.0
 )  # latitude degrees per metre north (sphere; for rates only)
 _NOTICE_AFTER = 3  # samples before a clock offset is reported
+#: A SYSTEM_TIME sample of the station-minus-GNSS offset this far (s) from the median is a step of the station clock
+#: (NTP, an operator) once :data:`GNSS_STEP_SAMPLES` of them in a row agree within :data:`GNSS_STEP_AGREE_S`: the
+#: offset restarts from them (:attr:`Telemetry.gnss_clock_steps`); one alone is an outlier and moves nothing.
+GNSS_STEP_S = 1.0
+GNSS_STEP_SAMPLES = 2
+GNSS_STEP_AGREE_S = 0.25
 _ASIDE_MAX = 256  # samples kept aside while a clock waits for a reboot's confirmation
 #: Where the UAV link's delay in use comes from (a frame's ``time_source``), and what each word means.
 LATENCY_SOURCES = {
@@ -87,6 +93,11 @@ class Telemetry:
             None  # (delay, 1-sigma) from the video's motion, s
         )
         self._gnss = Median()  # arrival-scale minus GNSS time, per SYSTEM_TIME
+        self._gnss_new: list[
+            float
+        ] = []  # samples off the median by a step, not yet agreeing enough
+        self.gnss_clock_steps = 0  # station clock steps seen against GNSS time (SYSTEM_TIME)
+        self.last_gnss_clock_step_s: float | None = None
         self.uuv_clock = ClockMap(w)  # the UUV's own depth stamps
         self.depth_aligned_by: str | None = None  # "uuv_clock", "arrival" or "autopilot_clock"
         # roll, pitch, yaw of the UAV body (FRD in NED) and their rates
@@ -353,7 +364,7 @@ class Telemetry:
             return False
         if time_unix_usec <= 0:
             return True  # the autopilot has no UNIX time yet
-        self._gnss.add(t - time_unix_usec / 1e6)
+        self._gnss_sample(t - time_unix_usec / 1e6)
         off = self.station_minus_gnss_s
         if len(self._gnss) >= _NOTICE_AFTER and abs(off) > CLOCK_NOTICE_S:
             way = "behind" if off < 0 else "ahead of"
@@ -364,6 +375,30 @@ class Telemetry:
                 "telemetry is aligned by receive times, GPS_INPUT carries GNSS time",
             )
         return True
+
+    def _gnss_sample(self, x: float) -> None:
+        """One station-minus-GNSS sample (s): into the median, or, off it by :data:`GNSS_STEP_S`, held until
+        :data:`GNSS_STEP_SAMPLES` in a row agree: a step of the station clock, the median restarted from them (GNSS
+        time does not step: the station clock did). Without this the median of the last 31 would keep the old
+        offset until 16 samples of the new (GPS_INPUT's time that far off meanwhile)."""
+        median = self._gnss.value
+        if median is None or abs(x - median) <= GNSS_STEP_S:
+            self._gnss_new.clear()
+            self._gnss.add(x)
+            return
+        self._gnss_new.append(x)
+        new = self._gnss_new[-GNSS_STEP_SAMPLES:]
+        if len(new) == GNSS_STEP_SAMPLES and max(new) - min(new) <= GNSS_STEP_AGREE_S:
+            self.gnss_clock_steps += 1
+            self.last_gnss_clock_step_s = float(np.median(new)) - median
+            self._gnss.clear()
+            for v in new:
+                self._gnss.add(v)
+            self._gnss_new.clear()
+            self.notices.append(
+                f"the station clock stepped {self.last_gnss_clock_step_s:+.2f} s against GNSS time (SYSTEM_TIME): "
+                "GPS_INPUT's time follows the new offset"
+            )
 
     def add_timesync(self, tc1_ns: int, ts1_ns: int, receive_s: float) -> bool:
         """A TIMESYNC reply to our request: ``ts1`` our send time (station ns), ``tc1`` the autopilot's receipt (boot ns)."""

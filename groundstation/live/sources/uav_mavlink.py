@@ -84,6 +84,7 @@ def clock_status(tel: Telemetry) -> dict:
     measured = tel.measured_latency_s
     return {
         "station_minus_gnss_s": None if gnss is None else round(gnss, 3),
+        "gnss_clock_steps": tel.gnss_clock_steps,
         "uav_link_latency_ms": round(tel.uav_latency_s * 1000.0, 1),
         "uav_link_latency_source": tel.latency_source,
         "uav_link_latency_sigma_ms": round(tel.latency_sigma_s * 1000.0, 1),
