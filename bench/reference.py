@@ -17,7 +17,6 @@ share within 2·h_acc and the median h_acc, without and with the reference.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -32,9 +31,8 @@ from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.reference import read_reference
 from groundstation.offline.reference import sightings as marker_sightings
 from groundstation.session.read import load_session, read_table
-from localizer.fix import locate
 from localizer.pose import camera_pose
-from localizer.reference import corrected, offsets, sightings
+from localizer.reference import correct, offsets, sightings
 from sim_fixtures.generate import generate
 from sim_fixtures.marker import REFERENCE_TRACK_CSV
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -90,11 +88,9 @@ def geometry_only(name: str, args, work: Path) -> str:
     ref, _ = read_reference(s)
     cal, tel = s.calibration, s.telemetry
     t_m, u_m, v_m = marker_track(out, np.random.default_rng(7), args.pixel_sigma)
-    off, seen = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
-    found = offsets(t_m[seen], off[seen], fixes.t_unix)
-    pose = camera_pose(cal, tel, fixes.t_unix)
-    quiet = dataclasses.replace(pose, sigma_uav_m=np.zeros(len(pose.t_unix)))
-    better = corrected(fixes, locate(cal, quiet, fixes.u, fixes.v), found)
+    off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
+    found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
+    better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
     have = np.isfinite(found.offset_ne_m[:, 0]) & (fixes.status == "ok")
     return line(name, s, fixes, better, f"corrected {100 * have.mean():.0f} %")
 

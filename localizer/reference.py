@@ -8,10 +8,13 @@ depth); ``known − located`` is then the offset the UUV's fixes share, and addi
 
 The offset is taken over a window of :data:`WINDOW_S` around each fix (a plain GNSS walks over tens of seconds);
 its 1-sigma per axis is the standard error of the window's 1-second means (:data:`BLOCK_S`: the waves' jitter of the
-reference is correlated over about a second), at least the reference's own surveyed 1-sigma and
-:data:`MIN_SIGMA_M`. A corrected fix's claim drops the UAV position's term (the offset took it) and adds the
-offset's sigma; the attitude's and the height's terms stay whole (the offset takes only their shared part: the
-claim allows for them as before, so it only grows looser where the reference is far from the UUV in the image).
+reference is correlated over about a second), at least the reference's own surveyed 1-sigma and :data:`MIN_SIGMA_M`.
+
+A corrected fix's claim (:func:`correct`): the UAV position's term goes (the offset took it whole); of the camera's
+tilt, heading and height errors, shared by the reference's sightings and the UUV's fix, what is left is what they
+move the two differently: the difference of the UUV's and the reference's sensitivities (:func:`pose_jacobian`,
+the latter averaged over the window's sightings, as the offset is) times the calibration's sigmas; the fix's own
+terms (pixel, depth, time, waves, extrapolated attitude) stay; the offset's sigma is added.
 
 North/east metres, seconds on the station clock.
 """
@@ -23,10 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .attitude import rotation_about
 from .calibration import Calibration
 from .fix import Fixes, locate
 from .geodesy import geodetic_to_ned, ned_to_geodetic
 from .pose import CameraPose
+from .ray import pixel_to_offset
 
 #: the offset at a fix is taken from the reference's sightings this long around it (s)
 WINDOW_S = 10.0
@@ -36,6 +41,8 @@ BLOCK_S = 1.0
 MIN_SIGMA_M = 0.01
 #: fewer blocks than this in a window: no offset there
 MIN_BLOCKS = 3
+_ANGLE = 1e-4  # rad, the finite differences of pose_jacobian
+_HEIGHT = 1e-3  # m
 
 
 @dataclass(frozen=True)
@@ -52,12 +59,16 @@ class Reference:
 @dataclass(frozen=True)
 class Offsets:
     """The absolute offset at N times: ``offset_ne_m`` (N, 2) known − located (NaN where none), ``sigma_ne_m`` (N, 2)
-    its 1-sigma per axis, ``sightings`` (N,) the reference's located frames in each window."""
+    its 1-sigma per axis, ``sightings`` (N,) the reference's located frames in each window; ``jacobian`` how the
+    reference's located position moved with the camera's tilt, heading and height, as averaged into the offset."""
 
     t_unix: np.ndarray
     offset_ne_m: np.ndarray
     sigma_ne_m: np.ndarray
     sightings: np.ndarray
+    jacobian: (
+        np.ndarray
+    )  # (N, 2, 4) the sightings' pose_jacobian averaged as the offset is (NaN where none)
 
     def describe(self) -> str:
         """One line: the offset found (median over the times that have one) and its 1-sigma."""
@@ -73,11 +84,27 @@ class Offsets:
         )
 
 
-def sightings(
-    cal: Calibration, pose: CameraPose, u, v, ref: Reference
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each frame's offset (N, 2) known − located of the reference seen at pixels ``u``, ``v`` (NaN: not seen), and
-    whether it was located there. ``pose`` is the frames' (its UUV depth is replaced by the reference's)."""
+def pose_jacobian(cal: Calibration, pose: CameraPose, u, v, depth_m) -> np.ndarray:
+    """How the point seen at pixels ``u``, ``v`` at ``depth_m`` moves (north, east; m) with the camera turned about
+    North, East and Down (per radian) and raised (per metre): (N, 2, 4), NaN where it is not located."""
+    n = cal.water.refractive_index
+    R, h = pose.R_ned_from_cv, pose.height_m
+    d = np.broadcast_to(np.asarray(depth_m, dtype=float), h.shape)
+    with np.errstate(invalid="ignore"):
+        base, _ = pixel_to_offset(cal.camera, R, u, v, h, d, n)
+        cols = [
+            (pixel_to_offset(cal.camera, rotation_about(axis, _ANGLE) @ R, u, v, h, d, n)[0] - base)
+            / _ANGLE
+            for axis in np.eye(3)
+        ]
+        cols.append((pixel_to_offset(cal.camera, R, u, v, h + _HEIGHT, d, n)[0] - base) / _HEIGHT)
+    return np.stack(cols, axis=-1)
+
+
+def sightings(cal: Calibration, pose: CameraPose, u, v, ref: Reference):
+    """Each frame's offset (N, 2) known − located of the reference seen at pixels ``u``, ``v`` (NaN: not seen), whether
+    it was located there, and its :func:`pose_jacobian` (N, 2, 4). ``pose`` is the frames' (its UUV depth is replaced
+    by the reference's)."""
     n = len(pose.t_unix)
     at_ref = dataclasses.replace(
         pose, depth_m=np.full(n, float(ref.depth_m)), sigma_depth_m=np.zeros(n)
@@ -90,20 +117,22 @@ def sightings(
             located.lat[ok], located.lon[ok], 0.0, ref.lat_deg, ref.lon_deg, 0.0
         )
         off[ok] = -np.column_stack([north, east])
-    return off, ok
+    return off, ok, pose_jacobian(cal, pose, u, v, ref.depth_m)
 
 
-def offsets(t_sight, offset_ne_m, t_unix, ref_sigma_m: float = 0.0) -> Offsets:
-    """The offset and its 1-sigma at times ``t_unix`` from the sightings' offsets (``offset_ne_m`` (M, 2) at
-    ``t_sight``, NaN rows ignored): the mean of the :data:`BLOCK_S` means within :data:`WINDOW_S`, its standard
-    error (see the module doc)."""
+def offsets(t_sight, offset_ne_m, jacobian, t_unix, ref_sigma_m: float = 0.0) -> Offsets:
+    """The offset, its 1-sigma and the averaged jacobian at times ``t_unix`` from the sightings' (``offset_ne_m``
+    (M, 2) and ``jacobian`` (M, 2, 4) at ``t_sight``, NaN rows ignored): the mean of the :data:`BLOCK_S` means within
+    :data:`WINDOW_S`, its standard error (see the module doc)."""
     t_sight = np.asarray(t_sight, dtype=float)
     o = np.asarray(offset_ne_m, dtype=float)
-    keep = np.all(np.isfinite(o), axis=1)
-    t_sight, o = t_sight[keep], o[keep]
+    jac = np.asarray(jacobian, dtype=float).reshape(len(o), 8)
+    keep = np.all(np.isfinite(o), axis=1) & np.all(np.isfinite(jac), axis=1)
+    t_sight, o, jac = t_sight[keep], o[keep], jac[keep]
     t = np.asarray(t_unix, dtype=float)
     out = np.full((len(t), 2), np.nan)
     sig = np.full((len(t), 2), np.nan)
+    mean_jac = np.full((len(t), 8), np.nan)
     count = np.zeros(len(t), int)
     for i, ti in enumerate(t):
         near = np.abs(t_sight - ti) <= WINDOW_S / 2
@@ -117,32 +146,53 @@ def offsets(t_sight, offset_ne_m, t_unix, ref_sigma_m: float = 0.0) -> Offsets:
         labels, which = np.unique(block, return_inverse=True)
         if len(labels) < MIN_BLOCKS:
             continue
+        per = np.bincount(which)
         means = np.stack(
-            [np.bincount(which, weights=o[near, a]) / np.bincount(which) for a in range(2)], axis=1
+            [np.bincount(which, weights=x) / per for x in np.column_stack([o[near], jac[near]]).T],
+            axis=1,
         )
-        out[i] = means.mean(axis=0)
-        error = means.std(axis=0, ddof=1) / np.sqrt(len(labels))
+        out[i] = means[:, :2].mean(axis=0)
+        mean_jac[i] = means[:, 2:].mean(axis=0)
+        error = means[:, :2].std(axis=0, ddof=1) / np.sqrt(len(labels))
         sig[i] = np.maximum(np.hypot(error, ref_sigma_m), MIN_SIGMA_M)
-    return Offsets(t, out, sig, count)
+    return Offsets(t, out, sig, count, mean_jac.reshape(len(t), 2, 4))
 
 
-def corrected(fixes: Fixes, without_position: Fixes, found: Offsets) -> Fixes:
-    """``fixes`` moved by the offset where there is one; their claim: ``without_position``'s (the same fixes located
-    with the UAV position's sigma 0) with the offset's sigma added. Elsewhere unchanged."""
+def correct(cal: Calibration, pose: CameraPose, fixes: Fixes, found: Offsets) -> Fixes:
+    """``fixes`` (made from ``pose`` and ``cal``) moved by the offset where there is one, with the claim of the module
+    doc; elsewhere unchanged."""
+    use = (fixes.status == "ok") & np.all(np.isfinite(found.jacobian), axis=(1, 2))
     out = dataclasses.replace(fixes)
     for name in ("lat", "lon", "h_acc_m", "sigma_n_m", "sigma_e_m", "cov_ne_m2", "sigma_uav_m"):
         setattr(out, name, getattr(fixes, name).copy())
-    use = (fixes.status == "ok") & np.isfinite(found.offset_ne_m[:, 0])
     if not use.any():
         return out
-    o, s = found.offset_ne_m[use], found.sigma_ne_m[use]
+    n = len(pose.t_unix)
+    own = dataclasses.replace(
+        pose, sigma_uav_m=np.zeros(n), sigma_height_m=np.zeros(n)
+    )  # the shared terms taken out: ...
+    own_cal = dataclasses.replace(
+        cal, sigmas=dataclasses.replace(cal.sigmas, tilt_deg=0.0, yaw_deg=0.0)
+    )
+    alone = locate(own_cal, own, fixes.u, fixes.v, sigma_px=fixes.sigma_pixel_px)
+    # ... and put back as what they move the UUV and the reference differently
+    diff = pose_jacobian(cal, pose, fixes.u, fixes.v, pose.depth_m)[use] - found.jacobian[use]
+    tilt, yaw = np.radians(cal.sigmas.tilt_deg), np.radians(cal.sigmas.yaw_deg)
+    scale = np.stack(
+        np.broadcast_arrays(tilt, tilt, yaw, pose.sigma_height_m[use]), axis=-1
+    )  # (K, 4)
+    js = diff * scale[:, None, :]
+    cov = np.einsum("kaj,kbj->kab", js, js)
+    s = found.sigma_ne_m[use]
+    cov[:, 0, 0] += alone.sigma_n_m[use] ** 2 + s[:, 0] ** 2
+    cov[:, 1, 1] += alone.sigma_e_m[use] ** 2 + s[:, 1] ** 2
+    cov[:, 0, 1] += alone.cov_ne_m2[use]
+    o = found.offset_ne_m[use]
     out.lat[use], out.lon[use], _ = ned_to_geodetic(
         o[:, 0], o[:, 1], 0.0, fixes.lat[use], fixes.lon[use], 0.0
     )
-    sn = np.hypot(without_position.sigma_n_m[use], s[:, 0])
-    se = np.hypot(without_position.sigma_e_m[use], s[:, 1])
-    out.sigma_n_m[use], out.sigma_e_m[use] = sn, se
-    out.cov_ne_m2[use] = without_position.cov_ne_m2[use]
-    out.h_acc_m[use] = np.hypot(sn, se)
+    out.sigma_n_m[use], out.sigma_e_m[use] = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1])
+    out.cov_ne_m2[use] = cov[:, 0, 1]
+    out.h_acc_m[use] = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1])
     out.sigma_uav_m[use] = np.hypot(s[:, 0], s[:, 1])
     return out

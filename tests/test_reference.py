@@ -2,7 +2,6 @@
 and its sigma from white sightings, and a plain-GNSS drone's fixes against the simulator's truth (the marker's pixel
 the simulator's own projection, bench/reference.py's)."""
 
-import dataclasses
 import sys
 from pathlib import Path
 
@@ -14,9 +13,8 @@ from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.reference import read_reference
 from groundstation.offline.reference import sightings as marker_sightings
 from groundstation.session.read import load_session, read_table
-from localizer.fix import locate
 from localizer.pose import camera_pose
-from localizer.reference import BLOCK_S, WINDOW_S, corrected, offsets, sightings
+from localizer.reference import BLOCK_S, WINDOW_S, correct, offsets, sightings
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
@@ -33,7 +31,7 @@ def test_offset_is_the_windows_mean_with_its_standard_error():
     t = np.arange(0.0, 30.0, 0.1)
     true = np.array([0.7, -0.4])
     obs = true + rng.normal(0.0, 0.2, (len(t), 2))
-    found = offsets(t, obs, np.array([15.0, 100.0]))
+    found = offsets(t, obs, np.zeros((len(t), 2, 4)), np.array([15.0, 100.0]))
     expected_sigma = 0.2 / np.sqrt(WINDOW_S / 0.1)  # white: the block means' scatter / sqrt(blocks)
     assert np.all(np.abs(found.offset_ne_m[0] - true) < 3 * found.sigma_ne_m[0])
     assert np.all(np.abs(found.sigma_ne_m[0] / expected_sigma - 1.0) < 0.4)
@@ -55,12 +53,10 @@ def test_plain_gnss_drone_with_a_marker_in_view(tmp_path):
     cal, tel = s.calibration, s.telemetry
     t_m, u_m, v_m = bench.marker_track(tmp_path, np.random.default_rng(1), 0.5)
     ref, _ = read_reference(s)
-    off, seen = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
+    off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
     assert seen.mean() > 0.9
-    found = offsets(t_m[seen], off[seen], fixes.t_unix)
-    pose = camera_pose(cal, tel, fixes.t_unix)
-    quiet = dataclasses.replace(pose, sigma_uav_m=np.zeros(len(pose.t_unix)))
-    better = corrected(fixes, locate(cal, quiet, fixes.u, fixes.v), found)
+    found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
+    better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
     before = np.hypot(*error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth)[ok].T)
     after = np.hypot(*error_ne_m(better.t_unix, better.lat, better.lon, ok, s.truth)[ok].T)
     assert np.mean(after) < 0.2 * np.mean(before), (np.mean(after), np.mean(before))

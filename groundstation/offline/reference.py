@@ -13,7 +13,6 @@ none), and one line on stderr says what was found.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import tomllib
 
@@ -24,7 +23,7 @@ from groundstation.offline.bottom import subsample_rows
 from groundstation.session.read import Session, SessionError
 from groundstation.video.file import open_video
 from localizer import reference
-from localizer.fix import Fixes, locate
+from localizer.fix import Fixes
 from localizer.pose import camera_pose
 from localizer.tracking.predict import project_uuv
 
@@ -133,13 +132,14 @@ def apply(session: Session, fixes: Fixes, mode: str, correction=None):
     ref, radius_m = found
     cal, tel = session.calibration, session.telemetry
     t, u, v = sightings(session, ref, radius_m)
-    off, seen = reference.sightings(cal, camera_pose(cal, tel, t), u, v, ref)
-    offsets = reference.offsets(t[seen], off[seen], fixes.t_unix, ref.sigma_m)
+    seen_pose, seen_cal = camera_pose(cal, tel, t), cal
     pose = camera_pose(cal, tel, fixes.t_unix)
     if correction is not None:
+        seen_pose, seen_cal = correction.apply(session, seen_pose)
         pose, cal = correction.apply(session, pose)
-    quiet = dataclasses.replace(pose, sigma_uav_m=np.zeros(len(pose.t_unix)))
-    better = reference.corrected(fixes, locate(cal, quiet, fixes.u, fixes.v), offsets)
+    off, seen, jac = reference.sightings(seen_cal, seen_pose, u, v, ref)
+    offsets = reference.offsets(t[seen], off[seen], jac[seen], fixes.t_unix, ref.sigma_m)
+    better = reference.correct(cal, pose, fixes, offsets)
     print(
         f"{session.path.name}: the marker seen in {int(seen.sum())} of {len(t)} frames searched; "
         f"{offsets.describe()}",
