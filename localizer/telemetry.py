@@ -247,7 +247,10 @@ class Telemetry:
             was, now = clock.last_restart
             who = "autopilot" if own else f"component {component}"
             self.notices.append(
-                f"{who} rebooted (time_boot_ms went back from {was:.1f} s to {now:.1f} s): "
+                f"the station clock stepped back ({who}'s time_boot_ms went on from {was:.1f} s to {now:.1f} s): "
+                "a new clock segment; the telemetry before it is kept"
+                if now >= was
+                else f"{who} rebooted (time_boot_ms went back from {was:.1f} s to {now:.1f} s): "
                 "a new clock segment; the telemetry before it is kept"
             )
             if own:

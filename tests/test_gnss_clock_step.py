@@ -65,9 +65,13 @@ def test_a_forward_step_is_followed_within_two_samples_of_the_telemetry_moving(m
 
 def test_a_backward_step_is_followed_at_once():
     """-10 s: the clock map takes the station clock stepping back at once (a new clock segment), and the offset
-    starts again from the next sample."""
-    moved, followed, _ = _moved_and_followed(-10.0)
+    starts again from the next sample; the notice says the station clock stepped, not that the autopilot
+    rebooted."""
+    moved, followed, tel = _moved_and_followed(-10.0)
     assert moved == followed == 0
+    # said as what it is: the autopilot's boot time went on
+    assert any(n.startswith("the station clock stepped back") for n in tel.notices)
+    assert not any("rebooted" in n for n in tel.notices), tel.notices
 
 
 def test_one_bad_sample_moves_nothing():
