@@ -107,6 +107,12 @@ def ensure_session(duration_s: float) -> Path:
         print(f"generating {path} (once) ...", flush=True)
         generate(sc, path, progress=True)
         encode_as_camera(path)
+    add_third(path)
+    return path
+
+
+def add_third(path: Path) -> None:
+    """``uuvs/uuv3/`` in the two_uuvs_crossing session at ``path``: a copy of uuv1's records (once)."""
     third = path / UUVS_DIR / THIRD
     if not (third / UUV_TOML).exists():
         third.mkdir(parents=True, exist_ok=True)
@@ -118,7 +124,6 @@ def ensure_session(duration_s: float) -> Path:
             f"# uuv1's records: a third tracker session on the same vehicle\n"
             f"[tracker]\ninit_bbox = {list(box)}\n"
         )
-    return path
 
 
 class GpsEndpoints:

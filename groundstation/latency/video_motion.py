@@ -9,10 +9,16 @@ rays onto the second's is fitted (Kabsch), twice: the second time without the
 tracks the first fit explains worst (the UUV, glints). Over one frame interval
 the UAV moves centimetres at tens of metres' range, so the rotation is the
 image's motion.
+
+:class:`MotionThread` runs a :class:`RotationMeter` in a thread of its own, beside the caller's work: OpenCV
+releases the interpreter lock while it resizes and tracks the corners, so on a second core the motion costs the
+caller's loop little (``bench/profile.py``: the biggest stage of ``skyfix process`` after decoding).
 """
 
 from __future__ import annotations
 
+import queue
+import threading
 from dataclasses import dataclass
 
 import cv2
@@ -98,3 +104,44 @@ class RotationMeter:
         px = (px_small + 0.5) / self.scale - 0.5  # pixel centres back in full resolution
         rays = np.asarray(pixel_to_ray(self.camera, px[:, 0], px[:, 1]), dtype=float)
         return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
+class MotionThread:
+    """A :class:`RotationMeter` in a background thread: :meth:`feed` the frames in order (it waits while ``depth``
+    frames are not measured yet), :meth:`finish` for the rotations, the same and in the same order as measured in
+    the caller's thread. An error of the meter is raised by :meth:`finish`; :meth:`close` stops the thread (any
+    time; after :meth:`finish` nothing to do). The images fed must not change until measured."""
+
+    def __init__(self, camera: Camera, depth: int = 8):
+        self.meter = RotationMeter(camera)
+        self.rotations: list[Rotation] = []
+        self._queue: queue.Queue = queue.Queue(maxsize=depth)
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="video-motion", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while (item := self._queue.get()) is not None:
+            if self._error is not None:
+                continue  # failed: drain until the end, so feed never waits forever
+            try:
+                if (r := self.meter.measure(*item)) is not None:
+                    self.rotations.append(r)
+            except BaseException as e:  # noqa: BLE001 - raised again in the caller's thread by finish
+                self._error = e
+
+    def feed(self, t: float, image: np.ndarray) -> None:
+        """The next frame (time in any clock, s; grey or BGR image)."""
+        self._queue.put((t, image))
+
+    def close(self) -> None:
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join()
+
+    def finish(self) -> list[Rotation]:
+        """Every frame fed measured: the rotations between consecutive frames (see :meth:`RotationMeter.measure`)."""
+        self.close()
+        if self._error is not None:
+            raise self._error
+        return self.rotations

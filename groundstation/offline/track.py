@@ -21,8 +21,9 @@ a hidden UUV is not bridged.
 
 The camera poses of all frames are computed at once and shared with the session
 (which projects its predictions for many frames at a time). With ``measure_motion``
-the camera's rotation between consecutive frames is measured too
-(:class:`~groundstation.latency.video_motion.RotationMeter`), for the frames' offset to the
+the camera's rotation between consecutive frames is measured too, in a thread beside the tracking
+(:class:`~groundstation.latency.video_motion.MotionThread`; ``timings_s["motion"]``: the time waiting for it), for
+the frames' offset to the
 telemetry (:func:`groundstation.latency.estimate.offset_from_rotations`). With a
 :class:`~groundstation.height_from_size.HeightFromSize`, frames the UUV is tracked in are
 also measured for the camera's height from its size, in the same pass (``timings_s["size"]``).
@@ -38,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from groundstation.height_from_size import HeightFromSize
-from groundstation.latency.video_motion import RotationMeter
+from groundstation.latency.video_motion import MotionThread
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session, SessionError
 from groundstation.video.file import open_video
@@ -133,7 +134,7 @@ def track_session(
     period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
     gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
     warnings: list[str] = []
-    meter = RotationMeter(cal.camera) if measure_motion else None
+    meter = MotionThread(cal.camera) if measure_motion else None
     rotations = []
 
     t0 = time.perf_counter()
@@ -164,8 +165,7 @@ def track_session(
                     continue
                 if meter is not None:
                     t0 = time.perf_counter()
-                    if (r := meter.measure(float(t[row]), frame.image)) is not None:
-                        rotations.append(r)
+                    meter.feed(float(t[row]), frame.image)
                     timings["motion"] += time.perf_counter() - t0
                 if row < init_row:
                     continue
@@ -208,6 +208,10 @@ def track_session(
                     timings["size"] += time.perf_counter() - t0
                 done += 1
                 bar.update()
+            if meter is not None:
+                t0 = time.perf_counter()
+                rotations = meter.finish()
+                timings["motion"] += time.perf_counter() - t0
             if video.bad_reads:
                 warnings.append(
                     f"{session.video_path}: {video.bad_reads} unreadable frames skipped"
@@ -216,6 +220,8 @@ def track_session(
         raise SessionError(str(e)) from None
     finally:
         bar.close()
+        if meter is not None:
+            meter.close()
     if not started:
         raise SessionError(f"{session.video_path}: no frame of video_frames.csv could be decoded")
     missing = int(np.sum(status == "no_video"))
