@@ -44,6 +44,7 @@ from groundstation.offline.process import (
     print_warnings,
     size_of,
 )
+from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
 from groundstation.offline.smoothed import offline_track, write_smoothed_csv
 from groundstation.outputs import output_dir
@@ -318,6 +319,8 @@ def _evaluate_uuv(
     runs, results = {}, []
     for method, refraction in METHODS:
         fixes = locate_frames(session, pixels, refraction)
+        if refraction:  # a surveyed marker's offset (reference.toml), found through refraction
+            fixes, _ = apply_reference(session, fixes, "auto")
         print_warnings(session)
         (sess_dir / method).mkdir(parents=True, exist_ok=True)
         write_positions_csv(sess_dir / method / "positions.csv", fixes)
