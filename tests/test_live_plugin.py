@@ -8,6 +8,7 @@ depth reaches the telemetry and its status is the run's ``depth`` section."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -15,7 +16,11 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
 from live_helpers import ROOT, skyfix, stop, wait_for
+
+from groundstation.live import config
+from localizer.contract import ConfigError
 
 DEPTH_M = 2.75  # the plugin's constant depth
 READY_SAMPLES = 5  # the plugin touches its ready file once the telemetry has taken this many
@@ -152,3 +157,16 @@ def test_a_plugins_depth_source_is_chosen_by_name_and_runs(tmp_path):
     assert final["depth"]["received"] >= READY_SAMPLES
     assert final["depth"]["depth_m"] == DEPTH_M
     assert "depth" not in final["problems"]
+
+
+def test_a_part_whose_module_is_missing_is_refused_saying_what_to_install(monkeypatch):
+    """The mavsdk backend without MAVSDK-Python (``sys.modules`` entry None: not importable)."""
+    monkeypatch.setitem(sys.modules, "mavsdk", None)
+    parser = argparse.ArgumentParser()
+    config.add_arguments(parser)
+    args = parser.parse_args(["--calibration", "cal.toml", "--mavlink-backend", "mavsdk"])
+    with pytest.raises(ConfigError) as e:
+        config.run_config(args)
+    assert str(e.value) == (
+        "options: --mavlink-backend = 'mavsdk': needs mavsdk: pip install 'skyfix[mavsdk]'"
+    )
