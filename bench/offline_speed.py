@@ -1,6 +1,6 @@
 """``skyfix process`` against decoding the same video alone, at 1080p and 4K (issue 18).
 
-    .venv/bin/python bench/offline_speed.py [--sizes 1080p,4k] [--repeats 3] [--mil] [--tree LABEL=DIR ...]
+    .venv/bin/python bench/offline_speed.py [--sizes 1080p,4k] [--repeats 3] [--mil] [--lean] [--tree LABEL=DIR ...]
                                             [--out bench/results/offline_speed.txt]
 
 Sessions (generated once into /tmp/skyfix-bench: 40 s of 1080p, 10 s of 4K, 30 fps, a nadir hover with the
@@ -10,7 +10,10 @@ frames) and with PyAV (frame and slice threads, BGR frames), then ``skyfix proce
 the UUV's size measured), ``skyfix process --height-from-size off``, and with ``--mil`` the paper's MIL tracker
 (first round only: it is slow). The ratio is process fps / OpenCV decode-only fps (target ≥ 0.95), of the medians and,
 paired by round (each round's decode-only wall / its process wall: the machine's speed drifts between rounds), the
-pairs' median [least-most]. CPU seconds
+pairs' median [least-most]. The sessions' telemetry has no TIMESYNC (``[telemetry] timesync_hz = 0``, as many
+recordings): the link's delay is unknown, so ``skyfix process`` also estimates the frames' offset from the video's
+motion, as a user's run of such a recording does. Each process's peak RSS (``os.wait4``) and its CPU per second
+of video are printed, and the numbers written as JSON beside ``--out``. CPU seconds
 (the child's user + sys) show what the work costs beside the wall time: on a machine whose cores decoding alone
 keeps busy, process cannot be faster than its CPU seconds over the cores. ``skyfix process --help`` is timed too:
 the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
@@ -22,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
 import subprocess
 import sys
@@ -52,6 +54,9 @@ height_m = 12.0
 
 [uuv]
 depth_m = 1.5
+
+[telemetry]
+timesync_hz = 0.0  # no TIMESYNC, as many recordings: the link's delay is estimated from the video's motion
 """
 BENCH_DIR = Path("/tmp/skyfix-bench")
 
@@ -59,7 +64,7 @@ BENCH_DIR = Path("/tmp/skyfix-bench")
 def ensure_session(name: str) -> Path:
     """The benchmark session of one size, generated once."""
     w, h, duration = SIZES[name]
-    path = BENCH_DIR / f"offline_{name}_{duration}s"
+    path = BENCH_DIR / f"offline_{name}_{duration}s_motion"
     if (path / "video_frames.csv").exists():
         return path
     import tomllib
@@ -94,32 +99,43 @@ def decode_only(kind: str, video: str) -> int:
     return n
 
 
-def child(cmd: list[str], tree: Path = ROOT) -> tuple[float, float]:
-    """Wall seconds and CPU seconds (user + sys) of a child process run from source ``tree``, which must succeed."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t0 = time.perf_counter()
-    done = subprocess.run(
-        cmd,
-        check=False,
-        capture_output=True,
-        text=True,
-        cwd=tree,
-        env=dict(os.environ, PYTHONPATH=str(tree)),
-    )
-    wall = time.perf_counter() - t0
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if done.returncode:
-        raise SystemExit(f"{' '.join(cmd)}: exit {done.returncode}\n{done.stderr[-2000:]}")
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+def child(cmd: list[str], tree: Path = ROOT) -> tuple[float, float, float]:
+    """Wall seconds, CPU seconds (user + sys) and peak RSS (MB) of a child process run from source ``tree``, which
+    must succeed."""
+    with tempfile.TemporaryFile() as err:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(
+            cmd,
+            stdout=subprocess.DEVNULL,
+            stderr=err,
+            cwd=tree,
+            env=dict(os.environ, PYTHONPATH=str(tree)),
+        )
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        if proc.returncode:
+            err.seek(0)
+            tail = err.read().decode(errors="replace")[-2000:]
+            raise SystemExit(f"{' '.join(cmd)}: exit {proc.returncode}\n{tail}")
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
 
 
-def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work: Path) -> list[str]:
-    """One size's rounds (see the module doc); its result lines."""
+def bench_size(
+    name: str,
+    repeats: int,
+    mil: bool,
+    trees: dict[str, Path],
+    work: Path,
+    data: dict,
+    lean: bool = False,
+) -> list[str]:
+    """One size's rounds (see the module doc); its result lines, its numbers into ``data``."""
     session = ensure_session(name)
     video = str(next(session.glob("video.*")))
     frames = len((session / "video_frames.csv").read_text().splitlines()) - 1
     me = [sys.executable, str(Path(__file__).resolve())]
-    runs: dict[str, list[tuple[float, float]]] = {}
+    runs: dict[str, list[tuple[float, float, float]]] = {}
     process = [
         sys.executable,
         "-m",
@@ -134,8 +150,12 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
         "decode-only OpenCV": (me + ["--decode-only", "opencv", video], ROOT),
         "decode-only PyAV": (me + ["--decode-only", "pyav", video], ROOT),
     }
+    if lean:
+        del variants["decode-only PyAV"]
     for label, tree in trees.items():
         variants[f"process{label}"] = (process, tree)
+        if lean:
+            continue
         variants[f"process{label} --height-from-size off"] = (
             process + ["--height-from-size", "off"],
             tree,
@@ -148,16 +168,16 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
         if mil and r == 0:
             runs["process --tracker mil"] = [child(process + ["--tracker", "mil"])]
     w, h, duration = SIZES[name]
-    reference = frames / statistics.median(wall for wall, _ in runs["decode-only OpenCV"])
+    reference = frames / statistics.median(wall for wall, *_ in runs["decode-only OpenCV"])
     lines = [
         (
             f"{name}: {w}x{h}, {duration} s, {frames} frames; median of {repeats} interleaved rounds "
             f"(MIL: 1), {os.cpu_count()} cores"
         )
     ]
-    decode_walls = [wall for wall, _ in runs["decode-only OpenCV"]]
+    decode_walls = [wall for wall, *_ in runs["decode-only OpenCV"]]
     for variant, rs in runs.items():
-        walls = [wall for wall, _ in rs]
+        walls = [wall for wall, *_ in rs]
         fps = frames / statistics.median(walls)
         paired = sorted(
             d / w for d, w in zip(decode_walls, walls)
@@ -168,10 +188,23 @@ def bench_size(name: str, repeats: int, mil: bool, trees: dict[str, Path], work:
             else f"{fps:6.1f} fps  {fps / reference:5.2f}x decode-only  "
             f"{statistics.median(paired):4.2f}x [{paired[0]:4.2f}-{paired[-1]:4.2f}]  "
         )
-        lines.append(
-            f"  {variant:44s} {speed}CPU {statistics.median(cpu for _, cpu in rs):6.1f} s  "
-            f"(wall {', '.join(f'{x:.1f}' for x in walls)} s)"
+        cpu = statistics.median(c for _, c, _ in rs)
+        per_video_s = (
+            "" if variant.startswith("start-up") else f" ({cpu / duration:4.2f} per video s)"
         )
+        lines.append(
+            f"  {variant:44s} {speed}CPU {cpu:6.1f} s{per_video_s}  peak RSS "
+            f"{statistics.median(m for *_, m in rs):5.0f} MB  (wall {', '.join(f'{x:.1f}' for x in walls)} s)"
+        )
+        data[variant] = {
+            "fps": frames / statistics.median(walls),
+            "ratio_paired": statistics.median(paired)
+            if not variant.startswith("start-up")
+            else None,
+            "walls_s": walls,
+            "cpu_s": [c for _, c, _ in rs],
+            "peak_rss_mb": [m for *_, m in rs],
+        }
     return lines
 
 
@@ -189,6 +222,11 @@ def main(argv=None) -> int:
         metavar="LABEL=DIR",
         help="also time skyfix process from this source tree",
     )
+    p.add_argument(
+        "--lean",
+        action="store_true",
+        help="OpenCV decode-only and skyfix process (per tree) only: a round in a third of the time",
+    )
     p.add_argument("--out", type=Path, help="also write the results here")
     p.add_argument("--decode-only", nargs=2, metavar=("KIND", "VIDEO"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -198,11 +236,19 @@ def main(argv=None) -> int:
     trees = {"": ROOT} | {
         f" [{label}]": Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
     }
-    lines = []
+    lines, data = [], {}
     with tempfile.TemporaryDirectory() as work:
         for name in args.sizes.split(","):
-            lines += bench_size(name, args.repeats, args.mil, trees, Path(work))
-    emit(lines, args.out)
+            lines += bench_size(
+                name,
+                args.repeats,
+                args.mil,
+                trees,
+                Path(work),
+                data.setdefault(name, {}),
+                args.lean,
+            )
+    emit(lines, args.out, data)
     return 0
 
 
