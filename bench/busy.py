@@ -11,7 +11,7 @@ the first ``--quiet-minutes`` alone (the baseline), then ``--minutes`` with the 
 Per phase: every GPS_INPUT the UUV got (the replay's ``--uuv-log``), its fix_type 3 messages against the
 simulator's ``truth.csv`` at the message's GNSS time (through the loop's printed time shift; pymap3d, not
 the localizer): the worst, the 95th percentile, how many more than 0.5 m off; ArduPilot's GPS health rule on
-the messages' arrival (``tests/live_helpers.ardupilot_gps_unhealthy``, written from AP_GPS); the share of
+the messages' arrival (``groundstation.testing.ardupilot.ardupilot_gps_unhealthy``, written from AP_GPS); the share of
 received frames that gave an ``ok`` fix, frames the pipeline dropped and the reader skipped behind; and
 how late skyfix ran: the status's frame-arrival → GPS_INPUT p99 and the frames' arrival after their slot.
 
@@ -34,14 +34,9 @@ from pathlib import Path
 
 import numpy as np
 import pymap3d
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from live_run import ROOT, ServiceRun
 
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-from live_helpers import ardupilot_gps_unhealthy
-
+from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
 from groundstation.zenoh_session import open_session
 
 DEFAULT_SESSION = Path("/tmp/skyfix-busy/session")

@@ -23,7 +23,6 @@ from live_helpers import (
     MIN_SHARE,
     ROOT,
     SUBSCRIBER,
-    ardupilot_gps_unhealthy,
     free_port,
     read_jsonl,
     replay_shift,
@@ -37,6 +36,7 @@ from live_helpers import (
 from groundstation.contracts import GROUNDSTATION
 from groundstation.offline.process import process_session
 from groundstation.session.read import load_session
+from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
 
 BUNDLED = ROOT / "sim_fixtures" / "bundled"
 # SKYFIX_LIVE_SESSION may name another session (with truth.csv) to rehearse

@@ -30,7 +30,6 @@ import numpy as np
 import zenoh
 from live_helpers import (
     ROOT,
-    ardupilot_gps_unhealthy,
     free_port,
     read_jsonl,
     replay_shift,
@@ -43,6 +42,7 @@ from live_helpers import (
 
 from groundstation.mavlink.ingest import mavutil
 from groundstation.session.tlog import read_tlog
+from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
 from groundstation.video.send import send_video
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Timing

@@ -40,7 +40,6 @@ from live_helpers import (
     ROOT,
     SUBSCRIBER,
     GpsInputEndpoint,
-    ardupilot_gps_unhealthy,
     as_camera_sends_it,
     free_port,
     read_jsonl,
@@ -58,6 +57,7 @@ from groundstation.contracts import GROUNDSTATION
 from groundstation.live.ui.palette import PALETTE
 from groundstation.offline.process import process_session
 from groundstation.session.read import load_session, uuv_ids
+from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario
 

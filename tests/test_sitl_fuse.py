@@ -29,7 +29,6 @@ import zenoh
 from ardusub_sitl import ArduSub, ardusub_files
 from live_helpers import (
     SUBSCRIBER,
-    ardupilot_gps_unhealthy,
     as_camera_sends_it,
     free_port,
     read_jsonl,
@@ -42,6 +41,8 @@ from live_helpers import (
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from test_fusion import DRONE_SCENARIO, DRONES
 from test_zenoh_security import ROUTER
+
+from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
 
 pytestmark = pytest.mark.sitl
 
