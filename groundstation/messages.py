@@ -327,6 +327,20 @@ class GateChainStatus(Section):
     needed_s: float = Field(description="seconds needed (and at least 10 fixes)")
 
 
+class GateExchangeStatus(Section):
+    """Several UUVs: this UUV's target came near another's, and which vehicle it is has not been told yet
+    (localizer/exchange.py)."""
+
+    other: str = Field(description="the other UUV's id")
+    since_t: float = Field(description="when the target came near it (exposure, station clock)")
+    fixes: int = Field(description="fixes of the tracker's lock weighed since")
+    evidence: float = Field(
+        description="their log-likelihood ratio (nats): this UUV's own track at its own depth against the other's "
+        "at the other's depth"
+    )
+    needed: float = Field(description="the evidence needed for a valid fix (nats)")
+
+
 class GateStatus(Section):
     """The safety gates on what goes out as a valid fix (localizer/fix_gate.py): a track of the UUV."""
 
@@ -352,7 +366,8 @@ class GateStatus(Section):
         "clock (the frame's exposure moved against its arrival: a clock stepped), "
         "prediction (outside the window the telemetry predicted), innovation (off the "
         "track), diverged, reach (where the UUV cannot be since the last good fix), "
-        "unconfirmed (a target not confirmed yet)"
+        "unconfirmed (a target not confirmed yet), exchanged (the target came near another UUV's: not told apart "
+        "yet)"
     )
     last_refusal: str | None = Field(
         description="the latest refusal that says more than its reason, one line"
@@ -394,6 +409,10 @@ class GateStatus(Section):
         "frames (the gates keep to the monotonic clock)",
     )
     last_clock_step_s: float | None = Field(None, description="the last such step (s)")
+    exchange: GateExchangeStatus | None = Field(
+        None,
+        description="several UUVs: the target came near another UUV's and is not told apart yet (null: it is not)",
+    )
 
 
 class GnssStatus(Section):

@@ -45,7 +45,12 @@ only when every test passes; otherwise it names the first that failed:
   (innovation) and lie within reach; one that does not is left out, and after
   :data:`CHAIN_MISSES` such in a row the next starts a new chain. When the chain is long
   enough it is checked once more with the white share measured over it, and becomes the
-  track.
+  track;
+- ``exchanged`` (several UUVs in one video, each gate joined to one
+  :class:`~localizer.exchange.Fleet`): the target came near another UUV's, and which vehicle it is has not been told
+  yet — the other is on top or at about its depth while they are near, or, once they have parted, the fixes since do
+  not follow this UUV's own track, at its own depth, by enough evidence over the other's at the other's depth (see
+  :mod:`localizer.exchange`). The operator's confirmation ends it.
 
 The acceleration bound is the vehicle's (``max_accel_mps2``) unless a second source says it
 is not pushing: with ``thrusters`` (:class:`~localizer.thrusters.Thrusters`, the UUV's
@@ -81,6 +86,7 @@ at the first fix); the local frame is metres north and east of the first fix the
 
 from __future__ import annotations
 
+import copy
 import math
 from collections import Counter
 from dataclasses import dataclass
@@ -88,6 +94,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .exchange import DEPTH_APART_M, EVIDENCE, SAME_SPOT_M, Encounter, Fleet, Sighting, depth_shift
 from .fix import Fix, Fixes
 from .geodesy import geodetic_to_ned, ned_to_geodetic
 from .thrusters import STALE_S, Thrusters, idle_accel_mps2
@@ -138,6 +145,7 @@ REASONS = (
     "diverged",
     "reach",
     "unconfirmed",
+    "exchanged",
 )
 STATES = ("acquiring", "tracking", "diverged")
 
@@ -186,6 +194,27 @@ def gate_offline(fixes: Fixes, lost: np.ndarray, gate: FixGate) -> np.ndarray:
     return word
 
 
+def gate_together(
+    fixes: dict[str, Fixes], lost: dict[str, np.ndarray], gates: dict[str, FixGate]
+) -> dict[str, np.ndarray]:
+    """Several UUVs' fixes of one recording, by UUV id, through their gates (joined to one
+    :class:`~localizer.exchange.Fleet`), frame by frame in time order as live: per UUV what its gate says of each
+    frame's fix when offered (None taken, the reason refused, "" no fix; no confirmation taken back, unlike
+    :func:`gate_offline`). ``lost``: each UUV's frames whose tracker lost the target."""
+    words = {k: np.full(len(f), "", dtype=object) for k, f in fixes.items()}
+    order = sorted(
+        (float(f.t_unix[i]), n, k, i)
+        for n, (k, f) in enumerate(fixes.items())
+        for i in range(len(f))
+    )
+    for t, _, k, i in order:
+        if lost[k][i]:
+            gates[k].target_lost()
+        if fixes[k].status[i] == "ok":
+            words[k][i] = gates[k].check(fixes[k][i], t)
+    return words
+
+
 def in_window(fix: Fix, window) -> bool:
     """Whether the fix's pixel lies in ``window`` (x, y, w, h; None: no prediction, nothing to check)."""
     if window is None:
@@ -213,8 +242,18 @@ class FixGate:
         water_accel_mps2: float = WATER_ACCEL_MPS2,
         judge_track: bool = True,
         max_reach_m: float = MAX_REACH_M,
+        fleet: Fleet | None = None,
+        uuv_id: str = "",
     ):
         self.judge_track = judge_track
+        self.fleet, self.uuv_id = fleet, uuv_id
+        self.sighting: Sighting | None = None  # the newest target (:mod:`localizer.exchange`)
+        self.encounter: Encounter | None = (
+            None  # the target came near another UUV's: not told apart yet
+        )
+        self.valid_t = -math.inf  # the last valid fix (the gate's base)
+        if fleet is not None:
+            fleet.join(uuv_id, self)
         self.max_reach_m = max_reach_m
         self.max_speed_mps = max_speed_mps
         self.max_accel_mps2 = max_accel_mps2
@@ -260,6 +299,11 @@ class FixGate:
         self.last_refusal: str | None = None
 
     # -- the interface -------------------------------------------------------------------------
+    @property
+    def ref(self) -> tuple[float, float] | None:
+        """The local frame's origin (lat, lon; None before the first fix)."""
+        return self._ref
+
     def check(
         self, fix: Fix, now: float, window=None, arrival: Arrival | None = None
     ) -> str | None:
@@ -272,6 +316,7 @@ class FixGate:
         reason = self._reason(fix, now, window, arrival)
         if reason is None:
             self.accepted += 1
+            self.valid_t = self._last_t
         else:
             self.rejected[reason] += 1
         return reason
@@ -282,11 +327,20 @@ class FixGate:
         self._enter("acquiring", self._last_t if math.isfinite(self._last_t) else None)
         self._new_lock = True
         self._foreign = self._operator_lock = False
+        if self.encounter is not None:
+            self.encounter.restart()
 
     def confirm(self) -> dict:
         """The operator says the target tracked now is the UUV: this lock's fixes are confirmed as a first target's
         are (a second of consistent fixes) without the reach test, and then replace the track. Ends with the lock
-        (a loss, a release, a selection). What it did, JSON-ready."""
+        (a loss, a release, a selection); and that it is this UUV, whichever other came near. What it did, JSON-ready."""
+        if self.encounter is not None:
+            self.encounter, self._operator_lock = None, True
+            if self.state == "tracking":
+                return {
+                    "confirmed": True,
+                    "why": "the target is this UUV, whichever other UUV came near",
+                }
         if self.state == "tracking":
             return {"confirmed": False, "why": "the gates track the target already"}
         self._operator_lock, self._foreign = True, False
@@ -363,6 +417,8 @@ class FixGate:
                 leaves_track=True,
             )
         seen = self._local(fix, t)
+        if self.fleet is not None and (why := self._exchange(fix, seen)):
+            return self._refuse(seen.t, "exchanged", why)
         if self.state == "diverged":
             if seen.t < self._diverged_until:
                 return "diverged"
@@ -429,6 +485,48 @@ class FixGate:
             )
             return "diverged"
         return reason
+
+    def _exchange(self, fix: Fix, f: _Seen) -> str | None:
+        """Why ``fix`` may be another UUV's target (:mod:`localizer.exchange`), or None."""
+        shift = depth_shift(fix.north_m, fix.east_m, fix.height_m, fix.depth_m)
+        self.sighting = Sighting(f.t, f.z, fix.depth_m, shift)
+        others = {o.uuv_id: o for o in self.fleet.others(self.uuv_id, self, f.t)}
+        if any(
+            o.on_viewer is not None and np.hypot(*(o.on_viewer - f.z)) < SAME_SPOT_M
+            for o in others.values()
+        ):
+            self.encounter = (
+                None  # another UUV's tracker on this one, as its gate found: this is this UUV
+            )
+            return None
+        enc = self.encounter
+        if enc is None:
+            near = [(d, o) for o in others.values() if (d := o.near(f.z)) is not None]
+            if not near or self._operator_lock:
+                return None
+            o = min(near, key=lambda p: p[0])[1]
+            track = copy.deepcopy(self.track)
+            enc = self.encounter = Encounter(o.uuv_id, track, o.track, f.t)
+        other = others[enc.other_id]
+        below_m = other.depth_m - fix.depth_m
+        toward = below_m * shift if math.isfinite(below_m) else np.zeros(2)
+        R = UuvTrack.white_m2(f.C, self.scatter.share)
+        enc.weigh(f.t, f.z, R, toward, GATE_SIGMAS, other.track if other.valid else None)
+        apart = other.near(f.z)
+        if apart is not None:
+            if below_m >= DEPTH_APART_M:
+                return None  # on top: the other is hidden under it
+            return (
+                f"{apart:.2f} m from {other.uuv_id}'s target at {fix.depth_m:.2f} m to its {other.depth_m:.2f} m "
+                f"deep: which is which is not known while they are this near"
+            )
+        if enc.llr >= EVIDENCE:
+            self.encounter = None
+            return None
+        return (
+            f"since {other.uuv_id} came near, the target's {enc.fixes} fixes say {enc.llr:+.1f} nats that it is "
+            f"{self.uuv_id or 'this UUV'}, not {other.uuv_id} ({EVIDENCE:g} needed, or the operator's confirmation)"
+        )
 
     def _track_step(self, f: _Seen) -> str | None:
         share = self.scatter.share
@@ -594,6 +692,7 @@ class FixGate:
             "operator_confirmed": self._operator_lock,
             "clock_steps": self.clock_steps,
             "last_clock_step_s": num(self.last_clock_step_s),
+            "exchange": self.encounter.status() if self.encounter is not None else None,
         }
         if self._chain:
             out["chain"] = {

@@ -259,10 +259,11 @@ def test_two_uuvs_in_one_video_each_with_its_own_fixes_and_gps_input(tmp_path, c
         unhealthy = ardupilot_gps_unhealthy(t_recv[(t_recv > t_recv[0] + 1.0)])
         assert unhealthy is None, f"{uuv_id}: ArduPilot would call GPS_INPUT unhealthy: {unhealthy}"
         valid = [g for _, g in received if g["fix_type"] == 3]
-        # valid as the UUV's gates accepted (test_live_e2e.py): refused only while confirming or for age, all arrived
+        # valid as the UUV's gates accepted (test_live_e2e.py): refused only while confirming, for age, or while the
+        # two came near and were not told apart yet (exchanged: localizer/exchange.py); all arrived
         sent = status[-1]["gps_input"]
         refused = {reason: n for reason, n in sent["gates"]["rejected"].items() if n}
-        assert set(refused) <= {"unconfirmed", "age"}, (
+        assert set(refused) <= {"unconfirmed", "age", "exchanged"}, (
             uuv_id,
             refused,
             sent["gates"]["last_refusal"],

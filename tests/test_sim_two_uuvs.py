@@ -21,6 +21,7 @@ import pymap3d
 import pytest
 from live_helpers import ROOT, skyfix
 
+from groundstation.offline.fleet import gate_fleet
 from groundstation.offline.track import track_session
 from groundstation.session import SessionError
 from groundstation.session.depth import read_depth
@@ -189,23 +190,51 @@ def test_the_tracker_keeps_each_uuv(crossing):
         assert r["ok"] > 0.9 * r["frames"] and r["p95_px"] < 3.0, (own, r)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 19: lost while uuv1 passes right over it, uuv2's tracker re-acquires "
-    "uuv1 where it predicted uuv2 and stays on it",
-)
-def test_the_tracker_keeps_a_uuv_the_other_passes_right_over(tmp_path):
+def valid_fix_report(path: Path) -> dict:
+    """Per UUV, the fixes the live gates would send as valid (:func:`groundstation.offline.fleet.gate_fleet`: each
+    UUV tracked from its own first box and located at its own depth, the gates joined), compared frame by frame with
+    both UUVs' tracks: the identity swaps among the valid fixes' pixels, and how many valid."""
+    gated = gate_fleet(path)
+    tracks = {
+        i: np.column_stack([s.track["u"], s.track["v"]])
+        for i, s in ((i, load_session(path, uuv=i)) for i in IDS)
+    }
+    report = {}
+    for own, other in (IDS, IDS[::-1]):
+        g = gated[own]
+        px = np.column_stack([g.fixes.u, g.fixes.v])
+        px[~g.valid] = np.nan
+        to_own = np.hypot(*(px - tracks[own]).T)
+        to_other = np.hypot(*(px - tracks[other]).T)
+        report[own] = {
+            "swaps": identity_swaps(
+                to_other < to_own
+            ),  # NaN (no valid fix, a UUV hidden) compares False
+            "valid": int(g.valid.sum()),
+            "ok": int((g.fixes.status == "ok").sum()),
+            "frames": len(px),
+            "valid_after_102": int(g.valid[102:].sum()),
+        }
+    print(report)
+    return report
+
+
+def test_no_valid_fix_swaps_when_a_uuv_passes_right_over_the_other(tmp_path):
     """Six seconds of the scenario with uuv1 passing right over uuv2 (miss_m = 0): uuv2 is hidden (less than half of
-    it showing) from frame 79 to 101. Measured: uuv2's tracker reports it lost in frames 82-88, takes uuv1 from frame 89
-    and stays on it to the end (swap from frame 102, when uuv2 shows again, up to 97 px off); uuv1's keeps uuv1."""
+    it showing) from frame 79 to 101. The tracker (issue 19, measured): uuv2's reports it lost in frames 82-88, takes
+    uuv1 from frame 89 and stays on it to the end (up to 97 px off); uuv1's keeps uuv1. Through the gates joined
+    (localizer/exchange.py): no valid fix of either UUV nearer the other's track than its own (uuv2's fixes of uuv1
+    are ``exchanged``), and uuv1, on top, keeps its valid fixes after the crossing."""
     sc = with_overrides(
         load_scenario(SCENARIO),
         duration_s=6.0,
         uuv={"east_m": -0.9, "weave_m": 0.0},
         second_uuv={"pass_at_s": 3.0, "miss_m": 0.0},
     )
-    for own, r in tracking_report(generate(sc, tmp_path / "s").session).items():
+    report = valid_fix_report(generate(sc, tmp_path / "s").session)
+    for own, r in report.items():
         assert not r["swaps"], (own, r)
+    assert report[PRIMARY_UUV]["valid_after_102"] > 0.9 * (180 - 102), report
 
 
 def test_a_second_uuv_needs_the_vehicle_and_a_folder_name():

@@ -78,6 +78,7 @@ from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration, ConfigError, Tracker
 from localizer.depth import DepthGate
+from localizer.exchange import Fleet
 from localizer.fix_gate import FixGate
 from localizer.height import status as height_status
 from localizer.telemetry import Telemetry
@@ -250,6 +251,7 @@ async def serve(cfg: config.RunConfig) -> dict:
 
         # -- each UUV: its depth, its own position, its tracker and its outputs -------------------------------------
         crowd = Crowd() if several else None  # two trackers on one vehicle: no fix for either
+        fleet = Fleet() if several else None  # the gates compare each target with the other UUVs'
         tracking = (
             ThreadPoolExecutor(1, thread_name_prefix="track") if several else None
         )  # one thread for all
@@ -273,6 +275,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None,
                 vet=partial(crowd.vet, u.id) if crowd else None,
                 tracking=tracking,
+                fleet=fleet,
                 on_tracked=[from_size.on_tracked] if from_size else [],
             )
             closers.append(chain.fix_sink.close)
@@ -364,6 +367,7 @@ class UuvChain:
         on_tracked,
         vet=None,
         tracking=None,
+        fleet=None,
     ):
         self.uuv = u
         self.workers = own = Workers()
@@ -406,6 +410,8 @@ class UuvChain:
                 thrusters=thrusters,
                 water_accel_mps2=cfg.uuv_water_accel_mps2,
                 max_reach_m=cfg.uuv_max_reach_m,
+                fleet=fleet,
+                uuv_id=u.id,
             )
             if cfg.state_folder:  # the UUV's last trusted track, kept across restarts
                 path = track_path(cfg.state_folder, u.id)

@@ -55,6 +55,7 @@ _GATE_WORDS = {
     "diverged": "fixes left the UUV's track",
     "reach": "fix beyond the UUV's reach",
     "unconfirmed": "confirming the target",
+    "exchanged": "may be the other UUV: not told apart yet",
 }
 #: every reason word → its plain words (a status or refusal without short words here: its own description)
 NO_FIX_WHY: dict[str, str] = {
