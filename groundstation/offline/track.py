@@ -14,10 +14,11 @@ be decoded: truncated or corrupt video).
 
 Forward and backward (``both_ways``; offline, the whole video is there): the frames the forward, causal pass
 reports without the UUV just before a re-acquisition (hidden a moment by the waves, searched for, the candidate
-being confirmed by the frames after it) are traced back from it: a second tracker starts on the re-acquired UUV
-and steps back through them (up to :data:`BACKWARD_S` of them, kept decoded meanwhile) until it loses it; the
-frames it finds the UUV in are ``ok`` too (``bridged``). An occlusion stops it as it stops the forward pass:
-a hidden UUV is not bridged.
+being confirmed) are traced back from it once the frames after it confirm it (the forward pass keeps it
+:data:`CONFIRM_BACK_S` without a loss; one lost again sooner, e.g. water that passed for the UUV while it was
+hidden, is not traced): a second tracker starts on the re-acquired UUV and steps back through them (up to
+:data:`BACKWARD_S` of them, kept decoded meanwhile) until it loses it; the frames it finds the UUV in are ``ok``
+too (``bridged``). An occlusion stops it as it stops the forward pass: a hidden UUV is not bridged.
 
 The camera poses of all frames are computed at once and shared with the session
 (which projects its predictions for many frames at a time). With ``measure_motion``
@@ -51,6 +52,8 @@ from localizer.tracking.target import TargetState
 
 #: Offline, frames without the UUV are traced back from a re-acquisition through at most this many seconds of them.
 BACKWARD_S = 3.0
+#: ... once the forward pass has kept the re-acquired UUV this long (s) without a loss.
+CONFIRM_BACK_S = 1.0
 
 
 @dataclass
@@ -133,6 +136,7 @@ def track_session(
     bridged = np.zeros(n, dtype=bool)
     period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
     gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
+    pending = None  # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
     warnings: list[str] = []
     meter = MotionThread(cal.camera) if measure_motion else None
     rotations = []
@@ -194,14 +198,20 @@ def track_session(
                 )
                 sigma[row] = result.sigma_px
                 if both_ways and not result.ok:
+                    if pending is not None:  # lost again before the frames after it confirmed it
+                        pending = None
+                        gap.clear()
                     gap.append((row, frame.image.copy()))
                 elif both_ways and gap:
-                    t0 = time.perf_counter()
-                    for r, back in _trace_back(tracking, pose, row, frame.image, result, gap):
-                        status[r], u[r], v[r], conf[r] = "ok", back.u, back.v, back.confidence
-                        sigma[r], bridged[r] = back.sigma_px, True
-                    gap.clear()
-                    timings["backward"] += time.perf_counter() - t0
+                    pending = pending or (row, frame.image.copy(), result)
+                    if t[row] - t[pending[0]] >= CONFIRM_BACK_S:
+                        t0 = time.perf_counter()
+                        for r, back in _trace_back(tracking, pose, *pending, gap):
+                            status[r], u[r], v[r], conf[r] = "ok", back.u, back.v, back.confidence
+                            sigma[r], bridged[r] = back.sigma_px, True
+                        gap.clear()
+                        pending = None
+                        timings["backward"] += time.perf_counter() - t0
                 if size is not None and result.ok and size.due(float(t[row])):
                     t0 = time.perf_counter()
                     size.take(size.measure(frame.bgr(), pose, row, result.u, result.v))
