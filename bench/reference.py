@@ -24,6 +24,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+import claim_calibration as claim
 
 from groundstation.offline import process
 from groundstation.offline.evaluate import error_ne_m, shape_m
@@ -95,6 +98,48 @@ def geometry_only(name: str, args, work: Path) -> str:
     return line(name, s, fixes, better, f"corrected {100 * have.mean():.0f} %")
 
 
+def population(name: str, args, work: Path) -> str:
+    """``--seeds`` drones of the platform (biases drawn as bench/claim_calibration.py draws them, its platform's
+    sigmas in ``[uncertainty]``, the UUV's true pixel) with the marker's simulator pixel: the pooled share within
+    2·h_acc and within h_acc, and RMS error over RMS h_acc, without and with the reference."""
+    base = load_scenario(ROOT / "sim_fixtures" / "scenarios" / f"{name}.toml")
+    pooled = {"without": ([], []), "with": ([], [])}
+    for seed in range(args.seeds):
+        sc = with_overrides(
+            base,
+            name=f"{name}_s{seed}",
+            seed=1000 + seed,
+            duration_s=args.population_s,
+            fps=2.0,
+            sensors={**claim.draw_sensors(seed), "gnss_mode": base.sensors.gnss_mode},
+            marker={"enabled": True},
+        )
+        out = work / "population" / f"{name}_s{seed}"
+        generate(sc, out, video=False)
+        s = load_session(out)
+        s.calibration = claim.platform_claim(s.calibration, 0.0)
+        fixes = process.process_session(s, use_track=True)
+        cal, tel = s.calibration, s.telemetry
+        ref, _ = read_reference(s)
+        t_m, u_m, v_m = marker_track(out, np.random.default_rng(seed), args.pixel_sigma)
+        off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
+        found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
+        better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
+        for key, f in (("without", fixes), ("with", better)):
+            e = errors(s, f)
+            ok = np.isfinite(e[:, 0])
+            pooled[key][0].append(np.hypot(*e[ok].T))
+            pooled[key][1].append(f.h_acc_m[ok])
+    cells = []
+    for key in ("without", "with"):
+        err, acc = (np.concatenate(x) for x in pooled[key])
+        ratio = np.sqrt(np.mean(err**2)) / np.sqrt(np.mean(acc**2))
+        cells.append(
+            f"{100 * np.mean(err <= 2 * acc):5.1f} % {100 * np.mean(err <= acc):5.1f} % {ratio:.2f}"
+        )
+    return f"{name:24s} {args.seeds:3d} x {args.population_s:g} s   " + "   ".join(cells)
+
+
 def rendered(args, work: Path) -> str:
     """sensors_plain_nadir rendered with the marker: skyfix process's --reference auto finds it in the video."""
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_plain_nadir.toml")
@@ -119,6 +164,10 @@ def main() -> int:
     p.add_argument("--fps", type=float, default=5.0)
     p.add_argument("--pixel-sigma", type=float, default=0.5)
     p.add_argument("--rendered-s", type=float, default=8.0)
+    p.add_argument(
+        "--seeds", type=int, default=20, help="drones per scenario in the population rows"
+    )
+    p.add_argument("--population-s", type=float, default=60.0)
     p.add_argument("--work", type=Path, default=Path("/tmp/skyfix-reference"))
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "reference.txt")
     args = p.parse_args()
@@ -133,6 +182,17 @@ def main() -> int:
         *(geometry_only(name, args, args.work) for name in SCENARIOS),
         rendered(args, args.work),
     ):
+        print(text, flush=True)
+        lines.append(text)
+    head = (
+        f"population: {args.seeds} drones per scenario, biases drawn as bench/claim_calibration.py's platform, "
+        "its sigmas in [uncertainty]\n"
+        f"{'scenario':24s} {'drones':>12s}   without: in2sig in1sig rms_ratio   with: in2sig in1sig rms_ratio"
+    )
+    print(head, flush=True)
+    lines.append(head)
+    for name in SCENARIOS:
+        text = population(name, args, args.work)
         print(text, flush=True)
         lines.append(text)
     args.out.parent.mkdir(parents=True, exist_ok=True)

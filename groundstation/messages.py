@@ -155,6 +155,36 @@ class FixMessage(Message):
         "known)",
     )
     time_source: str | None = Field(None, description="where the UAV link's delay came from")
+    pose_source: Literal["bottom"] | None = Field(
+        None,
+        description="the camera's pose beyond the telemetry: bottom, its attitude and position corrected by what "
+        "the static seafloor in the video told (skyfix process --pose-from-bottom); null: the telemetry's as "
+        "reported, and the fields below null",
+    )
+    cam_err_n_deg: float | None = Field(
+        None,
+        description="the camera attitude error taken off the reported attitude, degrees: reported minus true "
+        "as a rotation vector in NED (north and east: the tilt; down: the heading)",
+    )
+    cam_err_e_deg: float | None = Field(None, description="see cam_err_n_deg")
+    cam_err_d_deg: float | None = Field(None, description="see cam_err_n_deg")
+    sigma_tilt_deg: NonNegative = Field(
+        None,
+        description="the estimated tilt's 1-sigma, degrees (with the recording's thirds' spread); null: not "
+        "estimated, the calibration's in h_acc_m",
+    )
+    sigma_yaw_deg: NonNegative = Field(
+        None, description="the estimated heading's 1-sigma, degrees; null: not estimated"
+    )
+    walk_n_m: float | None = Field(
+        None,
+        description="the UAV position's correction applied, metres north (true = reported + it): the GNSS's "
+        "walk about its mean over the recording (the mean itself needs a reference of known position)",
+    )
+    walk_e_m: float | None = Field(None, description="see walk_n_m, metres east")
+    sigma_walk_m: NonNegative = Field(
+        None, description="the correction's horizontal 1-sigma about the GNSS's mean, metres"
+    )
 
     @model_validator(mode="after")
     def _position_iff_ok(self):
@@ -173,9 +203,9 @@ class FixMessage(Message):
         values = {
             name: num(name)
             for name in cls.model_fields
-            if name not in ("schema_", "t", "frame", "status", *WORDS)
+            if name not in ("schema_", "t", "frame", "status", "pose_source", *WORDS)
         }
-        values |= {name: getattr(fix, name) or None for name in WORDS}
+        values |= {name: getattr(fix, name) or None for name in (*WORDS, "pose_source")}
         if not fix.ok:
             values["lat"] = values["lon"] = None
         return cls(schema_=FIX_SCHEMA, t=fix.t_unix, frame=fix.frame, status=fix.status, **values)
@@ -188,7 +218,7 @@ class FixMessage(Message):
         nan = float("nan")
         kept = {f.name for f in dataclasses.fields(Fix)} - {"t_unix", "status", "frame"}
         values = {
-            k: (v if v is not None else ("" if k in WORDS else nan))
+            k: (v if v is not None else ("" if k in (*WORDS, "pose_source") else nan))
             for k, v in self.model_dump(include=kept).items()
         }
         return Fix(t_unix=self.t, status=self.status, frame=self.frame, **values)

@@ -230,6 +230,16 @@ def bias_rotvec(tilt_rad, yaw_rad, bias_heading_rad) -> np.ndarray:
     return np.stack([a * c - b * s, a * s + b * c, np.full(psi.shape, float(yaw_rad))], axis=-1)
 
 
+def in_bias_frame(rotvec_ned, bias_heading_rad) -> np.ndarray:
+    """A NED rotation vector (..., 3) as (forward, right, down) about bias frames of these headings: the inverse of
+    :func:`bias_rotvec` (units kept)."""
+    r, psi = np.asarray(rotvec_ned, dtype=float), np.asarray(bias_heading_rad, dtype=float)
+    c, s = np.cos(psi), np.sin(psi)
+    return np.stack(
+        [r[..., 0] * c + r[..., 1] * s, -r[..., 0] * s + r[..., 1] * c, r[..., 2]], axis=-1
+    )
+
+
 def camera_heading_rad(R_ned_from_cv) -> np.ndarray:
     """The heading (radians from North) of cameras with no roll about their optical axis: the direction their image
     right (cv x, level then) makes 90° to the right of; defined straight down too, where the optical axis has none."""
@@ -280,21 +290,55 @@ def _velocity_steps(poses: FramePoses, knots) -> np.ndarray:
     position's white noise averages over a knot's frames); zeros without a velocity."""
     if poses.velocity_ne_mps is None:
         return np.zeros((len(knots) - 1, 2))
-    t = np.asarray(poses.t_s, dtype=float)
-    order = np.argsort(t)
-    t, vel, pos = (
-        t[order],
-        np.asarray(poses.velocity_ne_mps, float)[order],
-        np.asarray(poses.camera_ne_m, float)[order],
+    drift, _ = velocity_drift(poses.t_s, poses.velocity_ne_mps, poses.camera_ne_m, knots)
+    return np.diff(drift, axis=0)
+
+
+def velocity_drift(t_s, velocity_ne_mps, position_ne_m, knots) -> tuple[np.ndarray, np.ndarray]:
+    """What the reported velocity says of the reported position (frames in any order, NaN rows ignored): the
+    velocity integrated (trapezoids, in time order) less the position's change, true − reported up to a constant,
+    fitted by the knots' piecewise-linear curve (J, 2), and each frame's remainder (K, 2) about that curve (NaN where
+    the frame had none): the position's white noise, negated (``true = reported + walk + remainder`` where the
+    velocity is exact), which the knots are too far apart to follow."""
+    t = np.asarray(t_s, dtype=float)
+    vel, pos = np.asarray(velocity_ne_mps, float), np.asarray(position_ne_m, float)
+    good = np.flatnonzero(
+        np.isfinite(t) & np.all(np.isfinite(vel), 1) & np.all(np.isfinite(pos), 1)
     )
+    order = good[np.argsort(t[good])]
+    t, vel, pos = t[order], vel[order], pos[order]
     travelled = np.concatenate(
         [np.zeros((1, 2)), np.cumsum(0.5 * (vel[1:] + vel[:-1]) * np.diff(t)[:, None], axis=0)]
     )
     basis = _interp_knots(knots, np.eye(len(knots)), t)  # (K, J): each frame's weights of the knots
-    drift, *_ = np.linalg.lstsq(
-        basis, travelled - (pos - pos[0]), rcond=None
-    )  # true − reported, up to a constant
-    return np.diff(drift, axis=0)
+    target = travelled - (pos - pos[0])  # true − reported, up to a constant
+    drift, *_ = np.linalg.lstsq(basis, target, rcond=None)
+    remainder = np.full((len(np.asarray(t_s)), 2), np.nan)
+    remainder[order] = target - basis @ drift
+    return drift, remainder
+
+
+def velocity_rate_m(
+    est: BottomEstimate, poses: FramePoses, min_move_m: float = 0.5
+) -> float | None:
+    """The reported velocity's integrated error (m/√s) as the bottom shows it: the fitted walk's change between knots
+    less what the velocity said (:func:`_velocity_steps`), along the drone's motion only (the bottom's slide measures
+    the distance flown whatever the heading; across the motion a heading bias can pass for a walk), per √s, RMS over
+    the knot intervals in which the drone moved at least ``min_move_m``; None without a velocity or such intervals.
+    The velocity's error is taken alike in every direction."""
+    if poses.velocity_ne_mps is None or len(est.knot_t_s) < 2:
+        return None
+    steps = _velocity_steps(poses, est.knot_t_s)
+    t = np.asarray(poses.t_s, dtype=float)
+    order = np.argsort(t)
+    at_knots = _interp_knots(t[order], np.asarray(poses.camera_ne_m, float)[order], est.knot_t_s)
+    moved = np.diff(at_knots, axis=0)
+    length = np.hypot(*moved.T)
+    use = length >= min_move_m
+    if not np.any(use):
+        return None
+    along = np.sum((np.diff(est.walk_ne_m, axis=0) - steps)[use] * moved[use], axis=1) / length[use]
+    return float(np.sqrt(np.mean(along**2 / np.diff(est.knot_t_s)[use])))
 
 
 def white_noise_m(poses: FramePoses) -> float | None:

@@ -63,6 +63,24 @@ class Fix:
     time_source: str = ""
     frame: int = -1
     confidence: float = float("nan")  # tracker's, 0..1
+    # the pose as estimated beyond the telemetry (groundstation.offline.bottom); "" and NaN: the telemetry's as reported
+    pose_source: str = (
+        ""  # "bottom": the attitude and position corrected by what the static floor told
+    )
+    cam_err_n_deg: float = float(
+        "nan"
+    )  # the camera attitude error taken off (reported − true, NED rotation vector)
+    cam_err_e_deg: float = float("nan")
+    cam_err_d_deg: float = float("nan")
+    sigma_tilt_deg: float = float(
+        "nan"
+    )  # its 1-sigmas (NaN: not estimated, the calibration's in h_acc)
+    sigma_yaw_deg: float = float("nan")
+    walk_n_m: float = float(
+        "nan"
+    )  # the position correction applied (true = reported + it), about the GNSS's mean
+    walk_e_m: float = float("nan")
+    sigma_walk_m: float = float("nan")  # its horizontal 1-sigma
 
     @property
     def ok(self) -> bool:
@@ -74,6 +92,18 @@ class Fix:
 
 #: The columns of :class:`Fixes` that hold words, not numbers.
 WORDS = ("height_source", "depth_source", "time_source")
+#: The pose estimated beyond the telemetry (:class:`Fix`'s last fields; positions.csv has them only when estimated)
+POSE_COLUMNS = (
+    "pose_source",
+    "cam_err_n_deg",
+    "cam_err_e_deg",
+    "cam_err_d_deg",
+    "sigma_tilt_deg",
+    "sigma_yaw_deg",
+    "walk_n_m",
+    "walk_e_m",
+    "sigma_walk_m",
+)
 
 
 @dataclass
@@ -106,6 +136,25 @@ class Fixes:
     height_source: np.ndarray  # object arrays of str
     depth_source: np.ndarray
     time_source: np.ndarray
+    #: :data:`POSE_COLUMNS` (None: "" and NaN, nothing estimated)
+    pose_source: np.ndarray | None = None
+    cam_err_n_deg: np.ndarray | None = None
+    cam_err_e_deg: np.ndarray | None = None
+    cam_err_d_deg: np.ndarray | None = None
+    sigma_tilt_deg: np.ndarray | None = None
+    sigma_yaw_deg: np.ndarray | None = None
+    walk_n_m: np.ndarray | None = None
+    walk_e_m: np.ndarray | None = None
+    sigma_walk_m: np.ndarray | None = None
+
+    def __post_init__(self):
+        n = len(self.t_unix)
+        for name in POSE_COLUMNS:
+            if getattr(self, name) is None:
+                word = name == "pose_source"
+                setattr(
+                    self, name, np.full(n, "" if word else np.nan, dtype=object if word else float)
+                )
 
     @classmethod
     def of(cls, t_unix, status, **columns) -> Fixes:
@@ -115,7 +164,7 @@ class Fixes:
         for f in fields(cls):
             if f.name in ("t_unix", "status"):
                 continue
-            word = f.name in WORDS
+            word = f.name in (*WORDS, "pose_source")
             default = np.full(len(t), "" if word else np.nan, dtype=object if word else float)
             out[f.name] = (
                 np.asarray(columns[f.name], dtype=object if word else float)
@@ -130,7 +179,7 @@ class Fixes:
     def __getitem__(self, i: int) -> Fix:
         return Fix(
             **{
-                k: (str(v[i]) if k == "status" or k in WORDS else float(v[i]))
+                k: (str(v[i]) if k in ("status", "pose_source", *WORDS) else float(v[i]))
                 for k, v in vars(self).items()
             }
         )

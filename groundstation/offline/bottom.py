@@ -14,6 +14,14 @@ its surroundings), and each point is matched again against the frame it was foun
 of frame-to-frame matches adds up any pull of what remains of the web, a match against the first sight does not
 (0.6 px RMS, 0.007 m/s).
 
+What separates a heading bias from the GNSS's walk is the reported velocity (a compass bias turns the floor's
+slide, the velocity does not turn): the walk's prior is about what the velocity says, at a rate the bottom measures.
+A first fit on :data:`VELOCITY_RATE_M` gives the walk; along the drone's motion (where no heading bias can pass for a
+walk) its change between knots less the velocity's is the velocity's own integrated error
+(:func:`localizer.bottom.velocity_rate_m`), and the estimate is made again with that rate (at least
+:data:`MIN_VELOCITY_RATE_M`, at most the GNSS's own): a plain receiver's walk is then told by its velocity and the
+floor, not by its position.
+
 The estimate is also made on each third of the recording alone (:data:`PARTS`), and its sigmas widened by
 the thirds' spread (:func:`localizer.bottom.with_parts`). A fit whose residuals exceed :data:`MAX_RMS_PX` is not
 applied (a warning says why); the tilt and the heading are applied each where the bottom told it
@@ -21,20 +29,25 @@ applied (a warning says why); the tilt and the heading are applied each where th
 states for it (``[uncertainty] tilt_deg``, ``yaw_deg``: else the bottom does not know it better than the platform).
 The correction (:class:`PoseCorrection`) turns every frame's reported attitude back by the estimated error
 (only the parts applied: a hovering drone's are left alone) and moves the reported position by the
-walk; each fix's accuracy then takes the estimate's 1-sigmas (floored at :data:`MIN_TILT_DEG`,
+walk and each frame's own remainder about what the velocity says between the walk's knots (the position's white
+noise: :meth:`PoseCorrection.position_ne_m`); each fix's accuracy then takes the estimate's 1-sigmas (floored at :data:`MIN_TILT_DEG`,
 :data:`MIN_YAW_DEG`: the AHRS's wander) instead of ``[uncertainty] tilt_deg``, ``yaw_deg``. The walk is
 relative to the GNSS's mean over the recording: its absolute offset stays the GNSS's, and so does the
-position's sigma in h_acc. positions.csv gets per frame (columns after skyfix's own): ``pose_source``
-(``bottom`` or empty), the estimated camera attitude error ``cam_err_n_deg``, ``cam_err_e_deg``,
-``cam_err_d_deg`` (reported − true, a rotation vector in NED, as ``truth_errors.csv``), its 1-sigmas
-``sigma_tilt_deg``, ``sigma_yaw_deg``, and the position correction applied ``walk_n_m``, ``walk_e_m``
-(true = reported + walk).
+position's sigma in h_acc. Each fix says what was estimated (:data:`localizer.fix.POSE_COLUMNS`, also in the
+Zenoh fix message, :class:`groundstation.messages.FixMessage`), and positions.csv gets them per frame (columns after
+skyfix's own, :func:`pose_cells`): ``pose_source`` (``bottom`` or empty), the estimated camera attitude error
+``cam_err_n_deg``, ``cam_err_e_deg``, ``cam_err_d_deg`` (reported − true, a rotation vector in NED, as
+``truth_errors.csv``), its 1-sigmas ``sigma_tilt_deg``, ``sigma_yaw_deg`` (empty where not applied), the position
+correction applied ``walk_n_m``, ``walk_e_m`` (true = reported + walk) and its horizontal 1-sigma ``sigma_walk_m``
+about the GNSS's mean. :func:`summary` is the same as one JSON object (``pose_from_bottom.json`` beside
+positions.csv).
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,10 +60,12 @@ from groundstation.session.read import Session
 from groundstation.video.file import open_video
 from localizer import bottom
 from localizer.calibration import Calibration
+from localizer.fix import POSE_COLUMNS, Fixes
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
 from localizer.pose import CameraPose, servo_mount
 
 MODES = ("auto", "off")
+NAME = "pose_from_bottom.json"  # beside positions.csv: :func:`summary`
 RATE_HZ = 5.0  # frames used per second of video
 MAX_FEATURES = 250  # corners tracked at once
 MIN_DISTANCE_PX = 12  # between corners
@@ -69,9 +84,10 @@ PARTS = 3  # the estimate is also made on each of this many consecutive stretche
 #: (the simulator's caustics drifting over it: 0.85-1.0 px, against 0.41 without them), and the sigmas, which take
 #: the residuals as white, would claim far more than the estimate knows
 MAX_RMS_PX = 0.6
-VELOCITY_RATE_M = (
-    0.05  # m/√s: the integrated EKF velocity's error, the walk's prior with a velocity
-)
+#: m/√s: the integrated EKF velocity's error, the walk's prior with a velocity before the bottom measured it
+#: (:func:`localizer.bottom.velocity_rate_m` on a first fit), and the least it is taken after
+VELOCITY_RATE_M = 0.05
+MIN_VELOCITY_RATE_M = 0.005
 MIN_WHITE_M = 0.003  # the reported position's white noise (localizer.bottom.white_noise_m) taken at least this
 GNSS_WALK_S = (
     60.0  # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
@@ -80,16 +96,6 @@ MIN_TILT_DEG = (
     0.05  # the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
 )
 MIN_YAW_DEG = 0.1
-COLUMNS = (
-    "pose_source",
-    "cam_err_n_deg",
-    "cam_err_e_deg",
-    "cam_err_d_deg",
-    "sigma_tilt_deg",
-    "sigma_yaw_deg",
-    "walk_n_m",
-    "walk_e_m",
-)
 _LK = {
     "winSize": (31, 31),
     "maxLevel": 4,
@@ -286,9 +292,7 @@ class PoseCorrection:
 
     def headings(self, session: Session, pose: CameraPose) -> np.ndarray:
         """The bias frame's heading per frame of ``pose``."""
-        if self.tilt_frame == "camera":
-            return bottom.camera_heading_rad(pose.R_ned_from_cv)
-        return _body_yaw(session, pose.t_unix)
+        return bias_headings(session, pose, self.tilt_frame)
 
     def error_rotvec(self, session: Session, pose: CameraPose) -> np.ndarray:
         """The attitude error applied (reported − true, NED rotation vector) per frame: the told parts only."""
@@ -302,7 +306,7 @@ class PoseCorrection:
         """The poses with the attitude turned back and the position moved by the walk, and the calibration whose
         tilt and heading sigmas are the estimate's (where applied)."""
         R = bottom.rodrigues(-self.error_rotvec(session, pose)) @ pose.R_ned_from_cv
-        walk = self.estimate.walk_at(pose.t_unix)
+        walk = self.position_ne_m(pose)
         lat, lon, _ = ned_to_geodetic(
             walk[:, 0], walk[:, 1], 0.0, pose.lat_deg, pose.lon_deg, pose.alt_amsl_m
         )
@@ -321,6 +325,19 @@ class PoseCorrection:
             )
         return corrected, dataclasses.replace(cal, sigmas=sigmas)
 
+    def position_ne_m(self, pose: CameraPose) -> np.ndarray:
+        """The position correction (K, 2) per frame of ``pose`` (true = reported + it): the walk, and where the
+        frames have a velocity each one's own remainder about what the velocity says between the walk's knots
+        (:func:`localizer.bottom.velocity_drift`: the reported position's white noise, which the knots cannot
+        follow; 0 where unknown)."""
+        walk = self.estimate.walk_at(pose.t_unix)
+        if len(pose.t_unix) < 3:
+            return walk
+        _, remainder = bottom.velocity_drift(
+            pose.t_unix, pose.velocity_ned_mps[:, :2], uav_ne_m(pose), self.estimate.knot_t_s
+        )
+        return walk + np.nan_to_num(remainder)
+
     def describe(self) -> str:
         what = [w for w, on in (("tilt", self.tilt_applied), ("heading", self.yaw_applied)) if on]
         applied = (
@@ -330,22 +347,100 @@ class PoseCorrection:
         )
         return f"pose from the bottom: {self.estimate.describe()}; {applied}"
 
-    def columns(self, session: Session, pose: CameraPose) -> dict[str, list[str]]:
-        """positions.csv's extra cells per frame of ``pose`` (see the module doc)."""
+    def values(self, session: Session, pose: CameraPose) -> dict[str, np.ndarray]:
+        """The fixes' :data:`localizer.fix.POSE_COLUMNS` per frame of ``pose`` (the reported poses; see the module
+        doc): what was estimated and applied, NaN sigmas where a part was not applied."""
+        e, n = self.estimate, len(pose.t_unix)
         err = np.degrees(self.error_rotvec(session, pose))
-        walk = self.estimate.walk_at(pose.t_unix)
-        e = self.estimate
-        sig_t = f"{np.degrees(e.sigma_tilt_rad):.4f}" if self.tilt_applied else ""
-        sig_y = f"{np.degrees(e.sigma_yaw_rad):.4f}" if self.yaw_applied else ""
-        n = len(pose.t_unix)
+        walk = self.position_ne_m(pose)
+        sigma_walk = e.sigma_walk_at(pose.t_unix)
         return {
-            "pose_source": ["bottom"] * n,
-            **{c: [f"{x:.4f}" for x in err[:, i]] for i, c in enumerate(COLUMNS[1:4])},
-            "sigma_tilt_deg": [sig_t] * n,
-            "sigma_yaw_deg": [sig_y] * n,
-            "walk_n_m": [f"{x:.4f}" for x in walk[:, 0]],
-            "walk_e_m": [f"{x:.4f}" for x in walk[:, 1]],
+            "pose_source": np.full(n, "bottom", dtype=object),
+            **{c: err[:, i] for i, c in enumerate(POSE_COLUMNS[1:4])},
+            "sigma_tilt_deg": np.full(
+                n, np.degrees(e.sigma_tilt_rad) if self.tilt_applied else np.nan
+            ),
+            "sigma_yaw_deg": np.full(
+                n, np.degrees(e.sigma_yaw_rad) if self.yaw_applied else np.nan
+            ),
+            "walk_n_m": walk[:, 0],
+            "walk_e_m": walk[:, 1],
+            "sigma_walk_m": np.hypot(sigma_walk[:, 0], sigma_walk[:, 1]),
         }
+
+
+def summary(correction: PoseCorrection) -> dict:
+    """What was estimated, how sure and what was applied, as one JSON object (degrees, metres): the tilt about the
+    bias frame (``tilt_frame``: the camera's heading or the airframe's) forward and right, the heading, their
+    1-sigmas (with the parts' spread) and each part's values, the floor's depth, the position's walk about the
+    GNSS's mean (largest, and its largest 1-sigma), the walk prior's rate (m/√s, as the velocity was measured), the
+    fit (features, observations, frames, RMS pixels, slide share)."""
+    e = correction.estimate
+    deg = [round(float(np.degrees(x)), 4) for x in (*e.tilt_rad, e.yaw_rad)]
+    return {
+        "estimated": {"tilt": bool(e.tilt_estimated), "heading": bool(e.yaw_estimated)},
+        "applied": {
+            "tilt": bool(correction.tilt_applied),
+            "heading": bool(correction.yaw_applied),
+            "walk": True,
+        },
+        "tilt_frame": correction.tilt_frame,
+        "tilt_fwd_deg": deg[0],
+        "tilt_right_deg": deg[1],
+        "sigma_tilt_deg": round(float(np.degrees(e.sigma_tilt_rad)), 4),
+        "heading_deg": deg[2],
+        "sigma_heading_deg": round(float(np.degrees(e.sigma_yaw_rad)), 4),
+        "parts_deg": [
+            [None if not np.isfinite(x) else round(float(np.degrees(x)), 4) for x in part[:3]]
+            for part in e.parts
+        ],
+        "floor_depth_m": round(e.floor_depth_m, 4),
+        "sigma_floor_depth_m": round(e.sigma_floor_depth_m, 4),
+        "walk_max_m": round(float(np.max(np.hypot(*e.walk_ne_m.T))), 4),
+        "sigma_walk_max_m": round(float(np.max(np.hypot(*e.sigma_walk_ne_m.T))), 4),
+        "walk_rate_m_per_sqrt_s": round(float(e.priors.walk_rate_m), 5),
+        "features": e.n_features,
+        "observations": e.n_observations,
+        "frames": e.n_frames,
+        "rms_px": round(e.rms_px, 3),
+        "slide_share": round(e.slide_share, 3),
+    }
+
+
+def write_summary(path: Path, correction: PoseCorrection) -> None:
+    """:func:`summary` as a JSON file (atomically: a temporary file, then renamed)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    tmp.write_text(json.dumps(summary(correction), indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def pose_cells(fixes: Fixes) -> dict[str, list[str]]:
+    """positions.csv's extra cells per fix: :data:`localizer.fix.POSE_COLUMNS` (degrees and metres to 4 decimals,
+    empty where NaN)."""
+    return {
+        c: [
+            str(x) if c == "pose_source" else (f"{x:.4f}" if np.isfinite(x) else "")
+            for x in getattr(fixes, c)
+        ]
+        for c in POSE_COLUMNS
+    }
+
+
+def uav_ne_m(pose: CameraPose) -> np.ndarray:
+    """The reported UAV's horizontal position (K, 2), m north and east of the first frame with a position."""
+    finite = np.flatnonzero(np.isfinite(pose.lat_deg))
+    first = int(finite[0]) if len(finite) else 0
+    origin = (pose.lat_deg[first], pose.lon_deg[first], pose.alt_amsl_m[first])
+    n, e, _ = geodetic_to_ned(pose.lat_deg, pose.lon_deg, pose.alt_amsl_m, *origin)
+    return np.column_stack([n, e])
+
+
+def bias_headings(session: Session, pose: CameraPose, frame: str) -> np.ndarray:
+    """The heading (radians) per frame of ``pose`` of the tilt's bias frame ``frame`` (:func:`tilt_frame`)."""
+    if frame == "camera":
+        return bottom.camera_heading_rad(pose.R_ned_from_cv)
+    return _body_yaw(session, pose.t_unix)
 
 
 def _body_yaw(session: Session, t_unix) -> np.ndarray:
@@ -394,15 +489,9 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
     if n_features < MIN_FEATURES:
         return f"{n_features} floor features tracked (fewer than {MIN_FEATURES})"
     sub = rows
-    origin = (pose.lat_deg[sub[0]], pose.lon_deg[sub[0]], pose.alt_amsl_m[sub[0]])
-    n, e, _ = geodetic_to_ned(pose.lat_deg[sub], pose.lon_deg[sub], pose.alt_amsl_m[sub], *origin)
-    camera_ne = np.column_stack([n, e]) + pose.cam_offset_ned_m[sub, :2]
+    camera_ne = (uav_ne_m(pose) + pose.cam_offset_ned_m[:, :2])[sub]
     frame_tilt = tilt_frame(session)
-    headings = (
-        bottom.camera_heading_rad(pose.R_ned_from_cv[sub])
-        if frame_tilt == "camera"
-        else _body_yaw(session, pose.t_unix[sub])
-    )
+    headings = bias_headings(session, pose, frame_tilt)[sub]
     poses = bottom.FramePoses(
         pose.t_unix[sub],
         pose.R_ned_from_cv[sub],
@@ -418,6 +507,13 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
         white_m=0.0 if white is None else max(MIN_WHITE_M, white),
     )
     cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
+    measured = bottom.velocity_rate_m(bottom.estimate(cam, n_water, poses, obs, priors), poses)
+    if (
+        measured is not None
+    ):  # the velocity as good as the bottom shows it (a first fit on the stated prior)
+        priors = dataclasses.replace(
+            priors, walk_rate_m=min(gnss_rate, max(MIN_VELOCITY_RATE_M, measured))
+        )
     est = bottom.estimate(cam, n_water, poses, obs, priors, parts=PARTS)
     if est.rms_px > MAX_RMS_PX:
         return (

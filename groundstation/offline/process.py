@@ -33,7 +33,15 @@ from groundstation.height_from_size import MODES as SIZE_MODES
 from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.estimate import offset_from_rotations
 from groundstation.offline.bottom import MODES as BOTTOM_MODES
-from groundstation.offline.bottom import PoseCorrection, append_columns, pixels_at, pose_from_bottom
+from groundstation.offline.bottom import NAME as BOTTOM_NAME
+from groundstation.offline.bottom import (
+    PoseCorrection,
+    append_columns,
+    pixels_at,
+    pose_cells,
+    pose_from_bottom,
+    write_summary,
+)
 from groundstation.offline.reference import MODES as REFERENCE_MODES
 from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
@@ -144,10 +152,13 @@ def locate_frames(
     session.warnings.extend(
         f"{session.path}: {notice}" for notice in take_notices(session.telemetry)
     )
-    cal = session.calibration
+    cal, reported = session.calibration, pose
     if correction is not None:
         pose, cal = correction.apply(session, pose)
     fixes = locate(cal, pose, u, v, refraction=refraction, sigma_px=sigma_px)
+    if correction is not None:
+        for name, values in correction.values(session, reported).items():
+            setattr(fixes, name, values)
     lost = (track_status != "ok") & (pose.status == "ok")
     fixes.status[lost] = track_status[lost]
     if len(fixes) and not np.any(fixes.status == "ok"):
@@ -229,12 +240,8 @@ def run(args) -> int:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
     if correction is not None:
-        append_columns(
-            out / "positions.csv",
-            correction.columns(
-                session, camera_pose(session.calibration, session.telemetry, fixes.t_unix)
-            ),
-        )
+        append_columns(out / "positions.csv", pose_cells(fixes))
+        write_summary(out / BOTTOM_NAME, correction)
     if reference_cells is not None:
         append_columns(out / "positions.csv", reference_cells)
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
