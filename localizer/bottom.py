@@ -145,6 +145,8 @@ class BottomEstimate:
     n_frames: int
     inliers: np.ndarray = field(repr=False)  # (M,) bool: residual within 3 loss scales
     priors: Priors = field(default_factory=Priors, repr=False)
+    #: (2J, 2J) the walk's covariance, knots' (north, east) in turn (m²); empty: not known
+    cov_walk_m2: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     #: (P, 4) each part's tilt_fwd, tilt_right, yaw (rad) and floor depth (m) alone, NaN where it gave none; the
     #: sigmas above include their spread (see the module doc); (0, 4): not asked
     parts: np.ndarray = field(default_factory=lambda: np.zeros((0, N_GLOBAL)), repr=False)
@@ -324,8 +326,9 @@ def velocity_rate_m(
     """The reported velocity's integrated error (m/√s) as the bottom shows it: the fitted walk's change between knots
     less what the velocity said (:func:`_velocity_steps`), along the drone's motion only (the bottom's slide measures
     the distance flown whatever the heading; across the motion a heading bias can pass for a walk), per √s, RMS over
-    the knot intervals in which the drone moved at least ``min_move_m``; None without a velocity or such intervals.
-    The velocity's error is taken alike in every direction."""
+    the knot intervals in which the drone moved at least ``min_move_m``, less what the fit's own uncertainty of that
+    change explains (:attr:`BottomEstimate.cov_walk_m2`: the floor's noise, not the velocity's); None without a
+    velocity or such intervals. The velocity's error is taken alike in every direction."""
     if poses.velocity_ne_mps is None or len(est.knot_t_s) < 2:
         return None
     steps = _velocity_steps(poses, est.knot_t_s)
@@ -337,8 +340,19 @@ def velocity_rate_m(
     use = length >= min_move_m
     if not np.any(use):
         return None
-    along = np.sum((np.diff(est.walk_ne_m, axis=0) - steps)[use] * moved[use], axis=1) / length[use]
-    return float(np.sqrt(np.mean(along**2 / np.diff(est.knot_t_s)[use])))
+    unit = moved[use] / length[use, None]
+    along = np.sum((np.diff(est.walk_ne_m, axis=0) - steps)[use] * unit, axis=1)
+    own = np.zeros(len(unit))
+    if est.cov_walk_m2.size:  # the variance of each interval's change along the motion: dᵀ C d
+        J = len(est.knot_t_s)
+        d = np.zeros((len(unit), 2 * J))
+        j = np.flatnonzero(use)
+        for a in range(2):
+            d[np.arange(len(j)), 2 * (j + 1) + a] = unit[:, a]
+            d[np.arange(len(j)), 2 * j + a] = -unit[:, a]
+        own = np.einsum("ia,ab,ib->i", d, est.cov_walk_m2, d)
+    excess = np.maximum(along**2 - own, 0.0) / np.diff(est.knot_t_s)[use]
+    return float(np.sqrt(np.mean(excess)))
 
 
 def white_noise_m(poses: FramePoses) -> float | None:
@@ -715,6 +729,7 @@ def _estimate(
         knot_t_s=prob.knots,
         walk_ne_m=walk.copy(),
         sigma_walk_ne_m=np.sqrt(cov_walk),
+        cov_walk_m2=cov[N_GLOBAL : N_GLOBAL + 2 * prob.J, N_GLOBAL : N_GLOBAL + 2 * prob.J].copy(),
         features_ne_m=feats.copy(),
         rms_px=float(np.sqrt(np.mean(norm[inliers] ** 2) / 2) * priors.pixel_px),
         slide_share=slide_share(camera, obs),

@@ -174,3 +174,28 @@ def test_parts_that_disagree_widen_the_sigmas():
     assert np.degrees(whole.sigma_yaw_rad) < 0.5 * np.degrees(spread)
     assert split.sigma_yaw_rad == pytest.approx(np.hypot(whole.sigma_yaw_rad, spread), rel=1e-6)
     assert "parts' spread" in split.describe()
+
+
+def test_the_velocitys_own_error_is_measured_along_the_motion():
+    # a velocity whose integral walks at 0.03 m/√s (white 0.06 m/s held over each 0.25 s frame); the positions exact
+    lens, poses, obs, _ = _session(speed_mps=1.2)
+    first = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.05))
+    exact = bottom.velocity_rate_m(first, poses)
+    noisy_velocity = poses.velocity_ne_mps + np.random.default_rng(8).normal(
+        0.0, 0.06, poses.velocity_ne_mps.shape
+    )
+    noisy = dataclasses.replace(poses, velocity_ne_mps=noisy_velocity)
+    first = bottom.estimate(lens, N_WATER, noisy, obs, bottom.Priors(walk_rate_m=0.05))
+    assert bottom.velocity_rate_m(first, noisy) == pytest.approx(0.03, rel=0.5)
+    assert exact < 0.01  # nothing but the floor's own noise, which the fit's covariance explains
+    hover = _session(speed_mps=0.0)
+    assert bottom.velocity_rate_m(first, hover[1]) is None  # no motion: nothing to measure along
+
+
+def test_each_frames_white_noise_is_what_the_velocity_does_not_explain():
+    _, poses, _, error_ne = _session(speed_mps=1.2, white_m=0.03)
+    knots = bottom.knot_times(poses.t_s, 2.0)
+    _, remainder = bottom.velocity_drift(poses.t_s, poses.velocity_ne_mps, poses.camera_ne_m, knots)
+    # true = reported + walk + remainder: the remainder is minus the white error (its mean aside)
+    expected = -(error_ne - error_ne.mean(axis=0))
+    assert np.sqrt(np.mean((remainder - expected) ** 2)) < 0.01 < np.sqrt(np.mean(expected**2))
