@@ -257,7 +257,9 @@ class Clocks(Section):
     uav_link_latency_measured_ms: float | None = Field(
         description="what TIMESYNC measured, used or not"
     )
-    uav_reboots: int = Field(description="autopilot reboots seen (new clock segments)")
+    uav_reboots: int = Field(
+        description="autopilot reboots seen (its time_boot_ms went back; a step of the station clock is not one)"
+    )
     uuv_clock_minus_station_s: float | None = Field(
         description="the UUV's clock minus the station's"
     )

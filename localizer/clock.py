@@ -91,6 +91,7 @@ class ClockMap:
             tuple[float, float]
         ] = []  # outliers that may be a new clock: (source, arrival)
         self.segments = 0  # restarts seen (reboots of the source, steps of the station clock)
+        self.reboots = 0  # those of them where the source's time went back (the source rebooted)
         self.outliers = 0  # samples not used
         self.last_restart: tuple[float, float] | None = (
             None  # (source time before, source time after)
@@ -148,6 +149,7 @@ class ClockMap:
     def _restart(self, before: float, samples: list[tuple[float, float]]) -> None:
         self._min.clear()
         self.segments += 1
+        self.reboots += samples[0][0] < before - self.reboot_s
         self.last_restart = (before, samples[0][0])
         self._last_source = self._last_arrival = None
         for src, arr in samples:

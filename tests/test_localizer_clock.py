@@ -49,11 +49,13 @@ def test_reboot_and_station_clock_step_start_new_segments():
     # boot clock back by 599 s: a reboot once samples agree for 0.25 s
     assert [c.add(2.0 + 0.1 * i, 2003.02 + 0.1 * i) for i in range(4)] == [OUTLIER] * 3 + [RESTART]
     assert c.segments == 1 and c.last_restart == (pytest.approx(600.95), 2.0)
+    assert c.reboots == 1
     assert c.offset_s == pytest.approx(2001.02)
     assert (
         c.add(3.0, 1990.0) == RESTART
     )  # the station clock stepped back 13 s (NTP): our own clock, at once
     assert c.segments == 2 and c.offset_s == pytest.approx(1987.0)
+    assert c.reboots == 1  # the boot clock went on: the station's step is no reboot of the source
 
 
 def test_stray_times_do_not_move_the_clock():

@@ -89,7 +89,7 @@ def clock_status(tel: Telemetry) -> dict:
         "uav_link_latency_source": tel.latency_source,
         "uav_link_latency_sigma_ms": round(tel.latency_sigma_s * 1000.0, 1),
         "uav_link_latency_measured_ms": None if measured is None else round(measured * 1000.0, 1),
-        "uav_reboots": tel.uav_clock.segments,
+        "uav_reboots": tel.uav_clock.reboots,
         "uuv_clock_minus_station_s": None if uuv is None else round(uuv, 3),
         "depth_aligned_by": tel.depth_aligned_by,
     }
