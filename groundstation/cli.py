@@ -25,6 +25,11 @@ COMMANDS = (
         "accuracy of sessions with truth.csv: refraction vs straight ray",
     ),
     (
+        "mosaic",
+        "groundstation.offline.mosaic",
+        "a georeferenced mosaic of the bottom (Cloud-Optimised GeoTIFF) from a session's video",
+    ),
+    (
         "sim",
         "sim_fixtures.cli",
         "generate a synthetic session (video, telemetry, truth) from a scenario",

@@ -1,0 +1,148 @@
+"""``skyfix mosaic``: a georeferenced mosaic of the bottom (groundstation/offline/mosaic.py), checked on a generated
+session against what the simulator painted: bottom_survey's drone (its AHRS, compass and GNSS errors) for 3 s at
+640x360 over a textured floor with a surveyed bullseye ([marker]). The bullseye is found in the mosaic by template
+matching, its cell turned into UTM by the GeoTIFF's own transform and compared with reference.toml's lat/lon through
+pyproj (not the localizer's geometry)."""
+
+import json
+import shutil
+import subprocess
+import tomllib
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import rasterio
+from pyproj import Transformer
+
+from groundstation.cli import main
+from sim_fixtures.generate import generate
+from sim_fixtures.scenario import load_scenario, with_overrides
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+#: bottom_survey's drone without its attitude errors: what is left is the mosaic's own geometry and the RTK's noise
+NO_POSE_ERRORS = {
+    "roll_bias_deg": 0.0,
+    "pitch_bias_deg": 0.0,
+    "yaw_bias_deg": 0.0,
+    "wander_deg": 0.0,
+}
+
+
+@pytest.fixture(scope="module", params=["as_flown", "no_pose_errors"])
+def mosaic(tmp_path_factory, request):
+    """The session (with its scenario) and the mosaic's output folder, made by the command line; the drone's
+    attitude errors as the scenario has them, or none."""
+    session = tmp_path_factory.mktemp("survey")
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "bottom_survey.toml")
+    sc = with_overrides(
+        sc, duration_s=3.0, camera={"width": 640, "height": 360}, marker={"enabled": True}
+    )
+    if request.param == "no_pose_errors":
+        sc = with_overrides(sc, sensors=NO_POSE_ERRORS)
+    generate(sc, session)
+    out = tmp_path_factory.mktemp("mosaic")
+    depth = str(sc.site.floor_depth_m)
+    assert (
+        main(["mosaic", str(session), "--out", str(out), "--floor-depth-m", depth, "--quiet"]) == 0
+    )
+    return sc, session, out
+
+
+def bullseye_centre_px(grey: np.ndarray, radius_px: float) -> tuple[float, float]:
+    """The (col, row) of a bullseye's centre (a white disc, a black centre of half its radius) in a grey image, by
+    normalised cross-correlation with a drawn one and a parabola through the peak's neighbours."""
+    half = int(np.ceil(1.6 * radius_px))
+    yy, xx = np.mgrid[-half : half + 1, -half : half + 1]
+    dist = np.hypot(xx, yy)
+    template = np.full(dist.shape, 128, np.uint8)
+    template[dist <= radius_px] = 255
+    template[dist <= radius_px / 2] = 0
+    score = cv2.matchTemplate(grey, template, cv2.TM_CCOEFF_NORMED)
+    _, peak, _, (c, r) = cv2.minMaxLoc(score)
+    assert peak > 0.6, peak
+
+    def vertex(a, b, m):
+        return 0.5 * (a - b) / (a - 2 * m + b)
+
+    dc = vertex(score[r, c - 1], score[r, c + 1], score[r, c])
+    dr = vertex(score[r - 1, c], score[r + 1, c], score[r, c])
+    return float(c + dc + half), float(r + dr + half)  # float64: UTM coordinates need it
+
+
+def test_mosaic_is_a_cog_in_utm_with_the_marker_where_it_was_surveyed(mosaic):
+    """The COG opens with rasterio in the UTM zone of the site (EPSG 32632 at 63.44 N, 10.4 E), tiled with
+    overviews, its bounds the sidecar's and around the marker; the bullseye found in it lies within the stated
+    1-sigma of reference.toml's position with the drone's attitude errors, within 2 cells without them."""
+    sc, session, out = mosaic
+    side = json.loads((out / "mosaic.json").read_text())
+    ref = tomllib.loads((session / "reference.toml").read_text())
+    with rasterio.open(out / "mosaic.tif") as d:
+        assert d.crs.to_epsg() == 32632
+        assert d.profile["tiled"] and d.overviews(1)
+        assert d.count == 4
+        rgb = np.transpose(d.read((1, 2, 3)), (1, 2, 0))
+        alpha = d.read(4)
+        transform, bounds = d.transform, d.bounds
+    assert side["crs"] == "EPSG:32632"
+    b = side["bounds_m"]
+    assert np.allclose(
+        [bounds.left, bounds.bottom, bounds.right, bounds.top],
+        [b["west"], b["south"], b["east"], b["north"]],
+    )
+    assert transform.a == pytest.approx(side["gsd_m"]) and transform.e == pytest.approx(
+        -side["gsd_m"]
+    )
+    assert 0.3 < np.mean(alpha == 255) <= 1.0
+    x_ref, y_ref = Transformer.from_crs(4326, 32632, always_xy=True).transform(
+        ref["lon_deg"], ref["lat_deg"]
+    )
+    assert bounds.left < x_ref < bounds.right and bounds.bottom < y_ref < bounds.top
+
+    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    col, row = bullseye_centre_px(grey, ref["radius_m"] / side["gsd_m"])
+    assert alpha[round(row), round(col)] == 255
+    x, y = rasterio.transform.xy(transform, row, col)  # the cell's centre
+    error_m = float(np.hypot(x - x_ref, y - y_ref))
+    print(
+        f"marker: {error_m:.3f} m = {error_m / side['gsd_m']:.1f} cells; stated 1-sigma "
+        f"{side['horizontal_sigma_m']:.3f} m"
+    )
+    if sc.sensors.yaw_bias_deg == 0.0:
+        assert error_m <= 2 * side["gsd_m"], (error_m, side)
+    else:
+        assert error_m <= side["horizontal_sigma_m"], (error_m, side)
+
+
+def test_gdalinfo_reads_the_crs_and_the_bounds(mosaic):
+    """gdalinfo (GDAL's own, not rasterio's) says the UTM zone and the sidecar's corners, and that it is a COG."""
+    if shutil.which("gdalinfo") is None:
+        pytest.skip("gdalinfo not installed")
+    _, _, out = mosaic
+    side = json.loads((out / "mosaic.json").read_text())
+    info = json.loads(
+        subprocess.run(
+            ["gdalinfo", "-json", str(out / "mosaic.tif")],
+            capture_output=True,
+            check=True,
+            text=True,
+        ).stdout
+    )
+    assert '"EPSG",32632' in info["coordinateSystem"]["wkt"].replace(" ", "")
+    corners = info["cornerCoordinates"]
+    b = side["bounds_m"]
+    assert np.allclose(corners["upperLeft"], [b["west"], b["north"]], atol=1e-3)
+    assert np.allclose(corners["lowerRight"], [b["east"], b["south"]], atol=1e-3)
+    assert info["metadata"]["IMAGE_STRUCTURE"]["LAYOUT"] == "COG"
+
+
+def test_bad_floor_depth_is_one_line_naming_it(mosaic, capsys):
+    _, session, out = mosaic
+    assert (
+        main(["mosaic", str(session), "--out", str(out), "--floor-depth-m", "-1", "--quiet"]) == 2
+    )
+    err = capsys.readouterr().err.strip()
+    assert "--floor-depth-m -1" in err and len(err.splitlines()) == 1
