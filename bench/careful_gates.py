@@ -19,16 +19,12 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-
 from emit import emit
-from test_careful_gates import kept_gate, off_valid, still, tracked
 
+from groundstation.testing.careful_gates import kept_gate, off_valid, still, tracked
 from groundstation.testing.gate_streams import HZ, T0
 from localizer.fix_gate import FixGate
 

@@ -26,12 +26,16 @@ from pathlib import Path
 
 import numpy as np
 
+from groundstation.testing.live import (
+    SUBSCRIBER,
+    free_port,
+    read_jsonl,
+    replay_shift,
+    truth_errors_m,
+    wait_for,
+)
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-
-from live_helpers import SUBSCRIBER, free_port, read_jsonl, replay_shift, truth_errors_m, wait_for
-
 CONDITIONS = (
     "clock_sync",
     "clock_offset",

@@ -25,15 +25,14 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from groundstation.testing.fuse_peers import Drone, gps_input_errors_m, key, ok_errors, run_fuser
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-from fuse_peers import Drone, gps_input_errors_m, key, ok_errors, run_fuser
 
 REAL_A, REAL_B = Drone("a", (0.02, 0.0), 0.02, 0.2), Drone("b", (-0.02, 0.0), 0.02, 0.2)
 FAKE = Drone("f", (0.8, 0.0), 0.005, 0.014)

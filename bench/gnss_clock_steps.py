@@ -10,14 +10,12 @@ bench/careful_gates.py's.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-from test_gnss_clock_step import HZ, _moved_and_followed
-
+from groundstation.testing.gnss_clock import HZ, moved_and_followed
 from localizer import telemetry
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
@@ -26,11 +24,11 @@ def main() -> None:
     args = ap.parse_args()
     lines = []
     for step in (10.0, -10.0):
-        moved, now, tel = _moved_and_followed(step)
+        moved, now, tel = moved_and_followed(step)
         detect = telemetry.GNSS_STEP_S
         telemetry.GNSS_STEP_S = float("inf")
         try:
-            _, before, _ = _moved_and_followed(step)
+            _, before, _ = moved_and_followed(step)
         finally:
             telemetry.GNSS_STEP_S = detect
         lines.append(

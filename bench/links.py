@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/links.py [--trials 5] [--link-trials 2] [--out bench/results/links.txt]
 
-The scenarios are the live tests' (``tests/link_scenarios.py``), run here several times each:
+The scenarios are the live tests' (``groundstation/testing/link_scenarios.py``), run here several times each:
 
 - stop: SIGINT (SIGTERM every other trial) to ``skyfix run`` while everything flows from ``skyfix replay``,
   while a UDP video URL gets nothing, while an RTSP open hangs on a server that never answers, and while
@@ -25,9 +25,15 @@ import tempfile
 import time
 from pathlib import Path
 
+from groundstation.testing.link_scenarios import (
+    LINK_INPUTS,
+    SHUTDOWN_STATES,
+    link_comes_back,
+    make_session,
+    shutdown,
+)
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-from link_scenarios import LINK_INPUTS, SHUTDOWN_STATES, link_comes_back, make_session, shutdown
 
 REQUIRED_S = 1.0
 

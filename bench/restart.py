@@ -4,7 +4,7 @@ and one line within a second).
     .venv/bin/python bench/restart.py [--kills 3] [--out bench/results/restart.txt]
 
 - restart: ``deploy/field.toml`` as shipped (endpoints on loopback) under ``deploy/skyfix.service``'s restart policy,
-  run by the stand-in supervisor of the tests (tests/supervisor.py: Restart=on-failure, its RestartSec); ``kill -9``
+  run by the stand-in supervisor of the tests (groundstation/testing/supervisor.py: Restart=on-failure, its RestartSec); ``kill -9``
   of the service ``--kills`` times: the time from the kill to the first GPS_INPUT of the next start (the kernel's
   receive time at the UUV's endpoint), the CPU time the new process had used by then (``/proc``: what the wall
   time comes to on an idle machine), and each start's recording folder;
@@ -24,6 +24,8 @@ Prints both and writes them to ``--out``.
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import os
 import signal
 import subprocess
@@ -32,16 +34,11 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
-import json
-import math
-
-from live_helpers import GpsInputEndpoint, skyfix, start, stop, wait_until
-from supervisor import Supervisor, field_config
-
+from groundstation.testing.live import GpsInputEndpoint, skyfix, start, stop, wait_until
+from groundstation.testing.supervisor import Supervisor, field_config
 from localizer.geodesy import horizontal_error_m
 
+ROOT = Path(__file__).resolve().parents[1]
 BACK_S = 3.0
 MISTAKE_S = 1.0
 MISTAKES = {

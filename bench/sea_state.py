@@ -31,7 +31,6 @@ import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from groundstation.session.read import load_session
 from groundstation.video.file import open_video

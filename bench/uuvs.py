@@ -58,11 +58,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 from emit import emit
-
-from bench.live_latency import (
+from live_latency import (
     BENCH_DIR,
     CAMERA_LATENCY_MS,
     decode_baseline,
@@ -74,6 +72,7 @@ from bench.live_latency import (
     pipeline_baseline,
     proc_sample,
 )
+
 from groundstation.mavlink.ingest import (
     mavutil,  # pymavlink, set to MAVLink 2 before its first import
 )

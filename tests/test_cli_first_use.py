@@ -244,7 +244,7 @@ def _check(config: Path, *options: str) -> subprocess.CompletedProcess:
 
 
 def test_check_validates_the_shipped_configuration_and_starts_nothing(tmp_path):
-    from supervisor import field_config
+    from groundstation.testing.supervisor import field_config
 
     config, values = field_config(tmp_path, free_port())
     out = _check(config)
@@ -272,7 +272,7 @@ def test_check_validates_the_shipped_configuration_and_starts_nothing(tmp_path):
 
 
 def test_check_refuses_a_signing_key_others_may_read(tmp_path):
-    from supervisor import field_config
+    from groundstation.testing.supervisor import field_config
 
     config, _ = field_config(tmp_path, free_port())
     key = tmp_path / "gps_input.key"

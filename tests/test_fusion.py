@@ -10,8 +10,6 @@ import subprocess
 
 import numpy as np
 import pytest
-from fuse_peers import Drone, gps_input_errors_m, ok_errors, run_fuser
-from fuse_peers import key as peer_key
 from live_helpers import skyfix, truth_errors_m
 from pyproj import Geod
 from scipy.optimize import brentq
@@ -20,6 +18,8 @@ from groundstation.fuse.fuser import Fuser
 from groundstation.fuse.service import FixSources
 from groundstation.messages import FixMessage
 from groundstation.session.positions import read_positions_csv
+from groundstation.testing.fuse_peers import Drone, gps_input_errors_m, ok_errors, run_fuser
+from groundstation.testing.fuse_peers import key as peer_key
 from localizer.fix import Fix
 from localizer.fix_gate import FixGate
 from localizer.fusion import (

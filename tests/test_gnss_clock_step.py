@@ -12,51 +12,22 @@ from __future__ import annotations
 
 import pytest
 
+from groundstation.testing.gnss_clock import AHEAD_S, feed, moved_and_followed
 from localizer.telemetry import Telemetry
-
-T0 = 1_750_000_000.0
-HZ = 2.0
-AHEAD_S = 0.32  # the station clock ahead of GNSS time, plus the link's delay
-
-
-def feed(tel: Telemetry, k0: int, k1: int, step_s: float, bad: dict | None = None) -> list:
-    """SYSTEM_TIME samples k0..k1-1 with the station clock stepped by ``step_s``; ``bad``: sample → a GNSS time
-    that far off (a wrong time_unix_usec). The offset after each."""
-    out = []
-    for k in range(k0, k1):
-        gnss = T0 + k / HZ
-        unix = gnss + (bad or {}).get(k, 0.0)
-        assert tel.add_system_time(
-            100_000 + round(k * 1000 / HZ), round(unix * 1e6), gnss + AHEAD_S + step_s
-        )
-        out.append(tel.station_minus_gnss_s)
-    return out
-
-
-def _moved_and_followed(step_s: float) -> tuple[int, int, Telemetry]:
-    """Samples after the step until the offset first moved, and until it was the new one; the telemetry."""
-    tel = Telemetry()
-    feed(tel, 0, 60, 0.0)
-    after = feed(tel, 60, 200, step_s)
-    moved = next(i for i, x in enumerate(after) if abs(x - AHEAD_S) > 1.0)
-    followed = next(
-        i for i, x in enumerate(after) if x == pytest.approx(AHEAD_S + step_s, abs=0.01)
-    )
-    return moved, followed, tel
 
 
 def test_a_forward_step_is_followed_within_two_samples_of_the_telemetry_moving(monkeypatch):
     """+10 s: the telemetry's scale (the clock map's minimum) moves once its window has passed the step; from then
     the fixes are made again, and their GNSS time follows within two samples. The control, every sample into the
     median as before: the new offset some 14 samples (7 s) later, fixes 10 s off in GNSS time meanwhile."""
-    moved, followed, tel = _moved_and_followed(10.0)
+    moved, followed, tel = moved_and_followed(10.0)
     print(f"+10 s: the offset moved {moved} samples after the step, the new one {followed - moved} after that; "
           f"steps {tel.gnss_clock_steps} ({tel.last_gnss_clock_step_s:+.2f} s)")  # fmt: skip
     assert followed == moved  # the old offset, then the new: nothing between
     assert tel.gnss_clock_steps == 1 and tel.last_gnss_clock_step_s == pytest.approx(10.0, abs=0.01)
     assert any("stepped +10.00 s against GNSS time" in n for n in tel.notices)
     monkeypatch.setattr("localizer.telemetry.GNSS_STEP_S", float("inf"))
-    _, followed_before, _ = _moved_and_followed(10.0)
+    _, followed_before, _ = moved_and_followed(10.0)
     print(
         f"control: the new offset {followed_before} samples after the step ({followed_before - followed} later)"
     )
@@ -67,7 +38,7 @@ def test_a_backward_step_is_followed_at_once():
     """-10 s: the clock map takes the station clock stepping back at once (a new clock segment), and the offset
     starts again from the next sample; the notice says the station clock stepped, not that the autopilot
     rebooted."""
-    moved, followed, tel = _moved_and_followed(-10.0)
+    moved, followed, tel = moved_and_followed(-10.0)
     assert moved == followed == 0
     # said as what it is: the autopilot's boot time went on
     assert any(n.startswith("the station clock stepped back") for n in tel.notices)

@@ -16,11 +16,11 @@ import socket
 import subprocess
 import time
 
-from link_scenarios import start_router
 from live_helpers import free_port
 
 from groundstation.live.sinks.gps_input import GpsInputSink
 from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
+from groundstation.testing.link_scenarios import start_router
 from groundstation.zenoh_session import open_session
 
 

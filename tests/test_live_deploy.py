@@ -15,10 +15,10 @@ from pathlib import Path
 import pytest
 import zenoh
 from live_helpers import ROOT
-from supervisor import read_unit, systemd_seconds
 
 from groundstation.config_files import load_calibration
 from groundstation.live.config import run_config
+from groundstation.testing.supervisor import read_unit, systemd_seconds
 from groundstation.zenoh_session import make_config
 
 DEPLOY = ROOT / "deploy"

@@ -21,11 +21,16 @@ import threading
 import time
 
 import pytest
-from link_scenarios import LINK_INPUTS, link_comes_back, make_session, shutdown
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
 from groundstation.mavlink.ingest import mavutil
 from groundstation.mavlink.link import MavlinkLink
+from groundstation.testing.link_scenarios import (
+    LINK_INPUTS,
+    link_comes_back,
+    make_session,
+    shutdown,
+)
 
 STOP_BOUND_S = (
     5.0  # generous for a loaded 2-core CI; the requirement (1 s) is checked by bench/links.py

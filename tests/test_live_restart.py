@@ -12,9 +12,9 @@ import subprocess
 import tomllib
 
 from live_helpers import ROOT, GpsInputEndpoint, skyfix, wait_for
-from supervisor import Supervisor, field_config
 
 from groundstation.live.sinks.recorder import new_recording
+from groundstation.testing.supervisor import Supervisor, field_config
 
 FOLDER = re.compile(r"^\d{8}-\d{6}(-\d+)?$")
 

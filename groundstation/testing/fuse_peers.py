@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 import zenoh
-from live_helpers import GpsInputEndpoint, free_port, skyfix, start, stop, wait_for
 from pyproj import Geod
 
 from groundstation.messages import FixMessage
+from groundstation.testing.live import GpsInputEndpoint, free_port, skyfix, start, stop, wait_for
 from localizer.fix import Fix
 
 LAT0, LON0 = 63.44, 10.40

@@ -22,7 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Self
 
-from live_helpers import ROOT, free_port, start, stop
+from groundstation.testing.live import ROOT, free_port, start, stop
 
 DEPLOY = ROOT / "deploy"
 UNIT = DEPLOY / "skyfix.service"

@@ -20,7 +20,7 @@ import time
 import tomllib
 from pathlib import Path
 
-from live_helpers import (
+from groundstation.testing.live import (
     ROOT,
     GpsInputEndpoint,
     free_port,
