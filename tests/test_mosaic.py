@@ -1,5 +1,6 @@
 """``skyfix mosaic``: a georeferenced mosaic of the bottom (groundstation/offline/mosaic.py), checked on a generated
-session against what the simulator painted: bottom_survey's drone (its AHRS, compass and GNSS errors) for 3 s at
+session against what the simulator painted: bottom_survey's drone (its AHRS, compass and GNSS errors; none; or
+corrected by the pose from the bottom) for 3 s at
 640x360 over a textured floor with a surveyed bullseye ([marker]). The bullseye is found in the mosaic by template
 matching, its cell turned into UTM by the GeoTIFF's own transform and compared with reference.toml's lat/lon through
 pyproj (not the localizer's geometry)."""
@@ -32,10 +33,11 @@ NO_POSE_ERRORS = {
 }
 
 
-@pytest.fixture(scope="module", params=["as_flown", "no_pose_errors"])
+@pytest.fixture(scope="module", params=["as_flown", "no_pose_errors", "pose_from_bottom"])
 def mosaic(tmp_path_factory, request):
-    """The session (with its scenario) and the mosaic's output folder, made by the command line; the drone's
-    attitude errors as the scenario has them, or none."""
+    """The session, the mosaic's output folder made by the command line, and whether the mosaic's poses are
+    expected right to 2 cells: the drone's attitude errors as the scenario has them (the floor depth given), none,
+    or as flown and corrected by the pose from the bottom (its floor depth the estimate's)."""
     session = tmp_path_factory.mktemp("survey")
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "bottom_survey.toml")
     sc = with_overrides(
@@ -45,11 +47,12 @@ def mosaic(tmp_path_factory, request):
         sc = with_overrides(sc, sensors=NO_POSE_ERRORS)
     generate(sc, session)
     out = tmp_path_factory.mktemp("mosaic")
-    depth = str(sc.site.floor_depth_m)
-    assert (
-        main(["mosaic", str(session), "--out", str(out), "--floor-depth-m", depth, "--quiet"]) == 0
-    )
-    return sc, session, out
+    if request.param == "pose_from_bottom":
+        how = ["--pose-from-bottom", "auto"]
+    else:
+        how = ["--floor-depth-m", str(sc.site.floor_depth_m)]
+    assert main(["mosaic", str(session), "--out", str(out), *how, "--quiet"]) == 0
+    return session, out, request.param != "as_flown"
 
 
 def bullseye_centre_px(grey: np.ndarray, radius_px: float) -> tuple[float, float]:
@@ -76,8 +79,9 @@ def bullseye_centre_px(grey: np.ndarray, radius_px: float) -> tuple[float, float
 def test_mosaic_is_a_cog_in_utm_with_the_marker_where_it_was_surveyed(mosaic):
     """The COG opens with rasterio in the UTM zone of the site (EPSG 32632 at 63.44 N, 10.4 E), tiled with
     overviews, its bounds the sidecar's and around the marker; the bullseye found in it lies within the stated
-    1-sigma of reference.toml's position with the drone's attitude errors, within 2 cells without them."""
-    sc, session, out = mosaic
+    1-sigma of reference.toml's position with the drone's attitude errors, within 2 cells without them or with
+    them corrected from the bottom."""
+    session, out, exact = mosaic
     side = json.loads((out / "mosaic.json").read_text())
     ref = tomllib.loads((session / "reference.toml").read_text())
     with rasterio.open(out / "mosaic.tif") as d:
@@ -111,7 +115,7 @@ def test_mosaic_is_a_cog_in_utm_with_the_marker_where_it_was_surveyed(mosaic):
         f"marker: {error_m:.3f} m = {error_m / side['gsd_m']:.1f} cells; stated 1-sigma "
         f"{side['horizontal_sigma_m']:.3f} m"
     )
-    if sc.sensors.yaw_bias_deg == 0.0:
+    if exact:
         assert error_m <= 2 * side["gsd_m"], (error_m, side)
     else:
         assert error_m <= side["horizontal_sigma_m"], (error_m, side)
@@ -121,7 +125,7 @@ def test_gdalinfo_reads_the_crs_and_the_bounds(mosaic):
     """gdalinfo (GDAL's own, not rasterio's) says the UTM zone and the sidecar's corners, and that it is a COG."""
     if shutil.which("gdalinfo") is None:
         pytest.skip("gdalinfo not installed")
-    _, _, out = mosaic
+    _, out, _ = mosaic
     side = json.loads((out / "mosaic.json").read_text())
     info = json.loads(
         subprocess.run(
@@ -140,7 +144,7 @@ def test_gdalinfo_reads_the_crs_and_the_bounds(mosaic):
 
 
 def test_bad_floor_depth_is_one_line_naming_it(mosaic, capsys):
-    _, session, out = mosaic
+    session, out, _ = mosaic
     assert (
         main(["mosaic", str(session), "--out", str(out), "--floor-depth-m", "-1", "--quiet"]) == 2
     )

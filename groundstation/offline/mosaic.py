@@ -27,7 +27,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from groundstation.offline.bottom import pixels_at, subsample_rows, uuv_radius_px
+from groundstation.offline.bottom import MODES as BOTTOM_MODES
+from groundstation.offline.bottom import PoseCorrection, pixels_at, subsample_rows, uuv_radius_px
 from groundstation.outputs import output_dir
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
@@ -203,22 +204,32 @@ def _paint(
 def make_mosaic(
     session: Session,
     out: Path,
-    floor_depth_m: float,
+    floor_depth_m: float | None,
     floor_sigma_m: float = 0.1,
     rate_hz: float = RATE_HZ,
     gsd_m: float | None = None,
     progress: bool = False,
+    correction: PoseCorrection | None = None,
 ) -> dict:
-    """Write ``mosaic.tif`` and ``mosaic.json`` (see the module doc) into ``out``; returns the sidecar's dict."""
+    """Write ``mosaic.tif`` and ``mosaic.json`` (see the module doc) into ``out``; returns the sidecar's dict.
+
+    ``correction`` (the pose from the bottom, :func:`groundstation.offline.process.bottom_correction`): every
+    frame's pose corrected by it, and its floor depth and sigma used where ``floor_depth_m`` is None."""
     cal, cam = session.calibration, session.calibration.camera
-    if not floor_depth_m > 0:
+    if floor_depth_m is None and correction is not None:
+        floor_depth_m = correction.estimate.floor_depth_m
+        floor_sigma_m = correction.estimate.sigma_floor_depth_m
+    if floor_depth_m is None or not floor_depth_m > 0:
         raise SessionError(
-            f"--floor-depth-m {floor_depth_m}: must be a positive depth below the surface, m"
+            f"--floor-depth-m {floor_depth_m}: must be a positive depth below the surface, m "
+            "(or estimated: --pose-from-bottom auto)"
         )
     if session.video_path is None or session.frames is None:
         raise SessionError(f"{session.path}: no video.* and video_frames.csv to make a mosaic from")
     rows = subsample_rows(session.frames["t"], rate_hz)
     pose = camera_pose(cal, session.telemetry, session.frames["t"][rows])
+    if correction is not None:
+        pose, cal = correction.apply(session, pose)
     usable = np.isin(pose.status, USABLE) & (pose.height_m > 0)
     if not np.any(usable):
         raise SessionError(
@@ -290,6 +301,7 @@ def make_mosaic(
         "blend": "nearest_to_nadir",
         "floor_depth_m": floor_depth_m,
         "floor_depth_sigma_m": floor_sigma_m,
+        "pose_source": "bottom" if correction is not None else "telemetry",
         "filled_share": float(np.mean(np.isfinite(best))),
         **accuracy_m(cal, take(pose, used), cam, floor_depth_m, floor_sigma_m),
     }
@@ -326,6 +338,12 @@ def run(args) -> int:
     out = output_dir(args.out)
     session = load_session(args.session, args.uuv)
     try:
+        correction = None
+        if args.pose_from_bottom != "off":
+            from groundstation.offline.process import bottom_correction, frame_pixels
+
+            pixels = frame_pixels(session, use_track=True)
+            correction = bottom_correction(session, pixels, args.pose_from_bottom, not args.quiet)
         found = make_mosaic(
             session,
             out,
@@ -334,6 +352,7 @@ def run(args) -> int:
             args.rate_hz,
             args.gsd_m,
             not args.quiet,
+            correction,
         )
     finally:
         for w in session.warnings:
@@ -353,9 +372,17 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     p.add_argument(
         "--floor-depth-m",
         type=float,
-        required=True,
+        default=None,
         metavar="M",
-        help="the floor's depth below the water surface, m",
+        help="the floor's depth below the water surface, m (default: the pose from the bottom's estimate)",
+    )
+    p.add_argument(
+        "--pose-from-bottom",
+        choices=BOTTOM_MODES,
+        default="off",
+        help="auto: correct every frame's pose by what the static seafloor tells (as skyfix process "
+        "--pose-from-bottom auto; UUV pixels from track.csv) and take its floor depth where "
+        "--floor-depth-m is not given; off (default)",
     )
     p.add_argument(
         "--floor-depth-sigma-m",
