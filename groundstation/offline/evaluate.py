@@ -41,12 +41,12 @@ from groundstation.offline.process import (
     add_uuv_bounds,
     frame_pixels,
     locate_frames,
+    located,
     print_warnings,
     size_of,
 )
-from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
-from groundstation.offline.smoothed import offline_track, write_smoothed_csv
+from groundstation.offline.smoothed import offline_track, traced_back, write_smoothed_csv
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
 from groundstation.session.read import (
@@ -302,7 +302,7 @@ def _evaluate_uuv(
         print(f"{name}: no video: pixels from track.csv", file=sys.stderr)
     size = size_of(session, height_from_size, from_track)
     try:
-        pixels = frame_pixels(session, from_track, tracker, progress, motion, size)
+        pixels = frame_pixels(session, from_track, tracker, progress, motion, size, both_ways=True)
     finally:
         print_warnings(session)
     if size is not None:
@@ -318,17 +318,24 @@ def _evaluate_uuv(
     )
     runs, results = {}, []
     for method, refraction in METHODS:
-        fixes = locate_frames(session, pixels, refraction)
-        if refraction:  # a surveyed marker's offset (reference.toml), found through refraction
-            fixes, _ = apply_reference(session, fixes, "auto")
+        # a surveyed marker's offset (reference.toml), found through refraction
+        fixes, offline, _ = located(
+            session, pixels, refraction, None, "auto" if refraction else "off"
+        )
         print_warnings(session)
         (sess_dir / method).mkdir(parents=True, exist_ok=True)
         write_positions_csv(sess_dir / method / "positions.csv", fixes)
         err_ne = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, fixes.status == "ok", session.truth)
         err = np.hypot(*err_ne.T)
         runs[method] = (fixes, err)
-        smoothed, status = offline_track(fixes, *bounds)
-        write_smoothed_csv(sess_dir / method / SMOOTHED_NAME, fixes, smoothed, status)
+        smoothed, status = offline_track(offline, *bounds)
+        write_smoothed_csv(
+            sess_dir / method / SMOOTHED_NAME,
+            offline,
+            smoothed,
+            status,
+            traced_back(fixes, offline),
+        )
         sm_ne = error_ne_m(fixes.t_unix, smoothed.lat, smoothed.lon, smoothed.ok, session.truth)
         n = frames or len(fixes)
         s = replace(

@@ -5,7 +5,10 @@ A session with several UUVs (``uuvs/<id>/``) is processed as one UUV's (``--uuv`
 and its ``track.csv``; the UAV's telemetry and the video are shared.
 
 Pixels come from ``track.csv`` (``--use-track``, geometry only) or from tracking
-the session's video. ``--no-refraction`` runs the paper's straight-ray method.
+the session's video. ``--no-refraction`` runs the paper's straight-ray method. The video is tracked once forward
+and backward (:func:`groundstation.offline.track.track_session` ``both_ways``): positions.csv has the causal pass's
+fixes only (what a live run would have sent); the smoothed track also takes the fixes of the frames traced back from
+a re-acquisition (its ``traced_back`` column).
 
 Time: when the UAV link's delay is neither stated (``[timing] mavlink_latency_s``)
 nor measured (TIMESYNC in the tlog), the frames' offset to the telemetry is
@@ -23,6 +26,7 @@ Tracking the video also measures the camera's height from the UUV's size
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections import Counter
 from typing import NamedTuple
@@ -45,7 +49,7 @@ from groundstation.offline.bottom import (
 from groundstation.offline.reference import MODES as REFERENCE_MODES
 from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
-from groundstation.offline.smoothed import offline_track, write_smoothed_csv
+from groundstation.offline.smoothed import offline_track, traced_back, write_smoothed_csv
 from groundstation.offline.smoothed import summary as smoothed_summary
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
@@ -69,6 +73,9 @@ class Pixels(NamedTuple):
     v: np.ndarray
     status: np.ndarray
     sigma_px: np.ndarray | None = None
+    #: the same frames tracked forward and backward (:func:`frame_pixels` ``both_ways``): these pixels and those of
+    #: the frames traced back from a re-acquisition (ok too); None when none was (these are the offline ones too)
+    offline: Pixels | None = None
 
 
 def frame_pixels(
@@ -78,8 +85,11 @@ def frame_pixels(
     progress: bool = False,
     motion: bool = True,
     size: HeightFromSize | None = None,
+    both_ways: bool = False,
 ) -> Pixels:
-    """The UUV's :class:`Pixels` per frame: from track.csv or from tracking the video.
+    """The UUV's :class:`Pixels` per frame: from track.csv or from tracking the video (causal, as live; with
+    ``both_ways`` tracked once forward and backward, :func:`groundstation.offline.track.track_session`, the frames
+    traced back in ``offline``).
 
     Tracking the video of a session whose link delay is unknown, with ``motion``, also estimates the frames'
     offset to the telemetry and applies it when settled (see the module doc); an unknown delay is a warning.
@@ -100,7 +110,12 @@ def frame_pixels(
 
     measure = motion and session.telemetry.latency_source == "unknown"
     tracked = track_session(
-        session, tracker_name=tracker, progress=progress, measure_motion=measure, size=size
+        session,
+        tracker_name=tracker,
+        progress=progress,
+        measure_motion=measure,
+        size=size,
+        both_ways=both_ways,
     )
     session.warnings.extend(tracked.warnings)
     if size is not None:
@@ -111,7 +126,13 @@ def frame_pixels(
         session,
         "--no-motion-offset" if not motion else "no estimate from the video surer than that",
     )
-    return Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
+    both = Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
+    if tracked.bridged is None or not tracked.bridged.any():
+        return both
+    causal = [
+        np.where(tracked.bridged, np.nan, a) for a in (tracked.u, tracked.v, tracked.sigma_px)
+    ]
+    return Pixels(tracked.t, causal[0], causal[1], tracked.causal_status, causal[2], both)
 
 
 def _align_by_motion(session: Session, rotations) -> None:
@@ -147,7 +168,7 @@ def locate_frames(
 ) -> Fixes:
     """Fixes for :class:`Pixels` (or a tuple of its first four, e.g. track.csv's; see :func:`frame_pixels`), the
     poses corrected by ``correction`` (:func:`bottom_correction`) when given."""
-    t, u, v, track_status, sigma_px = Pixels(*pixels)
+    t, u, v, track_status, sigma_px = Pixels(*pixels)[:5]
     pose = camera_pose(session.calibration, session.telemetry, t)
     session.warnings.extend(
         f"{session.path}: {notice}" for notice in take_notices(session.telemetry)
@@ -170,6 +191,43 @@ def locate_frames(
                 f"is {fixes.status[i]} (camera height {pose.height_m[i]:.2f} m): check [mount] and [water]"
             )
     return fixes
+
+
+def located(
+    session: Session,
+    pixels: Pixels,
+    refraction: bool,
+    correction: PoseCorrection | None,
+    reference: str,
+) -> tuple[Fixes, Fixes, dict | None]:
+    """positions.csv's fixes (causal, as live), the smoothed track's (these and the frames traced back,
+    ``pixels.offline``) and positions.csv's reference cells (:func:`groundstation.offline.reference.apply`
+    ``reference``, the same correction for both; None without one)."""
+    if pixels.offline is None:
+        fixes, cells = apply_reference(
+            session, locate_frames(session, pixels, refraction, correction), reference, correction
+        )
+        return fixes, fixes, cells
+    both = locate_frames(session, pixels.offline, refraction, correction)
+    both, cells = apply_reference(session, both, reference, correction)
+    back = (pixels.offline.status == "ok") & (pixels.status != "ok")
+    causal = rows_replaced(both, locate_frames(session, pixels, refraction, correction), back)
+    for column in (cells or {}).values():  # the reference corrects ok fixes only
+        for i in np.flatnonzero(back):
+            column[i] = ""
+    return causal, both, cells
+
+
+def rows_replaced(fixes: Fixes, other: Fixes, rows: np.ndarray) -> Fixes:
+    """``fixes`` with the rows ``rows`` (bool per frame) taken from ``other`` (the same frames)."""
+    columns = {}
+    for f in dataclasses.fields(fixes):
+        mine = getattr(fixes, f.name)
+        if isinstance(mine, np.ndarray):
+            mine = mine.copy()
+            mine[rows] = getattr(other, f.name)[rows]
+        columns[f.name] = mine
+    return Fixes(**columns)
 
 
 def process_session(
@@ -231,11 +289,18 @@ def run(args) -> int:
     size = size_of(session, args.height_from_size, args.use_track)
     try:
         pixels = frame_pixels(
-            session, args.use_track, args.tracker, not args.quiet, not args.no_motion_offset, size
+            session,
+            args.use_track,
+            args.tracker,
+            not args.quiet,
+            not args.no_motion_offset,
+            size,
+            both_ways=True,
         )
         correction = bottom_correction(session, pixels, args.pose_from_bottom, not args.quiet)
-        fixes = locate_frames(session, pixels, not args.no_refraction, correction)
-        fixes, reference_cells = apply_reference(session, fixes, args.reference, correction)
+        fixes, offline, reference_cells = located(
+            session, pixels, not args.no_refraction, correction, args.reference
+        )
     finally:
         print_warnings(session)
     write_positions_csv(out / "positions.csv", fixes)
@@ -245,9 +310,10 @@ def run(args) -> int:
     if reference_cells is not None:
         append_columns(out / "positions.csv", reference_cells)
     print(f"{summary(fixes)} -> {out / 'positions.csv'}")
-    smoothed, status = offline_track(fixes, args.uuv_max_speed_mps, args.uuv_max_accel_mps2)
-    write_smoothed_csv(out / SMOOTHED_NAME, fixes, smoothed, status)
-    print(f"{smoothed_summary(status, smoothed)} -> {out / SMOOTHED_NAME}")
+    smoothed, status = offline_track(offline, args.uuv_max_speed_mps, args.uuv_max_accel_mps2)
+    traced = traced_back(fixes, offline)
+    write_smoothed_csv(out / SMOOTHED_NAME, offline, smoothed, status, traced)
+    print(f"{smoothed_summary(status, smoothed, traced)} -> {out / SMOOTHED_NAME}")
     if size is not None:
         print(size.summary())
     return 0

@@ -13,9 +13,13 @@ Columns: ``positions.csv``'s first six (``t,lat,lon,depth_m,h_acc_m,status``), s
 sigma_e_m,cov_ne_m2`` (against the truth: the smoothed part plus the error the fixes
 share), ``sigma_shared_m`` (that shared part's DRMS: the floor no smoothing goes below),
 ``vn_mps,ve_mps`` (the smoothed velocity) and ``gap_s`` (0 at a frame with its own fix;
-the time between the fixes around a bridged frame). ``status``: ``ok`` where there is a
-smoothed position; else the frame's own word from positions.csv, or ``refused`` for a
-fix the gates refused that no fixes around it bridge.
+the time between the fixes around a bridged frame) and ``traced_back`` (1: the frame's fix
+is not in positions.csv: the UUV's pixel there was found by tracing a re-acquisition back
+through the frames the causal pass had lost it in, as ``process`` and ``evaluate`` track
+the video, :func:`groundstation.offline.track.track_session` ``both_ways``; else 0).
+``status``: ``ok`` where there is a smoothed position; else the frame's own word (from
+positions.csv, or ``ok`` for a fix traced back), or ``refused`` for a fix the gates
+refused that no fixes around it bridge.
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ COLUMNS = (
     "vn_mps",
     "ve_mps",
     "gap_s",
+    "traced_back",
 )
 
 
@@ -63,8 +68,21 @@ def offline_track(
     return smoothed, status
 
 
-def write_smoothed_csv(path: Path, fixes: Fixes, smoothed: Smoothed, status: np.ndarray) -> None:
-    """The table of the module doc, one row per frame of ``fixes``."""
+def traced_back(causal: Fixes, offline: Fixes) -> np.ndarray:
+    """Per frame (bool): ``offline`` (the smoothed track's fixes) has a fix there that ``causal`` (positions.csv's,
+    the same frames) has not: a frame traced back from a re-acquisition."""
+    return (offline.status == "ok") & (causal.status != "ok")
+
+
+def write_smoothed_csv(
+    path: Path,
+    fixes: Fixes,
+    smoothed: Smoothed,
+    status: np.ndarray,
+    traced: np.ndarray | None = None,
+) -> None:
+    """The table of the module doc, one row per frame of ``fixes``; ``traced``: :func:`traced_back` (None: none)."""
+    traced = np.zeros(len(fixes), dtype=bool) if traced is None else traced
     cov, shared = smoothed.cov_m2, smoothed.cov_shared_m2
     columns = (
         fixes.t_unix,
@@ -80,8 +98,9 @@ def write_smoothed_csv(path: Path, fixes: Fixes, smoothed: Smoothed, status: np.
         smoothed.vn_mps,
         smoothed.ve_mps,
         smoothed.gap_s,
+        traced.astype(int).astype(str),
     )
-    digits = (6, 9, 9, 4, 4, None, 4, 4, 6, 4, 4, 4, 3)
+    digits = (6, 9, 9, 4, 4, None, 4, 4, 6, 4, 4, 4, 3, None)
     write_table(
         path, COLUMNS, ([_cell(v, d) for v, d in zip(row, digits)] for row in zip(*columns))
     )
@@ -93,12 +112,14 @@ def _cell(value, digits: int | None) -> str:
     return f"{value:.{digits}f}" if math.isfinite(value) else ""
 
 
-def summary(status: np.ndarray, smoothed: Smoothed) -> str:
-    """One line: how many frames have a smoothed position, how many of them bridged, the noise's share of the fixes'
-    covariance (frame to frame, or over a wave's period) and the acceleration bound (median over the frames)."""
+def summary(status: np.ndarray, smoothed: Smoothed, traced: np.ndarray | None = None) -> str:
+    """One line: how many frames have a smoothed position, how many of them bridged (and with ``traced``,
+    :func:`traced_back`, how many traced back), the noise's share of the fixes' covariance (frame to frame, or over
+    a wave's period) and the acceleration bound (median over the frames)."""
     bridged = int(np.sum(smoothed.ok & (smoothed.gap_s > 0)))
+    back = "" if traced is None else f", {int(np.sum(traced & smoothed.ok))} traced back"
     return (
-        f"smoothed: {int(smoothed.ok.sum())} of {len(status)} frames ({bridged} bridged), "
+        f"smoothed: {int(smoothed.ok.sum())} of {len(status)} frames ({bridged} bridged{back}), "
         f"{int(np.sum(status == 'refused'))} fixes refused; noise's share of the fixes' covariance "
         f"{smoothed.white_share:.3f} (over a wave's period {smoothed.wave_share:.3f}), acceleration bound "
         f"{float(np.median(smoothed.accel_mps2[smoothed.ok])) if smoothed.ok.any() else float('nan'):.2f} m/s²"

@@ -75,6 +75,7 @@ class TrackedVideo:
     bridged: np.ndarray | None = (
         None  # bool: frames found by tracing a re-acquisition back (``both_ways``); else the causal pass's
     )
+    causal_status: np.ndarray | None = None  # the causal pass's words (status but where bridged)
 
 
 def _init_row(session: Session, t: np.ndarray) -> int:
@@ -134,6 +135,7 @@ def track_session(
     )
     timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0, "backward": 0.0}
     bridged = np.zeros(n, dtype=bool)
+    causal_words: dict[int, str] = {}  # row -> the causal pass's word a bridged "ok" replaced
     period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
     gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
     pending = None  # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
@@ -207,6 +209,7 @@ def track_session(
                     if t[row] - t[pending[0]] >= CONFIRM_BACK_S:
                         t0 = time.perf_counter()
                         for r, back in _trace_back(tracking, pose, *pending, gap):
+                            causal_words[r] = status[r]
                             status[r], u[r], v[r], conf[r] = "ok", back.u, back.v, back.confidence
                             sigma[r], bridged[r] = back.sigma_px, True
                         gap.clear()
@@ -243,9 +246,11 @@ def track_session(
         warnings.append(f"{session.video_path}: {extra} frames beyond video_frames.csv ignored")
     not_ok = status != "ok"
     u[not_ok], v[not_ok], sigma[not_ok] = np.nan, np.nan, np.nan
-    return TrackedVideo(
-        frame_idx, t, u, v, status, conf, sigma, timings, warnings, rotations, bridged
-    )
+    causal_status = status.copy()
+    for r, word in causal_words.items():
+        causal_status[r] = word
+    tracked = (frame_idx, t, u, v, status, conf, sigma)
+    return TrackedVideo(*tracked, timings, warnings, rotations, bridged, causal_status)
 
 
 def _trace_back(forward: TrackingSession, pose, row: int, image, found, gap) -> list:
