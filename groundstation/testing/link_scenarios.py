@@ -251,19 +251,21 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
 
 
 def make_session(out: Path) -> Path:
-    """nadir_hover rendered for :data:`SESSION_S` s at :data:`SESSION_FPS` fps (once per directory)."""
+    """nadir_hover rendered for :data:`SESSION_S` s at :data:`SESSION_FPS` fps (once per directory), by the
+    simulator's own command (``skyfix sim``: the groundstation imports no module of the simulator)."""
     if (out / "session.toml").exists():
         return out
-    from sim_fixtures.generate import generate
-    from sim_fixtures.scenario import scenario_from_dict
-
     text = (
         (ROOT / "sim_fixtures" / "scenarios" / "nadir_hover.toml")
         .read_text()
         .replace("duration_s = 7.0", f"duration_s = {SESSION_S}\nfps = {SESSION_FPS}")
     )
     assert tomllib.loads(text)["fps"] == SESSION_FPS
-    generate(scenario_from_dict(tomllib.loads(text)), out, text)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    scenario = out.parent / f"{out.name}.toml"
+    scenario.write_text(text)
+    cmd = skyfix("sim", str(scenario), "--out", str(out), "--quiet")
+    subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
     return out
 
 
