@@ -288,9 +288,9 @@ def status_words_page() -> str:
 
 
 def gps_input_page() -> str:
-    from groundstation.live.sinks import gps_input as sink
     from groundstation.mavlink.ids import GPS_COMPID, SKYFIX_SYSID
     from groundstation.mavlink.ingest import mavutil
+    from groundstation.runtime import gps_input as sink
     from localizer.fix import Fix
 
     t = 1_763_800_000.033

@@ -23,7 +23,7 @@ from typing import Annotated, Literal
 from annotated_types import Ge, Le
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from groundstation.live.sinks.no_fix import NO_FIX_WHY
+from groundstation.runtime.no_fix import NO_FIX_WHY
 from localizer.fix import WORDS, Fix
 from localizer.fix_gate import STATES as GATE_STATES
 from localizer.status import STATUSES, Status

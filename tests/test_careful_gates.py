@@ -12,12 +12,12 @@ import time
 import pytest
 
 from groundstation.live.pipeline import FrameInfo
-from groundstation.live.sinks.gps_input import GpsInputSink
 from groundstation.live.track_memory import (
     read_track,
     track_path,
     write_track,
 )
+from groundstation.runtime.gps_input import GpsInputSink
 from groundstation.testing.careful_gates import (
     LATENCY_S,
     kept_gate,

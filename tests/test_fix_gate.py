@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from live_helpers import free_port
 
-from groundstation.live.sinks.gps_input import LOSS_STATUSES, GpsInputSink, mavlink_gps_link
 from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.process import process_session
+from groundstation.runtime.gps_input import LOSS_STATUSES, GpsInputSink, mavlink_gps_link
 from groundstation.session.read import load_session
 from groundstation.testing import gate_streams
 from groundstation.testing.gate_streams import (

@@ -18,7 +18,7 @@ import time
 
 from live_helpers import free_port
 
-from groundstation.live.sinks.gps_input import GpsInputSink
+from groundstation.runtime.gps_input import GpsInputSink
 from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.testing.link_scenarios import start_router
 from groundstation.zenoh_session import open_session

@@ -9,14 +9,14 @@ from datetime import UTC, datetime, timedelta
 import pytest
 from live_helpers import free_port, wait_for
 
-from groundstation.live.sinks.gps_input import (
+from groundstation.mavlink.ingest import mavutil
+from groundstation.runtime.gps_input import (
     IGNORE_ALL,
     GpsInputSink,
     gps_input_fields,
     gps_time,
     mavlink_gps_link,
 )
-from groundstation.mavlink.ingest import mavutil
 from localizer.fix import Fix
 from localizer.fix_gate import FixGate
 
@@ -212,8 +212,8 @@ def test_injection_through_blueos_mavlink_in():
 def test_every_reason_for_no_fix_has_plain_words():
     """Each word a no-fix message can be for (a fix status, a gate's refusal, the sink's own) has the operator's
     words; the status's schema lists exactly these."""
-    from groundstation.live.sinks.no_fix import NO_FIX_WHY
     from groundstation.messages import GpsInputStatus
+    from groundstation.runtime.no_fix import NO_FIX_WHY
     from localizer.fix_gate import REASONS
     from localizer.status import STATUSES
 

@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from groundstation.cli import main
-from groundstation.live.sinks.gps_input import LOSS_STATUSES
 from groundstation.offline.evaluate import shape_m
 from groundstation.offline.process import process_session
 from groundstation.offline.smoothed import COLUMNS, offline_track
+from groundstation.runtime.gps_input import LOSS_STATUSES
 from groundstation.session.positions import read_positions_csv
 from groundstation.session.read import load_session, read_table
 from localizer.fix import Fixes

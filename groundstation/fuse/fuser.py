@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from groundstation.live.sinks.gps_input import LOSS_STATUSES
+from groundstation.runtime.gps_input import LOSS_STATUSES
 from localizer.clock import Median
 from localizer.fix import Fix
 from localizer.fix_gate import CONFIRM_S, MAX_REACH_M, MAX_SPEED_MPS, FixGate

@@ -5,14 +5,14 @@ Each drone's ``skyfix run`` publishes its fixes on its own key under the UUV's
 laptop, or on the UUV's companion computer) subscribes to ``skyfix/uuv/<id>/drone/*/fix``,
 takes the drones named with ``--source`` (any other key's fixes are counted, never fused; without a
 ``--source`` it does not start), fuses (:mod:`groundstation.fuse.fuser`) and is the one that sends GPS_INPUT
-(:mod:`groundstation.live.sinks.gps_input`, its gate judging accuracy, age and order only: each
+(:mod:`groundstation.runtime.gps_input`, its gate judging accuracy, age and order only: each
 source was judged against its own track). Out, on Zenoh: the fused fixes (``skyfix.fix/1``,
 unchanged) on ``skyfix/uuv/<id>/fix``, the status (``skyfix.fuse-status/1``) once a second on
 ``skyfix/uuv/<id>/fuse/status`` with a liveliness token, and for late joiners queryables
 answering the latest of both. A drone that drops out leaves the others' fixes going out with
 no gap; one that joins is used after its own gate confirmed it (a second).
 
-Before anything is opened, the start's checks of ``skyfix run`` (:mod:`groundstation.live.preflight`): the
+Before anything is opened, the start's checks of ``skyfix run`` (:mod:`groundstation.runtime.preflight`): the
 drones named (``--source``), GPS_INPUT's connection string and signing key (readable by its owner only), and a
 Zenoh that trusts nobody by default (TLS with mutual authentication and access control beyond loopback, no
 multicast scouting, its credentials files readable, the private ones by their owner only; ``--zenoh-insecure``
@@ -38,16 +38,16 @@ from pathlib import Path
 import zenoh
 from pydantic import ValidationError
 
-from groundstation.live.preflight import (
+from groundstation.logs import Throttle, kind_of
+from groundstation.mavlink.link import read_signing_key
+from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
+from groundstation.runtime.gps_input import GpsInputSink, mavlink_gps_link
+from groundstation.runtime.preflight import (
     link_problem,
     private_file,
     zenoh_credentials,
     zenoh_problem,
 )
-from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
-from groundstation.logs import Throttle, kind_of
-from groundstation.mavlink.link import read_signing_key
-from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
 from groundstation.runtime.queries import ZenohControl
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped

@@ -7,7 +7,7 @@ Zenoh, :mod:`.sources.depth_zenoh`, or ArduSub's own over BlueOS's Zenoh or MAVL
 in :mod:`.registry`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`groundstation.video.live`),
 the per-frame :mod:`.pipeline` (and the height from the UUV's size, :mod:`groundstation.height_from_size`),
-GPS_INPUT to the UUV (:mod:`.sinks.gps_input`),
+GPS_INPUT to the UUV (:mod:`groundstation.runtime.gps_input`),
 the 1 Hz Zenoh status (:mod:`groundstation.runtime.zenoh_fix`), the operator's commands
 (:mod:`.control`), the web page (:mod:`.ui`, unless ``--no-ui``) and, with ``--record``,
 the recorder (:mod:`.sinks.recorder`). The web page's port is taken before any worker
@@ -51,7 +51,6 @@ from groundstation.live import config, registry
 from groundstation.live.control import Control
 from groundstation.live.pipeline import Pipeline
 from groundstation.live.registry import DepthInput, UavInput
-from groundstation.live.sinks.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.live.sinks.recorder import Recorder, new_recording
 from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uuv_position import UuvPosition, parse_hint
@@ -61,6 +60,7 @@ from groundstation.live.ui.server import PageUuv, WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
 from groundstation.mavlink.link import read_signing_key
+from groundstation.runtime.gps_input import GpsInputSink, mavlink_gps_link
 from groundstation.runtime.queries import ZenohControl
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import (

@@ -1,7 +1,7 @@
 """A MAVLink link skyfix owns: one thread that reads, writes and reconnects, never the event loop.
 
 Used for the UAV's telemetry (:mod:`groundstation.live.sources.uav_mavlink`) and for GPS_INPUT to the UUV
-(:mod:`groundstation.live.sinks.gps_input`). One thread (named after the link) owns the transport
+(:mod:`groundstation.runtime.gps_input`). One thread (named after the link) owns the transport
 (:mod:`groundstation.mavlink.transport`): it opens it, reads and parses what arrives, writes what is
 handed over, sends the HEARTBEAT (if the link has one) every second, and on any error
 closes the transport and opens it again with back-off (:data:`BACKOFF_S`, doubling up to

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.live.sinks.gps_input import LOSS_STATUSES
 from groundstation.offline.process import frame_pixels, locate_frames
+from groundstation.runtime.gps_input import LOSS_STATUSES
 from groundstation.session.read import load_session, uuv_ids
 from localizer.exchange import Fleet
 from localizer.fix import Fixes

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.live.sinks.gps_input import LOSS_STATUSES
+from groundstation.runtime.gps_input import LOSS_STATUSES
 from groundstation.session.positions import write_table
 from localizer.fix import Fixes
 from localizer.fix_gate import FixGate, gate_offline
