@@ -836,7 +836,7 @@ class GpsInputStatus(Section):
         None,
         description="why the last message said no fix (null when it carried a fix): a fix status word (the "
         "newest frame's), gate_<refusal> (the safety gates held the newest fix back), no_frames, no_new_fix (the "
-        "last valid fix aged out and no frame came after it), stopped (groundstation/live/sinks/no_fix.py)",
+        "last valid fix aged out and no frame came after it), stopped (groundstation/runtime/no_fix.py)",
     )
     no_fix_why: str | None = Field(None, description="the same in the operator's words")
     sent_h_acc_m: NonNegative = Field(
