@@ -4,7 +4,7 @@ Nothing here is copied by hand: every CLI command's ``--help`` comes from the pa
 register (:data:`groundstation.cli.COMMANDS`), every configuration key with its default and unit from the
 pydantic contracts' JSON Schemas (:mod:`groundstation.contracts`, :mod:`sim_fixtures.contracts`), the
 status words from :data:`localizer.status.STATUSES`, GPS_INPUT field by field from the sink's own
-:func:`~groundstation.live.sinks.gps_input.gps_input_fields`, ``positions.csv``'s columns from
+:func:`~groundstation.runtime.gps_input.gps_input_fields`, ``positions.csv``'s columns from
 :mod:`groundstation.session.positions` and the benches from their docstrings. A change in the code is a
 change in the site; ``mkdocs build --strict`` fails on a broken link.
 """
@@ -319,7 +319,7 @@ def gps_input_page() -> str:
                 (
                     f"skyfix sends MAVLink `GPS_INPUT` from system {SKYFIX_SYSID}, component {GPS_COMPID}. The table is "
                     "made at build time by the sink's own `gps_input_fields` "
-                    "(`groundstation/live/sinks/gps_input.py`) for an example fix (exposure "
+                    f"(`{sink.__name__.replace('.', '/')}.py`) for an example fix (exposure "
                     f"`t_gnss` = {t - 0.002:.3f}, `h_acc_m` 0.21, `v_acc_m` 0.31, sent 50 ms later) and for no fix."
                 ),
                 "",
