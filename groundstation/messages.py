@@ -132,8 +132,8 @@ class FixMessage(Message):
         None,
         description="1-sigma of each of u and v as it went into h_acc_m, "
         "pixels: the tracker's own (its match, the window it searched, the frames "
-        "since its last match and since it (re)acquired the UUV; README, 'How sure "
-        "the pixel is')",
+        "since its last match and since it (re)acquired the UUV; docs: explanation/tracking, "
+        "'How sure the pixel is')",
     )
     sigma_uav_m: NonNegative = Field(
         None,
@@ -143,8 +143,8 @@ class FixMessage(Message):
     )
     height_source: str | None = Field(
         None,
-        description="what measured the height within the last 30 s (README, "
-        "'The height above the water'): takeoff or amsl (nothing: the EKF's height), "
+        description="what measured the height within the last 30 s (docs: "
+        "explanation/height): takeoff or amsl (nothing: the EKF's height), "
         "gnss_rtk, gnss, baro+gnss_rtk, baro+gnss, rangefinder, size, joined by +",
     )
     depth_source: str | None = Field(

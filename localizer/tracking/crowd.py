@@ -7,7 +7,7 @@ boxes (pixels x, y, w, h, with their frame index) and says ``same_vehicle`` for 
 (:func:`same_spot`) within :data:`NEAR_FRAMES` frames: which tracker is right is not known, so neither gives a
 fix until they part or the operator selects again. Two UUVs
 passing right over each other look the same, and also get no fix while they overlap; which one is which when
-they part, the boxes cannot tell (see the README's several-UUV section).
+they part, the boxes cannot tell (docs/explanation/tracking.md, "Several UUVs").
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ a while. :func:`pixel_sigma_px` adds these terms in quadrature:
   template holds the point it started on); a box given as exact (``init_bbox``) is taken as drawn.
 
 The constants are calibrated on generated sessions against the exact pixel the simulator
-writes (``bench/pixel_sigma.py``; the README's "How sure the pixel is" gives the numbers):
+writes (``bench/pixel_sigma.py``; docs/explanation/tracking.md, "How sure the pixel is", explains them):
 the match's terms so that no scenario has fewer than 90 % of its tracked pixels within twice
 their DRMS (√2·σ, h_acc's reading): 91-100 % per session, 98.7 % pooled; the outline's from
 clicks and acquisitions beside the UUV's shadow and elsewhere (2-6 px off a vehicle 28 px
