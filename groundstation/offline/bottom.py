@@ -57,7 +57,6 @@ import numpy as np
 
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session
-from groundstation.video.file import open_video
 from localizer import bottom
 from localizer.calibration import Calibration
 from localizer.fix import POSE_COLUMNS, Fixes
@@ -158,12 +157,7 @@ def track_bottom(
     next_id = 0
     bar = progress_bar(len(rows), f"{session.path.name}: bottom features", progress)
     try:
-        with open_video(
-            session.video_path,
-            expected_size=(cal.camera.width, cal.camera.height),
-            indices=session.frames["frame"].astype(int),
-            grey=True,
-        ) as video:
+        with session.open_video(grey=True) as video:
             for vf in video.prefetch():
                 k = wanted.get(vf.index)
                 if k is None:

@@ -32,7 +32,6 @@ from groundstation.offline.bottom import PoseCorrection, pixels_at, subsample_ro
 from groundstation.outputs import output_dir
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
-from groundstation.video.file import open_video
 from localizer.geodesy import ned_to_geodetic
 from localizer.pose import CameraPose, camera_pose, take
 from localizer.ray import offset_to_pixel, pixel_to_offset
@@ -262,11 +261,7 @@ def make_mosaic(
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows) if k in polys}
     bar = progress_bar(len(wanted), f"{session.path.name}: mosaic", progress)
     try:
-        with open_video(
-            session.video_path,
-            expected_size=(cam.width, cam.height),
-            indices=session.frames["frame"].astype(int),
-        ) as video:
+        with session.open_video() as video:
             for vf in video.prefetch():
                 k = wanted.get(vf.index)
                 if k is None:

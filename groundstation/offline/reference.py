@@ -21,7 +21,6 @@ import numpy as np
 
 from groundstation.offline.bottom import subsample_rows
 from groundstation.session.read import Session, SessionError
-from groundstation.video.file import open_video
 from localizer import reference
 from localizer.fix import Fixes
 from localizer.pose import camera_pose
@@ -102,12 +101,7 @@ def sightings(session: Session, ref: reference.Reference, radius_m: float):
     reach_m = SEARCH_SIGMAS * (np.nan_to_num(pose.sigma_uav_m) + slant_m * angle)
     u, v = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
-    with open_video(
-        session.video_path,
-        expected_size=(cal.camera.width, cal.camera.height),
-        indices=session.frames["frame"].astype(int),
-        grey=True,
-    ) as video:
+    with session.open_video(grey=True) as video:
         for vf in video.prefetch():
             k = wanted.get(vf.index)
             if k is None or not np.isfinite(u0[k]):

@@ -43,7 +43,6 @@ from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.video_motion import MotionThread
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session, SessionError
-from groundstation.video.file import open_video
 from groundstation.video.frames import VideoError
 from localizer.pose import camera_pose
 from localizer.tracking import GREY_TRACKERS
@@ -152,12 +151,7 @@ def track_session(
     done = 0
     started = False
     try:
-        with open_video(
-            session.video_path,
-            expected_size=(cal.camera.width, cal.camera.height),
-            indices=frame_idx,
-            grey=tracker_name in GREY_TRACKERS,
-        ) as video:
+        with session.open_video(grey=tracker_name in GREY_TRACKERS) as video:
             frames = video.prefetch()
             while True:
                 t0 = time.perf_counter()

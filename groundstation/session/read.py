@@ -27,6 +27,7 @@ from groundstation.mavlink.ingest import ingest, uav_system
 from groundstation.session import SessionError
 from groundstation.session.depth import read_depth
 from groundstation.session.tlog import read_tlog
+from groundstation.video.file import Video, open_video
 from localizer.calibration import Calibration, ConfigError
 from localizer.depth import SOURCE_WORDS
 from localizer.telemetry import Telemetry
@@ -108,6 +109,17 @@ class Session:
     warnings: list[str] = field(default_factory=list)
     uav_sysid: int | None = None
     uuv_id: str = PRIMARY_UUV  # whose depth, track, truth and [tracker] these are (see uuv_ids)
+
+    def open_video(self, grey: bool = False) -> Video:
+        """The session's video: frames numbered by ``video_frames.csv``, each checked against the calibration's
+        image size; ``grey``: luma only (see :func:`groundstation.video.file.open_video`)."""
+        cam = self.calibration.camera
+        return open_video(
+            self.video_path,
+            expected_size=(cam.width, cam.height),
+            indices=self.frames["frame"].astype(int),
+            grey=grey,
+        )
 
 
 def _number(text: str, where: str, col: str, allow_empty: bool) -> float:
