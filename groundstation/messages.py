@@ -770,7 +770,7 @@ class DatagramStatus(Section):
 
 
 class SenderStatus(Section):
-    """An ``rtp://`` or ``udp://`` input's sender lock (groundstation.sender_lock)."""
+    """An ``rtp://`` or ``udp://`` input's sender lock (groundstation.runtime.sender_lock)."""
 
     peer: str | None = Field(
         description="the address HOST:PORT datagrams are taken from (null: none yet, or every sender)"

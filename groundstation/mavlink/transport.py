@@ -39,7 +39,7 @@ import sys
 import time
 
 # ANY_PEER (``--mavlink-peer any``) and RELOCK_S are the lock's, named here for the link's users
-from groundstation.sender_lock import ANY_PEER, RELOCK_S, SenderLock  # noqa: F401
+from groundstation.runtime.sender_lock import ANY_PEER, RELOCK_S, SenderLock  # noqa: F401
 
 WRITE_TIMEOUT_S = 1.0
 UDP_RCVBUF = (
@@ -189,7 +189,7 @@ class Udp(_Transport):
             socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF
         )  # the kernel caps it (rmem_max)
         self.listen = listen
-        # listening: the sender lock (groundstation.sender_lock; locked False: every sender read, ANY_PEER)
+        # listening: the sender lock (groundstation.runtime.sender_lock; locked False: every sender read, ANY_PEER)
         self.lock: SenderLock | None = None
         self._dest: tuple[str, int] | None = None
         if listen:

@@ -10,7 +10,7 @@
 | other ``scheme://`` | url | whatever FFmpeg opens, live |
 | a path | file | a file, read once |
 
-``udp://`` and ``rtp://`` take one sender (:mod:`groundstation.sender_lock`): the first whose datagram is
+``udp://`` and ``rtp://`` take one sender (:mod:`groundstation.runtime.sender_lock`): the first whose datagram is
 the stream's, or ``peer=HOST:PORT`` (the camera's source address), or every sender with ``peer=any``;
 the others' datagrams are counted (the status's ``sender``), never read.
 
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
-from groundstation.sender_lock import ANY_PEER, parse_peer
+from groundstation.runtime.sender_lock import ANY_PEER, parse_peer
 from groundstation.video.frames import VideoError
 
 # No "fflags nobuffer": it throws away the packets read while probing, and with them the

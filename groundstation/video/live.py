@@ -61,7 +61,7 @@ from collections.abc import Callable
 import av
 import numpy as np
 
-from groundstation.sender_lock import SenderLock
+from groundstation.runtime.sender_lock import SenderLock
 from groundstation.threads import Handoff, Supervised, in_thread
 from groundstation.video.ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
 from groundstation.video.frames import LiveFrame, VideoError, decoder, ffmpeg_reason, put_until
@@ -160,7 +160,7 @@ class VideoLive:
         self.handoff: Handoff | None = None
         self.reader = Supervised("video", self._read)
         self._datagrams: DatagramInput | None = None  # the open rtp:// or udp:// input
-        # rtp://, udp://: the one sender taken, kept across its connections (groundstation.sender_lock)
+        # rtp://, udp://: the one sender taken, kept across its connections (groundstation.runtime.sender_lock)
         src = self.source
         self.sender_lock = (
             SenderLock(src.peer, not src.any_sender, relock_s=read_timeout_s)

@@ -8,7 +8,7 @@ yields one ``av.Packet`` per whole access unit (``pts`` in 1/90 000 s); the deco
 The codec is the depacketizer's: given for RTP, read from the PMT for MPEG-TS — the open waits
 for it as FFmpeg's open waits for its probe, and raises ``TimeoutError`` after ``open_timeout_s``
 (:class:`~groundstation.video.frames.VideoError` for a program without H.264/H.265 video).
-Each datagram is read only when the input's :class:`~groundstation.sender_lock.SenderLock` admits its
+Each datagram is read only when the input's :class:`~groundstation.runtime.sender_lock.SenderLock` admits its
 sender; the lock is taken by the first sender whose datagram the depacketizer reads as the stream's (one
 that adds to ``bad_packets`` does not lock), and is the caller's, kept across reconnections: a second
 sender neither splices its packets into the stream nor takes the port over while the camera sends (a
@@ -26,7 +26,7 @@ from fractions import Fraction
 
 import av
 
-from groundstation.sender_lock import SenderLock
+from groundstation.runtime.sender_lock import SenderLock
 from groundstation.video.frames import VideoError
 from groundstation.video.rtp import VIDEO_HZ
 
