@@ -163,9 +163,8 @@ def fly(obs: Observer, pilot: Pilot) -> dict[str, float]:
             )
         pilot.x = FORWARD if what == "forward" else 0
         pilot.z = STICK[what]
-        time.sleep(
-            seconds
-        )  # the flight's own pace (the simulator runs in real time), not a condition
+        # the flight's own pace (the simulator runs in real time), not a condition
+        time.sleep(seconds)
     marks["end"] = time.time()
     return marks
 
