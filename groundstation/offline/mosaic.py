@@ -4,23 +4,27 @@ Frames are taken about ``--rate-hz`` apart (:func:`groundstation.offline.bottom.
 camera's pose at its time (:func:`localizer.pose.camera_pose`). A frame's footprint on the floor (its border's
 pixels through the refracting flat surface to the floor's depth, :func:`localizer.ray.pixel_to_offset`, no
 farther than :data:`MAX_RANGE` slant heights) bounds the cells it can fill; each cell of the north-up grid is
-projected back into the frame (:func:`localizer.ray.offset_to_pixel`) and sampled there. A cell keeps the sample
-of the frame whose camera was nearest above it (nearest-to-nadir blending: no ghosting of a misplaced frame). The
-UUV's pixel (track.csv) and a disc around it (:func:`groundstation.offline.bottom.uuv_radius_px`: its shadow
-too) are left out.
+projected back into the frame (:func:`localizer.ray.offset_to_pixel`) and sampled there. The cells' colours are
+the weighted mean of the frames' samples (:func:`feather_weight`: fading out towards each image's border, so no
+seam shows where a frame ends, and favouring frames seen near nadir). The UUV's pixel (the tracker's: the
+``u``, ``v`` of a positions.csv, :func:`uuv_pixels`; else track.csv) and a disc around it
+(:func:`groundstation.offline.bottom.uuv_radius_px`: its shadow too) are left out.
 
 The grid is in the UTM zone of the session's first pose (WGS84, metres, EPSG 326xx/327xx); a cell's UTM
 coordinates go to the camera's local north/east by each frame's own affine map (UTM's scale and meridian
 convergence at the camera, from two points 1 m north and east of it). The video is read once, frame by frame;
-only the output grid is held. Written as a Cloud-Optimised GeoTIFF (``mosaic.tif``: RGB and an alpha band,
-through rasterio's GDAL), and beside it ``mosaic.json``: the grid, the frames used, and the mosaic's
-accuracy (:func:`accuracy_m`).
+the blend's sums are kept in tiles (:class:`Accumulator`), at most :data:`MAX_TILES` in memory and the rest on
+disk, so the memory does not grow with the recording. Written as a Cloud-Optimised GeoTIFF (``mosaic.tif``: RGB
+and an alpha band, through rasterio's GDAL), and beside it ``mosaic.json``: the grid, the frames used, where the
+UUV's pixels came from, and the mosaic's accuracy (:func:`accuracy_m`).
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import tempfile
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +35,7 @@ from groundstation.offline.bottom import MODES as BOTTOM_MODES
 from groundstation.offline.bottom import PoseCorrection, pixels_at, subsample_rows, uuv_radius_px
 from groundstation.outputs import output_dir
 from groundstation.progress import progress as progress_bar
+from groundstation.session.positions import read_positions_csv
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
 from localizer.geodesy import ned_to_geodetic
 from localizer.pose import CameraPose, camera_pose, take
@@ -42,6 +47,11 @@ RATE_HZ = 2.0  # frames used per second of video (default)
 N_WATER = 1.34
 MAX_RANGE = 3.0  # a footprint reaches at most this many times the camera's height above the floor
 BORDER_SAMPLES = 16  # pixels per image edge projected to the floor for the footprint
+FEATHER = (
+    0.1  # the blend's weight rises from the image's border over this share of its shorter side
+)
+TILE = 256  # the blend's tiles and the GeoTIFF's blocks, cells a side
+MAX_TILES = 96  # tiles of the blend held in memory (16 bytes a cell: 100 MB), the rest on disk
 #: pose statuses whose camera is known: the UUV's depth is not needed for the floor
 USABLE = ("ok", "no_depth", "stale_depth")
 
@@ -156,11 +166,20 @@ def _grid(footprints_utm: list[np.ndarray], epsg: int, gsd_m: float) -> Grid:
     )
 
 
-def _paint(
-    image, grid: Grid, poly_utm, xy_cam, jac, camera, R, height_m, floor_depth_m, uuv, rgb, best
-):
-    """Sample ``image`` (BGR) into the cells inside ``poly_utm`` where this frame's camera is nearer above than
-    the one that filled them; ``uuv`` = (u, v, radius px) is left out (NaN: nothing)."""
+def feather_weight(camera, u, v, ne_m: np.ndarray, lever_m: float) -> np.ndarray:
+    """A sample's weight in the blend: rising from 0 at the image's border to 1 at :data:`FEATHER` of its shorter
+    side inside (no seams where frames end), times (lever² / (lever² + ρ²))² for the floor point ρ m (horizontal)
+    from below the camera, ``lever_m`` its height plus the floor's refracted depth (frames seen near nadir count most:
+    a slightly misplaced oblique frame blurs less)."""
+    edge = np.minimum.reduce([u, camera.width - 1 - u, v, camera.height - 1 - v])
+    ramp = np.clip(edge / (FEATHER * min(camera.width, camera.height)), 0.0, 1.0)
+    rho2 = np.sum(np.square(ne_m), axis=-1)
+    return ramp * np.square(lever_m**2 / (lever_m**2 + rho2))
+
+
+def _paint(image, grid: Grid, poly_utm, xy_cam, jac, camera, R, height_m, floor_depth_m, uuv, acc):
+    """Add ``image``'s (BGR) samples, weighted (:func:`feather_weight`), into the cells inside ``poly_utm``;
+    ``uuv`` = (u, v, radius px): its disc is left out (NaN: nothing)."""
     col = (poly_utm[:, 0] - grid.west_m) / grid.gsd_m - 0.5
     row = (grid.north_m - poly_utm[:, 1]) / grid.gsd_m - 0.5
     c0, c1 = max(0, int(np.floor(col.min()))), min(grid.width, int(np.ceil(col.max())) + 1)
@@ -176,7 +195,6 @@ def _paint(
     dxy = np.stack([x - xy_cam[0], y - xy_cam[1]], axis=-1)
     ne = dxy @ np.linalg.inv(jac).T
     u, v = offset_to_pixel(camera, R, ne, height_m, floor_depth_m, N_WATER)
-    score = np.linalg.norm(ne, axis=-1)
     ok = (
         (inside == 1)
         & np.isfinite(u)
@@ -185,19 +203,84 @@ def _paint(
         & (u <= camera.width - 1)
         & (v >= 0)
         & (v <= camera.height - 1)
-        & (score < best[r0:r1, c0:c1])
     )
     uu, vu, radius = uuv
     if np.isfinite(uu) and np.isfinite(vu):
         ok &= np.hypot(u - uu, v - vu) > radius
-    sampled = cv2.remap(
-        image,
-        np.nan_to_num(u, nan=-1).astype(np.float32),
-        np.nan_to_num(v, nan=-1).astype(np.float32),
-        cv2.INTER_LINEAR,
-    )
-    rgb[r0:r1, c0:c1][ok] = sampled[ok][:, ::-1]
-    best[r0:r1, c0:c1][ok] = score[ok]
+    u, v = np.where(ok, u, -1.0), np.where(ok, v, -1.0)
+    weight = np.where(ok, feather_weight(camera, u, v, ne, height_m + floor_depth_m / N_WATER), 0.0)
+    sampled = cv2.remap(image, u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR)
+    block = np.concatenate([sampled[:, :, ::-1] * weight[..., None], weight[..., None]], axis=-1)
+    acc.add(r0, c0, block.astype(np.float32))
+
+
+class Accumulator:
+    """The blend's sums over the grid, per cell the weighted R, G, B and the weight (float32), kept in
+    :data:`TILE` x :data:`TILE` tiles made where a frame first paints; at most ``max_tiles`` are held in memory, the
+    least recently painted written to ``.npy`` files in ``spill_dir`` and read back when painted again. Its memory is
+    bounded whatever the recording's length and the grid's extent."""
+
+    def __init__(self, spill_dir: Path, max_tiles: int = MAX_TILES):
+        self.spill_dir, self.max_tiles = spill_dir, max_tiles
+        self.held: OrderedDict[tuple[int, int], np.ndarray] = OrderedDict()
+        self.spilled: set[tuple[int, int]] = set()
+
+    def _path(self, key: tuple[int, int]) -> Path:
+        return self.spill_dir / f"tile_{key[0]}_{key[1]}.npy"
+
+    def tile(self, key: tuple[int, int]) -> np.ndarray:
+        """Tile ``key`` (tile row, tile column), made or read back, now the most recently used."""
+        if key in self.held:
+            self.held.move_to_end(key)
+            return self.held[key]
+        if key in self.spilled:
+            self.spilled.discard(key)
+            arr = np.load(self._path(key))
+        else:
+            arr = np.zeros((TILE, TILE, 4), np.float32)
+        self.held[key] = arr
+        while len(self.held) > self.max_tiles:
+            old, old_arr = self.held.popitem(last=False)
+            np.save(self._path(old), old_arr)
+            self.spilled.add(old)
+        return arr
+
+    def add(self, r0: int, c0: int, block: np.ndarray) -> None:
+        """Add ``block`` (rows, cols, 4) at grid row ``r0``, column ``c0``."""
+        r1, c1 = r0 + block.shape[0], c0 + block.shape[1]
+        for tr in range(r0 // TILE, (r1 - 1) // TILE + 1):
+            for tc in range(c0 // TILE, (c1 - 1) // TILE + 1):
+                a, b = max(r0, tr * TILE), min(r1, (tr + 1) * TILE)
+                c, d = max(c0, tc * TILE), min(c1, (tc + 1) * TILE)
+                self.tile((tr, tc))[
+                    a - tr * TILE : b - tr * TILE, c - tc * TILE : d - tc * TILE
+                ] += block[a - r0 : b - r0, c - c0 : d - c0]
+
+    def painted(self) -> list[tuple[int, int]]:
+        """The tiles any frame painted, (tile row, tile column)."""
+        return sorted(set(self.held) | self.spilled)
+
+    def rgba(self, key: tuple[int, int]) -> np.ndarray:
+        """Tile ``key``'s blend (TILE, TILE, 4 uint8): the weighted mean RGB, alpha 255 where a frame painted."""
+        arr = self.held[key] if key in self.held else np.load(self._path(key))
+        w = arr[:, :, 3:]
+        rgb = np.divide(arr[:, :, :3], w, out=np.zeros_like(arr[:, :, :3]), where=w > 0)
+        alpha = np.where(w[:, :, 0] > 0, 255, 0)
+        return np.dstack([np.clip(np.round(rgb), 0, 255), alpha]).astype(np.uint8)
+
+
+def uuv_pixels(session: Session, positions: Path | None):
+    """The UUV's pixels to leave out, as (t, u, v, where from): ``positions`` (a positions.csv: the tracker's
+    ``u``, ``v``, e.g. ``skyfix process``'s output) or the session's own positions.csv (a recorded session's: the
+    live tracker's), else its track.csv; None where there is neither."""
+    src = positions if positions is not None else session.path / "positions.csv"
+    if positions is not None or src.is_file():
+        fixes = read_positions_csv(src)
+        return fixes.t_unix, fixes.u, fixes.v, str(src)
+    if session.track is not None:
+        tr = session.track
+        return tr["t"], tr["u"], tr["v"], str(session.path / "track.csv")
+    return None
 
 
 def make_mosaic(
@@ -209,11 +292,15 @@ def make_mosaic(
     gsd_m: float | None = None,
     progress: bool = False,
     correction: PoseCorrection | None = None,
+    positions: Path | None = None,
+    max_tiles: int = MAX_TILES,
 ) -> dict:
     """Write ``mosaic.tif`` and ``mosaic.json`` (see the module doc) into ``out``; returns the sidecar's dict.
 
     ``correction`` (the pose from the bottom, :func:`groundstation.offline.process.bottom_correction`): every
-    frame's pose corrected by it, and its floor depth and sigma used where ``floor_depth_m`` is None."""
+    frame's pose corrected by it, and its floor depth and sigma used where ``floor_depth_m`` is None.
+    ``positions``: the positions.csv whose pixels are the UUV's (:func:`uuv_pixels`). ``max_tiles``: the
+    :class:`Accumulator`'s tiles held in memory."""
     cal, cam = session.calibration, session.calibration.camera
     if floor_depth_m is None and correction is not None:
         floor_depth_m = correction.estimate.floor_depth_m
@@ -246,45 +333,44 @@ def make_mosaic(
         gsd_m = float(np.nanmedian(pose.height_m[usable] + floor_depth_m / N_WATER) / cam.fx)
         gsd_m = float(f"{gsd_m:.2g}")
     grid = _grid(list(polys.values()), epsg, gsd_m)
-    if session.track is not None:
-        uuv_u, uuv_v = pixels_at(
-            pose.t_unix, session.track["t"], session.track["u"], session.track["v"]
-        )
+    found = uuv_pixels(session, positions)
+    if found is not None:
+        uuv_u, uuv_v = pixels_at(pose.t_unix, *found[:3])
     else:
         uuv_u = uuv_v = np.full(len(rows), np.nan)
         session.warnings.append(
-            f"{session.path}: no track.csv: the UUV is not left out of the mosaic"
+            f"{session.path}: no positions.csv or track.csv: the UUV is not left out of the mosaic"
         )
     radius = uuv_radius_px(cal, pose)
-    rgb = np.zeros((grid.height, grid.width, 3), np.uint8)
-    best = np.full((grid.height, grid.width), np.inf, np.float32)
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows) if k in polys}
     bar = progress_bar(len(wanted), f"{session.path.name}: mosaic", progress)
-    try:
-        with session.open_video() as video:
-            for vf in video.prefetch():
-                k = wanted.get(vf.index)
-                if k is None:
-                    continue
-                _paint(
-                    vf.image,
-                    grid,
-                    polys[k],
-                    xy_cam[k],
-                    jac[k],
-                    cam,
-                    pose.R_ned_from_cv[k],
-                    pose.height_m[k],
-                    floor_depth_m,
-                    (uuv_u[k], uuv_v[k], radius[k]),
-                    rgb,
-                    best,
-                )
-                bar.update()
-    finally:
-        bar.close()
-    write_cog(out / NAME, rgb, np.isfinite(best), grid)
+    with tempfile.TemporaryDirectory(prefix=".mosaic-", dir=out) as spill:
+        acc = Accumulator(Path(spill), max_tiles)
+        try:
+            with session.open_video() as video:
+                for vf in video.prefetch():
+                    k = wanted.get(vf.index)
+                    if k is None:
+                        continue
+                    _paint(
+                        vf.image,
+                        grid,
+                        polys[k],
+                        xy_cam[k],
+                        jac[k],
+                        cam,
+                        pose.R_ned_from_cv[k],
+                        pose.height_m[k],
+                        floor_depth_m,
+                        (uuv_u[k], uuv_v[k], radius[k]),
+                        acc,
+                    )
+                    bar.update()
+        finally:
+            bar.close()
+        filled = write_cog(out / NAME, acc, grid, Path(spill))
     used = np.array(sorted(polys))
+    masked = np.isfinite(uuv_u[used]) & np.isfinite(uuv_v[used])
     sidecar = {
         "file": NAME,
         "crs": f"EPSG:{grid.epsg}",
@@ -293,23 +379,29 @@ def make_mosaic(
         "size_px": [grid.width, grid.height],
         "frames": len(wanted),
         "rate_hz": rate_hz,
-        "blend": "nearest_to_nadir",
+        "blend": "feathered_mean",
         "floor_depth_m": floor_depth_m,
         "floor_depth_sigma_m": floor_sigma_m,
         "pose_source": "bottom" if correction is not None else "telemetry",
-        "filled_share": float(np.mean(np.isfinite(best))),
+        "uuv_left_out": {
+            "pixels_from": None if found is None else found[3],
+            "frames": int(masked.sum()),
+        },
+        "filled_share": filled / (grid.width * grid.height),
         **accuracy_m(cal, take(pose, used), cam, floor_depth_m, floor_sigma_m),
     }
     (out / SIDECAR).write_text(json.dumps(sidecar, indent=2) + "\n")
     return sidecar
 
 
-def write_cog(path: Path, rgb: np.ndarray, filled: np.ndarray, grid: Grid) -> None:
-    """A Cloud-Optimised GeoTIFF: RGB and an alpha band (255 where a frame filled the cell) on ``grid``."""
+def write_cog(path: Path, acc: Accumulator, grid: Grid, scratch: Path) -> int:
+    """A Cloud-Optimised GeoTIFF of the blend on ``grid``: RGB and an alpha band (255 where a frame painted the
+    cell), written tile by tile to a sparse tiled GeoTIFF in ``scratch`` and copied to a COG with overviews
+    (no whole-grid array in memory); returns the cells filled."""
     import rasterio
     from rasterio.enums import ColorInterp
-    from rasterio.io import MemoryFile
     from rasterio.shutil import copy as copy_raster
+    from rasterio.windows import Window
 
     profile = {
         "driver": "GTiff",
@@ -320,38 +412,83 @@ def write_cog(path: Path, rgb: np.ndarray, filled: np.ndarray, grid: Grid) -> No
         "crs": rasterio.crs.CRS.from_epsg(grid.epsg),
         "transform": grid.transform(),
         "photometric": "RGB",
+        "tiled": True,
+        "blockxsize": TILE,
+        "blockysize": TILE,
+        "sparse_ok": True,
     }
-    with MemoryFile() as mem, mem.open(**profile) as dst:
-        for b in range(3):
-            dst.write(rgb[:, :, b], b + 1)
-        dst.write(np.where(filled, 255, 0).astype(np.uint8), 4)
+    filled = 0
+    staged = scratch / "staged.tif"
+    with rasterio.open(staged, "w", **profile) as dst:
         dst.colorinterp = [ColorInterp.red, ColorInterp.green, ColorInterp.blue, ColorInterp.alpha]
-        copy_raster(dst, str(path), driver="COG", compress="DEFLATE")
+        for tr, tc in acc.painted():
+            rgba = acc.rgba((tr, tc))
+            h, w = min(TILE, grid.height - tr * TILE), min(TILE, grid.width - tc * TILE)
+            rgba = rgba[:h, :w]
+            filled += int(np.count_nonzero(rgba[:, :, 3]))
+            dst.write(np.moveaxis(rgba, -1, 0), window=Window(tc * TILE, tr * TILE, w, h))
+    copy_raster(str(staged), str(path), driver="COG", compress="DEFLATE")
+    return filled
 
 
-def run(args) -> int:
-    out = output_dir(args.out)
-    session = load_session(args.session, args.uuv)
+def mosaic_of(
+    session_path,
+    out: Path,
+    floor_depth_m: float | None,
+    floor_sigma_m: float = 0.1,
+    pose_from_bottom: str = "off",
+    uuv: str = PRIMARY_UUV,
+    positions: Path | None = None,
+    progress: bool = False,
+    rate_hz: float = RATE_HZ,
+    gsd_m: float | None = None,
+) -> dict:
+    """:func:`make_mosaic` of the session at ``session_path`` (its UUV ``uuv``), its pose corrected from the bottom
+    with ``pose_from_bottom`` ``auto`` (the UUV's pixels as :func:`uuv_pixels`); its warnings on stderr."""
+    session = load_session(session_path, uuv)
     try:
         correction = None
-        if args.pose_from_bottom != "off":
-            from groundstation.offline.process import bottom_correction, frame_pixels
+        if pose_from_bottom != "off":
+            from groundstation.offline.process import Pixels, bottom_correction
 
-            pixels = frame_pixels(session, use_track=True)
-            correction = bottom_correction(session, pixels, args.pose_from_bottom, not args.quiet)
-        found = make_mosaic(
+            found = uuv_pixels(session, positions)
+            if found is None:
+                raise SessionError(
+                    f"{session.path}: no positions.csv or track.csv for the UUV's pixels "
+                    "(needed by --pose-from-bottom)"
+                )
+            pixels = Pixels(*found[:3], np.full(len(found[0]), "ok", dtype=object))
+            correction = bottom_correction(session, pixels, pose_from_bottom, progress)
+        return make_mosaic(
             session,
             out,
-            args.floor_depth_m,
-            args.floor_depth_sigma_m,
-            args.rate_hz,
-            args.gsd_m,
-            not args.quiet,
+            floor_depth_m,
+            floor_sigma_m,
+            rate_hz,
+            gsd_m,
+            progress,
             correction,
+            positions,
         )
     finally:
         for w in session.warnings:
             print(f"warning: {w}", file=sys.stderr)
+
+
+def run(args) -> int:
+    out = output_dir(args.out)
+    found = mosaic_of(
+        args.session,
+        out,
+        args.floor_depth_m,
+        args.floor_depth_sigma_m,
+        args.pose_from_bottom,
+        args.uuv,
+        args.positions,
+        not args.quiet,
+        args.rate_hz,
+        args.gsd_m,
+    )
     print(
         f"{found['frames']} frames, {found['size_px'][0]}x{found['size_px'][1]} cells of {found['gsd_m']:g} m "
         f"({found['crs']}), 1-sigma {found['horizontal_sigma_m']:.2f} m -> {out / NAME}"
@@ -400,7 +537,13 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         help="the grid's cell size, m (default: the image's resolution on the floor below the camera)",
     )
     p.add_argument(
-        "--uuv", default=PRIMARY_UUV, metavar="ID", help="whose track.csv box is left out"
+        "--positions",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="a positions.csv (skyfix process's output) whose tracked pixels u, v are the UUV's to leave out "
+        "(default: the session's positions.csv, else its track.csv)",
     )
+    p.add_argument("--uuv", default=PRIMARY_UUV, metavar="ID", help="whose pixels are left out")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
