@@ -57,13 +57,15 @@ Radians, metres, seconds.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.optimize import least_squares
 
 from .camera import Camera, pixel_to_ray
 from .refraction import offset_from_ray
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 #: a bias is "estimated" when its posterior 1-sigma is below this share of its prior's ...
 ESTIMATED_SHARE = 0.3
@@ -508,6 +510,8 @@ class _Problem:
     def jacobian(self, x):
         """Sparse Jacobian: the globals by finite differences, the walk and the features exactly (they enter the
         ground position linearly: + (1 − s)·walk[j] + s·walk[j + 1] − feature)."""
+        import scipy.sparse as sp  # here, not at the top: scipy takes ~0.3 s to import, every command would pay it
+
         M = self.M
         base, Aw = self.observation_residuals(x, with_whitening=True)
         glob = np.zeros((2 * M, N_GLOBAL))
@@ -538,6 +542,8 @@ class _Problem:
         return sp.vstack([linear + dense, self._prior_jacobian()]).tocsr()
 
     def _prior_jacobian(self):
+        import scipy.sparse as sp
+
         p, J = self.priors, self.J
         n = self.n_params
         rows, cols, vals = (
@@ -696,6 +702,9 @@ def _estimate(
     camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors
 ) -> BottomEstimate:
     """The whole recording's fit (:func:`estimate` without parts)."""
+    import scipy.sparse as sp
+    from scipy.optimize import least_squares
+
     prob = _Problem(camera, n_water, poses, obs, priors)
     fit = least_squares(
         prob.residuals,
