@@ -30,6 +30,11 @@ COMMANDS = (
         "a georeferenced mosaic of the bottom (Cloud-Optimised GeoTIFF) from a session's video",
     ),
     (
+        "tiles",
+        "groundstation.tiles",
+        "a GeoTIFF (the mosaic, an orthophoto) as web-map tiles: a Z/X/Y.png folder, an MBTiles file",
+    ),
+    (
         "sim",
         "sim_fixtures.cli",
         "generate a synthetic session (video, telemetry, truth) from a scenario",

@@ -369,6 +369,12 @@ class RunConfig(UuvOptions):
         "any free port",
     )
     no_ui: Flag = Field(False, description="serve no web page")
+    basemap: FilePath | None = Field(
+        None,
+        description="the web page's map drawn over a base map of the site, served by skyfix itself (no "
+        "internet): a GeoTIFF (skyfix mosaic's mosaic.tif of an earlier flight, an orthophoto), an MBTiles "
+        "file or a folder of Z/X/Y.png tiles (skyfix tiles)",
+    )
     ui_token: Text | None = Field(
         None,
         description="the web page's token (default: none on localhost, a random one "

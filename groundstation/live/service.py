@@ -288,7 +288,16 @@ async def serve(cfg: config.RunConfig) -> dict:
             for c in chains
         ]
         ui = (
-            WebUi(cfg.ui, cfg.ui_token, page_uuvs, topview, feed, size, settings_of(cfg))
+            WebUi(
+                cfg.ui,
+                cfg.ui_token,
+                page_uuvs,
+                topview,
+                feed,
+                size,
+                settings_of(cfg),
+                cfg.basemap,
+            )
             if feed
             else None
         )

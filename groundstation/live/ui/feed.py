@@ -46,7 +46,7 @@ KEEP_FRAMES = (
 )
 
 
-def _lower_priority() -> None:
+def lower_priority() -> None:
     """Make the calling thread nicer than the rest of the process (Linux: a thread is a task); elsewhere a no-op."""
     try:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), ENCODER_NICE)
@@ -125,7 +125,7 @@ class VideoFeed:
         self._busy = False
         self._last_taken = -math.inf
         self._encoder = ThreadPoolExecutor(
-            1, thread_name_prefix="ui-jpeg", initializer=_lower_priority
+            1, thread_name_prefix="ui-jpeg", initializer=lower_priority
         )
 
     def on_frame(self, frame) -> None:

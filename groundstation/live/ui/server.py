@@ -8,7 +8,10 @@ needs uvicorn, which wants to own the process's signals and loop.)
 Routes: ``/`` the page and ``/static/*`` its files (package data, nothing from the
 internet); ``/ws`` the page's WebSocket; ``POST /api/select|release|acquire|confirm`` the
 operator's commands (JSON as on Zenoh, :mod:`groundstation.live.control`; an error is HTTP
-400 with ``{"error": "<one line>"}``); ``GET /api/status`` the status now.
+400 with ``{"error": "<one line>"}``); ``GET /api/status`` the status now;
+``/basemap/{z}/{x}/{y}`` the base map's tiles (``--basemap``: a GeoTIFF, an MBTiles file or a folder of tiles,
+:func:`groundstation.tiles.open_basemap`), read or rendered one at a time in a thread of their own at a lower
+priority (the tracker goes first), the last :data:`TILE_CACHE` kept; 404 where the base map has none.
 
 Several UUVs (``[[uuv]]``, one :class:`PageUuv` each): a command's JSON body names its UUV,
 ``"uuv": "<id>"`` (taken out before the command sees the rest); without it the command is
@@ -20,7 +23,7 @@ status of a run of several).
 
 The WebSocket sends, to each page: ``{"type": "hello", ...}`` once (the camera's size,
 the run's settings, ``uuvs``: each UUV's ``id``, ``colour`` (:mod:`.palette`) and ``track``
-so far); ``{"type": "state", ...}`` once a second, and at once when what a UUV's GPS_INPUT sends changes
+so far; ``basemap``: the base map's ``info()`` and its tiles' ``url`` template, or null); ``{"type": "state", ...}`` once a second, and at once when what a UUV's GPS_INPUT sends changes
 (the status as ``/api/status`` has it,
 input rates measured here, the map's :meth:`TopView.snapshot` and ``uuvs``: per UUV its
 ``id``, the track points that page has not seen, its safety gates on the map
@@ -48,19 +51,22 @@ import logging
 import secrets
 import socket
 import time
-from collections import deque
+from collections import OrderedDict, deque
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from importlib import resources
+from pathlib import Path
 from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 
 from groundstation.live.control import Control, ControlError, jsonable
 from groundstation.live.ui.bind import is_loopback, parse_bind
-from groundstation.live.ui.feed import VideoFeed
+from groundstation.live.ui.feed import VideoFeed, lower_priority
 from groundstation.live.ui.palette import colour
 from groundstation.live.ui.topview import TopView
+from groundstation.tiles import FORMATS, BaseMapError, open_basemap
 
 log = logging.getLogger("skyfix.ui")
 
@@ -71,6 +77,8 @@ CHANGE_POLL_S = 0.1  # how often the pusher asks whether what a UUV's GPS_INPUT 
 WS_CLOSE_S = 0.5  # a stop waits this long for open pages to take the close
 RATE_WINDOW_S = 3.0
 COMMANDS = ("select", "release", "acquire", "confirm")
+TILE_CACHE = 512  # base-map tiles kept in memory (PNG, a few kB to 100 kB each)
+TILE_URL = "/basemap/{z}/{x}/{y}"
 SECURITY_HEADERS = {
     "Content-Security-Policy": "default-src 'self'; img-src 'self' blob:; connect-src 'self'; frame-ancestors 'none'",
     "X-Frame-Options": "DENY",
@@ -151,6 +159,7 @@ class WebUi:
 
     ``control``: the one UUV's commands, or each UUV's :class:`PageUuv` in the run's order (the topview's
     ``tracks`` in the same order). ``settings``: what the page shows about the run's configuration.
+    ``basemap``: the map's base (a GeoTIFF, an MBTiles file or a folder of tiles), opened by :meth:`start`.
     """
 
     def __init__(
@@ -162,6 +171,7 @@ class WebUi:
         feed: VideoFeed,
         camera_size: tuple[int, int],
         settings: dict,
+        basemap: str | None = None,
     ):
         self.host, self.port = parse_bind(bind)
         self.bind = bind
@@ -184,16 +194,30 @@ class WebUi:
         self.refused = 0
         self._runner: web.AppRunner | None = None
         self._sockets: set[web.WebSocketResponse] = set()
+        self.basemap_path = basemap
+        self.basemap = None
+        self._tiles: OrderedDict[tuple[int, int, int], bytes | None] = OrderedDict()
+        self._tiler = ThreadPoolExecutor(
+            1, thread_name_prefix="ui-tiles", initializer=lower_priority
+        )
 
     # -- life ------------------------------------------------------------------------------------------
     async def start(self) -> None:
-        """Listen on ``--ui``; :class:`UiError` naming the option when that cannot be done."""
+        """Open ``--basemap`` and listen on ``--ui``; :class:`UiError` naming the option when that cannot be done."""
+        if self.basemap_path is not None:
+            try:
+                self.basemap = await asyncio.get_running_loop().run_in_executor(
+                    self._tiler, open_basemap, Path(self.basemap_path)
+                )
+            except BaseMapError as e:
+                raise UiError(f"--basemap: {e}") from None
         app = web.Application(middlewares=[self._guard], client_max_size=64 * 1024)
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._websocket)
         app.router.add_get("/favicon.ico", self._no_icon)
         app.router.add_get("/api/status", self._status)
         app.router.add_post("/api/{command}", self._command)
+        app.router.add_get("/basemap/{z:\\d+}/{x:\\d+}/{y:\\d+}", self._tile)
         app.router.add_static("/static/", str(STATIC))
         app.on_response_prepare.append(self._headers)
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
@@ -228,6 +252,9 @@ class WebUi:
                 await asyncio.wait(closing, timeout=WS_CLOSE_S)
             if self._runner is not None:
                 await self._runner.cleanup()
+            if self.basemap is not None:
+                self._tiler.submit(self.basemap.close)
+            self._tiler.shutdown(wait=False, cancel_futures=True)
 
     def status(self) -> dict:
         return {
@@ -354,6 +381,25 @@ class WebUi:
     async def _index(self, request: web.Request) -> web.StreamResponse:
         return web.FileResponse(STATIC / "index.html")
 
+    async def _tile(self, request: web.Request) -> web.Response:
+        """A tile of the base map (PNG, JPEG or WebP as the base map has them); 404 where it has none."""
+        key = tuple(int(request.match_info[k]) for k in "zxy")
+        z, x, y = key
+        if self.basemap is None or z > 30 or not (0 <= x < 2**z and 0 <= y < 2**z):
+            return web.Response(status=404)
+        if key in self._tiles:
+            self._tiles.move_to_end(key)
+        else:
+            self._tiles[key] = await asyncio.get_running_loop().run_in_executor(
+                self._tiler, self.basemap.tile, *key
+            )
+            while len(self._tiles) > TILE_CACHE:
+                self._tiles.popitem(last=False)
+        data = self._tiles[key]
+        if data is None:
+            return web.Response(status=404)
+        return web.Response(body=data, content_type=FORMATS[self.basemap.info()["format"]])
+
     async def _status(self, request: web.Request) -> web.Response:
         return web.json_response(self.status_now(), dumps=lambda o: json.dumps(o, allow_nan=False))
 
@@ -423,6 +469,7 @@ class WebUi:
             },
             "settings": self.settings,
             "uuvs": uuvs,
+            "basemap": None if self.basemap is None else {**self.basemap.info(), "url": TILE_URL},
         }
         for k, u in enumerate(uuvs):
             if u["track"]:

@@ -2,14 +2,15 @@
 // selection, map, health. No status for 2 s: the page turns grey ("no status since …"), nothing on it green.
 // Several UUVs ([[uuv]]): each in its colour (box, label, track, rows); the operator picks the UUV a selection,
 // "Release" or "Await" applies to (the buttons above them, or the keys 1–9). With one, the page is as it was.
-// Everything comes from this server (WebSocket /ws, POST /api/<command>); nothing from the internet.
+// Everything comes from this server (WebSocket /ws, POST /api/<command>, the map library Leaflet under
+// /static/vendor/, the base map's tiles under /basemap/); nothing from the internet.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
 const video = $("video");
 const vctx = video.getContext("2d");
 const map = $("map");
-const mctx = map.getContext("2d");
+const mctx = $("map-overlay").getContext("2d");
 
 const page = {
   camera: { width: 0, height: 0 },
@@ -59,6 +60,7 @@ function onText(msg) {
     page.settings = msg.settings;
     page.uuvs = msg.uuvs.map((u) => ({ id: u.id, colour: u.colour, track: u.track, gate: null, rates: {} }));
     page.sel = Math.min(page.sel, page.uuvs.length - 1);
+    showBasemap(msg.basemap);
     showPicker();
     sizeVideo();
     return;
@@ -78,6 +80,7 @@ function onText(msg) {
     });
     showStatus();
     showSending();
+    if (page.follow) fitView();
     drawMap();
     showHealth();
   }
@@ -490,20 +493,60 @@ function niceLength(m) {  // 1, 2, 5 × 10^k not above m
   return [5, 2, 1].map((k) => k * p).find((x) => x <= m) || p;
 }
 
-function drawMap() {
-  const dpr = window.devicePixelRatio || 1;
-  const r = map.getBoundingClientRect();
-  map.width = Math.max(1, Math.round(r.width * dpr));
-  map.height = Math.max(1, Math.round(r.height * dpr));
-  const W = map.width, H = map.height, ctx = mctx;
-  ctx.fillStyle = "#fff";
-  ctx.fillRect(0, 0, W, H);
-  const m = page.map;
-  map.dataset.points = page.uuvs.length ? page.uuvs[0].track.length : 0;  // the first UUV's
-  map.dataset.tracks = page.uuvs.map((u) => `${u.id}:${u.track.length}`).join(" ");
-  if (!m) return;
-  // what must be in view: the UAV, its footprint, the last 30 s of each track
-  const pts = [];
+// The map is Leaflet's (web Mercator, north up; served by skyfix, nothing from the internet) over the base map's
+// tiles when the run has one (--basemap); what skyfix draws (footprint, tracks, accuracy circles and ellipses, the
+// UAV, north arrow, scale bar) goes on a canvas above the tiles, placed by Leaflet's projection. The map follows the
+// UAV, its footprint and the last 30 s of each track ("follow"); dragging or zooming it stops that.
+const MAX_ZOOM = 26;
+const WGS84_A = 6378137.0, WGS84_E2 = 6.69437999014e-3;
+const lmap = L.map(map, { zoomSnap: 0, zoomDelta: 0.5, maxZoom: MAX_ZOOM, zoomControl: false,
+                          attributionControl: false, zoomAnimation: false, fadeAnimation: false })
+  .setView([0, 0], 1);
+L.control.zoom({ position: "bottomright" }).addTo(lmap);
+page.follow = true;
+let fitting = false, baseLayer = null;
+lmap.on("move zoom resize", () => drawMap());
+lmap.on("dragstart zoomstart", () => { if (!fitting) setFollow(false); });
+$("follow").onchange = () => { setFollow($("follow").checked); if (page.follow) fitView(); drawMap(); };
+
+function setFollow(on) {
+  page.follow = on;
+  $("follow").checked = on;
+}
+
+// The base map of the hello (its tiles' URL, bounds, zoom levels), or none: the map's white
+function showBasemap(b) {
+  if (baseLayer) baseLayer.remove();
+  baseLayer = null;
+  page.basemap = b;
+  map.dataset.tiles = b ? "loading" : "";
+  if (!b) return;
+  const [w, s, e, n] = b.bounds;
+  if (!page.map || !page.map.origin) {  // nothing of the run to show yet: the base map
+    fitting = true;
+    lmap.fitBounds([[s, w], [n, e]], { animate: false });
+    fitting = false;
+  }
+  // no tiles asked for far below the base map's own zooms (no minNativeZoom: a world view would ask for millions)
+  baseLayer = L.tileLayer(b.url, { bounds: [[s, w], [n, e]], minZoom: Math.max(0, b.minzoom - 3),
+                                   maxNativeZoom: b.maxzoom, maxZoom: MAX_ZOOM, keepBuffer: 1 });
+  baseLayer.on("loading", () => { map.dataset.tiles = "loading"; });
+  baseLayer.on("load", () => { map.dataset.tiles = "loaded"; });
+  baseLayer.addTo(lmap);
+}
+
+// metres north and east of the map's origin → [lat, lon] (degrees), with the WGS84 ellipsoid's radii of curvature
+// at the origin (a local flat map: its error grows with the square of the distance over the earth's radius)
+function toLatLng(n, e) {
+  const o = page.map.origin, phi = o.lat * Math.PI / 180, s = 1 - WGS84_E2 * Math.sin(phi) ** 2;
+  const meridian = WGS84_A * (1 - WGS84_E2) / s ** 1.5, normal = WGS84_A / Math.sqrt(s);
+  return [o.lat + n / meridian * 180 / Math.PI, o.lon + e / (normal * Math.cos(phi)) * 180 / Math.PI];
+}
+
+// what must be in view: the UAV, its footprint, the last 30 s of each track; [north, east] metres
+function inView() {
+  const m = page.map, pts = [];
+  if (!m || !m.origin) return pts;
   if (m.uav) pts.push(m.uav);
   if (m.footprint) pts.push(...m.footprint);
   for (const u of page.uuvs) {
@@ -512,20 +555,49 @@ function drawMap() {
     const gt = u.gate && u.gate.track;
     if (gt) pts.push([gt.n, gt.e]);
   }
+  return pts;
+}
+
+// the view around what must be in view, 1.25 times its span (at least 4 m) across the map's shorter side
+function fitView() {
+  const pts = inView();
+  if (!pts.length) return;
+  const ns = pts.map((p) => p[0]), es = pts.map((p) => p[1]);
+  const n0 = (Math.min(...ns) + Math.max(...ns)) / 2, e0 = (Math.min(...es) + Math.max(...es)) / 2;
+  const span = Math.max(Math.max(...ns) - Math.min(...ns), Math.max(...es) - Math.min(...es), 4);
+  const size = lmap.getSize(), centre = toLatLng(n0, e0);
+  const pxPerM = Math.min(size.x, size.y) / (span * 1.25);  // CSS pixels; at zoom z a pixel is 2πa cos(lat) / (256 2^z) m
+  const zoom = Math.log2(pxPerM * 2 * Math.PI * WGS84_A * Math.cos(centre[0] * Math.PI / 180) / 256);
+  fitting = true;
+  lmap.setView(centre, Math.min(zoom, MAX_ZOOM), { animate: false });
+  fitting = false;
+}
+
+function drawMap() {
+  const dpr = window.devicePixelRatio || 1;
+  const canvas = mctx.canvas, size = lmap.getSize();
+  canvas.width = Math.max(1, Math.round(size.x * dpr));
+  canvas.height = Math.max(1, Math.round(size.y * dpr));
+  const W = canvas.width, H = canvas.height, ctx = mctx;
+  ctx.clearRect(0, 0, W, H);
+  const m = page.map;
+  map.dataset.points = page.uuvs.length ? page.uuvs[0].track.length : 0;  // the first UUV's
+  map.dataset.tracks = page.uuvs.map((u) => `${u.id}:${u.track.length}`).join(" ");
+  if (!m) return;
   const gate0 = page.uuvs.length ? page.uuvs[0].gate : null;
   map.dataset.gate = gate0 ? gate0.state : "";  // the first UUV's
   map.dataset.gates = page.uuvs.map((u) => `${u.id}:${u.gate ? u.gate.state : ""}`).join(" ");
-  if (!pts.length) {
+  if (!inView().length) {
     ctx.fillStyle = "#000";
     ctx.font = `bold ${16 * dpr}px system-ui, sans-serif`;
     ctx.fillText(`no UAV position (${m.pose})`, 10 * dpr, 24 * dpr);
     return;
   }
-  const ns = pts.map((p) => p[0]), es = pts.map((p) => p[1]);
-  const n0 = (Math.min(...ns) + Math.max(...ns)) / 2, e0 = (Math.min(...es) + Math.max(...es)) / 2;
-  const span = Math.max(Math.max(...ns) - Math.min(...ns), Math.max(...es) - Math.min(...es), 4);
-  const pxPerM = Math.min(W, H) / (span * 1.25);
-  const X = (e) => W / 2 + (e - e0) * pxPerM, Y = (n) => H / 2 - (n - n0) * pxPerM;
+  // canvas pixels of a point metres east (X) and north (Y) of the origin: web Mercator's x is the longitude's, y the
+  // latitude's alone
+  const X = (e) => lmap.latLngToContainerPoint(toLatLng(0, e)).x * dpr;
+  const Y = (n) => lmap.latLngToContainerPoint(toLatLng(n, 0)).y * dpr;
+  const pxPerM = X(1) - X(0);
   if (m.footprint) {
     ctx.beginPath();
     m.footprint.forEach((p, i) => (i ? ctx.lineTo(X(p[1]), Y(p[0])) : ctx.moveTo(X(p[1]), Y(p[0]))));
@@ -589,7 +661,8 @@ function drawMap() {
     + (m.height_m !== null ? ` · camera ${m.height_m.toFixed(1)} m above the water` : "")
     + (m.horizon ? " · horizon in view: footprint cut" : "")
     + (m.footprint ? "" : ` · no footprint (${m.pose})`)
-    + (o ? ` · origin ${o.lat.toFixed(6)}, ${o.lon.toFixed(6)}` : "");
+    + (o ? ` · origin ${o.lat.toFixed(6)}, ${o.lon.toFixed(6)}` : "")
+    + (page.basemap ? ` · base map ${page.basemap.name}` : " · no base map");
 }
 
 // "#b00000" and an opacity → "rgba(176, 0, 0, 0.35)"
