@@ -1,4 +1,4 @@
-"""``skyfix export SESSION|positions.csv --format geojson|kml|gpx|csv [--out FILE]``: the fixes for GIS tools.
+"""``skyfix export SESSION|positions.csv --format geojson|kml|gpx|csv [--out FILE] [--qgis]``: the fixes for GIS tools.
 
 Reads ``positions.csv`` (a recorded session has one; ``skyfix process SESSION --out DIR``
 writes one into DIR) and writes one file for QGIS, Google Earth or a GPS tool, with each
@@ -19,6 +19,10 @@ fix's accuracy and status:
 - ``csv``: every frame, with an ISO 8601 time; QGIS opens it as a delimited-text layer
   with X = ``lon``, Y = ``lat`` (EPSG:4326).
 
+With ``--qgis`` (or ``--mosaic PATH``) also a QGIS project beside the export, ``FILE.qgs`` (:func:`qgis_project`):
+the track over the bottom's mosaic (:func:`map_mosaic`: given, found beside, or made by
+:func:`groundstation.offline.mosaic.mosaic_of`), each layer with its CRS, paths relative to the project.
+
 Times: ``time`` is the exposure in UTC from ``t_gnss`` (the UAV's GNSS clock) where it is
 known, else from ``t`` (the station clock); ``time_source`` says which.
 """
@@ -30,6 +34,7 @@ import io
 import json
 import math
 import os
+import uuid
 from datetime import UTC, datetime
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -284,10 +289,172 @@ def export(path, fmt: str, out=None) -> tuple[Path, Fixes]:
     return dest, fixes
 
 
+#: how a QGIS project opens each export: (provider, the source after the file's path, geometry)
+QGIS_LAYERS = {
+    "geojson": ("ogr", "", "Point"),
+    "kml": ("ogr", "|layername=track", "Line"),
+    "gpx": ("ogr", "|layername=tracks", "Line"),
+    "csv": (
+        "delimitedtext",
+        "?type=csv&xField=lon&yField=lat&crs=EPSG:4326&geomType=point",
+        "Point",
+    ),
+}
+
+
+def _layer_id(name: str) -> str:
+    """A QGIS layer id: the name and a UUID (QGIS replaces a bare name with a new id, unlinking the layer tree)."""
+    return f"{name}_{uuid.uuid5(uuid.NAMESPACE_URL, 'urn:skyfix:qgis:' + name)}".replace("-", "_")
+
+
+def _relative(target: Path, base: Path) -> str:
+    return "./" + Path(os.path.relpath(target.resolve(), base.resolve())).as_posix()
+
+
+def _srs(parent: ET.Element, epsg: int) -> None:
+    """A QGIS ``<spatialrefsys>`` of EPSG ``epsg``: its WKT (what QGIS reads when no internal id is given), PROJ
+    string and authority id."""
+    from rasterio.crs import CRS
+
+    crs = CRS.from_epsg(epsg)
+    srs = _sub(parent, "spatialrefsys")
+    _sub(srs, "wkt", crs.to_wkt())
+    _sub(srs, "proj4", crs.to_proj4())
+    _sub(srs, "srid", str(epsg))
+    _sub(srs, "authid", f"EPSG:{epsg}")
+    _sub(srs, "description", crs.to_wkt().split('"')[1])  # the name: WKT's first quoted text
+    _sub(srs, "geographicflag", "true" if crs.is_geographic else "false")
+
+
+def _map_layer(
+    layers, kind: str, layer_id: str, name: str, source: str, provider: str, epsg: int, **attrib
+):
+    layer = _sub(layers, "maplayer", type=kind, **attrib)
+    _sub(layer, "id", layer_id)
+    _sub(layer, "datasource", source)
+    _sub(layer, "layername", name)
+    _srs(_sub(layer, "srs"), epsg)
+    _sub(layer, "provider", provider, encoding="UTF-8")
+
+
+def qgis_project(qgs: Path, track: Path, fmt: str, mosaic: Path, name: str) -> str:
+    """A QGIS project (``.qgs`` XML) for ``qgs``: the exported ``track`` (format ``fmt``, EPSG:4326) drawn over the
+    ``mosaic`` GeoTIFF (in its own CRS, the project's too), paths relative to the project's folder, the map
+    opening on the mosaic's extent."""
+    import rasterio
+
+    with rasterio.open(mosaic) as d:
+        epsg, bounds = d.crs.to_epsg(), d.bounds
+    if epsg is None:
+        raise SessionError(
+            f"{mosaic}: its CRS has no EPSG code ({d.crs}); QGIS project not written"
+        )
+    provider, suffix, geometry = QGIS_LAYERS[fmt]
+    base = qgs.parent
+    track_source = _relative(track, base) + suffix
+    if provider == "delimitedtext":
+        track_source = "file:" + track_source
+    root = ET.Element("qgis", projectname=name, version="3.22.0-skyfix")
+    _sub(root, "title", f"{name}: the track over the bottom's mosaic")
+    _srs(_sub(root, "projectCrs"), epsg)
+    tree = _sub(root, "layer-tree-group")
+    for layer_id, label, source, prov in (
+        (_layer_id("track"), f"{name} track ({fmt})", track_source, provider),
+        (_layer_id("mosaic"), "mosaic", _relative(mosaic, base), "gdal"),
+    ):  # the first is drawn on top
+        _sub(
+            tree,
+            "layer-tree-layer",
+            id=layer_id,
+            name=label,
+            source=source,
+            providerKey=prov,
+            checked="Qt::Checked",
+            expanded="1",
+        )
+    canvas = _sub(root, "mapcanvas", name="theMapCanvas")
+    _sub(canvas, "units", "meters")
+    extent = _sub(canvas, "extent")
+    for tag, value in zip(("xmin", "ymin", "xmax", "ymax"), bounds, strict=True):
+        _sub(extent, tag, repr(float(value)))
+    _srs(_sub(canvas, "destinationsrs"), epsg)
+    layers = _sub(root, "projectlayers")
+    _map_layer(
+        layers,
+        "vector",
+        _layer_id("track"),
+        f"{name} track ({fmt})",
+        track_source,
+        provider,
+        4326,
+        geometry=geometry,
+    )
+    _map_layer(
+        layers, "raster", _layer_id("mosaic"), "mosaic", _relative(mosaic, base), "gdal", epsg
+    )
+    props = _sub(root, "properties")
+    _sub(_sub(props, "Paths"), "Absolute", "false", type="bool")
+    # without it QGIS reads a project as one without a CRS (no reprojection of the layers)
+    _sub(_sub(props, "SpatialRefSys"), "ProjectionsEnabled", "1", type="int")
+    return (
+        "<!DOCTYPE qgis PUBLIC 'http://mrcc.com/qgis.dtd' 'SYSTEM'>\n"
+        + _xml(root).split("\n", 1)[1]
+    )
+
+
+def map_mosaic(
+    src: Path, dest: Path, mosaic=None, session=None, floor_depth_m=None, progress=False
+) -> Path:
+    """The mosaic a project shows: ``mosaic`` when given, else ``mosaic.tif`` beside the export ``dest``, made there
+    when missing (:func:`groundstation.offline.mosaic.mosaic_of`) from ``session`` (default: the folder of the
+    positions.csv ``src``, a recorded session), the UUV left out around ``src``'s tracked pixels, the floor at
+    ``floor_depth_m`` or estimated from the bottom."""
+    from groundstation.offline.mosaic import NAME, mosaic_of
+
+    if mosaic is not None:
+        if not Path(mosaic).is_file():
+            raise SessionError(f"--mosaic {mosaic}: no such file")
+        return Path(mosaic)
+    found = dest.parent / NAME
+    if found.is_file():
+        return found
+    folder = Path(session) if session else src.parent
+    if not (folder / "session.toml").is_file():
+        raise SessionError(
+            f"{found}: missing, and {folder} is not a session to make it from "
+            "(give --session DIR, or --mosaic PATH, or run skyfix mosaic)"
+        )
+    mosaic_of(
+        folder,
+        dest.parent,
+        floor_depth_m,
+        pose_from_bottom="off" if floor_depth_m is not None else "auto",
+        positions=src,
+        progress=progress,
+    )
+    return found
+
+
+def write_project(src: Path, dest: Path, fmt: str, mosaic: Path) -> Path:
+    """``<export's file name>.qgs`` beside the export ``dest`` (``fixes.geojson.qgs``: one per format,
+    :func:`qgis_project`); returns its path."""
+    qgs = dest.with_name(dest.name + ".qgs")
+    name = src.parent.resolve().name
+    qgs.write_text(qgis_project(qgs, dest, fmt, mosaic, name), encoding="utf-8")
+    return qgs
+
+
 def run(args) -> int:
     dest, fixes = export(args.session, args.format, args.out)
     ok = int(np.sum(fixes.status == "ok"))
     print(f"{len(fixes)} frames, {ok} with a fix -> {dest}")
+    if args.qgis or args.mosaic:
+        src = positions_path(Path(args.session))
+        mosaic = map_mosaic(
+            src, dest, args.mosaic, args.session_dir, args.floor_depth_m, not args.quiet
+        )
+        qgs = write_project(src, dest, args.format, mosaic)
+        print(f"QGIS project: the track over {mosaic} -> {qgs}")
     return 0
 
 
@@ -309,4 +476,27 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     p.add_argument(
         "--out", metavar="FILE", help="output file (default: fixes.<format> next to positions.csv)"
     )
+    p.add_argument(
+        "--qgis",
+        action="store_true",
+        help="also write a QGIS project (FILE.qgs, e.g. fixes.geojson.qgs) showing the track over the bottom's "
+        "mosaic: --mosaic, else mosaic.tif beside FILE, made there when missing (skyfix mosaic)",
+    )
+    p.add_argument(
+        "--mosaic", metavar="PATH", help="the mosaic GeoTIFF the project shows (implies --qgis)"
+    )
+    p.add_argument(
+        "--session",
+        dest="session_dir",
+        metavar="DIR",
+        help="the session to make the mosaic from (default: positions.csv's folder)",
+    )
+    p.add_argument(
+        "--floor-depth-m",
+        type=float,
+        default=None,
+        metavar="M",
+        help="the floor's depth for making the mosaic, m (default: estimated from the bottom)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)

@@ -6,7 +6,8 @@ refraction and straight ray, or ``report``'s positions.csv):
 - ``top_view.png``: the fixes seen from above in metres east and north of a stated
   origin (its latitude and longitude in the title), a north arrow, the truth as a
   line when there is one, where the track was lost, colour = the fix's 1-sigma
-  accuracy (one run) or the method (several);
+  accuracy (one run) or the method (several); over the bottom's mosaic (``skyfix mosaic``'s GeoTIFF) when
+  there is one;
 - ``timeline.png``: the horizontal error against truth and the claimed accuracy
   (h_acc and 2·h_acc) over time, or h_acc alone without truth, and a status strip;
   stretches without a fix shaded in both, by cause, and times without any frame
@@ -23,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from localizer.fix import Fixes
-from localizer.geodesy import geodetic_to_ned
+from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
 from localizer.status import STATUSES, runs
 
 #: cause → (colour, the status words)
@@ -60,6 +61,9 @@ CAUSES = {
     "gates": ("#e377c2", ("refused",)),
 }
 OK_COLOUR = "#2ca02c"
+MAP_MARGIN_M = 3.0  # the top view shows at least this much of the mosaic around the track
+MAP_MAX_PX = 1500  # the mosaic under the top view is resampled to at most this many pixels a side
+DPI = 100
 METHOD_COLOURS = ("tab:blue", "tab:orange", "tab:purple", "tab:brown")
 
 
@@ -104,7 +108,77 @@ def _span_s(fixes: Fixes, a: int, b: int) -> float:
     return float(fixes.t_unix[b - 1] - fixes.t_unix[a]) + period
 
 
-def top_view(path: Path, name: str, fixes_by_run: dict[str, Fixes], truth: dict | None) -> None:
+def mosaic_ne(mosaic: Path, lat0: float, lon0: float, limits_ne_m) -> tuple[np.ndarray, tuple]:
+    """The mosaic GeoTIFF resampled onto the top view's plane (metres east and north of ``lat0``, ``lon0``, as
+    :func:`localizer.geodesy.geodetic_to_ned`) over ``limits_ne_m`` (east min, east max, north min, north max):
+    each output pixel's centre to latitude/longitude (:func:`localizer.geodesy.ned_to_geodetic`), to the mosaic's
+    CRS (GDAL) and sampled there (bilinear); returns the RGBA image (rows north to south, transparent where the
+    mosaic is not) and its extent (east min, east max, north min, north max), m, for ``imshow``. Only the part of
+    the mosaic under the view is read, decimated to the view's resolution."""
+    import cv2
+    import rasterio
+    from rasterio.crs import CRS
+    from rasterio.warp import transform
+    from rasterio.windows import Window
+
+    e0, e1, n0, n1 = limits_ne_m
+    with rasterio.open(mosaic) as d:
+        gsd = abs(d.transform.a)
+        step = max(gsd, max(e1 - e0, n1 - n0) / MAP_MAX_PX)
+        w, h = int(np.ceil((e1 - e0) / step)), int(np.ceil((n1 - n0) / step))
+        east = e0 + (np.arange(w) + 0.5) * step
+        north = n1 - (np.arange(h) + 0.5) * step
+        nn, ee = np.meshgrid(north, east, indexing="ij")
+        lat, lon, _ = ned_to_geodetic(nn, ee, 0.0, lat0, lon0, 0.0)
+        x, y = transform(CRS.from_epsg(4326), d.crs, lon.ravel(), lat.ravel())
+        inv, x, y = ~d.transform, np.asarray(x), np.asarray(y)
+        col, row = inv.a * x + inv.b * y + inv.c, inv.d * x + inv.e * y + inv.f
+        col, row = col.reshape(h, w) - 0.5, row.reshape(h, w) - 0.5  # pixel centres at integers
+        c0, r0 = max(0, int(np.floor(col.min()))), max(0, int(np.floor(row.min())))
+        c1, r1 = (
+            min(d.width, int(np.ceil(col.max())) + 2),
+            min(d.height, int(np.ceil(row.max())) + 2),
+        )
+        image = np.zeros((h, w, 4), np.uint8)
+        if c1 <= c0 or r1 <= r0:
+            return image, (e0, e0 + w * step, n1 - h * step, n1)
+        f = max(1, int(step / gsd))  # read decimated where the view is coarser than the mosaic
+        shape = (4, max(1, (r1 - r0) // f), max(1, (c1 - c0) // f))
+        data = d.read((1, 2, 3, 4), window=Window(c0, r0, c1 - c0, r1 - r0), out_shape=shape)
+    sx, sy = shape[2] / (c1 - c0), shape[1] / (r1 - r0)
+    map_x = ((col - c0 + 0.5) * sx - 0.5).astype(np.float32)
+    map_y = ((row - r0 + 0.5) * sy - 0.5).astype(np.float32)
+    image = cv2.remap(
+        np.ascontiguousarray(np.moveaxis(data, 0, -1)),
+        map_x,
+        map_y,
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
+    return image, (e0, e0 + w * step, n1 - h * step, n1)
+
+
+def _view_limits(points_ne: list[np.ndarray]) -> tuple[float, float, float, float]:
+    """East min/max, north min/max (m) around the points ((N, 2): north, east), :data:`MAP_MARGIN_M` or a fifth of
+    the span beyond, whichever is more."""
+    pts = np.concatenate([p for p in points_ne if len(p)])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = np.maximum(MAP_MARGIN_M, 0.2 * (hi - lo))
+    (n0, e0), (n1, e1) = lo - pad, hi + pad
+    return float(e0), float(e1), float(n0), float(n1)
+
+
+def top_view(
+    path: Path,
+    name: str,
+    fixes_by_run: dict[str, Fixes],
+    truth: dict | None,
+    mosaic: Path | None = None,
+) -> dict | None:
+    """``top_view.png`` (see the module doc), over the ``mosaic`` GeoTIFF (:func:`mosaic_ne`) when given. Returns
+    where the plane is in the PNG: ``origin_deg`` (lat, lon), the axes' ``east_m`` and ``north_m`` limits and
+    ``axes_px`` (left, top, right, bottom pixel edges, rows from the top), or None without a fix to draw."""
     plt = _pyplot()
     first = next(iter(fixes_by_run.values()))
     ok = first.status == "ok"
@@ -121,7 +195,8 @@ def top_view(path: Path, name: str, fixes_by_run: dict[str, Fixes], truth: dict 
         n, e, _ = geodetic_to_ned(np.asarray(lat), np.asarray(lon), 0.0, lat0, lon0, 0.0)
         return n, e
 
-    fig, ax = plt.subplots(figsize=(7.5, 7))
+    fig, ax = plt.subplots(figsize=(7.5, 7), dpi=DPI)
+    drawn: list[np.ndarray] = []
     if lat0 is None:
         ax.text(
             0.5,
@@ -137,10 +212,12 @@ def top_view(path: Path, name: str, fixes_by_run: dict[str, Fixes], truth: dict 
         if truth is not None:
             n, e = ne(truth["lat"], truth["lon"])
             ax.plot(e, n, "-", color="black", lw=1.5, label="truth")
+            drawn.append(np.column_stack([n, e]))
         single = len(fixes_by_run) == 1
         for k, (method, fixes) in enumerate(fixes_by_run.items()):
             good = fixes.status == "ok"
             n, e = ne(fixes.lat[good], fixes.lon[good])
+            drawn.append(np.column_stack([n, e]))
             if single:
                 sc = ax.scatter(
                     e, n, c=fixes.h_acc_m[good], s=9, cmap="viridis", zorder=3, label="fix"
@@ -177,19 +254,46 @@ def top_view(path: Path, name: str, fixes_by_run: dict[str, Fixes], truth: dict 
             ax.plot(e[0], n[0], "^", color="black", ms=9, zorder=5, label="first fix")
             ax.plot(e[1], n[1], "s", color="black", ms=8, mfc="none", zorder=5, label="last fix")
         ax.plot(0, 0, "+", color="black", ms=14, mew=1.5, zorder=2)
-        ax.set_aspect("equal", adjustable="datalim")
+        drawn.append(np.zeros((1, 2)))
+        if mosaic is not None:  # the view's limits the mosaic's, the axes' box shaped to them
+            _under(ax, mosaic, lat0, lon0, _view_limits(drawn))
+        ax.set_aspect("equal", adjustable="box" if mosaic is not None else "datalim")
         ax.set_xlabel("east of the origin (m)")
         ax.set_ylabel("north of the origin (m)")
+        over = (
+            f"\nover the mosaic {mosaic.name} ({mosaic.parent.name}/)" if mosaic is not None else ""
+        )
         ax.set_title(
-            f"{name}: top view\norigin (0, 0) = {_origin_text(lat0, lon0)} ({where}), WGS84",
+            f"{name}: top view\norigin (0, 0) = {_origin_text(lat0, lon0)} ({where}), WGS84{over}",
             fontsize=11,
         )
         ax.grid(True, alpha=0.3)
         ax.legend(loc="lower left", fontsize=8, framealpha=0.9)
         _north_arrow(ax)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=DPI)
+    where_px = None
+    if lat0 is not None:
+        left, bottom, right, top = ax.get_window_extent().extents
+        height = fig.get_size_inches()[1] * DPI
+        where_px = {
+            "origin_deg": (lat0, lon0),
+            "east_m": ax.get_xlim(),
+            "north_m": ax.get_ylim(),
+            "axes_px": (left, height - top, right, height - bottom),
+        }
     plt.close(fig)
+    return where_px
+
+
+def _under(ax, mosaic: Path, lat0: float, lon0: float, limits) -> None:
+    """The mosaic under everything drawn, the axes' limits set to ``limits`` (east min/max, north min/max, m)."""
+    e0, e1, n0, n1 = limits
+    image, extent = mosaic_ne(mosaic, lat0, lon0, limits)
+    ax.set_autoscale_on(False)
+    ax.imshow(image, extent=extent, origin="upper", zorder=0, interpolation="bilinear")
+    ax.set_xlim(e0, e1)
+    ax.set_ylim(n0, n1)
 
 
 def frame_gaps(t_unix: np.ndarray) -> list[tuple[float, float]]:
@@ -342,11 +446,12 @@ def write_plots(
     fixes_by_run: dict[str, Fixes],
     truth: dict | None = None,
     errors_by_run: dict[str, np.ndarray] | None = None,
+    mosaic: Path | None = None,
 ) -> list[Path]:
-    """The three PNGs into ``out_dir``; the first run gives the statuses."""
+    """The three PNGs into ``out_dir``; the first run gives the statuses; the top view over ``mosaic``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [out_dir / "top_view.png", out_dir / "timeline.png", out_dir / "status.png"]
-    top_view(paths[0], name, fixes_by_run, truth)
+    top_view(paths[0], name, fixes_by_run, truth, mosaic)
     timeline(paths[1], name, fixes_by_run, errors_by_run)
     status_breakdown(paths[2], name, next(iter(fixes_by_run.values())))
     return paths

@@ -1,9 +1,11 @@
-"""``skyfix report SESSION|positions.csv [--truth truth.csv] [--out DIR]``: PNG plots of a run's fixes.
+"""``skyfix report SESSION|positions.csv [--truth truth.csv] [--mosaic PATH] [--out DIR]``: PNG plots of a run's fixes.
 
 Reads ``positions.csv`` (a recorded session's, or ``skyfix process``'s output) and, when
 there is one (``--truth``, or ``truth.csv`` beside positions.csv), the truth; writes
 ``top_view.png``, ``timeline.png`` and ``status.png`` (see :mod:`groundstation.offline.plots`)
-into ``--out`` (default: ``report/`` beside positions.csv) and prints a summary.
+into ``--out`` (default: ``report/`` beside positions.csv) and prints a summary. The top view is
+drawn over the bottom's mosaic: ``--mosaic``, or ``mosaic.tif`` beside positions.csv (``skyfix mosaic``'s,
+or the one ``skyfix export --qgis`` made).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 
 from groundstation.offline.evaluate import errors_m
 from groundstation.offline.export import positions_path
+from groundstation.offline.mosaic import NAME as MOSAIC_NAME
 from groundstation.offline.plots import frame_gaps, write_plots
 from groundstation.session.positions import read_positions_csv
 from groundstation.session.read import SessionError, read_table
@@ -53,8 +56,12 @@ def summary(fixes, err: np.ndarray | None) -> str:
     return "; ".join(lines)
 
 
-def report(path, truth_path=None, out=None) -> tuple[list[Path], str]:
+def report(path, truth_path=None, out=None, mosaic=None) -> tuple[list[Path], str]:
     src = positions_path(Path(path))
+    if mosaic is not None and not Path(mosaic).is_file():
+        raise SessionError(f"--mosaic {mosaic}: no such file")
+    beside = src.with_name(MOSAIC_NAME)
+    mosaic = Path(mosaic) if mosaic is not None else beside if beside.is_file() else None
     fixes = read_positions_csv(src)
     if len(fixes) == 0:
         raise SessionError(f"{src}: no rows")
@@ -68,13 +75,13 @@ def report(path, truth_path=None, out=None) -> tuple[list[Path], str]:
     name = src.parent.resolve().name
     out_dir = Path(out) if out else src.with_name("report")
     paths = write_plots(
-        out_dir, name, {"fixes": fixes}, truth, None if err is None else {"fixes": err}
+        out_dir, name, {"fixes": fixes}, truth, None if err is None else {"fixes": err}, mosaic
     )
     return paths, summary(fixes, err)
 
 
 def run(args) -> int:
-    paths, text = report(args.session, args.truth, args.out)
+    paths, text = report(args.session, args.truth, args.out, args.mosaic)
     print(text)
     print(f"plots -> {', '.join(str(p) for p in paths)}")
     return 0
@@ -85,7 +92,8 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     p = subparsers.add_parser(
         name,
         help=help,
-        description="Writes top_view.png (the fixes from above, origin and north stated), timeline.png "
+        description="Writes top_view.png (the fixes from above, origin and north stated, over the "
+        "bottom's mosaic when there is one), timeline.png "
         "(error against truth, when there is one, and the claimed accuracy over time, gaps "
         "shaded by cause) and status.png (frames per status) and prints a summary.",
     )
@@ -98,6 +106,12 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         "--truth",
         metavar="FILE",
         help="truth.csv (t,lat,lon,depth_m); default: beside positions.csv",
+    )
+    p.add_argument(
+        "--mosaic",
+        metavar="PATH",
+        help="the bottom's mosaic (GeoTIFF) to draw the top view over (default: mosaic.tif beside "
+        "positions.csv, if there is one)",
     )
     p.add_argument(
         "--out", metavar="DIR", help="output folder (default: report/ beside positions.csv)"
