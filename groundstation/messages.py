@@ -758,14 +758,15 @@ class DatagramStatus(Section):
 
     lost_packets: int = Field(
         description="RTP sequence numbers never received; MPEG-TS packets missing (continuity "
-        "counter gaps) or marked in error"
+        "counter gaps) or marked in error; zenoh: messages dropped while the reader was behind"
     )
     dropped_frames: int = Field(
         description="frames not decoded: damaged by a loss, or depending on one that was "
         "(until the next keyframe)"
     )
     bad_packets: int = Field(
-        description="datagrams that are not RTP of the configured payload type, or not MPEG-TS"
+        description="datagrams that are not RTP of the configured payload type, or not MPEG-TS; "
+        "zenoh: payloads that are not foxglove.CompressedVideo in CDR"
     )
 
 
@@ -773,7 +774,8 @@ class SenderStatus(Section):
     """An ``rtp://`` or ``udp://`` input's sender lock (groundstation.runtime.sender_lock)."""
 
     peer: str | None = Field(
-        description="the address HOST:PORT datagrams are taken from (null: none yet, or every sender)"
+        description="the address HOST:PORT datagrams are taken from, or (zenoh:) the Zenoh ID that "
+        "time-stamps the messages taken (null: none yet, or every sender)"
     )
     locked: bool = Field(description="false: peer=any, every sender's datagrams are read")
     foreign_datagrams: int = Field(description="datagrams from other senders, refused unread")
@@ -786,7 +788,9 @@ class VideoStatus(Section):
     """The UAV's video stream."""
 
     url: str
-    kind: str = Field(description="the input kind: udp (MPEG-TS), rtp, sdp, rtsp, v4l2, file")
+    kind: str = Field(
+        description="the input kind: udp (MPEG-TS), rtp, zenoh, sdp, rtsp, v4l2, file"
+    )
     state: str = Field(description="starting, open, receiving, waiting, ended, stopped")
     frames: int
     connects: int
@@ -816,7 +820,10 @@ class VideoStatus(Section):
     handoff: HandoffStatus | None = Field(None, description="frames from the reader thread")
     rtp: DatagramStatus | None = Field(None, description="rtp:// inputs only")
     mpegts: DatagramStatus | None = Field(None, description="udp:// (MPEG-TS) inputs only")
-    sender: SenderStatus | None = Field(None, description="rtp:// and udp:// inputs only")
+    zenoh: DatagramStatus | None = Field(
+        None, description="zenoh: inputs only (BlueOS's camera manager's messages)"
+    )
+    sender: SenderStatus | None = Field(None, description="rtp://, udp:// and zenoh: inputs only")
 
 
 class GpsInputStatus(Section):

@@ -16,7 +16,8 @@ agrees with itself:
   (``t`` + shift when it has none), so a UUV clock that was off stays off. A session of several UUVs: each
   other UUV's ``uuvs/<id>/depth.jsonl`` on its own key (``--uuv-depth-key ID=KEY``).
 - The video: sent in-process as MPEG-TS to ``--video-out`` (default
-  ``udp://127.0.0.1:5600``; ``rtp://host:port`` sends RTP), each frame at its
+  ``udp://127.0.0.1:5600``; ``rtp://host:port`` sends RTP; ``zenoh:video/<source>/stream`` publishes it
+  as BlueOS's camera manager does, :func:`groundstation.video.zenoh_video.publish_video`), each frame at its
   ``video_frames.csv`` time + shift (+ ``--video-delay-ms``) by the file's
   timestamps (:func:`groundstation.video.send.send_video`): a camera whose
   glass-to-first-packet latency is ``--video-delay-ms`` (default 0).
@@ -46,6 +47,7 @@ import select
 import sys
 import threading
 import time
+from functools import partial
 from pathlib import Path
 
 from groundstation.mavlink.ingest import LinkError, connect, mavutil
@@ -55,6 +57,7 @@ from groundstation.session.depth import read_depth
 from groundstation.session.read import SessionError, read_table, uuv_files
 from groundstation.session.tlog import read_tlog
 from groundstation.video.send import send_video
+from groundstation.video.zenoh_video import publish_video
 from groundstation.zenoh_session import open_session, put_json
 
 log = logging.getLogger("skyfix.replay")
@@ -312,12 +315,15 @@ class Replay:
             t_first = float(self.frames["t"][0])
             t0 = t_first + shift + args.video_delay_ms / 1000.0
             cuts = Cuts(args.cut, "video")
+            zenoh_out = args.video_out.startswith(
+                "zenoh:"
+            )  # as BlueOS's camera manager publishes it
             threads.append(
                 threading.Thread(
-                    target=send_video,
+                    target=partial(publish_video, session=session) if zenoh_out else send_video,
                     args=(
                         self.video,
-                        args.video_out,
+                        args.video_out.removeprefix("zenoh:"),
                         t0,
                         self.stop,
                         lambda t_s, key: cuts.skip(t_first - self.t_start + t_s, key),
@@ -372,7 +378,8 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     p.add_argument(
         "--video-out",
         default="udp://127.0.0.1:5600",
-        help="where the video goes: udp://host:port (MPEG-TS) or rtp://host:port (RTP)",
+        help="where the video goes: udp://host:port (MPEG-TS), rtp://host:port (RTP) or zenoh:KEY "
+        "(foxglove.CompressedVideo on Zenoh, as BlueOS's camera manager publishes it)",
     )
     p.add_argument("--no-video", action="store_true", help="do not stream the video")
     p.add_argument(

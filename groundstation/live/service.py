@@ -155,7 +155,9 @@ async def serve(cfg: config.RunConfig) -> dict:
                 chain.pipeline.submit(frame)
 
         if cfg.video:
-            video = VideoLive(cfg.video, fixed_latency_s, on_frame, expected_size=size)
+            video = VideoLive(
+                cfg.video, fixed_latency_s, on_frame, expected_size=size, session=session
+            )
             motion = OnlineLatency(
                 cal,
                 tel,

@@ -68,8 +68,9 @@ class SenderLock:
         self.peer, self._heard = addr, time.monotonic()
 
     def status(self) -> dict:
+        peer = self.peer  # an address, or a Zenoh ID (groundstation.video.zenoh_video)
         return {
-            "peer": None if self.peer is None else f"{self.peer[0]}:{self.peer[1]}",
+            "peer": peer if peer is None or isinstance(peer, str) else f"{peer[0]}:{peer[1]}",
             "locked": self.locked,
             "foreign_datagrams": self.foreign,
             "relocks": self.relocks,

@@ -4,6 +4,7 @@
 |---|---|---|
 | ``udp://HOST:PORT[?peer=…]`` | udp | MPEG-TS over UDP (a multicast group joined), depacketized by skyfix (:mod:`.mpegts`), decoded by FFmpeg |
 | ``rtp://HOST:PORT?codec=h264\\|h265[&pt=96][&peer=…]`` | rtp | RTP without a session description (QGroundControl/BlueOS send H.264 RTP to 5600), depacketized by skyfix (:mod:`.rtp`), decoded by FFmpeg |
+| ``zenoh:video/<source>/stream[?peer=ZID\\|any]`` | zenoh | BlueOS's camera manager's ``foxglove.CompressedVideo`` messages on the service's Zenoh session (:mod:`.zenoh_video`), decoded by FFmpeg |
 | ``FILE.sdp`` | sdp | the RTP stream the file describes, live |
 | ``rtsp://…[?transport=tcp\\|udp]`` | rtsp | RTSP, over TCP or UDP (default: FFmpeg tries UDP first) |
 | ``/dev/videoN``, ``v4l2:N`` ``[?video_size=WxH&framerate=F&input_format=mjpeg]`` | v4l2 | a V4L2 camera |
@@ -48,7 +49,7 @@ class VideoInput:
     """An input ready for ``av.open(file, format=format, container_options=options)``."""
 
     url: str  # as given
-    kind: str  # udp, rtp, sdp, rtsp, v4l2, url, file
+    kind: str  # udp, rtp, zenoh, sdp, rtsp, v4l2, url, file
     file: str
     format: str | None = None
     options: dict[str, str] = field(default_factory=dict)
@@ -57,8 +58,9 @@ class VideoInput:
         None  # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp`; ``file`` the address)
     )
     payload_type: int | None = None  # rtp
-    peer: tuple[str, int] | None = None  # udp, rtp: the only sender taken (peer=HOST:PORT)
-    any_sender: bool = False  # udp, rtp: peer=any, every sender taken
+    # udp, rtp: the only sender taken (peer=HOST:PORT); zenoh: the Zenoh ID (hex) that time-stamps its messages
+    peer: tuple[str, int] | str | None = None
+    any_sender: bool = False  # udp, rtp, zenoh: peer=any, every sender taken
 
     @property
     def live(self) -> bool:
@@ -169,6 +171,26 @@ def _v4l2(url: str, device: str, query: dict[str, str]) -> VideoInput:
     return VideoInput(url, "v4l2", device, "v4l2", {**LOW_DELAY, **query})
 
 
+def _zenoh(url: str, key: str, query: dict[str, str]) -> VideoInput:
+    """``zenoh:KEY[?peer=ZID|any]``: ``peer`` the Zenoh ID (hex) that time-stamps the camera's messages."""
+    if not key or any(c in key for c in "*$#") or "//" in key or key.strip("/") != key:
+        raise VideoError(
+            f"{url}: {key!r} is not one Zenoh key (expected e.g. zenoh:video/<source>/stream)"
+        )
+    peer = query.pop("peer", None)
+    if query:
+        raise VideoError(f"{url}: unknown option {next(iter(query))} (zenoh: takes peer only)")
+    if peer is not None and peer != ANY_PEER and not re.fullmatch(r"[0-9a-fA-F]{1,32}", peer):
+        raise VideoError(f"{url}: peer={peer} is not a Zenoh ID (hex) or {ANY_PEER}")
+    return VideoInput(
+        url,
+        "zenoh",
+        key,
+        peer=None if peer in (None, ANY_PEER) else peer.lower(),
+        any_sender=peer == ANY_PEER,
+    )
+
+
 def parse_video_input(url: str) -> VideoInput:
     """The :class:`VideoInput` for a ``--video`` value (see the module doc)."""
     url = str(url)
@@ -176,6 +198,8 @@ def parse_video_input(url: str) -> VideoInput:
     query = dict(parse_qsl(query_text, keep_blank_values=True))
     if url.startswith("v4l2:"):
         return _v4l2(url, base.removeprefix("v4l2:"), query)
+    if url.startswith("zenoh:"):
+        return _zenoh(url, base.removeprefix("zenoh:"), query)
     if base.startswith("/dev/video"):
         return _v4l2(url, base, query)
     if "://" not in url:

@@ -69,6 +69,7 @@ from groundstation.video.inputs import VideoInput, parse_video_input
 from groundstation.video.mpegts import TsDepacketizer
 from groundstation.video.rtp import Depacketizer
 from groundstation.video.udp import DatagramInput
+from groundstation.video.zenoh_video import ZenohVideoInput
 from localizer.clock import ClockMap
 
 log = logging.getLogger("skyfix.video")
@@ -135,8 +136,10 @@ class VideoLive:
         open_timeout_s: float | None = None,
         read_timeout_s: float = 2.0,
         retry_max_s: float = 1.0,
+        session=None,  # the service's Zenoh session, for a zenoh: input
     ):
         self.source = parse_video_input(url)
+        self.session = session
         if open_timeout_s is None:  # an RTSP session takes several round trips to set up
             open_timeout_s = RTSP_OPEN_TIMEOUT_S if self.source.kind == "rtsp" else OPEN_TIMEOUT_S
         self.url = url
@@ -164,7 +167,7 @@ class VideoLive:
         src = self.source
         self.sender_lock = (
             SenderLock(src.peer, not src.any_sender, relock_s=read_timeout_s)
-            if src.kind in ("rtp", "udp")
+            if src.kind in ("rtp", "udp", "zenoh")
             else None
         )
         self._datagrams_before = {
@@ -240,6 +243,13 @@ class VideoLive:
                 self.open_timeout_s,
                 self.read_timeout_s,
                 self.sender_lock,
+            )
+            return self._datagrams
+        if src.kind == "zenoh":
+            if self.session is None:
+                raise VideoError(f"{self.url}: a zenoh: video needs the service's Zenoh session")
+            self._datagrams = ZenohVideoInput(
+                self.session, src.file, self.open_timeout_s, self.read_timeout_s, self.sender_lock
             )
             return self._datagrams
         return av.open(
@@ -399,5 +409,6 @@ class VideoLive:
             "handoff": self.handoff.status() if self.handoff else None,
             "rtp": self._datagram_counts() if self.source.kind == "rtp" else None,
             "mpegts": self._datagram_counts() if self.source.kind == "udp" else None,
+            "zenoh": self._datagram_counts() if self.source.kind == "zenoh" else None,
             "sender": self.sender_lock.status() if self.sender_lock is not None else None,
         }

@@ -28,7 +28,7 @@ import av
 
 from groundstation.runtime.sender_lock import SenderLock
 from groundstation.video.frames import VideoError
-from groundstation.video.rtp import VIDEO_HZ
+from groundstation.video.rtp import VIDEO_HZ, AccessUnit
 
 DATAGRAM_BYTES = 65_536
 SOCKET_BUFFER_BYTES = 4 << 20  # a 1080p keyframe comes as a burst of some 150 datagrams
@@ -43,6 +43,15 @@ class _Stream:
 class _Streams:
     def __init__(self, stream: _Stream):
         self.video = [stream]
+
+
+def packet_of(unit: AccessUnit, stream) -> av.Packet:
+    """An access unit as the packet the decoder takes (``pts`` in the stream's 1/90 000 s)."""
+    packet = av.Packet(unit.data)
+    packet.pts = packet.dts = unit.timestamp
+    packet.time_base = stream.time_base
+    packet.is_keyframe = unit.keyframe
+    return packet
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -108,12 +117,7 @@ class DatagramInput:
     def demux(self, stream) -> Iterator[av.Packet]:
         while True:
             while self._units:
-                unit = self._units.popleft()
-                packet = av.Packet(unit.data)
-                packet.pts = packet.dts = unit.timestamp
-                packet.time_base = stream.time_base
-                packet.is_keyframe = unit.keyframe
-                yield packet
+                yield packet_of(self._units.popleft(), stream)
             try:
                 self._receive(time.monotonic() + self.read_timeout_s)
             except TimeoutError:
