@@ -1,7 +1,7 @@
 """Benchmark of the live service: stream slot → GPS_INPUT at the UUV, at 720p30 and 1080p30.
 
     .venv/bin/python bench/live_latency.py [--sizes 720p,1080p] [--transports mpegts,rtp] [--duration-s 30]
-        [--out bench/results/live_latency.txt] [--variant NAME=ARGS ...]
+        [--out bench/results/live_latency.txt] [--variant NAME=ARGS ...] [--busy N]
 
 For each size a session is generated once into ``/tmp/skyfix-bench/`` by the
 simulator (the UAV hovering 10 m up, yawing and drifting; several minutes at
@@ -18,7 +18,8 @@ Measured, per size:
 - **slot → GPS_INPUT**: for each new fix, its arrival at the UUV minus the frame's
   stream slot (its exposure + the camera's latency: when its first packet left);
   p50/p99/max. This holds the packets' transit, demuxing, decoding, tracking,
-  waiting for telemetry, locating and sending. Target p99 ≤ 50 ms. Keyframes and
+  waiting for telemetry, locating and sending. Target p99 ≤ 40 ms (issue 30), ≤ 80 ms beside two
+  busy processes (``--busy 2``: each run again beside two processes spinning ``while True: pass``). Keyframes and
   the other frames are also shown apart: an MPEG-TS PES packet over 64 KiB (a
   1080p keyframe) has no length, and FFmpeg's demuxer hands it over only when the
   next one starts, one frame interval later; over RTP, FFmpeg does that with every
@@ -29,6 +30,7 @@ Measured, per size:
   cannot see a whole frame's shift; the online latency estimate from the image's
   motion can, and is shown next to the configured latency.
 - **accuracy**: horizontal error of valid GPS_INPUT against ``truth.csv``.
+- the share of the frames sent that got an ``ok`` fix;
 - how many frames the pipeline held for attitude telemetry (the newest sample more
   than 30 ms older than the frame), frames dropped, CPU and RSS.
 
@@ -42,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import itertools
 import json
 import os
 import shlex
@@ -92,6 +95,7 @@ depth_m = 1.0
 BENCH_DIR = Path("/tmp/skyfix-bench")
 CAMERA_LATENCY_MS = 100  # the replayed camera's glass-to-first-packet latency, configured as such
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+BUSY = "while True: pass"  # a busy process beside the service (--busy)
 
 
 def ensure_session(name: str, duration_s: float) -> Path:
@@ -248,7 +252,9 @@ def nearest_times(sorted_t: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.where(np.abs(right - t) < np.abs(left - t), right, left)
 
 
-def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> dict:
+def live(session_dir: Path, work: Path, transport: str, run_args: list[str], busy: int = 0) -> dict:
+    """One ``skyfix run`` fed by ``skyfix replay`` over ``transport``, beside ``busy`` processes spinning
+    ``while True: pass`` (a laptop's other programs: on 2 cores, 2 of them take both cores' worth of CPU)."""
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     if transport == "rtp":  # RTP on an even port, RTCP on the next
         video = next(p for p in range(video & ~1, 65534, 2) if port_pair_free(p))
@@ -304,6 +310,7 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> 
     with open(work / "run.log", "w") as run_log, open(work / "replay.log", "w") as replay_log:
         service = subprocess.Popen(run, stdout=run_log, stderr=subprocess.STDOUT, cwd=ROOT)
         rep = None
+        spinners = [subprocess.Popen([py, "-c", BUSY]) for _ in range(busy)]
         try:
             time.sleep(3.0)
             rep = subprocess.Popen(replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT)
@@ -313,7 +320,7 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str]) -> 
             service.send_signal(signal.SIGINT)
             service.wait(30)
         finally:
-            kill_left(service, rep)
+            kill_left(service, rep, *spinners)
     final = json.loads(stats.read_text())
     shift = json.loads((work / "replay.log").read_text().splitlines()[0])["shift_s"]
     session = load_session(session_dir)
@@ -387,12 +394,19 @@ def report(name: str, session: Path, res: dict) -> list[str]:
     kf, of = res["slot_to_gps_input_keyframes_ms"], res["slot_to_gps_input_other_frames_ms"]
     motion = res["video"]["latency_from_motion"]
     return [
-        f"{name} ({session.name}, {res['frames_sent']} frames):",
+        (
+            f"{name} ({session.name}, {res['frames_sent']} frames; load average {res.get('load_average')} at the "
+            "start: a shared machine)"
+        ),
+        (
+            f"  frames with an ok fix: {pl['statuses'].get('ok', 0)} of {res['frames_sent']} sent "
+            f"({100.0 * pl['statuses'].get('ok', 0) / res['frames_sent']:.1f} %)"
+        ),
         f"  baseline decode only (PyAV, per frame): p50 {d['p50']} ms, p99 {d['p99']} ms",
         f"  baseline Pipeline.process (tracker + pose + locate, per frame): p50 {b['p50']} ms, p99 {b['p99']} ms",
         (
             f"  live: stream slot -> GPS_INPUT at the UUV over {lat['n']} fixes: p50 {lat['p50']} ms, "
-            f"p99 {lat['p99']} ms, max {lat['max']} ms   (target p99 <= 50)"
+            f"p99 {lat['p99']} ms, max {lat['max']} ms   (target p99 <= 40; 80 beside two busy processes)"
         ),
         (
             f"    keyframes ({kf['n']}): p50 {kf['p50']} ms, max {kf['max']} ms; other frames: p50 {of['p50']} ms, "
@@ -438,6 +452,13 @@ def main() -> int:
         help="a run of the service with these extra `skyfix run` arguments, e.g. "
         "'no-size=--height-from-size off' (repeatable; default: the service as configured)",
     )
+    ap.add_argument(
+        "--busy",
+        type=int,
+        default=0,
+        metavar="N",
+        help="each run again beside N processes spinning `while True: pass` (a laptop's other programs)",
+    )
     args = ap.parse_args()
     variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [
         ("", [])
@@ -456,13 +477,21 @@ def main() -> int:
             "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames),
         }
         for transport in args.transports.split(","):
-            for variant, run_args in variants:
-                name = f"{size} {transport}" + (f" {variant}" if variant else "")
-                work = BENCH_DIR / f"run_{size}_{transport}{'_' + variant if variant else ''}"
+            for (variant, run_args), busy in itertools.product(variants, sorted({0, args.busy})):
+                tag = "_".join(x for x in (variant, f"busy{busy}" if busy else "") if x)
+                name = " ".join(x for x in (size, transport, variant) if x) + (
+                    f" beside {busy} busy processes" if busy else ""
+                )
+                work = BENCH_DIR / f"run_{size}_{transport}{'_' + tag if tag else ''}"
                 work.mkdir(parents=True, exist_ok=True)
                 for f in work.iterdir():
                     f.unlink()
-                results[name] = res = {**baselines, **live(session, work, transport, run_args)}
+                load = os.getloadavg()[0]
+                results[name] = res = {
+                    **baselines,
+                    **live(session, work, transport, run_args, busy),
+                    "load_average": round(load, 1),
+                }
                 lines += report(name, session, res)
     emit(lines, args.out, results)
     return 0

@@ -19,7 +19,9 @@ window, checked against the configured height and (``auto``) handed to the heigh
 :mod:`groundstation.offline.track`) and live; :class:`OnlineHeightFromSize` runs it in ``skyfix run``
 like the video latency's estimate: frames handed from the pipeline, on the event loop, to a thread
 (skipped while it is busy: never stalling decoding or tracking) that has each measured in a
-low-priority process of its own (:func:`measure_frame`: a measurement was 60 ms of Python and
+low-priority process of its own, the frame handed over through shared memory (:class:`SharedFrame`: pickling a
+1080p frame into the process's pipe held the interpreter's lock for 3-15 ms, five times a second, against
+decoding and tracking; a copy into shared memory releases it) (:func:`measure_frame`: a measurement was 60 ms of Python and
 NumPy at 720p, 120 ms at 1080p, ~20 ms at 1080p since its corners' rays meet the water by Newton's
 method and its support scan samples less, ~12 ms since the scan samples along rows of points and further
 out only where an edge is near (issue 18: 28.8 → 17.1 ms of CPU, medians over the 195 measurements of
@@ -43,6 +45,7 @@ import sys
 import threading
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
+from multiprocessing.shared_memory import SharedMemory
 
 import numpy as np
 
@@ -102,6 +105,54 @@ def measure_frame(
         float(pose.sigma_depth_m[i]),
         n,
     )
+
+
+class SharedFrame:
+    """One frame at a time in shared memory, from the service to its measuring process (see the module doc): the
+    block is made for the first frame (again for a larger one) and unlinked by :meth:`close`."""
+
+    def __init__(self):
+        self.block: SharedMemory | None = None
+
+    def put(self, image: np.ndarray) -> tuple[str, tuple[int, ...], str]:
+        """Copy ``image`` in (the interpreter's lock released: numpy's copy of a large array); what
+        :func:`measure_shared` reads it by: (the block's name, the shape, the dtype)."""
+        if self.block is None or self.block.size < image.nbytes:
+            self.close()
+            self.block = SharedMemory(create=True, size=image.nbytes)
+        view = np.ndarray(image.shape, image.dtype, buffer=self.block.buf)
+        np.copyto(view, image)
+        del view  # no view may outlive the block's close
+        return self.block.name, image.shape, image.dtype.str
+
+    def close(self) -> None:
+        if self.block is not None:
+            self.block.close()
+            self.block.unlink()
+            self.block = None
+
+
+#: The measuring process's view of the service's shared frame: its block, by name (a new name: a new block).
+_attached: dict[str, SharedMemory] = {}
+
+
+def measure_shared(
+    cal: Calibration,
+    frame: tuple[str, tuple[int, ...], str],
+    pose: CameraPose,
+    i: int,
+    u: float,
+    v: float,
+) -> SizeHeight | str:
+    """:func:`measure_frame` of the frame :meth:`SharedFrame.put` put into shared memory (the measuring process)."""
+    name, shape, dtype = frame
+    if name not in _attached:
+        for old in _attached.values():  # the service made a new block
+            old.close()
+        _attached.clear()
+        _attached[name] = SharedMemory(name=name)
+    image = np.ndarray(shape, np.dtype(dtype), buffer=_attached[name].buf)
+    return measure_frame(cal, image, pose, i, u, v)
 
 
 def start_measuring_process() -> None:
@@ -275,19 +326,22 @@ class OnlineHeightFromSize:
         pool.submit(
             importlib.import_module, __name__
         )  # the process starts and imports now, not at the first frame
+        shared = SharedFrame()
         try:
             while not stop.is_set():
                 try:
                     image, pose, u, v = self._frames.get(timeout=0.2)
                 except queue.Empty:
                     continue
-                result = pool.submit(measure_frame, self.work.cal, image, pose, 0, u, v).result()
+                frame = shared.put(image)
+                result = pool.submit(measure_shared, self.work.cal, frame, pose, 0, u, v).result()
                 try:
                     self._loop.call_soon_threadsafe(self.work.take, result)
                 except RuntimeError:  # the loop is closed: stopped
                     return
         finally:
             pool.shutdown(wait=False, cancel_futures=True)
+            shared.close()
 
     def status(self) -> dict:
         return self.work.status() | {"frames_skipped": self.skipped, **self.worker.status()}
