@@ -241,6 +241,7 @@ class RunConfig(UuvOptions):
     video: NamedOrNone = Field(
         None,
         description="the UAV's video: udp://127.0.0.1:5600, an .sdp file, rtsp://..., "
+        "zenoh:video/<source>/stream (BlueOS's camera manager on Zenoh), "
         "a file (anything FFmpeg opens); none: no video (required: a run that names neither "
         "is refused)",
     )
