@@ -38,20 +38,24 @@ FLOOR_DEPTH_M = 4.0  # bottom_survey's site.floor_depth_m
 QGIS_PYTHON = "/usr/bin/python3"  # Debian's python3-qgis installs qgis.core for the system's Python
 
 
-@pytest.fixture(scope="module")
-def run(tmp_path_factory):
-    """The session, its processed output folder (positions.csv from tracking the video) and the GeoJSON export's
-    folder with the mosaic made by ``export --qgis``."""
-    session = tmp_path_factory.mktemp("survey")
+def _scenario(**overrides):
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "bottom_survey.toml")
-    sc = with_overrides(
+    return with_overrides(
         sc,
         duration_s=3.0,
         camera={"width": 640, "height": 360},
         marker={"enabled": True},
         sensors=NO_POSE_ERRORS,
+        **overrides,
     )
-    generate(sc, session)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """The session, its processed output folder (positions.csv from tracking the video) and the GeoJSON export's
+    folder with the mosaic made by ``export --qgis``."""
+    session = tmp_path_factory.mktemp("survey")
+    generate(_scenario(), session)
     out = tmp_path_factory.mktemp("processed")
     assert main(["process", str(session), "--out", str(out), "--quiet"]) == 0
     args = ["--session", str(session), "--floor-depth-m", str(FLOOR_DEPTH_M), "--quiet"]
@@ -264,3 +268,44 @@ def test_report_command_uses_the_mosaic_beside_positions(run, capsys):
     assert main(["report", str(out), "--mosaic", str(out / "none.tif")]) == 2
     err = capsys.readouterr().err.strip()
     assert "--mosaic" in err and "none.tif" in err and len(err.splitlines()) == 1
+
+
+def _rgba(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    with rasterio.open(path) as d:
+        return np.moveaxis(d.read((1, 2, 3)), 0, -1).astype(float), d.read(4) == 255
+
+
+def test_the_uuv_is_left_out_around_the_trackers_pixels(run, tmp_path):
+    """The mosaic export made (the UUV left out around positions.csv's tracked pixels) against the same flight over
+    the same floor with a UUV too small to see (5 cm): few cells differ by more than 10 levels; with no pixels to
+    leave out (positions.csv's u, v emptied) the UUV's trail shows: several times as many."""
+    session, out = run
+    ghost = tmp_path / "ghost"
+    generate(_scenario(uuv={"size_m": [0.05, 0.05, 0.05]}), ghost)
+    depth = ["--floor-depth-m", str(FLOOR_DEPTH_M), "--quiet"]
+    assert main(["mosaic", str(ghost), "--out", str(tmp_path / "floor"), *depth]) == 0
+    rows = (out / "positions.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    iu, iv = header.index("u"), header.index("v")
+    blank = []
+    for line in rows[1:]:
+        cells = line.split(",")
+        cells[iu] = cells[iv] = ""
+        blank.append(",".join(cells))
+    (tmp_path / "no_pixels.csv").write_text("\n".join([rows[0], *blank]) + "\n")
+    no_pixels = ["--positions", str(tmp_path / "no_pixels.csv")]
+    assert main(["mosaic", str(session), "--out", str(tmp_path / "kept"), *no_pixels, *depth]) == 0
+    assert (
+        json.loads((tmp_path / "kept" / "mosaic.json").read_text())["uuv_left_out"]["frames"] == 0
+    )
+
+    floor, a_floor = _rgba(tmp_path / "floor" / "mosaic.tif")
+    left_out, a_left = _rgba(out / "mosaic.tif")
+    kept, a_kept = _rgba(tmp_path / "kept" / "mosaic.tif")
+    assert floor.shape == left_out.shape == kept.shape  # the same poses: the same grid
+    both = a_floor & a_left & a_kept
+    differ_left_out = int(np.sum((np.abs(left_out - floor).max(axis=-1) > 10) & both))
+    differ_kept = int(np.sum((np.abs(kept - floor).max(axis=-1) > 10) & both))
+    print(f"cells > 10 levels off the floor: UUV left out {differ_left_out}, kept {differ_kept}")
+    assert differ_kept > 200
+    assert differ_left_out < 0.25 * differ_kept

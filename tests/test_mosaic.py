@@ -150,3 +150,36 @@ def test_bad_floor_depth_is_one_line_naming_it(mosaic, capsys):
     )
     err = capsys.readouterr().err.strip()
     assert "--floor-depth-m -1" in err and len(err.splitlines()) == 1
+
+
+def test_the_blend_spilled_to_disk_is_the_blend_held_in_memory(tmp_path):
+    """The blend's tiles (groundstation.offline.mosaic.Accumulator): random weighted blocks added across tile
+    borders give the same weighted mean with 1 tile held in memory (the rest spilled and read back) as with all
+    held, and that mean is the one computed here over a whole-grid array."""
+    from groundstation.offline.mosaic import TILE, Accumulator
+
+    rng = np.random.default_rng(3)
+    height, width = 2 * TILE + 37, 3 * TILE + 5
+    whole = np.zeros((height, width, 4))
+    spilled, held = tmp_path / "spilled", tmp_path / "held"
+    spilled.mkdir()
+    held.mkdir()
+    small, large = Accumulator(spilled, max_tiles=1), Accumulator(held, max_tiles=100)
+    for _ in range(12):
+        h, w = rng.integers(1, 300, size=2)
+        r0, c0 = rng.integers(0, height - h), rng.integers(0, width - w)
+        weight = rng.uniform(0, 1, (h, w)) * (rng.uniform(size=(h, w)) > 0.3)
+        block = np.dstack([rng.uniform(0, 255, (h, w, 3)) * weight[..., None], weight])
+        whole[r0 : r0 + h, c0 : c0 + w] += block
+        small.add(int(r0), int(c0), block.astype(np.float32))
+        large.add(int(r0), int(c0), block.astype(np.float32))
+    assert small.painted() == large.painted() and any(spilled.iterdir())
+    for tr, tc in large.painted():
+        a, b = small.rgba((tr, tc)), large.rgba((tr, tc))
+        assert np.array_equal(a, b)
+        ref = whole[tr * TILE : (tr + 1) * TILE, tc * TILE : (tc + 1) * TILE]
+        w = ref[:, :, 3]
+        h_, w_ = w.shape
+        assert np.array_equal(a[:h_, :w_, 3] == 255, w > 0)
+        mean = ref[:, :, :3] / np.where(w > 0, w, 1)[..., None]
+        assert np.max(np.abs(a[:h_, :w_, :3] - np.round(mean))[w > 0]) <= 1
