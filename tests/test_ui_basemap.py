@@ -248,3 +248,43 @@ def test_the_page_draws_the_base_map_under_the_fixes_at_the_right_pixel(tmp_path
         f"{off.max():.1f} px ({px_per_m:.1f} px/m)"
     )
     assert np.median(off) <= 2 + 0.1 * px_per_m and off.max() <= 7 + 0.1 * px_per_m
+
+
+def test_leaflet_is_unpacked_only_from_a_tarball_of_the_pinned_integrity(tmp_path, monkeypatch):
+    import base64
+    import hashlib
+    import io
+    import tarfile
+
+    from groundstation.live.ui import vendor
+
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w:gz") as tar:
+        for name in (
+            "dist/leaflet.js",
+            "dist/leaflet.css",
+            "LICENSE",
+            "dist/images/layers.png",
+            "src/Map.js",
+        ):
+            data = f"// {name}\n".encode()
+            info = tarfile.TarInfo(f"package/{name}")
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    tgz = tmp_path / "leaflet.tgz"
+    tgz.write_bytes(buf.getvalue())
+    monkeypatch.setenv(vendor.ENV, str(tgz))
+    # not the registry's integrity: refused, nothing written
+    with pytest.raises(vendor.VendorError, match="is not the registry's integrity"):
+        vendor.fetch(tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    # its own integrity: the page's files only, and the version
+    own = "sha512-" + base64.b64encode(hashlib.sha512(tgz.read_bytes()).digest()).decode()
+    monkeypatch.setattr(vendor, "INTEGRITY", own)
+    assert vendor.fetch(tmp_path / "out") and vendor.is_present(tmp_path / "out")
+    files = sorted(
+        p.relative_to(tmp_path / "out").as_posix() for p in (tmp_path / "out").rglob("*.*")
+    )
+    assert files == ["images/layers.png", "leaflet.css", "leaflet.js"]
+    assert (tmp_path / "out" / "LICENSE").read_text() == "// LICENSE\n"
+    assert not vendor.fetch(tmp_path / "out")  # there already

@@ -94,7 +94,7 @@ def fetch(dest: Path = DEST) -> bool:
     if is_present(dest):
         return False
     data = download()
-    check_integrity(data)
+    check_integrity(data, INTEGRITY)
     unpack(data, dest)
     return True
 
