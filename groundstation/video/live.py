@@ -9,7 +9,10 @@ true when the decoder falls behind (a loaded laptop, 1080p): the packets wait in
 queue of at most :data:`PACKET_BACKLOG`, not in the socket. While more than
 :data:`BEHIND_PACKETS` wait, a live stream's decoded frames are not converted nor
 handed over (they would be stale; ``skipped_behind`` in the status), so the
-decoder catches up instead of falling further behind. Each frame handed over goes
+decoder catches up instead of falling further behind; while more than :data:`CATCH_UP_PACKETS` wait (a decoder
+slower than the stream: a saturated laptop), the packets before the newest keyframe among them are dropped
+unread (newest wins; counted in ``skipped_behind`` too): decoding restarts there, fresh frames come out again
+instead of none at all (every decoded frame stale, skipped) with the stream seconds behind. Each frame handed over goes
 to the event loop as a :class:`LiveFrame` through a bounded
 :class:`~groundstation.threads.Handoff` (:data:`HANDOFF_FRAMES`; beyond, the oldest
 is dropped and counted). The thread is :class:`~groundstation.threads.Supervised`
@@ -83,6 +86,9 @@ PACKET_BACKLOG = (
     120  # packets read but not yet decoded, at most (4 s at 30 fps); then reading waits
 )
 BEHIND_PACKETS = 2  # live: with more than this many packets waiting, decoded frames are skipped
+CATCH_UP_PACKETS = (
+    30  # live: with more than this many waiting (1 s at 30 fps), skip to the newest keyframe
+)
 HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
 READER_STOP_S = 0.3  # a stop waits this long for the reader thread
 RTP_KINDS = ("sdp", "rtsp")  # inputs FFmpeg depacketizes from RTP (rtp://: skyfix itself, .rtp)
@@ -101,6 +107,25 @@ def _demux(container, stream, packets: queue.Queue, done: threading.Event) -> No
         put_until(packets, _END, done)
     except (av.error.FFmpegError, OSError) as e:
         put_until(packets, e, done)
+
+
+def catch_up(packets: queue.Queue, waiting: deque) -> tuple[int, float | None]:
+    """A live decoder far behind: the queued packets moved into ``waiting`` (up to :data:`PACKET_BACKLOG`), those
+    before the newest keyframe among them dropped (its decoding needs none of them); (how many were dropped, the
+    last dropped one's ``t_recv``)."""
+    while len(waiting) < PACKET_BACKLOG:
+        try:
+            waiting.append(packets.get_nowait())
+        except queue.Empty:
+            break
+    newest = max(
+        (i for i, item in enumerate(waiting) if isinstance(item, tuple) and item[0].is_keyframe),
+        default=0,
+    )
+    t_last = None
+    for _ in range(newest):  # packets all (the demuxer's last word comes after every packet)
+        t_last = waiting.popleft()[1]
+    return newest, t_last
 
 
 def _drain(packets: queue.Queue) -> None:
@@ -153,6 +178,7 @@ class VideoLive:
         self.connects = 0
         self.decode_errors = 0
         self.skipped_behind = 0
+        self.caught_up = 0  # times the decoder skipped to a keyframe to catch up
         self.backlog = 0
         self.state = "starting"
         self.last_recv: float | None = None
@@ -296,9 +322,22 @@ class VideoLive:
         previous_out: float | None = (
             None  # ends_at_next: when the previous access unit was handed over
         )
+        waiting: deque = deque()  # taken from the queue by a catch-up, not yet decoded
         while not stop.is_set():
+            if self.source.live and len(waiting) + packets.qsize() > CATCH_UP_PACKETS:
+                dropped, t_last = catch_up(packets, waiting)
+                if dropped:
+                    self.skipped_behind += dropped
+                    previous_out = t_last if ends_at_next else previous_out
+                    if not self.caught_up:
+                        log.warning(
+                            "video: the decoder is %d frames behind the stream: skipped to the newest keyframe "
+                            "(again whenever it is; counted in skipped_behind)",
+                            dropped,
+                        )
+                    self.caught_up += 1
             try:
-                item = packets.get(timeout=0.1)
+                item = waiting.popleft() if waiting else packets.get(timeout=0.1)
             except queue.Empty:
                 continue
             if isinstance(item, BaseException):
@@ -321,7 +360,7 @@ class VideoLive:
             except av.error.InvalidDataError:
                 self.decode_errors += 1
                 continue
-            self.backlog = packets.qsize()
+            self.backlog = len(waiting) + packets.qsize()
             behind = self.source.live and self.backlog > BEHIND_PACKETS
             for frame in decoded:
                 t_first = first_recv.pop(frame.pts, t_recv)
