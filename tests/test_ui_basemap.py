@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from live_helpers import ROOT, LiveRun, ui_url, wait_for
 from pyproj import Geod
+from test_ui_access import service  # noqa: F401 (the fixture: skyfix run without inputs)
 from ui_browser import available, chromium
 
 from groundstation.tiles import BaseMapError, open_basemap
@@ -288,3 +289,23 @@ def test_leaflet_is_unpacked_only_from_a_tarball_of_the_pinned_integrity(tmp_pat
     assert files == ["images/layers.png", "leaflet.css", "leaflet.js"]
     assert (tmp_path / "out" / "LICENSE").read_text() == "// LICENSE\n"
     assert not vendor.fetch(tmp_path / "out")  # there already
+
+
+@pytest.mark.skipif(available() is not None, reason=str(available()))
+def test_without_leaflet_the_page_works_and_says_the_map_is_missing(service, tmp_path):  # noqa: F811
+    """An installation without the map library (not fetched): the header, health and commands work, the map says
+    why it is empty, no JavaScript error."""
+    base, _ = service()
+    with chromium(tmp_path, base) as browser:
+        page = browser.page
+        page.route("**/leaflet.js", lambda route: route.abort())
+        page.goto(base + "/")
+        page.wait_for_selector("#conn.ok", timeout=20_000)
+        wait_for(
+            lambda: "Leaflet) is missing" in page.inner_text("#map-info"),
+            10,
+            "the map saying its library is missing",
+        )
+        assert page.inner_text("#sending") == "NOT SENDING"  # the run has no --gps-input
+        wait_for(lambda: "UAV MAVLink" in page.inner_text("#health"), 10, "the health table")
+        assert not browser.errors, browser.errors

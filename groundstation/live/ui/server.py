@@ -62,6 +62,7 @@ from urllib.parse import urlsplit
 from aiohttp import WSMsgType, web
 
 from groundstation.live.control import Control, ControlError, jsonable
+from groundstation.live.ui import vendor
 from groundstation.live.ui.bind import is_loopback, parse_bind
 from groundstation.live.ui.feed import VideoFeed, lower_priority
 from groundstation.live.ui.palette import colour
@@ -211,6 +212,13 @@ class WebUi:
                 )
             except BaseMapError as e:
                 raise UiError(f"--basemap: {e}") from None
+        if not vendor.is_present():
+            log.warning(
+                "web page: its map library, Leaflet %s, is not in %s: the page shows no map "
+                "(./dev setup, or python -m groundstation.live.ui.vendor, fetches it)",
+                vendor.VERSION,
+                vendor.DEST,
+            )
         app = web.Application(middlewares=[self._guard], client_max_size=64 * 1024)
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._websocket)

@@ -496,17 +496,20 @@ function niceLength(m) {  // 1, 2, 5 × 10^k not above m
 // The map is Leaflet's (web Mercator, north up; served by skyfix, nothing from the internet) over the base map's
 // tiles when the run has one (--basemap); what skyfix draws (footprint, tracks, accuracy circles and ellipses, the
 // UAV, north arrow, scale bar) goes on a canvas above the tiles, placed by Leaflet's projection. The map follows the
-// UAV, its footprint and the last 30 s of each track ("follow"); dragging or zooming it stops that.
+// UAV, its footprint and the last 30 s of each track ("follow"); dragging or zooming it stops that. Without Leaflet
+// (an installation that did not fetch it) the rest of the page works and the map says what is missing.
 const MAX_ZOOM = 26;
 const WGS84_A = 6378137.0, WGS84_E2 = 6.69437999014e-3;
-const lmap = L.map(map, { zoomSnap: 0, zoomDelta: 0.5, maxZoom: MAX_ZOOM, zoomControl: false,
-                          attributionControl: false, zoomAnimation: false, fadeAnimation: false })
-  .setView([0, 0], 1);
-L.control.zoom({ position: "bottomright" }).addTo(lmap);
+const lmap = window.L ? L.map(map, { zoomSnap: 0, zoomDelta: 0.5, maxZoom: MAX_ZOOM, zoomControl: false,
+                                     attributionControl: false, zoomAnimation: false, fadeAnimation: false })
+  .setView([0, 0], 1) : null;
 page.follow = true;
 let fitting = false, baseLayer = null;
-lmap.on("move zoom resize", () => drawMap());
-lmap.on("dragstart zoomstart", () => { if (!fitting) setFollow(false); });
+if (lmap) {
+  L.control.zoom({ position: "bottomright" }).addTo(lmap);
+  lmap.on("move zoom resize", () => drawMap());
+  lmap.on("dragstart zoomstart", () => { if (!fitting) setFollow(false); });
+}
 $("follow").onchange = () => { setFollow($("follow").checked); if (page.follow) fitView(); drawMap(); };
 
 function setFollow(on) {
@@ -520,7 +523,7 @@ function showBasemap(b) {
   baseLayer = null;
   page.basemap = b;
   map.dataset.tiles = b ? "loading" : "";
-  if (!b) return;
+  if (!b || !lmap) return;
   const [w, s, e, n] = b.bounds;
   if (!page.map || !page.map.origin) {  // nothing of the run to show yet: the base map
     fitting = true;
@@ -561,7 +564,7 @@ function inView() {
 // the view around what must be in view, 1.25 times its span (at least 4 m) across the map's shorter side
 function fitView() {
   const pts = inView();
-  if (!pts.length) return;
+  if (!pts.length || !lmap) return;
   const ns = pts.map((p) => p[0]), es = pts.map((p) => p[1]);
   const n0 = (Math.min(...ns) + Math.max(...ns)) / 2, e0 = (Math.min(...es) + Math.max(...es)) / 2;
   const span = Math.max(Math.max(...ns) - Math.min(...ns), Math.max(...es) - Math.min(...es), 4);
@@ -574,12 +577,6 @@ function fitView() {
 }
 
 function drawMap() {
-  const dpr = window.devicePixelRatio || 1;
-  const canvas = mctx.canvas, size = lmap.getSize();
-  canvas.width = Math.max(1, Math.round(size.x * dpr));
-  canvas.height = Math.max(1, Math.round(size.y * dpr));
-  const W = canvas.width, H = canvas.height, ctx = mctx;
-  ctx.clearRect(0, 0, W, H);
   const m = page.map;
   map.dataset.points = page.uuvs.length ? page.uuvs[0].track.length : 0;  // the first UUV's
   map.dataset.tracks = page.uuvs.map((u) => `${u.id}:${u.track.length}`).join(" ");
@@ -587,6 +584,17 @@ function drawMap() {
   const gate0 = page.uuvs.length ? page.uuvs[0].gate : null;
   map.dataset.gate = gate0 ? gate0.state : "";  // the first UUV's
   map.dataset.gates = page.uuvs.map((u) => `${u.id}:${u.gate ? u.gate.state : ""}`).join(" ");
+  if (!lmap) {
+    $("map-info").textContent = "no map: its library (Leaflet) is missing from this installation of skyfix "
+      + "(./dev setup, or python -m groundstation.live.ui.vendor, fetches it)";
+    return;
+  }
+  const dpr = window.devicePixelRatio || 1;
+  const canvas = mctx.canvas, size = lmap.getSize();
+  canvas.width = Math.max(1, Math.round(size.x * dpr));
+  canvas.height = Math.max(1, Math.round(size.y * dpr));
+  const W = canvas.width, H = canvas.height, ctx = mctx;
+  ctx.clearRect(0, 0, W, H);
   if (!inView().length) {
     ctx.fillStyle = "#000";
     ctx.font = `bold ${16 * dpr}px system-ui, sans-serif`;
