@@ -20,7 +20,7 @@ import subprocess
 import cv2
 import numpy as np
 import pytest
-from live_helpers import ROOT, LiveRun, ui_url, wait_for
+from live_helpers import ROOT, LiveRun, free_port, skyfix, ui_url, wait_for
 from pyproj import Geod
 from test_ui_access import service  # noqa: F401 (the fixture: skyfix run without inputs)
 from ui_browser import available, chromium
@@ -157,6 +157,15 @@ def test_bad_base_maps_are_one_line_errors_naming_the_file(tmp_path):
         with pytest.raises(BaseMapError) as e:
             open_basemap(path)
         assert str(path) in str(e.value) and why in str(e.value) and "\n" not in str(e.value)
+    # skyfix run stops at the start (exit 2), naming the option and the file
+    run = subprocess.run(
+        skyfix("run", "--calibration", str(SESSION / "session.toml"), "--video", "none", "--gps-input",
+               "none", "--mavlink", f"udpin:127.0.0.1:{free_port()}", "--basemap", str(text),
+               "--duration-s", "20"),
+        check=False, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert run.returncode == 2
+    assert f"skyfix run: error: --basemap: {text}: not an image GDAL reads" in run.stderr
 
 
 @pytest.mark.skipif(available() is not None, reason=str(available()))
