@@ -146,15 +146,17 @@ class GeoTiffTiles:
     def render(self, z: int, x: int, y: int) -> np.ndarray | None:
         """Tile ``z/x/y`` as RGBA (4 x 256 x 256, uint8), None where the image has no pixel in it."""
         import rasterio
-        from rasterio.transform import from_bounds
+        from affine import Affine
         from rasterio.warp import Resampling, reproject
 
+        west, _, east, north = tile_bounds_m(z, x, y)
+        size = (east - west) / TILE_PX
         n = len(self.bands) - (1 if self.alpha else 0)
         out = np.zeros((n + 1, TILE_PX, TILE_PX), np.uint8)
         reproject(
             rasterio.band(self.ds, self.bands),
             out,
-            dst_transform=from_bounds(*tile_bounds_m(z, x, y), TILE_PX, TILE_PX),
+            dst_transform=Affine(size, 0.0, west, 0.0, -size, north),  # a tile pixel's size, m
             dst_crs="EPSG:3857",
             src_alpha=self.alpha,
             dst_alpha=n + 1,

@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 from live_helpers import ROOT, LiveRun, free_port, skyfix, ui_url, wait_for
 from pyproj import Geod
-from test_ui_access import service  # noqa: F401 (the fixture: skyfix run without inputs)
+from test_ui_access import _get, service  # noqa: F401 (the fixture: skyfix run without inputs)
 from ui_browser import available, chromium
 
-from groundstation.tiles import BaseMapError, open_basemap
+from groundstation.tiles import BaseMapError, GeoTiffTiles, open_basemap, tiles_in, write_tiles
 
 SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
 A_M = 6378137.0  # web Mercator's sphere
@@ -88,8 +88,7 @@ def test_a_geotiff_becomes_tiles_with_its_mark_where_web_mercator_says(tmp_path)
     lat, lon = 63.44, 10.40
     tif = _geotiff(tmp_path / "site.tif", lat, lon, 12.0, 0.03, 0.5, alpha=True)
     out = subprocess.run(
-        [str(ROOT / ".venv" / "bin" / "skyfix"), "tiles", str(tif), "--out", str(tmp_path / "xyz"),
-         "--mbtiles", str(tmp_path / "site.mbtiles")],
+        skyfix("tiles", str(tif), "--out", str(tmp_path / "xyz"), "--mbtiles", str(tmp_path / "site.mbtiles")),
         check=False, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert out.returncode == 0, out.stderr
@@ -142,6 +141,26 @@ def test_a_geotiff_becomes_tiles_with_its_mark_where_web_mercator_says(tmp_path)
     )
     if info.returncode == 0 or "not found" not in info.stderr:
         assert "Pseudo-Mercator" in info.stdout, info.stdout[:500] + info.stderr
+
+
+def test_the_service_serves_an_mbtiles_base_maps_tiles(service, tmp_path):  # noqa: F811
+    """``skyfix run --basemap FILE.mbtiles``: its tiles at /basemap/Z/X/Y byte for byte; 404 where it has none."""
+    tif = _geotiff(tmp_path / "site.tif", 63.44, 10.40, 12.0, 0.03, 0.5, alpha=True)
+    source = GeoTiffTiles(tif)
+    write_tiles(source, None, tmp_path / "site.mbtiles")
+    mb = open_basemap(tmp_path / "site.mbtiles")
+    z = mb.info()["maxzoom"]
+    x, y = next((x, y) for x, y in tiles_in(source.bounds, z) if mb.tile(z, x, y))
+    base, _ = service("--basemap", str(tmp_path / "site.mbtiles"))
+    status, headers, body = _get(f"{base}/basemap/{z}/{x}/{y}")
+    assert status == 200 and headers["Content-Type"] == "image/png" and body == mb.tile(z, x, y)
+    for path in (
+        f"{z}/0/0",
+        "3/8/0",
+        "31/0/0",
+        "2/1/-1",
+    ):  # none there; beyond the zoom's tiles; not a tile
+        assert _get(f"{base}/basemap/{path}")[0] == 404, path
 
 
 def test_bad_base_maps_are_one_line_errors_naming_the_file(tmp_path):
