@@ -4,8 +4,9 @@ from a GeoTIFF, an MBTiles file or a folder of tiles, and written as a folder or
 - :func:`open_basemap`: a base map for the live page (``skyfix run --basemap``): a GeoTIFF (the mosaic of an earlier
   flight, ``skyfix mosaic``, or an orthophoto the team brings; any CRS, 8-bit grey or RGB, with an alpha band,
   a nodata value or neither) rendered tile by tile when asked (:class:`GeoTiffTiles`: each tile warped by
-  rasterio's GDAL, bilinear); an MBTiles file (:class:`MbTiles`, SQLite: its ``metadata`` and ``tiles``, rows in
-  TMS order as the MBTiles 1.3 specification has them); or a folder ``Z/X/Y.png`` (or ``.jpg``, ``.webp``:
+  rasterio's GDAL, bilinear, from the coarsest of the image's overviews that is fine enough); an MBTiles file
+  (:class:`MbTiles`, SQLite: its ``metadata`` and ``tiles``, rows in TMS order as the MBTiles 1.3 specification
+  has them); or a folder ``Z/X/Y.png`` (or ``.jpg``, ``.webp``:
   :class:`TileFolder`; XYZ order, as ``gdal2tiles.py --xyz`` writes). Each says its ``info()``: its name, the
   tiles' format, its bounds (degrees west, south, east, north) and zoom levels, and gives ``tile(z, x, y)``: the
   tile's bytes, or None where it has none.
@@ -133,6 +134,8 @@ class GeoTiffTiles:
             ground = transform_bounds(ds.crs, "EPSG:3857", *ds.bounds)
             self.gsd_m = (ground[2] - ground[0]) * math.cos(math.radians(lat)) / ds.width
         self.minzoom, self.maxzoom = zoom_range(self.bounds, self.gsd_m)
+        self.lat_deg = lat
+        self._overviews = {}  # overview level -> its dataset, opened once
 
     def info(self) -> dict:
         return {
@@ -154,7 +157,7 @@ class GeoTiffTiles:
         n = len(self.bands) - (1 if self.alpha else 0)
         out = np.zeros((n + 1, TILE_PX, TILE_PX), np.uint8)
         reproject(
-            rasterio.band(self.ds, self.bands),
+            rasterio.band(self._level(z), self.bands),
             out,
             dst_transform=Affine(size, 0.0, west, 0.0, -size, north),  # a tile pixel's size, m
             dst_crs="EPSG:3857",
@@ -166,12 +169,28 @@ class GeoTiffTiles:
             return None
         return out[[0, 0, 0, 1]] if self.grey else out
 
+    def _level(self, z: int):
+        """The dataset a zoom-``z`` tile is warped from: the coarsest of the image's overviews (a COG's, the
+        mosaic's) whose cells are no larger than the tile's pixels, else the image (GDAL's warper would read it
+        whole for a tile of a low zoom)."""
+        import rasterio
+
+        factors = self.ds.overviews(1)
+        coarser = pixel_m(z, self.lat_deg) / self.gsd_m
+        level = max((i for i, f in enumerate(factors) if f <= coarser), default=None)
+        if level is None:
+            return self.ds
+        if level not in self._overviews:
+            self._overviews[level] = rasterio.open(self.path, overview_level=level)
+        return self._overviews[level]
+
     def tile(self, z: int, x: int, y: int) -> bytes | None:
         rgba = self.render(z, x, y)
         return None if rgba is None else encode_png(rgba)
 
     def close(self) -> None:
-        self.ds.close()
+        for ds in (self.ds, *self._overviews.values()):
+            ds.close()
 
 
 class MbTiles:

@@ -84,6 +84,33 @@ def _green(rgb: np.ndarray) -> np.ndarray:
     return (g > 170) & (r < 90) & (b < 120)
 
 
+def _tile_xy(lat: float, lon: float, z: int) -> tuple[float, float]:
+    """The zoom-``z`` tile coordinates of a point (fractional), by pyproj's web Mercator."""
+    x_m, y_m = _mercator_m(lat, lon)
+    tile_m = 2 * math.pi * A_M / 2**z
+    return (x_m + math.pi * A_M) / tile_m, (math.pi * A_M - y_m) / tile_m
+
+
+def _disc_where_mercator_says(png: bytes, tx: float, ty: float, radius_px: float) -> None:
+    """The green disc in the tile (PNG) at the tile position (``tx``, ``ty``) within a pixel, at its radius; the
+    tile transparent south of it (the image's alpha 0 there)."""
+    rgba = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)[..., [2, 1, 0, 3]]
+    ys, xs = np.nonzero(_green(rgba) & (rgba[..., 3] == 255))
+    want = ((tx % 1) * 256 - 0.5, (ty % 1) * 256 - 0.5)  # pixel centres
+    assert len(xs) > 20
+    # the disc may run over the tile's edge: its centre from its extent on the sides inside the tile
+    got = ((xs.min() + xs.max()) / 2, (ys.min() + ys.max()) / 2)
+    inside = [
+        c for c, lo, hi in ((0, xs.min(), xs.max()), (1, ys.min(), ys.max())) if lo > 0 and hi < 255
+    ]
+    assert inside, "the disc fills its tile's width and height"
+    for c in inside:
+        assert abs(got[c] - want[c]) <= 1.0, (got, want)
+    assert abs((xs.max() - xs.min() + 1) / 2 - radius_px) <= 1.5 if 0 in inside else True
+    south = int(want[1] + 4 * radius_px)
+    assert south >= 256 or not rgba[south:, :, 3].any()
+
+
 def test_a_geotiff_becomes_tiles_with_its_mark_where_web_mercator_says(tmp_path):
     lat, lon = 63.44, 10.40
     tif = _geotiff(tmp_path / "site.tif", lat, lon, 12.0, 0.03, 0.5, alpha=True)
@@ -102,32 +129,20 @@ def test_a_geotiff_becomes_tiles_with_its_mark_where_web_mercator_says(tmp_path)
     w, s, e, n = mb.info()["bounds"]
     assert w < lon < e and s < lat < n and (e - w) * 111e3 * math.cos(math.radians(lat)) < 25
     # the disc in its tile, at pyproj's web Mercator
-    x_m, y_m = _mercator_m(lat, lon)
-    tile_m = 2 * math.pi * A_M / 2**z
-    tx, ty = (x_m + math.pi * A_M) / tile_m, (math.pi * A_M - y_m) / tile_m
+    tx, ty = _tile_xy(lat, lon, z)
     png = mb.tile(z, int(tx), int(ty))
     assert png == folder.tile(z, int(tx), int(ty)) and png is not None
-    rgba = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)[..., [2, 1, 0, 3]]
-    ys, xs = np.nonzero(_green(rgba) & (rgba[..., 3] == 255))
-    want = ((tx % 1) * 256 - 0.5, (ty % 1) * 256 - 0.5)  # pixel centres
-    assert len(xs) > 100
-    # the disc may run over the tile's edge: its centre from its extent on the sides inside the tile
-    got = ((xs.min() + xs.max()) / 2, (ys.min() + ys.max()) / 2)
-    radius_px = 0.5 / pixel(z)
-    inside = [
-        c for c, lo, hi in ((0, xs.min(), xs.max()), (1, ys.min(), ys.max())) if lo > 0 and hi < 255
-    ]
-    assert inside, "the disc fills its tile's width and height"
-    for c in inside:
-        assert abs(got[c] - want[c]) <= 1.0, (got, want)
-    assert abs((xs.max() - xs.min() + 1) / 2 - radius_px) <= 1.5 if 0 in inside else True
-    # transparent where the image's alpha is 0 (south of the disc) and outside it
-    south = (
-        rgba[int(min(255, want[1] + 4 * radius_px)) :, :, 3]
-        if want[1] + 4 * radius_px < 256
-        else None
-    )
-    assert south is None or not south.any()
+    _disc_where_mercator_says(png, tx, ty, 0.5 / pixel(z))
+    # a tile of a coarser zoom, from the image's overviews (a COG's: 2, 4, 8 times coarser): there too
+    import rasterio
+
+    with rasterio.open(tif, "r+") as ds:
+        ds.build_overviews([2, 4, 8])
+    coarse = GeoTiffTiles(tif)
+    assert coarse.ds.overviews(1) == [2, 4, 8]
+    tx, ty = _tile_xy(lat, lon, z - 2)
+    _disc_where_mercator_says(coarse.tile(z - 2, int(tx), int(ty)), tx, ty, 0.5 / pixel(z - 2))
+    assert 0 in coarse._overviews  # taken from the first overview (0.06 m cells for 0.068 m pixels)
     # the MBTiles: rows in TMS order (row 0 in the south), one per tile of the folder; GDAL reads it
     db = sqlite3.connect(tmp_path / "site.mbtiles")
     rows = db.execute("SELECT zoom_level, tile_column, tile_row FROM tiles").fetchall()
