@@ -15,7 +15,7 @@ sigma and source word; the UAV's horizontal sigma follows GPS_RAW_INT and the EK
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -135,6 +135,17 @@ def camera_pose(
     ``alignment`` = (word, 1-sigma s) says the frames' times were aligned otherwise (live: the video latency
     estimated from the image's motion). Either sigma adds to ``[uncertainty] time_s``.
     """
+    return with_depth(
+        cal, uav_pose(cal, tel, t_unix, alignment), tel.depth if depth is None else depth
+    )
+
+
+def uav_pose(
+    cal: Calibration, tel: Telemetry, t_unix, alignment: tuple[str, float] | None = None
+) -> CameraPose:
+    """:func:`camera_pose` without the UUV's depth: what the UAV's telemetry says, the same for every UUV in the
+    frame (computed once per frame, each UUV's depth added by :func:`with_depth`). Its depth fields are NaN and its
+    status is not yet checked for the depth nor for a camera below the surface."""
     t = np.atleast_1d(np.asarray(t_unix, dtype=float))
     n = len(t)
     status = np.full(n, "ok", dtype=object)
@@ -144,13 +155,6 @@ def camera_pose(
     R_gimbal, R_body, sig_tilt, sig_yaw = _rotations(cal, tel, tq, status)
     p, sp, ep = tel.position.sample(tq)
     _mark(status, sp, "position")
-    depth = tel.depth if depth is None else depth
-    dep, sd, ed = depth.sample(t)
-    _mark(status, sd, "depth")
-    depth_age_s = np.maximum(0.0, t - depth.last_t) if len(depth) else np.zeros(n)
-    sigma_depth = frame_sigma_m(dep[:, 1], dep[:, 2], ed[:, 0], depth_age_s, cal.sigmas.depth_m)
-    words = np.array((*SOURCE_WORDS, ""), dtype=object)  # "": no depth at that frame
-    depth_source = words[np.where(np.isfinite(dep[:, 3]), dep[:, 3], len(SOURCE_WORDS)).astype(int)]
 
     R_cv = att.R_ned_from_cv(R_gimbal)
     R_before = att.R_ned_from_cv(_rotations(cal, tel, tq - RATE_STEP_S)[0])
@@ -181,7 +185,6 @@ def camera_pose(
         - height.bias_m
     )
     cam_h = uav_h - offset_ned[:, 2]
-    status[(status == "ok") & ~(cam_h > 0)] = "below_surface"
     sig = cal.sigmas
     time_source, sigma_alignment_s = alignment or (tel.latency_source, tel.latency_sigma_s)
     return CameraPose(
@@ -194,7 +197,7 @@ def camera_pose(
         cam_offset_ned_m=offset_ned,
         uav_height_m=uav_h,
         height_m=cam_h,
-        depth_m=dep[:, 0],
+        depth_m=np.full(n, np.nan),
         sigma_tilt_rad=sig_tilt,
         sigma_yaw_rad=sig_yaw,
         sigma_uav_m=sigma_uav,
@@ -203,9 +206,26 @@ def camera_pose(
         t_gnss=t - offset_gnss if offset_gnss is not None else np.full(n, np.nan),
         geoid_separation_m=gnss[:, 1],
         sigma_height_m=height.sigma_m,
-        sigma_depth_m=sigma_depth,
+        sigma_depth_m=np.full(n, np.nan),
         sigma_time_s=np.full(n, np.hypot(sig.time_s, sigma_alignment_s)),
         height_source=height.source,
-        depth_source=depth_source,
+        depth_source=np.full(n, "", dtype=object),
         time_source=np.full(n, time_source, dtype=object),
+    )
+
+
+def with_depth(cal: Calibration, pose: CameraPose, depth: Series) -> CameraPose:
+    """A :func:`uav_pose` with the UUV's depth from ``depth`` at its times: its depth fields, and its status
+    checked for the depth, then for the camera below the surface (as :func:`camera_pose` says)."""
+    t = pose.t_unix
+    status = pose.status.copy()
+    dep, sd, ed = depth.sample(t)
+    _mark(status, sd, "depth")
+    depth_age_s = np.maximum(0.0, t - depth.last_t) if len(depth) else np.zeros(len(t))
+    sigma_depth = frame_sigma_m(dep[:, 1], dep[:, 2], ed[:, 0], depth_age_s, cal.sigmas.depth_m)
+    words = np.array((*SOURCE_WORDS, ""), dtype=object)  # "": no depth at that frame
+    depth_source = words[np.where(np.isfinite(dep[:, 3]), dep[:, 3], len(SOURCE_WORDS)).astype(int)]
+    status[(status == "ok") & ~(pose.height_m > 0)] = "below_surface"
+    return replace(
+        pose, status=status, depth_m=dep[:, 0], sigma_depth_m=sigma_depth, depth_source=depth_source
     )

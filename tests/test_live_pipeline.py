@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import json
+from dataclasses import fields
 
 import numpy as np
+import pytest
+from conftest import T0_UNIX
 
 from groundstation.config_files import load_calibration
-from groundstation.live.pipeline import Pipeline
+from groundstation.live.pipeline import FramePoses, Pipeline
 from groundstation.runtime.zenoh_fix import fix_to_json
 from groundstation.video.frames import LiveFrame
+from localizer.calibration import Calibration
 from localizer.fix import Fix
+from localizer.pose import CameraPose, camera_pose
 from localizer.telemetry import Telemetry
 
 CAL = """
@@ -134,3 +139,33 @@ def test_operator_commands_run_between_frames_on_held_frames():
             await asyncio.gather(task, return_exceptions=True)
 
     asyncio.run(scenario())
+
+
+def _same(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    if a.dtype == object:
+        return a.tolist() == b.tolist()
+    return np.array_equal(a, b, equal_nan=True)
+
+
+def test_a_frames_pose_is_computed_once_for_every_uuv(cal_dict, make_telemetry):
+    """Two UUVs' pipelines share each frame's pose (FramePoses): computed once, each with its own UUV's depth,
+    field for field what camera_pose gives that UUV alone; asked again for a frame that was early, computed anew
+    once."""
+    cal = Calibration.from_dict(cal_dict())
+    tel = make_telemetry(depth_m=2.0)
+    other = make_telemetry(depth_m=3.5).depth  # the second UUV's depth series
+    poses = FramePoses(cal, tel)
+    a = Pipeline(cal, tel, "default", [], poses=poses)
+    b = Pipeline(cal, tel, "default", [], poses=poses, depth=other)
+    frame = LiveFrame(0, T0_UNIX + 1.0, T0_UNIX + 1.0, np.zeros((48, 64, 3), np.uint8))
+    pa, pb = a._pose(frame), b._pose(frame)
+    assert (poses.computed, poses.shared) == (1, 1)
+    assert pa.depth_m[0] == pytest.approx(2.0) and pb.depth_m[0] == pytest.approx(3.5)
+    for pose, depth in ((pa, tel.depth), (pb, other)):
+        alone = camera_pose(cal, tel, frame.t_unix, None, depth)
+        assert alone.status[0] == "ok"
+        for f in fields(CameraPose):
+            assert _same(getattr(pose, f.name), getattr(alone, f.name)), f.name
+    b._pose(frame, again=True), a._pose(frame, again=True)
+    assert (poses.computed, poses.shared) == (2, 2)

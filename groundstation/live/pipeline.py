@@ -3,7 +3,8 @@
 Frames wait in a short queue; when the tracker falls behind, the oldest waiting
 frame is dropped (and counted), so a fix is never computed for a frame that is
 already old. Each frame's camera pose is computed once, on the event loop (where
-the telemetry is written), when the frame is taken for tracking; the
+the telemetry is written), when the frame is taken for tracking: its UAV's part once for
+every UUV tracked in the video (:class:`FramePoses`), each UUV's depth added; the
 :class:`~localizer.tracking.session.TrackingSession` (the same as offline) tracks it
 in a worker thread (OpenCV releases the GIL) with that pose, and the geometry
 locates the tracked pixel with the same pose. The first frame is selected with the
@@ -54,7 +55,7 @@ from groundstation.video.frames import LiveFrame
 from localizer.calibration import Calibration
 from localizer.fix import Fix, locate
 from localizer.height import take_notices
-from localizer.pose import CameraPose, camera_pose
+from localizer.pose import CameraPose, uav_pose, with_depth
 from localizer.telemetry import Telemetry
 from localizer.timeline import Series
 from localizer.tracking import TrackResult
@@ -67,6 +68,34 @@ log = logging.getLogger("skyfix.pipeline")
 EXTRAPOLATE_S = 0.03
 #: At most this many frames are held for selections, whatever ``history_s``.
 MAX_HELD = 300
+#: The poses of this many recent frames are kept for the other UUVs (:class:`FramePoses`).
+KEEP_FRAMES = 64
+
+
+class FramePoses:
+    """The UAV's part of each frame's camera pose (:func:`localizer.pose.uav_pose`), computed once for all the UUVs
+    tracked in the video, on the event loop: each UUV's pipeline asks when it takes the frame for tracking and, when
+    the frame was early for its telemetry, again when it locates it; the first to ask computes, the others take
+    what it computed (``again``: the first to ask again computes anew, with the telemetry there is then). The last
+    :data:`KEEP_FRAMES` frames' are kept."""
+
+    def __init__(self, cal: Calibration, tel: Telemetry):
+        self.cal, self.tel = cal, tel
+        self.computed = 0  # poses computed
+        self.shared = 0  # poses taken as computed for another UUV
+        self._poses: dict[int, tuple[CameraPose, tuple | None, bool]] = {}
+
+    def pose(self, frame: LiveFrame, alignment: tuple | None, again: bool = False) -> CameraPose:
+        kept = self._poses.get(frame.index)
+        if kept is not None and kept[1] == alignment and (kept[2] or not again):
+            self.shared += 1
+            return kept[0]
+        pose = uav_pose(self.cal, self.tel, frame.t_unix, alignment)
+        self.computed += 1
+        self._poses[frame.index] = (pose, alignment, again)
+        while len(self._poses) > KEEP_FRAMES:
+            del self._poses[next(iter(self._poses))]
+        return pose
 
 
 @dataclass(frozen=True)
@@ -107,9 +136,10 @@ class Pipeline:
     1-sigma s) of aligned frames' times when not the link delay's (see the module doc);
     ``depth``: the UUV's depth series when not ``tel``'s own (one of several UUVs in the video); ``vet(frame,
     box)``: a status word when a tracked box may not be this UUV's (:meth:`localizer.tracking.crowd.Crowd.vet`),
-    called with every frame's box (None when the tracker has none); ``tracking``: the thread the tracker steps run
-    in (several UUVs' pipelines share one: their steps, mostly the interpreter's work, would otherwise contend for
-    its lock and each wait for the other's; default: asyncio's pool);
+    called with every frame's box (None when the tracker has none); ``tracking``: the threads the tracker steps run
+    in (default: asyncio's pool; several UUVs' pipelines share a pool with a thread each, so that no UUV's step
+    waits for the others'); ``poses``: the frames' poses shared with the
+    other UUVs' pipelines (default: its own);
     ``on_tracked``: see :attr:`on_tracked`.
     """
 
@@ -128,6 +158,7 @@ class Pipeline:
         depth: Series | None = None,
         vet: Callable[[int, tuple | None], str | None] | None = None,
         tracking: Executor | None = None,
+        poses: FramePoses | None = None,
     ):
         self.cal = cal
         self.tel = tel
@@ -141,6 +172,7 @@ class Pipeline:
         self.depth = depth
         self.vet = vet
         self.tracking = tracking
+        self.poses = poses or FramePoses(cal, tel)
         self._told_unknown = False
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
@@ -316,10 +348,12 @@ class Pipeline:
         t = float(self.tel.uav_time(frame.t_unix)) - EXTRAPOLATE_S
         return any(s.last_t is None or s.last_t < t for s in self._angle_series)
 
-    def _pose(self, frame: LiveFrame) -> CameraPose:
-        """The camera at the frame's time, with the telemetry there is now (on the loop)."""
+    def _pose(self, frame: LiveFrame, again: bool = False) -> CameraPose:
+        """The camera at the frame's time, with the telemetry there is now (on the loop; ``again``: when it was
+        early, see :class:`FramePoses`), and this UUV's depth."""
         alignment = self.alignment() if self.alignment is not None and frame.aligned else None
-        return camera_pose(self.cal, self.tel, frame.t_unix, alignment, self.depth)
+        depth = self.tel.depth if self.depth is None else self.depth
+        return with_depth(self.cal, self.poses.pose(frame, alignment, again), depth)
 
     async def _track(self, frame: LiveFrame) -> Tracked:
         """Track one frame with its pose (computed here, on the loop) and hold it for selections."""
@@ -376,7 +410,7 @@ class Pipeline:
                         pass
                     self.waited_s += loop.time() - t0
                     continue
-                item.pose, item.early = self._pose(item.frame), False
+                item.pose, item.early = self._pose(item.frame, again=True), False
             self._tracked.popleft()
             if item.result.ok:
                 for listener in self.on_tracked:
@@ -407,7 +441,7 @@ class Pipeline:
         """The fix of one frame with the telemetry there is now (status says why when there is none)."""
         item = await self._track(frame)
         if item.early:
-            item.pose = self._pose(frame)
+            item.pose = self._pose(frame, again=True)
         return self._locate(item)
 
     def _locate(self, item: Tracked) -> Fix:

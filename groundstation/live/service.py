@@ -49,7 +49,7 @@ from groundstation.height_from_size import HeightFromSize, OnlineHeightFromSize
 from groundstation.latency.estimate import OnlineLatency
 from groundstation.live import config, registry
 from groundstation.live.control import Control
-from groundstation.live.pipeline import Pipeline
+from groundstation.live.pipeline import FramePoses, Pipeline
 from groundstation.live.registry import DepthInput, UavInput
 from groundstation.live.sinks.recorder import Recorder, new_recording
 from groundstation.live.sources.rates import needed_rates
@@ -255,8 +255,9 @@ async def serve(cfg: config.RunConfig) -> dict:
         crowd = Crowd() if several else None  # two trackers on one vehicle: no fix for either
         fleet = Fleet() if several else None  # the gates compare each target with the other UUVs'
         tracking = (
-            ThreadPoolExecutor(1, thread_name_prefix="track") if several else None
-        )  # one thread for all
+            ThreadPoolExecutor(len(cfg.uuvs), thread_name_prefix="track") if several else None
+        )  # a thread per UUV: no UUV's tracker step waits for the others'
+        poses = FramePoses(cal, tel)  # each frame's pose computed once for all the UUVs
         if tracking:
             closers.append(lambda: tracking.shutdown(wait=False, cancel_futures=True))
         for i, u in enumerate(cfg.uuvs):
@@ -277,6 +278,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 alignment=(lambda: ("motion", motion.applied_sigma_s)) if video and auto else None,
                 vet=partial(crowd.vet, u.id) if crowd else None,
                 tracking=tracking,
+                poses=poses,
                 fleet=fleet,
                 on_tracked=[from_size.on_tracked] if from_size else [],
             )
@@ -379,6 +381,7 @@ class UuvChain:
         vet=None,
         tracking=None,
         fleet=None,
+        poses=None,
     ):
         self.uuv = u
         self.workers = own = Workers()
@@ -449,6 +452,7 @@ class UuvChain:
             alignment=alignment,
             vet=vet,
             tracking=tracking,
+            poses=poses,
             depth=uuv_tel.depth,
         )
         own.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
