@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from annotated_types import Ge, Le
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -152,7 +152,7 @@ class FixMessage(Message):
         description="where the depth came from: skyfix (skyfix's JSON on Zenoh), "
         "session (a recording's depth.jsonl naming none), ardusub_pressure (ArduSub's "
         "depth sensor), ardusub_ekf (ArduSub's EKF, until the sensor's parameters are "
-        "known)",
+        "known), or a registered depth source's name",
     )
     time_source: str | None = Field(None, description="where the UAV link's delay came from")
     pose_source: Literal["bottom"] | None = Field(
@@ -639,7 +639,8 @@ class DepthStatus(Section):
         description="its 1-sigma (null: the calibration's [uncertainty] depth_m)"
     )
     source: str | None = Field(
-        description="where it came from: skyfix, ardusub_pressure, ardusub_ekf"
+        description="where it came from: skyfix, ardusub_pressure, ardusub_ekf, or a registered depth "
+        "source's name"
     )
     vertical_speed_mps: float | None = Field(
         description="the vehicle's vertical speed, positive down (ArduSub)"
@@ -1017,6 +1018,11 @@ class StatusMessage(Message):
         None, description="with --video, unless --height-from-size off"
     )
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
+    outputs: dict[str, dict[str, Any]] | None = Field(
+        None,
+        description="each of the UUV's outputs (outputs) by name, its own state (zenoh: key, published), "
+        "but GPS_INPUT's, which is gps_input",
+    )
     latency: LatencyStatus | None = Field(None, description="with --gps-input")
     record: RecordStatus | None = Field(None, description="with --record")
     track_memory: TrackMemoryStatus | None = Field(

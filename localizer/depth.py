@@ -44,7 +44,9 @@ from .clock import OUTLIER, RESTART, ClockMap
 
 #: ArduSub's pascals per metre of water of specific gravity 1 (AP_Baro::update: "9800 Pascal/m depth in water").
 ARDUSUB_PA_PER_M = 9800.0
-#: Where a depth came from (the word in the pose, the fix message and positions.csv).
+#: Where a depth came from (the word in the pose, the fix message and positions.csv): the built-in words. A live
+#: depth source registered under another name records its name (passed in:
+#: :meth:`~localizer.telemetry.Telemetry.name_depth_source`).
 SOURCES = {
     "skyfix": "skyfix's JSON {t, depth_m} on Zenoh (skyfix replay, or the UUV's own publisher)",
     "session": "a recorded session's depth.jsonl that does not name its source",

@@ -21,12 +21,12 @@ import numpy as np
 
 from . import attitude as att
 from .calibration import UAV_HORIZONTAL_FALLBACK_M, Calibration
-from .depth import SOURCE_WORDS, frame_sigma_m
+from .depth import frame_sigma_m
 from .gnss import position_sigma_m
 from .height import ekf_height_error
 from .surface import height_above_surface_m
-from .telemetry import DEG_PER_M, Telemetry
-from .timeline import BEFORE_FIRST, OK, Series
+from .telemetry import DEG_PER_M, DepthSeries, Telemetry
+from .timeline import BEFORE_FIRST, OK
 
 #: Time step (s) over which the camera's angular velocity is measured.
 RATE_STEP_S = 0.02
@@ -124,7 +124,7 @@ def camera_pose(
     tel: Telemetry,
     t_unix,
     alignment: tuple[str, float] | None = None,
-    depth: Series | None = None,
+    depth: DepthSeries | None = None,
 ) -> CameraPose:
     """The camera at station time(s) ``t_unix`` (see the module doc), with the UUV's depth from ``depth``
     (:attr:`Telemetry.depth <localizer.telemetry.Telemetry.depth>` of one UUV's telemetry; default ``tel``'s own:
@@ -214,7 +214,7 @@ def uav_pose(
     )
 
 
-def with_depth(cal: Calibration, pose: CameraPose, depth: Series) -> CameraPose:
+def with_depth(cal: Calibration, pose: CameraPose, depth: DepthSeries) -> CameraPose:
     """A :func:`uav_pose` with the UUV's depth from ``depth`` at its times: its depth fields, and its status
     checked for the depth, then for the camera below the surface (as :func:`camera_pose` says)."""
     t = pose.t_unix
@@ -223,8 +223,8 @@ def with_depth(cal: Calibration, pose: CameraPose, depth: Series) -> CameraPose:
     _mark(status, sd, "depth")
     depth_age_s = np.maximum(0.0, t - depth.last_t) if len(depth) else np.zeros(len(t))
     sigma_depth = frame_sigma_m(dep[:, 1], dep[:, 2], ed[:, 0], depth_age_s, cal.sigmas.depth_m)
-    words = np.array((*SOURCE_WORDS, ""), dtype=object)  # "": no depth at that frame
-    depth_source = words[np.where(np.isfinite(dep[:, 3]), dep[:, 3], len(SOURCE_WORDS)).astype(int)]
+    words = np.array((*depth.words, ""), dtype=object)  # "": no depth at that frame
+    depth_source = words[np.where(np.isfinite(dep[:, 3]), dep[:, 3], len(depth.words)).astype(int)]
     status[(status == "ok") & ~(pose.height_m > 0)] = "below_surface"
     return replace(
         pose, status=status, depth_m=dep[:, 0], sigma_depth_m=sigma_depth, depth_source=depth_source

@@ -20,8 +20,9 @@ week time. The UUV's depth is stored at station time: by the UUV's own stamp whe
 its clock agrees with the station's (within ``depth_clock_tolerance_s``), else
 mapped by its arrival times minus ``depth_latency_s``; a depth from the UUV's autopilot
 comes already mapped from its boot clock (:class:`localizer.depth.ArduSubDepth`). Each depth
-sample keeps its 1-sigma, its source (a word of :data:`localizer.depth.SOURCE_WORDS`) and the
-vehicle's vertical speed, which :func:`localizer.depth.frame_sigma_m` grows its sigma with.
+sample keeps its 1-sigma, its source (a word of :data:`localizer.depth.SOURCE_WORDS`, or the name of the depth
+source that :meth:`Telemetry.name_depth_source` was given) and the vehicle's vertical speed, which
+:func:`localizer.depth.frame_sigma_m` grows its sigma with.
 
 Angles in radians, positions in degrees and metres, rates per second.
 """
@@ -63,6 +64,16 @@ LATENCY_SOURCES = {
 _BOOT_USEC_MAX = (
     10**15
 )  # a GPS_RAW_INT time_usec below this (31 years) counts from the autopilot's boot
+
+
+class DepthSeries(Series):
+    """The UUV's depth below the surface (m, positive down), its 1-sigma (m; NaN: the calibration's), the vehicle's
+    vertical speed (m/s, positive down; NaN: unknown) and its source, an index into :attr:`words` (those of
+    :data:`~localizer.depth.SOURCE_WORDS`, then the names given to :meth:`Telemetry.name_depth_source`)."""
+
+    def __init__(self, max_gap_s: float, max_hold_s: float, keep_s: float | None):
+        super().__init__("lsss", max_gap_s, max_hold_s, keep_s)
+        self.words: list[str] = list(SOURCE_WORDS)
 
 
 class Telemetry:
@@ -111,9 +122,9 @@ class Telemetry:
         # GPS_RAW_INT at receive times: the receiver's horizontal accuracy (m), the geoid separation (m), fix_type,
         # the GNSS altitude (m AMSL), vertical accuracy (m), HDOP and VDOP (NaN: not given); see add_gps_raw
         self.gnss = Series("sssssss", math.inf, 10.0, keep_s)
-        # UUV depth below the surface (m, positive down), its 1-sigma (m; NaN: the calibration's), the vehicle's
-        # vertical speed (m/s, positive down; NaN: unknown) and its source (index into SOURCE_WORDS), station seconds
-        self.depth = Series("lsss", timing.depth_gap_s, timing.depth_hold_s, keep_s)
+        # the UUV's depth, station seconds (see DepthSeries); a depth added without a source word is depth_source's
+        self.depth = DepthSeries(timing.depth_gap_s, timing.depth_hold_s, keep_s)
+        self.depth_source = "skyfix"
         # absolute measurements of the UAV's height above the water, per source ("rangefinder", "size", ...):
         # the reported position's height (m) and its 1-sigma (m), on the UAV buffers' time scale
         self.height_fixes: dict[str, Series] = {}
@@ -526,15 +537,16 @@ class Telemetry:
         receive_s: float | None = None,
         *,
         sigma_m: float = math.nan,
-        source: str = "skyfix",
+        source: str | None = None,
         vspeed_mps: float = math.nan,
     ) -> bool:
         """The UUV's depth (m, positive down), stamped ``t_source`` by the UUV and received at ``receive_s``.
 
         Without ``receive_s`` (sessions that did not record arrivals) the UUV's stamp
-        is taken as station time. ``sigma_m`` (NaN: the calibration's), ``source`` and
-        ``vspeed_mps`` (positive down, NaN: unknown) are kept with it.
+        is taken as station time. ``sigma_m`` (NaN: the calibration's), ``source`` (None:
+        :attr:`depth_source`) and ``vspeed_mps`` (positive down, NaN: unknown) are kept with it.
         """
+        source = self.depth_source if source is None else source
         if not self._depth_ok(depth_m, source):
             return False
         latency = self.timing.depth_latency_s
@@ -562,8 +574,15 @@ class Telemetry:
                         "off the station's: its depth is aligned by arrival times",
                     )
         return self._append(
-            self.depth, t, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source))
+            self.depth, t, (depth_m, sigma_m, vspeed_mps, self.depth.words.index(source))
         )
+
+    def name_depth_source(self, name: str) -> None:
+        """Depths added without a source word are ``name``'s from now on (the live depth source's name, as the
+        service registered it): a word of this telemetry's depth."""
+        if name not in self.depth.words:
+            self.depth.words.append(name)
+        self.depth_source = name
 
     def add_autopilot_depth(
         self, t_station: float, depth_m: float, sigma_m: float, source: str, vspeed_mps: float
@@ -573,13 +592,13 @@ class Telemetry:
             return False
         self.depth_aligned_by = "autopilot_clock"
         return self._append(
-            self.depth, t_station, (depth_m, sigma_m, vspeed_mps, SOURCE_WORDS.index(source))
+            self.depth, t_station, (depth_m, sigma_m, vspeed_mps, self.depth.words.index(source))
         )
 
     def _depth_ok(self, depth_m: float, source: str) -> bool:
-        if source not in SOURCE_WORDS:
+        if source not in self.depth.words:
             return self._refuse(
-                self.depth, f"depth source {source!r} is not one of {', '.join(SOURCE_WORDS)}"
+                self.depth, f"depth source {source!r} is not one of {', '.join(self.depth.words)}"
             )
         if not (
             isinstance(depth_m, (int, float)) and DEPTH_RANGE_M[0] <= depth_m <= DEPTH_RANGE_M[1]

@@ -1,26 +1,43 @@
-"""A depth source of another distribution: one module registered by name, chosen by a config file, run by ``skyfix
-run`` with no module of skyfix edited.
+"""A depth source and an output of another distribution: each one module registered by name, chosen by a config
+file, run by ``skyfix run`` with no module of skyfix edited.
 
 The plugin is installed the way pip installs one: its module and a ``dist-info`` folder whose entry point (group
 ``skyfix.parts``) names the module, on the interpreter's path. The registry then offers its name to the
-configuration (the ``depth_source`` choices and the JSON Schema's enum) and the service builds and runs it: its
-depth reaches the telemetry and its status is the run's ``depth`` section."""
+configuration (the ``depth_source`` or ``outputs`` choices and the JSON Schema's enum) and the service builds and
+runs it: the depth source's depth reaches the telemetry and its status is the run's ``depth`` section; the output
+gets every fix the service makes (the same the Zenoh output publishes) and its status is ``outputs.NAME``."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import socket
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
-from live_helpers import ROOT, skyfix, stop, wait_for
+from conftest import T0_UNIX
+from live_helpers import (
+    ROOT,
+    free_port,
+    read_jsonl,
+    replay_shift,
+    skyfix,
+    start,
+    stop,
+    truth_errors_m,
+    wait_for,
+)
 
 from groundstation.live import config
 from localizer.contract import ConfigError
+from localizer.fix import locate
+from localizer.pose import camera_pose
+from localizer.telemetry import Telemetry
 
 DEPTH_M = 2.75  # the plugin's constant depth
 READY_SAMPLES = 5  # the plugin touches its ready file once the telemetry has taken this many
@@ -81,15 +98,16 @@ SCHEMA_ENUM = (
 )
 
 
-def _install_plugin(site: Path) -> None:
+def _install_plugin(
+    site: Path, module: str = "skyfix_constant_depth", text: str = PLUGIN, name: str = "constant"
+) -> None:
     """The plugin's module and its distribution's metadata with the entry point, as pip would leave them."""
-    (site / "skyfix_constant_depth.py").write_text(PLUGIN)
-    info = site / "skyfix_constant_depth-0.1.dist-info"
+    (site / f"{module}.py").write_text(text)
+    info = site / f"{module}-0.1.dist-info"
     info.mkdir()
-    (info / "METADATA").write_text(
-        "Metadata-Version: 2.1\nName: skyfix-constant-depth\nVersion: 0.1\n"
-    )
-    (info / "entry_points.txt").write_text("[skyfix.parts]\nconstant = skyfix_constant_depth\n")
+    dist = module.replace("_", "-")
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(f"[skyfix.parts]\n{name} = {module}\n")
 
 
 def _config(tmp_path: Path) -> Path:
@@ -170,3 +188,123 @@ def test_a_part_whose_module_is_missing_is_refused_saying_what_to_install(monkey
     assert str(e.value) == (
         "options: --mavlink-backend = 'mavsdk': needs mavsdk: pip install 'skyfix[mavsdk]'"
     )
+
+
+OUTPUT_PLUGIN = textwrap.dedent(
+    '''
+    """Each fix as one JSON line in the file $FIX_FILE: an output outside skyfix."""
+
+    import asyncio
+    import json
+    import os
+
+    from groundstation.live.registry import OutputInput, register
+
+
+    class FixFile:
+        def __init__(self, out: OutputInput):
+            self.path = os.environ["FIX_FILE"]
+            self.uuv = out.options.id
+            self.file = open(self.path, "w")  # its start: the file is there before the first fix
+            self.written = 0
+
+        async def run(self) -> None:
+            try:
+                await asyncio.get_running_loop().create_future()
+            finally:  # its stop
+                self.file.close()
+
+        def on_fix(self, fix, info) -> None:
+            row = {"uuv": self.uuv, "t": fix.t_unix, "status": fix.status, "lat": fix.lat, "lon": fix.lon}
+            self.file.write(json.dumps(row) + "\\n")
+            self.written += 1
+
+        def status(self, now: float) -> dict:
+            return {"path": self.path, "written": self.written}
+
+
+    @register("output", "fix_file", "each fix as a JSON line in $FIX_FILE (a plugin)")
+    def build(out: OutputInput) -> FixFile:
+        return FixFile(out)
+    '''
+)
+SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
+
+
+def test_a_plugins_output_is_chosen_by_name_and_gets_every_fix_of_a_run(tmp_path):
+    """``skyfix replay`` of a bundled session into ``skyfix run`` whose run.toml names the plugin's output beside
+    Zenoh's: the plugin's file holds every fix the run published on Zenoh, in order, the valid ones on the UUV."""
+    site = tmp_path / "site"
+    site.mkdir()
+    _install_plugin(site, "skyfix_fix_file", OUTPUT_PLUGIN, "fix_file")
+    fixes_file = tmp_path / "fixes.jsonl"
+    env = dict(os.environ, PYTHONPATH=str(site), FIX_FILE=str(fixes_file))
+    mav, video = free_port(), free_port()
+    zenoh_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(
+        f'calibration = "{SESSION / "session.toml"}"\n'
+        f'mavlink = "udpin:127.0.0.1:{mav}"\nvideo = "udp://127.0.0.1:{video}"\n'
+        f'video_latency_ms = 0\ngps_input = "none"\nzenoh_listen = ["{zenoh_ep}"]\nno_ui = true\n'
+        f'duration_s = 120\nstats = "{tmp_path / "stats.json"}"\noutputs = ["zenoh", "fix_file"]\n'
+    )
+    replay_cmd = skyfix(
+        "replay",
+        str(SESSION),
+        *("--mavlink-out", f"udpout:127.0.0.1:{mav}", "--video-out", f"udp://127.0.0.1:{video}"),
+        *("--zenoh-connect", zenoh_ep, "--uuv-listen", "", "--tail-s", "1.0"),
+    )
+    run = subprocess.Popen(
+        skyfix("run", "--config", str(cfg)),
+        stdout=(tmp_path / "run.log").open("w"),
+        stderr=subprocess.STDOUT,
+        cwd=ROOT,
+        env=env,
+    )
+    try:
+        wait_for(fixes_file.exists, 60, "the plugin's file (the service built its outputs)")
+        replay = start(replay_cmd, tmp_path / "replay.log")
+        replay.wait(60)
+    finally:
+        stop(run)
+    run_log = (tmp_path / "run.log").read_text()
+    assert run.returncode == 0, run_log[-3000:]
+    assert replay.returncode == 0, (tmp_path / "replay.log").read_text()[-3000:]
+    final = json.loads((tmp_path / "stats.json").read_text())
+    rows = read_jsonl(fixes_file)
+    assert final["outputs"] == {
+        "zenoh": {"key": "skyfix/uuv/fix", "published": final["fixes_published"]},
+        "fix_file": {"path": str(fixes_file), "written": len(rows)},
+    }
+    assert len(rows) == final["fixes_published"] == final["pipeline"]["processed"] > 0
+    assert [r["t"] for r in rows] == sorted(r["t"] for r in rows)
+    assert {r["uuv"] for r in rows} == {"uuv1"}
+    ok = [r for r in rows if r["status"] == "ok"]
+    assert len(ok) >= 0.5 * len(rows), {r["status"] for r in rows}
+    shift = replay_shift(tmp_path / "replay.log")
+    err = truth_errors_m(
+        SESSION,
+        np.array([r["t"] for r in ok]) - shift,
+        np.array([r["lat"] for r in ok]),
+        np.array([r["lon"] for r in ok]),
+    )
+    assert float(np.median(err)) < 0.5, err
+    assert (
+        "gps_input" not in final
+    )  # gps_input = "none": the default's GPS_INPUT has nothing to send
+
+
+def test_a_plugins_depth_is_recorded_under_its_registered_name(make_cal, make_telemetry):
+    """The service names the telemetry's depth after the part it built (``Telemetry.name_depth_source``): a depth its
+    source adds without a word is that name's, in the pose and the fix; a word never named is refused."""
+    cal = make_cal()
+    tel = make_telemetry(duration_s=3.0)
+    tel.depth.clear()
+    assert tel.add_depth(T0_UNIX + 0.5, 2.0, T0_UNIX + 0.55)  # before: skyfix's
+    tel.name_depth_source("constant")
+    assert tel.add_depth(T0_UNIX + 1.5, 2.1, T0_UNIX + 1.55)
+    assert not tel.add_depth(T0_UNIX + 2.0, 2.1, T0_UNIX + 2.05, source="sonar")
+    pose = camera_pose(cal, tel, [T0_UNIX + 0.6, T0_UNIX + 1.6])
+    assert list(pose.depth_source) == ["skyfix", "constant"]
+    assert list(locate(cal, pose, [960.0] * 2, [540.0] * 2).depth_source) == ["skyfix", "constant"]
+    assert Telemetry().add_depth(1.0, 2.0) and Telemetry().depth_source == "skyfix"

@@ -64,6 +64,9 @@ NONE = "none"
 NamedOrNone = Annotated[Text | None, BeforeValidator(lambda v: None if v == NONE else v)]
 #: The inputs ``skyfix run`` refuses to start without: a value, or :data:`NONE` (:func:`unnamed_inputs`)
 NAMED_INPUTS = ("video", "gps_input")
+#: Each UUV's outputs unless its ``outputs`` names others: its fixes on Zenoh and GPS_INPUT (when ``gps_input``
+#: names a link)
+DEFAULT_OUTPUTS = ("zenoh", "gps_input")
 
 
 @dataclass(frozen=True, kw_only=True, config=CLOSED)
@@ -97,6 +100,11 @@ class UuvOptions:
         description="sign GPS_INPUT (MAVLink 2) with the key in "
         "this file: 32 bytes, or 64 hex digits",
     )
+    outputs: tuple[Literal[registry.choices("output")], ...] = Field(
+        DEFAULT_OUTPUTS,
+        description="where the UUV's fixes go (registered outputs, each once): "
+        f"{registry.described('output')}",
+    )
     uuv_position_key: Text | None = Field(
         None,
         description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
@@ -117,6 +125,20 @@ class UuvOptions:
                 "gps_input_signing_key",
                 self.gps_input_signing_key,
                 "signing needs a MAVLink --gps-input link (not zenoh:)",
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _outputs_once_and_gps_input_among_them(self):
+        twice = sorted({name for name in self.outputs if self.outputs.count(name) > 1})
+        if twice:
+            raise Invalid("outputs", list(self.outputs), f"{twice[0]} named twice")
+        if self.gps_input and "gps_input" not in self.outputs:
+            raise Invalid(
+                "outputs",
+                list(self.outputs),
+                f"gps_input = {self.gps_input!r} names a link, but gps_input is not among the outputs: "
+                'add it, or say gps_input = "none"',
             )
         return self
 
@@ -493,8 +515,13 @@ class RunConfig(UuvOptions):
 
     @model_validator(mode="after")
     def _parts_installed(self):
-        for kind, key in (("uav", "mavlink_backend"), ("depth", "depth_source")):
-            for name in {getattr(o, key) for o in (self, *self.uuv) if hasattr(o, key)}:
+        for kind, key in (
+            ("uav", "mavlink_backend"),
+            ("depth", "depth_source"),
+            ("output", "outputs"),
+        ):
+            values = [getattr(o, key) for o in (self, *self.uuv) if hasattr(o, key)]
+            for name in {n for v in values for n in (v if isinstance(v, tuple) else (v,))}:
                 missing = registry.part(kind, name).missing()
                 if missing:
                     raise Invalid(key, name, missing)
@@ -591,6 +618,7 @@ def _path_marker(name: str) -> _RelativeToFile | None:
 METAVARS = {
     "ui": "HOST:PORT",
     "ui_token": "TOKEN",
+    "outputs": "NAME",
 }  # options whose value is neither a path, a key nor a URL
 
 
@@ -649,7 +677,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         elif _admits_auto(info.annotation):
             group.add_argument(flag(name), type=_number_or_auto, metavar="MS|auto", **kw)
         elif kind is tuple:
-            group.add_argument(flag(name), action="append", metavar="ENDPOINT", **kw)
+            group.add_argument(
+                flag(name), action="append", metavar=METAVARS.get(name, "ENDPOINT"), **kw
+            )
         elif choices:
             group.add_argument(flag(name), choices=choices, **kw)
         else:

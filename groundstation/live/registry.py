@@ -1,22 +1,25 @@
-"""The live service's parts by name: one way to plug in a source (as MAVProxy's modules, BlueOS's services).
+"""The live service's parts by name: one way to plug in a source or an output (as MAVProxy's modules, BlueOS's
+services).
 
 A part is a :class:`Worker` (``async run()`` and ``status(now)``); a :class:`Source` also hands each accepted
-input to its ``listeners`` (the recorder); a :class:`Sink` takes each fix (``on_fix(fix, info)``). A worker is
-started by running ``run()`` as a task of the service's TaskGroup and stopped by cancelling that task, stage by
-stage (:class:`~groundstation.runtime.workers.Workers`): a blocked read never holds the stop.
+input to its ``listeners`` (the recorder); a :class:`Sink` takes each fix (``on_fix(fix, info)``); an
+:class:`Output` is a worker and a sink. A worker is started by running ``run()`` as a task of the service's
+TaskGroup and stopped by cancelling that task, stage by stage (:class:`~groundstation.runtime.workers.Workers`): a
+blocked read never holds the stop.
 
 The parts a configuration chooses by name are registered here, one kind each (:data:`KINDS`):
 
 - ``depth``: the UUV's depth (``depth_source``), built from a :class:`DepthInput`;
-- ``uav``: the UAV's telemetry (``mavlink_backend``), built from a :class:`UavInput`.
+- ``uav``: the UAV's telemetry (``mavlink_backend``), built from a :class:`UavInput`;
+- ``output``: where each UUV's fixes go (``outputs``, several), built from an :class:`OutputInput`.
 
 A part is registered by its module: ``@register("depth", "NAME", help="...")`` on a function that builds it. The
-service's own parts are the modules of :mod:`groundstation.live.sources`; another distribution's are the modules
+service's own parts are the modules of :data:`BUILTIN`'s packages; another distribution's are the modules
 named by its entry points in the group :data:`ENTRY_POINTS` (``[project.entry-points."skyfix.parts"]`` in its
 pyproject.toml: ``NAME = "its_module"``), imported once when the choices are first asked for. So a new depth
-source is one module and its registration: the configuration's choices (``depth_source``'s values, its flag's
-``--help``, the JSON Schema's enum) are :func:`choices`, and :class:`~groundstation.live.service.UuvChain` builds
-the one chosen by :func:`part`'s ``build``.
+source or output is one module and its registration: the configuration's choices (``depth_source``'s and
+``outputs``' values, the flags' ``--help``, the JSON Schema's enums) are :func:`choices`, and
+:class:`~groundstation.live.service.UuvChain` builds the ones chosen by :func:`part`'s ``build``.
 """
 
 from __future__ import annotations
@@ -37,12 +40,14 @@ if TYPE_CHECKING:
     from groundstation.live.config import RunConfig, UuvConfig
     from localizer.calibration import Calibration
     from localizer.depth import DepthGate
+    from localizer.fix_gate import FixGate
     from localizer.telemetry import Telemetry
     from localizer.thrusters import Thrusters
 
-KINDS = ("depth", "uav")
+KINDS = ("depth", "uav", "output")
 ENTRY_POINTS = "skyfix.parts"
-BUILTIN = "groundstation.live.sources"  # the package whose modules register the service's own parts
+#: the packages whose modules register the service's own parts
+BUILTIN = ("groundstation.live.sources", "groundstation.live.outputs")
 
 
 @runtime_checkable
@@ -68,11 +73,20 @@ class Sink(Protocol):
     def on_fix(self, fix: Any, info: Any) -> None: ...
 
 
+@runtime_checkable
+class Output(Worker, Sink, Protocol):
+    """Where a UUV's fixes go: ``on_fix`` takes each of them on the event loop (``fix.ok``: a valid fix; else
+    ``fix.status`` says why there is none), ``run()`` from its start (open its link) until cancelled (its stop:
+    close it, say "no fix" last where the reader needs it), ``status(now)`` its state. Outputs stop last, once the
+    pipeline that feeds them has stopped."""
+
+
 @dataclass(frozen=True)
 class DepthInput:
     """What a depth source is built from: the UUV's options, the Zenoh session, the UUV's telemetry (the source
-    adds each depth to it), the gate every sample passes, the depth's 1-sigma (m, the calibration's) and, for a
-    part registered with ``thrusters=True``, the thrusters the fix gate reads."""
+    adds each depth to it; a depth added without a source word records ``name``), the gate every sample passes,
+    the depth's 1-sigma (m, the calibration's), for a part registered with ``thrusters=True`` the thrusters the fix
+    gate reads, and the name it is registered as."""
 
     options: UuvConfig
     session: zenoh.Session
@@ -80,6 +94,22 @@ class DepthInput:
     gate: DepthGate
     sigma_m: float
     thrusters: Thrusters | None
+    name: str
+
+
+@dataclass(frozen=True)
+class OutputInput:
+    """What an output is built from: the name it is registered as, the UUV's options (its keys and links), the
+    run's, the Zenoh session and the UUV's safety gates (:class:`~localizer.fix_gate.FixGate`: those the
+    operator's confirmation and the kept track reach, for the output that sends the fixes to the UUV's autopilot;
+    None when the UUV has no ``gps_input``). An output that gates the fixes otherwise makes a gate of its own (a
+    gate follows one stream of fixes)."""
+
+    name: str
+    options: UuvConfig
+    run: RunConfig
+    session: zenoh.Session
+    gate: FixGate | None
 
 
 @dataclass(frozen=True)
@@ -95,14 +125,17 @@ class UavInput:
 class Part:
     """A registered part: its kind and name, the function that builds it, its one-line help; ``thrusters``: it
     reads the UUV's thruster outputs too (the fix gate's second source of motion); ``needs``: the module it
-    imports when it runs and the pip requirement that brings it (an optional extra)."""
+    imports when it runs and the pip requirement that brings it (an optional extra); ``section``: an output's
+    status section of its own (else its status is the status's ``outputs.NAME``). An output's ``build`` may
+    return None: nothing to send for this UUV (``gps_input`` without a link)."""
 
     kind: str
     name: str
-    build: Callable[[Any], Worker]
+    build: Callable[[Any], Worker | None]
     help: str
     thrusters: bool = False
     needs: tuple[str, str] | None = None
+    section: str | None = None
 
     def missing(self) -> str | None:
         """What to install when the module it needs is missing (one line), else None."""
@@ -121,9 +154,10 @@ def register(
     help: str,
     thrusters: bool = False,
     needs: tuple[str, str] | None = None,
+    section: str | None = None,
 ) -> Callable:
-    """Decorator: the function builds the part ``name`` of ``kind`` (from a :class:`DepthInput` or
-    :class:`UavInput`). A name taken twice is an error naming both modules."""
+    """Decorator: the function builds the part ``name`` of ``kind`` (from a :class:`DepthInput`,
+    :class:`UavInput` or :class:`OutputInput`). A name taken twice is an error naming both modules."""
     if kind not in KINDS:
         raise ValueError(f"part kind {kind!r}: expected one of {', '.join(KINDS)}")
 
@@ -133,7 +167,7 @@ def register(
             raise ValueError(
                 f"{kind} part {name!r} registered twice: {taken.build.__module__} and {build.__module__}"
             )
-        _parts[kind][name] = Part(kind, name, build, help, thrusters, needs)
+        _parts[kind][name] = Part(kind, name, build, help, thrusters, needs, section)
         return build
 
     return decorate
@@ -145,9 +179,10 @@ def _load() -> None:
     if _loaded:
         return
     _loaded = True
-    package = importlib.import_module(BUILTIN)
-    for module in pkgutil.iter_modules(package.__path__, f"{BUILTIN}."):
-        importlib.import_module(module.name)
+    for builtin in BUILTIN:
+        package = importlib.import_module(builtin)
+        for module in pkgutil.iter_modules(package.__path__, f"{builtin}."):
+            importlib.import_module(module.name)
     for ep in entry_points(group=ENTRY_POINTS):
         try:
             ep.load()

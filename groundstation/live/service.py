@@ -7,8 +7,8 @@ Zenoh, :mod:`.sources.depth_zenoh`, or ArduSub's own over BlueOS's Zenoh or MAVL
 in :mod:`.registry`), the UUV's own position estimate
 (:mod:`.sources.uuv_position`), the UAV's video (:mod:`groundstation.video.live`),
 the per-frame :mod:`.pipeline` (and the height from the UUV's size, :mod:`groundstation.height_from_size`),
-GPS_INPUT to the UUV (:mod:`groundstation.runtime.gps_input`),
-the 1 Hz Zenoh status (:mod:`groundstation.runtime.zenoh_fix`), the operator's commands
+each UUV's outputs, the parts its ``outputs`` names (by default the fixes on Zenoh and GPS_INPUT to the UUV,
+:mod:`.outputs`), the 1 Hz Zenoh status (:mod:`groundstation.runtime.zenoh_fix`), the operator's commands
 (:mod:`.control`), the web page (:mod:`.ui`, unless ``--no-ui``) and, with ``--record``,
 the recorder (:mod:`.sinks.recorder`). The web page's port is taken before any worker
 starts, so a port in use stops the service at once (exit 2). Blocking I/O lives in threads owned by the
@@ -50,7 +50,7 @@ from groundstation.latency.estimate import OnlineLatency
 from groundstation.live import config, registry
 from groundstation.live.control import Control
 from groundstation.live.pipeline import FramePoses, Pipeline
-from groundstation.live.registry import DepthInput, UavInput
+from groundstation.live.registry import DepthInput, OutputInput, UavInput
 from groundstation.live.sinks.recorder import Recorder, new_recording
 from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uuv_position import UuvPosition, parse_hint
@@ -59,8 +59,7 @@ from groundstation.live.ui.feed import VideoFeed
 from groundstation.live.ui.server import PageUuv, WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
-from groundstation.mavlink.link import read_signing_key
-from groundstation.runtime.gps_input import GpsInputSink, mavlink_gps_link
+from groundstation.runtime.gps_input import GpsInputSink
 from groundstation.runtime.queries import ZenohControl
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import (
@@ -73,7 +72,6 @@ from groundstation.runtime.workers import (
     stopped,
 )
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
-from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration, ConfigError, Tracker
@@ -282,7 +280,6 @@ async def serve(cfg: config.RunConfig) -> dict:
                 fleet=fleet,
                 on_tracked=[from_size.on_tracked] if from_size else [],
             )
-            closers.append(chain.fix_sink.close)
             chains.append(chain)
             workers.include(chain.workers)
 
@@ -345,6 +342,25 @@ async def serve(cfg: config.RunConfig) -> dict:
         session.close()
 
 
+def uuv_outputs(
+    cfg: config.RunConfig, u: config.UuvConfig, session, gate, workers: Workers
+) -> list:
+    """The UUV's outputs (``outputs``, registered parts) built by name, each run with ``workers`` (stopped last,
+    once the pipeline is) with its status: its own section, or under ``outputs`` by name."""
+    built, listed = [], {}
+    for name in u.outputs:
+        part = registry.part("output", name)
+        out = part.build(OutputInput(name, u, cfg, session, gate))
+        if out is None:  # nothing to send for this UUV (gps_input none)
+            continue
+        built.append(workers.add(out, LAST, part.section))
+        if part.section is None:
+            listed[name] = out
+    if listed:
+        workers.section("outputs", lambda now: {n: o.status(now) for n, o in listed.items()})
+    return built
+
+
 def uuv_calibration(cal: Calibration, u: config.UuvConfig, source: str) -> Calibration:
     """The calibration with one UUV's own first box (``[[uuv]] init_bbox``) as ``[tracker]``."""
     try:
@@ -390,8 +406,9 @@ class UuvChain:
         # the UUV's thrusters, read with its depth from ArduSub: the fix gate's second source of the UUV's motion
         source = registry.part("depth", u.depth_source)
         thrusters = Thrusters(cfg.thruster_deadband_us) if source.thrusters else None
+        uuv_tel.name_depth_source(source.name)  # the word of a depth its source adds without one
         depth = source.build(
-            DepthInput(u, session, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters)
+            DepthInput(u, session, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters, source.name)
         )
         own.add(depth, INPUTS, "depth", is_input=True)
         if recorder:  # its part of the recording
@@ -406,15 +423,8 @@ class UuvChain:
             INPUTS,
             "uuv_position",
         )
-        self.fix_sink = fix_sink = ZenohFixSink(session, u.fix_key)
-        self.gps = gps = None
+        gate = None  # the UUV's safety gates, for GPS_INPUT
         if u.gps_input:
-            key = read_signing_key(u.gps_input_signing_key) if u.gps_input_signing_key else None
-            link = (
-                ZenohMavlinkIn(session, u.gps_input.removeprefix("zenoh:"))
-                if u.gps_input.startswith("zenoh:")
-                else mavlink_gps_link(u.gps_input, signing_key=key)
-            )
             max_age_s = cfg.fix_max_age_ms / 1000.0
             gate = FixGate(
                 max_speed_mps=cfg.uuv_max_speed_mps,
@@ -431,7 +441,9 @@ class UuvChain:
                 path = track_path(cfg.state_folder, u.id)
                 keeper = TrackMemory(gate, path, remember(gate, path, cfg.track_max_age_s))
                 own.add(keeper, OUTPUTS, "track_memory", lambda now: keeper.status())
-            self.gps = gps = GpsInputSink(link, cfg.gps_input_hz, max_age_s, gate)
+        outputs = uuv_outputs(cfg, u, session, gate, own)
+        fix_sink = next((o for o in outputs if isinstance(o, ZenohFixSink)), None)
+        self.gps = gps = next((o for o in outputs if isinstance(o, GpsInputSink)), None)
         watchdog = Watchdog(
             lambda now: shared.inputs(now) | own.inputs(now),
             tuple(needed_rates(cal.mount.attitude_source)),
@@ -439,7 +451,7 @@ class UuvChain:
             require_s=REQUIRE_S if cfg.require_inputs else None,
         )
         feed, topview = page
-        sinks = [s for s in (fix_sink, gps, recorder, feed, topview, watchdog) if s is not None]
+        sinks = [s for s in (*outputs, recorder, feed, topview, watchdog) if s is not None]
         self.pipeline = pipeline = Pipeline(
             cal,
             tel,
@@ -457,11 +469,15 @@ class UuvChain:
         )
         own.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
         own.section("target", lambda now: pipeline.target)
-        own.section("fixes_published", lambda now: fix_sink.published)
-        own.section("fix", lambda now: fix_sink.latest)
+
+        def latest_fix() -> dict | None:
+            """The last fix published on Zenoh (None without the output zenoh)."""
+            return fix_sink.latest if fix_sink else None
+
+        own.section("fixes_published", lambda now: fix_sink.published if fix_sink else 0)
+        own.section("fix", lambda now: latest_fix())
         own.add(watchdog, PIPELINE, "problems", lambda now: dict(watchdog.problems))
         if gps:
-            own.add(gps, LAST, "gps_input")
             own.section("latency", lambda now: latency_summary(list(gps.latencies_s)[-1000:]))
         self.control = Control(pipeline, self.status, gps.gate.confirm if gps else None)
         status_sink = ZenohStatus(session, u.status_key, u.alive_key, self.status)
@@ -469,7 +485,7 @@ class UuvChain:
             session,
             self.control,
             u.control_prefix,
-            {u.fix_key: lambda: fix_sink.latest, u.status_key: lambda: status_sink.latest},
+            {u.fix_key: latest_fix, u.status_key: lambda: status_sink.latest},
         )
         own.add(self.zenoh_control, INPUTS, "control", lambda now: self.zenoh_control.status())
         own.add(status_sink, OUTPUTS)

@@ -29,7 +29,10 @@ def fix_to_json(fix: Fix) -> dict:
 
 
 class ZenohFixSink:
-    """Publishes every fix on ``key``; ``latest`` is the last one published (JSON-ready)."""
+    """Publishes every fix on ``key``; ``latest`` is the last one published (JSON-ready).
+
+    Its publisher is declared at once (no fix waits for :meth:`run`) and undeclared by :meth:`close`, which
+    :meth:`run` calls when it is cancelled (the service's output ``zenoh``)."""
 
     def __init__(self, session: zenoh.Session, key: str):
         self.session = session
@@ -43,8 +46,22 @@ class ZenohFixSink:
         put_json(self._pub, self.latest, self.session)
         self.published += 1
 
+    async def run(self) -> None:
+        """Until cancelled; then the publisher is undeclared."""
+        try:
+            await asyncio.get_running_loop().create_future()
+        finally:
+            self.close()
+
+    def status(self, now: float) -> dict:
+        """The key and the fixes published on it."""
+        return {"key": self.key, "published": self.published}
+
     def close(self) -> None:
-        self._pub.undeclare()
+        """Undeclare the publisher (once)."""
+        if self._pub is not None:
+            self._pub.undeclare()
+            self._pub = None
 
 
 class ZenohStatus:
