@@ -308,3 +308,42 @@ def test_a_plugins_depth_is_recorded_under_its_registered_name(make_cal, make_te
     assert list(pose.depth_source) == ["skyfix", "constant"]
     assert list(locate(cal, pose, [960.0] * 2, [540.0] * 2).depth_source) == ["skyfix", "constant"]
     assert Telemetry().add_depth(1.0, 2.0) and Telemetry().depth_source == "skyfix"
+
+
+@pytest.mark.parametrize(
+    "flags,why",
+    [
+        (
+            ["--outputs", "zenoh", "--outputs", "zenoh", "--gps-input", "none"],
+            "--outputs = ['zenoh', 'zenoh']: zenoh named twice",
+        ),
+        (
+            ["--outputs", "zenoh", "--gps-input", "udpout:127.0.0.1:14660"],
+            (
+                "--outputs = ['zenoh']: gps_input = 'udpout:127.0.0.1:14660' names a link, but gps_input is "
+                'not among the outputs: add it, or say gps_input = "none"'
+            ),
+        ),
+        (["--outputs", "sonar"], "--outputs = 'sonar': expected one of 'zenoh' or 'gps_input'"),
+    ],
+)
+def test_outputs_each_once_and_gps_input_among_them_else_one_line(flags, why):
+    parser = argparse.ArgumentParser()
+    config.add_arguments(parser)
+    args = parser.parse_args(["--calibration", "cal.toml", *flags])
+    with pytest.raises(ConfigError) as e:
+        config.run_config(args)
+    assert str(e.value) == f"options: {why}"
+
+
+def test_the_default_outputs_are_zenoh_and_gps_input_for_each_uuv(tmp_path):
+    cfg = tmp_path / "run.toml"
+    cfg.write_text(
+        'calibration = "cal.toml"\n'
+        '[[uuv]]\nid = "a"\ngps_input = "udpout:127.0.0.1:14660"\n'
+        '[[uuv]]\nid = "b"\ngps_input = "none"\noutputs = ["zenoh"]\ndepth_key = "uuv/b/depth"\n'
+    )
+    parser = argparse.ArgumentParser()
+    config.add_arguments(parser)
+    run = config.run_config(parser.parse_args(["--config", str(cfg)]))
+    assert [u.outputs for u in run.uuvs] == [("zenoh", "gps_input"), ("zenoh",)]
