@@ -196,6 +196,8 @@ def proc_sample(pid: int) -> tuple[float, float]:
 
 def pct(values, *qs) -> dict:
     a = np.asarray(values, dtype=float)
+    if len(a) == 0:  # no fix at all (a starved run)
+        return {f"p{q}": None for q in qs} | {"max": None, "n": 0}
     return {f"p{q}": round(float(np.percentile(a, q)), 2) for q in qs} | {
         "max": round(float(a.max()), 2),
         "n": len(a),
@@ -372,9 +374,9 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str], bus
         "arrival_to_sent_ms": final["latency"],
         "frame_time_error_ms": pct(np.abs(t_exp - nearest) * 1000.0, 50, 99),
         "accuracy_m": {
-            "mae": round(float(err.mean()), 4),
-            "p95": round(float(np.percentile(err, 95)), 4),
-            "max": round(float(err.max()), 4),
+            "mae": round(float(err.mean()), 4) if len(err) else None,
+            "p95": round(float(np.percentile(err, 95)), 4) if len(err) else None,
+            "max": round(float(err.max()), 4) if len(err) else None,
             "valid": len(err),
         },
         "cpu_pct": round(100.0 * (s[-1, 1] - s[half, 1]) / (s[-1, 0] - s[half, 0]), 1),
