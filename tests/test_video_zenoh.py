@@ -6,7 +6,7 @@ Checked: the CDR layout against bytes written out by hand from the camera manage
 timed by the messages' own time stamps (a camera clock 1000 s off, frames published in bursts of two); another
 peer's video refused and counted, garbage counted, a stream that stops reported and taken again when it returns;
 ``skyfix run`` fed by ``skyfix replay --video-out zenoh:...`` through a router tracks a generated session as
-accurately as over RTP, and measures a camera's 80 ms latency from the image's motion.
+accurately as over RTP; ``skyfix latency`` measures a Zenoh camera's glass-to-publication latency.
 """
 
 from __future__ import annotations
@@ -16,9 +16,10 @@ import socket
 import subprocess
 import threading
 import time
-import tomllib
+from fractions import Fraction
 from pathlib import Path
 
+import av
 import numpy as np
 import pytest
 from live_helpers import (
@@ -32,9 +33,9 @@ from live_helpers import (
     truth_errors_m,
     wait_for,
 )
-from test_latency_motion import ERROR_S, SCENARIO, TOLERANCE_S
 from test_live_video_inputs import FPS, SIZE, Receiver, _check_timing
 
+from groundstation.latency.timecode import render_timecode
 from groundstation.video.frames import VideoError
 from groundstation.video.inputs import parse_video_input
 from groundstation.video.zenoh_video import (
@@ -42,13 +43,12 @@ from groundstation.video.zenoh_video import (
     BadVideoMessage,
     CompressedVideo,
     camera_access_units,
+    camera_encoder,
     encode_compressed_video,
     parse_compressed_video,
     publish_video,
 )
 from groundstation.zenoh_session import open_session
-from sim_fixtures.generate import generate
-from sim_fixtures.scenario import scenario_from_dict
 
 KEY = "video/RadCamUDPStream/stream"  # the camera manager's: its stream's name, letters and digits only
 
@@ -218,10 +218,8 @@ def test_zenoh_inputs_are_parsed_and_bad_ones_named():
 SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"  # 640x360, 7 s
 
 
-def _live_fixes(
-    tmp_path: Path, video_out: str, video_in: str, session: Path = SESSION, latency_ms: str = "0"
-) -> tuple[list[dict], dict]:
-    """``skyfix replay`` of ``session`` (its video to ``video_out``) into ``skyfix run --video video_in``, both
+def _live_fixes(tmp_path: Path, video_out: str, video_in: str) -> tuple[list[dict], dict]:
+    """``skyfix replay`` of :data:`SESSION` (its video to ``video_out``) into ``skyfix run --video video_in``, both
     clients of a Zenoh router (BlueOS's); the fixes (on the session's clock) and the last status seen there."""
     router_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     router = open_session(listen=[router_ep], mode="router")
@@ -239,13 +237,13 @@ def _live_fixes(
         skyfix(
             "run",
             "--calibration",
-            str(session / "session.toml"),
+            str(SESSION / "session.toml"),
             "--mavlink",
             f"udpin:127.0.0.1:{mav}",
             "--video",
             video_in,
             "--video-latency-ms",
-            latency_ms,
+            "0",
             "--zenoh-connect",
             router_ep,
             "--zenoh-listen",
@@ -262,7 +260,7 @@ def _live_fixes(
         replay = start(
             skyfix(
                 "replay",
-                str(session),
+                str(SESSION),
                 "--mavlink-out",
                 f"udpout:127.0.0.1:{mav}",
                 "--video-out",
@@ -313,19 +311,58 @@ def test_the_live_service_tracks_from_zenoh_as_from_rtp(tmp_path):
     assert mae["zenoh"] <= 0.1 and mae["zenoh"] <= 1.5 * mae["rtp"] + 0.005, mae
 
 
-def test_the_latency_is_measured_from_the_motion_over_zenoh(tmp_path):
-    """A yawing UAV whose camera's frames leave 80 ms after their exposure (the simulator stamps them late, the
-    replay publishes each at its stamp): the service measures that latency from the image's motion, from the
-    messages' own time stamps, as it does over RTP (tests/test_latency_motion.py)."""
-    text = SCENARIO.format(name="zenoh", w=640, h=360, error=ERROR_S).replace(
-        "duration_s = 22.0", "duration_s = 14.0"
+def test_latency_command_measures_a_zenoh_camera(tmp_path):
+    """``skyfix latency --video zenoh:...``: a camera filming the time code through a known delay, published as
+    the camera manager publishes (through a router): the glass-to-publication latency within one display frame."""
+    delay_s, display_hz, seconds = 0.120, 60.0, 20.0
+    router_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    http = free_port(socket.SOCK_STREAM)
+    log = tmp_path / "latency.log"
+    sent, halt = [], threading.Event()
+
+    def camera(session) -> None:
+        """Frame i due at t_i shows the code a 60 Hz screen showed at t_i − delay_s; published when encoded."""
+        enc = camera_encoder(640, 360, Fraction(1, FPS))
+        t0 = time.time() + 0.3
+        for i in range(int(seconds * FPS)):
+            if halt.wait(max(0.0, t0 + i / FPS - time.time())):
+                return
+            glass = t0 + i / FPS - delay_s
+            shown_ms = int(np.floor(glass * display_hz) / display_hz * 1000.0)
+            frame = av.VideoFrame.from_ndarray(render_timecode(shown_ms, 640, 360), format="bgr24")
+            frame.pts = i
+            for packet in enc.encode(frame.reformat(format="yuv420p")):
+                now_ns = time.time_ns()
+                msg = CompressedVideo(
+                    now_ns // 10**9, now_ns % 10**9, "vehicle", bytes(packet), "h264"
+                )
+                session.put(KEY, encode_compressed_video(msg), encoding=ENCODING)
+                sent.append(now_ns / 1e9 - glass)
+
+    router = open_session(listen=[router_ep], mode="router")
+    cam = open_session(connect=[router_ep], mode="client")
+    thread = threading.Thread(target=camera, args=(cam,))
+    proc = start(
+        skyfix("latency", "--video", f"zenoh:{KEY}", "--zenoh-connect", router_ep)
+        + ["--port", str(http), "--duration-s", "40", "--samples", "90"]
+        + ["--display-hz", str(display_hz)],
+        log,
     )
-    session = tmp_path / "session"
-    generate(scenario_from_dict(tomllib.loads(text)), session, text)
-    _, status = _live_fixes(
-        tmp_path, f"zenoh:{KEY}", f"zenoh:{KEY}", session, str(round(ERROR_S * 1000))
-    )
-    est = status["video"]["latency_from_motion"]
-    print(f"zenoh, 80 ms configured: {est}")
-    assert est["estimate_ms"] is not None, est
-    assert abs(est["estimate_ms"] / 1000 - ERROR_S) <= TOLERANCE_S and est["sigma_ms"] <= 10
+    try:
+        wait_for(lambda: "Open http" in log.read_text(), 20, "the command to start")
+        thread.start()
+        proc.wait(60)
+    finally:
+        halt.set()
+        if thread.is_alive():
+            thread.join(10)
+        stop(proc)
+        cam.close()
+        router.close()
+    text = log.read_text()
+    assert proc.returncode == 0, text[-2000:]
+    result = json.loads(text.strip().splitlines()[-1])
+    measured_ms, true_ms = result["latency"]["video_latency_ms"], float(np.median(sent)) * 1000.0
+    print(f"zenoh latency: measured {measured_ms} ms, true {true_ms:.1f} ms; {result['latency']}")
+    assert result["video"]["kind"] == "zenoh" and result["latency"]["n"] >= 60
+    assert abs(measured_ms - true_ms) <= 1000.0 / display_hz

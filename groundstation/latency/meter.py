@@ -33,6 +33,7 @@ import numpy as np
 from groundstation.latency.timecode import CELLS, marker_cells, read_timecode
 from groundstation.video.frames import LiveFrame, VideoError
 from groundstation.video.live import VideoLive
+from groundstation.zenoh_session import ZenohError, open_session
 
 log = logging.getLogger("skyfix.latency")
 
@@ -142,9 +143,15 @@ def summary(samples_s: list[float], period_s: float) -> dict:
 
 
 async def measure(
-    url: str, duration_s: float, max_samples: int, page: TimecodePage, display_hz: float
+    url: str,
+    duration_s: float,
+    max_samples: int,
+    page: TimecodePage,
+    display_hz: float,
+    session=None,
 ) -> dict:
-    """Read the time code from the stream's frames until enough samples or time; the summary."""
+    """Read the time code from the stream's frames until enough samples or time; the summary. ``session``: the
+    Zenoh session a ``zenoh:`` video comes on."""
     samples: list[float] = []
     frames = 0
     busy = False
@@ -174,7 +181,7 @@ async def measure(
             if len(samples) >= max_samples:
                 done.set()
 
-    video = VideoLive(url, 0.0, on_frame)
+    video = VideoLive(url, 0.0, on_frame, session=session)
     task = asyncio.create_task(video.run())
     try:
         await asyncio.wait_for(done.wait(), timeout=duration_s)
@@ -206,13 +213,20 @@ def latency(args: argparse.Namespace) -> int:
             f"({args.video}); measuring for up to {args.duration_s:g} s ...",
             flush=True,
         )
+        session = None
         try:
+            # BlueOS's camera manager on Zenoh (groundstation.video.zenoh_video)
+            if args.video.startswith("zenoh:"):
+                session = open_session(args.zenoh_connect or (), config_file=args.zenoh_config)
             result = asyncio.run(
-                measure(args.video, args.duration_s, args.samples, page, args.display_hz)
+                measure(args.video, args.duration_s, args.samples, page, args.display_hz, session)
             )
-        except VideoError as e:
+        except (VideoError, ZenohError) as e:
             print(f"skyfix latency: error: {e}", file=sys.stderr)
             return 2
+        finally:
+            if session is not None:
+                session.close()
     lat = result.get("latency")
     if lat is None:
         why = result["video"]["error"] or "no time code recognised"
@@ -234,6 +248,13 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(name, help=help, description=__doc__.split("\n\n")[0])
     p.add_argument("--video", required=True, help="the UAV's video, as for skyfix run")
+    p.add_argument(
+        "--zenoh-connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="a zenoh: video's Zenoh endpoint (BlueOS's router, e.g. tls/192.168.2.2:7447)",
+    )
+    p.add_argument("--zenoh-config", help="a zenoh: video's Zenoh JSON5 config file")
     p.add_argument("--host", default="127.0.0.1", help="address the time code page is served on")
     p.add_argument(
         "--port", type=int, default=8765, help="port of the time code page (0: any free one)"

@@ -40,6 +40,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
 import av
@@ -270,12 +271,12 @@ class ZenohVideoInput:
         self._sub.undeclare()
 
 
-def _encoder(stream):
-    """A camera's H.264 encoder (:data:`ENCODER_OPTIONS`) for frames of the file ``stream`` (its time base)."""
+def camera_encoder(width: int, height: int, time_base: Fraction):
+    """A camera's H.264 encoder (:data:`ENCODER_OPTIONS`): frames of ``width`` x ``height`` px, their ``pts`` in
+    ``time_base`` s, in; one access unit (Annex B) per frame out."""
     ctx = av.CodecContext.create("libx264", "w")
-    src = stream.codec_context
-    ctx.width, ctx.height, ctx.pix_fmt = src.width, src.height, "yuv420p"
-    ctx.time_base = stream.time_base
+    ctx.width, ctx.height, ctx.pix_fmt = width, height, "yuv420p"
+    ctx.time_base = time_base
     ctx.options = ENCODER_OPTIONS
     return ctx
 
@@ -285,7 +286,9 @@ def camera_access_units(path: Path) -> Iterator[tuple[float, av.Packet]]:
     frame, one access unit, Annex B)`` per frame."""
     with av.open(str(path)) as container:
         stream = container.streams.video[0]
-        enc = _encoder(stream)
+        enc = camera_encoder(
+            stream.codec_context.width, stream.codec_context.height, stream.time_base
+        )
         t_first = None
         for frame in container.decode(stream):
             if frame.pts is None:
