@@ -8,8 +8,10 @@ from a GeoTIFF, an MBTiles file or a folder of tiles, and written as a folder or
   (:class:`MbTiles`, SQLite: its ``metadata`` and ``tiles``, rows in TMS order as the MBTiles 1.3 specification
   has them); or a folder ``Z/X/Y.png`` (or ``.jpg``, ``.webp``:
   :class:`TileFolder`; XYZ order, as ``gdal2tiles.py --xyz`` writes). Each says its ``info()``: its name, the
-  tiles' format, its bounds (degrees west, south, east, north) and zoom levels, and gives ``tile(z, x, y)``: the
-  tile's bytes, or None where it has none.
+  tiles' format, its bounds (degrees west, south, east, north), zoom levels and ``sigma_m``: the horizontal
+  1-sigma of the image's placement that ``skyfix mosaic``'s sidecar states (``mosaic.json`` beside
+  ``mosaic.tif``; None for other base maps), and gives ``tile(z, x, y)``: the tile's bytes, or None where it has
+  none.
 - ``skyfix tiles GEOTIFF --out DIR [--mbtiles FILE]``: a GeoTIFF written as tiles, zoom :func:`zoom_range`
   (from the one where the image fits in a tile to its native resolution), only tiles with a pixel of the image.
 
@@ -19,6 +21,7 @@ WGS84's equatorial radius, :data:`EARTH_RADIUS_M`).
 
 from __future__ import annotations
 
+import json
 import math
 import sqlite3
 import sys
@@ -144,6 +147,7 @@ class GeoTiffTiles:
             "bounds": [round(b, 8) for b in self.bounds],
             "minzoom": self.minzoom,
             "maxzoom": self.maxzoom,
+            "sigma_m": sidecar_sigma_m(self.path),
         }
 
     def render(self, z: int, x: int, y: int) -> np.ndarray | None:
@@ -221,6 +225,7 @@ class MbTiles:
             "bounds": bounds,
             "minzoom": int(meta.get("minzoom", zooms[0])),
             "maxzoom": int(meta.get("maxzoom", zooms[1])),
+            "sigma_m": None,
         }
 
     def info(self) -> dict:
@@ -266,6 +271,7 @@ class TileFolder:
             "bounds": [round(v, 8) for v in (w, s, e, n)],
             "minzoom": zooms[0],
             "maxzoom": top,
+            "sigma_m": None,
         }
 
     def info(self) -> dict:
@@ -277,6 +283,16 @@ class TileFolder:
 
     def close(self) -> None:
         pass
+
+
+def sidecar_sigma_m(path: Path) -> float | None:
+    """The horizontal 1-sigma (m) of an image's placement as ``skyfix mosaic``'s sidecar states it (its name with
+    ``.json``: ``mosaic.json`` beside ``mosaic.tif``, ``horizontal_sigma_m``); None without one."""
+    try:
+        value = json.loads(path.with_suffix(".json").read_text()).get("horizontal_sigma_m")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return float(value) if isinstance(value, int | float) and math.isfinite(value) else None
 
 
 def _tile_degrees(z: int, x: int, y: int) -> tuple[float, float, float, float]:

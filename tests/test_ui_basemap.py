@@ -164,6 +164,7 @@ def test_the_service_serves_an_mbtiles_base_maps_tiles(service, tmp_path):  # no
     source = GeoTiffTiles(tif)
     write_tiles(source, None, tmp_path / "site.mbtiles")
     mb = open_basemap(tmp_path / "site.mbtiles")
+    assert mb.info()["sigma_m"] is None and source.info()["sigma_m"] is None  # no sidecar
     z = mb.info()["maxzoom"]
     x, y = next((x, y) for x, y in tiles_in(source.bounds, z) if mb.tile(z, x, y))
     base, _ = service("--basemap", str(tmp_path / "site.mbtiles"))
@@ -211,6 +212,9 @@ def test_the_page_draws_the_base_map_under_the_fixes_at_the_right_pixel(tmp_path
     lon, lat, _ = Geod(ellps="WGS84").fwd(uuv[1], uuv[0], az, math.hypot(3.0, 1.5))
     radius_m = 0.4
     tif = _geotiff(tmp_path / "site.tif", *uuv, 30.0, 0.02, radius_m, alpha=False, mark=(lat, lon))
+    (tmp_path / "site.json").write_text(
+        '{"horizontal_sigma_m": 0.123}'
+    )  # as skyfix mosaic's sidecar
     with LiveRun(
         tmp_path,
         SESSION,
@@ -247,7 +251,7 @@ def test_the_page_draws_the_base_map_under_the_fixes_at_the_right_pixel(tmp_path
                                    r.left, r.top, s.x, s.y]; }"""
             )
             png = browser.screenshot("basemap")
-            assert "base map site.tif" in page.inner_text("#map-info")
+            assert "base map site.tif (placed to ±0.12 m, 1σ)" in page.inner_text("#map-info")
             assert not browser.errors, browser.errors
             assert browser.outside == [] and all(u.startswith(origin) for u in browser.requests)
             requested = " ".join(browser.requests)

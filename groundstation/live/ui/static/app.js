@@ -670,7 +670,8 @@ function drawMap() {
     + (m.horizon ? " · horizon in view: footprint cut" : "")
     + (m.footprint ? "" : ` · no footprint (${m.pose})`)
     + (o ? ` · origin ${o.lat.toFixed(6)}, ${o.lon.toFixed(6)}` : "")
-    + (page.basemap ? ` · base map ${page.basemap.name}` : " · no base map");
+    + (!page.basemap ? " · no base map" : ` · base map ${page.basemap.name}`
+       + (page.basemap.sigma_m !== null ? ` (placed to ±${page.basemap.sigma_m.toFixed(2)} m, 1σ)` : ""));
 }
 
 // "#b00000" and an opacity → "rgba(176, 0, 0, 0.35)"
