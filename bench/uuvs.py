@@ -26,7 +26,8 @@ machine a saturated host caps what the service gets), the frames its decoder ski
 the UUVs); per UUV: **slot → GPS_INPUT** (each new valid fix's first arrival at its endpoint minus its frame's
 stream slot, the exposure + the camera's latency), p50/p99, the service's own packet arrival → GPS_INPUT sent
 (``--stats``: with several UUVs, ``uuvs.{id}.latency``), the frames its pipeline dropped (its tracker behind),
-the share of frames sent with an ok fix, the MAE of the valid GPS_INPUT against its own truth and the frame
+the share of frames sent its tracker had the UUV in (``tracked``: uuv1 and uuv3 on one vehicle track it but get no
+ok fix, ``same_vehicle``) and with an ok fix, the MAE of the valid GPS_INPUT against its own truth and the frame
 time error (a fix's time minus the nearest true exposure: a clock map gone wrong shows there), and how many
 valid GPS_INPUT lie nearer the other vehicle's truth than its own (an identity swap: GPS_INPUT names no vehicle,
 so the autopilot would take the other's position).
@@ -88,6 +89,10 @@ OTHER = {
     "uuv2": "uuv1",
     THIRD: "uuv2",
 }  # the other vehicle in the video, for the identity check
+
+
+#: A frame's status when the tracker had no UUV in it (``localizer.tracking.TrackResult``'s words).
+NOT_TRACKED = ("lost", "awaiting_target", "released")
 
 
 def ensure_session(duration_s: float) -> Path:
@@ -200,6 +205,13 @@ def peak_rss_mb(pid: int) -> float:
     )
 
 
+def tracked_share(pipeline: dict, frames_sent: int) -> float:
+    """The share of the frames sent that the UUV's tracker had the UUV in: processed, its status none of
+    :data:`NOT_TRACKED` (an ok fix, or one vetoed after tracking: ``same_vehicle``, a pose's status)."""
+    missed = sum(pipeline["statuses"].get(word, 0) for word in NOT_TRACKED)
+    return round((pipeline["processed"] - missed) / frames_sent, 3)
+
+
 def uuv_result(
     session: Path,
     uuv_id: str,
@@ -241,6 +253,7 @@ def uuv_result(
         "arrival_to_sent_ms": own["latency"],
         "pipeline": {k: pl[k] for k in ("processed", "dropped", "held_for_telemetry", "statuses")},
         "ok_share": round(pl["statuses"].get("ok", 0) / len(frames_t), 3),
+        "tracked_share": tracked_share(pl, len(frames_t)),
         "frame_time_error_ms": pct(np.abs(t_exp - nearest_times(frames_t, t_exp)) * 1000.0, 50, 99)
         if keys
         else {"p50": None, "p99": None, "max": None, "n": 0},
@@ -404,6 +417,7 @@ def table(rounds: list[dict]) -> list[str]:
         ("slot->GPS_INPUT p50/p99 ms (n)", 30),
         ("arrival->sent p50/p99 ms", 24),
         ("dropped", 7),
+        ("tracked", 7),
         ("ok share", 8),
         ("MAE m", 6),
         ("nearer other", 12),
@@ -442,6 +456,7 @@ def table(rounds: list[dict]) -> list[str]:
                     f"{lat['p50']} / {lat['p99']} ({lat['n']})",
                     f"{a['p50_ms']} / {a['p99_ms']}",
                     u["pipeline"]["dropped"],
+                    u.get("tracked_share", tracked_share(u["pipeline"], res["frames_sent"])),
                     u["ok_share"],
                     u["mae_m"],
                     u["nearer_other_vehicle"],
@@ -492,6 +507,10 @@ def main() -> int:
         (
             "decoder skipped: frames the service decoded but did not hand on, its decoder behind (of those sent); "
             "dropped: frames the UUV's pipeline dropped, its tracker behind;"
+        ),
+        (
+            "tracked: frames its tracker had the UUV in / frames sent (uuv1 and uuv3 on one vehicle get no ok fix: "
+            "same_vehicle); target with 3 UUVs: >= 0.95 each, slot->GPS_INPUT p99 <= 60 ms;"
         ),
         (
             "ok share: the UUV's ok fixes / frames sent; MAE: valid GPS_INPUT at its endpoint vs its own truth; "
