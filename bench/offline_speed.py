@@ -15,7 +15,10 @@ recordings): the link's delay is unknown, so ``skyfix process`` also estimates t
 motion, as a user's run of such a recording does. Each process's peak RSS (``os.wait4``) and its CPU per second
 of video are printed, and the numbers written as JSON beside ``--out``. CPU seconds
 (the child's user + sys) show what the work costs beside the wall time: on a machine whose cores decoding alone
-keeps busy, process cannot be faster than its CPU seconds over the cores. ``skyfix process --help`` is timed too:
+keeps busy, process cannot be faster than its CPU seconds over the cores. The machine's 1-minute load average
+after each run is printed (its range in each size's heading), and each process run's line on the frames' offset to
+the telemetry (the estimate, its σ, its thirds'; round 1's under the table): a change to the motion estimate shows
+what it did to the offset beside what it did to the speed. ``skyfix process --help`` is timed too:
 the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
 ``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C DIR``: before and after in the
 same run).
@@ -58,6 +61,8 @@ depth_m = 1.5
 timesync_hz = 0.0  # no TIMESYNC, as many recordings: the link's delay is estimated from the video's motion
 """
 BENCH_DIR = Path("/tmp/skyfix-bench")
+#: ``skyfix process``'s stderr line on the frames' offset to the telemetry (its estimate, σ, thirds), kept per run
+OFFSET_LINE = "offset to the telemetry from the video's motion"
 
 
 def ensure_session(name: str) -> Path:
@@ -98,9 +103,9 @@ def decode_only(kind: str, video: str) -> int:
     return n
 
 
-def child(cmd: list[str], tree: Path = ROOT) -> tuple[float, float, float]:
-    """Wall seconds, CPU seconds (user + sys) and peak RSS (MB) of a child process run from source ``tree``, which
-    must succeed."""
+def child(cmd: list[str], tree: Path = ROOT) -> tuple[float, float, float, str]:
+    """Wall seconds, CPU seconds (user + sys), peak RSS (MB) and the stderr's line on the time offset
+    (:data:`OFFSET_LINE`, "" without one) of a child process run from source ``tree``, which must succeed."""
     with tempfile.TemporaryFile() as err:
         t0 = time.perf_counter()
         proc = subprocess.Popen(
@@ -117,7 +122,11 @@ def child(cmd: list[str], tree: Path = ROOT) -> tuple[float, float, float]:
             err.seek(0)
             tail = err.read().decode(errors="replace")[-2000:]
             raise SystemExit(f"{' '.join(cmd)}: exit {proc.returncode}\n{tail}")
-    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
+        err.seek(0)
+        offset = next(
+            (x for x in err.read().decode(errors="replace").splitlines() if OFFSET_LINE in x), ""
+        )
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024, offset
 
 
 def bench_size(
@@ -134,7 +143,8 @@ def bench_size(
     video = str(next(session.glob("video.*")))
     frames = len((session / "video_frames.csv").read_text().splitlines()) - 1
     me = [sys.executable, str(Path(__file__).resolve())]
-    runs: dict[str, list[tuple[float, float, float]]] = {}
+    runs: dict[str, list[tuple[float, float, float, str]]] = {}
+    loads = []  # the machine's 1-minute load average after each run
     process = [
         sys.executable,
         "-m",
@@ -163,7 +173,11 @@ def bench_size(
     for r in range(repeats):
         for variant, (cmd, tree) in variants.items():
             runs.setdefault(variant, []).append(child(cmd, tree))
-            print(f"  {name} round {r + 1}: {variant}: {runs[variant][-1][0]:.2f} s", flush=True)
+            loads.append(os.getloadavg()[0])
+            print(
+                f"  {name} round {r + 1}: {variant}: {runs[variant][-1][0]:.2f} s (load {loads[-1]:.1f})",
+                flush=True,
+            )
         if mil and r == 0:
             runs["process --tracker mil"] = [child(process + ["--tracker", "mil"])]
     w, h, duration = SIZES[name]
@@ -171,7 +185,7 @@ def bench_size(
     lines = [
         (
             f"{name}: {w}x{h}, {duration} s, {frames} frames; median of {repeats} interleaved rounds "
-            f"(MIL: 1), {os.cpu_count()} cores"
+            f"(MIL: 1), {os.cpu_count()} cores, load average (1 min) {min(loads):.1f}-{max(loads):.1f}"
         )
     ]
     decode_walls = [wall for wall, *_ in runs["decode-only OpenCV"]]
@@ -187,13 +201,13 @@ def bench_size(
             else f"{fps:6.1f} fps  {fps / reference:5.2f}x decode-only  "
             f"{statistics.median(paired):4.2f}x [{paired[0]:4.2f}-{paired[-1]:4.2f}]  "
         )
-        cpu = statistics.median(c for _, c, _ in rs)
+        cpu = statistics.median(c for _, c, *_ in rs)
         per_video_s = (
             "" if variant.startswith("start-up") else f" ({cpu / duration:4.2f} per video s)"
         )
         lines.append(
             f"  {variant:44s} {speed}CPU {cpu:6.1f} s{per_video_s}  peak RSS "
-            f"{statistics.median(m for *_, m in rs):5.0f} MB  (wall {', '.join(f'{x:.1f}' for x in walls)} s)"
+            f"{statistics.median(m for *_, m, _ in rs):5.0f} MB  (wall {', '.join(f'{x:.1f}' for x in walls)} s)"
         )
         data[variant] = {
             "fps": frames / statistics.median(walls),
@@ -201,9 +215,16 @@ def bench_size(
             if not variant.startswith("start-up")
             else None,
             "walls_s": walls,
-            "cpu_s": [c for _, c, _ in rs],
-            "peak_rss_mb": [m for *_, m in rs],
+            "cpu_s": [c for _, c, *_ in rs],
+            "peak_rss_mb": [m for *_, m, _ in rs],
+            "offset": [o for *_, o in rs],
         }
+    lines += [
+        f"  {variant}, round 1's {rs[0][3][rs[0][3].index(OFFSET_LINE) :]}"
+        for variant, rs in runs.items()
+        if rs[0][3]
+    ]
+    data["load_1min"] = loads
     return lines
 
 

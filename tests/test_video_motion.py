@@ -7,7 +7,12 @@ import cv2
 import numpy as np
 import pytest
 
-from groundstation.latency.video_motion import MotionThread, RotationMeter
+from groundstation.latency.video_motion import (
+    PAIRS_PER_THIRD,
+    MotionThread,
+    RotationMeter,
+    measured_every,
+)
 from localizer.camera import Camera
 
 W, H = 640, 360
@@ -50,3 +55,38 @@ def test_close_stops_the_thread_early():
     thread.feed(0.0, _frames(1)[0])
     thread.close()
     assert not thread._thread.is_alive()
+
+
+def test_every_third_frame_measured_is_the_meter_on_those_frames():
+    frames = _frames(13)
+    meter = RotationMeter(CAMERA)
+    expected = [meter.measure(i / 30, f) for i, f in enumerate(frames) if i % 3 == 0][1:]
+    thread = MotionThread(CAMERA, every=3)
+    for i, f in enumerate(frames):
+        thread.feed(i / 30, f)
+    got = thread.finish()
+    assert [(r.t0, r.t1) for r in got] == [(i / 30, (i + 3) / 30) for i in range(0, 10, 3)]
+    assert all(np.array_equal(a.rotvec, b.rotvec) for a, b in zip(got, expected, strict=True))
+    # three frames apart, the pan turns the camera three times as far
+    assert np.median([r.rotvec[1] for r in got]) == pytest.approx(-6 / 600, rel=0.2)
+
+
+@pytest.mark.parametrize(
+    ("frames", "period_s", "every"),
+    [
+        (210, 1 / 30, 1),
+        (720, 1 / 30, 1),
+        (721, 1 / 30, 2),
+        (1200, 1 / 30, 3),
+        (36000, 1 / 30, 3),
+        (36000, 1 / 10, 1),
+        (36000, 1 / 60, 6),
+        (1, float("inf"), 1),
+    ],
+)
+def test_a_long_recording_is_measured_ten_times_a_second_each_third_keeping_its_pairs(
+    frames, period_s, every
+):
+    assert measured_every(frames, period_s) == every
+    if every > 1:  # each third keeps PAIRS_PER_THIRD pairs
+        assert (frames - 1) // every // 3 >= PAIRS_PER_THIRD

@@ -12,7 +12,12 @@ image's motion.
 
 :class:`MotionThread` runs a :class:`RotationMeter` in a thread of its own, beside the caller's work: OpenCV
 releases the interpreter lock while it resizes and tracks the corners, so on a second core the motion costs the
-caller's loop little (``bench/profile.py``: the biggest stage of ``skyfix process`` after decoding).
+caller's loop little. It measures every frame, or every :func:`measured_every`-th: offline, a recording long
+enough that each of its thirds (:func:`groundstation.latency.estimate.offset_from_rotations`) keeps
+:data:`PAIRS_PER_THIRD` pairs is measured at most :data:`OFFLINE_HZ` a second, as live
+(:data:`groundstation.latency.estimate.MEASURE_HZ`): a pair three frames apart turns three times as far as a pair
+of neighbours, so a third of the pairs tells the offset about as well, for a third of the CPU
+(``bench/profile_stages.py``: the biggest stage of ``skyfix process`` after decoding).
 """
 
 from __future__ import annotations
@@ -28,8 +33,12 @@ from localizer.camera import Camera, pixel_to_ray
 
 WIDTH_PX = 480  # frames are reduced to this width to find and track corners
 MIN_TRACKS = 12
-MAX_CORNERS = 150
-REDETECT_BELOW = 80  # tracked corners left before new ones are found
+MAX_CORNERS = 60
+REDETECT_BELOW = 30  # tracked corners left before new ones are found
+LK_WINDOW_PX = 15  # Lucas-Kanade's window (on the reduced image) ...
+LK_LEVELS = 3  # ... and its pyramid's levels above the image
+OFFLINE_HZ = 10.0  # offline, frames measured at most this often (live's rate) ...
+PAIRS_PER_THIRD = 120  # ... while each third of the recording keeps this many frame pairs (twice a sure estimate's)
 
 
 @dataclass(frozen=True)
@@ -80,7 +89,7 @@ class RotationMeter:
             )
         if p0 is None or len(p0) < MIN_TRACKS:
             return None
-        lk = {"winSize": (21, 21), "maxLevel": 3}
+        lk = {"winSize": (LK_WINDOW_PX, LK_WINDOW_PX), "maxLevel": LK_LEVELS}
         p1, ok1, _ = cv2.calcOpticalFlowPyrLK(gray0, gray, p0, None, **lk)
         back, ok2, _ = cv2.calcOpticalFlowPyrLK(gray, gray0, p1, None, **lk)
         good = (
@@ -106,15 +115,27 @@ class RotationMeter:
         return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
 
+def measured_every(frames: int, period_s: float) -> int:
+    """Offline: the motion of a recording of ``frames`` frames ``period_s`` apart (s) is measured in every this
+    many-th frame: at most :data:`OFFLINE_HZ` a second, while each third keeps :data:`PAIRS_PER_THIRD` pairs."""
+    if not 0.0 < period_s < float("inf"):
+        return 1
+    fastest = max(1, round(1.0 / (OFFLINE_HZ * period_s)))
+    return max(1, min(fastest, (frames - 1) // (3 * PAIRS_PER_THIRD)))
+
+
 class MotionThread:
     """A :class:`RotationMeter` in a background thread: :meth:`feed` the frames in order (it waits while ``depth``
     frames are not measured yet), :meth:`finish` for the rotations, the same and in the same order as measured in
     the caller's thread (each frame waiting holds its decoded frame, 12 MB at 4K: ``bench/offline_speed.py``'s 4K
     peak RSS grew 579 -> 713 MB with 8, so the default is smaller). An error of the meter is raised by :meth:`finish`; :meth:`close` stops the thread (any
-    time; after :meth:`finish` nothing to do). The images fed must not change until measured."""
+    time; after :meth:`finish` nothing to do). The images fed must not change until measured. ``every``: only the
+    first of every this many frames fed is measured (:func:`measured_every`); the others are dropped at once."""
 
-    def __init__(self, camera: Camera, depth: int = 4):
+    def __init__(self, camera: Camera, depth: int = 4, every: int = 1):
         self.meter = RotationMeter(camera)
+        self.every = every
+        self._fed = 0
         self.rotations: list[Rotation] = []
         self._queue: queue.Queue = queue.Queue(maxsize=depth)
         self._error: BaseException | None = None
@@ -133,7 +154,9 @@ class MotionThread:
 
     def feed(self, t: float, image: np.ndarray) -> None:
         """The next frame (time in any clock, s; grey or BGR image)."""
-        self._queue.put((t, image))
+        self._fed += 1
+        if (self._fed - 1) % self.every == 0:
+            self._queue.put((t, image))
 
     def close(self) -> None:
         if self._thread.is_alive():

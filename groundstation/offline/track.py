@@ -22,7 +22,8 @@ too (``bridged``). An occlusion stops it as it stops the forward pass: a hidden 
 
 The camera poses of all frames are computed at once and shared with the session
 (which projects its predictions for many frames at a time). With ``measure_motion``
-the camera's rotation between consecutive frames is measured too, in a thread beside the tracking
+the camera's rotation between frames is measured too (every frame of a short recording, 10 a second of a
+long one: :func:`~groundstation.latency.video_motion.measured_every`), in a thread beside the tracking
 (:class:`~groundstation.latency.video_motion.MotionThread`; ``timings_s["motion"]``: the time waiting for it), for
 the frames' offset to the
 telemetry (:func:`groundstation.latency.estimate.offset_from_rotations`). With a
@@ -40,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from groundstation.height_from_size import HeightFromSize
-from groundstation.latency.video_motion import MotionThread
+from groundstation.latency.video_motion import MotionThread, measured_every
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session, SessionError
 from groundstation.video.frames import VideoError
@@ -139,7 +140,7 @@ def track_session(
     gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
     pending = None  # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
     warnings: list[str] = []
-    meter = MotionThread(cal.camera) if measure_motion else None
+    meter = MotionThread(cal.camera, every=measured_every(n, period_s)) if measure_motion else None
     rotations = []
 
     t0 = time.perf_counter()
