@@ -347,3 +347,33 @@ def test_the_default_outputs_are_zenoh_and_gps_input_for_each_uuv(tmp_path):
     config.add_arguments(parser)
     run = config.run_config(parser.parse_args(["--config", str(cfg)]))
     assert [u.outputs for u in run.uuvs] == [("zenoh", "gps_input"), ("zenoh",)]
+
+
+def test_a_plugin_whose_output_is_no_output_stops_the_start_in_one_line(tmp_path):
+    """A part registered as an output whose build returns something without on_fix: exit 2, one line naming it."""
+    site = tmp_path / "site"
+    site.mkdir()
+    broken = (
+        "from groundstation.live.registry import register\n\n\n"
+        '@register("output", "broken", "builds no output")\n'
+        "def build(out):\n    return object()\n"
+    )
+    _install_plugin(site, "skyfix_broken_output", broken, "broken")
+    cfg = _config(tmp_path)
+    cfg.write_text(
+        cfg.read_text().replace('depth_source = "constant"', 'outputs = ["zenoh", "broken"]')
+    )
+    run = subprocess.run(
+        skyfix("run", "--config", str(cfg)),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(site)),
+        timeout=120,
+        check=False,
+    )
+    assert run.returncode == 2, run.stderr[-3000:]
+    assert run.stderr.strip().splitlines()[-1] == (
+        "skyfix run: error: output broken (skyfix_broken_output): build() = 'object': not an output: it "
+        "needs run(), status(now) and on_fix(fix, info)"
+    )

@@ -353,6 +353,13 @@ def uuv_outputs(
         out = part.build(OutputInput(name, u, cfg, session, gate))
         if out is None:  # nothing to send for this UUV (gps_input none)
             continue
+        if not isinstance(out, registry.Output):
+            raise ConfigError(
+                f"output {name} ({part.build.__module__})",
+                "build()",
+                type(out).__name__,
+                "not an output: it needs run(), status(now) and on_fix(fix, info)",
+            )
         built.append(workers.add(out, LAST, part.section))
         if part.section is None:
             listed[name] = out
