@@ -30,6 +30,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.ndimage import map_coordinates
 
 from groundstation.offline.bottom import MODES as BOTTOM_MODES
 from groundstation.offline.bottom import PoseCorrection, pixels_at, subsample_rows, uuv_radius_px
@@ -49,6 +50,9 @@ MAX_RANGE = 3.0  # a footprint reaches at most this many times the camera's heig
 BORDER_SAMPLES = 16  # pixels per image edge projected to the floor for the footprint
 FEATHER = (
     0.1  # the blend's weight rises from the image's border over this share of its shorter side
+)
+LATTICE = (
+    8  # cells between the grid points projected exactly into each frame (bilinear between them)
 )
 TILE = 256  # the blend's tiles and the GeoTIFF's blocks, cells a side
 MAX_TILES = 96  # tiles of the blend held in memory (16 bytes a cell: 100 MB), the rest on disk
@@ -190,11 +194,22 @@ def _paint(image, grid: Grid, poly_utm, xy_cam, jac, camera, R, height_m, floor_
     pts = np.round(np.column_stack([col - c0, row - r0]) * 16).astype(np.int32)
     cv2.fillPoly(inside, [pts], 1, shift=4)
     rr, cc = np.mgrid[r0:r1, c0:c1]
-    x = grid.west_m + (cc + 0.5) * grid.gsd_m
-    y = grid.north_m - (rr + 0.5) * grid.gsd_m
-    dxy = np.stack([x - xy_cam[0], y - xy_cam[1]], axis=-1)
-    ne = dxy @ np.linalg.inv(jac).T
-    u, v = offset_to_pixel(camera, R, ne, height_m, floor_depth_m, N_WATER)
+    to_ne = np.linalg.inv(jac).T
+
+    def cells_ne(rows, cols):
+        x = grid.west_m + (cols + 0.5) * grid.gsd_m
+        y = grid.north_m - (rows + 0.5) * grid.gsd_m
+        return np.stack([x - xy_cam[0], y - xy_cam[1]], axis=-1) @ to_ne
+
+    ne = cells_ne(rr, cc)
+    # the refracted projection on a lattice every LATTICE cells, bilinear between (it is smooth at that scale)
+    lr = np.append(np.arange(r0, r1 - 1, LATTICE), r1 - 1)
+    lc = np.append(np.arange(c0, c1 - 1, LATTICE), c1 - 1)
+    lrr, lcc = np.meshgrid(lr, lc, indexing="ij")
+    u_lat, v_lat = offset_to_pixel(camera, R, cells_ne(lrr, lcc), height_m, floor_depth_m, N_WATER)
+    at = (np.interp(rr, lr, np.arange(len(lr))), np.interp(cc, lc, np.arange(len(lc))))
+    u = map_coordinates(u_lat, at, order=1, mode="nearest")
+    v = map_coordinates(v_lat, at, order=1, mode="nearest")
     ok = (
         (inside == 1)
         & np.isfinite(u)
