@@ -99,8 +99,8 @@ def test_help_shows_defaults_choices_and_the_required_calibration(capsys):
         name,
         info,
     ) in config.RunConfig.__pydantic_fields__.items():  # every option has its flag and help
-        if name == "uuv":  # tables of the config file, no flag
-            assert "[[uuv]]" in text
+        if name in config.FILE_ONLY:  # tables of the config file, no flag
+            assert {"uuv": "[[uuv]]", "parts": "[parts.NAME]"}[name] in text
         else:
             assert config.flag(name) in text and info.description.split()[0] in text
 

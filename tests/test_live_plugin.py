@@ -44,10 +44,10 @@ READY_SAMPLES = 5  # the plugin touches its ready file once the telemetry has ta
 
 PLUGIN = textwrap.dedent(
     f'''
-    """A constant depth, stamped now, every 50 ms: a depth source outside skyfix."""
+    """A constant depth, stamped now, every 50 ms: a depth source outside skyfix (its table [parts.constant]: the
+    file it touches once ready)."""
 
     import asyncio
-    import os
     import time
     from pathlib import Path
 
@@ -70,7 +70,7 @@ PLUGIN = textwrap.dedent(
                     self.received += 1
                     self.last_recv = now
                     if self.received == {READY_SAMPLES}:
-                        Path(os.environ["CONSTANT_DEPTH_READY"]).touch()
+                        Path(self.depth.settings["ready"]).touch()
                 await asyncio.sleep(0.05)
 
         def status(self, now: float) -> dict:
@@ -127,7 +127,8 @@ def test_a_plugins_depth_source_is_chosen_by_name_and_runs(tmp_path):
     _install_plugin(site)
     cfg = _config(tmp_path)
     ready = tmp_path / "ready"
-    env = dict(os.environ, PYTHONPATH=str(site), CONSTANT_DEPTH_READY=str(ready))
+    cfg.write_text(cfg.read_text() + f'[parts.constant]\nready = "{ready}"\n')
+    env = dict(os.environ, PYTHONPATH=str(site))
 
     # without the plugin the name is no choice: one line naming the file, the key and the value
     refused = subprocess.run(
@@ -192,18 +193,25 @@ def test_a_part_whose_module_is_missing_is_refused_saying_what_to_install(monkey
 
 OUTPUT_PLUGIN = textwrap.dedent(
     '''
-    """Each fix as one JSON line in the file $FIX_FILE: an output outside skyfix."""
+    """Each fix as one JSON line in a file (its table [parts.fix_file]: path): an output outside skyfix."""
 
     import asyncio
     import json
-    import os
+
+    from pydantic.dataclasses import dataclass
 
     from groundstation.live.registry import OutputInput, register
+    from localizer.contract import CLOSED, Text
+
+
+    @dataclass(frozen=True, config=CLOSED)
+    class Settings:
+        path: Text  # the file the fixes are written to
 
 
     class FixFile:
         def __init__(self, out: OutputInput):
-            self.path = os.environ["FIX_FILE"]
+            self.path = out.settings.path
             self.uuv = out.options.id
             self.file = open(self.path, "w")  # its start: the file is there before the first fix
             self.written = 0
@@ -223,7 +231,7 @@ OUTPUT_PLUGIN = textwrap.dedent(
             return {"path": self.path, "written": self.written}
 
 
-    @register("output", "fix_file", "each fix as a JSON line in $FIX_FILE (a plugin)")
+    @register("output", "fix_file", "each fix as a JSON line in a file (a plugin)", settings=Settings)
     def build(out: OutputInput) -> FixFile:
         return FixFile(out)
     '''
@@ -238,7 +246,7 @@ def test_a_plugins_output_is_chosen_by_name_and_gets_every_fix_of_a_run(tmp_path
     site.mkdir()
     _install_plugin(site, "skyfix_fix_file", OUTPUT_PLUGIN, "fix_file")
     fixes_file = tmp_path / "fixes.jsonl"
-    env = dict(os.environ, PYTHONPATH=str(site), FIX_FILE=str(fixes_file))
+    env = dict(os.environ, PYTHONPATH=str(site))
     mav, video = free_port(), free_port()
     zenoh_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     cfg = tmp_path / "run.toml"
@@ -247,6 +255,7 @@ def test_a_plugins_output_is_chosen_by_name_and_gets_every_fix_of_a_run(tmp_path
         f'mavlink = "udpin:127.0.0.1:{mav}"\nvideo = "udp://127.0.0.1:{video}"\n'
         f'video_latency_ms = 0\ngps_input = "none"\nzenoh_listen = ["{zenoh_ep}"]\nno_ui = true\n'
         f'duration_s = 120\nstats = "{tmp_path / "stats.json"}"\noutputs = ["zenoh", "fix_file"]\n'
+        f'[parts.fix_file]\npath = "{fixes_file}"\n'
     )
     replay_cmd = skyfix(
         "replay",
@@ -377,3 +386,66 @@ def test_a_plugin_whose_output_is_no_output_stops_the_start_in_one_line(tmp_path
         "skyfix run: error: output broken (skyfix_broken_output): build() = 'object': not an output: it "
         "needs run(), status(now) and on_fix(fix, info)"
     )
+
+
+#: validates each config file given and prints one line each: its UUVs' part settings, or the error
+CHECK_CONFIGS = textwrap.dedent(
+    """
+    import argparse, sys
+    from groundstation.live import config
+    for path in sys.argv[1:]:
+        parser = argparse.ArgumentParser()
+        config.add_arguments(parser)
+        try:
+            print([u.parts for u in config.run_config(parser.parse_args(["--config", path])).uuvs])
+        except config.ConfigError as e:
+            print(e)
+    """
+)
+
+
+def test_a_plugins_settings_are_its_table_checked_at_start_else_one_line(tmp_path):
+    """``[parts.fix_file]`` (one UUV) or ``[uuv.parts.fix_file]`` (each [[uuv]] table) checked against the settings
+    the plugin declares: a wrong, missing or unknown key, or a table for a part the UUV does not run, one line
+    naming the file, the key and the value."""
+    site = tmp_path / "site"
+    site.mkdir()
+    _install_plugin(site, "skyfix_fix_file", OUTPUT_PLUGIN, "fix_file")
+    one = 'calibration = "cal.toml"\noutputs = ["zenoh", "fix_file"]\n'
+    uuvs = 'calibration = "cal.toml"\n[[uuv]]\nid = "a"\noutputs = ["fix_file"]\n'
+    cases = {
+        one + '[parts.fix_file]\npath = "a.jsonl"\n': "[{'fix_file': {'path': 'a.jsonl'}}]",
+        one + "[parts.fix_file]\npath = 3\n": "parts.fix_file.path = 3: expected a string",
+        one: "parts.fix_file.path = None: missing",
+        one + '[parts.fix_file]\npath = "a"\nmode = "w"\n': (
+            "parts.fix_file.mode = 'w': unknown key (known: path)"
+        ),
+        'calibration = "cal.toml"\noutputs = ["zenoh"]\n[parts.fix_file]\npath = "a"\n': (
+            "parts.fix_file = {'path': 'a'}: fix_file is not a part this UUV runs (depth_source 'skyfix', "
+            "outputs zenoh)"
+        ),
+        uuvs
+        + "[uuv.parts.fix_file]\npath = 3\n": "uuv[0].parts.fix_file.path = 3: expected a string",
+        uuvs + '[uuv.parts.fix_file]\npath = "a"\n[[uuv]]\nid = "b"\noutputs = ["zenoh"]\n'
+        'depth_key = "b/depth"\n': "[{'fix_file': {'path': 'a'}}, {}]",
+        'calibration = "cal.toml"\n[parts.fix_file]\npath = "a"\n[[uuv]]\nid = "a"\n': (
+            "parts = {'fix_file': {'path': 'a'}}: set per UUV, in each [[uuv]] table, when there are several"
+        ),
+    }
+    files = []
+    for i, text in enumerate(cases):
+        files.append(tmp_path / f"run{i}.toml")
+        files[-1].write_text(text)
+    checked = subprocess.run(
+        [sys.executable, "-c", CHECK_CONFIGS, *map(str, files)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(site)),
+        timeout=120,
+        check=True,
+    )
+    lines = checked.stdout.splitlines()
+    assert len(lines) == len(cases), checked.stdout
+    for path, want, got in zip(files, cases.values(), lines):
+        assert got == (want if want.startswith("[") else f"{path}: {want}")

@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 from pathlib import Path
-from typing import Annotated, Literal, get_args, get_origin
+from typing import Annotated, Any, Literal, get_args, get_origin
 
 from annotated_types import Ge, Gt
 from pydantic import BeforeValidator, Field, StringConstraints, model_validator
@@ -67,6 +67,8 @@ NAMED_INPUTS = ("video", "gps_input")
 #: Each UUV's outputs unless its ``outputs`` names others: its fixes on Zenoh and GPS_INPUT (when ``gps_input``
 #: names a link)
 DEFAULT_OUTPUTS = ("zenoh", "gps_input")
+#: The options that are tables of the config file, never flags: ``[[uuv]]``, ``[parts.NAME]``
+FILE_ONLY = ("uuv", "parts")
 
 
 @dataclass(frozen=True, kw_only=True, config=CLOSED)
@@ -105,6 +107,11 @@ class UuvOptions:
         description="where the UUV's fixes go (registered outputs, each once): "
         f"{registry.described('output')}",
     )
+    parts: dict[Text, dict[Text, Any]] = Field(
+        default_factory=dict,
+        description="settings of the UUV's depth source and outputs, a table each (config file only): "
+        "[parts.NAME] (in a [[uuv]] table: [uuv.parts.NAME]), checked by the part NAME",
+    )
     uuv_position_key: Text | None = Field(
         None,
         description="Zenoh key of the UUV's own GLOBAL_POSITION_INT as "
@@ -140,6 +147,26 @@ class UuvOptions:
                 f"gps_input = {self.gps_input!r} names a link, but gps_input is not among the outputs: "
                 'add it, or say gps_input = "none"',
             )
+        return self
+
+    @model_validator(mode="after")
+    def _parts_settings(self):
+        if getattr(self, "uuv", ()):  # several UUVs: each [[uuv]] table's own
+            return self
+        runs = [
+            registry.part("depth", self.depth_source),
+            *(registry.part("output", name) for name in self.outputs),
+        ]
+        for name, table in self.parts.items():
+            if name not in {part.name for part in runs}:
+                raise Invalid(
+                    f"parts.{name}",
+                    table,
+                    f"{name} is not a part this UUV runs (depth_source {self.depth_source!r}, "
+                    f"outputs {', '.join(self.outputs)})",
+                )
+        for part in runs:  # without a table, its defaults
+            registry.settings(part, self.parts.get(part.name, {}))
         return self
 
     @model_validator(mode="after")
@@ -580,7 +607,7 @@ def _uuv_defaults() -> dict:
     """The top-level options a UUV of its own has, with their defaults."""
     fields = RunConfig.__pydantic_fields__
     return {
-        name: fields[name].default
+        name: fields[name].get_default(call_default_factory=True)
         for name in (
             *UuvOptions.__pydantic_fields__,
             "fix_key",
@@ -661,10 +688,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--config",
         metavar="FILE",
         help="TOML file of run options, keys as the flags' names with "
-        "underscores (deploy/field.toml)",
+        "underscores (deploy/field.toml); a part's settings in its table [parts.NAME]",
     )
     for name, info in RunConfig.__pydantic_fields__.items():
-        if name == "uuv":  # tables: the config file's [[uuv]]
+        if name in FILE_ONLY:
             continue
         kind, choices = _base(info.annotation)
         text = info.description
@@ -745,8 +772,10 @@ def run_config(args: argparse.Namespace) -> RunConfig:
         return validate(RunConfig, {**file_values, **flags}, "options")
     except ConfigError as e:
         top = e.key.split(".")[0].split("[")[0]
-        if top in file_values and top not in flags:
+        if top in file_values and top not in flags or top in FILE_ONLY and args.config:
             raise ConfigError(args.config, e.key, e.value, e.why) from None
+        if top in FILE_ONLY:  # a part chosen by a flag: its settings are its table's
+            raise ConfigError("options", e.key, e.value, e.why) from None
         why = "required (a flag or the --config file)" if e.why == "missing" else e.why
         raise ConfigError(
             "options", flag(top) if top in RunConfig.__pydantic_fields__ else e.key, e.value, why

@@ -20,6 +20,12 @@ pyproject.toml: ``NAME = "its_module"``), imported once when the choices are fir
 source or output is one module and its registration: the configuration's choices (``depth_source``'s and
 ``outputs``' values, the flags' ``--help``, the JSON Schema's enums) are :func:`choices`, and
 :class:`~groundstation.live.service.UuvChain` builds the ones chosen by :func:`part`'s ``build``.
+
+A depth source or output has settings of its own: the configuration's table ``[parts.NAME]`` (one UUV) or
+``[uuv.parts.NAME]`` (each ``[[uuv]]`` table), handed to it as its input's ``settings`` (:func:`settings`). A part
+registered with ``settings=T`` (a pydantic dataclass with ``config=CLOSED``) gets a ``T`` checked at start (a bad,
+missing or unknown key is a one-line error naming the file, ``parts.NAME.KEY`` and the value); without, the table as
+written, read-only.
 """
 
 from __future__ import annotations
@@ -27,12 +33,13 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import pkgutil
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.metadata import entry_points
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
-from localizer.contract import ConfigError
+from localizer.contract import ConfigError, Invalid, validate
 
 if TYPE_CHECKING:
     import zenoh
@@ -86,7 +93,7 @@ class DepthInput:
     """What a depth source is built from: the UUV's options, the Zenoh session, the UUV's telemetry (the source
     adds each depth to it; a depth added without a source word records ``name``), the gate every sample passes,
     the depth's 1-sigma (m, the calibration's), for a part registered with ``thrusters=True`` the thrusters the fix
-    gate reads, and the name it is registered as."""
+    gate reads, the name it is registered as and its settings (:func:`settings`)."""
 
     options: UuvConfig
     session: zenoh.Session
@@ -95,6 +102,7 @@ class DepthInput:
     sigma_m: float
     thrusters: Thrusters | None
     name: str
+    settings: Any
 
 
 @dataclass(frozen=True)
@@ -102,14 +110,15 @@ class OutputInput:
     """What an output is built from: the name it is registered as, the UUV's options (its keys and links), the
     run's, the Zenoh session and the UUV's safety gates (:class:`~localizer.fix_gate.FixGate`: those the
     operator's confirmation and the kept track reach, for the output that sends the fixes to the UUV's autopilot;
-    None when the UUV has no ``gps_input``). An output that gates the fixes otherwise makes a gate of its own (a
-    gate follows one stream of fixes)."""
+    None when the UUV has no ``gps_input``), and its settings (:func:`settings`). An output that gates the fixes
+    otherwise makes a gate of its own (a gate follows one stream of fixes)."""
 
     name: str
     options: UuvConfig
     run: RunConfig
     session: zenoh.Session
     gate: FixGate | None
+    settings: Any
 
 
 @dataclass(frozen=True)
@@ -126,8 +135,9 @@ class Part:
     """A registered part: its kind and name, the function that builds it, its one-line help; ``thrusters``: it
     reads the UUV's thruster outputs too (the fix gate's second source of motion); ``needs``: the module it
     imports when it runs and the pip requirement that brings it (an optional extra); ``section``: an output's
-    status section of its own (else its status is the status's ``outputs.NAME``). An output's ``build`` may
-    return None: nothing to send for this UUV (``gps_input`` without a link)."""
+    status section of its own (else its status is the status's ``outputs.NAME``); ``settings``: the type of its
+    table ``[parts.NAME]`` (None: the table as written). An output's ``build`` may return None: nothing to send for
+    this UUV (``gps_input`` without a link)."""
 
     kind: str
     name: str
@@ -136,6 +146,7 @@ class Part:
     thrusters: bool = False
     needs: tuple[str, str] | None = None
     section: str | None = None
+    settings: type | None = None
 
     def missing(self) -> str | None:
         """What to install when the module it needs is missing (one line), else None."""
@@ -155,9 +166,11 @@ def register(
     thrusters: bool = False,
     needs: tuple[str, str] | None = None,
     section: str | None = None,
+    settings: type | None = None,
 ) -> Callable:
     """Decorator: the function builds the part ``name`` of ``kind`` (from a :class:`DepthInput`,
-    :class:`UavInput` or :class:`OutputInput`). A name taken twice is an error naming both modules."""
+    :class:`UavInput` or :class:`OutputInput`; its settings of type ``settings``). A name taken twice is an error
+    naming both modules."""
     if kind not in KINDS:
         raise ValueError(f"part kind {kind!r}: expected one of {', '.join(KINDS)}")
 
@@ -167,7 +180,7 @@ def register(
             raise ValueError(
                 f"{kind} part {name!r} registered twice: {taken.build.__module__} and {build.__module__}"
             )
-        _parts[kind][name] = Part(kind, name, build, help, thrusters, needs, section)
+        _parts[kind][name] = Part(kind, name, build, help, thrusters, needs, section, settings)
         return build
 
     return decorate
@@ -211,3 +224,15 @@ def part(kind: str, name: str) -> Part:
 def described(kind: str) -> str:
     """Each part's name and help, for a configuration key's description: ``name: help; name: help``."""
     return "; ".join(f"{p.name}: {p.help}" for p in parts(kind).values())
+
+
+def settings(part: Part, table: Mapping[str, Any]) -> Any:
+    """The part's settings from its table in the configuration (``[parts.NAME]``, empty when there is none): a
+    ``part.settings`` checked, else the table as written, read-only. A bad key or value raises
+    :class:`~localizer.contract.Invalid` naming ``parts.NAME.KEY`` and the value (the configuration's check)."""
+    if part.settings is None:
+        return MappingProxyType(dict(table))
+    try:
+        return validate(part.settings, dict(table), "parts")
+    except ConfigError as e:
+        raise Invalid(f"parts.{part.name}.{e.key}", e.value, e.why) from None

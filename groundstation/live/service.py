@@ -350,7 +350,8 @@ def uuv_outputs(
     built, listed = [], {}
     for name in u.outputs:
         part = registry.part("output", name)
-        out = part.build(OutputInput(name, u, cfg, session, gate))
+        settings = registry.settings(part, u.parts.get(name, {}))
+        out = part.build(OutputInput(name, u, cfg, session, gate, settings))
         if out is None:  # nothing to send for this UUV (gps_input none)
             continue
         if not isinstance(out, registry.Output):
@@ -414,8 +415,10 @@ class UuvChain:
         source = registry.part("depth", u.depth_source)
         thrusters = Thrusters(cfg.thruster_deadband_us) if source.thrusters else None
         uuv_tel.name_depth_source(source.name)  # the word of a depth its source adds without one
+        settings = registry.settings(source, u.parts.get(source.name, {}))
+        sigma_m = cal.sigmas.depth_m
         depth = source.build(
-            DepthInput(u, session, uuv_tel, depth_gate, cal.sigmas.depth_m, thrusters, source.name)
+            DepthInput(u, session, uuv_tel, depth_gate, sigma_m, thrusters, source.name, settings)
         )
         own.add(depth, INPUTS, "depth", is_input=True)
         if recorder:  # its part of the recording
