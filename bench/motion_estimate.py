@@ -17,6 +17,7 @@ simulator's default). No TIMESYNC in either.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -121,6 +122,9 @@ def main(argv=None) -> int:
                 f"  {variant:8s} {measured:5d} frames measured, CPU {cpu_ms:5.2f} ms per video frame: {offset}"
             )
             print(lines[-1], flush=True)
+    lines.append(
+        f"load average (1, 5, 15 min) at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}"
+    )
     emit(lines, args.out)
     return 0
 
