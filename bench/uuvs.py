@@ -1,7 +1,7 @@
 """Benchmark of several UUVs in one live video: CPU and latency with 1, 2 and 3 UUVs in one 1080p30 stream.
 
     .venv/bin/python bench/uuvs.py [--counts 1,2,3] [--rounds 1] [--baseline-frames 150] [--duration-s 20]
-        [--out bench/results/uuvs.txt]
+        [--profile-s 10] [--out bench/results/uuvs.txt]
 
 The session is the ``two_uuvs_crossing`` scenario (two BlueROV2s passing nearly head on under a camera 10 m up)
 rendered at 1920x1080 30 fps, generated once into ``/tmp/skyfix-bench/`` (a few minutes) and its video re-encoded
@@ -31,6 +31,10 @@ ok fix, ``same_vehicle``) and with an ok fix, the MAE of the valid GPS_INPUT aga
 time error (a fix's time minus the nearest true exposure: a clock map gone wrong shows there), and how many
 valid GPS_INPUT lie nearer the other vehicle's truth than its own (an identity swap: GPS_INPUT names no vehicle,
 so the autopilot would take the other's position).
+
+With ``--profile-s`` and py-spy on PATH (installed apart from the project), each run also samples which of the
+service's threads holds the interpreter's lock, and where, for that long mid-video (``py-spy record --gil``):
+the threads' and the top functions' shares of the samples are printed under the table.
 
 Baselines in each round: decode only (PyAV demux + decode + BGR conversion per frame, offline, the live decoder's
 settings: :func:`bench.live_latency.decode_baseline`), the floor of every run, and one UUV's per-frame work
@@ -266,8 +270,62 @@ def uuv_result(
     }
 
 
-def live(session: Path, work: Path, ids) -> dict:
-    """One ``skyfix run`` with these UUVs, fed by ``skyfix replay``: its CPU and memory and each UUV's numbers."""
+def gil_profile(pid: int, seconds: float, out: Path) -> subprocess.Popen | None:
+    """py-spy (when on PATH: installed apart from the project) sampling, for ``seconds``, which of the process's
+    threads holds the interpreter's lock and where (``--gil``), into ``out``; None without py-spy."""
+    spy = shutil.which("py-spy")
+    if spy is None or seconds <= 0:
+        return None
+    cmd = [spy, "record", "--gil", "--threads", "--nonblocking", "-r", "200", "-f", "raw"]
+    return subprocess.Popen(
+        [*cmd, "-d", str(round(seconds)), "-o", str(out), "-p", str(pid)],  # whole seconds only
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+
+
+#: The service's frames every sample of its loop or threads passes through: left out of the functions' shares.
+FRAMEWORK = ("cli.py", "command.py", "workers.py", "service.py", "threads.py")
+
+
+def own(frame: str) -> str | None:
+    """A py-spy frame (``function (path:line)``) as ``module.function`` when it is skyfix's own code (``localizer``,
+    ``groundstation``, less :data:`FRAMEWORK`), else None."""
+    name, _, where = frame.partition(" (")
+    path = where.rsplit(":", 1)[0]
+    for package in ("localizer/", "groundstation/"):
+        if package in path and not path.endswith(FRAMEWORK):
+            module = path[path.index(package) :].removesuffix(".py").replace("/", ".")
+            return f"{module.rsplit('.', 1)[-1]}.{name}"
+    return None
+
+
+def gil_summary(raw: Path, top: int = 15) -> dict:
+    """Shares of py-spy's samples holding the lock (its raw stacks: ``thread;frame;...;frame count``): per thread
+    (by name) and per function of skyfix's own (inclusive, the ``top`` most)."""
+    threads: dict[str, int] = {}
+    functions: dict[str, int] = {}
+    total = 0
+    for line in raw.read_text().splitlines() if raw.exists() else []:
+        stack, _, count = line.rpartition(" ")
+        frames, n = stack.split(";"), int(count)
+        total += n
+        name = frames[0].split("): ", 1)[-1]
+        threads[name] = threads.get(name, 0) + n
+        for f in {own(f) for f in frames[1:]} - {None}:
+            functions[f] = functions.get(f, 0) + n
+    share = {k: round(v / total, 3) for k, v in sorted(threads.items(), key=lambda kv: -kv[1])}
+    best = sorted(functions.items(), key=lambda kv: -kv[1])[:top]
+    return {
+        "samples": total,
+        "threads": share,
+        "functions": {k: round(v / total, 3) for k, v in best},
+    }
+
+
+def live(session: Path, work: Path, ids, profile_s: float = 0.0) -> dict:
+    """One ``skyfix run`` with these UUVs, fed by ``skyfix replay``: its CPU and memory and each UUV's numbers
+    (and, ``profile_s`` > 0 with py-spy on PATH, what held the interpreter's lock for that long mid-video)."""
     endpoints = GpsEndpoints(ids)  # first: the free ports below are not theirs
     ports = {"mav": free_port(), "video": free_port(), "zenoh": free_port(socket.SOCK_STREAM)}
     stats, config = work / "stats.json", work / "run.toml"
@@ -316,14 +374,19 @@ def live(session: Path, work: Path, ids) -> dict:
             rep = subprocess.Popen(
                 replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT, env=env
             )
+            spy, spy_at = None, time.time() + 5.0  # the replay's lead and the first frames past
             while rep.poll() is None:
+                if profile_s > 0 and spy is None and time.time() > spy_at:
+                    spy = gil_profile(service.pid, profile_s, work / "py-spy.txt") or False
                 samples.append((time.time(), *proc_sample(service.pid), *host_cpu()))
                 time.sleep(0.25)
+            if spy:  # its samples are written when it ends
+                spy.wait(profile_s + 30)
             peak_mb = peak_rss_mb(service.pid)
             service.send_signal(signal.SIGINT)
             service.wait(30)
         finally:
-            kill_left(service, rep)
+            kill_left(service, rep, spy or None)
             endpoints.close()
     for uuv_id, received in endpoints.received.items():
         (work / f"gps_input_{uuv_id}.jsonl").write_text(
@@ -364,6 +427,7 @@ def live(session: Path, work: Path, ids) -> dict:
             100.0 * busy / total, 1
         ),  # the whole machine, every core, over the video's span
         "rss_mb": {"peak": round(peak_mb, 1), "end": round(float(s[-1, 2]), 1)},
+        "gil_profile": gil_summary(work / "py-spy.txt") if profile_s > 0 else None,
         "per_uuv": {
             uuv_id: uuv_result(
                 session,
@@ -467,6 +531,24 @@ def table(rounds: list[dict]) -> list[str]:
     return lines
 
 
+def profiles(rounds: list[dict]) -> list[str]:
+    """The lock profiles (``--profile-s``): per run, the threads' and the top functions' shares of the samples."""
+    lines = []
+    for r, rnd in enumerate(rounds):
+        for n, res in rnd["runs"].items():
+            p = res.get("gil_profile")
+            if not p:
+                continue
+            lines.append(
+                f"round {r + 1}, {n} UUV(s): {p['samples']} samples of the thread holding the interpreter's lock"
+            )
+            lines.append("  threads: " + ", ".join(f"{k} {v:.1%}" for k, v in p["threads"].items()))
+            lines.append(
+                "  functions: " + ", ".join(f"{k} {v:.1%}" for k, v in p["functions"].items())
+            )
+    return lines
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--counts", default="1,2,3", help="comma-separated numbers of UUVs: 1, 2, 3")
@@ -482,6 +564,13 @@ def main() -> int:
     )
     ap.add_argument(
         "--duration-s", type=float, default=20.0, help="session length (generated once per length)"
+    )
+    ap.add_argument(
+        "--profile-s",
+        type=int,
+        default=0,
+        help="with py-spy on PATH: sample what holds the interpreter's lock in skyfix run for this long "
+        "mid-video, per thread and function (0: no profile)",
     )
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "uuvs.txt")
     args = ap.parse_args()
@@ -535,8 +624,8 @@ def main() -> int:
             shutil.rmtree(work, ignore_errors=True)
             work.mkdir(parents=True)
             print(f"round {r + 1}, {n} UUV(s): {', '.join(RUNS[n])} ...", flush=True)
-            rnd["runs"][n] = live(session, work, RUNS[n])
-    emit(lines + table(rounds), args.out, rounds)
+            rnd["runs"][n] = live(session, work, RUNS[n], args.profile_s)
+    emit(lines + table(rounds) + profiles(rounds), args.out, rounds)
     return 0
 
 
