@@ -41,7 +41,7 @@ from pydantic import ValidationError
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.link import read_signing_key
 from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
-from groundstation.runtime.gps_input import GpsInputSink, mavlink_gps_link
+from groundstation.runtime import parts
 from groundstation.runtime.preflight import (
     link_problem,
     private_file,
@@ -52,7 +52,6 @@ from groundstation.runtime.queries import ZenohControl
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
-from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
 from groundstation.threads import Handoff
 from groundstation.zenoh_session import open_session, subscribe
 from localizer.calibration import ConfigError
@@ -65,6 +64,9 @@ log = logging.getLogger("skyfix.fuse")
 
 #: the fuser's Zenoh listener without --zenoh-listen or --zenoh-config: this machine only, a port of the system's
 LOCAL_LISTEN = "tcp/127.0.0.1:0"
+#: the fuser's outputs, registered parts (:mod:`groundstation.runtime.parts`): the fused fixes on Zenoh, GPS_INPUT
+#: when ``--gps-input`` names a link
+FUSE_OUTPUTS = ("zenoh", "gps_input")
 HANDOFF_FIXES = 512  # fix messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
 
 
@@ -154,28 +156,14 @@ async def serve(args: argparse.Namespace) -> dict:
                 clock_s=args.shared_clock_ms / 1000.0,
             ),
         )
-        fix_sink = ZenohFixSink(session, args.fix_key)
+        gate = FixGate(max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s, judge_track=False)
+        outputs = fuse_outputs(args, session, gate)
+        fix_sink = next(out for _, out in outputs if isinstance(out, ZenohFixSink))
         closers.append(fix_sink.close)
-        gps = None
-        if args.gps_input:
-            key = (
-                read_signing_key(args.gps_input_signing_key) if args.gps_input_signing_key else None
-            )
-            link = (
-                ZenohMavlinkIn(session, args.gps_input.removeprefix("zenoh:"))
-                if args.gps_input.startswith("zenoh:")
-                else mavlink_gps_link(args.gps_input, signing_key=key)
-            )
-            gps = GpsInputSink(
-                link,
-                args.gps_input_hz,
-                max_age_s,
-                FixGate(max_h_acc_m=args.fix_max_h_acc_m, max_age_s=max_age_s, judge_track=False),
-            )
         workers = Workers()
         workers.section("uuv", lambda now: args.uuv)
         sources = workers.add(
-            FixSources(session, args.sources, fuser, [s for s in (fix_sink, gps) if s]),
+            FixSources(session, args.sources, fuser, [out for _, out in outputs]),
             INPUTS,
             "input",
         )
@@ -204,8 +192,8 @@ async def serve(args: argparse.Namespace) -> dict:
         )
         workers.section("process", Usage().status)
         workers.add(status_sink, OUTPUTS)
-        if gps:
-            workers.add(gps, LAST, "gps_input")
+        for part, out in outputs:
+            workers.add(out, LAST, part.section)
         log.info(
             "skyfix fuse: UUV %s, fixes from %s (taken from %s), fused on %s, GPS_INPUT %s",
             args.uuv,
@@ -220,6 +208,23 @@ async def serve(args: argparse.Namespace) -> dict:
         for close in closers:
             close()
         session.close()
+
+
+def fuse_outputs(
+    args: argparse.Namespace, session, gate: FixGate
+) -> list[tuple[parts.Part, parts.Output]]:
+    """The fuser's outputs (:data:`FUSE_OUTPUTS`) built by name from the registry the live service's come from, with
+    their parts: the arguments are the UUV's options and the run's (``fix_key``, ``gps_input``, its signing key and
+    rate, ``fix_max_age_ms``), ``gate`` GPS_INPUT's (accuracy, age and order only)."""
+    built = []
+    for name in FUSE_OUTPUTS:
+        part = parts.part("output", name)
+        out = part.build(
+            parts.OutputInput(name, args, args, session, gate, parts.settings(part, {}))
+        )
+        if out is not None:  # gps_input without a link: nothing
+            built.append((part, out))
+    return built
 
 
 def run(args: argparse.Namespace) -> int:

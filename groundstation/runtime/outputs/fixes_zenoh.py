@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from groundstation.live.registry import OutputInput, register
+from groundstation.runtime.parts import OutputInput, register
 from groundstation.runtime.zenoh_fix import ZenohFixSink
 
 

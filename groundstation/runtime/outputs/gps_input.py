@@ -3,9 +3,9 @@ safety gates (:class:`~groundstation.runtime.gps_input.GpsInputSink`); nothing w
 
 from __future__ import annotations
 
-from groundstation.live.registry import OutputInput, register
 from groundstation.mavlink.link import read_signing_key
 from groundstation.runtime.gps_input import GpsInputSink, mavlink_gps_link
+from groundstation.runtime.parts import OutputInput, register
 from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
 
 ZENOH = "zenoh:"  # gps_input's prefix of a Zenoh key (BlueOS's mavlink-server)
