@@ -109,7 +109,7 @@ def population(name: str, args, work: Path) -> str:
             seed=1000 + seed,
             duration_s=args.population_s,
             fps=2.0,
-            sensors={**claim.draw_sensors(seed), "gnss_mode": base.sensors.gnss_mode},
+            sensors={**claim.draw_sensors(seed, args.seeds), "gnss_mode": base.sensors.gnss_mode},
             marker={"enabled": True},
         )
         out = work / "population" / f"{name}_s{seed}"
