@@ -136,9 +136,9 @@ class Pipeline:
     1-sigma s) of aligned frames' times when not the link delay's (see the module doc);
     ``depth``: the UUV's depth series when not ``tel``'s own (one of several UUVs in the video); ``vet(frame,
     box)``: a status word when a tracked box may not be this UUV's (:meth:`localizer.tracking.crowd.Crowd.vet`),
-    called with every frame's box (None when the tracker has none); ``tracking``: the threads the tracker steps run
-    in (default: asyncio's pool; several UUVs' pipelines share a pool with a thread each, so that no UUV's step
-    waits for the others'); ``poses``: the frames' poses shared with the
+    called with every frame's box (None when the tracker has none); ``tracking``: the thread the tracker steps run
+    in (several UUVs' pipelines share one: their steps, mostly the interpreter's work, would otherwise contend for
+    its lock, measured with ``bench/uuvs.py``; default: asyncio's pool); ``poses``: the frames' poses shared with the
     other UUVs' pipelines (default: its own);
     ``on_tracked``: see :attr:`on_tracked`.
     """

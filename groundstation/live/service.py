@@ -253,8 +253,8 @@ async def serve(cfg: config.RunConfig) -> dict:
         crowd = Crowd() if several else None  # two trackers on one vehicle: no fix for either
         fleet = Fleet() if several else None  # the gates compare each target with the other UUVs'
         tracking = (
-            ThreadPoolExecutor(len(cfg.uuvs), thread_name_prefix="track") if several else None
-        )  # a thread per UUV: no UUV's tracker step waits for the others'
+            ThreadPoolExecutor(1, thread_name_prefix="track") if several else None
+        )  # one thread for all (a thread each contended for the interpreter's lock: bench/uuvs.py)
         poses = FramePoses(cal, tel)  # each frame's pose computed once for all the UUVs
         if tracking:
             closers.append(lambda: tracking.shutdown(wait=False, cancel_futures=True))
