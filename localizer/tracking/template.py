@@ -46,7 +46,14 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   as set) eases the bars (``wave_*``), smooths image and template before matching (the waves scramble the fine
   structure, not the shape), lets the template learn the mean distorted appearance, and holds up to
   ``wave_misses`` frames without a match before a loss (:attr:`~localizer.tracking.Match.held`); a match after
-  such frames needs nearly the re-acquisition's bar.
+  such frames needs nearly the re-acquisition's bar. In waves every match, followed or a candidate, also needs
+  ``wave_contrast_share`` of the UUV's contrast level (:meth:`~TemplateMatcher._least_contrast`: the waves scramble
+  its structure, not how much it stands out; the water and the seafloor the template finds without it have a
+  fraction of it); a follow with ``wave_keep_contrast`` of it needs a score only above the water's level less
+  ``wave_keep_below`` and within ``wave_keep_drop`` of the recent level of its matches (a second vehicle passing
+  over it raises the contrast too, and drags the score down); a search for a candidate ranks the places with
+  less contrast last (:meth:`~TemplateMatcher._least_spread`), the water beside its window too. The level, and
+  the template, learn only from follows with ``wave_keep_contrast`` of it (a reference kept from clear frames).
 - Neither takes a candidate away from the prediction while the UUV's first appearance
   still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
   partly hidden, say by a vehicle passing over it, beside a look-alike). Only a candidate
@@ -180,12 +187,29 @@ class TemplateParams:
     wave_background_sides: float = (
         1.5  # ... those windows this many template sides further out, each way
     )
-    wave_keep_contrast: float = (
-        0.75  # a follow below those bars, right after a match, is still the UUV if its patch
+    #: a follow below those bars (a candidate being confirmed: below its bar) is still the UUV if its patch keeps
+    #: this share of the UUV's contrast level (below; the waves scramble its structure, not its spread; the water
+    #: where it was has less) ...
+    wave_keep_contrast: float = 0.8
+    #: ... and its score is above the water's level less this (a deep UUV's distorted image scores as the water's)
+    wave_keep_below: float = 0.2
+    #: ... and (a follow) no more than this below the recent level of its matches (a second vehicle passing over
+    #: it raises the contrast too, and drags the score down from the UUV's own level)
+    wave_keep_drop: float = 0.3
+    wave_confirm_share: float = (
+        0.5  # a candidate found again where it is expected (confirming it): this share of the way
     )
-    #                                    keeps this much of the first appearance's grey-level spread (see _contrast:
-    #                                    the waves scramble its structure, not its spread; the water where it was has
-    #                                    less) and its score is above the water's level
+    wave_contrast_share: float = (
+        0.7  # in waves a match (followed or a candidate) has at least this share of the UUV's
+    )
+    #                                     contrast level (see _contrast): the water and the seafloor the template
+    #                                     finds where the UUV is hidden, or beside it, have a fraction of its spread
+    wave_contrast_rate: float = 0.05  # ... that level: a running mean at this rate of the clear follows (wave_keep_contrast)
+
+
+#: Taken from the rank of a place too flat to be the UUV (see ``spread`` of :meth:`TemplateMatcher._search`): it
+#: ranks below every place that is not.
+_FLAT_PENALTY = 10.0
 
 
 def _parabola(a: float, b: float, c: float) -> float:
@@ -241,6 +265,17 @@ def _ncc_maps(image: np.ndarray, columns: np.ndarray, side: int) -> np.ndarray:
     scores = (places @ columns) / np.sqrt(np.where(flat, 1.0, spread))[:, None]
     scores[flat] = 0.0
     return scores.T.reshape(columns.shape[1], rows, cols)
+
+
+def _spread_map(image: np.ndarray, side: int) -> np.ndarray:
+    """The grey levels' standard deviation in every side × side window of ``image`` (as ``cv2.matchTemplate``'s
+    places: rows - side + 1, columns - side + 1)."""
+    image = image.astype(np.float32)
+    mean, square = (cv2.blur(x, (side, side)) for x in (image, image * image))
+    h = side // 2
+    rows, cols = image.shape[0] - side + 1, image.shape[1] - side + 1
+    var = square[h : h + rows, h : h + cols] - mean[h : h + rows, h : h + cols] ** 2
+    return np.sqrt(np.maximum(var, 0.0))
 
 
 def _warp(src: np.ndarray, centre, angle_deg: float, scale: float, side: int) -> np.ndarray:
@@ -381,6 +416,10 @@ class TemplateMatcher:
         self._velocity = (0.0, 0.0)
         self._level = 1.0  # the recent level of the matches' scores (the first appearance's own, at first) ...
         self._levels = 0  # ... over this many matches
+        self._candidate_contrast = 1.0  # the contrast of the last candidate (see _candidate_passes)
+        self._contrast_level = (
+            1.0  # the recent level of the matches' contrast (the first's own, at first)
+        )
         self._frames = 0
         self._mean_score = math.nan  # the follows' best scores' mean ...
         self._scatter2 = 0.0  # ... and mean square departure from it (see _waves) ...
@@ -437,18 +476,22 @@ class TemplateMatcher:
         dy = (y0 + step * np.arange(shape[0], dtype=np.float32) - qy) / s
         return (0.5 * self.p.distance_weight) * (dy[:, None] ** 2 + dx[None, :] ** 2)
 
-    def _match_in(self, region, bx0: int, by0: int, template: np.ndarray, prior=None):
+    def _match_in(
+        self, region, bx0: int, by0: int, template: np.ndarray, prior=None, spread: float = 0.0
+    ):
         """(rank, score, u, v) of the template's best match in a working-resolution region (rank: the score less
-        the distance penalty from ``prior`` = (u, v, sigma_px), full-resolution pixels; the score without one).
-        In waves both are smoothed first (:meth:`_blur_px`): the waves scramble the vehicle's fine structure, not
-        its shape."""
+        the distance penalty from ``prior`` = (u, v, sigma_px), full-resolution pixels; the score without one;
+        places whose grey levels spread less than ``spread`` rank last). In waves both are smoothed first
+        (:meth:`_blur_px`): the waves scramble the vehicle's fine structure, not its shape."""
+        flat = _spread_map(region, template.shape[0]) < spread if spread > 0 else None
         if (sigma := self._blur_px()) > 0:
             region, template = (cv2.GaussianBlur(x, (0, 0), sigma) for x in (region, template))
         scores = cv2.matchTemplate(region, template, cv2.TM_CCOEFF_NORMED)
         half = (template.shape[0] - 1) / 2.0
-        rank, best, j, i = _peak(
-            scores, self._penalty(scores.shape, bx0 + half, by0 + half, 1.0, prior)
-        )
+        penalty = self._penalty(scores.shape, bx0 + half, by0 + half, 1.0, prior)
+        if flat is not None:
+            penalty = _FLAT_PENALTY * flat + (0.0 if penalty is None else penalty)
+        rank, best, j, i = _peak(scores, penalty)
         u, v = self._to_full(bx0 + j + half, by0 + i + half)
         return rank, best, u, v
 
@@ -485,12 +528,20 @@ class TemplateMatcher:
         return best
 
     def _search(
-        self, frame_bgr, cu: float, cv_: float, radius_px: float, angles, sigma_px: float = math.nan
+        self,
+        frame_bgr,
+        cu: float,
+        cv_: float,
+        radius_px: float,
+        angles,
+        sigma_px: float = math.nan,
+        spread: float = 0.0,
     ):
         """Best (score, u, v, angle) over headings within ``radius_px`` of (cu, cv_).
 
         With a finite ``sigma_px`` the best is the one whose score less its distance
-        penalty from (cu, cv_) is highest (see :data:`TemplateParams.distance_weight`).
+        penalty from (cu, cv_) is highest (see :data:`TemplateParams.distance_weight`);
+        places whose grey levels spread less than ``spread`` (see :meth:`_spread`) rank last.
         A window wider than ``coarse_side`` is first searched block-averaged (the
         template about ``coarse_px`` across); the ``coarse_keep`` best places
         found there are matched again at working resolution, and the best of those counts.
@@ -501,9 +552,11 @@ class TemplateMatcher:
             return -1.0, math.nan, math.nan, self._angle
         if max(region.shape) <= self.p.coarse_side:
             best = max(
-                (*self._match_in(region, bx0, by0, self._template(a), prior), a) for a in angles
+                (*self._match_in(region, bx0, by0, self._template(a), prior, spread), a)
+                for a in angles
             )
             return best[1:]
+        flat = _spread_map(region, self.S) < spread if spread > 0 else None
         f = max(2, self.S // self.p.coarse_px)
         h, w = region.shape[0] // f, region.shape[1] // f
         small = cv2.resize(region[: h * f, : w * f], (w, h), interpolation=cv2.INTER_AREA)
@@ -516,9 +569,15 @@ class TemplateMatcher:
                 c = (
                     half * f + (f - 1) / 2.0
                 )  # the first cell's centre, working pixels from the region's corner
-                r, _, j, i = _peak(
-                    scores, self._penalty(scores.shape, bx0 + c, by0 + c, float(f), prior)
-                )
+                penalty = self._penalty(scores.shape, bx0 + c, by0 + c, float(f), prior)
+                if flat is not None:  # the full-resolution places nearest the cells' centres
+                    at = [
+                        np.clip(np.round(c + f * np.arange(n) - (self.S - 1) / 2.0), 0, m - 1)
+                        for n, m in zip(scores.shape, flat.shape)
+                    ]
+                    low = flat[np.ix_(at[0].astype(int), at[1].astype(int))]
+                    penalty = _FLAT_PENALTY * low + (0.0 if penalty is None else penalty)
+                r, _, j, i = _peak(scores, penalty)
                 places.append((r, c + j * f, c + i * f, a))
         best = (-math.inf, -1.0, math.nan, math.nan, self._angle)
         kept: list[tuple[float, float]] = []
@@ -532,7 +591,10 @@ class TemplateMatcher:
             x0, y0 = max(round(x) - r, 0), max(round(y) - r, 0)
             window = region[y0 : round(y) + r + 1, x0 : round(x) + r + 1]
             if min(window.shape) > self.S:
-                found = (*self._match_in(window, bx0 + x0, by0 + y0, self._template(a), prior), a)
+                found = (
+                    *self._match_in(window, bx0 + x0, by0 + y0, self._template(a), prior, spread),
+                    a,
+                )
                 best = max(best, found)
         return best[1:]
 
@@ -687,21 +749,44 @@ class TemplateMatcher:
         close = self._floor()
         return close + self._waves() * max(self._far() - close, 0.0)
 
-    def _beside(self, frame_bgr, cu: float, cv_: float, radius: float) -> list[float]:
+    def _least_contrast(self) -> float:
+        """In waves, the least contrast (see :meth:`_contrast`) that passes for the UUV: ``min_contrast``, and
+        ``wave_contrast_share`` of the level of the frames it was followed in (the water and the seafloor the
+        template finds where it is hidden, or beside it, have a fraction of its grey-level spread)."""
+        return max(self.p.min_contrast, self.p.wave_contrast_share * self._contrast_level)
+
+    def _least_spread(self) -> float:
+        """In waves, the grey-level spread (see :meth:`_spread`) below which a place is not searched for a candidate
+        (:meth:`_least_contrast`); 0 on a still surface."""
+        return self._least_contrast() * self._first_spread if self._wavy else 0.0
+
+    def _beside(
+        self, frame_bgr, cu: float, cv_: float, radius: float, spread: float = 0.0
+    ) -> list[float]:
         """The template's best scores on the water beside the prediction's window: in windows as large,
-        ``wave_background_sides`` template sides further out on each side (those inside the frame)."""
+        ``wave_background_sides`` template sides further out on each side (those inside the frame); with a
+        ``spread``, at places whose grey levels spread at least that much (see :meth:`_search`; none: no score)."""
         d = radius + self.p.wave_background_sides * self.S * self.k * self._scale
         found = (
-            self._search(frame_bgr, cu + du, cv_ + dv, radius, (self._angle,))[0]
+            self._search(frame_bgr, cu + du, cv_ + dv, radius, (self._angle,), spread=spread)
             for du, dv in ((d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d))
         )
-        return [s for s in found if s > -1.0]
+        return [
+            s
+            for s, u, v, _ in found
+            if s > -1.0 and (spread <= 0 or self._spread(frame_bgr, u, v) >= spread)
+        ]
+
+    def _matched(self) -> float:
+        """The recent level of the UUV's matches; before any, the follows' mean score (the first appearance's own
+        1.0 is not what the waves let it reach)."""
+        return self._level if self._levels else self._mean_score
 
     def _wave_bar(self, share: float) -> float:
         """In waves, an NCC ``share`` of the way from the water's level to the recent level of the UUV's matches
         (:meth:`_floor` until the water's level is known; before any match, the follows' mean score: the first
         appearance's own 1.0 is not what the waves let it reach)."""
-        level = self._level if self._levels else self._mean_score
+        level = self._matched()
         return (
             self._water + share * (level - self._water)
             if math.isfinite(self._water)
@@ -716,15 +801,19 @@ class TemplateMatcher:
         radius: float,
         score: float,
         evidence: float | None = None,
+        again: bool = False,
     ) -> bool:
         """In waves: whether the UUV is in the window of ``radius`` about (cu, cv_) whose best score is ``score``.
         Its best stands out of the water beside the window (:meth:`_beside`). A follow (``evidence``: the mean of
         the last ``wave_evidence_frames`` scores; one frame's does not tell, the wave-distorted UUV's falls at times
         as low as the water's best) keeps the water's level from the water beside; ``score`` reaches
         ``wave_follow_share`` and ``evidence`` ``wave_evidence_share`` of the way from the water's level to the
-        UUV's (:meth:`_wave_bar`). A candidate while lost: ``wave_reacquire_share``. A UUV just hidden leaves the
+        UUV's (:meth:`_wave_bar`). A candidate while lost: ``wave_reacquire_share``; found ``again`` where it was
+        expected (confirmed in the window of a follow): ``wave_confirm_share``. A UUV just hidden leaves the
         water in the window, which stands out of the water beside it no more than by chance."""
-        beside = self._beside(frame_bgr, cu, cv_, radius)
+        beside = self._beside(
+            frame_bgr, cu, cv_, radius, self._least_spread() if evidence is None else 0.0
+        )
         if beside and evidence is not None:
             water = float(np.median(beside))
             self._water = (
@@ -733,7 +822,8 @@ class TemplateMatcher:
                 else (self._water + self.p.wave_background_rate * (water - self._water))
             )
         if evidence is None:
-            passed = score >= self._wave_bar(self.p.wave_reacquire_share)
+            share = self.p.wave_confirm_share if again else self.p.wave_reacquire_share
+            passed = score >= self._wave_bar(share)
         else:
             passed = score >= self._wave_bar(self.p.wave_follow_share) and (
                 evidence >= self._wave_bar(self.p.wave_evidence_share)
@@ -800,23 +890,27 @@ class TemplateMatcher:
         self._note_score(score)
         self._recent = (self._recent + [score])[-self.p.wave_evidence_frames :]
         near = math.hypot(u - cu, v - cv_) <= radius + 2 * self.k
+        contrast = self._contrast(frame_bgr, u, v)
+        clear = contrast >= self.p.wave_keep_contrast * self._contrast_level
         if in_waves:
-            contrast = self._contrast(frame_bgr, u, v)
             passed = (
                 near
-                and contrast >= self.p.min_contrast
+                and contrast >= self._least_contrast()
                 and self._stands_out(
                     frame_bgr, cu, cv_, radius, score, float(np.mean(self._recent))
                 )
             )
             passed = passed or (
                 near
-                and not self._misses
-                and contrast >= self.p.wave_keep_contrast
-                and score > self._water
+                and clear
+                and score
+                > max(self._water - self.p.wave_keep_below, self._matched() - self.p.wave_keep_drop)
             )
         else:
             passed = score >= floor and near and self._visible(frame_bgr, u, v)
+        self._contrast_level += (
+            self.p.wave_contrast_rate * (passed and clear) * (contrast - self._contrast_level)
+        )
         if not passed:
             self._misses += 1
             young = (
@@ -831,7 +925,11 @@ class TemplateMatcher:
         self._level += max(0.1, 1.0 / self._levels) * (
             score - self._level
         )  # a running mean over the first ones
-        if score >= self.p.update_score - self._waves() * self.p.wave_update_drop and slow_step:
+        if (
+            (clear or not in_waves)
+            and score >= self.p.update_score - self._waves() * self.p.wave_update_drop
+            and slow_step
+        ):
             self._learn(frame_bgr, u, v)
         return self._match(True, score, u, v)
 
@@ -843,13 +941,23 @@ class TemplateMatcher:
         v: float,
         prediction: Prediction | None,
         window: tuple[float, float, float],
+        again: bool = False,
     ) -> Match:
         """A candidate while lost, the best found in ``window`` (u, v, radius): the re-acquisition's bar, or the bar
         of :meth:`follow` when the prediction's window is no wider than the vehicle (lost a moment ago: nothing else
-        fits where it can be). In waves: it stands out of the water beside the window (:meth:`_stands_out`)."""
+        fits where it can be). In waves: it stands out of the water beside the window (:meth:`_stands_out`; found
+        ``again`` where it was expected: a lower bar) with the UUV's contrast (:meth:`_least_contrast`). Its
+        contrast is the UUV's level once it is confirmed on a still surface (:meth:`resume`: it may have faded or
+        cleared meanwhile)."""
+        contrast = self._candidate_contrast = self._contrast(frame_bgr, u, v)
         if self._wavy:
-            passed = self._contrast(frame_bgr, u, v) >= self.p.min_contrast and self._stands_out(
-                frame_bgr, *window, score
+            passed = contrast >= self._least_contrast() and self._stands_out(
+                frame_bgr, *window, score, again=again
+            )
+            passed = passed or (
+                again
+                and contrast >= self.p.wave_keep_contrast * self._contrast_level
+                and score > self._water - self.p.wave_keep_below
             )
             return self._match(passed, score, u, v)
         side = self.S * self.k * self._scale
@@ -867,11 +975,11 @@ class TemplateMatcher:
         self._prepare(frame_bgr, u, v, tol)
         window = (u, v, tol)
         score, u, v, _ = self._search(
-            frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas
+            frame_bgr, u, v, tol, (self._angle,), tol / self.p.search_sigmas, self._least_spread()
         )
         if score >= self._ok():
             score, u, v = self._refine(frame_bgr, (score, u, v))
-        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction, window)
+        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction, window, again=True)
         if (
             candidate.found
             and prediction is not None
@@ -885,6 +993,10 @@ class TemplateMatcher:
         self._misses = 0
         self._recent = [match.score]
         self.u, self.v, self._seen_angle = match.u, match.v, self._angle
+        if (
+            not self._wavy
+        ):  # in waves a candidate's contrast is one frame's (caustics, break-up): the level stays
+            self._contrast_level = self._candidate_contrast
 
     def search(self, frame_bgr, prediction: Prediction | None) -> Match:
         """Best match over every heading in the prediction's window (the whole frame without one)."""
@@ -912,7 +1024,9 @@ class TemplateMatcher:
             ]
         else:
             angles = [self._angle + 360.0 * j / n for j in range(n)]
-        score, u, v, angle = self._search(frame_bgr, cu, cv_, radius, angles, sigma)
+        score, u, v, angle = self._search(
+            frame_bgr, cu, cv_, radius, angles, sigma, self._least_spread()
+        )
         if score < self._ok():  # not even a candidate (headings are coarse here: refined below)
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
