@@ -225,7 +225,8 @@ class MbTiles:
             "bounds": bounds,
             "minzoom": int(meta.get("minzoom", zooms[0])),
             "maxzoom": int(meta.get("maxzoom", zooms[1])),
-            "sigma_m": None,
+            # as write_tiles wrote it: skyfix mosaic's sidecar's (None for others)
+            "sigma_m": _finite_or_none(meta.get("sigma_m")),
         }
 
     def info(self) -> dict:
@@ -283,6 +284,15 @@ class TileFolder:
 
     def close(self) -> None:
         pass
+
+
+def _finite_or_none(text: str | None) -> float | None:
+    """A metadata value as a finite number, else None."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) else None
 
 
 def sidecar_sigma_m(path: Path) -> float | None:

@@ -16,12 +16,14 @@ convergence at the camera, from two points 1 m north and east of it). The video 
 the blend's sums are kept in tiles (:class:`Accumulator`), at most :data:`MAX_TILES` in memory and the rest on
 disk, so the memory does not grow with the recording. Written as a Cloud-Optimised GeoTIFF (``mosaic.tif``: RGB
 and an alpha band, through rasterio's GDAL), and beside it ``mosaic.json``: the grid, the frames used, where the
-UUV's pixels came from, and the mosaic's accuracy (:func:`accuracy_m`).
+UUV's pixels came from, and the mosaic's accuracy (:func:`accuracy_m`). Then, unless ``--no-tiles``, as
+web-Mercator map tiles (:func:`mosaic_tiles`): the folder ``tiles/`` (``Z/X/Y.png``) and ``mosaic.mbtiles``.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 import tempfile
 from collections import OrderedDict
@@ -38,11 +40,14 @@ from groundstation.outputs import output_dir
 from groundstation.progress import progress as progress_bar
 from groundstation.session.positions import read_positions_csv
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
+from groundstation.tiles import GeoTiffTiles, Written, write_tiles
 from localizer.geodesy import ned_to_geodetic
 from localizer.pose import CameraPose, camera_pose, take
 from localizer.ray import offset_to_pixel, pixel_to_offset
 
 NAME = "mosaic.tif"
+TILES_DIR = "tiles"  # its map tiles, Z/X/Y.png (XYZ order)
+MBTILES = "mosaic.mbtiles"  # the same tiles in an MBTiles file
 SIDECAR = "mosaic.json"
 RATE_HZ = 2.0  # frames used per second of video (default)
 N_WATER = 1.34
@@ -508,14 +513,38 @@ def run(args) -> int:
         f"{found['frames']} frames, {found['size_px'][0]}x{found['size_px'][1]} cells of {found['gsd_m']:g} m "
         f"({found['crs']}), 1-sigma {found['horizontal_sigma_m']:.2f} m -> {out / NAME}"
     )
+    if not args.no_tiles:
+        done = mosaic_tiles(out)
+        print(
+            f"{sum(done.tiles.values())} map tiles, zoom {done.minzoom}-{done.maxzoom} -> "
+            f"{out / TILES_DIR} and {out / MBTILES}"
+        )
     return 0
+
+
+def mosaic_tiles(out: Path) -> Written:
+    """``out``'s ``mosaic.tif`` as web-Mercator map tiles: the folder ``tiles/`` (``Z/X/Y.png``) and
+    ``mosaic.mbtiles`` (:func:`groundstation.tiles.write_tiles`, zooms from the one where it fits in a tile to its
+    own resolution); their ``sigma_m`` is the sidecar's."""
+    source = GeoTiffTiles(out / NAME)
+    try:
+        folder = out / TILES_DIR
+        if folder.exists():
+            shutil.rmtree(folder)
+        return write_tiles(source, folder, out / MBTILES)
+    finally:
+        source.close()
 
 
 def register(subparsers, name: str, help: str | None = None) -> None:
     """Adds the subcommand ``name`` with its one-line ``help`` (both from :data:`groundstation.cli.COMMANDS`)."""
     p = subparsers.add_parser(name, help=help)
     p.add_argument("session", help="session directory (format v1) with its video")
-    p.add_argument("--out", required=True, help="output directory for mosaic.tif and mosaic.json")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output directory for mosaic.tif, mosaic.json and the map tiles",
+    )
     p.add_argument(
         "--floor-depth-m",
         type=float,
@@ -560,5 +589,10 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         "(default: the session's positions.csv, else its track.csv)",
     )
     p.add_argument("--uuv", default=PRIMARY_UUV, metavar="ID", help="whose pixels are left out")
+    p.add_argument(
+        "--no-tiles",
+        action="store_true",
+        help=f"write no map tiles ({TILES_DIR}/Z/X/Y.png and {MBTILES}; written by default)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
