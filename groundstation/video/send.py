@@ -26,7 +26,7 @@ COPY_CODECS = ("h264", "hevc", "mpeg2video")
 MPEGTS_OPTIONS = {"omit_video_pes_length": "0", "flush_packets": "1"}
 
 
-def _wait_until(t_unix: float, stop: threading.Event) -> bool:
+def wait_until(t_unix: float, stop: threading.Event) -> bool:
     """Wait for a UNIX time; False if stopped first."""
     delay = t_unix - time.time()
     return not stop.wait(delay) if delay > 0 else not stop.is_set()
@@ -104,7 +104,7 @@ def send_video(
         pts0 = None
         for pts_s, packet in _packets(container, stream, out):
             pts0 = pts_s if pts0 is None else pts0
-            if not _wait_until(t0_unix + pts_s - pts0, stop):
+            if not wait_until(t0_unix + pts_s - pts0, stop):
                 break
             if skip is not None and skip(pts_s - pts0, packet.is_keyframe):
                 continue

@@ -34,14 +34,19 @@ DATAGRAM_BYTES = 65_536
 SOCKET_BUFFER_BYTES = 4 << 20  # a 1080p keyframe comes as a burst of some 150 datagrams
 
 
-class _Stream:
+class DecoderStream:
+    """What :func:`packet_of` and the decoder loop need of a container's stream, for access units that come
+    without one (RTP over UDP, BlueOS's Zenoh video): a decoder context of the codec, time in 1/90 000 s."""
+
     def __init__(self, codec: str):
         self.codec_context = av.CodecContext.create("hevc" if codec == "h265" else codec, "r")
         self.time_base = Fraction(1, VIDEO_HZ)
 
 
-class _Streams:
-    def __init__(self, stream: _Stream):
+class DecoderStreams:
+    """A stand-in for a container's ``streams``: its one video stream."""
+
+    def __init__(self, stream: DecoderStream):
         self.video = [stream]
 
 
@@ -112,7 +117,7 @@ class DatagramInput:
         except BaseException:
             self._sock.close()
             raise
-        self.streams = _Streams(_Stream(depacketizer.codec))
+        self.streams = DecoderStreams(DecoderStream(depacketizer.codec))
 
     def demux(self, stream) -> Iterator[av.Packet]:
         while True:

@@ -49,8 +49,8 @@ import zenoh
 from groundstation.logs import Throttle, kind_of
 from groundstation.runtime.sender_lock import SenderLock
 from groundstation.video.rtp import VIDEO_HZ, AccessUnit
-from groundstation.video.send import _wait_until
-from groundstation.video.udp import _Stream, _Streams, packet_of
+from groundstation.video.send import wait_until
+from groundstation.video.udp import DecoderStream, DecoderStreams, packet_of
 
 log = logging.getLogger("skyfix.video")
 
@@ -208,7 +208,7 @@ class ZenohVideoInput:
         except BaseException:
             self.close()
             raise
-        self.streams = _Streams(_Stream(self.codec))
+        self.streams = DecoderStreams(DecoderStream(self.codec))
 
     def _on_sample(self, sample: zenoh.Sample) -> None:  # Zenoh's thread: a bounded hand-off only
         item = (sample.payload.to_bytes(), sender_of(sample))
@@ -317,7 +317,7 @@ def publish_video(
     publisher = session.declare_publisher(key, encoding=ENCODING)
     try:
         for t_s, packet in camera_access_units(path):
-            if not _wait_until(t0_unix + t_s, stop):
+            if not wait_until(t0_unix + t_s, stop):
                 break
             if skip is not None and skip(t_s, packet.is_keyframe):
                 continue
