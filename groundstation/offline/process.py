@@ -2,7 +2,10 @@
 ``positions_smoothed.csv`` (the fixes smoothed over the whole recording: :mod:`groundstation.offline.smoothed`).
 
 A session with several UUVs (``uuvs/<id>/``) is processed as one UUV's (``--uuv``): its depth, its first box
-and its ``track.csv``; the UAV's telemetry and the video are shared.
+and its ``track.csv``; the UAV's telemetry and the video are shared. ``--uuv all`` processes every UUV of the
+session into ``<out>/<id>/`` (the same files, the same results as each alone), tracking them all in one pass
+over the video (:func:`tracked_pixels`): each frame decoded once, its UAV pose and the video's motion computed
+once.
 
 Pixels come from ``track.csv`` (``--use-track``, geometry only) or from tracking
 the session's video. ``--no-refraction`` runs the paper's straight-ray method. The video is tracked once forward
@@ -53,13 +56,15 @@ from groundstation.offline.smoothed import offline_track, traced_back, write_smo
 from groundstation.offline.smoothed import summary as smoothed_summary
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
-from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
+from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session, uuv_ids
 from localizer.fix import Fixes, locate
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
 from localizer.height import take_notices
 from localizer.pose import camera_pose
 from localizer.tracking import TRACKERS
 
+#: ``--uuv`` for every UUV of the session (one pass over the video, an output folder each).
+ALL_UUVS = "all"
 # Per-frame statuses that, when no frame at all has a fix, mean the session itself is wrong.
 _GEOMETRY_FAILURES = ("no_water", "below_surface", "bad_pixel")
 
@@ -106,26 +111,57 @@ def frame_pixels(
         raise SessionError(
             f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)"
         )
-    from groundstation.offline.track import track_session
+    return tracked_pixels([session], tracker, progress, motion, [size], both_ways)[0]
 
-    measure = motion and session.telemetry.latency_source == "unknown"
-    tracked = track_session(
-        session,
+
+def tracked_pixels(
+    sessions: list[Session],
+    tracker: str = "default",
+    progress: bool = False,
+    motion: bool = True,
+    sizes: list[HeightFromSize | None] | None = None,
+    both_ways: bool = False,
+) -> list[Pixels]:
+    """:func:`frame_pixels` from the video of several UUVs of one session (``sessions``: the session read as each
+    UUV's; ``sizes``: one each or None) tracked in one pass
+    (:func:`groundstation.offline.track.track_sessions`): the frames' offset to the telemetry is estimated once,
+    from the pass's rotations, and applied to each. One :class:`Pixels` per session, each the same as
+    :func:`frame_pixels` of that session alone."""
+    from groundstation.offline.track import track_sessions
+
+    first = sessions[0]
+    measure = motion and first.telemetry.latency_source == "unknown"
+    videos = track_sessions(
+        sessions,
         tracker_name=tracker,
         progress=progress,
         measure_motion=measure,
-        size=size,
+        sizes=sizes,
         both_ways=both_ways,
     )
-    session.warnings.extend(tracked.warnings)
-    if size is not None:
-        session.warnings.extend(size.warnings)
-    if measure:
-        _align_by_motion(session, tracked.rotations)
-    _warn_unknown_delay(
-        session,
-        "--no-motion-offset" if not motion else "no estimate from the video surer than that",
+    found = (
+        offset_from_rotations(first.calibration, first.telemetry, videos[0].rotations)
+        if measure
+        else None
     )
+    pixels = []
+    for session, tracked, size in zip(sessions, videos, sizes or [None] * len(sessions)):
+        session.warnings.extend(tracked.warnings)
+        if size is not None:
+            session.warnings.extend(size.warnings)
+        if found is not None:
+            _align_by_motion(session, found, quiet=session is not first)
+        _warn_unknown_delay(
+            session,
+            "--no-motion-offset" if not motion else "no estimate from the video surer than that",
+        )
+        pixels.append(_pixels_of(tracked))
+    return pixels
+
+
+def _pixels_of(tracked) -> Pixels:
+    """A :class:`~groundstation.offline.track.TrackedVideo`'s causal pixels, the frames traced back in
+    ``offline``."""
     both = Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
     if tracked.bridged is None or not tracked.bridged.any():
         return both
@@ -135,13 +171,15 @@ def frame_pixels(
     return Pixels(tracked.t, causal[0], causal[1], tracked.causal_status, causal[2], both)
 
 
-def _align_by_motion(session: Session, rotations) -> None:
-    """Estimate the frames' offset to the telemetry from the measured rotations of the whole video; apply it, with
-    its σ covering what the video's thirds disagree on, when settled or surer than the unknown delay's σ."""
-    found = offset_from_rotations(session.calibration, session.telemetry, rotations)
+def _align_by_motion(session: Session, found, quiet: bool = False) -> None:
+    """Apply the frames' offset to the telemetry ``found`` from the measured rotations of the whole video
+    (:func:`~groundstation.latency.estimate.offset_from_rotations`), with its σ covering what the video's thirds
+    disagree on, when settled or surer than the unknown delay's σ; ``quiet``: without the line on stderr."""
     applied = found.better_than(session.telemetry.timing.unknown_latency_sigma_s)
     if applied:
         session.telemetry.set_motion_latency(found.estimate.offset_s, found.sigma_s)
+    if quiet:
+        return
     print(
         f"{session.path.name}: the frames' offset to the telemetry from the video's motion: {found.describe()}"
         + (
@@ -285,18 +323,48 @@ def print_warnings(session: Session) -> None:
 
 def run(args) -> int:
     out = output_dir(args.out)
-    session = load_session(args.session, args.uuv)
-    size = size_of(session, args.height_from_size, args.use_track)
+    if args.uuv != ALL_UUVS:
+        return process_one(load_session(args.session, args.uuv), args, out)
+    sessions = [load_session(args.session, uuv) for uuv in uuv_ids(args.session)]
+    if args.use_track:
+        for session in sessions:
+            process_one(session, args, output_dir(out / session.uuv_id))
+        return 0
+    sizes = [size_of(s, args.height_from_size, args.use_track) for s in sessions]
     try:
-        pixels = frame_pixels(
-            session,
-            args.use_track,
+        pixels = tracked_pixels(
+            sessions,
             args.tracker,
             not args.quiet,
             not args.no_motion_offset,
-            size,
+            sizes,
             both_ways=True,
         )
+    finally:
+        for session in sessions:
+            print_warnings(session)
+    for session, uuv_pixels, size in zip(sessions, pixels, sizes):
+        process_one(session, args, output_dir(out / session.uuv_id), (uuv_pixels, size))
+    return 0
+
+
+def process_one(session: Session, args, out, tracked: tuple | None = None) -> int:
+    """One UUV's ``skyfix process`` into the folder ``out``; ``tracked``: its (:class:`Pixels`, size
+    measurement) from a pass over the video shared with the session's other UUVs (:func:`tracked_pixels`)."""
+    try:
+        if tracked is None:
+            size = size_of(session, args.height_from_size, args.use_track)
+            pixels = frame_pixels(
+                session,
+                args.use_track,
+                args.tracker,
+                not args.quiet,
+                not args.no_motion_offset,
+                size,
+                both_ways=True,
+            )
+        else:
+            pixels, size = tracked
         correction = bottom_correction(session, pixels, args.pose_from_bottom, not args.quiet)
         fixes, offline, reference_cells = located(
             session, pixels, not args.no_refraction, correction, args.reference
@@ -328,7 +396,8 @@ def register(subparsers, name: str, help: str | None = None) -> None:
     )
     add_uuv_argument(
         p,
-        "the UUV to locate: its depth, first box and track (default: %(default)s, the session's own)",
+        "the UUV to locate: its depth, first box and track (default: %(default)s, the session's own); "
+        f"{ALL_UUVS}: every UUV of the session, tracked in one pass over the video, each into --out/<its id>/",
     )
     add_uuv_bounds(p)
     p.add_argument(

@@ -20,6 +20,10 @@ hidden, is not traced): a second tracker starts on the re-acquired UUV and steps
 :data:`BACKWARD_S` of them, kept decoded meanwhile) until it loses it; the frames it finds the UUV in are ``ok``
 too (``bridged``). An occlusion stops it as it stops the forward pass: a hidden UUV is not bridged.
 
+Several UUVs of one session (:func:`track_sessions`) are tracked in one pass over the video: each frame is
+decoded once and handed to every UUV's :class:`UuvTrack`; the UAV's pose of every frame and the video's motion are
+computed once for all of them. Each UUV's result is the same as :func:`track_session` of that UUV alone.
+
 The camera poses of all frames are computed at once and shared with the session
 (which projects its predictions for many frames at a time). With ``measure_motion``
 the camera's rotation between frames is measured too (every frame of a short recording, 10 a second of a
@@ -45,7 +49,7 @@ from groundstation.latency.video_motion import MotionThread, measured_every
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session, SessionError
 from groundstation.video.frames import VideoError
-from localizer.pose import camera_pose
+from localizer.pose import uav_pose, with_depth
 from localizer.tracking import GREY_TRACKERS
 from localizer.tracking.session import SelectionError, TrackingSession
 from localizer.tracking.target import TargetState
@@ -108,51 +112,55 @@ def track_session(
     ``init_bbox``, an unknown tracker, a video that cannot be opened or whose frame
     size differs from the calibration, an init frame that cannot be decoded.
     """
-    cal = session.calibration
-    if session.video_path is None or session.frames is None:
-        raise SessionError(f"{session.path}: no video.* with video_frames.csv to track")
-    if cal.init_bbox is None:
-        raise SessionError(
-            f"{session.path / 'session.toml'}: tracker.init_bbox missing (needed to track the video)"
-        )
-    try:
-        tracking = TrackingSession(cal, tracker_name)
-    except ValueError as e:
-        raise SessionError(str(e)) from None
+    return track_sessions([session], tracker_name, progress, measure_motion, [size], both_ways)[0]
 
-    frame_idx = session.frames["frame"].astype(int)
-    t = session.frames["t"]
+
+def track_sessions(
+    sessions: list[Session],
+    tracker_name: str = "default",
+    progress: bool = False,
+    measure_motion: bool = False,
+    sizes: list[HeightFromSize | None] | None = None,
+    both_ways: bool = False,
+) -> list[TrackedVideo]:
+    """:func:`track_session` of several UUVs of one session (``sessions``: the session read as each UUV's,
+    :func:`~groundstation.session.read.load_session` ``uuv``; ``sizes``: one each or None) in one pass over the
+    video: each frame is decoded once, the UAV's pose of every frame computed once
+    (:func:`~localizer.pose.uav_pose`, each UUV's depth added by :func:`~localizer.pose.with_depth`), the video's
+    motion measured once (the same ``rotations`` in every result), and every UUV's :class:`UuvTrack` stepped on
+    each frame. One result per session, each the same as :func:`track_session` of that session alone."""
+    first = sessions[0]
+    if first.video_path is None or first.frames is None:
+        raise SessionError(f"{first.path}: no video.* with video_frames.csv to track")
+    tracks = [
+        UuvTrack(s, tracker_name, size, both_ways)
+        for s, size in zip(sessions, sizes or [None] * len(sessions), strict=True)
+    ]
+    frame_idx = first.frames["frame"].astype(int)
+    t = first.frames["t"]
     n = len(t)
     row_of = {int(f): i for i, f in enumerate(frame_idx)}
-    init_row = _init_row(session, t)
-    status = np.full(n, "no_video", dtype=object)
-    status[:init_row] = "before_init"
-    u, v, conf, sigma = (
-        np.full(n, np.nan),
-        np.full(n, np.nan),
-        np.full(n, np.nan),
-        np.full(n, np.nan),
-    )
-    timings = {"decode_wait": 0.0, "track": 0.0, "motion": 0.0, "size": 0.0, "backward": 0.0}
-    bridged = np.zeros(n, dtype=bool)
-    causal_words: dict[int, str] = {}  # row -> the causal pass's word a bridged "ok" replaced
+    timings = {"decode_wait": 0.0, "motion": 0.0}
     period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
-    gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
-    pending = None  # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
-    warnings: list[str] = []
-    meter = MotionThread(cal.camera, every=measured_every(n, period_s)) if measure_motion else None
+    meter = (
+        MotionThread(first.calibration.camera, every=measured_every(n, period_s))
+        if measure_motion
+        else None
+    )
     rotations = []
+    read_warnings: list[str] = []
 
     t0 = time.perf_counter()
-    pose = camera_pose(cal, session.telemetry, t)
+    uav = uav_pose(first.calibration, first.telemetry, t)
+    for track in tracks:
+        track.pose = with_depth(track.session.calibration, uav, track.session.telemetry.depth)
     timings["pose"] = time.perf_counter() - t0
 
-    bar = progress_bar(n - init_row, f"{session.path.name}: tracking", progress)
+    first_row = min(track.init_row for track in tracks)
+    bar = progress_bar(n - first_row, f"{first.path.name}: tracking", progress)
     extra = 0
-    done = 0
-    started = False
     try:
-        with session.open_video(grey=tracker_name in GREY_TRACKERS) as video:
+        with first.open_video(grey=tracker_name in GREY_TRACKERS) as video:
             frames = video.prefetch()
             while True:
                 t0 = time.perf_counter()
@@ -168,61 +176,17 @@ def track_session(
                     t0 = time.perf_counter()
                     meter.feed(float(t[row]), frame.image)
                     timings["motion"] += time.perf_counter() - t0
-                if row < init_row:
-                    continue
-                t0 = time.perf_counter()
-                if not started:
-                    if row != init_row:
-                        raise SessionError(
-                            f"{session.video_path}: frame {frame_idx[init_row]} (t = {t[init_row]:.3f}), the one "
-                            "tracker.init_bbox belongs to, could not be decoded"
-                        )
-                    try:
-                        result = tracking.select(frame.image, pose, row, box=cal.init_bbox)
-                    except SelectionError as e:
-                        raise SessionError(
-                            f"{session.path / 'session.toml'}: tracker.init_bbox: {e}"
-                        ) from None
-                    started = True
-                else:
-                    result = tracking.step(frame.image, pose, row)
-                timings["track"] += time.perf_counter() - t0
-                status[row], u[row], v[row], conf[row] = (
-                    result.status,
-                    result.u,
-                    result.v,
-                    result.confidence,
-                )
-                sigma[row] = result.sigma_px
-                if both_ways and not result.ok:
-                    if pending is not None:  # lost again before the frames after it confirmed it
-                        pending = None
-                        gap.clear()
-                    gap.append((row, frame.image.copy()))
-                elif both_ways and gap:
-                    pending = pending or (row, frame.image.copy(), result)
-                    if t[row] - t[pending[0]] >= CONFIRM_BACK_S:
-                        t0 = time.perf_counter()
-                        for r, back in _trace_back(tracking, pose, *pending, gap):
-                            causal_words[r] = status[r]
-                            status[r], u[r], v[r], conf[r] = "ok", back.u, back.v, back.confidence
-                            sigma[r], bridged[r] = back.sigma_px, True
-                        gap.clear()
-                        pending = None
-                        timings["backward"] += time.perf_counter() - t0
-                if size is not None and result.ok and size.due(float(t[row])):
-                    t0 = time.perf_counter()
-                    size.take(size.measure(frame.bgr(), pose, row, result.u, result.v))
-                    timings["size"] += time.perf_counter() - t0
-                done += 1
-                bar.update()
+                for track in tracks:
+                    track.step(row, frame)
+                if row >= first_row:
+                    bar.update()
             if meter is not None:
                 t0 = time.perf_counter()
                 rotations = meter.finish()
                 timings["motion"] += time.perf_counter() - t0
             if video.bad_reads:
-                warnings.append(
-                    f"{session.video_path}: {video.bad_reads} unreadable frames skipped"
+                read_warnings.append(
+                    f"{first.video_path}: {video.bad_reads} unreadable frames skipped"
                 )
     except VideoError as e:
         raise SessionError(str(e)) from None
@@ -230,22 +194,153 @@ def track_session(
         bar.close()
         if meter is not None:
             meter.close()
-    if not started:
-        raise SessionError(f"{session.video_path}: no frame of video_frames.csv could be decoded")
-    missing = int(np.sum(status == "no_video"))
-    if missing:
-        warnings.append(
-            f"{session.video_path}: {missing} frames of video_frames.csv not in the video (status no_video)"
+    extra_warnings = (
+        [f"{first.video_path}: {extra} frames beyond video_frames.csv ignored"] if extra else []
+    )
+    return [
+        track.result(frame_idx, timings, read_warnings, extra_warnings, rotations)
+        for track in tracks
+    ]
+
+
+class UuvTrack:
+    """One UUV's tracking through a session's video (its tracker, its per-frame results, its frames kept for
+    tracing back), stepped frame by frame by :func:`track_sessions`; ``pose``: its camera pose of every frame, set
+    before the first step."""
+
+    def __init__(
+        self,
+        session: Session,
+        tracker_name: str,
+        size: HeightFromSize | None,
+        both_ways: bool,
+    ) -> None:
+        cal = session.calibration
+        if cal.init_bbox is None:
+            raise SessionError(
+                f"{session.path / 'session.toml'}: tracker.init_bbox missing (needed to track the video)"
+            )
+        try:
+            self.tracking = TrackingSession(cal, tracker_name)
+        except ValueError as e:
+            raise SessionError(str(e)) from None
+        self.session, self.size, self.both_ways, self.pose = session, size, both_ways, None
+        self.t = t = session.frames["t"]
+        n = len(t)
+        self.init_row = _init_row(session, t)
+        self.status = np.full(n, "no_video", dtype=object)
+        self.status[: self.init_row] = "before_init"
+        self.u, self.v, self.conf, self.sigma = (np.full(n, np.nan) for _ in range(4))
+        self.timings = {"track": 0.0, "size": 0.0, "backward": 0.0}
+        self.bridged = np.zeros(n, dtype=bool)
+        self.causal_words: dict[
+            int, str
+        ] = {}  # row -> the causal pass's word a bridged "ok" replaced
+        period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
+        self.gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
+        self.pending = (
+            None  # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
         )
-    if extra:
-        warnings.append(f"{session.video_path}: {extra} frames beyond video_frames.csv ignored")
-    not_ok = status != "ok"
-    u[not_ok], v[not_ok], sigma[not_ok] = np.nan, np.nan, np.nan
-    causal_status = status.copy()
-    for r, word in causal_words.items():
-        causal_status[r] = word
-    tracked = (frame_idx, t, u, v, status, conf, sigma)
-    return TrackedVideo(*tracked, timings, warnings, rotations, bridged, causal_status)
+        self.started = False
+
+    def step(self, row: int, frame) -> None:
+        """Track the UUV in the decoded ``frame``, row ``row`` of ``video_frames.csv`` (nothing before its
+        ``init_t``)."""
+        if row < self.init_row:
+            return
+        session, pose, timings = self.session, self.pose, self.timings
+        t0 = time.perf_counter()
+        if not self.started:
+            if row != self.init_row:
+                raise SessionError(
+                    f"{session.video_path}: frame {int(session.frames['frame'][self.init_row])} "
+                    f"(t = {self.t[self.init_row]:.3f}), the one tracker.init_bbox belongs to, could not be decoded"
+                )
+            try:
+                result = self.tracking.select(
+                    frame.image, pose, row, box=session.calibration.init_bbox
+                )
+            except SelectionError as e:
+                raise SessionError(
+                    f"{session.path / 'session.toml'}: tracker.init_bbox: {e}"
+                ) from None
+            self.started = True
+        else:
+            result = self.tracking.step(frame.image, pose, row)
+        timings["track"] += time.perf_counter() - t0
+        self.status[row], self.u[row], self.v[row], self.conf[row] = (
+            result.status,
+            result.u,
+            result.v,
+            result.confidence,
+        )
+        self.sigma[row] = result.sigma_px
+        if self.both_ways:
+            self._trace_when_confirmed(row, frame, result)
+        size = self.size
+        if size is not None and result.ok and size.due(float(self.t[row])):
+            t0 = time.perf_counter()
+            size.take(size.measure(frame.bgr(), pose, row, result.u, result.v))
+            timings["size"] += time.perf_counter() - t0
+
+    def _trace_when_confirmed(self, row: int, frame, result) -> None:
+        """``both_ways``: keep the frames without the UUV; once a re-acquisition after them is confirmed, the ones
+        a tracker stepping back from it finds the UUV in become ``ok`` (bridged)."""
+        if not result.ok:
+            if self.pending is not None:  # lost again before the frames after it confirmed it
+                self.pending = None
+                self.gap.clear()
+            self.gap.append((row, frame.image.copy()))
+        elif self.gap:
+            self.pending = self.pending or (row, frame.image.copy(), result)
+            if self.t[row] - self.t[self.pending[0]] >= CONFIRM_BACK_S:
+                t0 = time.perf_counter()
+                status = self.status
+                for r, back in _trace_back(self.tracking, self.pose, *self.pending, self.gap):
+                    self.causal_words[r] = status[r]
+                    status[r], self.u[r], self.v[r], self.conf[r] = (
+                        "ok",
+                        back.u,
+                        back.v,
+                        back.confidence,
+                    )
+                    self.sigma[r], self.bridged[r] = back.sigma_px, True
+                self.gap.clear()
+                self.pending = None
+                self.timings["backward"] += time.perf_counter() - t0
+
+    def result(
+        self, frame_idx, timings: dict, read_warnings: list, extra_warnings: list, rotations
+    ) -> TrackedVideo:
+        """The :class:`TrackedVideo` once every frame was stepped (``timings``, warnings and ``rotations``: the
+        pass's, shared by its UUVs)."""
+        session, status = self.session, self.status
+        if not self.started:
+            raise SessionError(
+                f"{session.video_path}: no frame of video_frames.csv could be decoded"
+            )
+        warnings = list(read_warnings)
+        missing = int(np.sum(status == "no_video"))
+        if missing:
+            warnings.append(
+                f"{session.video_path}: {missing} frames of video_frames.csv not in the video (status no_video)"
+            )
+        warnings.extend(extra_warnings)
+        u, v, sigma = self.u, self.v, self.sigma
+        not_ok = status != "ok"
+        u[not_ok], v[not_ok], sigma[not_ok] = np.nan, np.nan, np.nan
+        causal_status = status.copy()
+        for r, word in self.causal_words.items():
+            causal_status[r] = word
+        tracked = (frame_idx, self.t, u, v, status, self.conf, sigma)
+        return TrackedVideo(
+            *tracked,
+            {**timings, **self.timings},
+            warnings,
+            rotations,
+            self.bridged,
+            causal_status,
+        )
 
 
 def _trace_back(forward: TrackingSession, pose, row: int, image, found, gap) -> list:

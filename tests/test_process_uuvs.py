@@ -1,0 +1,88 @@
+"""``skyfix process --uuv all``: every UUV of a session tracked in one pass over the video, each into its own folder,
+each with the files processing that UUV alone writes, byte for byte.
+
+The session: ``sim_fixtures/scenarios/two_uuvs_crossing.toml`` cut to 4 s, without TIMESYNC and with the camera
+wobbling, so the link's delay is unknown and the frames' offset to the telemetry is estimated from the video's
+motion (once, for both UUVs).
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from groundstation.cli import main
+from groundstation.offline import track
+from groundstation.session.read import Session, uuv_ids
+from sim_fixtures.generate import generate
+from sim_fixtures.scenario import load_scenario, with_overrides
+
+SCENARIO = (
+    Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
+)
+FILES = ("positions.csv", "positions_smoothed.csv")
+
+pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
+
+
+@pytest.fixture(scope="module")
+def crossing(tmp_path_factory) -> Path:
+    sc = with_overrides(
+        load_scenario(SCENARIO),
+        duration_s=6.0,
+        mount={"attitude_source": "fixed", "fixed_rpy_deg": [0.0, -88.0, 0.0]},
+        uav={"wobble_deg": 2.0, "wobble_hz": 1.2},
+        telemetry={"timesync_hz": 0.0},
+    )
+    path = tmp_path_factory.mktemp("uuvs") / "s"
+    generate(sc, path)
+    return path
+
+
+def _counted(monkeypatch, owner, name: str) -> list:
+    """Calls of ``owner.name`` (still the real one) counted, one list entry each."""
+    calls, real = [], getattr(owner, name)
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(owner, name, counting)
+    return calls
+
+
+def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsys, monkeypatch):
+    ids = uuv_ids(crossing)
+    assert len(ids) == 2
+    opened = _counted(monkeypatch, Session, "open_video")
+    poses = _counted(monkeypatch, track, "uav_pose")
+    assert main(["process", str(crossing), "--uuv", "all", "--out", str(tmp_path / "all")]) == 0
+    err = capsys.readouterr().err
+    assert (len(opened), len(poses)) == (
+        1,
+        1,
+    )  # the video decoded once, each frame's UAV pose computed once
+    assert err.count("the frames' offset to the telemetry from the video's motion") == 1, err
+
+    for uuv in ids:
+        alone = tmp_path / "alone" / uuv
+        assert main(["process", str(crossing), "--uuv", uuv, "--out", str(alone)]) == 0
+        for name in FILES:
+            assert (tmp_path / "all" / uuv / name).read_bytes() == (alone / name).read_bytes(), (
+                uuv,
+                name,
+            )
+        rows = [
+            r
+            for r in (alone / "positions.csv").read_text().splitlines()[1:]
+            if "before_init" not in r
+        ]
+        assert sum(",ok," in r for r in rows) > 0.6 * len(
+            rows
+        )  # uuv1 is lost a while in this view (alone too)
+        assert all(",motion," in r for r in rows if ",ok," in r)  # the offset estimated and applied
+    assert len(opened) == 1 + len(ids)
+    first, second = ((tmp_path / "all" / uuv / FILES[0]).read_bytes() for uuv in ids)
+    assert first != second
