@@ -712,6 +712,25 @@ class MotionLatencyStatus(Section):
     failure: str | None = Field(None, description="the last such failure: its kind and message")
 
 
+class LiveMosaicStatus(Section):
+    """The mosaic of the bottom growing live, the page's base map (--live-mosaic)."""
+
+    painted: int = Field(description="frames painted into the mosaic")
+    skipped: int = Field(
+        description="frames due while the painter was still busy with the one before"
+    )
+    no_pose: int = Field(description="frames due without a camera pose (no telemetry yet)")
+    every_s: float = Field(
+        description="seconds of video between the frames painted (--live-mosaic-every-s)"
+    )
+    floor_depth_m: float = Field(
+        description="the floor's depth below the surface it is painted at, m"
+    )
+    gsd_m: float | None = Field(
+        description="the mosaic's cell size, m (None before the first frame)"
+    )
+
+
 class HeightFromSizeStatus(Section):
     """The camera's height above the water from the UUV's size in the video (--height-from-size)."""
 
@@ -1017,6 +1036,7 @@ class StatusMessage(Message):
     height_from_size: HeightFromSizeStatus | None = Field(
         None, description="with --video, unless --height-from-size off"
     )
+    live_mosaic: LiveMosaicStatus | None = Field(None, description="with --live-mosaic")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     outputs: dict[str, dict[str, Any]] | None = Field(
         None,

@@ -36,6 +36,7 @@ from localizer.contract import (
     Invalid,
     NonNegative,
     Number,
+    Positive,
     Text,
     Vector4,
     validate,
@@ -425,6 +426,18 @@ class RunConfig(UuvOptions):
         "internet): a GeoTIFF (skyfix mosaic's mosaic.tif of an earlier flight, an orthophoto), an MBTiles "
         "file or a folder of Z/X/Y.png tiles (skyfix tiles)",
     )
+    live_mosaic: Flag = Field(
+        False,
+        description="the web page's base map: a mosaic of the bottom growing live from the video (a frame every "
+        "--live-mosaic-every-s, painted at a low priority, skipped when the painter is behind); needs "
+        "--floor-depth-m; not with --basemap",
+    )
+    floor_depth_m: Positive | None = Field(
+        None, description="the floor's depth below the water surface, m (for --live-mosaic)"
+    )
+    live_mosaic_every_s: Positive = Field(
+        1.0, description="seconds of video between the frames the live mosaic paints"
+    )
     ui_token: Text | None = Field(
         None,
         description="the web page's token (default: none on localhost, a random one "
@@ -526,6 +539,20 @@ class RunConfig(UuvOptions):
     def recording(self) -> str | None:
         """The option that records the run (``record`` or ``recordings``, its value); None without."""
         return self.record or self.recordings
+
+    @model_validator(mode="after")
+    def _live_mosaic_needs_a_floor(self):
+        if self.live_mosaic and self.floor_depth_m is None:
+            raise Invalid(
+                "live_mosaic",
+                True,
+                "needs the floor's depth: --floor-depth-m M (m below the surface)",
+            )
+        if self.live_mosaic and self.basemap is not None:
+            raise Invalid(
+                "live_mosaic", True, f"--basemap {self.basemap} is given too: one base map"
+            )
+        return self
 
     @model_validator(mode="after")
     def _record_needs_pymavlink(self):

@@ -49,6 +49,7 @@ from groundstation.height_from_size import HeightFromSize, OnlineHeightFromSize
 from groundstation.latency.estimate import OnlineLatency
 from groundstation.live import config, registry
 from groundstation.live.control import Control
+from groundstation.live.mosaic_live import LiveMosaic
 from groundstation.live.pipeline import FramePoses, Pipeline
 from groundstation.live.registry import DepthInput, OutputInput, UavInput
 from groundstation.live.sinks.recorder import Recorder, new_recording
@@ -226,6 +227,11 @@ async def serve(cfg: config.RunConfig) -> dict:
                 (u.id, lambda i=i: chains[i].pipeline.target) for i, u in enumerate(cfg.uuvs)
             ]
             feed = VideoFeed(targets if several else targets[0][1])
+        mosaic = None
+        if cfg.live_mosaic and feed and video:  # the page's base map, grown from the video
+            mosaic = LiveMosaic(cal, tel, cfg.floor_depth_m, cfg.live_mosaic_every_s)
+            workers.section("live_mosaic", lambda now: mosaic.status())
+            closers.append(mosaic.close)
 
         def first_aligned_frame(frame) -> None:
             if frame.aligned and not first_aligned:
@@ -238,6 +244,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 feed and feed.on_frame,
                 motion and motion.on_frame,
                 motion and auto and first_aligned_frame,
+                mosaic and mosaic.on_frame,
             )
             if f
         ]
@@ -297,7 +304,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 feed,
                 size,
                 settings_of(cfg),
-                cfg.basemap,
+                mosaic or cfg.basemap,
             )
             if feed
             else None

@@ -160,7 +160,8 @@ class WebUi:
 
     ``control``: the one UUV's commands, or each UUV's :class:`PageUuv` in the run's order (the topview's
     ``tracks`` in the same order). ``settings``: what the page shows about the run's configuration.
-    ``basemap``: the map's base (a GeoTIFF, an MBTiles file or a folder of tiles), opened by :meth:`start`.
+    ``basemap``: the map's base (a GeoTIFF, an MBTiles file or a folder of tiles), opened by :meth:`start`; or one
+    the run makes (:class:`groundstation.live.mosaic_live.LiveMosaic`: its ``version`` in the tiles' cache key).
     """
 
     def __init__(
@@ -172,7 +173,7 @@ class WebUi:
         feed: VideoFeed,
         camera_size: tuple[int, int],
         settings: dict,
-        basemap: str | None = None,
+        basemap=None,
     ):
         self.host, self.port = parse_bind(bind)
         self.bind = bind
@@ -197,7 +198,7 @@ class WebUi:
         self._sockets: set[web.WebSocketResponse] = set()
         self.basemap_path = basemap
         self.basemap = None
-        self._tiles: OrderedDict[tuple[int, int, int], bytes | None] = OrderedDict()
+        self._tiles: OrderedDict[tuple[int, int, int, int], bytes | None] = OrderedDict()
         self._tiler = ThreadPoolExecutor(
             1, thread_name_prefix="ui-tiles", initializer=lower_priority
         )
@@ -205,6 +206,9 @@ class WebUi:
     # -- life ------------------------------------------------------------------------------------------
     async def start(self) -> None:
         """Open ``--basemap`` and listen on ``--ui``; :class:`UiError` naming the option when that cannot be done."""
+        if self.basemap_path is not None and not isinstance(self.basemap_path, str):
+            # one the run made: the live mosaic
+            self.basemap, self.basemap_path = self.basemap_path, None
         if self.basemap_path is not None:
             try:
                 self.basemap = await asyncio.get_running_loop().run_in_executor(
@@ -391,15 +395,15 @@ class WebUi:
 
     async def _tile(self, request: web.Request) -> web.Response:
         """A tile of the base map (PNG, JPEG or WebP as the base map has them); 404 where it has none."""
-        key = tuple(int(request.match_info[k]) for k in "zxy")
-        z, x, y = key
+        z, x, y = (int(request.match_info[k]) for k in "zxy")
         if self.basemap is None or z > 30 or not (0 <= x < 2**z and 0 <= y < 2**z):
             return web.Response(status=404)
+        key = (z, x, y, getattr(self.basemap, "version", 0))  # the live mosaic's grows
         if key in self._tiles:
             self._tiles.move_to_end(key)
         else:
             self._tiles[key] = await asyncio.get_running_loop().run_in_executor(
-                self._tiler, self.basemap.tile, *key
+                self._tiler, self.basemap.tile, z, x, y
             )
             while len(self._tiles) > TILE_CACHE:
                 self._tiles.popitem(last=False)

@@ -70,6 +70,7 @@ function onText(msg) {
     page.statusAt = performance.now();
     page.rates = msg.rates;
     page.map = msg.map;
+    refreshLiveMosaic(msg.status.live_mosaic);
     msg.uuvs.forEach((u, k) => {
       const mine = page.uuvs[k];
       if (!mine) return;
@@ -536,6 +537,13 @@ function showBasemap(b) {
   baseLayer.on("loading", () => { map.dataset.tiles = "loading"; });
   baseLayer.on("load", () => { map.dataset.tiles = "loaded"; });
   baseLayer.addTo(lmap);
+}
+
+// the live mosaic (live_mosaic = true) painted another frame: its tiles fetched anew (the version in their URL)
+function refreshLiveMosaic(m) {
+  if (!m || !baseLayer || m.painted === page.mosaicPainted) return;
+  page.mosaicPainted = m.painted;
+  baseLayer.setUrl(`${page.basemap.url}?v=${m.painted}`);
 }
 
 // metres north and east of the map's origin → [lat, lon] (degrees), with the WGS84 ellipsoid's radii of curvature

@@ -1,0 +1,225 @@
+"""The mosaic of the bottom growing live (``live_mosaic = true``, ``floor_depth_m``): the live page's base map made
+from the run's own video as the drone flies.
+
+Every ``live_mosaic_every_s`` seconds of video a frame is taken, its camera pose computed from the telemetry there
+is then (:func:`localizer.pose.uav_pose`, on the event loop), and it is painted in a low-priority thread
+(:func:`groundstation.live.ui.feed.lower_priority`) with ``skyfix mosaic``'s own painting
+(:func:`groundstation.offline.mosaic._paint`, its :class:`~groundstation.offline.mosaic.Accumulator`) onto a grid
+in the UTM zone of the first painted frame, centred on it, :data:`HALF_M` m each way (cells made only where a frame
+paints). A frame that comes while the painter is still busy with the one before is skipped and counted: the
+mosaic takes the CPU the rest of the service leaves. The UUV is not left out (its pixel is the tracker's, per UUV;
+the mean over the frames dilutes it).
+
+:meth:`LiveMosaic.tile` renders a web-Mercator tile (EPSG:3857, 256 px) from the blend's cells under it, warped
+by rasterio's GDAL (bilinear); ``version`` counts the frames painted, and the page's tiles are fetched anew when it
+changes.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import tempfile
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from groundstation.live.ui.feed import lower_priority
+from groundstation.offline.mosaic import (
+    N_WATER,
+    TILE,
+    Accumulator,
+    Grid,
+    _paint,
+    camera_utm,
+    footprint_ne_m,
+    utm_epsg,
+)
+from groundstation.tiles import MAX_ZOOM, TILE_PX, encode_png, pixel_m, tile_bounds_m, zoom_range
+from localizer.pose import uav_pose
+
+log = logging.getLogger(__name__)
+
+HALF_M = 500.0  # the grid's extent each way from the first painted frame, m
+NO_UUV = (math.nan, math.nan, 0.0)  # the UUV is not left out
+
+
+class LiveMosaic:
+    """The growing mosaic: :meth:`on_frame` (a frame listener, on the event loop) takes a frame every ``every_s``
+    s of video to paint; :meth:`tile` (the page's tile thread) and :meth:`info` serve it as a base map."""
+
+    def __init__(self, cal, tel, floor_depth_m: float, every_s: float):
+        self.cal, self.tel = cal, tel
+        self.floor_depth_m, self.every_s = floor_depth_m, every_s
+        self.painted = 0  # frames painted
+        self.skipped = 0  # frames due while the painter was busy
+        self.no_pose = (
+            0  # frames due without a camera pose (no telemetry yet, a camera under the surface)
+        )
+        self.grid: Grid | None = None
+        self.lat_deg = 0.0  # the first painted frame's
+        self._spill = tempfile.TemporaryDirectory(prefix="skyfix-live-mosaic-")
+        self.acc = Accumulator(Path(self._spill.name))
+        self._lock = (
+            threading.Lock()
+        )  # the accumulator: painted by the painter, read by the tile thread
+        self._busy = False
+        self._last_t = -math.inf
+        self._painter = ThreadPoolExecutor(
+            1, thread_name_prefix="mosaic", initializer=lower_priority
+        )
+
+    @property
+    def version(self) -> int:
+        return self.painted
+
+    def on_frame(self, frame) -> None:
+        if frame.t_unix - self._last_t < self.every_s:
+            return
+        if self._busy:
+            self.skipped += 1
+            return
+        self._last_t = frame.t_unix
+        pose = uav_pose(self.cal, self.tel, frame.t_unix)
+        if pose.status[0] != "ok" or not pose.height_m[0] > 0:
+            self.no_pose += 1
+            return
+        self._busy = True
+        done = self._painter.submit(self._paint, frame.image, pose)
+        done.add_done_callback(self._painted)
+
+    def _painted(self, done) -> None:
+        self._busy = False
+        if done.exception() is not None:
+            log.error("live mosaic: a frame could not be painted: %s", done.exception())
+
+    def _paint(self, image: np.ndarray, pose) -> None:
+        cam = self.cal.camera
+        if self.grid is None:
+            epsg = utm_epsg(pose.lat_deg[0], pose.lon_deg[0])
+            xy, _ = camera_utm(pose, epsg)
+            gsd_m = float(f"{(pose.height_m[0] + self.floor_depth_m / N_WATER) / cam.fx:.2g}")
+            cells = round(2 * HALF_M / gsd_m)
+            west = math.floor((xy[0, 0] - HALF_M) / gsd_m) * gsd_m
+            north = math.ceil((xy[0, 1] + HALF_M) / gsd_m) * gsd_m
+            self.grid = Grid(epsg, west, north, gsd_m, cells, cells)
+            self.lat_deg = float(pose.lat_deg[0])
+        xy_cam, jac = camera_utm(pose, self.grid.epsg)
+        poly = xy_cam[0] + footprint_ne_m(cam, pose, 0, self.floor_depth_m) @ jac[0].T
+        if len(poly) < 3:
+            return
+        with self._lock:
+            _paint(
+                image,
+                self.grid,
+                poly,
+                xy_cam[0],
+                jac[0],
+                cam,
+                pose.R_ned_from_cv[0],
+                pose.height_m[0],
+                self.floor_depth_m,
+                NO_UUV,
+                self.acc,
+            )
+            self.painted += 1
+
+    def info(self) -> dict:
+        """The base map's ``info()`` (as :mod:`groundstation.tiles`' have it), with ``version``."""
+        g = self.grid
+        if g is None:
+            bounds, zooms = [-180.0, -85.0511, 180.0, 85.0511], (0, MAX_ZOOM)
+        else:
+            from rasterio.warp import transform_bounds
+
+            bounds = [
+                round(b, 8) for b in transform_bounds(f"EPSG:{g.epsg}", "EPSG:4326", *g.bounds())
+            ]
+            zooms = zoom_range(tuple(bounds), g.gsd_m)
+        return {
+            "name": "live mosaic",
+            "format": "png",
+            "bounds": bounds,
+            "minzoom": zooms[0],
+            "maxzoom": zooms[1],
+            "sigma_m": None,
+            "version": self.version,
+        }
+
+    def tile(self, z: int, x: int, y: int) -> bytes | None:
+        """Tile ``z/x/y`` as PNG (RGBA, transparent where no frame painted), None where nothing is painted."""
+        from affine import Affine
+        from rasterio.warp import Resampling, reproject, transform_bounds
+
+        g = self.grid
+        if g is None:
+            return None
+        west, south, east, north = tile_bounds_m(z, x, y)
+        w, s, e, n = transform_bounds("EPSG:3857", f"EPSG:{g.epsg}", west, south, east, north)
+        step = max(1, int(pixel_m(z, self.lat_deg) / g.gsd_m))  # cells a tile pixel spans
+        c0 = max(0, math.floor((w - g.west_m) / g.gsd_m) - step)
+        c1 = min(g.width, math.ceil((e - g.west_m) / g.gsd_m) + step)
+        r0 = max(0, math.floor((g.north_m - n) / g.gsd_m) - step)
+        r1 = min(g.height, math.ceil((g.north_m - s) / g.gsd_m) + step)
+        if c1 <= c0 or r1 <= r0:
+            return None
+        src = self._cells(r0, r1, c0, c1, step)
+        if src is None:
+            return None
+        size = (east - west) / TILE_PX
+        out = np.zeros((4, TILE_PX, TILE_PX), np.uint8)
+        cell = g.gsd_m * step
+        reproject(
+            np.ascontiguousarray(src.transpose(2, 0, 1)),
+            out,
+            src_transform=Affine(
+                cell, 0, g.west_m + c0 * g.gsd_m, 0, -cell, g.north_m - r0 * g.gsd_m
+            ),
+            src_crs=f"EPSG:{g.epsg}",
+            dst_transform=Affine(size, 0, west, 0, -size, north),
+            dst_crs="EPSG:3857",
+            resampling=Resampling.bilinear,
+            init_dest_nodata=False,
+        )
+        out[3] = np.where(out[3] >= 128, 255, 0)
+        if not out[3].any():
+            return None
+        return encode_png(out)
+
+    def _cells(self, r0: int, r1: int, c0: int, c1: int, step: int) -> np.ndarray | None:
+        """The blend's RGBA (uint8) at every ``step``-th grid row of r0:r1 and column of c0:c1; None where no
+        frame painted."""
+        out = np.zeros((-(-(r1 - r0) // step), -(-(c1 - c0) // step), 4), np.uint8)
+        any_painted = False
+        with self._lock:
+            for tr, tc in self.acc.painted():
+                a, b = max(r0, tr * TILE), min(r1, (tr + 1) * TILE)
+                c, d = max(c0, tc * TILE), min(c1, (tc + 1) * TILE)
+                if b <= a or d <= c:
+                    continue
+                rows = np.arange(-(-(a - r0) // step), -(-(b - r0) // step))
+                cols = np.arange(-(-(c - c0) // step), -(-(d - c0) // step))
+                if len(rows) == 0 or len(cols) == 0:
+                    continue
+                rgba = self.acc.rgba((tr, tc))
+                out[np.ix_(rows, cols)] = rgba[
+                    np.ix_(r0 + rows * step - tr * TILE, c0 + cols * step - tc * TILE)
+                ]
+                any_painted = True
+        return out if any_painted else None
+
+    def status(self) -> dict:
+        return {
+            "painted": self.painted,
+            "skipped": self.skipped,
+            "no_pose": self.no_pose,
+            "every_s": self.every_s,
+            "floor_depth_m": self.floor_depth_m,
+            "gsd_m": None if self.grid is None else self.grid.gsd_m,
+        }
+
+    def close(self) -> None:
+        self._painter.shutdown(wait=True, cancel_futures=True)
+        self._spill.cleanup()

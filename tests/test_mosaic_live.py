@@ -1,0 +1,88 @@
+"""The mosaic of the bottom growing live (groundstation/live/mosaic_live.py): ``skyfix run --live-mosaic
+--floor-depth-m`` over the replay of a generated session (bottom_survey's drone without its attitude errors, 3 s at
+640x360, a textured floor with a surveyed bullseye) serves the mosaic as the page's base map at /basemap/Z/X/Y
+on 127.0.0.1; the bullseye found in those tiles lies where reference.toml says (pyproj's web Mercator, not the
+localizer's geometry); the status (its schema's) counts the frames painted and skipped. A run asking for it without a floor
+depth is refused in one line naming the key."""
+
+import json
+import math
+
+from jsonschema import Draft202012Validator
+from live_helpers import ROOT, LiveRun, read_jsonl, skyfix, ui_url, wait_for
+from test_mosaic import NO_POSE_ERRORS, marker_error_in_tiles
+from test_ui_access import _get
+
+from groundstation.contracts import GROUNDSTATION
+from sim_fixtures.generate import generate
+from sim_fixtures.scenario import load_scenario, with_overrides
+
+
+def test_the_live_mosaic_serves_the_marker_where_it_was_surveyed(tmp_path):
+    import subprocess
+    import tomllib
+
+    session = tmp_path / "survey"
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "bottom_survey.toml")
+    sc = with_overrides(
+        sc,
+        duration_s=3.0,
+        camera={"width": 640, "height": 360},
+        marker={"enabled": True},
+        sensors=NO_POSE_ERRORS,
+    )
+    generate(sc, session)
+    ref = tomllib.loads((session / "reference.toml").read_text())
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    with LiveRun(
+        run_dir,
+        session,
+        "--live-mosaic",
+        "--floor-depth-m",
+        str(sc.site.floor_depth_m),
+        "--live-mosaic-every-s",
+        "0.2",
+        video_latency_ms=0,
+    ) as live:
+        base = ui_url(run_dir / "run.log").rstrip("/")
+        wait_for(lambda: live.replay.poll() is not None, 40, "the replay's end")
+
+        def mosaic_status() -> dict:
+            status, _, body = _get(f"{base}/api/status")
+            assert status == 200
+            return json.loads(body)["live_mosaic"]
+
+        wait_for(lambda: mosaic_status()["painted"] >= 5, 20, "five frames painted")
+        st = mosaic_status()
+        lat = math.radians(ref["lat_deg"])
+        z = math.ceil(math.log2(2 * math.pi * 6378137.0 * math.cos(lat) / 256 / st["gsd_m"]))
+
+        def tile(z, x, y):
+            status, _, body = _get(f"{base}/basemap/{z}/{x}/{y}?v={st['painted']}")
+            assert status in (200, 404), status
+            return body if status == 200 else None
+
+        error_m, pixel_m = marker_error_in_tiles(tile, z, ref)
+        live.finish()
+    print(
+        f"live mosaic: {st['painted']} frames painted, {st['skipped']} skipped, cells {st['gsd_m']} m; "
+        f"marker in the zoom-{z} tiles {error_m:.3f} m (tile pixel {pixel_m:.3f} m)"
+    )
+    assert error_m <= 3 * st["gsd_m"] + pixel_m, (error_m, st)
+    # its status section on Zenoh, as the status schema has it
+    schema = Draft202012Validator(json.loads(GROUNDSTATION.path_of("status").read_text()))
+    status = [
+        json.loads(s["payload"]) for s in read_jsonl(live.sub_out) if s["key"] == "skyfix/status"
+    ]
+    assert status[-1]["live_mosaic"]["painted"] >= st["painted"]
+    assert [e.message for m in status for e in schema.iter_errors(m)] == []
+
+    refused = subprocess.run(
+        skyfix("run", "--calibration", str(session / "session.toml"), "--live-mosaic", "--video", "none",
+               "--gps-input", "none", "--no-ui"),
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert refused.returncode == 2
+    assert "--live-mosaic = True: needs the floor's depth: --floor-depth-m" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1
