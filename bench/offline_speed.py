@@ -1,6 +1,7 @@
 """``skyfix process`` against decoding the same video alone, at 1080p and 4K (issue 18).
 
-    .venv/bin/python bench/offline_speed.py [--sizes 1080p,4k] [--repeats 3] [--mil] [--lean] [--tree LABEL=DIR ...]
+    .venv/bin/python bench/offline_speed.py [--sizes 1080p,4k] [--repeats 3] [--mil] [--lean] [--uuvs]
+                                            [--tree LABEL=DIR ...]
                                             [--out bench/results/offline_speed.txt]
 
 Sessions (generated once into /tmp/skyfix-bench: 40 s of 1080p, 10 s of 4K, 30 fps, a nadir hover with the
@@ -21,7 +22,8 @@ the telemetry (the estimate, its σ, its thirds'; round 1's under the table): a 
 what it did to the offset beside what it did to the speed. ``skyfix process --help`` is timed too:
 the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
 ``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C DIR``: before and after in the
-same run).
+same run). ``--uuvs``: also a session with three UUVs (:func:`bench_uuvs`): ``skyfix process --uuv all`` (one pass
+over the video for the three) against decode-only of the same file and against one process per UUV.
 """
 
 from __future__ import annotations
@@ -181,14 +183,28 @@ def bench_size(
         if mil and r == 0:
             runs["process --tracker mil"] = [child(process + ["--tracker", "mil"])]
     w, h, duration = SIZES[name]
-    reference = frames / statistics.median(wall for wall, *_ in runs["decode-only OpenCV"])
     lines = [
         (
             f"{name}: {w}x{h}, {duration} s, {frames} frames; median of {repeats} interleaved rounds "
             f"(MIL: 1), {os.cpu_count()} cores, load average (1 min) {min(loads):.1f}-{max(loads):.1f}"
         )
     ]
+    lines += table(runs, frames, duration, data)
+    lines += [
+        f"  {variant}, round 1's {rs[0][3][rs[0][3].index(OFFSET_LINE) :]}"
+        for variant, rs in runs.items()
+        if rs[0][3]
+    ]
+    data["load_1min"] = loads
+    return lines
+
+
+def table(runs: dict, frames: int, duration: float, data: dict) -> list[str]:
+    """A line per variant of ``runs`` (its child runs, one a round; see :func:`child`) against the medians and
+    each round's ``decode-only OpenCV``; its numbers into ``data``."""
+    reference = frames / statistics.median(wall for wall, *_ in runs["decode-only OpenCV"])
     decode_walls = [wall for wall, *_ in runs["decode-only OpenCV"]]
+    lines = []
     for variant, rs in runs.items():
         walls = [wall for wall, *_ in rs]
         fps = frames / statistics.median(walls)
@@ -219,18 +235,56 @@ def bench_size(
             "peak_rss_mb": [m for *_, m, _ in rs],
             "offset": [o for *_, o in rs],
         }
-    lines += [
-        f"  {variant}, round 1's {rs[0][3][rs[0][3].index(OFFSET_LINE) :]}"
-        for variant, rs in runs.items()
-        if rs[0][3]
-    ]
-    data["load_1min"] = loads
     return lines
+
+
+def bench_uuvs(repeats: int, work: Path, data: dict) -> list[str]:
+    """The three-UUV 1080p session of ``bench/uuvs.py`` (two_uuvs_crossing, 20 s, its video as a camera sends it,
+    uuv3 a copy of uuv1's records), interleaved rounds: OpenCV decode-only, ``skyfix process --uuv all`` (the three
+    in one pass), ``--uuv uuv1`` alone, and the three one process each (as before ``--uuv all``: walls and CPU
+    summed, the largest peak RSS)."""
+    from uuvs import ensure_session as uuvs_session
+
+    session = uuvs_session(20.0)
+    video = str(next(session.glob("video.*")))
+    frames = len((session / "video_frames.csv").read_text().splitlines()) - 1
+    me = [sys.executable, str(Path(__file__).resolve())]
+    process = [sys.executable, "-m", "groundstation.cli", "process", str(session), "--quiet"]
+    ids = ("uuv1", "uuv2", "uuv3")
+    runs: dict[str, list[tuple[float, float, float, str]]] = {}
+    loads = []
+    for r in range(repeats):
+        one_each = [child(process + ["--uuv", uuv, "--out", str(work / uuv)]) for uuv in ids]
+        rounds = {
+            "decode-only OpenCV": child(me + ["--decode-only", "opencv", video]),
+            "process --uuv all (3 UUVs, one pass)": child(
+                process + ["--uuv", "all", "--out", str(work / "all")]
+            ),
+            "process --uuv uuv1 (1 UUV)": one_each[0],
+            "3 x process --uuv ID (3 passes)": (
+                sum(w for w, *_ in one_each),
+                sum(c for _, c, *_ in one_each),
+                max(m for *_, m, _ in one_each),
+                "",
+            ),
+        }
+        for variant, run in rounds.items():
+            runs.setdefault(variant, []).append(run)
+        loads.append(os.getloadavg()[0])
+        print(f"  1080p 3 UUVs round {r + 1}: load {loads[-1]:.1f}", flush=True)
+    heading = (
+        f"1080p, 3 UUVs ({session.name}): 1920x1080, 20 s, {frames} frames; median of {repeats} interleaved "
+        f"rounds, {os.cpu_count()} cores, load average (1 min) {min(loads):.1f}-{max(loads):.1f}"
+    )
+    data["load_1min"] = loads
+    return [heading, *table(runs, frames, 20.0, data)]
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--sizes", default="1080p,4k", help="comma-separated: 1080p, 4k (default both)")
+    p.add_argument(
+        "--sizes", default="1080p,4k", help='comma-separated: 1080p, 4k (default both; "": none)'
+    )
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument(
         "--mil", action="store_true", help="also the MIL tracker's pipeline (once per size)"
@@ -247,6 +301,11 @@ def main(argv=None) -> int:
         action="store_true",
         help="OpenCV decode-only and skyfix process (per tree) only: a round in a third of the time",
     )
+    p.add_argument(
+        "--uuvs",
+        action="store_true",
+        help="also the three-UUV 1080p session: process --uuv all against decode-only and one process per UUV",
+    )
     p.add_argument("--out", type=Path, help="also write the results here")
     p.add_argument("--decode-only", nargs=2, metavar=("KIND", "VIDEO"), help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -258,7 +317,7 @@ def main(argv=None) -> int:
     }
     lines, data = [], {}
     with tempfile.TemporaryDirectory() as work:
-        for name in args.sizes.split(","):
+        for name in filter(None, args.sizes.split(",")):
             lines += bench_size(
                 name,
                 args.repeats,
@@ -268,6 +327,8 @@ def main(argv=None) -> int:
                 data.setdefault(name, {}),
                 args.lean,
             )
+        if args.uuvs:
+            lines += bench_uuvs(args.repeats, Path(work), data.setdefault("1080p_3uuvs", {}))
     emit(lines, args.out, data)
     return 0
 
