@@ -53,7 +53,7 @@ def test_the_live_mosaic_serves_the_marker_where_it_was_surveyed(tmp_path):
             assert status == 200
             return json.loads(body)["live_mosaic"]
 
-        wait_for(lambda: mosaic_status()["painted"] >= 5, 20, "five frames painted")
+        wait_for(lambda: mosaic_status()["painted"] >= 3, 20, "three frames painted")
         st = mosaic_status()
         lat = math.radians(ref["lat_deg"])
         z = math.ceil(math.log2(2 * math.pi * 6378137.0 * math.cos(lat) / 256 / st["gsd_m"]))

@@ -4,7 +4,7 @@ from the run's own video as the drone flies.
 Every ``live_mosaic_every_s`` seconds of video a frame is taken, its camera pose computed from the telemetry there
 is then (:func:`localizer.pose.uav_pose`, on the event loop), and it is painted in a low-priority thread
 (:func:`groundstation.live.ui.feed.lower_priority`) with ``skyfix mosaic``'s own painting
-(:func:`groundstation.offline.mosaic._paint`, its :class:`~groundstation.offline.mosaic.Accumulator`) onto a grid
+(:func:`groundstation.offline.mosaic.paint`, its :class:`~groundstation.offline.mosaic.Accumulator`) onto a grid
 in the UTM zone of the first painted frame, centred on it, :data:`HALF_M` m each way (cells made only where a frame
 paints). A frame that comes while the painter is still busy with the one before is skipped and counted: the
 mosaic takes the CPU the rest of the service leaves. The UUV is not left out (its pixel is the tracker's, per UUV;
@@ -32,9 +32,9 @@ from groundstation.offline.mosaic import (
     TILE,
     Accumulator,
     Grid,
-    _paint,
     camera_utm,
     footprint_ne_m,
+    paint,
     utm_epsg,
 )
 from groundstation.tiles import MAX_ZOOM, TILE_PX, encode_png, pixel_m, tile_bounds_m, zoom_range
@@ -87,7 +87,7 @@ class LiveMosaic:
             self.no_pose += 1
             return
         self._busy = True
-        done = self._painter.submit(self._paint, frame.image, pose)
+        done = self._painter.submit(self._paint_frame, frame.image, pose)
         done.add_done_callback(self._painted)
 
     def _painted(self, done) -> None:
@@ -95,7 +95,7 @@ class LiveMosaic:
         if done.exception() is not None:
             log.error("live mosaic: a frame could not be painted: %s", done.exception())
 
-    def _paint(self, image: np.ndarray, pose) -> None:
+    def _paint_frame(self, image: np.ndarray, pose) -> None:
         cam = self.cal.camera
         if self.grid is None:
             epsg = utm_epsg(pose.lat_deg[0], pose.lon_deg[0])
@@ -111,7 +111,7 @@ class LiveMosaic:
         if len(poly) < 3:
             return
         with self._lock:
-            _paint(
+            paint(
                 image,
                 self.grid,
                 poly,

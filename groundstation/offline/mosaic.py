@@ -186,7 +186,7 @@ def feather_weight(camera, u, v, ne_m: np.ndarray, lever_m: float) -> np.ndarray
     return ramp * np.square(lever_m**2 / (lever_m**2 + rho2))
 
 
-def _paint(image, grid: Grid, poly_utm, xy_cam, jac, camera, R, height_m, floor_depth_m, uuv, acc):
+def paint(image, grid: Grid, poly_utm, xy_cam, jac, camera, R, height_m, floor_depth_m, uuv, acc):
     """Add ``image``'s (BGR) samples, weighted (:func:`feather_weight`), into the cells inside ``poly_utm``;
     ``uuv`` = (u, v, radius px): its disc is left out (NaN: nothing)."""
     col = (poly_utm[:, 0] - grid.west_m) / grid.gsd_m - 0.5
@@ -372,7 +372,7 @@ def make_mosaic(
                     k = wanted.get(vf.index)
                     if k is None:
                         continue
-                    _paint(
+                    paint(
                         vf.image,
                         grid,
                         polys[k],
