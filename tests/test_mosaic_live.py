@@ -7,22 +7,24 @@ depth is refused in one line naming the key."""
 
 import json
 import math
+from urllib.parse import parse_qs, urlsplit
 
+import pytest
 from jsonschema import Draft202012Validator
 from live_helpers import ROOT, LiveRun, read_jsonl, skyfix, ui_url, wait_for
 from test_mosaic import NO_POSE_ERRORS, marker_error_in_tiles
 from test_ui_access import _get
+from ui_browser import available, chromium
 
 from groundstation.contracts import GROUNDSTATION
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
 
-def test_the_live_mosaic_serves_the_marker_where_it_was_surveyed(tmp_path):
-    import subprocess
-    import tomllib
-
-    session = tmp_path / "survey"
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory):
+    """bottom_survey without attitude errors, 3 s at 640x360, with its bullseye; and its scenario."""
+    session = tmp_path_factory.mktemp("survey")
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "bottom_survey.toml")
     sc = with_overrides(
         sc,
@@ -32,6 +34,14 @@ def test_the_live_mosaic_serves_the_marker_where_it_was_surveyed(tmp_path):
         sensors=NO_POSE_ERRORS,
     )
     generate(sc, session)
+    return session, sc
+
+
+def test_the_live_mosaic_serves_the_marker_where_it_was_surveyed(survey, tmp_path):
+    import subprocess
+    import tomllib
+
+    session, sc = survey
     ref = tomllib.loads((session / "reference.toml").read_text())
     run_dir = tmp_path / "run"
     run_dir.mkdir()
@@ -86,3 +96,49 @@ def test_the_live_mosaic_serves_the_marker_where_it_was_surveyed(tmp_path):
     assert refused.returncode == 2
     assert "--live-mosaic = True: needs the floor's depth: --floor-depth-m" in refused.stderr
     assert len(refused.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.skipif(available() is not None, reason=str(available()))
+def test_the_page_fetches_the_mosaics_tiles_anew_as_it_grows(survey, tmp_path):
+    """In Chromium: the page asks for the live mosaic's tiles with the version of each painted frame, loads them,
+    and asks nothing of another machine."""
+    session, sc = survey
+    with LiveRun(
+        tmp_path,
+        session,
+        "--live-mosaic",
+        "--floor-depth-m",
+        str(sc.site.floor_depth_m),
+        "--live-mosaic-every-s",
+        "0.2",
+        video_latency_ms=0,
+        replay_now=False,
+    ) as live:
+        url = ui_url(tmp_path / "run.log")
+        with chromium(tmp_path, url.split("?")[0].rstrip("/")) as browser:
+            page = browser.page
+            page.goto(url)
+            page.wait_for_selector("#conn.ok", timeout=20_000)
+            live.start_replay()
+
+            def versions() -> set[str]:
+                page.evaluate("0")  # the browser's events (its requests) handed over
+                return {
+                    parse_qs(urlsplit(u).query).get("v", [""])[0]
+                    for u in browser.requests
+                    if "/basemap/" in u
+                } - {""}
+
+            wait_for(
+                lambda: len(versions()) >= 2, 30, "tiles of two versions of the mosaic asked for"
+            )
+            wait_for(
+                lambda: page.eval_on_selector("#map", "m => m.dataset.tiles") == "loaded",
+                20,
+                "the mosaic's tiles loaded",
+            )
+            assert not browser.errors, browser.errors
+            assert browser.outside == []
+            asked = sorted(versions(), key=int)
+        live.finish()
+    print(f"tile versions asked for: {asked}")
