@@ -204,12 +204,23 @@ class TemplateParams:
     )
     #                                     contrast level (see _contrast): the water and the seafloor the template
     #                                     finds where the UUV is hidden, or beside it, have a fraction of its spread
+    #: ... or, when lower, this share of the way from the contrast of the water beside the UUV (the best places of
+    #: the template there, a running mean) to that level: at 8 m/s caustics dim a UUV that stands far above the
+    #: water to 0.6 of its level for several frames, while a UUV that stands out little keeps the strict share
+    wave_contrast_between: float = 0.4
+    #: the follow below the usual bars (wave_keep_contrast): or, when lower, this share of that way
+    wave_keep_between: float = 0.5
     wave_contrast_rate: float = 0.05  # ... that level: a running mean at this rate of the clear follows (wave_keep_contrast)
 
 
 #: Taken from the rank of a place too flat to be the UUV (see ``spread`` of :meth:`TemplateMatcher._search`): it
 #: ranks below every place that is not.
 _FLAT_PENALTY = 10.0
+
+
+def _running(mean: float, value: float, rate: float) -> float:
+    """A running mean at ``rate`` moved towards ``value`` (``value`` itself while ``mean`` is NaN: the first)."""
+    return value if not math.isfinite(mean) else mean + rate * (value - mean)
 
 
 def _parabola(a: float, b: float, c: float) -> float:
@@ -431,6 +442,7 @@ class TemplateMatcher:
         self._water = (
             math.nan
         )  # ... and the water's level (the best score beside the UUV, a running mean)
+        self._water_contrast = math.nan  # ... and the contrast there (a running mean)
         self._wavy = False  # judged as through waves (see _in_waves)
 
     def _begin(self, prediction: Prediction | None) -> None:
@@ -749,11 +761,17 @@ class TemplateMatcher:
         close = self._floor()
         return close + self._waves() * max(self._far() - close, 0.0)
 
-    def _least_contrast(self) -> float:
+    def _least_contrast(self, share: float | None = None, between: float | None = None) -> float:
         """In waves, the least contrast (see :meth:`_contrast`) that passes for the UUV: ``min_contrast``, and
-        ``wave_contrast_share`` of the level of the frames it was followed in (the water and the seafloor the
-        template finds where it is hidden, or beside it, have a fraction of its grey-level spread)."""
-        return max(self.p.min_contrast, self.p.wave_contrast_share * self._contrast_level)
+        ``share`` (``wave_contrast_share``) of the level of the frames it was followed in (the water and the
+        seafloor the template finds where it is hidden, or beside it, have a fraction of its grey-level spread) or,
+        when lower, ``between`` (``wave_contrast_between``) of the way from the contrast of the water beside it
+        to that level (a UUV whose contrast flickers far above the water's: its dim frames pass)."""
+        level = self._contrast_level
+        share = self.p.wave_contrast_share if share is None else share
+        between = self.p.wave_contrast_between if between is None else between
+        bar = self._water_contrast + between * (level - self._water_contrast)
+        return max(self.p.min_contrast, min(share * level, bar if math.isfinite(bar) else level))
 
     def _least_spread(self) -> float:
         """In waves, the grey-level spread (see :meth:`_spread`) below which a place is not searched for a candidate
@@ -762,17 +780,18 @@ class TemplateMatcher:
 
     def _beside(
         self, frame_bgr, cu: float, cv_: float, radius: float, spread: float = 0.0
-    ) -> list[float]:
-        """The template's best scores on the water beside the prediction's window: in windows as large,
-        ``wave_background_sides`` template sides further out on each side (those inside the frame); with a
-        ``spread``, at places whose grey levels spread at least that much (see :meth:`_search`; none: no score)."""
+    ) -> list[tuple[float, float]]:
+        """The template's best scores on the water beside the prediction's window, and the contrast there (see
+        :meth:`_contrast`): in windows as large, ``wave_background_sides`` template sides further out on each side
+        (those inside the frame); with a ``spread``, at places whose grey levels spread at least that much (see
+        :meth:`_search`; none: no score)."""
         d = radius + self.p.wave_background_sides * self.S * self.k * self._scale
         found = (
             self._search(frame_bgr, cu + du, cv_ + dv, radius, (self._angle,), spread=spread)
             for du, dv in ((d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d))
         )
         return [
-            s
+            (s, self._contrast(frame_bgr, u, v))
             for s, u, v, _ in found
             if s > -1.0 and (spread <= 0 or self._spread(frame_bgr, u, v) >= spread)
         ]
@@ -814,13 +833,11 @@ class TemplateMatcher:
         beside = self._beside(
             frame_bgr, cu, cv_, radius, self._least_spread() if evidence is None else 0.0
         )
+        scores = [s for s, _ in beside]
         if beside and evidence is not None:
-            water = float(np.median(beside))
-            self._water = (
-                water
-                if not math.isfinite(self._water)
-                else (self._water + self.p.wave_background_rate * (water - self._water))
-            )
+            water, flat = (float(np.median(x)) for x in zip(*beside, strict=True))
+            self._water = _running(self._water, water, self.p.wave_background_rate)
+            self._water_contrast = _running(self._water_contrast, flat, self.p.wave_background_rate)
         if evidence is None:
             share = self.p.wave_confirm_share if again else self.p.wave_reacquire_share
             passed = score >= self._wave_bar(share)
@@ -828,7 +845,7 @@ class TemplateMatcher:
             passed = score >= self._wave_bar(self.p.wave_follow_share) and (
                 evidence >= self._wave_bar(self.p.wave_evidence_share)
             )
-        return passed and (not beside or score > float(np.median(beside)))
+        return passed and (not scores or score > float(np.median(scores)))
 
     # -- per frame ---------------------------------------------------------------------------
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
@@ -902,7 +919,8 @@ class TemplateMatcher:
             )
             passed = passed or (
                 near
-                and clear
+                and contrast
+                >= self._least_contrast(self.p.wave_keep_contrast, self.p.wave_keep_between)
                 and score
                 > max(self._water - self.p.wave_keep_below, self._matched() - self.p.wave_keep_drop)
             )
