@@ -19,9 +19,8 @@ class BuildWithLeaflet(build_py):
         path = Path(__file__).parent / "groundstation" / "live" / "ui" / "vendor.py"
         spec = importlib.util.spec_from_file_location("skyfix_vendor", path)
         vendor = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(
-            vendor
-        )  # standard library only: skyfix's dependencies are not installed yet
+        # standard library only: skyfix's dependencies are not installed yet
+        spec.loader.exec_module(vendor)
         vendor.fetch()
         super().run()
 

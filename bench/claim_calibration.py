@@ -225,9 +225,8 @@ class Pooled:
     sessions: int
     within_2sigma: float  # share of the fixes within 2·h_acc
     calibrated: float  # ... that a calibrated claim would hold (:func:`calibrated_share`)
-    within_1sigma: (
-        float  # ... within h_acc (a 2-D normal error: 63-68 % when the claim is its DRMS)
-    )
+    # ... within h_acc (a 2-D normal error: 63-68 % when the claim is its DRMS)
+    within_1sigma: float
     whole: float  # share of the sessions with every fix within 2·h_acc
     rms_err_m: float
     rms_acc_m: float

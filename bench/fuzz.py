@@ -104,9 +104,8 @@ class Storm:
         self.run = run
         self.uav_sysid = first.get_srcSystem()
         self.sent = {"mavlink": Counter(), "depth": Counter()}
-        self.accidental = (
-            Counter()
-        )  # garbage that happens to hold a frame with a valid CRC: "uav" or "other" system
+        # garbage that happens to hold a frame with a valid CRC: "uav" or "other" system
+        self.accidental = Counter()
         self.samples: list[dict] = []
         self._stop = threading.Event()
 
@@ -264,12 +263,10 @@ def check(session: Path, base: dict, fuzz: dict) -> tuple[dict, list[str]]:
             f"datagrams read {uav_f['link']['reads']} + dropped by the kernel {drops}, sent {datagrams[1]}"
         )
     for name, (got, want) in counts.items():
-        lost = (
-            drops if name in ("other_systems", "refused", "genuine_received") else 0
-        )  # the UAV port's drops
-        extra = (
-            acc["uav"] if name == "refused" else 0
-        )  # an accidental frame from the UAV may be refused too
+        # the UAV port's drops
+        lost = drops if name in ("other_systems", "refused", "genuine_received") else 0
+        # an accidental frame from the UAV may be refused too
+        extra = acc["uav"] if name == "refused" else 0
         if not want - lost <= got <= want + extra:
             failed.append(
                 f"{name}: counted {got}, expected {want}"

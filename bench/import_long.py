@@ -90,9 +90,8 @@ def write_video(path: Path, seconds: float, size: tuple[int, int], start_s: floa
         s.width, s.height, s.pix_fmt = w, h, "yuv420p"
         s.time_base = Fraction(1, FPS)
         for i in range(n):
-            angle = float(
-                yaw_deg(start_s + i / FPS)
-            )  # looking down, a yaw to the right turns the image left
+            # looking down, a yaw to the right turns the image left
+            angle = float(yaw_deg(start_s + i / FPS))
             M = cv2.getRotationMatrix2D((side / 2, side / 2), angle, 1.0)
             M[:, 2] -= [(side - w) / 2, (side - h) / 2]
             img = cv2.warpAffine(floor, M, (w, h))

@@ -208,9 +208,8 @@ def table(runs: dict, frames: int, duration: float, data: dict) -> list[str]:
     for variant, rs in runs.items():
         walls = [wall for wall, *_ in rs]
         fps = frames / statistics.median(walls)
-        paired = sorted(
-            d / w for d, w in zip(decode_walls, walls)
-        )  # each round against its own decode-only run
+        # each round against its own decode-only run
+        paired = sorted(d / w for d, w in zip(decode_walls, walls))
         speed = (
             f"{'':49s}"
             if variant.startswith("start-up")

@@ -109,9 +109,10 @@ def bench(path: Path) -> dict:
     out["awaiting_far_estimate"] = {**_ms(searching), "state": ts.state.value}
 
     tr = session.track
+    # UUV visible
     k = next(
         i for i in range(len(t) // 2, len(t)) if np.isfinite(np.interp(t[i], tr["t"], tr["u"]))
-    )  # UUV visible
+    )
     u, v = float(np.interp(t[k], tr["t"], tr["u"])), float(np.interp(t[k], tr["t"], tr["v"]))
     clicks = [
         _timed(TrackingSession(cal).select, frames[k], pose, k, point=(u + 2.0, v - 1.0))[1]
@@ -119,9 +120,8 @@ def bench(path: Path) -> dict:
     ]
     out["select_click"] = _ms(clicks)
     fps = (len(t) - 1) / (t[-1] - t[0])
-    back = min(
-        round(fps), len(t) - k - 1
-    )  # a selection 1 s back, then the catch-up through the frames held since
+    # a selection 1 s back, then the catch-up through the frames held since
+    back = min(round(fps), len(t) - k - 1)
 
     def select_and_catch_up():
         s = TrackingSession(cal)

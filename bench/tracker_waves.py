@@ -54,9 +54,8 @@ CONDITIONS = (
 )
 OCCLUSION_S = (5.0, 6.5)
 DEPTH_SWING_M = 0.2
-WRONG_LOCK_SIZES = (
-    3.0  # a located pixel further than this many UUV sizes from the truth is a wrong lock
-)
+# a located pixel further than this many UUV sizes from the truth is a wrong lock
+WRONG_LOCK_SIZES = 3.0
 BOX_PAD_PX = 3  # the generator grows the UUV's first box by this on each side (sim_fixtures.generate._first_box)
 
 #: The child: track a session as ``skyfix process`` does; JSON per frame on stdout.

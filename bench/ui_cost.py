@@ -163,9 +163,8 @@ def encode_baseline(session_dir: Path, n: int = 100) -> dict:
     with open_video(session.video_path) as video:
         image = next(iter(video)).image
     encode_jpeg(image, 960, 80)
-    t0 = (
-        time.process_time()
-    )  # CPU, OpenCV's helper threads included (this process does nothing else meanwhile)
+    # CPU, OpenCV's helper threads included (this process does nothing else meanwhile)
+    t0 = time.process_time()
     for _ in range(n):
         encode_jpeg(image, 960, 80)
     ms = (time.process_time() - t0) / n * 1000.0

@@ -264,9 +264,8 @@ def uuv_result(
         "mae_m": round(float(err.mean()), 4) if keys else None,
         "max_err_m": round(float(err.max()), 4) if keys else None,
         "valid_fixes": len(err),
-        "nearer_other_vehicle": int(
-            (other <= err).sum()
-        ),  # valid GPS_INPUT nearer the other vehicle than its own
+        # valid GPS_INPUT nearer the other vehicle than its own
+        "nearer_other_vehicle": int((other <= err).sum()),
     }
 
 
@@ -423,9 +422,8 @@ def live(session: Path, work: Path, ids, profile_s: float = 0.0) -> dict:
         },
         "station_minus_gnss_s": to_station,
         "cpu_s_per_video_s": round(cpu_s / (t1 - t0), 3),
-        "host_busy_pct": round(
-            100.0 * busy / total, 1
-        ),  # the whole machine, every core, over the video's span
+        # the whole machine, every core, over the video's span
+        "host_busy_pct": round(100.0 * busy / total, 1),
         "rss_mb": {"peak": round(peak_mb, 1), "end": round(float(s[-1, 2]), 1)},
         "gil_profile": gil_summary(work / "py-spy.txt") if profile_s > 0 else None,
         "per_uuv": {

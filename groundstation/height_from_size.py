@@ -323,9 +323,8 @@ class OnlineHeightFromSize:
         pool = ProcessPoolExecutor(
             1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process
         )
-        pool.submit(
-            importlib.import_module, __name__
-        )  # the process starts and imports now, not at the first frame
+        # the process starts and imports now, not at the first frame
+        pool.submit(importlib.import_module, __name__)
         shared = SharedFrame()
         try:
             while not stop.is_set():

@@ -315,9 +315,8 @@ class Replay:
             t_first = float(self.frames["t"][0])
             t0 = t_first + shift + args.video_delay_ms / 1000.0
             cuts = Cuts(args.cut, "video")
-            zenoh_out = args.video_out.startswith(
-                "zenoh:"
-            )  # as BlueOS's camera manager publishes it
+            # as BlueOS's camera manager publishes it
+            zenoh_out = args.video_out.startswith("zenoh:")
             threads.append(
                 threading.Thread(
                     target=partial(publish_video, session=session) if zenoh_out else send_video,

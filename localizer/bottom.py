@@ -89,9 +89,8 @@ class Priors:
     yaw_rad: float = np.radians(10.0)  # the heading bias's
     walk_rate_m: float = 0.2  # GNSS walk: 1-sigma of its change over 1 s, growing with √time (m/√s)
     knot_spacing_s: float = 2.0  # the walk's knots
-    white_m: float = (
-        0.0  # the reported position's white noise, 1-sigma per axis (m): per-frame offsets; 0: none
-    )
+    # the reported position's white noise, 1-sigma per axis (m): per-frame offsets; 0: none
+    white_m: float = 0.0
     pixel_px: float = 0.7  # a tracked floor point's 1-sigma in u and v
     floor_depth_m: float | None = None  # given: not estimated
     floor_depth_prior_m: float = 100.0  # estimated: its (weak) prior's 1-sigma about the start
@@ -106,12 +105,10 @@ class FramePoses:
     R_ned_from_cv: np.ndarray  # (K, 3, 3)
     camera_ne_m: np.ndarray  # (K, 2) the camera's horizontal position in a local frame
     height_m: np.ndarray  # the camera above the water
-    bias_heading_rad: np.ndarray | None = (
-        None  # the tilt bias's frame (see the module doc); None: 0 (North, East)
-    )
-    velocity_ne_mps: np.ndarray | None = (
-        None  # (K, 2) the reported horizontal velocity; None: not used
-    )
+    # the tilt bias's frame (see the module doc); None: 0 (North, East)
+    bias_heading_rad: np.ndarray | None = None
+    # (K, 2) the reported horizontal velocity; None: not used
+    velocity_ne_mps: np.ndarray | None = None
 
 
 @dataclass
@@ -139,9 +136,8 @@ class BottomEstimate:
     sigma_walk_ne_m: np.ndarray  # (J, 2): relative to the mean (which is held at 0)
     features_ne_m: np.ndarray  # (F, 2)
     rms_px: float  # of the inlying residuals, each of u and v, pixels
-    slide_share: (
-        float  # how far the features slid in the image (:func:`slide_share`), share of its diagonal
-    )
+    # how far the features slid in the image (:func:`slide_share`), share of its diagonal
+    slide_share: float
     n_observations: int
     n_features: int
     n_frames: int
@@ -412,9 +408,8 @@ class _Problem:
         rays = pixel_to_ray(
             camera, np.stack([u, u + _PIXEL_STEP, u]), np.stack([v, v, v + _PIXEL_STEP])
         )
-        self.d0 = np.einsum(
-            "mij,kmj->kmi", R, rays
-        )  # the reported rays in NED, and of the moved pixels
+        # the reported rays in NED, and of the moved pixels
+        self.d0 = np.einsum("mij,kmj->kmi", R, rays)
         self.h = np.broadcast_to(self.h, (3, self.M))
         t = np.asarray(poses.t_s, dtype=float)
         self.knots = knot_times(t, priors.knot_spacing_s)
@@ -436,9 +431,8 @@ class _Problem:
     def offsets(self, g):
         """Horizontal offsets (3, M, 2) from the camera of each observation's pixel and of the pixel moved by
         :data:`_PIXEL_STEP` in u and in v, for globals ``g``."""
-        w = -bias_rotvec(
-            g[:2], g[2], self.psi
-        )  # the true rays: the reported ones turned back by the error
+        # the true rays: the reported ones turned back by the error
+        w = -bias_rotvec(g[:2], g[2], self.psi)
         d = _rotate(np.broadcast_to(w, self.d0.shape), self.d0)
         off, _ = offset_from_ray(d, self.h, np.full(self.h.shape, g[3]), self.n_water)
         return off
@@ -520,9 +514,8 @@ class _Problem:
                 xs = x.copy()
                 xs[i] += step
                 glob[:, i] = ((self.observation_residuals(xs) - base) / step).ravel()
-        rows = np.repeat(
-            np.arange(2 * M).reshape(M, 2), 2, axis=1
-        )  # (M, 4): row (m, a) against columns (b = 0, 1)
+        # (M, 4): row (m, a) against columns (b = 0, 1)
+        rows = np.repeat(np.arange(2 * M).reshape(M, 2), 2, axis=1)
         pairs = [
             (N_GLOBAL + 2 * self.j, Aw * (1 - self.s)[:, None, None]),
             (N_GLOBAL + 2 * (self.j + 1), Aw * self.s[:, None, None]),
@@ -723,9 +716,8 @@ def _estimate(
     inliers = norm < 3.0 * priors.loss_scale
     n_dense = prob.first_feature
     dof = max(1, 2 * int(inliers.sum()) - prob.n_params + 4)
-    scale2 = max(
-        1.0, float(np.sum(norm[inliers] ** 2) / dof)
-    )  # never claim better than the pixel sigma
+    # never claim better than the pixel sigma
+    scale2 = max(1.0, float(np.sum(norm[inliers] ** 2) / dof))
     cov = _covariance(sp.csr_matrix(fit.jac), n_dense, scale2)
     g, walk, _, feats = prob.unpack(x)
     cov_walk = np.diagonal(cov[N_GLOBAL:, N_GLOBAL:])[: 2 * prob.J].reshape(prob.J, 2)

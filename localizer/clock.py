@@ -28,9 +28,8 @@ class _WindowMin:
 
     def __init__(self, window_s: float):
         self.window_s = window_s
-        self._q: deque[tuple[float, float, object]] = (
-            deque()
-        )  # (arrival, value, payload), values increasing
+        # (arrival, value, payload), values increasing
+        self._q: deque[tuple[float, float, object]] = deque()
 
     def clear(self) -> None:
         self._q.clear()
@@ -93,9 +92,8 @@ class ClockMap:
         self.segments = 0  # restarts seen (reboots of the source, steps of the station clock)
         self.reboots = 0  # those of them where the source's time went back (the source rebooted)
         self.outliers = 0  # samples not used
-        self.last_restart: tuple[float, float] | None = (
-            None  # (source time before, source time after)
-        )
+        # (source time before, source time after)
+        self.last_restart: tuple[float, float] | None = None
 
     def _fits(self, source_s: float, arrival_s: float) -> bool:
         off = self.offset_s

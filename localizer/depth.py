@@ -215,14 +215,12 @@ class ArduSubDepth:
         self.ekf: tuple[float, float] | None = None  # (t, depth) of the newest EKF depth
         self.vspeed_mps = math.nan  # GLOBAL_POSITION_INT.vz, positive down
         self.pressure: tuple[float, float] | None = None  # (t, depth) of the newest pressure depth
-        self.disagreement_m: float | None = (
-            None  # pressure depth − EKF depth at the newest cross-check
-        )
+        # pressure depth − EKF depth at the newest cross-check
+        self.disagreement_m: float | None = None
         self.disagreeing = False
         self.reboots = 0
-        self.zero_not_followed_pa: float | None = (
-            None  # ArduSub's depth sensor zero taken under water, not followed
-        )
+        # ArduSub's depth sensor zero taken under water, not followed
+        self.zero_not_followed_pa: float | None = None
         self.refusal: str | None = None
         self.notices: list[str] = []
         self._received: set[str] = set()  # parameters received since the autopilot's last (re)boot

@@ -92,9 +92,8 @@ class Other:
     depth_m: float
     track: UuvTrack | None
     valid: bool = False  # its own fixes are valid now: its track says where it is
-    on_viewer: np.ndarray | None = (
-        None  # its recent target, which its gate found to be the viewer's UUV
-    )
+    # its recent target, which its gate found to be the viewer's UUV
+    on_viewer: np.ndarray | None = None
 
     def near(self, z: np.ndarray) -> float | None:
         """The distance (m) from ``z`` to its target or track's position, whichever is nearer, when under

@@ -47,38 +47,31 @@ class Fix:
     cov_ne_m2: float = float("nan")
     t_gnss: float = float("nan")  # the exposure as GNSS (UNIX) time; NaN without SYSTEM_TIME
     height_m: float = float("nan")  # the camera's height above the water used
-    sigma_height_m: float = float(
-        "nan"
-    )  # 1-sigma of the inputs as they went into h_acc_m: the height ...
+    # 1-sigma of the inputs as they went into h_acc_m: the height ...
+    sigma_height_m: float = float("nan")
     sigma_depth_m: float = float("nan")  # ... the depth ...
     sigma_time_s: float = float("nan")  # ... and the frame's time against the telemetry
-    sigma_pixel_px: float = float(
-        "nan"
-    )  # the tracker's 1-sigma of each of u and v as it went into h_acc_m (pixels)
-    sigma_uav_m: float = float(
-        "nan"
-    )  # the UAV position's horizontal 1-sigma (GNSS) as it went into h_acc_m
+    # the tracker's 1-sigma of each of u and v as it went into h_acc_m (pixels)
+    sigma_pixel_px: float = float("nan")
+    # the UAV position's horizontal 1-sigma (GNSS) as it went into h_acc_m
+    sigma_uav_m: float = float("nan")
     height_source: str = ""  # where each input came from (see localizer.pose.CameraPose)
     depth_source: str = ""
     time_source: str = ""
     frame: int = -1
     confidence: float = float("nan")  # tracker's, 0..1
     # the pose as estimated beyond the telemetry (groundstation.offline.bottom); "" and NaN: the telemetry's as reported
-    pose_source: str = (
-        ""  # "bottom": the attitude and position corrected by what the static floor told
-    )
-    cam_err_n_deg: float = float(
-        "nan"
-    )  # the camera attitude error taken off (reported − true, NED rotation vector)
+    # "bottom": the attitude and position corrected by what the static floor told
+    pose_source: str = ""
+    # the camera attitude error taken off (reported − true, NED rotation vector)
+    cam_err_n_deg: float = float("nan")
     cam_err_e_deg: float = float("nan")
     cam_err_d_deg: float = float("nan")
-    sigma_tilt_deg: float = float(
-        "nan"
-    )  # its 1-sigmas (NaN: not estimated, the calibration's in h_acc)
+    # its 1-sigmas (NaN: not estimated, the calibration's in h_acc)
+    sigma_tilt_deg: float = float("nan")
     sigma_yaw_deg: float = float("nan")
-    walk_n_m: float = float(
-        "nan"
-    )  # the position correction applied (true = reported + it), about the GNSS's mean
+    # the position correction applied (true = reported + it), about the GNSS's mean
+    walk_n_m: float = float("nan")
     walk_e_m: float = float("nan")
     sigma_walk_m: float = float("nan")  # its horizontal 1-sigma
 

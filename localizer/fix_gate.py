@@ -248,9 +248,8 @@ class FixGate:
         self.judge_track = judge_track
         self.fleet, self.uuv_id = fleet, uuv_id
         self.sighting: Sighting | None = None  # the newest target (:mod:`localizer.exchange`)
-        self.encounter: Encounter | None = (
-            None  # the target came near another UUV's: not told apart yet
-        )
+        # the target came near another UUV's: not told apart yet
+        self.encounter: Encounter | None = None
         self.valid_t = -math.inf  # the last valid fix (the gate's base)
         if fleet is not None:
             fleet.join(uuv_id, self)
@@ -267,17 +266,15 @@ class FixGate:
         self._now = -math.inf
         self.state = "acquiring"
         self.state_since_t: float | None = None
-        self.track: UuvTrack | None = (
-            None  # the last confirmed track: while acquiring, where the UUV was
-        )
+        # the last confirmed track: while acquiring, where the UUV was
+        self.track: UuvTrack | None = None
         self.scatter = Scatter()
         self._ref: tuple[float, float] | None = None  # lat, lon of the local frame's origin
         self._chain: list[_Seen] = []
         self._chain_track: UuvTrack | None = None
         self._chain_misses = 0  # fixes in a row that disagreed with the chain
-        self._refusing_since: float | None = (
-            None  # tracking: the first refused fix since the last accepted
-        )
+        # tracking: the first refused fix since the last accepted
+        self._refusing_since: float | None = None
         self._diverged_until = -math.inf
         self._last_t = -math.inf
         self._new_lock = True  # the next ok fix is the first of the tracker's lock (after a loss)
@@ -286,9 +283,8 @@ class FixGate:
         self._shift = 0.0  # the station clock's steps since the first arrival (s): a fix's time is t_unix − this
         self._base: float | None = None  # station minus monotonic clock (s) at the first arrival
         self._offset: float | None = None  # ... and at the last
-        self._gap: float | None = (
-            None  # the last frame's exposure-to-arrival gap on the station clock (s)
-        )
+        # the last frame's exposure-to-arrival gap on the station clock (s)
+        self._gap: float | None = None
         self.clock_steps = 0
         self.last_clock_step_s: float | None = None
         self.confirmed_t: tuple[
@@ -495,9 +491,8 @@ class FixGate:
             o.on_viewer is not None and np.hypot(*(o.on_viewer - f.z)) < SAME_SPOT_M
             for o in others.values()
         ):
-            self.encounter = (
-                None  # another UUV's tracker on this one, as its gate found: this is this UUV
-            )
+            # another UUV's tracker on this one, as its gate found: this is this UUV
+            self.encounter = None
             return None
         enc = self.encounter
         if enc is None:

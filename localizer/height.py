@@ -150,13 +150,11 @@ class _Aux(NamedTuple):
 
     sigma_g: float  # the GNSS altitude's slow error's 1-sigma in force (NaN before one came)
     fix: int  # its fix type (-1 before)
-    S: (
-        float | None
-    )  # the water altitude GNSS altitudes are referred to (take-off: the first difference)
+    # the water altitude GNSS altitudes are referred to (take-off: the first difference)
+    S: float | None
     refused: tuple = ()  # (source, measurements refused in a row) of the sources whose newest was refused
-    z_prev: float = (
-        math.nan
-    )  # the previous GNSS measurement (NaN: none since the fix type or the reference changed)
+    # the previous GNSS measurement (NaN: none since the fix type or the reference changed)
+    z_prev: float = math.nan
     scatter: tuple = (
         0,
         0.0,
@@ -344,9 +342,8 @@ class HeightEstimator:
             if (
                 aux.S is None
             ):  # the first: GNSS altitudes give the drift from here on; the drift so far, if its rate
-                P[_E, _D] = P[_D, _E] = (
-                    0.0  # is learnt, is not inferred from it (only a take-off reference's S is unset)
-                )
+                # is learnt, is not inferred from it (only a take-off reference's S is unset)
+                P[_E, _D] = P[_D, _E] = 0.0
             S = alt - h_e if aux.S is None else aux.S
             z = alt - h_e - S
             scatter = _scattered(aux, z)

@@ -53,20 +53,17 @@ class CameraPose:
     omega_ned: np.ndarray  # (N, 3) the camera's angular velocity in NED, rad/s
     velocity_ned_mps: np.ndarray  # (N, 3) the UAV's velocity in NED, m/s
     t_gnss: np.ndarray  # the frame's time as GNSS (UNIX) time; NaN without SYSTEM_TIME
-    geoid_separation_m: (
-        np.ndarray
-    )  # ellipsoid minus mean sea level at the UAV (GPS_RAW_INT); NaN if unknown
+    # ellipsoid minus mean sea level at the UAV (GPS_RAW_INT); NaN if unknown
+    geoid_separation_m: np.ndarray
     # each input's 1-sigma as it goes into the fix's accuracy, and where the input came from (a word per frame)
     sigma_height_m: np.ndarray  # the camera's height above the water
     sigma_depth_m: np.ndarray  # the UUV's depth
     sigma_time_s: np.ndarray  # the frame's time against the telemetry's
-    height_source: (
-        np.ndarray
-    )  # object array of str: what measured the height (localizer.height), e.g. "gnss_rtk"
+    # object array of str: what measured the height (localizer.height), e.g. "gnss_rtk"
+    height_source: np.ndarray
     depth_source: np.ndarray
-    time_source: (
-        np.ndarray
-    )  # how the frame is aligned to the telemetry: configured, timesync, motion or unknown
+    # how the frame is aligned to the telemetry: configured, timesync, motion or unknown
+    time_source: np.ndarray
 
 
 def take(pose: CameraPose, idx) -> CameraPose:
@@ -175,9 +172,8 @@ def uav_pose(
     offset_gnss = tel.station_minus_gnss_s
 
     offset_ned = np.einsum("nij,j->ni", R_body, np.asarray(cal.mount.camera_offset_m))
-    height = ekf_height_error(
-        cal.water, cal.sigmas, tel, tq
-    )  # the barometer's drift, from GNSS, a rangefinder, ...
+    # the barometer's drift, from GNSS, a rangefinder, ...
+    height = ekf_height_error(cal.water, cal.sigmas, tel, tq)
     uav_h = (
         height_above_surface_m(
             p[:, 2], p[:, 3], cal.water.takeoff_height_above_surface_m, cal.water.surface_amsl_m

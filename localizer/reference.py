@@ -66,9 +66,8 @@ class Offsets:
     offset_ne_m: np.ndarray
     sigma_ne_m: np.ndarray
     sightings: np.ndarray
-    jacobian: (
-        np.ndarray
-    )  # (N, 2, 4) the sightings' pose_jacobian averaged as the offset is (NaN where none)
+    # (N, 2, 4) the sightings' pose_jacobian averaged as the offset is (NaN where none)
+    jacobian: np.ndarray
 
     def describe(self) -> str:
         """One line: the offset found (median over the times that have one) and its 1-sigma."""
@@ -140,9 +139,8 @@ def offsets(t_sight, offset_ne_m, jacobian, t_unix, ref_sigma_m: float = 0.0) ->
         if not near.any():
             continue
         block = np.floor((t_sight[near] - (ti - WINDOW_S / 2)) / BLOCK_S).astype(int)
-        block = np.minimum(
-            block, round(WINDOW_S / BLOCK_S) - 1
-        )  # the window's end joins its last block
+        # the window's end joins its last block
+        block = np.minimum(block, round(WINDOW_S / BLOCK_S) - 1)
         labels, which = np.unique(block, return_inverse=True)
         if len(labels) < MIN_BLOCKS:
             continue
@@ -168,9 +166,8 @@ def correct(cal: Calibration, pose: CameraPose, fixes: Fixes, found: Offsets) ->
     if not use.any():
         return out
     n = len(pose.t_unix)
-    own = dataclasses.replace(
-        pose, sigma_uav_m=np.zeros(n), sigma_height_m=np.zeros(n)
-    )  # the shared terms taken out: ...
+    # the shared terms taken out: ...
+    own = dataclasses.replace(pose, sigma_uav_m=np.zeros(n), sigma_height_m=np.zeros(n))
     own_cal = dataclasses.replace(
         cal, sigmas=dataclasses.replace(cal.sigmas, tilt_deg=0.0, yaw_deg=0.0)
     )
@@ -178,9 +175,8 @@ def correct(cal: Calibration, pose: CameraPose, fixes: Fixes, found: Offsets) ->
     # ... and put back as what they move the UUV and the reference differently
     diff = pose_jacobian(cal, pose, fixes.u, fixes.v, pose.depth_m)[use] - found.jacobian[use]
     tilt, yaw = np.radians(cal.sigmas.tilt_deg), np.radians(cal.sigmas.yaw_deg)
-    scale = np.stack(
-        np.broadcast_arrays(tilt, tilt, yaw, pose.sigma_height_m[use]), axis=-1
-    )  # (K, 4)
+    # (K, 4)
+    scale = np.stack(np.broadcast_arrays(tilt, tilt, yaw, pose.sigma_height_m[use]), axis=-1)
     js = diff * scale[:, None, :]
     cov = np.einsum("kaj,kbj->kab", js, js)
     s = found.sigma_ne_m[use]

@@ -53,9 +53,8 @@ def box_corners_px(
     fwd = _CORNERS[:, 0] * (uuv.length_m / 2.0)
     right = _CORNERS[:, 1] * (uuv.width_m / 2.0)
     c, s = np.cos(heading)[..., None], np.sin(heading)[..., None]
-    face = centre[..., None, :] + np.stack(
-        [c * fwd - s * right, s * fwd + c * right], axis=-1
-    )  # (..., 4, 2)
+    # (..., 4, 2)
+    face = centre[..., None, :] + np.stack([c * fwd - s * right, s * fwd + c * right], axis=-1)
     ne = np.concatenate([face, face], axis=-2)
     hh = np.broadcast_to(h[..., None], ne.shape[:-1])
     depth = np.broadcast_to(np.repeat([d, d + uuv.height_m], 4), ne.shape[:-1])
@@ -77,9 +76,8 @@ def point_to_pixel(camera: Camera, R_ned_from_cv, offset_ne_m, height_m, depth_m
     ray_ned = np.concatenate(
         [ne * scale[..., None], np.broadcast_to(h, rho.shape)[..., None]], axis=-1
     )
-    return ray_to_pixel(
-        camera, np.einsum("...ji,...j->...i", np.asarray(R_ned_from_cv), ray_ned)
-    )  # R^T · ray
+    # R^T · ray
+    return ray_to_pixel(camera, np.einsum("...ji,...j->...i", np.asarray(R_ned_from_cv), ray_ned))
 
 
 def _surface_distance(
@@ -152,9 +150,8 @@ class EdgePoints:
         """The points' positions (..., K, 2) on the same edges of other corner positions (..., 8, 2)."""
         c = np.asarray(corners, dtype=float)
         lead = c.shape[:-2]
-        a = np.repeat(
-            self.along, 2
-        )  # (2K,): x and y alike, so that NumPy's loops run along the points
+        # (2K,): x and y alike, so that NumPy's loops run along the points
+        a = np.repeat(self.along, 2)
         first = np.take(c, self.first, axis=-2).reshape(*lead, -1)
         second = np.take(c, self.second, axis=-2).reshape(*lead, -1)
         return ((1.0 - a) * first + a * second).reshape(*lead, len(self.along), 2)
@@ -175,14 +172,12 @@ def edge_points(
     length_px = np.hypot(e[:, 0], e[:, 1])
     keep = length_px >= min_edge_px  # also leaves out NaN
     first, second, e, length_px = first[keep], second[keep], e[keep], length_px[keep]
-    count = np.maximum(
-        2, (length_px * (1.0 - 2.0 * trim) / spacing_px).astype(int) + 1
-    )  # points per edge
+    # points per edge
+    count = np.maximum(2, (length_px * (1.0 - 2.0 * trim) / spacing_px).astype(int) + 1)
     edge = np.repeat(np.arange(len(count)), count)  # each point's edge
     last = np.cumsum(count) - 1  # each edge's last point
-    index = (
-        np.arange(len(edge)) - (last - count + 1)[edge]
-    )  # each point's place on its edge: 0, 1, ...
+    # each point's place on its edge: 0, 1, ...
+    index = np.arange(len(edge)) - (last - count + 1)[edge]
     along = index * (((1.0 - trim) - trim) / (count - 1))[edge] + trim
     along[last] = 1.0 - trim
     normal = np.stack([e[:, 1], -e[:, 0]], axis=-1) / length_px[:, None]
@@ -306,9 +301,8 @@ class HeightBias:
         if not self.heights:
             return None
         b = np.array([h.bias_m for h in self.heights])
-        s = np.maximum(
-            [h.sigma_m for h in self.heights], 1e-3
-        )  # a perfect fit is not an infinite weight
+        # a perfect fit is not an infinite weight
+        s = np.maximum([h.sigma_m for h in self.heights], 1e-3)
         t = np.array([h.t_unix for h in self.heights])
         median = float(np.median(b))
         spread = 1.4826 * float(np.median(np.abs(b - median)))

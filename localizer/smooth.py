@@ -85,9 +85,8 @@ class Smoothed:
     gap_s: np.ndarray
     white_share: float  # s², measured over the recording: frame to frame, or over a wave's period when that is larger
     wave_share: float  # the share measured over a wave's period (NaN: too few fixes)
-    accel_mps2: (
-        np.ndarray
-    )  # per frame: the acceleration bound of the process noise over the step to it
+    # per frame: the acceleration bound of the process noise over the step to it
+    accel_mps2: np.ndarray
 
     @property
     def cov_m2(self) -> np.ndarray:
@@ -145,9 +144,8 @@ def smooth_fixes(
     wave = jitter_share(fits, C[idx])
     gap = _gaps(fixes.t_unix, idx)
     accel = np.full(n, float(max_accel_mps2))
-    correlated = (
-        wave >= CORRELATED_RATIO * share
-    )  # the noise does not average from frame to frame: waves' jitter
+    # the noise does not average from frame to frame: waves' jitter
+    correlated = wave >= CORRELATED_RATIO * share
     if correlated:
         share = min(1.0, wave)
         accel = data_accel_mps2(fixes.t_unix, idx, gap, fits, C[idx], share, max_accel_mps2)
@@ -200,13 +198,11 @@ class LocalFits:
     of it, itself included; NaN where fewer than :data:`WAVE_MIN_FIXES`."""
 
     resid_m: np.ndarray  # N×2: the fix minus the quadratic at its time
-    leverage: (
-        np.ndarray
-    )  # N: the quadratic's weight on its own fix (the residual's variance: 1 − this of the noise's)
+    # N: the quadratic's weight on its own fix (the residual's variance: 1 − this of the noise's)
+    leverage: np.ndarray
     accel_mps2: np.ndarray  # N×2: the quadratic's acceleration (twice its second-order coefficient)
-    accel_gain: (
-        np.ndarray
-    )  # N: the acceleration's variance per unit variance of the noise on one axis
+    # N: the acceleration's variance per unit variance of the noise on one axis
+    accel_gain: np.ndarray
 
 
 def local_fits(t: np.ndarray, z: np.ndarray, span_s: float = WAVE_SPAN_S) -> LocalFits:

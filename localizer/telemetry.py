@@ -42,9 +42,8 @@ from .timeline import Series
 
 #: Station-clock disagreements (seconds) worth telling the operator about.
 CLOCK_NOTICE_S = 0.1
-DEG_PER_M = math.degrees(
-    1.0 / 6_378_137.0
-)  # latitude degrees per metre north (sphere; for rates only)
+# latitude degrees per metre north (sphere; for rates only)
+DEG_PER_M = math.degrees(1.0 / 6_378_137.0)
 _NOTICE_AFTER = 3  # samples before a clock offset is reported
 #: A SYSTEM_TIME sample of the station-minus-GNSS offset this far (s) from the median is a step of the station clock
 #: (NTP, an operator) once :data:`GNSS_STEP_SAMPLES` of them in a row agree within :data:`GNSS_STEP_AGREE_S`: the
@@ -61,9 +60,8 @@ LATENCY_SOURCES = {
     "unknown": "neither stated, measured nor estimated: taken as 0, its 1-sigma [timing] unknown_latency_sigma_s",
 }
 
-_BOOT_USEC_MAX = (
-    10**15
-)  # a GPS_RAW_INT time_usec below this (31 years) counts from the autopilot's boot
+# a GPS_RAW_INT time_usec below this (31 years) counts from the autopilot's boot
+_BOOT_USEC_MAX = 10**15
 
 
 class DepthSeries(Series):
@@ -89,20 +87,17 @@ class Telemetry:
     def __init__(self, timing: Timing | None = None, keep_s: float | None = None):
         self.timing = timing = timing or Timing()
         w = timing.clock_window_s
-        self.uav_clock = ClockMap(
-            w
-        )  # the autopilot's time_boot_ms (the component that sends ATTITUDE)
+        # the autopilot's time_boot_ms (the component that sends ATTITUDE)
+        self.uav_clock = ClockMap(w)
         self._component_clocks: dict[
             int, ClockMap
         ] = {}  # other components' boot clocks (a MAVLink gimbal)
         self.timesync = RoundTrip(w)
         self._measured_latency_s: float | None = None
-        self.measured_latency_from_s: float | None = (
-            None  # arrival (station s) of the first TIMESYNC measurement
-        )
-        self._motion_latency: tuple[float, float] | None = (
-            None  # (delay, 1-sigma) from the video's motion, s
-        )
+        # arrival (station s) of the first TIMESYNC measurement
+        self.measured_latency_from_s: float | None = None
+        # (delay, 1-sigma) from the video's motion, s
+        self._motion_latency: tuple[float, float] | None = None
         self._gnss = Median()  # arrival-scale minus GNSS time, per SYSTEM_TIME
         self._gnss_new: list[
             float
@@ -128,17 +123,14 @@ class Telemetry:
         # absolute measurements of the UAV's height above the water, per source ("rangefinder", "size", ...):
         # the reported position's height (m) and its 1-sigma (m), on the UAV buffers' time scale
         self.height_fixes: dict[str, Series] = {}
-        self.height_estimator = (
-            None  # the height filter over them (localizer.height), made on first use
-        )
+        # the height filter over them (localizer.height), made on first use
+        self.height_estimator = None
         self.armed: bool | None = None  # the autopilot's HEARTBEAT SAFETY_ARMED flag, once seen
         self.arm_times: list[float] = []  # when it armed (UAV buffers' scale), transitions seen
-        self.distance_sensor_seen = (
-            False  # a downward DISTANCE_SENSOR came: ArduPilot's RANGEFINDER is its copy
-        )
-        self.rangefinder_out_of_range = (
-            0  # readings at or beyond their range: no return from the water
-        )
+        # a downward DISTANCE_SENSOR came: ArduPilot's RANGEFINDER is its copy
+        self.distance_sensor_seen = False
+        # readings at or beyond their range: no return from the water
+        self.rangefinder_out_of_range = 0
         self._keep_s = keep_s
         self.autopilot_component: int | None = None
         self.mount_type: int | None = None  # the autopilot's MNT1_TYPE parameter, once seen

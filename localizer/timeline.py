@@ -38,9 +38,8 @@ STALE = 3  # the newest sample is too old
 class Sampled(NamedTuple):
     values: np.ndarray  # (..., ncols); NaN where status is not OK
     status: np.ndarray  # (...) int8
-    error: (
-        np.ndarray
-    )  # (..., ncols) 1-sigma estimate of the extrapolation/hold error; 0 when interpolated
+    # (..., ncols) 1-sigma estimate of the extrapolation/hold error; 0 when interpolated
+    error: np.ndarray
 
 
 def _wrap(a):

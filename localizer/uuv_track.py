@@ -160,9 +160,8 @@ class UuvTrack:
         max_reach_m: float = math.inf,
     ):
         self.max_speed_mps = max_speed_mps
-        self.max_reach_m = (
-            max_reach_m  # however long since its last fix, the UUV is taken within this (m) of it
-        )
+        # however long since its last fix, the UUV is taken within this (m) of it
+        self.max_reach_m = max_reach_m
         self.max_accel_mps2 = max_accel_mps2
         self.t = t
         self.x = np.array([z[0], z[1], 0.0, 0.0])
@@ -171,9 +170,8 @@ class UuvTrack:
         self.P[2:, 2:] = np.eye(2) * max_speed_mps**2
         self.C = C  # the newest fix's covariance (m²) ...
         self.common = (1.0 - share) * C  # ... and its common part
-        self.tight = (
-            False  # its last step was judged (and filtered) with a bound tighter than the vehicle's
-        )
+        # its last step was judged (and filtered) with a bound tighter than the vehicle's
+        self.tight = False
 
     @staticmethod
     def white_m2(C: np.ndarray, share: float) -> np.ndarray:

@@ -85,9 +85,8 @@ MARK = "# synthetic session made by skyfix sim"  # first line of session.toml
 class Truth:
     """The true geometry at each frame (arrays over frames)."""
 
-    t_unix: (
-        np.ndarray
-    )  # exposure time on the ground station's clock (video_frames.csv, track.csv, truth.csv)
+    # exposure time on the ground station's clock (video_frames.csv, track.csv, truth.csv)
+    t_unix: np.ndarray
     tau_s: np.ndarray  # seconds since the first frame; true time is start_unix + tau_s
     R_ned_from_cv: np.ndarray  # (N, 3, 3)
     camera_ned: np.ndarray  # (N, 3)
@@ -96,18 +95,15 @@ class Truth:
     visible: np.ndarray  # not occluded
     u: np.ndarray  # exact distorted pixel of the reference point
     v: np.ndarray
-    second_ned: np.ndarray | None = (
-        None  # (N, 3) the second vehicle's top-face centre, if there is one
-    )
+    # (N, 3) the second vehicle's top-face centre, if there is one
+    second_ned: np.ndarray | None = None
     second_box: Box | None = None  # ... its heading, size and look
     rock: Box | None = None
-    second_u: np.ndarray | None = (
-        None  # exact distorted pixel of a second UUV's reference point (role = "uuv")
-    )
+    # exact distorted pixel of a second UUV's reference point (role = "uuv")
+    second_u: np.ndarray | None = None
     second_v: np.ndarray | None = None
-    wave_error_ne: np.ndarray | None = (
-        None  # (N, 2) the waves' own error at the UUV's pixel (wave_error_ne), if waves
-    )
+    # (N, 2) the waves' own error at the UUV's pixel (wave_error_ne), if waves
+    wave_error_ne: np.ndarray | None = None
     second_wave_error_ne: np.ndarray | None = None  # ... at a second UUV's
 
     def others(self, i: int) -> tuple[Box, ...]:
@@ -206,9 +202,8 @@ def apparent_pixel(
             uu,
             vv,
         )
-        jac = (
-            np.stack([land[:, 1] - land[:, 0], land[:, 2] - land[:, 0]], axis=-1) / h
-        )  # (N, 2 NE, 2 uv)
+        # (N, 2 NE, 2 uv)
+        jac = np.stack([land[:, 1] - land[:, 0], land[:, 2] - land[:, 0]], axis=-1) / h
         with np.errstate(invalid="ignore"):
             step = np.linalg.solve(jac, (land[:, 0] - point_ned[todo, :2])[..., None])[..., 0]
         px[todo] -= step
@@ -605,9 +600,8 @@ class Encoder:
             "libx264",
             "-preset",
             "veryfast",
-            *rate_control(
-                crf, downlink, fps
-            ),  # a keyframe every second by default, as field cameras send: a
+            # a keyframe every second by default, as field cameras send: a
+            *rate_control(crf, downlink, fps),
             # live decoder that joins late starts within a second
             "-pix_fmt",
             "yuv420p",

@@ -89,9 +89,8 @@ class Motion:
             tau_s, np.radians(u.yaw_swing_deg), 1.0 / u.yaw_period_s, ph[0]
         )
         tilt = np.radians(u.tilt_deg) + _wave(tau_s, np.radians(u.gust_deg), 0.27, ph[1])
-        lean = (
-            np.radians(u.wind_from_deg) - yaw
-        )  # the airframe leans towards where the wind comes from
+        # the airframe leans towards where the wind comes from
+        lean = np.radians(u.wind_from_deg) - yaw
         roll, pitch = tilt * np.sin(lean), -tilt * np.cos(lean)
         if u.wobble_deg:
             w = np.radians(u.wobble_deg)

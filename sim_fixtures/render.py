@@ -40,9 +40,8 @@ from .waves import downwind_rad, phase_speed, wave_field
 
 FLOOR_M_PER_PX = 0.015
 SKY_BGR = np.array([235.0, 215.0, 200.0], np.float32)
-GLINT_HAZE = (
-    0.1  # the smooth part of the sun's glint; the rest comes in sparkles from surface ripples
-)
+# the smooth part of the sun's glint; the rest comes in sparkles from surface ripples
+GLINT_HAZE = 0.1
 MIN_CONTRAST = 1.0  # grey levels: the UUV counts as visible only if it changes its box at least this much (RMS)
 GREY_BGR = np.array([0.114, 0.587, 0.299])  # luma weights (as cv2.COLOR_BGR2GRAY)
 
@@ -78,9 +77,8 @@ class WaterPath(NamedTuple):
     down_m: np.ndarray  # (N,) its down coordinate: 0 on the flat surface, −η on a wave
     dir_water: np.ndarray  # (N, 3) unit direction in the water
     wet: np.ndarray  # (N,) False for rays that do not point down into the water (their other values are meaningless)
-    normal_up: (
-        np.ndarray | None
-    )  # (N, 3) the facets' unit normals on the air side; None: the flat surface
+    # (N, 3) the facets' unit normals on the air side; None: the flat surface
+    normal_up: np.ndarray | None
 
 
 CROSSING_ITERATIONS = 2  # fixed-point steps from the flat crossing to a wave's (the error shrinks by slope·tan θ each)
@@ -252,9 +250,8 @@ CAUSTIC_DRIFT_NE = (
     (0.11, 0.07),
     (-0.05, 0.13),
 )  # m/s: the two caustic layers' drift over a flat surface
-CAUSTIC_WAVELENGTH_M = (
-    0.4  # the caustic pattern's cells (0.12-1 m) are focused by waves about this long ...
-)
+# the caustic pattern's cells (0.12-1 m) are focused by waves about this long ...
+CAUSTIC_WAVELENGTH_M = 0.4
 CAUSTIC_SPREAD_DEG = 30.0  # ... that travel downwind, ± this
 
 
@@ -331,9 +328,8 @@ class Renderer:
         el, az = np.radians(sc.render.sun_elevation_deg), np.radians(sc.render.sun_azimuth_deg)
         self.sun_up_ned = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
         self.shadow = sc.render.shadow if sc.render.sun_elevation_deg > 0 else 0.0
-        self.sunlight_in_water = refract_into_water(
-            -self.sun_up_ned, self.n_water
-        )  # going down, unit
+        # going down, unit
+        self.sunlight_in_water = refract_into_water(-self.sun_up_ned, self.n_water)
         self._ray_tiles: OrderedDict[int, np.ndarray] = OrderedDict()  # see _rays
 
     # --- geometry shared with the tests ------------------------------------------------------------
@@ -697,9 +693,8 @@ class Renderer:
         gain = fields["gain"]
         k = self.sc.render.caustics
         sun = None  # the sunlight's factor on the floor: the caustics, and the shadows
-        caustics = (
-            None  # the frame's caustic texture where it lights the vehicles too (under waves)
-        )
+        # the frame's caustic texture where it lights the vehicles too (under waves)
+        caustics = None
         if k > 0:
             texture_now = self._caustic_texture(view.tau_s)
             caus = cv2.remap(texture_now, fmap, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)

@@ -66,9 +66,8 @@ STREAM = {
     "baro_wander": 5,
     "baro_noise": 6,
 }
-KNOTS_PER_CORRELATION = (
-    10  # a slow error is drawn this many times per correlation time, joined by a cubic spline
-)
+# a slow error is drawn this many times per correlation time, joined by a cubic spline
+KNOTS_PER_CORRELATION = 10
 MARGIN_S = 3.0  # ... over the telemetry's span and this much beyond
 
 

@@ -67,9 +67,8 @@ GIMBAL_DEVICE_FLAGS_PITCH_LOCK = 8  # pitch relative to the horizon
 GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME = 32
 GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME = 64
 SEND_LATENCY_US = 800  # the autopilot sends a message this long after sampling it
-GCS_PARAM_COUNT = (
-    1200  # PARAM_VALUE param_count: the autopilot's number of parameters (illustrative)
-)
+# PARAM_VALUE param_count: the autopilot's number of parameters (illustrative)
+GCS_PARAM_COUNT = 1200
 
 # independent random streams: np.random.default_rng([seed, 404, STREAM[name]])
 STREAM = {
@@ -90,9 +89,8 @@ STREAM = {
     "gnss_alt_noise": 15,
 }
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # a rangefinder looking down the body's z axis
-OUT_OF_RANGE_ADD_M = (
-    1.0  # ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
-)
+# ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
+OUT_OF_RANGE_ADD_M = 1.0
 
 
 def stream(sc: Scenario, name: str):
@@ -228,9 +226,8 @@ def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
         + rng.normal(0.0, 1.0, len(tau)) * sc.telemetry.height_noise_m
         + gnss_alt_error_m(sc, tau)
     )
-    alt = alt + stream(sc, "gnss_alt_noise").normal(
-        0.0, u.gnss_alt_noise_m, len(tau)
-    )  # its own stream: 0 adds 0
+    # its own stream: 0 adds 0
+    alt = alt + stream(sc, "gnss_alt_noise").normal(0.0, u.gnss_alt_noise_m, len(tau))
     vel = motion.uav_velocity_ned(tau)
     speed = np.hypot(vel[:, 0], vel[:, 1])
     cog = np.round(np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360 * 100).astype(int) % 36000
@@ -313,9 +310,8 @@ def _gimbal(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
     tau = clock.tau_of_us(t_us)
     att_noise = np.radians(sc.telemetry.attitude_noise_deg)
     g = levelled(sc, motion.reported_gimbal(tau)) + rng.normal(0.0, 1.0, (len(tau), 3)) * att_noise
-    vehicle_yaw = (
-        motion.uav_rpy(tau)[:, 2] + ahrs_error_rpy(sc, tau)[:, 2]
-    )  # the autopilot's heading
+    # the autopilot's heading
+    vehicle_yaw = motion.uav_rpy(tau)[:, 2] + ahrs_error_rpy(sc, tau)[:, 2]
     yaw_abs = g[:, 2] + vehicle_yaw
     if sc.mount.attitude_source == "mount_orientation":
         return "mount_orientation", [

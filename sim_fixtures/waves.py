@@ -44,9 +44,8 @@ K_M = 370.0  # rad/m: the gravity-capillary waves' slowest wavenumber (Elfouhail
 C_M = 0.23  # m/s: their phase speed there
 K_TOTAL_MAX = 10 * K_M  # Cox & Munk's total counts slopes up to here (the spectrum is ~0 beyond)
 RESOLVE_PX = 4.0  # the shortest wave resolved, in the floor's pixels at the surface, straight down
-GRID_PER_WAVELENGTH = (
-    5  # the floor's surface grids: points per shortest wavelength (interpolated bicubically)
-)
+# the floor's surface grids: points per shortest wavelength (interpolated bicubically)
+GRID_PER_WAVELENGTH = 5
 MAX_GRID_POINTS = 1_500_000  # ... and at most this many points a grid
 MARGIN = 2  # points a coarser octave's grid reaches past the finer one's on every side
 CHUNK = 1 << 21  # (points × waves) evaluated at once by the exact sums
@@ -161,9 +160,8 @@ class Spectrum:
 class WaveField:
     """One realisation: ``len(amplitude_m)`` linear waves (arrays over the waves)."""
 
-    k_ne: (
-        np.ndarray
-    )  # (M, 2) wave vectors, north and east (rad/m), pointing where each wave travels
+    # (M, 2) wave vectors, north and east (rad/m), pointing where each wave travels
+    k_ne: np.ndarray
     amplitude_m: np.ndarray  # (M,)
     omega: np.ndarray  # (M,) rad/s
     phase: np.ndarray  # (M,) rad

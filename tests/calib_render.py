@@ -40,9 +40,8 @@ class TrueCamera:
 class Texture:
     image: np.ndarray  # uint8 grey
     px_per_m: float
-    origin_px: (
-        float  # texture coordinate of the board's (0, 0) (top-left of its squares), both axes
-    )
+    # texture coordinate of the board's (0, 0) (top-left of its squares), both axes
+    origin_px: float
     size_m: tuple[float, float]  # the squares' area, width and height
 
 
@@ -115,9 +114,8 @@ def render(
     """The grey image of the board at pose (rvec, tvec): board frame → camera frame."""
     x, y = _rays(cam, ss)
     R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float))
-    H = np.column_stack(
-        [R[:, 0], R[:, 1], np.asarray(tvec, dtype=float).ravel()]
-    )  # board (X, Y, 1) → ray
+    # board (X, Y, 1) → ray
+    H = np.column_stack([R[:, 0], R[:, 1], np.asarray(tvec, dtype=float).ravel()])
     Hi = np.linalg.inv(H)
     a = Hi[0, 0] * x + Hi[0, 1] * y + Hi[0, 2]
     b = Hi[1, 0] * x + Hi[1, 1] * y + Hi[1, 2]

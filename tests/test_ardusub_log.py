@@ -15,12 +15,10 @@ from groundstation.session.ardusub_log import read_ardusub_depth
 from groundstation.testing.dataflash_log import DataflashWriter
 
 WEEK, WEEK_MS = 2447, 316_382_800  # a GPS_INPUT's time: the fix's frame exposure ...
-UNIX_FIX = (
-    315964800 + WEEK * 604800 + WEEK_MS / 1000 - 18
-)  # (GPS epoch + weeks + ms − 18 leap seconds)
-ARRIVED_BOOT_S = (
-    10.1  # ... reaching ArduSub at 10.1 s after its boot, GPS1_DELAY_MS = 100 after the exposure:
-)
+# (GPS epoch + weeks + ms − 18 leap seconds)
+UNIX_FIX = 315964800 + WEEK * 604800 + WEEK_MS / 1000 - 18
+# ... reaching ArduSub at 10.1 s after its boot, GPS1_DELAY_MS = 100 after the exposure:
+ARRIVED_BOOT_S = 10.1
 UNIX_AT_BOOT_0 = UNIX_FIX + 0.1 - ARRIVED_BOOT_S  # so ArduSub booted at UNIX_FIX − 10 s
 
 
@@ -93,16 +91,13 @@ def test_the_primary_water_sensor_is_the_depth_on_the_fixes_clock(tmp_path):
     assert len(records) == 30  # the unhealthy record (k = 7) skipped
     assert any("1 BARO records of sensor 1 unhealthy" in w for w in warnings), warnings
     first = records[0]
-    assert first["t"] == pytest.approx(
-        UNIX_AT_BOOT_0 + 11.0, abs=1e-6
-    )  # the sample's time, not the record's
-    assert first["depth_m"] == pytest.approx(
-        5.5, abs=1e-4
-    )  # −(Alt − Offset), not the air sensor's 35 m
+    # the sample's time, not the record's
+    assert first["t"] == pytest.approx(UNIX_AT_BOOT_0 + 11.0, abs=1e-6)
+    # −(Alt − Offset), not the air sensor's 35 m
+    assert first["depth_m"] == pytest.approx(5.5, abs=1e-4)
     assert first["vspeed_mps"] == pytest.approx(0.5) and first["source"] == "ardusub_pressure"
-    assert all(
-        "sigma_m" not in r for r in records
-    )  # the EKF agrees: the calibration's sigma stands
+    # the EKF agrees: the calibration's sigma stands
+    assert all("sigma_m" not in r for r in records)
     assert all(abs(r["depth_m"] - depth_at(r["t"] - UNIX_AT_BOOT_0)) < 1e-4 for r in records)
     json.dumps(records)  # as depth.jsonl holds them
 

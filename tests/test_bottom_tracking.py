@@ -66,9 +66,8 @@ def _median_flow(a, b):
 def test_floor_marks_follow_the_floor_not_the_caustics(frames):
     a, b = frames
     raw = _median_flow(a, b)
-    marks = _median_flow(
-        floor_marks(a, 7), floor_marks(b, 7)
-    )  # 7 px: CAUSTIC_WEB_M at 3 cm a pixel
+    # 7 px: CAUSTIC_WEB_M at 3 cm a pixel
+    marks = _median_flow(floor_marks(a, 7), floor_marks(b, 7))
     # the raw image's corners are the web's: they move with it (the floor's shift plus the web's drift, 5 px)
     assert np.linalg.norm(raw - FLOOR_SHIFT_PX) > 3.0
     assert np.linalg.norm(marks - FLOOR_SHIFT_PX) < 0.4  # measured 0.25

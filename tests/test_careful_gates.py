@@ -57,9 +57,8 @@ def test_a_kept_track_too_old_or_broken_is_not_read(tmp_path):
     write_track(path, {**memory, "age_s": 301.0})
     assert read_track(path, max_age_s=300.0) is None
     assert read_track(path, max_age_s=400.0)[1] == pytest.approx(301.0, abs=1.0)
-    path.write_text(
-        '{"t": 1'
-    )  # what a torn write would leave (write_track renames a whole file into place)
+    # what a torn write would leave (write_track renames a whole file into place)
+    path.write_text('{"t": 1')
     assert read_track(path, 300.0) is None and read_track(tmp_path / "none.json", 300.0) is None
 
 

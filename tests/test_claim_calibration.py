@@ -45,12 +45,10 @@ def test_wave_term_against_rays_through_drawn_facets(scene, wind_mps):
         accuracy(CAM, R, u, v, h, d, N_WATER, Sigmas(**{**vars(QUIET), "wind_mps": wind_mps}))[0]
     )
     ray = R @ np.asarray(pixel_to_ray(CAM, u, v), dtype=float)
-    s = np.random.default_rng(7).normal(
-        0.0, slope, (20000, 2)
-    )  # the surface rises s_n per metre north, s_e east
-    normal_up = np.column_stack(
-        [-s, -np.ones(len(s))]
-    )  # NED: (-s_n, -s_e, -1), up out of the water
+    # the surface rises s_n per metre north, s_e east
+    s = np.random.default_rng(7).normal(0.0, slope, (20000, 2))
+    # NED: (-s_n, -s_e, -1), up out of the water
+    normal_up = np.column_stack([-s, -np.ones(len(s))])
     normal_up /= np.linalg.norm(normal_up, axis=1, keepdims=True)
     w = snell(np.broadcast_to(ray, (len(s), 3)), normal_up, N_WATER)
     flat = snell(ray, np.array([0.0, 0.0, -1.0]), N_WATER)
@@ -99,9 +97,8 @@ def test_the_simulator_states_its_sensors_as_their_errors(tmp_path):
     tilt_rms = math.sqrt(np.mean(err["cam_err_n_deg"] ** 2 + err["cam_err_e_deg"] ** 2) / 2.0)
     assert sig["tilt_deg"] == pytest.approx(tilt_rms, rel=0.02)
     assert sig["yaw_deg"] == pytest.approx(np.mean(np.abs(err["cam_err_d_deg"])), rel=0.02)
-    assert sig["uav_horizontal_m"] == pytest.approx(
-        math.hypot(0.015, 0.015), rel=1e-3
-    )  # rtk: walk and white
+    # rtk: walk and white
+    assert sig["uav_horizontal_m"] == pytest.approx(math.hypot(0.015, 0.015), rel=1e-3)
     assert sig["wind_mps"] == 4.0
 
 

@@ -56,29 +56,24 @@ def calibrated(primary=1, ground_pa=98188.3, spec_grav=1.0) -> ArduSubDepth:
 
 def test_pressure_depth_is_ardusubs_formula_worked_by_hand():
     # AP_Baro::update, water sensor: altitude = (ground - pressure) / 9800 / BARO_SPEC_GRAV; depth = -altitude
-    assert depth_from_pressure_m(132900.0, 98188.3, 1.0) == pytest.approx(
-        34711.7 / 9800.0
-    )  # 3.54201 m
-    assert depth_from_pressure_m(132900.0, 98188.3, 1.024) == pytest.approx(
-        3.542010204 / 1.024
-    )  # sea water
+    # 3.54201 m
+    assert depth_from_pressure_m(132900.0, 98188.3, 1.0) == pytest.approx(34711.7 / 9800.0)
+    # sea water
+    assert depth_from_pressure_m(132900.0, 98188.3, 1.024) == pytest.approx(3.542010204 / 1.024)
     d = calibrated(primary=1, spec_grav=1.024)
-    assert (
-        feed(d, "SCALED_PRESSURE", 1.0, press_abs=1329.0) is None
-    )  # the onboard barometer: not the depth sensor
+    # the onboard barometer: not the depth sensor
+    assert feed(d, "SCALED_PRESSURE", 1.0, press_abs=1329.0) is None
     s = feed(d, "SCALED_PRESSURE2", 1.0, press_abs=1329.0)  # hPa
     assert s.source == "ardusub_pressure" and s.depth_m == pytest.approx(3.45899434)
-    assert s.t == pytest.approx(
-        T0_UNIX + 1.0 - LATENCY_S
-    )  # boot clock → station clock, minus the latency
+    # boot clock → station clock, minus the latency
+    assert s.t == pytest.approx(T0_UNIX + 1.0 - LATENCY_S)
     assert d.pressure_message == "SCALED_PRESSURE2" and d.wanted_params() == []
 
 
 def test_ekf_depth_stands_in_until_the_parameters_come():
     d = ArduSubDepth(sigma_m=0.05, latency_s=LATENCY_S)
-    s = gpi(
-        d, 0.0, relative_alt_mm=-1234, vz_cms=20
-    )  # no origin (alt exactly 0): depth = -relative_alt
+    # no origin (alt exactly 0): depth = -relative_alt
+    s = gpi(d, 0.0, relative_alt_mm=-1234, vz_cms=20)
     assert (s.depth_m, s.source, s.sigma_m, s.vspeed_mps) == (1.234, "ardusub_ekf", 0.05, 0.2)
     assert d.wanted_params() == ["BARO_PRIMARY", "BARO_SPEC_GRAV"]
     # param_id as mavlink-server writes it (a string), as older versions did (a list of characters), as bytes
@@ -88,15 +83,13 @@ def test_ekf_depth_stands_in_until_the_parameters_come():
     assert feed(d, "SCALED_PRESSURE2", 0.15, press_abs=1108.9) is None  # no ground pressure yet
     feed(d, "PARAM_VALUE", 0.2, param_id=b"BARO2_GND_PRESS\x00", param_value=98188.3)
     s = feed(d, "SCALED_PRESSURE2", 0.25, press_abs=1108.9)
-    assert s.source == "ardusub_pressure" and s.depth_m == pytest.approx(
-        12701.7 / 9800.0
-    )  # 1.29609 m
+    # 1.29609 m
+    assert s.source == "ardusub_pressure" and s.depth_m == pytest.approx(12701.7 / 9800.0)
     # cross-checked against the EKF 0.25 s before, moving 0.2 m/s down: 1.234 + 0.05 = 1.284, 0.012 apart
     assert d.disagreement_m == pytest.approx(1.29609 - 1.284, abs=1e-4) and s.sigma_m == 0.05
     assert gpi(d, 0.3, relative_alt_mm=-1300) is None  # the pressure is the measurement now
-    assert (
-        gpi(d, 5.0, relative_alt_mm=-1300) is None
-    )  # and stays so when it pauses: no silent switch to the EKF
+    # and stays so when it pauses: no silent switch to the EKF
+    assert gpi(d, 5.0, relative_alt_mm=-1300) is None
 
 
 def test_a_home_turns_relative_alt_into_an_altitude_which_is_never_taken_as_depth():
@@ -105,9 +98,8 @@ def test_a_home_turns_relative_alt_into_an_altitude_which_is_never_taken_as_dept
     press = 1021.047 + 4.06 * 9800 * 1.024 / 100  # hPa at 4.06 m by ArduSub's formula
     gpi(d, 0.0, relative_alt_mm=-4060)
     assert feed(d, "SCALED_PRESSURE", 0.1, press_abs=press).depth_m == pytest.approx(4.06)
-    assert (
-        gpi(d, 1.0, relative_alt_mm=115939, alt_mm=115939) is None
-    )  # origin and home: EKF depth unknown
+    # origin and home: EKF depth unknown
+    assert gpi(d, 1.0, relative_alt_mm=115939, alt_mm=115939) is None
     assert d.ekf is None and d.wants_origin
     s = feed(d, "SCALED_PRESSURE", 1.1, press_abs=press)
     assert (
@@ -124,9 +116,8 @@ def test_a_home_turns_relative_alt_into_an_altitude_which_is_never_taken_as_dept
 def test_a_disagreement_is_one_warning_and_goes_into_the_sigma():
     d = calibrated(primary=0, ground_pa=100000.0)
     gpi(d, 0.0, relative_alt_mm=-3000)
-    s = feed(
-        d, "SCALED_PRESSURE", 0.1, press_abs=1000.0 + 4.0 * 98.0
-    )  # 4.00 m against the EKF's 3.00 m
+    # 4.00 m against the EKF's 3.00 m
+    s = feed(d, "SCALED_PRESSURE", 0.1, press_abs=1000.0 + 4.0 * 98.0)
     assert s.depth_m == pytest.approx(4.0) and s.sigma_m == pytest.approx(math.hypot(0.05, 1.0))
     assert len(d.notices) == 1 and "4.00 m and its EKF's 3.00 m disagree by +1.00 m" in d.notices[0]
     gpi(d, 0.2, relative_alt_mm=-3000)
@@ -139,9 +130,8 @@ def test_a_disagreement_is_one_warning_and_goes_into_the_sigma():
 
 def test_a_recalibration_at_the_surface_is_followed_one_under_water_is_not():
     d = calibrated(primary=0, ground_pa=100000.0)
-    feed(
-        d, "PARAM_VALUE", 0.0, param_id="BARO1_GND_PRESS", param_value=100000.0 + 980.0
-    )  # 0.1 m: weather
+    # 0.1 m: weather
+    feed(d, "PARAM_VALUE", 0.0, param_id="BARO1_GND_PRESS", param_value=100000.0 + 980.0)
     assert d.ground_pa[0] == 100980.0 and "the depth zero moved +0.10 m" in d.notices.pop()
     assert feed(d, "SCALED_PRESSURE", 0.1, press_abs=1009.8 + 3.0 * 98.0).depth_m == pytest.approx(
         3.0
@@ -149,16 +139,14 @@ def test_a_recalibration_at_the_surface_is_followed_one_under_water_is_not():
     # a preflight calibration at 3 m: ArduSub's zero is now there; skyfix keeps the surface's
     feed(d, "PARAM_VALUE", 0.2, param_id="BARO1_GND_PRESS", param_value=100980.0 + 3.0 * 9800.0)
     assert d.ground_pa[0] == 100980.0 and "3.00 m below the old one" in d.notices.pop()
-    feed(
-        d, "PARAM_VALUE", 30.0, param_id="BARO1_GND_PRESS", param_value=100980.0 + 3.0 * 9800.0
-    )  # read again
+    # read again
+    feed(d, "PARAM_VALUE", 30.0, param_id="BARO1_GND_PRESS", param_value=100980.0 + 3.0 * 9800.0)
     assert not d.notices and d.zero_not_followed_pa == 100980.0 + 3.0 * 9800.0
     gpi(d, 30.05, relative_alt_mm=0)  # ArduSub's EKF now says 0 m: on its new zero, not compared
     s = feed(d, "SCALED_PRESSURE", 30.1, press_abs=1009.8 + 3.0 * 98.0)
     assert s.depth_m == pytest.approx(3.0) and s.sigma_m == 0.05 and d.disagreement_m is None
-    feed(
-        d, "PARAM_VALUE", 60.0, param_id="BARO1_GND_PRESS", param_value=100980.0
-    )  # zeroed at the surface again
+    # zeroed at the surface again
+    feed(d, "PARAM_VALUE", 60.0, param_id="BARO1_GND_PRESS", param_value=100980.0)
     assert d.zero_not_followed_pa is None and not d.notices
 
 
@@ -300,9 +288,8 @@ def test_old_blueos_settings_say_what_to_write(tmp_path):
     assert str(e.value).startswith(
         f"{tmp_path / 'f.toml'}: depth_key = 'mavlink/1/1/VFR_HUD': VFR_HUD is not ArduSub's depth"
     ) and str(e.value).endswith("e.g. mavlink/1/1")
-    assert (
-        cfg('depth_source = "blueos"\n').depth_input_key == "mavlink/1/1"
-    )  # old configs without the key
+    # old configs without the key
+    assert cfg('depth_source = "blueos"\n').depth_input_key == "mavlink/1/1"
     assert (
         cfg('depth_source = "blueos"\ndepth_key = "mavlink/2/1"\n').depth_input_key == "mavlink/2/1"
     )
@@ -367,9 +354,8 @@ def test_the_watchdog_says_when_the_depth_is_only_ardusubs_ekf():
     src._on_payload(
         "mavlink/1/1/GLOBAL_POSITION_INT", json.dumps({"message": message}).encode(), now
     )
-    uav = UavMavlink(
-        "udpin:127.0.0.1:14550", Telemetry(), {"ATTITUDE": 25.0}
-    )  # not opened: its status only
+    # not opened: its status only
+    uav = UavMavlink("udpin:127.0.0.1:14550", Telemetry(), {"ATTITUDE": 25.0})
     status = InputsStatus.model_validate({"uav": uav.status(now), "depth": src.status(now)})
     assert status.depth.source == "ardusub_ekf" and status.depth.depth_m == 1.5
     assert problems(status, ("ATTITUDE",), 1)["depth"] == (

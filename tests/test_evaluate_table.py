@@ -88,12 +88,10 @@ def test_cli_table_matches_independent_computation(tmp_path, capsys):
         ok = pos.status == "ok"
         lat_t = np.interp(pos.t_unix[ok], truth["t"], truth["lat"])
         lon_t = np.interp(pos.t_unix[ok], truth["t"], truth["lon"])
-        _, _, d = GEOD.inv(
-            pos.lon[ok], pos.lat[ok], lon_t, lat_t
-        )  # positions.csv: 1e-9 deg ~ 0.1 mm
-        assert (
-            int(row["fixes"]) == ok.sum() < n_frames == int(row["frames"])
-        )  # occluded frames have no fix
+        # positions.csv: 1e-9 deg ~ 0.1 mm
+        _, _, d = GEOD.inv(pos.lon[ok], pos.lat[ok], lon_t, lat_t)
+        # occluded frames have no fix
+        assert int(row["fixes"]) == ok.sum() < n_frames == int(row["frames"])
         assert float(row["coverage"]) == pytest.approx(ok.sum() / n_frames)
         assert float(row["mae_m"]) == pytest.approx(np.mean(d), abs=1e-4)
         assert float(row["rmse_m"]) == pytest.approx(np.sqrt(np.mean(d**2)), abs=1e-4)

@@ -45,9 +45,8 @@ def processed(tmp_path_factory):
 def test_geojson(processed):
     out, pos = processed
     text = (out / "fixes.geojson").read_text()
-    valid = geojson.loads(
-        text
-    )  # the geojson package checks the structure (it rounds to 6 decimals: not for values)
+    # the geojson package checks the structure (it rounds to 6 decimals: not for values)
+    valid = geojson.loads(text)
     assert valid.is_valid, valid.errors()
     doc = json.loads(text)
     assert len(doc["features"]) == len(pos)
@@ -73,9 +72,8 @@ def test_kml(processed):
     marks = folders["fixes"].findall(f"{KML}Placemark")
     assert len(marks) == len(ok)
     for pm, i in zip(marks, ok):
-        lon, lat, alt = map(
-            float, pm.findtext(f".//{KML}coordinates").split(",")
-        )  # KML: lon,lat,alt (AMSL)
+        # KML: lon,lat,alt (AMSL)
+        lon, lat, alt = map(float, pm.findtext(f".//{KML}coordinates").split(","))
         assert (lon, lat, alt) == pytest.approx(
             (pos.lon[i], pos.lat[i], pos.alt_amsl_m[i]), abs=1e-4
         )
@@ -88,9 +86,8 @@ def test_kml(processed):
     gaps = [(a, b, w) for a, b, w in runs(pos.status) if w != "ok"]
     names = [pm.findtext(f"{KML}name") for pm in folders["no fix"].findall(f"{KML}Placemark")]
     assert names == [f"{w}: {b - a} frames" for a, b, w in gaps]
-    assert (
-        len(folders["track"].findall(f"{KML}Placemark")) == len(gaps) + 1
-    )  # the gap splits the track
+    # the gap splits the track
+    assert len(folders["track"].findall(f"{KML}Placemark")) == len(gaps) + 1
 
 
 def test_gpx(processed):
@@ -105,9 +102,8 @@ def test_gpx(processed):
         assert float(p.get("lat")) == pytest.approx(pos.lat[i], abs=1e-9)
         assert float(p.get("lon")) == pytest.approx(pos.lon[i], abs=1e-9)
         assert float(p.findtext(f"{GPX}ele")) == pytest.approx(pos.alt_amsl_m[i], abs=1e-4)
-        assert float(p.findtext(f"{GPX}geoidheight")) == pytest.approx(
-            40.0, abs=2e-4
-        )  # the scenario's
+        # the scenario's
+        assert float(p.findtext(f"{GPX}geoidheight")) == pytest.approx(40.0, abs=2e-4)
         assert float(p.findtext(f"{GPX}hdop")) == pytest.approx(pos.h_acc_m[i], abs=1e-4)
         assert p.findtext(f"{GPX}extensions/{SKYFIX}status") == "ok"
     # the GPX 1.1 schema's order of a point's elements

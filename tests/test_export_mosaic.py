@@ -232,9 +232,8 @@ def test_report_draws_the_top_view_over_the_mosaic_in_place(run, tmp_path):
 
     rgb = (imread(png)[..., :3] * 255).astype(np.uint8)
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-    half = int(
-        3 * ref["radius_m"] * px_per_m
-    )  # search the figure around the marker (the legend, the bar aside)
+    # search the figure around the marker (the legend, the bar aside)
+    half = int(3 * ref["radius_m"] * px_per_m)
     r0, c0 = int(row_ref) - half, int(col_ref) - half
     col, row = bullseye_centre_px(
         grey[r0 : r0 + 2 * half, c0 : c0 + 2 * half], ref["radius_m"] * px_per_m

@@ -136,9 +136,8 @@ def test_diverged_ends_after_its_time():
     _, valid = gate_on(stream)
     t = np.array([f.t_unix for f in stream.fixes])
     refused_for = t[valid & stream.wrong].min() - t[stream.wrong].min()
-    assert (
-        DIVERGED_S <= refused_for <= DIVERGED_S + CONFIRM_S + 0.1
-    )  # then acquired again: 0.8 m is in reach
+    # then acquired again: 0.8 m is in reach
+    assert DIVERGED_S <= refused_for <= DIVERGED_S + CONFIRM_S + 0.1
 
 
 def test_the_gate_does_not_forget_where_the_uuv_was():
@@ -354,9 +353,8 @@ def test_accuracy_age_order_and_the_prediction_window():
     assert gate.check(fix_at(t, 0, 0, float("nan")), t) == "h_acc"
     assert gate.check(fix_at(t, 0, 0, 0.3), t + 0.51) == "age"
     assert gate.check(fixes[0], fixes[0].t_unix) == "out_of_order"
-    assert (
-        gate.check(fix_at(t, 0, 0, 0.3), t, window=(700.0, 0.0, 100.0, 100.0)) == "prediction"
-    )  # pixel (640, 360)
+    # pixel (640, 360)
+    assert gate.check(fix_at(t, 0, 0, 0.3), t, window=(700.0, 0.0, 100.0, 100.0)) == "prediction"
     assert gate.check(fix_at(t, 0, 0, 0.3), t, window=(600.0, 300.0, 100.0, 100.0)) is None
     assert {k: v for k, v in gate.rejected.items() if v} == {
         "h_acc": 2,
@@ -374,9 +372,10 @@ def test_status_has_the_state_the_reasons_and_the_track():
     assert s["state"] == "tracking" and s["chain"] is None and s["reach_m"] is None
     tr = s["track"]
     speed = math.hypot(tr["vn_mps"], tr["ve_mps"])
+    # north-east
     assert speed == pytest.approx(V, abs=0.1) and tr["vn_mps"] == pytest.approx(
         tr["ve_mps"], abs=0.1
-    )  # north-east
+    )
     last = stream.fixes[-1]
     assert tr["lat"] == pytest.approx(last.lat, abs=0.05 / 111_195) and tr["sigma_n_m"] >= 0.0
     gate.target_lost()

@@ -92,7 +92,6 @@ def test_the_track_starts_again_where_all_the_drones_agree():
     print(
         f"first ok there {first_there - 2.0:.2f} s after the jump; {off} off_track; {restarts} restart"
     )
-    assert all(
-        n < 0.5 or n > 2.8 for s, n in north
-    )  # the old place (a frame or two) or the new, nothing between
+    # the old place (a frame or two) or the new, nothing between
+    assert all(n < 0.5 or n > 2.8 for s, n in north)
     assert first_there - 2.0 >= 1.0 and restarts == 1 and off > 20

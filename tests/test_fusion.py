@@ -79,12 +79,10 @@ def test_two_disagreeing_drones_need_the_prior_to_decide_or_there_is_no_fix():
     two = {"a": est(0.0, 0.0, 0.1, 0.1), "b": est(1.5, 0.0, 0.1, 0.1)}
     assert choose(two, None) == ()
     assert choose(two, est(1.45, 0.02, 0.1, 0.1)) == ("b",)
-    assert (
-        choose(two, est(0.75, 0.0, 0.1, 0.1)) == ()
-    )  # a prior halfway agrees with neither (5.3 sigma)
-    assert (
-        choose(two, est(0.75, 0.0, 1.0, 1.0)) == ()
-    )  # a vague prior agrees with both: still undecided
+    # a prior halfway agrees with neither (5.3 sigma)
+    assert choose(two, est(0.75, 0.0, 0.1, 0.1)) == ()
+    # a vague prior agrees with both: still undecided
+    assert choose(two, est(0.75, 0.0, 1.0, 1.0)) == ()
 
 
 def test_source_track_moves_a_fix_on_by_its_velocity_and_grows_its_covariance():
@@ -189,9 +187,8 @@ def test_a_drone_dropping_out_leaves_no_gap_and_it_rejoins_after_its_gate_confir
     during = [north_east(f)[0] for f in ok if 2.3 < f.t_gnss - 1000.0 < 3.9]
     assert np.allclose(during, 0.05, atol=0.005)  # a's own
     after = [north_east(f)[0] for f in ok if f.t_gnss - 1000.0 > 5.2]
-    assert np.allclose(
-        after, 0.0, atol=0.005
-    )  # b back (confirmed by its gate within a second) and averaged in
+    # b back (confirmed by its gate within a second) and averaged in
+    assert np.allclose(after, 0.0, atol=0.005)
 
 
 def test_disagreeing_pair_with_nothing_to_decide_is_no_fix():
@@ -347,17 +344,14 @@ def test_drones_sharing_an_error_do_not_average_it_away_worked_by_hand():
 
 
 def test_shared_errors_are_held_within_the_claim():
-    C = np.diag(
-        [0.02**2, 0.05**2]
-    )  # claims 2 cm north, 5 cm east; the drones are said to share 10 cm
+    # claims 2 cm north, 5 cm east; the drones are said to share 10 cm
+    C = np.diag([0.02**2, 0.05**2])
     G = fit_shared(C, shared_gnss(0.1))
-    assert G @ G.T == pytest.approx(
-        np.eye(2) * 0.75 * 0.02**2
-    )  # 3/4 of the claim where it is smallest
+    # 3/4 of the claim where it is smallest
+    assert G @ G.T == pytest.approx(np.eye(2) * 0.75 * 0.02**2)
     assert np.all(np.linalg.eigvalsh(C - G @ G.T) >= 0.25 * 0.02**2 - 1e-12)
-    assert fit_shared(C, shared_gnss(0.01)) == pytest.approx(
-        shared_gnss(0.01)
-    )  # within it: as it is
+    # within it: as it is
+    assert fit_shared(C, shared_gnss(0.01)) == pytest.approx(shared_gnss(0.01))
 
 
 def test_shared_effects_follow_each_drones_geometry():
@@ -383,13 +377,11 @@ def test_shared_effects_follow_each_drones_geometry():
         f, SharedSigmas(gnss_m=0.1, height_m=0.3, clock_s=0.01), np.array([0.3, -0.2])
     )
     assert G[:, 0] == pytest.approx(along * math.tan(w) * 0.05, rel=1e-6)
-    assert G[:, 1] == pytest.approx(
-        along * math.tan(a) * 0.3, rel=1e-6
-    )  # the shared 0.3, below the fix's 0.4
+    # the shared 0.3, below the fix's 0.4
+    assert G[:, 1] == pytest.approx(along * math.tan(a) * 0.3, rel=1e-6)
     assert G[:, 2:4] == pytest.approx(np.eye(2) * 0.1) and G[:, 4] == pytest.approx([0.003, -0.002])
-    f.height_source = (
-        "rangefinder"  # its own height measurement: the weather's trend does not enter
-    )
+    # its own height measurement: the weather's trend does not enter
+    f.height_source = "rangefinder"
     assert shared_effects(f, SharedSigmas(height_m=0.3))[:, 1] == pytest.approx([0.0, 0.0])
 
 

@@ -146,9 +146,8 @@ def test_service_survives_the_autopilot_going_away(tmp_path):
                 down
             )  # the server closes client, then listener
             with pytest.raises(subprocess.TimeoutExpired):
-                service.wait(
-                    OUTAGE_S
-                )  # the autopilot stays away; the service must not exit meanwhile
+                # the autopilot stays away; the service must not exit meanwhile
+                service.wait(OUTAGE_S)
         resumes.append(_autopilot_back(ap, service, link_state))
         assert service.poll() is None, run_log.read_text()[-3000:]
         stop(service)
@@ -365,9 +364,8 @@ def test_the_rate_holds_while_the_event_loop_is_blocked():
         rx.close()
     during = [(t, g["fix_type"]) for t, g in rx.received if t_block <= t <= t_unblock]
     t_all = [t for t, _ in rx.received if t_block - 0.2 <= t <= t_unblock]
-    gaps_ms = (
-        np.diff([*t_all, t_unblock]) * 1000
-    )  # up to the end of the block: silence at its end is a gap too
+    # up to the end of the block: silence at its end is a gap too
+    gaps_ms = np.diff([*t_all, t_unblock]) * 1000
     print(
         f"{len(during)} GPS_INPUT while the loop was blocked for {t_unblock - t_block:.2f} s; max gap "
         f"{gaps_ms.max():.0f} ms; fix_types {[ft for _, ft in during]}"
@@ -398,9 +396,8 @@ def test_a_failing_keep_alive_restarts_and_says_so(caplog):
 
     async def run() -> dict:
         sink = GpsInputSink(link, hz=10.0, max_age_s=0.5)
-        task = asyncio.create_task(
-            sink.run()
-        )  # no fixes: every GPS_INPUT before the stop is the keep-alive's
+        # no fixes: every GPS_INPUT before the stop is the keep-alive's
+        task = asyncio.create_task(sink.run())
         await asyncio.to_thread(
             wait_for, lambda: len(rx.received) >= 5, 20, "GPS_INPUT after the restarts"
         )

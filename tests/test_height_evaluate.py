@@ -66,9 +66,8 @@ def test_rtk_gnss_beside_a_drifting_barometer(capsys, tmp_path):
         capsys, with_overrides(RTK, uav={"gnss_fix_type": 0}), tmp_path, "baro"
     )
     assert baro["mae_m"] > 0.2 and np.abs(dh).min() > 0.35 and set(pos.height_source) == {"amsl"}
-    assert (
-        np.mean(np.abs(dh) <= 2 * pos.sigma_height_m) >= 0.95
-    )  # not measured, but not claimed either
+    # not measured, but not claimed either
+    assert np.mean(np.abs(dh) <= 2 * pos.sigma_height_m) >= 0.95
 
 
 def test_white_rtk_noise_does_not_move_the_height(capsys, tmp_path):
@@ -78,9 +77,8 @@ def test_white_rtk_noise_does_not_move_the_height(capsys, tmp_path):
     exact = with_overrides(RTK_NOISE, uav={"baro_drift_m": 0.0, "gnss_alt_error_m": 0.0})
     rtk, pos, dh, _ = evaluate(capsys, exact, tmp_path, "rtk")
     assert set(pos.height_source) == {"baro+gnss_rtk"}
-    assert (
-        np.sqrt(np.mean(np.diff(dh) ** 2)) < 0.01 and np.abs(dh).max() < 0.02
-    )  # was 1.8 cm, 5.4 cm
+    # was 1.8 cm, 5.4 cm
+    assert np.sqrt(np.mean(np.diff(dh) ** 2)) < 0.01 and np.abs(dh).max() < 0.02
     alone, pos, _, _ = evaluate(
         capsys, with_overrides(exact, telemetry={"gps_raw_hz": 0.0}), tmp_path, "alone"
     )
@@ -98,18 +96,16 @@ def test_rangefinder_that_sees_the_water_or_the_seafloor(capsys, tmp_path):
     assert np.mean(np.abs(dh) <= 2 * pos.sigma_height_m) >= 0.95
     t = pos.t_unix - pos.t_unix[0]
     assert np.all(pos.height_source[(t < 49.5) | (t > 60.5)] == "rangefinder+baro+gnss")
-    assert np.all(
-        pos.height_source[(t > 50.5) & (t < 59.5)] == "baro+gnss"
-    )  # 30 s into the dropout
+    # 30 s into the dropout
+    assert np.all(pos.height_source[(t > 50.5) & (t < 59.5)] == "baro+gnss")
     floor, pos, dh, err = evaluate(
         capsys, with_overrides(RANGEFINDER, rangefinder={"sees": "floor"}), tmp_path, "floor"
     )
     assert err.count("height: rangefinder gives") == 1 and "sigma apart" in err  # one line
     assert "rangefinder" not in "".join(pos.height_source)  # never used
     assert floor["mae_m"] > 0.2 and np.mean(np.abs(dh) <= 2 * pos.sigma_height_m) >= 0.95
-    assert (
-        np.median(pos.sigma_height_m) > np.median(np.abs(dh)) + 1.0
-    )  # the disagreement is in the sigma
+    # the disagreement is in the sigma
+    assert np.median(pos.sigma_height_m) > np.median(np.abs(dh)) + 1.0
 
 
 @pytest.mark.parametrize("reference", ["takeoff", "amsl"])

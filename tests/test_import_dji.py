@@ -25,9 +25,8 @@ from localizer.attitude import R_ned_from_mount_orientation, euler_to_R
 from localizer.geodesy import geodetic_to_ned
 
 FIXTURES = Path(__file__).parent / "fixtures" / "dji"
-T0_UNIX = (
-    1684067696.789  # 2023-05-14T12:34:56.789Z (`date -u -d 2023-05-14T12:34:56Z +%s` = 1684067696)
-)
+# 2023-05-14T12:34:56.789Z (`date -u -d 2023-05-14T12:34:56Z +%s` = 1684067696)
+T0_UNIX = 1684067696.789
 LAT0, LON0, R_EARTH_M = 43.5, 16.4, 6_371_000.0
 VIDEO_AT_S, FPS, FRAMES = 40.0, 30, 90  # the video's first frame 40 s into the record
 ZONE_H, CAMERA_CLOCK_ERROR_S = 2.0, 0.3  # the camera's clock: local time UTC+2, 0.3 s fast
@@ -321,12 +320,12 @@ def test_phantomhelp_feet_and_local_times(tmp_path):
     path = tmp_path / "DJIFlightRecord_2023-05-14_[14-34-56].csv"
     write_phantomhelp(path)
     flight = read_dji_csv(path, utc_offset_h=2.0)
-    assert flight.unix_minus_boot_s == pytest.approx(
-        1684067696.78, abs=1e-6
-    )  # 14:34:56.78 at UTC+2
+    # 14:34:56.78 at UTC+2
+    assert flight.unix_minus_boot_s == pytest.approx(1684067696.78, abs=1e-6)
+    # ft → m
     assert flight.pos[0, 4] == pytest.approx(30.48) and flight.pos[0, 3] == pytest.approx(
         100.0, abs=1e-4
-    )  # ft → m
+    )
     assert math.degrees(flight.att[0, 3]) == pytest.approx(-90.0) and flight.mnt[
         0, 3
     ] == pytest.approx(0.0)
@@ -437,9 +436,8 @@ def test_a_real_cameras_srt_excerpt():
     """DJI Air 2S (DJI_SRT_Parser's sample, MIT): ``SrtCnt``, the ``,ms,µs`` clock, ``[altitude: ...]`` only."""
     track = read_srt(FIXTURES / "air2s_excerpt.SRT")
     assert list(track.frame) == [0, 1, 2] and track.t_video_s == pytest.approx([0.0, 0.033, 0.066])
-    assert track.t_camera_s[0] == pytest.approx(
-        1659879640 + 0.774808, abs=1e-6
-    )  # 2022-08-07 13:40:40,774,808
+    # 2022-08-07 13:40:40,774,808
+    assert track.t_camera_s[0] == pytest.approx(1659879640 + 0.774808, abs=1e-6)
     assert track.t_camera_s[2] - track.t_camera_s[1] == pytest.approx(0.033367, abs=1e-6)
     assert (track.lat_deg[0], track.lon_deg[1]) == (41.424724, 2.234147)
     assert np.isnan(track.rel_alt_m).all() and np.isnan(track.gimbal_ypr_deg).all()
@@ -594,12 +592,10 @@ def test_airdata_layout_hand_worked(tmp_path, calibration, depth):
     t56 = 1684067696.0  # 2023-05-14T12:34:56Z
     assert flight.unix_minus_boot_s == pytest.approx(t56 + 0.75, abs=1e-6)
     assert flight.unix_minus_boot_sigma_s == pytest.approx(0.05, abs=1e-6)
-    assert flight.att[:, 0] == pytest.approx(
-        [0.0, 0.1, 0.2, 0.3], abs=1e-6
-    )  # (UNIX-time arithmetic: 0.2 µs)
-    assert flight.pos[0, 1:] == pytest.approx(
-        [43.5, 16.4, 304.8, 30.48]
-    )  # 1000 ft AMSL, 100 ft above take-off
+    # (UNIX-time arithmetic: 0.2 µs)
+    assert flight.att[:, 0] == pytest.approx([0.0, 0.1, 0.2, 0.3], abs=1e-6)
+    # 1000 ft AMSL, 100 ft above take-off
+    assert flight.pos[0, 1:] == pytest.approx([43.5, 16.4, 304.8, 30.48])
     # 0.0001° of latitude and longitude at 43.5° N: 11.1 m north (a meridian degree 111.1 km there), 8.1 m east
     # (a parallel degree 80.8 km: 111.3 km · cos 43.5°)
     n, e, _ = geodetic_to_ned(flight.pos[1, 1], flight.pos[1, 2], 0.0, 43.5, 16.4, 0.0)

@@ -26,9 +26,8 @@ from groundstation.testing.dataflash_log import DataflashWriter
 
 WEEK, WEEK_MS = 2447, 316_382_800  # the first GPS fix's time ...
 BOOT_AT_FIX_S = 10.0  # ... arriving 10 s after the autopilot booted
-UNIX_AT_FIX = (
-    315964800 + WEEK * 604800 + WEEK_MS / 1000 - 18
-)  # GPS epoch, weeks, ms, minus 18 leap seconds
+# GPS epoch, weeks, ms, minus 18 leap seconds
+UNIX_AT_FIX = 315964800 + WEEK * 604800 + WEEK_MS / 1000 - 18
 
 
 def roll_deg(t):
@@ -137,9 +136,8 @@ def test_a_log_becomes_a_session_on_gps_time_without_the_simulators_truth(field_
         log, video, depth, cal, out, video_start_unix=start, depth_columns=("time_unix", "depth")
     )
     assert report["unix_minus_boot_s"] == pytest.approx(UNIX_AT_FIX - BOOT_AT_FIX_S, abs=1e-6)
-    assert (
-        report["unix_minus_boot_sigma_s"] <= 0.0005
-    )  # the fixes agree: only the stamps' whole milliseconds
+    # the fixes agree: only the stamps' whole milliseconds
+    assert report["unix_minus_boot_sigma_s"] <= 0.0005
     msgs = read_tlog(out / "uav.tlog")
     kinds = {m.get_type() for _, m in msgs}
     assert {

@@ -102,9 +102,8 @@ def test_latency_command_recovers_a_known_delay(tmp_path):
     try:
         wait_for(lambda: "Open http" in log.read_text(), 20, "the command to start")
         page = urllib.request.urlopen(f"http://127.0.0.1:{http}/", timeout=5).read().decode()
-        assert (
-            "requestAnimationFrame" in page and page.count("[") > 1000
-        )  # the markers travel with the page
+        # the markers travel with the page
+        assert "requestAnimationFrame" in page and page.count("[") > 1000
         now = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{http}/now", timeout=5).read())[
             "t_unix"
         ]

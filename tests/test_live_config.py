@@ -192,9 +192,10 @@ def test_a_tracker_that_never_reports_a_loss_is_refused_for_gps_input(tmp_path):
         ConfigError, match=r"c\.toml: tracker = 'mil': this tracker never reports losing the UUV"
     ):
         config.run_config(_parse(["--config", str(tmp_path / "c.toml")]))
+    # no GPS_INPUT
     assert (
         config.run_config(_parse(["--calibration", "x.toml", "--tracker", "mil"])).tracker == "mil"
-    )  # no GPS_INPUT
+    )
     for name in ("default", "kcf", "csrt"):  # they report losses
         cfg = config.run_config(
             _parse(
@@ -229,9 +230,8 @@ def test_web_page_options_are_checked(flags, message):
 
 def test_web_page_options():
     cfg = config.run_config(_parse(["--calibration", "x.toml"]))
-    assert (
-        cfg.ui == "127.0.0.1:8080" and not cfg.no_ui and cfg.ui_token is None
-    )  # on by default, on localhost
+    # on by default, on localhost
+    assert cfg.ui == "127.0.0.1:8080" and not cfg.no_ui and cfg.ui_token is None
     cfg = config.run_config(
         _parse(["--calibration", "x.toml", "--ui", "[::1]:0", "--ui-token", "abcdefgh12"])
     )

@@ -95,9 +95,8 @@ def test_blueos_global_position_int():
     assert parse_global_position(_blueos(lat=634400123, lon=104000456)) == pytest.approx(
         (63.4400123, 10.4000456)
     )
-    assert (
-        parse_global_position(_blueos(lat=0, lon=0)) is None
-    )  # ArduPilot before it has a position
+    # ArduPilot before it has a position
+    assert parse_global_position(_blueos(lat=0, lon=0)) is None
     for payload, why in [
         (b"nope", "not JSON"),
         (b'{"message": 3}', "no 'message'"),

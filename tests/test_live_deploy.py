@@ -35,9 +35,8 @@ def test_field_config_and_calibration():
     cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
     assert cfg.calibration == str(DEPLOY / "calibration.toml") and cfg.depth_source == "blueos"
     cal = load_calibration(cfg.calibration)
-    assert (
-        cal.init_bbox is None and cal.camera.width == 1920
-    )  # live, the target is selected or acquired
+    # live, the target is selected or acquired
+    assert cal.init_bbox is None and cal.camera.width == 1920
     assert cfg.uuv_position_key == "mavlink/1/1/GLOBAL_POSITION_INT"
 
 

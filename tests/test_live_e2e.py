@@ -142,9 +142,8 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
     fix = [json.loads(s["payload"]) for s in fixes]
     ok = [f for f in fix if f["status"] == "ok"]
     assert len(ok) >= MIN_SHARE * n_frames and len(ok) >= 0.9 * len(fix), {f["status"] for f in fix}
-    final = json.loads(
-        (tmp_path / "stats.json").read_text()
-    )  # every frame decoded was tracked or dropped
+    # every frame decoded was tracked or dropped
+    final = json.loads((tmp_path / "stats.json").read_text())
     video, pipeline = final["video"], final["pipeline"]
     assert (
         pipeline["processed"] + pipeline["dropped"] == video["frames"]
@@ -185,9 +184,8 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
         assert not bad, (
             f"{len(bad)} {name} messages break {GROUNDSTATION.path_of(name).name}, first: {bad[0]}"
         )
-    assert (
-        "does not fit its schema" not in run_log
-    )  # and as the service's own model says, where it is assembled
+    # and as the service's own model says, where it is assembled
+    assert "does not fit its schema" not in run_log
     assert all(
         f["alt_ellipsoid_m"] is not None and f["t_gnss"] is not None and f["sigma_n_m"] > 0
         for f in ok
@@ -256,9 +254,8 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
         and rec.frames is not None
         and len(rec.frames["t"]) > MIN_SHARE * n_frames
     )
-    assert (
-        rec.calibration.init_t == ok[0]["t"]
-    )  # the live run's first fix, not the calibration file's init_t
+    # the live run's first fix, not the calibration file's init_t
+    assert rec.calibration.init_t == ok[0]["t"]
     # ... whose [timing] says what the run measured and used: the link delay TIMESYNC measured, the video latency
     timing = rec.calibration.timing
     assert (

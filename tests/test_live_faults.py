@@ -170,9 +170,8 @@ def _mavlink_garbage(session: Path):
     rng = random.Random(7)
 
     def datagrams(session_t: float, i: int) -> list[bytes]:
-        boot_ms = (
-            int(np.interp(session_t, t_att, boot_att)) + 1
-        )  # the UAV's own clock: only the values are bad
+        # the UAV's own clock: only the values are bad
+        boot_ms = int(np.interp(session_t, t_att, boot_att)) + 1
         nan_att = mav.attitude_encode(boot_ms, float("nan"), 0.1, 0.2, 0.0, 0.0, 0.0).pack(mav)
         bad_pos = mav.global_position_int_encode(
             boot_ms, 950_000_000, 104_000_000, 10_000, 10_000, 0, 0, 0, 0
@@ -430,9 +429,8 @@ def test_video_and_depth_cut(tmp_path):
 
     gps = read_jsonl(uuv_log)
     numbers = _check_gps_input(gps, session, shift)
-    s_recv = (
-        np.array([g["t_recv"] for g in gps]) - shift - t0
-    )  # session seconds after the first frame
+    # session seconds after the first frame
+    s_recv = np.array([g["t_recv"] for g in gps]) - shift - t0
     s_fix = np.array([g["time_usec"] / 1e6 for g in gps]) - shift - t0
     valid = np.array([g["fix_type"] == 3 for g in gps])
     hold_s = Timing().depth_hold_s
@@ -448,9 +446,8 @@ def test_video_and_depth_cut(tmp_path):
     # 7 seen on a loaded CI, where the first second of a stream is slow to decode)
     assert before.sum() >= 3, f"only {before.sum()} valid fixes before the video cut"
     last_frame_s = s_fix[before].max()
-    assert (
-        last_frame_s <= VIDEO_CUT_S + SLACK_S
-    )  # exposure times are estimated: receive time − latency
+    # exposure times are estimated: receive time − latency
+    assert last_frame_s <= VIDEO_CUT_S + SLACK_S
     switch = s_recv > last_frame_s + MAX_AGE_S + PERIOD_S + SLACK_S
     late = valid & switch & (s_recv < VIDEO_BACK_S)
     assert not late.any(), f"valid fixes {s_recv[late] - last_frame_s} s after the last frame"

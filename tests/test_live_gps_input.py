@@ -24,9 +24,8 @@ from localizer.fix_gate import FixGate
 @pytest.mark.parametrize("t_unix", [1763800000.0, 1763800000.2504, 1_700_000_000.999, 1483228800.0])
 def test_gps_time_matches_calendar(t_unix):
     gps_epoch = datetime(1980, 1, 6, tzinfo=UTC)
-    elapsed = (
-        datetime.fromtimestamp(t_unix, UTC) + timedelta(seconds=18) - gps_epoch
-    )  # 18 leap s since 2017
+    # 18 leap s since 2017
+    elapsed = datetime.fromtimestamp(t_unix, UTC) + timedelta(seconds=18) - gps_epoch
     week, ms = gps_time(t_unix)
     assert week == elapsed.days // 7
     assert ms == pytest.approx(

@@ -105,9 +105,8 @@ def test_live_status_says_what_measured_the_height(tmp_path):
     assert not bad, bad[0]
     s = status[-1]
     h = s["height"]
-    tau = (
-        s["t"] - shift - SCENARIO.start_unix
-    )  # about when it was taken: the height swings 0.3 m in 20 s
+    # about when it was taken: the height swings 0.3 m in 20 s
+    tau = s["t"] - shift - SCENARIO.start_unix
     truth = float(-Motion(SCENARIO).uav_ned(np.array([tau]))[0, 2])
     assert (
         h["source"] == "rangefinder+baro+gnss"
@@ -115,9 +114,8 @@ def test_live_status_says_what_measured_the_height(tmp_path):
         and h["reference_set_at"] == "boot"
     )
     assert abs(h["height_m"] - truth) < 0.1 and h["sigma_m"] < 0.1
-    assert (
-        abs(h["ekf_height_m"] - h["height_m"] - h["bias_m"]) < 2e-3 and 0.4 < h["bias_m"] < 0.6
-    )  # 0.5 m high
+    # 0.5 m high
+    assert abs(h["ekf_height_m"] - h["height_m"] - h["bias_m"]) < 2e-3 and 0.4 < h["bias_m"] < 0.6
     assert (
         h["sources"]["rangefinder"]["refused"] == 0
         and h["sources"]["rangefinder"]["disagrees_m"] is None

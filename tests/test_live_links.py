@@ -32,9 +32,8 @@ from groundstation.testing.link_scenarios import (
     shutdown,
 )
 
-STOP_BOUND_S = (
-    5.0  # generous for a loaded 2-core CI; the requirement (1 s) is checked by bench/links.py
-)
+# generous for a loaded 2-core CI; the requirement (1 s) is checked by bench/links.py
+STOP_BOUND_S = 5.0
 BACK_BOUND_S = 3.0
 
 

@@ -72,9 +72,8 @@ def test_backends_agree_on_one_stream():
     for name in ("attitude", "position", "gimbal"):
         a, b = getattr(tels[0], name), getattr(tels[1], name)
         assert len(a) == len(b) == 25, name
-        np.testing.assert_allclose(
-            a.values, b.values, rtol=1e-6, atol=1e-7
-        )  # MAVSDK's JSON prints floats
+        # MAVSDK's JSON prints floats
+        np.testing.assert_allclose(a.values, b.values, rtol=1e-6, atol=1e-7)
         # each backend aligns by its own receive times (MAVSDK hands messages over later, more so on a
         # loaded machine): the same boot-clock spacing, shifted by the difference of least delays
         np.testing.assert_allclose(np.diff(a.times), np.diff(b.times), atol=0.05)

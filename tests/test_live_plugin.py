@@ -298,9 +298,8 @@ def test_a_plugins_output_is_chosen_by_name_and_gets_every_fix_of_a_run(tmp_path
         np.array([r["lon"] for r in ok]),
     )
     assert float(np.median(err)) < 0.5, err
-    assert (
-        "gps_input" not in final
-    )  # gps_input = "none": the default's GPS_INPUT has nothing to send
+    # gps_input = "none": the default's GPS_INPUT has nothing to send
+    assert "gps_input" not in final
 
 
 def test_a_plugins_depth_is_recorded_under_its_registered_name(make_cal, make_telemetry):

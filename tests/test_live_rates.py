@@ -172,13 +172,11 @@ def test_asks_for_the_rates_it_needs_and_measures_them():
         status = uav.status(time.time())
     assert ok, status
     assert (30, pytest.approx(40000.0)) in ap.commands  # ATTITUDE at 25 Hz
-    assert all(
-        msg_id != 33 for msg_id, _ in ap.commands
-    )  # GLOBAL_POSITION_INT already came at 10 Hz
+    # GLOBAL_POSITION_INT already came at 10 Hz
+    assert all(msg_id != 33 for msg_id, _ in ap.commands)
     assert "accepted" in status["rate_requests"]["ATTITUDE"]
-    assert all(
-        msg_id != 132 for msg_id, _ in ap.commands
-    )  # no rangefinder: DISTANCE_SENSOR is not asked for
+    # no rangefinder: DISTANCE_SENSOR is not asked for
+    assert all(msg_id != 132 for msg_id, _ in ap.commands)
     assert status["rates_hz"]["ATTITUDE"] >= 20.0
     assert status["clocks"]["uav_link_latency_source"] == "timesync"
     assert status["clocks"]["uav_link_latency_ms"] == pytest.approx(LINK_DELAY_S * 1000, abs=15.0)

@@ -100,9 +100,8 @@ def test_recording_is_flushed_and_survives_kill(tmp_path):
     assert sent - 60 <= len(session.telemetry.attitude) <= sent  # at most the last second lost
     assert len(session.telemetry.position) >= sent - 60 and len(session.telemetry.depth) >= 20
     first = json.loads((rec / "depth.jsonl").read_text().splitlines()[0])
-    assert (
-        first["source"] == "skyfix" and "sigma_m" not in first
-    )  # what the service used: the calibration's sigma
+    # what the service used: the calibration's sigma
+    assert first["source"] == "skyfix" and "sigma_m" not in first
     assert session.calibration.mount.attitude_source == "fixed"
     assert (rec / "positions.csv").read_text().startswith("t,lat,lon,depth_m,h_acc_m,status")
 
@@ -176,9 +175,8 @@ def test_recording_says_when_the_link_delay_was_measured(tmp_path):
     assert abs(timing["mavlink_latency_measured_s"] - delay_s) < 0.003
     assert answered_from < timing["mavlink_latency_measured_from_t"] < answered_from + 3.0
     assert "video_latency_s" not in timing and "mavlink_latency_s" not in timing
-    cal = Calibration.from_dict(
-        tomllib.loads((rec / "session.toml").read_text())
-    )  # keys of the contract
+    # keys of the contract
+    cal = Calibration.from_dict(tomllib.loads((rec / "session.toml").read_text()))
     assert cal.timing.mavlink_latency_measured_s == timing["mavlink_latency_measured_s"]
     tel = Telemetry(cal.timing)  # the recorded tlog, as skyfix process reads it
     tlog = mav.mavlink_connection(str(rec / "uav.tlog"))

@@ -33,9 +33,8 @@ def test_irregular_frame_times_map_each_frame_to_its_row(tmp_path):
     writer = VideoWriter(tmp_path / "video.ts", tmp_path / "video_frames.csv", SIZE)
     for i in range(N):
         writer.write(float(t[i]), _image(i))
-    writer.write(
-        float(t[N - 1]) - 0.5, _image(0)
-    )  # out of order (a reconnected stream on another clock): left out
+    # out of order (a reconnected stream on another clock): left out
+    writer.write(float(t[N - 1]) - 0.5, _image(0))
     writer.close()
     assert writer.written == N and writer.dropped == 1
 

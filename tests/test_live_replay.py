@@ -43,17 +43,15 @@ def test_timesync_replies_and_gps_time_are_shifted_but_requests_and_boot_times_a
     reply = _decode(mav.timesync_encode(412_045_000_000, 1_763_800_000_123_456_789).pack(mav))
     out = _decode(frame_bytes(reply, 1000.5))
     assert out.ts1 == 1_763_800_000_123_456_789 + 1_000_500_000_000 and out.tc1 == 412_045_000_000
-    request = mav.timesync_encode(0, 412_000_000_000).pack(
-        mav
-    )  # the autopilot's own request: its clock
+    # the autopilot's own request: its clock
+    request = mav.timesync_encode(0, 412_000_000_000).pack(mav)
     assert frame_bytes(_decode(request), 1000.5) == request
     gps = _decode(
         mav.gps_raw_int_encode(1_763_800_000_250_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(mav)
     )
     assert _decode(frame_bytes(gps, 2.0)).time_usec == 1_763_800_002_250_000
-    boot_stamped = mav.gps_raw_int_encode(412_000_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(
-        mav
-    )  # ArduPilot's
+    # ArduPilot's
+    boot_stamped = mav.gps_raw_int_encode(412_000_000, 3, 1, 2, 3, 70, 100, 0, 0, 14).pack(mav)
     assert frame_bytes(_decode(boot_stamped), 2.0) == boot_stamped
 
 
@@ -98,9 +96,8 @@ def test_the_uuv_log_stamps_a_gps_input_with_its_arrival_while_the_replay_is_hel
         ]
 
     try:
-        wait_for(
-            lambda: gps_input(1) or logged(1), 30, "the replay listening"
-        )  # the socket is bound
+        # the socket is bound
+        wait_for(lambda: gps_input(1) or logged(1), 30, "the replay listening")
         replay.send_signal(signal.SIGSTOP)
         t_before = time.time()
         gps_input(2)  # on loopback the datagram is in the replay's socket queue when sendto returns

@@ -25,9 +25,8 @@ def test_starts_in_one_second_get_folders_of_their_own(tmp_path):
     assert [p.name for p in made] == ["20250615-150640", "20250615-150640-2", "20250615-150640-3"]
     assert all(p.is_dir() and not any(p.iterdir()) for p in made)
     (made[1] / "session.toml").write_text("version = 1\n")
-    assert (
-        new_recording(tmp_path / "rec", t).name == "20250615-150640-4"
-    )  # nothing made earlier is reused
+    # nothing made earlier is reused
+    assert new_recording(tmp_path / "rec", t).name == "20250615-150640-4"
 
 
 def _recordings(root) -> list:

@@ -58,13 +58,11 @@ def test_depth_over_zenoh_clocks_garbage_and_jumps(caplog):
             await asyncio.sleep(0.05)
         publisher.put("uuv/depth", b"\xff\x00garbage")
         publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": "deep"}))
-        publisher.put(
-            "uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0})
-        )  # out of range
+        # out of range
+        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0}))
         await asyncio.sleep(0.05)
-        publisher.put(
-            "uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0})
-        )  # 2.96 m in 0.1 s
+        # 2.96 m in 0.1 s
+        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0}))
         await asyncio.sleep(0.05)
         publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.06}))
 
@@ -154,9 +152,8 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
             )
             other.mav.attitude_send(boot_ms, 1.0, 1.0, 1.0, 0, 0, 0)
             if i == 5:
-                sender.write(
-                    b"\xfd\x09\x00\x00\x00\x01\x01\x1e\x00\x00" + b"\x00" * 11
-                )  # corrupt: bad CRC
+                # corrupt: bad CRC
+                sender.write(b"\xfd\x09\x00\x00\x00\x01\x01\x1e\x00\x00" + b"\x00" * 11)
             await asyncio.sleep(0.02)
 
     try:
@@ -167,9 +164,8 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
         other.close()
     assert uav.uav_sysid == 1
     assert len(tel.attitude) == 10 and len(tel.position) == 10
-    assert tel.attitude.values[:, 0].max() == pytest.approx(
-        0.01
-    )  # system 7's attitude was not mixed in
+    # system 7's attitude was not mixed in
+    assert tel.attitude.values[:, 0].max() == pytest.approx(0.01)
     assert uav.health.other_systems == 10 and uav.health.bad_data >= 1
     status = uav.status(time.time())
     assert abs(status["clocks"]["station_minus_gnss_s"]) < 0.1  # SYSTEM_TIME was stamped when sent
@@ -230,9 +226,8 @@ def test_video_reconnects_when_the_stream_resumes():
     first = [f for f in frames if f.t_recv <= ended[0] + 0.5]
     second = [f for f in frames if f.t_recv > ended[0] + 1.5]  # after the first stream timed out
     assert video.connects >= 2
-    assert (
-        len(first) >= 25 and len(second) >= 25
-    )  # 45 frames sent each time; a GOP may be lost at a start
+    # 45 frames sent each time; a GOP may be lost at a start
+    assert len(first) >= 25 and len(second) >= 25
     assert [f.index for f in frames] == list(range(len(frames)))
     # exposure = stream slot − latency; the slot (PTS on the station clock) is never after the arrival
     assert all(

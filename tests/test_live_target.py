@@ -117,9 +117,8 @@ def test_run_without_init_bbox_acquires_near_the_uuvs_own_estimate(tmp_path):
                 check=False,
             )
             assert summary.returncode == 0 and "target tracking (prior)" in summary.stdout, summary
-            assert (
-                "web page http://127.0.0.1:" in summary.stdout
-            )  # the run's page (live_helpers: a free port)
+            # the run's page (live_helpers: a free port)
+            assert "web page http://127.0.0.1:" in summary.stdout
             # late joiners: the latest fix and status on their own keys
             zs = open_session(connect=[live.ep])
             try:
@@ -159,9 +158,8 @@ def test_run_without_init_bbox_acquires_near_the_uuvs_own_estimate(tmp_path):
     assert first_valid >= 3 and all(
         g["fix_type"] == 1 and g["ignore_flags"] == 255 for g in gps[:first_valid]
     )
-    assert (
-        gps[first_valid]["time_usec"] / 1e6 >= fixes[first_ok]["t"] - 1e-3
-    )  # nothing before the first ok fix
+    # nothing before the first ok fix
+    assert gps[first_valid]["time_usec"] / 1e6 >= fixes[first_ok]["t"] - 1e-3
     valid = [g for g in gps if g["fix_type"] == 3]
     err = live.gps_errors_m(valid)
     print(

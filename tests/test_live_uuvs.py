@@ -412,9 +412,8 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         )
         boxes = [u["box"] for u in overlay["uuvs"]]
         assert all(b and len(b) == 4 for b in boxes) and boxes[0] != boxes[1], boxes
-        assert (
-            overlay["status"] == "ok" and overlay["box"] == boxes[0]
-        )  # the first UUV's, as with one
+        # the first UUV's, as with one
+        assert overlay["status"] == "ok" and overlay["box"] == boxes[0]
 
         # a command must name its UUV
         code, answer = _http(base + "/api/release", {})

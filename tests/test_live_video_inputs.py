@@ -246,9 +246,8 @@ def test_stream_slot_is_when_the_frame_was_sent(clips, scheme, tmp_path):
     for f in rx.frames:
         k = int(np.argmin(np.mean((images - _small_gray(f.image)) ** 2, axis=(1, 2))))
         late_ms.append((f.t_slot - (t0 + times[k])) * 1000.0)
-    settled = np.array(
-        late_ms[FPS:]
-    )  # after the first second: the connection's first packets are stamped late
+    # after the first second: the connection's first packets are stamped late
+    settled = np.array(late_ms[FPS:])
     print(
         f"{scheme}: {len(late_ms)} frames, slot − send time p50 {np.median(settled):.2f} ms, "
         f"range {settled.min():.2f} … {settled.max():.2f} ms"
@@ -506,9 +505,8 @@ def test_stop_while_the_stream_is_down_exits_cleanly(tmp_path):
     text = log.read_text()
     assert proc.returncode == 0, text[-3000:]
     assert "terminate called" not in text and "Traceback" not in text, text[-3000:]
-    assert (
-        "skyfix.ffmpeg" in text and " libav." not in text
-    )  # FFmpeg's words only through skyfix's throttle
+    # FFmpeg's words only through skyfix's throttle
+    assert "skyfix.ffmpeg" in text and " libav." not in text
 
 
 def test_ffmpeg_complaints_are_thinned_out(clips, tmp_path, caplog):
@@ -533,9 +531,8 @@ def test_ffmpeg_complaints_are_thinned_out(clips, tmp_path, caplog):
             sender.kill()
             sender.wait()
     ffmpeg_lines = [r.getMessage() for r in caplog.records if r.name == "skyfix.ffmpeg"]
-    said = (
-        logging.getLogger("libav").handlers[0].throttle.counts
-    )  # every complaint FFmpeg made, by kind
+    # every complaint FFmpeg made, by kind
+    said = logging.getLogger("libav").handlers[0].throttle.counts
     allowed = sum(min(n, 3) + n // 100 for n in said.values())
     print(
         f"FFmpeg said {sum(said.values())} things of {len(said)} kinds; {len(ffmpeg_lines)} lines logged; "

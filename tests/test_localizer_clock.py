@@ -51,9 +51,8 @@ def test_reboot_and_station_clock_step_start_new_segments():
     assert c.segments == 1 and c.last_restart == (pytest.approx(600.95), 2.0)
     assert c.reboots == 1
     assert c.offset_s == pytest.approx(2001.02)
-    assert (
-        c.add(3.0, 1990.0) == RESTART
-    )  # the station clock stepped back 13 s (NTP): our own clock, at once
+    # the station clock stepped back 13 s (NTP): our own clock, at once
+    assert c.add(3.0, 1990.0) == RESTART
     assert c.segments == 2 and c.offset_s == pytest.approx(1987.0)
     assert c.reboots == 1  # the boot clock went on: the station's step is no reboot of the source
 
@@ -107,13 +106,11 @@ def test_one_way_delay_from_the_least_delays_each_way():
         sent = 1_700_000_100.0 + i
         remote = sent + up - station_minus_boot  # the autopilot's boot clock at receipt
         assert rt.add(remote, sent, sent + up + dn)
-        down.add(
-            remote + 0.5, remote + 0.5 + station_minus_boot + dn
-        )  # a message it sends 0.5 s later
+        # a message it sends 0.5 s later
+        down.add(remote + 0.5, remote + 0.5 + station_minus_boot + dn)
     assert rt.round_trip_s == pytest.approx(0.06)  # the fastest exchange: 20 ms up but 40 ms down
-    assert rt.one_way_delay_s(down) == pytest.approx(
-        0.02, abs=1e-6
-    )  # float64 UNIX seconds: ~0.2 µs
+    # float64 UNIX seconds: ~0.2 µs
+    assert rt.one_way_delay_s(down) == pytest.approx(0.02, abs=1e-6)
     assert not rt.add(5.0, 100.0, 99.0)  # came back before it left
     assert not rt.add(5.0, 100.0, 103.0)  # 3 s round trip: not an answer to this request
     assert rt.exchanges == 4

@@ -149,9 +149,8 @@ def test_heights_above_the_ellipsoid_follow_gps_raw_int(make_cal, make_telemetry
     ):  # GPS_RAW_INT at 10 Hz over the telemetry's span: alt_ellipsoid 47.25 m above alt
         tel.add_gps_raw(0, 3, 412.0, 0.8, 1.6, 0.9, 1.3, 47.25, T0_UNIX + i * 0.1)
     f = fix_at_principal_point(cal, tel)
-    assert f.alt_amsl_m == pytest.approx(
-        412.0 - 30.0 - 2.0
-    )  # the UUV: the UAV's alt − height − depth
+    # the UUV: the UAV's alt − height − depth
+    assert f.alt_amsl_m == pytest.approx(412.0 - 30.0 - 2.0)
     assert f.alt_ellipsoid_m == pytest.approx(f.alt_amsl_m + 47.25)
 
 

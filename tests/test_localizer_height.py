@@ -115,9 +115,8 @@ def test_a_tilted_rangefinder_reads_long():
 def test_gnss_sigmas_follow_what_the_receiver_says():
     assert gnss.horizontal_sigma_m(3, 0.9, 1.2) == 0.9  # h_acc given: the receiver's own
     assert gnss.horizontal_sigma_m(3, math.nan, 1.2) == pytest.approx(1.2 * 1.8)  # HDOP × UERE(3D)
-    assert gnss.horizontal_sigma_m(6, math.nan, math.nan) == pytest.approx(
-        0.012
-    )  # RTK fixed, HDOP unknown: 1
+    # RTK fixed, HDOP unknown: 1
+    assert gnss.horizontal_sigma_m(6, math.nan, math.nan) == pytest.approx(0.012)
     assert gnss.horizontal_sigma_m(4, math.nan, 0.8) == pytest.approx(0.8 * 1.2)
     assert math.isnan(gnss.horizontal_sigma_m(1, math.nan, 0.8))  # no fix
     assert gnss.vertical_sigma_m(3, 2.2, 1.0) == 2.2
@@ -129,9 +128,8 @@ def test_gnss_sigmas_follow_what_the_receiver_says():
 def test_the_uavs_horizontal_sigma_in_the_pose_follows_gps_raw_int():
     c, tel = cal(), telemetry(duration_s=3.0)
     times = T0 + np.array([1.0, 2.0])
-    assert np.allclose(
-        camera_pose(c, tel, times).sigma_uav_m, 1.5
-    )  # no GPS_RAW_INT: a plain GNSS assumed
+    # no GPS_RAW_INT: a plain GNSS assumed
+    assert np.allclose(camera_pose(c, tel, times).sigma_uav_m, 1.5)
     for k in range(30):  # a DOP-only receiver (h_acc 0): HDOP 0.9 × the 3D fix's 1.8 m
         tel.add_gps_raw(0, 3, SURFACE + TRUE_H, 0.0, 0.0, 0.9, 1.4, math.nan, T0 + k * 0.1)
     assert np.allclose(camera_pose(c, tel, times).sigma_uav_m, 0.9 * 1.8)
@@ -222,12 +220,10 @@ def test_a_white_rtk_noise_does_not_move_the_height_and_a_drift_is_followed(amsl
     tau = np.arange(20.0, 120.0, 0.2)  # one answer between each two GNSS altitudes
     bias, sigma, source = at(c, tel, tau)
     err = bias - drift(tau)
-    assert (
-        np.sqrt(np.mean(np.diff(err) ** 2)) < 0.003
-    )  # was 2.1 cm: the height followed each message's noise
-    assert (
-        np.sqrt(np.mean(err**2)) < 0.01 and np.abs(err).max() < 0.03
-    )  # was 1.7 cm RMS: worse than one message
+    # was 2.1 cm: the height followed each message's noise
+    assert np.sqrt(np.mean(np.diff(err) ** 2)) < 0.003
+    # was 1.7 cm RMS: worse than one message
+    assert np.sqrt(np.mean(err**2)) < 0.01 and np.abs(err).max() < 0.03
     assert np.mean(np.abs(err) <= 2 * sigma) >= 0.95
     assert set(source) == {"gnss_rtk" if amsl else "baro+gnss_rtk"}
 
@@ -237,9 +233,8 @@ def test_a_white_rtk_noise_does_not_move_the_height_and_a_drift_is_followed(amsl
 
 def test_one_absolute_height_is_a_kalman_update():
     c, tel = cal(), telemetry()
-    assert tel.add_height(
-        "size", T0 + 4.0, TRUE_H - 0.8, 0.2
-    )  # the EKF reads 0.8 m high by this measurement
+    # the EKF reads 0.8 m high by this measurement
+    assert tel.add_height("size", T0 + 4.0, TRUE_H - 0.8, 0.2)
     bias, sigma, source = at(c, tel, [3.9, 4.0])
     pb = 0.3**2 + walk(BOOT0_S + 4.0, c)
     assert bias[0] == 0.0 and source[0] == "takeoff"  # causal: not before its time
@@ -257,13 +252,11 @@ def test_a_source_that_disagrees_is_not_used_and_widens_the_sigma():
     for k, off in enumerate((6.0, 6.1, 4.0, 4.1)):  # metres below what the EKF says: 6σ, 6σ, 4σ, 4σ
         assert tel.add_height("rangefinder", T0 + 1.0 + k, TRUE_H + off, 0.01)
     bias, sigma, source = at(c, tel, [4.5, 4.0 + CONFLICT_HOLD_S + 0.5])
-    assert (
-        bias[0] == 0.0 and source[0] == "takeoff"
-    )  # none used: 4σ is inside the gate, not within 3σ
+    # none used: 4σ is inside the gate, not within 3σ
+    assert bias[0] == 0.0 and source[0] == "takeoff"
     assert sigma[0] == pytest.approx(math.hypot(1.0, 4.1 / 2))
-    assert sigma[1] == pytest.approx(
-        1.0
-    )  # the disagreement counts until CONFLICT_HOLD_S after its last reading
+    # the disagreement counts until CONFLICT_HOLD_S after its last reading
+    assert sigma[1] == pytest.approx(1.0)
     notices = take_notices(tel)
     assert (
         len(notices) == 1
@@ -289,9 +282,8 @@ def test_one_glitch_is_refused_quietly():
     for k, off in enumerate((0.0, 20.0, 0.0)):
         tel.add_height("rangefinder", T0 + 1.0 + k, TRUE_H + off, 0.01)
     bias, sigma, _ = at(c, tel, [2.5, 3.5])
-    assert sigma[0] < 0.01 and bias[1] == pytest.approx(
-        0.0, abs=1e-6
-    )  # not widened; the next one used
+    # not widened; the next one used
+    assert sigma[0] < 0.01 and bias[1] == pytest.approx(0.0, abs=1e-6)
     assert take_notices(tel) == []
 
 

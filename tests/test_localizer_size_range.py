@@ -41,9 +41,8 @@ CAMERA = Camera(
     cy=SIM.cy,
     distortion=SIM.dist.ravel().tolist(),
 )
-R_GIMBAL_FROM_CV = np.array(
-    [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
-)  # cv z (optical axis) = gimbal x
+# cv z (optical axis) = gimbal x
+R_GIMBAL_FROM_CV = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
 def _sim_corners(R, camera_ned, top_ned, heading_rad):
@@ -57,9 +56,8 @@ def _sim_corners(R, camera_ned, top_ned, heading_rad):
     pts = np.array(pts)
     under = pts[:, 2] > 0
     seen = pts.copy()
-    seen[under] = surface_crossing(
-        camera_ned, pts[under], N_WATER
-    )  # what the camera sees of a submerged point
+    # what the camera sees of a submerged point
+    seen[under] = surface_crossing(camera_ned, pts[under], N_WATER)
     return np.stack(project(SIM, R, camera_ned, seen), axis=-1)
 
 
@@ -116,9 +114,8 @@ def test_outline_of_a_square_with_points_inside_turns_its_normals_outwards():
         e = pts[j] - pts[i]
         normal = np.array([e[1], -e[0]]) / np.hypot(*e)
         mid = (pts[i] + pts[j]) / 2
-        assert np.hypot(*(mid + normal - (20, 20))) > np.hypot(
-            *(mid - (20, 20))
-        )  # away from the centre
+        # away from the centre
+        assert np.hypot(*(mid + normal - (20, 20))) > np.hypot(*(mid - (20, 20)))
     assert polygon_area(pts[hull]) == pytest.approx(400.0)
     assert polygon_area(pts[hull][::-1]) == pytest.approx(400.0)
 
@@ -130,9 +127,8 @@ def test_edge_points_leave_out_the_corners_and_follow_moved_corners():
     assert len(pts.xy) == 4 * 8  # 7 px of each 10 px edge, a point every pixel
     along_edge = np.sum(np.abs(pts.normal) * np.abs(pts.xy - 5.0), axis=1)
     assert np.allclose(along_edge, 5.0)  # on the edges
-    assert np.all(
-        np.abs(pts.xy - 5.0).min(axis=1) <= 3.5 + 1e-9
-    )  # at most 3.5 px from an edge's middle
+    # at most 3.5 px from an edge's middle
+    assert np.all(np.abs(pts.xy - 5.0).min(axis=1) <= 3.5 + 1e-9)
     assert np.allclose(pts.moved(square), pts.xy)
     assert np.allclose(pts.moved(square + (2.0, -1.0)), pts.xy + (2.0, -1.0))
     assert np.allclose(pts.moved(square * 2.0), pts.xy * 2.0)
@@ -159,9 +155,8 @@ def test_size_height_adds_the_errors_all_frames_share():
     assert h.sigma_common_m == pytest.approx(math.hypot(range_m * relative, 0.05 / 1.34))
     assert h.sigma_total_m == pytest.approx(math.hypot(0.03, h.sigma_common_m))
     assert h.bias_m == pytest.approx(0.8)
-    above = size_height(
-        5.0, 10.0, 0.03, 50.0, 0.2, 11.0, 0.3, -0.1, 0.05, 1.34
-    )  # top face out of the water
+    # top face out of the water
+    above = size_height(5.0, 10.0, 0.03, 50.0, 0.2, 11.0, 0.3, -0.1, 0.05, 1.34)
     assert above.sigma_common_m == pytest.approx(math.hypot(10.0 * relative, 0.05 / 1.34))
 
 
@@ -210,9 +205,8 @@ def test_window_forgets_old_measurements():
     est = HeightBias(window_s=30.0)
     for h in _measurements(np.random.default_rng(4), bias=2.0, n=300, hz=10.0):  # t 100 .. 130
         est.add(h)
-    later = _measurements(
-        np.random.default_rng(5), bias=0.2, n=400, hz=10.0
-    )  # t 100 .. 140, moved 40 s on
+    # t 100 .. 140, moved 40 s on
+    later = _measurements(np.random.default_rng(5), bias=0.2, n=400, hz=10.0)
     for h in later:
         est.add(
             SizeHeight(

@@ -102,9 +102,8 @@ def test_statuses_gap_stale_before_first():
     assert list(status) == [BEFORE_FIRST, OK, GAP, OK, OK, OK, STALE]
     assert vals[1, 0] == pytest.approx(0.5)
     assert vals[3, 0] == pytest.approx(12.5)
-    assert vals[5, 0] == pytest.approx(
-        13.0
-    )  # held within max_hold_s (no rate column to extrapolate with)
+    # held within max_hold_s (no rate column to extrapolate with)
+    assert vals[5, 0] == pytest.approx(13.0)
     assert np.all(np.isnan(vals[[0, 2, 6], 0]))
     # the hold's error: the last rate of change (10 per second) times the 0.15 s since the last sample
     assert err[5, 0] == pytest.approx(1.5) and err[3, 0] == 0.0 and err[4, 0] == 0.0
@@ -189,9 +188,8 @@ def test_extrapolation_with_rates_and_its_error():
     assert list(status) == [OK, OK, STALE]
     assert vals[0, 0] == pytest.approx(0.105 + 1.1 * 0.05)
     assert vals[1, 0] == pytest.approx(0.105 + 1.1 * 0.2)
-    assert err[0, 0] == pytest.approx(
-        0.5 * 1.0 * 0.05**2
-    )  # half the rate's change per second × dt²
+    # half the rate's change per second × dt²
+    assert err[0, 0] == pytest.approx(0.5 * 1.0 * 0.05**2)
     assert err[1, 0] == pytest.approx(0.5 * 1.0 * 0.2**2)
 
 
@@ -327,9 +325,8 @@ def test_reboot_keeps_earlier_telemetry_and_starts_a_new_segment(make_cal, make_
     it use the new segment, and the reboot is noticed once."""
     cal = make_cal()
     tel = make_telemetry(duration_s=3.0)  # boot times 250 s … 253 s at T0 … T0 + 3 s
-    t_new = (
-        T0_UNIX + 5.0
-    )  # rebooted at T0 + 3.2 s; telemetry again from T0 + 5 s, boot clock at 1.8 s
+    # rebooted at T0 + 3.2 s; telemetry again from T0 + 5 s, boot clock at 1.8 s
+    t_new = T0_UNIX + 5.0
     for i in range(20):
         boot_ms = 1800 + 100 * i
         t = t_new + 0.1 * i
@@ -354,14 +351,12 @@ def test_telemetry_refuses_impossible_samples():
     assert tel.add_position(1000, 47.5, 8.5, 412.0, 28.0, z, t)
     assert not tel.add_position(1100, 0.0, 0.0, 0.0, 0.0, z, t + 0.1)
     assert tel.refusal == "lat/lon 0/0: the UAV has no GPS fix yet"
-    assert not tel.add_position(
-        1200, 475000000, 85000000, 412.0, 28.0, z, t + 0.2
-    )  # degE7 not converted
+    # degE7 not converted
+    assert not tel.add_position(1200, 475000000, 85000000, 412.0, 28.0, z, t + 0.2)
     assert "out of range" in tel.refusal
     assert tel.add_gimbal(1000, (1.0, 0.0, 0.0, 0.0), 64, t)
-    assert not tel.add_gimbal(
-        1100, (0.0, 0.0, 0.0, 0.0), 64, t + 0.1
-    )  # all-zero "no attitude" quaternion
+    # all-zero "no attitude" quaternion
+    assert not tel.add_gimbal(1100, (0.0, 0.0, 0.0, 0.0), 64, t + 0.1)
     assert not tel.add_gimbal(1200, (1.0, math.nan, 0.0, 0.0), 64, t + 0.2)
     assert tel.add_depth(T0_UNIX, 2.0)
     assert not tel.add_depth(T0_UNIX + 1, math.nan)

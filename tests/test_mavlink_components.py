@@ -151,8 +151,7 @@ def test_a_garbage_frame_cannot_fake_a_reboot_but_a_real_reboot_is_seen():
         for i in range(20)
     ]
     assert taken.index(True) >= 2 and all(taken[taken.index(True) :])  # held back until confirmed
-    assert (
-        tel.uav_clock.segments == 1 and len(tel.attitude) == n + 20
-    )  # then the held ones appended too
+    # then the held ones appended too
+    assert tel.uav_clock.segments == 1 and len(tel.attitude) == n + 20
     assert sum("rebooted" in notice for notice in tel.notices) == 1
     assert list(camera_pose(_cal(), tel, [T0 + 2.0]).status) == ["ok"]

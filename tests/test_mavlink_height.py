@@ -55,9 +55,8 @@ def test_heartbeat_arming_is_seen_only_from_the_autopilot(tel):
     ingest(tel, beat(armed), T0 + 0.5)  # already armed when first heard: no arming seen
     assert tel.armed is True and tel.arm_times == []
     ingest(tel, beat(disarmed), T0 + 1.0)
-    ingest(
-        tel, beat(armed, kind=mav.MAV_TYPE_GCS, autopilot=mav.MAV_AUTOPILOT_INVALID), T0 + 1.2
-    )  # a ground station
+    # a ground station
+    ingest(tel, beat(armed, kind=mav.MAV_TYPE_GCS, autopilot=mav.MAV_AUTOPILOT_INVALID), T0 + 1.2)
     assert tel.armed is False and tel.arm_times == []
     ingest(tel, beat(armed), T0 + 1.5)
     assert tel.armed is True and tel.arm_times == [T0 + 1.5]
@@ -71,9 +70,8 @@ def test_downward_distance_sensor_becomes_a_height(tel):
         tel.height_fixes["rangefinder"].values[0],
     )
     assert t == pytest.approx(T0 + 1.04, abs=1e-6)  # on the autopilot's clock, as its ATTITUDE
-    assert h == pytest.approx(
-        12.5 * math.cos(ROLL) * math.cos(PITCH), abs=1e-6
-    )  # read along the tilted body axis
+    # read along the tilted body axis
+    assert h == pytest.approx(12.5 * math.cos(ROLL) * math.cos(PITCH), abs=1e-6)
     assert sigma == pytest.approx(math.hypot(0.05, 0.125))
     ingest(tel, _decode(distance_sensor(ms + 100, 1250, covariance=16)), T0 + 1.14)  # 16 cm²: 4 cm
     assert tel.height_fixes["rangefinder"].values[1][1] == pytest.approx(0.04)
@@ -94,9 +92,8 @@ def test_readings_that_are_not_a_height(tel, cm, orientation, quality, why):
     assert not ingest(
         tel, _decode(distance_sensor(BOOT0_MS + 1000, cm, orientation, quality)), T0 + 1.04
     )
-    assert (
-        tel.refusal is None and "rangefinder" not in tel.height_fixes
-    )  # not refused: simply no reading
+    # not refused: simply no reading
+    assert tel.refusal is None and "rangefinder" not in tel.height_fixes
     assert tel.rangefinder_out_of_range == (1 if why == "out of range" else 0)
 
 
@@ -109,9 +106,8 @@ def test_rangefinder_message_only_without_distance_sensor(tel):
     )
     assert t == T0 + 1.0 and h == pytest.approx(12.5 * math.cos(ROLL) * math.cos(PITCH), abs=1e-5)
     ingest(tel, _decode(distance_sensor(BOOT0_MS + 1100, 1250)), T0 + 1.14)
-    assert not ingest(
-        tel, _decode(mav.MAVLink_rangefinder_message(12.5, 0.0)), T0 + 1.2
-    )  # its copy: once
+    # its copy: once
+    assert not ingest(tel, _decode(mav.MAVLink_rangefinder_message(12.5, 0.0)), T0 + 1.2)
     assert len(tel.height_fixes["rangefinder"]) == 2
 
 
@@ -146,14 +142,12 @@ def test_gps_raw_int_altitude_accuracies_and_dops(tel):
         )
 
     assert ingest(tel, raw(BOOT0_MS + 900, 6, 70, 120, 14, 25), T0 + 1.0)
-    assert ingest(
-        tel, raw(BOOT0_MS + 1100, 3, 65535, 65535, 0, 0), T0 + 1.2
-    )  # DOPs unknown, no accuracies
+    # DOPs unknown, no accuracies
+    assert ingest(tel, raw(BOOT0_MS + 1100, 3, 65535, 65535, 0, 0), T0 + 1.2)
     assert ingest(tel, raw(BOOT0_MS + 1300, 2, 90, 65535, 0, 0), T0 + 1.4)  # 2D: no altitude
     t, v = tel.gnss.times, tel.gnss.values  # h_acc, geoid, fix, alt, v_acc, HDOP, VDOP
-    assert t[0] == pytest.approx(
-        T0 + 0.94, abs=1e-6
-    )  # ArduPilot's fix time (boot µs) on the autopilot's clock
+    # ArduPilot's fix time (boot µs) on the autopilot's clock
+    assert t[0] == pytest.approx(T0 + 0.94, abs=1e-6)
     assert np.allclose(v[0], [0.014, 40.0, 6, 32.0, 0.025, 0.7, 1.2])
     assert v[1][2] == 3 and v[1][3] == 32.0 and np.isnan(v[1][[0, 4, 5, 6]]).all()
     assert v[2][2] == 2 and np.isnan(v[2][3]) and v[2][5] == pytest.approx(0.9)

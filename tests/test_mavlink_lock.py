@@ -126,9 +126,8 @@ def test_a_link_that_requires_signing_takes_only_signed_messages():
     try:
         autopilot.sendto(heartbeat(1), ("127.0.0.1", port))
         autopilot.sendto(heartbeat(1, bytes(32)), ("127.0.0.1", port))  # another key
-        autopilot.sendto(
-            heartbeat(1, key, 2), ("127.0.0.1", port)
-        )  # (pymavlink took the forged one's time)
+        # (pymavlink took the forged one's time)
+        autopilot.sendto(heartbeat(1, key, 2), ("127.0.0.1", port))
         wait_for(lambda: len(got) == 3, 10, lambda: f"3 messages: {got}")
         status = link.status(0)
     finally:

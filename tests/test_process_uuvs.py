@@ -79,9 +79,8 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
             for r in (alone / "positions.csv").read_text().splitlines()[1:]
             if "before_init" not in r
         ]
-        assert sum(",ok," in r for r in rows) > 0.6 * len(
-            rows
-        )  # uuv1 is lost a while in this view (alone too)
+        # uuv1 is lost a while in this view (alone too)
+        assert sum(",ok," in r for r in rows) > 0.6 * len(rows)
         assert all(",motion," in r for r in rows if ",ok," in r)  # the offset estimated and applied
     assert len(opened) == 1 + len(ids)
     first, second = ((tmp_path / "all" / uuv / FILES[0]).read_bytes() for uuv in ids)

@@ -62,9 +62,8 @@ def test_report_without_truth_names_each_gap(tmp_path, capsys):
     )
     for i, s in enumerate(statuses):
         ll = f"{63.44 + i * 1e-6:.9f},{10.4 + i * 2e-6:.9f}" if s == "ok" else ","
-        t = (
-            1763800000 + i * 0.1 + (2.0 if i >= 35 else 0.0)
-        )  # the video stops for 2 s before frame 35
+        # the video stops for 2 s before frame 35
+        t = 1763800000 + i * 0.1 + (2.0 if i >= 35 else 0.0)
         rows.append(f"{t:.3f},{ll},1.0,{0.2 if s == 'ok' else ''},{s}")
     (tmp_path / "positions.csv").write_text("\n".join(rows) + "\n")
     assert main(["report", str(tmp_path), "--out", str(tmp_path / "plots")]) == 0

@@ -156,7 +156,6 @@ def test_garbage_and_other_payload_types_are_ignored(stream):
             assert d.push(junk) == []
         noise = noise[4:] + noise[:4]
         units += d.push(g)
-    assert d.bad_packets >= len(
-        datagrams
-    )  # random bytes that look like RTP of this stream are rare
+    # random bytes that look like RTP of this stream are rare
+    assert d.bad_packets >= len(datagrams)
     assert len(units) == 60 and d.lost_packets == 0

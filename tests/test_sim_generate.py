@@ -116,9 +116,8 @@ def test_frames_rendered_apart_are_the_frames_rendered_in_turn():
     camera = gen.camera_of(sc)
     truth = gen.frame_truth(sc, gen.Motion(sc), camera)
     renderer = gen.Renderer(sc, camera)
-    apart = list(
-        gen._frames(renderer, sc, truth, workers=2)
-    )  # copies of the renderer, its noise not drawn yet
+    # copies of the renderer, its noise not drawn yet
+    apart = list(gen._frames(renderer, sc, truth, workers=2))
     in_turn = list(gen._frames(renderer, sc, truth, workers=1))
     assert len(in_turn) == len(apart) == 10
     for (img_a, boxes_a), (img_b, boxes_b) in zip(in_turn, apart, strict=True):

@@ -68,18 +68,16 @@ def test_baro_bias_and_drift_are_in_the_ekf_heights_only(tlogs):
         tau, alt, rel = gpi(sc, records)
         h = true_height(sc, tau)
         expected = u.baro_bias_m + u.baro_drift_m * tau / sc.duration_s  # the knobs' stated meaning
-        assert (
-            np.abs(alt - (s.surface_amsl_m + h) - expected).max() < 0.003
-        )  # mm rounding, flat-earth altitude
+        # mm rounding, flat-earth altitude
+        assert np.abs(alt - (s.surface_amsl_m + h) - expected).max() < 0.003
         assert np.abs(rel - (h - s.takeoff_height_above_surface_m) - expected).max() < 0.002
         raw = [m for _, m in of_kind(records, "GPS_RAW_INT")]
         t_raw = np.array([m.time_usec for m in raw]) / 1e6 - sc.start_unix
         gnss_err = np.array([m.alt for m in raw]) / 1e3 - (
             s.surface_amsl_m + true_height(sc, t_raw)
         )
-        assert (
-            abs(np.corrcoef(gnss_err, u.baro_drift_m * t_raw)[0, 1]) < 0.9
-        )  # not the barometer's ramp
+        # not the barometer's ramp
+        assert abs(np.corrcoef(gnss_err, u.baro_drift_m * t_raw)[0, 1]) < 0.9
         rms = np.sqrt(np.mean(gnss_err**2))
         assert 0.3 * u.gnss_alt_error_m < rms < 2.0 * u.gnss_alt_error_m, (name, rms)
         # a slow wander: from one fix to the next (0.2 s) it moves by a small share of its size
@@ -131,9 +129,8 @@ def test_heartbeat_arms_at_its_time(tlogs):
     assert all(a for tau, a in beats if tau > sc.uav.armed_at_s + 0.3)
     assert not any(a for tau, a in beats if tau < sc.uav.armed_at_s)
     assert [a for _, a in beats][:1] == [False] and any(a for _, a in beats)
-    assert all(
-        m.base_mode & armed for _, m in of_kind(tlogs["rtk"][1], "HEARTBEAT")
-    )  # unset: armed throughout
+    # unset: armed throughout
+    assert all(m.base_mode & armed for _, m in of_kind(tlogs["rtk"][1], "HEARTBEAT"))
 
 
 def _attitude_at(records, boot_ms):
@@ -160,9 +157,8 @@ def test_downward_rangefinder_reads_along_the_tilted_body_axis(tlogs):
     assert np.abs(err).max() < 5 * rf.noise_m and 0.5 * rf.noise_m < err.std() < 1.5 * rf.noise_m
     tilt = np.degrees(np.arccos(np.cos(roll) * np.cos(pitch)))
     assert tilt.mean() > 5  # a windy day: the slant range is ~1 % long, 12 cm at 12 m
-    assert not np.any((tau >= 20.0) & (tau < 25.0)) and np.any(
-        (tau >= 25.0) & (tau < 26.0)
-    )  # the dropout
+    # the dropout
+    assert not np.any((tau >= 20.0) & (tau < 25.0)) and np.any((tau >= 25.0) & (tau < 26.0))
     span = sc.telemetry.lead_s + sc.duration_s + 1.0 - 5.0
     assert abs(len(ds) - rf.rate_hz * span) <= 2
     rng = [m for _, m in of_kind(records, "RANGEFINDER")]  # ArduPilot's copy of the same reading

@@ -158,9 +158,8 @@ def test_tlog_records_are_station_receive_times(sessions):
     clock = Clock.of(sc)
     st_us = round(sc.clock.station_offset_s * 1e6)
     for t_rec, m in of_kind(read_tlog(path / "uav.tlog"), "SYSTEM_TIME"):
-        assert (
-            m.time_unix_usec == clock.boot_epoch_us + 1000 * m.time_boot_ms
-        )  # GNSS time, not the station's
+        # GNSS time, not the station's
+        assert m.time_unix_usec == clock.boot_epoch_us + 1000 * m.time_boot_ms
         delay = (t_rec - st_us - m.time_unix_usec) / 1e6
         assert sc.link.delay_s <= delay < sc.link.delay_s + 0.3
 
@@ -176,20 +175,17 @@ def test_timesync_replies_like_ardupilot(sessions):
     for t_rec, m in replies:
         assert m.get_srcSystem() == 1 and m.get_srcComponent() == 1 and m.tc1 > 0
         sent_true = m.ts1 // 1000 - st_us  # ts1: the station's send time in ns
-        arrived_true = (
-            clock.boot_epoch_us + m.tc1 // 1000
-        )  # tc1: the autopilot's boot time in ns at arrival
+        # tc1: the autopilot's boot time in ns at arrival
+        arrived_true = clock.boot_epoch_us + m.tc1 // 1000
         up.append((arrived_true - sent_true) / 1e6)
         down.append((t_rec - st_us - arrived_true) / 1e6)
-        est.append(
-            (m.ts1 / 1e3 + t_rec) / 2 - m.tc1 / 1e3
-        )  # station µs at boot zero, from one exchange
+        # station µs at boot zero, from one exchange
+        est.append((m.ts1 / 1e3 + t_rec) / 2 - m.tc1 / 1e3)
     up, down = np.array(up), np.array(down)
     d, j = sc.link.delay_s, sc.link.jitter_s
     assert up.min() >= d - 1e-6 and down.min() >= d + 0.0008 - 1e-6
-    assert (
-        np.median(up) < d + 3 * j and np.median(down) < d + 0.0008 + 3 * j
-    )  # symmetric on average
+    # symmetric on average
+    assert np.median(up) < d + 3 * j and np.median(down) < d + 0.0008 + 3 * j
     # the usual estimate recovers the boot clock's zero on the station's clock to the link's asymmetry
     assert (
         np.abs(np.array(est) - (clock.boot_epoch_us + st_us)).max()
@@ -215,9 +211,8 @@ def test_gps_raw_int_is_the_reported_position_with_gnss_time(sessions):
         assert (m.h_acc, m.v_acc) == (20, 40) and m.alt_ellipsoid - m.alt == round(
             s.geoid_separation_m * 1000
         )
-        assert (
-            sc.link.delay_s <= (t_rec - st_us - m.time_usec) / 1e6 < sc.link.delay_s + 0.3
-        )  # true UNIX µs
+        # true UNIX µs
+        assert sc.link.delay_s <= (t_rec - st_us - m.time_usec) / 1e6 < sc.link.delay_s + 0.3
         t = m.time_usec / 1e6
         lat = np.interp(t, t_gpi, [g.lat for g in gpi]) / 1e7
         lon = np.interp(t, t_gpi, [g.lon for g in gpi]) / 1e7
@@ -347,9 +342,8 @@ def test_servo_mount_reports_target_minus_lean(sessions):
     gim = [m for _, m in of_kind(recs, "GIMBAL_DEVICE_ATTITUDE_STATUS")]
     assert {m.flags for m in gim} == {44}
     t_g = np.array([m.time_boot_ms for m in gim])
-    roll_v = np.interp(
-        t_g, t_att, [m.roll for m in att]
-    )  # the vehicle's lean from its own ATTITUDE
+    # the vehicle's lean from its own ATTITUDE
+    roll_v = np.interp(t_g, t_att, [m.roll for m in att])
     pitch_v = np.interp(t_g, t_att, [m.pitch for m in att])
     R_q = quat_to_R(np.array([m.q for m in gim], dtype=float))
     yaw_r, pitch_r, roll_r = Rotation.from_matrix(R_q).as_euler("ZYX").T

@@ -274,17 +274,15 @@ def test_shadow_lands_where_the_refracted_sunlight_through_the_corners_meets_the
     )
     uv = np.round(pixels(shadow.camera, truth, i, pts, shadow.n)).astype(int)
     seen = ~uuv[uv[:, 1], uv[:, 0]]
-    footprint_m = (
-        2.5 * (floor - truth.camera_ned[i, 2]) / shadow.camera.fx
-    )  # about 2.5 pixels on the floor
+    # about 2.5 pixels on the floor
+    footprint_m = 2.5 * (floor - truth.camera_ned[i, 2]) / shadow.camera.fx
     deep_in, far_out = seen & (inside_m > footprint_m), seen & (inside_m < -footprint_m)
     assert deep_in.sum() > 300  # much of the shadow is beside the UUV, not under it
     assert dark[uv[deep_in, 1], uv[deep_in, 0]].all()
     assert not dark[uv[far_out, 1], uv[far_out, 0]].any()
     inner = cv2.erode(drawn, np.ones((3, 3), np.uint8)).astype(bool)  # pixels the UUV covers whole
-    assert inner.sum() > 100 and np.array_equal(
-        with_shadow[inner], without[inner]
-    )  # its own shadow is not on it
+    # its own shadow is not on it
+    assert inner.sum() > 100 and np.array_equal(with_shadow[inner], without[inner])
 
 
 def test_shadow_touches_the_uuv_at_times(shadow):

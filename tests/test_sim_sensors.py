@@ -167,9 +167,8 @@ def test_the_camera_as_reported_carries_what_a_real_mount_would(sessions, name):
 def test_straight_down_the_levelling_error_tilts_the_optical_axis(sessions):
     sc, records, _ = sessions["nadir_vehicle_frame"]
     _, R_rep = reported_camera(sc, records)
-    off_nadir = np.degrees(
-        np.arccos(np.clip(R_rep[:, 2, 0], -1, 1))
-    )  # the optical axis from straight down
+    # the optical axis from straight down
+    off_nadir = np.degrees(np.arccos(np.clip(R_rep[:, 2, 0], -1, 1)))
     assert np.abs(off_nadir - np.hypot(0.25, 0.15)).max() < 1e-3
 
 
@@ -204,9 +203,8 @@ def test_truth_errors_holds_what_the_telemetry_carries(sessions, name):
             (t_msg >= tau[0]) & (t_msg <= tau[-1]),
         )  # the frames' span
         for got, column in ((n - true[:, 0], "north_err_m"), (e - true[:, 1], "east_err_m")):
-            assert (
-                np.abs(got - np.interp(t_msg, tau, errors[column]))[within].max() < 0.007
-            )  # 1e-7 deg rounding
+            # 1e-7 deg rounding
+            assert np.abs(got - np.interp(t_msg, tau, errors[column]))[within].max() < 0.007
     gpi = [m for _, m in of_kind(records, "GLOBAL_POSITION_INT")]
     t_gpi = boot_tau(sc, gpi)
     rel_err = np.array([m.relative_alt for m in gpi]) / 1e3 - (

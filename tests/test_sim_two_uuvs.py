@@ -207,9 +207,8 @@ def valid_fix_report(path: Path) -> dict:
         to_own = np.hypot(*(px - tracks[own]).T)
         to_other = np.hypot(*(px - tracks[other]).T)
         report[own] = {
-            "swaps": identity_swaps(
-                to_other < to_own
-            ),  # NaN (no valid fix, a UUV hidden) compares False
+            # NaN (no valid fix, a UUV hidden) compares False
+            "swaps": identity_swaps(to_other < to_own),
             "valid": int(g.valid.sum()),
             "ok": int((g.fixes.status == "ok").sum()),
             "frames": len(px),
@@ -318,9 +317,8 @@ def test_each_uuv_is_evaluated_against_its_own_truth(crossing, tmp_path):
     assert one.returncode == 0, one.stderr
     fixes = read_positions_csv(tmp_path / "p" / "positions.csv")
     own = read_table(path / "uuvs" / "uuv2" / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
-    assert np.allclose(
-        fixes.u, own["u"], equal_nan=True
-    )  # uuv2's pixels, not the session's own UUV's
+    # uuv2's pixels, not the session's own UUV's
+    assert np.allclose(fixes.u, own["u"], equal_nan=True)
     bad = subprocess.run(
         skyfix("evaluate", str(path), "--uuv", "uuv9", "--out", str(tmp_path / "bad"), "--quiet"),
         check=False,

@@ -73,9 +73,8 @@ def test_slope_variance_is_cox_and_munks_and_the_realisation_has_the_resolved_ba
     )
     assert field.resolved_mss == pytest.approx(resolved, rel=2e-3)
     assert field.resolved_mss + field.unresolved_mss == pytest.approx(total, rel=2e-3)
-    assert (
-        0.3 < field.resolved_mss / total < 0.9
-    )  # a wavelength of 4 pixels from 25 m (19 cm) resolves this much
+    # a wavelength of 4 pixels from 25 m (19 cm) resolves this much
+    assert 0.3 < field.resolved_mss / total < 0.9
 
     # measured on the realisation: the slopes at random places and times
     rng = np.random.default_rng(3)

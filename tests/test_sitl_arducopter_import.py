@@ -91,9 +91,8 @@ def fly(obs: Observer) -> tuple[float, float]:
             0,
             0,
         )
-        command(
-            obs, mavlink2.MAV_CMD_CONDITION_YAW, 45.0, 20.0, 1 if i % 2 == 0 else -1, 1
-        )  # relative turn
+        # relative turn
+        command(obs, mavlink2.MAV_CMD_CONDITION_YAW, 45.0, 20.0, 1 if i % 2 == 0 else -1, 1)
         wait_for(
             lambda p=pitch, t=since: gimbal_samples_at(obs, p, t) >= HOLD_SAMPLES,
             30,
@@ -320,9 +319,8 @@ def the_survey_filmed_is_located(
     )
     camera, fps = camera_of(sc), sc.fps
     t_sim, R_body, lla = sim_truth(log)
-    frames_t = np.arange(
-        survey_span[0] + VIDEO_LATE_S, survey_span[1], 1.0 / fps
-    )  # on the log's UNIX clock
+    # on the log's UNIX clock
+    frames_t = np.arange(survey_span[0] + VIDEO_LATE_S, survey_span[1], 1.0 / fps)
     boot = frames_t - clock_s
     ned = np.column_stack(
         pymap3d.geodetic2ned(lla[:, 0], lla[:, 1], lla[:, 2], LAT, LON, HOME_AMSL_M)

@@ -40,9 +40,8 @@ pytestmark = pytest.mark.sitl
 LAT, LON, SURFACE_AMSL_M = 63.4400, 10.4000, 0.40  # the scenario's [site]; ArduSub's --home
 DURATION_S = 42.0
 OCCLUSION_S = (30.0, 33.0)  # the UUV is hidden (session seconds from the first frame)
-WARMUP_S = (
-    30.0  # ArduSub's uptime before the replay starts (its README: start it ~30 s before the fixes)
-)
+# ArduSub's uptime before the replay starts (its README: start it ~30 s before the fixes)
+WARMUP_S = 30.0
 NO_FIX_MAX_S = 0.5  # issue 11: GPS_RAW_INT shows the loss within 0.5 s of skyfix sending fix_type 1
 # GLOBAL_POSITION_INT against the last fix ArduSub received, from 2 s after EKF3 took the GPS to the loss.
 # The simulated sub sits still, so its IMU contradicts every move of the (moving, ≤ 0.35 m/s) UUV's fixes:

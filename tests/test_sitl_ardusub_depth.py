@@ -48,9 +48,8 @@ SEA_PA, SEA_PA_PER_M = (
     1024.0 * 9.80665,
 )  # the SITL's water: AP_Baro::SimpleUnderWaterAtmosphere
 MAX_ERROR_M = 0.1
-MAX_WITHOUT_S = (
-    2.0  # the first status may come before the first depth: at most this much of the flight without
-)
+# the first status may come before the first depth: at most this much of the flight without
+MAX_WITHOUT_S = 2.0
 # The vehicle's water is sea water (1024 kg/m³): ArduSub's BARO_SPEC_GRAV says so (else its depths are 2.4 % long);
 # arming checks off (no GPS at arming, as under water)
 DEPTH_PARM = EXTRA_PARM + "BARO_SPEC_GRAV 1.024\nARMING_CHECK 0\n"
@@ -410,9 +409,8 @@ def own_log_follows_the_truth(
     warnings: list[str] = []
     records, found = read_ardusub_depth(logs[-1], 0.05, warnings)
     live = [(t, t - m.time_boot_ms / 1000) for t, m in obs.of("GLOBAL_POSITION_INT")]
-    live_clock = min(
-        c for t, c in live if t >= marks["gps"]
-    )  # the simulator's clock may drift from the station's
+    # the simulator's clock may drift from the station's
+    live_clock = min(c for t, c in live if t >= marks["gps"])
     drift_ms = [
         round(1000 * (min(c for t, c in live if t0 <= t < t0 + 5) - live_clock), 1)
         for t0 in np.arange(live[0][0], live[-1][0] - 5, 5)

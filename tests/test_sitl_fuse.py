@@ -47,15 +47,13 @@ from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
 pytestmark = pytest.mark.sitl
 
 LAT, LON, SURFACE_AMSL_M = 63.4400, 10.4000, 0.40
-START_UNIX = (
-    1763800000.0  # the scenarios' first frame (their default start_unix), station clock = true time
-)
+# the scenarios' first frame (their default start_unix), station clock = true time
+START_UNIX = 1763800000.0
 DURATION_S = 36.0
 CUT_S = (14.0, 10.0)  # drone b's video is cut from 14 s after its session's start, for 10 s
 LEAD_S = 2.0  # the sessions' telemetry starts this long before their first frame (the scenarios' default lead_s)
-CAMERA_LATENCY_MS = (
-    55  # glass to first packet of the replayed cameras, configured as such in the services
-)
+# glass to first packet of the replayed cameras, configured as such in the services
+CAMERA_LATENCY_MS = 55
 WARMUP_S = 30.0  # ArduSub's uptime before the fixes (its README)
 FIX_3D = 3
 # the scenario of tests/test_fusion.py, smaller and slower (two services, two replays and ArduSub share this

@@ -79,9 +79,8 @@ def test_ardusub_reboot_under_a_running_service(tmp_path):
         with pytest.raises(subprocess.TimeoutExpired):
             service.wait(DOWN_S)  # the autopilot stays away; the service keeps running
 
-        sitl.start(
-            instance=sitl.instance
-        )  # returns at its first HEARTBEAT: booted, SERIAL1 listening
+        # returns at its first HEARTBEAT: booted, SERIAL1 listening
+        sitl.start(instance=sitl.instance)
         t_back = sitl.observer.of("HEARTBEAT")[0][0]
         wait_for(
             lambda: sitl.observer.of("GPS_INPUT", t_back) or service.poll() is not None,

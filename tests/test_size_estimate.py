@@ -50,9 +50,8 @@ def test_auto_hands_over_only_agreeing_measurements_once_sure(cal_dict):
             assert "size" not in tel.height_fixes  # nothing before it is sure
     assert work.estimate.sure and abs(work.estimate.bias_m - 0.8) < 2 * work.estimate.sigma_m
     fixes = tel.height_fixes["size"]
-    assert (
-        len(fixes) == work.applied == len(heights) - 2
-    )  # all but the two outliers, the early ones too
+    # all but the two outliers, the early ones too
+    assert len(fixes) == work.applied == len(heights) - 2
     t = [h.t_unix for h in heights]
     assert t[3] not in fixes.times and t[45] not in fixes.times and fixes.times[0] == t[0]
     values = fixes.values

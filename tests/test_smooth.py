@@ -126,12 +126,10 @@ def test_white_noise_is_averaged_by_the_expected_factor_and_covered():
     expected = sigma * math.sqrt(np.mean(noise[:, 0, 0] + noise[:, 1, 1]))
     assert rms < 0.5 * rms_raw  # 0.0068 m against 0.028 m
     assert 0.85 < rms / expected < 1.15
-    assert (
-        sm.white_share > 0.5
-    )  # white noise as large as claimed: most of the claim changes frame to frame
-    assert rms < math.sqrt(
-        np.mean(sm.cov_own_m2[:, 0, 0] + sm.cov_own_m2[:, 1, 1])
-    )  # the claim allows accelerations
+    # white noise as large as claimed: most of the claim changes frame to frame
+    assert sm.white_share > 0.5
+    # the claim allows accelerations
+    assert rms < math.sqrt(np.mean(sm.cov_own_m2[:, 0, 0] + sm.cov_own_m2[:, 1, 1]))
     assert np.mean(np.hypot(*err.T) <= 2.0 * sm.h_acc_m) > 0.9
 
 
@@ -147,9 +145,8 @@ def test_a_shared_error_stays_in_the_smoothed_track_and_its_sigma():
     assert sm.white_share < 0.01  # the claim's frame-to-frame share: 1 cm of 25 cm
     assert np.all(np.hypot(*err.T) <= 2.0 * sm.h_acc_m)
     assert np.all(sm.h_acc_m > 0.99 * fx.h_acc_m * math.sqrt(1.0 - sm.white_share))
-    assert (
-        shape_m(err) < 0.004 < shape_m(z - truth)
-    )  # the track's form is sharpened, its place is not
+    # the track's form is sharpened, its place is not
+    assert shape_m(err) < 0.004 < shape_m(z - truth)
 
 
 def test_gaps_are_bridged_within_the_bound_and_beyond_it_have_no_position():
@@ -187,9 +184,8 @@ def test_fixes_off_the_track_are_refused_offline_and_bridged_over():
     err = np.hypot(*(local(sm.lat, sm.lon) - truth).T)
     assert sm.ok[away].all() and np.all(sm.gap_s[away] > 0)  # bridged, not measured
     assert err[away].max() < 0.03
-    assert sm.ok[~away].all() and np.all(
-        sm.gap_s[~away] == 0
-    )  # the first second confirmed by those after it
+    # the first second confirmed by those after it
+    assert sm.ok[~away].all() and np.all(sm.gap_s[~away] == 0)
 
 
 def jitter(
@@ -213,12 +209,10 @@ def test_a_waves_jitter_is_averaged_over_its_period_and_covered(seed):
     err = local(sm.lat, sm.lon) - truth
     rms_raw = math.sqrt(np.mean(np.sum((z - truth) ** 2, axis=1)))
     rms = math.sqrt(np.mean(np.sum(err**2, axis=1)))
-    assert (
-        rms < 0.25 * rms_raw
-    )  # 0.0015-0.0021 m against 0.0166 m (the vehicle's bound as the process noise: 0.006)
-    assert 0.7 < sm.wave_share < 1.2 and sm.white_share == min(
-        1.0, sm.wave_share
-    )  # (1.17 / 1.2)^2 = 0.95
+    # 0.0015-0.0021 m against 0.0166 m (the vehicle's bound as the process noise: 0.006)
+    assert rms < 0.25 * rms_raw
+    # (1.17 / 1.2)^2 = 0.95
+    assert 0.7 < sm.wave_share < 1.2 and sm.white_share == min(1.0, sm.wave_share)
     assert np.median(sm.accel_mps2) < 0.1 * A
     assert np.mean(np.hypot(*err.T) <= 2.0 * sm.h_acc_m) > 0.95
 
@@ -283,9 +277,8 @@ def test_a_reacquired_target_is_confirmed_by_the_frames_after_it_offline(occlusi
         live.append(live_gate.check(fixes[i], fixes.t_unix[i]) if fixes.status[i] == "ok" else "")
     live = np.array(live, dtype=object)
     offline = gate_offline(fixes, lost, FixGate(max_h_acc_m=math.inf, max_age_s=math.inf))
-    back = np.flatnonzero(
-        (fixes.status == "ok") & np.r_[False, lost[:-1]]
-    )  # the first fix after the loss
+    # the first fix after the loss
+    back = np.flatnonzero((fixes.status == "ok") & np.r_[False, lost[:-1]])
     assert len(back) == 1
     first_second = (fixes.t_unix >= fixes.t_unix[back[0]]) & (
         fixes.t_unix < fixes.t_unix[back[0]] + 0.9 * CONFIRM_S
@@ -297,12 +290,10 @@ def test_a_reacquired_target_is_confirmed_by_the_frames_after_it_offline(occlusi
     live_cover = np.mean([w is None for w in live[visible]])
     offline_cover = np.mean([w is None for w in offline[visible]])
     sm, words = offline_track(fixes, V, A)
-    assert (
-        offline_cover > live_cover + 0.3
-    )  # the first acquisition's second, and the re-acquisition's
-    assert sm.ok[visible].all() and np.all(
-        sm.gap_s[first_second] == 0
-    )  # their own fixes, and the rest bridged
+    # the first acquisition's second, and the re-acquisition's
+    assert offline_cover > live_cover + 0.3
+    # their own fixes, and the rest bridged
+    assert sm.ok[visible].all() and np.all(sm.gap_s[first_second] == 0)
     assert "refused" not in set(words)
 
 
@@ -314,9 +305,8 @@ def test_process_writes_the_smoothed_track_beside_positions(tmp_path, capsys):
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == COLUMNS
     pos = read_positions_csv(out / "positions.csv")
-    again = read_positions_csv(
-        out / "positions_smoothed.csv"
-    )  # the same six first columns: report, export
+    # the same six first columns: report, export
+    again = read_positions_csv(out / "positions_smoothed.csv")
     assert np.array_equal(again.t_unix, pos.t_unix)
     assert np.all(again.h_acc_m[again.status == "ok"] > 0)
     bridged = np.array([float(r["gap_s"]) > 0 for r in rows])

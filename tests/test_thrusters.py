@@ -36,9 +36,8 @@ def test_channels_come_from_the_frame_and_the_servo_functions():
 def test_idle_is_every_horizontal_motor_within_the_deadband():
     th = vectored_thrusters()
     assert th.outputs(0.0, pulses(1500)) is True
-    assert (
-        th.outputs(0.1, pulses(1525, 1475, 1475, 1525)) is True
-    )  # ArduSub's heading hold, seen on its SITL
+    # ArduSub's heading hold, seen on its SITL
+    assert th.outputs(0.1, pulses(1525, 1475, 1475, 1525)) is True
     assert th.outputs(0.2, pulses(1526)) is False
     assert th.outputs(0.3, pulses(0)) is None and th.unusable == 1  # channel 1 not output
     assert Thrusters(deadband_us=0).outputs(0.0, pulses(1501)) is None  # not known: no parameters

@@ -117,9 +117,8 @@ def test_estimated_offset_is_as_good_as_the_stated_delay(session, tmp_path, caps
     assert mae_motion <= 1.2 * mae_stated
     rows = _positions(tmp_path / "ev_motion", session.name)
     assert len(rows) > 150 and {r["time_source"] for r in rows} == {"motion"}
-    assert all(
-        0.02 <= float(r["sigma_time_s"]) < 0.0255 for r in rows
-    )  # [uncertainty] time_s ⊕ the estimate's σ
+    # [uncertainty] time_s ⊕ the estimate's σ
+    assert all(0.02 <= float(r["sigma_time_s"]) < 0.0255 for r in rows)
     assert {r["time_source"] for r in _positions(tmp_path / "ev", "stated")} == {"configured"}
 
 
@@ -242,7 +241,6 @@ def test_offline_sigma_covers_what_the_thirds_disagree_on():
         SessionOffset(e(22.0, 2.0, APPLY_PAIRS - 1), (e(22.0), e(22.0), e(22.0))).sigma_s
         == math.inf
     )
-    wild = SessionOffset(
-        e(20.0, 1.0, 3 * APPLY_PAIRS), (e(110.0), e(-10.0), e(-26.0))
-    )  # the 8 m/s thirds
+    # the 8 m/s thirds
+    wild = SessionOffset(e(20.0, 1.0, 3 * APPLY_PAIRS), (e(110.0), e(-10.0), e(-26.0)))
     assert not wild.better_than(0.05)

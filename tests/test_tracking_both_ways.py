@@ -38,9 +38,8 @@ def test_a_reacquisition_is_traced_back_through_the_frames_the_causal_pass_misse
     assert 20 <= (~visible).sum() <= 40 and not causal.bridged.any()
     ok_causal, ok_both = causal.status == "ok", both.status == "ok"
     assert ok_both[visible].sum() > ok_causal[visible].sum()  # more visible frames located ...
-    assert np.array_equal(
-        ok_both & ~both.bridged, ok_causal
-    )  # ... the causal pass's own unchanged ...
+    # ... the causal pass's own unchanged ...
+    assert np.array_equal(ok_both & ~both.bridged, ok_causal)
     assert not ok_both[~visible].any() and not both.bridged[~visible].any()  # ... none hidden
     assert set(causal.status[~visible]) == set(both.status[~visible]) == {"lost"}
     err = np.hypot(both.u - session.track["u"], both.v - session.track["v"])

@@ -71,9 +71,8 @@ def test_select_track_lose_reacquire_release_and_click(occlusion):
     clip = occlusion
     ts = TrackingSession(clip.cal)
     assert ts.state is TargetState.AWAITING_TARGET
-    assert (
-        ts.step(clip.frames[0], clip.pose, 0).status == "awaiting_target"
-    )  # no selection, no prior
+    # no selection, no prior
+    assert ts.step(clip.frames[0], clip.pose, 0).status == "awaiting_target"
 
     # the simulator's own box around the whole vehicle in frame 0, selected on frame 1's successor frame 0
     first = ts.select(clip.frames[0], clip.pose, 0, box=clip.cal.init_bbox)
@@ -139,9 +138,8 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
     with pytest.raises(
         SelectionError, match=r"box \[40, 300, 33, 34\]: no vehicle-sized object stands out"
     ):
-        ts.select(
-            clip.frames[1], clip.pose, 1, box=(40, 300, 33, 34), verify=True
-        )  # an operator's box on water
+        # an operator's box on water
+        ts.select(clip.frames[1], clip.pose, 1, box=(40, 300, 33, 34), verify=True)
     no_pose = camera_pose(clip.cal, clip.session.telemetry, [clip.t[-1] + 60.0])
     with pytest.raises(SelectionError, match=r"no camera pose at that frame \(stale_attitude\)"):
         ts.select(clip.frames[1], no_pose, 0, point=(clip.u[1], clip.v[1]))

@@ -102,9 +102,8 @@ def test_a_click_beside_the_shadow_outlines_the_vehicle_alone(clips):
         )
     ts = TrackingSession(clip.cal)
     truth = clip.session.truth
-    prior = Prior(
-        float(truth["lat"][0]) + 1e-5, float(truth["lon"][0]) + 1e-5, sigma_m=2.0
-    )  # ~1.1 m, ~0.7 m off
+    # ~1.1 m, ~0.7 m off
+    prior = Prior(float(truth["lat"][0]) + 1e-5, float(truth["lon"][0]) + 1e-5, sigma_m=2.0)
     results = [ts.step(clip.frames[i], clip.pose, i, prior) for i in range(len(clip.frames))]
     ok = [i for i, r in enumerate(results) if r.ok]
     assert ok and max(clip.error_px(i, results[i]) for i in ok) < 3.0

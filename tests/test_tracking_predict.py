@@ -46,9 +46,8 @@ def test_projection_is_where_the_fix_finds_the_uuv(make_cal, make_telemetry, gim
     centre = locate(cal, pose, [959.5, 959.5], [539.5, 539.5])
     lat, lon, _ = ned_to_geodetic(0.5, -0.6, 0.0, centre.lat[0], centre.lon[0], 0.0)
     u, v, _ = project_uuv(cal, pose, lat, lon)
-    back = locate(
-        cal, pose, u, v
-    )  # the inverse, by a different code path (undistortion, forward Snell)
+    # the inverse, by a different code path (undistortion, forward Snell)
+    back = locate(cal, pose, u, v)
     n = (back.lat - lat) * 111_320.0
     e = (back.lon - lon) * 111_320.0 * math.cos(math.radians(lat))
     assert np.all(np.hypot(n, e) < 1e-3)

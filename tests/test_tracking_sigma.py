@@ -29,18 +29,14 @@ def test_each_of_the_trackers_signs_of_doubt_widens_the_sigma():
     calm = pixel_sigma_px(30.0, 0.95, 4.0, 10.0)
     assert 0.2 <= calm < 1.0
     assert pixel_sigma_px(30.0, 0.7, 4.0, 10.0) > calm  # a weaker match
-    assert (
-        pixel_sigma_px(30.0, 0.95, 40.0, 10.0) > calm
-    )  # sought in a wider window (frames skipped, a loss)
-    assert (
-        pixel_sigma_px(30.0, 0.95, 4.0, 0.0) > pixel_sigma_px(30.0, 0.95, 4.0, 0.5) > calm
-    )  # just (re)acquired
-    assert (
-        pixel_sigma_px(30.0, 0.95, 4.0, 10.0, outlined=True) > 2.0 * calm
-    )  # outlined by skyfix, not boxed
-    assert pixel_sigma_px(60.0, 0.95, 8.0, 10.0) == pytest.approx(
-        2.0 * calm
-    )  # in proportion to the vehicle's size
+    # sought in a wider window (frames skipped, a loss)
+    assert pixel_sigma_px(30.0, 0.95, 40.0, 10.0) > calm
+    # just (re)acquired
+    assert pixel_sigma_px(30.0, 0.95, 4.0, 0.0) > pixel_sigma_px(30.0, 0.95, 4.0, 0.5) > calm
+    # outlined by skyfix, not boxed
+    assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, outlined=True) > 2.0 * calm
+    # in proportion to the vehicle's size
+    assert pixel_sigma_px(60.0, 0.95, 8.0, 10.0) == pytest.approx(2.0 * calm)
     assert pixel_sigma_px(30.0, math.nan, 4.0, 10.0) > calm  # a tracker without a score
     assert math.isnan(pixel_sigma_px(math.nan, 0.95, 4.0, 10.0))
 

@@ -126,9 +126,8 @@ def test_at_the_frame_edge_or_too_small_it_says_why():
         sc.site.refractive_index,
     )
     assert measure(image, *args, 8.0, 180.0, uuv, h, d, n) == "border"
-    assert (
-        measure(image, *args, truth.u[0], truth.v[0], uuv, 3.0 * h, d, n) == "too_small"
-    )  # configured 3× too high
+    # configured 3× too high
+    assert measure(image, *args, truth.u[0], truth.v[0], uuv, 3.0 * h, d, n) == "too_small"
 
 
 def test_the_size_scan_samples_further_out_only_where_it_must():
@@ -148,9 +147,8 @@ def test_the_size_scan_samples_further_out_only_where_it_must():
     heading = silhouette._headings(image, camera, R, u, v, uuv, h, depth, n, p)[0]
     scales = np.exp(np.linspace(np.log(p.scan_to), np.log(p.scan_from), 25))
     corners = box_corners_px(camera, R, u, v, heading, uuv, h * scales, depth, n)  # (25, 8, 2)
-    texture = silhouette._texture(
-        image, corners[-1], p
-    )  # beyond the largest outline (the lowest height)
+    # beyond the largest outline (the lowest height)
+    texture = silhouette._texture(image, corners[-1], p)
     mid = corners[len(corners) // 2]
     pts = edge_points(mid, outline(mid), p.spacing_px, p.trim)
     e = corners[:, pts.second] - corners[:, pts.first]
@@ -170,6 +168,5 @@ def test_the_size_scan_samples_further_out_only_where_it_must():
     is_edge, tm, _ = edges
     edge_near = is_edge[np.abs(tm) <= p.agree_px].any(axis=0)
     assert every.mean(axis=-1).max() > 0.3  # outlines near the vehicle's are supported ...
-    assert (
-        np.mean(edge_near & ~every) > 0.1
-    )  # ... and many points with an edge near have one further out
+    # ... and many points with an edge near have one further out
+    assert np.mean(edge_near & ~every) > 0.1

@@ -78,9 +78,8 @@ def make_clip(n=120, hidden=(), seed=3, noise=3.0, grow=0.0):
         cx, cy = cx - (px - x0), cy - (py - y0)
         visible = not any(a <= i < b for a, b in hidden)
         if visible:
-            _draw_target(
-                img, cx, cy, heading_deg=25 + 1.5 * i, scale=1.0 + grow * i / n
-            )  # keeps turning
+            # keeps turning
+            _draw_target(img, cx, cy, heading_deg=25 + 1.5 * i, scale=1.0 + grow * i / n)
         img = np.clip(img + rng.normal(0, noise, img.shape), 0, 255).astype(np.uint8)
         frames.append(img)
         truth.append((cx, cy) if visible else (np.nan, np.nan))
@@ -221,9 +220,8 @@ def test_a_box_outside_the_frame_is_refused_and_changes_nothing():
 def test_every_backend_tracks_a_short_clip(name):
     frames, truth, _ = make_clip(n=25)
     target = _target(name)
-    assert (
-        target.update(frames[0], None).status == "awaiting_target"
-    )  # no matcher runs before a selection
+    # no matcher runs before a selection
+    assert target.update(frames[0], None).status == "awaiting_target"
     results = _run(target, frames, truth)
     ok = [r for r in results if r.ok]
     assert len(ok) >= 20
@@ -346,9 +344,8 @@ def test_the_template_does_not_learn_its_way_onto_something_else():
     assert all(math.hypot(m.u - c[0], m.v - c[1]) < 2.0 for m in found if m.found), (
         "followed the rock"
     )
-    assert not any(
-        m.found for m in found[fade[1] - 10 :]
-    )  # (nearly) only the rock is left: the UUV is lost
+    # (nearly) only the rock is left: the UUV is lost
+    assert not any(m.found for m in found[fade[1] - 10 :])
 
 
 @pytest.mark.parametrize("how", ["follow", "search"])
@@ -398,6 +395,5 @@ def test_several_templates_at_once_score_as_opencv_does():
     for t, got in zip(templates, maps, strict=True):
         want = cv2.matchTemplate(image, t, cv2.TM_CCOEFF_NORMED)
         np.testing.assert_allclose(got, want, atol=1e-4)
-    assert (
-        np.all(maps[:, :2, :2] == 0.0) and np.ptp(maps) > 0.5
-    )  # the flat places, and scores that vary elsewhere
+    # the flat places, and scores that vary elsewhere
+    assert np.all(maps[:, :2, :2] == 0.0) and np.ptp(maps) > 0.5

@@ -47,9 +47,8 @@ def _track(path):
     results = [ts.select(frames[0], pose, 0, box=cal.init_bbox)]
     results += [ts.step(frames[i], pose, i) for i in range(1, len(frames))]
     ok = np.array([r.ok for r in results])
-    err = np.array(
-        [math.hypot(r.u - u[i], r.v - v[i]) for i, r in enumerate(results) if r.ok]
-    )  # NaN: hidden
+    # NaN: hidden
+    err = np.array([math.hypot(r.u - u[i], r.v - v[i]) for i, r in enumerate(results) if r.ok])
     return ok, np.isfinite(u), err
 
 

@@ -97,9 +97,8 @@ def test_beyond_localhost_every_request_needs_the_printed_token(service, tmp_pat
     assert "HttpOnly" in headers["Set-Cookie"] and "SameSite=Strict" in headers["Set-Cookie"]
     code, _, body = _get(base + "/api/status", headers={"Authorization": f"Bearer {token}"})
     status = json.loads(body)
-    assert (
-        code == 200 and status["target"]["state"] == "awaiting_target"
-    )  # the refused release changed nothing
+    # the refused release changed nothing
+    assert code == 200 and status["target"]["state"] == "awaiting_target"
     assert status["ui"]["token"] and status["ui"]["refused"] >= 9
 
     if available() is not None:
@@ -108,9 +107,8 @@ def test_beyond_localhost_every_request_needs_the_printed_token(service, tmp_pat
         page = browser.page
         page.goto(base + "/")  # without the token: refused, nothing of the page
         assert "needs its token" in page.inner_text("body")
-        page.goto(
-            f"{base}/?token={token}"
-        )  # the printed URL: the page, then its WebSocket by the cookie
+        # the printed URL: the page, then its WebSocket by the cookie
+        page.goto(f"{base}/?token={token}")
         page.wait_for_selector("#conn.ok", timeout=20_000)
         wait_for(
             lambda: page.eval_on_selector("#health tbody", "b => b.rows.length") > 3,

@@ -212,9 +212,8 @@ def test_the_page_draws_the_base_map_under_the_fixes_at_the_right_pixel(tmp_path
     lon, lat, _ = Geod(ellps="WGS84").fwd(uuv[1], uuv[0], az, math.hypot(3.0, 1.5))
     radius_m = 0.4
     tif = _geotiff(tmp_path / "site.tif", *uuv, 30.0, 0.02, radius_m, alpha=False, mark=(lat, lon))
-    (tmp_path / "site.json").write_text(
-        '{"horizontal_sigma_m": 0.123}'
-    )  # as skyfix mosaic's sidecar
+    # as skyfix mosaic's sidecar
+    (tmp_path / "site.json").write_text('{"horizontal_sigma_m": 0.123}')
     with LiveRun(
         tmp_path,
         SESSION,

@@ -54,12 +54,10 @@ def test_the_footprint_is_the_images_outline_on_the_water(name):
     assert off_border.max() < 0.05, (
         off_border.max()
     )  # footprint points are rounded to the millimetre
-    assert np.allclose(v[:EDGE_SAMPLES], -0.5, atol=0.05) and np.all(
-        np.diff(u[:EDGE_SAMPLES]) > 0
-    )  # top edge
-    assert np.allclose(
-        u[EDGE_SAMPLES : 2 * EDGE_SAMPLES], w - 0.5, atol=0.05
-    )  # then the right edge, clockwise
+    # top edge
+    assert np.allclose(v[:EDGE_SAMPLES], -0.5, atol=0.05) and np.all(np.diff(u[:EDGE_SAMPLES]) > 0)
+    # then the right edge, clockwise
+    assert np.allclose(u[EDGE_SAMPLES : 2 * EDGE_SAMPLES], w - 0.5, atol=0.05)
 
 
 def test_the_track_keeps_ok_fixes_sent_once():

@@ -152,9 +152,8 @@ def test_only_the_operator_commands_and_only_the_vehicle_gives_the_depth(tmp_pat
         sessions += [forger, vehicle]
         for n in range(3):
             forger.put("mavlink/1/1/SCALED_PRESSURE2", pressure(n))
-        list(
-            forger.get("skyfix/uuv/fix", timeout=5.0)
-        )  # after the forged ones on the same link: they were judged
+        # after the forged ones on the same link: they were judged
+        list(forger.get("skyfix/uuv/fix", timeout=5.0))
         vehicle.put("mavlink/1/1/SCALED_PRESSURE2", pressure(10))
         wait_for(
             lambda: status_now(local)["depth"]["received"] >= 1,

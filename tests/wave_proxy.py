@@ -49,9 +49,8 @@ class WaveProxy:
         self.kx, self.ky = k * np.cos(heading), k * np.sin(heading)
         self.omega = np.sqrt(9.81 * k * px_per_m)  # rad/s, deep water (k in rad/px)
         self.phase = rng.uniform(0, 2 * np.pi, waves)
-        self.amp = (
-            2.0 * shift_px / math.sqrt(waves) / k
-        )  # heights: each wave moves the image by amp·k, all alike
+        # heights: each wave moves the image by amp·k, all alike
+        self.amp = 2.0 * shift_px / math.sqrt(waves) / k
         kc = 2 * np.pi / (cell_px * np.exp(rng.uniform(math.log(0.5), math.log(2.5), 30)))
         tc = rng.uniform(0, 2 * np.pi, 30)
         self.kcx, self.kcy = kc * np.cos(tc), kc * np.sin(tc)

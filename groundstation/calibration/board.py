@@ -98,9 +98,8 @@ class Detector:
             np.linalg.norm(np.diff(grid, axis=1), axis=2).min(),
             np.linalg.norm(np.diff(grid, axis=0), axis=2).min(),
         )
-        half = int(
-            np.clip(0.4 * spacing, 2, 11)
-        )  # the window must not reach the neighbouring corners
+        # the window must not reach the neighbouring corners
+        half = int(np.clip(0.4 * spacing, 2, 11))
         criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-3)
         corners = cv2.cornerSubPix(
             gray, np.ascontiguousarray(corners, dtype=np.float32), (half, half), (-1, -1), criteria
@@ -125,9 +124,8 @@ class Result:
     rms_px: float  # over every point of the views used
     views: list[View]  # used
     view_rms_px: np.ndarray  # per view used
-    dropped: list[tuple[str, float]] = field(
-        default_factory=list
-    )  # (name, RMS px) rejected as outliers
+    # (name, RMS px) rejected as outliers
+    dropped: list[tuple[str, float]] = field(default_factory=list)
     limit_px: float | None = None  # the last rejection threshold
 
     @property

@@ -107,12 +107,10 @@ class Source:
     delay_s: float | None = None  # arrival (fuser's clock) minus the fix's time
     time_base: str | None = None  # "gnss" or "station"
     h_acc_m: float | None = None
-    h_acc_used_m: float | None = (
-        None  # its claim as the last fusion weighed it: shared part, floors
-    )
-    floor_m: float | None = (
-        None  # the DRMS of what the floors added to its claim at the last fusion
-    )
+    # its claim as the last fusion weighed it: shared part, floors
+    h_acc_used_m: float | None = None
+    # the DRMS of what the floors added to its claim at the last fusion
+    floor_m: float | None = None
     offset: Median = field(default_factory=Median)  # its fixes' aligned time minus station time (s)
 
     def status(self, now: float) -> dict:
@@ -157,14 +155,12 @@ class Fuser:
         self.max_accel_mps2 = max_accel_mps2
         self.clock_tolerance_s = clock_tolerance_s
         self.shared = shared or SharedSigmas()
-        self.min_step_s = (
-            0.9 / max_hz
-        )  # a little under the period: sources' frames do not tick exactly
+        # a little under the period: sources' frames do not tick exactly
+        self.min_step_s = 0.9 / max_hz
         self.sources: dict[str, Source] = {}
         self.unconfigured: Counter[str] = Counter()  # fixes from names not configured, by name
-        self.fused = SourceTrack(
-            max_accel_mps2
-        )  # the fused fixes: what decides between disagreeing sources
+        # the fused fixes: what decides between disagreeing sources
+        self.fused = SourceTrack(max_accel_mps2)
         self.output = OutputGate(max_speed_mps, max_accel_mps2, max_reach_m)
         self.floors = Floors()
         self.published = 0
@@ -280,9 +276,8 @@ class Fuser:
         if self._fused_since is None:
             self._fused_since = t
         lat, lon, _ = ned_to_geodetic(est.z[0], est.z[1], 0.0, *self._ref, 0.0)
-        geoid_m = (
-            newest.alt_ellipsoid_m - newest.alt_amsl_m
-        )  # NaN without the source's ellipsoid height
+        # NaN without the source's ellipsoid height
+        geoid_m = newest.alt_ellipsoid_m - newest.alt_amsl_m
         return Fix(
             t_unix=newest.t_unix,
             status="ok",

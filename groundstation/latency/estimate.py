@@ -70,9 +70,8 @@ WARN_S = 0.030  # an estimate this far from the configured latency is worth a wa
 APPLY_SIGMA_S = 0.005  # an estimate is sure with this 1-sigma at most ...
 APPLY_PAIRS = 60  # ... from at least this many frame pairs (6 s at MEASURE_HZ; fewer when the machine is busy);
 STEADY_COUNT, STEADY_S = 3, 0.005  # settled: this many sure estimates, within 5 ms of each other
-NOISE_FLOOR_RAD = (
-    1e-5  # an axis's residual is taken as at least this (the image measures no better)
-)
+# an axis's residual is taken as at least this (the image measures no better)
+NOISE_FLOOR_RAD = 1e-5
 
 
 @dataclass(frozen=True)
@@ -369,9 +368,10 @@ def find_video_start(
         )
         r = pred.reshape(len(s_), len(pick), 3) - meas[None]
         sq = np.sum(r**2, axis=2)
+        # robust
         cost[a : a + 2000] = np.sum(
             np.minimum(sq, 9.0 * np.median(sq, axis=1, keepdims=True)), axis=1
-        )  # robust
+        )
     best = int(np.argmin(cost))
     rivals = np.abs(starts - starts[best]) > START_APART_S
     contrast = float(cost[best] / cost[rivals].min()) if rivals.any() else 0.0

@@ -122,9 +122,8 @@ class Tracked:
     pose: CameraPose
     result: TrackResult
     early: bool  # the pose was computed more than EXTRAPOLATE_S past the newest attitude sample
-    window: tuple[float, float, float, float] | None = (
-        None  # where the prediction had the UUV searched
-    )
+    # where the prediction had the UUV searched
+    window: tuple[float, float, float, float] | None = None
     lock: int = 0  # the operator's commands before it was tracked
 
 
@@ -181,12 +180,10 @@ class Pipeline:
         self._tracked_ready = asyncio.Event()
         self._telemetry = asyncio.Event()
         self._held: deque[Tracked] = deque()  # recent tracked frames, for selections
-        self._started = (
-            False  # the first frame was taken, or a command came first: init_bbox no longer applies
-        )
-        self.commands = (
-            0  # the operator's select, release and acquire commands done: a frame's FrameInfo.lock
-        )
+        # the first frame was taken, or a command came first: init_bbox no longer applies
+        self._started = False
+        # the operator's select, release and acquire commands done: a frame's FrameInfo.lock
+        self.commands = 0
         self._angle_series = [tel.attitude] + (
             [tel.gimbal]
             if cal.mount.attitude_source == "gimbal_device"
@@ -201,9 +198,8 @@ class Pipeline:
         self.dropped = 0
         self.statuses: Counter[str] = Counter()
         self.last_status: str | None = None
-        self.target = (
-            self.session.status()
-        )  # the tracking session's status after the latest frame or command
+        # the tracking session's status after the latest frame or command
+        self.target = self.session.status()
         #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
         self.on_tracked: list[Callable] = list(on_tracked)
 
@@ -379,9 +375,8 @@ class Pipeline:
             self._started = True
             if self.cal.init_bbox is not None:
                 try:
-                    return self.session.select(
-                        frame.image, pose, box=self.cal.init_bbox
-                    )  # as configured
+                    # as configured
+                    return self.session.select(frame.image, pose, box=self.cal.init_bbox)
                 except SelectionError as e:
                     log.warning(
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e

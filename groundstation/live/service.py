@@ -259,9 +259,8 @@ async def serve(cfg: config.RunConfig) -> dict:
         # -- each UUV: its depth, its own position, its tracker and its outputs -------------------------------------
         crowd = Crowd() if several else None  # two trackers on one vehicle: no fix for either
         fleet = Fleet() if several else None  # the gates compare each target with the other UUVs'
-        tracking = (
-            ThreadPoolExecutor(1, thread_name_prefix="track") if several else None
-        )  # one thread for all (a thread each contended for the interpreter's lock: bench/uuvs.py)
+        # one thread for all (a thread each contended for the interpreter's lock: bench/uuvs.py)
+        tracking = ThreadPoolExecutor(1, thread_name_prefix="track") if several else None
         poses = FramePoses(cal, tel)  # each frame's pose computed once for all the UUVs
         if tracking:
             closers.append(lambda: tracking.shutdown(wait=False, cancel_futures=True))
@@ -311,9 +310,8 @@ async def serve(cfg: config.RunConfig) -> dict:
         )
         if ui:
             workers.add(ui, INPUTS, "ui", lambda now: ui.status())
-            await (
-                ui.start()
-            )  # UiError (an OSError) when its port is taken: exit 2 before anything runs
+            # UiError (an OSError) when its port is taken: exit 2 before anything runs
+            await ui.start()
         for chain in chains:
             u = chain.uuv
             log.info(

@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault(
-    "MAVLINK20", "1"
-)  # must precede pymavlink's import (in mavutil()) to parse MAVLink 2
+# must precede pymavlink's import (in mavutil()) to parse MAVLink 2
+os.environ.setdefault("MAVLINK20", "1")
 
 import math
 from collections.abc import Mapping
@@ -156,9 +155,8 @@ def ingest(tel: Telemetry, msg, receive_unix_s: float) -> bool:
     if kind == "TIMESYNC":  # the autopilot's own requests (tc1 = 0) need nothing from us
         return msg.tc1 == 0 or tel.add_timesync(msg.tc1, msg.ts1, receive_unix_s)
     if kind == "GPS_RAW_INT":
-        alt_ellipsoid_mm = (
-            getattr(msg, "alt_ellipsoid", 0) or 0
-        )  # MAVLink 2 extensions: 0 when not sent
+        # MAVLink 2 extensions: 0 when not sent
+        alt_ellipsoid_mm = getattr(msg, "alt_ellipsoid", 0) or 0
         geoid = (alt_ellipsoid_mm - msg.alt) / 1000.0 if alt_ellipsoid_mm else float("nan")
 
         def dop(x):

@@ -68,9 +68,8 @@ OUTBOX = 64
 SIGNING_LINK_ID = 1
 KEY_BYTES = 32
 STABLE_S = 1.0
-STOP_TIMEOUT_S = (
-    0.5  # a stop waits this long for the last message, then leaves the thread to end by itself
-)
+# a stop waits this long for the last message, then leaves the thread to end by itself
+STOP_TIMEOUT_S = 0.5
 _SIGNING_EPOCH = 1420070400  # 2015-01-01, MAVLink signing's time origin
 #: First-open errors that mean "the other end is not there yet", not a wrong option: keep trying.
 _NOT_YET = (ConnectionError, TimeoutError)
@@ -154,17 +153,15 @@ class MavlinkLink:
         self.mav = _Locked(_Outbox(self), srcSystem=system, srcComponent=component)
         self.parser = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
         self.parser.robust_parsing = True
-        self._checker = mavlink.MAVLink(
-            None, srcSystem=system, srcComponent=component
-        )  # packs to check, unsigned
+        # packs to check, unsigned
+        self._checker = mavlink.MAVLink(None, srcSystem=system, srcComponent=component)
         if signing_key is not None:
             s = self.mav.signing
             s.secret_key, s.sign_outgoing, s.link_id = signing_key, True, SIGNING_LINK_ID
             s.timestamp = int((max(time.time(), _SIGNING_EPOCH) - _SIGNING_EPOCH) * 100_000)
             if require_signed:
-                self.parser.signing.secret_key = (
-                    signing_key  # and no allow_unsigned_callback: unsigned is refused
-                )
+                # and no allow_unsigned_callback: unsigned is refused
+                self.parser.signing.secret_key = signing_key
         self.signed = signing_key is not None
         self.heartbeat = heartbeat
         self.on_message = on_message or (lambda msg, t: None)

@@ -42,9 +42,8 @@ import time
 from groundstation.runtime.sender_lock import ANY_PEER, RELOCK_S, SenderLock  # noqa: F401
 
 WRITE_TIMEOUT_S = 1.0
-UDP_RCVBUF = (
-    4 << 20
-)  # a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
+# a burst of datagrams (or a busy moment of the reader) is absorbed, not dropped
+UDP_RCVBUF = 4 << 20
 CONNECT_TIMEOUT_S = 1.0
 DEFAULT_BAUD = 115200
 _READ_MAX = 65536
@@ -185,9 +184,8 @@ class Udp(_Transport):
         self.url = url
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
-        self.sock.setsockopt(
-            socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF
-        )  # the kernel caps it (rmem_max)
+        # the kernel caps it (rmem_max)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RCVBUF)
         self.listen = listen
         # listening: the sender lock (groundstation.runtime.sender_lock; locked False: every sender read, ANY_PEER)
         self.lock: SenderLock | None = None
@@ -200,9 +198,8 @@ class Udp(_Transport):
         else:
             self._dest = (socket.gethostbyname(addr[0]), addr[1])
         self.last_from: tuple[str, int] | None = None
-        self.kernel_times = (
-            sys.platform == "linux"
-        )  # elsewhere the option's number means something else
+        # elsewhere the option's number means something else
+        self.kernel_times = sys.platform == "linux"
         if self.kernel_times:
             self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
 
@@ -254,9 +251,8 @@ class Udp(_Transport):
 
     def write(self, buf: bytes) -> None:
         if self.dest is not None:
-            self.sock.sendto(
-                buf, self.dest
-            )  # unconnected: no ICMP errors, but a missing route raises
+            # unconnected: no ICMP errors, but a missing route raises
+            self.sock.sendto(buf, self.dest)
 
     def close(self) -> None:
         self.sock.close()

@@ -69,9 +69,8 @@ RATE_HZ = 5.0  # frames used per second of video
 MAX_FEATURES = 250  # corners tracked at once
 MIN_DISTANCE_PX = 12  # between corners
 BACK_PX = 0.5  # forward-backward track disagreement that drops a corner
-ANCHOR_PX = (
-    2.0  # a point matched against its first sight this far from the chain's match is dropped
-)
+# a point matched against its first sight this far from the chain's match is dropped
+ANCHOR_PX = 2.0
 #: bright lines on the floor narrower than this are taken for caustics and removed (:func:`floor_marks`), and the
 #: floor's dark marks smaller than it are what is tracked (m, at the camera's slant range)
 CAUSTIC_WEB_M = 0.2
@@ -88,12 +87,10 @@ MAX_RMS_PX = 0.6
 VELOCITY_RATE_M = 0.05
 MIN_VELOCITY_RATE_M = 0.005
 MIN_WHITE_M = 0.003  # the reported position's white noise (localizer.bottom.white_noise_m) taken at least this
-GNSS_WALK_S = (
-    60.0  # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
-)
-MIN_TILT_DEG = (
-    0.05  # the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
-)
+# the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
+GNSS_WALK_S = 60.0
+# the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
+MIN_TILT_DEG = 0.05
 MIN_YAW_DEG = 0.1
 _LK = {
     "winSize": (31, 31),

@@ -53,12 +53,10 @@ RATE_HZ = 2.0  # frames used per second of video (default)
 N_WATER = 1.34
 MAX_RANGE = 3.0  # a footprint reaches at most this many times the camera's height above the floor
 BORDER_SAMPLES = 16  # pixels per image edge projected to the floor for the footprint
-FEATHER = (
-    0.1  # the blend's weight rises from the image's border over this share of its shorter side
-)
-LATTICE = (
-    8  # cells between the grid points projected exactly into each frame (bilinear between them)
-)
+# the blend's weight rises from the image's border over this share of its shorter side
+FEATHER = 0.1
+# cells between the grid points projected exactly into each frame (bilinear between them)
+LATTICE = 8
 TILE = 256  # the blend's tiles and the GeoTIFF's blocks, cells a side
 MAX_TILES = 96  # tiles of the blend held in memory (16 bytes a cell: 100 MB), the rest on disk
 #: pose statuses whose camera is known: the UUV's depth is not needed for the floor
@@ -112,9 +110,8 @@ def camera_utm(pose: CameraPose, epsg: int) -> tuple[np.ndarray, np.ndarray]:
     )
     x, y = transform(CRS.from_epsg(4326), CRS.from_epsg(epsg), lon.ravel(), lat.ravel())
     xy = np.column_stack([x, y]).reshape(-1, 3, 2)
-    jac = np.stack(
-        [xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]], axis=-1
-    )  # columns: d/dnorth, d/deast
+    # columns: d/dnorth, d/deast
+    jac = np.stack([xy[:, 1] - xy[:, 0], xy[:, 2] - xy[:, 0]], axis=-1)
     return xy[:, 0], jac
 
 

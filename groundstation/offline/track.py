@@ -73,12 +73,10 @@ class TrackedVideo:
     sigma_px: np.ndarray  # tracker's 1-sigma of each of u and v (pixels), NaN without a track
     timings_s: dict = field(default_factory=dict)  # seconds spent per stage
     warnings: list = field(default_factory=list)
-    rotations: list = field(
-        default_factory=list
-    )  # video_motion.Rotation between consecutive frames (measure_motion)
-    bridged: np.ndarray | None = (
-        None  # bool: frames found by tracing a re-acquisition back (``both_ways``); else the causal pass's
-    )
+    # video_motion.Rotation between consecutive frames (measure_motion)
+    rotations: list = field(default_factory=list)
+    # bool: frames found by tracing a re-acquisition back (``both_ways``); else the causal pass's
+    bridged: np.ndarray | None = None
     causal_status: np.ndarray | None = None  # the causal pass's words (status but where bridged)
 
 
@@ -238,9 +236,8 @@ class UuvTrack:
         ] = {}  # row -> the causal pass's word a bridged "ok" replaced
         period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
         self.gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
-        self.pending = (
-            None  # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
-        )
+        # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
+        self.pending = None
         self.started = False
 
     def step(self, row: int, frame) -> None:

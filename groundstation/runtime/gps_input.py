@@ -205,9 +205,8 @@ class GpsInputSink:
         self.last_sent_t: float | None = None  # UNIX s, station clock
         self.no_fix_reason: str | None = None  # why the last message said no fix (:mod:`.no_fix`)
         self.sent_fix: Fix | None = None  # the fix the last message carried, when it carried one
-        self.latencies_s: deque[float] = deque(
-            maxlen=100_000
-        )  # frame arrival → GPS_INPUT sent, new fixes
+        # frame arrival → GPS_INPUT sent, new fixes
+        self.latencies_s: deque[float] = deque(maxlen=100_000)
         self._fix: Fix | None = None
         self._info = None
         self._new = asyncio.Event()
@@ -216,12 +215,10 @@ class GpsInputSink:
         self._lock = 0  # the operator's commands before the newest frame (FrameInfo.lock)
         self._stopping = False
         self._closed = False
-        self._send_lock = (
-            threading.Lock()
-        )  # the loop (new fixes) and the keep-alive thread both send
-        self._next_due = (
-            0.0  # time.monotonic() by which the keep-alive sends if nothing else was sent
-        )
+        # the loop (new fixes) and the keep-alive thread both send
+        self._send_lock = threading.Lock()
+        # time.monotonic() by which the keep-alive sends if nothing else was sent
+        self._next_due = 0.0
         self._keep_alive = Supervised("GPS_INPUT keep-alive", self._keep_alive_body)
 
     def on_fix(self, fix: Fix, info) -> None:

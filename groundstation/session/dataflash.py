@@ -48,9 +48,8 @@ MIN_3D_STATUS = 3  # AP_GPS GPS_OK_FIX_3D and better
 WHOLE_MS_SIGMA_S = 0.001 * math.sqrt(2.0 / 12.0)  # the difference of two times rounded to whole ms
 DOWNWARD = 25  # MAV_SENSOR_ROTATION_PITCH_270
 EV_ARMED, EV_DISARMED = 10, 11  # AP_Logger's LogEvent
-BINARY_START = bytes(
-    (0xA3, 0x95, 0x80)
-)  # a binary log's first record: its header and FMT's own type (128)
+# a binary log's first record: its header and FMT's own type (128)
+BINARY_START = bytes((0xA3, 0x95, 0x80))
 COLUMNS = {
     "ATT": ("TimeUS", "Roll", "Pitch", "Yaw"),
     "IMU": ("TimeUS", "GyrX", "GyrY", "GyrZ"),
@@ -79,13 +78,11 @@ class FlightLog:
     path: Path
     att: np.ndarray  # (n, 7): t_s, roll, pitch, yaw (rad), and the body rates (rad/s)
     pos: np.ndarray  # (n, 5): t_s, lat, lon (deg), alt (m AMSL), relative alt (m)
-    gps: (
-        np.ndarray
-    )  # (n, 10): t_s (arrival), unix_s, status, sats, hdop, alt (m), h_acc, v_acc (m; nan unknown),
-    #                  lat, lon (deg)
-    mnt: (
-        np.ndarray
-    )  # (n, 5): t_s, roll, pitch (earth frame), yaw relative to the vehicle, yaw from North (deg)
+    # (n, 10): t_s (arrival), unix_s, status, sats, hdop, alt (m), h_acc, v_acc (m; nan unknown),
+    # lat, lon (deg)
+    gps: np.ndarray
+    # (n, 5): t_s, roll, pitch (earth frame), yaw relative to the vehicle, yaw from North (deg)
+    mnt: np.ndarray
     rangefinder: np.ndarray  # (n, 2): t_s, distance (m)
     triggers_s: np.ndarray  # boot seconds of CAM / TRIG records
     armed: list[tuple[float, bool]]  # (boot s, armed) at each arming and disarming

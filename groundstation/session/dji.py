@@ -160,9 +160,8 @@ AIRDATA_COLUMNS = {
 }
 AIRDATA_TIME, AIRDATA_UTC = "time(millisecond)", "datetime(utc)"
 AIRDATA_ANGLE_UNITS = {"degrees", "deg", "°"}
-AIRDATA_CLOCK_TOLERANCE_S = (
-    0.01  # how far datetime(utc) and time(millisecond) may disagree beyond the 1 s resolution
-)
+# how far datetime(utc) and time(millisecond) may disagree beyond the 1 s resolution
+AIRDATA_CLOCK_TOLERANCE_S = 0.01
 LOCAL_COLUMNS = ("CUSTOM.date [local]", "CUSTOM.updateTime [local]")
 LOCAL_FORMATS = (
     "%m/%d/%Y %I:%M:%S.%f %p",
@@ -170,9 +169,8 @@ LOCAL_FORMATS = (
     "%m/%d/%Y %I:%M:%S %p",
     "%m/%d/%Y %H:%M:%S",
 )
-ZONES_S = np.arange(
-    -12 * 3600, 14 * 3600 + 1, 900
-)  # every time zone's offset from UTC, quarter hours
+# every time zone's offset from UTC, quarter hours
+ZONES_S = np.arange(-12 * 3600, 14 * 3600 + 1, 900)
 REFINE_S = 2.0
 REFINE_STEP_S = 0.01
 MIN_OVERLAP = 0.5  # share of the SRT's frames that must fall within the record at an offset
@@ -531,9 +529,8 @@ class SrtTrack:
     """A DJI camera's subtitles (see the module doc); NaN where a subtitle lacks a value."""
 
     path: Path
-    frame: (
-        np.ndarray
-    )  # the video frame (FrameCnt / SrtCnt − 1); the older form: the subtitle's order (from 0)
+    # the video frame (FrameCnt / SrtCnt − 1); the older form: the subtitle's order (from 0)
+    frame: np.ndarray
     t_video_s: np.ndarray  # the subtitle's start in the video
     t_camera_s: np.ndarray  # the camera's clock, seconds since 1970-01-01 of its own (local) time
     lat_deg: np.ndarray
@@ -569,9 +566,8 @@ GPS_ORDERS = (
     "lat,lon",
     "lon,lat",
 )  # the older form's GPS(a, b): a latitude first, or a longitude first
-ORDER_FIT_M = (
-    100.0  # the older form: the order that fits must fit the record within this (RMS m)...
-)
+# the older form: the order that fits must fit the record within this (RMS m)...
+ORDER_FIT_M = 100.0
 ORDER_RATIO, ORDER_MARGIN_M = 3.0, 50.0  # ...and the other must fit at least this much worse (both)
 
 
@@ -701,12 +697,10 @@ class SrtClock:
     residual_m: float  # RMS distance between the SRT's track and the record's at this offset
     frames: int  # SRT frames compared
     found: bool  # matched (else given)
-    gps_order: str | None = (
-        None  # the older form's GPS(a, b) order ("lat,lon" / "lon,lat"); None: the newer form
-    )
-    order_residuals_m: tuple[float, float] | None = (
-        None  # the older form: the best fit of each of GPS_ORDERS
-    )
+    # the older form's GPS(a, b) order ("lat,lon" / "lon,lat"); None: the newer form
+    gps_order: str | None = None
+    # the older form: the best fit of each of GPS_ORDERS
+    order_residuals_m: tuple[float, float] | None = None
 
 
 def track_residual_m(srt: SrtTrack, flight: FlightLog, offsets_s: np.ndarray) -> np.ndarray:

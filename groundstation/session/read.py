@@ -39,9 +39,8 @@ _NEEDED_FOR_SOURCE = {
 }
 PRIMARY_UUV = "uuv1"  # the id of the UUV whose records are the session's own files
 UUVS_DIR = "uuvs"  # the folder of the other UUVs' folders, one per id
-UUV_TOML = (
-    "uuv.toml"  # in a UUV's folder: its [tracker] table (init_bbox, init_t), as session.toml's
-)
+# in a UUV's folder: its [tracker] table (init_bbox, init_t), as session.toml's
+UUV_TOML = "uuv.toml"
 
 
 @dataclass(frozen=True)

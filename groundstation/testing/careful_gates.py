@@ -53,9 +53,8 @@ def kept_gate(tmp_path, h_acc_m: float = 0.4, down_s: float = 3.0) -> tuple[FixG
     keeper = TrackMemory(gate, path)
     keeper.write()
     keeper.write()  # unchanged: not written again
-    assert (
-        keeper.written == 1 and path.exists() and not list(tmp_path.glob(".track-*"))
-    )  # no temporary left
+    # no temporary left
+    assert keeper.written == 1 and path.exists() and not list(tmp_path.glob(".track-*"))
     kept = json.loads(path.read_text())
     kept["age_s"] += down_s  # the time the service was down
     write_track(

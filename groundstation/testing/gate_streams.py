@@ -33,9 +33,8 @@ class Stream:
     fixes: list[Fix]
     truth_ne: np.ndarray  # (n, 2) metres north, east: where the UUV is at each fix
     wrong: np.ndarray  # (n,) bool: the fix is not the UUV (a drift, a jump, a look-alike)
-    start: (
-        np.ndarray
-    )  # (n,) bool: a (re)acquisition starts at this fix (the first, the first after a loss)
+    # (n,) bool: a (re)acquisition starts at this fix (the first, the first after a loss)
+    start: np.ndarray
 
     def real_after(self, seconds: float) -> np.ndarray:
         """Fixes of the UUV (ok, not wrong) more than ``seconds`` after its latest (re)acquisition began."""
@@ -214,9 +213,8 @@ def bounded_fit_residual_m(
     t0 = t[round(before_s * HZ) - 1]
     z = np.where(t > t0, speed_mps * (t - t0), 0.0)
     dt = 1.0 / HZ
-    M = np.zeros(
-        (len(t), len(t) + 1)
-    )  # x = x0 + v0·t + Σ a_j · (what a_j, held over its frame, adds later)
+    # x = x0 + v0·t + Σ a_j · (what a_j, held over its frame, adds later)
+    M = np.zeros((len(t), len(t) + 1))
     M[:, 0], M[:, 1] = 1.0, t
     for j in range(len(t) - 1):
         tau = t - t[j]

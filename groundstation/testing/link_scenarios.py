@@ -45,9 +45,8 @@ CUT_S = {
     "router": 6.0,
     "video": 6.0,
 }  # > the watchdog's 3 s + its 1 s period
-SESSION_S = (
-    19.0  # the generated session: long enough for a 10 s MAVLink cut with fixes before and after
-)
+# the generated session: long enough for a 10 s MAVLink cut with fixes before and after
+SESSION_S = 19.0
 SESSION_FPS = 15.0
 
 # A Zenoh router (the only router on PyPI is zenoh's own, in a Python session of mode "router"), its own process.
@@ -377,9 +376,8 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
             _, t_back = publisher.stdout.readline().split()
             t_back = float(t_back)
         elif which == "router":
-            t_launch = (
-                time.time()
-            )  # the router may carry traffic before it prints "ready": the cut ends here
+            # the router may carry traffic before it prints "ready": the cut ends here
+            t_launch = time.time()
             router, t_back = start_router(endpoint)
         else:
 

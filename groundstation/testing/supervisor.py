@@ -74,9 +74,8 @@ def field_config(tmp: Path, gps_input_port: int) -> tuple[Path, dict]:
         "recordings": str(tmp / "recordings"),
     }
     path = tmp / "field.toml"
-    path.write_text(
-        "".join(f"{k} = {json.dumps(v)}\n" for k, v in values.items())
-    )  # JSON's strings, numbers, lists
+    # JSON's strings, numbers, lists
+    path.write_text("".join(f"{k} = {json.dumps(v)}\n" for k, v in values.items()))
     return path, values
 
 

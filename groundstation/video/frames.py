@@ -24,9 +24,8 @@ class VideoFrame:
     index: int
     image: np.ndarray
     t_s: float = 0.0
-    decoded: av.VideoFrame | None = (
-        None  # read grey: the decoded frame whose luma plane ``image`` is a view of
-    )
+    # read grey: the decoded frame whose luma plane ``image`` is a view of
+    decoded: av.VideoFrame | None = None
 
     def bgr(self) -> np.ndarray:
         """The frame in BGR uint8: ``image``, or converted from the decoded frame (as a frame not read grey is)."""

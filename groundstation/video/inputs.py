@@ -54,9 +54,8 @@ class VideoInput:
     format: str | None = None
     options: dict[str, str] = field(default_factory=dict)
     port: int | None = None  # the local UDP port it binds (udp, rtp), for "in use" messages
-    codec: str | None = (
-        None  # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp`; ``file`` the address)
-    )
+    # rtp: h264 or h265 (read by skyfix itself, :mod:`.rtp`; ``file`` the address)
+    codec: str | None = None
     payload_type: int | None = None  # rtp
     # udp, rtp: the only sender taken (peer=HOST:PORT); zenoh: the Zenoh ID (hex) that time-stamps its messages
     peer: tuple[str, int] | str | None = None

@@ -82,13 +82,11 @@ RTSP_OPEN_TIMEOUT_S = 5.0
 RETRY_MIN_S = 0.25  # first wait after a failed open; doubles up to retry_max_s
 CLOCK_WINDOW_S = 30.0  # the stream-to-station offset follows drift over this window
 STATS_FRAMES = 300  # frames the status's delay percentiles are taken over
-PACKET_BACKLOG = (
-    120  # packets read but not yet decoded, at most (4 s at 30 fps); then reading waits
-)
+# packets read but not yet decoded, at most (4 s at 30 fps); then reading waits
+PACKET_BACKLOG = 120
 BEHIND_PACKETS = 2  # live: with more than this many packets waiting, decoded frames are skipped
-CATCH_UP_PACKETS = (
-    30  # live: with more than this many waiting (1 s at 30 fps), skip to the newest keyframe
-)
+# live: with more than this many waiting (1 s at 30 fps), skip to the newest keyframe
+CATCH_UP_PACKETS = 30
 HANDOFF_FRAMES = 8  # frames decoded but not yet taken by the event loop
 READER_STOP_S = 0.3  # a stop waits this long for the reader thread
 RTP_KINDS = ("sdp", "rtsp")  # inputs FFmpeg depacketizes from RTP (rtp://: skyfix itself, .rtp)
@@ -319,9 +317,8 @@ class VideoLive:
         self.clock = clock = ClockMap(window_s=CLOCK_WINDOW_S)
         first_recv: dict[int, float] = {}
         connected = False
-        previous_out: float | None = (
-            None  # ends_at_next: when the previous access unit was handed over
-        )
+        # ends_at_next: when the previous access unit was handed over
+        previous_out: float | None = None
         waiting: deque = deque()  # taken from the queue by a catch-up, not yet decoded
         while not stop.is_set():
             if self.source.live and len(waiting) + packets.qsize() > CATCH_UP_PACKETS:

@@ -76,21 +76,18 @@ class TsDepacketizer:
 
     def __init__(self):
         self.codec: str | None = None  # h264 or h265, once the PMT has said
-        self.unreadable: str | None = (
-            None  # why the program's video cannot be read (a PMT without H.264/H.265)
-        )
+        # why the program's video cannot be read (a PMT without H.264/H.265)
+        self.unreadable: str | None = None
         self.lost_packets = 0  # TS packets missing (continuity-counter gaps) or marked in error
-        self.dropped_units = (
-            0  # access units not handed over: damaged, or depending on one that was
-        )
+        # access units not handed over: damaged, or depending on one that was
+        self.dropped_units = 0
         self.bad_packets = 0  # datagrams or packets that are not MPEG-TS
         self._pmt_pid: int | None = None
         self._video_pid: int | None = None
         self._cc: int | None = None
         self._pes: bytearray | None = None  # the PES being received, from its start code
-        self._length: int | None = (
-            None  # its declared length (bytes after the length field), 0: none
-        )
+        # its declared length (bytes after the length field), 0: none
+        self._length: int | None = None
         self._damaged = False
         self._need_keyframe = False
         self._wraps = 0

@@ -52,14 +52,12 @@ class Depacketizer:
         if codec not in ("h264", "h265"):
             raise ValueError(f"RTP codec {codec!r}: h264 or h265")
         self.codec = codec
-        self.unreadable: str | None = (
-            None  # never set: the codec is given (MPEG-TS's comes from its PMT)
-        )
+        # never set: the codec is given (MPEG-TS's comes from its PMT)
+        self.unreadable: str | None = None
         self.payload_type = payload_type
         self.lost_packets = 0  # sequence numbers never seen
-        self.dropped_units = (
-            0  # access units not handed over: damaged, or depending on one that was
-        )
+        # access units not handed over: damaged, or depending on one that was
+        self.dropped_units = 0
         self.bad_packets = 0  # datagrams that are not RTP of this stream's shape
         self._seq: int | None = None
         self._ts: int | None = None  # the current access unit's RTP timestamp, unwrapped

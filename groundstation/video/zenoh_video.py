@@ -192,9 +192,8 @@ class ZenohVideoInput:
         self.key = key
         self.read_timeout_s = read_timeout_s
         self.lock = SenderLock() if lock is None else lock
-        self.depacketizer = self.counts = (
-            MessageCounts()
-        )  # the live reader's name for an input's losses
+        # the live reader's name for an input's losses
+        self.depacketizer = self.counts = MessageCounts()
         self.codec: str | None = None
         self._messages: queue.Queue = queue.Queue(maxsize=MESSAGE_BACKLOG)
         self._queue_lock = threading.Lock()

@@ -37,9 +37,8 @@ class Prediction:
     height_px: float
     sigma_px: float = float("nan")  # 1-sigma uncertainty of (u, v); NaN: unknown
     px_per_m: float = float("nan")  # image scale at the UUV (pixels per metre); NaN: unknown
-    turn_deg: float = float(
-        "nan"
-    )  # how far its heading may have turned since it was last seen (deg); NaN: any
+    # how far its heading may have turned since it was last seen (deg); NaN: any
+    turn_deg: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -50,12 +49,10 @@ class TrackResult:
     u: float = float("nan")  # the UUV's centre, distorted pixels
     v: float = float("nan")
     box: tuple[int, int, int, int] | None = None  # x, y, w, h
-    confidence: float = float(
-        "nan"
-    )  # 0..1; while lost or acquiring, the best candidate's score when one was sought
-    sigma_px: float = float(
-        "nan"
-    )  # 1-sigma of each of u and v (pixels) when ok (:mod:`.sigma`); NaN: unknown
+    # 0..1; while lost or acquiring, the best candidate's score when one was sought
+    confidence: float = float("nan")
+    # 1-sigma of each of u and v (pixels) when ok (:mod:`.sigma`); NaN: unknown
+    sigma_px: float = float("nan")
 
     @property
     def ok(self) -> bool:

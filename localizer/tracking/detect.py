@@ -167,9 +167,8 @@ def outline(
     win = win.reshape(h, w, -1)
     background = cv2.medianBlur(win, min(_odd(2.5 * r), 255)).reshape(h, w, -1)
     dev = np.sqrt(np.sum((win.astype(np.float32) - background) ** 2, axis=2))
-    dev[shade(win, background, r / math.sqrt(2.0), p)] = (
-        0.0  # the seafloor in shade is no part of the vehicle
-    )
+    # the seafloor in shade is no part of the vehicle
+    dev[shade(win, background, r / math.sqrt(2.0), p)] = 0.0
     yy, xx = np.mgrid[0:h, 0:w]
     near = np.hypot(xx - ((u - x0) - (g - 1) / 2.0) / g, yy - ((v - y0) - (g - 1) / 2.0) / g) < r
     top = float(dev[near].max()) if near.any() else 0.0

@@ -19,9 +19,8 @@ import numpy as np
 from . import Match, Prediction
 
 MIL_SEED = 1
-CONFIRM_TOLERANCE = (
-    0.3  # a confirmed candidate lies this close (in box sides) to where it is expected
-)
+# a confirmed candidate lies this close (in box sides) to where it is expected
+CONFIRM_TOLERANCE = 0.3
 
 
 def check_box(frame: np.ndarray, box) -> tuple[int, int, int, int]:
@@ -59,9 +58,8 @@ class OpenCVMatcher:
         self._offset = (0.0, 0.0) if point is None else (point[0] - centre[0], point[1] - centre[1])
         if self.name == "mil":
             cv2.setRNGSeed(MIL_SEED)
-        self._tracker.init(
-            frame_bgr, box
-        )  # OpenCV's update() before init() would crash the process
+        # OpenCV's update() before init() would crash the process
+        self._tracker.init(frame_bgr, box)
 
     def follow(self, frame_bgr, prediction: Prediction | None = None) -> Match:
         ok, box = self._tracker.update(frame_bgr)

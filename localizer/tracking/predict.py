@@ -35,9 +35,8 @@ UUV_TOP_SPEED_MPS = 1.5  # a BlueROV2's top speed (``skyfix run --uuv-max-speed-
 UUV_ACCEL_MPS2 = 3.0
 #: How fast the UUV may turn (deg/s): ArduSub's yaw rate at full stick and full joystick gain, ACRO_YAW_P (4.5) × 45°.
 UUV_YAW_RATE_DPS = 200.0
-TURN_MARGIN_DEG = (
-    10.0  # ... plus this: the camera's own turning, and the heading followed lagging a turn
-)
+# ... plus this: the camera's own turning, and the heading followed lagging a turn
+TURN_MARGIN_DEG = 10.0
 BASE_SIGMA_M = 0.08  # the prediction's 1-sigma from the telemetry itself (attitude, timing)
 _STEP_M = 0.05  # finite-difference step for the image scale
 WINDOW_SIGMAS = 3.0  # the search window the matchers use: the prediction ± this many sigmas

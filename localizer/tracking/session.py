@@ -111,13 +111,11 @@ class TrackingSession:
         self.detect_params = detect_params or DetectParams()
         self.origin: str | None = None  # how the current target was chosen: "box", "click", "prior"
         self._outlined = False  # the target's box is an outline skyfix found (its pixel carries the outline's error)
-        self.prediction: Prediction | None = (
-            None  # where the latest step looked for the UUV (None: nowhere in particular)
-        )
+        # where the latest step looked for the UUV (None: nowhere in particular)
+        self.prediction: Prediction | None = None
         self.last = TrackResult("awaiting_target")
-        self._length_px = (
-            math.nan
-        )  # the vehicle's apparent length at the latest prediction or selection
+        # the vehicle's apparent length at the latest prediction or selection
+        self._length_px = math.nan
         self._forget()
         self._awaiting_frames = 0
         self._noted_state = None
@@ -268,9 +266,8 @@ class TrackingSession:
         self._anchor: tuple[float, float] | None = None  # lat, lon of a sighting
         self._anchor_age = 0  # frames predicted from it
         self._anchor_tried: _Sighting | None = None  # the sighting last located
-        self._proj: tuple[CameraPose, int, np.ndarray] | None = (
-            None  # anchor projected: pose, first index, (n, 3)
-        )
+        # anchor projected: pose, first index, (n, 3)
+        self._proj: tuple[CameraPose, int, np.ndarray] | None = None
         self._moves: list[
             tuple[float, float, float, float]
         ] = []  # recent sightings: t, residual u, v, px_per_m

@@ -42,9 +42,8 @@ MATCH_SHARE = 0.016  # a good match's error, per axis, as a share of the vehicle
 SCORE_SHARE = 0.1  # ... growing by this share of the length per unit of score lost below 1
 FLOOR_PX = 0.2  # never surer than this (pixels)
 UNSCORED_SHARE = 0.16  # a tracker without a score: this share of the length (KCF, CSRT: 1.3-4.9 px rms, 20-28 px long)
-TRACKING_WINDOW = (
-    0.5  # a frame after a frame: the prediction's 1-sigma is up to this share of the length
-)
+# a frame after a frame: the prediction's 1-sigma is up to this share of the length
+TRACKING_WINDOW = 0.5
 WINDOW_SHARE = 0.05  # a wider window adds this share of its 1-sigma beyond that
 ACQUIRED_SHARE = 0.03  # just (re)acquired: this share of the length ...
 ACQUIRED_S = 1.0  # ... fading with this time constant (s)

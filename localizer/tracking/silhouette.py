@@ -76,16 +76,13 @@ class SilhouetteParams:
     trim: float = 0.15  # ... leaving out this share of each edge at both ends (blurred corners)
     reach_px: float = 3.0  # edges looked for this far either way along the normal ...
     step_px: float = 0.5  # ... sampled this often
-    noise_factor: float = (
-        6.0  # an edge: a peak of the colour's change this many times the water's own
-    )
-    agree_px: float = (
-        0.75  # an edge this close to the outline supports it, when there is none further out ...
-    )
+    # an edge: a peak of the colour's change this many times the water's own
+    noise_factor: float = 6.0
+    # an edge this close to the outline supports it, when there is none further out ...
+    agree_px: float = 0.75
     clear_px: float = 6.0  # ... up to this far
-    axes_radius: float = (
-        0.7  # the vehicle's axes from gradients within this share of its diagonal of the pixel
-    )
+    # the vehicle's axes from gradients within this share of its diagonal of the pixel
+    axes_radius: float = 0.7
     scan_from: float = 0.7  # outline sizes scanned: heights from this ...
     scan_to: float = 1.45  # ... to this times the configured height ...
     scan_step: float = 0.015  # ... this far apart (relative); the largest supported at least ...
@@ -95,12 +92,10 @@ class SilhouetteParams:
     min_found: float = 0.5  # at least this share of the points must find an edge
     min_support: float = 0.6  # the outline found must be supported at this share of its points
     max_rms_px: float = 0.6  # the fitted outline's residual, at most
-    border_px: float = (
-        6.0  # the outline this far inside the frame (its edges are searched beyond it)
-    )
-    min_size_px: float = (
-        16.0  # the outline's size (the square root of its area) at least: smaller, the vehicle's
-    )
+    # the outline this far inside the frame (its edges are searched beyond it)
+    border_px: float = 6.0
+    # the outline's size (the square root of its area) at least: smaller, the vehicle's
+    min_size_px: float = 16.0
     # inner structure and its outline are a pixel apart, and the water's texture as large as its parts (16-20 px:
     # fewer frames fit, each within its own larger 1-sigma; about 15 px: none)
 
@@ -152,12 +147,10 @@ def measure(
     headings = _headings(frame_bgr, camera, R, u, v, uuv, height_m, depth_m, n_water, p)
     if headings is None:
         return "no_water"
-    scales = np.exp(
-        np.arange(math.log(p.scan_to), math.log(p.scan_from), -p.scan_step)
-    )  # the largest outline last
-    xs = np.stack(
-        np.broadcast_arrays(height_m * scales[None, :], headings[:, None], u, v), axis=-1
-    )  # (2, S, 4)
+    # the largest outline last
+    scales = np.exp(np.arange(math.log(p.scan_to), math.log(p.scan_from), -p.scan_step))
+    # (2, S, 4)
+    xs = np.stack(np.broadcast_arrays(height_m * scales[None, :], headings[:, None], u, v), axis=-1)
     c = corners(xs)
     if c is None:
         return "no_water"
@@ -171,13 +164,11 @@ def measure(
     if not support.max() > 0:
         return "few_edges"
     good = support >= p.near_best * support.max()
-    k = int(
-        np.flatnonzero(good.any(axis=0))[-1]
-    )  # the largest outline nearly as well supported as the best
+    # the largest outline nearly as well supported as the best
+    k = int(np.flatnonzero(good.any(axis=0))[-1])
     x = xs[int(np.argmax(support[:, k])), k]
-    steps = np.array(
-        [0.005 * height_m, 0.01, 0.25, 0.25]
-    )  # finite differences: height, heading, u, v
+    # finite differences: height, heading, u, v
+    steps = np.array([0.005 * height_m, 0.01, 0.25, 0.25])
     settled = np.array([0.002 * height_m, 0.02, 0.25, 0.25])  # a pass moving less: done
     for n in range(p.passes):
         c = corners(x + np.concatenate([np.zeros((1, 4)), np.diag(steps)]))
@@ -190,9 +181,8 @@ def measure(
         if np.all(np.abs(moved) < settled):
             x = fit.x
             break
-        x = x + moved * 0.5 ** max(
-            0, n - 1
-        )  # damped more and more: edges flipping from pass to pass would cycle
+        # damped more and more: edges flipping from pass to pass would cycle
+        x = x + moved * 0.5 ** max(0, n - 1)
     else:
         return "no_convergence"
     if not 0.5 * height_m <= x[0] <= 2.0 * height_m:
@@ -363,9 +353,8 @@ def _changes(window: np.ndarray, xy: np.ndarray, normal: np.ndarray, t: np.ndarr
     )
     d = profile[1:] - profile[:-1]  # (T - 1, N, channels)
     d *= d
-    sq = (
-        d[..., 0] + d[..., 1] + d[..., 2] if d.shape[-1] == 3 else d.sum(axis=-1)
-    )  # faster than sum() for 3
+    # faster than sum() for 3
+    sq = d[..., 0] + d[..., 1] + d[..., 2] if d.shape[-1] == 3 else d.sum(axis=-1)
     return np.sqrt(sq).reshape(len(t) - 1, *xy.shape[:-1])
 
 
@@ -437,18 +426,16 @@ def _supports(frame_bgr, corners, texture: float, p: SilhouetteParams) -> np.nda
     window, origin = _window(
         frame_bgr, corners.min(axis=(0, 1)), corners.max(axis=(0, 1)), p.clear_px + 1.0
     )
-    xy = pts.moved(corners).reshape(-1) - np.tile(
-        origin, len(corners) * len(pts.xy)
-    )  # flat: long loops
+    # flat: long loops
+    xy = pts.moved(corners).reshape(-1) - np.tile(origin, len(corners) * len(pts.xy))
     xy = xy.reshape(-1, 2)  # (S · K, 2), window pixels
     _, at, edge = np.unique(pts.first, return_index=True, return_inverse=True)  # the points' edges
     e = corners[:, pts.second[at]] - corners[:, pts.first[at]]  # (S, edges, 2)
     normal = np.stack([e[..., 1], -e[..., 0]], axis=-1) / np.linalg.norm(e, axis=-1, keepdims=True)
     normal = np.take(normal, edge, axis=1).reshape(-1, 2)
     inside = math.ceil(p.agree_px / p.step_px)
-    t = (
-        np.arange(-inside - 1, round(p.clear_px / p.step_px) + 2) * p.step_px
-    )  # rows from agree_px inside on
+    # rows from agree_px inside on
+    t = np.arange(-inside - 1, round(p.clear_px / p.step_px) + 2) * p.step_px
     near = np.flatnonzero(np.abs((t[1:-2] + t[2:-1]) / 2.0) <= p.agree_px)
     threshold = p.noise_factor * texture
     end = near[-1] + 1  # rows [0, end): up to agree_px outside; [end, ...): further out

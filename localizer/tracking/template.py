@@ -83,110 +83,84 @@ class TemplateParams:
     update_score: float = 0.7  # NCC above this: blend the match into the template
     adapt_every: int = 1  # try other headings and learn the appearance every this many frames
     learn_rate: float = 0.04  # fraction of the template replaced per learning step
-    learn_contrast: float = (
-        0.2  # learn only from patches with at least this share of the first appearance's contrast
-    )
-    check_contrast: float = (
-        0.5  # check a match against the first appearance when it has at least this share of it
-    )
-    min_contrast: float = (
-        0.08  # a match with less (faded into the water: deep, turbid) is not the UUV
-    )
-    recentre_px: float = (
-        0.2  # undo the learnt template's drift from its first appearance beyond this
-    )
+    # learn only from patches with at least this share of the first appearance's contrast
+    learn_contrast: float = 0.2
+    # check a match against the first appearance when it has at least this share of it
+    check_contrast: float = 0.5
+    # a match with less (faded into the water: deep, turbid) is not the UUV
+    min_contrast: float = 0.08
+    # undo the learnt template's drift from its first appearance beyond this
+    recentre_px: float = 0.2
     anchor_score: float = 0.2  # a clear match (check_contrast) shows the first appearance at least this well (NCC) ...
-    anchor_drift: float = (
-        0.12  # ... within this share of the template's side of the tracked point (else: a drift),
-    )
+    # ... within this share of the template's side of the tracked point (else: a drift),
+    anchor_drift: float = 0.12
     anchor_drift_px: float = 2.0  # ... or this many working pixels if more ...
-    anchor_shift_px: int = (
-        4  # ... sought within this many working pixels of it; further off only if it matches
-    )
+    # ... sought within this many working pixels of it; further off only if it matches
+    anchor_shift_px: int = 4
     anchor_level: float = 0.05  # ... at the tracked point no more than this less well
-    core_share: float = (
-        0.6  # the first appearance compared: the central square of this share of the template's
-    )
-    #                          side, the vehicle at any heading (the corners hold the seafloor, which changes) ...
-    first_turn_deg: float = (
-        15.0  # ... turned up to this much either way from the learnt template's own turn from
-    )
-    #                               it (the heading followed strays slowly) ...
+    # the first appearance compared: the central square of this share of the template's
+    # side, the vehicle at any heading (the corners hold the seafloor, which changes) ...
+    core_share: float = 0.6
+    # ... turned up to this much either way from the learnt template's own turn from
+    # it (the heading followed strays slowly) ...
+    first_turn_deg: float = 15.0
     first_turn_step_deg: float = 5.0  # ... in these steps
-    there_score: float = (
-        0.5  # a candidate away from the prediction is refused while the first appearance matches
-    )
-    #                           this well (NCC) nearer the prediction (the UUV partly hidden beside a look-alike)
+    # a candidate away from the prediction is refused while the first appearance matches
+    # this well (NCC) nearer the prediction (the UUV partly hidden beside a look-alike)
+    there_score: float = 0.5
     distance_weight: float = 0.2  # a candidate's score less this × half its squared distance from the prediction in sigmas
     turn_step_deg: float = 6.0  # heading change tried each time (each way)
     max_turn_steps: int = 4  # ... and up to this many steps while the match improves
-    turn_drop: float = (
-        0.05  # try other headings at once when the score falls this far below the level
-    )
+    # try other headings at once when the score falls this far below the level
+    turn_drop: float = 0.05
     turn_gain: float = 0.01  # turn a whole step only to a heading that matches better by this much
     search_sigmas: float = 3.0  # window half-size in prediction sigmas
     min_radius_px: float = 6.0  # smallest window half-size (full-resolution pixels)
     default_radius_px: float = 40.0  # window half-size without a prediction while tracking
     reacquire_score: float = 0.7
-    reacquire_below_level: float = (
-        0.15  # re-acquisition also needs a score within this of the level
-    )
+    # re-acquisition also needs a score within this of the level
+    reacquire_below_level: float = 0.15
     reacquire_tolerance: float = 0.3  # agreement between consecutive matches, in template sides
     reacquire_headings: int = 8  # headings tried while lost (then refined by turn steps)
-    scale_step: float = (
-        0.01  # re-scale the template when the predicted size changes by more than this
-    )
-    coarse_side: int = (
-        96  # windows wider than this (working pixels) are searched block-averaged first
-    )
+    # re-scale the template when the predicted size changes by more than this
+    scale_step: float = 0.01
+    # windows wider than this (working pixels) are searched block-averaged first
+    coarse_side: int = 96
     coarse_px: int = 8  # ... with the template about this many blocks across
-    coarse_keep: int = (
-        3  # ... and this many of the best places found there matched again at full resolution
-    )
+    # ... and this many of the best places found there matched again at full resolution
+    coarse_keep: int = 3
     wobble_rate: float = 0.03  # the match score's scatter about its recent mean: a moving mean square at this rate ...
-    wobble_mean_rate: float = (
-        0.2  # ... about a moving mean at this rate (a few frames: a slow change is no wobble)
-    )
+    # ... about a moving mean at this rate (a few frames: a slow change is no wobble)
+    wobble_mean_rate: float = 0.2
     wobble_cap: float = 0.2  # ... each frame's change counted up to this much (a loss is one change, waves are many)
-    wobble_flat: float = (
-        0.04  # scatter (NCC, 1-sigma) of a still surface's matches: no wave tolerance below it ...
-    )
-    wobble_waves: float = (
-        0.09  # ... the whole tolerance from this (waves: the UUV wobbles, breaks up, flickers)
-    )
-    wave_blur_px: float = (
-        1.0  # waves: image and template smoothed by up to this (working pixels, Gaussian sigma)
-    )
+    # scatter (NCC, 1-sigma) of a still surface's matches: no wave tolerance below it ...
+    wobble_flat: float = 0.04
+    # ... the whole tolerance from this (waves: the UUV wobbles, breaks up, flickers)
+    wobble_waves: float = 0.09
+    # waves: image and template smoothed by up to this (working pixels, Gaussian sigma)
+    wave_blur_px: float = 1.0
     wave_ok_drop: float = 0.1  # ... ok_score and reacquire_score lowered by up to this
     wave_level_drop: float = 0.15  # ... level_drop and reacquire_below_level raised by up to this
-    wave_update_drop: float = (
-        0.2  # ... update_score lowered by up to this (learn the mean wave-distorted appearance)
-    )
-    wave_misses: float = (
-        3.0  # ... and up to this many frames in a row without a match are held, not yet a loss
-    )
-    wave_mode: float = (
-        0.5  # from this much wave (see _waves; until it is nil again) the UUV is judged on the
-    )
-    #                         evidence of several frames and on how it stands out of the water beside it:
-    wave_evidence_frames: int = (
-        3  # ... the mean of the last this many follows' best scores (one frame's may fall
-    )
-    #                                 as low as the water's) reaching this share of the way from the water's level to
+    # ... update_score lowered by up to this (learn the mean wave-distorted appearance)
+    wave_update_drop: float = 0.2
+    # ... and up to this many frames in a row without a match are held, not yet a loss
+    wave_misses: float = 3.0
+    # from this much wave (see _waves; until it is nil again) the UUV is judged on the
+    # evidence of several frames and on how it stands out of the water beside it:
+    wave_mode: float = 0.5
+    # ... the mean of the last this many follows' best scores (one frame's may fall
+    # as low as the water's) reaching this share of the way from the water's level to
+    wave_evidence_frames: int = 3
     wave_evidence_share: float = 0.5  # the UUV's (the recent level of its matches) ...
-    wave_follow_share: float = (
-        0.35  # ... and the frame's own score this share; a candidate while lost this share:
-    )
-    wave_reacquire_share: float = (
-        0.75  # the seafloor holds still patches that match as well as the water's best
-    )
-    wave_background_rate: float = (
-        0.1  # ... the water's level: a running mean at this rate of the best score in
-    )
-    #                                     windows beside the prediction's (the template on the water around the UUV)
-    wave_background_sides: float = (
-        1.5  # ... those windows this many template sides further out, each way
-    )
+    # ... and the frame's own score this share; a candidate while lost this share:
+    wave_follow_share: float = 0.35
+    # the seafloor holds still patches that match as well as the water's best
+    wave_reacquire_share: float = 0.75
+    # ... the water's level: a running mean at this rate of the best score in
+    # windows beside the prediction's (the template on the water around the UUV)
+    wave_background_rate: float = 0.1
+    # ... those windows this many template sides further out, each way
+    wave_background_sides: float = 1.5
     #: a follow below those bars (a candidate being confirmed: below its bar) is still the UUV if its patch keeps
     #: this share of the UUV's contrast level (below; the waves scramble its structure, not its spread; the water
     #: where it was has less) ...
@@ -196,14 +170,12 @@ class TemplateParams:
     #: ... and (a follow) no more than this below the recent level of its matches (a second vehicle passing over
     #: it raises the contrast too, and drags the score down from the UUV's own level)
     wave_keep_drop: float = 0.3
-    wave_confirm_share: float = (
-        0.5  # a candidate found again where it is expected (confirming it): this share of the way
-    )
-    wave_contrast_share: float = (
-        0.7  # in waves a match (followed or a candidate) has at least this share of the UUV's
-    )
-    #                                     contrast level (see _contrast): the water and the seafloor the template
-    #                                     finds where the UUV is hidden, or beside it, have a fraction of its spread
+    # a candidate found again where it is expected (confirming it): this share of the way
+    wave_confirm_share: float = 0.5
+    # in waves a match (followed or a candidate) has at least this share of the UUV's
+    # contrast level (see _contrast): the water and the seafloor the template
+    # finds where the UUV is hidden, or beside it, have a fraction of its spread
+    wave_contrast_share: float = 0.7
     #: ... or, when lower, this share of the way from the contrast of the water beside the UUV (the best places of
     #: the template there, a running mean) to that level: at 8 m/s caustics dim a UUV that stands far above the
     #: water to 0.6 of its level for several frames, while a UUV that stands out little keeps the strict share
@@ -409,16 +381,14 @@ class TemplateMatcher:
         self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
         self._grey = None
         self._angle, self._scale = 0.0, 1.0
-        self._seen_angle = (
-            0.0  # the heading the UUV was last seen at (a candidate's own may differ)
-        )
+        # the heading the UUV was last seen at (a candidate's own may differ)
+        self._seen_angle = 0.0
         self._ref_px_per_m = px_per_m
         self.u, self.v = point if point is not None else (x + (w - 1) / 2.0, y + (h - 1) / 2.0)
         self._cache: dict = {}
         self._canon = self._upright(frame_bgr, self.u, self.v)
-        self._first = (
-            self._canon.copy()
-        )  # the first appearance; compared: its core (the vehicle alone) ...
+        # the first appearance; compared: its core (the vehicle alone) ...
+        self._first = self._canon.copy()
         self._core = max(5, round(self.p.core_share * self.S)) | 1
         self._first_turn = 0.0  # ... turned as the learnt template has turned from it
         self._firsts: dict = {}  # the core at turns (multiples of first_turn_step_deg)
@@ -428,9 +398,8 @@ class TemplateMatcher:
         self._level = 1.0  # the recent level of the matches' scores (the first appearance's own, at first) ...
         self._levels = 0  # ... over this many matches
         self._candidate_contrast = 1.0  # the contrast of the last candidate (see _candidate_passes)
-        self._contrast_level = (
-            1.0  # the recent level of the matches' contrast (the first's own, at first)
-        )
+        # the recent level of the matches' contrast (the first's own, at first)
+        self._contrast_level = 1.0
         self._frames = 0
         self._mean_score = math.nan  # the follows' best scores' mean ...
         self._scatter2 = 0.0  # ... and mean square departure from it (see _waves) ...
@@ -439,9 +408,8 @@ class TemplateMatcher:
         self._recent: list[
             float
         ] = []  # in waves: the last follows' best scores (see _evidence) ...
-        self._water = (
-            math.nan
-        )  # ... and the water's level (the best score beside the UUV, a running mean)
+        # ... and the water's level (the best score beside the UUV, a running mean)
+        self._water = math.nan
         self._water_contrast = math.nan  # ... and the contrast there (a running mean)
         self._wavy = False  # judged as through waves (see _in_waves)
 
@@ -578,9 +546,8 @@ class TemplateMatcher:
             if t.shape[0] < min(h, w):
                 scores = cv2.matchTemplate(small, t, cv2.TM_CCOEFF_NORMED)
                 half = (t.shape[0] - 1) / 2.0
-                c = (
-                    half * f + (f - 1) / 2.0
-                )  # the first cell's centre, working pixels from the region's corner
+                # the first cell's centre, working pixels from the region's corner
+                c = half * f + (f - 1) / 2.0
                 penalty = self._penalty(scores.shape, bx0 + c, by0 + c, float(f), prior)
                 if flat is not None:  # the full-resolution places nearest the cells' centres
                     at = [
@@ -860,9 +827,8 @@ class TemplateMatcher:
         vehicle looks much the same end for end, so the heading may be half a turn off; it is turned round then."""
         contrast = self._contrast(frame_bgr, u, v)
         if contrast < self.p.check_contrast:
-            return (
-                contrast >= self.p.min_contrast
-            )  # fading into the water: its structure is lost, the template judges
+            # fading into the water: its structure is lost, the template judges
+            return contrast >= self.p.min_contrast
         patch = self._upright(frame_bgr, u, v)
         if patch is not None and self._first_at(patch) is not None:
             return True
@@ -901,9 +867,8 @@ class TemplateMatcher:
         if slow_step or score < self._level - self.p.turn_drop:
             score, u, v = self._refine(frame_bgr, (score, u, v))
         in_waves = self._in_waves()
-        floor = (
-            self._floor() if not self._misses else self._rebound()
-        )  # after a held frame: convincingly back
+        # after a held frame: convincingly back
+        floor = self._floor() if not self._misses else self._rebound()
         self._note_score(score)
         self._recent = (self._recent + [score])[-self.p.wave_evidence_frames :]
         near = math.hypot(u - cu, v - cv_) <= radius + 2 * self.k
@@ -931,9 +896,8 @@ class TemplateMatcher:
         )
         if not passed:
             self._misses += 1
-            young = (
-                self._changes <= self.p.wave_evidence_frames
-            )  # the first follows: the sea state not yet told
+            # the first follows: the sea state not yet told
+            young = self._changes <= self.p.wave_evidence_frames
             held = near and self._misses <= self.p.wave_misses * max(self._waves(), float(young))
             return Match(False, score, u, v, held=held)
         self._misses = 0
@@ -1060,9 +1024,8 @@ class TemplateMatcher:
             and prediction is not None
             and self._still_there(frame_bgr, prediction, saved, u, v)
         ):
-            candidate = self._match(
-                False, score, u, v
-            )  # a look-alike beside the UUV, which is partly hidden
+            # a look-alike beside the UUV, which is partly hidden
+            candidate = self._match(False, score, u, v)
         if not candidate.found:
             self._angle = saved
         return candidate

@@ -66,9 +66,8 @@ CALIBRATION_TABLES = ("camera", "mount", "water", "tracker", "uncertainty", "tim
 QUEUE_ITEMS = 20000  # records waiting for the writer (MAVLink frames, depth samples, fixes): ~2 min of telemetry
 QUEUE_FRAMES = 30  # video frames waiting for the encoder
 FLUSH_S = 1.0
-CLOSE_WAIT_S = (
-    0.5  # a stop waits this long for the writer to close its files, then leaves it to finish
-)
+# a stop waits this long for the writer to close its files, then leaves it to finish
+CLOSE_WAIT_S = 0.5
 #: ``[timing]`` keys that say what a live run measured and used (localizer.calibration.Timing)
 RECORDED_TIMING = (
     "mavlink_latency_measured_s",

@@ -76,9 +76,8 @@ PARAM_RETRY_S = 3.0
 PARAM_REFRESH_S = 30.0
 ORIGIN_RETRY_S = 5.0
 ASK_PERIOD_S = 0.25
-HANDOFF_MESSAGES = (
-    512  # messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
-)
+# messages received but not yet taken by the event loop (beyond: oldest dropped, counted)
+HANDOFF_MESSAGES = 512
 MAV_CMD_REQUEST_MESSAGE = 512
 GPS_GLOBAL_ORIGIN_ID = 49
 _PREFIX = re.compile(
@@ -134,9 +133,8 @@ class ArduSubReader:
         )
         self.autopilot: tuple[int, int] | None = None
         self.received = self.bad = self.refused = 0
-        self.last: tuple[DepthSample, float] | None = (
-            None  # the newest accepted sample and its arrival
-        )
+        # the newest accepted sample and its arrival
+        self.last: tuple[DepthSample, float] | None = None
         self._asked: dict[str, float] = {}
         self._throttle = Throttle()
 
@@ -409,9 +407,8 @@ class ArduSubMavlink:
         self.handoff = Handoff(
             asyncio.get_running_loop(), lambda item: self._on_message(*item), HANDOFF_MESSAGES
         )
-        self.link.on_message = lambda msg, t_recv: self.handoff.put(
-            (msg, t_recv)
-        )  # the link's thread
+        # the link's thread
+        self.link.on_message = lambda msg, t_recv: self.handoff.put((msg, t_recv))
         await in_thread(self.link.open, name="UUV MAVLink open")
         try:
             while True:

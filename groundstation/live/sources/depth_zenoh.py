@@ -31,9 +31,8 @@ from localizer.telemetry import Telemetry
 
 log = logging.getLogger("skyfix.depth")
 
-HANDOFF_SAMPLES = (
-    256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
-)
+# samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
+HANDOFF_SAMPLES = 256
 
 
 class BadDepth(ValueError):

@@ -157,9 +157,8 @@ class UavMavlink:
         self.handoff = Handoff(
             asyncio.get_running_loop(), lambda item: self._on_message(*item), HANDOFF_MESSAGES
         )
-        self.link.on_message = lambda msg, t_recv: self.handoff.put(
-            (msg, t_recv)
-        )  # the link's thread
+        # the link's thread
+        self.link.on_message = lambda msg, t_recv: self.handoff.put((msg, t_recv))
         await in_thread(self.link.open, name="UAV MAVLink open")
         try:
             next_beat = 0.0
@@ -257,9 +256,8 @@ class UavMavlink:
             and self.tel.distance_sensor_seen
             and kind not in self.requests.needed
         ):
-            self.requests.needed[kind] = (
-                RANGEFINDER_HZ  # the UAV has a downward rangefinder: its rate too
-            )
+            # the UAV has a downward rangefinder: its rate too
+            self.requests.needed[kind] = RANGEFINDER_HZ
         if kind == "COMMAND_ACK" and self.autopilot is not None:
             self.requests.on_ack(msg.command, msg.result)
         if kind in USED and not used and self.tel.refusal:

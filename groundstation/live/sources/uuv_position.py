@@ -32,9 +32,8 @@ log = logging.getLogger("skyfix.uuv_position")
 
 #: An estimate older than this (s) is no longer a prior.
 MAX_AGE_S = 30.0
-HANDOFF_SAMPLES = (
-    256  # samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
-)
+# samples received but not yet taken by the event loop (beyond: oldest dropped, counted)
+HANDOFF_SAMPLES = 256
 
 
 class BadPosition(ValueError):

@@ -41,9 +41,8 @@ from groundstation.live.ui.palette import colour
 from localizer.fix import Fix
 
 ENCODER_NICE = 10  # the encoding thread's niceness, above the service's other threads
-KEEP_FRAMES = (
-    16  # frames kept (references) while a page watches: enough for the telemetry wait at 30 fps
-)
+# frames kept (references) while a page watches: enough for the telemetry wait at 30 fps
+KEEP_FRAMES = 16
 
 
 def lower_priority() -> None:
@@ -111,9 +110,8 @@ class VideoFeed:
         self._parts: dict[
             int, dict[int, tuple]
         ] = {}  # several UUVs: frame index → UUV → its (fix, info)
-        self._newest = [-1] * len(
-            self._targets
-        )  # several UUVs: the newest frame each one's fix came for
+        # several UUVs: the newest frame each one's fix came for
+        self._newest = [-1] * len(self._targets)
         self.min_interval_s = 1.0 / max_fps
         self.max_width = max_width
         self.quality = quality

@@ -46,9 +46,8 @@ class UuvTrack:
     def __init__(self, view: TopView, keep: int, min_dt_s: float):
         self.view = view
         self.min_dt_s = min_dt_s
-        self.track: deque[tuple[int, float, float, float, float]] = deque(
-            maxlen=keep
-        )  # seq, t, lat, lon, h_acc
+        # seq, t, lat, lon, h_acc
+        self.track: deque[tuple[int, float, float, float, float]] = deque(maxlen=keep)
         self._seq = 0
 
     def on_fix(self, fix: Fix, info) -> None:
@@ -149,9 +148,8 @@ class TopView:
         if good.sum() >= 3:
             pts = off[good] + pose.cam_offset_ned_m[0, :2] + uav
             out["footprint"] = [[round(float(a), 3), round(float(b), 3)] for a, b in pts]
-            out["top_edge"] = int(
-                good[:EDGE_SAMPLES].sum()
-            )  # the first points are the image's top edge
+            # the first points are the image's top edge
+            out["top_edge"] = int(good[:EDGE_SAMPLES].sum())
         return out
 
     def gate_view(self, gates: dict | None) -> dict | None:
