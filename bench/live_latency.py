@@ -254,9 +254,17 @@ def nearest_times(sorted_t: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.where(np.abs(right - t) < np.abs(left - t), right, left)
 
 
-def live(session_dir: Path, work: Path, transport: str, run_args: list[str], busy: int = 0) -> dict:
+def live(
+    session_dir: Path,
+    work: Path,
+    transport: str,
+    run_args: list[str],
+    busy: int = 0,
+    ui: bool = False,
+) -> dict:
     """One ``skyfix run`` fed by ``skyfix replay`` over ``transport``, beside ``busy`` processes spinning
-    ``while True: pass`` (a laptop's other programs: on 2 cores, 2 of them take both cores' worth of CPU)."""
+    ``while True: pass`` (a laptop's other programs: on 2 cores, 2 of them take both cores' worth of CPU);
+    with ``ui`` the service serves its page (on a free port; nobody opens it), else ``--no-ui``."""
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     if transport == "rtp":  # RTP on an even port, RTCP on the next
         video = next(p for p in range(video & ~1, 65534, 2) if port_pair_free(p))
@@ -280,7 +288,7 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str], bus
         str(CAMERA_LATENCY_MS),
         "--zenoh-listen",
         ep,
-        "--no-ui",
+        *(["--ui", "127.0.0.1:0"] if ui else ["--no-ui"]),
         "--gps-input",
         f"udpout:127.0.0.1:{uuv}",
         "--stats",
@@ -379,6 +387,7 @@ def live(session_dir: Path, work: Path, transport: str, run_args: list[str], bus
             "max": round(float(err.max()), 4) if len(err) else None,
             "valid": len(err),
         },
+        "live_mosaic": final.get("live_mosaic"),
         "cpu_pct": round(100.0 * (s[-1, 1] - s[half, 1]) / (s[-1, 0] - s[half, 0]), 1),
         "rss_mb": {"mid": round(float(s[half, 2]), 1), "end": round(float(s[-1, 2]), 1)},
     }
