@@ -55,16 +55,14 @@ class LiveMosaic:
         self.floor_depth_m, self.every_s = floor_depth_m, every_s
         self.painted = 0  # frames painted
         self.skipped = 0  # frames due while the painter was busy
-        self.no_pose = (
-            0  # frames due without a camera pose (no telemetry yet, a camera under the surface)
-        )
+        # frames due without a camera pose (no telemetry yet, a camera under the surface)
+        self.no_pose = 0
         self.grid: Grid | None = None
         self.lat_deg = 0.0  # the first painted frame's
         self._spill = tempfile.TemporaryDirectory(prefix="skyfix-live-mosaic-")
         self.acc = Accumulator(Path(self._spill.name))
-        self._lock = (
-            threading.Lock()
-        )  # the accumulator: painted by the painter, read by the tile thread
+        # the accumulator: painted by the painter, read by the tile thread
+        self._lock = threading.Lock()
         self._busy = False
         self._last_t = -math.inf
         self._painter = ThreadPoolExecutor(
