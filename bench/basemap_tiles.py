@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/basemap_tiles.py [--geotiff FILE] [--tiles 24] [--out bench/results/basemap_tiles.txt]
 
-``skyfix run --basemap FILE.tif`` renders each tile the page asks for (:class:`groundstation.tiles.GeoTiffTiles`:
+``skyfix run --basemap FILE.tif`` renders each tile the page asks for (:class:`groundstation.map.tiles.GeoTiffTiles`:
 rasterio's GDAL warps the image into the tile, bilinear, then PNG), in one thread at a lower priority, and keeps
 the last 512. Per zoom level, from the one where the image fits in a tile to its native one, up to ``--tiles`` tiles
 around the image's centre are rendered once each, cold (every tile once, as a page that pans sees them); printed:
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.tiles import GeoTiffTiles, tile_of, tiles_in
+from groundstation.map.tiles import GeoTiffTiles, tile_of, tiles_in
 
 SIZE = 8000
 GSD_M = 0.02

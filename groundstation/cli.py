@@ -31,7 +31,7 @@ COMMANDS = (
     ),
     (
         "tiles",
-        "groundstation.tiles",
+        "groundstation.map.tiles",
         "a GeoTIFF (the mosaic, an orthophoto) as web-map tiles: a Z/X/Y.png folder, an MBTiles file",
     ),
     (

@@ -188,7 +188,7 @@ def test_the_blend_spilled_to_disk_is_the_blend_held_in_memory(tmp_path):
 def marker_error_in_tiles(tile, z: int, ref: dict) -> tuple[float, float]:
     """The bullseye of reference.toml (``ref``) found in the 3 x 3 zoom-``z`` tiles around its surveyed position
     (``tile(z, x, y)``: a tile's PNG or None), its tile pixel turned into a position by pyproj's web Mercator (not
-    groundstation.tiles' formulas): its distance from the surveyed position and a tile pixel's size, m."""
+    groundstation.map.tiles' formulas): its distance from the surveyed position and a tile pixel's size, m."""
     to_merc = Transformer.from_crs(4326, 3857, always_xy=True)
     half_world = to_merc.transform(180.0, 0.0)[0]
     tile_m = 2 * half_world / 2**z
@@ -217,7 +217,7 @@ def test_the_map_tiles_hold_the_marker_where_web_mercator_says(mosaic):
     zoom the bullseye found in the tiles (:func:`marker_error_in_tiles`) lies as near the truth as in the COG:
     within 2 cells and a tile pixel without attitude errors or with them corrected, within the stated 1-sigma as
     flown."""
-    from groundstation.tiles import open_basemap
+    from groundstation.map.tiles import open_basemap
 
     session, out, exact = mosaic
     side = json.loads((out / "mosaic.json").read_text())

@@ -25,7 +25,7 @@ from pyproj import Geod
 from test_ui_access import _get, service  # noqa: F401 (the fixture: skyfix run without inputs)
 from ui_browser import available, chromium
 
-from groundstation.tiles import BaseMapError, GeoTiffTiles, open_basemap, tiles_in, write_tiles
+from groundstation.map.tiles import BaseMapError, GeoTiffTiles, open_basemap, tiles_in, write_tiles
 
 SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
 A_M = 6378137.0  # web Mercator's sphere

@@ -27,6 +27,14 @@ from pathlib import Path
 import numpy as np
 
 from groundstation.live.ui.feed import lower_priority
+from groundstation.map.tiles import (
+    MAX_ZOOM,
+    TILE_PX,
+    encode_png,
+    pixel_m,
+    tile_bounds_m,
+    zoom_range,
+)
 from groundstation.offline.mosaic import (
     N_WATER,
     TILE,
@@ -37,7 +45,6 @@ from groundstation.offline.mosaic import (
     paint,
     utm_epsg,
 )
-from groundstation.tiles import MAX_ZOOM, TILE_PX, encode_png, pixel_m, tile_bounds_m, zoom_range
 from localizer.pose import uav_pose
 
 log = logging.getLogger(__name__)
@@ -125,7 +132,7 @@ class LiveMosaic:
             self.painted += 1
 
     def info(self) -> dict:
-        """The base map's ``info()`` (as :mod:`groundstation.tiles`' have it), with ``version``."""
+        """The base map's ``info()`` (as :mod:`groundstation.map.tiles`' have it), with ``version``."""
         g = self.grid
         if g is None:
             bounds, zooms = [-180.0, -85.0511, 180.0, 85.0511], (0, MAX_ZOOM)

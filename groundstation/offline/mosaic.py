@@ -34,13 +34,13 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
+from groundstation.map.tiles import GeoTiffTiles, Written, write_tiles
 from groundstation.offline.bottom import MODES as BOTTOM_MODES
 from groundstation.offline.bottom import PoseCorrection, pixels_at, subsample_rows, uuv_radius_px
 from groundstation.outputs import output_dir
 from groundstation.progress import progress as progress_bar
 from groundstation.session.positions import read_positions_csv
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
-from groundstation.tiles import GeoTiffTiles, Written, write_tiles
 from localizer.geodesy import ned_to_geodetic
 from localizer.pose import CameraPose, camera_pose, take
 from localizer.ray import offset_to_pixel, pixel_to_offset
@@ -521,7 +521,7 @@ def run(args) -> int:
 
 def mosaic_tiles(out: Path) -> Written:
     """``out``'s ``mosaic.tif`` as web-Mercator map tiles: the folder ``tiles/`` (``Z/X/Y.png``) and
-    ``mosaic.mbtiles`` (:func:`groundstation.tiles.write_tiles`, zooms from the one where it fits in a tile to its
+    ``mosaic.mbtiles`` (:func:`groundstation.map.tiles.write_tiles`, zooms from the one where it fits in a tile to its
     own resolution); their ``sigma_m`` is the sidecar's."""
     source = GeoTiffTiles(out / NAME)
     try:

@@ -10,7 +10,7 @@ internet); ``/ws`` the page's WebSocket; ``POST /api/select|release|acquire|conf
 operator's commands (JSON as on Zenoh, :mod:`groundstation.live.control`; an error is HTTP
 400 with ``{"error": "<one line>"}``); ``GET /api/status`` the status now;
 ``/basemap/{z}/{x}/{y}`` the base map's tiles (``--basemap``: a GeoTIFF, an MBTiles file or a folder of tiles,
-:func:`groundstation.tiles.open_basemap`), read or rendered one at a time in a thread of their own at a lower
+:func:`groundstation.map.tiles.open_basemap`), read or rendered one at a time in a thread of their own at a lower
 priority (the tracker goes first), the last :data:`TILE_CACHE` kept; 404 where the base map has none.
 
 Several UUVs (``[[uuv]]``, one :class:`PageUuv` each): a command's JSON body names its UUV,
@@ -67,7 +67,7 @@ from groundstation.live.ui.bind import is_loopback, parse_bind
 from groundstation.live.ui.feed import VideoFeed, lower_priority
 from groundstation.live.ui.palette import colour
 from groundstation.live.ui.topview import TopView
-from groundstation.tiles import FORMATS, BaseMapError, open_basemap
+from groundstation.map.tiles import FORMATS, BaseMapError, open_basemap
 
 log = logging.getLogger("skyfix.ui")
 
