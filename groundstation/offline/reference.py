@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import sys
 import tomllib
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -37,8 +38,12 @@ COLUMNS = ("ref_offset_n_m", "ref_offset_e_m", "ref_sigma_n_m", "ref_sigma_e_m")
 def read_reference(session: Session) -> tuple[reference.Reference, float] | None:
     """The session's ``reference.toml``: the reference and the marker's radius (m); None without the file."""
     path = session.path / FILE
-    if not path.is_file():
-        return None
+    return read_file(path) if path.is_file() else None
+
+
+def read_file(path: Path) -> tuple[reference.Reference, float]:
+    """A ``reference.toml`` (see the module doc) at ``path``: the reference and the marker's radius (m);
+    :class:`~groundstation.session.read.SessionError` (one line: the file, what is wrong) for a bad one."""
     try:
         d = tomllib.loads(path.read_text())
         ref = reference.Reference(
@@ -89,16 +94,23 @@ def _peak(three) -> float:
     return 0.0 if den >= 0 else 0.5 * (a - c) / den
 
 
+def expected(cal, pose, ref: reference.Reference, radius_m: float):
+    """Where the reported ``pose`` puts the marker in each of its frames, and how far to look: ``(u0, v0, radius_px,
+    reach_px)`` arrays (pixels; NaN where it is not in front of the camera), the reach :data:`SEARCH_SIGMAS` of the
+    pose's position and attitude sigmas."""
+    u0, v0, px_per_m = project_uuv(cal, pose, ref.lat_deg, ref.lon_deg, ref.depth_m)
+    slant_m = pose.height_m + ref.depth_m
+    angle = np.radians(np.hypot(cal.sigmas.tilt_deg, cal.sigmas.yaw_deg))
+    reach_m = SEARCH_SIGMAS * (np.nan_to_num(pose.sigma_uav_m) + slant_m * angle)
+    return u0, v0, radius_m * px_per_m, reach_m * px_per_m
+
+
 def sightings(session: Session, ref: reference.Reference, radius_m: float):
     """The times and pixels (NaN: not found) of the marker in the frames at :data:`RATE_HZ`."""
     cal, tel = session.calibration, session.telemetry
     rows = subsample_rows(session.frames["t"], RATE_HZ)
     t = session.frames["t"][rows]
-    pose = camera_pose(cal, tel, t)
-    u0, v0, px_per_m = project_uuv(cal, pose, ref.lat_deg, ref.lon_deg, ref.depth_m)
-    slant_m = pose.height_m + ref.depth_m
-    angle = np.radians(np.hypot(cal.sigmas.tilt_deg, cal.sigmas.yaw_deg))
-    reach_m = SEARCH_SIGMAS * (np.nan_to_num(pose.sigma_uav_m) + slant_m * angle)
+    u0, v0, radius_px, reach_px = expected(cal, camera_pose(cal, tel, t), ref, radius_m)
     u, v = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
     with session.open_video(grey=True) as video:
@@ -107,7 +119,7 @@ def sightings(session: Session, ref: reference.Reference, radius_m: float):
             if k is None or not np.isfinite(u0[k]):
                 continue
             grey = vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY)
-            hit = find(grey, u0[k], v0[k], radius_m * px_per_m[k], reach_m[k] * px_per_m[k])
+            hit = find(grey, u0[k], v0[k], radius_px[k], reach_px[k])
             if hit is not None:
                 u[k], v[k] = hit
     return t, u, v
