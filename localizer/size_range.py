@@ -28,6 +28,7 @@ import numpy as np
 from .calibration import Uuv
 from .camera import Camera, ray_to_pixel
 from .ray import pixel_to_offset
+from .refraction import surface_distance
 
 #: Body (forward, right) signs of the top face's corners, in order around it; the bottom face's follow.
 _CORNERS = np.array([[1.0, 1.0], [1.0, -1.0], [-1.0, -1.0], [-1.0, 1.0]])
@@ -65,48 +66,19 @@ def box_corners_px(
 def point_to_pixel(camera: Camera, R_ned_from_cv, offset_ne_m, height_m, depth_m, n_water: float):
     """Distorted pixels (u, v) of points at horizontal offsets (..., 2) from the camera and depths (...) below the
     water ``height_m`` (...) below it: :func:`localizer.ray.offset_to_pixel`, the surface crossing found by
-    :func:`_surface_distance`; points above the water (depth ≤ 0) along straight rays."""
+    :func:`localizer.refraction.surface_distance` (points above the water, depth ≤ 0, along straight rays)."""
     ne = np.asarray(offset_ne_m, dtype=float)
     h, depth = np.broadcast_arrays(
         np.asarray(height_m, dtype=float), np.asarray(depth_m, dtype=float)
     )
     rho = np.hypot(ne[..., 0], ne[..., 1])
     with np.errstate(divide="ignore", invalid="ignore"):
-        scale = np.where(rho > 0, _surface_distance(rho, h, depth, n_water) / rho, 0.0)
+        scale = np.where(rho > 0, surface_distance(rho, h, depth, n_water) / rho, 0.0)
     ray_ned = np.concatenate(
         [ne * scale[..., None], np.broadcast_to(h, rho.shape)[..., None]], axis=-1
     )
     # R^T · ray
     return ray_to_pixel(camera, np.einsum("...ji,...j->...i", np.asarray(R_ned_from_cv), ray_ned))
-
-
-def _surface_distance(
-    rho_m, height_m, depth_m, n_water: float, tol_m: float = 1e-12, max_steps: int = 30
-):
-    """Horizontal distance from the camera to where the ray to a point ``rho_m`` away and ``depth_m`` below the
-    surface crosses it (``height_m`` below the camera): :func:`localizer.refraction.surface_distance`, solved by
-    Newton's method from the straight ray's crossing (kept within the same bracket) until every step is below
-    ``tol_m``; the straight ray's crossing for points above the water (depth ≤ 0).
-
-    The same to 1e-14 m on 10 000 random geometries (0-60 m away, 0.5-120 m high, 0-10 m deep) in 4-6 steps,
-    where the bisection takes 64: a height measurement (:mod:`localizer.tracking.silhouette`) projects corners
-    some ten times, and took 37-43 ms of CPU with the bisection, 33 ms with this (20 frames of
-    ``bench/offline_speed.py``'s 1080p session, the same heights to 1e-9 m).
-    """
-    lo = rho_m * height_m / (height_m + depth_m)
-    x = lo
-    under = depth_m > 0
-    for _ in range(max_steps):
-        r = np.hypot(x, height_m)
-        sin_w = x / (n_water * r)
-        cos2_w = 1.0 - sin_w * sin_w
-        f = x + depth_m * sin_w / np.sqrt(cos2_w) - rho_m
-        slope = 1.0 + depth_m * height_m * height_m / (n_water * r**3 * cos2_w**1.5)
-        step = np.where(under, f / slope, 0.0)
-        x = np.where(under, np.clip(x - step, lo, rho_m), lo)
-        if not np.any(np.abs(step) > tol_m):
-            break
-    return x
 
 
 def outline(points) -> list[int]:

@@ -13,14 +13,12 @@ import pytest
 
 from localizer.calibration import Uuv
 from localizer.camera import Camera
-from localizer.refraction import surface_distance
 from localizer.size_range import (
     AT_SURFACE_M,
     EDGE_BIAS_PX,
     SIZE_SIGMA,
     HeightBias,
     SizeHeight,
-    _surface_distance,
     box_corners_px,
     edge_points,
     outline,
@@ -250,24 +248,3 @@ def test_sigma_holds_the_error_within_two_sigmas_95_percent_of_the_time(rho):
         e = est.estimate()
         inside += abs(e.bias_m - 0.8) <= 2 * e.sigma_m
     assert 0.92 <= inside / n <= 0.995, inside / n
-
-
-def test_newtons_surface_crossing_is_the_bisections():
-    """The corners' surface crossing by Newton's method against the localizer's bisection; the straight ray's
-    crossing above the water."""
-    rng = np.random.default_rng(3)
-    rho, h = rng.uniform(0.0, 60.0, 5000), rng.uniform(0.5, 120.0, 5000)
-    d = np.concatenate([rng.uniform(0.0, 10.0, 4000), rng.uniform(-0.4, 0.0, 1000)])
-    under = d > 0
-    np.testing.assert_allclose(
-        _surface_distance(rho, h, d, N_WATER)[under],
-        surface_distance(rho[under], h[under], d[under], N_WATER),
-        rtol=0,
-        atol=1e-11,
-    )
-    np.testing.assert_allclose(
-        _surface_distance(rho, h, d, N_WATER)[~under],
-        surface_distance(rho[~under], h[~under], d[~under], None),
-        rtol=0,
-        atol=1e-11,
-    )
