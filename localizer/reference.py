@@ -6,6 +6,10 @@ surveyed marker on the seafloor, a buoy or boat reporting its own GNSS) is locat
 locates the UUV (:func:`localizer.fix.locate`: the reported pose, refraction at the surface, the reference's known
 depth); ``known − located`` is then the offset the UUV's fixes share, and adding it to them removes it.
 
+A moving reference (a buoy or boat reporting its GNSS) is where its reports put it at each frame's time
+(:func:`reported_at`: interpolated between them, its 1-sigma theirs with its speed times how well their times are
+known); the rest is the same.
+
 The offset is taken over a window of :data:`WINDOW_S` around each fix (a plain GNSS walks over tens of seconds);
 its 1-sigma per axis is the standard error of the window's 1-second means (:data:`BLOCK_S`: the waves' jitter of the
 reference is correlated over about a second), at least the reference's own surveyed 1-sigma and :data:`MIN_SIGMA_M`.
@@ -41,6 +45,8 @@ BLOCK_S = 1.0
 MIN_SIGMA_M = 0.01
 #: fewer blocks than this in a window: no offset there
 MIN_BLOCKS = 3
+#: a moving reference's position is interpolated only between reports at most this far apart (s)
+MAX_GAP_S = 2.0
 _ANGLE = 1e-4  # rad, the finite differences of pose_jacobian
 _HEIGHT = 1e-3  # m
 
@@ -48,12 +54,52 @@ _HEIGHT = 1e-3  # m
 @dataclass(frozen=True)
 class Reference:
     """A point of known position: WGS84 degrees, its depth below the water surface (m; 0 on it, a buoy), and how
-    well it is known (1-sigma per horizontal axis, m)."""
+    well it is known (1-sigma per horizontal axis, m). A moving reference's ``lat_deg``, ``lon_deg`` and ``sigma_m``
+    are arrays (N,), one per frame (:func:`reported_at`; NaN where it has no position)."""
 
-    lat_deg: float
-    lon_deg: float
+    lat_deg: float | np.ndarray
+    lon_deg: float | np.ndarray
     depth_m: float
-    sigma_m: float = 0.0
+    sigma_m: float | np.ndarray = 0.0
+
+
+@dataclass(frozen=True)
+class Reports:
+    """A moving reference's reported positions (a buoy's or boat's GNSS fixes): their times on the station clock
+    (s, increasing), WGS84 degrees, and each one's stated 1-sigma per horizontal axis (m)."""
+
+    t_unix: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    sigma_m: np.ndarray
+
+
+def reported_at(reports: Reports, t_unix, depth_m: float, time_sigma_s: float) -> Reference:
+    """Where a moving reference's ``reports`` put it at times ``t_unix`` (s, station clock): linear between the two
+    reports around each time (north/east metres), NaN before the first, after the last or across a gap of more than
+    :data:`MAX_GAP_S`; its ``sigma_m`` the larger of the two reports' with its speed there times ``time_sigma_s``
+    (how well the reports' times are known: the GNSS's latency) added in quadrature."""
+    t = np.asarray(t_unix, dtype=float)
+    nan = np.full(t.shape, np.nan)
+    tr = np.asarray(reports.t_unix, dtype=float)
+    if len(tr) < 2:
+        return Reference(nan, nan.copy(), depth_m, nan.copy())
+    lat0, lon0 = float(reports.lat_deg[0]), float(reports.lon_deg[0])
+    north, east, _ = geodetic_to_ned(reports.lat_deg, reports.lon_deg, 0.0, lat0, lon0, 0.0)
+    i = np.clip(np.searchsorted(tr, t), 1, len(tr) - 1)
+    gap = tr[i] - tr[i - 1]
+    w = (t - tr[i - 1]) / gap
+    dn, de = north[i] - north[i - 1], east[i] - east[i - 1]
+    lat, lon, _ = ned_to_geodetic(north[i - 1] + w * dn, east[i - 1] + w * de, 0.0, lat0, lon0, 0.0)
+    stated = np.maximum(reports.sigma_m[i - 1], reports.sigma_m[i])
+    sigma = np.hypot(stated, np.hypot(dn, de) / gap * time_sigma_s)
+    inside = (w >= 0) & (w <= 1) & (gap <= MAX_GAP_S)
+    return Reference(
+        np.where(inside, lat, np.nan),
+        np.where(inside, lon, np.nan),
+        depth_m,
+        np.where(inside, sigma, np.nan),
+    )
 
 
 @dataclass(frozen=True)
@@ -102,18 +148,21 @@ def pose_jacobian(cal: Calibration, pose: CameraPose, u, v, depth_m) -> np.ndarr
 
 def sightings(cal: Calibration, pose: CameraPose, u, v, ref: Reference):
     """Each frame's offset (N, 2) known − located of the reference seen at pixels ``u``, ``v`` (NaN: not seen), whether
-    it was located there, and its :func:`pose_jacobian` (N, 2, 4). ``pose`` is the frames' (its UUV depth is replaced
-    by the reference's)."""
+    it was located there (and the reference's position known), and its :func:`pose_jacobian` (N, 2, 4). ``pose`` is
+    the frames' (its UUV depth is replaced by the reference's)."""
     n = len(pose.t_unix)
     at_ref = dataclasses.replace(
         pose, depth_m=np.full(n, float(ref.depth_m)), sigma_depth_m=np.zeros(n)
     )
     located = locate(cal, at_ref, u, v)
-    ok = located.status == "ok"
+    lat0, lon0 = (
+        np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in (ref.lat_deg, ref.lon_deg)
+    )
+    ok = (located.status == "ok") & np.isfinite(lat0)
     off = np.full((n, 2), np.nan)
     if ok.any():
         north, east, _ = geodetic_to_ned(
-            located.lat[ok], located.lon[ok], 0.0, ref.lat_deg, ref.lon_deg, 0.0
+            located.lat[ok], located.lon[ok], 0.0, lat0[ok], lon0[ok], 0.0
         )
         off[ok] = -np.column_stack([north, east])
     return off, ok, pose_jacobian(cal, pose, u, v, ref.depth_m)

@@ -54,6 +54,7 @@ from groundstation.progress import progress as progress_bar
 from groundstation.session.read import UUV_TOML, UUVS_DIR
 from localizer.calibration import ConfigError
 
+from .buoy import buoy_ned, gnss_records, hull_m, write_buoy
 from .geometry import (
     R_GIMBAL_FROM_CV,
     SimCamera,
@@ -105,13 +106,17 @@ class Truth:
     # (N, 2) the waves' own error at the UUV's pixel (wave_error_ne), if waves
     wave_error_ne: np.ndarray | None = None
     second_wave_error_ne: np.ndarray | None = None  # ... at a second UUV's
+    # (N, 3) a buoy's marked top's centre ([buoy]), if there is one
+    buoy_ned: np.ndarray | None = None
+    buoy_box: Box | None = None  # ... its hull
 
     def others(self, i: int) -> tuple[Box, ...]:
-        """The look-alikes at frame ``i``."""
+        """The look-alikes at frame ``i``, and the buoy last."""
         second = (
             () if self.second_box is None else (replace(self.second_box, ned=self.second_ned[i]),)
         )
-        return second + (() if self.rock is None else (self.rock,))
+        buoy = () if self.buoy_box is None else (replace(self.buoy_box, ned=self.buoy_ned[i]),)
+        return second + (() if self.rock is None else (self.rock,)) + buoy
 
     def view(self, i: int) -> View:
         return View(
@@ -269,6 +274,10 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
         second_u, second_v, second_wave_error = pixel(second_ned)
     if sc.rock.enabled:
         rock = Box(motion.rock_ned, motion.rock_heading, sc.rock.size_m, "rock")
+    buoy = buoy_box = None
+    if sc.buoy.enabled:
+        buoy = buoy_ned(sc, tau)
+        buoy_box = Box(buoy[0], 0.0, hull_m(sc), "buoy")
     return Truth(
         t_unix,
         tau,
@@ -286,6 +295,8 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
         second_v,
         wave_error,
         second_wave_error,
+        buoy,
+        buoy_box,
     )
 
 
@@ -795,7 +806,8 @@ def generate(
     truth = frame_truth(sc, motion, camera)
     clock = Clock.of(sc)
 
-    messages = write_tlog(out / "uav.tlog", sc, motion, clock)
+    buoy_heard = gnss_records(sc, clock, -sc.telemetry.lead_s / 2)
+    messages = write_tlog(out / "uav.tlog", sc, motion, clock, buoy_heard)
     _write_depth(out / "depth.jsonl", depth_records(sc, motion.uuv_depth_m, clock))
     _write_truth(out / "truth.csv", sc, truth.t_unix, truth.uuv_ned)
     marker_uv = (None, None)
@@ -805,6 +817,12 @@ def generate(
             camera, truth.R_ned_from_cv, truth.camera_ned, point, sc.site.refractive_index
         )
     write_reference(out, sc, truth.t_unix, *marker_uv, camera.width, camera.height)
+    buoy_uv = (None, None)
+    if sc.buoy.enabled:
+        buoy_uv = reference_pixel(
+            camera, truth.R_ned_from_cv, truth.camera_ned, truth.buoy_ned, sc.site.refractive_index
+        )
+    write_buoy(out, sc, truth.t_unix, truth.buoy_ned, *buoy_uv, camera.width, camera.height)
     if has_slow_errors(sc):
         write_truth_errors(out / "truth_errors.csv", sc, motion, truth)
     else:

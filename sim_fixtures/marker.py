@@ -63,6 +63,11 @@ def write_reference(out: Path, sc: Scenario, t_unix, u, v, width: int, height: i
         f"depth_m = {float(sc.site.floor_depth_m)!r}\nsigma_m = 0.0\n"
         f"radius_m = {float(sc.marker.radius_m)!r}\n"
     )
+    write_track(track, t_unix, u, v, width, height)
+
+
+def write_track(track: Path, t_unix, u, v, width: int, height: int) -> None:
+    """A reference's pixel per frame (``t,u,v``) into ``track``, empty where it is outside the image."""
     inside = (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1)
     with open(track, "w", newline="") as f:
         w = csv.writer(f)

@@ -27,12 +27,14 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from functools import partial
 from typing import NamedTuple
 
 import cv2
 import numpy as np
 
 from . import texture
+from .buoy import albedo as buoy_albedo
 from .geometry import SimCamera, facet_normal_up, pixel_rays, refract_into_water
 from .marker import paint
 from .scenario import Scenario
@@ -54,7 +56,7 @@ class Box:
     ned: np.ndarray  # (3,) centre of its top face, world NED
     heading: float
     size_m: tuple  # length, width, height
-    look: str  # "vehicle" (a BlueROV2) or "rock"
+    look: str  # "vehicle" (a BlueROV2), "rock" or "buoy" (sim_fixtures.buoy)
 
 
 @dataclass(frozen=True)
@@ -635,7 +637,12 @@ class Renderer:
             keep, add = self._surface(
                 ray[own], view, None if p.normal_up is None else p.normal_up[own]
             )
-            colour[own] = (ALBEDO[b.look](point[own], face[own]) * gain + veil) * keep + add
+            paint_box = (
+                partial(buoy_albedo, radius_m=self.sc.buoy.radius_m)
+                if b.look == "buoy"
+                else ALBEDO[b.look]
+            )
+            colour[own] = (paint_box(point[own], face[own]) * gain + veil) * keep + add
         n = ss * ss
         cover = (owner >= 0).reshape(len(vv), n).mean(axis=1)[:, None]
         mean_hit = colour.reshape(len(vv), n, 3).sum(axis=1) / np.maximum(cover * n, 1)

@@ -628,6 +628,44 @@ class MarkerSpec:
 
 
 @dataclass(frozen=True, config=CLOSED)
+class BuoySpec:
+    """``[buoy]``: a buoy drifting on the surface that reports its RTK GNSS over MAVLink, a moving reference of known
+    position (:mod:`sim_fixtures.buoy`): a square hull whose top is painted as the marker (a white disc, a black
+    centre of half its radius); its GPS_RAW_INT from its own system id in ``uav.tlog``, as a ground station records
+    what it hears; ``reference.toml`` names that system id (as a team would configure it)."""
+
+    enabled: Flag = Field(False, description="the buoy is there")
+    north_m: Number = Field(1.5, description="where it starts, from the UUV's path centre (north)")
+    east_m: Number = Field(-1.5, description="... and east")
+    drift_mps: Pair = Field((0.005, 0.01), description="its drift (north, east; m/s)")
+    swing_m: NonNegative = Field(
+        0.5, description="amplitude of its swing on the mooring (each axis, m)"
+    )
+    swing_period_s: Positive = Field(
+        60.0, description="period of the swing (north; east 1.6 of it)"
+    )
+    radius_m: Annotated[Number, Gt(0.05), Le(2.0)] = Field(
+        0.25, description="the white disc's radius on its top; the hull is 2.6 of it across"
+    )
+    depth_m: NonNegative = Field(
+        0.0, description="its marked top's depth below the still surface (0: at the surface)"
+    )
+    draft_m: Positive = Field(0.3, description="the hull's height below its top")
+    system_id: Annotated[Whole, Ge(2), Le(255)] = Field(
+        42, description="its MAVLink system id (the UAV is 1)"
+    )
+    gnss_hz: Positive = Field(5.0, description="its GPS_RAW_INT rate")
+    gnss_sigma_m: NonNegative = Field(
+        0.015, description="its GNSS's error, 1-sigma per horizontal axis (RTK)"
+    )
+    gnss_correlation_s: Positive = Field(
+        10.0, description="the error's correlation time (first-order Gauss-Markov)"
+    )
+    link_delay_s: NonNegative = Field(0.25, description="its radio link's delay to the station")
+    link_jitter_s: NonNegative = Field(0.05, description="mean exponential jitter on it")
+
+
+@dataclass(frozen=True, config=CLOSED)
 class RockSpec:
     """``[rock]``: a dark rock, a box of about the UUV's size lying still on the seafloor, placed by the UUV's
     path (a look-alike the UUV passes close by or over)."""
@@ -676,6 +714,7 @@ class Scenario:
     second_uuv: SecondUuvSpec = Field(default_factory=SecondUuvSpec)
     rock: RockSpec = Field(default_factory=RockSpec)
     marker: MarkerSpec = Field(default_factory=MarkerSpec)
+    buoy: BuoySpec = Field(default_factory=BuoySpec)
     waves: WavesSpec = Field(default_factory=WavesSpec)
     downlink: DownlinkSpec = Field(default_factory=DownlinkSpec)
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
@@ -728,6 +767,8 @@ class Scenario:
                 "the UUV must stay between the surface (its top face at depth 0 or below) and "
                 "the seafloor (site.floor_depth_m)",
             )
+        if self.buoy.enabled and self.marker.enabled:
+            raise Invalid("buoy.enabled", True, "one reference a session: [marker] is enabled too")
         if self.second_uuv.role == "uuv" and not self.second_uuv.enabled:
             raise Invalid("second_uuv.role", "uuv", "a second UUV needs second_uuv.enabled = true")
         floor = self.site.floor_depth_m

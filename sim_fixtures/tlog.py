@@ -480,8 +480,11 @@ def _messages(sc: Scenario, motion: Motion, clock: Clock):
     return out
 
 
-def write_tlog(path: Path, sc: Scenario, motion: Motion, clock: Clock) -> dict[str, int]:
-    """Write ``uav.tlog``; returns the number of messages of each type."""
+def write_tlog(
+    path: Path, sc: Scenario, motion: Motion, clock: Clock, others: list[tuple[int, bytes]] = ()
+) -> dict[str, int]:
+    """Write ``uav.tlog``; returns the number of the UAV's messages of each type. ``others``: records
+    ``(station µs, MAVLink frame)`` of other systems the station heard (a buoy's), merged in by time."""
     mav = mavutil().mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     msgs = sorted(_messages(sc, motion, clock), key=lambda m: m[0])  # stable: ties keep their order
     send_us = np.array([m[0] for m in msgs], dtype=np.int64) + SEND_LATENCY_US
@@ -490,9 +493,12 @@ def write_tlog(path: Path, sc: Scenario, motion: Motion, clock: Clock) -> dict[s
         send_us + np.round((sc.link.delay_s + extra) * 1e6).astype(np.int64)
     )
     counts: dict[str, int] = {}
+    records = []
+    for (_, name, args), t_us in zip(msgs, clock.station_us(recv_us)):
+        msg = getattr(mav, name + "_encode")(*args)
+        records.append((int(t_us), msg.pack(mav)))
+        counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
     with open(path, "wb") as f:
-        for (_, name, args), t_us in zip(msgs, clock.station_us(recv_us)):
-            msg = getattr(mav, name + "_encode")(*args)
-            f.write(tlog_record(int(t_us), msg.pack(mav)))
-            counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
+        for t_us, frame in sorted([*records, *others], key=lambda r: r[0]):
+            f.write(tlog_record(t_us, frame))
     return counts

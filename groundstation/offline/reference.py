@@ -9,12 +9,24 @@ around where the reported pose puts it (:func:`localizer.tracking.predict.projec
 its size there (:func:`bullseye`); a peak below :data:`MIN_SCORE` is no sighting. positions.csv gets the offset
 applied per fix (columns ``ref_offset_n_m``, ``ref_offset_e_m``, ``ref_sigma_n_m``, ``ref_sigma_e_m``; empty where
 none), and one line on stderr says what was found.
+
+A buoy or boat reporting its GNSS over MAVLink (a moving reference, :class:`Buoy`) carries the same bullseye; its
+``reference.toml`` has ``system_id`` (its MAVLink system) instead of ``lat_deg``/``lon_deg``, ``depth_m`` (its
+marking's below the surface: 0 at it), ``radius_m``, and optionally ``time_sigma_s``, ``latency_s`` and ``sigma_m``
+(:class:`Buoy`). Its positions are the GPS_RAW_INT messages of that system in the session's ``uav.tlog`` (the
+station records what it hears; messages of any other system are not used), each at its fix's GNSS time
+(``time_usec``, UNIX µs) on the station clock (the UAV's SYSTEM_TIME alignment), or, without one, its receive time
+less ``latency_s``; each one's 1-sigma per axis its ``h_acc``/√2 (``sigma_m`` where it states none). The buoy is
+looked for where its reported position, interpolated at each frame's time (:func:`localizer.reference.reported_at`),
+projects.
 """
 
 from __future__ import annotations
 
 import sys
 import tomllib
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -22,6 +34,7 @@ import numpy as np
 
 from groundstation.offline.bottom import subsample_rows
 from groundstation.session.read import Session, SessionError
+from groundstation.session.tlog import read_tlog
 from localizer import reference
 from localizer.fix import Fixes
 from localizer.pose import camera_pose
@@ -33,19 +46,42 @@ RATE_HZ = 5.0  # frames searched per second of video
 SEARCH_SIGMAS = 3.0
 MIN_SCORE = 0.6  # the correlation's peak that counts as a sighting
 COLUMNS = ("ref_offset_n_m", "ref_offset_e_m", "ref_sigma_n_m", "ref_sigma_e_m")
+GNSS_TIME_MIN_US = (
+    1e15  # a GPS_RAW_INT time_usec above this is UNIX time (after 2001), below it boot time
+)
+MIN_FIX_TYPE = 3  # GPS_RAW_INT fix_type: 3D fix or better
 
 
-def read_reference(session: Session) -> tuple[reference.Reference, float] | None:
-    """The session's ``reference.toml``: the reference and the marker's radius (m); None without the file."""
+@dataclass(frozen=True)
+class Buoy:
+    """A moving reference reporting its GNSS over MAVLink (``reference.toml`` with ``system_id``): its MAVLink
+    system id; its marking's depth below the surface (m); how well its reports' GNSS times are known on the station
+    clock (``time_sigma_s``, s); its link's latency when a report has no GNSS time (``latency_s``, s: it is stamped
+    when received less that, that whole latency its time's 1-sigma); a report's 1-sigma per axis when its
+    ``h_acc`` is 0 (``sigma_m``, m)."""
+
+    system_id: int
+    depth_m: float
+    time_sigma_s: float = 0.02
+    latency_s: float = 0.3
+    sigma_m: float = 0.5
+
+
+def read_reference(session: Session) -> tuple[reference.Reference | Buoy, float] | None:
+    """The session's ``reference.toml``: the reference (a marker's :class:`~localizer.reference.Reference`, or a
+    :class:`Buoy`) and its marking's radius (m); None without the file."""
     path = session.path / FILE
     return read_file(path) if path.is_file() else None
 
 
-def read_file(path: Path) -> tuple[reference.Reference, float]:
-    """A ``reference.toml`` (see the module doc) at ``path``: the reference and the marker's radius (m);
-    :class:`~groundstation.session.read.SessionError` (one line: the file, what is wrong) for a bad one."""
+def read_file(path: Path) -> tuple[reference.Reference | Buoy, float]:
+    """A ``reference.toml`` (see the module doc) at ``path``: the reference (a :class:`Buoy` where it names a
+    ``system_id``) and its marking's radius (m); :class:`~groundstation.session.read.SessionError` (one line: the
+    file, what is wrong) for a bad one."""
     try:
         d = tomllib.loads(path.read_text())
+        if "system_id" in d:
+            return _buoy(path, d), float(d["radius_m"])
         ref = reference.Reference(
             float(d["lat_deg"]),
             float(d["lon_deg"]),
@@ -57,6 +93,51 @@ def read_file(path: Path) -> tuple[reference.Reference, float]:
         raise SessionError(
             f"{path}: {type(e).__name__}: {e} (needs lat_deg, lon_deg, depth_m, radius_m)"
         ) from None
+
+
+def _buoy(path: Path, d: dict) -> Buoy:
+    sid = d["system_id"]
+    if not isinstance(sid, int) or not 1 <= sid <= 255:
+        raise ValueError(f"system_id = {sid!r}: a MAVLink system id, 1-255")
+    buoy = Buoy(
+        sid,
+        float(d["depth_m"]),
+        **{k: float(d[k]) for k in ("time_sigma_s", "latency_s", "sigma_m") if k in d},
+    )
+    for key in ("depth_m", "time_sigma_s", "latency_s", "sigma_m"):
+        if not getattr(buoy, key) >= 0:
+            raise ValueError(f"{key} = {getattr(buoy, key)!r}: must be >= 0")
+    return buoy
+
+
+def report(msg, recv_unix_s: float, buoy: Buoy, station_minus_gnss_s: float | None):
+    """One of the buoy's GNSS reports from a MAVLink message received at ``recv_unix_s`` (station clock):
+    ``(t_unix, lat_deg, lon_deg, sigma_m, gnss_time)`` for a GPS_RAW_INT of its system with a 3D fix or better
+    (see the module doc; ``gnss_time`` whether its time is its fix's), else None. Live or offline."""
+    if msg.get_type() != "GPS_RAW_INT" or msg.get_srcSystem() != buoy.system_id:
+        return None
+    if msg.fix_type < MIN_FIX_TYPE:
+        return None
+    h_acc_mm = getattr(msg, "h_acc", 0)
+    sigma = h_acc_mm / 1000 / np.sqrt(2.0) if h_acc_mm > 0 else buoy.sigma_m
+    gnss_time = msg.time_usec > GNSS_TIME_MIN_US and station_minus_gnss_s is not None
+    t = msg.time_usec / 1e6 + station_minus_gnss_s if gnss_time else recv_unix_s - buoy.latency_s
+    return t, msg.lat / 1e7, msg.lon / 1e7, float(sigma), gnss_time
+
+
+def reports(records, buoy: Buoy, station_minus_gnss_s: float | None):
+    """The buoy's reports (:class:`localizer.reference.Reports`, in time order, a repeated time once) among
+    ``records`` ``(receive time UNIX s, message)``, and the 1-sigma of their times (s): ``time_sigma_s``, or
+    ``latency_s`` when some have no GNSS time."""
+    rows = [r for t, m in records if (r := report(m, t, buoy, station_minus_gnss_s)) is not None]
+    rows.sort(key=lambda r: r[0])
+    t = np.array([r[0] for r in rows])
+    keep = np.concatenate([[True], np.diff(t) > 0]) if len(t) else np.zeros(0, bool)
+    cols = [np.array([r[k] for r in rows], dtype=float)[keep] for k in range(4)]
+    all_gnss = all(r[4] for r in rows)
+    return reference.Reports(*cols), buoy.time_sigma_s if all_gnss else max(
+        buoy.time_sigma_s, buoy.latency_s
+    )
 
 
 def bullseye(radius_px: float) -> np.ndarray:
@@ -105,12 +186,14 @@ def expected(cal, pose, ref: reference.Reference, radius_m: float):
     return u0, v0, radius_m * px_per_m, reach_m * px_per_m
 
 
-def sightings(session: Session, ref: reference.Reference, radius_m: float):
-    """The times and pixels (NaN: not found) of the marker in the frames at :data:`RATE_HZ`."""
+def sightings(session: Session, ref, radius_m: float):
+    """The times and pixels (NaN: not found) of the marker in the frames at :data:`RATE_HZ`; ``ref`` a
+    :class:`~localizer.reference.Reference`, or a function of the frames' times giving one (a moving reference)."""
     cal, tel = session.calibration, session.telemetry
     rows = subsample_rows(session.frames["t"], RATE_HZ)
     t = session.frames["t"][rows]
-    u0, v0, radius_px, reach_px = expected(cal, camera_pose(cal, tel, t), ref, radius_m)
+    at = ref(t) if callable(ref) else ref
+    u0, v0, radius_px, reach_px = expected(cal, camera_pose(cal, tel, t), at, radius_m)
     u, v = np.full(len(rows), np.nan), np.full(len(rows), np.nan)
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
     with session.open_video(grey=True) as video:
@@ -125,6 +208,32 @@ def sightings(session: Session, ref: reference.Reference, radius_m: float):
     return t, u, v
 
 
+def buoy_track(session: Session, buoy: Buoy):
+    """``(where, what)``: the buoy's position at given times (a function of them giving a
+    :class:`~localizer.reference.Reference`: :func:`localizer.reference.reported_at` of its reports in uav.tlog) and
+    a few words on its reports; None, with a warning, where the session has no usable reports of its system."""
+    where = f"{session.path / FILE}: system_id = {buoy.system_id}"
+    if buoy.system_id == session.uav_sysid:
+        session.warnings.append(f"{where}: that is the UAV's own system; the buoy is not used")
+        return None
+    records = read_tlog(session.path / "uav.tlog")
+    found, time_sigma_s = reports(records, buoy, session.telemetry.station_minus_gnss_s)
+    if len(found.t_unix) < 2:
+        heard = sorted({m.get_srcSystem() for _, m in records if m.get_type() == "GPS_RAW_INT"})
+        session.warnings.append(
+            f"{where}: no GPS_RAW_INT with a fix from that system in uav.tlog (GPS_RAW_INT from systems "
+            f"{', '.join(map(str, heard)) or 'none'}); the buoy is not used"
+        )
+        return None
+    what = (
+        f"the buoy (system {buoy.system_id}: {len(found.t_unix)} GNSS reports, median 1-sigma "
+        f"{np.median(found.sigma_m):.3f} m per axis, their times ± {1000 * time_sigma_s:.0f} ms)"
+    )
+    return partial(
+        reference.reported_at, found, depth_m=buoy.depth_m, time_sigma_s=time_sigma_s
+    ), what
+
+
 def apply(session: Session, fixes: Fixes, mode: str, correction=None):
     """``--reference``: the fixes corrected by the marker's offset and positions.csv's cells (:data:`COLUMNS`), or
     ``(fixes, None)`` (``off``, no reference.toml, no video: a warning says why); ``correction`` the pose's from the
@@ -137,17 +246,29 @@ def apply(session: Session, fixes: Fixes, mode: str, correction=None):
         return fixes, None
     ref, radius_m = found
     cal, tel = session.calibration, session.telemetry
-    t, u, v = sightings(session, ref, radius_m)
+    where, what = ref, "the marker"
+    if isinstance(ref, Buoy):
+        moving = buoy_track(session, ref)
+        if moving is None:
+            return fixes, None
+        where, what = moving
+    t, u, v = sightings(session, where, radius_m)
+    at = where(t) if callable(where) else where
     seen_pose, seen_cal = camera_pose(cal, tel, t), cal
     pose = camera_pose(cal, tel, fixes.t_unix)
     if correction is not None:
         seen_pose, seen_cal = correction.apply(session, seen_pose)
         pose, cal = correction.apply(session, pose)
-    off, seen, jac = reference.sightings(seen_cal, seen_pose, u, v, ref)
-    offsets = reference.offsets(t[seen], off[seen], jac[seen], fixes.t_unix, ref.sigma_m)
+    off, seen, jac = reference.sightings(seen_cal, seen_pose, u, v, at)
+    ref_sigma_m = (
+        np.sqrt(np.mean(np.square(np.broadcast_to(at.sigma_m, t.shape)[seen])))
+        if seen.any()
+        else 0.0
+    )
+    offsets = reference.offsets(t[seen], off[seen], jac[seen], fixes.t_unix, ref_sigma_m)
     better = reference.correct(cal, pose, fixes, offsets)
     print(
-        f"{session.path.name}: the marker seen in {int(seen.sum())} of {len(t)} frames searched; "
+        f"{session.path.name}: {what} seen in {int(seen.sum())} of {len(t)} frames searched; "
         f"{offsets.describe()}",
         file=sys.stderr,
     )

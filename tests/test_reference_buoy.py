@@ -1,0 +1,108 @@
+"""A buoy reporting its RTK GNSS over MAVLink fixes a plain-GNSS drone's absolute offset ([buoy] in sim_fixtures,
+groundstation/offline/reference.py, localizer.reference.reported_at): the buoy found in the rendered video around its
+reported position's projection, the fixes against the simulator's truth; a buoy heard from a system id that
+reference.toml does not name is not used."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from groundstation.offline import process
+from groundstation.offline.evaluate import error_ne_m
+from groundstation.offline.reference import (
+    FILE,
+    Buoy,
+    apply,
+    buoy_track,
+    read_reference,
+    sightings,
+)
+from groundstation.session.read import load_session, read_table
+from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
+from localizer.reference import MAX_GAP_S, Reports, reported_at
+from sim_fixtures.generate import generate
+from sim_fixtures.scenario import load_scenario, with_overrides
+
+ROOT = Path(__file__).resolve().parents[1]
+LAT0, LON0 = 63.44, 10.40
+
+
+def test_reported_position_is_interpolated_at_the_frames_time():
+    """Reports at 5 Hz of a point moving 0.5 m/s north-east with a stated 2 cm: between two reports the position is
+    the straight line's (checked in metres against the motion), its sigma 2 cm with the speed times the time's sigma;
+    none before the first report, after the last, or in a gap longer than MAX_GAP_S."""
+    t = np.concatenate([np.arange(0.0, 4.0, 0.2), np.arange(4.0 + MAX_GAP_S + 0.5, 10.0, 0.2)])
+    velocity = np.array([0.3, 0.4])
+    lat, lon, _ = ned_to_geodetic(t * velocity[0], t * velocity[1], 0.0, LAT0, LON0, 0.0)
+    reports = Reports(t, lat, lon, np.full(len(t), 0.02))
+    at = reported_at(reports, np.array([1.05, 2.5, -1.0, 5.0, 11.0]), 0.0, time_sigma_s=0.1)
+    n, e, _ = geodetic_to_ned(at.lat_deg[:2], at.lon_deg[:2], 0.0, LAT0, LON0, 0.0)
+    assert np.allclose(n, [1.05 * 0.3, 2.5 * 0.3], atol=1e-6)
+    assert np.allclose(e, [1.05 * 0.4, 2.5 * 0.4], atol=1e-6)
+    assert np.allclose(at.sigma_m[:2], np.hypot(0.02, 0.5 * 0.1))
+    assert np.all(np.isnan(at.lat_deg[2:])) and np.all(np.isnan(at.sigma_m[2:]))
+
+
+@pytest.fixture(scope="module")
+def buoy_session(tmp_path_factory) -> Path:
+    """sensors_plain_nadir's drone (plain GNSS walk, AHRS and compass biases) for 4 s at 10 fps, 640x360, with the
+    [buoy] drifting on the surface, rendered."""
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_plain_nadir.toml")
+    sc = with_overrides(
+        sc,
+        duration_s=4.0,
+        fps=10.0,
+        camera={"width": 640, "height": 360},
+        buoy={"enabled": True, "drift_mps": (0.1, -0.05)},
+    )
+    out = tmp_path_factory.mktemp("buoy")
+    generate(sc, out)
+    return out
+
+
+def errors(s, fixes) -> np.ndarray:
+    ok = fixes.status == "ok"
+    return np.hypot(*error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth)[ok].T)
+
+
+def test_a_buoy_corrects_a_plain_gnss_drone(buoy_session):
+    """The buoy found in every frame searched within 1 px of the simulator's reference_track.csv; the fixes' absolute
+    MAE below 0.2 m and a quarter of the uncorrected one, at least 90 % within 2 h_acc, and positions.csv's cells
+    filled for every ok fix."""
+    s = load_session(buoy_session)
+    buoy, radius_m = read_reference(s)
+    assert isinstance(buoy, Buoy) and buoy.system_id == 42
+    fixes = process.process_session(s, use_track=True)
+    better, cells = apply(s, fixes, "auto")
+    assert cells is not None
+    before, after = errors(s, fixes), errors(s, better)
+    assert np.mean(after) < min(0.2, 0.25 * np.mean(before)), (np.mean(after), np.mean(before))
+    ok = better.status == "ok"
+    assert np.mean(after <= 2 * better.h_acc_m[ok]) >= 0.9
+    assert all(c != "" for c, good in zip(cells["ref_offset_n_m"], ok) if good)
+
+    where, _ = buoy_track(s, buoy)
+    t, u, v = sightings(s, where, radius_m)
+    truth = read_table(buoy_session / "reference_track.csv", ("t", "u", "v"))
+    i = np.searchsorted(truth["t"], t)
+    assert np.all(np.isfinite(u))
+    assert np.median(np.hypot(u - truth["u"][i], v - truth["v"][i])) < 1.0
+
+
+def test_a_buoy_from_another_system_id_is_not_used(buoy_session, tmp_path):
+    """The same session, its reference.toml naming system 7 (the buoy sends as 42): no correction, the fixes
+    unchanged, a warning naming the configured id and the system heard."""
+    shutil.copytree(buoy_session, tmp_path, dirs_exist_ok=True)
+    toml = tmp_path / FILE
+    toml.write_text(toml.read_text().replace("system_id = 42", "system_id = 7"))
+    s = load_session(tmp_path)
+    fixes = process.process_session(s, use_track=True)
+    same, cells = apply(s, fixes, "auto")
+    assert cells is None
+    ok = fixes.status == "ok"
+    assert np.array_equal(same.lat[ok], fixes.lat[ok]) and np.array_equal(
+        same.h_acc_m, fixes.h_acc_m
+    )
+    assert any("system_id = 7" in w and "42" in w for w in s.warnings), s.warnings
