@@ -87,11 +87,11 @@ def servo_mount(cal: Calibration, tel: Telemetry) -> bool:
 def _rotations(cal: Calibration, tel: Telemetry, tq, status=None):
     """``(R_ned_from_gimbal, R_ned_from_body, sigma_tilt, sigma_yaw)`` at UAV-scale times ``tq``.
 
-    ``status`` given: failing inputs are marked in it.
+    ``status`` given: failing inputs at the first ``len(status)`` times are marked in it.
     """
     a, sa, ea = tel.attitude.sample(tq)
     if status is not None:
-        _mark(status, sa, "attitude")
+        _mark(status, sa[: len(status)], "attitude")
     R_body = att.euler_to_R(a[:, 0], a[:, 1], a[:, 2])
     sig_tilt, sig_yaw = np.hypot(ea[:, 0], ea[:, 1]), ea[:, 2].copy()
     src = cal.mount.attitude_source
@@ -112,7 +112,7 @@ def _rotations(cal: Calibration, tel: Telemetry, tq, status=None):
         R_gimbal = att.R_ned_from_mount_orientation(*np.degrees(g.T), a[:, 2], body)
         g_tilt, g_yaw = np.hypot(eg[:, 0], eg[:, 1]), eg[:, 2]
     if status is not None:
-        _mark(status, sg, "gimbal")
+        _mark(status, sg[: len(status)], "gimbal")
     return R_gimbal, R_body, np.hypot(sig_tilt, g_tilt), np.hypot(sig_yaw, g_yaw)
 
 
@@ -149,12 +149,15 @@ def uav_pose(
     status[~np.isfinite(t)] = "bad_time"
     tq = tel.uav_time(t)
 
-    R_gimbal, R_body, sig_tilt, sig_yaw = _rotations(cal, tel, tq, status)
+    # at the frames' times and RATE_STEP_S before them (the angular velocity), sampled at once
+    R_gimbal, R_body, sig_tilt, sig_yaw = _rotations(
+        cal, tel, np.concatenate([tq, tq - RATE_STEP_S]), status
+    )
+    R_body, sig_tilt, sig_yaw = R_body[:n], sig_tilt[:n], sig_yaw[:n]
     p, sp, ep = tel.position.sample(tq)
     _mark(status, sp, "position")
 
-    R_cv = att.R_ned_from_cv(R_gimbal)
-    R_before = att.R_ned_from_cv(_rotations(cal, tel, tq - RATE_STEP_S)[0])
+    R_cv, R_before = np.split(att.R_ned_from_cv(R_gimbal), 2)
     omega = np.nan_to_num(att.rotvec(R_cv @ np.swapaxes(R_before, -1, -2)) / RATE_STEP_S)
     cos_lat = np.cos(np.radians(p[:, 0]))
     velocity = np.nan_to_num(
