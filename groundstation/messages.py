@@ -185,6 +185,23 @@ class FixMessage(Message):
     sigma_walk_m: NonNegative = Field(
         None, description="the correction's horizontal 1-sigma about the GNSS's mean, metres"
     )
+    ref_offset_n_m: float | None = Field(
+        None,
+        description="a reference of known position's correction applied (skyfix run --reference, skyfix process "
+        "--reference): the drone's absolute offset (the reference's known minus located position) added to the "
+        "position, metres north; null: no correction applied (none estimated yet, or it lapsed)",
+    )
+    ref_offset_e_m: float | None = Field(None, description="see ref_offset_n_m, metres east")
+    ref_sigma_n_m: NonNegative = Field(
+        None, description="the offset's 1-sigma north, metres (in h_acc_m)"
+    )
+    ref_sigma_e_m: NonNegative = Field(None, description="the offset's 1-sigma east, metres")
+    ref_sightings: Annotated[int, Ge(0)] | None = Field(
+        None, description="the reference's sightings in the offset's window"
+    )
+    ref_age_s: NonNegative = Field(
+        None, description="the age of the reference's last sighting at the fix's time, seconds"
+    )
 
     @model_validator(mode="after")
     def _position_iff_ok(self):
@@ -731,6 +748,38 @@ class LiveMosaicStatus(Section):
     )
 
 
+class ReferenceStatus(Section):
+    """A surveyed marker in view (--reference): the drone's absolute offset it shows, added to every fix while the
+    marker was seen within the window (groundstation/live/reference_live.py)."""
+
+    file: str = Field(description="the reference.toml")
+    state: Literal["searching", "applied", "lapsed"] = Field(
+        description="searching: no offset yet; applied: the offset is added to every fix now; lapsed: there was one, "
+        "but too few sightings in the last window_s (the fixes are the telemetry's again)"
+    )
+    offset_n_m: float | None = Field(
+        description="the offset now (known minus located), metres north; null unless applied"
+    )
+    offset_e_m: float | None = Field(description="the offset now, metres east")
+    sigma_n_m: float | None = Field(description="its 1-sigma north, metres (in the fixes' h_acc)")
+    sigma_e_m: float | None = Field(description="its 1-sigma east, metres")
+    sightings: int = Field(description="the marker's sightings in the last window_s")
+    age_s: float | None = Field(
+        description="the age of the last sighting, seconds (null: never seen)"
+    )
+    window_s: float = Field(description="the offset's window, seconds")
+    searched: int = Field(description="frames searched for the marker")
+    seen: int = Field(description="frames it was found in")
+    skipped: int = Field(
+        description="frames due while the search was still busy with the one before"
+    )
+    no_pose: int = Field(
+        description="frames due without a camera pose (no telemetry yet, latency unsettled)"
+    )
+    every_s: float = Field(description="seconds of video between the frames searched")
+    corrected: int = Field(description="fixes the offset was added to")
+
+
 class HeightFromSizeStatus(Section):
     """The camera's height above the water from the UUV's size in the video (--height-from-size)."""
 
@@ -1037,6 +1086,7 @@ class StatusMessage(Message):
         None, description="with --video, unless --height-from-size off"
     )
     live_mosaic: LiveMosaicStatus | None = Field(None, description="with --live-mosaic")
+    reference: ReferenceStatus | None = Field(None, description="with --reference and --video")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     outputs: dict[str, dict[str, Any]] | None = Field(
         None,

@@ -74,6 +74,15 @@ class Fix:
     walk_n_m: float = float("nan")
     walk_e_m: float = float("nan")
     sigma_walk_m: float = float("nan")  # its horizontal 1-sigma
+    # a reference of known position's correction applied (localizer.reference, live: groundstation.live.reference_live):
+    # the drone's absolute offset (known − located) added north and east, its 1-sigma per axis (in h_acc_m), the
+    # reference's sightings in its window and the age of the last one (s); NaN: no correction applied
+    ref_offset_n_m: float = float("nan")
+    ref_offset_e_m: float = float("nan")
+    ref_sigma_n_m: float = float("nan")
+    ref_sigma_e_m: float = float("nan")
+    ref_sightings: float = float("nan")
+    ref_age_s: float = float("nan")
 
     @property
     def ok(self) -> bool:

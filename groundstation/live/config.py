@@ -438,6 +438,16 @@ class RunConfig(UuvOptions):
     live_mosaic_every_s: Positive = Field(
         1.0, description="seconds of video between the frames the live mosaic paints"
     )
+    reference: FilePath | None = Field(
+        None,
+        description="a surveyed marker in view, as skyfix process's reference.toml (lat_deg, lon_deg, depth_m, "
+        "sigma_m, radius_m): looked for in a frame every --reference-every-s at a low priority, the drone's absolute "
+        "offset it shows added to every fix (its sigma in h_acc) while it was seen in at least 4 of the last 10 s",
+    )
+    reference_every_s: Positive = Field(
+        0.2,
+        description="seconds of video between the frames the --reference marker is looked for in",
+    )
     ui_token: Text | None = Field(
         None,
         description="the web page's token (default: none on localhost, a random one "
@@ -552,6 +562,31 @@ class RunConfig(UuvOptions):
             raise Invalid(
                 "live_mosaic", True, f"--basemap {self.basemap} is given too: one base map"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _reference_readable(self):
+        if self.reference is not None:
+            from groundstation.offline.reference import read_file
+            from groundstation.session import SessionError
+
+            path = Path(self.reference)
+            if self.video is None:
+                raise Invalid(
+                    "reference", self.reference, "needs the video to find it in (--video)"
+                )
+            if not path.is_file():
+                raise Invalid("reference", self.reference, "no such file")
+            try:
+                ref, _ = read_file(path)
+            except SessionError as e:
+                raise Invalid(
+                    "reference", self.reference, str(e).removeprefix(f"{path}: ")
+                ) from None
+            if not hasattr(ref, "lat_deg"):
+                raise Invalid(
+                    "reference", self.reference, "live, only a surveyed marker (lat_deg, lon_deg)"
+                )
         return self
 
     @model_validator(mode="after")

@@ -138,7 +138,8 @@ class Pipeline:
     called with every frame's box (None when the tracker has none); ``tracking``: the thread the tracker steps run
     in (several UUVs' pipelines share one: their steps, mostly the interpreter's work, would otherwise contend for
     its lock, measured with ``bench/uuvs.py``; default: asyncio's pool); ``poses``: the frames' poses shared with the
-    other UUVs' pipelines (default: its own);
+    other UUVs' pipelines (default: its own); ``correct(fix, pose)``: each located fix as corrected beyond the
+    telemetry (a reference in view: :meth:`groundstation.live.reference_live.LiveReference.correct`);
     ``on_tracked``: see :attr:`on_tracked`.
     """
 
@@ -158,6 +159,7 @@ class Pipeline:
         vet: Callable[[int, tuple | None], str | None] | None = None,
         tracking: Executor | None = None,
         poses: FramePoses | None = None,
+        correct: Callable[[Fix, CameraPose], Fix] | None = None,
     ):
         self.cal = cal
         self.tel = tel
@@ -172,6 +174,7 @@ class Pipeline:
         self.vet = vet
         self.tracking = tracking
         self.poses = poses or FramePoses(cal, tel)
+        self.correct = correct
         self._told_unknown = False
         self._queue: deque[LiveFrame] = deque()
         self._ready = asyncio.Event()
@@ -453,6 +456,8 @@ class Pipeline:
             fix = Fix(frame.t_unix, "latency_unsettled", result.u, result.v)
         else:
             fix = locate(self.cal, item.pose, result.u, result.v, sigma_px=result.sigma_px)[0]
+            if self.correct is not None:
+                fix = self.correct(fix, item.pose)
             if fix.ok and fix.time_source == "unknown" and not self._told_unknown:
                 self._told_unknown = True
                 log.warning(

@@ -39,6 +39,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -51,6 +52,7 @@ from groundstation.live import config, registry
 from groundstation.live.control import Control
 from groundstation.live.mosaic_live import LiveMosaic
 from groundstation.live.pipeline import FramePoses, Pipeline
+from groundstation.live.reference_live import LiveReference
 from groundstation.live.registry import DepthInput, OutputInput, UavInput
 from groundstation.live.sinks.recorder import Recorder, new_recording
 from groundstation.live.sources.rates import needed_rates
@@ -60,6 +62,7 @@ from groundstation.live.ui.feed import VideoFeed
 from groundstation.live.ui.server import PageUuv, WebUi, settings_of
 from groundstation.live.ui.topview import TopView
 from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
+from groundstation.offline.reference import read_file
 from groundstation.runtime.gps_input import GpsInputSink
 from groundstation.runtime.queries import ZenohControl
 from groundstation.runtime.usage import Usage
@@ -232,6 +235,14 @@ async def serve(cfg: config.RunConfig) -> dict:
             mosaic = LiveMosaic(cal, tel, cfg.floor_depth_m, cfg.live_mosaic_every_s)
             workers.section("live_mosaic", lambda now: mosaic.status())
             closers.append(mosaic.close)
+        reference = None
+        if (
+            cfg.reference and video
+        ):  # a surveyed marker in view: the drone's absolute offset added to every fix
+            found = read_file(Path(cfg.reference))
+            reference = LiveReference(cal, tel, cfg.reference, *found, cfg.reference_every_s)
+            workers.section("reference", reference.status)
+            closers.append(reference.close)
 
         def first_aligned_frame(frame) -> None:
             if frame.aligned and not first_aligned:
@@ -245,6 +256,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 motion and motion.on_frame,
                 motion and auto and first_aligned_frame,
                 mosaic and mosaic.on_frame,
+                reference and reference.on_frame,
             )
             if f
         ]
@@ -285,6 +297,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 poses=poses,
                 fleet=fleet,
                 on_tracked=[from_size.on_tracked] if from_size else [],
+                correct=reference and reference.correct,
             )
             chains.append(chain)
             workers.include(chain.workers)
@@ -411,6 +424,7 @@ class UuvChain:
         tracking=None,
         fleet=None,
         poses=None,
+        correct=None,
     ):
         self.uuv = u
         self.workers = own = Workers()
@@ -481,6 +495,7 @@ class UuvChain:
             tracking=tracking,
             poses=poses,
             depth=uuv_tel.depth,
+            correct=correct,
         )
         own.add(pipeline, PIPELINE, "pipeline", lambda now: pipeline.status())
         own.section("target", lambda now: pipeline.target)

@@ -836,6 +836,18 @@ function showHealth() {
                   + (h.mode === "auto" ? `, ${h.applied} applied` : "")
                   + ` · ${h.measured} measured, ${Object.values(h.rejected).reduce((a, b) => a + b, 0)} without`));
   }
+  if (s.reference) {  // a surveyed marker in view: the drone's absolute offset added to every fix
+    const r = s.reference;
+    const state = r.state === "applied" ? "ok" : r.state === "lapsed" ? "warn: lapsed" : "—";
+    rows.push(row("reference", state, age(r.age_s), "",
+                  (r.state === "applied"
+                    ? `offset N ${fmt(r.offset_n_m, 3, " m")} ± ${fmt(r.sigma_n_m, 3, " m")}, `
+                      + `E ${fmt(r.offset_e_m, 3, " m")} ± ${fmt(r.sigma_e_m, 3, " m")} added to every fix`
+                    : r.state === "lapsed" ? `not applied: too few sightings in the last ${r.window_s} s`
+                    : "no offset yet")
+                  + ` · ${r.sightings} sightings in ${r.window_s} s · ${r.seen}/${r.searched} frames found, `
+                  + `${r.skipped} skipped · ${r.corrected} fixes corrected · ${r.file}`));
+  }
   // a UUV's own rows: named with its id when there are several
   const each = (fn) => page.uuvs.forEach((u, k) => fn(own(k), several() ? `${u.id} ` : "", u.rates,
                                                       (key) => ((own(k).problems || {})[key] ? "problem" : "ok")));

@@ -1,0 +1,222 @@
+"""A surveyed marker in view, live (``reference = FILE``, ``reference_every_s``): the drone's absolute offset it
+shows added to every fix, as ``skyfix process --reference auto`` does offline (:mod:`groundstation.offline.reference`,
+:mod:`localizer.reference`).
+
+Every ``reference_every_s`` seconds of video a frame is taken, its camera pose computed from the telemetry there is
+then (:func:`localizer.pose.uav_pose`, on the event loop), and the marker is looked for around where that pose puts
+it (:func:`groundstation.offline.reference.expected`, :func:`~groundstation.offline.reference.find`) in a
+low-priority thread (:func:`groundstation.live.ui.feed.lower_priority`); a frame that comes while the search is
+still busy with the one before is skipped and counted, as the live mosaic's painter does
+(:mod:`groundstation.live.mosaic_live`). A sighting is the offset known − located of the marker through the frame's
+reported pose (:func:`localizer.reference.sightings`).
+
+Each fix (:meth:`LiveReference.correct`, called by the pipeline with the fix's pose) gets the offset of the sightings
+of the :data:`~localizer.reference.WINDOW_S` before its frame (causal: the offline window centred on the frame,
+shifted back by half of it; at least :data:`~localizer.reference.MIN_BLOCKS` seconds with a sighting), and its claim
+is :func:`localizer.reference.correct`'s: the offset's sigma in h_acc, the UAV position's term gone. The fix says what
+was added (``ref_offset_n_m`` …, ``ref_sightings``, ``ref_age_s``); with too few sightings in the window the
+correction lapses and the fixes are the telemetry's again. Station-clock seconds, north/east metres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import threading
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+
+import cv2
+import numpy as np
+
+from groundstation.live.ui.feed import lower_priority
+from groundstation.offline.reference import expected, find
+from localizer import reference
+from localizer.fix import Fix, Fixes
+from localizer.pose import CameraPose, uav_pose
+
+log = logging.getLogger("skyfix.reference")
+
+#: sightings older than this before the newest are let go (s)
+KEEP_S = 2 * reference.WINDOW_S
+
+
+def drift_line(t_sight: np.ndarray, offset_ne_m: np.ndarray, t_unix: float):
+    """The offset at ``t_unix`` (2,) and its 1-sigma per axis (2,) from a straight line through the sightings'
+    :data:`~localizer.reference.BLOCK_S` means (``offset_ne_m`` (M, 2) at ``t_sight``, all before ``t_unix``): the
+    window's mean lags its newest sighting by half the window, and a plain GNSS walks centimetres a second. The sigma
+    is the line's standard error there from the means' scatter about it; None with fewer than
+    :data:`~localizer.reference.MIN_BLOCKS` + 1 blocks."""
+    block = np.floor((t_unix - t_sight) / reference.BLOCK_S).astype(int)
+    labels, which = np.unique(block, return_inverse=True)
+    k = len(labels)
+    if k < reference.MIN_BLOCKS + 1:
+        return None
+    per = np.bincount(which)
+    t_block = np.bincount(which, weights=t_sight - t_unix) / per
+    means = np.stack([np.bincount(which, weights=o) / per for o in offset_ne_m.T], axis=1)
+    design = np.column_stack([np.ones(k), t_block])
+    coef, *_ = np.linalg.lstsq(design, means, rcond=None)
+    scatter = ((means - design @ coef) ** 2).sum(axis=0) / (k - 2)
+    return coef[0], np.sqrt(scatter * np.linalg.inv(design.T @ design)[0, 0])
+
+
+def as_fixes(fix: Fix) -> Fixes:
+    """One fix as :class:`~localizer.fix.Fixes` of one."""
+    names = [f.name for f in dataclasses.fields(Fixes)][2:]
+    return Fixes.of([fix.t_unix], [fix.status], **{n: [getattr(fix, n)] for n in names})
+
+
+class LiveReference:
+    """The marker's sightings and the offset they give: :meth:`on_frame` (a frame listener, on the event loop) takes
+    a frame every ``every_s`` s of video to search; :meth:`correct` (each UUV's pipeline) adds the offset to a fix;
+    :meth:`status` the ``reference`` section. ``ref``, ``radius_m``: :func:`groundstation.offline.reference.read_file`'s
+    of ``path``."""
+
+    def __init__(
+        self, cal, tel, path: str, ref: reference.Reference, radius_m: float, every_s: float
+    ):
+        self.cal, self.tel = cal, tel
+        self.path, self.ref, self.radius_m, self.every_s = path, ref, radius_m, every_s
+        self.searched = 0  # frames searched
+        self.seen = 0  # frames the marker was found in
+        self.skipped = 0  # frames due while the search was busy
+        self.no_pose = 0  # frames due without a camera pose
+        self.corrected = 0  # fixes the offset was added to
+        # (t_unix, offset (2,), jacobian (2, 4)) of each sighting: appended by the search, read by correct()
+        self._sightings: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
+        self._lock = threading.Lock()
+        self._busy = False
+        self._last_t = -math.inf
+        self._applying = False  # the last fix was corrected (its change is logged)
+        self._estimated = False  # an offset was found once: without one now, it lapsed
+        self._search = ThreadPoolExecutor(
+            1, thread_name_prefix="reference", initializer=lower_priority
+        )
+
+    def on_frame(self, frame) -> None:
+        if frame.t_unix - self._last_t < self.every_s:
+            return
+        if self._busy:
+            self.skipped += 1
+            return
+        self._last_t = frame.t_unix
+        pose = uav_pose(self.cal, self.tel, frame.t_unix)
+        if not frame.aligned or pose.status[0] != "ok" or not pose.height_m[0] > 0:
+            self.no_pose += 1
+            return
+        self._busy = True
+        done = self._search.submit(self.look, frame.image, pose)
+        done.add_done_callback(self._looked)
+
+    def _looked(self, done) -> None:
+        self._busy = False
+        if done.exception() is not None:
+            log.error("reference: a frame could not be searched: %s", done.exception())
+
+    def look(self, image: np.ndarray, pose: CameraPose) -> None:
+        """Search one frame (the search's thread) and keep the sighting."""
+        self.searched += 1
+        u0, v0, radius_px, reach_px = expected(self.cal, pose, self.ref, self.radius_m)
+        if not np.isfinite(u0[0]):
+            return
+        grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        hit = find(grey, u0[0], v0[0], radius_px[0], reach_px[0])
+        if hit is None:
+            return
+        off, ok, jac = reference.sightings(self.cal, pose, [hit[0]], [hit[1]], self.ref)
+        if not ok[0]:
+            return
+        self.seen += 1
+        t = float(pose.t_unix[0])
+        with self._lock:
+            self._sightings.append((t, off[0], jac[0]))
+            while self._sightings and self._sightings[0][0] < t - KEEP_S:
+                self._sightings.popleft()
+
+    def offsets(self, t_unix: float) -> tuple[reference.Offsets, float]:
+        """The offset at ``t_unix`` from the sightings of the window before it, and the age of the last of them (s;
+        NaN: none)."""
+        with self._lock:
+            kept = [s for s in self._sightings if s[0] <= t_unix]
+        if not kept:
+            t, off, jac = np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2, 4))
+        else:
+            t = np.array([s[0] for s in kept])
+            off, jac = np.stack([s[1] for s in kept]), np.stack([s[2] for s in kept])
+        found = reference.offsets(t, off, jac, [t_unix - reference.WINDOW_S / 2], self.ref.sigma_m)
+        recent = t >= t_unix - reference.WINDOW_S
+        line = drift_line(t[recent], off[recent], t_unix)
+        if line is None or not np.isfinite(found.offset_ne_m[0, 0]):
+            found = dataclasses.replace(found, offset_ne_m=np.full((1, 2), np.nan))
+        else:
+            at, sigma = line
+            found = dataclasses.replace(
+                found,
+                offset_ne_m=at[None],
+                sigma_ne_m=np.maximum(sigma, found.sigma_ne_m[0])[None],
+            )
+        self._estimated |= bool(np.isfinite(found.offset_ne_m[0, 0]))
+        return found, (t_unix - t[-1]) if len(t) else math.nan
+
+    def correct(self, fix: Fix, pose: CameraPose) -> Fix:
+        """``fix`` (made with ``pose``) with the offset added and its claim, when there is one at its time (on the
+        event loop)."""
+        if not fix.ok:
+            return fix
+        found, age_s = self.offsets(fix.t_unix)
+        applying = bool(np.isfinite(found.offset_ne_m[0, 0]))
+        if applying != self._applying:
+            self._applying = applying
+            log.info(
+                "%s",
+                found.describe()
+                if applying
+                else "reference: the correction lapsed (too few sightings)",
+            )
+        if not applying:
+            return fix
+        self.corrected += 1
+        better = reference.correct(self.cal, pose, as_fixes(fix), found)[0]
+        (n, e), (sn, se) = found.offset_ne_m[0], found.sigma_ne_m[0]
+        return dataclasses.replace(
+            better,
+            frame=fix.frame,
+            confidence=fix.confidence,
+            ref_offset_n_m=float(n),
+            ref_offset_e_m=float(e),
+            ref_sigma_n_m=float(sn),
+            ref_sigma_e_m=float(se),
+            ref_sightings=float(found.sightings[0]),
+            ref_age_s=float(age_s),
+        )
+
+    def status(self, now: float) -> dict:
+        found, age_s = self.offsets(now)
+        applied = bool(np.isfinite(found.offset_ne_m[0, 0]))
+        (n, e), (sn, se) = found.offset_ne_m[0], found.sigma_ne_m[0]
+
+        def num(x: float, digits: int = 4) -> float | None:
+            return round(float(x), digits) if applied else None
+
+        return {
+            "file": self.path,
+            "state": "applied" if applied else "lapsed" if self._estimated else "searching",
+            "offset_n_m": num(n),
+            "offset_e_m": num(e),
+            "sigma_n_m": num(sn),
+            "sigma_e_m": num(se),
+            "sightings": int(found.sightings[0]),
+            "age_s": round(age_s, 3) if math.isfinite(age_s) else None,
+            "window_s": reference.WINDOW_S,
+            "searched": self.searched,
+            "seen": self.seen,
+            "skipped": self.skipped,
+            "no_pose": self.no_pose,
+            "every_s": self.every_s,
+            "corrected": self.corrected,
+        }
+
+    def close(self) -> None:
+        self._search.shutdown(wait=True, cancel_futures=True)

@@ -1,0 +1,143 @@
+"""A surveyed marker in view, live (groundstation/live/reference_live.py): ``skyfix run --reference reference.toml``
+over the replay of a generated session (sensors_plain_nadir's drone: a plain GNSS's walk, AHRS and compass biases;
+8 s at 640x360 with the simulator's bullseye on the floor). The fixes on Zenoh carry the offset added, its sigma, the
+sightings and the last one's age; against the simulator's truth they are within 2 h_acc and several times closer
+than the same fixes without the offset; GPS_INPUT sends them with that h_acc; the status names the reference and the
+offset (its schema's). The correction lapses when the marker has not been seen for the window; a bad reference file
+is refused in one line naming the key."""
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+from jsonschema import Draft202012Validator
+from live_helpers import ROOT, LiveRun, read_jsonl
+
+from groundstation.contracts import GROUNDSTATION
+from groundstation.live import config
+from groundstation.live.reference_live import LiveReference
+from groundstation.offline.reference import read_file
+from groundstation.session.read import load_session
+from localizer.contract import ConfigError
+from localizer.fix import Fix
+from localizer.geodesy import ned_to_geodetic
+from localizer.reference import WINDOW_S
+from sim_fixtures.generate import generate
+from sim_fixtures.scenario import load_scenario, with_overrides
+
+
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory):
+    """sensors_plain_nadir, 8 s at 15 fps and 640x360, with its [marker]."""
+    session = tmp_path_factory.mktemp("plain")
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_plain_nadir.toml")
+    sc = with_overrides(
+        sc,
+        duration_s=8.0,
+        fps=15.0,
+        camera={"width": 640, "height": 360},
+        marker={"enabled": True},
+    )
+    generate(sc, session)
+    return session
+
+
+def test_the_live_fixes_take_the_markers_offset(plain, tmp_path):
+    live = LiveRun(
+        tmp_path, plain, "--reference", str(plain / "reference.toml"), video_latency_ms=0
+    )
+    # the session's own calibration: its [tracker] init_bbox locks the UUV on the first frame, before the marker's
+    # offset is known (the fixes then step by it)
+    live.run_cmd[live.run_cmd.index("--calibration") + 1] = str(plain / "session.toml")
+    with live:
+        live.finish()
+    ok = [f for f in live.fixes() if f["status"] == "ok"]
+    fixed = [f for f in ok if f["ref_offset_n_m"] is not None]
+    assert len(fixed) >= 10 and ok[0]["ref_offset_n_m"] is None, (len(ok), len(fixed))
+    after = live.fix_errors_m(fixed)
+    h_acc = np.array([f["h_acc_m"] for f in fixed])
+    # the same fixes without the offset: the reported pose's positions
+    off = np.array([[f["ref_offset_n_m"], f["ref_offset_e_m"]] for f in fixed])
+    lat, lon, _ = ned_to_geodetic(
+        -off[:, 0], -off[:, 1], 0.0, [f["lat"] for f in fixed], [f["lon"] for f in fixed], 0.0
+    )
+    raw = [f | {"lat": a, "lon": b} for f, a, b in zip(fixed, lat, lon)]
+    before = live.fix_errors_m(raw)
+    print(
+        f"{len(ok)} ok fixes, {len(fixed)} with the marker's offset: MAE {after.mean():.3f} m "
+        f"(without it {before.mean():.3f} m), h_acc median {np.median(h_acc):.3f} m, "
+        f"{np.mean(after <= 2 * h_acc):.0%} within 2 h_acc; offset {off.mean(axis=0).round(3)} m, "
+        f"sightings {fixed[-1]['ref_sightings']}, last {fixed[-1]['ref_age_s']:.2f} s old"
+    )
+    assert after.mean() < 0.25 * before.mean()
+    assert np.mean(after <= 2 * h_acc) >= 0.9
+    assert all(0 < f["ref_sigma_n_m"] < f["h_acc_m"] and f["ref_sightings"] >= 3 for f in fixed)
+    assert all(0 <= f["ref_age_s"] <= 1.0 for f in fixed)
+
+    # GPS_INPUT: the corrected position and its h_acc
+    t0 = fixed[0]["t"]
+    valid = [g for g in live.gps_input() if g["fix_type"] == 3 and g["time_usec"] / 1e6 > t0]
+    assert len(valid) >= 10
+    sent = live.gps_errors_m(valid)
+    claim = np.array([g["horiz_accuracy"] for g in valid])
+    print(
+        f"GPS_INPUT after the offset: {len(valid)} valid, MAE {sent.mean():.3f} m, "
+        f"horiz_accuracy median {np.median(claim):.3f} m"
+    )
+    assert sent.mean() < 0.25 * before.mean() and np.mean(sent <= 2 * claim) >= 0.9
+    assert np.median(claim) < 0.5 * np.median(before)
+
+    # the status names the reference and its offset, as its schema has it
+    schema = Draft202012Validator(json.loads(GROUNDSTATION.path_of("status").read_text()))
+    status = [
+        json.loads(s["payload"]) for s in read_jsonl(live.sub_out) if s["key"] == "skyfix/status"
+    ]
+    assert [e.message for m in status for e in schema.iter_errors(m)] == []
+    applied = [s["reference"] for s in status if s["reference"]["state"] == "applied"]
+    assert applied, [s["reference"] for s in status]
+    last = applied[-1]
+    assert last["file"].endswith("reference.toml") and last["seen"] >= 3 and last["sightings"] >= 3
+    assert abs(last["offset_n_m"] - off[-1, 0]) < 3 * last["sigma_n_m"] + 0.05
+    assert status[0]["reference"]["state"] == "searching"
+
+
+def test_the_correction_lapses_without_sightings(plain):
+    """The session's own frames searched directly (the search's function, not its thread): an offset at the last
+    frame, none a window after it; a fix then goes out as it came."""
+    s = load_session(plain)
+    ref, radius_m = read_file(plain / "reference.toml")
+    live = LiveReference(s.calibration, s.telemetry, "reference.toml", ref, radius_m, 0.2)
+    try:
+        from localizer.pose import uav_pose
+
+        t_of = dict(zip(s.frames["frame"][::3].astype(int), s.frames["t"][::3]))
+        with s.open_video(grey=True) as video:
+            for vf in video.prefetch():
+                if vf.index in t_of:
+                    live.look(vf.image, uav_pose(s.calibration, s.telemetry, t_of[vf.index]))
+        t_end = float(s.frames["t"][-1])
+        found, age_s = live.offsets(t_end)
+        assert np.isfinite(found.offset_ne_m[0]).all() and age_s < 0.5
+        assert live.status(t_end)["state"] == "applied"
+        later = t_end + WINDOW_S
+        assert not np.isfinite(live.offsets(later)[0].offset_ne_m[0]).any()
+        assert live.status(later)["state"] == "lapsed"
+        fix = Fix(later, "ok", lat=63.4, lon=10.4, h_acc_m=1.5)
+        assert live.correct(fix, None) is fix
+    finally:
+        live.close()
+
+
+def test_a_bad_reference_file_is_refused_in_one_line(tmp_path):
+    bad = tmp_path / "reference.toml"
+    bad.write_text("lat_deg = 63.4\nlon_deg = 10.4\ndepth_m = 2.0\n")
+    parser = argparse.ArgumentParser()
+    config.add_arguments(parser)
+    args = parser.parse_args(
+        ["--calibration", "cal.toml", "--video", "udp://127.0.0.1:5600", "--reference", str(bad)]
+    )
+    with pytest.raises(ConfigError) as e:
+        config.run_config(args)
+    assert str(e.value).startswith(f"options: --reference = '{bad}': KeyError: 'radius_m'")
+    assert "\n" not in str(e.value)
