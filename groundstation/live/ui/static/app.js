@@ -365,6 +365,8 @@ function showStatus() {
   const fixText = (f, name) => (f && f.status === "ok"
     ? `${name} ${f.lat.toFixed(7)}, ${f.lon.toFixed(7)} ± ${f.h_acc_m.toFixed(2)} m, depth ${fmt(f.depth_m)} m`
       + ` (frame ${f.frame}, ${(s.t - f.t).toFixed(1)} s ago)`
+      + (f.ref_offset_n_m == null ? ""  // a surveyed marker's offset added (--reference)
+        : ` · reference offset N ${fmt(f.ref_offset_n_m, 2)}, E ${fmt(f.ref_offset_e_m, 2)} m added`)
     : `${several() ? `${name}: ` : ""}no fix: ${f ? f.status : "no frames yet"}`);
   if (!several()) {
     $("fix-text").textContent = fixText(fix, "UUV");
