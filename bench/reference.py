@@ -1,8 +1,14 @@
-"""A reference of known position in view (a surveyed marker on the seafloor, ``[marker]``): the fixes' absolute error
-without and with the offset it gives (:mod:`localizer.reference`, ``skyfix process --reference``).
+"""A reference of known position in view (a surveyed marker on the seafloor, ``[marker]``, or a buoy drifting on the
+surface that reports its RTK GNSS over MAVLink, ``[buoy]``): the fixes' absolute error without and with the offset it
+gives (:mod:`localizer.reference`, ``skyfix process --reference``).
 
     .venv/bin/python bench/reference.py [--duration 120] [--fps 5] [--pixel-sigma 0.5] [--rendered-s 8]
+                                        [--references marker,buoy]
                                         [--work /tmp/skyfix-reference] [--out bench/results/reference.txt]
+
+The buoy's position at each sighting is where its GNSS reports in uav.tlog put it (interpolated, time-aligned:
+:func:`groundstation.offline.reference.buoy_track`), as ``skyfix process`` takes it; the RTK drones' rows without a
+reference are what the plain drones' rows with one are to approach.
 
 Geometry only, for each scenario (plain GNSS and RTK drones with the AHRS and compass biases of ``sensors_*``, the
 UUV's true pixel from track.csv): the marker's pixel is the simulator's (reference_track.csv) plus a detector's white
@@ -28,8 +34,8 @@ import claim_calibration as claim
 
 from groundstation.offline import process
 from groundstation.offline.evaluate import error_ne_m, shape_m
+from groundstation.offline.reference import Buoy, buoy_track, read_reference, sigma_seen
 from groundstation.offline.reference import apply as apply_reference
-from groundstation.offline.reference import read_reference
 from groundstation.offline.reference import sightings as marker_sightings
 from groundstation.session.read import load_session, read_table
 from localizer.pose import camera_pose
@@ -52,6 +58,17 @@ def marker_track(path: Path, rng, pixel_sigma: float):
     tr = read_table(path / REFERENCE_TRACK_CSV, ("t", "u", "v"), allow_empty=("u", "v"))
     noise = rng.normal(0.0, pixel_sigma, (2, len(tr["t"])))
     return tr["t"], tr["u"] + noise[0], tr["v"] + noise[1]
+
+
+def reference_offsets(s, path: Path, rng, pixel_sigma: float, t_fix):
+    """The offset at the fixes' times ``t_fix`` from the reference's simulator pixel (+ noise, :func:`marker_track`):
+    the surveyed marker, or the buoy where its reports put it at each sighting."""
+    cal, tel = s.calibration, s.telemetry
+    t_m, u_m, v_m = marker_track(path, rng, pixel_sigma)
+    ref, _ = read_reference(s)
+    at = buoy_track(s, ref)[0](t_m) if isinstance(ref, Buoy) else ref
+    off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, at)
+    return offsets(t_m[seen], off[seen], jac[seen], t_fix, sigma_seen(at, seen))
 
 
 def row(err, h_acc) -> tuple:
@@ -78,25 +95,23 @@ def line(name: str, s, fixes, better, note: str) -> str:
     )
 
 
-def geometry_only(name: str, args, work: Path) -> str:
-    """The marker's pixel the simulator's (+ noise): what the offset does once the marker is found."""
+def geometry_only(name: str, args, work: Path, kind: str = "marker") -> str:
+    """The reference's pixel the simulator's (+ noise): what the offset does once it is found; ``kind`` the
+    scenario's table of it (``marker`` or ``buoy``)."""
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / f"{name}.toml")
-    sc = with_overrides(sc, duration_s=args.duration, fps=args.fps, marker={"enabled": True})
-    out = work / name
+    sc = with_overrides(sc, duration_s=args.duration, fps=args.fps, **{kind: {"enabled": True}})
+    out = work / kind / name
     generate(sc, out, video=False)
     s = load_session(out)
     fixes = process.process_session(s, use_track=True)
-    ref, _ = read_reference(s)
     cal, tel = s.calibration, s.telemetry
-    t_m, u_m, v_m = marker_track(out, np.random.default_rng(7), args.pixel_sigma)
-    off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
-    found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
+    found = reference_offsets(s, out, np.random.default_rng(7), args.pixel_sigma, fixes.t_unix)
     better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
     have = np.isfinite(found.offset_ne_m[:, 0]) & (fixes.status == "ok")
     return line(name, s, fixes, better, f"corrected {100 * have.mean():.0f} %")
 
 
-def population(name: str, args, work: Path) -> str:
+def population(name: str, args, work: Path, kind: str = "marker") -> str:
     """``--seeds`` drones of the platform (biases drawn as bench/claim_calibration.py draws them, its platform's
     sigmas in ``[uncertainty]``, the UUV's true pixel) with the marker's simulator pixel: the pooled share within
     2·h_acc and within h_acc, and RMS error over RMS h_acc, without and with the reference."""
@@ -110,18 +125,16 @@ def population(name: str, args, work: Path) -> str:
             duration_s=args.population_s,
             fps=2.0,
             sensors={**claim.draw_sensors(seed, args.seeds), "gnss_mode": base.sensors.gnss_mode},
-            marker={"enabled": True},
+            **{kind: {"enabled": True}},
         )
-        out = work / "population" / f"{name}_s{seed}"
+        out = work / kind / "population" / f"{name}_s{seed}"
         generate(sc, out, video=False)
         s = load_session(out)
         s.calibration = claim.platform_claim(s.calibration, 0.0)
         fixes = process.process_session(s, use_track=True)
         cal, tel = s.calibration, s.telemetry
-        ref, _ = read_reference(s)
-        t_m, u_m, v_m = marker_track(out, np.random.default_rng(seed), args.pixel_sigma)
-        off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
-        found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
+        rng = np.random.default_rng(seed)
+        found = reference_offsets(s, out, rng, args.pixel_sigma, fixes.t_unix)
         better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
         for key, f in (("without", fixes), ("with", better)):
             e = errors(s, f)
@@ -138,15 +151,16 @@ def population(name: str, args, work: Path) -> str:
     return f"{name:24s} {args.seeds:3d} x {args.population_s:g} s   " + "   ".join(cells)
 
 
-def rendered(args, work: Path) -> str:
-    """sensors_plain_nadir rendered with the marker: skyfix process's --reference auto finds it in the video."""
+def rendered(args, work: Path, kind: str = "marker") -> str:
+    """sensors_plain_nadir rendered with the reference: skyfix process's --reference auto finds it in the video."""
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_plain_nadir.toml")
-    sc = with_overrides(sc, duration_s=args.rendered_s, fps=30.0, marker={"enabled": True})
-    out = work / "rendered_plain_nadir"
+    sc = with_overrides(sc, duration_s=args.rendered_s, fps=30.0, **{kind: {"enabled": True}})
+    out = work / kind / "rendered_plain_nadir"
     generate(sc, out)
     s = load_session(out)
     fixes = process.process_session(s, use_track=True)
-    t, u, v = marker_sightings(s, *read_reference(s))
+    ref, radius_m = read_reference(s)
+    t, u, v = marker_sightings(s, buoy_track(s, ref)[0] if isinstance(ref, Buoy) else ref, radius_m)
     better, _ = apply_reference(s, fixes, "auto")
     truth = read_table(out / REFERENCE_TRACK_CSV, ("t", "u", "v"), allow_empty=("u", "v"))
     seen = np.isfinite(u)
@@ -154,6 +168,12 @@ def rendered(args, work: Path) -> str:
     miss = np.hypot(u[seen] - truth["u"][i], v[seen] - truth["v"][i])
     note = f"found {seen.sum()}/{len(u)}, pixel error median {np.median(miss):.2f} max {miss.max():.2f} px"
     return line(f"rendered_plain_nadir {args.rendered_s:g}s", s, fixes, better, note)
+
+
+TABLES = {
+    "marker": "[marker] on the seafloor (its defaults)",
+    "buoy": "[buoy] drifting on the surface, RTK GNSS over MAVLink (its defaults)",
+}
 
 
 def main() -> int:
@@ -166,33 +186,36 @@ def main() -> int:
         "--seeds", type=int, default=20, help="drones per scenario in the population rows"
     )
     p.add_argument("--population-s", type=float, default=60.0)
+    p.add_argument(
+        "--references",
+        default="marker,buoy",
+        help="which references, comma-separated: marker, buoy",
+    )
     p.add_argument("--work", type=Path, default=Path("/tmp/skyfix-reference"))
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "reference.txt")
     args = p.parse_args()
-    head = (
-        f"[marker] on the seafloor (its defaults); geometry only: its pixel the simulator's + {args.pixel_sigma:g} px "
-        f"white, {args.duration:g} s at {args.fps:g} fps; rendered: found in the video; UUV: true pixel\n"
-        f"{'scenario':24s} {'fixes':>6s}  without: MAE shape in2sig h_acc   with: MAE shape in2sig h_acc"
-    )
-    print(head, flush=True)
-    lines = [head]
-    for text in (
-        *(geometry_only(name, args, args.work) for name in SCENARIOS),
-        rendered(args, args.work),
-    ):
+    lines = []
+
+    def say(text: str) -> None:
         print(text, flush=True)
         lines.append(text)
-    head = (
-        f"population: {args.seeds} drones per scenario, biases drawn as bench/claim_calibration.py's platform, "
-        "its sigmas in [uncertainty]\n"
-        f"{'scenario':24s} {'drones':>12s}   without: in2sig in1sig rms_ratio   with: in2sig in1sig rms_ratio"
-    )
-    print(head, flush=True)
-    lines.append(head)
-    for name in SCENARIOS:
-        text = population(name, args, args.work)
-        print(text, flush=True)
-        lines.append(text)
+
+    for kind in args.references.split(","):
+        say(
+            f"{TABLES[kind]}; geometry only: its pixel the simulator's + {args.pixel_sigma:g} px "
+            f"white, {args.duration:g} s at {args.fps:g} fps; rendered: found in the video; UUV: true pixel\n"
+            f"{'scenario':24s} {'fixes':>6s}  without: MAE shape in2sig h_acc   with: MAE shape in2sig h_acc"
+        )
+        for name in SCENARIOS:
+            say(geometry_only(name, args, args.work, kind))
+        say(rendered(args, args.work, kind))
+        say(
+            f"population ({kind}): {args.seeds} drones per scenario, biases drawn as bench/claim_calibration.py's "
+            "platform, its sigmas in [uncertainty]\n"
+            f"{'scenario':24s} {'drones':>12s}   without: in2sig in1sig rms_ratio   with: in2sig in1sig rms_ratio"
+        )
+        for name in SCENARIOS:
+            say(population(name, args, args.work, kind))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
     return 0

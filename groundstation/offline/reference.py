@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import sys
 import tomllib
+from collections import deque
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 
 import cv2
@@ -125,19 +125,45 @@ def report(msg, recv_unix_s: float, buoy: Buoy, station_minus_gnss_s: float | No
     return t, msg.lat / 1e7, msg.lon / 1e7, float(sigma), gnss_time
 
 
-def reports(records, buoy: Buoy, station_minus_gnss_s: float | None):
-    """The buoy's reports (:class:`localizer.reference.Reports`, in time order, a repeated time once) among
-    ``records`` ``(receive time UNIX s, message)``, and the 1-sigma of their times (s): ``time_sigma_s``, or
-    ``latency_s`` when some have no GNSS time."""
-    rows = [r for t, m in records if (r := report(m, t, buoy, station_minus_gnss_s)) is not None]
-    rows.sort(key=lambda r: r[0])
-    t = np.array([r[0] for r in rows])
-    keep = np.concatenate([[True], np.diff(t) > 0]) if len(t) else np.zeros(0, bool)
-    cols = [np.array([r[k] for r in rows], dtype=float)[keep] for k in range(4)]
-    all_gnss = all(r[4] for r in rows)
-    return reference.Reports(*cols), buoy.time_sigma_s if all_gnss else max(
-        buoy.time_sigma_s, buoy.latency_s
-    )
+class BuoyReports:
+    """A buoy's GNSS reports as they come, live or from a log: :meth:`add` each MAVLink message heard (those of other
+    systems, or without a fix, are not used; a report not later than the last is dropped); :meth:`at` its position
+    at given times (:func:`localizer.reference.reported_at`: a :class:`~localizer.reference.Reference` of arrays for
+    :func:`expected` and :func:`localizer.reference.sightings`). ``keep_s``: reports older than this before the
+    newest are let go (live); None keeps all. Not thread-safe."""
+
+    def __init__(self, buoy: Buoy, keep_s: float | None = None):
+        self.buoy, self.keep_s = buoy, keep_s
+        self._rows: deque[tuple[float, float, float, float]] = deque()
+        self.all_gnss_time = True  # every report kept so far had its fix's GNSS time
+
+    def add(self, msg, recv_unix_s: float, station_minus_gnss_s: float | None) -> bool:
+        """Take one message received at ``recv_unix_s`` (station clock); True if it was the buoy's report."""
+        r = report(msg, recv_unix_s, self.buoy, station_minus_gnss_s)
+        if r is None or (self._rows and r[0] <= self._rows[-1][0]):
+            return False
+        self._rows.append(r[:4])
+        self.all_gnss_time &= r[4]
+        while self.keep_s is not None and self._rows[0][0] < r[0] - self.keep_s:
+            self._rows.popleft()
+        return True
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    @property
+    def time_sigma_s(self) -> float:
+        """The 1-sigma of the reports' times (s): ``time_sigma_s``, or ``latency_s`` once one had no GNSS time."""
+        b = self.buoy
+        return b.time_sigma_s if self.all_gnss_time else max(b.time_sigma_s, b.latency_s)
+
+    def reports(self) -> reference.Reports:
+        cols = np.array(self._rows, dtype=float).reshape(-1, 4).T
+        return reference.Reports(*cols)
+
+    def at(self, t_unix) -> reference.Reference:
+        """Where the reports put the buoy at times ``t_unix`` (station clock; NaN where they do not)."""
+        return reference.reported_at(self.reports(), t_unix, self.buoy.depth_m, self.time_sigma_s)
 
 
 def bullseye(radius_px: float) -> np.ndarray:
@@ -217,8 +243,10 @@ def buoy_track(session: Session, buoy: Buoy):
         session.warnings.append(f"{where}: that is the UAV's own system; the buoy is not used")
         return None
     records = read_tlog(session.path / "uav.tlog")
-    found, time_sigma_s = reports(records, buoy, session.telemetry.station_minus_gnss_s)
-    if len(found.t_unix) < 2:
+    track = BuoyReports(buoy)
+    for t, msg in records:
+        track.add(msg, t, session.telemetry.station_minus_gnss_s)
+    if len(track) < 2:
         heard = sorted({m.get_srcSystem() for _, m in records if m.get_type() == "GPS_RAW_INT"})
         session.warnings.append(
             f"{where}: no GPS_RAW_INT with a fix from that system in uav.tlog (GPS_RAW_INT from systems "
@@ -226,12 +254,18 @@ def buoy_track(session: Session, buoy: Buoy):
         )
         return None
     what = (
-        f"the buoy (system {buoy.system_id}: {len(found.t_unix)} GNSS reports, median 1-sigma "
-        f"{np.median(found.sigma_m):.3f} m per axis, their times ± {1000 * time_sigma_s:.0f} ms)"
+        f"the buoy (system {buoy.system_id}: {len(track)} GNSS reports, median 1-sigma "
+        f"{np.median(track.reports().sigma_m):.3f} m per axis, their times ± {1000 * track.time_sigma_s:.0f} ms)"
     )
-    return partial(
-        reference.reported_at, found, depth_m=buoy.depth_m, time_sigma_s=time_sigma_s
-    ), what
+    return track.at, what
+
+
+def sigma_seen(at: reference.Reference, seen) -> float:
+    """The reference's 1-sigma per axis the offset carries: the marker's, or a moving reference's RMS over the frames
+    it was seen in (``seen``, (N,) bool; 0 where none)."""
+    if np.ndim(at.sigma_m) == 0:
+        return float(at.sigma_m)
+    return float(np.sqrt(np.mean(np.square(at.sigma_m[seen])))) if np.any(seen) else 0.0
 
 
 def apply(session: Session, fixes: Fixes, mode: str, correction=None):
@@ -260,12 +294,7 @@ def apply(session: Session, fixes: Fixes, mode: str, correction=None):
         seen_pose, seen_cal = correction.apply(session, seen_pose)
         pose, cal = correction.apply(session, pose)
     off, seen, jac = reference.sightings(seen_cal, seen_pose, u, v, at)
-    ref_sigma_m = (
-        np.sqrt(np.mean(np.square(np.broadcast_to(at.sigma_m, t.shape)[seen])))
-        if seen.any()
-        else 0.0
-    )
-    offsets = reference.offsets(t[seen], off[seen], jac[seen], fixes.t_unix, ref_sigma_m)
+    offsets = reference.offsets(t[seen], off[seen], jac[seen], fixes.t_unix, sigma_seen(at, seen))
     better = reference.correct(cal, pose, fixes, offsets)
     print(
         f"{session.path.name}: {what} seen in {int(seen.sum())} of {len(t)} frames searched; "
