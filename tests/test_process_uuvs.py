@@ -11,11 +11,13 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from groundstation.cli import main
-from groundstation.offline import track
-from groundstation.session.read import Session, uuv_ids
+from groundstation.height_from_size import HeightFromSize
+from groundstation.offline import track, uuv_workers
+from groundstation.session.read import Session, load_session, uuv_ids
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
@@ -85,3 +87,44 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
     assert len(opened) == 1 + len(ids)
     first, second = ((tmp_path / "all" / uuv / FILES[0]).read_bytes() for uuv in ids)
     assert first != second
+
+
+def _tracked(path: Path, workers: bool) -> tuple[list, list, list]:
+    """Both UUVs of ``path`` tracked in one pass as ``skyfix process --uuv all`` tracks them (the motion measured,
+    traced back, the height from size in ``auto``): the results, each size's status, each telemetry's height
+    fixes (times, values)."""
+    sessions = [load_session(path, uuv) for uuv in uuv_ids(path)]
+    sizes = [HeightFromSize(s.calibration, s.telemetry, "auto") for s in sessions]
+    videos = track.track_sessions(
+        sessions, measure_motion=True, sizes=sizes, both_ways=True, workers=workers
+    )
+    fixes = [
+        [
+            (series.times.tolist(), series.values.tolist())
+            for series in s.telemetry.height_fixes.values()
+        ]
+        for s in sessions
+    ]
+    return videos, [size.status() for size in sizes], fixes
+
+
+def test_worker_processes_give_the_same_results(crossing, monkeypatch):
+    """Each UUV tracked in a process of its own, the frames through a shared ring of two (each slot written again
+    as soon as both workers are done with it): the same per-frame results, the same heights from size taken (and
+    handed to the telemetry) as stepping both in this process."""
+    monkeypatch.setattr(uuv_workers, "RING_SLOTS", 2)
+    alone_videos, alone_sizes, alone_fixes = _tracked(crossing, workers=False)
+    # counted in this process only: the workers' steps are counted in theirs
+    steps = _counted(monkeypatch, track.UuvTrack, "step")
+    videos, sizes, fixes = _tracked(crossing, workers=True)
+    assert steps == []
+    # uuv1's outline is rejected in this view (border, few edges): uuv2's heights are measured and applied
+    assert sizes == alone_sizes and sizes[1]["applied"] > 10, sizes
+    assert fixes == alone_fixes and fixes[1]
+    for video, alone in zip(videos, alone_videos, strict=True):
+        assert np.sum(video.status == "ok") > 0.6 * len(video.status)
+        assert video.rotations and len(video.rotations) == len(alone.rotations)
+        for name in ("u", "v", "sigma_px", "confidence"):
+            np.testing.assert_array_equal(getattr(video, name), getattr(alone, name))
+        for name in ("status", "causal_status", "bridged"):
+            assert getattr(video, name).tolist() == getattr(alone, name).tolist()

@@ -46,6 +46,7 @@ import numpy as np
 
 from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.video_motion import MotionThread, measured_every
+from groundstation.offline.uuv_workers import TrackWorkers, available
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session, SessionError
 from groundstation.video.frames import VideoError
@@ -58,6 +59,19 @@ from localizer.tracking.target import TargetState
 BACKWARD_S = 3.0
 #: ... once the forward pass has kept the re-acquired UUV this long (s) without a loss.
 CONFIRM_BACK_S = 1.0
+#: What stepping a :class:`UuvTrack` changes (:meth:`UuvTrack.state`).
+STEPPED = (
+    "status",
+    "u",
+    "v",
+    "conf",
+    "sigma",
+    "timings",
+    "bridged",
+    "causal_words",
+    "started",
+    "size_taken",
+)
 
 
 @dataclass
@@ -120,13 +134,18 @@ def track_sessions(
     measure_motion: bool = False,
     sizes: list[HeightFromSize | None] | None = None,
     both_ways: bool = False,
+    workers: bool | None = None,
 ) -> list[TrackedVideo]:
     """:func:`track_session` of several UUVs of one session (``sessions``: the session read as each UUV's,
     :func:`~groundstation.session.read.load_session` ``uuv``; ``sizes``: one each or None) in one pass over the
     video: each frame is decoded once, the UAV's pose of every frame computed once
     (:func:`~localizer.pose.uav_pose`, each UUV's depth added by :func:`~localizer.pose.with_depth`), the video's
     motion measured once (the same ``rotations`` in every result), and every UUV's :class:`UuvTrack` stepped on
-    each frame. One result per session, each the same as :func:`track_session` of that session alone."""
+    each frame. One result per session, each the same as :func:`track_session` of that session alone.
+
+    ``workers``: each UUV's track stepped in a process of its own, the frames shared
+    (:class:`~groundstation.offline.uuv_workers.TrackWorkers`; None: where the platform forks), else in this
+    process; the same results either way."""
     first = sessions[0]
     if first.video_path is None or first.frames is None:
         raise SessionError(f"{first.path}: no video.* with video_frames.csv to track")
@@ -138,13 +157,8 @@ def track_sessions(
     t = first.frames["t"]
     n = len(t)
     row_of = {int(f): i for i, f in enumerate(frame_idx)}
-    timings = {"decode_wait": 0.0, "motion": 0.0}
+    timings = {"decode_wait": 0.0, "motion": 0.0, "hand_on": 0.0}
     period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
-    meter = (
-        MotionThread(first.calibration.camera, every=measured_every(n, period_s))
-        if measure_motion
-        else None
-    )
     rotations = []
     read_warnings: list[str] = []
 
@@ -154,6 +168,14 @@ def track_sessions(
         track.pose = with_depth(track.session.calibration, uav, track.session.telemetry.depth)
     timings["pose"] = time.perf_counter() - t0
 
+    cam = first.calibration.camera
+    # forked before any thread of this pass starts (the motion meter's, the decoder's, the progress bar's)
+    pool = (
+        TrackWorkers(tracks, 3 * cam.width * cam.height)
+        if (available() if workers is None else workers)
+        else None
+    )
+    meter = MotionThread(cam, every=measured_every(n, period_s)) if measure_motion else None
     first_row = min(track.init_row for track in tracks)
     bar = progress_bar(n - first_row, f"{first.path.name}: tracking", progress)
     extra = 0
@@ -174,10 +196,19 @@ def track_sessions(
                     t0 = time.perf_counter()
                     meter.feed(float(t[row]), frame.image)
                     timings["motion"] += time.perf_counter() - t0
-                for track in tracks:
-                    track.step(row, frame)
+                if pool is not None:
+                    t0 = time.perf_counter()
+                    pool.step(row, frame)
+                    timings["hand_on"] += time.perf_counter() - t0
+                else:
+                    for track in tracks:
+                        track.step(row, frame)
                 if row >= first_row:
                     bar.update()
+            if pool is not None:
+                t0 = time.perf_counter()
+                pool.finish()
+                timings["hand_on"] += time.perf_counter() - t0
             if meter is not None:
                 t0 = time.perf_counter()
                 rotations = meter.finish()
@@ -192,6 +223,8 @@ def track_sessions(
         bar.close()
         if meter is not None:
             meter.close()
+        if pool is not None:
+            pool.close()
     extra_warnings = (
         [f"{first.video_path}: {extra} frames beyond video_frames.csv ignored"] if extra else []
     )
@@ -239,6 +272,8 @@ class UuvTrack:
         # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
         self.pending = None
         self.started = False
+        # (t_unix, measurement or why not) of each frame the height from size was measured in, in order
+        self.size_taken: list[tuple[float, object]] = []
 
     def step(self, row: int, frame) -> None:
         """Track the UUV in the decoded ``frame``, row ``row`` of ``video_frames.csv`` (nothing before its
@@ -277,8 +312,27 @@ class UuvTrack:
         size = self.size
         if size is not None and result.ok and size.due(float(self.t[row])):
             t0 = time.perf_counter()
-            size.take(size.measure(frame.bgr(), pose, row, result.u, result.v))
+            measured = size.measure(frame.bgr(), pose, row, result.u, result.v)
+            size.take(measured)
+            self.size_taken.append((float(self.t[row]), measured))
             timings["size"] += time.perf_counter() - t0
+
+    def state(self) -> dict:
+        """What stepping changed (the per-frame results, the timings, the heights from size taken), for
+        :meth:`adopt` in another process."""
+        return {key: getattr(self, key) for key in STEPPED}
+
+    def adopt(self, state: dict) -> None:
+        """The :meth:`state` of this UUV's track stepped in another process, as if stepped here: the heights from
+        size it took are taken by this track's ``size`` in the same order (see
+        :mod:`groundstation.offline.uuv_workers`)."""
+        for key in STEPPED:
+            if key != "size_taken":
+                setattr(self, key, state[key])
+        for t_unix, measured in state["size_taken"]:
+            self.size.due(t_unix)
+            self.size.take(measured)
+            self.size_taken.append((t_unix, measured))
 
     def _trace_when_confirmed(self, row: int, frame, result) -> None:
         """``both_ways``: keep the frames without the UUV; once a re-acquisition after them is confirmed, the ones
