@@ -774,7 +774,8 @@ class ReferenceStatus(Section):
         description="frames due while the search was still busy with the one before"
     )
     no_pose: int = Field(
-        description="frames due without a camera pose (no telemetry yet, latency unsettled)"
+        description="frames due without a camera pose (no telemetry yet); frames stamped before the video's "
+        "latency settled are not due"
     )
     every_s: float = Field(description="seconds of video between the frames searched")
     corrected: int = Field(description="fixes the offset was added to")

@@ -129,7 +129,11 @@ def test_the_operator_page_shows_the_reference(plain, tmp_path):
                 cells = page.query_selector('#health tr[data-input="reference"]')
                 return cells.inner_text() if cells else ""
 
-            wait_for(lambda: "added to every fix" in row(), 30, "the reference row applied")
+            wait_for(
+                lambda: "added to every fix" in row() and "m added" in page.inner_text("#fix-text"),
+                30,
+                "the reference row applied and a corrected fix",
+            )
             text, fix_text = row(), page.inner_text("#fix-text")
             browser.screenshot("reference")
             assert not browser.errors, browser.errors

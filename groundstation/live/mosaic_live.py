@@ -1,9 +1,8 @@
 """The mosaic of the bottom growing live (``live_mosaic = true``, ``floor_depth_m``): the live page's base map made
 from the run's own video as the drone flies.
 
-Every ``live_mosaic_every_s`` seconds of video a frame is taken, its camera pose computed from the telemetry there
-is then (:func:`localizer.pose.uav_pose`, on the event loop), and it is painted in a low-priority thread
-(:func:`groundstation.live.ui.feed.lower_priority`) with ``skyfix mosaic``'s own painting
+Every ``live_mosaic_every_s`` seconds of video a frame is taken with its camera pose and painted in a low-priority
+thread (:class:`groundstation.live.every_frame.EveryFrame`) with ``skyfix mosaic``'s own painting
 (:func:`groundstation.offline.mosaic.paint`, its :class:`~groundstation.offline.mosaic.Accumulator`) onto a grid
 in the UTM zone of the first painted frame, centred on it, :data:`HALF_M` m each way (cells made only where a frame
 paints). A frame that comes while the painter is still busy with the one before is skipped and counted: the
@@ -17,16 +16,14 @@ changes.
 
 from __future__ import annotations
 
-import logging
 import math
 import tempfile
 import threading
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from groundstation.live.ui.feed import lower_priority
+from groundstation.live.every_frame import EveryFrame
 from groundstation.map.tiles import (
     MAX_ZOOM,
     TILE_PX,
@@ -45,60 +42,31 @@ from groundstation.offline.mosaic import (
     paint,
     utm_epsg,
 )
-from localizer.pose import uav_pose
-
-log = logging.getLogger(__name__)
 
 HALF_M = 500.0  # the grid's extent each way from the first painted frame, m
 NO_UUV = (math.nan, math.nan, 0.0)  # the UUV is not left out
 
 
 class LiveMosaic:
-    """The growing mosaic: :meth:`on_frame` (a frame listener, on the event loop) takes a frame every ``every_s``
+    """The growing mosaic: ``on_frame`` (a frame listener, on the event loop) takes a frame every ``every_s``
     s of video to paint; :meth:`tile` (the page's tile thread) and :meth:`info` serve it as a base map."""
 
     def __init__(self, cal, tel, floor_depth_m: float, every_s: float):
         self.cal, self.tel = cal, tel
         self.floor_depth_m, self.every_s = floor_depth_m, every_s
         self.painted = 0  # frames painted
-        self.skipped = 0  # frames due while the painter was busy
-        # frames due without a camera pose (no telemetry yet, a camera under the surface)
-        self.no_pose = 0
         self.grid: Grid | None = None
         self.lat_deg = 0.0  # the first painted frame's
         self._spill = tempfile.TemporaryDirectory(prefix="skyfix-live-mosaic-")
         self.acc = Accumulator(Path(self._spill.name))
         # the accumulator: painted by the painter, read by the tile thread
         self._lock = threading.Lock()
-        self._busy = False
-        self._last_t = -math.inf
-        self._painter = ThreadPoolExecutor(
-            1, thread_name_prefix="mosaic", initializer=lower_priority
-        )
+        self._painter = EveryFrame(cal, tel, every_s, self._paint_frame, "live mosaic")
+        self.on_frame = self._painter.on_frame
 
     @property
     def version(self) -> int:
         return self.painted
-
-    def on_frame(self, frame) -> None:
-        if frame.t_unix - self._last_t < self.every_s:
-            return
-        if self._busy:
-            self.skipped += 1
-            return
-        self._last_t = frame.t_unix
-        pose = uav_pose(self.cal, self.tel, frame.t_unix)
-        if pose.status[0] != "ok" or not pose.height_m[0] > 0:
-            self.no_pose += 1
-            return
-        self._busy = True
-        done = self._painter.submit(self._paint_frame, frame.image, pose)
-        done.add_done_callback(self._painted)
-
-    def _painted(self, done) -> None:
-        self._busy = False
-        if done.exception() is not None:
-            log.error("live mosaic: a frame could not be painted: %s", done.exception())
 
     def _paint_frame(self, image: np.ndarray, pose) -> None:
         cam = self.cal.camera
@@ -218,13 +186,13 @@ class LiveMosaic:
     def status(self) -> dict:
         return {
             "painted": self.painted,
-            "skipped": self.skipped,
-            "no_pose": self.no_pose,
+            "skipped": self._painter.skipped,
+            "no_pose": self._painter.no_pose,
             "every_s": self.every_s,
             "floor_depth_m": self.floor_depth_m,
             "gsd_m": None if self.grid is None else self.grid.gsd_m,
         }
 
     def close(self) -> None:
-        self._painter.shutdown(wait=True, cancel_futures=True)
+        self._painter.close()
         self._spill.cleanup()

@@ -2,12 +2,11 @@
 shows added to every fix, as ``skyfix process --reference auto`` does offline (:mod:`groundstation.offline.reference`,
 :mod:`localizer.reference`).
 
-Every ``reference_every_s`` seconds of video a frame is taken, its camera pose computed from the telemetry there is
-then (:func:`localizer.pose.uav_pose`, on the event loop), and the marker is looked for around where that pose puts
-it (:func:`groundstation.offline.reference.expected`, :func:`~groundstation.offline.reference.find`) in a
-low-priority thread (:func:`groundstation.live.ui.feed.lower_priority`); a frame that comes while the search is
-still busy with the one before is skipped and counted, as the live mosaic's painter does
-(:mod:`groundstation.live.mosaic_live`). A sighting is the offset known − located of the marker through the frame's
+Every ``reference_every_s`` seconds of video an aligned frame is taken with its camera pose, and the marker is looked
+for around where that pose puts it (:func:`groundstation.offline.reference.expected`,
+:func:`~groundstation.offline.reference.find`) in a low-priority thread; a frame that comes while the search is
+still busy with the one before is skipped and counted (:class:`groundstation.live.every_frame.EveryFrame`, as the
+live mosaic's painter). A sighting is the offset known − located of the marker through the frame's
 reported pose (:func:`localizer.reference.sightings`).
 
 Each fix (:meth:`LiveReference.correct`, called by the pipeline with the fix's pose) gets the offset of the sightings
@@ -25,16 +24,15 @@ import logging
 import math
 import threading
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
-from groundstation.live.ui.feed import lower_priority
+from groundstation.live.every_frame import EveryFrame
 from groundstation.offline.reference import expected, find
 from localizer import reference
 from localizer.fix import Fix, Fixes
-from localizer.pose import CameraPose, uav_pose
+from localizer.pose import CameraPose
 
 log = logging.getLogger("skyfix.reference")
 
@@ -81,39 +79,17 @@ class LiveReference:
         self.path, self.ref, self.radius_m, self.every_s = path, ref, radius_m, every_s
         self.searched = 0  # frames searched
         self.seen = 0  # frames the marker was found in
-        self.skipped = 0  # frames due while the search was busy
-        self.no_pose = 0  # frames due without a camera pose
         self.corrected = 0  # fixes the offset was added to
         # (t_unix, offset (2,), jacobian (2, 4)) of each sighting: appended by the search, read by correct()
         self._sightings: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
         self._lock = threading.Lock()
-        self._busy = False
-        self._last_t = -math.inf
         self._applying = False  # the last fix was corrected (its change is logged)
         self._estimated = False  # an offset was found once: without one now, it lapsed
-        self._search = ThreadPoolExecutor(
-            1, thread_name_prefix="reference", initializer=lower_priority
-        )
+        self._search = EveryFrame(cal, tel, every_s, self.look, "reference")
 
     def on_frame(self, frame) -> None:
-        if frame.t_unix - self._last_t < self.every_s:
-            return
-        if self._busy:
-            self.skipped += 1
-            return
-        self._last_t = frame.t_unix
-        pose = uav_pose(self.cal, self.tel, frame.t_unix)
-        if not frame.aligned or pose.status[0] != "ok" or not pose.height_m[0] > 0:
-            self.no_pose += 1
-            return
-        self._busy = True
-        done = self._search.submit(self.look, frame.image, pose)
-        done.add_done_callback(self._looked)
-
-    def _looked(self, done) -> None:
-        self._busy = False
-        if done.exception() is not None:
-            log.error("reference: a frame could not be searched: %s", done.exception())
+        if frame.aligned:  # a frame stamped before the video's latency settled is not searched
+            self._search.on_frame(frame)
 
     def look(self, image: np.ndarray, pose: CameraPose) -> None:
         """Search one frame (the search's thread) and keep the sighting."""
@@ -212,11 +188,11 @@ class LiveReference:
             "window_s": reference.WINDOW_S,
             "searched": self.searched,
             "seen": self.seen,
-            "skipped": self.skipped,
-            "no_pose": self.no_pose,
+            "skipped": self._search.skipped,
+            "no_pose": self._search.no_pose,
             "every_s": self.every_s,
             "corrected": self.corrected,
         }
 
     def close(self) -> None:
-        self._search.shutdown(wait=True, cancel_futures=True)
+        self._search.close()
