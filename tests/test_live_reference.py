@@ -18,6 +18,7 @@ from ui_browser import available, chromium
 
 from groundstation.contracts import GROUNDSTATION
 from groundstation.live import config
+from groundstation.live.console import summary
 from groundstation.live.reference_live import LiveReference
 from groundstation.offline.reference import read_file
 from groundstation.session.read import load_session
@@ -102,6 +103,10 @@ def test_the_live_fixes_take_the_markers_offset(plain, tmp_path):
     assert last["file"].endswith("reference.toml") and last["seen"] >= 3 and last["sightings"] >= 3
     assert abs(last["offset_n_m"] - off[-1, 0]) < 3 * last["sigma_n_m"] + 0.05
     assert status[0]["reference"]["state"] == "searching"
+    said = summary(status[-1])  # skyfix status's lines
+    assert re.search(r"reference applied: offset north [-+]\d\.\d{3} ± 0\.\d{3} m, east", said), (
+        said
+    )
 
 
 @pytest.mark.skipif(available() is not None, reason=str(available()))

@@ -52,7 +52,7 @@ def _age(now: float, t) -> str:
 
 def summary(status: dict) -> str:
     """A few lines an operator reads at a glance: the target, the latest fix, the inputs, GPS_INPUT, the height from
-    the UUV's size, the web page."""
+    the UUV's size, the reference's offset, the web page."""
     now = status.get("t", time.time())
     target = status.get("target") or {}
     line = [time.strftime("%H:%M:%S", time.localtime(now)) + f"  target {target.get('state')}"]
@@ -106,6 +106,8 @@ def summary(status: dict) -> str:
             f"  height from the UUV's size: configured - measured {size['bias_m']:+.2f} ± {size['sigma_m']:.2f} m"
             f" over {size['frames']} frames ({'sure' if size['sure'] else 'not sure'})"
         )
+    if status.get("reference"):
+        lines.append("  " + _reference(status["reference"]))
     ui = status.get("ui")
     if ui and ui.get("url"):
         lines.append(
@@ -113,6 +115,18 @@ def summary(status: dict) -> str:
             f"{ui.get('viewers')} open"
         )
     return "\n".join(lines)
+
+
+def _reference(ref: dict) -> str:
+    """The status's ``reference`` section in a line: whether its offset is added to the fixes, how sure it is."""
+    last = "never seen" if ref["age_s"] is None else f"last seen {ref['age_s']:.1f} s ago"
+    if ref["state"] != "applied":
+        return f"reference {ref['state']}: {ref['seen']} of {ref['searched']} frames found, {last}"
+    return (
+        f"reference applied: offset north {ref['offset_n_m']:+.3f} ± {ref['sigma_n_m']:.3f} m, "
+        f"east {ref['offset_e_m']:+.3f} ± {ref['sigma_e_m']:.3f} m, {ref['sightings']} sightings in "
+        f"{ref['window_s']:g} s, {last}"
+    )
 
 
 def _pair(text: str, n: int, what: str) -> list[float]:
