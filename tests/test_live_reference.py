@@ -19,7 +19,7 @@ from ui_browser import available, chromium
 from groundstation.contracts import GROUNDSTATION
 from groundstation.live import config
 from groundstation.live.console import summary
-from groundstation.live.reference_live import LiveReference
+from groundstation.live.reference_live import LiveReference, drift_line
 from groundstation.offline.reference import read_file
 from groundstation.session.read import load_session
 from localizer.contract import ConfigError
@@ -107,6 +107,20 @@ def test_the_live_fixes_take_the_markers_offset(plain, tmp_path):
     assert re.search(r"reference applied: offset north [-+]\d\.\d{3} ± 0\.\d{3} m, east", said), (
         said
     )
+
+
+def test_the_line_follows_a_walk_the_windows_mean_trails():
+    """Sightings at 5 Hz of an offset walking 5 cm/s plus 3 cm white noise, over the 10 s before t: the line's
+    offset at t within 3 sigma of the truth there, where the window's mean is more than 0.2 m behind."""
+    rng = np.random.default_rng(5)
+    t = np.arange(90.0, 100.0, 0.2)
+    true = np.column_stack([0.05 * t, -0.02 * t])
+    obs = true + rng.normal(0.0, 0.03, true.shape)
+    at, sigma = drift_line(t, obs, 100.0)
+    assert np.all(np.abs(at - [5.0, -2.0]) < 3 * sigma), (at, sigma)
+    assert np.all(sigma < 0.03)
+    assert abs(obs[:, 0].mean() - 5.0) > 0.2
+    assert drift_line(t[-10:], obs[-10:], 100.0) is None  # 2 s of sightings: no line
 
 
 @pytest.mark.skipif(available() is not None, reason=str(available()))

@@ -10,9 +10,11 @@ live mosaic's painter). A sighting is the offset known − located of the marker
 reported pose (:func:`localizer.reference.sightings`).
 
 Each fix (:meth:`LiveReference.correct`, called by the pipeline with the fix's pose) gets the offset of the sightings
-of the :data:`~localizer.reference.WINDOW_S` before its frame (causal: the offline window centred on the frame,
-shifted back by half of it; at least :data:`~localizer.reference.MIN_BLOCKS` seconds with a sighting), and its claim
-is :func:`localizer.reference.correct`'s: the offset's sigma in h_acc, the UAV position's term gone. The fix says what
+of the :data:`~localizer.reference.WINDOW_S` before its frame (causal): a straight line through their
+:data:`~localizer.reference.BLOCK_S` means taken at the frame's time (:func:`drift_line`; the offline window's
+mean, whose sigma is the floor of the line's, would trail a plain GNSS's walk by half the window), with sightings in
+at least :data:`~localizer.reference.MIN_BLOCKS` + 1 of its seconds. Its claim is :func:`localizer.reference.correct`'s:
+the offset's sigma in h_acc, the UAV position's term gone. The fix says what
 was added (``ref_offset_n_m`` …, ``ref_sightings``, ``ref_age_s``); with too few sightings in the window the
 correction lapses and the fixes are the telemetry's again. Station-clock seconds, north/east metres.
 """
