@@ -183,6 +183,10 @@ class TemplateParams:
     #: the follow below the usual bars (wave_keep_contrast): or, when lower, this share of that way
     wave_keep_between: float = 0.5
     wave_contrast_rate: float = 0.05  # ... that level: a running mean at this rate of the clear follows (wave_keep_contrast)
+    #: in waves a candidate found while lost further than this many of the prediction's sigmas from it passes
+    #: (:meth:`~TemplateMatcher._candidate_passes`) with its score less the distance penalty (``distance_weight``)
+    #: of the sigmas beyond: a wide window's best patch of seafloor near its edge matches as well as the UUV does
+    wave_far_sigmas: float = 2.0
 
 
 #: Taken from the rank of a place too flat to be the UUV (see ``spread`` of :meth:`TemplateMatcher._search`): it
@@ -1013,7 +1017,11 @@ class TemplateMatcher:
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
-        candidate = self._candidate_passes(frame_bgr, score, u, v, prediction, (cu, cv_, radius))
+        far = self._far_penalty(u - cu, v - cv_, sigma)
+        candidate = self._candidate_passes(
+            frame_bgr, score - far, u, v, prediction, (cu, cv_, radius)
+        )
+        candidate = self._match(candidate.found, score, u, v)
         if (
             abs((self._angle - saved + 90.0) % 180.0 - 90.0) > turn
         ):  # a heading it cannot have turned to (either
@@ -1029,6 +1037,16 @@ class TemplateMatcher:
         if not candidate.found:
             self._angle = saved
         return candidate
+
+    def _far_penalty(self, du: float, dv: float, sigma_px: float) -> float:
+        """In waves, what a candidate (du, dv) pixels from the prediction of 1-sigma ``sigma_px`` (NaN: none) must
+        score beyond its bar: the distance penalty (``distance_weight``) of its sigmas beyond ``wave_far_sigmas``.
+        The search ranks by that penalty, but in a wide window the UUV's hidden place leaves only water and
+        seafloor, whose best patch may lie near the window's edge; 0 on a still surface."""
+        if not (self._wavy and sigma_px > 0):
+            return 0.0
+        beyond = max(0.0, math.hypot(du, dv) / sigma_px - self.p.wave_far_sigmas)
+        return 0.5 * self.p.distance_weight * beyond * beyond
 
     def _still_there(
         self, frame_bgr, prediction: Prediction, angle: float, u: float, v: float
