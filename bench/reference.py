@@ -151,11 +151,16 @@ def population(name: str, args, work: Path, kind: str = "marker") -> str:
     return f"{name:24s} {args.seeds:3d} x {args.population_s:g} s   " + "   ".join(cells)
 
 
-def rendered(args, work: Path, kind: str = "marker") -> str:
-    """sensors_plain_nadir rendered with the reference: skyfix process's --reference auto finds it in the video."""
-    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_plain_nadir.toml")
-    sc = with_overrides(sc, duration_s=args.rendered_s, fps=30.0, **{kind: {"enabled": True}})
-    out = work / kind / "rendered_plain_nadir"
+def rendered(
+    args, work: Path, kind: str = "marker", scene: str = "sensors_plain_nadir", seconds=None
+) -> str:
+    """``scene`` rendered with the reference for ``seconds`` (``--rendered-s``) at 30 fps: skyfix process's
+    --reference auto finds it in the video."""
+    seconds = args.rendered_s if seconds is None else seconds
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / f"{scene}.toml")
+    sc = with_overrides(sc, duration_s=seconds, fps=30.0, **{kind: {"enabled": True}})
+    label = "rendered_plain_nadir" if scene == "sensors_plain_nadir" else f"rendered_{scene}"
+    out = work / kind / label
     generate(sc, out)
     s = load_session(out)
     fixes = process.process_session(s, use_track=True)
@@ -167,7 +172,7 @@ def rendered(args, work: Path, kind: str = "marker") -> str:
     i = np.searchsorted(truth["t"], t[seen])
     miss = np.hypot(u[seen] - truth["u"][i], v[seen] - truth["v"][i])
     note = f"found {seen.sum()}/{len(u)}, pixel error median {np.median(miss):.2f} max {miss.max():.2f} px"
-    return line(f"rendered_plain_nadir {args.rendered_s:g}s", s, fixes, better, note)
+    return line(f"{label} {seconds:g}s", s, fixes, better, note)
 
 
 TABLES = {
@@ -186,6 +191,13 @@ def main() -> int:
         "--seeds", type=int, default=20, help="drones per scenario in the population rows"
     )
     p.add_argument("--population-s", type=float, default=60.0)
+    p.add_argument(
+        "--waves-s",
+        type=float,
+        default=4.0,
+        help="the buoy also rendered on WAVES_SCENE (a floating deck is seen through the air): this long; 0: not",
+    )
+    p.add_argument("--waves-scene", default="weather_5mps_plain")
     p.add_argument(
         "--references",
         default="marker,buoy",
@@ -209,6 +221,8 @@ def main() -> int:
         for name in SCENARIOS:
             say(geometry_only(name, args, args.work, kind))
         say(rendered(args, args.work, kind))
+        if kind == "buoy" and args.waves_s > 0:
+            say(rendered(args, args.work, kind, args.waves_scene, args.waves_s))
         say(
             f"population ({kind}): {args.seeds} drones per scenario, biases drawn as bench/claim_calibration.py's "
             "platform, its sigmas in [uncertainty]\n"

@@ -13,7 +13,9 @@ Look-alikes (``[second_uuv]``, ``[rock]``) are boxes too, ray cast in windows of
 each ray takes the nearest box it meets. With ``[render] shadow`` > 0 the boxes cast
 shadows: a point on the floor or on a box is in shadow where the ray from it towards the
 sun (the sunlight refracted at the flat surface, straight in the water) meets another box;
-there the sun's share of the light (and the caustics, which are sunlight) is missing.
+there the sun's share of the light (and the caustics, which are sunlight) is missing. A buoy (``[buoy]``) is a box
+too; with its deck at the surface it floats: its top is seen straight through the air, sunlit, before anything in
+the water (:meth:`Renderer._deck`).
 
 With wind waves (``[waves]``, :mod:`sim_fixtures.waves`) every ray meets the wavy surface
 (:func:`water_path_ned`: its height included) and is refracted through the local facet's
@@ -199,6 +201,11 @@ def rock_albedo(point, face_axis):
 
 
 ALBEDO = {"vehicle": uuv_albedo, "rock": rock_albedo}
+
+
+def floats(box: Box) -> bool:
+    """A buoy whose deck is at the surface (depth 0): seen straight through the air, not through the water."""
+    return box.look == "buoy" and box.ned[2] <= 0.0
 
 
 def pixels_of(windows, height: int, width: int):
@@ -608,19 +615,28 @@ class Renderer:
         surface, dir_water = p.surface_ne, p.dir_water
         owner, nearest, hits = np.full(len(ray), -1), np.full(len(ray), np.inf), []
         for k, b in enumerate(boxes):
-            origin, direction = to_body(surface, dir_water, b, p.down_m)
-            origin[~p.wet] = np.nan
-            hit, t_in, face, point = hit_box(origin, direction, b.size_m)
-            hit &= np.isfinite(origin[:, 0])
+            if floats(b):
+                hit, t_in, face, point = self._deck(ray, view, b)
+                order = np.where(hit, -1.0, np.inf)  # above the water: before anything in it
+            else:
+                origin, direction = to_body(surface, dir_water, b, p.down_m)
+                origin[~p.wet] = np.nan
+                hit, t_in, face, point = hit_box(origin, direction, b.size_m)
+                hit &= np.isfinite(origin[:, 0])
+                order = t_in
             hits.append((hit, t_in, face, point))
-            closer = hit & (t_in < nearest)
-            owner[closer], nearest[closer] = k, t_in[closer]
+            closer = hit & (order < nearest)
+            owner[closer], nearest[closer] = k, order[closer]
         if not (owner >= 0).any():
             return unseen
         colour = np.zeros((len(ray), 3))
         for k, (b, (_, t_in, face, point)) in enumerate(zip(boxes, hits)):
             own = owner == k
             if not own.any():
+                continue
+            if floats(b):  # sunlit in the air: no water, no surface between
+                albedo = buoy_albedo(point[own], face[own], self.sc.buoy.radius_m)
+                colour[own] = albedo * self.sc.render.exposure
                 continue
             gain, veil = self._through_water(b.ned[2] + point[own, 2], t_in[own])
             at = np.column_stack(
@@ -653,6 +669,19 @@ class Renderer:
             self._seen((owner == k).reshape(len(vv), n), hits[k][0].sum(), colour, before, vv, uu)
             for k in range(len(boxes))
         )
+
+    def _deck(self, ray_cv, view: View, box: Box):
+        """:func:`hit_box` of camera rays (N, 3) straight through the air with a floating box's top face (its deck at
+        the surface, :func:`floats`): the rays that meet its top only (the sides are under the water)."""
+        d = ray_cv @ view.R_ned_from_cv.T.astype(ray_cv.dtype)
+        origin, direction = to_body(
+            np.broadcast_to(view.camera_ned[:2], (len(d), 2)),
+            d,
+            box,
+            np.full(len(d), view.camera_ned[2]),
+        )
+        hit, t_in, face, point = hit_box(origin, direction, box.size_m)
+        return hit & (face == 2), t_in, face, point
 
     def _seen(self, own, rays_hit: int, colour, before, vv, uu):
         """A box's bounding box (x, y, w, h) where it can be seen, else None (see :meth:`_boxes`).

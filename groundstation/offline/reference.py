@@ -140,11 +140,18 @@ class BuoyReports:
     def add(self, msg, recv_unix_s: float, station_minus_gnss_s: float | None) -> bool:
         """Take one message received at ``recv_unix_s`` (station clock); True if it was the buoy's report."""
         r = report(msg, recv_unix_s, self.buoy, station_minus_gnss_s)
-        if r is None or (self._rows and r[0] <= self._rows[-1][0]):
+        return r is not None and self.add_report(*r)
+
+    def add_report(
+        self, t_unix: float, lat_deg: float, lon_deg: float, sigma_m: float, gnss_time: bool
+    ) -> bool:
+        """Take one report that came another way (e.g. Zenoh): its time on the station clock (s), WGS84 degrees, its
+        1-sigma per axis (m), whether its time is its fix's GNSS time (else a receive time); True if kept."""
+        if self._rows and t_unix <= self._rows[-1][0]:
             return False
-        self._rows.append(r[:4])
-        self.all_gnss_time &= r[4]
-        while self.keep_s is not None and self._rows[0][0] < r[0] - self.keep_s:
+        self._rows.append((t_unix, lat_deg, lon_deg, sigma_m))
+        self.all_gnss_time &= gnss_time
+        while self.keep_s is not None and self._rows[0][0] < t_unix - self.keep_s:
             self._rows.popleft()
         return True
 
