@@ -1,7 +1,8 @@
 """Benchmark of the live service: stream slot → GPS_INPUT at the UUV, at 720p30 and 1080p30.
 
     .venv/bin/python bench/live_latency.py [--sizes 720p,1080p] [--transports mpegts,rtp] [--duration-s 30]
-        [--out bench/results/live_latency.txt] [--variant NAME=ARGS ...] [--busy N]
+        [--out bench/results/live_latency.txt] [--variant NAME=ARGS ...] [--busy N] [--rounds N]
+        [--tree LABEL=DIR ...]
 
 For each size a session is generated once into ``/tmp/skyfix-bench/`` by the
 simulator (the UAV hovering 10 m up, yawing and drifting; several minutes at
@@ -34,6 +35,11 @@ Measured, per size:
 - how many frames the pipeline held for attitude telemetry (the newest sample more
   than 30 ms older than the frame), frames dropped, CPU and RSS.
 
+On a shared machine one run's p99 measures its neighbours' bursts as much as the service: ``--rounds N`` repeats
+every run, interleaved, and prints each one's median [min-max] over the rounds with the load average at each
+start; ``--tree LABEL=DIR`` runs the service from another source tree too (e.g. ``git archive <commit> | tar -x -C
+DIR``: the service before a change), interleaved with this tree's in every round.
+
 Baselines in the same run: decode-only (PyAV demux + decode + BGR conversion per
 frame, offline, the live decoder's settings) and the per-frame work
 (:meth:`groundstation.live.pipeline.Pipeline.process`: tracker + pose + locate) timed
@@ -50,6 +56,7 @@ import os
 import shlex
 import signal
 import socket
+import statistics
 import subprocess
 import sys
 import time
@@ -194,6 +201,22 @@ def proc_sample(pid: int) -> tuple[float, float]:
     return cpu_s, rss_kb / 1024.0
 
 
+def run_queue_wait_s(pid: int) -> float:
+    """Seconds the threads of a process (those alive now) have spent runnable but waiting for a core, summed
+    (``/proc/PID/task/TID/schedstat``'s second field); NaN where the kernel does not keep it."""
+    total = 0.0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            text = (task / "schedstat").read_text()
+        except OSError:  # the thread ended meanwhile
+            continue
+        fields = text.split()
+        if len(fields) < 2:
+            return float("nan")
+        total += int(fields[1]) / 1e9
+    return total
+
+
 def pct(values, *qs) -> dict:
     a = np.asarray(values, dtype=float)
     if len(a) == 0:  # no fix at all (a starved run)
@@ -261,10 +284,12 @@ def live(
     run_args: list[str],
     busy: int = 0,
     ui: bool = False,
+    tree: Path = ROOT,
 ) -> dict:
     """One ``skyfix run`` fed by ``skyfix replay`` over ``transport``, beside ``busy`` processes spinning
     ``while True: pass`` (a laptop's other programs: on 2 cores, 2 of them take both cores' worth of CPU);
-    with ``ui`` the service serves its page (on a free port; nobody opens it), else ``--no-ui``."""
+    with ``ui`` the service serves its page (on a free port; nobody opens it), else ``--no-ui``; the service
+    from the source ``tree`` (the replay always from this one)."""
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     if transport == "rtp":  # RTP on an even port, RTCP on the next
         video = next(p for p in range(video & ~1, 65534, 2) if port_pair_free(p))
@@ -316,16 +341,24 @@ def live(
         "--lead-s",
         "2",
     ]
-    samples = []  # (time, cpu_s, rss_mb)
+    samples = []  # (time, cpu_s, rss_mb, run-queue wait s)
     with open(work / "run.log", "w") as run_log, open(work / "replay.log", "w") as replay_log:
-        service = subprocess.Popen(run, stdout=run_log, stderr=subprocess.STDOUT, cwd=ROOT)
+        service = subprocess.Popen(
+            run,
+            stdout=run_log,
+            stderr=subprocess.STDOUT,
+            cwd=tree,
+            env=dict(os.environ, PYTHONPATH=str(tree)),
+        )
         rep = None
         spinners = [subprocess.Popen([py, "-c", BUSY]) for _ in range(busy)]
         try:
             time.sleep(3.0)
             rep = subprocess.Popen(replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT)
             while rep.poll() is None:
-                samples.append((time.time(), *proc_sample(service.pid)))
+                samples.append(
+                    (time.time(), *proc_sample(service.pid), run_queue_wait_s(service.pid))
+                )
                 time.sleep(0.5)
             service.send_signal(signal.SIGINT)
             service.wait(30)
@@ -390,6 +423,7 @@ def live(
         "live_mosaic": final.get("live_mosaic"),
         "cpu_pct": round(100.0 * (s[-1, 1] - s[half, 1]) / (s[-1, 0] - s[half, 0]), 1),
         "rss_mb": {"mid": round(float(s[half, 2]), 1), "end": round(float(s[-1, 2]), 1)},
+        "run_queue_wait_pct": round(100.0 * (s[-1, 3] - s[half, 3]) / (s[-1, 0] - s[half, 0]), 1),
     }
 
 
@@ -439,7 +473,33 @@ def report(name: str, session: Path, res: dict) -> list[str]:
             f"  video: arrival after slot {res['video']['arrival_after_slot_ms']} ms, decode "
             f"{res['video']['decode_ms']} ms; CPU {res['cpu_pct']} % of a core; RSS {res['rss_mb']} MB"
         ),
+        (
+            f"  starved: the service's threads runnable but waiting for a core {res['run_queue_wait_pct']} % of the "
+            "time (summed over its threads, /proc schedstat; second half of the run)"
+        ),
     ]
+
+
+def summary(rounds: dict) -> list[str]:
+    """Median [min-max] over the rounds of each run: slot -> GPS_INPUT p50 and p99, the share of frames with an ok
+    fix, the service's CPU and its threads' wait for a core, and the load average at its start."""
+
+    def spread(values) -> str:
+        v = [x for x in values if x is not None]
+        if not v:
+            return "None"
+        return f"{statistics.median(v):.1f} [{min(v):.1f}-{max(v):.1f}]"
+
+    lines = [f"median [min-max] over {len(next(iter(rounds.values())))} rounds:"]
+    for name, runs in rounds.items():
+        ok = [100.0 * r["pipeline"]["statuses"].get("ok", 0) / r["frames_sent"] for r in runs]
+        lines.append(
+            f"  {name}: slot->GPS_INPUT p99 {spread(r['slot_to_gps_input_ms']['p99'] for r in runs)} ms, "
+            f"p50 {spread(r['slot_to_gps_input_ms']['p50'] for r in runs)} ms; ok {spread(ok)} %; "
+            f"CPU {spread(r['cpu_pct'] for r in runs)} % of a core, waiting for one "
+            f"{spread(r['run_queue_wait_pct'] for r in runs)} %; load {spread(r['load_average'] for r in runs)}"
+        )
+    return lines
 
 
 def main() -> int:
@@ -470,7 +530,21 @@ def main() -> int:
         metavar="N",
         help="each run again beside N processes spinning `while True: pass` (a laptop's other programs)",
     )
+    ap.add_argument(
+        "--rounds", type=int, default=1, help="repeat every run this many times (interleaved)"
+    )
+    ap.add_argument(
+        "--tree",
+        action="append",
+        default=[],
+        metavar="LABEL=DIR",
+        help="each run again with the service from this source tree (e.g. `git archive <commit> | tar -x -C "
+        "DIR`: the service before, interleaved with this tree's; repeatable)",
+    )
     args = ap.parse_args()
+    trees = {"now": ROOT} | {
+        label: Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
+    }
     variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [
         ("", [])
     ]
@@ -481,29 +555,43 @@ def main() -> int:
         )
     ]
     results = {}
+    rounds = {}  # name (without its round) -> the results of its rounds
     for size in args.sizes.split(","):
         session = ensure_session(size, args.duration_s)
         baselines = {
             "decode_only_ms": decode_baseline(session),
             "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames),
         }
-        for transport in args.transports.split(","):
-            for (variant, run_args), busy in itertools.product(variants, sorted({0, args.busy})):
-                tag = "_".join(x for x in (variant, f"busy{busy}" if busy else "") if x)
-                name = " ".join(x for x in (size, transport, variant) if x) + (
-                    f" beside {busy} busy processes" if busy else ""
-                )
-                work = BENCH_DIR / f"run_{size}_{transport}{'_' + tag if tag else ''}"
-                work.mkdir(parents=True, exist_ok=True)
-                for f in work.iterdir():
-                    f.unlink()
-                load = os.getloadavg()[0]
-                results[name] = res = {
-                    **baselines,
-                    **live(session, work, transport, run_args, busy),
-                    "load_average": round(load, 1),
-                }
-                lines += report(name, session, res)
+        for rnd, transport, ((variant, run_args), busy), label in itertools.product(
+            range(1, args.rounds + 1),
+            args.transports.split(","),
+            itertools.product(variants, sorted({0, args.busy})),
+            trees,
+        ):
+            tag = "_".join(
+                x
+                for x in (variant, f"busy{busy}" if busy else "", label if len(trees) > 1 else "")
+                if x
+            )
+            name = " ".join(
+                x for x in (size, transport, variant, label if len(trees) > 1 else "") if x
+            ) + (f" beside {busy} busy processes" if busy else "")
+            work = BENCH_DIR / f"run_{size}_{transport}{'_' + tag if tag else ''}"
+            work.mkdir(parents=True, exist_ok=True)
+            for f in work.iterdir():
+                f.unlink()
+            load = os.getloadavg()[0]
+            res = {
+                **baselines,
+                **live(session, work, transport, run_args, busy, tree=trees[label]),
+                "load_average": round(load, 1),
+            }
+            rounds.setdefault(name, []).append(res)
+            name_round = f"{name}, round {rnd}" if args.rounds > 1 else name
+            results[name_round] = res
+            lines += report(name_round, session, res)
+    if args.rounds > 1:
+        lines += summary(rounds)
     emit(lines, args.out, results)
     return 0
 
