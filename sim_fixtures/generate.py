@@ -30,6 +30,10 @@ layout :mod:`groundstation.session.read` reads): ``truth.csv`` and ``track.csv``
 reference point (its track empty where it cannot be seen, less than half of it showing past
 the first UUV included), ``depth.jsonl`` by the same sensor and link model (its own random
 streams), and ``uuv.toml`` with its ``[tracker]`` box in the first frame it can be seen.
+
+A buoy (``[buoy]``, :mod:`sim_fixtures.buoy`) is rendered with the vehicles; its GPS_RAW_INT, from its own system
+id, are merged into ``uav.tlog`` by their receive times, and the session gets its ``reference.toml``,
+``reference_track.csv`` and ``buoy_truth.csv``.
 """
 
 from __future__ import annotations
