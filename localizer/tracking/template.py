@@ -402,6 +402,8 @@ class TemplateMatcher:
         self._level = 1.0  # the recent level of the matches' scores (the first appearance's own, at first) ...
         self._levels = 0  # ... over this many matches
         self._candidate_contrast = 1.0  # the contrast of the last candidate (see _candidate_passes)
+        # in waves: the contrasts of the candidate being confirmed, found by the search and again since
+        self._candidate_contrasts: list[float] = []
         # the recent level of the matches' contrast (the first's own, at first)
         self._contrast_level = 1.0
         self._frames = 0
@@ -932,11 +934,13 @@ class TemplateMatcher:
         """A candidate while lost, the best found in ``window`` (u, v, radius): the re-acquisition's bar, or the bar
         of :meth:`follow` when the prediction's window is no wider than the vehicle (lost a moment ago: nothing else
         fits where it can be). In waves: it stands out of the water beside the window (:meth:`_stands_out`; found
-        ``again`` where it was expected: a lower bar) with the UUV's contrast (:meth:`_least_contrast`). Its
+        ``again`` where it was expected: a lower bar) with the UUV's contrast (:meth:`_least_contrast`), and found
+        ``again`` its contrast averaged over the frames it was found in is ``wave_keep_contrast`` of the UUV's. Its
         contrast is the UUV's level once it is confirmed on a still surface (:meth:`resume`: it may have faded or
         cleared meanwhile)."""
         contrast = self._candidate_contrast = self._contrast(frame_bgr, u, v)
         if self._wavy:
+            self._candidate_contrasts = (self._candidate_contrasts if again else []) + [contrast]
             passed = contrast >= self._least_contrast() and self._stands_out(
                 frame_bgr, *window, score, again=again
             )
@@ -945,7 +949,11 @@ class TemplateMatcher:
                 and contrast >= self.p.wave_keep_contrast * self._contrast_level
                 and score > self._water - self.p.wave_keep_below
             )
-            return self._match(passed, score, u, v)
+            # one frame's contrast flickers (caustics); the seafloor's, averaged, has a fraction of the UUV's
+            steady = float(np.mean(self._candidate_contrasts)) >= (
+                self.p.wave_keep_contrast * self._contrast_level
+            )
+            return self._match(passed and (steady or not again), score, u, v)
         side = self.S * self.k * self._scale
         if prediction is not None and self._radius(prediction, math.inf) <= side:
             need = self._rebound()
