@@ -54,6 +54,9 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   over it raises the contrast too, and drags the score down); a search for a candidate ranks the places with
   less contrast last (:meth:`~TemplateMatcher._least_spread`), the water beside its window too. The level, and
   the template, learn only from follows with ``wave_keep_contrast`` of it (a reference kept from clear frames).
+  A candidate further than ``wave_far_sigmas`` from the prediction pays the distance penalty of the sigmas beyond
+  (:meth:`~TemplateMatcher._far_penalty`), and a re-acquisition's contrast averaged over its confirmation frames
+  reaches ``wave_keep_contrast`` of the level (a seafloor patch passes a frame's lower bar now and then).
 - Neither takes a candidate away from the prediction while the UUV's first appearance
   still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
   partly hidden, say by a vehicle passing over it, beside a look-alike). Only a candidate
