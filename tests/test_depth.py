@@ -10,6 +10,7 @@ import math
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import T0_UNIX
 
@@ -362,3 +363,34 @@ def test_the_watchdog_says_when_the_depth_is_only_ardusubs_ekf():
         "depth: ArduSub's EKF only, unchecked: BARO_PRIMARY, "
         "BARO_SPEC_GRAV not received yet on Zenoh key mavlink/1/1"
     )
+
+
+def test_a_buoy_heard_before_the_drone_is_not_taken_for_the_uav(tmp_path):
+    """A reference's GPS_RAW_INT (its own system) recorded before the drone's first message leaves the UAV the drone."""
+    import shutil
+    import struct
+
+    from groundstation.mavlink.ingest import mavutil
+    from groundstation.session.read import load_session
+
+    session = tmp_path / "s"
+    shutil.copytree(
+        Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover", session
+    )
+    tlog = session / "uav.tlog"
+    data = tlog.read_bytes()
+    first_us = struct.unpack(">Q", data[:8])[0]
+    buoy = mavutil().mavlink.MAVLink(None, srcSystem=42, srcComponent=1)
+    report = buoy.gps_raw_int_encode(0, 6, 455_000_000, 137_000_000, 0, 65535, 65535, 0, 65535, 12)
+    tlog.write_bytes(struct.pack(">Q", first_us - 1_000_000) + report.pack(buoy) + data)
+
+    loaded = load_session(session)
+    ok = load_session(
+        shutil.copytree(
+            Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover",
+            tmp_path / "twin",
+        )
+    )
+    assert any("1 messages from systems other than the UAV (sysid 1)" in w for w in loaded.warnings)
+    assert len(loaded.telemetry.attitude) == len(ok.telemetry.attitude) > 0
+    assert np.array_equal(loaded.telemetry.attitude.values, ok.telemetry.attitude.values)

@@ -87,7 +87,17 @@ def names_the_uav(msg) -> bool:
 
 
 def uav_system(msgs) -> int | None:
-    """The UAV's system id among ``msgs`` (in order): that of the first message that :func:`names_the_uav`."""
+    """The UAV's system id in a whole recording ``msgs`` (in order): that of the first ATTITUDE, else of the first
+    message that :func:`names_the_uav`.
+
+    A recording has every message at once, so a buoy's or boat's GPS_RAW_INT heard before the drone's first message
+    (its own system, reporting a reference's position) does not make it the UAV: only a system that reports an
+    attitude is taken while one does.
+    """
+    msgs = list(msgs)
+    attitude = next((m.get_srcSystem() for m in msgs if m.get_type() == "ATTITUDE"), None)
+    if attitude is not None:
+        return attitude
     return next((m.get_srcSystem() for m in msgs if names_the_uav(m)), None)
 
 
