@@ -59,6 +59,7 @@ import socket
 import statistics
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -73,6 +74,10 @@ from groundstation.live.pipeline import Pipeline
 from groundstation.session.read import load_session
 from groundstation.video.file import open_video
 from groundstation.video.frames import LiveFrame
+from groundstation.video.mpegts import TsDepacketizer
+from groundstation.video.rtp import Depacketizer
+from groundstation.video.send import send_video
+from groundstation.video.udp import DATAGRAM_BYTES, SOCKET_BUFFER_BYTES, DecoderStream, packet_of
 from localizer.geodesy import horizontal_error_m
 
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080)}
@@ -225,6 +230,66 @@ def pct(values, *qs) -> dict:
         "max": round(float(a.max()), 2),
         "n": len(a),
     }
+
+
+def capture_datagrams(session_dir: Path, scheme: str, seconds: float) -> list[bytes]:
+    """The UDP datagrams of the first ``seconds`` of the session's video as ``skyfix replay`` sends it (``scheme``
+    rtp or udp: MPEG-TS), caught on loopback."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, SOCKET_BUFFER_BYTES)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(0.5)
+    got: list[bytes] = []
+    sent = threading.Event()
+
+    def receive():
+        while True:
+            try:
+                got.append(sock.recv(DATAGRAM_BYTES))
+            except TimeoutError:
+                if sent.is_set():
+                    return
+
+    receiver = threading.Thread(target=receive)
+    receiver.start()
+    stop = threading.Event()
+    timer = threading.Timer(seconds, stop.set)
+    timer.start()
+    try:
+        send_video(
+            session_dir / "video.ts",
+            f"{scheme}://127.0.0.1:{sock.getsockname()[1]}",
+            time.time(),
+            stop,
+        )
+    finally:
+        timer.cancel()
+        sent.set()
+        receiver.join()
+        sock.close()
+    return got
+
+
+def depacketize_baseline(session_dir: Path, seconds: float = 4.0) -> dict:
+    """CPU ms per frame of skyfix's own depacketizing (the demuxing thread's Python per frame: datagrams to the
+    decoder's packets), RTP and MPEG-TS, on the datagrams of the session's first ``seconds`` as sent."""
+    out = {}
+    for transport, scheme in (("rtp", "rtp"), ("mpegts", "udp")):
+        datagrams = capture_datagrams(session_dir, scheme, seconds)
+        depacketizer = Depacketizer("h264") if transport == "rtp" else TsDepacketizer()
+        stream = DecoderStream("h264")
+        frames = 0
+        t0 = time.process_time()
+        for datagram in datagrams:
+            for unit in depacketizer.push(datagram):
+                packet_of(unit, stream)
+                frames += 1
+        cpu_s = time.process_time() - t0
+        out[transport] = {
+            "ms_per_frame": round(1000.0 * cpu_s / max(frames, 1), 3),
+            "datagrams_per_frame": round(len(datagrams) / max(frames, 1), 1),
+        }
+    return out
 
 
 def decode_baseline(session_dir: Path) -> dict:
@@ -448,6 +513,11 @@ def report(name: str, session: Path, res: dict) -> list[str]:
             f"({100.0 * pl['statuses'].get('ok', 0) / res['frames_sent']:.1f} %)"
         ),
         f"  baseline decode only (PyAV, per frame): p50 {d['p50']} ms, p99 {d['p99']} ms",
+        "  baseline depacketize (skyfix's own, CPU per frame): "
+        + ", ".join(
+            f"{t} {v['ms_per_frame']} ms ({v['datagrams_per_frame']} datagrams a frame)"
+            for t, v in res["depacketize_cpu"].items()
+        ),
         f"  baseline Pipeline.process (tracker + pose + locate, per frame): p50 {b['p50']} ms, p99 {b['p99']} ms",
         (
             f"  live: stream slot -> GPS_INPUT at the UUV over {lat['n']} fixes: p50 {lat['p50']} ms, "
@@ -560,6 +630,7 @@ def main() -> int:
         session = ensure_session(size, args.duration_s)
         baselines = {
             "decode_only_ms": decode_baseline(session),
+            "depacketize_cpu": depacketize_baseline(session),
             "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames),
         }
         for rnd, transport, ((variant, run_args), busy), label in itertools.product(
