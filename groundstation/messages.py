@@ -748,11 +748,40 @@ class LiveMosaicStatus(Section):
     )
 
 
+class BuoyStatus(Section):
+    """A buoy's (or boat's) GNSS reports on the UAV's MAVLink link (--reference naming a system_id)."""
+
+    system_id: int = Field(description="its MAVLink system id (reference.toml's system_id)")
+    component_id: int | None = Field(
+        description="its component id (reference.toml's component_id; null: any component)"
+    )
+    reports: int = Field(description="its GPS_RAW_INT taken")
+    last_report_age_s: float | None = Field(
+        description="seconds since the last one taken came (null: none yet)"
+    )
+    no_fix: int = Field(description="its reports without a 3D fix")
+    refused: int = Field(
+        description="its reports refused as no position (lat/lon out of range, NaN, 0/0) or with a time far "
+        "from their receipt"
+    )
+    foreign: dict[str, int] = Field(
+        description="GPS_RAW_INT of other systems (not the UAV's) refused, by 'system:component'"
+    )
+
+
 class ReferenceStatus(Section):
-    """A surveyed marker in view (--reference): the drone's absolute offset it shows, added to every fix while the
-    marker was seen within the window (groundstation/live/reference_live.py)."""
+    """A reference of known position in view (--reference): a surveyed marker or a buoy reporting its GNSS; the
+    drone's absolute offset it shows, added to every fix while it was seen within the window
+    (groundstation/live/reference_live.py)."""
 
     file: str = Field(description="the reference.toml")
+    kind: Literal["marker", "buoy"] = Field(
+        description="marker: surveyed (lat_deg, lon_deg); buoy: its position from its GNSS reports (system_id)"
+    )
+    buoy: BuoyStatus | None = Field(description="the buoy's reports (null: a marker)")
+    no_report: int = Field(
+        description="frames due that the buoy's reports did not cover (none within 2 s around the frame)"
+    )
     state: Literal["searching", "applied", "lapsed"] = Field(
         description="searching: no offset yet; applied: the offset is added to every fix now; lapsed: there was one, "
         "but too few sightings in the last window_s (the fixes are the telemetry's again)"

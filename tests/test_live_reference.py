@@ -19,12 +19,14 @@ from ui_browser import available, chromium
 from groundstation.contracts import GROUNDSTATION
 from groundstation.live import config
 from groundstation.live.console import summary
-from groundstation.live.reference_live import LiveReference, drift_line
+from groundstation.live.reference_live import LiveBuoy, LiveReference, drift_line
+from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.reference import read_file
-from groundstation.session.read import load_session
+from groundstation.session.read import load_session, read_table
+from groundstation.session.tlog import read_tlog, tlog_record
 from localizer.contract import ConfigError
 from localizer.fix import Fix
-from localizer.geodesy import ned_to_geodetic
+from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
 from localizer.reference import WINDOW_S
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -33,17 +35,75 @@ from sim_fixtures.scenario import load_scenario, with_overrides
 @pytest.fixture(scope="module")
 def plain(tmp_path_factory):
     """sensors_plain_nadir, 8 s at 15 fps and 640x360, with its [marker]."""
-    session = tmp_path_factory.mktemp("plain")
+    return generated(tmp_path_factory.mktemp("plain"), marker={"enabled": True})
+
+
+def generated(session, **reference):
+    """sensors_plain_nadir (a plain GNSS's walk, AHRS and compass biases), 8 s at 15 fps and 640x360, with
+    ``reference`` (its [marker] or [buoy]), generated into ``session``."""
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_plain_nadir.toml")
     sc = with_overrides(
-        sc,
-        duration_s=8.0,
-        fps=15.0,
-        camera={"width": 640, "height": 360},
-        marker={"enabled": True},
+        sc, duration_s=8.0, fps=15.0, camera={"width": 640, "height": 360}, **reference
     )
     generate(sc, session)
     return session
+
+
+def refusal(reference_toml) -> str:
+    """skyfix run's refusal of ``--reference reference_toml``."""
+    parser = argparse.ArgumentParser()
+    config.add_arguments(parser)
+    args = parser.parse_args(
+        [
+            "--calibration",
+            "cal.toml",
+            "--video",
+            "udp://127.0.0.1:5600",
+            "--reference",
+            str(reference_toml),
+        ]
+    )
+    with pytest.raises(ConfigError) as e:
+        config.run_config(args)
+    return str(e.value)
+
+
+def corrected_fixes(live: LiveRun):
+    """The run's fixes with the reference's offset (at least 10, the first ok fix without), checked against the
+    simulator's truth: within 2 h_acc, a quarter of the error of the same fixes without the offset (the reported
+    pose's positions); their offsets (K, 2) and those errors without it."""
+    ok = [f for f in live.fixes() if f["status"] == "ok"]
+    fixed = [f for f in ok if f["ref_offset_n_m"] is not None]
+    assert len(fixed) >= 10 and ok[0]["ref_offset_n_m"] is None, (len(ok), len(fixed))
+    after = live.fix_errors_m(fixed)
+    h_acc = np.array([f["h_acc_m"] for f in fixed])
+    off = np.array([[f["ref_offset_n_m"], f["ref_offset_e_m"]] for f in fixed])
+    lat, lon, _ = ned_to_geodetic(
+        -off[:, 0], -off[:, 1], 0.0, [f["lat"] for f in fixed], [f["lon"] for f in fixed], 0.0
+    )
+    raw = [f | {"lat": a, "lon": b} for f, a, b in zip(fixed, lat, lon)]
+    before = live.fix_errors_m(raw)
+    print(
+        f"{len(ok)} ok fixes, {len(fixed)} with the reference's offset: MAE {after.mean():.3f} m "
+        f"(without it {before.mean():.3f} m), h_acc median {np.median(h_acc):.3f} m, "
+        f"{np.mean(after <= 2 * h_acc):.0%} within 2 h_acc; offset {off.mean(axis=0).round(3)} m, "
+        f"sightings {fixed[-1]['ref_sightings']}, last {fixed[-1]['ref_age_s']:.2f} s old"
+    )
+    assert after.mean() < 0.25 * before.mean()
+    assert np.mean(after <= 2 * h_acc) >= 0.9
+    assert all(0 < f["ref_sigma_n_m"] < f["h_acc_m"] and f["ref_sightings"] >= 3 for f in fixed)
+    assert all(0 <= f["ref_age_s"] <= 2.0 for f in fixed)
+    return fixed, off, before
+
+
+def statuses(live: LiveRun) -> list[dict]:
+    """The run's status messages on Zenoh, each checked against the status schema."""
+    schema = Draft202012Validator(json.loads(GROUNDSTATION.path_of("status").read_text()))
+    status = [
+        json.loads(s["payload"]) for s in read_jsonl(live.sub_out) if s["key"] == "skyfix/status"
+    ]
+    assert [e.message for m in status for e in schema.iter_errors(m)] == []
+    return status
 
 
 def test_the_live_fixes_take_the_markers_offset(plain, tmp_path):
@@ -55,28 +115,7 @@ def test_the_live_fixes_take_the_markers_offset(plain, tmp_path):
     live.run_cmd[live.run_cmd.index("--calibration") + 1] = str(plain / "session.toml")
     with live:
         live.finish()
-    ok = [f for f in live.fixes() if f["status"] == "ok"]
-    fixed = [f for f in ok if f["ref_offset_n_m"] is not None]
-    assert len(fixed) >= 10 and ok[0]["ref_offset_n_m"] is None, (len(ok), len(fixed))
-    after = live.fix_errors_m(fixed)
-    h_acc = np.array([f["h_acc_m"] for f in fixed])
-    # the same fixes without the offset: the reported pose's positions
-    off = np.array([[f["ref_offset_n_m"], f["ref_offset_e_m"]] for f in fixed])
-    lat, lon, _ = ned_to_geodetic(
-        -off[:, 0], -off[:, 1], 0.0, [f["lat"] for f in fixed], [f["lon"] for f in fixed], 0.0
-    )
-    raw = [f | {"lat": a, "lon": b} for f, a, b in zip(fixed, lat, lon)]
-    before = live.fix_errors_m(raw)
-    print(
-        f"{len(ok)} ok fixes, {len(fixed)} with the marker's offset: MAE {after.mean():.3f} m "
-        f"(without it {before.mean():.3f} m), h_acc median {np.median(h_acc):.3f} m, "
-        f"{np.mean(after <= 2 * h_acc):.0%} within 2 h_acc; offset {off.mean(axis=0).round(3)} m, "
-        f"sightings {fixed[-1]['ref_sightings']}, last {fixed[-1]['ref_age_s']:.2f} s old"
-    )
-    assert after.mean() < 0.25 * before.mean()
-    assert np.mean(after <= 2 * h_acc) >= 0.9
-    assert all(0 < f["ref_sigma_n_m"] < f["h_acc_m"] and f["ref_sightings"] >= 3 for f in fixed)
-    assert all(0 <= f["ref_age_s"] <= 2.0 for f in fixed)
+    fixed, off, before = corrected_fixes(live)
 
     # GPS_INPUT: the corrected position and its h_acc
     t0 = fixed[0]["t"]
@@ -92,15 +131,12 @@ def test_the_live_fixes_take_the_markers_offset(plain, tmp_path):
     assert np.median(claim) < 0.5 * np.median(before)
 
     # the status names the reference and its offset, as its schema has it
-    schema = Draft202012Validator(json.loads(GROUNDSTATION.path_of("status").read_text()))
-    status = [
-        json.loads(s["payload"]) for s in read_jsonl(live.sub_out) if s["key"] == "skyfix/status"
-    ]
-    assert [e.message for m in status for e in schema.iter_errors(m)] == []
+    status = statuses(live)
     applied = [s["reference"] for s in status if s["reference"]["state"] == "applied"]
     assert applied, [s["reference"] for s in status]
     last = applied[-1]
     assert last["file"].endswith("reference.toml") and last["seen"] >= 3 and last["sightings"] >= 3
+    assert last["kind"] == "marker" and last["buoy"] is None
     assert abs(last["offset_n_m"] - off[-1, 0]) < 3 * last["sigma_n_m"] + 0.05
     assert status[0]["reference"]["state"] == "searching"
     said = summary(status[-1])  # skyfix status's lines
@@ -195,12 +231,103 @@ def test_the_correction_lapses_without_sightings(plain):
 def test_a_bad_reference_file_is_refused_in_one_line(tmp_path):
     bad = tmp_path / "reference.toml"
     bad.write_text("lat_deg = 63.4\nlon_deg = 10.4\ndepth_m = 2.0\n")
-    parser = argparse.ArgumentParser()
-    config.add_arguments(parser)
-    args = parser.parse_args(
-        ["--calibration", "cal.toml", "--video", "udp://127.0.0.1:5600", "--reference", str(bad)]
+    said = refusal(bad)
+    assert said.startswith(f"options: --reference = '{bad}': KeyError: 'radius_m'")
+    assert "\n" not in said
+
+
+# a second buoy on the link, three metres north of the first: not the configured one
+FOREIGN_SYSID = 43
+FOREIGN_NORTH_1E7_DEG = 270  # ~3 m of latitude
+
+
+@pytest.fixture(scope="module")
+def buoy(tmp_path_factory):
+    """sensors_plain_nadir, 8 s at 15 fps and 640x360, with the [buoy] drifting on the surface (system 42 at 5 Hz);
+    uav.tlog also gets, beside each of its reports, the same report from system 43 three metres north, and every
+    fifth of them a copy from system 42 with its latitude out of range (malformed)."""
+    session = generated(
+        tmp_path_factory.mktemp("buoy"), buoy={"enabled": True, "drift_mps": (0.1, -0.05)}
     )
-    with pytest.raises(ConfigError) as e:
-        config.run_config(args)
-    assert str(e.value).startswith(f"options: --reference = '{bad}': KeyError: 'radius_m'")
-    assert "\n" not in str(e.value)
+    mav = mavutil().mavlink
+    foreign = mav.MAVLink(None, srcSystem=FOREIGN_SYSID, srcComponent=1)
+    bad = mav.MAVLink(None, srcSystem=42, srcComponent=1)
+    records, k = [], 0
+    for t, m in read_tlog(session / "uav.tlog"):
+        t_us = round(t * 1e6)
+        records.append((t_us, bytes(m.get_msgbuf())))
+        if m.get_type() == "GPS_RAW_INT" and m.get_srcSystem() == 42:
+            fields = {f: getattr(m, f) for f in m.get_fieldnames()}
+            other = mav.MAVLink_gps_raw_int_message(
+                **(fields | {"lat": m.lat + FOREIGN_NORTH_1E7_DEG})
+            )
+            records.append((t_us + 100, bytes(other.pack(foreign))))
+            if k % 5 == 0:
+                broken = mav.MAVLink_gps_raw_int_message(**(fields | {"lat": 2**31 - 1}))
+                records.append((t_us + 200, bytes(broken.pack(bad))))
+            k += 1
+    (session / "uav.tlog").write_bytes(b"".join(tlog_record(t, b) for t, b in records))
+    return session
+
+
+def test_the_live_fixes_take_a_buoys_offset(buoy, tmp_path):
+    """A buoy reporting its RTK GNSS on the UAV's link: the fixes corrected by its offset within 2 h_acc of the truth
+    and a quarter of the error without it; the other system's reports, three metres off, refused and counted (they
+    would move the fixes by that much), the malformed ones refused; the status says buoy and its last report's age."""
+    live = LiveRun(tmp_path, buoy, "--reference", str(buoy / "reference.toml"), video_latency_ms=0)
+    live.run_cmd[live.run_cmd.index("--calibration") + 1] = str(buoy / "session.toml")
+    with live:
+        live.finish()
+    corrected_fixes(live)
+    status = statuses(live)
+    applied = [s["reference"] for s in status if s["reference"]["state"] == "applied"]
+    assert applied, [s["reference"] for s in status]
+    last = applied[-1]
+    print(f"status: {last}")
+    assert last["kind"] == "buoy" and last["seen"] >= 3
+    b = last["buoy"]
+    assert b["system_id"] == 42 and b["reports"] >= 20
+    assert min(a["buoy"]["last_report_age_s"] for a in applied) < 1.0  # while the reports came
+    assert b["foreign"].get(f"{FOREIGN_SYSID}:1", 0) >= 20 and b["refused"] >= 4
+    assert status[-1]["uav"]["sysid"] == 1
+    said = summary(status[-1])  # skyfix status's lines
+    assert re.search(
+        r"buoy system 42: \d+ reports, the last \d+\.\d s ago, \d+ malformed and \d+ of", said
+    )
+    log = (tmp_path / "run.log").read_text()
+    assert f"GPS_RAW_INT of system {FOREIGN_SYSID} component 1 refused" in log
+    assert "the buoy's GPS_RAW_INT #1 refused: lat 2147483647" in log
+
+
+def test_a_buoys_reports_taken_only_from_its_own_system(buoy):
+    """LiveBuoy fed uav.tlog's messages directly: only system 42's well-formed reports are kept, so its position at a
+    frame's time is within 5 cm of buoy_truth.csv (its RTK error 1.5 cm per axis); system 43's are counted; a
+    component_id the buoy does not send from refuses all of them; the search's wait ends at WAIT_S without a report."""
+    s = load_session(buoy)
+    ref, _ = read_file(buoy / "reference.toml")
+    records = read_tlog(buoy / "uav.tlog")
+    live = LiveBuoy(s.telemetry, ref, None)
+    for t, m in records:
+        live.on_mavlink(m, t)
+    truth = read_table(buoy / "buoy_truth.csv", ("t", "lat", "lon"))
+    mid = len(truth["t"]) // 2
+    at = live.at(float(truth["t"][mid]))
+    n, e, _ = geodetic_to_ned(
+        at.lat_deg, at.lon_deg, 0.0, truth["lat"][mid], truth["lon"][mid], 0.0
+    )
+    assert np.hypot(n, e)[0] < 0.05, (n, e)
+    st = live.status(float(truth["t"][-1]))
+    assert st["foreign"][f"{FOREIGN_SYSID}:1"] == st["reports"] and st["refused"] >= 4
+    only = LiveBuoy(s.telemetry, ref, 7)
+    for t, m in records:
+        only.on_mavlink(m, t)
+    assert only.status(0.0)["reports"] == 0 and only.status(0.0)["foreign"]["42:1"] > 0
+    assert not np.isfinite(only.at(float(truth["t"][mid])).lat_deg).any()
+
+
+def test_a_bad_component_id_is_refused_in_one_line(buoy, tmp_path):
+    bad = tmp_path / "reference.toml"
+    bad.write_text((buoy / "reference.toml").read_text() + "component_id = 300\n")
+    assert refusal(bad) == (
+        f"options: --reference = '{bad}': component_id = 300: a MAVLink component id, 1-255"
+    )

@@ -440,9 +440,11 @@ class RunConfig(UuvOptions):
     )
     reference: FilePath | None = Field(
         None,
-        description="a surveyed marker in view, as skyfix process's reference.toml (lat_deg, lon_deg, depth_m, "
-        "sigma_m, radius_m): looked for in a frame every --reference-every-s at a low priority, the drone's absolute "
-        "offset it shows added to every fix (its sigma in h_acc) while it was seen in at least 4 of the last 10 s",
+        description="a reference of known position in view, as skyfix process's reference.toml: a surveyed marker "
+        "(lat_deg, lon_deg, depth_m, sigma_m, radius_m) or a buoy reporting its GNSS as GPS_RAW_INT on the UAV's "
+        "--mavlink link (system_id, optional component_id: no other system's reports are taken; depth_m, radius_m): "
+        "looked for in a frame every --reference-every-s at a low priority, the drone's absolute offset it shows "
+        "added to every fix (its sigma in h_acc) while it was seen in at least 4 of the last 10 s",
     )
     reference_every_s: Positive = Field(
         0.2,
@@ -577,15 +579,22 @@ class RunConfig(UuvOptions):
                 )
             if not path.is_file():
                 raise Invalid("reference", self.reference, "no such file")
+            from groundstation.live.reference_live import component_id
+
             try:
                 ref, _ = read_file(path)
+                component_id(path)
             except SessionError as e:
                 raise Invalid(
                     "reference", self.reference, str(e).removeprefix(f"{path}: ")
                 ) from None
-            if not hasattr(ref, "lat_deg"):
+            except ValueError as e:
+                raise Invalid("reference", self.reference, str(e)) from None
+            if not hasattr(ref, "lat_deg") and self.mavlink_backend != "pymavlink":
                 raise Invalid(
-                    "reference", self.reference, "live, only a surveyed marker (lat_deg, lon_deg)"
+                    "reference",
+                    self.reference,
+                    "a buoy's reports are read with --mavlink-backend pymavlink",
                 )
         return self
 

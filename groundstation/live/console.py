@@ -118,14 +118,25 @@ def summary(status: dict) -> str:
 
 
 def _reference(ref: dict) -> str:
-    """The status's ``reference`` section in a line: whether its offset is added to the fixes, how sure it is."""
+    """The status's ``reference`` section in a line: whether its offset is added to the fixes, how sure it is, and a
+    buoy's reports."""
     last = "never seen" if ref["age_s"] is None else f"last seen {ref['age_s']:.1f} s ago"
     if ref["state"] != "applied":
-        return f"reference {ref['state']}: {ref['seen']} of {ref['searched']} frames found, {last}"
+        line = f"reference {ref['state']}: {ref['seen']} of {ref['searched']} frames found, {last}"
+    else:
+        line = (
+            f"reference applied: offset north {ref['offset_n_m']:+.3f} ± {ref['sigma_n_m']:.3f} m, "
+            f"east {ref['offset_e_m']:+.3f} ± {ref['sigma_e_m']:.3f} m, {ref['sightings']} sightings in "
+            f"{ref['window_s']:g} s, {last}"
+        )
+    buoy = ref.get("buoy")
+    if not buoy:
+        return line
+    age = buoy["last_report_age_s"]
     return (
-        f"reference applied: offset north {ref['offset_n_m']:+.3f} ± {ref['sigma_n_m']:.3f} m, "
-        f"east {ref['offset_e_m']:+.3f} ± {ref['sigma_e_m']:.3f} m, {ref['sightings']} sightings in "
-        f"{ref['window_s']:g} s, {last}"
+        f"{line}; buoy system {buoy['system_id']}: {buoy['reports']} reports, "
+        f"{'none yet' if age is None else f'the last {age:.1f} s ago'}, "
+        f"{buoy['refused']} malformed and {sum(buoy['foreign'].values())} of other systems refused"
     )
 
 

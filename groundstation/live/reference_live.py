@@ -1,6 +1,14 @@
-"""A surveyed marker in view, live (``reference = FILE``, ``reference_every_s``): the drone's absolute offset it
-shows added to every fix, as ``skyfix process --reference auto`` does offline (:mod:`groundstation.offline.reference`,
-:mod:`localizer.reference`).
+"""A reference of known position in view, live (``reference = FILE``, ``reference_every_s``): a surveyed marker, or a
+buoy reporting its GNSS (:class:`LiveBuoy`); the drone's absolute offset it shows added to every fix, as ``skyfix
+process --reference auto`` does offline (:mod:`groundstation.offline.reference`, :mod:`localizer.reference`).
+
+A buoy (the file names its ``system_id``, and optionally ``component_id``) reports GPS_RAW_INT on the UAV's MAVLink
+link; the UAV's source hands this module every message of another system (its ``others``) and never takes the buoy's
+system for the UAV's. Only the buoy's reports are kept (:class:`LiveBuoy`: any other system's are refused and counted,
+malformed ones refused in a log line); a frame is searched for it where its reports, interpolated at the frame's
+time, put it (:meth:`LiveBuoy.at` waits up to :data:`WAIT_S` for the report after the frame), its sigma the
+reports' with their speed times their time's sigma. When its reports stop, frames are no longer searched
+(``no_report``) and the correction lapses as when a marker leaves the view.
 
 Every ``reference_every_s`` seconds of video an aligned frame is taken with its camera pose, and the marker is looked
 for around where that pose puts it (:func:`groundstation.offline.reference.expected`,
@@ -25,13 +33,16 @@ import dataclasses
 import logging
 import math
 import threading
-from collections import deque
+import tomllib
+from collections import Counter, deque
+from pathlib import Path
 
 import cv2
 import numpy as np
 
 from groundstation.live.every_frame import EveryFrame
-from groundstation.offline.reference import expected, find
+from groundstation.logs import Throttle
+from groundstation.offline.reference import Buoy, BuoyReports, expected, find, report
 from localizer import reference
 from localizer.fix import Fix, Fixes
 from localizer.pose import CameraPose
@@ -40,6 +51,10 @@ log = logging.getLogger("skyfix.reference")
 
 #: sightings older than this before the newest are let go (s)
 KEEP_S = 2 * reference.WINDOW_S
+#: how long the search waits for the buoy's first report after a frame's time (s): it comes over its own radio
+WAIT_S = 1.0
+#: a buoy's report whose time on the station clock is further than this from when it came is refused (s)
+MAX_SKEW_S = 5.0
 
 
 def drift_line(t_sight: np.ndarray, offset_ne_m: np.ndarray, t_unix: float):
@@ -68,6 +83,101 @@ def as_fixes(fix: Fix) -> Fixes:
     return Fixes.of([fix.t_unix], [fix.status], **{n: [getattr(fix, n)] for n in names})
 
 
+def component_id(path: Path) -> int | None:
+    """A buoy's ``reference.toml``'s ``component_id`` (its MAVLink component, 1-255): only its reports from that
+    component are taken; None (the key absent): any component of its ``system_id``. ValueError for a bad one."""
+    cid = tomllib.loads(Path(path).read_text()).get("component_id")
+    if cid is not None and (type(cid) is not int or not 1 <= cid <= 255):
+        raise ValueError(f"component_id = {cid!r}: a MAVLink component id, 1-255")
+    return cid
+
+
+def malformed(msg) -> str | None:
+    """Why a GPS_RAW_INT is no position (its lat/lon, 1e-7 degrees, out of range, NaN, or 0, 0), or None."""
+    lat, lon = float(msg.lat), float(msg.lon)
+    if not (abs(lat) <= 90e7 and abs(lon) <= 180e7):
+        return f"lat {msg.lat}, lon {msg.lon} (1e-7 deg): out of range"
+    if lat == 0 and lon == 0:
+        return "lat 0, lon 0: no position"
+    return None
+
+
+class LiveBuoy:
+    """A buoy's GNSS reports heard live: :meth:`on_mavlink` (on the event loop) gets every message of a system other
+    than the UAV's on its MAVLink link. Only the GPS_RAW_INT of the buoy's ``system_id`` (and ``component_id``, when
+    the file names one) are taken (:class:`groundstation.offline.reference.BuoyReports`); one from any other system or
+    component is refused and counted by ``system:component`` (``foreign``), one of the buoy's that is no position
+    (:func:`malformed`) or whose time is more than :data:`MAX_SKEW_S` from its receipt refused with a log line, one
+    without a 3D fix counted. :meth:`at` (the search's thread) is where the reports put it at a frame's time."""
+
+    def __init__(self, tel, buoy: Buoy, component: int | None):
+        self.tel, self.buoy, self.component = tel, buoy, component
+        self.reports = BuoyReports(buoy, keep_s=KEEP_S)
+        self.taken = 0  # reports kept
+        self.no_fix = 0  # the buoy's reports without a 3D fix
+        self.refused = 0  # the buoy's reports that are no position
+        self.foreign: Counter[str] = Counter()  # GPS_RAW_INT of other systems/components
+        self.last_recv = math.nan  # station time the last report kept came
+        self._newest_t = -math.inf  # the last report's time (station clock)
+        self._throttle = Throttle()
+        self._changed = threading.Condition()
+
+    def on_mavlink(self, msg, t_recv: float) -> None:
+        if msg.get_type() != "GPS_RAW_INT":
+            return
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        if sysid != self.buoy.system_id or self.component not in (None, compid):
+            self.foreign[f"{sysid}:{compid}"] += 1
+            if self._throttle(f"foreign {sysid}:{compid}"):
+                log.warning(
+                    "reference: GPS_RAW_INT of system %d component %d refused (the buoy is system %d%s)",
+                    sysid,
+                    compid,
+                    self.buoy.system_id,
+                    "" if self.component is None else f" component {self.component}",
+                )
+            return
+        why = malformed(msg)
+        got = None if why else report(msg, t_recv, self.buoy, self.tel.station_minus_gnss_s)
+        if why is None and got is None:
+            self.no_fix += 1
+            return
+        if why is None and not abs(got[0] - t_recv) <= MAX_SKEW_S:
+            why = f"its time is {got[0] - t_recv:+.1f} s from its receipt"
+        if why:
+            self.refused += 1
+            n = self._throttle(why)
+            if n:
+                log.warning("reference: the buoy's GPS_RAW_INT #%d refused: %s", n, why)
+            return
+        with self._changed:
+            if self.reports.add_report(*got):
+                self.taken += 1
+                self.last_recv = t_recv
+                self._newest_t = got[0]
+                self._changed.notify_all()
+
+    def at(self, t_unix: float) -> reference.Reference:
+        """Where the reports put the buoy at ``t_unix`` (arrays of one; NaN where they do not), once a report after
+        it has come or :data:`WAIT_S` has passed: a report comes over the buoy's radio after the frame."""
+        with self._changed:
+            self._changed.wait_for(lambda: self._newest_t >= t_unix, WAIT_S)
+            return self.reports.at(np.array([t_unix]))
+
+    def status(self, now: float) -> dict:
+        return {
+            "system_id": self.buoy.system_id,
+            "component_id": self.component,
+            "reports": self.taken,
+            "last_report_age_s": round(now - self.last_recv, 3)
+            if math.isfinite(self.last_recv)
+            else None,
+            "no_fix": self.no_fix,
+            "refused": self.refused,
+            "foreign": dict(self.foreign),
+        }
+
+
 class LiveReference:
     """The marker's sightings and the offset they give: :meth:`on_frame` (a frame listener, on the event loop) takes
     a frame every ``every_s`` s of video to search; :meth:`correct` (each UUV's pipeline) adds the offset to a fix;
@@ -79,11 +189,14 @@ class LiveReference:
     ):
         self.cal, self.tel = cal, tel
         self.path, self.ref, self.radius_m, self.every_s = path, ref, radius_m, every_s
+        self.buoy = LiveBuoy(tel, ref, component_id(Path(path))) if isinstance(ref, Buoy) else None
+        self.no_report = 0  # frames the buoy's reports did not cover
         self.searched = 0  # frames searched
         self.seen = 0  # frames the marker was found in
         self.corrected = 0  # fixes the offset was added to
-        # (t_unix, offset (2,), jacobian (2, 4)) of each sighting: appended by the search, read by correct()
-        self._sightings: deque[tuple[float, np.ndarray, np.ndarray]] = deque()
+        # (t_unix, offset (2,), jacobian (2, 4), the reference's 1-sigma per axis) of each sighting: appended by the
+        # search, read by correct()
+        self._sightings: deque[tuple[float, np.ndarray, np.ndarray, float]] = deque()
         self._lock = threading.Lock()
         self._applying = False  # the last fix was corrected (its change is logged)
         self._estimated = False  # an offset was found once: without one now, it lapsed
@@ -96,20 +209,25 @@ class LiveReference:
     def look(self, image: np.ndarray, pose: CameraPose) -> None:
         """Search one frame (the search's thread) and keep the sighting."""
         self.searched += 1
-        u0, v0, radius_px, reach_px = expected(self.cal, pose, self.ref, self.radius_m)
+        t = float(pose.t_unix[0])
+        at = self.ref if self.buoy is None else self.buoy.at(t)
+        if not np.all(np.isfinite(at.lat_deg)):
+            self.no_report += 1
+            return
+        u0, v0, radius_px, reach_px = expected(self.cal, pose, at, self.radius_m)
         if not np.isfinite(u0[0]):
             return
         grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         hit = find(grey, u0[0], v0[0], radius_px[0], reach_px[0])
         if hit is None:
             return
-        off, ok, jac = reference.sightings(self.cal, pose, [hit[0]], [hit[1]], self.ref)
+        off, ok, jac = reference.sightings(self.cal, pose, [hit[0]], [hit[1]], at)
         if not ok[0]:
             return
         self.seen += 1
-        t = float(pose.t_unix[0])
+        sigma_m = float(np.ravel(at.sigma_m)[0])
         with self._lock:
-            self._sightings.append((t, off[0], jac[0]))
+            self._sightings.append((t, off[0], jac[0], sigma_m))
             while self._sightings and self._sightings[0][0] < t - KEEP_S:
                 self._sightings.popleft()
 
@@ -119,12 +237,14 @@ class LiveReference:
         with self._lock:
             kept = [s for s in self._sightings if s[0] <= t_unix]
         if not kept:
-            t, off, jac = np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2, 4))
+            t, off, jac, ref_sigma = np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2, 4)), np.zeros(0)
         else:
-            t = np.array([s[0] for s in kept])
+            t, ref_sigma = np.array([s[0] for s in kept]), np.array([s[3] for s in kept])
             off, jac = np.stack([s[1] for s in kept]), np.stack([s[2] for s in kept])
-        found = reference.offsets(t, off, jac, [t_unix - reference.WINDOW_S / 2], self.ref.sigma_m)
         recent = t >= t_unix - reference.WINDOW_S
+        # the reference's own sigma: the marker's survey, or a buoy's reports' RMS over its sightings
+        sigma_m = float(np.sqrt(np.mean(np.square(ref_sigma[recent])))) if recent.any() else 0.0
+        found = reference.offsets(t, off, jac, [t_unix - reference.WINDOW_S / 2], sigma_m)
         line = drift_line(t[recent], off[recent], t_unix)
         if line is None or not np.isfinite(found.offset_ne_m[0, 0]):
             found = dataclasses.replace(found, offset_ne_m=np.full((1, 2), np.nan))
@@ -180,6 +300,9 @@ class LiveReference:
 
         return {
             "file": self.path,
+            "kind": "marker" if self.buoy is None else "buoy",
+            "buoy": None if self.buoy is None else self.buoy.status(now),
+            "no_report": self.no_report,
             "state": "applied" if applied else "lapsed" if self._estimated else "searching",
             "offset_n_m": num(n),
             "offset_e_m": num(e),

@@ -241,6 +241,9 @@ async def serve(cfg: config.RunConfig) -> dict:
         ):  # a surveyed marker in view: the drone's absolute offset added to every fix
             found = read_file(Path(cfg.reference))
             reference = LiveReference(cal, tel, cfg.reference, *found, cfg.reference_every_s)
+            if reference.buoy:  # its GNSS reports come on the UAV's link from its own system
+                uav.not_uav.add(reference.buoy.buoy.system_id)
+                uav.others.append(reference.buoy.on_mavlink)
             workers.section("reference", reference.status)
             closers.append(reference.close)
 

@@ -16,7 +16,8 @@ pitch are relative to) and for the telemetry rates skyfix needs
 (:mod:`.rates`, DISTANCE_SENSOR's once a downward one came; ``--no-request-rates``
 leaves them alone). Only the UAV's
 messages are used: the system id of the first autopilot heartbeat or used
-message; others are counted. On ``udpin:`` the link takes datagrams from the UAV's address only (the first to
+message (never a system in ``not_uav``: a buoy's); others are counted and handed to ``others`` (a buoy's reports:
+:mod:`groundstation.live.reference_live`). On ``udpin:`` the link takes datagrams from the UAV's address only (the first to
 send its messages, or ``--mavlink-peer``); with ``--mavlink-signing-key`` only messages signed with that key. Malformed frames (pymavlink's BAD_DATA) and refused
 samples are counted and logged with their reason, never fatal; so are the
 telemetry's notices (reboots, clocks that disagree).
@@ -131,6 +132,9 @@ class UavMavlink:
         self.url = url
         self.tel = tel
         self.listeners = listeners or []
+        # get ``(msg, t_recv_unix)`` of every good message of another system (a buoy reporting its GNSS)
+        self.others: list[Callable] = []
+        self.not_uav: set[int] = set()  # systems never taken for the UAV (a buoy's)
         self.health = LinkHealth()
         self.requests = RateRequests(needed_hz, enabled=request_rates)
         self.uav_sysid: int | None = None
@@ -177,7 +181,7 @@ class UavMavlink:
         return (
             msg.get_srcSystem() == self.uav_sysid
             if self.uav_sysid is not None
-            else names_the_uav(msg)
+            else names_the_uav(msg) and msg.get_srcSystem() not in self.not_uav
         )
 
     def _beat(self, conn, now: float) -> None:
@@ -228,7 +232,7 @@ class UavMavlink:
 
     def _is_uav(self, msg) -> bool:
         sysid = msg.get_srcSystem()
-        if self.uav_sysid is None and names_the_uav(msg):
+        if self.uav_sysid is None and names_the_uav(msg) and sysid not in self.not_uav:
             self.uav_sysid = sysid
             log.info("UAV MAVLink: using system %d on %s", sysid, self.url)
         return sysid == self.uav_sysid
@@ -240,6 +244,8 @@ class UavMavlink:
             return
         if not self._is_uav(msg):
             self.health.other_systems += 1
+            for listener in self.others:
+                listener(msg, t_recv)
             return
         self.health.seen(kind, t_recv)
         measured_before = self.tel.measured_latency_s

@@ -848,7 +848,14 @@ function showHealth() {
                     : r.state === "lapsed" ? `not applied: too few sightings in the last ${r.window_s} s`
                     : "no offset yet")
                   + ` · ${r.sightings} sightings in ${r.window_s} s · ${r.seen}/${r.searched} frames found, `
-                  + `${r.skipped} skipped · ${r.corrected} fixes corrected · ${r.file}`));
+                  + `${r.skipped} skipped · ${r.corrected} fixes corrected · ${r.file}`
+                  + (r.buoy  // a buoy reporting its GNSS: its reports and those refused
+                    ? ` · buoy system ${r.buoy.system_id}: ${r.buoy.reports} reports, `
+                      + (r.buoy.last_report_age_s === null ? "none yet"
+                        : `the last ${age(r.buoy.last_report_age_s)} ago`)
+                      + `, ${r.buoy.refused} malformed and `
+                      + `${Object.values(r.buoy.foreign).reduce((a, b) => a + b, 0)} of other systems refused`
+                    : "")));
   }
   // a UUV's own rows: named with its id when there are several
   const each = (fn) => page.uuvs.forEach((u, k) => fn(own(k), several() ? `${u.id} ` : "", u.rates,
