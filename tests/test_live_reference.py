@@ -17,7 +17,7 @@ from live_helpers import ROOT, LiveRun, read_jsonl, ui_url, wait_for
 from ui_browser import available, chromium
 
 from groundstation.contracts import GROUNDSTATION
-from groundstation.live import config
+from groundstation.live import config, reference_live
 from groundstation.live.console import summary
 from groundstation.live.reference_live import LiveBuoy, LiveReference, drift_line
 from groundstation.mavlink.ingest import mavutil
@@ -27,6 +27,7 @@ from groundstation.session.tlog import read_tlog, tlog_record
 from localizer.contract import ConfigError
 from localizer.fix import Fix
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
+from localizer.pose import uav_pose
 from localizer.reference import WINDOW_S
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -208,8 +209,6 @@ def test_the_correction_lapses_without_sightings(plain):
     ref, radius_m = read_file(plain / "reference.toml")
     live = LiveReference(s.calibration, s.telemetry, "reference.toml", ref, radius_m, 0.2)
     try:
-        from localizer.pose import uav_pose
-
         t_of = dict(zip(s.frames["frame"][::3].astype(int), s.frames["t"][::3]))
         with s.open_video(grey=True) as video:
             for vf in video.prefetch():
@@ -299,6 +298,14 @@ def test_the_live_fixes_take_a_buoys_offset(buoy, tmp_path):
     assert "the buoy's GPS_RAW_INT #1 refused: lat 2147483647" in log
 
 
+def hear(live: LiveBuoy, session, records, until_t: float = np.inf) -> None:
+    """What the UAV's link hands LiveBuoy: the messages of the systems other than the UAV's received before
+    ``until_t``."""
+    for t, m in records:
+        if t < until_t and m.get_srcSystem() != session.uav_sysid:
+            live.on_mavlink(m, t)
+
+
 def test_a_buoys_reports_taken_only_from_its_own_system(buoy):
     """LiveBuoy fed uav.tlog's messages directly: only system 42's well-formed reports are kept, so its position at a
     frame's time is within 5 cm of buoy_truth.csv (its RTK error 1.5 cm per axis); system 43's are counted; a
@@ -307,8 +314,7 @@ def test_a_buoys_reports_taken_only_from_its_own_system(buoy):
     ref, _ = read_file(buoy / "reference.toml")
     records = read_tlog(buoy / "uav.tlog")
     live = LiveBuoy(s.telemetry, ref, None)
-    for t, m in records:
-        live.on_mavlink(m, t)
+    hear(live, s, records)
     truth = read_table(buoy / "buoy_truth.csv", ("t", "lat", "lon"))
     mid = len(truth["t"]) // 2
     at = live.at(float(truth["t"][mid]))
@@ -319,10 +325,39 @@ def test_a_buoys_reports_taken_only_from_its_own_system(buoy):
     st = live.status(float(truth["t"][-1]))
     assert st["foreign"][f"{FOREIGN_SYSID}:1"] == st["reports"] and st["refused"] >= 4
     only = LiveBuoy(s.telemetry, ref, 7)
-    for t, m in records:
-        only.on_mavlink(m, t)
+    hear(only, s, records)
     assert only.status(0.0)["reports"] == 0 and only.status(0.0)["foreign"]["42:1"] > 0
     assert not np.isfinite(only.at(float(truth["t"][mid])).lat_deg).any()
+
+
+def test_the_buoys_correction_lapses_when_its_reports_stop(buoy, monkeypatch):
+    """The buoy's reports heard for the first 5 s only, the session's frames searched directly (the search's
+    function, not its thread, no wait for a report): frames after the last report are not searched (no_report); the
+    offset applies at the end and lapses a window after the last report; the status says buoy and the age."""
+    monkeypatch.setattr(reference_live, "WAIT_S", 0.0)
+    s = load_session(buoy)
+    ref, radius_m = read_file(buoy / "reference.toml")
+    live = LiveReference(
+        s.calibration, s.telemetry, str(buoy / "reference.toml"), ref, radius_m, 0.2
+    )
+    try:
+        t_cut = float(s.frames["t"][0]) + 5.0
+        hear(live.buoy, s, read_tlog(buoy / "uav.tlog"), t_cut)
+        t_of = dict(zip(s.frames["frame"][::3].astype(int), s.frames["t"][::3]))
+        with s.open_video(grey=True) as video:
+            for vf in video.prefetch():
+                if vf.index in t_of:
+                    live.look(vf.image, uav_pose(s.calibration, s.telemetry, t_of[vf.index]))
+        after = sum(t > t_cut for t in t_of.values())
+        assert live.no_report >= after - 2 and live.seen >= 10, (live.no_report, after, live.seen)
+        t_end = float(s.frames["t"][-1])
+        st = live.status(t_end)
+        assert st["kind"] == "buoy" and st["state"] == "applied"
+        assert t_end - t_cut <= st["buoy"]["last_report_age_s"] <= t_end - t_cut + 1.0
+        later = live.status(t_cut + WINDOW_S)
+        assert later["state"] == "lapsed" and later["offset_n_m"] is None
+    finally:
+        live.close()
 
 
 def test_a_bad_component_id_is_refused_in_one_line(buoy, tmp_path):
