@@ -9,9 +9,13 @@ is refused in one line naming the key."""
 import argparse
 import json
 import re
+import shutil
+import threading
+import time
 
 import numpy as np
 import pytest
+import zenoh
 from jsonschema import Draft202012Validator
 from live_helpers import ROOT, LiveRun, read_jsonl, ui_url, wait_for
 from ui_browser import available, chromium
@@ -22,6 +26,7 @@ from groundstation.live.console import summary
 from groundstation.live.reference_live import LiveBuoy, LiveReference, drift_line
 from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.reference import read_file
+from groundstation.runtime.zenoh_mavlink import mavlink_json
 from groundstation.session.read import load_session, read_table
 from groundstation.session.tlog import read_tlog, tlog_record
 from localizer.contract import ConfigError
@@ -366,3 +371,76 @@ def test_a_bad_component_id_is_refused_in_one_line(buoy, tmp_path):
     assert refusal(bad) == (
         f"options: --reference = '{bad}': component_id = 300: a MAVLink component id, 1-255"
     )
+
+
+@pytest.fixture(scope="module")
+def buoy_zenoh(buoy, tmp_path_factory):
+    """The buoy session without its reports in uav.tlog: ``(session, [(t_record, message)])`` of the GPS_RAW_INT of
+    the other systems (the buoy's, system 43's, the malformed copies) to publish on Zenoh instead."""
+    session = tmp_path_factory.mktemp("buoy_zenoh")
+    shutil.copytree(buoy, session, dirs_exist_ok=True)
+    uav_sysid = load_session(buoy).uav_sysid
+    records = read_tlog(buoy / "uav.tlog")
+    kept = [(t, m) for t, m in records if m.get_srcSystem() == uav_sysid]
+    (session / "uav.tlog").write_bytes(
+        b"".join(tlog_record(round(t * 1e6), bytes(m.get_msgbuf())) for t, m in kept)
+    )
+    return session, [(t, m) for t, m in records if m.get_srcSystem() != uav_sysid]
+
+
+def publish(endpoint: str, heard, shift_s: float, stop: threading.Event) -> None:
+    """Each of ``heard``'s GPS_RAW_INT on Zenoh as BlueOS's mavlink-server publishes it
+    (``mavlink/{sys}/{comp}/GPS_RAW_INT``, JSON), each at its record time + ``shift_s`` with its time shifted by
+    that (as the replay sends the UAV's), and one payload that is not JSON halfway."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    with zenoh.open(conf) as z:
+        for k, (t, m) in enumerate(heard):
+            if stop.wait(max(0.0, t + shift_s - time.time())):
+                return
+            key = f"mavlink/{m.get_srcSystem()}/{m.get_srcComponent()}/GPS_RAW_INT"
+            fields = {f: getattr(m, f) for f in m.get_fieldnames()}
+            fields["time_usec"] += round(
+                shift_s * 1e6
+            )  # its GNSS time shifted as the replay shifts the UAV's
+            head = {"system_id": m.get_srcSystem(), "component_id": m.get_srcComponent()}
+            body = {"header": head | {"sequence": k % 256, "message_id": m.get_msgId()}}
+            z.put(key, json.dumps(body | {"message": mavlink_json("GPS_RAW_INT", fields)}))
+            if k == len(heard) // 2:
+                z.put(key, b"not json")
+
+
+def test_a_buoys_reports_on_zenoh(buoy_zenoh, tmp_path):
+    """The buoy's reports published on Zenoh as BlueOS does (none in uav.tlog), the service subscribed to every
+    system's (--reference-zenoh-key mavlink/*/*/GPS_RAW_INT): the fixes take the buoy's offset as over MAVLink; system
+    43's refused and counted, the malformed ones and a payload that is not JSON refused."""
+    session, heard = buoy_zenoh
+    live = LiveRun(
+        tmp_path,
+        session,
+        "--reference",
+        str(session / "reference.toml"),
+        "--reference-zenoh-key",
+        "mavlink/*/*/GPS_RAW_INT",
+        video_latency_ms=0,
+    )
+    live.run_cmd[live.run_cmd.index("--calibration") + 1] = str(session / "session.toml")
+    stop = threading.Event()
+    with live:
+        publisher = threading.Thread(target=publish, args=(live.ep, heard, live.shift, stop))
+        publisher.start()
+        try:
+            live.finish()
+        finally:
+            stop.set()
+            publisher.join()
+    corrected_fixes(live)
+    last = [s["reference"] for s in statuses(live)][-1]
+    print(f"status: {last}")
+    b = last["buoy"]
+    assert last["kind"] == "buoy" and b["reports"] >= 20
+    assert b["foreign"].get(f"{FOREIGN_SYSID}:1", 0) >= 20 and b["refused"] >= 5
+    log = (tmp_path / "run.log").read_text()
+    assert "GPS_RAW_INT on mavlink/42/1/GPS_RAW_INT refused: not JSON" in log

@@ -450,6 +450,12 @@ class RunConfig(UuvOptions):
         0.2,
         description="seconds of video between the frames the --reference marker is looked for in",
     )
+    reference_zenoh_key: Text | None = Field(
+        None,
+        description="a --reference buoy's GPS_RAW_INT on Zenoh as BlueOS's mavlink-server publishes them, e.g. "
+        "mavlink/*/*/GPS_RAW_INT (its JSON header's system and component: only the buoy's are taken, others "
+        "refused and counted), besides those on --mavlink",
+    )
     ui_token: Text | None = Field(
         None,
         description="the web page's token (default: none on localhost, a random one "
@@ -568,6 +574,12 @@ class RunConfig(UuvOptions):
 
     @model_validator(mode="after")
     def _reference_readable(self):
+        if self.reference is None and self.reference_zenoh_key is not None:
+            raise Invalid(
+                "reference_zenoh_key",
+                self.reference_zenoh_key,
+                "for a buoy's reports: no --reference",
+            )
         if self.reference is not None:
             from groundstation.offline.reference import read_file
             from groundstation.session import SessionError
@@ -590,6 +602,12 @@ class RunConfig(UuvOptions):
                 ) from None
             except ValueError as e:
                 raise Invalid("reference", self.reference, str(e)) from None
+            if hasattr(ref, "lat_deg") and self.reference_zenoh_key is not None:
+                raise Invalid(
+                    "reference_zenoh_key",
+                    self.reference_zenoh_key,
+                    "for a buoy's reports: --reference names a surveyed marker",
+                )
             if not hasattr(ref, "lat_deg") and self.mavlink_backend != "pymavlink":
                 raise Invalid(
                     "reference",

@@ -4,7 +4,8 @@ process --reference auto`` does offline (:mod:`groundstation.offline.reference`,
 
 A buoy (the file names its ``system_id``, and optionally ``component_id``) reports GPS_RAW_INT on the UAV's MAVLink
 link; the UAV's source hands this module every message of another system (its ``others``) and never takes the buoy's
-system for the UAV's. Only the buoy's reports are kept (:class:`LiveBuoy`: any other system's are refused and counted,
+system for the UAV's; with ``reference_zenoh_key`` its reports also come on Zenoh as BlueOS publishes them
+(:class:`BuoyZenoh`). Only the buoy's reports are kept (:class:`LiveBuoy`: any other system's are refused and counted,
 malformed ones refused in a log line); a frame is searched for it where its reports, interpolated at the frame's
 time, put it (:meth:`LiveBuoy.at` waits up to :data:`WAIT_S` for the report after the frame), its sigma the
 reports' with their speed times their time's sigma. When its reports stop, frames are no longer searched
@@ -29,7 +30,9 @@ correction lapses and the fixes are the telemetry's again. Station-clock seconds
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
+import json
 import logging
 import math
 import threading
@@ -41,8 +44,11 @@ import cv2
 import numpy as np
 
 from groundstation.live.every_frame import EveryFrame
-from groundstation.logs import Throttle
+from groundstation.logs import Throttle, kind_of
+from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.reference import Buoy, BuoyReports, expected, find, report
+from groundstation.threads import Handoff
+from groundstation.zenoh_session import subscribe
 from localizer import reference
 from localizer.fix import Fix, Fixes
 from localizer.pose import CameraPose
@@ -176,6 +182,91 @@ class LiveBuoy:
             "refused": self.refused,
             "foreign": dict(self.foreign),
         }
+
+
+@dataclasses.dataclass(frozen=True)
+class HeardReport:
+    """A GPS_RAW_INT that came on Zenoh, as :meth:`LiveBuoy.on_mavlink` reads a pymavlink message."""
+
+    system: int
+    component: int
+    time_usec: int
+    fix_type: int
+    lat: float
+    lon: float
+    h_acc: int
+
+    def get_type(self) -> str:
+        return "GPS_RAW_INT"
+
+    def get_srcSystem(self) -> int:
+        return self.system
+
+    def get_srcComponent(self) -> int:
+        return self.component
+
+
+class BadReport(ValueError):
+    """A GPS_RAW_INT payload on Zenoh that cannot be read."""
+
+
+def parse_gps_raw(payload: bytes) -> HeardReport:
+    """A GPS_RAW_INT as BlueOS's mavlink-server publishes it on Zenoh (``mavlink/{sys}/{comp}/GPS_RAW_INT``:
+    ``{"header": {"system_id", "component_id", ...}, "message": {"type": "GPS_RAW_INT", "lat", "lon", "time_usec",
+    "fix_type": {"type": "GPS_FIX_TYPE_..."}, "h_acc", ...}}``); its system and component the header's.
+    :class:`BadReport` naming what is wrong (a lat/lon that is no position is :func:`malformed`'s to refuse)."""
+    try:
+        obj = json.loads(payload)
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        raise BadReport("not JSON") from None
+    head = obj.get("header") if isinstance(obj, dict) else None
+    msg = obj.get("message") if isinstance(obj, dict) else None
+    if not isinstance(head, dict) or not isinstance(msg, dict):
+        raise BadReport("no 'header' and 'message' objects")
+    if msg.get("type") != "GPS_RAW_INT":
+        raise BadReport(f"message type {msg.get('type')!r} is not GPS_RAW_INT")
+    fix = msg.get("fix_type")
+    if isinstance(fix, dict):
+        entry = mavutil().mavlink.enums["GPS_FIX_TYPE"]
+        fix = next((k for k, e in entry.items() if e.name == fix.get("type")), None)
+    fields = {
+        "system": head.get("system_id"),
+        "component": head.get("component_id"),
+        "time_usec": msg.get("time_usec", 0),
+        "fix_type": fix,
+        "lat": msg.get("lat"),
+        "lon": msg.get("lon"),
+        "h_acc": msg.get("h_acc", 0),
+    }
+    for name, value in fields.items():
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise BadReport(f"{name} = {value!r}: expected a number")
+    return HeardReport(**fields)
+
+
+class BuoyZenoh:
+    """A worker subscribing to ``key`` (a Zenoh key expression; BlueOS's ``mavlink/*/*/GPS_RAW_INT`` hears every
+    system's) and handing each GPS_RAW_INT (:func:`parse_gps_raw`) to ``buoy``'s :meth:`LiveBuoy.on_mavlink`, which
+    keeps only the buoy's; a payload that does not parse is refused with a log line and counted in the buoy's
+    ``refused``."""
+
+    def __init__(self, session, key: str, buoy: LiveBuoy):
+        self.session, self.key, self.buoy = session, key, buoy
+        self._throttle = Throttle()
+
+    async def run(self) -> None:
+        handoff = Handoff(asyncio.get_running_loop(), lambda item: self._on(*item), 256)
+        await subscribe(self.session, self.key, handoff)
+
+    def _on(self, key: str, data: bytes, t_recv: float) -> None:
+        try:
+            heard = parse_gps_raw(data)
+        except BadReport as e:
+            self.buoy.refused += 1
+            if self._throttle(kind_of(str(e))):
+                log.warning("reference: GPS_RAW_INT on %s refused: %s: %r", key, e, data[:120])
+            return
+        self.buoy.on_mavlink(heard, t_recv)
 
 
 class LiveReference:

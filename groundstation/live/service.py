@@ -52,7 +52,7 @@ from groundstation.live import config, registry
 from groundstation.live.control import Control
 from groundstation.live.mosaic_live import LiveMosaic
 from groundstation.live.pipeline import FramePoses, Pipeline
-from groundstation.live.reference_live import LiveReference
+from groundstation.live.reference_live import BuoyZenoh, LiveReference
 from groundstation.live.registry import DepthInput, OutputInput, UavInput
 from groundstation.live.sinks.recorder import Recorder, new_recording
 from groundstation.live.sources.rates import needed_rates
@@ -244,6 +244,8 @@ async def serve(cfg: config.RunConfig) -> dict:
             if reference.buoy:  # its GNSS reports come on the UAV's link from its own system
                 uav.not_uav.add(reference.buoy.buoy.system_id)
                 uav.others.append(reference.buoy.on_mavlink)
+                if cfg.reference_zenoh_key:  # and on Zenoh
+                    workers.add(BuoyZenoh(session, cfg.reference_zenoh_key, reference.buoy), INPUTS)
             workers.section("reference", reference.status)
             closers.append(reference.close)
 
