@@ -23,7 +23,14 @@ from ui_browser import available, chromium
 from groundstation.contracts import GROUNDSTATION
 from groundstation.live import config, reference_live
 from groundstation.live.console import summary
-from groundstation.live.reference_live import LiveBuoy, LiveReference, drift_line
+from groundstation.live.reference_live import (
+    BadReport,
+    LiveBuoy,
+    LiveReference,
+    drift_line,
+    malformed,
+    parse_gps_raw,
+)
 from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.reference import read_file
 from groundstation.runtime.zenoh_mavlink import mavlink_json
@@ -444,3 +451,40 @@ def test_a_buoys_reports_on_zenoh(buoy_zenoh, tmp_path):
     assert b["foreign"].get(f"{FOREIGN_SYSID}:1", 0) >= 20 and b["refused"] >= 5
     log = (tmp_path / "run.log").read_text()
     assert "GPS_RAW_INT on mavlink/42/1/GPS_RAW_INT refused: not JSON" in log
+
+
+def test_a_zenoh_report_is_read_or_refused_in_one_line():
+    """BlueOS's JSON of a GPS_RAW_INT (mavlink_json's, the project's encoder for mavlink-server): its header's system
+    and component, its fix type's enum name as the number; NaN or out-of-range coordinates read but malformed; what
+    is not such a message refused naming why."""
+    fields = {"time_usec": 1_700_000_000_000_000, "fix_type": 6, "lat": 634400000, "lon": 103999000}
+    fields |= {"alt": 0, "eph": 70, "epv": 120, "vel": 0, "cog": 0, "satellites_visible": 20}
+    head = {"system_id": 42, "component_id": 3, "sequence": 0, "message_id": 24}
+    good = {"header": head, "message": mavlink_json("GPS_RAW_INT", fields | {"h_acc": 21})}
+    assert good["message"]["fix_type"] == {"type": "GPS_FIX_TYPE_RTK_FIXED"}
+    r = parse_gps_raw(json.dumps(good).encode())
+    assert (r.get_srcSystem(), r.get_srcComponent(), r.fix_type, r.lat, r.h_acc) == (
+        42,
+        3,
+        6,
+        634400000,
+        21,
+    )
+    assert malformed(r) is None
+    nan = json.dumps(good | {"message": good["message"] | {"lat": float("nan")}}).encode()
+    assert "out of range" in malformed(parse_gps_raw(nan))
+    assert "out of range" in malformed(
+        parse_gps_raw(json.dumps(good).replace("634400000", "950000000").encode())
+    )
+    for bad, why in (
+        (b"{", "not JSON"),
+        (json.dumps({"message": good["message"]}).encode(), "no 'header'"),
+        (json.dumps(good | {"message": {"type": "HEARTBEAT"}}).encode(), "is not GPS_RAW_INT"),
+        (
+            json.dumps(good | {"message": good["message"] | {"lon": "10.4"}}).encode(),
+            "lon = '10.4'",
+        ),
+        (json.dumps(good | {"header": {"system_id": True}}).encode(), "system = True"),
+    ):
+        with pytest.raises(BadReport, match=why):
+            parse_gps_raw(bad)
