@@ -67,6 +67,11 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
         1,
     )  # the video decoded once, each frame's UAV pose computed once
     assert err.count("the frames' offset to the telemetry from the video's motion") == 1, err
+    workers = tmp_path / "workers"  # each UUV tracked in a process of its own: the same files
+    assert (
+        main(["process", str(crossing), "--uuv", "all", "--track-workers", "--out", str(workers)])
+        == 0
+    )
 
     for uuv in ids:
         alone = tmp_path / "alone" / uuv
@@ -76,6 +81,7 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
                 uuv,
                 name,
             )
+            assert (workers / uuv / name).read_bytes() == (alone / name).read_bytes(), (uuv, name)
         rows = [
             r
             for r in (alone / "positions.csv").read_text().splitlines()[1:]
@@ -84,7 +90,7 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
         # uuv1 is lost a while in this view (alone too)
         assert sum(",ok," in r for r in rows) > 0.6 * len(rows)
         assert all(",motion," in r for r in rows if ",ok," in r)  # the offset estimated and applied
-    assert len(opened) == 1 + len(ids)
+    assert len(opened) == 2 + len(ids)
     first, second = ((tmp_path / "all" / uuv / FILES[0]).read_bytes() for uuv in ids)
     assert first != second
 

@@ -121,12 +121,14 @@ def tracked_pixels(
     motion: bool = True,
     sizes: list[HeightFromSize | None] | None = None,
     both_ways: bool = False,
+    workers: bool = False,
 ) -> list[Pixels]:
     """:func:`frame_pixels` from the video of several UUVs of one session (``sessions``: the session read as each
     UUV's; ``sizes``: one each or None) tracked in one pass
     (:func:`groundstation.offline.track.track_sessions`): the frames' offset to the telemetry is estimated once,
     from the pass's rotations, and applied to each. One :class:`Pixels` per session, each the same as
-    :func:`frame_pixels` of that session alone."""
+    :func:`frame_pixels` of that session alone. ``workers``: each UUV tracked in a process of its own
+    (:func:`~groundstation.offline.track.track_sessions`)."""
     from groundstation.offline.track import track_sessions
 
     first = sessions[0]
@@ -138,6 +140,7 @@ def tracked_pixels(
         measure_motion=measure,
         sizes=sizes,
         both_ways=both_ways,
+        workers=workers,
     )
     found = (
         offset_from_rotations(first.calibration, first.telemetry, videos[0].rotations)
@@ -339,6 +342,7 @@ def run(args) -> int:
             not args.no_motion_offset,
             sizes,
             both_ways=True,
+            workers=args.track_workers,
         )
     finally:
         for session in sessions:
@@ -432,6 +436,12 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         "says it); off",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--track-workers",
+        action="store_true",
+        help=f"with --uuv {ALL_UUVS}: each UUV tracked in a process of its own, the decoded frames shared (the "
+        "same results; it costs CPU, so it only helps with idle cores; where the platform forks)",
+    )
     add_motion_offset_flag(p)
     p.set_defaults(func=run)
 

@@ -134,7 +134,7 @@ def track_sessions(
     measure_motion: bool = False,
     sizes: list[HeightFromSize | None] | None = None,
     both_ways: bool = False,
-    workers: bool | None = None,
+    workers: bool = False,
 ) -> list[TrackedVideo]:
     """:func:`track_session` of several UUVs of one session (``sessions``: the session read as each UUV's,
     :func:`~groundstation.session.read.load_session` ``uuv``; ``sizes``: one each or None) in one pass over the
@@ -143,9 +143,10 @@ def track_sessions(
     motion measured once (the same ``rotations`` in every result), and every UUV's :class:`UuvTrack` stepped on
     each frame. One result per session, each the same as :func:`track_session` of that session alone.
 
-    ``workers``: each UUV's track stepped in a process of its own, the frames shared
-    (:class:`~groundstation.offline.uuv_workers.TrackWorkers`; None: where the platform forks), else in this
-    process; the same results either way."""
+    ``workers``: each UUV's track stepped in a process of its own where the platform forks, the frames shared
+    (:class:`~groundstation.offline.uuv_workers.TrackWorkers`; ``skyfix process --track-workers``), else in this
+    process; the same results either way. Off by default: on a busy 2-core machine the workers cost CPU and time
+    (``bench/offline_speed.py --uuvs``, ``docs/explanation/performance.md``)."""
     first = sessions[0]
     if first.video_path is None or first.frames is None:
         raise SessionError(f"{first.path}: no video.* with video_frames.csv to track")
@@ -170,11 +171,7 @@ def track_sessions(
 
     cam = first.calibration.camera
     # forked before any thread of this pass starts (the motion meter's, the decoder's, the progress bar's)
-    pool = (
-        TrackWorkers(tracks, 3 * cam.width * cam.height)
-        if (available() if workers is None else workers)
-        else None
-    )
+    pool = TrackWorkers(tracks, 3 * cam.width * cam.height) if workers and available() else None
     meter = MotionThread(cam, every=measured_every(n, period_s)) if measure_motion else None
     first_row = min(track.init_row for track in tracks)
     bar = progress_bar(n - first_row, f"{first.path.name}: tracking", progress)
