@@ -43,15 +43,20 @@ COX_MUNK_MSS = (0.003, 0.00512)
 #: simulator's wind sea (Elfouhaily's spectrum scaled to Cox and Munk, averaged over the top face) keeps
 #: 15–37 % at 2–8 m/s, 1–2 m deep (bench/claim_calibration.py).
 SLOPE_SHARE_UUV = 0.35
+#: ... from this wind up (m/s); below it the share falls in proportion to the wind: a light wind's sea is short
+#: waves (its peak's wavelength grows with the wind squared), so less of its slope is in waves longer than the
+#: vehicle (the simulator's keeps about half the share at 2 m/s that it keeps at 5, bench/claim_calibration.py)
+FULL_SHARE_WIND_MPS = 4.0
 
 
 def wave_slope_sigma_rad(wind_mps) -> np.ndarray:
     """The waves' slope (radians, 1-sigma per axis, North and East alike) that moves the UUV's image in wind
-    ``wind_mps``: half of Cox and Munk's mean square slope per axis, :data:`SLOPE_SHARE_UUV` of it.
-    0 for no wind (a still surface)."""
+    ``wind_mps``: half of Cox and Munk's mean square slope per axis, :data:`SLOPE_SHARE_UUV` of it (less below
+    :data:`FULL_SHARE_WIND_MPS`, in proportion to the wind). 0 for no wind (a still surface)."""
     w = np.asarray(wind_mps, dtype=float)
     a, b = COX_MUNK_MSS
-    return np.where(w > 0, np.sqrt(SLOPE_SHARE_UUV * (a + b * w) / 2.0), 0.0)
+    share = SLOPE_SHARE_UUV * np.clip(w / FULL_SHARE_WIND_MPS, 0.0, 1.0)
+    return np.where(w > 0, np.sqrt(share * (a + b * w) / 2.0), 0.0)
 
 
 def _facet_run(dir_ned, depth_m, n_water, R_facet=None):
