@@ -1,6 +1,6 @@
 """``skyfix process`` against decoding the same video alone, at 1080p and 4K (issue 18).
 
-    .venv/bin/python bench/offline_speed.py [--sizes 1080p,4k] [--repeats 3] [--mil] [--lean] [--uuvs]
+    .venv/bin/python bench/offline_speed.py [--sizes 1080p,4k] [--repeats 3] [--mil] [--lean] [--uuvs [1080p,4k]]
                                             [--tree LABEL=DIR ...]
                                             [--out bench/results/offline_speed.txt]
 
@@ -22,8 +22,10 @@ the telemetry (the estimate, its σ, its thirds'; round 1's under the table): a 
 what it did to the offset beside what it did to the speed. ``skyfix process --help`` is timed too:
 the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
 ``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C DIR``: before and after in the
-same run). ``--uuvs``: also a session with three UUVs (:func:`bench_uuvs`): ``skyfix process --uuv all`` (one pass
-over the video for the three) against decode-only of the same file and against one process per UUV.
+same run). ``--uuvs [SIZES]``: also the session with three UUVs at 1080p (20 s) and 4K (8 s) (:func:`bench_uuvs`):
+``skyfix process --uuv all`` (one pass over the video for the three), with ``--track-workers`` (each UUV tracked in a
+worker process: :mod:`groundstation.offline.uuv_workers`) and ``--uuv uuv1`` alone against decode-only of the same
+file, each ``--tree`` too. Peak RSS is the largest of the command's processes (``os.wait4``), not their sum.
 """
 
 from __future__ import annotations
@@ -42,6 +44,8 @@ ROOT = Path(__file__).resolve().parents[1]
 from emit import emit
 
 SIZES = {"1080p": (1920, 1080, 40), "4k": (3840, 2160, 10)}
+#: The three-UUV sessions (``--uuvs``): (width, height), seconds (4K renders are slow: a short one)
+UUVS_SIZES = {"1080p": ((1920, 1080), 20.0), "4k": ((3840, 2160), 8.0)}
 SCENARIO = """\
 name = "offline_{name}"
 description = "{duration} s of {w}x{h} at 30 fps, nadir hover with a 1 s occlusion: the offline speed benchmark"
@@ -237,46 +241,52 @@ def table(runs: dict, frames: int, duration: float, data: dict) -> list[str]:
     return lines
 
 
-def bench_uuvs(repeats: int, work: Path, data: dict) -> list[str]:
-    """The three-UUV 1080p session of ``bench/uuvs.py`` (two_uuvs_crossing, 20 s, its video as a camera sends it,
-    uuv3 a copy of uuv1's records), interleaved rounds: OpenCV decode-only, ``skyfix process --uuv all`` (the three
-    in one pass), ``--uuv uuv1`` alone, and the three one process each (as before ``--uuv all``: walls and CPU
-    summed, the largest peak RSS)."""
+def bench_uuvs(
+    name: str, repeats: int, trees: dict[str, Path], work: Path, data: dict
+) -> list[str]:
+    """The three-UUV session of ``bench/uuvs.py`` (two_uuvs_crossing, its video as a camera sends it, uuv3 a copy of
+    uuv1's records) at ``name`` (:data:`UUVS_SIZES`), interleaved rounds: OpenCV decode-only of its video, then per
+    source tree ``skyfix process --uuv all`` (the three in one pass over the video) and ``--uuv uuv1`` alone, and
+    this tree's ``--uuv all --track-workers`` (each UUV tracked in a worker process)."""
     from uuvs import ensure_session as uuvs_session
 
-    session = uuvs_session(20.0)
+    (w, h), duration = UUVS_SIZES[name]
+    session = uuvs_session(duration, (w, h))
     video = str(next(session.glob("video.*")))
     frames = len((session / "video_frames.csv").read_text().splitlines()) - 1
     me = [sys.executable, str(Path(__file__).resolve())]
     process = [sys.executable, "-m", "groundstation.cli", "process", str(session), "--quiet"]
-    ids = ("uuv1", "uuv2", "uuv3")
+    variants = {"decode-only OpenCV": (me + ["--decode-only", "opencv", video], ROOT)}
+    for label, tree in trees.items():
+        variants[f"process{label} --uuv all (3 UUVs)"] = (
+            process + ["--uuv", "all", "--out", str(work / "all")],
+            tree,
+        )
+        if tree == ROOT:
+            variants["process --uuv all --track-workers"] = (
+                process + ["--uuv", "all", "--track-workers", "--out", str(work / "workers")],
+                tree,
+            )
+        variants[f"process{label} --uuv uuv1 (1 UUV)"] = (
+            process + ["--uuv", "uuv1", "--out", str(work / "uuv1")],
+            tree,
+        )
     runs: dict[str, list[tuple[float, float, float, str]]] = {}
     loads = []
     for r in range(repeats):
-        one_each = [child(process + ["--uuv", uuv, "--out", str(work / uuv)]) for uuv in ids]
-        rounds = {
-            "decode-only OpenCV": child(me + ["--decode-only", "opencv", video]),
-            "process --uuv all (3 UUVs, one pass)": child(
-                process + ["--uuv", "all", "--out", str(work / "all")]
-            ),
-            "process --uuv uuv1 (1 UUV)": one_each[0],
-            "3 x process --uuv ID (3 passes)": (
-                sum(w for w, *_ in one_each),
-                sum(c for _, c, *_ in one_each),
-                max(m for *_, m, _ in one_each),
-                "",
-            ),
-        }
-        for variant, run in rounds.items():
-            runs.setdefault(variant, []).append(run)
-        loads.append(os.getloadavg()[0])
-        print(f"  1080p 3 UUVs round {r + 1}: load {loads[-1]:.1f}", flush=True)
+        for variant, (cmd, tree) in variants.items():
+            runs.setdefault(variant, []).append(child(cmd, tree))
+            loads.append(os.getloadavg()[0])
+            print(
+                f"  {name} 3 UUVs round {r + 1}: {variant}: {runs[variant][-1][0]:.2f} s (load {loads[-1]:.1f})",
+                flush=True,
+            )
     heading = (
-        f"1080p, 3 UUVs ({session.name}): 1920x1080, 20 s, {frames} frames; median of {repeats} interleaved "
-        f"rounds, {os.cpu_count()} cores, load average (1 min) {min(loads):.1f}-{max(loads):.1f}"
+        f"{name}, 3 UUVs ({session.name}): {w}x{h}, {duration:g} s, {frames} frames; median of {repeats} "
+        f"interleaved rounds, {os.cpu_count()} cores, load average (1 min) {min(loads):.1f}-{max(loads):.1f}"
     )
     data["load_1min"] = loads
-    return [heading, *table(runs, frames, 20.0, data)]
+    return [heading, *table(runs, frames, duration, data)]
 
 
 def main(argv=None) -> int:
@@ -302,8 +312,11 @@ def main(argv=None) -> int:
     )
     p.add_argument(
         "--uuvs",
-        action="store_true",
-        help="also the three-UUV 1080p session: process --uuv all against decode-only and one process per UUV",
+        nargs="?",
+        const="1080p,4k",
+        default="",
+        help="also the three-UUV session at these sizes (default 1080p,4k): process --uuv all and --uuv uuv1 "
+        "against decode-only",
     )
     p.add_argument("--out", type=Path, help="also write the results here")
     p.add_argument("--decode-only", nargs=2, metavar=("KIND", "VIDEO"), help=argparse.SUPPRESS)
@@ -326,8 +339,10 @@ def main(argv=None) -> int:
                 data.setdefault(name, {}),
                 args.lean,
             )
-        if args.uuvs:
-            lines += bench_uuvs(args.repeats, Path(work), data.setdefault("1080p_3uuvs", {}))
+        for name in filter(None, args.uuvs.split(",")):
+            lines += bench_uuvs(
+                name, args.repeats, trees, Path(work), data.setdefault(f"{name}_3uuvs", {})
+            )
     emit(lines, args.out, data)
     return 0
 

@@ -99,17 +99,18 @@ OTHER = {
 NOT_TRACKED = ("lost", "awaiting_target", "released")
 
 
-def ensure_session(duration_s: float) -> Path:
-    """The 1080p30 two_uuvs_crossing session, generated once, its video as a camera sends it, with ``uuvs/uuv3/``
-    (a copy of uuv1's records: a third tracker session on the same vehicle)."""
-    path = BENCH_DIR / f"uuvs_1080p_{duration_s:g}s"
+def ensure_session(duration_s: float, size: tuple[int, int] = SIZE) -> Path:
+    """The two_uuvs_crossing session at 30 fps (``size``: width, height; 1080p by default), generated once, its video
+    as a camera sends it, with ``uuvs/uuv3/`` (a copy of uuv1's records: a third tracker session on the same
+    vehicle)."""
+    path = BENCH_DIR / f"uuvs_{size[1]}p_{duration_s:g}s"
     if not (path / "video.ts").exists():
         from sim_fixtures.generate import generate
         from sim_fixtures.scenario import load_scenario, with_overrides
 
         sc = with_overrides(
             load_scenario(SCENARIO),
-            camera={"width": SIZE[0], "height": SIZE[1]},
+            camera={"width": size[0], "height": size[1]},
             duration_s=duration_s,
         )
         print(f"generating {path} (once) ...", flush=True)
