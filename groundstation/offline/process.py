@@ -431,9 +431,9 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         "--reference",
         choices=REFERENCE_MODES,
         default="auto",
-        help="auto (default): where the session has a reference.toml (a surveyed marker of known position), find "
-        "the marker in the video and correct every fix by the drone's absolute offset it shows (positions.csv "
-        "says it); off",
+        help="auto (default): where the session has a reference.toml (a surveyed marker of known position, or a "
+        "buoy or boat reporting its GNSS from the system_id it names), find the reference in the video and correct "
+        "every fix by the drone's absolute offset it shows (positions.csv says it); off",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument(
