@@ -18,7 +18,7 @@ from groundstation.session.read import load_session
 from groundstation.video.file import open_video
 from localizer.pose import camera_pose
 from localizer.tracking.session import TrackingSession
-from localizer.tracking.sigma import pixel_sigma_px
+from localizer.tracking.sigma import JITTER_RATE, jitter2_px2, pixel_sigma_px
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
@@ -39,6 +39,29 @@ def test_each_of_the_trackers_signs_of_doubt_widens_the_sigma():
     assert pixel_sigma_px(60.0, 0.95, 8.0, 10.0) == pytest.approx(2.0 * calm)
     assert pixel_sigma_px(30.0, math.nan, 4.0, 10.0) > calm  # a tracker without a score
     assert math.isnan(pixel_sigma_px(math.nan, 0.95, 4.0, 10.0))
+    # a track that jitters against its predictions through waves (a slide off the vehicle) ...
+    assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, jitter_px=2.0, waves=1.0) > 3.0 * calm
+    assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, jitter_px=2.0, waves=0.5) > 1.5 * calm
+    # ... not on a still surface (a noisy telemetry's prediction jitters)
+    assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, jitter_px=2.0, waves=0.0) == calm
+
+
+def test_the_jitter_is_the_running_rms_per_axis_of_the_follows_offsets():
+    """The first follows: their mean square (per axis); then a running mean at JITTER_RATE, so a slide's jump
+    widens the sigma at once and the widening fades over the following steady follows."""
+    j2 = jitter2_px2(0.0, 1, 3.0, 4.0)
+    assert j2 == pytest.approx(12.5)  # (3² + 4²) / 2
+    assert jitter2_px2(j2, 2, 0.0, 0.0) == pytest.approx(6.25)
+    steady = 1.0
+    for n in range(3, 200):
+        steady = jitter2_px2(steady, n, 1.0, 1.0)
+    assert steady == pytest.approx(1.0)
+    jumped = jitter2_px2(steady, 200, 10.0, 0.0)
+    assert jumped == pytest.approx(1.0 + JITTER_RATE * (50.0 - 1.0))
+    after = jumped
+    for n in range(201, 231):
+        after = jitter2_px2(after, n, 1.0, 1.0)
+    assert steady < after < jumped
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")

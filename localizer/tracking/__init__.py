@@ -99,6 +99,9 @@ class Matcher(Protocol):
     def resume(self, match: Match) -> None:
         """Tracking again from a confirmed candidate."""
 
+    def waves(self) -> float:
+        """How far its matches wobble as through wind waves: 0 (a still surface, or a matcher that cannot tell) to 1."""
+
 
 TRACKERS = ("default", "ncc", "mil", "kcf", "csrt")  # "default" is "ncc"
 #: Backends that never report a loss (OpenCV's MIL reports a match even after drifting off the UUV): fine offline

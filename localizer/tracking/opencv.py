@@ -79,5 +79,9 @@ class OpenCVMatcher:
         )
         return m if near else Match(False, m.score, m.u, m.v)
 
+    def waves(self) -> float:
+        """No reading of the sea state (see :class:`~localizer.tracking.Matcher`)."""
+        return 0.0
+
     def resume(self, match: Match) -> None:
         pass

@@ -54,7 +54,7 @@ from .predict import (
     project_uuv,
     top_face_pixel,
 )
-from .sigma import pixel_sigma_px
+from .sigma import jitter2_px2, pixel_sigma_px
 from .target import Target, TargetParams, TargetState
 
 #: A sighting's located position is reused for the predictions of this many frames, then located afresh.
@@ -239,7 +239,8 @@ class TrackingSession:
     # -- internals ----------------------------------------------------------------------------------
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
         """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
-        the match's score, the prediction's window, the time since the UUV was (re)acquired, how it was chosen)."""
+        the match's score, the prediction's window, the time since the UUV was (re)acquired, how it was chosen, the
+        follows' jitter against their predictions through waves)."""
         if self.state is not self._noted_state:
             self._noted_state, self.since_t, self.frames_in_state = self.state, t_unix, 0
         self.frames_in_state += 1
@@ -248,6 +249,11 @@ class TrackingSession:
             self._length_px = p.width_px
         if result.ok:
             window = p.sigma_px if p is not None else math.nan
+            if p is not None and math.isfinite(p.u + p.v):
+                self._follows += 1
+                self._jitter2 = jitter2_px2(
+                    self._jitter2, self._follows, result.u - p.u, result.v - p.v
+                )
             result = replace(
                 result,
                 sigma_px=pixel_sigma_px(
@@ -256,6 +262,8 @@ class TrackingSession:
                     window,
                     t_unix - self.since_t,
                     self._outlined,
+                    math.sqrt(self._jitter2),
+                    self.target.waves,
                 ),
             )
         self.last = result
@@ -272,6 +280,8 @@ class TrackingSession:
             tuple[float, float, float, float]
         ] = []  # recent sightings: t, residual u, v, px_per_m
         self.speed_mps = math.nan  # how fast the UUV was last seen moving (NaN: not known)
+        # the follows' mean square jitter against their predictions (pixels², per axis) and their count
+        self._jitter2, self._follows = 0.0, 0
 
     def _locate(self, one: CameraPose, point) -> tuple[tuple[float, float] | None, float]:
         """The pixel's position at the UUV's depth and the image scale there: ``((lat, lon) or None, px_per_m)``."""

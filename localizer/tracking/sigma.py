@@ -21,7 +21,16 @@ a while. :func:`pixel_sigma_px` adds these terms in quadrature:
 - the selection: a target skyfix outlined itself (a click, a live box snapped to the object in
   it, or the UUV's own position estimate: :func:`~localizer.tracking.detect.outline`) carries
   the outline's error, ``OUTLINED_SHARE × length_px``, for as long as it is tracked (the
-  template holds the point it started on); a box given as exact (``init_bbox``) is taken as drawn.
+  template holds the point it started on); a box given as exact (``init_bbox``) is taken as drawn;
+- the jitter: ``JITTER_GAIN`` × the follows' recent jitter against their predictions, the running RMS per axis
+  of each match's offset from the pixel the camera's motion predicted it at (:func:`jitter2_px2`), × how far the
+  matches wobble as through waves (the matcher's reading, 0 on a still surface: there a noisy telemetry's
+  prediction jitters more than the match, which is then a fraction of a pixel off). Through wind
+  waves the UUV's image wobbles, breaks up and is at times matched beside the vehicle: the match's error is a
+  share of the vehicle's size that no score tells (the smoothed template matches as well with the vehicle in a
+  corner of its square), but the track then moves against the camera's motion as the UUV itself does not. The
+  errors last over several frames (a wave's period, a slide onto the water beside the vehicle), so the
+  frame-to-frame jitter shows a part of them only, hence a gain above the √½ of white errors.
 
 The constants are calibrated on generated sessions against the exact pixel the simulator
 writes (``bench/pixel_sigma.py``; docs/explanation/tracking.md, "How sure the pixel is", explains them):
@@ -30,7 +39,10 @@ their DRMS (√2·σ, h_acc's reading): 91-100 % per session, 98.7 % pooled; the
 clicks and acquisitions beside the UUV's shadow and elsewhere (2-6 px off a vehicle 28 px
 long). Errors in those sessions are mostly a constant offset per session (where the reference
 point was taken), so the share is near 100 % in most and lower in a few; the window's and the
-(re)acquisition's terms did not show in them (no lock went to a look-alike) and are set small.
+(re)acquisition's terms did not show in them (no lock went to a look-alike) and are set small. The jitter's on
+``bench/tracker_waves.py``'s renders through wind waves (2-8 m/s, the UUV 15-38 px, 1-3.4 m deep), against the
+pixel seen through the waves: its results file has the shares within twice the DRMS, of all the frames reported
+``ok`` and of those more than half the UUV's size off it.
 Pure: no I/O.
 """
 
@@ -48,6 +60,10 @@ WINDOW_SHARE = 0.05  # a wider window adds this share of its 1-sigma beyond that
 ACQUIRED_SHARE = 0.03  # just (re)acquired: this share of the length ...
 ACQUIRED_S = 1.0  # ... fading with this time constant (s)
 OUTLINED_SHARE = 0.08  # a target skyfix outlined (a click, a live box, the UUV's own estimate): this share of the length
+JITTER_GAIN = 4.0  # the follows' jitter against their predictions (RMS per axis), times this
+JITTER_RATE = (
+    0.1  # ... a running mean square at this rate per follow (a running mean over the first ones)
+)
 
 
 def pixel_sigma_px(
@@ -56,13 +72,17 @@ def pixel_sigma_px(
     window_px: float,
     since_acquired_s: float,
     outlined: bool = False,
+    jitter_px: float = 0.0,
+    waves: float = 0.0,
 ) -> float:
     """1-sigma (pixels) of each of the tracked pixel's u and v (see the module doc).
 
     ``length_px``: the vehicle's apparent length; ``score``: the match's (0..1; NaN: the tracker has none);
     ``window_px``: the 1-sigma of the prediction it was sought with (NaN: none); ``since_acquired_s``: time since
     the UUV was selected or (re)acquired; ``outlined``: the target was outlined by skyfix (a click, a live box, a
-    prior), not a box given as exact. NaN when the length is unknown.
+    prior), not a box given as exact; ``jitter_px``: the follows' recent jitter against their predictions (RMS per
+    axis, pixels: the square root of :func:`jitter2_px2`); ``waves``: how far the matches wobble as through waves
+    (0..1, :meth:`~localizer.tracking.Matcher.waves`). NaN when the length is unknown.
     """
     if not length_px > 0:
         return math.nan
@@ -77,4 +97,12 @@ def pixel_sigma_px(
     )
     fresh = ACQUIRED_SHARE * length_px * math.exp(-max(since_acquired_s, 0.0) / ACQUIRED_S)
     selected = OUTLINED_SHARE * length_px if outlined else 0.0
-    return math.sqrt(max(match, FLOOR_PX) ** 2 + wide**2 + fresh**2 + selected**2)
+    jitter = JITTER_GAIN * min(max(waves, 0.0), 1.0) * jitter_px
+    return math.sqrt(max(match, FLOOR_PX) ** 2 + wide**2 + fresh**2 + selected**2 + jitter**2)
+
+
+def jitter2_px2(jitter2: float, follows: int, du_px: float, dv_px: float) -> float:
+    """The follows' mean square jitter per axis (pixels²) once a follow ``(du_px, dv_px)`` off its prediction is
+    counted: a running mean square at ``JITTER_RATE`` (a running mean over the first ones; ``follows`` counts this
+    one), from ``jitter2``, the mean before it."""
+    return jitter2 + max(JITTER_RATE, 1.0 / follows) * (0.5 * (du_px**2 + dv_px**2) - jitter2)

@@ -101,6 +101,12 @@ class Target:
         self._matcher, self._hits = None, []
         self.state = TargetState.AWAITING_TARGET
 
+    @property
+    def waves(self) -> float:
+        """How far the matches wobble as through wind waves, 0 to 1 (:meth:`~localizer.tracking.Matcher.waves`; 0
+        without a matcher)."""
+        return self._matcher.waves() if self._matcher is not None else 0.0
+
     # -- per frame -------------------------------------------------------------------------------
     def update(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
         """The UUV in the next frame (see the module doc for the states)."""

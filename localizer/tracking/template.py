@@ -698,6 +698,10 @@ class TemplateMatcher:
             max(0.0, (scatter - self.p.wobble_flat) / (self.p.wobble_waves - self.p.wobble_flat)),
         )
 
+    def waves(self) -> float:
+        """The :class:`~localizer.tracking.Matcher`'s reading of the sea state: :meth:`_waves`."""
+        return self._waves()
+
     def _in_waves(self) -> bool:
         """Whether the UUV is judged as seen through waves (:meth:`_stands_out`): from when :meth:`_waves` reaches
         ``wave_mode`` until it is nil again (the scatter eases as the template learns the wave-distorted mean)."""
