@@ -808,6 +808,11 @@ class ReferenceStatus(Section):
     )
     every_s: float = Field(description="seconds of video between the frames searched")
     corrected: int = Field(description="fixes the offset was added to")
+    kept_own: int = Field(
+        0,
+        description="fixes kept as they were: their own claim (h_acc) was smaller than the corrected one's "
+        "(a drone whose pose is already better than the reference's offset)",
+    )
 
 
 class HeightFromSizeStatus(Section):

@@ -18,7 +18,9 @@ A corrected fix's claim (:func:`correct`): the UAV position's term goes (the off
 tilt, heading and height errors, shared by the reference's sightings and the UUV's fix, what is left is what they
 move the two differently: the difference of the UUV's and the reference's sensitivities (:func:`pose_jacobian`,
 the latter averaged over the window's sightings, as the offset is) times the calibration's sigmas; the fix's own
-terms (pixel, depth, time, waves, extrapolated attitude) stay; the offset's sigma is added.
+terms (pixel, depth, time, waves, extrapolated attitude) stay; the offset's sigma is added. A fix is corrected only
+where that claim is smaller than its own (:func:`applied`): a drone whose pose is already better than the
+reference's offset (RTK, a reference seen far off or briefly) keeps its own fix.
 
 North/east metres, seconds on the station clock.
 """
@@ -205,9 +207,14 @@ def offsets(t_sight, offset_ne_m, jacobian, t_unix, ref_sigma_m: float = 0.0) ->
     return Offsets(t, out, sig, count, mean_jac.reshape(len(t), 2, 4))
 
 
+def applied(fixes: Fixes, better: Fixes) -> np.ndarray:
+    """Where :func:`correct` moved ``fixes`` into ``better`` (its claim smaller than the fix's own), (N,) bool."""
+    return better.h_acc_m < fixes.h_acc_m
+
+
 def correct(cal: Calibration, pose: CameraPose, fixes: Fixes, found: Offsets) -> Fixes:
-    """``fixes`` (made from ``pose`` and ``cal``) moved by the offset where there is one, with the claim of the module
-    doc; elsewhere unchanged."""
+    """``fixes`` (made from ``pose`` and ``cal``) moved by the offset where there is one and its claim of the module
+    doc is smaller than the fix's own; elsewhere unchanged."""
     use = (fixes.status == "ok") & np.all(np.isfinite(found.jacobian), axis=(1, 2))
     out = dataclasses.replace(fixes)
     for name in ("lat", "lon", "h_acc_m", "sigma_n_m", "sigma_e_m", "cov_ne_m2", "sigma_uav_m"):
@@ -232,7 +239,12 @@ def correct(cal: Calibration, pose: CameraPose, fixes: Fixes, found: Offsets) ->
     cov[:, 0, 0] += alone.sigma_n_m[use] ** 2 + s[:, 0] ** 2
     cov[:, 1, 1] += alone.sigma_e_m[use] ** 2 + s[:, 1] ** 2
     cov[:, 0, 1] += alone.cov_ne_m2[use]
-    o = found.offset_ne_m[use]
+    # the reference's claim against the fix's own: only a smaller one is taken
+    smaller = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1]) < fixes.h_acc_m[use]
+    use[use] = smaller
+    cov, s, o = cov[smaller], s[smaller], found.offset_ne_m[use]
+    if not use.any():
+        return out
     out.lat[use], out.lon[use], _ = ned_to_geodetic(
         o[:, 0], o[:, 1], 0.0, fixes.lat[use], fixes.lon[use], 0.0
     )

@@ -14,7 +14,7 @@ from groundstation.offline.reference import read_reference
 from groundstation.offline.reference import sightings as marker_sightings
 from groundstation.session.read import load_session, read_table
 from localizer.pose import camera_pose
-from localizer.reference import BLOCK_S, WINDOW_S, correct, offsets, sightings
+from localizer.reference import BLOCK_S, WINDOW_S, applied, correct, offsets, sightings
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
@@ -62,6 +62,33 @@ def test_plain_gnss_drone_with_a_marker_in_view(tmp_path):
     assert np.mean(after) < 0.2 * np.mean(before), (np.mean(after), np.mean(before))
     assert np.mean(after <= 2 * better.h_acc_m[ok]) >= 0.9
     assert np.all(better.h_acc_m[ok] < fixes.h_acc_m[ok])
+
+
+def test_an_rtk_drone_keeps_its_own_fixes_where_they_claim_less(tmp_path):
+    """sensors_rtk_nadir (RTK, the same biases) with the marker as in the plain drone's test: the reference's offset is
+    taken only by fixes whose own claim is larger than the corrected one; the others are left exactly as they were,
+    so the RTK drone's absolute MAE is not made worse by a reference less sure than its own position."""
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_rtk_nadir.toml")
+    sc = with_overrides(sc, duration_s=40.0, fps=5.0, marker={"enabled": True})
+    generate(sc, tmp_path, video=False)
+    s = load_session(tmp_path)
+    fixes = process.process_session(s, use_track=True)
+    ok = fixes.status == "ok"
+    cal, tel = s.calibration, s.telemetry
+    t_m, u_m, v_m = bench.marker_track(tmp_path, np.random.default_rng(1), 0.5)
+    ref, _ = read_reference(s)
+    off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
+    found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
+    better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
+    moved = applied(fixes, better)
+    assert moved.mean() < 0.5, moved.mean()
+    kept = ~moved
+    assert np.array_equal(better.lat[kept], fixes.lat[kept], equal_nan=True)
+    assert np.array_equal(better.h_acc_m[kept], fixes.h_acc_m[kept], equal_nan=True)
+    assert np.all(better.h_acc_m[moved] < fixes.h_acc_m[moved])
+    before = np.hypot(*error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth)[ok].T)
+    after = np.hypot(*error_ne_m(better.t_unix, better.lat, better.lon, ok, s.truth)[ok].T)
+    assert np.mean(after) <= 1.1 * np.mean(before), (np.mean(after), np.mean(before))
 
 
 def test_a_rendered_marker_is_found_and_corrects_a_plain_gnss_drone(tmp_path):

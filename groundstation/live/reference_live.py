@@ -285,6 +285,9 @@ class LiveReference:
         self.searched = 0  # frames searched
         self.seen = 0  # frames the marker was found in
         self.corrected = 0  # fixes the offset was added to
+        self.kept_own = (
+            0  # fixes whose own claim was smaller than the corrected one's (kept as they were)
+        )
         # (t_unix, offset (2,), jacobian (2, 4), the reference's 1-sigma per axis) of each sighting: appended by the
         # search, read by correct()
         self._sightings: deque[tuple[float, np.ndarray, np.ndarray, float]] = deque()
@@ -366,8 +369,13 @@ class LiveReference:
             )
         if not applying:
             return fix
+        own = as_fixes(fix)
+        moved = reference.correct(self.cal, pose, own, found)
+        if not reference.applied(own, moved)[0]:
+            self.kept_own += 1
+            return fix
         self.corrected += 1
-        better = reference.correct(self.cal, pose, as_fixes(fix), found)[0]
+        better = moved[0]
         (n, e), (sn, se) = found.offset_ne_m[0], found.sigma_ne_m[0]
         return dataclasses.replace(
             better,
@@ -408,6 +416,7 @@ class LiveReference:
             "no_pose": self._search.no_pose,
             "every_s": self.every_s,
             "corrected": self.corrected,
+            "kept_own": self.kept_own,
         }
 
     def close(self) -> None:

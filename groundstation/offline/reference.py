@@ -308,7 +308,7 @@ def apply(session: Session, fixes: Fixes, mode: str, correction=None):
         f"{offsets.describe()}",
         file=sys.stderr,
     )
-    used = (fixes.status == "ok") & np.isfinite(offsets.offset_ne_m[:, 0])
+    used = reference.applied(fixes, better)
     cells = {
         c: [f"{x:.4f}" if ok else "" for x, ok in zip(col, used)]
         for c, col in zip(COLUMNS, [*offsets.offset_ne_m.T, *offsets.sigma_ne_m.T])
