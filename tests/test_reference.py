@@ -40,23 +40,29 @@ def test_offset_is_the_windows_mean_with_its_standard_error():
     assert BLOCK_S < WINDOW_S
 
 
-def test_plain_gnss_drone_with_a_marker_in_view(tmp_path):
-    """sensors_plain_nadir for 40 s at 5 fps (plain GNSS walk, AHRS and compass biases), a surveyed marker on the
-    floor ([marker], its pixel the simulator's + 0.5 px): the absolute MAE at most a fifth of the uncorrected one, and the claim still covers: at least 90 % within
-    2 h_acc, each h_acc smaller than before."""
-    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_plain_nadir.toml")
+def _marker_corrected(tmp_path, scenario: str):
+    """``scenario`` for 40 s at 5 fps with the marker, geometry only (its pixel the simulator's + 0.5 px): the session,
+    its fixes, which marker frames were seen, and the fixes corrected by the marker's offset."""
+    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / f"{scenario}.toml")
     sc = with_overrides(sc, duration_s=40.0, fps=5.0, marker={"enabled": True})
     generate(sc, tmp_path, video=False)
     s = load_session(tmp_path)
     fixes = process.process_session(s, use_track=True)
-    ok = fixes.status == "ok"
     cal, tel = s.calibration, s.telemetry
     t_m, u_m, v_m = bench.marker_track(tmp_path, np.random.default_rng(1), 0.5)
     ref, _ = read_reference(s)
     off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
-    assert seen.mean() > 0.9
     found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
-    better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
+    return s, fixes, seen, correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
+
+
+def test_plain_gnss_drone_with_a_marker_in_view(tmp_path):
+    """sensors_plain_nadir for 40 s at 5 fps (plain GNSS walk, AHRS and compass biases), a surveyed marker on the
+    floor ([marker], its pixel the simulator's + 0.5 px): the absolute MAE at most a fifth of the uncorrected one, and the claim still covers: at least 90 % within
+    2 h_acc, each h_acc smaller than before."""
+    s, fixes, seen, better = _marker_corrected(tmp_path, "sensors_plain_nadir")
+    ok = fixes.status == "ok"
+    assert seen.mean() > 0.9
     before = np.hypot(*error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth)[ok].T)
     after = np.hypot(*error_ne_m(better.t_unix, better.lat, better.lon, ok, s.truth)[ok].T)
     assert np.mean(after) < 0.2 * np.mean(before), (np.mean(after), np.mean(before))
@@ -68,18 +74,8 @@ def test_an_rtk_drone_keeps_its_own_fixes_where_they_claim_less(tmp_path):
     """sensors_rtk_nadir (RTK, the same biases) with the marker as in the plain drone's test: the reference's offset is
     taken only by fixes whose own claim is larger than the corrected one; the others are left exactly as they were,
     so the RTK drone's absolute MAE is not made worse by a reference less sure than its own position."""
-    sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / "sensors_rtk_nadir.toml")
-    sc = with_overrides(sc, duration_s=40.0, fps=5.0, marker={"enabled": True})
-    generate(sc, tmp_path, video=False)
-    s = load_session(tmp_path)
-    fixes = process.process_session(s, use_track=True)
+    s, fixes, _, better = _marker_corrected(tmp_path, "sensors_rtk_nadir")
     ok = fixes.status == "ok"
-    cal, tel = s.calibration, s.telemetry
-    t_m, u_m, v_m = bench.marker_track(tmp_path, np.random.default_rng(1), 0.5)
-    ref, _ = read_reference(s)
-    off, seen, jac = sightings(cal, camera_pose(cal, tel, t_m), u_m, v_m, ref)
-    found = offsets(t_m[seen], off[seen], jac[seen], fixes.t_unix)
-    better = correct(cal, camera_pose(cal, tel, fixes.t_unix), fixes, found)
     moved = applied(fixes, better)
     assert moved.mean() < 0.5, moved.mean()
     kept = ~moved
