@@ -113,14 +113,22 @@ class Truth:
     # (N, 3) a buoy's marked top's centre ([buoy]), if there is one
     buoy_ned: np.ndarray | None = None
     buoy_box: Box | None = None  # ... its hull
+    # a third vehicle ([third_uuv]), as the second's fields
+    third_ned: np.ndarray | None = None
+    third_box: Box | None = None
+    third_u: np.ndarray | None = None
+    third_v: np.ndarray | None = None
+    third_wave_error_ne: np.ndarray | None = None
 
     def others(self, i: int) -> tuple[Box, ...]:
-        """The look-alikes at frame ``i``, and the buoy last."""
-        second = (
-            () if self.second_box is None else (replace(self.second_box, ned=self.second_ned[i]),)
+        """The look-alikes at frame ``i`` (the second vehicle, the third, the rock), and the buoy last."""
+        moving = tuple(
+            replace(box, ned=ned[i])
+            for box, ned in ((self.second_box, self.second_ned), (self.third_box, self.third_ned))
+            if box is not None
         )
         buoy = () if self.buoy_box is None else (replace(self.buoy_box, ned=self.buoy_ned[i]),)
-        return second + (() if self.rock is None else (self.rock,)) + buoy
+        return moving + (() if self.rock is None else (self.rock,)) + buoy
 
     def view(self, i: int) -> View:
         return View(
@@ -276,6 +284,12 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
         second_ned = motion.second_ned(tau)
     if sc.second_uuv.role == "uuv":
         second_u, second_v, second_wave_error = pixel(second_ned)
+    third = third_ned = third_u = third_v = third_wave_error = None
+    if sc.third_uuv.enabled:
+        third_ned = motion.second_ned(tau, "third_uuv")
+        third = Box(third_ned[0], motion.third_heading, sc.uuv.size_m, "vehicle")
+    if sc.third_uuv.role == "uuv":
+        third_u, third_v, third_wave_error = pixel(third_ned)
     if sc.rock.enabled:
         rock = Box(motion.rock_ned, motion.rock_heading, sc.rock.size_m, "rock")
     buoy = buoy_box = None
@@ -301,6 +315,11 @@ def frame_truth(sc: Scenario, motion: Motion, camera: SimCamera) -> Truth:
         second_wave_error,
         buoy,
         buoy_box,
+        third_ned,
+        third,
+        third_u,
+        third_v,
+        third_wave_error,
     )
 
 
@@ -737,33 +756,38 @@ def _write_second_uuv(
     motion: Motion,
     clock: Clock,
     boxes: list | None,
+    which: str = "second",
 ) -> None:
     """A second UUV's records in ``uuvs/<id>/``; ``boxes`` its bounding box per frame where it can be seen (None
-    without video: then it counts as seen wherever it is in the image, and has no first box)."""
-    folder = out / UUVS_DIR / sc.second_uuv.id
+    without video: then it counts as seen wherever it is in the image, and has no first box). ``which`` "third":
+    the third UUV's (``[third_uuv]``)."""
+    key = f"{which}_uuv"
+    ned, u, v = (getattr(truth, f"{which}_{k}") for k in ("ned", "u", "v"))
+    folder = out / UUVS_DIR / getattr(sc, key).id
     folder.mkdir(parents=True, exist_ok=True)
     _write_depth(
         folder / "depth.jsonl",
         depth_records(
-            sc, lambda tau: motion.second_ned(tau)[..., 2], clock, ("second_depth", "second_link")
+            sc,
+            lambda tau: motion.second_ned(tau, key)[..., 2],
+            clock,
+            (f"{which}_depth", f"{which}_link"),
         ),
     )
-    _write_truth(folder / "truth.csv", sc, truth.t_unix, truth.second_ned)
+    _write_truth(folder / "truth.csv", sc, truth.t_unix, ned)
     in_view = _in_view(boxes, np.ones(len(truth.t_unix), bool))
-    _write_track(
-        folder / "track.csv", camera, truth.t_unix, truth.second_u, truth.second_v, in_view
-    )
+    _write_track(folder / "track.csv", camera, truth.t_unix, u, v, in_view)
     _write_truth_waves(
         folder / TRUTH_WAVES_CSV,
         camera,
         truth.t_unix,
-        truth.second_u,
-        truth.second_v,
+        u,
+        v,
         in_view,
-        truth.second_wave_error_ne,
+        getattr(truth, f"{which}_wave_error_ne"),
     )
     init = None if boxes is None else _first_box(boxes, truth.t_unix, camera)
-    (folder / UUV_TOML).write_text(_uuv_toml(sc, sc.second_uuv.id, init))
+    (folder / UUV_TOML).write_text(_uuv_toml(sc, getattr(sc, key).id, init))
 
 
 @dataclass(frozen=True)
@@ -858,6 +882,9 @@ def generate(
         _write_second_uuv(
             out, sc, camera, truth, motion, clock, None if seen is None else [b[1] for b in seen]
         )
+    if sc.third_uuv.role == "uuv":  # its box after the second vehicle's (Truth.others)
+        boxes = None if seen is None else [b[2] for b in seen]
+        _write_second_uuv(out, sc, camera, truth, motion, clock, boxes, "third")
     if scenario_text is not None:
         (out / "scenario.toml").write_text(scenario_text)
     return Report(out, len(truth.t_unix), render_s, time.perf_counter() - t0, messages)

@@ -68,13 +68,9 @@ class Motion:
         else:
             self._axis_offset_ne_m = self._axis_offset()
             self._centre_ne_m = np.array([v.north_m, v.east_m]) - self._axis_offset_ne_m
-        s = sc.second_uuv
-        course = self.uuv_heading(s.pass_at_s) + np.radians(s.course_rel_deg)
-        self.second_heading = float(wrap_pi(course))
-        self._second_dir_ne = np.array([np.cos(course), np.sin(course)])
-        self._second_at_pass_ne_m = self.uuv_ne(s.pass_at_s) + s.miss_m * np.array(
-            [-np.sin(course), np.cos(course)]
-        )
+        self._lines = {key: self._line(getattr(sc, key)) for key in ("second_uuv", "third_uuv")}
+        self.second_heading = self._lines["second_uuv"][0]
+        self.third_heading = self._lines["third_uuv"][0]
         r = sc.rock
         self.rock_ned = np.append(
             self.uuv_ne(r.at_s) + np.asarray(r.offset_m), sc.site.floor_depth_m - r.size_m[2]
@@ -237,15 +233,21 @@ class Motion:
         return np.concatenate([self.uuv_ne(tau_s), self.uuv_depth_m(tau_s)[..., None]], axis=-1)
 
     # --- the look-alikes ----------------------------------------------------------------------------
-    def second_ned(self, tau_s):
+    def _line(self, s):
+        """A passing vehicle's line (``[second_uuv]``'s or ``[third_uuv]``'s table ``s``): its heading (radians), its
+        direction (north, east) and its place at ``pass_at_s`` (north, east, m)."""
+        course = self.uuv_heading(s.pass_at_s) + np.radians(s.course_rel_deg)
+        at_pass = self.uuv_ne(s.pass_at_s) + s.miss_m * np.array([-np.sin(course), np.cos(course)])
+        return float(wrap_pi(course)), np.array([np.cos(course), np.sin(course)]), at_pass
+
+    def second_ned(self, tau_s, key: str = "second_uuv"):
         """The second vehicle's reference point (centre of its top face), world NED (..., 3): a straight line at
-        ``speed_mps`` through its place at ``pass_at_s``; its heading is :attr:`second_heading` (radians)."""
-        s = self.sc.second_uuv
+        ``speed_mps`` through its place at ``pass_at_s``; its heading is :attr:`second_heading` (radians).
+        ``key`` "third_uuv": the third vehicle's (:attr:`third_heading`)."""
+        s = getattr(self.sc, key)
+        _, direction_ne, at_pass_ne_m = self._lines[key]
         tau = np.asarray(tau_s, dtype=float)
-        ne = (
-            self._second_at_pass_ne_m
-            + (s.speed_mps * (tau - s.pass_at_s))[..., None] * self._second_dir_ne
-        )
+        ne = at_pass_ne_m + (s.speed_mps * (tau - s.pass_at_s))[..., None] * direction_ne
         return np.concatenate([ne, np.full(tau.shape + (1,), s.depth_m)], axis=-1)
 
     # --- placement -----------------------------------------------------------------------------
@@ -277,11 +279,12 @@ class Motion:
 
 
 def first_contact(sc: Scenario, motion: Motion, other: str, step_s: float = 0.02):
-    """The first scenario time (telemetry lead included) at which the UUV and ``other`` ("the second vehicle" or
-    "the rock", when enabled) might touch, or None: their depth spans overlap while their centres are closer than
+    """The first scenario time (telemetry lead included) at which the UUV and ``other`` ("the second vehicle", "the
+    third vehicle" or "the rock", when enabled) might touch, or None: their depth spans overlap while their centres are closer than
     the sum of their half diagonals (a conservative test: boxes that pass it never touch)."""
     v = sc.uuv
-    if other == "the second vehicle" and sc.second_uuv.enabled:
+    key = {"the second vehicle": "second_uuv", "the third vehicle": "third_uuv"}.get(other)
+    if key is not None and getattr(sc, key).enabled:
         size, top = v.size_m, None
     elif other == "the rock" and sc.rock.enabled:
         size, top = sc.rock.size_m, motion.rock_ned
@@ -289,7 +292,7 @@ def first_contact(sc: Scenario, motion: Motion, other: str, step_s: float = 0.02
         return None
     tau = np.arange(-sc.telemetry.lead_s, sc.duration_s + step_s, step_s)
     uuv = motion.uuv_ned(tau)
-    there = motion.second_ned(tau) if top is None else np.broadcast_to(top, uuv.shape)
+    there = motion.second_ned(tau, key) if top is None else np.broadcast_to(top, uuv.shape)
     reach = 0.5 * (np.hypot(v.size_m[0], v.size_m[1]) + np.hypot(size[0], size[1]))
     close = np.hypot(*(uuv[:, :2] - there[:, :2]).T) < reach
     overlap = (uuv[:, 2] < there[:, 2] + size[2]) & (there[:, 2] < uuv[:, 2] + v.size_m[2])

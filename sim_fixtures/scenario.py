@@ -712,6 +712,10 @@ class Scenario:
     telemetry: TelemetrySpec = Field(default_factory=TelemetrySpec)
     render: RenderSpec = Field(default_factory=RenderSpec)
     second_uuv: SecondUuvSpec = Field(default_factory=SecondUuvSpec)
+    third_uuv: SecondUuvSpec = Field(
+        default_factory=lambda: SecondUuvSpec(id="uuv3"),
+        description="a third vehicle, as [second_uuv] (which it needs enabled) on a line of its own",
+    )
     rock: RockSpec = Field(default_factory=RockSpec)
     marker: MarkerSpec = Field(default_factory=MarkerSpec)
     buoy: BuoySpec = Field(default_factory=BuoySpec)
@@ -771,13 +775,23 @@ class Scenario:
             raise Invalid("buoy.enabled", True, "one reference a session: [marker] is enabled too")
         if self.second_uuv.role == "uuv" and not self.second_uuv.enabled:
             raise Invalid("second_uuv.role", "uuv", "a second UUV needs second_uuv.enabled = true")
-        floor = self.site.floor_depth_m
-        if self.second_uuv.enabled and not self.second_uuv.depth_m + v.size_m[2] < floor:
+        if self.third_uuv.enabled and not self.second_uuv.enabled:
             raise Invalid(
-                "second_uuv.depth_m",
-                self.second_uuv.depth_m,
-                f"its bottom must stay above the seafloor (site.floor_depth_m = {floor:g})",
+                "third_uuv.enabled", True, "a third vehicle needs second_uuv.enabled = true"
             )
+        if self.third_uuv.role == "uuv" and not self.third_uuv.enabled:
+            raise Invalid("third_uuv.role", "uuv", "a third UUV needs third_uuv.enabled = true")
+        if self.third_uuv.role == "uuv" and self.third_uuv.id == self.second_uuv.id:
+            raise Invalid("third_uuv.id", self.third_uuv.id, "already second_uuv.id")
+        floor = self.site.floor_depth_m
+        for key in ("second_uuv", "third_uuv"):
+            spec = getattr(self, key)
+            if spec.enabled and not spec.depth_m + v.size_m[2] < floor:
+                raise Invalid(
+                    f"{key}.depth_m",
+                    spec.depth_m,
+                    f"its bottom must stay above the seafloor (site.floor_depth_m = {floor:g})",
+                )
         if self.rock.enabled and not self.rock.size_m[2] < floor:
             raise Invalid(
                 "rock.size_m",
@@ -790,6 +804,7 @@ class Scenario:
             motion = Motion(self)
             for key, value, other in (
                 ("second_uuv.miss_m", self.second_uuv.miss_m, "the second vehicle"),
+                ("third_uuv.miss_m", self.third_uuv.miss_m, "the third vehicle"),
                 ("rock.offset_m", list(self.rock.offset_m), "the rock"),
             ):
                 hit_s = first_contact(self, motion, other)

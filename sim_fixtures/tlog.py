@@ -87,6 +87,8 @@ STREAM = {
     "second_depth": 13,
     "second_link": 14,  # a second UUV's depth sensor and link
     "gnss_alt_noise": 15,
+    "third_depth": 16,
+    "third_link": 17,  # a third UUV's depth sensor and link
 }
 MAV_SENSOR_ROTATION_PITCH_270 = 25  # a rangefinder looking down the body's z axis
 # ArduPilot's lidar drivers report max + 1 m when nothing returns (e.g. Benewake)
