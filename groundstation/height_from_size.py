@@ -208,6 +208,13 @@ class HeightFromSize:
         self._last_t = t_unix
         return True
 
+    def asks_estimate(self, t_unix: float) -> bool:
+        """Whether :meth:`due` at ``t_unix`` depends on the measurements taken so far (on whether their estimate is
+        sure). False while the frame is too soon after the last one counted however sure the estimate is: the
+        measurements still being made elsewhere need not have been taken yet (``skyfix process``'s measuring
+        process, :class:`groundstation.offline.uuv_workers.SizeWorker`)."""
+        return t_unix - self._last_t >= min(self.period_s, self.sure_period_s) - 0.005
+
     def measure(
         self, image: np.ndarray, pose: CameraPose, i: int, u: float, v: float
     ) -> SizeHeight | str:

@@ -97,10 +97,13 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
 
 def _tracked(path: Path, workers: bool) -> tuple[list, list, list]:
     """Both UUVs of ``path`` tracked in one pass as ``skyfix process --uuv all`` tracks them (the motion measured,
-    traced back, the height from size in ``auto``): the results, each size's status, each telemetry's height
-    fixes (times, values)."""
+    traced back, the height from size in ``auto``, at 10 Hz and 2 Hz once sure: sure 4.6 s in, the frames measured
+    after depend on it): the results, each size's status, each telemetry's height fixes (times, values)."""
     sessions = [load_session(path, uuv) for uuv in uuv_ids(path)]
-    sizes = [HeightFromSize(s.calibration, s.telemetry, "auto") for s in sessions]
+    sizes = [
+        HeightFromSize(s.calibration, s.telemetry, "auto", measure_hz=10.0, sure_hz=2.0)
+        for s in sessions
+    ]
     videos = track.track_sessions(
         sessions, measure_motion=True, sizes=sizes, both_ways=True, workers=workers
     )
@@ -116,17 +119,32 @@ def _tracked(path: Path, workers: bool) -> tuple[list, list, list]:
 
 def test_worker_processes_give_the_same_results(crossing, monkeypatch):
     """Each UUV tracked in a process of its own, the frames through a shared ring of two (each slot written again
-    as soon as both workers are done with it): the same per-frame results, the same heights from size taken (and
-    handed to the telemetry) as stepping both in this process."""
+    as soon as both workers are done with it), and (the default) the heights from size measured in a process of
+    their own through a ring of one slot (each measurement taken before the next is handed over): the same
+    per-frame results, the same heights from size taken (and handed to the telemetry) as stepping and measuring
+    both in this process."""
     monkeypatch.setattr(uuv_workers, "RING_SLOTS", 2)
-    alone_videos, alone_sizes, alone_fixes = _tracked(crossing, workers=False)
-    # counted in this process only: the workers' steps are counted in theirs
+    monkeypatch.setattr(uuv_workers, "SIZE_SLOTS", 1)
+    with monkeypatch.context() as m:
+        m.setattr(track, "available", lambda: False)  # as where the platform cannot fork
+        measured = _counted(m, HeightFromSize, "measure")
+        alone_videos, alone_sizes, alone_fixes = _tracked(crossing, workers=False)
+        assert len(measured) > 20
+    # counted in this process only: the processes' steps and measurements are counted in theirs
     steps = _counted(monkeypatch, track.UuvTrack, "step")
-    videos, sizes, fixes = _tracked(crossing, workers=True)
-    assert steps == []
-    # uuv1's outline is rejected in this view (border, few edges): uuv2's heights are measured and applied
-    assert sizes == alone_sizes and sizes[1]["applied"] > 10, sizes
-    assert fixes == alone_fixes and fixes[1]
+    measured = _counted(monkeypatch, HeightFromSize, "measure")
+    by_size_worker = _tracked(crossing, workers=False)
+    assert measured == [] and len(steps) > 0
+    steps.clear()
+    for videos, sizes, fixes in (by_size_worker, _tracked(crossing, workers=True)):
+        assert steps == [] and measured == []
+        # uuv1's outline is rejected in this view (border, few edges): uuv2's heights are measured and applied
+        assert sizes == alone_sizes and sizes[1]["applied"] > 10, sizes
+        assert fixes == alone_fixes and fixes[1]
+        _assert_same_videos(videos, alone_videos)
+
+
+def _assert_same_videos(videos: list, alone_videos: list) -> None:
     for video, alone in zip(videos, alone_videos, strict=True):
         assert np.sum(video.status == "ok") > 0.6 * len(video.status)
         assert video.rotations and len(video.rotations) == len(alone.rotations)

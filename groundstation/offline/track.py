@@ -32,7 +32,9 @@ long one: :func:`~groundstation.latency.video_motion.measured_every`), in a thre
 the frames' offset to the
 telemetry (:func:`groundstation.latency.estimate.offset_from_rotations`). With a
 :class:`~groundstation.height_from_size.HeightFromSize`, frames the UUV is tracked in are
-also measured for the camera's height from its size, in the same pass (``timings_s["size"]``).
+also measured for the camera's height from its size, in the same pass (``timings_s["size"]``), in a process beside
+it where the platform forks (:class:`~groundstation.offline.uuv_workers.SizeWorker`; ``timings_s["size_wait"]``:
+the time waiting for its last results): the same measurements, the same estimate.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ import numpy as np
 
 from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.video_motion import MotionThread, measured_every
-from groundstation.offline.uuv_workers import TrackWorkers, available
+from groundstation.offline.uuv_workers import SizeWorker, TrackWorkers, available
 from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session, SessionError
 from groundstation.video.frames import VideoError
@@ -172,6 +174,13 @@ def track_sessions(
     cam = first.calibration.camera
     # forked before any thread of this pass starts (the motion meter's, the decoder's, the progress bar's)
     pool = TrackWorkers(tracks, 3 * cam.width * cam.height) if workers and available() else None
+    measurer = (
+        SizeWorker(tracks, 3 * cam.width * cam.height)
+        if pool is None and available() and any(track.size is not None for track in tracks)
+        else None
+    )
+    for track in tracks:
+        track.measurer = measurer
     meter = MotionThread(cam, every=measured_every(n, period_s)) if measure_motion else None
     first_row = min(track.init_row for track in tracks)
     bar = progress_bar(n - first_row, f"{first.path.name}: tracking", progress)
@@ -206,6 +215,10 @@ def track_sessions(
                 t0 = time.perf_counter()
                 pool.finish()
                 timings["hand_on"] += time.perf_counter() - t0
+            if measurer is not None:
+                t0 = time.perf_counter()
+                measurer.finish()
+                timings["size_wait"] = time.perf_counter() - t0
             if meter is not None:
                 t0 = time.perf_counter()
                 rotations = meter.finish()
@@ -222,6 +235,8 @@ def track_sessions(
             meter.close()
         if pool is not None:
             pool.close()
+        if measurer is not None:
+            measurer.close()
     extra_warnings = (
         [f"{first.video_path}: {extra} frames beyond video_frames.csv ignored"] if extra else []
     )
@@ -253,6 +268,8 @@ class UuvTrack:
         except ValueError as e:
             raise SessionError(str(e)) from None
         self.session, self.size, self.both_ways, self.pose = session, size, both_ways, None
+        # where the heights from size are measured: in another process (a SizeWorker), or here (None)
+        self.measurer = None
         self.t = t = session.frames["t"]
         n = len(t)
         self.init_row = _init_row(session, t)
@@ -306,13 +323,24 @@ class UuvTrack:
         self.sigma[row] = result.sigma_px
         if self.both_ways:
             self._trace_when_confirmed(row, frame, result)
-        size = self.size
-        if size is not None and result.ok and size.due(float(self.t[row])):
-            t0 = time.perf_counter()
-            measured = size.measure(frame.bgr(), pose, row, result.u, result.v)
-            size.take(measured)
-            self.size_taken.append((float(self.t[row]), measured))
-            timings["size"] += time.perf_counter() - t0
+        size, measurer = self.size, self.measurer
+        if size is None or not result.ok:
+            return
+        t0 = time.perf_counter()
+        t_unix = float(self.t[row])
+        if measurer is not None and size.asks_estimate(t_unix):
+            measurer.settle(self)
+        if size.due(t_unix):
+            if measurer is not None:
+                measurer.submit(self, row, frame, result.u, result.v)
+            else:
+                self.took(t_unix, size.measure(frame.bgr(), pose, row, result.u, result.v))
+        timings["size"] += time.perf_counter() - t0
+
+    def took(self, t_unix: float, measured) -> None:
+        """The height from size measured in the frame at ``t_unix`` (or why not) taken into the estimate."""
+        self.size.take(measured)
+        self.size_taken.append((t_unix, measured))
 
     def state(self) -> dict:
         """What stepping changed (the per-frame results, the timings, the heights from size taken), for
@@ -328,8 +356,7 @@ class UuvTrack:
                 setattr(self, key, state[key])
         for t_unix, measured in state["size_taken"]:
             self.size.due(t_unix)
-            self.size.take(measured)
-            self.size_taken.append((t_unix, measured))
+            self.took(t_unix, measured)
 
     def _trace_when_confirmed(self, row: int, frame, result) -> None:
         """``both_ways``: keep the frames without the UUV; once a re-acquisition after them is confirmed, the ones

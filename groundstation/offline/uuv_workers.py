@@ -22,8 +22,20 @@ from size it took, in order; the main process takes those into its own
 the telemetry's fusion are the ones the main process would have had stepping the tracks itself. The worker's own
 copy logs nothing (its warnings would be the main process's twice).
 
+**The height from size in a process of its own (the default).** Without the track workers, the UUVs are stepped
+in the main process but their heights from size are measured by one :class:`SizeWorker` process beside it (issue
+30: py-spy of ``skyfix process --uuv all``, three UUVs at 1080p: the measurements were 45 % of the main thread,
+~11 ms each of Python and NumPy). A frame to measure is copied into a free slot of a ring of :data:`SIZE_SLOTS`,
+as above, with the track's number, the row and the tracked pixel; the process converts it to BGR, measures and
+sends the result back, in the order handed over. The main process tracks on meanwhile and takes each result into
+its UUV's :class:`~groundstation.height_from_size.HeightFromSize`, in order, at the latest before that UUV's next
+``due`` whose answer depends on the estimate
+(:meth:`~groundstation.height_from_size.HeightFromSize.asks_estimate`: a fifth of a second later at 5 Hz): the
+frames measured, the estimate, the warnings and the heights handed to the fusion are the ones measuring in place
+gives.
+
 Where ``fork`` is not available (Windows, macOS' default), :func:`available` is False and the main process steps
-the tracks itself.
+the tracks and measures their heights itself.
 """
 
 from __future__ import annotations
@@ -33,6 +45,7 @@ import mmap
 import multiprocessing
 import pickle
 import signal
+from collections import deque
 from dataclasses import dataclass
 
 import av
@@ -42,6 +55,8 @@ from groundstation.session.read import SessionError
 
 #: Frames in the shared ring: how far the fastest worker may run ahead of the slowest.
 RING_SLOTS = 6
+#: Frames in the height-from-size process's ring: measurements handed over and not yet taken, at most.
+SIZE_SLOTS = 6
 #: While waiting on a worker, check this often (s) that it is still alive.
 POLL_S = 0.5
 #: A worker's acknowledgement of one frame stepped.
@@ -100,6 +115,22 @@ def _views(ring: mmap.mmap, offset: int, shapes) -> list[np.ndarray]:
     return views
 
 
+def put_frame(ring: mmap.mmap, slot: int, slot_bytes: int, frame, video) -> tuple:
+    """Copy the decoded ``frame`` into slot ``slot`` of ``ring`` (slots of ``slot_bytes``); its layout
+    (:func:`_layout`), which :func:`ring_frame` reads it by. A frame larger than a slot is a
+    :class:`SessionError` naming the ``video``."""
+    layout = _layout(frame)
+    shapes, colour = layout
+    if sum(int(np.prod(s)) for s in shapes) > slot_bytes:
+        raise SessionError(f"{video}: a frame of shape {shapes} is larger than the calibration's")
+    views = _views(ring, slot * slot_bytes, shapes)
+    sources = [frame.image] if colour is None else [_plane(p) for p in frame.decoded.planes]
+    for view, source in zip(views, sources, strict=True):
+        np.copyto(view, source)
+    del views  # no view may outlive the ring's close
+    return layout
+
+
 def ring_frame(ring: mmap.mmap, offset: int, layout) -> RingFrame:
     """The frame a slot from byte ``offset`` holds (``layout``: :func:`_layout`'s)."""
     shapes, colour = layout
@@ -142,17 +173,9 @@ class TrackWorkers:
         every worker is done with the frame in it. Raises a worker's error."""
         slot = self.sent % RING_SLOTS
         self._wait_done(self.sent - RING_SLOTS + 1)
-        layout = _layout(frame)
-        shapes, colour = layout
-        if sum(int(np.prod(s)) for s in shapes) > self.slot_bytes:
-            raise SessionError(
-                f"{self.tracks[0].session.video_path}: a frame of shape {shapes} is larger than the calibration's"
-            )
-        views = _views(self.ring, slot * self.slot_bytes, shapes)
-        sources = [frame.image] if colour is None else [_plane(p) for p in frame.decoded.planes]
-        for view, source in zip(views, sources, strict=True):
-            np.copyto(view, source)
-        del views  # no view may outlive the ring's close
+        layout = put_frame(
+            self.ring, slot, self.slot_bytes, frame, self.tracks[0].session.video_path
+        )
         for link in self.links:
             link.send((row, slot, layout))
         self.sent += 1
@@ -183,18 +206,102 @@ class TrackWorkers:
 
     def _receive(self, i: int):
         """Worker ``i``'s next message: an acknowledgement (counted) or its results; its error raised here."""
-        link, proc = self.links[i], self.procs[i]
-        while not link.poll(POLL_S):
-            if not proc.is_alive():
-                raise SessionError(
-                    f"{proc.name}: the tracking process ended (exit code {proc.exitcode})"
-                )
-        message = link.recv()
+        message = _received(self.links[i], self.procs[i])
         if message is DONE:
             self.done[i] += 1
-        elif message[0] == "error":
-            raise message[1]
         return message
+
+
+def _received(link, proc):
+    """The next message of the worker ``proc`` on ``link``; its error raised here, its end a :class:`SessionError`."""
+    while not link.poll(POLL_S):
+        if not proc.is_alive():
+            raise SessionError(f"{proc.name}: the process ended (exit code {proc.exitcode})")
+    message = link.recv()
+    if message is not DONE and message[0] == "error":
+        raise message[1]
+    return message
+
+
+class SizeWorker:
+    """The heights from size of the UUVs' ``tracks`` (:class:`~groundstation.offline.track.UuvTrack`, their poses
+    set) measured in one process beside the pass (see the module doc); ``frame_bytes``: the most a decoded frame
+    takes (bytes). A track hands its frames to :meth:`submit`, and calls :meth:`settle` before its size's
+    :meth:`~groundstation.height_from_size.HeightFromSize.due` whenever that depends on the estimate
+    (:meth:`~groundstation.height_from_size.HeightFromSize.asks_estimate`); :meth:`finish` at the end,
+    :meth:`close` always (stops the process)."""
+
+    def __init__(self, tracks: list, frame_bytes: int):
+        self.tracks, self.slot_bytes = tracks, frame_bytes
+        self.ring = mmap.mmap(
+            -1, SIZE_SLOTS * frame_bytes
+        )  # anonymous, MAP_SHARED: seen by the fork
+        self.free = list(range(SIZE_SLOTS))
+        self.pending: deque = deque()  # (track, t_unix, slot) of each frame handed over, in order
+        ctx = multiprocessing.get_context("fork")
+        self.link, theirs = ctx.Pipe()
+        self.proc = ctx.Process(
+            target=_measure,
+            args=(tracks, theirs, self.ring, frame_bytes),
+            name="height from size",
+            daemon=True,
+        )
+        self.proc.start()
+        theirs.close()
+
+    def submit(self, track, row: int, frame, u: float, v: float) -> None:
+        """Measure ``track``'s height from size in the decoded ``frame`` (row ``row``) around its pixel (u, v): the
+        frame copied into a free slot (waiting for the oldest measurement when none is)."""
+        if not self.free:
+            self._take_oldest()
+        slot = self.free.pop()
+        layout = put_frame(self.ring, slot, self.slot_bytes, frame, track.session.video_path)
+        self.link.send((self.tracks.index(track), row, u, v, slot, layout))
+        self.pending.append((track, float(track.t[row]), slot))
+
+    def settle(self, track) -> None:
+        """Every measurement handed over for ``track`` taken by it, in order."""
+        while any(mine is track for mine, _, _ in self.pending):
+            self._take_oldest()
+
+    def finish(self) -> None:
+        """Every measurement handed over taken; the process ends."""
+        while self.pending:
+            self._take_oldest()
+        self.link.send(None)
+
+    def close(self) -> None:
+        """Stop the process (any time) and release the ring."""
+        if self.proc.is_alive():
+            self.proc.terminate()
+        self.proc.join()
+        self.link.close()
+        self.ring.close()
+
+    def _take_oldest(self) -> None:
+        measured = _received(self.link, self.proc)[1]
+        track, t_unix, slot = self.pending.popleft()
+        self.free.append(slot)
+        track.took(t_unix, measured)
+
+
+def _measure(tracks: list, link, ring: mmap.mmap, slot_bytes: int) -> None:
+    """The measuring process: each frame ``link`` names (track number, row, u, v, slot, layout) until None measured
+    and its result sent back (``("result", SizeHeight or why not)``), or its first error (``("error", exception)``;
+    the frames after it are read and ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the main process stops it
+    failed = False
+    while (message := link.recv()) is not None:
+        if failed:
+            continue
+        i, row, u, v, slot, layout = message
+        track = tracks[i]
+        try:
+            image = ring_frame(ring, slot * slot_bytes, layout).bgr()
+            link.send(("result", track.size.measure(image, track.pose, row, u, v)))
+        except Exception as e:  # noqa: BLE001 - raised again in the main process
+            failed = True
+            link.send(("error", _picklable(e)))
 
 
 def _work(track, link, ring: mmap.mmap, slot_bytes: int) -> None:
