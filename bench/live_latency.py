@@ -206,6 +206,11 @@ def proc_sample(pid: int) -> tuple[float, float]:
     return cpu_s, rss_kb / 1024.0
 
 
+def nice_of(pid: int) -> int:
+    """The nice value a process runs at (``/proc/PID/stat``'s 19th field), read back rather than assumed."""
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
+
+
 def run_queue_wait_s(pid: int) -> float:
     """Seconds the threads of a process (those alive now) have spent runnable but waiting for a core, summed
     (``/proc/PID/task/TID/schedstat``'s second field); NaN where the kernel does not keep it."""
@@ -350,11 +355,13 @@ def live(
     busy: int = 0,
     ui: bool = False,
     tree: Path = ROOT,
+    nice: int = 0,
 ) -> dict:
     """One ``skyfix run`` fed by ``skyfix replay`` over ``transport``, beside ``busy`` processes spinning
     ``while True: pass`` (a laptop's other programs: on 2 cores, 2 of them take both cores' worth of CPU);
     with ``ui`` the service serves its page (on a free port; nobody opens it), else ``--no-ui``; the service
-    from the source ``tree`` (the replay always from this one)."""
+    from the source ``tree`` (the replay always from this one), started at ``nice`` (``nice -n``, as
+    deploy/skyfix.service's ``Nice=`` starts it; the busy processes and the replay at the bench's own)."""
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     if transport == "rtp":  # RTP on an even port, RTCP on the next
         video = next(p for p in range(video & ~1, 65534, 2) if port_pair_free(p))
@@ -364,6 +371,7 @@ def live(
     stats = work / "stats.json"
     py = sys.executable
     run = [
+        *(["nice", "-n", str(nice)] if nice else []),
         py,
         "-m",
         "groundstation.cli",
@@ -419,6 +427,10 @@ def live(
         spinners = [subprocess.Popen([py, "-c", BUSY]) for _ in range(busy)]
         try:
             time.sleep(3.0)
+            priority = {
+                "service_nice": nice_of(service.pid),
+                "busy_nice": [nice_of(p.pid) for p in spinners],
+            }
             rep = subprocess.Popen(replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT)
             while rep.poll() is None:
                 samples.append(
@@ -458,6 +470,7 @@ def live(
     s = np.array(samples)
     half = len(s) // 2
     return {
+        "priority": priority,
         "frames_sent": len(frames_t),
         "video": {
             k: final["video"][k]
@@ -507,6 +520,10 @@ def report(name: str, session: Path, res: dict) -> list[str]:
         (
             f"{name} ({session.name}, {res['frames_sent']} frames; load average {res.get('load_average')} at the "
             "start: a shared machine)"
+        ),
+        (
+            f"  priority: the service at nice {res['priority']['service_nice']}, the busy processes at nice "
+            f"{res['priority']['busy_nice'] or '-'} (read from /proc)"
         ),
         (
             f"  frames with an ok fix: {pl['statuses'].get('ok', 0)} of {res['frames_sent']} sent "
@@ -564,7 +581,8 @@ def summary(rounds: dict) -> list[str]:
     for name, runs in rounds.items():
         ok = [100.0 * r["pipeline"]["statuses"].get("ok", 0) / r["frames_sent"] for r in runs]
         lines.append(
-            f"  {name}: slot->GPS_INPUT p99 {spread(r['slot_to_gps_input_ms']['p99'] for r in runs)} ms, "
+            f"  {name} (service at nice {sorted({r['priority']['service_nice'] for r in runs})}): "
+            f"slot->GPS_INPUT p99 {spread(r['slot_to_gps_input_ms']['p99'] for r in runs)} ms, "
             f"p50 {spread(r['slot_to_gps_input_ms']['p50'] for r in runs)} ms; ok {spread(ok)} %; "
             f"CPU {spread(r['cpu_pct'] for r in runs)} % of a core, waiting for one "
             f"{spread(r['run_queue_wait_pct'] for r in runs)} %; load {spread(r['load_average'] for r in runs)}"
@@ -604,6 +622,13 @@ def main() -> int:
         "--rounds", type=int, default=1, help="repeat every run this many times (interleaved)"
     )
     ap.add_argument(
+        "--nice",
+        default="0",
+        metavar="N[,N...]",
+        help="comma-separated: each run again with the service started at these nice values (`nice -n N`, as "
+        "deploy/skyfix.service's Nice= starts it; the busy processes stay at the bench's own; negative needs root)",
+    )
+    ap.add_argument(
         "--tree",
         action="append",
         default=[],
@@ -615,6 +640,7 @@ def main() -> int:
     trees = {"now": ROOT} | {
         label: Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
     }
+    nices = [int(n) for n in args.nice.split(",")]
     variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [
         ("", [])
     ]
@@ -633,19 +659,33 @@ def main() -> int:
             "depacketize_cpu": depacketize_baseline(session),
             "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames),
         }
-        for rnd, transport, ((variant, run_args), busy), label in itertools.product(
+        for rnd, transport, ((variant, run_args), busy), label, nice in itertools.product(
             range(1, args.rounds + 1),
             args.transports.split(","),
             itertools.product(variants, sorted({0, args.busy})),
             trees,
+            nices,
         ):
             tag = "_".join(
                 x
-                for x in (variant, f"busy{busy}" if busy else "", label if len(trees) > 1 else "")
+                for x in (
+                    variant,
+                    f"busy{busy}" if busy else "",
+                    label if len(trees) > 1 else "",
+                    f"nice{nice}" if nice else "",
+                )
                 if x
             )
             name = " ".join(
-                x for x in (size, transport, variant, label if len(trees) > 1 else "") if x
+                x
+                for x in (
+                    size,
+                    transport,
+                    variant,
+                    label if len(trees) > 1 else "",
+                    f"nice {nice}" if len(nices) > 1 or nice else "",
+                )
+                if x
             ) + (f" beside {busy} busy processes" if busy else "")
             work = BENCH_DIR / f"run_{size}_{transport}{'_' + tag if tag else ''}"
             work.mkdir(parents=True, exist_ok=True)
@@ -654,7 +694,7 @@ def main() -> int:
             load = os.getloadavg()[0]
             res = {
                 **baselines,
-                **live(session, work, transport, run_args, busy, tree=trees[label]),
+                **live(session, work, transport, run_args, busy, tree=trees[label], nice=nice),
                 "load_average": round(load, 1),
             }
             rounds.setdefault(name, []).append(res)
