@@ -8,7 +8,9 @@ motion (once, for both UUVs).
 
 from __future__ import annotations
 
+import os
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +18,8 @@ import pytest
 
 from groundstation.cli import main
 from groundstation.height_from_size import HeightFromSize
-from groundstation.offline import track, uuv_workers
-from groundstation.session.read import Session, load_session, uuv_ids
+from groundstation.offline import process, track, uuv_workers
+from groundstation.session.read import Session, SessionError, load_session, uuv_ids
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
@@ -152,3 +154,23 @@ def _assert_same_videos(videos: list, alone_videos: list) -> None:
             np.testing.assert_array_equal(getattr(video, name), getattr(alone, name))
         for name in ("status", "causal_status", "bridged"):
             assert getattr(video, name).tolist() == getattr(alone, name).tolist()
+
+
+def _job(i: int, fail: bool) -> None:
+    print(f"out {i} {os.getpid()}")
+    print(f"err {i}", file=sys.stderr)
+    if fail:
+        raise SessionError(f"job {i} failed")
+
+
+def test_each_beside_prints_in_order_and_raises_the_first_error(capsys):
+    """``--uuv all``'s UUVs after the pass: the first job here, the others in processes of their own, their output
+    in the jobs' order, the first error raised (a later job's output and error dropped)."""
+    with pytest.raises(SessionError, match="job 2 failed"):
+        process.each_beside(_job, [(0, False), (1, False), (2, True), (3, True)])
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
+    assert [line.split()[:2] for line in lines] == [["out", "0"], ["out", "1"], ["out", "2"]]
+    pids = [int(line.split()[2]) for line in lines]
+    assert pids[0] == os.getpid() and len(set(pids)) == 3
+    assert captured.err.splitlines() == ["err 0", "err 1", "err 2"]

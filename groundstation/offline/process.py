@@ -29,7 +29,10 @@ Tracking the video also measures the camera's height from the UUV's size
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
+import multiprocessing
 import sys
 from collections import Counter
 from typing import NamedTuple
@@ -54,6 +57,7 @@ from groundstation.offline.reference import apply as apply_reference
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
 from groundstation.offline.smoothed import offline_track, traced_back, write_smoothed_csv
 from groundstation.offline.smoothed import summary as smoothed_summary
+from groundstation.offline.uuv_workers import available, picklable
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session, uuv_ids
@@ -347,9 +351,61 @@ def run(args) -> int:
     finally:
         for session in sessions:
             print_warnings(session)
-    for session, uuv_pixels, size in zip(sessions, pixels, sizes):
-        process_one(session, args, output_dir(out / session.uuv_id), (uuv_pixels, size))
+    jobs = [
+        (session, args, output_dir(out / session.uuv_id), (uuv_pixels, size))
+        for session, uuv_pixels, size in zip(sessions, pixels, sizes)
+    ]
+    each_beside(process_one, jobs)
     return 0
+
+
+def each_beside(work, jobs: list[tuple]) -> None:
+    """``work(*job)`` for every job: the first here and the others meanwhile in processes forked for them, where
+    the platform forks (``skyfix process --uuv all``: each UUV's geometry and files once the video's pass is done,
+    on cores idle by then; issue 30). What the others print is held back and printed after the first's, in order;
+    the first error raised is raised here once the jobs before it have printed theirs. Without ``fork``: one after
+    the other here."""
+    if len(jobs) < 2 or not available():
+        for job in jobs:
+            work(*job)
+        return
+    ctx = multiprocessing.get_context("fork")
+    others = []
+    for job in jobs[1:]:
+        mine, theirs = ctx.Pipe(duplex=False)
+        proc = ctx.Process(target=_beside, args=(work, job, theirs), daemon=True)
+        proc.start()
+        theirs.close()
+        others.append((mine, proc))
+    try:
+        work(*jobs[0])
+        for link, proc in others:
+            try:
+                out, err, error = link.recv()
+            except EOFError:
+                raise SessionError(f"{proc.name}: ended (exit code {proc.exitcode})") from None
+            sys.stdout.write(out)
+            sys.stderr.write(err)
+            if error is not None:
+                raise error
+    finally:
+        for link, proc in others:
+            if proc.is_alive():
+                proc.terminate()
+            proc.join()
+            link.close()
+
+
+def _beside(work, job: tuple, link) -> None:
+    """:func:`each_beside`'s forked process: ``work(*job)``, what it printed and its error (or None) sent back."""
+    out, err = io.StringIO(), io.StringIO()
+    error = None
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            work(*job)
+        except Exception as e:  # noqa: BLE001 - raised again in the main process
+            error = picklable(e)
+    link.send((out.getvalue(), err.getvalue(), error))
 
 
 def process_one(session: Session, args, out, tracked: tuple | None = None) -> int:

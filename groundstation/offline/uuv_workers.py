@@ -301,7 +301,7 @@ def _measure(tracks: list, link, ring: mmap.mmap, slot_bytes: int) -> None:
             link.send(("result", track.size.measure(image, track.pose, row, u, v)))
         except Exception as e:  # noqa: BLE001 - raised again in the main process
             failed = True
-            link.send(("error", _picklable(e)))
+            link.send(("error", picklable(e)))
 
 
 def _work(track, link, ring: mmap.mmap, slot_bytes: int) -> None:
@@ -319,14 +319,14 @@ def _work(track, link, ring: mmap.mmap, slot_bytes: int) -> None:
             track.step(row, ring_frame(ring, slot * slot_bytes, layout))
         except Exception as e:  # noqa: BLE001 - raised again in the main process
             failed = True
-            link.send(("error", _picklable(e)))
+            link.send(("error", picklable(e)))
             continue
         link.send(DONE)
     if not failed:
         link.send(("result", track.state()))
 
 
-def _picklable(e: Exception) -> Exception:
+def picklable(e: Exception) -> Exception:
     """``e``, or a RuntimeError with its words when it cannot be sent to the main process."""
     try:
         pickle.dumps(e)
