@@ -10,10 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from groundstation.mavlink.ingest import mavutil
 from groundstation.offline import process
 from groundstation.offline.evaluate import error_ne_m
 from groundstation.offline.reference import (
+    BOOT_WINDOW_S,
     FILE,
+    BootClock,
     Buoy,
     BuoyReports,
     apply,
@@ -169,3 +172,100 @@ def test_a_fast_boat_is_taken_where_it_was_at_each_frame(tmp_path):
     aligned = mae(BuoyReports(buoy), tel.station_minus_gnss_s)
     late = mae(BuoyReports(dataclasses.replace(buoy, latency_s=0.0)), None)
     assert aligned < 0.15 and late > aligned + 0.04, (aligned, late)
+
+
+#: the buoy's boot in the tests' GLOBAL_POSITION_INT: this long before the UNIX epoch's session (s)
+BOOT_BEFORE_S = 4321.5
+
+
+def as_global_position(msg, boot_unix_s: float):
+    """A GPS_RAW_INT as the same system's and component's GLOBAL_POSITION_INT (an ArduPilot boat's EKF) stamped on a
+    boot clock started at ``boot_unix_s`` (its GNSS time less that)."""
+    mav = mavutil().mavlink.MAVLink(
+        None, srcSystem=msg.get_srcSystem(), srcComponent=msg.get_srcComponent()
+    )
+    boot_ms = round((msg.time_usec / 1e6 - boot_unix_s) * 1e3)
+    out = mav.global_position_int_encode(
+        boot_ms, msg.lat, msg.lon, msg.alt, 0, msg.vel, 0, 0, msg.cog
+    )
+    out.pack(mav)
+    return out
+
+
+def global_position_records(records, system_id: int) -> list:
+    """``records`` (a tlog's) with ``system_id``'s GPS_RAW_INT as GLOBAL_POSITION_INT (:func:`as_global_position`),
+    its boot :data:`BOOT_BEFORE_S` before its first report's GNSS time."""
+    first = next(
+        m for _, m in records if m.get_type() == "GPS_RAW_INT" and m.get_srcSystem() == system_id
+    )
+    boot = first.time_usec / 1e6 - BOOT_BEFORE_S
+    return [
+        (t, as_global_position(m, boot))
+        if m.get_type() == "GPS_RAW_INT" and m.get_srcSystem() == system_id
+        else (t, m)
+        for t, m in records
+    ]
+
+
+def test_a_buoy_sending_global_position_int(buoy_session):
+    """The buoy's reports as GLOBAL_POSITION_INT (boot time, no accuracy) fed as heard: only system 42's are taken
+    (not the UAV's own); each one's time on the station clock within 2 sigma (half the buoy's latency_s) of its fix's
+    true GNSS time there, its sigma the buoy's sigma_m; its position at a frame within 5 cm of buoy_truth.csv. Once a
+    GPS_RAW_INT comes, the GLOBAL_POSITION_INT are no longer taken."""
+    s = load_session(buoy_session)
+    buoy, _ = read_reference(s)
+    raw = read_tlog(buoy_session / "uav.tlog")
+    records = global_position_records(raw, 42)
+    track = BuoyReports(buoy)
+    taken = [track.add(m, t, s.telemetry.station_minus_gnss_s) for t, m in records]
+    mine = [m.get_type() == "GLOBAL_POSITION_INT" and m.get_srcSystem() == 42 for _, m in records]
+    assert taken == mine and sum(taken) > 10
+    assert any(m.get_type() == "GLOBAL_POSITION_INT" and not k for (_, m), k in zip(records, mine))
+    gnss_t = np.array(
+        [
+            m.time_usec / 1e6
+            for _, m in raw
+            if m.get_type() == "GPS_RAW_INT" and m.get_srcSystem() == 42
+        ]
+    )
+    got = track.reports()
+    assert track.time_sigma_s == pytest.approx(buoy.latency_s / 2)
+    late = got.t_unix - (gnss_t + s.telemetry.station_minus_gnss_s)
+    assert np.all(np.abs(late) <= 2 * track.time_sigma_s), late
+    assert np.all(got.sigma_m == buoy.sigma_m)
+    truth = read_table(buoy_session / "buoy_truth.csv", ("t", "lat", "lon"))
+    t = truth["t"][5:-5:5]
+    at = track.at(t)
+    n, e, _ = geodetic_to_ned(
+        at.lat_deg, at.lon_deg, 0.0, truth["lat"][5:-5:5], truth["lon"][5:-5:5], 0.0
+    )
+    assert np.all(np.hypot(n, e) < 0.05), np.hypot(n, e)
+    t_raw, first_raw = next(
+        (t, m) for t, m in raw if m.get_type() == "GPS_RAW_INT" and m.get_srcSystem() == 42
+    )
+    both = BuoyReports(buoy)
+    assert both.add(first_raw, t_raw, s.telemetry.station_minus_gnss_s)
+    assert not any(
+        both.add(m, t, s.telemetry.station_minus_gnss_s) for t, m in records if t > t_raw
+    )
+
+
+def test_a_boot_clock_on_the_station_clock():
+    """Reports stamped on a boot clock, received 0.2-0.5 s later (0.2 s plus an exponential jitter of 0.1 s): each one
+    put within 0.15 s (half the stated 0.3 s latency) of its true station time once the fastest report is in the
+    window; the buoy restarting (its boot time back to 0) starts over on the new clock, as does a clock that drifted
+    more than the window ago."""
+    rng = np.random.default_rng(3)
+    clock = BootClock()
+    boot = np.arange(100.0, 400.0, 0.2)
+    truth = 1.7e9 + boot  # station time of each fix
+    recv = truth + 0.2 + rng.exponential(0.1, len(boot))
+    got = np.array([clock.station(b, r, 0.3)[0] for b, r in zip(boot, recv)])
+    assert clock.station(400.0, truth[-1] + 0.4, 0.3)[1] == pytest.approx(0.15)
+    assert np.all(np.abs(got - truth)[50:] <= 0.15), np.abs(got - truth)[50:].max()
+    restarted = clock.station(1.0, truth[-1] + 30.0 + 0.25, 0.3)[0]
+    assert abs(restarted - (truth[-1] + 30.0)) <= 0.15
+    drifting = BootClock()
+    offsets = 1.7e9 + 0.002 * boot  # the buoy's clock slow by 2 ms a second: 0.6 s over the 300 s
+    got = np.array([drifting.station(b, b + o + 0.25, 0.3)[0] for b, o in zip(boot, offsets)])
+    assert np.all(np.abs(got - (boot + offsets))[-50:] <= 0.15 + 0.002 * BOOT_WINDOW_S)

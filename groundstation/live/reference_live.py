@@ -2,8 +2,9 @@
 buoy reporting its GNSS (:class:`LiveBuoy`); the drone's absolute offset it shows added to every fix, as ``skyfix
 process --reference auto`` does offline (:mod:`groundstation.offline.reference`, :mod:`localizer.reference`).
 
-A buoy (the file names its ``system_id``, and optionally ``component_id``) reports GPS_RAW_INT on the UAV's MAVLink
-link; the UAV's source hands this module every message of another system (its ``others``) and never takes the buoy's
+A buoy (the file names its ``system_id``, and optionally ``component_id``) reports GPS_RAW_INT, or GLOBAL_POSITION_INT
+(an ArduPilot boat, BlueOS: its boot time put on the station clock as offline,
+:class:`groundstation.offline.reference.BootClock`), on the UAV's MAVLink link; the UAV's source hands this module every message of another system (its ``others``) and never takes the buoy's
 system for the UAV's; with ``reference_zenoh_key`` its reports also come on Zenoh as BlueOS publishes them
 (:class:`BuoyZenoh`). Only the buoy's reports are kept (:class:`LiveBuoy`: any other system's are refused and counted,
 malformed ones refused in a log line); a frame is searched for it where its reports, interpolated at the frame's
@@ -22,7 +23,8 @@ Each fix (:meth:`LiveReference.correct`, called by the pipeline with the fix's p
 of the :data:`~localizer.reference.WINDOW_S` before its frame (causal): a straight line through their
 :data:`~localizer.reference.BLOCK_S` means taken at the frame's time (:func:`drift_line`; the offline window's
 mean, whose sigma is the floor of the line's, would trail a plain GNSS's walk by half the window), with sightings in
-at least :data:`~localizer.reference.MIN_BLOCKS` + 1 of its seconds. Its claim is :func:`localizer.reference.correct`'s:
+at least :data:`~localizer.reference.MIN_BLOCKS` + 1 of its seconds and the newest at most :data:`HORIZON_S` before the
+frame (its sigma growing with that age). Its claim is :func:`localizer.reference.correct`'s:
 the offset's sigma in h_acc, the UAV position's term gone. The fix says what
 was added (``ref_offset_n_m`` …, ``ref_sightings``, ``ref_age_s``); with too few sightings in the window the
 correction lapses and the fixes are the telemetry's again. Station-clock seconds, north/east metres.
@@ -61,26 +63,44 @@ KEEP_S = 2 * reference.WINDOW_S
 WAIT_S = 1.0
 #: a buoy's report whose time on the station clock is further than this from when it came is refused (s)
 MAX_SKEW_S = 5.0
+#: the line through the sightings is carried at most this long past the newest of them (s; 5 searches at the default
+#: 5 Hz, one of its 1-s blocks): beyond, the correction lapses and the fixes go out as the telemetry made them. A plain
+#: GNSS's walk curves away from the line: its claim covers 90 % of it within 2 sigma 1 s on, 80 % 2 s on
+#: (tests/test_live_reference.py)
+HORIZON_S = 1.0
 
 
 def drift_line(t_sight: np.ndarray, offset_ne_m: np.ndarray, t_unix: float):
     """The offset at ``t_unix`` (2,) and its 1-sigma per axis (2,) from a straight line through the sightings'
     :data:`~localizer.reference.BLOCK_S` means (``offset_ne_m`` (M, 2) at ``t_sight``, all before ``t_unix``): the
     window's mean lags its newest sighting by half the window, and a plain GNSS walks centimetres a second. The sigma
-    is the line's standard error there from the means' scatter about it; None with fewer than
-    :data:`~localizer.reference.MIN_BLOCKS` + 1 blocks."""
+    is a prediction's, not the line's standard error alone (a walk is no line: that one covered 65 % of a plain GNSS's
+    within 2 sigma): the means' scatter about the line (s) at the newest sighting, with the line's standard error
+    there, growing as a walk of s per block with the time since that sighting, plus the slope's standard error times
+    that time (at least the statistical error of the line carried there, whatever their correlation). None with
+    fewer than
+    :data:`~localizer.reference.MIN_BLOCKS` + 1 blocks, or when the newest sighting is more than :data:`HORIZON_S`
+    before ``t_unix``."""
+    if not len(t_sight) or t_unix - t_sight.max() > HORIZON_S:
+        return None
     block = np.floor((t_unix - t_sight) / reference.BLOCK_S).astype(int)
     labels, which = np.unique(block, return_inverse=True)
     k = len(labels)
     if k < reference.MIN_BLOCKS + 1:
         return None
+    age_s = t_unix - t_sight.max()
     per = np.bincount(which)
-    t_block = np.bincount(which, weights=t_sight - t_unix) / per
+    t_block = np.bincount(which, weights=t_sight - t_sight.max()) / per
     means = np.stack([np.bincount(which, weights=o) / per for o in offset_ne_m.T], axis=1)
     design = np.column_stack([np.ones(k), t_block])
     coef, *_ = np.linalg.lstsq(design, means, rcond=None)
     scatter = ((means - design @ coef) ** 2).sum(axis=0) / (k - 2)
-    return coef[0], np.sqrt(scatter * np.linalg.inv(design.T @ design)[0, 0])
+    spread = np.linalg.inv(design.T @ design)
+    # a block mean's own scatter about the line, the line's error at the newest sighting, and the scatter again per
+    # block of age (what the line does not explain walks on)
+    sigma_last = np.sqrt(scatter * (1.0 + spread[0, 0] + age_s / reference.BLOCK_S))
+    sigma_slope = np.sqrt(scatter * spread[1, 1])
+    return coef[0] + coef[1] * age_s, sigma_last + sigma_slope * age_s
 
 
 def as_fixes(fix: Fix) -> Fixes:
@@ -99,7 +119,8 @@ def component_id(path: Path) -> int | None:
 
 
 def malformed(msg) -> str | None:
-    """Why a GPS_RAW_INT is no position (its lat/lon, 1e-7 degrees, out of range, NaN, or 0, 0), or None."""
+    """Why a GPS_RAW_INT or GLOBAL_POSITION_INT is no position (its lat/lon, 1e-7 degrees, out of range, NaN, or 0,
+    0), or None."""
     lat, lon = float(msg.lat), float(msg.lon)
     if not (abs(lat) <= 90e7 and abs(lon) <= 180e7):
         return f"lat {msg.lat}, lon {msg.lon} (1e-7 deg): out of range"
@@ -110,7 +131,7 @@ def malformed(msg) -> str | None:
 
 class LiveBuoy:
     """A buoy's GNSS reports heard live: :meth:`on_mavlink` (on the event loop) gets every message of a system other
-    than the UAV's on its MAVLink link. Only the GPS_RAW_INT of the buoy's ``system_id`` (and ``component_id``, when
+    than the UAV's on its MAVLink link. Only the GPS_RAW_INT (or GLOBAL_POSITION_INT) of the buoy's ``system_id`` (and ``component_id``, when
     the file names one) are taken (:class:`groundstation.offline.reference.BuoyReports`); one from any other system or
     component is refused and counted by ``system:component`` (``foreign``), one of the buoy's that is no position
     (:func:`malformed`) or whose time is more than :data:`MAX_SKEW_S` from its receipt refused with a log line, one
@@ -122,21 +143,23 @@ class LiveBuoy:
         self.taken = 0  # reports kept
         self.no_fix = 0  # the buoy's reports without a 3D fix
         self.refused = 0  # the buoy's reports that are no position
-        self.foreign: Counter[str] = Counter()  # GPS_RAW_INT of other systems/components
+        self.foreign: Counter[str] = Counter()  # reports of other systems/components
         self.last_recv = math.nan  # station time the last report kept came
         self._newest_t = -math.inf  # the last report's time (station clock)
         self._throttle = Throttle()
         self._changed = threading.Condition()
 
     def on_mavlink(self, msg, t_recv: float) -> None:
-        if msg.get_type() != "GPS_RAW_INT":
+        kind = msg.get_type()
+        if kind not in ("GPS_RAW_INT", "GLOBAL_POSITION_INT"):
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
         if sysid != self.buoy.system_id or self.component not in (None, compid):
             self.foreign[f"{sysid}:{compid}"] += 1
             if self._throttle(f"foreign {sysid}:{compid}"):
                 log.warning(
-                    "reference: GPS_RAW_INT of system %d component %d refused (the buoy is system %d%s)",
+                    "reference: %s of system %d component %d refused (the buoy is system %d%s)",
+                    kind,
                     sysid,
                     compid,
                     self.buoy.system_id,
@@ -144,7 +167,13 @@ class LiveBuoy:
                 )
             return
         why = malformed(msg)
-        got = None if why else report(msg, t_recv, self.buoy, self.tel.station_minus_gnss_s)
+        got = (
+            None
+            if why
+            else report(
+                msg, t_recv, self.buoy, self.tel.station_minus_gnss_s, self.reports.boot_clock
+            )
+        )
         if why is None and got is None:
             self.no_fix += 1
             return
@@ -154,10 +183,10 @@ class LiveBuoy:
             self.refused += 1
             n = self._throttle(why)
             if n:
-                log.warning("reference: the buoy's GPS_RAW_INT #%d refused: %s", n, why)
+                log.warning("reference: the buoy's %s #%d refused: %s", kind, n, why)
             return
         with self._changed:
-            if self.reports.add_report(*got):
+            if self.reports.add_report(*got, kind == "GPS_RAW_INT"):
                 self.taken += 1
                 self.last_recv = t_recv
                 self._newest_t = got[0]

@@ -16,9 +16,12 @@ marking's below the surface: 0 at it), ``radius_m``, and optionally ``time_sigma
 (:class:`Buoy`). Its positions are the GPS_RAW_INT messages of that system in the session's ``uav.tlog`` (the
 station records what it hears; messages of any other system are not used), each at its fix's GNSS time
 (``time_usec``, UNIX µs) on the station clock (the UAV's SYSTEM_TIME alignment), or, without one, its receive time
-less ``latency_s``; each one's 1-sigma per axis its ``h_acc``/√2 (``sigma_m`` where it states none). The buoy is
-looked for where its reported position, interpolated at each frame's time (:func:`localizer.reference.reported_at`),
-projects.
+less ``latency_s``; each one's 1-sigma per axis its ``h_acc``/√2 (``sigma_m`` where it states none). A buoy that
+sends GLOBAL_POSITION_INT instead (its autopilot's EKF: an ArduPilot boat, BlueOS) is read from those: they carry its
+boot time, not GNSS time, put on the station clock by the fastest of its reports of the last :data:`BOOT_WINDOW_S`
+(:class:`BootClock`: its time's 1-sigma half of ``latency_s``), each one's 1-sigma ``sigma_m`` (they state none); one
+that sends both is followed by its GPS_RAW_INT. The buoy is looked for where its reported position, interpolated at
+each frame's time (:func:`localizer.reference.reported_at`), projects.
 """
 
 from __future__ import annotations
@@ -50,6 +53,9 @@ GNSS_TIME_MIN_US = (
     1e15  # a GPS_RAW_INT time_usec above this is UNIX time (after 2001), below it boot time
 )
 MIN_FIX_TYPE = 3  # GPS_RAW_INT fix_type: 3D fix or better
+#: a buoy's GLOBAL_POSITION_INT is put on the station clock by the fastest of its reports of this long before (s): a
+#: window, so that the buoy's clock drifting against the station's is followed (:class:`BootClock`)
+BOOT_WINDOW_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -110,19 +116,57 @@ def _buoy(path: Path, d: dict) -> Buoy:
     return buoy
 
 
-def report(msg, recv_unix_s: float, buoy: Buoy, station_minus_gnss_s: float | None):
+class BootClock:
+    """A buoy's boot clock (GLOBAL_POSITION_INT's ``time_boot_ms``, s) on the station clock: its reports of the last
+    :data:`BOOT_WINDOW_S` came ``receipt − boot time`` apart, the smallest of these the fastest report's, whose
+    latency on the link is between 0 and the buoy's ``latency_s``: half of it is taken, its 1-sigma half of it too
+    (a bound's, where a uniform one's would be 0.29 of it). A boot time that goes back (the buoy restarted) starts
+    over."""
+
+    def __init__(self):
+        self._seen: deque[tuple[float, float]] = deque()  # (receipt, receipt − boot time) (s)
+        self._last_boot_s = -np.inf
+
+    def station(self, boot_s: float, recv_unix_s: float, latency_s: float) -> tuple[float, float]:
+        """``(t_unix, its 1-sigma)`` (s) of a report stamped ``boot_s`` received at ``recv_unix_s``."""
+        if boot_s < self._last_boot_s:
+            self._seen.clear()
+        self._last_boot_s = boot_s
+        self._seen.append((recv_unix_s, recv_unix_s - boot_s))
+        while self._seen[0][0] < recv_unix_s - BOOT_WINDOW_S:
+            self._seen.popleft()
+        return boot_s + min(d for _, d in self._seen) - latency_s / 2, latency_s / 2
+
+
+def report(
+    msg,
+    recv_unix_s: float,
+    buoy: Buoy,
+    station_minus_gnss_s: float | None,
+    boot_clock: BootClock | None = None,
+):
     """One of the buoy's GNSS reports from a MAVLink message received at ``recv_unix_s`` (station clock):
-    ``(t_unix, lat_deg, lon_deg, sigma_m, gnss_time)`` for a GPS_RAW_INT of its system with a 3D fix or better
-    (see the module doc; ``gnss_time`` whether its time is its fix's), else None. Live or offline."""
-    if msg.get_type() != "GPS_RAW_INT" or msg.get_srcSystem() != buoy.system_id:
+    ``(t_unix, lat_deg, lon_deg, sigma_m, time_sigma_s)`` for a GPS_RAW_INT of its system with a 3D fix or better
+    (see the module doc; ``time_sigma_s`` its time's 1-sigma: the buoy's ``time_sigma_s`` for its fix's GNSS time,
+    else ``latency_s``), or a GLOBAL_POSITION_INT of its system (its autopilot's EKF, as an ArduPilot boat or BlueOS
+    sends; no accuracy in it: the buoy's ``sigma_m``; not at 0, 0) at its ``time_boot_ms`` on ``boot_clock``
+    (:class:`BootClock`; None: not taken), else None. Live or offline."""
+    kind = msg.get_type()
+    if kind not in ("GPS_RAW_INT", "GLOBAL_POSITION_INT") or msg.get_srcSystem() != buoy.system_id:
         return None
+    if kind == "GLOBAL_POSITION_INT":
+        if boot_clock is None or msg.lat == msg.lon == 0:
+            return None
+        t, time_sigma_s = boot_clock.station(msg.time_boot_ms / 1e3, recv_unix_s, buoy.latency_s)
+        return t, msg.lat / 1e7, msg.lon / 1e7, buoy.sigma_m, max(time_sigma_s, buoy.time_sigma_s)
     if msg.fix_type < MIN_FIX_TYPE:
         return None
     h_acc_mm = getattr(msg, "h_acc", 0)
     sigma = h_acc_mm / 1000 / np.sqrt(2.0) if h_acc_mm > 0 else buoy.sigma_m
     gnss_time = msg.time_usec > GNSS_TIME_MIN_US and station_minus_gnss_s is not None
     t = msg.time_usec / 1e6 + station_minus_gnss_s if gnss_time else recv_unix_s - buoy.latency_s
-    return t, msg.lat / 1e7, msg.lon / 1e7, float(sigma), gnss_time
+    time_sigma_s = buoy.time_sigma_s if gnss_time else max(buoy.time_sigma_s, buoy.latency_s)
+    return t, msg.lat / 1e7, msg.lon / 1e7, float(sigma), time_sigma_s
 
 
 class BuoyReports:
@@ -130,39 +174,46 @@ class BuoyReports:
     systems, or without a fix, are not used; a report not later than the last is dropped); :meth:`at` its position
     at given times (:func:`localizer.reference.reported_at`: a :class:`~localizer.reference.Reference` of arrays for
     :func:`expected` and :func:`localizer.reference.sightings`). ``keep_s``: reports older than this before the
-    newest are let go (live); None keeps all. Not thread-safe."""
+    newest are let go (live); None keeps all. A buoy that sends GPS_RAW_INT beside GLOBAL_POSITION_INT is followed by
+    the former (its fix's GNSS time and accuracy) from its first one on. Not thread-safe."""
 
     def __init__(self, buoy: Buoy, keep_s: float | None = None):
         self.buoy, self.keep_s = buoy, keep_s
         self._rows: deque[tuple[float, float, float, float]] = deque()
-        self.all_gnss_time = True  # every report kept so far had its fix's GNSS time
+        self.time_sigma_s = (
+            buoy.time_sigma_s
+        )  # the 1-sigma of the reports' times (s): the largest kept so far
+        self.boot_clock = BootClock()  # a GLOBAL_POSITION_INT's time_boot_ms on the station clock
+        self.gps_raw = False  # a GPS_RAW_INT was kept: GLOBAL_POSITION_INT no longer are
 
     def add(self, msg, recv_unix_s: float, station_minus_gnss_s: float | None) -> bool:
-        """Take one message received at ``recv_unix_s`` (station clock); True if it was the buoy's report."""
-        r = report(msg, recv_unix_s, self.buoy, station_minus_gnss_s)
-        return r is not None and self.add_report(*r)
+        """Take one message received at ``recv_unix_s`` (station clock); True if it was the buoy's report, kept."""
+        r = report(msg, recv_unix_s, self.buoy, station_minus_gnss_s, self.boot_clock)
+        return r is not None and self.add_report(*r, msg.get_type() == "GPS_RAW_INT")
 
     def add_report(
-        self, t_unix: float, lat_deg: float, lon_deg: float, sigma_m: float, gnss_time: bool
+        self,
+        t_unix: float,
+        lat_deg: float,
+        lon_deg: float,
+        sigma_m: float,
+        time_sigma_s: float,
+        gps_raw: bool = True,
     ) -> bool:
-        """Take one report that came another way (e.g. Zenoh): its time on the station clock (s), WGS84 degrees, its
-        1-sigma per axis (m), whether its time is its fix's GNSS time (else a receive time); True if kept."""
-        if self._rows and t_unix <= self._rows[-1][0]:
+        """Take one report (:func:`report`'s, or one that came another way, e.g. Zenoh): its time on the station clock
+        (s), WGS84 degrees, its 1-sigma per axis (m), its time's 1-sigma (s), whether a GPS_RAW_INT's (else a
+        GLOBAL_POSITION_INT's: not taken once a GPS_RAW_INT was); True if kept."""
+        if (self._rows and t_unix <= self._rows[-1][0]) or (self.gps_raw and not gps_raw):
             return False
+        self.gps_raw |= gps_raw
         self._rows.append((t_unix, lat_deg, lon_deg, sigma_m))
-        self.all_gnss_time &= gnss_time
+        self.time_sigma_s = max(self.time_sigma_s, time_sigma_s)
         while self.keep_s is not None and self._rows[0][0] < t_unix - self.keep_s:
             self._rows.popleft()
         return True
 
     def __len__(self) -> int:
         return len(self._rows)
-
-    @property
-    def time_sigma_s(self) -> float:
-        """The 1-sigma of the reports' times (s): ``time_sigma_s``, or ``latency_s`` once one had no GNSS time."""
-        b = self.buoy
-        return b.time_sigma_s if self.all_gnss_time else max(b.time_sigma_s, b.latency_s)
 
     def reports(self) -> reference.Reports:
         cols = np.array(self._rows, dtype=float).reshape(-1, 4).T
@@ -254,9 +305,10 @@ def buoy_track(session: Session, buoy: Buoy):
     for t, msg in records:
         track.add(msg, t, session.telemetry.station_minus_gnss_s)
     if len(track) < 2:
-        heard = sorted({m.get_srcSystem() for _, m in records if m.get_type() == "GPS_RAW_INT"})
+        kinds = ("GPS_RAW_INT", "GLOBAL_POSITION_INT")
+        heard = sorted({m.get_srcSystem() for _, m in records if m.get_type() in kinds})
         session.warnings.append(
-            f"{where}: no GPS_RAW_INT with a fix from that system in uav.tlog (GPS_RAW_INT from systems "
+            f"{where}: no GPS_RAW_INT with a fix nor GLOBAL_POSITION_INT from that system in uav.tlog (from systems "
             f"{', '.join(map(str, heard)) or 'none'}); the buoy is not used"
         )
         return None
