@@ -815,6 +815,65 @@ class ReferenceStatus(Section):
     )
 
 
+class BottomStatus(Section):
+    """The drone's pose biases estimated from the static bottom, live (--pose-from-bottom;
+    groundstation/live/bottom_live.py): what was estimated, how sure, and whether the fixes take it."""
+
+    state: Literal["estimating", "applied", "lapsed"] = Field(
+        description="estimating: no estimate yet; applied: the latest estimate is within its hold and each fix is "
+        "made again with it where its claim is smaller; lapsed: there was one, its newest frame is now older than "
+        "two windows (the fixes are the telemetry's again)"
+    )
+    every_s: float = Field(description="seconds of video between the frames tracked")
+    window_s: float = Field(description="the seconds of video the estimate is made from")
+    frames: int = Field(description="frames in the window now")
+    taken: int = Field(description="frames tracked")
+    skipped: int = Field(description="frames due while the tracker was busy with the one before")
+    no_pose: int = Field(description="frames due without a camera pose")
+    fits: int = Field(description="estimates made")
+    refused: int = Field(
+        description="estimates that gave none (too few features, a floor that moves, ...)"
+    )
+    last_refusal: str | None = Field(
+        description="why the last estimate gave none (null: it gave one)"
+    )
+    age_s: float | None = Field(
+        description="seconds from the latest estimate's newest frame to now (null: none yet)"
+    )
+    corrected: int = Field(description="fixes made again with the estimate")
+    kept_own: int = Field(
+        description="fixes kept as they were: their own claim (h_acc) was smaller than the corrected one's"
+    )
+    tilt_frame: Literal["camera", "body"] | None = Field(
+        description="the tilt's bias frame: a stabilised gimbal's heading, or the airframe's"
+    )
+    tilt_applied: bool | None = Field(
+        description="the tilt taken off the fixes (the bottom told it better than [uncertainty] tilt_deg)"
+    )
+    heading_applied: bool | None = Field(
+        description="the heading taken off (told better than [uncertainty] yaw_deg)"
+    )
+    tilt_fwd_deg: float | None = Field(
+        description="the camera's tilt error (reported minus true) about the bias frame's forward axis"
+    )
+    tilt_right_deg: float | None = Field(description="... about its right axis")
+    sigma_tilt_deg: float | None = Field(
+        description="the tilt's 1-sigma (with the window's thirds' spread)"
+    )
+    heading_deg: float | None = Field(description="the heading error (a compass reading high: +)")
+    sigma_heading_deg: float | None = Field(description="its 1-sigma")
+    walk_n_m: float | None = Field(
+        description="the position correction at the window's end, north (true = reported + it), about the "
+        "window's GNSS mean"
+    )
+    walk_e_m: float | None = Field(description="... east")
+    sigma_walk_m: float | None = Field(description="its horizontal 1-sigma")
+    floor_depth_m: float | None = Field(description="the floor's depth the estimate found")
+    features: int | None = Field(description="floor features in the estimate")
+    observations: int | None = Field(description="their observations")
+    rms_px: float | None = Field(description="the fit's RMS residual, pixels")
+
+
 class HeightFromSizeStatus(Section):
     """The camera's height above the water from the UUV's size in the video (--height-from-size)."""
 
@@ -1122,6 +1181,7 @@ class StatusMessage(Message):
     )
     live_mosaic: LiveMosaicStatus | None = Field(None, description="with --live-mosaic")
     reference: ReferenceStatus | None = Field(None, description="with --reference and --video")
+    bottom: BottomStatus | None = Field(None, description="with --pose-from-bottom and --video")
     gps_input: GpsInputStatus | None = Field(None, description="with --gps-input")
     outputs: dict[str, dict[str, Any]] | None = Field(
         None,

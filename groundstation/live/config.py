@@ -456,6 +456,23 @@ class RunConfig(UuvOptions):
         "mavlink/*/*/GPS_RAW_INT (its JSON header's system and component: only the buoy's are taken, others "
         "refused and counted), besides those on --mavlink",
     )
+    pose_from_bottom: Flag = Field(
+        False,
+        description="the drone's tilt and heading biases and its GNSS's walk estimated from the static bottom in the "
+        "video (as skyfix process --pose-from-bottom auto, causally): a frame every --bottom-every-s tracked at a "
+        "low priority, the estimate made again every 2 s of video from the last --bottom-window-s; each fix made "
+        "again with it where its claim is smaller than the fix's own (the fix's pose_* fields say what was "
+        "applied); needs --video",
+    )
+    bottom_every_s: Positive = Field(
+        0.25,
+        description="seconds of video between the frames --pose-from-bottom tracks the floor in",
+    )
+    bottom_window_s: Positive = Field(
+        10.0,
+        description="seconds of video --pose-from-bottom estimates from (the last ones); its estimate lapses two "
+        "windows after its newest frame",
+    )
     ui_token: Text | None = Field(
         None,
         description="the web page's token (default: none on localhost, a random one "
@@ -614,6 +631,14 @@ class RunConfig(UuvOptions):
                     self.reference,
                     "a buoy's reports are read with --mavlink-backend pymavlink",
                 )
+        return self
+
+    @model_validator(mode="after")
+    def _bottom_needs_video(self):
+        if self.pose_from_bottom and self.video is None:
+            raise Invalid(
+                "pose_from_bottom", True, "needs the video to see the bottom in (--video)"
+            )
         return self
 
     @model_validator(mode="after")

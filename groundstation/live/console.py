@@ -108,6 +108,8 @@ def summary(status: dict) -> str:
         )
     if status.get("reference"):
         lines.append("  " + _reference(status["reference"]))
+    if status.get("bottom"):
+        lines.append("  " + _bottom(status["bottom"]))
     ui = status.get("ui")
     if ui and ui.get("url"):
         lines.append(
@@ -115,6 +117,23 @@ def summary(status: dict) -> str:
             f"{ui.get('viewers')} open"
         )
     return "\n".join(lines)
+
+
+def _bottom(b: dict) -> str:
+    """The status's ``bottom`` section in a line: whether the fixes take the estimate, what it is and how sure."""
+    line = (
+        f"pose from the bottom {b['state']}: {b['frames']} frames in {b['window_s']:g} s, {b['fits']} estimates "
+        f"({b['refused']} gave none), {b['corrected']} fixes corrected, {b['kept_own']} kept their own"
+    )
+    if b["tilt_fwd_deg"] is None:
+        return line
+    told = [w for w, on in (("tilt", b["tilt_applied"]), ("heading", b["heading_applied"])) if on]
+    return (
+        f"{line}; tilt fwd {b['tilt_fwd_deg']:+.2f}° right {b['tilt_right_deg']:+.2f}° ± {b['sigma_tilt_deg']:.2f}°, "
+        f"heading {b['heading_deg']:+.2f}° ± {b['sigma_heading_deg']:.2f}°, walk north {b['walk_n_m']:+.2f} "
+        f"east {b['walk_e_m']:+.2f} ± {b['sigma_walk_m']:.2f} m ({' and '.join(told) or 'the walk only'} applied), "
+        f"{b['features']} features, {b['age_s']:.1f} s old"
+    )
 
 
 def _reference(ref: dict) -> str:

@@ -33,6 +33,8 @@ class EveryFrame:
         self, cal, tel, every_s: float, work: Callable[[np.ndarray, CameraPose], None], name: str
     ):
         self.cal, self.tel, self.every_s, self.work, self.name = cal, tel, every_s, work, name
+        #: ``adjust(pose)`` (on the loop) the pose the work gets, when set: the pose another estimate corrected
+        self.adjust: Callable[[CameraPose], CameraPose] | None = None
         self.skipped = 0  # frames due while the work was busy
         self.no_pose = 0  # frames due without a camera pose
         self._busy = False
@@ -50,6 +52,8 @@ class EveryFrame:
         if pose.status[0] != "ok" or not pose.height_m[0] > 0:
             self.no_pose += 1
             return
+        if self.adjust is not None:
+            pose = self.adjust(pose)
         self._busy = True
         self._thread.submit(self.work, frame.image, pose).add_done_callback(self._done)
 

@@ -49,6 +49,7 @@ from groundstation.config_files import load_calibration
 from groundstation.height_from_size import HeightFromSize, OnlineHeightFromSize
 from groundstation.latency.estimate import OnlineLatency
 from groundstation.live import config, registry
+from groundstation.live.bottom_live import LiveBottom
 from groundstation.live.control import Control
 from groundstation.live.mosaic_live import LiveMosaic
 from groundstation.live.pipeline import FramePoses, Pipeline
@@ -249,6 +250,21 @@ async def serve(cfg: config.RunConfig) -> dict:
             workers.section("reference", reference.status)
             closers.append(reference.close)
 
+        bottom = None
+        if (
+            cfg.pose_from_bottom and video
+        ):  # the drone's pose biases from the static bottom, causally
+            bottom = LiveBottom(cal, tel, cfg.bottom_every_s, cfg.bottom_window_s)
+            workers.section("bottom", bottom.status)
+            closers.append(bottom.close)
+            if reference:  # its sightings through the bottom's corrected pose: its offset is what is left after it
+                reference._search.adjust = bottom.pose_only
+        correct = (
+            bottom.then(reference.correct)
+            if bottom and reference
+            else (bottom and bottom.correct) or (reference and reference.correct)
+        )
+
         def first_aligned_frame(frame) -> None:
             if frame.aligned and not first_aligned:
                 first_aligned.append(frame.t_unix)
@@ -262,6 +278,7 @@ async def serve(cfg: config.RunConfig) -> dict:
                 motion and auto and first_aligned_frame,
                 mosaic and mosaic.on_frame,
                 reference and reference.on_frame,
+                bottom and bottom.on_frame,
             )
             if f
         ]
@@ -301,8 +318,12 @@ async def serve(cfg: config.RunConfig) -> dict:
                 tracking=tracking,
                 poses=poses,
                 fleet=fleet,
-                on_tracked=[from_size.on_tracked] if from_size else [],
-                correct=reference and reference.correct,
+                on_tracked=[
+                    f
+                    for f in (from_size and from_size.on_tracked, bottom and bottom.on_tracked)
+                    if f
+                ],
+                correct=correct,
             )
             chains.append(chain)
             workers.include(chain.workers)

@@ -130,6 +130,82 @@ def floor_marks(grey: np.ndarray, kernel_px: int) -> np.ndarray:
     return np.clip(marks * (255.0 / top), 0, 255).astype(np.uint8)
 
 
+class FloorTracker:
+    """Floor feature tracks frame by frame (pyramidal Lucas–Kanade in :func:`floor_marks` images, each point matched
+    again against its first sight, away from the UUV's disc; new corners where fewer than 70 % of
+    :data:`MAX_FEATURES` are left): :meth:`step` with each frame in turn, :meth:`observations` the tracks so far.
+    ``width``, ``height``: the image's (pixels)."""
+
+    def __init__(self, width: int, height: int):
+        self.width, self.height = width, height
+        self.frame: list[int] = []  # per observation: the frame's number as given to step ...
+        self.feature: list[int] = []  # ... the feature's, and its pixel
+        self.us: list[float] = []
+        self.vs: list[float] = []
+        self.next_id = 0
+        self._prev = None
+        self._points, self._ids = np.zeros((0, 1, 2), np.float32), np.zeros(0, int)
+        # each point's first sight: its frame, pixel, and the frames' images
+        self._first_k, self._first_xy, self._images = (
+            np.zeros(0, int),
+            np.zeros((0, 1, 2), np.float32),
+            {},
+        )
+
+    def step(self, k: int, grey: np.ndarray, uuv_u: float, uuv_v: float, radius_px: float) -> None:
+        """Track into frame number ``k`` (increasing), ``grey`` its :func:`floor_marks`; the UUV at pixel ``uuv_u``,
+        ``uuv_v`` (NaN: not known) with no feature within ``radius_px`` of it."""
+        self._images[k] = grey
+        points, ids, first_k, first_xy = self._points, self._ids, self._first_k, self._first_xy
+        if self._prev is not None and len(points):
+            p1, ok1, _ = cv2.calcOpticalFlowPyrLK(self._prev, grey, points, None, **_LK)
+            back, ok2, _ = cv2.calcOpticalFlowPyrLK(grey, self._prev, p1, None, **_LK)
+            good = (
+                (ok1.ravel() == 1)
+                & (ok2.ravel() == 1)
+                & (np.linalg.norm((back - points).reshape(-1, 2), axis=1) < BACK_PX)
+            )
+            p1, anchored = _match_first_sight(self._images, first_k, first_xy, grey, p1)
+            good &= anchored
+            points, ids, first_k, first_xy = p1[good], ids[good], first_k[good], first_xy[good]
+        keep = _away(points.reshape(-1, 2), self.width, self.height, uuv_u, uuv_v, radius_px)
+        points, ids, first_k, first_xy = points[keep], ids[keep], first_k[keep], first_xy[keep]
+        if len(points) < 0.7 * MAX_FEATURES:
+            new = _corners(grey, points.reshape(-1, 2), uuv_u, uuv_v, radius_px)
+            new = new.reshape(-1, 1, 2).astype(np.float32)
+            points, first_xy = np.concatenate([points, new]), np.concatenate([first_xy, new])
+            first_k = np.concatenate([first_k, np.full(len(new), k)])
+            ids = np.concatenate([ids, np.arange(self.next_id, self.next_id + len(new))])
+            self.next_id += len(new)
+        self._images = {j: self._images[j] for j in set(first_k.tolist())}
+        xy = points.reshape(-1, 2)
+        self.frame += [k] * len(xy)
+        self.feature += list(ids)
+        self.us += list(xy[:, 0])
+        self.vs += list(xy[:, 1])
+        self._prev = grey
+        self._points, self._ids, self._first_k, self._first_xy = points, ids, first_k, first_xy
+
+    def forget(self, before_k: int) -> None:
+        """Let go of the observations in frames numbered below ``before_k`` (the tracks go on)."""
+        keep = [i for i, k in enumerate(self.frame) if k >= before_k]
+        self.frame = [self.frame[i] for i in keep]
+        self.feature = [self.feature[i] for i in keep]
+        self.us = [self.us[i] for i in keep]
+        self.vs = [self.vs[i] for i in keep]
+
+    def observations(self) -> bottom.Observations:
+        """The tracks so far: :class:`localizer.bottom.Observations` (``frame`` the numbers given to :meth:`step`) of the
+        features seen at least :data:`MIN_OBSERVATIONS` times, numbered 0..F-1."""
+        frame, feature = np.asarray(self.frame, int), np.asarray(self.feature, int)
+        counts = np.bincount(feature, minlength=self.next_id) if self.next_id else np.zeros(0, int)
+        seen = counts[feature] >= MIN_OBSERVATIONS if len(feature) else np.zeros(0, bool)
+        _, renumbered = np.unique(feature[seen], return_inverse=True)
+        return bottom.Observations(
+            frame[seen], renumbered, np.asarray(self.us)[seen], np.asarray(self.vs)[seen]
+        )
+
+
 def track_bottom(
     session: Session,
     rows: np.ndarray,
@@ -139,19 +215,12 @@ def track_bottom(
     kernel_px: int,
     progress: bool = False,
 ):
-    """Floor feature tracks through the frames at ``rows`` of video_frames.csv: :class:`localizer.bottom.Observations`
-    with ``frame`` indexing ``rows``. ``uuv_u``, ``uuv_v``, ``radius_px`` per row (NaN: the UUV not known there);
-    tracked in :func:`floor_marks` of ``kernel_px`` (:func:`web_kernel_px`)."""
+    """Floor feature tracks through the frames at ``rows`` of video_frames.csv (:class:`FloorTracker`):
+    :class:`localizer.bottom.Observations` with ``frame`` indexing ``rows``. ``uuv_u``, ``uuv_v``, ``radius_px`` per
+    row (NaN: the UUV not known there); tracked in :func:`floor_marks` of ``kernel_px`` (:func:`web_kernel_px`)."""
     cal = session.calibration
     wanted = {int(session.frames["frame"][r]): k for k, r in enumerate(rows)}
-    frame, feature, us, vs = [], [], [], []
-    prev, points, ids = None, np.zeros((0, 1, 2), np.float32), np.zeros(0, int)
-    first_k, first_xy, images = (
-        np.zeros(0, int),
-        np.zeros((0, 1, 2), np.float32),
-        {},
-    )  # each point's first sight
-    next_id = 0
+    tracker = FloorTracker(cal.camera.width, cal.camera.height)
     bar = progress_bar(len(rows), f"{session.path.name}: bottom features", progress)
     try:
         with session.open_video(grey=True) as video:
@@ -159,63 +228,19 @@ def track_bottom(
                 k = wanted.get(vf.index)
                 if k is None:
                     continue
-                grey = floor_marks(
-                    vf.image if vf.image.ndim == 2 else cv2.cvtColor(vf.image, cv2.COLOR_BGR2GRAY),
-                    kernel_px,
-                )
-                images[k] = grey
                 r = rows[k]
-                if prev is not None and len(points):
-                    p1, ok1, _ = cv2.calcOpticalFlowPyrLK(prev, grey, points, None, **_LK)
-                    back, ok2, _ = cv2.calcOpticalFlowPyrLK(grey, prev, p1, None, **_LK)
-                    good = (
-                        (ok1.ravel() == 1)
-                        & (ok2.ravel() == 1)
-                        & (np.linalg.norm((back - points).reshape(-1, 2), axis=1) < BACK_PX)
-                    )
-                    p1, anchored = _match_first_sight(images, first_k, first_xy, grey, p1)
-                    good &= anchored
-                    points, ids, first_k, first_xy = (
-                        p1[good],
-                        ids[good],
-                        first_k[good],
-                        first_xy[good],
-                    )
-                xy = points.reshape(-1, 2)
-                keep = _away(
-                    xy, cal.camera.width, cal.camera.height, uuv_u[r], uuv_v[r], radius_px[r]
+                tracker.step(
+                    k, floor_marks(grey_of(vf.image), kernel_px), uuv_u[r], uuv_v[r], radius_px[r]
                 )
-                points, ids, first_k, first_xy = (
-                    points[keep],
-                    ids[keep],
-                    first_k[keep],
-                    first_xy[keep],
-                )
-                if len(points) < 0.7 * MAX_FEATURES:
-                    new = _corners(grey, points.reshape(-1, 2), uuv_u[r], uuv_v[r], radius_px[r])
-                    new = new.reshape(-1, 1, 2).astype(np.float32)
-                    points, first_xy = (
-                        np.concatenate([points, new]),
-                        np.concatenate([first_xy, new]),
-                    )
-                    first_k = np.concatenate([first_k, np.full(len(new), k)])
-                    ids = np.concatenate([ids, np.arange(next_id, next_id + len(new))])
-                    next_id += len(new)
-                images = {j: images[j] for j in set(first_k.tolist())}
-                xy = points.reshape(-1, 2)
-                frame += [k] * len(xy)
-                feature += list(ids)
-                us += list(xy[:, 0])
-                vs += list(xy[:, 1])
-                prev = grey
                 bar.update()
     finally:
         bar.close()
-    frame, feature = np.asarray(frame, int), np.asarray(feature, int)
-    counts = np.bincount(feature, minlength=next_id) if next_id else np.zeros(0, int)
-    seen = counts[feature] >= MIN_OBSERVATIONS if len(feature) else np.zeros(0, bool)
-    _, renumbered = np.unique(feature[seen], return_inverse=True)
-    return bottom.Observations(frame[seen], renumbered, np.asarray(us)[seen], np.asarray(vs)[seen])
+    return tracker.observations()
+
+
+def grey_of(image: np.ndarray) -> np.ndarray:
+    """An image as 8-bit grey (a grey one as it is)."""
+    return image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
 
 
 def _match_first_sight(images, first_k, first_xy, grey, predicted):
@@ -431,10 +456,11 @@ def bias_headings(session: Session, pose: CameraPose, frame: str) -> np.ndarray:
     """The heading (radians) per frame of ``pose`` of the tilt's bias frame ``frame`` (:func:`tilt_frame`)."""
     if frame == "camera":
         return bottom.camera_heading_rad(pose.R_ned_from_cv)
-    return _body_yaw(session, pose.t_unix)
+    return body_yaw(session, pose.t_unix)
 
 
-def _body_yaw(session: Session, t_unix) -> np.ndarray:
+def body_yaw(session: Session, t_unix) -> np.ndarray:
+    """The airframe's heading (radians) at times ``t_unix`` (station clock) from the session's attitude."""
     tel = session.telemetry
     a, _, _ = tel.attitude.sample(tel.uav_time(np.asarray(t_unix, dtype=float)))
     return a[:, 2]
@@ -476,22 +502,44 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
         web_kernel_px(session.calibration, pose),
         progress,
     )
+    frame_tilt = tilt_frame(session)
+    poses = frame_poses(session, pose, rows, frame_tilt)
+    return fit(session, poses, obs, float(np.nanmedian(pose.sigma_uav_m[rows])), frame_tilt)
+
+
+def frame_poses(
+    session: Session, pose: CameraPose, rows: np.ndarray, frame_tilt: str, headings=None
+) -> bottom.FramePoses:
+    """The reported cameras of the frames ``rows`` of ``pose`` as the estimate takes them (:func:`uav_ne_m` of all
+    ``pose``'s frames, the bias frame ``frame_tilt``'s headings: :func:`bias_headings`, or ``headings`` (radians, one
+    per frame of ``pose``) when given)."""
+    camera_ne = (uav_ne_m(pose) + pose.cam_offset_ned_m[:, :2])[rows]
+    if headings is None:
+        headings = bias_headings(session, pose, frame_tilt)
+    return bottom.FramePoses(
+        pose.t_unix[rows],
+        pose.R_ned_from_cv[rows],
+        camera_ne,
+        pose.height_m[rows],
+        np.asarray(headings, float)[rows],
+        pose.velocity_ned_mps[rows, :2],
+    )
+
+
+def fit(
+    session: Session,
+    poses: bottom.FramePoses,
+    obs: bottom.Observations,
+    sigma_uav_m: float,
+    frame_tilt: str,
+):
+    """The :class:`PoseCorrection` from floor tracks ``obs`` seen from ``poses`` (the GNSS's horizontal 1-sigma
+    ``sigma_uav_m``, the tilt's bias frame ``frame_tilt``), or a string saying why there is none (see the module
+    doc). ``session``: anything with the session's ``calibration`` and ``telemetry``."""
     n_features = int(obs.feature.max()) + 1 if len(obs.feature) else 0
     if n_features < MIN_FEATURES:
         return f"{n_features} floor features tracked (fewer than {MIN_FEATURES})"
-    sub = rows
-    camera_ne = (uav_ne_m(pose) + pose.cam_offset_ned_m[:, :2])[sub]
-    frame_tilt = tilt_frame(session)
-    headings = bias_headings(session, pose, frame_tilt)[sub]
-    poses = bottom.FramePoses(
-        pose.t_unix[sub],
-        pose.R_ned_from_cv[sub],
-        camera_ne,
-        pose.height_m[sub],
-        headings,
-        pose.velocity_ned_mps[sub, :2],
-    )
-    gnss_rate = float(np.nanmedian(pose.sigma_uav_m[sub])) / np.sqrt(GNSS_WALK_S)
+    gnss_rate = sigma_uav_m / np.sqrt(GNSS_WALK_S)
     white = bottom.white_noise_m(poses)
     priors = bottom.Priors(
         walk_rate_m=min(gnss_rate, VELOCITY_RATE_M),

@@ -367,6 +367,9 @@ function showStatus() {
       + ` (frame ${f.frame}, ${(s.t - f.t).toFixed(1)} s ago)`
       + (f.ref_offset_n_m == null ? ""  // a surveyed marker's offset added (--reference)
         : ` · reference offset N ${fmt(f.ref_offset_n_m, 2)}, E ${fmt(f.ref_offset_e_m, 2)} m added`)
+      + (f.pose_source !== "bottom" ? ""  // the pose corrected by the bottom's estimate (--pose-from-bottom)
+        : ` · pose from the bottom: heading error ${fmt(f.cam_err_d_deg, 2)}° taken off, walk `
+          + `N ${fmt(f.walk_n_m, 2)} E ${fmt(f.walk_e_m, 2)} m applied`)
     : `${several() ? `${name}: ` : ""}no fix: ${f ? f.status : "no frames yet"}`);
   if (!several()) {
     $("fix-text").textContent = fixText(fix, "UUV");
@@ -856,6 +859,20 @@ function showHealth() {
                       + `, ${r.buoy.refused} malformed and `
                       + `${Object.values(r.buoy.foreign).reduce((a, b) => a + b, 0)} of other systems refused`
                     : "")));
+  }
+  if (s.bottom) {  // the drone's pose biases from the static bottom (--pose-from-bottom)
+    const b = s.bottom;
+    const state = b.state === "applied" ? "ok" : b.state === "lapsed" ? "warn: lapsed" : "—";
+    rows.push(row("pose from bottom", state, age(b.age_s), "",
+                  (b.tilt_fwd_deg == null ? "no estimate yet"
+                    : `tilt fwd ${fmt(b.tilt_fwd_deg, 2)}° right ${fmt(b.tilt_right_deg, 2)}° ± ${fmt(b.sigma_tilt_deg, 2)}°, `
+                      + `heading ${fmt(b.heading_deg, 2)}° ± ${fmt(b.sigma_heading_deg, 2)}°, `
+                      + `walk N ${fmt(b.walk_n_m, 2)} E ${fmt(b.walk_e_m, 2)} ± ${fmt(b.sigma_walk_m, 2, " m")} · `
+                      + `${[b.tilt_applied && "tilt", b.heading_applied && "heading"].filter(Boolean).join(" and ")
+                           || "the walk only"} applied · ${b.features} features`)
+                  + ` · ${b.frames} frames in ${b.window_s} s, ${b.skipped} skipped · ${b.fits} estimates, `
+                  + `${b.refused} gave none${b.last_refusal ? ` (${b.last_refusal})` : ""} · `
+                  + `${b.corrected} fixes corrected, ${b.kept_own} kept their own`));
   }
   // a UUV's own rows: named with its id when there are several
   const each = (fn) => page.uuvs.forEach((u, k) => fn(own(k), several() ? `${u.id} ` : "", u.rates,
