@@ -4,7 +4,8 @@
         [--profile-s 10] [--out bench/results/uuvs.txt]
 
 The session is the ``two_uuvs_crossing`` scenario (two BlueROV2s passing nearly head on under a camera 10 m up)
-rendered at 1920x1080 30 fps, generated once into ``/tmp/skyfix-bench/`` (a few minutes) and its video re-encoded
+with a third vehicle (:data:`THIRD_UUV`, ``[third_uuv]``: 0.6 m deep, passing uuv1 1 m to its side the other way,
+never nearer either vehicle than 1 m) rendered at 1920x1080 30 fps, generated once into ``/tmp/skyfix-bench/`` (a few minutes) and its video re-encoded
 as a camera sends it (:func:`bench.live_latency.encode_as_camera`). As in ``bench/live_latency.py``,
 ``skyfix replay`` sends every frame as MPEG-TS over UDP :data:`CAMERA_LATENCY_MS` after its exposure, the UAV's
 MAVLink and each UUV's depth on its own Zenoh key into one ``skyfix run --config`` on loopback, whose ``[[uuv]]``
@@ -12,10 +13,9 @@ tables are the UUVs of the run:
 
 - 1 UUV: ``uuv1``;
 - 2 UUVs: ``uuv1`` and ``uuv2``, the two vehicles of the scenario;
-- 3 UUVs: those two and ``uuv3``, **a third tracker session on the same vehicle as uuv1**: the cached session holds
-  ``uuvs/uuv3/``, a copy of uuv1's depth, truth, track and first box, and the replay publishes that depth on its
-  own key. The scenario has two vehicles only: this measures the cost of a third tracker, not a third vehicle's
-  accuracy.
+- 3 UUVs: those two and ``uuv3``, the third vehicle, its depth on its own key.
+
+All three vehicles are in the video in every run (the ones not configured are look-alikes to the others).
 
 Each UUV has its own GPS_INPUT link, a UDP port on 127.0.0.1 the benchmark listens on (one thread, one socket per
 UUV, pymavlink's parser), stamping each GPS_INPUT with its arrival.
@@ -26,10 +26,9 @@ machine a saturated host caps what the service gets), the frames its decoder ski
 the UUVs); per UUV: **slot → GPS_INPUT** (each new valid fix's first arrival at its endpoint minus its frame's
 stream slot, the exposure + the camera's latency), p50/p99, the service's own packet arrival → GPS_INPUT sent
 (``--stats``: with several UUVs, ``uuvs.{id}.latency``), the frames its pipeline dropped (its tracker behind),
-the share of frames sent its tracker had the UUV in (``tracked``: uuv1 and uuv3 on one vehicle track it but get no
-ok fix, ``same_vehicle``) and with an ok fix, the MAE of the valid GPS_INPUT against its own truth and the frame
+the share of frames sent its tracker had the UUV in (``tracked``) and with an ok fix, the MAE of the valid GPS_INPUT against its own truth and the frame
 time error (a fix's time minus the nearest true exposure: a clock map gone wrong shows there), and how many
-valid GPS_INPUT lie nearer the other vehicle's truth than its own (an identity swap: GPS_INPUT names no vehicle,
+valid GPS_INPUT lie nearer another vehicle's truth than its own (an identity swap: GPS_INPUT names no vehicle,
 so the autopilot would take the other's position).
 
 With ``--profile-s`` and py-spy on PATH (installed apart from the project), each run also samples which of the
@@ -73,26 +72,36 @@ from live_latency import (
     free_port,
     kill_left,
     nearest_times,
+    nice_of,
     pct,
     pipeline_baseline,
     proc_sample,
 )
 
+from groundstation.config_files import read_toml
 from groundstation.mavlink.ingest import (
     mavutil,  # pymavlink, set to MAVLink 2 before its first import
 )
-from groundstation.session.read import UUV_TOML, UUVS_DIR, load_session, uuv_files
+from groundstation.session.read import load_session, uuv_files
 from localizer.geodesy import horizontal_error_m
 
 SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
 SIZE = (1920, 1080)
-THIRD = "uuv3"  # a third tracker session on uuv1 (the scenario has two vehicles)
-RUNS = {1: ("uuv1",), 2: ("uuv1", "uuv2"), 3: ("uuv1", "uuv2", THIRD)}
-OTHER = {
-    "uuv1": "uuv2",
-    "uuv2": "uuv1",
-    THIRD: "uuv2",
-}  # the other vehicle in the video, for the identity check
+#: The third vehicle (``[third_uuv]``, as ``[second_uuv]``): passing uuv1 the other way 1 m to its side, slower and
+#: shallower, its path 1.0 m from uuv1's and uuv2's at their closest and in view throughout (1080p: pixel rows
+#: 585-908 of 1080).
+THIRD_UUV = {
+    "enabled": True,
+    "role": "uuv",
+    "id": "uuv3",
+    "pass_at_s": 10.0,
+    "miss_m": -1.0,
+    "course_rel_deg": 175.0,
+    "speed_mps": 0.2,
+    "depth_m": 0.6,
+}
+VEHICLES = ("uuv1", "uuv2", "uuv3")  # all in the video, each run
+RUNS = {n: VEHICLES[:n] for n in (1, 2, 3)}
 
 
 #: A frame's status when the tracker had no UUV in it (``localizer.tracking.TrackResult``'s words).
@@ -100,39 +109,23 @@ NOT_TRACKED = ("lost", "awaiting_target", "released")
 
 
 def ensure_session(duration_s: float, size: tuple[int, int] = SIZE) -> Path:
-    """The two_uuvs_crossing session at 30 fps (``size``: width, height; 1080p by default), generated once, its video
-    as a camera sends it, with ``uuvs/uuv3/`` (a copy of uuv1's records: a third tracker session on the same
-    vehicle)."""
-    path = BENCH_DIR / f"uuvs_{size[1]}p_{duration_s:g}s"
+    """The two_uuvs_crossing session with :data:`THIRD_UUV` at 30 fps (``size``: width, height; 1080p by default),
+    three vehicles with their records (``uuvs/uuv2/``, ``uuvs/uuv3/``), generated once, its video as a camera sends
+    it."""
+    path = BENCH_DIR / f"uuvs3_{size[1]}p_{duration_s:g}s"
     if not (path / "video.ts").exists():
         from sim_fixtures.generate import generate
-        from sim_fixtures.scenario import load_scenario, with_overrides
+        from sim_fixtures.scenario import scenario_from_dict
 
-        sc = with_overrides(
-            load_scenario(SCENARIO),
-            camera={"width": size[0], "height": size[1]},
-            duration_s=duration_s,
+        data = read_toml(SCENARIO)
+        data["camera"] |= {"width": size[0], "height": size[1]}
+        sc = scenario_from_dict(
+            data | {"duration_s": duration_s, "third_uuv": THIRD_UUV}, str(SCENARIO)
         )
         print(f"generating {path} (once) ...", flush=True)
         generate(sc, path, progress=True)
         encode_as_camera(path)
-    add_third(path)
     return path
-
-
-def add_third(path: Path) -> None:
-    """``uuvs/uuv3/`` in the two_uuvs_crossing session at ``path``: a copy of uuv1's records (once)."""
-    third = path / UUVS_DIR / THIRD
-    if not (third / UUV_TOML).exists():
-        third.mkdir(parents=True, exist_ok=True)
-        first = uuv_files(path)
-        for f in (first.depth, first.truth, first.track):
-            shutil.copy(f, third / f.name)
-        box = tomllib.loads(first.tracker_toml.read_text())["tracker"]["init_bbox"]
-        (third / UUV_TOML).write_text(
-            f"# uuv1's records: a third tracker session on the same vehicle\n"
-            f"[tracker]\ninit_bbox = {list(box)}\n"
-        )
 
 
 class GpsEndpoints:
@@ -246,7 +239,8 @@ def uuv_result(
             lat, lon, np.interp(t, truth["t"], truth["lat"]), np.interp(t, truth["t"], truth["lon"])
         )
 
-    err, other = error_m(uuv_id), error_m(OTHER[uuv_id])
+    err = error_m(uuv_id)
+    other = np.min([error_m(v) for v in VEHICLES if v != uuv_id], axis=0)
     pl = own["pipeline"]
     return {
         "gps_input_messages": len(received),
@@ -265,7 +259,7 @@ def uuv_result(
         "mae_m": round(float(err.mean()), 4) if keys else None,
         "max_err_m": round(float(err.max()), 4) if keys else None,
         "valid_fixes": len(err),
-        # valid GPS_INPUT nearer the other vehicle than its own
+        # valid GPS_INPUT nearer another vehicle than its own
         "nearer_other_vehicle": int((other <= err).sum()),
     }
 
@@ -323,15 +317,17 @@ def gil_summary(raw: Path, top: int = 15) -> dict:
     }
 
 
-def live(session: Path, work: Path, ids, profile_s: float = 0.0) -> dict:
-    """One ``skyfix run`` with these UUVs, fed by ``skyfix replay``: its CPU and memory and each UUV's numbers
-    (and, ``profile_s`` > 0 with py-spy on PATH, what held the interpreter's lock for that long mid-video)."""
+def live(session: Path, work: Path, ids, profile_s: float = 0.0, nice: int = 0) -> dict:
+    """One ``skyfix run`` with these UUVs, started at ``nice``, fed by ``skyfix replay``: its CPU and memory and each
+    UUV's numbers (and, ``profile_s`` > 0 with py-spy on PATH, what held the interpreter's lock for that long
+    mid-video)."""
     endpoints = GpsEndpoints(ids)  # first: the free ports below are not theirs
     ports = {"mav": free_port(), "video": free_port(), "zenoh": free_port(socket.SOCK_STREAM)}
     stats, config = work / "stats.json", work / "run.toml"
     config.write_text(run_toml(session, ids, ports, endpoints.ports, stats))
     py = sys.executable
-    run = [py, "-m", "groundstation.cli", "run", "--config", str(config)]
+    run = [*(["nice", "-n", str(nice)] if nice else []), py, "-m", "groundstation.cli", "run"]
+    run += ["--config", str(config)]
     replay = [
         py,
         "-m",
@@ -371,6 +367,7 @@ def live(session: Path, work: Path, ids, profile_s: float = 0.0) -> dict:
                     )
                 time.sleep(0.2)
             time.sleep(1.0)
+            service_nice = nice_of(service.pid)
             rep = subprocess.Popen(
                 replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT, env=env
             )
@@ -410,6 +407,7 @@ def live(session: Path, work: Path, ids, profile_s: float = 0.0) -> dict:
         "uuvs": list(ids),
         "frames_sent": n_frames,
         "load_average": round(load, 2),
+        "service_nice": service_nice,
         "video": {
             k: final["video"][k]
             for k in (
@@ -472,6 +470,8 @@ def table(rounds: list[dict]) -> list[str]:
     """The table: per round, the decode-only baseline, then a row per run and UUV."""
     cols = [
         ("UUVs", 5),
+        ("load", 4),
+        ("nice", 4),
         ("CPU-s/video-s", 13),
         ("peak RSS MB", 11),
         ("host busy %", 11),
@@ -495,7 +495,7 @@ def table(rounds: list[dict]) -> list[str]:
         ):
             base = rnd[key]
             lines.append(
-                f"{'base':>5} | {base['cpu_s_per_video_s']:>13} | {'':>11} | {base['host_busy_pct']:>11} | "
+                f"{'base':>5} | {'':>4} | {'':>4} | {base['cpu_s_per_video_s']:>13} | {'':>11} | {base['host_busy_pct']:>11} | "
                 f"{what}, offline, round {r + 1}: per frame p50 {base['per_frame_ms']['p50']} ms, "
                 f"p99 {base['per_frame_ms']['p99']} ms"
             )
@@ -505,13 +505,15 @@ def table(rounds: list[dict]) -> list[str]:
                 run = (
                     (
                         n,
+                        res["load_average"],
+                        res.get("service_nice", "?"),
                         res["cpu_s_per_video_s"],
                         res["rss_mb"]["peak"],
                         res["host_busy_pct"],
                         f"{res['video']['skipped_behind']}/{res['frames_sent']}",
                     )
                     if i == 0
-                    else ("",) * 5
+                    else ("",) * 7
                 )
                 row = (
                     *run,
@@ -571,6 +573,12 @@ def main() -> int:
         help="with py-spy on PATH: sample what holds the interpreter's lock in skyfix run for this long "
         "mid-video, per thread and function (0: no profile)",
     )
+    ap.add_argument(
+        "--nice",
+        type=int,
+        default=0,
+        help="start the service at this nice value (`nice -n`, as deploy/skyfix.service's Nice=; negative: root)",
+    )
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "uuvs.txt")
     args = ap.parse_args()
     session = ensure_session(args.duration_s)
@@ -585,8 +593,11 @@ def main() -> int:
             + "; ".join(f"{n}: {', '.join(RUNS[n])}" for n in RUNS)
         ),
         (
-            f"{THIRD} is a third tracker session on the same vehicle as uuv1 (a copy of its depth, truth and "
-            "first box): the cost of a third tracker, not a third vehicle's accuracy."
+            "three distinct vehicles in the video in every run: uuv3 is [third_uuv] "
+            + ", ".join(
+                f"{k} = {v}" for k, v in THIRD_UUV.items() if k not in ("enabled", "role", "id")
+            )
+            + f"; the service at nice {args.nice} (`nice -n`, as deploy/skyfix.service's Nice=; read back per run)"
         ),
         (
             "CPU-s/video-s: the skyfix run process over the video's span (decode only: this process, offline); "
@@ -597,16 +608,16 @@ def main() -> int:
             "dropped: frames the UUV's pipeline dropped, its tracker behind;"
         ),
         (
-            "tracked: frames its tracker had the UUV in / frames sent (uuv1 and uuv3 on one vehicle get no ok fix: "
-            "same_vehicle); target with 3 UUVs: >= 0.95 each, slot->GPS_INPUT p99 <= 60 ms;"
+            "tracked: frames its tracker had the UUV in / frames sent; "
+            "target with 3 UUVs: >= 0.95 each, slot->GPS_INPUT p99 <= 60 ms;"
         ),
         (
             "ok share: the UUV's ok fixes / frames sent; MAE: valid GPS_INPUT at its endpoint vs its own truth; "
             "t err: |a fix's time - the nearest true exposure|;"
         ),
         (
-            f"nearer other: valid GPS_INPUT nearer the other vehicle's truth than its own, an identity swap "
-            f"({THIRD}'s own is uuv1's, its other uuv2's)."
+            "nearer other: valid GPS_INPUT nearer another vehicle's truth than its own, an identity swap; "
+            "load: the load average at the run's start (a shared machine)."
         ),
         "",
     ]
@@ -623,7 +634,7 @@ def main() -> int:
             shutil.rmtree(work, ignore_errors=True)
             work.mkdir(parents=True)
             print(f"round {r + 1}, {n} UUV(s): {', '.join(RUNS[n])} ...", flush=True)
-            rnd["runs"][n] = live(session, work, RUNS[n], args.profile_s)
+            rnd["runs"][n] = live(session, work, RUNS[n], args.profile_s, args.nice)
     emit(lines + table(rounds) + profiles(rounds), args.out, rounds)
     return 0
 
