@@ -511,8 +511,9 @@ def test_a_buoys_reports_on_zenoh(buoy_zenoh, tmp_path):
 
 def test_a_zenoh_report_is_read_or_refused_in_one_line():
     """BlueOS's JSON of a GPS_RAW_INT (mavlink_json's, the project's encoder for mavlink-server): its header's system
-    and component, its fix type's enum name as the number; NaN or out-of-range coordinates read but malformed; what
-    is not such a message refused naming why."""
+    and component, its fix type's enum name as the number; NaN or out-of-range coordinates read but malformed; a
+    GLOBAL_POSITION_INT read with its boot time (refused without one); what is not such a message refused naming
+    why."""
     fields = {"time_usec": 1_700_000_000_000_000, "fix_type": 6, "lat": 634400000, "lon": 103999000}
     fields |= {"alt": 0, "eph": 70, "epv": 120, "vel": 0, "cog": 0, "satellites_visible": 20}
     head = {"system_id": 42, "component_id": 3, "sequence": 0, "message_id": 24}
@@ -532,6 +533,21 @@ def test_a_zenoh_report_is_read_or_refused_in_one_line():
     assert "out of range" in malformed(
         parse_gps_raw(json.dumps(good).replace("634400000", "950000000").encode())
     )
+    fields = {"time_boot_ms": 123456, "lat": 634400000, "lon": 103999000, "alt": 0}
+    fields |= {"relative_alt": 0, "vx": 0, "vy": 0, "vz": 0, "hdg": 0}
+    ekf = {"header": head, "message": mavlink_json("GLOBAL_POSITION_INT", fields)}
+    r = parse_gps_raw(json.dumps(ekf).encode())
+    assert r.get_type() == "GLOBAL_POSITION_INT" and (r.get_srcSystem(), r.time_boot_ms) == (
+        42,
+        123456,
+    )
+    assert malformed(r) is None and (r.lat, r.lon) == (634400000, 103999000)
+    with pytest.raises(BadReport, match="time_boot_ms = None"):
+        parse_gps_raw(
+            json.dumps(
+                ekf | {"message": {"type": "GLOBAL_POSITION_INT", "lat": 1, "lon": 1}}
+            ).encode()
+        )
     for bad, why in (
         (b"{", "not JSON"),
         (json.dumps({"message": good["message"]}).encode(), "no 'header'"),

@@ -48,7 +48,14 @@ import numpy as np
 from groundstation.live.every_frame import EveryFrame
 from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ingest import mavutil
-from groundstation.offline.reference import Buoy, BuoyReports, expected, find, report
+from groundstation.offline.reference import (
+    REPORT_KINDS,
+    Buoy,
+    BuoyReports,
+    expected,
+    find,
+    report,
+)
 from groundstation.threads import Handoff
 from groundstation.zenoh_session import subscribe
 from localizer import reference
@@ -131,8 +138,8 @@ def malformed(msg) -> str | None:
 
 class LiveBuoy:
     """A buoy's GNSS reports heard live: :meth:`on_mavlink` (on the event loop) gets every message of a system other
-    than the UAV's on its MAVLink link. Only the GPS_RAW_INT (or GLOBAL_POSITION_INT) of the buoy's ``system_id`` (and ``component_id``, when
-    the file names one) are taken (:class:`groundstation.offline.reference.BuoyReports`); one from any other system or
+    than the UAV's on its MAVLink link. Only the GPS_RAW_INT (or GLOBAL_POSITION_INT) of the buoy's ``system_id``
+    (and ``component_id``, when the file names one) are taken (:class:`groundstation.offline.reference.BuoyReports`); one from any other system or
     component is refused and counted by ``system:component`` (``foreign``), one of the buoy's that is no position
     (:func:`malformed`) or whose time is more than :data:`MAX_SKEW_S` from its receipt refused with a log line, one
     without a 3D fix counted. :meth:`at` (the search's thread) is where the reports put it at a frame's time."""
@@ -151,7 +158,7 @@ class LiveBuoy:
 
     def on_mavlink(self, msg, t_recv: float) -> None:
         kind = msg.get_type()
-        if kind not in ("GPS_RAW_INT", "GLOBAL_POSITION_INT"):
+        if kind not in REPORT_KINDS:
             return
         sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
         if sysid != self.buoy.system_id or self.component not in (None, compid):
@@ -215,18 +222,21 @@ class LiveBuoy:
 
 @dataclasses.dataclass(frozen=True)
 class HeardReport:
-    """A GPS_RAW_INT that came on Zenoh, as :meth:`LiveBuoy.on_mavlink` reads a pymavlink message."""
+    """A GPS_RAW_INT or GLOBAL_POSITION_INT (``kind``) that came on Zenoh, as :meth:`LiveBuoy.on_mavlink` reads a
+    pymavlink message (the fields the other kind lacks 0)."""
 
     system: int
     component: int
-    time_usec: int
-    fix_type: int
     lat: float
     lon: float
-    h_acc: int
+    kind: str = "GPS_RAW_INT"
+    time_usec: int = 0
+    fix_type: int = 0
+    h_acc: int = 0
+    time_boot_ms: int = 0
 
     def get_type(self) -> str:
-        return "GPS_RAW_INT"
+        return self.kind
 
     def get_srcSystem(self) -> int:
         return self.system
@@ -236,14 +246,15 @@ class HeardReport:
 
 
 class BadReport(ValueError):
-    """A GPS_RAW_INT payload on Zenoh that cannot be read."""
+    """A report's payload on Zenoh that cannot be read."""
 
 
 def parse_gps_raw(payload: bytes) -> HeardReport:
     """A GPS_RAW_INT as BlueOS's mavlink-server publishes it on Zenoh (``mavlink/{sys}/{comp}/GPS_RAW_INT``:
     ``{"header": {"system_id", "component_id", ...}, "message": {"type": "GPS_RAW_INT", "lat", "lon", "time_usec",
-    "fix_type": {"type": "GPS_FIX_TYPE_..."}, "h_acc", ...}}``); its system and component the header's.
-    :class:`BadReport` naming what is wrong (a lat/lon that is no position is :func:`malformed`'s to refuse)."""
+    "fix_type": {"type": "GPS_FIX_TYPE_..."}, "h_acc", ...}}``), or a GLOBAL_POSITION_INT (its ``time_boot_ms``,
+    ``lat``, ``lon``); its system and component the header's. :class:`BadReport` naming what is wrong (a lat/lon that
+    is no position is :func:`malformed`'s to refuse)."""
     try:
         obj = json.loads(payload)
     except (ValueError, UnicodeDecodeError, RecursionError):
@@ -252,30 +263,37 @@ def parse_gps_raw(payload: bytes) -> HeardReport:
     msg = obj.get("message") if isinstance(obj, dict) else None
     if not isinstance(head, dict) or not isinstance(msg, dict):
         raise BadReport("no 'header' and 'message' objects")
-    if msg.get("type") != "GPS_RAW_INT":
-        raise BadReport(f"message type {msg.get('type')!r} is not GPS_RAW_INT")
-    fix = msg.get("fix_type")
-    if isinstance(fix, dict):
-        entry = mavutil().mavlink.enums["GPS_FIX_TYPE"]
-        fix = next((k for k, e in entry.items() if e.name == fix.get("type")), None)
+    kind = msg.get("type")
+    if kind not in REPORT_KINDS:
+        raise BadReport(f"message type {kind!r} is not {' or '.join(REPORT_KINDS)}")
     fields = {
         "system": head.get("system_id"),
         "component": head.get("component_id"),
-        "time_usec": msg.get("time_usec", 0),
-        "fix_type": fix,
         "lat": msg.get("lat"),
         "lon": msg.get("lon"),
-        "h_acc": msg.get("h_acc", 0),
     }
+    if kind == "GLOBAL_POSITION_INT":
+        fields["time_boot_ms"] = msg.get("time_boot_ms")
+    else:
+        fix = msg.get("fix_type")
+        if isinstance(fix, dict):
+            entry = mavutil().mavlink.enums["GPS_FIX_TYPE"]
+            fix = next((k for k, e in entry.items() if e.name == fix.get("type")), None)
+        fields |= {
+            "time_usec": msg.get("time_usec", 0),
+            "fix_type": fix,
+            "h_acc": msg.get("h_acc", 0),
+        }
     for name, value in fields.items():
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise BadReport(f"{name} = {value!r}: expected a number")
-    return HeardReport(**fields)
+    return HeardReport(kind=kind, **fields)
 
 
 class BuoyZenoh:
     """A worker subscribing to ``key`` (a Zenoh key expression; BlueOS's ``mavlink/*/*/GPS_RAW_INT`` hears every
-    system's) and handing each GPS_RAW_INT (:func:`parse_gps_raw`) to ``buoy``'s :meth:`LiveBuoy.on_mavlink`, which
+    system's; ``mavlink/*/*/GLOBAL_POSITION_INT`` for a buoy that sends those) and handing each report
+    (:func:`parse_gps_raw`) to ``buoy``'s :meth:`LiveBuoy.on_mavlink`, which
     keeps only the buoy's; a payload that does not parse is refused with a log line and counted in the buoy's
     ``refused``."""
 
@@ -293,7 +311,9 @@ class BuoyZenoh:
         except BadReport as e:
             self.buoy.refused += 1
             if self._throttle(kind_of(str(e))):
-                log.warning("reference: GPS_RAW_INT on %s refused: %s: %r", key, e, data[:120])
+                # the message its key names (BlueOS's keys end with it)
+                kind = key.rsplit("/", 1)[-1]
+                log.warning("reference: %s on %s refused: %s: %r", kind, key, e, data[:120])
             return
         self.buoy.on_mavlink(heard, t_recv)
 

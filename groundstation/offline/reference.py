@@ -53,6 +53,8 @@ GNSS_TIME_MIN_US = (
     1e15  # a GPS_RAW_INT time_usec above this is UNIX time (after 2001), below it boot time
 )
 MIN_FIX_TYPE = 3  # GPS_RAW_INT fix_type: 3D fix or better
+#: the messages a buoy's reports come in (:func:`report`)
+REPORT_KINDS = ("GPS_RAW_INT", "GLOBAL_POSITION_INT")
 #: a buoy's GLOBAL_POSITION_INT is put on the station clock by the fastest of its reports of this long before (s): a
 #: window, so that the buoy's clock drifting against the station's is followed (:class:`BootClock`)
 BOOT_WINDOW_S = 60.0
@@ -152,7 +154,7 @@ def report(
     sends; no accuracy in it: the buoy's ``sigma_m``; not at 0, 0) at its ``time_boot_ms`` on ``boot_clock``
     (:class:`BootClock`; None: not taken), else None. Live or offline."""
     kind = msg.get_type()
-    if kind not in ("GPS_RAW_INT", "GLOBAL_POSITION_INT") or msg.get_srcSystem() != buoy.system_id:
+    if kind not in REPORT_KINDS or msg.get_srcSystem() != buoy.system_id:
         return None
     if kind == "GLOBAL_POSITION_INT":
         if boot_clock is None or msg.lat == msg.lon == 0:
@@ -305,8 +307,7 @@ def buoy_track(session: Session, buoy: Buoy):
     for t, msg in records:
         track.add(msg, t, session.telemetry.station_minus_gnss_s)
     if len(track) < 2:
-        kinds = ("GPS_RAW_INT", "GLOBAL_POSITION_INT")
-        heard = sorted({m.get_srcSystem() for _, m in records if m.get_type() in kinds})
+        heard = sorted({m.get_srcSystem() for _, m in records if m.get_type() in REPORT_KINDS})
         session.warnings.append(
             f"{where}: no GPS_RAW_INT with a fix nor GLOBAL_POSITION_INT from that system in uav.tlog (from systems "
             f"{', '.join(map(str, heard)) or 'none'}); the buoy is not used"
