@@ -25,7 +25,10 @@ Printed per condition: fixes (sessions), the pooled share within 2·h_acc, the s
 ("calib.": a normal error of each fix's own claimed covariance, so 95.4 % for an error along one axis to 98.2 % for
 a circular one), the share within h_acc, the share of
 sessions that are entirely within 2·h_acc, RMS error and RMS h_acc and their ratio (1: the claim is the error's DRMS; well below 1:
-loose), MAE and median h_acc; with waves the RMS of the waves' own error (truth_waves.csv), the RMS of the
+loose), MAE and median h_acc, the share of the errors' components along the claimed covariance's axes within 2
+sigma of theirs ("axes 2σ": 95.4 % for a calibrated claim of any shape) and the share of fixes within twice the
+larger axis's sigma ("2σ maj": the reading of ArduPilot's EKF3, which takes GPS_INPUT's horiz_accuracy as each
+axis's 1-sigma: 86.5 % of a circular error, 95.4 % of one along one axis); with waves the RMS of the waves' own error (truth_waves.csv), the RMS of the
 claim's wave term alone (every other sigma 0) and the share of the waves' error within twice that.
 """
 
@@ -115,15 +118,46 @@ def draw_sensors(seed: int, seeds: int) -> dict:
     }
 
 
-def scenario(c: Condition, seed: int, seeds: int, duration_s: float, fps: float) -> Scenario:
+#: ``--terms``: one error source at a time, by name: the ``[sensors]`` keys of the drone's draw that make it (every
+#: other source off: :data:`SENSORS_OFF`) and the ``[uncertainty]`` sigmas of the claim's term for it (every other
+#: sigma 0, :func:`only_sigmas`); "rest" is none of the drone's errors against the claim's remaining terms.
+TERMS = {
+    "gimbal_level": (("gimbal_level_deg",), ("tilt_deg",)),
+    "ahrs_tilt": (("roll_bias_deg", "pitch_bias_deg"), ()),
+    "compass": (("yaw_bias_deg",), ("yaw_deg",)),
+    "wander": (("wander_deg", "wander_s"), ()),
+    "gnss": (("gnss_mode",), ("uav_horizontal_m",)),
+    "barometer": (("baro_wander_m", "baro_noise_m"), ("height_m", "baro_drift_10min_m")),
+    "rest": ((), ("depth_m", "time_s", "pixel_px")),
+}
+SENSORS_OFF = {
+    "roll_bias_deg": 0.0,
+    "pitch_bias_deg": 0.0,
+    "yaw_bias_deg": 0.0,
+    "wander_deg": 0.0,
+    "gimbal_level_deg": (0.0, 0.0),
+    "gnss_mode": "exact",
+    "baro_wander_m": 0.0,
+    "baro_noise_m": 0.0,
+}
+
+
+def scenario(
+    c: Condition, seed: int, seeds: int, duration_s: float, fps: float, term: str | None = None
+) -> Scenario:
+    """Condition ``c`` flown by drone ``seed`` of :func:`population` ``seeds``; ``term``: that one error source
+    of the drone's (:data:`TERMS`), the rest off."""
     sc = load_scenario(SCENARIOS / f"{VIEWS[c.view].format(c.gnss)}.toml")
+    sensors = {**draw_sensors(seed, seeds), "gnss_mode": c.gnss}
+    if term is not None:
+        sensors = {**SENSORS_OFF, **{k: v for k, v in sensors.items() if k in TERMS[term][0]}}
     tables = {
         "name": f"{c.name}_s{seed}",
         "seed": 1000 + seed,
         "duration_s": duration_s,
         "fps": fps,
         "uav": {"height_m": c.height_m},
-        "sensors": {**draw_sensors(seed, seeds), "gnss_mode": c.gnss},
+        "sensors": sensors,
     }
     if c.wind_mps:
         tables["waves"] = {"wind_mps": c.wind_mps}
@@ -142,23 +176,29 @@ def platform_claim(cal, pixel_px: float):
     )
 
 
+#: the [uncertainty] sigmas that make a fix's horizontal claim (wind_mps aside)
+_CLAIM_SIGMAS = (
+    "pixel_px",
+    "tilt_deg",
+    "yaw_deg",
+    "height_m",
+    "baro_drift_10min_m",
+    "depth_m",
+    "uav_horizontal_m",
+    "time_s",
+    "surface_amsl_m",
+)
+
+
+def only_sigmas(cal, keep=()):
+    """The calibration with every sigma 0 but ``keep``'s and the wind's."""
+    quiet = {f: 0.0 for f in _CLAIM_SIGMAS if f not in keep}
+    return replace(cal, sigmas=replace(cal.sigmas, **quiet))
+
+
 def waves_only(cal):
     """The calibration with every sigma 0 but the wind's: the claim's wave term alone."""
-    quiet = {
-        f: 0.0
-        for f in (
-            "pixel_px",
-            "tilt_deg",
-            "yaw_deg",
-            "height_m",
-            "baro_drift_10min_m",
-            "depth_m",
-            "uav_horizontal_m",
-            "time_s",
-            "surface_amsl_m",
-        )
-    }
-    return replace(cal, sigmas=replace(cal.sigmas, **quiet))
+    return only_sigmas(cal)
 
 
 #: directions (radians) over which :func:`calibrated_share` integrates
@@ -176,20 +216,41 @@ def calibrated_share(fixes, ok) -> np.ndarray:
     cov[:, 0, 1] = cov[:, 1, 0] = fixes.cov_ne_m2[ok]
     axes = np.clip(np.linalg.eigvalsh(cov), 0.0, None)  # (n, 2) the variances along its axes
     along = axes @ np.stack([np.cos(_ANGLES) ** 2, np.sin(_ANGLES) ** 2])  # (n, angles)
-    with np.errstate(divide="ignore"):
+    with np.errstate(
+        divide="ignore", invalid="ignore"
+    ):  # a claim of 0 (--terms' unclaimed sources): NaN
         return np.mean(1.0 - np.exp(-2.0 * axes.sum(axis=1, keepdims=True) / along), axis=1)
 
 
-def session_errors(path: Path, pixel_px: float | None) -> tuple[np.ndarray, ...]:
-    """(horizontal error, h_acc, :func:`calibrated_share`, the waves' own error, the claim's wave term) per fixed
-    frame (m) of the true pixel's refraction fixes; ``pixel_px`` None: the session's own ``[uncertainty]``, else the
-    platform's (:func:`platform_claim`)."""
+def along_axes(err_ne_m, fixes, ok) -> tuple[np.ndarray, np.ndarray]:
+    """Per fix, the share of its error's two components along its claimed covariance's axes within 2 sigma of that
+    axis (0, 0.5 or 1: 95.4 % on average for a calibrated claim of any shape), and its larger axis's sigma (m): what
+    ArduPilot's EKF3 takes a GPS_INPUT's horiz_accuracy as (each axis's 1-sigma)."""
+    cov = np.zeros((int(ok.sum()), 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = fixes.sigma_n_m[ok] ** 2, fixes.sigma_e_m[ok] ** 2
+    cov[:, 0, 1] = cov[:, 1, 0] = fixes.cov_ne_m2[ok]
+    var, vec = np.linalg.eigh(cov)
+    along = np.einsum("ni,nij->nj", err_ne_m, vec)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        within = np.abs(along) <= 2 * np.sqrt(np.clip(var, 0.0, None))
+    return within.mean(axis=1), np.sqrt(np.clip(var[:, 1], 0.0, None))
+
+
+def session_errors(
+    path: Path, pixel_px: float | None, term: str | None = None
+) -> tuple[np.ndarray, ...]:
+    """(horizontal error, h_acc, :func:`calibrated_share`, :func:`along_axes`' two, the waves' own error, the claim's
+    wave term) per fixed frame (m) of the true pixel's refraction fixes; ``pixel_px`` None: the session's own ``[uncertainty]``, else the
+    platform's (:func:`platform_claim`); ``term``: only that term's sigmas of it (:data:`TERMS`)."""
     s = load_session(path)
     if pixel_px is not None:
         s.calibration = platform_claim(s.calibration, pixel_px)
+    if term is not None:
+        s.calibration = only_sigmas(s.calibration, TERMS[term][1])
     fixes = process.process_session(s, use_track=True)
     ok = fixes.status == "ok"
-    err = np.hypot(*error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth).T)[ok]
+    err_ne = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth)[ok]
+    err = np.hypot(*err_ne.T)
     waves = wave_acc = np.full(err.shape, np.nan)
     if (path / "truth_waves.csv").is_file():
         w = read_table(
@@ -200,18 +261,26 @@ def session_errors(path: Path, pixel_px: float | None) -> tuple[np.ndarray, ...]
         waves = np.hypot(w["wave_dn_m"], w["wave_de_m"])[ok]
         s.calibration = waves_only(s.calibration)
         wave_acc = process.process_session(s, use_track=True).h_acc_m[ok]
-    return err, fixes.h_acc_m[ok], calibrated_share(fixes, ok), waves, wave_acc
+    axes, major = along_axes(err_ne, fixes, ok)
+    return err, fixes.h_acc_m[ok], calibrated_share(fixes, ok), axes, major, waves, wave_acc
 
 
 def fly(
-    c: Condition, seeds: int, duration_s: float, fps: float, work: Path, pixel_px: float | None
+    c: Condition,
+    seeds: int,
+    duration_s: float,
+    fps: float,
+    work: Path,
+    pixel_px: float | None,
+    term: str | None = None,
 ) -> list:
-    """:func:`session_errors` of ``seeds`` drones of the platform in condition ``c`` (sessions under ``work``)."""
+    """:func:`session_errors` of ``seeds`` drones of the platform in condition ``c`` (sessions under ``work``);
+    ``term``: that error source alone against that term of the claim (:data:`TERMS`)."""
     per_seed = []
     for seed in range(seeds):
-        out = work / c.name / f"s{seed}"
-        generate(scenario(c, seed, seeds, duration_s, fps), out, video=False)
-        per_seed.append(session_errors(out, pixel_px))
+        out = work / (c.name if term is None else f"{c.name}_{term}") / f"s{seed}"
+        generate(scenario(c, seed, seeds, duration_s, fps, term), out, video=False)
+        per_seed.append(session_errors(out, pixel_px, term))
     return per_seed
 
 
@@ -232,6 +301,12 @@ class Pooled:
     rms_acc_m: float
     mae_m: float
     median_acc_m: float
+    axes_2sigma: (
+        float  # share of the errors' components along the claim's axes within 2 sigma of theirs
+    )
+    major_2sigma: (
+        float  # share of the fixes within 2 x the claim's larger axis's sigma (EKF3's reading)
+    )
 
     @property
     def ratio(self) -> float:
@@ -240,7 +315,9 @@ class Pooled:
 
 
 def pooled(per_seed: list) -> Pooled:
-    err, acc, calibrated = (np.concatenate(column) for column in list(zip(*per_seed))[:3])
+    err, acc, calibrated, axes, major = (
+        np.concatenate(column) for column in list(zip(*per_seed))[:5]
+    )
     return Pooled(
         len(err),
         len(per_seed),
@@ -252,6 +329,8 @@ def pooled(per_seed: list) -> Pooled:
         rms(acc),
         float(np.mean(err)),
         float(np.median(acc)),
+        float(np.mean(axes)),
+        float(np.mean(err <= 2 * major)),
     )
 
 
@@ -261,17 +340,32 @@ def summary(c: Condition, per_seed: list) -> str:
         f"{c.name:<26} {p.fixes:5d} ({p.sessions:3d})  {p.within_2sigma:6.1%}  {p.calibrated:6.1%}"
         f"  {p.within_1sigma:6.1%}"
         f"  {p.whole:6.1%}  {p.rms_err_m:7.3f}  {p.rms_acc_m:7.3f}  {p.ratio:5.2f}  {p.mae_m:7.3f}"
-        f"  {p.median_acc_m:7.3f}"
+        f"  {p.median_acc_m:7.3f}  {p.axes_2sigma:6.1%}  {p.major_2sigma:6.1%}"
     )
-    waves, wave_acc = (np.concatenate(column) for column in list(zip(*per_seed))[3:])
+    waves, wave_acc = (np.concatenate(column) for column in list(zip(*per_seed))[5:])
     if np.isfinite(waves).all() and len(waves):
         line += f"  {rms(waves):7.3f}  {rms(wave_acc):7.3f}  {np.mean(waves <= 2 * wave_acc):6.1%}"
     return line
 
 
+def term_summary(c: Condition, term: str, per_seed: list) -> str:
+    """One line of ``--terms``: the error source's RMS error against its term's RMS claim."""
+    p = pooled(per_seed)
+    line = f"{c.name:<18} {term:<13} {p.fixes:5d}  {p.rms_err_m:7.4f}  {p.rms_acc_m:7.4f}"
+    if p.rms_acc_m == 0:  # a source the claim has no term for
+        return line + f"  {'-':>5}  {'-':>6}  {'-':>6}"
+    return line + f"  {p.ratio:5.2f}  {p.within_2sigma:6.1%}  {p.calibrated:6.1%}"
+
+
+TERM_HEADER = (
+    f"{'condition':<18} {'term':<13} {'fixes':>5}  {'RMS err':>7}  {'RMS acc':>7}  {'ratio':>5}"
+    f"  {'in 2σ':>6}  {'calib.':>6}"
+)
+
 HEADER = (
     f"{'condition':<26} {'fixes (sessions)':>17}  {'in 2σ':>6}  {'calib.':>6}  {'in 1σ':>6}  {'whole':>6}  {'RMS err':>7}"
-    f"  {'RMS acc':>7}  {'ratio':>5}  {'MAE':>7}  {'med acc':>7}  {'waves':>7}  {'w. acc':>7}  {'w. 2σ':>6}"
+    f"  {'RMS acc':>7}  {'ratio':>5}  {'MAE':>7}  {'med acc':>7}  {'axes 2σ':>6}  {'2σ maj':>6}  {'waves':>7}"
+    f"  {'w. acc':>7}  {'w. 2σ':>6}"
 )
 
 
@@ -298,8 +392,15 @@ def main() -> int:
         default=0.0,
         help="[uncertainty] pixel_px with the platform's sigmas (default 0: track.csv's pixel is exact)",
     )
+    ap.add_argument(
+        "--terms",
+        action="store_true",
+        help="one error source at a time against its term of the claim (conditions without wind)",
+    )
     args = ap.parse_args()
     picked = [c for c in conditions() if not args.only or any(w in c.name for w in args.only)]
+    if args.terms:
+        picked = [c for c in picked if not c.wind_mps]
     claim = (
         "as written" if args.as_written else f"platform tilt/yaw sigmas, pixel_px {args.pixel_px:g}"
     )
@@ -308,11 +409,16 @@ def main() -> int:
             f"claim calibration: {args.seeds} seeds x {args.duration:g} s at {args.fps:g} fps, true pixel, "
             f"[uncertainty]: {claim}; platform {PLATFORM}, {WANDER}"
         ),
-        HEADER,
+        TERM_HEADER if args.terms else HEADER,
     ]
     print("\n".join(lines), flush=True)
     t0 = time.perf_counter()
-    for c in picked:
+    for c in picked if args.terms else ():
+        for term in TERMS:
+            per_seed = fly(c, args.seeds, args.duration, args.fps, args.work, args.pixel_px, term)
+            lines.append(term_summary(c, term, per_seed))
+            print(lines[-1], flush=True)
+    for c in () if args.terms else picked:
         per_seed = fly(
             c,
             args.seeds,

@@ -2,9 +2,11 @@
 against an independent refraction through tilted facets, the EKF's own position error, and what the simulator
 states for its sensors. The pooled part is the fast part of ``bench/claim_calibration.py``."""
 
+import dataclasses
 import math
 import sys
 import tomllib
+import types
 from pathlib import Path
 
 import numpy as np
@@ -118,3 +120,44 @@ def test_the_claim_is_calibrated_over_a_platforms_drones(tmp_path, gnss, view, h
     assert p.fixes == 40 * 6
     assert 0.85 <= p.within_2sigma, p
     assert p.within_1sigma <= 0.85 and p.ratio >= 0.75, p
+
+
+def test_one_term_at_a_time_flies_that_source_against_that_term():
+    """--terms: a drone with only its compass bias against the claim's heading term alone; with only its GNSS walk
+    against the stated position term alone (the other sources off, the other sigmas 0)."""
+    c = bench.Condition("rtk_nadir", "rtk", "nadir", 10.0)
+    full = bench.scenario(c, 3, 40, 3.0, 2.0).sensors
+    compass = bench.scenario(c, 3, 40, 3.0, 2.0, "compass").sensors
+    assert compass.yaw_bias_deg == full.yaw_bias_deg != 0.0
+    assert compass.roll_bias_deg == compass.wander_deg == compass.baro_wander_m == 0.0
+    assert tuple(compass.gimbal_level_deg) == (0.0, 0.0) and compass.gnss_mode == "exact"
+    assert bench.scenario(c, 3, 40, 3.0, 2.0, "gnss").sensors.gnss_mode == "rtk"
+    held = bench.only_sigmas(
+        _Held(Sigmas(uav_horizontal_m=0.02, wind_mps=5.0)), ("yaw_deg",)
+    ).sigmas
+    assert held.yaw_deg == Sigmas().yaw_deg and held.wind_mps == 5.0
+    assert held.tilt_deg == held.uav_horizontal_m == held.time_s == held.height_m == 0.0
+
+
+@dataclasses.dataclass(frozen=True)
+class _Held:
+    """What bench.only_sigmas needs of a calibration: its sigmas."""
+
+    sigmas: Sigmas
+
+
+def test_along_axes_of_normal_errors_of_the_claimed_shape():
+    """20000 errors drawn from each fix's claimed covariance (a tilted ellipse 3:1, and circular): 95.4 % of their
+    components along the claim's axes within 2 sigma; within twice the larger axis's sigma 86.5 % of the circular
+    ones (1 - exp(-2)), more of the elongated ones."""
+    rng = np.random.default_rng(30)
+    n = 20000
+    for sn, se, c in ((0.3, 0.2, 0.04), (0.1, 0.1, 0.0)):
+        fixes = types.SimpleNamespace(
+            sigma_n_m=np.full(n, sn), sigma_e_m=np.full(n, se), cov_ne_m2=np.full(n, c)
+        )
+        err = rng.multivariate_normal([0.0, 0.0], [[sn**2, c], [c, se**2]], n)
+        axes, major = bench.along_axes(err, fixes, np.ones(n, bool))
+        assert abs(axes.mean() - 0.9545) < 0.005, axes.mean()
+        within = np.mean(np.hypot(*err.T) <= 2 * major)
+        assert within > 0.9 if c else abs(within - (1 - math.exp(-2))) < 0.01, within
