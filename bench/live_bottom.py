@@ -38,7 +38,7 @@ from groundstation.live.bottom_live import (
     corrected,
 )
 from groundstation.offline import process
-from groundstation.offline.bottom import bias_headings, grey_of, pixels_at
+from groundstation.offline.bottom import bias_headings, grey_of, pixels_at, tilt_frame
 from groundstation.offline.evaluate import error_ne_m, shape_m
 from groundstation.session.read import load_session
 from localizer.pose import camera_pose, take
@@ -57,14 +57,14 @@ def replay(s, every_s: float, window_s: float, fit_latency: bool):
     a fit took. Ready: the newest frame's time in its window, plus the fit's own wall time with ``fit_latency``
     (fits one after the other, as the live fitter thread; a fit due while the one before runs waits)."""
     platform = Platform(s.calibration, s.telemetry)
-    window = BottomWindow(platform, window_s)
+    window = BottomWindow(platform, window_s, tilt_frame(s))
     pixels = process.frame_pixels(s, use_track=True)
     frames_t = np.asarray(s.frames["t"], float)
     pose = camera_pose(s.calibration, s.telemetry, frames_t)
     uuv_u, uuv_v = pixels_at(frames_t, *process.Pixels(*pixels)[:3])
     headings = bias_headings(s, pose, window.frame_tilt)
     row_of = {int(f): r for r, f in enumerate(s.frames["frame"])}
-    estimates, seconds, last_t, last_fit, busy_until = [], [], -np.inf, -np.inf, -np.inf
+    estimates, seconds, last_t, last_fit, busy_until = [], [], -np.inf, np.nan, -np.inf
     with s.open_video(grey=True) as video:
         for vf in video.prefetch():
             r = row_of.get(vf.index)
@@ -72,6 +72,8 @@ def replay(s, every_s: float, window_s: float, fit_latency: bool):
                 continue
             last_t = frames_t[r]
             window.add(grey_of(vf.image), take(pose, [r]), headings[r], uuv_u[r], uuv_v[r])
+            if np.isnan(last_fit):  # the first fit once the window has REFIT_S of frames, as live
+                last_fit = last_t
             if last_t - last_fit >= REFIT_S and last_t >= busy_until:
                 last_fit = last_t
                 start = time.perf_counter()

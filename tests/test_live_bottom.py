@@ -27,7 +27,7 @@ from groundstation.live.bottom_live import (
 )
 from groundstation.messages import BottomStatus
 from groundstation.offline import process
-from groundstation.offline.bottom import bias_headings, grey_of, pixels_at
+from groundstation.offline.bottom import bias_headings, grey_of, pixels_at, tilt_frame
 from groundstation.offline.evaluate import error_ne_m
 from groundstation.session.read import load_session
 from localizer.bottom import in_bias_frame
@@ -53,7 +53,7 @@ def survey(tmp_path_factory):
 def fitted(survey):
     """The window after the session's frames and its estimate (the newest frame's time, the correction)."""
     _, s = survey
-    window = BottomWindow(Platform(s.calibration, s.telemetry), WINDOW_S)
+    window = BottomWindow(Platform(s.calibration, s.telemetry), WINDOW_S, tilt_frame(s))
     frames_t = np.asarray(s.frames["t"], float)
     pose = camera_pose(s.calibration, s.telemetry, frames_t)
     uuv_u, uuv_v = pixels_at(frames_t, *process.Pixels(*process.frame_pixels(s, True))[:3])

@@ -90,11 +90,13 @@ class BottomWindow:
     estimate over the frames of the last ``window_s`` seconds. Not thread-safe by itself: :class:`LiveBottom`
     holds its lock around :meth:`add` and :meth:`snapshot`."""
 
-    def __init__(self, platform: Platform, window_s: float):
+    def __init__(self, platform: Platform, window_s: float, frame_tilt: str):
         self.platform, self.window_s = platform, window_s
         cam = platform.calibration.camera
         self.tracker = FloorTracker(cam.width, cam.height)
-        self.frame_tilt = tilt_frame(platform)
+        self.frame_tilt = (
+            frame_tilt  # the tilt's bias frame (groundstation.offline.bottom.tilt_frame)
+        )
         self.taken = 0  # frames added
         # per frame in the window: its number, pose (one frame) and bias-frame heading (rad)
         self._frames: deque[tuple[int, CameraPose, float]] = deque()
@@ -171,20 +173,22 @@ class LiveBottom:
     def __init__(self, cal, tel, every_s: float, window_s: float):
         self.platform = Platform(cal, tel)
         self.every_s, self.window_s = every_s, window_s
-        self.window = BottomWindow(self.platform, window_s)
+        self.window = BottomWindow(self.platform, window_s, tilt_frame(self.platform))
         self.fits = 0  # estimates made
         self.refused = 0  # fits that gave none
         self.corrected = 0  # fixes made again with the estimate
         self.kept_own = 0  # fixes whose own claim was smaller than the corrected one's
         self._estimate: Estimate | None = None
         self._pixel = (-math.inf, math.nan, math.nan)  # the UUV's last tracked pixel: (t, u, v)
-        self._headings: deque[tuple[float, float]] = deque(
+        self._headings: deque[tuple[float, str, float]] = deque(
             maxlen=64
         )  # (t, bias heading) of due frames
         self._lock = threading.Lock()
         self._fitting = False
         self._last_why = ""  # why the last fit gave none
-        self._last_fit_t = -math.inf
+        self._last_fit_t = (
+            math.nan
+        )  # the frame the last fit was started at (the first: the first frame's)
         self._applying = False
         self._fitter = ThreadPoolExecutor(
             1, thread_name_prefix="bottom-fit", initializer=lower_priority
@@ -195,10 +199,11 @@ class LiveBottom:
     def on_frame(self, frame) -> None:
         if not frame.aligned:  # a frame stamped before the video's latency settled is not taken
             return
-        if (
-            self.window.frame_tilt == "body"
-        ):  # the airframe's heading, read on the loop where telemetry is written
-            self._headings.append((frame.t_unix, float(body_yaw(self.platform, [frame.t_unix])[0])))
+        # the tilt's bias frame and the airframe's heading, read on the loop where the telemetry is written (a servo
+        # mount is known once its gimbal's messages came)
+        frame_tilt = tilt_frame(self.platform)
+        yaw = float(body_yaw(self.platform, [frame.t_unix])[0]) if frame_tilt == "body" else 0.0
+        self._headings.append((frame.t_unix, frame_tilt, yaw))
         self._track.on_frame(frame)
 
     def on_tracked(self, image, pose: CameraPose, u: float, v: float) -> None:
@@ -211,24 +216,35 @@ class LiveBottom:
         t_px, u, v = self._pixel
         if not abs(t - t_px) <= PIXEL_AGE_S:
             u = v = math.nan
+        seen = next((h for h in reversed(self._headings) if h[0] == t), None)
+        if seen is None:
+            return
+        _, frame_tilt, yaw = seen
         heading = (
-            next((h for th, h in reversed(self._headings) if th == t), math.nan)
-            if self.window.frame_tilt == "body"
-            else float(bias_headings(self.platform, pose, "camera")[0])
+            yaw
+            if frame_tilt == "body"
+            else float(bias_headings(self.platform, pose, frame_tilt)[0])
         )
         if not math.isfinite(heading):
             return
         with self._lock:
-            self.window.add(image, pose, heading, u, v)
+            if (
+                frame_tilt != self.window.frame_tilt
+            ):  # the mount became known: a window in its frame
+                self.window = BottomWindow(self.platform, self.window_s, frame_tilt)
+            window = self.window
+            window.add(image, pose, heading, u, v)
+            if math.isnan(self._last_fit_t):  # the first fit once the window has REFIT_S of frames
+                self._last_fit_t = t
             due = t - self._last_fit_t >= REFIT_S and not self._fitting
             if due:
                 self._fitting, self._last_fit_t = True, t
-                snapshot = self.window.snapshot()
+                snapshot = window.snapshot()
         if due:
-            self._fitter.submit(self._fit, snapshot, t).add_done_callback(self._fitted)
+            self._fitter.submit(self._fit, window, snapshot, t).add_done_callback(self._fitted)
 
-    def _fit(self, snapshot, t_newest: float) -> Estimate:
-        found = self.window.fit(snapshot)
+    def _fit(self, window: BottomWindow, snapshot, t_newest: float) -> Estimate:
+        found = window.fit(snapshot)
         if isinstance(found, str):
             return Estimate(None, found, t_newest)
         return Estimate(found, "", t_newest)
