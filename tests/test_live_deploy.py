@@ -67,6 +67,8 @@ def test_systemd_unit_restarts_within_its_limit_hardened_and_records_where_it_ma
         "RestrictSUIDSGID": "yes",
     }
     assert {k: service.get(k) for k in hardening} == hardening
+    # above the desktop's programs (FIELD.md, "Priority"), not realtime
+    assert -20 < int(service["Nice"]) < 0 and service["RestrictRealtime"] == "yes"
     assert set(service["RestrictAddressFamilies"].split()) == {
         "AF_INET",
         "AF_INET6",
