@@ -57,6 +57,9 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   A candidate further than ``wave_far_sigmas`` from the prediction pays the distance penalty of the sigmas beyond
   (:meth:`~TemplateMatcher._far_penalty`), and a re-acquisition's contrast averaged over its confirmation frames
   reaches ``wave_keep_contrast`` of the level (a seafloor patch passes a frame's lower bar now and then).
+  A follow that passes in waves is moved part of the way onto the vehicle standing out of the seafloor near it
+  (:meth:`~TemplateMatcher._centred`; the smoothed template matches about as well with the vehicle in a corner of
+  its square): judged, and learnt from, where the template matched.
 - Neither takes a candidate away from the prediction while the UUV's first appearance
   still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
   partly hidden, say by a vehicle passing over it, beside a look-alike). Only a candidate
@@ -190,6 +193,14 @@ class TemplateParams:
     #: (:meth:`~TemplateMatcher._candidate_passes`) with its score less the distance penalty (``distance_weight``)
     #: of the sigmas beyond: a wide window's best patch of seafloor near its edge matches as well as the UUV does
     wave_far_sigmas: float = 2.0
+    #: in waves a follow is moved ``wave_centre_pull`` of the way onto the vehicle-sized square (this share of the
+    #: template's side) standing out most from the seafloor within ``wave_centre_reach`` of the template's side,
+    #: where it departs from the seafloor ``wave_centre_distinct`` times as much as 9 in 10 of the seafloor's
+    #: squares around it (see :meth:`~TemplateMatcher._centred`)
+    wave_centre_share: float = 0.5
+    wave_centre_reach: float = 0.3
+    wave_centre_pull: float = 0.5
+    wave_centre_distinct: float = 1.5
 
 
 #: Taken from the rank of a place too flat to be the UUV (see ``spread`` of :meth:`TemplateMatcher._search`): it
@@ -401,6 +412,9 @@ class TemplateMatcher:
         self._firsts: dict = {}  # the core at turns (multiples of first_turn_step_deg)
         self._first_columns: dict = {}  # ... and several turns' cores ready for _ncc_maps
         self._first_spread = self._spread(frame_bgr, self.u, self.v)
+        self._weights = self._polarity(frame_bgr, self.u, self.v)  # see _blob
+        # the tracked point's offset from the box's centre (the vehicle's, e.g. its top face's seen obliquely)
+        self._offset = (self.u - (x + (w - 1) / 2.0), self.v - (y + (h - 1) / 2.0))
         self._velocity = (0.0, 0.0)
         self._level = 1.0  # the recent level of the matches' scores (the first appearance's own, at first) ...
         self._levels = 0  # ... over this many matches
@@ -827,6 +841,77 @@ class TemplateMatcher:
             )
         return passed and (not scores or score > float(np.median(scores)))
 
+    def _departures(self, frame_bgr, u: float, v: float, half: int):
+        """The working-resolution square of side 2·``half`` + 1 about full-res (u, v): its darker and brighter
+        departures from the seafloor's grey level (the square's median), and its corner (bx0, by0); None where it
+        leaves the frame."""
+        qx, qy = self._to_work(u, v)
+        bx0, by0 = round(qx) - half, round(qy) - half
+        region = self._blocks(frame_bgr, bx0, by0, 2 * half + 1, 2 * half + 1)
+        if bx0 < 0 or by0 < 0 or region.shape != (2 * half + 1, 2 * half + 1):
+            return None
+        away = region - float(np.median(region))
+        return np.maximum(-away, 0.0), np.maximum(away, 0.0), bx0, by0
+
+    def _box(self) -> int:
+        """The side (working pixels, odd) of the vehicle-sized square: ``wave_centre_share`` of the template's."""
+        return max(3, round(self.p.wave_centre_share * self.S * self._scale)) | 1
+
+    def _polarity(self, frame_bgr, u: float, v: float) -> tuple[float, float]:
+        """How much the vehicle at (u, v) departs from the seafloor darker and brighter beyond the seafloor's own
+        departures (its vehicle-sized square's mean departure less that of the square outside the template's, in a
+        square twice the template's side), each at least 0: the weights of :meth:`_blob` (caustics and glint
+        brighten the seafloor; a dark hull stands out as darker)."""
+        inner = max(1, round(self.S * self._scale) // 2)
+        found = self._departures(frame_bgr, u, v, 2 * inner)
+        if found is None:
+            return 0.0, 0.0
+        *maps, _, _ = found
+        half, box = 2 * inner, self._box()
+        outside = np.ones(maps[0].shape, bool)
+        outside[half - inner : half + inner + 1, half - inner : half + inner + 1] = False
+        core = slice(half - box // 2, half + box // 2 + 1)
+        return tuple(max(0.0, float(m[core, core].mean() - m[outside].mean())) for m in maps)
+
+    def _blob(self, frame_bgr, u: float, v: float) -> tuple[float, float, float] | None:
+        """The vehicle standing out of the seafloor near (u, v): the vehicle-sized square (:meth:`_box`) within
+        ``wave_centre_reach`` of the template's side of it whose grey levels depart most from the seafloor's as the
+        vehicle's first appearance did (:meth:`_polarity`); its centre (full-res) and how distinct it is: its
+        mean departure over the 90th percentile of the squares' beyond three quarters of the template's side
+        about (u, v). None where that leaves the frame or the first appearance did not depart."""
+        side, box = round(self.S * self._scale), self._box()
+        reach = max(1, round(self.p.wave_centre_reach * side))
+        found = self._departures(frame_bgr, u, v, side + box // 2 + 1)
+        if found is None or not sum(self._weights) > 0:
+            return None
+        darker, brighter, bx0, by0 = found
+        away = cv2.blur(self._weights[0] * darker + self._weights[1] * brighter, (box, box))
+        half, edge, inner = away.shape[0] // 2, box // 2, round(0.75 * side)
+        _, best, j, i = _peak(
+            away[half - reach : half + reach + 1, half - reach : half + reach + 1]
+        )
+        floor = np.zeros(away.shape, bool)
+        floor[edge:-edge, edge:-edge] = True
+        floor[half - inner : half + inner + 1, half - inner : half + inner + 1] = False
+        distinct = best / max(float(np.percentile(away[floor], 90)), 1e-6)
+        return (*self._to_full(bx0 + half + j - reach, by0 + half + i - reach), distinct)
+
+    def _centred(self, frame_bgr, u: float, v: float) -> tuple[float, float]:
+        """In waves, a followed match (u, v) moved ``wave_centre_pull`` of the way onto the vehicle standing out of
+        the seafloor near it (:meth:`_blob`) where it is at least ``wave_centre_distinct`` (the smoothed template
+        matches about as well with the vehicle in a corner of its square as at its centre); the tracked point
+        kept where it was on the vehicle at start (its offset from the box's centre, turned and scaled as the
+        template)."""
+        blob = self._blob(frame_bgr, u, v)
+        if blob is None or blob[2] < self.p.wave_centre_distinct:
+            return u, v
+        a = math.radians(self._angle)
+        ox, oy = self._offset
+        c, s_ = self._scale * math.cos(a), self._scale * math.sin(a)
+        tu, tv = blob[0] + c * ox - s_ * oy, blob[1] + s_ * ox + c * oy
+        pull = self.p.wave_centre_pull
+        return u + pull * (tu - u), v + pull * (tv - v)
+
     # -- per frame ---------------------------------------------------------------------------
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
         if prediction is None or not math.isfinite(prediction.sigma_px):
@@ -914,6 +999,10 @@ class TemplateMatcher:
             held = near and self._misses <= self.p.wave_misses * max(self._waves(), float(young))
             return Match(False, score, u, v, held=held)
         self._misses = 0
+        # the template's own match: what it learns (the centring below jitters with the waves)
+        matched_at = (u, v)
+        if in_waves:
+            u, v = self._centred(frame_bgr, u, v)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v, self._seen_angle = u, v, self._angle
         self._levels += 1
@@ -925,7 +1014,7 @@ class TemplateMatcher:
             and score >= self.p.update_score - self._waves() * self.p.wave_update_drop
             and slow_step
         ):
-            self._learn(frame_bgr, u, v)
+            self._learn(frame_bgr, *matched_at)
         return self._match(True, score, u, v)
 
     def _candidate_passes(
