@@ -66,3 +66,14 @@ def test_a_follow_is_not_moved_where_the_seafloor_has_patches_as_dark_as_the_veh
     frame = _with_vehicle(frame, *VEHICLE[:2])
     at = (VEHICLE[0] + 6.0, VEHICLE[1] + 3.0)
     assert m._centred(frame, *at) == at
+
+
+def test_a_vehicle_at_the_frames_edges_is_started_and_followed_without_centring():
+    """The squares about a vehicle at the frame's edges leave the frame: no centring, no error (a start
+    at the top-left corner once failed in cv2.cvtColor on an empty region)."""
+    floor = _floor(6)
+    for u, v in ((12.0, 10.0), (SIZE[1] - 13.0, SIZE[0] - 11.0)):
+        frame = cv2.cvtColor(_with_vehicle(floor, u, v), cv2.COLOR_GRAY2BGR)  # as decoded
+        m = TemplateMatcher()
+        m.start(frame, (round(u) - 10, round(v) - 8, 21, 17))
+        assert m._centred(frame, u + 2.0, v + 1.0) == (u + 2.0, v + 1.0)
