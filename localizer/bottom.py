@@ -23,7 +23,8 @@ by robust nonlinear least squares (:func:`scipy.optimize.least_squares`):
   velocity (the EKF's, from the receiver's Doppler, which a slow position error is not in), about what
   the velocity says the position should have moved less what it did; its **mean over the knots
   is held at 0**: a constant offset of everything is invisible in the bottom, so the
-  corrected track keeps the GNSS's mean position (the absolute offset needs a reference);
+  corrected track keeps the GNSS's mean position (the absolute offset needs a reference); the fit starts from the
+  walk the velocity tells (a plain receiver's decimetres), not from none;
 - with ``white_m`` > 0, each frame's own offset ``o_k`` on top of the walk (``true = reported + w(t) + o_k``), with a
   white prior of that 1-sigma per axis: the reported position's white noise (a receiver's few centimetres, which
   2-second knots cannot follow and which would otherwise bend the floor to fit them). A uniform shift of one frame's
@@ -419,6 +420,9 @@ class _Problem:
         self.j = j
         self.s = np.clip((tk - self.knots[j]) / (self.knots[j + 1] - self.knots[j]), 0.0, 1.0)
         self.walk_steps = _velocity_steps(poses, self.knots)
+        # the walk the velocity tells, about its mean: where the fit starts (a plain receiver's walks decimetres)
+        walk0 = np.concatenate([np.zeros((1, 2)), np.cumsum(self.walk_steps, axis=0)])
+        self.walk0 = walk0 - walk0.mean(axis=0)
         self.K = len(t) if priors.white_m > 0 else 0
         self.first_feature = N_GLOBAL + 2 * self.J + 2 * self.K
         self.depth_fixed = priors.floor_depth_m
@@ -448,11 +452,11 @@ class _Problem:
         return self.cam + walk + off[0], np.linalg.inv(Jg)
 
     def _start_depth(self) -> float:
-        """The grid depth at which each feature's ground positions scatter least in pixels (zero biases and walk)."""
-        zero = np.zeros((self.J, 2))
+        """The grid depth at which each feature's ground positions scatter least in pixels (zero biases, the walk the
+        velocity tells)."""
         best, best_cost = _DEPTH_GRID_M[0], np.inf
         for depth in _DEPTH_GRID_M:
-            gp, A = self.ground(np.array([0.0, 0.0, 0.0, depth]), zero)
+            gp, A = self.ground(np.array([0.0, 0.0, 0.0, depth]), self.walk0)
             cost = np.median(
                 np.linalg.norm(np.einsum("mij,mj->mi", A, gp - self._means(gp)[self.f]), axis=-1)
             )
@@ -572,6 +576,7 @@ class _Problem:
     def start(self) -> np.ndarray:
         x = np.zeros(self.n_params)
         x[3] = self.depth0 if self.depth_fixed is None else 0.0
+        x[N_GLOBAL : N_GLOBAL + 2 * self.J] = self.walk0.ravel()
         g, walk, _, _ = self.unpack(x)
         x[self.first_feature :] = self._means(self.ground(g, walk)[0]).ravel()
         return x

@@ -199,3 +199,22 @@ def test_each_frames_white_noise_is_what_the_velocity_does_not_explain():
     # true = reported + walk + remainder: the remainder is minus the white error (its mean aside)
     expected = -(error_ne - error_ne.mean(axis=0))
     assert np.sqrt(np.mean((remainder - expected) ** 2)) < 0.01 < np.sqrt(np.mean(expected**2))
+
+
+def test_a_plain_receivers_walk_told_by_the_velocity_is_where_the_fit_starts():
+    # a plain receiver walks decimetres in seconds (0.6 m over 12 s here) while its velocity (the EKF's, from the
+    # Doppler) is exact: the fit starts from the walk the velocity tells (a robust fit started from no walk, every
+    # step of it many prior sigmas off, stopped short of it on the generated survey line), about its mean
+    def walk(t):
+        return np.column_stack([0.05 * t, -0.3 * np.sin(t / 6.0)])
+
+    lens, poses, obs, error_ne = _session(speed_mps=1.2, walk=walk)
+    problem = bottom._Problem(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.003))
+    _, start, _, _ = problem.unpack(problem.start())
+    expected = -(error_ne - error_ne.mean(axis=0))
+    found = bottom._interp_knots(problem.knots, start, poses.t_s)
+    # its mean is held over the knots, the expected one's over the frames
+    found = found - found.mean(axis=0)
+    assert np.max(np.abs(expected)) > 0.25
+    assert np.max(np.abs(found - expected)) < 0.005
+    assert problem.depth0 == pytest.approx(FLOOR_M, rel=0.15)
