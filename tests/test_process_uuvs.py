@@ -63,7 +63,8 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
     opened = _counted(monkeypatch, Session, "open_video")
     poses = _counted(monkeypatch, track, "uav_pose")
     assert main(["process", str(crossing), "--uuv", "all", "--out", str(tmp_path / "all")]) == 0
-    err = capsys.readouterr().err
+    printed = capsys.readouterr()
+    err = printed.err
     assert (len(opened), len(poses)) == (
         1,
         1,
@@ -74,6 +75,13 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
         main(["process", str(crossing), "--uuv", "all", "--track-workers", "--out", str(workers)])
         == 0
     )
+    beside = (
+        tmp_path / "beside"
+    )  # the heights from size and each UUV's files in processes of their own
+    capsys.readouterr()
+    assert main(["process", str(crossing), "--uuv", "all", "--beside", "--out", str(beside)]) == 0
+    # the same lines in the same order
+    assert capsys.readouterr().out == printed.out.replace(str(tmp_path / "all"), str(beside))
 
     for uuv in ids:
         alone = tmp_path / "alone" / uuv
@@ -84,6 +92,7 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
                 name,
             )
             assert (workers / uuv / name).read_bytes() == (alone / name).read_bytes(), (uuv, name)
+            assert (beside / uuv / name).read_bytes() == (alone / name).read_bytes(), (uuv, name)
         rows = [
             r
             for r in (alone / "positions.csv").read_text().splitlines()[1:]
@@ -92,12 +101,12 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
         # uuv1 is lost a while in this view (alone too)
         assert sum(",ok," in r for r in rows) > 0.6 * len(rows)
         assert all(",motion," in r for r in rows if ",ok," in r)  # the offset estimated and applied
-    assert len(opened) == 2 + len(ids)
+    assert len(opened) == 3 + len(ids)
     first, second = ((tmp_path / "all" / uuv / FILES[0]).read_bytes() for uuv in ids)
     assert first != second
 
 
-def _tracked(path: Path, workers: bool) -> tuple[list, list, list]:
+def _tracked(path: Path, workers: bool, size_process: bool = False) -> tuple[list, list, list]:
     """Both UUVs of ``path`` tracked in one pass as ``skyfix process --uuv all`` tracks them (the motion measured,
     traced back, the height from size in ``auto``, at 10 Hz and 2 Hz once sure: sure 4.6 s in, the frames measured
     after depend on it): the results, each size's status, each telemetry's height fixes (times, values)."""
@@ -107,7 +116,12 @@ def _tracked(path: Path, workers: bool) -> tuple[list, list, list]:
         for s in sessions
     ]
     videos = track.track_sessions(
-        sessions, measure_motion=True, sizes=sizes, both_ways=True, workers=workers
+        sessions,
+        measure_motion=True,
+        sizes=sizes,
+        both_ways=True,
+        workers=workers,
+        size_process=size_process,
     )
     fixes = [
         [
@@ -128,14 +142,13 @@ def test_worker_processes_give_the_same_results(crossing, monkeypatch):
     monkeypatch.setattr(uuv_workers, "RING_SLOTS", 2)
     monkeypatch.setattr(uuv_workers, "SIZE_SLOTS", 1)
     with monkeypatch.context() as m:
-        m.setattr(track, "available", lambda: False)  # as where the platform cannot fork
         measured = _counted(m, HeightFromSize, "measure")
         alone_videos, alone_sizes, alone_fixes = _tracked(crossing, workers=False)
         assert len(measured) > 20
     # counted in this process only: the processes' steps and measurements are counted in theirs
     steps = _counted(monkeypatch, track.UuvTrack, "step")
     measured = _counted(monkeypatch, HeightFromSize, "measure")
-    by_size_worker = _tracked(crossing, workers=False)
+    by_size_worker = _tracked(crossing, workers=False, size_process=True)
     assert measured == [] and len(steps) > 0
     steps.clear()
     for videos, sizes, fixes in (by_size_worker, _tracked(crossing, workers=True)):

@@ -95,6 +95,7 @@ def frame_pixels(
     motion: bool = True,
     size: HeightFromSize | None = None,
     both_ways: bool = False,
+    size_process: bool = False,
 ) -> Pixels:
     """The UUV's :class:`Pixels` per frame: from track.csv or from tracking the video (causal, as live; with
     ``both_ways`` tracked once forward and backward, :func:`groundstation.offline.track.track_session`, the frames
@@ -102,7 +103,8 @@ def frame_pixels(
 
     Tracking the video of a session whose link delay is unknown, with ``motion``, also estimates the frames'
     offset to the telemetry and applies it when settled (see the module doc); an unknown delay is a warning.
-    ``size``: measuring the camera's height from the UUV's size in the same pass; its warnings join the session's.
+    ``size``: measuring the camera's height from the UUV's size in the same pass; its warnings join the session's
+    (``size_process``: measured in a process beside it, :func:`tracked_pixels`).
     """
     if use_track:
         if session.track is None:
@@ -115,7 +117,9 @@ def frame_pixels(
         raise SessionError(
             f"{session.path}: no video.* file (use --use-track to take pixels from track.csv)"
         )
-    return tracked_pixels([session], tracker, progress, motion, [size], both_ways)[0]
+    return tracked_pixels(
+        [session], tracker, progress, motion, [size], both_ways, size_process=size_process
+    )[0]
 
 
 def tracked_pixels(
@@ -126,12 +130,14 @@ def tracked_pixels(
     sizes: list[HeightFromSize | None] | None = None,
     both_ways: bool = False,
     workers: bool = False,
+    size_process: bool = False,
 ) -> list[Pixels]:
     """:func:`frame_pixels` from the video of several UUVs of one session (``sessions``: the session read as each
     UUV's; ``sizes``: one each or None) tracked in one pass
     (:func:`groundstation.offline.track.track_sessions`): the frames' offset to the telemetry is estimated once,
     from the pass's rotations, and applied to each. One :class:`Pixels` per session, each the same as
-    :func:`frame_pixels` of that session alone. ``workers``: each UUV tracked in a process of its own
+    :func:`frame_pixels` of that session alone. ``workers``: each UUV tracked in a process of its own;
+    ``size_process``: the heights from size measured in a process beside the pass
     (:func:`~groundstation.offline.track.track_sessions`)."""
     from groundstation.offline.track import track_sessions
 
@@ -145,6 +151,7 @@ def tracked_pixels(
         sizes=sizes,
         both_ways=both_ways,
         workers=workers,
+        size_process=size_process,
     )
     found = (
         offset_from_rotations(first.calibration, first.telemetry, videos[0].rotations)
@@ -347,6 +354,7 @@ def run(args) -> int:
             sizes,
             both_ways=True,
             workers=args.track_workers,
+            size_process=args.beside,
         )
     finally:
         for session in sessions:
@@ -355,7 +363,11 @@ def run(args) -> int:
         (session, args, output_dir(out / session.uuv_id), (uuv_pixels, size))
         for session, uuv_pixels, size in zip(sessions, pixels, sizes)
     ]
-    each_beside(process_one, jobs)
+    if args.beside:
+        each_beside(process_one, jobs)
+    else:
+        for job in jobs:
+            process_one(*job)
     return 0
 
 
@@ -422,6 +434,7 @@ def process_one(session: Session, args, out, tracked: tuple | None = None) -> in
                 not args.no_motion_offset,
                 size,
                 both_ways=True,
+                size_process=args.beside,
             )
         else:
             pixels, size = tracked
@@ -497,6 +510,13 @@ def register(subparsers, name: str, help: str | None = None) -> None:
         action="store_true",
         help=f"with --uuv {ALL_UUVS}: each UUV tracked in a process of its own, the decoded frames shared (the "
         "same results; it costs CPU, so it only helps with idle cores; where the platform forks)",
+    )
+    p.add_argument(
+        "--beside",
+        action="store_true",
+        help="the height from the UUV's size measured in a process of its own during the pass over the video, "
+        f"and with --uuv {ALL_UUVS} the UUVs' positions and files in processes of their own after it (the same "
+        "files; it costs CPU, so it only helps with idle cores; where the platform forks)",
     )
     add_motion_offset_flag(p)
     p.set_defaults(func=run)

@@ -32,9 +32,9 @@ long one: :func:`~groundstation.latency.video_motion.measured_every`), in a thre
 the frames' offset to the
 telemetry (:func:`groundstation.latency.estimate.offset_from_rotations`). With a
 :class:`~groundstation.height_from_size.HeightFromSize`, frames the UUV is tracked in are
-also measured for the camera's height from its size, in the same pass (``timings_s["size"]``), in a process beside
-it where the platform forks (:class:`~groundstation.offline.uuv_workers.SizeWorker`; ``timings_s["size_wait"]``:
-the time waiting for its last results): the same measurements, the same estimate.
+also measured for the camera's height from its size, in the same pass (``timings_s["size"]``), with
+``size_process`` in a process beside it (:class:`~groundstation.offline.uuv_workers.SizeWorker`;
+``timings_s["size_wait"]``: the time waiting for its last results): the same measurements, the same estimate.
 """
 
 from __future__ import annotations
@@ -137,6 +137,7 @@ def track_sessions(
     sizes: list[HeightFromSize | None] | None = None,
     both_ways: bool = False,
     workers: bool = False,
+    size_process: bool = False,
 ) -> list[TrackedVideo]:
     """:func:`track_session` of several UUVs of one session (``sessions``: the session read as each UUV's,
     :func:`~groundstation.session.read.load_session` ``uuv``; ``sizes``: one each or None) in one pass over the
@@ -148,7 +149,10 @@ def track_sessions(
     ``workers``: each UUV's track stepped in a process of its own where the platform forks, the frames shared
     (:class:`~groundstation.offline.uuv_workers.TrackWorkers`; ``skyfix process --track-workers``), else in this
     process; the same results either way. Off by default: on a busy 2-core machine the workers cost CPU and time
-    (``bench/offline_speed.py --uuvs``, ``docs/explanation/performance.md``)."""
+    (``bench/offline_speed.py --uuvs``, ``docs/explanation/performance.md``). ``size_process``: without ``workers``,
+    the heights from size measured in a process beside this one where the platform forks
+    (:class:`~groundstation.offline.uuv_workers.SizeWorker`; ``skyfix process --beside``), else here; the same
+    results either way, off by default for the same reason."""
     first = sessions[0]
     if first.video_path is None or first.frames is None:
         raise SessionError(f"{first.path}: no video.* with video_frames.csv to track")
@@ -176,7 +180,7 @@ def track_sessions(
     pool = TrackWorkers(tracks, 3 * cam.width * cam.height) if workers and available() else None
     measurer = (
         SizeWorker(tracks, 3 * cam.width * cam.height)
-        if pool is None and available() and any(track.size is not None for track in tracks)
+        if size_process and pool is None and available() and any(t.size is not None for t in tracks)
         else None
     )
     for track in tracks:
