@@ -23,9 +23,11 @@ what it did to the offset beside what it did to the speed. ``skyfix process --he
 the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
 ``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C DIR``: before and after in the
 same run). ``--uuvs [SIZES]``: also the session with three UUVs at 1080p (20 s) and 4K (8 s) (:func:`bench_uuvs`):
-``skyfix process --uuv all`` (one pass over the video for the three), with ``--track-workers`` (each UUV tracked in a
-worker process: :mod:`groundstation.offline.uuv_workers`) and ``--uuv uuv1`` alone against decode-only of the same
-file, each ``--tree`` too. Peak RSS is the largest of the command's processes (``os.wait4``), not their sum.
+``skyfix process --uuv all`` (one pass over the video for the three), with ``--beside`` (the heights from size and
+the UUVs' files in processes of their own) and ``--track-workers`` (each UUV tracked in a worker process:
+:mod:`groundstation.offline.uuv_workers`), and ``--uuv uuv1`` alone (and with ``--beside``) against decode-only of
+the same file, each ``--tree`` too, and whether each run's positions files are byte-identical to this tree's (the last
+round's). Peak RSS is the largest of the command's processes (``os.wait4``), not their sum; CPU is theirs together.
 """
 
 from __future__ import annotations
@@ -244,10 +246,10 @@ def table(runs: dict, frames: int, duration: float, data: dict) -> list[str]:
 def bench_uuvs(
     name: str, repeats: int, trees: dict[str, Path], work: Path, data: dict
 ) -> list[str]:
-    """The three-UUV session of ``bench/uuvs.py`` (two_uuvs_crossing, its video as a camera sends it, uuv3 a copy of
-    uuv1's records) at ``name`` (:data:`UUVS_SIZES`), interleaved rounds: OpenCV decode-only of its video, then per
-    source tree ``skyfix process --uuv all`` (the three in one pass over the video) and ``--uuv uuv1`` alone, and
-    this tree's ``--uuv all --track-workers`` (each UUV tracked in a worker process)."""
+    """The three-UUV session of ``bench/uuvs.py`` (its ``ensure_session``) at ``name`` (:data:`UUVS_SIZES`),
+    interleaved rounds: OpenCV decode-only of its video, then per source tree ``skyfix process --uuv all`` (the three
+    in one pass over the video) and ``--uuv uuv1`` alone, and this tree's ``--beside`` of both and ``--uuv all
+    --track-workers`` (each UUV tracked in a worker process); whether their positions files are identical."""
     from uuvs import ensure_session as uuvs_session
 
     (w, h), duration = UUVS_SIZES[name]
@@ -257,20 +259,22 @@ def bench_uuvs(
     me = [sys.executable, str(Path(__file__).resolve())]
     process = [sys.executable, "-m", "groundstation.cli", "process", str(session), "--quiet"]
     variants = {"decode-only OpenCV": (me + ["--decode-only", "opencv", video], ROOT)}
+    outs = {}  # (tree label, what) -> the output folder of its last run
     for label, tree in trees.items():
-        variants[f"process{label} --uuv all (3 UUVs)"] = (
-            process + ["--uuv", "all", "--out", str(work / "all")],
-            tree,
-        )
-        if tree == ROOT:
-            variants["process --uuv all --track-workers"] = (
-                process + ["--uuv", "all", "--track-workers", "--out", str(work / "workers")],
+        for what, args in (("--uuv all", ["--uuv", "all"]), ("--uuv uuv1", ["--uuv", "uuv1"])):
+            outs[label, what] = work / f"{what[6:]}{len(outs)}"
+            variants[f"process{label} {what} ({'3 UUVs' if what.endswith('all') else '1 UUV'})"] = (
+                process + args + ["--out", str(outs[label, what])],
                 tree,
             )
-        variants[f"process{label} --uuv uuv1 (1 UUV)"] = (
-            process + ["--uuv", "uuv1", "--out", str(work / "uuv1")],
-            tree,
-        )
+            if tree != ROOT:
+                continue
+            for flag in ("--beside", "--track-workers")[: 2 if what.endswith("all") else 1]:
+                outs[label, f"{what} {flag}"] = work / f"{what[6:]}{flag}"
+                variants[f"process {what} {flag}"] = (
+                    process + args + [flag, "--out", str(outs[label, f"{what} {flag}"])],
+                    tree,
+                )
     runs: dict[str, list[tuple[float, float, float, str]]] = {}
     loads = []
     for r in range(repeats):
@@ -286,7 +290,34 @@ def bench_uuvs(
         f"interleaved rounds, {os.cpu_count()} cores, load average (1 min) {min(loads):.1f}-{max(loads):.1f}"
     )
     data["load_1min"] = loads
-    return [heading, *table(runs, frames, duration, data)]
+    return [heading, *table(runs, frames, duration, data), *identical(outs, data)]
+
+
+def identical(outs: dict, data: dict) -> list[str]:
+    """Whether each run's positions files (``outs``: (tree label, what) -> its output folder) are byte-identical
+    to this tree's (``--beside``, ``--track-workers``: to this tree's without them): a line each, into ``data``
+    too."""
+    lines = []
+    for (label, what), folder in outs.items():
+        mine = outs["", " ".join(what.split()[:2])]
+        if folder == mine:
+            continue
+        files = sorted(p.relative_to(mine) for p in mine.rglob("positions*.csv"))
+        same = [
+            f
+            for f in files
+            if (folder / f).is_file() and (folder / f).read_bytes() == (mine / f).read_bytes()
+        ]
+        data[f"identical{label} {what}"] = [str(f) for f in same]
+        lines.append(
+            f"  process{label} {what}: {len(same)} of {len(files)} positions files byte-identical to this tree's"
+            + (
+                ""
+                if len(same) == len(files)
+                else f" (differ: {', '.join(str(f) for f in files if f not in same)})"
+            )
+        )
+    return lines
 
 
 def main(argv=None) -> int:
