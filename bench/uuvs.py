@@ -3,9 +3,9 @@
     .venv/bin/python bench/uuvs.py [--counts 1,2,3] [--rounds 1] [--baseline-frames 150] [--duration-s 20]
         [--profile-s 10] [--out bench/results/uuvs.txt]
 
-The session is the ``two_uuvs_crossing`` scenario (two BlueROV2s passing nearly head on under a camera 10 m up)
-with a third vehicle (:data:`THIRD_UUV`, ``[third_uuv]``: 0.6 m deep, passing uuv1 1 m to its side the other way,
-never nearer either vehicle than 1 m) rendered at 1920x1080 30 fps, generated once into ``/tmp/skyfix-bench/`` (a few minutes) and its video re-encoded
+The session is the ``three_uuvs_crossing`` scenario (two BlueROV2s passing nearly head on under a camera 10 m up,
+a third, ``[third_uuv]``, 0.6 m deep, passing uuv1 1 m to its side the other way, never nearer either vehicle than
+1 m) rendered at 1920x1080 30 fps, generated once into ``/tmp/skyfix-bench/`` (a few minutes) and its video re-encoded
 as a camera sends it (:func:`bench.live_latency.encode_as_camera`). As in ``bench/live_latency.py``,
 ``skyfix replay`` sends every frame as MPEG-TS over UDP :data:`CAMERA_LATENCY_MS` after its exposure, the UAV's
 MAVLink and each UUV's depth on its own Zenoh key into one ``skyfix run --config`` on loopback, whose ``[[uuv]]``
@@ -85,21 +85,8 @@ from groundstation.mavlink.ingest import (
 from groundstation.session.read import load_session, uuv_files
 from localizer.geodesy import horizontal_error_m
 
-SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
+SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "three_uuvs_crossing.toml"
 SIZE = (1920, 1080)
-#: The third vehicle (``[third_uuv]``, as ``[second_uuv]``): passing uuv1 the other way 1 m to its side, slower and
-#: shallower, its path 1.0 m from uuv1's and uuv2's at their closest and in view throughout (1080p: pixel rows
-#: 585-908 of 1080).
-THIRD_UUV = {
-    "enabled": True,
-    "role": "uuv",
-    "id": "uuv3",
-    "pass_at_s": 10.0,
-    "miss_m": -1.0,
-    "course_rel_deg": 175.0,
-    "speed_mps": 0.2,
-    "depth_m": 0.6,
-}
 VEHICLES = ("uuv1", "uuv2", "uuv3")  # all in the video, each run
 RUNS = {n: VEHICLES[:n] for n in (1, 2, 3)}
 
@@ -109,7 +96,7 @@ NOT_TRACKED = ("lost", "awaiting_target", "released")
 
 
 def ensure_session(duration_s: float, size: tuple[int, int] = SIZE) -> Path:
-    """The two_uuvs_crossing session with :data:`THIRD_UUV` at 30 fps (``size``: width, height; 1080p by default),
+    """The three_uuvs_crossing session at 30 fps (``size``: width, height; 1080p by default),
     three vehicles with their records (``uuvs/uuv2/``, ``uuvs/uuv3/``), generated once, its video as a camera sends
     it."""
     path = BENCH_DIR / f"uuvs3_{size[1]}p_{duration_s:g}s"
@@ -119,9 +106,7 @@ def ensure_session(duration_s: float, size: tuple[int, int] = SIZE) -> Path:
 
         data = read_toml(SCENARIO)
         data["camera"] |= {"width": size[0], "height": size[1]}
-        sc = scenario_from_dict(
-            data | {"duration_s": duration_s, "third_uuv": THIRD_UUV}, str(SCENARIO)
-        )
+        sc = scenario_from_dict(data | {"duration_s": duration_s}, str(SCENARIO))
         print(f"generating {path} (once) ...", flush=True)
         generate(sc, path, progress=True)
         encode_as_camera(path)
@@ -588,14 +573,16 @@ def main() -> int:
             f"load average {os.getloadavg()[0]:.1f}"
         ),
         (
-            f"{session.name}: two_uuvs_crossing at {SIZE[0]}x{SIZE[1]} 30 fps, MPEG-TS over UDP, camera latency "
+            f"{session.name}: three_uuvs_crossing at {SIZE[0]}x{SIZE[1]} 30 fps, MPEG-TS over UDP, camera latency "
             f"{CAMERA_LATENCY_MS} ms; runs: "
             + "; ".join(f"{n}: {', '.join(RUNS[n])}" for n in RUNS)
         ),
         (
             "three distinct vehicles in the video in every run: uuv3 is [third_uuv] "
             + ", ".join(
-                f"{k} = {v}" for k, v in THIRD_UUV.items() if k not in ("enabled", "role", "id")
+                f"{k} = {v}"
+                for k, v in read_toml(SCENARIO)["third_uuv"].items()
+                if k not in ("enabled", "role", "id")
             )
             + f"; the service at nice {args.nice} (`nice -n`, as deploy/skyfix.service's Nice=; read back per run)"
         ),

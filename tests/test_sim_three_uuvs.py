@@ -1,4 +1,4 @@
-"""A third vehicle (``[third_uuv]``, as ``[second_uuv]``) in ``two_uuvs_crossing``, checked without the localizer:
+"""A third vehicle (``[third_uuv]``, as ``[second_uuv]``) in ``three_uuvs_crossing``, checked without the localizer:
 its own records under ``uuvs/uuv3/`` (a straight line at its speed and depth, its own depth samples, its first box
 around its own track pixel), and the scenario's refusals (bench/uuvs.py's three-UUV session is made this way)."""
 
@@ -19,24 +19,15 @@ from sim_fixtures.generate import generate
 from sim_fixtures.scenario import scenario_from_dict
 
 SCENARIO = (
-    Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
+    Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "three_uuvs_crossing.toml"
 )
-THIRD = {
-    "enabled": True,
-    "role": "uuv",
-    "id": "uuv3",
-    "pass_at_s": 10.0,
-    "miss_m": -1.0,
-    "course_rel_deg": 175.0,
-    "speed_mps": 0.2,
-    "depth_m": 0.6,
-}
+THIRD = tomllib.loads(SCENARIO.read_text())["third_uuv"]
 IDS = (PRIMARY_UUV, "uuv2", "uuv3")
 
 
 def scenario(**changes):
     data = tomllib.loads(SCENARIO.read_text())
-    return scenario_from_dict({**data, "third_uuv": THIRD, **changes})
+    return scenario_from_dict({**data, **changes})
 
 
 def local_ne(sc, truth) -> np.ndarray:
