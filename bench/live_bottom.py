@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from pose_from_bottom import EXTRA, SESSIONS, session, truth_bias
+from pose_from_bottom import EXTRA, SESSIONS, session, targets, truth_bias, write
 
 from groundstation.live.bottom_live import (
     REFIT_S,
@@ -189,22 +189,7 @@ def main() -> int:
         whys = sorted({w.split(";")[0] for _, c, w in estimates if c is None})
         if whys:
             notes.append(f"{name}: refused: " + " | ".join(whys))
-    for name, shape in shapes.items():
-        twin = name.replace("_plain", "_rtk")
-        if twin != name and twin in shapes:
-            lines.append(
-                f"{name}: shape {shape:.4f} m = {shape / shapes[twin]:.2f}x {twin}'s {shapes[twin]:.4f} m "
-                "(offline target: within 1.5x)"
-            )
-        elif "_rtk" in name:
-            lines.append(
-                f"{name}: absolute MAE {maes[name]:.3f} m (offline target with RTK: <= 0.10 m)"
-            )
-        print(lines[-1])
-    lines += ["", *notes]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"-> {args.out}")
+    write(args.out, lines + targets(shapes, maes, "offline target"), notes)
     return 0
 
 

@@ -109,6 +109,30 @@ def cells(true_deg, correction: PoseCorrection | None) -> list[str]:
     ]
 
 
+def targets(shapes: dict[str, float], maes: dict[str, float], word: str) -> list[str]:
+    """Issue 28's targets, printed: a plain-GNSS session's shape (m) against its RTK twin's, an RTK session's
+    absolute MAE (m); ``word`` names the target (e.g. "offline target" where the run is not offline's)."""
+    lines = []
+    for name, shape in shapes.items():
+        twin = name.replace("_plain", "_rtk")
+        if twin != name and twin in shapes:
+            lines.append(
+                f"{name}: shape {shape:.4f} m = {shape / shapes[twin]:.2f}x {twin}'s {shapes[twin]:.4f} m "
+                f"({word}: within 1.5x)"
+            )
+        elif "_rtk" in name:
+            lines.append(f"{name}: absolute MAE {maes[name]:.3f} m ({word} with RTK: <= 0.10 m)")
+        print(lines[-1])
+    return lines
+
+
+def write(out: Path, lines: list[str], notes: list[str]) -> None:
+    """The table and its targets, a blank line, then the notes, into ``out``."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text("\n".join([*lines, "", *notes]) + "\n")
+    print(f"-> {out}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, default=Path("/tmp/skyfix-bottom"))
@@ -134,20 +158,7 @@ def main() -> int:
         )
         notes.append(f"{name}: " + ("none" if corr is None else corr.describe()))
         print(lines[-1], flush=True)
-    for name, shape in shapes.items():
-        twin = name.replace("_plain", "_rtk")
-        if twin != name and twin in shapes:
-            lines.append(
-                f"{name}: shape {shape:.4f} m = {shape / shapes[twin]:.2f}x {twin}'s {shapes[twin]:.4f} m "
-                "(target: within 1.5x)"
-            )
-        elif "_rtk" in name:
-            lines.append(f"{name}: absolute MAE {maes[name]:.3f} m (target with RTK: <= 0.10 m)")
-        print(lines[-1])
-    lines += ["", *notes]
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
-    print(f"-> {args.out}")
+    write(args.out, lines + targets(shapes, maes, "target"), notes)
     return 0
 
 
