@@ -40,6 +40,7 @@ import math
 import threading
 import tomllib
 from collections import Counter, deque
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -348,6 +349,11 @@ class LiveReference:
     def on_frame(self, frame) -> None:
         if frame.aligned:  # a frame stamped before the video's latency settled is not searched
             self._search.on_frame(frame)
+
+    def sight_through(self, adjust: Callable[[CameraPose], CameraPose]) -> None:
+        """Search each frame with the pose ``adjust`` gives (e.g. the bottom's corrected one: the offset found is
+        then what is left after that correction)."""
+        self._search.adjust = adjust
 
     def look(self, image: np.ndarray, pose: CameraPose) -> None:
         """Search one frame (the search's thread) and keep the sighting."""

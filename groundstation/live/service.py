@@ -258,7 +258,7 @@ async def serve(cfg: config.RunConfig) -> dict:
             workers.section("bottom", bottom.status)
             closers.append(bottom.close)
             if reference:  # its sightings through the bottom's corrected pose: its offset is what is left after it
-                reference._search.adjust = bottom.pose_only
+                reference.sight_through(bottom.pose_only)
         correct = (
             bottom.then(reference.correct)
             if bottom and reference
