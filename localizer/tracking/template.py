@@ -847,7 +847,8 @@ class TemplateMatcher:
         leaves the frame."""
         qx, qy = self._to_work(u, v)
         bx0, by0 = round(qx) - half, round(qy) - half
-        if bx0 < 0 or by0 < 0:  # checked before reading: a negative slice would wrap or come out empty
+        # checked before reading: a negative slice would wrap or come out empty
+        if bx0 < 0 or by0 < 0:
             return None
         region = self._blocks(frame_bgr, bx0, by0, 2 * half + 1, 2 * half + 1)
         if region.shape != (2 * half + 1, 2 * half + 1):
