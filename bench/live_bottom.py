@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from pose_from_bottom import EXTRA, SESSIONS, session, targets, truth_bias, write
+from pose_from_bottom import EXTRA, SESSIONS, fix_scores, session, targets, truth_bias, write
 
 from groundstation.live.bottom_live import (
     REFIT_S,
@@ -39,7 +39,6 @@ from groundstation.live.bottom_live import (
 )
 from groundstation.offline import process
 from groundstation.offline.bottom import bias_headings, grey_of, pixels_at, tilt_frame
-from groundstation.offline.evaluate import error_ne_m, shape_m
 from groundstation.session.read import load_session
 from localizer.pose import camera_pose, take
 
@@ -88,19 +87,6 @@ def replay(s, every_s: float, window_s: float, fit_latency: bool):
                     )
                 )
     return estimates, float(np.mean(seconds)) if seconds else float("nan")
-
-
-def scores(s, fixes, truth):
-    ok = fixes.status == "ok"
-    err = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, truth)
-    e = np.hypot(*err.T)
-    good = np.isfinite(e)
-    return (
-        float(np.mean(e[good])),
-        shape_m(err),
-        float(np.mean(e[good] <= 2 * fixes.h_acc_m[good])),
-        float(np.median(fixes.h_acc_m[good])),
-    )
 
 
 def live_fixes(s, estimates, window_s: float):
@@ -163,10 +149,10 @@ def main() -> int:
         s = load_session(path, "uuv1")
         truth = s.truth
         fixes0 = process.locate_frames(s, process.frame_pixels(s, use_track=True))
-        mae0, shape0, _, _ = scores(s, fixes0, truth)
+        mae0, shape0, _, _ = fix_scores(fixes0, truth)
         estimates, fit_s = replay(s, args.every_s, args.window_s, not args.no_fit_latency)
         fixes1, share = live_fixes(s, estimates, args.window_s)
-        mae1, shape1, in1, h_acc = scores(s, fixes1, truth)
+        mae1, shape1, in1, h_acc = fix_scores(fixes1, truth)
         shapes[name], maes[name] = shape1, mae1
         last = next((c for _, c, _ in reversed(estimates) if c is not None), None)
         true_deg = truth_bias(path, s, last)

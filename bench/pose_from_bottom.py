@@ -74,8 +74,13 @@ def scores(s, pose_from_bottom: str):
     pixels = process.frame_pixels(s, use_track=True)
     correction = process.bottom_correction(s, pixels, pose_from_bottom)
     fixes = process.locate_frames(s, pixels, correction=correction)
+    return (*fix_scores(fixes, s.truth), correction)
+
+
+def fix_scores(fixes, truth) -> tuple[float, float, float, float]:
+    """(MAE m, shape m, share within 2·h_acc, median h_acc m) of the ok fixes against the truth."""
     ok = fixes.status == "ok"
-    err = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, s.truth)
+    err = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, ok, truth)
     e = np.hypot(*err.T)
     good = np.isfinite(e)
     return (
@@ -83,7 +88,6 @@ def scores(s, pose_from_bottom: str):
         shape_m(err),
         float(np.mean(e[good] <= 2 * fixes.h_acc_m[good])),
         float(np.median(fixes.h_acc_m[good])),
-        correction,
     )
 
 
