@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import queue
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import av
 import numpy as np
@@ -26,10 +26,18 @@ class VideoFrame:
     t_s: float = 0.0
     # read grey: the decoded frame whose luma plane ``image`` is a view of
     decoded: av.VideoFrame | None = None
+    # the conversion of ``decoded``, once made (the UUVs measured in one frame share it)
+    _bgr: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def bgr(self) -> np.ndarray:
-        """The frame in BGR uint8: ``image``, or converted from the decoded frame (as a frame not read grey is)."""
-        return self.image if self.decoded is None else self.decoded.to_ndarray(format="bgr24")
+        """The frame in BGR uint8: ``image``, or converted from the decoded frame (as a frame not read grey is),
+        converted once per frame (read-only: it is shared)."""
+        if self.decoded is None:
+            return self.image
+        if self._bgr is None:
+            self._bgr = self.decoded.to_ndarray(format="bgr24")
+            self._bgr.flags.writeable = False
+        return self._bgr
 
 
 def ffmpeg_reason(e: Exception) -> str:

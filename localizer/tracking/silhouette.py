@@ -330,32 +330,31 @@ def _changes(window: np.ndarray, xy: np.ndarray, normal: np.ndarray, t: np.ndarr
     positions are computed in float64 and then rounded, as they always were: float32 arithmetic moves them by
     1e-5 px, and that moved 9 of 182 heights of ``bench/offline_speed.py``'s 1080p session by 0.2-35 mm (the fit
     follows edges that flip between peaks at that level)."""
-    x, y = xy[..., 0].reshape(-1), xy[..., 1].reshape(-1)
-    X, Y = (
-        t[:, None] * normal[..., 0].reshape(-1),
-        t[:, None] * normal[..., 1].reshape(-1),
-    )  # (T, N)
-    X += x
-    Y += y
-    X, Y = X.astype(np.float32), Y.astype(np.float32)
+    n = xy.size // 2
+    XY = np.multiply.outer(t, normal.reshape(n, 2))  # (T, N, 2): x and y interleaved, one map
+    XY += xy.reshape(n, 2)
+    XY = XY.astype(np.float32)
     parts = [
         cv2.remap(
             window,
-            X[:, a : a + _REMAP_MAX_COLS],
-            Y[:, a : a + _REMAP_MAX_COLS],
+            XY[:, a : a + _REMAP_MAX_COLS],
+            None,
             cv2.INTER_LINEAR,
             borderMode=cv2.BORDER_REPLICATE,
         )
-        for a in range(0, len(x), _REMAP_MAX_COLS)
+        for a in range(0, n, _REMAP_MAX_COLS)
     ]
     profile = (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)).reshape(
-        len(t), len(x), -1
+        len(t), n, -1
     )
-    d = profile[1:] - profile[:-1]  # (T - 1, N, channels)
+    d = np.subtract(profile[1:], profile[:-1])  # (T - 1, N, channels)
     d *= d
-    # faster than sum() for 3
-    sq = d[..., 0] + d[..., 1] + d[..., 2] if d.shape[-1] == 3 else d.sum(axis=-1)
-    return np.sqrt(sq).reshape(len(t) - 1, *xy.shape[:-1])
+    if d.shape[-1] == 3:  # faster than sum() for 3, in place
+        sq = np.add(d[..., 0], d[..., 1])
+        sq += d[..., 2]
+    else:
+        sq = d.sum(axis=-1)
+    return np.sqrt(sq, out=sq).reshape(len(t) - 1, *xy.shape[:-1])
 
 
 def _texture(frame_bgr, corners, p: SilhouetteParams) -> float:
