@@ -19,6 +19,7 @@ import pytest
 from groundstation.cli import main
 from groundstation.height_from_size import HeightFromSize
 from groundstation.offline import process, track, uuv_workers
+from groundstation.session import read
 from groundstation.session.read import Session, SessionError, load_session, uuv_ids
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -62,13 +63,12 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
     assert len(ids) == 2
     opened = _counted(monkeypatch, Session, "open_video")
     poses = _counted(monkeypatch, track, "uav_pose")
+    tlogs = _counted(monkeypatch, read, "read_tlog")
     assert main(["process", str(crossing), "--uuv", "all", "--out", str(tmp_path / "all")]) == 0
     printed = capsys.readouterr()
     err = printed.err
-    assert (len(opened), len(poses)) == (
-        1,
-        1,
-    )  # the video decoded once, each frame's UAV pose computed once
+    # the video decoded once, each frame's UAV pose computed once, the UAV's log parsed once
+    assert (len(opened), len(poses), len(tlogs)) == (1, 1, 1)
     assert err.count("the frames' offset to the telemetry from the video's motion") == 1, err
     workers = tmp_path / "workers"  # each UUV tracked in a process of its own: the same files
     assert (

@@ -60,7 +60,14 @@ from groundstation.offline.smoothed import summary as smoothed_summary
 from groundstation.offline.uuv_workers import available, picklable
 from groundstation.outputs import output_dir
 from groundstation.session.positions import write_positions_csv
-from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session, uuv_ids
+from groundstation.session.read import (
+    PRIMARY_UUV,
+    Session,
+    SessionError,
+    load_session,
+    load_sessions,
+    uuv_ids,
+)
 from localizer.fix import Fixes, locate
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
 from localizer.height import take_notices
@@ -339,7 +346,7 @@ def run(args) -> int:
     out = output_dir(args.out)
     if args.uuv != ALL_UUVS:
         return process_one(load_session(args.session, args.uuv), args, out)
-    sessions = [load_session(args.session, uuv) for uuv in uuv_ids(args.session)]
+    sessions = load_sessions(args.session, uuv_ids(args.session))
     if args.use_track:
         for session in sessions:
             process_one(session, args, output_dir(out / session.uuv_id))

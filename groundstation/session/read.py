@@ -202,9 +202,20 @@ def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
     return count
 
 
-def _read_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> int:
-    """Ingest the UAV's messages; returns the UAV's system id (:func:`~groundstation.mavlink.ingest.uav_system`)."""
-    msgs = [m for _, m in read_tlog(path, warnings)]
+def _read_tlog(
+    path: Path, tel: Telemetry, source: str, warnings: list[str], read: dict | None = None
+) -> int:
+    """Ingest the UAV's messages; returns the UAV's system id (:func:`~groundstation.mavlink.ingest.uav_system`).
+    ``read``: the log's messages and its reading's warnings kept there by the first call, reused by the others
+    (:func:`load_sessions`)."""
+    if read is None or path not in read:
+        read_warnings: list[str] = []
+        msgs = [m for _, m in read_tlog(path, read_warnings)]
+        if read is not None:
+            read[path] = msgs, read_warnings
+    else:
+        msgs, read_warnings = read[path]
+    warnings.extend(read_warnings)
     sysid = uav_system(msgs)
     if sysid is None:
         raise SessionError(
@@ -275,8 +286,16 @@ def _calibration(meta: dict, toml_path: Path, uuv: UuvFiles) -> Calibration:
         raise SessionError(str(e)) from None
 
 
-def load_session(path, uuv: str = PRIMARY_UUV) -> Session:
-    """Read and validate a session directory, as the records of its UUV ``uuv`` (see :func:`uuv_ids`)."""
+def load_sessions(path, uuvs: list[str]) -> list[Session]:
+    """:func:`load_session` of each of ``uuvs``, the UAV's telemetry log parsed once for all (each UUV's
+    :class:`~localizer.telemetry.Telemetry` ingests it: the heights from size add to one UUV's alone)."""
+    read: dict = {}
+    return [load_session(path, uuv, read) for uuv in uuvs]
+
+
+def load_session(path, uuv: str = PRIMARY_UUV, read: dict | None = None) -> Session:
+    """Read and validate a session directory, as the records of its UUV ``uuv`` (see :func:`uuv_ids`); ``read``:
+    see :func:`load_sessions`."""
     path = Path(path)
     if not path.is_dir():
         raise SessionError(f"{path}: not a session directory")
@@ -292,7 +311,7 @@ def load_session(path, uuv: str = PRIMARY_UUV) -> Session:
 
     warnings: list[str] = list(cal.warnings)
     tel = Telemetry(cal.timing)
-    sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings)
+    sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings, read)
     if not files.depth.is_file():
         raise SessionError(f"{files.depth}: missing (the UUV's depth is required)")
     _read_depth(files.depth, tel, warnings)
