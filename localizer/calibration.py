@@ -155,6 +155,17 @@ class Sigmas:
         "that wanders over about 10 minutes (in proportion to time at first, with its square root later), the "
         "weather's pressure tendency, 'falling slowly' being up to 1.5 hPa in 3 h, at 8.3 m per hPa near sea level",
     )
+    baro_wander_m: NonNegative = Field(
+        0.15,
+        description="the share of height_m (at most all of it) that wanders back and forth over tens of seconds, "
+        "as large at any time: the prop wash, gusts and the air's temperature in the barometer's pressure "
+        "(0.1-0.2 typical hovering); GNSS altitudes that can see it follow it over seconds in proportion to their "
+        "accuracy, and where they show none (an RTK receiver beside a steady barometer) it is left out "
+        "(localizer/height.py)",
+    )
+    baro_wander_s: Positive = Field(
+        30.0, description="its correlation time (a first-order Gauss-Markov process)"
+    )
     depth_m: NonNegative = Field(
         0.05, description="UUV depth: a pressure sensor with the surface pressure zeroed"
     )

@@ -5,9 +5,10 @@ or ``alt`` − ``[water] surface_amsl_m``: :mod:`localizer.surface`) is the smoo
 telemetry's rate. With the barometer as the EKF's height source (ArduPilot's EK3_SRC1_POSZ = 1)
 both follow the barometer, which drifts. Its error ``b`` = EKF height − true height is estimated
 by a small Kalman filter (:class:`HeightEstimator`) over whatever measures it, and a frame's
-height is the EKF height − ``b``. States ``x = (e, d, s, g)``, metres (``d`` m/s):
+height is the EKF height − ``b``. States ``x = (e, d, s, g, w)``, metres (``d`` m/s):
 
-- ``e``: the EKF height's own error. 0 ± ``[uncertainty] height_m`` when its reference was set:
+- ``e``: the EKF height's own error. 0 ± ``[uncertainty] height_m`` when its reference was set (less the
+  wander's share, ``w``'s):
   the take-off (ArduPilot sets home, so ``relative_alt`` 0, when it arms: an arming seen in
   the HEARTBEATs starts ``e`` again) or, in the amsl reference or when no arming was seen, the
   autopilot's boot (its EKF origin): a conservative bound on the flight time. It then drifts at
@@ -33,10 +34,24 @@ height is the EKF height − ``b``. States ``x = (e, d, s, g)``, metres (``d`` m
   scatter against the EKF's height from one message to the next (:func:`_scattered`): an RTK
   receiver's claimed v_acc can be optimistic.
 
-The height's error is ``b = e`` (take-off reference) or ``e + s`` (amsl). Measurements:
+- ``w``: the barometer's wander (the prop wash, gusts, the air's temperature: centimetres to decimetres back
+  and forth over tens of seconds, which the drift's 600-s rate cannot follow), first-order Gauss-Markov of
+  1-sigma ``[uncertainty] baro_wander_m`` (a share of ``height_m``: at most all of it, so the height's sigma
+  without measurements is what it was) and correlation time ``baro_wander_s``. It is kept across an arming
+  (ArduPilot zeroes the height, the air goes on); in the take-off reference the wander so far joins ``e`` at
+  the first GNSS altitude and ``w`` starts there from 0, as the drift's rate does: GNSS altitudes give its
+  changes, and its return to its mean must not say where the level was. Whether it is in the model is
+  measured (:meth:`HeightEstimator._bent`): GNSS altitudes fine enough to see it (one message's white noise
+  under a quarter of what the wander moves over :data:`WANDER_LAG_S`) keep it only while the means of their
+  successive :data:`WANDER_LAG_S` spans move as much as that quarter beyond their white noise; before that,
+  and where they do not move (an RTK receiver beside a steady barometer), it is left out (no process noise),
+  so the receiver's white noise does not move the height; coarser ones (a plain fix) cannot tell and keep it,
+  and their metres move the height by little more than nothing.
 
-- a GNSS altitude ``a`` (GPS_RAW_INT, 3D fix or better): ``a − h_ekf − S = s + g − e`` (take-off;
-  ``S`` the first such difference) or ``g − e`` (amsl, ``S`` = ``surface_amsl_m``). An RTK fix's
+The height's error is ``b = e + w`` (take-off reference) or ``e + w + s`` (amsl). Measurements:
+
+- a GNSS altitude ``a`` (GPS_RAW_INT, 3D fix or better): ``a − h_ekf − S = s + g − e − w`` (take-off;
+  ``S`` the first such difference) or ``g − e − w`` (amsl, ``S`` = ``surface_amsl_m``). An RTK fix's
   centimetre accuracy makes it the height when the water's altitude is known; a plain fix's
   metres give little more than the barometer;
 - an absolute height ``h`` (:attr:`Telemetry.height_fixes`: a downward rangefinder, the UUV's
@@ -93,11 +108,16 @@ AGREE_SIGMAS = 3.0  # ... and its source's next ones until one comes within this
 CONFLICT_AFTER = 3  # a source disagrees once this many of its measurements in a row were refused (not one glitch)
 CONFLICT_HOLD_S = 10.0  # a disagreement counts in the sigma until this long after the source's last refused measurement
 SOURCE_WINDOW_S = 30.0
+WANDER_LAG_S = (
+    2.0  # the span over which GNSS altitudes are averaged to see the barometer's wander ...
+)
+BEND_N = 20  # ... and the differences of such means averaged (40 s)
 RANGEFINDER_FLOOR_M = 0.05  # laser rangefinders' data sheets: ±5 cm up to a few metres ...
 RANGEFINDER_SHARE = 0.01  # ... and 1 % of the range beyond (e.g. Benewake TFmini Plus, TF03)
 
 _ARM, _GNSS, _FIX = 0, 1, 2
-_E, _D, _S, _G = range(4)  # the state's indices
+_E, _D, _S, _G, _W = range(5)  # the state's indices
+_N = 5
 
 
 def drift_variance_m2(dt_s, rate_sigma_mps, tau_s=DRIFT_RATE_TAU_S):
@@ -112,6 +132,12 @@ def drift_rate_sigma_mps(drift_10min_m: float) -> float:
     """The drift rate's stationary 1-sigma (m/s) that makes the drift's 1-sigma ``drift_10min_m`` after
     :data:`DRIFT_REFERENCE_S`."""
     return drift_10min_m / math.sqrt(float(drift_variance_m2(DRIFT_REFERENCE_S, 1.0)))
+
+
+def difference_var(sigma_m, lag_s, tau_s):
+    """Variance (m²) of ``x(t) − x(t − lag)`` for a first-order Gauss-Markov ``x`` of stationary 1-sigma ``sigma_m``
+    and correlation time ``tau_s``: ``2σ²·(1 − e^(−lag/τ))``."""
+    return -2.0 * sigma_m**2 * math.expm1(-lag_s / tau_s)
 
 
 def rangefinder_height_m(distance_m, roll_rad, pitch_rad):
@@ -159,6 +185,12 @@ class _Aux(NamedTuple):
         0,
         0.0,
     )  # (differences counted, the running mean of half their squares): see _scattered
+    # the barometer's wander: whether it is in the model (see _bent), the GNSS measurements (t, z) of the last
+    # 2·WANDER_LAG_S since the fix type or the reference changed, and (differences counted, the running mean of
+    # what they show beyond the white noise and g, the time of the newest)
+    wander: bool = True
+    window: tuple = ()
+    bend: tuple = (0, 0.0, -math.inf)
 
 
 class HeightEstimator:
@@ -174,15 +206,20 @@ class HeightEstimator:
         self.key = (water, sigmas)
         self.amsl = water.surface_amsl_m is not None
         self.word = "amsl" if self.amsl else "takeoff"
-        self.c = np.array([1.0, 0.0, 1.0 if self.amsl else 0.0, 0.0])  # b = c·x
+        self.c = np.array([1.0, 0.0, 1.0 if self.amsl else 0.0, 0.0, 1.0])  # b = c·x
         self.rate_sigma_mps = drift_rate_sigma_mps(sigmas.baro_drift_10min_m)
+        # the wander's share of height_m, and what is left of it for e
+        self.wander_m = min(sigmas.baro_wander_m, sigmas.height_m)
+        self.e0_var_m2 = sigmas.height_m**2 - self.wander_m**2
+        # what the wander puts in a difference of GNSS altitudes over WANDER_LAG_S
+        self.wander_d_m2 = difference_var(self.wander_m, WANDER_LAG_S, sigmas.baro_wander_s)
         self._base: tuple | None = None  # (t, x, P, aux) at the autopilot's boot
         self._entries: list[tuple] = []  # (t, kind, data), sorted by t
         self._entry_t: list[float] = []  # their times
         self._n = 0  # entries processed: their states are valid
         self._t = np.empty(0)
-        self._x = np.empty((0, 4))
-        self._P = np.empty((0, 4, 4))
+        self._x = np.empty((0, _N))
+        self._P = np.empty((0, _N, _N))
         self._aux: list[_Aux] = []  # per processed entry
         self._src: list[str | None] = []  # per processed entry: the source word of its measurement
         self._ok: list[bool] = []  # ... whether it was used
@@ -238,13 +275,14 @@ class HeightEstimator:
                 return
             P = np.diag(
                 [
-                    self.sigmas.height_m**2,
+                    self.e0_var_m2,
                     self.rate_sigma_mps**2,
                     (self.sigmas.surface_amsl_m if self.amsl else SURFACE_UNKNOWN_M) ** 2,
                     0.0,
+                    self.wander_m**2,
                 ]
             )
-            self._base = (boot, np.zeros(4), P, _Aux(math.nan, -1, self.water.surface_amsl_m))
+            self._base = (boot, np.zeros(_N), P, _Aux(math.nan, -1, self.water.surface_amsl_m))
         new = sorted(self._pull(tel), key=lambda e: e[0])
         if new:
             first = len(self._entries)
@@ -259,7 +297,7 @@ class HeightEstimator:
         self._trim(tel)
 
     # -- the filter -----------------------------------------------------------------------------
-    def _predict(self, x, P, dt, sigma_g):
+    def _predict(self, x, P, dt, sigma_g, wander=True):
         """State and covariance ``dt`` s later (arrays broadcast over leading axes): ``e`` integrates the rate ``d``
         (the exact discretisation of an integrated first-order Gauss-Markov process), ``g`` decays."""
         dt = np.asarray(dt, dtype=float)
@@ -269,7 +307,7 @@ class HeightEstimator:
             np.expm1(-2.0 * dt / tau),
         )  # φ − 1, φ² − 1 (φ = e^(−dt/τ)), without cancellation
         phi_g = np.exp(-dt / GNSS_TAU_S)
-        F = np.zeros(dt.shape + (4, 4))
+        F = np.zeros(dt.shape + (_N, _N))
         F[..., _E, _E] = F[..., _S, _S] = 1.0
         F[..., _E, _D] = -tau * m1
         F[..., _D, _D] = 1.0 + m1
@@ -279,6 +317,9 @@ class HeightEstimator:
         Q[..., _E, _D] = Q[..., _D, _E] = var_d * tau * m1**2
         Q[..., _D, _D] = -var_d * m2
         Q[..., _G, _G] = np.nan_to_num(np.asarray(sigma_g, dtype=float)) ** 2 * (1.0 - phi_g**2)
+        phi_w = np.exp(-dt / self.sigmas.baro_wander_s)
+        F[..., _W, _W] = phi_w
+        Q[..., _W, _W] = np.where(wander, self.wander_m**2 * (1.0 - phi_w**2), 0.0)
         x = np.einsum("...ij,...j->...i", F, x)
         P = F @ P @ np.swapaxes(F, -1, -2) + Q
         return x, P
@@ -296,7 +337,7 @@ class HeightEstimator:
         h_ekf = ekf_height_m(self.water, tel, [e[0] for e in entries])
         ts, xs, Ps = [], [], []
         for (t, kind, data), h_e in zip(entries, h_ekf):
-            x, P = self._predict(x, P, max(0.0, t - t0), aux.sigma_g)
+            x, P = self._predict(x, P, max(0.0, t - t0), aux.sigma_g, aux.wander)
             x, P, aux, word, ok, gap = self._step(t, kind, data, float(h_e), x, P, aux)
             ts.append(t)
             xs.append(x)
@@ -307,8 +348,8 @@ class HeightEstimator:
             self._gap.append(gap)
             t0 = t
         self._t = np.concatenate([self._t[:k], ts])
-        self._x = np.concatenate([self._x[:k], np.reshape(xs, (-1, 4))])
-        self._P = np.concatenate([self._P[:k], np.reshape(Ps, (-1, 4, 4))])
+        self._x = np.concatenate([self._x[:k], np.reshape(xs, (-1, _N))])
+        self._P = np.concatenate([self._P[:k], np.reshape(Ps, (-1, _N, _N))])
         self._n = len(self._entries)
         self._cache = None
 
@@ -320,8 +361,8 @@ class HeightEstimator:
             x, P = x.copy(), P.copy()
             x[_E] = x[_S] = 0.0
             P[_E, :] = P[:, _E] = P[_S, :] = P[:, _S] = 0.0
-            P[_E, _E], P[_S, _S] = self.sigmas.height_m**2, SURFACE_UNKNOWN_M**2
-            return x, P, aux._replace(z_prev=math.nan), None, False, math.nan
+            P[_E, _E], P[_S, _S] = self.e0_var_m2, SURFACE_UNKNOWN_M**2
+            return x, P, aux._replace(z_prev=math.nan, window=()), None, False, math.nan
         if not math.isfinite(h_e):
             return x, P, aux, None, False, math.nan
         if kind == _GNSS:
@@ -334,7 +375,9 @@ class HeightEstimator:
                 x[_G] = 0.0
                 P[_G, :] = P[:, _G] = 0.0
                 P[_G, _G] = sigma**2
-                aux = aux._replace(z_prev=math.nan, scatter=(0, 0.0))
+                aux = aux._replace(
+                    z_prev=math.nan, scatter=(0, 0.0), window=(), bend=(0, 0.0, -math.inf)
+                )
             elif sigma != aux.sigma_g:  # the receiver's accuracy changed: the same error, rescaled
                 x[_G] *= sigma / aux.sigma_g
                 P[_G, :] *= sigma / aux.sigma_g
@@ -342,15 +385,21 @@ class HeightEstimator:
             if (
                 aux.S is None
             ):  # the first: GNSS altitudes give the drift from here on; the drift so far, if its rate
-                # is learnt, is not inferred from it (only a take-off reference's S is unset)
+                # is learnt, is not inferred from it (only a take-off reference's S is unset); nor is the level
+                # from the wander's return to its mean: the wander so far joins e, the wander from here starts at 0
+                T = np.eye(_N)
+                T[_E, _W], T[_W, _W] = 1.0, 0.0
+                x, P = T @ x, T @ P @ T.T
                 P[_E, _D] = P[_D, _E] = 0.0
             S = alt - h_e if aux.S is None else aux.S
             z = alt - h_e - S
             scatter = _scattered(aux, z)
-            aux = aux._replace(sigma_g=sigma, fix=fix, S=S, z_prev=z, scatter=scatter)
-            word = ("" if self.amsl else "baro+") + ("gnss_rtk" if gnss.is_rtk(fix) else "gnss")
-            row = np.array([-1.0, 0.0, 0.0 if self.amsl else 1.0, 1.0])
             r, said_m = max((GNSS_WHITE * stated) ** 2, scatter[1]) + 1e-6, alt - S
+            aux = self._bent(
+                aux._replace(sigma_g=sigma, fix=fix, S=S, z_prev=z, scatter=scatter), t, z, r
+            )
+            word = ("" if self.amsl else "baro+") + ("gnss_rtk" if gnss.is_rtk(fix) else "gnss")
+            row = np.array([-1.0, 0.0, 0.0 if self.amsl else 1.0, 1.0, -1.0])
         else:
             word, said_m, stated = data
             row, z, r = self.c, h_e - said_m, stated**2
@@ -387,9 +436,35 @@ class HeightEstimator:
         aux = aux._replace(refused=tuple(sorted(streaks.items())))
         K = P @ row / s
         x = x + K * innovation
-        A = np.eye(4) - np.outer(K, row)
+        A = np.eye(_N) - np.outer(K, row)
         P = A @ P @ A.T + np.outer(K, K) * r
         return x, P, aux, word, True, math.nan
+
+    def _bent(self, aux: _Aux, t: float, z: float, r: float) -> _Aux:
+        """``aux`` with the GNSS measurement ``z`` (m, at ``t``; white noise of variance ``r``) in its window, and
+        whether the barometer's wander is in the model. Every :data:`WANDER_LAG_S` the means of the measurements in
+        the last two such spans give a difference; what its square shows beyond what the white noise and the GNSS's
+        slow error ``g`` put in it is averaged over about the last :data:`BEND_N`. The wander is in the model unless
+        these GNSS altitudes could see it (one measurement's white noise under a quarter of what the configured
+        wander puts in a difference) and do not (their mean under that quarter, or none measured yet): an exact
+        barometer beside an RTK receiver is not made to follow the receiver's white noise (nor a drift: over
+        :data:`WANDER_LAG_S` it moves millimetres); a plain receiver cannot tell, so the configured wander stays."""
+        lag = WANDER_LAG_S
+        window = tuple(m for m in aux.window if m[0] > t - 2.0 * lag) + ((t, z),)
+        n, mean, newest = aux.bend
+        spans = [[zz for tt, zz in window if t - (k + 1) * lag < tt <= t - k * lag] for k in (1, 0)]
+        if t - newest >= lag and window[0][0] <= t - 1.5 * lag and min(map(len, spans)) >= 2:
+            a, b = (sum(v) / len(v) for v in spans)
+            white = r * (1.0 / len(spans[0]) + 1.0 / len(spans[1]))
+            g = difference_var(aux.sigma_g, lag, GNSS_TAU_S)
+            n += 1
+            mean += ((b - a) ** 2 - white - g - mean) / min(n, BEND_N)
+            newest = t
+        seen = (
+            r < self.wander_d_m2 / 4.0
+        )  # one measurement's white noise: the spans' means have less
+        wander = not seen or (n > 0 and mean >= self.wander_d_m2 / 4.0)
+        return aux._replace(window=window, bend=(n, mean, newest), wander=wander)
 
     def _tell(self, source: str, t: float, text: str) -> None:
         if (source, t) not in self._told:
@@ -450,7 +525,8 @@ class HeightEstimator:
         x = np.where((i >= 0)[:, None], self._x[j] if self._n else xb, xb)
         P = np.where((i >= 0)[:, None, None], self._P[j] if self._n else Pb, Pb)
         sigma_g = np.array([self._aux[k].sigma_g if k >= 0 else auxb.sigma_g for k in i])
-        x, P = self._predict(x, P, np.maximum(np.nan_to_num(tq - t0), 0.0), sigma_g)
+        wander = np.array([self._aux[k].wander if k >= 0 else auxb.wander for k in i], dtype=bool)
+        x, P = self._predict(x, P, np.maximum(np.nan_to_num(tq - t0), 0.0), sigma_g, wander)
         bias = x @ self.c
         sigma = np.sqrt(np.einsum("i,nij,j->n", self.c, P, self.c))
         words = np.full(n, self.word, dtype=object)

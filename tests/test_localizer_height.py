@@ -228,6 +228,29 @@ def test_a_white_rtk_noise_does_not_move_the_height_and_a_drift_is_followed(amsl
     assert set(source) == {"gnss_rtk" if amsl else "baro+gnss_rtk"}
 
 
+def test_a_wandering_barometer_is_followed_by_rtk_altitudes_not_by_a_plain_fix():
+    """A barometer that wanders 10 cm back and forth over 20 s (prop wash, gusts) beside GNSS altitudes with 2 cm of
+    white noise: RTK altitudes (take-off reference) show the wander, and the height follows it (its changes: the
+    level before the wander was seen stays the take-off's), the sigma covering what is left; a plain fix's metres
+    cannot see it and barely move the height."""
+    c = cal()
+    wander = lambda tau: 0.1 * math.sin(2.0 * math.pi * tau / 20.0)
+    noise = np.random.default_rng(3).normal(0.0, 0.02, 300)
+    tau = np.arange(15.0, 60.0, 0.2)
+    truth = np.array([wander(t) for t in tau])
+    for fix, v_acc in ((6, 0.02), (3, 4.0)):
+        tel = telemetry(duration_s=60.0, ekf_error=wander)
+        for k in range(300):
+            gps(tel, k * 0.2 + 0.1, SURFACE + TRUE_H + noise[k], v_acc=v_acc, fix=fix)
+        bias, sigma, _ = at(c, tel, tau)
+        err = bias - truth
+        if fix == 6:  # was 6.6 cm (the barometer's own): its 600-s drift cannot follow a wander
+            assert np.std(err) < 0.25 * np.std(truth)
+            assert np.mean(np.abs(err) <= 2 * sigma) >= 0.95
+        else:
+            assert np.abs(bias).max() < 0.01
+
+
 # --- absolute heights and the cross-check --------------------------------------------------------------
 
 
@@ -247,7 +270,7 @@ def test_a_source_that_disagrees_is_not_used_and_widens_the_sigma():
     """A lidar reading the seafloor: 6 sigma off, refused; the third in a row makes it disagree: one line, and
     the sigma covers both; once refused it is taken back only within AGREE_SIGMAS, not as soon as it is inside
     the gate."""
-    c = cal(height_m=1.0, baro_drift_10min_m=0.0)
+    c = cal(height_m=1.0, baro_drift_10min_m=0.0, baro_wander_m=0.0)  # a barometer that holds
     tel = telemetry(duration_s=60.0)
     for k, off in enumerate((6.0, 6.1, 4.0, 4.1)):  # metres below what the EKF says: 6σ, 6σ, 4σ, 4σ
         assert tel.add_height("rangefinder", T0 + 1.0 + k, TRUE_H + off, 0.01)
@@ -277,7 +300,7 @@ def test_a_source_that_disagrees_is_not_used_and_widens_the_sigma():
 
 
 def test_one_glitch_is_refused_quietly():
-    c = cal(height_m=1.0, baro_drift_10min_m=0.0)
+    c = cal(height_m=1.0, baro_drift_10min_m=0.0, baro_wander_m=0.0)  # a barometer that holds
     tel = telemetry(duration_s=10.0)
     for k, off in enumerate((0.0, 20.0, 0.0)):
         tel.add_height("rangefinder", T0 + 1.0 + k, TRUE_H + off, 0.01)
