@@ -21,15 +21,16 @@ platform, not this drone's draw; and ``pixel_px`` 0 (``--pixel-px``): the true p
 ``--as-written`` keeps the session's own table (the draws' magnitudes, or skyfix's defaults with an older
 simulator).
 
-Printed per condition: fixes (sessions), the pooled share within 2·h_acc, the share a calibrated claim gives
-("calib.": a normal error of each fix's own claimed covariance, so 95.4 % for an error along one axis to 98.2 % for
-a circular one), the share within h_acc, the share of
-sessions that are entirely within 2·h_acc, RMS error and RMS h_acc and their ratio (1: the claim is the error's DRMS; well below 1:
-loose), MAE and median h_acc, the share of the errors' components along the claimed covariance's axes within 2
-sigma of theirs ("axes 2σ": 95.4 % for a calibrated claim of any shape) and the share of fixes within twice the
-larger axis's sigma ("2σ maj": the reading of ArduPilot's EKF3, which takes GPS_INPUT's horiz_accuracy as each
-axis's 1-sigma: 86.5 % of a circular error, 95.4 % of one along one axis); with waves the RMS of the waves' own error (truth_waves.csv), the RMS of the
-claim's wave term alone (every other sigma 0) and the share of the waves' error within twice that.
+Printed per condition: fixes (sessions), the pooled share within 2·h_acc (h_acc: half the radius of the claimed
+covariance's 95 % circle, localizer/uncertainty.py), the share a calibrated claim gives ("calib.": a normal error of
+each fix's own claimed covariance within 2·h_acc, 95 % of any shape: checks h_acc against its covariance), the share
+within h_acc (53 % of a circular error to 67 % of one along one axis), the share of sessions that are entirely
+within 2·h_acc, RMS error and RMS h_acc, the ratio of the RMS error to the RMS of the claimed covariance's DRMS
+sqrt(σ_N² + σ_E²) (1: calibrated; well below 1: loose), MAE and median h_acc, the share of the errors' components
+along the claimed covariance's axes within 2 sigma of theirs ("axes 2σ": 95.4 % for a calibrated claim of any
+shape) and the share of fixes within twice the larger axis's sigma ("2σ maj": 86.5 % of a circular error, 95.4 % of
+one along one axis); with waves the RMS of the waves' own error (truth_waves.csv), the RMS of the claim's wave term
+alone as an h_acc (every other sigma 0) and the share of the waves' error within twice that.
 """
 
 from __future__ import annotations
@@ -207,10 +208,10 @@ _ANGLES = np.linspace(0.0, np.pi, 720, endpoint=False)
 
 def calibrated_share(fixes, ok) -> np.ndarray:
     """Per fix, the share within 2·h_acc of a normal error of the fix's own claimed covariance (sigma_n, sigma_e,
-    cov_ne): what a calibrated claim of that shape holds (95.4 % along one axis, 98.2 % circular). Exact: with
-    variances a, b along its axes, a standard normal (ρ cos θ, ρ sin θ) is within when
-    ρ² (a cos² θ + b sin² θ) <= 4 (a + b), which for ρ² (exponential, mean 2) has probability
-    1 − exp(−2 (a + b) / (a cos² θ + b sin² θ)), averaged over θ."""
+    cov_ne): what a calibrated claim of that shape holds (95 % of any shape when h_acc is its covariance's). Exact:
+    with variances a, b along its axes, a standard normal (ρ cos θ, ρ sin θ) is within when
+    ρ² (a cos² θ + b sin² θ) <= 4 h_acc², which for ρ² (exponential, mean 2) has probability
+    1 − exp(−2 h_acc² / (a cos² θ + b sin² θ)), averaged over θ."""
     cov = np.zeros((int(ok.sum()), 2, 2))
     cov[:, 0, 0], cov[:, 1, 1] = fixes.sigma_n_m[ok] ** 2, fixes.sigma_e_m[ok] ** 2
     cov[:, 0, 1] = cov[:, 1, 0] = fixes.cov_ne_m2[ok]
@@ -219,7 +220,7 @@ def calibrated_share(fixes, ok) -> np.ndarray:
     with np.errstate(
         divide="ignore", invalid="ignore"
     ):  # a claim of 0 (--terms' unclaimed sources): NaN
-        return np.mean(1.0 - np.exp(-2.0 * axes.sum(axis=1, keepdims=True) / along), axis=1)
+        return np.mean(1.0 - np.exp(-2.0 * fixes.h_acc_m[ok, None] ** 2 / along), axis=1)
 
 
 def along_axes(err_ne_m, fixes, ok) -> tuple[np.ndarray, np.ndarray]:
@@ -239,8 +240,8 @@ def along_axes(err_ne_m, fixes, ok) -> tuple[np.ndarray, np.ndarray]:
 def session_errors(
     path: Path, pixel_px: float | None, term: str | None = None
 ) -> tuple[np.ndarray, ...]:
-    """(horizontal error, h_acc, :func:`calibrated_share`, :func:`along_axes`' two, the waves' own error, the claim's
-    wave term) per fixed frame (m) of the true pixel's refraction fixes; ``pixel_px`` None: the session's own ``[uncertainty]``, else the
+    """(horizontal error, h_acc, the claimed covariance's DRMS, :func:`calibrated_share`, :func:`along_axes`' two,
+    the waves' own error, the claim's wave term) per fixed frame (m) of the true pixel's refraction fixes; ``pixel_px`` None: the session's own ``[uncertainty]``, else the
     platform's (:func:`platform_claim`); ``term``: only that term's sigmas of it (:data:`TERMS`)."""
     s = load_session(path)
     if pixel_px is not None:
@@ -262,7 +263,8 @@ def session_errors(
         s.calibration = waves_only(s.calibration)
         wave_acc = process.process_session(s, use_track=True).h_acc_m[ok]
     axes, major = along_axes(err_ne, fixes, ok)
-    return err, fixes.h_acc_m[ok], calibrated_share(fixes, ok), axes, major, waves, wave_acc
+    drms = np.hypot(fixes.sigma_n_m[ok], fixes.sigma_e_m[ok])
+    return err, fixes.h_acc_m[ok], drms, calibrated_share(fixes, ok), axes, major, waves, wave_acc
 
 
 def fly(
@@ -294,11 +296,12 @@ class Pooled:
     sessions: int
     within_2sigma: float  # share of the fixes within 2·h_acc
     calibrated: float  # ... that a calibrated claim would hold (:func:`calibrated_share`)
-    # ... within h_acc (a 2-D normal error: 63-68 % when the claim is its DRMS)
+    # ... within h_acc (a calibrated claim: 53 % of a circular error to 67 % of one along one axis)
     within_1sigma: float
     whole: float  # share of the sessions with every fix within 2·h_acc
     rms_err_m: float
     rms_acc_m: float
+    rms_drms_m: float  # RMS of the claimed covariances' DRMS
     mae_m: float
     median_acc_m: float
     axes_2sigma: (
@@ -310,13 +313,13 @@ class Pooled:
 
     @property
     def ratio(self) -> float:
-        """RMS error / RMS h_acc: 1 when h_acc is the errors' DRMS, well below 1 when the claim is loose."""
-        return self.rms_err_m / self.rms_acc_m
+        """RMS error / RMS of the claimed covariances' DRMS: 1 when calibrated, well below 1 when loose."""
+        return self.rms_err_m / self.rms_drms_m
 
 
 def pooled(per_seed: list) -> Pooled:
-    err, acc, calibrated, axes, major = (
-        np.concatenate(column) for column in list(zip(*per_seed))[:5]
+    err, acc, drms, calibrated, axes, major = (
+        np.concatenate(column) for column in list(zip(*per_seed))[:6]
     )
     return Pooled(
         len(err),
@@ -327,6 +330,7 @@ def pooled(per_seed: list) -> Pooled:
         float(np.mean([np.all(e <= 2 * a) for e, a, *_ in per_seed])),
         rms(err),
         rms(acc),
+        rms(drms),
         float(np.mean(err)),
         float(np.median(acc)),
         float(np.mean(axes)),
@@ -342,7 +346,7 @@ def summary(c: Condition, per_seed: list) -> str:
         f"  {p.whole:6.1%}  {p.rms_err_m:7.3f}  {p.rms_acc_m:7.3f}  {p.ratio:5.2f}  {p.mae_m:7.3f}"
         f"  {p.median_acc_m:7.3f}  {p.axes_2sigma:6.1%}  {p.major_2sigma:6.1%}"
     )
-    waves, wave_acc = (np.concatenate(column) for column in list(zip(*per_seed))[5:])
+    waves, wave_acc = (np.concatenate(column) for column in list(zip(*per_seed))[6:])
     if np.isfinite(waves).all() and len(waves):
         line += f"  {rms(waves):7.3f}  {rms(wave_acc):7.3f}  {np.mean(waves <= 2 * wave_acc):6.1%}"
     return line

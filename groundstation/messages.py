@@ -95,7 +95,9 @@ class FixMessage(Message):
         description="the UUV depth used, metres below the surface (positive down)"
     )
     h_acc_m: NonNegative = Field(
-        description="horizontal 1-sigma accuracy, metres: DRMS, sqrt(sigma_n² + sigma_e²)"
+        description="horizontal accuracy, metres: half the radius of the circle holding 95 % of a normal "
+        "error of (sigma_n, sigma_e, cov_ne), so 2·h_acc holds 95 % whatever its shape (1.2239 sigma for a "
+        "round error, 0.98 sigma along one axis); ArduPilot's EKF3 takes it as each axis's 1-sigma"
     )
     v_acc_m: NonNegative = Field(description="vertical 1-sigma accuracy, metres")
     sigma_n_m: NonNegative = Field(description="1-sigma of the north coordinate, metres")
@@ -1226,7 +1228,7 @@ class FuseSourceStatus(Section):
     h_acc_m: NonNegative = Field(description="its last ok fix's h_acc_m")
     h_acc_used_m: NonNegative = Field(
         None,
-        description="its claim as the last fusion weighed it, DRMS, metres: with "
+        description="its claim as the last fusion weighed it, metres, as an h_acc_m: with "
         "what its fixes showed beyond it (floor_m)",
     )
     floor_m: NonNegative = Field(

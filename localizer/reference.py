@@ -38,6 +38,7 @@ from .fix import Fixes, locate
 from .geodesy import geodetic_to_ned, ned_to_geodetic
 from .pose import CameraPose
 from .ray import pixel_to_offset
+from .uncertainty import h_acc_from_cov_m
 
 #: the offset at a fix is taken from the reference's sightings this long around it (s)
 WINDOW_S = 10.0
@@ -240,9 +241,10 @@ def correct(cal: Calibration, pose: CameraPose, fixes: Fixes, found: Offsets) ->
     cov[:, 1, 1] += alone.sigma_e_m[use] ** 2 + s[:, 1] ** 2
     cov[:, 0, 1] += alone.cov_ne_m2[use]
     # the reference's claim against the fix's own: only a smaller one is taken
-    smaller = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1]) < fixes.h_acc_m[use]
+    h_acc = h_acc_from_cov_m(cov)
+    smaller = h_acc < fixes.h_acc_m[use]
     use[use] = smaller
-    cov, s, o = cov[smaller], s[smaller], found.offset_ne_m[use]
+    cov, s, o, h_acc = cov[smaller], s[smaller], found.offset_ne_m[use], h_acc[smaller]
     if not use.any():
         return out
     out.lat[use], out.lon[use], _ = ned_to_geodetic(
@@ -250,6 +252,6 @@ def correct(cal: Calibration, pose: CameraPose, fixes: Fixes, found: Offsets) ->
     )
     out.sigma_n_m[use], out.sigma_e_m[use] = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1])
     out.cov_ne_m2[use] = cov[:, 0, 1]
-    out.h_acc_m[use] = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1])
+    out.h_acc_m[use] = h_acc
     out.sigma_uav_m[use] = np.hypot(s[:, 0], s[:, 1])
     return out

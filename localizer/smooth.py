@@ -35,6 +35,7 @@ import numpy as np
 
 from .fix import Fixes
 from .geodesy import geodetic_to_ned, ned_to_geodetic
+from .uncertainty import h_acc_from_cov_m
 from .uuv_track import (
     SCATTER_MIN,
     WHITE_FLOOR_M,
@@ -95,9 +96,8 @@ class Smoothed:
 
     @property
     def h_acc_m(self) -> np.ndarray:
-        """Horizontal accuracy (m, DRMS as a fix's ``h_acc_m``)."""
-        C = self.cov_m2
-        return np.sqrt(C[:, 0, 0] + C[:, 1, 1])
+        """Horizontal accuracy (m) as a fix's ``h_acc_m``: half the radius of :attr:`cov_m2`'s 95 % circle."""
+        return h_acc_from_cov_m(self.cov_m2)
 
 
 def smooth_fixes(

@@ -16,9 +16,11 @@ makes the fix, so the estimate follows refraction and distortion exactly. On top
   Munk's (:func:`wave_slope_sigma_rad`); the Jacobian is taken by turning the facet by a small
   angle about North and about East (:func:`_facet_run`).
 
-The result is the covariance of (north, east) per fix; ``h_acc_m`` is its DRMS,
-sqrt(σ_N² + σ_E²). For a 2-D normal error 2·DRMS holds 95.4 % (all of it along one axis)
-to 98.2 % (circular) when the input sigmas are right. The sigmas describe a platform's
+The result is the covariance of (north, east) per fix; ``h_acc_m`` is half the radius of the circle
+that holds 95 % of a normal error of that covariance (:func:`h_acc_from_cov_m`), so 2·h_acc holds 95 % of
+the fixes whatever the error's shape when the input sigmas are right (a DRMS, sqrt(σ_N² + σ_E²), holds
+95.4 % along one axis to 98.2 % circular: loose where the error is round). It is also what ArduPilot's
+EKF3 reads GPS_INPUT's ``horiz_accuracy`` as: each axis's 1-sigma (docs/explanation/accuracy.md). The sigmas describe a platform's
 population: a tilt or compass bias is constant over one flight (all of its fixes are in or
 out together), and the share is over the flights of drones of that kind (bench/claim_calibration.py).
 """
@@ -47,6 +49,40 @@ SLOPE_SHARE_UUV = 0.35
 #: waves (its peak's wavelength grows with the wind squared), so less of its slope is in waves longer than the
 #: vehicle (the simulator's keeps about half the share at 2 m/s that it keeps at 5, bench/claim_calibration.py)
 FULL_SHARE_WIND_MPS = 4.0
+
+
+#: Half the radius of the circle holding 95 % of a 2-D normal error, per its larger axis's sigma sqrt(λ1), at the
+#: axis ratios sqrt(λ2 / λ1) of :data:`_AXIS_RATIOS` (λ1 ≥ λ2 the covariance's eigenvalues): P(|x| < 2·k·sqrt(λ1))
+#: = 0.95 solved by numerical integration; 1.96 / 2 along one axis, sqrt(−2 ln 0.05) / 2 circular. Linear
+#: interpolation between them is within 0.03 % (tests/test_uncertainty_h_acc.py checks it against an independent integration).
+H_ACC_PER_MAJOR_SIGMA = np.array(
+    [0.97998, 0.9803, 0.98126, 0.98289, 0.9852, 0.98825, 0.9921, 0.99683, 1.00257, 1.00951, 1.01793]
+    + [1.02819, 1.04065, 1.05556, 1.07299, 1.0929, 1.11514, 1.13954, 1.1659, 1.19406, 1.22387]
+)
+_AXIS_RATIOS = np.linspace(0.0, 1.0, len(H_ACC_PER_MAJOR_SIGMA))
+#: ``h_acc`` of a circular error per its sigma on each axis: an isotropic covariance from an ``h_acc`` (m) has
+#: ``h_acc / H_ACC_PER_SIGMA_ISOTROPIC`` (m) on each axis.
+H_ACC_PER_SIGMA_ISOTROPIC = float(H_ACC_PER_MAJOR_SIGMA[-1])
+
+
+def h_acc_from_cov_m(cov_ne_m2) -> np.ndarray:
+    """A fix's horizontal accuracy ``h_acc`` (m) from its (north, east) covariance ``cov_ne_m2`` (m², ``(..., 2, 2)``):
+    half the radius of the circle about the fix that holds 95 % of a normal error of that covariance, so a
+    calibrated claim has 95 % of its fixes within 2·h_acc whatever the error's shape. 1.2239 σ for a circular error
+    of σ per axis, 0.98 σ for one along a single axis (:data:`H_ACC_PER_MAJOR_SIGMA`). NaN in, NaN out."""
+    C = np.asarray(cov_ne_m2, dtype=float)
+    mean = (C[..., 0, 0] + C[..., 1, 1]) / 2.0
+    half_gap = np.hypot((C[..., 0, 0] - C[..., 1, 1]) / 2.0, C[..., 0, 1])
+    major, minor = mean + half_gap, np.clip(mean - half_gap, 0.0, None)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(major > 0, np.sqrt(minor / major), 1.0)
+    return np.sqrt(major) * np.interp(ratio, _AXIS_RATIOS, H_ACC_PER_MAJOR_SIGMA)
+
+
+def isotropic_sigma_m(h_acc_m) -> np.ndarray:
+    """Each axis's 1-sigma (m) of the circular error whose ``h_acc`` is ``h_acc_m`` (m): for a claim that states no
+    covariance of its own."""
+    return np.asarray(h_acc_m, dtype=float) / H_ACC_PER_SIGMA_ISOTROPIC
 
 
 def wave_slope_sigma_rad(wind_mps) -> np.ndarray:
@@ -152,8 +188,8 @@ def accuracy(
             js = (_facet_run(base, d, n_water, rotation_about(axis, ang)) - level) * (slope / ang)
             cov += js[..., :, None] * js[..., None, :]
     uav = np.broadcast_to(np.asarray(sigma_uav_m, dtype=float), u.shape)
-    cov[..., 0, 0] += uav**2 / 2.0  # isotropic: the DRMS grows by sigma_uav
+    cov[..., 0, 0] += uav**2 / 2.0  # isotropic: sigma_uav is a DRMS (a receiver's)
     cov[..., 1, 1] += uav**2 / 2.0
-    h_acc = np.sqrt(cov[..., 0, 0] + cov[..., 1, 1])
+    h_acc = h_acc_from_cov_m(cov)
     v_acc = np.broadcast_to(np.hypot(sig_d, sigmas.surface_amsl_m), h_acc.shape).copy()
     return h_acc, v_acc, cov

@@ -42,6 +42,8 @@ from collections import deque
 
 import numpy as np
 
+from .uncertainty import isotropic_sigma_m
+
 #: Time scale (s) over which the fixes' common error changes: the attitude, height and GNSS errors of a
 #: hovering UAV drift over tens of seconds; its turning rotates an attitude bias's footprint within seconds.
 TAU_COMMON_S = 5.0
@@ -67,12 +69,13 @@ _H = np.hstack([np.eye(2), np.zeros((2, 2))])
 def fix_covariance_m2(
     sigma_n_m: float, sigma_e_m: float, cov_ne_m2: float, h_acc_m: float
 ) -> np.ndarray:
-    """A fix's 2×2 north-east covariance (m²); isotropic from ``h_acc_m`` (its DRMS) when the per-axis
-    values are missing (a positions.csv of another tool)."""
+    """A fix's 2×2 north-east covariance (m²); isotropic from ``h_acc_m`` (half its 95 % circle's radius:
+    :func:`~localizer.uncertainty.isotropic_sigma_m` per axis) when the per-axis values are missing (a
+    positions.csv of another tool)."""
     if math.isfinite(sigma_n_m) and math.isfinite(sigma_e_m):
         c = cov_ne_m2 if math.isfinite(cov_ne_m2) else 0.0
         return np.array([[sigma_n_m**2, c], [c, sigma_e_m**2]])
-    return np.eye(2) * h_acc_m**2 / 2.0
+    return np.eye(2) * float(isotropic_sigma_m(h_acc_m)) ** 2
 
 
 def common_change_m2(C: np.ndarray, gap_s: float) -> np.ndarray:

@@ -34,6 +34,7 @@ from localizer.fusion import (
     fuse,
     shared_effects,
 )
+from localizer.uncertainty import H_ACC_PER_SIGMA_ISOTROPIC
 
 LAT0, LON0 = 63.44, 10.40
 GEOD = Geod(ellps="WGS84")
@@ -120,7 +121,7 @@ def fix(t: float, n_m: float, e_m: float, sigma_m: float) -> Fix:
         v_acc_m=0.3,
         depth_m=1.3,
         t_gnss=t,
-        h_acc_m=math.sqrt(2) * sigma_m,
+        h_acc_m=H_ACC_PER_SIGMA_ISOTROPIC * sigma_m,
         sigma_n_m=sigma_m,
         sigma_e_m=sigma_m,
         cov_ne_m2=0.0,

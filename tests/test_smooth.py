@@ -26,6 +26,7 @@ from localizer.fix import Fixes
 from localizer.fix_gate import CONFIRM_S, FixGate, gate_offline
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
 from localizer.smooth import BRIDGE_SIGMA_M, smooth_fixes
+from localizer.uncertainty import H_ACC_PER_SIGMA_ISOTROPIC
 from localizer.uuv_track import PROCESS_ACCEL_SHARE, WHITE_FLOOR_M
 from sim_fixtures.bundle import BUNDLED_DIR
 
@@ -48,7 +49,7 @@ def fixes_of(t, n_m, e_m, sigma_m, status=None) -> Fixes:
         sigma_n_m=s,
         sigma_e_m=s,
         cov_ne_m2=np.zeros(len(t)),
-        h_acc_m=s * math.sqrt(2.0),
+        h_acc_m=s * H_ACC_PER_SIGMA_ISOTROPIC,
         depth_m=np.full(len(t), 1.5),
     )
 

@@ -39,7 +39,8 @@ the fuser's clock minus the fix's time). The fused fix carries the newest source
 and ``t_gnss``; at most ``max_hz`` fused fixes a second go out (two drones at 30 fps would
 otherwise make 60).
 
-A fused fix: ``ok``, its position and 2×2 covariance the fusion's, ``h_acc_m`` their DRMS,
+A fused fix: ``ok``, its position and 2×2 covariance the fusion's, ``h_acc_m`` half that covariance's 95 % circle's radius
+(:func:`~localizer.uncertainty.h_acc_from_cov_m`, as every fix's),
 ``v_acc_m`` the best source's (the depth is shared), ``depth_m`` and the word fields the
 newest source fix's; no pixel (``u``, ``v``) and no offset from a UAV (``north_m``, ``east_m``).
 When sources disagree and nothing decides between them: a ``disagree`` fix (no position), and
@@ -75,6 +76,7 @@ from localizer.fusion import (
     shared_effects,
 )
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
+from localizer.uncertainty import h_acc_from_cov_m
 from localizer.uuv_track import fix_covariance_m2
 
 #: Fused fixes go out at most this often per second by default.
@@ -107,7 +109,7 @@ class Source:
     delay_s: float | None = None  # arrival (fuser's clock) minus the fix's time
     time_base: str | None = None  # "gnss" or "station"
     h_acc_m: float | None = None
-    # its claim as the last fusion weighed it: shared part, floors
+    # its claim as the last fusion weighed it (as an h_acc): shared part, floors
     h_acc_used_m: float | None = None
     # the DRMS of what the floors added to its claim at the last fusion
     floor_m: float | None = None
@@ -235,7 +237,7 @@ class Fuser:
             estimates[name] = e.floored(self.floors.excess_m2(name, t))
             src = self.sources[name]
             src.floor_m = math.sqrt(max(0.0, np.trace(estimates[name].C - claimed[name].C)))
-            src.h_acc_used_m = math.sqrt(np.trace(estimates[name].C))
+            src.h_acc_used_m = float(h_acc_from_cov_m(estimates[name].C))
         settled = self._fused_since is not None and t - self._fused_since >= CONFIRM_S
         chosen = choose(scattered, self.fused.at(t) if settled else None)
         for name, src in self.sources.items():
@@ -286,7 +288,7 @@ class Fuser:
             alt_amsl_m=est.alt_m,
             alt_ellipsoid_m=est.alt_m + geoid_m,
             depth_m=newest.depth_m,
-            h_acc_m=math.sqrt(est.C[0, 0] + est.C[1, 1]),
+            h_acc_m=float(h_acc_from_cov_m(est.C)),
             v_acc_m=est.v_acc_m,
             sigma_n_m=math.sqrt(est.C[0, 0]),
             sigma_e_m=math.sqrt(est.C[1, 1]),

@@ -12,7 +12,10 @@ What (:func:`gps_input_fields`):
 
 - The newest ``ok`` fix that passed the gates (below), while at most ``max_age_s`` old: ``fix_type``
   3; ``lat``/``lon`` degE7; ``alt`` the UUV's altitude AMSL (m);
-  ``horiz_accuracy``/``vert_accuracy`` the fix's ``h_acc_m``/``v_acc_m``;
+  ``horiz_accuracy``/``vert_accuracy`` the fix's ``h_acc_m``/``v_acc_m`` (AP_GPS_MAV copies
+  ``horiz_accuracy`` into the GPS state's horizontal accuracy and EKF3 fuses it as the north and the
+  east position's 1-sigma each, floored at EK3_POSNE_M_NSE: ``h_acc_m``, half the 95 % circle's radius,
+  is that sigma for a round error; see docs/explanation/accuracy.md);
   ``hdop`` = ``h_acc_m / UERE_M`` and ``vdop`` = ``v_acc_m / UERE_M`` with a
   nominal 1 m user range error, so EKF3's alignment gate hdop ≤ 2.5 means
   h_acc ≤ 2.5 m; ``satellites_visible`` the constant :data:`SATELLITES` (EKF3

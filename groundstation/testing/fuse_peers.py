@@ -23,6 +23,7 @@ from pyproj import Geod
 from groundstation.messages import FixMessage
 from groundstation.testing.live import GpsInputEndpoint, free_port, skyfix, start, stop, wait_for
 from localizer.fix import Fix
+from localizer.uncertainty import H_ACC_PER_SIGMA_ISOTROPIC
 
 LAT0, LON0 = 63.44, 10.40
 SPEED_MPS = 0.3  # the UUV goes north
@@ -82,7 +83,7 @@ def payload(
         v_acc_m=0.3,
         depth_m=1.3,
         t_gnss=t + ahead_s,
-        h_acc_m=math.sqrt(2) * s,
+        h_acc_m=H_ACC_PER_SIGMA_ISOTROPIC * s,
         sigma_n_m=s,
         sigma_e_m=s,
         cov_ne_m2=0.0,

@@ -1,7 +1,7 @@
 """Fix streams for the safety gates, with their truth: the failures the issue measured, and real motion.
 
 Each stream is 30 Hz fixes of a UUV near (LAT0, LON0), each with its claimed ``h_acc_m``
-(isotropic: sigma_n = sigma_e = h_acc/√2) and a white error of :data:`NOISE_M` per axis
+(isotropic: sigma_n = sigma_e = h_acc / 1.2239, :func:`localizer.uncertainty.isotropic_sigma_m`) and a white error of :data:`NOISE_M` per axis
 (the generated sessions' frame-to-frame scatter: consecutive fixes differ by 3–7 mm). A
 stream says for each fix where the UUV truly is and whether the fix is the UUV at all
 (``wrong``: the tracker on something else). Positions are built in metres north and east
@@ -18,6 +18,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from localizer.fix import Fix
+from localizer.uncertainty import isotropic_sigma_m
 
 LAT0, LON0 = 63.44, 10.40
 M_PER_DEG = math.pi / 180.0 * 6_371_000.0
@@ -45,7 +46,7 @@ class Stream:
 def fix_at(t: float, north_m: float, east_m: float, h_acc_m: float, status: str = "ok") -> Fix:
     lat = LAT0 + north_m / M_PER_DEG
     lon = LON0 + east_m / (M_PER_DEG * math.cos(math.radians(LAT0)))
-    s = h_acc_m / math.sqrt(2.0)
+    s = float(isotropic_sigma_m(h_acc_m))
     if status != "ok":
         return Fix(t_unix=t, status=status)
     return Fix(
