@@ -21,7 +21,9 @@ by robust nonlinear least squares (:func:`scipy.optimize.least_squares`):
   piecewise linear in time with knots every ``knot_spacing_s``: ``true = reported + w``.
   Its increments have a random-walk prior (``walk_rate_m``/√s) about 0, or, given the reported
   velocity (the EKF's, from the receiver's Doppler, which a slow position error is not in), about what
-  the velocity says the position should have moved less what it did; its **mean over the knots
+  the velocity says the position should have moved less what it did (given candidate rates, ``walk_rates_m``, the
+  rate is the one of the largest marginal likelihood, :func:`walk_rate_log_evidence`, and the walk's sigmas take
+  the spread of the walks of the rates the recording cannot tell apart); its **mean over the knots
   is held at 0**: a constant offset of everything is invisible in the bottom, so the
   corrected track keeps the GNSS's mean position (the absolute offset needs a reference); the fit starts from the
   walk the velocity tells (a plain receiver's decimetres), not from none;
@@ -89,6 +91,9 @@ class Priors:
     tilt_rad: float = np.radians(3.0)  # each tilt component's prior about 0
     yaw_rad: float = np.radians(10.0)  # the heading bias's
     walk_rate_m: float = 0.2  # GNSS walk: 1-sigma of its change over 1 s, growing with √time (m/√s)
+    # candidate walk rates (m/√s): given, the fit at ``walk_rate_m`` is made again at the one of the largest
+    # marginal likelihood (:func:`walk_rate_log_evidence`); empty: ``walk_rate_m`` is kept
+    walk_rates_m: tuple[float, ...] = ()
     knot_spacing_s: float = 2.0  # the walk's knots
     # the reported position's white noise, 1-sigma per axis (m): per-frame offsets; 0: none
     white_m: float = 0.0
@@ -149,6 +154,9 @@ class BottomEstimate:
     #: (P, 4) each part's tilt_fwd, tilt_right, yaw (rad) and floor depth (m) alone, NaN where it gave none; the
     #: sigmas above include their spread (see the module doc); (0, 4): not asked
     parts: np.ndarray = field(default_factory=lambda: np.zeros((0, N_GLOBAL)), repr=False)
+    #: (R, 2) the candidate walk rates (m/√s) and their log marginal likelihoods (:attr:`Priors.walk_rates_m`; the
+    #: chosen one is ``priors.walk_rate_m``); (0, 2): none tried
+    walk_rate_evidence: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
 
     @property
     def sigma_tilt_rad(self) -> float:
@@ -317,41 +325,6 @@ def velocity_drift(t_s, velocity_ne_mps, position_ne_m, knots) -> tuple[np.ndarr
     remainder = np.full((len(np.asarray(t_s)), 2), np.nan)
     remainder[order] = target - basis @ drift
     return drift, remainder
-
-
-def velocity_rate_m(
-    est: BottomEstimate, poses: FramePoses, min_move_m: float = 0.5
-) -> float | None:
-    """The reported velocity's integrated error (m/√s) as the bottom shows it: the fitted walk's change between knots
-    less what the velocity said (:func:`_velocity_steps`), along the drone's motion only (the bottom's slide measures
-    the distance flown whatever the heading; across the motion a heading bias can pass for a walk), per √s, RMS over
-    the knot intervals in which the drone moved at least ``min_move_m``, less what the fit's own uncertainty of that
-    change explains (:attr:`BottomEstimate.cov_walk_m2`: the floor's noise, not the velocity's); None without a
-    velocity or such intervals. The velocity's error is taken alike in every direction."""
-    if poses.velocity_ne_mps is None or len(est.knot_t_s) < 2:
-        return None
-    steps = _velocity_steps(poses, est.knot_t_s)
-    t = np.asarray(poses.t_s, dtype=float)
-    order = np.argsort(t)
-    at_knots = _interp_knots(t[order], np.asarray(poses.camera_ne_m, float)[order], est.knot_t_s)
-    moved = np.diff(at_knots, axis=0)
-    length = np.hypot(*moved.T)
-    use = length >= min_move_m
-    if not np.any(use):
-        return None
-    unit = moved[use] / length[use, None]
-    along = np.sum((np.diff(est.walk_ne_m, axis=0) - steps)[use] * unit, axis=1)
-    own = np.zeros(len(unit))
-    if est.cov_walk_m2.size:  # the variance of each interval's change along the motion: dᵀ C d
-        J = len(est.knot_t_s)
-        d = np.zeros((len(unit), 2 * J))
-        j = np.flatnonzero(use)
-        for a in range(2):
-            d[np.arange(len(j)), 2 * (j + 1) + a] = unit[:, a]
-            d[np.arange(len(j)), 2 * j + a] = -unit[:, a]
-        own = np.einsum("ia,ab,ib->i", d, est.cov_walk_m2, d)
-    excess = np.maximum(along**2 - own, 0.0) / np.diff(est.knot_t_s)[use]
-    return float(np.sqrt(np.mean(excess)))
 
 
 def white_noise_m(poses: FramePoses) -> float | None:
@@ -585,7 +558,14 @@ class _Problem:
 def _covariance(jac: sp.csr_matrix, n_dense: int, scale2: float) -> np.ndarray:
     """Covariance of the first ``n_dense`` parameters, the rest (2×2 feature blocks) eliminated by their Schur
     complement of the Gauss-Newton Hessian ``JᵀJ``; times ``scale2``."""
-    H = (jac.T @ jac).tocsc()
+    S, _, _ = _reduced((jac.T @ jac).tocsc(), np.zeros(jac.shape[1]), n_dense)
+    return np.linalg.inv(S) * scale2
+
+
+def _reduced(H: sp.csc_matrix, g: np.ndarray, n_dense: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """The normal equations ``H·δ = −g`` with the parameters after the first ``n_dense`` (2×2 feature blocks, none
+    coupled to another) eliminated: the Schur complement ``S`` (n_dense × n_dense), the reduced ``g`` and
+    ``g_fᵀ·H_ff⁻¹·g_f`` (what the features' own step takes off the squared residuals)."""
     Hgg = H[:n_dense, :n_dense].toarray()
     Hgp = H[:n_dense, n_dense:].toarray()
     Hpp = H[n_dense:, n_dense:]
@@ -597,8 +577,50 @@ def _covariance(jac: sp.csr_matrix, n_dense: int, scale2: float) -> np.ndarray:
     blocks += np.eye(2) * 1e-12
     inv = np.linalg.inv(blocks)
     Hgp3 = Hgp.reshape(n_dense, nf, 2)
+    gp = g[n_dense:].reshape(nf, 2)
+    inv_gp = np.einsum("fab,fb->fa", inv, gp)
     S = Hgg - np.einsum("gfa,fab,hfb->gh", Hgp3, inv, Hgp3)
-    return np.linalg.inv(S) * scale2
+    return S, g[:n_dense] - np.einsum("gfa,fa->g", Hgp3, inv_gp), float(np.sum(gp * inv_gp))
+
+
+def walk_rate_log_evidence(prob: _Problem, x: np.ndarray, rates_m) -> tuple[np.ndarray, np.ndarray]:
+    """The log marginal likelihood (up to a constant) of each walk rate ``rates_m`` (m/√s) for the recording of
+    ``prob``, linearized at its solution ``x`` (the walk, the frames' offsets and the features enter the residuals
+    linearly; the biases and the depth, nearly so): the residuals' Gaussian integral over all the parameters,
+    ``−½·χ²_min − ½·log det S − n·log rate``, with ``S`` the walk's, the offsets' and the globals' posterior
+    information (the features eliminated, whose information does not depend on the rate) and ``n`` the walk's
+    increments (their prior's normalisation). The observations are weighted as the robust loss weighs them at ``x``
+    and scaled by their own variance there (the pixel sigma is a prior's guess). A rate too small bends the floor to
+    fit the velocity's steps; one too large pays for the freedom it does not use. Also each rate's walk (R, J, 2) in
+    the same linear model (the step from ``x``'s)."""
+    import scipy.sparse as sp
+
+    M2, p = 2 * prob.M, prob.priors
+    r, jac = prob.residuals(x), prob.jacobian(x)
+    w = np.ones(len(r))
+    w[:M2] = (1.0 + (r[:M2] / p.loss_scale) ** 2) ** -0.25  # √ρ' of soft_l1: the loss's weights
+    dof = max(1, M2 - prob.n_params)
+    w[:M2] /= np.sqrt(np.sum((w[:M2] * r[:M2]) ** 2) / dof)
+    walk_rows = np.zeros(len(r), bool)
+    walk_rows[M2 + N_GLOBAL : M2 + N_GLOBAL + 2 * (prob.J - 1)] = True
+    fixed = sp.diags(np.where(walk_rows, 0.0, w)) @ jac
+    walk = sp.diags(walk_rows.astype(float)) @ jac
+    b_fixed, b_walk = np.where(walk_rows, 0.0, w * r), np.where(walk_rows, r, 0.0)
+    n = prob.first_feature
+    S0, g0, taken = _reduced((fixed.T @ fixed).tocsc(), fixed.T @ b_fixed, n)
+    Sw = (walk.T @ walk)[:n, :n].toarray()
+    gw = (walk.T @ b_walk)[:n]
+    c0 = float(b_fixed @ b_fixed) - taken
+    cw = float(b_walk @ b_walk)
+    out, walks = [], []
+    for rate in np.asarray(rates_m, dtype=float):
+        k = (p.walk_rate_m / rate) ** 2  # the walk's rows were made at the priors' rate
+        S, g = S0 + k * Sw, g0 + k * gw
+        step = -np.linalg.solve(S, g)
+        chi2 = c0 + k * cw + g @ step
+        out.append(-0.5 * chi2 - 0.5 * np.linalg.slogdet(S)[1] - walk_rows.sum() * np.log(rate))
+        walks.append((x + np.pad(step, (0, len(x) - n)))[N_GLOBAL : N_GLOBAL + 2 * prob.J])
+    return np.array(out), np.array(walks).reshape(len(out), prob.J, 2)
 
 
 def estimate(
@@ -701,20 +723,18 @@ def _estimate(
 ) -> BottomEstimate:
     """The whole recording's fit (:func:`estimate` without parts)."""
     import scipy.sparse as sp
-    from scipy.optimize import least_squares
 
     prob = _Problem(camera, n_water, poses, obs, priors)
-    fit = least_squares(
-        prob.residuals,
-        prob.start(),
-        jac=prob.jacobian,
-        loss="soft_l1",
-        f_scale=priors.loss_scale,
-        x_scale="jac",
-        method="trf",
-        tr_solver="lsmr",
-        max_nfev=60,
-    )
+    fit = _solve(prob, prob.start())
+    evidence, rate_spread = np.zeros((0, 2)), 0.0
+    if priors.walk_rates_m:
+        rates = np.asarray(priors.walk_rates_m, dtype=float)
+        log_evidence, walks = walk_rate_log_evidence(prob, fit.x, rates)
+        evidence, best = np.column_stack([rates, log_evidence]), int(np.argmax(log_evidence))
+        rate_spread = _rate_spread(log_evidence, walks, best)
+        chosen = replace(priors, walk_rate_m=float(rates[best]), walk_rates_m=())
+        prob = _Problem(camera, n_water, poses, obs, chosen)
+        fit, priors = _solve(prob, fit.x), chosen
     x = fit.x
     r_obs = prob.observation_residuals(x)
     norm = np.hypot(r_obs[:, 0], r_obs[:, 1])
@@ -725,7 +745,9 @@ def _estimate(
     scale2 = max(1.0, float(np.sum(norm[inliers] ** 2) / dof))
     cov = _covariance(sp.csr_matrix(fit.jac), n_dense, scale2)
     g, walk, _, feats = prob.unpack(x)
-    cov_walk = np.diagonal(cov[N_GLOBAL:, N_GLOBAL:])[: 2 * prob.J].reshape(prob.J, 2)
+    cov_walk_m2 = (
+        cov[N_GLOBAL : N_GLOBAL + 2 * prob.J, N_GLOBAL : N_GLOBAL + 2 * prob.J] + rate_spread
+    )
     return BottomEstimate(
         tilt_rad=g[:2].copy(),
         yaw_rad=float(g[2]),
@@ -734,8 +756,8 @@ def _estimate(
         sigma_floor_depth_m=0.0 if priors.floor_depth_m is not None else float(np.sqrt(cov[3, 3])),
         knot_t_s=prob.knots,
         walk_ne_m=walk.copy(),
-        sigma_walk_ne_m=np.sqrt(cov_walk),
-        cov_walk_m2=cov[N_GLOBAL : N_GLOBAL + 2 * prob.J, N_GLOBAL : N_GLOBAL + 2 * prob.J].copy(),
+        sigma_walk_ne_m=np.sqrt(np.diagonal(cov_walk_m2)).reshape(prob.J, 2),
+        cov_walk_m2=cov_walk_m2,
         features_ne_m=feats.copy(),
         rms_px=float(np.sqrt(np.mean(norm[inliers] ** 2) / 2) * priors.pixel_px),
         slide_share=slide_share(camera, obs),
@@ -744,4 +766,31 @@ def _estimate(
         n_frames=len(np.unique(prob.k)),
         inliers=inliers,
         priors=priors,
+        walk_rate_evidence=evidence,
+    )
+
+
+def _rate_spread(log_evidence: np.ndarray, walks: np.ndarray, best: int) -> np.ndarray:
+    """The walk's covariance (2J × 2J, m²) for not knowing its rate: the walks of the rates tried (R, J, 2) about the
+    chosen one's, weighted by their marginal likelihoods (the rates tried taken alike a priori). Rates the recording
+    cannot tell apart but whose walks differ widen the walk's sigma (as the parts' spread widens the biases')."""
+    weight = np.exp(log_evidence - log_evidence.max())
+    d = (walks - walks[best]).reshape(len(walks), -1)
+    return np.einsum("r,ra,rb->ab", weight / weight.sum(), d, d)
+
+
+def _solve(prob: _Problem, x0: np.ndarray):
+    """The robust least-squares solution of ``prob`` from ``x0`` (:func:`scipy.optimize.least_squares`'s result)."""
+    from scipy.optimize import least_squares
+
+    return least_squares(
+        prob.residuals,
+        x0,
+        jac=prob.jacobian,
+        loss="soft_l1",
+        f_scale=prob.priors.loss_scale,
+        x_scale="jac",
+        method="trf",
+        tr_solver="lsmr",
+        max_nfev=60,
     )

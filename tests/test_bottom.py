@@ -176,20 +176,27 @@ def test_parts_that_disagree_widen_the_sigmas():
     assert "parts' spread" in split.describe()
 
 
-def test_the_velocitys_own_error_is_measured_along_the_motion():
-    # a velocity whose integral walks at 0.03 m/√s (white 0.06 m/s held over each 0.25 s frame); the positions exact
+def test_the_walk_rate_is_the_one_the_recording_likes_best():
+    # the walk's prior about what the velocity says, its rate chosen per recording by the marginal likelihood: an
+    # exact velocity wants the tightest rate on offer, one whose integral walks at 0.03 m/√s (white 0.06 m/s held
+    # over each 0.25 s frame) about that (a fixed rate, or a floor under it, is right for one of them only)
     lens, poses, obs, _ = _session(speed_mps=1.2)
-    first = bottom.estimate(lens, N_WATER, poses, obs, bottom.Priors(walk_rate_m=0.05))
-    exact = bottom.velocity_rate_m(first, poses)
     noisy_velocity = poses.velocity_ne_mps + np.random.default_rng(8).normal(
         0.0, 0.06, poses.velocity_ne_mps.shape
     )
     noisy = dataclasses.replace(poses, velocity_ne_mps=noisy_velocity)
-    first = bottom.estimate(lens, N_WATER, noisy, obs, bottom.Priors(walk_rate_m=0.05))
-    assert bottom.velocity_rate_m(first, noisy) == pytest.approx(0.03, rel=0.5)
-    assert exact < 0.01  # nothing but the floor's own noise, which the fit's covariance explains
-    hover = _session(speed_mps=0.0)
-    assert bottom.velocity_rate_m(first, hover[1]) is None  # no motion: nothing to measure along
+    rates = tuple(np.geomspace(0.001, 0.3, 12))
+    priors = bottom.Priors(walk_rate_m=0.05, walk_rates_m=rates)
+    exact = bottom.estimate(lens, N_WATER, poses, obs, priors)
+    assert exact.priors.walk_rate_m == rates[0] and exact.priors.walk_rates_m == ()
+    found = bottom.estimate(lens, N_WATER, noisy, obs, priors)
+    assert found.priors.walk_rate_m == pytest.approx(0.03, rel=0.5)
+    evidence = found.walk_rate_evidence
+    assert np.array_equal(evidence[:, 0], rates)
+    assert found.priors.walk_rate_m == evidence[np.argmax(evidence[:, 1]), 0]
+    # the positions are exact (no walk): what the noisy velocity left in the walk is within its claimed sigmas
+    assert np.sqrt(np.mean((found.walk_ne_m / found.sigma_walk_ne_m) ** 2)) < 2.0
+    assert np.degrees(found.yaw_rad) == pytest.approx(YAW_DEG, abs=0.5)
 
 
 def test_each_frames_white_noise_is_what_the_velocity_does_not_explain():

@@ -15,12 +15,11 @@ of frame-to-frame matches adds up any pull of what remains of the web, a match a
 (0.6 px RMS, 0.007 m/s).
 
 What separates a heading bias from the GNSS's walk is the reported velocity (a compass bias turns the floor's
-slide, the velocity does not turn): the walk's prior is about what the velocity says, at a rate the bottom measures.
-A first fit on :data:`VELOCITY_RATE_M` gives the walk; along the drone's motion (where no heading bias can pass for a
-walk) its change between knots less the velocity's is the velocity's own integrated error
-(:func:`localizer.bottom.velocity_rate_m`), and the estimate is made again with that rate (at least
-:data:`MIN_VELOCITY_RATE_M`, at most the GNSS's own): a plain receiver's walk is then told by its velocity and the
-floor, not by its position.
+slide, the velocity does not turn): the walk's prior is about what the velocity says, at a rate the recording
+chooses. A first fit on :data:`VELOCITY_RATE_M` is linearized, and of the rates from :data:`MIN_WALK_RATE_M` to the
+GNSS's own (:func:`walk_rates_m`) the estimate is made again at the one of the largest marginal likelihood
+(:func:`localizer.bottom.walk_rate_log_evidence`): an exact velocity gets a tight prior (a survey line's walk is then
+told by its velocity), one that the floor shows drifting a looser one; no fixed rate or floor suits both.
 
 The estimate is also made on each third of the recording alone (:data:`PARTS`), and its sigmas widened by
 the thirds' spread (:func:`localizer.bottom.with_parts`). A fit whose residuals exceed :data:`MAX_RMS_PX` is not
@@ -82,10 +81,14 @@ PARTS = 3  # the estimate is also made on each of this many consecutive stretche
 #: (the simulator's caustics drifting over it: 0.85-1.0 px, against 0.41 without them), and the sigmas, which take
 #: the residuals as white, would claim far more than the estimate knows
 MAX_RMS_PX = 0.6
-#: m/√s: the integrated EKF velocity's error, the walk's prior with a velocity before the bottom measured it
-#: (:func:`localizer.bottom.velocity_rate_m` on a first fit), and the least it is taken after
+#: m/√s: the integrated EKF velocity's error, the walk's prior of the first fit (at most the GNSS's own), before the
+#: recording chose its rate (:func:`walk_rates_m`)
 VELOCITY_RATE_M = 0.05
-MIN_VELOCITY_RATE_M = 0.005
+#: m/√s: the tightest walk rate the recording may choose (an EKF velocity good to 0.5 mm/s over a second)
+MIN_WALK_RATE_M = 0.0005
+WALK_RATES_PER_DECADE = (
+    8  # the candidate rates' density (their marginal likelihood is cheap: no fit each)
+)
 MIN_WHITE_M = 0.003  # the reported position's white noise (localizer.bottom.white_noise_m) taken at least this
 # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
 GNSS_WALK_S = 60.0
@@ -389,7 +392,7 @@ def summary(correction: PoseCorrection) -> dict:
     """What was estimated, how sure and what was applied, as one JSON object (degrees, metres): the tilt about the
     bias frame (``tilt_frame``: the camera's heading or the airframe's) forward and right, the heading, their
     1-sigmas (with the parts' spread) and each part's values, the floor's depth, the position's walk about the
-    GNSS's mean (largest, and its largest 1-sigma), the walk prior's rate (m/√s, as the velocity was measured), the
+    GNSS's mean (largest, and its largest 1-sigma), the walk prior's rate (m/√s, as the recording chose it), the
     fit (features, observations, frames, RMS pixels, slide share)."""
     e = correction.estimate
     deg = [round(float(np.degrees(x)), 4) for x in (*e.tilt_rad, e.yaw_rad)]
@@ -543,17 +546,12 @@ def fit(
     white = bottom.white_noise_m(poses)
     priors = bottom.Priors(
         walk_rate_m=min(gnss_rate, VELOCITY_RATE_M),
+        walk_rates_m=walk_rates_m(gnss_rate),
         white_m=0.0 if white is None else max(MIN_WHITE_M, white),
     )
     cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
-    measured = bottom.velocity_rate_m(bottom.estimate(cam, n_water, poses, obs, priors), poses)
-    if (
-        measured is not None
-    ):  # the velocity as good as the bottom shows it (a first fit on the stated prior)
-        priors = dataclasses.replace(
-            priors, walk_rate_m=min(gnss_rate, max(MIN_VELOCITY_RATE_M, measured))
-        )
     est = bottom.estimate(cam, n_water, poses, obs, priors, parts=PARTS)
+    priors = est.priors  # the walk rate the recording chose
     if est.rms_px > MAX_RMS_PX:
         return (
             f"the floor features do not stay put as a static floor would ({est.rms_px:.2f} px RMS, more than "
@@ -576,6 +574,15 @@ def fit(
             parts=est.parts,
         )  # sigmas: the free estimate's
     return PoseCorrection(est, tilt, yaw, frame_tilt)
+
+
+def walk_rates_m(gnss_rate_m: float) -> tuple[float, ...]:
+    """The walk rates (m/√s) the recording chooses from (:attr:`localizer.bottom.Priors.walk_rates_m`): from
+    :data:`MIN_WALK_RATE_M` to the GNSS's own (a velocity's integral no worse than the position), geometric, about
+    :data:`WALK_RATES_PER_DECADE` a decade."""
+    top = max(gnss_rate_m, MIN_WALK_RATE_M)
+    n = max(2, int(np.ceil(np.log10(top / MIN_WALK_RATE_M) * WALK_RATES_PER_DECADE)) + 1)
+    return tuple(float(r) for r in np.geomspace(MIN_WALK_RATE_M, top, n))
 
 
 def applicable(est: bottom.BottomEstimate, cal: Calibration) -> tuple[bool, bool]:
