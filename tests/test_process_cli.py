@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_uncertainty_h_acc import share_within
 
 from groundstation.cli import main
 from groundstation.session.positions import read_positions_csv
@@ -243,7 +244,11 @@ def test_positions_csv_round_trip_and_other_tools_files(session, tmp_path, capsy
     assert set(pos.height_source[ok]) == {"baro+gnss"} and all(pos.time_source[ok])
     # the bundled sessions carry GPS_RAW_INT with alt_ellipsoid: 40 m of geoid separation (scenario default)
     assert np.allclose(pos.alt_ellipsoid_m[ok] - pos.alt_amsl_m[ok], 40.0, atol=2e-4)
-    assert np.allclose(np.hypot(pos.sigma_n_m[ok], pos.sigma_e_m[ok]), pos.h_acc_m[ok], atol=2e-4)
+    # h_acc: 2·h_acc holds 95 % of a normal error of the row's covariance (as written: 4 decimals)
+    for sn, se, c, h in zip(
+        pos.sigma_n_m[ok], pos.sigma_e_m[ok], pos.cov_ne_m2[ok], pos.h_acc_m[ok]
+    ):
+        assert share_within(2 * h, [[sn**2, c], [c, se**2]]) == pytest.approx(0.95, abs=3e-3)
     spec_only = tmp_path / "spec_only.csv"
     spec_only.write_text(
         "t,lat,lon,depth_m,h_acc_m,status\n1.5,63.4,10.4,1.0,0.2,ok\n2.5,,,1.0,,lost\n"
