@@ -10,7 +10,9 @@ frames where the UUV can be seen, MAE, shape (MAE after the best constant offset
 wave-only MAE, what the telemetry allows (MAE and shape of the true pixel's flat-surface solution with the reported
 telemetry) and the tracked run's ratios to it (target: within 1.2×), and the smoothed track's shape (target with
 RTK: ≤ 0.03 m). The ``--use-track`` rows are the geometry alone, so the numbers mean something where the tracker still
-loses frames.
+loses frames. The last two columns measure the tracked pixel against the true one (``track.csv``: the UUV's top face
+seen through the waves) over the frames located: the bias (px, the length of the mean error) and the jitter about it
+(px, the mean distance from that mean), the pixel's own part of the tracked row's error.
 """
 
 from __future__ import annotations
@@ -24,7 +26,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
+import numpy as np
 from waves import session
+
+from groundstation.session.read import read_table
 
 SCENARIOS = sorted(p.stem for p in (ROOT / "sim_fixtures" / "scenarios").glob("weather_*.toml"))
 SKYFIX = [sys.executable, "-m", "groundstation.cli"]
@@ -56,11 +61,29 @@ def evaluate(path: Path, out: Path, use_track: bool) -> dict:
         return next(r for r in csv.DictReader(f) if r["method"] == "refraction")
 
 
-def row(name: str, pixels: str, r: dict) -> str:
+def pixel_error(path: Path, out: Path) -> tuple[float, float]:
+    """The located pixels' error against the true pixel (px): the bias (the mean error's length) and the jitter
+    (the mean distance from the mean error), over the frames of ``out``'s positions.csv reported ``ok``."""
+    truth = read_table(path / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    fixes = read_table(
+        out / path.name / "refraction" / "positions.csv", ("t", "u", "v"), allow_empty=("u", "v")
+    )
+    err = np.column_stack(
+        [fixes[c] - np.interp(fixes["t"], truth["t"], truth[c]) for c in ("u", "v")]
+    )
+    err = err[np.all(np.isfinite(err), axis=1)]
+    if not len(err):
+        return math.nan, math.nan
+    mean = err.mean(axis=0)
+    return float(np.hypot(*mean)), float(np.mean(np.hypot(*(err - mean).T)))
+
+
+def row(name: str, pixels: str, r: dict, pixel: tuple[float, float]) -> str:
     cells = []
     for key, head, form in COLUMNS:
         v = float(r[key])
         cells.append(f"{form.format(v) if math.isfinite(v) else '-':>{max(len(head), 7)}}")
+    cells += [f"{v:{w}.2f}" if math.isfinite(v) else f"{'-':>{w}}" for v, w in zip(pixel, (7, 9))]
     return f"{name:20s} {pixels:10s} " + " ".join(cells)
 
 
@@ -72,21 +95,18 @@ def main() -> int:
     ap.add_argument("--only", nargs="*")
     args = ap.parse_args()
     work = Path(args.work)
-    header = f"{'scenario':20s} {'pixels':10s} " + " ".join(
-        f"{h:>{max(len(h), 7)}}" for _, h, _ in COLUMNS
+    header = (
+        f"{'scenario':20s} {'pixels':10s} "
+        + " ".join(f"{h:>{max(len(h), 7)}}" for _, h, _ in COLUMNS)
+        + f" {'bias px':>7} {'jitter px':>9}"
     )
     lines = [header]
     print(header, flush=True)
     for name in args.only or SCENARIOS:
         path, _ = session(name, work, args.regenerate)
         for pixels, use_track in (("tracked", False), ("true pixel", True)):
-            lines.append(
-                row(
-                    name,
-                    pixels,
-                    evaluate(path, work / "evaluate" / pixels.replace(" ", "_") / name, use_track),
-                )
-            )
+            out = work / "evaluate" / pixels.replace(" ", "_") / name
+            lines.append(row(name, pixels, evaluate(path, out, use_track), pixel_error(path, out)))
             print(lines[-1], flush=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(lines) + "\n")
