@@ -145,14 +145,18 @@ def measure_shared(
     v: float,
 ) -> SizeHeight | str:
     """:func:`measure_frame` of the frame :meth:`SharedFrame.put` put into shared memory (the measuring process)."""
+    return measure_frame(cal, shared_image(frame), pose, i, u, v)
+
+
+def shared_image(frame: tuple[str, tuple[int, ...], str]) -> np.ndarray:
+    """The frame :meth:`SharedFrame.put` put into shared memory, as an array over it (a measuring process)."""
     name, shape, dtype = frame
     if name not in _attached:
         for old in _attached.values():  # the service made a new block
             old.close()
         _attached.clear()
         _attached[name] = SharedMemory(name=name)
-    image = np.ndarray(shape, np.dtype(dtype), buffer=_attached[name].buf)
-    return measure_frame(cal, image, pose, i, u, v)
+    return np.ndarray(shape, np.dtype(dtype), buffer=_attached[name].buf)
 
 
 def start_measuring_process() -> None:

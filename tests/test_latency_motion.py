@@ -277,3 +277,51 @@ def test_attitude_track_relative_rotations():
     slerp = Slerp(t, Rot.from_matrix(R))
     expected = (slerp(t1).inv() * slerp(t0)).as_rotvec()
     assert np.abs(track.relative(t0, t1) - expected).max() < 1e-6
+
+
+def test_online_estimate_is_measured_in_a_nicer_process():
+    """The live estimator's work runs in a process of its own 10 nice levels below the service (a thread of the
+    service holding the interpreter's lock at a low priority kept the frames waiting beside busy programs), its
+    handing thread at the service's priority, and it estimates exactly what the same work does in-process."""
+    import asyncio
+    import multiprocessing
+    import os
+    import time
+
+    from groundstation.latency.estimate import MotionEstimator
+    from groundstation.video.file import open_video
+
+    session = load_session(ROOT / "sim_fixtures" / "bundled" / "nadir_hover")
+    cal, tel = session.calibration, session.telemetry
+    with open_video(session.video_path) as video:
+        frames = [(float(session.frames["t"][f.index]), f.image) for f in video if f.index % 3 == 0]
+    now = frames[-1][0] + 0.5
+    online = OnlineLatency(cal, tel, 0.0)
+    online._loop = loop = asyncio.new_event_loop()
+    before = set(multiprocessing.active_children())
+    online.worker.start()
+    try:
+        for frame in frames:
+            online._frames.put(frame, timeout=30.0)
+        deadline = time.monotonic() + 60.0
+        while not online._frames.empty() and time.monotonic() < deadline:
+            online.worker.stop.wait(0.01)
+        online._tel = (
+            tel,
+            now,
+        )  # taken once the frame in hand is measured: the estimate has them all
+        while online.estimate is None and time.monotonic() < deadline:
+            online.worker.stop.wait(0.05)
+        children = [c for c in multiprocessing.active_children() if c not in before]
+        assert len(children) == 1
+        service_nice = os.getpriority(os.PRIO_PROCESS, 0)
+        assert os.getpriority(os.PRIO_PROCESS, online.worker.thread.native_id) == service_nice
+        assert os.getpriority(os.PRIO_PROCESS, children[0].pid) == min(service_nice + 10, 19)
+    finally:
+        online.worker.join(5.0)
+        loop.close()
+    in_process = MotionEstimator(cal, online.window_s, online.offsets)
+    for t, image in frames:
+        in_process.measure(t, image)
+    expected = in_process.estimate(tel, now)
+    assert expected is not None and online.estimate == expected

@@ -36,20 +36,21 @@ from __future__ import annotations
 import argparse
 import asyncio
 import copy
-import importlib
 import itertools
 import logging
 import math
-import os
+import multiprocessing
 import queue
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from groundstation.height_from_size import SharedFrame, shared_image, start_measuring_process
 from groundstation.latency.video_motion import Rotation, RotationMeter
 from groundstation.session.read import SessionError, load_session
 from groundstation.threads import Supervised, in_thread
@@ -65,7 +66,6 @@ TRACK_STEP_S = 0.005  # the camera attitude is sampled this often for the predic
 OFFSET_STEP_S = 0.005  # candidate offsets are this far apart (then refined)
 MEASURE_HZ = 10.0  # frames measured live, at most (every third at 30 fps: a third of the CPU)
 STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
-NICE = 10  # the measuring thread yields the CPU to decoding and tracking
 WARN_S = 0.030  # an estimate this far from the configured latency is worth a warning
 APPLY_SIGMA_S = 0.005  # an estimate is sure with this 1-sigma at most ...
 APPLY_PAIRS = 60  # ... from at least this many frame pairs (6 s at MEASURE_HZ; fewer when the machine is busy);
@@ -453,13 +453,63 @@ def session_offset(session_dir: str, search_s: float = 0.3) -> tuple[SessionOffs
     return offset_from_rotations(cal, session.telemetry, rotations, search_s), len(rotations) + 1
 
 
+class MotionEstimator:
+    """The live estimate's work, in :class:`OnlineLatency`'s measuring process: the rotation of each frame handed
+    over, kept for ``window_s``, and an estimate over them from a telemetry snapshot."""
+
+    def __init__(self, cal: Calibration, window_s: float, offsets: np.ndarray):
+        self.cal, self.window_s, self.offsets = cal, window_s, offsets
+        self.meter = RotationMeter(cal.camera)
+        self.rotations: deque[Rotation] = deque()
+
+    def measure(self, t_slot: float, image: np.ndarray) -> None:
+        if (r := self.meter.measure(t_slot, image)) is not None:
+            self.rotations.append(r)
+
+    def estimate(self, tel: Telemetry, now: float) -> OffsetEstimate | None:
+        """Over the rotations of the last ``window_s`` before ``now`` (station s); None without enough."""
+        while self.rotations and self.rotations[0].t0 < now - self.window_s:
+            self.rotations.popleft()
+        if not self.rotations:
+            return None
+        # sampled anew each time: the telemetry's alignment to the station clock sharpens as it comes
+        track = AttitudeTrack.from_telemetry(
+            self.cal, tel, self.rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3
+        )
+        return estimate_offset(list(self.rotations), track, self.offsets)
+
+
+#: The measuring process's one :class:`MotionEstimator` (:func:`start_estimator`).
+_estimator: list[MotionEstimator] = []
+
+
+def start_estimator(cal: Calibration, window_s: float, offsets: np.ndarray) -> None:
+    """The measuring process: its estimator, and the imports it needs, now (before the first frame)."""
+    _estimator[:] = [MotionEstimator(cal, window_s, offsets)]
+
+
+def measure_shared(t_slot: float, frame: tuple[str, tuple[int, ...], str]) -> None:
+    """The measuring process: :meth:`MotionEstimator.measure` of the frame :class:`SharedFrame` put in."""
+    _estimator[0].measure(t_slot, shared_image(frame))
+
+
+def estimate_now(tel: Telemetry, now: float) -> OffsetEstimate | None:
+    """The measuring process: :meth:`MotionEstimator.estimate`."""
+    return _estimator[0].estimate(tel, now)
+
+
 class OnlineLatency:
     """Worker estimating the glass-to-first-packet latency of the live video (see the module doc).
 
     ``on_frame`` (event loop) hands frames, at most :data:`MEASURE_HZ` a second, to a
-    low-priority thread that measures their rotation (frames arriving while it is busy
-    are skipped); once a second the telemetry is
-    copied on the loop and the thread extends the attitude track and estimates.
+    thread (frames arriving while it is busy are skipped) that has their rotation measured by a
+    :class:`MotionEstimator` in a low-priority process of its own, each frame through shared memory
+    (:class:`~groundstation.height_from_size.SharedFrame`; the process as the height from size's:
+    :func:`~groundstation.height_from_size.start_measuring_process`); once a second the telemetry is
+    copied on the loop and the process extends the attitude track and estimates. Not a low-priority
+    thread of the service: the estimate is some 80 ms of Python and NumPy a second holding the
+    interpreter's lock, and such a thread, preempted while it held the lock beside busy programs, kept
+    the frames' threads waiting until it got a core again (``bench/gil_inversion.py``).
     ``apply(latency_s)``, when given (``auto``), is called on the loop with each
     settled estimate (:func:`settled`) that moved by more than 2 ms; :attr:`applied_s` and
     :attr:`applied_sigma_s` are what is in use (None before the first).
@@ -490,11 +540,6 @@ class OnlineLatency:
         self._tel: tuple[Telemetry, float] | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.worker = Supervised("video-latency", self._work)
-        # scipy (AttitudeTrack's) now, as the service starts, not in the thread at the first estimate: loading its
-        # compiled modules holds the interpreter (0.67 s on a loaded 2-core machine), stalling every other thread
-        # with it, the GPS_INPUT keep-alive too
-        importlib.import_module("scipy.spatial.transform")
-        self._rotations: deque[Rotation] = deque()
         self._last_slot: float | None = None
 
     def on_frame(self, frame) -> None:
@@ -517,39 +562,38 @@ class OnlineLatency:
                 await asyncio.sleep(1.0)
                 self._tel = (copy.deepcopy(self.tel), time.time())
         finally:
-            # waited for (within a measurement): a thread left inside OpenCV when the process exits aborts it
             await in_thread(self.worker.join, STOP_WAIT_S, name="video-latency stop")
 
     def _work(self, stop: threading.Event) -> None:
+        """Hands the frames and the telemetry to the measuring process (started here: a restart after a failure
+        starts a new one) and the estimates back to the loop."""
         loop = self._loop
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), NICE)  # Linux: this thread only
-        meter = RotationMeter(self.cal.camera)
-        while not stop.is_set():
-            try:
-                t_slot, image = self._frames.get(timeout=0.2)
-                if (r := meter.measure(t_slot, image)) is not None:
-                    self._rotations.append(r)
-            except queue.Empty:
-                pass
-            snapshot, self._tel = self._tel, None
-            if snapshot is None:
-                continue
-            tel, now = snapshot
-            while self._rotations and self._rotations[0].t0 < now - self.window_s:
-                self._rotations.popleft()
-            if not self._rotations:
-                continue
-            # sampled anew each time: the telemetry's alignment to the station clock sharpens as it comes
-            track = AttitudeTrack.from_telemetry(
-                self.cal, tel, self._rotations[0].t0 + self.offsets.min() - 0.1, now - 0.3
-            )
-            estimate = estimate_offset(list(self._rotations), track, self.offsets)
-            if estimate is not None:
-                self.estimate = estimate
+        pool = ProcessPoolExecutor(
+            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process
+        )
+        # the process starts and imports now, not at the first frame
+        pool.submit(start_estimator, self.cal, self.window_s, self.offsets)
+        shared = SharedFrame()
+        try:
+            while not stop.is_set():
                 try:
-                    loop.call_soon_threadsafe(self._judge, estimate)
-                except RuntimeError:  # the loop is closed: stopped
-                    return
+                    t_slot, image = self._frames.get(timeout=0.2)
+                    pool.submit(measure_shared, t_slot, shared.put(image)).result()
+                except queue.Empty:
+                    pass
+                snapshot, self._tel = self._tel, None
+                if snapshot is None:
+                    continue
+                estimate = pool.submit(estimate_now, *snapshot).result()
+                if estimate is not None:
+                    self.estimate = estimate
+                    try:
+                        loop.call_soon_threadsafe(self._judge, estimate)
+                    except RuntimeError:  # the loop is closed: stopped
+                        return
+        finally:
+            pool.shutdown(wait=False, cancel_futures=True)
+            shared.close()
 
     def _judge(self, e: OffsetEstimate) -> None:
         latency = -e.offset_s
