@@ -13,6 +13,7 @@
 - :func:`in_thread`: a blocking call in a daemon thread of its own, awaited from the loop.
   Cancelling the await abandons the thread instead of waiting for it (a TCP connect or a
   thread join cannot be interrupted), so a stop never waits for I/O; the thread ends by itself.
+- :func:`start_opencv_workers`: OpenCV's worker threads started by the service's own thread, at its priority.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Callable
+
+import numpy as np
 
 from groundstation.logs import Throttle
 
@@ -162,3 +165,18 @@ async def in_thread(fn: Callable, *args, name: str = "skyfix-io"):
 
     threading.Thread(target=main, name=name, daemon=True).start()
     return await done
+
+
+def start_opencv_workers() -> None:
+    """Start OpenCV's worker threads now, from the calling thread (the service's, at its priority).
+
+    OpenCV starts its pool of worker threads at the first call that splits its work, in the thread that makes it,
+    and a new thread takes the nice value of the thread that starts it. A low-priority thread of the service (the
+    page's feed encoder, at nice 10) that came first would leave every frame's OpenCV work (the tracker's, the
+    decoded frame's conversion) waiting for nice-10 workers, which beside busy programs get a core seldom. The
+    latency estimate's thread used to (``bench/live_latency.py``'s per-nice line: nice-10 threads waiting for a core
+    more than one thread's whole time). A 1080p downscale splits its work whatever the pool's size.
+    """
+    import cv2  # here: this module's other users (the MAVLink link, Zenoh, the fuse service) need no OpenCV
+
+    cv2.resize(np.zeros((1080, 1920), np.uint8), (960, 540), interpolation=cv2.INTER_AREA)

@@ -77,6 +77,7 @@ from groundstation.runtime.workers import (
     stopped,
 )
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
+from groundstation.threads import start_opencv_workers
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration, ConfigError, Tracker
@@ -110,6 +111,7 @@ async def serve(cfg: config.RunConfig) -> dict:
     """Run the service until stopped; returns the final status (with several UUVs: the shared sections and each
     UUV's own under ``uuvs``)."""
     loop = asyncio.get_running_loop()
+    start_opencv_workers()  # before any thread of a lower priority can
     cal = load_calibration(cfg.calibration)
     tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S)
     stop = asyncio.Event()
