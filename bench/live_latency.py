@@ -52,6 +52,7 @@ import argparse
 import asyncio
 import itertools
 import json
+import math
 import os
 import shlex
 import signal
@@ -211,20 +212,21 @@ def nice_of(pid: int) -> int:
     return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
 
 
-def run_queue_wait_s(pid: int) -> float:
-    """Seconds the threads of a process (those alive now) have spent runnable but waiting for a core, summed
-    (``/proc/PID/task/TID/schedstat``'s second field); NaN where the kernel does not keep it."""
-    total = 0.0
+def thread_times_s(pid: int) -> dict[int, tuple[float, float]]:
+    """Per nice value of the threads of a process (those alive now): seconds on a core and seconds runnable but
+    waiting for one, summed (``/proc/PID/task/TID/schedstat``'s first two fields; each thread's nice from its
+    ``stat``); NaN where the kernel does not keep them."""
+    out: dict[int, tuple[float, float]] = {}
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
-            text = (task / "schedstat").read_text()
+            fields = (task / "schedstat").read_text().split()
+            nice = int((task / "stat").read_text().rsplit(")", 1)[1].split()[16])
         except OSError:  # the thread ended meanwhile
             continue
-        fields = text.split()
-        if len(fields) < 2:
-            return float("nan")
-        total += int(fields[1]) / 1e9
-    return total
+        run_s, wait_s = (int(f) / 1e9 for f in fields[:2]) if len(fields) >= 2 else (math.nan,) * 2
+        on, waiting = out.get(nice, (0.0, 0.0))
+        out[nice] = (on + run_s, waiting + wait_s)
+    return out
 
 
 def pct(values, *qs) -> dict:
@@ -415,6 +417,7 @@ def live(
         "2",
     ]
     samples = []  # (time, cpu_s, rss_mb, run-queue wait s)
+    by_nice = []  # thread_times_s at each sample
     with open(work / "run.log", "w") as run_log, open(work / "replay.log", "w") as replay_log:
         service = subprocess.Popen(
             run,
@@ -433,8 +436,13 @@ def live(
             }
             rep = subprocess.Popen(replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT)
             while rep.poll() is None:
+                by_nice.append(thread_times_s(service.pid))
                 samples.append(
-                    (time.time(), *proc_sample(service.pid), run_queue_wait_s(service.pid))
+                    (
+                        time.time(),
+                        *proc_sample(service.pid),
+                        sum(wait for _, wait in by_nice[-1].values()),
+                    )
                 )
                 time.sleep(0.5)
             service.send_signal(signal.SIGINT)
@@ -502,6 +510,18 @@ def live(
         "cpu_pct": round(100.0 * (s[-1, 1] - s[half, 1]) / (s[-1, 0] - s[half, 0]), 1),
         "rss_mb": {"mid": round(float(s[half, 2]), 1), "end": round(float(s[-1, 2]), 1)},
         "run_queue_wait_pct": round(100.0 * (s[-1, 3] - s[half, 3]) / (s[-1, 0] - s[half, 0]), 1),
+        "threads_by_nice_pct": {
+            nice: [
+                round(
+                    100.0
+                    * (by_nice[-1][nice][k] - by_nice[half][nice][k])
+                    / (s[-1, 0] - s[half, 0]),
+                    1,
+                )
+                for k in (0, 1)
+            ]
+            for nice in sorted(set(by_nice[half]) & set(by_nice[-1]))
+        },
     }
 
 
@@ -563,6 +583,11 @@ def report(name: str, session: Path, res: dict) -> list[str]:
         (
             f"  starved: the service's threads runnable but waiting for a core {res['run_queue_wait_pct']} % of the "
             "time (summed over its threads, /proc schedstat; second half of the run)"
+        ),
+        "  its threads by nice value (on a core / waiting for one, % of the time): "
+        + ", ".join(
+            f"nice {nice}: {on} / {waiting}"
+            for nice, (on, waiting) in res["threads_by_nice_pct"].items()
         ),
     ]
 
