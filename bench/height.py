@@ -2,17 +2,21 @@
 
     .venv/bin/python bench/height.py [--work /tmp/skyfix-height] [--out bench/results/height.txt]
                                      [--skyfix "PYTHON -m groundstation.cli" --skyfix-cwd DIR] [--only NAME ...]
+                                     [--weather /tmp/skyfix-weather]
 
 For each scenario (``sim_fixtures/scenarios/<name>.toml``, generated once into ``--work`` without
 video, and two variants of the rangefinder scenario: a lidar that gets no return from the water,
 one that sees the seafloor) it runs ``skyfix evaluate --use-track`` and reports, for the refraction
 method: the MAE against truth and the share of fixes within 2·h_acc (evaluate's own table), and
 from ``positions.csv`` the camera's height against its truth (the scenario's motion): mean and
-largest error, the RMS of its change from frame to frame, the share within 2·sigma_height_m, the
+largest error, its standard deviation (what is left once a constant offset is removed), the RMS of its change
+from frame to frame, the share within 2·sigma_height_m, the
 median sigma and the source words.
 ``--skyfix``/``--skyfix-cwd`` run another skyfix (an older checkout: before/after) on the same
 sessions. ``sim_fixtures/bundled/*`` is evaluated too (geometry only), the sessions that must not
-get worse.
+get worse. ``--weather DIR``: instead, the hovering drones in the weather (``bench/weather.py``'s sessions, cached
+in DIR; their barometers wander), with the smoothed track's shape (``evaluate``'s, the true pixel) after the height
+columns.
 """
 
 from __future__ import annotations
@@ -35,6 +39,9 @@ from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides
 
+WEATHER = tuple(
+    sorted(p.stem for p in (ROOT / "sim_fixtures" / "scenarios").glob("weather_*.toml"))
+)
 SCENARIOS = (
     "height_rtk_drift",
     "height_rtk_noise",
@@ -71,6 +78,7 @@ def evaluate(skyfix: list[str], cwd: Path, path: Path, out: Path) -> dict:
     return {
         "mae_m": float(row["mae_m"]),
         "in_2sigma": float(row["within_2sigma"]),
+        "smoothed_shape_m": float(row["smoothed_shape_m"]),
         "positions": read_positions_csv(out / path.name / "refraction" / "positions.csv"),
     }
 
@@ -85,7 +93,7 @@ def height_columns(name: str, pos) -> str:
         f"{w} {n / ok.sum():.0%}" for w, n in Counter(pos.height_source[ok]).most_common()
     )
     return (
-        f"{np.mean(np.abs(err[ok])):7.3f} {np.max(np.abs(err[ok])):7.3f} "
+        f"{np.mean(np.abs(err[ok])):7.3f} {np.max(np.abs(err[ok])):7.3f} {np.std(err[ok]):7.4f} "
         f"{np.sqrt(np.nanmean(step**2)):7.4f} "
         f"{np.mean(np.abs(err[ok]) <= 2 * sigma[ok]):6.1%} {np.median(sigma[ok]):6.3f}  {words}"
     )
@@ -101,27 +109,33 @@ def main() -> int:
     )
     ap.add_argument("--skyfix-cwd", default=str(ROOT))
     ap.add_argument("--only", nargs="*")
+    ap.add_argument(
+        "--weather", type=Path, help="the weather sessions' directory (bench/weather.py --work)"
+    )
     args = ap.parse_args()
     work = Path(args.work)
     runs = [("after", [sys.executable, "-m", "groundstation.cli"], ROOT)]
     if args.skyfix:
         runs.insert(0, ("before", shlex.split(args.skyfix), Path(args.skyfix_cwd)))
-    names = args.only or SCENARIOS
+    names = args.only or (WEATHER if args.weather else SCENARIOS)
     header = (
-        f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} {'dh step':>7s} "
+        f"{'scenario':28s} {'run':6s} {'MAE m':>7s} {'in 2h':>6s}  {'|dh| m':>7s} {'max dh':>7s} {'dh sd':>7s} {'dh step':>7s} "
         f"{'in 2σh':>6s} {'σh med':>6s}  height source"
     )
     lines = [header]
+    if args.weather:
+        lines[0] += "  smoothed shape m"
     for name in names:
-        path = session(name, work)
+        path = args.weather / name if args.weather else session(name, work)
         for label, skyfix, cwd in runs:
             r = evaluate(skyfix, cwd, path, work / label / path.name)
             lines.append(
                 f"{name:28s} {label:6s} {r['mae_m']:7.4f} {r['in_2sigma']:6.1%}  "
                 + height_columns(name, r["positions"])
+                + (f"  {r['smoothed_shape_m']:.4f}" if args.weather else "")
             )
             print(lines[-1], flush=True)
-    for name in BUNDLED if not args.only else ():
+    for name in BUNDLED if not (args.only or args.weather) else ():
         for label, skyfix, cwd in runs:
             r = evaluate(skyfix, cwd, BUNDLED_DIR / name, work / label / "bundled")
             lines.append(

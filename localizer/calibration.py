@@ -160,7 +160,7 @@ class Sigmas:
         description="the share of height_m (at most all of it) that wanders back and forth over tens of seconds, "
         "as large at any time: the prop wash, gusts and the air's temperature in the barometer's pressure "
         "(0.1-0.2 typical hovering); GNSS altitudes that can see it follow it over seconds in proportion to their "
-        "accuracy, and where they show none (an RTK receiver beside a steady barometer) it is left out "
+        "accuracy; where they show none (an RTK receiver beside a steady barometer) or cannot see it, it is held "
         "(localizer/height.py)",
     )
     baro_wander_s: Positive = Field(

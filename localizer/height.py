@@ -38,15 +38,17 @@ height is the EKF height − ``b``. States ``x = (e, d, s, g, w)``, metres (``d`
   and forth over tens of seconds, which the drift's 600-s rate cannot follow), first-order Gauss-Markov of
   1-sigma ``[uncertainty] baro_wander_m`` (a share of ``height_m``: at most all of it, so the height's sigma
   without measurements is what it was) and correlation time ``baro_wander_s``. It is kept across an arming
-  (ArduPilot zeroes the height, the air goes on); in the take-off reference the wander so far joins ``e`` at
-  the first GNSS altitude and ``w`` starts there from 0, as the drift's rate does: GNSS altitudes give its
-  changes, and its return to its mean must not say where the level was. Whether it is in the model is
-  measured (:meth:`HeightEstimator._bent`): GNSS altitudes fine enough to see it (one message's white noise
-  under a quarter of what the wander moves over :data:`WANDER_LAG_S`) keep it only while the means of their
-  successive :data:`WANDER_LAG_S` spans move as much as that quarter beyond their white noise; before that,
-  and where they do not move (an RTK receiver beside a steady barometer), it is left out (no process noise),
-  so the receiver's white noise does not move the height; coarser ones (a plain fix) cannot tell and keep it,
-  and their metres move the height by little more than nothing.
+  (ArduPilot zeroes the height, the air goes on); in the take-off reference, with GNSS altitudes fine enough
+  to see it (below), the wander so far joins ``e`` at the first and ``w`` starts there from 0: they give its
+  changes, and its return to its mean must not say where the level was (as the drift's rate learnt from them
+  must not say what the drift was before). Whether it moves is
+  measured (:meth:`HeightEstimator._bent`): it moves (first-order Gauss-Markov) only while GNSS altitudes fine
+  enough to see it (the white noise in a difference of the means of two successive :data:`WANDER_LAG_S` spans
+  under a quarter of what the wander moves over :data:`WANDER_LAG_S`) show it, those means moving by at least an
+  eighth of that beyond their white noise; else (before that, beside a steady barometer, with a plain fix that cannot
+  see it, with no GNSS) it is held as it is, neither decaying nor growing, its share of the sigma kept: an RTK
+  receiver's white noise does not move the height, a plain fix's metres move it by little more than nothing,
+  and a rangefinder's readings do not make a mean-reverting wander absorb the drift.
 
 The height's error is ``b = e + w`` (take-off reference) or ``e + w + s`` (amsl). Measurements:
 
@@ -188,7 +190,7 @@ class _Aux(NamedTuple):
     # the barometer's wander: whether it is in the model (see _bent), the GNSS measurements (t, z) of the last
     # 2·WANDER_LAG_S since the fix type or the reference changed, and (differences counted, the running mean of
     # what they show beyond the white noise and g, the time of the newest)
-    wander: bool = True
+    wander: bool = False
     window: tuple = ()
     bend: tuple = (0, 0.0, -math.inf)
 
@@ -317,9 +319,9 @@ class HeightEstimator:
         Q[..., _E, _D] = Q[..., _D, _E] = var_d * tau * m1**2
         Q[..., _D, _D] = -var_d * m2
         Q[..., _G, _G] = np.nan_to_num(np.asarray(sigma_g, dtype=float)) ** 2 * (1.0 - phi_g**2)
-        phi_w = np.exp(-dt / self.sigmas.baro_wander_s)
+        phi_w = np.where(wander, np.exp(-dt / self.sigmas.baro_wander_s), 1.0)  # else held as it is
         F[..., _W, _W] = phi_w
-        Q[..., _W, _W] = np.where(wander, self.wander_m**2 * (1.0 - phi_w**2), 0.0)
+        Q[..., _W, _W] = self.wander_m**2 * (1.0 - phi_w**2)
         x = np.einsum("...ij,...j->...i", F, x)
         P = F @ P @ np.swapaxes(F, -1, -2) + Q
         return x, P
@@ -361,7 +363,9 @@ class HeightEstimator:
             x, P = x.copy(), P.copy()
             x[_E] = x[_S] = 0.0
             P[_E, :] = P[:, _E] = P[_S, :] = P[:, _S] = 0.0
-            P[_E, _E], P[_S, _S] = self.e0_var_m2, SURFACE_UNKNOWN_M**2
+            # the height's sigma is height_m again: what the wander's own share is not (it may have joined e)
+            P[_E, _E] = max(self.sigmas.height_m**2 - P[_W, _W], 0.0)
+            P[_S, _S] = SURFACE_UNKNOWN_M**2
             return x, P, aux._replace(z_prev=math.nan, window=()), None, False, math.nan
         if not math.isfinite(h_e):
             return x, P, aux, None, False, math.nan
@@ -386,11 +390,17 @@ class HeightEstimator:
                 aux.S is None
             ):  # the first: GNSS altitudes give the drift from here on; the drift so far, if its rate
                 # is learnt, is not inferred from it (only a take-off reference's S is unset); nor is the level
-                # from the wander's return to its mean: the wander so far joins e, the wander from here starts at 0
-                T = np.eye(_N)
-                T[_E, _W], T[_W, _W] = 1.0, 0.0
-                x, P = T @ x, T @ P @ T.T
-                P[_E, _D] = P[_D, _E] = 0.0
+                # from the wander's return to its mean where they can see the wander: the wander so far joins
+                # e, the wander from here starts at 0
+                var_d = P[
+                    _D, _D
+                ]  # d made independent of the rest (of e alone could leave P indefinite)
+                P[_D, :] = P[:, _D] = 0.0
+                P[_D, _D] = var_d
+                if 2.0 * (GNSS_WHITE * stated) ** 2 < self.wander_d_m2 / 4.0:  # a difference of two
+                    T = np.eye(_N)
+                    T[_E, _W], T[_W, _W] = 1.0, 0.0
+                    x, P = T @ x, T @ P @ T.T
             S = alt - h_e if aux.S is None else aux.S
             z = alt - h_e - S
             scatter = _scattered(aux, z)
@@ -442,28 +452,29 @@ class HeightEstimator:
 
     def _bent(self, aux: _Aux, t: float, z: float, r: float) -> _Aux:
         """``aux`` with the GNSS measurement ``z`` (m, at ``t``; white noise of variance ``r``) in its window, and
-        whether the barometer's wander is in the model. Every :data:`WANDER_LAG_S` the means of the measurements in
-        the last two such spans give a difference; what its square shows beyond what the white noise and the GNSS's
-        slow error ``g`` put in it is averaged over about the last :data:`BEND_N`. The wander is in the model unless
-        these GNSS altitudes could see it (one measurement's white noise under a quarter of what the configured
-        wander puts in a difference) and do not (their mean under that quarter, or none measured yet): an exact
-        barometer beside an RTK receiver is not made to follow the receiver's white noise (nor a drift: over
-        :data:`WANDER_LAG_S` it moves millimetres); a plain receiver cannot tell, so the configured wander stays."""
+        whether the barometer's wander moves in the model. Every :data:`WANDER_LAG_S` the means of the measurements
+        in the last two such spans give a difference; what its square shows beyond what the white noise and the
+        GNSS's slow error ``g`` put in it is averaged over about the last :data:`BEND_N`. The wander moves while these
+        GNSS altitudes can see it (the white noise in a difference of the spans' means under a quarter of what the
+        configured wander puts there) and do (that average at least an eighth of it: a wander smoother than a
+        first-order process, or slower, shows less over a short span); else it is held as it is, its sigma with it:
+        an exact barometer beside an RTK receiver is not made to follow the receiver's white noise (nor a drift:
+        over :data:`WANDER_LAG_S` it moves millimetres), and a plain receiver's or a rangefinder's readings do not
+        make it absorb the drift."""
         lag = WANDER_LAG_S
         window = tuple(m for m in aux.window if m[0] > t - 2.0 * lag) + ((t, z),)
         n, mean, newest = aux.bend
         spans = [[zz for tt, zz in window if t - (k + 1) * lag < tt <= t - k * lag] for k in (1, 0)]
+        white = r * sum(
+            1.0 / max(len(v), 1) for v in spans
+        )  # in the difference of the spans' means
         if t - newest >= lag and window[0][0] <= t - 1.5 * lag and min(map(len, spans)) >= 2:
             a, b = (sum(v) / len(v) for v in spans)
-            white = r * (1.0 / len(spans[0]) + 1.0 / len(spans[1]))
             g = difference_var(aux.sigma_g, lag, GNSS_TAU_S)
             n += 1
             mean += ((b - a) ** 2 - white - g - mean) / min(n, BEND_N)
             newest = t
-        seen = (
-            r < self.wander_d_m2 / 4.0
-        )  # one measurement's white noise: the spans' means have less
-        wander = not seen or (n > 0 and mean >= self.wander_d_m2 / 4.0)
+        wander = white < self.wander_d_m2 / 4.0 and n > 0 and mean >= self.wander_d_m2 / 8.0
         return aux._replace(window=window, bend=(n, mean, newest), wander=wander)
 
     def _tell(self, source: str, t: float, text: str) -> None:
