@@ -269,6 +269,26 @@ def test_the_correction_lapses_without_sightings(plain):
         live.close()
 
 
+def test_the_references_sensitivity_is_taken_at_the_fixs_time(plain):
+    """A reference moving across the image (its pose_jacobian's compass column growing linearly over 10 s of
+    sightings, as a drifting buoy's): the offset's jacobian, which the corrected fix's claim subtracts from the UUV's,
+    is the line's at the fix's time, where the offset is taken, not the window's mean (half the window behind: a
+    buoy's fixes claimed its compass term 20-30 % short, 90-94 % within 2 h_acc)."""
+    s = load_session(plain)
+    ref, radius_m = read_file(plain / "reference.toml")
+    live = LiveReference(s.calibration, s.telemetry, "reference.toml", ref, radius_m, 0.2)
+    try:
+        t = np.arange(90.0, 100.0, 0.2)
+        jac = np.zeros((len(t), 2, 4))
+        jac[:, :, 2] = np.outer(t - 90.0, [0.1, -0.05])
+        off = np.random.default_rng(3).normal(0.0, 0.03, (len(t), 2))
+        live._sightings.extend(zip(t, off, jac, np.full(len(t), 0.01)))
+        found, _ = live.offsets(100.0)
+        assert np.allclose(found.jacobian[0, :, 2], [1.0, -0.5]), found.jacobian[0]
+    finally:
+        live.close()
+
+
 def test_a_bad_reference_file_is_refused_in_one_line(tmp_path):
     bad = tmp_path / "reference.toml"
     bad.write_text("lat_deg = 63.4\nlon_deg = 10.4\ndepth_m = 2.0\n")

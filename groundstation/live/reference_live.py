@@ -25,7 +25,8 @@ of the :data:`~localizer.reference.WINDOW_S` before its frame (causal): a straig
 mean, whose sigma is the floor of the line's, would trail a plain GNSS's walk by half the window), with sightings in
 at least :data:`~localizer.reference.MIN_BLOCKS` + 1 of its seconds and the newest at most :data:`HORIZON_S` before the
 frame (its sigma growing with that age). Its claim is :func:`localizer.reference.correct`'s:
-the offset's sigma in h_acc, the UAV position's term gone. The fix says what
+the offset's sigma in h_acc, the UAV position's term gone, the pose terms the reference's sensitivities to them (its
+pose_jacobian, on the same line at the frame's time: a buoy moves in the image) leave. The fix says what
 was added (``ref_offset_n_m`` …, ``ref_sightings``, ``ref_age_s``); with too few sightings in the window the
 correction lapses and the fixes are the telemetry's again. Station-clock seconds, north/east metres.
 """
@@ -399,10 +400,14 @@ class LiveReference:
             found = dataclasses.replace(found, offset_ne_m=np.full((1, 2), np.nan))
         else:
             at, sigma = line
+            # the reference's sensitivity to the pose where the line puts the offset, at the fix's time (a buoy moves
+            # in the image: the window's mean of it lags, and the compass term it leaves is under-stated)
+            jac_at, _ = drift_line(t[recent], jac[recent].reshape(-1, 8), t_unix)
             found = dataclasses.replace(
                 found,
                 offset_ne_m=at[None],
                 sigma_ne_m=np.maximum(sigma, found.sigma_ne_m[0])[None],
+                jacobian=jac_at.reshape(1, 2, 4),
             )
         self._estimated |= bool(np.isfinite(found.offset_ne_m[0, 0]))
         return found, (t_unix - t[-1]) if len(t) else math.nan
