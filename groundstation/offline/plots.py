@@ -223,7 +223,10 @@ def top_view(
                     e, n, c=fixes.h_acc_m[good], s=9, cmap="viridis", zorder=3, label="fix"
                 )
                 fig.colorbar(
-                    sc, ax=ax, shrink=0.8, label="h_acc: claimed 1-sigma horizontal accuracy (m)"
+                    sc,
+                    ax=ax,
+                    shrink=0.8,
+                    label="h_acc: claimed horizontal accuracy (m; 2·h_acc holds 95 %)",
                 )
             else:
                 ax.plot(
@@ -364,7 +367,13 @@ def timeline(
                 label=f"{label}2·h_acc (95% if the claim holds)",
             )
         ax.plot(
-            t, fixes.h_acc_m, "-", lw=1.2, color=c, alpha=0.7, label=f"{label}h_acc (claimed 1σ)"
+            t,
+            fixes.h_acc_m,
+            "-",
+            lw=1.2,
+            color=c,
+            alpha=0.7,
+            label=f"{label}h_acc (2·h_acc holds 95 %)",
         )
     shaded = _shade([ax], first, t0, alpha=0.18)
     ax.set_ylabel("horizontal (m)")

@@ -33,7 +33,7 @@ def summary(fixes, err: np.ndarray | None) -> str:
     ]
     if ok.any():
         lines.append(
-            f"h_acc (claimed 1σ) median {np.median(fixes.h_acc_m[ok]):.3f} m, "
+            f"h_acc (2·h_acc holds 95 %) median {np.median(fixes.h_acc_m[ok]):.3f} m, "
             f"max {np.nanmax(fixes.h_acc_m[ok]):.3f} m"
         )
     if err is not None and np.isfinite(err).any():

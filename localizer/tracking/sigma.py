@@ -35,7 +35,7 @@ a while. :func:`pixel_sigma_px` adds these terms in quadrature:
 The constants are calibrated on generated sessions against the exact pixel the simulator
 writes (``bench/pixel_sigma.py``; docs/explanation/tracking.md, "How sure the pixel is", explains them):
 the match's terms so that no scenario has fewer than 90 % of its tracked pixels within twice
-their DRMS (√2·σ, h_acc's reading): 91-100 % per session, 98.7 % pooled; the outline's from
+their DRMS (√2·σ; a fix's h_acc is no longer a DRMS but half its 95 % radius): 91-100 % per session, 98.7 % pooled; the outline's from
 clicks and acquisitions beside the UUV's shadow and elsewhere (2-6 px off a vehicle 28 px
 long). Errors in those sessions are mostly a constant offset per session (where the reference
 point was taken), so the share is near 100 % in most and lower in a few; the window's and the
