@@ -110,9 +110,8 @@ AGREE_SIGMAS = 3.0  # ... and its source's next ones until one comes within this
 CONFLICT_AFTER = 3  # a source disagrees once this many of its measurements in a row were refused (not one glitch)
 CONFLICT_HOLD_S = 10.0  # a disagreement counts in the sigma until this long after the source's last refused measurement
 SOURCE_WINDOW_S = 30.0
-WANDER_LAG_S = (
-    2.0  # the span over which GNSS altitudes are averaged to see the barometer's wander ...
-)
+# the span over which GNSS altitudes are averaged to see the barometer's wander ...
+WANDER_LAG_S = 2.0
 BEND_N = 20  # ... and the differences of such means averaged (40 s)
 RANGEFINDER_FLOOR_M = 0.05  # laser rangefinders' data sheets: ±5 cm up to a few metres ...
 RANGEFINDER_SHARE = 0.01  # ... and 1 % of the range beyond (e.g. Benewake TFmini Plus, TF03)
@@ -392,9 +391,8 @@ class HeightEstimator:
                 # is learnt, is not inferred from it (only a take-off reference's S is unset); nor is the level
                 # from the wander's return to its mean where they can see the wander: the wander so far joins
                 # e, the wander from here starts at 0
-                var_d = P[
-                    _D, _D
-                ]  # d made independent of the rest (of e alone could leave P indefinite)
+                # d made independent of the rest (of e alone could leave P indefinite)
+                var_d = P[_D, _D]
                 P[_D, :] = P[:, _D] = 0.0
                 P[_D, _D] = var_d
                 if 2.0 * (GNSS_WHITE * stated) ** 2 < self.wander_d_m2 / 4.0:  # a difference of two
