@@ -463,9 +463,8 @@ class HeightEstimator:
         window = tuple(m for m in aux.window if m[0] > t - 2.0 * lag) + ((t, z),)
         n, mean, newest = aux.bend
         spans = [[zz for tt, zz in window if t - (k + 1) * lag < tt <= t - k * lag] for k in (1, 0)]
-        white = r * sum(
-            1.0 / max(len(v), 1) for v in spans
-        )  # in the difference of the spans' means
+        # the white noise in the difference of the spans' means
+        white = r * sum(1.0 / max(len(v), 1) for v in spans)
         if t - newest >= lag and window[0][0] <= t - 1.5 * lag and min(map(len, spans)) >= 2:
             a, b = (sum(v) / len(v) for v in spans)
             g = difference_var(aux.sigma_g, lag, GNSS_TAU_S)

@@ -306,10 +306,8 @@ def test_online_estimate_is_measured_in_a_nicer_process():
         deadline = time.monotonic() + 60.0
         while not online._frames.empty() and time.monotonic() < deadline:
             online.worker.stop.wait(0.01)
-        online._tel = (
-            tel,
-            now,
-        )  # taken once the frame in hand is measured: the estimate has them all
+        # taken once the frame in hand is measured: the estimate has them all
+        online._tel = (tel, now)
         while online.estimate is None and time.monotonic() < deadline:
             online.worker.stop.wait(0.05)
         children = [c for c in multiprocessing.active_children() if c not in before]

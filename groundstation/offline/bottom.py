@@ -86,9 +86,8 @@ MAX_RMS_PX = 0.6
 VELOCITY_RATE_M = 0.05
 #: m/√s: the tightest walk rate the recording may choose (an EKF velocity good to 0.5 mm/s over a second)
 MIN_WALK_RATE_M = 0.0005
-WALK_RATES_PER_DECADE = (
-    8  # the candidate rates' density (their marginal likelihood is cheap: no fit each)
-)
+#: the candidate rates' density (their marginal likelihood is cheap: no fit each)
+WALK_RATES_PER_DECADE = 8
 MIN_WHITE_M = 0.003  # the reported position's white noise (localizer.bottom.white_noise_m) taken at least this
 # the GNSS error's correlation time assumed: its rate is sigma_uav / √(this) per √s
 GNSS_WALK_S = 60.0
