@@ -64,7 +64,7 @@ COMMANDS = (
     ),
     (
         "replay",
-        "groundstation.replay",
+        "groundstation.session.replay",
         "re-stream a recorded session live (MAVLink, Zenoh depth, video)",
     ),
     (

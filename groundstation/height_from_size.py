@@ -49,7 +49,7 @@ from multiprocessing.shared_memory import SharedMemory
 
 import numpy as np
 
-from groundstation.threads import Supervised, in_thread
+from groundstation.runtime.threads import Supervised, in_thread
 from localizer.calibration import Calibration
 from localizer.pose import CameraPose
 from localizer.size_range import BiasEstimate, HeightBias, SizeHeight, size_height

@@ -179,7 +179,7 @@ def put_json(target, obj: dict, session: zenoh.Session) -> None:
 
 async def subscribe(session: zenoh.Session, key: str, handoff) -> None:
     """Subscribe to ``key`` until cancelled: Zenoh's thread hands each sample over as ``(key, payload bytes,
-    t_recv_unix)`` through ``handoff`` (a bounded :class:`~groundstation.threads.Handoff`), nothing more."""
+    t_recv_unix)`` through ``handoff`` (a bounded :class:`~groundstation.runtime.threads.Handoff`), nothing more."""
 
     def on_sample(sample: zenoh.Sample) -> None:
         handoff.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))

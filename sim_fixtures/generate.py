@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from groundstation.progress import progress as progress_bar
+from groundstation.offline.progress import progress as progress_bar
 from groundstation.session.read import UUV_TOML, UUVS_DIR
 from localizer.calibration import ConfigError
 

@@ -10,7 +10,7 @@ import time
 from live_helpers import ROOT, free_port, read_jsonl, skyfix, start, stop, wait_for
 
 from groundstation.mavlink.ingest import mavutil
-from groundstation.replay import frame_bytes
+from groundstation.session.replay import frame_bytes
 
 
 def _decode(buf: bytes):

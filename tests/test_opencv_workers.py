@@ -1,4 +1,4 @@
-"""OpenCV's worker threads keep the service's priority (:func:`groundstation.threads.start_opencv_workers`): a thread
+"""OpenCV's worker threads keep the service's priority (:func:`groundstation.runtime.threads.start_opencv_workers`): a thread
 of the service at nice 10 that runs OpenCV (the page's feed encoder) must not start the pool that every frame's
 OpenCV work then waits for. Each case in a fresh interpreter: OpenCV starts its pool once per process."""
 
@@ -14,7 +14,7 @@ import json, sys, threading
 from pathlib import Path
 import numpy as np
 from groundstation.live.ui.feed import encode_jpeg, lower_priority
-from groundstation.threads import start_opencv_workers
+from groundstation.runtime.threads import start_opencv_workers
 
 if sys.argv[1] == "started":
     start_opencv_workers()

@@ -49,10 +49,10 @@ from groundstation.runtime.preflight import (
     zenoh_problem,
 )
 from groundstation.runtime.queries import ZenohControl
+from groundstation.runtime.threads import Handoff
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
-from groundstation.threads import Handoff
 from groundstation.zenoh_session import open_session, subscribe
 from localizer.calibration import ConfigError
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_REACH_M, MAX_SPEED_MPS, FixGate

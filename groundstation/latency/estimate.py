@@ -52,8 +52,8 @@ import numpy as np
 
 from groundstation.height_from_size import SharedFrame, shared_image, start_measuring_process
 from groundstation.latency.video_motion import Rotation, RotationMeter
+from groundstation.runtime.threads import Supervised, in_thread
 from groundstation.session.read import SessionError, load_session
-from groundstation.threads import Supervised, in_thread
 from groundstation.video.file import open_video
 from groundstation.video.frames import VideoError
 from localizer.calibration import Calibration

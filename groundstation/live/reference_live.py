@@ -58,7 +58,7 @@ from groundstation.offline.reference import (
     find,
     report,
 )
-from groundstation.threads import Handoff
+from groundstation.runtime.threads import Handoff
 from groundstation.zenoh_session import subscribe
 from localizer import reference
 from localizer.fix import Fix, Fixes

@@ -12,7 +12,7 @@ each UUV's outputs, the parts its ``outputs`` names (by default the fixes on Zen
 (:mod:`.control`), the web page (:mod:`.ui`, unless ``--no-ui``) and, with ``--record``,
 the recorder (:mod:`.sinks.recorder`). The web page's port is taken before any worker
 starts, so a port in use stops the service at once (exit 2). Blocking I/O lives in threads owned by the
-workers (:mod:`groundstation.threads`: bounded hand-offs to the loop, supervised, never waited for at a stop);
+workers (:mod:`groundstation.runtime.threads`: bounded hand-offs to the loop, supervised, never waited for at a stop);
 all telemetry is written and read on the event loop.
 
 The workers are declared in one registry (:mod:`groundstation.runtime.workers`): each with its stop stage, its
@@ -66,6 +66,7 @@ from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
 from groundstation.offline.reference import read_file
 from groundstation.runtime.gps_input import GpsInputSink
 from groundstation.runtime.queries import ZenohControl
+from groundstation.runtime.threads import start_opencv_workers
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import (
     INPUTS,
@@ -77,7 +78,6 @@ from groundstation.runtime.workers import (
     stopped,
 )
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
-from groundstation.threads import start_opencv_workers
 from groundstation.video.live import VideoLive
 from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration, ConfigError, Tracker

@@ -10,7 +10,7 @@ second; a connection that drops within :data:`STABLE_S` of opening, as an unplug
 serial radio or a server that accepts and closes, keeps the back-off growing). The log
 says "down" once per kind of error while the link is away, and "up" once it is back for
 good (:data:`STABLE_S`). Nothing else opens, writes or closes the transport. The thread is
-:class:`~groundstation.threads.Supervised`: a bug in it (or in ``on_message``) is one log line, the
+:class:`~groundstation.runtime.threads.Supervised`: a bug in it (or in ``on_message``) is one log line, the
 transport is closed and the thread starts over with back-off (``restarts`` in the status).
 
 Reading: every message, BAD_DATA included, goes to ``on_message(msg, t_recv_unix)`` on the
@@ -56,7 +56,7 @@ from pathlib import Path
 
 from groundstation.mavlink.ingest import LinkError, mavutil
 from groundstation.mavlink.transport import open_transport
-from groundstation.threads import Supervised
+from groundstation.runtime.threads import Supervised
 from localizer.calibration import ConfigError
 
 log = logging.getLogger("skyfix.mavlink")
@@ -351,7 +351,7 @@ class MavlinkLink:
             )
 
     def _run(self, stop: threading.Event) -> None:
-        """The link's thread (under :class:`~groundstation.threads.Supervised`): connect, serve, reconnect with back-off."""
+        """The link's thread (under :class:`~groundstation.runtime.threads.Supervised`): connect, serve, reconnect with back-off."""
         backoff = BACKOFF_S
         next_beat = 0.0
         try:

@@ -54,7 +54,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from groundstation.progress import progress as progress_bar
+from groundstation.offline.progress import progress as progress_bar
 from groundstation.session.read import Session
 from localizer import bottom
 from localizer.calibration import Calibration

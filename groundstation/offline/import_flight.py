@@ -54,8 +54,8 @@ import numpy as np
 from groundstation.config_files import load_calibration
 from groundstation.latency.estimate import VideoStart, find_video_start, measure_rotations
 from groundstation.mavlink.ingest import mavutil
+from groundstation.offline.progress import progress as progress_bar
 from groundstation.outputs import output_dir
-from groundstation.progress import progress as progress_bar
 from groundstation.session import SessionError
 from groundstation.session.ardusub_log import read_ardusub_depth
 from groundstation.session.dataflash import DOWNWARD, FlightLog, read_dataflash

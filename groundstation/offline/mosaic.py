@@ -37,8 +37,8 @@ from scipy.ndimage import map_coordinates
 from groundstation.map.tiles import GeoTiffTiles, Written, write_tiles
 from groundstation.offline.bottom import MODES as BOTTOM_MODES
 from groundstation.offline.bottom import PoseCorrection, pixels_at, subsample_rows, uuv_radius_px
+from groundstation.offline.progress import progress as progress_bar
 from groundstation.outputs import output_dir
-from groundstation.progress import progress as progress_bar
 from groundstation.session.positions import read_positions_csv
 from groundstation.session.read import PRIMARY_UUV, Session, SessionError, load_session
 from localizer.geodesy import ned_to_geodetic

@@ -48,8 +48,8 @@ import numpy as np
 
 from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.video_motion import MotionThread, measured_every
+from groundstation.offline.progress import progress as progress_bar
 from groundstation.offline.uuv_workers import SizeWorker, TrackWorkers, available
-from groundstation.progress import progress as progress_bar
 from groundstation.session.read import Session, SessionError
 from groundstation.video.frames import VideoError
 from localizer.pose import uav_pose, with_depth

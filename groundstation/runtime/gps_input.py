@@ -69,7 +69,7 @@ from groundstation.mavlink.ids import GPS_COMPID, SKYFIX_SYSID
 from groundstation.mavlink.ingest import mavutil
 from groundstation.mavlink.link import MavlinkLink
 from groundstation.runtime.no_fix import NO_FIX_WHY, no_fix_reason
-from groundstation.threads import Supervised, in_thread
+from groundstation.runtime.threads import Supervised, in_thread
 from localizer.fix import Fix
 from localizer.fix_gate import Arrival, FixGate
 

@@ -14,8 +14,8 @@ slower than the stream: a saturated laptop), the packets before the newest keyfr
 unread (newest wins; counted in ``skipped_behind`` too): decoding restarts there, fresh frames come out again
 instead of none at all (every decoded frame stale, skipped) with the stream seconds behind. Each frame handed over goes
 to the event loop as a :class:`LiveFrame` through a bounded
-:class:`~groundstation.threads.Handoff` (:data:`HANDOFF_FRAMES`; beyond, the oldest
-is dropped and counted). The thread is :class:`~groundstation.threads.Supervised`
+:class:`~groundstation.runtime.threads.Handoff` (:data:`HANDOFF_FRAMES`; beyond, the oldest
+is dropped and counted). The thread is :class:`~groundstation.runtime.threads.Supervised`
 (a bug in it is one log line and a restart with back-off). A stop does not wait for
 it: FFmpeg's open or read cannot be interrupted from outside and may block for up to
 its timeout, so the daemon thread is left to see the stop and end by itself.
@@ -65,7 +65,7 @@ import av
 import numpy as np
 
 from groundstation.runtime.sender_lock import SenderLock
-from groundstation.threads import Handoff, Supervised, in_thread
+from groundstation.runtime.threads import Handoff, Supervised, in_thread
 from groundstation.video.ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
 from groundstation.video.frames import LiveFrame, VideoError, decoder, ffmpeg_reason, put_until
 from groundstation.video.inputs import VideoInput, parse_video_input

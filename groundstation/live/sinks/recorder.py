@@ -52,10 +52,10 @@ from pathlib import Path
 
 import av
 
+from groundstation.runtime.threads import failure_kind, in_thread
 from groundstation.session.positions import COLUMNS, format_row
 from groundstation.session.read import PRIMARY_UUV, UUV_TOML, UUVS_DIR
 from groundstation.session.tlog import tlog_record
-from groundstation.threads import failure_kind, in_thread
 from localizer.depth import DepthSample
 from localizer.fix import Fix
 

@@ -57,8 +57,8 @@ from groundstation.mavlink.ingest import (
     servo_pulses_us,
 )
 from groundstation.mavlink.link import MavlinkLink
+from groundstation.runtime.threads import Handoff, in_thread
 from groundstation.runtime.zenoh_mavlink import MavlinkIn
-from groundstation.threads import Handoff, in_thread
 from groundstation.zenoh_session import subscribe
 from localizer.depth import (
     PRESSURE_MESSAGES,

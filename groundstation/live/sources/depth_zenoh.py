@@ -24,7 +24,7 @@ import zenoh
 
 from groundstation.live.registry import DepthInput, register
 from groundstation.logs import Throttle, kind_of
-from groundstation.threads import Handoff
+from groundstation.runtime.threads import Handoff
 from groundstation.zenoh_session import subscribe
 from localizer.depth import DepthGate, DepthSample
 from localizer.telemetry import Telemetry

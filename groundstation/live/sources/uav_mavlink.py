@@ -3,7 +3,7 @@
 The link (:class:`~groundstation.mavlink.link.MavlinkLink`: its own thread, reconnecting
 a TCP or serial link that drops, each UDP datagram parsed on its own) hands every
 message, with its receive time (station clock, UNIX seconds), to the event loop
-through a bounded :class:`~groundstation.threads.Handoff` (:data:`HANDOFF_MESSAGES`;
+through a bounded :class:`~groundstation.runtime.threads.Handoff` (:data:`HANDOFF_MESSAGES`;
 when the loop falls that far behind the oldest are dropped, counted in ``handoff``),
 where it is fed into the :class:`~localizer.telemetry.Telemetry` (only the loop
 touches the telemetry); what skyfix sends is queued for the link's thread, so the
@@ -37,7 +37,7 @@ from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID
 from groundstation.mavlink.ingest import USED, ingest, mavutil, names_the_uav
 from groundstation.mavlink.link import MavlinkLink, read_signing_key
-from groundstation.threads import Handoff, in_thread
+from groundstation.runtime.threads import Handoff, in_thread
 from localizer.gnss import horizontal_sigma_m, vertical_sigma_m
 from localizer.telemetry import Telemetry
 
