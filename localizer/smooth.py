@@ -131,14 +131,8 @@ def smooth_fixes(
             np.nan,
             np.full(n, float(max_accel_mps2)),
         )
-    ref = (float(fixes.lat[idx[0]]), float(fixes.lon[idx[0]]))
-    zn, ze, _ = geodetic_to_ned(fixes.lat, fixes.lon, 0.0, *ref, 0.0)
-    z = np.stack([zn, ze], axis=1)
-    C = nan2.copy()
-    for i in idx:
-        C[i] = fix_covariance_m2(
-            fixes.sigma_n_m[i], fixes.sigma_e_m[i], fixes.cov_ne_m2[i], fixes.h_acc_m[i]
-        )
+    ref, z = _positions(fixes, idx)
+    C = _covariances(fixes, idx)
     share = white_share(fixes.t_unix[idx], z[idx], C[idx])
     fits = local_fits(fixes.t_unix[idx], z[idx])
     wave = jitter_share(fits, C[idx])
@@ -181,6 +175,60 @@ def smooth_fixes(
         wave,
         accel,
     )
+
+
+def through_smoother(
+    fixes: Fixes, taken: np.ndarray, smoothed: Smoothed, max_speed_mps: float, z_ne_m: np.ndarray
+) -> np.ndarray:
+    """Another series ``z_ne_m`` (N×2, m, at the frames of ``fixes``) through the very smoother that made
+    ``smoothed`` from ``fixes`` (its noise share and acceleration bounds, the fixes' covariances, the frames
+    ``taken``): N×2, NaN where ``smoothed`` has no position. The smoother is linear in the positions, so an error's
+    share of the smoothed track is this of its per-frame series (an error budget)."""
+    taken = np.asarray(taken, bool) & (fixes.status == "ok") & np.isfinite(fixes.h_acc_m)
+    idx = np.flatnonzero(taken)
+    z = np.where(taken[:, None], np.nan_to_num(np.asarray(z_ne_m, float)), 0.0)
+    x, _ = _rts(
+        fixes.t_unix,
+        z,
+        _covariances(fixes, idx),
+        taken,
+        idx[0],
+        idx[-1],
+        smoothed.white_share,
+        max_speed_mps,
+        smoothed.accel_mps2,
+    )
+    return np.where(smoothed.ok[:, None], x[:, :2], np.nan)
+
+
+def recording_jitter_share(fixes: Fixes, use: np.ndarray) -> float:
+    """The share of the fixes' covariance that their jitter over a wave's period shows (:func:`jitter_share`), over
+    the fixes ``use`` (bool per frame; ok fixes with a finite ``h_acc_m``) of a whole recording; NaN from too few."""
+    idx = np.flatnonzero(
+        np.asarray(use, bool) & (fixes.status == "ok") & np.isfinite(fixes.h_acc_m)
+    )
+    if not len(idx):
+        return float("nan")
+    z = _positions(fixes, idx)[1]
+    return jitter_share(local_fits(fixes.t_unix[idx], z[idx]), _covariances(fixes, idx)[idx])
+
+
+def _positions(fixes: Fixes, idx: np.ndarray) -> tuple[tuple[float, float], np.ndarray]:
+    """The first fix ``idx``'s (lat, lon) and every fix's (north, east) from it (N×2, m)."""
+    ref = (float(fixes.lat[idx[0]]), float(fixes.lon[idx[0]]))
+    zn, ze, _ = geodetic_to_ned(fixes.lat, fixes.lon, 0.0, *ref, 0.0)
+    return ref, np.stack([zn, ze], axis=1)
+
+
+def _covariances(fixes: Fixes, idx: np.ndarray) -> np.ndarray:
+    """N×2×2 north-east covariances of the fixes ``idx`` (:func:`~localizer.uuv_track.fix_covariance_m2`), NaN at
+    the other frames."""
+    C = np.full((len(fixes), 2, 2), np.nan)
+    for i in idx:
+        C[i] = fix_covariance_m2(
+            fixes.sigma_n_m[i], fixes.sigma_e_m[i], fixes.cov_ne_m2[i], fixes.h_acc_m[i]
+        )
+    return C
 
 
 def white_share(t: np.ndarray, z: np.ndarray, C: np.ndarray) -> float:

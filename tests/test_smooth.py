@@ -25,7 +25,7 @@ from groundstation.session.read import load_session, read_table
 from localizer.fix import Fixes
 from localizer.fix_gate import CONFIRM_S, FixGate, gate_offline
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
-from localizer.smooth import BRIDGE_SIGMA_M, smooth_fixes
+from localizer.smooth import BRIDGE_SIGMA_M, smooth_fixes, through_smoother
 from localizer.uncertainty import H_ACC_PER_SIGMA_ISOTROPIC
 from localizer.uuv_track import PROCESS_ACCEL_SHARE, WHITE_FLOOR_M
 from sim_fixtures.bundle import BUNDLED_DIR
@@ -197,6 +197,45 @@ def jitter(
     phase = rng.uniform(0.0, 2.0 * math.pi, 2)
     wave = amp_m * np.sin(2.0 * math.pi * hz * (t - t[0])[:, None] + phase)
     return wave + rng.normal(0.0, white_m, wave.shape)
+
+
+def test_a_swell_after_a_calm_stretch_is_taken_offline_and_a_look_alike_still_refused():
+    """2.5 s of calm (4 mm), then a 1 Hz swell of 10 cm with 2 cm of white noise, under an RTK drone's claim (0.33 m
+    per axis), ten frames on a look-alike 2 m away in the swell: the live gate, its share measured on the calm, refuses
+    the swell's true fixes as ``innovation``; offline its share is at least the recording's over a wave's period, so
+    every true fix is taken and the look-alike's are still refused (bridged over)."""
+    t, truth, _ = line(12.0, 11, 0.0)
+    s = t - t[0]
+    calm = (s < 2.5)[:, None]
+    z = truth + np.where(calm, jitter(t, 11, 0.004, 0.001), jitter(t, 11, 0.1, 0.02))
+    away = (s > 7.0) & (s < 7.0 + 10 / FPS)
+    z[away] += [2.0, 0.0]
+    fixes = fixes_of(t, z[:, 0], z[:, 1], 0.33)
+    live = gate_offline(
+        fixes, np.zeros(len(t), bool), FixGate(V, A, max_h_acc_m=math.inf, max_age_s=math.inf)
+    )
+    assert np.sum((live == "innovation") & ~away) > 30  # 86 of 350
+    sm, status = offline_track(fixes, V, A)
+    assert np.all(sm.gap_s[~away] == 0) and np.all(status == "ok")
+    assert np.all(sm.gap_s[away] > 0)
+    assert np.hypot(*(local(sm.lat, sm.lon) - truth)[away].T).max() < 0.05
+
+
+def test_another_series_goes_through_the_same_smoother():
+    """The fixes' own positions through :func:`through_smoother` are the smoothed track; a constant comes out as
+    itself and a sum as the sum of its parts (the smoother is linear: an error budget adds up)."""
+    t, truth, _ = line(8.0, 12, 0.0)
+    z = truth + jitter(t, 12)
+    fixes = fixes_of(t, z[:, 0], z[:, 1], 0.012)
+    taken = np.ones(len(t), bool)
+    sm = smooth_fixes(fixes, taken, V, A)
+    own = through_smoother(fixes, taken, sm, V, local(fixes.lat, fixes.lon))
+    assert np.abs(own - local(sm.lat, sm.lon)).max() < 1e-6
+    const = through_smoother(fixes, taken, sm, V, np.tile([0.3, -0.2], (len(t), 1)))
+    assert np.abs(const - [0.3, -0.2]).max() < 1e-9
+    a, b = truth, z - truth
+    parts = through_smoother(fixes, taken, sm, V, a) + through_smoother(fixes, taken, sm, V, b)
+    assert np.abs(parts - through_smoother(fixes, taken, sm, V, z)).max() < 1e-9
 
 
 @pytest.mark.parametrize("seed", [6, 7])

@@ -4,7 +4,8 @@
 whole recording is there: the fixes go through the safety gates
 (:func:`localizer.fix_gate.gate_offline`: a fix off the UUV's track or a target never
 confirmed is left out; a re-acquired target's first second is confirmed by the fixes after
-it), and the ones taken are smoothed forward and backward
+it; the gates' white share never below the jitter the whole recording shows over a wave's
+period, :class:`FlooredScatter`), and the ones taken are smoothed forward and backward
 (:func:`localizer.smooth.smooth_fixes`), gaps bridged while the smoothed position's own
 1-sigma stays within :data:`localizer.smooth.BRIDGE_SIGMA_M`.
 
@@ -33,7 +34,8 @@ from groundstation.runtime.gps_input import LOSS_STATUSES
 from groundstation.session.positions import write_table
 from localizer.fix import Fixes
 from localizer.fix_gate import FixGate, gate_offline
-from localizer.smooth import Smoothed, smooth_fixes
+from localizer.smooth import Smoothed, recording_jitter_share, smooth_fixes
+from localizer.uuv_track import Scatter
 
 NAME = "positions_smoothed.csv"
 COLUMNS = (
@@ -59,6 +61,7 @@ def offline_track(
 ) -> tuple[Smoothed, np.ndarray]:
     """The smoothed track of a recording's fixes and its status word per frame (see the module doc)."""
     gate = FixGate(max_speed_mps, max_accel_mps2, max_h_acc_m=math.inf, max_age_s=math.inf)
+    gate.scatter = FlooredScatter(recording_jitter_share(fixes, fixes.status == "ok"))
     words = gate_offline(fixes, np.isin(fixes.status, LOSS_STATUSES), gate)
     taken = np.array([w is None for w in words], dtype=bool)
     smoothed = smooth_fixes(fixes, taken, max_speed_mps, max_accel_mps2)
@@ -66,6 +69,22 @@ def offline_track(
         smoothed.ok, "ok", np.where(fixes.status == "ok", "refused", fixes.status)
     ).astype(object)
     return smoothed, status
+
+
+class FlooredScatter(Scatter):
+    """The gate's white share (:class:`~localizer.uuv_track.Scatter`) never below ``floor``: offline, the jitter the
+    whole recording shows over a wave's period (:func:`localizer.smooth.recording_jitter_share`, a median: a wrong
+    target's jumps do not raise it). Waves move a fix by 5-10 cm over a second; the frame-to-frame share measured
+    on the fixes gated so far can be a tenth of that in a calm stretch (a fresh breeze's true pixel: 0.001 against
+    0.03), and the true UUV's next swell was refused as ``innovation``, then ``diverged``, for seconds."""
+
+    def __init__(self, floor: float):
+        super().__init__()
+        self.floor = floor if math.isfinite(floor) else 0.0
+
+    @property
+    def share(self) -> float:
+        return max(self.floor, super().share)
 
 
 def traced_back(causal: Fixes, offline: Fixes) -> np.ndarray:
