@@ -8,9 +8,9 @@ its own sensor errors on RTK and on plain GNSS; generated once with video into `
 twice, tracking the video and with ``--use-track`` (the true pixel), and prints the refraction rows: coverage of the
 frames where the UUV can be seen, MAE, shape (MAE after the best constant offset), share within 2·h_acc, the scene's
 wave-only MAE, what the telemetry allows (MAE and shape of the true pixel's flat-surface solution with the reported
-telemetry) and the tracked run's ratios to it (target: within 1.2×), and the smoothed track's shape (target with
-RTK: ≤ 0.03 m). The ``--use-track`` rows are the geometry alone, so the numbers mean something where the tracker still
-loses frames. The last two columns measure the tracked pixel against the true one (``track.csv``: the UUV's top face
+telemetry) and the tracked run's ratios to it (target: within 1.2×), the share of the frames the smoothed track has a
+position at and its shape (target with RTK: ≤ 0.03 m). The ``--use-track`` rows are the geometry alone, so the numbers
+mean something where the tracker still loses frames. The last two columns measure the tracked pixel against the true one (``track.csv``: the UUV's top face
 seen through the waves) over the frames located: the bias (px, the length of the mean error) and the jitter about it
 (px, the mean distance from that mean), the pixel's own part of the tracked row's error.
 """
@@ -43,7 +43,8 @@ COLUMNS = (
     ("allowed_shape_m", "shape m", "{:.4f}"),
     ("mae_ratio", "×MAE", "{:.2f}"),
     ("shape_ratio", "×shape", "{:.2f}"),
-    ("smoothed_shape_m", "smoothed shape", "{:.4f}"),
+    ("smoothed_coverage", "smoothed", "{:.1%}"),
+    ("smoothed_shape_m", "shape m", "{:.4f}"),
     ("smoothed_within_2sigma", "in 2σ", "{:.1%}"),
 )
 
