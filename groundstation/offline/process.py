@@ -67,12 +67,14 @@ from groundstation.session.read import (
     load_session,
     load_sessions,
     uuv_ids,
+    video_file,
 )
+from groundstation.video.file import decoding_early
 from localizer.fix import Fixes, locate
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
 from localizer.height import take_notices
 from localizer.pose import camera_pose
-from localizer.tracking import TRACKERS
+from localizer.tracking import GREY_TRACKERS, TRACKERS
 
 #: ``--uuv`` for every UUV of the session (one pass over the video, an output folder each).
 ALL_UUVS = "all"
@@ -343,6 +345,22 @@ def print_warnings(session: Session) -> None:
 
 
 def run(args) -> int:
+    with _decoding_early(args):
+        return _run(args)
+
+
+def _decoding_early(args):
+    """The session's video decoding from now on, while the session is read and its poses computed, on a core that
+    would be idle meanwhile (:func:`groundstation.video.file.decoding_early`; its tracking takes it): where it is
+    tracked here and nothing is forked beside the decoder's threads (not with ``--use-track``, ``--track-workers``,
+    ``--beside``)."""
+    video = video_file(args.session)
+    if video is None or args.use_track or args.track_workers or args.beside:
+        return contextlib.nullcontext()
+    return decoding_early(video, grey=args.tracker in GREY_TRACKERS)
+
+
+def _run(args) -> int:
     out = output_dir(args.out)
     if args.uuv != ALL_UUVS:
         return process_one(load_session(args.session, args.uuv), args, out)

@@ -293,6 +293,11 @@ def load_sessions(path, uuvs: list[str]) -> list[Session]:
     return [load_session(path, uuv, read) for uuv in uuvs]
 
 
+def video_file(path) -> Path | None:
+    """The session directory ``path``'s video (the first ``video.*`` file by name), or None."""
+    return next(iter(sorted(p for p in Path(path).glob("video.*") if p.is_file())), None)
+
+
 def load_session(path, uuv: str = PRIMARY_UUV, read: dict | None = None) -> Session:
     """Read and validate a session directory, as the records of its UUV ``uuv`` (see :func:`uuv_ids`); ``read``:
     see :func:`load_sessions`."""
@@ -330,13 +335,10 @@ def load_session(path, uuv: str = PRIMARY_UUV, read: dict | None = None) -> Sess
         session.track = read_table(files.track, ("t", "u", "v"), allow_empty=("u", "v"))
     if files.truth.is_file():
         session.truth = read_table(files.truth, ("t", "lat", "lon", "depth_m"))
-    videos = sorted(p for p in path.glob("video.*") if p.is_file())
-    if videos:
-        session.video_path = videos[0]
+    if (video := video_file(path)) is not None:
+        session.video_path = video
         if not (path / "video_frames.csv").is_file():
-            raise SessionError(
-                f"{path / 'video_frames.csv'}: missing (required with {videos[0].name})"
-            )
+            raise SessionError(f"{path / 'video_frames.csv'}: missing (required with {video.name})")
         session.frames = read_table(path / "video_frames.csv", ("frame", "t"))
         _restamp_unsettled(session)
     return session

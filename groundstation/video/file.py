@@ -36,10 +36,15 @@ with slice threads only from the keyframe before the first frame not yet handed 
 handed on already are skipped): every frame the slice-threaded decoder can decode is delivered,
 with its own index and time. Each packet that fails to decode is then skipped and counted
 (:attr:`Video.bad_reads`).
+
+:func:`decoding_early` starts decoding a file before its reader is ready (``skyfix process`` while it reads the
+session, with a core idle): the reader's :func:`open_video` takes that video as it is and reads on from its first
+frame, numbered by the ``indices`` given then (frames are numbered in the reader's thread, as it takes them).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import queue
@@ -62,6 +67,14 @@ REGULAR_TOLERANCE = 0.05
 #: 300 frames 3.3-3.7 s with 3, 2.7-2.9 s with 8 (peak RSS 228 → 364 MB; 535 MB with 16). Read in BGR, 8 were
 #: slower than 3 (``bench/import_long.py``'s 4K video, 600 frames: 3.7-4.9 s → 5.5-6.3 s).
 GREY_FRAME_THREADS = 8
+#: A video decoding early (:func:`decoding_early`) keeps at most about this many bytes of frames ahead of its reader
+#: (yuv420p 1080p: 67 frames, 4K: 16).
+EARLY_BYTES = 200 * 2**20
+#: A video decoding early keeps at least this many frames ahead (the prefetching reader's default).
+EARLY_FRAMES = 8
+
+#: The videos decoding early (:func:`decoding_early`), by (resolved path, grey), until :func:`open_video` takes one.
+_early: dict[tuple[Path, bool], _Early] = {}
 
 
 def frame_indices(pts: list[int], indices: Sequence[int] | None = None) -> dict[int, int]:
@@ -109,7 +122,7 @@ class Video:
         self._tb = float(self._stream.time_base or Fraction(1, 90000))
         self._last_index = -1
         self._frames = self._decode()
-        self._prefetching: tuple[threading.Event, threading.Thread] | None = None
+        self._prefetching: tuple[threading.Event, threading.Thread, queue.Queue] | None = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -170,14 +183,28 @@ class Video:
 
     def read(self) -> VideoFrame | None:
         """The next decodable frame, or None at the end of the video."""
+        return self._numbered(self._next_decoded())
+
+    def _next_decoded(self) -> tuple[av.VideoFrame, np.ndarray, av.VideoFrame | None] | None:
+        """The next decoded frame, its image (luma view or BGR, as :meth:`read` hands it on) and the frame again
+        where the image is its luma plane (:attr:`VideoFrame.decoded`), or None at the end; in the decoding thread
+        when prefetching."""
         try:
             frame = next(self._frames, None)
         except av.error.FFmpegError as e:
             raise VideoError(f"{self.url}: {ffmpeg_reason(e)}") from None
         if frame is None:
             return None
-        decoded = frame if self.grey and frame.format.name == "yuv420p" else None
-        image = frame.to_ndarray(format="bgr24") if decoded is None else _luma(frame)
+        if self.grey and frame.format.name == "yuv420p":
+            return frame, _luma(frame), frame
+        return frame, frame.to_ndarray(format="bgr24"), None
+
+    def _numbered(self, decoded: tuple | None) -> VideoFrame | None:
+        """:meth:`_next_decoded`'s frame checked and numbered (in the reader's thread: the numbering may be set after
+        decoding started, :func:`decoding_early`)."""
+        if decoded is None:
+            return None
+        frame, image, luma_of = decoded
         self._check_size(image)
         pts = frame.pts if frame.pts is not None else None
         index = (
@@ -188,7 +215,7 @@ class Video:
         index = max(index, self._last_index + 1)
         self._last_index = index
         t_s = (pts - self._t0) * self._tb if pts is not None else index / (self.fps or 30.0)
-        return VideoFrame(index, image, t_s, decoded)
+        return VideoFrame(index, image, t_s, luma_of)
 
     def _check_size(self, image: np.ndarray) -> None:
         if self.expected_size is None:
@@ -205,25 +232,17 @@ class Video:
             yield frame
 
     def prefetch(self, depth: int = 8) -> Iterator[VideoFrame]:
-        """Iterate with decoding in a background thread (FFmpeg releases the GIL), ``depth`` frames ahead.
+        """Iterate with decoding in a background thread (FFmpeg releases the GIL), ``depth`` frames ahead (a
+        video decoding early, :func:`decoding_early`, goes on from the frames it decoded meanwhile, then keeps
+        ``depth`` ahead).
 
         A :class:`VideoError` raised while decoding is re-raised in the caller's thread.
         """
-        q: queue.Queue = queue.Queue(maxsize=depth)
-        stop = threading.Event()
-
-        def work():
-            try:
-                for frame in self:
-                    if not put_until(q, frame, stop):
-                        return
-                put_until(q, None, stop)
-            except VideoError as e:
-                put_until(q, e, stop)
-
-        worker = threading.Thread(target=work, name="video-decode", daemon=True)
-        self._prefetching = (stop, worker)
-        worker.start()
+        if self._prefetching is None:
+            self._start(depth)
+        stop, worker, q = self._prefetching
+        with q.mutex:
+            q.maxsize = depth
         try:
             while True:
                 try:
@@ -232,19 +251,37 @@ class Video:
                     if stop.is_set() or not worker.is_alive():
                         return  # closed under us
                     continue
-                if item is None:
-                    return
                 if isinstance(item, VideoError):
                     raise item
-                yield item
+                if (frame := self._numbered(item)) is None:
+                    return
+                yield frame
         finally:
             stop.set()
             worker.join()
 
+    def _start(self, depth: int) -> None:
+        """Decoding in a background thread, at most ``depth`` frames ahead of the reader (:meth:`prefetch`)."""
+        q: queue.Queue = queue.Queue(maxsize=depth)
+        stop = threading.Event()
+
+        def work():
+            try:
+                while (item := self._next_decoded()) is not None:
+                    if not put_until(q, item, stop):
+                        return
+                put_until(q, None, stop)
+            except VideoError as e:
+                put_until(q, e, stop)
+
+        worker = threading.Thread(target=work, name="video-decode", daemon=True)
+        self._prefetching = (stop, worker, q)
+        worker.start()
+
     def close(self) -> None:
         """Release the decoder (after stopping a :meth:`prefetch` thread still reading from it)."""
         if self._prefetching is not None:
-            stop, worker = self._prefetching
+            stop, worker, _ = self._prefetching
             stop.set()
             worker.join()
             self._prefetching = None
@@ -261,6 +298,55 @@ def _luma(frame: av.VideoFrame) -> np.ndarray:
     """A view (H, W) of a yuv420p frame's luma plane, without its rows' padding."""
     plane = frame.planes[0]
     return np.frombuffer(plane, np.uint8).reshape(frame.height, plane.line_size)[:, : frame.width]
+
+
+class _Early:
+    """A video file opened and decoding in a thread of its own (:func:`decoding_early`); ``video``: the open
+    :class:`Video`, prefetching, once ``opened`` is set (None: it could not be opened, :func:`open_video` will say
+    why)."""
+
+    def __init__(self, path: Path, grey: bool):
+        self.path, self.grey = path, grey
+        self.video: Video | None = None
+        self.opened = threading.Event()
+        self._thread = threading.Thread(target=self._open, name="video-early", daemon=True)
+        self._thread.start()
+
+    def _open(self) -> None:
+        try:
+            video = _opened(str(self.path), 0, 0, self.grey)
+        except VideoError:
+            video = None
+        if video is not None:
+            w, h = video.size
+            frame_bytes = w * h * (3 if not self.grey else 1.5)
+            video._start(max(EARLY_FRAMES, int(EARLY_BYTES // frame_bytes) if frame_bytes else 0))
+        self.video = video
+        self.opened.set()
+
+    def taken(self) -> Video | None:
+        """The open video (None: it could not be opened), once open."""
+        self.opened.wait()
+        return self.video
+
+
+@contextlib.contextmanager
+def decoding_early(url, grey: bool = False) -> Iterator[None]:
+    """Within the block, the video file ``url`` is decoding already in the background (read ``grey`` or not, FFmpeg's
+    thread count, no limit on bad reads: :func:`open_video`'s defaults), up to :data:`EARLY_BYTES` of its frames
+    ahead: the block's first :func:`open_video` of that file with the same ``grey`` and those defaults takes it, as
+    it is, and reads on from its first frame (numbered by the ``indices`` given then). ``skyfix process`` starts
+    decoding so while it reads the session, which leaves a core idle (issue 30). A video not taken is closed at the
+    end of the block."""
+    key = (Path(url).resolve(), grey)
+    early = _early[key] = _early.get(key) or _Early(key[0], grey)
+    try:
+        yield
+    finally:
+        if _early.get(key) is early:
+            del _early[key]
+            if (video := early.taken()) is not None:
+                video.close()
 
 
 def _presentation_times(path: str) -> tuple[list[int], Fraction]:
@@ -308,8 +394,21 @@ def open_video(
     indices (``video_frames.csv``), which number the frames when the counts agree. ``grey``: frames as their
     luma plane where the video is yuv420p (see the module doc).
     """
-    route_ffmpeg_log()
     url = str(url)
+    path = Path(url)
+    early = (
+        _early.pop((path.resolve(), grey), None) if threads == 0 and max_bad_reads == 0 else None
+    )
+    if early is not None and (video := early.taken()) is not None:
+        video.url = url
+        return _adopted(video, expected_size, indices)
+    return _adopted(_opened(url, threads, max_bad_reads, grey), expected_size, indices)
+
+
+def _opened(url: str, threads: int, max_bad_reads: int, grey: bool) -> Video:
+    """The file ``url`` opened as :func:`open_video` opens it, its frames numbered by their timestamps alone, no
+    size expected yet."""
+    route_ffmpeg_log()
     path = Path(url)
     if not path.exists():
         raise VideoError(f"{url}: missing")
@@ -318,7 +417,7 @@ def open_video(
     if path.stat().st_size == 0:
         raise VideoError(f"{url}: empty file")
     try:
-        index_of = frame_indices(_presentation_times(url)[0], indices)
+        index_of = frame_indices(_presentation_times(url)[0])
         container = av.open(url)
         if not container.streams.video:
             container.close()
@@ -326,7 +425,16 @@ def open_video(
     except (av.error.FFmpegError, IndexError) as e:
         why = ffmpeg_reason(e) if isinstance(e, av.error.FFmpegError) else "no video stream"
         raise VideoError(f"{url}: FFmpeg cannot open it ({why})") from None
-    video = Video(container, url, expected_size, max_bad_reads, index_of, threads, grey)
+    return Video(container, url, None, max_bad_reads, index_of, threads, grey)
+
+
+def _adopted(video: Video, expected_size, indices: Sequence[int] | None) -> Video:
+    """``video`` (open, no frame read yet by its reader) with the ``expected_size`` and the frames numbered by
+    ``indices``, as :func:`open_video` describes."""
+    if indices is not None:
+        video._index_of = frame_indices(list(video._index_of), indices)
+    video.expected_size = expected_size
+    url = video.url
     w, h = video.size
     if expected_size is not None and w > 0 and h > 0 and (w, h) != tuple(expected_size):
         video.close()

@@ -1,0 +1,56 @@
+"""A video file decoding early (groundstation.video.file.decoding_early): taken by open_video as it is, numbered then."""
+
+import shutil
+
+import numpy as np
+import pytest
+from test_tracking_video import FPS, SIZE, N, _bar_column, _encode
+
+from groundstation.video import file
+from groundstation.video.file import decoding_early, open_video
+
+pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    return _encode(tmp_path_factory.mktemp("early") / "clip.mp4")
+
+
+def _read(video) -> list[tuple]:
+    return [(f.index, f.t_s, _bar_column(f.bgr())) for f in video.prefetch(depth=3)]
+
+
+@pytest.mark.parametrize("grey", [False, True])
+def test_the_early_decoder_gives_the_frames_a_fresh_open_gives(clip, grey):
+    """The session's numbering (``indices``) is given after decoding started: the frames come out numbered by it,
+    as from a video opened afterwards."""
+    indices = [100 + 2 * i for i in range(N)]
+    with open_video(clip, expected_size=SIZE, indices=indices, grey=grey) as fresh:
+        expected = _read(fresh)
+    with (
+        decoding_early(clip, grey=grey),
+        open_video(clip, expected_size=SIZE, indices=indices, grey=grey) as video,
+    ):
+        assert video._prefetching is not None  # taken decoding, not opened again
+        frames = _read(video)
+    assert frames == expected
+    assert [i for i, *_ in frames] == indices
+    assert [c for *_, c in frames] == [2 * i for i in range(N)]
+    np.testing.assert_allclose([t for _, t, _ in frames], np.arange(N) / FPS)
+
+
+def test_only_the_same_reading_takes_it_and_an_untaken_one_is_closed(clip):
+    with decoding_early(clip, grey=True):
+        early = file._early[(clip.resolve(), True)].taken()
+        with open_video(clip, grey=False) as colour:  # not grey: opened afresh
+            assert colour is not early and colour._prefetching is None
+        assert early._prefetching is not None
+    assert early._prefetching is None and not file._early  # closed
+
+
+def test_a_size_other_than_the_calibrations_is_still_an_error(clip):
+    from groundstation.video.frames import VideoError
+
+    with decoding_early(clip), pytest.raises(VideoError, match="differs from the calibration"):
+        open_video(clip, expected_size=(SIZE[0] * 2, SIZE[1]))
