@@ -31,6 +31,10 @@ slid off it (or locked onto something else), and the fix it gives is not the UUV
 says. The tracker's own jitter through waves is well inside it (its median error is at most 0.22 of the size in
 every condition). An earlier version counted a frame wrong only beyond 3 x the size and located otherwise, so a
 track 60-76 px off a 27 px UUV counted as located.
+
+A last table (:func:`separation`): how far the UUV stands out of the seafloor beside it, in grey levels (what the
+default tracker reads) and in the colour channel that best tells the first frame's vehicle from its surroundings
+(:func:`fisher_bgr`): whether a lost UUV was there to be seen, and in which.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ import sys
 import tomllib
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -211,6 +216,72 @@ def score(session: Path, tracked: dict, causal: bool) -> dict:
     }
 
 
+#: BGR weights of OpenCV's grey level (what the default tracker reads: a video's luma)
+GREY_BGR = np.array([0.114, 0.587, 0.299])
+SEPARATION_EVERY = 5  # frames: the separation is measured on every this-many-th visible frame ...
+SEPARATION_PLACES = 200  # ... against the seafloor's squares at this many places ...
+SEPARATION_REACH = 4.0  # ... 1 to this many UUV sizes from its true pixel
+
+
+def fisher_bgr(frame: np.ndarray, box) -> np.ndarray:
+    """BGR weights of the channel in which the vehicle in ``box`` (x, y, w, h; its central half) stands out most
+    from a ring one box side wide about it (Fisher's discriminant: the mean colours' difference weighed by the
+    inverse of the pooled covariance, a grey level of variance 1 added)."""
+    x, y, w, h = box
+    pixels = frame.astype(np.float64)
+    inner = pixels[y + h // 4 : y + h - h // 4, x + w // 4 : x + w - w // 4].reshape(-1, 3)
+    x0, y0 = max(x - w, 0), max(y - h, 0)
+    around = pixels[y0 : y + 2 * h, x0 : x + 2 * w]
+    outside = np.ones(around.shape[:2], bool)
+    outside[y - y0 : y - y0 + h, x - x0 : x - x0 + w] = False
+    pooled = np.cov(inner.T) + np.cov(around[outside].T) + np.eye(3)
+    return np.linalg.solve(pooled, inner.mean(axis=0) - around[outside].mean(axis=0))
+
+
+def _spread(level: np.ndarray, u: float, v: float, half: int) -> float:
+    """The standard deviation of ``level`` over the square of side 2·``half`` + 1 about (u, v) (NaN off it)."""
+    square = level[
+        max(round(v) - half, 0) : round(v) + half + 1, max(round(u) - half, 0) : round(u) + half + 1
+    ]
+    return float(square.std()) if square.size else math.nan
+
+
+def separation(session: Path) -> dict:
+    """How much the UUV stands out of the seafloor, in grey levels and in colour: per measured frame, the spread
+    (standard deviation) of the UUV-sized square at its true pixel over the 90th percentile of the spreads of such
+    squares of the seafloor about it (``SEPARATION_*``; below 1: the UUV stands out less than a tenth of the
+    seafloor's own patches); the median and the share of frames below 1.5, in grey levels (what the tracker reads)
+    and in the colour channel that tells the first frame's vehicle from its surroundings best (:func:`fisher_bgr`)."""
+    truth = read_table(session / "track.csv", ("t", "u", "v"), allow_empty=("u", "v"))
+    box = tomllib.loads((session / "session.toml").read_text())["tracker"]["init_bbox"]
+    half = (max(box[2], box[3]) - 2 * BOX_PAD_PX) // 2
+    rng = np.random.default_rng(0)
+    video = cv2.VideoCapture(str(session / "video.mp4"))
+    ratios, weights, i = {"grey": [], "colour": []}, None, 0
+    while True:
+        ok, frame = video.read()
+        if not ok:
+            break
+        if weights is None:
+            weights = {"grey": GREY_BGR, "colour": fisher_bgr(frame, box)}
+        u, v = truth["u"][i], truth["v"][i]
+        if np.isfinite(u) and i % SEPARATION_EVERY == 0:
+            reach = SEPARATION_REACH * 2 * half
+            offsets = rng.uniform(-reach, reach, (SEPARATION_PLACES, 2))
+            offsets = offsets[np.abs(offsets).max(axis=1) > 2 * half]
+            for name, w in weights.items():
+                level = frame.astype(np.float64) @ w
+                seafloor = [_spread(level, u + du, v + dv, half) for du, dv in offsets]
+                ratios[name].append(_spread(level, u, v, half) / np.nanpercentile(seafloor, 90))
+        i += 1
+    video.release()
+    out = {}
+    for name, r in ratios.items():
+        r = np.array(r)
+        out[f"{name}_median"], out[f"{name}_low"] = float(np.median(r)), float(np.mean(r < 1.5))
+    return out
+
+
 def _share(flags: np.ndarray, among: np.ndarray) -> float:
     """The share of ``among`` that ``flags`` holds (NaN of none)."""
     return float(flags[among].mean()) if among.any() else math.nan
@@ -239,12 +310,13 @@ def main() -> int:
         f"{'condition':14s} {'size':>4s} {'tol':>4s} {'tree':>8s} {'pass':>6s} {'located':>13s} {'share':>6s} "
         f"{'wrong':>5s} {'hidden ok':>9s} {'p50 px':>6s} {'p95 px':>6s} {'2drms':>6s} {'wrong 2drms':>11s} {'ms/fr':>6s}"
     )
-    lines, data = [header], {}
+    lines, data, separations = [header], {}, {}
     print(header, flush=True)
     for name, base, size_px, depth_m in CONDITIONS:
         if args.only and name not in args.only:
             continue
         session = condition(work, sim, name, base, size_px, depth_m, args.duration)
+        separations[name] = separation(session)
         for label, tree in trees.items():
             tracked = track(tree, session)
             for way in ("causal", "both") if tracked["bridged"] is not None else ("causal",):
@@ -268,7 +340,18 @@ def main() -> int:
         f"{name:14s} {'meets' if r['now']['causal']['meets'] else 'misses'}"
         for name, r in data.items()
     ]
-    emit(lines, Path(args.out), data)
+    lines += [
+        "",
+        "how much the UUV stands out of the seafloor (separation(): its square's spread over the 90th percentile of",
+        "the seafloor's squares about it; median over the frames, share of frames below 1.5), in grey levels (what",
+        "the tracker reads) and in the colour channel that best tells the first frame's vehicle from its surroundings:",
+        f"{'condition':14s} {'grey':>6s} {'< 1.5':>6s} {'colour':>6s} {'< 1.5':>6s}",
+    ]
+    lines += [
+        f"{name:14s} {r['grey_median']:6.2f} {r['grey_low']:6.1%} {r['colour_median']:6.2f} {r['colour_low']:6.1%}"
+        for name, r in separations.items()
+    ]
+    emit(lines, Path(args.out), {"tracked": data, "separation": separations})
     return 0
 
 
