@@ -1,7 +1,7 @@
 """Priority inversion on the interpreter's lock, isolated: a frame thread beside background Python at a low priority.
 
     .venv/bin/python bench/gil_inversion.py [--session DIR] [--seconds 10] [--rounds 3] [--nice -10]
-        [--out bench/results/gil_inversion.txt]
+        [--modes none,...] [--out bench/results/gil_inversion.txt]
 
 This process stands for ``skyfix run`` at the unit's priority (``--nice``, as deploy/skyfix.service's ``Nice=``;
 negative needs root) beside two processes spinning ``while True: pass`` at the bench's own priority. Its frame
@@ -20,7 +20,15 @@ of CPU holding the lock), in one of four ways (interleaved, ``--rounds`` times):
 - ``feed_nice10``: instead, the operator page's feed encoder as it runs (a thread at nice 10,
   :func:`groundstation.live.ui.feed.lower_priority`): a frame of the session's video to JPEG
   (:func:`~groundstation.live.ui.feed.encode_jpeg`, 960 pixels wide) 10 times a second, its work in OpenCV with
-  the lock released.
+  the lock released;
+- ``mosaic_nice10``: instead, the live mosaic's painting as it ran before it moved to a process: a frame of the
+  session's video painted once a second (:meth:`groundstation.live.mosaic_live.MosaicPainter.paint_frame`, floor 2 m
+  below the surface) in a thread at nice 10;
+- ``mosaic_process``: the live mosaic as it runs now (:class:`~groundstation.live.mosaic_live.LiveMosaic`): a
+  thread at this process's priority hands the frame to the painting process (shared memory, the process 10 nice
+  levels below this one) once a second and waits for it.
+
+``--modes`` runs a subset.
 
 Without ``--session``, ``bench/live_latency.py``'s 1080p session (``/tmp/skyfix-bench/live_1080p_20s``, rendered
 by that bench).
@@ -34,6 +42,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -42,12 +51,23 @@ import numpy as np
 from emit import emit
 
 from groundstation.latency.estimate import AttitudeTrack
+from groundstation.live.mosaic_live import LiveMosaic, MosaicPainter
 from groundstation.live.ui.feed import encode_jpeg, lower_priority
 from groundstation.session.read import load_session
 from groundstation.video.file import open_video
+from localizer.pose import uav_pose
 
 ROOT = Path(__file__).resolve().parents[1]
-MODES = ("none", "thread_nice10", "thread_same", "process", "feed_nice10")
+MODES = (
+    "none",
+    "thread_nice10",
+    "thread_same",
+    "process",
+    "feed_nice10",
+    "mosaic_nice10",
+    "mosaic_process",
+)
+FLOOR_DEPTH_M = 2.0  # the live mosaic's floor below the surface
 FRAME_S = 1.0 / 30.0
 FRAME_WORK_S = 0.002  # a frame's Python, holding the lock
 WINDOW_S = 20.0  # the live estimate's window
@@ -93,6 +113,27 @@ def feed_thread(session_dir: str, stop: threading.Event) -> None:
         stop.wait(max(0.0, 0.1 - (time.monotonic() - t0)))
 
 
+def mosaic_thread(session_dir: str, stop: threading.Event, in_process: bool) -> None:
+    """The live mosaic's painting once a second: in this thread at nice 10, or handed to its process."""
+    session = load_session(session_dir)
+    cal, tel = session.calibration, session.telemetry
+    with open_video(session.video_path) as video:
+        image = next(iter(video)).image
+    pose = uav_pose(cal, tel, float(session.frames["t"][0]))
+    with tempfile.TemporaryDirectory(prefix="skyfix-bench-mosaic-") as spill:
+        if in_process:
+            live = LiveMosaic(cal, tel, FLOOR_DEPTH_M, 1.0)
+            paint = live._paint_frame  # its EveryFrame thread's work
+        else:  # its thread at nice 10, as it was
+            paint = MosaicPainter(cal, FLOOR_DEPTH_M, Path(spill)).paint_frame
+            lower_priority()
+        try:
+            once_a_second(lambda: paint(image, pose), stop)
+        finally:
+            if in_process:
+                live.close()
+
+
 def background_process(session_dir: str, stop) -> None:
     os.nice(10)
     once_a_second(estimate_job(session_dir), stop)
@@ -126,6 +167,10 @@ def one_run(mode: str, session_dir: str, seconds: float) -> dict:
         )
     elif mode == "feed_nice10":
         worker = threading.Thread(target=feed_thread, args=(session_dir, stop), daemon=True)
+    elif mode.startswith("mosaic"):
+        worker = threading.Thread(
+            target=mosaic_thread, args=(session_dir, stop, mode == "mosaic_process"), daemon=True
+        )
     elif mode == "process":
         worker = spawn.Process(target=background_process, args=(session_dir, pstop), daemon=True)
     if worker is not None:
@@ -136,7 +181,7 @@ def one_run(mode: str, session_dir: str, seconds: float) -> dict:
     stop.set()
     pstop.set()
     if worker is not None:
-        worker.join(10.0)
+        worker.join(30.0)
     return {
         "p50_ms": round(float(np.percentile(done_ms, 50)), 1),
         "p99_ms": round(float(np.percentile(done_ms, 99)), 1),
@@ -154,7 +199,13 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--nice", type=int, default=-10, help="this process's nice (the service's)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "gil_inversion.txt")
+    ap.add_argument(
+        "--modes", default=",".join(MODES), help="comma-separated, of: " + ", ".join(MODES)
+    )
     args = ap.parse_args()
+    modes = args.modes.split(",")
+    if set(modes) - set(MODES):
+        ap.error(f"--modes {args.modes}: each of {', '.join(MODES)}")
     spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
     os.setpriority(os.PRIO_PROCESS, 0, args.nice)  # after the spinners: they keep the bench's own
     lines = [
@@ -164,10 +215,10 @@ def main() -> int:
             f"2 busy processes at nice {os.getpriority(os.PRIO_PROCESS, spinners[0].pid)}; {args.seconds:g} s a run"
         )
     ]
-    results: dict[str, list[dict]] = {m: [] for m in MODES}
+    results: dict[str, list[dict]] = {m: [] for m in modes}
     try:
         for rnd in range(1, args.rounds + 1):
-            for mode in MODES:
+            for mode in modes:
                 r = one_run(mode, args.session, args.seconds)
                 results[mode].append(r)
                 lines.append(

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/live_latency.py [--sizes 720p,1080p] [--transports mpegts,rtp] [--duration-s 30]
         [--out bench/results/live_latency.txt] [--variant NAME=ARGS ...] [--busy N] [--rounds N]
-        [--tree LABEL=DIR ...]
+        [--tree LABEL=DIR ...] [--page off,open]
 
 For each size a session is generated once into ``/tmp/skyfix-bench/`` by the
 simulator (the UAV hovering 10 m up, yawing and drifting; several minutes at
@@ -40,6 +40,12 @@ every run, interleaved, and prints each one's median [min-max] over the rounds w
 start; ``--tree LABEL=DIR`` runs the service from another source tree too (e.g. ``git archive <commit> | tar -x -C
 DIR``: the service before a change), interleaved with this tree's in every round.
 
+``--page open`` runs the service with its web page served and open for the whole replay in a headless Chromium
+(Debian's, driven by Playwright, ``bench/ui_cost.py``'s flags), receiving and drawing the video, the state and the
+map's tiles as an operator's page does (the side jobs the page shows, e.g. the live mosaic, come from ``--variant``:
+``'mosaic=--live-mosaic --floor-depth-m 2'``); each run prints the frames the page drew, the tiles it fetched and
+the browser's CPU (a program beside the service, at the bench's nice value). ``--page off,open`` runs both.
+
 Baselines in the same run: decode-only (PyAV demux + decode + BGR conversion per
 frame, offline, the live decoder's settings) and the per-frame work
 (:meth:`groundstation.live.pipeline.Pipeline.process`: tracker + pose + locate) timed
@@ -50,16 +56,19 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import itertools
 import json
 import math
 import os
+import re
 import shlex
 import signal
 import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -70,6 +79,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 from emit import emit
+from ui_cost import CHROMIUM, FLAGS, browser_cpu_s
 
 from groundstation.live.pipeline import Pipeline
 from groundstation.session.read import load_session
@@ -229,6 +239,41 @@ def thread_times_s(pid: int) -> dict[int, tuple[float, float]]:
     return out
 
 
+@contextlib.contextmanager
+def page_open(run_log: Path, timeout_s: float = 30.0):
+    """The service's web page (its URL from ``run_log``) open in a headless Chromium until the block ends; yields
+    (the Playwright page, the list of base-map tile URLs it fetched, growing)."""
+    from playwright.sync_api import sync_playwright
+
+    deadline = time.monotonic() + timeout_s
+    while not (m := re.search(r"web page: (http\S+)", run_log.read_text())):
+        if time.monotonic() > deadline:
+            raise RuntimeError(
+                f"the service printed no web page URL in {timeout_s:g} s ({run_log})"
+            )
+        time.sleep(0.1)
+    tiles: list[str] = []
+    with (
+        tempfile.TemporaryDirectory(prefix="skyfix-bench-chromium-") as profile,
+        sync_playwright() as pw,
+    ):
+        context = pw.chromium.launch_persistent_context(
+            profile,
+            executable_path=CHROMIUM,
+            headless=True,
+            args=FLAGS,
+            viewport={"width": 1400, "height": 1000},
+        )
+        try:
+            page = context.new_page()
+            page.on("requestfinished", lambda r: "/basemap/" in r.url and tiles.append(r.url))
+            page.goto(m[1])
+            page.wait_for_selector("#conn.ok", timeout=timeout_s * 1000)
+            yield page, tiles
+        finally:
+            context.close()
+
+
 def pct(values, *qs) -> dict:
     a = np.asarray(values, dtype=float)
     if len(a) == 0:  # no fix at all (a starved run)
@@ -358,12 +403,14 @@ def live(
     ui: bool = False,
     tree: Path = ROOT,
     nice: int = 0,
+    page: bool = False,
 ) -> dict:
     """One ``skyfix run`` fed by ``skyfix replay`` over ``transport``, beside ``busy`` processes spinning
     ``while True: pass`` (a laptop's other programs: on 2 cores, 2 of them take both cores' worth of CPU);
     with ``ui`` the service serves its page (on a free port; nobody opens it), else ``--no-ui``; the service
     from the source ``tree`` (the replay always from this one), started at ``nice`` (``nice -n``, as
-    deploy/skyfix.service's ``Nice=`` starts it; the busy processes and the replay at the bench's own)."""
+    deploy/skyfix.service's ``Nice=`` starts it; the busy processes and the replay at the bench's own); with
+    ``page`` the page served and open in a headless Chromium for the whole replay (:func:`page_open`)."""
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     if transport == "rtp":  # RTP on an even port, RTCP on the next
         video = next(p for p in range(video & ~1, 65534, 2) if port_pair_free(p))
@@ -388,7 +435,7 @@ def live(
         str(CAMERA_LATENCY_MS),
         "--zenoh-listen",
         ep,
-        *(["--ui", "127.0.0.1:0"] if ui else ["--no-ui"]),
+        *(["--ui", "127.0.0.1:0"] if ui or page else ["--no-ui"]),
         "--gps-input",
         f"udpout:127.0.0.1:{uuv}",
         "--stats",
@@ -418,7 +465,13 @@ def live(
     ]
     samples = []  # (time, cpu_s, rss_mb, run-queue wait s)
     by_nice = []  # thread_times_s at each sample
-    with open(work / "run.log", "w") as run_log, open(work / "replay.log", "w") as replay_log:
+    browser_cpu = []  # the browser's CPU seconds at each sample (with the page open)
+    drawn = tiles = None
+    with (
+        open(work / "run.log", "w") as run_log,
+        open(work / "replay.log", "w") as replay_log,
+        contextlib.ExitStack() as browser,
+    ):
         service = subprocess.Popen(
             run,
             stdout=run_log,
@@ -434,6 +487,7 @@ def live(
                 "service_nice": nice_of(service.pid),
                 "busy_nice": [nice_of(p.pid) for p in spinners],
             }
+            shown = browser.enter_context(page_open(work / "run.log")) if page else None
             rep = subprocess.Popen(replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT)
             while rep.poll() is None:
                 by_nice.append(thread_times_s(service.pid))
@@ -444,9 +498,17 @@ def live(
                         sum(wait for _, wait in by_nice[-1].values()),
                     )
                 )
-                time.sleep(0.5)
+                if shown:
+                    browser_cpu.append(browser_cpu_s(os.getpid()))
+                    shown[0].wait_for_timeout(500)  # lets Playwright's event loop run
+                else:
+                    time.sleep(0.5)
+            if shown:
+                drawn = int(shown[0].eval_on_selector("#video", "c => c.dataset.received") or 0)
+                tiles = len(shown[1])
+                browser.close()
             service.send_signal(signal.SIGINT)
-            service.wait(30)
+            service.wait(120)  # a side job's thread starved beside busy programs holds its stop up
         finally:
             kill_left(service, rep, *spinners)
     final = json.loads(stats.read_text())
@@ -479,6 +541,14 @@ def live(
     half = len(s) // 2
     return {
         "priority": priority,
+        "page": page
+        and {
+            "frames_drawn": drawn,
+            "tiles_fetched": tiles,
+            "browser_cpu_pct": round(
+                100.0 * (browser_cpu[-1] - browser_cpu[half]) / (s[-1, 0] - s[half, 0]), 1
+            ),
+        },
         "frames_sent": len(frames_t),
         "video": {
             k: final["video"][k]
@@ -589,7 +659,17 @@ def report(name: str, session: Path, res: dict) -> list[str]:
             f"nice {nice}: {on} / {waiting}"
             for nice, (on, waiting) in res["threads_by_nice_pct"].items()
         ),
-    ]
+    ] + (
+        [
+            (
+                f"  the page open in a headless Chromium: {res['page']['frames_drawn']} video frames drawn, "
+                f"{res['page']['tiles_fetched']} map tiles fetched; the browser's CPU "
+                f"{res['page']['browser_cpu_pct']} % of a core"
+            )
+        ]
+        if res.get("page")
+        else []
+    )
 
 
 def summary(rounds: dict) -> list[str]:
@@ -661,11 +741,21 @@ def main() -> int:
         help="each run again with the service from this source tree (e.g. `git archive <commit> | tar -x -C "
         "DIR`: the service before, interleaved with this tree's; repeatable)",
     )
+    ap.add_argument(
+        "--page",
+        default="off",
+        metavar="off,open",
+        help="comma-separated: each run again with the service's web page open in a headless Chromium (open) or "
+        "not served (off)",
+    )
     args = ap.parse_args()
     trees = {"now": ROOT} | {
         label: Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
     }
     nices = [int(n) for n in args.nice.split(",")]
+    pages = args.page.split(",")
+    if set(pages) - {"off", "open"}:
+        ap.error(f"--page {args.page}: each of off, open")
     variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [
         ("", [])
     ]
@@ -684,12 +774,13 @@ def main() -> int:
             "depacketize_cpu": depacketize_baseline(session),
             "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames),
         }
-        for rnd, transport, ((variant, run_args), busy), label, nice in itertools.product(
+        for rnd, transport, ((variant, run_args), busy), label, nice, page in itertools.product(
             range(1, args.rounds + 1),
             args.transports.split(","),
             itertools.product(variants, sorted({0, args.busy})),
             trees,
             nices,
+            pages,
         ):
             tag = "_".join(
                 x
@@ -698,6 +789,7 @@ def main() -> int:
                     f"busy{busy}" if busy else "",
                     label if len(trees) > 1 else "",
                     f"nice{nice}" if nice else "",
+                    "page" if page == "open" else "",
                 )
                 if x
             )
@@ -709,6 +801,7 @@ def main() -> int:
                     variant,
                     label if len(trees) > 1 else "",
                     f"nice {nice}" if len(nices) > 1 or nice else "",
+                    "page open" if page == "open" else "",
                 )
                 if x
             ) + (f" beside {busy} busy processes" if busy else "")
@@ -719,7 +812,16 @@ def main() -> int:
             load = os.getloadavg()[0]
             res = {
                 **baselines,
-                **live(session, work, transport, run_args, busy, tree=trees[label], nice=nice),
+                **live(
+                    session,
+                    work,
+                    transport,
+                    run_args,
+                    busy,
+                    tree=trees[label],
+                    nice=nice,
+                    page=page == "open",
+                ),
                 "load_average": round(load, 1),
             }
             rounds.setdefault(name, []).append(res)

@@ -142,3 +142,48 @@ def test_the_page_fetches_the_mosaics_tiles_anew_as_it_grows(survey, tmp_path):
             asked = sorted(versions(), key=int)
         live.finish()
     print(f"tile versions asked for: {asked}")
+
+
+def test_the_mosaic_is_painted_in_a_nicer_process(tmp_path):
+    """The painting and the tiles run in a process of their own 10 nice levels below the service (a thread of the
+    service painting at a low priority held the interpreter's lock while it waited for a core beside busy
+    programs), and a tile from it is byte for byte the same painter's in this process."""
+    import itertools
+    import multiprocessing
+    import os
+
+    from groundstation.live.mosaic_live import LiveMosaic, MosaicPainter
+    from groundstation.map.tiles import tile_of
+    from groundstation.session.read import load_session
+    from groundstation.video.file import open_video
+    from localizer.pose import uav_pose
+
+    session = load_session(ROOT / "sim_fixtures" / "bundled" / "nadir_hover")
+    cal, tel = session.calibration, session.telemetry
+    with open_video(session.video_path) as video:
+        frames = [
+            (float(session.frames["t"][f.index]), f.image)
+            for f in itertools.islice(video, 31)
+            if f.index % 30 == 0
+        ]
+    poses = [uav_pose(cal, tel, t) for t, _ in frames]
+    before = set(multiprocessing.active_children())
+    live = LiveMosaic(cal, tel, 2.0, 1.0)
+    try:
+        for (_, image), pose in zip(frames, poses):
+            live._paint_frame(image, pose)  # its EveryFrame thread's work
+        children = [c for c in multiprocessing.active_children() if c not in before]
+        assert len(children) == 1
+        assert os.getpriority(os.PRIO_PROCESS, children[0].pid) == min(
+            os.getpriority(os.PRIO_PROCESS, 0) + 10, 19
+        )
+        z = live.info()["maxzoom"]
+        xy = tile_of(float(poses[0].lat_deg[0]), float(poses[0].lon_deg[0]), z)
+        served = live.tile(z, *xy)
+    finally:
+        live.close()
+    in_process = MosaicPainter(cal, 2.0, tmp_path)
+    for (_, image), pose in zip(frames, poses):
+        in_process.paint_frame(image, pose)
+    assert live.painted == 2 and live.grid == in_process.grid
+    assert served is not None and served == in_process.tile(z, *xy)

@@ -4,7 +4,9 @@ mosaic's painter, :mod:`.mosaic_live`; the search for a surveyed marker, :mod:`.
 :meth:`EveryFrame.on_frame` (a frame listener, on the event loop) takes a frame once ``every_s`` seconds of video
 have passed since the last one taken, computes its camera pose from the telemetry there is then
 (:func:`localizer.pose.uav_pose`) and hands the image and the pose to ``work`` in a thread of its own at a lower
-priority than the rest of the process (:func:`groundstation.live.ui.feed.lower_priority`). A frame that comes due
+priority than the rest of the process (:func:`groundstation.live.ui.feed.lower_priority`; with ``lower=False`` at the
+process's own, for a ``work`` that only hands the frame to a process of its own and waits: a low-priority thread that
+holds the interpreter's lock keeps the frames' threads waiting while it waits for a core). A frame that comes due
 while ``work`` is still busy with the one before is skipped and counted (``skipped``): the job takes the CPU the
 rest of the service leaves. A frame without a pose (no telemetry yet, a camera under the surface) is counted
 (``no_pose``) and not worked on.
@@ -26,11 +28,17 @@ log = logging.getLogger(__name__)
 
 
 class EveryFrame:
-    """``work(image, pose)`` on a frame every ``every_s`` s of video, at a low priority (see the module doc);
-    ``name`` names its thread and its errors in the log."""
+    """``work(image, pose)`` on a frame every ``every_s`` s of video, at a low priority unless not ``lower`` (see
+    the module doc); ``name`` names its thread and its errors in the log."""
 
     def __init__(
-        self, cal, tel, every_s: float, work: Callable[[np.ndarray, CameraPose], None], name: str
+        self,
+        cal,
+        tel,
+        every_s: float,
+        work: Callable[[np.ndarray, CameraPose], None],
+        name: str,
+        lower: bool = True,
     ):
         self.cal, self.tel, self.every_s, self.work, self.name = cal, tel, every_s, work, name
         #: ``adjust(pose)`` (on the loop) the pose the work gets, when set: the pose another estimate corrected
@@ -39,7 +47,9 @@ class EveryFrame:
         self.no_pose = 0  # frames due without a camera pose
         self._busy = False
         self._last_t = -math.inf
-        self._thread = ThreadPoolExecutor(1, thread_name_prefix=name, initializer=lower_priority)
+        self._thread = ThreadPoolExecutor(
+            1, thread_name_prefix=name, initializer=lower_priority if lower else None
+        )
 
     def on_frame(self, frame) -> None:
         if frame.t_unix - self._last_t < self.every_s:

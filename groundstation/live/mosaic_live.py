@@ -1,13 +1,20 @@
 """The mosaic of the bottom growing live (``live_mosaic = true``, ``floor_depth_m``): the live page's base map made
 from the run's own video as the drone flies.
 
-Every ``live_mosaic_every_s`` seconds of video a frame is taken with its camera pose and painted in a low-priority
-thread (:class:`groundstation.live.every_frame.EveryFrame`) with ``skyfix mosaic``'s own painting
+Every ``live_mosaic_every_s`` seconds of video a frame is taken with its camera pose
+(:class:`groundstation.live.every_frame.EveryFrame`) and painted with ``skyfix mosaic``'s own painting
 (:func:`groundstation.offline.mosaic.paint`, its :class:`~groundstation.offline.mosaic.Accumulator`) onto a grid
 in the UTM zone of the first painted frame, centred on it, :data:`HALF_M` m each way (cells made only where a frame
 paints). A frame that comes while the painter is still busy with the one before is skipped and counted: the
 mosaic takes the CPU the rest of the service leaves. The UUV is not left out (its pixel is the tracker's, per UUV;
 the mean over the frames dilutes it).
+
+The painting and the tiles run in a process of their own (:class:`MosaicPainter`, at nice 10, ending with the
+service: :func:`groundstation.height_from_size.start_measuring_process`), the frame handed over through shared
+memory (:class:`~groundstation.height_from_size.SharedFrame`): they are Python and NumPy, and a thread of the
+service at a low priority that ran them held the interpreter's lock while it waited for a core beside busy
+programs, the frames' threads waiting with it (``bench/live_latency.py --page open``). The service's threads only
+hand work over and wait for it, the lock released.
 
 :meth:`LiveMosaic.tile` renders a web-Mercator tile (EPSG:3857, 256 px) from the blend's cells under it, warped
 by rasterio's GDAL (bilinear); ``version`` counts the frames painted, and the page's tiles are fetched anew when it
@@ -17,12 +24,14 @@ changes.
 from __future__ import annotations
 
 import math
+import multiprocessing
 import tempfile
-import threading
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
+from groundstation.height_from_size import SharedFrame, shared_image, start_measuring_process
 from groundstation.live.every_frame import EveryFrame
 from groundstation.map.tiles import (
     MAX_ZOOM,
@@ -47,28 +56,17 @@ HALF_M = 500.0  # the grid's extent each way from the first painted frame, m
 NO_UUV = (math.nan, math.nan, 0.0)  # the UUV is not left out
 
 
-class LiveMosaic:
-    """The growing mosaic: ``on_frame`` (a frame listener, on the event loop) takes a frame every ``every_s``
-    s of video to paint; :meth:`tile` (the page's tile thread) and :meth:`info` serve it as a base map."""
+class MosaicPainter:
+    """The growing mosaic's grid and blend, in the painting process: :meth:`paint_frame` and :meth:`tile`."""
 
-    def __init__(self, cal, tel, floor_depth_m: float, every_s: float):
-        self.cal, self.tel = cal, tel
-        self.floor_depth_m, self.every_s = floor_depth_m, every_s
-        self.painted = 0  # frames painted
+    def __init__(self, cal, floor_depth_m: float, spill: Path):
+        self.cal, self.floor_depth_m = cal, floor_depth_m
         self.grid: Grid | None = None
         self.lat_deg = 0.0  # the first painted frame's
-        self._spill = tempfile.TemporaryDirectory(prefix="skyfix-live-mosaic-")
-        self.acc = Accumulator(Path(self._spill.name))
-        # the accumulator: painted by the painter, read by the tile thread
-        self._lock = threading.Lock()
-        self._painter = EveryFrame(cal, tel, every_s, self._paint_frame, "live mosaic")
-        self.on_frame = self._painter.on_frame
+        self.acc = Accumulator(spill)
 
-    @property
-    def version(self) -> int:
-        return self.painted
-
-    def _paint_frame(self, image: np.ndarray, pose) -> None:
+    def paint_frame(self, image: np.ndarray, pose) -> tuple[Grid, float] | None:
+        """Paint one frame; the grid and the first painted frame's latitude (deg), None when it painted nothing."""
         cam = self.cal.camera
         if self.grid is None:
             epsg = utm_epsg(pose.lat_deg[0], pose.lon_deg[0])
@@ -82,44 +80,21 @@ class LiveMosaic:
         xy_cam, jac = camera_utm(pose, self.grid.epsg)
         poly = xy_cam[0] + footprint_ne_m(cam, pose, 0, self.floor_depth_m) @ jac[0].T
         if len(poly) < 3:
-            return
-        with self._lock:
-            paint(
-                image,
-                self.grid,
-                poly,
-                xy_cam[0],
-                jac[0],
-                cam,
-                pose.R_ned_from_cv[0],
-                pose.height_m[0],
-                self.floor_depth_m,
-                NO_UUV,
-                self.acc,
-            )
-            self.painted += 1
-
-    def info(self) -> dict:
-        """The base map's ``info()`` (as :mod:`groundstation.map.tiles`' have it), with ``version``."""
-        g = self.grid
-        if g is None:
-            bounds, zooms = [-180.0, -85.0511, 180.0, 85.0511], (0, MAX_ZOOM)
-        else:
-            from rasterio.warp import transform_bounds
-
-            bounds = [
-                round(b, 8) for b in transform_bounds(f"EPSG:{g.epsg}", "EPSG:4326", *g.bounds())
-            ]
-            zooms = zoom_range(tuple(bounds), g.gsd_m)
-        return {
-            "name": "live mosaic",
-            "format": "png",
-            "bounds": bounds,
-            "minzoom": zooms[0],
-            "maxzoom": zooms[1],
-            "sigma_m": None,
-            "version": self.version,
-        }
+            return None
+        paint(
+            image,
+            self.grid,
+            poly,
+            xy_cam[0],
+            jac[0],
+            cam,
+            pose.R_ned_from_cv[0],
+            pose.height_m[0],
+            self.floor_depth_m,
+            NO_UUV,
+            self.acc,
+        )
+        return self.grid, self.lat_deg
 
     def tile(self, z: int, x: int, y: int) -> bytes | None:
         """Tile ``z/x/y`` as PNG (RGBA, transparent where no frame painted), None where nothing is painted."""
@@ -166,22 +141,105 @@ class LiveMosaic:
         frame painted."""
         out = np.zeros((-(-(r1 - r0) // step), -(-(c1 - c0) // step), 4), np.uint8)
         any_painted = False
-        with self._lock:
-            for tr, tc in self.acc.painted():
-                a, b = max(r0, tr * TILE), min(r1, (tr + 1) * TILE)
-                c, d = max(c0, tc * TILE), min(c1, (tc + 1) * TILE)
-                if b <= a or d <= c:
-                    continue
-                rows = np.arange(-(-(a - r0) // step), -(-(b - r0) // step))
-                cols = np.arange(-(-(c - c0) // step), -(-(d - c0) // step))
-                if len(rows) == 0 or len(cols) == 0:
-                    continue
-                rgba = self.acc.rgba((tr, tc))
-                out[np.ix_(rows, cols)] = rgba[
-                    np.ix_(r0 + rows * step - tr * TILE, c0 + cols * step - tc * TILE)
-                ]
-                any_painted = True
+        for tr, tc in self.acc.painted():
+            a, b = max(r0, tr * TILE), min(r1, (tr + 1) * TILE)
+            c, d = max(c0, tc * TILE), min(c1, (tc + 1) * TILE)
+            if b <= a or d <= c:
+                continue
+            rows = np.arange(-(-(a - r0) // step), -(-(b - r0) // step))
+            cols = np.arange(-(-(c - c0) // step), -(-(d - c0) // step))
+            if len(rows) == 0 or len(cols) == 0:
+                continue
+            rgba = self.acc.rgba((tr, tc))
+            out[np.ix_(rows, cols)] = rgba[
+                np.ix_(r0 + rows * step - tr * TILE, c0 + cols * step - tc * TILE)
+            ]
+            any_painted = True
         return out if any_painted else None
+
+
+#: The painting process's one :class:`MosaicPainter` (:func:`start_painter`).
+_painter: list[MosaicPainter] = []
+
+
+def start_painter(cal, floor_depth_m: float, spill: str) -> None:
+    """The painting process: its painter, and the imports it needs, now (before the first frame)."""
+    _painter[:] = [MosaicPainter(cal, floor_depth_m, Path(spill))]
+
+
+def paint_shared(frame: tuple[str, tuple[int, ...], str], pose) -> tuple[Grid, float] | None:
+    """The painting process: :meth:`MosaicPainter.paint_frame` of the frame :class:`SharedFrame` put in."""
+    return _painter[0].paint_frame(shared_image(frame), pose)
+
+
+def tile_now(z: int, x: int, y: int) -> bytes | None:
+    """The painting process: :meth:`MosaicPainter.tile`."""
+    return _painter[0].tile(z, x, y)
+
+
+class LiveMosaic:
+    """The growing mosaic: ``on_frame`` (a frame listener, on the event loop) takes a frame every ``every_s``
+    s of video to paint; :meth:`tile` (the page's tile thread) and :meth:`info` serve it as a base map. The
+    painting process starts here (its imports before the first frame) and ends with :meth:`close`."""
+
+    def __init__(self, cal, tel, floor_depth_m: float, every_s: float):
+        self.cal, self.tel = cal, tel
+        self.floor_depth_m, self.every_s = floor_depth_m, every_s
+        self.painted = 0  # frames painted
+        self.grid: Grid | None = None  # the painting process's, once it painted
+        self.lat_deg = 0.0  # the first painted frame's
+        self._spill = tempfile.TemporaryDirectory(prefix="skyfix-live-mosaic-")
+        self._pool = ProcessPoolExecutor(
+            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process
+        )
+        self._pool.submit(start_painter, cal, floor_depth_m, self._spill.name)
+        self._shared = (
+            SharedFrame()
+        )  # one frame at a time: EveryFrame hands over the next once this one is done
+        # its thread only hands the frame over and waits: at the service's priority (see EveryFrame)
+        self._painter = EveryFrame(cal, tel, every_s, self._paint_frame, "live mosaic", lower=False)
+        self.on_frame = self._painter.on_frame
+
+    @property
+    def version(self) -> int:
+        return self.painted
+
+    def _paint_frame(self, image: np.ndarray, pose) -> None:
+        """(:class:`EveryFrame`'s thread, at the service's priority) the frame to the painting process, and its
+        answer back."""
+        done = self._pool.submit(paint_shared, self._shared.put(image), pose).result()
+        if done is not None:
+            self.grid, self.lat_deg = done
+            self.painted += 1
+
+    def info(self) -> dict:
+        """The base map's ``info()`` (as :mod:`groundstation.map.tiles`' have it), with ``version``."""
+        g = self.grid
+        if g is None:
+            bounds, zooms = [-180.0, -85.0511, 180.0, 85.0511], (0, MAX_ZOOM)
+        else:
+            from rasterio.warp import transform_bounds
+
+            bounds = [
+                round(b, 8) for b in transform_bounds(f"EPSG:{g.epsg}", "EPSG:4326", *g.bounds())
+            ]
+            zooms = zoom_range(tuple(bounds), g.gsd_m)
+        return {
+            "name": "live mosaic",
+            "format": "png",
+            "bounds": bounds,
+            "minzoom": zooms[0],
+            "maxzoom": zooms[1],
+            "sigma_m": None,
+            "version": self.version,
+        }
+
+    def tile(self, z: int, x: int, y: int) -> bytes | None:
+        """Tile ``z/x/y`` as PNG (RGBA, transparent where no frame painted), None where nothing is painted
+        (rendered by the painting process, between two frames' painting)."""
+        if self.grid is None:
+            return None
+        return self._pool.submit(tile_now, z, x, y).result()
 
     def status(self) -> dict:
         return {
@@ -195,4 +253,6 @@ class LiveMosaic:
 
     def close(self) -> None:
         self._painter.close()
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._shared.close()
         self._spill.cleanup()
