@@ -17,12 +17,13 @@ def clip(tmp_path_factory):
     return _encode(tmp_path_factory.mktemp("early") / "clip.mp4")
 
 
-def _read(video) -> list[tuple]:
-    return [(f.index, f.t_s, _bar_column(f.bgr())) for f in video.prefetch(depth=3)]
+def _read(video, prefetch: bool = True) -> list[tuple]:
+    frames = video.prefetch(depth=3) if prefetch else iter(video.read, None)
+    return [(f.index, f.t_s, _bar_column(f.bgr())) for f in frames]
 
 
-@pytest.mark.parametrize("grey", [False, True])
-def test_the_early_decoder_gives_the_frames_a_fresh_open_gives(clip, grey):
+@pytest.mark.parametrize(("grey", "prefetch"), [(False, True), (True, True), (True, False)])
+def test_the_early_decoder_gives_the_frames_a_fresh_open_gives(clip, grey, prefetch):
     """The session's numbering (``indices``) is given after decoding started: the frames come out numbered by it,
     as from a video opened afterwards."""
     indices = [100 + 2 * i for i in range(N)]
@@ -33,7 +34,7 @@ def test_the_early_decoder_gives_the_frames_a_fresh_open_gives(clip, grey):
         open_video(clip, expected_size=SIZE, indices=indices, grey=grey) as video,
     ):
         assert video._prefetching is not None  # taken decoding, not opened again
-        frames = _read(video)
+        frames = _read(video, prefetch)
     assert frames == expected
     assert [i for i, *_ in frames] == indices
     assert [c for *_, c in frames] == [2 * i for i in range(N)]

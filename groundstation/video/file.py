@@ -182,7 +182,10 @@ class Video:
             yield from (f for f in frames if last is None or f.pts is None or f.pts > last)
 
     def read(self) -> VideoFrame | None:
-        """The next decodable frame, or None at the end of the video."""
+        """The next decodable frame, or None at the end of the video (a video decoding early,
+        :func:`decoding_early`, goes on from the frames it decoded meanwhile)."""
+        if self._prefetching is not None:
+            return self._numbered(_queued(*self._prefetching))
         return self._numbered(self._next_decoded())
 
     def _next_decoded(self) -> tuple[av.VideoFrame, np.ndarray, av.VideoFrame | None] | None:
@@ -240,25 +243,17 @@ class Video:
         """
         if self._prefetching is None:
             self._start(depth)
-        stop, worker, q = self._prefetching
+        stop, worker, q = prefetching = self._prefetching
         with q.mutex:
             q.maxsize = depth
         try:
-            while True:
-                try:
-                    item = q.get(timeout=0.1)
-                except queue.Empty:
-                    if stop.is_set() or not worker.is_alive():
-                        return  # closed under us
-                    continue
-                if isinstance(item, VideoError):
-                    raise item
-                if (frame := self._numbered(item)) is None:
-                    return
+            while (frame := self._numbered(_queued(*prefetching))) is not None:
                 yield frame
         finally:
             stop.set()
             worker.join()
+            if self._prefetching is prefetching:
+                self._prefetching = None
 
     def _start(self, depth: int) -> None:
         """Decoding in a background thread, at most ``depth`` frames ahead of the reader (:meth:`prefetch`)."""
@@ -292,6 +287,21 @@ class Video:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _queued(stop: threading.Event, worker: threading.Thread, q: queue.Queue):
+    """The decoding thread's next item (:meth:`Video._next_decoded`'s), None at the end or once stopped; its
+    :class:`VideoError` raised here, in the reader's thread."""
+    while True:
+        try:
+            item = q.get(timeout=0.1)
+        except queue.Empty:
+            if stop.is_set() or not worker.is_alive():
+                return None  # closed under us
+            continue
+        if isinstance(item, VideoError):
+            raise item
+        return item
 
 
 def _luma(frame: av.VideoFrame) -> np.ndarray:
