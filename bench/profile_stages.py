@@ -1,13 +1,14 @@
 """Where ``skyfix process``'s milliseconds go: per frame and per stage, wall time, CPU time and time holding the
 interpreter, at 720p and 1080p with one, two and three UUVs (issue 30).
 
-    .venv/bin/python bench/profile_stages.py [--sizes 720p,1080p] [--counts 1,2,3] [--duration-s 3]
+    .venv/bin/python bench/profile_stages.py [--sizes 720p,1080p] [--counts 1,2,3] [--duration-s 20] [--frames 150]
                                       [--out bench/results/profile.txt]
 
-The session is the ``two_uuvs_crossing`` scenario rendered at 1280x720 and 1920x1080 (``--duration-s``, generated
-once into ``/tmp/skyfix-bench/profile_SIZE_Ns``) with ``uuvs/uuv3/``, a copy of uuv1's records: a third tracker
-session on the same vehicle (``bench/uuvs.py``'s ``add_third``). Three UUVs is one, two and three
-:class:`~localizer.tracking.session.TrackingSession` on the same frames, as the live service runs them.
+The session is ``bench/uuvs.py``'s three-UUV session (``three_uuvs_crossing``, three vehicles in the video, as
+``bench/offline_speed.py --uuvs`` times it) at 1280x720 or 1920x1080 (``--duration-s``, generated once into
+``/tmp/skyfix-bench/``); its first ``--frames`` frames are profiled (every frame is kept decoded: 3 MB each at
+1080p). One, two and three UUVs are that many :class:`~localizer.tracking.session.TrackingSession` on the same
+frames.
 
 Stages, each run as ``skyfix process`` runs it (the same functions, the same arguments):
 
@@ -16,16 +17,20 @@ Stages, each run as ``skyfix process`` runs it (the same functions, the same arg
   threads run during this stage alone and the process CPU of the others is theirs;
 - ``colour``: the luma plane's frame converted to BGR (:meth:`~groundstation.video.frames.VideoFrame.bgr`), for the
   frames the height from size measures;
-- ``motion``: the camera's rotation between frames (:class:`~groundstation.latency.video_motion.RotationMeter`);
+- ``motion``: the camera's rotation between frames (:class:`~groundstation.latency.video_motion.RotationMeter`),
+  in the frames ``skyfix process`` measures (:func:`~groundstation.latency.video_motion.measured_every` of the
+  whole session's frames); the command measures it only where the link's delay is unknown (not in this session);
 - ``track ID``: one UUV's :meth:`~localizer.tracking.session.TrackingSession.step`;
 - ``size ID``: one UUV's height from its size (:class:`~groundstation.height_from_size.HeightFromSize`);
+- ``load``: the session read as each UUV's (:func:`~groundstation.session.read.load_sessions`: the telemetry log
+  parsed once), before the pass (``skyfix process`` decodes meanwhile: :func:`~groundstation.video.file.decoding_early`);
 - ``pose``: every frame's camera pose at once (:func:`localizer.pose.camera_pose`), as the tracker shares it;
 - ``offset``: the frames' offset to the telemetry from the rotations
   (:func:`~groundstation.latency.estimate.offset_from_rotations`);
 - ``geometry ID``: the fixes of one UUV's pixels (:func:`groundstation.offline.process.locate_frames`);
 - ``output ID``: positions.csv, the smoothed track and positions_smoothed.csv of one UUV.
 
-The batch stages (pose, offset, geometry, output) are shown per frame (their total over the frames). ``start-up``:
+The batch stages (load, pose, offset, geometry, output) are shown per frame (their total over the frames). ``start-up``:
 ``skyfix process --help`` in a child process (the interpreter and the command's imports), once per run.
 
 **Method.** Per stage: wall time (``time.perf_counter``), the main thread's CPU (``time.thread_time``) and the
@@ -63,16 +68,16 @@ from typing import Self
 
 import numpy as np
 from emit import emit
-from uuvs import add_third
+from uuvs import ensure_session as uuvs_session
 
 from groundstation.height_from_size import HeightFromSize
 from groundstation.latency.estimate import offset_from_rotations
-from groundstation.latency.video_motion import RotationMeter
+from groundstation.latency.video_motion import RotationMeter, measured_every
 from groundstation.offline.process import Pixels, locate_frames
 from groundstation.offline.smoothed import NAME as SMOOTHED_NAME
 from groundstation.offline.smoothed import offline_track, write_smoothed_csv
 from groundstation.session.positions import write_positions_csv
-from groundstation.session.read import load_session
+from groundstation.session.read import load_sessions
 from groundstation.video.file import open_video
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
 from localizer.pose import camera_pose
@@ -83,26 +88,7 @@ UUVS = ("uuv1", "uuv2", "uuv3")
 PROBE_PERIOD_S = 0.0005
 SWITCH_INTERVAL_S = 0.0005
 LATE_S = 0.0002
-BENCH_DIR = Path("/tmp/skyfix-bench")
 ROOT = Path(__file__).resolve().parents[1]
-SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
-
-
-def ensure_session(size: str, duration_s: float) -> Path:
-    """The two_uuvs_crossing session at ``size``, generated once, with ``uuvs/uuv3/``."""
-    path = BENCH_DIR / f"profile_{size}_{duration_s:g}s"
-    if not (path / "video_frames.csv").exists():
-        from sim_fixtures.generate import generate
-        from sim_fixtures.scenario import load_scenario, with_overrides
-
-        w, h = SIZES[size]
-        sc = with_overrides(
-            load_scenario(SCENARIO), camera={"width": w, "height": h}, duration_s=duration_s
-        )
-        print(f"generating {path} (once) ...", flush=True)
-        generate(sc, path)
-    add_third(path)
-    return path
 
 
 class Probe:
@@ -183,17 +169,19 @@ class Stages:
         return out
 
 
-def profile_run(path: Path, ids: tuple[str, ...], work: Path) -> dict:
-    """One pass of ``skyfix process``'s stages over the session for the UUVs ``ids`` (see the module doc)."""
-    sessions = {uuv: load_session(path, uuv) for uuv in ids}
-    first = sessions[ids[0]]
-    cal = first.calibration
-    t = first.frames["t"]
-    frame_idx = first.frames["frame"].astype(int)
-    row_of = {int(f): i for i, f in enumerate(frame_idx)}
+def profile_run(path: Path, ids: tuple[str, ...], work: Path, max_frames: int) -> dict:
+    """One pass of ``skyfix process``'s stages over the first ``max_frames`` frames of the session for the UUVs
+    ``ids`` (see the module doc)."""
     stages = Stages()
     with Probe() as probe:
         checks = probe_checks(probe)
+        with stages("load"):
+            sessions = dict(zip(ids, load_sessions(path, list(ids)), strict=True))
+        first = sessions[ids[0]]
+        cal = first.calibration
+        t = first.frames["t"]
+        frame_idx = first.frames["frame"].astype(int)
+        row_of = {int(f): i for i, f in enumerate(frame_idx)}
         frames = []
         with open_video(
             first.video_path,
@@ -201,7 +189,7 @@ def profile_run(path: Path, ids: tuple[str, ...], work: Path) -> dict:
             indices=frame_idx,
             grey=True,
         ) as video:
-            while True:
+            while len(frames) < max_frames:
                 with stages("decode"):
                     frame = video.read()
                 if frame is None:
@@ -221,13 +209,15 @@ def profile_run(path: Path, ids: tuple[str, ...], work: Path) -> dict:
                 for uuv in ids
             }
             meter = RotationMeter(cal.camera)
+            every = measured_every(len(t), float(np.median(np.diff(t))))
             rotations = []
             started: set[str] = set()
-            for frame in frames:
+            for k, frame in enumerate(frames):
                 row = row_of[frame.index]
-                with stages("motion"):
-                    if (r := meter.measure(float(t[row]), frame.image)) is not None:
-                        rotations.append(r)
+                if k % every == 0:
+                    with stages("motion"):
+                        if (r := meter.measure(float(t[row]), frame.image)) is not None:
+                            rotations.append(r)
                 bgr = None
                 for uuv in ids:
                     with stages(f"track {uuv}"):
@@ -321,7 +311,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", default="720p,1080p")
     p.add_argument("--counts", default="1,2,3")
-    p.add_argument("--duration-s", type=float, default=3.0)
+    p.add_argument("--duration-s", type=float, default=20.0)
+    p.add_argument(
+        "--frames", type=int, default=150, help="the first this many frames (default %(default)s)"
+    )
     p.add_argument("--out", type=Path)
     args = p.parse_args(argv)
     sys.setswitchinterval(SWITCH_INTERVAL_S)
@@ -334,9 +327,9 @@ def main(argv=None) -> int:
     ]
     with tempfile.TemporaryDirectory() as work:
         for size in args.sizes.split(","):
-            path = ensure_session(size, args.duration_s)
+            path = uuvs_session(args.duration_s, SIZES[size])
             for count in (int(c) for c in args.counts.split(",")):
-                res = profile_run(path, UUVS[:count], Path(work))
+                res = profile_run(path, UUVS[:count], Path(work), args.frames)
                 data["runs"][f"{size}_{count}"] = res
                 lines += table(size, count, res)
                 print("\n".join(lines[-len(res["stages"]) - 3 :]), flush=True)
