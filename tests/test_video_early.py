@@ -50,6 +50,15 @@ def test_only_the_same_reading_takes_it_and_an_untaken_one_is_closed(clip):
     assert early._prefetching is None and not file._early  # closed
 
 
+def test_a_file_it_cannot_open_is_reported_by_the_readers_open(tmp_path):
+    from groundstation.video.frames import VideoError
+
+    bad = tmp_path / "video.mp4"
+    bad.write_bytes(b"not a video")
+    with decoding_early(bad), pytest.raises(VideoError, match="FFmpeg cannot open it"):
+        open_video(bad)
+
+
 def test_a_size_other_than_the_calibrations_is_still_an_error(clip):
     from groundstation.video.frames import VideoError
 

@@ -323,16 +323,18 @@ class _Early:
         self._thread.start()
 
     def _open(self) -> None:
+        """Open and start decoding; whatever fails, ``opened`` is set (the reader's :func:`open_video` then opens
+        the file itself and reports what is wrong with it)."""
         try:
             video = _opened(str(self.path), 0, 0, self.grey)
-        except VideoError:
-            video = None
-        if video is not None:
             w, h = video.size
             frame_bytes = w * h * (3 if not self.grey else 1.5)
             video._start(max(EARLY_FRAMES, int(EARLY_BYTES // frame_bytes) if frame_bytes else 0))
-        self.video = video
-        self.opened.set()
+            self.video = video
+        except VideoError:
+            pass
+        finally:
+            self.opened.set()
 
     def taken(self) -> Video | None:
         """The open video (None: it could not be opened), once open."""
