@@ -222,6 +222,15 @@ class HeightEstimator:
         self._x = np.empty((0, _N))
         self._P = np.empty((0, _N, _N))
         self._aux: list[_Aux] = []  # per processed entry
+        self._pre: list[
+            tuple
+        ] = []  # ... the state and covariance predicted to it, before it (x, P)
+        self._resets: list[tuple | None] = []  # ... what it reset (see _step)
+        # offline: the filter that answers for the two-sided states (see _both_ways), ...
+        self._smooth: HeightEstimator | None = None
+        self.two_sided = False  # ... which it is
+        self.moves = False  # ... its barometer's wander moving throughout
+        self._rts: tuple | None = None  # ... its two-sided states (see _smoothed)
         self._src: list[str | None] = []  # per processed entry: the source word of its measurement
         self._ok: list[bool] = []  # ... whether it was used
         self._gap: list[float] = []  # ... the disagreement (m) of a refused one, else NaN
@@ -299,8 +308,16 @@ class HeightEstimator:
 
     # -- the filter -----------------------------------------------------------------------------
     def _predict(self, x, P, dt, sigma_g, wander=True):
-        """State and covariance ``dt`` s later (arrays broadcast over leading axes): ``e`` integrates the rate ``d``
-        (the exact discretisation of an integrated first-order Gauss-Markov process), ``g`` decays."""
+        """State and covariance ``dt`` s later (arrays broadcast over leading axes): see :meth:`_transition`."""
+        F, Q = self._transition(dt, sigma_g, wander)
+        x = np.einsum("...ij,...j->...i", F, x)
+        P = F @ P @ np.swapaxes(F, -1, -2) + Q
+        return x, P
+
+    def _transition(self, dt, sigma_g, wander=True):
+        """The transition matrix ``F`` and process noise ``Q`` over ``dt`` s (arrays broadcast over leading axes):
+        ``e`` integrates the rate ``d`` (the exact discretisation of an integrated first-order Gauss-Markov
+        process), ``g`` decays, ``w`` decays while it moves (else it is held)."""
         dt = np.asarray(dt, dtype=float)
         tau, var_d = DRIFT_RATE_TAU_S, self.rate_sigma_mps**2
         m1, m2 = (
@@ -321,13 +338,11 @@ class HeightEstimator:
         phi_w = np.where(wander, np.exp(-dt / self.sigmas.baro_wander_s), 1.0)  # else held as it is
         F[..., _W, _W] = phi_w
         Q[..., _W, _W] = self.wander_m**2 * (1.0 - phi_w**2)
-        x = np.einsum("...ij,...j->...i", F, x)
-        P = F @ P @ np.swapaxes(F, -1, -2) + Q
-        return x, P
+        return F, Q
 
     def _run(self, tel: Telemetry) -> None:
         k = self._n
-        for col in (self._aux, self._src, self._ok, self._gap):
+        for col in (self._aux, self._src, self._ok, self._gap, self._resets):
             del col[k:]
         t0, x, P, aux = (
             self._base
@@ -336,10 +351,12 @@ class HeightEstimator:
         )
         entries = self._entries[k:]
         h_ekf = ekf_height_m(self.water, tel, [e[0] for e in entries])
-        ts, xs, Ps = [], [], []
+        ts, xs, Ps, pre = [], [], [], []
         for (t, kind, data), h_e in zip(entries, h_ekf):
-            x, P = self._predict(x, P, max(0.0, t - t0), aux.sigma_g, aux.wander)
-            x, P, aux, word, ok, gap = self._step(t, kind, data, float(h_e), x, P, aux)
+            x, P = self._predict(x, P, max(0.0, t - t0), aux.sigma_g, aux.wander or self.moves)
+            pre.append((x, P))
+            x, P, aux, word, ok, gap, reset = self._step(t, kind, data, float(h_e), x, P, aux)
+            self._resets.append(reset)
             ts.append(t)
             xs.append(x)
             Ps.append(P)
@@ -351,11 +368,14 @@ class HeightEstimator:
         self._t = np.concatenate([self._t[:k], ts])
         self._x = np.concatenate([self._x[:k], np.reshape(xs, (-1, _N))])
         self._P = np.concatenate([self._P[:k], np.reshape(Ps, (-1, _N, _N))])
+        self._pre = self._pre[:k] + pre
         self._n = len(self._entries)
-        self._cache = None
+        self._cache = self._smooth = None
 
     def _step(self, t, kind, data, h_e, x, P, aux: _Aux):
-        """One entry: ``(x, P, aux, source word or None, used, disagreement m or NaN)``."""
+        """One entry: ``(x, P, aux, source word or None, used, disagreement m or NaN, reset)``; ``reset``: None, or
+        ``(A, P_r)`` when the entry changed what the state means before its measurement (the state then ``A·x``,
+        its covariance ``P_r``: an arming, a GNSS error source started afresh or rescaled, the wander joining ``e``)."""
         if (
             kind == _ARM
         ):  # the take-off reference is set again: e starts over, and GNSS altitudes count from here
@@ -365,9 +385,11 @@ class HeightEstimator:
             # the height's sigma is height_m again: what the wander's own share is not (it may have joined e)
             P[_E, _E] = max(self.sigmas.height_m**2 - P[_W, _W], 0.0)
             P[_S, _S] = SURFACE_UNKNOWN_M**2
-            return x, P, aux._replace(z_prev=math.nan, window=()), None, False, math.nan
+            A = np.diag([0.0, 1.0, 0.0, 1.0, 1.0])
+            return x, P, aux._replace(z_prev=math.nan, window=()), None, False, math.nan, (A, P)
         if not math.isfinite(h_e):
-            return x, P, aux, None, False, math.nan
+            return x, P, aux, None, False, math.nan, None
+        A = np.eye(_N)
         if kind == _GNSS:
             fix, alt, stated = data
             sigma = stated * math.sqrt(1.0 - GNSS_WHITE**2)
@@ -375,7 +397,7 @@ class HeightEstimator:
             if fix != aux.fix or not math.isfinite(
                 aux.sigma_g
             ):  # a new error source: g starts afresh
-                x[_G] = 0.0
+                x[_G] = A[_G, _G] = 0.0
                 P[_G, :] = P[:, _G] = 0.0
                 P[_G, _G] = sigma**2
                 aux = aux._replace(
@@ -383,6 +405,7 @@ class HeightEstimator:
                 )
             elif sigma != aux.sigma_g:  # the receiver's accuracy changed: the same error, rescaled
                 x[_G] *= sigma / aux.sigma_g
+                A[_G, _G] = sigma / aux.sigma_g
                 P[_G, :] *= sigma / aux.sigma_g
                 P[:, _G] *= sigma / aux.sigma_g
             if (
@@ -399,6 +422,7 @@ class HeightEstimator:
                     T = np.eye(_N)
                     T[_E, _W], T[_W, _W] = 1.0, 0.0
                     x, P = T @ x, T @ P @ T.T
+                A = None  # the two-sided states do not reach back past it either
             S = alt - h_e if aux.S is None else aux.S
             z = alt - h_e - S
             scatter = _scattered(aux, z)
@@ -411,6 +435,7 @@ class HeightEstimator:
         else:
             word, said_m, stated = data
             row, z, r = self.c, h_e - said_m, stated**2
+        reset = None if A is not None and np.array_equal(A, np.eye(_N)) else (A, P)
         innovation = z - row @ x
         s = row @ P @ row + r
         apart = abs(innovation) / math.sqrt(s)
@@ -436,6 +461,7 @@ class HeightEstimator:
                 word,
                 False,
                 innovation,
+                reset,
             )
         if streak >= CONFLICT_AFTER:
             self._tell(
@@ -444,9 +470,9 @@ class HeightEstimator:
         aux = aux._replace(refused=tuple(sorted(streaks.items())))
         K = P @ row / s
         x = x + K * innovation
-        A = np.eye(_N) - np.outer(K, row)
-        P = A @ P @ A.T + np.outer(K, K) * r
-        return x, P, aux, word, True, math.nan
+        J = np.eye(_N) - np.outer(K, row)
+        P = J @ P @ J.T + np.outer(K, K) * r
+        return x, P, aux, word, True, math.nan, reset
 
     def _bent(self, aux: _Aux, t: float, z: float, r: float) -> _Aux:
         """``aux`` with the GNSS measurement ``z`` (m, at ``t``; white noise of variance ``r``) in its window, and
@@ -488,12 +514,21 @@ class HeightEstimator:
         if k < 0:
             return
         self._base = (self._t[k], self._x[k], self._P[k], self._aux[k])
-        for col in (self._entries, self._entry_t, self._aux, self._src, self._ok, self._gap):
+        for col in (
+            self._entries,
+            self._entry_t,
+            self._aux,
+            self._src,
+            self._ok,
+            self._gap,
+            self._pre,
+            self._resets,
+        ):
             del col[: k + 1]
         self._t, self._x, self._P = self._t[k + 1 :], self._x[k + 1 :], self._P[k + 1 :]
         self._n -= k + 1
         self._told = {told for told in self._told if told[1] > self._base[0]}
-        self._cache = None
+        self._cache = self._smooth = None
 
     # -- answers --------------------------------------------------------------------------------
     def _columns(self) -> dict:
@@ -526,6 +561,11 @@ class HeightEstimator:
             return HeightAt(
                 np.full(n, np.nan), np.full(n, np.nan), np.full(n, self.word, dtype=object)
             )
+        return (self._both_ways(tel) if tel.height_two_sided else self)._answer(tq)
+
+    def _answer(self, tq) -> HeightAt:
+        """:meth:`at` once the filter has run; the two-sided states where :attr:`two_sided`."""
+        n = len(tq)
         i = np.searchsorted(self._t[: self._n], tq, side="right") - 1
         t0b, xb, Pb, auxb = self._base
         j = np.maximum(i, 0)
@@ -534,7 +574,10 @@ class HeightEstimator:
         P = np.where((i >= 0)[:, None, None], self._P[j] if self._n else Pb, Pb)
         sigma_g = np.array([self._aux[k].sigma_g if k >= 0 else auxb.sigma_g for k in i])
         wander = np.array([self._aux[k].wander if k >= 0 else auxb.wander for k in i], dtype=bool)
+        wander |= self.moves
         x, P = self._predict(x, P, np.maximum(np.nan_to_num(tq - t0), 0.0), sigma_g, wander)
+        if self.two_sided:
+            x, P = self._two_sided(tq, i, x, P, sigma_g, wander)
         bias = x @ self.c
         sigma = np.sqrt(np.einsum("i,nij,j->n", self.c, P, self.c))
         words = np.full(n, self.word, dtype=object)
@@ -549,6 +592,73 @@ class HeightEstimator:
         bad = ~np.isfinite(tq)
         bias[bad] = sigma[bad] = np.nan
         return HeightAt(bias, sigma, words)
+
+    def _both_ways(self, tel: Telemetry) -> HeightEstimator:
+        """Offline (the whole recording): the filter run again over the same entries for the two-sided states, its
+        barometer's wander moving from the start if the causal filter found it moving over most of the recording
+        since it first did (the causal filter holds it until GNSS altitudes have shown it moves, then follows it
+        late: in the first seconds the height follows the barometer)."""
+        if self._smooth is None:
+            est = self._smooth = HeightEstimator(self.water, self.sigmas)
+            moved = np.array([a.wander for a in self._aux[: self._n]], dtype=bool)
+            # moving over at least half of the entries since it was first seen (not a few flickers)
+            est.moves = bool(moved.any() and moved[np.argmax(moved) :].mean() >= 0.5)
+            est.two_sided = True
+            est._base, est._entries, est._entry_t = self._base, self._entries, self._entry_t
+            est._run(tel)
+        return self._smooth
+
+    def _smoothed(self) -> tuple:
+        """Two-sided (Rauch-Tung-Striebel) over all the entries: per entry the state and covariance predicted to it
+        before its resets, given the filter's and given every measurement before and after it (``x⁻, P⁻, xˢ, Pˢ``)."""
+        if self._rts is None:
+            n = self._n
+            x_pre = np.reshape([p[0] for p in self._pre], (n, _N))
+            P_pre = np.reshape([p[1] for p in self._pre], (n, _N, _N))
+            xs, Ps = np.empty((n, _N)), np.empty((n, _N, _N))
+            for k in range(n - 1, -1, -1):
+                x_k, P_k = (
+                    self._x[k],
+                    self._P[k],
+                )  # after the entry: the two-sided from the next one's
+                if k < n - 1:
+                    aux = self._aux[k]
+                    wander = aux.wander or self.moves
+                    F, _ = self._transition(self._t[k + 1] - self._t[k], aux.sigma_g, wander)
+                    C = P_k @ F.T @ _pinv(P_pre[k + 1])
+                    x_k, P_k = (
+                        x_k + C @ (xs[k + 1] - x_pre[k + 1]),
+                        P_k + C @ (Ps[k + 1] - P_pre[k + 1]) @ C.T,
+                    )
+                A, P_r = self._resets[k] or (np.eye(_N), None)
+                if P_r is None:  # a measurement does not change the state
+                    xs[k], Ps[k] = x_k, P_k
+                elif (
+                    A is None
+                ):  # the first GNSS altitude of a take-off reference: nothing reaches back
+                    xs[k], Ps[k] = x_pre[k], P_pre[k]
+                else:  # back through what the entry reset: the state was A·x, of covariance P_r
+                    J = P_pre[k] @ A.T @ _pinv(P_r)
+                    xs[k] = x_pre[k] + J @ (x_k - A @ x_pre[k])
+                    Ps[k] = P_pre[k] + J @ (P_k - P_r) @ J.T
+            self._rts = (x_pre, P_pre, xs, Ps)
+        return self._rts
+
+    def _two_sided(self, tq, i, x, P, sigma_g, wander) -> tuple:
+        """The states ``x``, ``P`` at ``tq`` predicted from the entry ``i`` before each (-1: the base), given the
+        entries after them too: a Rauch-Tung-Striebel step back from the next entry's two-sided state (offline:
+        the whole recording; the frames after the newest entry keep the prediction)."""
+        has = (i + 1 < self._n) & np.isfinite(tq)
+        if not has.any():
+            return x, P
+        x_pre, P_pre, xs, Ps = self._smoothed()
+        k = i[has] + 1
+        F, _ = self._transition(self._t[k] - tq[has], sigma_g[has], wander[has])
+        C = P[has] @ np.swapaxes(F, -1, -2) @ _pinv(P_pre[k])
+        x, P = x.copy(), P.copy()
+        x[has] += np.einsum("nij,nj->ni", C, xs[k] - x_pre[k])
+        P[has] += C @ (Ps[k] - P_pre[k]) @ np.swapaxes(C, -1, -2)
+        return x, P
 
     def summary(self, tel: Telemetry, t_uav: float) -> dict:
         """The estimate at ``t_uav`` and what went into it (for the status): the EKF's height and the corrected
@@ -593,6 +703,15 @@ def _scattered(aux: _Aux, z: float) -> tuple:
         return n, mean
     n += 1
     return n, mean + ((z - aux.z_prev) ** 2 / 2.0 - mean) / min(n, SCATTER_N)
+
+
+def _pinv(P) -> np.ndarray:
+    """Pseudo-inverse of (stacked) covariances, scaled by their diagonals (the states' variances span 1e-8 to 1e6 m²;
+    a state set or reset exactly has none)."""
+    d = np.sqrt(np.diagonal(P, axis1=-2, axis2=-1))
+    d = np.where(d > 0.0, 1.0 / np.where(d > 0.0, d, 1.0), 1.0)
+    scaled = np.linalg.pinv(d[..., :, None] * P * d[..., None, :], rcond=1e-12, hermitian=True)
+    return d[..., :, None] * scaled * d[..., None, :]
 
 
 def _age(times, tq) -> np.ndarray:

@@ -125,6 +125,8 @@ class Telemetry:
         self.height_fixes: dict[str, Series] = {}
         # the height filter over them (localizer.height), made on first use
         self.height_estimator = None
+        # offline (the whole recording): each height uses the measurements after it too (localizer.height)
+        self.height_two_sided = False
         self.armed: bool | None = None  # the autopilot's HEARTBEAT SAFETY_ARMED flag, once seen
         self.arm_times: list[float] = []  # when it armed (UAV buffers' scale), transitions seen
         # a downward DISTANCE_SENSOR came: ArduPilot's RANGEFINDER is its copy

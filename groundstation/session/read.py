@@ -316,6 +316,8 @@ def load_session(path, uuv: str = PRIMARY_UUV, read: dict | None = None) -> Sess
 
     warnings: list[str] = list(cal.warnings)
     tel = Telemetry(cal.timing)
+    # the whole recording: each frame's height uses the GNSS altitudes after it too
+    tel.height_two_sided = True
     sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings, read)
     if not files.depth.is_file():
         raise SessionError(f"{files.depth}: missing (the UUV's depth is required)")
