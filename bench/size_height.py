@@ -1,6 +1,7 @@
 """The camera's height from the UUV's size: accuracy against the simulator's truth, and its cost.
 
     .venv/bin/python bench/size_height.py [CASE ...] [--out bench/results] [--sessions DIR] [--regenerate]
+                                          [--schedule HZ,SURE_HZ,MIN_FRAMES ...]
 
 For each case (:data:`CASES`: ``sim_fixtures/scenarios/size_surface.toml`` with overrides: the UUV at
 the surface and 1.5-2 m deep, nadir and 20-35° off nadir, 720p and 1080p, 8-20 m up) a session
@@ -19,7 +20,12 @@ independent of the localizer):
   height, and with it corrected by the final estimate (a constant correction: what the height's
   fusion would do with a barometer's bias that does not drift);
 - cost: CPU time (of the tracking thread) per measured frame against the tracker's per tracked
-  frame (:meth:`TrackingSession.step`), in the same run.
+  frame (:meth:`TrackingSession.step`), in the same run;
+- the measuring schedule (``--schedule``, :func:`scheduled`; by default ``skyfix process``'s own: at most
+  :data:`~groundstation.height_from_size.MEASURE_HZ` a second, :data:`~groundstation.height_from_size.SURE_HZ` once
+  sure, sure from :data:`~localizer.size_range.MIN_FRAMES` measurements): the frames it measures, taken from the
+  measurements at :data:`FRAMES_HZ` (a measurement depends on its frame alone), how many, the estimate at the end,
+  when it became sure and its sure estimates within twice their 1-sigma.
 
 Prints a table and writes ``OUT/size_height.json``.
 """
@@ -38,12 +44,13 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
-from groundstation.height_from_size import MEASURE_HZ, HeightFromSize
+from groundstation.height_from_size import MEASURE_HZ, SURE_HZ, HeightFromSize
 from groundstation.offline import track as track_video
 from groundstation.offline.evaluate import errors_m
 from groundstation.offline.process import locate_frames
 from groundstation.offline.track import track_session
 from groundstation.session.read import load_session
+from localizer import size_range
 from localizer.size_range import SizeHeight
 from localizer.tracking.session import TrackingSession
 from sim_fixtures.generate import generate
@@ -51,6 +58,8 @@ from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides
 
 BASE = ROOT / "sim_fixtures" / "scenarios" / "size_surface.toml"
+#: Frames measured a second throughout (every frame offered: the per-frame errors; the schedules pick from them)
+FRAMES_HZ = 5.0
 
 
 class TimedTracking(TrackingSession):
@@ -95,12 +104,14 @@ CASES = {
 
 
 class Recording(HeightFromSize):
-    """Every measurement, the estimate after each, and the CPU time measuring took; at ``MEASURE_HZ`` throughout
-    (not less often once sure, as ``process`` measures): the per-frame errors over every frame offered."""
+    """Every measurement (with its frame's time), the estimate after each, and the CPU time measuring took; at
+    :data:`FRAMES_HZ` throughout (not less often once sure, as ``process`` measures): the per-frame errors over every
+    frame offered."""
 
     def __init__(self, *args):
-        super().__init__(*args, sure_hz=MEASURE_HZ)
+        super().__init__(*args, measure_hz=FRAMES_HZ, sure_hz=FRAMES_HZ)
         self.results: list = []
+        self.timed: list = []  # (t_unix, result)
         self.estimates: list = []
         self.cpu_s = 0.0
 
@@ -114,6 +125,7 @@ class Recording(HeightFromSize):
     def take(self, result):
         super().take(result)
         self.results.append(result)
+        self.timed.append((self._last_t, result))
         if isinstance(result, SizeHeight):
             self.estimates.append((result.t_unix, self.estimate))
 
@@ -137,7 +149,45 @@ def session_for(name: str, case: dict, sessions: Path, regenerate: bool):
     return sc, out
 
 
-def run_case(name: str, case: dict, sessions: Path, regenerate: bool) -> dict:
+def scheduled(size: Recording, schedule: tuple[float, float, int], true_bias_at) -> dict:
+    """What a schedule (measure_hz, sure_hz, min_frames) makes of the measurements ``size`` took at
+    :data:`FRAMES_HZ`: the frames it measures (:meth:`HeightFromSize.due` of those offered, in order), taken into an
+    estimate of its own as ``process`` takes them; ``true_bias_at(t)``: the configured height's true error."""
+    measure_hz, sure_hz, min_frames = schedule
+    mine = HeightFromSize(size.cal, size.tel, "check", measure_hz, sure_hz)
+    measured, first_sure, sure_err, sure_sig = 0, None, [], []
+    kept, size_range.MIN_FRAMES = size_range.MIN_FRAMES, min_frames
+    try:
+        for t_unix, result in size.timed:
+            if not mine.due(t_unix):
+                continue
+            measured += 1
+            mine.take(result)
+            e = mine.estimate
+            if e is not None and e.sure:
+                first_sure = t_unix if first_sure is None else first_sure
+                sure_err.append(e.bias_m - float(true_bias_at(t_unix)))
+                sure_sig.append(e.sigma_m)
+    finally:
+        size_range.MIN_FRAMES = kept
+    e = mine.estimate
+    t0 = size.timed[0][0] if size.timed else float("nan")
+    return {
+        "schedule": list(schedule),
+        "measured": measured,
+        "ok": mine.measured,
+        "sure_after_s": _f(first_sure and first_sure - t0),
+        "final_bias_err_m": _f(e and e.bias_m - float(true_bias_at(size.timed[-1][0]))),
+        "final_sigma_m": _f(e and e.sigma_m),
+        "final_sure": bool(e and e.sure),
+        "sure_estimates": len(sure_err),
+        "sure_within_2sigma": _stat(np.mean, np.abs(sure_err) <= 2 * np.array(sure_sig)),
+    }
+
+
+def run_case(
+    name: str, case: dict, sessions: Path, regenerate: bool, schedules: list[tuple] = ()
+) -> dict:
     sc, path = session_for(name, case, sessions, regenerate)
     session = load_session(path)
     cal = session.calibration
@@ -210,6 +260,10 @@ def run_case(name: str, case: dict, sessions: Path, regenerate: bool) -> dict:
         "fix_mae_corrected_m": mae_corrected,
         "track_ms_per_frame": 1000 * TimedTracking.cpu_s / max(TimedTracking.steps, 1),
         "size_ms_per_measured": 1000 * size.cpu_s / max(len(size.results), 1),
+        "schedules": [
+            scheduled(size, sc_, lambda tt: np.interp(tt, t, true_bias) if len(t) else np.nan)
+            for sc_ in schedules
+        ],
     }
     return out
 
@@ -236,11 +290,24 @@ def main(argv=None) -> int:
         help="where the generated sessions are kept",
     )
     p.add_argument("--regenerate", action="store_true")
+    p.add_argument(
+        "--schedule",
+        action="append",
+        help="HZ,SURE_HZ,MIN_FRAMES: a measuring schedule to compare (repeatable; default: process's own, "
+        f"{MEASURE_HZ:g},{SURE_HZ:g},{size_range.MIN_FRAMES})",
+    )
     args = p.parse_args(argv)
+    schedules = [
+        (float(a), float(b), int(c))
+        for a, b, c in (
+            x.split(",")
+            for x in args.schedule or [f"{MEASURE_HZ},{SURE_HZ},{size_range.MIN_FRAMES}"]
+        )
+    ]
     rows = []
     for name in args.cases:
         t0 = time.perf_counter()
-        row = run_case(name, CASES[name], Path(args.sessions), args.regenerate)
+        row = run_case(name, CASES[name], Path(args.sessions), args.regenerate, schedules)
         rows.append(row)
         print(
             f"{name}: {row['measured']}/{row['offered']} measured; frame error {row['frame_err_mean_m']:+.3f} ± "
@@ -253,6 +320,22 @@ def main(argv=None) -> int:
             f"({time.perf_counter() - t0:.0f} s)",
             flush=True,
         )
+        for sch in row["schedules"]:
+            print(
+                "  schedule {:g} Hz, {:g} Hz once sure, sure from {} measurements: {} measured ({} ok); estimate error "
+                "{:+.3f} ± {:.3f} m ({}), sure after {:.1f} s, sure estimates in 2σ {:.0%} of {}".format(
+                    *sch["schedule"],
+                    sch["measured"],
+                    sch["ok"],
+                    sch["final_bias_err_m"],
+                    sch["final_sigma_m"],
+                    "sure" if sch["final_sure"] else "not sure",
+                    sch["sure_after_s"],
+                    sch["sure_within_2sigma"],
+                    sch["sure_estimates"],
+                ),
+                flush=True,
+            )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "size_height.json").write_text(json.dumps(rows, indent=1))

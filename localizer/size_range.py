@@ -170,7 +170,11 @@ AT_SURFACE_M = 0.3
 WINDOW_S = 30.0  # the estimate's sliding window
 BLOCK_S = 1.0  # measurements within a block are alike (the same view, the same background): the spread of the
 # blocks' means, not of single measurements, gives the estimate's 1-sigma (grown by the means' own correlation)
-MIN_FRAMES, MIN_BLOCKS = 20, 5  # sure: at least this many measurements over this many blocks ...
+# Two a block are enough: the blocks' spread gives the 1-sigma, and the error every measurement shares most of it
+# (bench/size_height.py's --schedule, issue 30: 10 gave the estimates and 1-sigmas 20 gave, sure sooner, so the
+# measuring slows to one a second sooner); once sure, a window at one a second stays sure while a third of its frames
+# give a measurement (20 needed two thirds: with fewer, back to five a second).
+MIN_FRAMES, MIN_BLOCKS = 10, 5  # sure: at least this many measurements over this many blocks ...
 SURE_SIGMA_M = 0.25  # ... a 1-sigma at most this ...
 MAX_OUTLIERS = 0.3  # ... and at most this share of them left out as outliers
 

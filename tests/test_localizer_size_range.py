@@ -16,6 +16,7 @@ from localizer.camera import Camera
 from localizer.size_range import (
     AT_SURFACE_M,
     EDGE_BIAS_PX,
+    MIN_FRAMES,
     SIZE_SIGMA,
     HeightBias,
     SizeHeight,
@@ -197,6 +198,10 @@ def test_sure_only_with_enough_measurements_over_enough_seconds_and_a_small_sigm
     for h in _measurements(np.random.default_rng(3), bias=0.5, n=300, sigma=0.1, common=0.3):
         far.add(h)
     assert not far.estimate().sure and far.estimate().sigma_m > 0.25
+    slow = HeightBias()  # a measurement a second: the blocks are there, the measurements count
+    for k, h in enumerate(_measurements(np.random.default_rng(6), bias=0.5, n=15, hz=1.0)):
+        slow.add(h)
+        assert slow.estimate().sure == (k + 1 >= MIN_FRAMES), k
 
 
 def test_window_forgets_old_measurements():

@@ -19,7 +19,7 @@ from live_helpers import wait_until
 
 from groundstation.height_from_size import HeightFromSize
 from localizer.calibration import Calibration
-from localizer.size_range import SizeHeight
+from localizer.size_range import MIN_FRAMES, SizeHeight
 from localizer.telemetry import Telemetry
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -161,9 +161,9 @@ def test_process_finds_the_configured_heights_error(tmp_path):
     )
     assert m, run.stdout
     bias, sigma, frames, sure = float(m[1]), float(m[2]), int(m[3]), m[4]
-    assert sure == "sure" and frames >= 20 and abs(bias - 2.0) <= 2 * sigma and sigma < 0.2, (
-        run.stdout
-    )
+    assert (
+        sure == "sure" and frames >= MIN_FRAMES and abs(bias - 2.0) <= 2 * sigma and sigma < 0.2
+    ), run.stdout
     assert "m above what the UUV's size in the image says" in run.stderr, run.stderr
 
 
