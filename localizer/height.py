@@ -66,9 +66,13 @@ disagrees: until :data:`CONFLICT_HOLD_S` after its last refused one, the height'
 both (``hypot(sigma, disagreement / 2)``); which one is right is not known, so h_acc says so
 (when in doubt, no fix: GPS_INPUT's gate on h_acc). A disagreement starting and ending is one
 line each (:func:`take_notices`), naming both heights; a single glitch is neither.
-The filter is causal: a frame's height uses the measurements up to its time, offline as live;
-measurements that arrive late (the UUV's size is measured after the frame) are fused in time
-order by re-running the filter from just before them.
+Live, the filter is causal: a frame's height uses the measurements up to its time; measurements that arrive late
+(the UUV's size is measured after the frame) are fused in time order by re-running the filter from just before them.
+Offline (:attr:`Telemetry.height_two_sided`: the whole recording) a frame's height uses the measurements after it
+too: a Rauch-Tung-Striebel smoother over the filter's states (:meth:`HeightEstimator._smoothed`), with the same model;
+it does not reach back past a take-off reference's first GNSS altitude (the drift before it, and the level, are not
+inferred from them), and the wander moves from the start when the causal filter found it moving over most of the
+recording (:meth:`HeightEstimator._both_ways`).
 
 A frame's source word names what updated the estimate within :data:`SOURCE_WINDOW_S` before it,
 joined by ``+``: ``rangefinder``, ``size`` (any absolute source by its name), ``gnss_rtk`` / ``gnss``
