@@ -31,9 +31,13 @@ from groundstation.offline.bottom import PoseCorrection, bias_headings
 from groundstation.offline.evaluate import error_ne_m, shape_m
 from groundstation.session.read import load_session
 from localizer.bottom import in_bias_frame
+from localizer.geodesy import geodetic_to_ned
 from localizer.pose import camera_pose
 from sim_fixtures.generate import generate
+from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import load_scenario, with_overrides
+from sim_fixtures.sensors import position_white_ne_m
+from sim_fixtures.tlog import Clock, sample_times, stream
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "sim_fixtures" / "scenarios"
@@ -51,21 +55,65 @@ HEADER = (
 )
 
 
+def scenario_of(name: str, duration_s: float | None):
+    """The session's scenario (:data:`SESSIONS`, :data:`EXTRA`)."""
+    scenario, gnss, wind_mps = {**SESSIONS, **EXTRA}[name]
+    sc = load_scenario(SCENARIOS / f"{scenario}.toml")
+    return with_overrides(
+        sc,
+        name=name,
+        duration_s=duration_s or sc.duration_s,
+        sensors={"gnss_mode": gnss},
+        **({"waves": {"wind_mps": wind_mps}} if wind_mps else {}),
+    )
+
+
 def session(name: str, work: Path, duration_s: float | None) -> Path:
     """The session's folder, rendered when missing."""
-    scenario, gnss, wind_mps = {**SESSIONS, **EXTRA}[name]
     out = work / name
     if not (out / "video.mp4").is_file():
-        sc = load_scenario(SCENARIOS / f"{scenario}.toml")
-        sc = with_overrides(
-            sc,
-            name=name,
-            duration_s=duration_s or sc.duration_s,
-            sensors={"gnss_mode": gnss},
-            **({"waves": {"wind_mps": wind_mps}} if wind_mps else {}),
-        )
-        generate(sc, out, video=True)
+        generate(scenario_of(name, duration_s), out, video=True)
     return out
+
+
+def truth_check(name: str, path: Path, s, duration_s: float | None) -> str:
+    """One line: the reported UAV position at the frames (GLOBAL_POSITION_INT as the ground station interpolates it)
+    less the true one (the scenario's motion) against ``truth_errors.csv``'s ``north_err_m``, ``east_err_m`` (cm RMS
+    per axis about the mean, and frame to frame), then less the message's white draws too (the EKF position's
+    ``gnss_white_m``, which truth_errors.csv leaves out: the same draws as :func:`sim_fixtures.tlog.write_tlog`'s,
+    linearly interpolated to the frames): what is left is the positions' 1e-7 degree steps and the interpolation."""
+    sc = scenario_of(name, duration_s)
+    te = np.genfromtxt(path / "truth_errors.csv", delimiter=",", names=True)
+    tau = np.arange(len(te)) / sc.fps
+    pose = camera_pose(s.calibration, s.telemetry, te["t"])
+    site = sc.site
+    n, e, _ = geodetic_to_ned(
+        pose.lat_deg, pose.lon_deg, pose.alt_amsl_m, site.lat_deg, site.lon_deg, site.surface_amsl_m
+    )
+    off = np.column_stack([n, e]) - Motion(sc).uav_ned(tau)[:, :2]
+    off -= np.column_stack([te["north_err_m"], te["east_err_m"]])
+    clock, tel = Clock.of(sc), sc.telemetry
+    sent, _ = sample_times(
+        clock, tel.position_hz, -tel.lead_s, sc.duration_s + 1.0, stream(sc, "position")
+    )
+    white = position_white_ne_m(sc, "ekf", len(sent))
+    at = np.column_stack([np.interp(tau, clock.tau_of_us(sent), w) for w in white.T])
+
+    def cm(x):
+        return "/".join(f"{v:.2f}" for v in 100 * np.std(x, axis=0))
+
+    d = np.diff(off, axis=0)
+    # the camera's tilt wander about its mean (the bias taken off), as a ground shift at the UUV's apparent depth below
+    # the camera (near nadir: height + depth / n)
+    tilt = np.radians(np.column_stack([te["cam_err_n_deg"], te["cam_err_e_deg"]]))
+    slant_m = sc.uav.height_m + sc.uuv.depth_m / site.refractive_index
+    wander_mm = 1000 * slant_m * np.mean(np.hypot(*(tilt - tilt.mean(axis=0)).T))
+    return (
+        f"{name}: reported - true - truth_errors: {cm(off)} cm RMS N/E (frame to frame {cm(d)}); "
+        f"the white draws interpolated: {cm(at)}; left once they are taken off too: {cm(off - at)} "
+        f"(the 1e-7 degree steps alone: {100 * 0.0111 / np.sqrt(12):.2f} cm north); the tilt's wander "
+        f"uncorrected would be a shape of {wander_mm:.1f} mm"
+    )
 
 
 def scores(s, pose_from_bottom: str):
@@ -143,7 +191,21 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "pose_from_bottom.txt")
     ap.add_argument("--duration", type=float, default=None, help="seconds of each session")
     ap.add_argument("--only", nargs="*", default=None, choices=[*SESSIONS, *EXTRA])
+    ap.add_argument(
+        "--truth-check",
+        type=Path,
+        default=None,
+        help="only compare each session's reported position with truth_errors.csv (truth_check), into this file",
+    )
     args = ap.parse_args()
+    if args.truth_check:
+        checks = []
+        for name in args.only or SESSIONS:
+            path = session(name, args.work, args.duration)
+            checks.append(truth_check(name, path, load_session(path, "uuv1"), args.duration))
+            print(checks[-1], flush=True)
+        write(args.truth_check, checks, [])
+        return 0
     lines, shapes, maes, notes = [HEADER], {}, {}, []
     print(HEADER, flush=True)
     for name in args.only or SESSIONS:
