@@ -9,8 +9,9 @@ paints). A frame that comes while the painter is still busy with the one before 
 mosaic takes the CPU the rest of the service leaves. The UUV is not left out (its pixel is the tracker's, per UUV;
 the mean over the frames dilutes it).
 
-The painting and the tiles run in a process of their own (:class:`MosaicPainter`, at nice 10, ending with the
-service: :func:`groundstation.height_from_size.start_measuring_process`), the frame handed over through shared
+The painting and the tiles run in a process of their own (:class:`MosaicPainter`, :func:`start_painting_process`:
+10 nice levels below the service and at least at nice 10, as the painting thread was: the map yields the CPU to
+every program beside it; ending with the service), the frame handed over through shared
 memory (:class:`~groundstation.height_from_size.SharedFrame`): they are Python and NumPy, and a thread of the
 service at a low priority that ran them held the interpreter's lock while it waited for a core beside busy
 programs, the frames' threads waiting with it (``bench/live_latency.py --page open``). The service's threads only
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import math
 import multiprocessing
+import os
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -33,6 +35,7 @@ import numpy as np
 
 from groundstation.height_from_size import SharedFrame, shared_image, start_measuring_process
 from groundstation.live.every_frame import EveryFrame
+from groundstation.live.ui.feed import ENCODER_NICE
 from groundstation.map.tiles import (
     MAX_ZOOM,
     TILE_PX,
@@ -158,6 +161,14 @@ class MosaicPainter:
         return out if any_painted else None
 
 
+def start_painting_process() -> None:
+    """The painting process: :func:`start_measuring_process` (the service's nice + 10, ending with it), and at least
+    at nice :data:`~groundstation.live.ui.feed.ENCODER_NICE`: the painting is the page's, the fixes' CPU comes first
+    and the laptop's other programs' too."""
+    start_measuring_process()
+    os.setpriority(os.PRIO_PROCESS, 0, max(os.getpriority(os.PRIO_PROCESS, 0), ENCODER_NICE))
+
+
 #: The painting process's one :class:`MosaicPainter` (:func:`start_painter`).
 _painter: list[MosaicPainter] = []
 
@@ -190,7 +201,7 @@ class LiveMosaic:
         self.lat_deg = 0.0  # the first painted frame's
         self._spill = tempfile.TemporaryDirectory(prefix="skyfix-live-mosaic-")
         self._pool = ProcessPoolExecutor(
-            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process
+            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_painting_process
         )
         self._pool.submit(start_painter, cal, floor_depth_m, self._spill.name)
         self._shared = (
