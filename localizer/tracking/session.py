@@ -91,7 +91,13 @@ class _Sighting:
     v: float
     pu: float  # NaN without an anchor
     pv: float
-    pose: CameraPose  # one frame
+    # that frame's pose: frame ``i`` of ``poses`` (taken only when located: most sightings never are)
+    poses: CameraPose
+    i: int = 0
+
+    def pose(self) -> CameraPose:
+        """The one frame's pose."""
+        return take(self.poses, [self.i])
 
 
 class TrackingSession:
@@ -309,7 +315,7 @@ class TrackingSession:
         if proj is not None and not (math.isfinite(proj[0]) and math.isfinite(proj[1])):
             return
         pu, pv = (proj[0], proj[1]) if proj is not None else (math.nan, math.nan)
-        self._seen = _Sighting(float(pose.t_unix[i]), u, v, pu, pv, take(pose, [i]))
+        self._seen = _Sighting(float(pose.t_unix[i]), u, v, pu, pv, pose, i)
         if proj is not None:
             self._moved(float(pose.t_unix[i]), u - pu, v - pv, float(proj[2]))
 
@@ -335,7 +341,7 @@ class TrackingSession:
             self._anchor is None or self._anchor_age > REANCHOR_FRAMES
         ) and seen is not self._anchor_tried:
             self._anchor_tried = seen
-            anchor, _ = self._locate(seen.pose, (seen.u, seen.v))
+            anchor, _ = self._locate(seen.pose(), (seen.u, seen.v))
             if anchor is not None:
                 self._anchor, self._anchor_age, self._proj = anchor, 1, None
                 ru, rv = (

@@ -75,7 +75,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
+from numpy.lib.stride_tricks import as_strided
 
 from . import Match, Prediction
 from .opencv import check_box
@@ -207,6 +207,10 @@ class TemplateParams:
 #: ranks below every place that is not.
 _FLAT_PENALTY = 10.0
 
+#: Working pixels: a frame's first conversion (:meth:`TemplateMatcher._prepare`) holds the upright patch about a
+#: match this far from the prediction (a match further off converts its own: slower, the same values).
+_UPRIGHT_SLACK = 2
+
 
 def _running(mean: float, value: float, rate: float) -> float:
     """A running mean at ``rate`` moved towards ``value`` (``value`` itself while ``mean`` is NaN: the first)."""
@@ -254,10 +258,13 @@ def _ncc_maps(image: np.ndarray, columns: np.ndarray, side: int) -> np.ndarray:
     own cost is most of it. As OpenCV, a flat place of the image scores 0.
     """
     rows, cols = image.shape[0] - side + 1, image.shape[1] - side + 1
+    # the places as a strided view converted in one copy (sliding_window_view's checks and a float32 copy cost
+    # about as much as the product below)
+    s0, s1 = image.strides
     places = (
-        sliding_window_view(image, (side, side))
-        .reshape(rows * cols, side * side)
+        as_strided(image, (rows, cols, side, side), (s0, s1, s0, s1), writeable=False)
         .astype(np.float64)
+        .reshape(rows * cols, side * side)
     )
     sums = places.sum(axis=1)
     squares = np.einsum("ij,ij->i", places, places)
@@ -300,6 +307,8 @@ class TemplateMatcher:
     def __init__(self, params: TemplateParams | None = None):
         self.p = params or TemplateParams()
         self._grey = None  # (bx0, by0, blocks): the largest area of the current frame converted (see _blocks)
+        # the current frame's spreads and upright patches by place (read-only; a follow reads each up to thrice)
+        self._looks: dict = {}
 
     # -- images at working resolution ------------------------------------------------------
     def _blocks(self, frame_bgr, bx0: int, by0: int, bw: int, bh: int) -> np.ndarray:
@@ -340,9 +349,13 @@ class TemplateMatcher:
         return qx * k + (k - 1) / 2.0, qy * k + (k - 1) / 2.0
 
     def _upright(self, frame_bgr, u: float, v: float) -> np.ndarray | None:
-        """The canonical-frame patch (side D) of the UUV centred at full-res (u, v), or None off the frame."""
+        """The canonical-frame patch (side D) of the UUV centred at full-res (u, v), or None off the frame
+        (read-only)."""
+        key = ("upright", u, v, self._angle, self._scale)
+        if key in self._looks:
+            return self._looks[key]
         qx, qy = self._to_work(u, v)
-        half = math.ceil(self.D * self._scale * 0.75) + 2
+        half = self._upright_half()
         bx0, by0 = int(qx) - half, int(qy) - half
         region = self._blocks(
             frame_bgr,
@@ -351,13 +364,19 @@ class TemplateMatcher:
             2 * half + 1 + min(bx0, 0),
             2 * half + 1 + min(by0, 0),
         )
-        if region.shape[0] < 4 or region.shape[1] < 4:
-            return None
-        centre = (qx - max(bx0, 0), qy - max(by0, 0))
-        return _warp(region, centre, self._angle, self._scale, self.D)
+        patch = None
+        if region.shape[0] >= 4 and region.shape[1] >= 4:
+            centre = (qx - max(bx0, 0), qy - max(by0, 0))
+            patch = _warp(region, centre, self._angle, self._scale, self.D)
+            patch.flags.writeable = False
+        self._looks[key] = patch
+        return patch
 
     def _spread(self, frame_bgr, u: float, v: float) -> float:
         """Standard deviation (grey levels) of the working-resolution square the template covers at full-res (u, v)."""
+        key = ("spread", u, v, self._scale)
+        if key in self._looks:
+            return self._looks[key]
         qx, qy = self._to_work(u, v)
         half = max(1, round(self.S * self._scale) // 2)
         square = self._blocks(
@@ -367,7 +386,8 @@ class TemplateMatcher:
             2 * half + 1,
             2 * half + 1,
         )
-        return float(cv2.meanStdDev(square)[1][0, 0]) if square.size else 0.0
+        self._looks[key] = float(cv2.meanStdDev(square)[1][0, 0]) if square.size else 0.0
+        return self._looks[key]
 
     def _contrast(self, frame_bgr, u: float, v: float) -> float:
         """The grey-level spread at (u, v) relative to the first appearance's (see :meth:`_spread`)."""
@@ -397,7 +417,7 @@ class TemplateMatcher:
         self.k = max(1, round(max(w, h) / self.p.work_px))
         self.S = math.ceil(max(w, h) / self.k) | 1  # matching template side (odd)
         self.D = math.ceil(self.S * math.sqrt(2.0)) + 2 | 1  # canonical side: holds every rotation
-        self._grey = None
+        self._grey, self._looks = None, {}
         self._angle, self._scale = 0.0, 1.0
         # the heading the UUV was last seen at (a candidate's own may differ)
         self._seen_angle = 0.0
@@ -439,7 +459,7 @@ class TemplateMatcher:
     def _begin(self, prediction: Prediction | None) -> None:
         """A new frame: follow the predicted apparent size relative to that at start (in steps of
         ``scale_step``; without a scale at start, the first prediction's is the reference)."""
-        self._grey = None
+        self._grey, self._looks = None, {}
         if prediction is None or not prediction.px_per_m > 0:
             return
         if not self._ref_px_per_m > 0:
@@ -462,10 +482,21 @@ class TemplateMatcher:
             return None, 0, 0
         return self._blocks(frame_bgr, bx0, by0, bx1 - bx0, by1 - by0), bx0, by0
 
+    def _upright_half(self) -> int:
+        """Half the side (working pixels) of the square :meth:`_upright` reads about its centre."""
+        return math.ceil(self.D * self._scale * 0.75) + 2
+
     def _prepare(self, frame_bgr, cu: float, cv_: float, radius_px: float) -> None:
-        """Convert at once what a search within ``radius_px`` of (cu, cv_) reads, and what the
-        refinement and the contrast check around its match read (see :meth:`_blocks`)."""
-        self._region(frame_bgr, cu, cv_, radius_px + 4 * self.k, self.S)
+        """Convert at once what a search within ``radius_px`` of (cu, cv_) reads, what the
+        refinement and the contrast check around its match read, and the upright patch about a match
+        within :data:`_UPRIGHT_SLACK` of (cu, cv_) (see :meth:`_blocks`): one conversion a frame, not two."""
+        qx, qy = self._to_work(cu, cv_)
+        half = max(
+            (self.S - 1) // 2 + max(1, math.ceil(radius_px / self.k) + 4),
+            self._upright_half() + _UPRIGHT_SLACK,
+        )
+        bx0, by0 = max(round(qx) - half, 0), max(round(qy) - half, 0)
+        self._blocks(frame_bgr, bx0, by0, round(qx) + half + 1 - bx0, round(qy) + half + 1 - by0)
 
     def _penalty(self, shape, x0: float, y0: float, step: float, prior) -> np.ndarray | None:
         """The distance penalty (see :data:`TemplateParams.distance_weight`) of a score map whose cell (i, j) puts
