@@ -79,7 +79,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 from emit import emit
-from ui_cost import CHROMIUM, FLAGS, browser_cpu_s
+from ui_cost import browser_cpu_s, launch_browser
 
 from groundstation.live.pipeline import Pipeline
 from groundstation.session.read import load_session
@@ -257,13 +257,7 @@ def page_open(run_log: Path, timeout_s: float = 30.0):
         tempfile.TemporaryDirectory(prefix="skyfix-bench-chromium-") as profile,
         sync_playwright() as pw,
     ):
-        context = pw.chromium.launch_persistent_context(
-            profile,
-            executable_path=CHROMIUM,
-            headless=True,
-            args=FLAGS,
-            viewport={"width": 1400, "height": 1000},
-        )
+        context = launch_browser(pw, profile)
         try:
             page = context.new_page()
             page.on("requestfinished", lambda r: "/basemap/" in r.url and tiles.append(r.url))

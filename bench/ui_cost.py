@@ -108,6 +108,18 @@ FLAGS = [
 PAGE_FPS = 10.0  # the feed's rate limit (groundstation.live.ui.feed)
 
 
+def launch_browser(pw, profile: str):
+    """Headless Chromium (playwright's ``pw``) with the operator's window size and :data:`FLAGS`, its profile in
+    ``profile``: the page as a field laptop shows it."""
+    return pw.chromium.launch_persistent_context(
+        profile,
+        executable_path=CHROMIUM,
+        headless=True,
+        args=FLAGS,
+        viewport={"width": 1400, "height": 1000},
+    )
+
+
 def ensure_session(path: Path) -> Path:
     if (path / "session.toml").exists():
         return path
@@ -250,13 +262,7 @@ def one_run(session_dir: Path, work: Path, mode: str) -> dict:
                 from playwright.sync_api import sync_playwright
 
                 pw = sync_playwright().start()
-                context = pw.chromium.launch_persistent_context(
-                    profile,
-                    executable_path=CHROMIUM,
-                    headless=True,
-                    args=FLAGS,
-                    viewport={"width": 1400, "height": 1000},
-                )
+                context = launch_browser(pw, profile)
                 page = context.new_page()
                 page.goto(url)
                 page.wait_for_selector("#conn.ok", timeout=30_000)
