@@ -36,8 +36,8 @@ import numpy as np
 import pymap3d
 from live_run import ROOT, ServiceRun
 
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
-from groundstation.zenoh_session import open_session
 
 DEFAULT_SESSION = Path("/tmp/skyfix-busy/session")
 BAD_M = 0.5

@@ -46,8 +46,8 @@ import numpy as np
 from live_run import ROOT, ServiceRun, proc_sample
 
 from groundstation.mavlink.ingest import mavutil
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.session.tlog import read_tlog
-from groundstation.zenoh_session import open_session
 from localizer.geodesy import horizontal_error_m
 from sim_fixtures.hostile import DEPTH_KINDS, MAVLINK_KINDS, DepthFuzzer, MavlinkFuzzer, schedule
 

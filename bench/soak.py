@@ -33,7 +33,7 @@ from pathlib import Path
 
 from live_run import ROOT, ServiceRun, proc_sample
 
-from groundstation.zenoh_session import open_session
+from groundstation.runtime.zenoh_session import open_session
 
 DEFAULT_SESSION = Path("/tmp/skyfix-soak/session")
 RSS_GROWTH_MAX = 0.05

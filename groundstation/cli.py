@@ -94,7 +94,7 @@ COMMANDS = (
     ),
     (
         "deploy",
-        "groundstation.deploy_command",
+        "groundstation.live.deploy",
         "print a shipped deployment file (systemd unit, configuration, Zenoh) or copy them all",
     ),
 )
@@ -122,8 +122,8 @@ class _Version(argparse.Action):
 def _one_line_errors() -> tuple[type[Exception], ...]:
     """The errors a subcommand reports as one line and exit code 2; imported only once one is raised."""
     from groundstation.mavlink.ingest import LinkError
+    from groundstation.runtime.zenoh_session import ZenohError
     from groundstation.session import SessionError
-    from groundstation.zenoh_session import ZenohError
     from localizer.calibration import ConfigError
 
     return (SessionError, ConfigError, LinkError, ZenohError)

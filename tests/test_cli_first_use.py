@@ -290,7 +290,7 @@ def test_status_finds_a_local_service_by_default(tmp_path):
     """``skyfix status`` as the README shows it, with no endpoint: it finds ``skyfix run`` started with none."""
     from live_helpers import start, stop, wait_until
 
-    from groundstation.zenoh_session import LOCAL_ENDPOINT
+    from groundstation.runtime.zenoh_session import LOCAL_ENDPOINT
 
     host, port = LOCAL_ENDPOINT.removeprefix("tcp/").rsplit(":", 1)
     with socket.socket() as probe:

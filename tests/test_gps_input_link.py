@@ -30,7 +30,7 @@ from live_helpers import ROOT, GpsInputEndpoint, free_port, skyfix, start, stop,
 from groundstation.mavlink.ingest import mavutil
 from groundstation.mavlink.link import MavlinkLink, read_signing_key
 from groundstation.runtime.gps_input import GpsInputSink, mavlink_gps_link
-from groundstation.zenoh_session import open_session
+from groundstation.runtime.zenoh_session import open_session
 from localizer.calibration import ConfigError
 from localizer.fix import Fix
 

@@ -20,8 +20,8 @@ from live_helpers import free_port
 
 from groundstation.runtime.gps_input import GpsInputSink
 from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.testing.link_scenarios import start_router
-from groundstation.zenoh_session import open_session
 
 
 def _router(ep: str) -> subprocess.Popen:

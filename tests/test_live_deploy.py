@@ -18,8 +18,8 @@ from live_helpers import ROOT
 
 from groundstation.config_files import load_calibration
 from groundstation.live.config import run_config
+from groundstation.runtime.zenoh_session import make_config
 from groundstation.testing.supervisor import read_unit, systemd_seconds
-from groundstation.zenoh_session import make_config
 
 DEPLOY = ROOT / "deploy"
 

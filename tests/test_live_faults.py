@@ -41,10 +41,10 @@ from live_helpers import (
 )
 
 from groundstation.mavlink.ingest import mavutil
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.session.tlog import read_tlog
 from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
 from groundstation.video.send import send_video
-from groundstation.zenoh_session import open_session
 from localizer.calibration import Timing
 
 BUNDLED = ROOT / "sim_fixtures" / "bundled"

@@ -164,7 +164,7 @@ def test_injection_through_blueos_mavlink_in():
     import socket
 
     from groundstation.runtime.zenoh_mavlink import ZenohMavlinkIn
-    from groundstation.zenoh_session import open_session
+    from groundstation.runtime.zenoh_session import open_session
 
     ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     skyfix_side, blueos_side = open_session(listen=[ep]), open_session(connect=[ep])

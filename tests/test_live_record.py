@@ -14,8 +14,8 @@ from live_helpers import free_port, skyfix, start, stop, wait_for
 
 from groundstation.live.sinks.recorder import Recorder
 from groundstation.mavlink.ingest import ingest, mavutil
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.session.read import load_session, read_table
-from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration
 from localizer.fix import Fix
 from localizer.telemetry import Telemetry

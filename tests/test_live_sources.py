@@ -15,12 +15,12 @@ from live_helpers import free_port
 from groundstation.live.sources.depth_zenoh import DepthZenoh, parse_depth
 from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uav_mavlink import UavMavlink
-from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import SKYFIX_SYSID
 from groundstation.mavlink.ingest import mavutil
 from groundstation.mavlink.transport import ANY_PEER
+from groundstation.runtime.logs import Throttle, kind_of
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.video.live import VideoLive
-from groundstation.zenoh_session import open_session
 from localizer.telemetry import Telemetry
 
 

@@ -10,7 +10,7 @@ import time
 from live_helpers import free_port
 
 from groundstation.runtime.zenoh_fix import ZenohStatus
-from groundstation.zenoh_session import open_session
+from groundstation.runtime.zenoh_session import open_session
 
 
 def test_status_and_liveliness(caplog):

@@ -21,7 +21,7 @@ import numpy as np
 import pymap3d
 from live_helpers import MIN_SHARE, ROOT, LiveRun, skyfix, track_pixel, wait_for
 
-from groundstation.zenoh_session import open_session
+from groundstation.runtime.zenoh_session import open_session
 
 SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
 VIDEO_LATENCY_MS = 0  # the replay sends each frame at its exposure time (see test_live_e2e)

@@ -20,7 +20,7 @@ import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 from test_sitl_ardusub import LAT, LON, SURFACE_AMSL_M, ArduSub, ardusub_files
 
-from groundstation.zenoh_session import open_session
+from groundstation.runtime.zenoh_session import open_session
 
 pytestmark = pytest.mark.sitl
 

@@ -36,6 +36,7 @@ from live_helpers import (
 from test_live_video_inputs import FPS, SIZE, Receiver, _check_timing
 
 from groundstation.latency.timecode import render_timecode
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.video.frames import VideoError
 from groundstation.video.inputs import parse_video_input
 from groundstation.video.zenoh_video import (
@@ -48,7 +49,6 @@ from groundstation.video.zenoh_video import (
     parse_compressed_video,
     publish_video,
 )
-from groundstation.zenoh_session import open_session
 
 KEY = "video/RadCamUDPStream/stream"  # the camera manager's: its stream's name, letters and digits only
 

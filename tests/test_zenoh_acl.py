@@ -22,7 +22,7 @@ from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from test_zenoh_security import deployed
 
-from groundstation.zenoh_session import make_config, trust_problem
+from groundstation.runtime.zenoh_session import make_config, trust_problem
 
 SESSION = ROOT / "sim_fixtures" / "bundled" / "nadir_hover"
 IDENTITIES = ("skyfix", "operator", "drone-a", "blueos")

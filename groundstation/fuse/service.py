@@ -38,10 +38,10 @@ from pathlib import Path
 import zenoh
 from pydantic import ValidationError
 
-from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.link import read_signing_key
 from groundstation.messages import FUSE_STATUS_SCHEMA, FixMessage, FuseStatusMessage
 from groundstation.runtime import parts
+from groundstation.runtime.logs import Throttle, kind_of
 from groundstation.runtime.preflight import (
     link_problem,
     private_file,
@@ -53,7 +53,7 @@ from groundstation.runtime.threads import Handoff
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import INPUTS, LAST, OUTPUTS, Workers, run_to_end, stopped
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
-from groundstation.zenoh_session import open_session, subscribe
+from groundstation.runtime.zenoh_session import open_session, subscribe
 from localizer.calibration import ConfigError
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_REACH_M, MAX_SPEED_MPS, FixGate
 from localizer.fusion import SharedSigmas

@@ -31,9 +31,9 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from groundstation.latency.timecode import CELLS, marker_cells, read_timecode
+from groundstation.runtime.zenoh_session import ZenohError, open_session
 from groundstation.video.frames import LiveFrame, VideoError
 from groundstation.video.live import VideoLive
-from groundstation.zenoh_session import ZenohError, open_session
 
 log = logging.getLogger("skyfix.latency")
 

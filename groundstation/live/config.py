@@ -27,8 +27,8 @@ from groundstation.live.sources.depth_ardusub import autopilot_prefix
 from groundstation.live.sources.uuv_position import parse_hint
 from groundstation.live.ui.bind import check_token, parse_bind
 from groundstation.mavlink.transport import ANY_PEER
+from groundstation.runtime.zenoh_session import LOCAL_ENDPOINT
 from groundstation.session.read import PRIMARY_UUV
-from groundstation.zenoh_session import LOCAL_ENDPOINT
 from localizer.contract import (
     CLOSED,
     ConfigError,
@@ -558,7 +558,7 @@ class RunConfig(UuvOptions):
     @property
     def zenoh_listen_endpoints(self) -> tuple[str, ...]:
         """The Zenoh endpoints the run listens on: those given, else (without a Zenoh configuration file, whose own
-        apply) :data:`~groundstation.zenoh_session.LOCAL_ENDPOINT`, where the console commands look by default."""
+        apply) :data:`~groundstation.runtime.zenoh_session.LOCAL_ENDPOINT`, where the console commands look by default."""
         if self.zenoh_listen or self.zenoh_config:
             return self.zenoh_listen
         return (LOCAL_ENDPOINT,)

@@ -6,7 +6,7 @@ a short summary instead (``--json`` for the whole status), once or every
 ``--interval-s`` with ``--watch`` (Ctrl-C stops). No answer within ``--timeout-s``,
 or a refused command, is one line on stderr and exit code 2 (``--watch`` keeps
 asking). Without ``--zenoh-connect`` or ``--zenoh-config`` they connect to
-:data:`~groundstation.zenoh_session.LOCAL_ENDPOINT`, where a ``skyfix run`` on this
+:data:`~groundstation.runtime.zenoh_session.LOCAL_ENDPOINT`, where a ``skyfix run`` on this
 machine listens by default.
 
     skyfix status --watch
@@ -24,7 +24,7 @@ import json
 import sys
 import time
 
-from groundstation.zenoh_session import LOCAL_ENDPOINT, open_session
+from groundstation.runtime.zenoh_session import LOCAL_ENDPOINT, open_session
 
 
 class ConsoleError(Exception):

@@ -216,7 +216,7 @@ def _ports(cfg: config.RunConfig) -> Iterator[tuple[str, str, int, str, int]]:
 def _zenoh_listeners(cfg: config.RunConfig) -> list[str]:
     """The endpoints the run's Zenoh session listens on: the flags' or the default's, else its configuration file's
     (its own, or those of its mode when the file leaves them to Zenoh's defaults)."""
-    from groundstation.zenoh_session import endpoints, make_config
+    from groundstation.runtime.zenoh_session import endpoints, make_config
 
     if not cfg.zenoh_config:
         return list(cfg.zenoh_listen_endpoints)

@@ -48,7 +48,6 @@ import cv2
 import numpy as np
 
 from groundstation.live.every_frame import EveryFrame
-from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.reference import (
     REPORT_KINDS,
@@ -58,8 +57,9 @@ from groundstation.offline.reference import (
     find,
     report,
 )
+from groundstation.runtime.logs import Throttle, kind_of
 from groundstation.runtime.threads import Handoff
-from groundstation.zenoh_session import subscribe
+from groundstation.runtime.zenoh_session import subscribe
 from localizer import reference
 from localizer.fix import Fix, Fixes
 from localizer.pose import CameraPose

@@ -78,8 +78,8 @@ from groundstation.runtime.workers import (
     stopped,
 )
 from groundstation.runtime.zenoh_fix import ZenohFixSink, ZenohStatus
+from groundstation.runtime.zenoh_session import open_session
 from groundstation.video.live import VideoLive
-from groundstation.zenoh_session import open_session
 from localizer.calibration import Calibration, ConfigError, Tracker
 from localizer.depth import DepthGate
 from localizer.exchange import Fleet

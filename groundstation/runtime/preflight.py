@@ -41,10 +41,10 @@ def link_problem(url: str) -> str | None:
 def zenoh_problem(
     connect, listen, *, multicast: bool, config_file: str | None, insecure: bool
 ) -> str | None:
-    """Why a Zenoh session of these settings (:func:`~groundstation.zenoh_session.make_config`'s) cannot be made or
-    lets strangers command or feed its process (:func:`~groundstation.zenoh_session.trust_problem`); None when
+    """Why a Zenoh session of these settings (:func:`~groundstation.runtime.zenoh_session.make_config`'s) cannot be made or
+    lets strangers command or feed its process (:func:`~groundstation.runtime.zenoh_session.trust_problem`); None when
     neither. ``skyfix run`` and ``skyfix fuse`` check it at every start."""
-    from groundstation.zenoh_session import make_config, trust_problem
+    from groundstation.runtime.zenoh_session import make_config, trust_problem
 
     try:
         conf = make_config(connect, listen, multicast=multicast, config_file=config_file)
@@ -70,7 +70,7 @@ def zenoh_credentials(config_file: str, connect, listen, source: str, key: str) 
     """The credentials files a Zenoh configuration names (TLS keys, a password file) read, the private ones
     readable by their owner only (:func:`private_file`); the paths checked. :class:`ConfigError` naming ``source``
     and ``key`` (where the configuration file was given) when the file is no Zenoh configuration."""
-    from groundstation.zenoh_session import make_config
+    from groundstation.runtime.zenoh_session import make_config
 
     try:
         conf = make_config(connect, listen, config_file=config_file)

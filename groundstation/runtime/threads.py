@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from groundstation.logs import Throttle
+from groundstation.runtime.logs import Throttle
 
 log = logging.getLogger("skyfix.threads")
 

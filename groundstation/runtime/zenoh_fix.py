@@ -17,7 +17,7 @@ import zenoh
 from pydantic import BaseModel, ValidationError
 
 from groundstation.messages import STATUS_SCHEMA, FixMessage, StatusMessage
-from groundstation.zenoh_session import put_json
+from groundstation.runtime.zenoh_session import put_json
 from localizer.fix import Fix
 
 log = logging.getLogger("skyfix.status")

@@ -53,12 +53,12 @@ from pathlib import Path
 from groundstation.mavlink.ingest import LinkError, connect, mavutil
 from groundstation.mavlink.link import HEARTBEAT_PERIOD_S
 from groundstation.mavlink.transport import open_transport
+from groundstation.runtime.zenoh_session import open_session, put_json
 from groundstation.session.depth import read_depth
 from groundstation.session.read import SessionError, read_table, uuv_files
 from groundstation.session.tlog import read_tlog
 from groundstation.video.send import send_video
 from groundstation.video.zenoh_video import publish_video
-from groundstation.zenoh_session import open_session, put_json
 
 log = logging.getLogger("skyfix.replay")
 

@@ -69,7 +69,7 @@ finally:
 DEPTH_PUBLISHER = r"""
 import json, sys, time
 import numpy as np
-from groundstation.zenoh_session import open_session
+from groundstation.runtime.zenoh_session import open_session
 session_dir, shift, endpoint = sys.argv[1], float(sys.argv[2]), sys.argv[3]
 rows = [json.loads(line) for line in open(session_dir + "/depth.jsonl") if line.strip()]
 t, d = np.array([r["t"] for r in rows]), np.array([r["depth_m"] for r in rows])
@@ -272,7 +272,7 @@ class _Statuses:
     """Every ``skyfix/status`` message (t_recv, message) seen by an own Zenoh session."""
 
     def __init__(self, endpoint: str):
-        from groundstation.zenoh_session import open_session
+        from groundstation.runtime.zenoh_session import open_session
 
         self.got: list[tuple[float, dict]] = []
         self.session = open_session([endpoint])

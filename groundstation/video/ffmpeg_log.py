@@ -1,4 +1,4 @@
-"""FFmpeg's own log lines (through PyAV) in skyfix's log, thinned out by :class:`~groundstation.logs.Throttle`.
+"""FFmpeg's own log lines (through PyAV) in skyfix's log, thinned out by :class:`~groundstation.runtime.logs.Throttle`.
 
 FFmpeg says why a stream fails ("bind failed: Address already in use", "non-existing
 PPS 0 referenced") in its log, not in the error code. :func:`route_ffmpeg_log`
@@ -15,7 +15,7 @@ import time
 
 import av.logging
 
-from groundstation.logs import Throttle, kind_of
+from groundstation.runtime.logs import Throttle, kind_of
 
 log = logging.getLogger("skyfix.ffmpeg")
 

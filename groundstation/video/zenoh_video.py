@@ -26,7 +26,7 @@ stamps its own): ``peer=ZID`` takes that one only; without it the first sender w
 taken (:class:`~groundstation.runtime.sender_lock.SenderLock`, as ``rtp://`` takes the first address); ``any``
 takes everyone. Another sender's messages, and messages nobody time-stamped (no identity), are refused and
 counted (the status's ``sender``); this keeps a second camera out of the stream, it is no authentication (that
-is the session's TLS, :mod:`groundstation.zenoh_session`). A payload that is not such a message is counted
+is the session's TLS, :mod:`groundstation.runtime.zenoh_session`). A payload that is not such a message is counted
 (``bad_packets``) and logged in one line; a stream that stops is a ``TimeoutError`` after the read timeout,
 reported and reopened by the live reader.
 """
@@ -46,7 +46,7 @@ from pathlib import Path
 import av
 import zenoh
 
-from groundstation.logs import Throttle, kind_of
+from groundstation.runtime.logs import Throttle, kind_of
 from groundstation.runtime.sender_lock import SenderLock
 from groundstation.video.rtp import VIDEO_HZ, AccessUnit
 from groundstation.video.send import wait_until

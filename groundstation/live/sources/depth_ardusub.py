@@ -46,7 +46,6 @@ import zenoh
 
 from groundstation.live.registry import DepthInput, register
 from groundstation.live.sources.rates import DEPTH_HZ, THRUSTERS_HZ, RateMeter, RateRequests
-from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID, is_autopilot_heartbeat
 from groundstation.mavlink.ingest import (
     ARDUSUB_USED,
@@ -57,9 +56,10 @@ from groundstation.mavlink.ingest import (
     servo_pulses_us,
 )
 from groundstation.mavlink.link import MavlinkLink
+from groundstation.runtime.logs import Throttle, kind_of
 from groundstation.runtime.threads import Handoff, in_thread
 from groundstation.runtime.zenoh_mavlink import MavlinkIn
-from groundstation.zenoh_session import subscribe
+from groundstation.runtime.zenoh_session import subscribe
 from localizer.depth import (
     PRESSURE_MESSAGES,
     ArduSubDepth,

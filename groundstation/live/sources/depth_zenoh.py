@@ -7,7 +7,7 @@ arrival times (:meth:`localizer.telemetry.Telemetry.add_depth`). ArduSub's own d
 Zenoh or a MAVLink link, is :mod:`.depth_ardusub`.
 
 Zenoh's callback thread only copies the payload and hands it to the event loop
-(:func:`~groundstation.zenoh_session.subscribe`, a bounded hand-off). A sample that moved faster than
+(:func:`~groundstation.runtime.zenoh_session.subscribe`, a bounded hand-off). A sample that moved faster than
 the vehicle can dive is refused (:class:`localizer.depth.DepthGate`). A payload that does not parse
 is logged in one line with the offending value and counted; the service keeps running.
 """
@@ -23,9 +23,9 @@ from collections.abc import Callable
 import zenoh
 
 from groundstation.live.registry import DepthInput, register
-from groundstation.logs import Throttle, kind_of
+from groundstation.runtime.logs import Throttle, kind_of
 from groundstation.runtime.threads import Handoff
-from groundstation.zenoh_session import subscribe
+from groundstation.runtime.zenoh_session import subscribe
 from localizer.depth import DepthGate, DepthSample
 from localizer.telemetry import Telemetry
 

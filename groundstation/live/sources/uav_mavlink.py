@@ -33,10 +33,10 @@ from collections.abc import Callable
 
 from groundstation.live.registry import UavInput, register
 from groundstation.live.sources.rates import RANGEFINDER_HZ, RateMeter, RateRequests, needed_rates
-from groundstation.logs import Throttle, kind_of
 from groundstation.mavlink.ids import GCS_COMPID, SKYFIX_SYSID
 from groundstation.mavlink.ingest import USED, ingest, mavutil, names_the_uav
 from groundstation.mavlink.link import MavlinkLink, read_signing_key
+from groundstation.runtime.logs import Throttle, kind_of
 from groundstation.runtime.threads import Handoff, in_thread
 from localizer.gnss import horizontal_sigma_m, vertical_sigma_m
 from localizer.telemetry import Telemetry

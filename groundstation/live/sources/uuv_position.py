@@ -22,9 +22,9 @@ import logging
 
 import zenoh
 
-from groundstation.logs import Throttle, kind_of
+from groundstation.runtime.logs import Throttle, kind_of
 from groundstation.runtime.threads import Handoff
-from groundstation.zenoh_session import subscribe
+from groundstation.runtime.zenoh_session import subscribe
 from localizer.tracking.predict import UUV_SPEED_MPS
 from localizer.tracking.session import Prior
 

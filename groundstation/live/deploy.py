@@ -28,7 +28,7 @@ def deploy_files() -> Traversable:
     try:
         return resources.files("groundstation.deploy")
     except ModuleNotFoundError:
-        return Path(__file__).resolve().parents[1] / "deploy"
+        return Path(__file__).resolve().parents[2] / "deploy"
 
 
 def zenoh_names(root: Traversable) -> dict[str, Traversable]:
