@@ -20,6 +20,7 @@ from groundstation.testing.live import (  # noqa: F401 (the tests import them fr
     start,
     stop,
     truth_errors_m,
+    until,
     wait_for,
     wait_until,
 )

@@ -8,9 +8,10 @@ import logging
 import socket
 import subprocess
 import time
+from pathlib import Path
 
 import pytest
-from live_helpers import free_port
+from live_helpers import free_port, until
 
 from groundstation.live.sources.depth_zenoh import DepthZenoh, parse_depth
 from groundstation.live.sources.rates import needed_rates
@@ -24,14 +25,16 @@ from groundstation.video.live import VideoLive
 from localizer.telemetry import Telemetry
 
 
-async def _run_for(worker, seconds, during=None):
+async def _run_until(worker, done, what, during=None):
+    """Run ``worker`` while ``during()`` (the stimulus) runs and until ``done()`` holds: conditions, not times."""
     task = asyncio.create_task(worker.run())
-    await asyncio.sleep(0.3)
-    if during is not None:
-        await during()
-    await asyncio.sleep(seconds)
-    task.cancel()
-    await asyncio.gather(task, return_exceptions=True)
+    try:
+        if during is not None:
+            await during()
+        await until(done, 30.0, what)
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
 
 
 def test_depth_over_zenoh_clocks_garbage_and_jumps(caplog):
@@ -46,31 +49,46 @@ def test_depth_over_zenoh_clocks_garbage_and_jumps(caplog):
     synced = DepthZenoh(service, "uuv/depth_synced", tel_sync)
     stamps = []
 
+    to_own = publisher.declare_publisher("uuv/depth")
+    to_synced = publisher.declare_publisher("uuv/depth_synced")
+
     async def publish():
-        await asyncio.sleep(0.5)  # let the subscriptions propagate
+        await until(
+            lambda: to_own.matching_status.matching and to_synced.matching_status.matching,
+            30.0,
+            "the service's depth subscriptions",
+        )
         for i in range(3):
-            publisher.put(
-                "uuv/depth",
-                json.dumps({"t": time.time() + 3600.0, "depth_m": 1.0 + 0.02 * i, "extra": "x"}),
+            to_own.put(
+                json.dumps({"t": time.time() + 3600.0, "depth_m": 1.0 + 0.02 * i, "extra": "x"})
             )
             stamps.append(time.time())
-            publisher.put("uuv/depth_synced", json.dumps({"t": stamps[-1], "depth_m": 0.5}))
-            await asyncio.sleep(0.05)
-        publisher.put("uuv/depth", b"\xff\x00garbage")
-        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": "deep"}))
+            to_synced.put(json.dumps({"t": stamps[-1], "depth_m": 0.5}))
+            await asyncio.sleep(0.05)  # the stimulus: a depth sensor's pace
+        to_own.put(b"\xff\x00garbage")
+        to_own.put(json.dumps({"t": time.time() + 3600.0, "depth_m": "deep"}))
         # out of range
-        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0}))
+        to_own.put(json.dumps({"t": time.time() + 3600.0, "depth_m": 99999.0}))
         await asyncio.sleep(0.05)
         # 2.96 m in 0.1 s
-        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0}))
+        to_own.put(json.dumps({"t": time.time() + 3600.0, "depth_m": 4.0}))
         await asyncio.sleep(0.05)
-        publisher.put("uuv/depth", json.dumps({"t": time.time() + 3600.0, "depth_m": 1.06}))
+        to_own.put(json.dumps({"t": time.time() + 3600.0, "depth_m": 1.06}))
 
     async def both():
-        await asyncio.gather(_run_for(own, 0.8, publish), _run_for(synced, 1.3))
+        await asyncio.gather(
+            _run_until(
+                own,
+                lambda: len(tel_own.depth) == 4 and own.bad + own.refused == 4,
+                lambda: (
+                    f"4 depths and 4 refusals, seen {len(tel_own.depth)}, {own.bad}+{own.refused}"
+                ),
+                publish,
+            ),
+            _run_until(synced, lambda: len(tel_sync.depth) == 3, "3 synced depths"),
+        )
 
     caplog.set_level(logging.WARNING)
-    t_start = time.time()
     try:
         asyncio.run(both())
     finally:
@@ -80,7 +98,8 @@ def test_depth_over_zenoh_clocks_garbage_and_jumps(caplog):
     assert own.bad == 2 and own.refused == 2 and own.gate.refused == 1
     assert tel_own.depth_aligned_by == "arrival"
     assert tel_own.uuv_clock_minus_station_s == pytest.approx(3600.0, abs=0.2)
-    assert t_start < tel_own.depth.times[0] < time.time()  # on the station clock, not an hour ahead
+    # on the station clock (its arrival less the configured latency), not an hour ahead
+    assert abs(tel_own.depth.times[0] - stamps[0]) < 2.0
     assert any("UUV's clock is +3600" in r.message for r in caplog.records)
     assert tel_sync.depth_aligned_by == "uuv_clock" and list(tel_sync.depth.times) == stamps
     assert any("deep" in r.message for r in caplog.records)
@@ -139,12 +158,17 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
     other = mav.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=7, source_component=1)
 
     async def send():
-        sender.mav.heartbeat_send(
-            mav.mavlink.MAV_TYPE_QUADROTOR, mav.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4
-        )
-        await asyncio.sleep(0.1)
+        async def heard():  # its heartbeat until the service has bound its port and taken it
+            while uav.uav_sysid is None:
+                sender.mav.heartbeat_send(
+                    mav.mavlink.MAV_TYPE_QUADROTOR, mav.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4
+                )
+                await asyncio.sleep(0.05)
+
+        await asyncio.wait_for(heard(), 30.0)
+        t0 = time.time()
         for i in range(10):
-            boot_ms = 100_000 + i * 20
+            boot_ms = 100_000 + round((time.time() - t0) * 1000)  # an autopilot's clock: real time
             sender.mav.system_time_send(int(time.time() * 1e6), boot_ms)
             sender.mav.attitude_send(boot_ms, 0.01, -0.02, 0.5 + i * 0.01, 0, 0, 0)
             sender.mav.global_position_int_send(
@@ -156,9 +180,20 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
                 sender.write(b"\xfd\x09\x00\x00\x00\x01\x01\x1e\x00\x00" + b"\x00" * 11)
             await asyncio.sleep(0.02)
 
+    heartbeats = []  # the service's, to its UAV
+
+    def done() -> bool:
+        if not heartbeats and (hb := sender.recv_match(type="HEARTBEAT", blocking=False)):
+            heartbeats.append(hb)
+        return len(tel.attitude) == 10 and uav.health.other_systems == 10 and bool(heartbeats)
+
     try:
-        asyncio.run(_run_for(uav, 1.3, send))
-        hb = sender.recv_match(type="HEARTBEAT", blocking=True, timeout=2.0)
+        asyncio.run(
+            _run_until(
+                uav, done, lambda: f"10 attitudes and a heartbeat: {len(tel.attitude)}", send
+            )
+        )
+        hb = heartbeats[0]
     finally:
         sender.close()
         other.close()
@@ -170,11 +205,7 @@ def test_uav_mavlink_ingests_heartbeats_and_survives_bad_frames():
     status = uav.status(time.time())
     assert abs(status["clocks"]["station_minus_gnss_s"]) < 0.1  # SYSTEM_TIME was stamped when sent
     assert set(status["age_s"]) >= {"ATTITUDE", "GLOBAL_POSITION_INT", "SYSTEM_TIME"}
-    assert (
-        hb is not None
-        and hb.type == mav.mavlink.MAV_TYPE_GCS
-        and hb.get_srcSystem() == SKYFIX_SYSID
-    )
+    assert hb.type == mav.mavlink.MAV_TYPE_GCS and hb.get_srcSystem() == SKYFIX_SYSID
 
 
 def _stream(port: int, seconds: float) -> subprocess.Popen:
@@ -205,26 +236,38 @@ def _stream(port: int, seconds: float) -> subprocess.Popen:
     )
 
 
+def _udp_bound(port: int) -> bool:
+    """Whether a UDP socket of this machine is bound to ``port`` (read from /proc: binding to test would
+    take the port from the reader for a moment)."""
+    lines = Path("/proc/net/udp").read_text().splitlines()[1:]
+    return any(line.split()[1].endswith(f":{port:04X}") for line in lines)
+
+
 def test_video_reconnects_when_the_stream_resumes():
     port = free_port()
     frames = []
     video = VideoLive(f"udp://127.0.0.1:{port}", 0.1, frames.append, read_timeout_s=1.5)
-    ended = []
+
+    started = []
 
     async def two_streams():
         task = asyncio.create_task(video.run())
-        await asyncio.sleep(0.5)
-        for _ in range(2):
-            p = _stream(port, 1.5)
-            await asyncio.to_thread(p.wait)
-            ended.append(time.time())
-            await asyncio.sleep(2.5)  # silence: read timeout, then reconnect attempts
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
+        try:
+            for _ in range(2):
+                # listening: at the start, or again after the last stream's silence timed out
+                await until(lambda: _udp_bound(port), 30.0, f"a socket on port {port}")
+                started.append(time.time())
+                p = _stream(port, 1.5)
+                await asyncio.to_thread(p.wait)
+                await until(lambda: video.state == "waiting", 30.0, "the silence's timeout")
+            await until(lambda: len(frames) == video.frames, 30.0, "the frames handed over")
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
 
     asyncio.run(two_streams())
-    first = [f for f in frames if f.t_recv <= ended[0] + 0.5]
-    second = [f for f in frames if f.t_recv > ended[0] + 1.5]  # after the first stream timed out
+    first = [f for f in frames if f.t_recv < started[1]]
+    second = [f for f in frames if f.t_recv >= started[1]]
     assert video.connects >= 2
     # 45 frames sent each time; a GOP may be lost at a start
     assert len(first) >= 25 and len(second) >= 25

@@ -5,6 +5,7 @@ They run from a checkout: :data:`ROOT` is the checkout's top folder (the subproc
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import random
@@ -131,6 +132,17 @@ def wait_for(predicate, timeout_s: float, what) -> None:
         raise AssertionError(
             f"timed out after {timeout_s} s waiting for {what() if callable(what) else what}"
         )
+
+
+async def until(predicate, timeout_s: float, what, poll_s: float = 0.02) -> None:
+    """:func:`wait_for` on an event loop: polls ``predicate()`` every ``poll_s`` without blocking the loop."""
+    end = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError(
+                f"timed out after {timeout_s} s waiting for {what() if callable(what) else what}"
+            )
+        await asyncio.sleep(poll_s)
 
 
 # An independent Zenoh subscriber (run in its own process): every sample on the key
