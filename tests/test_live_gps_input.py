@@ -7,7 +7,7 @@ import time
 from datetime import UTC, datetime, timedelta
 
 import pytest
-from live_helpers import free_port, wait_for
+from live_helpers import free_port, until, wait_for
 
 from groundstation.mavlink.ingest import mavutil
 from groundstation.runtime.gps_input import (
@@ -96,67 +96,96 @@ def test_no_fix_is_explicit(fix, dt):
     assert out["lat"] == 0 and out["lon"] == 0 and out["satellites_visible"] == 0
 
 
-def test_sender_over_pymavlink_rate_fix_and_expiry():
-    port = free_port()
-    uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
-    got = []
+class _Received:
+    """The GPS_INPUT messages a UDP endpoint got so far: (system, component, fix_type, time_usec in s)."""
 
-    async def scenario():
-        sink = _sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), max_age_s=0.5)
-        task = asyncio.create_task(sink.run())
-        await asyncio.sleep(1.0)  # no fix yet: no-fix messages at 10 Hz
-        t_fix = time.time()
-        _offer_confirmed(sink, t_fix)
-        await asyncio.sleep(1.2)  # valid until 0.5 s old, then no-fix again
+    def __init__(self, port: int):
+        self.conn = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
+        self.got: list[tuple[int, int, int, float]] = []
+
+    def __call__(self) -> list[tuple[int, int, int, float]]:
+        while (m := self.conn.recv_match(type="GPS_INPUT", blocking=False)) is not None:
+            self.got.append(
+                (m.get_srcSystem(), m.get_srcComponent(), m.fix_type, m.time_usec / 1e6)
+            )
+        return self.got
+
+    def types(self) -> list[int]:
+        return [ft for _, _, ft, _ in self()]
+
+
+async def _run_sink(sink, scenario):
+    """``scenario()`` while the sink runs; then the sink stopped."""
+    task = asyncio.create_task(sink.run())
+    try:
+        return await scenario()
+    finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
+
+
+def test_sender_over_pymavlink_rate_fix_and_expiry():
+    port = free_port()
+    received = _Received(port)
+    sink = _sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), max_age_s=0.5)
+
+    async def scenario():
+        await until(lambda: len(received()) >= 10, 30.0, "no fix yet: ten no-fix messages")
+        t_fix = time.time()
+        _offer_confirmed(sink, t_fix)
+        types = received.types
+
+        def expired() -> bool:
+            return 3 in types() and types()[-1] == 1
+
+        await until(expired, 30.0, lambda: f"the fix sent, then no fix again: {types()}")
         return t_fix
 
     try:
-        t_fix = asyncio.run(scenario())
-        while (m := uuv.recv_match(type="GPS_INPUT", blocking=True, timeout=0.3)) is not None:
-            got.append((m.get_srcSystem(), m.get_srcComponent(), m.fix_type, m.time_usec / 1e6))
+        t_fix = asyncio.run(_run_sink(sink, scenario))
     finally:
-        uuv.close()
+        received.conn.close()
+    got = received.got
     assert {(s, c) for s, c, _, _ in got} == {(245, 220)}
     types = [ft for _, _, ft, _ in got]
-    before = types[: types.index(3)]
-    assert len(before) >= 9 and set(before) == {1}
+    first = types.index(3)
+    assert first >= 10 and set(types[:first]) == {1}
     valid = [t for _, _, ft, t in got if ft == 3]
-    assert 4 <= len(valid) <= 7  # 0.5 s of validity at 10 Hz (+ the immediate send)
+    assert 2 <= len(valid) <= 7  # kept at 10 Hz for its 0.5 s of validity (+ the immediate send)
     assert all(t == pytest.approx(t_fix, abs=1e-6) for t in valid)
-    assert types[-1] == 1
-    assert 19 <= len(got) <= 26  # 2.2 s at 10 Hz plus the fix sent at once
+    expiry = got[first + len(valid)]  # the first no-fix after it, stamped when sent
+    assert expiry[2] == 1 and expiry[3] >= t_fix + 0.5 - 1e-3  # not before the fix was 0.5 s old
 
 
 @pytest.mark.parametrize("status", ["lost", "awaiting_target", "released"])
 def test_tracker_loss_ends_the_fix_at_once(status):
     """A lost, dropped or released target must not keep the last position alive for max_age_s."""
     port = free_port()
-    uuv = mavutil().mavlink_connection(f"udpin:127.0.0.1:{port}")
+    received = _Received(port)
+    sink = _sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), max_age_s=5.0)
 
     async def scenario():
-        sink = _sink(mavlink_gps_link(f"udpout:127.0.0.1:{port}"), max_age_s=5.0)
-        task = asyncio.create_task(sink.run())
-        await asyncio.sleep(0.3)
+        await until(lambda: received(), 30.0, "the sender's first message")
         t = time.time()
         _offer_confirmed(sink, t)
-        await asyncio.sleep(0.05)
+        await until(lambda: 3 in received.types(), 30.0, "the fix")
+        t_loss = time.time()
         sink.on_fix(_fix(t + 0.03, status=status), info=_info(t + 0.03))
-        await asyncio.sleep(0.3)
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
+
+        def after_loss() -> list[int]:  # from the first no-fix sent after the loss on
+            got = received()
+            k = next((i for i, m in enumerate(got) if m[2] == 1 and m[3] > t_loss), len(got))
+            return [ft for _, _, ft, _ in got[k:]]
+
+        await until(lambda: len(after_loss()) >= 4, 30.0, "the no-fix messages after the loss")
+        return after_loss()
 
     try:
-        asyncio.run(scenario())
-        types = []
-        while (m := uuv.recv_match(type="GPS_INPUT", blocking=True, timeout=0.3)) is not None:
-            types.append(m.fix_type)
+        after = asyncio.run(_run_sink(sink, scenario))
     finally:
-        uuv.close()
-    first_valid = types.index(3)
-    assert types[first_valid:].count(3) == 1  # only the fix itself; after the loss, no-fix only
-    assert len(types) - first_valid >= 4  # the no-fix messages kept coming at 10 Hz
+        received.conn.close()
+    assert set(after) == {1}  # no fix after the loss, though the last one was valid for 5 s
+    assert 3 in [ft for _, _, ft, _ in received.got]
 
 
 def test_injection_through_blueos_mavlink_in():
@@ -173,15 +202,23 @@ def test_injection_through_blueos_mavlink_in():
         "mavlink/in", lambda s: got.append((str(s.encoding), s.payload.to_string()))
     )
 
+    def types() -> list[int]:
+        return [json.loads(p)["message"].get("fix_type") for _, p in got]
+
     async def scenario():
-        await asyncio.sleep(0.3)
+        probe = skyfix_side.declare_publisher(
+            "mavlink/in"
+        )  # BlueOS's subscription seen from skyfix
+        await until(lambda: probe.matching_status.matching, 30.0, "the subscription at mavlink/in")
+        probe.undeclare()
         sink = _sink(ZenohMavlinkIn(skyfix_side, "mavlink/in"), max_age_s=0.5)
-        task = asyncio.create_task(sink.run())
-        await asyncio.sleep(0.25)
-        _offer_confirmed(sink, time.time())
-        await asyncio.sleep(0.2)
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
+
+        async def one_fix():
+            await until(lambda: got, 30.0, "the sender's first message at mavlink/in")
+            _offer_confirmed(sink, time.time())
+            await until(lambda: 3 in types(), 30.0, "the fix at mavlink/in")
+
+        await _run_sink(sink, one_fix)
 
     def last_is_no_fix() -> (
         bool
