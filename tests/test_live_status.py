@@ -7,7 +7,7 @@ import json
 import socket
 import time
 
-from live_helpers import free_port
+from live_helpers import free_port, until
 
 from groundstation.runtime.zenoh_fix import ZenohStatus
 from groundstation.runtime.zenoh_session import open_session
@@ -34,19 +34,21 @@ def test_status_and_liveliness(caplog):
     alive = {}
     sink = ZenohStatus(service, "skyfix/status", "skyfix/alive", status, 0.2)
 
+    def tokens(when: str) -> list[str]:
+        """The liveliness tokens the watcher sees now (a query: what a monitor asks)."""
+        replies = watcher.liveliness().get("skyfix/**", timeout=1.0)
+        alive[when] = [str(r.ok.key_expr) for r in replies]
+        return alive[when]
+
     async def scenario():
-        await asyncio.sleep(0.3)
         task = asyncio.create_task(sink.run())
-        await asyncio.sleep(0.7)
-        alive["during"] = [
-            str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=2.0)
-        ]
-        task.cancel()
-        await asyncio.gather(task, return_exceptions=True)
-        await asyncio.sleep(0.3)
-        alive["after"] = [
-            str(r.ok.key_expr) for r in watcher.liveliness().get("skyfix/**", timeout=1.0)
-        ]
+        try:
+            await until(lambda: len(got) >= 3, 30.0, lambda: f"3 statuses, got {len(got)}")
+            await until(lambda: tokens("during"), 30.0, "the token")
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+        await until(lambda: not tokens("after"), 30.0, "the token gone")
 
     try:
         asyncio.run(scenario())
