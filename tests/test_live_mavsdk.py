@@ -7,13 +7,15 @@ import time
 
 import numpy as np
 import pytest
-from live_helpers import free_port
+from live_helpers import free_port, until
 
 from groundstation.live.sources.rates import needed_rates
 from groundstation.live.sources.uav_mavlink import UavMavlink
 from groundstation.live.sources.uav_mavsdk import UavMavsdk, mavsdk_url
 from groundstation.mavlink.ingest import mavutil
 from localizer.telemetry import Telemetry
+
+NAMES = ("attitude", "position", "gimbal")
 
 
 def test_backends_agree_on_one_stream():
@@ -39,9 +41,13 @@ def test_backends_agree_on_one_stream():
 
     async def scenario():
         tasks = [asyncio.create_task(b.run()) for b in backends]
-        for _ in range(8):  # MAVSDK needs the autopilot's heartbeat before it passes messages on
-            send(m.heartbeat_encode(2, 3, 0, 0, 4))
-            await asyncio.sleep(0.25)
+
+        async def heard():  # MAVSDK needs the autopilot's heartbeat before it passes messages on
+            while any(b.uav_sysid is None for b in backends):
+                send(m.heartbeat_encode(2, 3, 0, 0, 4))
+                await asyncio.sleep(0.25)
+
+        await asyncio.wait_for(heard(), 60.0)
         now = time.time()
         for i in range(25):
             boot, r = 200_000 + 20 * i, rng.uniform(-0.3, 0.3, 3)
@@ -59,7 +65,11 @@ def test_backends_agree_on_one_stream():
             )
             send(m.gimbal_device_attitude_status_encode(0, 0, boot, 64, q, 0, 0, 0, 0))
             await asyncio.sleep(0.02)
-        await asyncio.sleep(0.5)
+        await until(
+            lambda: all(len(getattr(t, n)) == 25 for t in tels for n in NAMES),
+            30.0,
+            lambda: f"25 samples of each: {[[len(getattr(t, n)) for n in NAMES] for t in tels]}",
+        )
         for t in tasks:
             t.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
@@ -69,7 +79,7 @@ def test_backends_agree_on_one_stream():
     finally:
         for s in senders:
             s.close()
-    for name in ("attitude", "position", "gimbal"):
+    for name in NAMES:
         a, b = getattr(tels[0], name), getattr(tels[1], name)
         assert len(a) == len(b) == 25, name
         # MAVSDK's JSON prints floats
