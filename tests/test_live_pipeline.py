@@ -8,6 +8,7 @@ from dataclasses import fields
 import numpy as np
 import pytest
 from conftest import T0_UNIX
+from live_helpers import until
 
 from groundstation.config_files import load_calibration
 from groundstation.live.pipeline import FramePoses, Pipeline
@@ -97,15 +98,10 @@ def test_operator_commands_run_between_frames_on_held_frames():
         def on_fix(self, fix, info):
             fixes.append(fix)
 
-    async def until(n: int):
-        async with asyncio.timeout(30):
-            while len(fixes) < n:
-                await asyncio.sleep(0.01)
-
     async def feed(pipeline, frames):
         for i in frames:  # one at a time: nothing is dropped
             pipeline.submit(LiveFrame(i, float(t[i]), float(t[i]), images[i]))
-            await until(i + 1)
+            await until(lambda n=i + 1: len(fixes) >= n, 30.0, f"frame {i}'s fix")
 
     async def scenario():
         pipeline = Pipeline(cal, session.telemetry, "default", [Collect()], history_s=0.5)
