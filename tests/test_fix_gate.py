@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_helpers import free_port
+from live_helpers import free_port, until
 
 from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.process import process_session
@@ -446,8 +446,9 @@ def test_gps_input_never_carries_a_refused_fix():
             sink.on_fix(f, type("I", (), {"t_recv": f.t_unix})())
         old = fix_at(time.time() - 2.0, -5.0, 0.0, 0.3)
         offered.append((old, False))
+        sent = sink.sent
         sink.on_fix(old, type("I", (), {"t_recv": time.time()})())
-        await asyncio.sleep(0.3)
+        await until(lambda: sink.sent > sent, 30.0, "a message after the old fix")
         await sink.stop()
         await task
         return sink

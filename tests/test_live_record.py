@@ -10,7 +10,7 @@ import time
 import tomllib
 
 import numpy as np
-from live_helpers import free_port, skyfix, start, stop, wait_for
+from live_helpers import free_port, skyfix, start, stop, until, wait_for
 
 from groundstation.live.sinks.recorder import Recorder
 from groundstation.mavlink.ingest import ingest, mavutil
@@ -207,9 +207,14 @@ def test_recorded_tables_keep_their_times_increasing(tmp_path):
     ):
         rec.first.on_fix(Fix(t, status), None)
 
+    def written(name: str) -> int:
+        path = tmp_path / "rec" / name
+        return path.read_text().count("\n") if path.exists() else 0
+
     async def record_a_moment():
         task = asyncio.create_task(rec.run())
-        await asyncio.sleep(0.3)
+        # the header and the three fixes (the writer thread flushes every second)
+        await until(lambda: written("positions.csv") >= 4, 30.0, "positions.csv written")
         task.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await task
