@@ -49,13 +49,16 @@ CUT_S = {
 SESSION_S = 19.0
 SESSION_FPS = 15.0
 
-# A Zenoh router (the only router on PyPI is zenoh's own, in a Python session of mode "router"), its own process.
+# A Zenoh router (the only router on PyPI is zenoh's own, in a Python session of mode "router"), its own process;
+# it opens when a line comes on its stdin.
 ROUTER = r"""
 import json, sys, time, zenoh
 c = zenoh.Config()
 c.insert_json5("mode", '"router"')
 c.insert_json5("scouting/multicast/enabled", "false")
 c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+print("loaded", flush=True)
+sys.stdin.readline()  # opened when told: a restart's imports are done before the cut ends
 s = zenoh.open(c)
 print("ready", time.time(), flush=True)
 try:
@@ -65,7 +68,8 @@ finally:
     s.close()
 """
 
-# A UUV's depth publisher, its own process: the session's depth at (now − shift), 10 Hz, until killed.
+# A UUV's depth publisher, its own process: the session's depth at (now − shift), 10 Hz, from a line on its stdin
+# until killed.
 DEPTH_PUBLISHER = r"""
 import json, sys, time
 import numpy as np
@@ -73,6 +77,8 @@ from groundstation.runtime.zenoh_session import open_session
 session_dir, shift, endpoint = sys.argv[1], float(sys.argv[2]), sys.argv[3]
 rows = [json.loads(line) for line in open(session_dir + "/depth.jsonl") if line.strip()]
 t, d = np.array([r["t"] for r in rows]), np.array([r["depth_m"] for r in rows])
+print("loaded", flush=True)
+sys.stdin.readline()  # started when told: a restart's imports are done before the cut ends
 z = open_session([endpoint])
 first = True
 try:
@@ -88,15 +94,44 @@ finally:
 """
 
 
-def start_router(endpoint: str) -> tuple[subprocess.Popen, float]:
-    """A router listening on ``endpoint``; the process and when it said it was ready (UNIX s). It listens before
-    it says so: a client may be connected through it a little before that moment."""
+def loaded_router(endpoint: str) -> subprocess.Popen:
+    """A router process for ``endpoint`` with its imports done, not yet open (:func:`go`; it listens a little
+    before it says it is ready: a client may be connected through it before that moment)."""
     proc = subprocess.Popen(
-        [sys.executable, "-c", ROUTER, endpoint], stdout=subprocess.PIPE, text=True
+        [sys.executable, "-c", ROUTER, endpoint],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
     )
-    word, t_ready = proc.stdout.readline().split()
-    assert word == "ready"
-    return proc, float(t_ready)
+    assert proc.stdout.readline().strip() == "loaded"
+    return proc
+
+
+def loaded_depth_publisher(session: Path, shift_s: float, endpoint: str) -> subprocess.Popen:
+    """A :data:`DEPTH_PUBLISHER` of ``session`` with its imports done, not yet publishing (:func:`go`)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift_s), endpoint],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
+    assert proc.stdout.readline().strip() == "loaded"
+    return proc
+
+
+def go(proc: subprocess.Popen) -> float:
+    """Tell a loaded router or depth publisher to start; the moment it said it had (UNIX s)."""
+    proc.stdin.write("go\n")
+    proc.stdin.flush()
+    _, t = proc.stdout.readline().split()
+    return float(t)
+
+
+def start_router(endpoint: str) -> tuple[subprocess.Popen, float]:
+    """A router listening on ``endpoint``; the process and when it said it was ready (UNIX s)."""
+    proc = loaded_router(endpoint)
+    return proc, go(proc)
 
 
 def kill(proc: subprocess.Popen) -> None:
@@ -286,6 +321,12 @@ class _Statuses:
         self.session.close()
 
 
+def _said(log: Path, lines: int = 25) -> str:
+    """The last ``lines`` lines of a service's log that are not JSON records."""
+    said = [line for line in log.read_text().splitlines() if not line.startswith("{")]
+    return "\n".join(said[-lines:])
+
+
 def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
     """``skyfix run`` fed by ``skyfix replay`` of ``session``; ``which`` (:data:`LINK_INPUTS`) goes away
     :data:`CUT_FROM_S` s into the session for :data:`CUT_S` s and comes back. Returned: when it went and came
@@ -348,37 +389,32 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
         )
         procs.append(replay)
         shift = replay_shift(replay_log)
-        t_start = json.loads(replay_log.read_text().splitlines()[0])["t_start"]
+        started = json.loads(replay_log.read_text().splitlines()[0])
+        t_start, t_end = started["t_start"], started["t_end"]
         publisher = None
         if which == "depth":
-            publisher = subprocess.Popen(
-                [sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
-                stdout=subprocess.PIPE,
-                text=True,
-                cwd=ROOT,
-            )
+            publisher = loaded_depth_publisher(session, shift, endpoint)
             procs.append(publisher)
+            go(publisher)
         t_cut, t_return = t_start + CUT_FROM_S, t_start + CUT_FROM_S + CUT_S[which]
         wait_for(lambda: time.time() >= t_cut, 60, "the cut")
         if which == "depth":
             kill(publisher)
+            # its start-up, seconds on a loaded machine, inside the cut
+            publisher = loaded_depth_publisher(session, shift, endpoint)
+            procs.append(publisher)
         elif which == "router":
             kill(router)
+            router = loaded_router(
+                endpoint
+            )  # its start-up, seconds on a loaded machine, inside the cut
         wait_for(lambda: time.time() >= t_return, 60, "the end of the cut")
         if which == "depth":
-            publisher = subprocess.Popen(
-                [sys.executable, "-c", DEPTH_PUBLISHER, str(session), str(shift), endpoint],
-                stdout=subprocess.PIPE,
-                text=True,
-                cwd=ROOT,
-            )
-            procs.append(publisher)
-            _, t_back = publisher.stdout.readline().split()
-            t_back = float(t_back)
+            t_back = go(publisher)
         elif which == "router":
             # the router may carry traffic before it prints "ready": the cut ends here
             t_launch = time.time()
-            router, t_back = start_router(endpoint)
+            t_back = go(router)
         else:
 
             def back() -> float | None:
@@ -391,7 +427,11 @@ def link_comes_back(tmp: Path, session: Path, which: str) -> dict:
         wait_for(
             lambda: listener.first_valid_after(t_back) is not None,
             20,
-            "a valid GPS_INPUT after the return",
+            lambda: (
+                f"a valid GPS_INPUT after the return, {t_back - t_start:.2f} s into the replay (which ends at "
+                f"{t_end - t_start:.2f} s); fix types since: {[ft for tr, ft in listener.got if tr >= t_back]}; "
+                f"the service said: {_said(run_log)}"
+            ),
         )
         t_valid = listener.first_valid_after(t_back)
         replay.wait(30)
