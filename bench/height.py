@@ -14,7 +14,8 @@ from frame to frame, the share within 2·sigma_height_m, the
 median sigma and the source words.
 ``--skyfix``/``--skyfix-cwd`` run another skyfix (an older checkout: before/after) on the same
 sessions. ``sim_fixtures/bundled/*`` is evaluated too (geometry only), the sessions that must not
-get worse. ``--weather DIR``: instead, the hovering drones in the weather (``bench/weather.py``'s sessions, cached
+get worse. ``<name>:climb``: the scenario climbing and descending 3 m at up to 0.94 m/s, its EKF heights with 3 cm of
+white noise (what the height must follow without lag). ``--weather DIR``: instead, the hovering drones in the weather (``bench/weather.py``'s sessions, cached
 in DIR; their barometers wander), with the smoothed track's shape (``evaluate``'s, the true pixel) after the height
 columns.
 """
@@ -49,13 +50,23 @@ SCENARIOS = (
     "height_rangefinder",
     "height_rangefinder:nothing",
     "height_rangefinder:floor",
+    "height_rtk_noise:climb",
+    "weather_5mps_rtk:climb",
 )
+CLIMB_SWING_M = (
+    3.0  # ":climb": the hover's slow height changes' amplitude (a 20-s period: up to 0.94 m/s) ...
+)
+CLIMB_BARO_NOISE_M = 0.03  # ... and the EKF heights' white noise
 
 
 def scenario(name: str):
-    base, _, sees = name.partition(":")
+    base, _, variant = name.partition(":")
     sc = load_scenario(ROOT / "sim_fixtures" / "scenarios" / f"{base}.toml")
-    return with_overrides(sc, rangefinder={"sees": sees}) if sees else sc
+    if variant == "climb":  # climbing and descending at up to 0.9 m/s, a barometer with white noise
+        return with_overrides(
+            sc, uav={"height_swing_m": CLIMB_SWING_M}, sensors={"baro_noise_m": CLIMB_BARO_NOISE_M}
+        )
+    return with_overrides(sc, rangefinder={"sees": variant}) if variant else sc
 
 
 def session(name: str, work: Path) -> Path:

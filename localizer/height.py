@@ -5,7 +5,8 @@ or ``alt`` − ``[water] surface_amsl_m``: :mod:`localizer.surface`) is the smoo
 telemetry's rate. With the barometer as the EKF's height source (ArduPilot's EK3_SRC1_POSZ = 1)
 both follow the barometer, which drifts. Its error ``b`` = EKF height − true height is estimated
 by a small Kalman filter (:class:`HeightEstimator`) over whatever measures it, and a frame's
-height is the EKF height − ``b``. States ``x = (e, d, s, g, w)``, metres (``d`` m/s):
+height is the EKF height − ``b`` − the EKF height's own white noise (:mod:`localizer.height_noise`: the answers'
+``bias_m`` hold both, their sigma both). States ``x = (e, d, s, g, w)``, metres (``d`` m/s):
 
 - ``e``: the EKF height's own error. 0 ± ``[uncertainty] height_m`` when its reference was set (less the
   wander's share, ``w``'s):
@@ -88,6 +89,7 @@ taken to sit at the reported position.
 from __future__ import annotations
 
 import bisect
+import copy
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
@@ -96,6 +98,7 @@ import numpy as np
 
 from . import gnss
 from .calibration import Sigmas, Water
+from .height_noise import HeightNoise
 from .surface import height_above_surface_m
 from .timeline import OK
 
@@ -243,6 +246,7 @@ class HeightEstimator:
         self._arms_taken = 0
         self._told: set = set()  # notices given, by (source, entry time): a re-run repeats none
         self.notices: list[str] = []
+        self.noise = HeightNoise(water)  # the EKF height's white noise (localizer.height_noise)
 
     def __deepcopy__(self, memo) -> HeightEstimator:
         """A copy for another thread (the live latency estimate copies the telemetry once a second), made in
@@ -253,6 +257,7 @@ class HeightEstimator:
             k: type(v)(v) if isinstance(v, (list, dict, set)) else v
             for k, v in self.__dict__.items()
         }
+        new.noise = copy.deepcopy(self.noise)
         return new
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -283,6 +288,7 @@ class HeightEstimator:
 
     def update(self, tel: Telemetry) -> None:
         """Fuse what arrived since the last call (re-running the filter from the earliest new time)."""
+        self.noise.update(tel)
         if self._base is None:
             boot = tel.uav_clock.offset_s  # the autopilot's boot on the UAV buffers' scale
             if boot is None:
@@ -565,7 +571,11 @@ class HeightEstimator:
             return HeightAt(
                 np.full(n, np.nan), np.full(n, np.nan), np.full(n, self.word, dtype=object)
             )
-        return (self._both_ways(tel) if tel.height_two_sided else self)._answer(tq)
+        out = (self._both_ways(tel) if tel.height_two_sided else self)._answer(tq)
+        noise_m, sigma_m = self.noise.at(
+            tq, tel.height_two_sided
+        )  # the EKF height's white noise, taken out
+        return HeightAt(out.bias_m + noise_m, np.hypot(out.sigma_m, sigma_m), out.source)
 
     def _answer(self, tq) -> HeightAt:
         """:meth:`at` once the filter has run; the two-sided states where :attr:`two_sided`."""
