@@ -13,7 +13,7 @@ noise's differences plus the walk's steps, and their sums over :data:`LAG_N` mes
 noises plus :data:`LAG_N` steps: the mean square of ``r_k`` is ``2R + q``, of the sums ``2R + LAG_N·q`` (over about
 the last :data:`MOMENTS_N` messages; ``q`` at least :data:`WALK_FLOOR` of ``R``, so that a velocity that disagrees
 with the heights is followed within about a second). A motion smoother than a walk shows a larger ``q`` over
-:data:`LAG_N` messages than over one: less is smoothed, nothing lags. An EKF whose height has no white noise shows
+:data:`LAG_N` messages than over one: less is smoothed, nothing lags. An EKF whose height has no white noise (under :data:`NOISE_FLOOR_M`) shows
 none and is left as it is.
 
 The filter starts again at an arming (ArduPilot sets home: ``relative_alt`` steps), a gap in the messages longer than
@@ -44,6 +44,7 @@ LAG_N = (
 )
 WALK_FLOOR = 0.01  # q is at least this share of R per message
 JUMP_SIGMAS = 5.0  # a height this far from the prediction starts the filter again
+NOISE_FLOOR_M = 0.002  # white noise below this (the messages' millimetres) is left as it is
 
 
 class HeightNoise:
@@ -126,8 +127,7 @@ class HeightNoise:
             if len(self._sums) > LAG_N:
                 nL += 1
                 mL += ((self._sums[-1] - self._sums[0]) ** 2 - mL) / min(nL, MOMENTS_N)
-            K = P_pre / s if s > 0.0 else 1.0
-            x, P = x_pre + K * (h - x_pre), (1.0 - K) * P_pre
+            x, P = _update(x_pre, P_pre, h, R)
         self._moments = (n1, m1, nL, mL)
         self._rows.append((t, h, v, u, restart, x, P, x_pre, P_pre, R, q))
 
@@ -152,9 +152,7 @@ class HeightNoise:
                     xp[k], Pp[k], xf[k], Pf[k] = h, math.inf, h, R
                     continue
                 xp[k], Pp[k] = xf[k - 1] + u, Pf[k - 1] + q
-                s = Pp[k] + R
-                K = Pp[k] / s if s > 0.0 else 1.0
-                xf[k], Pf[k] = xp[k] + K * (h - xp[k]), (1.0 - K) * Pp[k]
+                xf[k], Pf[k] = _update(xp[k], Pp[k], h, R)
             xs, Ps = xf.copy(), Pf.copy()
             for k in range(n - 2, -1, -1):
                 if (
@@ -196,4 +194,13 @@ def _noise(m1: float, nL: int, mL: float) -> tuple[float, float]:
     :data:`LAG_N`; before a sum is counted, all of ``r`` is taken as the walk (nothing is smoothed)."""
     walk = max(mL - m1, 0.0) / (LAG_N - 1) if nL else m1
     R = max(m1 - walk, 0.0) / 2.0
+    R = R if R >= NOISE_FLOOR_M**2 else 0.0
     return R, max(walk, WALK_FLOOR * R)
+
+
+def _update(x_pre: float, P_pre: float, h: float, R: float) -> tuple[float, float]:
+    """The level and its variance after the height ``h`` of noise variance ``R`` (0: the height itself, exactly)."""
+    if R == 0.0:
+        return h, 0.0
+    K = P_pre / (P_pre + R)
+    return x_pre + K * (h - x_pre), (1.0 - K) * P_pre

@@ -23,7 +23,7 @@ from localizer.height import (
     status,
     take_notices,
 )
-from localizer.height_noise import WALK_FLOOR
+from localizer.height_noise import NOISE_FLOOR_M, WALK_FLOOR
 from localizer.pose import camera_pose
 from localizer.telemetry import Telemetry
 
@@ -514,3 +514,12 @@ def test_an_ekf_height_that_steps_is_followed_at_once():
         tau >= 20.0
     )  # between the messages before and at the step: the EKF's own
     assert np.abs(err[settled]).max() < 0.06 and np.sqrt(np.mean(err[settled] ** 2)) < 0.02
+
+
+def test_millimetres_of_noise_are_left_as_they_are():
+    """An EKF height with 1 mm of noise (its messages' own millimetres) is used as it comes, to the bit (the
+    sessions without noise keep their positions.csv); 3 cm of it is taken out."""
+    c, tau = cal(height_m=0.1), np.arange(5.0, 39.0, 1.0 / 30.0)
+    for noise_m in (0.001, 0.03):
+        a = ekf_height_error(c.water, c.sigmas, noisy(lambda t: TRUE_H, noise_m), T0 + tau)
+        assert np.all(a.bias_m == 0.0) == (noise_m < NOISE_FLOOR_M)
