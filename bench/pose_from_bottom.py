@@ -174,7 +174,8 @@ def targets(shapes: dict[str, float], maes: dict[str, float], word: str) -> list
             )
         elif "_rtk" in name:
             lines.append(f"{name}: absolute MAE {maes[name]:.3f} m ({word} with RTK: <= 0.10 m)")
-        print(lines[-1])
+    for line in lines:
+        print(line)
     return lines
 
 

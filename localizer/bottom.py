@@ -31,6 +31,11 @@ by robust nonlinear least squares (:func:`scipy.optimize.least_squares`):
   white prior of that 1-sigma per axis: the reported position's white noise (a receiver's few centimetres, which
   2-second knots cannot follow and which would otherwise bend the floor to fit them). A uniform shift of one frame's
   floor points is all it can absorb: the biases show in how the points move *across* the frames, which is not white.
+- with ``tilt_wander_rad`` > 0, the tilt's slow wander ``δ(t)`` about its constant part (``tilt + δ(t)``, an AHRS's
+  wander): values at the walk's knots, linear between them, with the prior of a first-order Gauss-Markov process of
+  that 1-sigma and correlation time ``tilt_wander_s`` (each knot given the one before), their **mean held at 0** (the
+  constant part is the tilt's mean over the recording). A slow tilt change shifts the floor as the walk does: it is
+  told apart where the walk is held (RTK, an exact velocity), else it stays within its prior.
 
 A residual is a floor point's ground position seen from one frame minus the feature's,
 turned into pixels by the inverse of the ground-per-pixel Jacobian at that observation
@@ -97,6 +102,10 @@ class Priors:
     knot_spacing_s: float = 2.0  # the walk's knots
     # the reported position's white noise, 1-sigma per axis (m): per-frame offsets; 0: none
     white_m: float = 0.0
+    # the tilt's slow wander about its constant bias, 1-sigma per axis (rad), a first-order Gauss-Markov process of
+    # correlation time ``tilt_wander_s``, at the walk's knots; 0: the tilt is constant
+    tilt_wander_rad: float = 0.0
+    tilt_wander_s: float = 60.0
     pixel_px: float = 0.7  # a tracked floor point's 1-sigma in u and v
     floor_depth_m: float | None = None  # given: not estimated
     floor_depth_prior_m: float = 100.0  # estimated: its (weak) prior's 1-sigma about the start
@@ -157,6 +166,8 @@ class BottomEstimate:
     #: (R, 2) the candidate walk rates (m/√s) and their log marginal likelihoods (:attr:`Priors.walk_rates_m`; the
     #: chosen one is ``priors.walk_rate_m``); (0, 2): none tried
     walk_rate_evidence: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    #: (J, 2) the tilt's wander about ``tilt_rad`` at the knots (:attr:`Priors.tilt_wander_rad`); (0, 2): none
+    tilt_wander_rad: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
 
     @property
     def sigma_tilt_rad(self) -> float:
@@ -194,6 +205,13 @@ class BottomEstimate:
         """``exp(−[ε]×)`` (..., 3, 3) per frame: ``R_true = correction · R_reported``."""
         return rodrigues(-self.error_rotvec(bias_heading_rad))
 
+    def tilt_at(self, t_s) -> np.ndarray:
+        """The tilt (..., 2) (forward, right) at times ``t_s``: the constant bias and its wander (held beyond the
+        first and last knots)."""
+        if not len(self.tilt_wander_rad):
+            return np.broadcast_to(self.tilt_rad, np.shape(t_s) + (2,))
+        return self.tilt_rad + _interp_knots(self.knot_t_s, self.tilt_wander_rad, t_s)
+
     def walk_at(self, t_s) -> np.ndarray:
         """The position correction (..., 2) at times ``t_s`` (held beyond the first and last knots)."""
         return _interp_knots(self.knot_t_s, self.walk_ne_m, t_s)
@@ -208,6 +226,10 @@ class BottomEstimate:
             f"± {np.degrees(self.sigma_tilt_rad):.2f}°"
             + ("" if self.tilt_estimated else " (not observable)")
         )
+        if len(self.tilt_wander_rad):
+            tilt += (
+                f", wandering up to {np.degrees(np.abs(self.tilt_wander_rad).max()):.2f}° about it"
+            )
         yaw = (
             f"heading {np.degrees(self.yaw_rad):+.2f}° ± {np.degrees(self.sigma_yaw_rad):.2f}°"
             + ("" if self.yaw_estimated else " (not observable)")
@@ -231,12 +253,14 @@ class BottomEstimate:
 
 
 def bias_rotvec(tilt_rad, yaw_rad, bias_heading_rad) -> np.ndarray:
-    """The attitude error's rotation vector (..., 3) in NED: the tilt (forward, right) about the axes of bias frames
-    of these headings, the yaw about Down (see the module doc)."""
+    """The attitude error's rotation vector (..., 3) in NED: the tilt (forward, right; (2,) or one per frame (..., 2))
+    about the axes of bias frames of these headings, the yaw about Down (see the module doc)."""
     psi = np.asarray(bias_heading_rad, dtype=float)
-    a, b = float(tilt_rad[0]), float(tilt_rad[1])
+    tilt = np.asarray(tilt_rad, dtype=float)
+    a, b = tilt[..., 0], tilt[..., 1]
     c, s = np.cos(psi), np.sin(psi)
-    return np.stack([a * c - b * s, a * s + b * c, np.full(psi.shape, float(yaw_rad))], axis=-1)
+    fwd, right, yaw = np.broadcast_arrays(a * c - b * s, a * s + b * c, float(yaw_rad))
+    return np.stack([fwd, right, yaw], axis=-1)
 
 
 def in_bias_frame(rotvec_ned, bias_heading_rad) -> np.ndarray:
@@ -397,7 +421,9 @@ class _Problem:
         walk0 = np.concatenate([np.zeros((1, 2)), np.cumsum(self.walk_steps, axis=0)])
         self.walk0 = walk0 - walk0.mean(axis=0)
         self.K = len(t) if priors.white_m > 0 else 0
-        self.first_feature = N_GLOBAL + 2 * self.J + 2 * self.K
+        self.W = self.J if priors.tilt_wander_rad > 0 else 0
+        self.first_wander = N_GLOBAL + 2 * self.J + 2 * self.K
+        self.first_feature = self.first_wander + 2 * self.W
         self.depth_fixed = priors.floor_depth_m
         self.depth0 = (
             priors.floor_depth_m if priors.floor_depth_m is not None else self._start_depth()
@@ -405,19 +431,25 @@ class _Problem:
         self.n_params = self.first_feature + 2 * self.F
 
     # --- geometry ---------------------------------------------------------------------------------
-    def offsets(self, g):
+    def offsets(self, g, wander=None):
         """Horizontal offsets (3, M, 2) from the camera of each observation's pixel and of the pixel moved by
-        :data:`_PIXEL_STEP` in u and in v, for globals ``g``."""
+        :data:`_PIXEL_STEP` in u and in v, for globals ``g`` and the tilt's wander at the knots (J, 2) if any."""
+        tilt = g[:2]
+        if wander is not None and len(wander):
+            tilt = (
+                tilt + (1 - self.s)[:, None] * wander[self.j] + self.s[:, None] * wander[self.j + 1]
+            )
         # the true rays: the reported ones turned back by the error
-        w = -bias_rotvec(g[:2], g[2], self.psi)
+        w = -bias_rotvec(tilt, g[2], self.psi)
         d = _rotate(np.broadcast_to(w, self.d0.shape), self.d0)
         off, _ = offset_from_ray(d, self.h, np.full(self.h.shape, g[3]), self.n_water)
         return off
 
-    def ground(self, g, walk_knots, white=None):
+    def ground(self, g, walk_knots, white=None, wander=None):
         """Ground positions (M, 2) of every observation and the 2×2 pixels-per-metre matrices (M, 2, 2) there
-        (the inverse of d ground / d pixel), for globals ``g``, walk knots (J, 2) and frame offsets (K, 2) if any."""
-        off = self.offsets(g)
+        (the inverse of d ground / d pixel), for globals ``g``, walk knots (J, 2), frame offsets (K, 2) and the tilt's
+        wander at the knots (J, 2) if any."""
+        off = self.offsets(g, wander)
         Jg = np.stack([(off[1] - off[0]) / _PIXEL_STEP, (off[2] - off[0]) / _PIXEL_STEP], axis=-1)
         walk = (1 - self.s)[:, None] * walk_knots[self.j] + self.s[:, None] * walk_knots[self.j + 1]
         if white is not None and len(white):
@@ -449,14 +481,18 @@ class _Problem:
         if self.depth_fixed is not None:
             g[3] = self.depth_fixed
         walk = x[N_GLOBAL : N_GLOBAL + 2 * self.J].reshape(self.J, 2)
-        white = x[N_GLOBAL + 2 * self.J : self.first_feature].reshape(self.K, 2)
+        white = x[N_GLOBAL + 2 * self.J : self.first_wander].reshape(self.K, 2)
         feats = x[self.first_feature :].reshape(self.F, 2)
         return g, walk, white, feats
+
+    def wander(self, x):
+        """The tilt's wander at the knots (J, 2) in ``x``; (0, 2) when the tilt is constant."""
+        return x[self.first_wander : self.first_feature].reshape(self.W, 2)
 
     def observation_residuals(self, x, with_whitening: bool = False):
         """Residuals (M, 2) in pixel sigmas; ``with_whitening``: also d residual / d ground (M, 2, 2)."""
         g, walk, white, feats = self.unpack(x)
-        gp, A = self.ground(g, walk, white)
+        gp, A = self.ground(g, walk, white, self.wander(x))
         Aw = A / self.priors.pixel_px
         r = np.einsum("mij,mj->mi", Aw, gp - feats[self.f])
         return (r, Aw) if with_whitening else r
@@ -472,8 +508,22 @@ class _Problem:
                 ((np.diff(walk, axis=0) - self.walk_steps) / rate).ravel(),
                 walk.mean(axis=0) / 1e-3,  # the gauge: the correction's mean is 0
                 (white / p.white_m).ravel() if self.K else [],
+                self._wander_prior_rows() @ self.wander(x).ravel() if self.W else [],
             ]
         )
+
+    def _wander_prior_rows(self) -> np.ndarray:
+        """The tilt wander's prior as linear residuals of its knots (2J − 2 + 2 rows, 2J columns): each knot given the
+        one before as a first-order Gauss-Markov process says (``(δ_j − φ·δ_{j−1}) / (σ·√(1 − φ²))``, ``φ =
+        exp(−Δt/τ)``), and its mean held at 0 (the constant part is the bias's)."""
+        p, J = self.priors, self.W
+        phi = np.exp(-np.diff(self.knots) / p.tilt_wander_s)
+        scale = p.tilt_wander_rad * np.sqrt(1 - phi**2)
+        step = np.zeros((J - 1, J))
+        step[np.arange(J - 1), np.arange(1, J)] = 1 / scale
+        step[np.arange(J - 1), np.arange(J - 1)] = -phi / scale
+        rows = np.vstack([step, np.full((1, J), 1 / (J * 1e-6))])
+        return np.kron(rows, np.eye(2))
 
     def residuals(self, x):
         return np.concatenate([self.observation_residuals(x).ravel(), self.prior_residuals(x)])
@@ -500,6 +550,10 @@ class _Problem:
         ]
         if self.K:
             pairs.append((N_GLOBAL + 2 * self.J + 2 * self.k, Aw))
+        if self.W:  # the wander moves each observation's tilt as the globals' tilt does, shared by its two knots
+            tilt = glob.reshape(M, 2, N_GLOBAL)[:, :, :2]
+            pairs.append((self.first_wander + 2 * self.j, tilt * (1 - self.s)[:, None, None]))
+            pairs.append((self.first_wander + 2 * (self.j + 1), tilt * self.s[:, None, None]))
         cols = [np.tile(first[:, None] + np.array([0, 1]), 2) for first, _ in pairs]
         linear = sp.csr_matrix(
             (
@@ -544,7 +598,14 @@ class _Problem:
             rows += list(range(r, r + n_white))
             cols += list(range(N_GLOBAL + 2 * J, N_GLOBAL + 2 * J + n_white))
             vals += [1 / p.white_m] * n_white
-        return sp.csr_matrix((vals, (rows, cols)), shape=(r + n_white, n))
+        r += n_white
+        if self.W:
+            wander = sp.coo_matrix(self._wander_prior_rows())
+            rows += list(r + wander.row)
+            cols += list(self.first_wander + wander.col)
+            vals += list(wander.data)
+            r += wander.shape[0]
+        return sp.csr_matrix((vals, (rows, cols)), shape=(r, n))
 
     def start(self) -> np.ndarray:
         x = np.zeros(self.n_params)
@@ -767,6 +828,7 @@ def _estimate(
         inliers=inliers,
         priors=priors,
         walk_rate_evidence=evidence,
+        tilt_wander_rad=prob.wander(x).copy(),
     )
 
 

@@ -21,6 +21,10 @@ GNSS's own (:func:`walk_rates_m`) the estimate is made again at the one of the l
 (:func:`localizer.bottom.walk_rate_log_evidence`): an exact velocity gets a tight prior (a survey line's walk is then
 told by its velocity), one that the floor shows drifting a looser one; no fixed rate or floor suits both.
 
+Where the tilt is the AHRS's (a servo mount or a fixed camera, :func:`tilt_frame` ``body``), it may wander about its
+bias within the AHRS's wander (:data:`MIN_TILT_DEG`, :data:`TILT_WANDER_S`:
+:attr:`localizer.bottom.Priors.tilt_wander_rad`); the correction turns each frame back by the tilt at its time.
+
 The estimate is also made on each third of the recording alone (:data:`PARTS`), and its sigmas widened by
 the thirds' spread (:func:`localizer.bottom.with_parts`). A fit whose residuals exceed :data:`MAX_RMS_PX` is not
 applied (a warning says why); the tilt and the heading are applied each where the bottom told it
@@ -94,6 +98,9 @@ GNSS_WALK_S = 60.0
 # the estimate's sigmas in h_acc are floored here (the attitude's wander is not a bias)
 MIN_TILT_DEG = 0.05
 MIN_YAW_DEG = 0.1
+#: s: the AHRS wander's correlation time (a first-order Gauss-Markov of 1-sigma MIN_TILT_DEG): the tilt's prior
+#: between the walk's knots (:attr:`localizer.bottom.Priors.tilt_wander_rad`)
+TILT_WANDER_S = 60.0
 _LK = {
     "winSize": (31, 31),
     "maxLevel": 4,
@@ -315,7 +322,7 @@ class PoseCorrection:
     def error_rotvec(self, session: Session, pose: CameraPose) -> np.ndarray:
         """The attitude error applied (reported − true, NED rotation vector) per frame: the told parts only."""
         e = self.estimate
-        tilt = e.tilt_rad if self.tilt_applied else np.zeros(2)
+        tilt = e.tilt_at(pose.t_unix) if self.tilt_applied else np.zeros(2)
         return bottom.bias_rotvec(
             tilt, e.yaw_rad if self.yaw_applied else 0.0, self.headings(session, pose)
         )
@@ -389,8 +396,8 @@ class PoseCorrection:
 
 def summary(correction: PoseCorrection) -> dict:
     """What was estimated, how sure and what was applied, as one JSON object (degrees, metres): the tilt about the
-    bias frame (``tilt_frame``: the camera's heading or the airframe's) forward and right, the heading, their
-    1-sigmas (with the parts' spread) and each part's values, the floor's depth, the position's walk about the
+    bias frame (``tilt_frame``: the camera's heading or the airframe's) forward and right (and the largest of its
+    wander about them, 0 where none is modelled), the heading, their 1-sigmas (with the parts' spread) and each part's values, the floor's depth, the position's walk about the
     GNSS's mean (largest, and its largest 1-sigma), the walk prior's rate (m/√s, as the recording chose it), the
     fit (features, observations, frames, RMS pixels, slide share)."""
     e = correction.estimate
@@ -406,6 +413,9 @@ def summary(correction: PoseCorrection) -> dict:
         "tilt_fwd_deg": deg[0],
         "tilt_right_deg": deg[1],
         "sigma_tilt_deg": round(float(np.degrees(e.sigma_tilt_rad)), 4),
+        "tilt_wander_max_deg": round(
+            float(np.degrees(np.max(np.abs(e.tilt_wander_rad), initial=0.0))), 4
+        ),
         "heading_deg": deg[2],
         "sigma_heading_deg": round(float(np.degrees(e.sigma_yaw_rad)), 4),
         "parts_deg": [
@@ -547,6 +557,8 @@ def fit(
         walk_rate_m=min(gnss_rate, VELOCITY_RATE_M),
         walk_rates_m=walk_rates_m(gnss_rate),
         white_m=0.0 if white is None else max(MIN_WHITE_M, white),
+        tilt_wander_rad=np.radians(MIN_TILT_DEG) if frame_tilt == "body" else 0.0,
+        tilt_wander_s=TILT_WANDER_S,
     )
     cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
     est = bottom.estimate(cam, n_water, poses, obs, priors, parts=PARTS)
@@ -562,6 +574,7 @@ def fit(
         held = dataclasses.replace(
             priors,
             tilt_rad=priors.tilt_rad if tilt else 1e-7,
+            tilt_wander_rad=priors.tilt_wander_rad if tilt else 0.0,
             yaw_rad=priors.yaw_rad if yaw else 1e-7,
         )
         again = bottom.estimate(cam, n_water, poses, obs, held)
