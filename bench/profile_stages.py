@@ -15,8 +15,8 @@ Stages, each run as ``skyfix process`` runs it (the same functions, the same arg
 - ``decode``: FFmpeg (PyAV) demux + decode to the luma plane, frame threads as
   :func:`~groundstation.video.file.open_video` reads grey; every frame is decoded first and kept, so the decoder's
   threads run during this stage alone and the process CPU of the others is theirs;
-- ``colour``: the luma plane's frame converted to BGR (:meth:`~groundstation.video.frames.VideoFrame.bgr`), for the
-  frames the height from size measures;
+- ``colour``: the luma plane's frame made ready for BGR (:meth:`~groundstation.video.frames.VideoFrame.bgr_regions`),
+  for the frames the height from size measures; the windows a measurement reads are converted in its ``size`` stage;
 - ``motion``: the camera's rotation between frames (:class:`~groundstation.latency.video_motion.RotationMeter`),
   in the frames ``skyfix process`` measures (:func:`~groundstation.latency.video_motion.measured_every` of the
   whole session's frames); the command measures it only where the link's delay is unknown (not in this session);
@@ -239,7 +239,7 @@ def profile_run(path: Path, ids: tuple[str, ...], work: Path, max_frames: int) -
                     if result.ok and size.due(float(t[row])):
                         if bgr is None:
                             with stages("colour"):
-                                bgr = frame.bgr()
+                                bgr = frame.bgr_regions()
                         with stages(f"size {uuv}"):
                             size.take(size.measure(bgr, pose, row, result.u, result.v))
         with stages("offset"):

@@ -338,7 +338,7 @@ class UuvTrack:
             if measurer is not None:
                 measurer.submit(self, row, frame, result.u, result.v)
             else:
-                self.took(t_unix, size.measure(frame.bgr(), pose, row, result.u, result.v))
+                self.took(t_unix, size.measure(frame.bgr_regions(), pose, row, result.u, result.v))
         timings["size"] += time.perf_counter() - t0
 
     def took(self, t_unix: float, measured) -> None:

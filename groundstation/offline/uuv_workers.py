@@ -11,8 +11,9 @@ UUVs: the main thread busy all the time, tracking and measuring 80 % of it, the 
 shared with the workers (an anonymous shared mapping made before they are forked: nothing to name, nothing left
 behind by a crash), a yuv420p frame as its three planes as decoded, another as BGR; every worker reads it in place.
 A worker acknowledges each frame once stepped; a slot is written again once every worker has acknowledged the
-frame in it. A worker's :meth:`RingFrame.bgr` converts the planes with FFmpeg as the decoded frame's own
-:meth:`~groundstation.video.frames.VideoFrame.bgr` does (the same colour space and range: the same bytes).
+frame in it. A worker's :meth:`RingFrame.bgr_regions` converts the planes with FFmpeg where they are read, as the
+decoded frame's own :meth:`~groundstation.video.frames.VideoFrame.bgr_regions` does (the same colour space and
+range: the same bytes).
 
 **The same results.** The workers are forked after the poses are computed, so each inherits its UUV's track as it
 is (nothing pickled on the way in). At the end a worker sends back its UUV's per-frame results and the heights
@@ -48,10 +49,10 @@ import signal
 from collections import deque
 from dataclasses import dataclass
 
-import av
 import numpy as np
 
 from groundstation.session.read import SessionError
+from groundstation.video.frames import BgrRegions, plane_array
 
 #: Frames in the shared ring: how far the fastest worker may run ahead of the slowest.
 RING_SLOTS = 6
@@ -78,21 +79,12 @@ class RingFrame:
     planes: list[np.ndarray] | None = None
     colour: tuple[int, int] = (0, 0)
 
-    def bgr(self) -> np.ndarray:
-        """The frame in BGR uint8, converted by FFmpeg as the decoded frame would be."""
+    def bgr_regions(self) -> BgrRegions | np.ndarray:
+        """The frame in BGR uint8 where it is read, converted by FFmpeg as the decoded frame's would be
+        (:meth:`~groundstation.video.frames.VideoFrame.bgr_regions`), or ``image`` where that is BGR."""
         if self.planes is None:
             return self.image
-        h, w = self.image.shape
-        frame = av.VideoFrame(w, h, "yuv420p")
-        frame.colorspace, frame.color_range = self.colour
-        for plane, source in zip(frame.planes, self.planes, strict=True):
-            np.copyto(_plane(plane), source)
-        return frame.to_ndarray(format="bgr24")
-
-
-def _plane(plane) -> np.ndarray:
-    """A view (height, width) of an FFmpeg frame's plane, without its rows' padding."""
-    return np.frombuffer(plane, np.uint8).reshape(plane.height, plane.line_size)[:, : plane.width]
+        return BgrRegions(self.planes, self.colour)
 
 
 def _layout(frame) -> tuple[list[tuple[int, ...]], tuple[int, int] | None]:
@@ -124,7 +116,7 @@ def put_frame(ring: mmap.mmap, slot: int, slot_bytes: int, frame, video) -> tupl
     if sum(int(np.prod(s)) for s in shapes) > slot_bytes:
         raise SessionError(f"{video}: a frame of shape {shapes} is larger than the calibration's")
     views = _views(ring, slot * slot_bytes, shapes)
-    sources = [frame.image] if colour is None else [_plane(p) for p in frame.decoded.planes]
+    sources = [frame.image] if colour is None else [plane_array(p) for p in frame.decoded.planes]
     for view, source in zip(views, sources, strict=True):
         np.copyto(view, source)
     del views  # no view may outlive the ring's close
@@ -297,7 +289,7 @@ def _measure(tracks: list, link, ring: mmap.mmap, slot_bytes: int) -> None:
         i, row, u, v, slot, layout = message
         track = tracks[i]
         try:
-            image = ring_frame(ring, slot * slot_bytes, layout).bgr()
+            image = ring_frame(ring, slot * slot_bytes, layout).bgr_regions()
             link.send(("result", track.size.measure(image, track.pose, row, u, v)))
         except Exception as e:  # noqa: BLE001 - raised again in the main process
             failed = True

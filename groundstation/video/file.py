@@ -10,7 +10,8 @@ Read ``grey`` (for a reader of the grey levels alone, as the default tracker), a
 is a view of its luma plane as decoded: no conversion and no copy, where FFmpeg's conversion to BGR
 (swscale, in the decoding thread) added a quarter to the CPU time of decoding (``bench/offline_speed.py``'s
 40 s of 1080p: 12.3 CPU-s decoded, 15.1 to BGR, 15.6 to grey); :meth:`VideoFrame.bgr` converts the frames
-that need colour, as they would have been. Frames in other pixel formats are read in BGR, as without ``grey``.
+that need colour, as they would have been (:meth:`VideoFrame.bgr_regions` only the windows read of them). Frames in
+other pixel formats are read in BGR, as without ``grey``.
 
 A frame's index comes from the container's timestamps, found by reading every
 packet's presentation time first (demuxing only, no decoding):

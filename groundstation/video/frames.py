@@ -28,6 +28,7 @@ class VideoFrame:
     decoded: av.VideoFrame | None = None
     # the conversion of ``decoded``, once made (the UUVs measured in one frame share it)
     _bgr: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _regions: BgrRegions | None = field(default=None, repr=False, compare=False)
 
     def bgr(self) -> np.ndarray:
         """The frame in BGR uint8: ``image``, or converted from the decoded frame (as a frame not read grey is),
@@ -38,6 +39,73 @@ class VideoFrame:
             self._bgr = self.decoded.to_ndarray(format="bgr24")
             self._bgr.flags.writeable = False
         return self._bgr
+
+    def bgr_regions(self) -> BgrRegions | np.ndarray:
+        """The frame in BGR uint8 where it is read (:class:`BgrRegions`; the UUVs measured in one frame share it), or
+        ``image`` where that is BGR already."""
+        if self.decoded is None:
+            return self.image
+        if self._regions is None:
+            planes = [plane_array(p) for p in self.decoded.planes]
+            self._regions = BgrRegions(planes, (self.decoded.colorspace, self.decoded.color_range))
+        return self._regions
+
+
+def plane_array(plane) -> np.ndarray:
+    """A view (height, width) of an FFmpeg frame's plane, without its rows' padding."""
+    return np.frombuffer(plane, np.uint8).reshape(plane.height, plane.line_size)[:, : plane.width]
+
+
+#: A region :class:`BgrRegions` converts reaches this far (pixels) beyond the rows and columns read: the windows one
+#: height-from-size measurement reads lie around one vehicle.
+REGION_MARGIN_PX = 48
+
+
+class BgrRegions:
+    """A yuv420p frame in BGR uint8, converted where it is read: ``regions[rows, cols]`` (two slices without a step)
+    is what the whole frame's conversion holds there, converted by FFmpeg with the region around it
+    (:data:`REGION_MARGIN_PX` beyond, on even pixels) the first time it is read; ``shape`` is the whole frame's.
+
+    The height from size reads a few windows around each vehicle: converting them costs a fraction of converting the
+    whole frame (swscale's work is per pixel). FFmpeg's conversion of a same-sized yuv420p frame takes each pixel's
+    own chroma sample, so a region cut on even pixels converts to the whole frame's bytes there
+    (``tests/test_video_bgr_regions.py`` checks it on a camera-encoded video). ``planes``: Y (H, W), U and V;
+    ``colour``: the frame's (colorspace, color_range)."""
+
+    ndim = 3
+
+    def __init__(self, planes: list[np.ndarray], colour: tuple[int, int]):
+        self.planes, self.colour = planes, colour
+        self.shape = (*planes[0].shape, 3)
+        self._converted: list[tuple[int, int, np.ndarray]] = []  # (first row, first column, BGR)
+
+    def __getitem__(self, key: tuple[slice, slice]) -> np.ndarray:
+        rows, cols = key
+        if rows.step not in (None, 1) or cols.step not in (None, 1):
+            raise IndexError("BgrRegions: slices without a step only")
+        y0, y1, _ = rows.indices(self.shape[0])
+        x0, x1, _ = cols.indices(self.shape[1])
+        for ry, rx, bgr in self._converted:
+            if ry <= y0 and rx <= x0 and y1 <= ry + bgr.shape[0] and x1 <= rx + bgr.shape[1]:
+                return bgr[y0 - ry : y1 - ry, x0 - rx : x1 - rx]
+        ry, rx, bgr = self._convert(y0, y1, x0, x1)
+        self._converted.append((ry, rx, bgr))
+        return bgr[y0 - ry : y1 - ry, x0 - rx : x1 - rx]
+
+    def _convert(self, y0: int, y1: int, x0: int, x1: int) -> tuple[int, int, np.ndarray]:
+        """The region around rows ``y0:y1`` and columns ``x0:x1`` converted: (its first row, first column, BGR)."""
+        H, W = self.shape[:2]
+        m = REGION_MARGIN_PX
+        ry, rx = max(0, y0 - m) // 2 * 2, max(0, x0 - m) // 2 * 2
+        ry1, rx1 = min(H, (y1 + m + 1) // 2 * 2), min(W, (x1 + m + 1) // 2 * 2)
+        frame = av.VideoFrame(rx1 - rx, ry1 - ry, "yuv420p")
+        frame.colorspace, frame.color_range = self.colour
+        cuts = [(ry, ry1, rx, rx1)] + [(ry // 2, (ry1 + 1) // 2, rx // 2, (rx1 + 1) // 2)] * 2
+        for plane, source, (a, b, c, d) in zip(frame.planes, self.planes, cuts, strict=True):
+            np.copyto(plane_array(plane), source[a:b, c:d])
+        bgr = frame.to_ndarray(format="bgr24")
+        bgr.flags.writeable = False
+        return ry, rx, bgr
 
 
 def ffmpeg_reason(e: Exception) -> str:
