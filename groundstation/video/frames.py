@@ -69,8 +69,9 @@ class BgrRegions:
     The height from size reads a few windows around each vehicle: converting them costs a fraction of converting the
     whole frame (swscale's work is per pixel). FFmpeg's conversion of a same-sized yuv420p frame takes each pixel's
     own chroma sample, so a region cut on even pixels converts to the whole frame's bytes there
-    (``tests/test_video_bgr_regions.py`` checks it on a camera-encoded video). ``planes``: Y (H, W), U and V;
-    ``colour``: the frame's (colorspace, color_range)."""
+    (``tests/test_video_bgr_regions.py``). A frame of odd height it converts otherwise (a region's bytes differ): a
+    frame of odd size is converted whole. ``planes``: Y (H, W), U and V; ``colour``: the frame's (colorspace,
+    color_range)."""
 
     ndim = 3
 
@@ -98,6 +99,8 @@ class BgrRegions:
         m = REGION_MARGIN_PX
         ry, rx = max(0, y0 - m) // 2 * 2, max(0, x0 - m) // 2 * 2
         ry1, rx1 = min(H, (y1 + m + 1) // 2 * 2), min(W, (x1 + m + 1) // 2 * 2)
+        if H % 2 or W % 2:  # swscale converts a frame of odd size otherwise: whole
+            ry, rx, ry1, rx1 = 0, 0, H, W
         frame = av.VideoFrame(rx1 - rx, ry1 - ry, "yuv420p")
         frame.colorspace, frame.color_range = self.colour
         cuts = [(ry, ry1, rx, rx1)] + [(ry // 2, (ry1 + 1) // 2, rx // 2, (rx1 + 1) // 2)] * 2
