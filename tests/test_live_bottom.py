@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import multiprocessing
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from groundstation.live import config
+from groundstation.live import bottom_live, config
 from groundstation.live.bottom_live import (
     HOLD_WINDOWS,
     BottomWindow,
@@ -30,6 +32,7 @@ from groundstation.offline import process
 from groundstation.offline.bottom import bias_headings, grey_of, pixels_at, tilt_frame
 from groundstation.offline.evaluate import error_ne_m
 from groundstation.session.read import load_session
+from groundstation.testing.live import wait_for
 from localizer.bottom import in_bias_frame
 from localizer.calibration import ConfigError
 from localizer.pose import camera_pose, take
@@ -50,23 +53,33 @@ def survey(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def fitted(survey):
-    """The window after the session's frames and its estimate (the newest frame's time, the correction)."""
+def taken(survey):
+    """The frames taken every EVERY_S s in time order, each as what the tracker gets: (its grey image, its pose, the
+    tilt's bias-frame heading, the UUV's pixel u, v)."""
     _, s = survey
-    window = BottomWindow(Platform(s.calibration, s.telemetry), WINDOW_S, tilt_frame(s))
     frames_t = np.asarray(s.frames["t"], float)
     pose = camera_pose(s.calibration, s.telemetry, frames_t)
     uuv_u, uuv_v = pixels_at(frames_t, *process.Pixels(*process.frame_pixels(s, True))[:3])
-    headings = bias_headings(s, pose, window.frame_tilt)
+    headings = bias_headings(s, pose, tilt_frame(s))
     row = {int(f): r for r, f in enumerate(s.frames["frame"])}
-    last = -np.inf
+    out, last = [], -np.inf
     with s.open_video(grey=True) as video:
         for vf in video.prefetch():
             r = row[vf.index]
             if frames_t[r] - last >= EVERY_S:
                 last = frames_t[r]
-                window.add(grey_of(vf.image), take(pose, [r]), headings[r], uuv_u[r], uuv_v[r])
-    return window, last, window.fit(window.snapshot())
+                out.append((grey_of(vf.image), take(pose, [r]), headings[r], uuv_u[r], uuv_v[r]))
+    return out
+
+
+@pytest.fixture(scope="module")
+def fitted(survey, taken):
+    """The window after the session's frames and its estimate (the newest frame's time, the correction)."""
+    _, s = survey
+    window = BottomWindow(Platform(s.calibration, s.telemetry), WINDOW_S, tilt_frame(s))
+    for frame in taken:
+        window.add(*frame)
+    return window, float(taken[-1][1].t_unix[0]), window.fit(window.snapshot())
 
 
 def test_the_window_estimates_the_attitude_error_the_simulator_made(survey, fitted):
@@ -88,6 +101,44 @@ def test_the_window_estimates_the_attitude_error_the_simulator_made(survey, fitt
         sigma_deg,
     )
     assert sigma_deg[2] < 0.5  # the heading told well below the platform's own
+
+
+def same(a, b) -> bool:
+    """``a`` and ``b`` equal field for field (dataclasses, arrays bit for bit, NaN where NaN)."""
+    if dataclasses.is_dataclass(a):
+        return type(a) is type(b) and all(
+            same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a)
+        )
+    if isinstance(a, np.ndarray | float):
+        return np.array_equal(a, b, equal_nan=True) and np.shape(a) == np.shape(b)
+    return a == b
+
+
+def test_the_service_tracks_and_fits_in_processes_of_its_own_the_same_estimate(
+    survey, taken, fitted, monkeypatch
+):
+    """The same frames through :meth:`LiveBottom.look` (the tracking thread's work: the frame to the tracking
+    process, the window to the fitting process, one fit due at the last frame): the estimate is the one the window
+    fitted in this process, field for field. Both processes 10 nice levels below this one (at least at nice 10)."""
+    _, s = survey
+    window, t_last, found = fitted
+    assert window.frame_tilt == "body"
+    monkeypatch.setattr(bottom_live, "REFIT_S", t_last - float(taken[0][1].t_unix[0]))
+    before = set(multiprocessing.active_children())
+    live = LiveBottom(s.calibration, s.telemetry, EVERY_S, WINDOW_S)
+    try:
+        for image, pose, heading, u, v in taken:
+            live._headings.append((float(pose.t_unix[0]), "body", heading))
+            live.on_tracked(image, pose, u, v)
+            live.look(image, pose)
+        wait_for(lambda: live.fits == 1, 60.0, lambda: f"the fit ({live.status(t_last)})")
+        children = [c for c in multiprocessing.active_children() if c not in before]
+        nice = min(max(os.getpriority(os.PRIO_PROCESS, 0) + 10, 10), 19)
+        assert [os.getpriority(os.PRIO_PROCESS, c.pid) for c in children] == [nice, nice]
+    finally:
+        live.close()
+    assert live.taken == live.frames == len(taken) and live.refused == 0
+    assert same(live._estimate.correction, found)
 
 
 def test_fixes_made_again_with_the_estimate_refused_where_their_own_claim_is_smaller_and_lapsed(

@@ -8,8 +8,11 @@ is refused in one line naming the key."""
 
 import argparse
 import json
+import multiprocessing
+import os
 import re
 import shutil
+import signal
 import threading
 import time
 
@@ -32,7 +35,9 @@ from groundstation.live.reference_live import (
     drift_line,
     malformed,
     parse_gps_raw,
+    search,
 )
+from groundstation.live.side_process import ProcessLost
 from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.reference import read_file
 from groundstation.runtime.zenoh_mavlink import mavlink_json
@@ -244,18 +249,43 @@ def test_the_operator_page_shows_the_reference(plain, tmp_path):
     assert re.search(r"reference offset N [-\d.]+, E [-\d.]+ m added", fix_text), fix_text
 
 
-def test_the_correction_lapses_without_sightings(plain):
-    """The session's own frames searched directly (the search's function, not its thread): an offset at the last
-    frame, none the line's horizon after it (nor a window after it); a fix then goes out as it came."""
+def test_the_correction_lapses_without_sightings(plain, caplog):
+    """The session's own frames searched directly (the search's function, not its thread): the sightings the search's
+    process found are exactly those :func:`search` finds in this process; an offset at the last frame, none the line's
+    horizon after it (nor a window after it); a fix then goes out as it came. The search's process is 10 nice levels
+    below this one (at least at nice 10); killed, it is one line in the log and a new one that searches on."""
     s = load_session(plain)
     ref, radius_m = read_file(plain / "reference.toml")
+    before = set(multiprocessing.active_children())
     live = LiveReference(s.calibration, s.telemetry, "reference.toml", ref, radius_m, 0.2)
     try:
         t_of = dict(zip(s.frames["frame"][::3].astype(int), s.frames["t"][::3]))
+        here = []  # (t, the sighting) of the same search in this process
         with s.open_video(grey=True) as video:
             for vf in video.prefetch():
                 if vf.index in t_of:
-                    live.look(vf.image, uav_pose(s.calibration, s.telemetry, t_of[vf.index]))
+                    pose = uav_pose(s.calibration, s.telemetry, t_of[vf.index])
+                    live.look(vf.image, pose)
+                    here.append(
+                        (t_of[vf.index], search(s.calibration, radius_m, vf.image, pose, ref))
+                    )
+                    last = vf.image, pose
+        found_here = [(t, *hit) for t, hit in here if hit is not None]
+        assert len(found_here) >= 10 and len(live._sightings) == len(found_here)
+        for (t, off, jac, _), (t_here, off_here, jac_here) in zip(live._sightings, found_here):
+            assert t == t_here and np.array_equal(off, off_here) and np.array_equal(jac, jac_here)
+        (child,) = [c for c in multiprocessing.active_children() if c not in before]
+        assert os.getpriority(os.PRIO_PROCESS, child.pid) == min(
+            max(os.getpriority(os.PRIO_PROCESS, 0) + 10, 10), 19
+        )
+        os.kill(child.pid, signal.SIGKILL)
+        with pytest.raises(ProcessLost):
+            live.look(*last)
+        seen = live.seen
+        live.look(*last)  # a new process
+        assert live.seen == seen + 1
+        lost = [r for r in caplog.records if "process ended" in r.getMessage()]
+        assert len(lost) == 1 and lost[0].levelname == "ERROR", caplog.text
         t_end = float(s.frames["t"][-1])
         found, age_s = live.offsets(t_end)
         assert np.isfinite(found.offset_ne_m[0]).all() and age_s < 0.5

@@ -2,14 +2,18 @@
 ``bottom_window_s``): ``skyfix process --pose-from-bottom auto``'s estimate (:mod:`groundstation.offline.bottom`,
 :mod:`localizer.bottom`) made causally, over a sliding window of the last frames, as live cannot see the future.
 
-Every ``bottom_every_s`` seconds of video an aligned frame is taken with its camera pose in a low-priority thread
+Every ``bottom_every_s`` seconds of video an aligned frame is taken with its camera pose
 (:class:`groundstation.live.every_frame.EveryFrame`, as the reference's search) and its floor features tracked on
 from the frame taken before (:class:`groundstation.offline.bottom.FloorTracker`: the floor's dark marks, away from
-the UUV's last tracked pixel); a frame due while the tracker is still busy is skipped and counted (a skip breaks
-the tracks: new ones start). Every :data:`REFIT_S` seconds of video the estimate is made again in a second
-low-priority thread (:class:`BottomWindow.fit`: :func:`groundstation.offline.bottom.fit`, the offline estimate's own
-priors, parts and refusals) from the frames of the last ``bottom_window_s`` seconds; while it works, frames go on
-being tracked and a due fit waits for it.
+the UUV's last tracked pixel) in the tracking process, which holds the window (:func:`add_now`); a frame due while
+the tracker is still busy is skipped and counted (a skip breaks the tracks: new ones start). Every :data:`REFIT_S`
+seconds of video the estimate is made again in a second process (:func:`fit_window`:
+:func:`groundstation.offline.bottom.fit`, the offline estimate's own priors, parts and refusals) from the frames of
+the last ``bottom_window_s`` seconds; while it works, frames go on being tracked and a due fit waits for it. Both
+are low-priority processes of their own (:class:`groundstation.live.side_process.SideProcess`, the frame handed over
+in shared memory): in low-priority threads of the service their Python held the interpreter's lock while they
+waited for a core, the frames' threads waiting with them. A tracking process that ends is started again with an
+empty window (one log line).
 
 Each fix (:meth:`LiveBottom.correct`, called by the pipeline with the fix's pose) is made again with the latest
 estimate's correction (:meth:`groundstation.offline.bottom.PoseCorrection.apply`: the attitude turned back by the
@@ -33,14 +37,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import threading
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from groundstation.live.every_frame import EveryFrame
-from groundstation.live.ui.feed import lower_priority
+from groundstation.live.side_process import ProcessLost, SideProcess
 from groundstation.offline.bottom import (
     FloorTracker,
     PoseCorrection,
@@ -87,8 +90,8 @@ def concatenated(poses: list[CameraPose]) -> CameraPose:
 
 class BottomWindow:
     """The causal estimator: :meth:`add` each taken frame in turn (its floor features tracked on), :meth:`fit` the
-    estimate over the frames of the last ``window_s`` seconds. Not thread-safe by itself: :class:`LiveBottom`
-    holds its lock around :meth:`add` and :meth:`snapshot`."""
+    estimate over the frames of the last ``window_s`` seconds. Not thread-safe: live, the tracking process's one
+    thread holds it (:func:`add_now`)."""
 
     def __init__(self, platform: Platform, window_s: float, frame_tilt: str):
         self.platform, self.window_s = platform, window_s
@@ -133,13 +136,47 @@ class BottomWindow:
 
     def fit(self, snapshot) -> PoseCorrection | str:
         """The estimate from a :meth:`snapshot` (any thread), or why there is none."""
-        poses, obs, sigma_uav_m = snapshot
-        if len(poses.t_s) < 3:
-            return "fewer than 3 frames in the window"
-        return fit(self.platform, poses, obs, sigma_uav_m, self.frame_tilt)
+        return fit_window(self.platform, snapshot, self.frame_tilt)
 
     def frames(self) -> int:
         return len(self._frames)
+
+
+def fit_window(platform: Platform, snapshot, frame_tilt: str) -> PoseCorrection | str:
+    """The estimate from a window's :meth:`~BottomWindow.snapshot` (its tilt's bias frame ``frame_tilt``), or why
+    there is none."""
+    poses, obs, sigma_uav_m = snapshot
+    if len(poses.t_s) < 3:
+        return "fewer than 3 frames in the window"
+    return fit(platform, poses, obs, sigma_uav_m, frame_tilt)
+
+
+#: A bottom process's state (:func:`start_bottom`): the platform (the calibration: the telemetry is the service's),
+#: the window's length (s) and, in the tracking process, its window (made at the first frame).
+_process: dict = {}
+
+
+def start_bottom(cal, window_s: float) -> None:
+    """A bottom process (tracking or fitting): what its work takes besides the frames, and its imports, now."""
+    _process.update(platform=Platform(cal, None), window_s=window_s, window=None)
+
+
+def add_now(image, pose, heading_rad, uuv_u, uuv_v, frame_tilt: str, snapshot: bool):
+    """The tracking process: :meth:`BottomWindow.add` to its window (a new one when the tilt's bias frame
+    ``frame_tilt`` is not the window's: the mount became known); the window's frames, frames taken, and its
+    :meth:`~BottomWindow.snapshot` when ``snapshot`` (else None)."""
+    window = _process["window"]
+    if window is None or window.frame_tilt != frame_tilt:
+        window = _process["window"] = BottomWindow(
+            _process["platform"], _process["window_s"], frame_tilt
+        )
+    window.add(image, pose, heading_rad, uuv_u, uuv_v)
+    return window.frames(), window.taken, window.snapshot() if snapshot else None
+
+
+def fit_now(snapshot, frame_tilt: str) -> PoseCorrection | str:
+    """The fitting process: :func:`fit_window`."""
+    return fit_window(_process["platform"], snapshot, frame_tilt)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +210,8 @@ class LiveBottom:
     def __init__(self, cal, tel, every_s: float, window_s: float):
         self.platform = Platform(cal, tel)
         self.every_s, self.window_s = every_s, window_s
-        self.window = BottomWindow(self.platform, window_s, tilt_frame(self.platform))
+        self.frames = 0  # frames in the tracking process's window
+        self.taken = 0  # frames added to it
         self.fits = 0  # estimates made
         self.refused = 0  # fits that gave none
         self.corrected = 0  # fixes made again with the estimate
@@ -183,16 +221,16 @@ class LiveBottom:
         self._headings: deque[tuple[float, str, float]] = deque(
             maxlen=64
         )  # (t, bias heading) of due frames
-        self._lock = threading.Lock()
         self._fitting = False
         self._last_why = ""  # why the last fit gave none
         self._last_fit_t = (
             math.nan
         )  # the frame the last fit was started at (the first: the first frame's)
         self._applying = False
-        self._fitter = ThreadPoolExecutor(
-            1, thread_name_prefix="bottom-fit", initializer=lower_priority
-        )
+        self._tracking = SideProcess("bottom", start_bottom, cal, window_s)
+        self._fitting_process = SideProcess("bottom-fit", start_bottom, cal, window_s)
+        # its thread only hands the window to the fitting process and waits (see EveryFrame)
+        self._fitter = ThreadPoolExecutor(1, thread_name_prefix="bottom-fit")
         self._track = EveryFrame(cal, tel, every_s, self.look, "bottom")
 
     # -- the frames (event loop, then the tracking thread) --------------------------------------------------------
@@ -227,24 +265,23 @@ class LiveBottom:
         )
         if not math.isfinite(heading):
             return
-        with self._lock:
-            if (
-                frame_tilt != self.window.frame_tilt
-            ):  # the mount became known: a window in its frame
-                self.window = BottomWindow(self.platform, self.window_s, frame_tilt)
-            window = self.window
-            window.add(image, pose, heading, u, v)
-            if math.isnan(self._last_fit_t):  # the first fit once the window has REFIT_S of frames
-                self._last_fit_t = t
-            due = t - self._last_fit_t >= REFIT_S and not self._fitting
-            if due:
-                self._fitting, self._last_fit_t = True, t
-                snapshot = window.snapshot()
+        if math.isnan(self._last_fit_t):  # the first fit once the window has REFIT_S of frames
+            self._last_fit_t = t
+        due = t - self._last_fit_t >= REFIT_S and not self._fitting
         if due:
-            self._fitter.submit(self._fit, window, snapshot, t).add_done_callback(self._fitted)
+            self._fitting, self._last_fit_t = True, t
+        try:
+            self.frames, self.taken, snapshot = self._tracking.call_on(
+                add_now, image, pose, heading, u, v, frame_tilt, due
+            )
+        except ProcessLost:
+            self._fitting = False
+            raise
+        if due:
+            self._fitter.submit(self._fit, snapshot, frame_tilt, t).add_done_callback(self._fitted)
 
-    def _fit(self, window: BottomWindow, snapshot, t_newest: float) -> Estimate:
-        found = window.fit(snapshot)
+    def _fit(self, snapshot, frame_tilt: str, t_newest: float) -> Estimate:
+        found = self._fitting_process.call(fit_now, snapshot, frame_tilt)
         if isinstance(found, str):
             return Estimate(None, found, t_newest)
         return Estimate(found, "", t_newest)
@@ -252,7 +289,8 @@ class LiveBottom:
     def _fitted(self, done) -> None:
         self._fitting = False
         if done.exception() is not None:
-            log.error("bottom: the estimate failed: %s", done.exception())
+            if not isinstance(done.exception(), ProcessLost):  # logged where it is started again
+                log.error("bottom: the estimate failed: %s", done.exception())
             return
         est = done.result()
         self.fits += 1
@@ -331,8 +369,8 @@ class LiveBottom:
             "state": state,
             "every_s": self.every_s,
             "window_s": self.window_s,
-            "frames": self.window.frames(),
-            "taken": self.window.taken,
+            "frames": self.frames,
+            "taken": self.taken,
             "skipped": self._track.skipped,
             "no_pose": self._track.no_pose,
             "fits": self.fits,
@@ -366,6 +404,8 @@ class LiveBottom:
         }
 
     def close(self) -> None:
+        self._tracking.close()
+        self._fitting_process.close()
         self._track.close()
         self._fitter.shutdown(wait=True, cancel_futures=True)
 

@@ -1,15 +1,15 @@
-"""A frame every so many seconds of video, worked on at a low priority: the live service's side jobs (the live
-mosaic's painter, :mod:`.mosaic_live`; the search for a surveyed marker, :mod:`.reference_live`).
+"""A frame every so many seconds of video for a side job of the live service (the live mosaic's painter,
+:mod:`.mosaic_live`; the search for a surveyed marker, :mod:`.reference_live`; the bottom's tracking,
+:mod:`.bottom_live`).
 
 :meth:`EveryFrame.on_frame` (a frame listener, on the event loop) takes a frame once ``every_s`` seconds of video
 have passed since the last one taken, computes its camera pose from the telemetry there is then
-(:func:`localizer.pose.uav_pose`) and hands the image and the pose to ``work`` in a thread of its own at a lower
-priority than the rest of the process (:func:`groundstation.live.ui.feed.lower_priority`; with ``lower=False`` at the
-process's own, for a ``work`` that only hands the frame to a process of its own and waits: a low-priority thread that
-holds the interpreter's lock keeps the frames' threads waiting while it waits for a core). A frame that comes due
-while ``work`` is still busy with the one before is skipped and counted (``skipped``): the job takes the CPU the
-rest of the service leaves. A frame without a pose (no telemetry yet, a camera under the surface) is counted
-(``no_pose``) and not worked on.
+(:func:`localizer.pose.uav_pose`) and hands the image and the pose to ``work`` in a thread of its own, at the
+service's priority: ``work`` hands the frame to the job's process (:class:`groundstation.live.side_process.SideProcess`,
+at a low priority) and waits for it, the interpreter's lock released (a low-priority thread of the service that held
+the lock kept the frames' threads waiting while it waited for a core). A frame that comes due while ``work`` is still
+busy with the one before is skipped and counted (``skipped``): the job takes the CPU the rest of the service leaves.
+A frame without a pose (no telemetry yet, a camera under the surface) is counted (``no_pose``) and not worked on.
 """
 
 from __future__ import annotations
@@ -21,15 +21,15 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from groundstation.live.ui.feed import lower_priority
+from groundstation.live.side_process import ProcessLost
 from localizer.pose import CameraPose, uav_pose
 
 log = logging.getLogger(__name__)
 
 
 class EveryFrame:
-    """``work(image, pose)`` on a frame every ``every_s`` s of video, at a low priority unless not ``lower`` (see
-    the module doc); ``name`` names its thread and its errors in the log."""
+    """``work(image, pose)`` on a frame every ``every_s`` s of video (see the module doc); ``name`` names its thread
+    and its errors in the log."""
 
     def __init__(
         self,
@@ -38,7 +38,6 @@ class EveryFrame:
         every_s: float,
         work: Callable[[np.ndarray, CameraPose], None],
         name: str,
-        lower: bool = True,
     ):
         self.cal, self.tel, self.every_s, self.work, self.name = cal, tel, every_s, work, name
         #: ``adjust(pose)`` (on the loop) the pose the work gets, when set: the pose another estimate corrected
@@ -47,9 +46,7 @@ class EveryFrame:
         self.no_pose = 0  # frames due without a camera pose
         self._busy = False
         self._last_t = -math.inf
-        self._thread = ThreadPoolExecutor(
-            1, thread_name_prefix=name, initializer=lower_priority if lower else None
-        )
+        self._thread = ThreadPoolExecutor(1, thread_name_prefix=name)
 
     def on_frame(self, frame) -> None:
         if frame.t_unix - self._last_t < self.every_s:
@@ -69,7 +66,8 @@ class EveryFrame:
 
     def _done(self, done) -> None:
         self._busy = False
-        if done.exception() is not None:
+        # a process lost is logged where it is started again
+        if done.exception() is not None and not isinstance(done.exception(), ProcessLost):
             log.error("%s: a frame could not be worked on: %s", self.name, done.exception())
 
     def close(self) -> None:

@@ -9,13 +9,13 @@ paints). A frame that comes while the painter is still busy with the one before 
 mosaic takes the CPU the rest of the service leaves. The UUV is not left out (its pixel is the tracker's, per UUV;
 the mean over the frames dilutes it).
 
-The painting and the tiles run in a process of their own (:class:`MosaicPainter`, :func:`start_painting_process`:
-10 nice levels below the service and at least at nice 10, as the painting thread was: the map yields the CPU to
-every program beside it; ending with the service), the frame handed over through shared
-memory (:class:`~groundstation.height_from_size.SharedFrame`): they are Python and NumPy, and a thread of the
-service at a low priority that ran them held the interpreter's lock while it waited for a core beside busy
-programs, the frames' threads waiting with it (``bench/live_latency.py --page open``). The service's threads only
-hand work over and wait for it, the lock released.
+The painting and the tiles run in a process of their own (:class:`MosaicPainter` in a
+:class:`~groundstation.live.side_process.SideProcess`: 10 nice levels below the service and at least at nice 10, as
+the painting thread was; ending with the service; the frame handed over through shared memory): they are Python and
+NumPy, and a thread of the service at a low priority that ran them held the interpreter's lock while it waited for a
+core beside busy programs, the frames' threads waiting with it (``bench/live_latency.py --page open``). The
+service's threads only hand work over and wait for it, the lock released. A painting process that ends is started
+again with an empty mosaic (one log line).
 
 :meth:`LiveMosaic.tile` renders a web-Mercator tile (EPSG:3857, 256 px) from the blend's cells under it, warped
 by rasterio's GDAL (bilinear); ``version`` counts the frames painted, and the page's tiles are fetched anew when it
@@ -25,17 +25,13 @@ changes.
 from __future__ import annotations
 
 import math
-import multiprocessing
-import os
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from groundstation.height_from_size import SharedFrame, shared_image, start_measuring_process
 from groundstation.live.every_frame import EveryFrame
-from groundstation.live.ui.feed import ENCODER_NICE
+from groundstation.live.side_process import ProcessLost, SideProcess
 from groundstation.map.tiles import (
     MAX_ZOOM,
     TILE_PX,
@@ -161,14 +157,6 @@ class MosaicPainter:
         return out if any_painted else None
 
 
-def start_painting_process() -> None:
-    """The painting process: :func:`start_measuring_process` (the service's nice + 10, ending with it), and at least
-    at nice :data:`~groundstation.live.ui.feed.ENCODER_NICE`: the painting is the page's, the fixes' CPU comes first
-    and the laptop's other programs' too."""
-    start_measuring_process()
-    os.setpriority(os.PRIO_PROCESS, 0, max(os.getpriority(os.PRIO_PROCESS, 0), ENCODER_NICE))
-
-
 #: The painting process's one :class:`MosaicPainter` (:func:`start_painter`).
 _painter: list[MosaicPainter] = []
 
@@ -178,9 +166,9 @@ def start_painter(cal, floor_depth_m: float, spill: str) -> None:
     _painter[:] = [MosaicPainter(cal, floor_depth_m, Path(spill))]
 
 
-def paint_shared(frame: tuple[str, tuple[int, ...], str], pose) -> tuple[Grid, float] | None:
-    """The painting process: :meth:`MosaicPainter.paint_frame` of the frame :class:`SharedFrame` put in."""
-    return _painter[0].paint_frame(shared_image(frame), pose)
+def paint_now(image: np.ndarray, pose) -> tuple[Grid, float] | None:
+    """The painting process: :meth:`MosaicPainter.paint_frame`."""
+    return _painter[0].paint_frame(image, pose)
 
 
 def tile_now(z: int, x: int, y: int) -> bytes | None:
@@ -200,15 +188,10 @@ class LiveMosaic:
         self.grid: Grid | None = None  # the painting process's, once it painted
         self.lat_deg = 0.0  # the first painted frame's
         self._spill = tempfile.TemporaryDirectory(prefix="skyfix-live-mosaic-")
-        self._pool = ProcessPoolExecutor(
-            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_painting_process
+        self._process = SideProcess(
+            "live mosaic", start_painter, cal, floor_depth_m, self._spill.name
         )
-        self._pool.submit(start_painter, cal, floor_depth_m, self._spill.name)
-        self._shared = (
-            SharedFrame()
-        )  # one frame at a time: EveryFrame hands over the next once this one is done
-        # its thread only hands the frame over and waits: at the service's priority (see EveryFrame)
-        self._painter = EveryFrame(cal, tel, every_s, self._paint_frame, "live mosaic", lower=False)
+        self._painter = EveryFrame(cal, tel, every_s, self._paint_frame, "live mosaic")
         self.on_frame = self._painter.on_frame
 
     @property
@@ -218,7 +201,7 @@ class LiveMosaic:
     def _paint_frame(self, image: np.ndarray, pose) -> None:
         """(:class:`EveryFrame`'s thread, at the service's priority) the frame to the painting process, and its
         answer back."""
-        done = self._pool.submit(paint_shared, self._shared.put(image), pose).result()
+        done = self._process.call_on(paint_now, image, pose)
         if done is not None:
             self.grid, self.lat_deg = done
             self.painted += 1
@@ -250,7 +233,10 @@ class LiveMosaic:
         (rendered by the painting process, between two frames' painting)."""
         if self.grid is None:
             return None
-        return self._pool.submit(tile_now, z, x, y).result()
+        try:
+            return self._process.call(tile_now, z, x, y)
+        except ProcessLost:  # logged; the mosaic starts again
+            return None
 
     def status(self) -> dict:
         return {
@@ -263,7 +249,6 @@ class LiveMosaic:
         }
 
     def close(self) -> None:
+        self._process.close()
         self._painter.close()
-        self._pool.shutdown(wait=True, cancel_futures=True)
-        self._shared.close()
         self._spill.cleanup()

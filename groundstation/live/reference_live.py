@@ -13,11 +13,12 @@ reports' with their speed times their time's sigma. When its reports stop, frame
 (``no_report``) and the correction lapses as when a marker leaves the view.
 
 Every ``reference_every_s`` seconds of video an aligned frame is taken with its camera pose, and the marker is looked
-for around where that pose puts it (:func:`groundstation.offline.reference.expected`,
-:func:`~groundstation.offline.reference.find`) in a low-priority thread; a frame that comes while the search is
-still busy with the one before is skipped and counted (:class:`groundstation.live.every_frame.EveryFrame`, as the
-live mosaic's painter). A sighting is the offset known − located of the marker through the frame's
-reported pose (:func:`localizer.reference.sightings`).
+for around where that pose puts it (:func:`search`: :func:`groundstation.offline.reference.expected`,
+:func:`~groundstation.offline.reference.find`) in a low-priority process of its own, the frame handed over in shared
+memory (:class:`groundstation.live.side_process.SideProcess`, as the live mosaic's painter: a thread of the service at
+a low priority held the interpreter's lock while it waited for a core); a frame that comes while the search is still
+busy with the one before is skipped and counted (:class:`groundstation.live.every_frame.EveryFrame`). A sighting is
+the offset known − located of the marker through the frame's reported pose (:func:`localizer.reference.sightings`).
 
 Each fix (:meth:`LiveReference.correct`, called by the pipeline with the fix's pose) gets the offset of the sightings
 of the :data:`~localizer.reference.WINDOW_S` before its frame (causal): a straight line through their
@@ -48,6 +49,7 @@ import cv2
 import numpy as np
 
 from groundstation.live.every_frame import EveryFrame
+from groundstation.live.side_process import SideProcess
 from groundstation.mavlink.ingest import mavutil
 from groundstation.offline.reference import (
     REPORT_KINDS,
@@ -110,6 +112,34 @@ def drift_line(t_sight: np.ndarray, offset_ne_m: np.ndarray, t_unix: float):
     sigma_last = np.sqrt(scatter * (1.0 + spread[0, 0] + age_s / reference.BLOCK_S))
     sigma_slope = np.sqrt(scatter * spread[1, 1])
     return coef[0] + coef[1] * age_s, sigma_last + sigma_slope * age_s
+
+
+def search(cal, radius_m: float, image: np.ndarray, pose: CameraPose, at: reference.Reference):
+    """The marker (``at``, of radius ``radius_m``) looked for in one frame around where ``pose`` puts it: the
+    sighting's offset (2,) and pose jacobian (2, 4), or None where it was not found."""
+    u0, v0, radius_px, reach_px = expected(cal, pose, at, radius_m)
+    if not np.isfinite(u0[0]):
+        return None
+    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    hit = find(grey, u0[0], v0[0], radius_px[0], reach_px[0])
+    if hit is None:
+        return None
+    off, ok, jac = reference.sightings(cal, pose, [hit[0]], [hit[1]], at)
+    return (off[0], jac[0]) if ok[0] else None
+
+
+#: The search's process: its calibration and the marker's radius (:func:`start_search`).
+_searching: list = []
+
+
+def start_search(cal, radius_m: float) -> None:
+    """The search's process: what :func:`search` takes besides the frame, and its imports, now."""
+    _searching[:] = [cal, radius_m]
+
+
+def search_now(image: np.ndarray, pose: CameraPose, at: reference.Reference):
+    """The search's process: :func:`search`."""
+    return search(*_searching, image, pose, at)
 
 
 def as_fixes(fix: Fix) -> Fixes:
@@ -345,6 +375,7 @@ class LiveReference:
         self._lock = threading.Lock()
         self._applying = False  # the last fix was corrected (its change is logged)
         self._estimated = False  # an offset was found once: without one now, it lapsed
+        self._process = SideProcess("reference", start_search, cal, radius_m)
         self._search = EveryFrame(cal, tel, every_s, self.look, "reference")
 
     def on_frame(self, frame) -> None:
@@ -357,27 +388,20 @@ class LiveReference:
         self._search.adjust = adjust
 
     def look(self, image: np.ndarray, pose: CameraPose) -> None:
-        """Search one frame (the search's thread) and keep the sighting."""
+        """Search one frame (the search's thread: in its process) and keep the sighting."""
         self.searched += 1
         t = float(pose.t_unix[0])
         at = self.ref if self.buoy is None else self.buoy.at(t)
         if not np.all(np.isfinite(at.lat_deg)):
             self.no_report += 1
             return
-        u0, v0, radius_px, reach_px = expected(self.cal, pose, at, self.radius_m)
-        if not np.isfinite(u0[0]):
-            return
-        grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        hit = find(grey, u0[0], v0[0], radius_px[0], reach_px[0])
-        if hit is None:
-            return
-        off, ok, jac = reference.sightings(self.cal, pose, [hit[0]], [hit[1]], at)
-        if not ok[0]:
+        found = self._process.call_on(search_now, image, pose, at)
+        if found is None:
             return
         self.seen += 1
         sigma_m = float(np.ravel(at.sigma_m)[0])
         with self._lock:
-            self._sightings.append((t, off[0], jac[0], sigma_m))
+            self._sightings.append((t, *found, sigma_m))
             while self._sightings and self._sightings[0][0] < t - KEEP_S:
                 self._sightings.popleft()
 
@@ -480,4 +504,5 @@ class LiveReference:
         }
 
     def close(self) -> None:
+        self._process.close()
         self._search.close()
