@@ -303,10 +303,12 @@ def test_the_references_sensitivity_is_taken_at_the_fixs_time(plain):
     """A reference moving across the image (its pose_jacobian's compass column growing linearly over 10 s of
     sightings, as a drifting buoy's): the offset's jacobian, which the corrected fix's claim subtracts from the UUV's,
     is the line's at the fix's time, where the offset is taken, not the window's mean (half the window behind: a
-    buoy's fixes claimed its compass term 20-30 % short, 90-94 % within 2 h_acc)."""
+    buoy's fixes claimed its compass term 20-30 % short, 90-94 % within 2 h_acc). Closed, its search's process ends."""
     s = load_session(plain)
     ref, radius_m = read_file(plain / "reference.toml")
+    before = set(multiprocessing.active_children())
     live = LiveReference(s.calibration, s.telemetry, "reference.toml", ref, radius_m, 0.2)
+    (child,) = [c for c in multiprocessing.active_children() if c not in before]
     try:
         t = np.arange(90.0, 100.0, 0.2)
         jac = np.zeros((len(t), 2, 4))
@@ -317,6 +319,8 @@ def test_the_references_sensitivity_is_taken_at_the_fixs_time(plain):
         assert np.allclose(found.jacobian[0, :, 2], [1.0, -0.5]), found.jacobian[0]
     finally:
         live.close()
+    # the search's process ends with it, whether it had started or not (a stop waits for no start-up)
+    wait_for(lambda: not child.is_alive(), 10.0, "the search's process's end")
 
 
 def test_a_bad_reference_file_is_refused_in_one_line(tmp_path):

@@ -22,7 +22,6 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
-import signal
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -51,10 +50,9 @@ def start_side_process() -> None:
     os.setpriority(os.PRIO_PROCESS, 0, max(os.getpriority(os.PRIO_PROCESS, 0), ENCODER_NICE))
 
 
-def _started(start: Callable, args: tuple) -> int:
-    """The process: the job's ``start(*args)`` (its state, its imports); its pid."""
+def _started(start: Callable, args: tuple) -> None:
+    """The process: the job's ``start(*args)`` (its state, its imports)."""
     start(*args)
-    return os.getpid()
 
 
 def on_frame(fn: Callable, frame: FrameRef, *args):
@@ -70,20 +68,19 @@ class SideProcess:
         self.name = name
         self.restarts = 0  # processes started again after one ended
         self._start = (start, args)
-        self._shared = (
-            SharedFrame()
-        )  # one frame at a time: its caller hands over the next once this one is done
+        # one frame at a time: its caller hands over the next once this one is done
+        self._shared = SharedFrame()
         self._lock = threading.Lock()
         self._closed = False
-        self._pool, self._pid = self._begin()
+        #: the process's start (its ``start`` done): a future
+        self._pool, self.started = self._begin()
 
     def _begin(self) -> tuple[ProcessPoolExecutor, Future]:
         pool = ProcessPoolExecutor(
             1, mp_context=multiprocessing.get_context("spawn"), initializer=start_side_process
         )
-        return pool, pool.submit(
-            _started, *self._start
-        )  # it starts and imports now, not at the first call
+        # it starts and imports now, not at the first call
+        return pool, pool.submit(_started, *self._start)
 
     def call(self, fn: Callable, *args):
         """``fn(*args)`` in the process, waited for; :class:`ProcessLost` when the process ended meanwhile."""
@@ -111,19 +108,15 @@ class SideProcess:
             self.restarts += 1
             log.error("%s: its process ended; a new one started (#%d)", self.name, self.restarts)
             broken.shutdown(wait=False, cancel_futures=True)
-            self._pool, self._pid = self._begin()
+            self._pool, self.started = self._begin()
 
     def close(self) -> None:
-        """End the process now: a call it works on ends in :class:`ProcessLost`, not waited for."""
+        """End the process now, started or still starting: a call it works on or waits for ends in
+        :class:`ProcessLost`, not waited for."""
         with self._lock:
             self._closed = True
-            if self._pid.done() and self._pid.exception() is None:
-                try:
-                    os.kill(self._pid.result(), signal.SIGTERM)
-                except ProcessLookupError:
-                    pass
+            # the pool's own processes (Python 3.14's terminate_workers()); the pool sees them end
+            for process in list((self._pool._processes or {}).values()):
+                process.terminate()
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._shared.close()
-
-    def status(self) -> dict:
-        return {"restarts": self.restarts}
