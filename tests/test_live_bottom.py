@@ -131,7 +131,8 @@ def test_the_service_tracks_and_fits_in_processes_of_its_own_the_same_estimate(
             live._headings.append((float(pose.t_unix[0]), "body", heading))
             live.on_tracked(image, pose, u, v)
             live.look(image, pose)
-        wait_for(lambda: live.fits == 1, 60.0, lambda: f"the fit ({live.status(t_last)})")
+        # at nice 10 beside busy programs the fit takes a long while (44 s beside two spinning processes)
+        wait_for(lambda: live.fits == 1, 180.0, lambda: f"the fit ({live.status(t_last)})")
         children = [c for c in multiprocessing.active_children() if c not in before]
         nice = min(max(os.getpriority(os.PRIO_PROCESS, 0) + 10, 10), 19)
         assert [os.getpriority(os.PRIO_PROCESS, c.pid) for c in children] == [nice, nice]
