@@ -153,9 +153,9 @@ def smooth_fixes(
                 fixes.t_unix, idx, fits, C, taken, share, max_speed_mps, accel, own
             )[:, None, None]
         )
-    widest = np.array(
-        [np.linalg.eigvalsh(p)[-1] if np.all(np.isfinite(p)) else np.inf for p in own]
-    )
+    finite = np.all(np.isfinite(own), axis=(1, 2))
+    widest = np.full(n, np.inf)
+    widest[finite] = np.linalg.eigvalsh(own[finite])[:, -1]
     ok = taken | (np.isfinite(gap) & (widest <= bridge_sigma_m**2))
     x[~ok], own[~ok], shared[~ok] = np.nan, np.nan, np.nan
     lat, lon, _ = ned_to_geodetic(x[:, 0], x[:, 1], 0.0, *ref, 0.0)

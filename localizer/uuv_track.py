@@ -64,6 +64,11 @@ SCATTER_FIXES = 7
 #: ... when they span at most this long (s).
 SCATTER_SPAN_S = 0.7
 _H = np.hstack([np.eye(2), np.zeros((2, 2))])
+_H_T = _H.T
+_EYE4 = np.eye(4)
+_FLOOR_M2 = np.eye(2) * WHITE_FLOOR_M**2  # the white floor's covariance (m²)
+_MID = SCATTER_FIXES // 2
+_OTHERS = np.arange(SCATTER_FIXES) != _MID  # the fixes a Scatter's line goes through
 
 
 def fix_covariance_m2(
@@ -112,17 +117,17 @@ class Scatter:
         self._last.append((t, z, C))
         if len(self._last) < SCATTER_FIXES or t - self._last[0][0] > SCATTER_SPAN_S:
             return
-        mid = SCATTER_FIXES // 2
         ts = np.array([f[0] for f in self._last])
         zs = np.array([f[1] for f in self._last])
-        others = np.arange(SCATTER_FIXES) != mid
-        tc = ts[others] - ts[others].mean()
+        t_others, z_others = ts[_OTHERS], zs[_OTHERS]
+        t_mean = t_others.mean()
+        tc = t_others - t_mean
         sxx = float(tc @ tc)
-        slope = tc @ zs[others] / sxx
-        dt = ts[mid] - ts[others].mean()
-        r = zs[mid] - (zs[others].mean(axis=0) + slope * dt)
-        h = 1.0 / others.sum() + dt * dt / sxx
-        Cn = self._last[mid][2] * (1.0 + h) + np.eye(2) * WHITE_FLOOR_M**2 * (1.0 + h)
+        slope = tc @ z_others / sxx
+        dt = ts[_MID] - t_mean
+        r = zs[_MID] - (z_others.mean(axis=0) + slope * dt)
+        h = 1.0 / (SCATTER_FIXES - 1) + dt * dt / sxx
+        Cn = self._last[_MID][2] * (1.0 + h) + _FLOOR_M2 * (1.0 + h)
         self._q.append(float(r @ np.linalg.solve(Cn, r)))
 
     def restart(self) -> None:
@@ -179,7 +184,7 @@ class UuvTrack:
     @staticmethod
     def white_m2(C: np.ndarray, share: float) -> np.ndarray:
         """The white part of a fix's covariance ``C`` (m²): ``share·C`` and the floor."""
-        return share * C + np.eye(2) * WHITE_FLOOR_M**2
+        return share * C + _FLOOR_M2
 
     def predict(self, t: float, accel_mps2: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """State and covariance at ``t`` (not before :attr:`t`), the acceleration's process noise included
@@ -201,9 +206,9 @@ class UuvTrack:
         R = self.white_m2(C, share)
         x, P = self.predict(t, accel_mps2)
         S = P[:2, :2] + R
-        K = P @ _H.T @ np.linalg.inv(S)
+        K = P @ _H_T @ np.linalg.inv(S)
         x = x + K @ (z - x[:2])
-        IKH = np.eye(4) - K @ _H
+        IKH = _EYE4 - K @ _H
         P = IKH @ P @ IKH.T + K @ R @ K.T  # Joseph form: stays symmetric and positive
         speed = math.hypot(x[2], x[3])
         if speed > self.max_speed_mps:
@@ -253,7 +258,7 @@ class UuvTrack:
 
 def transition(dt: float) -> np.ndarray:
     """The state's (north, east, v_north, v_east) constant-velocity transition over ``dt`` seconds (4×4)."""
-    F = np.eye(4)
+    F = _EYE4.copy()
     F[0, 2] = F[1, 3] = dt
     return F
 
@@ -261,8 +266,12 @@ def transition(dt: float) -> np.ndarray:
 def _process_noise(accel_mps2: float, dt: float) -> np.ndarray:
     """The process noise (4×4) of a white acceleration of 1-sigma :data:`PROCESS_ACCEL_SHARE` × ``accel_mps2`` over
     ``dt`` seconds (see the module doc)."""
-    G = np.vstack([np.eye(2) * dt * dt / 2.0, np.eye(2) * dt])
-    return (PROCESS_ACCEL_SHARE * accel_mps2) ** 2 * (G @ G.T)
+    g_pos, g_vel = dt * dt / 2.0, dt  # G = [g_pos·I; g_vel·I]: G Gᵀ written out
+    Q = np.zeros((4, 4))
+    Q[0, 0] = Q[1, 1] = g_pos * g_pos
+    Q[0, 2] = Q[2, 0] = Q[1, 3] = Q[3, 1] = g_pos * g_vel
+    Q[2, 2] = Q[3, 3] = g_vel * g_vel
+    return (PROCESS_ACCEL_SHARE * accel_mps2) ** 2 * Q
 
 
 def _beyond(offset: np.ndarray, radius_m: float, U: np.ndarray) -> tuple[float, float, float]:
