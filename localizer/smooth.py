@@ -374,11 +374,12 @@ def _rts(
     xf[first], Pf[first] = track.x, track.P
     for k in range(first + 1, last + 1):
         a = float(accel_mps2[k])
-        xp[k], Pp[k] = track.predict(float(t[k]), a)
+        predicted = track.predict(float(t[k]), a)
+        xp[k], Pp[k] = predicted
         if taken[k]:
-            track.update(float(t[k]), z[k], C[k], share, a)
+            track.update(float(t[k]), z[k], C[k], share, a, predicted)
         else:
-            track.coast(float(t[k]), a)
+            track.coast(float(t[k]), a, predicted)
         xf[k], Pf[k] = track.x, track.P
     xs, Ps = xf.copy(), Pf.copy()
     for k in range(last - 1, first - 1, -1):

@@ -194,17 +194,27 @@ class UuvTrack:
         F = transition(dt)
         return F @ self.x, F @ self.P @ F.T + _process_noise(a, dt)
 
-    def coast(self, t: float, accel_mps2: float | None = None) -> None:
-        """Move on to ``t`` without a fix (the prediction becomes the state; ``accel_mps2`` as in :meth:`predict`)."""
-        self.x, self.P = self.predict(t, accel_mps2)
+    def coast(
+        self, t: float, accel_mps2: float | None = None, predicted: tuple | None = None
+    ) -> None:
+        """Move on to ``t`` without a fix (the prediction becomes the state; ``accel_mps2`` as in :meth:`predict`;
+        ``predicted``: :meth:`predict`'s result for them, when the caller has it)."""
+        self.x, self.P = self.predict(t, accel_mps2) if predicted is None else predicted
         self.t = max(self.t, t)
 
     def update(
-        self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None
+        self,
+        t: float,
+        z: np.ndarray,
+        C: np.ndarray,
+        share: float,
+        accel_mps2: float | None = None,
+        predicted: tuple | None = None,
     ) -> None:
-        """Take the fix ``z`` (covariance ``C``) at ``t``; the velocity is held within the top speed."""
+        """Take the fix ``z`` (covariance ``C``) at ``t``; the velocity is held within the top speed (``predicted``
+        as in :meth:`coast`)."""
         R = self.white_m2(C, share)
-        x, P = self.predict(t, accel_mps2)
+        x, P = self.predict(t, accel_mps2) if predicted is None else predicted
         S = P[:2, :2] + R
         K = P @ _H_T @ np.linalg.inv(S)
         x = x + K @ (z - x[:2])
