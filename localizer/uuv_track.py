@@ -120,12 +120,12 @@ class Scatter:
         ts = np.array([f[0] for f in self._last])
         zs = np.array([f[1] for f in self._last])
         t_others, z_others = ts[_OTHERS], zs[_OTHERS]
-        t_mean = t_others.mean()
+        t_mean = t_others.sum() / (SCATTER_FIXES - 1)
         tc = t_others - t_mean
         sxx = float(tc @ tc)
         slope = tc @ z_others / sxx
         dt = ts[_MID] - t_mean
-        r = zs[_MID] - (z_others.mean(axis=0) + slope * dt)
+        r = zs[_MID] - (z_others.sum(axis=0) / (SCATTER_FIXES - 1) + slope * dt)
         h = 1.0 / (SCATTER_FIXES - 1) + dt * dt / sxx
         Cn = self._last[_MID][2] * (1.0 + h) + _FLOOR_M2 * (1.0 + h)
         self._q.append(float(r @ np.linalg.solve(Cn, r)))
