@@ -526,7 +526,7 @@ class FixGate:
     def _track_step(self, f: _Seen) -> str | None:
         share = self.scatter.share
         a = self._accel(self.track)
-        d = self.track.distance(f.t, f.z, f.C, share, a)[0]
+        d = self.track.sigmas(f.t, f.z, f.C, share, a)
         if d > GATE_SIGMAS:
             idle = f", its thrusters idle: {a:.2f} m/s²" if a < self.max_accel_mps2 else ""
             return self._refuse(
@@ -564,7 +564,7 @@ class FixGate:
             return "reach"
         self._last_t = f.t
         a = self._accel(self._chain_track) if self._chain else None
-        if self._chain and self._chain_track.distance(f.t, f.z, f.C, share, a)[0] <= GATE_SIGMAS:
+        if self._chain and self._chain_track.sigmas(f.t, f.z, f.C, share, a) <= GATE_SIGMAS:
             self._chain.append(f)
             self._chain_track.update(f.t, f.z, f.C, share, a)
             self._chain_misses = 0
@@ -599,7 +599,7 @@ class FixGate:
             a = self._accel(track)
             if check and (
                 self._out_of_reach(f, share)
-                or (i and track.distance(f.t, f.z, f.C, share, a)[0] > GATE_SIGMAS)
+                or (i and track.sigmas(f.t, f.z, f.C, share, a) > GATE_SIGMAS)
             ):
                 return track, max(i, 1)
             if i:

@@ -241,14 +241,26 @@ class UuvTrack:
         those of the bound that gives ``d``. ``accel_mps2``: the acceleration bound over this
         step, if not :attr:`max_accel_mps2`.
         """
+        return max(_beyond(*bound) for bound in self._bounds(t, z, C, share, accel_mps2))
+
+    def sigmas(
+        self, t: float, z: np.ndarray, C: np.ndarray, share: float, accel_mps2: float | None = None
+    ) -> float:
+        """:meth:`distance`'s ``d`` alone (the same number, without the radius and the margin)."""
+        return max(_sigmas_beyond(*bound) for bound in self._bounds(t, z, C, share, accel_mps2))
+
+    def _bounds(
+        self, t, z, C, share, accel_mps2
+    ) -> tuple[tuple[np.ndarray, float, np.ndarray], ...]:
+        """:meth:`distance`'s two bounds: each the fix's offset (m), the bound's radius (m) and the covariance (m²)."""
         a = self.max_accel_mps2 if accel_mps2 is None else accel_mps2
         dt = max(0.0, t - self.t)
         F = transition(dt)
         extra = self.white_m2(C, share) + common_change_m2(C, dt)
         moved_on, P_moved = (F @ self.x)[:2], (F @ self.P @ F.T)[:2, :2]
-        return max(
-            _beyond(z - self.x[:2], self.reach_m(t), self.P[:2, :2] + extra),
-            _beyond(z - moved_on, 0.5 * a * dt * dt, P_moved + extra),
+        return (
+            (z - self.x[:2], self.reach_m(t), self.P[:2, :2] + extra),
+            (z - moved_on, 0.5 * a * dt * dt, P_moved + extra),
         )
 
     def widen(self, seconds: float) -> None:
@@ -287,7 +299,15 @@ def _process_noise(accel_mps2: float, dt: float) -> np.ndarray:
 def _beyond(offset: np.ndarray, radius_m: float, U: np.ndarray) -> tuple[float, float, float]:
     """``(d, radius_m, margin_m)``: the Mahalanobis distance (covariance ``U``) of the part of ``offset`` beyond
     ``radius_m``, and 1-sigma of ``U`` along its widest axis."""
+    return (
+        _sigmas_beyond(offset, radius_m, U),
+        radius_m,
+        math.sqrt(float(np.linalg.eigvalsh(U)[-1])),
+    )
+
+
+def _sigmas_beyond(offset: np.ndarray, radius_m: float, U: np.ndarray) -> float:
+    """:func:`_beyond`'s Mahalanobis distance alone."""
     off = math.hypot(*offset)
     beyond = offset * (max(0.0, off - radius_m) / off) if off > 0 else offset
-    d = math.sqrt(max(0.0, float(beyond @ np.linalg.solve(U, beyond))))
-    return d, radius_m, math.sqrt(float(np.linalg.eigvalsh(U)[-1]))
+    return math.sqrt(max(0.0, float(beyond @ np.linalg.solve(U, beyond))))

@@ -73,6 +73,9 @@ def test_distance_by_hand():
     assert common_change_m2(C, 0.1)[0, 0] == pytest.approx(change)
     assert radius == pytest.approx(0.15)
     assert d == pytest.approx(0.10 / math.sqrt(2 * WHITE_FLOOR_M**2 + change), rel=1e-6)
+    assert (
+        track.sigmas(0.1, np.array([0.25, 0.0]), C, share=0.0) == d
+    )  # what the gates compute per fix
     by_accel = (0.25 - 0.5 * A * 0.01) / math.sqrt(
         WHITE_FLOOR_M**2 + 0.01 * V**2 + WHITE_FLOOR_M**2 + change
     )
