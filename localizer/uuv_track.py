@@ -142,12 +142,14 @@ class Scatter:
     def ratio(self) -> float | None:
         """``s²`` as measured, not capped: above 1 the fixes scatter from frame to frame by more than their whole
         claimed covariance; None until :data:`SCATTER_MIN` fixes were measured."""
-        return float(np.mean(self._q)) / 2.0 if len(self._q) >= SCATTER_MIN else None
+        n = len(self._q)
+        return float(np.fromiter(self._q, float, n).mean()) / 2.0 if n >= SCATTER_MIN else None
 
     @property
     def share(self) -> float:
         """``s²``, at most 1; 1 until :data:`SCATTER_MIN` fixes were measured."""
-        return 1.0 if self.ratio is None else min(1.0, self.ratio)
+        ratio = self.ratio
+        return 1.0 if ratio is None else min(1.0, ratio)
 
 
 class UuvTrack:
