@@ -106,9 +106,12 @@ def smooth_fixes(
     max_speed_mps: float,
     max_accel_mps2: float,
     bridge_sigma_m: float = BRIDGE_SIGMA_M,
+    recorded: FittedFixes | None = None,
 ) -> Smoothed:
     """The smoothed track of ``fixes`` (times increasing) from those ``taken`` (ok fixes the gates took, with a
-    finite ``h_acc_m``), for a UUV of top speed ``max_speed_mps`` and acceleration bound ``max_accel_mps2``."""
+    finite ``h_acc_m``), for a UUV of top speed ``max_speed_mps`` and acceleration bound ``max_accel_mps2``.
+    ``recorded``: :func:`recording_fits` of the same fixes, taken as they are where its fixes are the ones taken
+    (the same arrays as computing them again)."""
     taken = np.asarray(taken, bool) & (fixes.status == "ok") & np.isfinite(fixes.h_acc_m)
     n = len(fixes)
     nan2 = np.full((n, 2, 2), np.nan)
@@ -131,10 +134,13 @@ def smooth_fixes(
             np.nan,
             np.full(n, float(max_accel_mps2)),
         )
-    ref, z = _positions(fixes, idx)
-    C = _covariances(fixes, idx)
+    fitted = (
+        recorded
+        if recorded is not None and np.array_equal(recorded.idx, idx)
+        else fitted_fixes(fixes, idx)
+    )
+    ref, z, C, fits = fitted.ref, fitted.z, fitted.C, fitted.fits
     share = white_share(fixes.t_unix[idx], z[idx], C[idx])
-    fits = local_fits(fixes.t_unix[idx], z[idx])
     wave = jitter_share(fits, C[idx])
     gap = _gaps(fixes.t_unix, idx)
     accel = np.full(n, float(max_accel_mps2))
@@ -201,16 +207,40 @@ def through_smoother(
     return np.where(smoothed.ok[:, None], x[:, :2], np.nan)
 
 
-def recording_jitter_share(fixes: Fixes, use: np.ndarray) -> float:
-    """The share of the fixes' covariance that their jitter over a wave's period shows (:func:`jitter_share`), over
-    the fixes ``use`` (bool per frame; ok fixes with a finite ``h_acc_m``) of a whole recording; NaN from too few."""
+@dataclass(frozen=True)
+class FittedFixes:
+    """The fixes ``idx`` of a recording as the smoother reads them: the first one's (lat, lon) ``ref``, every
+    frame's (north, east) from it ``z`` (N×2, m), the covariances ``C`` (N×2×2, NaN at the other frames) and the
+    :class:`LocalFits` of the fixes ``idx``."""
+
+    idx: np.ndarray
+    ref: tuple[float, float]
+    z: np.ndarray
+    C: np.ndarray
+    fits: LocalFits
+
+
+def fitted_fixes(fixes: Fixes, idx: np.ndarray) -> FittedFixes:
+    """:class:`FittedFixes` of ``fixes``' frames ``idx`` (not empty)."""
+    ref, z = _positions(fixes, idx)
+    return FittedFixes(idx, ref, z, _covariances(fixes, idx), local_fits(fixes.t_unix[idx], z[idx]))
+
+
+def recording_fits(fixes: Fixes, use: np.ndarray) -> FittedFixes | None:
+    """:func:`fitted_fixes` of the fixes ``use`` (bool per frame; ok fixes with a finite ``h_acc_m``) of a whole
+    recording; None where there is none."""
     idx = np.flatnonzero(
         np.asarray(use, bool) & (fixes.status == "ok") & np.isfinite(fixes.h_acc_m)
     )
-    if not len(idx):
+    return fitted_fixes(fixes, idx) if len(idx) else None
+
+
+def recording_jitter_share(fitted: FittedFixes | None) -> float:
+    """The share of the fixes' covariance that their jitter over a wave's period shows (:func:`jitter_share`), over
+    the fixes of a whole recording (:func:`recording_fits`); NaN from too few."""
+    if fitted is None:
         return float("nan")
-    z = _positions(fixes, idx)[1]
-    return jitter_share(local_fits(fixes.t_unix[idx], z[idx]), _covariances(fixes, idx)[idx])
+    return jitter_share(fitted.fits, fitted.C[fitted.idx])
 
 
 def _positions(fixes: Fixes, idx: np.ndarray) -> tuple[tuple[float, float], np.ndarray]:

@@ -34,7 +34,7 @@ from groundstation.runtime.gps_input import LOSS_STATUSES
 from groundstation.session.positions import write_table
 from localizer.fix import Fixes
 from localizer.fix_gate import FixGate, gate_offline
-from localizer.smooth import Smoothed, recording_jitter_share, smooth_fixes
+from localizer.smooth import Smoothed, recording_fits, recording_jitter_share, smooth_fixes
 from localizer.uuv_track import Scatter
 
 NAME = "positions_smoothed.csv"
@@ -61,10 +61,12 @@ def offline_track(
 ) -> tuple[Smoothed, np.ndarray]:
     """The smoothed track of a recording's fixes and its status word per frame (see the module doc)."""
     gate = FixGate(max_speed_mps, max_accel_mps2, max_h_acc_m=math.inf, max_age_s=math.inf)
-    gate.scatter = FlooredScatter(recording_jitter_share(fixes, fixes.status == "ok"))
+    recorded = recording_fits(fixes, fixes.status == "ok")
+    gate.scatter = FlooredScatter(recording_jitter_share(recorded))
     words = gate_offline(fixes, np.isin(fixes.status, LOSS_STATUSES), gate)
     taken = np.array([w is None for w in words], dtype=bool)
-    smoothed = smooth_fixes(fixes, taken, max_speed_mps, max_accel_mps2)
+    # the fixes' local fits computed once: the same fixes where the gates take every ok fix
+    smoothed = smooth_fixes(fixes, taken, max_speed_mps, max_accel_mps2, recorded=recorded)
     status = np.where(
         smoothed.ok, "ok", np.where(fixes.status == "ok", "refused", fixes.status)
     ).astype(object)
