@@ -25,7 +25,7 @@ from groundstation.session.read import load_session, read_table
 from localizer.fix import Fixes
 from localizer.fix_gate import CONFIRM_S, FixGate, gate_offline
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
-from localizer.smooth import BRIDGE_SIGMA_M, smooth_fixes, through_smoother
+from localizer.smooth import BRIDGE_SIGMA_M, recording_fits, smooth_fixes, through_smoother
 from localizer.uncertainty import H_ACC_PER_SIGMA_ISOTROPIC
 from localizer.uuv_track import PROCESS_ACCEL_SHARE, WHITE_FLOOR_M
 from sim_fixtures.bundle import BUNDLED_DIR
@@ -236,6 +236,28 @@ def test_another_series_goes_through_the_same_smoother():
     a, b = truth, z - truth
     parts = through_smoother(fixes, taken, sm, V, a) + through_smoother(fixes, taken, sm, V, b)
     assert np.abs(parts - through_smoother(fixes, taken, sm, V, z)).max() < 1e-9
+
+
+def test_the_recordings_fits_serve_the_smoother_only_for_the_same_fixes():
+    """:func:`recording_fits` of the ok fixes (computed once for the gates' floor) handed to the smoother: the same
+    track, array for array, as the smoother's own where it smooths those very fixes; where the gates refused some
+    (the first among them, so the positions' origin moves too), the smoother makes its own and gives what it gives
+    without them."""
+    t, truth, _ = line(10.0, 6, 0.0)
+    z = truth + jitter(t, 6)
+    fixes = fixes_of(t, z[:, 0], z[:, 1], 0.012)
+    recorded = recording_fits(fixes, fixes.status == "ok")
+    every = np.ones(len(t), bool)
+    some = every.copy()
+    some[[0, 40, 41, 200]] = False
+    for taken in (every, some):
+        mine = smooth_fixes(fixes, taken, V, A)
+        given = smooth_fixes(fixes, taken, V, A, recorded=recorded)
+        for name in vars(mine):
+            assert np.array_equal(getattr(mine, name), getattr(given, name), equal_nan=True), name
+    assert not np.array_equal(
+        smooth_fixes(fixes, some, V, A).north_m, smooth_fixes(fixes, every, V, A).north_m
+    )
 
 
 @pytest.mark.parametrize("seed", [6, 7])
