@@ -168,6 +168,9 @@ class BottomEstimate:
     walk_rate_evidence: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     #: (J, 2) the tilt's wander about ``tilt_rad`` at the knots (:attr:`Priors.tilt_wander_rad`); (0, 2): none
     tilt_wander_rad: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    #: (J, 2) the walk the reported velocity told at the knots (:func:`velocity_drift` on the fit's frames, about its
+    #: mean), which the walk's prior follows; (0, 2): the frames had no velocity
+    velocity_walk_ne_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
 
     @property
     def sigma_tilt_rad(self) -> float:
@@ -327,12 +330,17 @@ def _velocity_steps(poses: FramePoses, knots) -> np.ndarray:
     return np.diff(drift, axis=0)
 
 
-def velocity_drift(t_s, velocity_ne_mps, position_ne_m, knots) -> tuple[np.ndarray, np.ndarray]:
+def velocity_drift(
+    t_s, velocity_ne_mps, position_ne_m, knots, curve_ne_m=None
+) -> tuple[np.ndarray, np.ndarray]:
     """What the reported velocity says of the reported position (frames in any order, NaN rows ignored): the
     velocity integrated (trapezoids, in time order) less the position's change, true − reported up to a constant,
     fitted by the knots' piecewise-linear curve (J, 2), and each frame's remainder (K, 2) about that curve (NaN where
     the frame had none): the position's white noise, negated (``true = reported + walk + remainder`` where the
-    velocity is exact), which the knots are too far apart to follow."""
+    velocity is exact), which the knots are too far apart to follow. ``curve_ne_m`` (J, 2) given: the remainder is
+    about that curve instead (up to a constant: the remainder's mean is taken off), e.g. the one a fit on other
+    frames of the same recording followed (:attr:`BottomEstimate.velocity_walk_ne_m`): a curve fitted to these
+    frames' white noise would differ from it by that noise's share in the knots."""
     t = np.asarray(t_s, dtype=float)
     vel, pos = np.asarray(velocity_ne_mps, float), np.asarray(position_ne_m, float)
     good = np.flatnonzero(
@@ -345,7 +353,11 @@ def velocity_drift(t_s, velocity_ne_mps, position_ne_m, knots) -> tuple[np.ndarr
     )
     basis = _interp_knots(knots, np.eye(len(knots)), t)  # (K, J): each frame's weights of the knots
     target = travelled - (pos - pos[0])  # true − reported, up to a constant
-    drift, *_ = np.linalg.lstsq(basis, target, rcond=None)
+    if curve_ne_m is None:
+        drift, *_ = np.linalg.lstsq(basis, target, rcond=None)
+    else:
+        drift = np.asarray(curve_ne_m, float)
+        drift = drift + np.mean(target - basis @ drift, axis=0)
     remainder = np.full((len(np.asarray(t_s)), 2), np.nan)
     remainder[order] = target - basis @ drift
     return drift, remainder
@@ -829,6 +841,9 @@ def _estimate(
         priors=priors,
         walk_rate_evidence=evidence,
         tilt_wander_rad=prob.wander(x).copy(),
+        velocity_walk_ne_m=prob.walk0.copy()
+        if poses.velocity_ne_mps is not None
+        else np.zeros((0, 2)),
     )
 
 

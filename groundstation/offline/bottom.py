@@ -354,12 +354,20 @@ class PoseCorrection:
         """The position correction (K, 2) per frame of ``pose`` (true = reported + it): the walk, and where the
         frames have a velocity each one's own remainder about what the velocity says between the walk's knots
         (:func:`localizer.bottom.velocity_drift`: the reported position's white noise, which the knots cannot
-        follow; 0 where unknown)."""
-        walk = self.estimate.walk_at(pose.t_unix)
+        follow; 0 where unknown). The remainder is about the velocity's curve that the fit's walk followed
+        (:attr:`localizer.bottom.BottomEstimate.velocity_walk_ne_m`, fitted on the fit's frames), not one fitted
+        again to these frames: the two differ by the white noise's share in the knots (a plain receiver's
+        centimetres of it put millimetres into every knot), which the walk would not carry."""
+        e = self.estimate
+        walk = e.walk_at(pose.t_unix)
         if len(pose.t_unix) < 3:
             return walk
         _, remainder = bottom.velocity_drift(
-            pose.t_unix, pose.velocity_ned_mps[:, :2], uav_ne_m(pose), self.estimate.knot_t_s
+            pose.t_unix,
+            pose.velocity_ned_mps[:, :2],
+            uav_ne_m(pose),
+            e.knot_t_s,
+            e.velocity_walk_ne_m if len(e.velocity_walk_ne_m) else None,
         )
         return walk + np.nan_to_num(remainder)
 
