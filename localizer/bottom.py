@@ -124,6 +124,9 @@ class FramePoses:
     bias_heading_rad: np.ndarray | None = None
     # (K, 2) the reported horizontal velocity; None: not used
     velocity_ne_mps: np.ndarray | None = None
+    # (K, 2) the reported position the velocity is of (the drone's, where the camera sits on a lever arm that turns
+    # with it); None: the camera's
+    velocity_origin_ne_m: np.ndarray | None = None
 
 
 @dataclass
@@ -326,7 +329,8 @@ def _velocity_steps(poses: FramePoses, knots) -> np.ndarray:
     position's white noise averages over a knot's frames); zeros without a velocity."""
     if poses.velocity_ne_mps is None:
         return np.zeros((len(knots) - 1, 2))
-    drift, _ = velocity_drift(poses.t_s, poses.velocity_ne_mps, poses.camera_ne_m, knots)
+    origin = poses.camera_ne_m if poses.velocity_origin_ne_m is None else poses.velocity_origin_ne_m
+    drift, _ = velocity_drift(poses.t_s, poses.velocity_ne_mps, origin, knots)
     return np.diff(drift, axis=0)
 
 
@@ -784,6 +788,7 @@ def _part_values(
                 poses.height_m,
                 poses.bias_heading_rad,
                 poses.velocity_ne_mps,
+                poses.velocity_origin_ne_m,
             )
         )
     )

@@ -533,16 +533,17 @@ def frame_poses(
     """The reported cameras of the frames ``rows`` of ``pose`` as the estimate takes them (:func:`uav_ne_m` of all
     ``pose``'s frames, the bias frame ``frame_tilt``'s headings: :func:`bias_headings`, or ``headings`` (radians, one
     per frame of ``pose``) when given)."""
-    camera_ne = (uav_ne_m(pose) + pose.cam_offset_ned_m[:, :2])[rows]
+    uav_ne = uav_ne_m(pose)
     if headings is None:
         headings = bias_headings(session, pose, frame_tilt)
     return bottom.FramePoses(
         pose.t_unix[rows],
         pose.R_ned_from_cv[rows],
-        camera_ne,
+        (uav_ne + pose.cam_offset_ned_m[:, :2])[rows],
         pose.height_m[rows],
         np.asarray(headings, float)[rows],
         pose.velocity_ned_mps[rows, :2],
+        uav_ne[rows],
     )
 
 
