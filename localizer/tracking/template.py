@@ -45,7 +45,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   about their recent mean. That scatter (:meth:`~TemplateMatcher._waves`, nil on a still surface: the bars above
   as set) eases the bars (``wave_*``), smooths image and template before matching (the waves scramble the fine
   structure, not the shape), lets the template learn the mean distorted appearance, and holds up to
-  ``wave_misses`` frames without a match before a loss (:attr:`~localizer.tracking.Match.held`); a match after
+  ``wave_misses`` frames without a match before a loss (:attr:`~localizer.tracking.Match.held`; up to
+  ``wave_hold_misses`` while the held place still stands out of the water beside it); a match after
   such frames needs nearly the re-acquisition's bar. In waves every match, followed or a candidate, also needs
   ``wave_contrast_share`` of the UUV's contrast level (:meth:`~TemplateMatcher._least_contrast`: the waves scramble
   its structure, not how much it stands out; the water and the seafloor the template finds without it have a
@@ -149,8 +150,13 @@ class TemplateParams:
     wave_level_drop: float = 0.15  # ... level_drop and reacquire_below_level raised by up to this
     # ... update_score lowered by up to this (learn the mean wave-distorted appearance)
     wave_update_drop: float = 0.2
-    # ... and up to this many frames in a row without a match are held, not yet a loss
+    # ... and up to this many frames in a row without a match are held, not yet a loss ...
     wave_misses: float = 3.0
+    #: ... or up to this many while the held match keeps ``wave_hold_between`` of the way from the contrast of the
+    #: water beside the UUV to its level (see :meth:`~TemplateMatcher._least_contrast`): the waves break its image up
+    #: or caustics dim it for a few frames, it has not gone (where it is hidden, the water has the water's contrast)
+    wave_hold_misses: float = 6.0
+    wave_hold_between: float = 0.25
     # from this much wave (see _waves; until it is nil again) the UUV is judged on the
     # evidence of several frames and on how it stands out of the water beside it:
     wave_mode: float = 0.5
@@ -1030,7 +1036,12 @@ class TemplateMatcher:
             self._misses += 1
             # the first follows: the sea state not yet told
             young = self._changes <= self.p.wave_evidence_frames
-            held = near and self._misses <= self.p.wave_misses * max(self._waves(), float(young))
+            misses = (
+                self.p.wave_hold_misses
+                if in_waves and contrast >= self._least_contrast(1.0, self.p.wave_hold_between)
+                else self.p.wave_misses
+            )
+            held = near and self._misses <= misses * max(self._waves(), float(young))
             return Match(False, score, u, v, held=held)
         self._misses = 0
         # the template's own match: what it learns (the centring below jitters with the waves)
