@@ -310,6 +310,7 @@ def main() -> int:
         f"{'condition':14s} {'size':>4s} {'tol':>4s} {'tree':>8s} {'pass':>6s} {'located':>13s} {'share':>6s} "
         f"{'wrong':>5s} {'hidden ok':>9s} {'p50 px':>6s} {'p95 px':>6s} {'2drms':>6s} {'wrong 2drms':>11s} {'ms/fr':>6s}"
     )
+    load_before = " ".join(f"{x:.2f}" for x in os.getloadavg())
     lines, data, separations = [header], {}, {}
     print(header, flush=True)
     for name, base, size_px, depth_m in CONDITIONS:
@@ -351,7 +352,10 @@ def main() -> int:
         f"{name:14s} {r['grey_median']:6.2f} {r['grey_low']:6.1%} {r['colour_median']:6.2f} {r['colour_low']:6.1%}"
         for name, r in separations.items()
     ]
-    emit(lines, Path(args.out), {"tracked": data, "separation": separations})
+    load_after = " ".join(f"{x:.2f}" for x in os.getloadavg())
+    load = f"load average (1, 5, 15 min): {load_before} at the start, {load_after} at the end"
+    lines += ["", load]
+    emit(lines, Path(args.out), {"tracked": data, "separation": separations, "load": load})
     return 0
 
 
