@@ -206,7 +206,7 @@ class TemplateParams:
     wave_centre_share: float = 0.5
     wave_centre_reach: float = 0.3
     wave_centre_pull: float = 0.5
-    wave_centre_distinct: float = 1.5
+    wave_centre_distinct: float = 1.4
 
 
 #: Taken from the rank of a place too flat to be the UUV (see ``spread`` of :meth:`TemplateMatcher._search`): it
