@@ -17,9 +17,11 @@ import socket
 import subprocess
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from ahead import Render, Renders
 from live_helpers import ROOT, wait_for
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -313,3 +315,59 @@ class ArduCopter(ArduSub):
     logs are in ``logs/`` of its directory."""
 
     MODEL = "quad"
+
+
+class Booting:
+    """:meth:`ArduSub.start` in a thread of its own (the test goes on meanwhile); :meth:`ready` waits for it and
+    raises what it raised."""
+
+    def __init__(self, sitl: ArduSub):
+        self.sitl = sitl
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._start, name="sitl-boot", daemon=True)
+        self.thread.start()
+
+    def _start(self) -> None:
+        try:
+            self.sitl.start()
+        except BaseException as e:  # noqa: BLE001 - handed to the test by ready()
+            self.error = e
+
+    def ready(self) -> ArduSub:
+        self.thread.join()
+        if self.error is not None:
+            raise self.error
+        return self.sitl
+
+    def close(self) -> None:
+        self.thread.join()
+        self.sitl.stop()
+
+
+@dataclass
+class Prepared:
+    """Sessions being rendered by ``skyfix sim`` (``renders``: name → the render into ``dir/name``, since
+    ``t_start``) and an autopilot booting: a SITL test's slow beginnings (``tests/ahead.py``)."""
+
+    dir: Path
+    renders: Renders
+    t_start: float
+    boot: Booting
+
+    def close(self) -> None:
+        self.renders.close()
+        self.boot.close()
+
+
+def render_and_boot(
+    tmp: Path, scenarios: dict[str, str], sitl: ArduSub, background: bool
+) -> Prepared:
+    """Start rendering each scenario (name → TOML text) into ``tmp/name`` (log ``tmp/sim_name.log``), in the
+    ``background`` or not (:class:`ahead.Render`), and booting ``sitl``."""
+    t_start, renders = time.time(), Renders()
+    for name, text in scenarios.items():
+        (tmp / f"{name}.toml").write_text(text)
+        renders[name] = Render(
+            tmp / f"{name}.toml", tmp / name, tmp / f"sim_{name}.log", background
+        )
+    return Prepared(tmp, renders, t_start, Booting(sitl))

@@ -2,6 +2,7 @@
 
 import math
 
+import ahead
 import pytest
 
 from localizer.calibration import Calibration
@@ -118,3 +119,29 @@ def make_telemetry():
 def quat_ypr():
     """``quat_ypr(yaw_deg, pitch_deg, roll_deg) -> (w, x, y, z)``, see ``quat_from_ypr_deg``."""
     return quat_from_ypr_deg
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers",
+        f"{ahead.MARKER}(prepare, at_start=False): prepare(directory, background) starts the test's slow inputs "
+        "while the test before it runs, or from the run's start (tests/ahead.py)",
+    )
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    ahead.prepare_ahead(item, nextitem)
+    yield
+
+
+@pytest.fixture
+def prepared(request, tmp_path):
+    """What the test's ``ahead`` marker prepared, ahead or now (tests/ahead.py); closed after the test."""
+    ready = ahead.take(request.node.get_closest_marker(ahead.MARKER).args[0], tmp_path)
+    yield ready
+    ready.close()
+
+
+def pytest_sessionfinish(session):
+    ahead.close_unused()

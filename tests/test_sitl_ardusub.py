@@ -6,7 +6,8 @@ either the test is skipped. ArduPilot's ``sub.parm`` must lie next to the binary
 (``deploy/build_ardusub.sh`` builds both). Timeline, all waits on conditions:
 
 1. ``skyfix sim`` renders a small scenario (320×180, :data:`DURATION_S` s, the UUV hidden during
-   :data:`OCCLUSION_S`) while ArduSub boots in a scratch directory (``-I N`` with free ports).
+   :data:`OCCLUSION_S`) while ArduSub boots in a scratch directory (``-I N`` with free ports); both are started
+   while the test before runs (``tests/ahead.py``), the render on otherwise idle CPU.
 2. An observer (the test, a GCS on SERIAL0) requests GPS_RAW_INT at 20 Hz and GLOBAL_POSITION_INT and
    EKF_STATUS_REPORT at 10 Hz. ArduSub forwards the GPS_INPUT it gets from SERIAL1 to the observer
    (broadcast routing), so one clock stamps what the autopilot received and what it reported.
@@ -28,10 +29,11 @@ import math
 import socket
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
-from ardusub_sitl import ArduSub, ardusub_files
+from ardusub_sitl import ArduSub, Prepared, ardusub_files, render_and_boot
 from live_helpers import free_port, replay_shift, skyfix, start, stop, wait_for
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -113,21 +115,23 @@ def latest_before(items, t):
     return out
 
 
-def test_ardusub_sitl_takes_skyfix_gps_input(tmp_path):
+def prepare(tmp: Path, background: bool) -> Prepared:
     binary, sub_parm = ardusub_files()
+    sitl = ArduSub(binary, sub_parm, tmp / "ardusub", home=(LAT, LON, SURFACE_AMSL_M, 0.0))
+    return render_and_boot(tmp, {"session": SCENARIO}, sitl, background)
+
+
+@pytest.mark.ahead.with_args(prepare)
+def test_ardusub_sitl_takes_skyfix_gps_input(prepared):
+    tmp_path, sitl = prepared.dir, prepared.boot.sitl
+    binary = sitl.binary
     t_test = time.time()
-    scenario = tmp_path / "sitl_ardusub.toml"
-    scenario.write_text(SCENARIO)
     session = tmp_path / "session"
-    sitl = ArduSub(binary, sub_parm, tmp_path / "ardusub", home=(LAT, LON, SURFACE_AMSL_M, 0.0))
     procs: list[subprocess.Popen] = []
     mav, video = free_port(), free_port()
     zenoh_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     try:
-        t_gen = time.time()
-        gen = start(skyfix("sim", str(scenario), "--out", str(session)), tmp_path / "sim.log")
-        procs.append(gen)
-        sitl.start()
+        prepared.boot.ready()
         obs = sitl.observer
         for msg_id, hz in (
             (mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT, 20.0),
@@ -135,9 +139,9 @@ def test_ardusub_sitl_takes_skyfix_gps_input(tmp_path):
             (mavlink2.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 10.0),
         ):
             obs.request_interval(msg_id, hz)
-        wait_for(lambda: gen.poll() is not None, 600, "skyfix sim to render the session")
-        gen_s = time.time() - t_gen
-        assert gen.returncode == 0, (tmp_path / "sim.log").read_text()[-3000:]
+        prepared.renders["session"].wait(600)
+        t_ready = time.time()
+        gen_s = t_ready - prepared.t_start
         wait_for(
             lambda: sitl.boot_s() >= WARMUP_S or not sitl.alive(), 180, f"ArduSub up {WARMUP_S:g} s"
         )
@@ -284,8 +288,8 @@ def test_ardusub_sitl_takes_skyfix_gps_input(tmp_path):
 
     print(f"\nArduSub SITL: {binary}, instance ports {sitl.ports}")
     print(
-        f"session generated in {gen_s:.1f} s ({DURATION_S:g} s, 320x180); replay started at ArduSub uptime "
-        f"{boot_at_replay:.1f} s; test {time.time() - t_test:.1f} s in all"
+        f"session ready {gen_s:.1f} s after its render began ({DURATION_S:g} s, 320x180), {t_ready - t_test:.1f} s "
+        f"into the test; replay started at ArduSub uptime {boot_at_replay:.1f} s; test {time.time() - t_test:.1f} s in all"
     )
     print(
         f"EKF3 alignment: EKF_POS_HORIZ_ABS {t_aligned - t_first_fix:.2f} s after the first 3D GPS_INPUT "

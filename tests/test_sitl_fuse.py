@@ -22,11 +22,12 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 import zenoh
-from ardusub_sitl import ArduSub, ardusub_files
+from ardusub_sitl import ArduSub, Prepared, ardusub_files, render_and_boot
 from live_helpers import (
     SUBSCRIBER,
     as_camera_sends_it,
@@ -77,10 +78,17 @@ ROUTER_CONFIG = """{{ mode: "router", listen: {{ endpoints: ["tcp/127.0.0.1:{por
   scouting: {{ multicast: {{ enabled: false }} }} }}"""
 
 
-def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
+def prepare(tmp: Path, background: bool) -> Prepared:
     binary, sub_parm = ardusub_files()
+    sitl = ArduSub(binary, sub_parm, tmp / "ardusub", home=(LAT, LON, SURFACE_AMSL_M, 0.0))
+    scenarios = {f"session_{d}": scenario(d, *view) for d, view in DRONES.items()}
+    return render_and_boot(tmp, scenarios, sitl, background)
+
+
+@pytest.mark.ahead.with_args(prepare)
+def test_two_drones_fused_into_one_gps_input_through_a_cut(prepared):
+    tmp_path, sitl = prepared.dir, prepared.boot.sitl
     sessions = {d: tmp_path / f"session_{d}" for d in DRONES}
-    sitl = ArduSub(binary, sub_parm, tmp_path / "ardusub", home=(LAT, LON, SURFACE_AMSL_M, 0.0))
     procs: list[subprocess.Popen] = []
     port = free_port(socket.SOCK_STREAM)
     ep = f"tcp/127.0.0.1:{port}"
@@ -88,18 +96,6 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
     zlog = tmp_path / "zenoh.jsonl"
     late = None
     try:
-        gens = []
-        for d, (height, yaw, pitch, gimbal_yaw) in DRONES.items():
-            (tmp_path / f"{d}.toml").write_text(scenario(d, height, yaw, pitch, gimbal_yaw))
-            gens.append(
-                start(
-                    skyfix(
-                        "sim", str(tmp_path / f"{d}.toml"), "--out", str(sessions[d]), "--quiet"
-                    ),
-                    tmp_path / f"sim_{d}.log",
-                )
-            )
-        procs += gens
         router = subprocess.Popen(
             [sys.executable, "-c", ROUTER, str(tmp_path / "router.json5")],
             stdout=subprocess.PIPE,
@@ -107,7 +103,7 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
         )
         procs.append(router)
         assert router.stdout.readline().strip() == "ready"
-        sitl.start()
+        prepared.boot.ready()
         obs = sitl.observer
         for msg_id, hz in (
             (mavlink2.MAVLINK_MSG_ID_GPS_RAW_INT, 20.0),
@@ -141,11 +137,8 @@ def test_two_drones_fused_into_one_gps_input_through_a_cut(tmp_path):
             tmp_path / "fuse.log",
         )
         procs.append(fuser)
-        for g, d in zip(gens, DRONES, strict=True):
-            wait_for(lambda g=g: g.poll() is not None, 600, f"skyfix sim of drone {d}")
-            assert g.returncode == 0, (tmp_path / f"sim_{d}.log").read_text()[-3000:]
         for d in DRONES:
-            as_camera_sends_it(sessions[d] / "video.mp4")
+            as_camera_sends_it(prepared.renders[f"session_{d}"].wait(600) / "video.mp4")
         truth = {d: (sessions[d] / "truth.csv").read_text() for d in DRONES}
         assert truth["a"] == truth["b"], "the two drones must see the same dive"
         ports = {d: (free_port(), free_port()) for d in DRONES}

@@ -1,0 +1,98 @@
+"""Slow preparations made before a test needs them: ``pytest.mark.ahead.with_args(prepare)``.
+
+Some tests spend most of their time waiting for things that need little of the CPU (a freshly booted ArduSub's
+warm-up, real-time flights and replays), others render a large session first. ``prepare(directory, background)``
+starts such a preparation (a session rendered by ``skyfix sim``, an autopilot booting) and returns an object with
+``close()``. ``tests/conftest.py`` calls it ahead, with ``background`` true: while the test before runs, or, with
+``at_start=True``, from the run's first test (of another module: a module run alone prepares its own).
+Background renders (:class:`Render`) take only CPU that no test wants; one not done when needed is made again
+in the foreground. The test takes it with :func:`take` (or :func:`taken`), made then and there
+when nothing was prepared ahead (the test run alone, or first). What a test gets is made the same way either way;
+only when differs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from live_helpers import skyfix, start, stop
+
+MARKER = "ahead"
+_READY: dict[Callable, object] = {}  # prepare → what it prepared
+_STARTED: set[Callable] = set()  # each is prepared once
+
+
+class Render:
+    """``skyfix sim SCENARIO --out OUT`` (log ``LOG``), in the background (Linux's idle scheduling class, ``chrt
+    --idle 0``: it and its children run only on CPU time no other process wants) or not."""
+
+    def __init__(self, scenario: Path, out: Path, log: Path, background: bool):
+        self.cmd = skyfix("sim", str(scenario), "--out", str(out), "--quiet")
+        self.out, self.log = out, log
+        self.proc = start(["chrt", "--idle", "0", *self.cmd] if background else self.cmd, log)
+        self.background = background
+
+    def wait(self, timeout_s: float) -> Path:
+        """The session, once rendered. A background render still running (on a busy machine it may get no CPU at
+        all) is started again in the foreground."""
+        if self.background and self.proc.poll() is None:
+            stop(self.proc, 5.0)
+            self.proc, self.background = start(self.cmd, self.log), False
+        assert self.proc.wait(timeout_s) == 0, self.log.read_text()[-3000:]
+        return self.out
+
+    def close(self) -> None:
+        stop(self.proc, 5.0)
+
+
+class Renders(dict[str, Render]):
+    """Renders by name, closed together."""
+
+    def close(self) -> None:
+        for r in self.values():
+            r.close()
+
+
+def _prepare(item: pytest.Item, prepare: Callable) -> None:
+    _STARTED.add(prepare)
+    directory = item.config._tmp_path_factory.mktemp(f"ahead_{prepare.__module__}", numbered=True)
+    try:
+        _READY[prepare] = prepare(directory, True)
+    except (Exception, pytest.skip.Exception):  # noqa: BLE001, S110 - the test meets it again in take()
+        pass
+
+
+def prepare_ahead(item: pytest.Item, nextitem: pytest.Item | None) -> None:
+    """Before ``item`` runs: the preparations of ``nextitem``, and on the run's first test those marked
+    ``at_start`` of the other modules; a failure (a missing binary: a skip) is left for the test to meet itself."""
+    if item is item.session.items[0]:
+        for other in item.session.items:
+            for mark in other.iter_markers(MARKER):
+                if (
+                    mark.kwargs.get("at_start")
+                    and getattr(other, "module", None) is not getattr(item, "module", None)
+                    and mark.args[0] not in _STARTED
+                ):
+                    _prepare(other, mark.args[0])
+    for mark in nextitem.iter_markers(MARKER) if nextitem is not None else ():
+        if not mark.kwargs.get("at_start") and mark.args[0] not in _STARTED:
+            _prepare(nextitem, mark.args[0])
+
+
+def taken(prepare: Callable):
+    """What ``prepare`` prepared ahead, or None."""
+    return _READY.pop(prepare, None)
+
+
+def take(prepare: Callable, tmp_path: Path):
+    """What ``prepare`` prepared ahead, else what it prepares now (in ``tmp_path``)."""
+    ready = taken(prepare)
+    return prepare(tmp_path, False) if ready is None else ready
+
+
+def close_unused() -> None:
+    """Close what was prepared for a test that did not run (deselected, or the run stopped before it)."""
+    while _READY:
+        _READY.popitem()[1].close()
