@@ -13,15 +13,28 @@ only when differs.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import os
+import signal
+import subprocess
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from live_helpers import skyfix, start, stop
+from live_helpers import ROOT, skyfix
 
 MARKER = "ahead"
 _READY: dict[Callable, object] = {}  # prepare → what it prepared
 _STARTED: set[Callable] = set()  # each is prepared once
+
+
+def _threads(pid: int) -> Iterator[int]:
+    """The threads of process ``pid`` and of its descendants (``/proc``)."""
+    with contextlib.suppress(FileNotFoundError, ProcessLookupError):
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            yield int(task.name)
+            for child in (task / "children").read_text().split():
+                yield from _threads(int(child))
 
 
 class Render:
@@ -31,20 +44,41 @@ class Render:
     def __init__(self, scenario: Path, out: Path, log: Path, background: bool):
         self.cmd = skyfix("sim", str(scenario), "--out", str(out), "--quiet")
         self.out, self.log = out, log
-        self.proc = start(["chrt", "--idle", "0", *self.cmd] if background else self.cmd, log)
+        self.proc = self._start(["chrt", "--idle", "0", *self.cmd] if background else self.cmd)
         self.background = background
 
+    def _start(self, cmd: list[str]) -> subprocess.Popen:
+        """In a process group of its own: :meth:`close` ends its rendering processes and its encoder too."""
+        with open(self.log, "w") as f:
+            return subprocess.Popen(
+                cmd,
+                stdout=f,
+                stderr=subprocess.STDOUT,
+                cwd=ROOT,
+                env=dict(os.environ, PYTHONUNBUFFERED="1"),
+                start_new_session=True,
+            )
+
     def wait(self, timeout_s: float) -> Path:
-        """The session, once rendered. A background render still running (on a busy machine it may get no CPU at
-        all) is started again in the foreground."""
+        """The session, once rendered. A background render still running (on a busy machine it may have had no CPU
+        at all) goes on at the tests' priority, or, where this user may not raise it, is started again so."""
         if self.background and self.proc.poll() is None:
-            stop(self.proc, 5.0)
-            self.proc, self.background = start(self.cmd, self.log), False
+            try:
+                for tid in _threads(self.proc.pid):
+                    with contextlib.suppress(ProcessLookupError):
+                        os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+            except PermissionError:
+                self.close()
+                self.proc = self._start(self.cmd)
+        self.background = False
         assert self.proc.wait(timeout_s) == 0, self.log.read_text()[-3000:]
         return self.out
 
     def close(self) -> None:
-        stop(self.proc, 5.0)
+        if self.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
 
 
 class Renders(dict[str, Render]):

@@ -14,9 +14,11 @@ import json
 import socket
 import subprocess
 import tomllib
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 
+import ahead
 import numpy as np
 import pytest
 from live_helpers import ROOT, free_port, read_jsonl, skyfix, start, stop, truth_errors_m
@@ -54,10 +56,40 @@ video_time_error_s = {error}
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080)}
 
 
+def _scenario(size: str) -> str:
+    w, h = SIZES[size]
+    return SCENARIO.format(name=size, w=w, h=h, error=ERROR_S)
+
+
+def render(tmp: Path, background: bool) -> ahead.Renders:
+    """Both sessions, rendered from the run's start on CPU no test wants (``tests/ahead.py``): the largest
+    renders of the tests, made while the tests before this module leave a core idle."""
+    renders = ahead.Renders()
+    for size in SIZES:
+        (tmp / f"{size}.toml").write_text(_scenario(size))
+        renders[size] = ahead.Render(
+            tmp / f"{size}.toml", tmp / size, tmp / f"{size}.log", background
+        )
+    return renders
+
+
+pytestmark = pytest.mark.ahead.with_args(render, at_start=True)
+
+
+@pytest.fixture(scope="module")
+def rendered() -> Iterator[ahead.Renders | None]:
+    """The sessions rendered ahead, if they were (not when this module runs alone, or first)."""
+    renders = ahead.taken(render)
+    yield renders
+    if renders is not None:
+        renders.close()
+
+
 @pytest.fixture(scope="module", params=list(SIZES))
-def session(request, tmp_path_factory) -> Path:
-    w, h = SIZES[request.param]
-    text = SCENARIO.format(name=request.param, w=w, h=h, error=ERROR_S)
+def session(request, rendered, tmp_path_factory) -> Path:
+    if rendered is not None:
+        return rendered[request.param].wait(900)
+    text = _scenario(request.param)
     out = tmp_path_factory.mktemp(f"motion_{request.param}")
     generate(scenario_from_dict(tomllib.loads(text)), out, text)
     return out
