@@ -5,8 +5,8 @@ warm-up, real-time flights and replays), others render a large session first. ``
 starts such a preparation (a session rendered by ``skyfix sim``, an autopilot booting) and returns an object with
 ``close()``. ``tests/conftest.py`` calls it ahead, with ``background`` true: while the test before runs, or, with
 ``at_start=True``, from the run's first test (of another module: a module run alone prepares its own).
-Background renders (:class:`Render`) take only CPU that no test wants; one not done when needed is made again
-in the foreground. The test takes it with :func:`take` (or :func:`taken`), made then and there
+Background renders (:class:`Render`) take only CPU that no test wants; one not done when needed goes on at the
+tests' priority (or, where this user may not raise it, is started again at it). The test takes it with :func:`take` (or :func:`taken`), made then and there
 when nothing was prepared ahead (the test run alone, or first). What a test gets is made the same way either way;
 only when differs.
 """
