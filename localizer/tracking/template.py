@@ -60,7 +60,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   reaches ``wave_keep_contrast`` of the level (a seafloor patch passes a frame's lower bar now and then).
   A follow that passes in waves is moved part of the way onto the vehicle standing out of the seafloor near it
   (:meth:`~TemplateMatcher._centred`; the smoothed template matches about as well with the vehicle in a corner of
-  its square): judged, and learnt from, where the template matched.
+  its square), or near the prediction where it passed on its contrast alone and lies beyond that vehicle's square:
+  judged, and learnt from, where the template matched.
 - Neither takes a candidate away from the prediction while the UUV's first appearance
   still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
   partly hidden, say by a vehicle passing over it, beside a look-alike). Only a candidate
@@ -936,21 +937,36 @@ class TemplateMatcher:
         distinct = best / max(float(np.percentile(away[floor], 90)), 1e-6)
         return (*self._to_full(bx0 + half + j - reach, by0 + half + i - reach), distinct)
 
-    def _centred(self, frame_bgr, u: float, v: float) -> tuple[float, float]:
+    def _centred(
+        self, frame_bgr, u: float, v: float, predicted: tuple[float, float] | None = None
+    ) -> tuple[float, float]:
         """In waves, a followed match (u, v) moved ``wave_centre_pull`` of the way onto the vehicle standing out of
-        the seafloor near it (:meth:`_blob`) where it is at least ``wave_centre_distinct`` (the smoothed template
-        matches about as well with the vehicle in a corner of its square as at its centre); the tracked point
-        kept where it was on the vehicle at start (its offset from the box's centre, turned and scaled as the
-        template)."""
+        the seafloor near it (:meth:`_on_vehicle`; the smoothed template matches about as well with the vehicle in
+        a corner of its square as at its centre). A follow that passed on its contrast alone (``predicted``: the
+        prediction it was searched about; its score under the follow bar, the template does not tell where in the
+        window the vehicle is) and whose match lies beyond the square of the vehicle standing out near the
+        prediction is moved as far onto that vehicle instead (the match slides over the seafloor beside it)."""
+        found = self._on_vehicle(frame_bgr, u, v)
+        if predicted is not None and (there := self._on_vehicle(frame_bgr, *predicted)) is not None:
+            half = self._box() * self.k / 2.0
+            if max(abs(u - there[0]), abs(v - there[1])) > half:
+                found = there
+        if found is None:
+            return u, v
+        pull = self.p.wave_centre_pull
+        return u + pull * (found[0] - u), v + pull * (found[1] - v)
+
+    def _on_vehicle(self, frame_bgr, u: float, v: float) -> tuple[float, float] | None:
+        """The tracked point on the vehicle standing out of the seafloor near (u, v) (:meth:`_blob`) where it is at
+        least ``wave_centre_distinct``: kept where it was on the vehicle at start (its offset from the box's
+        centre, turned and scaled as the template); None where no vehicle stands out so."""
         blob = self._blob(frame_bgr, u, v)
         if blob is None or blob[2] < self.p.wave_centre_distinct:
-            return u, v
+            return None
         a = math.radians(self._angle)
         ox, oy = self._offset
         c, s_ = self._scale * math.cos(a), self._scale * math.sin(a)
-        tu, tv = blob[0] + c * ox - s_ * oy, blob[1] + s_ * ox + c * oy
-        pull = self.p.wave_centre_pull
-        return u + pull * (tu - u), v + pull * (tv - v)
+        return blob[0] + c * ox - s_ * oy, blob[1] + s_ * ox + c * oy
 
     # -- per frame ---------------------------------------------------------------------------
     def _radius(self, prediction: Prediction | None, fallback: float) -> float:
@@ -1012,6 +1028,8 @@ class TemplateMatcher:
         near = math.hypot(u - cu, v - cv_) <= radius + 2 * self.k
         contrast = self._contrast(frame_bgr, u, v)
         clear = contrast >= self.p.wave_keep_contrast * self._contrast_level
+        # passed on its contrast alone (its score under the follow bar)
+        kept = False
         if in_waves:
             passed = (
                 near
@@ -1020,13 +1038,14 @@ class TemplateMatcher:
                     frame_bgr, cu, cv_, radius, score, float(np.mean(self._recent))
                 )
             )
-            passed = passed or (
+            kept = not passed and (
                 near
                 and contrast
                 >= self._least_contrast(self.p.wave_keep_contrast, self.p.wave_keep_between)
                 and score
                 > max(self._water - self.p.wave_keep_below, self._matched() - self.p.wave_keep_drop)
             )
+            passed = passed or kept
         else:
             passed = score >= floor and near and self._visible(frame_bgr, u, v)
         self._contrast_level += (
@@ -1047,7 +1066,7 @@ class TemplateMatcher:
         # the template's own match: what it learns (the centring below jitters with the waves)
         matched_at = (u, v)
         if in_waves:
-            u, v = self._centred(frame_bgr, u, v)
+            u, v = self._centred(frame_bgr, u, v, (cu, cv_) if kept else None)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v, self._seen_angle = u, v, self._angle
         self._levels += 1
