@@ -96,3 +96,13 @@ def test_a_follow_passed_on_contrast_alone_is_moved_onto_the_vehicle_near_the_pr
     assert math.hypot(*np.subtract(m._centred(frame, *slid), half_way)) > 4.0
     inside = (u + 5.0, v + 2.0)
     assert m._centred(frame, *inside, predicted=(u, v)) == m._centred(frame, *inside)
+
+
+def test_the_template_learns_a_follow_only_where_something_near_it_stands_out_of_the_seafloor():
+    """In waves a follow on a patch of seafloor beside the vehicle (nothing near it departs from the seafloor more
+    than the seafloor's own places) does not teach the template; one on the vehicle does."""
+    floor = _floor(8)
+    m = _started(_with_vehicle(floor, *VEHICLE[:2]))
+    frame = _with_vehicle(floor, *VEHICLE[:2])
+    assert m._teaches(frame, *VEHICLE[:2])
+    assert not m._teaches(frame, VEHICLE[0] - 150.0, VEHICLE[1] + 60.0)

@@ -54,7 +54,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   ``wave_keep_below`` and within ``wave_keep_drop`` of the recent level of its matches (a second vehicle passing
   over it raises the contrast too, and drags the score down); a search for a candidate ranks the places with
   less contrast last (:meth:`~TemplateMatcher._least_spread`), the water beside its window too. The level, and
-  the template, learn only from follows with ``wave_keep_contrast`` of it (a reference kept from clear frames).
+  the template, learn only from follows with ``wave_keep_contrast`` of it (a reference kept from clear frames);
+  the template only where something near the match stands out of the seafloor (``wave_learn_distinct``).
   A candidate further than ``wave_far_sigmas`` from the prediction pays the distance penalty of the sigmas beyond
   (:meth:`~TemplateMatcher._far_penalty`), and a re-acquisition's contrast averaged over its confirmation frames
   reaches ``wave_keep_contrast`` of the level (a seafloor patch passes a frame's lower bar now and then).
@@ -208,6 +209,10 @@ class TemplateParams:
     wave_centre_reach: float = 0.3
     wave_centre_pull: float = 0.5
     wave_centre_distinct: float = 1.4
+    #: in waves the template learns only from follows where the square standing out most near the match departs
+    #: from the seafloor this many times as much as 9 in 10 of the seafloor's squares (see
+    #: :meth:`~TemplateMatcher._teaches`)
+    wave_learn_distinct: float = 1.0
 
 
 #: Taken from the rank of a place too flat to be the UUV (see ``spread`` of :meth:`TemplateMatcher._search`): it
@@ -956,6 +961,14 @@ class TemplateMatcher:
         pull = self.p.wave_centre_pull
         return u + pull * (found[0] - u), v + pull * (found[1] - v)
 
+    def _teaches(self, frame_bgr, u: float, v: float) -> bool:
+        """In waves, whether a follow matched at (u, v) may teach the template: the vehicle-sized square standing
+        out most near it (:meth:`_blob`) departs from the seafloor at least ``wave_learn_distinct`` times as much
+        as 9 in 10 of the seafloor's squares. Where nothing stands out of the seafloor more than its own places do,
+        the match is on a patch of seafloor beside the vehicle (or on a vehicle the waves hid in it)."""
+        blob = self._blob(frame_bgr, u, v)
+        return blob is not None and blob[2] >= self.p.wave_learn_distinct
+
     def _on_vehicle(self, frame_bgr, u: float, v: float) -> tuple[float, float] | None:
         """The tracked point on the vehicle standing out of the seafloor near (u, v) (:meth:`_blob`) where it is at
         least ``wave_centre_distinct``: kept where it was on the vehicle at start (its offset from the box's
@@ -1077,6 +1090,7 @@ class TemplateMatcher:
             (clear or not in_waves)
             and score >= self.p.update_score - self._waves() * self.p.wave_update_drop
             and slow_step
+            and (not in_waves or self._teaches(frame_bgr, *matched_at))
         ):
             self._learn(frame_bgr, *matched_at)
         return self._match(True, score, u, v)
