@@ -41,6 +41,11 @@ def _started(frame: np.ndarray) -> TemplateMatcher:
     return m
 
 
+def _centred(m, frame, u, v, predicted=None):
+    """A follow matched at (u, v) centred as :meth:`TemplateMatcher.follow` does."""
+    return m._centred(frame, u, v, m._blob(frame, u, v), predicted)
+
+
 def test_a_slid_follow_is_moved_half_way_back_onto_the_vehicle_not_onto_a_caustic():
     floor = _floor(3)
     m = _started(_with_vehicle(floor, *VEHICLE[:2]))
@@ -52,7 +57,7 @@ def test_a_slid_follow_is_moved_half_way_back_onto_the_vehicle_not_onto_a_causti
     cv2.circle(
         frame, (round(u) + 16, round(v) + 4), 7, 230, -1
     )  # a bright caustic patch beside the slid follow
-    cu, cv_ = m._centred(frame, u + 6.0, v + 3.0)
+    cu, cv_ = _centred(m, frame, u + 6.0, v + 3.0)
     assert math.hypot(cu - (u + 3.0), cv_ - (v + 1.5)) <= 1.5, (cu, cv_)
 
 
@@ -65,7 +70,7 @@ def test_a_follow_is_not_moved_where_the_seafloor_has_patches_as_dark_as_the_veh
         cv2.ellipse(frame, (int(pu), int(pv)), VEHICLE[2:], 0.0, 0.0, 360.0, 60.0, -1)
     frame = _with_vehicle(frame, *VEHICLE[:2])
     at = (VEHICLE[0] + 6.0, VEHICLE[1] + 3.0)
-    assert m._centred(frame, *at) == at
+    assert _centred(m, frame, *at) == at
 
 
 def test_a_vehicle_at_the_frames_edges_is_started_and_followed_without_centring():
@@ -76,7 +81,7 @@ def test_a_vehicle_at_the_frames_edges_is_started_and_followed_without_centring(
         frame = cv2.cvtColor(_with_vehicle(floor, u, v), cv2.COLOR_GRAY2BGR)  # as decoded
         m = TemplateMatcher()
         m.start(frame, (round(u) - 10, round(v) - 8, 21, 17))
-        assert m._centred(frame, u + 2.0, v + 1.0) == (u + 2.0, v + 1.0)
+        assert _centred(m, frame, u + 2.0, v + 1.0) == (u + 2.0, v + 1.0)
 
 
 def test_a_follow_passed_on_contrast_alone_is_moved_onto_the_vehicle_near_the_prediction():
@@ -90,12 +95,12 @@ def test_a_follow_passed_on_contrast_alone_is_moved_onto_the_vehicle_near_the_pr
     frame = _with_vehicle(floor, u, v)
     slid = (u + 24.0, v + 3.0)  # the match slid onto the seafloor beside it
     half_way = ((slid[0] + u) / 2.0, (slid[1] + v) / 2.0)
-    cu, cv_ = m._centred(frame, *slid, predicted=(u, v))
+    cu, cv_ = _centred(m, frame, *slid, predicted=(u, v))
     assert math.hypot(cu - half_way[0], cv_ - half_way[1]) <= 1.5, (cu, cv_)
     # about its own match: short of it (the vehicle's square out of reach)
-    assert math.hypot(*np.subtract(m._centred(frame, *slid), half_way)) > 4.0
+    assert math.hypot(*np.subtract(_centred(m, frame, *slid), half_way)) > 4.0
     inside = (u + 5.0, v + 2.0)
-    assert m._centred(frame, *inside, predicted=(u, v)) == m._centred(frame, *inside)
+    assert _centred(m, frame, *inside, predicted=(u, v)) == _centred(m, frame, *inside)
 
 
 def test_the_template_learns_a_follow_only_where_something_near_it_stands_out_of_the_seafloor():
@@ -104,5 +109,5 @@ def test_the_template_learns_a_follow_only_where_something_near_it_stands_out_of
     floor = _floor(8)
     m = _started(_with_vehicle(floor, *VEHICLE[:2]))
     frame = _with_vehicle(floor, *VEHICLE[:2])
-    assert m._teaches(frame, *VEHICLE[:2])
-    assert not m._teaches(frame, VEHICLE[0] - 150.0, VEHICLE[1] + 60.0)
+    assert m._teaches(m._blob(frame, *VEHICLE[:2]))
+    assert not m._teaches(m._blob(frame, VEHICLE[0] - 150.0, VEHICLE[1] + 60.0))

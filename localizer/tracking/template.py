@@ -943,16 +943,25 @@ class TemplateMatcher:
         return (*self._to_full(bx0 + half + j - reach, by0 + half + i - reach), distinct)
 
     def _centred(
-        self, frame_bgr, u: float, v: float, predicted: tuple[float, float] | None = None
+        self,
+        frame_bgr,
+        u: float,
+        v: float,
+        blob: tuple[float, float, float] | None,
+        predicted: tuple[float, float] | None = None,
     ) -> tuple[float, float]:
         """In waves, a followed match (u, v) moved ``wave_centre_pull`` of the way onto the vehicle standing out of
-        the seafloor near it (:meth:`_on_vehicle`; the smoothed template matches about as well with the vehicle in
-        a corner of its square as at its centre). A follow that passed on its contrast alone (``predicted``: the
-        prediction it was searched about; its score under the follow bar, the template does not tell where in the
-        window the vehicle is) and whose match lies beyond the square of the vehicle standing out near the
-        prediction is moved as far onto that vehicle instead (the match slides over the seafloor beside it)."""
-        found = self._on_vehicle(frame_bgr, u, v)
-        if predicted is not None and (there := self._on_vehicle(frame_bgr, *predicted)) is not None:
+        the seafloor near it (``blob``: :meth:`_blob` at (u, v); :meth:`_on_vehicle`; the smoothed template matches
+        about as well with the vehicle in a corner of its square as at its centre). A follow that passed on its
+        contrast alone (``predicted``: the prediction it was searched about; its score under the follow bar, the
+        template does not tell where in the window the vehicle is) and whose match lies beyond the square of the
+        vehicle standing out near the prediction is moved as far onto that vehicle instead (the match slides over
+        the seafloor beside it)."""
+        found = self._on_vehicle(blob)
+        if (
+            predicted is not None
+            and (there := self._on_vehicle(self._blob(frame_bgr, *predicted))) is not None
+        ):
             half = self._box() * self.k / 2.0
             if max(abs(u - there[0]), abs(v - there[1])) > half:
                 found = there
@@ -961,19 +970,17 @@ class TemplateMatcher:
         pull = self.p.wave_centre_pull
         return u + pull * (found[0] - u), v + pull * (found[1] - v)
 
-    def _teaches(self, frame_bgr, u: float, v: float) -> bool:
-        """In waves, whether a follow matched at (u, v) may teach the template: the vehicle-sized square standing
-        out most near it (:meth:`_blob`) departs from the seafloor at least ``wave_learn_distinct`` times as much
-        as 9 in 10 of the seafloor's squares. Where nothing stands out of the seafloor more than its own places do,
-        the match is on a patch of seafloor beside the vehicle (or on a vehicle the waves hid in it)."""
-        blob = self._blob(frame_bgr, u, v)
+    def _teaches(self, blob: tuple[float, float, float] | None) -> bool:
+        """In waves, whether a follow may teach the template: the vehicle-sized square standing out most near its
+        match (``blob``: :meth:`_blob` there) departs from the seafloor at least ``wave_learn_distinct`` times as
+        much as 9 in 10 of the seafloor's squares. Where nothing stands out of the seafloor more than its own
+        places do, the match is on a patch of seafloor beside the vehicle (or on a vehicle the waves hid in it)."""
         return blob is not None and blob[2] >= self.p.wave_learn_distinct
 
-    def _on_vehicle(self, frame_bgr, u: float, v: float) -> tuple[float, float] | None:
-        """The tracked point on the vehicle standing out of the seafloor near (u, v) (:meth:`_blob`) where it is at
+    def _on_vehicle(self, blob: tuple[float, float, float] | None) -> tuple[float, float] | None:
+        """The tracked point on the vehicle standing out of the seafloor (``blob``: :meth:`_blob`) where it is at
         least ``wave_centre_distinct``: kept where it was on the vehicle at start (its offset from the box's
         centre, turned and scaled as the template); None where no vehicle stands out so."""
-        blob = self._blob(frame_bgr, u, v)
         if blob is None or blob[2] < self.p.wave_centre_distinct:
             return None
         a = math.radians(self._angle)
@@ -1078,8 +1085,10 @@ class TemplateMatcher:
         self._misses = 0
         # the template's own match: what it learns (the centring below jitters with the waves)
         matched_at = (u, v)
+        # the vehicle standing out near the template's match: where the follow is centred, whether it teaches
+        blob = self._blob(frame_bgr, u, v) if in_waves else None
         if in_waves:
-            u, v = self._centred(frame_bgr, u, v, (cu, cv_) if kept else None)
+            u, v = self._centred(frame_bgr, u, v, blob, (cu, cv_) if kept else None)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
         self.u, self.v, self._seen_angle = u, v, self._angle
         self._levels += 1
@@ -1090,7 +1099,7 @@ class TemplateMatcher:
             (clear or not in_waves)
             and score >= self.p.update_score - self._waves() * self.p.wave_update_drop
             and slow_step
-            and (not in_waves or self._teaches(frame_bgr, *matched_at))
+            and (not in_waves or self._teaches(blob))
         ):
             self._learn(frame_bgr, *matched_at)
         return self._match(True, score, u, v)
