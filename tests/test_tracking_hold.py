@@ -59,3 +59,21 @@ def test_a_vehicle_gone_is_lost_after_wave_misses():
     gone = [m.follow(_frame(None), PREDICTION) for _ in range(round(m.p.wave_hold_misses))]
     assert not any(x.found for x in gone)
     assert not any(x.held for x in gone[round(m.p.wave_misses) :]), [x.held for x in gone]
+
+
+def test_a_match_climbed_out_of_the_window_holds_the_prediction_while_the_vehicle_stands_out_there():
+    """A follow's best match climbs uphill from where it ranked best (:func:`~localizer.tracking.template._peak`),
+    in waves at times out of the window onto the seafloor beside the vehicle (w2_35px_3.4m of
+    ``bench/tracker_waves.py``: 21 px off a prediction of 15 px radius). That says nothing of the prediction's
+    place: the frame is held while the vehicle still stands out there, not held where it is gone."""
+    for level, held in ((DARK, True), (None, False)):
+        m = _in_waves()
+        off = 3.0 * m.p.search_sigmas * PREDICTION.sigma_px  # beyond the window
+        m._search = _returning((0.9, U + off, V + off, m._angle))  # the match as climbed
+        x = m.follow(_frame(level), PREDICTION)
+        assert not x.found and x.held is held, (level, x)
+
+
+def _returning(found):
+    """A stand-in for :meth:`TemplateMatcher._search` that finds ``found``."""
+    return lambda *args, **kwargs: found

@@ -46,7 +46,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   as set) eases the bars (``wave_*``), smooths image and template before matching (the waves scramble the fine
   structure, not the shape), lets the template learn the mean distorted appearance, and holds up to
   ``wave_misses`` frames without a match before a loss (:attr:`~localizer.tracking.Match.held`; up to
-  ``wave_hold_misses`` while the held place still stands out of the water beside it); a match after
+  ``wave_hold_misses`` while the held place still stands out of the water beside it; a match that climbed out of
+  the window holds the prediction's place while it has the contrast a follow needs); a match after
   such frames needs nearly the re-acquisition's bar. In waves every match, followed or a candidate, also needs
   ``wave_contrast_share`` of the UUV's contrast level (:meth:`~TemplateMatcher._least_contrast`: the waves scramble
   its structure, not how much it stands out; the water and the seafloor the template finds without it have a
@@ -1075,6 +1076,11 @@ class TemplateMatcher:
             self._misses += 1
             # the first follows: the sea state not yet told
             young = self._changes <= self.p.wave_evidence_frames
+            if in_waves and not near:
+                # the match climbed out of the window onto something beside it: the prediction's place is held
+                # while it stands out as the UUV does
+                contrast = self._contrast(frame_bgr, cu, cv_)
+                near = contrast >= self._least_contrast()
             misses = (
                 self.p.wave_hold_misses
                 if in_waves and contrast >= self._least_contrast(1.0, self.p.wave_hold_between)
