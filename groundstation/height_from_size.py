@@ -15,6 +15,10 @@ window, checked against the configured height and (``auto``) handed to the heigh
   with its 1-sigma (its own and the error every measurement shares); those of the window before it
   became sure too. A single frame, an outline locked on the vehicle's inner structure, never is.
 
+The UUVs of one video (``skyfix process --uuv all``) share one estimate (:func:`shared_sizes`,
+:class:`SharedEstimate`): the camera's height above the water is the same for all, so the frames measured a second
+are one UUV's, taken in turn, and each UUV's heights are checked against the others'.
+
 :class:`HeightFromSize` is the work, the same offline (in the tracker's pass over the video,
 :mod:`groundstation.offline.track`) and live; :class:`OnlineHeightFromSize` runs it in ``skyfix run``
 like the video latency's estimate: frames handed from the pipeline, on the event loop, to a thread
@@ -34,6 +38,7 @@ from __future__ import annotations
 
 import asyncio
 import ctypes
+import dataclasses
 import importlib
 import logging
 import math
@@ -52,7 +57,13 @@ import numpy as np
 from groundstation.runtime.threads import Supervised, in_thread
 from localizer.calibration import Calibration
 from localizer.pose import CameraPose
-from localizer.size_range import BiasEstimate, HeightBias, SizeHeight, size_height
+from localizer.size_range import (
+    MIN_BLOCKS,
+    BiasEstimate,
+    HeightBias,
+    SizeHeight,
+    size_height,
+)
 from localizer.telemetry import Telemetry
 from localizer.tracking.silhouette import measure
 
@@ -67,6 +78,10 @@ MEASURE_HZ = 5.0  # frames measured a second, at most ...
 #: sure, a frame a second keeps the window watching at a fifth of the CPU (offline, the measurements were a fifth
 #: of ``skyfix process``'s CPU at 1080p; live, they compete with decoding for the cores).
 SURE_HZ = 1.0
+#: With several UUVs sharing one estimate, a UUV's turn is put off this many of the schedule's periods for each of
+#: its measurements in a row without a height (at most MAX_FAILED of them: its view may change).
+FAILED_TURNS = 1.0
+MAX_FAILED = 8
 NICE = 10  # the measuring process yields the CPU to decoding and tracking
 STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
 PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent dies
@@ -171,7 +186,10 @@ def start_measuring_process() -> None:
 
 class HeightFromSize:
     """Measurements of one run and their estimate (see the module doc); :meth:`measure` is pure (any thread),
-    :meth:`take` and :meth:`due` change the state (one thread: the event loop live)."""
+    :meth:`take` and :meth:`due` change the state (one thread: the event loop live).
+
+    ``shared``: the estimate of another UUV of the same video, which this one's measurements join
+    (:func:`shared_sizes`, :class:`SharedEstimate`); by default one of its own."""
 
     def __init__(
         self,
@@ -180,44 +198,45 @@ class HeightFromSize:
         mode: str,
         measure_hz: float = MEASURE_HZ,
         sure_hz: float = SURE_HZ,
+        shared: HeightFromSize | None = None,
+        name: str = "",
     ):
         if mode not in MODES[:2]:
             raise ValueError(
                 f"height_from_size = {mode!r}: expected one of {', '.join(MODES[:2])} to measure"
             )
-        self.cal, self.tel, self.mode = cal, tel, mode
-        self.period_s = 1.0 / measure_hz
-        self.sure_period_s = 1.0 / sure_hz
-        self.window = HeightBias()
-        self.estimate: BiasEstimate | None = None
+        self.cal, self.tel, self.mode, self.name = cal, tel, mode, name
+        self.shared = shared.shared if shared is not None else SharedEstimate(measure_hz, sure_hz)
+        self.shared.members.append(self)
         self.last: SizeHeight | None = None
         self.measured = 0
         self.rejected: Counter[str] = Counter()
         self.applied = 0
         self.warnings: list[str] = []
-        self._last_t = -math.inf
+        self.left_out = (
+            False  # its measurements disagree with the other UUVs': out of the shared estimate
+        )
         self._applied_t = -math.inf
-        self._warned: float | None = None
+
+    @property
+    def estimate(self) -> BiasEstimate | None:
+        return self.shared.estimate
+
+    @property
+    def window(self) -> HeightBias:
+        return self.shared.window
 
     def due(self, t_unix: float) -> bool:
         """Whether the frame at ``t_unix`` is to be measured (at most ``measure_hz`` a second, ``sure_hz`` while the
-        estimate is sure); counts it if so."""
-        period = (
-            self.sure_period_s
-            if self.estimate is not None and self.estimate.sure
-            else self.period_s
-        )
-        if t_unix - self._last_t < period - 0.005:
-            return False
-        self._last_t = t_unix
-        return True
+        estimate is sure, for all the UUVs sharing it together: :meth:`SharedEstimate.due`); counts it if so."""
+        return self.shared.due(self, t_unix)
 
     def asks_estimate(self, t_unix: float) -> bool:
         """Whether :meth:`due` at ``t_unix`` depends on the measurements taken so far (on whether their estimate is
-        sure). False while the frame is too soon after the last one counted however sure the estimate is: the
-        measurements still being made elsewhere need not have been taken yet (``skyfix process``'s measuring
-        process, :class:`groundstation.offline.uuv_workers.SizeWorker`)."""
-        return t_unix - self._last_t >= min(self.period_s, self.sure_period_s) - 0.005
+        sure, and with several UUVs which of them failed lately). False while the frame is too soon after the last
+        one counted however sure the estimate is: the measurements still being made elsewhere need not have been
+        taken yet (``skyfix process``'s measuring process, :class:`groundstation.offline.uuv_workers.SizeWorker`)."""
+        return self.shared.asks_estimate(t_unix)
 
     def measure(
         self, image: np.ndarray, pose: CameraPose, i: int, u: float, v: float
@@ -231,29 +250,19 @@ class HeightFromSize:
         the measurements handed to the height's fusion."""
         if isinstance(result, str):
             self.rejected[result] += 1
+            self.shared.failed(self)
             return
         self.measured += 1
         self.last = result
-        self.window.add(result)
-        e = self.estimate = self.window.estimate()
-        if not e.sure:
-            return
-        limit = 2.0 * math.hypot(e.sigma_m, e.configured_sigma_m)
-        if abs(e.bias_m) > limit and (
-            self._warned is None or abs(e.bias_m - self._warned) > limit / 2.0
-        ):
-            self._warned = e.bias_m
-            text = (
-                f"height from the UUV's size: the configured height above the water is {abs(e.bias_m):.2f} m "
-                f"{'above' if e.bias_m > 0 else 'below'} what the UUV's size in the image says (± {e.sigma_m:.2f} m, "
-                f"{e.frames} frames over {e.blocks} s, {e.at_surface:.0%} with the UUV at the surface; the "
-                f"configured height's own 1-sigma {e.configured_sigma_m:.2f} m): check [water] "
-                "takeoff_height_above_surface_m or surface_amsl_m, the barometer, and [uuv] (the vehicle's size)"
-            )
-            log.warning("%s", text)
-            self.warnings.append(text)
-        if self.mode != "auto":
-            return
+        self.shared.take(self, result)
+
+    def warn(self, text: str) -> None:
+        log.warning("%s", text)
+        self.warnings.append(text)
+
+    def hand_over(self, e: BiasEstimate) -> None:
+        """``auto``: the window's measurements not handed over yet that agree with the sure estimate ``e``, to the
+        height's fusion."""
         for h in self.window.heights:
             if h.t_unix > self._applied_t and e.agrees(h):
                 if self.tel.add_height(
@@ -265,17 +274,19 @@ class HeightFromSize:
     def summary(self) -> str:
         """One line: the estimate, or why there is none."""
         e = self.estimate
+        shared = self.shared.described(self)
         if e is None:
             why = (
                 ", ".join(f"{k} {n}" for k, n in self.rejected.most_common())
                 or "no frame with the UUV tracked"
             )
-            return f"height from the UUV's size: no measurement ({why})"
+            return f"height from the UUV's size: no measurement ({why}){shared}"
         return (
             f"height from the UUV's size: configured - measured {e.bias_m:+.2f} ± {e.sigma_m:.2f} m over "
             f"{e.frames} frames ({e.blocks} s, {e.at_surface:.0%} at the surface, {e.outliers} outliers left out, "
             f"{sum(self.rejected.values())} frames without a measurement), {'sure' if e.sure else 'not sure'}"
             + (f"; {self.applied} measurements applied" if self.mode == "auto" else "")
+            + shared
         )
 
     def status(self) -> dict:
@@ -300,6 +311,209 @@ class HeightFromSize:
             "last_height_m": num(last and last.uav_height_m),
             "last_sigma_m": num(last and last.sigma_total_m),
         }
+
+
+def shared_sizes(
+    sessions, mode: str, measure_hz: float = MEASURE_HZ, sure_hz: float = SURE_HZ
+) -> list[HeightFromSize]:
+    """One :class:`HeightFromSize` per UUV of one video (``sessions``: the session read as each UUV's), all sharing
+    one estimate (:class:`SharedEstimate`): the camera's height above the water is the same for every UUV."""
+    sizes: list[HeightFromSize] = []
+    for s in sessions:
+        sizes.append(
+            HeightFromSize(
+                s.calibration,
+                s.telemetry,
+                mode,
+                measure_hz,
+                sure_hz,
+                shared=sizes[0] if sizes else None,
+                name=s.uuv_id,
+            )
+        )
+    return sizes
+
+
+class SharedEstimate:
+    """The camera's height above the water from the size of every UUV of one video (their :class:`HeightFromSize`,
+    ``members``): one window, one estimate, one measuring schedule for them all (``skyfix process --uuv all``,
+    issue 30: each UUV measured at the rate of one, its CPU divided by the UUVs').
+
+    - The schedule (:meth:`due`): a frame is due at most ``measure_hz`` a second (``sure_hz`` while sure) for all
+      the UUVs together; it goes to the UUV asking whose turn is oldest: its last measurement's time, put off by
+      :data:`FAILED_TURNS` of the schedule's period times its measurements in a row that gave no height (a UUV whose
+      outline cannot be measured in this view takes fewer turns, not the others' share). A UUV counts as asking
+      while it asked within ``1 / measure_hz`` (one not tracked lately leaves its turn to the others). With one UUV
+      this is :class:`HeightFromSize`'s own schedule, unchanged.
+    - A measurement that fails adds nothing (no height: nothing to bias the estimate).
+    - A UUV whose heights disagree with the others' (its depth or ``[uuv]`` size wrong: its heights are all off by
+      the same) must not shift theirs silently (:meth:`_check`, at every height taken): each UUV whose heights in
+      the window span :data:`~localizer.size_range.MIN_BLOCKS` seconds has an estimate of its own; two more than 3
+      sigmas apart (each with the error its heights share) disagree. A UUV that disagrees with two or more others
+      that agree with each other is left out: a warning names it, its heights leave the window, it is measured no
+      more (its heights handed to the fusion before that, ``auto``, stay there). Two that disagree with no other to
+      tell which is right: a warning names both, and the estimate is not sure (nothing handed over, no warning on
+      the configured height) while they do. With heights of several UUVs in the window, the estimate is sure only
+      once two of them can be checked so (a UUV alone with heights is checked by nothing, as with one UUV).
+    - ``auto``: a measurement taken hands every member's telemetry the window's heights that agree with the sure
+      estimate (the UAV's height is the same for all).
+    """
+
+    def __init__(self, measure_hz: float, sure_hz: float):
+        self.period_s = 1.0 / measure_hz
+        self.sure_period_s = 1.0 / sure_hz
+        self.window = HeightBias()
+        self.estimate: BiasEstimate | None = None
+        self.members: list[HeightFromSize] = []
+        self._last_t = -math.inf
+        self._warned: float | None = None
+        self._asked: dict[int, float] = {}  # member's index -> the time it last asked
+        self._turn: dict[int, float] = {}  # member's index -> its turn's time (oldest goes first)
+        self._fails: dict[
+            int, int
+        ] = {}  # member's index -> its measurements in a row without a height
+        self._whose: dict[float, int] = {}  # t_unix of a height in the window -> its member's index
+        # not sure for the UUVs' sake: two UUVs' heights disagree (none other tells which is right), or of several
+        # UUVs with heights in the window fewer than two can be checked against each other yet
+        self.doubt = False
+        self._doubted: set[tuple[int, int]] = set()  # the pairs warned about
+
+    def due(self, member: HeightFromSize, t_unix: float) -> bool:
+        """See the class doc."""
+        me = self.members.index(member)
+        if member.left_out:
+            return False
+        self._asked[me] = t_unix
+        period = self._period()
+        if t_unix - self._last_t < period - 0.005:
+            return False
+        if len(self.members) > 1:
+            asking = [k for k, at in self._asked.items() if t_unix - at < self.period_s + 0.005]
+            if min(asking, key=lambda k: (self._turn.get(k, -math.inf), k)) != me:
+                return False
+            self._turn[me] = t_unix
+        self._last_t = t_unix
+        return True
+
+    def asks_estimate(self, t_unix: float) -> bool:
+        """:meth:`HeightFromSize.asks_estimate`."""
+        return t_unix - self._last_t >= min(self.period_s, self.sure_period_s) - 0.005
+
+    def failed(self, member: HeightFromSize) -> None:
+        """A measurement of ``member``'s gave no height: its next turns put off (see the class doc)."""
+        me = self.members.index(member)
+        fails = self._fails[me] = min(self._fails.get(me, 0) + 1, MAX_FAILED)
+        self._turn[me] = self._turn.get(me, -math.inf) + fails * FAILED_TURNS * self._period()
+
+    def take(self, member: HeightFromSize, h: SizeHeight) -> None:
+        """A height of ``member``'s: into the window (unless left out); the estimate, the warning, the checks of
+        the UUVs against each other and (``auto``) the heights handed to the fusion."""
+        me = self.members.index(member)
+        self._fails[me] = 0
+        if member.left_out:
+            return
+        self.window.add(h)
+        if len(self.members) > 1:
+            self._whose[h.t_unix] = me
+            self._whose = {x.t_unix: self._whose[x.t_unix] for x in self.window.heights}
+            self._check()
+        e = self.estimate = self.window.estimate()
+        if e is not None and self.doubt:
+            e = self.estimate = dataclasses.replace(e, sure=False)
+        if e is None or not e.sure:
+            return
+        limit = 2.0 * math.hypot(e.sigma_m, e.configured_sigma_m)
+        if abs(e.bias_m) > limit and (
+            self._warned is None or abs(e.bias_m - self._warned) > limit / 2.0
+        ):
+            self._warned = e.bias_m
+            self.members[0].warn(
+                f"height from the UUV's size: the configured height above the water is {abs(e.bias_m):.2f} m "
+                f"{'above' if e.bias_m > 0 else 'below'} what the UUV's size in the image says (± {e.sigma_m:.2f} m, "
+                f"{e.frames} frames over {e.blocks} s, {e.at_surface:.0%} with the UUV at the surface; the "
+                f"configured height's own 1-sigma {e.configured_sigma_m:.2f} m): check [water] "
+                "takeoff_height_above_surface_m or surface_amsl_m, the barometer, and [uuv] (the vehicle's size)"
+            )
+        for m in self.members:
+            if m.mode == "auto":
+                m.hand_over(e)
+
+    def _check(self) -> None:
+        """The UUVs' heights in the window against each other (see the class doc)."""
+        own = {}  # member's index -> the estimate of its own heights, where they span MIN_BLOCKS seconds
+        for k, m in enumerate(self.members):
+            mine = HeightBias()
+            mine.heights = [h for h in self.window.heights if self._whose[h.t_unix] == k]
+            e = None if m.left_out else mine.estimate()
+            if e is not None and e.blocks >= MIN_BLOCKS:
+                own[k] = e
+
+        def apart(i: int, j: int) -> bool:
+            return abs(own[i].bias_m - own[j].bias_m) > 3.0 * math.hypot(
+                own[i].sigma_m, own[j].sigma_m
+            )
+
+        for k in own:
+            others = [j for j in own if j != k]
+            if (
+                len(others) >= 2
+                and all(apart(k, j) for j in others)
+                and not any(apart(i, j) for i in others for j in others if i < j)
+            ):
+                self._leave_out(k, own)
+                return self._check()
+        pairs = [(i, j) for i in own for j in own if i < j and apart(i, j)]
+        having = {self._whose[h.t_unix] for h in self.window.heights}
+        self.doubt = bool(pairs) or (len(having) > 1 and len(own) < 2)
+        for i, j in pairs:
+            if (i, j) not in self._doubted:
+                self._doubted.add((i, j))
+                a, b = own[i], own[j]
+                first, second = self.members[i], self.members[j]
+                first.warn(
+                    f"height from the UUV's size: {first.name}'s and {second.name}'s heights disagree by "
+                    f"{abs(a.bias_m - b.bias_m):.2f} m (± {math.hypot(a.sigma_m, b.sigma_m):.2f} m, {a.frames} and "
+                    f"{b.frames} frames): the depth or [uuv] (the vehicle's size) of one of them is wrong; the "
+                    "estimate is not sure until another UUV's heights tell which"
+                )
+        return None
+
+    def _leave_out(self, k: int, own: dict) -> None:
+        """The ``k``-th member's heights disagree with all the others', which agree: out of the estimate."""
+        member = self.members[k]
+        member.left_out = True
+        self.window.heights = [h for h in self.window.heights if self._whose[h.t_unix] != k]
+        self._asked.pop(k, None)
+        rest = [j for j in own if j != k]
+        others = HeightBias()
+        others.heights = self.window.heights
+        b, a = others.estimate(), own[k]
+        apart = a.bias_m - b.bias_m
+        member.warn(
+            f"height from the UUV's size: {member.name}'s heights are {abs(apart):.2f} m "
+            f"{'below' if apart > 0 else 'above'} those of {', '.join(self.members[j].name for j in rest)} "
+            f"(± {math.hypot(a.sigma_m, b.sigma_m):.2f} m, {a.frames} and {b.frames} frames), which agree: check "
+            f"{member.name}'s depth and [uuv] (the vehicle's size); its heights are left out of the estimate"
+        )
+
+    def described(self, member: HeightFromSize) -> str:
+        """What a summary adds with several UUVs: the share, ``member``'s own part."""
+        if len(self.members) < 2:
+            return ""
+        names = ", ".join(m.name for m in self.members if not m.left_out)
+        mine = (
+            "left out (disagrees with the others)"
+            if member.left_out
+            else f"{member.measured} of them"
+        )
+        return f" (one estimate for {names}; {member.name}'s heights: {mine})"
+
+    def _period(self) -> float:
+        return (
+            self.sure_period_s
+            if self.estimate is not None and self.estimate.sure
+            else self.period_s
+        )
 
 
 class OnlineHeightFromSize:

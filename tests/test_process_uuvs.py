@@ -64,9 +64,14 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
     opened = _counted(monkeypatch, Session, "open_video")
     poses = _counted(monkeypatch, track, "uav_pose")
     tlogs = _counted(monkeypatch, read, "read_tlog")
+    measured = _counted(monkeypatch, HeightFromSize, "measure")
     assert main(["process", str(crossing), "--uuv", "all", "--out", str(tmp_path / "all")]) == 0
     printed = capsys.readouterr()
     err = printed.err
+    # one estimate of the camera's height for both UUVs, measured on one schedule
+    assert printed.out.count("(one estimate for uuv1, uuv2;") == 2, printed.out
+    measured_all = len(measured)
+    measured.clear()
     # the video decoded once, each frame's UAV pose computed once, the UAV's log parsed once
     assert (len(opened), len(poses), len(tlogs)) == (1, 1, 1)
     assert err.count("the frames' offset to the telemetry from the video's motion") == 1, err
@@ -102,6 +107,8 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
         assert sum(",ok," in r for r in rows) > 0.6 * len(rows)
         assert all(",motion," in r for r in rows if ",ok," in r)  # the offset estimated and applied
     assert len(opened) == 3 + len(ids)
+    # (the track workers' and --beside's measurements are counted in their processes, not here)
+    assert 0 < measured_all < 0.7 * len(measured), (measured_all, len(measured))
     first, second = ((tmp_path / "all" / uuv / FILES[0]).read_bytes() for uuv in ids)
     assert first != second
 

@@ -24,7 +24,8 @@ such estimate, ``--use-track``, ``--no-motion-offset``) the delay stays unknown:
 0, its 1-sigma ``[timing] unknown_latency_sigma_s`` in each fix's h_acc, and a warning says so.
 
 Tracking the video also measures the camera's height from the UUV's size
-(``--height-from-size``, :mod:`groundstation.height_from_size`) and prints its estimate.
+(``--height-from-size``, :mod:`groundstation.height_from_size`; one estimate for all the UUVs of ``--uuv all``) and
+prints its estimate.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from typing import NamedTuple
 import numpy as np
 
 from groundstation.height_from_size import MODES as SIZE_MODES
-from groundstation.height_from_size import HeightFromSize
+from groundstation.height_from_size import HeightFromSize, shared_sizes
 from groundstation.latency.estimate import offset_from_rotations
 from groundstation.offline.bottom import MODES as BOTTOM_MODES
 from groundstation.offline.bottom import NAME as BOTTOM_NAME
@@ -369,7 +370,12 @@ def _run(args) -> int:
         for session in sessions:
             process_one(session, args, output_dir(out / session.uuv_id))
         return 0
-    sizes = [size_of(s, args.height_from_size, args.use_track) for s in sessions]
+    # one estimate of the camera's height for all (not in track workers: each would see its own UUV's alone)
+    sizes = (
+        [size_of(s, args.height_from_size, args.use_track) for s in sessions]
+        if args.track_workers or args.height_from_size == "off" or sessions[0].video_path is None
+        else shared_sizes(sessions, args.height_from_size)
+    )
     try:
         pixels = tracked_pixels(
             sessions,

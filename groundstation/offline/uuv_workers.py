@@ -252,8 +252,10 @@ class SizeWorker:
         self.pending.append((track, float(track.t[row]), slot))
 
     def settle(self, track) -> None:
-        """Every measurement handed over for ``track`` taken by it, in order."""
-        while any(mine is track for mine, _, _ in self.pending):
+        """Every measurement handed over for ``track``, and for the tracks whose heights share its estimate
+        (:class:`~groundstation.height_from_size.SharedEstimate`), taken, in order."""
+        shared = track.size.shared
+        while any(mine.size.shared is shared for mine, _, _ in self.pending):
             self._take_oldest()
 
     def finish(self) -> None:
