@@ -213,10 +213,13 @@ class HeightFromSize:
         self.rejected: Counter[str] = Counter()
         self.applied = 0
         self.warnings: list[str] = []
-        self.left_out = (
-            False  # its measurements disagree with the other UUVs': out of the shared estimate
-        )
+        # the estimate its heights were left out of (they disagree with the other UUVs'), or None
+        self.left_from: SharedEstimate | None = None
         self._applied_t = -math.inf
+
+    @property
+    def left_out(self) -> bool:
+        return self.left_from is not None
 
     @property
     def estimate(self) -> BiasEstimate | None:
@@ -350,8 +353,10 @@ class SharedEstimate:
       the same) must not shift theirs silently (:meth:`_check`, at every height taken): each UUV whose heights in
       the window span :data:`~localizer.size_range.MIN_BLOCKS` seconds has an estimate of its own; two more than 3
       sigmas apart (each with the error its heights share) disagree. A UUV that disagrees with two or more others
-      that agree with each other is left out: a warning names it, its heights leave the window, it is measured no
-      more (its heights handed to the fusion before that, ``auto``, stay there). Two that disagree with no other to
+      that agree with each other is left out: a warning names it, its heights leave the window, and it goes on
+      with an estimate of its own from them, as a UUV alone (the range from its size is right for its own fixes
+      even where its depth is wrong: the error moves into the height); the shared heights handed to its fusion
+      before that, ``auto``, stay there. Two that disagree with no other to
       tell which is right: a warning names both, and the estimate is not sure (nothing handed over, no warning on
       the configured height) while they do. With heights of several UUVs in the window, the estimate is sure only
       once two of them can be checked so (a UUV alone with heights is checked by nothing, as with one UUV).
@@ -381,8 +386,6 @@ class SharedEstimate:
     def due(self, member: HeightFromSize, t_unix: float) -> bool:
         """See the class doc."""
         me = self.members.index(member)
-        if member.left_out:
-            return False
         self._asked[me] = t_unix
         period = self._period()
         if t_unix - self._last_t < period - 0.005:
@@ -410,8 +413,6 @@ class SharedEstimate:
         the UUVs against each other and (``auto``) the heights handed to the fusion."""
         me = self.members.index(member)
         self._fails[me] = 0
-        if member.left_out:
-            return
         self.window.add(h)
         if len(self.members) > 1:
             self._whose[h.t_unix] = me
@@ -435,7 +436,7 @@ class SharedEstimate:
                 "takeoff_height_above_surface_m or surface_amsl_m, the barometer, and [uuv] (the vehicle's size)"
             )
         for m in self.members:
-            if m.mode == "auto":
+            if m.mode == "auto" and m.shared is self:
                 m.hand_over(e)
 
     def _check(self) -> None:
@@ -444,7 +445,7 @@ class SharedEstimate:
         for k, m in enumerate(self.members):
             mine = HeightBias()
             mine.heights = [h for h in self.window.heights if self._whose[h.t_unix] == k]
-            e = None if m.left_out else mine.estimate()
+            e = mine.estimate() if m.shared is self else None
             if e is not None and e.blocks >= MIN_BLOCKS:
                 own[k] = e
 
@@ -481,7 +482,11 @@ class SharedEstimate:
     def _leave_out(self, k: int, own: dict) -> None:
         """The ``k``-th member's heights disagree with all the others', which agree: out of the estimate."""
         member = self.members[k]
-        member.left_out = True
+        alone = member.shared = SharedEstimate(1.0 / self.period_s, 1.0 / self.sure_period_s)
+        alone.members.append(member)
+        alone.window.heights = [h for h in self.window.heights if self._whose[h.t_unix] == k]
+        alone.estimate = alone.window.estimate()
+        member.left_from = self
         self.window.heights = [h for h in self.window.heights if self._whose[h.t_unix] != k]
         self._asked.pop(k, None)
         rest = [j for j in own if j != k]
@@ -493,20 +498,19 @@ class SharedEstimate:
             f"height from the UUV's size: {member.name}'s heights are {abs(apart):.2f} m "
             f"{'below' if apart > 0 else 'above'} those of {', '.join(self.members[j].name for j in rest)} "
             f"(± {math.hypot(a.sigma_m, b.sigma_m):.2f} m, {a.frames} and {b.frames} frames), which agree: check "
-            f"{member.name}'s depth and [uuv] (the vehicle's size); its heights are left out of the estimate"
+            f"{member.name}'s depth and [uuv] (the vehicle's size); its heights are left out of theirs, an estimate of "
+            "its own serves its fixes"
         )
 
     def described(self, member: HeightFromSize) -> str:
         """What a summary adds with several UUVs: the share, ``member``'s own part."""
+        if member.left_from is not None:
+            names = ", ".join(m.name for m in member.left_from.members if m.shared is not self)
+            return f" ({member.name}'s own: its heights disagree with those of {names})"
         if len(self.members) < 2:
             return ""
-        names = ", ".join(m.name for m in self.members if not m.left_out)
-        mine = (
-            "left out (disagrees with the others)"
-            if member.left_out
-            else f"{member.measured} of them"
-        )
-        return f" (one estimate for {names}; {member.name}'s heights: {mine})"
+        names = ", ".join(m.name for m in self.members if m.shared is self)
+        return f" (one estimate for {names}; {member.name}'s heights: {member.measured} of them)"
 
     def _period(self) -> float:
         return (

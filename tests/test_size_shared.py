@@ -65,25 +65,29 @@ def test_three_uuvs_take_turns_on_one_schedule(cal_dict):
 
 
 def test_a_uuv_whose_heights_disagree_is_left_out(cal_dict):
-    """uuv2's depth is wrong: its heights are 0.8 m off the others'. It is named, its heights leave the estimate,
-    and in ``auto`` no telemetry gets heights while they disagree, and every UUV's gets the others' after."""
+    """uuv2's depth is wrong: its heights are 0.6 m off the others'. It is named, its heights leave the estimate
+    and it goes on with one of its own; in ``auto`` no telemetry gets heights while they disagree, uuv1's and
+    uuv3's get theirs alone after, uuv2's its own."""
     sizes = _sizes(cal_dict, 3, "auto")
     rng = np.random.default_rng(2)
     _run(sizes, 20.0, lambda k, t: _height(t, 0.8 if k == 1 else 0.2, rng))
     assert sizes[1].left_out and not sizes[0].left_out and not sizes[2].left_out
     e = sizes[0].estimate
     assert e.sure and abs(e.bias_m - 0.2) < 2 * e.sigma_m and abs(e.bias_m - 0.2) < 0.05
+    assert sizes[2].estimate is e and abs(sizes[1].estimate.bias_m - 0.8) < 0.05
     # uuv1's warning, if any, is that it and uuv2 disagree while uuv3 could not yet tell which is right
-    assert len(sizes[1].warnings) == 1 and not sizes[2].warnings, [s.warnings for s in sizes]
+    assert sizes[1].warnings and not sizes[2].warnings, [s.warnings for s in sizes]
     assert all("uuv1's and uuv2's heights disagree" in w for w in sizes[0].warnings)
     assert (
         re.search(r"uuv2.s heights are 0\.[56]\d m below", sizes[1].warnings[0])
         and "uuv1, uuv3" in sizes[1].warnings[0]
     )
-    assert "left out" in sizes[1].summary() and "one estimate for uuv1, uuv3" in sizes[0].summary()
-    for s in sizes:
+    assert (
+        "uuv2's own" in sizes[1].summary() and "one estimate for uuv1, uuv3" in sizes[0].summary()
+    )
+    for s, height in zip(sizes, (9.8, 9.2, 9.8)):
         values = s.tel.height_fixes["size"].values[:, 0]
-        assert s.applied == len(values) > 10 and np.all(np.abs(values - 9.8) < 0.3), values
+        assert s.applied == len(values) > 10 and np.all(np.abs(values - height) < 0.3), values
 
 
 def test_two_uuvs_that_disagree_leave_the_estimate_unsure(cal_dict):
