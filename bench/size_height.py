@@ -114,6 +114,13 @@ class Recording(HeightFromSize):
         self.timed: list = []  # (t_unix, result)
         self.estimates: list = []
         self.cpu_s = 0.0
+        self._due_t = float("nan")  # the frame last found due: the one measured next
+
+    def due(self, t_unix):
+        if not super().due(t_unix):
+            return False
+        self._due_t = t_unix
+        return True
 
     def measure(self, *args):
         t0 = time.thread_time()
@@ -125,7 +132,7 @@ class Recording(HeightFromSize):
     def take(self, result):
         super().take(result)
         self.results.append(result)
-        self.timed.append((self._last_t, result))
+        self.timed.append((self._due_t, result))
         if isinstance(result, SizeHeight):
             self.estimates.append((result.t_unix, self.estimate))
 

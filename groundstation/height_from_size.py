@@ -356,10 +356,10 @@ class SharedEstimate:
       that agree with each other is left out: a warning names it, its heights leave the window, and it goes on
       with an estimate of its own from them, as a UUV alone (the range from its size is right for its own fixes
       even where its depth is wrong: the error moves into the height); the shared heights handed to its fusion
-      before that, ``auto``, stay there. Two that disagree with no other to
-      tell which is right: a warning names both, and the estimate is not sure (nothing handed over, no warning on
-      the configured height) while they do. With heights of several UUVs in the window, the estimate is sure only
-      once two of them can be checked so (a UUV alone with heights is checked by nothing, as with one UUV).
+      before that, ``auto``, stay there. Two that disagree with no other to tell which is right: a warning names
+      both, and the estimate is not sure (nothing handed over, no warning on the configured height) while they do.
+      With heights of several UUVs in the window, the estimate is sure only once two of them can be checked so (a
+      UUV alone with heights is checked by nothing, as with one UUV).
     - ``auto``: a measurement taken hands every member's telemetry the window's heights that agree with the sure
       estimate (the UAV's height is the same for all).
     """
@@ -374,9 +374,8 @@ class SharedEstimate:
         self._warned: float | None = None
         self._asked: dict[int, float] = {}  # member's index -> the time it last asked
         self._turn: dict[int, float] = {}  # member's index -> its turn's time (oldest goes first)
-        self._fails: dict[
-            int, int
-        ] = {}  # member's index -> its measurements in a row without a height
+        # member's index -> its measurements in a row without a height
+        self._fails: dict[int, int] = {}
         self._whose: dict[float, int] = {}  # t_unix of a height in the window -> its member's index
         # not sure for the UUVs' sake: two UUVs' heights disagree (none other tells which is right), or of several
         # UUVs with heights in the window fewer than two can be checked against each other yet
@@ -462,7 +461,8 @@ class SharedEstimate:
                 and not any(apart(i, j) for i in others for j in others if i < j)
             ):
                 self._leave_out(k, own)
-                return self._check()
+                self._check()
+                return
         pairs = [(i, j) for i in own for j in own if i < j and apart(i, j)]
         having = {self._whose[h.t_unix] for h in self.window.heights}
         self.doubt = bool(pairs) or (len(having) > 1 and len(own) < 2)
@@ -477,7 +477,6 @@ class SharedEstimate:
                     f"{b.frames} frames): the depth or [uuv] (the vehicle's size) of one of them is wrong; the "
                     "estimate is not sure until another UUV's heights tell which"
                 )
-        return None
 
     def _leave_out(self, k: int, own: dict) -> None:
         """The ``k``-th member's heights disagree with all the others', which agree: out of the estimate."""
