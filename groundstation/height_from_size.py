@@ -417,6 +417,10 @@ class SharedEstimate:
             self._whose[h.t_unix] = me
             self._whose = {x.t_unix: self._whose[x.t_unix] for x in self.window.heights}
             self._check()
+        self._estimated()
+
+    def _estimated(self) -> None:
+        """The window's estimate; once sure, the warning and (``auto``) the heights handed to the fusion."""
         e = self.estimate = self.window.estimate()
         if e is not None and self.doubt:
             e = self.estimate = dataclasses.replace(e, sure=False)
@@ -484,7 +488,9 @@ class SharedEstimate:
         alone = member.shared = SharedEstimate(1.0 / self.period_s, 1.0 / self.sure_period_s)
         alone.members.append(member)
         alone.window.heights = [h for h in self.window.heights if self._whose[h.t_unix] == k]
-        alone.estimate = alone.window.estimate()
+        # its next frame a period after the last measured: the frames measured do not depend on when the result
+        # that left it out was taken (SizeWorker takes them later, before the next frame that may be due)
+        alone._last_t = self._last_t
         member.left_from = self
         self.window.heights = [h for h in self.window.heights if self._whose[h.t_unix] != k]
         self._asked.pop(k, None)
@@ -500,6 +506,7 @@ class SharedEstimate:
             f"{member.name}'s depth and [uuv] (the vehicle's size); its heights are left out of theirs, an estimate of "
             "its own serves its fixes"
         )
+        alone._estimated()
 
     def described(self, member: HeightFromSize) -> str:
         """What a summary adds with several UUVs: the share, ``member``'s own part."""
