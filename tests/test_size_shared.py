@@ -32,16 +32,31 @@ def _height(t: float, bias: float, rng, sigma: float = 0.05) -> SizeHeight:
     return SizeHeight(t, 10.0 - bias + rng.normal() * sigma, sigma, 0.04, 10.0, 0.3, 0.2)
 
 
-def _run(sizes, seconds: float, result_of, asking=lambda k, t: True) -> list[tuple[float, int]]:
-    """30 fps: every UUV asks (``asking``) in order; a UUV given the frame takes ``result_of(k, t)`` at once.
-    The (time, UUV) of every frame given."""
-    given = []
+def _run(
+    sizes, seconds: float, result_of, asking=lambda k, t: True, later: bool = False
+) -> list[tuple[float, int]]:
+    """30 fps: every UUV asks (``asking``) in order; a UUV given the frame takes ``result_of(k, t)`` at once, or
+    with ``later`` as ``skyfix process --beside`` takes them (:class:`~groundstation.offline.uuv_workers.SizeWorker`):
+    in order, those of the UUVs sharing the asking one's estimate before it asks whenever its answer may depend on
+    them (``asks_estimate``). The (time, UUV) of every frame given."""
+    given, pending = [], []
     for f in range(round(seconds * 30)):
         t = T0 + f / 30.0
         for k, size in enumerate(sizes):
-            if asking(k, t) and size.due(t):
+            if not asking(k, t):
+                continue
+            if later and size.asks_estimate(t):
+                while any(sizes[j].shared is size.shared for j, _ in pending):
+                    j, result = pending.pop(0)
+                    sizes[j].take(result)
+            if size.due(t):
                 given.append((t, k))
-                size.take(result_of(k, t))
+                if later:
+                    pending.append((k, result_of(k, t)))
+                else:
+                    size.take(result_of(k, t))
+    for j, result in pending:  # the end of the pass: every result taken
+        sizes[j].take(result)
     return given
 
 
@@ -70,7 +85,12 @@ def test_a_uuv_whose_heights_disagree_is_left_out(cal_dict):
     uuv3's get theirs alone after, uuv2's its own."""
     sizes = _sizes(cal_dict, 3, "auto")
     rng = np.random.default_rng(2)
-    _run(sizes, 20.0, lambda k, t: _height(t, 0.8 if k == 1 else 0.2, rng))
+    results = {}  # (UUV, time) -> its measurement: the same in both runs
+
+    def result_of(k, t):
+        return results.setdefault((k, t), _height(t, 0.8 if k == 1 else 0.2, rng))
+
+    given = _run(sizes, 20.0, result_of)
     assert sizes[1].left_out and not sizes[0].left_out and not sizes[2].left_out
     e = sizes[0].estimate
     assert e.sure and abs(e.bias_m - 0.2) < 2 * e.sigma_m and abs(e.bias_m - 0.2) < 0.05
@@ -88,6 +108,14 @@ def test_a_uuv_whose_heights_disagree_is_left_out(cal_dict):
     for s, height in zip(sizes, (9.8, 9.2, 9.8)):
         values = s.tel.height_fixes["size"].values[:, 0]
         assert s.applied == len(values) > 10 and np.all(np.abs(values - height) < 0.3), values
+    # the results taken later, as measured beside the pass: the same frames measured, the same heights handed over
+    later = _sizes(cal_dict, 3, "auto")
+    assert _run(later, 20.0, result_of, later=True) == given
+    for a, b in zip(sizes, later, strict=True):
+        assert a.summary() == b.summary() and a.warnings == b.warnings
+        fixes, later_fixes = a.tel.height_fixes["size"], b.tel.height_fixes["size"]
+        np.testing.assert_array_equal(fixes.times, later_fixes.times)
+        np.testing.assert_array_equal(fixes.values, later_fixes.values)
 
 
 def test_two_uuvs_that_disagree_leave_the_estimate_unsure(cal_dict):
