@@ -59,6 +59,7 @@ from localizer.pose import CameraPose, uav_pose, with_depth
 from localizer.telemetry import Telemetry
 from localizer.timeline import Series
 from localizer.tracking import TrackResult
+from localizer.tracking.centroid import CentroidSteer
 from localizer.tracking.predict import window as search_window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession
 
@@ -164,6 +165,8 @@ class Pipeline:
         self.cal = cal
         self.tel = tel
         self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
+        # the reported pixel held to the vehicle's silhouette through waves
+        self.centre = CentroidSteer()
         self.sinks = list(sinks)
         self.queue_len = queue_len
         self.telemetry_wait_s = telemetry_wait_s
@@ -271,11 +274,13 @@ class Pipeline:
         later = [h for h in self._held if h.frame.index > held.frame.index]
 
         def select_and_catch_up() -> TrackResult:
-            result = self.session.select(
-                held.frame.image, held.pose, box=box, point=point, verify=True
+            self.centre.restart()
+            result = self._steered(
+                held,
+                self.session.select(held.frame.image, held.pose, box=box, point=point, verify=True),
             )
             for h in later:
-                self.session.step(h.frame.image, h.pose)
+                self._steered(h, self.session.step(h.frame.image, h.pose))
             return result
 
         result = await asyncio.get_running_loop().run_in_executor(
@@ -306,6 +311,7 @@ class Pipeline:
         self._started = True  # the operator's word wins over init_bbox
         self.commands += 1
         self.session.release()
+        self.centre.restart()
         for item in self._tracked:  # tracked before the release, not yet located: no fix from them
             item.result = TrackResult("released")
         self.target = self.session.status()
@@ -316,6 +322,7 @@ class Pipeline:
         self._started = True
         self.commands += 1
         self.session.acquire()
+        self.centre.restart()
         self.target = self.session.status()
         log.info("awaiting a target")
         return {"latest_frame": self._latest_frame(), "target": self.target}
@@ -379,12 +386,22 @@ class Pipeline:
             if self.cal.init_bbox is not None:
                 try:
                     # as configured
-                    return self.session.select(frame.image, pose, box=self.cal.init_bbox)
+                    return self.centre.after(
+                        self.session,
+                        frame.image,
+                        self.session.select(frame.image, pose, box=self.cal.init_bbox),
+                        frame.t_unix,
+                    )
                 except SelectionError as e:
                     log.warning(
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
                     )
-        return self.session.step(frame.image, pose, prior=prior)
+        result = self.session.step(frame.image, pose, prior=prior)
+        return self.centre.after(self.session, frame.image, result, frame.t_unix)
+
+    def _steered(self, held: Tracked, result: TrackResult) -> TrackResult:
+        """A held frame's ``result`` (a selection, a catch-up) steered as :meth:`_step`'s."""
+        return self.centre.after(self.session, held.frame.image, result, held.frame.t_unix)
 
     async def _locate_frames(self) -> None:
         loop = asyncio.get_running_loop()

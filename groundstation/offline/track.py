@@ -6,7 +6,8 @@ the height is measured in), selects the UUV
 with ``[tracker] init_bbox`` on the frame of ``init_t`` (the first frame without
 it), tracks it with a :class:`~localizer.tracking.session.TrackingSession` (the
 same as the live service's) and returns per-frame pixels with a status word for
-every row of ``video_frames.csv``:
+every row of ``video_frames.csv``; through waves each pixel is held to the vehicle's silhouette after the tracking
+step (:class:`~localizer.tracking.centroid.CentroidSteer`: what is reported, never what is tracked):
 
 ``ok``; ``lost`` (the tracker has lost the UUV); ``before_init`` (a frame before
 the one ``init_bbox`` belongs to); ``no_video`` (the frame is listed but could not
@@ -54,6 +55,7 @@ from groundstation.session.read import Session, SessionError
 from groundstation.video.frames import VideoError
 from localizer.pose import uav_pose, with_depth
 from localizer.tracking import GREY_TRACKERS
+from localizer.tracking.centroid import CentroidSteer
 from localizer.tracking.session import SelectionError, TrackingSession
 from localizer.tracking.target import TargetState
 
@@ -271,6 +273,8 @@ class UuvTrack:
             self.tracking = TrackingSession(cal, tracker_name)
         except ValueError as e:
             raise SessionError(str(e)) from None
+        # the reported pixel held to the vehicle's silhouette through waves (the tracking's own is untouched)
+        self.centre = CentroidSteer()
         self.session, self.size, self.both_ways, self.pose = session, size, both_ways, None
         # where the heights from size are measured: in another process (a SizeWorker), or here (None)
         self.measurer = None
@@ -317,6 +321,8 @@ class UuvTrack:
             self.started = True
         else:
             result = self.tracking.step(frame.image, pose, row)
+        tracked = result  # what the tracking decided, for tracing back from it
+        result = self.centre.after(self.tracking, frame.image, result, float(self.t[row]))
         timings["track"] += time.perf_counter() - t0
         self.status[row], self.u[row], self.v[row], self.conf[row] = (
             result.status,
@@ -326,7 +332,7 @@ class UuvTrack:
         )
         self.sigma[row] = result.sigma_px
         if self.both_ways:
-            self._trace_when_confirmed(row, frame, result)
+            self._trace_when_confirmed(row, frame, tracked)
         size, measurer = self.size, self.measurer
         if size is None or not result.ok:
             return
