@@ -3,8 +3,10 @@
 Some tests spend most of their time waiting for things that need little of the CPU (a freshly booted ArduSub's
 warm-up, real-time flights and replays), others render a large session first. ``prepare(directory, background)``
 starts such a preparation (a session rendered by ``skyfix sim``, an autopilot booting) and returns an object with
-``close()``. ``tests/conftest.py`` calls it ahead, with ``background`` true: while the test before runs, or, with
-``at_start=True``, from the run's first test (of another module: a module run alone prepares its own).
+``close()``. ``tests/conftest.py`` calls it ahead, with ``background`` true: while the test before runs; with
+``module_before=True``, from the first test of the module before (a preparation longer than one test: an
+autopilot's warm-up); with ``at_start=True``, from the run's first test (of another module: a module run alone
+prepares its own).
 Background renders (:class:`Render`) take only CPU that no test wants; one not done when needed goes on at the
 tests' priority (or, where this user may not raise it, is started again at it). The test takes it with :func:`take` (or :func:`taken`), made then and there
 when nothing was prepared ahead (the test run alone, or first). What a test gets is made the same way either way;
@@ -98,9 +100,28 @@ def _prepare(item: pytest.Item, prepare: Callable) -> None:
         pass
 
 
+def _next_module(item: pytest.Item) -> list[pytest.Item]:
+    """The tests of the module after ``item``'s, when ``item`` is the first of its module; else none."""
+    items = item.session.items
+    i = items.index(item)
+    module = getattr(item, "module", None)
+    if i > 0 and getattr(items[i - 1], "module", None) is module:
+        return []
+    modules = [getattr(other, "module", None) for other in items[i:]]
+    after = next((m for m in modules if m is not module), None)
+    return (
+        [] if after is None else [o for o, m in zip(items[i:], modules, strict=True) if m is after]
+    )
+
+
 def prepare_ahead(item: pytest.Item, nextitem: pytest.Item | None) -> None:
-    """Before ``item`` runs: the preparations of ``nextitem``, and on the run's first test those marked
-    ``at_start`` of the other modules; a failure (a missing binary: a skip) is left for the test to meet itself."""
+    """Before ``item`` runs: the preparations of ``nextitem``; on the first test of a module those marked
+    ``module_before`` of the next module; on the run's first test those marked ``at_start`` of the other modules.
+    A failure (a missing binary: a skip) is left for the test to meet itself."""
+    for other in _next_module(item):
+        for mark in other.iter_markers(MARKER):
+            if mark.kwargs.get("module_before") and mark.args[0] not in _STARTED:
+                _prepare(other, mark.args[0])
     if item is item.session.items[0]:
         for other in item.session.items:
             for mark in other.iter_markers(MARKER):

@@ -17,6 +17,7 @@ import socket
 import subprocess
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -318,11 +319,11 @@ class ArduCopter(ArduSub):
 
 
 class Booting:
-    """:meth:`ArduSub.start` in a thread of its own (the test goes on meanwhile); :meth:`ready` waits for it and
-    raises what it raised."""
+    """:meth:`ArduSub.start` in a thread of its own (the test goes on meanwhile), then ``then(sitl)`` if given (the
+    message rates a test asks for from the boot on); :meth:`ready` waits for it and raises what it raised."""
 
-    def __init__(self, sitl: ArduSub):
-        self.sitl = sitl
+    def __init__(self, sitl: ArduSub, then: Callable[[ArduSub], None] | None = None):
+        self.sitl, self.then = sitl, then
         self.error: BaseException | None = None
         self.thread = threading.Thread(target=self._start, name="sitl-boot", daemon=True)
         self.thread.start()
@@ -330,6 +331,8 @@ class Booting:
     def _start(self) -> None:
         try:
             self.sitl.start()
+            if self.then is not None:
+                self.then(self.sitl)
         except BaseException as e:  # noqa: BLE001 - handed to the test by ready()
             self.error = e
 

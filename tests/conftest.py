@@ -124,8 +124,9 @@ def quat_ypr():
 def pytest_configure(config):
     config.addinivalue_line(
         "markers",
-        f"{ahead.MARKER}(prepare, at_start=False): prepare(directory, background) starts the test's slow inputs "
-        "while the test before it runs, or from the run's start (tests/ahead.py)",
+        f"{ahead.MARKER}(prepare, module_before=False, at_start=False): prepare(directory, background) starts the "
+        "test's slow inputs while the test before it runs, the module before it, or from the run's start "
+        "(tests/ahead.py)",
     )
 
 

@@ -1,8 +1,9 @@
 """A drone's own DataFlash log, imported: ArduPilot's ArduCopter (SITL) flies with a gimbal and writes its ``.bin``;
 ``skyfix import`` turns it into a session, whose telemetry must say what the same autopilot said live over MAVLink.
 
-The flight (GUIDED): take off to 10 m, turn the vehicle, point the gimbal (``mount_brushless.parm``: roll/pitch
-in the earth frame, yaw relative to the vehicle) at four attitudes. A ground station on SERIAL0
+ArduCopter boots while the module before this one runs (``tests/ahead.py``): ~40 s from its start to EKF3 using
+the GPS. The flight (GUIDED): take off to 10 m, turn the vehicle, point the gimbal (``mount_brushless.parm``:
+roll/pitch in the earth frame, yaw relative to the vehicle) at four attitudes. A ground station on SERIAL0
 (:class:`~ardusub_sitl.Observer`) receives ATTITUDE (25 Hz), GLOBAL_POSITION_INT, SYSTEM_TIME and the gimbal's
 GIMBAL_DEVICE_ATTITUDE_STATUS meanwhile. Independent paths to the same truth: the live messages are the
 autopilot's MAVLink, the session's are rebuilt from its log records (ATT at 10 Hz, POS, GPS week time,
@@ -16,11 +17,12 @@ from __future__ import annotations
 
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 import pymap3d
 import pytest
-from ardusub_sitl import ArduCopter, Observer, arducopter_files
+from ardusub_sitl import ArduCopter, Booting, Observer, arducopter_files
 from live_helpers import ROOT, wait_for, wait_until
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from scipy.spatial.transform import Rotation, Slerp
@@ -169,26 +171,39 @@ def angle_deg(a, b):
     return np.abs((np.asarray(a) - np.asarray(b) + 180.0) % 360.0 - 180.0)
 
 
-def test_a_dataflash_log_imported_says_what_the_autopilot_said_live(tmp_path):
+def request_rates(sitl: ArduCopter) -> None:
+    """The live messages compared with the log, from the boot on."""
+    for msg_id, hz in (
+        (mavlink2.MAVLINK_MSG_ID_ATTITUDE, 25.0),
+        (mavlink2.MAVLINK_MSG_ID_SYSTEM_TIME, 2.0),
+        (mavlink2.MAVLINK_MSG_ID_GIMBAL_DEVICE_ATTITUDE_STATUS, 20.0),
+        (mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0),
+    ):
+        sitl.observer.request_interval(msg_id, hz)
+
+
+def prepare(tmp: Path, background: bool) -> Booting:
+    """ArduCopter booting in ``tmp/copter`` with :func:`request_rates`: ~40 s from its start to EKF3 using the GPS,
+    made while the module before this one runs (``tests/ahead.py``)."""
     binary, parms = arducopter_files()
-    sitl = ArduCopter(
+    copter = ArduCopter(
         binary,
         parms,
-        tmp_path / "copter",
+        tmp / "copter",
         home=(LAT, LON, HOME_AMSL_M, 0.0),
         extra_parm=EXTRA,
         keep=KEEP,
     )
+    return Booting(copter, then=request_rates)
+
+
+@pytest.mark.ahead.with_args(prepare, module_before=True)
+def test_a_dataflash_log_imported_says_what_the_autopilot_said_live(tmp_path, prepared):
+    sitl = prepared.sitl
+    binary = sitl.binary
     try:
-        sitl.start()
+        prepared.ready()
         obs = sitl.observer
-        for msg_id, hz in (
-            (mavlink2.MAVLINK_MSG_ID_ATTITUDE, 25.0),
-            (mavlink2.MAVLINK_MSG_ID_SYSTEM_TIME, 2.0),
-            (mavlink2.MAVLINK_MSG_ID_GIMBAL_DEVICE_ATTITUDE_STATUS, 20.0),
-            (mavlink2.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10.0),
-        ):
-            obs.request_interval(msg_id, hz)
         survey_span = fly(obs)
     finally:
         sitl.stop()
