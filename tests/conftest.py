@@ -4,6 +4,7 @@ import math
 
 import ahead
 import pytest
+from live_helpers import ROOT
 
 from localizer.calibration import Calibration
 from localizer.telemetry import Telemetry
@@ -119,6 +120,19 @@ def make_telemetry():
 def quat_ypr():
     """``quat_ypr(yaw_deg, pitch_deg, roll_deg) -> (w, x, y, z)``, see ``quat_from_ypr_deg``."""
     return quat_from_ypr_deg
+
+
+@pytest.fixture(scope="session")
+def two_uuvs_crossing(tmp_path_factory):
+    """``sim_fixtures/scenarios/two_uuvs_crossing.toml`` generated once for the run (video included): read by
+    test_sim_two_uuvs, copied by test_live_uuvs (which re-encodes its copy's video); never changed in place."""
+    from sim_fixtures.generate import generate
+    from sim_fixtures.scenario import load_scenario
+
+    scenario = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
+    path = tmp_path_factory.mktemp("two_uuvs_crossing") / "s"
+    generate(load_scenario(scenario), path, scenario_text=scenario.read_text())
+    return path
 
 
 def pytest_configure(config):

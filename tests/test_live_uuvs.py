@@ -58,10 +58,7 @@ from groundstation.live.ui.palette import PALETTE
 from groundstation.offline.process import process_session
 from groundstation.session.read import load_session, uuv_ids
 from groundstation.testing.ardupilot import ardupilot_gps_unhealthy
-from sim_fixtures.generate import generate
-from sim_fixtures.scenario import load_scenario
 
-SCENARIO = ROOT / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
 IDS = ("uuv1", "uuv2")
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
@@ -88,9 +85,11 @@ def own_and_other_errors_m(session, uuv_id, t_session, lat, lon):
 
 
 @pytest.fixture(scope="module")
-def crossing(tmp_path_factory):
-    """The generated two_uuvs_crossing session, its video as a camera sends it, shared by this module's runs."""
-    session = generate(load_scenario(SCENARIO), tmp_path_factory.mktemp("crossing") / "s").session
+def crossing(tmp_path_factory, two_uuvs_crossing):
+    """The generated two_uuvs_crossing session (a copy of the run's, ``tests/conftest.py``), its video as a camera
+    sends it, shared by this module's runs."""
+    session = tmp_path_factory.mktemp("crossing") / "s"
+    shutil.copytree(two_uuvs_crossing, session)
     as_camera_sends_it(session / "video.mp4")
     return session
 

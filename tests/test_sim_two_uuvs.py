@@ -41,12 +41,9 @@ pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs th
 
 
 @pytest.fixture(scope="module")
-def crossing(tmp_path_factory):
-    """The scenario and its generated session (video included)."""
-    sc = load_scenario(SCENARIO)
-    path = tmp_path_factory.mktemp("two_uuvs") / "s"
-    generate(sc, path, scenario_text=SCENARIO.read_text())
-    return sc, path
+def crossing(two_uuvs_crossing):
+    """The scenario and its generated session (video included; the run's, ``tests/conftest.py``)."""
+    return load_scenario(SCENARIO), two_uuvs_crossing
 
 
 def local_ned(sc, truth):
