@@ -19,7 +19,9 @@ import signal
 import socket
 import threading
 import time
+from pathlib import Path
 
+import ahead
 import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
@@ -29,6 +31,7 @@ from groundstation.testing.link_scenarios import (
     LINK_INPUTS,
     link_comes_back,
     make_session,
+    session_scenario,
     shutdown,
 )
 
@@ -62,11 +65,25 @@ def test_stop_whatever_the_inputs_do(tmp_path, state, sig):
     ]
 
 
+def render(tmp: Path, background: bool) -> ahead.Render:
+    """The links' session (:func:`make_session`'s), rendered while the module before this one runs, on CPU no test
+    wants (``tests/ahead.py``)."""
+    out = tmp / "session"
+    return ahead.Render(session_scenario(out), out, tmp / "sim.log", background)
+
+
 @pytest.fixture(scope="module")
 def long_session(tmp_path_factory):
-    return make_session(tmp_path_factory.mktemp("links") / "session")
+    rendered = ahead.taken(render)
+    if rendered is None:  # nothing rendered ahead: the module run alone, from one of its link tests
+        return make_session(tmp_path_factory.mktemp("links") / "session")
+    try:
+        return rendered.wait(900)
+    finally:
+        rendered.close()
 
 
+@pytest.mark.ahead.with_args(render, module_before=True)
 @pytest.mark.parametrize("which", LINK_INPUTS)
 def test_link_comes_back(tmp_path, long_session, which):
     r = link_comes_back(tmp_path, long_session, which)

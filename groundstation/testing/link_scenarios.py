@@ -285,11 +285,9 @@ def shutdown(tmp: Path, state: str, sig: int = signal.SIGINT) -> dict:
     }
 
 
-def make_session(out: Path) -> Path:
-    """nadir_hover rendered for :data:`SESSION_S` s at :data:`SESSION_FPS` fps (once per directory), by the
-    simulator's own command (``skyfix sim``: the groundstation imports no module of the simulator)."""
-    if (out / "session.toml").exists():
-        return out
+def session_scenario(out: Path) -> Path:
+    """The scenario of :func:`make_session` into ``out``, written next to it: nadir_hover for :data:`SESSION_S` s at
+    :data:`SESSION_FPS` fps."""
     text = (
         (ROOT / "sim_fixtures" / "scenarios" / "nadir_hover.toml")
         .read_text()
@@ -299,7 +297,15 @@ def make_session(out: Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     scenario = out.parent / f"{out.name}.toml"
     scenario.write_text(text)
-    cmd = skyfix("sim", str(scenario), "--out", str(out), "--quiet")
+    return scenario
+
+
+def make_session(out: Path) -> Path:
+    """:func:`session_scenario` rendered into ``out`` (once per directory), by the simulator's own command
+    (``skyfix sim``: the groundstation imports no module of the simulator)."""
+    if (out / "session.toml").exists():
+        return out
+    cmd = skyfix("sim", str(session_scenario(out)), "--out", str(out), "--quiet")
     subprocess.run(cmd, check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
     return out
 
