@@ -240,7 +240,7 @@ def test_the_operator_page_shows_the_reference(plain, tmp_path):
             text, fix_text = row(), page.inner_text("#fix-text")
             browser.screenshot("reference")
             assert not browser.errors, browser.errors
-        live.finish()
+        live.finish(early=True)
     print(f"{text!r}; {fix_text!r}")
     assert re.search(
         r"offset N [-\d.]+ m ± 0\.\d{3} m, E [-\d.]+ m ± 0\.\d{3} m added to every fix", text
