@@ -86,7 +86,7 @@ def test_a_vehicle_at_the_frames_edges_is_started_and_followed_without_centring(
 
 def test_a_follow_passed_on_contrast_alone_is_moved_onto_the_vehicle_near_the_prediction():
     """A follow whose score is under the follow bar (passed on its contrast alone) and whose match slid beyond
-    the square of the vehicle standing out near the prediction is moved half-way onto that vehicle; about its own
+    the square of the vehicle standing out near the prediction is moved onto that vehicle; about its own
     match the vehicle is out of reach (it would stay on the seafloor). A match inside that square is centred
     about itself as any follow."""
     floor = _floor(7)
@@ -94,11 +94,10 @@ def test_a_follow_passed_on_contrast_alone_is_moved_onto_the_vehicle_near_the_pr
     u, v = VEHICLE[0] - 8.0, VEHICLE[1] - 5.0  # the vehicle moved there, as predicted
     frame = _with_vehicle(floor, u, v)
     slid = (u + 24.0, v + 3.0)  # the match slid onto the seafloor beside it
-    half_way = ((slid[0] + u) / 2.0, (slid[1] + v) / 2.0)
     cu, cv_ = _centred(m, frame, *slid, predicted=(u, v))
-    assert math.hypot(cu - half_way[0], cv_ - half_way[1]) <= 1.5, (cu, cv_)
+    assert math.hypot(cu - u, cv_ - v) <= 1.5, (cu, cv_)
     # about its own match: short of it (the vehicle's square out of reach)
-    assert math.hypot(*np.subtract(_centred(m, frame, *slid), half_way)) > 4.0
+    assert math.hypot(*np.subtract(_centred(m, frame, *slid), (u, v))) > 8.0
     inside = (u + 5.0, v + 2.0)
     assert _centred(m, frame, *inside, predicted=(u, v)) == _centred(m, frame, *inside)
 

@@ -62,8 +62,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   reaches ``wave_keep_contrast`` of the level (a seafloor patch passes a frame's lower bar now and then).
   A follow that passes in waves is moved part of the way onto the vehicle standing out of the seafloor near it
   (:meth:`~TemplateMatcher._centred`; the smoothed template matches about as well with the vehicle in a corner of
-  its square), or near the prediction where it passed on its contrast alone and lies beyond that vehicle's square:
-  judged, and learnt from, where the template matched.
+  its square), or the whole way onto the vehicle near the prediction where it passed on its contrast alone and
+  lies beyond that vehicle's square: judged, and learnt from, where the template matched.
 - Neither takes a candidate away from the prediction while the UUV's first appearance
   still matches nearer the prediction (:meth:`~TemplateMatcher._still_there`: the UUV
   partly hidden, say by a vehicle passing over it, beside a look-alike). Only a candidate
@@ -956,7 +956,7 @@ class TemplateMatcher:
         about as well with the vehicle in a corner of its square as at its centre). A follow that passed on its
         contrast alone (``predicted``: the prediction it was searched about; its score under the follow bar, the
         template does not tell where in the window the vehicle is) and whose match lies beyond the square of the
-        vehicle standing out near the prediction is moved as far onto that vehicle instead (the match slides over
+        vehicle standing out near the prediction is moved onto that vehicle instead (the match slides over
         the seafloor beside it)."""
         found = self._on_vehicle(blob)
         if (
@@ -965,7 +965,7 @@ class TemplateMatcher:
         ):
             half = self._box() * self.k / 2.0
             if max(abs(u - there[0]), abs(v - there[1])) > half:
-                found = there
+                return there
         if found is None:
             return u, v
         pull = self.p.wave_centre_pull
