@@ -97,3 +97,39 @@ def test_nothing_darker_near_the_pixel_is_no_centroid():
     assert (
         abs(found[0] - 80.0) < 1.0 and 1.0 < found[1] - 60.0 < 4.0
     )  # the side below pulls it down
+
+
+def _patched(floor, side: int, rng) -> np.ndarray:
+    """The vehicle at (80, 60) with a dark patch 7 px wide beside its hull on the ``side`` (+1 right, -1 left): a
+    shadow, a caustic's edge, joining the silhouette."""
+    img = _frame(floor, 80.0, 60.0, rng)
+    inner = 80 + side * (HULL[0] + 1)
+    cols = slice(min(inner, inner + 7 * side), max(inner, inner + 7 * side))
+    img[60 - HULL[1] : 60 + HULL[1] + SIDE_PX, cols] = 70
+    return img
+
+
+def test_a_reacquired_frames_silhouette_is_as_noisy_as_any():
+    """After a loss the running average starts again from one frame's offset: the deadband is still the
+    silhouette's own noise (measured before the loss), not nil, so one frame's outline does not move the pixel by
+    its scatter. The tracker is on the vehicle throughout; a patch beside the hull, on either side by turns, puts
+    the silhouette's centroid a few pixels to that side."""
+    rng = np.random.default_rng(5)
+    floor = _seafloor(rng)
+    found = silhouette_centroid(_patched(floor, 1, rng), 80.0, 60.0, 2.0 * HULL[0])
+    assert found is not None and found[0] - 80.0 > 1.5
+    steer = CentroidSteer()
+    box = (80 - HULL[0], 60 - HULL[1], 2 * HULL[0] + 1, 2 * HULL[1] + 1)
+    ok = TrackResult("ok", 80.0, 60.0, box, 0.8, 1.0)
+    lost_at = int(3 * FPS)
+    moved = []
+    for k in range(int(4 * FPS)):
+        t = 1.7e9 + k / FPS
+        if k == lost_at:
+            steer.step(np.zeros((H, W), np.uint8), TrackResult("lost"), t, 1.0, 2.0 * HULL[0])
+            continue
+        result = steer.step(_patched(floor, 1 if k % 2 else -1, rng), ok, t, 1.0, 2.0 * HULL[0])
+        if k > lost_at:
+            moved.append(np.hypot(result.u - 80.0, result.v - 60.0))
+    assert moved[0] < 0.5, moved[:3]  # the re-acquired frame's outline, the patch on one side: kept
+    assert max(moved) < 1.0, max(moved)

@@ -14,7 +14,9 @@ in waves (the *anchor*): the selected point (the top face's centre) is where it 
 oblique view or a shadow puts off the silhouette's centroid. A walk within :attr:`CentroidParams.walk_sigmas` of
 the average's own scatter (the offset's frame-to-frame change, averaged) is taken as noise and that much of it is
 left out: where the tracker does not walk (light winds) its pixel is kept. After a loss the average starts again
-from the re-acquired frame's offset; the anchor stays (the vehicle, not the tracker, sets it).
+from the re-acquired frame's offset, its scatter still the offset's noise measured before (the silhouette's, not the
+track's: one frame's offset is as noisy after a loss as before it); the anchor stays (the vehicle, not the tracker,
+sets it).
 
 The tracker's decisions (its predictions, its ok and lost frames) are untouched: the steer is applied to the result a
 :class:`~localizer.tracking.session.TrackingSession` step returned, after it, and only where the matcher reads the
@@ -48,7 +50,7 @@ class CentroidParams:
     reach: float = 1.2  # the square's half-size, × the vehicle's apparent length
     rim: float = 0.8  # the seafloor: the square's pixels beyond this share of its half-size
     #: silhouette: darker than the seafloor's median by this many of its robust sigmas
-    dark_sigmas: float = 1.5
+    dark_sigmas: float = 2.0
     blur_px: float = 1.0  # the square smoothed first (Gaussian sigma, pixels): the codec's and the sensor's noise
     near: float = 0.5  # the silhouette's parts within this share of the length of the tracked pixel
     follow_s: float = 0.25  # the offset's running average's time constant (s)
@@ -107,14 +109,15 @@ class CentroidSteer:
             math.nan
         )  # its first wavy ok frame, when that came within anchor_s of the first
         self._anchor_sum, self._anchors = np.zeros(2), 0
+        # the offset's mean square change from frame to frame, and their count: the silhouette's noise, kept
+        # through losses (a re-acquired frame's offset is as noisy as any)
+        self._noise2, self._noises = 0.0, 0
         self._forget()
 
     def _forget(self) -> None:
         """After a loss, or while the surface is still: the running average started again."""
         self._offset: np.ndarray | None = None  # the offset's running average
         self._last: np.ndarray | None = None  # the last frame's offset
-        # the offset's mean square change from frame to frame, and their count
-        self._noise2, self._noises = 0.0, 0
         self._t = math.nan
         self._alpha = 1.0  # the running average's last step's weight
 
