@@ -2,7 +2,7 @@
 before the fit and the fit's passes, and what stopping the failing measurements early could save at most.
 
     .venv/bin/python bench/size_cost.py [--session DIR] [--uuv all] [--repeats 3]
-                                        [--out bench/results/size_cost.txt]
+                                        [--out bench/results/size_cost.txt] [--tree DIR] [--base DIR]
 
 Runs ``skyfix process`` on the session (default: ``bench/offline_speed.py``'s three-UUV 1080p one,
 ``/tmp/skyfix-bench/uuvs3_1080p_20s``; a bundled session of ``sim_fixtures/bundled`` works too) in this process,
@@ -19,6 +19,11 @@ passes taken, and two bounds on stopping early:
   failing measurements' passes.
 
 The machine's 1-minute load average after each repeat is printed (CPU times move little with it).
+
+``--tree DIR`` measures the source tree at DIR (an export of another commit) instead of this one. ``--base DIR``
+measures that tree and this one interleaved (base, this, base, ...: each repeat a process of its own, ``--tree``),
+prints both, the median CPU of all measurements and per measurement, and whether the two give the same
+measurements (the same outcomes, heights, headings and pixels, in the same order).
 """
 
 from __future__ import annotations
@@ -26,8 +31,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import json
 import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from collections import Counter
@@ -61,6 +69,10 @@ def measured(session: Path, uuv: str) -> list[dict]:
         result = measure(*args, **kwargs)
         log[-1]["cpu_s"] = time.thread_time() - t0
         log[-1]["outcome"] = result if isinstance(result, str) else "ok"
+        if not isinstance(result, str):  # what a change must keep: repr, every digit
+            log[-1]["result"] = repr(
+                (result.camera_height_m, result.sigma_m, result.heading_rad, result.u, result.v)
+            )
         return result
 
     silhouette._pass, height_from_size.measure = timed_pass, timed_measure
@@ -103,17 +115,8 @@ def summary(log: list[dict]) -> dict:
     return out
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--session", type=Path, default=SESSION)
-    p.add_argument("--uuv", default="all")
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--out", type=Path)
-    args = p.parse_args()
-    runs, loads = [], []
-    for _ in range(args.repeats):
-        runs.append(summary(measured(args.session, args.uuv)))
-        loads.append(os.getloadavg()[0])
+def report(args, runs: list[dict], loads: list[float]) -> list[str]:
+    """The printed summary of ``runs`` (of :func:`summary`)."""
 
     def med(f):
         return statistics.median(f(r) for r in runs)
@@ -126,9 +129,9 @@ def main() -> None:
         f"# bench/size_cost.py --session {args.session} --uuv {args.uuv} --repeats {args.repeats}",
         f"# {count} measurements; thread CPU, median over the repeats; load average (1 min) after each repeat: "
         + ", ".join(f"{x:.1f}" for x in loads),
-        f"all measurements {total:.3f} s; failing {failing:.3f} s ({failing / total:.0%}); their passes "
-        + f"{failing_passes:.3f} s ({failing_passes / total:.0%}: what an oracle stopping each failing "
-        + "measurement right after its scan would save)",
+        f"all measurements {total:.3f} s ({total / count * 1e3:.1f} ms each); failing {failing:.3f} s "
+        + f"({failing / total:.0%}); their passes {failing_passes:.3f} s ({failing_passes / total:.0%}: what an "
+        + "oracle stopping each failing measurement right after its scan would save)",
         "scan: before the first pass (the candidate headings, the scan of outline sizes); passes: the fit's",
         f"{'outcome':16s}{'count':>6s}{'scan s':>9s}{'passes s':>10s}  passes taken (number: measurements)",
     ]
@@ -144,7 +147,83 @@ def main() -> None:
             f"of {count} "
             f"(ok lost: {c['ok_lost']})"
         )
-    emit(lines, args.out, {"runs": runs, "loads": loads})
+    return lines
+
+
+def one_run(tree: Path, args) -> tuple[dict, list[dict]]:
+    """One repeat in a process of its own on the source tree ``tree``: its summary and its measurements."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run.txt"
+        subprocess.run(
+            [sys.executable, __file__, "--session", str(args.session), "--uuv", args.uuv]
+            + ["--repeats", "1", "--tree", str(tree), "--out", str(out)],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+        data = json.loads(out.with_suffix(".json").read_text())
+    return data["runs"][0], data["log"]
+
+
+def compare(args) -> None:
+    """``--base``: the base tree and this one interleaved, and whether their measurements are the same."""
+    this = Path(__file__).resolve().parents[1]
+    trees = {"base": args.base.resolve(), "this": this}
+    runs: dict = {name: [] for name in trees}
+    loads: dict = {name: [] for name in trees}
+    logs: dict = {}
+    for _ in range(args.repeats):
+        for name, tree in trees.items():
+            summary_, log = one_run(tree, args)
+            runs[name].append(summary_)
+            loads[name].append(os.getloadavg()[0])
+            logs.setdefault(name, log)
+    keep = [(m["outcome"], m.get("result")) for m in logs["base"]]
+    got = [(m["outcome"], m.get("result")) for m in logs["this"]]
+    changed = sum(a != b for a, b in zip(keep, got)) + abs(len(keep) - len(got))
+    lines = [
+        f"# bench/size_cost.py --base {trees['base']} (base) against {this} (this), interleaved, "
+        + f"{args.repeats} repeats each, a process each",
+    ]
+    for name in trees:
+        total = statistics.median(r["total_s"] for r in runs[name])
+        count = sum(o["count"] for o in runs[name][0]["outcomes"].values())
+        lines.append(
+            f"{name}: all measurements {total:.3f} s, {total / count * 1e3:.2f} ms each (thread CPU, median; "
+            + "each repeat: "
+            + ", ".join(f"{r['total_s']:.3f}" for r in runs[name])
+            + "; load after each: "
+            + ", ".join(f"{x:.1f}" for x in loads[name])
+            + ")"
+        )
+    lines.append(
+        f"measurements the same: {len(keep) - changed} of {len(keep)} (outcomes, heights, headings, pixels)"
+        + (" (identical)" if changed == 0 else f"; {changed} changed")
+    )
+    for name in trees:
+        lines += [f"## {name}"] + report(args, runs[name], loads[name])
+    emit(lines, args.out, {"runs": runs, "loads": loads, "changed": changed})
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--session", type=Path, default=SESSION)
+    p.add_argument("--uuv", default="all")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--out", type=Path)
+    p.add_argument("--tree", type=Path, help="the source tree to measure (default: this one)")
+    p.add_argument("--base", type=Path, help="a source tree to measure interleaved with this one")
+    args = p.parse_args()
+    if args.base:
+        compare(args)
+        return
+    if args.tree:
+        sys.path.insert(0, str(args.tree.resolve()))
+    runs, loads, logs = [], [], []
+    for _ in range(args.repeats):
+        logs.append(measured(args.session, args.uuv))
+        runs.append(summary(logs[-1]))
+        loads.append(os.getloadavg()[0])
+    emit(report(args, runs, loads), args.out, {"runs": runs, "loads": loads, "log": logs[0]})
 
 
 if __name__ == "__main__":
