@@ -2,7 +2,7 @@
 before the fit and the fit's passes, and what stopping the failing measurements early could save at most.
 
     .venv/bin/python bench/size_cost.py [--session DIR] [--uuv all] [--repeats 3]
-                                        [--out bench/results/size_cost.txt] [--tree DIR] [--base DIR]
+                                        [--out bench/results/size_cost.txt] [--base DIR]
 
 Runs ``skyfix process`` on the session (default: ``bench/offline_speed.py``'s three-UUV 1080p one,
 ``/tmp/skyfix-bench/uuvs3_1080p_20s``; a bundled session of ``sim_fixtures/bundled`` works too) in this process,
@@ -20,9 +20,8 @@ passes taken, and two bounds on stopping early:
 
 The machine's 1-minute load average after each repeat is printed (CPU times move little with it).
 
-``--tree DIR`` measures the source tree at DIR (an export of another commit) instead of this one. ``--base DIR``
-measures that tree and this one interleaved (base, this, base, ...: each repeat a process of its own, ``--tree``),
-prints both, the median CPU of all measurements and per measurement, and whether the two give the same
+``--base DIR`` measures the source tree at DIR (an export of another commit) and this one interleaved (base, this,
+base, ...: each repeat a process of its own, with the tree first on its ``PYTHONPATH``), prints both, the median CPU of all measurements and per measurement, and whether the two give the same
 measurements (the same outcomes, heights, headings and pixels, in the same order).
 """
 
@@ -156,9 +155,10 @@ def one_run(tree: Path, args) -> tuple[dict, list[dict]]:
         out = Path(tmp) / "run.txt"
         subprocess.run(
             [sys.executable, __file__, "--session", str(args.session), "--uuv", args.uuv]
-            + ["--repeats", "1", "--tree", str(tree), "--out", str(out)],
+            + ["--repeats", "1", "--out", str(out)],
             check=True,
             stdout=subprocess.DEVNULL,
+            env=dict(os.environ, PYTHONPATH=str(tree)),
         )
         data = json.loads(out.with_suffix(".json").read_text())
     return data["runs"][0], data["log"]
@@ -210,14 +210,11 @@ def main() -> None:
     p.add_argument("--uuv", default="all")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--out", type=Path)
-    p.add_argument("--tree", type=Path, help="the source tree to measure (default: this one)")
     p.add_argument("--base", type=Path, help="a source tree to measure interleaved with this one")
     args = p.parse_args()
     if args.base:
         compare(args)
         return
-    if args.tree:
-        sys.path.insert(0, str(args.tree.resolve()))
     runs, loads, logs = [], [], []
     for _ in range(args.repeats):
         logs.append(measured(args.session, args.uuv))
