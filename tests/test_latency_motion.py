@@ -220,23 +220,46 @@ def test_online_estimate(configured):
     assert "not the configured" not in log_right
 
 
+def _latency_lines(log: str) -> str:
+    """The auto run's account of its latency: each application (and what it replaced), warnings, failures."""
+    return "\n".join(
+        line for line in log.splitlines() if "skyfix.latency" in line or "video-latency" in line
+    )
+
+
+def _per_frame(err_auto: dict[float, float], err_right: dict[float, float], out: Path) -> str:
+    """Each frame's error in both runs, written to ``out``; the ten worst in the auto run, for the message."""
+    common = sorted(set(err_auto) & set(err_right))
+    rows = [(t, err_auto[t], err_right[t]) for t in common]
+    out.write_text(
+        "t_session,err_auto_m,err_configured_m\n"
+        + "".join(f"{t},{a:.4f},{r:.4f}\n" for t, a, r in rows)
+    )
+    worst = sorted(rows, key=lambda r: -r[1])[:10]
+    return f"worst frames (session s: auto m / configured m; all in {out}): " + ", ".join(
+        f"{t:.2f}: {a:.3f}/{r:.3f}" for t, a, r in worst
+    )
+
+
 # auto at 720p only: at 1080p on a loaded 2-core CI the service decodes too few frames to settle within the
 # session (52 of the 60 frame pairs one estimate needs, 19 s in; 149 on a quiet machine), which is the rule
-# working, not the estimate failing; the 1080p measurement itself is checked above
+# working, not the estimate failing; the 1080p measurement itself is checked above. On a failure the message
+# says why: what was applied when (the service logs each application), the status, and each frame's errors.
 @pytest.mark.parametrize("session", ["720p"], indirect=True)
 def test_auto_applies_the_estimate(session, configured, tmp_path):
     _, gps_right, shift_right, _ = configured
     auto, gps_auto, shift_auto, log_auto = _live(session, "auto", tmp_path / "auto")
     applied = auto["video"]["latency_from_motion"]
-    print(f"auto: {applied}")
+    why = f"auto: {applied}; video {auto['video'].get('frames')} frames, {auto['video'].get('skipped_behind')} skipped behind\n{_latency_lines(log_auto)}"
+    print(why)
     assert (
         applied["applied_ms"] is not None
         and abs(applied["applied_ms"] / 1000 - ERROR_S) <= TOLERANCE_S
-    )
+    ), why
     assert (
         0 < applied["applied_sigma_ms"] <= 5
         and auto["video"]["latency_ms"] == applied["applied_ms"]
-    )
+    ), why
     applied_at = _applied_at(log_auto)  # logged before the first frame is stamped with it
     before = [g for g in gps_auto if g["t_recv"] < applied_at]
     assert len(before) > 20 and all(g["fix_type"] == 1 for g in before), (
@@ -252,14 +275,16 @@ def test_auto_applies_the_estimate(session, configured, tmp_path):
     assert len(common) >= 30, (
         f"only {len(common)} frames with fixes in both runs after the latency was applied "
         f"(auto: {len(err_auto)} frames {min(err_auto, default=None)} … "
-        f"{max(err_auto, default=None)}; configured: {len(err_right)} frames)"
+        f"{max(err_auto, default=None)}; configured: {len(err_right)} frames)\n{why}"
     )
     mae_auto = float(np.mean([err_auto[t] for t in common]))
     mae_right = float(np.mean([err_right[t] for t in common]))
     print(
         f"MAE over {len(common)} frames after auto applied: auto {mae_auto:.4f} m, configured {mae_right:.4f} m"
     )
-    assert mae_auto <= 1.2 * mae_right + 0.003
+    assert mae_auto <= 1.2 * mae_right + 0.003, (
+        f"{why}\n{_per_frame(err_auto, err_right, tmp_path / 'errors.csv')}"
+    )
 
 
 def test_a_wrong_configured_latency_is_warned_about(caplog):
@@ -275,6 +300,28 @@ def test_a_wrong_configured_latency_is_warned_about(caplog):
         online._judge(OffsetEstimate(offset_s, 0.004, 210, 0.1))
     lines = [r.getMessage() for r in caplog.records if "not the configured" in r.getMessage()]
     assert len(lines) == 1 and "79 ± 4 ms" in lines[0] and "configured 0 ms" in lines[0]
+
+
+def test_auto_settles_on_new_frame_pairs_only():
+    """A starved service (its decoder behind, its measuring process waiting for a core) estimates again from the
+    same frame pairs: such repeats agree by themselves and must not settle; three from new pairs do, and the
+    applied latency's sigma covers their spread."""
+    applied = []
+    online = OnlineLatency(
+        load_session(ROOT / "sim_fixtures" / "bundled" / "nadir_hover").calibration,
+        None,
+        None,
+        applied.append,
+    )
+    stale = OffsetEstimate(-0.060, 0.001, 70, 0.1, 12.0)
+    for _ in range(5):  # the same pairs, once a second
+        online._judge(stale)
+    assert not online.settled and online.applied_s is None and applied == []
+    for offset_s, t_to in ((-0.0615, 12.4), (-0.0630, 12.9)):
+        online._judge(OffsetEstimate(offset_s, 0.001, 74, 0.1, t_to))
+    spread_s = np.std([-0.060, -0.0615, -0.063], ddof=1)
+    assert online.settled and applied == [0.063]
+    assert online.applied_sigma_s == pytest.approx(np.hypot(0.001, spread_s), rel=1e-12)
 
 
 def _rodrigues(rotvec: np.ndarray) -> np.ndarray:

@@ -16,7 +16,9 @@ heading (a gimbal locked to North) nothing (σ large).
 - **Settled** (:func:`settled`), the one rule for using an estimate: :data:`STEADY_COUNT`
   estimates, each *sure* (1-sigma at most :data:`APPLY_SIGMA_S` from at least
   :data:`APPLY_PAIRS` frame pairs), within :data:`STEADY_S` of each other. Live they
-  are the last estimates (one a second, over the last 20 s); offline the estimates
+  are the last estimates (one a second, over the last 20 s), each with a frame pair newer than the one
+  before's (repeats from the same pairs, a busy machine's, agree by themselves), the applied 1-sigma
+  widened by their spread; offline the estimates
   from consecutive thirds of the session (:func:`offset_from_rotations`), whose whole
   estimate is then the one used.
 - ``skyfix estimate-latency SESSION``: for a recording: by how much the frames'
@@ -82,6 +84,7 @@ class OffsetEstimate:
     sigma_s: float
     pairs: int  # frame pairs used
     rms_mrad: float  # residual per rotation component
+    t_to: float = math.nan  # the newest frame of the pairs (their clock, s)
 
 
 def sure(e: OffsetEstimate | None) -> bool:
@@ -250,7 +253,9 @@ def estimate_offset(
     sigma = float(np.sqrt(s2 / info)) if info > 0 else float("inf")
     resid = meas[use] - pred[best, use]
     sigma *= float(np.sqrt(_correlation_factor(np.sum(slope * resid * weights, axis=1))))
-    return OffsetEstimate(float(offset), sigma, n, float(np.sqrt(np.mean(resid**2))) * 1000.0)
+    return OffsetEstimate(
+        float(offset), sigma, n, float(np.sqrt(np.mean(resid**2))) * 1000.0, float(t1.max())
+    )
 
 
 def axis_weights(residuals: np.ndarray) -> np.ndarray:
@@ -596,6 +601,10 @@ class OnlineLatency:
             shared.close()
 
     def _judge(self, e: OffsetEstimate) -> None:
+        """One estimate: towards settling only when it has a frame pair newer than the last one judged (a starved
+        measuring process or decoder gives estimates from the same pairs again, which agree by themselves)."""
+        if self._recent and e.t_to <= self._recent[-1].t_to:
+            return
         latency = -e.offset_s
         self._recent.append(e)
         self.settled = settled(self._recent)
@@ -614,15 +623,20 @@ class OnlineLatency:
             )
         if self.apply is None:
             return
-        self.applied_sigma_s = e.sigma_s
+        # the claim covers what the settled estimates disagree on, as offline the thirds' spread
+        spread_s = float(np.std([r.offset_s for r in self._recent], ddof=1))
+        self.applied_sigma_s = math.hypot(e.sigma_s, spread_s)
         if self.applied_s is not None and abs(latency - self.applied_s) <= 0.002:
             return
-        if self.applied_s is None:
-            log.info(
-                "video: latency %.1f ± %.1f ms from the image's motion, applied: fixes from here on",
-                latency * 1000,
-                e.sigma_s * 1000,
-            )
+        log.info(
+            "video: latency %.1f ± %.1f ms from the image's motion, applied%s (%d frame pairs)",
+            latency * 1000,
+            self.applied_sigma_s * 1000,
+            ": fixes from here on"
+            if self.applied_s is None
+            else f" in place of {self.applied_s * 1000:.1f} ms",
+            e.pairs,
+        )
         self.applied_s = latency
         self.apply(latency)
 
