@@ -232,11 +232,11 @@ def _per_frame(err_auto: dict[float, float], err_right: dict[float, float], out:
     common = sorted(set(err_auto) & set(err_right))
     rows = [(t, err_auto[t], err_right[t]) for t in common]
     out.write_text(
-        "t_session,err_auto_m,err_configured_m\n"
+        "t_truth,err_auto_m,err_configured_m\n"
         + "".join(f"{t},{a:.4f},{r:.4f}\n" for t, a, r in rows)
     )
     worst = sorted(rows, key=lambda r: -r[1])[:10]
-    return f"worst frames (session s: auto m / configured m; all in {out}): " + ", ".join(
+    return f"worst frames (truth.csv t: auto m / configured m; all in {out}): " + ", ".join(
         f"{t:.2f}: {a:.3f}/{r:.3f}" for t, a, r in worst
     )
 
@@ -250,7 +250,11 @@ def test_auto_applies_the_estimate(session, configured, tmp_path):
     _, gps_right, shift_right, _ = configured
     auto, gps_auto, shift_auto, log_auto = _live(session, "auto", tmp_path / "auto")
     applied = auto["video"]["latency_from_motion"]
-    why = f"auto: {applied}; video {auto['video'].get('frames')} frames, {auto['video'].get('skipped_behind')} skipped behind\n{_latency_lines(log_auto)}"
+    why = (
+        f"auto: {applied}; video {auto['video'].get('frames')} frames, "
+        f"{auto['video'].get('skipped_behind')} skipped behind; statuses {auto['pipeline']['statuses']}; "
+        f"last target {auto.get('target')}\n{_latency_lines(log_auto)}"
+    )
     print(why)
     assert (
         applied["applied_ms"] is not None
