@@ -9,7 +9,7 @@ true when the decoder falls behind (a loaded laptop, 1080p): the packets wait in
 queue of at most :data:`PACKET_BACKLOG`, not in the socket. While more than
 :data:`BEHIND_PACKETS` wait, a live stream's decoded frames are not converted nor
 handed over (they would be stale; ``skipped_behind`` in the status), so the
-decoder catches up instead of falling further behind; while more than :data:`CATCH_UP_PACKETS` wait (a decoder
+decoder catches up instead of falling further behind (not the run's first frame: ``[tracker] init_bbox`` is its); while more than :data:`CATCH_UP_PACKETS` wait (a decoder
 slower than the stream: a saturated laptop), the packets before the newest keyframe among them are dropped
 unread (newest wins; counted in ``skipped_behind`` too): decoding restarts there, fresh frames come out again
 instead of none at all (every decoded frame stale, skipped) with the stream seconds behind. Each frame handed over goes
@@ -358,7 +358,9 @@ class VideoLive:
                 self.decode_errors += 1
                 continue
             self.backlog = len(waiting) + packets.qsize()
-            behind = self.source.live and self.backlog > BEHIND_PACKETS
+            # the run's first frame is handed over however late: [tracker] init_bbox belongs to it (the pipeline
+            # never drops it either), and a box put on a later frame, the UUV moved, is pixels off it in every fix
+            behind = self.source.live and self.backlog > BEHIND_PACKETS and self.frames > 0
             for frame in decoded:
                 t_first = first_recv.pop(frame.pts, t_recv)
                 if behind:
