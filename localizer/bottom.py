@@ -243,7 +243,7 @@ class BottomEstimate:
         depth = f"floor {self.floor_depth_m:.2f} m" + (
             f" ± {self.sigma_floor_depth_m:.2f}" if self.sigma_floor_depth_m > 0 else " (given)"
         )
-        walk = np.hypot(*self.walk_ne_m.T)
+        walk, sigma_walk = np.hypot(*self.walk_ne_m.T), np.hypot(*self.sigma_walk_ne_m.T)
         if len(self.parts):
             heading = "/".join(
                 "—" if np.isnan(y) else f"{np.degrees(y):+.2f}" for y in self.parts[:, 2]
@@ -252,7 +252,8 @@ class BottomEstimate:
                 f" (sigmas with the {len(self.parts)} parts' spread; their headings {heading}°)"
             )
         return (
-            f"{tilt}; {yaw}; {depth}; position walk up to {walk.max():.2f} m about the GNSS's mean; "
+            f"{tilt}; {yaw}; {depth}; position walk up to {walk.max():.2f} m ± {sigma_walk.max():.3f} m "
+            "about the GNSS's mean; "
             f"{self.n_features} floor features, {self.n_observations} observations in {self.n_frames} frames, "
             f"{self.rms_px:.2f} px RMS"
         )

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from groundstation.offline.bottom import MIN_TILT_DEG, PoseCorrection
 from localizer import bottom
 from localizer.camera import Camera
 from sim_fixtures.geometry import R_GIMBAL_FROM_CV, SimCamera, matrix_zyx, project, surface_crossing
@@ -129,6 +130,18 @@ def test_plain_gnss_walk_is_found_about_its_mean():
     found = est.walk_at(poses.t_s)
     assert np.max(np.abs(found - expected)) < 0.04 < np.max(np.abs(expected))
     assert np.degrees(est.yaw_rad) == pytest.approx(YAW_DEG, abs=0.5)
+    # the line says how sure the walk is, and what each fix's h_acc takes for what was applied (at least the AHRS's
+    # wander) and for what was not
+    sigma_walk = np.max(np.hypot(*est.sigma_walk_ne_m.T))
+    assert sigma_walk > 0
+    assert (
+        f"position walk up to {np.max(np.hypot(*est.walk_ne_m.T)):.2f} m ± {sigma_walk:.3f} m about"
+        in est.describe()
+    )
+    said = PoseCorrection(est, True, False, "camera").describe()
+    tilt_deg = max(MIN_TILT_DEG, np.degrees(est.sigma_tilt_rad))
+    assert f"h_acc takes tilt ± {tilt_deg:.2f}° for them, not [uncertainty]'s" in said
+    assert "heading ±" not in said.split("h_acc")[1] and "the camera's height" in said
 
 
 def test_hovering_drone_does_not_claim_the_biases():

@@ -338,17 +338,25 @@ class PoseCorrection:
         corrected = dataclasses.replace(
             pose, R_ned_from_cv=R, lat_deg=np.asarray(lat), lon_deg=np.asarray(lon)
         )
-        cal, e = session.calibration, self.estimate
-        sigmas = cal.sigmas
-        if self.tilt_applied:
-            sigmas = dataclasses.replace(
-                sigmas, tilt_deg=max(MIN_TILT_DEG, float(np.degrees(e.sigma_tilt_rad)))
-            )
-        if self.yaw_applied:
-            sigmas = dataclasses.replace(
-                sigmas, yaw_deg=max(MIN_YAW_DEG, float(np.degrees(e.sigma_yaw_rad)))
-            )
-        return corrected, dataclasses.replace(cal, sigmas=sigmas)
+        cal = session.calibration
+        claimed = {k: v for k, v in self.claimed_deg().items() if v is not None}
+        return corrected, dataclasses.replace(
+            cal, sigmas=dataclasses.replace(cal.sigmas, **claimed)
+        )
+
+    def claimed_deg(self) -> dict[str, float | None]:
+        """The tilt's and the heading's 1-sigmas (degrees) each fix's accuracy takes instead of ``[uncertainty]
+        tilt_deg``, ``yaw_deg``: the estimate's (with the parts' spread), floored at :data:`MIN_TILT_DEG`,
+        :data:`MIN_YAW_DEG` (the AHRS's wander); None where that part is not applied (the calibration's stays)."""
+        e = self.estimate
+        return {
+            "tilt_deg": max(MIN_TILT_DEG, float(np.degrees(e.sigma_tilt_rad)))
+            if self.tilt_applied
+            else None,
+            "yaw_deg": max(MIN_YAW_DEG, float(np.degrees(e.sigma_yaw_rad)))
+            if self.yaw_applied
+            else None,
+        }
 
     def position_ne_m(self, pose: CameraPose) -> np.ndarray:
         """The position correction (K, 2) per frame of ``pose`` (true = reported + it): the walk, and where the
@@ -372,11 +380,24 @@ class PoseCorrection:
         return walk + np.nan_to_num(remainder)
 
     def describe(self) -> str:
+        """One line: what was estimated and how sure (:meth:`localizer.bottom.BottomEstimate.describe`), what was
+        applied, and the sigmas h_acc took for it (:meth:`claimed_deg`; the rest of h_acc is as without it)."""
         what = [w for w, on in (("tilt", self.tilt_applied), ("heading", self.yaw_applied)) if on]
         applied = (
             f"applied: {' and '.join(what)} ({self.tilt_frame} frame tilt) and the position walk"
             if what
             else "applied: the position walk only"
+        )
+        claimed = [
+            f"{word} ± {sigma:.2f}°"
+            for word, sigma in zip(("tilt", "heading"), self.claimed_deg().values())
+            if sigma is not None
+        ]
+        if claimed:
+            applied += f"; h_acc takes {' and '.join(claimed)} for them, not [uncertainty]'s"
+        applied += (
+            "; not told by the bottom, in h_acc as without it: the GNSS's offset (the walk is about its mean) "
+            "and the camera's height (the floor's depth takes its error)"
         )
         return f"pose from the bottom: {self.estimate.describe()}; {applied}"
 
