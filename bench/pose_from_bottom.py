@@ -85,12 +85,8 @@ def truth_check(name: str, path: Path, s, duration_s: float | None) -> str:
     sc = scenario_of(name, duration_s)
     te = np.genfromtxt(path / "truth_errors.csv", delimiter=",", names=True)
     tau = np.arange(len(te)) / sc.fps
-    pose = camera_pose(s.calibration, s.telemetry, te["t"])
     site = sc.site
-    n, e, _ = geodetic_to_ned(
-        pose.lat_deg, pose.lon_deg, pose.alt_amsl_m, site.lat_deg, site.lon_deg, site.surface_amsl_m
-    )
-    off = np.column_stack([n, e]) - Motion(sc).uav_ned(tau)[:, :2]
+    off = reported_minus_true(name, path, s, duration_s)
     off -= np.column_stack([te["north_err_m"], te["east_err_m"]])
     clock, tel = Clock.of(sc), sc.telemetry
     sent, _ = sample_times(
@@ -114,6 +110,19 @@ def truth_check(name: str, path: Path, s, duration_s: float | None) -> str:
         f"(the 1e-7 degree steps alone: {100 * 0.0111 / np.sqrt(12):.2f} cm north); the tilt's wander "
         f"uncorrected would be a shape of {wander_mm:.1f} mm"
     )
+
+
+def reported_minus_true(name: str, path: Path, s, duration_s: float | None) -> np.ndarray:
+    """The reported UAV position (GLOBAL_POSITION_INT as the ground station interpolates it) less the true one (the
+    scenario's motion) at ``truth_errors.csv``'s frames: (K, 2) m north, east."""
+    sc = scenario_of(name, duration_s)
+    te = np.genfromtxt(path / "truth_errors.csv", delimiter=",", names=True)
+    pose = camera_pose(s.calibration, s.telemetry, te["t"])
+    site = sc.site
+    n, e, _ = geodetic_to_ned(
+        pose.lat_deg, pose.lon_deg, pose.alt_amsl_m, site.lat_deg, site.lon_deg, site.surface_amsl_m
+    )
+    return np.column_stack([n, e]) - Motion(sc).uav_ned(np.arange(len(te)) / sc.fps)[:, :2]
 
 
 def scores(s, pose_from_bottom: str):
