@@ -64,6 +64,7 @@ Radians, metres, seconds.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
@@ -86,6 +87,7 @@ _DEPTH_GRID_M = np.geomspace(0.2, 60.0, 48)
 _ANGLE_STEP = 1e-5  # rad, finite difference of the global parameters
 _DEPTH_STEP = 1e-4  # m
 _PIXEL_STEP = 0.5  # px, finite difference of the ground-per-pixel Jacobian
+_HEIGHT_STEP = 0.01  # m, finite difference of the heights' effect (:func:`_per_height`)
 N_GLOBAL = 4  # tilt_fwd, tilt_right, yaw, floor depth
 
 
@@ -174,6 +176,9 @@ class BottomEstimate:
     #: (J, 2) the walk the reported velocity told at the knots (:func:`velocity_drift` on the fit's frames, about its
     #: mean), which the walk's prior follows; (0, 2): the frames had no velocity
     velocity_walk_ne_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    #: (3,) how the tilt_fwd, tilt_right and yaw found move (rad) per metre the reported heights read high
+    #: (:func:`_per_height`): the floor does not tell the height, and its sigmas do not include this
+    bias_per_height_rad: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
 
     @property
     def sigma_tilt_rad(self) -> float:
@@ -251,6 +256,11 @@ class BottomEstimate:
             depth += (
                 f" (sigmas with the {len(self.parts)} parts' spread; their headings {heading}°)"
             )
+        per_m = np.degrees(self.bias_per_height_rad)
+        yaw += (
+            f"; per metre the camera's height reads high they move tilt {per_m[0]:+.2f}°/{per_m[1]:+.2f}°, "
+            f"heading {per_m[2]:+.2f}° (the floor does not tell the height)"
+        )
         return (
             f"{tilt}; {yaw}; {depth}; position walk up to {walk.max():.2f} m ± {sigma_walk.max():.3f} m "
             "about the GNSS's mean; "
@@ -640,6 +650,23 @@ def _covariance(jac: sp.csr_matrix, n_dense: int, scale2: float) -> np.ndarray:
     return np.linalg.inv(S) * scale2
 
 
+def _per_height(prob: _Problem, x: np.ndarray, inliers: np.ndarray) -> np.ndarray:
+    """How the biases at the solution ``x`` of ``prob`` move per metre of a common error of the reported heights
+    (tilt_fwd, tilt_right, yaw; rad per metre reading high): the Gauss-Newton step that takes up every frame's height
+    moved by the same amount, the floor's depth, the walk, the wander and the features free (the floor's depth takes
+    most of it: from above, a floor point's offset shows about ``h + D/n``); the inlying observations only."""
+    base = prob.observation_residuals(x)
+    moved = copy.copy(prob)
+    moved.h = prob.h + _HEIGHT_STEP
+    jac = prob.jacobian(x)
+    keep = np.concatenate([np.repeat(inliers, 2), np.ones(jac.shape[0] - 2 * prob.M)])
+    jac = jac.multiply(keep[:, None]).tocsr()
+    column = np.zeros(jac.shape[0])
+    column[: 2 * prob.M] = ((moved.observation_residuals(x) - base) / _HEIGHT_STEP).ravel()
+    S, g, _ = _reduced((jac.T @ jac).tocsc(), jac.T @ (column * keep), prob.first_feature)
+    return -np.linalg.solve(S, g)[:3]
+
+
 def _reduced(H: sp.csc_matrix, g: np.ndarray, n_dense: int) -> tuple[np.ndarray, np.ndarray, float]:
     """The normal equations ``H·δ = −g`` with the parameters after the first ``n_dense`` (2×2 feature blocks, none
     coupled to another) eliminated: the Schur complement ``S`` (n_dense × n_dense), the reduced ``g`` and
@@ -715,7 +742,7 @@ def estimate(
     ``parts`` ≥ 2: also solved on that many consecutive stretches of time alone, and the sigmas widened by their
     spread (:func:`with_parts`).
     """
-    est = _estimate(camera, n_water, poses, obs, priors)
+    est = _estimate(camera, n_water, poses, obs, priors, per_height=True)
     return est if parts < 2 else with_parts(est, camera, n_water, poses, obs, parts)
 
 
@@ -798,9 +825,15 @@ def _part_values(
 
 
 def _estimate(
-    camera: Camera, n_water, poses: FramePoses, obs: Observations, priors: Priors
+    camera: Camera,
+    n_water,
+    poses: FramePoses,
+    obs: Observations,
+    priors: Priors,
+    per_height: bool = False,
 ) -> BottomEstimate:
-    """The whole recording's fit (:func:`estimate` without parts)."""
+    """The whole recording's fit (:func:`estimate` without parts); ``per_height``: with
+    :attr:`BottomEstimate.bias_per_height_rad` (else zeros)."""
     import scipy.sparse as sp
 
     prob = _Problem(camera, n_water, poses, obs, priors)
@@ -850,6 +883,7 @@ def _estimate(
         velocity_walk_ne_m=prob.walk0.copy()
         if poses.velocity_ne_mps is not None
         else np.zeros((0, 2)),
+        bias_per_height_rad=_per_height(prob, x, inliers) if per_height else np.zeros(3),
     )
 
 

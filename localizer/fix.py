@@ -254,6 +254,7 @@ def locate(
             sigma_depth_m=pose.sigma_depth_m[idx],
             sigma_time_s=pose.sigma_time_s[idx],
             sigma_pixel_px=sig_px[idx],
+            rotation_per_height_ned=pose.rotation_per_height_ned[idx],
         )
         sig_n[idx], sig_e[idx], cov_ne[idx] = (
             np.sqrt(cov[:, 0, 0]),

@@ -64,6 +64,9 @@ class CameraPose:
     depth_source: np.ndarray
     # how the frame is aligned to the telemetry: configured, timesync, motion or unknown
     time_source: np.ndarray
+    # (N, 3) the attitude's error that comes with each metre the height reads high (a NED rotation vector per metre:
+    # a pose from the bottom's tilt and heading take up part of a height error, groundstation.offline.bottom); 0: none
+    rotation_per_height_ned: np.ndarray
 
 
 def take(pose: CameraPose, idx) -> CameraPose:
@@ -210,6 +213,7 @@ def uav_pose(
         height_source=height.source,
         depth_source=np.full(n, "", dtype=object),
         time_source=np.full(n, time_source, dtype=object),
+        rotation_per_height_ned=np.zeros((n, 3)),
     )
 
 

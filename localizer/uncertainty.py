@@ -128,6 +128,7 @@ def accuracy(
     sigma_depth_m=None,
     sigma_time_s=None,
     sigma_pixel_px=None,
+    rotation_per_height_ned=None,
 ):
     """``(h_acc_m, v_acc_m, cov_ne_m2)`` for fixes made from these inputs (shapes as ``u``; cov ``(..., 2, 2)``).
 
@@ -137,7 +138,10 @@ def accuracy(
     turn the time sigma into metres. ``sigma_height_m``, ``sigma_depth_m``, ``sigma_time_s``
     and ``sigma_pixel_px`` (scalars or shaped as ``u``) replace the calibration's ``height_m``,
     ``depth_m``, ``time_s`` and ``pixel_px`` when given: the inputs' own sigmas, per frame
-    (the pixel's: the tracker's, for each of u and v).
+    (the pixel's: the tracker's, for each of u and v). ``rotation_per_height_ned`` (rad per metre, ``(..., 3)``): the
+    attitude's error that comes with the height's (reported − true, a NED rotation vector per metre the height reads
+    high: a pose from the bottom's, whose tilt takes up part of a height error), so the height's term is the two
+    together.
     """
     u = np.asarray(u, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -158,6 +162,11 @@ def accuracy(
     J = [
         (off[k] - off[0]) / step for k, step in enumerate((px, px, ang, ang, ang, dl, dl), start=1)
     ]
+    if (
+        rotation_per_height_ned is not None
+    ):  # the corrected ray is the true one turned back by that error
+        turn = np.asarray(rotation_per_height_ned, dtype=float)
+        J[5] = J[5] - sum(J[2 + i] * turn[..., i : i + 1] for i in range(3))
     sig_h = sigmas.height_m if sigma_height_m is None else sigma_height_m
     sig_d = sigmas.depth_m if sigma_depth_m is None else sigma_depth_m
     sig_t = np.broadcast_to(

@@ -117,6 +117,20 @@ def test_moving_drone_recovers_the_biases_and_the_floor():
     R_true = est.correction(poses.bias_heading_rad) @ poses.R_ned_from_cv
     residual = Rotation.from_matrix(R_true @ np.swapaxes(poses.R_ned_from_cv, 1, 2)).as_rotvec()
     assert np.degrees(np.abs(residual[:, 2])) == pytest.approx(YAW_DEG, abs=0.5)
+    # the floor does not tell the height: reported 0.3 m high, the floor's depth takes most of it (about n times) and
+    # the tilt the rest, by what the estimate says it moves per metre (measured 0.22° right, 5x its sigma)
+    high = bottom.estimate(
+        lens,
+        N_WATER,
+        dataclasses.replace(poses, height_m=poses.height_m + 0.3),
+        obs,
+        bottom.Priors(walk_rate_m=0.003),
+    )
+    assert est.floor_depth_m - high.floor_depth_m == pytest.approx(0.3 * N_WATER, rel=0.15)
+    moved = np.array([*(high.tilt_rad - est.tilt_rad), high.yaw_rad - est.yaw_rad])
+    assert np.degrees(np.abs(moved[1])) > 2 * np.degrees(est.sigma_tilt_rad)
+    assert np.degrees(moved) == pytest.approx(np.degrees(0.3 * est.bias_per_height_rad), abs=0.02)
+    assert "per metre the camera's height reads high they move tilt" in est.describe()
 
 
 def test_plain_gnss_walk_is_found_about_its_mean():

@@ -172,3 +172,23 @@ def test_the_trackers_own_pixel_sigma_per_frame_against_monte_carlo():
             R, u, v, h, d, dataclasses.replace(quiet, pixel_px=sigma_px)
         )
         assert float(claimed) == pytest.approx(half_r95, rel=0.05)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_an_attitude_error_that_comes_with_the_heights_against_monte_carlo(sign):
+    # a pose from the bottom's tilt moves with the height's error (reported − true, per metre reading high): the
+    # camera turned back by that tilt at each drawn height; one sign takes back part of what the height moved the fix,
+    # the other adds to it, and the claim follows either (the height's term alone would be 25-40 % off)
+    R, u, v, h, d = SCENES["35° oblique"]
+    sig = dataclasses.replace(Sigmas(), **{**dict.fromkeys(ONLY, 0.0), "height_m": 1.0})
+    per_m = sign * np.radians([0.4, -0.6, 0.1])  # rad per metre, NED
+    rng = np.random.default_rng(4)
+    dh = rng.normal(0.0, sig.height_m, 3000)
+    Rs = np.stack([cv2.Rodrigues(-per_m * x)[0] @ R for x in dh])
+    true, _ = pixel_to_offset(CAM, R, u, v, h, d, N_WATER)
+    off, _ = pixel_to_offset(CAM, Rs, u, v, h + dh, d, N_WATER)
+    half_r95 = float(np.quantile(np.hypot(*(off - true).T), 0.95)) / 2.0
+    h_acc = accuracy(CAM, R, u, v, h, d, N_WATER, sig, rotation_per_height_ned=per_m)[0]
+    alone = accuracy(CAM, R, u, v, h, d, N_WATER, sig)[0]
+    assert float(h_acc) == pytest.approx(half_r95, rel=0.1)
+    assert abs(float(alone) / half_r95 - 1.0) > 0.25

@@ -34,7 +34,9 @@ The correction (:class:`PoseCorrection`) turns every frame's reported attitude b
 (only the parts applied: a hovering drone's are left alone) and moves the reported position by the
 walk and each frame's own remainder about what the velocity says between the walk's knots (the position's white
 noise: :meth:`PoseCorrection.position_ne_m`); each fix's accuracy then takes the estimate's 1-sigmas (floored at :data:`MIN_TILT_DEG`,
-:data:`MIN_YAW_DEG`: the AHRS's wander) instead of ``[uncertainty] tilt_deg``, ``yaw_deg``. The walk is
+:data:`MIN_YAW_DEG`: the AHRS's wander) instead of ``[uncertainty] tilt_deg``, ``yaw_deg``, and its height term the
+height's error together with the tilt and heading it moves in the estimate
+(:meth:`PoseCorrection.rotation_per_height_ned`: the floor does not tell the height). The walk is
 relative to the GNSS's mean over the recording: its absolute offset stays the GNSS's, and so does the
 position's sigma in h_acc. Each fix says what was estimated (:data:`localizer.fix.POSE_COLUMNS`, also in the
 Zenoh fix message, :class:`groundstation.messages.FixMessage`), and positions.csv gets them per frame (columns after
@@ -336,12 +338,28 @@ class PoseCorrection:
             walk[:, 0], walk[:, 1], 0.0, pose.lat_deg, pose.lon_deg, pose.alt_amsl_m
         )
         corrected = dataclasses.replace(
-            pose, R_ned_from_cv=R, lat_deg=np.asarray(lat), lon_deg=np.asarray(lon)
+            pose,
+            R_ned_from_cv=R,
+            lat_deg=np.asarray(lat),
+            lon_deg=np.asarray(lon),
+            rotation_per_height_ned=self.rotation_per_height_ned(session, pose),
         )
         cal = session.calibration
         claimed = {k: v for k, v in self.claimed_deg().items() if v is not None}
         return corrected, dataclasses.replace(
             cal, sigmas=dataclasses.replace(cal.sigmas, **claimed)
+        )
+
+    def rotation_per_height_ned(self, session: Session, pose: CameraPose) -> np.ndarray:
+        """The attitude error applied that comes with each metre the heights read high (rad per metre, NED rotation
+        vector per frame of ``pose``: :attr:`localizer.bottom.BottomEstimate.bias_per_height_rad`, the parts applied
+        only): a fix's height term in h_acc is the height's error and this together."""
+        e = self.estimate
+        per_m = e.bias_per_height_rad
+        return bottom.bias_rotvec(
+            per_m[:2] if self.tilt_applied else np.zeros(2),
+            per_m[2] if self.yaw_applied else 0.0,
+            self.headings(session, pose),
         )
 
     def claimed_deg(self) -> dict[str, float | None]:
@@ -396,8 +414,8 @@ class PoseCorrection:
         if claimed:
             applied += f"; h_acc takes {' and '.join(claimed)} for them, not [uncertainty]'s"
         applied += (
-            "; not told by the bottom, in h_acc as without it: the GNSS's offset (the walk is about its mean) "
-            "and the camera's height (the floor's depth takes its error)"
+            "; not told by the bottom, in h_acc: the GNSS's offset (the walk is about its mean) and the camera's "
+            "height (the floor's depth takes most of its error; its term has the tilt and heading it moves)"
         )
         return f"pose from the bottom: {self.estimate.describe()}; {applied}"
 
@@ -426,7 +444,7 @@ class PoseCorrection:
 def summary(correction: PoseCorrection) -> dict:
     """What was estimated, how sure and what was applied, as one JSON object (degrees, metres): the tilt about the
     bias frame (``tilt_frame``: the camera's heading or the airframe's) forward and right (and the largest of its
-    wander about them, 0 where none is modelled), the heading, their 1-sigmas (with the parts' spread) and each part's values, the floor's depth, the position's walk about the
+    wander about them, 0 where none is modelled), the heading, their 1-sigmas (with the parts' spread), how they move per metre the height reads high and each part's values, the floor's depth, the position's walk about the
     GNSS's mean (largest, and its largest 1-sigma), the walk prior's rate (m/√s, as the recording chose it), the
     fit (features, observations, frames, RMS pixels, slide share)."""
     e = correction.estimate
@@ -447,6 +465,7 @@ def summary(correction: PoseCorrection) -> dict:
         ),
         "heading_deg": deg[2],
         "sigma_heading_deg": round(float(np.degrees(e.sigma_yaw_rad)), 4),
+        "per_height_deg_per_m": [round(float(x), 4) for x in np.degrees(e.bias_per_height_rad)],
         "parts_deg": [
             [None if not np.isfinite(x) else round(float(np.degrees(x)), 4) for x in part[:3]]
             for part in e.parts
@@ -614,6 +633,7 @@ def fit(
             sigma_floor_depth_m=est.sigma_floor_depth_m,
             priors=est.priors,
             parts=est.parts,
+            bias_per_height_rad=est.bias_per_height_rad,
         )  # sigmas: the free estimate's
     return PoseCorrection(est, tilt, yaw, frame_tilt)
 
