@@ -12,6 +12,8 @@ session, with the estimate applied (``--pose-from-bottom auto``):
 - ``claim``: the share of fixes within 2·h_acc, the median h_acc, the error's RMS per axis (north, east) against the
   claimed 1-sigma's RMS (``sigma_n_m``, ``sigma_e_m``) and their ratio (1: calibrated; one session is one draw of the
   biases and the GNSS's offset, so a ratio is one sample of a correlated error, not a distribution);
+- ``the height's term alone``: the same claim with the height's term as it was before the estimate's tilt and
+  heading per metre of height (:attr:`localizer.bottom.BottomEstimate.bias_per_height_rad`) went into it (base's);
 - ``made of``: each input's share of h_acc² (the median over fixes of 1 − h_acc² without it / h_acc²): what the
   estimate put in (``tilt``, ``heading``: its sigmas, :meth:`groundstation.offline.bottom.PoseCorrection.claimed_deg`)
   and what it left as without it (the GNSS, the height, the pixel, the time, the depth);
@@ -117,13 +119,18 @@ def lines_for(name: str, work: Path) -> list[str]:
     t, u, v = pixels[:3]
     pose, cal = correction.apply(s, camera_pose(s.calibration, s.telemetry, t))
 
-    def fixes_of(names=()):
-        c, p = without(cal, pose, names)
+    def fixes_of(names=(), p=pose):
+        c, p = without(cal, p, names)
         f = locate(c, p, u, v)
         return f, error_ne_m(f.t_unix, f.lat, f.lon, f.status == "ok", s.truth)
 
     fixes, err = fixes_of()
     said, ok = claim_line(fixes, err)
+    alone = dataclasses.replace(
+        pose, rotation_per_height_ned=np.zeros_like(pose.rotation_per_height_ned)
+    )
+    before, _ = claim_line(*fixes_of(p=alone))
+    per_m = np.degrees(correction.estimate.bias_per_height_rad)
     shares = []
     for term, _, _ in TERMS:
         other, _ = fixes_of((term,))
@@ -144,6 +151,10 @@ def lines_for(name: str, work: Path) -> list[str]:
     gnss = off[good].mean(axis=0)
     return [
         f"{name}: claim: {said}",
+        (
+            f"{name}: the height's term alone (the claim before the fit's tilt and heading per metre of "
+            f"height, {per_m[0]:+.2f}/{per_m[1]:+.2f}/{per_m[2]:+.2f}°, went with it): {before}"
+        ),
         f"{name}: made of: " + ", ".join(shares),
         f"{name}: drawn only (no {', no '.join(not_drawn(name))} sigma): {drawn}",
         (
