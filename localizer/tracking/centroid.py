@@ -40,7 +40,6 @@ from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from . import TrackResult
 
@@ -81,6 +80,10 @@ def silhouette_centroid(
     median = float(np.median(floor))
     sigma = 1.4826 * float(np.median(np.abs(floor - median))) + 1e-6
     dark = (square - median) < -p.dark_sigmas * sigma
+    # here, not at the top: scipy.ndimage takes ~0.17 CPU-s to import, which every ``skyfix process`` and live
+    # service paid on its main thread before its first frame, though only a session in waves gets here
+    from scipy import ndimage
+
     dark = ndimage.binary_fill_holes(ndimage.binary_closing(dark))
     dark = ndimage.binary_opening(dark)
     parts, n = ndimage.label(dark)
