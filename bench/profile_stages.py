@@ -21,7 +21,9 @@ Stages, each run as ``skyfix process`` runs it (the same functions, the same arg
   in the frames ``skyfix process`` measures (:func:`~groundstation.latency.video_motion.measured_every` of the
   whole session's frames); the command measures it only where the link's delay is unknown (not in this session);
 - ``track ID``: one UUV's :meth:`~localizer.tracking.session.TrackingSession.step`;
-- ``size ID``: one UUV's height from its size (:class:`~groundstation.height_from_size.HeightFromSize`);
+- ``size ID``: one UUV's height from its size (:class:`~groundstation.height_from_size.HeightFromSize`), the UUVs
+  sharing one estimate and one measuring schedule as ``skyfix process --uuv all`` has them
+  (:func:`~groundstation.height_from_size.shared_sizes`: the UUVs measured at the rate of one, in turns);
 - ``load``: the session read as each UUV's (:func:`~groundstation.session.read.load_sessions`: the telemetry log
   parsed once), before the pass (``skyfix process`` decodes meanwhile: :func:`~groundstation.video.file.decoding_early`);
 - ``pose``: every frame's camera pose at once (:func:`localizer.pose.camera_pose`), as the tracker shares it;
@@ -70,7 +72,7 @@ import numpy as np
 from emit import emit
 from uuvs import ensure_session as uuvs_session
 
-from groundstation.height_from_size import HeightFromSize
+from groundstation.height_from_size import shared_sizes
 from groundstation.latency.estimate import offset_from_rotations
 from groundstation.latency.video_motion import RotationMeter, measured_every
 from groundstation.offline.process import Pixels, locate_frames
@@ -199,10 +201,8 @@ def profile_run(path: Path, ids: tuple[str, ...], work: Path, max_frames: int) -
             with stages("pose"):
                 pose = camera_pose(cal, first.telemetry, t)
             trackers = {uuv: TrackingSession(s.calibration) for uuv, s in sessions.items()}
-            sizes = {
-                uuv: HeightFromSize(s.calibration, s.telemetry, "check")
-                for uuv, s in sessions.items()
-            }
+            # one estimate shared by the UUVs, as ``skyfix process --uuv all`` measures them (one UUV: its own)
+            sizes = dict(zip(ids, shared_sizes(list(sessions.values()), "check"), strict=True))
             out = {
                 uuv: {k: np.full(len(t), np.nan) for k in ("u", "v", "sigma")}
                 | {"status": np.full(len(t), "no_video", dtype=object)}
