@@ -25,6 +25,11 @@ sea state as waves (:attr:`CentroidParams.waves_from`, until the reading is nil 
 which is not waves. On a still surface nothing is measured and the reported pixel is the tracker's. Its 1-sigma
 (``sigma_px``) is kept.
 
+Wherever the steer applies, the steered pixel is then filtered in time, the camera's motion the session's
+prediction gives taken out (:class:`~localizer.tracking.motion_filter.MotionFilter`; ``motion``: its parameters,
+None the defaults): the tracker's jumps from frame to frame through waves averaged, the vehicle's own motion
+followed. The filter starts again where the steer's average does (a loss, a still surface).
+
 :func:`silhouette_centroid` finds the silhouette around a pixel: in a square of :attr:`CentroidParams.reach` times
 the vehicle's apparent length, the pixels darker than the seafloor (the square's rim, beyond
 :attr:`CentroidParams.rim` of its half-size: its median and robust sigma) by :attr:`CentroidParams.dark_sigmas`,
@@ -42,6 +47,7 @@ import cv2
 import numpy as np
 
 from . import TrackResult
+from .motion_filter import MotionFilter, MotionFilterParams
 
 
 @dataclass(frozen=True)
@@ -100,8 +106,13 @@ class CentroidSteer:
     """One target's reported pixel steered by its silhouette (see the module doc); :meth:`restart` for a new
     target."""
 
-    def __init__(self, params: CentroidParams = CentroidParams()) -> None:
+    def __init__(
+        self,
+        params: CentroidParams = CentroidParams(),
+        motion: MotionFilterParams | None = None,
+    ) -> None:
         self.p = params
+        self.filter = MotionFilter(motion or MotionFilterParams())
         self.restart()
 
     def restart(self) -> None:
@@ -115,6 +126,7 @@ class CentroidSteer:
         # the offset's mean square change from frame to frame, and their count: the silhouette's noise, kept
         # through losses (a re-acquired frame's offset is as noisy as any)
         self._noise2, self._noises = 0.0, 0
+        self.filter.restart()
         self._forget()
 
     def _forget(self) -> None:
@@ -123,6 +135,7 @@ class CentroidSteer:
         self._last: np.ndarray | None = None  # the last frame's offset
         self._t = math.nan
         self._alpha = 1.0  # the running average's last step's weight
+        self.filter.forget()
 
     def after(self, session, image: np.ndarray, result: TrackResult, t_unix: float) -> TrackResult:
         """:meth:`step` for the ``result`` a :class:`~localizer.tracking.session.TrackingSession` ``session`` just
@@ -134,14 +147,38 @@ class CentroidSteer:
             t_unix,
             session.target.waves,
             expected.width_px if expected is not None else math.nan,
+            (expected.u, expected.v, expected.px_per_m) if expected is not None else None,
         )
 
     def step(
-        self, grey: np.ndarray, result: TrackResult, t_unix: float, waves: float, length_px: float
+        self,
+        grey: np.ndarray,
+        result: TrackResult,
+        t_unix: float,
+        waves: float,
+        length_px: float,
+        predicted: tuple[float, float, float] | None = None,
     ) -> TrackResult:
         """``result`` of the frame ``grey`` (H, W; a BGR frame is taken as its grey levels) at ``t_unix``, its pixel
-        steered when ``waves`` (the matcher's reading, 0..1) says the sea state is waves and the anchor is known;
-        ``length_px``: the vehicle's apparent length (NaN: unknown, the mean side of the result's box)."""
+        steered when ``waves`` (the matcher's reading, 0..1) says the sea state is waves and the anchor is known,
+        and filtered in time wherever the steer applies (:class:`~localizer.tracking.motion_filter.MotionFilter`);
+        ``length_px``: the vehicle's apparent length (NaN: unknown, the mean side of the result's box);
+        ``predicted``: the session's prediction for the frame, ``(u, v, px_per_m)`` (None: none, nothing
+        filtered)."""
+        steered = self._steered(grey, result, t_unix, waves, length_px)
+        if not self._steering(result):
+            return steered
+        u, v = self.filter.step((steered.u, steered.v), (result.u, result.v), predicted, t_unix)
+        return replace(steered, u=u, v=v)
+
+    def _steering(self, result: TrackResult) -> bool:
+        """Whether the steer applies to the frame just stepped: a pixel, in waves read from the start."""
+        return result.ok and result.box is not None and self._wavy and math.isfinite(self._anchor_t)
+
+    def _steered(
+        self, grey: np.ndarray, result: TrackResult, t_unix: float, waves: float, length_px: float
+    ) -> TrackResult:
+        """:meth:`step`'s pixel before the filter."""
         if not result.ok or result.box is None:
             self._forget()
             return result
