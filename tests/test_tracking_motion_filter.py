@@ -93,3 +93,41 @@ def test_the_steer_filters_in_waves_only_and_starts_again_after_a_loss():
     # the frame after the loss starts the filter again at the tracker's pixel (its prediction from before the loss
     # is not taken as the camera's motion)
     np.testing.assert_array_equal(after_loss[lost_at + 1], tracked[lost_at + 1])
+
+
+def test_the_smoothed_track_is_given_the_pixels_before_the_filter():
+    """positions.csv's fixes are made from the filtered pixels (causal, as live); the smoothed track's from the ones
+    before the filter, and from the frames traced back."""
+    from groundstation.offline.process import _pixels_of
+    from groundstation.offline.track import TrackedVideo
+
+    n = 5
+    t = 1.7e9 + np.arange(n) / FPS
+    status = np.array(["ok", "ok", "lost", "ok", "ok"], dtype=object)
+    u, v = np.array([10.0, 11.0, np.nan, 13.0, 14.0]), np.full(n, 20.0)
+    sigma = np.full(n, 1.5)
+    unfiltered = np.array([10.0, 11.5, np.nan, 12.0, 14.0])
+
+    def video(u_unfiltered, bridged=None, causal_status=None):
+        return TrackedVideo(
+            np.arange(n), t, u, v, status, np.full(n, 0.8), sigma,
+            bridged=bridged, causal_status=causal_status,
+            u_unfiltered=u_unfiltered, v_unfiltered=v.copy(),
+        )  # fmt: skip
+
+    same = _pixels_of(video(u.copy()))  # nothing filtered (a still surface): one set of pixels
+    assert same.offline is None
+    np.testing.assert_array_equal(same.u, u)
+    pixels = _pixels_of(video(unfiltered))
+    np.testing.assert_array_equal(pixels.u, u)
+    np.testing.assert_array_equal(pixels.offline.u, unfiltered)
+    np.testing.assert_array_equal(pixels.status, status)
+    # a frame traced back: offline only, as before the filter
+    bridged = np.array([False, False, True, False, False])
+    causal = np.array(["ok", "ok", "lost", "ok", "ok"], dtype=object)
+    traced_u = unfiltered.copy()
+    traced_u[2] = 12.5
+    status[2] = "ok"
+    pixels = _pixels_of(video(traced_u, bridged, causal))
+    assert np.isnan(pixels.u[2]) and pixels.status[2] == "lost"
+    np.testing.assert_array_equal(pixels.offline.u, traced_u)

@@ -185,14 +185,29 @@ def tracked_pixels(
 
 def _pixels_of(tracked) -> Pixels:
     """A :class:`~groundstation.offline.track.TrackedVideo`'s causal pixels, the frames traced back in
-    ``offline``."""
-    both = Pixels(tracked.t, tracked.u, tracked.v, tracked.status, tracked.sigma_px)
-    if tracked.bridged is None or not tracked.bridged.any():
+    ``offline``, whose pixels are the ones before the motion filter through waves
+    (:class:`~localizer.tracking.motion_filter.MotionFilter`): the smoothed track filters them itself, both ways,
+    and measures their noise as a frame's own, which a causal filter's averaging would hide."""
+    u, v = (
+        (tracked.u, tracked.v)
+        if tracked.u_unfiltered is None
+        else (tracked.u_unfiltered, tracked.v_unfiltered)
+    )
+    both = Pixels(tracked.t, u, v, tracked.status, tracked.sigma_px)
+    bridged = tracked.bridged is not None and tracked.bridged.any()
+    if not bridged and _same(u, tracked.u).all() and _same(v, tracked.v).all():
         return both
     causal = [
-        np.where(tracked.bridged, np.nan, a) for a in (tracked.u, tracked.v, tracked.sigma_px)
+        np.where(tracked.bridged, np.nan, a) if bridged else a
+        for a in (tracked.u, tracked.v, tracked.sigma_px)
     ]
-    return Pixels(tracked.t, causal[0], causal[1], tracked.causal_status, causal[2], both)
+    status = tracked.causal_status if bridged else tracked.status
+    return Pixels(tracked.t, causal[0], causal[1], status, causal[2], both)
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per frame: the same pixel coordinate (both NaN: no pixel in either)."""
+    return (a == b) | (np.isnan(a) & np.isnan(b))
 
 
 def _align_by_motion(session: Session, found, quiet: bool = False) -> None:
@@ -271,9 +286,14 @@ def located(
         )
         return fixes, fixes, cells
     both = locate_frames(session, pixels.offline, refraction, correction)
+    own = locate_frames(session, pixels, refraction, correction)
+    if not (_same(pixels.u, pixels.offline.u) | (pixels.status != "ok")).all():
+        # a pixel of its own where the offline one is before the motion filter: each set corrected on its own
+        causal, cells = apply_reference(session, own, reference, correction)
+        return causal, apply_reference(session, both, reference, correction)[0], cells
     both, cells = apply_reference(session, both, reference, correction)
     back = (pixels.offline.status == "ok") & (pixels.status != "ok")
-    causal = rows_replaced(both, locate_frames(session, pixels, refraction, correction), back)
+    causal = rows_replaced(both, own, back)
     for column in (cells or {}).values():  # the reference corrects ok fixes only
         for i in np.flatnonzero(back):
             column[i] = ""

@@ -7,7 +7,8 @@ with ``[tracker] init_bbox`` on the frame of ``init_t`` (the first frame without
 it), tracks it with a :class:`~localizer.tracking.session.TrackingSession` (the
 same as the live service's) and returns per-frame pixels with a status word for
 every row of ``video_frames.csv``; through waves each pixel is held to the vehicle's silhouette after the tracking
-step (:class:`~localizer.tracking.centroid.CentroidSteer`: what is reported, never what is tracked):
+step and filtered in time (:class:`~localizer.tracking.centroid.CentroidSteer`: what is reported, never what is
+tracked; the pixels before the filter kept beside them, ``u_unfiltered``, for the smoothed track):
 
 ``ok``; ``lost`` (the tracker has lost the UUV); ``before_init`` (a frame before
 the one ``init_bbox`` belongs to); ``no_video`` (the frame is listed but could not
@@ -72,6 +73,8 @@ STEPPED = (
     "sigma",
     "timings",
     "bridged",
+    "u_unfiltered",
+    "v_unfiltered",
     "causal_words",
     "started",
     "size_taken",
@@ -96,6 +99,9 @@ class TrackedVideo:
     # bool: frames found by tracing a re-acquisition back (``both_ways``); else the causal pass's
     bridged: np.ndarray | None = None
     causal_status: np.ndarray | None = None  # the causal pass's words (status but where bridged)
+    # the pixels before the motion filter through waves (CentroidSteer.unfiltered; u, v where it did not act)
+    u_unfiltered: np.ndarray | None = None
+    v_unfiltered: np.ndarray | None = None
 
 
 def _init_row(session: Session, t: np.ndarray) -> int:
@@ -284,6 +290,7 @@ class UuvTrack:
         self.status = np.full(n, "no_video", dtype=object)
         self.status[: self.init_row] = "before_init"
         self.u, self.v, self.conf, self.sigma = (np.full(n, np.nan) for _ in range(4))
+        self.u_unfiltered, self.v_unfiltered = np.full(n, np.nan), np.full(n, np.nan)
         self.timings = {"track": 0.0, "size": 0.0, "backward": 0.0}
         self.bridged = np.zeros(n, dtype=bool)
         self.causal_words: dict[
@@ -331,6 +338,10 @@ class UuvTrack:
             result.confidence,
         )
         self.sigma[row] = result.sigma_px
+        self.u_unfiltered[row], self.v_unfiltered[row] = (
+            self.centre.unfiltered.u,
+            self.centre.unfiltered.v,
+        )
         if self.both_ways:
             self._trace_when_confirmed(row, frame, tracked)
         size, measurer = self.size, self.measurer
@@ -389,6 +400,7 @@ class UuvTrack:
                         back.v,
                         back.confidence,
                     )
+                    self.u_unfiltered[r], self.v_unfiltered[r] = back.u, back.v
                     self.sigma[r], self.bridged[r] = back.sigma_px, True
                 self.gap.clear()
                 self.pending = None
@@ -413,7 +425,8 @@ class UuvTrack:
         warnings.extend(extra_warnings)
         u, v, sigma = self.u, self.v, self.sigma
         not_ok = status != "ok"
-        u[not_ok], v[not_ok], sigma[not_ok] = np.nan, np.nan, np.nan
+        for a in (u, v, sigma, self.u_unfiltered, self.v_unfiltered):
+            a[not_ok] = np.nan
         causal_status = status.copy()
         for r, word in self.causal_words.items():
             causal_status[r] = word
@@ -425,6 +438,8 @@ class UuvTrack:
             rotations,
             self.bridged,
             causal_status,
+            self.u_unfiltered,
+            self.v_unfiltered,
         )
 
 

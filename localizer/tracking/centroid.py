@@ -113,6 +113,8 @@ class CentroidSteer:
     ) -> None:
         self.p = params
         self.filter = MotionFilter(motion or MotionFilterParams())
+        #: the last frame's result before the filter (steered): what the offline smoothed track is made from
+        self.unfiltered: TrackResult | None = None
         self.restart()
 
     def restart(self) -> None:
@@ -165,7 +167,7 @@ class CentroidSteer:
         ``length_px``: the vehicle's apparent length (NaN: unknown, the mean side of the result's box);
         ``predicted``: the session's prediction for the frame, ``(u, v, px_per_m)`` (None: none, nothing
         filtered)."""
-        steered = self._steered(grey, result, t_unix, waves, length_px)
+        steered = self.unfiltered = self._steered(grey, result, t_unix, waves, length_px)
         if not self._steering(result):
             return steered
         u, v = self.filter.step((steered.u, steered.v), (result.u, result.v), predicted, t_unix)
