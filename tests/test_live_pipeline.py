@@ -165,3 +165,47 @@ def test_a_frames_pose_is_computed_once_for_every_uuv(cal_dict, make_telemetry):
             assert _same(getattr(pose, f.name), getattr(alone, f.name)), f.name
     b._pose(frame, again=True), a._pose(frame, again=True)
     assert (poses.computed, poses.shared) == (2, 2)
+
+
+def test_a_grey_tracker_reads_the_luma_plane_as_skyfix_process_does():
+    """Frames handed over with their luma plane beside BGR (as the live reader hands them) are tracked as ``skyfix
+    process`` tracks the video: the same status and pixel, frame for frame, through an occlusion; the same frames
+    in BGR alone are tracked on the conversion's other grey levels, and some pixels differ."""
+    import asyncio
+    from pathlib import Path
+
+    from groundstation.offline.track import track_session
+    from groundstation.session.read import load_session
+    from groundstation.video.file import open_video
+
+    session = load_session(
+        Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "occlusion"
+    )
+    cal, t = session.calibration, session.frames["t"]
+    offline = track_session(session)
+    with open_video(session.video_path, grey=True) as video:
+        frames = list(video)
+    assert all(f.image.ndim == 2 for f in frames)  # yuv420p: read as its luma plane
+
+    async def live(with_grey: bool) -> list[Fix]:
+        pipeline = Pipeline(cal, session.telemetry, "default", [])
+        return [
+            await pipeline.process(
+                LiveFrame(
+                    f.index,
+                    float(t[f.index]),
+                    float(t[f.index]),
+                    f.bgr(),
+                    grey=f.image if with_grey else None,
+                )
+            )
+            for f in frames
+        ]
+
+    seen, bgr_only = asyncio.run(live(True)), asyncio.run(live(False))
+    ok = offline.status == "ok"
+    assert 0 < ok.sum() < len(frames)  # tracked, and lost while hidden
+    assert [np.isfinite(f.u) for f in seen] == ok.tolist()
+    assert np.array_equal([f.u for f in seen], offline.u, equal_nan=True)
+    assert np.array_equal([f.v for f in seen], offline.v, equal_nan=True)
+    assert not np.array_equal([f.u for f in bgr_only], offline.u, equal_nan=True)

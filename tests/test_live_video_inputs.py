@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from live_helpers import ROOT, free_port, skyfix, start, stop, wait_for
 
+from groundstation.video.file import open_video
 from groundstation.video.frames import VideoError
 from groundstation.video.inputs import parse_video_input
 from groundstation.video.live import VideoLive
@@ -171,6 +172,10 @@ def test_rtp_without_sdp_file(clips, codec):
     assert status["kind"] == "rtp" and status["connects"] >= 1
     assert set(status["rtp"]) == {"lost_packets", "dropped_frames", "bad_packets"}
     _check_timing(rx.frames)
+    # beside BGR, each frame's luma plane: the grey levels skyfix process reads of the clip, byte for byte
+    with open_video(clips[codec], grey=True) as video:
+        offline = {f.image.tobytes() for f in video}
+    assert all(f.grey.shape == SIZE[::-1] and f.grey.tobytes() in offline for f in rx.frames)
 
 
 def _small_gray(image) -> np.ndarray:

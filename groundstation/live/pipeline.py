@@ -11,9 +11,11 @@ locates the tracked pixel with the same pose. The first frame is selected with t
 calibration's ``[tracker] init_bbox`` when there is one (its ``init_t`` is for
 recorded sessions and is not used live); otherwise the session awaits a target: the
 operator's selection (:meth:`Pipeline.select`), or a candidate found near the UUV's
-own position estimate (``prior``) and confirmed over several frames. Each located frame
-the UUV was tracked in goes, with its final pose, to the ``on_tracked`` listeners (the
-height from the UUV's size) before its fix goes out.
+own position estimate (``prior``) and confirmed over several frames. A tracker of grey levels (the default,
+:data:`~localizer.tracking.GREY_TRACKERS`) and the steer to the silhouette read each frame's luma plane as decoded
+(``LiveFrame.grey``), as ``skyfix process`` reads the video's: the same grey levels live and offline (a frame without
+one is read in BGR). Each located frame the UUV was tracked in goes, with its final pose and BGR image, to the
+``on_tracked`` listeners (the height from the UUV's size) before its fix goes out.
 
 A tracked frame is located at once when the camera's attitude telemetry
 (ATTITUDE, and the gimbal message) reached to within :data:`EXTRAPOLATE_S` of its
@@ -51,6 +53,8 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 
+import numpy as np
+
 from groundstation.video.frames import LiveFrame
 from localizer.calibration import Calibration
 from localizer.fix import Fix, locate
@@ -58,7 +62,7 @@ from localizer.height import take_notices
 from localizer.pose import CameraPose, uav_pose, with_depth
 from localizer.telemetry import Telemetry
 from localizer.timeline import Series
-from localizer.tracking import TrackResult
+from localizer.tracking import GREY_TRACKERS, TrackResult
 from localizer.tracking.centroid import CentroidSteer
 from localizer.tracking.predict import window as search_window
 from localizer.tracking.session import Prior, SelectionError, TrackingSession
@@ -165,6 +169,7 @@ class Pipeline:
         self.cal = cal
         self.tel = tel
         self.session = TrackingSession(cal, tracker)  # ValueError for an unknown tracker
+        self._grey = tracker in GREY_TRACKERS  # it reads a frame's luma plane where it has one
         # the reported pixel held to the vehicle's silhouette through waves
         self.centre = CentroidSteer()
         self.sinks = list(sinks)
@@ -277,10 +282,12 @@ class Pipeline:
             self.centre.restart()
             result = self._steered(
                 held,
-                self.session.select(held.frame.image, held.pose, box=box, point=point, verify=True),
+                self.session.select(
+                    self._seen(held.frame), held.pose, box=box, point=point, verify=True
+                ),
             )
             for h in later:
-                self._steered(h, self.session.step(h.frame.image, h.pose))
+                self._steered(h, self.session.step(self._seen(h.frame), h.pose))
             return result
 
         result = await asyncio.get_running_loop().run_in_executor(
@@ -380,7 +387,12 @@ class Pipeline:
         self.target = self.session.status()
         return item
 
+    def _seen(self, frame: LiveFrame) -> np.ndarray:
+        """The frame as the tracker reads it: its luma plane for a tracker of grey levels (as offline), else BGR."""
+        return frame.grey if self._grey and frame.grey is not None else frame.image
+
     def _step(self, frame: LiveFrame, pose: CameraPose, prior: Prior | None) -> TrackResult:
+        image = self._seen(frame)
         if not self._started:
             self._started = True
             if self.cal.init_bbox is not None:
@@ -388,20 +400,20 @@ class Pipeline:
                     # as configured
                     return self.centre.after(
                         self.session,
-                        frame.image,
-                        self.session.select(frame.image, pose, box=self.cal.init_bbox),
+                        image,
+                        self.session.select(image, pose, box=self.cal.init_bbox),
                         frame.t_unix,
                     )
                 except SelectionError as e:
                     log.warning(
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
                     )
-        result = self.session.step(frame.image, pose, prior=prior)
-        return self.centre.after(self.session, frame.image, result, frame.t_unix)
+        result = self.session.step(image, pose, prior=prior)
+        return self.centre.after(self.session, image, result, frame.t_unix)
 
     def _steered(self, held: Tracked, result: TrackResult) -> TrackResult:
         """A held frame's ``result`` (a selection, a catch-up) steered as :meth:`_step`'s."""
-        return self.centre.after(self.session, held.frame.image, result, held.frame.t_unix)
+        return self.centre.after(self.session, self._seen(held.frame), result, held.frame.t_unix)
 
     async def _locate_frames(self) -> None:
         loop = asyncio.get_running_loop()

@@ -59,7 +59,14 @@ import av
 import numpy as np
 
 from groundstation.video.ffmpeg_log import route_ffmpeg_log
-from groundstation.video.frames import VideoError, VideoFrame, decoder, ffmpeg_reason, put_until
+from groundstation.video.frames import (
+    VideoError,
+    VideoFrame,
+    decoder,
+    ffmpeg_reason,
+    luma,
+    put_until,
+)
 
 #: A step between timestamps within this share of a whole number of periods counts as regular.
 REGULAR_TOLERANCE = 0.05
@@ -199,8 +206,8 @@ class Video:
             raise VideoError(f"{self.url}: {ffmpeg_reason(e)}") from None
         if frame is None:
             return None
-        if self.grey and frame.format.name == "yuv420p":
-            return frame, _luma(frame), frame
+        if self.grey and (grey := luma(frame)) is not None:
+            return frame, grey, frame
         return frame, frame.to_ndarray(format="bgr24"), None
 
     def _numbered(self, decoded: tuple | None) -> VideoFrame | None:
@@ -303,12 +310,6 @@ def _queued(stop: threading.Event, worker: threading.Thread, q: queue.Queue):
         if isinstance(item, VideoError):
             raise item
         return item
-
-
-def _luma(frame: av.VideoFrame) -> np.ndarray:
-    """A view (H, W) of a yuv420p frame's luma plane, without its rows' padding."""
-    plane = frame.planes[0]
-    return np.frombuffer(plane, np.uint8).reshape(frame.height, plane.line_size)[:, : frame.width]
 
 
 class _Early:

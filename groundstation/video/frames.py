@@ -56,6 +56,12 @@ def plane_array(plane) -> np.ndarray:
     return np.frombuffer(plane, np.uint8).reshape(plane.height, plane.line_size)[:, : plane.width]
 
 
+def luma(frame: av.VideoFrame) -> np.ndarray | None:
+    """A view (H, W) of a yuv420p frame's luma plane as decoded (what a tracker of grey levels reads, no conversion
+    and no copy), None for other pixel formats (read in BGR)."""
+    return plane_array(frame.planes[0]) if frame.format.name == "yuv420p" else None
+
+
 #: A region :class:`BgrRegions` converts reaches this far (pixels) beyond the rows and columns read: the windows one
 #: height-from-size measurement reads lie around one vehicle.
 REGION_MARGIN_PX = 48
@@ -125,7 +131,11 @@ class LiveFrame:
     ``t_recv`` when its first packet was read from the network (before decoding);
     ``t_slot`` its stream slot: its PTS on the station clock (least arrival − PTS), ≤ ``t_recv``;
     ``aligned`` False while the latency is not known yet (``auto`` before its estimate settled);
-    ``t_recv_mono`` ``t_recv`` on the monotonic clock (s; None: not known yet, the pipeline sets it on arrival).
+    ``t_recv_mono`` ``t_recv`` on the monotonic clock (s; None: not known yet, the pipeline sets it on arrival);
+    ``grey`` the decoded frame's luma plane (:func:`luma`) beside ``image`` (BGR), None where it has none (another
+    pixel format, a frame not from a decoder): a tracker of grey levels reads it, as ``skyfix process`` reads a
+    video's (the frame's grey levels are then the same live and offline, where converting ``image`` to grey gives
+    other levels).
     """
 
     index: int
@@ -135,6 +145,7 @@ class LiveFrame:
     t_slot: float | None = None
     aligned: bool = True
     t_recv_mono: float | None = None
+    grey: np.ndarray | None = field(default=None, repr=False)
 
 
 def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:

@@ -13,7 +13,8 @@ decoder catches up instead of falling further behind (not the run's first frame:
 slower than the stream: a saturated laptop), the packets before the newest keyframe among them are dropped
 unread (newest wins; counted in ``skipped_behind`` too): decoding restarts there, fresh frames come out again
 instead of none at all (every decoded frame stale, skipped) with the stream seconds behind. Each frame handed over goes
-to the event loop as a :class:`LiveFrame` through a bounded
+to the event loop as a :class:`LiveFrame` (its BGR image and, beside it, its luma plane as decoded: the default
+tracker's grey levels, the same as ``skyfix process`` reads; :func:`frame_images`) through a bounded
 :class:`~groundstation.runtime.threads.Handoff` (:data:`HANDOFF_FRAMES`; beyond, the oldest
 is dropped and counted). The thread is :class:`~groundstation.runtime.threads.Supervised`
 (a bug in it is one log line and a restart with back-off). A stop does not wait for
@@ -67,7 +68,14 @@ import numpy as np
 from groundstation.runtime.sender_lock import SenderLock
 from groundstation.runtime.threads import Handoff, Supervised, in_thread
 from groundstation.video.ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
-from groundstation.video.frames import LiveFrame, VideoError, decoder, ffmpeg_reason, put_until
+from groundstation.video.frames import (
+    LiveFrame,
+    VideoError,
+    decoder,
+    ffmpeg_reason,
+    luma,
+    put_until,
+)
 from groundstation.video.inputs import VideoInput, parse_video_input
 from groundstation.video.mpegts import TsDepacketizer
 from groundstation.video.rtp import Depacketizer
@@ -105,6 +113,13 @@ def _demux(container, stream, packets: queue.Queue, done: threading.Event) -> No
         put_until(packets, _END, done)
     except (av.error.FFmpegError, OSError) as e:
         put_until(packets, e, done)
+
+
+def frame_images(frame: av.VideoFrame) -> tuple[np.ndarray, np.ndarray | None]:
+    """A decoded frame's images as they are handed over (:class:`LiveFrame`): ``image`` in BGR (the listeners', the
+    page's) and ``grey``, its luma plane (what a tracker of grey levels reads; None for a pixel format other than
+    yuv420p)."""
+    return frame.to_ndarray(format="bgr24"), luma(frame)
 
 
 def catch_up(packets: queue.Queue, waiting: deque) -> tuple[int, float | None]:
@@ -385,7 +400,7 @@ class VideoLive:
         log.info("video: receiving %s (connection %d)", self.url, self.connects)
 
     def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float) -> None:
-        image = frame.to_ndarray(format="bgr24")
+        image, grey = frame_images(frame)
         h, w = image.shape[:2]
         if self.expected_size is not None and (w, h) != tuple(self.expected_size):
             ew, eh = self.expected_size
@@ -395,7 +410,13 @@ class VideoLive:
         t_slot = float(clock.to_arrival(frame.pts * tb)) if frame.pts is not None else t_recv
         latency_s = self.latency_s  # read once: the event loop may set it meanwhile (auto)
         live = LiveFrame(
-            self.frames, t_slot - (latency_s or 0.0), t_recv, image, t_slot, latency_s is not None
+            self.frames,
+            t_slot - (latency_s or 0.0),
+            t_recv,
+            image,
+            t_slot,
+            latency_s is not None,
+            grey=grey,
         )
         self.frames += 1
         self.last_recv = t_recv
