@@ -1,7 +1,8 @@
 """The tracker through rendered wind waves (issue 28): wind 2-8 m/s, depth 1-3.4 m, the UUV ~15-35 px.
 
     .venv/bin/python bench/tracker_waves.py [--work /tmp/skyfix-tracker-waves] [--tree LABEL=DIR ...]
-                                            [--only NAME ...] [--out bench/results/tracker_waves.txt]
+                                            [--only NAME ...] [--path offline|live ...]
+                                            [--out bench/results/tracker_waves.txt]
 
 Each condition is a waves scenario (``sim_fixtures/scenarios/waves_*.toml``: its camera, drone, glint, caustics and
 downlink without B-frames) with the UUV at another depth and the camera's field of view set so the UUV spans about
@@ -22,6 +23,16 @@ live, and ``positions.csv``) and for the offline pass forward and backward (``bo
 ``track_session(both_ways=True)``, re-acquisitions traced back; a tree without it has its causal rows only). A last
 table: per condition, whether the causal pass meets the target (located >= 95 % of the visible frames, no wrong
 frame, no hidden frame ok).
+
+``--path live`` (``--path offline --path live``: both, one row each) tracks the video as ``skyfix run`` does
+instead: decoded as the live reader decodes a stream (:func:`groundstation.video.frames.decoder`'s low-delay slice
+threads, each frame's images as :func:`groundstation.video.live.frame_images` hands them over: BGR and its luma
+plane) and each frame through :meth:`groundstation.live.pipeline.Pipeline.process` (the tracker's step, the steer to
+the silhouette, the pose and the fix) at its ``video_frames.csv`` time, causal only (pass ``live``); a frame is
+reported ``ok`` where its fix has the tracker's pixel, its 1-sigma the fix's ``sigma_pixel_px``; ms per frame:
+``process`` whole. A tree whose live reader hands over BGR alone (before ``frame_images``) is tracked with that.
+With both paths, a table per condition and tree: the frames the live path reports otherwise than the offline causal
+pass (:func:`differing`; 0: live sees what offline sees).
 
 Why half the UUV's size (``LOCATED_SIZES``; the size is the longer side of its first rendered box, about its
 length): a pixel within half the vehicle's length of its reference point lies on the vehicle's image or at its
@@ -91,6 +102,42 @@ print(json.dumps({"status": list(r.status), "u": [None if x != x else x for x in
                   "sigma": [None if x != x else x for x in r.sigma_px.tolist()],
                   "bridged": None if bridged is None else bridged.tolist()}))
 """
+#: The child of ``--path live``: each frame decoded as the live reader does, through the live pipeline; JSON per
+#: frame on stdout, as :data:`TRACK`'s.
+LIVE = """\
+import asyncio, json, math, sys, time
+import av
+from groundstation.live.pipeline import Pipeline
+from groundstation.session.read import load_session
+from groundstation.video.frames import LiveFrame, decoder
+try:
+    from groundstation.video.live import frame_images
+except ImportError:  # a tree whose live reader hands over BGR alone
+    def frame_images(frame):
+        return frame.to_ndarray(format="bgr24"), None
+session = load_session(sys.argv[1])
+t = session.frames["t"]
+pipeline = Pipeline(session.calibration, session.telemetry, "default", [])
+fixes, spent = [], 0.0
+async def run():
+    global spent
+    with av.open(str(session.video_path)) as container:
+        stream = container.streams.video[0]
+        ctx = decoder(stream, low_delay=True)
+        for packet in container.demux(stream):
+            for frame in ctx.decode(packet):
+                image, grey = frame_images(frame)
+                i = len(fixes)
+                live = LiveFrame(i, float(t[i]), float(t[i]), image, **({} if grey is None else {"grey": grey}))
+                t0 = time.perf_counter()
+                fixes.append(await pipeline.process(live))
+                spent += time.perf_counter() - t0
+asyncio.run(run())
+nan = lambda x: None if math.isnan(x) else x
+print(json.dumps({"status": ["ok" if f.u == f.u else f.status for f in fixes], "u": [nan(f.u) for f in fixes],
+                  "v": [nan(f.v) for f in fixes], "track_s": spent,
+                  "sigma": [nan(f.sigma_pixel_px) for f in fixes], "bridged": None}))
+"""
 TARGET_SHARE = 0.95  # issue 28: located on at least this share of the visible frames, no wrong frame, no hidden ok
 #: The child: generate a session from a scenario given as JSON.
 GENERATE = """\
@@ -158,10 +205,11 @@ def condition(
     return out
 
 
-def track(tree: Path, session: Path) -> dict:
-    """The child's per-frame tracking of ``session`` from source ``tree``."""
+def track(tree: Path, session: Path, path: str = "offline") -> dict:
+    """The child's per-frame tracking of ``session`` from source ``tree``, as ``skyfix process`` does (``path``
+    ``offline``) or ``skyfix run`` (``live``)."""
     done = subprocess.run(
-        [sys.executable, "-c", TRACK, str(session)],
+        [sys.executable, "-c", TRACK if path == "offline" else LIVE, str(session)],
         cwd=tree,
         capture_output=True,
         text=True,
@@ -282,6 +330,28 @@ def separation(session: Path) -> dict:
     return out
 
 
+def differing(offline: dict, live: dict) -> int:
+    """How many frames the live path reports otherwise than the offline causal pass: ok in one and not the other, or
+    ok in both at pixels more than 0.001 px apart."""
+    bridged = offline["bridged"] or [False] * len(offline["status"])
+    n = 0
+    for i, (a, b) in enumerate(zip(offline["status"], live["status"], strict=True)):
+        ok_a, ok_b = a == "ok" and not bridged[i], b == "ok"
+        n += ok_a != ok_b or (
+            ok_a
+            and math.hypot(offline["u"][i] - live["u"][i], offline["v"][i] - live["v"][i]) > 1e-3
+        )
+    return n
+
+
+def _ways(path: str, tracked: dict) -> tuple[str, ...]:
+    """The passes a ``path``'s tracking is scored as: ``live``; offline ``causal``, and ``both`` where the tree
+    traces re-acquisitions back."""
+    if path == "live":
+        return ("live",)
+    return ("causal", "both") if tracked["bridged"] is not None else ("causal",)
+
+
 def _share(flags: np.ndarray, among: np.ndarray) -> float:
     """The share of ``among`` that ``flags`` holds (NaN of none)."""
     return float(flags[among].mean()) if among.any() else math.nan
@@ -298,6 +368,12 @@ def main() -> int:
         help="also track with this source tree (the tracker before)",
     )
     ap.add_argument("--only", nargs="*", help="condition names")
+    ap.add_argument(
+        "--path",
+        action="append",
+        choices=("offline", "live"),
+        help="track as skyfix process does (offline, the default) or as skyfix run (live); repeated: both",
+    )
     ap.add_argument("--duration", type=float, default=10.0, help="seconds of each session")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "tracker_waves.txt"))
     args = ap.parse_args()
@@ -306,12 +382,13 @@ def main() -> int:
         label: Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
     }
     sim = list(trees.values())[-1]
+    paths = args.path or ["offline"]
     header = (
         f"{'condition':14s} {'size':>4s} {'tol':>4s} {'tree':>8s} {'pass':>6s} {'located':>13s} {'share':>6s} "
         f"{'wrong':>5s} {'hidden ok':>9s} {'p50 px':>6s} {'p95 px':>6s} {'2drms':>6s} {'wrong 2drms':>11s} {'ms/fr':>6s}"
     )
     load_before = " ".join(f"{x:.2f}" for x in os.getloadavg())
-    lines, data, separations = [header], {}, {}
+    lines, data, separations, agree = [header], {}, {}, {}
     print(header, flush=True)
     for name, base, size_px, depth_m in CONDITIONS:
         if args.only and name not in args.only:
@@ -319,28 +396,47 @@ def main() -> int:
         session = condition(work, sim, name, base, size_px, depth_m, args.duration)
         separations[name] = separation(session)
         for label, tree in trees.items():
-            tracked = track(tree, session)
-            for way in ("causal", "both") if tracked["bridged"] is not None else ("causal",):
-                r = score(session, tracked, way == "causal")
-                data.setdefault(name, {}).setdefault(label, {})[way] = r
-                lines.append(
-                    f"{name:14s} {r['size_px']:4d} {r['tolerance_px']:4.1f} {label:>8s} {way:>6s} "
-                    f"{r['located']:5d} of {r['visible']:4d} {r['share']:6.1%} {r['wrong']:5d} "
-                    f"{r['hidden_ok']:4d} of {r['hidden']:2d} {r['p50_px']:6.2f} {r['p95_px']:6.1f} {r['covered']:6.1%} "
-                    f"{r['wrong_covered']:11.1%} {r['ms']:6.1f}"
-                )
-                print(lines[-1], flush=True)
+            per_path = {}
+            for path in paths:
+                per_path[path] = tracked = track(tree, session, path)
+                for way in _ways(path, tracked):
+                    r = score(session, tracked, way != "both")
+                    data.setdefault(name, {}).setdefault(label, {})[way] = r
+                    lines.append(
+                        f"{name:14s} {r['size_px']:4d} {r['tolerance_px']:4.1f} {label:>8s} {way:>6s} "
+                        f"{r['located']:5d} of {r['visible']:4d} {r['share']:6.1%} {r['wrong']:5d} "
+                        f"{r['hidden_ok']:4d} of {r['hidden']:2d} {r['p50_px']:6.2f} {r['p95_px']:6.1f} "
+                        f"{r['covered']:6.1%} {r['wrong_covered']:11.1%} {r['ms']:6.1f}"
+                    )
+                    print(lines[-1], flush=True)
+            if len(per_path) == 2:
+                agree.setdefault(name, {})[label] = differing(per_path["offline"], per_path["live"])
     lines += [
         "",
         (
-            f"target (causal, 'now'): located (within {LOCATED_SIZES} x the UUV's size) >= {TARGET_SHARE:.0%} "
-            "of the visible frames, no wrong frame, no hidden frame ok"
+            f"target ('now', causal and live): located (within {LOCATED_SIZES} x the UUV's size) >= "
+            f"{TARGET_SHARE:.0%} of the visible frames, no wrong frame, no hidden frame ok"
         ),
     ]
     lines += [
-        f"{name:14s} {'meets' if r['now']['causal']['meets'] else 'misses'}"
+        f"{name:14s} "
+        + " ".join(
+            f"{way} {'meets' if r['now'][way]['meets'] else 'misses'}"
+            for way in ("causal", "live")
+            if way in r["now"]
+        )
         for name, r in data.items()
     ]
+    if agree:
+        lines += [
+            "",
+            "live against offline (causal), per tree: the frames whose status (ok or not) or reported pixel differ",
+            f"{'condition':14s} " + " ".join(f"{label:>8s}" for label in trees),
+        ]
+        lines += [
+            f"{name:14s} " + " ".join(f"{r.get(label, -1):8d}" for label in trees)
+            for name, r in agree.items()
+        ]
     lines += [
         "",
         "how much the UUV stands out of the seafloor (separation(): its square's spread over the 90th percentile of",
@@ -355,7 +451,11 @@ def main() -> int:
     load_after = " ".join(f"{x:.2f}" for x in os.getloadavg())
     load = f"load average (1, 5, 15 min): {load_before} at the start, {load_after} at the end"
     lines += ["", load]
-    emit(lines, Path(args.out), {"tracked": data, "separation": separations, "load": load})
+    emit(
+        lines,
+        Path(args.out),
+        {"tracked": data, "live_differs": agree, "separation": separations, "load": load},
+    )
     return 0
 
 
