@@ -209,7 +209,7 @@ class TemplateParams:
     wave_centre_share: float = 0.5
     wave_centre_reach: float = 0.3
     wave_centre_pull: float = 0.5
-    wave_centre_distinct: float = 1.4
+    wave_centre_distinct: float = 1.2
     #: in waves the template learns only from follows where the square standing out most near the match departs
     #: from the seafloor this many times as much as 9 in 10 of the seafloor's squares (see
     #: :meth:`~TemplateMatcher._teaches`)
