@@ -54,7 +54,7 @@ from multiprocessing.shared_memory import SharedMemory
 
 import numpy as np
 
-from groundstation.runtime.threads import Supervised, in_thread
+from groundstation.runtime.threads import Supervised, in_thread, not_realtime
 from localizer.calibration import Calibration
 from localizer.pose import CameraPose
 from localizer.size_range import (
@@ -175,8 +175,10 @@ def shared_image(frame: tuple[str, tuple[int, ...], str]) -> np.ndarray:
 
 
 def start_measuring_process() -> None:
-    """The measuring process yields the CPU, and ends with the service even when the service is killed (Linux's
-    parent-death signal): a ``kill -9`` of ``skyfix run`` leaves no process behind."""
+    """The measuring process yields the CPU (never realtime, which it would take from a realtime service:
+    :func:`~groundstation.runtime.threads.realtime`), and ends with the service even when the service is killed
+    (Linux's parent-death signal): a ``kill -9`` of ``skyfix run`` leaves no process behind."""
+    not_realtime()
     os.nice(NICE)
     if sys.platform == "linux":
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)

@@ -83,6 +83,8 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
         "28",
         "--stats",
         str(tmp_path / "stats.json"),
+        "--realtime-priority",  # as deploy/field.toml: realtime where allowed, else one line and on as before
+        "1",
     )
     replay_cmd = skyfix(
         "replay",
@@ -127,6 +129,10 @@ def test_replay_run_subscriber_uuv(tmp_path, SESSION):
                 p.wait()
     run_log = (tmp_path / "run.log").read_text()
     assert procs[0].returncode == 0, run_log[-3000:]
+    said = [line for line in run_log.splitlines() if "scheduling: " in line]
+    assert len(said) == 1 and (
+        "SCHED_RR priority 1 (realtime" in said[0] or "not realtime" in said[0]
+    ), said
     assert replay.returncode == 0, (tmp_path / "replay.log").read_text()[-3000:]
 
     shift = replay_shift(tmp_path / "replay.log")

@@ -9,6 +9,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 SCRIPT = """
 import json, sys, threading
 from pathlib import Path
@@ -48,3 +50,77 @@ def test_opencv_workers_started_by_the_service_keep_its_priority():
     assert thread_nices("started") == [base]
     # the case it guards against: started by the nice-10 thread's OpenCV call, the workers stay at nice 10
     assert thread_nices("not started") == sorted({base, 10})
+
+
+REALTIME = """
+import json, multiprocessing, os, resource, sys, threading
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from groundstation.height_from_size import start_measuring_process
+from groundstation.live.ui.feed import lower_priority
+from groundstation.runtime.threads import realtime, start_opencv_workers
+
+def scheduling(stat):
+    fields = Path(stat).read_text().rsplit(")", 1)[1].split()
+    return [int(fields[38]), int(fields[37]), int(fields[16])]  # policy, realtime priority, nice
+
+if sys.argv[1] == "refused":
+    if os.geteuid() == 0:
+        os.setuid(65534)  # root may always; nobody without an RLIMIT_RTPRIO may not
+    resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0))
+else:
+    soft, hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
+    if os.geteuid() != 0 and hard != resource.RLIM_INFINITY and hard < 1:
+        print(json.dumps(None))  # no privilege to grant it here
+        sys.exit()
+    if os.geteuid() != 0:
+        resource.setrlimit(resource.RLIMIT_RTPRIO, (1, hard))
+before = {t.name for t in Path("/proc/self/task").iterdir()}  # numpy's BLAS threads: started at its import
+granted, line = realtime(1)
+out = {"granted": granted, "line": line, "main": scheduling("/proc/thread-self/stat")}
+if granted:
+    start_opencv_workers()
+    low = []
+    def background():
+        lower_priority()
+        low.append((threading.get_native_id(), scheduling("/proc/thread-self/stat")))
+    thread = threading.Thread(target=background)
+    thread.start()
+    thread.join()
+    low_id, out["low"] = low[0]
+    started = [t for t in Path("/proc/self/task").iterdir() if t.name not in before | {str(low_id)}]
+    out["threads"] = sorted({tuple(scheduling(t / "stat")) for t in started}) if started else None
+    with ProcessPoolExecutor(1, multiprocessing.get_context("spawn"), start_measuring_process) as pool:
+        policy = pool.submit(os.sched_getscheduler, 0).result(60)
+        out["process"] = [policy, 0, pool.submit(os.getpriority, os.PRIO_PROCESS, 0).result(60)]
+print(json.dumps(out))
+"""
+
+
+def realtime_case(case: str) -> dict | None:
+    out = subprocess.run(
+        [sys.executable, "-c", REALTIME, case], capture_output=True, text=True, check=True
+    )
+    return json.loads(out.stdout.splitlines()[-1])
+
+
+def test_realtime_takes_the_services_threads_and_leaves_its_background_out():
+    """``--realtime-priority 1`` (deploy/field.toml): the thread that asks, and the threads it starts after (OpenCV's
+    workers), run SCHED_RR 1; the page's encoder thread and a measuring process leave it (SCHED_OTHER, 10 nice levels
+    lower: a realtime background would take the cores the fixes and the laptop's other programs need)."""
+    got = realtime_case("granted")
+    if got is None:
+        pytest.skip("no privilege for SCHED_RR here (not root, RLIMIT_RTPRIO 0)")
+    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    rr = [os.SCHED_RR, 1, nice]
+    assert got["granted"] and got["main"] == rr and "SCHED_RR priority 1" in got["line"]
+    assert got["low"] == [os.SCHED_OTHER, 0, 10]
+    assert got["threads"] == [rr]
+    assert got["process"] == [os.SCHED_OTHER, 0, min(nice + 10, 19)]
+
+
+def test_realtime_refused_is_one_line_and_the_service_runs_as_before():
+    got = realtime_case("refused")
+    assert not got["granted"] and got["main"][0] == os.SCHED_OTHER
+    assert got["line"].startswith("scheduling: not realtime (SCHED_RR priority 1 refused: ")
+    assert "\n" not in got["line"]

@@ -17,7 +17,7 @@ import dataclasses
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args, get_origin
 
-from annotated_types import Ge, Gt
+from annotated_types import Ge, Gt, Le
 from pydantic import BeforeValidator, Field, StringConstraints, model_validator
 from pydantic.dataclasses import dataclass
 
@@ -39,6 +39,7 @@ from localizer.contract import (
     Positive,
     Text,
     Vector4,
+    Whole,
     validate,
     within,
 )
@@ -420,6 +421,14 @@ class RunConfig(UuvOptions):
         "any free port",
     )
     no_ui: Flag = Field(False, description="serve no web page")
+    realtime_priority: Annotated[Whole, Ge(0), Le(99)] = Field(
+        0,
+        description="the service's threads under Linux's round-robin realtime policy (SCHED_RR) at this priority "
+        "(1: the lowest; deploy/skyfix.service: 1), so a frame's work takes a core from the laptop's other programs "
+        "at once; its background work (side jobs' processes, the page's encoder) stays out of it; 0: not "
+        "realtime. Without the privilege (LimitRTPRIO in the unit, or root) one log line says so and it runs as "
+        "before",
+    )
     basemap: FilePath | None = Field(
         None,
         description="the web page's map drawn over a base map of the site, served by skyfix itself (no "

@@ -66,7 +66,7 @@ from groundstation.live.watchdog import REQUIRE_S, InputMissing, Watchdog
 from groundstation.offline.reference import read_file
 from groundstation.runtime.gps_input import GpsInputSink
 from groundstation.runtime.queries import ZenohControl
-from groundstation.runtime.threads import start_opencv_workers
+from groundstation.runtime.threads import realtime, start_opencv_workers
 from groundstation.runtime.usage import Usage
 from groundstation.runtime.workers import (
     INPUTS,
@@ -111,6 +111,9 @@ async def serve(cfg: config.RunConfig) -> dict:
     """Run the service until stopped; returns the final status (with several UUVs: the shared sections and each
     UUV's own under ``uuvs``)."""
     loop = asyncio.get_running_loop()
+    if cfg.realtime_priority:  # before any thread starts: each takes this one's policy
+        granted, line = realtime(cfg.realtime_priority)
+        (log.info if granted else log.warning)(line)
     start_opencv_workers()  # before any thread of a lower priority can
     cal = load_calibration(cfg.calibration)
     tel = Telemetry(cal.timing, keep_s=TELEMETRY_KEEP_S)

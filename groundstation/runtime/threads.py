@@ -14,12 +14,15 @@
   Cancelling the await abandons the thread instead of waiting for it (a TCP connect or a
   thread join cannot be interrupted), so a stop never waits for I/O; the thread ends by itself.
 - :func:`start_opencv_workers`: OpenCV's worker threads started by the service's own thread, at its priority.
+- :func:`realtime`: the service's threads under Linux's round-robin realtime policy; :func:`not_realtime` takes a
+  thread or process of background work back out of it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import os
 import threading
 import time
 import traceback
@@ -180,3 +183,35 @@ def start_opencv_workers() -> None:
     import cv2  # here: this module's other users (the MAVLink link, Zenoh, the fuse service) need no OpenCV
 
     cv2.resize(np.zeros((1080, 1920), np.uint8), (960, 540), interpolation=cv2.INTER_AREA)
+
+
+def realtime(priority: int) -> tuple[bool, str]:
+    """The calling thread under Linux's round-robin realtime policy (``SCHED_RR``) at ``priority`` (1: the lowest),
+    and with it every thread and process it starts from now on (a new thread takes its creator's policy); whether it
+    got it, and a line saying what it runs under.
+
+    A realtime thread that wakes takes a core from the programs of the normal policy at once, whatever their nice
+    values and their sessions' shares; one that never sleeps would keep a core, and the kernel's realtime throttling
+    (``/proc/sys/kernel/sched_rt_runtime_us``: 95 % of each second) leaves the rest of the system the remainder.
+    Without the privilege (root, ``CAP_SYS_NICE`` or an ``RLIMIT_RTPRIO`` of at least ``priority``: the unit's
+    ``LimitRTPRIO``) the thread stays as it was and the line says so. Background work (:func:`not_realtime`) leaves it.
+    """
+    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(priority))
+    except OSError as e:  # PermissionError: no privilege; EINVAL: a priority beyond the policy's
+        return False, (
+            f"scheduling: not realtime (SCHED_RR priority {priority} refused: {e.strerror}; the unit's LimitRTPRIO "
+            f"allows it): nice {nice}"
+        )
+    return (
+        True,
+        f"scheduling: SCHED_RR priority {priority} (realtime, round-robin); its background work not realtime",
+    )
+
+
+def not_realtime() -> None:
+    """The calling thread (or a new process's only one) back under the normal policy, at the nice value it had: for
+    background work started by a realtime thread (:func:`realtime`), before it lowers its priority further."""
+    if os.sched_getscheduler(0) in (os.SCHED_RR, os.SCHED_FIFO):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 
 from groundstation.live.ui.palette import colour
+from groundstation.runtime.threads import not_realtime
 from localizer.fix import Fix
 
 ENCODER_NICE = 10  # the encoding thread's niceness, above the service's other threads
@@ -46,8 +47,10 @@ KEEP_FRAMES = 16
 
 
 def lower_priority() -> None:
-    """Make the calling thread nicer than the rest of the process (Linux: a thread is a task); elsewhere a no-op."""
+    """Make the calling thread nicer than the rest of the process (Linux: a thread is a task), never realtime
+    (:func:`~groundstation.runtime.threads.not_realtime`); elsewhere a no-op."""
     try:
+        not_realtime()
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), ENCODER_NICE)
     except (AttributeError, OSError):
         pass
