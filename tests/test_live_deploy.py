@@ -67,15 +67,18 @@ def test_systemd_unit_restarts_within_its_limit_hardened_and_records_where_it_ma
         "RestrictSUIDSGID": "yes",
     }
     assert {k: service.get(k) for k in hardening} == hardening
-    # above the desktop's programs (FIELD.md, "Priority"), not realtime
-    assert -20 < int(service["Nice"]) < 0 and service["RestrictRealtime"] == "yes"
+    # above the desktop's programs (FIELD.md, "Priority"): the realtime policy at the lowest priority, which the
+    # field config asks for and the unit allows (no higher, and not refused), the nice value for what is not realtime
+    cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
+    assert cfg.realtime_priority == int(service["LimitRTPRIO"]) == 1
+    assert service.get("RestrictRealtime", "no") == "no" and "CPUSchedulingPolicy" not in service
+    assert -20 < int(service["Nice"]) < 0
     assert set(service["RestrictAddressFamilies"].split()) == {
         "AF_INET",
         "AF_INET6",
         "AF_UNIX",
         "AF_NETLINK",
     }
-    cfg = run_config(argparse.Namespace(config=str(DEPLOY / "field.toml")))
     state = Path("/var/lib") / service["StateDirectory"]
     assert (
         cfg.record is None
