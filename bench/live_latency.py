@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/live_latency.py [--sizes 720p,1080p] [--transports mpegts,rtp] [--duration-s 30]
         [--out bench/results/live_latency.txt] [--variant NAME=ARGS ...] [--busy N] [--rounds N]
-        [--tree LABEL=DIR ...] [--page off,open]
+        [--tree LABEL=DIR ...] [--page off,open] [--nice N,...] [--policy other,rr] [--replay-realtime]
 
 For each size a session is generated once into ``/tmp/skyfix-bench/`` by the
 simulator (the UAV hovering 10 m up, yawing and drifting; several minutes at
@@ -34,6 +34,13 @@ Measured, per size:
 - the share of the frames sent that got an ``ok`` fix;
 - how many frames the pipeline held for attitude telemetry (the newest sample more
   than 30 ms older than the frame), frames dropped, CPU and RSS.
+
+``--nice -10 --policy rr`` runs the service as deploy/skyfix.service does (``Nice=-10``; field.toml's
+``realtime_priority = 1``: its threads SCHED_RR 1, its background not); each run prints the scheduling read back from
+``/proc`` (the service's main thread, the replay's, the busy processes' nice values) and its threads' time on a core
+and waiting for one by scheduling. ``--replay-realtime`` runs the replay under SCHED_RR 1 too: it stands for the
+camera, the autopilots and the UUV, other machines than the laptop, and a replay starved by the machine's load sends
+the frames late and stamps the GPS_INPUT's arrival late (both counted in slot → GPS_INPUT), whatever the service does.
 
 On a shared machine one run's p99 measures its neighbours' bursts as much as the service: ``--rounds N`` repeats
 every run, interleaved, and prints each one's median [min-max] over the rounds with the load average at each
@@ -118,6 +125,7 @@ depth_m = 1.0
 BENCH_DIR = Path("/tmp/skyfix-bench")
 CAMERA_LATENCY_MS = 100  # the replayed camera's glass-to-first-packet latency, configured as such
 CLK_TCK = os.sysconf("SC_CLK_TCK")
+REALTIME_PRIORITY = 1  # --policy rr: the service's --realtime-priority (deploy/field.toml's)
 BUSY = "while True: pass"  # a busy process beside the service (--busy)
 
 
@@ -222,20 +230,32 @@ def nice_of(pid: int) -> int:
     return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
 
 
-def thread_times_s(pid: int) -> dict[int, tuple[float, float]]:
-    """Per nice value of the threads of a process (those alive now): seconds on a core and seconds runnable but
-    waiting for one, summed (``/proc/PID/task/TID/schedstat``'s first two fields; each thread's nice from its
-    ``stat``); NaN where the kernel does not keep them."""
-    out: dict[int, tuple[float, float]] = {}
+def priority_of(stat_path: Path) -> str:
+    """A thread's or process's scheduling, read back from its ``stat``: ``RR 1`` (the realtime policy and its
+    priority: fields 41 and 40) or ``nice N`` (the normal policy: field 19)."""
+    fields = stat_path.read_text().rsplit(")", 1)[1].split()
+    policy = int(fields[38])
+    if policy in (os.SCHED_RR, os.SCHED_FIFO):
+        return f"{'RR' if policy == os.SCHED_RR else 'FIFO'} {fields[37]}"
+    return (
+        f"nice {fields[16]}" if policy == os.SCHED_OTHER else f"policy {policy} nice {fields[16]}"
+    )
+
+
+def thread_times_s(pid: int) -> dict[str, tuple[float, float]]:
+    """Per scheduling (:func:`priority_of`) of the threads of a process (those alive now): seconds on a core and
+    seconds runnable but waiting for one, summed (``/proc/PID/task/TID/schedstat``'s first two fields); NaN where
+    the kernel does not keep them."""
+    out: dict[str, tuple[float, float]] = {}
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
             fields = (task / "schedstat").read_text().split()
-            nice = int((task / "stat").read_text().rsplit(")", 1)[1].split()[16])
+            priority = priority_of(task / "stat")
         except OSError:  # the thread ended meanwhile
             continue
         run_s, wait_s = (int(f) / 1e9 for f in fields[:2]) if len(fields) >= 2 else (math.nan,) * 2
-        on, waiting = out.get(nice, (0.0, 0.0))
-        out[nice] = (on + run_s, waiting + wait_s)
+        on, waiting = out.get(priority, (0.0, 0.0))
+        out[priority] = (on + run_s, waiting + wait_s)
     return out
 
 
@@ -398,13 +418,17 @@ def live(
     tree: Path = ROOT,
     nice: int = 0,
     page: bool = False,
+    realtime: bool = False,
+    replay_realtime: bool = False,
 ) -> dict:
     """One ``skyfix run`` fed by ``skyfix replay`` over ``transport``, beside ``busy`` processes spinning
     ``while True: pass`` (a laptop's other programs: on 2 cores, 2 of them take both cores' worth of CPU);
     with ``ui`` the service serves its page (on a free port; nobody opens it), else ``--no-ui``; the service
     from the source ``tree`` (the replay always from this one), started at ``nice`` (``nice -n``, as
     deploy/skyfix.service's ``Nice=`` starts it; the busy processes and the replay at the bench's own); with
-    ``page`` the page served and open in a headless Chromium for the whole replay (:func:`page_open`)."""
+    ``page`` the page served and open in a headless Chromium for the whole replay (:func:`page_open`); with
+    ``realtime`` the service asked for its realtime policy (``--realtime-priority 1``, as deploy/field.toml asks);
+    with ``replay_realtime`` the replay (the camera, the autopilots, the UUV: other machines) under SCHED_RR 1."""
     mav, video, uuv, zport = free_port(), free_port(), free_port(), free_port(socket.SOCK_STREAM)
     if transport == "rtp":  # RTP on an even port, RTCP on the next
         video = next(p for p in range(video & ~1, 65534, 2) if port_pair_free(p))
@@ -434,9 +458,11 @@ def live(
         f"udpout:127.0.0.1:{uuv}",
         "--stats",
         str(stats),
+        *(["--realtime-priority", str(REALTIME_PRIORITY)] if realtime else []),
         *run_args,
     ]
     replay = [
+        *(["chrt", "--rr", str(REALTIME_PRIORITY)] if replay_realtime else []),
         py,
         "-m",
         "groundstation.cli",
@@ -458,7 +484,7 @@ def live(
         "2",
     ]
     samples = []  # (time, cpu_s, rss_mb, run-queue wait s)
-    by_nice = []  # thread_times_s at each sample
+    by_priority = []  # thread_times_s at each sample
     browser_cpu = []  # the browser's CPU seconds at each sample (with the page open)
     drawn = tiles = None
     with (
@@ -484,12 +510,15 @@ def live(
             shown = browser.enter_context(page_open(work / "run.log")) if page else None
             rep = subprocess.Popen(replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT)
             while rep.poll() is None:
-                by_nice.append(thread_times_s(service.pid))
+                # read while it runs (chrt's exec done), until it ends
+                with contextlib.suppress(OSError):
+                    priority["replay"] = priority_of(Path(f"/proc/{rep.pid}/stat"))
+                by_priority.append(thread_times_s(service.pid))
                 samples.append(
                     (
                         time.time(),
                         *proc_sample(service.pid),
-                        sum(wait for _, wait in by_nice[-1].values()),
+                        sum(wait for _, wait in by_priority[-1].values()),
                     )
                 )
                 if shown:
@@ -501,6 +530,8 @@ def live(
                 drawn = int(shown[0].eval_on_selector("#video", "c => c.dataset.received") or 0)
                 tiles = len(shown[1])
                 browser.close()
+            # the service's main thread as it runs (it asks for the realtime policy once it has started)
+            priority["service"] = priority_of(Path(f"/proc/{service.pid}/stat"))
             service.send_signal(signal.SIGINT)
             service.wait(120)  # a side job's thread starved beside busy programs holds its stop up
         finally:
@@ -574,17 +605,17 @@ def live(
         "cpu_pct": round(100.0 * (s[-1, 1] - s[half, 1]) / (s[-1, 0] - s[half, 0]), 1),
         "rss_mb": {"mid": round(float(s[half, 2]), 1), "end": round(float(s[-1, 2]), 1)},
         "run_queue_wait_pct": round(100.0 * (s[-1, 3] - s[half, 3]) / (s[-1, 0] - s[half, 0]), 1),
-        "threads_by_nice_pct": {
-            nice: [
+        "threads_by_priority_pct": {
+            priority: [
                 round(
                     100.0
-                    * (by_nice[-1][nice][k] - by_nice[half][nice][k])
+                    * (by_priority[-1][priority][k] - by_priority[half][priority][k])
                     / (s[-1, 0] - s[half, 0]),
                     1,
                 )
                 for k in (0, 1)
             ]
-            for nice in sorted(set(by_nice[half]) & set(by_nice[-1]))
+            for priority in sorted(set(by_priority[half]) & set(by_priority[-1]))
         },
     }
 
@@ -606,8 +637,8 @@ def report(name: str, session: Path, res: dict) -> list[str]:
             "start: a shared machine)"
         ),
         (
-            f"  priority: the service at nice {res['priority']['service_nice']}, the busy processes at nice "
-            f"{res['priority']['busy_nice'] or '-'} (read from /proc)"
+            f"  priority: the service's main thread {res['priority']['service']}, the busy processes at nice "
+            f"{res['priority']['busy_nice'] or '-'}, the replay {res['priority']['replay']} (read from /proc)"
         ),
         (
             f"  frames with an ok fix: {pl['statuses'].get('ok', 0)} of {res['frames_sent']} sent "
@@ -648,10 +679,10 @@ def report(name: str, session: Path, res: dict) -> list[str]:
             f"  starved: the service's threads runnable but waiting for a core {res['run_queue_wait_pct']} % of the "
             "time (summed over its threads, /proc schedstat; second half of the run)"
         ),
-        "  its threads by nice value (on a core / waiting for one, % of the time): "
+        "  its threads by scheduling (on a core / waiting for one, % of the time): "
         + ", ".join(
-            f"nice {nice}: {on} / {waiting}"
-            for nice, (on, waiting) in res["threads_by_nice_pct"].items()
+            f"{priority}: {on} / {waiting}"
+            for priority, (on, waiting) in res["threads_by_priority_pct"].items()
         ),
     ] + (
         [
@@ -680,7 +711,7 @@ def summary(rounds: dict) -> list[str]:
     for name, runs in rounds.items():
         ok = [100.0 * r["pipeline"]["statuses"].get("ok", 0) / r["frames_sent"] for r in runs]
         lines.append(
-            f"  {name} (service at nice {sorted({r['priority']['service_nice'] for r in runs})}): "
+            f"  {name} (service {sorted({r['priority']['service'] for r in runs})}): "
             f"slot->GPS_INPUT p99 {spread(r['slot_to_gps_input_ms']['p99'] for r in runs)} ms, "
             f"p50 {spread(r['slot_to_gps_input_ms']['p50'] for r in runs)} ms; ok {spread(ok)} %; "
             f"CPU {spread(r['cpu_pct'] for r in runs)} % of a core, waiting for one "
@@ -728,6 +759,20 @@ def main() -> int:
         "deploy/skyfix.service's Nice= starts it; the busy processes stay at the bench's own; negative needs root)",
     )
     ap.add_argument(
+        "--policy",
+        default="other",
+        metavar="other,rr",
+        help="comma-separated: each run again with the service under the normal policy (other) or asking for the "
+        f"realtime one (rr: --realtime-priority {REALTIME_PRIORITY}, as deploy/field.toml asks under "
+        "deploy/skyfix.service)",
+    )
+    ap.add_argument(
+        "--replay-realtime",
+        action="store_true",
+        help=f"the replay (the camera, the autopilots and the UUV: other machines than the laptop) under SCHED_RR "
+        f"{REALTIME_PRIORITY}, so the load does not delay the sending nor the UUV's clock of arrival",
+    )
+    ap.add_argument(
         "--tree",
         action="append",
         default=[],
@@ -748,6 +793,9 @@ def main() -> int:
     }
     nices = [int(n) for n in args.nice.split(",")]
     pages = args.page.split(",")
+    policies = args.policy.split(",")
+    if set(policies) - {"other", "rr"}:
+        ap.error(f"--policy {args.policy}: each of other, rr")
     if set(pages) - {"off", "open"}:
         ap.error(f"--page {args.page}: each of off, open")
     variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [
@@ -768,12 +816,16 @@ def main() -> int:
             "depacketize_cpu": depacketize_baseline(session),
             "pipeline_process_ms": pipeline_baseline(session, args.baseline_frames),
         }
-        for rnd, transport, ((variant, run_args), busy), label, nice, page in itertools.product(
+        for rnd, transport, (
+            (variant, run_args),
+            busy,
+        ), label, nice, policy, page in itertools.product(
             range(1, args.rounds + 1),
             args.transports.split(","),
             itertools.product(variants, sorted({0, args.busy})),
             trees,
             nices,
+            policies,
             pages,
         ):
             tag = "_".join(
@@ -783,6 +835,7 @@ def main() -> int:
                     f"busy{busy}" if busy else "",
                     label if len(trees) > 1 else "",
                     f"nice{nice}" if nice else "",
+                    "rr" if policy == "rr" else "",
                     "page" if page == "open" else "",
                 )
                 if x
@@ -795,6 +848,7 @@ def main() -> int:
                     variant,
                     label if len(trees) > 1 else "",
                     f"nice {nice}" if len(nices) > 1 or nice else "",
+                    f"SCHED_RR {REALTIME_PRIORITY}" if policy == "rr" else "",
                     "page open" if page == "open" else "",
                 )
                 if x
@@ -815,6 +869,8 @@ def main() -> int:
                     tree=trees[label],
                     nice=nice,
                     page=page == "open",
+                    realtime=policy == "rr",
+                    replay_realtime=args.replay_realtime,
                 ),
                 "load_average": round(load, 1),
             }
