@@ -199,9 +199,13 @@ def realtime(priority: int) -> tuple[bool, str]:
     nice = os.getpriority(os.PRIO_PROCESS, 0)
     try:
         os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(priority))
-    except OSError as e:  # PermissionError: no privilege; EINVAL: a priority beyond the policy's
+    except (
+        OSError,
+        AttributeError,
+    ) as e:  # no privilege; a priority beyond the policy's; no such call (not Linux)
+        why = getattr(e, "strerror", None) or "no sched_setscheduler on this system"
         return False, (
-            f"scheduling: not realtime (SCHED_RR priority {priority} refused: {e.strerror}; the unit's LimitRTPRIO "
+            f"scheduling: not realtime (SCHED_RR priority {priority} refused: {why}; the unit's LimitRTPRIO "
             f"allows it): nice {nice}"
         )
     return (
@@ -212,6 +216,10 @@ def realtime(priority: int) -> tuple[bool, str]:
 
 def not_realtime() -> None:
     """The calling thread (or a new process's only one) back under the normal policy, at the nice value it had: for
-    background work started by a realtime thread (:func:`realtime`), before it lowers its priority further."""
-    if os.sched_getscheduler(0) in (os.SCHED_RR, os.SCHED_FIFO):
+    background work started by a realtime thread (:func:`realtime`), before it lowers its priority further; a no-op
+    where there is no realtime policy to leave."""
+    if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (
+        os.SCHED_RR,
+        os.SCHED_FIFO,
+    ):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
