@@ -106,6 +106,7 @@ POSE_COLUMNS = (
     "walk_e_m",
     "sigma_walk_m",
 )
+_WORD_FIELDS = ("status", "pose_source", *WORDS)  # the fields of :class:`Fix` that are words
 
 
 @dataclass
@@ -180,11 +181,20 @@ class Fixes:
 
     def __getitem__(self, i: int) -> Fix:
         return Fix(
-            **{
-                k: (str(v[i]) if k in ("status", "pose_source", *WORDS) else float(v[i]))
-                for k, v in vars(self).items()
-            }
+            **{k: (str(v[i]) if k in _WORD_FIELDS else float(v[i])) for k, v in vars(self).items()}
         )
+
+    def each(self, indices) -> list[Fix]:
+        """The :class:`Fix` of each frame of ``indices`` (``fixes[i]`` for many at once: each column converted
+        once)."""
+        idx = np.asarray(indices, dtype=int)
+        columns = {
+            k: [str(x) for x in v[idx]]
+            if k in _WORD_FIELDS
+            else np.asarray(v[idx], dtype=float).tolist()
+            for k, v in vars(self).items()
+        }
+        return [Fix(**dict(zip(columns, row))) for row in zip(*columns.values())]
 
 
 def locate(

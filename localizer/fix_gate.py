@@ -181,13 +181,21 @@ def gate_offline(fixes: Fixes, lost: np.ndarray, gate: FixGate) -> np.ndarray:
     """
     word = np.full(len(fixes), "", dtype=object)
     at = {}
-    for i in np.argsort(fixes.t_unix, kind="stable"):
+    order = np.argsort(fixes.t_unix, kind="stable")
+    ok = order[fixes.status[order] == "ok"]
+    each = dict(zip(ok.tolist(), fixes.each(ok)))
+    ne_m = None  # every frame's north and east of the gate's origin, once it has one (m)
+    for i in order.tolist():
         if lost[i]:
             gate.target_lost()
-        if fixes.status[i] != "ok":
+        if i not in each:
             continue
-        at[float(fixes.t_unix[i])] = i
-        word[i] = gate.check(fixes[i], float(fixes.t_unix[i]))
+        t = each[i].t_unix
+        at[t] = i
+        word[i] = gate.check(each[i], t, ne_m=None if ne_m is None else ne_m[i])
+        if ne_m is None and gate.ref is not None:
+            n, e, _ = geodetic_to_ned(fixes.lat, fixes.lon, 0.0, *gate.ref, 0.0)
+            ne_m = np.column_stack([n, e])
         if gate.confirmed_t:
             word[[at[t] for t in gate.confirmed_t]] = None
             gate.confirmed_t = ()
@@ -301,15 +309,21 @@ class FixGate:
         return self._ref
 
     def check(
-        self, fix: Fix, now: float, window=None, arrival: Arrival | None = None
+        self,
+        fix: Fix,
+        now: float,
+        window=None,
+        arrival: Arrival | None = None,
+        ne_m: np.ndarray | None = None,
     ) -> str | None:
         """None if ``fix`` (status ok) may go out as valid, else the reason; counts either way.
 
         ``now``: the station clock (UNIX s) when offered; ``window``: (x, y, w, h) pixels where the telemetry's
         prediction had the tracker look for this frame, or None; ``arrival``: when its frame arrived (the gate's
-        time base, see the module doc), or None.
+        time base, see the module doc), or None; ``ne_m``: the fix's north and east of the gate's :attr:`ref` (m),
+        when the caller computed them (offline, for every fix at once), or None.
         """
-        reason = self._reason(fix, now, window, arrival)
+        reason = self._reason(fix, now, window, arrival, ne_m)
         if reason is None:
             self.accepted += 1
             self.valid_t = self._last_t
@@ -387,7 +401,9 @@ class FixGate:
         self.target_lost()
 
     # -- the tests -----------------------------------------------------------------------------
-    def _reason(self, fix: Fix, now: float, window, arrival: Arrival | None) -> str | None:
+    def _reason(
+        self, fix: Fix, now: float, window, arrival: Arrival | None, ne_m: np.ndarray | None
+    ) -> str | None:
         t, age, stepped = self._time(fix, now, arrival)
         self._now = now
         if not (math.isfinite(fix.h_acc_m) and fix.h_acc_m <= self.max_h_acc_m):
@@ -412,7 +428,7 @@ class FixGate:
                 f"pixel ({fix.u:.0f}, {fix.v:.0f}) outside the window the telemetry predicted",
                 leaves_track=True,
             )
-        seen = self._local(fix, t)
+        seen = self._local(fix, t, ne_m)
         if self.fleet is not None and (why := self._exchange(fix, seen)):
             return self._refuse(seen.t, "exchanged", why)
         if self.state == "diverged":
@@ -644,11 +660,11 @@ class FixGate:
             self.max_speed_mps, self.max_accel_mps2, f.t, f.z, f.C, share, self.max_reach_m
         )
 
-    def _local(self, fix: Fix, t: float) -> _Seen:
-        """The fix in the local frame at ``t`` (the gate's base)."""
+    def _local(self, fix: Fix, t: float, ne_m: np.ndarray | None) -> _Seen:
+        """The fix in the local frame at ``t`` (the gate's base); ``ne_m``: its north and east (m), if known."""
         if self._ref is None:
             self._ref = (fix.lat, fix.lon)
-        n, e, _ = geodetic_to_ned(fix.lat, fix.lon, 0.0, *self._ref, 0.0)
+        n, e = geodetic_to_ned(fix.lat, fix.lon, 0.0, *self._ref, 0.0)[:2] if ne_m is None else ne_m
         C = fix_covariance_m2(fix.sigma_n_m, fix.sigma_e_m, fix.cov_ne_m2, fix.h_acc_m)
         return _Seen(t, np.array([float(n), float(e)]), C)
 

@@ -90,7 +90,7 @@ def format_row(fix) -> list[str]:
 
 def write_positions_csv(path: Path, fixes: Fixes) -> None:
     """Write all fixes atomically (temporary file, then rename)."""
-    write_table(path, COLUMNS, (format_row(fixes[i]) for i in range(len(fixes))))
+    write_table(path, COLUMNS, (format_row(f) for f in fixes.each(range(len(fixes)))))
 
 
 def write_table(path: Path, header, rows) -> None:
