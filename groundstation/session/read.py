@@ -15,6 +15,7 @@ telemetry and calibration, so everything that processes a session processes it f
 
 from __future__ import annotations
 
+import copy
 import csv
 import math
 import tomllib
@@ -28,7 +29,7 @@ from groundstation.session import SessionError
 from groundstation.session.depth import read_depth
 from groundstation.session.tlog import read_tlog
 from groundstation.video.file import Video, open_video
-from localizer.calibration import Calibration, ConfigError
+from localizer.calibration import Calibration, ConfigError, Timing
 from localizer.depth import SOURCE_WORDS
 from localizer.telemetry import Telemetry
 
@@ -203,19 +204,31 @@ def _read_depth(path: Path, tel: Telemetry, warnings: list[str]) -> int:
 
 
 def _read_tlog(
-    path: Path, tel: Telemetry, source: str, warnings: list[str], read: dict | None = None
-) -> int:
-    """Ingest the UAV's messages; returns the UAV's system id (:func:`~groundstation.mavlink.ingest.uav_system`).
-    ``read``: the log's messages and its reading's warnings kept there by the first call, reused by the others
-    (:func:`load_sessions`)."""
-    if read is None or path not in read:
-        read_warnings: list[str] = []
-        msgs = [m for _, m in read_tlog(path, read_warnings)]
-        if read is not None:
-            read[path] = msgs, read_warnings
-    else:
-        msgs, read_warnings = read[path]
-    warnings.extend(read_warnings)
+    path: Path, timing: Timing, source: str, warnings: list[str], read: dict | None = None
+) -> tuple[Telemetry, int]:
+    """The UAV's messages ingested into a new :class:`~localizer.telemetry.Telemetry` with ``timing`` (the whole
+    recording: two-sided heights), and the UAV's system id (:func:`~groundstation.mavlink.ingest.uav_system`).
+    ``read``: the telemetry and the warnings the log made, kept there by the first call; the others with the same
+    ``timing`` and ``source`` start from a copy of that telemetry (:func:`load_sessions`)."""
+    if read is not None and path in read:
+        kept, sysid, kept_warnings, kept_source = read[path]
+        if kept.timing == timing and kept_source == source:
+            warnings.extend(kept_warnings)
+            return copy.deepcopy(kept, {id(kept.timing): timing}), sysid
+    tel = Telemetry(timing)
+    # the whole recording: each frame's height uses the GNSS altitudes after it too
+    tel.height_two_sided = True
+    mine: list[str] = []  # the warnings of this log
+    sysid = _ingest_tlog(path, tel, source, mine)
+    warnings.extend(mine)
+    if read is not None and path not in read:
+        read[path] = copy.deepcopy(tel, {id(timing): timing}), sysid, mine, source
+    return tel, sysid
+
+
+def _ingest_tlog(path: Path, tel: Telemetry, source: str, warnings: list[str]) -> int:
+    """Ingest the UAV's messages into ``tel``; returns the UAV's system id."""
+    msgs = [m for _, m in read_tlog(path, warnings)]
     sysid = uav_system(msgs)
     if sysid is None:
         raise SessionError(
@@ -287,8 +300,8 @@ def _calibration(meta: dict, toml_path: Path, uuv: UuvFiles) -> Calibration:
 
 
 def load_sessions(path, uuvs: list[str]) -> list[Session]:
-    """:func:`load_session` of each of ``uuvs``, the UAV's telemetry log parsed once for all (each UUV's
-    :class:`~localizer.telemetry.Telemetry` ingests it: the heights from size add to one UUV's alone)."""
+    """:func:`load_session` of each of ``uuvs``, the UAV's telemetry log parsed and ingested once for all (each
+    UUV's :class:`~localizer.telemetry.Telemetry` a copy: the heights from size add to one UUV's alone)."""
     read: dict = {}
     return [load_session(path, uuv, read) for uuv in uuvs]
 
@@ -315,10 +328,9 @@ def load_session(path, uuv: str = PRIMARY_UUV, read: dict | None = None) -> Sess
     cal = _calibration(meta, toml_path, files)
 
     warnings: list[str] = list(cal.warnings)
-    tel = Telemetry(cal.timing)
-    # the whole recording: each frame's height uses the GNSS altitudes after it too
-    tel.height_two_sided = True
-    sysid = _read_tlog(path / "uav.tlog", tel, cal.mount.attitude_source, warnings, read)
+    tel, sysid = _read_tlog(
+        path / "uav.tlog", cal.timing, cal.mount.attitude_source, warnings, read
+    )
     if not files.depth.is_file():
         raise SessionError(f"{files.depth}: missing (the UUV's depth is required)")
     _read_depth(files.depth, tel, warnings)
