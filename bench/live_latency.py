@@ -91,7 +91,7 @@ from ui_cost import browser_cpu_s, launch_browser
 from groundstation.live.pipeline import Pipeline
 from groundstation.session.read import load_session
 from groundstation.video.file import open_video
-from groundstation.video.frames import LiveFrame
+from groundstation.video.frames import live_frame
 from groundstation.video.mpegts import TsDepacketizer
 from groundstation.video.rtp import Depacketizer
 from groundstation.video.send import send_video
@@ -387,14 +387,14 @@ def pipeline_baseline(session_dir: Path, n_frames: int) -> dict:
 
     async def work():
         with open_video(
-            session.video_path, expected_size=(cal.camera.width, cal.camera.height)
+            session.video_path, expected_size=(cal.camera.width, cal.camera.height), grey=True
         ) as video:
             for frame in video:
                 if frame.index >= n_frames:
                     break
                 t = float(session.frames["t"][frame.index])
                 t0 = time.perf_counter()
-                await pipeline.process(LiveFrame(frame.index, t, t, frame.image, t))
+                await pipeline.process(live_frame(frame, t))
                 times.append(time.perf_counter() - t0)
 
     asyncio.run(work())

@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 from groundstation.live.pipeline import Pipeline
 from groundstation.session.read import load_session
 from groundstation.video.file import open_video
-from groundstation.video.frames import LiveFrame
+from groundstation.video.frames import live_frame
 from localizer.pose import camera_pose
 from localizer.tracking.session import Prior, TrackingSession
 
@@ -59,8 +59,9 @@ def _timed(fn, *args, **kw):
 def bench(path: Path) -> dict:
     session = load_session(path)
     cal, t = session.calibration, session.frames["t"]
-    with open_video(session.video_path) as video:
-        frames = [f.image for f in video]
+    with open_video(session.video_path, grey=True) as video:
+        decoded = list(video)
+    frames = [f.bgr() for f in decoded]
     pose = camera_pose(cal, session.telemetry, t)
     truth = session.truth
     out = {
@@ -78,9 +79,9 @@ def bench(path: Path) -> dict:
     live = []
 
     async def run_live():
-        for i, image in enumerate(frames):
+        for i, frame in enumerate(decoded):
             t0 = time.process_time()
-            await pipeline.process(LiveFrame(i, float(t[i]), float(t[i]), image))
+            await pipeline.process(live_frame(frame, float(t[i])))
             live.append(time.process_time() - t0)
 
     asyncio.run(run_live())

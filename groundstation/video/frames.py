@@ -148,6 +148,13 @@ class LiveFrame:
     grey: np.ndarray | None = field(default=None, repr=False)
 
 
+def live_frame(frame: VideoFrame, t_unix: float) -> LiveFrame:
+    """A file's ``frame`` handed over as the live reader hands a stream's (exposure, arrival and slot at ``t_unix``):
+    in BGR and, where it was read grey, its luma plane beside it (replays of a file through the live pipeline)."""
+    grey = frame.image if frame.decoded is not None else None
+    return LiveFrame(frame.index, t_unix, t_unix, frame.bgr(), t_unix, grey=grey)
+
+
 def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:
     """Put ``item`` into the bounded ``q``, waiting for room, unless ``stop`` is set first (then False)."""
     while not stop.is_set():
