@@ -54,6 +54,7 @@ def test_at_most_the_backlog_is_taken_from_the_queue():
 @dataclass
 class Decoded:
     pts: int
+    format = SimpleNamespace(name="bgr24")  # not yuv420p: handed over in BGR alone
 
     def to_ndarray(self, format: str):
         return np.zeros((4, 6, 3), np.uint8)
