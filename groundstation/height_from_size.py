@@ -42,7 +42,6 @@ import dataclasses
 import importlib
 import logging
 import math
-import multiprocessing
 import os
 import queue
 import signal
@@ -54,7 +53,7 @@ from multiprocessing.shared_memory import SharedMemory
 
 import numpy as np
 
-from groundstation.runtime.threads import Supervised, in_thread, not_realtime
+from groundstation.runtime.threads import OUTSIDE_REALTIME, Supervised, in_thread
 from localizer.calibration import Calibration
 from localizer.pose import CameraPose
 from localizer.size_range import (
@@ -176,9 +175,9 @@ def shared_image(frame: tuple[str, tuple[int, ...], str]) -> np.ndarray:
 
 def start_measuring_process() -> None:
     """The measuring process yields the CPU (never realtime, which it would take from a realtime service:
-    :func:`~groundstation.runtime.threads.realtime`), and ends with the service even when the service is killed
-    (Linux's parent-death signal): a ``kill -9`` of ``skyfix run`` leaves no process behind."""
-    not_realtime()
+    :func:`~groundstation.runtime.threads.realtime`; it starts outside that policy,
+    :data:`~groundstation.runtime.threads.OUTSIDE_REALTIME`), and ends with the service even when the service is
+    killed (Linux's parent-death signal): a ``kill -9`` of ``skyfix run`` leaves no process behind."""
     os.nice(NICE)
     if sys.platform == "linux":
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
@@ -558,7 +557,7 @@ class OnlineHeightFromSize:
     def _run(self, stop: threading.Event) -> None:
         """Hands each frame to the measuring process (started here: a restart after a failure starts a new one)."""
         pool = ProcessPoolExecutor(
-            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process
+            1, mp_context=OUTSIDE_REALTIME, initializer=start_measuring_process
         )
         # the process starts and imports now, not at the first frame
         pool.submit(importlib.import_module, __name__)

@@ -41,7 +41,6 @@ import copy
 import itertools
 import logging
 import math
-import multiprocessing
 import queue
 import threading
 import time
@@ -54,7 +53,7 @@ import numpy as np
 
 from groundstation.height_from_size import SharedFrame, shared_image, start_measuring_process
 from groundstation.latency.video_motion import Rotation, RotationMeter
-from groundstation.runtime.threads import Supervised, in_thread
+from groundstation.runtime.threads import OUTSIDE_REALTIME, Supervised, in_thread
 from groundstation.session.read import SessionError, load_session
 from groundstation.video.file import open_video
 from groundstation.video.frames import VideoError
@@ -574,7 +573,7 @@ class OnlineLatency:
         starts a new one) and the estimates back to the loop."""
         loop = self._loop
         pool = ProcessPoolExecutor(
-            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_measuring_process
+            1, mp_context=OUTSIDE_REALTIME, initializer=start_measuring_process
         )
         # the process starts and imports now, not at the first frame
         pool.submit(start_estimator, self.cal, self.window_s, self.offsets)

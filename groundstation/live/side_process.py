@@ -20,7 +20,6 @@ lost (:class:`ProcessLost`). :meth:`SideProcess.close` ends it at once (a fit in
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import os
 import threading
 from collections.abc import Callable
@@ -31,6 +30,7 @@ import numpy as np
 
 from groundstation.height_from_size import SharedFrame, shared_image, start_measuring_process
 from groundstation.live.ui.feed import ENCODER_NICE
+from groundstation.runtime.threads import OUTSIDE_REALTIME
 
 log = logging.getLogger("skyfix.side")
 
@@ -76,9 +76,7 @@ class SideProcess:
         self._pool, self.started = self._begin()
 
     def _begin(self) -> tuple[ProcessPoolExecutor, Future]:
-        pool = ProcessPoolExecutor(
-            1, mp_context=multiprocessing.get_context("spawn"), initializer=start_side_process
-        )
+        pool = ProcessPoolExecutor(1, mp_context=OUTSIDE_REALTIME, initializer=start_side_process)
         # it starts and imports now, not at the first call
         return pool, pool.submit(_started, *self._start)
 

@@ -15,7 +15,7 @@
   thread join cannot be interrupted), so a stop never waits for I/O; the thread ends by itself.
 - :func:`start_opencv_workers`: OpenCV's worker threads started by the service's own thread, at its priority.
 - :func:`realtime`: the service's threads under Linux's round-robin realtime policy; :func:`not_realtime` takes a
-  thread or process of background work back out of it.
+  thread or process of background work back out of it, and :data:`OUTSIDE_REALTIME` starts processes outside it.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from multiprocessing.context import SpawnContext, SpawnProcess
 
 import numpy as np
 
@@ -194,7 +196,8 @@ def realtime(priority: int) -> tuple[bool, str]:
     values and their sessions' shares; one that never sleeps would keep a core, and the kernel's realtime throttling
     (``/proc/sys/kernel/sched_rt_runtime_us``: 95 % of each second) leaves the rest of the system the remainder.
     Without the privilege (root, ``CAP_SYS_NICE`` or an ``RLIMIT_RTPRIO`` of at least ``priority``: the unit's
-    ``LimitRTPRIO``) the thread stays as it was and the line says so. Background work (:func:`not_realtime`) leaves it.
+    ``LimitRTPRIO``) the thread stays as it was and the line says so. Background work leaves it: a thread by
+    :func:`not_realtime`, a process by starting outside it (:data:`OUTSIDE_REALTIME`).
     """
     nice = os.getpriority(os.PRIO_PROCESS, 0)
     try:
@@ -215,11 +218,32 @@ def realtime(priority: int) -> tuple[bool, str]:
 
 
 def not_realtime() -> None:
-    """The calling thread (or a new process's only one) back under the normal policy, at the nice value it had: for
-    background work started by a realtime thread (:func:`realtime`), before it lowers its priority further; a no-op
-    where there is no realtime policy to leave."""
+    """The calling thread back under the normal policy, at the nice value it had: for background work started by a
+    realtime thread (:func:`realtime`), before it lowers its priority further; a no-op where there is no realtime
+    policy to leave."""
     if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) in (
         os.SCHED_RR,
         os.SCHED_FIFO,
     ):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+class _SpawnedOutsideRealtime(SpawnProcess):
+    @staticmethod
+    def _Popen(process_obj):  # multiprocessing's hook for a process's start: the spawn itself
+        with ThreadPoolExecutor(
+            1, thread_name_prefix="skyfix-spawn", initializer=not_realtime
+        ) as spawner:
+            return spawner.submit(SpawnProcess._Popen, process_obj).result()
+
+
+class _OutsideRealtime(SpawnContext):
+    Process = _SpawnedOutsideRealtime
+
+
+#: multiprocessing's spawn context (a ``ProcessPoolExecutor``'s ``mp_context``), its processes started by a thread of
+#: their own that left the realtime policy first (:func:`not_realtime`): a new process takes the policy of the thread
+#: that starts it, and one that left it in its own first call would run its interpreter's start and imports under the
+#: service's policy, round-robin with the service's threads, at each start and each restart. The thread that asks
+#: (its pool's) keeps its policy.
+OUTSIDE_REALTIME = _OutsideRealtime()
