@@ -1086,6 +1086,12 @@ class TargetStatus(Section):
     box: list[int] | None = Field(description="x, y, w, h of the latest match")
     confidence: float | None
     seen_t: float | None = Field(description="when the UUV was last seen, station clock")
+    init_bbox: str | None = Field(
+        None,
+        description="how [tracker] init_bbox was taken on the first frame, checked as an operator's box: kept, "
+        "snapped (off the vehicle: its outline taken), refused (no vehicle in it), unchecked (no camera pose); "
+        "null: none configured, or no frame yet",
+    )
 
 
 class UuvPositionStatus(Section):

@@ -209,3 +209,57 @@ def test_a_grey_tracker_reads_the_luma_plane_as_skyfix_process_does():
     assert np.array_equal([f.u for f in seen], offline.u, equal_nan=True)
     assert np.array_equal([f.v for f in seen], offline.v, equal_nan=True)
     assert not np.array_equal([f.u for f in bgr_only], offline.u, equal_nan=True)
+
+
+@pytest.mark.parametrize("dx_px", [0, 25, -25])
+def test_a_configured_init_bbox_off_the_vehicle_is_snapped_or_refused(dx_px, caplog):
+    """``[tracker] init_bbox`` is checked on the first frame as an operator's box is: on the vehicle it is kept as
+    drawn; 25 px to the right (still over the vehicle's edge) it is snapped onto the vehicle's outline; 25 px to the
+    left (open water) it is refused, and the run awaits a target. No fix is ok with the box's offset, whichever:
+    each ok fix's pixel is within 3 px of the simulator's (the vehicle is about 28 px long). nadir_hover's frames."""
+    import asyncio
+    from dataclasses import replace
+    from pathlib import Path
+
+    from groundstation.session.read import load_session
+    from groundstation.video.file import open_video
+
+    session = load_session(
+        Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover"
+    )
+    t, truth = session.frames["t"], session.track
+    x, y, w, h = session.calibration.init_bbox
+    box = (x + dx_px, y, w, h)
+    cal = replace(session.calibration, tracker=replace(session.calibration.tracker, init_bbox=box))
+    with open_video(session.video_path, grey=True) as video:
+        frames = [f for f, _ in zip(video, range(15), strict=False)]
+
+    async def live():
+        pipeline = Pipeline(cal, session.telemetry, "default", [])
+        fixes = [
+            await pipeline.process(
+                LiveFrame(f.index, float(t[f.index]), float(t[f.index]), f.bgr(), grey=f.image)
+            )
+            for f in frames
+        ]
+        return pipeline, fixes
+
+    with caplog.at_level("WARNING", logger="skyfix.pipeline"):
+        pipeline, fixes = asyncio.run(live())
+    ok = [f for f in fixes if f.ok]
+    du = [f.u - np.interp(f.t_unix, truth["t"], truth["u"]) for f in ok]
+    dv = [f.v - np.interp(f.t_unix, truth["t"], truth["v"]) for f in ok]
+    assert np.all(np.abs(du) < 3.0) and np.all(np.abs(dv) < 3.0), (du, dv)
+    said = pipeline.target["init_bbox"]
+    if dx_px == 0:
+        assert said == "kept" and len(ok) == len(frames) and not caplog.records
+    elif dx_px > 0:
+        assert said.startswith(f"snapped: {list(box)} is off the vehicle") and len(ok) == len(
+            frames
+        )
+        assert [r.getMessage() for r in caplog.records] == [f"tracker.init_bbox on frame 0: {said}"]
+    else:
+        assert not ok and pipeline.target["state"] == "awaiting_target"
+        assert said.startswith(f"refused: box {list(box)}: no vehicle-sized object")
+        (record,) = caplog.records
+        assert f"tracker.init_bbox on frame 0: box {list(box)}" in record.getMessage()

@@ -38,7 +38,9 @@ Operator commands (:meth:`Pipeline.select`, :meth:`Pipeline.release`,
 refers to a frame the operator saw: the session is re-initialised there and then
 catches up through the held frames after it before the next live frame. An operator's
 box must hold a vehicle-sized object standing out of the water (a box on open water is
-refused, not tracked as the seafloor; ``init_bbox`` is taken as configured). A release
+refused, not tracked as the seafloor). ``init_bbox`` is checked the same way on the first frame: kept as drawn when
+it holds the vehicle's outline, snapped onto the outline when it is off it, refused (awaiting a target) when no
+vehicle stands out in it; one warning names the box, and the status's ``target.init_bbox`` says which. A release
 also turns frames tracked before it but not yet located into ``released`` ones: no
 fix goes out after it.
 """
@@ -209,8 +211,10 @@ class Pipeline:
         self.dropped = 0
         self.statuses: Counter[str] = Counter()
         self.last_status: str | None = None
+        # how ``[tracker] init_bbox`` was taken (None: not configured, or not yet): kept, snapped, refused, unchecked
+        self.init_bbox: str | None = None
         # the tracking session's status after the latest frame or command
-        self.target = self.session.status()
+        self.target = self._status()
         #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
         self.on_tracked: list[Callable] = list(on_tracked)
 
@@ -295,7 +299,7 @@ class Pipeline:
         )
         self._started = True
         self.commands += 1
-        self.target = self.session.status()
+        self.target = self._status()
         log.info(
             "target selected on frame %d (%s %s), caught up %d frames: %s",
             held.frame.index,
@@ -321,7 +325,7 @@ class Pipeline:
         self.centre.restart()
         for item in self._tracked:  # tracked before the release, not yet located: no fix from them
             item.result = TrackResult("released")
-        self.target = self.session.status()
+        self.target = self._status()
         log.info("target released")
         return {"latest_frame": self._latest_frame(), "target": self.target}
 
@@ -330,9 +334,13 @@ class Pipeline:
         self.commands += 1
         self.session.acquire()
         self.centre.restart()
-        self.target = self.session.status()
+        self.target = self._status()
         log.info("awaiting a target")
         return {"latest_frame": self._latest_frame(), "target": self.target}
+
+    def _status(self) -> dict:
+        """The tracking session's status and how ``init_bbox`` was taken."""
+        return {**self.session.status(), "init_bbox": self.init_bbox}
 
     def _latest_frame(self) -> int | None:
         """The newest frame tracked: the command applies to every later frame."""
@@ -384,7 +392,7 @@ class Pipeline:
             len(self._held) > MAX_HELD or frame.t_recv - self._held[0].frame.t_recv > self.history_s
         ):
             self._held.popleft()
-        self.target = self.session.status()
+        self.target = self._status()
         return item
 
     def _seen(self, frame: LiveFrame) -> np.ndarray:
@@ -397,19 +405,34 @@ class Pipeline:
             self._started = True
             if self.cal.init_bbox is not None:
                 try:
-                    # as configured
                     return self.centre.after(
-                        self.session,
-                        image,
-                        self.session.select(image, pose, box=self.cal.init_bbox),
-                        frame.t_unix,
+                        self.session, image, self._init_select(frame, image, pose), frame.t_unix
                     )
                 except SelectionError as e:
+                    self.init_bbox = f"refused: {e}"
                     log.warning(
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
                     )
         result = self.session.step(image, pose, prior=prior)
         return self.centre.after(self.session, image, result, frame.t_unix)
+
+    def _init_select(self, frame: LiveFrame, image, pose: CameraPose) -> TrackResult:
+        """The first frame selected with ``[tracker] init_bbox``, checked as an operator's box is: kept as drawn on
+        the vehicle's outline, snapped onto it when off (logged), SelectionError when no vehicle stands out in it."""
+        box = self.cal.init_bbox
+        result = self.session.select(image, pose, box=box, verify=True, keep_drawn=True)
+        if self.session.outlined:
+            self.init_bbox = (
+                f"snapped: {list(box)} is off the vehicle; its outline {list(result.box)} taken"
+            )
+            log.warning("tracker.init_bbox on frame %d: %s", frame.index, self.init_bbox)
+        else:
+            self.init_bbox = (
+                "kept"
+                if pose.status[0] == "ok"
+                else f"unchecked: no camera pose on frame {frame.index} ({pose.status[0]})"
+            )
+        return result
 
     def _steered(self, held: Tracked, result: TrackResult) -> TrackResult:
         """A held frame's ``result`` (a selection, a catch-up) steered as :meth:`_step`'s."""

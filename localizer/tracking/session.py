@@ -15,6 +15,10 @@ once by the caller and shared with the geometry.
   tracked as the seafloor's texture, and every fix would be wrong. The object's outline
   then replaces the drawn box: a box dragged by hand is pixels off the vehicle, and a
   tracker that never drifts toward the vehicle would keep that offset in every fix.
+  With ``keep_drawn`` as well (a configured ``init_bbox``, drawn on a recorded frame), a
+  box whose centre is within :data:`DRAWN_AGREES` outline errors of the outline's is kept
+  as drawn (a box drawn on the frame is exact, an outline pixels off); one further off is
+  snapped onto the outline.
 - :meth:`~TrackingSession.step`: the next frame. Its prediction is the UUV's last
   sighting moved by what the camera did since: the sighting is located (an *anchor*,
   re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
@@ -54,13 +58,16 @@ from .predict import (
     project_uuv,
     top_face_pixel,
 )
-from .sigma import jitter2_px2, pixel_sigma_px
+from .sigma import OUTLINED_SHARE, jitter2_px2, pixel_sigma_px
 from .target import Target, TargetParams, TargetState
 
 #: A sighting's located position is reused for the predictions of this many frames, then located afresh.
 REANCHOR_FRAMES = 64
 #: A click asks for an object within this share of the vehicle's diagonal of it (the window's 3 sigma).
 CLICK_REACH = 1.0
+#: A drawn box kept (``keep_drawn``) when its centre is within this many outline errors
+#: (:data:`~localizer.tracking.sigma.OUTLINED_SHARE` of the vehicle's length) of the outline's, per axis.
+DRAWN_AGREES = 3.0
 #: The UUV's speed is measured over its sightings of the last this many seconds ...
 SPEED_WINDOW_S = 0.5
 #: ... at least this long apart ...
@@ -132,16 +139,30 @@ class TrackingSession:
     def state(self) -> TargetState:
         return self.target.state
 
+    @property
+    def outlined(self) -> bool:
+        """Whether the target's box is an outline skyfix found, not the box as given."""
+        return self._outlined
+
     # -- the operator's commands ------------------------------------------------------------------
     def select(
-        self, frame_bgr, pose: CameraPose, i: int = 0, *, box=None, point=None, verify: bool = False
+        self,
+        frame_bgr,
+        pose: CameraPose,
+        i: int = 0,
+        *,
+        box=None,
+        point=None,
+        verify: bool = False,
+        keep_drawn: bool = False,
     ) -> TrackResult:
         """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of this frame, from now on.
 
         Raises :class:`SelectionError` (and changes nothing) for a box outside the
         frame, or a click with no object standing out near it or without a pose;
         with ``verify``, also for a box with no object standing out in it (checked
-        when the pose can size the vehicle).
+        when the pose can size the vehicle); ``keep_drawn``: a verified box on the
+        vehicle's outline is kept as drawn (see the module doc).
         """
         if (box is None) == (point is None):
             raise SelectionError("give either a box [x, y, w, h] or a point [u, v]")
@@ -156,6 +177,8 @@ class TrackingSession:
             outlined = self._outline_click(frame_bgr, one, point)
         elif verify:
             outlined = self._outline_box(frame_bgr, one, box)
+            if keep_drawn and outlined is not None and self._agrees(one, box, outlined):
+                outlined = None
         box = outlined or box
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
@@ -425,6 +448,15 @@ class TrackingSession:
                 "water in it; draw the box around the UUV"
             )
         return found.box
+
+    def _agrees(self, one: CameraPose, drawn, outline) -> bool:
+        """Whether the drawn box's centre is within :data:`DRAWN_AGREES` outline errors of the outline's."""
+        (dx, dy), (ox, oy) = (
+            (b[0] + (b[2] - 1) / 2.0, b[1] + (b[3] - 1) / 2.0) for b in (drawn, outline)
+        )
+        _, px_per_m = self._locate(one, (ox, oy))
+        reach_px = DRAWN_AGREES * OUTLINED_SHARE * VEHICLE_FOOTPRINT_M[0] * px_per_m
+        return abs(dx - ox) <= reach_px and abs(dy - oy) <= reach_px
 
     def _acquire(self, frame_bgr, pose: CameraPose, i: int, prior: Prior) -> TrackResult:
         """Awaiting a target, with the UUV's own estimate: search near it for a candidate to confirm."""
