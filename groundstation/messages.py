@@ -1089,7 +1089,8 @@ class TargetStatus(Section):
     init_bbox: str | None = Field(
         None,
         description="how [tracker] init_bbox was taken on the first frame, checked as an operator's box: kept, "
-        "snapped (off the vehicle: its outline taken), refused (no vehicle in it), unchecked (no camera pose); "
+        "snapped (off the vehicle: its outline taken), refused (no vehicle in it), unchecked (no camera pose on "
+        "the first frame: checked on the first frame tracked with one, then kept, snapped or refused 'on frame N'); "
         "null: none configured, or no frame yet",
     )
 

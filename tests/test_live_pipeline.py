@@ -263,3 +263,69 @@ def test_a_configured_init_bbox_off_the_vehicle_is_snapped_or_refused(dx_px, cap
         assert said.startswith(f"refused: box {list(box)}: no vehicle-sized object")
         (record,) = caplog.records
         assert f"tracker.init_bbox on frame 0: box {list(box)}" in record.getMessage()
+
+
+@pytest.mark.parametrize("dx_px", [0, 25, -25])
+def test_an_init_bbox_taken_without_a_pose_is_checked_on_the_first_frame_with_one(dx_px, caplog):
+    """The UAV's attitude arrives after the first frames (the video starts first): ``init_bbox`` cannot be checked
+    on frame 0 (no pose to size the vehicle) and is tracked unchecked; on the first frame tracked with a pose it is
+    checked as it would have been: on the vehicle kept, 25 px right snapped onto the outline, 25 px left (open
+    water, tracked as the seafloor until then) refused. Without the late check the -25 px box gives ok fixes 25 px
+    off the vehicle once the attitude arrives. nadir_hover's frames."""
+    import asyncio
+    import copy
+    from dataclasses import replace
+    from pathlib import Path
+
+    from groundstation.session.read import load_session
+    from groundstation.video.file import open_video
+
+    session = load_session(
+        Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover"
+    )
+    t, truth = session.frames["t"], session.track
+    tel = copy.deepcopy(session.telemetry)
+    att = tel.attitude
+    cut = float(tel.uav_time(t[3])) + 1e-3  # frames 0-3 come before the first attitude sample
+    kept = att.times > cut
+    times, values = att.times[kept].copy(), att.values[kept].copy()
+    att.clear()
+    for ti, vi in zip(times, values, strict=True):
+        assert att.append(float(ti), vi)
+    x, y, w, h = session.calibration.init_bbox
+    box = (x + dx_px, y, w, h)
+    cal = replace(session.calibration, tracker=replace(session.calibration.tracker, init_bbox=box))
+    with open_video(session.video_path, grey=True) as video:
+        frames = [f for f, _ in zip(video, range(15), strict=False)]
+
+    async def live():
+        pipeline = Pipeline(cal, tel, "default", [])
+        fixes, said = [], []
+        for f in frames:
+            frame = LiveFrame(f.index, float(t[f.index]), float(t[f.index]), f.bgr(), grey=f.image)
+            fixes.append(await pipeline.process(frame))
+            said.append(pipeline.target["init_bbox"])
+        return pipeline, fixes, said
+
+    with caplog.at_level("WARNING", logger="skyfix.pipeline"):
+        pipeline, fixes, said = asyncio.run(live())
+    assert not any(f.ok for f in fixes[:4])  # no pose, no fix
+    assert all(s.startswith("unchecked: no camera pose on frame 0") for s in said[:4]), said[:4]
+    ok = [f for f in fixes if f.ok]
+    du = [f.u - np.interp(f.t_unix, truth["t"], truth["u"]) for f in ok]
+    dv = [f.v - np.interp(f.t_unix, truth["t"], truth["v"]) for f in ok]
+    assert np.all(np.abs(du) < 3.0) and np.all(np.abs(dv) < 3.0), (du, dv)
+    final = said[-1]
+    if dx_px == 0:
+        assert final == "kept: checked on frame 4, the first with a camera pose"
+        assert len(ok) == len(frames) - 4 and not caplog.records
+    elif dx_px > 0:
+        assert final.startswith("snapped on frame 4, the first with a camera pose: the tracked box")
+        assert len(ok) == len(frames) - 4
+        assert [r.getMessage() for r in caplog.records] == [f"tracker.init_bbox: {final}"]
+    else:
+        assert not ok and pipeline.target["state"] == "awaiting_target"
+        assert final.startswith("refused on frame 4, the first with a camera pose: box ")
+        assert "no vehicle-sized object" in final
+        (record,) = caplog.records
+        assert record.getMessage() == f"tracker.init_bbox: {final}; awaiting a target"

@@ -40,7 +40,9 @@ catches up through the held frames after it before the next live frame. An opera
 box must hold a vehicle-sized object standing out of the water (a box on open water is
 refused, not tracked as the seafloor). ``init_bbox`` is checked the same way on the first frame: kept as drawn when
 it holds the vehicle's outline, snapped onto the outline when it is off it, refused (awaiting a target) when no
-vehicle stands out in it; one warning names the box, and the status's ``target.init_bbox`` says which. A release
+vehicle stands out in it; one warning names the box, and the status's ``target.init_bbox`` says which. A first
+frame without a camera pose cannot size the vehicle: the box is then tracked unchecked and checked on the first frame
+tracked with a pose (before any fix can be ok, since a fix needs the pose). A release
 also turns frames tracked before it but not yet located into ``released`` ones: no
 fix goes out after it.
 """
@@ -213,6 +215,9 @@ class Pipeline:
         self.last_status: str | None = None
         # how ``[tracker] init_bbox`` was taken (None: not configured, or not yet): kept, snapped, refused, unchecked
         self.init_bbox: str | None = None
+        # init_bbox was taken without a camera pose: checked on the first frame tracked with one (unless a command
+        # came first)
+        self._unchecked = False
         # the tracking session's status after the latest frame or command
         self.target = self._status()
         #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
@@ -414,6 +419,8 @@ class Pipeline:
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
                     )
         result = self.session.step(image, pose, prior=prior)
+        if self._unchecked and not self.commands and result.ok and pose.status[0] == "ok":
+            result = self._check_late(frame, image, pose, result)
         return self.centre.after(self.session, image, result, frame.t_unix)
 
     def _init_select(self, frame: LiveFrame, image, pose: CameraPose) -> TrackResult:
@@ -427,11 +434,38 @@ class Pipeline:
             )
             log.warning("tracker.init_bbox on frame %d: %s", frame.index, self.init_bbox)
         else:
+            self._unchecked = pose.status[0] != "ok"
             self.init_bbox = (
-                "kept"
-                if pose.status[0] == "ok"
-                else f"unchecked: no camera pose on frame {frame.index} ({pose.status[0]})"
+                f"unchecked: no camera pose on frame {frame.index} ({pose.status[0]})"
+                if self._unchecked
+                else "kept"
             )
+        return result
+
+    def _check_late(
+        self, frame: LiveFrame, image, pose: CameraPose, result: TrackResult
+    ) -> TrackResult:
+        """An ``init_bbox`` taken unchecked (its frame had no camera pose to size the vehicle), checked on the first
+        frame tracked with a pose as it would have been on its own: the tracked box kept, snapped onto the vehicle's
+        outline, or refused (awaiting a target). Without this, a box drawn on open water would be tracked as the
+        seafloor and every fix once the telemetry arrives would be wrong."""
+        self._unchecked = False
+        try:
+            checked = self.session.select(image, pose, box=result.box, verify=True, keep_drawn=True)
+        except SelectionError as e:
+            self.session.acquire()
+            self.centre.restart()
+            self.init_bbox = f"refused on frame {frame.index}, the first with a camera pose: {e}"
+            log.warning("tracker.init_bbox: %s; awaiting a target", self.init_bbox)
+            return TrackResult("awaiting_target")
+        if self.session.outlined:
+            self.init_bbox = (
+                f"snapped on frame {frame.index}, the first with a camera pose: the tracked box "
+                f"{list(result.box)} is off the vehicle; its outline {list(checked.box)} taken"
+            )
+            log.warning("tracker.init_bbox: %s", self.init_bbox)
+            return checked
+        self.init_bbox = f"kept: checked on frame {frame.index}, the first with a camera pose"
         return result
 
     def _steered(self, held: Tracked, result: TrackResult) -> TrackResult:
