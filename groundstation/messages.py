@@ -864,6 +864,10 @@ class BottomStatus(Section):
     )
     heading_deg: float | None = Field(description="the heading error (a compass reading high: +)")
     sigma_heading_deg: float | None = Field(description="its 1-sigma")
+    per_height_deg_per_m: list[float] | None = Field(
+        description="how the tilt forward, right and the heading move per metre the camera's height reads high "
+        "(the floor does not tell the height: the fit takes part of a height error as tilt); the claim carries it"
+    )
     walk_n_m: float | None = Field(
         description="the position correction at the window's end, north (true = reported + it), about the "
         "window's GNSS mean"

@@ -178,6 +178,9 @@ def test_fixes_made_again_with_the_estimate_refused_where_their_own_claim_is_sma
         BottomStatus.model_validate(status)
         assert status["state"] == "applied" and status["heading_applied"]
         assert status["heading_deg"] == pytest.approx(np.degrees(found.estimate.yaw_rad), abs=1e-3)
+        per_m = np.degrees(found.estimate.bias_per_height_rad)
+        assert np.any(np.abs(per_m) > 0.01)  # the survey's fit moves with the height
+        assert status["per_height_deg_per_m"] == pytest.approx(per_m.tolist(), abs=1e-4)
         # the estimate lapses HOLD_WINDOWS windows after its newest frame
         late = dataclasses.replace(fixes[i], t_unix=t0 + HOLD_WINDOWS * WINDOW_S + 0.1)
         assert live.correct(late, take(pose, [i])) is late
