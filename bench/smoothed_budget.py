@@ -1,7 +1,7 @@
 """The smoothed offline track's error budget: which of the drone's errors make its shape, with the true pixel.
 
     .venv/bin/python bench/smoothed_budget.py [--work /tmp/skyfix-weather] [--out bench/results/smoothed_budget.txt]
-                                              [--only NAME ...]
+                                              [--only NAME ...] [--pixels true tracked]
 
 For each weather session (``bench/weather.py``'s, generated into ``--work`` if missing) the true pixel (track.csv) is
 located as ``evaluate --use-track`` locates it and smoothed as ``positions_smoothed.csv`` is
@@ -22,6 +22,8 @@ track's shape without it (``without``: what removing that term alone would leave
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import os
 import sys
 from pathlib import Path
 
@@ -32,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 from waves import session as generated
 
 from groundstation.offline.evaluate import error_ne_m, shape_m
-from groundstation.offline.process import frame_pixels, locate_frames
+from groundstation.offline.process import frame_pixels, locate_frames, located
 from groundstation.offline.smoothed import offline_track
 from groundstation.session.read import load_session, read_table
 from localizer.fix_gate import MAX_ACCEL_MPS2, MAX_SPEED_MPS
@@ -49,6 +51,8 @@ SCENARIOS = sorted(p.stem for p in (ROOT / "sim_fixtures" / "scenarios").glob("w
 ERRORS = ("cam_err_n_deg", "cam_err_e_deg", "cam_err_d_deg", "north_err_m", "east_err_m")
 BOUNDS = (MAX_SPEED_MPS["bluerov2"], MAX_ACCEL_MPS2["bluerov2"])
 _DEPTH = 1e-3  # m, the depth's finite difference
+#: constant acceleration bounds (m/s²) tried in place of the data's (the smoother's window)
+CONSTANT_ACCEL_MPS2 = (0.3, 0.5, 0.7, 1.0)
 
 
 def terms(path: Path) -> tuple[dict[str, np.ndarray], np.ndarray, object, np.ndarray, dict]:
@@ -109,8 +113,21 @@ def rms_about_mean(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((x - x.mean(axis=0)) ** 2, axis=1)))) if len(x) else np.nan
 
 
-def budget(path: Path) -> list[str]:
+def tracked(path: Path, parts: dict, err: np.ndarray, truth: dict) -> tuple[object, np.ndarray]:
+    """The tracked video's fixes as ``evaluate`` smooths them (tracked both ways, the frames traced back included)
+    and their error (N×2); adds the tracked pixel's own term to ``parts`` (their error less the true pixel's ``err``,
+    the same frames and telemetry)."""
+    session = load_session(path)
+    _, fixes, _ = located(session, frame_pixels(session, False, both_ways=True), True, None, "auto")
+    err_tracked = error_ne_m(fixes.t_unix, fixes.lat, fixes.lon, fixes.status == "ok", truth)
+    parts["tracked pixel"] = err_tracked - err
+    return fixes, err_tracked
+
+
+def budget(path: Path, pixels: str = "true") -> list[str]:
     parts, err, fixes, truth_ne, truth = terms(path)
+    if pixels == "tracked":
+        fixes, err = tracked(path, parts, err, truth)
     smoothed, _ = offline_track(fixes, *BOUNDS)
     taken = smoothed.ok & (smoothed.gap_s == 0)
     through = {k: through_smoother(fixes, taken, smoothed, BOUNDS[0], x) for k, x in parts.items()}
@@ -133,7 +150,35 @@ def budget(path: Path) -> list[str]:
         f"  {'smoothed track (evaluate)':24s} {'':8s} {rms_about_mean(sm_err):8.4f} "
         f"{shape_m(sm_err):8.4f}   in 2σ {np.mean(np.hypot(*sm_err[smoothed.ok].T) <= 2 * smoothed.h_acc_m[smoothed.ok]):.1%}"
     )
-    return lines
+    slow = total - through["waves"] - through["smoother's lag"]
+    lines.append(
+        f"  floor: the slow terms alone (no waves, no lag) {shape_m(slow):.4f}; "
+        f"without the heading bias too {shape_m(slow - through['heading bias']):.4f}"
+    )
+    return lines + window(fixes, taken, smoothed, err, parts["waves"], truth_ne)
+
+
+def window(fixes, taken, smoothed, err, waves, truth_ne) -> list[str]:
+    """The smoothed shape, and the waves' and the lag's shapes through the smoother, with the data's acceleration
+    bound and with each of :data:`CONSTANT_ACCEL_MPS2` in its place (the same noise share, frames and fixes)."""
+    cells = []
+    bounds = [("data's", smoothed)] + [
+        (f"{a:.1f}", dataclasses.replace(smoothed, accel_mps2=np.full(len(fixes), a)))
+        for a in CONSTANT_ACCEL_MPS2
+    ]
+    for label, sm in bounds:
+
+        def through(x, sm=sm):
+            return through_smoother(fixes, taken, sm, BOUNDS[0], x)
+
+        lag = through(truth_ne) - truth_ne
+        cells.append(
+            f"{label} {shape_m(through(err) + lag):.4f} ({shape_m(through(waves)):.4f}/{shape_m(lag):.4f})"
+        )
+    return [
+        f"  window: acceleration bound (m/s², the data's median {np.median(smoothed.accel_mps2):.2f}) "
+        "shape (waves/lag): " + ", ".join(cells)
+    ]
 
 
 def main() -> int:
@@ -141,14 +186,19 @@ def main() -> int:
     ap.add_argument("--work", default="/tmp/skyfix-weather")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "smoothed_budget.txt"))
     ap.add_argument("--only", nargs="*")
+    ap.add_argument("--pixels", nargs="*", choices=("true", "tracked"), default=["true"])
     args = ap.parse_args()
     head = f"  {'term (m)':24s} {'raw':>8s} {'smoothed':>8s} {'shape':>8s} {'without':>8s}"
-    lines = []
+    lines = [
+        f"# load average (1, 5, 15 min) at the start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}"
+    ]
     for name in args.only or SCENARIOS:
         path, _ = generated(name, Path(args.work), False)
-        block = [name, head, *budget(path)]
-        lines += block
-        print("\n".join(block), flush=True)
+        for pixels in args.pixels:
+            block = [f"{name} ({pixels} pixel)", head, *budget(path, pixels)]
+            lines += block
+            print("\n".join(block), flush=True)
+    lines.append(f"# load average at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     Path(args.out).write_text("\n".join(lines) + "\n")
     print(f"-> {args.out}")
     return 0

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -236,6 +237,18 @@ def test_another_series_goes_through_the_same_smoother():
     a, b = truth, z - truth
     parts = through_smoother(fixes, taken, sm, V, a) + through_smoother(fixes, taken, sm, V, b)
     assert np.abs(parts - through_smoother(fixes, taken, sm, V, z)).max() < 1e-9
+    # another acceleration bound put in its place is the smoother at that bound (bench/smoothed_budget.py's window):
+    # white noise keeps the vehicle's bound, so smoothing with a smaller vehicle's is the same filter
+    t, _, z = line(8.0, 13, 0.02)
+    fixes = fixes_of(t, z[:, 0], z[:, 1], 0.02)
+    taken = np.ones(len(t), bool)
+    at_vehicle, at_half = smooth_fixes(fixes, taken, V, A), smooth_fixes(fixes, taken, V, 0.5)
+    assert np.all(at_half.accel_mps2 == 0.5)
+    replaced = replace(at_vehicle, accel_mps2=np.full(len(t), 0.5))
+    own = through_smoother(fixes, taken, replaced, V, local(fixes.lat, fixes.lon))
+    assert np.abs(own - local(at_half.lat, at_half.lon)).max() < 1e-6
+    # and not the vehicle's own track: the bound is what changed
+    assert np.abs(own - local(at_vehicle.lat, at_vehicle.lon)).max() > 1e-3
 
 
 def test_the_recordings_fits_serve_the_smoother_only_for_the_same_fixes():
