@@ -155,7 +155,21 @@ def budget(path: Path, pixels: str = "true") -> list[str]:
         f"  floor: the slow terms alone (no waves, no lag) {shape_m(slow):.4f}; "
         f"without the heading bias too {shape_m(slow - through['heading bias']):.4f}"
     )
+    lines.append(
+        f"  check: the true track turned about the drone's nadir by the scenario's compass bias, shape "
+        f"{shape_m(turned_about_nadir(path, fixes.t_unix - truth['t'][0], truth_ne)):.4f} "
+        f"(the heading bias term's raw shape {shape_m(parts['heading bias']):.4f})"
+    )
     return lines + window(fixes, taken, smoothed, err, parts["waves"], truth_ne)
+
+
+def turned_about_nadir(path: Path, tau_s: np.ndarray, truth_ne: np.ndarray) -> np.ndarray:
+    """The error (N×2, m) a constant compass bias alone makes, computed apart from the Jacobians: the true track
+    turned about the drone's true position by the scenario's ``yaw_bias_deg`` (to first order). Not a constant
+    offset where the UUV moves: its shape is the bias times the track's extent."""
+    sc = load_scenario(path / "scenario.toml")
+    d = truth_ne - Motion(sc).uav_ned(tau_s)[:, :2]
+    return np.radians(sc.sensors.yaw_bias_deg) * np.column_stack([-d[:, 1], d[:, 0]])
 
 
 def window(fixes, taken, smoothed, err, waves, truth_ne) -> list[str]:
