@@ -74,42 +74,78 @@ def distort(x, y, distortion):
     return xd, yd
 
 
+#: Arrays of up to this many points are undistorted point by point in plain floats (numpy's overhead per operation
+#: is most of a small array's time: the height from size undistorts 1-5 pixels at a time), all stepped together until
+#: every one has converged, as an array's are: the same steps, the same results.
+SCALAR_POINTS = 16
+
+
 def undistort(xd, yd, distortion, iterations: int = 20, tol: float = 1e-14):
     """Invert :func:`distort` by Newton's method (to ~1e-12, far below a pixel).
 
     OpenCV's ``undistortPoints`` stops after a few fixed-point steps, which leaves
     errors of 0.01–0.1 px in image corners; this converges quadratically instead.
     Returns NaN where the iteration does not converge (outside the lens model's
-    valid region).
+    valid region). Up to :data:`SCALAR_POINTS` points are stepped in plain floats.
     """
-    k1, k2, p1, p2, k3 = distortion
     xd = np.asarray(xd, dtype=float)
     yd = np.asarray(yd, dtype=float)
-    x = xd.copy()
-    y = yd.copy()
-    for _ in range(iterations):
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
-        fx = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
-        fy = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
-        # Jacobian of (xd, yd) with respect to (x, y)
-        j11 = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
-        j12 = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
-        j21 = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
-        j22 = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
-        det = j11 * j22 - j12 * j21
-        dx = (j22 * fx - j12 * fy) / det
-        dy = (-j21 * fx + j11 * fy) / det
-        x = x - dx
-        y = y - dy
-        if np.all(np.abs(dx) + np.abs(dy) < tol):
-            break
+    x = y = None
+    if 0 < xd.size <= SCALAR_POINTS and xd.shape == yd.shape:
+        x, y = _undistort_floats(xd, yd, distortion, iterations, tol)
+    if x is None:
+        x = xd.copy()
+        y = yd.copy()
+        for _ in range(iterations):
+            dx, dy = _newton_step(x, y, xd, yd, distortion)
+            x = x - dx
+            y = y - dy
+            if np.all(np.abs(dx) + np.abs(dy) < tol):
+                break
     xr, yr = distort(x, y, distortion)
     bad = ~(np.abs(xr - xd) + np.abs(yr - yd) < 1e-9)
     if np.any(bad):
         x = np.where(bad, np.nan, x)
         y = np.where(bad, np.nan, y)
+    return x, y
+
+
+def _newton_step(x, y, xd, yd, distortion):
+    """:func:`undistort`'s Newton step (dx, dy) from ``(x, y)`` towards the distorted ``(xd, yd)``, of floats or of
+    arrays alike (the same operations in the same order)."""
+    k1, k2, p1, p2, k3 = distortion
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
+    fx = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
+    fy = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
+    # Jacobian of (xd, yd) with respect to (x, y)
+    j11 = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x
+    j12 = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+    j21 = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y
+    j22 = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x
+    det = j11 * j22 - j12 * j21
+    return (j22 * fx - j12 * fy) / det, (-j21 * fx + j11 * fy) / det
+
+
+def _undistort_floats(xd: np.ndarray, yd: np.ndarray, distortion, iterations: int, tol: float):
+    """:func:`undistort`'s steps point by point in plain floats, every point stepped until all have converged (as
+    an array's); (x, y) arrays of ``xd``'s shape, or (None, None) where a step divides by zero (the arrays' steps
+    then give what numpy gives)."""
+    k = tuple(float(c) for c in distortion)
+    targets = list(zip(xd.ravel().tolist(), yd.ravel().tolist(), strict=True))
+    points = targets
+    try:
+        for _ in range(iterations):
+            steps = [
+                _newton_step(x, y, a, b, k) for (x, y), (a, b) in zip(points, targets, strict=True)
+            ]
+            points = [(x - dx, y - dy) for (x, y), (dx, dy) in zip(points, steps, strict=True)]
+            if all(abs(dx) + abs(dy) < tol for dx, dy in steps):
+                break
+    except ZeroDivisionError:
+        return None, None
+    x, y = (np.array(c, dtype=float).reshape(xd.shape) for c in zip(*points, strict=True))
     return x, y
 
 

@@ -48,6 +48,9 @@ def box_corners_px(
         *(np.asarray(x, dtype=float) for x in (u, v, heading_rad, height_m))
     )
     d = float(depth_m)
+    if u.size > 1 and np.all(u == u.flat[0]) and np.all(v == v.flat[0]):
+        # one pixel (a scan over heights and headings): its ray once, the same steps (undistort's) as for each
+        u, v = u.flat[0], v.flat[0]
     centre, _ = pixel_to_offset(
         camera, R_ned_from_cv, u, v, h, np.full(h.shape, d), n_water if d > 0 else None
     )
@@ -83,13 +86,14 @@ def point_to_pixel(camera: Camera, R_ned_from_cv, offset_ne_m, height_m, depth_m
 
 def outline(points) -> list[int]:
     """Indices of the convex hull of ``points`` (N, 2), in the order that makes ``(e_v, -e_u)`` point outwards."""
-    pts = np.asarray(points, dtype=float)
-    order = sorted(range(len(pts)), key=lambda i: (pts[i, 0], pts[i, 1]))
+    pts = np.asarray(
+        points, dtype=float
+    ).tolist()  # plain floats: the same arithmetic, without numpy's scalars
+    order = sorted(range(len(pts)), key=lambda i: pts[i])
 
     def turn(o, a, b):
-        return (pts[a, 0] - pts[o, 0]) * (pts[b, 1] - pts[o, 1]) - (pts[a, 1] - pts[o, 1]) * (
-            pts[b, 0] - pts[o, 0]
-        )
+        (xo, yo), (xa, ya), (xb, yb) = pts[o], pts[a], pts[b]
+        return (xa - xo) * (yb - yo) - (ya - yo) * (xb - xo)
 
     lower: list[int] = []
     upper: list[int] = []

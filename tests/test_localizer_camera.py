@@ -5,7 +5,14 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from localizer.camera import Camera, distort, pixel_to_ray, ray_to_pixel, undistort
+from localizer.camera import (
+    SCALAR_POINTS,
+    Camera,
+    distort,
+    pixel_to_ray,
+    ray_to_pixel,
+    undistort,
+)
 
 # the session spec's example lens, and a strongly barrelled wide one
 SPEC = Camera(1920, 1080, 1664.0, 1664.0, 959.5, 539.5, (-0.12, 0.08, 0.0004, -0.0002, -0.01))
@@ -39,6 +46,28 @@ def test_undistort_inverts_distort_over_the_whole_image():
         assert err_px.max() < 1e-6, (cam, err_px.max())
         # and undistortion really moves corner pixels (the test is not vacuous)
         assert np.hypot((x - xd) * cam.fx, (y - yd) * cam.fy).max() > 20
+
+
+def test_small_arrays_take_the_arrays_steps_in_floats():
+    """Up to SCALAR_POINTS points are stepped in plain floats, all together until every one has converged: bit for
+    bit what numpy's steps give (an array of one point more, a copy of one of them, takes numpy's over the same
+    points), a point outside the lens model NaN in both."""
+    for cam in CAMERAS:
+        u, v = _image_grid(cam, 9)
+        xd = np.append((u.ravel() - cam.cx) / cam.fx, 3.0)  # the last beyond the lens model
+        yd = np.append((v.ravel() - cam.cy) / cam.fy, 3.0)
+        for a in range(xd.size - SCALAR_POINTS, -1, -4):  # the first with the point beyond
+            sx, sy = xd[a : a + SCALAR_POINTS], yd[a : a + SCALAR_POINTS]
+            x, y = undistort(sx, sy, cam.distortion)
+            ax, ay = undistort(np.append(sx, sx[0]), np.append(sy, sy[0]), cam.distortion)
+            assert x.tobytes() == ax[:-1].tobytes() and y.tobytes() == ay[:-1].tobytes(), (cam, a)
+            if a == xd.size - SCALAR_POINTS:
+                assert np.isnan(x[-1]) and np.isfinite(x[:-1]).all()
+        x, y = undistort(xd[40], yd[40], cam.distortion)  # one point: arrays of its shape
+        many = undistort(
+            np.full(SCALAR_POINTS + 1, xd[40]), np.full(SCALAR_POINTS + 1, yd[40]), cam.distortion
+        )
+        assert x.shape == () and (x, y) == (many[0][0], many[1][0])
 
 
 def test_pixel_ray_pixel_round_trip_including_corners():
