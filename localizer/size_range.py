@@ -86,9 +86,8 @@ def point_to_pixel(camera: Camera, R_ned_from_cv, offset_ne_m, height_m, depth_m
 
 def outline(points) -> list[int]:
     """Indices of the convex hull of ``points`` (N, 2), in the order that makes ``(e_v, -e_u)`` point outwards."""
-    pts = np.asarray(
-        points, dtype=float
-    ).tolist()  # plain floats: the same arithmetic, without numpy's scalars
+    # plain floats: the same arithmetic, without numpy's scalars
+    pts = np.asarray(points, dtype=float).tolist()
     order = sorted(range(len(pts)), key=lambda i: pts[i])
 
     def turn(o, a, b):
