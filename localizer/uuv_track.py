@@ -251,18 +251,36 @@ class UuvTrack:
         """:meth:`distance`'s ``d`` alone (the same number, without the radius and the margin)."""
         return max(_sigmas_beyond(*bound) for bound in self._bounds(t, z, C, share, accel_mps2))
 
-    def _bounds(
-        self, t, z, C, share, accel_mps2
-    ) -> tuple[tuple[np.ndarray, float, np.ndarray], ...]:
-        """:meth:`distance`'s two bounds: each the fix's offset (m), the bound's radius (m) and the covariance (m²)."""
+    def _bounds(self, t, z, C, share, accel_mps2) -> tuple[tuple, tuple]:
+        """:meth:`distance`'s two bounds: each the fix's offset (north, east; m), the bound's radius (m) and the
+        covariance (m²: north², north·east, east²).
+
+        Written out in floats (the transition's structure: the moved-on covariance is ``P_pos + Δ·(P_pv + P_vp) +
+        Δ²·P_vel``): the gates compare ``d`` with a bound, and numpy's per-call cost on 2×2 and 4×4 arrays was most
+        of a fix's gating."""
         a = self.max_accel_mps2 if accel_mps2 is None else accel_mps2
         dt = max(0.0, t - self.t)
-        F = transition(dt)
-        extra = self.white_m2(C, share) + common_change_m2(C, dt)
-        moved_on, P_moved = (F @ self.x)[:2], (F @ self.P @ F.T)[:2, :2]
+        (cnn, cne), (_, cee) = C.tolist()
+        # the fix's white part (white_m2) and how much the common error can have changed (common_change_m2)
+        grow = share + 2.0 * (1.0 - math.exp(-0.5 * (dt / TAU_COMMON_S) ** 2))
+        floor = WHITE_FLOOR_M**2
+        enn, ene, eee = grow * cnn + floor, grow * cne, grow * cee + floor
+        (pnn, pne, pnvn, pnve), (_, pee, pevn, peve), (_, _, pvnvn, pvnve), (_, _, _, pveve) = (
+            self.P.tolist()
+        )
+        n, e, vn, ve = self.x.tolist()
+        zn, ze = z.tolist() if isinstance(z, np.ndarray) else z
+        dt2 = dt * dt
         return (
-            (z - self.x[:2], self.reach_m(t), self.P[:2, :2] + extra),
-            (z - moved_on, 0.5 * a * dt * dt, P_moved + extra),
+            (zn - n, ze - e, self.reach_m(t), pnn + enn, pne + ene, pee + eee),
+            (
+                zn - (n + dt * vn),
+                ze - (e + dt * ve),
+                0.5 * a * dt2,
+                pnn + 2.0 * dt * pnvn + dt2 * pvnvn + enn,
+                pne + dt * (pnve + pevn) + dt2 * pvnve + ene,
+                pee + 2.0 * dt * peve + dt2 * pveve + eee,
+            ),
         )
 
     def widen(self, seconds: float) -> None:
@@ -298,18 +316,22 @@ def _process_noise(accel_mps2: float, dt: float) -> np.ndarray:
     return (PROCESS_ACCEL_SHARE * accel_mps2) ** 2 * Q
 
 
-def _beyond(offset: np.ndarray, radius_m: float, U: np.ndarray) -> tuple[float, float, float]:
-    """``(d, radius_m, margin_m)``: the Mahalanobis distance (covariance ``U``) of the part of ``offset`` beyond
-    ``radius_m``, and 1-sigma of ``U`` along its widest axis."""
-    return (
-        _sigmas_beyond(offset, radius_m, U),
-        radius_m,
-        math.sqrt(float(np.linalg.eigvalsh(U)[-1])),
-    )
+def _beyond(
+    dn: float, de: float, radius_m: float, unn: float, une: float, uee: float
+) -> tuple[float, float, float]:
+    """``(d, radius_m, margin_m)``: the Mahalanobis distance (covariance ``[[unn, une], [une, uee]]``) of the part of
+    the offset (``dn``, ``de``) beyond ``radius_m``, and 1-sigma of the covariance along its widest axis."""
+    widest = 0.5 * (unn + uee) + math.hypot(0.5 * (unn - uee), une)
+    return _sigmas_beyond(dn, de, radius_m, unn, une, uee), radius_m, math.sqrt(widest)
 
 
-def _sigmas_beyond(offset: np.ndarray, radius_m: float, U: np.ndarray) -> float:
-    """:func:`_beyond`'s Mahalanobis distance alone."""
-    off = math.hypot(*offset)
-    beyond = offset * (max(0.0, off - radius_m) / off) if off > 0 else offset
-    return math.sqrt(max(0.0, float(beyond @ np.linalg.solve(U, beyond))))
+def _sigmas_beyond(
+    dn: float, de: float, radius_m: float, unn: float, une: float, uee: float
+) -> float:
+    """:func:`_beyond`'s Mahalanobis distance alone (the 2×2 inverse written out)."""
+    off = math.hypot(dn, de)
+    if off > 0:
+        keep = max(0.0, off - radius_m) / off
+        dn, de = dn * keep, de * keep
+    q = (uee * dn * dn - 2.0 * une * dn * de + unn * de * de) / (unn * uee - une * une)
+    return math.sqrt(max(0.0, q))
