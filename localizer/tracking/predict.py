@@ -16,7 +16,6 @@ times the vehicle's footprint. Batched over the pose's frames.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 
@@ -103,14 +102,19 @@ def top_face_pixel(
 
 
 def prediction_at(
-    u: float, v: float, px_per_m: float, sigma_m: float, shift_px=(0.0, 0.0)
+    u: float,
+    v: float,
+    px_per_m: float,
+    sigma_m: float,
+    shift_px=(0.0, 0.0),
+    turn_deg: float = math.nan,
 ) -> Prediction | None:
     """A :class:`Prediction` from one frame's projection (see :func:`project_uuv`); None if it is NaN.
 
     ``sigma_m``: how far (1-sigma, metres) the UUV may have moved since the
     position that was projected; ``shift_px``: a pixel correction added to the
     projection, e.g. the residual between the last tracked pixel and the
-    projection at that frame.
+    projection at that frame; ``turn_deg``: how far its heading may have turned (NaN: any).
     """
     if not (math.isfinite(u) and math.isfinite(v) and px_per_m > 0):
         return None
@@ -122,6 +126,7 @@ def prediction_at(
         height_px=float(beam_m * px_per_m),
         sigma_px=float(sigma_m * px_per_m),
         px_per_m=float(px_per_m),
+        turn_deg=turn_deg,
     )
 
 
@@ -168,9 +173,6 @@ def follow(
     if not (math.isfinite(shift[0]) and math.isfinite(shift[1])):
         return None
     u, v, px_per_m = projected_now[:3]
-    p = prediction_at(u, v, px_per_m, reach_m(dt_s, speed_mps) / WINDOW_SIGMAS, shift)
-    return (
-        None
-        if p is None
-        else replace(p, turn_deg=min(180.0, UUV_YAW_RATE_DPS * abs(dt_s) + TURN_MARGIN_DEG))
-    )
+    sigma_m = reach_m(dt_s, speed_mps) / WINDOW_SIGMAS
+    turn_deg = min(180.0, UUV_YAW_RATE_DPS * abs(dt_s) + TURN_MARGIN_DEG)
+    return prediction_at(u, v, px_per_m, sigma_m, shift, turn_deg)

@@ -41,7 +41,7 @@ Pure: no I/O, no clock; a frame's time is its pose's ``t_unix``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -283,17 +283,18 @@ class TrackingSession:
                 self._jitter2 = jitter2_px2(
                     self._jitter2, self._follows, result.u - p.u, result.v - p.v
                 )
-            result = replace(
-                result,
-                sigma_px=pixel_sigma_px(
-                    self._length_px,
-                    result.confidence,
-                    window,
-                    t_unix - self.since_t,
-                    self._outlined,
-                    math.sqrt(self._jitter2),
-                    self.target.waves,
-                ),
+            sigma_px = pixel_sigma_px(
+                self._length_px,
+                result.confidence,
+                window,
+                t_unix - self.since_t,
+                self._outlined,
+                math.sqrt(self._jitter2),
+                self.target.waves,
+            )
+            # a TrackResult made afresh (dataclasses.replace costs as much as the sigma itself)
+            result = TrackResult(
+                result.status, result.u, result.v, result.box, result.confidence, sigma_px
             )
         self.last = result
         return result
@@ -350,9 +351,12 @@ class TrackingSession:
         ]
         if t - self._moves[0][0] < SPEED_SPAN_S or not px_per_m > 0:
             return
-        ts, us, vs, _ = np.array(self._moves).T
-        ts = ts - ts.mean()
-        du, dv = (float(np.dot(ts, x - x.mean()) / np.dot(ts, ts)) for x in (us, vs))
+        # one row per quantity (each row's mean as of a 1-D array: pairwise along the row)
+        moves = np.array(self._moves).T.copy()
+        (ts, us, vs, _), (t_mean, u_mean, v_mean, _) = moves, moves.mean(axis=1)
+        ts = ts - t_mean
+        tt = np.dot(ts, ts)
+        du, dv = (float(np.dot(ts, x - mean) / tt) for x, mean in ((us, u_mean), (vs, v_mean)))
         self.speed_mps = math.hypot(du, dv) / px_per_m + SPEED_MARGIN_MPS
 
     def _predict(self, pose: CameraPose, i: int) -> Prediction | None:

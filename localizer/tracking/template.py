@@ -263,6 +263,10 @@ def _peak(
     return float(rank), float(scores[i, j]), float(j + dx), float(i + dy)
 
 
+#: :func:`_ncc_maps`: a place whose spread is within this share of its squares' sum is flat (float32's rounding)
+_FLAT_EPS = 10.0 * np.finfo(np.float32).eps
+
+
 def _ncc_maps(image: np.ndarray, columns: np.ndarray, side: int) -> np.ndarray:
     """``cv2.matchTemplate(image, t, TM_CCOEFF_NORMED)`` for several side × side templates ``t`` at once: maps
     (templates, rows, columns). ``columns``: each template flattened, less its mean, divided by its norm.
@@ -272,17 +276,17 @@ def _ncc_maps(image: np.ndarray, columns: np.ndarray, side: int) -> np.ndarray:
     """
     rows, cols = image.shape[0] - side + 1, image.shape[1] - side + 1
     # the places as a strided view converted in one copy (sliding_window_view's checks and a float32 copy cost
-    # about as much as the product below)
+    # about as much as the product below), in C order: the strided view's own order makes the reshape copy again
     s0, s1 = image.strides
     places = (
         as_strided(image, (rows, cols, side, side), (s0, s1, s0, s1), writeable=False)
-        .astype(np.float64)
+        .astype(np.float64, order="C")
         .reshape(rows * cols, side * side)
     )
     sums = places.sum(axis=1)
     squares = np.einsum("ij,ij->i", places, places)
     spread = squares - sums * sums / (side * side)
-    flat = spread <= np.minimum(0.5, 10.0 * np.finfo(np.float32).eps * squares)
+    flat = spread <= np.minimum(0.5, _FLAT_EPS * squares)
     scores = (places @ columns) / np.sqrt(np.where(flat, 1.0, spread))[:, None]
     scores[flat] = 0.0
     return scores.T.reshape(columns.shape[1], rows, cols)
@@ -443,7 +447,7 @@ class TemplateMatcher:
         self._core = max(5, round(self.p.core_share * self.S)) | 1
         self._first_turn = 0.0  # ... turned as the learnt template has turned from it
         self._firsts: dict = {}  # the core at turns (multiples of first_turn_step_deg)
-        self._first_columns: dict = {}  # ... and several turns' cores ready for _ncc_maps
+        self._first_columns: dict = {}  # ... and the turns about each step's, ready for _ncc_maps
         self._first_spread = self._spread(frame_bgr, self.u, self.v)
         self._weights = self._polarity(frame_bgr, self.u, self.v)  # see _blob
         # the tracked point's offset from the box's centre (the vehicle's, e.g. its top face's seen obliquely)
@@ -656,23 +660,22 @@ class TemplateMatcher:
             )
         return self._firsts[key]
 
-    def _first_cores(self, turns) -> np.ndarray:
-        """The first appearance's cores at ``turns`` (see :meth:`_first_core`) as the columns of one matrix,
-        each less its mean and divided by its norm (float64, cached): the templates of :func:`_ncc_maps`."""
-        key = tuple(
-            round(a / self.p.first_turn_step_deg) % round(360.0 / self.p.first_turn_step_deg)
-            for a in turns
-        )
-        if key not in self._first_columns:
+    def _first_cores(self, centre: int) -> tuple[list[float], np.ndarray]:
+        """The turns within ``first_turn_deg`` of ``centre`` steps of ``first_turn_step_deg``, and the first
+        appearance's cores at them (see :meth:`_first_core`) as the columns of one matrix, each less its mean and
+        divided by its norm (float64): the templates of :func:`_ncc_maps`. Cached by ``centre``."""
+        if centre not in self._first_columns:
+            step = self.p.first_turn_step_deg
+            n = round(self.p.first_turn_deg / step)
+            turns = [step * (centre + j) for j in range(-n, n + 1)]
             cores = np.stack(
                 [self._first_core(a).ravel().astype(np.float64) for a in turns], axis=1
             )
             cores -= cores.mean(axis=0)
             norms = np.linalg.norm(cores, axis=0)
-            self._first_columns[key] = np.divide(
-                cores, norms, out=np.zeros_like(cores), where=norms > 0
-            )
-        return self._first_columns[key]
+            columns = np.divide(cores, norms, out=np.zeros_like(cores), where=norms > 0)
+            self._first_columns[centre] = (turns, columns)
+        return self._first_columns[centre]
 
     def _first_at(self, upright: np.ndarray) -> tuple[float, float, float] | None:
         """Where an upright canonical image (side D) shows the UUV's first appearance: ``(dx, dy, turn_deg)``, its
@@ -685,14 +688,13 @@ class TemplateMatcher:
         lo = (self.D - core) // 2 - m
         window = upright[lo : lo + core + 2 * m, lo : lo + core + 2 * m]
         step = self.p.first_turn_step_deg
-        n = round(self.p.first_turn_deg / step)
-        turns = [step * (round(self._first_turn / step) + j) for j in range(-n, n + 1)]
-        maps = _ncc_maps(window, self._first_cores(turns), core)
+        turns, columns = self._first_cores(round(self._first_turn / step))
+        maps = _ncc_maps(window, columns, core)
         tops = maps.reshape(len(turns), -1).max(axis=1)
         j = int(np.argmax(tops))
         _, score, dx, dy = _peak(maps[j])
         turn = turns[j] + (
-            step * _parabola(tops[j - 1], score, tops[j + 1]) if 0 < j < 2 * n else 0.0
+            step * _parabola(tops[j - 1], score, tops[j + 1]) if 0 < j < len(turns) - 1 else 0.0
         )
         dx, dy = dx - m, dy - m
         if score < self.p.anchor_score:
