@@ -16,7 +16,7 @@ What a fix is made of, as the track sees it::
   "within their accuracy" of each other when they share one bias. On the generated
   sessions ``C`` claims 0.1–0.4 m (1-sigma per axis) while consecutive fixes differ by
   3–7 mm, or 4–7 cm with ``field_like``'s noisy telemetry. The common error changes
-  smoothly, over seconds (:func:`common_change_m2`): little from one frame to the next,
+  smoothly, over seconds (:func:`common_change_share`): little from one frame to the next,
   much across a long loss.
 
 The state is the position and velocity of the fixes (the UUV plus its slowly changing
@@ -83,11 +83,11 @@ def fix_covariance_m2(
     return np.eye(2) * float(isotropic_sigma_m(h_acc_m)) ** 2
 
 
-def common_change_m2(C: np.ndarray, gap_s: float) -> np.ndarray:
-    """Covariance (m²) of the change of a common error of covariance ``C`` over ``gap_s`` seconds: a smooth
-    error (correlation ``exp(−Δ²/2τ²)``, τ = :data:`TAU_COMMON_S`), so a frame's change is tiny and a minute's
-    is as large as the error itself."""
-    return 2.0 * (1.0 - math.exp(-0.5 * (gap_s / TAU_COMMON_S) ** 2)) * C
+def common_change_share(gap_s: float) -> float:
+    """The covariance of the change of a common error over ``gap_s`` seconds, as a share of the error's own
+    covariance: a smooth error (correlation ``exp(−Δ²/2τ²)``, τ = :data:`TAU_COMMON_S`), so a frame's change is
+    tiny and a minute's is as large as the error itself."""
+    return 2.0 * (1.0 - math.exp(-0.5 * (gap_s / TAU_COMMON_S) ** 2))
 
 
 class Scatter:
@@ -238,7 +238,7 @@ class UuvTrack:
         each, the fix's offset beyond the
         bound, over its covariance — the track's own (carried over Δ for the second), the
         fix's white part and how much the common error can have changed
-        (:func:`common_change_m2`) — is a Mahalanobis distance; ``d`` is the larger.
+        (:func:`common_change_share`) — is a Mahalanobis distance; ``d`` is the larger.
         ``radius_m`` and ``margin_m`` (1-sigma of that covariance along its widest axis) are
         those of the bound that gives ``d``. ``accel_mps2``: the acceleration bound over this
         step, if not :attr:`max_accel_mps2`.
@@ -261,8 +261,8 @@ class UuvTrack:
         a = self.max_accel_mps2 if accel_mps2 is None else accel_mps2
         dt = max(0.0, t - self.t)
         (cnn, cne), (_, cee) = C.tolist()
-        # the fix's white part (white_m2) and how much the common error can have changed (common_change_m2)
-        grow = share + 2.0 * (1.0 - math.exp(-0.5 * (dt / TAU_COMMON_S) ** 2))
+        # the fix's white part (white_m2) and how much the common error can have changed
+        grow = share + common_change_share(dt)
         floor = WHITE_FLOOR_M**2
         enn, ene, eee = grow * cnn + floor, grow * cne, grow * cee + floor
         (pnn, pne, pnvn, pnve), (_, pee, pevn, peve), (_, _, pvnvn, pvnve), (_, _, _, pveve) = (

@@ -44,7 +44,7 @@ from groundstation.testing.gate_streams import (
 from localizer.fix import Fix
 from localizer.fix_gate import CONFIRM_S, DIVERGED_S, MAX_ACCEL_MPS2, MAX_SPEED_MPS, FixGate
 from localizer.thrusters import DRAG_LINEAR, DRAG_QUADRATIC, MASS_KG
-from localizer.uuv_track import WHITE_FLOOR_M, Scatter, UuvTrack, common_change_m2
+from localizer.uuv_track import WHITE_FLOOR_M, Scatter, UuvTrack, common_change_share
 from sim_fixtures.bundle import BUNDLED_DIR
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -70,7 +70,7 @@ def test_distance_by_hand():
     track = UuvTrack(V, A, 0.0, np.zeros(2), C, share=0.0)
     d, radius, _ = track.distance(0.1, np.array([0.25, 0.0]), C, share=0.0)
     change = 2 * (1 - math.exp(-0.5 * (0.1 / 5.0) ** 2)) * 0.01
-    assert common_change_m2(C, 0.1)[0, 0] == pytest.approx(change)
+    assert common_change_share(0.1) * C[0, 0] == pytest.approx(change)
     assert radius == pytest.approx(0.15)
     assert d == pytest.approx(0.10 / math.sqrt(2 * WHITE_FLOOR_M**2 + change), rel=1e-6)
     assert (
