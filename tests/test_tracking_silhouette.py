@@ -170,3 +170,32 @@ def test_the_size_scan_samples_further_out_only_where_it_must():
     assert every.mean(axis=-1).max() > 0.3  # outlines near the vehicle's are supported ...
     # ... and many points with an edge near have one further out
     assert np.mean(edge_near & ~every) > 0.1
+
+
+def test_windows_of_the_converted_region_sample_as_the_frames_own():
+    """The scan's and the passes' windows, read from the region :class:`silhouette._Floats` converts once (views of
+    it) or from the frame beyond it, give the colour's changes the frame's own windows give, also at samples beyond
+    a window's edge (where ``cv2.remap`` replicates its border) and at the frame's edge."""
+    rng = np.random.default_rng(11)
+    frame = rng.integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    floats = silhouette._Floats(frame, np.array([40.0, 30.0]), np.array([90.0, 70.0]), 7.0)
+    # inside the region (its windows views), beyond it at the frame's corner, partly beyond it
+    for lo, hi in (
+        ((50.3, 40.2), (80.6, 60.1)),
+        ((2.0, 1.5), (30.0, 20.0)),
+        ((70.0, 50.0), (150.0, 110.0)),
+    ):
+        want, origin = silhouette._window(frame, np.array(lo), np.array(hi), 7.0)
+        got, got_origin = silhouette._window(floats, np.array(lo), np.array(hi), 7.0)
+        assert got.dtype == np.float32 and np.array_equal(got, want)
+        assert np.array_equal(got_origin, origin)
+        xy = rng.uniform(-4.0, 4.0, (300, 2)) + rng.uniform(0.0, 1.0, (300, 1)) * np.array(
+            want.shape[1::-1]
+        )
+        normal = rng.normal(size=(300, 2))
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        t = np.arange(-7, 15) * 0.5
+        assert np.array_equal(
+            silhouette._changes(got, xy, normal, t), silhouette._changes(want, xy, normal, t)
+        )
+    assert floats[41:60, 33:50].base is not None  # a view, not a conversion

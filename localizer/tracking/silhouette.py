@@ -159,8 +159,10 @@ def measure(
     configured = c[0, np.argmin(np.abs(scales - 1.0))]
     if math.sqrt(polygon_area(configured[outline(configured)])) < p.min_size_px:
         return "too_small"
-    texture = _texture(frame_bgr, c[0, -1], p)
-    support = np.array([_supports(frame_bgr, ch, texture, p) for ch in c])  # (2, S)
+    # the windows of the scan and of most passes, in float32 once
+    floats = _Floats(frame_bgr, c.min(axis=(0, 1, 2)), c.max(axis=(0, 1, 2)), p.clear_px + 1.0)
+    texture = _texture(floats, c[0, -1], p)
+    support = np.array([_supports(floats, ch, texture, p) for ch in c])  # (2, S)
     if not support.max() > 0:
         return "few_edges"
     good = support >= p.near_best * support.max()
@@ -174,7 +176,7 @@ def measure(
         c = corners(x + np.concatenate([np.zeros((1, 4)), np.diag(steps)]))
         if c is None:
             return "no_water"
-        fit = _pass(frame_bgr, x, c, steps, texture, p)
+        fit = _pass(floats, x, c, steps, texture, p)
         if isinstance(fit, str):
             return fit
         moved = fit.x - x
@@ -308,13 +310,39 @@ def _pass(frame_bgr, x, corners, steps, texture: float, p: SilhouetteParams) -> 
     )
 
 
-def _window(frame_bgr, lo, hi, margin_px: float):
-    """The frame around pixels ``lo``..``hi`` (and ``margin_px`` beyond, plus interpolation's pixel) as float32,
-    and its origin (x, y)."""
-    H, W = frame_bgr.shape[:2]
+def _bounds(shape, lo, hi, margin_px: float):
+    """The rows and columns ``(y0, y1, x0, x1)`` of the frame (of ``shape``) around pixels ``lo``..``hi`` (and
+    ``margin_px`` beyond, plus interpolation's pixel)."""
+    H, W = shape[:2]
     x0, y0 = np.maximum(np.floor(np.asarray(lo) - margin_px).astype(int) - 1, 0)
     x1, y1 = np.minimum(np.ceil(np.asarray(hi) + margin_px).astype(int) + 2, (W, H))
-    return frame_bgr[y0:y1, x0:x1].astype(np.float32), np.array([x0, y0])
+    return int(y0), int(y1), int(x0), int(x1)
+
+
+def _window(frame_bgr, lo, hi, margin_px: float):
+    """The frame (or :class:`_Floats`) around pixels ``lo``..``hi`` (and ``margin_px`` beyond, plus interpolation's
+    pixel) as float32, and its origin (x, y)."""
+    y0, y1, x0, x1 = _bounds(frame_bgr.shape, lo, hi, margin_px)
+    return frame_bgr[y0:y1, x0:x1].astype(np.float32, copy=False), np.array([x0, y0])
+
+
+class _Floats:
+    """A frame read as float32: the region around pixels ``lo``..``hi`` (as :func:`_window` reads it) converted once,
+    its windows views of it (the same values: ``cv2.remap`` replicates a view's own border); others converted when
+    read."""
+
+    def __init__(self, frame_bgr, lo, hi, margin_px: float):
+        self.frame, self.shape = frame_bgr, frame_bgr.shape
+        self.y0, y1, self.x0, x1 = _bounds(self.shape, lo, hi, margin_px)
+        self.region = frame_bgr[self.y0 : y1, self.x0 : x1].astype(np.float32)
+
+    def __getitem__(self, key: tuple[slice, slice]) -> np.ndarray:
+        rows, cols = key
+        y0, x0 = rows.start - self.y0, cols.start - self.x0
+        y1, x1 = rows.stop - self.y0, cols.stop - self.x0
+        if y0 >= 0 and x0 >= 0 and y1 <= self.region.shape[0] and x1 <= self.region.shape[1]:
+            return self.region[y0:y1, x0:x1]
+        return self.frame[rows, cols].astype(np.float32)
 
 
 #: ``cv2.remap`` takes maps narrower than this (SHRT_MAX): longer lists of points are sampled in parts.
