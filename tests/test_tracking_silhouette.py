@@ -199,3 +199,24 @@ def test_windows_of_the_converted_region_sample_as_the_frames_own():
             silhouette._changes(got, xy, normal, t), silhouette._changes(want, xy, normal, t)
         )
     assert floats[41:60, 33:50].base is not None  # a view, not a conversion
+
+
+def test_median_is_numpys():
+    """The fit's and the texture's median: ``np.median``'s number, to the bit, for odd and even counts, ties,
+    float32 and float64, and NaN."""
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 8, 9, 250, 251, 1000):
+        for dtype in (np.float64, np.float32):
+            for x in (
+                rng.normal(size=n),
+                rng.integers(0, 4, n) * 0.1,
+                rng.exponential(size=n) * 1e-3,
+            ):
+                x = x.astype(dtype)
+                assert (
+                    np.float64(silhouette._median(x)).tobytes()
+                    == np.float64(np.median(x)).tobytes()
+                )
+    x = rng.normal(size=9)
+    x[4] = np.nan
+    assert np.isnan(silhouette._median(x))
