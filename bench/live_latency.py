@@ -126,6 +126,10 @@ BENCH_DIR = Path("/tmp/skyfix-bench")
 CAMERA_LATENCY_MS = 100  # the replayed camera's glass-to-first-packet latency, configured as such
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 REALTIME_PRIORITY = 1  # --policy rr: the service's --realtime-priority (deploy/field.toml's)
+POLICY_HELP = (
+    "comma-separated: each run again with the service under the normal policy (other) or asking for the realtime "
+    f"one (rr: --realtime-priority {REALTIME_PRIORITY}, as deploy/field.toml asks under deploy/skyfix.service)"
+)
 BUSY = "while True: pass"  # a busy process beside the service (--busy)
 
 
@@ -228,6 +232,19 @@ def proc_sample(pid: int) -> tuple[float, float]:
 def nice_of(pid: int) -> int:
     """The nice value a process runs at (``/proc/PID/stat``'s 19th field), read back rather than assumed."""
     return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
+
+
+def policies(text: str) -> list[str]:
+    """``--policy``'s value (:data:`POLICY_HELP`): its policies, each ``other`` or ``rr``."""
+    got = text.split(",")
+    if set(got) - {"other", "rr"}:
+        raise argparse.ArgumentTypeError(f"{text}: each of other, rr")
+    return got
+
+
+def realtime_args(realtime: bool) -> list[str]:
+    """``skyfix run``'s arguments asking for the realtime policy (``--policy rr``), as deploy/field.toml does."""
+    return ["--realtime-priority", str(REALTIME_PRIORITY)] if realtime else []
 
 
 def priority_of(stat_path: Path) -> str:
@@ -458,7 +475,7 @@ def live(
         f"udpout:127.0.0.1:{uuv}",
         "--stats",
         str(stats),
-        *(["--realtime-priority", str(REALTIME_PRIORITY)] if realtime else []),
+        *realtime_args(realtime),
         *run_args,
     ]
     replay = [
@@ -759,12 +776,7 @@ def main() -> int:
         "deploy/skyfix.service's Nice= starts it; the busy processes stay at the bench's own; negative needs root)",
     )
     ap.add_argument(
-        "--policy",
-        default="other",
-        metavar="other,rr",
-        help="comma-separated: each run again with the service under the normal policy (other) or asking for the "
-        f"realtime one (rr: --realtime-priority {REALTIME_PRIORITY}, as deploy/field.toml asks under "
-        "deploy/skyfix.service)",
+        "--policy", type=policies, default="other", metavar="other,rr", help=POLICY_HELP
     )
     ap.add_argument(
         "--replay-realtime",
@@ -793,9 +805,6 @@ def main() -> int:
     }
     nices = [int(n) for n in args.nice.split(",")]
     pages = args.page.split(",")
-    policies = args.policy.split(",")
-    if set(policies) - {"other", "rr"}:
-        ap.error(f"--policy {args.policy}: each of other, rr")
     if set(pages) - {"off", "open"}:
         ap.error(f"--page {args.page}: each of off, open")
     variants = [(v.partition("=")[0], shlex.split(v.partition("=")[2])) for v in args.variant] or [
@@ -825,7 +834,7 @@ def main() -> int:
             itertools.product(variants, sorted({0, args.busy})),
             trees,
             nices,
-            policies,
+            args.policy,
             pages,
         ):
             tag = "_".join(

@@ -1,7 +1,7 @@
 """Benchmark of several UUVs in one live video: CPU and latency with 1, 2 and 3 UUVs in one 1080p30 stream.
 
     .venv/bin/python bench/uuvs.py [--counts 1,2,3] [--rounds 1] [--baseline-frames 150] [--duration-s 20]
-        [--profile-s 10] [--out bench/results/uuvs.txt]
+        [--profile-s 10] [--nice N] [--policy other,rr] [--out bench/results/uuvs.txt]
 
 The session is the ``three_uuvs_crossing`` scenario (two BlueROV2s passing nearly head on under a camera 10 m up,
 a third, ``[third_uuv]``, 0.6 m deep, passing uuv1 1 m to its side the other way, never nearer either vehicle than
@@ -31,6 +31,11 @@ time error (a fix's time minus the nearest true exposure: a clock map gone wrong
 valid GPS_INPUT lie nearer another vehicle's truth than its own (an identity swap: GPS_INPUT names no vehicle,
 so the autopilot would take the other's position).
 
+``--nice -10 --policy other,rr`` runs each count under the normal policy and again realtime, interleaved, the service
+started as deploy/skyfix.service starts it (``Nice=-10``) and asking for SCHED_RR as deploy/field.toml does
+(:func:`bench.live_latency.realtime_args`); each run's scheduling is read back from ``/proc`` (the service's main
+thread: ``RR 1`` or ``nice N``).
+
 With ``--profile-s`` and py-spy on PATH (installed apart from the project), each run also samples which of the
 service's threads holds the interpreter's lock, and where, for that long mid-video (``py-spy record --gil``):
 the threads' and the top functions' shares of the samples are printed under the table.
@@ -46,6 +51,7 @@ logs, configs, stats and each UUV's GPS_INPUT (``gps_input_ID.jsonl``) in ``/tmp
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import select
@@ -67,6 +73,7 @@ from emit import emit
 from live_latency import (
     BENCH_DIR,
     CAMERA_LATENCY_MS,
+    POLICY_HELP,
     decode_baseline,
     encode_as_camera,
     free_port,
@@ -75,7 +82,10 @@ from live_latency import (
     nice_of,
     pct,
     pipeline_baseline,
+    policies,
+    priority_of,
     proc_sample,
+    realtime_args,
 )
 
 from groundstation.config_files import read_toml
@@ -302,17 +312,19 @@ def gil_summary(raw: Path, top: int = 15) -> dict:
     }
 
 
-def live(session: Path, work: Path, ids, profile_s: float = 0.0, nice: int = 0) -> dict:
-    """One ``skyfix run`` with these UUVs, started at ``nice``, fed by ``skyfix replay``: its CPU and memory and each
-    UUV's numbers (and, ``profile_s`` > 0 with py-spy on PATH, what held the interpreter's lock for that long
-    mid-video)."""
+def live(
+    session: Path, work: Path, ids, profile_s: float = 0.0, nice: int = 0, realtime: bool = False
+) -> dict:
+    """One ``skyfix run`` with these UUVs, started at ``nice`` (with ``realtime``: asking for SCHED_RR), fed by
+    ``skyfix replay``: its CPU and memory and each UUV's numbers (and, ``profile_s`` > 0 with py-spy on PATH, what
+    held the interpreter's lock for that long mid-video)."""
     endpoints = GpsEndpoints(ids)  # first: the free ports below are not theirs
     ports = {"mav": free_port(), "video": free_port(), "zenoh": free_port(socket.SOCK_STREAM)}
     stats, config = work / "stats.json", work / "run.toml"
     config.write_text(run_toml(session, ids, ports, endpoints.ports, stats))
     py = sys.executable
     run = [*(["nice", "-n", str(nice)] if nice else []), py, "-m", "groundstation.cli", "run"]
-    run += ["--config", str(config)]
+    run += ["--config", str(config), *realtime_args(realtime)]
     replay = [
         py,
         "-m",
@@ -353,6 +365,8 @@ def live(session: Path, work: Path, ids, profile_s: float = 0.0, nice: int = 0) 
                 time.sleep(0.2)
             time.sleep(1.0)
             service_nice = nice_of(service.pid)
+            # its main thread's scheduling as it runs (it asked for the realtime policy as it started)
+            scheduling = priority_of(Path(f"/proc/{service.pid}/stat"))
             rep = subprocess.Popen(
                 replay, stdout=replay_log, stderr=subprocess.STDOUT, cwd=ROOT, env=env
             )
@@ -393,6 +407,7 @@ def live(session: Path, work: Path, ids, profile_s: float = 0.0, nice: int = 0) 
         "frames_sent": n_frames,
         "load_average": round(load, 2),
         "service_nice": service_nice,
+        "scheduling": scheduling,
         "video": {
             k: final["video"][k]
             for k in (
@@ -457,6 +472,7 @@ def table(rounds: list[dict]) -> list[str]:
         ("UUVs", 5),
         ("load", 4),
         ("nice", 4),
+        ("sched", 7),
         ("CPU-s/video-s", 13),
         ("peak RSS MB", 11),
         ("host busy %", 11),
@@ -480,25 +496,26 @@ def table(rounds: list[dict]) -> list[str]:
         ):
             base = rnd[key]
             lines.append(
-                f"{'base':>5} | {'':>4} | {'':>4} | {base['cpu_s_per_video_s']:>13} | {'':>11} | {base['host_busy_pct']:>11} | "
+                f"{'base':>5} | {'':>4} | {'':>4} | {'':>7} | {base['cpu_s_per_video_s']:>13} | {'':>11} | {base['host_busy_pct']:>11} | "
                 f"{what}, offline, round {r + 1}: per frame p50 {base['per_frame_ms']['p50']} ms, "
                 f"p99 {base['per_frame_ms']['p99']} ms"
             )
-        for n, res in rnd["runs"].items():
+        for res in rnd["runs"].values():
             for i, (uuv_id, u) in enumerate(res["per_uuv"].items()):
                 lat, a = u["slot_to_gps_input_ms"], u["arrival_to_sent_ms"]
                 run = (
                     (
-                        n,
+                        len(res["uuvs"]),
                         res["load_average"],
                         res.get("service_nice", "?"),
+                        res.get("scheduling", "?"),
                         res["cpu_s_per_video_s"],
                         res["rss_mb"]["peak"],
                         res["host_busy_pct"],
                         f"{res['video']['skipped_behind']}/{res['frames_sent']}",
                     )
                     if i == 0
-                    else ("",) * 7
+                    else ("",) * 8
                 )
                 row = (
                     *run,
@@ -526,7 +543,7 @@ def profiles(rounds: list[dict]) -> list[str]:
             if not p:
                 continue
             lines.append(
-                f"round {r + 1}, {n} UUV(s): {p['samples']} samples of the thread holding the interpreter's lock"
+                f"round {r + 1}, {n}: {p['samples']} samples of the thread holding the interpreter's lock"
             )
             lines.append("  threads: " + ", ".join(f"{k} {v:.1%}" for k, v in p["threads"].items()))
             lines.append(
@@ -564,6 +581,9 @@ def main() -> int:
         default=0,
         help="start the service at this nice value (`nice -n`, as deploy/skyfix.service's Nice=; negative: root)",
     )
+    ap.add_argument(
+        "--policy", type=policies, default="other", metavar="other,rr", help=POLICY_HELP
+    )
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "uuvs.txt")
     args = ap.parse_args()
     session = ensure_session(args.duration_s)
@@ -584,7 +604,11 @@ def main() -> int:
                 for k, v in read_toml(SCENARIO)["third_uuv"].items()
                 if k not in ("enabled", "role", "id")
             )
-            + f"; the service at nice {args.nice} (`nice -n`, as deploy/skyfix.service's Nice=; read back per run)"
+            + f"; the service at nice {args.nice} (`nice -n`, as deploy/skyfix.service's Nice=) under "
+            + " and ".join(
+                {"other": "the normal policy", "rr": "SCHED_RR 1"}[p] for p in args.policy
+            )
+            + " (sched: its main thread's, read back per run)"
         ),
         (
             "CPU-s/video-s: the skyfix run process over the video's span (decode only: this process, offline); "
@@ -616,12 +640,15 @@ def main() -> int:
             "runs": {},
         }
         rounds.append(rnd)
-        for n in (int(c) for c in args.counts.split(",")):
-            work = BENCH_DIR / f"run_uuvs_r{r + 1}_{n}"
+        for n, policy in itertools.product((int(c) for c in args.counts.split(",")), args.policy):
+            name = f"{n} UUV(s){' rr' if policy == 'rr' else ''}"
+            work = BENCH_DIR / f"run_uuvs_r{r + 1}_{n}{'_rr' if policy == 'rr' else ''}"
             shutil.rmtree(work, ignore_errors=True)
             work.mkdir(parents=True)
-            print(f"round {r + 1}, {n} UUV(s): {', '.join(RUNS[n])} ...", flush=True)
-            rnd["runs"][n] = live(session, work, RUNS[n], args.profile_s, args.nice)
+            print(f"round {r + 1}, {name}: {', '.join(RUNS[n])} ...", flush=True)
+            rnd["runs"][name] = live(
+                session, work, RUNS[n], args.profile_s, args.nice, policy == "rr"
+            )
     emit(lines + table(rounds) + profiles(rounds), args.out, rounds)
     return 0
 
