@@ -53,7 +53,12 @@ from multiprocessing.shared_memory import SharedMemory
 
 import numpy as np
 
-from groundstation.runtime.threads import OUTSIDE_REALTIME, Supervised, in_thread
+from groundstation.runtime.threads import (
+    OUTSIDE_REALTIME,
+    Supervised,
+    background_nice,
+    in_thread,
+)
 from localizer.calibration import Calibration
 from localizer.pose import CameraPose
 from localizer.size_range import (
@@ -81,7 +86,6 @@ SURE_HZ = 1.0
 #: its measurements in a row without a height (at most MAX_FAILED of them: its view may change).
 FAILED_TURNS = 1.0
 MAX_FAILED = 8
-NICE = 10  # the measuring process yields the CPU to decoding and tracking
 STOP_WAIT_S = 1.0  # a stop waits this long for the measuring thread
 PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent dies
 
@@ -174,11 +178,12 @@ def shared_image(frame: tuple[str, tuple[int, ...], str]) -> np.ndarray:
 
 
 def start_measuring_process() -> None:
-    """The measuring process yields the CPU (never realtime, which it would take from a realtime service:
-    :func:`~groundstation.runtime.threads.realtime`; it starts outside that policy,
-    :data:`~groundstation.runtime.threads.OUTSIDE_REALTIME`), and ends with the service even when the service is
-    killed (Linux's parent-death signal): a ``kill -9`` of ``skyfix run`` leaves no process behind."""
-    os.nice(NICE)
+    """The measuring process yields the CPU (10 nice levels below the service,
+    :func:`~groundstation.runtime.threads.background_nice`; it starts outside the realtime policy and at the normal
+    nice value at most, :data:`~groundstation.runtime.threads.OUTSIDE_REALTIME`), and ends with the service even
+    when the service is killed (Linux's parent-death signal): a ``kill -9`` of ``skyfix run`` leaves no process
+    behind."""
+    os.setpriority(os.PRIO_PROCESS, 0, background_nice())
     if sys.platform == "linux":
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
         if os.getppid() == 1:  # the service died before the signal was asked for

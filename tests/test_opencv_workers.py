@@ -74,6 +74,8 @@ else:
         sys.exit()
     if os.geteuid() != 0:
         resource.setrlimit(resource.RLIMIT_RTPRIO, (1, hard))
+if sys.argv[1] == "granted" and os.geteuid() == 0:
+    os.setpriority(os.PRIO_PROCESS, 0, -10)  # the unit's Nice=-10
 before = {t.name for t in Path("/proc/self/task").iterdir()}  # numpy's BLAS threads: started at its import
 granted, line = realtime(1)
 out = {"granted": granted, "line": line, "main": scheduling("/proc/thread-self/stat")}
@@ -91,13 +93,18 @@ if granted:
     out["threads"] = sorted({tuple(scheduling(t / "stat")) for t in started}) if started else None
     # the measuring process's policy as its first code of ours sees it: before the initializer leaves the policy
     # (nothing else changes it after the spawn), so its interpreter's start and imports ran under it too
-    at_start = "import os; os.environ['POLICY_AT_START'] = str(os.sched_getscheduler(0))"
+    at_start = "import os; os.environ['AT_START'] = f'{os.sched_getscheduler(0)} {os.getpriority(os.PRIO_PROCESS, 0)}'"
     measuring = "from groundstation.height_from_size import start_measuring_process; start_measuring_process()"
     with ProcessPoolExecutor(1, OUTSIDE_REALTIME, exec, (f"{at_start}; {measuring}", {})) as pool:
         policy = pool.submit(os.sched_getscheduler, 0).result(60)
         nice = pool.submit(os.getpriority, os.PRIO_PROCESS, 0).result(60)
-        out["process"] = [int(pool.submit(os.getenv, "POLICY_AT_START").result(60)), policy, 0, nice]
+        out["process at start"] = [int(x) for x in pool.submit(os.getenv, "AT_START").result(60).split()]
+        out["process"] = [policy, nice]
     out["main after the spawn"] = scheduling("/proc/thread-self/stat")  # the thread that asked keeps its policy
+    # multiprocessing's resource tracker (the pool's locks and queues are registered with it): a process too
+    from multiprocessing import resource_tracker
+    out["resource tracker"] = scheduling(f"/proc/{resource_tracker._resource_tracker._pid}/stat")
+out["nice"] = os.getpriority(os.PRIO_PROCESS, 0)
 print(json.dumps(out))
 """
 
@@ -110,19 +117,24 @@ def realtime_case(case: str) -> dict | None:
 
 
 def test_realtime_takes_the_services_threads_and_leaves_its_background_out():
-    """``--realtime-priority 1`` (deploy/field.toml): the thread that asks, and the threads it starts after (OpenCV's
-    workers), run SCHED_RR 1; the page's encoder thread and a measuring process leave it (SCHED_OTHER, 10 nice levels
-    lower: a realtime background would take the cores the fixes and the laptop's other programs need), the process
-    from its start: its interpreter's start and imports too."""
+    """``--realtime-priority 1`` (deploy/field.toml) at the unit's nice -10 (where root may): the thread that asks,
+    and the threads it starts after (OpenCV's workers), run SCHED_RR 1; the page's encoder thread, a measuring process
+    and multiprocessing's resource tracker leave it (SCHED_OTHER; the encoder and the measuring process 10 nice levels
+    lower: a realtime background would take the cores the fixes and the laptop's other programs need), the processes
+    from their start, at the normal nice value at most: their interpreter's start and imports too."""
     got = realtime_case("granted")
     if got is None:
         pytest.skip("no privilege for SCHED_RR here (not root, RLIMIT_RTPRIO 0)")
-    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    nice = got["nice"]
     rr = [os.SCHED_RR, 1, nice]
+    assert nice == (-10 if os.geteuid() == 0 else os.getpriority(os.PRIO_PROCESS, 0))
     assert got["granted"] and got["main"] == rr and "SCHED_RR priority 1" in got["line"]
     assert got["low"] == [os.SCHED_OTHER, 0, 10]
     assert got["threads"] == [rr]
-    assert got["process"] == [os.SCHED_OTHER, os.SCHED_OTHER, 0, min(nice + 10, 19)]
+    # started at the normal nice at most (not the service's -10), working 10 levels below the service
+    assert got["process at start"] == [os.SCHED_OTHER, max(nice, 0)]
+    assert got["process"] == [os.SCHED_OTHER, min(nice + 10, 19)]
+    assert got["resource tracker"] == [os.SCHED_OTHER, 0, max(nice, 0)]
     assert got["main after the spawn"] == rr
 
 

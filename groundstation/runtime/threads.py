@@ -15,7 +15,8 @@
   thread join cannot be interrupted), so a stop never waits for I/O; the thread ends by itself.
 - :func:`start_opencv_workers`: OpenCV's worker threads started by the service's own thread, at its priority.
 - :func:`realtime`: the service's threads under Linux's round-robin realtime policy; :func:`not_realtime` takes a
-  thread or process of background work back out of it, and :data:`OUTSIDE_REALTIME` starts processes outside it.
+  thread or process of background work back out of it, and :data:`OUTSIDE_REALTIME` starts processes outside it
+  and at the normal nice value at most (multiprocessing's resource tracker too: :func:`in_background`).
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ import traceback
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import suppress
+from multiprocessing import resource_tracker
 from multiprocessing.context import SpawnContext, SpawnProcess
 
 import numpy as np
@@ -211,6 +214,9 @@ def realtime(priority: int) -> tuple[bool, str]:
             f"scheduling: not realtime (SCHED_RR priority {priority} refused: {why}; the unit's LimitRTPRIO "
             f"allows it): nice {nice}"
         )
+    # multiprocessing's resource tracker, a process started by the thread that first makes a pool's lock or a shared
+    # frame (a realtime one: realtime itself): started now, as background work
+    in_background(resource_tracker.ensure_running)
     return (
         True,
         f"scheduling: SCHED_RR priority {priority} (realtime, round-robin); its background work not realtime",
@@ -228,13 +234,42 @@ def not_realtime() -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
+#: Background processes (the measuring processes, the side jobs) work this many nice levels below the service
+#: (:func:`background_nice`): at the unit's ``Nice=-10``, nice 0; they yield the CPU to decoding and tracking.
+BACKGROUND_NICE = 10
+
+
+def _start_background() -> None:
+    """The calling thread (one that starts a background process, which takes its policy and nice value) out of the
+    realtime policy and at the normal nice value (0) at most: not at the service's raised priority (Linux: a thread
+    is a task; elsewhere the nice value stays)."""
+    not_realtime()
+    with suppress(AttributeError, OSError):
+        tid = threading.get_native_id()
+        os.setpriority(os.PRIO_PROCESS, tid, max(os.getpriority(os.PRIO_PROCESS, tid), 0))
+
+
+def background_nice() -> int:
+    """In a background process started by :func:`in_background`: the nice value it works at, :data:`BACKGROUND_NICE`
+    levels below its parent's (the service's main thread) and never below the one it started at (at most 19)."""
+    parent = os.getpriority(os.PRIO_PROCESS, os.getppid())
+    return max(os.getpriority(os.PRIO_PROCESS, 0), min(19, parent + BACKGROUND_NICE))
+
+
+def in_background(fn: Callable, *args):
+    """``fn(*args)`` (a process's start) in a short-lived thread outside the realtime policy and at the normal nice
+    value at most (:func:`_start_background`), its result: the process starts there, its interpreter's start and
+    imports included, while the calling thread keeps its policy and nice value."""
+    with ThreadPoolExecutor(
+        1, thread_name_prefix="skyfix-spawn", initializer=_start_background
+    ) as spawner:
+        return spawner.submit(fn, *args).result()
+
+
 class _SpawnedOutsideRealtime(SpawnProcess):
     @staticmethod
     def _Popen(process_obj):  # multiprocessing's hook for a process's start: the spawn itself
-        with ThreadPoolExecutor(
-            1, thread_name_prefix="skyfix-spawn", initializer=not_realtime
-        ) as spawner:
-            return spawner.submit(SpawnProcess._Popen, process_obj).result()
+        return in_background(SpawnProcess._Popen, process_obj)
 
 
 class _OutsideRealtime(SpawnContext):
@@ -242,8 +277,9 @@ class _OutsideRealtime(SpawnContext):
 
 
 #: multiprocessing's spawn context (a ``ProcessPoolExecutor``'s ``mp_context``), its processes started by a thread of
-#: their own that left the realtime policy first (:func:`not_realtime`): a new process takes the policy of the thread
-#: that starts it, and one that left it in its own first call would run its interpreter's start and imports under the
-#: service's policy, round-robin with the service's threads, at each start and each restart. The thread that asks
-#: (its pool's) keeps its policy.
+#: their own that left the realtime policy and the service's negative nice value first (:func:`in_background`): a new
+#: process takes the policy and nice value of the thread that starts it, and one that left them in its own first call
+#: would run its interpreter's start and imports at the service's priority, at each start and each restart. The
+#: thread that asks (its pool's) keeps its own. The process's first call sets the nice value it works at
+#: (:func:`background_nice`).
 OUTSIDE_REALTIME = _OutsideRealtime()
