@@ -211,13 +211,10 @@ def test_a_grey_tracker_reads_the_luma_plane_as_skyfix_process_does():
     assert not np.array_equal([f.u for f in bgr_only], offline.u, equal_nan=True)
 
 
-@pytest.mark.parametrize("dx_px", [0, 25, -25])
-def test_a_configured_init_bbox_off_the_vehicle_is_snapped_or_refused(dx_px, caplog):
-    """``[tracker] init_bbox`` is checked on the first frame as an operator's box is: on the vehicle it is kept as
-    drawn; 25 px to the right (still over the vehicle's edge) it is snapped onto the vehicle's outline; 25 px to the
-    left (open water) it is refused, and the run awaits a target. No fix is ok with the box's offset, whichever:
-    each ok fix's pixel is within 3 px of the simulator's (the vehicle is about 28 px long). nadir_hover's frames."""
-    import asyncio
+def _nadir_hover_boxed(dx_px: int, attitude_from_frame: int = 0):
+    """nadir_hover with its ``init_bbox`` moved ``dx_px`` right, its first 15 frames (luma and BGR) and its
+    telemetry, whose attitude starts after frame ``attitude_from_frame - 1`` (the frames before it have no pose)."""
+    import copy
     from dataclasses import replace
     from pathlib import Path
 
@@ -227,29 +224,60 @@ def test_a_configured_init_bbox_off_the_vehicle_is_snapped_or_refused(dx_px, cap
     session = load_session(
         Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover"
     )
-    t, truth = session.frames["t"], session.track
+    t = session.frames["t"]
+    tel = session.telemetry
+    if attitude_from_frame:
+        tel = copy.deepcopy(tel)
+        att = tel.attitude
+        kept = att.times > float(tel.uav_time(t[attitude_from_frame - 1])) + 1e-3
+        times, values = att.times[kept].copy(), att.values[kept].copy()
+        att.clear()
+        for ti, vi in zip(times, values, strict=True):
+            assert att.append(float(ti), vi)
     x, y, w, h = session.calibration.init_bbox
     box = (x + dx_px, y, w, h)
     cal = replace(session.calibration, tracker=replace(session.calibration.tracker, init_bbox=box))
     with open_video(session.video_path, grey=True) as video:
         frames = [f for f, _ in zip(video, range(15), strict=False)]
+    return session, cal, tel, box, frames
+
+
+def _live_boxed(session, cal, tel, frames):
+    """The frames through a live pipeline: the pipeline, each frame's fix and ``target.init_bbox`` after it."""
+    import asyncio
+
+    t = session.frames["t"]
 
     async def live():
-        pipeline = Pipeline(cal, session.telemetry, "default", [])
-        fixes = [
-            await pipeline.process(
-                LiveFrame(f.index, float(t[f.index]), float(t[f.index]), f.bgr(), grey=f.image)
-            )
-            for f in frames
-        ]
-        return pipeline, fixes
+        pipeline = Pipeline(cal, tel, "default", [])
+        fixes, said = [], []
+        for f in frames:
+            frame = LiveFrame(f.index, float(t[f.index]), float(t[f.index]), f.bgr(), grey=f.image)
+            fixes.append(await pipeline.process(frame))
+            said.append(pipeline.target["init_bbox"])
+        return pipeline, fixes, said
 
-    with caplog.at_level("WARNING", logger="skyfix.pipeline"):
-        pipeline, fixes = asyncio.run(live())
-    ok = [f for f in fixes if f.ok]
+    return asyncio.run(live())
+
+
+def _assert_on_the_vehicle(ok: list[Fix], truth) -> None:
+    """Each ok fix's pixel within 3 px of the simulator's (the vehicle is about 28 px long)."""
     du = [f.u - np.interp(f.t_unix, truth["t"], truth["u"]) for f in ok]
     dv = [f.v - np.interp(f.t_unix, truth["t"], truth["v"]) for f in ok]
     assert np.all(np.abs(du) < 3.0) and np.all(np.abs(dv) < 3.0), (du, dv)
+
+
+@pytest.mark.parametrize("dx_px", [0, 25, -25])
+def test_a_configured_init_bbox_off_the_vehicle_is_snapped_or_refused(dx_px, caplog):
+    """``[tracker] init_bbox`` is checked on the first frame as an operator's box is: on the vehicle it is kept as
+    drawn; 25 px to the right (still over the vehicle's edge) it is snapped onto the vehicle's outline; 25 px to the
+    left (open water) it is refused, and the run awaits a target. No fix is ok with the box's offset, whichever:
+    each ok fix's pixel is within 3 px of the simulator's (the vehicle is about 28 px long). nadir_hover's frames."""
+    session, cal, tel, box, frames = _nadir_hover_boxed(dx_px)
+    with caplog.at_level("WARNING", logger="skyfix.pipeline"):
+        pipeline, fixes, _ = _live_boxed(session, cal, tel, frames)
+    ok = [f for f in fixes if f.ok]
+    _assert_on_the_vehicle(ok, session.track)
     said = pipeline.target["init_bbox"]
     if dx_px == 0:
         assert said == "kept" and len(ok) == len(frames) and not caplog.records
@@ -272,49 +300,13 @@ def test_an_init_bbox_taken_without_a_pose_is_checked_on_the_first_frame_with_on
     checked as it would have been: on the vehicle kept, 25 px right snapped onto the outline, 25 px left (open
     water, tracked as the seafloor until then) refused. Without the late check the -25 px box gives ok fixes 25 px
     off the vehicle once the attitude arrives. nadir_hover's frames."""
-    import asyncio
-    import copy
-    from dataclasses import replace
-    from pathlib import Path
-
-    from groundstation.session.read import load_session
-    from groundstation.video.file import open_video
-
-    session = load_session(
-        Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled" / "nadir_hover"
-    )
-    t, truth = session.frames["t"], session.track
-    tel = copy.deepcopy(session.telemetry)
-    att = tel.attitude
-    cut = float(tel.uav_time(t[3])) + 1e-3  # frames 0-3 come before the first attitude sample
-    kept = att.times > cut
-    times, values = att.times[kept].copy(), att.values[kept].copy()
-    att.clear()
-    for ti, vi in zip(times, values, strict=True):
-        assert att.append(float(ti), vi)
-    x, y, w, h = session.calibration.init_bbox
-    box = (x + dx_px, y, w, h)
-    cal = replace(session.calibration, tracker=replace(session.calibration.tracker, init_bbox=box))
-    with open_video(session.video_path, grey=True) as video:
-        frames = [f for f, _ in zip(video, range(15), strict=False)]
-
-    async def live():
-        pipeline = Pipeline(cal, tel, "default", [])
-        fixes, said = [], []
-        for f in frames:
-            frame = LiveFrame(f.index, float(t[f.index]), float(t[f.index]), f.bgr(), grey=f.image)
-            fixes.append(await pipeline.process(frame))
-            said.append(pipeline.target["init_bbox"])
-        return pipeline, fixes, said
-
+    session, cal, tel, _, frames = _nadir_hover_boxed(dx_px, attitude_from_frame=4)
     with caplog.at_level("WARNING", logger="skyfix.pipeline"):
-        pipeline, fixes, said = asyncio.run(live())
+        pipeline, fixes, said = _live_boxed(session, cal, tel, frames)
     assert not any(f.ok for f in fixes[:4])  # no pose, no fix
     assert all(s.startswith("unchecked: no camera pose on frame 0") for s in said[:4]), said[:4]
     ok = [f for f in fixes if f.ok]
-    du = [f.u - np.interp(f.t_unix, truth["t"], truth["u"]) for f in ok]
-    dv = [f.v - np.interp(f.t_unix, truth["t"], truth["v"]) for f in ok]
-    assert np.all(np.abs(du) < 3.0) and np.all(np.abs(dv) < 3.0), (du, dv)
+    _assert_on_the_vehicle(ok, session.track)
     final = said[-1]
     if dx_px == 0:
         assert final == "kept: checked on frame 4, the first with a camera pose"
