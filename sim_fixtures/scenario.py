@@ -468,6 +468,12 @@ class SensorsSpec:
         description="1-sigma white noise of the EKF's heights, new with each "
         "GLOBAL_POSITION_INT (alt and relative_alt alike; a few cm typical)",
     )
+    draw: Annotated[Whole, Ge(0)] = Field(
+        0,
+        description="which draw of the sensors' random errors (the wanders, walks and white noise here, [uav]'s "
+        "GNSS altitude errors): 0 the scenario's own; another number another draw of the same sizes, the scene "
+        "and its video the same",
+    )
 
     @model_validator(mode="after")
     def _exact_is_exact(self):

@@ -44,7 +44,9 @@ The scene's error budget, the slow errors (biases, wanders, walks) at each frame
 ``truth_errors.csv`` (:func:`sim_fixtures.generate.write_truth_errors`); the white parts are new with each
 message and not in it. Each error draws from its own random stream (``np.random.default_rng([seed, 505, k])``),
 apart from the telemetry's: turning a sensor on leaves every other value of the session as it was, and with
-all of them off the telemetry is byte for byte what it was without ``[sensors]``.
+all of them off the telemetry is byte for byte what it was without ``[sensors]``. ``draw`` (not 0) draws every one of
+them (and ``[uav]``'s GNSS altitude errors) again, of the same sizes: another flight of the same drone over the
+same scene.
 """
 
 from __future__ import annotations
@@ -72,7 +74,13 @@ MARGIN_S = 3.0  # ... over the telemetry's span and this much beyond
 
 
 def stream(sc: Scenario, name: str):
-    return np.random.default_rng([sc.seed, 505, STREAM[name]])
+    return np.random.default_rng([sc.seed, 505, STREAM[name], *drawn(sc)])
+
+
+def drawn(sc: Scenario) -> list[int]:
+    """What a sensor error's random stream is seeded with beside the scenario's seed: ``[sensors] draw`` where it is
+    not 0 (0 keeps the streams, and so every session made before it, as they were)."""
+    return [sc.sensors.draw] if sc.sensors.draw else []
 
 
 def gauss_markov(rng, sigma: float, corr_s: float, step_s: float, shape: tuple) -> np.ndarray:

@@ -54,6 +54,7 @@ from .sensors import (
     ahrs_error_rpy,
     baro_noise_m,
     baro_wander_m,
+    drawn,
     gnss_claim,
     levelled,
     ned_with_error,
@@ -95,8 +96,10 @@ MAV_SENSOR_ROTATION_PITCH_270 = 25  # a rangefinder looking down the body's z ax
 OUT_OF_RANGE_ADD_M = 1.0
 
 
-def stream(sc: Scenario, name: str):
-    return np.random.default_rng([sc.seed, 404, STREAM[name]])
+def stream(sc: Scenario, name: str, sensor: bool = False):
+    """The random stream ``name``; ``sensor``: a sensor's error, drawn again with ``[sensors] draw``
+    (:func:`sim_fixtures.sensors.drawn`)."""
+    return np.random.default_rng([sc.seed, 404, STREAM[name], *(drawn(sc) if sensor else [])])
 
 
 def exponential(rng, mean_s: float, n: int) -> np.ndarray:
@@ -195,7 +198,7 @@ def gnss_alt_error_m(sc: Scenario, tau_s):
     0.61 and 0.37 of it, random phases, together of RMS ``uav.gnss_alt_error_m``."""
     u = sc.uav
     tau = np.asarray(tau_s, dtype=float)
-    phases = stream(sc, "gnss_alt").uniform(0.0, 2 * np.pi, 3)
+    phases = stream(sc, "gnss_alt", sensor=True).uniform(0.0, 2 * np.pi, 3)
     amplitude = u.gnss_alt_error_m / np.sqrt(1.5)  # three sinusoids of amplitude a: RMS a·sqrt(3/2)
     return sum(
         amplitude * np.sin(2 * np.pi * tau / (u.gnss_alt_error_period_s * k) + ph)
@@ -229,7 +232,7 @@ def _gps_raw(sc: Scenario, motion: Motion, clock: Clock, t_us, ms, rng):
         + gnss_alt_error_m(sc, tau)
     )
     # its own stream: 0 adds 0
-    alt = alt + stream(sc, "gnss_alt_noise").normal(0.0, u.gnss_alt_noise_m, len(tau))
+    alt = alt + stream(sc, "gnss_alt_noise", sensor=True).normal(0.0, u.gnss_alt_noise_m, len(tau))
     vel = motion.uav_velocity_ned(tau)
     speed = np.hypot(vel[:, 0], vel[:, 1])
     cog = np.round(np.degrees(np.arctan2(vel[:, 1], vel[:, 0])) % 360 * 100).astype(int) % 36000

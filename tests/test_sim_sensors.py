@@ -270,6 +270,10 @@ def test_the_ekf_position_walks_with_the_configured_rms(tmp_path, mode, rms_m):
         corr = np.mean([np.corrcoef(err[:-lag, i], err[lag:, i])[0, 1] for i in range(2)])
         assert corr == pytest.approx(np.exp(-1), abs=0.12)
     assert np.allclose(position_error_ne_m(sc, tau), err, atol=0.012)
+    # [sensors] draw: another walk of the same size over the same flight
+    again = position_error_ne_m(with_overrides(sc, sensors={"draw": 1}), tau)
+    assert np.sqrt(np.mean(np.sum(again**2, axis=1))) == pytest.approx(rms_m, rel=0.15)
+    assert abs(np.corrcoef(again[:, 0], position_error_ne_m(sc, tau)[:, 0])[0, 1]) < 0.3
 
 
 def test_sensors_off_the_telemetry_is_byte_for_byte_the_bundled(tmp_path):
