@@ -108,6 +108,11 @@ class Priors:
     # correlation time ``tilt_wander_s``, at the walk's knots; 0: the tilt is constant
     tilt_wander_rad: float = 0.0
     tilt_wander_s: float = 60.0
+    # the reported heights' wander about their level, 1-sigma (m), a first-order Gauss-Markov process of correlation
+    # time ``height_wander_s`` (a barometer's): the floor does not tell it, the walk takes up part of it, and the
+    # walk's sigmas take that part (:func:`_walk_per_height`); 0: the heights' error is taken as constant
+    height_wander_m: float = 0.0
+    height_wander_s: float = 30.0
     pixel_px: float = 0.7  # a tracked floor point's 1-sigma in u and v
     floor_depth_m: float | None = None  # given: not estimated
     floor_depth_prior_m: float = 100.0  # estimated: its (weak) prior's 1-sigma about the start
@@ -655,16 +660,50 @@ def _per_height(prob: _Problem, x: np.ndarray, inliers: np.ndarray) -> np.ndarra
     (tilt_fwd, tilt_right, yaw; rad per metre reading high): the Gauss-Newton step that takes up every frame's height
     moved by the same amount, the floor's depth, the walk, the wander and the features free (the floor's depth takes
     most of it: from above, a floor point's offset shows about ``h + D/n``); the inlying observations only."""
+    return _height_steps(prob, x, inliers, np.ones((prob.M, 1)))[:3, 0]
+
+
+def _walk_per_height(prob: _Problem, x: np.ndarray, inliers: np.ndarray) -> np.ndarray:
+    """(2J, J): how the walk's knots (north, east in turn) move (m) per metre the reported heights read high about
+    each knot (linear between knots, as the walk): :func:`_per_height`'s step for a height error that varies, which
+    the floor's depth and the biases cannot take up alone."""
+    s = prob.s[:, None]
+    hats = (np.arange(prob.J) == prob.j[:, None]) * (1 - s) + (
+        np.arange(prob.J) == prob.j[:, None] + 1
+    ) * s
+    return _height_steps(prob, x, inliers, hats)[N_GLOBAL : N_GLOBAL + 2 * prob.J]
+
+
+def _height_steps(
+    prob: _Problem, x: np.ndarray, inliers: np.ndarray, shapes: np.ndarray
+) -> np.ndarray:
+    """The Gauss-Newton steps of the dense parameters (globals, walk, offsets, wander; the features eliminated) that
+    take up the reported heights moved by each column of ``shapes`` (M, C: metres per observation), (n_dense, C)."""
     base = prob.observation_residuals(x)
     moved = copy.copy(prob)
     moved.h = prob.h + _HEIGHT_STEP
+    per_m = (moved.observation_residuals(x) - base) / _HEIGHT_STEP  # (M, 2)
     jac = prob.jacobian(x)
     keep = np.concatenate([np.repeat(inliers, 2), np.ones(jac.shape[0] - 2 * prob.M)])
     jac = jac.multiply(keep[:, None]).tocsr()
-    column = np.zeros(jac.shape[0])
-    column[: 2 * prob.M] = ((moved.observation_residuals(x) - base) / _HEIGHT_STEP).ravel()
-    S, g, _ = _reduced((jac.T @ jac).tocsc(), jac.T @ (column * keep), prob.first_feature)
-    return -np.linalg.solve(S, g)[:3]
+    H = (jac.T @ jac).tocsc()
+    steps = []
+    for shape in np.asarray(shapes, dtype=float).T:
+        column = np.zeros(jac.shape[0])
+        column[: 2 * prob.M] = (per_m * shape[:, None]).ravel()
+        S, g, _ = _reduced(H, jac.T @ (column * keep), prob.first_feature)
+        steps.append(-np.linalg.solve(S, g))
+    return np.array(steps).T
+
+
+def height_wander_cov_m2(priors: Priors, knots_s: np.ndarray) -> np.ndarray:
+    """(J, J) the reported heights' wander at the knots about its mean over them (m²): a first-order Gauss-Markov
+    process of :attr:`Priors.height_wander_m`, ``height_wander_s``; its mean is a common error, which the floor's depth
+    and the tilt take up (:attr:`BottomEstimate.bias_per_height_rad`), not the walk (whose mean is held at 0)."""
+    t = np.asarray(knots_s, dtype=float)
+    cov = priors.height_wander_m**2 * np.exp(-np.abs(t[:, None] - t) / priors.height_wander_s)
+    centre = np.eye(len(t)) - 1.0 / len(t)
+    return centre @ cov @ centre
 
 
 def _reduced(H: sp.csc_matrix, g: np.ndarray, n_dense: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -860,6 +899,9 @@ def _estimate(
     cov_walk_m2 = (
         cov[N_GLOBAL : N_GLOBAL + 2 * prob.J, N_GLOBAL : N_GLOBAL + 2 * prob.J] + rate_spread
     )
+    if per_height and priors.height_wander_m > 0:
+        moves = _walk_per_height(prob, x, inliers)
+        cov_walk_m2 = cov_walk_m2 + moves @ height_wander_cov_m2(priors, prob.knots) @ moves.T
     return BottomEstimate(
         tilt_rad=g[:2].copy(),
         yaw_rad=float(g[2]),

@@ -302,3 +302,23 @@ def test_a_wandering_tilt_is_followed_within_its_prior():
     assert np.degrees(est.tilt_rad) == pytest.approx(np.mean(true, axis=0), abs=0.03)
     assert np.degrees(est.yaw_rad) == pytest.approx(YAW_DEG, abs=0.5)
     assert est.rms_px < fixed.rms_px
+
+
+def test_the_walk_sigma_takes_up_what_the_heights_wander_moves_it():
+    # the reported heights wander 0.1 m back and forth over 20 s (a barometer's prop wash and gusts): the floor does
+    # not tell the height, and the walk takes up part of its wander (measured: its error about its mean 0.97/1.49 of
+    # its sigma north/east when the heights are taken as constant); given the wander's prior (the platform's
+    # [uncertainty] baro_wander_m, baro_wander_s) the walk's sigma takes that part too, the fit itself the same
+    lens, poses, obs, _ = _session(speed_mps=1.2)
+    wander_m = 0.1 * np.sin(2 * np.pi * poses.t_s / 20.0 + 1.0)
+    moved = dataclasses.replace(poses, height_m=poses.height_m + wander_m)
+    priors = bottom.Priors(walk_rate_m=0.003, height_wander_m=0.1, height_wander_s=30.0)
+    est = bottom.estimate(lens, N_WATER, moved, obs, priors)
+    error_m = est.walk_at(poses.t_s)  # the positions are exact: the walk found is its error
+    sigma_m = est.sigma_walk_at(poses.t_s)
+    assert np.max(np.abs(error_m)) > 0.01  # the wander moved it
+    assert np.all(np.sqrt(np.mean(error_m**2, axis=0) / np.mean(sigma_m**2, axis=0)) < 1.0)
+    # its mean is a common error: the floor's depth and the tilt take it, not the walk (whose mean is held at 0)
+    cov = bottom.height_wander_cov_m2(priors, est.knot_t_s)
+    assert cov.sum(axis=0) == pytest.approx(np.zeros(len(est.knot_t_s)), abs=1e-12)
+    assert np.sqrt(np.mean(np.diagonal(cov))) < 0.1

@@ -602,12 +602,15 @@ def fit(
         return f"{n_features} floor features tracked (fewer than {MIN_FEATURES})"
     gnss_rate = sigma_uav_m / np.sqrt(GNSS_WALK_S)
     white = bottom.white_noise_m(poses)
+    sigmas = session.calibration.sigmas
     priors = bottom.Priors(
         walk_rate_m=min(gnss_rate, VELOCITY_RATE_M),
         walk_rates_m=walk_rates_m(gnss_rate),
         white_m=0.0 if white is None else max(MIN_WHITE_M, white),
         tilt_wander_rad=np.radians(MIN_TILT_DEG) if frame_tilt == "body" else 0.0,
         tilt_wander_s=TILT_WANDER_S,
+        height_wander_m=min(sigmas.baro_wander_m, sigmas.height_m),
+        height_wander_s=sigmas.baro_wander_s,
     )
     cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
     est = bottom.estimate(cam, n_water, poses, obs, priors, parts=PARTS)
