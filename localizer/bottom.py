@@ -184,6 +184,10 @@ class BottomEstimate:
     #: (3,) how the tilt_fwd, tilt_right and yaw found move (rad) per metre the reported heights read high
     #: (:func:`_per_height`): the floor does not tell the height, and its sigmas do not include this
     bias_per_height_rad: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
+    #: (2J, 3) how the walk's knots (north, east in turn) move (m) with the tilt_fwd, tilt_right and yaw found (per
+    #: rad: the fit's covariance of the walk with them over theirs): what an error of the biases beyond the fit's
+    #: own sigma puts into the walk (:meth:`with_walk_error`); (0, 3): not known
+    walk_per_bias_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
 
     @property
     def sigma_tilt_rad(self) -> float:
@@ -234,6 +238,16 @@ class BottomEstimate:
 
     def sigma_walk_at(self, t_s) -> np.ndarray:
         return _interp_knots(self.knot_t_s, self.sigma_walk_ne_m, t_s)
+
+    def with_walk_error(self, moves_m) -> BottomEstimate:
+        """This estimate with the walk's covariance and sigmas widened by errors the fit's own covariance does not
+        hold: ``moves_m`` (2J, C), each column how far one independent 1-sigma error moves the knots (north, east in
+        turn, m), e.g. :attr:`walk_per_bias_m` times the biases' error beyond the fit's sigma (the parts' spread)."""
+        moves = np.asarray(moves_m, dtype=float).reshape(len(self.cov_walk_m2), -1)
+        cov = self.cov_walk_m2 + moves @ moves.T
+        return replace(
+            self, cov_walk_m2=cov, sigma_walk_ne_m=np.sqrt(np.diagonal(cov)).reshape(-1, 2)
+        )
 
     def describe(self) -> str:
         """One line: what was estimated and how sure."""
@@ -811,7 +825,7 @@ def with_parts(
         0.0 if p.floor_depth_m is not None else float(np.hypot(est.sigma_floor_depth_m, spread[3]))
     )
     return replace(
-        est,
+        est.with_walk_error(est.walk_per_bias_m * spread[:3]),
         cov_bias=est.cov_bias + np.diag(spread[:3] ** 2),
         sigma_floor_depth_m=sigma_depth,
         parts=values,
@@ -926,6 +940,7 @@ def _estimate(
         if poses.velocity_ne_mps is not None
         else np.zeros((0, 2)),
         bias_per_height_rad=_per_height(prob, x, inliers) if per_height else np.zeros(3),
+        walk_per_bias_m=cov[N_GLOBAL : N_GLOBAL + 2 * prob.J, :3] @ np.linalg.inv(cov[:3, :3]),
     )
 
 

@@ -7,12 +7,13 @@ by a GNSS walk. Nothing of the localizer's geometry makes the data.
 """
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from groundstation.offline.bottom import MIN_TILT_DEG, PoseCorrection
+from groundstation.offline.bottom import MIN_TILT_DEG, PoseCorrection, held_walk_error_m
 from localizer import bottom
 from localizer.camera import Camera
 from sim_fixtures.geometry import R_GIMBAL_FROM_CV, SimCamera, matrix_zyx, project, surface_crossing
@@ -152,10 +153,33 @@ def test_plain_gnss_walk_is_found_about_its_mean():
         f"position walk up to {np.max(np.hypot(*est.walk_ne_m.T)):.2f} m ± {sigma_walk:.3f} m about"
         in est.describe()
     )
-    said = PoseCorrection(est, True, False, "camera").describe()
+    correction = PoseCorrection(est, True, False, "camera")
+    said = correction.describe()
     tilt_deg = max(MIN_TILT_DEG, np.degrees(est.sigma_tilt_rad))
     assert f"h_acc takes tilt ± {tilt_deg:.2f}° for them, not [uncertainty]'s" in said
     assert "heading ±" not in said.split("h_acc")[1] and "the camera's height" in said
+    # the corrected position's sigma (a DRMS) in h_acc is the GNSS's and the walk's own error together
+    frames = SimpleNamespace(t_unix=poses.t_s, sigma_uav_m=np.full(len(poses.t_s), 1.2))
+    sigma_walk_m = np.hypot(*est.sigma_walk_at(poses.t_s).T)
+    assert correction.sigma_position_m(frames) == pytest.approx(np.hypot(1.2, sigma_walk_m))
+    # the heading held at 0 (not applied) while the compass reads 2° high: the walk fitted again takes up part of
+    # it, which its own sigma does not hold (measured: its error 0.127/0.057 m against 0.011/0.020); widened by
+    # what the free fit's walk moves per radian of heading times the heading's sigma as h_acc takes it (the
+    # calibration's 2°) and the tilt's by its own (0.122/0.086 m, the error 1.05/0.66 of it), and then by how far
+    # it is from the free fit's walk too
+    held = bottom.estimate(
+        lens, N_WATER, poses, obs, dataclasses.replace(est.priors, yaw_rad=1e-7, walk_rates_m=())
+    )
+    error_m = held.walk_at(poses.t_s) - expected
+    ratio = np.sqrt(
+        np.mean(error_m**2, axis=0) / np.mean(held.sigma_walk_at(poses.t_s) ** 2, axis=0)
+    )
+    assert np.max(ratio) > 3.0
+    calibration = SimpleNamespace(tilt_deg=0.2, yaw_deg=YAW_DEG)
+    moves = held_walk_error_m(est, held, calibration, True, False)
+    for widened in (held.with_walk_error(moves[:, :3]), held.with_walk_error(moves)):
+        sigma_m = widened.sigma_walk_at(poses.t_s)
+        assert np.all(np.sqrt(np.mean(error_m**2, axis=0) / np.mean(sigma_m**2, axis=0)) < 1.5)
 
 
 def test_hovering_drone_does_not_claim_the_biases():

@@ -37,8 +37,10 @@ noise: :meth:`PoseCorrection.position_ne_m`); each fix's accuracy then takes the
 :data:`MIN_YAW_DEG`: the AHRS's wander) instead of ``[uncertainty] tilt_deg``, ``yaw_deg``, and its height term the
 height's error together with the tilt and heading it moves in the estimate
 (:meth:`PoseCorrection.rotation_per_height_ned`: the floor does not tell the height). The walk is
-relative to the GNSS's mean over the recording: its absolute offset stays the GNSS's, and so does the
-position's sigma in h_acc. Each fix says what was estimated (:data:`localizer.fix.POSE_COLUMNS`, also in the
+relative to the GNSS's mean over the recording: its absolute offset stays the GNSS's, and the position's sigma in
+h_acc is the GNSS's and the walk's own together (:meth:`PoseCorrection.sigma_position_m`); the walk's sigma takes
+what the biases' error beyond the fit's moves it (the parts' spread; a bias not applied, held at 0 in the walk
+fitted again, by the calibration's sigma, and how far that walk is from the free fit's: :func:`held_walk_error_m`). Each fix says what was estimated (:data:`localizer.fix.POSE_COLUMNS`, also in the
 Zenoh fix message, :class:`groundstation.messages.FixMessage`), and positions.csv gets them per frame (columns after
 skyfix's own, :func:`pose_cells`): ``pose_source`` (``bottom`` or empty), the estimated camera attitude error
 ``cam_err_n_deg``, ``cam_err_e_deg``, ``cam_err_d_deg`` (reported − true, a rotation vector in NED, as
@@ -342,6 +344,7 @@ class PoseCorrection:
             R_ned_from_cv=R,
             lat_deg=np.asarray(lat),
             lon_deg=np.asarray(lon),
+            sigma_uav_m=self.sigma_position_m(pose),
             rotation_per_height_ned=self.rotation_per_height_ned(session, pose),
         )
         cal = session.calibration
@@ -349,6 +352,14 @@ class PoseCorrection:
         return corrected, dataclasses.replace(
             cal, sigmas=dataclasses.replace(cal.sigmas, **claimed)
         )
+
+    def sigma_position_m(self, pose: CameraPose) -> np.ndarray:
+        """The corrected position's horizontal 1-sigma per frame of ``pose`` (a DRMS, as ``sigma_uav_m``): the
+        GNSS's (its offset, which the walk about its mean does not see) and the walk's own error together. The
+        walk replaces the GNSS's wander about its mean with its own error: the GNSS's sigma, which held both the
+        offset and that wander, is kept whole (never surer)."""
+        e = self.estimate
+        return np.hypot(pose.sigma_uav_m, np.hypot(*e.sigma_walk_at(pose.t_unix).T))
 
     def rotation_per_height_ned(self, session: Session, pose: CameraPose) -> np.ndarray:
         """The attitude error applied that comes with each metre the heights read high (rad per metre, NED rotation
@@ -414,8 +425,9 @@ class PoseCorrection:
         if claimed:
             applied += f"; h_acc takes {' and '.join(claimed)} for them, not [uncertainty]'s"
         applied += (
-            "; not told by the bottom, in h_acc: the GNSS's offset (the walk is about its mean) and the camera's "
-            "height (the floor's depth takes most of its error; its term has the tilt and heading it moves)"
+            "; not told by the bottom, in h_acc: the GNSS's offset (the walk is about its mean; with the walk's "
+            "sigma) and the camera's height (the floor's depth takes most of its error; its term has the tilt and "
+            "heading it moves)"
         )
         return f"pose from the bottom: {self.estimate.describe()}; {applied}"
 
@@ -637,8 +649,34 @@ def fit(
             priors=est.priors,
             parts=est.parts,
             bias_per_height_rad=est.bias_per_height_rad,
+            walk_per_bias_m=est.walk_per_bias_m,
+        ).with_walk_error(
+            held_walk_error_m(est, again, sigmas, tilt, yaw)
         )  # sigmas: the free estimate's
     return PoseCorrection(est, tilt, yaw, frame_tilt)
+
+
+def held_walk_error_m(
+    free: bottom.BottomEstimate, held: bottom.BottomEstimate, sigmas, tilt: bool, yaw: bool
+) -> np.ndarray:
+    """(2J, 4): what the walk ``held`` (fitted again with the parts not applied held at 0) does not know of, as
+    :meth:`localizer.bottom.BottomEstimate.with_walk_error` takes it: the tilt_fwd, tilt_right and yaw errors that
+    move it as they move the ``free`` fit's walk (:attr:`~localizer.bottom.BottomEstimate.walk_per_bias_m`), a part
+    held as wrong as the calibration says (``[uncertainty] tilt_deg``, ``yaw_deg``, what h_acc takes for it), one
+    applied by its sigma with the parts' spread (the fit's own share counted twice: never surer); and how far it
+    is from the free fit's walk (holding a part at 0 moves the floor's depth and the walk with it)."""
+    sigma_rad = np.array(
+        [
+            *(
+                np.sqrt(np.diagonal(free.cov_bias)[:2])
+                if tilt
+                else np.radians([sigmas.tilt_deg] * 2)
+            ),
+            free.sigma_yaw_rad if yaw else np.radians(sigmas.yaw_deg),
+        ]
+    )
+    moved = (held.walk_ne_m - free.walk_ne_m).reshape(-1, 1)
+    return np.column_stack([free.walk_per_bias_m * sigma_rad, moved])
 
 
 def walk_rates_m(gnss_rate_m: float) -> tuple[float, ...]:
