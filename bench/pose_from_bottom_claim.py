@@ -297,12 +297,17 @@ def main() -> int:
     if args.draws:
         lines.append(pooled(args.only, pools))
         print(lines[-1], flush=True)
-    lines.append(f"({args.only}: load average {' '.join(f'{x:.1f}' for x in os.getloadavg())})")
-    print(lines[-1], flush=True)
-    if args.out:
-        with open(args.out, "a") as f:
-            f.write("\n".join(lines) + "\n")
+    finish(lines, args.only, args.out)
     return 0
+
+
+def finish(lines: list[str], label: str, out: Path | None) -> None:
+    """The load average as the last line, printed; all ``lines`` appended to ``out`` when given."""
+    lines.append(f"({label}: load average {' '.join(f'{x:.1f}' for x in os.getloadavg())})")
+    print(lines[-1], flush=True)
+    if out:
+        with open(out, "a") as f:
+            f.write("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -13,12 +13,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 from pathlib import Path
 
 import numpy as np
 from pose_from_bottom import reported_minus_true
-from pose_from_bottom_claim import NAMES, rms, session_of
+from pose_from_bottom_claim import NAMES, finish, rms, session_of
 
 from groundstation.offline import process
 from groundstation.offline.evaluate import error_ne_m
@@ -93,13 +92,8 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=None, help="append the lines to this file")
     args = ap.parse_args()
     lines = lines_for(args.only, args.work, args.draw)
-    lines.append(
-        f"({args.only} draw {args.draw}: load average {' '.join(f'{x:.1f}' for x in os.getloadavg())})"
-    )
     print("\n".join(lines), flush=True)
-    if args.out:
-        with open(args.out, "a") as f:
-            f.write("\n".join(lines) + "\n")
+    finish(lines, f"{args.only} draw {args.draw}", args.out)
     return 0
 
 
