@@ -700,12 +700,12 @@ def _height_steps(
     jac = prob.jacobian(x)
     keep = np.concatenate([np.repeat(inliers, 2), np.ones(jac.shape[0] - 2 * prob.M)])
     jac = jac.multiply(keep[:, None]).tocsr()
-    H = (jac.T @ jac).tocsc()
+    S, Hgp3, inv = _schur((jac.T @ jac).tocsc(), prob.first_feature)  # the same for every shape
     steps = []
     for shape in np.asarray(shapes, dtype=float).T:
         column = np.zeros(jac.shape[0])
         column[: 2 * prob.M] = (per_m * shape[:, None]).ravel()
-        S, g, _ = _reduced(H, jac.T @ (column * keep), prob.first_feature)
+        g, _ = _reduced_g(Hgp3, inv, jac.T @ (column * keep), prob.first_feature)
         steps.append(-np.linalg.solve(S, g))
     return np.array(steps).T
 
@@ -724,6 +724,13 @@ def _reduced(H: sp.csc_matrix, g: np.ndarray, n_dense: int) -> tuple[np.ndarray,
     """The normal equations ``H·δ = −g`` with the parameters after the first ``n_dense`` (2×2 feature blocks, none
     coupled to another) eliminated: the Schur complement ``S`` (n_dense × n_dense), the reduced ``g`` and
     ``g_fᵀ·H_ff⁻¹·g_f`` (what the features' own step takes off the squared residuals)."""
+    S, Hgp3, inv = _schur(H, n_dense)
+    return (S, *_reduced_g(Hgp3, inv, g, n_dense))
+
+
+def _schur(H: sp.csc_matrix, n_dense: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_reduced`'s Schur complement ``S``, with what reduces a ``g`` (:func:`_reduced_g`): the dense-feature
+    block (n_dense, nf, 2) and the features' inverted 2×2 blocks (nf, 2, 2)."""
     Hgg = H[:n_dense, :n_dense].toarray()
     Hgp = H[:n_dense, n_dense:].toarray()
     Hpp = H[n_dense:, n_dense:]
@@ -735,10 +742,16 @@ def _reduced(H: sp.csc_matrix, g: np.ndarray, n_dense: int) -> tuple[np.ndarray,
     blocks += np.eye(2) * 1e-12
     inv = np.linalg.inv(blocks)
     Hgp3 = Hgp.reshape(n_dense, nf, 2)
-    gp = g[n_dense:].reshape(nf, 2)
+    return Hgg - np.einsum("gfa,fab,hfb->gh", Hgp3, inv, Hgp3), Hgp3, inv
+
+
+def _reduced_g(
+    Hgp3: np.ndarray, inv: np.ndarray, g: np.ndarray, n_dense: int
+) -> tuple[np.ndarray, float]:
+    """:func:`_reduced`'s reduced ``g`` and ``g_fᵀ·H_ff⁻¹·g_f``, from :func:`_schur`'s blocks."""
+    gp = g[n_dense:].reshape(len(inv), 2)
     inv_gp = np.einsum("fab,fb->fa", inv, gp)
-    S = Hgg - np.einsum("gfa,fab,hfb->gh", Hgp3, inv, Hgp3)
-    return S, g[:n_dense] - np.einsum("gfa,fa->g", Hgp3, inv_gp), float(np.sum(gp * inv_gp))
+    return g[:n_dense] - np.einsum("gfa,fa->g", Hgp3, inv_gp), float(np.sum(gp * inv_gp))
 
 
 def walk_rate_log_evidence(prob: _Problem, x: np.ndarray, rates_m) -> tuple[np.ndarray, np.ndarray]:
