@@ -512,6 +512,11 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
                     and "uuv2 GPS_INPUT" in health
                     and health.count("UAV MAVLink") == 1
                 )
+                # how each UUV's [[uuv]] init_bbox was taken on the first frame: the recorded box, on its vehicle
+                assert status["uuvs"]["uuv1"]["target"]["init_bbox"] == "kept", status["uuvs"][
+                    "uuv1"
+                ]
+                assert page.inner_text("#target-state").endswith("· init_bbox kept")
                 browser.screenshot("6-two-uuvs-uuv2-released")
                 page.keyboard.press("2")
                 assert page.eval_on_selector("#uuv-pick", "p => p.dataset.selected") == "uuv2"

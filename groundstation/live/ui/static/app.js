@@ -353,7 +353,10 @@ function showStatus() {
   const h = s.height;  // the UAV's height above the water, as the fixes use it
   $("height").textContent = h ? `height ${fmt(h.height_m, 2)} ± ${fmt(h.sigma_m, 2, " m")} (${h.source})` : "height —";
   const t = mine.target;
-  $("target-state").textContent = `${who}target ${t.state}${t.origin ? ` (${t.origin})` : ""}`;
+  const ts = $("target-state");
+  ts.textContent = `${who}target ${t.state}${t.origin ? ` (${t.origin})` : ""}`
+    + (t.init_bbox ? ` · init_bbox ${t.init_bbox.split(":")[0]}` : "");  // kept, snapped, refused, unchecked
+  ts.title = t.init_bbox ? `[tracker] init_bbox on the first frame: ${t.init_bbox}` : "";
   const g = mine.gps_input && mine.gps_input.gates;  // the safety gates: what GPS_INPUT lets through
   const gate = $("gate-state");
   const trackAge = g && g.track ? agedBy(g.track.age_s) : null;  // its last fix's, now
