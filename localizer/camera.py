@@ -8,6 +8,7 @@ shape) and returns arrays of that shape.
 
 from __future__ import annotations
 
+import math
 from typing import Annotated
 
 import numpy as np
@@ -64,9 +65,12 @@ def distort(x, y, distortion):
     ``x = X/Z``, ``y = Y/Z`` of a point in the ``cv`` frame (unitless). Returns the
     distorted normalized coordinates ``(xd, yd)``, OpenCV's model exactly.
     """
+    return _distorted(np.asarray(x, dtype=float), np.asarray(y, dtype=float), distortion)
+
+
+def _distorted(x, y, distortion):
+    """:func:`distort`'s arithmetic, of floats or of arrays alike (the same operations in the same order)."""
     k1, k2, p1, p2, k3 = distortion
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
     r2 = x * x + y * y
     radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
@@ -90,18 +94,18 @@ def undistort(xd, yd, distortion, iterations: int = 20, tol: float = 1e-14):
     """
     xd = np.asarray(xd, dtype=float)
     yd = np.asarray(yd, dtype=float)
-    x = y = None
     if 0 < xd.size <= SCALAR_POINTS and xd.shape == yd.shape:
         x, y = _undistort_floats(xd, yd, distortion, iterations, tol)
-    if x is None:
-        x = xd.copy()
-        y = yd.copy()
-        for _ in range(iterations):
-            dx, dy = _newton_step(x, y, xd, yd, distortion)
-            x = x - dx
-            y = y - dy
-            if np.all(np.abs(dx) + np.abs(dy) < tol):
-                break
+        if x is not None:
+            return x, y
+    x = xd.copy()
+    y = yd.copy()
+    for _ in range(iterations):
+        dx, dy = _newton_step(x, y, xd, yd, distortion)
+        x = x - dx
+        y = y - dy
+        if np.all(np.abs(dx) + np.abs(dy) < tol):
+            break
     xr, yr = distort(x, y, distortion)
     bad = ~(np.abs(xr - xd) + np.abs(yr - yd) < 1e-9)
     if np.any(bad):
@@ -129,9 +133,9 @@ def _newton_step(x, y, xd, yd, distortion):
 
 
 def _undistort_floats(xd: np.ndarray, yd: np.ndarray, distortion, iterations: int, tol: float):
-    """:func:`undistort`'s steps point by point in plain floats, every point stepped until all have converged (as
-    an array's); (x, y) arrays of ``xd``'s shape, or (None, None) where a step divides by zero (the arrays' steps
-    then give what numpy gives)."""
+    """:func:`undistort`'s steps and its check point by point in plain floats, every point stepped until all have
+    converged (as an array's); (x, y) arrays of ``xd``'s shape, or (None, None) where a step divides by zero (the
+    arrays' steps then give what numpy gives)."""
     k = tuple(float(c) for c in distortion)
     targets = list(zip(xd.ravel().tolist(), yd.ravel().tolist(), strict=True))
     points = targets
@@ -145,6 +149,14 @@ def _undistort_floats(xd: np.ndarray, yd: np.ndarray, distortion, iterations: in
                 break
     except ZeroDivisionError:
         return None, None
+    # the check of undistort's arrays, point by point: NaN where distorting back misses the pixel
+    nan = (math.nan, math.nan)
+    points = [
+        p if abs(xr - a) + abs(yr - b) < 1e-9 else nan
+        for p, (a, b), (xr, yr) in zip(
+            points, targets, (_distorted(x, y, k) for x, y in points), strict=True
+        )
+    ]
     x, y = (np.array(c, dtype=float).reshape(xd.shape) for c in zip(*points, strict=True))
     return x, y
 
