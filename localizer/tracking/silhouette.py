@@ -245,8 +245,20 @@ def _axes_angle(frame_bgr, u: float, v: float, radius_px: float) -> float:
     yy, xx = np.ogrid[0 : grey.shape[0], 0 : grey.shape[1]]
     near = np.hypot(xx + x0 - u, yy + y0 - v) <= radius_px
     gx, gy = gx[near], gy[near]
-    z = (gx + 1j * gy) ** 4 / np.maximum(gx**2 + gy**2, 1e-9)  # |g|², angle × 4
+    z = _fourth_power(gx + 1j * gy) / np.maximum(gx**2 + gy**2, 1e-9)  # |g|², angle × 4
     return float(np.angle(z.sum()) / 4.0)
+
+
+def _fourth_power(z: np.ndarray) -> np.ndarray:
+    """``z ** 4`` of complex ``z``, the products numpy's power takes for it (``((z·z)·(z·z))·(1 + 0j)``, each written
+    out in ``z``'s own precision), without its per-element loop: the same numbers, signed zeros included, at a
+    third of its CPU."""
+    r, i = z.real, z.imag
+    r2, i2 = r * r - i * i, r * i + i * r
+    r4, i4 = r2 * r2 - i2 * i2, r2 * i2 + i2 * r2
+    out = np.empty_like(z)
+    out.real, out.imag = r4 - 0 * i4, i4 + 0 * r4
+    return out
 
 
 def _inside(corners, W: int, H: int, border_px: float) -> bool:
