@@ -85,6 +85,8 @@ EVENTS = (
     ("groundstation.offline.track", "UuvTrack.step", "tracking started", "first"),
     ("groundstation.video.file", "Video._next_decoded", "last frame decoded", "none"),
 )
+#: (module, attribute, what): the time any thread spends in it noted, span by span
+WAITS = (("groundstation.video.file", "put_until", "decoder blocked, its queue full"),)
 #: An interval with fewer cores wanted than this is serial (the machine's 2 cores: one idle at least half the time).
 SERIAL_CORES = 1.5
 #: The main thread outside every wrapped function and import.
@@ -105,6 +107,7 @@ class Notes:
         self.main = threading.get_ident()
         self.seen: set[str] = set()
         self.decoded = 0  # frames decoded so far
+        self.waits: dict[str, list[tuple[float, float]]] = {}
 
     def enter(self, phase: str) -> None:
         self.stack.append(phase)
@@ -142,9 +145,21 @@ class Notes:
 
         return wrapped
 
+    def wait(self, what: str, inner):
+        spans = self.waits.setdefault(what, [])
+
+        def wrapped(*a, **k):
+            t0 = time.perf_counter()
+            try:
+                return inner(*a, **k)
+            finally:
+                spans.append((t0, time.perf_counter()))
+
+        return wrapped
+
     def imported(self, module) -> None:
         """Wrap ``module``'s functions of :data:`PHASES` and :data:`EVENTS`, once it is imported."""
-        for mod, attr, name, *when in EVENTS + PHASES:
+        for mod, attr, name, *when in EVENTS + PHASES + WAITS:
             if mod != module.__name__:
                 continue
             owner, _, leaf = attr.rpartition(".")
@@ -152,11 +167,13 @@ class Notes:
             inner = getattr(owner, leaf, None) if owner is not None else None
             if inner is None:
                 continue
-            setattr(
-                owner,
-                leaf,
-                self.event(name, when[0], inner) if when else self.phase(name, inner),
-            )
+            if (mod, attr, name) in WAITS:
+                wrapped = self.wait(name, inner)
+            elif when:
+                wrapped = self.event(name, when[0], inner)
+            else:
+                wrapped = self.phase(name, inner)
+            setattr(owner, leaf, wrapped)
 
 
 class ImportNotes:
@@ -226,6 +243,7 @@ def child(notes_path: str, argv: list[str]) -> int:
                 "marks": notes.marks,
                 "events": notes.events,
                 "threads": notes.threads,
+                "waits": notes.waits,
             }
         )
     )
@@ -385,6 +403,15 @@ def events_of(run: dict) -> dict[str, tuple[float, float, int]]:
     return found
 
 
+def waits_of(run: dict) -> dict[str, tuple[float, float]]:
+    """Per :data:`WAITS` entry: the seconds spent in it, and of those before the tracking started."""
+    start = next((t for t, name, *_ in run["notes"]["events"] if name == "tracking started"), 0.0)
+    return {
+        what: (sum(b - a for a, b in spans), sum(min(b, start) - a for a, b in spans if a < start))
+        for what, spans in run["notes"]["waits"].items()
+    }
+
+
 def table(label: str, runs: list[dict]) -> list[str]:
     """A variant's per-phase medians over its runs, in the order the phases first came."""
     per = [per_phase(intervals(r)) for r in runs]
@@ -399,6 +426,7 @@ def table(label: str, runs: list[dict]) -> list[str]:
     serial = [sum(p["serial_s"] for p in ph.values()) for ph in per]
     serial_busy = [sum(p["serial_busy_s"] for p in ph.values()) for ph in per]
     ev = [events_of(r) for r in runs]
+    waits = [waits_of(r) for r in runs]
     lines = [
         f"{label}: wall {med(walls):.2f} s [{min(walls):.2f}-{max(walls):.2f}], CPU {med(cpus):.2f} s, "
         f"serial (< {SERIAL_CORES:g} cores wanted) {med(serial):.2f} s, (< {SERIAL_CORES:g} busy) {med(serial_busy):.2f} s; "
@@ -407,6 +435,12 @@ def table(label: str, runs: list[dict]) -> list[str]:
             f"({med([e[name][1] for e in ev if name in e]):.2f} CPU-s, "
             f"{med([e[name][2] for e in ev if name in e]):.0f} frames decoded)"
             for name in dict.fromkeys(n for e in ev for n in e)
+        ),
+        "  "
+        + "; ".join(
+            f"{what} {med([w[what][0] for w in waits if what in w]):.2f} s, "
+            f"{med([w[what][1] for w in waits if what in w]):.2f} s of it before the tracking started"
+            for what in dict.fromkeys(x for w in waits for x in w)
         ),
         (
             f"  {'phase (main thread)':28s} {'wall s':>6s} {'CPU s':>6s} {'busy':>5s} {'wanted':>6s} "
@@ -520,6 +554,7 @@ def main(argv=None) -> int:
                 "cpu_s": r["cpu_s"],
                 "phases": per_phase(intervals(r)),
                 "events": events_of(r),
+                "waits": waits_of(r),
             }
             for r in rs
         ]
