@@ -56,9 +56,11 @@ Covariances are from the Jacobian at the solution (Gauss-Newton, the features el
 their Schur complement), scaled by the residuals' variance. They take the residuals as white, and
 what is not (a floor light that drags the points, waves, a walk the knots cannot follow) they do not
 see: asked for ``parts``, :func:`estimate` also solves each of that many consecutive stretches of the
-recording alone and widens the biases' and the floor depth's sigmas by the sample standard deviation of
-the parts' values (``hypot(σ, spread)``, as :attr:`groundstation.latency.estimate.SessionOffset.sigma_s`
-does for the video's delay), so an estimate whose thirds disagree is not claimed.
+recording alone and widens the biases' and the floor depth's sigmas by the standard error of the parts' mean
+(``hypot(σ, spread/√P)``, ``spread`` the sample standard deviation of the P parts' values): the whole fit holds
+all the parts' data, so its error beyond its own sigma is that of their mean, not one part's. An estimate whose
+thirds disagree is not claimed; a bias that changes during the recording (which one part's scatter would hold,
+each frame's error being its change from the mean) is held only to a third of its variance with three parts.
 Radians, metres, seconds.
 """
 
@@ -171,7 +173,7 @@ class BottomEstimate:
     #: (2J, 2J) the walk's covariance, knots' (north, east) in turn (m²); empty: not known
     cov_walk_m2: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)), repr=False)
     #: (P, 4) each part's tilt_fwd, tilt_right, yaw (rad) and floor depth (m) alone, NaN where it gave none; the
-    #: sigmas above include their spread (see the module doc); (0, 4): not asked
+    #: sigmas above include the standard error of their mean (see the module doc); (0, 4): not asked
     parts: np.ndarray = field(default_factory=lambda: np.zeros((0, N_GLOBAL)), repr=False)
     #: (R, 2) the candidate walk rates (m/√s) and their log marginal likelihoods (:attr:`Priors.walk_rates_m`; the
     #: chosen one is ``priors.walk_rate_m``); (0, 2): none tried
@@ -816,8 +818,9 @@ def with_parts(
     est: BottomEstimate, camera: Camera, n_water, poses: FramePoses, obs: Observations, parts: int
 ) -> BottomEstimate:
     """``est`` with each of ``parts`` consecutive stretches of the frames' times solved alone (:attr:`BottomEstimate.parts`)
-    and its sigmas widened by their sample standard deviation; with fewer than two parts solved, by the priors (the
-    recording does not show that the bottom told the biases)."""
+    and its sigmas widened by the standard error of their mean (their sample standard deviation over the square root
+    of their number, see the module doc); with fewer than two parts solved, by the priors (the recording does not
+    show that the bottom told the biases)."""
     t = np.asarray(poses.t_s, dtype=float)
     edges = np.linspace(t.min(), t.max(), parts + 1)
     part = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, parts - 1)
@@ -830,7 +833,7 @@ def with_parts(
     solved = values[np.all(np.isfinite(values), axis=1)]
     p = est.priors
     spread = (
-        np.std(solved, axis=0, ddof=1)
+        np.std(solved, axis=0, ddof=1) / np.sqrt(len(solved))
         if len(solved) >= 2
         else np.array([p.tilt_rad, p.tilt_rad, p.yaw_rad, p.floor_depth_prior_m])
     )
