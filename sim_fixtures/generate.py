@@ -19,7 +19,8 @@ renderer and each frame's noise offset, so the frames are the same) and encoded 
 Times: the frames' exposure times in ``video_frames.csv``, ``track.csv`` and
 ``truth.csv`` are on the ground station's clock (true time + ``[clock]
 station_offset_s``), as a recording laptop stamps them; ``video_frames.csv``'s are
-``[clock] video_time_error_s`` later than that (a frame time from a wrong latency). ``depth.jsonl`` has one line
+``[clock] video_time_error_s`` and the error drawn from ``[sensors] video_time_sigma_s`` later than that (a frame
+time from a wrong latency, :func:`~sim_fixtures.sensors.video_time_error_s`). ``depth.jsonl`` has one line
 per depth measurement, ``{"t": <the UUV's clock when it measured>, "depth_m": <m, positive
 down>, "t_recv": <the station's clock when the ground station received it>}``; the UUV's
 clock is true time + ``uuv_offset_s``; the depth link takes ``link.depth_delay_s`` plus an
@@ -79,6 +80,7 @@ from .sensors import (
     platform_sigmas,
     position_error_ne_m,
     reported_R_ned_from_gimbal,
+    video_time_error_s,
 )
 from .tlog import Clock, baro_error_m, exponential, gnss_alt_error_m, stream, write_tlog
 from .waves import WaveField, wave_field
@@ -855,7 +857,7 @@ def generate(
         write_truth_errors(out / "truth_errors.csv", sc, motion, truth)
     else:
         (out / "truth_errors.csv").unlink(missing_ok=True)  # an earlier generated session's
-    stamped = truth.t_unix + sc.clock.video_time_error_s
+    stamped = truth.t_unix + video_time_error_s(sc)
     _write_csv(
         out / "video_frames.csv", ("frame", "t"), ((i, f"{t:.6f}") for i, t in enumerate(stamped))
     )

@@ -468,11 +468,17 @@ class SensorsSpec:
         description="1-sigma white noise of the EKF's heights, new with each "
         "GLOBAL_POSITION_INT (alt and relative_alt alike; a few cm typical)",
     )
+    video_time_sigma_s: NonNegative = Field(
+        0.0,
+        description="1-sigma of a constant error of video_frames.csv's times (the frames' stamps minus their "
+        "exposures: a latency known to this much), drawn once per flight and added to [clock] video_time_error_s; "
+        "stated as [uncertainty] time_s",
+    )
     draw: Annotated[Whole, Ge(0)] = Field(
         0,
-        description="which draw of the sensors' random errors (the wanders, walks and white noise here, [uav]'s "
-        "GNSS altitude errors): 0 the scenario's own; another number another draw of the same sizes, the scene "
-        "and its video the same",
+        description="which draw of the sensors' random errors (the wanders, walks and white noise here, the "
+        "frames' time error, [uav]'s GNSS altitude errors): 0 the scenario's own; another number another draw of "
+        "the same sizes, the scene and its video the same",
     )
 
     @model_validator(mode="after")

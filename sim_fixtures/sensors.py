@@ -67,6 +67,7 @@ STREAM = {
     "gnss_white_raw": 4,
     "baro_wander": 5,
     "baro_noise": 6,
+    "video_time": 7,
 }
 # a slow error is drawn this many times per correlation time, joined by a cubic spline
 KNOTS_PER_CORRELATION = 10
@@ -207,6 +208,14 @@ def position_white_ne_m(sc: Scenario, message: str, n: int) -> np.ndarray:
     )
 
 
+def video_time_error_s(sc: Scenario) -> float:
+    """video_frames.csv's times minus the frames' true exposures (s): ``[clock] video_time_error_s`` and a constant
+    drawn from ``[sensors] video_time_sigma_s`` (one per flight: a latency known to that much)."""
+    sigma = sc.sensors.video_time_sigma_s
+    drawn_s = float(stream(sc, "video_time").normal(0.0, sigma)) if sigma else 0.0
+    return sc.clock.video_time_error_s + drawn_s
+
+
 def baro_wander_m(sc: Scenario, tau_s) -> np.ndarray:
     """The barometer's slow wander (m, positive: the EKF's heights read high) at scenario times."""
     s = sc.sensors
@@ -242,7 +251,7 @@ def platform_sigmas(sc: Scenario) -> dict[str, float]:
     ``tilt_deg``: the camera's tilt per axis, a stabilised gimbal's levelling error (its own IMU), else (a servo
     mount, a fixed camera) the AHRS's roll and pitch bias and wander; ``yaw_deg``: the compass's bias and wander;
     ``uav_horizontal_m``: the EKF position's walk and white noise (horizontal RMS; a stated error, not the
-    receiver's claim); ``height_m``: the EKF heights' error, the take-off's bias, the barometer's wander (stationary:
+    receiver's claim); ``time_s``: the frames' time error; ``height_m``: the EKF heights' error, the take-off's bias, the barometer's wander (stationary:
     as large at any time as when the reference was set) and white noise; ``baro_drift_10min_m``: ``[uav]
     baro_drift_m``'s change over 10 minutes."""
     s, u = sc.sensors, sc.uav
@@ -260,6 +269,8 @@ def platform_sigmas(sc: Scenario) -> dict[str, float]:
     g = gnss_mode(sc)
     if g.walk_m or g.white_m:
         out["uav_horizontal_m"] = float(np.hypot(g.walk_m, g.white_m))
+    if s.video_time_sigma_s:
+        out["time_s"] = s.video_time_sigma_s
     if s.baro_wander_m or s.baro_noise_m:
         out["height_m"] = float(np.sqrt(u.baro_bias_m**2 + s.baro_wander_m**2 + s.baro_noise_m**2))
         out["baro_drift_10min_m"] = abs(u.baro_drift_m) * 600.0 / sc.duration_s

@@ -17,6 +17,7 @@ import pymap3d
 import pytest
 from test_sim_knobs import SCENARIOS, of_kind, read_tlog
 
+from groundstation.session.read import load_session
 from localizer.attitude import (
     R_ned_from_fixed_mount,
     R_ned_from_gimbal_device,
@@ -29,7 +30,7 @@ from sim_fixtures.bundle import BUNDLED, BUNDLED_DIR
 from sim_fixtures.generate import TRUTH_ERRORS_HEADER, generate
 from sim_fixtures.motion import Motion
 from sim_fixtures.scenario import SensorsSpec, load_scenario, scenario_from_dict, with_overrides
-from sim_fixtures.sensors import gnss_claim, position_error_ne_m
+from sim_fixtures.sensors import gnss_claim, position_error_ne_m, video_time_error_s
 from sim_fixtures.tlog import Clock, write_tlog
 
 BIAS = {
@@ -311,3 +312,36 @@ def test_sensors_scenarios_load():
     for path in sorted(Path(SCENARIOS).glob("sensors_*.toml")):
         sc = load_scenario(path)
         assert sc.sensors.yaw_bias_deg and sc.sensors.gnss_mode in ("rtk", "plain"), path
+
+
+def stamp_error_s(out) -> np.ndarray:
+    """The generated session's video_frames.csv times less its frames' true exposures (truth.csv's), per frame (s)."""
+    stamped = np.loadtxt(out / "video_frames.csv", delimiter=",", skiprows=1)[:, 1]
+    return stamped - np.loadtxt(out / "truth.csv", delimiter=",", skiprows=1)[:, 0]
+
+
+def test_the_frames_stamps_carry_a_time_error_drawn_per_flight(tmp_path):
+    """``[sensors] video_time_sigma_s``: video_frames.csv's times are off the frames' true exposures (truth.csv's) by
+    one constant per flight, a new one with each ``[sensors] draw``, of that 1-sigma over many flights; the session
+    states it as ``[uncertainty] time_s``; the telemetry is the same as without it."""
+    sc = biased("oblique_2m", video_time_sigma_s=0.02)
+    errors = []
+    for name, flight in (
+        ("draw0", sc),
+        ("draw1", with_overrides(sc, sensors={"draw": 1})),
+        ("none", with_overrides(sc, sensors={"video_time_sigma_s": 0.0})),
+    ):
+        generate(flight, tmp_path / name, video=False)
+        error = stamp_error_s(tmp_path / name)
+        assert np.ptp(error) < 2e-6  # one constant (to the file's microseconds)
+        errors.append(float(np.mean(error)))
+    assert load_session(tmp_path / "draw0").calibration.sigmas.time_s == 0.02
+    assert abs(errors[0] - errors[1]) > 1e-4 and errors[2] == pytest.approx(0.0, abs=2e-6)
+    assert (tmp_path / "none" / "uav.tlog").read_bytes() == (
+        tmp_path / "draw0" / "uav.tlog"
+    ).read_bytes()
+    # over many flights, the error's RMS is the sigma stated
+    drawn = [video_time_error_s(with_overrides(sc, sensors={"draw": d})) for d in range(400)]
+    assert drawn[:2] == pytest.approx(errors[:2], abs=2e-6)
+    assert np.sqrt(np.mean(np.square(drawn))) == pytest.approx(0.02, rel=0.1)
+    assert abs(np.mean(drawn)) < 0.004
