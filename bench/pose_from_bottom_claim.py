@@ -5,7 +5,7 @@ the simulator's truth (bench/pose_from_bottom.py's sessions, the true pixel or t
                                                      [--draws N] [--out FILE]
 
 One session per process (``--only``; rendered into ``--work`` when missing, as bench/pose_from_bottom.py does).
-``NAME_baro``, ``NAME_height`` are the session again with errors drawn that bench/pose_from_bottom.py's
+``NAME_baro``, ``NAME_height``, ``NAME_time`` are the session again with errors drawn that bench/pose_from_bottom.py's
 sessions do not draw (:data:`VARIANTS`; their ``session.toml`` states them as the platform would): its telemetry
 generated again, its twin's rendered video linked (the video does not depend on them). ``--tracked``: the pixel
 tracked in the video (with the tracker's own sigma) instead of track.csv's true one. ``--draws N``: a variant flown
@@ -22,10 +22,13 @@ pooling the draws (:func:`pooled`). Per session, with the estimate applied (``--
   and what it left as without it (the GNSS, the height, the pixel, the time, the depth);
 - ``drawn only``: the same claim without the pixel's sigma where the pixel is the true one and, on the sessions
   without a variant's, the height's (``truth_errors.csv``'s ``height_err_m`` is 0 throughout): whether the terms the
-  session does draw are claimed honestly;
+  session does draw are claimed honestly; ``without the time term``: the same claim without the frames' time sigma
+  (the error a frame time error makes is the drone's motion less the UUV's over it, about none where the drone flies
+  with the UUV, while the term takes the drone's);
 - ``per term``: each term's error RMS against its claimed 1-sigma's: the pose's height (less the simulator's), the
   attitude left after the correction against the tilt's sigma with the height's share (the tilt per metre times the
-  height's sigma), the walk, the GNSS's offset, the pixel (tracked less true, against the tracker's sigma);
+  height's sigma), the walk, the GNSS's offset, the pixel (tracked less true, against the tracker's sigma), the
+  frames' time (``video_frames.csv``'s less ``truth.csv``'s, against the claim's ``sigma_time_s``);
 - ``estimate``: the attitude error left after the correction (truth_errors.csv's ``cam_err_*`` less the correction
   applied, RMS over frames per NED axis, degrees) against the sigmas h_acc took, and the position: the
   correction's error about the GNSS's mean (the reported position less the true one, :func:`reported_minus_true`,
@@ -38,6 +41,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -66,15 +70,22 @@ TERMS = (
 #: the errors each variant draws (:func:`with_overrides` keys) by the twin's GNSS mode: ``_baro`` the barometer 0.3 m
 #: high with a 0.1 m wander; ``_height`` the weather sessions' barometer (``sim_fixtures/scenarios/weather_*``: a
 #: 0.15 m wander of 30 s and 0.03 m white) and a GNSS altitude as its receiver gives it (RTK: 2 cm white and a 1 cm
-#: slow error, as ``height_rtk_noise.toml``; plain: a 1.5 m slow error and 0.1 m white)
+#: slow error, as ``height_rtk_noise.toml``; plain: a 1.5 m slow error and 0.1 m white); ``_time`` those and the frames'
+#: stamps off by a constant of 1-sigma :data:`FRAME_TIME_S` (a latency known to that much, stated as ``[uncertainty]
+#: time_s``; its default, which the other variants state without drawing it)
 HEIGHT = {
     "rtk": {"gnss_alt_noise_m": 0.02, "gnss_alt_error_m": 0.01, "gnss_alt_error_period_s": 120.0},
     "plain": {"gnss_alt_noise_m": 0.1, "gnss_alt_error_m": 1.5},
 }
 WEATHER_BARO = {"baro_wander_m": 0.15, "baro_noise_m": 0.03}
+FRAME_TIME_S = 0.02
 VARIANTS = {
     "_baro": lambda gnss: {"uav": {"baro_bias_m": 0.3}, "sensors": {"baro_wander_m": 0.1}},
     "_height": lambda gnss: {"uav": HEIGHT[gnss], "sensors": WEATHER_BARO},
+    "_time": lambda gnss: {
+        "uav": HEIGHT[gnss],
+        "sensors": {**WEATHER_BARO, "video_time_sigma_s": FRAME_TIME_S},
+    },
 }
 NAMES = [*SESSIONS, *(f"{n}{v}" for v in VARIANTS for n in SESSIONS)]
 
@@ -106,8 +117,13 @@ def session_of(name: str, work: Path, draw: int = 0) -> tuple[str, Path]:
         errors["sensors"] = {**errors["sensors"], "draw": draw}
         generate(with_overrides(sc, name=out.name, **errors), out, video=False)
         (out / "video.mp4").symlink_to((path / "video.mp4").resolve())
-        # the twin's [tracker] box (made with the video, which this one links)
+        # the twin's [tracker] box (made with the video, which this one links), at the same frame's stamp here (a
+        # variant's frames' time error moves the stamps)
         tracker = (path / "session.toml").read_text().split("[tracker]")[1].split("\n\n")[0]
+        init_t = float(tracker.split("init_t = ")[1].split()[0])
+        frame = int(np.argmin(np.abs(load_session(path).frames["t"] - init_t)))
+        stamped = float(load_session(out).frames["t"][frame])
+        tracker = re.sub(r"init_t = \S+", f"init_t = {stamped!r}", tracker)
         toml = (out / "session.toml").read_text()
         (out / "session.toml").write_text(
             toml.replace("[uncertainty]", f"[tracker]{tracker}\n\n[uncertainty]", 1)
@@ -179,6 +195,7 @@ def lines_for(name: str, work: Path, tracked: bool, draw: int = 0) -> tuple[list
         share = 1.0 - (other.h_acc_m[ok] / fixes.h_acc_m[ok]) ** 2
         shares.append(f"{term} {np.median(share):.1%}")
     drawn, _ = claim_line(*fixes_of(not_drawn(name, tracked)))
+    timeless, _ = claim_line(*fixes_of(("time",)))
 
     te = np.genfromtxt(path / "truth_errors.csv", delimiter=",", names=True)
     at = camera_pose(s.calibration, s.telemetry, te["t"])
@@ -202,6 +219,8 @@ def lines_for(name: str, work: Path, tracked: bool, draw: int = 0) -> tuple[list
     px_err = rms(np.column_stack([u, v]) - true_px)
     px_said = rms(np.broadcast_to(cal.sigmas.pixel_px if sigma_px is None else sigma_px, u.shape))
     walk_err = moved - moved.mean(axis=0)
+    frame_time_s = float(np.median(s.frames["t"] - s.truth["t"]))
+    sigma_time_s = float(np.median(at.sigma_time_s))
     pool = {
         "err": err[ok],
         "sigma_ne": np.column_stack([fixes.sigma_n_m[ok], fixes.sigma_e_m[ok]]),
@@ -210,6 +229,7 @@ def lines_for(name: str, work: Path, tracked: bool, draw: int = 0) -> tuple[list
         "tilt": np.column_stack([left_deg[:2][None, :], np.degrees(rms(tilt_said))[None, None]]),
         "walk": np.column_stack([walk_err, correction.estimate.sigma_walk_at(at.t_unix)[good]]),
         "gnss": np.array([[*gnss, sigma_uav]]),
+        "time": np.array([[frame_time_s, sigma_time_s]]),
     }
     return [
         f"{name}: claim: {said}",
@@ -219,6 +239,7 @@ def lines_for(name: str, work: Path, tracked: bool, draw: int = 0) -> tuple[list
         ),
         f"{name}: made of: " + ", ".join(shares),
         f"{name}: drawn only ({'; '.join(f'no {x} sigma' for x in not_drawn(name, tracked)) or 'all drawn'}): {drawn}",
+        f"{name}: without the time term (its sigma 0): {timeless}",
         (
             f"{name}: per term, error RMS / claimed 1σ RMS: height {rms(height_err):.3f}/{rms(at.sigma_height_m):.3f} m "
             f"= {rms(height_err) / rms(at.sigma_height_m):.2f} (within 2σ {np.mean(np.abs(height_err) <= 2 * at.sigma_height_m):.0%}); "
@@ -228,7 +249,8 @@ def lines_for(name: str, work: Path, tracked: bool, draw: int = 0) -> tuple[list
             f"{rms(moved - moved.mean(axis=0))[1] / sigma_walk[1]:.2f}; "
             f"GNSS offset N/E {abs(gnss[0]) / sigma_uav:.2f}/{abs(gnss[1]) / sigma_uav:.2f}; "
             f"pixel u/v {px_err[0]:.2f}/{px_err[1]:.2f} px / {px_said:.2f} px "
-            f"({'tracked' if tracked else 'the true pixel'}, {found.sum()} of {len(found)} frames)"
+            f"({'tracked' if tracked else 'the true pixel'}, {found.sum()} of {len(found)} frames); "
+            f"frame time {frame_time_s * 1000:+.1f}/{sigma_time_s * 1000:.1f} ms"
         ),
         (
             f"{name}: estimate: attitude left RMS N/E/D {left_deg[0]:.3f}/{left_deg[1]:.3f}/{left_deg[2]:.3f}° "
@@ -246,12 +268,12 @@ def lines_for(name: str, work: Path, tracked: bool, draw: int = 0) -> tuple[list
 def pooled(name: str, pools: list[dict]) -> str:
     """One line over the draws: the share of fixes within 2·h_acc, the error's RMS against the claim's per axis, and
     per term its error's RMS against its claimed 1-sigma's (the height, the tilt left with the height's share, the
-    walk about the GNSS's mean, the GNSS's offset)."""
+    walk about the GNSS's mean, the GNSS's offset, the frames' time)."""
     pools = [p for p in pools if p]
     cat = {k: np.concatenate([p[k] for p in pools]) for k in pools[0]}
     e = np.hypot(*cat["err"].T)
     got, said = rms(cat["err"]), rms(cat["sigma_ne"])
-    h, t, w, g = cat["height"], cat["tilt"], cat["walk"], cat["gnss"]
+    h, t, w, g, ft = cat["height"], cat["tilt"], cat["walk"], cat["gnss"], cat["time"]
     return (
         f"{name} over {len(pools)} draws: in 2σ {np.mean(e <= 2 * cat['h_acc']):.1%} of {len(e)} fixes, median "
         f"h_acc {np.median(cat['h_acc']):.3f} m; error RMS / claimed 1σ N/E {got[0]:.4f}/{said[0]:.4f} = "
@@ -259,7 +281,7 @@ def pooled(name: str, pools: list[dict]) -> str:
         f"{rms(h[:, 0]) / rms(h[:, 1]):.2f}, tilt left N/E {rms(t[:, 0]) / rms(t[:, 2]):.2f}/"
         f"{rms(t[:, 1]) / rms(t[:, 2]):.2f}, walk N/E {rms(w[:, 0]) / rms(w[:, 2]):.2f}/"
         f"{rms(w[:, 1]) / rms(w[:, 3]):.2f}, GNSS offset N/E {rms(g[:, 0]) / rms(g[:, 2]):.2f}/"
-        f"{rms(g[:, 1]) / rms(g[:, 2]):.2f}"
+        f"{rms(g[:, 1]) / rms(g[:, 2]):.2f}, frame time {rms(ft[:, 0]) / rms(ft[:, 1]):.2f}"
     )
 
 
@@ -287,7 +309,7 @@ def main() -> int:
     )
     args = ap.parse_args()
     if args.draws and not split(args.only)[1]:
-        ap.error("--draws: a variant's name (NAME_height, NAME_baro)")
+        ap.error("--draws: a variant's name (NAME_height, NAME_time, NAME_baro)")
     lines, pools = [], []
     for draw in range(args.from_draw, args.draws + 1):
         more, pool = lines_for(args.only, args.work, args.tracked, draw)
