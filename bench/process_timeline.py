@@ -18,7 +18,9 @@ other work on the cores).
 
 Per interval: **busy** is the cores the command ran on, **wanted** the cores it ran on or waited for (busy + run
 queue). On a machine shared with others busy drops when they take the cores; wanted does not: wanted below the
-machine's cores is the command's own idleness. Printed per phase of the main thread (medians of the runs): its wall,
+machine's cores is the command's own idleness. Not quite: a thread waiting for the interpreter's lock sleeps (it is
+not wanting a core), so where the thread holding the lock waits for a core, the others waiting for the lock look
+idle too: under a heavy load serial seconds grow beyond the command's own. Printed per phase of the main thread (medians of the runs): its wall,
 the CPU of the command's threads in it, the cores busy and wanted on average, and its **serial** time, the intervals
 with fewer than :data:`SERIAL_CORES` cores wanted (and, beside it, busy). Then one run's timeline (the run of median
 wall), ``--bucket-s`` a line: busy, wanted, the decoding threads' share (FFmpeg's threads and ``video-decode``), the
