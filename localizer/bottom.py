@@ -61,6 +61,10 @@ recording alone and widens the biases' and the floor depth's sigmas by the stand
 all the parts' data, so its error beyond its own sigma is that of their mean, not one part's. An estimate whose
 thirds disagree is not claimed; a bias that changes during the recording (which one part's scatter would hold,
 each frame's error being its change from the mean) is held only to a third of its variance with three parts.
+Such a bias can also pull the whole fit away from every part (a compass that steps by 3° in the last third moved
+the whole fit's forward tilt by 3.2° while the three parts agreed on it within 0.07°): where the whole fit is more
+than :data:`WHOLE_APART` times its own and the standard error's sigmas from the parts' mean, that distance is added
+to the bias's sigma too.
 Radians, metres, seconds.
 """
 
@@ -84,6 +88,9 @@ ESTIMATED_SHARE = 0.3
 MIN_SLIDE_SHARE = 0.15
 #: a part of the recording (``estimate(parts=...)``) with fewer features seen twice in it gives no estimate
 MIN_PART_FEATURES = 10
+#: The whole fit's distance from its parts' mean, in its own sigma and the parts' standard error together, beyond which
+#: the distance is added to its sigma (a model that does not hold over the whole recording).
+WHOLE_APART = 3.0
 #: floor depths tried for the start (m), geometric
 _DEPTH_GRID_M = np.geomspace(0.2, 60.0, 48)
 _ANGLE_STEP = 1e-5  # rad, finite difference of the global parameters
@@ -819,8 +826,9 @@ def with_parts(
 ) -> BottomEstimate:
     """``est`` with each of ``parts`` consecutive stretches of the frames' times solved alone (:attr:`BottomEstimate.parts`)
     and its sigmas widened by the standard error of their mean (their sample standard deviation over the square root
-    of their number, see the module doc); with fewer than two parts solved, by the priors (the recording does not
-    show that the bottom told the biases)."""
+    of their number, see the module doc), the biases' also by the whole fit's distance from their mean where more than
+    :data:`WHOLE_APART` times the two sigmas together; with fewer than two parts solved, by the priors (the recording
+    does not show that the bottom told the biases)."""
     t = np.asarray(poses.t_s, dtype=float)
     edges = np.linspace(t.min(), t.max(), parts + 1)
     part = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, parts - 1)
@@ -832,11 +840,14 @@ def with_parts(
     )
     solved = values[np.all(np.isfinite(values), axis=1)]
     p = est.priors
-    spread = (
-        np.std(solved, axis=0, ddof=1) / np.sqrt(len(solved))
-        if len(solved) >= 2
-        else np.array([p.tilt_rad, p.tilt_rad, p.yaw_rad, p.floor_depth_prior_m])
-    )
+    if len(solved) >= 2:
+        spread = np.std(solved, axis=0, ddof=1) / np.sqrt(len(solved))
+        # the whole fit's biases outside their parts (a bias that steps, absorbed by another): that distance is claimed
+        away = np.abs(np.array([*est.tilt_rad, est.yaw_rad]) - solved[:, :3].mean(axis=0))
+        apart = away > WHOLE_APART * np.hypot(spread[:3], np.sqrt(np.diagonal(est.cov_bias)))
+        spread[:3] = np.where(apart, np.hypot(spread[:3], away), spread[:3])
+    else:
+        spread = np.array([p.tilt_rad, p.tilt_rad, p.yaw_rad, p.floor_depth_prior_m])
     sigma_depth = (
         0.0 if p.floor_depth_m is not None else float(np.hypot(est.sigma_floor_depth_m, spread[3]))
     )

@@ -227,6 +227,13 @@ def test_parts_that_disagree_widen_the_sigmas(monkeypatch):
     assert np.degrees(whole.sigma_yaw_rad) < 0.5 * np.degrees(spread)
     assert np.degrees(split.sigma_yaw_rad) > 2.0 * np.degrees(whole.sigma_yaw_rad)
     assert "parts' spread" in split.describe()
+    # the step pulls the whole fit's tilt away from every part's (which agree on the truth): the claim covers it
+    tilt_error_deg = np.degrees(split.tilt_rad) - TILT_DEG
+    assert (
+        np.abs(np.degrees(split.parts[:, :2]) - TILT_DEG).max() < 0.3 < np.abs(tilt_error_deg).max()
+    )
+    sigma_tilt_deg = np.degrees(np.sqrt(np.diagonal(split.cov_bias)[:2]))
+    assert np.all(np.abs(tilt_error_deg) < 2.0 * sigma_tilt_deg), (tilt_error_deg, sigma_tilt_deg)
 
     # the whole recording's fit holds all the parts' data: its error beyond its own sigma is that of the parts'
     # mean, not one part's. Parts drawn about a truth with a scatter the fit's sigma does not hold (0.2° per part),
