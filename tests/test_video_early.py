@@ -64,3 +64,38 @@ def test_a_size_other_than_the_calibrations_is_still_an_error(clip):
 
     with decoding_early(clip), pytest.raises(VideoError, match="differs from the calibration"):
         open_video(clip, expected_size=(SIZE[0] * 2, SIZE[1]))
+
+
+def test_a_video_closed_before_its_end_is_freed_under_the_interpreters_lock():
+    # read grey, the file decodes in FFmpeg's frame threads, which log through PyAV (each message takes the
+    # interpreter's lock); a video closed with frames in flight and then collected by the garbage collector (which
+    # holds the lock) waited forever for them. In a process of its own, with a bound on its time.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    code = (
+        "import gc\n"
+        "from groundstation.video.file import open_video\n"
+        f"path = {str(root / 'sim_fixtures' / 'bundled' / 'nadir_hover' / 'video.mp4')!r}\n"
+        "for _ in range(20):\n"
+        "    video = open_video(path, grey=True)\n"
+        "    frames = [f for f, _ in zip(video, range(15), strict=False)]\n"
+        "    video.close()\n"
+        "    del video, frames\n"
+        "    gc.collect()\n"
+        "print('freed')\n"
+    )
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", code],
+            check=False,
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail("closing and collecting a video read in part hung (its frame threads)")
+    assert done.returncode == 0 and done.stdout.strip() == "freed", done.stderr[-2000:]

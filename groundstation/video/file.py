@@ -129,6 +129,7 @@ class Video:
         self._t0 = min(index_of) if index_of else 0
         self._tb = float(self._stream.time_base or Fraction(1, 90000))
         self._last_index = -1
+        self._ctx = None  # the frame-threaded decoder while :meth:`_decode` decodes with it
         self._frames = self._decode()
         self._prefetching: tuple[threading.Event, threading.Thread, queue.Queue] | None = None
 
@@ -144,7 +145,7 @@ class Video:
         threads = self.threads or (
             max(GREY_FRAME_THREADS, (os.cpu_count() or 1) + 1) if self.grey else 0
         )
-        ctx = decoder(self._stream, threads=threads, frame_threads=True)
+        ctx = self._ctx = decoder(self._stream, threads=threads, frame_threads=True)
         keyframes: list[
             tuple[int, int]
         ] = []  # (pts, packet number) of the keyframe packets demuxed
@@ -171,6 +172,7 @@ class Video:
     def _decode_slices(self, start: int, last: int | None) -> Iterator[av.VideoFrame]:
         """The file opened again and decoded with slice threads from packet number ``start`` on, frames up to pts
         ``last`` (handed on already) left out; each packet that fails is counted and skipped."""
+        self._ctx = None
         self._container.close()
         self._container = av.open(self.url)
         self._stream = self._container.streams.video[0]
@@ -282,12 +284,24 @@ class Video:
         worker.start()
 
     def close(self) -> None:
-        """Release the decoder (after stopping a :meth:`prefetch` thread still reading from it)."""
+        """Release the decoder (after stopping a :meth:`prefetch` thread still reading from it).
+
+        A video closed before its end has frames in flight in FFmpeg's frame threads, and each thread logs as it
+        parses (PyAV's log callback takes the interpreter's lock for every message, FFmpeg's debug lines too).
+        Freeing the decoder waits for those threads; freed where the lock is held (by the garbage collector: the
+        decoding generator and the video refer to each other), it waited forever for a thread waiting for the lock.
+        So the decoding ends here: the generator is closed and the decoder drained (its frames in flight decoded,
+        the lock released meanwhile), and the decoder freed later has idle threads."""
         if self._prefetching is not None:
             stop, worker, _ = self._prefetching
             stop.set()
             worker.join()
             self._prefetching = None
+        self._frames.close()
+        if self._ctx is not None:
+            with contextlib.suppress(av.error.FFmpegError):
+                self._ctx.decode(None)
+            self._ctx = None
         self._container.close()
 
     def __enter__(self) -> Self:
