@@ -506,7 +506,6 @@ def main(argv=None) -> int:
     args, rest = p.parse_known_args(argv)
     if args.child:
         return child(args.child, rest[1:] if rest[:1] == ["--"] else rest)
-    sys.path.insert(0, str(ROOT / "bench"))
     from emit import emit
     from uuvs import ensure_session
 
