@@ -20,7 +20,11 @@ being confirmed) are traced back from it once the frames after it confirm it (th
 :data:`CONFIRM_BACK_S` without a loss; one lost again sooner, e.g. water that passed for the UUV while it was
 hidden, is not traced): a second tracker starts on the re-acquired UUV and steps back through them (up to
 :data:`BACKWARD_S` of them, kept decoded meanwhile) until it loses it; the frames it finds the UUV in are ``ok``
-too (``bridged``). An occlusion stops it as it stops the forward pass: a hidden UUV is not bridged.
+too (``bridged``). An occlusion stops it as it stops the forward pass: a hidden UUV is not bridged. Through waves
+the frames without the UUV are traced back too from a frame soon after them (:data:`SURE_WITHIN_S`) that the forward
+pass follows the UUV in standing out of the seafloor (:data:`SURE_DISTINCT`), by a copy of the forward tracker
+(:meth:`~localizer.tracking.session.TrackingSession.back_from`): there a re-acquisition is soon followed by a frame
+the waves hide the UUV in, and the waves lose it without an occlusion.
 
 Several UUVs of one session (:func:`track_sessions`) are tracked in one pass over the video: each frame is
 decoded once and handed to every UUV's :class:`UuvTrack`; the UAV's pose of every frame and the video's motion are
@@ -64,6 +68,11 @@ from localizer.tracking.target import TargetState
 BACKWARD_S = 3.0
 #: ... once the forward pass has kept the re-acquired UUV this long (s) without a loss.
 CONFIRM_BACK_S = 1.0
+#: Through waves, also from a frame the forward pass follows the UUV in standing out of the seafloor this much (the
+#: template matcher's ``distinct``: its vehicle-sized square over 9 in 10 of the seafloor's squares about it) ...
+SURE_DISTINCT = 1.5
+#: ... within this many seconds after the frames without it.
+SURE_WITHIN_S = 0.5
 #: What stepping a :class:`UuvTrack` changes (:meth:`UuvTrack.state`).
 STEPPED = (
     "status",
@@ -298,6 +307,10 @@ class UuvTrack:
         ] = {}  # row -> the causal pass's word a bridged "ok" replaced
         period_s = float(np.median(np.diff(t))) if n > 1 else math.inf
         self.gap: deque = deque(maxlen=max(1, round(BACKWARD_S / period_s)) if period_s > 0 else 1)
+        # through waves: (row, image) of the frames since the first one without the UUV not yet traced back, and
+        # the latest such frame's time
+        self.behind: deque = deque(maxlen=self.gap.maxlen)
+        self.missed_t = -math.inf
         # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
         self.pending = None
         self.started = False
@@ -344,6 +357,7 @@ class UuvTrack:
         )
         if self.both_ways:
             self._trace_when_confirmed(row, frame, tracked)
+            self._trace_when_sure(row, frame, tracked)
         size, measurer = self.size, self.measurer
         if size is None or not result.ok:
             return
@@ -391,20 +405,56 @@ class UuvTrack:
             self.pending = self.pending or (row, frame.image.copy(), result)
             if self.t[row] - self.t[self.pending[0]] >= CONFIRM_BACK_S:
                 t0 = time.perf_counter()
-                status = self.status
-                for r, back in _trace_back(self.tracking, self.pose, *self.pending, self.gap):
-                    self.causal_words[r] = status[r]
-                    status[r], self.u[r], self.v[r], self.conf[r] = (
-                        "ok",
-                        back.u,
-                        back.v,
-                        back.confidence,
-                    )
-                    self.u_unfiltered[r], self.v_unfiltered[r] = back.u, back.v
-                    self.sigma[r], self.bridged[r] = back.sigma_px, True
+                self._bridge(_trace_back(self.tracking, self.pose, *self.pending, self.gap))
                 self.gap.clear()
                 self.pending = None
                 self.timings["backward"] += time.perf_counter() - t0
+
+    def _trace_when_sure(self, row: int, frame, result) -> None:
+        """``both_ways``, through waves: the frames without the UUV are traced back too from a frame the forward pass
+        follows it in standing out of the seafloor (:data:`SURE_DISTINCT`), within :data:`SURE_WITHIN_S` after them,
+        by a copy of the forward tracker (what it learnt of the UUV's wave-distorted appearance and of the sea
+        state), through the frames since, until it loses the UUV. The waves hide the UUV for a moment or slide the
+        follow off it without an occlusion, and a re-acquisition is then soon followed by a held frame."""
+        if not result.ok:
+            self.behind.append((row, frame.image.copy()))
+            self.missed_t = self.t[row]
+            return
+        if not self.behind:
+            return
+        if self.t[row] - self.missed_t > SURE_WITHIN_S:
+            self.behind.clear()
+            return
+        if not self.tracking.target.distinct >= SURE_DISTINCT:
+            self.behind.append((row, frame.image.copy()))
+            return
+        t0 = time.perf_counter()
+        try:
+            back = self.tracking.back_from(frame.image, self.pose, row)
+        except SelectionError:  # its box reaches beyond the frame
+            self.behind.clear()
+            return
+        traced = []
+        for r, earlier in reversed(self.behind):
+            found = back.step(earlier, self.pose, r)
+            if back.state is not TargetState.TRACKING:
+                break
+            if found.ok and self.status[r] != "ok":
+                traced.append((r, found))
+        self._bridge(traced)
+        self.behind.clear()
+        self.timings["backward"] += time.perf_counter() - t0
+
+    def _bridge(self, traced) -> None:
+        """The frames a tracker stepping back found the UUV in (``(row, TrackResult)``) reported ``ok``."""
+        status = self.status
+        for r, back in traced:
+            if self.bridged[r]:  # traced already, from another frame
+                continue
+            self.causal_words[r] = status[r]
+            status[r], self.u[r], self.v[r], self.conf[r] = "ok", back.u, back.v, back.confidence
+            self.u_unfiltered[r], self.v_unfiltered[r] = back.u, back.v
+            self.sigma[r], self.bridged[r] = back.sigma_px, True
 
     def result(
         self, frame_idx, timings: dict, read_warnings: list, extra_warnings: list, rotations

@@ -196,6 +196,17 @@ class TrackingSession:
             frame_bgr, one, box, (float(point[0]), float(point[1])), "box", False
         )
 
+    def back_from(self, frame_bgr, pose: CameraPose, i: int) -> TrackingSession:
+        """A session tracking the UUV this one found in this frame (its latest result, ``ok``) through other frames
+        of the same video, e.g. offline back in time: started there as :meth:`start_at` starts, its matcher a copy
+        of this one's (the appearance it learnt, and through waves the sea state and the water's levels it read).
+        SelectionError for a box outside the frame."""
+        found = self.last
+        back = TrackingSession(self.cal, self.tracker)
+        back.start_at(frame_bgr, pose, i, found.box, (found.u, found.v))
+        back.target.adopt(self.target, found)
+        return back
+
     def _track_from(
         self, frame_bgr, one: CameraPose, box, centre, origin: str, outlined: bool
     ) -> TrackResult:

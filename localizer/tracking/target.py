@@ -28,6 +28,7 @@ Per-frame status words (:class:`~localizer.tracking.TrackResult`): ``ok`` only w
 
 from __future__ import annotations
 
+import copy
 import enum
 import math
 from collections.abc import Callable
@@ -106,6 +107,19 @@ class Target:
         """How far the matches wobble as through wind waves, 0 to 1 (:meth:`~localizer.tracking.Matcher.waves`; 0
         without a matcher)."""
         return self._matcher.waves() if self._matcher is not None else 0.0
+
+    @property
+    def distinct(self) -> float:
+        """Through waves, how much the UUV followed in the latest frame stands out of the seafloor beside it (the
+        matcher's ``distinct``, as :class:`~localizer.tracking.template.TemplateMatcher` reads it); NaN otherwise."""
+        return getattr(self._matcher, "distinct", math.nan)
+
+    def adopt(self, other: Target, found: TrackResult) -> None:
+        """Track on with a copy of ``other``'s matcher (what it learnt of the UUV), from ``found``: the UUV as
+        ``other`` found it in this frame."""
+        self._matcher, self._hits = copy.deepcopy(other._matcher), []
+        self._matcher.resume(Match(True, found.confidence, found.u, found.v, found.box))
+        self.state = TargetState.TRACKING
 
     # -- per frame -------------------------------------------------------------------------------
     def update(self, frame_bgr, prediction: Prediction | None) -> TrackResult:

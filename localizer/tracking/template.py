@@ -326,6 +326,9 @@ class TemplateMatcher:
         self._grey = None  # (bx0, by0, blocks): the largest area of the current frame converted (see _blocks)
         # the current frame's spreads and upright patches by place (read-only; a follow reads each up to thrice)
         self._looks: dict = {}
+        # in waves, how much the vehicle standing out near this frame's followed match departs from the seafloor
+        # (:meth:`_blob`'s distinctness); NaN for a frame not followed so
+        self.distinct = math.nan
 
     # -- images at working resolution ------------------------------------------------------
     def _blocks(self, frame_bgr, bx0: int, by0: int, bw: int, bh: int) -> np.ndarray:
@@ -477,6 +480,7 @@ class TemplateMatcher:
         """A new frame: follow the predicted apparent size relative to that at start (in steps of
         ``scale_step``; without a scale at start, the first prediction's is the reference)."""
         self._grey, self._looks = None, {}
+        self.distinct = math.nan
         if prediction is None or not prediction.px_per_m > 0:
             return
         if not self._ref_px_per_m > 0:
@@ -1095,6 +1099,8 @@ class TemplateMatcher:
         matched_at = (u, v)
         # the vehicle standing out near the template's match: where the follow is centred, whether it teaches
         blob = self._blob(frame_bgr, u, v) if in_waves else None
+        if blob is not None:
+            self.distinct = blob[2]
         if in_waves:
             u, v = self._centred(frame_bgr, u, v, blob, (cu, cv_) if kept else None)
         self._velocity = (u - self.u, v - self.v) if prediction is None else (0.0, 0.0)
