@@ -356,8 +356,10 @@ class UuvTrack:
             self.centre.unfiltered.v,
         )
         if self.both_ways:
-            self._trace_when_confirmed(row, frame, tracked)
-            self._trace_when_sure(row, frame, tracked)
+            # the frame kept for tracing back, copied once for both
+            image = frame.image.copy() if not tracked.ok or self.gap or self.behind else None
+            self._trace_when_confirmed(row, image, tracked)
+            self._trace_when_sure(row, image, tracked)
         size, measurer = self.size, self.measurer
         if size is None or not result.ok:
             return
@@ -393,16 +395,16 @@ class UuvTrack:
             self.size.due(t_unix)
             self.took(t_unix, measured)
 
-    def _trace_when_confirmed(self, row: int, frame, result) -> None:
+    def _trace_when_confirmed(self, row: int, image, result) -> None:
         """``both_ways``: keep the frames without the UUV; once a re-acquisition after them is confirmed, the ones
         a tracker stepping back from it finds the UUV in become ``ok`` (bridged)."""
         if not result.ok:
             if self.pending is not None:  # lost again before the frames after it confirmed it
                 self.pending = None
                 self.gap.clear()
-            self.gap.append((row, frame.image.copy()))
+            self.gap.append((row, image))
         elif self.gap:
-            self.pending = self.pending or (row, frame.image.copy(), result)
+            self.pending = self.pending or (row, image, result)
             if self.t[row] - self.t[self.pending[0]] >= CONFIRM_BACK_S:
                 t0 = time.perf_counter()
                 self._bridge(_trace_back(self.tracking, self.pose, *self.pending, self.gap))
@@ -410,14 +412,14 @@ class UuvTrack:
                 self.pending = None
                 self.timings["backward"] += time.perf_counter() - t0
 
-    def _trace_when_sure(self, row: int, frame, result) -> None:
+    def _trace_when_sure(self, row: int, image, result) -> None:
         """``both_ways``, through waves: the frames without the UUV are traced back too from a frame the forward pass
         follows it in standing out of the seafloor (:data:`SURE_DISTINCT`), within :data:`SURE_WITHIN_S` after them,
         by a copy of the forward tracker (what it learnt of the UUV's wave-distorted appearance and of the sea
         state), through the frames since, until it loses the UUV. The waves hide the UUV for a moment or slide the
         follow off it without an occlusion, and a re-acquisition is then soon followed by a held frame."""
         if not result.ok:
-            self.behind.append((row, frame.image.copy()))
+            self.behind.append((row, image))
             self.missed_t = self.t[row]
             return
         if not self.behind:
@@ -426,11 +428,11 @@ class UuvTrack:
             self.behind.clear()
             return
         if not self.tracking.target.distinct >= SURE_DISTINCT:
-            self.behind.append((row, frame.image.copy()))
+            self.behind.append((row, image))
             return
         t0 = time.perf_counter()
         try:
-            back = self.tracking.back_from(frame.image, self.pose, row)
+            back = self.tracking.back_from(image, self.pose, row)
         except SelectionError:  # its box reaches beyond the frame
             self.behind.clear()
             return
