@@ -747,6 +747,47 @@ def estimator(water: Water, sigmas: Sigmas, tel: Telemetry) -> HeightEstimator:
     return est
 
 
+def share(tel: Telemetry, source: Telemetry) -> bool:
+    """Give ``tel`` a copy of ``source``'s height filter, made and updated, where ``tel`` has none yet and the filter
+    reads the same from both (:func:`_reads`): the UUVs of one video each have a copy of the UAV's telemetry, whose
+    filter is then run once, not once a UUV (the same states, the same notices; a copy whose telemetry gains inputs
+    later, e.g. heights from size, re-runs from them as any filter does). Whether it was given."""
+    est = source.height_estimator
+    if est is None or tel.height_estimator is not None or not _same(_reads(tel), _reads(source)):
+        return False
+    tel.height_estimator = copy.deepcopy(est)
+    return True
+
+
+def _reads(tel: Telemetry) -> list:
+    """Everything of ``tel`` its height filter reads (:class:`HeightEstimator` and its
+    :class:`~localizer.height_noise.HeightNoise`): the autopilot's boot on the buffers' scale, the history kept,
+    whether two-sided, the arming times, and GLOBAL_POSITION_INT, GPS_RAW_INT and each absolute height source in
+    their order (each series' times, values and sampling bounds)."""
+    series = [("position", tel.position), ("gnss", tel.gnss), *tel.height_fixes.items()]
+    return [
+        tel.uav_clock.offset_s,
+        tel.keep_s,
+        tel.height_two_sided,
+        tel.arm_times,
+        *(
+            (name, s.kinds, s.max_gap_s, s.max_hold_s, s.keep_s, s.times, s.values)
+            for name, s in series
+        ),
+    ]
+
+
+def _same(a, b) -> bool:
+    """Equal, item by item (arrays and floats: NaN equal to NaN)."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.array_equal(a, b, equal_nan=True)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(map(_same, a, b))
+    return a == b or (
+        isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)
+    )
+
+
 def ekf_height_error(water: Water, sigmas: Sigmas, tel: Telemetry, t_uav) -> HeightAt:
     """The EKF height's estimated error at UAV-scale times (the telemetry's :class:`HeightEstimator`)."""
     return estimator(water, sigmas, tel).at(tel, t_uav)

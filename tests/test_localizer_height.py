@@ -20,6 +20,7 @@ from localizer.height import (
     ekf_height_m,
     rangefinder_height_m,
     rangefinder_sigma_m,
+    share,
     status,
     take_notices,
 )
@@ -384,6 +385,38 @@ def test_a_copy_of_the_telemetry_goes_its_own_way():
     after_twin, after = at(c, twin, [5.0, 25.0]), at(c, tel, [5.0, 25.0])
     assert np.array_equal(after_twin[0], before[0]) and np.array_equal(after_twin[1], before[1])
     assert not np.allclose(after[1], before[1]) and take_notices(twin) == []
+
+
+def test_a_filter_is_shared_only_with_a_telemetry_that_gives_it_the_same_inputs():
+    """The UUVs of one video each have a copy of the UAV's telemetry: the filter one ran is shared with a copy that
+    reads the same (the same answers and notices, not run again), never with one that differs in any input."""
+    import copy
+
+    c, tel = cal(), telemetry(duration_s=30.0, ekf_error=lambda tau: 0.7)
+    tel.height_two_sided = True
+    for k in range(10):  # the last ones 3 m off: refused, a notice
+        tel.add_height("rangefinder", T0 + k, TRUE_H - (3.0 if k > 5 else 0.0), 0.05)
+    gps(tel, 4.5, SURFACE + TRUE_H, v_acc=0.2)
+    twins = [copy.deepcopy(tel) for _ in range(6)]
+    fresh = [at(c, copy.deepcopy(twin), [5.0, 25.0]) for twin in twins[:1]]
+    reference = at(c, tel, [5.0, 25.0])
+    notices = take_notices(copy.deepcopy(tel))
+    assert notices and not share(tel, tel)  # it has its own
+    twins[1].add_height(
+        "rangefinder", T0 + 12.0, TRUE_H, 0.05
+    )  # one input differs in each of these
+    twins[2].add_attitude(round((BOOT0_S + 31.0) * 1000), 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), T0 + 31.0)
+    feed(twins[3], 30.1, 30.1)
+    twins[4].arm_times.append(T0 + 1.0)
+    twins[5].height_two_sided = False
+    assert [share(twin, tel) for twin in twins] == [True, False, True, False, False, False]
+    assert twins[0].height_estimator is not tel.height_estimator
+    assert twins[2].height_estimator is not None  # ATTITUDE is none of the filter's inputs
+    shared = at(c, twins[0], [5.0, 25.0])
+    for got in (shared, fresh[0]):
+        assert all(np.array_equal(a, b) for a, b in zip(got, reference))
+    assert take_notices(twins[0]) == notices
+    assert twins[1].height_estimator is None and twins[3].height_estimator is None
 
 
 # --- offline: the whole recording, both ways -------------------------------------------------------------

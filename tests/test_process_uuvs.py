@@ -21,6 +21,7 @@ from groundstation.height_from_size import HeightFromSize
 from groundstation.offline import process, track, uuv_workers
 from groundstation.session import read
 from groundstation.session.read import Session, SessionError, load_session, uuv_ids
+from localizer.height import HeightEstimator
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
 
@@ -65,6 +66,7 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
     poses = _counted(monkeypatch, track, "uav_pose")
     tlogs = _counted(monkeypatch, read, "read_tlog")
     measured = _counted(monkeypatch, HeightFromSize, "measure")
+    filters = _counted(monkeypatch, HeightEstimator, "_run")
     assert main(["process", str(crossing), "--uuv", "all", "--out", str(tmp_path / "all")]) == 0
     printed = capsys.readouterr()
     err = printed.err
@@ -72,8 +74,9 @@ def test_all_uuvs_in_one_pass_give_each_uuvs_own_files(crossing, tmp_path, capsy
     assert printed.out.count("(one estimate for uuv1, uuv2;") == 2, printed.out
     measured_all = len(measured)
     measured.clear()
-    # the video decoded once, each frame's UAV pose computed once, the UAV's log parsed once
-    assert (len(opened), len(poses), len(tlogs)) == (1, 1, 1)
+    # the video decoded once, each frame's UAV pose computed once, the UAV's log parsed once, its height filter run
+    # once (causal and two-sided: localizer.height.share)
+    assert (len(opened), len(poses), len(tlogs), len(filters)) == (1, 1, 1, 2)
     assert err.count("the frames' offset to the telemetry from the video's motion") == 1, err
     workers = tmp_path / "workers"  # each UUV tracked in a process of its own: the same files
     assert (

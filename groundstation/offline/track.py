@@ -58,6 +58,7 @@ from groundstation.offline.progress import progress as progress_bar
 from groundstation.offline.uuv_workers import SizeWorker, TrackWorkers, available
 from groundstation.session.read import Session, SessionError
 from groundstation.video.frames import VideoError
+from localizer.height import share as share_height_filter
 from localizer.pose import uav_pose, with_depth
 from localizer.tracking import GREY_TRACKERS
 from localizer.tracking.centroid import CentroidSteer
@@ -190,6 +191,8 @@ def track_sessions(
     uav = uav_pose(first.calibration, first.telemetry, t)
     for track in tracks:
         track.pose = with_depth(track.session.calibration, uav, track.session.telemetry.depth)
+        # the UAV's height filter the pose ran, for each UUV's geometry after the pass (its telemetry a copy)
+        share_height_filter(track.session.telemetry, first.telemetry)
     timings["pose"] = time.perf_counter() - t0
 
     cam = first.calibration.camera
