@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.offline.track import track_session
+from groundstation.offline.track import Kept, track_session, track_sessions
 from groundstation.session.read import load_session
 from sim_fixtures.generate import generate
 from sim_fixtures.scenario import load_scenario, with_overrides
@@ -31,7 +31,9 @@ def session(tmp_path_factory):
     return load_session(generate(sc, tmp_path_factory.mktemp("occl") / "s").session)
 
 
-def test_a_reacquisition_is_traced_back_through_the_frames_the_causal_pass_missed(session):
+def test_a_reacquisition_is_traced_back_through_the_frames_the_causal_pass_missed(
+    session, monkeypatch
+):
     causal = track_session(session)
     both = track_session(session, both_ways=True)
     visible = np.isfinite(session.track["u"])
@@ -46,3 +48,12 @@ def test_a_reacquisition_is_traced_back_through_the_frames_the_causal_pass_misse
     assert np.all(err[both.bridged] < 3.0)  # at the UUV's own pixel (it spans ~26 px)
     assert np.all(np.isfinite(both.sigma_px[ok_both]))
     assert np.array_equal(np.isnan(both.u), ~ok_both)
+    # two UUVs lost in the same frames (the same one, read twice) keep one copy of each frame between them, and
+    # each is traced back as alone
+    kept, real = [], Kept.__call__
+    monkeypatch.setattr(Kept, "__call__", lambda self: kept.append(real(self)) or kept[-1])
+    twice = track_sessions([session, load_session(session.path)], both_ways=True)
+    assert len(kept) >= 2 * (~visible).sum() and len({id(k) for k in kept}) * 2 == len(kept)
+    for tracked in twice:
+        assert np.array_equal(tracked.status, both.status)
+        assert np.array_equal(tracked.u, both.u, equal_nan=True)

@@ -231,8 +231,9 @@ def track_sessions(
                     pool.step(row, frame)
                     timings["hand_on"] += time.perf_counter() - t0
                 else:
+                    kept = Kept(frame.image)  # one copy of a frame however many UUVs keep it
                     for track in tracks:
-                        track.step(row, frame)
+                        track.step(row, frame, kept)
                 if row >= first_row:
                     bar.update()
             if pool is not None:
@@ -320,9 +321,10 @@ class UuvTrack:
         # (t_unix, measurement or why not) of each frame the height from size was measured in, in order
         self.size_taken: list[tuple[float, object]] = []
 
-    def step(self, row: int, frame) -> None:
+    def step(self, row: int, frame, kept: Kept | None = None) -> None:
         """Track the UUV in the decoded ``frame``, row ``row`` of ``video_frames.csv`` (nothing before its
-        ``init_t``)."""
+        ``init_t``); ``kept``: the frame's copy to keep for tracing back, shared by the UUVs stepped on it (default:
+        one of its own)."""
         if row < self.init_row:
             return
         session, pose, timings = self.session, self.pose, self.timings
@@ -359,8 +361,9 @@ class UuvTrack:
             self.centre.unfiltered.v,
         )
         if self.both_ways:
-            # the frame kept for tracing back, copied once for both
-            image = frame.image.copy() if not tracked.ok or self.gap or self.behind else None
+            kept = kept or Kept(frame.image)
+            # the frame kept for tracing back: one copy for both traces and every UUV that keeps it
+            image = kept() if not tracked.ok or self.gap or self.behind else None
             self._trace_when_confirmed(row, image, tracked)
             self._trace_when_sure(row, image, tracked)
         size, measurer = self.size, self.measurer
@@ -496,6 +499,20 @@ class UuvTrack:
             self.u_unfiltered,
             self.v_unfiltered,
         )
+
+
+class Kept:
+    """A frame's image copied to be kept beyond the decoder's buffer (the frames a UUV was lost in, for tracing
+    back), on the first call only: the UUVs lost in the same frame keep the same copy (read-only), not one each."""
+
+    def __init__(self, image: np.ndarray) -> None:
+        self.image, self._copy = image, None
+
+    def __call__(self) -> np.ndarray:
+        if self._copy is None:
+            self._copy = self.image.copy()
+            self._copy.flags.writeable = False
+        return self._copy
 
 
 def _trace_back(forward: TrackingSession, pose, row: int, image, found, gap) -> list:
