@@ -1,0 +1,155 @@
+"""Whether the check of an operator's box (and of ``[tracker] init_bbox`` live) tells the UUV from the seafloor in waves.
+
+    .venv/bin/python bench/box_check_waves.py [--work /tmp/h1-waves] [--out bench/results/box_check_waves.txt]
+
+Live, a box is taken only where :func:`localizer.tracking.detect.detect` finds a vehicle-sized object standing out
+of the water in it (``TrackingSession.select(..., verify=True)``, the live pipeline's check): the best place's
+saliency (its deviation energy over the window's median) at least ``min_saliency`` and ``distinct`` times the best
+elsewhere. For each session (bench/tracker_waves.py's rendered wave conditions in ``--work``, and the bundled flat
+ones), on frames 0, 60 and 150, with the camera's pose of the frame:
+
+- ``vehicle``: the box of ``init_bbox``'s size centred on the UUV's true pixel (track.csv) as the live check takes
+  it: ``kept``/``snapped`` or ``refused``, and the saliency detect finds there with no floor (``-``: none distinct);
+- ``seafloor``: the same box moved 2, 3 and 4.5 box sizes away in 8 directions (inside the frame): how many the
+  check takes on something other than the UUV (a box on the seafloor tracked as the UUV), and the saliencies of the
+  places detect finds distinct there with no floor (their largest): what a floor would have to stay above.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import tomllib
+from pathlib import Path
+
+import av
+import numpy as np
+from emit import emit
+
+from groundstation.session.read import load_session
+from localizer.fix import locate
+from localizer.pose import camera_pose, take
+from localizer.tracking import Prediction
+from localizer.tracking.detect import DetectParams, detect
+from localizer.tracking.predict import prediction_at, project_uuv
+from localizer.tracking.session import SelectionError, TrackingSession
+
+ROOT = Path(__file__).resolve().parents[1]
+FRAMES = (0, 60, 150)
+STEPS = (2.0, 3.0, 4.5)  # box sizes away from the UUV
+NO_FLOOR = DetectParams(min_saliency=0.0)
+
+
+def images(video: Path, picks) -> dict:
+    """The frames ``picks`` (indices in decoding order) of ``video`` as BGR."""
+    out = {}
+    with av.open(str(video)) as container:
+        for i, frame in enumerate(container.decode(video=0)):
+            if i in picks:
+                out[i] = frame.to_ndarray(format="bgr24")
+            if i >= max(picks):
+                break
+    return out
+
+
+def checked(session, image, pose, i: int, box) -> tuple[str, tuple[float, float] | None]:
+    """What the live check makes of ``box`` in frame ``i``: (kept/snapped/refused, the taken box's centre)."""
+    tracking = TrackingSession(session.calibration, "default")
+    try:
+        result = tracking.select(image, pose, i, box=box, verify=True, keep_drawn=True)
+    except SelectionError:
+        return "refused", None
+    return ("snapped" if tracking.outlined else "kept"), (result.u, result.v)
+
+
+def saliency(
+    image, pose, i: int, session, u: float, v: float, box
+) -> tuple[float | None, float, float]:
+    """(saliency, u, v) of the place detect finds distinct in ``box`` centred at (u, v) with no floor, sized by the
+    frame's pose as the check sizes it ((None, nan, nan): none)."""
+    one = take(pose, [i])
+    fix = locate(session.calibration, one, [u], [v])
+    if fix.status[0] != "ok":
+        return None, math.nan, math.nan
+    _, _, px_per_m = project_uuv(session.calibration, one, fix.lat[0], fix.lon[0])
+    guess = prediction_at(u, v, float(px_per_m[0]), 0.0)
+    if guess is None:
+        return None, math.nan, math.nan
+    reach = math.hypot(box[2], box[3]) / 2.0 / NO_FLOOR.search_sigmas
+    found = detect(
+        image,
+        Prediction(u, v, guess.width_px, guess.height_px, reach, float(px_per_m[0])),
+        NO_FLOOR,
+    )
+    return (None, math.nan, math.nan) if found is None else (found.saliency, found.u, found.v)
+
+
+def run(path: Path) -> dict:
+    """Per frame: the vehicle's box checked and its saliency; the seafloor boxes taken and their saliencies."""
+    session = load_session(path)
+    w, h = tomllib.loads((path / "session.toml").read_text())["tracker"]["init_bbox"][2:]
+    truth = np.genfromtxt(path / "track.csv", delimiter=",", names=True)
+    t = session.frames["t"]
+    pose = camera_pose(session.calibration, session.telemetry, t)
+    rows = []
+    for i, image in images(session.video_path, set(FRAMES)).items():
+        H, W = image.shape[:2]
+        u, v = float(truth["u"][i]), float(truth["v"][i])
+        if not (math.isfinite(u) and math.isfinite(v)):  # the UUV hidden in this frame
+            continue
+        box = [round(u - w / 2), round(v - h / 2), w, h]
+        word, _ = checked(session, image, pose, i, box)
+        s, _, _ = saliency(image, pose, i, session, u, v, box)
+        taken, distinct = 0, []
+        for k in STEPS:
+            for a in range(8):
+                cu = u + k * w * math.cos(a * math.pi / 4)
+                cv_ = v + k * h * math.sin(a * math.pi / 4)
+                if not (w < cu < W - w and h < cv_ < H - h):
+                    continue
+                sea = [round(cu - w / 2), round(cv_ - h / 2), w, h]
+                what, at = checked(session, image, pose, i, sea)
+                if what != "refused" and math.hypot(at[0] - u, at[1] - v) > max(w, h):
+                    taken += 1
+                s_sea, su, sv = saliency(image, pose, i, session, cu, cv_, sea)
+                if s_sea is not None and math.hypot(su - u, sv - v) > max(w, h):
+                    distinct.append(s_sea)
+        rows.append(
+            {
+                "frame": i,
+                "vehicle": word,
+                "vehicle_saliency": s,
+                "seafloor_taken": taken,
+                "seafloor_distinct": sorted(distinct),
+            }
+        )
+    return {"session": path.name, "rows": rows}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--work", type=Path, default=Path("/tmp/h1-waves"))
+    parser.add_argument("--out", type=Path)
+    args = parser.parse_args()
+    sessions = sorted(p for p in args.work.glob("w*") if (p / "session.toml").exists())
+    sessions += sorted((ROOT / "sim_fixtures" / "bundled").glob("*/"))
+    results = [run(p) for p in sessions if (p / "track.csv").exists()]
+    p = DetectParams()
+    head = f"The live box check (min_saliency {p.min_saliency:g}, distinct {p.distinct:g}) on the UUV and the seafloor"
+    columns = "session                frame  vehicle  saliency  seafloor boxes taken  seafloor distinct (largest 3)"
+    lines = [f"{head}, frames {FRAMES}", columns]
+    for r in results:
+        for row in r["rows"]:
+            s = row["vehicle_saliency"]
+            top = ", ".join(f"{x:.1f}" for x in row["seafloor_distinct"][-3:])
+            lines.append(
+                f"{r['session']:22s} {row['frame']:5d}  {row['vehicle']:8s} "
+                f"{'-' if s is None else f'{s:.1f}':>8s}  {row['seafloor_taken']:20d}  {top}"
+            )
+    lines.append(f"load average (1 min) {os.getloadavg()[0]:.1f}")
+    emit(lines, args.out, results)
+
+
+if __name__ == "__main__":
+    main()
