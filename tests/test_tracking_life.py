@@ -19,8 +19,14 @@ import pytest
 from groundstation.session.read import load_session
 from groundstation.video.file import open_video
 from localizer.pose import camera_pose, take
+from localizer.tracking import TrackResult
 from localizer.tracking.predict import window
-from localizer.tracking.session import Prior, SelectionError, TrackingSession
+from localizer.tracking.session import (
+    STOOD_OUT_WITHIN_S,
+    Prior,
+    SelectionError,
+    TrackingSession,
+)
 from localizer.tracking.target import TargetParams, TargetState
 
 BUNDLED = Path(__file__).resolve().parents[1] / "sim_fixtures" / "bundled"
@@ -220,3 +226,62 @@ def test_no_acquisition_while_hidden_nor_far_from_the_estimate(occlusion):
     far = Prior(*clip.truth_moved(0, 40.0, 0.0), sigma_m=3.0)
     results = _run(clip, ts, range(60), far)
     assert {r.status for r in results.values()} == {"awaiting_target"}
+
+
+class _Scripted:
+    """A stand-in for the session's target, through waves: each frame's result and the matcher's ``distinct`` as
+    scripted; it keeps the prediction each frame was looked for with."""
+
+    def __init__(self, script):
+        self.script, self.state, self.waves, self.distinct, self.looked = (
+            list(script),
+            TargetState.TRACKING,
+            0.8,
+            math.nan,
+            [],
+        )
+
+    def update(self, frame, prediction):
+        self.looked.append(prediction)
+        result, self.distinct = self.script.pop(0)
+        return result
+
+
+def test_through_waves_a_follow_that_does_not_stand_out_does_not_move_where_the_uuv_is_looked_for(
+    occlusion,
+):
+    """A follow whose vehicle stands out of the seafloor less than ``STOOD_OUT_DISTINCT`` (slid onto a patch beside
+    the UUV) leaves the next frames looking where the last sighting that stood out, moved by the camera, puts the
+    UUV; the prediction itself (what the reported pixel is filtered against) starts from the latest sighting. Once a
+    follow stands out again, or the last that did is older than ``STOOD_OUT_WITHIN_S``, both are the same."""
+    clip = occlusion
+    ts = TrackingSession(clip.cal)
+    ts.select(clip.frames[0], clip.pose, 0, box=clip.cal.init_bbox)
+
+    def on(i, du=0.0):
+        return TrackResult("ok", clip.u[i] + du, clip.v[i], (0, 0, 10, 10), 0.7)
+
+    slid = 12.0
+    late = math.ceil(STOOD_OUT_WITHIN_S / (clip.t[1] - clip.t[0])) + 2
+    steps = [(on(1), 1.5), (on(2, slid), 0.5), (on(3, slid), 0.6), (on(4), 1.2), (on(5, slid), 0.5)]
+    steps += [(on(i, slid), 0.5) for i in range(6, 7 + late)]
+    ts.target = target = _Scripted(steps)
+    errors = []  # per frame: where it was looked for, and the prediction, off the true pixel
+    for i in range(1, 7 + late):
+        ts.step(clip.frames[i], clip.pose, i)
+        looked, p = target.looked[-1], ts.prediction
+        errors.append(
+            (
+                math.hypot(looked.u - clip.u[i], looked.v - clip.v[i]),
+                math.hypot(p.u - clip.u[i], p.v - clip.v[i]),
+            )
+        )
+    # frame 2 predicted from frame 1 (stood out): both on the UUV
+    assert errors[1][0] < 3.0 and errors[1][1] < 3.0
+    # frames 3, 4: looked for from frame 1's sighting, predicted from the slid ones
+    assert all(looked < 3.0 and p > slid - 3.0 for looked, p in errors[2:4])
+    # frame 5 after frame 4 stood out again: the same
+    assert errors[4][0] < 3.0 and errors[4][1] < 3.0
+    # frame 6 and on, slid from frame 5: looked for from frame 4's sighting while it is recent enough, then the latest
+    assert errors[5][0] < 3.0 and errors[5][1] > slid - 3.0
+    assert errors[-1][0] > slid - 3.0 and errors[-1] == errors[-1][::-1]

@@ -390,7 +390,7 @@ class Pipeline:
             self.tracking, self._step, frame, pose, prior
         )
         item = Tracked(
-            frame, pose, result, early, search_window(self.session.prediction), self.commands
+            frame, pose, result, early, search_window(self.session.sought), self.commands
         )
         self._held.append(item)
         while (

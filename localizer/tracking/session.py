@@ -27,6 +27,11 @@ once by the caller and shared with the geometry.
   frame without a pose has no residual: the last one with a pose stays the
   prediction's start, its uncertainty growing with its age. Projections are
   made for up to :data:`REANCHOR_FRAMES` frames of the pose batch at once.
+  Through waves the UUV is looked for from the last sighting it stood out of the
+  seafloor in (the matcher's ``distinct``, at least :data:`STOOD_OUT_DISTINCT`), when
+  later ones did not and it is at most :data:`STOOD_OUT_WITHIN_S` older: a follow
+  that slid onto a patch of seafloor beside a small, deep UUV does not drag the
+  next frames' window (and a search's, once lost) onto that patch.
 - While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
   every ``search_every`` frames the prior is projected into the frame at the UUV's
   depth and the window its uncertainty spans is searched for a vehicle-sized object
@@ -68,6 +73,11 @@ CLICK_REACH = 1.0
 #: A drawn box kept (``keep_drawn``) when its centre is within this many outline errors
 #: (:data:`~localizer.tracking.sigma.OUTLINED_SHARE` of the vehicle's length) of the outline's, per axis.
 DRAWN_AGREES = 3.0
+#: Through waves, a follow whose vehicle stands out of the seafloor less than this (the matcher's ``distinct``) does
+#: not move where the next frames look for the UUV: the last sighting that stood out does ...
+STOOD_OUT_DISTINCT = 0.95
+#: ... while it is at most this much older than the latest sighting (s)
+STOOD_OUT_WITHIN_S = 0.5
 #: The UUV's speed is measured over its sightings of the last this many seconds ...
 SPEED_WINDOW_S = 0.5
 #: ... at least this long apart ...
@@ -124,8 +134,11 @@ class TrackingSession:
         self.detect_params = detect_params or DetectParams()
         self.origin: str | None = None  # how the current target was chosen: "box", "click", "prior"
         self._outlined = False  # the target's box is an outline skyfix found (its pixel carries the outline's error)
-        # where the latest step looked for the UUV (None: nowhere in particular)
+        # the latest step's prediction: the last sighting moved by what the camera did since (None: none)
         self.prediction: Prediction | None = None
+        # where the latest step looked for the UUV (None: nowhere in particular): the prediction, or through waves
+        # the last sighting that stood out of the seafloor moved so (see the module doc)
+        self.sought: Prediction | None = None
         self.last = TrackResult("awaiting_target")
         # the vehicle's apparent length at the latest prediction or selection
         self._length_px = math.nan
@@ -219,7 +232,7 @@ class TrackingSession:
         self._start(one, centre, anchor)
         self.origin = origin
         self._outlined = outlined
-        self.prediction = None
+        self.prediction = self.sought = None
         self._length_px = VEHICLE_FOOTPRINT_M[0] * px_per_m
         return self._note(float(one.t_unix[0]), result)
 
@@ -238,7 +251,7 @@ class TrackingSession:
         self, frame_bgr, pose: CameraPose, i: int = 0, prior: Prior | None = None
     ) -> TrackResult:
         """The UUV in the next frame (``pose``'s frame ``i``); ``prior`` is used while awaiting a target."""
-        self.prediction = None
+        self.prediction = self.sought = None
         if self.target.state is TargetState.AWAITING_TARGET:
             result = (
                 self._acquire(frame_bgr, pose, i, prior)
@@ -247,9 +260,12 @@ class TrackingSession:
             )
         else:
             self.prediction = self._predict(pose, i)
-            result = self.target.update(frame_bgr, self.prediction)
+            self.sought = self._from_stood_out(pose, i) or self.prediction
+            result = self.target.update(frame_bgr, self.sought)
             if result.ok:
                 self._saw(pose, i, result.u, result.v)
+                if not self.target.distinct < STOOD_OUT_DISTINCT:  # NaN: not read (a still surface)
+                    self._stood_out = self._seen
             elif self.target.state is TargetState.AWAITING_TARGET:
                 self._forget()  # a candidate that did not confirm
         return self._note(float(pose.t_unix[i]), result)
@@ -312,6 +328,8 @@ class TrackingSession:
 
     def _forget(self) -> None:
         self._seen: _Sighting | None = None
+        # the last sighting the UUV stood out of the seafloor in (through waves; see the module doc)
+        self._stood_out: _Sighting | None = None
         self._anchor: tuple[float, float] | None = None  # lat, lon of a sighting
         self._anchor_age = 0  # frames predicted from it
         self._anchor_tried: _Sighting | None = None  # the sighting last located
@@ -336,7 +354,9 @@ class TrackingSession:
         """A new target seen at ``point`` in the one-frame pose ``one`` (located at ``anchor``, or None)."""
         self._forget()
         pu, pv = point if anchor is not None else (math.nan, math.nan)
-        self._seen = _Sighting(float(one.t_unix[0]), point[0], point[1], pu, pv, one)
+        self._seen = self._stood_out = _Sighting(
+            float(one.t_unix[0]), point[0], point[1], pu, pv, one
+        )
         self._anchor, self._anchor_tried = anchor, self._seen
 
     def _saw(self, pose: CameraPose, i: int, u: float, v: float) -> None:
@@ -392,14 +412,37 @@ class TrackingSession:
                     else []
                 )
                 seen.pu, seen.pv = seen.u, seen.v  # the anchor is where this pixel is
+                stood_out = self._stood_out
+                if stood_out is not None and stood_out is not seen:
+                    if math.isfinite(ru + rv):  # its projection moved as the others' residuals did
+                        stood_out.pu, stood_out.pv = stood_out.pu + ru, stood_out.pv + rv
+                    else:
+                        self._stood_out = None
+        return self._follow(seen, pose, i)
+
+    def _from_stood_out(self, pose: CameraPose, i: int) -> Prediction | None:
+        """Through waves, the prediction from the last sighting the UUV stood out of the seafloor in, when later
+        ones did not (see the module doc); None otherwise."""
+        stood_out, seen = self._stood_out, self._seen
+        if (
+            stood_out is None
+            or seen is None
+            or stood_out is seen
+            or seen.t_unix - stood_out.t_unix > STOOD_OUT_WITHIN_S
+        ):
+            return None
+        return self._follow(stood_out, pose, i)
+
+    def _follow(self, sighting: _Sighting, pose: CameraPose, i: int) -> Prediction | None:
+        """The prediction for the pose's frame ``i`` from ``sighting`` (:func:`~localizer.tracking.predict.follow`)."""
         proj = self._projection(pose, i)
         if proj is None:
             return None
         return follow(
             proj,
-            (seen.pu, seen.pv),
-            (seen.u, seen.v),
-            float(pose.t_unix[i]) - seen.t_unix,
+            (sighting.pu, sighting.pv),
+            (sighting.u, sighting.v),
+            float(pose.t_unix[i]) - sighting.t_unix,
             self.speed_mps,
         )
 
