@@ -13,6 +13,12 @@ ones), on frames 0, 60 and 150, with the camera's pose of the frame:
 - ``seafloor``: the same box moved 2, 3 and 4.5 box sizes away in 8 directions (inside the frame): how many the
   check takes on something other than the UUV (a box on the seafloor tracked as the UUV), and the saliencies of the
   places detect finds distinct there with no floor (their largest): what a floor would have to stay above.
+
+``--follow``: also each box taken unchecked (as ``select`` without ``verify``) on frames 0 and 60 of the wave
+conditions and followed for :data:`FOLLOW` frames by the default tracker: of the UUV's box and of the seafloor
+boxes 2 and 3 sizes away (those the tracker did not carry onto the UUV), the frames reported ``ok``, the median of
+the matcher's ``distinct`` and the share of frames it reaches ``SURE_DISTINCT`` (the offline pass's "stands out"):
+whether following a box for a second would tell the UUV from the seafloor where one frame does not.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import av
 import numpy as np
 from emit import emit
 
+from groundstation.offline.track import SURE_DISTINCT
 from groundstation.session.read import load_session
 from localizer.fix import locate
 from localizer.pose import camera_pose, take
@@ -39,6 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FRAMES = (0, 60, 150)
 STEPS = (2.0, 3.0, 4.5)  # box sizes away from the UUV
 NO_FLOOR = DetectParams(min_saliency=0.0)
+FOLLOW = 30  # frames a box taken unchecked is followed (--follow)
 
 
 def images(video: Path, picks) -> dict:
@@ -83,6 +91,46 @@ def saliency(
         NO_FLOOR,
     )
     return (None, math.nan, math.nan) if found is None else (found.saliency, found.u, found.v)
+
+
+def followed(path: Path, start: int) -> dict:
+    """The UUV's box and the seafloor boxes of frame ``start`` taken unchecked and followed :data:`FOLLOW` frames."""
+    session = load_session(path)
+    w, h = tomllib.loads((path / "session.toml").read_text())["tracker"]["init_bbox"][2:]
+    truth = np.genfromtxt(path / "track.csv", delimiter=",", names=True)
+    pose = camera_pose(session.calibration, session.telemetry, session.frames["t"])
+    frames = images(session.video_path, set(range(start, start + FOLLOW + 1)))
+    u, v = float(truth["u"][start]), float(truth["v"][start])
+    H, W = frames[start].shape[:2]
+    out = {"session": path.name, "frame": start, "uuv": None, "seafloor": []}
+    for k, a in [(0.0, 0)] + [(k, a) for k in STEPS[:2] for a in range(8)]:
+        cu, cv_ = u + k * w * math.cos(a * math.pi / 4), v + k * h * math.sin(a * math.pi / 4)
+        if not (w < cu < W - w and h < cv_ < H - h):
+            continue
+        tracking = TrackingSession(session.calibration, "default")
+        tracking.select(
+            frames[start], pose, start, box=[round(cu - w / 2), round(cv_ - h / 2), w, h]
+        )
+        ok, on_uuv, distinct = 0, 0, []
+        for j in range(start + 1, start + FOLLOW + 1):
+            result = tracking.step(frames[j], pose, j)
+            distinct.append(tracking.target.distinct)
+            ok += result.ok
+            near = math.hypot(result.u - truth["u"][j], result.v - truth["v"][j]) < max(w, h) / 2
+            on_uuv += bool(result.ok and near)
+        d = np.array(distinct, float)
+        seen = d[np.isfinite(d)]
+        row = {
+            "ok": ok,
+            "on_uuv": on_uuv,
+            "distinct_median": float(np.median(seen)) if seen.size else math.nan,
+            "sure_share": float(np.mean(seen >= SURE_DISTINCT)) if seen.size else 0.0,
+        }
+        if k == 0:
+            out["uuv"] = row
+        elif on_uuv < FOLLOW // 6:  # carried onto the UUV: not a seafloor box any more
+            out["seafloor"].append(row)
+    return out
 
 
 def run(path: Path) -> dict:
@@ -131,6 +179,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--work", type=Path, default=Path("/tmp/h1-waves"))
     parser.add_argument("--out", type=Path)
+    parser.add_argument("--follow", action="store_true", help="also boxes followed for a second")
     args = parser.parse_args()
     sessions = sorted(p for p in args.work.glob("w*") if (p / "session.toml").exists())
     sessions += sorted((ROOT / "sim_fixtures" / "bundled").glob("*/"))
@@ -147,8 +196,28 @@ def main() -> None:
                 f"{r['session']:22s} {row['frame']:5d}  {row['vehicle']:8s} "
                 f"{'-' if s is None else f'{s:.1f}':>8s}  {row['seafloor_taken']:20d}  {top}"
             )
+    follows = []
+    if args.follow:
+        lines += [
+            "",
+            f"Boxes taken unchecked, followed {FOLLOW} frames: ok, distinct's median, share >= {SURE_DISTINCT:g}",
+            "session         frame  UUV's box               seafloor boxes: n, largest ok, median, share",
+        ]
+        for p in sessions:
+            if not p.name.startswith("w"):
+                continue
+            for start in (0, 60):
+                f = followed(p, start)
+                follows.append(f)
+                uuv, sea = f["uuv"], f["seafloor"]
+                lines.append(
+                    f"{f['session']:15s} {start:5d}  ok {uuv['ok']:2d} {uuv['distinct_median']:5.2f} "
+                    f"{uuv['sure_share']:4.2f}       {len(sea):2d}, "
+                    f"{max(r['ok'] for r in sea)}, {np.nanmax([r['distinct_median'] for r in sea]):.2f}, "
+                    f"{max(r['sure_share'] for r in sea):.2f}"
+                )
     lines.append(f"load average (1 min) {os.getloadavg()[0]:.1f}")
-    emit(lines, args.out, results)
+    emit(lines, args.out, {"boxes": results, "followed": follows})
 
 
 if __name__ == "__main__":
