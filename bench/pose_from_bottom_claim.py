@@ -23,8 +23,9 @@ pooling the draws (:func:`pooled`). Per session, with the estimate applied (``--
 - ``drawn only``: the same claim without the pixel's sigma where the pixel is the true one and, on the sessions
   without a variant's, the height's (``truth_errors.csv``'s ``height_err_m`` is 0 throughout): whether the terms the
   session does draw are claimed honestly; ``without the time term``: the same claim without the frames' time sigma
-  (the error a frame time error makes is the drone's motion less the UUV's over it, about none where the drone flies
-  with the UUV, while the term takes the drone's);
+  (the error a frame time error makes is the camera's motion less the UUV's over it, about none where the drone
+  flies with the UUV; the term takes the same, the UUV's velocity from its fixes:
+  :func:`groundstation.offline.bottom.locate_on_track`, as ``skyfix process`` does);
 - ``per term``: each term's error RMS against its claimed 1-sigma's: the pose's height (less the simulator's), the
   attitude left after the correction against the tilt's sigma with the height's share (the tilt per metre times the
   height's sigma), the walk, the GNSS's offset, the pixel (tracked less true, against the tracker's sigma), the
@@ -48,9 +49,9 @@ import numpy as np
 from pose_from_bottom import SESSIONS, reported_minus_true, scenario_of, session
 
 from groundstation.offline import process
+from groundstation.offline.bottom import locate_on_track
 from groundstation.offline.evaluate import error_ne_m
 from groundstation.session.read import load_session
-from localizer.fix import locate
 from localizer.pose import camera_pose
 from sim_fixtures.generate import generate
 from sim_fixtures.motion import Motion
@@ -179,7 +180,7 @@ def lines_for(name: str, work: Path, tracked: bool, draw: int = 0) -> tuple[list
 
     def fixes_of(names=(), p=pose):
         c, p = without(cal, p, names)
-        f = locate(c, p, u, v, sigma_px=0.0 if "pixel" in names else sigma_px)
+        f = locate_on_track(c, p, u, v, sigma_px=0.0 if "pixel" in names else sigma_px)
         return f, error_ne_m(f.t_unix, f.lat, f.lon, f.status == "ok", s.truth)
 
     fixes, err = fixes_of()

@@ -198,13 +198,21 @@ class Fixes:
 
 
 def locate(
-    cal: Calibration, pose: CameraPose, u, v, refraction: bool = True, sigma_px=None
+    cal: Calibration,
+    pose: CameraPose,
+    u,
+    v,
+    refraction: bool = True,
+    sigma_px=None,
+    target_velocity_ne_mps=None,
 ) -> Fixes:
     """Fixes for pixels (u, v) seen at the poses' times; ``refraction=False`` is the paper's straight ray.
 
     Pixels that are NaN mean the tracker had nothing (status ``no_track``) unless
     the pose already failed. ``sigma_px``: the tracker's 1-sigma of each of u and v per
     pixel (scalar or shaped as ``u``); None or NaN: the calibration's ``[uncertainty] pixel_px``.
+    ``target_velocity_ne_mps`` ((N, 2) m/s, or None): the UUV's own velocity per frame, which the accuracy's time
+    term takes the camera's motion relative to (:func:`localizer.uncertainty.accuracy`).
     """
     u = np.atleast_1d(np.asarray(u, dtype=float))
     v = np.atleast_1d(np.asarray(v, dtype=float))
@@ -265,6 +273,9 @@ def locate(
             sigma_time_s=pose.sigma_time_s[idx],
             sigma_pixel_px=sig_px[idx],
             rotation_per_height_ned=pose.rotation_per_height_ned[idx],
+            target_velocity_ne_mps=None
+            if target_velocity_ne_mps is None
+            else np.asarray(target_velocity_ne_mps, dtype=float)[idx],
         )
         sig_n[idx], sig_e[idx], cov_ne[idx] = (
             np.sqrt(cov[:, 0, 0]),

@@ -8,7 +8,9 @@ makes the fix, so the estimate follows refraction and distortion exactly. On top
 - the UAV position's own error (its GNSS receiver's accuracy), isotropic;
 - the time alignment: a frame matched to telemetry ``sigmas.time_s`` off sees the
   camera as it was that much earlier or later; the fix then moves by the
-  camera's angular velocity through the same Jacobian, plus the UAV's velocity;
+  camera's angular velocity through the same Jacobian, plus the UAV's velocity, less the located point's own
+  where it is given (``target_velocity_ne_mps``: a frame stamped late also shows the UUV where it was, so the fix
+  is off by the camera's motion relative to the UUV's; a drone flying with the UUV makes next to no error);
 - extrapolated or held telemetry: its estimated error adds to tilt and heading;
 - wind waves (``sigmas.wind_mps``; with refraction): each facet of the surface the ray
   crosses is tilted by the waves' slope, which bends the ray in the water: a point at depth
@@ -129,6 +131,7 @@ def accuracy(
     sigma_time_s=None,
     sigma_pixel_px=None,
     rotation_per_height_ned=None,
+    target_velocity_ne_mps=None,
 ):
     """``(h_acc_m, v_acc_m, cov_ne_m2)`` for fixes made from these inputs (shapes as ``u``; cov ``(..., 2, 2)``).
 
@@ -141,7 +144,8 @@ def accuracy(
     (the pixel's: the tracker's, for each of u and v). ``rotation_per_height_ned`` (rad per metre, ``(..., 3)``): the
     attitude's error that comes with the height's (reported − true, a NED rotation vector per metre the height reads
     high: a pose from the bottom's, whose tilt takes up part of a height error), so the height's term is the two
-    together.
+    together. ``target_velocity_ne_mps`` (m/s, ``(..., 2)``): the located point's horizontal velocity (the UUV's, from
+    its track); the time term is then the camera's motion relative to it (None: the point taken as still).
     """
     u = np.asarray(u, dtype=float)
     v = np.asarray(v, dtype=float)
@@ -180,7 +184,8 @@ def accuracy(
     for j, s in zip(J, sig):
         js = j * np.asarray(s, dtype=float)[..., None]
         cov += js[..., :, None] * js[..., None, :]
-    if np.any(sig_t > 0) and (omega_ned is not None or velocity_ned_mps is not None):
+    moving = (omega_ned, velocity_ned_mps, target_velocity_ne_mps)
+    if np.any(sig_t > 0) and any(x is not None for x in moving):
         rate = np.zeros(u.shape + (2,))
         if omega_ned is not None:
             w = np.asarray(omega_ned, dtype=float)
@@ -188,6 +193,10 @@ def accuracy(
         if velocity_ned_mps is not None:
             vel = np.asarray(velocity_ned_mps, dtype=float)
             rate += vel[..., :2] - J[5] * vel[..., 2:3]  # descending lowers the camera
+        if (
+            target_velocity_ne_mps is not None
+        ):  # the fix is scored where the point is at the frame's stamp
+            rate -= np.asarray(target_velocity_ne_mps, dtype=float)
         js = rate * sig_t[..., None]
         cov += js[..., :, None] * js[..., None, :]
     slope = float(wave_slope_sigma_rad(sigmas.wind_mps))

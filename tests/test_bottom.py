@@ -13,9 +13,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from groundstation.offline.bottom import MIN_TILT_DEG, PoseCorrection, held_walk_error_m
+from groundstation.offline.bottom import (
+    MIN_TILT_DEG,
+    PoseCorrection,
+    held_walk_error_m,
+    track_velocity_ne_mps,
+)
 from localizer import bottom
 from localizer.camera import Camera
+from localizer.geodesy import ned_to_geodetic
 from sim_fixtures.geometry import R_GIMBAL_FROM_CV, SimCamera, matrix_zyx, project, surface_crossing
 
 N_WATER = 1.34
@@ -374,3 +380,23 @@ def test_the_walk_sigma_takes_up_what_the_heights_wander_moves_it():
     cov = bottom.height_wander_cov_m2(priors, est.knot_t_s)
     assert cov.sum(axis=0) == pytest.approx(np.zeros(len(est.knot_t_s)), abs=1e-12)
     assert np.sqrt(np.mean(np.diagonal(cov))) < 0.1
+
+
+def test_the_uuvs_velocity_for_the_time_term_is_its_tracks():
+    # a UUV turning on a 12 m circle at 1.5 m/s, located at 30 Hz with 3 cm of scatter per axis: the velocity per fix is
+    # the track's (the derivative of its path, computed here on its own) to a few centimetres a second; a fix with
+    # fewer than 3 neighbours within the window says 0 (the time term then takes the camera's whole motion)
+    rng = np.random.default_rng(2)
+    t = 1.7e9 + np.arange(0.0, 20.0, 1 / 30)
+    angle = 1.5 / 12.0 * (t - t[0])
+    ne = 12.0 * np.column_stack([np.sin(angle), 1.0 - np.cos(angle)])
+    truth = 1.5 * np.column_stack([np.cos(angle), np.sin(angle)])
+    lat, lon, _ = ned_to_geodetic(*(ne + rng.normal(0.0, 0.03, ne.shape)).T, 0.0, 43.5, 16.4, 0.0)
+    status = np.full(len(t), "ok", dtype=object)
+    status[300:400] = "lost"
+    status[340] = "ok"  # alone among lost frames
+    fixes = SimpleNamespace(t_unix=t, status=status, lat=np.asarray(lat), lon=np.asarray(lon))
+    got = track_velocity_ne_mps(fixes)
+    told = (status == "ok") & (np.arange(len(t)) != 340)
+    assert np.sqrt(np.mean(np.sum((got[told] - truth[told]) ** 2, axis=1))) < 0.05
+    assert np.all(got[~told] == 0.0)

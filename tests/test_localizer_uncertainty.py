@@ -125,15 +125,28 @@ def test_extrapolated_attitude_adds_to_tilt_and_heading():
     )
 
 
-def test_time_alignment_error_against_monte_carlo():
+@pytest.mark.parametrize("target", [None, (1.3, -0.9), (-0.7, 0.4)])
+def test_time_alignment_error_against_monte_carlo(target):
     """A camera turning at ω and travelling at v, matched to telemetry δt ~ N(0, σ_t) off: the fix moves by
-    the rotation ω·δt of the ray, v_h·δt, and the height change −v_d·δt. Checked by drawing δt."""
+    the rotation ω·δt of the ray, v_h·δt, and the height change −v_d·δt. Checked by drawing δt. With the UUV's
+    own velocity given (``target``), the fix is scored where the UUV is at the frame's stamp: its motion over δt
+    comes off the camera's (one near the camera's horizontal velocity, one against it)."""
     R, u, v, h, d = SCENES["35° oblique"]
     omega = np.array([0.05, -0.12, 0.3])  # rad/s in NED
     vel = np.array([1.5, -0.8, 0.6])  # m/s
     quiet = Sigmas(pixel_px=0.0, tilt_deg=0.0, yaw_deg=0.0, height_m=0.0, depth_m=0.0, time_s=0.05)
     h_acc, _, cov = accuracy(
-        CAM, R, u, v, h, d, N_WATER, quiet, omega_ned=omega, velocity_ned_mps=vel
+        CAM,
+        R,
+        u,
+        v,
+        h,
+        d,
+        N_WATER,
+        quiet,
+        omega_ned=omega,
+        velocity_ned_mps=vel,
+        target_velocity_ne_mps=target,
     )
     rng = np.random.default_rng(5)
     dt = rng.normal(0.0, quiet.time_s, 4000)
@@ -142,7 +155,8 @@ def test_time_alignment_error_against_monte_carlo():
     off, _ = pixel_to_offset(
         CAM, Rs, np.full(len(dt), u), np.full(len(dt), v), h - vel[2] * dt, d, N_WATER
     )
-    err = off + vel[:2] * dt[:, None] - true
+    uuv = np.zeros(2) if target is None else np.asarray(target)
+    err = off + (vel[:2] - uuv) * dt[:, None] - true
     radius = np.hypot(err[:, 0], err[:, 1])
     assert float(h_acc) == pytest.approx(np.quantile(radius, 0.95) / 2.0, rel=0.05)
     assert cov[0, 1] == pytest.approx(np.mean(err[:, 0] * err[:, 1]), rel=0.15, abs=1e-5)

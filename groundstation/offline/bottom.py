@@ -36,7 +36,9 @@ walk and each frame's own remainder about what the velocity says between the wal
 noise: :meth:`PoseCorrection.position_ne_m`); each fix's accuracy then takes the estimate's 1-sigmas (floored at :data:`MIN_TILT_DEG`,
 :data:`MIN_YAW_DEG`: the AHRS's wander) instead of ``[uncertainty] tilt_deg``, ``yaw_deg``, and its height term the
 height's error together with the tilt and heading it moves in the estimate
-(:meth:`PoseCorrection.rotation_per_height_ned`: the floor does not tell the height). The walk is
+(:meth:`PoseCorrection.rotation_per_height_ned`: the floor does not tell the height), and its time term the camera's
+motion relative to the UUV's own (:func:`locate_on_track`: a constant frame time error moves the camera and the UUV
+alike, which the floor does not see). The walk is
 relative to the GNSS's mean over the recording: its absolute offset stays the GNSS's, and the position's sigma in
 h_acc is the GNSS's and the walk's own together (:meth:`PoseCorrection.sigma_position_m`); the walk's sigma takes
 what the biases' error beyond the fit's moves it (the parts' spread; a bias not applied, held at 0 in the walk
@@ -66,7 +68,7 @@ from groundstation.offline.progress import progress as progress_bar
 from groundstation.session.read import Session
 from localizer import bottom
 from localizer.calibration import Calibration
-from localizer.fix import POSE_COLUMNS, Fixes
+from localizer.fix import POSE_COLUMNS, Fixes, locate
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
 from localizer.pose import CameraPose, servo_mount
 
@@ -105,6 +107,10 @@ MIN_YAW_DEG = 0.1
 #: s: the AHRS wander's correlation time (a first-order Gauss-Markov of 1-sigma MIN_TILT_DEG): the tilt's prior
 #: between the walk's knots (:attr:`localizer.bottom.Priors.tilt_wander_rad`)
 TILT_WANDER_S = 60.0
+#: s: the UUV's velocity for the fixes' time term is the slope of its fixes over this long about each frame
+#: (:func:`track_velocity_ne_mps`): long enough that the fixes' scatter (waves, pixel) makes millimetres a second of
+#: it, short against the UUV's turns
+TRACK_VELOCITY_S = 1.0
 _LK = {
     "winSize": (31, 31),
     "maxLevel": 4,
@@ -451,6 +457,44 @@ class PoseCorrection:
             "walk_e_m": walk[:, 1],
             "sigma_walk_m": np.hypot(sigma_walk[:, 0], sigma_walk[:, 1]),
         }
+
+
+def locate_on_track(cal: Calibration, pose: CameraPose, u, v, **kwargs) -> Fixes:
+    """:func:`localizer.fix.locate`'s fixes (its ``kwargs``) of the poses a :class:`PoseCorrection` applied, their time
+    term taking the camera's motion relative to the UUV's own (:func:`track_velocity_ne_mps` of the fixes made first):
+    the pose from the bottom is measured in the frames, so a frame stamped late puts both the camera and the UUV
+    where they were at its exposure, and its fix is off by the camera's motion less the UUV's (a drone flying with
+    the UUV: next to none), not by the drone's whole motion. The positions are :func:`locate`'s."""
+    first = locate(cal, pose, u, v, **kwargs)
+    return locate(cal, pose, u, v, target_velocity_ne_mps=track_velocity_ne_mps(first), **kwargs)
+
+
+def track_velocity_ne_mps(fixes: Fixes) -> np.ndarray:
+    """(N, 2) the located UUV's horizontal velocity (m/s) at each fix: the slope of a straight line (least squares)
+    through its ``ok`` fixes within :data:`TRACK_VELOCITY_S` / 2 either side, 0 where fewer than 3 (the time term then
+    takes the camera's whole motion, as without a track)."""
+    t = np.asarray(fixes.t_unix, dtype=float)
+    out = np.zeros((len(t), 2))
+    ok = np.flatnonzero((fixes.status == "ok") & np.isfinite(fixes.lat) & np.isfinite(t))
+    if len(ok) < 3:
+        return out
+    n, e, _ = geodetic_to_ned(
+        fixes.lat[ok], fixes.lon[ok], 0.0, fixes.lat[ok[0]], fixes.lon[ok[0]], 0.0
+    )
+    tk = t[ok] - t[ok[0]]
+    lo = np.searchsorted(tk, tk - TRACK_VELOCITY_S / 2, side="left")
+    hi = np.searchsorted(tk, tk + TRACK_VELOCITY_S / 2, side="right")
+    sums = [
+        np.concatenate([[0.0], np.cumsum(x)])
+        for x in (np.ones_like(tk), tk, tk * tk, tk * n, tk * e, n, e)
+    ]
+    c, st, stt, stn, ste, sn, se = (s[hi] - s[lo] for s in sums)
+    var = c * stt - st * st
+    fit = (c >= 3) & (var > 1e-12)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out[ok, 0] = np.where(fit, (c * stn - st * sn) / var, 0.0)
+        out[ok, 1] = np.where(fit, (c * ste - st * se) / var, 0.0)
+    return out
 
 
 def summary(correction: PoseCorrection) -> dict:

@@ -48,6 +48,7 @@ from groundstation.offline.bottom import NAME as BOTTOM_NAME
 from groundstation.offline.bottom import (
     PoseCorrection,
     append_columns,
+    locate_on_track,
     pixels_at,
     pose_cells,
     pose_from_bottom,
@@ -251,10 +252,11 @@ def locate_frames(
         f"{session.path}: {notice}" for notice in take_notices(session.telemetry)
     )
     cal, reported = session.calibration, pose
-    if correction is not None:
+    if correction is None:
+        fixes = locate(cal, pose, u, v, refraction=refraction, sigma_px=sigma_px)
+    else:
         pose, cal = correction.apply(session, pose)
-    fixes = locate(cal, pose, u, v, refraction=refraction, sigma_px=sigma_px)
-    if correction is not None:
+        fixes = locate_on_track(cal, pose, u, v, refraction=refraction, sigma_px=sigma_px)
         for name, values in correction.values(session, reported).items():
             setattr(fixes, name, values)
     lost = (track_status != "ok") & (pose.status == "ok")
