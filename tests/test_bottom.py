@@ -16,10 +16,13 @@ from scipy.spatial.transform import Rotation
 from groundstation.offline.bottom import (
     MIN_TILT_DEG,
     PoseCorrection,
+    centred_wander_m,
     held_walk_error_m,
+    kept_height_wander_m,
     track_velocity_ne_mps,
 )
 from localizer import bottom
+from localizer.calibration import Sigmas
 from localizer.camera import Camera
 from localizer.geodesy import ned_to_geodetic
 from sim_fixtures.geometry import R_GIMBAL_FROM_CV, SimCamera, matrix_zyx, project, surface_crossing
@@ -400,3 +403,46 @@ def test_the_uuvs_velocity_for_the_time_term_is_its_tracks():
     told = (status == "ok") & (np.arange(len(t)) != 340)
     assert np.sqrt(np.mean(np.sum((got[told] - truth[told]) ** 2, axis=1))) < 0.05
     assert np.all(got[~told] == 0.0)
+
+
+def _gnss_session(alt_m, v_acc_m, t_s):
+    """What :func:`kept_height_wander_m` takes of a session: the calibration's sigmas and GNSS altitudes (GPS_RAW_INT's
+    columns h_acc, geoid, fix type, alt, v_acc, HDOP, VDOP) at ``t_s``, on the station's clock."""
+    values = np.zeros((len(t_s), 7))
+    values[:, 2], values[:, 3], values[:, 4] = 6, alt_m, v_acc_m
+    gnss = SimpleNamespace(times=np.asarray(t_s, float), values=values)
+    telemetry = SimpleNamespace(gnss=gnss, uav_time=lambda t: np.asarray(t, float))
+    return SimpleNamespace(calibration=SimpleNamespace(sigmas=Sigmas()), telemetry=telemetry)
+
+
+def test_the_heights_wander_the_walk_takes_is_what_they_move_against_the_gnss():
+    # the barometer wanders 0.15 m (the default [uncertainty] baro_wander_m) over 30 s; heights that move with an RTK
+    # altitude exactly (its 2 cm) keep none of it: the walk's prior is then the receiver's slow error's change,
+    # centimetres; heights that wander against the GNSS altitudes by a 0.05 m sine get a prior whose change over the
+    # knots is at least what they moved, binned as the walk's knots (computed here on its own); a plain receiver's
+    # metres, or no GNSS altitude, leave the barometer's
+    t = np.arange(0.0, 16.0, 0.2)
+    poses = bottom.FramePoses(
+        t, np.zeros((len(t), 3, 3)), np.zeros((len(t), 2)), 20.0 + np.zeros(len(t))
+    )
+    t_gnss = np.arange(0.0, 16.0, 0.1)
+    baro = 0.15 * np.sin(2 * np.pi * t / 30.0)
+    followed = kept_height_wander_m(
+        _gnss_session(np.interp(t_gnss, t, baro), 0.02, t_gnss),
+        dataclasses.replace(poses, height_m=20.0 + baro),
+    )
+    assert followed < 0.03
+    moving = 0.05 * np.sin(2 * np.pi * t / 8.0)
+    prior = kept_height_wander_m(
+        _gnss_session(np.zeros(len(t_gnss)), 0.02, t_gnss),
+        dataclasses.replace(poses, height_m=20.0 + moving),
+    )
+    knots = bottom.knot_times(t, 2.0)
+    span = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, len(knots) - 2)
+    means = np.bincount(span, weights=moving) / np.bincount(span)
+    assert centred_wander_m(prior, 30.0, knots) >= np.sqrt(np.mean((means - means.mean()) ** 2))
+    assert followed < prior < Sigmas().baro_wander_m
+    plain = _gnss_session(np.zeros(len(t_gnss)) + 1.5 * np.sin(t_gnss / 5.0), 3.0, t_gnss)
+    assert kept_height_wander_m(plain, poses) == Sigmas().baro_wander_m
+    none = _gnss_session(np.zeros(0), 0.02, np.zeros(0))
+    assert kept_height_wander_m(none, poses) == Sigmas().baro_wander_m

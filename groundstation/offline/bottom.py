@@ -66,10 +66,11 @@ import numpy as np
 
 from groundstation.offline.progress import progress as progress_bar
 from groundstation.session.read import Session
-from localizer import bottom
+from localizer import bottom, gnss
 from localizer.calibration import Calibration
 from localizer.fix import POSE_COLUMNS, Fixes, locate
 from localizer.geodesy import geodetic_to_ned, ned_to_geodetic
+from localizer.height import GNSS_TAU_S, GNSS_WHITE
 from localizer.pose import CameraPose, servo_mount
 
 MODES = ("auto", "off")
@@ -620,7 +621,8 @@ def pose_from_bottom(session: Session, pose: CameraPose, uuv_u, uuv_v, progress:
     )
     frame_tilt = tilt_frame(session)
     poses = frame_poses(session, pose, rows, frame_tilt)
-    return fit(session, poses, obs, float(np.nanmedian(pose.sigma_uav_m[rows])), frame_tilt)
+    sigma_uav_m = float(np.nanmedian(pose.sigma_uav_m[rows]))
+    return fit(session, poses, obs, sigma_uav_m, frame_tilt, kept_height_wander_m(session, poses))
 
 
 def frame_poses(
@@ -649,10 +651,13 @@ def fit(
     obs: bottom.Observations,
     sigma_uav_m: float,
     frame_tilt: str,
+    height_wander_m: float | None = None,
 ):
     """The :class:`PoseCorrection` from floor tracks ``obs`` seen from ``poses`` (the GNSS's horizontal 1-sigma
     ``sigma_uav_m``, the tilt's bias frame ``frame_tilt``), or a string saying why there is none (see the module
-    doc). ``session``: anything with the session's ``calibration`` and ``telemetry``."""
+    doc). ``session``: anything with the session's ``calibration`` and ``telemetry``. ``height_wander_m``: the
+    heights' wander the walk's sigma takes (:func:`kept_height_wander_m`; None: the barometer's, ``[uncertainty]
+    baro_wander_m`` at most ``height_m``, as the live service's fits take it)."""
     n_features = int(obs.feature.max()) + 1 if len(obs.feature) else 0
     if n_features < MIN_FEATURES:
         return f"{n_features} floor features tracked (fewer than {MIN_FEATURES})"
@@ -665,7 +670,9 @@ def fit(
         white_m=0.0 if white is None else max(MIN_WHITE_M, white),
         tilt_wander_rad=np.radians(MIN_TILT_DEG) if frame_tilt == "body" else 0.0,
         tilt_wander_s=TILT_WANDER_S,
-        height_wander_m=min(sigmas.baro_wander_m, sigmas.height_m),
+        height_wander_m=min(sigmas.baro_wander_m, sigmas.height_m)
+        if height_wander_m is None
+        else height_wander_m,
         height_wander_s=sigmas.baro_wander_s,
     )
     cam, n_water = session.calibration.camera, session.calibration.water.refractive_index
@@ -698,6 +705,49 @@ def fit(
             held_walk_error_m(est, again, sigmas, tilt, yaw)
         )  # sigmas: the free estimate's
     return PoseCorrection(est, tilt, yaw, frame_tilt)
+
+
+def kept_height_wander_m(session: Session, poses: bottom.FramePoses) -> float:
+    """The walk's prior for the reported heights' wander (:attr:`localizer.bottom.Priors.height_wander_m`, a
+    first-order Gauss-Markov of ``[uncertainty] baro_wander_s``). The walk takes up how the heights' error changes
+    over the recording (:func:`localizer.bottom.height_wander_cov_m2`), not its level: the barometer's wander
+    (``baro_wander_m``, at most ``height_m``) where the heights follow it, less where they follow GNSS altitudes
+    (the height's estimator fuses them, :mod:`localizer.height`). Their error then changes by what they move
+    against the GNSS altitudes (the difference averaged over each of the walk's knot spans, about its mean: the
+    GNSS's white noise left in it counts too) and by the GNSS altitude's own slow error's change (1-sigma the
+    receiver's vertical accuracy less its white share, :data:`localizer.height.GNSS_WHITE`, correlation time
+    :data:`localizer.height.GNSS_TAU_S`) together; the prior is the wander whose change over these knots is that
+    (never more than the barometer's; without a GNSS altitude over every knot span, the barometer's)."""
+    sigmas = session.calibration.sigmas
+    barometer = min(sigmas.baro_wander_m, sigmas.height_m)
+    tel = session.telemetry
+    knots = bottom.knot_times(poses.t_s, bottom.Priors.knot_spacing_s)
+    if barometer == 0 or len(knots) < 2 or not len(tel.gnss.times):
+        return barometer
+    frames_uav = tel.uav_time(np.asarray(poses.t_s, dtype=float))
+    t, values = tel.gnss.times, tel.gnss.values
+    fix, alt, v_acc, vdop = (values[:, i] for i in (2, 3, 4, 6))
+    sigma_v = gnss.vertical_sigma_m(fix, v_acc, vdop)
+    used = (t >= frames_uav.min()) & (t <= frames_uav.max()) & np.isfinite(alt + sigma_v)
+    span = np.clip(
+        np.searchsorted(tel.uav_time(knots), t[used], side="right") - 1, 0, len(knots) - 2
+    )
+    counts = np.bincount(span, minlength=len(knots) - 1)
+    if np.any(counts == 0):
+        return barometer
+    apart = np.interp(t[used], frames_uav, poses.height_m) - alt[used]
+    means = np.bincount(span, weights=apart) / counts
+    moved = float(np.sqrt(np.mean((means - means.mean()) ** 2)))
+    slow = np.sqrt(1.0 - GNSS_WHITE**2) * float(np.median(sigma_v[used]))
+    change = np.hypot(moved, centred_wander_m(slow, GNSS_TAU_S, knots))
+    return min(barometer, change / centred_wander_m(1.0, sigmas.baro_wander_s, knots))
+
+
+def centred_wander_m(sigma_m: float, tau_s: float, knots_s: np.ndarray) -> float:
+    """The RMS over the knots ``knots_s`` of a first-order Gauss-Markov process (1-sigma ``sigma_m``, correlation
+    time ``tau_s``) about its mean over them (:func:`localizer.bottom.height_wander_cov_m2`)."""
+    priors = bottom.Priors(height_wander_m=sigma_m, height_wander_s=tau_s)
+    return float(np.sqrt(np.mean(np.diagonal(bottom.height_wander_cov_m2(priors, knots_s)))))
 
 
 def held_walk_error_m(
