@@ -442,14 +442,11 @@ class UuvTrack:
         except SelectionError:  # its box reaches beyond the frame
             self.behind.clear()
             return
-        traced = []
-        for r, earlier in reversed(self.behind):
-            found = back.step(earlier, self.pose, r)
-            if back.state is not TargetState.TRACKING:
-                break
-            if found.ok and self.status[r] != "ok":
-                traced.append((r, found))
-        self._bridge(traced)
+        self._bridge(
+            (r, found)
+            for r, found in _stepped_back(back, self.pose, self.behind)
+            if self.status[r] != "ok"
+        )
         self.behind.clear()
         self.timings["backward"] += time.perf_counter() - t0
 
@@ -524,8 +521,14 @@ def _trace_back(forward: TrackingSession, pose, row: int, image, found, gap) -> 
         back.start_at(image, pose, row, found.box, (found.u, found.v))
     except SelectionError:  # its box reaches beyond the frame
         return []
+    return _stepped_back(back, pose, gap)
+
+
+def _stepped_back(back: TrackingSession, pose, frames) -> list:
+    """``(row, TrackResult)`` of the frames ``frames`` ((row, image), oldest first) the tracker ``back`` finds the UUV
+    in, stepping back from the newest until it loses it."""
     traced = []
-    for r, earlier in reversed(gap):
+    for r, earlier in reversed(frames):
         result = back.step(earlier, pose, r)
         if back.state is not TargetState.TRACKING:
             break
