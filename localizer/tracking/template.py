@@ -57,6 +57,8 @@ What passes for the UUV (the lost/re-acquire life itself is :class:`~.target.Tar
   less contrast last (:meth:`~TemplateMatcher._least_spread`), the water beside its window too. The level, and
   the template, learn only from follows with ``wave_keep_contrast`` of it (a reference kept from clear frames);
   the template only where something near the match stands out of the seafloor (``wave_learn_distinct``).
+  A search's best is judged as a candidate from the re-acquisition's wave bar on (:meth:`~TemplateMatcher._candidate`),
+  not refused under ``ok_score`` first (a UUV the waves let the template match only at 0.3 is otherwise never found).
   A candidate further than ``wave_far_sigmas`` from the prediction pays the distance penalty of the sigmas beyond
   (:meth:`~TemplateMatcher._far_penalty`), and a re-acquisition's contrast averaged over its confirmation frames
   reaches ``wave_keep_contrast`` of the level (a seafloor patch passes a frame's lower bar now and then).
@@ -781,6 +783,15 @@ class TemplateMatcher:
         """The least NCC that passes for the UUV: ``ok_score``, lower in waves."""
         return self.p.ok_score - self._waves() * self.p.wave_ok_drop
 
+    def _candidate(self) -> float:
+        """The least NCC a search's best (before refining) needs to be judged as a candidate: :meth:`_ok`; in waves
+        no more than the bar a candidate must reach (:meth:`_stands_out`'s ``wave_reacquire_share`` of the way from
+        the water's level to the UUV's): a UUV the waves let the template match no better than that is judged as
+        the candidate bars judge it, not refused before."""
+        if not self._wavy:
+            return self._ok()
+        return min(self._ok(), self._wave_bar(self.p.wave_reacquire_share))
+
     def _floor(self) -> float:
         """The least NCC a match near the prediction needs: :meth:`_ok`, and no more than ``level_drop`` (more in
         waves) below the recent level."""
@@ -1218,7 +1229,7 @@ class TemplateMatcher:
         score, u, v, angle = self._search(
             frame_bgr, cu, cv_, radius, angles, sigma, self._least_spread()
         )
-        if score < self._ok():  # not even a candidate (headings are coarse here: refined below)
+        if score < self._candidate():  # not even one (headings are coarse here: refined below)
             return self._match(False, score, u, v)
         saved, self._angle = self._angle, angle
         score, u, v = self._refine(frame_bgr, (score, u, v))
