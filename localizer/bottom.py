@@ -53,8 +53,17 @@ depends on the bias frame being right), :attr:`BottomEstimate.estimated` also as
 across a good part of the image (:data:`MIN_SLIDE_SHARE`).
 
 Covariances are from the Jacobian at the solution (Gauss-Newton, the features eliminated by
-their Schur complement), scaled by the residuals' variance. They take the residuals as white, and
-what is not (a floor light that drags the points, waves, a walk the knots cannot follow) they do not
+their Schur complement), the observations' variance the residuals' own: the a-posteriori variance factor
+``χ²/dof`` of the inlying residuals (in :attr:`Priors.pixel_px` sigmas, ``dof`` their number less the parameters'),
+not floored at ``pixel_px``, which is the weighting's guess (and the robust loss's scale), not a measurement. The
+white per-point noise is what ``χ²/dof`` measures (over thousands of degrees of freedom, to about a per cent); what
+the residuals do not show (an error the features or the walk take up, a pull along the tracks) is not white
+per-point noise, and a floor on it would size it as the white noise's share whatever it is: what of it moves the
+biases is what the parts' spread takes (below), and :mod:`groundstation.offline.bottom` does not apply a fit whose
+residuals are too large (``MAX_RMS_PX``). The priors' rows keep their own variances (the estimator's covariance
+``H⁻¹·(χ²/dof·H_obs + H_prior)·H⁻¹``, :func:`_covariance`): where a prior alone tells a parameter its sigma stays
+the prior's, where the bottom tells it the sigma follows the residuals. The covariances take the residuals as white,
+and what is not (a floor light that drags the points, waves, a walk the knots cannot follow) they do not
 see: asked for ``parts``, :func:`estimate` also solves each of that many consecutive stretches of the
 recording alone and widens the biases' and the floor depth's sigmas by the standard error of the parts' mean
 (``hypot(σ, spread/√P)``, ``spread`` the sample standard deviation of the P parts' values): the whole fit holds
@@ -122,7 +131,8 @@ class Priors:
     # walk's sigmas take that part (:func:`_walk_per_height`); 0: the heights' error is taken as constant
     height_wander_m: float = 0.0
     height_wander_s: float = 30.0
-    pixel_px: float = 0.7  # a tracked floor point's 1-sigma in u and v
+    # a tracked floor point's 1-sigma in u and v the fit weighs them by; the covariance takes the residuals' own
+    pixel_px: float = 0.7
     floor_depth_m: float | None = None  # given: not estimated
     floor_depth_prior_m: float = 100.0  # estimated: its (weak) prior's 1-sigma about the start
     loss_scale: float = 2.0  # soft_l1's scale, in pixel sigmas
@@ -194,8 +204,9 @@ class BottomEstimate:
     #: (:func:`_per_height`): the floor does not tell the height, and its sigmas do not include this
     bias_per_height_rad: np.ndarray = field(default_factory=lambda: np.zeros(3), repr=False)
     #: (2J, 3) how the walk's knots (north, east in turn) move (m) with the tilt_fwd, tilt_right and yaw found (per
-    #: rad: the fit's covariance of the walk with them over theirs): what an error of the biases beyond the fit's
-    #: own sigma puts into the walk (:meth:`with_walk_error`); (0, 3): not known
+    #: rad: the inverse Gauss-Newton Hessian's block of the walk with them over theirs, whatever the observations'
+    #: variance): what an error of the biases beyond the fit's own sigma puts into the walk (:meth:`with_walk_error`);
+    #: (0, 3): not known
     walk_per_bias_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), repr=False)
 
     @property
@@ -671,11 +682,20 @@ class _Problem:
         return x
 
 
-def _covariance(jac: sp.csr_matrix, n_dense: int, scale2: float) -> np.ndarray:
+def _covariance(
+    jac: sp.csr_matrix, n_dense: int, scale2: float, n_obs: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Covariance of the first ``n_dense`` parameters, the rest (2×2 feature blocks) eliminated by their Schur
-    complement of the Gauss-Newton Hessian ``JᵀJ``; times ``scale2``."""
+    complement ``S`` of the Gauss-Newton Hessian ``H = JᵀJ``, with the first ``n_obs`` rows of ``J`` (the
+    observations') of variance ``scale2`` and the priors' rows (after them, on the dense parameters only) of theirs:
+    the estimate's own covariance ``H⁻¹·(scale2·H_obs + H_prior)·H⁻¹ = scale2·S⁻¹ − (scale2 − 1)·S⁻¹·H_prior·S⁻¹``
+    (where the observations tell a parameter this is ``scale2·S⁻¹``; where only its prior does, the prior's
+    variance). Also ``S⁻¹``: how the parameters move together in the fit (``S⁻¹``'s regressions are ``−S``'s blocks'),
+    whatever the observations' variance."""
     S, _, _ = _reduced((jac.T @ jac).tocsc(), np.zeros(jac.shape[1]), n_dense)
-    return np.linalg.inv(S) * scale2
+    inv = np.linalg.inv(S)
+    prior = jac[n_obs:, :n_dense]
+    return scale2 * inv - (scale2 - 1.0) * inv @ (prior.T @ prior).toarray() @ inv, inv
 
 
 def _per_height(prob: _Problem, x: np.ndarray, inliers: np.ndarray) -> np.ndarray:
@@ -933,9 +953,9 @@ def _estimate(
     inliers = norm < 3.0 * priors.loss_scale
     n_dense = prob.first_feature
     dof = max(1, 2 * int(inliers.sum()) - prob.n_params + 4)
-    # never claim better than the pixel sigma
-    scale2 = max(1.0, float(np.sum(norm[inliers] ** 2) / dof))
-    cov = _covariance(sp.csr_matrix(fit.jac), n_dense, scale2)
+    # the observations' variance factor: the residuals' own (the pixel sigma is a prior's guess), not floored
+    scale2 = float(np.sum(norm[inliers] ** 2) / dof)
+    cov, together = _covariance(sp.csr_matrix(fit.jac), n_dense, scale2, 2 * prob.M)
     g, walk, _, feats = prob.unpack(x)
     cov_walk_m2 = (
         cov[N_GLOBAL : N_GLOBAL + 2 * prob.J, N_GLOBAL : N_GLOBAL + 2 * prob.J] + rate_spread
@@ -967,7 +987,8 @@ def _estimate(
         if poses.velocity_ne_mps is not None
         else np.zeros((0, 2)),
         bias_per_height_rad=_per_height(prob, x, inliers) if per_height else np.zeros(3),
-        walk_per_bias_m=cov[N_GLOBAL : N_GLOBAL + 2 * prob.J, :3] @ np.linalg.inv(cov[:3, :3]),
+        walk_per_bias_m=together[N_GLOBAL : N_GLOBAL + 2 * prob.J, :3]
+        @ np.linalg.inv(together[:3, :3]),
     )
 
 
