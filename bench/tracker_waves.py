@@ -1,14 +1,18 @@
 """The tracker through rendered wind waves (issue 28): wind 2-8 m/s, depth 1-3.4 m, the UUV ~15-35 px.
 
     .venv/bin/python bench/tracker_waves.py [--work /tmp/skyfix-tracker-waves] [--tree LABEL=DIR ...]
-                                            [--only NAME ...] [--path offline|live ...]
+                                            [--only NAME ...] [--path offline|live ...] [--seeds N ...]
                                             [--out bench/results/tracker_waves.txt]
 
 Each condition is a waves scenario (``sim_fixtures/scenarios/waves_*.toml``: its camera, drone, glint, caustics and
 downlink without B-frames) with the UUV at another depth and the camera's field of view set so the UUV spans about
 the size asked (measured once on a 3-frame render, the field of view scaled by the ratio); the UUV is hidden from
 5.0 to 6.5 s (``occlusions``). Sessions are generated once into ``--work`` (reused when there) by the simulator of
-the last ``--tree`` (an older reader may refuse a newer simulator's keys).
+the last ``--tree`` (an older reader may refuse a newer simulator's keys). ``--seeds``: each condition also rendered
+with these random seeds instead of its scenario's (``NAME_sSEED``: other waves, sensor errors and vehicle path; the
+field of view is scaled again, so the UUV's size differs a little), and a last table sums every session's counts:
+one render is one wave realisation, and the tracker's result varies much between them. A seed renders to the same
+video every time (the downlink encode runs on one thread).
 
 The video is tracked as ``skyfix process`` does (:func:`groundstation.offline.track.track_session`) in a child process
 from this tree and from each ``--tree`` (e.g. ``git archive <commit> | tar -x -C DIR``: the tracker before, in the
@@ -149,10 +153,18 @@ generate(scenario_from_dict(json.loads(sys.argv[1])), sys.argv[2])
 
 
 def scenario_dict(
-    name: str, base: str, depth_m: float, hfov_deg: float | None, duration_s: float
+    name: str,
+    base: str,
+    depth_m: float,
+    hfov_deg: float | None,
+    duration_s: float,
+    seed: int | None = None,
 ) -> dict:
-    """The base scenario with the UUV at ``depth_m``, the field of view (None: the base's), the occlusion."""
+    """The base scenario with the UUV at ``depth_m``, the field of view (None: the base's), the occlusion, the random
+    seed (None: the base's)."""
     data = tomllib.loads((SCENARIOS / f"{base}.toml").read_text())
+    if seed is not None:
+        data["seed"] = seed
     data.update(
         name=name,
         duration_s=duration_s,
@@ -186,20 +198,29 @@ def render(tree: Path, data: dict, out: Path) -> None:
 
 
 def condition(
-    work: Path, sim: Path, name: str, base: str, size_px: float, depth_m: float, duration_s: float
+    work: Path,
+    sim: Path,
+    name: str,
+    base: str,
+    size_px: float,
+    depth_m: float,
+    duration_s: float,
+    seed: int | None = None,
 ) -> Path:
-    """The condition's session in ``work`` (generated once by the simulator of ``sim``): the field of view scaled
-    from a 3-frame render so the UUV spans about ``size_px``."""
+    """The condition's session in ``work`` (generated once by the simulator of ``sim``; with another ``seed``, as
+    ``NAME_sSEED``): the field of view scaled from a 3-frame render so the UUV spans about ``size_px``."""
+    if seed is not None:
+        name = f"{name}_s{seed}"
     out = work / name
     if (out / "video.mp4").is_file():
         return out
-    probe = scenario_dict(name, base, depth_m, None, 0.1)
+    probe = scenario_dict(name, base, depth_m, None, 0.1, seed)
     render(sim, probe, work / "probe" / name)
     half = math.radians(probe["camera"]["hfov_deg"]) / 2.0
     hfov = 2.0 * math.degrees(
         math.atan(math.tan(half) * first_size_px(work / "probe" / name) / size_px)
     )
-    data = scenario_dict(name, base, depth_m, round(hfov, 2), duration_s)
+    data = scenario_dict(name, base, depth_m, round(hfov, 2), duration_s, seed)
     print(f"{name}: rendering (hfov {hfov:.1f} deg) ...", flush=True)
     render(sim, data, out)
     return out
@@ -375,6 +396,13 @@ def main() -> int:
         help="track as skyfix process does (offline, the default) or as skyfix run (live); repeated: both",
     )
     ap.add_argument("--duration", type=float, default=10.0, help="seconds of each session")
+    ap.add_argument(
+        "--seeds",
+        nargs="*",
+        type=int,
+        default=[],
+        help="also each condition rendered with these random seeds (other waves, sensor errors, vehicle path)",
+    )
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "tracker_waves.txt"))
     args = ap.parse_args()
     work = Path(args.work)
@@ -390,10 +418,15 @@ def main() -> int:
     load_before = " ".join(f"{x:.2f}" for x in os.getloadavg())
     lines, data, separations, agree = [header], {}, {}, {}
     print(header, flush=True)
-    for name, base, size_px, depth_m in CONDITIONS:
-        if args.only and name not in args.only:
-            continue
-        session = condition(work, sim, name, base, size_px, depth_m, args.duration)
+    runs = [
+        (c, seed)
+        for c in CONDITIONS
+        if not args.only or c[0] in args.only
+        for seed in (None, *args.seeds)
+    ]
+    for (base_name, base, size_px, depth_m), seed in runs:
+        session = condition(work, sim, base_name, base, size_px, depth_m, args.duration, seed)
+        name = session.name
         separations[name] = separation(session)
         for label, tree in trees.items():
             per_path = {}
@@ -427,6 +460,22 @@ def main() -> int:
         )
         for name, r in data.items()
     ]
+    lines += [
+        "",
+        "summed over the sessions, per tree and pass: located of visible / wrong / hidden ok of hidden",
+    ]
+    for label in trees:
+        for way in ("causal", "both", "live"):
+            rows = [r[label][way] for r in data.values() if way in r.get(label, {})]
+            if rows:
+                total = {
+                    k: sum(r[k] for r in rows)
+                    for k in ("located", "visible", "wrong", "hidden_ok", "hidden")
+                }
+                lines.append(
+                    f"{label:>8s} {way:>6s} {total['located']:6d} of {total['visible']:6d} / {total['wrong']:5d} / "
+                    f"{total['hidden_ok']:4d} of {total['hidden']:4d}   ({len(rows)} sessions)"
+                )
     if agree:
         lines += [
             "",
