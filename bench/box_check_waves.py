@@ -13,6 +13,14 @@ ones), on frames 0, 60 and 150, with the camera's pose of the frame:
 - ``seafloor``: the same box moved 2, 3 and 4.5 box sizes away in 8 directions (inside the frame): how many the
   check takes on something other than the UUV (a box on the seafloor tracked as the UUV), and the saliencies of the
   places detect finds distinct there with no floor (their largest): what a floor would have to stay above.
+- ``steady``: the same boxes checked over frames as the live pipeline now checks them
+  (``TrackingSession.select(..., steady=True)``: followed from that frame for ``STEADY_S``, taken when a vehicle
+  stands out of the mean of its window's saliencies): the vehicle's box kept/snapped/refused, and how many seafloor
+  boxes it takes on something other than the UUV (the taken box's centre further than the box's size from the
+  UUV's true pixel in the frame the check ends on).
+
+``--luma``: the frames' luma planes, as the live pipeline's default tracker reads them (and checks the boxes on),
+instead of BGR.
 
 ``--follow``: also each box taken unchecked (as ``select`` without ``verify``) on frames 0 and 60 of the wave
 conditions and followed for :data:`FOLLOW` frames by the default tracker: of the UUV's box and of the seafloor
@@ -40,22 +48,23 @@ from localizer.pose import camera_pose, take
 from localizer.tracking import Prediction
 from localizer.tracking.detect import DetectParams, detect
 from localizer.tracking.predict import prediction_at, project_uuv
-from localizer.tracking.session import SelectionError, TrackingSession
+from localizer.tracking.session import STEADY_S, SelectionError, TrackingSession
 
 ROOT = Path(__file__).resolve().parents[1]
 FRAMES = (0, 60, 150)
 STEPS = (2.0, 3.0, 4.5)  # box sizes away from the UUV
 NO_FLOOR = DetectParams(min_saliency=0.0)
 FOLLOW = 30  # frames a box taken unchecked is followed (--follow)
+STEADY_FRAMES = 40  # frames read after each of FRAMES for the check over frames (at most 2 x STEADY_S at 30 fps)
 
 
-def images(video: Path, picks) -> dict:
-    """The frames ``picks`` (indices in decoding order) of ``video`` as BGR."""
+def images(video: Path, picks, luma: bool = False) -> dict:
+    """The frames ``picks`` (indices in decoding order) of ``video`` as BGR (``luma``: their luma planes)."""
     out = {}
     with av.open(str(video)) as container:
         for i, frame in enumerate(container.decode(video=0)):
             if i in picks:
-                out[i] = frame.to_ndarray(format="bgr24")
+                out[i] = frame.to_ndarray(format="gray" if luma else "bgr24")
             if i >= max(picks):
                 break
     return out
@@ -69,6 +78,21 @@ def checked(session, image, pose, i: int, box) -> tuple[str, tuple[float, float]
     except SelectionError:
         return "refused", None
     return ("snapped" if tracking.outlined else "kept"), (result.u, result.v)
+
+
+def checked_steady(
+    session, frames: dict, pose, i: int, box
+) -> tuple[str, tuple[float, float] | None, int]:
+    """What the check over frames makes of ``box`` drawn on frame ``i``: (kept/snapped/refused, the taken box's
+    centre, the frame the check ended on)."""
+    tracking = TrackingSession(session.calibration, "default")
+    tracking.select(frames[i], pose, i, box=box, verify=True, keep_drawn=True, steady=True)
+    j = i
+    while tracking.check == "confirming" and j + 1 in frames:
+        j += 1
+        result = tracking.step(frames[j], pose, j)
+    word = tracking.check.split(":")[0]
+    return word, ((result.u, result.v) if word in ("kept", "snapped") else None), j
 
 
 def saliency(
@@ -133,23 +157,31 @@ def followed(path: Path, start: int) -> dict:
     return out
 
 
-def run(path: Path) -> dict:
-    """Per frame: the vehicle's box checked and its saliency; the seafloor boxes taken and their saliencies."""
+def run(path: Path, luma: bool = False) -> dict:
+    """Per frame: the vehicle's box checked (on one frame, over frames) and its saliency; the seafloor boxes taken
+    (by each check) and their saliencies."""
     session = load_session(path)
     w, h = tomllib.loads((path / "session.toml").read_text())["tracker"]["init_bbox"][2:]
     truth = np.genfromtxt(path / "track.csv", delimiter=",", names=True)
     t = session.frames["t"]
     pose = camera_pose(session.calibration, session.telemetry, t)
     rows = []
-    for i, image in images(session.video_path, set(FRAMES)).items():
+    frames = images(
+        session.video_path,
+        {j for i in FRAMES for j in range(i, min(i + STEADY_FRAMES, len(t)))},
+        luma,
+    )
+    for i in FRAMES:
+        image = frames[i]
         H, W = image.shape[:2]
         u, v = float(truth["u"][i]), float(truth["v"][i])
         if not (math.isfinite(u) and math.isfinite(v)):  # the UUV hidden in this frame
             continue
         box = [round(u - w / 2), round(v - h / 2), w, h]
         word, _ = checked(session, image, pose, i, box)
+        steady, _, _ = checked_steady(session, frames, pose, i, box)
         s, _, _ = saliency(image, pose, i, session, u, v, box)
-        taken, distinct = 0, []
+        taken, steady_taken, distinct = 0, 0, []
         for k in STEPS:
             for a in range(8):
                 cu = u + k * w * math.cos(a * math.pi / 4)
@@ -160,6 +192,11 @@ def run(path: Path) -> dict:
                 what, at = checked(session, image, pose, i, sea)
                 if what != "refused" and math.hypot(at[0] - u, at[1] - v) > max(w, h):
                     taken += 1
+                what, at, j = checked_steady(session, frames, pose, i, sea)
+                if what != "refused" and not (
+                    math.hypot(at[0] - truth["u"][j], at[1] - truth["v"][j]) <= max(w, h)
+                ):
+                    steady_taken += 1
                 s_sea, su, sv = saliency(image, pose, i, session, cu, cv_, sea)
                 if s_sea is not None and math.hypot(su - u, sv - v) > max(w, h):
                     distinct.append(s_sea)
@@ -169,6 +206,8 @@ def run(path: Path) -> dict:
                 "vehicle": word,
                 "vehicle_saliency": s,
                 "seafloor_taken": taken,
+                "vehicle_steady": steady,
+                "seafloor_taken_steady": steady_taken,
                 "seafloor_distinct": sorted(distinct),
             }
         )
@@ -180,22 +219,45 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("/tmp/h1-waves"))
     parser.add_argument("--out", type=Path)
     parser.add_argument("--follow", action="store_true", help="also boxes followed for a second")
+    parser.add_argument(
+        "--luma", action="store_true", help="the frames' luma planes (as live) instead of BGR"
+    )
+    parser.add_argument("--only", nargs="*", help="only these sessions (names)")
     args = parser.parse_args()
     sessions = sorted(p for p in args.work.glob("w*") if (p / "session.toml").exists())
     sessions += sorted((ROOT / "sim_fixtures" / "bundled").glob("*/"))
-    results = [run(p) for p in sessions if (p / "track.csv").exists()]
+    if args.only:
+        sessions = [p for p in sessions if p.name in args.only]
+    results = [run(p, args.luma) for p in sessions if (p / "track.csv").exists()]
     p = DetectParams()
-    head = f"The live box check (min_saliency {p.min_saliency:g}, distinct {p.distinct:g}) on the UUV and the seafloor"
-    columns = "session                frame  vehicle  saliency  seafloor boxes taken  seafloor distinct (largest 3)"
-    lines = [f"{head}, frames {FRAMES}", columns]
+    head = (
+        f"The live box check on one frame (min_saliency {p.min_saliency:g}, distinct {p.distinct:g}) and over "
+        f"{STEADY_S:g} s of frames (steady) on the UUV and the seafloor, frames {FRAMES}, "
+        f"{'luma' if args.luma else 'BGR'}"
+    )
+    columns = (
+        "session                frame  vehicle  saliency  seafloor boxes taken  steady: vehicle  seafloor taken"
+        "  seafloor distinct (largest 3)"
+    )
+    lines = [head, columns]
     for r in results:
         for row in r["rows"]:
             s = row["vehicle_saliency"]
             top = ", ".join(f"{x:.1f}" for x in row["seafloor_distinct"][-3:])
             lines.append(
                 f"{r['session']:22s} {row['frame']:5d}  {row['vehicle']:8s} "
-                f"{'-' if s is None else f'{s:.1f}':>8s}  {row['seafloor_taken']:20d}  {top}"
+                f"{'-' if s is None else f'{s:.1f}':>8s}  {row['seafloor_taken']:20d}  "
+                f"        {row['vehicle_steady']:8s}  {row['seafloor_taken_steady']:14d}  {top}"
             )
+    for name, key in (("one frame", "seafloor_taken"), ("steady", "seafloor_taken_steady")):
+        rows = [row for r in results for row in r["rows"]]
+        kept = sum(
+            row["vehicle" if key == "seafloor_taken" else "vehicle_steady"] != "refused"
+            for row in rows
+        )
+        lines.append(
+            f"{name}: UUV boxes taken {kept} of {len(rows)}, seafloor boxes taken {sum(row[key] for row in rows)}"
+        )
     follows = []
     if args.follow:
         lines += [

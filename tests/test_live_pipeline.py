@@ -18,6 +18,7 @@ from localizer.calibration import Calibration
 from localizer.fix import Fix
 from localizer.pose import CameraPose, camera_pose
 from localizer.telemetry import Telemetry
+from localizer.tracking.session import STEADY_S
 
 CAL = """
 [camera]
@@ -112,12 +113,20 @@ def test_operator_commands_run_between_frames_on_held_frames():
             await feed(pipeline, range(20))
             assert {f.status for f in fixes} == {"released"}  # init_bbox did not take over
             tr = session.track
-            u, v = np.interp(t[12], tr["t"], tr["u"]), np.interp(t[12], tr["t"], tr["v"])
+            u, v = np.interp(t[9], tr["t"], tr["u"]), np.interp(t[9], tr["t"], tr["v"])
             w, h = cal.init_bbox[2:]
-            answer = await pipeline.select(12, box=(u - (w - 1) / 2, v - (h - 1) / 2, w, h))
+            # a box on the seafloor three box sizes off the UUV: refused on the held frames it was followed in
+            with pytest.raises(
+                SelectionError,
+                match=r"no vehicle-sized object stands out .* over \d+ of \d+ frames",
+            ):
+                await pipeline.select(9, box=(u + 2.5 * w, v - (h - 1) / 2, w, h))
+            assert pipeline.target["state"] == "awaiting_target"
+            # the held frames after frame 9 span STEADY_S (0.3 s): checked on them
+            answer = await pipeline.select(9, box=(u - (w - 1) / 2, v - (h - 1) / 2, w, h))
             assert (
-                answer["frame"] == 12
-                and answer["caught_up"] == 7
+                answer["frame"] == 9
+                and answer["caught_up"] == 10
                 and answer["target"]["state"] == "tracking"
             )
             with pytest.raises(
@@ -170,7 +179,8 @@ def test_a_frames_pose_is_computed_once_for_every_uuv(cal_dict, make_telemetry):
 def test_a_grey_tracker_reads_the_luma_plane_as_skyfix_process_does():
     """Frames handed over with their luma plane beside BGR (as the live reader hands them) are tracked as ``skyfix
     process`` tracks the video: the same status and pixel, frame for frame, through an occlusion; the same frames
-    in BGR alone are tracked on the conversion's other grey levels, and some pixels differ."""
+    in BGR alone are tracked on the conversion's other grey levels, and some pixels differ. Live, ``init_bbox`` is
+    checked over the frames of its first ``STEADY_S`` (no fix meanwhile); from then on the same as offline."""
     import asyncio
     from pathlib import Path
 
@@ -203,16 +213,21 @@ def test_a_grey_tracker_reads_the_luma_plane_as_skyfix_process_does():
         ]
 
     seen, bgr_only = asyncio.run(live(True)), asyncio.run(live(False))
-    ok = offline.status == "ok"
-    assert 0 < ok.sum() < len(frames)  # tracked, and lost while hidden
-    assert [np.isfinite(f.u) for f in seen] == ok.tolist()
-    assert np.array_equal([f.u for f in seen], offline.u, equal_nan=True)
-    assert np.array_equal([f.v for f in seen], offline.v, equal_nan=True)
+    checked = next(i for i, f in enumerate(seen) if f.status != "awaiting_target")
+    assert checked - round(STEADY_S * 30) in (
+        0,
+        1,
+    )  # the first frame STEADY_S on (30 fps, the times' rounding)
+    ok = offline.status[checked:] == "ok"
+    assert 0 < ok.sum() < len(ok)  # tracked, and lost while hidden
+    assert [np.isfinite(f.u) for f in seen[checked:]] == ok.tolist()
+    assert np.array_equal([f.u for f in seen[checked:]], offline.u[checked:], equal_nan=True)
+    assert np.array_equal([f.v for f in seen[checked:]], offline.v[checked:], equal_nan=True)
     assert not np.array_equal([f.u for f in bgr_only], offline.u, equal_nan=True)
 
 
 def _nadir_hover_boxed(dx_px: int, attitude_from_frame: int = 0):
-    """nadir_hover with its ``init_bbox`` moved ``dx_px`` right, its first 15 frames (luma and BGR) and its
+    """nadir_hover with its ``init_bbox`` moved ``dx_px`` right, its first 20 frames (luma and BGR) and its
     telemetry, whose attitude starts after frame ``attitude_from_frame - 1`` (the frames before it have no pose)."""
     import copy
     from dataclasses import replace
@@ -238,7 +253,7 @@ def _nadir_hover_boxed(dx_px: int, attitude_from_frame: int = 0):
     box = (x + dx_px, y, w, h)
     cal = replace(session.calibration, tracker=replace(session.calibration.tracker, init_bbox=box))
     with open_video(session.video_path, grey=True) as video:
-        frames = [f for f, _ in zip(video, range(15), strict=False)]
+        frames = [f for f, _ in zip(video, range(20), strict=False)]
     return session, cal, tel, box, frames
 
 
@@ -267,24 +282,30 @@ def _assert_on_the_vehicle(ok: list[Fix], truth) -> None:
     assert np.all(np.abs(du) < 3.0) and np.all(np.abs(dv) < 3.0), (du, dv)
 
 
-@pytest.mark.parametrize("dx_px", [0, 25, -25])
+@pytest.mark.parametrize("dx_px", [0, 20, -35])
 def test_a_configured_init_bbox_off_the_vehicle_is_snapped_or_refused(dx_px, caplog):
-    """``[tracker] init_bbox`` is checked on the first frame as an operator's box is: on the vehicle it is kept as
-    drawn; 25 px to the right (still over the vehicle's edge) it is snapped onto the vehicle's outline; 25 px to the
-    left (open water) it is refused, and the run awaits a target. No fix is ok with the box's offset, whichever:
-    each ok fix's pixel is within 3 px of the simulator's (the vehicle is about 28 px long). nadir_hover's frames."""
+    """``[tracker] init_bbox`` is checked from the first frame as an operator's box is, over the frames of
+    ``STEADY_S`` (``confirming`` meanwhile, no fix): on the vehicle it is kept as drawn; 20 px to the right (still
+    over the vehicle's edge) it is snapped onto the vehicle's outline; 35 px to the left (open water) it is refused,
+    and the run awaits a target. No fix is ok with the box's offset, whichever: each ok fix's pixel is within 3 px of
+    the simulator's (the vehicle is about 28 px long). nadir_hover's frames. (The box is 33 px wide: 25 px either
+    side it still holds the vehicle's edge, about 5 px of it, and the one-frame check took or refused it by the
+    frame: 25 px to the right it refused it on frames 5 and 10, 25 px to the left on frame 0 alone.)"""
     session, cal, tel, box, frames = _nadir_hover_boxed(dx_px)
     with caplog.at_level("WARNING", logger="skyfix.pipeline"):
-        pipeline, fixes, _ = _live_boxed(session, cal, tel, frames)
+        pipeline, fixes, said_then = _live_boxed(session, cal, tel, frames)
     ok = [f for f in fixes if f.ok]
     _assert_on_the_vehicle(ok, session.track)
+    # the frames of the check (no fix): up to the first STEADY_S on (at 30 fps, with the times' rounding)
+    checking = next((i for i, s in enumerate(said_then) if not s.startswith("confirming")), None)
+    assert checking in (round(STEADY_S * 30), round(STEADY_S * 30) + 1), said_then
+    assert not any(f.ok for f in fixes[:checking])
     said = pipeline.target["init_bbox"]
     if dx_px == 0:
-        assert said == "kept" and len(ok) == len(frames) and not caplog.records
+        assert said == "kept" and len(ok) == len(frames) - checking and not caplog.records
     elif dx_px > 0:
-        assert said.startswith(f"snapped: {list(box)} is off the vehicle") and len(ok) == len(
-            frames
-        )
+        assert said.startswith(f"snapped: {list(box)} is off the vehicle")
+        assert len(ok) == len(frames) - checking
         assert [r.getMessage() for r in caplog.records] == [f"tracker.init_bbox on frame 0: {said}"]
     else:
         assert not ok and pipeline.target["state"] == "awaiting_target"
@@ -293,27 +314,31 @@ def test_a_configured_init_bbox_off_the_vehicle_is_snapped_or_refused(dx_px, cap
         assert f"tracker.init_bbox on frame 0: box {list(box)}" in record.getMessage()
 
 
-@pytest.mark.parametrize("dx_px", [0, 25, -25])
+@pytest.mark.parametrize("dx_px", [0, 20, -35])
 def test_an_init_bbox_taken_without_a_pose_is_checked_on_the_first_frame_with_one(dx_px, caplog):
     """The UAV's attitude arrives after the first frames (the video starts first): ``init_bbox`` cannot be checked
-    on frame 0 (no pose to size the vehicle) and is tracked unchecked; on the first frame tracked with a pose it is
-    checked as it would have been: on the vehicle kept, 25 px right snapped onto the outline, 25 px left (open
-    water, tracked as the seafloor until then) refused. Without the late check the -25 px box gives ok fixes 25 px
-    off the vehicle once the attitude arrives. nadir_hover's frames."""
+    from frame 0 (no pose to size the vehicle) and is tracked unchecked; from the first frame tracked with a pose it
+    is checked as it would have been: on the vehicle kept, 20 px right snapped onto the outline, 35 px left (open
+    water, tracked as the seafloor until then) refused. Without the late check a box on open water
+    gives ok fixes off the vehicle once the attitude arrives. nadir_hover's frames."""
     session, cal, tel, _, frames = _nadir_hover_boxed(dx_px, attitude_from_frame=4)
     with caplog.at_level("WARNING", logger="skyfix.pipeline"):
         pipeline, fixes, said = _live_boxed(session, cal, tel, frames)
-    assert not any(f.ok for f in fixes[:4])  # no pose, no fix
+    # the frames of the check from frame 4 (no fix): up to the first STEADY_S on (30 fps, the times' rounding)
+    checked = next(i for i, s in enumerate(said) if i > 4 and not s.startswith("confirming"))
+    assert checked - 4 in (round(STEADY_S * 30), round(STEADY_S * 30) + 1), said
+    assert not any(f.ok for f in fixes[:checked])  # no pose, no fix; then checking
     assert all(s.startswith("unchecked: no camera pose on frame 0") for s in said[:4]), said[:4]
+    assert all(s.endswith("from frame 4, the first with a camera pose") for s in said[4:checked])
     ok = [f for f in fixes if f.ok]
     _assert_on_the_vehicle(ok, session.track)
     final = said[-1]
     if dx_px == 0:
         assert final == "kept: checked on frame 4, the first with a camera pose"
-        assert len(ok) == len(frames) - 4 and not caplog.records
+        assert len(ok) == len(frames) - checked and not caplog.records
     elif dx_px > 0:
         assert final.startswith("snapped on frame 4, the first with a camera pose: the tracked box")
-        assert len(ok) == len(frames) - 4
+        assert len(ok) == len(frames) - checked
         assert [r.getMessage() for r in caplog.records] == [f"tracker.init_bbox: {final}"]
     else:
         assert not ok and pipeline.target["state"] == "awaiting_target"

@@ -198,8 +198,9 @@ def test_select_release_and_select_again_over_zenoh(tmp_path):
             ok, answer = _ask(zs, "skyfix/cmd/release", b"garbage")
             assert not ok and "takes none" in answer["error"]
 
-            # a box around the UUV on a frame the operator saw a moment ago (the simulator's truth pixel there)
-            seen = live.fixes()[-10]
+            # a box around the UUV on a frame the operator saw a moment ago (the simulator's truth pixel there): the
+            # held frames after it span the box's check over frames (STEADY_S, 0.3 s), so it is taken at once
+            seen = live.fixes()[-20]
             u, v = _track_pixel(seen["t"] - live.shift)
             w, h = 33, 34  # the vehicle's size in this session's first frame
             ok, answer = _ask(

@@ -38,11 +38,17 @@ Operator commands (:meth:`Pipeline.select`, :meth:`Pipeline.release`,
 refers to a frame the operator saw: the session is re-initialised there and then
 catches up through the held frames after it before the next live frame. An operator's
 box must hold a vehicle-sized object standing out of the water (a box on open water is
-refused, not tracked as the seafloor). ``init_bbox`` is checked the same way on the first frame: kept as drawn when
+refused, not tracked as the seafloor), checked over the frames of the next
+:data:`~localizer.tracking.session.STEADY_S` it is followed in (``TrackingSession.select(..., steady=True)``: through
+wind waves one frame does not tell a deep UUV from a caustic on the seafloor); meanwhile its frames are
+``awaiting_target`` (no fix) and the target's state ``confirming``. A box drawn on a held frame is checked on the
+held frames after it as it catches up: refused at once (SelectionError) when they span the check, else later (a
+warning; the status says). ``init_bbox`` is checked the same way from the first frame: kept as drawn when
 it holds the vehicle's outline, snapped onto the outline when it is off it, refused (awaiting a target) when no
-vehicle stands out in it; one warning names the box, and the status's ``target.init_bbox`` says which. A first
-frame without a camera pose cannot size the vehicle: the box is then tracked unchecked and checked on the first frame
-tracked with a pose (before any fix can be ok, since a fix needs the pose). A release
+vehicle stands out in it; one warning names the box, and the status's ``target.init_bbox`` says which (``confirming``
+meanwhile). A first frame without a camera pose cannot size the vehicle: the box is then tracked unchecked and
+checked from the first frame tracked with a pose (before any fix can be ok, since a fix needs the pose). A click is
+checked on its frame alone. A release
 also turns frames tracked before it but not yet located into ``released`` ones: no
 fix goes out after it.
 """
@@ -69,7 +75,7 @@ from localizer.timeline import Series
 from localizer.tracking import GREY_TRACKERS, TrackResult
 from localizer.tracking.centroid import CentroidSteer
 from localizer.tracking.predict import window as search_window
-from localizer.tracking.session import Prior, SelectionError, TrackingSession
+from localizer.tracking.session import STEADY_S, Prior, SelectionError, TrackingSession
 
 log = logging.getLogger("skyfix.pipeline")
 
@@ -134,6 +140,17 @@ class Tracked:
     # where the prediction had the UUV searched
     window: tuple[float, float, float, float] | None = None
     lock: int = 0  # the operator's commands before it was tracked
+
+
+@dataclass(frozen=True)
+class _Checking:
+    """A box being checked over frames: the frame it was drawn on (or checked from), the box, whether it is
+    ``init_bbox`` (``late``: checked from the first frame with a camera pose)."""
+
+    frame: int
+    box: tuple
+    init: bool = False
+    late: bool = False
 
 
 class Pipeline:
@@ -218,6 +235,8 @@ class Pipeline:
         # init_bbox was taken without a camera pose: checked on the first frame tracked with one (unless a command
         # came first)
         self._unchecked = False
+        # a box being checked over frames (init_bbox's, or the operator's): how to name its verdict (see _checked)
+        self._checking: _Checking | None = None
         # the tracking session's status after the latest frame or command
         self.target = self._status()
         #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
@@ -287,16 +306,24 @@ class Pipeline:
             )
         later = [h for h in self._held if h.frame.index > held.frame.index]
 
-        def select_and_catch_up() -> TrackResult:
+        def select_and_catch_up() -> TrackResult | None:
+            """The selection and the held frames after it; None: the box refused on them."""
             self.centre.restart()
+            image = self._seen(held.frame)
             result = self._steered(
                 held,
                 self.session.select(
-                    self._seen(held.frame), held.pose, box=box, point=point, verify=True
+                    image, held.pose, box=box, point=point, verify=True, steady=box is not None
                 ),
             )
+            self._checking = _Checking(held.frame.index, box) if self.session.check else None
             for h in later:
-                self._steered(h, self.session.step(self._seen(h.frame), h.pose))
+                result = self._steered(h, self.session.step(self._seen(h.frame), h.pose))
+                if self._checking is not None and self.session.check != "confirming":
+                    self._checking = None
+                    if self.session.check.startswith("refused"):
+                        self.centre.restart()
+                        return None
             return result
 
         result = await asyncio.get_running_loop().run_in_executor(
@@ -305,6 +332,8 @@ class Pipeline:
         self._started = True
         self.commands += 1
         self.target = self._status()
+        if result is None:  # refused by the check over the held frames: awaiting a target
+            raise SelectionError(self.session.check.removeprefix("refused: "))
         log.info(
             "target selected on frame %d (%s %s), caught up %d frames: %s",
             held.frame.index,
@@ -317,7 +346,7 @@ class Pipeline:
             "frame": held.frame.index,
             "u": result.u,
             "v": result.v,
-            "box": list(result.box),
+            "box": list(result.box) if result.box else None,
             "caught_up": len(later),
             "latest_frame": self._latest_frame(),
             "target": self.target,
@@ -419,21 +448,25 @@ class Pipeline:
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
                     )
         result = self.session.step(image, pose, prior=prior)
+        if self._checking is not None and self.session.check != "confirming":
+            self._checked(frame, result)
         if self._unchecked and not self.commands and result.ok and pose.status[0] == "ok":
             result = self._check_late(frame, image, pose, result)
         return self.centre.after(self.session, image, result, frame.t_unix)
 
     def _init_select(self, frame: LiveFrame, image, pose: CameraPose) -> TrackResult:
-        """The first frame selected with ``[tracker] init_bbox``, checked as an operator's box is: kept as drawn on
-        the vehicle's outline, snapped onto it when off (logged), SelectionError when no vehicle stands out in it."""
+        """The first frame selected with ``[tracker] init_bbox``, checked over the frames after it as an operator's box
+        is (:meth:`_checked` names the verdict); without a camera pose, taken unchecked (:meth:`_check_late`)."""
         box = self.cal.init_bbox
-        result = self.session.select(image, pose, box=box, verify=True, keep_drawn=True)
-        if self.session.outlined:
+        result = self.session.select(
+            image, pose, box=box, verify=True, keep_drawn=True, steady=True
+        )
+        if self.session.check == "confirming":
+            self._checking = _Checking(frame.index, box, init=True)
             self.init_bbox = (
-                f"snapped: {list(box)} is off the vehicle; its outline {list(result.box)} taken"
+                f"confirming: checked over the frames of {STEADY_S:g} s from frame {frame.index}"
             )
-            log.warning("tracker.init_bbox on frame %d: %s", frame.index, self.init_bbox)
-        else:
+        else:  # no pose to size the vehicle there
             self._unchecked = pose.status[0] != "ok"
             self.init_bbox = (
                 f"unchecked: no camera pose on frame {frame.index} ({pose.status[0]})"
@@ -445,28 +478,63 @@ class Pipeline:
     def _check_late(
         self, frame: LiveFrame, image, pose: CameraPose, result: TrackResult
     ) -> TrackResult:
-        """An ``init_bbox`` taken unchecked (its frame had no camera pose to size the vehicle), checked on the first
-        frame tracked with a pose as it would have been on its own: the tracked box kept, snapped onto the vehicle's
-        outline, or refused (awaiting a target). Without this, a box drawn on open water would be tracked as the
-        seafloor and every fix once the telemetry arrives would be wrong."""
+        """An ``init_bbox`` taken unchecked (its frame had no camera pose to size the vehicle), checked from the
+        first frame tracked with a pose as it would have been from its own: the tracked box kept, snapped onto the
+        vehicle's outline, or refused (awaiting a target). Without this, a box drawn on open water would be tracked
+        as the seafloor and every fix once the telemetry arrives would be wrong."""
         self._unchecked = False
-        try:
-            checked = self.session.select(image, pose, box=result.box, verify=True, keep_drawn=True)
-        except SelectionError as e:
-            self.session.acquire()
-            self.centre.restart()
-            self.init_bbox = f"refused on frame {frame.index}, the first with a camera pose: {e}"
-            log.warning("tracker.init_bbox: %s; awaiting a target", self.init_bbox)
-            return TrackResult("awaiting_target")
-        if self.session.outlined:
+        checking = self.session.select(
+            image, pose, box=result.box, verify=True, keep_drawn=True, steady=True
+        )
+        if (
+            self.session.check != "confirming"
+        ):  # the box's pixel not on the water: nothing to size the vehicle
+            self.init_bbox = f"kept: checked on frame {frame.index}, the first with a camera pose"
+            return checking
+        self._checking = _Checking(frame.index, result.box, init=True, late=True)
+        self.init_bbox = (
+            f"confirming: checked over the frames of {STEADY_S:g} s from frame {frame.index}, the first with a "
+            "camera pose"
+        )
+        return checking
+
+    def _checked(self, frame: LiveFrame, result: TrackResult) -> None:
+        """A box checked over frames taken or refused on this frame: said (init_bbox's status) and logged."""
+        checking, self._checking = self._checking, None
+        verdict = self.session.check
+        if verdict is None:  # a command came first
+            return
+        if verdict != "kept":
+            self.centre.restart()  # the steer's outline was of the box as drawn
+        if not checking.init:
+            if verdict.startswith("refused"):
+                log.warning("selection on frame %d %s; awaiting a target", checking.frame, verdict)
+            return
+        first = f"on frame {checking.frame}, the first with a camera pose" if checking.late else ""
+        box = list(checking.box)
+        if verdict == "kept":
+            self.init_bbox = f"kept: checked {first}" if first else "kept"
+            return
+        if verdict == "snapped":
             self.init_bbox = (
-                f"snapped on frame {frame.index}, the first with a camera pose: the tracked box "
-                f"{list(result.box)} is off the vehicle; its outline {list(checked.box)} taken"
+                f"snapped {first}: the tracked box {box} is off the vehicle; its outline {list(result.box)} taken"
+                if first
+                else f"snapped: {box} is off the vehicle; its outline {list(result.box)} taken"
             )
-            log.warning("tracker.init_bbox: %s", self.init_bbox)
-            return checked
-        self.init_bbox = f"kept: checked on frame {frame.index}, the first with a camera pose"
-        return result
+        else:
+            self.init_bbox = (
+                f"{verdict.replace('refused', f'refused {first}', 1)}" if first else verdict
+            )
+        awaiting = "; awaiting a target" if verdict.startswith("refused") else ""
+        if first:
+            log.warning("tracker.init_bbox: %s%s", self.init_bbox, awaiting)
+        else:
+            log.warning(
+                "tracker.init_bbox on frame %d: %s%s",
+                checking.frame,
+                self.init_bbox.removeprefix("refused: "),
+                awaiting,
+            )
 
     def _steered(self, held: Tracked, result: TrackResult) -> TrackResult:
         """A held frame's ``result`` (a selection, a catch-up) steered as :meth:`_step`'s."""

@@ -74,10 +74,32 @@ def _odd(x: float) -> int:
     return max(3, round(x) | 1)
 
 
+@dataclass(frozen=True)
+class Saliency:
+    """Each place's saliency in a prediction's window (see the module doc): ``map`` per block (0 outside the window),
+    the blocks' centres ``bu`` (columns) and ``bv`` (rows) in full-resolution pixels, the block's side ``f`` and the
+    footprint's diagonal ``diag`` (pixels)."""
+
+    map: np.ndarray
+    bu: np.ndarray
+    bv: np.ndarray
+    f: int
+    diag: float
+
+
 def detect(
     frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams | None = None
 ) -> Detection | None:
     """The most salient vehicle-sized object in the prediction's window, or None (see the module doc)."""
+    p = params or DetectParams()
+    found = saliency(frame_bgr, prediction, p)
+    return None if found is None else standing_out(frame_bgr, found, p)
+
+
+def saliency(
+    frame_bgr: np.ndarray, prediction: Prediction, params: DetectParams | None = None
+) -> Saliency | None:
+    """Each place's saliency in the prediction's window (steps 1-2 of the module doc); None: no window to read."""
     p = params or DetectParams()
     side = math.sqrt(prediction.width_px * prediction.height_px)
     diag = math.hypot(prediction.width_px, prediction.height_px)
@@ -104,20 +126,28 @@ def detect(
     background = cv2.blur(small, (_odd(p.background_sides * s),) * 2).reshape(h, w, -1)
     energy = np.sum((small - background) ** 2, axis=2)
     energy[shade(small, background, s, p)] = 0.0
-    saliency = cv2.blur(energy, (_odd(0.8 * s),) * 2) / max(float(np.median(energy)), 1e-6)
+    ratio = cv2.blur(energy, (_odd(0.8 * s),) * 2) / max(float(np.median(energy)), 1e-6)
     # only places within the window (block centres in full-resolution pixels)
     bu = x0 + np.arange(w) * f + (f - 1) / 2.0
     bv = y0 + np.arange(h) * f + (f - 1) / 2.0
     inside = np.hypot(bu[None, :] - prediction.u, bv[:, None] - prediction.v) <= radius
-    saliency = np.where(inside, saliency, 0.0).astype(np.float32)
-    _, best, _, (j, i) = cv2.minMaxLoc(saliency)
+    return Saliency(np.where(inside, ratio, 0.0).astype(np.float32), bu, bv, f, diag)
+
+
+def standing_out(
+    frame_bgr: np.ndarray, found: Saliency, params: DetectParams | None = None
+) -> Detection | None:
+    """The best place of ``found`` (the saliencies of ``frame_bgr``'s window) when it stands out, with its outline in
+    ``frame_bgr`` (steps 3-4 of the module doc); None otherwise."""
+    p = params or DetectParams()
+    _, best, _, (j, i) = cv2.minMaxLoc(found.map)
     if best < p.min_saliency:
         return None
-    elsewhere = saliency.copy()
-    cv2.circle(elsewhere, (j, i), math.ceil(1.5 * diag / f), 0.0, -1)
+    elsewhere = found.map.copy()
+    cv2.circle(elsewhere, (j, i), math.ceil(1.5 * found.diag / found.f), 0.0, -1)
     if best < p.distinct * float(elsewhere.max()):
         return None
-    box = outline(frame_bgr, float(bu[j]), float(bv[i]), diag, p)
+    box = outline(frame_bgr, float(found.bu[j]), float(found.bv[i]), found.diag, p)
     if box is None:
         return None
     x, y, bw, bh = box

@@ -18,7 +18,15 @@ once by the caller and shared with the geometry.
   With ``keep_drawn`` as well (a configured ``init_bbox``, drawn on a recorded frame), a
   box whose centre is within :data:`DRAWN_AGREES` outline errors of the outline's is kept
   as drawn (a box drawn on the frame is exact, an outline pixels off); one further off is
-  snapped onto the outline.
+  snapped onto the outline. With ``steady`` as well (the live service's boxes), the box is
+  checked over the frames of the next :data:`STEADY_S` instead of its own alone: followed
+  from it (its frames ``awaiting_target``, the state ``CONFIRMING``, :attr:`~TrackingSession.check`
+  ``"confirming"``), then taken when a vehicle-sized object stands out of the mean of its
+  window's saliencies over them (:class:`~localizer.tracking.steady.SteadyWindow`; its floor
+  :data:`STEADY_MIN_SALIENCY`), refused (awaiting a target) otherwise. Through wind waves one
+  frame does not tell a small, deep UUV from the seafloor: the waves break the vehicle's image
+  up and caustics on the seafloor stand out as much, while over a fraction of a second a
+  caustic's flicker averages out and the vehicle's saliency stays.
 - :meth:`~TrackingSession.step`: the next frame. Its prediction is the UUV's last
   sighting moved by what the camera did since: the sighting is located (an *anchor*,
   re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
@@ -46,7 +54,7 @@ Pure: no I/O, no clock; a frame's time is its pose's ``t_unix``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -64,6 +72,7 @@ from .predict import (
     top_face_pixel,
 )
 from .sigma import OUTLINED_SHARE, jitter2_px2, pixel_sigma_px
+from .steady import SteadyWindow
 from .target import Target, TargetParams, TargetState
 
 #: A sighting's located position is reused for the predictions of this many frames, then located afresh.
@@ -78,6 +87,13 @@ DRAWN_AGREES = 3.0
 STOOD_OUT_DISTINCT = 0.95
 #: ... while it is at most this much older than the latest sighting (s)
 STOOD_OUT_WITHIN_S = 0.5
+#: A box checked over frames (``select(..., steady=True)``) is followed this long (s) before it is taken or refused ...
+STEADY_S = 0.3
+#: ... in at least this share of the frames ...
+STEADY_FOLLOWED = 0.5
+#: ... and taken when the mean of its window's saliencies over them stands out this much (the one-frame
+#: ``min_saliency``'s counterpart: a caustic's flicker averages down, a vehicle's saliency stays)
+STEADY_MIN_SALIENCY = 18.0
 #: The UUV's speed is measured over its sightings of the last this many seconds ...
 SPEED_WINDOW_S = 0.5
 #: ... at least this long apart ...
@@ -142,6 +158,11 @@ class TrackingSession:
         self.last = TrackResult("awaiting_target")
         # the vehicle's apparent length at the latest prediction or selection
         self._length_px = math.nan
+        # a box being checked over frames (``select(..., steady=True)``): see :meth:`_select_steady`
+        self._steady: _Steady | None = None
+        # how the latest box checked over frames was taken: "confirming", "kept", "snapped", "refused: <why>";
+        # None: no such box since the latest selection, release or acquire
+        self.check: str | None = None
         self._forget()
         self._awaiting_frames = 0
         self._noted_state = None
@@ -150,7 +171,8 @@ class TrackingSession:
 
     @property
     def state(self) -> TargetState:
-        return self.target.state
+        """The target's state; ``CONFIRMING`` while a box is checked over frames."""
+        return TargetState.CONFIRMING if self._steady is not None else self.target.state
 
     @property
     def outlined(self) -> bool:
@@ -168,6 +190,7 @@ class TrackingSession:
         point=None,
         verify: bool = False,
         keep_drawn: bool = False,
+        steady: bool = False,
     ) -> TrackResult:
         """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of this frame, from now on.
 
@@ -185,6 +208,8 @@ class TrackingSession:
                 f"{'box' if box is not None else 'point'} {list(given)}: expected finite pixels"
             )
         one = take(pose, [i])
+        if verify and steady and box is not None:
+            return self._select_steady(frame_bgr, one, box, keep_drawn)
         outlined = None
         if point is not None:
             outlined = self._outline_click(frame_bgr, one, point)
@@ -224,6 +249,16 @@ class TrackingSession:
         self, frame_bgr, one: CameraPose, box, centre, origin: str, outlined: bool
     ) -> TrackResult:
         """Tracking starts on ``box`` with the top face's pixel ``centre`` in the one-frame pose ``one``."""
+        return self._note(
+            float(one.t_unix[0]), self._begin(frame_bgr, one, box, centre, origin, outlined)
+        )
+
+    def _begin(
+        self, frame_bgr, one: CameraPose, box, centre, origin: str, outlined: bool
+    ) -> TrackResult:
+        """:meth:`_track_from`'s start, its result not yet noted."""
+        self._steady = None
+        self.check = None
         anchor, px_per_m = self._locate(one, centre)
         try:
             result = self.target.select(frame_bgr, box, centre, px_per_m)
@@ -234,16 +269,18 @@ class TrackingSession:
         self._outlined = outlined
         self.prediction = self.sought = None
         self._length_px = VEHICLE_FOOTPRINT_M[0] * px_per_m
-        return self._note(float(one.t_unix[0]), result)
+        return result
 
     def release(self) -> None:
         """Let go of the target: every frame is ``released`` until a new selection or :meth:`acquire`."""
         self.target.release()
+        self._steady, self.check = None, None
         self._forget()
 
     def acquire(self) -> None:
         """Drop the target and await one: a selection, or automatic acquisition from a prior."""
         self.target.acquire()
+        self._steady, self.check = None, None
         self._forget()
 
     # -- per frame ----------------------------------------------------------------------------------
@@ -268,6 +305,8 @@ class TrackingSession:
                     self._stood_out = self._seen
             elif self.target.state is TargetState.AWAITING_TARGET:
                 self._forget()  # a candidate that did not confirm
+            if self._steady is not None:
+                result = self._checked(frame_bgr, pose, i, result)
         return self._note(float(pose.t_unix[i]), result)
 
     def status(self) -> dict:
@@ -485,27 +524,91 @@ class TrackingSession:
             )
         return found.box
 
-    def _outline_box(self, frame_bgr, one: CameraPose, box) -> tuple[int, int, int, int] | None:
-        """The outline of the vehicle-sized object standing out of the water within ``box`` (see the module doc);
-        SelectionError if there is none; None without a pose to size the vehicle."""
+    def _box_prediction(self, one: CameraPose, box) -> Prediction | None:
+        """The window :func:`~localizer.tracking.detect.detect` reads for a box (x, y, w, h): centred on it, the
+        vehicle's size at its centre, its half-diagonal 3 sigma; None without a pose to size the vehicle."""
         x, y, w, h = (float(c) for c in box)
         cu, cv_ = x + (w - 1) / 2.0, y + (h - 1) / 2.0
         _, px_per_m = self._locate(one, (cu, cv_))
         guess = prediction_at(cu, cv_, px_per_m, 0.0)
         if guess is None:
-            return None  # no pose to size the vehicle: the operator's box is all there is
+            return None
         reach = math.hypot(w, h) / 2.0 / self.detect_params.search_sigmas
-        found = detect(
-            frame_bgr,
-            Prediction(cu, cv_, guess.width_px, guess.height_px, reach, px_per_m),
-            self.detect_params,
-        )
-        if found is None or not _overlap(found.box, (x, y, w, h)):
-            raise SelectionError(
-                f"box [{x:g}, {y:g}, {w:g}, {h:g}]: no vehicle-sized object stands out of the "
-                "water in it; draw the box around the UUV"
-            )
+        return Prediction(cu, cv_, guess.width_px, guess.height_px, reach, px_per_m)
+
+    def _outline_box(self, frame_bgr, one: CameraPose, box) -> tuple[int, int, int, int] | None:
+        """The outline of the vehicle-sized object standing out of the water within ``box`` (see the module doc);
+        SelectionError if there is none; None without a pose to size the vehicle."""
+        window = self._box_prediction(one, box)
+        if window is None:
+            return None  # no pose to size the vehicle: the operator's box is all there is
+        found = detect(frame_bgr, window, self.detect_params)
+        if found is None or not _overlap(found.box, box):
+            raise SelectionError(f"{_named(box)}: {_NOTHING_IN_BOX}; draw the box around the UUV")
         return found.box
+
+    def _select_steady(self, frame_bgr, one: CameraPose, box, keep_drawn: bool) -> TrackResult:
+        """A box to check over frames (see :meth:`select`): followed from this frame on, its frames
+        ``awaiting_target`` until :meth:`_checked` takes or refuses it. Without a pose to size the vehicle, the box
+        is tracked unchecked, as :meth:`select` does."""
+        window = self._box_prediction(one, box)
+        x, y, w, h = box
+        cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
+        centre = (float(cu[0]), float(cv_[0]))
+        if window is None:
+            return self._track_from(frame_bgr, one, box, centre, "box", False)
+        self._begin(frame_bgr, one, box, centre, "box", False)
+        params = replace(self.detect_params, min_saliency=STEADY_MIN_SALIENCY)
+        self._steady = _Steady(
+            SteadyWindow(window, centre, params), tuple(box), keep_drawn, float(one.t_unix[0])
+        )
+        self._steady.window.add(frame_bgr, centre)
+        self.check = "confirming"
+        return self._note(float(one.t_unix[0]), TrackResult("awaiting_target"))
+
+    def _checked(self, frame_bgr, pose: CameraPose, i: int, result: TrackResult) -> TrackResult:
+        """A frame of a box being checked over frames, ``result`` the target's: ``awaiting_target`` until
+        :data:`STEADY_S` has passed and the box is followed in the frame (at most twice that); then the box
+        refused (awaiting a target; :attr:`check` says why) unless it was followed in :data:`STEADY_FOLLOWED` of
+        the frames and a vehicle-sized object stands out of the mean of its window's saliencies, overlapping the
+        box as followed here: then kept (``keep_drawn``, the box's centre agreeing with the outline's, or with
+        where the mean's object is: an outline in one frame through waves may be a part of it) or snapped onto the
+        outline in this frame, and ``ok``."""
+        steady = self._steady
+        steady.frames += 1
+        if result.ok:
+            steady.window.add(frame_bgr, (result.u, result.v))
+        age_s = float(pose.t_unix[i]) - steady.t0_unix
+        if age_s < STEADY_S or (not result.ok and age_s < 2 * STEADY_S):
+            return TrackResult("awaiting_target", confidence=result.confidence)
+        window, found = steady.window, None
+        if result.ok and window.frames >= STEADY_FOLLOWED * steady.frames:
+            x, y, w, h = steady.box
+            du, dv = result.u - window.start_uv[0], result.v - window.start_uv[1]
+            followed = (round(x + du), round(y + dv), w, h)
+            found = window.detect()
+        if found is None or not _overlap(found.box, followed):
+            box = _named(steady.box)
+            self.acquire()
+            self.check = (
+                f"refused: {box}: {_NOTHING_IN_BOX} over {window.frames} of {steady.frames} "
+                "frames it was followed in; draw the box around the UUV"
+            )
+            return TrackResult("awaiting_target")
+        one = take(pose, [i])
+        pu, pv = window.peak()
+        fw, fh = found.box[2:]
+        if steady.keep_drawn and (
+            self._agrees(one, followed, found.box)
+            or self._agrees(one, followed, (pu - (fw - 1) / 2.0, pv - (fh - 1) / 2.0, fw, fh))
+        ):
+            self._steady, self.check = None, "kept"
+            return result
+        fx, fy, fw, fh = found.box
+        cu, cv_ = top_face_pixel(self.cal, one, [fx + (fw - 1) / 2.0], [fy + (fh - 1) / 2.0])
+        snapped = self._begin(frame_bgr, one, found.box, (float(cu[0]), float(cv_[0])), "box", True)
+        self.check = "snapped"
+        return snapped
 
     def _agrees(self, one: CameraPose, drawn, outline) -> bool:
         """Whether the drawn box's centre is within :data:`DRAWN_AGREES` outline errors of the outline's."""
@@ -539,6 +642,27 @@ class TrackingSession:
         self._outlined = True
         here = prediction_at(centre[0], centre[1], scale, BASE_SIGMA_M)
         return self.target.propose(frame_bgr, found.box, centre, scale, here)
+
+
+#: Why a box is refused: the one-frame check's and the check over frames' words
+_NOTHING_IN_BOX = "no vehicle-sized object stands out of the water in it"
+
+
+def _named(box) -> str:
+    """A box as its refusal names it: ``box [x, y, w, h]``."""
+    return "box [" + ", ".join(f"{float(c):g}" for c in box) + "]"
+
+
+@dataclass
+class _Steady:
+    """A box being checked over frames: the mean window, the box as drawn, whether to keep it as drawn on the
+    outline, the first frame's time, the frames seen since (the first included)."""
+
+    window: SteadyWindow
+    box: tuple
+    keep_drawn: bool
+    t0_unix: float
+    frames: int = 1
 
 
 def _overlap(a, b) -> bool:
