@@ -580,7 +580,10 @@ def _uncertainty_toml(sc: Scenario) -> str:
 def rate_control(crf: int, downlink: DownlinkSpec | None, fps: float) -> list[str]:
     """x264's rate control and GOP options: quality ``crf`` with a keyframe a second (``downlink`` None or without a
     bitrate, and then ``keyframe_s`` sets the GOP); or as a drone's downlink, ``bitrate_mbps`` constant (``-b:v`` =
-    ``-maxrate``, ``-bufsize`` ``buffer_s`` of it) without B-frames (``-bf 0``: each frame sent as it is made)."""
+    ``-maxrate``, ``-bufsize`` ``buffer_s`` of it) without B-frames (``-bf 0``: each frame sent as it is made), on one
+    thread: x264's rate control with a buffer on several frame threads reads the sizes of frames still being encoded,
+    so the same frames came out differently from one render to the next (every decoded frame from the 9th on, in
+    tests/test_sim_waves.py's clip): a scenario renders to the same video every time only on one thread."""
     gop = str(max(1, round((1.0 if downlink is None else downlink.keyframe_s) * fps)))
     if downlink is None or downlink.bitrate_mbps is None:
         return ["-crf", str(crf), "-g", gop]
@@ -596,6 +599,8 @@ def rate_control(crf: int, downlink: DownlinkSpec | None, fps: float) -> list[st
         "0",
         "-g",
         gop,
+        "-threads",
+        "1",
     ]
 
 
