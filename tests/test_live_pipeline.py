@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import fields
 
 import numpy as np
@@ -113,17 +114,19 @@ def test_operator_commands_run_between_frames_on_held_frames():
             await feed(pipeline, range(20))
             assert {f.status for f in fixes} == {"released"}  # init_bbox did not take over
             tr = session.track
-            u, v = np.interp(t[9], tr["t"], tr["u"]), np.interp(t[9], tr["t"], tr["v"])
             w, h = cal.init_bbox[2:]
+
+            def box(i, off=0.0):  # the UUV's box on frame i, ``off`` box widths to its right
+                u, v = np.interp(t[i], tr["t"], tr["u"]), np.interp(t[i], tr["t"], tr["v"])
+                return (u - (w - 1) / 2 + off * w, v - (h - 1) / 2, w, h)
+
+            refused = r"no vehicle-sized object stands out .* over \d+ of \d+ frames"
             # a box on the seafloor three box sizes off the UUV: refused on the held frames it was followed in
-            with pytest.raises(
-                SelectionError,
-                match=r"no vehicle-sized object stands out .* over \d+ of \d+ frames",
-            ):
-                await pipeline.select(9, box=(u + 2.5 * w, v - (h - 1) / 2, w, h))
+            with pytest.raises(SelectionError, match=refused):
+                await pipeline.select(9, box=box(9, 3.0))
             assert pipeline.target["state"] == "awaiting_target"
             # the held frames after frame 9 span STEADY_S (0.3 s): checked on them
-            answer = await pipeline.select(9, box=(u - (w - 1) / 2, v - (h - 1) / 2, w, h))
+            answer = await pipeline.select(9, box=box(9))
             assert (
                 answer["frame"] == 9
                 and answer["caught_up"] == 10
@@ -133,12 +136,27 @@ def test_operator_commands_run_between_frames_on_held_frames():
                 SelectionError,
                 match=r"frame 3 is not held \(held: frames [45]…19, the last 0.5 s\)",
             ):
-                await pipeline.select(3, box=(u, v, w, h))
-            await feed(pipeline, range(20, 40))
-            assert all(f.ok for f in fixes[20:40])
+                await pipeline.select(3, box=box(3))
+            await feed(pipeline, range(20, 25))
+            # a box on the newest frame: the answer waits for the check's verdict on the frames to come
+            seafloor, _ = await asyncio.gather(
+                pipeline.select(24, box=box(24, 3.0)),
+                feed(pipeline, range(25, 37)),
+                return_exceptions=True,
+            )
+            assert isinstance(seafloor, SelectionError) and re.search(refused, str(seafloor)), (
+                seafloor
+            )
+            assert pipeline.target["state"] == "awaiting_target"
+            answer, _ = await asyncio.gather(
+                pipeline.select(36, box=box(36)), feed(pipeline, range(37, 55))
+            )
+            assert answer["frame"] == 36 and answer["caught_up"] == 0, answer
+            assert answer["target"]["state"] == "tracking" and answer["latest_frame"] > 36, answer
+            assert not any(f.ok for f in fixes[25:37]) and all(f.ok for f in fixes[-5:])
             await pipeline.release()
-            await feed(pipeline, range(40, 60))
-            assert {f.status for f in fixes[40:]} == {"released"}
+            await feed(pipeline, range(55, 60))
+            assert {f.status for f in fixes[55:]} == {"released"}
         finally:
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)

@@ -449,8 +449,8 @@ def test_the_page_shows_and_commands_each_uuv(tmp_path, crossing):
         t_same = time.time()
         box1 = _http(base + "/api/status")[1]["uuvs"]["uuv1"]["target"]["box"]
         code, answer = _http(base + "/api/select", {"uuv": "uuv2", "box": box1})
-        # live, a box is checked over its first frames (confirming, no fix) before it is tracked
-        assert code == 200 and answer["target"]["state"] in ("confirming", "tracking"), answer
+        # the answer waits for the box's check over its first frames: taken, the vehicle tracked
+        assert code == 200 and answer["target"]["state"] == "tracking", answer
         wait_for(
             lambda: all(
                 len(run.fixes(i)) > 3

@@ -21,7 +21,9 @@ frames tracked before it but not yet sent are ``released`` too). GPS_INPUT says 
 from the first released fix on: until then (one frame) it may repeat the previous fix,
 and without frames that fix expires after ``--fix-max-age-ms``. ``u``, ``v`` is the
 selected frame's tracked pixel (the top face's centre), ``caught_up`` the held frames
-tracked since it.
+tracked since it. A box is checked over the frames of its first ``STEADY_S`` (the held
+frames after it, then the frames to come; :mod:`groundstation.live.pipeline`): the answer
+waits for that verdict (a refusal is an error reply) and says where the target is then.
 Pixels follow OpenCV (distorted image, u right, v down, top-left pixel centre (0, 0)).
 ``target`` is the tracking session's status: ``state`` (``awaiting_target``,
 ``tracking``, ``lost``, ``confirming``, ``released``), ``origin`` (``box``, ``click``,

@@ -42,7 +42,8 @@ refused, not tracked as the seafloor), checked over the frames of the next
 :data:`~localizer.tracking.session.STEADY_S` it is followed in (``TrackingSession.select(..., steady=True)``: through
 wind waves one frame does not tell a deep UUV from a caustic on the seafloor); meanwhile its frames are
 ``awaiting_target`` (no fix) and the target's state ``confirming``. A box drawn on a held frame is checked on the
-held frames after it as it catches up: refused at once (SelectionError) when they span the check, else later (a
+held frames after it as it catches up, then on the frames to come: the command answers with the verdict (a refusal
+is a SelectionError), or after :data:`VERDICT_WAIT_S` with the target still ``confirming`` (its refusal then a
 warning; the status says). ``init_bbox`` is checked the same way from the first frame: kept as drawn when
 it holds the vehicle's outline, snapped onto the outline when it is off it, refused (awaiting a target) when no
 vehicle stands out in it; one warning names the box, and the status's ``target.init_bbox`` says which (``confirming``
@@ -81,6 +82,9 @@ log = logging.getLogger("skyfix.pipeline")
 
 #: A frame up to this far (s) after the newest attitude sample is located without waiting for the next one.
 EXTRAPOLATE_S = 0.03
+#: How long an operator's selection waits for its box's check over the frames after it (STEADY_S of frames, on a
+#: stalled stream longer) before it answers "confirming".
+VERDICT_WAIT_S = 5.0
 #: At most this many frames are held for selections, whatever ``history_s``.
 MAX_HELD = 300
 #: The poses of this many recent frames are kept for the other UUVs (:class:`FramePoses`).
@@ -237,6 +241,10 @@ class Pipeline:
         self._unchecked = False
         # a box being checked over frames (init_bbox's, or the operator's): how to name its verdict (see _checked)
         self._checking: _Checking | None = None
+        # the operator's selection awaiting the check's verdict (the held frames did not span it), and its answer's
+        # frame and catch-up
+        self._answer: asyncio.Future | None = None
+        self._answer_info: dict = {}
         # the tracking session's status after the latest frame or command
         self.target = self._status()
         #: ``listener(image, pose, u, v)`` for each located frame with an ok track (its one-frame pose, the pixel)
@@ -275,7 +283,18 @@ class Pipeline:
         Raises :class:`~localizer.tracking.session.SelectionError` for a frame no longer
         held, a box outside it, a click with nothing there.
         """
-        return await self._command(lambda: self._select(frame, box, point))
+        answer = await self._command(lambda: self._select(frame, box, point))
+        if not isinstance(answer, asyncio.Future):
+            return answer
+        try:  # a box still being checked when the held frames ran out: its verdict on the frames to come
+            return await asyncio.wait_for(asyncio.shield(answer), VERDICT_WAIT_S)
+        except TimeoutError:  # no verdict yet (the stream stalled): the target says "confirming"
+            self._answer = None
+            return {
+                **self._answer_info,
+                "target": self.target,
+                "latest_frame": self._latest_frame(),
+            }
 
     async def release(self) -> dict:
         """Let go of the target: no fix until a new selection (or :meth:`acquire`)."""
@@ -291,7 +310,7 @@ class Pipeline:
         self._ready.set()
         return await done
 
-    async def _select(self, index: int | None, box, point) -> dict:
+    async def _select(self, index: int | None, box, point) -> dict | asyncio.Future:
         if not self._held:
             raise SelectionError("no frame received yet")
         held = (
@@ -342,15 +361,35 @@ class Pipeline:
             len(later),
             self.target["state"],
         )
+        self._answer_info = {"frame": held.frame.index, "caught_up": len(later)}
+        if (
+            self._checking is not None
+        ):  # the held frames did not span the check: answered on its verdict
+            self._answer = asyncio.get_running_loop().create_future()
+            return self._answer
+        return self._answered(result)
+
+    def _answered(self, result: TrackResult) -> dict:
+        """A selection's answer once taken: where the target is on the latest frame tracked."""
         return {
-            "frame": held.frame.index,
+            **self._answer_info,
             "u": result.u,
             "v": result.v,
             "box": list(result.box) if result.box else None,
-            "caught_up": len(later),
             "latest_frame": self._latest_frame(),
             "target": self.target,
         }
+
+    def _give_verdict(self, result: TrackResult) -> None:
+        """The operator's box checked over the frames after the held ones: its answer (on the loop)."""
+        answer, self._answer = self._answer, None
+        if answer.done():  # timed out
+            return
+        verdict = self.session.check
+        if verdict.startswith("refused"):
+            answer.set_exception(SelectionError(verdict.removeprefix("refused: ")))
+        else:
+            answer.set_result(self._answered(result))
 
     async def _release(self) -> dict:
         self._started = True  # the operator's word wins over init_bbox
@@ -385,6 +424,14 @@ class Pipeline:
         while True:
             if self._commands:
                 command, done = self._commands.popleft()
+                if (
+                    self._answer is not None
+                ):  # a selection still being checked: this command comes first
+                    answer, self._answer = self._answer, None
+                    if not answer.done():
+                        answer.set_exception(
+                            SelectionError("a later command came before the box was checked")
+                        )
                 try:
                     done.set_result(await command())
                 except (SelectionError, ValueError) as e:
@@ -427,6 +474,8 @@ class Pipeline:
         ):
             self._held.popleft()
         self.target = self._status()
+        if self._answer is not None and self._checking is None:
+            self._give_verdict(result)
         return item
 
     def _seen(self, frame: LiveFrame) -> np.ndarray:
