@@ -11,8 +11,8 @@ the size asked (measured once on a 3-frame render, the field of view scaled by t
 the last ``--tree`` (an older reader may refuse a newer simulator's keys). ``--seeds``: each condition also rendered
 with these random seeds instead of its scenario's (``NAME_sSEED``: other waves, sensor errors and vehicle path; the
 field of view is scaled again, so the UUV's size differs a little), and a last table sums every session's counts:
-one render is one wave realisation, and the tracker's result varies much between them. (A downlink render is not
-byte-reproducible: x264's buffered rate control on several threads; bench/results/tracker_waves_seeds_s15.txt.)
+one render is one wave realisation, and the tracker's result varies much between them. A seed renders to the same
+video every time (the downlink encode runs on one thread).
 
 The video is tracked as ``skyfix process`` does (:func:`groundstation.offline.track.track_session`) in a child process
 from this tree and from each ``--tree`` (e.g. ``git archive <commit> | tar -x -C DIR``: the tracker before, in the
