@@ -75,6 +75,7 @@ from localizer.telemetry import Telemetry
 from localizer.timeline import Series
 from localizer.tracking import GREY_TRACKERS, TrackResult
 from localizer.tracking.centroid import CentroidSteer
+from localizer.tracking.colour import Chroma
 from localizer.tracking.predict import window as search_window
 from localizer.tracking.session import STEADY_S, Prior, SelectionError, TrackingSession
 
@@ -332,12 +333,21 @@ class Pipeline:
             result = self._steered(
                 held,
                 self.session.select(
-                    image, held.pose, box=box, point=point, verify=True, steady=box is not None
+                    image,
+                    held.pose,
+                    box=box,
+                    point=point,
+                    verify=True,
+                    steady=box is not None,
+                    chroma=Chroma.of(held.frame.image),
                 ),
             )
             self._checking = _Checking(held.frame.index, box) if self.session.check else None
             for h in later:
-                result = self._steered(h, self.session.step(self._seen(h.frame), h.pose))
+                result = self._steered(
+                    h,
+                    self.session.step(self._seen(h.frame), h.pose, chroma=Chroma.of(h.frame.image)),
+                )
                 if self._checking is not None and self.session.check != "confirming":
                     self._checking = None
                     if self.session.check.startswith("refused"):
@@ -496,7 +506,7 @@ class Pipeline:
                     log.warning(
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
                     )
-        result = self.session.step(image, pose, prior=prior)
+        result = self.session.step(image, pose, prior=prior, chroma=Chroma.of(frame.image))
         if self._checking is not None and self.session.check != "confirming":
             self._checked(frame, result)
         if self._unchecked and not self.commands and result.ok and pose.status[0] == "ok":
@@ -508,7 +518,13 @@ class Pipeline:
         is (:meth:`_checked` names the verdict); without a camera pose, taken unchecked (:meth:`_check_late`)."""
         box = self.cal.init_bbox
         result = self.session.select(
-            image, pose, box=box, verify=True, keep_drawn=True, steady=True
+            image,
+            pose,
+            box=box,
+            verify=True,
+            keep_drawn=True,
+            steady=True,
+            chroma=Chroma.of(frame.image),
         )
         if self.session.check == "confirming":
             self._checking = _Checking(frame.index, box, init=True)
@@ -533,7 +549,13 @@ class Pipeline:
         as the seafloor and every fix once the telemetry arrives would be wrong."""
         self._unchecked = False
         checking = self.session.select(
-            image, pose, box=result.box, verify=True, keep_drawn=True, steady=True
+            image,
+            pose,
+            box=result.box,
+            verify=True,
+            keep_drawn=True,
+            steady=True,
+            chroma=Chroma.of(frame.image),
         )
         if (
             self.session.check != "confirming"

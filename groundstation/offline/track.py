@@ -337,7 +337,7 @@ class UuvTrack:
                 )
             try:
                 result = self.tracking.select(
-                    frame.image, pose, row, box=session.calibration.init_bbox
+                    frame.image, pose, row, box=session.calibration.init_bbox, chroma=frame.chroma()
                 )
             except SelectionError as e:
                 raise SessionError(
@@ -345,7 +345,7 @@ class UuvTrack:
                 ) from None
             self.started = True
         else:
-            result = self.tracking.step(frame.image, pose, row)
+            result = self.tracking.step(frame.image, pose, row, chroma=frame.chroma())
         tracked = result  # what the tracking decided, for tracing back from it
         result = self.centre.after(self.tracking, frame.image, result, float(self.t[row]))
         timings["track"] += time.perf_counter() - t0

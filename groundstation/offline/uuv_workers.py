@@ -53,6 +53,7 @@ import numpy as np
 
 from groundstation.session.read import SessionError
 from groundstation.video.frames import BgrRegions, plane_array
+from localizer.tracking.colour import Chroma
 
 #: Frames in the shared ring: how far the fastest worker may run ahead of the slowest.
 RING_SLOTS = 6
@@ -85,6 +86,10 @@ class RingFrame:
         if self.planes is None:
             return self.image
         return BgrRegions(self.planes, self.colour)
+
+    def chroma(self) -> Chroma | None:
+        """The frame's colour as :meth:`~groundstation.video.frames.VideoFrame.chroma` reads it."""
+        return Chroma.of(self.image, self.planes)
 
 
 def _layout(frame) -> tuple[list[tuple[int, ...]], tuple[int, int] | None]:

@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 import av
 import numpy as np
 
+from localizer.tracking.colour import Chroma
+
 
 class VideoError(RuntimeError):
     """A video that cannot be read as required; the message is one line."""
@@ -49,6 +51,12 @@ class VideoFrame:
             planes = [plane_array(p) for p in self.decoded.planes]
             self._regions = BgrRegions(planes, (self.decoded.colorspace, self.decoded.color_range))
         return self._regions
+
+    def chroma(self) -> Chroma | None:
+        """The frame's colour as the tracker's check reads it (:class:`~localizer.tracking.colour.Chroma`): the
+        decoded frame's chroma planes, or ``image``'s when that is BGR."""
+        planes = None if self.decoded is None else [plane_array(p) for p in self.decoded.planes]
+        return Chroma.of(self.image, planes)
 
 
 def plane_array(plane) -> np.ndarray:

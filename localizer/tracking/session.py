@@ -62,6 +62,7 @@ from ..calibration import Calibration
 from ..fix import locate
 from ..pose import CameraPose, take
 from . import Prediction, TrackResult, make_matcher
+from .colour import Chroma, ColourModel, learn, separation
 from .detect import DetectParams, detect
 from .predict import (
     BASE_SIGMA_M,
@@ -163,6 +164,10 @@ class TrackingSession:
         # how the latest box checked over frames was taken: "confirming", "kept", "snapped", "refused: <why>";
         # None: no such box since the latest selection, release or acquire
         self.check: str | None = None
+        # the vehicle's colour, learnt on the first frame tracked from a selection (:mod:`.colour`; None: not learnt,
+        # or it does not stand out in colour), and whether it is still to be learnt
+        self._colour: ColourModel | None = None
+        self._learn_colour = False
         self._forget()
         self._awaiting_frames = 0
         self._noted_state = None
@@ -191,6 +196,7 @@ class TrackingSession:
         verify: bool = False,
         keep_drawn: bool = False,
         steady: bool = False,
+        chroma: Chroma | None = None,
     ) -> TrackResult:
         """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of this frame, from now on.
 
@@ -198,7 +204,8 @@ class TrackingSession:
         frame, or a click with no object standing out near it or without a pose;
         with ``verify``, also for a box with no object standing out in it (checked
         when the pose can size the vehicle); ``keep_drawn``: a verified box on the
-        vehicle's outline is kept as drawn (see the module doc).
+        vehicle's outline is kept as drawn (see the module doc). ``chroma``: the frame's colour, the vehicle's
+        learnt there (:mod:`.colour`; a box checked over frames: on the frame it is taken in).
         """
         if (box is None) == (point is None):
             raise SelectionError("give either a box [x, y, w, h] or a point [u, v]")
@@ -209,7 +216,7 @@ class TrackingSession:
             )
         one = take(pose, [i])
         if verify and steady and box is not None:
-            return self._select_steady(frame_bgr, one, box, keep_drawn)
+            return self._learned(chroma, self._select_steady(frame_bgr, one, box, keep_drawn))
         outlined = None
         if point is not None:
             outlined = self._outline_click(frame_bgr, one, point)
@@ -222,7 +229,9 @@ class TrackingSession:
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
         centre = (float(cu[0]), float(cv_[0]))
         origin = "click" if point is not None else "box"
-        return self._track_from(frame_bgr, one, box, centre, origin, outlined is not None)
+        return self._learned(
+            chroma, self._track_from(frame_bgr, one, box, centre, origin, outlined is not None)
+        )
 
     def start_at(self, frame_bgr, pose: CameraPose, i: int, box, point) -> TrackResult:
         """Track the UUV from a sighting another pass over the same video made (e.g. offline, tracing a
@@ -243,6 +252,7 @@ class TrackingSession:
         back = TrackingSession(self.cal, self.tracker)
         back.start_at(frame_bgr, pose, i, found.box, (found.u, found.v))
         back.target.adopt(self.target, found)
+        back._colour, back._learn_colour = self._colour, False
         return back
 
     def _track_from(
@@ -259,6 +269,7 @@ class TrackingSession:
         """:meth:`_track_from`'s start, its result not yet noted."""
         self._steady = None
         self.check = None
+        self._colour, self._learn_colour = None, True
         anchor, px_per_m = self._locate(one, centre)
         try:
             result = self.target.select(frame_bgr, box, centre, px_per_m)
@@ -285,9 +296,15 @@ class TrackingSession:
 
     # -- per frame ----------------------------------------------------------------------------------
     def step(
-        self, frame_bgr, pose: CameraPose, i: int = 0, prior: Prior | None = None
+        self,
+        frame_bgr,
+        pose: CameraPose,
+        i: int = 0,
+        prior: Prior | None = None,
+        chroma: Chroma | None = None,
     ) -> TrackResult:
-        """The UUV in the next frame (``pose``'s frame ``i``); ``prior`` is used while awaiting a target."""
+        """The UUV in the next frame (``pose``'s frame ``i``); ``prior`` is used while awaiting a target;
+        ``chroma``: the frame's colour, the tracked place checked against the vehicle's (:meth:`_coloured`)."""
         self.prediction = self.sought = None
         if self.target.state is TargetState.AWAITING_TARGET:
             result = (
@@ -307,6 +324,9 @@ class TrackingSession:
                 self._forget()  # a candidate that did not confirm
             if self._steady is not None:
                 result = self._checked(frame_bgr, pose, i, result)
+            if result.ok and self._colour is not None and chroma is not None:
+                result = self._coloured(chroma, result)
+            result = self._learned(chroma, result)
         return self._note(float(pose.t_unix[i]), result)
 
     def status(self) -> dict:
@@ -332,6 +352,30 @@ class TrackingSession:
         }
 
     # -- internals ----------------------------------------------------------------------------------
+    def _learned(self, chroma: Chroma | None, result: TrackResult) -> TrackResult:
+        """``result``, the vehicle's colour learnt at its pixel when it is still to be (the first frame tracked
+        ``ok`` from a selection; one checked over frames once taken)."""
+        if (
+            self._learn_colour
+            and result.ok
+            and self._steady is None
+            and chroma is not None
+            and self._length_px > 0  # sized by a pose
+        ):
+            self._learn_colour = False
+            self._colour = learn(chroma, result.u, result.v, _half_px(result))
+        return result
+
+    def _coloured(self, chroma: Chroma, result: TrackResult) -> TrackResult:
+        """A frame's ``ok`` result, no fix (``lost``) where the tracked place does not have the vehicle's colour
+        (:mod:`.colour`). Only the frame's word changes: the tracker follows on as it would have, its sighting and
+        its template as they were (a loss declared on the colour, with the searches after it, located fewer frames
+        through waves: bench/results/colour_check_s16.txt)."""
+        d = separation(self._colour, chroma, result.u, result.v, _half_px(result))
+        return (
+            result if self._colour.matches(d) else TrackResult("lost", confidence=result.confidence)
+        )
+
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
         """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
         the match's score, the prediction's window, the time since the UUV was (re)acquired, how it was chosen, the
@@ -663,6 +707,11 @@ class _Steady:
     keep_drawn: bool
     t0_unix: float
     frames: int = 1
+
+
+def _half_px(result: TrackResult) -> float:
+    """Half the tracked box's longer side (px; NaN without a box): the vehicle's colour is read in a square of it."""
+    return max(result.box[2:]) / 2 if result.box else math.nan
 
 
 def _overlap(a, b) -> bool:

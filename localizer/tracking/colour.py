@@ -1,0 +1,136 @@
+"""Whether a tracked place has the UUV's colour: a check of the lock, not a tracker (issue 28).
+
+Through wind waves a deep UUV's grey levels break up, and caustic-lit seafloor matches its grey template and its
+contrast as well as the vehicle does: a lock can creep off the vehicle onto the seafloor and be followed there as
+if it were the UUV (bench/results/tracker_waves_wrong_s45_s15.txt). The vehicle's colour tells them apart where
+its grey levels do not: a BlueROV2's hull stands out of sand or weed in the chroma channels, and a caustic changes
+how bright the seafloor is, not its hue.
+
+When tracking starts on a box or a click (:meth:`~localizer.tracking.session.TrackingSession.select`), the
+vehicle's colour is learnt on that frame (:func:`learn`): the direction in the two chroma channels (Cb, Cr) in
+which the central half of the vehicle's square stands out most from a ring round it (Fisher's discriminant, the two
+regions' pooled covariance plus one level² of noise), and the separation along it there. Every frame tracked
+after, the same separation is read at the tracked pixel (:func:`separation`): the central half's mean against the
+ring's, in units of the ring's spread along the learnt direction. On the vehicle it stays near the learnt one;
+on seafloor that only matches the grey template it is near 0 (the place's colour is its surroundings').
+
+A vehicle whose colour does not stand out when it is selected (:data:`LEARN_MIN_SEPARATION`: a grey hull on grey
+sand) gets no model, and no check: the check never refuses what it cannot tell.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: A vehicle whose chroma separation at its selection is below this gets no colour model (nothing to check with).
+LEARN_MIN_SEPARATION = 2.0
+#: A tracked place whose separation along the learnt direction is below this (ring spreads) does not have the
+#: vehicle's colour.
+MIN_SEPARATION = 1.0
+#: The ring about the vehicle's square reaches this many half-lengths from its centre.
+RING_HALVES = 3
+
+
+class Chroma:
+    """A frame's two chroma channels (Cb, Cr), read where needed: a yuv420p frame's planes as decoded (half
+    resolution), or a BGR image's converted window by window (OpenCV's YCrCb)."""
+
+    def __init__(self, cb: np.ndarray | None = None, cr: np.ndarray | None = None, bgr=None):
+        self._cb, self._cr, self._bgr = cb, cr, bgr
+        if bgr is not None:
+            self.shape = bgr.shape[:2]
+            self.scale = 1.0
+        else:
+            self.shape = cb.shape
+            self.scale = 0.5  # yuv420p: one chroma sample per 2 x 2 pixels
+
+    @classmethod
+    def of(cls, image: np.ndarray, planes=None) -> Chroma | None:
+        """A frame's chroma: from its yuv420p ``planes`` (Y, U, V) when given, else from ``image`` when it is BGR;
+        None for a grey image alone."""
+        if planes is not None and len(planes) == 3:
+            return cls(planes[1], planes[2])
+        if image.ndim == 3 and image.shape[2] == 3:
+            return cls(bgr=image)
+        return None
+
+    def square(self, u: float, v: float, half_px: float):
+        """The chroma (n, m, 2) float32 of the square of half-side ``half_px`` (image pixels) about the image pixel
+        (u, v), clipped to the frame, and (u, v) in its samples; None when (u, v) is off the frame."""
+        s = self.scale
+        cu, cv_ = (u + 0.5) * s - 0.5, (v + 0.5) * s - 0.5
+        h = half_px * s
+        rows, cols = self.shape
+        if not (0 <= cu < cols and 0 <= cv_ < rows):
+            return None
+        x0, y0 = max(math.floor(cu - h), 0), max(math.floor(cv_ - h), 0)
+        x1, y1 = min(math.ceil(cu + h) + 1, cols), min(math.ceil(cv_ + h) + 1, rows)
+        if self._bgr is not None:
+            ycrcb = cv2.cvtColor(np.ascontiguousarray(self._bgr[y0:y1, x0:x1]), cv2.COLOR_BGR2YCrCb)
+            out = ycrcb[:, :, 2:0:-1].astype(np.float32)  # Cb, Cr
+        else:
+            out = np.dstack((self._cb[y0:y1, x0:x1], self._cr[y0:y1, x0:x1])).astype(np.float32)
+        return out, cu - x0, cv_ - y0
+
+
+@dataclass(frozen=True)
+class ColourModel:
+    """The vehicle's colour as learnt: ``weights`` of (Cb, Cr) and its ``separation`` along them then."""
+
+    weights: np.ndarray
+    separation: float
+
+    def matches(self, separation_now: float) -> bool:
+        """Whether a place's separation (:func:`separation`) is the vehicle's; NaN (not read): taken as it is."""
+        return not separation_now < MIN_SEPARATION
+
+
+def _regions(chroma: Chroma, u: float, v: float, half_px: float):
+    """(central half (k, 2), ring (n, 2)) of the vehicle's square of half-side ``half_px`` at (u, v); None when
+    either is too small to read (off the frame)."""
+    got = chroma.square(u, v, RING_HALVES * half_px)
+    if got is None:
+        return None
+    pixels, cu, cv_ = got
+    h = half_px * chroma.scale
+    ys, xs = np.ogrid[: pixels.shape[0], : pixels.shape[1]]
+    dist = np.maximum(np.abs(xs - cu), np.abs(ys - cv_))
+    inner, ring = pixels[dist <= max(h / 2, 0.5)], pixels[dist > h]
+    if len(inner) < 1 or len(ring) < 8:
+        return None
+    return inner, ring
+
+
+def learn(chroma: Chroma | None, u: float, v: float, half_px: float) -> ColourModel | None:
+    """The vehicle's colour at its pixel (u, v), its square's half-side ``half_px`` (half its apparent length);
+    None when it does not stand out in colour (:data:`LEARN_MIN_SEPARATION`) or cannot be read there."""
+    if chroma is None or not half_px >= 1:
+        return None
+    regions = _regions(chroma, u, v, half_px)
+    if regions is None:
+        return None
+    inner, ring = regions
+    pooled = np.cov(ring.T) + (np.cov(inner.T) if len(inner) > 2 else 0) + np.eye(2)
+    weights = np.linalg.solve(pooled, inner.mean(axis=0) - ring.mean(axis=0))
+    model = ColourModel(weights, 0.0)
+    d = _separation(model, inner, ring)
+    return ColourModel(weights, d) if d >= LEARN_MIN_SEPARATION else None
+
+
+def separation(model: ColourModel, chroma: Chroma, u: float, v: float, half_px: float) -> float:
+    """How far the place (u, v) stands out of the ring round it along the learnt colour (ring spreads); NaN where
+    it cannot be read."""
+    if not half_px >= 1:
+        return math.nan
+    regions = _regions(chroma, u, v, half_px)
+    return math.nan if regions is None else _separation(model, *regions)
+
+
+def _separation(model: ColourModel, inner: np.ndarray, ring: np.ndarray) -> float:
+    w = model.weights
+    ring_w = ring @ w
+    return float((inner.mean(axis=0) @ w - ring_w.mean()) / math.sqrt(ring_w.var() + 1e-6))
