@@ -40,6 +40,11 @@ once by the caller and shared with the geometry.
   later ones did not and it is at most :data:`STOOD_OUT_WITHIN_S` older: a follow
   that slid onto a patch of seafloor beside a small, deep UUV does not drag the
   next frames' window (and a search's, once lost) onto that patch.
+- The vehicle's colour: learnt on the first frame tracked from a selection, when it stands out of its
+  surroundings in the chroma channels (:mod:`.colour`, from the ``chroma`` given with the frames); every later
+  ``ok`` frame whose tracked place does not stand out in that colour is no fix (``lost``), the tracker following on
+  as it would have. Through wind waves a follow can slide onto caustic-lit seafloor that matches the vehicle's grey
+  levels: that place does not have its colour.
 - While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
   every ``search_every`` frames the prior is projected into the frame at the UUV's
   depth and the window its uncertainty spans is searched for a vehicle-sized object
