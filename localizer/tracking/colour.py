@@ -134,3 +134,58 @@ def _separation(model: ColourModel, inner: np.ndarray, ring: np.ndarray) -> floa
     w = model.weights
     ring_w = ring @ w
     return float((inner.mean(axis=0) @ w - ring_w.mean()) / math.sqrt(ring_w.var() + 1e-6))
+
+
+def find(
+    model: ColourModel, chroma: Chroma, window: tuple[float, float, float, float], half_px: float
+) -> tuple[float, float, float] | None:
+    """The place in ``window`` (x, y, w, h image pixels) that stands out most in the vehicle's colour: ``(u, v,
+    separation)`` (:func:`separation` there), None where nothing in it can be read. Every place's separation at once
+    (box filters of the learnt channel), the best one's read again as :func:`separation` reads one."""
+    if not half_px >= 1:
+        return None
+    x, y, w, h = window
+    reach = RING_HALVES * half_px
+    got = chroma.square(x + w / 2, y + h / 2, max(w, h) / 2 + reach)
+    if got is None:
+        return None
+    pixels, cu, cv_ = got
+    s = chroma.scale
+    level = pixels @ model.weights.astype(np.float32)
+    inner_r, hole_r, ring_r = max(round(half_px * s / 2), 0), round(half_px * s), round(reach * s)
+    if min(level.shape) <= 2 * ring_r + 1:
+        return None
+
+    def sums(a: np.ndarray, r: int) -> np.ndarray:
+        return cv2.boxFilter(
+            a, -1, (2 * r + 1, 2 * r + 1), normalize=False, borderType=cv2.BORDER_CONSTANT
+        )
+
+    n_inner, n_hole, n_ring = (2 * inner_r + 1) ** 2, (2 * hole_r + 1) ** 2, (2 * ring_r + 1) ** 2
+    squared = level * level
+    ring_sum = sums(level, ring_r) - sums(level, hole_r)
+    ring_sq = sums(squared, ring_r) - sums(squared, hole_r)
+    ring_mean = ring_sum / (n_ring - n_hole)
+    ring_var = np.maximum(ring_sq / (n_ring - n_hole) - ring_mean**2, 0.0)
+    d = (sums(level, inner_r) / n_inner - ring_mean) / np.sqrt(ring_var + 1e-6)
+    # only centres whose ring lies within the region read, and inside the window
+    ys, xs = np.mgrid[: level.shape[0], : level.shape[1]]
+    u_img, v_img = (
+        (xs + (x + w / 2 + 0.5) * s - 0.5 - cu + 0.5) / s - 0.5,
+        (ys + (y + h / 2 + 0.5) * s - 0.5 - cv_ + 0.5) / s - 0.5,
+    )
+    inside = (
+        (xs >= ring_r)
+        & (xs < level.shape[1] - ring_r)
+        & (ys >= ring_r)
+        & (ys < level.shape[0] - ring_r)
+        & (u_img >= x)
+        & (u_img <= x + w)
+        & (v_img >= y)
+        & (v_img <= y + h)
+    )
+    if not inside.any():
+        return None
+    best = np.unravel_index(np.argmax(np.where(inside, d, -np.inf)), d.shape)
+    u, v = float(u_img[best]), float(v_img[best])
+    return u, v, separation(model, chroma, u, v, half_px)

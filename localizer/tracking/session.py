@@ -67,7 +67,7 @@ from ..calibration import Calibration
 from ..fix import locate
 from ..pose import CameraPose, take
 from . import Prediction, TrackResult, make_matcher
-from .colour import Chroma, ColourModel, learn, separation
+from .colour import Chroma, ColourModel, find, learn, separation
 from .detect import DetectParams, detect
 from .predict import (
     BASE_SIGMA_M,
@@ -77,6 +77,7 @@ from .predict import (
     project_uuv,
     top_face_pixel,
 )
+from .predict import window as search_window
 from .sigma import OUTLINED_SHARE, jitter2_px2, pixel_sigma_px
 from .steady import SteadyWindow
 from .target import Target, TargetParams, TargetState
@@ -106,6 +107,13 @@ SPEED_WINDOW_S = 0.5
 SPEED_SPAN_S = 0.2
 #: ... and taken this much faster (m/s): the sightings' own scatter.
 SPEED_MARGIN_MPS = 0.1
+#: After this many frames in a row without the vehicle's colour at the tracked place (or once lost), the window the
+#: UUV is sought in is searched for its colour ...
+COLOUR_SEARCH_AFTER = 2
+#: ... and tracking restarts where it stands out at least this share of its separation when learnt, and at least
+#: this much (ring spreads: the best of a window's places of seafloor reaches 2.2 through waves)
+COLOUR_FOUND_SHARE = 0.5
+COLOUR_FOUND_MIN = 3.0
 
 
 @dataclass(frozen=True)
@@ -173,6 +181,9 @@ class TrackingSession:
         # or it does not stand out in colour), and whether it is still to be learnt
         self._colour: ColourModel | None = None
         self._learn_colour = False
+        # frames in a row the colour check withheld, and the last box it passed (w, h)
+        self._vetoed = 0
+        self._box_wh: tuple[int, int] | None = None
         self._forget()
         self._awaiting_frames = 0
         self._noted_state = None
@@ -329,8 +340,10 @@ class TrackingSession:
                 self._forget()  # a candidate that did not confirm
             if self._steady is not None:
                 result = self._checked(frame_bgr, pose, i, result)
-            if result.ok and self._colour is not None and chroma is not None:
+            if self._colour is not None and chroma is not None:
                 result = self._coloured(chroma, result)
+                if self._vetoed >= COLOUR_SEARCH_AFTER or self.target.state is TargetState.LOST:
+                    result = self._found_by_colour(frame_bgr, chroma, pose, i) or result
             result = self._learned(chroma, result)
         return self._note(float(pose.t_unix[i]), result)
 
@@ -369,6 +382,7 @@ class TrackingSession:
         ):
             self._learn_colour = False
             self._colour = learn(chroma, result.u, result.v, _half_px(result))
+            self._vetoed, self._box_wh = 0, result.box[2:]
         return result
 
     def _coloured(self, chroma: Chroma, result: TrackResult) -> TrackResult:
@@ -376,10 +390,41 @@ class TrackingSession:
         (:mod:`.colour`). Only the frame's word changes: the tracker follows on as it would have, its sighting and
         its template as they were (a loss declared on the colour, with the searches after it, located fewer frames
         through waves: bench/results/colour_check_s16.txt)."""
+        if not result.ok:
+            return result
         d = separation(self._colour, chroma, result.u, result.v, _half_px(result))
-        return (
-            result if self._colour.matches(d) else TrackResult("lost", confidence=result.confidence)
-        )
+        if self._colour.matches(d):
+            self._vetoed, self._box_wh = 0, result.box[2:] if result.box else self._box_wh
+            return result
+        self._vetoed += 1
+        return TrackResult("lost", confidence=result.confidence)
+
+    def _found_by_colour(
+        self, frame_bgr, chroma: Chroma, pose: CameraPose, i: int
+    ) -> TrackResult | None:
+        """Tracking restarted where the vehicle's colour stands out most in the window the UUV is sought in, when
+        it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`); None otherwise."""
+        win = search_window(self.sought or self.prediction)
+        if win is None or self._box_wh is None:
+            return None
+        bw, bh = self._box_wh
+        got = find(self._colour, chroma, win, max(bw, bh) / 2)
+        if got is None or not got[2] >= max(
+            COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation
+        ):
+            return None
+        one = take(pose, [i])
+        cu, cv_ = top_face_pixel(self.cal, one, [got[0]], [got[1]])
+        centre = (float(cu[0]), float(cv_[0]))
+        anchor, px_per_m = self._locate(one, centre)
+        box = (round(got[0] - (bw - 1) / 2), round(got[1] - (bh - 1) / 2), bw, bh)
+        try:
+            result = self.target.select(frame_bgr, box, centre, px_per_m)
+        except ValueError:  # the box reaches beyond the frame
+            return None
+        self._start(one, centre, anchor)
+        self._vetoed = 0
+        return result
 
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
         """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
