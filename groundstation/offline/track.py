@@ -62,6 +62,7 @@ from localizer.height import share as share_height_filter
 from localizer.pose import uav_pose, with_depth
 from localizer.tracking import GREY_TRACKERS
 from localizer.tracking.centroid import CentroidSteer
+from localizer.tracking.colour import Chroma
 from localizer.tracking.session import SelectionError, TrackingSession
 from localizer.tracking.target import TargetState
 
@@ -231,7 +232,8 @@ def track_sessions(
                     pool.step(row, frame)
                     timings["hand_on"] += time.perf_counter() - t0
                 else:
-                    kept = Kept(frame.image)  # one copy of a frame however many UUVs keep it
+                    # one copy of a frame however many UUVs keep it
+                    kept = Kept(frame.image, frame.chroma())
                     for track in tracks:
                         track.step(row, frame, kept)
                 if row >= first_row:
@@ -361,7 +363,7 @@ class UuvTrack:
             self.centre.unfiltered.v,
         )
         if self.both_ways:
-            kept = kept or Kept(frame.image)
+            kept = kept or Kept(frame.image, frame.chroma())
             # the frame kept for tracing back: one copy for both traces and every UUV that keeps it
             image = kept() if not tracked.ok or self.gap or self.behind else None
             self._trace_when_confirmed(row, image, tracked)
@@ -438,7 +440,7 @@ class UuvTrack:
             return
         t0 = time.perf_counter()
         try:
-            back = self.tracking.back_from(image, self.pose, row)
+            back = self.tracking.back_from(image[0], self.pose, row)
         except SelectionError:  # its box reaches beyond the frame
             self.behind.clear()
             return
@@ -499,37 +501,40 @@ class UuvTrack:
 
 
 class Kept:
-    """A frame's image copied to be kept beyond the decoder's buffer (the frames a UUV was lost in, for tracing
-    back), on the first call only: the UUVs lost in the same frame keep the same copy (read-only), not one each."""
+    """A frame's image and colour copied to be kept beyond the decoder's buffer (the frames a UUV was lost in, for
+    tracing back): ``(image, chroma)``, copied on the first call only: the UUVs lost in the same frame keep the same
+    copy (read-only), not one each."""
 
-    def __init__(self, image: np.ndarray) -> None:
-        self.image, self._copy = image, None
+    def __init__(self, image: np.ndarray, chroma: Chroma | None = None) -> None:
+        self.image, self.chroma, self._copy = image, chroma, None
 
-    def __call__(self) -> np.ndarray:
+    def __call__(self) -> tuple[np.ndarray, Chroma | None]:
         if self._copy is None:
-            self._copy = self.image.copy()
-            self._copy.flags.writeable = False
+            image = self.image.copy()
+            image.flags.writeable = False
+            self._copy = (image, None if self.chroma is None else self.chroma.copy())
         return self._copy
 
 
-def _trace_back(forward: TrackingSession, pose, row: int, image, found, gap) -> list:
-    """``(row, TrackResult)`` of the frames in ``gap`` ((row, image), the frames just before ``row`` without the UUV,
-    oldest first) a tracker started on the UUV ``found`` in frame ``row`` finds it in, stepping back until it
-    loses it."""
+def _trace_back(forward: TrackingSession, pose, row: int, kept, found, gap) -> list:
+    """``(row, TrackResult)`` of the frames in ``gap`` ((row, (image, chroma)), the frames just before ``row`` without
+    the UUV, oldest first) a tracker started on the UUV ``found`` in frame ``row`` (``kept``: its image and chroma)
+    finds it in, stepping back until it loses it; the vehicle's colour the forward tracker's."""
     back = TrackingSession(forward.cal, forward.tracker)
     try:
-        back.start_at(image, pose, row, found.box, (found.u, found.v))
+        back.start_at(kept[0], pose, row, found.box, (found.u, found.v))
     except SelectionError:  # its box reaches beyond the frame
         return []
+    back.take_colour(forward)
     return _stepped_back(back, pose, gap)
 
 
 def _stepped_back(back: TrackingSession, pose, frames) -> list:
-    """``(row, TrackResult)`` of the frames ``frames`` ((row, image), oldest first) the tracker ``back`` finds the UUV
-    in, stepping back from the newest until it loses it."""
+    """``(row, TrackResult)`` of the frames ``frames`` ((row, (image, chroma)), oldest first) the tracker ``back`` finds
+    the UUV in, stepping back from the newest until it loses it."""
     traced = []
-    for r, earlier in reversed(frames):
-        result = back.step(earlier, pose, r)
+    for r, (earlier, chroma) in reversed(frames):
+        result = back.step(earlier, pose, r, chroma=chroma)
         if back.state is not TargetState.TRACKING:
             break
         if result.ok:

@@ -48,6 +48,12 @@ class Chroma:
             self.shape = cb.shape
             self.scale = 0.5  # yuv420p: one chroma sample per 2 x 2 pixels
 
+    def copy(self) -> Chroma:
+        """The same colour in arrays of its own (a frame kept beyond the decoder's buffer)."""
+        if self._bgr is not None:
+            return Chroma(bgr=self._bgr.copy())
+        return Chroma(self._cb.copy(), self._cr.copy())
+
     @classmethod
     def of(cls, image: np.ndarray, planes=None) -> Chroma | None:
         """A frame's chroma: from its yuv420p ``planes`` (Y, U, V) when given, else from ``image`` when it is BGR;
@@ -138,10 +144,11 @@ def _separation(model: ColourModel, inner: np.ndarray, ring: np.ndarray) -> floa
 
 def find(
     model: ColourModel, chroma: Chroma, window: tuple[float, float, float, float], half_px: float
-) -> tuple[float, float, float] | None:
+) -> tuple[float, float, float, float] | None:
     """The place in ``window`` (x, y, w, h image pixels) that stands out most in the vehicle's colour: ``(u, v,
-    separation)`` (:func:`separation` there), None where nothing in it can be read. Every place's separation at once
-    (box filters of the learnt channel), the best one's read again as :func:`separation` reads one."""
+    separation, second)``, its :func:`separation` and the best separation more than a vehicle's length
+    (2 x ``half_px``) from it; None where nothing in it can be read. Every place's separation at once (box filters of
+    the learnt channel), the best one's read again as :func:`separation` reads one."""
     if not half_px >= 1:
         return None
     x, y, w, h = window
@@ -186,6 +193,10 @@ def find(
     )
     if not inside.any():
         return None
-    best = np.unravel_index(np.argmax(np.where(inside, d, -np.inf)), d.shape)
+    d = np.where(inside, d, -np.inf)
+    best = np.unravel_index(np.argmax(d), d.shape)
     u, v = float(u_img[best]), float(v_img[best])
-    return u, v, separation(model, chroma, u, v, half_px)
+    # the best place more than a vehicle's length from it: a second vehicle of the same colour makes it ambiguous
+    away = (np.abs(u_img - u) > 2 * half_px) | (np.abs(v_img - v) > 2 * half_px)
+    second = float(np.max(d[away], initial=-np.inf))
+    return u, v, separation(model, chroma, u, v, half_px), second

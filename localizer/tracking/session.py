@@ -107,8 +107,11 @@ SPEED_WINDOW_S = 0.5
 SPEED_SPAN_S = 0.2
 #: ... and taken this much faster (m/s): the sightings' own scatter.
 SPEED_MARGIN_MPS = 0.1
-#: After this many frames in a row without the vehicle's colour at the tracked place (or once lost), the window the
-#: UUV is sought in is searched for its colour ...
+#: Through waves (the matcher's reading at least this), after this many frames in a row without the vehicle's
+#: colour at the tracked place (or once lost), the window the UUV is sought in is searched for its colour (on a still
+#: surface the grey-level tracker's own guards against look-alikes hold, a search by colour alone would jump to a
+#: second vehicle of the same colour) ...
+COLOUR_SEARCH_WAVES = 0.5
 COLOUR_SEARCH_AFTER = 2
 #: ... and tracking restarts where it stands out at least this share of its separation when learnt, and at least
 #: this much (ring spreads: the best of a window's places of seafloor reaches 2.2 through waves)
@@ -268,8 +271,14 @@ class TrackingSession:
         back = TrackingSession(self.cal, self.tracker)
         back.start_at(frame_bgr, pose, i, found.box, (found.u, found.v))
         back.target.adopt(self.target, found)
-        back._colour, back._learn_colour = self._colour, False
+        back.take_colour(self)
         return back
+
+    def take_colour(self, other: TrackingSession) -> None:
+        """Check the vehicle's colour as ``other`` learnt it (a tracker of the same UUV through other frames of the
+        same video), not learning its own."""
+        self._colour, self._learn_colour = other._colour, False
+        self._vetoed, self._box_wh = 0, other._box_wh
 
     def _track_from(
         self, frame_bgr, one: CameraPose, box, centre, origin: str, outlined: bool
@@ -402,16 +411,18 @@ class TrackingSession:
     def _found_by_colour(
         self, frame_bgr, chroma: Chroma, pose: CameraPose, i: int
     ) -> TrackResult | None:
-        """Tracking restarted where the vehicle's colour stands out most in the window the UUV is sought in, when
-        it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`); None otherwise."""
+        """Through waves, tracking restarted where the vehicle's colour stands out most in the window the UUV is
+        sought in, when it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`) and nowhere else in
+        the window more than a vehicle's length away does; None otherwise."""
         win = search_window(self.sought or self.prediction)
-        if win is None or self._box_wh is None:
+        if win is None or self._box_wh is None or not self.target.waves >= COLOUR_SEARCH_WAVES:
             return None
         bw, bh = self._box_wh
         got = find(self._colour, chroma, win, max(bw, bh) / 2)
-        if got is None or not got[2] >= max(
-            COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation
-        ):
+        bar = max(COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation)
+        if (
+            got is None or not got[2] >= bar or got[3] >= bar
+        ):  # none, or two of the vehicle's colour
             return None
         one = take(pose, [i])
         cu, cv_ = top_face_pixel(self.cal, one, [got[0]], [got[1]])
