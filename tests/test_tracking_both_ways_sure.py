@@ -24,7 +24,7 @@ class _Back:
     def __init__(self, seen: dict):
         self.seen, self.state = seen, TargetState.TRACKING
 
-    def step(self, image, pose, row: int) -> TrackResult:
+    def step(self, image, pose, row: int, chroma=None) -> TrackResult:
         if not self.seen.get(row, False):
             self.state = TargetState.LOST
             return TrackResult("lost")
@@ -53,7 +53,7 @@ def _forward(script, seen: dict):
     for row, (ok, distinct) in enumerate(script):
         track.tracking.target.distinct = distinct
         result = TrackResult("ok", 1.0, 1.0) if ok else TrackResult("lost")
-        track._trace_when_sure(row, np.zeros(1), result)
+        track._trace_when_sure(row, (np.zeros(1), None), result)  # a kept frame: (image, chroma)
     return list(np.flatnonzero(track.bridged)), starts, track
 
 

@@ -117,6 +117,9 @@ COLOUR_SEARCH_AFTER = 2
 #: this much (ring spreads: the best of a window's places of seafloor reaches 2.2 through waves)
 COLOUR_FOUND_SHARE = 0.5
 COLOUR_FOUND_MIN = 3.0
+#: A restart by colour gives no fix until the vehicle's colour is at the tracked place on this many frames in a row
+#: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more).
+COLOUR_CONFIRM_FRAMES = 2
 
 
 @dataclass(frozen=True)
@@ -184,8 +187,9 @@ class TrackingSession:
         # or it does not stand out in colour), and whether it is still to be learnt
         self._colour: ColourModel | None = None
         self._learn_colour = False
-        # frames in a row the colour check withheld, and the last box it passed (w, h)
-        self._vetoed = 0
+        # frames in a row the colour check withheld, the frames a restart by colour still needs it on in a row
+        # before a fix, and the last box it passed (w, h)
+        self._vetoed = self._unconfirmed = 0
         self._box_wh: tuple[int, int] | None = None
         self._forget()
         self._awaiting_frames = 0
@@ -278,7 +282,7 @@ class TrackingSession:
         """Check the vehicle's colour as ``other`` learnt it (a tracker of the same UUV through other frames of the
         same video), not learning its own."""
         self._colour, self._learn_colour = other._colour, False
-        self._vetoed, self._box_wh = 0, other._box_wh
+        self._vetoed, self._unconfirmed, self._box_wh = 0, 0, other._box_wh
 
     def _track_from(
         self, frame_bgr, one: CameraPose, box, centre, origin: str, outlined: bool
@@ -391,7 +395,7 @@ class TrackingSession:
         ):
             self._learn_colour = False
             self._colour = learn(chroma, result.u, result.v, _half_px(result))
-            self._vetoed, self._box_wh = 0, result.box[2:]
+            self._vetoed, self._unconfirmed, self._box_wh = 0, 0, result.box[2:]
         return result
 
     def _coloured(self, chroma: Chroma, result: TrackResult) -> TrackResult:
@@ -404,8 +408,13 @@ class TrackingSession:
         d = separation(self._colour, chroma, result.u, result.v, _half_px(result))
         if self._colour.matches(d):
             self._vetoed, self._box_wh = 0, result.box[2:] if result.box else self._box_wh
-            return result
-        self._vetoed += 1
+            if self._unconfirmed == 0:
+                return result
+            self._unconfirmed -= 1
+        else:
+            self._vetoed += 1
+            if self._unconfirmed:
+                self._unconfirmed = COLOUR_CONFIRM_FRAMES
         return TrackResult("lost", confidence=result.confidence)
 
     def _found_by_colour(
@@ -413,7 +422,8 @@ class TrackingSession:
     ) -> TrackResult | None:
         """Through waves, tracking restarted where the vehicle's colour stands out most in the window the UUV is
         sought in, when it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`) and nowhere else in
-        the window more than a vehicle's length away does; None otherwise."""
+        the window more than a vehicle's length away does (no fix until :data:`COLOUR_CONFIRM_FRAMES` more frames
+        have its colour there: ``lost``); None otherwise."""
         win = search_window(self.sought or self.prediction)
         if win is None or self._box_wh is None or not self.target.waves >= COLOUR_SEARCH_WAVES:
             return None
@@ -434,8 +444,8 @@ class TrackingSession:
         except ValueError:  # the box reaches beyond the frame
             return None
         self._start(one, centre, anchor)
-        self._vetoed = 0
-        return result
+        self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
+        return TrackResult("lost", confidence=result.confidence)
 
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
         """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
