@@ -21,6 +21,7 @@ from localizer.tracking.colour import (
     LEARN_MIN_SEPARATION,
     MIN_SEPARATION,
     Chroma,
+    find,
     learn,
     separation,
 )
@@ -67,6 +68,31 @@ def test_the_hull_stands_out_in_colour_and_a_caustic_does_not():
     grey[110:130, 90:130] = 40
     assert learn(Chroma(bgr=grey), 109.5, 119.5, half) is None
     assert Chroma.of(grey[:, :, 0]) is None  # a grey image alone has no colour to read
+
+
+def test_the_hull_is_found_again_by_its_colour_and_a_second_hull_makes_it_ambiguous():
+    """find(): the place in a window standing out most in the learnt colour is the hull's (its centre within 2 px,
+    its separation what separation() reads there), not a caustic; a second hull of the same colour in the window
+    stands out as much (the caller's ambiguity)."""
+    rng = np.random.default_rng(2)
+    first = _sand(rng)
+    first[110:130, 90:130] = (150, 90, 40)
+    model = learn(Chroma(bgr=first), 109.5, 119.5, 20.0)
+    moved = _sand(rng)
+    moved[150:170, 180:220] = (
+        150,
+        90,
+        40,
+    )  # the hull 90 px right and 40 px down, at (199.5, 159.5)
+    caustic = np.clip(moved[60:80, 120:160].astype(np.float64) * 1.8, 0, 255)
+    moved[60:80, 120:160] = caustic.astype(np.uint8)
+    u, v, d, second = find(model, Chroma(bgr=moved), (100.0, 40.0, 160.0, 150.0), 20.0)
+    assert abs(u - 199.5) <= 2 and abs(v - 159.5) <= 2, (u, v)
+    assert d == pytest.approx(separation(model, Chroma(bgr=moved), u, v, 20.0))
+    assert d > 3 * LEARN_MIN_SEPARATION and second < MIN_SEPARATION * 2, (d, second)
+    moved[60:80, 120:160] = (150, 90, 40)  # a second hull where the caustic was
+    _, _, d, second = find(model, Chroma(bgr=moved), (100.0, 40.0, 160.0, 150.0), 20.0)
+    assert second > 0.5 * d, (d, second)
 
 
 def _washed_out(frame: np.ndarray, u: float, v: float, reach: int) -> np.ndarray:

@@ -14,6 +14,9 @@ after, the same separation is read at the tracked pixel (:func:`separation`): th
 ring's, in units of the ring's spread along the learnt direction. On the vehicle it stays near the learnt one;
 on seafloor that only matches the grey template it is near 0 (the place's colour is its surroundings').
 
+:func:`find` reads every place of a window at once (box filters of the learnt channel): where the vehicle's colour
+stands out most, for a tracker that lost it through waves to start again there.
+
 A vehicle whose colour does not stand out when it is selected (:data:`LEARN_MIN_SEPARATION`: a grey hull on grey
 sand) gets no model, and no check: the check never refuses what it cannot tell.
 """

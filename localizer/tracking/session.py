@@ -44,7 +44,10 @@ once by the caller and shared with the geometry.
   surroundings in the chroma channels (:mod:`.colour`, from the ``chroma`` given with the frames); every later
   ``ok`` frame whose tracked place does not stand out in that colour is no fix (``lost``), the tracker following on
   as it would have. Through wind waves a follow can slide onto caustic-lit seafloor that matches the vehicle's grey
-  levels: that place does not have its colour.
+  levels: that place does not have its colour. Through waves, after :data:`COLOUR_SEARCH_AFTER` frames in a row
+  without it (or once lost), the window the UUV is sought in is searched for the vehicle's colour
+  (:func:`.colour.find`) and tracking restarts where it stands out as when learnt, and nowhere else does
+  (:meth:`TrackingSession._found_by_colour`).
 - While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
   every ``search_every`` frames the prior is projected into the frame at the UUV's
   depth and the window its uncertainty spans is searched for a vehicle-sized object
