@@ -233,7 +233,7 @@ def track_sessions(
                     timings["hand_on"] += time.perf_counter() - t0
                 else:
                     # one copy of a frame however many UUVs keep it
-                    kept = Kept(frame.image, frame.chroma())
+                    kept = Kept(frame)
                     for track in tracks:
                         track.step(row, frame, kept)
                 if row >= first_row:
@@ -363,7 +363,7 @@ class UuvTrack:
             self.centre.unfiltered.v,
         )
         if self.both_ways:
-            kept = kept or Kept(frame.image, frame.chroma())
+            kept = kept or Kept(frame)
             # the frame kept for tracing back: one copy for both traces and every UUV that keeps it
             image = kept() if not tracked.ok or self.gap or self.behind else None
             self._trace_when_confirmed(row, image, tracked)
@@ -505,14 +505,14 @@ class Kept:
     tracing back): ``(image, chroma)``, copied on the first call only: the UUVs lost in the same frame keep the same
     copy (read-only), not one each."""
 
-    def __init__(self, image: np.ndarray, chroma: Chroma | None = None) -> None:
-        self.image, self.chroma, self._copy = image, chroma, None
+    def __init__(self, frame) -> None:
+        self.frame, self._copy = frame, None
 
     def __call__(self) -> tuple[np.ndarray, Chroma | None]:
         if self._copy is None:
-            image = self.image.copy()
+            image, chroma = self.frame.image.copy(), self.frame.chroma()
             image.flags.writeable = False
-            self._copy = (image, None if self.chroma is None else self.chroma.copy())
+            self._copy = (image, None if chroma is None else chroma.copy())
         return self._copy
 
 

@@ -125,8 +125,7 @@ def learn(chroma: Chroma | None, u: float, v: float, half_px: float) -> ColourMo
     inner, ring = regions
     pooled = np.cov(ring.T) + (np.cov(inner.T) if len(inner) > 2 else 0) + np.eye(2)
     weights = np.linalg.solve(pooled, inner.mean(axis=0) - ring.mean(axis=0))
-    model = ColourModel(weights, 0.0)
-    d = _separation(model, inner, ring)
+    d = _separation(weights, inner, ring)
     return ColourModel(weights, d) if d >= LEARN_MIN_SEPARATION else None
 
 
@@ -136,11 +135,10 @@ def separation(model: ColourModel, chroma: Chroma, u: float, v: float, half_px: 
     if not half_px >= 1:
         return math.nan
     regions = _regions(chroma, u, v, half_px)
-    return math.nan if regions is None else _separation(model, *regions)
+    return math.nan if regions is None else _separation(model.weights, *regions)
 
 
-def _separation(model: ColourModel, inner: np.ndarray, ring: np.ndarray) -> float:
-    w = model.weights
+def _separation(w: np.ndarray, inner: np.ndarray, ring: np.ndarray) -> float:
     ring_w = ring @ w
     return float((inner.mean(axis=0) @ w - ring_w.mean()) / math.sqrt(ring_w.var() + 1e-6))
 
