@@ -44,7 +44,8 @@ once by the caller and shared with the geometry.
   surroundings in the chroma channels (:mod:`.colour`, from the ``chroma`` given with the frames); every later
   ``ok`` frame whose tracked place does not stand out in that colour is no fix (``lost``), the tracker following on
   as it would have. Through wind waves a follow can slide onto caustic-lit seafloor that matches the vehicle's grey
-  levels: that place does not have its colour. Through waves, after :data:`COLOUR_SEARCH_AFTER` frames in a row
+  levels: that place does not have its colour. Through waves (read for :data:`COLOUR_SEARCH_ROUGH_S`: a vehicle
+  passing over the UUV makes the matches wobble for a moment too), after :data:`COLOUR_SEARCH_AFTER` frames in a row
   without it (or once lost), the window the UUV is sought in is searched for the vehicle's colour
   (:func:`.colour.find`) and tracking restarts where it stands out as when learnt, and nowhere else does
   (:meth:`TrackingSession._found_by_colour`).
@@ -116,13 +117,11 @@ SPEED_MARGIN_MPS = 0.1
 #: second vehicle of the same colour) ...
 COLOUR_SEARCH_WAVES = 0.5
 COLOUR_SEARCH_AFTER = 2
-#: ... when the matcher has read that sea state for at least this long (s): waves last, while a vehicle passing over
-#: the UUV makes the matches wobble for a moment as waves would (tests/test_tracking_lookalikes.py, crossing_close:
-#: the reading rose to 1 within 0.2 s of the pass, and a search by colour then jumped to the passing vehicle) ...
+#: ... when the matcher has read that sea state for at least this long (s), and until it has read a calmer one as
+#: long: waves last, while a vehicle passing over the UUV makes the matches wobble for a moment as waves would
+#: (tests/test_tracking_lookalikes.py, crossing_close: the reading rose to 1 within 0.2 s of the pass, and a search
+#: by colour then jumped to the passing vehicle), and a restart's new matcher reads a calm sea over its first frames
 COLOUR_SEARCH_ROUGH_S = 1.0
-#: ... (a restart by colour's new matcher reads the sea anew: its readings over this long (s) after the restart do
-#: not end the time read)
-COLOUR_REREAD_S = 0.5
 #: ... and tracking restarts where it stands out at least this share of its separation when learnt, and at least
 #: this much (ring spreads: the best of a window's places of seafloor reaches 2.2 through waves)
 COLOUR_FOUND_SHARE = 0.5
@@ -201,9 +200,10 @@ class TrackingSession:
         # before a fix, and the last box it passed (w, h)
         self._vetoed = self._unconfirmed = 0
         self._box_wh: tuple[int, int] | None = None
-        # since when (t_unix) the matcher has read the sea as rough (NaN: it does not), and the latest restart by
-        # colour (see :data:`COLOUR_SEARCH_ROUGH_S`)
-        self._rough_since_t = self._restarted_t = math.nan
+        # the sea as read (see :data:`COLOUR_SEARCH_ROUGH_S`): rough, and the matcher's latest reading (rough or
+        # not) since when (t_unix)
+        self._rough = self._reading_rough = False
+        self._reading_since_t = math.nan
         self._forget()
         self._awaiting_frames = 0
         self._noted_state = None
@@ -439,12 +439,7 @@ class TrackingSession:
         the window more than a vehicle's length away does (no fix until :data:`COLOUR_CONFIRM_FRAMES` more frames
         have its colour there: ``lost``); None otherwise."""
         win = search_window(self.sought or self.prediction)
-        t_unix = float(pose.t_unix[i])
-        if (
-            win is None
-            or self._box_wh is None
-            or not t_unix - self._rough_since_t >= COLOUR_SEARCH_ROUGH_S
-        ):
+        if win is None or self._box_wh is None or not self._rough:
             return None
         bw, bh = self._box_wh
         got = find(self._colour, chroma, win, max(bw, bh) / 2)
@@ -464,17 +459,16 @@ class TrackingSession:
             return None
         self._start(one, centre, anchor)
         self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
-        self._restarted_t = t_unix
         return TrackResult("lost", confidence=result.confidence)
 
     def _read_sea(self, t_unix: float) -> None:
-        """Since when the matcher reads the sea as rough (:data:`COLOUR_SEARCH_WAVES`), kept through the first
-        :data:`COLOUR_REREAD_S` of a restart by colour's matcher."""
-        if self.target.waves >= COLOUR_SEARCH_WAVES:
-            if not self._rough_since_t <= t_unix:  # NaN: from now
-                self._rough_since_t = t_unix
-        elif not t_unix - self._restarted_t < COLOUR_REREAD_S:
-            self._rough_since_t = math.nan
+        """The sea as read: rough once the matcher has read it so (:data:`COLOUR_SEARCH_WAVES`) for
+        :data:`COLOUR_SEARCH_ROUGH_S`, calm once it has read it calmer as long."""
+        rough = self.target.waves >= COLOUR_SEARCH_WAVES
+        if rough is not self._reading_rough:
+            self._reading_rough, self._reading_since_t = rough, t_unix
+        if t_unix - self._reading_since_t >= COLOUR_SEARCH_ROUGH_S:
+            self._rough = rough
 
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
         """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
