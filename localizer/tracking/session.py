@@ -121,6 +121,7 @@ COLOUR_SEARCH_AFTER = 2
 #: long: waves last, while a vehicle passing over the UUV makes the matches wobble for a moment as waves would
 #: (tests/test_tracking_lookalikes.py, crossing_close: the reading rose to 1 within 0.2 s of the pass, and a search
 #: by colour then jumped to the passing vehicle), and a restart's new matcher reads a calm sea over its first frames
+#: (before either has been read this long, the latest reading)
 COLOUR_SEARCH_ROUGH_S = 1.0
 #: ... and tracking restarts where it stands out at least this share of its separation when learnt, and at least
 #: this much (ring spreads: the best of a window's places of seafloor reaches 2.2 through waves)
@@ -200,9 +201,10 @@ class TrackingSession:
         # before a fix, and the last box it passed (w, h)
         self._vetoed = self._unconfirmed = 0
         self._box_wh: tuple[int, int] | None = None
-        # the sea as read (see :data:`COLOUR_SEARCH_ROUGH_S`): rough, and the matcher's latest reading (rough or
-        # not) since when (t_unix)
-        self._rough = self._reading_rough = False
+        # the sea as read (see :data:`COLOUR_SEARCH_ROUGH_S`): rough or not (None: not yet read that long), and the
+        # matcher's latest reading (rough or not) since when (t_unix)
+        self._rough: bool | None = None
+        self._reading_rough: bool | None = None
         self._reading_since_t = math.nan
         self._forget()
         self._awaiting_frames = 0
@@ -439,7 +441,8 @@ class TrackingSession:
         the window more than a vehicle's length away does (no fix until :data:`COLOUR_CONFIRM_FRAMES` more frames
         have its colour there: ``lost``); None otherwise."""
         win = search_window(self.sought or self.prediction)
-        if win is None or self._box_wh is None or not self._rough:
+        rough = self._rough if self._rough is not None else self._reading_rough
+        if win is None or self._box_wh is None or not rough:
             return None
         bw, bh = self._box_wh
         got = find(self._colour, chroma, win, max(bw, bh) / 2)
@@ -463,7 +466,8 @@ class TrackingSession:
 
     def _read_sea(self, t_unix: float) -> None:
         """The sea as read: rough once the matcher has read it so (:data:`COLOUR_SEARCH_WAVES`) for
-        :data:`COLOUR_SEARCH_ROUGH_S`, calm once it has read it calmer as long."""
+        :data:`COLOUR_SEARCH_ROUGH_S`, calm once it has read it calmer as long; before either, the latest reading
+        (a track's first second: waves from the start are read at once, and no pass has a calm to rise from)."""
         rough = self.target.waves >= COLOUR_SEARCH_WAVES
         if rough is not self._reading_rough:
             self._reading_rough, self._reading_since_t = rough, t_unix
