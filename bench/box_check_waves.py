@@ -46,6 +46,7 @@ from groundstation.session.read import load_session
 from localizer.fix import locate
 from localizer.pose import camera_pose, take
 from localizer.tracking import Prediction
+from localizer.tracking.colour import Chroma
 from localizer.tracking.detect import DetectParams, detect
 from localizer.tracking.predict import prediction_at, project_uuv
 from localizer.tracking.session import STEADY_S, SelectionError, TrackingSession
@@ -86,11 +87,20 @@ def checked_steady(
     """What the check over frames makes of ``box`` drawn on frame ``i``: (kept/snapped/refused, the taken box's
     centre, the frame the check ended on)."""
     tracking = TrackingSession(session.calibration, "default")
-    tracking.select(frames[i], pose, i, box=box, verify=True, keep_drawn=True, steady=True)
+    tracking.select(
+        frames[i],
+        pose,
+        i,
+        box=box,
+        verify=True,
+        keep_drawn=True,
+        steady=True,
+        chroma=Chroma.of(frames[i]),
+    )
     j = i
     while tracking.check == "confirming" and j + 1 in frames:
         j += 1
-        result = tracking.step(frames[j], pose, j)
+        result = tracking.step(frames[j], pose, j, chroma=Chroma.of(frames[j]))
     word = tracking.check.split(":")[0]
     return word, ((result.u, result.v) if word in ("kept", "snapped") else None), j
 

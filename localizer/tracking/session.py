@@ -127,6 +127,13 @@ COLOUR_SEARCH_ROUGH_S = 1.0
 #: this much (ring spreads: the best of a window's places of seafloor reaches 2.2 through waves)
 COLOUR_FOUND_SHARE = 0.5
 COLOUR_FOUND_MIN = 3.0
+#: A box checked over frames whose vehicle stands out of its surroundings in colour at least this much when drawn
+#: (ring spreads: :func:`.colour.learn`; the UUV's boxes 1.9-10.4 on the wave renders, 33 of 36 at least 3; boxes
+#: of seafloor 1-4.5 box sizes away at most 2.99, 0 of 819) is also taken when its colour is found where it is
+#: sought (:meth:`TrackingSession._colour_found`) in :data:`STEADY_FOLLOWED` of the check's frames, and is at the
+#: tracked place in the frame the check ends on: through waves the matcher may lose a small, deep UUV in the check's
+#: first frames, and the grey levels' mean then shows no vehicle where the colour does.
+STEADY_COLOUR_MIN = 3.0
 #: A restart by colour gives no fix until the vehicle's colour is at the tracked place on this many frames in a row
 #: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more).
 COLOUR_CONFIRM_FRAMES = 2
@@ -254,7 +261,9 @@ class TrackingSession:
             )
         one = take(pose, [i])
         if verify and steady and box is not None:
-            return self._learned(chroma, self._select_steady(frame_bgr, one, box, keep_drawn))
+            return self._learned(
+                chroma, self._select_steady(frame_bgr, one, box, keep_drawn, chroma)
+            )
         outlined = None
         if point is not None:
             outlined = self._outline_click(frame_bgr, one, point)
@@ -368,7 +377,7 @@ class TrackingSession:
             elif self.target.state is TargetState.AWAITING_TARGET:
                 self._forget()  # a candidate that did not confirm
             if self._steady is not None:
-                result = self._checked(frame_bgr, pose, i, result)
+                result = self._checked(frame_bgr, pose, i, result, chroma)
             if self._colour is not None and chroma is not None:
                 result = self._coloured(chroma, result)
                 if self._vetoed >= COLOUR_SEARCH_AFTER or self.target.state is TargetState.LOST:
@@ -440,17 +449,11 @@ class TrackingSession:
         sought in, when it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`) and nowhere else in
         the window more than a vehicle's length away does (no fix until :data:`COLOUR_CONFIRM_FRAMES` more frames
         have its colour there: ``lost``); None otherwise."""
-        win = search_window(self.sought or self.prediction)
         rough = self._rough if self._rough is not None else self._reading_rough
-        if win is None or self._box_wh is None or not rough:
+        got = self._colour_found(chroma) if rough else None
+        if got is None:
             return None
         bw, bh = self._box_wh
-        got = find(self._colour, chroma, win, max(bw, bh) / 2)
-        bar = max(COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation)
-        if (
-            got is None or not got[2] >= bar or got[3] >= bar
-        ):  # none, or two of the vehicle's colour
-            return None
         one = take(pose, [i])
         cu, cv_ = top_face_pixel(self.cal, one, [got[0]], [got[1]])
         centre = (float(cu[0]), float(cv_[0]))
@@ -463,6 +466,17 @@ class TrackingSession:
         self._start(one, centre, anchor)
         self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
         return TrackResult("lost", confidence=result.confidence)
+
+    def _colour_found(self, chroma: Chroma) -> tuple[float, float, float, float] | None:
+        """:func:`.colour.find`'s answer in the window the UUV is sought in, where the vehicle's colour stands out
+        as learnt (:data:`COLOUR_FOUND_SHARE`, :data:`COLOUR_FOUND_MIN`) and nowhere else more than a vehicle's
+        length away does; None otherwise (none, or two of the vehicle's colour)."""
+        win = search_window(self.sought or self.prediction)
+        if win is None or self._box_wh is None:
+            return None
+        got = find(self._colour, chroma, win, max(self._box_wh) / 2)
+        bar = max(COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation)
+        return None if got is None or not got[2] >= bar or got[3] >= bar else got
 
     def _read_sea(self, t_unix: float) -> None:
         """The sea as read: rough once the matcher has read it so (:data:`COLOUR_SEARCH_WAVES`) for
@@ -689,10 +703,13 @@ class TrackingSession:
             raise SelectionError(f"{_named(box)}: {_NOTHING_IN_BOX}; draw the box around the UUV")
         return found.box
 
-    def _select_steady(self, frame_bgr, one: CameraPose, box, keep_drawn: bool) -> TrackResult:
+    def _select_steady(
+        self, frame_bgr, one: CameraPose, box, keep_drawn: bool, chroma: Chroma | None
+    ) -> TrackResult:
         """A box to check over frames (see :meth:`select`): followed from this frame on, its frames
-        ``awaiting_target`` until :meth:`_checked` takes or refuses it. Without a pose to size the vehicle, the box
-        is tracked unchecked, as :meth:`select` does."""
+        ``awaiting_target`` until :meth:`_checked` takes or refuses it; its colour learnt in ``chroma`` for the
+        check (:data:`STEADY_COLOUR_MIN`; learnt again where it is taken). Without a pose to size the vehicle, the
+        box is tracked unchecked, as :meth:`select` does."""
         window = self._box_prediction(one, box)
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
@@ -705,19 +722,32 @@ class TrackingSession:
             SteadyWindow(window, centre, params), tuple(box), keep_drawn, float(one.t_unix[0])
         )
         self._steady.window.add(frame_bgr, centre)
+        self._colour = learn(chroma, centre[0], centre[1], max(box[2], box[3]) / 2)
+        self._vetoed, self._unconfirmed, self._box_wh = 0, 0, tuple(box[2:])
         self.check = "confirming"
         return self._note(float(one.t_unix[0]), TrackResult("awaiting_target"))
 
-    def _checked(self, frame_bgr, pose: CameraPose, i: int, result: TrackResult) -> TrackResult:
+    def _checked(
+        self, frame_bgr, pose: CameraPose, i: int, result: TrackResult, chroma: Chroma | None
+    ) -> TrackResult:
         """A frame of a box being checked over frames, ``result`` the target's: ``awaiting_target`` until
         :data:`STEADY_S` has passed and the box is followed in the frame (at most twice that); then the box
         refused (awaiting a target; :attr:`check` says why) unless it was followed in :data:`STEADY_FOLLOWED` of
         the frames and a vehicle-sized object stands out of the mean of its window's saliencies, overlapping the
         box as followed here: then kept (``keep_drawn``, the box's centre agreeing with the outline's, or with
         where the mean's object is: an outline in one frame through waves may be a part of it) or snapped onto the
-        outline in this frame, and ``ok``."""
+        outline in this frame, and ``ok``; or, its colour standing out (:data:`STEADY_COLOUR_MIN`), kept as followed
+        when its colour was found where it was sought in :data:`STEADY_FOLLOWED` of the frames and is at the tracked
+        place here."""
         steady = self._steady
         steady.frames += 1
+        coloured = (
+            chroma is not None
+            and self._colour is not None
+            and self._colour.separation >= STEADY_COLOUR_MIN
+        )
+        if coloured and self._colour_found(chroma) is not None:
+            steady.coloured += 1
         if result.ok:
             steady.window.add(frame_bgr, (result.u, result.v))
         age_s = float(pose.t_unix[i]) - steady.t0_unix
@@ -730,8 +760,19 @@ class TrackingSession:
             followed = (round(x + du), round(y + dv), w, h)
             found = window.detect()
         if found is None or not _overlap(found.box, followed):
+            if (
+                coloured
+                and result.ok
+                and steady.coloured >= STEADY_FOLLOWED * steady.frames
+                and self._colour.matches(
+                    separation(self._colour, chroma, result.u, result.v, _half_px(result))
+                )
+            ):
+                self._steady, self.check = None, "kept"
+                return result
             box = _named(steady.box)
             self.acquire()
+            self._colour = None  # the refused box's
             self.check = (
                 f"refused: {box}: {_NOTHING_IN_BOX} over {window.frames} of {steady.frames} "
                 "frames it was followed in; draw the box around the UUV"
@@ -798,13 +839,14 @@ def _named(box) -> str:
 @dataclass
 class _Steady:
     """A box being checked over frames: the mean window, the box as drawn, whether to keep it as drawn on the
-    outline, the first frame's time, the frames seen since (the first included)."""
+    outline, the first frame's time, the frames seen since (the first included) and those its colour was found in."""
 
     window: SteadyWindow
     box: tuple
     keep_drawn: bool
     t0_unix: float
     frames: int = 1
+    coloured: int = 0  # frames its colour was found where it was sought
 
 
 def _half_px(result: TrackResult) -> float:
