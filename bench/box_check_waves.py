@@ -17,7 +17,11 @@ ones), on frames 0, 60 and 150, with the camera's pose of the frame:
   (``TrackingSession.select(..., steady=True)``: followed from that frame for ``STEADY_S``, taken when a vehicle
   stands out of the mean of its window's saliencies): the vehicle's box kept/snapped/refused, and how many seafloor
   boxes it takes on something other than the UUV (the taken box's centre further than the box's size from the
-  UUV's true pixel in the frame the check ends on).
+  UUV's true pixel in the frame the check ends on). The frames' colour is given as the live pipeline gives it (from
+  the BGR frame; none with ``--luma``, whose frames are grey).
+- ``colour when drawn``: how far each box stands out of its surroundings in colour when drawn, as the check over
+  frames learns it (:func:`localizer.tracking.colour.learn`): the UUV's boxes and the seafloor's against
+  ``STEADY_COLOUR_MIN``, the least a box's colour takes it by.
 
 ``--luma``: the frames' luma planes, as the live pipeline's default tracker reads them (and checks the boxes on),
 instead of BGR.
@@ -46,10 +50,15 @@ from groundstation.session.read import load_session
 from localizer.fix import locate
 from localizer.pose import camera_pose, take
 from localizer.tracking import Prediction
-from localizer.tracking.colour import Chroma
+from localizer.tracking.colour import Chroma, learn
 from localizer.tracking.detect import DetectParams, detect
 from localizer.tracking.predict import prediction_at, project_uuv
-from localizer.tracking.session import STEADY_S, SelectionError, TrackingSession
+from localizer.tracking.session import (
+    STEADY_COLOUR_MIN,
+    STEADY_S,
+    SelectionError,
+    TrackingSession,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 FRAMES = (0, 60, 150)
@@ -127,6 +136,13 @@ def saliency(
     return (None, math.nan, math.nan) if found is None else (found.saliency, found.u, found.v)
 
 
+def colour_drawn(image, u: float, v: float, box) -> float:
+    """How far the box centred at (u, v) stands out of its surroundings in colour, as the check over frames learns
+    it when the box is drawn (:func:`localizer.tracking.colour.learn`, ring spreads; NaN: not read)."""
+    model = learn(Chroma.of(image), u, v, max(box[2:]) / 2, min_separation=-math.inf)
+    return math.nan if model is None else model.separation
+
+
 def followed(path: Path, start: int) -> dict:
     """The UUV's box and the seafloor boxes of frame ``start`` taken unchecked and followed :data:`FOLLOW` frames."""
     session = load_session(path)
@@ -191,7 +207,7 @@ def run(path: Path, luma: bool = False) -> dict:
         word, _ = checked(session, image, pose, i, box)
         steady, _, _ = checked_steady(session, frames, pose, i, box)
         s, _, _ = saliency(image, pose, i, session, u, v, box)
-        taken, steady_taken, distinct = 0, 0, []
+        taken, steady_taken, distinct, colours = 0, 0, [], []
         for k in STEPS:
             for a in range(8):
                 cu = u + k * w * math.cos(a * math.pi / 4)
@@ -207,6 +223,7 @@ def run(path: Path, luma: bool = False) -> dict:
                     math.hypot(at[0] - truth["u"][j], at[1] - truth["v"][j]) <= max(w, h)
                 ):
                     steady_taken += 1
+                colours.append(colour_drawn(image, cu, cv_, sea))
                 s_sea, su, sv = saliency(image, pose, i, session, cu, cv_, sea)
                 if s_sea is not None and math.hypot(su - u, sv - v) > max(w, h):
                     distinct.append(s_sea)
@@ -219,6 +236,8 @@ def run(path: Path, luma: bool = False) -> dict:
                 "vehicle_steady": steady,
                 "seafloor_taken_steady": steady_taken,
                 "seafloor_distinct": sorted(distinct),
+                "vehicle_colour": colour_drawn(image, u, v, box),
+                "seafloor_colours": colours,
             }
         )
     return {"session": path.name, "rows": rows}
@@ -268,6 +287,14 @@ def main() -> None:
         lines.append(
             f"{name}: UUV boxes taken {kept} of {len(rows)}, seafloor boxes taken {sum(row[key] for row in rows)}"
         )
+    rows = [row for r in results for row in r["rows"]]
+    uuv = np.array([row["vehicle_colour"] for row in rows])
+    sea = np.array([c for row in rows for c in row["seafloor_colours"]])
+    lines.append(
+        f"colour when drawn (ring spreads): UUV boxes {np.nanmin(uuv):.2f}-{np.nanmax(uuv):.2f}, "
+        f"{np.sum(uuv >= STEADY_COLOUR_MIN)} of {len(uuv)} at least STEADY_COLOUR_MIN {STEADY_COLOUR_MIN:g}; "
+        f"seafloor boxes at most {np.nanmax(sea):.2f}, {np.sum(sea >= STEADY_COLOUR_MIN)} of {len(sea)} at least it"
+    )
     follows = []
     if args.follow:
         lines += [

@@ -114,9 +114,15 @@ def _regions(chroma: Chroma, u: float, v: float, half_px: float):
     return inner, ring
 
 
-def learn(chroma: Chroma | None, u: float, v: float, half_px: float) -> ColourModel | None:
+def learn(
+    chroma: Chroma | None,
+    u: float,
+    v: float,
+    half_px: float,
+    min_separation: float = LEARN_MIN_SEPARATION,
+) -> ColourModel | None:
     """The vehicle's colour at its pixel (u, v), its square's half-side ``half_px`` (half its apparent length);
-    None when it does not stand out in colour (:data:`LEARN_MIN_SEPARATION`) or cannot be read there."""
+    None when it does not stand out in colour (``min_separation``) or cannot be read there."""
     if chroma is None or not half_px >= 1:
         return None
     regions = _regions(chroma, u, v, half_px)
@@ -126,7 +132,7 @@ def learn(chroma: Chroma | None, u: float, v: float, half_px: float) -> ColourMo
     pooled = np.cov(ring.T) + (np.cov(inner.T) if len(inner) > 2 else 0) + np.eye(2)
     weights = np.linalg.solve(pooled, inner.mean(axis=0) - ring.mean(axis=0))
     d = _separation(weights, inner, ring)
-    return ColourModel(weights, d) if d >= LEARN_MIN_SEPARATION else None
+    return ColourModel(weights, d) if d >= min_separation else None
 
 
 def separation(model: ColourModel, chroma: Chroma, u: float, v: float, half_px: float) -> float:
