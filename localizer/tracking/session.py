@@ -768,7 +768,8 @@ class TrackingSession:
                     separation(self._colour, chroma, result.u, result.v, _half_px(result))
                 )
             ):
-                self._steady, self.check = None, "kept"
+                # the colour as learnt in the drawn box, not where a search by colour restarted the matcher
+                self._steady, self.check, self._learn_colour = None, "kept", False
                 return result
             box = _named(steady.box)
             self.acquire()
