@@ -128,8 +128,8 @@ COLOUR_SEARCH_ROUGH_S = 1.0
 COLOUR_FOUND_SHARE = 0.5
 COLOUR_FOUND_MIN = 3.0
 #: A box checked over frames whose vehicle stands out of its surroundings in colour at least this much when drawn
-#: (ring spreads: :func:`.colour.learn`; the UUV's boxes 1.9-10.4 on the wave renders, 33 of 36 at least 3; boxes
-#: of seafloor 1-4.5 box sizes away at most 2.99, 0 of 819) is also taken when its colour is found where it is
+#: (ring spreads: :func:`.colour.learn`; nearly every UUV box of the wave renders does, no seafloor box, the most
+#: just under it: bench/results/box_check_colour_s17.txt) is also taken when its colour is found where it is
 #: sought (:meth:`TrackingSession._colour_found`) in :data:`STEADY_FOLLOWED` of the check's frames, and is at the
 #: tracked place in the frame the check ends on: through waves the matcher may lose a small, deep UUV in the check's
 #: first frames, and the grey levels' mean then shows no vehicle where the colour does.
