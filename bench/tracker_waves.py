@@ -119,6 +119,7 @@ try:
 except ImportError:  # a tree whose live reader hands over BGR alone
     def frame_images(frame):
         return frame.to_ndarray(format="bgr24"), None
+planes = {"grey", "chroma"} & set(LiveFrame.__dataclass_fields__)  # what the tree's live reader hands over
 session = load_session(sys.argv[1])
 t = session.frames["t"]
 pipeline = Pipeline(session.calibration, session.telemetry, "default", [])
@@ -130,9 +131,11 @@ async def run():
         ctx = decoder(stream, low_delay=True)
         for packet in container.demux(stream):
             for frame in ctx.decode(packet):
-                image, grey = frame_images(frame)
+                image, *extra = frame_images(frame)
                 i = len(fixes)
-                live = LiveFrame(i, float(t[i]), float(t[i]), image, **({} if grey is None else {"grey": grey}))
+                given = dict(zip(("grey", "chroma"), extra))
+                live = LiveFrame(i, float(t[i]), float(t[i]), image,
+                                 **{k: x for k, x in given.items() if k in planes and x is not None})
                 t0 = time.perf_counter()
                 fixes.append(await pipeline.process(live))
                 spent += time.perf_counter() - t0

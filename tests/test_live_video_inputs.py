@@ -173,9 +173,15 @@ def test_rtp_without_sdp_file(clips, codec):
     assert set(status["rtp"]) == {"lost_packets", "dropped_frames", "bad_packets"}
     _check_timing(rx.frames)
     # beside BGR, each frame's luma plane: the grey levels skyfix process reads of the clip, byte for byte
+    # and its chroma planes: the colour skyfix process's check reads (the whole frame's, as the check reads a square)
+    centre, half = (SIZE[0] / 2, SIZE[1] / 2), max(SIZE)
     with open_video(clips[codec], grey=True) as video:
-        offline = {f.image.tobytes() for f in video}
+        offline, colour = set(), set()
+        for f in video:
+            offline.add(f.image.tobytes())
+            colour.add(f.chroma().square(*centre, half)[0].tobytes())
     assert all(f.grey.shape == SIZE[::-1] and f.grey.tobytes() in offline for f in rx.frames)
+    assert all(f.chroma.square(*centre, half)[0].tobytes() in colour for f in rx.frames)
 
 
 def _small_gray(image) -> np.ndarray:

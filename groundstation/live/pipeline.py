@@ -75,7 +75,6 @@ from localizer.telemetry import Telemetry
 from localizer.timeline import Series
 from localizer.tracking import GREY_TRACKERS, TrackResult
 from localizer.tracking.centroid import CentroidSteer
-from localizer.tracking.colour import Chroma
 from localizer.tracking.predict import window as search_window
 from localizer.tracking.session import STEADY_S, Prior, SelectionError, TrackingSession
 
@@ -339,14 +338,14 @@ class Pipeline:
                     point=point,
                     verify=True,
                     steady=box is not None,
-                    chroma=Chroma.of(held.frame.image),
+                    chroma=held.frame.colour(),
                 ),
             )
             self._checking = _Checking(held.frame.index, box) if self.session.check else None
             for h in later:
                 result = self._steered(
                     h,
-                    self.session.step(self._seen(h.frame), h.pose, chroma=Chroma.of(h.frame.image)),
+                    self.session.step(self._seen(h.frame), h.pose, chroma=h.frame.colour()),
                 )
                 if self._checking is not None and self.session.check != "confirming":
                     self._checking = None
@@ -506,7 +505,7 @@ class Pipeline:
                     log.warning(
                         "tracker.init_bbox on frame %d: %s; awaiting a target", frame.index, e
                     )
-        result = self.session.step(image, pose, prior=prior, chroma=Chroma.of(frame.image))
+        result = self.session.step(image, pose, prior=prior, chroma=frame.colour())
         if self._checking is not None and self.session.check != "confirming":
             self._checked(frame, result)
         if self._unchecked and not self.commands and result.ok and pose.status[0] == "ok":
@@ -524,7 +523,7 @@ class Pipeline:
             verify=True,
             keep_drawn=True,
             steady=True,
-            chroma=Chroma.of(frame.image),
+            chroma=frame.colour(),
         )
         if self.session.check == "confirming":
             self._checking = _Checking(frame.index, box, init=True)
@@ -555,7 +554,7 @@ class Pipeline:
             verify=True,
             keep_drawn=True,
             steady=True,
-            chroma=Chroma.of(frame.image),
+            chroma=frame.colour(),
         )
         if (
             self.session.check != "confirming"

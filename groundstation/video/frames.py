@@ -70,6 +70,13 @@ def luma(frame: av.VideoFrame) -> np.ndarray | None:
     return plane_array(frame.planes[0]) if frame.format.name == "yuv420p" else None
 
 
+def chroma_planes(frame: av.VideoFrame) -> Chroma | None:
+    """A yuv420p frame's chroma planes as decoded (views, no conversion), None for other pixel formats."""
+    if frame.format.name != "yuv420p":
+        return None
+    return Chroma.of(None, [plane_array(p) for p in frame.planes])
+
+
 #: A region :class:`BgrRegions` converts reaches this far (pixels) beyond the rows and columns read: the windows one
 #: height-from-size measurement reads lie around one vehicle.
 REGION_MARGIN_PX = 48
@@ -143,7 +150,8 @@ class LiveFrame:
     ``grey`` the decoded frame's luma plane (:func:`luma`) beside ``image`` (BGR), None where it has none (another
     pixel format, a frame not from a decoder): a tracker of grey levels reads it, as ``skyfix process`` reads a
     video's (the frame's grey levels are then the same live and offline, where converting ``image`` to grey gives
-    other levels).
+    other levels). ``chroma``: likewise its chroma planes (:func:`chroma_planes`), the colour the tracker's check
+    reads offline (:meth:`colour`).
     """
 
     index: int
@@ -154,13 +162,27 @@ class LiveFrame:
     aligned: bool = True
     t_recv_mono: float | None = None
     grey: np.ndarray | None = field(default=None, repr=False)
+    chroma: Chroma | None = field(default=None, repr=False)
+
+    def colour(self) -> Chroma | None:
+        """The frame's colour as the tracker's check reads it: the decoded chroma planes where handed over, else
+        ``image``'s (BGR converted: other values, on sub-sampled colour)."""
+        return self.chroma if self.chroma is not None else Chroma.of(self.image)
 
 
 def live_frame(frame: VideoFrame, t_unix: float) -> LiveFrame:
     """A file's ``frame`` handed over as the live reader hands a stream's (exposure, arrival and slot at ``t_unix``):
     in BGR and, where it was read grey, its luma plane beside it (replays of a file through the live pipeline)."""
-    grey = frame.image if frame.decoded is not None else None
-    return LiveFrame(frame.index, t_unix, t_unix, frame.bgr(), t_unix, grey=grey)
+    decoded = frame.decoded is not None
+    return LiveFrame(
+        frame.index,
+        t_unix,
+        t_unix,
+        frame.bgr(),
+        t_unix,
+        grey=frame.image if decoded else None,
+        chroma=frame.chroma() if decoded else None,
+    )
 
 
 def put_until(q: queue.Queue, item, stop: threading.Event) -> bool:

@@ -71,6 +71,7 @@ from groundstation.video.ffmpeg_log import last_ffmpeg_error, route_ffmpeg_log
 from groundstation.video.frames import (
     LiveFrame,
     VideoError,
+    chroma_planes,
     decoder,
     ffmpeg_reason,
     luma,
@@ -82,6 +83,7 @@ from groundstation.video.rtp import Depacketizer
 from groundstation.video.udp import DatagramInput
 from groundstation.video.zenoh_video import ZenohVideoInput
 from localizer.clock import ClockMap
+from localizer.tracking.colour import Chroma
 
 log = logging.getLogger("skyfix.video")
 
@@ -115,11 +117,11 @@ def _demux(container, stream, packets: queue.Queue, done: threading.Event) -> No
         put_until(packets, e, done)
 
 
-def frame_images(frame: av.VideoFrame) -> tuple[np.ndarray, np.ndarray | None]:
+def frame_images(frame: av.VideoFrame) -> tuple[np.ndarray, np.ndarray | None, Chroma | None]:
     """A decoded frame's images as they are handed over (:class:`LiveFrame`): ``image`` in BGR (the listeners', the
-    page's) and ``grey``, its luma plane (what a tracker of grey levels reads; None for a pixel format other than
-    yuv420p)."""
-    return frame.to_ndarray(format="bgr24"), luma(frame)
+    page's), ``grey``, its luma plane (what a tracker of grey levels reads), and its chroma planes (the colour the
+    tracker's check reads); None for a pixel format other than yuv420p."""
+    return frame.to_ndarray(format="bgr24"), luma(frame), chroma_planes(frame)
 
 
 def catch_up(packets: queue.Queue, waiting: deque) -> tuple[int, float | None]:
@@ -400,7 +402,7 @@ class VideoLive:
         log.info("video: receiving %s (connection %d)", self.url, self.connects)
 
     def _hand_over(self, frame, tb: float, clock: ClockMap, t_recv: float) -> None:
-        image, grey = frame_images(frame)
+        image, grey, chroma = frame_images(frame)
         h, w = image.shape[:2]
         if self.expected_size is not None and (w, h) != tuple(self.expected_size):
             ew, eh = self.expected_size
@@ -417,6 +419,7 @@ class VideoLive:
             t_slot,
             latency_s is not None,
             grey=grey,
+            chroma=chroma,
         )
         self.frames += 1
         self.last_recv = t_recv
