@@ -707,9 +707,9 @@ class TrackingSession:
         self, frame_bgr, one: CameraPose, box, keep_drawn: bool, chroma: Chroma | None
     ) -> TrackResult:
         """A box to check over frames (see :meth:`select`): followed from this frame on, its frames
-        ``awaiting_target`` until :meth:`_checked` takes or refuses it; its colour learnt in ``chroma`` for the
-        check (:data:`STEADY_COLOUR_MIN`; learnt again where it is taken). Without a pose to size the vehicle, the
-        box is tracked unchecked, as :meth:`select` does."""
+        ``awaiting_target`` until :meth:`_checked` takes or refuses it; its colour learnt in ``chroma``, for the
+        check (:data:`STEADY_COLOUR_MIN`) and kept once the box is taken as drawn (learnt again on the outline it is
+        snapped to). Without a pose to size the vehicle, the box is tracked unchecked, as :meth:`select` does."""
         window = self._box_prediction(one, box)
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
@@ -786,7 +786,8 @@ class TrackingSession:
             self._agrees(one, followed, found.box)
             or self._agrees(one, followed, (pu - (fw - 1) / 2.0, pv - (fh - 1) / 2.0, fw, fh))
         ):
-            self._steady, self.check = None, "kept"
+            # the colour as learnt in the drawn box (as offline, where init_bbox is taken on its frame)
+            self._steady, self.check, self._learn_colour = None, "kept", False
             return result
         fx, fy, fw, fh = found.box
         cu, cv_ = top_face_pixel(self.cal, one, [fx + (fw - 1) / 2.0], [fy + (fh - 1) / 2.0])
