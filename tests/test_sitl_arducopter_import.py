@@ -362,8 +362,14 @@ def the_survey_filmed_is_located(
     )
     camera, fps = camera_of(sc), sc.fps
     t_sim, R_body, lla = sim_truth(log)
-    # on the log's UNIX clock
+    # on the log's UNIX clock; the frames its SIM records cover (the autopilot stopped, its last records may not
+    # have reached the file: CI once lost the survey's end)
     frames_t = np.arange(survey_span[0] + VIDEO_LATE_S, survey_span[1], 1.0 / fps)
+    covered = frames_t - clock_s <= t_sim[-1]
+    assert covered.mean() >= 0.8, (
+        f"the log's SIM records end at boot {t_sim[-1]:.2f} s, {covered.mean():.0%} into the survey"
+    )
+    frames_t = frames_t[covered]
     boot = frames_t - clock_s
     ned = np.column_stack(
         pymap3d.geodetic2ned(lla[:, 0], lla[:, 1], lla[:, 2], LAT, LON, HOME_AMSL_M)
