@@ -768,9 +768,7 @@ class TrackingSession:
                     separation(self._colour, chroma, result.u, result.v, _half_px(result))
                 )
             ):
-                # the colour as learnt in the drawn box, not where a search by colour restarted the matcher
-                self._steady, self.check, self._learn_colour = None, "kept", False
-                return result
+                return self._kept(result)
             box = _named(steady.box)
             self.acquire()
             self._colour = None  # the refused box's
@@ -786,14 +784,19 @@ class TrackingSession:
             self._agrees(one, followed, found.box)
             or self._agrees(one, followed, (pu - (fw - 1) / 2.0, pv - (fh - 1) / 2.0, fw, fh))
         ):
-            # the colour as learnt in the drawn box (as offline, where init_bbox is taken on its frame)
-            self._steady, self.check, self._learn_colour = None, "kept", False
-            return result
+            return self._kept(result)
         fx, fy, fw, fh = found.box
         cu, cv_ = top_face_pixel(self.cal, one, [fx + (fw - 1) / 2.0], [fy + (fh - 1) / 2.0])
         snapped = self._begin(frame_bgr, one, found.box, (float(cu[0]), float(cv_[0])), "box", True)
         self.check = "snapped"
         return snapped
+
+    def _kept(self, result: TrackResult) -> TrackResult:
+        """The box checked over frames taken as drawn, ``result`` its frame's: the vehicle's colour stays as learnt
+        in the drawn box (as offline, where init_bbox is taken on its frame), not learnt again where the check ends
+        (the matcher's place then, or a search by colour's)."""
+        self._steady, self.check, self._learn_colour = None, "kept", False
+        return result
 
     def _agrees(self, one: CameraPose, drawn, outline) -> bool:
         """Whether the drawn box's centre is within :data:`DRAWN_AGREES` outline errors of the outline's."""
