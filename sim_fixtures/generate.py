@@ -424,15 +424,23 @@ def _in_view(boxes, otherwise: np.ndarray) -> np.ndarray:
 
 
 def _first_box(boxes, t_unix, camera: SimCamera, pad_px: int = 3):
-    """``(init_bbox, init_t)``: a vehicle's bounding box in the first frame it can be seen in (``boxes``, one per
-    frame, None where it cannot), grown by ``pad_px`` within the image; None where it is never seen."""
-    i = next((i for i, b in enumerate(boxes) if b is not None), None)
-    if i is None:
-        return None
-    x, y, w, h = boxes[i]
-    x0, y0 = max(0, x - pad_px), max(0, y - pad_px)
-    box = (x0, y0, min(camera.width, x + w + pad_px) - x0, min(camera.height, y + h + pad_px) - y0)
-    return box, float(t_unix[i])
+    """``(init_bbox, init_t)``: a vehicle's bounding box in the first frame it is wholly in view in (``boxes``, one
+    per frame, None where it cannot be seen; a box cut by the image's edge reaches it), grown by ``pad_px`` and
+    still clear of the edge by a pixel, as an operator draws it; None where it never is. A box cut by the edge
+    holds part of the vehicle: a tracker started on it fixes off the vehicle's centre (and skyfix refuses it)."""
+    for i, b in enumerate(boxes):
+        if b is None:
+            continue
+        x, y, w, h = b
+        box = (x - pad_px, y - pad_px, w + 2 * pad_px, h + 2 * pad_px)
+        if (
+            box[0] >= 1
+            and box[1] >= 1
+            and box[0] + box[2] <= camera.width - 1
+            and box[1] + box[3] <= camera.height - 1
+        ):
+            return box, float(t_unix[i])
+    return None
 
 
 TRUTH_ERRORS_HEADER = (
@@ -883,7 +891,9 @@ def generate(
     )
     init = None if seen is None else _first_box(uuv_boxes, truth.t_unix, camera)
     if seen is not None and init is None:
-        raise ValueError(f"scenario {sc.name}: the UUV is never visible, so there is no init_bbox")
+        raise ValueError(
+            f"scenario {sc.name}: the UUV is never wholly in view, so there is no init_bbox"
+        )
     (out / "session.toml").write_text(_session_toml(sc, camera, *(init or (None, None))))
     if sc.second_uuv.role == "uuv":
         _write_second_uuv(

@@ -1,11 +1,11 @@
 """``skyfix process --uuv all``: every UUV of a session tracked in one pass over the video, each into its own folder,
 each with the files processing that UUV alone writes, byte for byte.
 
-The session: ``sim_fixtures/scenarios/two_uuvs_crossing.toml`` cut to 6 s, without TIMESYNC and with the camera
+The session: ``two_uuvs_crossing`` as :mod:`crossing` generates it (6 s, without TIMESYNC and with the camera
 wobbling, so the link's delay is unknown and the frames' offset to the telemetry is estimated from the video's
-motion (once, for both UUVs). The UAV 12 m up, 1 m south of the scenario's place: both vehicles wholly in view
-from the first frame (10 m up above the path's centre uuv1 started as a 5 px sliver at the frame's bottom edge, the
-tracker's template of it a part of the vehicle, then lost for most of the clip).
+motion, once for both UUVs). The UAV 12 m up, 1 m south of the scenario's place: both vehicles wholly in view
+from the first frame (at the scenario's place, 10 m up, uuv1 is first seen as a sliver at the frame's bottom edge:
+``test_tracking_frame_edge.py``).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from crossing import crossing_session
 
 from groundstation.cli import main
 from groundstation.height_from_size import HeightFromSize
@@ -24,12 +25,7 @@ from groundstation.offline import process, track, uuv_workers
 from groundstation.session import read
 from groundstation.session.read import Session, SessionError, load_session, uuv_ids
 from localizer.height import HeightEstimator
-from sim_fixtures.generate import generate
-from sim_fixtures.scenario import load_scenario, with_overrides
 
-SCENARIO = (
-    Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios" / "two_uuvs_crossing.toml"
-)
 FILES = ("positions.csv", "positions_smoothed.csv")
 
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg CLI")
@@ -37,16 +33,7 @@ pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs th
 
 @pytest.fixture(scope="module")
 def crossing(tmp_path_factory) -> Path:
-    sc = with_overrides(
-        load_scenario(SCENARIO),
-        duration_s=6.0,
-        mount={"attitude_source": "fixed", "fixed_rpy_deg": [0.0, -88.0, 0.0]},
-        uav={"wobble_deg": 2.0, "wobble_hz": 1.2, "north_m": -1.0, "height_m": 12.0},
-        telemetry={"timesync_hz": 0.0},
-    )
-    path = tmp_path_factory.mktemp("uuvs") / "s"
-    generate(sc, path)
-    return path
+    return crossing_session(tmp_path_factory, north_m=-1.0, height_m=12.0)
 
 
 def _counted(monkeypatch, owner, name: str) -> list:

@@ -123,3 +123,25 @@ def test_frames_rendered_apart_are_the_frames_rendered_in_turn():
     for (img_a, boxes_a), (img_b, boxes_b) in zip(in_turn, apart, strict=True):
         assert np.array_equal(img_a, img_b) and boxes_a == boxes_b
     assert len({img.tobytes() for img, _ in in_turn}) == 10  # the noise differs frame to frame
+
+
+def test_init_bbox_is_where_the_uuv_is_first_wholly_in_view(tmp_path):
+    """A UUV entering the view across the top edge: its first box is drawn once the vehicle is wholly in view, clear
+    of the edge (a box cut by the edge would hold part of it, and skyfix refuses one on the edge)."""
+    enters = {
+        **TINY,
+        "duration_s": 1.5,
+        "mount": {"pitch_deg": -90.0},
+        "uav": {"height_m": 6.0, "standoff": "given", "yaw_deg": 0.0, "yaw_swing_deg": 0.0},
+        "uuv": {"path": "cruise", "north_m": 2.6, "speed_mps": 1.2, "course_deg": 180.0},
+        "occlusions": [],
+    }
+    session = load_session(generate(scenario_from_dict(enters), tmp_path / "s").session)
+    t, v = session.frames["t"], session.track["v"]
+    seen = np.flatnonzero(np.isfinite(v))
+    assert seen[0] > 0 and v[seen[0]] < 3.0  # seen first at the top edge, cut by it
+    x, y, w, h = session.calibration.init_bbox
+    first = int(np.searchsorted(t, session.calibration.init_t))
+    assert first > seen[0] + 1  # not while it is cut
+    assert x >= 1 and y >= 1 and x + w <= 159 and y + h <= 95
+    assert y <= v[first] <= y + h and x <= session.track["u"][first] <= x + w

@@ -9,6 +9,7 @@ true position. The UUV's "own estimate" is the truth moved a few metres (pymap3d
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -121,6 +122,10 @@ def test_select_track_lose_reacquire_release_and_click(occlusion):
     assert np.mean([clip.error_px(i, r) for i, r in results.items()]) < 2.0
 
 
+def _named(box) -> str:
+    return re.escape("box [" + ", ".join(str(c) for c in box) + "]")
+
+
 def test_bad_selections_are_refused_and_change_nothing(occlusion):
     clip = occlusion
     ts = TrackingSession(clip.cal)
@@ -146,6 +151,20 @@ def test_bad_selections_are_refused_and_change_nothing(occlusion):
     ):
         # an operator's box on water
         ts.select(clip.frames[1], clip.pose, 1, box=(40, 300, 33, 34), verify=True)
+    # a box on the frame's edge (first or last row or column): the UUV may be cut off there, and a template of part
+    # of it would fix off its centre; refused however it is selected, a box one pixel in is not refused for it
+    for edge in ((0, 100, 33, 34), (300, 0, 33, 34), (607, 100, 33, 34), (300, 326, 33, 34)):
+        for how in ({}, {"verify": True, "keep_drawn": True, "steady": True}):
+            with pytest.raises(SelectionError, match=rf"{_named(edge)} is on the frame's edge"):
+                ts.select(clip.frames[1], clip.pose, 1, box=edge, **how)
+    inside = TrackingSession(clip.cal).select(clip.frames[1], clip.pose, 1, box=(1, 1, 33, 34))
+    assert inside.ok
+    # the UUV cut off by the frame's left edge (the frame cropped 6 px left of its centre): a box around what shows
+    # of it is outlined on the edge, and refused for that
+    cut = np.ascontiguousarray(clip.frames[1][:, round(clip.u[1]) - 6 :])
+    drawn = (1, round(clip.v[1]) - 17, 22, 34)
+    with pytest.raises(SelectionError, match=r"box \[0, .* is on the frame's edge"):
+        ts.select(cut, clip.pose, 1, box=drawn, verify=True)
     no_pose = camera_pose(clip.cal, clip.session.telemetry, [clip.t[-1] + 60.0])
     with pytest.raises(SelectionError, match=r"no camera pose at that frame \(stale_attitude\)"):
         ts.select(clip.frames[1], no_pose, 0, point=(clip.u[1], clip.v[1]))

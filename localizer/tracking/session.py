@@ -26,7 +26,10 @@ once by the caller and shared with the geometry.
   :data:`STEADY_MIN_SALIENCY`), refused (awaiting a target) otherwise. Through wind waves one
   frame does not tell a small, deep UUV from the seafloor: the waves break the vehicle's image
   up and caustics on the seafloor stand out as much, while over a fraction of a second a
-  caustic's flicker averages out and the vehicle's saliency stays.
+  caustic's flicker averages out and the vehicle's saliency stays. A box on the frame's edge
+  (drawn, or the outline found for a click, a box or a prior) is refused: the vehicle may be
+  cut off there, and a template of part of it puts every fix off its centre by up to half its
+  length, which no claim carries.
 - :meth:`~TrackingSession.step`: the next frame. Its prediction is the UUV's last
   sighting moved by what the camera did since: the sighting is located (an *anchor*,
   re-located every :data:`REANCHOR_FRAMES` frames), projected into this frame's
@@ -246,7 +249,8 @@ class TrackingSession:
         """Track the UUV in ``box`` (x, y, w, h) or at the click ``point`` (u, v) of this frame, from now on.
 
         Raises :class:`SelectionError` (and changes nothing) for a box outside the
-        frame, or a click with no object standing out near it or without a pose;
+        frame or on its edge (the box tracked: drawn, or the outline found), or a click with no object standing out
+        near it or without a pose;
         with ``verify``, also for a box with no object standing out in it (checked
         when the pose can size the vehicle); ``keep_drawn``: a verified box on the
         vehicle's outline is kept as drawn (see the module doc). ``chroma``: the frame's colour, the vehicle's
@@ -272,6 +276,7 @@ class TrackingSession:
             if keep_drawn and outlined is not None and self._agrees(one, box, outlined):
                 outlined = None
         box = outlined or box
+        _refuse_at_edge(frame_bgr, box)
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
         centre = (float(cu[0]), float(cv_[0]))
@@ -710,6 +715,7 @@ class TrackingSession:
         ``awaiting_target`` until :meth:`_checked` takes or refuses it; its colour learnt in ``chroma``, for the
         check (:data:`STEADY_COLOUR_MIN`) and kept once the box is taken as drawn (learnt again on the outline it is
         snapped to). Without a pose to size the vehicle, the box is tracked unchecked, as :meth:`select` does."""
+        _refuse_at_edge(frame_bgr, box)
         window = self._box_prediction(one, box)
         x, y, w, h = box
         cu, cv_ = top_face_pixel(self.cal, one, [x + (w - 1) / 2.0], [y + (h - 1) / 2.0])
@@ -769,14 +775,10 @@ class TrackingSession:
                 )
             ):
                 return self._kept(result)
-            box = _named(steady.box)
-            self.acquire()
-            self._colour = None  # the refused box's
-            self.check = (
-                f"refused: {box}: {_NOTHING_IN_BOX} over {window.frames} of {steady.frames} "
-                "frames it was followed in; draw the box around the UUV"
+            return self._refused(
+                f"refused: {_named(steady.box)}: {_NOTHING_IN_BOX} over {window.frames} of "
+                f"{steady.frames} frames it was followed in; draw the box around the UUV"
             )
-            return TrackResult("awaiting_target")
         one = take(pose, [i])
         pu, pv = window.peak()
         fw, fh = found.box[2:]
@@ -785,11 +787,22 @@ class TrackingSession:
             or self._agrees(one, followed, (pu - (fw - 1) / 2.0, pv - (fh - 1) / 2.0, fw, fh))
         ):
             return self._kept(result)
+        if _at_edge(frame_bgr, found.box):
+            return self._refused(
+                f"refused: the vehicle's outline {_named(found.box)} is {_AT_EDGE}"
+            )
         fx, fy, fw, fh = found.box
         cu, cv_ = top_face_pixel(self.cal, one, [fx + (fw - 1) / 2.0], [fy + (fh - 1) / 2.0])
         snapped = self._begin(frame_bgr, one, found.box, (float(cu[0]), float(cv_[0])), "box", True)
         self.check = "snapped"
         return snapped
+
+    def _refused(self, why: str) -> TrackResult:
+        """The box checked over frames refused (:attr:`check` says ``why``): awaiting a target, its colour dropped."""
+        self.acquire()
+        self._colour = None  # the refused box's
+        self.check = why
+        return TrackResult("awaiting_target")
 
     def _kept(self, result: TrackResult) -> TrackResult:
         """The box checked over frames taken as drawn, ``result`` its frame's: the vehicle's colour stays as learnt
@@ -818,7 +831,7 @@ class TrackingSession:
         found = (
             detect(frame_bgr, near_prior, self.detect_params) if near_prior is not None else None
         )
-        if found is None:
+        if found is None or _at_edge(frame_bgr, found.box):
             return TrackResult("awaiting_target")
         cu, cv_ = top_face_pixel(self.cal, one, [found.u], [found.v])
         centre = (float(cu[0]), float(cv_[0]))
@@ -834,6 +847,28 @@ class TrackingSession:
 
 #: Why a box is refused: the one-frame check's and the check over frames' words
 _NOTHING_IN_BOX = "no vehicle-sized object stands out of the water in it"
+
+
+#: Why a box on the frame's edge is refused
+_AT_EDGE = (
+    "on the frame's edge: the UUV may be cut off there, and a template of part of it would put every fix off "
+    "its centre; select the UUV when it is wholly in view"
+)
+
+
+def _at_edge(frame, box) -> bool:
+    """Whether a box (x, y, w, h) inside the frame reaches its edge (its first or last row or column): the object
+    in it may be cut off by the edge. A box reaching beyond the frame is not (the matcher names that)."""
+    rows, cols = frame.shape[:2]
+    x, y, w, h = (round(c) for c in box)
+    inside = x >= 0 and y >= 0 and x + w <= cols and y + h <= rows
+    return inside and (x == 0 or y == 0 or x + w == cols or y + h == rows)
+
+
+def _refuse_at_edge(frame, box) -> None:
+    """SelectionError for a box on the frame's edge (:func:`_at_edge`)."""
+    if _at_edge(frame, box):
+        raise SelectionError(f"{_named(box)} is {_AT_EDGE}")
 
 
 def _named(box) -> str:

@@ -764,6 +764,15 @@ class TemplateMatcher:
             max(0.0, (scatter - self.p.wobble_flat) / (self.p.wobble_waves - self.p.wobble_flat)),
         )
 
+    def _whole(self, frame_bgr, u: float, v: float) -> bool:
+        """Whether the template's square at (u, v) lies inside the frame. The sea state is read only from follows
+        whose vehicle is sought and found wholly in view: one cut by the frame's edge (drifting out of view and back
+        with the camera's wobble) scores low from frame to frame as through waves, on a still surface too, and the
+        waves' looser bars and the reported pixel's steer (:mod:`.centroid`) would then apply."""
+        half = self.S * self.k * self._scale / 2.0
+        rows, cols = frame_bgr.shape[:2]
+        return half <= u <= cols - 1 - half and half <= v <= rows - 1 - half
+
     def waves(self) -> float:
         """The :class:`~localizer.tracking.Matcher`'s reading of the sea state: :meth:`_waves`."""
         return self._waves()
@@ -1061,7 +1070,8 @@ class TemplateMatcher:
         in_waves = self._in_waves()
         # after a held frame: convincingly back
         floor = self._floor() if not self._misses else self._rebound()
-        self._note_score(score)
+        if self._whole(frame_bgr, cu, cv_) and self._whole(frame_bgr, u, v):
+            self._note_score(score)
         self._recent = (self._recent + [score])[-self.p.wave_evidence_frames :]
         near = math.hypot(u - cu, v - cv_) <= radius + 2 * self.k
         contrast = self._contrast(frame_bgr, u, v)
