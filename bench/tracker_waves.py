@@ -58,6 +58,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -187,9 +188,12 @@ def first_size_px(path: Path) -> int:
 
 def render(tree: Path, data: dict, out: Path) -> None:
     """Generate the session of scenario ``data`` into ``out`` with the simulator of source ``tree`` (the oldest
-    tree compared: a newer simulator may write keys an older reader refuses)."""
+    tree compared: a newer simulator may write keys an older reader refuses). Written beside ``out`` and moved
+    there once whole: a render cut short (the bench stopped) leaves no session a later run would take as done."""
+    partial = out.with_name(out.name + ".partial")
+    shutil.rmtree(partial, ignore_errors=True)
     done = subprocess.run(
-        [sys.executable, "-c", GENERATE, json.dumps(data), str(out)],
+        [sys.executable, "-c", GENERATE, json.dumps(data), str(partial)],
         cwd=tree,
         capture_output=True,
         text=True,
@@ -198,6 +202,8 @@ def render(tree: Path, data: dict, out: Path) -> None:
     )
     if done.returncode:
         raise RuntimeError(f"generating {out} from {tree}: {done.stderr.strip().splitlines()[-1:]}")
+    shutil.rmtree(out, ignore_errors=True)
+    partial.rename(out)
 
 
 def condition(
