@@ -51,7 +51,9 @@ once by the caller and shared with the geometry.
   passing over the UUV makes the matches wobble for a moment too), after :data:`COLOUR_SEARCH_AFTER` frames in a row
   without it (or once lost), the window the UUV is sought in is searched for the vehicle's colour
   (:func:`.colour.find`) and tracking restarts where it stands out as when learnt, and nowhere else does
-  (:meth:`TrackingSession._found_by_colour`).
+  (:meth:`TrackingSession._found_by_colour`). A restart the colour check refutes before it is proven
+  (:data:`COLOUR_PROVEN_FRAMES`) is undone: the track goes back to what it was, the UUV sought from its last
+  sighting (a place of the seafloor shows the vehicle's colour now and then as the waves play).
 - While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
   every ``search_every`` frames the prior is projected into the frame at the UUV's
   depth and the window its uncertainty spans is searched for a vehicle-sized object
@@ -65,6 +67,7 @@ Pure: no I/O, no clock; a frame's time is its pose's ``t_unix``.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, replace
 
@@ -127,7 +130,9 @@ COLOUR_SEARCH_AFTER = 2
 #: (before either has been read this long, the latest reading)
 COLOUR_SEARCH_ROUGH_S = 1.0
 #: ... and tracking restarts where it stands out at least this share of its separation when learnt, and at least
-#: this much (ring spreads: the best of a window's places of seafloor reaches 2.2 through waves)
+#: this much (ring spreads: the best of a window's places of seafloor reached 2.2 through waves in the renders it was
+#: set on; while the UUV is hidden a few pass, as far as the UUV itself stands out when it is found again:
+#: :data:`COLOUR_PROVEN_FRAMES` undoes those, bench/results/tracker_waves_colour_undo_s19.txt)
 COLOUR_FOUND_SHARE = 0.5
 COLOUR_FOUND_MIN = 3.0
 #: A box checked over frames whose vehicle stands out of its surroundings in colour at least this much when drawn
@@ -140,6 +145,15 @@ STEADY_COLOUR_MIN = 3.0
 #: A restart by colour gives no fix until the vehicle's colour is at the tracked place on this many frames in a row
 #: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more).
 COLOUR_CONFIRM_FRAMES = 2
+#: A restart by colour is undone when, before its colour has been at the track on this many frames and within
+#: :data:`COLOUR_PROVEN_S` of it, the colour check withholds :data:`COLOUR_SEARCH_AFTER` frames in a row and the
+#: search by colour finds it nowhere in the window: the track goes back to what it was before (lost: the grey levels'
+#: search from the last sighting). A place of the seafloor shows the vehicle's colour for a few frames now and then
+#: as the waves play, and a track restarted there during an occlusion held that place and never found the UUV again
+#: when it came back beside it; a small, deep UUV's own colour comes and goes for a frame or two, but a restart on
+#: it has its colour on most frames (bench/results/tracker_waves_colour_undo_s19.txt).
+COLOUR_PROVEN_FRAMES = 8
+COLOUR_PROVEN_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -211,6 +225,8 @@ class TrackingSession:
         # before a fix, and the last box it passed (w, h)
         self._vetoed = self._unconfirmed = 0
         self._box_wh: tuple[int, int] | None = None
+        # what the latest restarts by colour replaced (used while they are not proven: :data:`COLOUR_PROVEN_FRAMES`)
+        self._undo: _Undo | None = None
         # the sea as read (see :data:`COLOUR_SEARCH_ROUGH_S`): rough or not (None: not yet read that long), and the
         # matcher's latest reading (rough or not) since when (t_unix)
         self._rough: bool | None = None
@@ -328,6 +344,7 @@ class TrackingSession:
         self._steady = None
         self.check = None
         self._colour, self._learn_colour = None, True
+        self._undo = None
         anchor, px_per_m = self._locate(one, centre)
         try:
             result = self.target.select(frame_bgr, box, centre, px_per_m)
@@ -344,12 +361,14 @@ class TrackingSession:
         """Let go of the target: every frame is ``released`` until a new selection or :meth:`acquire`."""
         self.target.release()
         self._steady, self.check = None, None
+        self._undo = None
         self._forget()
 
     def acquire(self) -> None:
         """Drop the target and await one: a selection, or automatic acquisition from a prior."""
         self.target.acquire()
         self._steady, self.check = None, None
+        self._undo = None
         self._forget()
 
     # -- per frame ----------------------------------------------------------------------------------
@@ -386,7 +405,10 @@ class TrackingSession:
             if self._colour is not None and chroma is not None:
                 result = self._coloured(chroma, result)
                 if self._vetoed >= COLOUR_SEARCH_AFTER or self.target.state is TargetState.LOST:
-                    result = self._found_by_colour(frame_bgr, chroma, pose, i) or result
+                    found = self._found_by_colour(frame_bgr, chroma, pose, i)
+                    if found is None and self._vetoed >= COLOUR_SEARCH_AFTER:
+                        self._undo_refuted(float(pose.t_unix[i]))
+                    result = found or result
             result = self._learned(chroma, result)
         return self._note(float(pose.t_unix[i]), result)
 
@@ -437,6 +459,8 @@ class TrackingSession:
             return result
         d = separation(self._colour, chroma, result.u, result.v, _half_px(result))
         if self._colour.matches(d):
+            if self._undo is not None:
+                self._undo.passed += 1
             self._vetoed, self._box_wh = 0, result.box[2:] if result.box else self._box_wh
             if self._unconfirmed == 0:
                 return result
@@ -464,13 +488,29 @@ class TrackingSession:
         centre = (float(cu[0]), float(cv_[0]))
         anchor, px_per_m = self._locate(one, centre)
         box = (round(got[0] - (bw - 1) / 2), round(got[1] - (bh - 1) / 2), bw, bh)
+        before = copy.copy(self.target)  # its matcher is replaced, not changed
         try:
             result = self.target.select(frame_bgr, box, centre, px_per_m)
         except ValueError:  # the box reaches beyond the frame
             return None
+        t_unix = float(one.t_unix[0])
+        if self._undo is None or self._undo.proven(t_unix):
+            self._undo = _Undo(before, {name: getattr(self, name) for name in _TRACK})
+        self._undo.t_unix, self._undo.passed = t_unix, 0
         self._start(one, centre, anchor)
         self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
         return TrackResult("lost", confidence=result.confidence)
+
+    def _undo_refuted(self, t_unix: float) -> None:
+        """The track as it was before the latest restarts by colour when the colour refuted them before they were
+        proven (:data:`COLOUR_PROVEN_FRAMES`)."""
+        undo, self._undo = self._undo, None
+        if undo is None or undo.proven(t_unix):
+            return
+        self.target = undo.target
+        for name, value in undo.track.items():
+            setattr(self, name, value)
+        self._vetoed, self._unconfirmed = 0, 0
 
     def _colour_found(self, chroma: Chroma) -> tuple[float, float, float, float] | None:
         """:func:`.colour.find`'s answer in the window the UUV is sought in, where the vehicle's colour stands out
@@ -527,6 +567,7 @@ class TrackingSession:
         return result
 
     def _forget(self) -> None:
+        """No sighting, no motion: the track's own state (each field here is in :data:`_TRACK`)."""
         self._seen: _Sighting | None = None
         # the last sighting the UUV stood out of the seafloor in (through waves; see the module doc)
         self._stood_out: _Sighting | None = None
@@ -887,6 +928,36 @@ class _Steady:
     t0_unix: float
     frames: int = 1
     coloured: int = 0  # frames its colour was found where it was sought
+
+
+#: The track's own state a restart by colour replaces (:meth:`TrackingSession._start`) and an undo restores
+_TRACK = (
+    "_seen",
+    "_stood_out",
+    "_anchor",
+    "_anchor_age",
+    "_anchor_tried",
+    "_proj",
+    "_moves",
+    "speed_mps",
+    "_jitter2",
+    "_follows",
+)
+
+
+@dataclass
+class _Undo:
+    """What restarts by colour replaced: the target (its matcher then) and the track's state (:data:`_TRACK`); the
+    latest restart's time (t_unix) and the frames its colour was at the track since."""
+
+    target: Target
+    track: dict
+    t_unix: float = math.nan
+    passed: int = 0
+
+    def proven(self, t_unix: float) -> bool:
+        """Whether the latest restart stands (:data:`COLOUR_PROVEN_FRAMES`, :data:`COLOUR_PROVEN_S`)."""
+        return self.passed >= COLOUR_PROVEN_FRAMES or t_unix - self.t_unix > COLOUR_PROVEN_S
 
 
 def _half_px(result: TrackResult) -> float:
