@@ -48,7 +48,8 @@ once by the caller and shared with the geometry.
   ``ok`` frame whose tracked place does not stand out in that colour is no fix (``lost``), the tracker following on
   as it would have. Through wind waves a follow can slide onto caustic-lit seafloor that matches the vehicle's grey
   levels: that place does not have its colour. Through waves (read for :data:`COLOUR_SEARCH_ROUGH_S`: a vehicle
-  passing over the UUV makes the matches wobble for a moment too), after :data:`COLOUR_SEARCH_AFTER` frames in a row
+  passing over the UUV makes the matches wobble for a moment too; or a configured wind of at least
+  :data:`COLOUR_SEARCH_WIND_MPS`), after :data:`COLOUR_SEARCH_AFTER` frames in a row
   without it (or once lost), the window the UUV is sought in is searched for the vehicle's colour
   (:func:`.colour.find`) and tracking restarts where it stands out as when learnt, and nowhere else does
   (:meth:`TrackingSession._found_by_colour`). A restart the colour check refutes before it is proven
@@ -129,6 +130,11 @@ COLOUR_SEARCH_AFTER = 2
 #: by colour then jumped to the passing vehicle), and a restart's new matcher reads a calm sea over its first frames
 #: (before either has been read this long, the latest reading)
 COLOUR_SEARCH_ROUGH_S = 1.0
+#: ... or from the start when the configured wind (``[uncertainty] wind_mps``: the operator's word on the sea) is at
+#: least this (m/s): the matcher reads the sea from its follows, and a small UUV lost through waves in its first
+#: frames left a reading of too few follows (0.43 of a 5 m/s sea) that no later follow changed, so the UUV, standing out
+#: in its colour at the prediction, was never sought by it (bench/results/tracker_waves_wind_s19.txt)
+COLOUR_SEARCH_WIND_MPS = 2.0
 #: ... and tracking restarts where it stands out at least this share of its separation when learnt, and at least
 #: this much (ring spreads: the best of a window's places of seafloor reached 2.2 through waves in the renders it was
 #: set on; while the UUV is hidden a few pass, as far as the UUV itself stands out when it is found again:
@@ -479,6 +485,7 @@ class TrackingSession:
         the window more than a vehicle's length away does (no fix until :data:`COLOUR_CONFIRM_FRAMES` more frames
         have its colour there: ``lost``); None otherwise."""
         rough = self._rough if self._rough is not None else self._reading_rough
+        rough = rough or self.cal.sigmas.wind_mps >= COLOUR_SEARCH_WIND_MPS
         got = self._colour_found(chroma) if rough else None
         if got is None:
             return None
