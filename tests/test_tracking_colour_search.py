@@ -9,7 +9,9 @@
 - A configured wind makes the sea rough for the search from the start (``COLOUR_SEARCH_WIND_MPS``): the
   w5_15px_2.0m condition with seed 2, ``waves_5mps_oblique`` with the UUV 2 m deep and about 16 px. The matcher
   lost it in its first frames, its reading of the sea stayed at three follows' (0.43), and the UUV, standing out in
-  its colour at the prediction, was never sought by it: 1 of 90 frames located (measured). Now 80 of 90.
+  its colour at the prediction, was never sought by it: 1 of 90 frames located (measured). With the wind 80 of 90;
+  the rest were frames the matcher held (its best place under its bars, not yet a loss) at the prediction, the
+  vehicle's colour standing out there: those are fixes now (``HELD_COLOUR_REACH``), 87 of 90.
 """
 
 from __future__ import annotations
@@ -78,5 +80,5 @@ def test_a_configured_wind_lets_the_colour_find_a_uuv_lost_at_the_start(tmp_path
         seed=2,
     )
     assert visible.all()
-    assert located.mean() >= 0.8, f"{located.sum()} of {len(t)} frames located"
+    assert located.mean() >= 0.93, f"{located.sum()} of {len(t)} frames located"
     assert not wrong.any(), np.flatnonzero(wrong)

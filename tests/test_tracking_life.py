@@ -249,7 +249,9 @@ def test_no_acquisition_while_hidden_nor_far_from_the_estimate(occlusion):
 
 class _Scripted:
     """A stand-in for the session's target, through waves: each frame's result and the matcher's ``distinct`` as
-    scripted; it keeps the prediction each frame was looked for with."""
+    scripted (never a held match); it keeps the prediction each frame was looked for with."""
+
+    held = None
 
     def __init__(self, script):
         self.script, self.state, self.waves, self.distinct, self.looked = (

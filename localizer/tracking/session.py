@@ -54,7 +54,9 @@ once by the caller and shared with the geometry.
   (:func:`.colour.find`) and tracking restarts where it stands out as when learnt, and nowhere else does
   (:meth:`TrackingSession._found_by_colour`). A restart the colour check refutes before it is proven
   (:data:`COLOUR_PROVEN_FRAMES`) is undone: the track goes back to what it was, the UUV sought from its last
-  sighting (a place of the seafloor shows the vehicle's colour now and then as the waves play).
+  sighting (a place of the seafloor shows the vehicle's colour now and then as the waves play). A frame the matcher
+  holds through waves (not yet a loss) is a fix at its best place when that is close to where the UUV was sought and
+  the vehicle's colour stands out there (:data:`HELD_COLOUR_REACH`).
 - While awaiting a target with a :class:`Prior` (the UUV's own position estimate),
   every ``search_every`` frames the prior is projected into the frame at the UUV's
   depth and the window its uncertainty spans is searched for a vehicle-sized object
@@ -77,7 +79,7 @@ import numpy as np
 from ..calibration import Calibration
 from ..fix import locate
 from ..pose import CameraPose, take
-from . import Prediction, TrackResult, make_matcher
+from . import Match, Prediction, TrackResult, make_matcher
 from .colour import Chroma, ColourModel, find, learn, separation
 from .detect import DetectParams, detect
 from .predict import (
@@ -151,6 +153,13 @@ STEADY_COLOUR_MIN = 3.0
 #: A restart by colour gives no fix until the vehicle's colour is at the tracked place on this many frames in a row
 #: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more).
 COLOUR_CONFIRM_FRAMES = 2
+#: A frame the matcher held through waves (its best place under its bars, not yet a loss) is a fix at that place when
+#: it is within this share of the vehicle's box of where the UUV was sought and the vehicle's colour stands out there
+#: as a restart by colour needs it to (:data:`COLOUR_FOUND_SHARE`, :data:`COLOUR_FOUND_MIN`): the waves drag a small or
+#: deep UUV's score under the bars for a few frames at a time while it is there. Further from where it was sought the
+#: held place was more often beside the UUV, and with the colour check's own bar a held frame just after the UUV was
+#: hidden was taken (bench/results/tracker_waves_held_s19.txt).
+HELD_COLOUR_REACH = 0.2
 #: A restart by colour is undone when, before its colour has been at the track on this many frames and within
 #: :data:`COLOUR_PROVEN_S` of it, the colour check withholds :data:`COLOUR_SEARCH_AFTER` frames in a row and the
 #: search by colour finds it nowhere in the window: the track goes back to what it was before (lost: the grey levels'
@@ -406,8 +415,9 @@ class TrackingSession:
                     self._stood_out = self._seen
             elif self.target.state is TargetState.AWAITING_TARGET:
                 self._forget()  # a candidate that did not confirm
+            held = self.target.held  # the matcher's place in a frame it held (None: not held)
             if self._steady is not None:
-                result = self._checked(frame_bgr, pose, i, result, chroma)
+                result, held = self._checked(frame_bgr, pose, i, result, chroma), None
             if self._colour is not None and chroma is not None:
                 result = self._coloured(chroma, result)
                 if self._vetoed >= COLOUR_SEARCH_AFTER or self.target.state is TargetState.LOST:
@@ -415,6 +425,8 @@ class TrackingSession:
                     if found is None and self._vetoed >= COLOUR_SEARCH_AFTER:
                         self._undo_refuted(float(pose.t_unix[i]))
                     result = found or result
+                if held is not None and self.target.held is held:  # not undone meanwhile
+                    result = self._held_coloured(chroma, held, result) or result
             result = self._learned(chroma, result)
         return self._note(float(pose.t_unix[i]), result)
 
@@ -476,6 +488,25 @@ class TrackingSession:
             if self._unconfirmed:
                 self._unconfirmed = COLOUR_CONFIRM_FRAMES
         return TrackResult("lost", confidence=result.confidence)
+
+    def _held_coloured(
+        self, chroma: Chroma, held: Match, result: TrackResult
+    ) -> TrackResult | None:
+        """A frame the matcher held (its best place under its bars, not yet a loss), ``ok`` at that place when it is
+        within :data:`HELD_COLOUR_REACH` of where the UUV was sought and the vehicle's colour stands out there as a
+        restart by colour needs (not while one awaits its confirmation); None otherwise. ``result``: the frame's (``lost``). The tracker follows on
+        as it would have."""
+        sought = self.sought or self.prediction
+        if sought is None or self._box_wh is None or self._unconfirmed:
+            return None
+        bw, bh = self._box_wh
+        if math.hypot(held.u - sought.u, held.v - sought.v) > HELD_COLOUR_REACH * max(bw, bh):
+            return None
+        box = (round(held.u - (bw - 1) / 2), round(held.v - (bh - 1) / 2), bw, bh)
+        d = separation(self._colour, chroma, held.u, held.v, max(bw, bh) / 2)
+        if not d >= max(COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation):
+            return None
+        return TrackResult("ok", held.u, held.v, box, result.confidence)
 
     def _found_by_colour(
         self, frame_bgr, chroma: Chroma, pose: CameraPose, i: int

@@ -64,6 +64,8 @@ class Target:
         self._origin = TargetState.AWAITING_TARGET  # where a candidate being confirmed came from
         self._hits: list[tuple[float, float, float, float]] = []  # u, v, predicted u, v
         self._lost_frames = 0
+        # the latest frame's match when the matcher held it (:attr:`~localizer.tracking.Match.held`; None otherwise)
+        self.held: Match | None = None
 
     # -- commands ------------------------------------------------------------------------------
     def select(self, frame_bgr, box, point=None, px_per_m: float = float("nan")) -> TrackResult:
@@ -124,11 +126,13 @@ class Target:
     # -- per frame -------------------------------------------------------------------------------
     def update(self, frame_bgr, prediction: Prediction | None) -> TrackResult:
         """The UUV in the next frame (see the module doc for the states)."""
+        self.held = None
         if self.state is TargetState.TRACKING:
             m = self._matcher.follow(frame_bgr, prediction)
             if m.found:
                 return TrackResult("ok", m.u, m.v, m.box, _confidence(m.score))
             if m.held:
+                self.held = m
                 return TrackResult("lost", confidence=_confidence(m.score))
             self.state = TargetState.LOST
             self._lost_frames = -1  # search on the next frame, then every search_every frames
