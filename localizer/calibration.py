@@ -189,7 +189,8 @@ class Sigmas:
         0.0,
         description="the wind over the water (m/s, 10 m up): its waves' slopes (Cox and Munk) bend each ray, "
         "a jitter of about depth x (1 - 1/n) x slope per axis, from the share of the slopes' variance in waves long "
-        "enough to move the UUV's whole image (localizer/uncertainty.py); 0: a still surface",
+        "enough to move the UUV's whole image (localizer/uncertainty.py); from 2 up the tracker also seeks a lost UUV "
+        "by its colour from the first frame (localizer/tracking/session.py); 0: a still surface",
     )
 
 
