@@ -494,19 +494,17 @@ class TrackingSession:
     ) -> TrackResult | None:
         """A frame the matcher held (its best place under its bars, not yet a loss), ``ok`` at that place when it is
         within :data:`HELD_COLOUR_REACH` of where the UUV was sought and the vehicle's colour stands out there as a
-        restart by colour needs (not while one awaits its confirmation); None otherwise. ``result``: the frame's (``lost``). The tracker follows on
-        as it would have."""
+        restart by colour needs (not while one awaits its confirmation); None otherwise. ``result``: the frame's
+        (``lost``). The tracker follows on as it would have."""
         sought = self.sought or self.prediction
         if sought is None or self._box_wh is None or self._unconfirmed:
             return None
-        bw, bh = self._box_wh
-        if math.hypot(held.u - sought.u, held.v - sought.v) > HELD_COLOUR_REACH * max(bw, bh):
+        length = max(self._box_wh)
+        if math.hypot(held.u - sought.u, held.v - sought.v) > HELD_COLOUR_REACH * length:
             return None
-        box = (round(held.u - (bw - 1) / 2), round(held.v - (bh - 1) / 2), bw, bh)
-        d = separation(self._colour, chroma, held.u, held.v, max(bw, bh) / 2)
-        if not d >= max(COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation):
+        if not separation(self._colour, chroma, held.u, held.v, length / 2) >= self._colour_bar():
             return None
-        return TrackResult("ok", held.u, held.v, box, result.confidence)
+        return TrackResult("ok", held.u, held.v, self._box_at(held.u, held.v), result.confidence)
 
     def _found_by_colour(
         self, frame_bgr, chroma: Chroma, pose: CameraPose, i: int
@@ -520,12 +518,11 @@ class TrackingSession:
         got = self._colour_found(chroma) if rough else None
         if got is None:
             return None
-        bw, bh = self._box_wh
         one = take(pose, [i])
         cu, cv_ = top_face_pixel(self.cal, one, [got[0]], [got[1]])
         centre = (float(cu[0]), float(cv_[0]))
         anchor, px_per_m = self._locate(one, centre)
-        box = (round(got[0] - (bw - 1) / 2), round(got[1] - (bh - 1) / 2), bw, bh)
+        box = self._box_at(got[0], got[1])
         before = copy.copy(self.target)  # its matcher is replaced, not changed
         try:
             result = self.target.select(frame_bgr, box, centre, px_per_m)
@@ -558,8 +555,18 @@ class TrackingSession:
         if win is None or self._box_wh is None:
             return None
         got = find(self._colour, chroma, win, max(self._box_wh) / 2)
-        bar = max(COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation)
+        bar = self._colour_bar()
         return None if got is None or not got[2] >= bar or got[3] >= bar else got
+
+    def _colour_bar(self) -> float:
+        """How far (ring spreads) a place must stand out in the vehicle's colour to be taken for it without the
+        matcher: :data:`COLOUR_FOUND_SHARE` of its separation when learnt, at least :data:`COLOUR_FOUND_MIN`."""
+        return max(COLOUR_FOUND_MIN, COLOUR_FOUND_SHARE * self._colour.separation)
+
+    def _box_at(self, u: float, v: float) -> tuple[int, int, int, int]:
+        """The last box the colour check passed (its size), centred on (u, v)."""
+        bw, bh = self._box_wh
+        return (round(u - (bw - 1) / 2), round(v - (bh - 1) / 2), bw, bh)
 
     def _read_sea(self, t_unix: float) -> None:
         """The sea as read: rough once the matcher has read it so (:data:`COLOUR_SEARCH_WAVES`) for
