@@ -5,7 +5,7 @@
 with :meth:`~localizer.tracking.session.TrackingSession.step` recorded: each UUV's session as it was before its first
 step, and every step's frame and pose. The steps are then replayed ``--repeats`` times from those states, timed with
 the thread's CPU clock (the decoder's threads are not counted); the best replay counts. The results' digest (every
-step's :class:`~localizer.tracking.TrackResult`) must be the same for every tree: a change that alters one value
+step's :class:`~localizer.tracking.TrackResult`; each frame's colour replayed with it, for the colour check) must be the same for every tree: a change that alters one value
 shows here. Trees are run in turn, ``--rounds`` times, so a shared machine's load falls on each alike.
 
     python bench/tracker_step.py --tree before=/tmp/before --tree after=. --out bench/results/tracker_step.txt
@@ -32,16 +32,16 @@ def replay(session: str, uuv: str, repeats: int) -> dict:
     from groundstation import cli
     from localizer.tracking.session import TrackingSession
 
-    states, steps, images, poses = {}, [], {}, {}
+    states, steps, images, chromas, poses = {}, [], {}, {}, {}
     step = TrackingSession.step
 
-    def recording(self, frame, pose, i=0, prior=None):
+    def recording(self, frame, pose, i=0, prior=None, chroma=None):
         if id(self) not in states:
             states[id(self)], poses[id(self)] = copy.deepcopy(self), pose
-        if i not in images:
-            images[i] = frame.copy()
+        if i not in images:  # copies: the decoder reuses its frames' buffers
+            images[i], chromas[i] = frame.copy(), None if chroma is None else chroma.copy()
         steps.append((id(self), i))
-        return step(self, frame, pose, i, prior)
+        return step(self, frame, pose, i, prior, chroma)
 
     TrackingSession.step = recording
     with tempfile.TemporaryDirectory() as out:
@@ -54,7 +54,7 @@ def replay(session: str, uuv: str, repeats: int) -> dict:
         digest, cpu_s = hashlib.sha256(), 0.0
         for k, i in steps:
             t0 = time.thread_time()
-            result = sessions[k].step(images[i], poses[k], i)
+            result = sessions[k].step(images[i], poses[k], i, chroma=chromas[i])
             cpu_s += time.thread_time() - t0
             digest.update(repr(result).encode())
         digests.add(digest.hexdigest()[:16])

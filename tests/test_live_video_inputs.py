@@ -179,9 +179,15 @@ def test_rtp_without_sdp_file(clips, codec):
         offline, colour = set(), set()
         for f in video:
             offline.add(f.image.tobytes())
-            colour.add(f.chroma().square(*centre, half)[0].tobytes())
+            colour.add(_chroma_bytes(f.chroma(), centre, half))
     assert all(f.grey.shape == SIZE[::-1] and f.grey.tobytes() in offline for f in rx.frames)
-    assert all(f.chroma.square(*centre, half)[0].tobytes() in colour for f in rx.frames)
+    assert all(_chroma_bytes(f.chroma, centre, half) in colour for f in rx.frames)
+
+
+def _chroma_bytes(chroma, centre, half) -> bytes:
+    """The bytes of both chroma channels of the square the colour check reads."""
+    cb, cr, _, _ = chroma.square(*centre, half)
+    return cb.tobytes() + cr.tobytes()
 
 
 def _small_gray(image) -> np.ndarray:

@@ -21,6 +21,7 @@ from localizer.tracking.colour import (
     LEARN_MIN_SEPARATION,
     MIN_SEPARATION,
     Chroma,
+    ColourModel,
     find,
     learn,
     separation,
@@ -68,6 +69,36 @@ def test_the_hull_stands_out_in_colour_and_a_caustic_does_not():
     grey[110:130, 90:130] = 40
     assert learn(Chroma(bgr=grey), 109.5, 119.5, half) is None
     assert Chroma.of(grey[:, :, 0]) is None  # a grey image alone has no colour to read
+
+
+@pytest.mark.parametrize("half", [1.0, 3.3, 12.0, 70.0])
+def test_separation_reads_the_central_half_against_the_ring_as_defined(half):
+    """separation() (sums over rectangles) against the pixels gathered one by one as the module doc defines the
+    regions: the central half of the vehicle's square (Chebyshev distance) and the ring beyond it out to three
+    half-lengths, on random chroma planes, near the frame's edge too; learn()'s separation is its own place's."""
+    rng = np.random.default_rng(int(half * 10))
+    cb, cr = (rng.integers(0, 256, (300, 400), dtype=np.uint8) for _ in range(2))
+    chroma = Chroma(cb, cr)
+    weights = np.array([0.7, -0.4])
+    for u, v in [(401.3, 298.8), (3.0, 5.5), (790.2, 590.7), (256.75, 300.25)]:
+        cu, cv_ = (
+            (u + 0.5) / 2 - 0.5,
+            (v + 0.5) / 2 - 0.5,
+        )  # yuv420p: one chroma sample per 2 x 2 pixels
+        ys, xs = np.mgrid[:300, :400]
+        dist = np.maximum(np.abs(xs - cu), np.abs(ys - cv_))
+        reach = 3 * half / 2
+        inner = dist <= max(half / 4, 0.5)
+        ring = (dist > half / 2) & (xs >= np.floor(cu - reach)) & (xs <= np.ceil(cu + reach))
+        ring &= (ys >= np.floor(cv_ - reach)) & (ys <= np.ceil(cv_ + reach))
+        level = cb * weights[0] + cr * weights[1]
+        expected = (level[inner].mean() - level[ring].mean()) / np.sqrt(level[ring].var() + 1e-6)
+        got = separation(ColourModel(weights, 1.0), chroma, u, v, half)
+        assert got == pytest.approx(expected, rel=1e-9, abs=1e-12), (u, v)
+    model = learn(Chroma(cb, cr), 401.3, 298.8, half, min_separation=-np.inf)
+    assert model.separation == pytest.approx(
+        separation(model, chroma, 401.3, 298.8, half), rel=1e-12
+    )
 
 
 def test_the_hull_is_found_again_by_its_colour_and_a_second_hull_makes_it_ambiguous():

@@ -68,8 +68,9 @@ class Chroma:
         return None
 
     def square(self, u: float, v: float, half_px: float):
-        """The chroma (n, m, 2) float32 of the square of half-side ``half_px`` (image pixels) about the image pixel
-        (u, v), clipped to the frame, and (u, v) in its samples; None when (u, v) is off the frame."""
+        """The chroma channels (Cb, Cr), each (n, m) uint8, of the square of half-side ``half_px`` (image pixels)
+        about the image pixel (u, v), clipped to the frame, and (u, v) in its samples; None when (u, v) is off the
+        frame."""
         s = self.scale
         cu, cv_ = (u + 0.5) * s - 0.5, (v + 0.5) * s - 0.5
         h = half_px * s
@@ -80,10 +81,8 @@ class Chroma:
         x1, y1 = min(math.ceil(cu + h) + 1, cols), min(math.ceil(cv_ + h) + 1, rows)
         if self._bgr is not None:
             ycrcb = cv2.cvtColor(np.ascontiguousarray(self._bgr[y0:y1, x0:x1]), cv2.COLOR_BGR2YCrCb)
-            out = ycrcb[:, :, 2:0:-1].astype(np.float32)  # Cb, Cr
-        else:
-            out = np.dstack((self._cb[y0:y1, x0:x1], self._cr[y0:y1, x0:x1])).astype(np.float32)
-        return out, cu - x0, cv_ - y0
+            return ycrcb[:, :, 2], ycrcb[:, :, 1], cu - x0, cv_ - y0
+        return self._cb[y0:y1, x0:x1], self._cr[y0:y1, x0:x1], cu - x0, cv_ - y0
 
 
 @dataclass(frozen=True)
@@ -98,20 +97,58 @@ class ColourModel:
         return not separation_now < MIN_SEPARATION
 
 
-def _regions(chroma: Chroma, u: float, v: float, half_px: float):
-    """(central half (k, 2), ring (n, 2)) of the vehicle's square of half-side ``half_px`` at (u, v); None when
-    either is too small to read (off the frame)."""
+@dataclass(frozen=True)
+class _Region:
+    """A region's pixels in (Cb, Cr): their count, ``mean`` (2,) and ``scatter`` (2, 2): the sum of the outer
+    products of their deviations from the mean."""
+
+    n: int
+    mean: np.ndarray
+    scatter: np.ndarray
+
+    @classmethod
+    def of(cls, sums: list[int]) -> _Region:
+        """From the exact sums ``[n, Σb, Σr, Σb², Σbr, Σr²]`` of its pixels' channels b, r (n > 0)."""
+        n, sb, sr, sbb, sbr, srr = sums
+        # n·Σxxᵀ − ΣxΣxᵀ in Python's integers, exact: the scatter's one rounding is the division
+        scatter = (
+            np.array(
+                [[n * sbb - sb * sb, n * sbr - sb * sr], [n * sbr - sb * sr, n * srr - sr * sr]]
+            )
+            / n
+        )
+        return cls(n, np.array([sb, sr]) / n, scatter)
+
+
+def _within(n: int, centre: float, reach: float) -> slice:
+    """The samples 0..n-1 within ``reach`` of ``centre`` (a run: empty when none is)."""
+    near = np.flatnonzero(np.abs(np.arange(n) - centre) <= reach)
+    return slice(int(near[0]), int(near[-1]) + 1) if len(near) else slice(0, 0)
+
+
+def _regions(chroma: Chroma, u: float, v: float, half_px: float) -> tuple[_Region, _Region] | None:
+    """(central half, ring) of the vehicle's square of half-side ``half_px`` at (u, v): the pixels within half of it
+    (Chebyshev distance), and those beyond it up to :data:`RING_HALVES` of it; None when either is too small to read
+    (off the frame). Their moments come from exact integer sums over rectangles (the ring: the square less its hole),
+    no pixel is gathered."""
     got = chroma.square(u, v, RING_HALVES * half_px)
     if got is None:
         return None
-    pixels, cu, cv_ = got
+    cb, cr, cu, cv_ = got
     h = half_px * chroma.scale
-    ys, xs = np.ogrid[: pixels.shape[0], : pixels.shape[1]]
-    dist = np.maximum(np.abs(xs - cu), np.abs(ys - cv_))
-    inner, ring = pixels[dist <= max(h / 2, 0.5)], pixels[dist > h]
-    if len(inner) < 1 or len(ring) < 8:
+    b, r = cb.astype(np.uint16), cr.astype(np.uint16)  # a product of two 8-bit levels fits 16 bits
+    products = (b, r, b * b, b * r, r * r)
+
+    def sums(rows: slice, cols: slice) -> list[int]:
+        return [b[rows, cols].size] + [int(p[rows, cols].sum(dtype=np.int64)) for p in products]
+
+    (rows, cols), reach = b.shape, max(h / 2, 0.5)
+    inner = sums(_within(rows, cv_, reach), _within(cols, cu, reach))
+    hole = sums(_within(rows, cv_, h), _within(cols, cu, h))
+    ring = [whole - held for whole, held in zip(sums(slice(None), slice(None)), hole, strict=True)]
+    if inner[0] < 1 or ring[0] < 8:
         return None
-    return inner, ring
+    return _Region.of(inner), _Region.of(ring)
 
 
 def learn(
@@ -129,8 +166,14 @@ def learn(
     if regions is None:
         return None
     inner, ring = regions
-    pooled = np.cov(ring.T) + (np.cov(inner.T) if len(inner) > 2 else 0) + np.eye(2)
-    weights = np.linalg.solve(pooled, inner.mean(axis=0) - ring.mean(axis=0))
+    pooled = (
+        ring.scatter / (ring.n - 1)
+        + (inner.scatter / (inner.n - 1) if inner.n > 2 else 0)
+        + np.eye(2)
+    )
+    # the means' difference in float32, as the model has always been learnt: its last bits move find()'s best place
+    # between two that stand out equally (bench/same_outputs.py)
+    weights = np.linalg.solve(pooled, inner.mean.astype(np.float32) - ring.mean.astype(np.float32))
     d = _separation(weights, inner, ring)
     return ColourModel(weights, d) if d >= min_separation else None
 
@@ -144,9 +187,10 @@ def separation(model: ColourModel, chroma: Chroma, u: float, v: float, half_px: 
     return math.nan if regions is None else _separation(model.weights, *regions)
 
 
-def _separation(w: np.ndarray, inner: np.ndarray, ring: np.ndarray) -> float:
-    ring_w = ring @ w
-    return float((inner.mean(axis=0) @ w - ring_w.mean()) / math.sqrt(ring_w.var() + 1e-6))
+def _separation(w: np.ndarray, inner: _Region, ring: _Region) -> float:
+    """The inner region's mean against the ring's along ``w``, in units of the ring's spread along it."""
+    spread_sq = float(w @ ring.scatter @ w) / ring.n
+    return float((inner.mean - ring.mean) @ w / math.sqrt(spread_sq + 1e-6))
 
 
 def find(
@@ -163,9 +207,9 @@ def find(
     got = chroma.square(x + w / 2, y + h / 2, max(w, h) / 2 + reach)
     if got is None:
         return None
-    pixels, cu, cv_ = got
+    cb, cr, cu, cv_ = got
     s = chroma.scale
-    level = pixels @ model.weights.astype(np.float32)
+    level = np.dstack((cb, cr)).astype(np.float32) @ model.weights.astype(np.float32)
     inner_r, hole_r, ring_r = max(round(half_px * s / 2), 0), round(half_px * s), round(reach * s)
     if min(level.shape) <= 2 * ring_r + 1:
         return None
