@@ -20,14 +20,17 @@ keeps busy, process cannot be faster than its CPU seconds over the cores. The ma
 after each run is printed (its range in each size's heading), and each process run's line on the frames' offset to
 the telemetry (the estimate, its σ, its thirds'; round 1's under the table): a change to the motion estimate shows
 what it did to the offset beside what it did to the speed. ``skyfix process --help`` is timed too:
-the start-up every process run pays (the interpreter and the command's imports). ``--tree LABEL=DIR`` also times
-``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C DIR``: before and after in the
-same run). ``--uuvs [SIZES]``: also the session with three UUVs at 1080p (20 s) and 4K (8 s) (:func:`bench_uuvs`):
-``skyfix process --uuv all`` (one pass over the video for the three), with ``--beside`` (the heights from size and
-the UUVs' files in processes of their own) and ``--track-workers`` (each UUV tracked in a worker process:
-:mod:`groundstation.offline.uuv_workers`), and ``--uuv uuv1`` alone (and with ``--beside``) against decode-only of
-the same file, each ``--tree`` too, and whether each run's positions files are byte-identical to this tree's (the last
-round's). Peak RSS is the largest of the command's processes (``os.wait4``), not their sum; CPU is theirs together.
+the start-up every process run pays (the interpreter and the command's imports). Each tree's modules are
+byte-compiled first, as pip compiles a package's when it installs it: run from source where the environment sets
+``PYTHONDONTWRITEBYTECODE`` (this machine's does), every run compiled its ~75 modules again (0.15-0.2 s).
+``--tree LABEL=DIR`` also times ``skyfix process`` from another source tree (e.g. ``git archive HEAD | tar -x -C
+DIR``: before and after in the same run). ``--uuvs [SIZES]``: also the session with three UUVs at 1080p (20 s) and 4K
+(8 s) (:func:`bench_uuvs`): ``skyfix process --uuv all`` (one pass over the video for the three), with ``--beside``
+(the heights from size and the UUVs' files in processes of their own) and ``--track-workers`` (each UUV tracked in a
+worker process: :mod:`groundstation.offline.uuv_workers`), and ``--uuv uuv1`` alone (and with ``--beside``) against
+decode-only of the same file, each ``--tree`` too, and whether each run's positions files are byte-identical to this
+tree's (the last round's). Peak RSS is the largest of the command's processes (``os.wait4``), not their sum; CPU is
+theirs together.
 """
 
 from __future__ import annotations
@@ -358,6 +361,14 @@ def main(argv=None) -> int:
     trees = {"": ROOT} | {
         f" [{label}]": Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
     }
+    for (
+        tree
+    ) in trees.values():  # as installed: pip byte-compiles a package's modules (see the module doc)
+        subprocess.run(
+            [sys.executable, "-m", "compileall", "-q", "localizer", "groundstation"],
+            cwd=tree,
+            check=True,
+        )
     lines, data = [], {}
     with tempfile.TemporaryDirectory() as work:
         for name in filter(None, args.sizes.split(",")):

@@ -1,11 +1,11 @@
 """Where the whole ``skyfix process`` command's wall time and CPU go, phase by phase and thread by thread (issue 30).
 
     .venv/bin/python bench/profile_process.py [--uuv all] [--duration-s 20] [--size 1080p] [--bucket-s 0.5]
-                                              [--out bench/results/profile_process.txt]
+                                              [--session DIR] [--out bench/results/profile_process.txt]
 
 ``bench/profile_stages.py`` times each stage alone (every frame decoded first); this runs the command itself, as a
 user does (``groundstation.cli.main(["process", SESSION, "--quiet", "--uuv", ...])`` in this process, its imports
-included), on ``bench/uuvs.py``'s three-UUV session, and watches it three ways:
+included), on ``bench/uuvs.py``'s three-UUV session (or ``--session``), and watches it three ways:
 
 - **phase**: what the main thread is doing: the functions of :data:`PHASES` are wrapped to note, on the main thread,
   when each starts and ends (the innermost running names the phase: reading the session, within the pass over the
@@ -307,6 +307,9 @@ def main(argv=None) -> int:
     p.add_argument("--uuv", default="all", help="the command's --uuv (all, uuv1, ...)")
     p.add_argument("--duration-s", type=float, default=20.0)
     p.add_argument("--size", default="1080p", choices=("1080p", "4k"))
+    p.add_argument(
+        "--session", type=Path, help="this session instead (e.g. bench/offline_speed.py's)"
+    )
     p.add_argument("--interval-ms", type=float, default=10.0)
     p.add_argument("--bucket-s", type=float, default=0.5)
     p.add_argument("--watch", type=int, help=argparse.SUPPRESS)
@@ -319,7 +322,7 @@ def main(argv=None) -> int:
     from uuvs import ensure_session as uuvs_session
 
     size = {"1080p": (1920, 1080), "4k": (3840, 2160)}[args.size]
-    session = uuvs_session(args.duration_s, size)
+    session = args.session or uuvs_session(args.duration_s, size)
     lines, data = profile(session, args.uuv, args.interval_ms / 1000, args.bucket_s)
     emit(lines, args.out, data)
     return 0
