@@ -361,9 +361,8 @@ def main(argv=None) -> int:
     trees = {"": ROOT} | {
         f" [{label}]": Path(d).resolve() for label, d in (t.split("=", 1) for t in args.tree)
     }
-    for (
-        tree
-    ) in trees.values():  # as installed: pip byte-compiles a package's modules (see the module doc)
+    # as installed: pip byte-compiles a package's modules (see the module doc)
+    for tree in trees.values():
         subprocess.run(
             [sys.executable, "-m", "compileall", "-q", "localizer", "groundstation"],
             cwd=tree,

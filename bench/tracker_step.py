@@ -4,9 +4,10 @@
 ``skyfix process`` of a session is run once per source tree (``--height-from-size off``: the tracking is the same)
 with :meth:`~localizer.tracking.session.TrackingSession.step` recorded: each UUV's session as it was before its first
 step, and every step's frame and pose. The steps are then replayed ``--repeats`` times from those states, timed with
-the thread's CPU clock (the decoder's threads are not counted); the best replay counts. The results' digest (every
-step's :class:`~localizer.tracking.TrackResult`; each frame's colour replayed with it, for the colour check) must be the same for every tree: a change that alters one value
-shows here. Trees are run in turn, ``--rounds`` times, so a shared machine's load falls on each alike.
+the thread's CPU clock (the decoder's threads are not counted); the best replay counts. Each frame's colour is
+replayed with it, for the colour check. The results' digest (every step's :class:`~localizer.tracking.TrackResult`)
+must be the same for every tree: a change that alters one value shows here. Trees are run in turn, ``--rounds``
+times, so a shared machine's load falls on each alike.
 
     python bench/tracker_step.py --tree before=/tmp/before --tree after=. --out bench/results/tracker_step.txt
 """
