@@ -151,7 +151,9 @@ COLOUR_FOUND_MIN = 3.0
 #: first frames, and the grey levels' mean then shows no vehicle where the colour does.
 STEADY_COLOUR_MIN = 3.0
 #: A restart by colour gives no fix until the vehicle's colour is at the tracked place on this many frames in a row
-#: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more).
+#: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more). The
+#: restart's own frame is a fix when the restart is within :data:`HELD_COLOUR_REACH` of where the UUV was sought:
+#: the evidence that makes a held frame one (bench/results/tracker_waves_restart_near_s21.txt).
 COLOUR_CONFIRM_FRAMES = 2
 #: A frame the matcher held through waves (its best place under its bars, not yet a loss) is a fix at that place when
 #: it is within this share of the vehicle's box of where the UUV was sought and the vehicle's colour stands out there
@@ -493,31 +495,37 @@ class TrackingSession:
         self, chroma: Chroma, held: Match, result: TrackResult
     ) -> TrackResult | None:
         """A frame the matcher held (its best place under its bars, not yet a loss), ``ok`` at that place when it is
-        within :data:`HELD_COLOUR_REACH` of where the UUV was sought and the vehicle's colour stands out there as a
-        restart by colour needs (not while one awaits its confirmation); None otherwise. ``result``: the frame's
-        (``lost``). The tracker follows on as it would have."""
-        sought = self.sought or self.prediction
-        if sought is None or self._box_wh is None or self._unconfirmed:
+        near where the UUV was sought (:meth:`_near_sought`) and the vehicle's colour stands out there as a restart by
+        colour needs (not while one awaits its confirmation); None otherwise. ``result``: the frame's (``lost``). The
+        tracker follows on as it would have."""
+        if self._box_wh is None or self._unconfirmed or not self._near_sought(held.u, held.v):
             return None
         length = max(self._box_wh)
-        if math.hypot(held.u - sought.u, held.v - sought.v) > HELD_COLOUR_REACH * length:
-            return None
         if not separation(self._colour, chroma, held.u, held.v, length / 2) >= self._colour_bar():
             return None
         return TrackResult("ok", held.u, held.v, self._box_at(held.u, held.v), result.confidence)
+
+    def _near_sought(self, u: float, v: float) -> bool:
+        """Whether (u, v) is within :data:`HELD_COLOUR_REACH` of the vehicle's box (its last size the colour check
+        passed) of where the UUV was sought in this frame."""
+        sought = self.sought or self.prediction
+        reach = HELD_COLOUR_REACH * max(self._box_wh)
+        return sought is not None and math.hypot(u - sought.u, v - sought.v) <= reach
 
     def _found_by_colour(
         self, frame_bgr, chroma: Chroma, pose: CameraPose, i: int
     ) -> TrackResult | None:
         """Through waves, tracking restarted where the vehicle's colour stands out most in the window the UUV is
         sought in, when it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`) and nowhere else in
-        the window more than a vehicle's length away does (no fix until :data:`COLOUR_CONFIRM_FRAMES` more frames
-        have its colour there: ``lost``); None otherwise."""
+        the window more than a vehicle's length away does; None otherwise. The track then gives no fix until
+        :data:`COLOUR_CONFIRM_FRAMES` more frames have its colour there; the restart's own frame is ``lost`` unless
+        the restart is near where the UUV was sought (:meth:`_near_sought`: a fix there, as a held frame would be)."""
         rough = self._rough if self._rough is not None else self._reading_rough
         rough = rough or self.cal.sigmas.wind_mps >= COLOUR_SEARCH_WIND_MPS
         got = self._colour_found(chroma) if rough else None
         if got is None:
             return None
+        near = self._near_sought(got[0], got[1])
         one = take(pose, [i])
         cu, cv_ = top_face_pixel(self.cal, one, [got[0]], [got[1]])
         centre = (float(cu[0]), float(cv_[0]))
@@ -534,7 +542,7 @@ class TrackingSession:
         self._undo.t_unix, self._undo.passed = t_unix, 0
         self._start(one, centre, anchor)
         self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
-        return TrackResult("lost", confidence=result.confidence)
+        return result if near else TrackResult("lost", confidence=result.confidence)
 
     def _undo_refuted(self, t_unix: float) -> None:
         """The track as it was before the latest restarts by colour when the colour refuted them before they were
