@@ -519,7 +519,8 @@ class TrackingSession:
         sought in, when it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`) and nowhere else in
         the window more than a vehicle's length away does; None otherwise. The track then gives no fix until
         :data:`COLOUR_CONFIRM_FRAMES` more frames have its colour there; the restart's own frame is ``lost`` unless
-        the restart is near where the UUV was sought (:meth:`_near_sought`: a fix there, as a held frame would be)."""
+        the restart is near where the UUV was sought (:meth:`_near_sought`: a fix there, as a held frame would be,
+        without a score: :data:`~localizer.tracking.sigma.UNSCORED_SHARE` of the vehicle's length claimed)."""
         rough = self._rough if self._rough is not None else self._reading_rough
         rough = rough or self.cal.sigmas.wind_mps >= COLOUR_SEARCH_WIND_MPS
         got = self._colour_found(chroma) if rough else None
@@ -542,7 +543,9 @@ class TrackingSession:
         self._undo.t_unix, self._undo.passed = t_unix, 0
         self._start(one, centre, anchor)
         self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
-        return result if near else TrackResult("lost", confidence=result.confidence)
+        if near:  # placed by its colour, not by a match: claimed as a tracker without a score is
+            return TrackResult("ok", result.u, result.v, result.box, math.nan)
+        return TrackResult("lost", confidence=result.confidence)
 
     def _undo_refuted(self, t_unix: float) -> None:
         """The track as it was before the latest restarts by colour when the colour refuted them before they were
