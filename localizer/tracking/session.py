@@ -543,7 +543,7 @@ class TrackingSession:
         self._undo.t_unix, self._undo.passed = t_unix, 0
         self._start(one, centre, anchor)
         self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
-        if near:  # placed by its colour, not by a match: claimed as a tracker without a score is
+        if near:  # placed by its colour, not by a match: the claim of a tracker without a score
             return TrackResult("ok", result.u, result.v, result.box, math.nan)
         return TrackResult("lost", confidence=result.confidence)
 
