@@ -18,7 +18,7 @@ ones), on frames 0, 60 and 150, with the camera's pose of the frame:
   stands out of the mean of its window's saliencies): the vehicle's box kept/snapped/refused, and how many seafloor
   boxes it takes on something other than the UUV (the taken box's centre further than the box's size from the
   UUV's true pixel in the frame the check ends on). The frames' colour is given as the live pipeline gives it (from
-  the BGR frame; none with ``--luma``, whose frames are grey).
+  the BGR frame; with ``--luma`` the decoded chroma planes).
 - ``colour when drawn``: how far each box stands out of its surroundings in colour when drawn, as the check over
   frames learns it (:func:`localizer.tracking.colour.learn`): the UUV's boxes and the seafloor's against
   ``STEADY_COLOUR_MIN``, the least a box's colour takes it by.
@@ -47,6 +47,7 @@ from emit import emit
 
 from groundstation.offline.track import SURE_DISTINCT
 from groundstation.session.read import load_session
+from groundstation.video.frames import chroma_planes
 from localizer.fix import locate
 from localizer.pose import camera_pose, take
 from localizer.tracking import Prediction
@@ -68,16 +69,18 @@ FOLLOW = 30  # frames a box taken unchecked is followed (--follow)
 STEADY_FRAMES = 40  # frames read after each of FRAMES for the check over frames (at most 2 x STEADY_S at 30 fps)
 
 
-def images(video: Path, picks, luma: bool = False) -> dict:
-    """The frames ``picks`` (indices in decoding order) of ``video`` as BGR (``luma``: their luma planes)."""
-    out = {}
+def images(video: Path, picks, luma: bool = False) -> tuple[dict, dict]:
+    """The frames ``picks`` (indices in decoding order) of ``video`` as BGR (``luma``: their luma planes), and their
+    colour as the live pipeline gives it (the BGR frame's; with ``luma`` the decoded chroma planes)."""
+    out, colours = {}, {}
     with av.open(str(video)) as container:
         for i, frame in enumerate(container.decode(video=0)):
             if i in picks:
                 out[i] = frame.to_ndarray(format="gray" if luma else "bgr24")
+                colours[i] = chroma_planes(frame).copy() if luma else Chroma.of(out[i])
             if i >= max(picks):
                 break
-    return out
+    return out, colours
 
 
 def checked(session, image, pose, i: int, box) -> tuple[str, tuple[float, float] | None]:
@@ -91,7 +94,7 @@ def checked(session, image, pose, i: int, box) -> tuple[str, tuple[float, float]
 
 
 def checked_steady(
-    session, frames: dict, pose, i: int, box
+    session, frames: dict, colours: dict, pose, i: int, box
 ) -> tuple[str, tuple[float, float] | None, int]:
     """What the check over frames makes of ``box`` drawn on frame ``i``: (kept/snapped/refused, the taken box's
     centre, the frame the check ended on)."""
@@ -104,12 +107,12 @@ def checked_steady(
         verify=True,
         keep_drawn=True,
         steady=True,
-        chroma=Chroma.of(frames[i]),
+        chroma=colours[i],
     )
     j = i
     while tracking.check == "confirming" and j + 1 in frames:
         j += 1
-        result = tracking.step(frames[j], pose, j, chroma=Chroma.of(frames[j]))
+        result = tracking.step(frames[j], pose, j, chroma=colours[j])
     word = tracking.check.split(":")[0]
     return word, ((result.u, result.v) if word in ("kept", "snapped") else None), j
 
@@ -136,10 +139,10 @@ def saliency(
     return (None, math.nan, math.nan) if found is None else (found.saliency, found.u, found.v)
 
 
-def colour_drawn(image, u: float, v: float, box) -> float:
+def colour_drawn(chroma: Chroma, u: float, v: float, box) -> float:
     """How far the box centred at (u, v) stands out of its surroundings in colour, as the check over frames learns
     it when the box is drawn (:func:`localizer.tracking.colour.learn`, ring spreads; NaN: not read)."""
-    model = learn(Chroma.of(image), u, v, max(box[2:]) / 2, min_separation=-math.inf)
+    model = learn(chroma, u, v, max(box[2:]) / 2, min_separation=-math.inf)
     return math.nan if model is None else model.separation
 
 
@@ -149,7 +152,7 @@ def followed(path: Path, start: int) -> dict:
     w, h = tomllib.loads((path / "session.toml").read_text())["tracker"]["init_bbox"][2:]
     truth = np.genfromtxt(path / "track.csv", delimiter=",", names=True)
     pose = camera_pose(session.calibration, session.telemetry, session.frames["t"])
-    frames = images(session.video_path, set(range(start, start + FOLLOW + 1)))
+    frames, _ = images(session.video_path, set(range(start, start + FOLLOW + 1)))
     u, v = float(truth["u"][start]), float(truth["v"][start])
     H, W = frames[start].shape[:2]
     out = {"session": path.name, "frame": start, "uuv": None, "seafloor": []}
@@ -192,7 +195,7 @@ def run(path: Path, luma: bool = False) -> dict:
     t = session.frames["t"]
     pose = camera_pose(session.calibration, session.telemetry, t)
     rows = []
-    frames = images(
+    frames, colours = images(
         session.video_path,
         {j for i in FRAMES for j in range(i, min(i + STEADY_FRAMES, len(t)))},
         luma,
@@ -205,9 +208,9 @@ def run(path: Path, luma: bool = False) -> dict:
             continue
         box = [round(u - w / 2), round(v - h / 2), w, h]
         word, _ = checked(session, image, pose, i, box)
-        steady, _, _ = checked_steady(session, frames, pose, i, box)
+        steady, _, _ = checked_steady(session, frames, colours, pose, i, box)
         s, _, _ = saliency(image, pose, i, session, u, v, box)
-        taken, steady_taken, distinct, colours = 0, 0, [], []
+        taken, steady_taken, distinct, drawn = 0, 0, [], []
         for k in STEPS:
             for a in range(8):
                 cu = u + k * w * math.cos(a * math.pi / 4)
@@ -218,12 +221,12 @@ def run(path: Path, luma: bool = False) -> dict:
                 what, at = checked(session, image, pose, i, sea)
                 if what != "refused" and math.hypot(at[0] - u, at[1] - v) > max(w, h):
                     taken += 1
-                what, at, j = checked_steady(session, frames, pose, i, sea)
+                what, at, j = checked_steady(session, frames, colours, pose, i, sea)
                 if what != "refused" and not (
                     math.hypot(at[0] - truth["u"][j], at[1] - truth["v"][j]) <= max(w, h)
                 ):
                     steady_taken += 1
-                colours.append(colour_drawn(image, cu, cv_, sea))
+                drawn.append(colour_drawn(colours[i], cu, cv_, sea))
                 s_sea, su, sv = saliency(image, pose, i, session, cu, cv_, sea)
                 if s_sea is not None and math.hypot(su - u, sv - v) > max(w, h):
                     distinct.append(s_sea)
@@ -236,8 +239,8 @@ def run(path: Path, luma: bool = False) -> dict:
                 "vehicle_steady": steady,
                 "seafloor_taken_steady": steady_taken,
                 "seafloor_distinct": sorted(distinct),
-                "vehicle_colour": colour_drawn(image, u, v, box),
-                "seafloor_colours": colours,
+                "vehicle_colour": colour_drawn(colours[i], u, v, box),
+                "seafloor_colours": drawn,
             }
         )
     return {"session": path.name, "rows": rows}
