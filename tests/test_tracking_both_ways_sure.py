@@ -31,9 +31,10 @@ class _Back:
         return TrackResult("ok", 100.0 + row, 50.0, sigma_px=1.0, confidence=0.7)
 
 
-def _forward(script, seen: dict):
-    """A UuvTrack fed ``script`` [(ok, the follow's distinct)] frame by frame; the rows it traced back (bridged)
-    and the rows each trace started from."""
+def _forward(script, seen: dict, proving=(), refuted_from: int | None = None):
+    """A UuvTrack fed ``script`` [(ok, the follow's distinct)] frame by frame, its track a restart by colour not yet
+    proven on the rows ``proving`` and refuted from row ``refuted_from`` on; the rows it traced back (bridged) and
+    the rows each trace started from."""
     n = len(script)
     track = object.__new__(UuvTrack)
     starts = []
@@ -42,16 +43,20 @@ def _forward(script, seen: dict):
         starts.append(row)
         return _Back(seen)
 
-    track.tracking = SimpleNamespace(target=SimpleNamespace(distinct=math.nan), back_from=back_from)
+    track.tracking = SimpleNamespace(
+        target=SimpleNamespace(distinct=math.nan), back_from=back_from, refuted=0
+    )
+    track.tracking.unproven = lambda t: round(t / PERIOD_S) in proving
     track.pose, track.t = None, PERIOD_S * np.arange(n)
     track.status = np.array(["ok" if ok else "lost" for ok, _ in script], dtype=object)
     track.u, track.v, track.conf, track.sigma, track.u_unfiltered, track.v_unfiltered = (
         np.full(n, np.nan) for _ in range(6)
     )
     track.bridged, track.causal_words, track.timings = np.zeros(n, bool), {}, {"backward": 0.0}
-    track.behind, track.missed_t = deque(maxlen=90), -math.inf
+    track.behind, track.missed_t, track.unproven = deque(maxlen=90), -math.inf, None
     for row, (ok, distinct) in enumerate(script):
         track.tracking.target.distinct = distinct
+        track.tracking.refuted = int(refuted_from is not None and row >= refuted_from)
         result = TrackResult("ok", 1.0, 1.0) if ok else TrackResult("lost")
         track._trace_when_sure(row, (np.zeros(1), None), result)  # a kept frame: (image, chroma)
     return list(np.flatnonzero(track.bridged)), starts, track
@@ -87,3 +92,26 @@ def test_not_traced_without_a_frame_the_uuv_stands_out_in_soon_after():
     script = [(True, 2.0)] * 3 + [(False, math.nan)] * 4 + [(True, 0.5)] * late + [(True, 2.0)]
     bridged, starts, _ = _forward(script, seen)
     assert bridged == [] and starts == []
+
+
+def test_traced_back_from_a_restart_by_colour_bridged_once_it_is_proven():
+    sure = SURE_DISTINCT + 0.1
+    # ok 0-2, without the UUV 3-7 (a restart by colour on 7), standing out 8-12, the restart proven from 11 on
+    script = [(True, sure)] * 3 + [(False, math.nan)] * 5 + [(True, sure)] * 5
+    seen = {r: True for r in range(13)} | {3: False}
+    bridged, starts, _ = _forward(script, seen, proving=range(7, 11))
+    assert starts == [8] and bridged == [4, 5, 6, 7]  # traced from 8, bridged on 11
+    for last in (9, 10):  # the recording ends before the restart is proven
+        bridged, starts, _ = _forward(script[: last + 1], seen, proving=range(7, 11))
+        assert starts == [8] and bridged == []
+
+
+def test_traced_back_from_a_restart_by_colour_dropped_when_the_colour_refutes_it():
+    sure = SURE_DISTINCT + 0.1
+    # as above, the colour refuting the restart on 10 (the track back to what it was: the UUV lost again)
+    script = [(True, sure)] * 3 + [(False, math.nan)] * 5 + [(True, sure)] * 2
+    script += [(False, math.nan)] * 3 + [(True, sure)] * 2
+    seen = {r: True for r in range(15)} | {3: False}
+    bridged, starts, _ = _forward(script, seen, proving=range(7, 10), refuted_from=10)
+    # not 4-7 (traced from 8, refuted), but 10-12 from 13, through the frames since
+    assert starts == [8, 13] and bridged == [10, 11, 12], (starts, bridged)

@@ -24,7 +24,10 @@ too (``bridged``). An occlusion stops it as it stops the forward pass: a hidden 
 the frames without the UUV are traced back too from a frame soon after them (:data:`SURE_WITHIN_S`) that the forward
 pass follows the UUV in standing out of the seafloor (:data:`SURE_DISTINCT`), by a copy of the forward tracker
 (:meth:`~localizer.tracking.session.TrackingSession.back_from`): there a re-acquisition is soon followed by a frame
-the waves hide the UUV in, and the waves lose it without an occlusion.
+the waves hide the UUV in, and the waves lose it without an occlusion. Traced back from a restart by colour the
+colour may still refute (:meth:`~localizer.tracking.session.TrackingSession.unproven`), the frames are bridged only
+once the restart is proven: one on a place of the seafloor that showed the vehicle's colour for a few frames was
+traced back through the frames the UUV was hidden in, and the colour refuted it three frames later.
 
 Several UUVs of one session (:func:`track_sessions`) are tracked in one pass over the video: each frame is
 decoded once and handed to every UUV's :class:`UuvTrack`; the UAV's pose of every frame and the video's motion are
@@ -317,6 +320,8 @@ class UuvTrack:
         # the latest such frame's time
         self.behind: deque = deque(maxlen=self.gap.maxlen)
         self.missed_t = -math.inf
+        # traced back from a restart by colour not yet proven: (the session's restarts undone then, [(row, result)])
+        self.unproven: tuple[int, list] | None = None
         # (row, image, TrackResult): a re-acquisition after the gap, to be confirmed
         self.pending = None
         self.started = False
@@ -425,14 +430,17 @@ class UuvTrack:
         follows it in standing out of the seafloor (:data:`SURE_DISTINCT`), within :data:`SURE_WITHIN_S` after them,
         by a copy of the forward tracker (what it learnt of the UUV's wave-distorted appearance and of the sea
         state), through the frames since, until it loses the UUV. The waves hide the UUV for a moment or slide the
-        follow off it without an occlusion, and a re-acquisition is then soon followed by a held frame."""
+        follow off it without an occlusion, and a re-acquisition is then soon followed by a held frame. Traced back
+        from a restart by colour not yet proven, the frames are bridged once it is (:meth:`_bridge_proven`)."""
+        t = self.t[row]
+        self._bridge_proven(t)
         if not result.ok:
             self.behind.append((row, image))
-            self.missed_t = self.t[row]
+            self.missed_t = t
             return
         if not self.behind:
             return
-        if self.t[row] - self.missed_t > SURE_WITHIN_S:
+        if t - self.missed_t > SURE_WITHIN_S:
             self.behind.clear()
             return
         if not self.tracking.target.distinct >= SURE_DISTINCT:
@@ -444,13 +452,30 @@ class UuvTrack:
         except SelectionError:  # its box reaches beyond the frame
             self.behind.clear()
             return
-        self._bridge(
+        traced = [
             (r, found)
             for r, found in _stepped_back(back, self.pose, self.behind)
             if self.status[r] != "ok"
-        )
+        ]
+        if self.tracking.unproven(t):  # bridged once the restart stands (:meth:`_bridge_proven`)
+            refuted, held = self.unproven or (self.tracking.refuted, [])
+            self.unproven = (refuted, held + traced)
+        else:
+            self._bridge(traced)
         self.behind.clear()
         self.timings["backward"] += time.perf_counter() - t0
+
+    def _bridge_proven(self, t: float) -> None:
+        """The frames traced back from a restart by colour (``unproven``) bridged once the restart is proven at
+        ``t``, dropped when the colour refuted it meanwhile: the trace then followed a place of the seafloor."""
+        if self.unproven is None:
+            return
+        refuted, traced = self.unproven
+        if self.tracking.refuted != refuted:
+            self.unproven = None
+        elif not self.tracking.unproven(t):
+            self._bridge(traced)
+            self.unproven = None
 
     def _bridge(self, traced) -> None:
         """The frames a tracker stepping back found the UUV in (``(row, TrackResult)``) reported ``ok``."""

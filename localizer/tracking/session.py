@@ -242,8 +242,10 @@ class TrackingSession:
         # before a fix, and the last box it passed (w, h)
         self._vetoed = self._unconfirmed = 0
         self._box_wh: tuple[int, int] | None = None
-        # what the latest restarts by colour replaced (used while they are not proven: :data:`COLOUR_PROVEN_FRAMES`)
+        # what the latest restarts by colour replaced (used while they are not proven: :data:`COLOUR_PROVEN_FRAMES`),
+        # and how many restarts were undone so far
         self._undo: _Undo | None = None
+        self.refuted = 0
         # the sea as read (see :data:`COLOUR_SEARCH_ROUGH_S`): rough or not (None: not yet read that long), and the
         # matcher's latest reading (rough or not) since when (t_unix)
         self._rough: bool | None = None
@@ -339,6 +341,12 @@ class TrackingSession:
         back.target.adopt(self.target, found)
         back.take_colour(self)
         return back
+
+    def unproven(self, t_unix: float) -> bool:
+        """Whether the track at ``t_unix`` is on a restart by colour not yet proven (:data:`COLOUR_PROVEN_FRAMES`,
+        :data:`COLOUR_PROVEN_S`): the colour may still refute it (:attr:`refuted` counts those), and the track go back
+        to what it was."""
+        return self._undo is not None and not self._undo.proven(t_unix)
 
     def take_colour(self, other: TrackingSession) -> None:
         """Check the vehicle's colour as ``other`` learnt it (a tracker of the same UUV through other frames of the
@@ -553,6 +561,7 @@ class TrackingSession:
         undo, self._undo = self._undo, None
         if undo is None or undo.proven(t_unix):
             return
+        self.refuted += 1
         self.target = undo.target
         for name, value in undo.track.items():
             setattr(self, name, value)
