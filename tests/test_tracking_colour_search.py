@@ -5,7 +5,10 @@
   it spans about 15 px, hidden from 5.0 to 6.5 s. During the occlusion the search by colour restarts the track on a
   place of the seafloor 50 px from the UUV's last sighting that shows the vehicle's colour for a few frames as the
   waves play; the colour check refutes it on nearly every frame after. Before the undo the track stayed on that
-  place: every one of the 30 frames after the UUV came back (45 px away) was lost (measured). Now 27 of 30.
+  place: every one of the 30 frames after the UUV came back (45 px away) was lost (measured). Now 27 of 30. A later
+  restart by colour while the UUV was still hidden showed the colour on the two frames after it too, and two hidden
+  frames (at 6.1 s) were reported on it; a restart away from where the UUV was sought now waits for four
+  (``COLOUR_CONFIRM_FAR_FRAMES``), and no hidden frame is reported.
 - A configured wind makes the sea rough for the search from the start (``COLOUR_SEARCH_WIND_MPS``): the
   w5_15px_2.0m condition with seed 2, ``waves_5mps_oblique`` with the UUV 2 m deep and about 16 px. The matcher
   lost it in its first frames, its reading of the sea stayed at three follows' (0.43), and the UUV, standing out in
@@ -40,7 +43,7 @@ SCENARIOS = Path(__file__).resolve().parents[1] / "sim_fixtures" / "scenarios"
 def _located(out: Path, base: str, depth_m: float, hfov_deg: float, **keys):
     """Render ``base`` with the UUV at ``depth_m`` and the field of view ``hfov_deg`` (other scenario ``keys``
     replaced) into ``out`` and track it as ``skyfix process`` does: (times from the start (s), visible, ok and
-    within half the UUV's size of it, ok and further) per frame."""
+    within half the UUV's size of it, ok and further, ok while hidden) per frame."""
     data = tomllib.loads((SCENARIOS / f"{base}.toml").read_text())
     data.update(name=out.name, **keys)
     data["uuv"] = dict(data["uuv"], depth_m=depth_m, depth_swing_m=0.2)
@@ -52,12 +55,12 @@ def _located(out: Path, base: str, depth_m: float, hfov_deg: float, **keys):
     half_px = (max(session.calibration.init_bbox[2:]) - 6) / 2  # the box is padded by 3 px a side
     ok, visible = tracked.status == "ok", np.isfinite(truth["u"])
     near = np.hypot(tracked.u - truth["u"], tracked.v - truth["v"]) <= half_px
-    return truth["t"] - truth["t"][0], visible, ok & near, ok & visible & ~near
+    return truth["t"] - truth["t"][0], visible, ok & near, ok & visible & ~near, ok & ~visible
 
 
 def test_a_restart_on_the_seafloor_during_an_occlusion_is_undone(tmp_path):
     hidden_s = (5.0, 6.5)
-    t, visible, located, wrong = _located(
+    t, visible, located, wrong, hidden_ok = _located(
         tmp_path / "undo",
         "waves_2mps_nadir",
         1.0,
@@ -71,12 +74,13 @@ def test_a_restart_on_the_seafloor_during_an_occlusion_is_undone(tmp_path):
     share = located[back].mean()
     assert share >= 0.8, f"{share:.0%} of the {back.sum()} frames after the occlusion located"
     assert not wrong.any(), np.flatnonzero(wrong)
+    assert not hidden_ok.any(), np.flatnonzero(hidden_ok)
 
 
 def _located_5mps(out: Path, hfov_deg: float, seed: int) -> np.ndarray:
     """3 s of ``waves_5mps_oblique`` with the UUV 2 m deep, in view throughout: per frame, located (no frame may
     be reported further from the UUV than half its size)."""
-    _, visible, located, wrong = _located(
+    _, visible, located, wrong, _ = _located(
         out, "waves_5mps_oblique", 2.0, hfov_deg, duration_s=3.0, occlusions=[], seed=seed
     )
     assert visible.all()

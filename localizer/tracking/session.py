@@ -155,6 +155,10 @@ STEADY_COLOUR_MIN = 3.0
 #: restart's own frame is a fix when the restart is within :data:`HELD_COLOUR_REACH` of where the UUV was sought:
 #: the evidence that makes a held frame one (bench/results/tracker_waves_restart_near_s21.txt).
 COLOUR_CONFIRM_FRAMES = 2
+#: ... and on this many when the restart is further than that from where the UUV was sought: such places of the
+#: seafloor showed the vehicle's colour on the two frames after too, while the UUV was hidden and as it came back
+#: beside them (bench/results/tracker_waves_confirm_far_s22.txt).
+COLOUR_CONFIRM_FAR_FRAMES = 4
 #: A frame the matcher held through waves (its best place under its bars, not yet a loss) is a fix at that place when
 #: it is within this share of the vehicle's box of where the UUV was sought and the vehicle's colour stands out there
 #: as a restart by colour needs it to (:data:`COLOUR_FOUND_SHARE`, :data:`COLOUR_FOUND_MIN`): the waves drag a small or
@@ -241,6 +245,7 @@ class TrackingSession:
         # frames in a row the colour check withheld, the frames a restart by colour still needs it on in a row
         # before a fix, and the last box it passed (w, h)
         self._vetoed = self._unconfirmed = 0
+        self._confirming = COLOUR_CONFIRM_FRAMES  # the frames the latest restart by colour needs
         self._box_wh: tuple[int, int] | None = None
         # what the latest restarts by colour replaced (used while they are not proven: :data:`COLOUR_PROVEN_FRAMES`),
         # and how many restarts were undone so far
@@ -496,7 +501,7 @@ class TrackingSession:
         else:
             self._vetoed += 1
             if self._unconfirmed:
-                self._unconfirmed = COLOUR_CONFIRM_FRAMES
+                self._unconfirmed = self._confirming
         return TrackResult("lost", confidence=result.confidence)
 
     def _held_coloured(
@@ -526,9 +531,10 @@ class TrackingSession:
         """Through waves, tracking restarted where the vehicle's colour stands out most in the window the UUV is
         sought in, when it stands out there as it did when learnt (:data:`COLOUR_FOUND_SHARE`) and nowhere else in
         the window more than a vehicle's length away does; None otherwise. The track then gives no fix until
-        :data:`COLOUR_CONFIRM_FRAMES` more frames have its colour there; the restart's own frame is ``lost`` unless
-        the restart is near where the UUV was sought (:meth:`_near_sought`: a fix there, as a held frame would be,
-        without a score: :data:`~localizer.tracking.sigma.UNSCORED_SHARE` of the vehicle's length claimed)."""
+        :data:`COLOUR_CONFIRM_FRAMES` more frames have its colour there (:data:`COLOUR_CONFIRM_FAR_FRAMES` for a
+        restart away from where the UUV was sought); the restart's own frame is ``lost`` unless the restart is near
+        where the UUV was sought (:meth:`_near_sought`: a fix there, as a held frame would be, without a score:
+        :data:`~localizer.tracking.sigma.UNSCORED_SHARE` of the vehicle's length claimed)."""
         rough = self._rough if self._rough is not None else self._reading_rough
         rough = rough or self.cal.sigmas.wind_mps >= COLOUR_SEARCH_WIND_MPS
         got = self._colour_found(chroma) if rough else None
@@ -550,7 +556,8 @@ class TrackingSession:
             self._undo = _Undo(before, {name: getattr(self, name) for name in _TRACK})
         self._undo.t_unix, self._undo.passed = t_unix, 0
         self._start(one, centre, anchor)
-        self._vetoed, self._unconfirmed = 0, COLOUR_CONFIRM_FRAMES
+        self._confirming = COLOUR_CONFIRM_FRAMES if near else COLOUR_CONFIRM_FAR_FRAMES
+        self._vetoed, self._unconfirmed = 0, self._confirming
         if near:  # placed by its colour, not by a match: the claim of a tracker without a score
             return TrackResult("ok", result.u, result.v, result.box, math.nan)
         return TrackResult("lost", confidence=result.confidence)
