@@ -70,32 +70,22 @@ def test_a_reacquisition_is_traced_back_through_the_frames_the_causal_pass_misse
         assert np.array_equal(tracked.u, both.u, equal_nan=True)
 
 
-def _waves(path: Path, base: str, hfov_deg: float, duration_s: float, seed: int | None = None):
-    """bench/tracker_waves.py's rendering of ``base`` with the UUV 3.4 m deep and hidden from 5.0 to 6.5 s, tracked
-    both ways: (visible, the pass, ``ok`` further than half the UUV's size from it) per frame (the causal pass's
-    words in its ``causal_status``, its pixels where not ``bridged``)."""
-    data = tomllib.loads((SCENARIOS / f"{base}.toml").read_text())
-    data.update(name=path.name, duration_s=duration_s, occlusions=[[5.0, 6.5]])
-    if seed is not None:
-        data["seed"] = seed
+def test_frames_traced_back_from_a_restart_by_colour_wait_for_its_proof(tmp_path):
+    # bench/tracker_waves.py's w8_15px_3.4m_s2, cut to 7.5 s
+    data = tomllib.loads((SCENARIOS / "waves_8mps_oblique.toml").read_text())
+    data.update(name="w8", seed=2, duration_s=7.5, occlusions=[[5.0, 6.5]])
     data["uuv"] = dict(data["uuv"], depth_m=3.4, depth_swing_m=0.2)
-    data["camera"] = dict(data["camera"], hfov_deg=hfov_deg)
-    session = load_session(generate(scenario_from_dict(data), path).session)
+    data["camera"] = dict(data["camera"], hfov_deg=76.85)
+    session = load_session(generate(scenario_from_dict(data), tmp_path / "w8").session)
     truth = session.track
     half_px = (max(session.calibration.init_bbox[2:]) - 6) / 2  # the box is padded by 3 px a side
-    both = track_session(session, both_ways=True)
-    off = (both.status == "ok") & (np.hypot(both.u - truth["u"], both.v - truth["v"]) > half_px)
-    return np.isfinite(truth["u"]), both, off
-
-
-def test_frames_traced_back_from_a_restart_by_colour_wait_for_its_proof(tmp_path):
-    visible, both, off = _waves(tmp_path / "w8", "waves_8mps_oblique", 76.85, 7.5, seed=2)
+    both = track_session(session, both_ways=True)  # the causal pass's pixels where not bridged
+    ok, visible = both.status == "ok", np.isfinite(truth["u"])
+    off = ok & (np.hypot(both.u - truth["u"], both.v - truth["v"]) > half_px)
     assert 40 <= (~visible).sum() <= 50
     # the restart on the seafloor is reported causally (as live) ...
     assert 1 <= (off & ~both.bridged).sum() <= 3
     # ... and not traced back
-    assert not (both.status == "ok")[~visible].any(), np.flatnonzero(
-        (both.status == "ok") & ~visible
-    )
+    assert not ok[~visible].any(), np.flatnonzero(ok & ~visible)
     assert not (both.bridged & off).any(), np.flatnonzero(both.bridged & off)
     assert both.bridged.sum() >= 10  # the waves' losses elsewhere still traced back
