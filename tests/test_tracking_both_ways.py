@@ -11,7 +11,9 @@
   reports the frame after before the colour refutes the restart (its frames of the vehicle's colour too few to prove
   it, ``COLOUR_PROVEN_FRAMES``) and the track goes back to the UUV's last sighting. The match stands out of the
   seafloor there: traced back from it, the pass reported 22 frames before it on that place, 17 of them while the
-  UUV was hidden (measured; with two frames of confirmation, 3 reported causally and 14 traced back). The frames
+  UUV was hidden (measured; with two frames of confirmation, 3 reported causally and 14 traced back). The frame
+  reported on the restart claims it: twice its DRMS covers the 48 px to the UUV (the restart's distance from where
+  the UUV was sought is in its sigma until it is proven; 10 px were claimed without). The frames
   traced back from a restart by colour are bridged only once it is proven (tests/test_tracking_both_ways_sure.py:
   when, on a scripted forward pass).
 """
@@ -85,6 +87,12 @@ def test_frames_traced_back_from_a_restart_by_colour_wait_for_its_proof(tmp_path
     assert 40 <= (~visible).sum() <= 50
     # the restart on the seafloor is reported causally (as live) ...
     assert 1 <= (off & ~both.bridged).sum() <= 3
+    # ... with a claim that covers it (twice its DRMS)
+    err = np.hypot(both.u - truth["u"], both.v - truth["v"])
+    assert np.all(err[off] <= 2.0 * np.sqrt(2.0) * both.sigma_px[off]), (
+        err[off],
+        both.sigma_px[off],
+    )
     # ... and not traced back
     assert not ok[~visible].any(), np.flatnonzero(ok & ~visible)
     assert not (both.bridged & off).any(), np.flatnonzero(both.bridged & off)

@@ -44,6 +44,13 @@ def test_each_of_the_trackers_signs_of_doubt_widens_the_sigma():
     assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, jitter_px=2.0, waves=0.5) > 1.5 * calm
     # ... not on a still surface (a noisy telemetry's prediction jitters)
     assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, jitter_px=2.0, waves=0.0) == calm
+    # a restart by colour not yet proven, 40 px from where the UUV was sought: its place read from the colour
+    # (0.16 of the length, 4.8 px) and half its distance (20 px), in quadrature with the rest
+    restarted = pixel_sigma_px(30.0, 0.95, 4.0, 10.0, restart_px=40.0)
+    assert restarted == pytest.approx(math.sqrt(calm**2 + 4.8**2 + 20.0**2))
+    assert pixel_sigma_px(30.0, 0.95, 4.0, 10.0, restart_px=0.0) == pytest.approx(
+        math.hypot(calm, 4.8)
+    )
 
 
 def test_the_jitter_is_the_running_rms_per_axis_of_the_follows_offsets():

@@ -251,6 +251,8 @@ class TrackingSession:
         # and how many restarts were undone so far
         self._undo: _Undo | None = None
         self.refuted = 0
+        # the latest restart by colour's distance from where the UUV was sought (px)
+        self._restart_px = math.nan
         # the sea as read (see :data:`COLOUR_SEARCH_ROUGH_S`): rough or not (None: not yet read that long), and the
         # matcher's latest reading (rough or not) since when (t_unix)
         self._rough: bool | None = None
@@ -541,6 +543,8 @@ class TrackingSession:
         if got is None:
             return None
         near = self._near_sought(got[0], got[1])
+        sought = self.sought or self.prediction
+        restart_px = math.hypot(got[0] - sought.u, got[1] - sought.v)
         one = take(pose, [i])
         cu, cv_ = top_face_pixel(self.cal, one, [got[0]], [got[1]])
         centre = (float(cu[0]), float(cv_[0]))
@@ -558,6 +562,7 @@ class TrackingSession:
         self._start(one, centre, anchor)
         self._confirming = COLOUR_CONFIRM_FRAMES if near else COLOUR_CONFIRM_FAR_FRAMES
         self._vetoed, self._unconfirmed = 0, self._confirming
+        self._restart_px = restart_px
         if near:  # placed by its colour, not by a match: the claim of a tracker without a score
             return TrackResult("ok", result.u, result.v, result.box, math.nan)
         return TrackResult("lost", confidence=result.confidence)
@@ -608,7 +613,7 @@ class TrackingSession:
     def _note(self, t_unix: float, result: TrackResult) -> TrackResult:
         """The frame's result, with its pixel's 1-sigma when ok (:func:`~localizer.tracking.sigma.pixel_sigma_px`:
         the match's score, the prediction's window, the time since the UUV was (re)acquired, how it was chosen, the
-        follows' jitter against their predictions through waves)."""
+        follows' jitter against their predictions through waves, a restart by colour not yet proven)."""
         if self.state is not self._noted_state:
             self._noted_state, self.since_t, self.frames_in_state = self.state, t_unix, 0
         self.frames_in_state += 1
@@ -630,6 +635,7 @@ class TrackingSession:
                 self._outlined,
                 math.sqrt(self._jitter2),
                 self.target.waves,
+                self._restart_px if self.unproven(t_unix) else math.nan,
             )
             # a TrackResult made afresh (dataclasses.replace costs as much as the sigma itself)
             result = TrackResult(

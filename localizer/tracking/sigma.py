@@ -18,6 +18,11 @@ a while. :func:`pixel_sigma_px` adds these terms in quadrature:
   match);
 - the (re)acquisition: ``ACQUIRED_SHARE × length_px``, fading with the time since the UUV
   was (re)acquired (``ACQUIRED_S``, e-folding);
+- a restart by colour not yet proven (through waves: the track restarted where the vehicle's colour stood out, not
+  yet held long enough to stand, :data:`~localizer.tracking.session.COLOUR_PROVEN_FRAMES`): its place is the
+  colour's, not a match's, ``UNSCORED_SHARE × length_px``; and where it is a place of the seafloor that shows the
+  vehicle's colour for a few frames, the UUV is where it was sought: ``RESTART_SHARE`` × the restart's distance from
+  there;
 - the selection: a target skyfix outlined itself (a click, a live box snapped to the object in
   it, or the UUV's own position estimate: :func:`~localizer.tracking.detect.outline`) carries
   the outline's error, ``OUTLINED_SHARE × length_px``, for as long as it is tracked (the
@@ -59,6 +64,10 @@ TRACKING_WINDOW = 0.5
 WINDOW_SHARE = 0.05  # a wider window adds this share of its 1-sigma beyond that
 ACQUIRED_SHARE = 0.03  # just (re)acquired: this share of the length ...
 ACQUIRED_S = 1.0  # ... fading with this time constant (s)
+# a restart by colour not yet proven: this share of its distance from where the UUV was sought (with
+# UNSCORED_SHARE of the length for its place): its fixes 48 px off the UUV were claimed 10 px before
+# (bench/results/restart_claim_s23.txt)
+RESTART_SHARE = 0.5
 OUTLINED_SHARE = 0.08  # a target skyfix outlined (a click, a live box, the UUV's own estimate): this share of the length
 JITTER_GAIN = 4.0  # the follows' jitter against their predictions (RMS per axis), times this
 JITTER_RATE = (
@@ -74,6 +83,7 @@ def pixel_sigma_px(
     outlined: bool = False,
     jitter_px: float = 0.0,
     waves: float = 0.0,
+    restart_px: float = math.nan,
 ) -> float:
     """1-sigma (pixels) of each of the tracked pixel's u and v (see the module doc).
 
@@ -82,7 +92,8 @@ def pixel_sigma_px(
     the UUV was selected or (re)acquired; ``outlined``: the target was outlined by skyfix (a click, a live box, a
     prior), not a box given as exact; ``jitter_px``: the follows' recent jitter against their predictions (RMS per
     axis, pixels: the square root of :func:`jitter2_px2`); ``waves``: how far the matches wobble as through waves
-    (0..1, :meth:`~localizer.tracking.Matcher.waves`). NaN when the length is unknown.
+    (0..1, :meth:`~localizer.tracking.Matcher.waves`); ``restart_px``: on a restart by colour not yet proven, its
+    distance from where the UUV was sought (pixels; NaN: none). NaN when the length is unknown.
     """
     if not length_px > 0:
         return math.nan
@@ -98,7 +109,14 @@ def pixel_sigma_px(
     fresh = ACQUIRED_SHARE * length_px * math.exp(-max(since_acquired_s, 0.0) / ACQUIRED_S)
     selected = OUTLINED_SHARE * length_px if outlined else 0.0
     jitter = JITTER_GAIN * min(max(waves, 0.0), 1.0) * jitter_px
-    return math.sqrt(max(match, FLOOR_PX) ** 2 + wide**2 + fresh**2 + selected**2 + jitter**2)
+    restart = (
+        math.hypot(UNSCORED_SHARE * length_px, RESTART_SHARE * restart_px)
+        if math.isfinite(restart_px)
+        else 0.0
+    )
+    return math.sqrt(
+        max(match, FLOOR_PX) ** 2 + wide**2 + fresh**2 + selected**2 + jitter**2 + restart**2
+    )
 
 
 def jitter2_px2(jitter2: float, follows: int, du_px: float, dv_px: float) -> float:
