@@ -19,6 +19,11 @@
   w5_15px_2.0m condition with seed 1 (the UUV about 12 px), cut to 3 s. Tracking restarts by colour twice, each
   time within ``HELD_COLOUR_REACH`` of the prediction, on frames reported lost before: 58 of 90 frames located,
   60 now, the two restart frames 3.8 and 1.7 px from the UUV (measured).
+- A frame the matcher holds counts for a restart's confirmation where the vehicle's colour stands out there as a
+  restart needs: the w5_25px_3.4m condition with seed 1 (the UUV 3.4 m deep, about 26 px), cut to 3 s. As the waves
+  lose the UUV, tracking restarts by colour on it; the waves then hold its matches under the bars for a few frames
+  at a time, and the restarts waited through them for frames the matcher found it in: 32 of 90 frames located, 46 now,
+  none off the UUV (measured).
 """
 
 from __future__ import annotations
@@ -96,3 +101,18 @@ def test_a_configured_wind_lets_the_colour_find_a_uuv_lost_at_the_start(tmp_path
 def test_a_restart_by_colour_near_the_prediction_is_a_fix_on_its_own_frame(tmp_path):
     located = _located_5mps(tmp_path / "near", 64.03, seed=1)  # the UUV ~12 px
     assert located.sum() >= 60, f"{located.sum()} of {len(located)} frames located"
+
+
+def test_frames_the_matcher_holds_confirm_a_restart_by_colour(tmp_path):
+    _, visible, located, wrong, _ = _located(
+        tmp_path / "held",
+        "waves_5mps_oblique",
+        3.4,
+        43.26,  # the UUV ~26 px
+        duration_s=3.0,
+        occlusions=[],
+        seed=1,
+    )
+    assert visible.all()
+    assert not wrong.any(), np.flatnonzero(wrong)
+    assert located.sum() >= 42, f"{located.sum()} of {len(located)} frames located"

@@ -151,7 +151,9 @@ COLOUR_FOUND_MIN = 3.0
 #: first frames, and the grey levels' mean then shows no vehicle where the colour does.
 STEADY_COLOUR_MIN = 3.0
 #: A restart by colour gives no fix until the vehicle's colour is at the tracked place on this many frames in a row
-#: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more). The
+#: after it (a place of the seafloor that stands out in it once, as the waves play, rarely does twice more; a frame
+#: the matcher held counts where the colour stands out there as a restart needs: :meth:`TrackingSession._held_coloured`,
+#: bench/results/tracker_waves_held_confirms_s23.txt). The
 #: restart's own frame is a fix when the restart is within :data:`HELD_COLOUR_REACH` of where the UUV was sought:
 #: the evidence that makes a held frame one (bench/results/tracker_waves_restart_near_s21.txt).
 COLOUR_CONFIRM_FRAMES = 2
@@ -511,12 +513,19 @@ class TrackingSession:
     ) -> TrackResult | None:
         """A frame the matcher held (its best place under its bars, not yet a loss), ``ok`` at that place when it is
         near where the UUV was sought (:meth:`_near_sought`) and the vehicle's colour stands out there as a restart by
-        colour needs (not while one awaits its confirmation); None otherwise. ``result``: the frame's (``lost``). The
-        tracker follows on as it would have."""
-        if self._box_wh is None or self._unconfirmed or not self._near_sought(held.u, held.v):
+        colour needs; None otherwise. While a restart by colour awaits its confirmation such a frame is one of its
+        frames of the vehicle's colour at the track (and of its proof), not yet a fix: the waves hold a small or deep
+        UUV's matches under the bars for a few frames at a time, and a restart on it waited through them.
+        ``result``: the frame's (``lost``). The tracker follows on as it would have."""
+        if self._box_wh is None or not self._near_sought(held.u, held.v):
             return None
         length = max(self._box_wh)
         if not separation(self._colour, chroma, held.u, held.v, length / 2) >= self._colour_bar():
+            return None
+        if self._unconfirmed:
+            self._unconfirmed -= 1
+            if self._undo is not None:
+                self._undo.passed += 1
             return None
         return TrackResult("ok", held.u, held.v, self._box_at(held.u, held.v), result.confidence)
 
