@@ -82,11 +82,11 @@ def test_a_restart_on_the_seafloor_during_an_occlusion_is_undone(tmp_path):
     assert not hidden_ok.any(), np.flatnonzero(hidden_ok)
 
 
-def _located_5mps(out: Path, hfov_deg: float, seed: int) -> np.ndarray:
-    """3 s of ``waves_5mps_oblique`` with the UUV 2 m deep, in view throughout: per frame, located (no frame may
-    be reported further from the UUV than half its size)."""
+def _located_5mps(out: Path, hfov_deg: float, seed: int, depth_m: float = 2.0) -> np.ndarray:
+    """3 s of ``waves_5mps_oblique`` with the UUV ``depth_m`` deep, in view throughout: per frame, located (no frame
+    may be reported further from the UUV than half its size)."""
     _, visible, located, wrong, _ = _located(
-        out, "waves_5mps_oblique", 2.0, hfov_deg, duration_s=3.0, occlusions=[], seed=seed
+        out, "waves_5mps_oblique", depth_m, hfov_deg, duration_s=3.0, occlusions=[], seed=seed
     )
     assert visible.all()
     assert not wrong.any(), np.flatnonzero(wrong)
@@ -104,15 +104,5 @@ def test_a_restart_by_colour_near_the_prediction_is_a_fix_on_its_own_frame(tmp_p
 
 
 def test_frames_the_matcher_holds_confirm_a_restart_by_colour(tmp_path):
-    _, visible, located, wrong, _ = _located(
-        tmp_path / "held",
-        "waves_5mps_oblique",
-        3.4,
-        43.26,  # the UUV ~26 px
-        duration_s=3.0,
-        occlusions=[],
-        seed=1,
-    )
-    assert visible.all()
-    assert not wrong.any(), np.flatnonzero(wrong)
+    located = _located_5mps(tmp_path / "held", 43.26, seed=1, depth_m=3.4)  # the UUV ~26 px
     assert located.sum() >= 42, f"{located.sum()} of {len(located)} frames located"
