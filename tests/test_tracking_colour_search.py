@@ -24,6 +24,10 @@
   lose the UUV, tracking restarts by colour on it; the waves then hold its matches under the bars for a few frames
   at a time, and the restarts waited through them for frames the matcher found it in: 32 of 90 frames located, 46 now,
   none off the UUV (measured).
+- A held frame is a fix where the UUV was sought when the vehicle's colour stands out there as a restart needs and
+  the matcher held a place further off: the w2_35px_3.4m condition with seed 1 (the UUV 3.4 m deep, about 36 px),
+  cut to 4 s. In three frames the matcher held a place of the seafloor beside the UUV while its colour stood out at
+  the prediction: 99 of 120 frames located, 102 now, none off the UUV (measured).
 """
 
 from __future__ import annotations
@@ -106,3 +110,12 @@ def test_a_restart_by_colour_near_the_prediction_is_a_fix_on_its_own_frame(tmp_p
 def test_frames_the_matcher_holds_confirm_a_restart_by_colour(tmp_path):
     located = _located_5mps(tmp_path / "held", 43.26, seed=1, depth_m=3.4)  # the UUV ~26 px
     assert located.sum() >= 42, f"{located.sum()} of {len(located)} frames located"
+
+
+def test_a_held_frame_is_a_fix_where_the_uuv_was_sought_when_its_colour_stands_out_there(tmp_path):
+    _, visible, located, wrong, _ = _located(
+        tmp_path / "sought", "waves_2mps_nadir", 3.4, 32.16, duration_s=4.0, occlusions=[], seed=1
+    )  # the UUV ~36 px
+    assert visible.all()
+    assert not wrong.any(), np.flatnonzero(wrong)
+    assert located.sum() >= 101, f"{located.sum()} of {len(located)} frames located"

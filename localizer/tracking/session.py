@@ -166,7 +166,9 @@ COLOUR_CONFIRM_FAR_FRAMES = 4
 #: as a restart by colour needs it to (:data:`COLOUR_FOUND_SHARE`, :data:`COLOUR_FOUND_MIN`): the waves drag a small or
 #: deep UUV's score under the bars for a few frames at a time while it is there. Further from where it was sought the
 #: held place was more often beside the UUV, and with the colour check's own bar a held frame just after the UUV was
-#: hidden was taken (bench/results/tracker_waves_held_s19.txt).
+#: hidden was taken (bench/results/tracker_waves_held_s19.txt). A held place further off is no fix, but where the
+#: UUV was sought is when the colour stands out there so: the matcher held a place of the seafloor beside a UUV whose
+#: colour stood out at the prediction (bench/results/tracker_waves_held_sought_s23.txt).
 HELD_COLOUR_REACH = 0.2
 #: A restart by colour is undone when, before its colour has been at the track on this many frames and within
 #: :data:`COLOUR_PROVEN_S` of it, the colour check withholds :data:`COLOUR_SEARCH_AFTER` frames in a row and the
@@ -511,23 +513,36 @@ class TrackingSession:
     def _held_coloured(
         self, chroma: Chroma, held: Match, result: TrackResult
     ) -> TrackResult | None:
-        """A frame the matcher held (its best place under its bars, not yet a loss), ``ok`` at that place when it is
-        near where the UUV was sought (:meth:`_near_sought`) and the vehicle's colour stands out there as a restart by
-        colour needs; None otherwise. While a restart by colour awaits its confirmation such a frame is one of its
-        frames of the vehicle's colour at the track (and of its proof), not yet a fix: the waves hold a small or deep
-        UUV's matches under the bars for a few frames at a time, and a restart on it waited through them.
-        ``result``: the frame's (``lost``). The tracker follows on as it would have."""
-        if self._box_wh is None or not self._near_sought(held.u, held.v):
+        """A frame the matcher held (its best place under its bars, not yet a loss), ``ok`` where the vehicle's colour
+        stands out as a restart by colour needs: at the held place when it is near where the UUV was sought
+        (:meth:`_near_sought`), else, through waves (:meth:`_sea_rough`), at where it was sought (placed by the colour
+        there, not by a match: the claim of a tracker without a score); None when at neither. On a still surface a
+        held frame is a vehicle cut by the frame's edge or hidden in part, and the prediction is no better than the
+        match (tests/test_tracking_frame_edge.py). While a restart by colour awaits its confirmation such
+        a frame is one of its frames of the vehicle's colour at the track (and of its proof), not yet a fix: the
+        waves hold a small or deep UUV's matches under the bars for a few frames at a time, and a restart on it
+        waited through them. ``result``: the frame's (``lost``). The tracker follows on as it would have."""
+        sought = self.sought or self.prediction
+        if self._box_wh is None or sought is None:
             return None
-        length = max(self._box_wh)
-        if not separation(self._colour, chroma, held.u, held.v, length / 2) >= self._colour_bar():
+        places = [(held.u, held.v, result.confidence)] if self._near_sought(held.u, held.v) else []
+        if self._sea_rough():
+            places.append((sought.u, sought.v, math.nan))
+        half_px = max(self._box_wh) / 2
+        bar = self._colour_bar()
+        place = next(
+            (p for p in places if separation(self._colour, chroma, p[0], p[1], half_px) >= bar),
+            None,
+        )
+        if place is None:
             return None
         if self._unconfirmed:
             self._unconfirmed -= 1
             if self._undo is not None:
                 self._undo.passed += 1
             return None
-        return TrackResult("ok", held.u, held.v, self._box_at(held.u, held.v), result.confidence)
+        u, v, confidence = place
+        return TrackResult("ok", u, v, self._box_at(u, v), confidence)
 
     def _near_sought(self, u: float, v: float) -> bool:
         """Whether (u, v) is within :data:`HELD_COLOUR_REACH` of the vehicle's box (its last size the colour check
@@ -546,9 +561,7 @@ class TrackingSession:
         restart away from where the UUV was sought); the restart's own frame is ``lost`` unless the restart is near
         where the UUV was sought (:meth:`_near_sought`: a fix there, as a held frame would be, without a score:
         :data:`~localizer.tracking.sigma.UNSCORED_SHARE` of the vehicle's length claimed)."""
-        rough = self._rough if self._rough is not None else self._reading_rough
-        rough = rough or self.cal.sigmas.wind_mps >= COLOUR_SEARCH_WIND_MPS
-        got = self._colour_found(chroma) if rough else None
+        got = self._colour_found(chroma) if self._sea_rough() else None
         if got is None:
             return None
         near = self._near_sought(got[0], got[1])
@@ -608,6 +621,13 @@ class TrackingSession:
         """The last box the colour check passed (its size), centred on (u, v)."""
         bw, bh = self._box_wh
         return (round(u - (bw - 1) / 2), round(v - (bh - 1) / 2), bw, bh)
+
+    def _sea_rough(self) -> bool:
+        """Whether the vehicle's colour alone may place it (a search by colour, a held frame's fix where the UUV was
+        sought): the sea as read rough (:meth:`_read_sea`), or a configured wind of at least
+        :data:`COLOUR_SEARCH_WIND_MPS`."""
+        rough = self._rough if self._rough is not None else self._reading_rough
+        return bool(rough) or self.cal.sigmas.wind_mps >= COLOUR_SEARCH_WIND_MPS
 
     def _read_sea(self, t_unix: float) -> None:
         """The sea as read: rough once the matcher has read it so (:data:`COLOUR_SEARCH_WAVES`) for
