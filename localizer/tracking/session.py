@@ -167,8 +167,8 @@ COLOUR_CONFIRM_FAR_FRAMES = 4
 #: deep UUV's score under the bars for a few frames at a time while it is there. Further from where it was sought the
 #: held place was more often beside the UUV, and with the colour check's own bar a held frame just after the UUV was
 #: hidden was taken (bench/results/tracker_waves_held_s19.txt). A held place further off is no fix, but through waves
-#: where the UUV was sought is when the colour stands out there so: the matcher held a place of the seafloor beside a UUV whose
-#: colour stood out at the prediction (bench/results/tracker_waves_held_sought_s23.txt).
+#: where the UUV was sought is when the colour stands out there so: the matcher held a place of the seafloor beside a
+#: UUV whose colour stood out at the prediction (bench/results/tracker_waves_held_sought_s23.txt).
 HELD_COLOUR_REACH = 0.2
 #: A restart by colour is undone when, before its colour has been at the track on this many frames and within
 #: :data:`COLOUR_PROVEN_S` of it, the colour check withholds :data:`COLOUR_SEARCH_AFTER` frames in a row and the
